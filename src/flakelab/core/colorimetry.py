@@ -1,0 +1,182 @@
+"""Reflectance → XYZ → CIELAB through colour-science (ASTM E308 weighting).
+
+Default: CIE D65 illuminant, CIE 1964 10° observer (automotive practice, DESIGN.md §2).
+The ASTM E308 weighting is linear in the reflectance, so its weights are taken once per
+(grid, illuminant, observer) from colour-science and applied as a matrix product over any
+number of samples × geometries.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import colour
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from flakelab.core.spectra import WAVELENGTHS, shape_of
+
+__all__ = [
+    "Conditions",
+    "D65_10",
+    "OBSERVERS",
+    "tristimulus_weights",
+    "white_point",
+    "reflectance_to_XYZ",
+    "reflectance_to_Lab",
+    "XYZ_to_Lab",
+    "Lab_to_XYZ",
+    "Lab_to_LCh",
+    "reflectance_to_sRGB",
+    "Lab_to_sRGB",
+]
+
+OBSERVERS = {
+    "2": "CIE 1931 2 Degree Standard Observer",
+    "10": "CIE 1964 10 Degree Standard Observer",
+}
+"""Short observer names as instruments write them (``D65/10``) → colour-science names."""
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """Illuminant and observer of a colorimetric computation, e.g. ``D65/10``.
+
+    ``illuminant`` is any key of ``colour.SDS_ILLUMINANTS`` (``D65``, ``A``, ``FL11``,
+    ``LED-B3`` …); ``observer`` is ``"2"`` or ``"10"`` [degree].
+    """
+
+    illuminant: str = "D65"
+    observer: str = "10"
+
+    def __post_init__(self) -> None:
+        if self.illuminant not in colour.SDS_ILLUMINANTS:
+            raise ValueError(
+                f"expected an illuminant known to colour-science (D65, A, FL11, LED-B3 …), "
+                f"got {self.illuminant!r}"
+            )
+        if self.observer not in OBSERVERS:
+            raise ValueError(f"expected observer '2' or '10', got {self.observer!r}")
+
+    @classmethod
+    def parse(cls, text: str) -> Conditions:
+        """Parse ``"D65/10"``, ``"A/2"``, ``"F11/10"`` (``F11`` means colour-science's ``FL11``).
+
+        Examples
+        --------
+        >>> Conditions.parse("F11/10")
+        Conditions(illuminant='FL11', observer='10')
+        """
+        illuminant, sep, observer = text.strip().partition("/")
+        observer = observer.strip().rstrip("°").removesuffix("deg").strip()
+        if not sep or not illuminant:
+            raise ValueError(f"expected ILLUMINANT/OBSERVER such as 'D65/10', got {text!r}")
+        illuminant = illuminant.strip()
+        if illuminant not in colour.SDS_ILLUMINANTS and f"FL{illuminant[1:]}" in (
+            colour.SDS_ILLUMINANTS
+        ):
+            illuminant = f"FL{illuminant[1:]}"
+        return cls(illuminant, observer)
+
+    def __str__(self) -> str:
+        return f"{self.illuminant}/{self.observer}"
+
+
+D65_10 = Conditions()
+
+
+@lru_cache(maxsize=32)
+def _weights(start: float, end: float, interval: float, conditions: Conditions) -> NDArray:
+    shape = colour.SpectralShape(start, end, interval)
+    cmfs = colour.MSDS_CMFS[OBSERVERS[conditions.observer]]
+    illuminant = colour.SDS_ILLUMINANTS[conditions.illuminant]
+    basis = colour.MultiSpectralDistributions(np.eye(len(shape.wavelengths)), shape.wavelengths)
+    weights = colour.msds_to_XYZ(basis, cmfs, illuminant, method="ASTM E308", shape=shape) / 100
+    weights.setflags(write=False)
+    return weights
+
+
+def tristimulus_weights(
+    wavelengths: ArrayLike = WAVELENGTHS, conditions: Conditions = D65_10
+) -> NDArray[np.float64]:
+    """ASTM E308 weights ``W[wavelength, XYZ]`` so that ``XYZ = R @ W`` with Y(white) = 1.
+
+    Taken from colour-science's ``msds_to_XYZ(method="ASTM E308")`` applied to the unit
+    spectra of the grid, which is exact because the weighting is linear.
+    """
+    shape = shape_of(wavelengths)
+    return _weights(shape.start, shape.end, shape.interval, conditions)
+
+
+def white_point(
+    wavelengths: ArrayLike = WAVELENGTHS, conditions: Conditions = D65_10
+) -> NDArray[np.float64]:
+    """XYZ of the perfect reflecting diffuser on the same grid and weighting [Y = 1]."""
+    return tristimulus_weights(wavelengths, conditions).sum(axis=0)
+
+
+def reflectance_to_XYZ(
+    reflectance: ArrayLike,
+    wavelengths: ArrayLike = WAVELENGTHS,
+    conditions: Conditions = D65_10,
+) -> NDArray[np.float64]:
+    """Tristimulus values of reflectance factors ``R[..., wavelength]`` [0–1] → XYZ [Y 0–1].
+
+    Examples
+    --------
+    >>> np.round(reflectance_to_XYZ(np.ones(31)), 4)
+    array([ 0.9481,  1.    ,  1.073 ])
+    """
+    R = np.asarray(reflectance, dtype=float)
+    return R @ tristimulus_weights(wavelengths, conditions)
+
+
+def XYZ_to_Lab(XYZ: ArrayLike, white: ArrayLike) -> NDArray[np.float64]:
+    """CIELAB [L* 0–100] of XYZ relative to the white's XYZ (same scale)."""
+    return colour.XYZ_to_Lab(np.asarray(XYZ, dtype=float), colour.XYZ_to_xy(white))
+
+
+def Lab_to_XYZ(Lab: ArrayLike, white: ArrayLike) -> NDArray[np.float64]:
+    """XYZ [Y 0–1] of CIELAB relative to the white's XYZ."""
+    return colour.Lab_to_XYZ(np.asarray(Lab, dtype=float), colour.XYZ_to_xy(white))
+
+
+def reflectance_to_Lab(
+    reflectance: ArrayLike,
+    wavelengths: ArrayLike = WAVELENGTHS,
+    conditions: Conditions = D65_10,
+) -> NDArray[np.float64]:
+    """CIELAB ``[..., 3]`` of reflectance factors ``R[..., wavelength]`` under ``conditions``.
+
+    Examples
+    --------
+    >>> np.round(reflectance_to_Lab(np.full(31, 0.5)), 3)
+    array([ 76.069,   0.   ,   0.   ])
+    """
+    XYZ = reflectance_to_XYZ(reflectance, wavelengths, conditions)
+    return XYZ_to_Lab(XYZ, white_point(wavelengths, conditions))
+
+
+def Lab_to_LCh(Lab: ArrayLike) -> NDArray[np.float64]:
+    """CIELCh: lightness, chroma C*ab and hue angle h [degree, 0–360]."""
+    return colour.Lab_to_LCHab(np.asarray(Lab, dtype=float))
+
+
+def Lab_to_sRGB(Lab: ArrayLike, white: ArrayLike | None = None) -> NDArray[np.float64]:
+    """Display sRGB [0–1, clipped] of CIELAB; chromatic adaptation CAT02 to D65/2°."""
+    white = white_point() if white is None else white
+    XYZ = Lab_to_XYZ(Lab, white)
+    rgb = colour.XYZ_to_sRGB(XYZ, colour.XYZ_to_xy(white))
+    return np.clip(rgb, 0.0, 1.0)
+
+
+def reflectance_to_sRGB(
+    reflectance: ArrayLike,
+    wavelengths: ArrayLike = WAVELENGTHS,
+    conditions: Conditions = D65_10,
+) -> NDArray[np.float64]:
+    """Display sRGB [0–1, clipped] of reflectance factors under ``conditions``."""
+    XYZ = reflectance_to_XYZ(reflectance, wavelengths, conditions)
+    white = white_point(wavelengths, conditions)
+    return np.clip(colour.XYZ_to_sRGB(XYZ, colour.XYZ_to_xy(white)), 0.0, 1.0)

@@ -1,0 +1,153 @@
+"""Multi-angle description and comparison of measurements: the numbers a colorist reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh
+from flakelab.core.difference import delta_E, delta_E_CIE2000, delta_LCH
+from flakelab.core.geometry import flake_angles
+from flakelab.core.measurement import Measurement
+from flakelab.core.tolerance import Tolerance, tolerance_preset
+
+__all__ = ["Comparison", "compare", "describe"]
+
+
+def describe(measurement: Measurement, conditions: Conditions = D65_10) -> dict[str, Any]:
+    """Per-geometry L*, a*, b*, C*, h, flake angles and stored-Lab agreement, as plain data."""
+    lab = measurement.lab(conditions)
+    lch = Lab_to_LCh(lab)
+    theta_flake, theta_inc = flake_angles(measurement.geometries)
+    stored_de = None
+    if measurement.stored_lab is not None and measurement.stored_lab_conditions == conditions:
+        stored_de = delta_E_CIE2000(lab, measurement.stored_lab)
+    geometries = []
+    for i, g in enumerate(measurement.geometries):
+        row = {
+            "name": g.name,
+            "L": float(lab[i, 0]), "a": float(lab[i, 1]), "b": float(lab[i, 2]),
+            "C": float(lch[i, 1]), "h": float(lch[i, 2]),
+            "theta_flake": float(theta_flake[i]), "theta_inc": float(theta_inc[i]),
+        }  # fmt: skip
+        if stored_de is not None:
+            row["de00_vs_stored"] = float(stored_de[i])
+        geometries.append(row)
+    return {
+        "sample": measurement.sample,
+        "instrument": measurement.instrument,
+        "measured_at": None if measurement.measured_at is None else measurement.measured_at.isoformat(),
+        "conditions": str(conditions),
+        "geometries": geometries,
+        "flop_index": measurement.flop_index(conditions),
+        "texture": dict(measurement.texture),
+    }
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Sample against reference at their common geometries."""
+
+    reference: Measurement
+    sample: Measurement
+    geometries: tuple[str, ...]
+    lab_reference: NDArray[np.float64]
+    lab_sample: NDArray[np.float64]
+    dLCH: NDArray[np.float64]
+    de00: NDArray[np.float64]
+    de_other: dict[str, NDArray[np.float64]]
+    passed: NDArray[np.bool_]
+    tolerance: Tolerance
+    conditions: Conditions
+
+    @property
+    def de00_max(self) -> float:
+        return float(self.de00.max())
+
+    @property
+    def de00_mean(self) -> float:
+        return float(self.de00.mean())
+
+    @property
+    def all_pass(self) -> bool:
+        return bool(self.passed.all())
+
+    def to_dict(self) -> dict[str, Any]:
+        rows = [
+            {
+                "name": name,
+                "L_reference": float(self.lab_reference[i, 0]),
+                "L_sample": float(self.lab_sample[i, 0]),
+                "dL": float(self.dLCH[i, 0]), "dC": float(self.dLCH[i, 1]),
+                "dH": float(self.dLCH[i, 2]), "de00": float(self.de00[i]),
+                **{f"de_{k}": float(v[i]) for k, v in self.de_other.items()},
+                "pass": bool(self.passed[i]),
+            }  # fmt: skip
+            for i, name in enumerate(self.geometries)
+        ]
+        flop_ref, flop_smp = self.reference.flop_index(self.conditions), self.sample.flop_index(
+            self.conditions
+        )
+        texture = {
+            k: self.sample.texture[k] - self.reference.texture[k]
+            for k in self.reference.texture
+            if k in self.sample.texture
+        }
+        return {
+            "reference": self.reference.sample,
+            "sample": self.sample.sample,
+            "conditions": str(self.conditions),
+            "tolerance": self.tolerance.name,
+            "geometries": rows,
+            "de00_max": self.de00_max,
+            "de00_mean": self.de00_mean,
+            "pass": self.all_pass,
+            "failing_geometries": [g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok],
+            "flop_index_reference": flop_ref,
+            "flop_index_sample": flop_smp,
+            "texture_difference": texture,
+        }
+
+
+def compare(
+    reference: Measurement,
+    sample: Measurement,
+    tolerance: Tolerance | str = "refinish",
+    *,
+    conditions: Conditions = D65_10,
+    also: tuple[str, ...] = ("CIE 1976", "CMC", "DIN99", "CAM16-UCS"),
+) -> Comparison:
+    """Compare ``sample`` with ``reference`` at every geometry both hold.
+
+    Raises
+    ------
+    ValueError
+        When the two measurements share no geometry.
+    """
+    tolerance = tolerance_preset(tolerance) if isinstance(tolerance, str) else tolerance
+    common = [g for g in reference.geometry_names if g in set(sample.geometry_names)]
+    if not common:
+        raise ValueError(
+            f"{reference.sample} and {sample.sample} share no geometry "
+            f"({', '.join(reference.geometry_names)} vs {', '.join(sample.geometry_names)})"
+        )
+    ref, smp = reference.select(common), sample.select(common)
+    lab_ref, lab_smp = ref.lab(conditions), smp.lab(conditions)
+    de00 = delta_E_CIE2000(lab_ref, lab_smp, kL=tolerance.kL, kC=tolerance.kC, kH=tolerance.kH)
+    dLCH = delta_LCH(lab_ref, lab_smp)
+    return Comparison(
+        reference=reference,
+        sample=sample,
+        geometries=tuple(common),
+        lab_reference=lab_ref,
+        lab_sample=lab_smp,
+        dLCH=dLCH,
+        de00=de00,
+        de_other={m: delta_E(lab_ref, lab_smp, method=m) for m in also},
+        passed=tolerance.passes(common, de00=de00, dLCH=dLCH),
+        tolerance=tolerance,
+        conditions=conditions,
+    )

@@ -1,0 +1,207 @@
+"""Measurement geometries: ASTM E2194 / E2539 names, directions and flake-based parameters.
+
+Conventions (DESIGN.md §2). The surface normal is +z; the illuminator lies in the x–z plane
+on the −x side, at ``illumination`` degrees from the normal. ``45as15`` means detection 15°
+from the specular direction toward the illuminator, so the detector sits at polar angle
+``illumination − aspecular`` on the specular (+x) side; a negative polar angle puts it on
+the light's side (45as110 → 65° from the normal beside the lamp). ``az±φ`` (out of plane,
+``45as25az90``) rotates the illuminator by φ degrees about the normal, the detector staying
+where the in-plane name puts it (CxF3 ``BRDFAngle``: "Azimuth is specified if an
+out-of-plane illumination angle is used").
+
+All direction vectors point away from the surface (toward lamp or detector).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "Geometry",
+    "INSTRUMENT_GEOMETRIES",
+    "N_BINDER",
+    "parse_geometry",
+    "parse_geometries",
+    "instrument_geometries",
+    "directions",
+    "refract_into_coating",
+    "flake_angles",
+]
+
+N_BINDER = 1.5
+"""Refractive index of binder and clearcoat [-], DESIGN.md §3."""
+
+_NAME = re.compile(
+    r"^\s*(?P<i>\d+(?:\.\d+)?)\s*as\s*(?P<a>[-+]?\d+(?:\.\d+)?)"
+    r"(?:\s*az\s*(?P<z>[-+]?\d+(?:\.\d+)?))?\s*$",
+    re.IGNORECASE,
+)
+
+
+def _number(value: float) -> str:
+    return f"{value:g}"
+
+
+@dataclass(frozen=True, order=True)
+class Geometry:
+    """One bidirectional measurement geometry [degree].
+
+    Examples
+    --------
+    >>> g = Geometry.parse("45as-15")
+    >>> g.illumination, g.aspecular, g.viewing
+    (45.0, -15.0, 60.0)
+    >>> str(Geometry(45, 25, 90))
+    '45as25az90'
+    """
+
+    illumination: float
+    aspecular: float
+    azimuth: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.illumination < 90.0:
+            raise ValueError(f"expected illumination angle in [0, 90)°, got {self.illumination}")
+        if not -90.0 < self.viewing < 90.0:
+            raise ValueError(
+                f"expected a detector above the surface, got {self} "
+                f"(polar angle {self.viewing:g}°)"
+            )
+
+    @classmethod
+    def parse(cls, name: str) -> Geometry:
+        """Parse an ASTM E2194/E2539 name such as ``45as15`` or ``45as25az90``."""
+        match = _NAME.match(str(name))
+        if match is None:
+            raise ValueError(
+                f"expected a geometry name such as '45as15' or '45as25az90', got {name!r}"
+            )
+        azimuth = float(match["z"]) if match["z"] is not None else 0.0
+        return cls(float(match["i"]), float(match["a"]), azimuth)
+
+    @property
+    def name(self) -> str:
+        base = f"{_number(self.illumination)}as{_number(self.aspecular)}"
+        return base if self.azimuth == 0 else f"{base}az{_number(self.azimuth)}"
+
+    @property
+    def viewing(self) -> float:
+        """Signed polar angle of the detector [degree]; negative on the illuminator's side."""
+        return self.illumination - self.aspecular
+
+    @property
+    def in_plane(self) -> bool:
+        return self.azimuth == 0
+
+    def __str__(self) -> str:
+        return self.name
+
+
+def parse_geometry(name: str) -> Geometry:
+    """Parse a geometry name (see :class:`Geometry`)."""
+    return Geometry.parse(name)
+
+
+def parse_geometries(names: ArrayLike) -> tuple[Geometry, ...]:
+    return tuple(Geometry.parse(str(n)) for n in np.atleast_1d(names))
+
+
+INSTRUMENT_GEOMETRIES: dict[str, tuple[str, ...]] = {
+    "byk-mac-i": ("45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"),
+    "ma-t6": ("45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"),
+    "ma-t12": (
+        "15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80",
+        "45as-15", "45as15", "45as25", "45as45", "45as75", "45as110",
+    ),
+    "five-angle": ("45as15", "45as25", "45as45", "45as75", "45as110"),
+}  # fmt: skip
+"""Geometry sets of common multi-angle instruments, in their export order."""
+
+
+def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
+    """Geometries of a named instrument (``byk-mac-i``, ``ma-t6``, ``ma-t12``, ``five-angle``)."""
+    key = instrument.strip().lower().replace(" ", "-").replace("_", "-")
+    if key not in INSTRUMENT_GEOMETRIES:
+        raise ValueError(
+            f"expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got instrument {instrument!r}"
+        )
+    return parse_geometries(INSTRUMENT_GEOMETRIES[key])
+
+
+def _angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:
+    """Illumination, aspecular and azimuth angles [radian] of geometries or their names."""
+    items = [geometries] if isinstance(geometries, Geometry | str) else list(geometries)
+    geoms = [g if isinstance(g, Geometry) else Geometry.parse(g) for g in items]
+    table = np.radians([(g.illumination, g.aspecular, g.azimuth) for g in geoms]).reshape(-1, 3)
+    return table[:, 0], table[:, 1], table[:, 2]
+
+
+def directions(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray]:
+    """Unit vectors to the illuminator and to the detector, each ``[n, 3]``, in air.
+
+    Examples
+    --------
+    >>> light, view = directions(["45as45"])
+    >>> np.round(view, 6).tolist()
+    [[0.0, 0.0, 1.0]]
+    """
+    theta_i, aspecular, azimuth = _angles(geometries)
+    light = np.stack(
+        [
+            -np.sin(theta_i) * np.cos(azimuth),
+            -np.sin(theta_i) * np.sin(azimuth),
+            np.cos(theta_i),
+        ],
+        axis=-1,
+    )
+    theta_v = theta_i - aspecular
+    view = np.stack([np.sin(theta_v), np.zeros_like(theta_v), np.cos(theta_v)], axis=-1)
+    return light, view
+
+
+def refract_into_coating(direction: ArrayLike, n: float = N_BINDER) -> NDArray[np.float64]:
+    """Directions ``[..., 3]`` in air → the refracted directions inside a medium of index n.
+
+    Snell's law keeps the azimuth and shrinks the tangential part by 1/n; the result still
+    points away from the surface (the direction light travels, reversed).
+
+    Examples
+    --------
+    >>> d = refract_into_coating([np.sin(np.radians(45)), 0, np.cos(np.radians(45))])
+    >>> round(float(np.degrees(np.arccos(d[2]))), 1)
+    28.1
+    """
+    if n < 1:
+        raise ValueError(f"expected a refractive index ≥ 1, got {n}")
+    d = np.asarray(direction, dtype=float)
+    tangential = d[..., :2] / n
+    normal = np.sqrt(1.0 - np.sum(tangential**2, axis=-1, keepdims=True))
+    return np.concatenate([tangential, normal], axis=-1)
+
+
+def flake_angles(
+    geometries: ArrayLike | Geometry, n: float = N_BINDER
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Flake-based parameters (θ_flake, θ_inc) [degree] of each geometry (DESIGN.md §2).
+
+    θ_flake is the tilt from the surface normal that a flake needs to mirror the refracted
+    illumination into the refracted viewing direction; θ_inc is the angle of incidence on
+    that flake.
+
+    Examples
+    --------
+    >>> theta_flake, theta_inc = flake_angles(["45as15"])
+    >>> round(float(theta_flake[0]), 1), round(float(theta_inc[0]), 1)
+    (4.3, 23.8)
+    """
+    light, view = directions(geometries)
+    light_in, view_in = refract_into_coating(light, n), refract_into_coating(view, n)
+    bisector = light_in + view_in
+    bisector /= np.linalg.norm(bisector, axis=-1, keepdims=True)
+    theta_flake = np.degrees(np.arccos(np.clip(bisector[..., 2], -1.0, 1.0)))
+    cos_inc = np.clip(np.sum(light_in * bisector, axis=-1), -1.0, 1.0)
+    return theta_flake, np.degrees(np.arccos(cos_inc))

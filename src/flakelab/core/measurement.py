@@ -1,0 +1,143 @@
+"""A multi-angle measurement: reflectance per geometry, texture readings and metadata."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import datetime
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab
+from flakelab.core.geometry import Geometry
+
+__all__ = ["Measurement", "TEXTURE_READINGS", "flop_index", "FLOP_GEOMETRIES"]
+
+TEXTURE_READINGS: tuple[str, ...] = (
+    "Sa15", "Si15", "Sa45", "Si45", "Sa75", "Si75", "SG", "G",
+)  # fmt: skip
+"""Texture readings: sparkle area Sa and intensity Si under directional light at 15°, 45°,
+75°, sparkle grade SG and graininess G under diffuse light (DESIGN.md §2, §4)."""
+
+FLOP_GEOMETRIES = ("45as15", "45as45", "45as110")
+
+
+def flop_index(L15: NDArray | float, L45: NDArray | float, L110: NDArray | float) -> NDArray:
+    """X-Rite flop index 2.69·(L*15 − L*110)^1.11 / (L*45)^0.86 at 45° illumination.
+
+    A negative L*15 − L*110 (an inverse flop, seen on some matte or pearl samples) keeps its
+    sign: the power applies to the magnitude.
+
+    Examples
+    --------
+    >>> round(float(flop_index(110.0, 50.0, 20.0)), 2)
+    14.48
+    """
+    dL = np.asarray(L15, dtype=float) - np.asarray(L110, dtype=float)
+    return 2.69 * np.sign(dL) * np.abs(dL) ** 1.11 / np.asarray(L45, dtype=float) ** 0.86
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """Reflectance factors of one sample at several geometries.
+
+    Attributes
+    ----------
+    sample : str
+        Sample or standard name.
+    geometries : tuple[Geometry, ...]
+        Measurement geometries, in the file's order (unique).
+    wavelengths : ndarray [nm]
+        Regular wavelength grid of the spectra.
+    reflectance : ndarray [geometry, wavelength], reflectance factor [0–1 for a white]
+    texture : mapping name → value, names from :data:`TEXTURE_READINGS`
+    instrument : str | None
+    measured_at : datetime | None
+    stored_lab : ndarray [geometry, 3] | None
+        L*a*b* as the instrument or file stated it, under ``stored_lab_conditions``.
+    metadata : mapping of further text fields kept through conversions.
+    """
+
+    sample: str
+    geometries: tuple[Geometry, ...]
+    wavelengths: NDArray[np.float64]
+    reflectance: NDArray[np.float64]
+    texture: Mapping[str, float] = field(default_factory=dict)
+    instrument: str | None = None
+    measured_at: datetime | None = None
+    stored_lab: NDArray[np.float64] | None = None
+    stored_lab_conditions: Conditions = D65_10
+    metadata: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        wl = np.asarray(self.wavelengths, dtype=float)
+        R = np.asarray(self.reflectance, dtype=float)
+        if R.shape != (len(self.geometries), wl.size):
+            raise ValueError(
+                f"expected reflectance of shape ({len(self.geometries)}, {wl.size}), "
+                f"got {R.shape}"
+            )
+        if not np.all(np.isfinite(R)):
+            raise ValueError("expected finite reflectance values, got NaN or infinity")
+        names = [g.name for g in self.geometries]
+        if len(set(names)) != len(names):
+            raise ValueError(f"expected unique geometries, got {names}")
+        unknown = [k for k in self.texture if k not in TEXTURE_READINGS]
+        if unknown:
+            raise ValueError(
+                f"expected texture readings among {', '.join(TEXTURE_READINGS)}, got {unknown}"
+            )
+        object.__setattr__(self, "wavelengths", wl)
+        object.__setattr__(self, "reflectance", R)
+        object.__setattr__(self, "texture", {k: float(v) for k, v in self.texture.items()})
+        if self.stored_lab is not None:
+            lab = np.asarray(self.stored_lab, dtype=float)
+            if lab.shape != (len(self.geometries), 3):
+                raise ValueError(
+                    f"expected stored L*a*b* of shape ({len(self.geometries)}, 3), got {lab.shape}"
+                )
+            object.__setattr__(self, "stored_lab", lab)
+
+    @property
+    def geometry_names(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.geometries)
+
+    def index(self, geometry: str | Geometry) -> int:
+        """Position of a geometry (name or object) in this measurement."""
+        g = geometry if isinstance(geometry, Geometry) else Geometry.parse(geometry)
+        try:
+            return self.geometries.index(g)
+        except ValueError:
+            raise KeyError(f"{self.sample}: no geometry {g.name}") from None
+
+    def lab(self, conditions: Conditions = D65_10) -> NDArray[np.float64]:
+        """CIELAB ``[geometry, 3]`` computed from the spectra (ASTM E308)."""
+        return reflectance_to_Lab(self.reflectance, self.wavelengths, conditions)
+
+    def lch(self, conditions: Conditions = D65_10) -> NDArray[np.float64]:
+        return Lab_to_LCh(self.lab(conditions))
+
+    def flop_index(self, conditions: Conditions = D65_10) -> float | None:
+        """Flop index from 45as15, 45as45, 45as110; None when one of them is missing."""
+        if not set(FLOP_GEOMETRIES) <= set(self.geometry_names):
+            return None
+        L = self.lab(conditions)[:, 0]
+        L15, L45, L110 = (L[self.index(name)] for name in FLOP_GEOMETRIES)
+        return float(flop_index(L15, L45, L110))
+
+    def select(self, geometries: tuple[Geometry, ...] | list[str]) -> Measurement:
+        """The same measurement restricted to (and ordered as) ``geometries``."""
+        rows = [self.index(g) for g in geometries]
+        return Measurement(
+            sample=self.sample,
+            geometries=tuple(self.geometries[i] for i in rows),
+            wavelengths=self.wavelengths,
+            reflectance=self.reflectance[rows],
+            texture=self.texture,
+            instrument=self.instrument,
+            measured_at=self.measured_at,
+            stored_lab=None if self.stored_lab is None else self.stored_lab[rows],
+            stored_lab_conditions=self.stored_lab_conditions,
+            metadata=self.metadata,
+        )

@@ -1,0 +1,167 @@
+"""Multi-angle tolerances: per-geometry limits on ΔE00 or on |ΔL*|, |ΔC*|, |ΔH*| → pass/fail."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.geometry import Geometry
+
+__all__ = ["Limit", "Tolerance", "TOLERANCE_PRESETS", "tolerance_preset"]
+
+_LIMIT_FIELDS = ("de00", "dL", "dC", "dH")
+
+
+@dataclass(frozen=True)
+class Limit:
+    """Upper bounds at one geometry; ``None`` leaves a quantity unchecked.
+
+    ``de00`` bounds ΔE00 (with ``kL``, ``kC``, ``kH`` weights); ``dL``, ``dC``, ``dH`` bound
+    the magnitudes of the CIELAB components ΔL*, ΔC*ab, ΔH*ab.
+    """
+
+    de00: float | None = None
+    dL: float | None = None
+    dC: float | None = None
+    dH: float | None = None
+
+    def __post_init__(self) -> None:
+        values = [getattr(self, k) for k in _LIMIT_FIELDS]
+        if all(v is None for v in values):
+            raise ValueError(f"expected at least one of {', '.join(_LIMIT_FIELDS)}, got none")
+        for k, v in zip(_LIMIT_FIELDS, values, strict=True):
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise ValueError(f"expected a positive limit for {k}, got {v!r}")
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "limit") -> Limit:
+        unknown = [k for k in data if k not in _LIMIT_FIELDS]
+        if unknown:
+            raise ValueError(f"{where}: expected keys among {', '.join(_LIMIT_FIELDS)}, got {unknown}")
+        try:
+            return cls(**{k: None if v is None else float(v) for k, v in data.items()})
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{where}: {error}") from None
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in _LIMIT_FIELDS if getattr(self, k) is not None}
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """Named per-geometry limits, with a default for geometries not listed.
+
+    Examples
+    --------
+    >>> tol = Tolerance("shop", Limit(de00=1.0), {"45as15": Limit(de00=2.0)})
+    >>> tol.passes(["45as15", "45as45"], de00=[1.5, 1.5], dLCH=np.zeros((2, 3))).tolist()
+    [True, False]
+    """
+
+    name: str
+    default: Limit
+    per_geometry: Mapping[str, Limit] = field(default_factory=dict)
+    description: str = ""
+    kL: float = 1.0
+    kC: float = 1.0
+    kH: float = 1.0
+
+    def __post_init__(self) -> None:
+        normalised = {Geometry.parse(k).name: v for k, v in self.per_geometry.items()}
+        object.__setattr__(self, "per_geometry", normalised)
+
+    def limit(self, geometry: str | Geometry) -> Limit:
+        name = geometry.name if isinstance(geometry, Geometry) else Geometry.parse(geometry).name
+        return self.per_geometry.get(name, self.default)
+
+    def passes(
+        self, geometries: list[str] | tuple, *, de00: NDArray | list, dLCH: NDArray
+    ) -> NDArray[np.bool_]:
+        """Pass/fail per geometry given ΔE00 ``[geometry]`` and ``[geometry, (ΔL, ΔC, ΔH)]``."""
+        de00 = np.asarray(de00, dtype=float)
+        dLCH = np.abs(np.asarray(dLCH, dtype=float))
+        limits = [self.limit(g) for g in geometries]
+        bounds = np.array(
+            [[np.inf if getattr(lim, k) is None else getattr(lim, k) for k in _LIMIT_FIELDS]
+             for lim in limits]
+        )  # fmt: skip
+        observed = np.concatenate([de00[..., None], dLCH], axis=-1)
+        return np.all(observed <= bounds, axis=-1)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str = "tolerance") -> Tolerance:
+        """Build from ``{name, description, default: {...}, geometries: {name: {...}}, kL…}``."""
+        allowed = {"name", "description", "default", "geometries", "kL", "kC", "kH"}
+        unknown = [k for k in data if k not in allowed]
+        if unknown:
+            raise ValueError(f"{source}: expected keys among {sorted(allowed)}, got {unknown}")
+        if "default" not in data:
+            raise ValueError(f"{source}: default: missing (e.g. default = {{ de00 = 1.0 }})")
+        geometries = {}
+        for key, value in dict(data.get("geometries", {})).items():
+            try:
+                name = Geometry.parse(key).name
+            except ValueError as error:
+                raise ValueError(f"{source}: geometries: {error}") from None
+            geometries[name] = Limit.from_dict(value, f"{source}: geometries.{key}")
+        weights = {}
+        for k in ("kL", "kC", "kH"):
+            value = data.get(k, 1.0)
+            if not isinstance(value, int | float) or value <= 0:
+                raise ValueError(f"{source}: {k}: expected a positive number, got {value!r}")
+            weights[k] = float(value)
+        return cls(
+            name=str(data.get("name", source)),
+            default=Limit.from_dict(data["default"], f"{source}: default"),
+            per_geometry=geometries,
+            description=str(data.get("description", "")),
+            **weights,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "description": self.description,
+            "kL": self.kL, "kC": self.kC, "kH": self.kH,
+            "default": self.default.to_dict(),
+            "geometries": {k: v.to_dict() for k, v in self.per_geometry.items()},
+        }  # fmt: skip
+
+
+_NEAR_SPECULAR = ("15as-15", "15as15", "45as-15", "45as15")
+
+TOLERANCE_PRESETS: dict[str, Tolerance] = {
+    t.name: t
+    for t in (
+        Tolerance(
+            "de00-1.0",
+            Limit(de00=1.0),
+            description="ΔE00 ≤ 1.0 at every geometry (the matching harness's success criterion).",
+        ),
+        Tolerance(
+            "refinish",
+            Limit(de00=1.0),
+            {**{g: Limit(de00=1.5) for g in _NEAR_SPECULAR}, "45as25": Limit(de00=1.2)},
+            description="flakelab's body-shop default: ΔE00 1.0, widened to 1.5 near specular "
+            "and 1.2 at 45as25 where flake sparkle makes readings less repeatable. "
+            "Not any OEM's specification.",
+        ),
+        Tolerance(
+            "components",
+            Limit(dL=1.0, dC=0.8, dH=0.6),
+            {g: Limit(dL=1.5, dC=1.2, dH=0.9) for g in _NEAR_SPECULAR},
+            description="|ΔL*| ≤ 1.0, |ΔC*| ≤ 0.8, |ΔH*| ≤ 0.6, × 1.5 near specular.",
+        ),
+    )
+}
+"""Named tolerances shipped with flakelab; user tolerances load from TOML or JSON files."""
+
+
+def tolerance_preset(name: str) -> Tolerance:
+    if name not in TOLERANCE_PRESETS:
+        raise ValueError(f"expected a tolerance among {', '.join(TOLERANCE_PRESETS)}, got {name!r}")
+    return TOLERANCE_PRESETS[name]

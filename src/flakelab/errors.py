@@ -1,0 +1,28 @@
+"""Exceptions every layer raises, so the CLI and the server can report them in one line."""
+
+from __future__ import annotations
+
+from os import PathLike
+
+__all__ = ["FlakelabError", "MeasurementFileError"]
+
+
+class FlakelabError(ValueError):
+    """A problem with user input that flakelab can state in one line."""
+
+
+class MeasurementFileError(FlakelabError):
+    """A measurement file that cannot be read: names the file, the field and the problem.
+
+    Examples
+    --------
+    >>> str(MeasurementFileError("a.csv", "not a number: 'x'", field="row 3, R450"))
+    "a.csv: row 3, R450: not a number: 'x'"
+    """
+
+    def __init__(self, path: str | PathLike[str], problem: str, *, field: str | None = None):
+        self.path = str(path)
+        self.field = field
+        self.problem = problem
+        where = f"{self.path}: {field}" if field else self.path
+        super().__init__(f"{where}: {problem}")

@@ -1,0 +1,138 @@
+"""Measurement files: MA-T12 xlsx, CxF3, CSV and JSON behind one interface.
+
+``read_measurements(path)`` detects the format from the file's content (not its name);
+``write_measurements(measurements, path)`` picks it from the extension. Every problem is a
+:class:`~flakelab.errors.MeasurementFileError` naming the file, the field and the problem.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Callable
+from os import PathLike
+from pathlib import Path
+
+from flakelab.core.measurement import Measurement
+from flakelab.errors import MeasurementFileError
+from flakelab.io.csv_table import read_csv, write_csv
+from flakelab.io.cxf import read_cxf, write_cxf
+from flakelab.io.json_document import read_json, write_json
+from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
+from flakelab.io.tolerance_file import read_tolerance
+
+__all__ = [
+    "FORMATS",
+    "detect_format",
+    "read_measurements",
+    "read_measurement",
+    "write_measurements",
+    "read_tolerance",
+]
+
+Reader = Callable[[str | PathLike], list[Measurement]]
+Writer = Callable[[list[Measurement], str | PathLike], None]
+
+FORMATS: dict[str, tuple[Reader, Writer, tuple[str, ...]]] = {
+    "mat12-xlsx": (read_mat12_xlsx, write_mat12_xlsx, (".xlsx",)),
+    "cxf": (read_cxf, write_cxf, (".cxf", ".xml")),
+    "csv": (read_csv, write_csv, (".csv", ".txt", ".tsv")),
+    "json": (read_json, write_json, (".json",)),
+}
+"""Format name → (reader, writer, file extensions written)."""
+
+_OTHER_KINDS = {
+    b"\x89PNG": "a PNG image",
+    b"%PDF": "a PDF document",
+    b"\xff\xd8\xff": "a JPEG image",
+    b"GIF8": "a GIF image",
+    b"\x1f\x8b": "a gzip archive",
+    b"\xd0\xcf\x11\xe0": "an old binary Office file (.xls); export as .xlsx",
+}
+
+
+def detect_format(path: str | PathLike) -> str:
+    """Name of the measurement format of a file, judged by its content."""
+    try:
+        head = Path(path).read_bytes()[:4096]
+    except FileNotFoundError:
+        raise MeasurementFileError(path, "no such file") from None
+    except IsADirectoryError:
+        raise MeasurementFileError(path, "is a directory, not a file") from None
+    except OSError as error:
+        raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
+    if not head.strip():
+        raise MeasurementFileError(path, "empty file")
+    if head.startswith(b"PK\x03\x04"):
+        try:
+            with zipfile.ZipFile(path) as archive:
+                names = set(archive.namelist())
+        except zipfile.BadZipFile:
+            raise MeasurementFileError(path, "truncated or corrupt ZIP/xlsx archive") from None
+        if "xl/workbook.xml" not in names:
+            raise MeasurementFileError(path, "a ZIP archive, but not an Excel workbook")
+        return "mat12-xlsx"
+    for magic, kind in _OTHER_KINDS.items():
+        if head.startswith(magic):
+            raise MeasurementFileError(path, f"not a measurement file: this is {kind}")
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if text.startswith(b"<"):
+        if b"colorexchangeformat.com/CxF3" in head or b"<CxF" in head or b":CxF" in head:
+            return "cxf"
+        raise MeasurementFileError(path, "an XML file, but not CxF3 (no CxF3 namespace)")
+    if text.startswith((b"{", b"[")):
+        return "json"
+    try:
+        first_line = text.decode("utf-8").splitlines()[0].lower()
+    except UnicodeDecodeError:
+        raise MeasurementFileError(path, "not a measurement file: binary content") from None
+    if "geometry" in first_line or first_line.startswith("#"):
+        return "csv"
+    raise MeasurementFileError(
+        path, "not a measurement file: expected MA-T12 xlsx, CxF3, flakelab JSON or a CSV with "
+        "a 'geometry' column",
+    )  # fmt: skip
+
+
+def read_measurements(path: str | PathLike) -> list[Measurement]:
+    """All measurements in a file, whatever its supported format."""
+    return FORMATS[detect_format(path)][0](path)
+
+
+def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:
+    """One measurement: the sample named, or the file's first (standard) one."""
+    measurements = read_measurements(path)
+    if sample is None:
+        return measurements[0]
+    for m in measurements:
+        if m.sample == sample:
+            return m
+    names = ", ".join(m.sample for m in measurements[:10])
+    raise MeasurementFileError(path, f"no sample {sample!r} (samples: {names})")
+
+
+def format_for_path(path: str | PathLike) -> str:
+    suffix = Path(path).suffix.lower()
+    for name, (_, _, suffixes) in FORMATS.items():
+        if suffix in suffixes:
+            return name
+    known = ", ".join(s for _, _, ss in FORMATS.values() for s in ss)
+    raise MeasurementFileError(path, f"unknown output extension {suffix!r} (known: {known})")
+
+
+def write_measurements(
+    measurements: list[Measurement], path: str | PathLike, format: str | None = None
+) -> None:
+    """Write measurements; the format comes from ``format`` or the extension of ``path``."""
+    if not measurements:
+        raise ValueError("expected at least one measurement to write, got none")
+    name = format or format_for_path(path)
+    if name not in FORMATS:
+        raise ValueError(f"expected a format among {', '.join(FORMATS)}, got {name!r}")
+    try:
+        FORMATS[name][1](measurements, path)
+    except ValueError as error:
+        if isinstance(error, MeasurementFileError):
+            raise
+        raise MeasurementFileError(path, str(error)) from None
+    except OSError as error:
+        raise MeasurementFileError(path, f"cannot be written ({error.strerror})") from None

@@ -1,0 +1,151 @@
+"""CSV: one row per sample × geometry (the layout of spreadsheets and of ../shared/data).
+
+Columns, in any order after the first two:
+
+``sample``, ``geometry``          required; geometry as an ASTM name (``45as15``)
+``R400`` … ``R700``               reflectance factor per wavelength [0–1]; any regular grid
+``L``, ``a``, ``b``               optional stored L*a*b*, under ``lab_conditions`` (D65/10 if absent)
+``instrument``, ``measured_at``   optional; ISO 8601 date-time
+``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
+``lab_conditions``                optional, e.g. ``D65/10``
+
+Lines starting with ``#`` are comments. Comma, semicolon or tab separated (detected).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from datetime import datetime
+from os import PathLike
+
+import numpy as np
+
+from flakelab.core.colorimetry import D65_10
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.errors import MeasurementFileError
+from flakelab.io.records import (
+    Reading,
+    assemble,
+    parse_conditions,
+    parse_geometry_name,
+    parse_number,
+    parse_spectrum,
+    parse_wavelength_header,
+    write_atomically,
+)
+
+__all__ = ["read_csv", "write_csv"]
+
+_META = ("sample", "geometry", "L", "a", "b", "instrument", "measured_at", "lab_conditions")
+
+
+def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]:
+    """Read measurements from a CSV file in the layout above."""
+    if text is None:
+        try:
+            text = open(path, encoding="utf-8-sig").read()  # noqa: SIM115
+        except UnicodeDecodeError as error:
+            raise MeasurementFileError(path, f"not UTF-8 text ({error.reason})") from None
+    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
+        raise MeasurementFileError(path, "empty CSV file")
+    dialect = csv.Sniffer().sniff(lines[0], delimiters=",;\t")
+    rows = list(csv.reader(io.StringIO("\n".join(lines)), dialect))
+    header = [h.strip() for h in rows[0]]
+    columns = {h: i for i, h in enumerate(header)}
+    for required in ("sample", "geometry"):
+        if required not in columns:
+            raise MeasurementFileError(
+                path, f"missing column {required!r} (columns: {', '.join(header[:6])}…)",
+                field="header",
+            )  # fmt: skip
+    if len(columns) != len(header):
+        duplicate = next(h for h in header if header.count(h) > 1)
+        raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
+    spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
+    if not spectral:
+        raise MeasurementFileError(path, "no reflectance columns such as R400", field="header")
+    wavelengths = parse_wavelength_header(path, [header[i] for i in spectral], "header")
+    has_lab = all(k in columns for k in "Lab")
+
+    readings, texture, instruments, conditions = [], {}, set(), set()
+    for number, row in enumerate(rows[1:], start=2):
+        where = f"row {number}"
+        if len(row) != len(header):
+            raise MeasurementFileError(
+                path, f"expected {len(header)} columns, got {len(row)} (truncated line?)", field=where
+            )
+        sample = row[columns["sample"]].strip()
+        if not sample:
+            raise MeasurementFileError(path, "empty sample name", field=f"{where}, sample")
+        geometry = parse_geometry_name(path, row[columns["geometry"]], f"{where}, geometry")
+        lab = (
+            np.array([parse_number(path, row[columns[k]], f"{where}, {k}") for k in "Lab"])
+            if has_lab and row[columns["L"]].strip()
+            else None
+        )
+        measured_at = None
+        if "measured_at" in columns and row[columns["measured_at"]].strip():
+            try:
+                measured_at = datetime.fromisoformat(row[columns["measured_at"]].strip())
+            except ValueError:
+                raise MeasurementFileError(
+                    path, f"expected an ISO 8601 date-time, got {row[columns['measured_at']]!r}",
+                    field=f"{where}, measured_at",
+                ) from None  # fmt: skip
+        for k in TEXTURE_READINGS:
+            if k in columns and row[columns[k]].strip():
+                value = parse_number(path, row[columns[k]], f"{where}, {k}")
+                previous = texture.setdefault(sample, {}).setdefault(k, value)
+                if previous != value:
+                    raise MeasurementFileError(
+                        path, f"texture {k} of {sample!r} differs between rows ({previous} vs {value})",
+                        field=f"{where}, {k}",
+                    )  # fmt: skip
+        if "instrument" in columns and row[columns["instrument"]].strip():
+            instruments.add(row[columns["instrument"]].strip())
+        if "lab_conditions" in columns and row[columns["lab_conditions"]].strip():
+            conditions.add(row[columns["lab_conditions"]].strip())
+        readings.append(
+            Reading(
+                where=where, sample=sample, geometry=geometry, lab=lab, measured_at=measured_at,
+                reflectance=parse_spectrum(path, [row[i] for i in spectral], wavelengths, where),
+            )
+        )  # fmt: skip
+    if len(conditions) > 1:
+        raise MeasurementFileError(path, f"several lab_conditions: {sorted(conditions)}")
+    lab_conditions = (
+        parse_conditions(path, conditions.pop(), "lab_conditions") if conditions else D65_10
+    )
+    return assemble(
+        path, readings, wavelengths, lab_conditions=lab_conditions, texture=texture,
+        instrument=instruments.pop() if len(instruments) == 1 else None,
+    )  # fmt: skip
+
+
+def write_csv(measurements: list[Measurement], path: str | PathLike) -> None:
+    """Write measurements in the CSV layout above (full float precision)."""
+    wavelengths = measurements[0].wavelengths
+    if any(not np.array_equal(m.wavelengths, wavelengths) for m in measurements):
+        raise ValueError("expected all measurements on one wavelength grid for one CSV file")
+    texture_keys = [k for k in TEXTURE_READINGS if any(k in m.texture for m in measurements)]
+    with_lab = any(m.stored_lab is not None for m in measurements)
+    header = ["sample", "geometry", *(f"R{w:g}" for w in wavelengths)]
+    header += ["L", "a", "b", "lab_conditions"] if with_lab else []
+    header += ["instrument", "measured_at", *texture_keys]
+
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for m in measurements:
+        for i, g in enumerate(m.geometries):
+            row: list[object] = [m.sample, g.name, *(repr(float(v)) for v in m.reflectance[i])]
+            if with_lab:
+                lab = m.stored_lab[i] if m.stored_lab is not None else ("", "", "")
+                row += [*(repr(float(v)) if v != "" else "" for v in lab)]
+                row += [str(m.stored_lab_conditions) if m.stored_lab is not None else ""]
+            row += [m.instrument or "", m.measured_at.isoformat() if m.measured_at else ""]
+            row += [repr(m.texture[k]) if k in m.texture else "" for k in texture_keys]
+            writer.writerow(row)
+    write_atomically(path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding="utf-8"))

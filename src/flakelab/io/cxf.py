@@ -1,0 +1,265 @@
+"""CxF3 (ISO 17972-1) with multi-angle geometry, through colour-cxf.
+
+Layout written (and expected on reading):
+
+- one ``ColorSpecification`` per geometry, ``Id="CS_<name>"``, whose ``MeasurementSpec``
+  holds ``GeometryChoice/MultiAngle/BRDFAngle`` (IlluminationAngle, Aspecular, Azimuth,
+  ``Notation`` = the ASTM name) and the ``WavelengthRange``;
+- one ``Object`` per sample, with a ``ReflectanceSpectrum`` (and optionally a
+  ``ColorCIELab``) per geometry referring to that specification;
+- texture readings, instrument and free metadata as ``Tag`` elements in a ``TagCollection``
+  named ``flakelab`` (``texture:Sa15``, ``instrument``, ``meta:<key>``).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from os import PathLike
+
+import colour_cxf
+import numpy as np
+from colour_cxf import cxf3
+from xsdata.exceptions import ParserError
+from xsdata.models.datatype import XmlDateTime
+
+from flakelab import __version__
+from flakelab.core.colorimetry import D65_10, Conditions
+from flakelab.core.geometry import Geometry
+from flakelab.core.measurement import Measurement
+from flakelab.errors import MeasurementFileError
+from flakelab.io.records import (
+    Reading,
+    assemble,
+    parse_conditions,
+    parse_number,
+    parse_spectrum,
+    write_atomically,
+)
+
+__all__ = ["read_cxf", "write_cxf"]
+
+_TAGS = "flakelab"
+_CXF_ILLUMINANTS = {m.value for m in cxf3.EilluminantType}
+
+
+def _geometry_of(path: str | PathLike, spec: cxf3.ColorSpecification) -> Geometry | None:
+    choice = spec.measurement_spec.geometry_choice if spec.measurement_spec else None
+    multi = getattr(choice, "choice", None)
+    if not isinstance(multi, cxf3.MultiAngleType):
+        return None
+    if len(multi.brdfangle) != 1:
+        raise MeasurementFileError(
+            path, f"expected one BRDFAngle, got {len(multi.brdfangle)}",
+            field=f"ColorSpecification {spec.id}",
+        )  # fmt: skip
+    angle = multi.brdfangle[0]
+    where = f"ColorSpecification {spec.id}, BRDFAngle"
+    try:
+        geometry = Geometry(
+            parse_number(path, angle.illumination_angle, f"{where}, IlluminationAngle"),
+            parse_number(path, angle.aspecular, f"{where}, Aspecular"),
+            0.0 if angle.azimuth is None else parse_number(path, angle.azimuth, f"{where}, Azimuth"),
+        )
+    except ValueError as error:
+        if isinstance(error, MeasurementFileError):
+            raise
+        raise MeasurementFileError(path, str(error), field=where) from None
+    if angle.notation and _parses(angle.notation) and Geometry.parse(angle.notation) != geometry:
+        raise MeasurementFileError(
+            path, f"Notation {angle.notation!r} disagrees with the angles ({geometry.name})",
+            field=where,
+        )  # fmt: skip
+    return geometry
+
+
+def _parses(name: str) -> bool:
+    try:
+        Geometry.parse(name)
+    except ValueError:
+        return False
+    return True
+
+
+def _conditions_of(path: str | PathLike, spec: cxf3.ColorSpecification) -> Conditions | None:
+    tristimulus = spec.tristimulus_spec
+    if tristimulus is None or tristimulus.observer is None:
+        return None
+    illuminant = tristimulus.illuminant_or_custom_illuminant
+    name = getattr(getattr(illuminant, "value", None), "value", None)
+    observer = getattr(tristimulus.observer.value, "value", "")
+    if name is None:
+        return None
+    return parse_conditions(
+        path, f"{name}/{observer.split('_')[0]}", f"ColorSpecification {spec.id}, TristimulusSpec"
+    )
+
+
+def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measurement]:
+    """Read multi-angle reflectance measurements from a CxF3 file."""
+    data = open(path, "rb").read() if content is None else content  # noqa: SIM115
+    try:
+        document = colour_cxf.read_cxf(data)
+    except (ParserError, ValueError, TypeError) as error:
+        raise MeasurementFileError(path, f"not valid CxF3 XML ({error})") from None
+    resources = document.resources
+    specs = (
+        resources.color_specification_collection.color_specification
+        if resources and resources.color_specification_collection
+        else []
+    )
+    geometries = {s.id: _geometry_of(path, s) for s in specs}
+    conditions = {s.id: _conditions_of(path, s) for s in specs}
+    objects = resources.object_collection.object_value if resources and resources.object_collection else []
+    if not objects:
+        raise MeasurementFileError(path, "no Object in ObjectCollection")
+
+    readings, texture, metadata = [], {}, {}
+    wavelengths: np.ndarray | None = None
+    instrument = None
+    lab_conditions = D65_10
+    for obj in objects:
+        sample = obj.name or obj.id
+        values = obj.color_values.choice if obj.color_values else []
+        labs = {
+            v.color_specification: np.array([v.l, v.a, v.b], dtype=float)
+            for v in values if isinstance(v, cxf3.ColorCielab)
+        }  # fmt: skip
+        for v in values:
+            if not isinstance(v, cxf3.ReflectanceSpectrum):
+                continue
+            where = f"Object {sample!r}, ReflectanceSpectrum {v.color_specification}"
+            geometry = geometries.get(v.color_specification)
+            if geometry is None:
+                raise MeasurementFileError(
+                    path, "its ColorSpecification has no MultiAngle BRDFAngle geometry", field=where
+                )
+            spec = next(s for s in specs if s.id == v.color_specification)
+            wr = spec.measurement_spec.wavelength_range
+            start = v.start_wl if v.start_wl is not None else (wr.start_wl if wr else None)
+            if start is None or wr is None or wr.increment is None:
+                raise MeasurementFileError(path, "no StartWL or WavelengthRange Increment", field=where)
+            grid = start + wr.increment * np.arange(len(v.value), dtype=float)
+            if wavelengths is None:
+                wavelengths = grid
+            elif not np.array_equal(grid, wavelengths):
+                raise MeasurementFileError(path, "spectra on different wavelength grids", field=where)
+            lab = labs.get(v.color_specification)
+            if lab is not None and conditions.get(v.color_specification):
+                lab_conditions = conditions[v.color_specification]
+            readings.append(
+                Reading(
+                    where=where, sample=sample, geometry=geometry,
+                    reflectance=parse_spectrum(path, v.value, grid, where), lab=lab,
+                    measured_at=obj.creation_date.value.to_datetime() if obj.creation_date
+                    and obj.creation_date.value else None,
+                )
+            )  # fmt: skip
+        for collection in obj.tag_collection:
+            if collection.name != _TAGS:
+                continue
+            for tag in collection.tag:
+                key, value = tag.name or "", tag.value or ""
+                if key.startswith("texture:"):
+                    texture.setdefault(sample, {})[key[8:]] = parse_number(
+                        path, value, f"Object {sample!r}, Tag {key}"
+                    )
+                elif key == "instrument":
+                    instrument = value
+                elif key.startswith("meta:"):
+                    metadata.setdefault(sample, {})[key[5:]] = value
+    if wavelengths is None:
+        raise MeasurementFileError(path, "no ReflectanceSpectrum in any Object")
+    return assemble(
+        path, readings, wavelengths, instrument=instrument, lab_conditions=lab_conditions,
+        texture=texture, metadata=metadata,
+    )  # fmt: skip
+
+
+def _xml_datetime(moment: datetime | None) -> cxf3.CreationDate:
+    moment = moment or datetime.now().replace(microsecond=0)
+    return cxf3.CreationDate(value=XmlDateTime.from_datetime(moment))
+
+
+def _specification(geometry: Geometry, wavelengths: np.ndarray, conditions: Conditions):
+    interval = int(round(wavelengths[1] - wavelengths[0]))
+    cxf_illuminant = conditions.illuminant.replace("FL", "F")
+    tristimulus = None
+    if cxf_illuminant in _CXF_ILLUMINANTS:
+        tristimulus = cxf3.TristimulusSpec(
+            illuminant_or_custom_illuminant=cxf3.Illuminant(value=cxf3.EilluminantType(cxf_illuminant)),
+            observer=cxf3.Observer(value=cxf3.EobserverType(f"{conditions.observer}_Degree")),
+            method=cxf3.Method(value=cxf3.EastmTableType.E308_TABLE6),
+        )
+    return cxf3.ColorSpecification(
+        id=f"CS_{geometry.name}",
+        tristimulus_spec=tristimulus,
+        measurement_spec=cxf3.MeasurementSpec(
+            measurement_type=cxf3.MeasurementType(value=cxf3.EspectrumType.SPECTRUM_REFLECTANCE),
+            geometry_choice=cxf3.GeometryChoice(
+                choice=cxf3.MultiAngleType(
+                    brdfangle=[
+                        cxf3.Brdfangle(
+                            illumination_angle=geometry.illumination,
+                            aspecular=geometry.aspecular,
+                            azimuth=None if geometry.in_plane else geometry.azimuth,
+                            notation=geometry.name,
+                        )
+                    ]
+                )
+            ),
+            wavelength_range=cxf3.WavelengthRange(start_wl=int(wavelengths[0]), increment=interval),
+        ),
+    )
+
+
+def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
+    """Write measurements as one CxF3 document (see module docstring for the layout)."""
+    wavelengths = measurements[0].wavelengths
+    if not 360 <= wavelengths[0] <= 400 or np.any(np.diff(wavelengths) % 1):
+        raise ValueError(
+            f"CxF3 holds spectra starting at 360–400 nm on whole-nm steps, got start "
+            f"{wavelengths[0]:g} nm"
+        )
+    geometries = sorted({g for m in measurements for g in m.geometries})
+    conditions = measurements[0].stored_lab_conditions
+    specs = [_specification(g, wavelengths, conditions) for g in geometries]
+    objects = []
+    for number, m in enumerate(measurements, start=1):
+        values: list[object] = []
+        for i, g in enumerate(m.geometries):
+            values.append(
+                cxf3.ReflectanceSpectrum(
+                    value=[float(v) for v in m.reflectance[i]],
+                    start_wl=int(m.wavelengths[0]),
+                    color_specification=f"CS_{g.name}",
+                )
+            )
+            if m.stored_lab is not None:
+                L, a, b = map(float, m.stored_lab[i])
+                values.append(cxf3.ColorCielab(l=L, a=a, b=b, color_specification=f"CS_{g.name}"))
+        tags = [cxf3.Tag(name=f"texture:{k}", value=repr(v)) for k, v in m.texture.items()]
+        tags += [cxf3.Tag(name=f"meta:{k}", value=v) for k, v in m.metadata.items()]
+        if m.instrument:
+            tags.append(cxf3.Tag(name="instrument", value=m.instrument))
+        objects.append(
+            cxf3.Object(
+                object_type="Standard" if number == 1 else "Sample",
+                name=m.sample,
+                id=str(number),
+                creation_date=_xml_datetime(m.measured_at),
+                color_values=cxf3.ColorValues(choice=values),
+                tag_collection=[cxf3.TagCollection(name=_TAGS, tag=tags)] if tags else [],
+            )
+        )
+    document = cxf3.CxF(
+        file_information=cxf3.FileInformation(
+            creator=f"flakelab {__version__}", creation_date=_xml_datetime(None),
+            description="Multi-angle reflectance measurements",
+        ),
+        resources=cxf3.Resources(
+            object_collection=cxf3.ObjectCollection(object_value=objects),
+            color_specification_collection=cxf3.ColorSpecificationCollection(color_specification=specs),
+        ),
+    )  # fmt: skip
+    data = colour_cxf.write_cxf(document)
+    write_atomically(path, lambda temporary: temporary.write_bytes(data))

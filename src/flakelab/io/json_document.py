@@ -1,0 +1,136 @@
+"""flakelab's JSON measurement document (lossless for everything a Measurement holds).
+
+::
+
+    {"format": "flakelab-measurements", "version": 1,
+     "measurements": [{
+        "sample": "...", "instrument": "...", "measured_at": "2024-05-29T19:02:51",
+        "wavelengths": [400, 410, ...],
+        "lab_conditions": "D65/10",
+        "geometries": [{"name": "45as15", "reflectance": [...], "lab": [L, a, b]}, ...],
+        "texture": {"Sa15": 12.1, ...}, "metadata": {"key": "value"}}]}
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime
+from os import PathLike
+from typing import Any
+
+import numpy as np
+
+from flakelab.core.measurement import Measurement
+from flakelab.errors import MeasurementFileError
+from flakelab.io.records import (
+    Reading,
+    assemble,
+    parse_conditions,
+    parse_geometry_name,
+    parse_number,
+    parse_spectrum,
+    parse_wavelength_header,
+    write_atomically,
+)
+
+__all__ = ["read_json", "write_json", "FORMAT_NAME"]
+
+FORMAT_NAME = "flakelab-measurements"
+
+
+def _require(path: str | PathLike, mapping: Any, key: str, kind: type, where: str) -> Any:
+    if not isinstance(mapping, dict) or key not in mapping:
+        raise MeasurementFileError(path, f"missing key {key!r}", field=where)
+    value = mapping[key]
+    if not isinstance(value, kind):
+        raise MeasurementFileError(
+            path, f"expected {kind.__name__}, got {type(value).__name__}", field=f"{where}.{key}"
+        )
+    return value
+
+
+def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement]:
+    """Read a flakelab JSON measurement document."""
+    try:
+        document = json.loads(open(path, encoding="utf-8").read() if text is None else text)  # noqa: SIM115
+    except json.JSONDecodeError as error:
+        raise MeasurementFileError(
+            path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"
+        ) from None
+    if not isinstance(document, dict) or document.get("format") != FORMAT_NAME:
+        raise MeasurementFileError(path, f"expected a JSON object with format {FORMAT_NAME!r}")
+    items = _require(path, document, "measurements", list, "$")
+    results: list[Measurement] = []
+    for n, item in enumerate(items):
+        where = f"measurements[{n}]"
+        sample = _require(path, item, "sample", str, where)
+        wavelengths = parse_wavelength_header(
+            path, _require(path, item, "wavelengths", list, where), f"{where}.wavelengths"
+        )
+        readings = []
+        for k, g in enumerate(_require(path, item, "geometries", list, where)):
+            gw = f"{where}.geometries[{k}]"
+            geometry = parse_geometry_name(path, _require(path, g, "name", str, gw), f"{gw}.name")
+            values = _require(path, g, "reflectance", list, gw)
+            lab = g.get("lab")
+            if lab is not None:
+                if not isinstance(lab, list) or len(lab) != 3:
+                    raise MeasurementFileError(path, "expected [L, a, b]", field=f"{gw}.lab")
+                lab = np.array([parse_number(path, v, f"{gw}.lab") for v in lab])
+            readings.append(
+                Reading(where=gw, sample=sample, geometry=geometry, lab=lab,
+                        reflectance=parse_spectrum(path, values, wavelengths, f"{gw}.reflectance"))
+            )  # fmt: skip
+        measured_at = item.get("measured_at")
+        try:
+            moment = datetime.fromisoformat(measured_at) if measured_at else None
+        except (TypeError, ValueError):
+            raise MeasurementFileError(
+                path, f"expected an ISO 8601 date-time, got {measured_at!r}", field=f"{where}.measured_at"
+            ) from None
+        for r in readings:
+            r.measured_at = moment
+        texture = item.get("texture") or {}
+        if not isinstance(texture, dict):
+            raise MeasurementFileError(path, "expected an object", field=f"{where}.texture")
+        texture = {k: parse_number(path, v, f"{where}.texture.{k}") for k, v in texture.items()}
+        conditions = parse_conditions(path, item.get("lab_conditions", "D65/10"), f"{where}.lab_conditions")
+        metadata = item.get("metadata") or {}
+        if not isinstance(metadata, dict):
+            raise MeasurementFileError(path, "expected an object", field=f"{where}.metadata")
+        results += assemble(
+            path, readings, wavelengths, instrument=item.get("instrument"), lab_conditions=conditions,
+            texture={sample: texture}, metadata={sample: {k: str(v) for k, v in metadata.items()}},
+        )  # fmt: skip
+    if not results:
+        raise MeasurementFileError(path, "no measurements", field="measurements")
+    return results
+
+
+def measurement_to_dict(m: Measurement) -> dict[str, Any]:
+    geometries = []
+    for i, g in enumerate(m.geometries):
+        entry: dict[str, Any] = {"name": g.name, "reflectance": m.reflectance[i].tolist()}
+        if m.stored_lab is not None:
+            entry["lab"] = m.stored_lab[i].tolist()
+        geometries.append(entry)
+    return {
+        "sample": m.sample,
+        "instrument": m.instrument,
+        "measured_at": m.measured_at.isoformat() if m.measured_at else None,
+        "wavelengths": m.wavelengths.tolist(),
+        "lab_conditions": str(m.stored_lab_conditions),
+        "geometries": geometries,
+        "texture": dict(m.texture),
+        "metadata": dict(m.metadata),
+    }
+
+
+def write_json(measurements: list[Measurement], path: str | PathLike) -> None:
+    document = {
+        "format": FORMAT_NAME,
+        "version": 1,
+        "measurements": [measurement_to_dict(m) for m in measurements],
+    }
+    text = json.dumps(document, indent=1, ensure_ascii=False)
+    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))

@@ -1,0 +1,220 @@
+"""X-Rite MA-T12 QC export (.xlsx), as the instrument software writes it.
+
+Sheets: ``Color Data`` (L*a*b* per geometry), ``Spectral Data`` (reflectance factor per
+geometry, 400–700 nm), ``Texture Data``, ``Texture Images``. Each sheet opens with
+``QC JOB:``, ``STANDARD:`` (and ``ILLUMINANT/OBSERVER:``) rows, then a header row starting
+with ``Name``. The shared exports carry no texture values, so the layout of texture columns
+in a real export is not known here; flakelab reads and writes texture as one row per sample
+with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from datetime import datetime
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+import openpyxl
+
+from flakelab.core.colorimetry import D65_10
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.errors import MeasurementFileError
+from flakelab.io.records import (
+    Reading,
+    assemble,
+    parse_conditions,
+    parse_geometry_name,
+    parse_number,
+    parse_spectrum,
+    parse_wavelength_header,
+    write_atomically,
+)
+
+__all__ = ["read_mat12_xlsx", "write_mat12_xlsx", "INSTRUMENT"]
+
+INSTRUMENT = "X-Rite MA-T12"
+_SPECTRAL, _COLOR, _TEXTURE = "Spectral Data", "Color Data", "Texture Data"
+
+
+def _split_sheet(rows: list[tuple]) -> tuple[dict[str, str], int]:
+    """Preamble key/values (``QC JOB`` …) and the index of the header row (first cell 'Name')."""
+    preamble: dict[str, str] = {}
+    for i, row in enumerate(rows):
+        first = str(row[0]).strip() if row and row[0] is not None else ""
+        if first == "Name":
+            return preamble, i
+        if first.endswith(":"):
+            preamble[first[:-1]] = "" if len(row) < 2 or row[1] is None else str(row[1])
+    return preamble, -1
+
+
+def _date(value: object) -> datetime | None:
+    if isinstance(value, datetime):
+        return value
+    if isinstance(value, str) and value.strip():
+        try:
+            return datetime.fromisoformat(value.strip())
+        except ValueError:
+            return None
+    return None
+
+
+def _data_rows(rows: list[tuple], header: int) -> list[tuple[int, tuple]]:
+    return [
+        (i + 1, row)
+        for i, row in enumerate(rows[header + 1 :], start=header + 1)
+        if row and any(v not in (None, "") for v in row)
+    ]
+
+
+def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
+    """Read every sample of an MA-T12 QC export.
+
+    Raises
+    ------
+    MeasurementFileError
+        For a truncated or corrupt workbook, a missing sheet or header, a wavelength header that
+        is not a regular grid, a non-numeric or NaN value, or an unknown geometry name.
+    """
+    try:
+        workbook = openpyxl.load_workbook(path, read_only=True, data_only=True)
+    except (zipfile.BadZipFile, KeyError, OSError, ValueError) as error:
+        raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
+    try:
+        sheets = {ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook}
+    except (zipfile.BadZipFile, OSError, ValueError, KeyError) as error:
+        raise MeasurementFileError(path, f"truncated or corrupt workbook ({error})") from None
+    finally:
+        workbook.close()
+    if _SPECTRAL not in sheets:
+        raise MeasurementFileError(
+            path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'})"
+        )
+    spectral = sheets[_SPECTRAL]
+    preamble, header = _split_sheet(spectral)
+    if header < 0:
+        raise MeasurementFileError(path, "no header row starting with 'Name'", field=_SPECTRAL)
+    labels = list(spectral[header])
+    while labels and labels[-1] in (None, ""):
+        labels.pop()
+    if labels[:3] != ["Name", "Date/Time", "Geometry"]:
+        raise MeasurementFileError(
+            path, f"expected columns Name, Date/Time, Geometry, got {labels[:3]}",
+            field=f"{_SPECTRAL}, row {header + 1}",
+        )  # fmt: skip
+    wavelengths = parse_wavelength_header(path, labels[3:], f"{_SPECTRAL}, row {header + 1}")
+    n = wavelengths.size
+
+    labs = _read_color_sheet(path, sheets.get(_COLOR))
+    lab_conditions = D65_10
+    if _COLOR in sheets:
+        color_preamble, _ = _split_sheet(sheets[_COLOR])
+        if color_preamble.get("ILLUMINANT/OBSERVER"):
+            lab_conditions = parse_conditions(
+                path, color_preamble["ILLUMINANT/OBSERVER"], f"{_COLOR}, ILLUMINANT/OBSERVER"
+            )
+
+    readings = []
+    for number, row in _data_rows(spectral, header):
+        where = f"{_SPECTRAL}, row {number}"
+        cells = list(row) + [None] * (3 + n - len(row))
+        sample = str(cells[0]).strip() if cells[0] is not None else ""
+        if not sample:
+            raise MeasurementFileError(path, "empty sample name", field=f"{where}, Name")
+        geometry = parse_geometry_name(path, cells[2], f"{where}, Geometry")
+        readings.append(
+            Reading(
+                where=where,
+                sample=sample,
+                geometry=geometry,
+                reflectance=parse_spectrum(path, cells[3 : 3 + n], wavelengths, where),
+                lab=labs.get((sample, geometry.name)) if labs else None,
+                measured_at=_date(cells[1]),
+            )
+        )
+    texture = _read_texture_sheet(path, sheets.get(_TEXTURE))
+    metadata = {
+        r.sample: {k: v for k, v in (("qc_job", preamble.get("QC JOB")),
+                                     ("standard", preamble.get("STANDARD"))) if v}
+        for r in readings
+    }  # fmt: skip
+    return assemble(
+        path, readings, wavelengths, instrument=INSTRUMENT, lab_conditions=lab_conditions,
+        texture=texture, metadata=metadata,
+    )  # fmt: skip
+
+
+def _read_color_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
+    if not rows:
+        return {}
+    _, header = _split_sheet(rows)
+    if header < 0:
+        return {}
+    labs = {}
+    for number, row in _data_rows(rows, header):
+        where = f"{_COLOR}, row {number}"
+        if len(row) < 6:
+            raise MeasurementFileError(path, f"expected 6 columns, got {len(row)}", field=where)
+        geometry = parse_geometry_name(path, row[2], f"{where}, Geometry")
+        lab = [parse_number(path, v, f"{where}, {k}") for v, k in zip(row[3:6], "Lab", strict=True)]
+        labs[(str(row[0]).strip(), geometry.name)] = np.array(lab)
+    return labs
+
+
+def _read_texture_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
+    if not rows:
+        return {}
+    _, header = _split_sheet(rows)
+    if header < 0:
+        return {}
+    labels = [str(v).strip() if v is not None else "" for v in rows[header]]
+    columns = {i: k for i, k in enumerate(labels) if k in TEXTURE_READINGS}
+    texture: dict[str, dict[str, float]] = {}
+    for number, row in _data_rows(rows, header):
+        where = f"{_TEXTURE}, row {number}"
+        values = {
+            k: parse_number(path, row[i], f"{where}, {k}")
+            for i, k in columns.items()
+            if i < len(row) and row[i] not in (None, "")
+        }
+        if values:
+            texture.setdefault(str(row[0]).strip(), {}).update(values)
+    return texture
+
+
+def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> None:
+    """Write measurements in the MA-T12 QC export layout (all samples in one workbook)."""
+    wavelengths = measurements[0].wavelengths
+    if any(not np.array_equal(m.wavelengths, wavelengths) for m in measurements):
+        raise ValueError("expected all measurements on one wavelength grid for one workbook")
+    workbook = openpyxl.Workbook()
+    standard = measurements[0].metadata.get("standard", measurements[0].sample)
+    job = measurements[0].metadata.get("qc_job", "flakelab export")
+    conditions = measurements[0].stored_lab_conditions
+
+    color = workbook.active
+    color.title = _COLOR
+    color.append(["QC JOB:", job])
+    color.append(["STANDARD:", standard])
+    color.append(["ILLUMINANT/OBSERVER:", str(conditions)])
+    color.append(["Name", "Date/Time", "Geometry", *(f"{k}* ({conditions})" for k in "Lab")])
+    texture = workbook.create_sheet(_TEXTURE)
+    texture.append(["QC JOB:", job])
+    texture.append(["STANDARD:", standard])
+    texture.append(["Name", "Date/Time", "Geometry", *TEXTURE_READINGS])
+    spectral = workbook.create_sheet(_SPECTRAL)
+    spectral.append(["QC JOB:", job])
+    spectral.append(["STANDARD:", standard])
+    spectral.append(["Name", "Date/Time", "Geometry", *(f"{w:g}" for w in wavelengths)])
+    for m in measurements:
+        lab = m.stored_lab if m.stored_lab is not None else m.lab(conditions)
+        for i, g in enumerate(m.geometries):
+            color.append([m.sample, m.measured_at, g.name, *map(float, lab[i])])
+            spectral.append([m.sample, m.measured_at, g.name, *map(float, m.reflectance[i])])
+        if m.texture:
+            texture.append(
+                [m.sample, m.measured_at, None, *(m.texture.get(k) for k in TEXTURE_READINGS)]
+            )
+    write_atomically(path, lambda temporary: workbook.save(Path(temporary)))

@@ -1,0 +1,201 @@
+"""Shared parsing and checks for every measurement reader: one row = one sample × geometry.
+
+Readers turn their format into :class:`Reading` rows and call :func:`assemble`, so every
+format reports the same problems the same way (file, field, problem).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from flakelab.core.colorimetry import D65_10, Conditions
+from flakelab.core.geometry import Geometry
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.spectra import shape_of
+from flakelab.errors import MeasurementFileError
+
+__all__ = [
+    "Reading",
+    "assemble",
+    "parse_wavelength_header",
+    "parse_number",
+    "parse_geometry_name",
+    "parse_conditions",
+    "write_atomically",
+    "REFLECTANCE_RANGE",
+]
+
+REFLECTANCE_RANGE = (-0.05, 100.0)
+"""Accepted reflectance factors: small negatives from instrument noise on black; large values
+near specular on bright aluminium. Outside this a file is wrong, not the paint."""
+
+_WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
+
+
+@dataclass
+class Reading:
+    """One spectrum of one sample at one geometry, with where it came from (for messages)."""
+
+    where: str
+    sample: str
+    geometry: Geometry
+    reflectance: np.ndarray
+    lab: np.ndarray | None = None
+    measured_at: datetime | None = None
+    extras: dict[str, str] = field(default_factory=dict)
+
+
+def parse_wavelength_header(path: str | PathLike, labels: Sequence[object], where: str) -> np.ndarray:
+    """Wavelengths [nm] from column labels such as ``400``, ``R400`` or ``400nm``; checked to
+    form a regular grid within 360–780 nm."""
+    values = []
+    for i, label in enumerate(labels):
+        match = _WAVELENGTH.match(str(label)) if label is not None else None
+        if match is None:
+            raise MeasurementFileError(
+                path, f"expected a wavelength such as 'R400' or '400', got {label!r}",
+                field=f"{where}, column {i + 1}",
+            )  # fmt: skip
+        values.append(float(match[1]))
+    wavelengths = np.array(values)
+    try:
+        shape_of(wavelengths)
+    except ValueError as error:
+        raise MeasurementFileError(path, f"wavelengths {error}", field=where) from None
+    if wavelengths[0] < 360 or wavelengths[-1] > 780:
+        raise MeasurementFileError(
+            path, f"expected wavelengths within 360–780 nm, got {wavelengths[0]:g}–"
+            f"{wavelengths[-1]:g} nm", field=where,
+        )  # fmt: skip
+    return wavelengths
+
+
+def parse_number(path: str | PathLike, value: object, where: str) -> float:
+    """A finite float from a cell, or a :class:`MeasurementFileError` naming the cell."""
+    if isinstance(value, bool):
+        raise MeasurementFileError(path, f"expected a number, got {value!r}", field=where)
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        shown = "an empty cell" if value in (None, "") else repr(value)
+        raise MeasurementFileError(path, f"expected a number, got {shown}", field=where) from None
+    if not math.isfinite(number):
+        raise MeasurementFileError(path, f"expected a finite number, got {value!r}", field=where)
+    return number
+
+
+def parse_spectrum(
+    path: str | PathLike, values: Sequence[object], wavelengths: np.ndarray, where: str
+) -> np.ndarray:
+    if len(values) != wavelengths.size:
+        raise MeasurementFileError(
+            path, f"expected {wavelengths.size} reflectance values, got {len(values)}", field=where
+        )
+    spectrum = np.array(
+        [parse_number(path, v, f"{where}, {wl:g} nm") for v, wl in zip(values, wavelengths, strict=True)]
+    )
+    low, high = REFLECTANCE_RANGE
+    bad = np.flatnonzero((spectrum < low) | (spectrum > high))
+    if bad.size:
+        i = bad[0]
+        raise MeasurementFileError(
+            path, f"expected a reflectance factor in [{low}, {high}], got {spectrum[i]:g}",
+            field=f"{where}, {wavelengths[i]:g} nm",
+        )  # fmt: skip
+    return spectrum
+
+
+def parse_geometry_name(path: str | PathLike, value: object, where: str) -> Geometry:
+    try:
+        return Geometry.parse(str(value).strip() if value is not None else "")
+    except ValueError as error:
+        raise MeasurementFileError(path, str(error), field=where) from None
+
+
+def parse_conditions(path: str | PathLike, text: str, where: str) -> Conditions:
+    try:
+        return Conditions.parse(text)
+    except ValueError as error:
+        raise MeasurementFileError(path, str(error), field=where) from None
+
+
+def assemble(
+    path: str | PathLike,
+    readings: Iterable[Reading],
+    wavelengths: np.ndarray,
+    *,
+    instrument: str | None = None,
+    lab_conditions: Conditions = D65_10,
+    texture: dict[str, dict[str, float]] | None = None,
+    metadata: dict[str, dict[str, str]] | None = None,
+) -> list[Measurement]:
+    """Group readings by sample (file order) into measurements, checking that each sample has
+    each geometry once and that stored L*a*b* is given for all of a sample's geometries or none."""
+    groups: dict[str, list[Reading]] = {}
+    for reading in readings:
+        groups.setdefault(reading.sample, []).append(reading)
+    if not groups:
+        raise MeasurementFileError(path, "no measurements found (the data table is empty)")
+    measurements = []
+    for sample, rows in groups.items():
+        seen: dict[Geometry, str] = {}
+        for row in rows:
+            if row.geometry in seen:
+                raise MeasurementFileError(
+                    path, f"geometry {row.geometry.name} of sample {sample!r} appears twice "
+                    f"(also at {seen[row.geometry]})", field=row.where,
+                )  # fmt: skip
+            seen[row.geometry] = row.where
+        labs = [r.lab for r in rows]
+        if any(lab is None for lab in labs) and not all(lab is None for lab in labs):
+            missing = next(r.where for r in rows if r.lab is None)
+            raise MeasurementFileError(
+                path, f"sample {sample!r} has L*a*b* for some geometries only", field=missing
+            )
+        sample_texture = (texture or {}).get(sample, {})
+        unknown = [k for k in sample_texture if k not in TEXTURE_READINGS]
+        if unknown:
+            raise MeasurementFileError(
+                path, f"expected texture readings among {', '.join(TEXTURE_READINGS)}, got {unknown}",
+                field=f"sample {sample!r}",
+            )  # fmt: skip
+        dates = [r.measured_at for r in rows if r.measured_at is not None]
+        measurements.append(
+            Measurement(
+                sample=sample,
+                geometries=tuple(r.geometry for r in rows),
+                wavelengths=wavelengths,
+                reflectance=np.stack([r.reflectance for r in rows]),
+                texture=sample_texture,
+                instrument=instrument,
+                measured_at=dates[0] if dates else None,
+                stored_lab=None if labs[0] is None else np.stack(labs),  # type: ignore[arg-type]
+                stored_lab_conditions=lab_conditions,
+                metadata=(metadata or {}).get(sample, {}),
+            )
+        )
+    return measurements
+
+
+def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> None:
+    """Write through a temporary file beside ``path`` and rename it into place, so a failure
+    never leaves a half-written file and never destroys the previous one."""
+    target = Path(path)
+    handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
+    os.close(handle)
+    try:
+        write(Path(temporary))
+        os.replace(temporary, target)
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
