@@ -187,6 +187,12 @@ def assemble(
     return measurements
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> None:
     """Write through a temporary file beside ``path`` and rename it into place, so a failure
     never leaves a half-written file and never destroys the previous one."""
@@ -195,6 +201,7 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
     os.close(handle)
     try:
         write(Path(temporary))
+        os.chmod(temporary, 0o666 & ~_umask())
         os.replace(temporary, target)
     finally:
         if os.path.exists(temporary):

@@ -1,0 +1,245 @@
+"""The ``flakelab`` command: thin wrappers that parse, call library functions and present."""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+from rich import box
+from rich.console import Console
+from rich.table import Table
+
+from flakelab import __version__
+from flakelab.core.colorimetry import Conditions
+from flakelab.core.comparison import compare as compare_measurements
+from flakelab.core.comparison import describe
+from flakelab.core.measurement import Measurement
+from flakelab.data import example_path
+from flakelab.errors import FlakelabError
+from flakelab.io import read_measurement, read_measurements, read_tolerance, write_measurements
+
+app = typer.Typer(
+    help="flakelab: match, predict and show the appearance of car paints.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+console = Console(width=None if sys.stdout.isatty() else 110)
+errors = Console(stderr=True)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def reports_errors(command: F) -> F:
+    """Turn user-input problems into one line on stderr and exit status 2 (never a traceback)."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except (FlakelabError, ValueError, KeyError, OSError) as error:
+            message = error.args[0] if isinstance(error, KeyError) and error.args else error
+            errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+            raise typer.Exit(2) from None
+        except Exception as error:  # pragma: no cover - a bug, reported without a traceback
+            if os.environ.get("FLAKELAB_DEBUG"):
+                raise
+            errors.print(
+                f"[bold red]internal error:[/] {type(error).__name__}: {error} "
+                "(set FLAKELAB_DEBUG=1 for a traceback and please report it)",
+                highlight=False, soft_wrap=True,
+            )  # fmt: skip
+            raise typer.Exit(70) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+ConditionsOption = Annotated[
+    str, typer.Option("--conditions", "-c", help="Illuminant/observer, e.g. D65/10, A/10, F11/10.")
+]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")]
+SampleOption = Annotated[
+    str | None, typer.Option("--sample", "-s", help="Sample name in a multi-sample file.")
+]
+
+
+def _fmt(value: float | None, digits: int = 2) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def _print_description(info: dict[str, Any]) -> None:
+    table = Table(
+        title=f"{info['sample']}  ({info['conditions']})", title_justify="left", box=box.SIMPLE_HEAD, collapse_padding=True
+    )
+    stored = any("de00_vs_stored" in g for g in info["geometries"])
+    for column in ("geometry", "θ_flake", "θ_inc", "L*", "a*", "b*", "C*", "h°") + (
+        ("ΔE00 vs file",) if stored else ()
+    ):
+        table.add_column(column, justify="left" if column == "geometry" else "right", no_wrap=True)
+    for g in info["geometries"]:
+        cells = [g["name"], _fmt(g["theta_flake"], 1), _fmt(g["theta_inc"], 1)]
+        cells += [_fmt(g[k]) for k in ("L", "a", "b", "C")] + [_fmt(g["h"], 1)]
+        cells += [f"{g['de00_vs_stored']:.4f}"] if stored else []
+        table.add_row(*cells)
+    console.print(table)
+    line = f"flop index: {_fmt(info['flop_index'])}"
+    if info["instrument"]:
+        line += f"   instrument: {info['instrument']}"
+    if info["measured_at"]:
+        line += f"   measured: {info['measured_at']}"
+    console.print(line, highlight=False)
+    if info["texture"]:
+        console.print("texture: " + "  ".join(f"{k} {v:.2f}" for k, v in info["texture"].items()))
+
+
+def _one_or_example(path: Path | None, example: str, sample: str | None) -> Measurement:
+    return read_measurement(path if path is not None else example_path(example), sample)
+
+
+@app.command()
+@reports_errors
+def inspect(
+    path: Annotated[Path | None, typer.Argument(help="Measurement file (xlsx, CxF, CSV, JSON).")] = None,
+    sample: SampleOption = None,
+    all_samples: Annotated[bool, typer.Option("--all", help="Every sample in the file.")] = False,
+    conditions: ConditionsOption = "D65/10",
+    as_json: JsonOption = False,
+    example: Annotated[bool, typer.Option("--example", help="Inspect the shipped example target.")] = False,
+) -> None:
+    """Per-geometry L*a*b*, C*, h, flake angles, flop index and texture of a measurement."""
+    if path is None and not example:
+        raise FlakelabError("give a measurement file, or --example")
+    cond = Conditions.parse(conditions)
+    source = path if path is not None else example_path("target")
+    measurements = read_measurements(source) if all_samples else [_one_or_example(path, "target", sample)]
+    infos = [describe(m, cond) for m in measurements]
+    if as_json:
+        out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
+        print(json.dumps(out, indent=1))
+        return
+    for info in infos:
+        _print_description(info)
+
+
+@app.command()
+@reports_errors
+def compare(
+    reference: Annotated[Path | None, typer.Argument(help="Target / standard measurement.")] = None,
+    sample: Annotated[Path | None, typer.Argument(help="Sample (spray-out) measurement.")] = None,
+    tolerance: Annotated[
+        str, typer.Option("--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or TOML/JSON file.")
+    ] = "refinish",
+    reference_sample: Annotated[str | None, typer.Option("--reference-sample")] = None,
+    sample_name: Annotated[str | None, typer.Option("--sample-name")] = None,
+    conditions: ConditionsOption = "D65/10",
+    as_json: JsonOption = False,
+    example: Annotated[
+        bool, typer.Option("--example", help="Compare the shipped example spray-out with its target.")
+    ] = False,
+    fail_on_reject: Annotated[
+        bool, typer.Option("--fail-on-reject", help="Exit with status 1 when a geometry fails.")
+    ] = False,
+) -> None:
+    """Multi-angle colour difference of a sample against a reference, with pass/fail."""
+    if not example and (reference is None or sample is None):
+        raise FlakelabError("give a reference and a sample file, or --example")
+    tol = read_tolerance(tolerance)
+    ref = _one_or_example(reference, "target", reference_sample)
+    smp = _one_or_example(sample, "sprayout", sample_name)
+    result = compare_measurements(ref, smp, tol, conditions=Conditions.parse(conditions))
+    report = result.to_dict()
+    if as_json:
+        print(json.dumps(report, indent=1))
+    else:
+        _print_comparison(report, tol)
+    if fail_on_reject and not result.all_pass:
+        raise typer.Exit(1)
+
+
+_LIMIT_LABELS = {"de00": "ΔE≤", "dL": "L≤", "dC": "C≤", "dH": "H≤"}
+
+
+def _print_comparison(report: dict[str, Any], tol: Any) -> None:
+    table = Table(
+        title=f"{report['sample']} vs {report['reference']}  ({report['conditions']}, "
+        f"tolerance {report['tolerance']})",
+        title_justify="left",
+        box=box.SIMPLE_HEAD,
+        collapse_padding=True,
+    )
+    for column in ("geometry", "L* ref", "L* smp", "ΔL*", "ΔC*", "ΔH*", "ΔE00", "limit", ""):
+        table.add_column(column, justify="left" if column == "geometry" else "right", no_wrap=True)
+    for g in report["geometries"]:
+        limit = tol.limit(g["name"]).to_dict()
+        shown = " ".join(f"{_LIMIT_LABELS[k]}{v:g}" for k, v in limit.items())
+        verdict = "[green]pass[/]" if g["pass"] else "[bold red]FAIL[/]"
+        table.add_row(
+            g["name"], _fmt(g["L_reference"]), _fmt(g["L_sample"]), _fmt(g["dL"]), _fmt(g["dC"]),
+            _fmt(g["dH"]), _fmt(g["de00"]), shown, verdict,
+        )  # fmt: skip
+    console.print(table)
+    verdict = "[green]PASS[/]" if report["pass"] else "[bold red]FAIL[/] at " + ", ".join(
+        report["failing_geometries"]
+    )
+    console.print(
+        f"ΔE00 max {report['de00_max']:.2f}, mean {report['de00_mean']:.2f}   "
+        f"flop index {_fmt(report['flop_index_reference'])} → {_fmt(report['flop_index_sample'])}   "
+        f"{verdict}",
+        highlight=False,
+    )
+    if report["texture_difference"]:
+        console.print(
+            "texture Δ: " + "  ".join(f"{k} {v:+.2f}" for k, v in report["texture_difference"].items())
+        )
+
+
+@app.command()
+@reports_errors
+def convert(
+    source: Annotated[Path, typer.Argument(help="Measurement file to read (any supported format).")],
+    target: Annotated[Path, typer.Argument(help="File to write; format from the extension.")],
+    sample: SampleOption = None,
+) -> None:
+    """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
+    measurements = [read_measurement(source, sample)] if sample else read_measurements(source)
+    write_measurements(measurements, target)
+    errors.print(f"wrote {len(measurements)} measurement(s) to {target}", highlight=False)
+
+
+@app.command()
+@reports_errors
+def plot(
+    path: Annotated[Path, typer.Argument(help="Measurement file.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Image to write (.png, .svg, .pdf).")],
+    sample: SampleOption = None,
+    conditions: ConditionsOption = "D65/10",
+) -> None:
+    """Spectra per geometry and L*, C* versus aspecular angle."""
+    from flakelab.render.plots import plot_measurements
+
+    plot_measurements([read_measurement(path, sample)], output, conditions=Conditions.parse(conditions))
+    errors.print(f"wrote {output}", highlight=False)
+
+
+@app.callback(invoke_without_command=True)
+def main(
+    version: Annotated[bool, typer.Option("--version", help="Print the version and exit.")] = False,
+) -> None:
+    if version:
+        print(f"flakelab {__version__}")
+        raise typer.Exit()
+
+
+def run() -> None:
+    """Console entry point."""
+    app(prog_name="flakelab")
+
+
+if __name__ == "__main__":
+    sys.exit(run())

@@ -1,0 +1,58 @@
+"""Plots of multi-angle measurements: spectra per geometry, L* and C* versus aspecular angle."""
+
+from __future__ import annotations
+
+from os import PathLike
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_sRGB  # noqa: E402
+from flakelab.core.measurement import Measurement  # noqa: E402
+from flakelab.io.records import write_atomically  # noqa: E402
+
+__all__ = ["plot_measurements"]
+
+
+def plot_measurements(
+    measurements: list[Measurement],
+    path: str | PathLike,
+    *,
+    conditions: Conditions = D65_10,
+    dpi: int = 120,
+) -> None:
+    """Save a figure: reflectance spectra per geometry (one panel per sample, each line drawn in
+    its own display colour) and L*, C*ab versus aspecular angle per illumination angle."""
+    n = len(measurements)
+    figure, axes = plt.subplots(n, 2, figsize=(11, 3.6 * n), squeeze=False)
+    for row, m in enumerate(measurements):
+        spectra, trend = axes[row]
+        colours = reflectance_to_sRGB(m.reflectance / max(1.0, m.reflectance.max()), m.wavelengths, conditions)
+        for i, g in enumerate(m.geometries):
+            spectra.plot(m.wavelengths, m.reflectance[i], color=colours[i], lw=1.6, label=g.name)
+        spectra.set(xlabel="wavelength [nm]", ylabel="reflectance factor", title=m.sample)
+        spectra.legend(fontsize=7, ncol=2, frameon=False)
+        spectra.grid(alpha=0.3)
+
+        lch = Lab_to_LCh(m.lab(conditions))
+        lightness_axis, chroma_axis = trend, trend.twinx()
+        for illumination in sorted({g.illumination for g in m.geometries}):
+            rows = [i for i, g in enumerate(m.geometries) if g.illumination == illumination and g.in_plane]
+            rows.sort(key=lambda i: m.geometries[i].aspecular)
+            aspecular = [m.geometries[i].aspecular for i in rows]
+            lightness_axis.plot(aspecular, lch[rows, 0], "o-", label=f"L*  {illumination:g}° light")
+            chroma_axis.plot(aspecular, lch[rows, 1], "s--", alpha=0.7, label=f"C*  {illumination:g}° light")
+        lightness_axis.set(xlabel="aspecular angle [°]", ylabel="L*", title=f"flop ({conditions})")
+        chroma_axis.set_ylabel("C*ab")
+        handles = lightness_axis.get_legend_handles_labels()
+        extra = chroma_axis.get_legend_handles_labels()
+        lightness_axis.legend(handles[0] + extra[0], handles[1] + extra[1], fontsize=7, frameon=False)
+        lightness_axis.grid(alpha=0.3)
+        lightness_axis.set_xticks(np.unique([g.aspecular for g in m.geometries]))
+    figure.tight_layout()
+    fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
+    write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
+    plt.close(figure)
