@@ -92,7 +92,10 @@ def _weights(start: float, end: float, interval: float, conditions: Conditions) 
     cmfs = colour.MSDS_CMFS[OBSERVERS[conditions.observer]]
     illuminant = colour.SDS_ILLUMINANTS[conditions.illuminant]
     basis = colour.MultiSpectralDistributions(np.eye(len(shape.wavelengths)), shape.wavelengths)
-    weights = colour.msds_to_XYZ(basis, cmfs, illuminant, method="ASTM E308", shape=shape) / 100
+    # colour-science warns when it trims the illuminant to the observer's range: expected here.
+    with colour.utilities.suppress_warnings(colour_runtime_warnings=True):
+        weights = colour.msds_to_XYZ(basis, cmfs, illuminant, method="ASTM E308", shape=shape)
+    weights = weights / 100
     weights.setflags(write=False)
     return weights
 

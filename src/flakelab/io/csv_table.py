@@ -50,8 +50,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise MeasurementFileError(path, "empty CSV file")
-    dialect = csv.Sniffer().sniff(lines[0], delimiters=",;\t")
-    rows = list(csv.reader(io.StringIO("\n".join(lines)), dialect))
+    try:
+        delimiter = csv.Sniffer().sniff(lines[0], delimiters=",;\t").delimiter
+    except csv.Error:
+        raise MeasurementFileError(path, "no comma, semicolon or tab separated header", field="header") from None
+    rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=delimiter))
     header = [h.strip() for h in rows[0]]
     columns = {h: i for i, h in enumerate(header)}
     for required in ("sample", "geometry"):

@@ -5,7 +5,8 @@ geometry, 400–700 nm), ``Texture Data``, ``Texture Images``. Each sheet opens 
 ``QC JOB:``, ``STANDARD:`` (and ``ILLUMINANT/OBSERVER:``) rows, then a header row starting
 with ``Name``. The shared exports carry no texture values, so the layout of texture columns
 in a real export is not known here; flakelab reads and writes texture as one row per sample
-with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`.
+with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`. An optional
+``INSTRUMENT:`` preamble row (written by flakelab for other instruments) names the instrument.
 """
 
 from __future__ import annotations
@@ -141,7 +142,7 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         for r in readings
     }  # fmt: skip
     return assemble(
-        path, readings, wavelengths, instrument=INSTRUMENT, lab_conditions=lab_conditions,
+        path, readings, wavelengths, instrument=preamble.get("INSTRUMENT") or INSTRUMENT, lab_conditions=lab_conditions,
         texture=texture, metadata=metadata,
     )  # fmt: skip
 
@@ -207,6 +208,8 @@ def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> N
     spectral = workbook.create_sheet(_SPECTRAL)
     spectral.append(["QC JOB:", job])
     spectral.append(["STANDARD:", standard])
+    if measurements[0].instrument and measurements[0].instrument != INSTRUMENT:
+        spectral.append(["INSTRUMENT:", measurements[0].instrument])
     spectral.append(["Name", "Date/Time", "Geometry", *(f"{w:g}" for w in wavelengths)])
     for m in measurements:
         lab = m.stored_lab if m.stored_lab is not None else m.lab(conditions)

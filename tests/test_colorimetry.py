@@ -1,0 +1,85 @@
+"""Colorimetry against the instrument's own numbers and colour-science's direct integration."""
+
+from __future__ import annotations
+
+import colour
+import numpy as np
+import pytest
+
+from flakelab.core import delta_E_CIE2000
+from flakelab.core.colorimetry import (
+    Conditions,
+    reflectance_to_Lab,
+    reflectance_to_sRGB,
+    reflectance_to_XYZ,
+    white_point,
+)
+from flakelab.core.spectra import SHAPE_RENDER, WAVELENGTHS, resample
+from flakelab.io import read_measurement, read_measurements
+
+
+def test_lab_from_spectra_equals_instrument_lab_in_every_ma_t12_export(ma_t12_files):
+    worst = 0.0
+    for path in ma_t12_files:
+        m = read_measurement(path)
+        assert m.stored_lab is not None and len(m.geometries) == 12
+        worst = max(worst, float(delta_E_CIE2000(m.lab(), m.stored_lab).max()))
+    assert worst <= 0.01
+
+
+def test_lab_from_spectra_equals_instrument_lab_for_all_2760_readings(ma_t12_dir):
+    measurements = read_measurements(ma_t12_dir / "all_samples_spectra.csv")
+    assert len(measurements) == 230
+    lab_rows = np.genfromtxt(
+        ma_t12_dir / "all_samples_instrument_lab_d65_10.csv", delimiter=",", skip_header=1,
+        usecols=(2, 3, 4),
+    )  # fmt: skip
+    computed = np.concatenate([m.lab() for m in measurements])
+    assert computed.shape == lab_rows.shape == (2760, 3)
+    assert delta_E_CIE2000(computed, lab_rows).max() <= 0.01
+
+
+@pytest.mark.parametrize("conditions", ["D65/10", "A/2", "F11/10", "D50/2"])
+def test_matrix_weighting_equals_colour_science_sd_to_XYZ(conditions):
+    cond = Conditions.parse(conditions)
+    rng = np.random.default_rng(3)
+    R = rng.uniform(0, 1, 31)
+    sd = colour.SpectralDistribution(R, WAVELENGTHS)
+    from flakelab.core.colorimetry import OBSERVERS
+
+    expected = colour.sd_to_XYZ(
+        sd, colour.MSDS_CMFS[OBSERVERS[cond.observer]], colour.SDS_ILLUMINANTS[cond.illuminant],
+        method="ASTM E308",
+    ) / 100  # fmt: skip
+    np.testing.assert_allclose(reflectance_to_XYZ(R, conditions=cond), expected, rtol=1e-9)
+
+
+def test_perfect_white_is_L100_and_neutral_and_grey_scales():
+    np.testing.assert_allclose(reflectance_to_Lab(np.ones(31)), [100, 0, 0], atol=1e-9)
+    # Y = 0.5 → L* = 116·0.5^(1/3) − 16 (CIE 15)
+    assert reflectance_to_Lab(np.full(31, 0.5))[0] == pytest.approx(116 * 0.5 ** (1 / 3) - 16)
+    np.testing.assert_allclose(white_point()[1], 1.0)
+    np.testing.assert_allclose(reflectance_to_sRGB(np.ones(31)), [1, 1, 1], atol=2e-3)
+
+
+def test_vectorised_over_samples_and_geometries_equals_one_by_one():
+    R = np.random.default_rng(0).uniform(0, 1, (4, 6, 31))
+    batched = reflectance_to_Lab(R)
+    single = np.array([[reflectance_to_Lab(R[i, j]) for j in range(6)] for i in range(4)])
+    np.testing.assert_allclose(batched, single)
+
+
+def test_resample_keeps_smooth_spectra_and_colour():
+    R = 0.4 + 0.3 * np.sin(WAVELENGTHS / 40.0)
+    coarse = resample(R, WAVELENGTHS, SHAPE_RENDER)
+    assert coarse.shape == (16,)
+    np.testing.assert_allclose(coarse, R[::2], atol=1e-12)  # 20 nm points are on the 10 nm grid
+    back = resample(coarse, SHAPE_RENDER.wavelengths)
+    assert delta_E_CIE2000(reflectance_to_Lab(back), reflectance_to_Lab(R)) < 0.2
+
+
+def test_unknown_illuminant_and_observer_rejected_with_message():
+    with pytest.raises(ValueError, match="expected an illuminant"):
+        Conditions.parse("D66/10")
+    with pytest.raises(ValueError, match="expected observer"):
+        Conditions.parse("D65/5")

@@ -1,0 +1,72 @@
+"""Colour differences against Sharma, Wu & Dalal (2005) and colour-science."""
+
+from __future__ import annotations
+
+import colour
+import numpy as np
+import pytest
+
+from flakelab.core.difference import DELTA_E_METHODS, delta_E, delta_E_CIE2000, delta_LCH
+
+# Sharma, Wu & Dalal (2005), Table 1: pairs 1, 2, 3, 7, 17, 25, 34.
+SHARMA = [
+    ((50.0000, 2.6772, -79.7751), (50.0000, 0.0000, -82.7485), 2.0425),
+    ((50.0000, 3.1571, -77.2803), (50.0000, 0.0000, -82.7485), 2.8615),
+    ((50.0000, 2.8361, -74.0200), (50.0000, 0.0000, -82.7485), 3.4412),
+    ((50.0000, 0.0000, 0.0000), (50.0000, -1.0000, 2.0000), 2.3669),
+    ((50.0000, 2.5000, 0.0000), (73.0000, 25.0000, -18.0000), 27.1492),
+    ((60.2574, -34.0099, 36.2677), (60.4626, -34.1751, 39.4387), 1.2644),
+    ((22.7233, 20.0904, -46.6940), (23.0331, 14.9730, -42.5619), 2.0373),
+]
+
+
+@pytest.mark.parametrize(("lab_1", "lab_2", "expected"), SHARMA)
+def test_ciede2000_matches_sharma_2005(lab_1, lab_2, expected):
+    assert delta_E_CIE2000(lab_1, lab_2) == pytest.approx(expected, abs=5e-5)
+    assert delta_E_CIE2000(lab_2, lab_1) == pytest.approx(expected, abs=5e-5)  # symmetric
+
+
+def test_ciede2000_equals_colour_science_for_kL_1_and_2():
+    rng = np.random.default_rng(11)
+    a = rng.uniform([0, -90, -90], [100, 90, 90], (2000, 3))
+    b = a + rng.normal(0, 4, a.shape)
+    np.testing.assert_allclose(delta_E_CIE2000(a, b), colour.difference.delta_E_CIE2000(a, b))
+    np.testing.assert_allclose(
+        delta_E_CIE2000(a, b, kL=2), colour.difference.delta_E_CIE2000(a, b, textiles=True)
+    )
+
+
+def test_parametric_factor_divides_its_own_term():
+    # A pure lightness difference: ΔE00 ∝ 1/kL, independent of kC and kH.
+    base = delta_E_CIE2000([50, 10, 10], [52, 10, 10])
+    assert delta_E_CIE2000([50, 10, 10], [52, 10, 10], kL=2, kC=3, kH=4) == pytest.approx(base / 2)
+
+
+@pytest.mark.parametrize("method", ["CIE 1976", "CMC", "DIN99", "CAM16-UCS"])
+def test_dispatcher_matches_colour_science(method):
+    a, b = np.array([52.0, 20.0, -31.0]), np.array([53.0, 18.5, -30.0])
+    got = delta_E(a, b, method=method)
+    if method == "CAM16-UCS":
+        assert 0.5 < got < 5  # same order as ΔE00 (≈ 1.5) for a small difference
+    else:
+        assert got == pytest.approx(colour.delta_E(a, b, method=method))
+    assert delta_E(a, a, method=method) == pytest.approx(0, abs=1e-9)
+
+
+def test_dispatcher_rejects_unknown_method_and_option_with_valid_names():
+    with pytest.raises(ValueError, match="expected a ΔE method among CIE 2000"):
+        delta_E([50, 0, 0], [50, 0, 0], method="CIE 2001")
+    with pytest.raises(TypeError, match="CIE 2000 takes options kL, kC, kH; got k_L"):
+        delta_E([50, 0, 0], [50, 0, 0], k_L=2)
+    assert set(DELTA_E_METHODS) >= {"CIE 2000", "CIE 1976", "CMC", "DIN99", "CAM16-UCS"}
+
+
+def test_lch_components_add_up_to_delta_E_ab_and_carry_sign():
+    rng = np.random.default_rng(5)
+    a = rng.uniform([20, -60, -60], [90, 60, 60], (500, 3))
+    b = a + rng.normal(0, 3, a.shape)
+    d = delta_LCH(a, b)
+    np.testing.assert_allclose((d**2).sum(-1), ((a - b) ** 2).sum(-1), rtol=1e-9)
+    # a red made yellower turns counter-clockwise: positive ΔH
+    assert delta_LCH([50, 40, 0], [50, 40, 5])[2] > 0
+    assert delta_LCH([50, 40, 0], [50, 45, 0])[1] == pytest.approx(5)

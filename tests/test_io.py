@@ -1,0 +1,148 @@
+"""Measurement files: round trips between formats and clear errors on bad input."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flakelab.errors import MeasurementFileError
+from flakelab.io import FORMATS, detect_format, read_measurement, read_measurements, write_measurements
+
+
+def _assert_same(a, b, *, texture=True, metadata=True):
+    assert a.sample == b.sample
+    assert a.geometry_names == b.geometry_names
+    np.testing.assert_allclose(b.reflectance, a.reflectance, atol=1e-6, rtol=0)
+    np.testing.assert_array_equal(a.wavelengths, b.wavelengths)
+    assert a.measured_at == b.measured_at
+    assert a.instrument == b.instrument
+    if a.stored_lab is not None:
+        np.testing.assert_allclose(b.stored_lab, a.stored_lab, atol=1e-9)
+        assert a.stored_lab_conditions == b.stored_lab_conditions
+    if texture:
+        assert dict(a.texture) == dict(b.texture)
+    if metadata:
+        assert dict(a.metadata) == dict(b.metadata)
+
+
+def test_xlsx_to_cxf_to_json_to_csv_keeps_every_spectrum_and_geometry(ma_t12_files, tmp_path):
+    for source in ma_t12_files:
+        original = read_measurement(source)
+        current, path = original, source
+        for suffix in (".cxf", ".json", ".csv"):
+            path = tmp_path / f"{source.stem}{suffix}"
+            write_measurements([current], path)
+            current = read_measurement(path)
+            _assert_same(original, current, metadata=suffix != ".csv")
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+def test_every_format_round_trips_every_field_it_can_hold(fmt, rich_measurement, tmp_path):
+    path = tmp_path / f"out{FORMATS[fmt][2][0]}"
+    write_measurements([rich_measurement], path)
+    back = read_measurements(path)
+    assert len(back) == 1
+    _assert_same(rich_measurement, back[0], metadata=fmt in ("cxf", "json"))
+    assert detect_format(path) == fmt
+
+
+def test_multi_sample_files_keep_order(rich_measurement, tmp_path):
+    from dataclasses import replace
+
+    others = [replace(rich_measurement, sample=f"trial {i}") for i in range(3)]
+    for suffix in (".csv", ".json", ".cxf", ".xlsx"):
+        path = tmp_path / f"many{suffix}"
+        write_measurements([rich_measurement, *others], path)
+        assert [m.sample for m in read_measurements(path)] == [rich_measurement.sample] + [
+            f"trial {i}" for i in range(3)
+        ]
+        assert read_measurement(path, "trial 2").sample == "trial 2"
+
+
+def test_format_is_detected_by_content_not_name(rich_measurement, tmp_path):
+    cxf = tmp_path / "a.cxf"
+    write_measurements([rich_measurement], cxf)
+    disguised = tmp_path / "measurement.txt"
+    shutil.copy(cxf, disguised)
+    assert detect_format(disguised) == "cxf"
+    _assert_same(rich_measurement, read_measurement(disguised))
+
+
+def _csv(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    return path
+
+
+HEADER = "sample,geometry," + ",".join(f"R{w}" for w in range(400, 710, 10))
+ROW = "S1,45as15," + ",".join(["0.5"] * 31)
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "problem"),
+    [
+        (HEADER + "\n" + ROW.replace(",0.5", ",nan", 1), "row 2, 400 nm", "finite number"),
+        (HEADER + "\n" + ROW.replace(",0.5", ",abc", 1), "row 2, 400 nm", "expected a number"),
+        (HEADER.replace("R410", "R415") + "\n" + ROW, "header", "constant step"),
+        (HEADER.replace("R410", "Rxx") + "\n" + ROW, "header, column 2", "expected a wavelength"),
+        (HEADER + "\n" + ROW.replace("45as15", "45as15x"), "row 2, geometry", "geometry name"),
+        (HEADER + "\n" + ROW + "\n" + ROW, "row 3", "appears twice"),
+        (HEADER + "\n" + ROW[:40], "row 2", "truncated line"),
+        (HEADER.replace("geometry", "angle") + "\n" + ROW, "header", "missing column 'geometry'"),
+        (HEADER + "\n" + ROW.replace(",0.5", ",-3", 1), "row 2, 400 nm", "reflectance factor"),
+    ],
+)
+def test_bad_csv_names_file_field_and_problem(tmp_path, text, field, problem):
+    path = _csv(tmp_path, text)
+    with pytest.raises(MeasurementFileError) as caught:
+        read_measurements(path)
+    message = str(caught.value)
+    assert message.startswith(str(path)), message
+    assert field in message and problem in message, message
+
+
+def test_truncated_xlsx_is_reported(ma_t12_files, tmp_path):
+    data = ma_t12_files[0].read_bytes()
+    path = tmp_path / "cut.xlsx"
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(MeasurementFileError, match="truncated or corrupt"):
+        read_measurements(path)
+
+
+def test_truncated_cxf_and_json_are_reported(rich_measurement, tmp_path):
+    for suffix, problem in ((".cxf", "not valid CxF3"), (".json", "invalid JSON")):
+        path = tmp_path / f"m{suffix}"
+        write_measurements([rich_measurement], path)
+        path.write_bytes(path.read_bytes()[:-200])
+        with pytest.raises(MeasurementFileError, match=problem):
+            read_measurements(path)
+
+
+def test_other_kinds_of_file_are_named(tmp_path):
+    png = tmp_path / "photo.csv"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))
+    with pytest.raises(MeasurementFileError, match="this is a PNG image"):
+        read_measurements(png)
+    empty = tmp_path / "empty.json"
+    empty.write_text("")
+    with pytest.raises(MeasurementFileError, match="empty file"):
+        read_measurements(empty)
+    with pytest.raises(MeasurementFileError, match="no such file"):
+        read_measurements(tmp_path / "missing.cxf")
+
+
+def test_a_failed_write_leaves_the_previous_file_intact(rich_measurement, tmp_path):
+    path = tmp_path / "kept.cxf"
+    write_measurements([rich_measurement], path)
+    before = path.read_bytes()
+    shifted = type(rich_measurement)(
+        sample="x", geometries=rich_measurement.geometries,
+        wavelengths=np.arange(420.0, 730.0, 10.0), reflectance=rich_measurement.reflectance,
+    )  # fmt: skip
+    with pytest.raises(MeasurementFileError, match="360–400 nm"):
+        write_measurements([shifted], path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["kept.cxf"]  # no temporary left behind
