@@ -16,7 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.core.geometry import directions, flake_angles, instrument_geometries, refract_into_coating
+from flakelab.core.geometry import (
+    directions,
+    flake_angles,
+    instrument_geometries,
+    refract_into_coating,
+)
 from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.io import write_measurements
@@ -30,9 +35,10 @@ def blue_metallic(blue: float, spread_deg: float, rng: np.random.Generator, nois
     light, view = directions(geometries)
     mu_sum = 1 / refract_into_coating(light)[:, 2] + 1 / refract_into_coating(view)[:, 2]
     absorption = blue * (
-        np.exp(-(((WAVELENGTHS - 600) / 55) ** 2)) + 0.9 * np.exp(-(((WAVELENGTHS - 690) / 50) ** 2))
+        np.exp(-(((WAVELENGTHS - 600) / 55) ** 2))
+        + 0.9 * np.exp(-(((WAVELENGTHS - 690) / 50) ** 2))
         + 0.25 * np.exp(-(((WAVELENGTHS - 530) / 40) ** 2))
-    )  # fmt: skip
+    )
     lobe = 2.2 * np.exp(-0.5 * (theta_flake / spread_deg) ** 2) + 0.045
     aluminium = 0.91 - 0.05 * np.exp(-(((WAVELENGTHS - 810) / 100) ** 2))
     R = lobe[:, None] * aluminium * np.exp(-absorption[None, :] * mu_sum[:, None]) + 0.004
@@ -44,11 +50,37 @@ def main() -> None:
     rng = np.random.default_rng(20261122)
     OUT.mkdir(parents=True, exist_ok=True)
     for name, blue, spread, texture in (
-        ("target", 1.1, 11.0, {"Sa15": 14.2, "Si15": 11.8, "Sa45": 9.6, "Si45": 7.9,
-                                "Sa75": 4.1, "Si75": 3.2, "SG": 8.7, "G": 6.4}),
-        ("sprayout", 1.14, 11.3, {"Sa15": 14.9, "Si15": 11.1, "Sa45": 10.3, "Si45": 7.4,
-                                   "Sa75": 4.6, "Si75": 3.0, "SG": 8.4, "G": 6.9}),
-    ):  # fmt: skip
+        (
+            "target",
+            1.1,
+            11.0,
+            {
+                "Sa15": 14.2,
+                "Si15": 11.8,
+                "Sa45": 9.6,
+                "Si45": 7.9,
+                "Sa75": 4.1,
+                "Si75": 3.2,
+                "SG": 8.7,
+                "G": 6.4,
+            },
+        ),
+        (
+            "sprayout",
+            1.14,
+            11.3,
+            {
+                "Sa15": 14.9,
+                "Si15": 11.1,
+                "Sa45": 10.3,
+                "Si45": 7.4,
+                "Sa75": 4.6,
+                "Si75": 3.0,
+                "SG": 8.4,
+                "G": 6.9,
+            },
+        ),
+    ):
         geometries, R = blue_metallic(blue, spread, rng, noise=0.002)
         measurement = Measurement(
             sample=f"Blue metallic {name} (synthetic)",

@@ -35,7 +35,7 @@ def rich_measurement() -> Measurement:
     rng = np.random.default_rng(7)
     geometries = tuple(Geometry.parse(n) for n in ("45as15", "45as45", "45as110", "45as25az90"))
     return Measurement(
-        sample="rich; sample, with \"quotes\"",
+        sample='rich; sample, with "quotes"',
         geometries=geometries,
         wavelengths=WAVELENGTHS,
         reflectance=rng.uniform(0.01, 1.8, (4, 31)),

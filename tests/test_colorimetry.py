@@ -31,9 +31,11 @@ def test_lab_from_spectra_equals_instrument_lab_for_all_2760_readings(ma_t12_dir
     measurements = read_measurements(ma_t12_dir / "all_samples_spectra.csv")
     assert len(measurements) == 230
     lab_rows = np.genfromtxt(
-        ma_t12_dir / "all_samples_instrument_lab_d65_10.csv", delimiter=",", skip_header=1,
+        ma_t12_dir / "all_samples_instrument_lab_d65_10.csv",
+        delimiter=",",
+        skip_header=1,
         usecols=(2, 3, 4),
-    )  # fmt: skip
+    )
     computed = np.concatenate([m.lab() for m in measurements])
     assert computed.shape == lab_rows.shape == (2760, 3)
     assert delta_E_CIE2000(computed, lab_rows).max() <= 0.01
@@ -47,10 +49,15 @@ def test_matrix_weighting_equals_colour_science_sd_to_XYZ(conditions):
     sd = colour.SpectralDistribution(R, WAVELENGTHS)
     from flakelab.core.colorimetry import OBSERVERS
 
-    expected = colour.sd_to_XYZ(
-        sd, colour.MSDS_CMFS[OBSERVERS[cond.observer]], colour.SDS_ILLUMINANTS[cond.illuminant],
-        method="ASTM E308",
-    ) / 100  # fmt: skip
+    expected = (
+        colour.sd_to_XYZ(
+            sd,
+            colour.MSDS_CMFS[OBSERVERS[cond.observer]],
+            colour.SDS_ILLUMINANTS[cond.illuminant],
+            method="ASTM E308",
+        )
+        / 100
+    )
     np.testing.assert_allclose(reflectance_to_XYZ(R, conditions=cond), expected, rtol=1e-9)
 
 

@@ -15,7 +15,9 @@ from flakelab.core.geometry import (
 )
 
 
-@pytest.mark.parametrize("name", ["45as15", "45as-15", "15as80", "45as110", "45as25az90", "45as25az-45"])
+@pytest.mark.parametrize(
+    "name", ["45as15", "45as-15", "15as80", "45as110", "45as25az90", "45as25az-45"]
+)
 def test_names_round_trip(name):
     assert Geometry.parse(name).name == name
 
@@ -68,7 +70,9 @@ def test_refraction_follows_snell_and_keeps_unit_length():
 
 def test_instrument_sets():
     assert len(instrument_geometries("MA-T12")) == 12
-    assert [g.name for g in instrument_geometries("BYK-mac i")] == list(INSTRUMENT_GEOMETRIES["byk-mac-i"])
+    assert [g.name for g in instrument_geometries("BYK-mac i")] == list(
+        INSTRUMENT_GEOMETRIES["byk-mac-i"]
+    )
     assert len(instrument_geometries("five-angle")) == 5
     with pytest.raises(ValueError, match="expected one of byk-mac-i"):
         instrument_geometries("ma-t99")
@@ -76,9 +80,13 @@ def test_instrument_sets():
 
 @pytest.mark.parametrize(
     ("name", "message"),
-    [("45 degrees", "expected a geometry name"), ("45as140", "expected a detector above"),
-     ("95as15", "expected illumination angle"), ("", "expected a geometry name")],
-)  # fmt: skip
+    [
+        ("45 degrees", "expected a geometry name"),
+        ("45as140", "expected a detector above"),
+        ("95as15", "expected illumination angle"),
+        ("", "expected a geometry name"),
+    ],
+)
 def test_bad_names_rejected_with_message(name, message):
     with pytest.raises(ValueError, match=message):
         Geometry.parse(name)

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 from flakelab.errors import MeasurementFileError
-from flakelab.io import FORMATS, detect_format, read_measurement, read_measurements, write_measurements
+from flakelab.io import (
+    FORMATS,
+    detect_format,
+    read_measurement,
+    read_measurements,
+    write_measurements,
+)
 
 
 def _assert_same(a, b, *, texture=True, metadata=True):
@@ -139,9 +145,11 @@ def test_a_failed_write_leaves_the_previous_file_intact(rich_measurement, tmp_pa
     write_measurements([rich_measurement], path)
     before = path.read_bytes()
     shifted = type(rich_measurement)(
-        sample="x", geometries=rich_measurement.geometries,
-        wavelengths=np.arange(420.0, 730.0, 10.0), reflectance=rich_measurement.reflectance,
-    )  # fmt: skip
+        sample="x",
+        geometries=rich_measurement.geometries,
+        wavelengths=np.arange(420.0, 730.0, 10.0),
+        reflectance=rich_measurement.reflectance,
+    )
     with pytest.raises(MeasurementFileError, match="360–400 nm"):
         write_measurements([shifted], path)
     assert path.read_bytes() == before

@@ -43,6 +43,8 @@ def reports_errors(command: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return command(*args, **kwargs)
+        except (typer.Exit, typer.Abort):
+            raise
         except (FlakelabError, ValueError, KeyError, OSError) as error:
             message = error.args[0] if isinstance(error, KeyError) and error.args else error
             errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
@@ -53,8 +55,9 @@ def reports_errors(command: F) -> F:
             errors.print(
                 f"[bold red]internal error:[/] {type(error).__name__}: {error} "
                 "(set FLAKELAB_DEBUG=1 for a traceback and please report it)",
-                highlight=False, soft_wrap=True,
-            )  # fmt: skip
+                highlight=False,
+                soft_wrap=True,
+            )
             raise typer.Exit(70) from None
 
     return wrapper  # type: ignore[return-value]
@@ -74,9 +77,8 @@ def _fmt(value: float | None, digits: int = 2) -> str:
 
 
 def _print_description(info: dict[str, Any]) -> None:
-    table = Table(
-        title=f"{info['sample']}  ({info['conditions']})", title_justify="left", box=box.SIMPLE_HEAD, collapse_padding=True
-    )
+    console.print(f"[bold]{info['sample']}[/]  ({info['conditions']})", highlight=False)
+    table = Table(box=box.SIMPLE_HEAD, collapse_padding=True)
     stored = any("de00_vs_stored" in g for g in info["geometries"])
     for column in ("geometry", "θ_flake", "θ_inc", "L*", "a*", "b*", "C*", "h°") + (
         ("ΔE00 vs file",) if stored else ()
@@ -105,19 +107,25 @@ def _one_or_example(path: Path | None, example: str, sample: str | None) -> Meas
 @app.command()
 @reports_errors
 def inspect(
-    path: Annotated[Path | None, typer.Argument(help="Measurement file (xlsx, CxF, CSV, JSON).")] = None,
+    path: Annotated[
+        Path | None, typer.Argument(help="Measurement file (xlsx, CxF, CSV, JSON).")
+    ] = None,
     sample: SampleOption = None,
     all_samples: Annotated[bool, typer.Option("--all", help="Every sample in the file.")] = False,
     conditions: ConditionsOption = "D65/10",
     as_json: JsonOption = False,
-    example: Annotated[bool, typer.Option("--example", help="Inspect the shipped example target.")] = False,
+    example: Annotated[
+        bool, typer.Option("--example", help="Inspect the shipped example target.")
+    ] = False,
 ) -> None:
     """Per-geometry L*a*b*, C*, h, flake angles, flop index and texture of a measurement."""
     if path is None and not example:
         raise FlakelabError("give a measurement file, or --example")
     cond = Conditions.parse(conditions)
     source = path if path is not None else example_path("target")
-    measurements = read_measurements(source) if all_samples else [_one_or_example(path, "target", sample)]
+    measurements = (
+        read_measurements(source) if all_samples else [_one_or_example(path, "target", sample)]
+    )
     infos = [describe(m, cond) for m in measurements]
     if as_json:
         out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
@@ -133,14 +141,18 @@ def compare(
     reference: Annotated[Path | None, typer.Argument(help="Target / standard measurement.")] = None,
     sample: Annotated[Path | None, typer.Argument(help="Sample (spray-out) measurement.")] = None,
     tolerance: Annotated[
-        str, typer.Option("--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or TOML/JSON file.")
+        str,
+        typer.Option(
+            "--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or TOML/JSON file."
+        ),
     ] = "refinish",
     reference_sample: Annotated[str | None, typer.Option("--reference-sample")] = None,
     sample_name: Annotated[str | None, typer.Option("--sample-name")] = None,
     conditions: ConditionsOption = "D65/10",
     as_json: JsonOption = False,
     example: Annotated[
-        bool, typer.Option("--example", help="Compare the shipped example spray-out with its target.")
+        bool,
+        typer.Option("--example", help="Compare the shipped example spray-out with its target."),
     ] = False,
     fail_on_reject: Annotated[
         bool, typer.Option("--fail-on-reject", help="Exit with status 1 when a geometry fails.")
@@ -166,13 +178,12 @@ _LIMIT_LABELS = {"de00": "ΔE≤", "dL": "L≤", "dC": "C≤", "dH": "H≤"}
 
 
 def _print_comparison(report: dict[str, Any], tol: Any) -> None:
-    table = Table(
-        title=f"{report['sample']} vs {report['reference']}  ({report['conditions']}, "
-        f"tolerance {report['tolerance']})",
-        title_justify="left",
-        box=box.SIMPLE_HEAD,
-        collapse_padding=True,
+    console.print(
+        f"[bold]{report['sample']}[/] vs [bold]{report['reference']}[/]  "
+        f"({report['conditions']}, tolerance {report['tolerance']})",
+        highlight=False,
     )
+    table = Table(box=box.SIMPLE_HEAD, collapse_padding=True)
     for column in ("geometry", "L* ref", "L* smp", "ΔL*", "ΔC*", "ΔH*", "ΔE00", "limit", ""):
         table.add_column(column, justify="left" if column == "geometry" else "right", no_wrap=True)
     for g in report["geometries"]:
@@ -180,29 +191,42 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
         shown = " ".join(f"{_LIMIT_LABELS[k]}{v:g}" for k, v in limit.items())
         verdict = "[green]pass[/]" if g["pass"] else "[bold red]FAIL[/]"
         table.add_row(
-            g["name"], _fmt(g["L_reference"]), _fmt(g["L_sample"]), _fmt(g["dL"]), _fmt(g["dC"]),
-            _fmt(g["dH"]), _fmt(g["de00"]), shown, verdict,
-        )  # fmt: skip
+            g["name"],
+            _fmt(g["L_reference"]),
+            _fmt(g["L_sample"]),
+            _fmt(g["dL"]),
+            _fmt(g["dC"]),
+            _fmt(g["dH"]),
+            _fmt(g["de00"]),
+            shown,
+            verdict,
+        )
     console.print(table)
-    verdict = "[green]PASS[/]" if report["pass"] else "[bold red]FAIL[/] at " + ", ".join(
-        report["failing_geometries"]
+    verdict = (
+        "[green]PASS[/]"
+        if report["pass"]
+        else "[bold red]FAIL[/] at " + ", ".join(report["failing_geometries"])
     )
     console.print(
         f"ΔE00 max {report['de00_max']:.2f}, mean {report['de00_mean']:.2f}   "
-        f"flop index {_fmt(report['flop_index_reference'])} → {_fmt(report['flop_index_sample'])}   "
+        f"flop index {_fmt(report['flop_index_reference'])} → "
+        f"{_fmt(report['flop_index_sample'])}   "
         f"{verdict}",
         highlight=False,
     )
     if report["texture_difference"]:
         console.print(
-            "texture Δ: " + "  ".join(f"{k} {v:+.2f}" for k, v in report["texture_difference"].items())
+            "texture Δ: "
+            + "  ".join(f"{k} {v:+.2f}" for k, v in report["texture_difference"].items())
         )
 
 
 @app.command()
 @reports_errors
 def convert(
-    source: Annotated[Path, typer.Argument(help="Measurement file to read (any supported format).")],
+    source: Annotated[
+        Path, typer.Argument(help="Measurement file to read (any supported format).")
+    ],
     target: Annotated[Path, typer.Argument(help="File to write; format from the extension.")],
     sample: SampleOption = None,
 ) -> None:
@@ -216,14 +240,18 @@ def convert(
 @reports_errors
 def plot(
     path: Annotated[Path, typer.Argument(help="Measurement file.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Image to write (.png, .svg, .pdf).")],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Image to write (.png, .svg, .pdf).")
+    ],
     sample: SampleOption = None,
     conditions: ConditionsOption = "D65/10",
 ) -> None:
     """Spectra per geometry and L*, C* versus aspecular angle."""
     from flakelab.render.plots import plot_measurements
 
-    plot_measurements([read_measurement(path, sample)], output, conditions=Conditions.parse(conditions))
+    plot_measurements(
+        [read_measurement(path, sample)], output, conditions=Conditions.parse(conditions)
+    )
     errors.print(f"wrote {output}", highlight=False)
 
 

@@ -29,17 +29,23 @@ def describe(measurement: Measurement, conditions: Conditions = D65_10) -> dict[
     for i, g in enumerate(measurement.geometries):
         row = {
             "name": g.name,
-            "L": float(lab[i, 0]), "a": float(lab[i, 1]), "b": float(lab[i, 2]),
-            "C": float(lch[i, 1]), "h": float(lch[i, 2]),
-            "theta_flake": float(theta_flake[i]), "theta_inc": float(theta_inc[i]),
-        }  # fmt: skip
+            "L": float(lab[i, 0]),
+            "a": float(lab[i, 1]),
+            "b": float(lab[i, 2]),
+            "C": float(lch[i, 1]),
+            "h": float(lch[i, 2]),
+            "theta_flake": float(theta_flake[i]),
+            "theta_inc": float(theta_inc[i]),
+        }
         if stored_de is not None:
             row["de00_vs_stored"] = float(stored_de[i])
         geometries.append(row)
     return {
         "sample": measurement.sample,
         "instrument": measurement.instrument,
-        "measured_at": None if measurement.measured_at is None else measurement.measured_at.isoformat(),
+        "measured_at": None
+        if measurement.measured_at is None
+        else measurement.measured_at.isoformat(),
         "conditions": str(conditions),
         "geometries": geometries,
         "flop_index": measurement.flop_index(conditions),
@@ -81,15 +87,18 @@ class Comparison:
                 "name": name,
                 "L_reference": float(self.lab_reference[i, 0]),
                 "L_sample": float(self.lab_sample[i, 0]),
-                "dL": float(self.dLCH[i, 0]), "dC": float(self.dLCH[i, 1]),
-                "dH": float(self.dLCH[i, 2]), "de00": float(self.de00[i]),
+                "dL": float(self.dLCH[i, 0]),
+                "dC": float(self.dLCH[i, 1]),
+                "dH": float(self.dLCH[i, 2]),
+                "de00": float(self.de00[i]),
                 **{f"de_{k}": float(v[i]) for k, v in self.de_other.items()},
                 "pass": bool(self.passed[i]),
-            }  # fmt: skip
+            }
             for i, name in enumerate(self.geometries)
         ]
-        flop_ref, flop_smp = self.reference.flop_index(self.conditions), self.sample.flop_index(
-            self.conditions
+        flop_ref, flop_smp = (
+            self.reference.flop_index(self.conditions),
+            self.sample.flop_index(self.conditions),
         )
         texture = {
             k: self.sample.texture[k] - self.reference.texture[k]
@@ -105,7 +114,9 @@ class Comparison:
             "de00_max": self.de00_max,
             "de00_mean": self.de00_mean,
             "pass": self.all_pass,
-            "failing_geometries": [g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok],
+            "failing_geometries": [
+                g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok
+            ],
             "flop_index_reference": flop_ref,
             "flop_index_sample": flop_smp,
             "texture_difference": texture,

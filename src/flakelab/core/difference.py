@@ -97,9 +97,17 @@ DELTA_E_METHODS: dict[str, Callable[..., NDArray[np.float64]]] = {
 }
 """ΔE methods by name: ΔE00 (kL, kC, kH), ΔE*ab, CMC (l, c), DIN99, CAM16-UCS."""
 
-_ALIASES = {"de00": "CIE 2000", "cie2000": "CIE 2000", "dEab": "CIE 1976", "cie1976": "CIE 1976",
-            "de76": "CIE 1976", "cmc": "CMC", "din99": "DIN99", "cam16-ucs": "CAM16-UCS",
-            "cam16ucs": "CAM16-UCS"}  # fmt: skip
+_ALIASES = {
+    "de00": "CIE 2000",
+    "cie2000": "CIE 2000",
+    "dEab": "CIE 1976",
+    "cie1976": "CIE 1976",
+    "de76": "CIE 1976",
+    "cmc": "CMC",
+    "din99": "DIN99",
+    "cam16-ucs": "CAM16-UCS",
+    "cam16ucs": "CAM16-UCS",
+}
 
 
 def _method_key(method: str) -> str:

@@ -68,8 +68,7 @@ class Geometry:
             raise ValueError(f"expected illumination angle in [0, 90)°, got {self.illumination}")
         if not -90.0 < self.viewing < 90.0:
             raise ValueError(
-                f"expected a detector above the surface, got {self} "
-                f"(polar angle {self.viewing:g}°)"
+                f"expected a detector above the surface, got {self} (polar angle {self.viewing:g}°)"
             )
 
     @classmethod
@@ -114,11 +113,21 @@ INSTRUMENT_GEOMETRIES: dict[str, tuple[str, ...]] = {
     "byk-mac-i": ("45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"),
     "ma-t6": ("45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"),
     "ma-t12": (
-        "15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80",
-        "45as-15", "45as15", "45as25", "45as45", "45as75", "45as110",
+        "15as-45",
+        "15as-30",
+        "15as-15",
+        "15as15",
+        "15as45",
+        "15as80",
+        "45as-15",
+        "45as15",
+        "45as25",
+        "45as45",
+        "45as75",
+        "45as110",
     ),
     "five-angle": ("45as15", "45as25", "45as45", "45as75", "45as110"),
-}  # fmt: skip
+}
 """Geometry sets of common multi-angle instruments, in their export order."""
 
 

@@ -15,8 +15,15 @@ from flakelab.core.geometry import Geometry
 __all__ = ["Measurement", "TEXTURE_READINGS", "flop_index", "FLOP_GEOMETRIES"]
 
 TEXTURE_READINGS: tuple[str, ...] = (
-    "Sa15", "Si15", "Sa45", "Si45", "Sa75", "Si75", "SG", "G",
-)  # fmt: skip
+    "Sa15",
+    "Si15",
+    "Sa45",
+    "Si45",
+    "Sa75",
+    "Si75",
+    "SG",
+    "G",
+)
 """Texture readings: sparkle area Sa and intensity Si under directional light at 15°, 45°,
 75°, sparkle grade SG and graininess G under diffuse light (DESIGN.md §2, §4)."""
 
@@ -32,7 +39,7 @@ def flop_index(L15: NDArray | float, L45: NDArray | float, L110: NDArray | float
     Examples
     --------
     >>> round(float(flop_index(110.0, 50.0, 20.0)), 2)
-    14.48
+    13.74
     """
     dL = np.asarray(L15, dtype=float) - np.asarray(L110, dtype=float)
     return 2.69 * np.sign(dL) * np.abs(dL) ** 1.11 / np.asarray(L45, dtype=float) ** 0.86
@@ -75,8 +82,7 @@ class Measurement:
         R = np.asarray(self.reflectance, dtype=float)
         if R.shape != (len(self.geometries), wl.size):
             raise ValueError(
-                f"expected reflectance of shape ({len(self.geometries)}, {wl.size}), "
-                f"got {R.shape}"
+                f"expected reflectance of shape ({len(self.geometries)}, {wl.size}), got {R.shape}"
             )
         if not np.all(np.isfinite(R)):
             raise ValueError("expected finite reflectance values, got NaN or infinity")

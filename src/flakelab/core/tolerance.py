@@ -41,7 +41,9 @@ class Limit:
     def from_dict(cls, data: Mapping[str, Any], where: str = "limit") -> Limit:
         unknown = [k for k in data if k not in _LIMIT_FIELDS]
         if unknown:
-            raise ValueError(f"{where}: expected keys among {', '.join(_LIMIT_FIELDS)}, got {unknown}")
+            raise ValueError(
+                f"{where}: expected keys among {', '.join(_LIMIT_FIELDS)}, got {unknown}"
+            )
         try:
             return cls(**{k: None if v is None else float(v) for k, v in data.items()})
         except (TypeError, ValueError) as error:
@@ -86,9 +88,11 @@ class Tolerance:
         dLCH = np.abs(np.asarray(dLCH, dtype=float))
         limits = [self.limit(g) for g in geometries]
         bounds = np.array(
-            [[np.inf if getattr(lim, k) is None else getattr(lim, k) for k in _LIMIT_FIELDS]
-             for lim in limits]
-        )  # fmt: skip
+            [
+                [np.inf if getattr(lim, k) is None else getattr(lim, k) for k in _LIMIT_FIELDS]
+                for lim in limits
+            ]
+        )
         observed = np.concatenate([de00[..., None], dLCH], axis=-1)
         return np.all(observed <= bounds, axis=-1)
 
@@ -126,10 +130,12 @@ class Tolerance:
         return {
             "name": self.name,
             "description": self.description,
-            "kL": self.kL, "kC": self.kC, "kH": self.kH,
+            "kL": self.kL,
+            "kC": self.kC,
+            "kH": self.kH,
             "default": self.default.to_dict(),
             "geometries": {k: v.to_dict() for k, v in self.per_geometry.items()},
-        }  # fmt: skip
+        }
 
 
 _NEAR_SPECULAR = ("15as-15", "15as15", "45as-15", "45as15")

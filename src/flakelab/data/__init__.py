@@ -1,4 +1,4 @@
-"""Data shipped with flakelab: example measurements (synthetic, see ``scripts/make_examples.py``)."""
+"""Data shipped with flakelab: example measurements (synthetic: ``scripts/make_examples.py``)."""
 
 from __future__ import annotations
 

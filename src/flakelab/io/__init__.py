@@ -85,12 +85,17 @@ def detect_format(path: str | PathLike) -> str:
         first_line = text.decode("utf-8").splitlines()[0].lower()
     except UnicodeDecodeError:
         raise MeasurementFileError(path, "not a measurement file: binary content") from None
-    if "geometry" in first_line or first_line.startswith("#") or any(d in first_line for d in ",;\t"):
+    if (
+        "geometry" in first_line
+        or first_line.startswith("#")
+        or any(d in first_line for d in ",;\t")
+    ):
         return "csv"
     raise MeasurementFileError(
-        path, "not a measurement file: expected MA-T12 xlsx, CxF3, flakelab JSON or a CSV with "
+        path,
+        "not a measurement file: expected MA-T12 xlsx, CxF3, flakelab JSON or a CSV with "
         "a 'geometry' column",
-    )  # fmt: skip
+    )
 
 
 def read_measurements(path: str | PathLike) -> list[Measurement]:

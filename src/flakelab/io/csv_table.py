@@ -4,7 +4,7 @@ Columns, in any order after the first two:
 
 ``sample``, ``geometry``          required; geometry as an ASTM name (``45as15``)
 ``R400`` … ``R700``               reflectance factor per wavelength [0–1]; any regular grid
-``L``, ``a``, ``b``               optional stored L*a*b*, under ``lab_conditions`` (D65/10 if absent)
+``L``, ``a``, ``b``               optional stored L*a*b* under ``lab_conditions`` (default D65/10)
 ``instrument``, ``measured_at``   optional; ISO 8601 date-time
 ``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
 ``lab_conditions``                optional, e.g. ``D65/10``
@@ -47,22 +47,27 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
             text = open(path, encoding="utf-8-sig").read()  # noqa: SIM115
         except UnicodeDecodeError as error:
             raise MeasurementFileError(path, f"not UTF-8 text ({error.reason})") from None
-    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    lines = [
+        line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
+    ]
     if not lines:
         raise MeasurementFileError(path, "empty CSV file")
     try:
         delimiter = csv.Sniffer().sniff(lines[0], delimiters=",;\t").delimiter
     except csv.Error:
-        raise MeasurementFileError(path, "no comma, semicolon or tab separated header", field="header") from None
+        raise MeasurementFileError(
+            path, "no comma, semicolon or tab separated header", field="header"
+        ) from None
     rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=delimiter))
     header = [h.strip() for h in rows[0]]
     columns = {h: i for i, h in enumerate(header)}
     for required in ("sample", "geometry"):
         if required not in columns:
             raise MeasurementFileError(
-                path, f"missing column {required!r} (columns: {', '.join(header[:6])}…)",
+                path,
+                f"missing column {required!r} (columns: {', '.join(header[:6])}…)",
                 field="header",
-            )  # fmt: skip
+            )
     if len(columns) != len(header):
         duplicate = next(h for h in header if header.count(h) > 1)
         raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
@@ -77,7 +82,9 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         where = f"row {number}"
         if len(row) != len(header):
             raise MeasurementFileError(
-                path, f"expected {len(header)} columns, got {len(row)} (truncated line?)", field=where
+                path,
+                f"expected {len(header)} columns, got {len(row)} (truncated line?)",
+                field=where,
             )
         sample = row[columns["sample"]].strip()
         if not sample:
@@ -94,37 +101,47 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
                 measured_at = datetime.fromisoformat(row[columns["measured_at"]].strip())
             except ValueError:
                 raise MeasurementFileError(
-                    path, f"expected an ISO 8601 date-time, got {row[columns['measured_at']]!r}",
+                    path,
+                    f"expected an ISO 8601 date-time, got {row[columns['measured_at']]!r}",
                     field=f"{where}, measured_at",
-                ) from None  # fmt: skip
+                ) from None
         for k in TEXTURE_READINGS:
             if k in columns and row[columns[k]].strip():
                 value = parse_number(path, row[columns[k]], f"{where}, {k}")
                 previous = texture.setdefault(sample, {}).setdefault(k, value)
                 if previous != value:
                     raise MeasurementFileError(
-                        path, f"texture {k} of {sample!r} differs between rows ({previous} vs {value})",
+                        path,
+                        f"texture {k} of {sample!r} differs between rows ({previous} vs {value})",
                         field=f"{where}, {k}",
-                    )  # fmt: skip
+                    )
         if "instrument" in columns and row[columns["instrument"]].strip():
             instruments.add(row[columns["instrument"]].strip())
         if "lab_conditions" in columns and row[columns["lab_conditions"]].strip():
             conditions.add(row[columns["lab_conditions"]].strip())
         readings.append(
             Reading(
-                where=where, sample=sample, geometry=geometry, lab=lab, measured_at=measured_at,
+                where=where,
+                sample=sample,
+                geometry=geometry,
+                lab=lab,
+                measured_at=measured_at,
                 reflectance=parse_spectrum(path, [row[i] for i in spectral], wavelengths, where),
             )
-        )  # fmt: skip
+        )
     if len(conditions) > 1:
         raise MeasurementFileError(path, f"several lab_conditions: {sorted(conditions)}")
     lab_conditions = (
         parse_conditions(path, conditions.pop(), "lab_conditions") if conditions else D65_10
     )
     return assemble(
-        path, readings, wavelengths, lab_conditions=lab_conditions, texture=texture,
+        path,
+        readings,
+        wavelengths,
+        lab_conditions=lab_conditions,
+        texture=texture,
         instrument=instruments.pop() if len(instruments) == 1 else None,
-    )  # fmt: skip
+    )
 
 
 def write_csv(measurements: list[Measurement], path: str | PathLike) -> None:
@@ -151,4 +168,6 @@ def write_csv(measurements: list[Measurement], path: str | PathLike) -> None:
             row += [m.instrument or "", m.measured_at.isoformat() if m.measured_at else ""]
             row += [repr(m.texture[k]) if k in m.texture else "" for k in texture_keys]
             writer.writerow(row)
-    write_atomically(path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding="utf-8"))
+    write_atomically(
+        path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding="utf-8")
+    )

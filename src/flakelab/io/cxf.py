@@ -49,16 +49,19 @@ def _geometry_of(path: str | PathLike, spec: cxf3.ColorSpecification) -> Geometr
         return None
     if len(multi.brdfangle) != 1:
         raise MeasurementFileError(
-            path, f"expected one BRDFAngle, got {len(multi.brdfangle)}",
+            path,
+            f"expected one BRDFAngle, got {len(multi.brdfangle)}",
             field=f"ColorSpecification {spec.id}",
-        )  # fmt: skip
+        )
     angle = multi.brdfangle[0]
     where = f"ColorSpecification {spec.id}, BRDFAngle"
     try:
         geometry = Geometry(
             parse_number(path, angle.illumination_angle, f"{where}, IlluminationAngle"),
             parse_number(path, angle.aspecular, f"{where}, Aspecular"),
-            0.0 if angle.azimuth is None else parse_number(path, angle.azimuth, f"{where}, Azimuth"),
+            0.0
+            if angle.azimuth is None
+            else parse_number(path, angle.azimuth, f"{where}, Azimuth"),
         )
     except ValueError as error:
         if isinstance(error, MeasurementFileError):
@@ -66,9 +69,10 @@ def _geometry_of(path: str | PathLike, spec: cxf3.ColorSpecification) -> Geometr
         raise MeasurementFileError(path, str(error), field=where) from None
     if angle.notation and _parses(angle.notation) and Geometry.parse(angle.notation) != geometry:
         raise MeasurementFileError(
-            path, f"Notation {angle.notation!r} disagrees with the angles ({geometry.name})",
+            path,
+            f"Notation {angle.notation!r} disagrees with the angles ({geometry.name})",
             field=where,
-        )  # fmt: skip
+        )
     return geometry
 
 
@@ -109,7 +113,11 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
     )
     geometries = {s.id: _geometry_of(path, s) for s in specs}
     conditions = {s.id: _conditions_of(path, s) for s in specs}
-    objects = resources.object_collection.object_value if resources and resources.object_collection else []
+    objects = (
+        resources.object_collection.object_value
+        if resources and resources.object_collection
+        else []
+    )
     if not objects:
         raise MeasurementFileError(path, "no Object in ObjectCollection")
 
@@ -122,8 +130,9 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         values = obj.color_values.choice if obj.color_values else []
         labs = {
             v.color_specification: np.array([v.l, v.a, v.b], dtype=float)
-            for v in values if isinstance(v, cxf3.ColorCielab)
-        }  # fmt: skip
+            for v in values
+            if isinstance(v, cxf3.ColorCielab)
+        }
         for v in values:
             if not isinstance(v, cxf3.ReflectanceSpectrum):
                 continue
@@ -137,23 +146,31 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
             wr = spec.measurement_spec.wavelength_range
             start = v.start_wl if v.start_wl is not None else (wr.start_wl if wr else None)
             if start is None or wr is None or wr.increment is None:
-                raise MeasurementFileError(path, "no StartWL or WavelengthRange Increment", field=where)
+                raise MeasurementFileError(
+                    path, "no StartWL or WavelengthRange Increment", field=where
+                )
             grid = start + wr.increment * np.arange(len(v.value), dtype=float)
             if wavelengths is None:
                 wavelengths = grid
             elif not np.array_equal(grid, wavelengths):
-                raise MeasurementFileError(path, "spectra on different wavelength grids", field=where)
+                raise MeasurementFileError(
+                    path, "spectra on different wavelength grids", field=where
+                )
             lab = labs.get(v.color_specification)
             if lab is not None and conditions.get(v.color_specification):
                 lab_conditions = conditions[v.color_specification]
             readings.append(
                 Reading(
-                    where=where, sample=sample, geometry=geometry,
-                    reflectance=parse_spectrum(path, v.value, grid, where), lab=lab,
-                    measured_at=obj.creation_date.value.to_datetime() if obj.creation_date
-                    and obj.creation_date.value else None,
+                    where=where,
+                    sample=sample,
+                    geometry=geometry,
+                    reflectance=parse_spectrum(path, v.value, grid, where),
+                    lab=lab,
+                    measured_at=obj.creation_date.value.to_datetime()
+                    if obj.creation_date and obj.creation_date.value
+                    else None,
                 )
-            )  # fmt: skip
+            )
         for collection in obj.tag_collection:
             if collection.name != _TAGS:
                 continue
@@ -170,9 +187,14 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
     if wavelengths is None:
         raise MeasurementFileError(path, "no ReflectanceSpectrum in any Object")
     return assemble(
-        path, readings, wavelengths, instrument=instrument, lab_conditions=lab_conditions,
-        texture=texture, metadata=metadata,
-    )  # fmt: skip
+        path,
+        readings,
+        wavelengths,
+        instrument=instrument,
+        lab_conditions=lab_conditions,
+        texture=texture,
+        metadata=metadata,
+    )
 
 
 def _xml_datetime(moment: datetime | None) -> cxf3.CreationDate:
@@ -186,7 +208,9 @@ def _specification(geometry: Geometry, wavelengths: np.ndarray, conditions: Cond
     tristimulus = None
     if cxf_illuminant in _CXF_ILLUMINANTS:
         tristimulus = cxf3.TristimulusSpec(
-            illuminant_or_custom_illuminant=cxf3.Illuminant(value=cxf3.EilluminantType(cxf_illuminant)),
+            illuminant_or_custom_illuminant=cxf3.Illuminant(
+                value=cxf3.EilluminantType(cxf_illuminant)
+            ),
             observer=cxf3.Observer(value=cxf3.EobserverType(f"{conditions.observer}_Degree")),
             method=cxf3.Method(value=cxf3.EastmTableType.E308_TABLE6),
         )
@@ -253,13 +277,16 @@ def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
         )
     document = cxf3.CxF(
         file_information=cxf3.FileInformation(
-            creator=f"flakelab {__version__}", creation_date=_xml_datetime(None),
+            creator=f"flakelab {__version__}",
+            creation_date=_xml_datetime(None),
             description="Multi-angle reflectance measurements",
         ),
         resources=cxf3.Resources(
             object_collection=cxf3.ObjectCollection(object_value=objects),
-            color_specification_collection=cxf3.ColorSpecificationCollection(color_specification=specs),
+            color_specification_collection=cxf3.ColorSpecificationCollection(
+                color_specification=specs
+            ),
         ),
-    )  # fmt: skip
+    )
     data = colour_cxf.write_cxf(document)
     write_atomically(path, lambda temporary: temporary.write_bytes(data))

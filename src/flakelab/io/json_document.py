@@ -78,15 +78,22 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
                     raise MeasurementFileError(path, "expected [L, a, b]", field=f"{gw}.lab")
                 lab = np.array([parse_number(path, v, f"{gw}.lab") for v in lab])
             readings.append(
-                Reading(where=gw, sample=sample, geometry=geometry, lab=lab,
-                        reflectance=parse_spectrum(path, values, wavelengths, f"{gw}.reflectance"))
-            )  # fmt: skip
+                Reading(
+                    where=gw,
+                    sample=sample,
+                    geometry=geometry,
+                    lab=lab,
+                    reflectance=parse_spectrum(path, values, wavelengths, f"{gw}.reflectance"),
+                )
+            )
         measured_at = item.get("measured_at")
         try:
             moment = datetime.fromisoformat(measured_at) if measured_at else None
         except (TypeError, ValueError):
             raise MeasurementFileError(
-                path, f"expected an ISO 8601 date-time, got {measured_at!r}", field=f"{where}.measured_at"
+                path,
+                f"expected an ISO 8601 date-time, got {measured_at!r}",
+                field=f"{where}.measured_at",
             ) from None
         for r in readings:
             r.measured_at = moment
@@ -94,14 +101,21 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
         if not isinstance(texture, dict):
             raise MeasurementFileError(path, "expected an object", field=f"{where}.texture")
         texture = {k: parse_number(path, v, f"{where}.texture.{k}") for k, v in texture.items()}
-        conditions = parse_conditions(path, item.get("lab_conditions", "D65/10"), f"{where}.lab_conditions")
+        conditions = parse_conditions(
+            path, item.get("lab_conditions", "D65/10"), f"{where}.lab_conditions"
+        )
         metadata = item.get("metadata") or {}
         if not isinstance(metadata, dict):
             raise MeasurementFileError(path, "expected an object", field=f"{where}.metadata")
         results += assemble(
-            path, readings, wavelengths, instrument=item.get("instrument"), lab_conditions=conditions,
-            texture={sample: texture}, metadata={sample: {k: str(v) for k, v in metadata.items()}},
-        )  # fmt: skip
+            path,
+            readings,
+            wavelengths,
+            instrument=item.get("instrument"),
+            lab_conditions=conditions,
+            texture={sample: texture},
+            metadata={sample: {k: str(v) for k, v in metadata.items()}},
+        )
     if not results:
         raise MeasurementFileError(path, "no measurements", field="measurements")
     return results

@@ -102,9 +102,10 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         labels.pop()
     if labels[:3] != ["Name", "Date/Time", "Geometry"]:
         raise MeasurementFileError(
-            path, f"expected columns Name, Date/Time, Geometry, got {labels[:3]}",
+            path,
+            f"expected columns Name, Date/Time, Geometry, got {labels[:3]}",
             field=f"{_SPECTRAL}, row {header + 1}",
-        )  # fmt: skip
+        )
     wavelengths = parse_wavelength_header(path, labels[3:], f"{_SPECTRAL}, row {header + 1}")
     n = wavelengths.size
 
@@ -137,14 +138,22 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         )
     texture = _read_texture_sheet(path, sheets.get(_TEXTURE))
     metadata = {
-        r.sample: {k: v for k, v in (("qc_job", preamble.get("QC JOB")),
-                                     ("standard", preamble.get("STANDARD"))) if v}
+        r.sample: {
+            k: v
+            for k, v in (("qc_job", preamble.get("QC JOB")), ("standard", preamble.get("STANDARD")))
+            if v
+        }
         for r in readings
-    }  # fmt: skip
+    }
     return assemble(
-        path, readings, wavelengths, instrument=preamble.get("INSTRUMENT") or INSTRUMENT, lab_conditions=lab_conditions,
-        texture=texture, metadata=metadata,
-    )  # fmt: skip
+        path,
+        readings,
+        wavelengths,
+        instrument=preamble.get("INSTRUMENT") or INSTRUMENT,
+        lab_conditions=lab_conditions,
+        texture=texture,
+        metadata=metadata,
+    )
 
 
 def _read_color_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:

@@ -55,7 +55,9 @@ class Reading:
     extras: dict[str, str] = field(default_factory=dict)
 
 
-def parse_wavelength_header(path: str | PathLike, labels: Sequence[object], where: str) -> np.ndarray:
+def parse_wavelength_header(
+    path: str | PathLike, labels: Sequence[object], where: str
+) -> np.ndarray:
     """Wavelengths [nm] from column labels such as ``400``, ``R400`` or ``400nm``; checked to
     form a regular grid within 360–780 nm."""
     values = []
@@ -63,9 +65,10 @@ def parse_wavelength_header(path: str | PathLike, labels: Sequence[object], wher
         match = _WAVELENGTH.match(str(label)) if label is not None else None
         if match is None:
             raise MeasurementFileError(
-                path, f"expected a wavelength such as 'R400' or '400', got {label!r}",
+                path,
+                f"expected a wavelength such as 'R400' or '400', got {label!r}",
                 field=f"{where}, column {i + 1}",
-            )  # fmt: skip
+            )
         values.append(float(match[1]))
     wavelengths = np.array(values)
     try:
@@ -74,9 +77,11 @@ def parse_wavelength_header(path: str | PathLike, labels: Sequence[object], wher
         raise MeasurementFileError(path, f"wavelengths {error}", field=where) from None
     if wavelengths[0] < 360 or wavelengths[-1] > 780:
         raise MeasurementFileError(
-            path, f"expected wavelengths within 360–780 nm, got {wavelengths[0]:g}–"
-            f"{wavelengths[-1]:g} nm", field=where,
-        )  # fmt: skip
+            path,
+            f"expected wavelengths within 360–780 nm, got {wavelengths[0]:g}–"
+            f"{wavelengths[-1]:g} nm",
+            field=where,
+        )
     return wavelengths
 
 
@@ -102,16 +107,20 @@ def parse_spectrum(
             path, f"expected {wavelengths.size} reflectance values, got {len(values)}", field=where
         )
     spectrum = np.array(
-        [parse_number(path, v, f"{where}, {wl:g} nm") for v, wl in zip(values, wavelengths, strict=True)]
+        [
+            parse_number(path, v, f"{where}, {wl:g} nm")
+            for v, wl in zip(values, wavelengths, strict=True)
+        ]
     )
     low, high = REFLECTANCE_RANGE
     bad = np.flatnonzero((spectrum < low) | (spectrum > high))
     if bad.size:
         i = bad[0]
         raise MeasurementFileError(
-            path, f"expected a reflectance factor in [{low}, {high}], got {spectrum[i]:g}",
+            path,
+            f"expected a reflectance factor in [{low}, {high}], got {spectrum[i]:g}",
             field=f"{where}, {wavelengths[i]:g} nm",
-        )  # fmt: skip
+        )
     return spectrum
 
 
@@ -152,9 +161,11 @@ def assemble(
         for row in rows:
             if row.geometry in seen:
                 raise MeasurementFileError(
-                    path, f"geometry {row.geometry.name} of sample {sample!r} appears twice "
-                    f"(also at {seen[row.geometry]})", field=row.where,
-                )  # fmt: skip
+                    path,
+                    f"geometry {row.geometry.name} of sample {sample!r} appears twice "
+                    f"(also at {seen[row.geometry]})",
+                    field=row.where,
+                )
             seen[row.geometry] = row.where
         labs = [r.lab for r in rows]
         if any(lab is None for lab in labs) and not all(lab is None for lab in labs):
@@ -166,9 +177,10 @@ def assemble(
         unknown = [k for k in sample_texture if k not in TEXTURE_READINGS]
         if unknown:
             raise MeasurementFileError(
-                path, f"expected texture readings among {', '.join(TEXTURE_READINGS)}, got {unknown}",
+                path,
+                f"expected texture readings among {', '.join(TEXTURE_READINGS)}, got {unknown}",
                 field=f"sample {sample!r}",
-            )  # fmt: skip
+            )
         dates = [r.measured_at for r in rows if r.measured_at is not None]
         measurements.append(
             Measurement(

@@ -41,7 +41,9 @@ def read_tolerance(name_or_path: str | PathLike) -> Tolerance:
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as error:
-        raise FlakelabError(f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'} ({error})") from None
+        raise FlakelabError(
+            f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'} ({error})"
+        ) from None
     try:
         return Tolerance.from_dict(data, source=str(path))
     except ValueError as error:

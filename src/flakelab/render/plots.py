@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_sRGB  # noqa: E402
+from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
@@ -24,15 +24,24 @@ def plot_measurements(
     conditions: Conditions = D65_10,
     dpi: int = 120,
 ) -> None:
-    """Save a figure: reflectance spectra per geometry (one panel per sample, each line drawn in
-    its own display colour) and L*, C*ab versus aspecular angle per illumination angle."""
+    """Save a figure: reflectance spectra per geometry (one row per sample; line colour by
+    aspecular angle, dashed for illumination below 30°) and L*, C*ab versus aspecular angle
+    per illumination angle."""
     n = len(measurements)
     figure, axes = plt.subplots(n, 2, figsize=(11, 3.6 * n), squeeze=False)
     for row, m in enumerate(measurements):
         spectra, trend = axes[row]
-        colours = reflectance_to_sRGB(m.reflectance / max(1.0, m.reflectance.max()), m.wavelengths, conditions)
+        aspecular = np.array([g.aspecular for g in m.geometries])
+        span = np.ptp(aspecular) or 1.0
         for i, g in enumerate(m.geometries):
-            spectra.plot(m.wavelengths, m.reflectance[i], color=colours[i], lw=1.6, label=g.name)
+            spectra.plot(
+                m.wavelengths,
+                m.reflectance[i],
+                color=plt.cm.viridis((g.aspecular - aspecular.min()) / span),
+                ls="-" if g.illumination >= 30 else "--",
+                lw=1.5,
+                label=g.name,
+            )
         spectra.set(xlabel="wavelength [nm]", ylabel="reflectance factor", title=m.sample)
         spectra.legend(fontsize=7, ncol=2, frameon=False)
         spectra.grid(alpha=0.3)
@@ -40,18 +49,27 @@ def plot_measurements(
         lch = Lab_to_LCh(m.lab(conditions))
         lightness_axis, chroma_axis = trend, trend.twinx()
         for illumination in sorted({g.illumination for g in m.geometries}):
-            rows = [i for i, g in enumerate(m.geometries) if g.illumination == illumination and g.in_plane]
+            rows = [
+                i
+                for i, g in enumerate(m.geometries)
+                if g.illumination == illumination and g.in_plane
+            ]
             rows.sort(key=lambda i: m.geometries[i].aspecular)
-            aspecular = [m.geometries[i].aspecular for i in rows]
-            lightness_axis.plot(aspecular, lch[rows, 0], "o-", label=f"L*  {illumination:g}° light")
-            chroma_axis.plot(aspecular, lch[rows, 1], "s--", alpha=0.7, label=f"C*  {illumination:g}° light")
+            angles = [m.geometries[i].aspecular for i in rows]
+            lightness_axis.plot(angles, lch[rows, 0], "o-", label=f"L*  {illumination:g}° light")
+            chroma_axis.plot(
+                angles, lch[rows, 1], "s--", alpha=0.7, label=f"C*  {illumination:g}° light"
+            )
         lightness_axis.set(xlabel="aspecular angle [°]", ylabel="L*", title=f"flop ({conditions})")
         chroma_axis.set_ylabel("C*ab")
         handles = lightness_axis.get_legend_handles_labels()
         extra = chroma_axis.get_legend_handles_labels()
-        lightness_axis.legend(handles[0] + extra[0], handles[1] + extra[1], fontsize=7, frameon=False)
+        lightness_axis.legend(
+            handles[0] + extra[0], handles[1] + extra[1], fontsize=7, frameon=False
+        )
         lightness_axis.grid(alpha=0.3)
-        lightness_axis.set_xticks(np.unique([g.aspecular for g in m.geometries]))
+        lightness_axis.set_xticks(np.unique(aspecular))
+        lightness_axis.tick_params(axis="x", labelrotation=60, labelsize=8)
     figure.tight_layout()
     fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
     write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))

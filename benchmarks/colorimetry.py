@@ -1,0 +1,72 @@
+"""Spectra → CIELAB throughput: flakelab's ASTM E308 weight matrix against colour-science's
+``msds_to_XYZ`` on the same spectra, in the same run (the baseline).
+
+    python benchmarks/colorimetry.py [--n 100000] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import tracemalloc
+
+import colour
+import numpy as np
+
+from flakelab.core.colorimetry import D65_10, OBSERVERS, reflectance_to_Lab, white_point
+from flakelab.core.spectra import SHAPE_STORE
+
+
+def baseline_lab(R: np.ndarray) -> np.ndarray:
+    msds = colour.MultiSpectralDistributions(R.T, SHAPE_STORE.wavelengths)
+    XYZ = colour.msds_to_XYZ(
+        msds, colour.MSDS_CMFS[OBSERVERS["10"]], colour.SDS_ILLUMINANTS["D65"],
+        method="ASTM E308", shape=SHAPE_STORE,
+    ) / 100  # fmt: skip
+    return colour.XYZ_to_Lab(XYZ, colour.XYZ_to_xy(white_point()))
+
+
+def timed(function, *args, repeat: int = 3) -> float:
+    best = np.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        function(*args)
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=100_000, help="spectra per run")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+
+    R = np.random.default_rng(args.seed).uniform(0, 1.2, (args.n, 31))
+    reflectance_to_Lab(R[:10], conditions=D65_10)  # build the weight table once
+    ours = timed(reflectance_to_Lab, R)
+    base_n = min(args.n, 20_000)
+    base = timed(baseline_lab, R[:base_n], repeat=1) * args.n / base_n
+    tracemalloc.start()
+    lab = reflectance_to_Lab(R)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    agreement = float(np.abs(lab[:base_n] - baseline_lab(R[:base_n])).max())
+    report = {
+        "spectra": args.n,
+        "flakelab_spectra_per_s": args.n / ours,
+        "colour_msds_to_XYZ_spectra_per_s": args.n / base,
+        "speedup": base / ours,
+        "max_abs_Lab_difference": agreement,
+        "peak_memory_mb": peak / 2**20,
+    }
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        for key, value in report.items():
+            print(f"{key:36s} {value:,.6g}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,151 @@
+"""The flakelab command as a user runs it (a real process: no traceback may leak)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flakelab.core import compare, tolerance_preset
+from flakelab.data import example_path
+from flakelab.io import read_measurement, read_measurements, write_measurements
+
+
+def flakelab(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "flakelab.cli.main", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def test_inspect_json_carries_lab_per_geometry_and_flop_index(ma_t12_files):
+    result = flakelab("inspect", ma_t12_files[0], "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    m = read_measurement(ma_t12_files[0])
+    assert [g["name"] for g in report["geometries"]] == list(m.geometry_names)
+    lab = np.array([[g["L"], g["a"], g["b"]] for g in report["geometries"]])
+    np.testing.assert_allclose(lab, m.stored_lab, atol=1e-3)  # the instrument's own numbers
+    assert report["flop_index"] == pytest.approx(m.flop_index())
+
+
+def test_compare_example_agrees_with_library_and_tolerance():
+    result = flakelab("compare", "--example", "--json", "--tolerance", "de00-1.0")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    direct = compare(
+        read_measurement(example_path("target")),
+        read_measurement(example_path("sprayout")),
+        "de00-1.0",
+    )
+    assert report["de00_max"] == pytest.approx(direct.de00_max)
+    for g in report["geometries"]:
+        assert g["pass"] == (g["de00"] <= 1.0)
+    assert report["pass"] == all(g["pass"] for g in report["geometries"])
+    assert flakelab("compare", "--example", "--fail-on-reject").returncode == (
+        0 if report["pass"] else 1
+    )
+
+
+def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files):
+    result = flakelab("compare", ma_t12_files[0], ma_t12_files[0], "--json", "-t", "components")
+    report = json.loads(result.stdout)
+    assert report["pass"] and report["de00_max"] == pytest.approx(0, abs=1e-9)
+
+
+def test_user_tolerance_file(tmp_path):
+    toml = tmp_path / "shop.toml"
+    toml.write_text('name = "shop"\n[default]\nde00 = 5.0\n[geometries."45as75"]\nde00 = 0.1\n')
+    report = json.loads(flakelab("compare", "--example", "--json", "-t", toml).stdout)
+    assert report["tolerance"] == "shop"
+    assert report["failing_geometries"] == ["45as75"]
+
+
+def test_convert_then_inspect_gives_the_same_numbers(ma_t12_files, tmp_path):
+    out = tmp_path / "converted.cxf"
+    assert flakelab("convert", ma_t12_files[1], out).returncode == 0
+    a = json.loads(flakelab("inspect", ma_t12_files[1], "--json").stdout)
+    b = json.loads(flakelab("inspect", out, "--json").stdout)
+    assert [g["L"] for g in a["geometries"]] == pytest.approx([g["L"] for g in b["geometries"]])
+
+
+def test_plot_writes_a_png(tmp_path):
+    out = tmp_path / "flop.png"
+    result = flakelab("plot", example_path("target"), "-o", out)
+    assert result.returncode == 0, result.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def _bad_files(tmp_path: Path, source: Path) -> dict[str, tuple[Path, str]]:
+    truncated = tmp_path / "truncated.xlsx"
+    truncated.write_bytes(source.read_bytes()[:30_000])
+    other = tmp_path / "picture.xlsx"
+    other.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(64))
+    header = "sample,geometry," + ",".join(f"R{w}" for w in range(400, 710, 10))
+    row = "S,45as15," + ",".join(["0.4"] * 31)
+    nan = tmp_path / "nan.csv"
+    nan.write_text(header + "\n" + row.replace("0.4", "NaN", 1) + "\n")
+    wrong = tmp_path / "wavelengths.csv"
+    wrong.write_text(header.replace("R500", "R505") + "\n" + row + "\n")
+    unknown = tmp_path / "geometry.csv"
+    unknown.write_text(header + "\n" + row.replace("45as15", "45az15") + "\n")
+    return {
+        "truncated": (truncated, "truncated or corrupt"),
+        "other kind": (other, "PNG image"),
+        "NaN": (nan, "row 2, 400 nm: expected a finite number"),
+        "wavelengths": (
+            wrong,
+            "header: wavelengths expected increasing wavelengths with a constant step",
+        ),
+        "geometry": (unknown, "row 2, geometry: expected a geometry name"),
+    }
+
+
+def test_bad_files_exit_nonzero_with_one_line_naming_file_and_problem(ma_t12_files, tmp_path):
+    for label, (path, problem) in _bad_files(tmp_path, ma_t12_files[0]).items():
+        result = flakelab("inspect", path)
+        assert result.returncode == 2, label
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1, (label, result.stderr)
+        assert str(path) in lines[0].replace("\n", "") and problem in lines[0], (label, lines[0])
+        assert "Traceback" not in result.stderr + result.stdout
+
+
+def test_bad_options_exit_nonzero_without_traceback():
+    for args, problem in (
+        (("inspect", "--example", "-c", "D66/10"), "expected an illuminant"),
+        (("compare", "--example", "-t", "no-such"), "neither a tolerance preset"),
+        (("inspect",), "give a measurement file"),
+    ):
+        result = flakelab(*args)
+        assert result.returncode == 2 and problem in result.stderr, result.stderr
+        assert "Traceback" not in result.stderr
+
+
+def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path):
+    existing = tmp_path / "out.bmp"
+    existing.write_text("keep me")
+    result = flakelab("convert", example_path("target"), existing)
+    assert result.returncode == 2 and "unknown output extension" in result.stderr
+    assert existing.read_text() == "keep me"
+
+
+def test_multi_sample_inspect_all(tmp_path):
+    m = read_measurement(example_path("target"))
+    path = tmp_path / "two.json"
+    write_measurements([m, read_measurement(example_path("sprayout"))], path)
+    report = json.loads(flakelab("inspect", path, "--all", "--json").stdout)
+    assert [x["sample"] for x in report["measurements"]] == [
+        x.sample for x in read_measurements(path)
+    ]
+
+
+def test_tolerance_presets_are_documented():
+    for name in ("refinish", "de00-1.0", "components"):
+        assert tolerance_preset(name).description

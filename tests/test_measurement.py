@@ -1,0 +1,77 @@
+"""Measurement, flop index and tolerances."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flakelab.core import Geometry, Limit, Measurement, Tolerance, compare, flop_index
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.io import read_tolerance
+
+
+def _grey_metallic(L_levels: dict[str, float]) -> Measurement:
+    """Neutral spectra whose L* at each geometry is given (Y from the CIE L* inverse)."""
+    names = list(L_levels)
+    L = np.array([L_levels[n] for n in names])
+    Y = ((L + 16) / 116) ** 3
+    return Measurement(
+        "grey",
+        tuple(Geometry.parse(n) for n in names),
+        WAVELENGTHS,
+        np.repeat(Y[:, None], 31, axis=1),
+    )
+
+
+def test_flop_index_from_spectra_matches_formula():
+    m = _grey_metallic({"45as15": 110.0, "45as45": 50.0, "45as110": 20.0})
+    np.testing.assert_allclose(m.lab()[:, 0], [110, 50, 20])
+    assert m.flop_index() == pytest.approx(2.69 * 90**1.11 / 50**0.86)
+    assert flop_index(110, 50, 20) == pytest.approx(13.7356, abs=1e-3)
+    # a solid colour (no angular dependence) has zero flop
+    assert _grey_metallic({"45as15": 50, "45as45": 50, "45as110": 50}).flop_index() == 0
+    assert _grey_metallic({"45as15": 50, "45as45": 50}).flop_index() is None
+
+
+def test_measurement_rejects_inconsistent_data():
+    g = (Geometry.parse("45as15"),)
+    with pytest.raises(ValueError, match="expected reflectance of shape"):
+        Measurement("x", g, WAVELENGTHS, np.ones((2, 31)))
+    with pytest.raises(ValueError, match="finite"):
+        Measurement("x", g, WAVELENGTHS, np.full((1, 31), np.nan))
+    with pytest.raises(ValueError, match="texture readings among"):
+        Measurement("x", g, WAVELENGTHS, np.ones((1, 31)), texture={"sparkle": 1.0})
+
+
+def test_tolerance_component_limits_and_per_geometry_override():
+    tol = Tolerance("t", Limit(dL=1.0, dC=0.5), {"45as15": Limit(de00=3.0)})
+    passed = tol.passes(
+        ["45as15", "45as45", "45as75"],
+        de00=[2.9, 0.3, 0.3],
+        dLCH=np.array([[2.5, 0, 0], [0.9, -0.4, 5.0], [0.2, 0.6, 0]]),
+    )
+    assert passed.tolist() == [True, True, False]
+
+
+def test_compare_reports_failing_geometries_only():
+    ref = _grey_metallic({"45as15": 100, "45as45": 50, "45as110": 20})
+    smp = _grey_metallic({"45as15": 100, "45as45": 50.5, "45as110": 22})
+    result = compare(ref, smp, "de00-1.0")
+    assert result.to_dict()["failing_geometries"] == ["45as110"]
+    assert result.de00[0] == pytest.approx(0, abs=1e-9)
+
+
+def test_tolerance_files_validated(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[default]\nde00 = -1\n")
+    with pytest.raises(ValueError, match="default: expected a positive limit for de00"):
+        read_tolerance(bad)
+    bad.write_text('[default]\nde00 = 1\n[geometries."45xx15"]\nde00 = 1\n')
+    with pytest.raises(ValueError, match="geometries: expected a geometry name"):
+        read_tolerance(bad)
+    bad.write_text("[default]\nde0 = 1\n")
+    with pytest.raises(ValueError, match="expected keys among de00, dL, dC, dH"):
+        read_tolerance(bad)
+    good = tmp_path / "good.json"
+    good.write_text('{"name": "j", "default": {"de00": 1.5}, "kL": 2}')
+    assert read_tolerance(good).kL == 2 and read_tolerance(good).limit("45as15").de00 == 1.5
