@@ -17,6 +17,7 @@ from flakelab.errors import MeasurementFileError
 from flakelab.io.csv_table import read_csv, write_csv
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.json_document import read_json, write_json
+from flakelab.io.library_file import read_library, write_library
 from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.tolerance_file import read_tolerance
 
@@ -27,6 +28,8 @@ __all__ = [
     "read_measurement",
     "write_measurements",
     "read_tolerance",
+    "read_library",
+    "write_library",
 ]
 
 Reader = Callable[[str | PathLike], list[Measurement]]

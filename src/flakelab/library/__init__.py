@@ -1,0 +1,22 @@
+"""Library layer: toners (aluminium flakes, pigments, pearls), binder, and their optics."""
+
+from flakelab.library.optics import (
+    aluminium_refractive_index,
+    flake_reflectance,
+    fresnel_reflectance,
+    pearl_reflectance,
+)
+from flakelab.library.toners import (
+    TONER_KINDS,
+    AluminiumFlake,
+    Binder,
+    Library,
+    LibraryError,
+    Pearl,
+    Pigment,
+)
+
+__all__ = [
+    "aluminium_refractive_index", "flake_reflectance", "fresnel_reflectance", "pearl_reflectance",
+    "TONER_KINDS", "AluminiumFlake", "Binder", "Library", "LibraryError", "Pearl", "Pigment",
+]  # fmt: skip

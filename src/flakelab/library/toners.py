@@ -1,0 +1,312 @@
+"""A shop's toner library: aluminium flakes, coloured pigments, pearls, binder and clearcoat.
+
+Every toner is a small frozen dataclass checked when built; a :class:`Library` holds them
+by name and turns recipes into validated mass fractions. Spectra live on the storage grid
+(:data:`~flakelab.core.spectra.WAVELENGTHS`). Files: ``flakelab.io.read_library``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.geometry import N_BINDER
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.errors import FlakelabError
+from flakelab.library.optics import SUBSTRATE_INDEX
+
+__all__ = [
+    "AluminiumFlake",
+    "Pigment",
+    "Pearl",
+    "Binder",
+    "Library",
+    "LibraryError",
+    "TONER_KINDS",
+    "SUM_TOLERANCE",
+]
+
+SUM_TOLERANCE = 1e-6
+"""Relative tolerance on recipe amounts summing to the can [-]."""
+
+
+class LibraryError(FlakelabError):
+    """A toner library or a recipe that is wrong: names the toner, the field and the problem."""
+
+
+def _positive(owner: str, name: str, value: float, *, upper: float | None = None) -> None:
+    if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+        raise LibraryError(f"{owner}: {name}: expected a positive number, got {value!r}")
+    if upper is not None and value > upper:
+        raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
+
+
+def _spectrum(owner: str, name: str, values: Any, *, allow_zero: bool = True) -> NDArray:
+    if values is None:
+        raise LibraryError(
+            f"{owner}: {name}: missing spectrum ({WAVELENGTHS.size} values, 400–700 nm)"
+        )
+    array = np.asarray(values, dtype=float)
+    if array.shape != WAVELENGTHS.shape:
+        raise LibraryError(
+            f"{owner}: {name}: expected {WAVELENGTHS.size} values (400–700 nm, 10 nm), "
+            f"got {array.size}"
+        )
+    if not np.all(np.isfinite(array)) or np.any(array < 0):
+        raise LibraryError(f"{owner}: {name}: expected finite non-negative values")
+    if not allow_zero and not np.any(array > 0):
+        raise LibraryError(f"{owner}: {name}: expected a spectrum that is not all zero")
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True)
+class AluminiumFlake:
+    """Aluminium flake toner: disks of radius ``radius_um`` [µm] and ``thickness_um`` [µm],
+    normals spread around the surface normal with s.d. ``orientation_sd_deg`` [degree];
+    ``surface_quality`` [0–1] scales the specular part (1 = mirror-like "silver dollar",
+    lower = "cornflake" with rough edges)."""
+
+    name: str
+    radius_um: float
+    thickness_um: float
+    orientation_sd_deg: float
+    surface_quality: float = 1.0
+    description: str = ""
+    kind = "aluminium"
+
+    def __post_init__(self) -> None:
+        _positive(self.name, "radius_um", self.radius_um, upper=100)
+        _positive(self.name, "thickness_um", self.thickness_um, upper=2)
+        _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
+        _positive(self.name, "surface_quality", self.surface_quality, upper=1)
+
+
+@dataclass(frozen=True)
+class Pigment:
+    """Coloured pigment or dye: specific absorption K(λ) and scattering S(λ) per unit mass
+    fraction [1/µm], Henyey–Greenstein asymmetry ``g`` [−1, 1]."""
+
+    name: str
+    family: str
+    absorption: NDArray[np.float64]
+    scattering: NDArray[np.float64]
+    g: float = 0.0
+    description: str = ""
+    kind = "pigment"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "absorption", _spectrum(self.name, "absorption", self.absorption))
+        object.__setattr__(self, "scattering", _spectrum(self.name, "scattering", self.scattering))
+        if not np.any(self.absorption > 0) and not np.any(self.scattering > 0):
+            raise LibraryError(f"{self.name}: absorption and scattering are both all zero")
+        if not -1 < self.g < 1:
+            raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {self.g!r}")
+
+    @property
+    def transparent(self) -> bool:
+        """True for a dye-like toner that absorbs but does not scatter."""
+        return not np.any(self.scattering > 0)
+
+
+@dataclass(frozen=True)
+class Pearl:
+    """Interference pigment: TiO2 coating of ``coating_nm`` [nm] on a platelet substrate
+    (``mica``, ``alumina``, ``silica``) of ``substrate_nm`` [nm]; geometry as flakes."""
+
+    name: str
+    coating_nm: float
+    substrate: str
+    substrate_nm: float
+    radius_um: float
+    orientation_sd_deg: float
+    description: str = ""
+    kind = "pearl"
+
+    def __post_init__(self) -> None:
+        _positive(self.name, "coating_nm", self.coating_nm, upper=1000)
+        _positive(self.name, "substrate_nm", self.substrate_nm, upper=5000)
+        _positive(self.name, "radius_um", self.radius_um, upper=100)
+        _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
+        if self.substrate not in SUBSTRATE_INDEX:
+            raise LibraryError(
+                f"{self.name}: substrate: expected one of {', '.join(SUBSTRATE_INDEX)}, "
+                f"got {self.substrate!r}"
+            )
+
+
+@dataclass(frozen=True)
+class Binder:
+    """Binder and clearcoat: refractive index, basecoat thickness [µm] and the primer's
+    diffuse reflectance R_g(λ)."""
+
+    refractive_index: float = N_BINDER
+    thickness_um: float = 15.0
+    primer_reflectance: NDArray[np.float64] = field(
+        default_factory=lambda: np.full(WAVELENGTHS.size, 0.05)
+    )
+
+    def __post_init__(self) -> None:
+        _positive("binder", "refractive_index", self.refractive_index, upper=3)
+        if self.refractive_index < 1:
+            raise LibraryError(
+                f"binder: refractive_index: expected ≥ 1, got {self.refractive_index}"
+            )
+        _positive("binder", "thickness_um", self.thickness_um, upper=200)
+        primer = _spectrum("binder", "primer_reflectance", self.primer_reflectance)
+        if np.any(primer > 1):
+            raise LibraryError("binder: primer_reflectance: expected values in [0, 1]")
+        object.__setattr__(self, "primer_reflectance", primer)
+
+
+Toner = AluminiumFlake | Pigment | Pearl
+TONER_KINDS: dict[str, type] = {"aluminium": AluminiumFlake, "pigment": Pigment, "pearl": Pearl}
+
+
+@dataclass(frozen=True)
+class Library:
+    """Toners by name plus the binder; the order of ``toners`` is the recipe vector order."""
+
+    name: str
+    toners: tuple[Toner, ...]
+    binder: Binder = field(default_factory=Binder)
+    synthetic: bool = False
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.toners:
+            raise LibraryError(f"library {self.name!r}: expected at least one toner, got none")
+        names = [t.name for t in self.toners]
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        if duplicates:
+            raise LibraryError(f"library {self.name!r}: toner names appear twice: {duplicates}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.toners)
+
+    def __getitem__(self, name: str) -> Toner:
+        for toner in self.toners:
+            if toner.name == name:
+                return toner
+        raise LibraryError(f"library {self.name!r}: unknown toner {name!r}")
+
+    def of_kind(self, kind: str) -> tuple[Toner, ...]:
+        if kind not in TONER_KINDS:
+            raise LibraryError(
+                f"expected a toner kind among {', '.join(TONER_KINDS)}, got {kind!r}"
+            )
+        return tuple(t for t in self.toners if t.kind == kind)
+
+    def fractions(
+        self, amounts: Mapping[str, float], *, total: float | None = None
+    ) -> NDArray[np.float64]:
+        """Mass fractions in library order from a recipe ``{toner: amount}``.
+
+        ``total`` is the can's content in the amounts' unit; when given, the amounts must sum
+        to it. Unknown toners, negative or non-finite amounts and an empty recipe are errors.
+
+        Examples
+        --------
+        >>> flakes = (AluminiumFlake("AL1", 10, 0.3, 10), AluminiumFlake("AL2", 20, 0.4, 12))
+        >>> lib = Library("demo", flakes)
+        >>> lib.fractions({"AL2": 30.0, "AL1": 10.0}, total=40.0).tolist()
+        [0.25, 0.75]
+        """
+        if not amounts:
+            raise LibraryError("recipe: expected at least one toner amount, got none")
+        vector = np.zeros(len(self.toners))
+        names = self.names
+        for name, amount in amounts.items():
+            if name not in names:
+                raise LibraryError(f"recipe: unknown toner {name!r} (library {self.name!r})")
+            if not (isinstance(amount, int | float) and np.isfinite(amount)) or amount < 0:
+                raise LibraryError(
+                    f"recipe: {name}: expected a non-negative amount, got {amount!r}"
+                )
+            vector[names.index(name)] = amount
+        amount_sum = vector.sum()
+        if amount_sum <= 0:
+            raise LibraryError("recipe: amounts sum to zero")
+        if total is not None and not np.isclose(amount_sum, total, rtol=SUM_TOLERANCE, atol=0):
+            raise LibraryError(
+                f"recipe: amounts sum to {amount_sum:g}, expected the can's {total:g}"
+            )
+        return vector / amount_sum
+
+    def to_dict(self) -> dict[str, Any]:
+        def toner_dict(t: Toner) -> dict[str, Any]:
+            data = {"kind": t.kind}
+            for f in fields(t):
+                value = getattr(t, f.name)
+                data[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
+            return data
+
+        return {
+            "format": "flakelab-library",
+            "version": 1,
+            "name": self.name,
+            "synthetic": self.synthetic,
+            "description": self.description,
+            "wavelengths": WAVELENGTHS.tolist(),
+            "binder": {
+                "refractive_index": self.binder.refractive_index,
+                "thickness_um": self.binder.thickness_um,
+                "primer_reflectance": self.binder.primer_reflectance.tolist(),
+            },
+            "toners": [toner_dict(t) for t in self.toners],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str = "library") -> Library:
+        """Build and check a library from its file structure (see :meth:`to_dict`)."""
+        if data.get("format") != "flakelab-library":
+            raise LibraryError(
+                f"{source}: expected format 'flakelab-library', got {data.get('format')!r}"
+            )
+        wavelengths = data.get("wavelengths", WAVELENGTHS.tolist())
+        if list(map(float, wavelengths)) != WAVELENGTHS.tolist():
+            raise LibraryError(f"{source}: wavelengths: expected 400–700 nm in 10 nm steps")
+        toners = []
+        for i, item in enumerate(data.get("toners", [])):
+            where = f"{source}: toners[{i}] ({item.get('name', '?')})"
+            kind = item.get("kind")
+            if kind not in TONER_KINDS:
+                raise LibraryError(
+                    f"{where}: kind: expected one of {', '.join(TONER_KINDS)}, got {kind!r}"
+                )
+            cls_ = TONER_KINDS[kind]
+            allowed = {f.name for f in fields(cls_)}
+            unknown = sorted(set(item) - allowed - {"kind"})
+            if unknown:
+                raise LibraryError(
+                    f"{where}: unknown fields {unknown} (expected {sorted(allowed)})"
+                )
+            missing = sorted(
+                f.name
+                for f in fields(cls_)
+                if f.name not in item and f.default is MISSING and f.default_factory is MISSING
+            )
+            if missing:
+                raise LibraryError(f"{where}: missing fields {missing}")
+            try:
+                toners.append(cls_(**{k: v for k, v in item.items() if k != "kind"}))
+            except LibraryError as error:
+                raise LibraryError(f"{source}: {error}") from None
+            except (TypeError, ValueError) as error:
+                raise LibraryError(f"{where}: {error}") from None
+        try:
+            binder = Binder(**data["binder"]) if "binder" in data else Binder()
+        except TypeError as error:
+            raise LibraryError(f"{source}: binder: {error}") from None
+        return cls(
+            name=str(data.get("name", source)),
+            toners=tuple(toners),
+            binder=binder,
+            synthetic=bool(data.get("synthetic", False)),
+            description=str(data.get("description", "")),
+        )

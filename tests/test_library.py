@@ -1,0 +1,112 @@
+"""Toner library: optics against known values, validation of files and recipes."""
+
+from __future__ import annotations
+
+import json
+
+import colour
+import numpy as np
+import pytest
+
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.io import read_library, write_library
+from flakelab.library import (
+    AluminiumFlake,
+    Library,
+    LibraryError,
+    aluminium_refractive_index,
+    flake_reflectance,
+    fresnel_reflectance,
+    pearl_reflectance,
+)
+
+
+def test_aluminium_reflectance_in_air_matches_handbook_values():
+    n = aluminium_refractive_index(np.array([450.0, 550.0, 650.0, 820.0]))
+    R = fresnel_reflectance(1.0, 1.0, n)
+    # Aluminium reflects ~91–92 % across the visible with its interband dip near 1.5 eV (~820 nm)
+    assert R[:3] == pytest.approx([0.92, 0.915, 0.91], abs=0.01)
+    assert R[3] < R[2] - 0.02
+
+
+def test_fresnel_matches_colour_science_for_dielectrics_and_total_internal_reflection():
+    for theta in (0.0, 20.0, 40.0):
+        expected = np.mean(
+            colour.phenomena.thin_film_tmm([1.0, 1.0, 1.5], 0.0, 550, theta)[0][0, 0, 0]
+        )
+        assert fresnel_reflectance(np.cos(np.radians(theta)), 1.0, 1.5) == pytest.approx(expected)
+    critical = np.degrees(np.arcsin(1 / 1.5))
+    assert fresnel_reflectance(np.cos(np.radians(critical + 1)), 1.5, 1.0) == pytest.approx(1.0)
+
+
+def test_flake_reflectance_is_bounded_and_rises_toward_grazing():
+    R = flake_reflectance(np.array([0.0, 45.0, 80.0, 89.0]), WAVELENGTHS)
+    assert R.shape == (4, 31) and np.all((R > 0.5) & (R <= 1))
+    assert np.all(R[3] > R[2])
+
+
+def test_pearl_is_lossless_and_its_colour_shifts_blue_with_angle():
+    for coating in (60.0, 75.0, 140.0):
+        R = pearl_reflectance(coating, WAVELENGTHS, [0.0, 60.0])
+        assert np.all((R >= 0) & (R <= 1))
+    for coating in (60.0, 75.0):  # first-order peak inside 400–700 nm
+        peak = WAVELENGTHS[np.argmax(pearl_reflectance(coating, WAVELENGTHS, [0.0, 60.0]), axis=-1)]
+        assert peak[1] < peak[0]  # the interference peak moves to shorter wavelengths off-normal
+    # thicker coatings put the first-order peak at longer wavelengths
+    first_order = [WAVELENGTHS[np.argmax(pearl_reflectance(c, WAVELENGTHS)[0])] for c in (60, 75)]
+    assert first_order[1] > first_order[0]
+
+
+def test_demo_library_round_trips_and_has_the_families():
+    lib = read_library()
+    assert lib.synthetic and len(lib.toners) == 35
+    assert [len(lib.of_kind(k)) for k in ("aluminium", "pigment", "pearl")] == [10, 20, 5]
+    families = {t.family for t in lib.of_kind("pigment")}
+    assert {"phthalocyanine", "quinacridone", "perylene", "iron oxide", "carbon"} <= families
+
+
+def test_library_file_round_trip(tmp_path):
+    lib = read_library()
+    path = tmp_path / "shop.json"
+    write_library(lib, path)
+    again = read_library(path)
+    assert again.names == lib.names
+    np.testing.assert_array_equal(
+        again["Phthalo blue GS"].absorption, lib["Phthalo blue GS"].absorption
+    )
+
+
+def test_recipe_validation():
+    lib = read_library()
+    f = lib.fractions({"Al coarse": 60.0, "Phthalo blue GS": 40.0}, total=100.0)
+    assert f.sum() == pytest.approx(1) and f[lib.names.index("Al coarse")] == pytest.approx(0.6)
+    with pytest.raises(LibraryError, match="unknown toner 'Al cosmic'"):
+        lib.fractions({"Al cosmic": 1.0})
+    with pytest.raises(LibraryError, match="Al coarse: expected a non-negative amount, got -1"):
+        lib.fractions({"Al coarse": -1.0})
+    with pytest.raises(LibraryError, match="amounts sum to 90, expected the can's 100"):
+        lib.fractions({"Al coarse": 50.0, "Phthalo blue GS": 40.0}, total=100.0)
+
+
+def test_library_file_with_missing_spectrum_or_bad_field_is_rejected(tmp_path):
+    data = read_library().to_dict()
+    del data["toners"][12]["absorption"]
+    path = tmp_path / "broken.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(LibraryError, match=r"toners\[12\] .*missing fields \['absorption'\]"):
+        read_library(path)
+    data = read_library().to_dict()
+    data["toners"][0]["radius_um"] = -5
+    path.write_text(json.dumps(data))
+    with pytest.raises(LibraryError, match="Al fine bright: radius_um: expected a positive number"):
+        read_library(path)
+    data["toners"][0]["radius_um"] = 5
+    data["toners"][15]["absorption"] = data["toners"][15]["absorption"][:30]
+    path.write_text(json.dumps(data))
+    with pytest.raises(LibraryError, match="absorption: expected 31 values"):
+        read_library(path)
+
+
+def test_duplicate_toner_names_rejected():
+    with pytest.raises(LibraryError, match="appear twice"):
+        Library("x", (AluminiumFlake("A", 5, 0.2, 10), AluminiumFlake("A", 6, 0.2, 10)))
