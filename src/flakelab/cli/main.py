@@ -123,9 +123,7 @@ def inspect(
         raise FlakelabError("give a measurement file, or --example")
     cond = Conditions.parse(conditions)
     source = path if path is not None else example_path("target")
-    measurements = (
-        read_measurements(source) if all_samples else [_one_or_example(path, "target", sample)]
-    )
+    measurements = read_measurements(source) if all_samples else [read_measurement(source, sample)]
     infos = [describe(m, cond) for m in measurements]
     if as_json:
         out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}

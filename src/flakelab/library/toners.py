@@ -45,7 +45,7 @@ def _positive(owner: str, name: str, value: float, *, upper: float | None = None
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
 
 
-def _spectrum(owner: str, name: str, values: Any, *, allow_zero: bool = True) -> NDArray:
+def _spectrum(owner: str, name: str, values: Any) -> NDArray:
     if values is None:
         raise LibraryError(
             f"{owner}: {name}: missing spectrum ({WAVELENGTHS.size} values, 400–700 nm)"
@@ -58,8 +58,6 @@ def _spectrum(owner: str, name: str, values: Any, *, allow_zero: bool = True) ->
         )
     if not np.all(np.isfinite(array)) or np.any(array < 0):
         raise LibraryError(f"{owner}: {name}: expected finite non-negative values")
-    if not allow_zero and not np.any(array > 0):
-        raise LibraryError(f"{owner}: {name}: expected a spectrum that is not all zero")
     array.setflags(write=False)
     return array
 
