@@ -149,7 +149,10 @@ PEARLS = [
 
 def main() -> None:
     toners = [
-        *(AluminiumFlake(n, r, t, sd, q, description=d) for n, r, t, sd, q, d in FLAKES),
+        *(
+            AluminiumFlake(n, r, t, sd, q, volume_fraction=0.04 if t < 0.1 else 0.13, description=d)
+            for n, r, t, sd, q, d in FLAKES
+        ),
         *(
             Pigment(
                 n,

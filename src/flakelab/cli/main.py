@@ -253,6 +253,84 @@ def plot(
     errors.print(f"wrote {output}", highlight=False)
 
 
+validate_app = typer.Typer(help="Validation experiments against the reference Monte Carlo.")
+app.add_typer(validate_app, name="validate")
+
+
+@validate_app.command("scaling")
+@reports_errors
+def validate_scaling(
+    json_output: JsonOption = False,
+    photons: Annotated[
+        int, typer.Option(help="Photons per Monte Carlo spectrum.", min=1000)
+    ] = 200_000,
+    seed: Annotated[int, typer.Option(help="Seed of the Monte Carlo runs.")] = 51,
+    spreads: Annotated[
+        str, typer.Option(help="Orientation spreads [°]: reference first, then the series.")
+    ] = "10,5,15",
+    plots: Annotated[
+        Path | None, typer.Option("--plots", help="Folder for the figures (one per spread).")
+    ] = Path("scaling-plots"),
+) -> None:
+    """The hybrid paper's scaling experiment (Table 1 dye series), Monte Carlo vs fast model
+    vs single-collision scaling."""
+    from flakelab.physics.scaling import run_series, scaling_report
+    from flakelab.render.plots import plot_scaling
+
+    values = [float(v) for v in spreads.split(",") if v.strip()]
+    if not values or any(not 0 < v <= 45 for v in values):
+        raise FlakelabError(f"--spreads: expected degrees in (0, 45], got {spreads!r}")
+    series = []
+    with _progress(json_output) as progress:
+        task = progress.add_task("Monte Carlo", total=8 * len(values))
+        for value in values:
+            series.append(run_series(value, photons, seed, progress=lambda: progress.advance(task)))
+    report = scaling_report(series[0], series[1:])
+    if plots is not None:
+        plots.mkdir(parents=True, exist_ok=True)
+        for one in series:
+            plot_scaling(one, plots / f"scaling-spread-{one.spread_deg:g}.png")
+        report["plots"] = sorted(str(p) for p in plots.glob("scaling-spread-*.png"))
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_scaling(report)
+
+
+def _progress(quiet: bool):
+    from rich.progress import Progress
+
+    return Progress(console=errors, disable=quiet or not errors.is_terminal, transient=True)
+
+
+def _print_scaling(report: dict[str, Any]) -> None:
+    table = Table(title=f"Scaling experiment ({report['photons_per_spectrum']:,} photons/spectrum)")
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    table.add_column("goal")
+    rows = (
+        ("shape correlation (min)", report["shape_correlation_min"], "≥ 0.99"),
+        ("span linearity R² (min)", report["span_linearity_r2"], "≥ 0.99"),
+        ("fast model ΔE00 mean", report["de00_mean"], "≤ 0.5"),
+        ("fast model ΔE00 max", report["de00_max"], "≤ 1.0"),
+        ("atlas ΔE00 mean", report["atlas_de00_mean"], ""),
+        ("atlas ΔE00 max", report["atlas_de00_max"], ""),
+        ("single collision ΔE00 mean", report["single_collision_de00_mean"], "reported"),
+        ("single collision ΔE00 max", report["single_collision_de00_max"], "reported"),
+        ("speed-up (MC / fast)", report["speedup"], "≥ 1000"),
+    )
+    for name, value, goal in rows:
+        table.add_row(name, f"{value:.4g}", goal)
+    console.print(table)
+    for entry in report.get("orientation_series", []):
+        change = entry["g_relative_change_median"]
+        console.print(
+            f"spread {entry['spread_deg']:g}°: g changes by {change['monte_carlo']:.1%} (MC), "
+            f"{change['fast']:.1%} (fast), {change['single_collision']:.1%} (single collision); "
+            f"fast ΔE00 mean {entry['de00_mean']:.2f}, single {entry['single_collision_de00_mean']:.2f}"
+        )
+
+
 @app.callback(invoke_without_command=True)
 def main(
     version: Annotated[bool, typer.Option("--version", help="Print the version and exit.")] = False,

@@ -67,13 +67,15 @@ class AluminiumFlake:
     """Aluminium flake toner: disks of radius ``radius_um`` [µm] and ``thickness_um`` [µm],
     normals spread around the surface normal with s.d. ``orientation_sd_deg`` [degree];
     ``surface_quality`` [0–1] scales the specular part (1 = mirror-like "silver dollar",
-    lower = "cornflake" with rough edges)."""
+    lower = "cornflake" with rough edges). ``volume_fraction`` [-] is the flakes' share of
+    the dry film when the recipe is this toner alone (amounts scale it down in a mix)."""
 
     name: str
     radius_um: float
     thickness_um: float
     orientation_sd_deg: float
     surface_quality: float = 1.0
+    volume_fraction: float = 0.13
     description: str = ""
     kind = "aluminium"
 
@@ -82,6 +84,7 @@ class AluminiumFlake:
         _positive(self.name, "thickness_um", self.thickness_um, upper=2)
         _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
         _positive(self.name, "surface_quality", self.surface_quality, upper=1)
+        _positive(self.name, "volume_fraction", self.volume_fraction, upper=0.6)
 
 
 @dataclass(frozen=True)
@@ -114,7 +117,8 @@ class Pigment:
 @dataclass(frozen=True)
 class Pearl:
     """Interference pigment: TiO2 coating of ``coating_nm`` [nm] on a platelet substrate
-    (``mica``, ``alumina``, ``silica``) of ``substrate_nm`` [nm]; geometry as flakes."""
+    (``mica``, ``alumina``, ``silica``) of ``substrate_nm`` [nm]; geometry and
+    ``volume_fraction`` as for :class:`AluminiumFlake`."""
 
     name: str
     coating_nm: float
@@ -122,10 +126,16 @@ class Pearl:
     substrate_nm: float
     radius_um: float
     orientation_sd_deg: float
+    volume_fraction: float = 0.10
     description: str = ""
     kind = "pearl"
 
+    @property
+    def thickness_um(self) -> float:
+        return (self.substrate_nm + 2 * self.coating_nm) / 1000
+
     def __post_init__(self) -> None:
+        _positive(self.name, "volume_fraction", self.volume_fraction, upper=0.6)
         _positive(self.name, "coating_nm", self.coating_nm, upper=1000)
         _positive(self.name, "substrate_nm", self.substrate_nm, upper=5000)
         _positive(self.name, "radius_um", self.radius_um, upper=100)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from os import PathLike
+from pathlib import Path
 
 import matplotlib
 
@@ -14,7 +15,7 @@ from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E4
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
-__all__ = ["plot_measurements"]
+__all__ = ["plot_measurements", "plot_scaling"]
 
 
 def plot_measurements(
@@ -72,5 +73,50 @@ def plot_measurements(
         lightness_axis.tick_params(axis="x", labelrotation=60, labelsize=8)
     figure.tight_layout()
     fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
+    write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
+    plt.close(figure)
+
+
+def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
+    """The hybrid paper's Figs. 5–7 for a :class:`~flakelab.physics.scaling.ScalingSeries`:
+    normalised g̃ of every sample against the dye's normalised extinction (Monte Carlo);
+    g at a near-specular and a far geometry for Monte Carlo, fast model and single-collision
+    scaling; the span of g against dye concentration with straight-line fits."""
+    from flakelab.physics.scaling import TABLE1_DYE, dye_extinction
+
+    wl = np.arange(400, 701, 10)
+    figure, (shape, curves, span) = plt.subplots(1, 3, figsize=(16, 4.6))
+    g_mc = series.g(series.monte_carlo)
+    near, far = series.geometries.index("45as15"), series.geometries.index("45as75")
+    for i, c in enumerate(TABLE1_DYE):
+        colour_ = plt.cm.Blues(0.35 + 0.65 * i / (len(TABLE1_DYE) - 1))
+        shape.plot(wl, g_mc[i, near] / g_mc[i, near].max(), color=colour_, label=f"{c:.2%}")
+    eps = dye_extinction()
+    shape.plot(wl, eps / eps.max(), "k--", label="extinction")
+    shape.set(xlabel="wavelength [nm]", ylabel="g̃ = g / max g", title="45as15, Monte Carlo")
+    shape.legend(fontsize=7, title="dye PVC", title_fontsize=7)
+    methods = (
+        ("Monte Carlo", g_mc, "-"),
+        ("fast model", series.g(series.fast), "--"),
+        ("single collision", series.g(series.single, series.single_base), ":"),
+    )
+    for label, g, style in methods:
+        for index, colour_ in ((near, "tab:blue"), (far, "tab:red")):
+            curves.plot(wl, g[-1, index], style, color=colour_,
+                        label=f"{label}, {series.geometries[index]}")  # fmt: skip
+    curves.set(xlabel="wavelength [nm]", ylabel="g = f0/f − 1",
+               title=f"dye PVC {TABLE1_DYE[-1]:.2%}")  # fmt: skip
+    curves.legend(fontsize=7)
+    for label, g, style in methods:
+        spans = g.max(-1) - g.min(-1)
+        for index, colour_ in ((near, "tab:blue"), (far, "tab:red")):
+            span.plot(TABLE1_DYE * 100, spans[:, index], "o" + style, color=colour_, ms=3,
+                      label=f"{label}, {series.geometries[index]}")  # fmt: skip
+    span.set(xlabel="dye PVC [%]", ylabel="span of g (max − min over λ)",
+             title="degree of non-uniformity")  # fmt: skip
+    span.legend(fontsize=7)
+    figure.suptitle(f"Scaling experiment, orientation spread {series.spread_deg:g}°")
+    figure.tight_layout()
+    fmt = Path(path).suffix.lstrip(".") or "png"
     write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
     plt.close(figure)

@@ -1,0 +1,34 @@
+"""Regenerate the fast model's flake atlas (src/flakelab/data/flake-atlas.npz).
+
+Dye-free Monte Carlo runs of a flake layer (σ_f = 1, black primer) over a grid of
+orientation spreads and optical depths, one per illumination angle of the MA-T12 geometries;
+each run's path table is stored as its double Laplace transform (flakelab.physics.fast).
+
+    python scripts/make_flake_atlas.py [--photons 100000] [--seed 2026]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from rich.progress import Progress
+
+from flakelab.physics.fast import ATLAS_DEPTHS, ATLAS_SPREADS, atlas_path, build_atlas
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--photons", type=int, default=100_000)
+    parser.add_argument("--seed", type=int, default=2026)
+    args = parser.parse_args()
+    with Progress() as progress:
+        task = progress.add_task(
+            "Monte Carlo runs", total=ATLAS_SPREADS.size * ATLAS_DEPTHS.size * 2
+        )
+        atlas = build_atlas(args.photons, args.seed, lambda: progress.advance(task))
+    atlas.save(atlas_path())
+    print(f"wrote {atlas_path()} ({atlas_path().stat().st_size / 1024:.0f} KiB)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Coating optics: formulation → spectral BRDF (fast model, scaling form, Monte Carlo)."""
