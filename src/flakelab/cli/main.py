@@ -327,7 +327,8 @@ def _print_scaling(report: dict[str, Any]) -> None:
         console.print(
             f"spread {entry['spread_deg']:g}°: g changes by {change['monte_carlo']:.1%} (MC), "
             f"{change['fast']:.1%} (fast), {change['single_collision']:.1%} (single collision); "
-            f"fast ΔE00 mean {entry['de00_mean']:.2f}, single {entry['single_collision_de00_mean']:.2f}"
+            f"fast ΔE00 mean {entry['de00_mean']:.2f}, "
+            f"single {entry['single_collision_de00_mean']:.2f}"
         )
 
 

@@ -87,7 +87,8 @@ class FlakeAtlas:
         if missing:
             raise FlakelabError(
                 f"geometries: the fast model's flake atlas has no {', '.join(missing)} "
-                f"(it covers {', '.join(self.geometries)}; rebuild with scripts/make_flake_atlas.py)"
+                f"(it covers {', '.join(self.geometries)}; "
+                "rebuild with scripts/make_flake_atlas.py)"
             )
         return np.array([self.geometries.index(n) for n in names])
 
