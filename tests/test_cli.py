@@ -149,3 +149,29 @@ def test_multi_sample_inspect_all(tmp_path):
 def test_tolerance_presets_are_documented():
     for name in ("refinish", "de00-1.0", "components"):
         assert tolerance_preset(name).description
+
+
+def test_validate_scaling_reproduces_the_papers_observations(tmp_path):
+    run = flakelab(
+        "validate", "scaling", "--json", "--photons", "5000", "--spreads", "10,5",
+        "--plots", str(tmp_path),
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    # the dye's fingerprint in g̃ and the linear span survive multiple flake bounces …
+    assert report["shape_correlation_min"] > 0.99
+    assert report["span_linearity_r2"] > 0.99
+    # … but single-collision magnitudes do not, while the path-table model does
+    assert report["single_collision_de00_mean"] > 5 * report["de00_mean"]
+    assert report["de00_mean"] < 1.0
+    entry = report["orientation_series"][0]
+    assert entry["spread_deg"] == 5 and entry["g_relative_change_median"]["single_collision"] < 0.01
+    assert entry["g_relative_change_median"]["monte_carlo"] > 0.02
+    assert sorted(Path(p).name for p in report["plots"]) == [
+        "scaling-spread-10.png", "scaling-spread-5.png",
+    ]  # fmt: skip
+
+
+def test_validate_scaling_rejects_bad_spreads():
+    run = flakelab("validate", "scaling", "--spreads", "0,90", "--plots", "")
+    assert run.returncode == 2 and "--spreads" in run.stderr and "Traceback" not in run.stderr

@@ -2,20 +2,25 @@
 
 from __future__ import annotations
 
-import functools
 import json
-import os
-import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any
 
 import typer
 from rich import box
-from rich.console import Console
 from rich.table import Table
 
 from flakelab import __version__
+from flakelab.cli.common import (
+    ConditionsOption,
+    JsonOption,
+    SampleOption,
+    console,
+    errors,
+    progress_bar,
+    reports_errors,
+)
+from flakelab.cli.learning import cases_app, model_app, train
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
@@ -30,46 +35,6 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-console = Console(width=None if sys.stdout.isatty() else 110)
-errors = Console(stderr=True)
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def reports_errors(command: F) -> F:
-    """Turn user-input problems into one line on stderr and exit status 2 (never a traceback)."""
-
-    @functools.wraps(command)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return command(*args, **kwargs)
-        except (typer.Exit, typer.Abort):
-            raise
-        except (FlakelabError, ValueError, KeyError, OSError) as error:
-            message = error.args[0] if isinstance(error, KeyError) and error.args else error
-            errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
-            raise typer.Exit(2) from None
-        except Exception as error:  # pragma: no cover - a bug, reported without a traceback
-            if os.environ.get("FLAKELAB_DEBUG"):
-                raise
-            errors.print(
-                f"[bold red]internal error:[/] {type(error).__name__}: {error} "
-                "(set FLAKELAB_DEBUG=1 for a traceback and please report it)",
-                highlight=False,
-                soft_wrap=True,
-            )
-            raise typer.Exit(70) from None
-
-    return wrapper  # type: ignore[return-value]
-
-
-ConditionsOption = Annotated[
-    str, typer.Option("--conditions", "-c", help="Illuminant/observer, e.g. D65/10, A/10, F11/10.")
-]
-JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")]
-SampleOption = Annotated[
-    str | None, typer.Option("--sample", "-s", help="Sample name in a multi-sample file.")
-]
 
 
 def _fmt(value: float | None, digits: int = 2) -> str:
@@ -253,6 +218,9 @@ def plot(
     errors.print(f"wrote {output}", highlight=False)
 
 
+app.add_typer(cases_app, name="cases")
+app.add_typer(model_app, name="model")
+app.command("train")(reports_errors(train))
 validate_app = typer.Typer(help="Validation experiments against the reference Monte Carlo.")
 app.add_typer(validate_app, name="validate")
 
@@ -281,7 +249,7 @@ def validate_scaling(
     if not values or any(not 0 < v <= 45 for v in values):
         raise FlakelabError(f"--spreads: expected degrees in (0, 45], got {spreads!r}")
     series = []
-    with _progress(json_output) as progress:
+    with progress_bar(json_output) as progress:
         task = progress.add_task("Monte Carlo", total=8 * len(values))
         for value in values:
             series.append(run_series(value, photons, seed, progress=lambda: progress.advance(task)))
@@ -295,12 +263,6 @@ def validate_scaling(
         print(json.dumps(report, indent=2))
         return
     _print_scaling(report)
-
-
-def _progress(quiet: bool):
-    from rich.progress import Progress
-
-    return Progress(console=errors, disable=quiet or not errors.is_terminal, transient=True)
 
 
 def _print_scaling(report: dict[str, Any]) -> None:
@@ -347,4 +309,4 @@ def run() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(run())
+    run()

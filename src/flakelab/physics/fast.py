@@ -145,9 +145,16 @@ def build_atlas(photons: int = 100_000, seed: int = 2026, progress=None) -> Flak
     for a, spread in enumerate(ATLAS_SPREADS):
         for b, depth in enumerate(ATLAS_DEPTHS):
             layer = Layer(
-                np.array([[1.0]]), np.radians([spread]), R, np.array([False]),
-                zeros, zeros, np.zeros(1), float(depth), np.zeros(WAVELENGTHS.size),
-            )  # fmt: skip
+                np.array([[1.0]]),
+                np.radians([spread]),
+                R,
+                np.array([False]),
+                zeros,
+                zeros,
+                np.zeros(1),
+                float(depth),
+                np.zeros(WAVELENGTHS.size),
+            )
             for indices in groups.values():
                 run += 1
                 result = simulate(layer, [geometries[i] for i in indices], photons, seed=seed + run)
@@ -155,6 +162,17 @@ def build_atlas(photons: int = 100_000, seed: int = 2026, progress=None) -> Flak
                 if progress:
                     progress()
     return FlakeAtlas(tuple(geometries), laplace, photons, seed)
+
+
+_LOG_CACHE: dict[tuple, NDArray] = {}
+
+
+def _log_laplace(atlas: FlakeAtlas, index: tuple[int, ...]) -> NDArray:
+    """log M of the atlas for some geometries, cached (interpolation is done in log)."""
+    key = (id(atlas), index)
+    if key not in _LOG_CACHE:
+        _LOG_CACHE[key] = np.log(np.maximum(atlas.laplace[:, :, list(index)], 1e-300))
+    return _LOG_CACHE[key]
 
 
 def _bracket(grid: NDArray, values: NDArray) -> tuple[NDArray, NDArray]:
@@ -177,11 +195,11 @@ def _aluminium_channel(
     if not np.any(active):
         return out
     rates, sigma = rates[active], sigma[active]
-    spread = np.degrees(rates @ layer.flake_sd[opaque] / sigma)
+    spread = np.degrees((rates * layer.spreads[active][:, opaque]).sum(axis=1) / sigma)
     bounce = rates @ layer.flake_reflectance[opaque, EFFECTIVE_INCIDENCE] / sigma[:, None]
     rho = -np.log(np.maximum(bounce, 1e-9))  # [F, W]
     kappa = extinction[active] / sigma[:, None]
-    depth = sigma * layer.thickness
+    depth = sigma * layer.film[active]
     i_s, w_s = _bracket(ATLAS_SPREADS, spread)
     i_d, w_d = _bracket(np.log(ATLAS_DEPTHS), np.log(np.maximum(depth, ATLAS_DEPTHS[0])))
     thin = np.minimum(depth / ATLAS_DEPTHS[0], 1.0)
@@ -190,18 +208,17 @@ def _aluminium_channel(
     i_k = i_k + 1
     w_k = np.where(kappa < ATLAS_KAPPA[1], kappa / ATLAS_KAPPA[1], w_k)
     i_k = np.where(kappa < ATLAS_KAPPA[1], 0, i_k)
-    log_m = np.log(np.maximum(atlas.laplace[:, :, atlas_index], 1e-300))  # [s, d, G, P, Q]
-    result = np.zeros((rates.shape[0], atlas_index.size, WAVELENGTHS.size))
-    f = np.arange(rates.shape[0])[:, None]
+    log_m = _log_laplace(atlas, tuple(atlas_index))  # [spread, depth, G, ρ, κ']
+    result = np.zeros((rates.shape[0], WAVELENGTHS.size, atlas_index.size))
     for ds, ws in ((0, 1 - w_s), (1, w_s)):
         for dd, wd in ((0, 1 - w_d), (1, w_d)):
-            grid = log_m[i_s + ds, i_d + dd]  # [F, G, P, Q]
-            grid = np.moveaxis(grid, 1, -1)  # [F, P, Q, G]
-            value = 0.0
+            outer = (ws * wd)[:, None]
+            spread_index, depth_index = (i_s + ds)[:, None], (i_d + dd)[:, None]
             for dr, wr in ((0, 1 - w_r), (1, w_r)):
                 for dk, wk in ((0, 1 - w_k), (1, w_k)):
-                    value = value + (wr * wk)[..., None] * grid[f, i_r + dr, i_k + dk]
-            result += (ws * wd)[:, None, None] * np.moveaxis(value, -1, 1)
+                    corner = log_m[spread_index, depth_index, :, i_r + dr, i_k + dk]  # [F, W, G]
+                    result += (outer * wr * wk)[..., None] * corner
+    result = np.moveaxis(result, 1, 2)
     out[active] = np.exp(result) * thin[:, None, None]
     return out
 
@@ -238,14 +255,13 @@ def single_collision(layer: Layer, geometries: ArrayLike) -> NDArray[np.float64]
     """
     geo = flake_geometry(geometries, layer.n)
     m = 1 / geo["mu_in"] + 1 / geo["mu_out"]
-    D = orientation_pdf(geo["theta_flake"][None, :], layer.flake_sd[:, None])  # [S, G]
+    D = orientation_pdf(geo["theta_flake"][None, None, :], layer.spreads[..., None])  # [F, S, G]
     R = _table_at(layer.flake_reflectance, geo["theta_inc"])  # [S, G, W]
-    lobe = np.einsum("fs,sg,sgw->fgw", layer.flake_rate, D, R)
+    lobe = np.einsum("fs,fsg,sgw->fgw", layer.flake_rate, D, R)
     lobe /= (4 * geo["mu_in"] * geo["mu_out"])[None, :, None]
     X = 2 * layer.flake_rate.sum(1)[:, None, None] + layer.absorption[:, None, :] * m[None, :, None]
-    depth = np.where(
-        X > 0, -np.expm1(-X * layer.thickness) / np.maximum(X, 1e-300), layer.thickness
-    )
+    H = layer.film[:, None, None]
+    depth = np.where(X > 0, -np.expm1(-X * H) / np.maximum(X, 1e-300), H)
     return geo["interface"][None, :, None] * lobe * depth
 
 
@@ -254,12 +270,12 @@ def _pearl_channel(layer: Layer, geo: dict, extinction_in: NDArray, extinction_o
     pearls = layer.flake_transmits
     if not np.any(pearls):
         return 0.0
-    D = orientation_pdf(geo["theta_flake"][None, :], layer.flake_sd[pearls, None])
+    D = orientation_pdf(geo["theta_flake"][None, None, :], layer.spreads[:, pearls, None])
     R = _table_at(layer.flake_reflectance[pearls], geo["theta_inc"])
-    lobe = np.einsum("fs,sg,sgw->fgw", layer.flake_rate[:, pearls], D, R)
+    lobe = np.einsum("fs,fsg,sgw->fgw", layer.flake_rate[:, pearls], D, R)
     lobe /= (4 * geo["mu_in"] * geo["mu_out"])[None, :, None]
     X = extinction_in + extinction_out
-    depth = -np.expm1(-X * layer.thickness) / np.maximum(X, 1e-300)
+    depth = -np.expm1(-X * layer.film[:, None, None]) / np.maximum(X, 1e-300)
     return geo["interface"][None, :, None] * lobe * depth
 
 
@@ -274,19 +290,32 @@ def _diffuse_channel(layer: Layer, geo: dict) -> NDArray:
     """Lambertian light from scattering pigments and the primer ``[F, G, W]``."""
     K, S = km_coefficients(layer.absorption, layer.scattering, layer.asymmetry[:, None])
     K_fl, S_fl = _flake_two_flux(layer)
-    everything = layer_reflectance(K + K_fl, S + S_fl, layer.thickness, layer.primer[None])
-    flakes_only = layer_reflectance(K + K_fl, S_fl, layer.thickness, 0.0)
+    H = layer.film[:, None]
+    everything = layer_reflectance(K + K_fl, S + S_fl, H, layer.primer[None])
+    flakes_only = layer_reflectance(K + K_fl, S_fl, H, 0.0)
     r_i = internal_diffuse_reflectance(layer.n)
     body = everything / (1 - r_i * everything) - flakes_only / (1 - r_i * flakes_only)
     return geo["interface"][None, :, None] * np.maximum(body, 0.0)[:, None, :] / np.pi
+
+
+PREDICT_BATCH = 2048
+"""Formulations evaluated together (bounds the memory of large batches)."""
 
 
 def predict(layer: Layer, geometries: ArrayLike, atlas: FlakeAtlas | None = None) -> NDArray:
     """Spectral BRDF ``[F, G, W]`` [1/sr] of every formulation in ``layer`` (fast model)."""
     atlas = atlas or load_atlas()
     geometries = list(geometries)
+    if layer.size > PREDICT_BATCH:
+        return np.concatenate(
+            [
+                predict(layer[start : start + PREDICT_BATCH], geometries, atlas)
+                for start in range(0, layer.size, PREDICT_BATCH)
+            ]
+        )
     geo = flake_geometry(geometries, layer.n)
-    extinction = layer.absorption + layer.scattering  # leaves the specular flake paths
+    # forward-scattered light stays near the specular flake paths; the rest leaves them
+    extinction = layer.absorption + layer.scattering * (1 - layer.asymmetry[:, None])
     aluminium = _aluminium_channel(layer, atlas.index(geometries), extinction, atlas)
     K_fl, S_fl = _flake_two_flux(layer)  # per depth: what flakes absorb plus reflect
     flakes = (K_fl + S_fl)[:, None, :]

@@ -47,7 +47,9 @@ class Layer:
     orientation spread [radian]; ``flake_reflectance[S, 91, W]`` reflectance versus incidence
     angle (surface quality included); ``flake_transmits[S]`` True for pearls (what is not
     reflected passes through). ``absorption``/``scattering[F, W]`` [1/µm], ``asymmetry[F]``
-    the Henyey–Greenstein g, ``thickness`` [µm], ``primer[W]`` the primer's reflectance.
+    the Henyey–Greenstein g, ``thickness`` [µm] (one for all, or ``[F]``), ``primer[W]`` the
+    primer's reflectance; ``spread_scale[F]`` multiplies every species' spread (spray
+    conditions change how well flakes align).
     """
 
     flake_rate: NDArray[np.float64]
@@ -57,9 +59,10 @@ class Layer:
     absorption: NDArray[np.float64]
     scattering: NDArray[np.float64]
     asymmetry: NDArray[np.float64]
-    thickness: float
+    thickness: float | NDArray[np.float64]
     primer: NDArray[np.float64]
     n: float = N_BINDER
+    spread_scale: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         F, S = np.shape(self.flake_rate)
@@ -74,6 +77,17 @@ class Layer:
     def size(self) -> int:
         return int(np.shape(self.flake_rate)[0])
 
+    @property
+    def spreads(self) -> NDArray[np.float64]:
+        """Orientation spread of each species in each formulation ``[F, S]`` [radian]."""
+        scale = np.ones(self.size) if self.spread_scale is None else self.spread_scale
+        return np.asarray(scale, dtype=float)[:, None] * self.flake_sd[None, :]
+
+    @property
+    def film(self) -> NDArray[np.float64]:
+        """Basecoat thickness of each formulation ``[F]`` [µm]."""
+        return np.broadcast_to(np.asarray(self.thickness, dtype=float), (self.size,))
+
     def __getitem__(self, index: int | slice) -> Layer:
         """The formulations ``index`` as a layer of their own (a slice keeps the batch axis)."""
         rows = slice(index, index + 1) if isinstance(index, int | np.integer) else index
@@ -83,6 +97,8 @@ class Layer:
             absorption=self.absorption[rows],
             scattering=self.scattering[rows],
             asymmetry=self.asymmetry[rows],
+            thickness=self.film[rows].copy() if np.ndim(self.thickness) else self.thickness,
+            spread_scale=None if self.spread_scale is None else self.spread_scale[rows],
         )
 
     def with_absorption(self, absorption: ArrayLike) -> Layer:

@@ -70,9 +70,11 @@ class PathTable:
         spectral = np.einsum("gkb,kw->gbw", self.weight, self.reflectance[None, :] ** k[:, None])
         bin_weight = self.weight.sum(axis=1)
         mean_length = np.divide(
-            (self.weight * self.length).sum(axis=1), bin_weight,
-            out=np.zeros_like(bin_weight), where=bin_weight > 0,
-        )  # fmt: skip
+            (self.weight * self.length).sum(axis=1),
+            bin_weight,
+            out=np.zeros_like(bin_weight),
+            where=bin_weight > 0,
+        )
         used = np.flatnonzero(bin_weight.sum(axis=0) > 0)
         return spectral[:, used], mean_length[:, used]
 
@@ -161,12 +163,36 @@ def _hg_pdf(cos_t, g):
 
 @numba.njit(cache=True)
 def _trace(  # noqa: PLR0913, PLR0915 — one kernel, all state explicit
-    first, count, seed, diffuse_in, d_in, w0,
-    det, det_factor, det_att, det_flake_att,
-    rates, sds, refl, transmits, refl_mean,
-    kappa, sigma, g, H, primer, n,
-    path_step, score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped,
-):  # fmt: skip
+    first,
+    count,
+    seed,
+    diffuse_in,
+    d_in,
+    w0,
+    det,
+    det_factor,
+    det_att,
+    det_flake_att,
+    rates,
+    sds,
+    refl,
+    transmits,
+    refl_mean,
+    kappa,
+    sigma,
+    g,
+    H,
+    primer,
+    n,
+    path_step,
+    score_sum,
+    score_sq,
+    albedo_sum,
+    albedo_sq,
+    table_w,
+    table_wl,
+    capped,
+):
     G, W = det_att.shape
     S = rates.shape[0]
     K, B = table_w.shape[1], table_w.shape[2]
@@ -334,22 +360,72 @@ def _trace(  # noqa: PLR0913, PLR0915 — one kernel, all state explicit
 
 @numba.njit(cache=True, parallel=True)
 def _trace_chunks(  # noqa: PLR0913
-    chunks, per_chunk, photons, seed, diffuse_in, d_in, w0,
-    det, det_factor, det_att, det_flake_att, rates, sds, refl, transmits, refl_mean,
-    kappa, sigma, g, H, primer, n, path_step,
-    score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped,
-):  # fmt: skip
+    chunks,
+    per_chunk,
+    photons,
+    seed,
+    diffuse_in,
+    d_in,
+    w0,
+    det,
+    det_factor,
+    det_att,
+    det_flake_att,
+    rates,
+    sds,
+    refl,
+    transmits,
+    refl_mean,
+    kappa,
+    sigma,
+    g,
+    H,
+    primer,
+    n,
+    path_step,
+    score_sum,
+    score_sq,
+    albedo_sum,
+    albedo_sq,
+    table_w,
+    table_wl,
+    capped,
+):
     for c in numba.prange(chunks):
         first = c * per_chunk
         count = min(per_chunk, photons - first)
         if count > 0:
             _trace(
-                first, count, seed, diffuse_in, d_in, w0,
-                det, det_factor, det_att, det_flake_att, rates, sds, refl, transmits, refl_mean,
-                kappa, sigma, g, H, primer, n, path_step,
-                score_sum[c], score_sq[c], albedo_sum[c], albedo_sq[c], table_w[c],
-                table_wl[c], capped[c],
-            )  # fmt: skip
+                first,
+                count,
+                seed,
+                diffuse_in,
+                d_in,
+                w0,
+                det,
+                det_factor,
+                det_att,
+                det_flake_att,
+                rates,
+                sds,
+                refl,
+                transmits,
+                refl_mean,
+                kappa,
+                sigma,
+                g,
+                H,
+                primer,
+                n,
+                path_step,
+                score_sum[c],
+                score_sq[c],
+                albedo_sum[c],
+                albedo_sq[c],
+                table_w[c],
+                table_wl[c],
+                capped[c],
+            )
 
 
 def _exit_attenuation(layer: Layer, outgoing: NDArray) -> tuple[NDArray, NDArray]:
@@ -358,7 +434,7 @@ def _exit_attenuation(layer: Layer, outgoing: NDArray) -> tuple[NDArray, NDArray
     flakes = np.zeros(outgoing.shape[0])
     spectral = np.zeros((outgoing.shape[0], WAVELENGTHS.size))
     for s, rate in enumerate(layer.flake_rate[0]):
-        projected = mean_projected_cosine(outgoing, float(layer.flake_sd[s]))
+        projected = mean_projected_cosine(outgoing, float(layer.spreads[0, s]))
         if layer.flake_transmits[s]:
             # a pearl removes only what it reflects; its reflectance near the mean incidence
             angle = np.degrees(np.arccos(np.clip(projected, 0, 1)))
@@ -406,27 +482,50 @@ def simulate(
     if rates.size == 0:
         rates = np.zeros(1)
     refl = layer.flake_reflectance if rates.size == layer.flake_sd.size else np.zeros((1, 91, W))
-    sds = layer.flake_sd if layer.flake_sd.size else np.radians([10.0])
+    sds = layer.spreads[0] if layer.flake_sd.size else np.radians([10.0])
     transmits = layer.flake_transmits if layer.flake_transmits.size else np.zeros(1, bool)
     start = time.perf_counter()
     _trace_chunks(
-        chunks, per_chunk, photons, np.uint64(seed),
-        diffuse_illumination, np.ascontiguousarray(incoming[0]), 1.0 if diffuse_illumination
-        else float(T_in[0]), np.ascontiguousarray(outgoing), det_factor, det_att, det_flake_att,
-        rates, np.asarray(sds, float), np.ascontiguousarray(refl), transmits.astype(np.bool_),
-        np.ascontiguousarray(refl.mean(axis=2)), layer.absorption[0].copy(),
-        layer.scattering[0].copy(), float(layer.asymmetry[0]), float(layer.thickness),
-        np.asarray(layer.primer, float), float(layer.n), float(path_step),
-        score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped,
-    )  # fmt: skip
+        chunks,
+        per_chunk,
+        photons,
+        np.uint64(seed),
+        diffuse_illumination,
+        np.ascontiguousarray(incoming[0]),
+        1.0 if diffuse_illumination else float(T_in[0]),
+        np.ascontiguousarray(outgoing),
+        det_factor,
+        det_att,
+        det_flake_att,
+        rates,
+        np.asarray(sds, float),
+        np.ascontiguousarray(refl),
+        transmits.astype(np.bool_),
+        np.ascontiguousarray(refl.mean(axis=2)),
+        layer.absorption[0].copy(),
+        layer.scattering[0].copy(),
+        float(layer.asymmetry[0]),
+        float(layer.film[0]),
+        np.asarray(layer.primer, float),
+        float(layer.n),
+        float(path_step),
+        score_sum,
+        score_sq,
+        albedo_sum,
+        albedo_sq,
+        table_w,
+        table_wl,
+        capped,
+    )
     seconds = time.perf_counter() - start
     mean = score_sum.sum(0) / photons
     stderr = np.sqrt(np.maximum(score_sq.sum(0) / photons - mean**2, 0) / (photons - 1))
     a_mean = albedo_sum.sum(0) / photons
     a_err = np.sqrt(np.maximum(albedo_sq.sum(0) / photons - a_mean**2, 0) / (photons - 1))
     weight = table_w.sum(0) / photons
-    length = np.divide(table_wl.sum(0) / photons, weight, out=np.zeros_like(weight),
-                       where=weight > 0)  # fmt: skip
+    length = np.divide(
+        table_wl.sum(0) / photons, weight, out=np.zeros_like(weight), where=weight > 0
+    )
     reflectance = _effective_reflectance(layer)
     return MonteCarloResult(
         brdf=mean,

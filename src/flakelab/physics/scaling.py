@@ -126,9 +126,14 @@ def run_series(
     start = time.perf_counter()
     # The dye paste dilutes the flakes a little: path lengths stretch as 1/σ_f
     fast = np.concatenate(
-        [table_run.table.brdf(samples.absorption[i : i + 1] * (TABLE1_FLAKES[0] / TABLE1_FLAKES[i]))
-         * 1.0 for i in range(samples.size)]
-    )  # fmt: skip
+        [
+            table_run.table.brdf(
+                samples.absorption[i : i + 1] * (TABLE1_FLAKES[0] / TABLE1_FLAKES[i])
+            )
+            * 1.0
+            for i in range(samples.size)
+        ]
+    )
     fast_seconds = time.perf_counter() - start
     return ScalingSeries(
         spread_deg=spread_deg,

@@ -102,18 +102,29 @@ def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
     )
     for label, g, style in methods:
         for index, colour_ in ((near, "tab:blue"), (far, "tab:red")):
-            curves.plot(wl, g[-1, index], style, color=colour_,
-                        label=f"{label}, {series.geometries[index]}")  # fmt: skip
-    curves.set(xlabel="wavelength [nm]", ylabel="g = f0/f − 1",
-               title=f"dye PVC {TABLE1_DYE[-1]:.2%}")  # fmt: skip
+            curves.plot(
+                wl, g[-1, index], style, color=colour_, label=f"{label}, {series.geometries[index]}"
+            )
+    curves.set(
+        xlabel="wavelength [nm]", ylabel="g = f0/f − 1", title=f"dye PVC {TABLE1_DYE[-1]:.2%}"
+    )
     curves.legend(fontsize=7)
     for label, g, style in methods:
         spans = g.max(-1) - g.min(-1)
         for index, colour_ in ((near, "tab:blue"), (far, "tab:red")):
-            span.plot(TABLE1_DYE * 100, spans[:, index], "o" + style, color=colour_, ms=3,
-                      label=f"{label}, {series.geometries[index]}")  # fmt: skip
-    span.set(xlabel="dye PVC [%]", ylabel="span of g (max − min over λ)",
-             title="degree of non-uniformity")  # fmt: skip
+            span.plot(
+                TABLE1_DYE * 100,
+                spans[:, index],
+                "o" + style,
+                color=colour_,
+                ms=3,
+                label=f"{label}, {series.geometries[index]}",
+            )
+    span.set(
+        xlabel="dye PVC [%]",
+        ylabel="span of g (max − min over λ)",
+        title="degree of non-uniformity",
+    )
     span.legend(fontsize=7)
     figure.suptitle(f"Scaling experiment, orientation spread {series.spread_deg:g}°")
     figure.tight_layout()

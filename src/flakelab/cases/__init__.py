@@ -1,0 +1,1 @@
+"""Refinish cases: the database, the synthetic case generator, import and export."""

@@ -1,0 +1,80 @@
+"""One refinish case: a target, the recipe mixed for it, the spray-out and how it ended."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.geometry import Geometry, parse_geometries
+from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.errors import FlakelabError
+
+__all__ = ["Case", "CaseError", "OUTCOMES"]
+
+OUTCOMES = ("accepted", "corrected", "rejected")
+"""How a case ended: the spray-out passed, needed a correction, or was given up."""
+
+
+class CaseError(FlakelabError):
+    """A case that is wrong: names the case, the field and the problem."""
+
+
+@dataclass(frozen=True, eq=False)
+class Case:
+    """Spectra on the storage grid, ``[G, 31]`` reflectance factors; ``recipe`` maps toner
+    names to mass fractions (summing to 1); textures map :data:`TEXTURE_READINGS` names."""
+
+    case_id: str
+    geometries: tuple[Geometry, ...]
+    recipe: Mapping[str, float]
+    target: NDArray[np.float64]
+    sprayout: NDArray[np.float64]
+    target_texture: Mapping[str, float] = field(default_factory=dict)
+    sprayout_texture: Mapping[str, float] = field(default_factory=dict)
+    instrument: str = "unknown"
+    shop: str = "unknown"
+    conditions: str = "D65/10"
+    outcome: str = "accepted"
+    synthetic: bool = False
+    created_at: datetime = field(default_factory=lambda: datetime.now(UTC))
+
+    def __post_init__(self) -> None:
+        where = f"case {self.case_id!r}"
+        geometries = parse_geometries([getattr(g, "name", g) for g in self.geometries])
+        object.__setattr__(self, "geometries", geometries)
+        for name in ("target", "sprayout"):
+            values = np.asarray(getattr(self, name), dtype=float)
+            if values.shape != (len(geometries), WAVELENGTHS.size):
+                raise CaseError(
+                    f"{where}: {name}: expected {len(geometries)} × 31 reflectance values, "
+                    f"got shape {values.shape}"
+                )
+            if not np.all(np.isfinite(values)) or np.any(values < -0.05):
+                raise CaseError(f"{where}: {name}: expected finite reflectance factors ≥ −0.05")
+            object.__setattr__(self, name, values)
+        if not self.recipe:
+            raise CaseError(f"{where}: recipe: expected at least one toner")
+        amounts = {str(k): float(v) for k, v in self.recipe.items()}
+        if any(not np.isfinite(v) or v < 0 for v in amounts.values()) or sum(amounts.values()) <= 0:
+            raise CaseError(f"{where}: recipe: expected non-negative amounts with a positive sum")
+        total = sum(amounts.values())
+        object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
+        if self.outcome not in OUTCOMES:
+            raise CaseError(
+                f"{where}: outcome: expected one of {', '.join(OUTCOMES)}, got {self.outcome!r}"
+            )
+        for name in ("target_texture", "sprayout_texture"):
+            readings = getattr(self, name)
+            unknown = sorted(set(readings) - set(TEXTURE_READINGS))
+            if unknown:
+                raise CaseError(f"{where}: {name}: unknown readings {unknown}")
+            object.__setattr__(self, name, {k: float(v) for k, v in readings.items()})
+
+    @property
+    def geometry_names(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.geometries)

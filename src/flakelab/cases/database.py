@@ -1,0 +1,155 @@
+"""The case database: SQLite by default (WAL, one file), any SQLAlchemy URL by option.
+
+``FLAKELAB_DATABASE_URL`` (or ``--database``) picks the database; without it flakelab uses
+``flakelab.db`` in the user data folder (``$XDG_DATA_HOME/flakelab``). Opening a database
+brings its schema up to date through the Alembic migrations shipped in ``migrations/``.
+Writes happen in one transaction per call: a batch is stored whole or not at all.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import Engine, create_engine, event, func, select
+from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+from sqlalchemy.orm import Session
+
+from flakelab.cases.case import Case, CaseError
+from flakelab.cases.schema import CaseRow
+from flakelab.errors import FlakelabError
+
+__all__ = [
+    "default_url",
+    "open_database",
+    "add_cases",
+    "iter_cases",
+    "count_cases",
+    "DatabaseError",
+]
+
+MIGRATIONS = Path(__file__).resolve().parent / "migrations"
+
+
+class DatabaseError(FlakelabError):
+    """The database cannot be opened or written; names the URL and the problem."""
+
+
+def default_url() -> str:
+    """``FLAKELAB_DATABASE_URL`` or a SQLite file in the user's data folder."""
+    if url := os.environ.get("FLAKELAB_DATABASE_URL"):
+        return url
+    base = Path(os.environ.get("XDG_DATA_HOME", Path.home() / ".local" / "share")) / "flakelab"
+    base.mkdir(parents=True, exist_ok=True)
+    return f"sqlite:///{base / 'flakelab.db'}"
+
+
+def url_for(target: str | os.PathLike) -> str:
+    """A URL as given, or a SQLite URL for a file path."""
+    text = str(target)
+    return text if "://" in text else f"sqlite:///{Path(text).resolve()}"
+
+
+def _sqlite_pragmas(dbapi_connection, _record) -> None:
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.execute("PRAGMA busy_timeout=30000")
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.close()
+
+
+def open_database(url: str | os.PathLike | None = None) -> Engine:
+    """An engine on an up-to-date database (migrations applied)."""
+    url = url_for(url) if url is not None else default_url()
+    try:
+        engine = create_engine(url)
+        if engine.dialect.name == "sqlite":
+            event.listen(engine, "connect", _sqlite_pragmas)
+        config = Config()
+        config.set_main_option("script_location", str(MIGRATIONS))
+        with engine.begin() as connection:
+            config.attributes["connection"] = connection
+            command.upgrade(config, "head")
+    except SQLAlchemyError as error:
+        raise DatabaseError(
+            f"{url}: cannot open the database: {error.__class__.__name__}: "
+            f"{str(error).splitlines()[0]}"
+        ) from None
+    return engine
+
+
+def _row(case: Case) -> CaseRow:
+    now = datetime.now(UTC)
+    return CaseRow(
+        case_id=case.case_id,
+        shop=case.shop,
+        instrument=case.instrument,
+        conditions=case.conditions,
+        outcome=case.outcome,
+        synthetic=case.synthetic,
+        geometries=list(case.geometry_names),
+        recipe=dict(case.recipe),
+        target=case.target.astype("<f4").tobytes(),
+        sprayout=case.sprayout.astype("<f4").tobytes(),
+        target_texture=dict(case.target_texture),
+        sprayout_texture=dict(case.sprayout_texture),
+        created_at=case.created_at,
+        updated_at=now,
+    )
+
+
+def _case(row: CaseRow) -> Case:
+    shape = (len(row.geometries), -1)
+    return Case(
+        case_id=row.case_id,
+        geometries=tuple(row.geometries),
+        recipe=row.recipe,
+        target=np.frombuffer(row.target, "<f4").reshape(shape).astype(float),
+        sprayout=np.frombuffer(row.sprayout, "<f4").reshape(shape).astype(float),
+        target_texture=row.target_texture,
+        sprayout_texture=row.sprayout_texture,
+        instrument=row.instrument,
+        shop=row.shop,
+        conditions=row.conditions,
+        outcome=row.outcome,
+        synthetic=row.synthetic,
+        created_at=row.created_at,
+    )
+
+
+def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
+    """Store cases in one transaction; a duplicate case id rolls the whole batch back."""
+    rows = [_row(c) for c in cases]
+    try:
+        with Session(engine) as session, session.begin():
+            session.add_all(rows)
+    except IntegrityError as error:
+        raise CaseError(
+            f"{engine.url}: a case id already exists; nothing was stored "
+            f"({str(error.orig).splitlines()[0]})"
+        ) from None
+    return len(rows)
+
+
+def iter_cases(
+    engine: Engine, *, instrument: str | None = None, batch: int = 2000, limit: int | None = None
+) -> Iterator[Case]:
+    """Cases in insertion order, read in batches."""
+    query = select(CaseRow).order_by(CaseRow.id)
+    if instrument:
+        query = query.where(CaseRow.instrument == instrument)
+    if limit:
+        query = query.limit(limit)
+    with Session(engine) as session:
+        for row in session.scalars(query.execution_options(yield_per=batch)):
+            yield _case(row)
+
+
+def count_cases(engine: Engine) -> int:
+    with Session(engine) as session:
+        return int(session.scalar(select(func.count(CaseRow.id))) or 0)

@@ -1,0 +1,270 @@
+"""Case histories as files: CSV (one row per case) and CxF3 (two samples per case).
+
+CSV columns: ``case_id, shop, instrument, conditions, outcome, synthetic, created_at,
+recipe`` (JSON object toner → amount), ``geometries`` (names joined by ``;``), then
+``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for every
+geometry and band (400–700 nm, 10 nm), then ``target:<reading>`` and
+``sprayout:<reading>`` texture readings (empty when not measured).
+
+CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
+the case's fields ride as ``meta:`` tags on the target.
+
+Readers check every row and name the file, row and column of the first problem; nothing is
+returned from a bad file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from datetime import datetime
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from flakelab.cases.case import Case, CaseError
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.errors import FlakelabError
+from flakelab.io.cxf import read_cxf, write_cxf
+from flakelab.io.records import write_atomically
+
+__all__ = ["read_cases", "write_cases", "CASE_FIELDS"]
+
+CASE_FIELDS = (
+    "case_id",
+    "shop",
+    "instrument",
+    "conditions",
+    "outcome",
+    "synthetic",
+    "created_at",
+    "recipe",
+    "geometries",
+)
+
+
+class CaseFileError(FlakelabError):
+    """A case file that is wrong: names the file, row, column and problem."""
+
+
+def _header(geometries: tuple[str, ...]) -> list[str]:
+    spectra = [
+        f"{role}:{g}:{int(w)}"
+        for role in ("target", "sprayout")
+        for g in geometries
+        for w in WAVELENGTHS
+    ]
+    texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
+    return [*CASE_FIELDS, *spectra, *texture]
+
+
+def write_cases(cases: list[Case], path: str | PathLike) -> None:
+    """Write cases as CSV or CxF3 (by extension), atomically."""
+    if not cases:
+        raise CaseFileError(f"{path}: expected at least one case to write, got none")
+    if Path(path).suffix.lower() in (".cxf", ".xml"):
+        write_cxf([m for c in cases for m in _as_measurements(c)], path)
+        return
+    geometries = cases[0].geometry_names
+    buffer = io.StringIO()
+    writer = csv.writer(buffer)
+    writer.writerow(_header(geometries))
+    for case in cases:
+        if case.geometry_names != geometries:
+            raise CaseFileError(
+                f"{path}: case {case.case_id!r}: geometries differ from the "
+                "first case's; write one instrument per CSV file"
+            )
+        writer.writerow(
+            [
+                case.case_id,
+                case.shop,
+                case.instrument,
+                case.conditions,
+                case.outcome,
+                "1" if case.synthetic else "0",
+                case.created_at.isoformat(),
+                json.dumps(case.recipe),
+                ";".join(geometries),
+                *(f"{v:.6g}" for v in case.target.ravel()),
+                *(f"{v:.6g}" for v in case.sprayout.ravel()),
+                *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
+                *(_fmt(case.sprayout_texture.get(t)) for t in TEXTURE_READINGS),
+            ]
+        )
+    text = buffer.getvalue()
+    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
+
+
+def _fmt(value: float | None) -> str:
+    return "" if value is None else f"{value:.6g}"
+
+
+def read_cases(path: str | PathLike) -> list[Case]:
+    """All cases of a CSV or CxF3 case file."""
+    path = Path(path)
+    if not path.exists():
+        raise CaseFileError(f"{path}: no such file")
+    if path.suffix.lower() in (".cxf", ".xml"):
+        return _from_measurements(path, read_cxf(path))
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise CaseFileError(f"{path}: not a UTF-8 text (CSV) file") from None
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows or rows[0][: len(CASE_FIELDS)] != list(CASE_FIELDS):
+        raise CaseFileError(
+            f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)}"
+        )
+    header = rows[0]
+    cases = []
+    for number, row in enumerate(rows[1:], start=2):
+        if not any(cell.strip() for cell in row):
+            continue
+        cases.append(_case_from_row(path, number, header, row))
+    if not cases:
+        raise CaseFileError(f"{path}: no cases after the header")
+    return cases
+
+
+def _case_from_row(path: Path, number: int, header: list[str], row: list[str]) -> Case:
+    where = f"{path}: row {number}"
+    if len(row) != len(header):
+        raise CaseFileError(f"{where}: expected {len(header)} columns, got {len(row)}")
+    cells = dict(zip(header, row, strict=True))
+    geometries = tuple(g for g in cells["geometries"].split(";") if g)
+    expected = _header(geometries)
+    if header != expected:
+        missing = [c for c in expected if c not in header][:3]
+        raise CaseFileError(
+            f"{where}: geometries: columns do not match {';'.join(geometries)}"
+            f" (missing e.g. {missing})"
+        )
+
+    def number_of(column: str) -> float:
+        try:
+            value = float(cells[column])
+        except ValueError:
+            raise CaseFileError(
+                f"{where}: {column}: expected a number, got {cells[column]!r}"
+            ) from None
+        if not np.isfinite(value):
+            raise CaseFileError(f"{where}: {column}: expected a finite number")
+        return value
+
+    def spectra(role: str) -> np.ndarray:
+        return np.array(
+            [[number_of(f"{role}:{g}:{int(w)}") for w in WAVELENGTHS] for g in geometries]
+        )
+
+    def texture(role: str) -> dict[str, float]:
+        return {t: number_of(f"{role}:{t}") for t in TEXTURE_READINGS if cells[f"{role}:{t}"]}
+
+    try:
+        recipe = json.loads(cells["recipe"])
+        if not isinstance(recipe, dict):
+            raise ValueError
+    except ValueError:
+        raise CaseFileError(f"{where}: recipe: expected a JSON object toner → amount") from None
+    try:
+        created = datetime.fromisoformat(cells["created_at"])
+    except ValueError:
+        raise CaseFileError(
+            f"{where}: created_at: expected an ISO 8601 date and time, got {cells['created_at']!r}"
+        ) from None
+    if cells["synthetic"] not in ("0", "1"):
+        raise CaseFileError(f"{where}: synthetic: expected 0 or 1, got {cells['synthetic']!r}")
+    try:
+        return Case(
+            case_id=cells["case_id"],
+            geometries=geometries,
+            recipe=recipe,
+            target=spectra("target"),
+            sprayout=spectra("sprayout"),
+            target_texture=texture("target"),
+            sprayout_texture=texture("sprayout"),
+            instrument=cells["instrument"],
+            shop=cells["shop"],
+            conditions=cells["conditions"],
+            outcome=cells["outcome"],
+            synthetic=cells["synthetic"] == "1",
+            created_at=created,
+        )
+    except (CaseError, ValueError) as error:
+        raise CaseFileError(f"{where}: {error}") from None
+
+
+def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
+    meta = {
+        "case_id": case.case_id,
+        "shop": case.shop,
+        "conditions": case.conditions,
+        "outcome": case.outcome,
+        "synthetic": "1" if case.synthetic else "0",
+        "created_at": case.created_at.isoformat(),
+        "recipe": json.dumps(case.recipe),
+    }
+    common = {
+        "geometries": case.geometries,
+        "wavelengths": WAVELENGTHS,
+        "instrument": case.instrument,
+    }
+    return (
+        Measurement(
+            f"{case.case_id}/target",
+            reflectance=case.target,
+            texture=case.target_texture,
+            metadata=meta,
+            **common,
+        ),
+        Measurement(
+            f"{case.case_id}/sprayout",
+            reflectance=case.sprayout,
+            texture=case.sprayout_texture,
+            metadata={"case_id": case.case_id},
+            **common,
+        ),
+    )
+
+
+def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case]:
+    by_name = {m.sample: m for m in measurements}
+    cases = []
+    for name, target in by_name.items():
+        if not name.endswith("/target"):
+            continue
+        case_id = name[: -len("/target")]
+        sprayout = by_name.get(f"{case_id}/sprayout")
+        where = f"{path}: sample {name!r}"
+        if sprayout is None:
+            raise CaseFileError(f"{where}: no matching '{case_id}/sprayout' sample")
+        meta = target.metadata
+        missing = [k for k in ("recipe", "outcome", "created_at") if k not in meta]
+        if missing:
+            raise CaseFileError(f"{where}: missing meta tags {missing}")
+        try:
+            cases.append(
+                Case(
+                    case_id=case_id,
+                    geometries=target.geometries,
+                    recipe=json.loads(meta["recipe"]),
+                    target=target.reflectance,
+                    sprayout=sprayout.reflectance,
+                    target_texture=target.texture,
+                    sprayout_texture=sprayout.texture,
+                    instrument=target.instrument or "unknown",
+                    shop=meta.get("shop", "unknown"),
+                    conditions=meta.get("conditions", "D65/10"),
+                    outcome=meta["outcome"],
+                    synthetic=meta.get("synthetic") == "1",
+                    created_at=datetime.fromisoformat(meta["created_at"]),
+                )
+            )
+        except (CaseError, ValueError) as error:
+            raise CaseFileError(f"{where}: {error}") from None
+    if not cases:
+        raise CaseFileError(f"{path}: no '<case>/target' samples: not a case history")
+    return cases

@@ -1,0 +1,319 @@
+"""Synthetic refinish cases from the physics model — labelled synthetic in every case.
+
+The generated world (DESIGN.md §5): an OEM paint (the hidden formulation) is sprayed at the
+factory with its own toner batches and application, weathers on the car, and is measured by
+the shop's instrument (the *target*). The colorist's recipe is that formulation as a good
+but imperfect match finds it; it is mixed from the shop's batches, sprayed with the shop's
+application and measured (the *spray-out*). Every random draw comes from one seeded
+generator, so ``(n, seed)`` gives the same cases on every machine.
+
+Sources of variation (all in :class:`WorldSettings`):
+* toner batches: strength × N(1, 3 %) per toner, hue drift of the pigment absorption by a
+  shift of N(0, 1.5 nm);
+* application: film build × N(1, 4 %), flake alignment (spread) × logN(0, 2 %);
+* weathering of targets: organic pigments fade 1–6 %, clearcoat haze adds 0.1–0.4 % flat
+  reflectance;
+* instrument: smooth multiplicative noise 0.1 % per band, a gain error 0.12 % per geometry
+  per reading, additive 2·10⁻⁴;
+* the colorist's recipe: the formulation's toners with amounts off by logN(0, 5 %).
+
+They were set so that ``World.realism`` lands in the ranges a shop sees (issue 4).
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.cases.case import Case
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.core.geometry import Geometry, instrument_geometries
+from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.library.toners import Library
+from flakelab.physics.fast import predict
+from flakelab.physics.layer import layer_from_fractions
+from flakelab.texture.readings import texture_readings
+
+__all__ = ["WorldSettings", "World", "Variation"]
+
+ORGANIC_FAMILIES = (
+    "phthalocyanine",
+    "quinacridone",
+    "perylene",
+    "diketopyrrolopyrrole",
+    "isoindoline",
+    "indanthrone",
+)
+"""Pigment families that fade in sunlight (inorganics — iron oxides, TiO2, carbon — hold)."""
+
+
+@dataclass(frozen=True)
+class WorldSettings:
+    """The size of every variation in the generated world (see the module notes)."""
+
+    batch_strength_sd: float = 0.03
+    batch_hue_shift_nm: float = 1.5
+    film_build_sd: float = 0.04
+    spread_sd: float = 0.02
+    fade_range: tuple[float, float] = (0.01, 0.06)
+    haze_range: tuple[float, float] = (0.001, 0.004)
+    noise_band: float = 0.001
+    noise_gain: float = 0.0012
+    noise_offset: float = 2e-4
+    recipe_error_sd: float = 0.05
+    weathered_share: float = 0.5
+    accept_de00: float = 1.0
+    correct_de00: float = 2.5
+    kinds: dict[str, float] = field(
+        default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
+    )
+
+
+@dataclass(frozen=True)
+class Variation:
+    """Per-formulation draws: toner strength ``[F, T]``, hue shift ``[F]`` [nm], film build
+    ``[F]`` (relative), spread scale ``[F]``."""
+
+    strength: NDArray
+    hue_shift: NDArray
+    film: NDArray
+    spread: NDArray
+
+
+class World:
+    """Formulations, their appearance and its measurement for one library and instrument."""
+
+    def __init__(
+        self,
+        library: Library,
+        instrument: str = "five-angle",
+        settings: WorldSettings | None = None,
+    ) -> None:
+        self.library = library
+        self.instrument = instrument
+        self.geometries: tuple[Geometry, ...] = instrument_geometries(instrument)
+        self.settings = settings or WorldSettings()
+        names = library.names
+        self._aluminium = [names.index(t.name) for t in library.of_kind("aluminium")]
+        self._pearls = [names.index(t.name) for t in library.of_kind("pearl")]
+        self._pigments = [names.index(t.name) for t in library.of_kind("pigment")]
+        self._organic = np.array(
+            [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
+        )
+        self._radius = np.array([t.radius_um for t in library.toners if t.kind != "pigment"])
+
+    # -- formulations ---------------------------------------------------------------------
+    def formulations(self, n: int, rng: np.random.Generator) -> NDArray:
+        """OEM-like mass fractions ``[n, T]``: an effect base and up to four pigments."""
+        kinds = list(self.settings.kinds)
+        p = np.array(list(self.settings.kinds.values()))
+        choice = rng.choice(len(kinds), size=n, p=p / p.sum())
+        x = np.zeros((n, len(self.library.toners)))
+        for row, kind in enumerate(choice):
+            x[row] = self._one_formulation(kinds[kind], rng)
+        return x
+
+    def _one_formulation(self, kind: str, rng: np.random.Generator) -> NDArray:
+        x = np.zeros(len(self.library.toners))
+        if kind == "metallic":
+            for i in rng.choice(self._aluminium, size=rng.integers(1, 3), replace=False):
+                x[i] = rng.uniform(0.3, 1.0)
+        elif kind == "pearl":
+            for i in rng.choice(self._pearls, size=rng.integers(1, 3), replace=False):
+                x[i] = rng.uniform(0.3, 1.0)
+            if rng.random() < 0.5:
+                x[rng.choice(self._aluminium)] = rng.uniform(0.05, 0.3)
+        effect = x.sum()
+        count = rng.integers(0 if kind != "solid" else 1, 5)
+        for i in rng.choice(self._pigments, size=count, replace=False):
+            # tinting strengths span two decades: log-uniform amounts
+            x[i] = np.exp(rng.uniform(np.log(0.003), np.log(0.15 if kind != "solid" else 1.0)))
+        if kind != "solid" and x.sum() - effect > 0.5 * x.sum():
+            x[x > 0] *= np.where(np.isin(np.flatnonzero(x > 0), self._pigments), 0.5, 1.0)
+        return x / x.sum()
+
+    # -- appearance -----------------------------------------------------------------------
+    def variation(self, n: int, rng: np.random.Generator) -> Variation:
+        s = self.settings
+        T = len(self.library.toners)
+        return Variation(
+            strength=rng.normal(1.0, s.batch_strength_sd, (n, T)),
+            hue_shift=rng.normal(0.0, s.batch_hue_shift_nm, n),
+            film=rng.normal(1.0, s.film_build_sd, n).clip(0.7, 1.3),
+            spread=np.exp(rng.normal(0.0, s.spread_sd, n)),
+        )
+
+    def nominal(self, n: int) -> Variation:
+        """No batch or application variation: the formulation as the library describes it."""
+        T = len(self.library.toners)
+        return Variation(np.ones((n, T)), np.zeros(n), np.ones(n), np.ones(n))
+
+    def appearance(self, fractions: NDArray, variation: Variation) -> tuple[NDArray, NDArray]:
+        """Reflectance factors ``[F, G, 31]`` (π·BRDF) and texture readings ``[F, 8]``."""
+        layer = layer_from_fractions(self.library, fractions * variation.strength)
+        shifted = _shift_spectra(layer.absorption, variation.hue_shift)
+        from dataclasses import replace
+
+        layer = replace(
+            layer,
+            absorption=shifted,
+            thickness=self.library.binder.thickness_um * variation.film,
+            spread_scale=variation.spread,
+        )
+        R = np.pi * predict(layer, self.geometries)
+        return R, texture_readings(layer, self._radius)
+
+    def weather(self, fractions: NDArray, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+        """Faded fractions ``[F, T]`` and the clearcoat haze ``[F]`` of weathered targets."""
+        lo, hi = self.settings.fade_range
+        fade = rng.uniform(lo, hi, (fractions.shape[0], 1))
+        faded = fractions * np.where(self._organic[None, :], 1 - fade, 1.0)
+        return faded, rng.uniform(*self.settings.haze_range, fractions.shape[0])
+
+    def measure(self, R: NDArray, rng: np.random.Generator) -> NDArray:
+        """One instrument reading of reflectance ``[F, G, W]``: smooth band noise, a gain
+        error per geometry and an offset."""
+        s = self.settings
+        F, G, W = R.shape
+        smooth = _smooth_noise(rng, (F, G, W)) * s.noise_band
+        gain = rng.normal(0, s.noise_gain, (F, G, 1))
+        return R * (1 + smooth + gain) + rng.normal(0, s.noise_offset, (F, G, 1))
+
+    # -- cases ----------------------------------------------------------------------------
+    def cases(
+        self,
+        n: int,
+        seed: int,
+        *,
+        batch: int = 500,
+        shop: str = "synthetic shop",
+        start: datetime | None = None,
+    ) -> Iterator[list[Case]]:
+        """``n`` cases in batches (a list per batch), reproducible from ``seed``."""
+        rng = np.random.default_rng(seed)
+        start = start or datetime(2026, 1, 1, tzinfo=UTC)
+        made = 0
+        while made < n:
+            size = min(batch, n - made)
+            yield self._batch(size, rng, shop, start, made, seed)
+            made += size
+
+    def _batch(self, size, rng, shop, start, offset, seed) -> list[Case]:
+        s = self.settings
+        hidden = self.formulations(size, rng)
+        oem = self.variation(size, rng)
+        weathered = rng.random(size) < s.weathered_share
+        aged, haze = self.weather(hidden, rng)
+        aged = np.where(weathered[:, None], aged, hidden)
+        target_R, target_tex = self.appearance(aged, oem)
+        target_R = target_R + np.where(weathered, haze, 0.0)[:, None, None]
+        target = self.measure(target_R, rng)
+        recipe = self.colorist_recipe(hidden, rng)
+        spray_R, spray_tex = self.appearance(recipe, self.variation(size, rng))
+        sprayout = self.measure(spray_R, rng)
+        worst = self.worst_de00(target, sprayout)
+        outcome = np.where(
+            worst <= s.accept_de00,
+            "accepted",
+            np.where(worst <= s.correct_de00, "corrected", "rejected"),
+        )
+        names = self.library.names
+        cases = []
+        for i in range(size):
+            ids = np.flatnonzero(recipe[i] > 0)
+            cases.append(
+                Case(
+                    case_id=str(uuid.UUID(int=int(rng.integers(0, 2**63)) << 64 | offset + i)),
+                    geometries=self.geometries,
+                    recipe={names[j]: float(recipe[i, j]) for j in ids},
+                    target=target[i],
+                    sprayout=sprayout[i],
+                    target_texture=dict(zip(TEXTURE_READINGS, target_tex[i], strict=True)),
+                    sprayout_texture=dict(zip(TEXTURE_READINGS, spray_tex[i], strict=True)),
+                    instrument=self.instrument,
+                    shop=shop,
+                    conditions="D65/10",
+                    outcome=str(outcome[i]),
+                    synthetic=True,
+                    created_at=start + timedelta(minutes=37 * (offset + i)),
+                )
+            )
+        return cases
+
+    def colorist_recipe(self, hidden: NDArray, rng: np.random.Generator) -> NDArray:
+        """The match a colorist mixes: every toner of the formulation, amounts off by
+        logN(0, ``recipe_error_sd``)."""
+        noisy = hidden * np.exp(rng.normal(0, self.settings.recipe_error_sd, hidden.shape))
+        return noisy / noisy.sum(axis=1, keepdims=True)
+
+    @staticmethod
+    def worst_de00(a: NDArray, b: NDArray) -> NDArray:
+        """Largest ΔE00 over geometries between reflectances ``[F, G, W]``."""
+        return delta_E(reflectance_to_Lab(a), reflectance_to_Lab(b)).max(axis=1)
+
+    # -- realism --------------------------------------------------------------------------
+    def realism(self, n: int = 400, seed: int = 0) -> dict[str, float]:
+        """How hard the generated world is, in the quantities a shop knows (issue 4)."""
+        rng = np.random.default_rng(seed)
+        x = self.formulations(n, rng)
+        R, _ = self.appearance(x, self.variation(n, rng))
+        index = [g.name for g in self.geometries].index("45as45")
+        first_reading, second_reading = self.measure(R, rng), self.measure(R, rng)
+        remeasure = delta_E(reflectance_to_Lab(first_reading), reflectance_to_Lab(second_reading))[
+            :, index
+        ]
+        batch = self.variation(n, rng)
+
+        def same_batch() -> Variation:  # the same cans, sprayed again
+            return Variation(batch.strength, batch.hue_shift, *self._application(n, rng))
+
+        first, _ = self.appearance(x, same_batch())
+        second, _ = self.appearance(x, same_batch())
+        respray = self.worst_de00(self.measure(first, rng), self.measure(second, rng))
+        metallic = x[:, self._aluminium].sum(1) > 0
+        aged, haze = self.weather(x, rng)
+        weathered_R, _ = self.appearance(aged, self.nominal(n))
+        fresh_R, _ = self.appearance(x, self.nominal(n))
+        weathered = self.worst_de00(fresh_R, weathered_R + haze[:, None, None])
+        return {
+            "remeasure_de00_median": float(np.median(remeasure)),
+            "respray_de00_median": float(np.median(respray[metallic])),
+            "respray_de00_median_all": float(np.median(respray)),
+            "batch_strength_sd": float(np.std(batch.strength)),
+            "weathered_target_de00_median": float(np.median(weathered)),
+            "formulations": n,
+            "seed": seed,
+        }
+
+    def _application(self, n: int, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+        s = self.settings
+        return (
+            rng.normal(1.0, s.film_build_sd, n).clip(0.7, 1.3),
+            np.exp(rng.normal(0.0, s.spread_sd, n)),
+        )
+
+
+def _shift_spectra(spectra: NDArray, shift_nm: NDArray) -> NDArray:
+    """Spectra ``[F, W]`` moved along the wavelength axis by ``shift_nm[F]`` (edges held)."""
+    positions = WAVELENGTHS[None, :] - shift_nm[:, None]
+    step = WAVELENGTHS[1] - WAVELENGTHS[0]
+    index = np.clip((positions - WAVELENGTHS[0]) / step, 0, WAVELENGTHS.size - 1)
+    low = np.floor(index).astype(int).clip(0, WAVELENGTHS.size - 2)
+    frac = index - low
+    rows = np.arange(spectra.shape[0])[:, None]
+    return spectra[rows, low] * (1 - frac) + spectra[rows, low + 1] * frac
+
+
+def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int, int]) -> NDArray:
+    """Unit-variance noise correlated over ~3 bands (an instrument's spectral noise)."""
+    raw = rng.normal(size=(*shape[:-1], shape[-1] + 4))
+    kernel = np.array([1, 2, 3, 2, 1], dtype=float)
+    kernel /= np.sqrt(np.sum(kernel**2))
+    return sum(kernel[i] * raw[..., i : i + shape[-1]] for i in range(5))

@@ -1,0 +1,55 @@
+"""Database tables (SQLAlchemy 2): cases and the model registry.
+
+Spectra are stored as little-endian float32 arrays (``[G, 31]``), recipes and texture
+readings as JSON; geometry names travel with every case, so cases from different instruments
+share one table. The schema evolves through Alembic migrations in ``migrations/``.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from sqlalchemy import JSON, Boolean, DateTime, Float, Integer, LargeBinary, String
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+__all__ = ["Base", "CaseRow", "ModelRow"]
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class CaseRow(Base):
+    __tablename__ = "cases"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    case_id: Mapped[str] = mapped_column(String(64), unique=True, index=True)
+    shop: Mapped[str] = mapped_column(String(120), index=True)
+    instrument: Mapped[str] = mapped_column(String(60), index=True)
+    conditions: Mapped[str] = mapped_column(String(30))
+    outcome: Mapped[str] = mapped_column(String(20))
+    synthetic: Mapped[bool] = mapped_column(Boolean)
+    geometries: Mapped[list] = mapped_column(JSON)
+    recipe: Mapped[dict] = mapped_column(JSON)
+    target: Mapped[bytes] = mapped_column(LargeBinary)
+    sprayout: Mapped[bytes] = mapped_column(LargeBinary)
+    target_texture: Mapped[dict] = mapped_column(JSON)
+    sprayout_texture: Mapped[dict] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class ModelRow(Base):
+    __tablename__ = "models"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(80), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    instrument: Mapped[str] = mapped_column(String(60))
+    status: Mapped[str] = mapped_column(String(20))
+    toners: Mapped[list] = mapped_column(JSON)
+    data_hash: Mapped[str] = mapped_column(String(64))
+    metrics: Mapped[dict] = mapped_column(JSON)
+    held_out_de00: Mapped[float] = mapped_column(Float)
+    artefact: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

@@ -1,0 +1,299 @@
+"""CLI: the case database, the case generator, training and the model registry."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from flakelab.cli.common import JsonOption, console, errors, progress_bar, reports_errors
+from flakelab.errors import FlakelabError
+
+cases_app = typer.Typer(help="Refinish cases: generate, import, export, realism.")
+model_app = typer.Typer(help="Learned forward models: list and evaluate.")
+
+DatabaseOption = Annotated[
+    str | None,
+    typer.Option(
+        "--database",
+        "-d",
+        help="Database URL or SQLite file (default: FLAKELAB_DATABASE_URL or the "
+        "user data folder).",
+    ),
+]
+InstrumentOption = Annotated[
+    str, typer.Option("--instrument", "-i", help="Geometry set: five-angle, ma-t12, byk-mac-i.")
+]
+LibraryOption = Annotated[
+    Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
+]
+
+
+def _is_case_file(path: Path) -> bool:
+    return path.suffix.lower() in (".csv", ".cxf", ".xml")
+
+
+def load_cases(source: str) -> list:
+    """Cases from a CSV/CxF file, or from a database (URL or .db/.sqlite file)."""
+    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.exchange import read_cases
+
+    path = Path(source)
+    if _is_case_file(path):
+        return read_cases(path)
+    if "://" not in source and not path.exists():
+        raise FlakelabError(f"{source}: no such case file or database")
+    return list(iter_cases(open_database(source)))
+
+
+@cases_app.command("generate")
+@reports_errors
+def generate(
+    n: Annotated[int, typer.Option("--n", min=1, help="Number of cases.")] = 1000,
+    seed: Annotated[int, typer.Option(help="Seed of the generated world.")] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="CSV/CxF file or SQLite .db to write.")
+    ] = None,
+    database: DatabaseOption = None,
+    instrument: InstrumentOption = "five-angle",
+    library: LibraryOption = None,
+    shop: Annotated[
+        str, typer.Option(help="Shop name recorded with the cases.")
+    ] = "synthetic shop",
+) -> None:
+    """Generate synthetic refinish cases (labelled synthetic) and store them."""
+    from flakelab.cases.database import add_cases, open_database
+    from flakelab.cases.exchange import write_cases
+    from flakelab.cases.generator import World
+    from flakelab.io import read_library
+
+    world = World(read_library(library), instrument)
+    to_file = out is not None and _is_case_file(out)
+    engine = None if to_file else open_database(out if out is not None else database)
+    collected = []
+    with progress_bar() as bar:
+        task = bar.add_task("generating cases", total=n)
+        for batch in world.cases(n, seed, shop=shop):
+            if to_file:
+                collected.extend(batch)
+            else:
+                add_cases(engine, batch)
+            bar.advance(task, len(batch))
+    if to_file:
+        write_cases(collected, out)
+    where = out if out is not None else engine.url
+    errors.print(
+        f"wrote {n} synthetic cases ({instrument}, seed {seed}) to {where}", highlight=False
+    )
+
+
+@cases_app.command("import")
+@reports_errors
+def import_cases(
+    source: Annotated[Path, typer.Argument(help="CSV or CxF3 case history.")],
+    database: DatabaseOption = None,
+) -> None:
+    """Import a shop's case history into the database (all cases or none)."""
+    from flakelab.cases.database import add_cases, open_database
+    from flakelab.cases.exchange import read_cases
+
+    cases = read_cases(source)
+    engine = open_database(database)
+    count = add_cases(engine, cases)
+    errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
+
+
+@cases_app.command("export")
+@reports_errors
+def export_cases(
+    target: Annotated[Path, typer.Argument(help="CSV or CxF3 file to write.")],
+    database: DatabaseOption = None,
+    instrument: Annotated[str | None, typer.Option(help="Only this instrument's cases.")] = None,
+) -> None:
+    """Export case histories as CSV or CxF3."""
+    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.exchange import write_cases
+
+    cases = list(iter_cases(open_database(database), instrument=instrument))
+    write_cases(cases, target)
+    errors.print(f"wrote {len(cases)} cases to {target}", highlight=False)
+
+
+@cases_app.command("realism")
+@reports_errors
+def realism(
+    seed: Annotated[int, typer.Option(help="Seed.")] = 0,
+    n: Annotated[int, typer.Option("--n", min=20, help="Formulations per statistic.")] = 400,
+    instrument: InstrumentOption = "five-angle",
+    library: LibraryOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """How hard the generated world is: remeasure, respray, batch and weathering ΔE00."""
+    from flakelab.cases.generator import World
+    from flakelab.io import read_library
+
+    report = World(read_library(library), instrument).realism(n, seed)
+    ranges = {
+        "remeasure_de00_median": (0.02, 0.10),
+        "respray_de00_median": (0.3, 0.8),
+        "batch_strength_sd": (0.02, 0.04),
+        "weathered_target_de00_median": (0.5, 2.0),
+    }
+    report["realistic_ranges"] = ranges
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"Generated world realism (seed {seed}, {n} formulations)")
+    for column in ("statistic", "value", "realistic range"):
+        table.add_column(column)
+    for key, (lo, hi) in ranges.items():
+        table.add_row(key, f"{report[key]:.3f}", f"{lo}–{hi}")
+    console.print(table)
+
+
+def train(
+    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
+    instrument: InstrumentOption = "five-angle",
+    library: LibraryOption = None,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the model here.")
+    ] = None,
+    database: DatabaseOption = None,
+    register_model: Annotated[
+        bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
+    ] = True,
+    epochs: Annotated[int, typer.Option(help="Epochs per stage (then as many fine-tuning).")] = 300,
+    hidden: Annotated[str, typer.Option(help="Hidden layer sizes.")] = "100,100,100",
+    holdout: Annotated[float, typer.Option(help="Share of cases held out to judge it.")] = 0.1,
+    adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
+    json_output: JsonOption = False,
+) -> None:
+    """Train the learned forward model with the hybrid paper's protocol."""
+    from flakelab.cases.database import open_database
+    from flakelab.io import read_library
+    from flakelab.models.registry import register
+    from flakelab.models.training import TrainingConfig, case_arrays, evaluate_model, train_protocol
+
+    lib = read_library(library)
+    chosen = [c for c in load_cases(cases) if c.instrument == instrument]
+    if not chosen:
+        raise FlakelabError(f"{cases}: no cases from instrument {instrument!r}")
+    effect = [t.kind != "pigment" for t in lib.toners]
+    rng = np.random.default_rng(seed)
+    held = rng.random(len(chosen)) < holdout
+    data = case_arrays([c for c, h in zip(chosen, held, strict=True) if not h], lib.names, effect)
+    held_out = case_arrays([c for c, h in zip(chosen, held, strict=True) if h], lib.names, effect)
+    sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
+    config = TrainingConfig(hidden=sizes, epochs=epochs, finetune_epochs=epochs, seed=seed)
+    stages = 2 * (config.folds + 1) * epochs + (config.adapt_epochs if adapt else 0)
+    with progress_bar(disable=json_output) as bar:
+        task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
+        model, report = train_protocol(
+            data, config, adapt_shop=adapt, progress=lambda k: bar.advance(task, k)
+        )
+    model.info["name"] = instrument
+    metrics = evaluate_model(model, held_out)
+    summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
+    summary["held_out"] = {k: metrics[k] for k in ("cases", "de00_mean", "de00_p95", "de00_max")}
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_bytes(model.to_bytes())
+        summary["file"] = str(out)
+    if register_model:
+        summary["registry"] = register(
+            open_database(database), model, held_out, metrics=summary["held_out"]
+        )
+    summary["loss_log_tail"] = report["log"][-3:]
+    if json_output:
+        print(json.dumps(summary, indent=2, default=str))
+        return
+    console.print_json(json.dumps(summary, default=str))
+
+
+@model_app.command("list")
+@reports_errors
+def list_models(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
+    """Registered model versions."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import SHIPPED, list_models
+
+    rows = list_models(open_database(database))
+    if json_output:
+        print(json.dumps({"registered": rows, "shipped": list(SHIPPED)}, indent=2))
+        return
+    table = Table(title="Models")
+    for column in ("name", "version", "status", "held-out ΔE00", "toners", "data", "created"):
+        table.add_column(column)
+    for r in rows:
+        table.add_row(
+            r["name"],
+            str(r["version"]),
+            r["status"],
+            f"{r['held_out_de00']:.3f}",
+            str(r["toners"]),
+            r["data_hash"],
+            r["created_at"][:19],
+        )
+    for name in SHIPPED:
+        table.add_row(name, "shipped", "default", "", "", "", "")
+    console.print(table)
+
+
+@model_app.command("evaluate")
+@reports_errors
+def evaluate(
+    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
+    model: Annotated[
+        str | None, typer.Option("--model", "-m", help="Model file (default: current).")
+    ] = None,
+    instrument: InstrumentOption = "five-angle",
+    library: LibraryOption = None,
+    database: DatabaseOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """ΔE00 of the model's predictions against the measured spray-outs."""
+    from flakelab.io import read_library
+    from flakelab.models.registry import current_model, load_model_file
+    from flakelab.models.training import case_arrays, evaluate_model
+
+    lib = read_library(library)
+    forward = (
+        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
+    )
+    chosen = [c for c in load_cases(cases) if c.geometry_names == forward.geometries]
+    if not chosen:
+        raise FlakelabError(f"{cases}: no cases with the model's geometries {forward.geometries}")
+    report = evaluate_model(forward, case_arrays(chosen, lib.names))
+    report["model"] = model or f"current {instrument}"
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"{report['model']} on {report['cases']} cases")
+    for column in ("geometry", "ΔE00 mean", "p95", "max"):
+        table.add_column(column, justify="right")
+    for g, v in report["per_geometry"].items():
+        table.add_row(g, f"{v['de00_mean']:.2f}", f"{v['de00_p95']:.2f}", f"{v['de00_max']:.2f}")
+    table.add_row(
+        "all",
+        f"{report['de00_mean']:.2f}",
+        f"{report['de00_p95']:.2f}",
+        f"{report['de00_max']:.2f}",
+        style="bold",
+    )
+    console.print(table)
+
+
+def _maybe_engine(database: str | None):
+    """The database only when one is named or configured; the shipped model needs none."""
+    import os
+
+    from flakelab.cases.database import open_database
+
+    if database or os.environ.get("FLAKELAB_DATABASE_URL"):
+        return open_database(database)
+    return None

@@ -1,0 +1,1 @@
+"""Learned forward model: an MLP from toner amounts to multi-angle reflectance and texture."""

@@ -1,0 +1,180 @@
+"""The learned forward model (DESIGN.md §5): recipe → reflectance at every geometry + texture.
+
+Inputs are mass fractions over the model's toner list (a recipe in any unit is normalised
+first); outputs are log reflectance factors at each geometry and band, then the texture
+readings. Inputs and outputs are standardised with the training data's statistics, stored
+with the weights. Log reflectance makes the loss relative, as colour differences are: a
+1 % error costs the same on a dark flop angle as near specular.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from numpy.typing import ArrayLike, NDArray
+from torch import nn
+
+from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.errors import FlakelabError
+
+__all__ = ["ForwardModel", "build_network", "LOG_FLOOR", "ModelError"]
+
+EFFECT_OFFSET = 0.05
+"""Added to the effect-pigment fraction in the ratio features (solids have none)."""
+LOG_FLOOR = 1e-3
+"""Reflectance factors are clipped here before the log (noise on black can go negative)."""
+
+
+class ModelError(FlakelabError):
+    """A model file or a model input that is wrong."""
+
+
+def build_network(inputs: int, outputs: int, hidden: Sequence[int] = (100, 100, 100)) -> nn.Module:
+    """MLP with SiLU activations (smooth, so matching gets useful gradients)."""
+    layers: list[nn.Module] = []
+    width = inputs
+    for size in hidden:
+        layers += [nn.Linear(width, size), nn.SiLU()]
+        width = size
+    layers.append(nn.Linear(width, outputs))
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class ForwardModel:
+    """A trained network with everything needed to use it."""
+
+    toners: tuple[str, ...]
+    geometries: tuple[str, ...]
+    instrument: str
+    network: nn.Module
+    hidden: tuple[int, ...]
+    x_mean: NDArray
+    x_std: NDArray
+    y_mean: NDArray
+    y_std: NDArray
+    info: dict
+    effect: NDArray | None = None
+
+    @property
+    def spectral_outputs(self) -> int:
+        return len(self.geometries) * WAVELENGTHS.size
+
+    # -- encoding ------------------------------------------------------------------------
+    def encode_targets(self, reflectance: ArrayLike, texture: ArrayLike) -> NDArray:
+        R = np.log(np.maximum(np.asarray(reflectance, dtype=float), LOG_FLOOR))
+        return np.concatenate([R.reshape(R.shape[0], -1), np.asarray(texture, float)], axis=1)
+
+    def decode_targets(self, y: NDArray) -> tuple[NDArray, NDArray]:
+        G = len(self.geometries)
+        R = np.exp(y[:, : self.spectral_outputs]).reshape(-1, G, WAVELENGTHS.size)
+        return R, y[:, self.spectral_outputs :]
+
+    def fractions(self, recipes: Sequence[Mapping[str, float]]) -> NDArray:
+        """Recipes ``{toner: amount}`` (any unit) → normalised fractions ``[N, T]``."""
+        x = np.zeros((len(recipes), len(self.toners)))
+        index = {name: i for i, name in enumerate(self.toners)}
+        for row, recipe in enumerate(recipes):
+            for name, amount in recipe.items():
+                if name not in index:
+                    raise ModelError(
+                        f"recipe: toner {name!r} is unknown to model "
+                        f"{self.info.get('name', '?')} ({len(self.toners)} toners)"
+                    )
+                x[row, index[name]] = amount
+        total = x.sum(axis=1, keepdims=True)
+        if np.any(total <= 0):
+            raise ModelError("recipe: amounts sum to zero")
+        return x / total
+
+    # -- prediction ----------------------------------------------------------------------
+    def features(self, fractions: torch.Tensor) -> torch.Tensor:
+        """Fractions plus each toner's amount per unit effect pigment: in a metallic the dye
+        acts through κ/σ_f (DESIGN.md §3), a ratio an MLP would otherwise have to learn."""
+        mask = torch.as_tensor(self.effect_mask(), dtype=fractions.dtype)
+        effect = (fractions * mask).sum(dim=1, keepdim=True)
+        return torch.cat([fractions, fractions / (effect + EFFECT_OFFSET)], dim=1)
+
+    def effect_mask(self) -> NDArray:
+        return np.zeros(len(self.toners)) if self.effect is None else np.asarray(self.effect, float)
+
+    def torch_forward(self, fractions: torch.Tensor) -> torch.Tensor:
+        """Differentiable: fractions ``[N, T]`` → outputs (log R, texture), de-standardised."""
+        x = (
+            self.features(fractions) - torch.as_tensor(self.x_mean, dtype=fractions.dtype)
+        ) / torch.as_tensor(self.x_std, dtype=fractions.dtype)
+        y = self.network(x)
+        return y * torch.as_tensor(self.y_std, dtype=y.dtype) + torch.as_tensor(
+            self.y_mean, dtype=y.dtype
+        )
+
+    def predict(self, fractions: ArrayLike, batch: int = 65536) -> tuple[NDArray, NDArray]:
+        """Reflectance factors ``[N, G, 31]`` and texture readings ``[N, 8]``."""
+        x = np.atleast_2d(np.asarray(fractions, dtype=np.float32))
+        if x.shape[1] != len(self.toners):
+            raise ModelError(f"fractions: expected {len(self.toners)} columns, got {x.shape[1]}")
+        self.network.eval()
+        out = []
+        with torch.no_grad():
+            for start in range(0, x.shape[0], batch):
+                out.append(self.torch_forward(torch.from_numpy(x[start : start + batch])).numpy())
+        return self.decode_targets(np.concatenate(out).astype(float))
+
+    # -- storage -------------------------------------------------------------------------
+    def to_bytes(self) -> bytes:
+        buffer = io.BytesIO()
+        meta = {
+            "format": "flakelab-model",
+            "version": 1,
+            "toners": list(self.toners),
+            "geometries": list(self.geometries),
+            "instrument": self.instrument,
+            "hidden": list(self.hidden),
+            "texture": list(TEXTURE_READINGS),
+            "info": self.info,
+            "effect": self.effect_mask().tolist(),
+        }
+        torch.save(
+            {
+                "meta": json.dumps(meta),
+                "state": self.network.state_dict(),
+                "norm": {
+                    k: torch.as_tensor(getattr(self, k), dtype=torch.float32)
+                    for k in ("x_mean", "x_std", "y_mean", "y_std")
+                },
+            },
+            buffer,
+        )
+        return buffer.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes, source: str = "model") -> ForwardModel:
+        try:
+            stored = torch.load(io.BytesIO(data), weights_only=True)
+            meta = json.loads(stored["meta"])
+        except Exception as error:  # torch raises many types for a bad file
+            raise ModelError(
+                f"{source}: not a flakelab model file ({error.__class__.__name__})"
+            ) from None
+        if meta.get("format") != "flakelab-model":
+            raise ModelError(f"{source}: format: expected 'flakelab-model'")
+        outputs = len(meta["geometries"]) * WAVELENGTHS.size + len(meta["texture"])
+        network = build_network(2 * len(meta["toners"]), outputs, meta["hidden"])
+        network.load_state_dict(stored["state"])
+        norm = {k: v.numpy().astype(float) for k, v in stored["norm"].items()}
+        return cls(
+            tuple(meta["toners"]),
+            tuple(meta["geometries"]),
+            meta["instrument"],
+            network,
+            tuple(meta["hidden"]),
+            info=meta["info"],
+            effect=np.array(meta["effect"]),
+            **norm,
+        )

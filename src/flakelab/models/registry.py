@@ -1,0 +1,141 @@
+"""Model registry: versioned artefacts in the case database, and the shipped defaults.
+
+A version holds the weights and normalisation (one ``flakelab-model`` blob), the toner list,
+instrument, training-data hash and metrics. A new version is promoted only when its held-out
+ΔE00 beats the promoted one's on the *same* held-out cases (both are evaluated again there).
+Without a promoted version, the shipped model for the instrument is the current one.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from pathlib import Path
+
+from sqlalchemy import Engine, func, select, update
+from sqlalchemy.orm import Session
+
+from flakelab.cases.schema import ModelRow
+from flakelab.models.network import ForwardModel, ModelError
+from flakelab.models.training import CaseArrays, evaluate_model
+
+__all__ = [
+    "shipped_model_path",
+    "shipped_model",
+    "register",
+    "promoted_model",
+    "list_models",
+    "load_model_file",
+    "current_model",
+]
+
+SHIPPED = {"five-angle": "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
+"""Shipped models per instrument (trained on generated cases for the demo library)."""
+
+
+def shipped_model_path(instrument: str) -> Path:
+    if instrument not in SHIPPED:
+        raise ModelError(
+            f"instrument: no shipped model for {instrument!r} "
+            f"(shipped: {', '.join(SHIPPED)}); train one with flakelab train"
+        )
+    return Path(__file__).resolve().parent.parent / "data" / "models" / SHIPPED[instrument]
+
+
+def load_model_file(path: str | Path) -> ForwardModel:
+    path = Path(path)
+    if not path.exists():
+        raise ModelError(f"{path}: no such model file")
+    return ForwardModel.from_bytes(path.read_bytes(), str(path))
+
+
+def shipped_model(instrument: str = "five-angle") -> ForwardModel:
+    return load_model_file(shipped_model_path(instrument))
+
+
+def list_models(engine: Engine) -> list[dict]:
+    with Session(engine) as session:
+        rows = session.scalars(select(ModelRow).order_by(ModelRow.name, ModelRow.version))
+        return [
+            {
+                "name": r.name,
+                "version": r.version,
+                "instrument": r.instrument,
+                "status": r.status,
+                "held_out_de00": r.held_out_de00,
+                "toners": len(r.toners),
+                "data_hash": r.data_hash[:12],
+                "created_at": r.created_at.isoformat(),
+                "size_kb": round(len(r.artefact) / 1024, 1),
+            }
+            for r in rows
+        ]
+
+
+def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
+    with Session(engine) as session:
+        row = session.scalars(
+            select(ModelRow).where(ModelRow.name == name, ModelRow.status == "promoted")
+        ).first()
+        return (
+            None if row is None else ForwardModel.from_bytes(row.artefact, f"{name} v{row.version}")
+        )
+
+
+def current_model(engine: Engine | None, instrument: str) -> ForwardModel:
+    """The promoted model for the instrument, else the shipped one."""
+    if engine is not None:
+        model = promoted_model(engine, instrument)
+        if model is not None:
+            return model
+    return shipped_model(instrument)
+
+
+def register(
+    engine: Engine,
+    model: ForwardModel,
+    held_out: CaseArrays,
+    *,
+    name: str | None = None,
+    metrics: dict | None = None,
+) -> dict:
+    """Store ``model`` as a new version and promote it if it beats the current one on
+    ``held_out``. Returns the version, both scores and whether it was promoted."""
+    name = name or model.instrument
+    score = evaluate_model(model, held_out)["de00_mean"]
+    try:
+        incumbent = current_model(engine, model.instrument)
+        incumbent_score = evaluate_model(incumbent, held_out)["de00_mean"]
+    except ModelError:
+        incumbent_score = float("inf")
+    promote = score < incumbent_score
+    with Session(engine) as session, session.begin():
+        version = (
+            session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == name)) or 0
+        ) + 1
+        if promote:
+            session.execute(
+                update(ModelRow)
+                .where(ModelRow.name == name, ModelRow.status == "promoted")
+                .values(status="retired")
+            )
+        session.add(
+            ModelRow(
+                name=name,
+                version=version,
+                instrument=model.instrument,
+                status="promoted" if promote else "candidate",
+                toners=list(model.toners),
+                data_hash=model.info.get("data_hash", ""),
+                metrics=metrics or {},
+                held_out_de00=score,
+                artefact=model.to_bytes(),
+                created_at=datetime.now(UTC),
+            )
+        )
+    return {
+        "name": name,
+        "version": version,
+        "held_out_de00": score,
+        "incumbent_de00": incumbent_score,
+        "promoted": promote,
+    }

@@ -1,0 +1,355 @@
+"""Training protocol of the hybrid paper (DESIGN.md §5) and held-out evaluation.
+
+1. Split the cases into five partitions (seeded).
+2. For each partition in turn, train on the other four (``epochs`` at ``learning_rate``, then
+   ``finetune_epochs`` at ``finetune_learning_rate``) and predict the held partition; every
+   case is thus judged once by a model that never saw it.
+3. Flag statistical outliers: a case whose error (mean squared standardised residual) lies
+   more than ``outlier_threshold`` robust standard deviations (median/MAD) above the median.
+4. Train the final model on the cleaned cases.
+5. Optionally adapt it to one shop or instrument (``adapt_epochs`` on that shop's cases).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from flakelab.cases.case import Case
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.models.network import ForwardModel, ModelError, build_network
+
+__all__ = [
+    "TrainingConfig",
+    "CaseArrays",
+    "case_arrays",
+    "train_protocol",
+    "fit",
+    "evaluate_model",
+    "flag_outliers",
+    "data_hash",
+]
+
+
+@dataclass(frozen=True)
+class TrainingConfig:
+    hidden: tuple[int, ...] = (100, 100, 100)
+    epochs: int = 300
+    finetune_epochs: int = 300
+    learning_rate: float = 2e-3
+    finetune_learning_rate: float = 2e-4
+    batch_size: int = 512
+    folds: int = 5
+    outlier_threshold: float = 6.0
+    adapt_epochs: int = 150
+    adapt_learning_rate: float = 2e-4
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class CaseArrays:
+    """Recipes ``x[N, T]``, spray-out reflectance ``R[N, G, 31]``, texture ``tex[N, 8]``."""
+
+    x: NDArray
+    R: NDArray
+    texture: NDArray
+    case_ids: tuple[str, ...]
+    shops: tuple[str, ...]
+    toners: tuple[str, ...]
+    geometries: tuple[str, ...]
+    instrument: str
+    effect: NDArray | None = None
+
+
+def case_arrays(
+    cases: Iterable[Case], toners: Sequence[str], effect: Sequence[bool] | None = None
+) -> CaseArrays:
+    """Stack cases of one instrument (one geometry set) into training arrays."""
+    index = {name: i for i, name in enumerate(toners)}
+    xs, Rs, texs, ids, shops = [], [], [], [], []
+    geometries = instrument = None
+    for case in cases:
+        if geometries is None:
+            geometries, instrument = case.geometry_names, case.instrument
+        elif case.geometry_names != geometries:
+            raise ModelError(
+                f"case {case.case_id!r}: geometries {case.geometry_names} differ "
+                f"from the first case's {geometries}; train one instrument at a time"
+            )
+        x = np.zeros(len(toners))
+        for name, amount in case.recipe.items():
+            if name not in index:
+                raise ModelError(
+                    f"case {case.case_id!r}: recipe: toner {name!r} is not in the library"
+                )
+            x[index[name]] = amount
+        xs.append(x)
+        Rs.append(case.sprayout)
+        texs.append([case.sprayout_texture.get(k, 0.0) for k in TEXTURE_READINGS])
+        ids.append(case.case_id)
+        shops.append(case.shop)
+    if not xs:
+        raise ModelError("cases: expected at least one case, got none")
+    return CaseArrays(
+        np.array(xs),
+        np.array(Rs),
+        np.array(texs),
+        tuple(ids),
+        tuple(shops),
+        tuple(toners),
+        tuple(geometries),
+        str(instrument),
+        None if effect is None else np.asarray(effect, float),
+    )
+
+
+def data_hash(data: CaseArrays) -> str:
+    """SHA-256 of the training data (recipes, spectra, texture) — recorded with every model."""
+    digest = hashlib.sha256()
+    for array in (data.x, data.R, data.texture):
+        digest.update(np.ascontiguousarray(array, dtype="<f4").tobytes())
+    return digest.hexdigest()
+
+
+def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> ForwardModel:
+    torch.manual_seed(config.seed)
+    probe = ForwardModel(
+        data.toners,
+        data.geometries,
+        data.instrument,
+        torch.nn.Identity(),
+        config.hidden,
+        np.zeros(1),
+        np.ones(1),
+        np.zeros(1),
+        np.ones(1),
+        {},
+        data.effect,
+    )
+    y = probe.encode_targets(data.R[rows], data.texture[rows])
+    x = probe.features(torch.as_tensor(data.x[rows])).numpy()
+    network = build_network(x.shape[1], y.shape[1], config.hidden)
+    return ForwardModel(
+        data.toners,
+        data.geometries,
+        data.instrument,
+        network,
+        tuple(config.hidden),
+        x.mean(0),
+        x.std(0) + 1e-3,
+        y.mean(0),
+        y.std(0) + 1e-3,
+        {"config": asdict(config)},
+        data.effect,
+    )
+
+
+def fit(
+    model: ForwardModel,
+    data: CaseArrays,
+    rows: NDArray,
+    epochs: int,
+    learning_rate: float,
+    config: TrainingConfig,
+    log: list,
+    stage: str,
+    progress: Callable[[int], None] | None = None,
+) -> None:
+    """Adam on the mean squared standardised error; cosine decay within the stage."""
+    if epochs <= 0 or rows.size == 0:
+        return
+    generator = torch.Generator().manual_seed(config.seed + len(log))
+    features = model.features(torch.as_tensor(data.x[rows])).numpy()
+    x = torch.as_tensor((features - model.x_mean) / model.x_std, dtype=torch.float32)
+    y_raw = model.encode_targets(data.R[rows], data.texture[rows])
+    y = torch.as_tensor((y_raw - model.y_mean) / model.y_std, dtype=torch.float32)
+    optimiser = torch.optim.Adam(model.network.parameters(), lr=learning_rate)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=epochs)
+    model.network.train()
+    for epoch in range(epochs):
+        order = torch.randperm(x.shape[0], generator=generator)
+        total = 0.0
+        for start in range(0, x.shape[0], config.batch_size):
+            batch = order[start : start + config.batch_size]
+            optimiser.zero_grad()
+            loss = torch.mean((model.network(x[batch]) - y[batch]) ** 2)
+            loss.backward()
+            optimiser.step()
+            total += float(loss.detach()) * batch.numel()
+        schedule.step()
+        log.append({"stage": stage, "epoch": epoch, "loss": total / x.shape[0]})
+        if progress:
+            progress(1)
+
+
+def _residual_error(model: ForwardModel, data: CaseArrays, rows: NDArray) -> NDArray:
+    R, tex = model.predict(data.x[rows])
+    predicted = model.encode_targets(R, tex)
+    observed = model.encode_targets(data.R[rows], data.texture[rows])
+    return np.mean(((predicted - observed) / model.y_std) ** 2, axis=1)
+
+
+def flag_outliers(errors: NDArray, threshold: float) -> NDArray[np.bool_]:
+    """True where an error is more than ``threshold`` robust s.d. above the median."""
+    median = np.median(errors)
+    mad = 1.4826 * np.median(np.abs(errors - median)) + 1e-12
+    return (errors - median) / mad > threshold
+
+
+def train_protocol(
+    data: CaseArrays,
+    config: TrainingConfig = TrainingConfig(),
+    *,
+    adapt_shop: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[ForwardModel, dict]:
+    """The full protocol; returns the final model and a report (outliers, losses, timings)."""
+    start = time.perf_counter()
+    n = data.x.shape[0]
+    if n < config.folds * 2:
+        raise ModelError(f"cases: expected at least {config.folds * 2} cases to train, got {n}")
+    rng = np.random.default_rng(config.seed)
+    partitions = np.array_split(rng.permutation(n), config.folds)
+    errors = np.zeros(n)
+    log: list[dict] = []
+    for k, held in enumerate(partitions):
+        train_rows = np.concatenate([p for j, p in enumerate(partitions) if j != k])
+        model = _new_model(data, config, train_rows)
+        fit(
+            model,
+            data,
+            train_rows,
+            config.epochs,
+            config.learning_rate,
+            config,
+            log,
+            f"fold {k + 1}",
+            progress,
+        )
+        fit(
+            model,
+            data,
+            train_rows,
+            config.finetune_epochs,
+            config.finetune_learning_rate,
+            config,
+            log,
+            f"fold {k + 1} fine-tune",
+            progress,
+        )
+        errors[held] = _residual_error(model, data, held)
+    outliers = flag_outliers(errors, config.outlier_threshold)
+    clean = np.flatnonzero(~outliers)
+    model = _new_model(data, config, clean)
+    fit(model, data, clean, config.epochs, config.learning_rate, config, log, "final", progress)
+    fit(
+        model,
+        data,
+        clean,
+        config.finetune_epochs,
+        config.finetune_learning_rate,
+        config,
+        log,
+        "final fine-tune",
+        progress,
+    )
+    if adapt_shop is not None:
+        shop_rows = np.flatnonzero((np.array(data.shops) == adapt_shop) & ~outliers)
+        if shop_rows.size == 0:
+            raise ModelError(f"--adapt: no cases from shop {adapt_shop!r}")
+        fit(
+            model,
+            data,
+            shop_rows,
+            config.adapt_epochs,
+            config.adapt_learning_rate,
+            config,
+            log,
+            f"adapt {adapt_shop}",
+            progress,
+        )
+    report = {
+        "cases": n,
+        "outliers": int(outliers.sum()),
+        "outlier_case_ids": [data.case_ids[i] for i in np.flatnonzero(outliers)],
+        "seconds": time.perf_counter() - start,
+        "final_loss": log[-1]["loss"],
+        "log": log,
+    }
+    model.info.update(
+        {
+            "data_hash": data_hash(data),
+            "trained_cases": int(clean.size),
+            "outliers_dropped": int(outliers.sum()),
+        }
+    )
+    return model, report
+
+
+def evaluate_model(model: ForwardModel, data: CaseArrays) -> dict:
+    """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
+    geometry; mean absolute texture error."""
+    if data.geometries != model.geometries:
+        missing = sorted(set(model.geometries) - set(data.geometries))
+        if missing:
+            raise ModelError(f"cases lack the model's geometries {missing}")
+        order = [data.geometries.index(g) for g in model.geometries]
+        data = CaseArrays(
+            data.x,
+            data.R[:, order],
+            data.texture,
+            data.case_ids,
+            data.shops,
+            data.toners,
+            model.geometries,
+            data.instrument,
+        )
+    x = _align_toners(model, data)
+    start = time.perf_counter()
+    R, texture = model.predict(x)
+    seconds = time.perf_counter() - start
+    de = delta_E(reflectance_to_Lab(data.R), reflectance_to_Lab(R))
+    per_geometry = {
+        g: {
+            "de00_mean": float(de[:, i].mean()),
+            "de00_p95": float(np.percentile(de[:, i], 95)),
+            "de00_max": float(de[:, i].max()),
+        }
+        for i, g in enumerate(model.geometries)
+    }
+    return {
+        "cases": int(x.shape[0]),
+        "de00_mean": float(de.mean()),
+        "de00_p95": float(np.percentile(de, 95)),
+        "de00_max": float(de.max()),
+        "per_geometry": per_geometry,
+        "texture_mae": dict(
+            zip(
+                TEXTURE_READINGS,
+                np.abs(texture - data.texture).mean(0).round(4).tolist(),
+                strict=True,
+            )
+        ),
+        "predict_seconds": seconds,
+    }
+
+
+def _align_toners(model: ForwardModel, data: CaseArrays) -> NDArray:
+    index = {name: i for i, name in enumerate(model.toners)}
+    x = np.zeros((data.x.shape[0], len(model.toners)))
+    for j, name in enumerate(data.toners):
+        used = data.x[:, j] > 0
+        if name not in index:
+            if np.any(used):
+                raise ModelError(f"cases use toner {name!r}, unknown to the model")
+            continue
+        x[:, index[name]] = data.x[:, j]
+    return x

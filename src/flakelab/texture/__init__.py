@@ -1,0 +1,1 @@
+"""Texture: sparkle and graininess readings of a coating."""

@@ -1,0 +1,66 @@
+"""Texture readings (Sa, Si at 15/45/75°, SG, G) predicted from a coating's flake population.
+
+The instruments do not publish their formulas (DESIGN.md §2), so flakelab defines its own
+from the physics of a camera looking along the normal at a coating lit from 15°, 45°, 75°:
+
+* a flake sparkles when its tilt mirrors the source into the camera: inside the binder the
+  needed tilt is θ_n = ½·asin(sin θ_light / n) (5.0°, 14.0°, 20.1° for n = 1.5);
+* flakes visible per image area: those within the top optical depth,
+  N_A = Σ_s N_s · d_vis with N_s = φ_s/(π a_s² t_s) and d_vis = 1/(σ_f + 2κ̄ + σ̄_s);
+* **sparkle area** Sa = 100·(1 − exp(−Σ_s N_A,s · π a_s² · p_s(θ_n) · Ω_cam)), the share of
+  the image covered by glints (Ω_cam = 0.02 sr, the camera's acceptance in the binder);
+* **sparkle intensity** Si = 10·R̄·(a/10 µm)^½·exp(−2κ̄·d_vis): brighter for larger, more
+  reflective and less buried flakes;
+* **sparkle grade** SG = ⅓·Σ_θ √(Sa_θ·Si_θ)/2;
+* **graininess** G (diffuse light): contrast of flake clusters at the mm scale,
+  G = 12·(a/20 µm)^0.75·√(coverage·(1 − coverage)) with coverage = 1 − exp(−N_A·π a²).
+
+Scales are chosen so that readings fall in the instruments' usual ranges (Sa, Si up to about
+30, SG and G about 0–20). Issue 6 measures the same quantities on rendered flake images.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.physics.layer import Layer, orientation_pdf
+
+__all__ = ["texture_readings", "SPARKLE_LIGHTS", "CAMERA_SOLID_ANGLE"]
+
+SPARKLE_LIGHTS = (15.0, 45.0, 75.0)
+"""Directional light angles [degree] of the sparkle readings."""
+CAMERA_SOLID_ANGLE = 0.02
+"""Acceptance of the camera pixel's glint cone, inside the binder [sr]."""
+
+
+def texture_readings(layer: Layer, radius_um: ArrayLike) -> NDArray[np.float64]:
+    """Readings ``[F, 8]`` in :data:`~flakelab.core.measurement.TEXTURE_READINGS` order for
+    each formulation; ``radius_um`` ``[S]`` of the flake species."""
+    radius = np.asarray(radius_um, dtype=float)
+    rate = layer.flake_rate  # σ_s = φ_s / t_s  [1/µm]
+    if rate.shape[1] == 0:
+        return np.zeros((layer.size, len(TEXTURE_READINGS)))
+    absorption = layer.absorption.mean(axis=1, keepdims=True)
+    scattering = layer.scattering.mean(axis=1, keepdims=True)
+    visible_depth = 1 / (rate.sum(1, keepdims=True) + 2 * absorption + scattering + 1 / 60.0)
+    area = np.pi * radius**2
+    per_area = rate / area * visible_depth  # N_A,s = φ/(πa²t)·d_vis [1/µm²]
+    covered = per_area * area  # expected flake cover within the visible depth
+    reflect = layer.flake_reflectance[:, 0].mean(axis=1)  # [S]
+    buried = np.exp(-2 * absorption * visible_depth)[:, 0]
+    weight = covered / np.maximum(covered.sum(1, keepdims=True), 1e-12)
+    mean_radius = (weight * radius).sum(1)
+    readings = []
+    for light in SPARKLE_LIGHTS:
+        tilt = 0.5 * np.arcsin(np.sin(np.radians(light)) / layer.n)
+        glint = covered * orientation_pdf(tilt, layer.spreads) * CAMERA_SOLID_ANGLE
+        sparkle_area = 100 * (1 - np.exp(-glint.sum(1)))
+        intensity = 10 * (weight * reflect).sum(1) * np.sqrt(mean_radius / 10) * buried
+        readings += [sparkle_area, intensity * (sparkle_area > 0)]
+    Sa, Si = np.array(readings[0::2]), np.array(readings[1::2])
+    SG = np.sqrt(Sa * Si).sum(0) / 6
+    coverage = 1 - np.exp(-covered.sum(1))
+    G = 12 * (mean_radius / 20) ** 0.75 * np.sqrt(coverage * (1 - coverage))
+    return np.column_stack([Sa[0], Si[0], Sa[1], Si[1], Sa[2], Si[2], SG, G])

@@ -1,0 +1,204 @@
+"""Coating optics: Monte Carlo invariants, Kubelka–Munk, the fast model and its path tables."""
+
+from __future__ import annotations
+
+import colour
+import numpy as np
+import pytest
+
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.io import read_library
+from flakelab.library import LibraryError
+from flakelab.library.optics import flake_reflectance, fresnel_reflectance
+from flakelab.physics.fast import predict, single_collision
+from flakelab.physics.kubelka_munk import (
+    inverse_saunderson,
+    km_coefficients,
+    ks_ratio,
+    layer_reflectance,
+    reflectance_infinite,
+    saunderson,
+)
+from flakelab.physics.layer import (
+    Layer,
+    interface_directions,
+    internal_diffuse_reflectance,
+    layer_from_fractions,
+    mean_projected_cosine,
+)
+from flakelab.physics.montecarlo import simulate
+from flakelab.physics.scaling import _de00
+
+W = WAVELENGTHS.size
+GEOMETRIES = ["45as-15", "45as15", "45as45", "45as110"]
+
+
+def layer(rate=0.0, sd=10.0, kappa=0.0, sigma=0.0, g=0.0, H=15.0, primer=0.05, n=1.5, R=None):
+    R = flake_reflectance(np.arange(91.0), WAVELENGTHS)[None] if R is None else R
+    return Layer(
+        np.array([[rate]]),
+        np.radians([sd]),
+        R,
+        np.array([False]),
+        np.full((1, W), kappa),
+        np.full((1, W), sigma),
+        np.full(1, g),
+        H,
+        np.full(W, primer),
+        n,
+    )
+
+
+def within(a, b, stderr, sigmas=4.0):
+    return np.all(np.abs(a - b) <= sigmas * stderr)
+
+
+def test_white_primer_without_interface_is_a_perfect_diffuser():
+    result = simulate(layer(primer=1.0, n=1.0), GEOMETRIES, 500, seed=1)
+    np.testing.assert_allclose(result.brdf, 1 / np.pi, rtol=1e-12)
+
+
+def test_white_primer_under_clearcoat_matches_the_fresnel_lambertian_limit():
+    # inside: Lambertian, every internal reflection returned; f = T_i T_o / (n² π (1 − r_i))
+    result = simulate(layer(primer=1.0), GEOMETRIES, 40_000, seed=2)
+    _, _, T_in, T_out = interface_directions(GEOMETRIES)
+    expected = T_in * T_out / (1.5**2 * np.pi * (1 - internal_diffuse_reflectance()))
+    assert within(result.brdf[:, 0], expected, result.stderr[:, 0])
+
+
+def test_lossless_layer_returns_all_light_that_entered():
+    mirror = np.ones((1, 91, W))
+    result = simulate(layer(rate=0.3, primer=1.0, R=mirror), GEOMETRIES, 5_000, seed=3)
+    _, _, T_in, _ = interface_directions(GEOMETRIES)
+    assert result.capped == 0
+    np.testing.assert_allclose(result.albedo, T_in[0], rtol=1e-9)
+
+
+def test_albedo_never_exceeds_what_entered():
+    result = simulate(layer(rate=0.25, sigma=0.2, g=0.4, kappa=0.01), GEOMETRIES, 5_000, seed=4)
+    _, _, T_in, _ = interface_directions(GEOMETRIES)
+    assert np.all(result.albedo <= T_in[0]) and np.all(result.albedo > 0)
+
+
+def test_reciprocity_swapping_light_and_detector():
+    # 45as15: light at 45°, detector 30° on the far side; 30as-15 is the same pair swapped
+    coating = layer(rate=0.2, kappa=0.02, sigma=0.1, g=0.3)
+    forward = simulate(coating, ["45as15"], 40_000, seed=5)
+    backward = simulate(coating, ["30as-15"], 40_000, seed=6)
+    combined = np.hypot(forward.stderr, backward.stderr)
+    assert within(forward.brdf, backward.brdf, combined)
+    assert np.all(combined < 0.01 * forward.brdf)
+
+
+@pytest.mark.parametrize(("kappa", "g"), [(0.01, 0.0), (0.05, 0.0), (0.02, 0.5)])
+def test_thick_scattering_layer_reaches_kubelka_munk(kappa, g):
+    # no flakes, no interface, diffuse light: the two-flux limit with K = 2κ, S = ¾σ(1 − g)
+    coating = layer(kappa=kappa, sigma=1.0, g=g, H=2000.0, primer=0.0, n=1.0)
+    result = simulate(coating, ["45as45"], 20_000, seed=7, diffuse_illumination=True)
+    K, S = km_coefficients(kappa, 1.0, g)
+    assert abs(result.albedo[0] - reflectance_infinite(K, S)) < 0.01
+
+
+def test_single_collision_is_the_first_term_of_the_path_table():
+    coating = layer(rate=0.25, sd=5.0)
+    geometries = ["45as15", "45as25", "45as45"]
+    result = simulate(coating, geometries, 40_000, seed=8)
+    one_bounce = result.table.weight[:, 1].sum(-1) * result.table.reflectance[15]
+    np.testing.assert_allclose(
+        single_collision(coating, geometries)[0, :, 15], one_bounce, rtol=0.02
+    )
+
+
+def test_path_table_predicts_a_dyed_layer_from_the_dye_free_one():
+    base = layer(rate=0.25)
+    dye = 0.05 * (1 + np.sin(WAVELENGTHS / 40.0))
+    dyed = base.with_absorption(dye[None])
+    table = simulate(base, GEOMETRIES, 30_000, seed=9).table
+    truth = simulate(dyed, GEOMETRIES, 30_000, seed=10)
+    predicted = table.brdf(dyed.absorption)[0]
+    assert np.all(np.abs(predicted / truth.brdf - 1) < 4 * truth.stderr / truth.brdf + 0.01)
+
+
+def test_seed_makes_the_monte_carlo_reproducible():
+    a = simulate(layer(rate=0.2), ["45as45"], 2_000, seed=11)
+    b = simulate(layer(rate=0.2), ["45as45"], 2_000, seed=11, chunks=3)
+    c = simulate(layer(rate=0.2), ["45as45"], 2_000, seed=12)
+    np.testing.assert_allclose(a.brdf, b.brdf, rtol=1e-12)
+    assert not np.allclose(a.brdf, c.brdf)
+
+
+def test_one_run_refuses_two_illumination_angles():
+    with pytest.raises(ValueError, match="one illumination"):
+        simulate(layer(), ["45as45", "15as15"], 100)
+
+
+def test_fresnel_at_the_clearcoat_matches_colour_science():
+    angles = np.array([0.0, 20.0, 45.0, 60.0, 80.0])
+    stack = np.array([[1.0], [1.5], [1.5]])
+    R_colour = colour.phenomena.multilayer_tmm(stack, [100.0], [550.0], angles)[0]
+    reference = R_colour[0, :, 0, :].mean(axis=-1)  # [wavelength, angle, thickness, s/p]
+    np.testing.assert_allclose(
+        fresnel_reflectance(np.cos(np.radians(angles)), 1.0, 1.5), reference, atol=1e-10
+    )
+
+
+def test_projected_cosine_of_flat_flakes_is_the_direction_cosine():
+    d = np.array([[0.0, 0.0, 1.0], [np.sin(0.5), 0.0, np.cos(0.5)]])
+    np.testing.assert_allclose(mean_projected_cosine(d, np.radians(0.01)), d[:, 2], rtol=1e-6)
+
+
+class TestKubelkaMunk:
+    def test_ks_round_trip(self):
+        R = np.linspace(0.02, 0.98, 9)
+        ratio = ks_ratio(R)
+        np.testing.assert_allclose(reflectance_infinite(ratio, 1.0), R, rtol=1e-12)
+
+    def test_thin_clear_layer_is_beer_lambert(self):
+        np.testing.assert_allclose(layer_reflectance(0.02, 0.0, 10.0, 0.8), 0.8 * np.exp(-0.4))
+
+    def test_thick_layer_hides_the_substrate(self):
+        for substrate in (0.0, 1.0):
+            assert np.isclose(
+                layer_reflectance(0.1, 2.0, 500.0, substrate), reflectance_infinite(0.1, 2.0)
+            )
+
+    def test_saunderson_round_trip(self):
+        R = np.linspace(0.0, 0.95, 7)
+        np.testing.assert_allclose(inverse_saunderson(saunderson(R)), R, atol=1e-12)
+
+
+class TestFastModel:
+    library = read_library(None)
+
+    def predict_and_trace(self, recipe):
+        coating = layer_from_fractions(self.library, self.library.fractions(recipe))
+        geometries = ["45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"]
+        return predict(coating, geometries)[0], simulate(coating, geometries, 40_000, seed=13)
+
+    def test_aluminium_with_a_dye_agrees_with_the_monte_carlo(self):
+        fast, mc = self.predict_and_trace({"Al medium": 0.95, "Phthalo blue GS": 0.05})
+        de = _de00(mc.brdf, fast)
+        assert de.mean() < 0.8 and de.max() < 1.5
+
+    def test_a_solid_colour_is_lambertian_under_the_fresnel_top(self):
+        fast, _ = self.predict_and_trace({"Titanium dioxide white": 0.9, "Phthalo blue GS": 0.1})
+        _, _, T_in, T_out = interface_directions(
+            ["45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"]
+        )
+        body = fast / (T_in * T_out)[:, None]
+        np.testing.assert_allclose(body, np.broadcast_to(body[:1], body.shape), rtol=1e-9)
+
+    def test_more_dye_darkens_every_geometry(self):
+        x = np.zeros((3, len(self.library.toners)))
+        names = self.library.names
+        for row, c in enumerate((0.0, 0.02, 0.06)):
+            x[row, names.index("Al coarse")] = 1 - c
+            x[row, names.index("Phthalo blue GS")] = c
+        f = predict(layer_from_fractions(self.library, x), ["45as15", "45as75"])
+        assert np.all(np.diff(f[:, :, 20], axis=0) < 0)
+
+    def test_fractions_must_match_the_library(self):
+        with pytest.raises(ValueError, match="columns"):
+            layer_from_fractions(self.library, np.ones((1, 3)))
+        with pytest.raises(LibraryError, match="unknown toner"):
+            self.library.fractions({"Unobtainium": 1.0})
