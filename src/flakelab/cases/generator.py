@@ -41,7 +41,10 @@ from flakelab.physics.fast import predict
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.texture.readings import texture_readings
 
-__all__ = ["WorldSettings", "World", "Variation"]
+__all__ = ["WorldSettings", "World", "Variation", "CHUNK"]
+
+CHUNK = 250
+"""Cases drawn from one random stream (the unit of reproducibility)."""
 
 ORGANIC_FAMILIES = (
     "phthalocyanine",
@@ -95,15 +98,21 @@ class World:
         library: Library,
         instrument: str = "five-angle",
         settings: WorldSettings | None = None,
+        exclude: tuple[str, ...] = (),
     ) -> None:
         self.library = library
         self.instrument = instrument
         self.geometries: tuple[Geometry, ...] = instrument_geometries(instrument)
         self.settings = settings or WorldSettings()
         names = library.names
-        self._aluminium = [names.index(t.name) for t in library.of_kind("aluminium")]
-        self._pearls = [names.index(t.name) for t in library.of_kind("pearl")]
-        self._pigments = [names.index(t.name) for t in library.of_kind("pigment")]
+        for name in exclude:
+            library[name]  # unknown names are an error
+        self.exclude = tuple(exclude)
+
+        def pool(kind: str) -> list[int]:
+            return [names.index(t.name) for t in library.of_kind(kind) if t.name not in exclude]
+
+        self._aluminium, self._pearls, self._pigments = map(pool, ("aluminium", "pearl", "pigment"))
         self._organic = np.array(
             [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
         )
@@ -123,16 +132,16 @@ class World:
     def _one_formulation(self, kind: str, rng: np.random.Generator) -> NDArray:
         x = np.zeros(len(self.library.toners))
         if kind == "metallic":
-            for i in rng.choice(self._aluminium, size=rng.integers(1, 3), replace=False):
+            for i in _pick(rng, self._aluminium, rng.integers(1, 3)):
                 x[i] = rng.uniform(0.3, 1.0)
         elif kind == "pearl":
-            for i in rng.choice(self._pearls, size=rng.integers(1, 3), replace=False):
+            for i in _pick(rng, self._pearls, rng.integers(1, 3)):
                 x[i] = rng.uniform(0.3, 1.0)
-            if rng.random() < 0.5:
+            if rng.random() < 0.5 and self._aluminium:
                 x[rng.choice(self._aluminium)] = rng.uniform(0.05, 0.3)
         effect = x.sum()
         count = rng.integers(0 if kind != "solid" else 1, 5)
-        for i in rng.choice(self._pigments, size=count, replace=False):
+        for i in _pick(rng, self._pigments, count):
             # tinting strengths span two decades: log-uniform amounts
             x[i] = np.exp(rng.uniform(np.log(0.003), np.log(0.15 if kind != "solid" else 1.0)))
         if kind != "solid" and x.sum() - effect > 0.5 * x.sum():
@@ -196,14 +205,18 @@ class World:
         shop: str = "synthetic shop",
         start: datetime | None = None,
     ) -> Iterator[list[Case]]:
-        """``n`` cases in batches (a list per batch), reproducible from ``seed``."""
-        rng = np.random.default_rng(seed)
+        """``n`` cases in lists of ``batch``, reproducible from ``seed``: case i is the same
+        whatever ``n`` or ``batch`` (each block of :data:`CHUNK` draws from its own stream)."""
         start = start or datetime(2026, 1, 1, tzinfo=UTC)
-        made = 0
-        while made < n:
-            size = min(batch, n - made)
-            yield self._batch(size, rng, shop, start, made, seed)
-            made += size
+        pending: list[Case] = []
+        for first in range(0, n, CHUNK):
+            rng = np.random.default_rng([seed, first // CHUNK])
+            pending += self._batch(min(CHUNK, n - first), rng, shop, start, first, seed)
+            while len(pending) >= batch:
+                yield pending[:batch]
+                pending = pending[batch:]
+        if pending:
+            yield pending
 
     def _batch(self, size, rng, shop, start, offset, seed) -> list[Case]:
         s = self.settings
@@ -298,6 +311,11 @@ class World:
             rng.normal(1.0, s.film_build_sd, n).clip(0.7, 1.3),
             np.exp(rng.normal(0.0, s.spread_sd, n)),
         )
+
+
+def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:
+    """Up to ``count`` distinct toners from ``pool`` (fewer when the library has fewer)."""
+    return rng.choice(pool, size=min(int(count), len(pool)), replace=False) if pool else []
 
 
 def _shift_spectra(spectra: NDArray, shift_nm: NDArray) -> NDArray:

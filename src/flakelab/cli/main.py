@@ -21,6 +21,7 @@ from flakelab.cli.common import (
     reports_errors,
 )
 from flakelab.cli.learning import cases_app, model_app, train
+from flakelab.cli.matching import correct_command, match_command
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
@@ -218,6 +219,8 @@ def plot(
     errors.print(f"wrote {output}", highlight=False)
 
 
+app.command("match")(reports_errors(match_command))
+app.command("correct")(reports_errors(correct_command))
 app.add_typer(cases_app, name="cases")
 app.add_typer(model_app, name="model")
 app.command("train")(reports_errors(train))

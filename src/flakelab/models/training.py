@@ -4,8 +4,8 @@
 2. For each partition in turn, train on the other four (``epochs`` at ``learning_rate``, then
    ``finetune_epochs`` at ``finetune_learning_rate``) and predict the held partition; every
    case is thus judged once by a model that never saw it.
-3. Flag statistical outliers: a case whose error (mean squared standardised residual) lies
-   more than ``outlier_threshold`` robust standard deviations (median/MAD) above the median.
+3. Flag statistical outliers: a case whose error (mean ΔE00 over geometries) lies more than
+   ``outlier_threshold`` robust standard deviations (median/MAD) above the median.
 4. Train the final model on the cleaned cases.
 5. Optionally adapt it to one shop or instrument (``adapt_epochs`` on that shop's cases).
 """
@@ -46,7 +46,7 @@ class TrainingConfig:
     finetune_epochs: int = 300
     learning_rate: float = 2e-3
     finetune_learning_rate: float = 2e-4
-    batch_size: int = 512
+    batch_size: int = 128
     folds: int = 5
     outlier_threshold: float = 6.0
     adapt_epochs: int = 150
@@ -191,10 +191,10 @@ def fit(
 
 
 def _residual_error(model: ForwardModel, data: CaseArrays, rows: NDArray) -> NDArray:
-    R, tex = model.predict(data.x[rows])
-    predicted = model.encode_targets(R, tex)
-    observed = model.encode_targets(data.R[rows], data.texture[rows])
-    return np.mean(((predicted - observed) / model.y_std) ** 2, axis=1)
+    """Mean ΔE00 over geometries of each case's prediction: the colorist's own yardstick
+    (log-reflectance residuals over-weight near-black spectra, where noise dominates)."""
+    R, _ = model.predict(data.x[rows])
+    return delta_E(reflectance_to_Lab(data.R[rows]), reflectance_to_Lab(R)).mean(axis=1)
 
 
 def flag_outliers(errors: NDArray, threshold: float) -> NDArray[np.bool_]:
@@ -289,6 +289,7 @@ def train_protocol(
             "data_hash": data_hash(data),
             "trained_cases": int(clean.size),
             "outliers_dropped": int(outliers.sum()),
+            "toner_cases": dict(zip(data.toners, (data.x[clean] > 0).sum(0).tolist(), strict=True)),
         }
     )
     return model, report

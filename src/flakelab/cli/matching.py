@@ -1,0 +1,238 @@
+"""CLI: the main job — match a target, weigh the recipe, correct after a spray-out."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich import box
+from rich.table import Table
+
+from flakelab.cli.common import JsonOption, console, errors, progress_bar
+from flakelab.cli.learning import DatabaseOption, InstrumentOption, LibraryOption, _maybe_engine
+from flakelab.errors import FlakelabError
+
+ModelOption = Annotated[
+    Path | None,
+    typer.Option("--model", "-m", help="Model file (default: current for the instrument)."),
+]
+ToleranceOption = Annotated[
+    str, typer.Option("--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or file.")
+]
+
+
+def _setup(library: Path | None, instrument: str, model: Path | None, database: str | None):
+    from flakelab.io import read_library
+    from flakelab.match.models import effect_mask, forward_for
+    from flakelab.models.registry import current_model, load_model_file
+
+    lib = read_library(library)
+    learned = (
+        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
+    )
+    forward = forward_for(learned, lib)
+    return lib, forward, effect_mask(lib, forward.toners)
+
+
+def _tolerance(spec: str):
+    from flakelab.core.tolerance import TOLERANCE_PRESETS, tolerance_preset
+    from flakelab.io import read_tolerance
+
+    return tolerance_preset(spec) if spec in TOLERANCE_PRESETS else read_tolerance(spec)
+
+
+def match_command(
+    target: Annotated[
+        str | None,
+        typer.Argument(help="Target measurement file, or 'evaluate' for the evaluation harness."),
+    ] = None,
+    example: Annotated[
+        bool, typer.Option("--example", help="Match the shipped example target.")
+    ] = False,
+    sample: Annotated[
+        str | None, typer.Option("--sample", "-s", help="Sample in the file.")
+    ] = None,
+    library: LibraryOption = None,
+    quantity: Annotated[str, typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg.")] = "250g",
+    resolution: Annotated[float, typer.Option(help="Scale resolution [g].")] = 0.1,
+    tolerance: ToleranceOption = "refinish",
+    candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
+    instrument: InstrumentOption = "five-angle",
+    model: ModelOption = None,
+    database: DatabaseOption = None,
+    targets: Annotated[int, typer.Option(min=1, help="evaluate: hidden targets.")] = 200,
+    novel_targets: Annotated[int, typer.Option(help="evaluate: targets with a new toner.")] = 50,
+    seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
+    json_output: JsonOption = False,
+) -> None:
+    """Match a target: ranked recipes with predicted ΔL*, ΔC*, ΔH*, ΔE00 per geometry, grams
+    for the can and pass/fail. ``flakelab match evaluate`` runs the evaluation harness."""
+    from flakelab.data import example_path
+    from flakelab.io import read_measurement
+    from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
+    from flakelab.match.search import MatchSettings, match
+
+    if target == "evaluate":
+        _evaluate(library, instrument, model, database, targets, novel_targets, seed, json_output)
+        return
+    if (target is None) == (not example):
+        raise FlakelabError("expected a target file or --example (one of them)")
+    grams = parse_quantity(quantity)
+    lib, forward, effect = _setup(library, instrument, model, database)
+    path = example_path("target") if example else Path(target)
+    measurement = read_measurement(path, sample)
+    tol = _tolerance(tolerance)
+    result = match(
+        measurement,
+        forward,
+        effect,
+        tolerance=tol,
+        settings=MatchSettings(candidates=candidates, seed=seed),
+    )
+    report = result.to_dict()
+    for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
+        lines = weigh(candidate.fractions, grams, resolution)
+        entry["weights_g"] = [
+            {"toner": ln.toner, "grams": ln.grams, "cumulative": ln.cumulative} for ln in lines
+        ]
+        entry["rounding_de00"] = rounding_cost(forward, candidate.fractions, lines)
+    report["quantity_g"] = grams
+    report["resolution_g"] = resolution
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_match(report)
+
+
+def _print_match(report: dict) -> None:
+    console.print(
+        f"[bold]{report['target']}[/] — {len(report['candidates'])} candidates "
+        f"({report['subsets_tried']} toner sets optimised in {report['seconds']:.2f} s, "
+        f"tolerance {report['tolerance']})"
+    )
+    for rank, c in enumerate(report["candidates"], start=1):
+        verdict = (
+            "[green]PASS[/]"
+            if c["passes"]
+            else "[red]FAIL[/] at " + ", ".join(c["failing_geometries"])
+        )
+        table = Table(
+            title=f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}",
+            box=box.SIMPLE_HEAVY,
+            title_justify="left",
+        )
+        table.add_column("toner")
+        table.add_column("g", justify="right")
+        table.add_column("cumul. g", justify="right")
+        for line in c["weights_g"]:
+            table.add_row(line["toner"], f"{line['grams']:.1f}", f"{line['cumulative']:.1f}")
+        geo = Table(box=box.SIMPLE, show_header=True)
+        for column in ("geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"):
+            geo.add_column(column, justify="right")
+        for g, v in c["geometries"].items():
+            geo.add_row(g, *(f"{v[k]:.2f}" for k in ("L", "a", "b", "dL", "dC", "dH", "dE00")))
+        console.print(table)
+        console.print(geo)
+        extra = f"model: {c['model']}; rounding to the scale costs ΔE00 {c['rounding_de00']:.3f}"
+        if c["novel_toners"]:
+            extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
+        console.print(extra, highlight=False)
+    for note in report["notes"]:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
+
+
+def _evaluate(library, instrument, model, database, targets, novel_targets, seed, json_output):
+    from flakelab.cases.generator import World
+    from flakelab.match.evaluate import evaluate_matching
+
+    lib, forward, effect = _setup(library, instrument, model, database)
+    world = World(lib, instrument)
+    with progress_bar(json_output) as bar:
+        task = bar.add_task("matching hidden targets", total=targets + novel_targets)
+        report = evaluate_matching(
+            world,
+            forward,
+            effect,
+            targets=targets,
+            seed=seed,
+            novel=forward.novel,
+            novel_targets=novel_targets if forward.novel else 0,
+            progress=lambda: bar.advance(task),
+        )
+    report["model"] = forward.name
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    console.print_json(json.dumps(report))
+
+
+def correct_command(
+    target: Annotated[Path, typer.Argument(help="Target measurement file.")],
+    recipe: Annotated[Path, typer.Option("--recipe", "-r", help="Recipe JSON {toner: grams}.")],
+    sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
+    mode: Annotated[
+        str, typer.Option(help="additions (can already mixed) or reformulate.")
+    ] = "additions",
+    library: LibraryOption = None,
+    instrument: InstrumentOption = "five-angle",
+    model: ModelOption = None,
+    database: DatabaseOption = None,
+    resolution: Annotated[float, typer.Option(help="Scale resolution [g].")] = 0.1,
+    json_output: JsonOption = False,
+) -> None:
+    """Correct a recipe from the measured spray-out (Jacobian of the model at the recipe,
+    applied to the observed offset)."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+    from flakelab.io import read_measurement
+    from flakelab.match.correction import correct
+    from flakelab.match.search import _target_spectra, evaluate_recipes
+
+    _, forward, _ = _setup(library, instrument, model, database)
+    try:
+        grams = json.loads(recipe.read_text())
+    except (OSError, ValueError) as error:
+        raise FlakelabError(f"{recipe}: expected a JSON object toner → grams ({error})") from None
+    if (
+        not isinstance(grams, dict)
+        or not grams
+        or not all(isinstance(v, int | float) and v >= 0 for v in grams.values())
+    ):
+        raise FlakelabError(f"{recipe}: expected a JSON object toner → non-negative grams")
+    total = float(sum(grams.values()))
+    if total <= 0:
+        raise FlakelabError(f"{recipe}: amounts sum to zero")
+    target_R, _, _ = _target_spectra(read_measurement(target), forward)
+    sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
+    fractions = {k: v / total for k, v in grams.items()}
+    correction = correct(forward, target_R, fractions, sprayed_R, mode=mode)
+    new = correction.fractions
+    before = delta_E(reflectance_to_Lab(target_R), reflectance_to_Lab(sprayed_R))
+    report = {"mode": mode, "before_de00": before.round(3).tolist()}
+    if mode == "additions":
+        report["add_g"] = {
+            k: round(round(v * total / resolution) * resolution, 6)
+            for k, v in correction.added.items()
+            if round(v * total / resolution) > 0
+        }
+    else:
+        report["recipe_g"] = {
+            k: round(round(v * total / resolution) * resolution, 6) for k, v in new.items()
+        }
+    x = np.array([[new.get(n, 0.0) for n in forward.toners]])
+    R, _ = evaluate_recipes(forward, x / x.sum())
+    x0 = np.array([[grams.get(n, 0.0) / total for n in forward.toners]])
+    R0, _ = evaluate_recipes(forward, x0)
+    expected = reflectance_to_Lab(sprayed_R) + reflectance_to_Lab(R[0]) - reflectance_to_Lab(R0[0])
+    report["expected_de00"] = delta_E(reflectance_to_Lab(target_R), expected).round(3).tolist()
+    report["geometries"] = list(forward.geometries)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    console.print_json(json.dumps(report))
+    errors.print(
+        "expected ΔE00 assumes the spray-out's offset from the model persists", highlight=False
+    )

@@ -1,0 +1,1 @@
+"""Formulation matching and correction: the main job."""

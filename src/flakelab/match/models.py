@@ -1,0 +1,32 @@
+"""Which forward model answers for a library and instrument."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flakelab.library.toners import Library
+from flakelab.match.forward import HybridForward, LearnedForward
+from flakelab.models.network import ForwardModel, ModelError
+
+__all__ = ["forward_for", "MIN_CASES", "effect_mask"]
+
+MIN_CASES = 20
+"""A toner with fewer training cases than this is new to the learned model: physics scales it."""
+
+
+def effect_mask(library: Library, toners) -> np.ndarray:
+    kinds = {t.name: t.kind for t in library.toners}
+    return np.array([kinds.get(n) in ("aluminium", "pearl") for n in toners])
+
+
+def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
+    """The learned model, or the hybrid when some library toners have too few cases."""
+    if tuple(model.toners) != library.names:
+        missing = sorted(set(library.names) - set(model.toners))
+        raise ModelError(
+            f"library {library.name!r} and model {model.info.get('name', '?')} "
+            f"differ in toners (e.g. {missing[:3]}); train a model for this library"
+        )
+    counts = model.info.get("toner_cases", {})
+    novel = [n for n in library.names if counts.get(n, MIN_CASES) < MIN_CASES]
+    return HybridForward(model, library, novel) if novel else LearnedForward(model)

@@ -1,0 +1,132 @@
+"""Case generator, database and case files."""
+
+from __future__ import annotations
+
+import multiprocessing
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from sqlalchemy import inspect
+
+from flakelab.cases.case import Case, CaseError
+from flakelab.cases.database import add_cases, count_cases, iter_cases, open_database
+from flakelab.cases.exchange import read_cases, write_cases
+from flakelab.cases.generator import World
+from flakelab.io import read_library
+
+
+@pytest.fixture(scope="module")
+def world() -> World:
+    return World(read_library(None), "five-angle")
+
+
+@pytest.fixture(scope="module")
+def cases(world) -> list[Case]:
+    return [c for batch in world.cases(40, seed=7, batch=16) for c in batch]
+
+
+def test_generator_is_reproducible_and_labelled_synthetic(world, cases):
+    again = [c for batch in world.cases(40, seed=7, batch=40) for c in batch]
+    assert [c.case_id for c in again] == [c.case_id for c in cases]
+    np.testing.assert_array_equal(again[-1].sprayout, cases[-1].sprayout)
+    assert all(c.synthetic for c in cases)
+    other = next(world.cases(5, seed=8))
+    assert not np.allclose(other[0].target, cases[0].target)
+
+
+def test_recipes_are_fractions_of_library_toners(world, cases):
+    names = set(world.library.names)
+    for case in cases:
+        assert set(case.recipe) <= names
+        assert np.isclose(sum(case.recipe.values()), 1.0)
+        assert 1 <= len(case.recipe) <= 6
+
+
+def test_generated_world_is_as_hard_as_a_shop(world):
+    report = world.realism(n=200, seed=3)
+    assert 0.02 <= report["remeasure_de00_median"] <= 0.10
+    assert 0.3 <= report["respray_de00_median"] <= 0.8
+    assert 0.02 <= report["batch_strength_sd"] <= 0.04
+    assert 0.5 <= report["weathered_target_de00_median"] <= 2.0
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".cxf"])
+def test_case_files_round_trip(cases, tmp_path, suffix):
+    path = tmp_path / f"cases{suffix}"
+    write_cases(cases, path)
+    back = read_cases(path)
+    assert [c.case_id for c in back] == [c.case_id for c in cases]
+    for a, b in zip(cases, back, strict=True):
+        np.testing.assert_allclose(b.target, a.target, rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(b.sprayout, a.sprayout, rtol=1e-5, atol=1e-7)
+        assert b.recipe == pytest.approx(a.recipe, rel=1e-12)
+        assert b.outcome == a.outcome and b.created_at == a.created_at
+        assert b.sprayout_texture == pytest.approx(a.sprayout_texture, rel=1e-5)
+
+
+def test_database_round_trip_and_migrations(cases, tmp_path):
+    url = tmp_path / "cases.db"
+    engine = open_database(url)
+    assert add_cases(engine, cases) == len(cases)
+    engine = open_database(url)  # reopening applies no migration twice
+    assert {"cases", "models", "alembic_version"} <= set(inspect(engine).get_table_names())
+    back = list(iter_cases(engine))
+    assert [c.case_id for c in back] == [c.case_id for c in cases]
+    np.testing.assert_allclose(back[3].sprayout, cases[3].sprayout, rtol=1e-6)
+
+
+def test_a_duplicate_case_stores_nothing(cases, tmp_path):
+    engine = open_database(tmp_path / "dup.db")
+    add_cases(engine, cases[:5])
+    with pytest.raises(CaseError, match="nothing was stored"):
+        add_cases(engine, cases[5:10] + cases[:1])
+    assert count_cases(engine) == 5
+
+
+def _write_batch(args):
+    url, seed = args
+    world = World(read_library(None), "five-angle")
+    engine = open_database(url)
+    for batch in world.cases(60, seed=seed, batch=10, shop=f"shop {seed}"):
+        add_cases(engine, batch)
+
+
+def test_concurrent_writers_lose_no_case(tmp_path):
+    url = str(tmp_path / "shared.db")
+    open_database(url)
+    with multiprocessing.get_context("spawn").Pool(3) as pool:
+        pool.map(_write_batch, [(url, s) for s in (1, 2, 3)])
+    assert count_cases(open_database(url)) == 180
+
+
+def _cli(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "flakelab.cli.main", *args], capture_output=True, text=True
+    )
+
+
+def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(cases, tmp_path):
+    good, bad = tmp_path / "good.csv", tmp_path / "bad.csv"
+    write_cases(cases[:4], good)
+    lines = good.read_text().splitlines()
+    cells = lines[3].split(",")
+    cells[20] = "abc"
+    lines[3] = ",".join(cells)
+    bad.write_text("\n".join(lines) + "\n")
+    database = str(tmp_path / "db.sqlite")
+    assert _cli("cases", "import", str(good), "--database", database).returncode == 0
+    run = _cli("cases", "import", str(bad), "--database", database)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "row 4" in run.stderr and "expected a number" in run.stderr
+    assert count_cases(open_database(database)) == 4
+
+
+def test_case_checks_its_fields():
+    with pytest.raises(CaseError, match="outcome"):
+        Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((1, 31)), outcome="maybe")
+    with pytest.raises(CaseError, match="sprayout"):
+        Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((2, 31)))
+    with pytest.raises(CaseError, match="recipe"):
+        Case("x", ("45as45",), {"A": -1.0}, np.ones((1, 31)), np.ones((1, 31)))

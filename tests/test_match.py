@@ -1,0 +1,156 @@
+"""Matching, recipe output and correction."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.match.correction import correct
+from flakelab.match.forward import KubelkaMunkForward
+from flakelab.match.recipe import RecipeError, parse_quantity, weigh
+from flakelab.match.search import MatchSettings, match
+
+OKUMURA = Path(__file__).resolve().parents[2] / "shared" / "data" / "pigment-km"
+
+
+def okumura() -> KubelkaMunkForward:
+    """K and S of 27 Golden acrylics (Okumura), 360–750 nm → the 400–700 nm grid."""
+    names, K, S = [], [], []
+    for line in (OKUMURA / "okumura_okumura.rs").read_text().splitlines():
+        if not line.strip():
+            continue
+        name, *values = line.split("\t")
+        values = np.array(values, dtype=float)
+        names.append(name.strip('"'))
+        K.append(values[4:35])
+        S.append(values[44:75])
+    return KubelkaMunkForward(names, np.array(K), np.array(S))
+
+
+def reflect(forward, x) -> np.ndarray:
+    with torch.no_grad():
+        return forward(torch.as_tensor(np.atleast_2d(x), dtype=torch.float64))[0].numpy()
+
+
+@pytest.fixture(scope="module")
+def km() -> KubelkaMunkForward:
+    if not OKUMURA.exists():
+        pytest.skip("shared pigment data not present")
+    return okumura()
+
+
+def mixture(km, parts: dict[str, float]) -> np.ndarray:
+    x = np.zeros(len(km.toners))
+    for name, value in parts.items():
+        x[km.toners.index(name)] = value
+    return x / x.sum()
+
+
+@pytest.mark.parametrize(
+    "parts",
+    [
+        {"Titanium White": 0.8, "Phthalo Blue (Green Shade)": 0.2},
+        {"Titanium White": 0.6, "Pyrrole Red": 0.3, "Hansa Yellow Opaque": 0.1},
+        {"Titanium White": 0.7, "Ultramarine Blue": 0.2, "Burnt Sienna": 0.1},
+    ],
+)
+def test_matcher_rebuilds_real_kubelka_munk_mixtures(km, parts):
+    missing = [p for p in parts if p not in km.toners]
+    if missing:
+        pytest.skip(f"pigments not in this data set: {missing}")
+    target = reflect(km, mixture(km, parts))[0]
+    result = match(target, km, settings=MatchSettings(candidates=3, seed=1))
+    best = result.candidates[0]
+    assert best.de00.max() <= 0.5
+    assert result.candidates == sorted(result.candidates, key=lambda c: c.score)
+
+
+def test_out_of_gamut_target_says_it_fails_and_where(km):
+    allowed = np.array(["Red" in n or "White" in n for n in km.toners])
+    green = reflect(km, mixture(km, {"Titanium White": 0.7, "Phthalo Green (Blue Shade)": 0.3}))
+    if "Phthalo Green (Blue Shade)" not in km.toners:
+        pytest.skip("pigment not in this data set")
+    result = match(green[0], km, allowed=allowed, settings=MatchSettings(candidates=2))
+    best = result.candidates[0]
+    assert not best.passes and best.failing == ["45as45"]
+    assert result.notes and "45as45" in result.notes[0]
+    assert set(best.fractions) <= {n for n, ok in zip(km.toners, allowed, strict=True) if ok}
+
+
+def test_correction_moves_the_sprayout_onto_the_target(km):
+    parts = {"Titanium White": 0.75, "Phthalo Blue (Green Shade)": 0.15, "Burnt Sienna": 0.10}
+    x_target = mixture(km, parts)
+    target = reflect(km, x_target)[0]
+    strong = KubelkaMunkForward(km.toners, km.K.numpy().copy(), km.S.numpy())
+    strong.K[km.toners.index("Phthalo Blue (Green Shade)")] *= 1.25  # a stronger batch
+    sprayed = reflect(strong, x_target)[0]
+    before = delta_E(reflectance_to_Lab(target), reflectance_to_Lab(sprayed)).max()
+    recipe = {n: float(v) for n, v in zip(km.toners, x_target, strict=True) if v > 0}
+    for mode in ("reformulate", "additions"):
+        fixed = correct(km, target, recipe, sprayed, mode=mode)
+        x = np.array([fixed.fractions.get(n, 0.0) for n in km.toners])
+        after = delta_E(reflectance_to_Lab(target), reflectance_to_Lab(reflect(strong, x)[0])).max()
+        assert after < 0.3 * before, mode
+        if mode == "additions":
+            assert all(v >= 0 for v in fixed.added.values())
+            assert fixed.added.get("Phthalo Blue (Green Shade)", 0.0) < 1e-3  # not the strong one
+
+
+def test_weighing_sums_to_the_can_at_the_scale_resolution():
+    lines = weigh({"A": 0.7777, "B": 0.2, "C": 0.0223}, 250.0, 0.1)
+    assert [ln.toner for ln in lines] == ["A", "B", "C"]
+    assert sum(ln.grams for ln in lines) == pytest.approx(250.0)
+    assert all(abs(ln.grams * 10 - round(ln.grams * 10)) < 1e-9 for ln in lines)
+    assert lines[-1].cumulative == pytest.approx(250.0)
+    assert lines[0].grams == pytest.approx(194.4)
+
+
+def test_impossible_quantities_are_refused():
+    with pytest.raises(RecipeError, match="too small"):
+        weigh({"A": 0.999, "B": 0.001}, 10.0, 0.1)
+    with pytest.raises(RecipeError, match="multiple"):
+        weigh({"A": 1.0}, 10.05, 0.1)
+    for text in ("0g", "-5g", "lots"):
+        with pytest.raises(RecipeError, match="--quantity"):
+            parse_quantity(text)
+    assert parse_quantity("0.5 kg") == 500.0 and parse_quantity("250g") == 250.0
+
+
+def flakelab(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "flakelab.cli.main", *args],
+                          capture_output=True, text=True)
+
+
+def test_match_example_gives_weighed_candidates_with_per_geometry_numbers():
+    run = flakelab("match", "--example", "--json", "--quantity", "250g", "--candidates", "2")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["geometries"] == ["45as15", "45as25", "45as45", "45as75", "45as110"]
+    best = report["candidates"][0]
+    assert sum(w["grams"] for w in best["weights_g"]) == pytest.approx(250.0)
+    assert set(best["geometries"]["45as45"]) == {"L", "a", "b", "dL", "dC", "dH", "dE00"}
+    # the example target is a blue metallic: the recipe holds aluminium and a blue
+    assert any(name.startswith("Al") for name in best["recipe"])
+    assert best["de00_max"] < 2.0
+    assert best["rounding_de00"] < 0.1
+
+
+def test_match_refuses_bad_input(tmp_path):
+    bad = tmp_path / "car.cxf"
+    bad.write_text("<not cxf")
+    run = flakelab("match", str(bad))
+    assert run.returncode == 2 and str(bad) in run.stderr and "Traceback" not in run.stderr
+    run = flakelab("match", "--example", "--quantity", "0g")
+    assert run.returncode == 2 and "--quantity" in run.stderr
+    empty = tmp_path / "empty.json"
+    empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
+    run = flakelab("match", "--example", "--library", str(empty))
+    assert run.returncode == 2 and "at least one toner" in run.stderr

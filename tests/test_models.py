@@ -1,0 +1,136 @@
+"""Learned forward model: storage, training protocol, outliers, registry, shipped models."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from flakelab.cases.database import open_database
+from flakelab.cases.generator import World
+from flakelab.io import read_library
+from flakelab.library import Library
+from flakelab.models.network import ForwardModel, ModelError
+from flakelab.models.registry import SHIPPED, list_models, register, shipped_model
+from flakelab.models.training import (
+    CaseArrays,
+    TrainingConfig,
+    case_arrays,
+    evaluate_model,
+    flag_outliers,
+    train_protocol,
+)
+
+LIBRARY = read_library(None)
+EFFECT = [t.kind != "pigment" for t in LIBRARY.toners]
+# a small shop (2 aluminium, 1 pearl, 4 pigments): 400 cases teach a model enough to judge
+SMALL = Library(
+    "small shop",
+    tuple(
+        LIBRARY[n]
+        for n in (
+            "Al medium",
+            "Al coarse",
+            "Pearl silver white",
+            "Phthalo blue GS",
+            "Quinacridone red",
+            "Iron oxide yellow",
+            "Carbon black",
+        )
+    ),
+    LIBRARY.binder,
+)
+QUICK = TrainingConfig(hidden=(64, 64), epochs=100, finetune_epochs=30, batch_size=16, seed=1)
+
+
+@pytest.fixture(scope="module")
+def data() -> CaseArrays:
+    world = World(SMALL, "five-angle")
+    cases = [c for b in world.cases(400, seed=21) for c in b]
+    return case_arrays(cases, SMALL.names, [t.kind != "pigment" for t in SMALL.toners])
+
+
+@pytest.fixture(scope="module")
+def trained(data):
+    return train_protocol(data, QUICK)
+
+
+def corrupted(data: CaseArrays, rows: list[int]) -> CaseArrays:
+    R = data.R.copy()
+    R[rows] = R[rows][:, :, ::-1] * 2.5  # a gross error: wrong panel, reversed spectrum
+    return CaseArrays(
+        data.x,
+        R,
+        data.texture,
+        data.case_ids,
+        data.shops,
+        data.toners,
+        data.geometries,
+        data.instrument,
+        data.effect,
+    )
+
+
+def test_model_survives_a_round_trip_through_bytes(trained, data):
+    model, _ = trained
+    again = ForwardModel.from_bytes(model.to_bytes())
+    a, ta = model.predict(data.x[:20])
+    b, tb = again.predict(data.x[:20])
+    np.testing.assert_allclose(a, b, rtol=1e-6)
+    np.testing.assert_allclose(ta, tb, rtol=1e-6, atol=1e-6)
+
+
+def test_training_learns_far_better_than_the_mean(trained, data):
+    model, report = trained
+    assert report["log"][-1]["loss"] < 0.5 * report["log"][0]["loss"]
+    mean_model = evaluate_model(model, data)
+    R_mean = np.exp(np.log(np.maximum(data.R, 1e-3)).mean(0))
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+
+    baseline = delta_E(reflectance_to_Lab(data.R), reflectance_to_Lab(R_mean[None])).mean()
+    assert mean_model["de00_mean"] < 0.5 * baseline
+
+
+def test_gross_errors_are_flagged_and_dropped(data):
+    bad_rows = [3, 50, 120, 200, 399]
+    _, report = train_protocol(corrupted(data, bad_rows), QUICK)
+    flagged = set(report["outlier_case_ids"])
+    assert {data.case_ids[i] for i in bad_rows} <= flagged
+    assert len(flagged) <= len(bad_rows) + 6
+
+
+def test_robust_outlier_rule():
+    errors = np.concatenate([np.random.default_rng(0).normal(1, 0.1, 500), [5.0, 9.0]])
+    assert np.flatnonzero(flag_outliers(errors, 6.0)).tolist() == [500, 501]
+
+
+def test_registry_promotes_only_a_better_model(trained, data, tmp_path):
+    engine = open_database(tmp_path / "models.db")
+    good, _ = trained
+    torch.manual_seed(0)
+    worse = ForwardModel.from_bytes(good.to_bytes())
+    with torch.no_grad():
+        for p in worse.network.parameters():
+            p.add_(0.3 * torch.randn_like(p))
+    first = register(engine, good, data, name="test")
+    second = register(engine, worse, data, name="test")
+    assert second["version"] == first["version"] + 1
+    assert not second["promoted"] and second["held_out_de00"] > first["held_out_de00"]
+    statuses = {(m["name"], m["version"]): m["status"] for m in list_models(engine)}
+    assert statuses[("test", second["version"])] == "candidate"
+
+
+def test_unknown_toner_in_a_recipe_is_an_error(trained):
+    model, _ = trained
+    with pytest.raises(ModelError, match="unknown"):
+        model.fractions([{"Unobtainium": 1.0}])
+
+
+@pytest.mark.parametrize("instrument", sorted(SHIPPED))
+def test_shipped_models_cover_the_demo_library(instrument):
+    model = shipped_model(instrument)
+    assert model.toners == LIBRARY.names
+    assert model.instrument == instrument
+    R, texture = model.predict(np.eye(len(LIBRARY.names))[:3])
+    assert R.shape == (3, len(model.geometries), 31) and np.all(R > 0)
