@@ -125,8 +125,9 @@ def test_impossible_quantities_are_refused():
 
 
 def flakelab(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flakelab.cli.main", *args],
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "flakelab.cli.main", *args], capture_output=True, text=True
+    )
 
 
 def test_match_example_gives_weighed_candidates_with_per_geometry_numbers():

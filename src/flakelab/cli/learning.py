@@ -268,8 +268,21 @@ def evaluate(
     chosen = [c for c in load_cases(cases) if c.geometry_names == forward.geometries]
     if not chosen:
         raise FlakelabError(f"{cases}: no cases with the model's geometries {forward.geometries}")
-    report = evaluate_model(forward, case_arrays(chosen, lib.names))
+    from flakelab.match.forward import LearnedForward
+    from flakelab.match.models import forward_for
+    from flakelab.match.search import evaluate_recipes
+
+    matcher = forward_for(forward, lib)
+    data = case_arrays(chosen, lib.names)
+    if isinstance(matcher, LearnedForward) and matcher.novel:
+        report = evaluate_model(forward, data, lambda x: evaluate_recipes(matcher, x))
+        novel = np.isin(np.array(lib.names), matcher.novel)
+        report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
+        report["new_toners"] = list(matcher.novel)
+    else:
+        report = evaluate_model(forward, data)
     report["model"] = model or f"current {instrument}"
+    report["forward"] = matcher.name
     if json_output:
         print(json.dumps(report, indent=2))
         return

@@ -17,7 +17,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.library.toners import Library
-from flakelab.models.network import ForwardModel
+from flakelab.models.network import LOG_CEILING, LOG_FLOOR, ForwardModel
 from flakelab.physics.fast import predict
 from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
@@ -38,7 +38,8 @@ class LearnedForward:
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         y = self.model.torch_forward(fractions.to(torch.float32)).to(torch.float64)
         spectral = self.model.spectral_outputs
-        R = torch.exp(y[:, :spectral]).reshape(-1, len(self.geometries), 31)
+        log_R = torch.clamp(y[:, :spectral], np.log(LOG_FLOOR) - 3, LOG_CEILING)
+        R = torch.exp(log_R).reshape(-1, len(self.geometries), 31)
         return R, y[:, spectral:]
 
 
@@ -71,18 +72,25 @@ class HybridForward(LearnedForward):
         self._step = 1e-4
 
     def _physics(self, x: NDArray) -> NDArray:
-        return predict(layer_from_fractions(self.library, x), self.geometries)
+        return np.pi * predict(layer_from_fractions(self.library, x), self.geometries)
 
     def physics_ratio(self, x: NDArray) -> tuple[NDArray, NDArray]:
-        """Ratio ``[N, G, W]`` and its Jacobian ``[N, G, W, T]`` (only rows with new toners
-        are computed; the others scale by one)."""
+        """Ratio R_phys(x) / R_phys(x_known) ``[N, G, W]`` (x_known: the known toners,
+        renormalised, as the learned model sees them; R_phys(x) alone when nothing is known)
+        and its Jacobian ``[N, G, W, T]``. Rows without new toners scale by one."""
         ratio = np.ones((x.shape[0], len(self.geometries), 31))
         jacobian = np.zeros((*ratio.shape, x.shape[1]))
         rows = np.flatnonzero(np.any(x[:, self._novel_mask] > 1e-9, axis=1))
         if rows.size == 0:
             return ratio, jacobian
         xs = x[rows]
-        base = self._physics(np.where(self._novel_mask, 0.0, xs)) + 1e-9
+        known = np.where(self._novel_mask, 0.0, xs)
+        total = known.sum(axis=1, keepdims=True)
+        base = np.where(
+            total[:, :, None] > 1e-6,
+            self._physics(known / np.maximum(total, 1e-12)) + 1e-9,
+            1.0,
+        )
         ratio[rows] = (self._physics(xs) + 1e-9) / base
         for column in np.flatnonzero(self._novel_mask & np.any(xs > 1e-9, axis=0)):
             bumped = xs.copy()
@@ -95,10 +103,11 @@ class HybridForward(LearnedForward):
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         mask = torch.as_tensor(~self._novel_mask, dtype=fractions.dtype)
         known = fractions * mask
-        known = known / torch.clamp(known.sum(1, keepdim=True), min=1e-9)
-        R, texture = super().__call__(known)
+        total = known.sum(1, keepdim=True)
+        R, texture = super().__call__(known / torch.clamp(total, min=1e-9))
         if not np.any(fractions.detach().numpy()[:, self._novel_mask] > 1e-9):
             return R, texture
+        R = torch.where(total[:, :, None] > 1e-6, R, torch.ones_like(R))
         return R * _PhysicsRatio.apply(fractions, self), texture
 
 

@@ -29,6 +29,9 @@ EFFECT_OFFSET = 0.05
 """Added to the effect-pigment fraction in the ratio features (solids have none)."""
 LOG_FLOOR = 1e-3
 """Reflectance factors are clipped here before the log (noise on black can go negative)."""
+LOG_CEILING = float(np.log(6.0))
+"""Predicted log reflectance factors are capped here: a bright aluminium reads about 3 near
+specular; an MLP far outside its data must not extrapolate to absurd values."""
 
 
 class ModelError(FlakelabError):
@@ -73,7 +76,8 @@ class ForwardModel:
 
     def decode_targets(self, y: NDArray) -> tuple[NDArray, NDArray]:
         G = len(self.geometries)
-        R = np.exp(y[:, : self.spectral_outputs]).reshape(-1, G, WAVELENGTHS.size)
+        log_R = np.clip(y[:, : self.spectral_outputs], np.log(LOG_FLOOR) - 3, LOG_CEILING)
+        R = np.exp(log_R).reshape(-1, G, WAVELENGTHS.size)
         return R, y[:, self.spectral_outputs :]
 
     def fractions(self, recipes: Sequence[Mapping[str, float]]) -> NDArray:

@@ -295,9 +295,10 @@ def train_protocol(
     return model, report
 
 
-def evaluate_model(model: ForwardModel, data: CaseArrays) -> dict:
+def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None) -> dict:
     """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
-    geometry; mean absolute texture error."""
+    geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
+    model's own prediction (the matcher's hybrid forward, for toners new to the model)."""
     if data.geometries != model.geometries:
         missing = sorted(set(model.geometries) - set(data.geometries))
         if missing:
@@ -315,7 +316,7 @@ def evaluate_model(model: ForwardModel, data: CaseArrays) -> dict:
         )
     x = _align_toners(model, data)
     start = time.perf_counter()
-    R, texture = model.predict(x)
+    R, texture = (predict or model.predict)(x)
     seconds = time.perf_counter() - start
     de = delta_E(reflectance_to_Lab(data.R), reflectance_to_Lab(R))
     per_geometry = {

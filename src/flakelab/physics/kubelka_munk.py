@@ -46,7 +46,7 @@ def reflectance_infinite(K: ArrayLike, S: ArrayLike) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> float(reflectance_infinite(0.125, 1.0))
+    >>> round(float(reflectance_infinite(2 / 15, 1.0)), 12)
     0.6
     """
     ratio = np.asarray(K, dtype=float) / np.asarray(S, dtype=float)
