@@ -42,7 +42,7 @@ def main() -> None:
         with Progress() as progress:
             task = progress.add_task(f"{instrument}: {n} cases", total=12 * epochs)
             model, report = train_protocol(
-                data, config, progress=lambda k: progress.advance(task, k)
+                data, config, progress=lambda k, task=task: progress.advance(task, k)
             )
         model.info.update(
             {
