@@ -42,9 +42,10 @@ class MatchError(FlakelabError):
 class MatchSettings:
     candidates: int = 5
     max_pigments: int = 4
-    screen_steps: int = 150
-    refine_steps: int = 250
-    top_pigments: int = 6
+    screen_steps: int = 120
+    refine_steps: int = 150
+    novel_threshold: float = 1.5
+    top_pigments: int = 5
     top_effects: int = 2
     sparsity: float = 0.4
     toner_penalty: float = 0.05
@@ -157,6 +158,27 @@ def _optimise(
         return x, _loss(forward, colour, x, target_lab, target_texture, settings)
 
 
+def _screen(forward, colour, allowed, effect, target_lab, target_texture, settings, generator):
+    T = len(forward.toners)
+    starts = [i for i in np.flatnonzero(effect & allowed)] + [None, None]
+    logits = 0.3 * torch.randn(len(starts), T, generator=generator, dtype=torch.float64) - 2.0
+    for row, i in enumerate(starts):
+        if i is not None:
+            logits[row, i] = 2.0
+    mask = torch.as_tensor(np.tile(allowed, (len(starts), 1)))
+    return _optimise(
+        forward,
+        colour,
+        logits,
+        mask,
+        target_lab,
+        target_texture,
+        settings,
+        settings.screen_steps,
+        settings.sparsity,
+    )
+
+
 def _subsets(x_screen: NDArray, effect: NDArray, settings: MatchSettings) -> list[tuple[int, ...]]:
     importance = x_screen.max(axis=0)
     effects = [i for i in np.argsort(-importance) if effect[i] and importance[i] > 0.02]
@@ -197,7 +219,18 @@ def _target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
     )
 
 
-def match(
+def match(*args, **kwargs) -> MatchResult:
+    """Ranked candidate recipes for a target; see :func:`_match` (run on one thread: the
+    batches are small, and a second thread only adds contention)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _match(*args, **kwargs)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _match(
     target,
     forward,
     effect: NDArray | None = None,
@@ -226,24 +259,18 @@ def match(
     if texture and all(k in texture for k in TEXTURE_READINGS):
         target_texture = torch.as_tensor([texture[k] for k in TEXTURE_READINGS])
     generator = torch.Generator().manual_seed(settings.seed)
-    # 1. screen: one restart per effect toner, plus solid starts
-    starts = [i for i in np.flatnonzero(effect & allowed)] + [None, None]
-    logits = 0.3 * torch.randn(len(starts), T, generator=generator, dtype=torch.float64) - 2.0
-    for row, i in enumerate(starts):
-        if i is not None:
-            logits[row, i] = 2.0
-    mask = torch.as_tensor(np.tile(allowed, (len(starts), 1)))
-    x_screen, screen_loss = _optimise(
-        forward,
-        colour,
-        logits,
-        mask,
-        target_lab,
-        target_texture,
-        settings,
-        settings.screen_steps,
-        settings.sparsity,
+    # 1. screen: one restart per effect toner, plus solid starts; toners new to the learned
+    #    model (physics-scaled, slower) join only when the known ones cannot get close
+    novel = np.array([n in forward.novel for n in forward.toners])
+    x_screen, screen_loss = _screen(
+        forward, colour, allowed & ~novel, effect, target_lab, target_texture, settings, generator
     )
+    if novel.any() and float(screen_loss.min()) > settings.novel_threshold:
+        x_all, loss_all = _screen(
+            forward, colour, allowed, effect, target_lab, target_texture, settings, generator
+        )
+        x_screen = torch.cat([x_screen, x_all])
+        screen_loss = torch.cat([screen_loss, loss_all])
     best = torch.argsort(screen_loss)[:3].numpy()
     subsets = _subsets(x_screen.numpy()[best], effect, settings)
     # 2.–3. refine every subset in one batch

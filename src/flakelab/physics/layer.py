@@ -15,6 +15,7 @@ Flakes are disks hit by a ray of direction d at a rate N·πa²·|d·n| per unit
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -229,6 +230,7 @@ def interface_directions(
     return -light_in, view_in, T_in, T_out
 
 
+@cache
 def internal_diffuse_reflectance(n: float = N_BINDER, steps: int = 20001) -> float:
     """Hemispherical reflectance of the coating's top for diffuse light from inside (≈0.60).
 
