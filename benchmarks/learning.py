@@ -5,7 +5,7 @@ the whole protocol (five partitions × (300 + 300) epochs, outlier screening, fi
 training), and reports wall time, peak memory (max RSS) and batched inference throughput,
 with held-out ΔE00 on 500 fresh cases.
 
-    python benchmarks/learning.py [--cases 61000] [--epochs 300] [--json]
+    python benchmarks/learning.py [--cases 61000] [--epochs 300] [--batch-size 256] [--json]
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", type=int, default=61_000)
     parser.add_argument("--epochs", type=int, default=300)
+    parser.add_argument("--batch-size", type=int, default=256)
     parser.add_argument("--instrument", default="five-angle")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true")
@@ -38,7 +39,9 @@ def main() -> None:
     cases = [c for batch in world.cases(args.cases, args.seed) for c in batch]
     generate_s = time.perf_counter() - start
     data = case_arrays(cases, library.names, effect)
-    config = TrainingConfig(epochs=args.epochs, finetune_epochs=args.epochs, seed=args.seed)
+    config = TrainingConfig(
+        epochs=args.epochs, finetune_epochs=args.epochs, batch_size=args.batch_size, seed=args.seed
+    )
     start = time.perf_counter()
     model, report = train_protocol(data, config)
     train_s = time.perf_counter() - start
@@ -54,6 +57,7 @@ def main() -> None:
     result = {
         "cases": args.cases,
         "epochs_per_stage": args.epochs,
+        "batch_size": args.batch_size,
         "generate_seconds": generate_s,
         "protocol_seconds": train_s,
         "protocol_minutes": train_s / 60,

@@ -1,0 +1,64 @@
+"""The case, training and correction commands as a user runs them (real processes)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from flakelab.data import example_path
+
+
+def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "flakelab.cli.main", *args],
+                          capture_output=True, text=True, env=env)  # fmt: skip
+
+
+def test_generate_train_register_list_and_evaluate(tmp_path):
+    cases, database = tmp_path / "cases.csv", str(tmp_path / "shop.db")
+    run = flakelab("cases", "generate", "--n", "120", "--seed", "5", "--out", str(cases))
+    assert run.returncode == 0, run.stderr
+    run = flakelab("train", str(cases), "--epochs", "3", "--hidden", "16", "--database", database,
+                   "--out", str(tmp_path / "m.pt"), "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["cases"] + report["held_out"]["cases"] == 120
+    assert report["registry"]["version"] == 1
+    # three epochs cannot beat the shipped model on the same held-out cases
+    assert report["registry"]["promoted"] is False
+    listed = json.loads(flakelab("model", "list", "--database", database, "--json").stdout)
+    assert [(m["version"], m["status"]) for m in listed["registered"]] == [(1, "candidate")]
+    run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["cases"] == 120
+
+
+def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
+                   "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert all(v > 0 for v in report["add_g"].values())
+    assert set(report["add_g"]) <= set(json.loads(recipe.read_text()))
+    assert max(report["expected_de00"]) < max(report["before_de00"])
+
+
+def test_correct_refuses_a_bad_recipe(tmp_path):
+    bad = tmp_path / "recipe.json"
+    bad.write_text(json.dumps({"Al medium": -3}))
+    target = str(example_path("target"))
+    run = flakelab("correct", target, "--recipe", str(bad), "--sprayed", target)
+    assert run.returncode == 2 and "recipe.json" in run.stderr and "Traceback" not in run.stderr
+    run = flakelab("correct", target, "--recipe", str(bad), "--sprayed", target, "--mode", "x")
+    assert run.returncode == 2
+
+
+def test_realism_json_reports_the_shop_statistics():
+    run = flakelab("cases", "realism", "--n", "60", "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    for key in ("remeasure_de00_median", "respray_de00_median", "batch_strength_sd",
+                "weathered_target_de00_median"):  # fmt: skip
+        assert key in report["realistic_ranges"] and report[key] > 0
