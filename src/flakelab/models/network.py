@@ -118,7 +118,7 @@ class ForwardModel:
             self.y_mean, dtype=y.dtype
         )
 
-    def predict(self, fractions: ArrayLike, batch: int = 65536) -> tuple[NDArray, NDArray]:
+    def predict(self, fractions: ArrayLike, batch: int = 16384) -> tuple[NDArray, NDArray]:
         """Reflectance factors ``[N, G, 31]`` and texture readings ``[N, 8]``."""
         x = np.atleast_2d(np.asarray(fractions, dtype=np.float32))
         if x.shape[1] != len(self.toners):
