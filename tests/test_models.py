@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -58,17 +60,7 @@ def trained(data):
 def corrupted(data: CaseArrays, rows: list[int]) -> CaseArrays:
     R = data.R.copy()
     R[rows] = R[rows][:, :, ::-1] * 2.5  # a gross error: wrong panel, reversed spectrum
-    return CaseArrays(
-        data.x,
-        R,
-        data.texture,
-        data.case_ids,
-        data.shops,
-        data.toners,
-        data.geometries,
-        data.instrument,
-        data.effect,
-    )
+    return replace(data, R=R)
 
 
 def test_model_survives_a_round_trip_through_bytes(trained, data):

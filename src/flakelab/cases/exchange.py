@@ -19,6 +19,7 @@ import csv
 import io
 import json
 from datetime import datetime
+from functools import cache
 from os import PathLike
 from pathlib import Path
 
@@ -50,7 +51,9 @@ class CaseFileError(FlakelabError):
     """A case file that is wrong: names the file, row, column and problem."""
 
 
-def _header(geometries: tuple[str, ...]) -> list[str]:
+@cache
+def _header(geometries: tuple[str, ...]) -> tuple[str, ...]:
+    """Column names for one geometry set (cached: every row of a file checks against it)."""
     spectra = [
         f"{role}:{g}:{int(w)}"
         for role in ("target", "sprayout")
@@ -58,7 +61,7 @@ def _header(geometries: tuple[str, ...]) -> list[str]:
         for w in WAVELENGTHS
     ]
     texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
-    return [*CASE_FIELDS, *spectra, *texture]
+    return (*CASE_FIELDS, *spectra, *texture)
 
 
 def write_cases(cases: list[Case], path: str | PathLike) -> None:
@@ -137,7 +140,7 @@ def _case_from_row(path: Path, number: int, header: list[str], row: list[str]) -
     cells = dict(zip(header, row, strict=True))
     geometries = tuple(g for g in cells["geometries"].split(";") if g)
     expected = _header(geometries)
-    if header != expected:
+    if tuple(header) != expected:
         missing = [c for c in expected if c not in header][:3]
         raise CaseFileError(
             f"{where}: geometries: columns do not match {';'.join(geometries)}"

@@ -152,12 +152,9 @@ class World:
     def variation(self, n: int, rng: np.random.Generator) -> Variation:
         s = self.settings
         T = len(self.library.toners)
-        return Variation(
-            strength=rng.normal(1.0, s.batch_strength_sd, (n, T)),
-            hue_shift=rng.normal(0.0, s.batch_hue_shift_nm, n),
-            film=rng.normal(1.0, s.film_build_sd, n).clip(0.7, 1.3),
-            spread=np.exp(rng.normal(0.0, s.spread_sd, n)),
-        )
+        strength = rng.normal(1.0, s.batch_strength_sd, (n, T))
+        hue_shift = rng.normal(0.0, s.batch_hue_shift_nm, n)
+        return Variation(strength, hue_shift, *self.application(n, rng))
 
     def nominal(self, n: int) -> Variation:
         """No batch or application variation: the formulation as the library describes it."""
@@ -285,7 +282,7 @@ class World:
         batch = self.variation(n, rng)
 
         def same_batch() -> Variation:  # the same cans, sprayed again
-            return Variation(batch.strength, batch.hue_shift, *self._application(n, rng))
+            return Variation(batch.strength, batch.hue_shift, *self.application(n, rng))
 
         first, _ = self.appearance(x, same_batch())
         second, _ = self.appearance(x, same_batch())
@@ -305,7 +302,8 @@ class World:
             "seed": seed,
         }
 
-    def _application(self, n: int, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+    def application(self, n: int, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+        """One spraying: relative film build and flake-spread scale ``[n]`` each."""
         s = self.settings
         return (
             rng.normal(1.0, s.film_build_sd, n).clip(0.7, 1.3),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -303,8 +304,6 @@ def evaluate(
 
 def _maybe_engine(database: str | None):
     """The database only when one is named or configured; the shipped model needs none."""
-    import os
-
     from flakelab.cases.database import open_database
 
     if database or os.environ.get("FLAKELAB_DATABASE_URL"):

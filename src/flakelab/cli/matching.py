@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich import box
 from rich.table import Table
@@ -188,46 +187,38 @@ def correct_command(
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import delta_E
     from flakelab.io import read_measurement
+    from flakelab.library import LibraryError
     from flakelab.match.correction import correct
-    from flakelab.match.search import _target_spectra, evaluate_recipes
+    from flakelab.match.search import _target_spectra
 
-    _, forward, _ = _setup(library, instrument, model, database)
+    lib, forward, _ = _setup(library, instrument, model, database)
     try:
         grams = json.loads(recipe.read_text())
     except (OSError, ValueError) as error:
         raise FlakelabError(f"{recipe}: expected a JSON object toner → grams ({error})") from None
-    if (
-        not isinstance(grams, dict)
-        or not grams
-        or not all(isinstance(v, int | float) and v >= 0 for v in grams.values())
-    ):
-        raise FlakelabError(f"{recipe}: expected a JSON object toner → non-negative grams")
+    if not isinstance(grams, dict):
+        raise FlakelabError(f"{recipe}: expected a JSON object toner → grams")
+    try:
+        x0 = lib.fractions(grams)  # unknown toners, negative or zero amounts: LibraryError
+    except LibraryError as error:
+        raise FlakelabError(f"{recipe}: {error}") from None
     total = float(sum(grams.values()))
-    if total <= 0:
-        raise FlakelabError(f"{recipe}: amounts sum to zero")
     target_R, _, _ = _target_spectra(read_measurement(target), forward)
     sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
-    fractions = {k: v / total for k, v in grams.items()}
+    fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     correction = correct(forward, target_R, fractions, sprayed_R, mode=mode)
-    new = correction.fractions
-    before = delta_E(reflectance_to_Lab(target_R), reflectance_to_Lab(sprayed_R))
+    target_lab = reflectance_to_Lab(target_R)
+    before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
     report = {"mode": mode, "before_de00": before.round(3).tolist()}
+
+    def on_scale(share: float) -> float:
+        return round(round(share * total / resolution) * resolution, 6)
+
     if mode == "additions":
-        report["add_g"] = {
-            k: round(round(v * total / resolution) * resolution, 6)
-            for k, v in correction.added.items()
-            if round(v * total / resolution) > 0
-        }
+        report["add_g"] = {k: on_scale(v) for k, v in correction.added.items() if on_scale(v) > 0}
     else:
-        report["recipe_g"] = {
-            k: round(round(v * total / resolution) * resolution, 6) for k, v in new.items()
-        }
-    x = np.array([[new.get(n, 0.0) for n in forward.toners]])
-    R, _ = evaluate_recipes(forward, x / x.sum())
-    x0 = np.array([[grams.get(n, 0.0) / total for n in forward.toners]])
-    R0, _ = evaluate_recipes(forward, x0)
-    expected = reflectance_to_Lab(sprayed_R) + reflectance_to_Lab(R[0]) - reflectance_to_Lab(R0[0])
-    report["expected_de00"] = delta_E(reflectance_to_Lab(target_R), expected).round(3).tolist()
+        report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
+    report["expected_de00"] = delta_E(target_lab, correction.expected_lab).round(3).tolist()
     report["geometries"] = list(forward.geometries)
     if json_output:
         print(json.dumps(report, indent=2))

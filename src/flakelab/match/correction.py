@@ -41,10 +41,12 @@ def _vector(forward, recipe: dict[str, float]) -> NDArray:
 @dataclass(frozen=True)
 class Correction:
     """The corrected recipe as fractions of its new total; ``added`` the additions per toner
-    relative to the mixed can's content (``additions`` mode; empty when reformulating)."""
+    relative to the mixed can's content (``additions`` mode; empty when reformulating);
+    ``expected_lab[G, 3]`` what the corrected spray-out should measure (prediction + offset)."""
 
     fractions: dict[str, float]
     added: dict[str, float]
+    expected_lab: NDArray
 
 
 def correct(
@@ -86,10 +88,13 @@ def correct(
         de = colour.delta_e94(target_lab, colour.lab(R)[0] + offset)
         (de.mean() + 0.5 * de.max()).backward()
         optimiser.step()
-    x = mixed().detach().numpy()[0]
+    with torch.no_grad():
+        final = mixed()
+        expected_lab = (colour.lab(forward(final)[0])[0] + offset).numpy()
+    x = final.numpy()[0]
     fractions = {forward.toners[i]: float(x[i]) for i in np.argsort(-x) if x[i] > 1e-6}
     added = {}
     if mode == "additions":
         a = (max_addition * torch.sigmoid(variable) * used).detach().numpy()[0]
         added = {forward.toners[i]: float(a[i]) for i in np.flatnonzero(a > 1e-4)}
-    return Correction(fractions, added)
+    return Correction(fractions, added, expected_lab)

@@ -35,7 +35,7 @@ def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
     oem, shop = world.variation(1, rng), world.variation(1, rng)
 
     def spray(x: np.ndarray) -> np.ndarray:
-        film, spread = world._application(1, rng)
+        film, spread = world.application(1, rng)
         variation = Variation(shop.strength, shop.hue_shift, film, spread)
         R, _ = world.appearance(x[None], variation)
         return world.measure(R, rng)[0]
@@ -80,8 +80,7 @@ def evaluate_matching(
     rng = np.random.default_rng(seed)
     names = list(world.library.names)
     allowed = np.array([n not in novel for n in names])
-    hidden = world.formulations(targets, rng)
-    hidden = hidden[:, :] * allowed
+    hidden = world.formulations(targets, rng) * allowed
     hidden /= hidden.sum(1, keepdims=True)
     rows = []
     for x in hidden:

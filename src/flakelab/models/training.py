@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import torch
@@ -304,16 +304,7 @@ def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None) -> dict:
         if missing:
             raise ModelError(f"cases lack the model's geometries {missing}")
         order = [data.geometries.index(g) for g in model.geometries]
-        data = CaseArrays(
-            data.x,
-            data.R[:, order],
-            data.texture,
-            data.case_ids,
-            data.shops,
-            data.toners,
-            model.geometries,
-            data.instrument,
-        )
+        data = replace(data, R=data.R[:, order], geometries=model.geometries)
     x = _align_toners(model, data)
     start = time.perf_counter()
     R, texture = (predict or model.predict)(x)

@@ -148,8 +148,16 @@ def mean_projected_cosine(direction: ArrayLike, sd: float, samples: int = 4096) 
     return np.mean(np.abs(np.asarray(direction, dtype=float) @ normals.T), axis=-1)
 
 
+@cache
 def species_reflectance(toner: AluminiumFlake | Pearl, n_binder: float = N_BINDER) -> NDArray:
-    """Reflectance table ``[91, 31]`` of one flake species in the binder versus incidence."""
+    """Reflectance table ``[91, 31]`` of one flake species in the binder versus incidence
+    (computed once per toner and binder; read-only)."""
+    table = _species_reflectance(toner, n_binder)
+    table.setflags(write=False)
+    return table
+
+
+def _species_reflectance(toner: AluminiumFlake | Pearl, n_binder: float) -> NDArray:
     if isinstance(toner, AluminiumFlake):
         return toner.surface_quality * flake_reflectance(REFLECTANCE_ANGLES, WAVELENGTHS, n_binder)
     return pearl_reflectance(
@@ -160,16 +168,6 @@ def species_reflectance(toner: AluminiumFlake | Pearl, n_binder: float = N_BINDE
         substrate_nm=toner.substrate_nm,
         n_binder=n_binder,
     )
-
-
-_REFLECTANCE_CACHE: dict[tuple, NDArray] = {}
-
-
-def _cached_reflectance(toner: AluminiumFlake | Pearl, n_binder: float) -> NDArray:
-    key = (toner, n_binder)
-    if key not in _REFLECTANCE_CACHE:
-        _REFLECTANCE_CACHE[key] = species_reflectance(toner, n_binder)
-    return _REFLECTANCE_CACHE[key]
 
 
 def layer_from_fractions(library: Library, fractions: ArrayLike) -> Layer:
@@ -202,7 +200,7 @@ def layer_from_fractions(library: Library, fractions: ArrayLike) -> Layer:
     return Layer(
         flake_rate=x[:, effect] * per_rate,
         flake_sd=np.radians([toners[i].orientation_sd_deg for i in effect]),
-        flake_reflectance=np.array([_cached_reflectance(toners[i], n) for i in effect]).reshape(
+        flake_reflectance=np.array([species_reflectance(toners[i], n) for i in effect]).reshape(
             len(effect), REFLECTANCE_ANGLES.size, WAVELENGTHS.size
         ),
         flake_transmits=np.array([toners[i].kind == "pearl" for i in effect], dtype=bool),

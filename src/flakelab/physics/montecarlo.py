@@ -162,37 +162,39 @@ def _hg_pdf(cos_t, g):
 
 
 @numba.njit(cache=True)
-def _trace(  # noqa: PLR0913, PLR0915 — one kernel, all state explicit
-    first,
-    count,
-    seed,
-    diffuse_in,
-    d_in,
-    w0,
-    det,
-    det_factor,
-    det_att,
-    det_flake_att,
-    rates,
-    sds,
-    refl,
-    transmits,
-    refl_mean,
-    kappa,
-    sigma,
-    g,
-    H,
-    primer,
-    n,
-    path_step,
-    score_sum,
-    score_sq,
-    albedo_sum,
-    albedo_sq,
-    table_w,
-    table_wl,
-    capped,
-):
+def _trace(first, count, seed, optics, tallies):
+    """Photons ``first … first + count``; ``optics`` and ``tallies`` as packed by
+    :func:`simulate` (read-only inputs; this chunk's accumulators)."""
+    (
+        diffuse_in,
+        d_in,
+        w0,
+        det,
+        det_factor,
+        det_att,
+        det_flake_att,
+        rates,
+        sds,
+        refl,
+        transmits,
+        refl_mean,
+        kappa,
+        sigma,
+        g,
+        H,
+        primer,
+        n,
+        path_step,
+    ) = optics
+    (
+        score_sum,
+        score_sq,
+        albedo_sum,
+        albedo_sq,
+        table_w,
+        table_wl,
+        capped,
+    ) = tallies
     G, W = det_att.shape
     S = rates.shape[0]
     K, B = table_w.shape[1], table_w.shape[2]
@@ -359,73 +361,15 @@ def _trace(  # noqa: PLR0913, PLR0915 — one kernel, all state explicit
 
 
 @numba.njit(cache=True, parallel=True)
-def _trace_chunks(  # noqa: PLR0913
-    chunks,
-    per_chunk,
-    photons,
-    seed,
-    diffuse_in,
-    d_in,
-    w0,
-    det,
-    det_factor,
-    det_att,
-    det_flake_att,
-    rates,
-    sds,
-    refl,
-    transmits,
-    refl_mean,
-    kappa,
-    sigma,
-    g,
-    H,
-    primer,
-    n,
-    path_step,
-    score_sum,
-    score_sq,
-    albedo_sum,
-    albedo_sq,
-    table_w,
-    table_wl,
-    capped,
-):
+def _trace_chunks(chunks, per_chunk, photons, seed, optics, tallies):
+    score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped = tallies
     for c in numba.prange(chunks):
         first = c * per_chunk
         count = min(per_chunk, photons - first)
         if count > 0:
-            _trace(
-                first,
-                count,
-                seed,
-                diffuse_in,
-                d_in,
-                w0,
-                det,
-                det_factor,
-                det_att,
-                det_flake_att,
-                rates,
-                sds,
-                refl,
-                transmits,
-                refl_mean,
-                kappa,
-                sigma,
-                g,
-                H,
-                primer,
-                n,
-                path_step,
-                score_sum[c],
-                score_sq[c],
-                albedo_sum[c],
-                albedo_sq[c],
-                table_w[c],
-                table_wl[c],
-                capped[c],
-            )
+            chunk = (score_sum[c], score_sq[c], albedo_sum[c], albedo_sq[c], table_w[c],
+                     table_wl[c], capped[c])  # fmt: skip
+            _trace(first, count, seed, optics, chunk)
 
 
 def _exit_attenuation(layer: Layer, outgoing: NDArray) -> tuple[NDArray, NDArray]:
@@ -485,11 +429,7 @@ def simulate(
     sds = layer.spreads[0] if layer.flake_sd.size else np.radians([10.0])
     transmits = layer.flake_transmits if layer.flake_transmits.size else np.zeros(1, bool)
     start = time.perf_counter()
-    _trace_chunks(
-        chunks,
-        per_chunk,
-        photons,
-        np.uint64(seed),
+    optics = (
         diffuse_illumination,
         np.ascontiguousarray(incoming[0]),
         1.0 if diffuse_illumination else float(T_in[0]),
@@ -509,14 +449,9 @@ def simulate(
         np.asarray(layer.primer, float),
         float(layer.n),
         float(path_step),
-        score_sum,
-        score_sq,
-        albedo_sum,
-        albedo_sq,
-        table_w,
-        table_wl,
-        capped,
     )
+    tallies = (score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped)
+    _trace_chunks(chunks, per_chunk, photons, np.uint64(seed), optics, tallies)
     seconds = time.perf_counter() - start
     mean = score_sum.sum(0) / photons
     stderr = np.sqrt(np.maximum(score_sq.sum(0) / photons - mean**2, 0) / (photons - 1))
