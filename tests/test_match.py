@@ -155,3 +155,40 @@ def test_match_refuses_bad_input(tmp_path):
     empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
     run = flakelab("match", "--example", "--library", str(empty))
     assert run.returncode == 2 and "at least one toner" in run.stderr
+
+
+@pytest.fixture(scope="module")
+def hybrid():
+    from flakelab.io import read_library
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    return forward_for(shipped_model("five-angle"), read_library(None))
+
+
+def test_hybrid_stands_new_toners_in_as_a_known_toner_of_their_kind(hybrid):
+    kinds = {t.name: t.kind for t in hybrid.library.toners}
+    names = hybrid.library.names
+    assert {names[j] for j in hybrid.proxies} == set(hybrid.novel)
+    for j, proxy in hybrid.proxies.items():
+        assert names[proxy] not in hybrid.novel and kinds[names[proxy]] == kinds[names[j]]
+    # the learned base never sees a new toner, and keeps the recipe's total
+    x = np.zeros((1, len(names)))
+    x[0, [names.index("Al medium"), names.index(hybrid.novel[0])]] = 0.9, 0.1
+    base = hybrid.base_fractions(x)
+    assert base[0, hybrid._novel_mask].sum() == 0 and base.sum() == pytest.approx(1.0)
+
+
+def test_hybrid_leans_on_physics_where_a_recipe_is_mostly_new_toner(hybrid):
+    # the learned base for a recipe made of stand-ins is an extrapolation; the physics model
+    # of the whole recipe must answer there, while a recipe without new toners is pure MLP
+    names = hybrid.library.names
+    x = np.zeros((2, len(names)))
+    x[0, names.index(hybrid.novel[0])] = 1.0
+    x[1, names.index("Al medium")] = 1.0
+    R = reflect(hybrid, x)
+    physics = hybrid._physics(x[:1])
+    assert np.max(delta_E(reflectance_to_Lab(R[:1]), reflectance_to_Lab(physics))) < 0.01
+    with torch.no_grad():
+        learned = hybrid.model.predict(x[1:])[0]
+    np.testing.assert_allclose(R[1:], learned, rtol=1e-5)

@@ -22,6 +22,7 @@ from flakelab.cli.common import (
 )
 from flakelab.cli.learning import cases_app, model_app, train
 from flakelab.cli.matching import correct_command, match_command
+from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
@@ -224,6 +225,9 @@ app.command("correct")(reports_errors(correct_command))
 app.add_typer(cases_app, name="cases")
 app.add_typer(model_app, name="model")
 app.command("train")(reports_errors(train))
+app.command("render")(reports_errors(render_command))
+app.command("render-grid")(reports_errors(render_grid_command))
+app.add_typer(texture_app, name="texture")
 validate_app = typer.Typer(help="Validation experiments against the reference Monte Carlo.")
 app.add_typer(validate_app, name="validate")
 

@@ -30,6 +30,9 @@ __all__ = [
     "Lab_to_LCh",
     "reflectance_to_sRGB",
     "Lab_to_sRGB",
+    "Lab_to_linear_sRGB",
+    "linear_sRGB_to_Lab",
+    "encode_sRGB",
 ]
 
 OBSERVERS = {
@@ -183,3 +186,25 @@ def reflectance_to_sRGB(
     XYZ = reflectance_to_XYZ(reflectance, wavelengths, conditions)
     white = white_point(wavelengths, conditions)
     return np.clip(colour.XYZ_to_sRGB(XYZ, colour.XYZ_to_xy(white)), 0.0, 1.0)
+
+
+def Lab_to_linear_sRGB(Lab: ArrayLike, white: ArrayLike | None = None) -> NDArray[np.float64]:
+    """Linear-light sRGB (not clipped, no transfer curve) of CIELAB; CAT02 to D65/2°.
+    Images are composed in linear light so that averages of pixels are averages of light."""
+    white = white_point() if white is None else white
+    XYZ = Lab_to_XYZ(Lab, white)
+    return colour.XYZ_to_sRGB(XYZ, colour.XYZ_to_xy(white), apply_cctf_encoding=False)
+
+
+def linear_sRGB_to_Lab(rgb: ArrayLike, white: ArrayLike | None = None) -> NDArray[np.float64]:
+    """Inverse of :func:`Lab_to_linear_sRGB`."""
+    white = white_point() if white is None else white
+    XYZ = colour.sRGB_to_XYZ(
+        np.asarray(rgb, float), colour.XYZ_to_xy(white), apply_cctf_decoding=False
+    )
+    return XYZ_to_Lab(XYZ, white)
+
+
+def encode_sRGB(rgb: ArrayLike) -> NDArray[np.float64]:
+    """Display values [0–1] of linear-light sRGB (IEC 61966-2-1 transfer curve, clipped)."""
+    return np.clip(colour.cctf_encoding(np.clip(np.asarray(rgb, float), 0.0, 1.0)), 0.0, 1.0)

@@ -2,8 +2,9 @@
 
 * :class:`LearnedForward` — the MLP (differentiable through torch).
 * :class:`HybridForward` — the MLP for known toners, times the physics model's scaling for
-  toners marked new (DESIGN.md §3, §6): R = R_MLP(x_known) · R_phys(x) / R_phys(x_known);
-  the physics ratio's derivatives come from finite differences on the toners in play.
+  toners marked new (DESIGN.md §3, §6): R = R_MLP(x_base) · R_phys(x) / R_phys(x_base), with
+  each new toner standing in the base as its closest known toner; the physics ratio's
+  derivatives come from finite differences on the new toners.
 * :class:`KubelkaMunkForward` — two-constant Kubelka–Munk with Saunderson for solids, from
   K and S per toner (e.g. measured pigment data).
 """
@@ -60,55 +61,117 @@ class _PhysicsRatio(torch.autograd.Function):
 
 
 class HybridForward(LearnedForward):
-    """Learned base, physics scaling for ``novel`` toners (too few cases to learn them)."""
+    """Learned base, physics scaling for ``novel`` toners (too few cases to learn them).
+
+    Each new toner stands in the learned base as its *proxy*: the known toner of the same
+    kind whose physics spectrum in a reference metallic is closest. The base then keeps the
+    recipe's concentrations (inside the training data), and the physics ratio only has to
+    carry the difference between two similar toners:
+    R = R_MLP(x_base) · R_phys(x) / R_phys(x_base), x_base = x with new → proxy amounts.
+    A new toner without a same-kind known toner is dropped from the base (renormalised).
+    When new toners make up most of the recipe, the base itself is mostly stand-ins, and the
+    physics base R_phys(x_base) takes over from the learned one (:meth:`_physics_trust`).
+    """
 
     def __init__(self, model: ForwardModel, library: Library, novel: Sequence[str]) -> None:
         super().__init__(model)
         self.library = library
         self.novel = tuple(novel)
-        self.name = f"hybrid: learned + physics scaling for {', '.join(self.novel)}"
         names = library.names
         self._novel_mask = np.array([n in self.novel for n in names])
+        self.proxies = _proxies(library, self._novel_mask)
+        self._substitute = np.eye(len(names))
+        for j in np.flatnonzero(self._novel_mask):
+            self._substitute[j] = 0.0
+            if j in self.proxies:
+                self._substitute[j, self.proxies[j]] = 1.0
+        stand_ins = ", ".join(
+            f"{names[j]} (as {names[self.proxies[j]]})" if j in self.proxies else names[j]
+            for j in np.flatnonzero(self._novel_mask)
+        )
+        self.name = f"hybrid: learned + physics scaling for {stand_ins}"
         self._step = 1e-4
 
     def _physics(self, x: NDArray) -> NDArray:
         return np.pi * predict(layer_from_fractions(self.library, x), self.geometries)
 
+    def base_fractions(self, x: NDArray) -> NDArray:
+        """What the learned model sees: new toners moved onto their proxies, renormalised."""
+        base = x @ self._substitute
+        return base / np.maximum(base.sum(axis=-1, keepdims=True), 1e-12)
+
     def physics_ratio(self, x: NDArray) -> tuple[NDArray, NDArray]:
-        """Ratio R_phys(x) / R_phys(x_known) ``[N, G, W]`` (x_known: the known toners,
-        renormalised, as the learned model sees them; R_phys(x) alone when nothing is known)
-        and its Jacobian ``[N, G, W, T]``. Rows without new toners scale by one."""
+        """Ratio R_phys(x) / R_phys(x_base) ``[N, G, W]`` and its Jacobian ``[N, G, W, T]``
+        with respect to the new toners' amounts. Rows without new toners scale by one."""
         ratio = np.ones((x.shape[0], len(self.geometries), 31))
         jacobian = np.zeros((*ratio.shape, x.shape[1]))
         rows = np.flatnonzero(np.any(x[:, self._novel_mask] > 1e-9, axis=1))
         if rows.size == 0:
             return ratio, jacobian
         xs = x[rows]
-        known = np.where(self._novel_mask, 0.0, xs)
-        total = known.sum(axis=1, keepdims=True)
-        base = np.where(
-            total[:, :, None] > 1e-6,
-            self._physics(known / np.maximum(total, 1e-12)) + 1e-9,
-            1.0,
-        )
-        ratio[rows] = (self._physics(xs) + 1e-9) / base
+        ratio[rows] = self._ratio(xs)
         for column in np.flatnonzero(self._novel_mask & np.any(xs > 1e-9, axis=0)):
             bumped = xs.copy()
             bumped[:, column] += self._step
-            jacobian[rows, ..., column] = (
-                (self._physics(bumped) + 1e-9) / base - ratio[rows]
-            ) / self._step
+            jacobian[rows, ..., column] = (self._ratio(bumped) - ratio[rows]) / self._step
         return ratio, jacobian
 
+    def _ratio(self, x: NDArray) -> NDArray:
+        base_sum = (x @ self._substitute).sum(axis=1)
+        base = np.where(
+            base_sum[:, None, None] > 1e-6, self._physics(self.base_fractions(x)) + 1e-9, 1.0
+        )
+        return (self._physics(x) + 1e-9) / base
+
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-        mask = torch.as_tensor(~self._novel_mask, dtype=fractions.dtype)
-        known = fractions * mask
-        total = known.sum(1, keepdim=True)
-        R, texture = super().__call__(known / torch.clamp(total, min=1e-9))
-        if not np.any(fractions.detach().numpy()[:, self._novel_mask] > 1e-9):
+        base = fractions @ torch.as_tensor(self._substitute, dtype=fractions.dtype)
+        total = base.sum(1, keepdim=True)
+        R, texture = super().__call__(base / torch.clamp(total, min=1e-9))
+        x = fractions.detach().numpy()
+        share = x[:, self._novel_mask].sum(axis=1)
+        if not np.any(share > 1e-9):
             return R, texture
         R = torch.where(total[:, :, None] > 1e-6, R, torch.ones_like(R))
+        trust = self._physics_trust(share)
+        if np.any(trust > 0):
+            # a base made mostly of stand-ins is outside what the learned model knows: lean
+            # on the physics base there (log-linear blend, no gradient through the blend)
+            rows = np.flatnonzero(trust > 0)
+            physics = np.ones_like(R.detach().numpy())
+            physics[rows] = self._physics(self.base_fractions(x[rows])) + 1e-9
+            w = torch.as_tensor(trust[:, None, None], dtype=R.dtype)
+            R = torch.exp((1 - w) * torch.log(R) + w * torch.log(torch.as_tensor(physics)))
         return R * _PhysicsRatio.apply(fractions, self), texture
+
+    @staticmethod
+    def _physics_trust(share: NDArray) -> NDArray:
+        """Weight of the physics base: 0 below 30 % new toners, 1 above 70 %, smooth between."""
+        t = np.clip((share - 0.3) / 0.4, 0.0, 1.0)
+        return t * t * (3 - 2 * t)
+
+
+def _proxies(library: Library, novel: NDArray) -> dict[int, int]:
+    """For each new toner, the known toner of its kind closest in log spectrum when each
+    makes up 10 % of a reference recipe (the library's first aluminium, else on its own)."""
+    names = library.names
+    aluminium = [names.index(t.name) for t in library.of_kind("aluminium")]
+    proxies = {}
+    for j in np.flatnonzero(novel):
+        kind = library.toners[j].kind
+        candidates = [i for i, t in enumerate(library.toners) if t.kind == kind and not novel[i]]
+        if not candidates:
+            continue
+        mixes = np.zeros((len(candidates) + 1, len(names)))
+        if aluminium and kind != "aluminium":
+            mixes[:, aluminium[0]] = 0.9
+        mixes[np.arange(len(candidates)), candidates] += 0.1 if aluminium else 1.0
+        mixes[-1, j] += 0.1 if aluminium else 1.0
+        spectra = np.log(
+            predict(layer_from_fractions(library, mixes), ("45as15", "45as45", "45as110")) + 1e-6
+        )
+        distance = np.sqrt(np.mean((spectra[:-1] - spectra[-1]) ** 2, axis=(1, 2)))
+        proxies[int(j)] = candidates[int(np.argmin(distance))]
+    return proxies
 
 
 class KubelkaMunkForward:

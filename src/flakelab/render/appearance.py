@@ -1,0 +1,320 @@
+"""Appearance-based rendering: colour + texture images of a measured paint (paper 001).
+
+Pipeline (DESIGN.md §4):
+
+1. **Appearance of a measurement** — L*a*b* at the in-plane geometries lit at 45°, indexed by
+   aspecular angle; the diffuse-light colour as the mean reflectance over those geometries
+   (a hemispherical average of the directional readings); glint impression g per lamp angle
+   (sparkle grade √(Sa·Si)/2 at 15°, 45°, 75°, placed at those aspecular angles: the texture
+   camera looks along the normal) and diffuse coarseness c (graininess G).
+2. **Texture images** from the fitted appearance-based processes, tone-mapped to display
+   grey T = G/(G + 1) (a white diffuser at half scale, glints near full scale), as the
+   instrument camera's 8-bit images are.
+3. **Composition** — eqs 5–6: colour + (T − mean T) per channel in linear light, clipped to
+   [0, 1]; the paper's renormalisation is done so each column's mean light is the uniform
+   colour's (the light clipped away is given back to the unclipped pixels), so adding
+   texture does not change colour. Eq. 7 mixes the diffuse and directional images with the
+   diffuse fraction d; gloss adds white near the specular direction.
+4. **Curved panel** — columns sweep the aspecular angle 0–110°; colour (in CIELAB) and glint
+   are interpolated between measured geometries with cardinal splines.
+5. **Distance** — the eye resolves about 1′ of arc, so relative to the reference distance
+   the coarseness pattern is blurred by the growth of the eye's spot (contrast falls), while
+   each glint keeps its size and is dimmed by the share of the spot it fills (its light is
+   spread over the spot but the eye still sees a point): two different methods, as the
+   paper found necessary. Texture is drawn at the camera's scale, one pixel = 15 µm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import CubicHermiteSpline
+from scipy.ndimage import gaussian_filter
+
+from flakelab.core.colorimetry import (
+    D65_10,
+    Conditions,
+    Lab_to_linear_sRGB,
+    encode_sRGB,
+    reflectance_to_Lab,
+)
+from flakelab.core.measurement import Measurement
+from flakelab.io.records import write_atomically
+from flakelab.texture.calibration import shipped_processes
+from flakelab.texture.generator import TextureProcess, patch_image
+from flakelab.texture.metrics import sparkle_grade
+
+__all__ = [
+    "DIFFUSE_FRACTION",
+    "REFERENCE_DISTANCE_M",
+    "Appearance",
+    "appearance_of",
+    "cardinal_spline",
+    "render_panel",
+    "render_curved",
+    "render_grid",
+    "compose",
+    "parse_distance",
+    "save_image",
+]
+
+DIFFUSE_FRACTION = 0.7
+"""Default diffuse share of the light: a body shop (paper 001: 70 % diffuse, 30 % direct)."""
+REFERENCE_DISTANCE_M = 0.5
+"""Distance at which texture is drawn as the camera saw it."""
+EYE_RESOLUTION_ARCMIN = 1.0
+CAMERA_PIXEL_UM = 15.0
+GLOSS_WIDTH_DEG = 3.0
+"""Angular half-width of the clearcoat's highlight around the specular direction."""
+SPARKLE_ANGLES = (15.0, 45.0, 75.0)
+CURVED_RANGE_DEG = (0.0, 110.0)
+_TENSION = 0.0  # cardinal spline tension: 0 is Catmull–Rom
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """What the renderer needs: colour along aspecular angle, diffuse colour, texture."""
+
+    aspecular: NDArray[np.float64]  # [K] degrees, increasing
+    Lab: NDArray[np.float64]  # [K, 3]
+    diffuse_Lab: NDArray[np.float64]  # [3]
+    glint: NDArray[np.float64]  # [3] at SPARKLE_ANGLES; 0 when unmeasured
+    coarseness: float  # 0 when unmeasured
+    name: str = ""
+
+
+def appearance_of(measurement: Measurement, conditions: Conditions = D65_10) -> Appearance:
+    """Colour and texture of ``measurement`` for rendering; needs in-plane geometries lit at
+    45° (the 45as… family every multi-angle instrument has)."""
+    rows = [i for i, g in enumerate(measurement.geometries) if g.illumination == 45 and g.in_plane]
+    if len(rows) < 2:
+        raise ValueError(
+            f"{measurement.sample}: rendering needs at least two in-plane geometries lit at "
+            f"45° (45as15, 45as45 …), got {', '.join(map(str, measurement.geometries))}"
+        )
+    aspecular = np.array([measurement.geometries[i].aspecular for i in rows])
+    order = np.argsort(aspecular)
+    reflectance = measurement.reflectance[rows][order]
+    Lab = reflectance_to_Lab(reflectance, measurement.wavelengths, conditions)
+    diffuse = reflectance_to_Lab(reflectance.mean(0), measurement.wavelengths, conditions)
+    texture = measurement.texture
+    glint = np.array(
+        [
+            sparkle_grade(texture.get(f"Sa{a:.0f}", 0.0), texture.get(f"Si{a:.0f}", 0.0))
+            for a in SPARKLE_ANGLES
+        ]
+    )
+    return Appearance(
+        aspecular[order], Lab, diffuse, glint, float(texture.get("G", 0.0)), measurement.sample
+    )
+
+
+def cardinal_spline(x: NDArray, y: NDArray, at: NDArray, tension: float = _TENSION) -> NDArray:
+    """Cardinal spline through (x, y) (y ``[K, ...]``), evaluated at ``at``; held constant
+    beyond the end points. Tangents (1 − tension)·(y[k+1] − y[k−1])/(x[k+1] − x[k−1])."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    if x.size == 1:
+        return np.broadcast_to(y[0], np.shape(at) + y.shape[1:]).copy()
+    slope = np.gradient(y, x, axis=0, edge_order=1)  # central differences inside
+    inner = (y[2:] - y[:-2]) / (x[2:] - x[:-2]).reshape((-1,) + (1,) * (y.ndim - 1))
+    slope[1:-1] = inner
+    spline = CubicHermiteSpline(x, y, (1 - tension) * slope, axis=0)
+    return spline(np.clip(at, x[0], x[-1]))
+
+
+def _tone(grey: NDArray) -> NDArray:
+    """Display grey of a texture image in white-diffuser units (a white at half scale)."""
+    return grey / (grey + 1.0)
+
+
+def compose(colour: NDArray, texture: NDArray, iterations: int = 4) -> NDArray:
+    """Eqs 5–6: linear ``colour`` ``[cols, 3]`` (or ``[3]``) + (T − column mean of T), clipped
+    to [0, 1], renormalised so each column keeps the colour's mean light where it can."""
+    rows, cols = texture.shape
+    colour = np.broadcast_to(np.asarray(colour, float), (cols, 3))
+    target = np.clip(colour, 0.0, 1.0)
+    deviation = texture - texture.mean(axis=0, keepdims=True)
+    image = np.clip(target[None] + deviation[..., None], 0.0, 1.0)
+    for _ in range(iterations):
+        deficit = target - image.mean(axis=0)  # [cols, 3]
+        free = np.where(deficit[None] > 0, image < 1, image > 0)
+        share = np.maximum(free.sum(axis=0), 1)
+        image = np.clip(image + free * (deficit * rows / share)[None], 0.0, 1.0)
+    return image
+
+
+def _eye_blur_px(distance_m: float) -> float:
+    """Extra blur σ [camera pixels] of the eye's spot at ``distance_m`` beyond the reference."""
+    spot = np.radians(EYE_RESOLUTION_ARCMIN / 60.0) / (2 * np.sqrt(2 * np.log(2)))
+    extra = max(distance_m**2 - REFERENCE_DISTANCE_M**2, 0.0)
+    return float(np.sqrt(extra) * spot * 1e6 / CAMERA_PIXEL_UM)
+
+
+def _as_map(value: NDArray | float) -> NDArray:
+    """A value per column (1-D), per pixel (2-D) or one for all, as a 2-D broadcastable map."""
+    value = np.asarray(value, dtype=float)
+    return value[None, :] if value.ndim == 1 else np.atleast_2d(value)
+
+
+def _texture_value(process: TextureProcess, value: NDArray) -> tuple[NDArray, NDArray]:
+    """Values clamped into the fitted range, and a strength that fades texture out below it
+    (a solid colour has none)."""
+    low, high = process.value_range
+    value = np.asarray(value, float)
+    return np.clip(value, low, high), np.clip(value / low, 0.0, 1.0)
+
+
+def texture_images(
+    glint: NDArray | float,
+    coarseness: NDArray | float,
+    shape: tuple[int, int],
+    *,
+    distance_m: float = REFERENCE_DISTANCE_M,
+    seed: int = 0,
+    processes: dict[str, TextureProcess] | None = None,
+) -> tuple[NDArray, NDArray]:
+    """Display-grey texture images (directional, diffuse) for ``glint`` and ``coarseness``
+    values that broadcast to ``shape`` (per column for a curved panel)."""
+    processes = processes or shipped_processes()
+    rng = np.random.default_rng(seed)
+    blur = _eye_blur_px(distance_m)
+    g, g_strength = _texture_value(processes["glint"], _as_map(glint))
+    controls = processes["glint"].controls(g)
+    sigma = controls["size"] / (2 * np.sqrt(2 * np.log(2)))
+    controls["grey"] = controls["grey"] * sigma**2 / (sigma**2 + blur**2)
+    directional = _tone(patch_image(**controls, shape=shape, rng=rng)) * g_strength
+    c, c_strength = _texture_value(processes["coarseness"], _as_map(coarseness))
+    grey = patch_image(**processes["coarseness"].controls(c), shape=shape, rng=rng)
+    if blur > 0:
+        grey = gaussian_filter(grey, blur, mode="wrap")
+    return directional, _tone(grey) * c_strength
+
+
+def _gloss(aspecular: NDArray, level: float) -> NDArray:
+    return level * np.exp(-0.5 * (np.asarray(aspecular, float) / GLOSS_WIDTH_DEG) ** 2)
+
+
+def _render(
+    appearance: Appearance,
+    aspecular: NDArray,
+    shape: tuple[int, int],
+    *,
+    diffuse_fraction: float,
+    distance_m: float,
+    gloss: float,
+    texture: bool,
+    seed: int,
+) -> NDArray:
+    """Linear-light image ``[rows, cols, 3]`` with column ``j`` at ``aspecular[j]``."""
+    if not 0.0 <= diffuse_fraction <= 1.0:
+        raise ValueError(f"light: expected a diffuse fraction in [0, 1], got {diffuse_fraction}")
+    if distance_m <= 0:
+        raise ValueError(f"distance: expected a positive distance, got {distance_m} m")
+    directional_colour = Lab_to_linear_sRGB(
+        cardinal_spline(appearance.aspecular, appearance.Lab, aspecular)
+    )
+    diffuse_colour = Lab_to_linear_sRGB(appearance.diffuse_Lab)
+    if texture:
+        glint = cardinal_spline(np.array(SPARKLE_ANGLES), appearance.glint, aspecular)
+        T_dir, T_diff = texture_images(
+            np.maximum(glint, 0.0), appearance.coarseness, shape, distance_m=distance_m, seed=seed
+        )
+    else:
+        T_dir = T_diff = np.zeros(shape)
+    directional = compose(directional_colour, T_dir)
+    diffuse = compose(diffuse_colour, T_diff)
+    image = diffuse * diffuse_fraction + directional * (1 - diffuse_fraction)  # eq. 7
+    highlight = _gloss(aspecular, gloss) * (1 - diffuse_fraction)
+    return np.clip(image + highlight[None, :, None], 0.0, 1.0)
+
+
+def render_panel(
+    appearance: Appearance,
+    aspecular: float = 45.0,
+    size_px: int = 512,
+    *,
+    diffuse_fraction: float = DIFFUSE_FRACTION,
+    distance_m: float = REFERENCE_DISTANCE_M,
+    gloss: float = 0.0,
+    texture: bool = True,
+    seed: int = 0,
+) -> NDArray:
+    """Flat panel seen at one aspecular angle: linear-light ``[size, size, 3]``."""
+    columns = np.full(size_px, float(aspecular))
+    options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
+    return _render(appearance, columns, (size_px, size_px), texture=texture, seed=seed, **options)
+
+
+def render_curved(
+    appearance: Appearance,
+    size_px: tuple[int, int] = (512, 1024),
+    *,
+    diffuse_fraction: float = DIFFUSE_FRACTION,
+    distance_m: float = REFERENCE_DISTANCE_M,
+    gloss: float = 0.8,
+    texture: bool = True,
+    seed: int = 0,
+) -> NDArray:
+    """Curved panel: columns sweep aspecular 0–110° (paper 001 Fig. 4), ``[rows, cols, 3]``."""
+    columns = np.linspace(*CURVED_RANGE_DEG, size_px[1])
+    options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
+    return _render(appearance, columns, size_px, texture=texture, seed=seed, **options)
+
+
+def render_grid(
+    appearance: Appearance,
+    steps: int = 8,
+    tile_px: int = 128,
+    *,
+    aspecular: float = 45.0,
+    diffuse_fraction: float = 0.5,
+    seed: int = 0,
+    processes: dict[str, TextureProcess] | None = None,
+) -> NDArray:
+    """Paper 001 Fig. 3: colour fixed; glint rises in ``steps`` across, coarseness up."""
+    processes = processes or shipped_processes()
+    glint = np.geomspace(*processes["glint"].value_range, steps)
+    coarse = np.geomspace(*processes["coarseness"].value_range, steps)[::-1]  # top: coarsest
+    colour = Lab_to_linear_sRGB(cardinal_spline(appearance.aspecular, appearance.Lab, aspecular))
+    diffuse_colour = Lab_to_linear_sRGB(appearance.diffuse_Lab)
+    side = steps * tile_px
+    T_dir, T_diff = texture_images(
+        np.repeat(glint, tile_px)[None, :],
+        np.repeat(coarse, tile_px)[:, None],
+        (side, side),
+        seed=seed,
+        processes=processes,
+    )
+    directional = compose(colour, T_dir)
+    diffuse = compose(diffuse_colour, T_diff)
+    return np.clip(diffuse * diffuse_fraction + directional * (1 - diffuse_fraction), 0.0, 1.0)
+
+
+def parse_distance(text: str) -> float:
+    """``0.5m``, ``50cm``, ``500mm`` (or a bare number of metres) → metres."""
+    units = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+    value = text.strip().lower().replace(" ", "")
+    unit = next((u for u in units if value.endswith(u)), "")
+    try:
+        metres = float(value[: len(value) - len(unit)]) * units.get(unit, 1.0)
+    except ValueError:
+        raise ValueError(
+            f"--distance: expected a distance like 0.5m or 50cm, got {text!r}"
+        ) from None
+    if not np.isfinite(metres) or metres <= 0:
+        raise ValueError(f"--distance: expected a positive distance, got {text!r}")
+    return metres
+
+
+def save_image(image: NDArray, path) -> None:
+    """Write a linear-light ``[rows, cols, 3]`` image as 8-bit sRGB (PNG, JPEG, TIFF by the
+    file's suffix), atomically."""
+    from matplotlib.image import imsave
+
+    suffix = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
+    if suffix not in {"png", "jpg", "jpeg", "tif", "tiff"}:
+        raise ValueError(f"{path}: expected an image file ending .png, .jpg or .tif")
+    pixels = np.round(encode_sRGB(image) * 255).astype(np.uint8)
+    write_atomically(path, lambda temporary: imsave(temporary, pixels, format=suffix))

@@ -1,0 +1,184 @@
+"""Appearance-based texture generation and rendering (issue 6): the patch process keeps its
+definition, the fitted processes return the values asked of them, texture keeps colour."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.stats import spearmanr
+
+from flakelab.core.colorimetry import linear_sRGB_to_Lab
+from flakelab.core.difference import delta_E_CIE2000 as delta_E00
+from flakelab.data import example_path
+from flakelab.io import read_measurement
+from flakelab.render.appearance import (
+    appearance_of,
+    cardinal_spline,
+    compose,
+    parse_distance,
+    render_curved,
+    render_panel,
+    texture_images,
+)
+from flakelab.texture.calibration import (
+    AnchorPanel,
+    _fit_anchor,
+    measure_texture,
+    roundtrip,
+    shipped_processes,
+)
+from flakelab.texture.generator import UNITS, control_values, patch_image
+from flakelab.texture.images import FlakePopulation
+from flakelab.texture.metrics import graininess
+
+
+@pytest.fixture(scope="module")
+def appearance():
+    return appearance_of(read_measurement(example_path("target")))
+
+
+def test_patch_process_mean_is_count_times_patch_light():
+    # E[image] = count · E[amplitude] · 2πσ²; log-uniform amplitudes average g·(1 − 1/s)/ln s
+    size, grey, count, sparkler = 3.0, 2.0, 0.05, 20.0
+    image = patch_image(size, grey, count, sparkler, (512, 512), np.random.default_rng(1))
+    sigma = size / (2 * np.sqrt(2 * np.log(2)))
+    expected = count * grey * (1 - 1 / sparkler) / np.log(sparkler) * 2 * np.pi * sigma**2
+    assert image.mean() == pytest.approx(expected, rel=0.03)
+    assert patch_image(size, grey, 0.0, 1.0, (64, 64), np.random.default_rng(0)).max() == 0.0
+
+
+def test_control_forms_are_the_papers():
+    constants = np.array([[0.0, 0.0, 1.0], [1.0, 2.0, 0.5], [np.log(3.0), 0.0, 1.0], [0, 1, 2]])
+    glint = control_values("glint", constants, 4.0)
+    assert glint["size"] == pytest.approx(51.0 * UNITS["glint"]["size"])  # 1 + 100/(1 + e^0)
+    assert glint["grey"] == pytest.approx((1 + 100 / (1 + np.exp(1 + 2 * 2.0))) * 10.0)
+    assert glint["count"] == pytest.approx((1 + 100 / 4) * UNITS["glint"]["count"])
+    coarse = control_values("coarseness", constants, 4.0)
+    assert coarse["grey"] == pytest.approx((1 + 2 * 4**0.5) * UNITS["coarseness"]["grey"])
+    assert coarse["sparkler"] == pytest.approx(16.0)
+
+
+def test_anchor_fit_recovers_a_known_process():
+    truth = dict(size=4.0, grey=1.5, count=0.3, sparkler=10.0)
+    image = patch_image(**truth, shape=(256, 256), rng=np.random.default_rng(3))
+    population = FlakePopulation(
+        np.array([10.0]), np.array([0.1]), np.array([10.0]), np.array([0.9])
+    )
+    anchor = AnchorPanel(population, image, measure_texture("coarseness", image))
+    controls = _fit_anchor("coarseness", anchor, (256, 256), 8)
+    fitted = dict(zip(("size", "grey", "count", "sparkler"), controls, strict=True))
+    again = patch_image(**fitted, shape=(512, 512), rng=np.random.default_rng(9))
+    assert graininess(again) == pytest.approx(anchor.value, rel=0.08)
+    assert again.mean() == pytest.approx(image.mean(), rel=0.05)
+
+
+@pytest.mark.parametrize("process", ["coarseness", "glint"])
+def test_closed_loop_returns_the_prescribed_texture(process):
+    report = roundtrip(shipped_processes()[process], points=5, size_px=768, seed=7)
+    assert report["rel_error_max"] <= 0.10, report
+
+
+def test_texture_sweeps_follow_per_column_values():
+    processes = shipped_processes()
+    glint = np.geomspace(*processes["glint"].value_range, 6)
+    columns = np.repeat(glint, 128)
+    raw = processes["glint"].image(np.broadcast_to(columns, (768, columns.size)), seed=2)
+    measured = [measure_texture("glint", raw[:, i * 128 : (i + 1) * 128]) for i in range(6)]
+    assert spearmanr(glint, measured).statistic >= 0.9
+
+
+@pytest.mark.parametrize("diffuse_fraction", [0.0, 0.7, 1.0])
+def test_texture_does_not_change_colour(appearance, diffuse_fraction):
+    for aspecular in appearance.aspecular:
+        options = dict(diffuse_fraction=diffuse_fraction, seed=int(aspecular) + 40)
+        plain = render_panel(appearance, aspecular, 256, texture=False, **options)
+        textured = render_panel(appearance, aspecular, 256, **options)
+        assert np.ptp(textured[..., 1]) > 0.05  # the texture is there
+        lab = linear_sRGB_to_Lab(np.stack([plain.mean((0, 1)), textured.mean((0, 1))]))
+        assert delta_E00(lab[0], lab[1]) <= 0.5, aspecular
+
+
+def test_compose_keeps_column_means_where_light_allows():
+    rng = np.random.default_rng(0)
+    texture = rng.gamma(0.3, 0.3, size=(300, 4))
+    colour = np.array([[0.02, 0.03, 0.1], [0.2, 0.3, 0.4], [0.6, 0.6, 0.6], [0.9, 0.95, 0.99]])
+    image = compose(colour, texture)
+    assert image.min() >= 0 and image.max() <= 1
+    np.testing.assert_allclose(image.mean(axis=0), colour, atol=2e-3)
+
+
+def test_cardinal_spline_passes_knots_and_keeps_lines():
+    x = np.array([-15.0, 15, 25, 45, 75, 110])
+    line = 3 * x[:, None] + np.array([1.0, -2.0])
+    at = np.linspace(-15, 110, 50)
+    np.testing.assert_allclose(cardinal_spline(x, line, at), 3 * at[:, None] + [1.0, -2.0])
+    y = np.sin(x / 30)[:, None]
+    np.testing.assert_allclose(cardinal_spline(x, y, x), y)
+    assert cardinal_spline(x, y, np.array([200.0]))[0, 0] == pytest.approx(y[-1, 0])
+
+
+def test_curved_panel_shows_measured_colour_and_gloss(appearance):
+    image = render_curved(appearance, (8, 221), diffuse_fraction=0.0, texture=False, gloss=0.5)
+    columns = np.linspace(0, 110, 221)
+    for angle, lab in zip(appearance.aspecular, appearance.Lab, strict=True):
+        if 0 <= angle <= 110:
+            j = int(np.argmin(abs(columns - angle)))
+            got = linear_sRGB_to_Lab(image[0, j])
+            if image[0, j].max() < 0.999:  # inside the display's range
+                assert delta_E00(got, lab) < 0.5, angle
+    brightness = image[0].sum(axis=1)
+    assert np.argmax(brightness) < 5  # the clearcoat's highlight sits at specular
+
+
+def test_distance_softens_coarseness_and_dims_glints():
+    near = texture_images(3.0, 15.0, (384, 384), distance_m=0.5, seed=1)
+    far = texture_images(3.0, 15.0, (384, 384), distance_m=3.0, seed=1)
+    assert far[1].std() < 0.6 * near[1].std()  # diffuse pattern: contrast falls
+    assert far[0].max() < near[0].max()  # glints: dimmer
+    assert np.sum(far[0] > 0.1) <= np.sum(near[0] > 0.1)
+
+
+def test_distance_parsing():
+    assert parse_distance("0.5m") == 0.5
+    assert parse_distance("50 cm") == pytest.approx(0.5)
+    assert parse_distance("2") == 2.0
+    for bad in ("far", "-1m", "0cm"):
+        with pytest.raises(ValueError, match="distance"):
+            parse_distance(bad)
+
+
+def flakelab(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "flakelab.cli.main", *args],
+                          capture_output=True, text=True)  # fmt: skip
+
+
+def test_render_commands_write_images_of_the_asked_size(tmp_path):
+    from matplotlib.image import imread
+
+    run = flakelab("render", "--view", "panel", "--size", "96", "-o", str(tmp_path / "p.png"))
+    assert run.returncode == 0, run.stderr
+    assert imread(tmp_path / "p.png").shape[:2] == (96, 96)
+    run = flakelab("render", "--size", "128", "--distance", "2m", "-o", str(tmp_path / "c.png"))
+    assert run.returncode == 0, run.stderr
+    assert imread(tmp_path / "c.png").shape[:2] == (64, 128)
+    run = flakelab("render-grid", "--steps", "3", "--tile", "32", "-o", str(tmp_path / "g.png"))
+    assert run.returncode == 0, run.stderr
+    assert imread(tmp_path / "g.png").shape[:2] == (96, 96)
+
+
+def test_render_refuses_bad_input_without_writing(tmp_path):
+    out = tmp_path / "x.png"
+    for args, message in [
+        (("--distance", "near"), "distance"),
+        (("--light", "1.5"), "diffuse fraction"),
+        ((str(tmp_path / "missing.cxf"),), "missing.cxf"),
+    ]:
+        run = flakelab("render", *args, "--size", "32", "-o", str(out))
+        assert run.returncode == 2 and message in run.stderr, run.stderr
+        assert "Traceback" not in run.stderr
+    run = flakelab("render", "--size", "32", "-o", str(tmp_path / "x.bmp"))
+    assert run.returncode == 2 and ".png" in run.stderr
+    assert list(tmp_path.iterdir()) == []
