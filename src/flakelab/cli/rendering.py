@@ -134,14 +134,29 @@ def texture_evaluate(
 @reports_errors
 def texture_fit(
     output: Annotated[Path, typer.Option("--output", "-o", help="JSON file to write.")],
+    process: Annotated[
+        list[str] | None,
+        typer.Option(help="Refit only this process (coarseness, glint); others kept from -o."),
+    ] = None,
     seed: SeedOption = 0,
     json_output: JsonOption = False,
 ) -> None:
-    """Fit both processes to the anchor ladders (the shipped file: ``src/flakelab/data/``)."""
-    from flakelab.texture.calibration import fit_process, roundtrip, save_processes
+    """Fit the processes to the anchor ladders (the shipped file: ``src/flakelab/data/``)."""
+    from flakelab.texture.calibration import (
+        fit_process,
+        load_processes,
+        roundtrip,
+        save_processes,
+    )
+    from flakelab.texture.generator import PROCESSES
 
-    fitted, reports = {}, {}
-    for name in ("coarseness", "glint"):
+    names = process or list(PROCESSES)
+    unknown = sorted(set(names) - set(PROCESSES))
+    if unknown:
+        raise ValueError(f"--process: expected one of {', '.join(PROCESSES)}, got {unknown}")
+    fitted = {} if set(names) == set(PROCESSES) else dict(load_processes(output))
+    reports = {}
+    for name in names:
         fitted[name], reports[name] = fit_process(
             name, seed=seed, progress=lambda m: errors.print(m)
         )

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicHermiteSpline
-from scipy.ndimage import gaussian_filter
+from scipy.ndimage import gaussian_filter, gaussian_filter1d
 
 from flakelab.core.colorimetry import (
     D65_10,
@@ -130,19 +130,28 @@ def _tone(grey: NDArray) -> NDArray:
 
 
 def compose(colour: NDArray, texture: NDArray, iterations: int = 4) -> NDArray:
-    """Eqs 5–6: linear ``colour`` ``[cols, 3]`` (or ``[3]``) + (T − column mean of T), clipped
-    to [0, 1], renormalised so each column keeps the colour's mean light where it can."""
+    """Eqs 5–6: linear ``colour`` ``[cols, 3]`` (or ``[3]``) + (T − mean T), clipped to
+    [0, 1], renormalised so the colour's mean light is kept where it can be. Means are
+    taken over rows and smoothed across neighbouring columns: a curved panel's colour and
+    texture change along its columns, and a raw column mean would stripe the image."""
     rows, cols = texture.shape
     colour = np.broadcast_to(np.asarray(colour, float), (cols, 3))
     target = np.clip(colour, 0.0, 1.0)
-    deviation = texture - texture.mean(axis=0, keepdims=True)
+    deviation = texture - _column_mean(texture)[None]
     image = np.clip(target[None] + deviation[..., None], 0.0, 1.0)
     for _ in range(iterations):
-        deficit = target - image.mean(axis=0)  # [cols, 3]
+        deficit = target - _column_mean(image)  # [cols, 3]
         free = np.where(deficit[None] > 0, image < 1, image > 0)
         share = np.maximum(free.sum(axis=0), 1)
         image = np.clip(image + free * (deficit * rows / share)[None], 0.0, 1.0)
     return image
+
+
+def _column_mean(image: NDArray) -> NDArray:
+    """Mean over rows, smoothed over about 1/64 of the columns."""
+    mean = image.mean(axis=0)
+    width = image.shape[1] / 64
+    return gaussian_filter1d(mean, width, axis=0, mode="nearest") if width >= 1 else mean
 
 
 def _eye_blur_px(distance_m: float) -> float:

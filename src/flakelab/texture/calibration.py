@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import curve_fit, least_squares, minimize
 
+from flakelab.io.records import write_atomically
 from flakelab.texture.generator import (
     CONTROLS,
     PROCESSES,
@@ -230,7 +231,7 @@ def fit_process(
     )
     note(f"{process}: fitting the forms of size, grey level and sparkler over the ladder")
     constants = _fit_free_forms(process, constants, anchors, shape, seed + 1, iterations)
-    constants[2] = _fit_count_form(process, constants, values)
+    constants = _fit_closed_loop(process, constants, values, per_anchor)
     fitted = TextureProcess(process, constants, (float(values[0]), float(values[-1])))
     mismatch = [_mismatch(process, fitted.controls(a.value), a, shape, seed + 1) for a in anchors]
     report = {
@@ -282,24 +283,39 @@ def expected_value(process: str, controls: dict) -> float:
     return sparkle_grade(*expected_sparkle(**floats, level=SPARKLE_LEVEL))
 
 
-def _fit_count_form(process: str, constants: NDArray, values: NDArray) -> NDArray:
-    """The count's (A, B, e) such that the expected texture value of the generated image
-    is the prescribed one across the ladder's range (the closed loop, in expectation)."""
+def _fit_closed_loop(
+    process: str, constants: NDArray, values: NDArray, per_anchor: NDArray
+) -> NDArray:
+    """Refit the count's (A, B, e) — for glint the grey level's too — so that the expected
+    texture value equals the prescribed one across the ladder's range (the closed loop, in
+    expectation); the grey level is held near its per-anchor fits by a weak penalty, so the
+    histograms stay matched. Graininess does not depend on the grey level (Campbell)."""
+    rows = [2] if process == "coarseness" else [1, 2]
     prescribed = np.geomspace(values[0], values[-1], 25)
+    low, high = _EXPONENTS[process]
 
-    def missed(trial):
+    def residuals(flat):
         full = constants.copy()
-        full[2] = trial
+        full[rows] = flat.reshape(len(rows), 3)
         controls = control_values(process, full, prescribed)
         got = [
             expected_value(process, {k: v[i] for k, v in controls.items()})
             for i in range(prescribed.size)
         ]
-        return np.log(np.maximum(got, 1e-9) / prescribed)
+        missed = np.log(np.maximum(got, 1e-9) / prescribed)
+        if len(rows) == 1:
+            return missed
+        grey = control_values(process, full, values)["grey"]
+        return np.concatenate([missed, 0.2 * np.log(grey / per_anchor[:, 1])])
 
-    low, high = _EXPONENTS[process]
-    start = np.clip(constants[2], [-np.inf, -np.inf, low], [np.inf, np.inf, high])
-    return least_squares(missed, start, bounds=([-np.inf, -np.inf, low], [np.inf, np.inf, high])).x
+    bounds = (
+        np.tile([-np.inf, -np.inf, low], len(rows)),
+        np.tile([np.inf, np.inf, high], len(rows)),
+    )
+    start = np.clip(constants[rows].ravel(), *bounds)
+    best = constants.copy()
+    best[rows] = least_squares(residuals, start, bounds=bounds).x.reshape(len(rows), 3)
+    return best
 
 
 def roundtrip(
@@ -332,7 +348,8 @@ def save_processes(processes: dict[str, TextureProcess], path: Path) -> None:
         }
         for name, p in processes.items()
     }
-    Path(path).write_text(json.dumps(document, indent=2) + "\n")
+    text = json.dumps(document, indent=2) + "\n"
+    write_atomically(path, lambda temporary: temporary.write_text(text))
 
 
 def load_processes(path: Path) -> dict[str, TextureProcess]:

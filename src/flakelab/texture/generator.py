@@ -53,10 +53,10 @@ FULL_SCALE = 1000.0
 """Camera full scale [white diffuser units]: the renormalisation after the sparkler."""
 UNITS = {
     "coarseness": {"size": 1.0, "grey": 0.01, "count": 0.1, "sparkler": 1.0},
-    "glint": {"size": 0.1, "grey": 10.0, "count": 0.0005, "sparkler": 2.0},
+    "glint": {"size": 0.1, "grey": 10.0, "count": 0.00025, "sparkler": 2.0},
 }
 """Scale of each control's function value: the Fermi–Dirac forms span 1–101, so a glint
-count (patches per pixel, about 0.001–0.05) is counted per 2,000 pixels, and so on."""
+count (patches per pixel, about 0.0005–0.025) is counted per 4,000 pixels, and so on."""
 DENSE_COUNT = 4.0
 """Patches per pixel above which a pixel's sum of patches is drawn from its gamma law."""
 _SIZE_BIN_RATIO = 1.12
