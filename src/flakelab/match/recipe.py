@@ -13,6 +13,7 @@ import numpy as np
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.units import parse_amount
 from flakelab.errors import FlakelabError
 
 __all__ = ["RecipeLine", "weigh", "rounding_cost", "parse_quantity", "RecipeError"]
@@ -32,18 +33,7 @@ class RecipeLine:
 def parse_quantity(text: str) -> float:
     """``250g``, ``0.5 kg``, ``1lb`` → grams."""
     units = {"kg": 1000.0, "g": 1.0, "lb": 453.59237, "oz": 28.349523125}
-    value = text.strip().lower().replace(" ", "")
-    unit = next((u for u in units if value.endswith(u)), "")
-    number, factor = (value[: -len(unit)], units[unit]) if unit else (value, 1.0)
-    try:
-        grams = float(number) * factor
-    except ValueError:
-        raise RecipeError(
-            f"--quantity: expected an amount like 250g or 0.5kg, got {text!r}"
-        ) from None
-    if not np.isfinite(grams) or grams <= 0:
-        raise RecipeError(f"--quantity: expected a positive amount, got {text!r}")
-    return grams
+    return parse_amount(text, units, "--quantity", "250g or 0.5kg", RecipeError)
 
 
 def weigh(

@@ -41,6 +41,7 @@ from flakelab.core.colorimetry import (
     reflectance_to_Lab,
 )
 from flakelab.core.measurement import Measurement
+from flakelab.core.units import parse_amount
 from flakelab.io.records import write_atomically
 from flakelab.texture.calibration import shipped_processes
 from flakelab.texture.generator import TextureProcess, patch_image
@@ -303,18 +304,7 @@ def render_grid(
 
 def parse_distance(text: str) -> float:
     """``0.5m``, ``50cm``, ``500mm`` (or a bare number of metres) → metres."""
-    units = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-    value = text.strip().lower().replace(" ", "")
-    unit = next((u for u in units if value.endswith(u)), "")
-    try:
-        metres = float(value[: len(value) - len(unit)]) * units.get(unit, 1.0)
-    except ValueError:
-        raise ValueError(
-            f"--distance: expected a distance like 0.5m or 50cm, got {text!r}"
-        ) from None
-    if not np.isfinite(metres) or metres <= 0:
-        raise ValueError(f"--distance: expected a positive distance, got {text!r}")
-    return metres
+    return parse_amount(text, {"mm": 1e-3, "cm": 1e-2, "m": 1.0}, "--distance", "0.5m or 50cm")
 
 
 def save_image(image: NDArray, path) -> None:

@@ -1,0 +1,29 @@
+"""Amounts typed with a unit (``250g``, ``0.5 kg``, ``50cm``) → one number in a base unit."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+__all__ = ["parse_amount"]
+
+
+def parse_amount(
+    text: str,
+    units: Mapping[str, float],
+    option: str,
+    example: str,
+    error: type[Exception] = ValueError,
+) -> float:
+    """``text`` in any of ``units`` (name → factor to the base unit; a bare number is in the
+    base unit) as a positive finite number, else ``error`` naming ``option``."""
+    value = text.strip().lower().replace(" ", "")
+    unit = max((u for u in units if value.endswith(u)), key=len, default="")
+    try:
+        amount = float(value[: len(value) - len(unit)]) * units.get(unit, 1.0)
+    except ValueError:
+        raise error(f"{option}: expected an amount like {example}, got {text!r}") from None
+    if not np.isfinite(amount) or amount <= 0:
+        raise error(f"{option}: expected a positive amount, got {text!r}")
+    return amount
