@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
-import tracemalloc
 
 import colour
 import numpy as np
 
 from flakelab.core.colorimetry import D65_10, OBSERVERS, reflectance_to_Lab, white_point
 from flakelab.core.spectra import SHAPE_STORE
+from timing import best_time, measure_peak
 
 
 def baseline_lab(R: np.ndarray) -> np.ndarray:
@@ -27,15 +26,6 @@ def baseline_lab(R: np.ndarray) -> np.ndarray:
     return colour.XYZ_to_Lab(XYZ, colour.XYZ_to_xy(white_point()))
 
 
-def timed(function, *args, repeat: int = 3) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function(*args)
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=100_000, help="spectra per run")
@@ -45,13 +35,10 @@ def main() -> None:
 
     R = np.random.default_rng(args.seed).uniform(0, 1.2, (args.n, 31))
     reflectance_to_Lab(R[:10], conditions=D65_10)  # build the weight table once
-    ours = timed(reflectance_to_Lab, R)
+    ours = best_time(reflectance_to_Lab, R)
     base_n = min(args.n, 20_000)
-    base = timed(baseline_lab, R[:base_n], repeat=1) * args.n / base_n
-    tracemalloc.start()
-    lab = reflectance_to_Lab(R)
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
+    base = best_time(baseline_lab, R[:base_n], repeat=1) * args.n / base_n
+    lab, _, peak_mb = measure_peak(reflectance_to_Lab, R)
     agreement = float(np.abs(lab[:base_n] - baseline_lab(R[:base_n])).max())
     report = {
         "spectra": args.n,
@@ -59,7 +46,7 @@ def main() -> None:
         "colour_msds_to_XYZ_spectra_per_s": args.n / base,
         "speedup": base / ours,
         "max_abs_Lab_difference": agreement,
-        "peak_memory_mb": peak / 2**20,
+        "peak_memory_mb": peak_mb,
     }
     if args.json:
         print(json.dumps(report, indent=1))

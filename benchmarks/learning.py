@@ -20,18 +20,14 @@ import numpy as np
 from flakelab.cases.generator import World
 from flakelab.io import read_library
 from flakelab.models.training import TrainingConfig, case_arrays, evaluate_model, train_protocol
+from timing import best_time
 
 
 def inference_rate(model, toners: int, n: int = 200_000) -> float:
     """Formulations per second through ``model.predict`` (batched), best of three."""
     x = np.random.default_rng(0).dirichlet(np.ones(toners) * 0.2, n)
     model.predict(x[:1000])
-    best = np.inf
-    for _ in range(3):
-        start = time.perf_counter()
-        model.predict(x)
-        best = min(best, time.perf_counter() - start)
-    return n / best
+    return n / best_time(model.predict, x)
 
 
 def main() -> None:

@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
-import tracemalloc
 
 import numpy as np
 
@@ -25,6 +23,7 @@ from flakelab.io import read_library
 from flakelab.physics.fast import predict
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.physics.montecarlo import simulate
+from timing import measure_peak
 
 GEOMETRIES = INSTRUMENT_GEOMETRIES["byk-mac-i"]
 LADDER = {
@@ -55,16 +54,6 @@ def random_fractions(library, n: int, seed: int) -> np.ndarray:
     for _ in range(3):
         x[rows, rng.choice(pigments, n)] += rng.uniform(0, 0.1, n)
     return x / x.sum(axis=1, keepdims=True)
-
-
-def measure_peak(function, *args):
-    tracemalloc.start()
-    start = time.perf_counter()
-    result = function(*args)
-    seconds = time.perf_counter() - start
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return result, seconds, peak / 2**20
 
 
 def main() -> None:

@@ -12,22 +12,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
-import tracemalloc
 
 from flakelab.data import example_path
 from flakelab.io import read_measurement
 from flakelab.render.appearance import appearance_of, render_curved, texture_images
 from flakelab.texture.calibration import shipped_processes
-
-
-def best_time(function, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return min(times)
+from timing import best_time, measure_peak
 
 
 def main() -> None:
@@ -39,13 +29,10 @@ def main() -> None:
     appearance = appearance_of(read_measurement(example_path("target")))
     shipped_processes()  # load once, outside the timings
     shape = (args.size, args.size)
-    textured = best_time(lambda: render_curved(appearance, shape), args.repeats)
-    plain = best_time(lambda: render_curved(appearance, shape, texture=False), args.repeats)
-    images = best_time(lambda: texture_images(2.0, 8.0, shape), args.repeats)
-    tracemalloc.start()
-    render_curved(appearance, shape)
-    peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
-    tracemalloc.stop()
+    textured = best_time(render_curved, appearance, shape, repeat=args.repeats)
+    plain = best_time(lambda: render_curved(appearance, shape, texture=False), repeat=args.repeats)
+    images = best_time(texture_images, 2.0, 8.0, shape, repeat=args.repeats)
+    _, _, peak_mb = measure_peak(render_curved, appearance, shape)
     report = {
         "size_px": args.size,
         "curved_textured_s": round(textured, 3),
