@@ -44,7 +44,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.units import parse_amount
 from flakelab.io.records import write_atomically
 from flakelab.texture.calibration import shipped_processes
-from flakelab.texture.generator import TextureProcess, patch_image
+from flakelab.texture.generator import FWHM_PER_SIGMA, TextureProcess, patch_image
 from flakelab.texture.metrics import sparkle_grade
 
 __all__ = [
@@ -157,7 +157,7 @@ def _column_mean(image: NDArray) -> NDArray:
 
 def _eye_blur_px(distance_m: float) -> float:
     """Extra blur σ [camera pixels] of the eye's spot at ``distance_m`` beyond the reference."""
-    spot = np.radians(EYE_RESOLUTION_ARCMIN / 60.0) / (2 * np.sqrt(2 * np.log(2)))
+    spot = np.radians(EYE_RESOLUTION_ARCMIN / 60.0) / FWHM_PER_SIGMA
     extra = max(distance_m**2 - REFERENCE_DISTANCE_M**2, 0.0)
     return float(np.sqrt(extra) * spot * 1e6 / CAMERA_PIXEL_UM)
 
@@ -172,7 +172,6 @@ def _texture_value(process: TextureProcess, value: NDArray) -> tuple[NDArray, ND
     """Values clamped into the fitted range, and a strength that fades texture out below it
     (a solid colour has none)."""
     low, high = process.value_range
-    value = np.asarray(value, float)
     return np.clip(value, low, high), np.clip(value / low, 0.0, 1.0)
 
 
@@ -192,7 +191,7 @@ def texture_images(
     blur = _eye_blur_px(distance_m)
     g, g_strength = _texture_value(processes["glint"], _as_map(glint))
     controls = processes["glint"].controls(g)
-    sigma = controls["size"] / (2 * np.sqrt(2 * np.log(2)))
+    sigma = controls["size"] / FWHM_PER_SIGMA
     controls["grey"] = controls["grey"] * sigma**2 / (sigma**2 + blur**2)
     directional = _tone(patch_image(**controls, shape=shape, rng=rng)) * g_strength
     c, c_strength = _texture_value(processes["coarseness"], _as_map(coarseness))
@@ -218,8 +217,6 @@ def _render(
     seed: int,
 ) -> NDArray:
     """Linear-light image ``[rows, cols, 3]`` with column ``j`` at ``aspecular[j]``."""
-    if not 0.0 <= diffuse_fraction <= 1.0:
-        raise ValueError(f"light: expected a diffuse fraction in [0, 1], got {diffuse_fraction}")
     if distance_m <= 0:
         raise ValueError(f"distance: expected a positive distance, got {distance_m} m")
     directional_colour = Lab_to_linear_sRGB(
@@ -233,11 +230,24 @@ def _render(
         )
     else:
         T_dir = T_diff = np.zeros(shape)
-    directional = compose(directional_colour, T_dir)
-    diffuse = compose(diffuse_colour, T_diff)
-    image = diffuse * diffuse_fraction + directional * (1 - diffuse_fraction)  # eq. 7
+    image = _mix(directional_colour, diffuse_colour, T_dir, T_diff, diffuse_fraction)
     highlight = _gloss(aspecular, gloss) * (1 - diffuse_fraction)
     return np.clip(image + highlight[None, :, None], 0.0, 1.0)
+
+
+def _mix(
+    directional_colour: NDArray,
+    diffuse_colour: NDArray,
+    directional_texture: NDArray,
+    diffuse_texture: NDArray,
+    diffuse_fraction: float,
+) -> NDArray:
+    """Eqs 5–7: each light's colour with its texture, mixed with the diffuse fraction d."""
+    if not 0.0 <= diffuse_fraction <= 1.0:
+        raise ValueError(f"light: expected a diffuse fraction in [0, 1], got {diffuse_fraction}")
+    directional = compose(directional_colour, directional_texture)
+    diffuse = compose(diffuse_colour, diffuse_texture)
+    return np.clip(diffuse * diffuse_fraction + directional * (1 - diffuse_fraction), 0.0, 1.0)
 
 
 def render_panel(
@@ -297,9 +307,7 @@ def render_grid(
         seed=seed,
         processes=processes,
     )
-    directional = compose(colour, T_dir)
-    diffuse = compose(diffuse_colour, T_diff)
-    return np.clip(diffuse * diffuse_fraction + directional * (1 - diffuse_fraction), 0.0, 1.0)
+    return _mix(colour, diffuse_colour, T_dir, T_diff, diffuse_fraction)
 
 
 def parse_distance(text: str) -> float:

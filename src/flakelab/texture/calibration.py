@@ -69,6 +69,8 @@ __all__ = [
 PERCENTILES = (10, 20, 30, 40, 50, 60, 70, 80, 90, 95, 99, 99.9)
 """Histogram percentiles compared (with the mean) between generated and anchor images."""
 ANCHOR_LIGHT = {"coarseness": "diffuse", "glint": 45.0}
+_MAX_COUNT = 50.0
+_REFUSED = 1e3
 _LOG_FLOOR = 0.03  # grey levels below 3 % of a white diffuser all look black
 _VALUE_WEIGHT = 20.0
 _SHIPPED = "texture-processes.json"
@@ -124,6 +126,11 @@ def histogram_statistics(image: NDArray) -> NDArray[np.float64]:
 
 
 def _mismatch(process: str, controls: dict, anchor: AnchorPanel, shape, seed: int) -> float:
+    """Histogram and value mismatch of the process's image with the anchor's; a count the
+    prescribed value cannot be reached with (infinite, or above 50 patches per pixel) is
+    refused with a large loss before any image is drawn."""
+    if not np.isfinite(controls["count"]) or controls["count"] > _MAX_COUNT:
+        return _REFUSED
     image = patch_image(**controls, shape=shape, rng=np.random.default_rng(seed))
     value = measure_texture(process, image)
     stats = histogram_statistics(image) - histogram_statistics(anchor.image)
@@ -167,10 +174,7 @@ def _fit_anchor(process: str, anchor: AnchorPanel, shape, seed: int) -> NDArray:
         return _complete(process, free, anchor.value, mean)
 
     def loss(log_free):
-        trial = controls(log_free)
-        if not np.isfinite(trial["count"]) or trial["count"] > 50:
-            return 1e3
-        return _mismatch(process, trial, anchor, shape, seed)
+        return _mismatch(process, controls(log_free), anchor, shape, seed)
 
     start = np.log(_initial_controls(process, anchor))
     result = minimize(loss, start, method="Nelder-Mead", options={"maxiter": 400})
@@ -258,9 +262,10 @@ def _fit_free_forms(process, constants, anchors, shape, seed, iterations) -> NDA
             controls = control_values(process, trial, anchor.value)
             free = np.array([float(controls[CONTROLS[r]]) for r in free_rows])
             full = _complete(process, free, anchor.value, float(anchor.image.mean()))
-            if not np.isfinite(full["count"]) or full["count"] > 50:
-                return 1e3
-            total += _mismatch(process, full, anchor, shape, seed)
+            loss = _mismatch(process, full, anchor, shape, seed)
+            if loss >= _REFUSED:
+                return _REFUSED
+            total += loss
         return total / len(anchors)
 
     start = constants[free_rows].ravel()

@@ -31,6 +31,7 @@ from scipy.ndimage import gaussian_filter
 __all__ = [
     "CONTROLS",
     "DENSE_COUNT",
+    "FWHM_PER_SIGMA",
     "PROCESSES",
     "FULL_SCALE",
     "TextureProcess",
@@ -60,7 +61,8 @@ count (patches per pixel, about 0.0005–0.025) is counted per 4,000 pixels, and
 DENSE_COUNT = 4.0
 """Patches per pixel above which a pixel's sum of patches is drawn from its gamma law."""
 _SIZE_BIN_RATIO = 1.12
-_FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
+FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
+"""Full width at half maximum of a Gaussian, in standard deviations."""
 
 
 def control_values(process: str, constants: NDArray, value: ArrayLike) -> dict[str, NDArray]:
@@ -110,7 +112,7 @@ def patch_image(
     if dense.any():
         mean_amplitude, spread = amplitude_moments(sparkler[dense])
         impulses[dense] = rng.gamma(count[dense] / spread, grey[dense] * mean_amplitude * spread)
-    sigma = np.maximum(size, 0.3) / _FWHM_PER_SIGMA
+    sigma = np.maximum(size, 0.3) / FWHM_PER_SIGMA
     image = np.zeros(shape)
     for bin_sigma, members in _size_bins(sigma):
         masked = impulses if members is None else np.where(members, impulses, 0.0)
@@ -128,7 +130,7 @@ def amplitude_moments(sparkler: ArrayLike) -> tuple[NDArray, NDArray]:
 
 def expected_mean(size: ArrayLike, grey: ArrayLike, count: ArrayLike, sparkler: ArrayLike):
     """Mean grey level of the process: count · E[a] · 2πσ² (Campbell's theorem)."""
-    sigma = np.asarray(size, dtype=float) / _FWHM_PER_SIGMA
+    sigma = np.asarray(size, dtype=float) / FWHM_PER_SIGMA
     return (
         np.asarray(count) * np.asarray(grey) * amplitude_moments(sparkler)[0] * 2 * np.pi * sigma**2
     )
@@ -140,7 +142,7 @@ def expected_graininess(
     """Graininess 100·CV of the process after Gaussian smoothing ``smoothing_px`` (the
     metric's): Campbell's theorem gives CV² = (E[a²]/E[a]²) / (4π·count·(σ² + σ_s²)), free
     of the grey level."""
-    sigma = np.asarray(size, dtype=float) / _FWHM_PER_SIGMA
+    sigma = np.asarray(size, dtype=float) / FWHM_PER_SIGMA
     spread = amplitude_moments(sparkler)[1]
     return 100 * np.sqrt(spread / (4 * np.pi * np.asarray(count) * (sigma**2 + smoothing_px**2)))
 
@@ -149,7 +151,7 @@ def count_for_graininess(
     value: ArrayLike, size: ArrayLike, sparkler: ArrayLike, smoothing_px: float
 ) -> NDArray:
     """The count that gives graininess ``value`` (inverse of :func:`expected_graininess`)."""
-    sigma = np.asarray(size, dtype=float) / _FWHM_PER_SIGMA
+    sigma = np.asarray(size, dtype=float) / FWHM_PER_SIGMA
     spread = amplitude_moments(sparkler)[1]
     return spread / (4 * np.pi * (np.asarray(value) / 100) ** 2 * (sigma**2 + smoothing_px**2))
 
@@ -179,7 +181,7 @@ def count_for_sparkle_grade(
 
 def _lit_pixels(size: float, grey: float, sparkler: float, level: float) -> tuple[float, float]:
     """E[pixels above ``level``] and E[Σ log10(pixel/level)] per patch."""
-    sigma = max(size, 0.3) / _FWHM_PER_SIGMA
+    sigma = max(size, 0.3) / FWHM_PER_SIGMA
     half = int(np.ceil(4 * sigma)) + 1
     impulse = np.zeros((2 * half + 1, 2 * half + 1))
     impulse[half, half] = 2 * np.pi * sigma**2
