@@ -161,11 +161,13 @@ def _proxies(library: Library, novel: NDArray) -> dict[int, int]:
         candidates = [i for i, t in enumerate(library.toners) if t.kind == kind and not novel[i]]
         if not candidates:
             continue
+        in_metallic = bool(aluminium) and kind != "aluminium"
+        share = 0.1 if in_metallic else 1.0
         mixes = np.zeros((len(candidates) + 1, len(names)))
-        if aluminium and kind != "aluminium":
-            mixes[:, aluminium[0]] = 0.9
-        mixes[np.arange(len(candidates)), candidates] += 0.1 if aluminium else 1.0
-        mixes[-1, j] += 0.1 if aluminium else 1.0
+        if in_metallic:
+            mixes[:, aluminium[0]] = 1.0 - share
+        mixes[np.arange(len(candidates)), candidates] += share
+        mixes[-1, j] += share
         spectra = np.log(
             predict(layer_from_fractions(library, mixes), ("45as15", "45as45", "45as110")) + 1e-6
         )
