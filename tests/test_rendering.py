@@ -182,3 +182,15 @@ def test_render_refuses_bad_input_without_writing(tmp_path):
     run = flakelab("render", "--size", "32", "-o", str(tmp_path / "x.bmp"))
     assert run.returncode == 2 and ".png" in run.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_texture_grid_keeps_one_colour_in_every_tile(appearance):
+    from flakelab.render.appearance import render_grid
+
+    # Fig. 3 holds colour fixed: every tile's mean is the untextured colour of the same light
+    steps, tile = 4, 96
+    image = render_grid(appearance, steps, tile, diffuse_fraction=0.5, seed=1)
+    tiles = image.reshape(steps, tile, steps, tile, 3).mean(axis=(1, 3)).reshape(-1, 3)
+    plain = render_panel(appearance, 45.0, 8, diffuse_fraction=0.5, texture=False)
+    reference = linear_sRGB_to_Lab(plain.mean(axis=(0, 1)))
+    assert np.max(delta_E00(linear_sRGB_to_Lab(tiles), reference)) <= 0.5

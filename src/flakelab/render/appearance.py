@@ -293,7 +293,9 @@ def render_grid(
     seed: int = 0,
     processes: dict[str, TextureProcess] | None = None,
 ) -> NDArray:
-    """Paper 001 Fig. 3: colour fixed; glint rises in ``steps`` across, coarseness up."""
+    """Paper 001 Fig. 3: colour fixed; glint rises in ``steps`` across, coarseness up.
+    Each tile is composed on its own, with one mean over its pixels, so every tile keeps the
+    colour (a mean down whole columns would mix the rows' different textures)."""
     processes = processes or shipped_processes()
     glint = np.geomspace(*processes["glint"].value_range, steps)
     coarse = np.geomspace(*processes["coarseness"].value_range, steps)[::-1]  # top: coarsest
@@ -307,7 +309,15 @@ def render_grid(
         seed=seed,
         processes=processes,
     )
-    return _mix(colour, diffuse_colour, T_dir, T_diff, diffuse_fraction)
+    image = np.empty((side, side, 3))
+    for i in range(steps):
+        for j in range(steps):
+            tile = np.s_[i * tile_px : (i + 1) * tile_px, j * tile_px : (j + 1) * tile_px]
+            # a tile's texture is uniform: one mean over all its pixels (as one column)
+            mixed = _mix(colour, diffuse_colour, T_dir[tile].reshape(-1, 1),
+                         T_diff[tile].reshape(-1, 1), diffuse_fraction)  # fmt: skip
+            image[tile] = mixed.reshape(tile_px, tile_px, 3)
+    return image
 
 
 def parse_distance(text: str) -> float:
