@@ -126,3 +126,28 @@ def test_shipped_models_cover_the_demo_library(instrument):
     assert model.instrument == instrument
     R, texture = model.predict(np.eye(len(LIBRARY.names))[:3])
     assert R.shape == (3, len(model.geometries), 31) and np.all(R > 0)
+
+
+def test_colour_loss_is_the_mean_squared_cie94_difference(trained, data):
+    """The training's colour term against colour-science's CIE 1994 (graphic arts), on
+    decoded network outputs; zero when the outputs are the measured data themselves."""
+    import colour
+
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.models.training import _colour_loss
+
+    model, _ = trained
+    rows = torch.arange(12)
+    loss = _colour_loss(model, data.R[:12])
+    features = model.features(torch.as_tensor(data.x[:12])).numpy()
+    with torch.no_grad():
+        output = model.network(torch.as_tensor((features - model.x_mean) / model.x_std).float())
+        value = float(loss(output, rows))
+    predicted, _ = model.predict(data.x[:12])
+    reference = colour.delta_E(
+        reflectance_to_Lab(data.R[:12]), reflectance_to_Lab(predicted), method="CIE 1994"
+    )
+    assert value == pytest.approx(np.mean(reference**2), rel=2e-3)
+    perfect = (model.encode_targets(data.R[:12], data.texture[:12]) - model.y_mean) / model.y_std
+    exact = float(loss(torch.as_tensor(perfect, dtype=torch.float32), rows))
+    assert exact < 1e-3 * value

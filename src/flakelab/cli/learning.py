@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -169,6 +170,11 @@ def train(
     ] = True,
     epochs: Annotated[int, typer.Option(help="Epochs per stage (then as many fine-tuning).")] = 300,
     hidden: Annotated[str, typer.Option(help="Hidden layer sizes.")] = "100,100,100",
+    batch_size: Annotated[int, typer.Option(min=1, help="Cases per optimiser step.")] = 128,
+    colour_weight: Annotated[
+        float | None,
+        typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term [default: 0.02]."),
+    ] = None,
     holdout: Annotated[float, typer.Option(help="Share of cases held out to judge it.")] = 0.1,
     adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
     seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
@@ -190,7 +196,15 @@ def train(
     data = case_arrays([c for c, h in zip(chosen, held, strict=True) if not h], lib.names, effect)
     held_out = case_arrays([c for c, h in zip(chosen, held, strict=True) if h], lib.names, effect)
     sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
-    config = TrainingConfig(hidden=sizes, epochs=epochs, finetune_epochs=epochs, seed=seed)
+    config = TrainingConfig(
+        hidden=sizes,
+        epochs=epochs,
+        finetune_epochs=epochs,
+        batch_size=batch_size,
+        seed=seed,
+    )
+    if colour_weight is not None:
+        config = replace(config, colour_weight=colour_weight)
     stages = 2 * (config.folds + 1) * epochs + (config.adapt_epochs if adapt else 0)
     with progress_bar(disable=json_output) as bar:
         task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)

@@ -19,7 +19,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.errors import FlakelabError
-from flakelab.match.objective import TorchColour
+from flakelab.core.torch_colour import TorchColour
 
 __all__ = ["correct", "Correction", "CORRECTION_MODES"]
 

@@ -29,7 +29,7 @@ from flakelab.core.difference import delta_E, delta_LCH
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.errors import FlakelabError
-from flakelab.match.objective import TorchColour
+from flakelab.core.torch_colour import TorchColour
 
 __all__ = ["Candidate", "MatchResult", "MatchSettings", "match", "MatchError"]
 

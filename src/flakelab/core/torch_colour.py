@@ -22,9 +22,10 @@ _KAPPA = 24389 / 27
 class TorchColour:
     """CIELAB of reflectance tensors ``[..., 31]`` under fixed conditions."""
 
-    def __init__(self, conditions: Conditions = D65_10) -> None:
-        self.weights = torch.as_tensor(np.array(tristimulus_weights(conditions=conditions)))
-        self.white = torch.as_tensor(white_point(conditions=conditions))
+    def __init__(self, conditions: Conditions = D65_10, dtype: torch.dtype = torch.float64) -> None:
+        weights = np.array(tristimulus_weights(conditions=conditions))
+        self.weights = torch.as_tensor(weights, dtype=dtype)
+        self.white = torch.as_tensor(white_point(conditions=conditions), dtype=dtype)
 
     def lab(self, R: torch.Tensor) -> torch.Tensor:
         t = (R.to(self.weights.dtype) @ self.weights) / self.white
