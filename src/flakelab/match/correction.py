@@ -18,8 +18,8 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from flakelab.errors import FlakelabError
 from flakelab.core.torch_colour import TorchColour
+from flakelab.errors import FlakelabError
 
 __all__ = ["correct", "Correction", "CORRECTION_MODES"]
 

@@ -28,8 +28,8 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, delta_LCH
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
-from flakelab.errors import FlakelabError
 from flakelab.core.torch_colour import TorchColour
+from flakelab.errors import FlakelabError
 
 __all__ = ["Candidate", "MatchResult", "MatchSettings", "match", "MatchError"]
 

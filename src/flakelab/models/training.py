@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 
 from flakelab.cases.case import Case
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.torch_colour import TorchColour
 from flakelab.core.difference import delta_E
 from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.torch_colour import TorchColour
 from flakelab.models.network import ForwardModel, ModelError, build_network
 
 __all__ = [
