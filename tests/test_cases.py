@@ -5,6 +5,7 @@ from __future__ import annotations
 import multiprocessing
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -50,6 +51,26 @@ def test_generated_world_is_as_hard_as_a_shop(world):
     assert 0.3 <= report["respray_de00_median"] <= 0.8
     assert 0.02 <= report["batch_strength_sd"] <= 0.04
     assert 0.5 <= report["weathered_target_de00_median"] <= 2.0
+    assert 0.3 <= report["exact_model_de00_mean"] <= report["exact_model_de00_p95"]
+
+
+def test_exact_model_floor_vanishes_without_variation(world):
+    """A noiseless world's spray-outs are exactly the nominal appearance."""
+    silent = replace(
+        world.settings,
+        batch_strength_sd=0.0,
+        batch_hue_shift_nm=0.0,
+        film_build_sd=0.0,
+        spread_sd=0.0,
+        noise_band=0.0,
+        noise_gain=0.0,
+        noise_offset=0.0,
+    )
+    quiet = World(world.library, world.instrument, silent)
+    rng = np.random.default_rng(5)
+    x = quiet.formulations(30, rng)
+    assert quiet.exact_model_de00(x, rng).max() < 1e-6
+    assert world.exact_model_de00(x, rng).mean() > 0.2
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".cxf"])

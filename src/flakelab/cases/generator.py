@@ -292,15 +292,27 @@ class World:
         weathered_R, _ = self.appearance(aged, self.nominal(n))
         fresh_R, _ = self.appearance(x, self.nominal(n))
         weathered = self.worst_de00(fresh_R, weathered_R + haze[:, None, None])
+        floor = self.exact_model_de00(x, rng)
         return {
             "remeasure_de00_median": float(np.median(remeasure)),
             "respray_de00_median": float(np.median(respray[metallic])),
             "respray_de00_median_all": float(np.median(respray)),
             "batch_strength_sd": float(np.std(batch.strength)),
             "weathered_target_de00_median": float(np.median(weathered)),
+            "exact_model_de00_mean": float(floor.mean()),
+            "exact_model_de00_p95": float(np.percentile(floor, 95)),
             "formulations": n,
             "seed": seed,
         }
+
+    def exact_model_de00(self, fractions: NDArray, rng: np.random.Generator) -> NDArray:
+        """ΔE00 ``[F, G]`` between spray-outs of ``fractions`` (shop batches, application,
+        instrument) and their nominal appearance: what a forward model that knew this world's
+        physics exactly would score in ``flakelab model evaluate`` — the cases' noise floor."""
+        n = fractions.shape[0]
+        R, _ = self.appearance(fractions, self.variation(n, rng))
+        nominal, _ = self.appearance(fractions, self.nominal(n))
+        return delta_E(reflectance_to_Lab(self.measure(R, rng)), reflectance_to_Lab(nominal))
 
     def application(self, n: int, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
         """One spraying: relative film build and flake-spread scale ``[n]`` each."""

@@ -154,6 +154,8 @@ def realism(
         table.add_column(column)
     for key, (lo, hi) in ranges.items():
         table.add_row(key, f"{report[key]:.3f}", f"{lo}–{hi}")
+    for key in ("exact_model_de00_mean", "exact_model_de00_p95"):
+        table.add_row(key, f"{report[key]:.3f}", "(the cases' noise floor)")
     console.print(table)
 
 
