@@ -5,7 +5,8 @@ the whole protocol (five partitions × (300 + 300) epochs, outlier screening, fi
 training), and reports wall time, peak memory (max RSS) and batched inference throughput,
 with held-out ΔE00 on 500 fresh cases.
 
-    python benchmarks/learning.py [--cases 61000] [--epochs 300] [--batch-size 256] [--json]
+    python benchmarks/learning.py [--cases 61000] [--epochs 300] [--batch-size 1024]
+        [--learning-rate 4e-3] [--json]
 """
 
 from __future__ import annotations
@@ -34,7 +35,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", type=int, default=61_000)
     parser.add_argument("--epochs", type=int, default=300)
-    parser.add_argument("--batch-size", type=int, default=256)
+    parser.add_argument("--batch-size", type=int, default=1024)
+    parser.add_argument(
+        "--learning-rate", type=float, default=4e-3, help="fine-tuning uses a tenth of it"
+    )
     parser.add_argument("--instrument", default="five-angle")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
@@ -60,7 +64,12 @@ def main() -> None:
     generate_s = time.perf_counter() - start
     data = case_arrays(cases, library.names, effect)
     config = TrainingConfig(
-        epochs=args.epochs, finetune_epochs=args.epochs, batch_size=args.batch_size, seed=args.seed
+        epochs=args.epochs,
+        finetune_epochs=args.epochs,
+        batch_size=args.batch_size,
+        learning_rate=args.learning_rate,
+        finetune_learning_rate=args.learning_rate / 10,
+        seed=args.seed,
     )
     start = time.perf_counter()
     model, report = train_protocol(data, config)
@@ -73,6 +82,8 @@ def main() -> None:
         "cases": args.cases,
         "epochs_per_stage": args.epochs,
         "batch_size": args.batch_size,
+        "learning_rate": args.learning_rate,
+        "colour_weight": config.colour_weight,
         "generate_seconds": generate_s,
         "protocol_seconds": train_s,
         "protocol_minutes": train_s / 60,
