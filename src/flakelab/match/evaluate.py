@@ -33,12 +33,15 @@ def _worst(a, b) -> float:
 
 def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
     oem, shop = world.variation(1, rng), world.variation(1, rng)
+    # each spray draws from its own stream, so the oracle's spray (and the next target) do
+    # not depend on whether the matcher needed a correction
+    first_rng, correction_rng, oracle_rng = rng.spawn(3)
 
-    def spray(x: np.ndarray) -> np.ndarray:
-        film, spread = world.application(1, rng)
+    def spray(x: np.ndarray, stream: np.random.Generator) -> np.ndarray:
+        film, spread = world.application(1, stream)
         variation = Variation(shop.strength, shop.hue_shift, film, spread)
         R, _ = world.appearance(x[None], variation)
-        return world.measure(R, rng)[0]
+        return world.measure(R, stream)[0]
 
     R_target, _ = world.appearance(x_hidden[None], oem)
     target = world.measure(R_target, rng)[0]
@@ -47,13 +50,14 @@ def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
     latency = time.perf_counter() - start
     best = result.candidates[0]
     x = np.array([best.fractions.get(n, 0.0) for n in forward.toners])
-    first = spray(x)
+    first = spray(x, first_rng)
     first_de = _worst(target, first)
     corrected_de = first_de
     if first_de > SUCCESS_DE00:
         recipe = correct(forward, target, best.fractions, first, mode="reformulate").fractions
-        corrected_de = _worst(target, spray(np.array([recipe.get(n, 0.0) for n in forward.toners])))
-    oracle_de = _worst(target, spray(x_hidden))
+        corrected = np.array([recipe.get(n, 0.0) for n in forward.toners])
+        corrected_de = _worst(target, spray(corrected, correction_rng))
+    oracle_de = _worst(target, spray(x_hidden, oracle_rng))
     return {
         "first_de00": first_de,
         "corrected_de00": min(first_de, corrected_de),
