@@ -83,9 +83,9 @@ def evaluate_matching(
     settings = settings or MatchSettings()
     rng = np.random.default_rng(seed)
     names = list(world.library.names)
-    allowed = np.array([n not in novel for n in names])
-    hidden = world.formulations(targets, rng) * allowed
-    hidden /= hidden.sum(1, keepdims=True)
+    # hidden formulations draw only on toners the model knows (a new toner is added below)
+    known = World(world.library, world.instrument, world.settings, exclude=novel)
+    hidden = known.formulations(targets, rng)
     rows = []
     for x in hidden:
         rows.append(_one(world, forward, effect, x, rng, settings))
@@ -93,9 +93,7 @@ def evaluate_matching(
             progress()
     novel_rows = []
     if novel and novel_targets:
-        base = world.formulations(novel_targets, rng) * allowed
-        for x in base:
-            x = x / x.sum()
+        for x in known.formulations(novel_targets, rng):
             x[names.index(novel[int(rng.integers(len(novel)))])] = np.exp(
                 rng.uniform(np.log(0.01), np.log(0.08))
             )
