@@ -177,9 +177,10 @@ def fit(
     generator = torch.Generator().manual_seed(config.seed + len(log))
     features = model.features(torch.as_tensor(data.x[rows])).numpy()
     x = torch.as_tensor((features - model.x_mean) / model.x_std, dtype=torch.float32)
-    y_raw = model.encode_targets(data.R[rows], data.texture[rows])
+    reflectance = data.R[rows]
+    y_raw = model.encode_targets(reflectance, data.texture[rows])
     y = torch.as_tensor((y_raw - model.y_mean) / model.y_std, dtype=torch.float32)
-    colour_loss = _colour_loss(model, data.R[rows]) if config.colour_weight > 0 else None
+    colour_loss = _colour_loss(model, reflectance) if config.colour_weight > 0 else None
     optimiser = torch.optim.Adam(model.network.parameters(), lr=learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=epochs)
     model.network.train()
