@@ -17,8 +17,10 @@ from flakelab.models.registry import SHIPPED, list_models, register, shipped_mod
 from flakelab.models.training import (
     CaseArrays,
     TrainingConfig,
+    _new_model,
     case_arrays,
     evaluate_model,
+    fit,
     flag_outliers,
     train_protocol,
 )
@@ -92,6 +94,26 @@ def test_gross_errors_are_flagged_and_dropped(data):
     assert len(flagged) <= len(bad_rows) + 6
 
 
+def _fit_side_by_side(data, rows: list, epochs: int) -> list[ForwardModel]:
+    models = [_new_model(data, QUICK, r) for r in rows]
+    fit(models, data, rows, epochs, 2e-3, QUICK, [], [f"model {k}" for k in range(len(rows))])
+    return models
+
+
+def test_models_trained_side_by_side_train_as_they_would_alone(data):
+    """The protocol's fold models share one batched network: model A must come out the same
+    whether it trains beside B or beside C, and (one epoch, the same draw) alone."""
+    a, b, c = np.arange(0, 200), np.arange(200, 400), np.arange(100, 300)
+    with_b = _fit_side_by_side(data, [a, b], epochs=3)[0].predict(data.x[:50])[0]
+    with_c = _fit_side_by_side(data, [a, c], epochs=3)[0].predict(data.x[:50])[0]
+    np.testing.assert_allclose(with_b, with_c, rtol=1e-5)
+    alone = _fit_side_by_side(data, [a], epochs=1)[0].predict(data.x[:50])[0]
+    beside = _fit_side_by_side(data, [a, c], epochs=1)[0].predict(data.x[:50])[0]
+    untrained = _new_model(data, QUICK, a).predict(data.x[:50])[0]
+    np.testing.assert_allclose(alone, beside, rtol=1e-4)
+    assert np.abs(alone - untrained).max() > 100 * np.abs(alone - beside).max()
+
+
 def test_robust_outlier_rule():
     errors = np.concatenate([np.random.default_rng(0).normal(1, 0.1, 500), [5.0, 9.0]])
     assert np.flatnonzero(flag_outliers(errors, 6.0)).tolist() == [500, 501]
@@ -137,17 +159,17 @@ def test_colour_loss_is_the_mean_squared_cie94_difference(trained, data):
     from flakelab.models.training import _colour_loss
 
     model, _ = trained
-    rows = torch.arange(12)
-    loss = _colour_loss(model, data.R[:12])
+    rows = torch.arange(12)[None]
+    loss = _colour_loss([model], [data.R[:12]])
     features = model.features(torch.as_tensor(data.x[:12])).numpy()
     with torch.no_grad():
         output = model.network(torch.as_tensor((features - model.x_mean) / model.x_std).float())
-        value = float(loss(output, rows))
+        value = float(loss(output[None], rows)[0])
     predicted, _ = model.predict(data.x[:12])
     reference = colour.delta_E(
         reflectance_to_Lab(data.R[:12]), reflectance_to_Lab(predicted), method="CIE 1994"
     )
     assert value == pytest.approx(np.mean(reference**2), rel=2e-3)
     perfect = (model.encode_targets(data.R[:12], data.texture[:12]) - model.y_mean) / model.y_std
-    exact = float(loss(torch.as_tensor(perfect, dtype=torch.float32), rows))
+    exact = float(loss(torch.as_tensor(perfect, dtype=torch.float32)[None], rows)[0])
     assert exact < 1e-3 * value

@@ -9,7 +9,8 @@ angles, where the eye (and ΔE00) is most sensitive and where the spread is larg
 1. Split the cases into five partitions (seeded).
 2. For each partition in turn, train on the other four (``epochs`` at ``learning_rate``, then
    ``finetune_epochs`` at ``finetune_learning_rate``) and predict the held partition; every
-   case is thus judged once by a model that never saw it.
+   case is thus judged once by a model that never saw it. The five fold models train side
+   by side in one batched network (:func:`fit`), each exactly as it would alone.
 3. Flag statistical outliers: a case whose error (mean ΔE00 over geometries) lies more than
    ``outlier_threshold`` robust standard deviations (median/MAD) above the median.
 4. Train the final model on the cleaned cases.
@@ -32,7 +33,7 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.torch_colour import TorchColour
-from flakelab.models.network import ForwardModel, ModelError, build_network
+from flakelab.models.network import ForwardModel, ModelError, StackedNetwork, build_network
 
 __all__ = [
     "TrainingConfig",
@@ -161,63 +162,98 @@ def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> Forwa
 
 
 def fit(
-    model: ForwardModel,
+    models: Sequence[ForwardModel],
     data: CaseArrays,
-    rows: NDArray,
+    rows: Sequence[NDArray],
     epochs: int,
     learning_rate: float,
     config: TrainingConfig,
     log: list,
-    stage: str,
+    stages: Sequence[str],
     progress: Callable[[int], None] | None = None,
 ) -> None:
-    """Adam on the loss of the module notes; cosine decay within the stage."""
-    if epochs <= 0 or rows.size == 0:
+    """Adam on the loss of the module notes, cosine decay within the stage, for K models at
+    once, model k on the cases ``rows[k]`` (logged as ``stages[k]``).
+
+    One :class:`StackedNetwork` carries the K networks. The loss is the sum of the models'
+    losses and Adam is elementwise, so each model trains as it would alone; the fold models
+    of the protocol share each step's fixed cost instead. Folds differ by at most one case:
+    an epoch draws the smallest fold's count from each, leaving out at most one case at
+    random."""
+    sizes = [r.size for r in rows]
+    if epochs <= 0 or min(sizes) == 0:
         return
     generator = torch.Generator().manual_seed(config.seed + len(log))
-    features = model.features(torch.as_tensor(data.x[rows])).numpy()
-    x = torch.as_tensor((features - model.x_mean) / model.x_std, dtype=torch.float32)
-    reflectance = data.R[rows]
-    y_raw = model.encode_targets(reflectance, data.texture[rows])
-    y = torch.as_tensor((y_raw - model.y_mean) / model.y_std, dtype=torch.float32)
-    colour_loss = _colour_loss(model, reflectance) if config.colour_weight > 0 else None
-    optimiser = torch.optim.Adam(model.network.parameters(), lr=learning_rate)
+    x = _stack_rows([_standard_inputs(m, data.x[r]) for m, r in zip(models, rows, strict=True)])
+    y = _stack_rows([_standard_targets(m, data, r) for m, r in zip(models, rows, strict=True)])
+    colour_loss = (
+        _colour_loss(models, [data.R[r] for r in rows]) if config.colour_weight > 0 else None
+    )
+    network = StackedNetwork([m.network for m in models])
+    optimiser = torch.optim.Adam(network.parameters(), lr=learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=epochs)
-    model.network.train()
+    per_epoch = min(sizes)
+    stack = torch.arange(len(models))[:, None]
     for epoch in range(epochs):
-        order = torch.randperm(x.shape[0], generator=generator)
-        total = 0.0
-        for start in range(0, x.shape[0], config.batch_size):
-            batch = order[start : start + config.batch_size]
+        order = torch.stack([torch.randperm(n, generator=generator)[:per_epoch] for n in sizes])
+        totals = torch.zeros(len(models))
+        for start in range(0, per_epoch, config.batch_size):
+            batch = order[:, start : start + config.batch_size]
             optimiser.zero_grad()
-            output = model.network(x[batch])
-            loss = torch.mean((output - y[batch]) ** 2)
+            output = network(x[stack, batch])
+            losses = torch.mean((output - y[stack, batch]) ** 2, dim=(1, 2))
             if colour_loss is not None:
-                loss = loss + config.colour_weight * colour_loss(output, batch)
-            loss.backward()
+                losses = losses + config.colour_weight * colour_loss(output, batch)
+            losses.sum().backward()
             optimiser.step()
-            total += float(loss.detach()) * batch.numel()
+            totals += losses.detach() * batch.shape[1]
         schedule.step()
-        log.append({"stage": stage, "epoch": epoch, "loss": total / x.shape[0]})
+        for stage, total in zip(stages, totals.tolist(), strict=True):
+            log.append({"stage": stage, "epoch": epoch, "loss": total / per_epoch})
         if progress:
-            progress(1)
+            progress(len(models))
+    network.copy_into([m.network for m in models])
+
+
+def _standard_inputs(model: ForwardModel, fractions: NDArray) -> torch.Tensor:
+    features = model.features(torch.as_tensor(fractions)).numpy()
+    return torch.as_tensor((features - model.x_mean) / model.x_std, dtype=torch.float32)
+
+
+def _standard_targets(model: ForwardModel, data: CaseArrays, rows: NDArray) -> torch.Tensor:
+    y = model.encode_targets(data.R[rows], data.texture[rows])
+    return torch.as_tensor((y - model.y_mean) / model.y_std, dtype=torch.float32)
+
+
+def _stack_rows(arrays: Sequence[torch.Tensor]) -> torch.Tensor:
+    """``[K, N_max, ...]``, shorter arrays padded with zeros (never drawn)."""
+    return torch.nn.utils.rnn.pad_sequence(list(arrays), batch_first=True)
 
 
 def _colour_loss(
-    model: ForwardModel, reflectance: NDArray
+    models: Sequence[ForwardModel], reflectance: Sequence[NDArray]
 ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
-    """Mean squared CIE94 difference of standardised network outputs for ``rows`` of the
-    measured ``reflectance [N, G, 31]`` (its CIELAB computed once)."""
+    """Per model, the mean squared CIE94 difference between standardised network outputs
+    ``[K, B, outputs]`` and the measured ``reflectance[k] [N_k, G, 31]`` at ``rows [K, B]``
+    (the measured CIELAB computed once)."""
     colour = TorchColour(dtype=torch.float32)
-    measured = colour.lab(torch.as_tensor(np.maximum(reflectance, 0.0), dtype=torch.float32))
-    spectral = model.spectral_outputs
-    scale = torch.as_tensor(model.y_std[:spectral], dtype=torch.float32)
-    offset = torch.as_tensor(model.y_mean[:spectral], dtype=torch.float32)
-    shape = (-1, *reflectance.shape[1:])
+    measured = _stack_rows(
+        [colour.lab(torch.as_tensor(np.maximum(R, 0.0), dtype=torch.float32)) for R in reflectance]
+    )
+    spectral = models[0].spectral_outputs
+
+    def standard(name: str) -> torch.Tensor:
+        values = [getattr(m, name)[:spectral] for m in models]
+        return torch.as_tensor(np.array(values), dtype=torch.float32)[:, None]
+
+    scale, offset = standard("y_std"), standard("y_mean")
+    stack = torch.arange(len(models))[:, None]
+    geometry_bands = reflectance[0].shape[1:]
 
     def loss(output: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-        R = torch.exp(output[:, :spectral] * scale + offset).reshape(shape)
-        return torch.mean(TorchColour.delta_e94(measured[rows], colour.lab(R)) ** 2)
+        R = torch.exp(output[..., :spectral] * scale + offset)
+        lab = colour.lab(R.reshape(*output.shape[:2], *geometry_bands))
+        return torch.mean(TorchColour.delta_e94(measured[stack, rows], lab) ** 2, dim=(1, 2))
 
     return loss
 
@@ -236,6 +272,22 @@ def flag_outliers(errors: NDArray, threshold: float) -> NDArray[np.bool_]:
     return (errors - median) / mad > threshold
 
 
+def _train_stage(models, data, rows, config, log, names, progress) -> None:
+    """``epochs`` at the learning rate, then ``finetune_epochs`` at the fine-tuning rate."""
+    fit(models, data, rows, config.epochs, config.learning_rate, config, log, names, progress)
+    fit(
+        models,
+        data,
+        rows,
+        config.finetune_epochs,
+        config.finetune_learning_rate,
+        config,
+        log,
+        [f"{name} fine-tune" for name in names],
+        progress,
+    )
+
+
 def train_protocol(
     data: CaseArrays,
     config: TrainingConfig = TrainingConfig(),
@@ -250,62 +302,33 @@ def train_protocol(
         raise ModelError(f"cases: expected at least {config.folds * 2} cases to train, got {n}")
     rng = np.random.default_rng(config.seed)
     partitions = np.array_split(rng.permutation(n), config.folds)
-    errors = np.zeros(n)
     log: list[dict] = []
-    for k, held in enumerate(partitions):
-        train_rows = np.concatenate([p for j, p in enumerate(partitions) if j != k])
-        model = _new_model(data, config, train_rows)
-        fit(
-            model,
-            data,
-            train_rows,
-            config.epochs,
-            config.learning_rate,
-            config,
-            log,
-            f"fold {k + 1}",
-            progress,
-        )
-        fit(
-            model,
-            data,
-            train_rows,
-            config.finetune_epochs,
-            config.finetune_learning_rate,
-            config,
-            log,
-            f"fold {k + 1} fine-tune",
-            progress,
-        )
+    train_rows = [
+        np.concatenate([p for j, p in enumerate(partitions) if j != k]) for k in range(config.folds)
+    ]
+    folds = [_new_model(data, config, rows) for rows in train_rows]
+    names = [f"fold {k + 1}" for k in range(config.folds)]
+    _train_stage(folds, data, train_rows, config, log, names, progress)
+    errors = np.zeros(n)
+    for model, held in zip(folds, partitions, strict=True):
         errors[held] = _residual_error(model, data, held)
     outliers = flag_outliers(errors, config.outlier_threshold)
     clean = np.flatnonzero(~outliers)
     model = _new_model(data, config, clean)
-    fit(model, data, clean, config.epochs, config.learning_rate, config, log, "final", progress)
-    fit(
-        model,
-        data,
-        clean,
-        config.finetune_epochs,
-        config.finetune_learning_rate,
-        config,
-        log,
-        "final fine-tune",
-        progress,
-    )
+    _train_stage([model], data, [clean], config, log, ["final"], progress)
     if adapt_shop is not None:
         shop_rows = np.flatnonzero((np.array(data.shops) == adapt_shop) & ~outliers)
         if shop_rows.size == 0:
             raise ModelError(f"--adapt: no cases from shop {adapt_shop!r}")
         fit(
-            model,
+            [model],
             data,
-            shop_rows,
+            [shop_rows],
             config.adapt_epochs,
             config.adapt_learning_rate,
             config,
             log,
-            f"adapt {adapt_shop}",
+            [f"adapt {adapt_shop}"],
             progress,
         )
     report = {
