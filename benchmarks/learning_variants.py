@@ -1,0 +1,116 @@
+"""Learned model: what buys held-out accuracy — cases, width, depth, epochs, batch.
+
+One variant per call: a single fit (training + fine-tuning, no fold screening) on N
+generated cases of the demo library without its two new toners (as the shipped model), then
+ΔE00 on the 500 unseen cases of ``flakelab cases generate --n 500 --seed 987`` through the
+matcher's forward (hybrid for the new toners), against the measured spray-outs and against
+the nominal physics of the recipes (the model's own error, without the cases' noise).
+
+    python benchmarks/learning_variants.py [--cases 20000] [--hidden 100,100,100]
+        [--epochs 150] [--batch-size 128] [--learning-rate 2e-3] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from flakelab.cases.generator import World
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.io import read_library
+from flakelab.match.models import forward_for
+from flakelab.match.search import evaluate_recipes
+from flakelab.models.training import TrainingConfig, _new_model, case_arrays, fit
+
+NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
+EVALUATION = (500, 987)
+"""Cases and seed of the README's unseen evaluation set."""
+
+
+def train_once(library, cases: int, config: TrainingConfig):
+    effect = [t.kind != "pigment" for t in library.toners]
+    world = World(library, "five-angle", exclude=NOVEL_TONERS)
+    data = case_arrays(
+        [c for b in world.cases(cases, config.seed) for c in b], library.names, effect
+    )
+    rows = [np.arange(data.x.shape[0])]
+    model = _new_model(data, config, rows[0])
+    log: list[dict] = []
+    fit([model], data, rows, config.epochs, config.learning_rate, config, log, ["fit"])
+    fit(
+        [model],
+        data,
+        rows,
+        config.finetune_epochs,
+        config.finetune_learning_rate,
+        config,
+        log,
+        ["ft"],
+    )
+    model.info["toner_cases"] = dict(zip(data.toners, (data.x > 0).sum(0).tolist(), strict=True))
+    return model
+
+
+def judge(library, model) -> dict[str, float]:
+    world = World(library, "five-angle")
+    n, seed = EVALUATION
+    data = case_arrays([c for b in world.cases(n, seed) for c in b], library.names)
+    predicted, _ = evaluate_recipes(forward_for(model, library), data.x)
+    nominal, _ = world.appearance(data.x, world.nominal(n))
+    lab = reflectance_to_Lab(predicted)
+    sprayout = delta_E(reflectance_to_Lab(data.R), lab)
+    own = delta_E(reflectance_to_Lab(nominal), lab)
+    kinds = np.array([t.kind for t in library.toners])
+    pearl = data.x[:, kinds == "pearl"].sum(1) > 0
+    solid = data.x[:, kinds != "pigment"].sum(1) == 0
+    return {
+        "de00_mean": float(sprayout.mean()),
+        "de00_p95": float(np.percentile(sprayout, 95)),
+        "model_vs_nominal_de00_mean": float(own.mean()),
+        "model_vs_nominal_de00_p95": float(np.percentile(own, 95)),
+        "model_vs_nominal_metallic": float(own[~pearl & ~solid].mean()),
+        "model_vs_nominal_pearl": float(own[pearl].mean()),
+        "model_vs_nominal_solid": float(own[solid].mean()),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", type=int, default=20_000)
+    parser.add_argument("--hidden", default="100,100,100")
+    parser.add_argument("--epochs", type=int, default=150, help="per stage (and fine-tuning)")
+    parser.add_argument("--batch-size", type=int, default=128)
+    parser.add_argument("--learning-rate", type=float, default=2e-3, help="fine-tuning: a tenth")
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    config = TrainingConfig(
+        hidden=tuple(int(h) for h in args.hidden.split(",")),
+        epochs=args.epochs,
+        finetune_epochs=args.epochs,
+        batch_size=args.batch_size,
+        learning_rate=args.learning_rate,
+        finetune_learning_rate=args.learning_rate / 10,
+        seed=args.seed,
+    )
+    library = read_library(None)
+    start = time.perf_counter()
+    model = train_once(library, args.cases, config)
+    result = {
+        **{k: v for k, v in vars(args).items() if k != "json"},
+        "train_seconds": time.perf_counter() - start,
+        **judge(library, model),
+    }
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        for key, value in result.items():
+            print(f"{key:28s} {value:,.6g}" if isinstance(value, float) else f"{key:28s} {value}")
+
+
+if __name__ == "__main__":
+    main()
