@@ -35,11 +35,9 @@ def inference_rate(model, toners: int, n: int = 200_000) -> float:
 def fold_stage_rates(data, config: TrainingConfig, epochs: int = 2) -> dict[str, float]:
     """Seconds per epoch of the five fold models trained side by side (one batched network,
     as the protocol does) against one at a time: the baseline measured in the same run."""
-    from flakelab.models.training import _new_model, fit
+    from flakelab.models.training import _new_model, fit, fold_rows
 
-    n = data.x.shape[0]
-    parts = np.array_split(np.random.default_rng(config.seed).permutation(n), config.folds)
-    rows = [np.concatenate(parts[:k] + parts[k + 1 :]) for k in range(config.folds)]
+    _, rows = fold_rows(data.x.shape[0], config)
     models = [_new_model(data, config, r) for r in rows]
     names = [f"fold {k}" for k in range(config.folds)]
     warm = [r[:4096] for r in rows]  # first calls pay one-off costs
@@ -91,13 +89,8 @@ def main() -> None:
     cases = [c for batch in world.cases(args.cases, args.seed) for c in batch]
     generate_s = time.perf_counter() - start
     data = case_arrays(cases, library.names, effect)
-    config = TrainingConfig(
-        epochs=args.epochs,
-        finetune_epochs=args.epochs,
-        batch_size=args.batch_size,
-        learning_rate=args.learning_rate,
-        finetune_learning_rate=args.learning_rate / 10,
-        seed=args.seed,
+    config = TrainingConfig.per_stage(
+        args.epochs, args.learning_rate, batch_size=args.batch_size, seed=args.seed
     )
     rates = fold_stage_rates(data, config)
     start = time.perf_counter()

@@ -24,7 +24,7 @@ from flakelab.core.difference import delta_E
 from flakelab.io import read_library
 from flakelab.match.models import forward_for
 from flakelab.match.search import evaluate_recipes
-from flakelab.models.training import TrainingConfig, _new_model, case_arrays, fit
+from flakelab.models.training import TrainingConfig, _new_model, _train_stage, case_arrays
 
 NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 EVALUATION = (500, 987)
@@ -39,18 +39,7 @@ def train_once(library, cases: int, config: TrainingConfig):
     )
     rows = [np.arange(data.x.shape[0])]
     model = _new_model(data, config, rows[0])
-    log: list[dict] = []
-    fit([model], data, rows, config.epochs, config.learning_rate, config, log, ["fit"])
-    fit(
-        [model],
-        data,
-        rows,
-        config.finetune_epochs,
-        config.finetune_learning_rate,
-        config,
-        log,
-        ["ft"],
-    )
+    _train_stage([model], data, rows, config, [], ["fit"], None)
     model.info["toner_cases"] = dict(zip(data.toners, (data.x > 0).sum(0).tolist(), strict=True))
     return model
 
@@ -88,13 +77,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    config = TrainingConfig(
+    config = TrainingConfig.per_stage(
+        args.epochs,
+        args.learning_rate,
         hidden=tuple(int(h) for h in args.hidden.split(",")),
-        epochs=args.epochs,
-        finetune_epochs=args.epochs,
         batch_size=args.batch_size,
-        learning_rate=args.learning_rate,
-        finetune_learning_rate=args.learning_rate / 10,
         seed=args.seed,
     )
     library = read_library(None)

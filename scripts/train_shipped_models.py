@@ -39,19 +39,12 @@ def main() -> None:
     library = read_library(None)
     effect = [t.kind != "pigment" for t in library.toners]
     for instrument in args.instrument or sorted(SETTINGS):
-        n, epochs, batch = SETTINGS[instrument]
+        n, epochs, batch_size = SETTINGS[instrument]
         world = World(library, instrument, exclude=NOVEL_TONERS)
         cases = [c for batch in world.cases(n, args.seed) for c in batch]
         data = case_arrays(cases, library.names, effect)
-        rate = TrainingConfig.learning_rate * batch / TrainingConfig.batch_size
-        config = TrainingConfig(
-            epochs=epochs,
-            finetune_epochs=epochs,
-            batch_size=batch,
-            learning_rate=rate,
-            finetune_learning_rate=rate / 10,
-            seed=args.seed,
-        )
+        rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
+        config = TrainingConfig.per_stage(epochs, rate, batch_size=batch_size, seed=args.seed)
         with Progress() as progress:
             task = progress.add_task(f"{instrument}: {n} cases", total=12 * epochs)
             model, report = train_protocol(

@@ -41,6 +41,7 @@ __all__ = [
     "case_arrays",
     "train_protocol",
     "fit",
+    "fold_rows",
     "evaluate_model",
     "flag_outliers",
     "data_hash",
@@ -61,6 +62,18 @@ class TrainingConfig:
     adapt_epochs: int = 150
     adapt_learning_rate: float = 2e-4
     seed: int = 0
+
+    @classmethod
+    def per_stage(cls, epochs: int, learning_rate: float, **settings) -> TrainingConfig:
+        """``epochs`` for training and for fine-tuning, which runs at a tenth of
+        ``learning_rate`` (the defaults' ratio)."""
+        return cls(
+            epochs=epochs,
+            finetune_epochs=epochs,
+            learning_rate=learning_rate,
+            finetune_learning_rate=learning_rate / 10,
+            **settings,
+        )
 
 
 @dataclass(frozen=True)
@@ -288,6 +301,16 @@ def _train_stage(models, data, rows, config, log, names, progress) -> None:
     )
 
 
+def fold_rows(n: int, config: TrainingConfig) -> tuple[list[NDArray], list[NDArray]]:
+    """The protocol's seeded partitions of ``n`` cases and, for each, the rows its fold model
+    trains on (the other partitions)."""
+    partitions = np.array_split(np.random.default_rng(config.seed).permutation(n), config.folds)
+    train_rows = [
+        np.concatenate([p for j, p in enumerate(partitions) if j != k]) for k in range(config.folds)
+    ]
+    return partitions, train_rows
+
+
 def train_protocol(
     data: CaseArrays,
     config: TrainingConfig = TrainingConfig(),
@@ -300,12 +323,8 @@ def train_protocol(
     n = data.x.shape[0]
     if n < config.folds * 2:
         raise ModelError(f"cases: expected at least {config.folds * 2} cases to train, got {n}")
-    rng = np.random.default_rng(config.seed)
-    partitions = np.array_split(rng.permutation(n), config.folds)
+    partitions, train_rows = fold_rows(n, config)
     log: list[dict] = []
-    train_rows = [
-        np.concatenate([p for j, p in enumerate(partitions) if j != k]) for k in range(config.folds)
-    ]
     folds = [_new_model(data, config, rows) for rows in train_rows]
     names = [f"fold {k + 1}" for k in range(config.folds)]
     _train_stage(folds, data, train_rows, config, log, names, progress)
