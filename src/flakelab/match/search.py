@@ -4,10 +4,12 @@
    none, for a solid), optimise softmax amounts against the multi-angle loss plus a
    square-root sparsity penalty. The restarts' best solutions say which effect toners and
    pigments the target needs.
-2. **Subsets** (smart pruning, not enumeration of the library): the best one or two effect
-   toners × every combination of up to ``max_pigments`` of the six best pigments.
+2. **Subsets** (smart pruning, not enumeration of the library): every combination of the
+   three most used effect toners (a pearl over an aluminium base takes all three) × every
+   combination of up to ``max_pigments`` of the six most used pigments.
 3. **Optimise** all subsets at once (one batch through the forward model, autograd, Adam on
-   masked softmax logits: amounts stay non-negative and sum to the can).
+   masked softmax logits: amounts stay non-negative and sum to the can), by successive
+   halving: a third of the steps on every subset, the rest on the ``refine_keep`` best.
 4. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry from
    colour-science, texture differences, the tolerance — plus a small penalty per toner, and
    return the best distinct candidates.
@@ -44,9 +46,10 @@ class MatchSettings:
     max_pigments: int = 4
     screen_steps: int = 120
     refine_steps: int = 150
+    refine_keep: int = 24
     novel_threshold: float = 1.5
-    top_pigments: int = 5
-    top_effects: int = 2
+    top_pigments: int = 6
+    top_effects: int = 3
     sparsity: float = 0.4
     toner_penalty: float = 0.05
     texture_weight: float = 0.1
@@ -142,7 +145,8 @@ def _loss(
 
 def _optimise(
     forward, colour, logits, mask, target_lab, target_texture, settings, steps, sparsity
-) -> tuple[torch.Tensor, torch.Tensor]:
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Adam on the logits of every row at once; returns the logits, amounts and losses."""
     logits = logits.clone().requires_grad_(True)
     optimiser = torch.optim.Adam([logits], lr=0.08)
     for _ in range(steps):
@@ -155,7 +159,7 @@ def _optimise(
         optimiser.step()
     with torch.no_grad():
         x = _masked_softmax(logits, mask)
-        return x, _loss(forward, colour, x, target_lab, target_texture, settings)
+        return logits.detach(), x, _loss(forward, colour, x, target_lab, target_texture, settings)
 
 
 def _screen(forward, colour, allowed, effect, target_lab, target_texture, settings, generator):
@@ -166,7 +170,7 @@ def _screen(forward, colour, allowed, effect, target_lab, target_texture, settin
         if i is not None:
             logits[row, i] = 2.0
     mask = torch.as_tensor(np.tile(allowed, (len(starts), 1)))
-    return _optimise(
+    _, x, loss = _optimise(
         forward,
         colour,
         logits,
@@ -177,6 +181,30 @@ def _screen(forward, colour, allowed, effect, target_lab, target_texture, settin
         settings.screen_steps,
         settings.sparsity,
     )
+    return x, loss
+
+
+def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -> torch.Tensor:
+    """Successive halving: a third of ``refine_steps`` on every subset, the rest on the
+    ``refine_keep`` best so far (a subset far behind after a third rarely wins; the batch
+    shrinks and the search's time with it)."""
+    first = settings.refine_steps // 3
+    logits, _, loss = _optimise(
+        forward, colour, init, mask, target_lab, target_texture, settings, first, 0.0
+    )
+    keep = torch.argsort(loss)[: settings.refine_keep]
+    _, x, _ = _optimise(
+        forward,
+        colour,
+        logits[keep],
+        mask[keep],
+        target_lab,
+        target_texture,
+        settings,
+        settings.refine_steps - first,
+        0.0,
+    )
+    return x
 
 
 def _subsets(x_screen: NDArray, effect: NDArray, settings: MatchSettings) -> list[tuple[int, ...]]:
@@ -185,9 +213,8 @@ def _subsets(x_screen: NDArray, effect: NDArray, settings: MatchSettings) -> lis
     pigments = [i for i in np.argsort(-importance) if not effect[i] and importance[i] > 0.002]
     effects, pigments = effects[: settings.top_effects], pigments[: settings.top_pigments]
     bases: list[tuple[int, ...]] = [()] if x_screen[:, effect].sum(1).min() < 0.05 else []
-    bases += [(e,) for e in effects]
-    if len(effects) > 1:
-        bases.append(tuple(effects))
+    for size in range(1, len(effects) + 1):
+        bases += list(itertools.combinations(effects, size))
     subsets = []
     for base in bases or [()]:
         for size in range(0 if base else 1, settings.max_pigments + 1):
@@ -273,22 +300,14 @@ def _match(
         screen_loss = torch.cat([screen_loss, loss_all])
     best = torch.argsort(screen_loss)[:3].numpy()
     subsets = _subsets(x_screen.numpy()[best], effect, settings)
-    # 2.–3. refine every subset in one batch
+    # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
         subset_mask[row, list(subset)] = True
     start_x = x_screen.numpy()[best[0]]
     init = torch.as_tensor(np.log(start_x + 1e-2))[None].repeat(len(subsets), 1)
-    x_refined, _ = _optimise(
-        forward,
-        colour,
-        init,
-        torch.as_tensor(subset_mask),
-        target_lab,
-        target_texture,
-        settings,
-        settings.refine_steps,
-        0.0,
+    x_refined = _refine(
+        forward, colour, init, torch.as_tensor(subset_mask), target_lab, target_texture, settings
     )
     x = x_refined.numpy()
     x[x < settings.min_amount] = 0.0
