@@ -9,7 +9,7 @@ matcher handles with the physics scaling (hybrid path).
 
 The five-angle model learns from 61,000 cases, the size of the hybrid paper's database for
 five-geometry instruments; held-out accuracy grows with the cases far more than with the
-network's width or the epochs (README, "Figures").
+network's width or the epochs (README, "Figures"), and a quarter of them are pearls.
 """
 
 from __future__ import annotations
@@ -30,10 +30,10 @@ NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 SETTINGS = {"five-angle": (61_000, 150, 256), "ma-t12": (10_000, 100, 128)}
 """Cases, epochs per stage and batch size for each shipped instrument (CPU time on a 2-core
 machine); the learning rate scales with the batch (2e-3 at 128)."""
-TRAINING_KINDS = {"metallic": 0.6, "pearl": 0.25, "solid": 0.15}
-"""Share of each paint family in the training cases: pearls (interference colour that
-changes with angle) are the model's hardest family, so they get more cases than the
-generator's default mix, which the evaluation cases keep."""
+TRAINING_KINDS = {"five-angle": {"metallic": 0.6, "pearl": 0.25, "solid": 0.15}}
+"""Share of each paint family in an instrument's training cases (else the generator's
+default mix, which the evaluation cases keep): pearls, whose interference colour changes
+with angle, are the model's hardest family and get more cases."""
 
 
 def main() -> None:
@@ -46,7 +46,8 @@ def main() -> None:
     effect = [t.kind != "pigment" for t in library.toners]
     for instrument in args.instrument or sorted(SETTINGS):
         n, epochs, batch_size = SETTINGS[instrument]
-        settings = WorldSettings(kinds=TRAINING_KINDS)
+        kinds = TRAINING_KINDS.get(instrument)
+        settings = WorldSettings(kinds=kinds) if kinds else WorldSettings()
         world = World(library, instrument, settings, exclude=NOVEL_TONERS)
         cases = [c for batch in world.cases(n, args.seed) for c in batch]
         data = case_arrays(cases, library.names, effect)
@@ -63,7 +64,7 @@ def main() -> None:
                 "novel_toners": list(NOVEL_TONERS),
                 "generator_seed": args.seed,
                 "cases": n,
-                "training_kinds": TRAINING_KINDS,
+                "training_kinds": settings.kinds,
             }
         )
         path = shipped_model_path(instrument)
