@@ -1,0 +1,80 @@
+"""Matcher: what buys first-shot success — the search's settings, on the same targets.
+
+Runs the evaluation harness (``flakelab match evaluate``) with the shipped five-angle model
+once per setting given, each a comma-separated list of :class:`MatchSettings` fields. Every
+run sees the same hidden targets and the same sprays (seeded), so rows differ only by the
+recipes the search proposed. The first row is the defaults: the baseline of the same run.
+
+    python benchmarks/match_variants.py [--targets 100] [--novel-targets 0] [--seed 4242]
+        [--json] "top_effects=2,top_pigments=5" "screen_steps=90" ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+from flakelab.cases.generator import World
+from flakelab.io import read_library
+from flakelab.match.evaluate import evaluate_matching
+from flakelab.match.models import effect_mask, forward_for
+from flakelab.match.search import MatchSettings
+from flakelab.models.registry import shipped_model
+
+FIGURES = (
+    "first_shot_success",
+    "after_one_correction",
+    "novel_toner_first_shot",
+    "oracle_success",
+    "predicted_de00_median",
+    "first_shot_de00_median",
+    "latency_p50_s",
+    "latency_p95_s",
+)
+
+
+def parse_settings(spec: str) -> MatchSettings:
+    """``"top_effects=2,sparsity=0.2"`` → MatchSettings (types from the dataclass)."""
+    types = {f.name: type(f.default) for f in dataclasses.fields(MatchSettings)}
+    values = {}
+    for item in filter(None, (part.strip() for part in spec.split(","))):
+        name, _, value = item.partition("=")
+        if name not in types:
+            raise SystemExit(f"setting {name!r}: not a MatchSettings field ({', '.join(types)})")
+        values[name] = types[name](value)
+    return MatchSettings(**values)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("settings", nargs="*", help="e.g. top_effects=2,top_pigments=5")
+    parser.add_argument("--targets", type=int, default=100)
+    parser.add_argument("--novel-targets", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    library = read_library(None)
+    forward = forward_for(shipped_model("five-angle"), library)
+    effect = effect_mask(library, forward.toners)
+    rows = []
+    for spec in ["", *args.settings]:
+        report = evaluate_matching(
+            World(library, "five-angle"),
+            forward,
+            effect,
+            targets=args.targets,
+            seed=args.seed,
+            novel=forward.novel,
+            novel_targets=args.novel_targets,
+            settings=parse_settings(spec),
+        )
+        rows.append({"settings": spec or "defaults", **{k: report[k] for k in FIGURES}})
+        if not args.json:
+            print(rows[-1]["settings"], {k: report[k] for k in FIGURES}, flush=True)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+
+
+if __name__ == "__main__":
+    main()
