@@ -57,10 +57,11 @@ def main() -> None:
     library = read_library(None)
     forward = forward_for(shipped_model("five-angle"), library)
     effect = effect_mask(library, forward.toners)
+    world = World(library, "five-angle")
     rows = []
     for spec in ["", *args.settings]:
         report = evaluate_matching(
-            World(library, "five-angle"),
+            world,
             forward,
             effect,
             targets=args.targets,
