@@ -27,7 +27,10 @@ __all__ = ["LearnedForward", "HybridForward", "KubelkaMunkForward"]
 
 
 class LearnedForward:
-    """The learned model; ``texture`` readings predicted alongside."""
+    """The learned model; ``texture`` readings predicted alongside. It computes in single
+    precision, as it was trained: the matcher optimises in ``dtype`` to avoid conversions."""
+
+    dtype = torch.float32
 
     def __init__(self, model: ForwardModel) -> None:
         self.model = model
@@ -37,7 +40,7 @@ class LearnedForward:
         self.novel: tuple[str, ...] = ()
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-        y = self.model.torch_forward(fractions.to(torch.float32)).to(torch.float64)
+        y = self.model.torch_forward(fractions.to(torch.float32)).to(fractions.dtype)
         spectral = self.model.spectral_outputs
         log_R = torch.clamp(y[:, :spectral], np.log(LOG_FLOOR) - 3, LOG_CEILING)
         R = torch.exp(log_R).reshape(-1, len(self.geometries), 31)
@@ -51,13 +54,14 @@ class _PhysicsRatio(torch.autograd.Function):
     def forward(ctx, fractions, hybrid):
         x = fractions.detach().numpy()
         ratio, jacobian = hybrid.physics_ratio(x)
+        ctx.dtype = fractions.dtype
         ctx.save_for_backward(torch.as_tensor(jacobian))
         return torch.as_tensor(ratio)
 
     @staticmethod
     def backward(ctx, grad):
         (jacobian,) = ctx.saved_tensors  # [N, G, W, T]
-        return torch.einsum("ngw,ngwt->nt", grad, jacobian), None
+        return torch.einsum("ngw,ngwt->nt", grad.to(jacobian.dtype), jacobian).to(ctx.dtype), None
 
 
 class HybridForward(LearnedForward):
@@ -140,8 +144,9 @@ class HybridForward(LearnedForward):
             physics = np.ones_like(R.detach().numpy())
             physics[rows] = self._physics(self.base_fractions(x[rows])) + 1e-9
             w = torch.as_tensor(trust[:, None, None], dtype=R.dtype)
-            R = torch.exp((1 - w) * torch.log(R) + w * torch.log(torch.as_tensor(physics)))
-        return R * _PhysicsRatio.apply(fractions, self), texture
+            physics = torch.as_tensor(physics, dtype=R.dtype)
+            R = torch.exp((1 - w) * torch.log(R) + w * torch.log(physics))
+        return R * _PhysicsRatio.apply(fractions, self).to(R.dtype), texture
 
     @staticmethod
     def _physics_trust(share: NDArray) -> NDArray:
@@ -178,6 +183,8 @@ def _proxies(library: Library, novel: NDArray) -> dict[int, int]:
 
 class KubelkaMunkForward:
     """Solid colours: K = Σ cK_i, S = Σ cS_i, R∞ and Saunderson; one (diffuse) geometry."""
+
+    dtype = torch.float64
 
     def __init__(
         self, names: Sequence[str], K: NDArray, S: NDArray, geometry: str = "45as45"

@@ -36,6 +36,11 @@ from flakelab.errors import FlakelabError
 __all__ = ["Candidate", "MatchResult", "MatchSettings", "match", "MatchError"]
 
 
+IMPORTANCE_FLOOR = 0.02
+"""A toner whose removal from the screen's solutions raises the loss (ΔE94 units) by less
+than this is not worth a refinement."""
+
+
 class MatchError(FlakelabError):
     """A target or library the matcher cannot work with."""
 
@@ -165,7 +170,7 @@ def _optimise(
 def _screen(forward, colour, allowed, effect, target_lab, target_texture, settings, generator):
     T = len(forward.toners)
     starts = [i for i in np.flatnonzero(effect & allowed)] + [None, None]
-    logits = 0.3 * torch.randn(len(starts), T, generator=generator, dtype=torch.float64) - 2.0
+    logits = 0.3 * torch.randn(len(starts), T, generator=generator, dtype=forward.dtype) - 2.0
     for row, i in enumerate(starts):
         if i is not None:
             logits[row, i] = 2.0
@@ -207,11 +212,14 @@ def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -
     return x
 
 
-def _subsets(x_screen: NDArray, effect: NDArray, settings: MatchSettings) -> list[tuple[int, ...]]:
-    importance = x_screen.max(axis=0)
-    effects = [i for i in np.argsort(-importance) if effect[i] and importance[i] > 0.02]
-    pigments = [i for i in np.argsort(-importance) if not effect[i] and importance[i] > 0.002]
-    effects, pigments = effects[: settings.top_effects], pigments[: settings.top_pigments]
+def _subsets(
+    x_screen: NDArray, importance: NDArray, effect: NDArray, settings: MatchSettings
+) -> list[tuple[int, ...]]:
+    """Toner sets to refine, from the screen's best solutions ``x_screen[S, T]`` and each
+    toner's ``importance[T]`` in them (:func:`_importance`)."""
+    ranked = [i for i in np.argsort(-importance) if importance[i] > IMPORTANCE_FLOOR]
+    effects = [i for i in ranked if effect[i]][: settings.top_effects]
+    pigments = [i for i in ranked if not effect[i]][: settings.top_pigments]
     bases: list[tuple[int, ...]] = [()] if x_screen[:, effect].sum(1).min() < 0.05 else []
     for size in range(1, len(effects) + 1):
         bases += list(itertools.combinations(effects, size))
@@ -219,7 +227,42 @@ def _subsets(x_screen: NDArray, effect: NDArray, settings: MatchSettings) -> lis
     for base in bases or [()]:
         for size in range(0 if base else 1, settings.max_pigments + 1):
             subsets += [base + combo for combo in itertools.combinations(pigments, size)]
-    return [s for s in subsets if s]
+    # each screen solution's own toners too, so that the screen's best is always reachable
+    subsets += [_support(row, effect, settings) for row in x_screen]
+    return list(dict.fromkeys(tuple(sorted(s)) for s in subsets if s))
+
+
+def _importance(forward, colour, x_best, target_lab, target_texture, settings) -> NDArray:
+    """How much each toner matters to the screen's best solutions ``x_best[S, T]``: the
+    largest rise in loss when it is taken out (the rest renormalised). Amount alone misses
+    a tint: 0.2 % of a red pigment can carry a whole colour in a silver metallic, where the
+    aluminiums are tens of per cent and interchangeable."""
+    S, T = x_best.shape
+    rows, toners = np.nonzero(x_best > 1e-4)
+    without = x_best[rows].copy()
+    without[np.arange(rows.size), toners] = 0.0
+    without /= without.sum(axis=1, keepdims=True)
+    with torch.no_grad():
+        losses = _loss(
+            forward,
+            colour,
+            torch.as_tensor(np.concatenate([x_best, without]), dtype=forward.dtype),
+            target_lab,
+            target_texture,
+            settings,
+        ).numpy()
+    importance = np.zeros(T)
+    np.maximum.at(importance, toners, losses[S:] - losses[rows])
+    return importance
+
+
+def _support(x: NDArray, effect: NDArray, settings: MatchSettings) -> tuple[int, ...]:
+    """The toners a screen solution uses (≥ 1 %): at most ``top_effects`` effect toners and
+    ``max_pigments`` pigments, the largest amounts."""
+    order = [i for i in np.argsort(-x) if x[i] >= 0.01]
+    effects = [i for i in order if effect[i]][: settings.top_effects]
+    pigments = [i for i in order if not effect[i]][: settings.max_pigments]
+    return tuple(sorted(effects) + sorted(pigments))
 
 
 def _target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
@@ -280,11 +323,13 @@ def _match(
     if not allowed.any():
         raise MatchError("library: no toners to match with")
     spectra, texture, name = _target_spectra(target, forward)
-    colour = TorchColour()
+    colour = TorchColour(dtype=forward.dtype)
     target_lab = colour.lab(torch.as_tensor(spectra))
     target_texture = None
     if texture and all(k in texture for k in TEXTURE_READINGS):
-        target_texture = torch.as_tensor([texture[k] for k in TEXTURE_READINGS])
+        target_texture = torch.as_tensor(
+            [texture[k] for k in TEXTURE_READINGS], dtype=forward.dtype
+        )
     generator = torch.Generator().manual_seed(settings.seed)
     # 1. screen: one restart per effect toner, plus solid starts; toners new to the learned
     #    model (physics-scaled, slower) join only when the known ones cannot get close
@@ -299,7 +344,9 @@ def _match(
         x_screen = torch.cat([x_screen, x_all])
         screen_loss = torch.cat([screen_loss, loss_all])
     best = torch.argsort(screen_loss)[:3].numpy()
-    subsets = _subsets(x_screen.numpy()[best], effect, settings)
+    x_best = x_screen.numpy()[best].astype(float)
+    importance = _importance(forward, colour, x_best, target_lab, target_texture, settings)
+    subsets = _subsets(x_best, importance, effect, settings)
     # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
@@ -309,7 +356,7 @@ def _match(
     x_refined = _refine(
         forward, colour, init, torch.as_tensor(subset_mask), target_lab, target_texture, settings
     )
-    x = x_refined.numpy()
+    x = x_refined.numpy().astype(float)
     x[x < settings.min_amount] = 0.0
     x /= x.sum(axis=1, keepdims=True)
     candidates = _judge(forward, x, spectra, texture, tolerance, settings)
@@ -332,8 +379,8 @@ def _match(
 
 def evaluate_recipes(forward, x: NDArray) -> tuple[NDArray, NDArray | None]:
     with torch.no_grad():
-        R, texture = forward(torch.as_tensor(x, dtype=torch.float64))
-    return R.numpy(), None if texture is None else texture.numpy()
+        R, texture = forward(torch.as_tensor(x, dtype=forward.dtype))
+    return R.double().numpy(), None if texture is None else texture.double().numpy()
 
 
 def _judge(forward, x, spectra, texture, tolerance, settings) -> list[Candidate]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import io
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -99,6 +99,7 @@ class ForwardModel:
     y_std: NDArray
     info: dict
     effect: NDArray | None = None
+    _constants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def spectral_outputs(self) -> int:
@@ -136,7 +137,7 @@ class ForwardModel:
     def features(self, fractions: torch.Tensor) -> torch.Tensor:
         """Fractions plus each toner's amount per unit effect pigment: in a metallic the dye
         acts through κ/σ_f (DESIGN.md §3), a ratio an MLP would otherwise have to learn."""
-        mask = torch.as_tensor(self.effect_mask(), dtype=fractions.dtype)
+        mask = self._constant("effect", fractions.dtype)
         effect = (fractions * mask).sum(dim=1, keepdim=True)
         return torch.cat([fractions, fractions / (effect + EFFECT_OFFSET)], dim=1)
 
@@ -145,13 +146,22 @@ class ForwardModel:
 
     def torch_forward(self, fractions: torch.Tensor) -> torch.Tensor:
         """Differentiable: fractions ``[N, T]`` → outputs (log R, texture), de-standardised."""
-        x = (
-            self.features(fractions) - torch.as_tensor(self.x_mean, dtype=fractions.dtype)
-        ) / torch.as_tensor(self.x_std, dtype=fractions.dtype)
-        y = self.network(x)
-        return y * torch.as_tensor(self.y_std, dtype=y.dtype) + torch.as_tensor(
-            self.y_mean, dtype=y.dtype
+        dtype = fractions.dtype
+        x = (self.features(fractions) - self._constant("x_mean", dtype)) / self._constant(
+            "x_std", dtype
         )
+        y = self.network(x)
+        return y * self._constant("y_std", y.dtype) + self._constant("y_mean", y.dtype)
+
+    def _constant(self, name: str, dtype: torch.dtype) -> torch.Tensor:
+        """The standardisation statistics and effect mask as tensors, made once per dtype:
+        the matcher calls the model hundreds of times per target with small batches, where
+        building them each call costs as much as the arithmetic."""
+        key = (name, dtype)
+        if key not in self._constants:
+            value = self.effect_mask() if name == "effect" else getattr(self, name)
+            self._constants[key] = torch.as_tensor(np.asarray(value), dtype=dtype)
+        return self._constants[key]
 
     def predict(self, fractions: ArrayLike, batch: int = 16384) -> tuple[NDArray, NDArray]:
         """Reflectance factors ``[N, G, 31]`` and texture readings ``[N, 8]``."""
