@@ -11,7 +11,9 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -33,7 +35,9 @@ class LearnedForward:
     dtype = torch.float32
 
     def __init__(self, model: ForwardModel) -> None:
-        self.model = model
+        # a frozen copy: the matcher differentiates with respect to the recipe only, and
+        # gradients for the weights would cost most of each backward pass (and pile up)
+        self.model = replace(model, network=copy.deepcopy(model.network).requires_grad_(False))
         self.toners = model.toners
         self.geometries = model.geometries
         self.name = f"learned ({model.instrument}, {model.info.get('name', 'model')})"
