@@ -47,6 +47,11 @@ class TorchColour:
     def delta_e94(lab_ref: torch.Tensor, lab: torch.Tensor) -> torch.Tensor:
         """CIE94 (graphic arts) colour difference, smooth everywhere (a small floor under the
         square root keeps the gradient finite at a perfect match)."""
+        return torch.sqrt(TorchColour.delta_e94_squared(lab_ref, lab))
+
+    @staticmethod
+    def delta_e94_squared(lab_ref: torch.Tensor, lab: torch.Tensor) -> torch.Tensor:
+        """ΔE94² (plus the floor): what a mean-squared loss needs, without a root to undo."""
         d = lab - lab_ref
         C1 = torch.sqrt((lab_ref[..., 1:] ** 2).sum(-1) + 1e-9)
         C2 = torch.sqrt((lab[..., 1:] ** 2).sum(-1) + 1e-9)
@@ -54,4 +59,4 @@ class TorchColour:
         d2 = d**2
         dH2 = torch.clamp(d2[..., 1:].sum(-1) - dC**2, min=0.0)
         SC, SH = 1 + 0.045 * C1, 1 + 0.015 * C1
-        return torch.sqrt(d2[..., 0] + (dC / SC) ** 2 + dH2 / SH**2 + 1e-6)
+        return d2[..., 0] + (dC / SC) ** 2 + dH2 / SH**2 + 1e-6

@@ -266,7 +266,7 @@ def _colour_loss(
     def loss(output: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
         R = torch.exp(output[..., :spectral] * scale + offset)
         lab = colour.lab(R.reshape(*output.shape[:2], *geometry_bands))
-        return torch.mean(TorchColour.delta_e94(measured[stack, rows], lab) ** 2, dim=(1, 2))
+        return torch.mean(TorchColour.delta_e94_squared(measured[stack, rows], lab), dim=(1, 2))
 
     return loss
 
