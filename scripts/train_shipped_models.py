@@ -9,7 +9,8 @@ matcher handles with the physics scaling (hybrid path).
 
 The five-angle model learns from 61,000 cases, the size of the hybrid paper's database for
 five-geometry instruments; held-out accuracy grows with the cases far more than with the
-network's width or the epochs (README, "Figures"), and a quarter of them are pearls.
+network's width or the epochs (README, "Figures"); the MA-T12 model learns from 30,000
+(12 geometries make each case costlier). A quarter of both models' cases are pearls.
 """
 
 from __future__ import annotations
@@ -27,10 +28,12 @@ from flakelab.models.training import TrainingConfig, case_arrays, train_protocol
 
 NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 """Demo toners absent from the shipped models' training cases."""
-SETTINGS = {"five-angle": (61_000, 150, 256), "ma-t12": (10_000, 100, 128)}
+SETTINGS = {"five-angle": (61_000, 150, 256), "ma-t12": (30_000, 150, 256)}
 """Cases, epochs per stage and batch size for each shipped instrument (CPU time on a 2-core
 machine); the learning rate scales with the batch (2e-3 at 128)."""
-TRAINING_KINDS = {"five-angle": {"metallic": 0.6, "pearl": 0.25, "solid": 0.15}}
+TRAINING_KINDS = {
+    instrument: {"metallic": 0.6, "pearl": 0.25, "solid": 0.15} for instrument in SETTINGS
+}
 """Share of each paint family in an instrument's training cases (else the generator's
 default mix, which the evaluation cases keep): pearls, whose interference colour changes
 with angle, are the model's hardest family and get more cases."""
