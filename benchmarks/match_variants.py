@@ -42,7 +42,7 @@ def parse_settings(spec: str) -> MatchSettings:
         name, _, value = item.partition("=")
         if name not in types:
             raise SystemExit(f"setting {name!r}: not a MatchSettings field ({', '.join(types)})")
-        values[name] = types[name](value)
+        values[name] = value in ("1", "true", "True") if types[name] is bool else types[name](value)
     return MatchSettings(**values)
 
 

@@ -180,6 +180,21 @@ def correct_command(
     model: ModelOption = None,
     database: DatabaseOption = None,
     resolution: Annotated[float, typer.Option(help="Scale resolution [g].")] = 0.1,
+    offset_weight: Annotated[
+        float | None,
+        typer.Option(
+            help="Share of the spray-out's offset from the model expected to persist "
+            "(batches, model error; the rest is this spray's application and noise).",
+            show_default="flakelab.match.correction.OFFSET_WEIGHT",
+        ),
+    ] = None,
+    extra_toners: Annotated[
+        int | None,
+        typer.Option(
+            help="Toners outside the recipe tried as one addition (0: none).",
+            show_default="flakelab.match.correction.EXTRA_TONERS_TRIED",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Correct a recipe from the measured spray-out (Jacobian of the model at the recipe,
@@ -206,7 +221,21 @@ def correct_command(
     target_R, _, _ = _target_spectra(read_measurement(target), forward)
     sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
-    correction = correct(forward, target_R, fractions, sprayed_R, mode=mode)
+    from flakelab.match.correction import EXTRA_TONERS_TRIED, OFFSET_WEIGHT
+
+    offset_weight = OFFSET_WEIGHT if offset_weight is None else offset_weight
+    extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
+    if extra_toners < 0:
+        raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
+    correction = correct(
+        forward,
+        target_R,
+        fractions,
+        sprayed_R,
+        mode=mode,
+        offset_weight=offset_weight,
+        extra_toners=extra_toners,
+    )
     target_lab = reflectance_to_Lab(target_R)
     before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
     report = {"mode": mode, "before_de00": before.round(3).tolist()}
@@ -218,6 +247,8 @@ def correct_command(
         report["add_g"] = {k: on_scale(v) for k, v in correction.added.items() if on_scale(v) > 0}
     else:
         report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
+    report["new_toner"] = correction.new_toner
+    report["offset_weight"] = offset_weight
     report["expected_de00"] = delta_E(target_lab, correction.expected_lab).round(3).tolist()
     report["geometries"] = list(forward.geometries)
     if json_output:
@@ -225,5 +256,7 @@ def correct_command(
         return
     console.print_json(json.dumps(report))
     errors.print(
-        "expected ΔE00 assumes the spray-out's offset from the model persists", highlight=False
+        f"expected ΔE00 assumes {offset_weight:.0%} of the spray-out's offset from the model "
+        "persists",
+        highlight=False,
     )

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from flakelab.cases.generator import Variation, World
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -21,43 +23,59 @@ from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct
 from flakelab.match.search import MatchSettings, match
 
-__all__ = ["evaluate_matching", "SUCCESS_DE00"]
+__all__ = ["evaluate_matching", "SUCCESS_DE00", "Trial", "trial", "worst_de00"]
 
 SUCCESS_DE00 = 1.0
 """A spray-out succeeds when ΔE00 ≤ this at every geometry."""
 
 
-def _worst(a, b) -> float:
+def worst_de00(a, b) -> float:
+    """The largest ΔE00 over geometries between two readings ``[G, 31]``."""
     return float(delta_E(reflectance_to_Lab(a), reflectance_to_Lab(b)).max())
 
 
-def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
+@dataclass
+class Trial:
+    """One hidden formulation in the shop's world: the target as measured on the car (the
+    factory's batches and application), the shop's own batches, and one random stream per
+    spray-out (the first, its correction, the oracle), so that no spray depends on another."""
+
+    world: World
+    target: NDArray
+    shop: Variation
+    streams: list[np.random.Generator]
+
+    def spray(self, x: NDArray, stream: np.random.Generator) -> NDArray:
+        """``x`` mixed from the shop's batches, sprayed once and measured ``[G, 31]``."""
+        film, spread = self.world.application(1, stream)
+        variation = Variation(self.shop.strength, self.shop.hue_shift, film, spread)
+        R, _ = self.world.appearance(x[None], variation)
+        return self.world.measure(R, stream)[0]
+
+
+def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     oem, shop = world.variation(1, rng), world.variation(1, rng)
-    # each spray draws from its own stream, so the oracle's spray (and the next target) do
-    # not depend on whether the matcher needed a correction
-    first_rng, correction_rng, oracle_rng = rng.spawn(3)
-
-    def spray(x: np.ndarray, stream: np.random.Generator) -> np.ndarray:
-        film, spread = world.application(1, stream)
-        variation = Variation(shop.strength, shop.hue_shift, film, spread)
-        R, _ = world.appearance(x[None], variation)
-        return world.measure(R, stream)[0]
-
+    streams = rng.spawn(3)
     R_target, _ = world.appearance(x_hidden[None], oem)
-    target = world.measure(R_target, rng)[0]
+    return Trial(world, world.measure(R_target, rng)[0], shop, streams)
+
+
+def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
+    t = trial(world, x_hidden, rng)
+    first_rng, correction_rng, oracle_rng = t.streams
     start = time.perf_counter()
-    result = match(target, forward, effect, settings=settings)
+    result = match(t.target, forward, effect, settings=settings)
     latency = time.perf_counter() - start
     best = result.candidates[0]
     x = np.array([best.fractions.get(n, 0.0) for n in forward.toners])
-    first = spray(x, first_rng)
-    first_de = _worst(target, first)
+    first = t.spray(x, first_rng)
+    first_de = worst_de00(t.target, first)
     corrected_de = first_de
     if first_de > SUCCESS_DE00:
-        recipe = correct(forward, target, best.fractions, first, mode="reformulate").fractions
+        recipe = correct(forward, t.target, best.fractions, first, mode="reformulate").fractions
         corrected = np.array([recipe.get(n, 0.0) for n in forward.toners])
-        corrected_de = _worst(target, spray(corrected, correction_rng))
-    oracle_de = _worst(target, spray(x_hidden, oracle_rng))
+        corrected_de = worst_de00(t.target, t.spray(corrected, correction_rng))
+    oracle_de = worst_de00(t.target, t.spray(x_hidden, oracle_rng))
     return {
         "first_de00": first_de,
         "corrected_de00": min(first_de, corrected_de),

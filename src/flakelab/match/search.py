@@ -49,16 +49,17 @@ class MatchError(FlakelabError):
 class MatchSettings:
     candidates: int = 5
     max_pigments: int = 4
-    screen_steps: int = 120
+    screen_steps: int = 90
     refine_steps: int = 150
     refine_keep: int = 24
     novel_threshold: float = 1.5
-    top_pigments: int = 6
+    top_pigments: int = 5
     top_effects: int = 3
     sparsity: float = 0.4
     toner_penalty: float = 0.05
     texture_weight: float = 0.1
     min_amount: float = 0.002
+    top_bases: int = 4
     seed: int = 0
 
 
@@ -167,26 +168,46 @@ def _optimise(
         return logits.detach(), x, _loss(forward, colour, x, target_lab, target_texture, settings)
 
 
-def _screen(forward, colour, allowed, effect, target_lab, target_texture, settings, generator):
+def _screen(
+    forward, colour, allowed, effect, target_lab, target_texture, settings, generator, bases
+) -> tuple[NDArray, NDArray, list[tuple[int, ...] | None]]:
+    """Restarts, all in one batch (a step costs about the same for 20 rows as for 140):
+
+    * free: one from each effect toner plus two solid starts, every toner allowed;
+    * with ``bases``, one per effect base — each effect toner alone and each pair — with
+      every pigment free. The free restarts drift to blends of half a dozen aluminiums that
+      the refinement's few effect toners cannot rebuild (and the learned model never saw);
+      these search the space the recipes live in.
+
+    Returns amounts ``[R, T]``, losses ``[R]`` and each row's effect base (None: free)."""
     T = len(forward.toners)
-    starts = [i for i in np.flatnonzero(effect & allowed)] + [None, None]
-    logits = 0.3 * torch.randn(len(starts), T, generator=generator, dtype=forward.dtype) - 2.0
+    effects = np.flatnonzero(effect & allowed)
+    starts = [*effects, None, None]
+    rows: list[tuple[int, ...] | None] = [None] * len(starts)
+    masks = [allowed] * len(starts)
+    if bases:
+        for base in (c for size in (1, 2) for c in itertools.combinations(effects, size)):
+            rows.append(base)
+            masks.append(allowed & (~effect | np.isin(np.arange(T), base)))
+    mask = np.stack(masks)
+    logits = 0.3 * torch.randn(len(rows), T, generator=generator, dtype=forward.dtype) - 2.0
     for row, i in enumerate(starts):
         if i is not None:
             logits[row, i] = 2.0
-    mask = torch.as_tensor(np.tile(allowed, (len(starts), 1)))
+    based = np.array([base is not None for base in rows])
+    logits[torch.as_tensor(based[:, None] & mask & effect[None])] = 2.0
     _, x, loss = _optimise(
         forward,
         colour,
         logits,
-        mask,
+        torch.as_tensor(mask),
         target_lab,
         target_texture,
         settings,
         settings.screen_steps,
         settings.sparsity,
     )
-    return x, loss
+    return x.numpy().astype(float), loss.numpy(), rows
 
 
 def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -> torch.Tensor:
@@ -194,9 +215,22 @@ def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -
     ``refine_keep`` best so far (a subset far behind after a third rarely wins; the batch
     shrinks and the search's time with it)."""
     first = settings.refine_steps // 3
-    logits, _, loss = _optimise(
+    logits, x, _ = _optimise(
         forward, colour, init, mask, target_lab, target_texture, settings, first, 0.0
     )
+    # ranked as they would be weighed: an amount under ``min_amount`` is dropped, and a
+    # subset whose loss rests on such traces must not push out one that does not
+    mask = _prune(x, mask, settings.min_amount)
+    with torch.no_grad():
+        pruned = x * mask
+        loss = _loss(
+            forward,
+            colour,
+            pruned / pruned.sum(1, keepdim=True),
+            target_lab,
+            target_texture,
+            settings,
+        )
     keep = torch.argsort(loss)[: settings.refine_keep]
     _, x, _ = _optimise(
         forward,
@@ -212,11 +246,18 @@ def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -
     return x
 
 
+def _prune(x: torch.Tensor, mask: torch.Tensor, min_amount: float) -> torch.Tensor:
+    """``mask`` without the toners under ``min_amount`` in ``x`` (the largest always kept)."""
+    largest = torch.nn.functional.one_hot(x.argmax(1), x.shape[1]).bool()
+    return mask & ((x >= min_amount) | largest)
+
+
 def _subsets(
     x_screen: NDArray, importance: NDArray, effect: NDArray, settings: MatchSettings
 ) -> list[tuple[int, ...]]:
     """Toner sets to refine, from the screen's best solutions ``x_screen[S, T]`` and each
-    toner's ``importance[T]`` in them (:func:`_importance`)."""
+    toner's ``importance[S, T]`` in them (:func:`_importance`)."""
+    importance = importance.max(0)
     ranked = [i for i in np.argsort(-importance) if importance[i] > IMPORTANCE_FLOOR]
     effects = [i for i in ranked if effect[i]][: settings.top_effects]
     pigments = [i for i in ranked if not effect[i]][: settings.top_pigments]
@@ -233,10 +274,10 @@ def _subsets(
 
 
 def _importance(forward, colour, x_best, target_lab, target_texture, settings) -> NDArray:
-    """How much each toner matters to the screen's best solutions ``x_best[S, T]``: the
-    largest rise in loss when it is taken out (the rest renormalised). Amount alone misses
-    a tint: 0.2 % of a red pigment can carry a whole colour in a silver metallic, where the
-    aluminiums are tens of per cent and interchangeable."""
+    """How much each toner matters to each of the screen's best solutions ``x_best[S, T]``:
+    the rise in loss ``[S, T]`` when it is taken out (the rest renormalised). Amount alone
+    misses a tint: 0.2 % of a red pigment can carry a whole colour in a silver metallic,
+    where the aluminiums are tens of per cent and interchangeable."""
     S, T = x_best.shape
     rows, toners = np.nonzero(x_best > 1e-4)
     without = x_best[rows].copy()
@@ -251,9 +292,62 @@ def _importance(forward, colour, x_best, target_lab, target_texture, settings) -
             target_texture,
             settings,
         ).numpy()
-    importance = np.zeros(T)
-    np.maximum.at(importance, toners, losses[S:] - losses[rows])
+    importance = np.zeros((S, T))
+    importance[rows, toners] = losses[S:] - losses[rows]
     return importance
+
+
+def _base_subsets(
+    bases: list[tuple[int, ...]], importance: NDArray, effect: NDArray, settings: MatchSettings
+) -> list[tuple[int, ...]]:
+    """Each effect base of the base screen's best rows with every combination of that row's
+    most important pigments (``importance[B, T]``)."""
+    subsets = []
+    for base, row in zip(bases, importance, strict=True):
+        ranked = [i for i in np.argsort(-row) if row[i] > IMPORTANCE_FLOOR and not effect[i]]
+        pigments = ranked[: settings.max_pigments]
+        for size in range(len(pigments) + 1):
+            subsets += [tuple(base) + combo for combo in itertools.combinations(pigments, size)]
+    return subsets
+
+
+STARTING_PIGMENT_LEVELS = (0.003, 0.02, 0.08)
+"""Amounts of each pigment in the generic starts of a subset (trace tint to strong colour)."""
+
+
+def _starts(
+    forward, colour, x_best, subset_mask, effect, target_lab, target_texture, settings
+) -> torch.Tensor:
+    """Starting logits ``[N, T]`` for each subset: the best, by loss, of the screen's best
+    solutions restricted to it and generic starts with every pigment at one of
+    :data:`STARTING_PIGMENT_LEVELS`. One start for all would leave a subset far from its own
+    optimum (a trace of black from a screen solution without black starts at tens of per cent)
+    and successive halving would drop it before it got there."""
+    N, T = subset_mask.shape
+    restricted = (x_best[:, None, :] + 1e-3) * subset_mask[None]
+    pigments = subset_mask & ~effect[None]
+    effects = subset_mask & effect[None]
+    generic = []
+    for level in STARTING_PIGMENT_LEVELS:
+        x = np.where(pigments, level, 0.0)
+        rest = (1.0 - x.sum(1, keepdims=True)).clip(0.05, None)
+        n_effects = effects.sum(1, keepdims=True)
+        x = x + np.where(effects, rest / np.maximum(n_effects, 1), 0.0)
+        generic.append(x)
+    candidates = np.concatenate([restricted, np.stack(generic)])
+    candidates /= candidates.sum(2, keepdims=True)
+    flat = candidates.reshape(-1, T)
+    with torch.no_grad():
+        loss = _loss(
+            forward,
+            colour,
+            torch.as_tensor(flat, dtype=forward.dtype),
+            target_lab,
+            target_texture,
+            settings,
+        ).numpy()
+    choice = loss.reshape(len(candidates), N).argmin(0)
+    return torch.as_tensor(np.log(candidates[choice, np.arange(N)] + 1e-6), dtype=forward.dtype)
 
 
 def _support(x: NDArray, effect: NDArray, settings: MatchSettings) -> tuple[int, ...]:
@@ -334,25 +428,52 @@ def _match(
     # 1. screen: one restart per effect toner, plus solid starts; toners new to the learned
     #    model (physics-scaled, slower) join only when the known ones cannot get close
     novel = np.array([n in forward.novel for n in forward.toners])
-    x_screen, screen_loss = _screen(
-        forward, colour, allowed & ~novel, effect, target_lab, target_texture, settings, generator
+    x_screen, screen_loss, bases = _screen(
+        forward,
+        colour,
+        allowed & ~novel,
+        effect,
+        target_lab,
+        target_texture,
+        settings,
+        generator,
+        bases=settings.top_bases > 0,
     )
     if novel.any() and float(screen_loss.min()) > settings.novel_threshold:
-        x_all, loss_all = _screen(
-            forward, colour, allowed, effect, target_lab, target_texture, settings, generator
+        x_all, loss_all, bases_all = _screen(
+            forward,
+            colour,
+            allowed,
+            effect,
+            target_lab,
+            target_texture,
+            settings,
+            generator,
+            bases=False,
         )
-        x_screen = torch.cat([x_screen, x_all])
-        screen_loss = torch.cat([screen_loss, loss_all])
-    best = torch.argsort(screen_loss)[:3].numpy()
-    x_best = x_screen.numpy()[best].astype(float)
-    importance = _importance(forward, colour, x_best, target_lab, target_texture, settings)
-    subsets = _subsets(x_best, importance, effect, settings)
+        x_screen = np.concatenate([x_screen, x_all])
+        screen_loss = np.concatenate([screen_loss, loss_all])
+        bases += bases_all
+    free = np.array([base is None for base in bases])
+    best = np.flatnonzero(free)[np.argsort(screen_loss[free])[:3]]
+    importance = _importance(forward, colour, x_screen[best], target_lab, target_texture, settings)
+    subsets = _subsets(x_screen[best], importance, effect, settings)
+    # the best effect bases, each with its own most important pigments
+    top = np.flatnonzero(~free)[np.argsort(screen_loss[~free])[: settings.top_bases]]
+    if top.size:
+        base_importance = _importance(
+            forward, colour, x_screen[top], target_lab, target_texture, settings
+        )
+        chosen = _base_subsets([bases[i] for i in top], base_importance, effect, settings)
+        subsets = list(dict.fromkeys(subsets + [tuple(sorted(s)) for s in chosen]))
+    x_best = x_screen[np.concatenate([best, top])]
     # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
         subset_mask[row, list(subset)] = True
-    start_x = x_screen.numpy()[best[0]]
-    init = torch.as_tensor(np.log(start_x + 1e-2))[None].repeat(len(subsets), 1)
+    init = _starts(
+        forward, colour, x_best, subset_mask, effect, target_lab, target_texture, settings
+    )
     x_refined = _refine(
         forward, colour, init, torch.as_tensor(subset_mask), target_lab, target_texture, settings
     )
