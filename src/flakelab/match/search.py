@@ -1,12 +1,13 @@
 """Recipe search: from a target measurement to ranked candidate formulations (DESIGN.md §6).
 
-1. **Screen** (all toners at once): several restarts, each starting from one effect base (or
-   none, for a solid), optimise softmax amounts against the multi-angle loss plus a
-   square-root sparsity penalty. The restarts' best solutions say which effect toners and
-   pigments the target needs.
+1. **Screen**, one batch of restarts with a square-root sparsity penalty: free ones (one from
+   each effect toner, or none for a solid; every toner allowed) and one per effect base (each
+   effect toner alone and each pair, pigments free). Their best solutions say which effect
+   toners and pigments the target needs (:func:`_importance`).
 2. **Subsets** (smart pruning, not enumeration of the library): every combination of the
-   three most used effect toners (a pearl over an aluminium base takes all three) × every
-   combination of up to ``max_pigments`` of the six most used pigments.
+   free restarts' three most important effect toners (a pearl over an aluminium base takes
+   all three) × every combination of up to ``max_pigments`` of their most important
+   pigments; each of the best effect bases × combinations of its own important pigments.
 3. **Optimise** all subsets at once (one batch through the forward model, autograd, Adam on
    masked softmax logits: amounts stay non-negative and sum to the can), by successive
    halving: a third of the steps on every subset, the rest on the ``refine_keep`` best.
