@@ -20,13 +20,11 @@ import json
 import numpy as np
 from rich.progress import track
 
+from _matcher import shipped_matcher
 from flakelab.cases.generator import World
-from flakelab.io import read_library
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import SUCCESS_DE00, trial, worst_de00
-from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.search import match
-from flakelab.models.registry import shipped_model
 
 
 def parse(spec: str) -> dict:
@@ -50,11 +48,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=77)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    library = read_library(None)
-    forward = forward_for(shipped_model("five-angle"), library)
-    effect = effect_mask(library, forward.toners)
-    world = World(library, "five-angle")
-    known = World(library, "five-angle", exclude=forward.novel)
+    world, forward, effect = shipped_matcher()
+    known = World(world.library, "five-angle", exclude=forward.novel)
     rng = np.random.default_rng(args.seed)
     specs = ["none", "defaults", *args.settings]
     passed: dict[str, list[float]] = {s: [] for s in specs}

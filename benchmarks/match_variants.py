@@ -15,12 +15,9 @@ import argparse
 import dataclasses
 import json
 
-from flakelab.cases.generator import World
-from flakelab.io import read_library
+from _matcher import shipped_matcher
 from flakelab.match.evaluate import evaluate_matching
-from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.search import MatchSettings
-from flakelab.models.registry import shipped_model
 
 FIGURES = (
     "first_shot_success",
@@ -54,10 +51,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    library = read_library(None)
-    forward = forward_for(shipped_model("five-angle"), library)
-    effect = effect_mask(library, forward.toners)
-    world = World(library, "five-angle")
+    world, forward, effect = shipped_matcher()
     rows = []
     for spec in ["", *args.settings]:
         report = evaluate_matching(

@@ -1,0 +1,15 @@
+"""What the matcher benchmarks share: the shipped five-angle model on the demo library."""
+
+from __future__ import annotations
+
+from flakelab.cases.generator import World
+from flakelab.io import read_library
+from flakelab.match.models import effect_mask, forward_for
+from flakelab.models.registry import shipped_model
+
+
+def shipped_matcher():
+    """The demo library's world, the shipped model's forward and its effect-toner mask."""
+    library = read_library(None)
+    forward = forward_for(shipped_model("five-angle"), library)
+    return World(library, "five-angle"), forward, effect_mask(library, forward.toners)
