@@ -23,7 +23,7 @@ from rich.progress import track
 from _matcher import shipped_matcher
 from flakelab.cases.generator import World
 from flakelab.match.correction import correct
-from flakelab.match.evaluate import SUCCESS_DE00, trial, worst_de00
+from flakelab.match.evaluate import SUCCESS_DE00, recipe_vector, trial, worst_de00
 from flakelab.match.search import match
 
 
@@ -34,10 +34,6 @@ def parse(spec: str) -> dict:
         name, _, value = item.partition("=")
         out[name] = int(value) if name in ("extra_toners", "steps") else float(value)
     return out
-
-
-def vector(forward, fractions: dict[str, float]) -> np.ndarray:
-    return np.array([fractions.get(n, 0.0) for n in forward.toners])
 
 
 def main() -> None:
@@ -60,19 +56,19 @@ def main() -> None:
         t = trial(world, x_hidden, rng)
         sprays = t.streams[1].bit_generator.seed_seq.spawn(args.sprays)
         best = match(t.target, forward, effect).candidates[0]
-        first = t.spray(vector(forward, best.fractions), t.streams[0])
+        first = t.spray(recipe_vector(forward, best.fractions), t.streams[0])
         if worst_de00(t.target, first) <= SUCCESS_DE00:
             continue
         failed += 1
         for spec in specs:
             if spec == "none":
-                x = vector(forward, best.fractions)
+                x = recipe_vector(forward, best.fractions)
             else:
                 keywords = {} if spec == "defaults" else parse(spec)
                 fixed = correct(
                     forward, t.target, best.fractions, first, mode="reformulate", **keywords
                 )
-                x = vector(forward, fixed.fractions)
+                x = recipe_vector(forward, fixed.fractions)
             # the same seeds for every setting: each sees the same sprays
             des = [worst_de00(t.target, t.spray(x, np.random.default_rng(s))) for s in sprays]
             passed[spec].append(float(np.mean(np.array(des) <= SUCCESS_DE00)))

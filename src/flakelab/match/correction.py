@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
+from flakelab.match.search import multi_angle_loss
 
 __all__ = ["correct", "Correction", "CORRECTION_MODES", "OFFSET_WEIGHT"]
 
@@ -42,7 +43,8 @@ OFFSET_WEIGHT = 0.7
 
 EXTRA_TONERS_TRIED = 8
 EXTRA_TONER_GAIN = 0.15
-"""Loss (ΔE94: mean + half the worst geometry) a toner new to the recipe must save to join."""
+"""Loss (:func:`~flakelab.match.search.multi_angle_loss`) a toner new to the recipe must save
+to join."""
 
 NEW_TONER_START = 0.002
 
@@ -72,11 +74,6 @@ class Correction:
     new_toner: str | None = None
 
 
-def _loss(colour, target_lab, lab) -> torch.Tensor:
-    de = colour.delta_e94(target_lab[None], lab)
-    return de.mean(1) + 0.5 * de.max(1).values
-
-
 def _extra_candidates(forward, colour, x0, target_lab, offset, count) -> list[int]:
     """Toners outside the recipe whose small addition lowers the loss fastest (the
     directional derivative of the renormalised mix, one backward pass)."""
@@ -86,7 +83,7 @@ def _extra_candidates(forward, colour, x0, target_lab, offset, count) -> list[in
     if not count or not candidates.size:
         return []
     x = x0.clone().requires_grad_(True)
-    _loss(colour, target_lab, colour.lab(forward(x)[0]) + offset).sum().backward()
+    multi_angle_loss(colour, target_lab, colour.lab(forward(x)[0]) + offset).sum().backward()
     g = x.grad[0]
     slope = (g - (g * x0[0]).sum()).numpy()
     steepest = candidates[np.argsort(slope[candidates])][:count]
@@ -140,12 +137,14 @@ def correct(
 
     for _ in range(steps):
         optimiser.zero_grad()
-        _loss(colour, target_lab, colour.lab(forward(mixed())[0]) + offset).sum().backward()
+        multi_angle_loss(
+            colour, target_lab, colour.lab(forward(mixed())[0]) + offset
+        ).sum().backward()
         optimiser.step()
     with torch.no_grad():
         final = mixed()
         lab = colour.lab(forward(final)[0]) + offset
-        loss = _loss(colour, target_lab, lab).numpy()
+        loss = multi_angle_loss(colour, target_lab, lab).numpy()
     loss[1:] += EXTRA_TONER_GAIN
     row = int(np.argmin(loss))
     x = final[row].double().numpy()

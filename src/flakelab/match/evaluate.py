@@ -23,10 +23,15 @@ from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct
 from flakelab.match.search import MatchSettings, match
 
-__all__ = ["evaluate_matching", "SUCCESS_DE00", "Trial", "trial", "worst_de00"]
+__all__ = ["evaluate_matching", "SUCCESS_DE00", "Trial", "trial", "worst_de00", "recipe_vector"]
 
 SUCCESS_DE00 = 1.0
 """A spray-out succeeds when ΔE00 ≤ this at every geometry."""
+
+
+def recipe_vector(forward, fractions: dict[str, float]) -> NDArray:
+    """A recipe's fractions ``{toner: share}`` as a vector over the model's toners."""
+    return np.array([fractions.get(n, 0.0) for n in forward.toners])
 
 
 def worst_de00(a, b) -> float:
@@ -67,13 +72,13 @@ def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
     result = match(t.target, forward, effect, settings=settings)
     latency = time.perf_counter() - start
     best = result.candidates[0]
-    x = np.array([best.fractions.get(n, 0.0) for n in forward.toners])
+    x = recipe_vector(forward, best.fractions)
     first = t.spray(x, first_rng)
     first_de = worst_de00(t.target, first)
     corrected_de = first_de
     if first_de > SUCCESS_DE00:
         recipe = correct(forward, t.target, best.fractions, first, mode="reformulate").fractions
-        corrected = np.array([recipe.get(n, 0.0) for n in forward.toners])
+        corrected = recipe_vector(forward, recipe)
         corrected_de = worst_de00(t.target, t.spray(corrected, correction_rng))
     oracle_de = worst_de00(t.target, t.spray(x_hidden, oracle_rng))
     return {

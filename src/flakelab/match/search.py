@@ -34,7 +34,7 @@ from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 
-__all__ = ["Candidate", "MatchResult", "MatchSettings", "match", "MatchError"]
+__all__ = ["Candidate", "MatchResult", "MatchSettings", "match", "MatchError", "multi_angle_loss"]
 
 
 IMPORTANCE_FLOOR = 0.02
@@ -134,6 +134,13 @@ def _masked_softmax(logits: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.softmax(logits.masked_fill(~mask, -1e4), dim=1)
 
 
+def multi_angle_loss(colour: TorchColour, target_lab: torch.Tensor, lab: torch.Tensor):
+    """The objective over geometries: mean CIE94 difference plus half the worst one, per
+    recipe ``lab[N, G, 3]`` against ``target_lab[G, 3]`` (smooth, unlike CIEDE2000)."""
+    de = colour.delta_e94(target_lab[None], lab)
+    return de.mean(dim=1) + 0.5 * de.max(dim=1).values
+
+
 def _loss(
     forward,
     colour: TorchColour,
@@ -143,8 +150,7 @@ def _loss(
     settings: MatchSettings,
 ) -> torch.Tensor:
     R, texture = forward(x)
-    de = colour.delta_e94(target_lab[None], colour.lab(R))
-    loss = de.mean(dim=1) + 0.5 * de.max(dim=1).values
+    loss = multi_angle_loss(colour, target_lab, colour.lab(R))
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
     return loss
@@ -308,7 +314,9 @@ def _base_subsets(
         ranked = [i for i in np.argsort(-row) if row[i] > IMPORTANCE_FLOOR and not effect[i]]
         pigments = ranked[: settings.max_pigments]
         for size in range(len(pigments) + 1):
-            subsets += [tuple(base) + combo for combo in itertools.combinations(pigments, size)]
+            subsets += [
+                tuple(sorted(base + combo)) for combo in itertools.combinations(pigments, size)
+            ]
     return subsets
 
 
@@ -457,17 +465,14 @@ def _match(
         bases += bases_all
     free = np.array([base is None for base in bases])
     best = np.flatnonzero(free)[np.argsort(screen_loss[free])[:3]]
-    importance = _importance(forward, colour, x_screen[best], target_lab, target_texture, settings)
-    subsets = _subsets(x_screen[best], importance, effect, settings)
-    # the best effect bases, each with its own most important pigments
     top = np.flatnonzero(~free)[np.argsort(screen_loss[~free])[: settings.top_bases]]
-    if top.size:
-        base_importance = _importance(
-            forward, colour, x_screen[top], target_lab, target_texture, settings
-        )
-        chosen = _base_subsets([bases[i] for i in top], base_importance, effect, settings)
-        subsets = list(dict.fromkeys(subsets + [tuple(sorted(s)) for s in chosen]))
     x_best = x_screen[np.concatenate([best, top])]
+    importance = _importance(forward, colour, x_best, target_lab, target_texture, settings)
+    n = best.size
+    subsets = _subsets(x_best[:n], importance[:n], effect, settings)
+    # the best effect bases, each with its own most important pigments
+    subsets += _base_subsets([bases[i] for i in top], importance[n:], effect, settings)
+    subsets = list(dict.fromkeys(subsets))
     # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
