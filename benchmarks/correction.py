@@ -6,10 +6,13 @@ comma-separated list of :func:`flakelab.match.correction.correct` keywords — a
 corrected recipe is sprayed ``--sprays`` times, the same random streams for every setting
 (one spray per target, as in the harness, is too noisy to rank settings). The first row is
 "none": the first recipe sprayed again unchanged, the baseline of the same run; the second
-the defaults.
+the defaults (the offset split by the library's physics). ``library=none`` corrects without
+the physics split (the whole offset weighted by ``OFFSET_WEIGHT``). ``--ceiling`` adds a row
+corrected from the spray-out as it would read without its own application and instrument
+noise, with the whole offset: what a perfect split of the offset could buy.
 
-    python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--json]
-        "offset_weight=1.0" "extra_toners=0" ...
+    python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling] [--json]
+        "library=none" "offset_weight=1.0" "persistent_sd=0.3" "extra_toners=0" ...
 """
 
 from __future__ import annotations
@@ -32,7 +35,10 @@ def parse(spec: str) -> dict:
     out = {}
     for item in filter(None, (part.strip() for part in spec.split(","))):
         name, _, value = item.partition("=")
-        out[name] = int(value) if name in ("extra_toners", "steps") else float(value)
+        if name == "library":  # library=none: no physics split, one weight for the offset
+            out[name] = None
+        else:
+            out[name] = int(value) if name in ("extra_toners", "steps") else float(value)
     return out
 
 
@@ -42,12 +48,13 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=60)
     parser.add_argument("--sprays", type=int, default=6)
     parser.add_argument("--seed", type=int, default=77)
+    parser.add_argument("--ceiling", action="store_true")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     world, forward, effect = shipped_matcher()
     known = World(world.library, "five-angle", exclude=forward.novel)
     rng = np.random.default_rng(args.seed)
-    specs = ["none", "defaults", *args.settings]
+    specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling)]
     passed: dict[str, list[float]] = {s: [] for s in specs}
     worst: dict[str, list[float]] = {s: [] for s in specs}
     failed = 0
@@ -63,8 +70,14 @@ def main() -> None:
         for spec in specs:
             if spec == "none":
                 x = recipe_vector(forward, best.fractions)
+            elif spec == "ceiling":
+                calm = t.unsprayed(recipe_vector(forward, best.fractions))
+                fixed = correct(forward, t.target, best.fractions, calm, mode="reformulate",
+                                offset_weight=1.0)  # fmt: skip
+                x = recipe_vector(forward, fixed.fractions)
             else:
                 keywords = {} if spec == "defaults" else parse(spec)
+                keywords = {"library": world.library, **keywords}
                 fixed = correct(
                     forward, t.target, best.fractions, first, mode="reformulate", **keywords
                 )

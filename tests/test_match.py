@@ -13,10 +13,19 @@ import torch
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
-from flakelab.match.correction import correct
+from flakelab.core.geometry import instrument_geometries
+from flakelab.io import read_library
+from flakelab.match.correction import (
+    NOISE_SD,
+    PERSISTENT_SD,
+    application_sensitivity,
+    correct,
+    split_offset,
+)
 from flakelab.match.forward import KubelkaMunkForward
 from flakelab.match.recipe import RecipeError, parse_quantity, weigh
 from flakelab.match.search import MatchSettings, match
+from flakelab.physics.application import SPREAD_SD, sprayed_reflectance
 
 OKUMURA = Path(__file__).resolve().parents[2] / "shared" / "data" / "pigment-km"
 
@@ -139,6 +148,51 @@ def test_correction_brings_in_a_toner_the_recipe_lacks(km):
         assert fixed.new_toner is not None and fixed.new_toner in fixed.fractions, mode
         assert "Blue" in fixed.new_toner or "Green" in fixed.new_toner, fixed.new_toner
         assert after.max() < 1.0, mode
+
+
+def _blue_silver():
+    library = read_library(None)
+    x = np.zeros(len(library.toners))
+    x[library.names.index("Al medium")] = 0.9
+    x[library.names.index("Phthalo blue GS")] = 0.1
+    return library, x, instrument_geometries("five-angle")
+
+
+def _lab_of_spray(library, x, geometries, film=1.0, spread=1.0):
+    return reflectance_to_Lab(sprayed_reflectance(library, x[None], geometries, [film], [spread]))[
+        0
+    ]
+
+
+def test_offset_split_recovers_a_spray_s_flake_spread():
+    """A spray-out whose flakes lie 3 % less spread and whose film is 5 % thicker, from the
+    same cans: the split names the spread (the posterior shrinks it by under a tenth) and
+    leaves little to correct for. The film build of a hiding metallic changes nothing."""
+    library, x, geometries = _blue_silver()
+    nominal = _lab_of_spray(library, x, geometries)
+    offset = _lab_of_spray(library, x, geometries, 1.05, np.exp(-0.03)) - nominal
+    persistent, sigmas = split_offset(offset, application_sensitivity(library, x, geometries))
+    assert sigmas[1] * SPREAD_SD == pytest.approx(-0.03, abs=0.004)
+    assert np.linalg.norm(persistent) < 0.2 * np.linalg.norm(offset)
+
+
+def test_offset_split_keeps_a_batch_offset():
+    """A 6 % stronger blue batch moves chroma and hue, which no film build or flake alignment
+    can: most of that offset is kept as persistent, and no application deviation is seen."""
+    library, x, geometries = _blue_silver()
+    strong = x.copy()
+    strong[library.names.index("Phthalo blue GS")] *= 1.06
+    nominal = _lab_of_spray(library, x, geometries)
+    offset = _lab_of_spray(library, strong, geometries) - nominal
+    persistent, sigmas = split_offset(offset, application_sensitivity(library, x, geometries))
+    kept = np.linalg.norm(persistent) / np.linalg.norm(offset)
+    assert kept > 0.7
+    assert np.abs(sigmas).max() < 1.0
+    # with one weight for the whole offset there is nothing to tell the two apart
+    plain, _ = split_offset(offset, np.zeros((2, len(geometries), 3)))
+    assert np.linalg.norm(plain) / np.linalg.norm(offset) == pytest.approx(
+        PERSISTENT_SD**2 / (PERSISTENT_SD**2 + NOISE_SD**2)
+    )
 
 
 def test_weighing_sums_to_the_can_at_the_scale_resolution():

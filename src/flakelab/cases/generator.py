@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import uuid
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
@@ -37,6 +37,7 @@ from flakelab.core.geometry import Geometry, instrument_geometries
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
+from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
 from flakelab.physics.fast import predict
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.texture.readings import texture_readings
@@ -63,8 +64,8 @@ class WorldSettings:
 
     batch_strength_sd: float = 0.03
     batch_hue_shift_nm: float = 1.5
-    film_build_sd: float = 0.04
-    spread_sd: float = 0.02
+    film_build_sd: float = FILM_BUILD_SD
+    spread_sd: float = SPREAD_SD
     fade_range: tuple[float, float] = (0.01, 0.06)
     haze_range: tuple[float, float] = (0.001, 0.004)
     noise_band: float = 0.001
@@ -164,14 +165,11 @@ class World:
     def appearance(self, fractions: NDArray, variation: Variation) -> tuple[NDArray, NDArray]:
         """Reflectance factors ``[F, G, 31]`` (π·BRDF) and texture readings ``[F, 8]``."""
         layer = layer_from_fractions(self.library, fractions * variation.strength)
-        shifted = _shift_spectra(layer.absorption, variation.hue_shift)
-        from dataclasses import replace
-
-        layer = replace(
-            layer,
-            absorption=shifted,
-            thickness=self.library.binder.thickness_um * variation.film,
-            spread_scale=variation.spread,
+        layer = sprayed_layer(
+            replace(layer, absorption=_shift_spectra(layer.absorption, variation.hue_shift)),
+            self.library,
+            variation.film,
+            variation.spread,
         )
         R = np.pi * predict(layer, self.geometries)
         return R, texture_readings(layer, self._radius)

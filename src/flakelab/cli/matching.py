@@ -183,9 +183,10 @@ def correct_command(
     offset_weight: Annotated[
         float | None,
         typer.Option(
-            help="Share of the spray-out's offset from the model expected to persist "
-            "(batches, model error; the rest is this spray's application and noise).",
-            show_default="flakelab.match.correction.OFFSET_WEIGHT",
+            help="Weight the whole of the spray-out's offset from the model by this share "
+            "(0 to 1) instead of splitting off this spray's film build and flake alignment "
+            "by the library's physics.",
+            show_default="physics split",
         ),
     ] = None,
     extra_toners: Annotated[
@@ -221,9 +222,8 @@ def correct_command(
     target_R, _, _ = _target_spectra(read_measurement(target), forward)
     sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
-    from flakelab.match.correction import EXTRA_TONERS_TRIED, OFFSET_WEIGHT
+    from flakelab.match.correction import EXTRA_TONERS_TRIED
 
-    offset_weight = OFFSET_WEIGHT if offset_weight is None else offset_weight
     extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
@@ -233,6 +233,7 @@ def correct_command(
         fractions,
         sprayed_R,
         mode=mode,
+        library=lib,
         offset_weight=offset_weight,
         extra_toners=extra_toners,
     )
@@ -249,14 +250,24 @@ def correct_command(
         report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
     report["new_toner"] = correction.new_toner
     report["offset_weight"] = offset_weight
+    report["spray_application"] = correction.application and {
+        name: round(value, 4) for name, value in correction.application.items()
+    }
     report["expected_de00"] = delta_E(target_lab, correction.expected_lab).round(3).tolist()
     report["geometries"] = list(forward.geometries)
     if json_output:
         print(json.dumps(report, indent=2))
         return
     console.print_json(json.dumps(report))
+    if correction.application is None:
+        assumed = f"{offset_weight:.0%} of the spray-out's offset from the model persists"
+    else:
+        film, spread = correction.application.values()
+        assumed = (
+            "the spray-out's offset from the model persists, except what this spray's "
+            f"application explains (film build {film:+.1%}, flake spread {spread:+.1%})"
+        )
     errors.print(
-        f"expected ΔE00 assumes {offset_weight:.0%} of the spray-out's offset from the model "
-        "persists",
+        f"expected ΔE00 assumes {assumed}",
         highlight=False,
     )

@@ -11,10 +11,16 @@ recipe minimises the difference between target and *prediction + offset*:
 
 Only part of the offset persists. The toner batches and the model's own error stay; the
 spray's film build and flake orientation and the instrument's noise are drawn afresh at the
-next spray, and correcting for them adds them back with the opposite sign. One spray-out
-cannot tell the two apart, so the offset is weighted by ``offset_weight``, the share of its
-variance expected to persist (a shrinkage estimate; ``benchmarks/correction.py`` measures
-what each weight buys).
+next spray, and correcting for them adds them back with the opposite sign. Given the library,
+the physics tells the two apart: how film build and flake spread move this recipe's colour
+(:mod:`flakelab.physics.application`) spans the directions a spray's
+application can take, and the offset is split as the posterior means of a linear-Gaussian
+model, offset = Σₖ aₖ·sₖ + p + n, with aₖ ~ N(0, 1) one-sigma application deviations along
+the sensitivities sₖ, p ~ N(0, σ_p²) the persistent offset and n ~ N(0, σ_n²) noise, every
+geometry and L*a*b* component alike: p̂ = σ_p²·C⁻¹·offset, â = Sᵀ·C⁻¹·offset,
+C = S·Sᵀ + (σ_p² + σ_n²)·I. Without the library (or with an explicit ``offset_weight``) the
+whole offset is weighted by one share, ``offset_weight`` (a shrinkage estimate).
+``benchmarks/correction.py`` measures what each choice buys.
 
 When the recipe's own toners cannot move the colour where it must go (a one-toner silver
 that came out too blue), one more toner may join: the few whose first-order effect on the
@@ -30,16 +36,40 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
+from flakelab.library.toners import Library
 from flakelab.match.search import multi_angle_loss
+from flakelab.physics.application import (
+    APPLICATION_PARAMETERS,
+    FILM_BUILD_SD,
+    SPREAD_SD,
+    sprayed_reflectance,
+)
 
-__all__ = ["correct", "Correction", "CORRECTION_MODES", "OFFSET_WEIGHT"]
+__all__ = [
+    "correct",
+    "Correction",
+    "CORRECTION_MODES",
+    "OFFSET_WEIGHT",
+    "PERSISTENT_SD",
+    "NOISE_SD",
+    "split_offset",
+]
 
 CORRECTION_MODES = ("additions", "reformulate")
 
 OFFSET_WEIGHT = 0.7
-"""Share of a spray-out's offset from the model assumed to persist at the next spray."""
+"""Share of a spray-out's offset from the model assumed to persist at the next spray, when
+the physics cannot split it (no library given)."""
+
+PERSISTENT_SD = 0.5
+"""σ_p: prior standard deviation of the persistent offset per L*a*b* component and geometry
+(the shop's toner batches, the model's error)."""
+
+NOISE_SD = 0.1
+"""σ_n: the rest that does not persist (instrument, weighing), per component and geometry."""
 
 EXTRA_TONERS_TRIED = 8
 EXTRA_TONER_GAIN = 0.15
@@ -66,12 +96,41 @@ class Correction:
     """The corrected recipe as fractions of its new total; ``added`` the additions per toner
     relative to the mixed can's content (``additions`` mode; empty when reformulating);
     ``expected_lab[G, 3]`` what the corrected spray-out should measure (prediction + the
-    weighted offset); ``new_toner`` the toner that joined the recipe, if one did."""
+    persistent offset); ``new_toner`` the toner that joined the recipe, if one did;
+    ``application`` the spray-out's estimated application deviation (relative film build,
+    relative flake spread), when the physics split the offset."""
 
     fractions: dict[str, float]
     added: dict[str, float]
     expected_lab: NDArray
     new_toner: str | None = None
+    application: dict[str, float] | None = None
+
+
+def split_offset(
+    offset: NDArray,
+    sensitivity: NDArray,
+    persistent_sd: float = PERSISTENT_SD,
+    noise_sd: float = NOISE_SD,
+) -> tuple[NDArray, NDArray]:
+    """The persistent part ``[G, 3]`` of a spray-out's L*a*b* ``offset`` from the model, and
+    its application deviations ``[K]`` in sigmas, given the L*a*b* change of one sigma of each
+    application parameter ``sensitivity[K, G, 3]`` (posterior means; module notes)."""
+    S = sensitivity.reshape(len(sensitivity), -1).T
+    C = S @ S.T + (persistent_sd**2 + noise_sd**2) * np.eye(S.shape[0])
+    w = np.linalg.solve(C, offset.reshape(-1))
+    return (persistent_sd**2 * w).reshape(offset.shape), S.T @ w
+
+
+def application_sensitivity(library: Library, x: NDArray, geometries) -> NDArray:
+    """L*a*b* change ``[2, G, 3]`` of recipe ``x[T]`` per one sigma of film build and of
+    flake spread: half the difference between sprays one sigma either side (the library's
+    physics)."""
+    film = np.array([1 + FILM_BUILD_SD, 1 - FILM_BUILD_SD, 1.0, 1.0])
+    spread = np.exp([0.0, 0.0, SPREAD_SD, -SPREAD_SD])
+    R = sprayed_reflectance(library, np.repeat(x[None], 4, axis=0), geometries, film, spread)
+    lab = reflectance_to_Lab(R).reshape(2, 2, len(geometries), 3)
+    return (lab[:, 0] - lab[:, 1]) / 2
 
 
 def _extra_candidates(forward, colour, x0, target_lab, offset, count) -> list[int]:
@@ -99,22 +158,38 @@ def correct(
     mode: str = "additions",
     steps: int = 300,
     max_addition: float = 0.5,
-    offset_weight: float = OFFSET_WEIGHT,
+    library: Library | None = None,
+    offset_weight: float | None = None,
+    persistent_sd: float = PERSISTENT_SD,
     extra_toners: int = EXTRA_TONERS_TRIED,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
-    ``extra_toners`` toners outside the recipe are tried (0: the recipe's toners only)."""
+    ``extra_toners`` toners outside the recipe are tried (0: the recipe's toners only).
+    With ``library`` (in the model's toner order) the offset is split by the physics of the
+    spray's application; ``offset_weight`` weights the whole offset instead."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
-    if not 0.0 <= offset_weight <= 1.0:
+    if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
         raise FlakelabError(f"--offset-weight: expected 0 to 1, got {offset_weight}")
     colour = TorchColour(dtype=forward.dtype)
-    x0 = torch.as_tensor(_vector(forward, recipe), dtype=forward.dtype)[None]
+    x_recipe = _vector(forward, recipe)
+    x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     with torch.no_grad():
         R0, _ = forward(x0)
         measured = colour.lab(torch.as_tensor(sprayed, dtype=forward.dtype))
-        offset = offset_weight * (measured - colour.lab(R0)[0])
+        raw = (measured - colour.lab(R0)[0]).double().numpy()
+    application = None
+    if library is None or offset_weight is not None:
+        persistent = (OFFSET_WEIGHT if offset_weight is None else offset_weight) * raw
+    else:
+        sensitivity = application_sensitivity(library, x_recipe, forward.geometries)
+        persistent, sigmas = split_offset(raw, sensitivity, persistent_sd)
+        film, spread = sigmas * [FILM_BUILD_SD, SPREAD_SD]
+        application = dict(
+            zip(APPLICATION_PARAMETERS, (float(film), float(np.expm1(spread))), strict=True)
+        )
+    offset = torch.as_tensor(persistent, dtype=forward.dtype)
     target_lab = colour.lab(torch.as_tensor(target, dtype=forward.dtype))
     extra = _extra_candidates(forward, colour, x0, target_lab, offset, extra_toners)
     used = (x0 > 0).repeat(1 + len(extra), 1)
@@ -158,4 +233,5 @@ def correct(
         added,
         lab[row].double().numpy(),
         forward.toners[extra[row - 1]] if row else None,
+        application,
     )

@@ -57,6 +57,12 @@ class Trial:
         R, _ = self.world.appearance(x[None], variation)
         return self.world.measure(R, stream)[0]
 
+    def unsprayed(self, x: NDArray) -> NDArray:
+        """``x`` mixed from the shop's batches at the nominal application, read without
+        noise ``[G, 31]``: a spray-out without its own application and instrument noise."""
+        variation = Variation(self.shop.strength, self.shop.hue_shift, np.ones(1), np.ones(1))
+        return self.world.appearance(x[None], variation)[0][0]
+
 
 def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     oem, shop = world.variation(1, rng), world.variation(1, rng)
@@ -77,7 +83,9 @@ def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
     first_de = worst_de00(t.target, first)
     corrected_de = first_de
     if first_de > SUCCESS_DE00:
-        recipe = correct(forward, t.target, best.fractions, first, mode="reformulate").fractions
+        recipe = correct(
+            forward, t.target, best.fractions, first, mode="reformulate", library=world.library
+        ).fractions
         corrected = recipe_vector(forward, recipe)
         corrected_de = worst_de00(t.target, t.spray(corrected, correction_rng))
     oracle_de = worst_de00(t.target, t.spray(x_hidden, oracle_rng))
