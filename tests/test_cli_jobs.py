@@ -45,6 +45,13 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     new = set(report["add_g"]) - set(json.loads(recipe.read_text()))
     assert new <= {report["new_toner"]}
     assert max(report["expected_de00"]) < max(report["before_de00"])
+    assert set(report["spray_application"]) == {"film build", "flake spread"}
+    # the table a colorist reads says the same: every addition with its grams
+    text = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed))
+    assert text.returncode == 0, text.stderr
+    for toner, grams in report["add_g"].items():
+        assert any(toner in ln and f"{grams:.1f}" in ln for ln in text.stdout.splitlines()), toner
+    assert "flake spread" in text.stdout
 
 
 def test_correct_refuses_a_bad_recipe(tmp_path):

@@ -10,7 +10,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, console, errors, progress_bar
+from flakelab.cli.common import JsonOption, console, progress_bar
 from flakelab.cli.learning import DatabaseOption, InstrumentOption, LibraryOption, _maybe_engine
 from flakelab.errors import FlakelabError
 
@@ -258,16 +258,36 @@ def correct_command(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    console.print_json(json.dumps(report))
-    if correction.application is None:
+    _print_correction(report, offset_weight)
+
+
+def _print_correction(report: dict, offset_weight: float | None) -> None:
+    """The correction as a colorist reads it: what to weigh, then the colour before/after."""
+    grams = report.get("add_g", report.get("recipe_g", {}))
+    title = "add to the mixed can" if report["mode"] == "additions" else "mix afresh"
+    table = Table(title=f"Correction: {title}", box=box.SIMPLE_HEAD)
+    table.add_column("toner")
+    table.add_column("g", justify="right")
+    for toner, g in grams.items():
+        label = f"{toner} [yellow](new to the recipe)[/]" if toner == report["new_toner"] else toner
+        table.add_row(label, f"{g:.1f}")
+    if not grams:
+        table.add_row("[dim]nothing to add on this scale[/]", "")
+    geo = Table(box=box.SIMPLE, show_header=True)
+    geo.add_column("ΔE00")
+    for name in report["geometries"]:
+        geo.add_column(name, justify="right")
+    geo.add_row("spray-out", *(f"{v:.2f}" for v in report["before_de00"]))
+    geo.add_row("expected", *(f"{v:.2f}" for v in report["expected_de00"]))
+    console.print(table)
+    console.print(geo)
+    application = report["spray_application"]
+    if application is None:
         assumed = f"{offset_weight:.0%} of the spray-out's offset from the model persists"
     else:
-        film, spread = correction.application.values()
+        film, spread = application.values()
         assumed = (
             "the spray-out's offset from the model persists, except what this spray's "
             f"application explains (film build {film:+.1%}, flake spread {spread:+.1%})"
         )
-    errors.print(
-        f"expected ΔE00 assumes {assumed}",
-        highlight=False,
-    )
+    console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
