@@ -15,6 +15,7 @@ from flakelab.library import Library
 from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.registry import SHIPPED, list_models, register, shipped_model
 from flakelab.models.training import (
+    SCREENINGS,
     CaseArrays,
     TrainingConfig,
     _new_model,
@@ -22,6 +23,7 @@ from flakelab.models.training import (
     evaluate_model,
     fit,
     flag_outliers,
+    protocol_epochs,
     train_protocol,
 )
 
@@ -86,12 +88,27 @@ def test_training_learns_far_better_than_the_mean(trained, data):
     assert mean_model["de00_mean"] < 0.5 * baseline
 
 
-def test_gross_errors_are_flagged_and_dropped(data):
+@pytest.mark.parametrize("screening", SCREENINGS)
+def test_gross_errors_are_flagged_and_dropped(data, screening):
     bad_rows = [3, 50, 120, 200, 399]
-    _, report = train_protocol(corrupted(data, bad_rows), QUICK)
+    config = replace(QUICK, screening=screening)
+    _, report = train_protocol(corrupted(data, bad_rows), config)
     flagged = set(report["outlier_case_ids"])
     assert {data.case_ids[i] for i in bad_rows} <= flagged
     assert len(flagged) <= len(bad_rows) + 6
+
+
+def test_sequential_screen_trains_one_model_a_session_per_partition(trained):
+    """The paper's first stage: four sessions, one partition each, then the final model; the
+    progress total counts every logged epoch."""
+    _, report = trained
+    stages = list(dict.fromkeys(entry["stage"] for entry in report["log"]))
+    sessions = [f"partition {k}" for k in range(1, QUICK.folds)]
+    assert stages == [s for k in sessions for s in (k, f"{k} fine-tune")] + [
+        "final",
+        "final fine-tune",
+    ]
+    assert len(report["log"]) == protocol_epochs(QUICK)
 
 
 def _fit_side_by_side(data, rows: list, epochs: int) -> list[ForwardModel]:

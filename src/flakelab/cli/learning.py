@@ -179,6 +179,13 @@ def train(
     ] = None,
     holdout: Annotated[float, typer.Option(help="Share of cases held out to judge it.")] = 0.1,
     adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
+    screening: Annotated[
+        str,
+        typer.Option(
+            help="Outlier screen: sequential (the paper's: one model, four partitions in turn, "
+            "the fifth as yardstick) or cross-validation (five fold models, 5x the work)."
+        ),
+    ] = "sequential",
     seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
     json_output: JsonOption = False,
 ) -> None:
@@ -186,7 +193,19 @@ def train(
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
     from flakelab.models.registry import register
-    from flakelab.models.training import TrainingConfig, case_arrays, evaluate_model, train_protocol
+    from flakelab.models.training import (
+        SCREENINGS,
+        TrainingConfig,
+        case_arrays,
+        evaluate_model,
+        protocol_epochs,
+        train_protocol,
+    )
+
+    if screening not in SCREENINGS:
+        raise FlakelabError(
+            f"--screening: expected one of {', '.join(SCREENINGS)}, got {screening!r}"
+        )
 
     lib = read_library(library)
     chosen = [c for c in load_cases(cases) if c.instrument == instrument]
@@ -203,11 +222,12 @@ def train(
         epochs=epochs,
         finetune_epochs=epochs,
         batch_size=batch_size,
+        screening=screening,
         seed=seed,
     )
     if colour_weight is not None:
         config = replace(config, colour_weight=colour_weight)
-    stages = 2 * (config.folds + 1) * epochs + (config.adapt_epochs if adapt else 0)
+    stages = protocol_epochs(config, adapt is not None)
     with progress_bar(disable=json_output) as bar:
         task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
         model, report = train_protocol(

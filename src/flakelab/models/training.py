@@ -7,13 +7,23 @@ the inverse of its spread over the cases, which under-weights the bright near-sp
 angles, where the eye (and ΔE00) is most sensitive and where the spread is largest.
 
 1. Split the cases into five partitions (seeded).
-2. For each partition in turn, train on the other four (``epochs`` at ``learning_rate``, then
-   ``finetune_epochs`` at ``finetune_learning_rate``) and predict the held partition; every
-   case is thus judged once by a model that never saw it. The five fold models train side
-   by side in one batched network (:func:`fit`), each exactly as it would alone.
+2. Screen (``screening``):
+   * ``"sequential"``, the paper's: "four of these subsets serve sequentially for model
+     training, with each training session comprising 300 epochs [...] followed by an
+     additional 300 fine-tuning epochs with reduced learning rates. The fifth part functions
+     as a validation set, enabling identification and removal of [...] statistical
+     outliers." One model trains on the first four partitions in turn (a session of
+     ``epochs`` at ``learning_rate`` then ``finetune_epochs`` at ``finetune_learning_rate``
+     on each); its errors on the fifth, which it never saw, set what an ordinary case's
+     error is, and every case is judged against them.
+   * ``"cross-validation"``: for each partition in turn, a model trains on the other four
+     (one session on all four) and judges the held partition, so that every case is judged
+     by a model that never saw it; five times the sequential screen's work. The five fold
+     models train side by side in one batched network (:func:`fit`), each as it would alone.
 3. Flag statistical outliers: a case whose error (mean ΔE00 over geometries) lies more than
-   ``outlier_threshold`` robust standard deviations (median/MAD) above the median.
-4. Train the final model on the cleaned cases.
+   ``outlier_threshold`` robust standard deviations (median/MAD of the judging errors) above
+   their median.
+4. Train the final model on the cleaned cases (one session).
 5. Optionally adapt it to one shop or instrument (``adapt_epochs`` on that shop's cases).
 """
 
@@ -45,7 +55,12 @@ __all__ = [
     "evaluate_model",
     "flag_outliers",
     "data_hash",
+    "SCREENINGS",
+    "protocol_epochs",
 ]
+
+SCREENINGS = ("sequential", "cross-validation")
+"""How the protocol finds outliers before the final training (module notes, step 2)."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +73,7 @@ class TrainingConfig:
     batch_size: int = 128
     colour_weight: float = 0.02
     folds: int = 5
+    screening: str = "sequential"
     outlier_threshold: float = 6.0
     adapt_epochs: int = 150
     adapt_learning_rate: float = 2e-4
@@ -278,10 +294,14 @@ def _residual_error(model: ForwardModel, data: CaseArrays, rows: NDArray) -> NDA
     return delta_E(reflectance_to_Lab(data.R[rows]), reflectance_to_Lab(R)).mean(axis=1)
 
 
-def flag_outliers(errors: NDArray, threshold: float) -> NDArray[np.bool_]:
-    """True where an error is more than ``threshold`` robust s.d. above the median."""
-    median = np.median(errors)
-    mad = 1.4826 * np.median(np.abs(errors - median)) + 1e-12
+def flag_outliers(
+    errors: NDArray, threshold: float, reference: NDArray | None = None
+) -> NDArray[np.bool_]:
+    """True where an error is more than ``threshold`` robust s.d. above the median of the
+    ``reference`` errors (default: ``errors`` themselves)."""
+    reference = errors if reference is None else reference
+    median = np.median(reference)
+    mad = 1.4826 * np.median(np.abs(reference - median)) + 1e-12
     return (errors - median) / mad > threshold
 
 
@@ -311,6 +331,37 @@ def fold_rows(n: int, config: TrainingConfig) -> tuple[list[NDArray], list[NDArr
     return partitions, train_rows
 
 
+def protocol_epochs(config: TrainingConfig, adapt: bool = False) -> int:
+    """Model-epochs the protocol runs (what it reports to ``progress``)."""
+    sessions = config.folds - 1 if config.screening == "sequential" else config.folds
+    per_session = config.epochs + config.finetune_epochs
+    return (sessions + 1) * per_session + (config.adapt_epochs if adapt else 0)
+
+
+def _screen_sequentially(data, config, partitions, log, progress) -> NDArray[np.bool_]:
+    """The paper's screen: one model, a session on each partition but the last in turn; the
+    last, unseen, sets the yardstick for every case's error."""
+    *sessions, validation = partitions
+    model = _new_model(data, config, np.concatenate(sessions))
+    for k, rows in enumerate(sessions):
+        _train_stage([model], data, [rows], config, log, [f"partition {k + 1}"], progress)
+    errors = _residual_error(model, data, np.arange(data.x.shape[0]))
+    return flag_outliers(errors, config.outlier_threshold, reference=errors[validation])
+
+
+def _screen_by_cross_validation(
+    data, config, partitions, train_rows, log, progress
+) -> NDArray[np.bool_]:
+    """Every case judged by the fold model that did not train on its partition."""
+    folds = [_new_model(data, config, rows) for rows in train_rows]
+    names = [f"fold {k + 1}" for k in range(config.folds)]
+    _train_stage(folds, data, train_rows, config, log, names, progress)
+    errors = np.zeros(data.x.shape[0])
+    for model, held in zip(folds, partitions, strict=True):
+        errors[held] = _residual_error(model, data, held)
+    return flag_outliers(errors, config.outlier_threshold)
+
+
 def train_protocol(
     data: CaseArrays,
     config: TrainingConfig = TrainingConfig(),
@@ -323,15 +374,16 @@ def train_protocol(
     n = data.x.shape[0]
     if n < config.folds * 2:
         raise ModelError(f"cases: expected at least {config.folds * 2} cases to train, got {n}")
+    if config.screening not in SCREENINGS:
+        raise ModelError(
+            f"screening: expected one of {', '.join(SCREENINGS)}, got {config.screening!r}"
+        )
     partitions, train_rows = fold_rows(n, config)
     log: list[dict] = []
-    folds = [_new_model(data, config, rows) for rows in train_rows]
-    names = [f"fold {k + 1}" for k in range(config.folds)]
-    _train_stage(folds, data, train_rows, config, log, names, progress)
-    errors = np.zeros(n)
-    for model, held in zip(folds, partitions, strict=True):
-        errors[held] = _residual_error(model, data, held)
-    outliers = flag_outliers(errors, config.outlier_threshold)
+    if config.screening == "sequential":
+        outliers = _screen_sequentially(data, config, partitions, log, progress)
+    else:
+        outliers = _screen_by_cross_validation(data, config, partitions, train_rows, log, progress)
     clean = np.flatnonzero(~outliers)
     model = _new_model(data, config, clean)
     _train_stage([model], data, [clean], config, log, ["final"], progress)
