@@ -258,10 +258,10 @@ def correct_command(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    _print_correction(report, offset_weight)
+    _print_correction(report)
 
 
-def _print_correction(report: dict, offset_weight: float | None) -> None:
+def _print_correction(report: dict) -> None:
     """The correction as a colorist reads it: what to weigh, then the colour before/after."""
     grams = report.get("add_g", report.get("recipe_g", {}))
     title = "add to the mixed can" if report["mode"] == "additions" else "mix afresh"
@@ -283,7 +283,7 @@ def _print_correction(report: dict, offset_weight: float | None) -> None:
     console.print(geo)
     application = report["spray_application"]
     if application is None:
-        assumed = f"{offset_weight:.0%} of the spray-out's offset from the model persists"
+        assumed = f"{report['offset_weight']:.0%} of the spray-out's offset from the model persists"
     else:
         film, spread = application.values()
         assumed = (
