@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
-from flakelab.cases.generator import World
 from flakelab.io import read_library
+from flakelab.match.evaluate import harness_world
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.models.registry import shipped_model
 
 
-def shipped_matcher():
-    """The demo library's world, the shipped model's forward and its effect-toner mask."""
+def shipped_matcher(world: str = "shop"):
+    """The demo library's harness world (``flakelab match evaluate --world``), the shipped
+    model's forward and its effect-toner mask."""
     library = read_library(None)
     forward = forward_for(shipped_model("five-angle"), library)
-    return World(library, "five-angle"), forward, effect_mask(library, forward.toners)
+    return (
+        harness_world(library, "five-angle", world),
+        forward,
+        effect_mask(library, forward.toners),
+    )

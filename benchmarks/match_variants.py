@@ -6,7 +6,7 @@ run sees the same hidden targets and the same sprays (seeded), so rows differ on
 recipes the search proposed. The first row is the defaults: the baseline of the same run.
 
     python benchmarks/match_variants.py [--targets 100] [--novel-targets 0] [--seed 4242]
-        [--json] "top_effects=2,top_pigments=5" "screen_steps=90" ...
+        [--world shop] [--json] "top_effects=2,top_pigments=5" "swap_above=inf" ...
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import dataclasses
 import json
 
 from _matcher import shipped_matcher
-from flakelab.match.evaluate import evaluate_matching
+from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching
 from flakelab.match.search import MatchSettings
 
 FIGURES = (
@@ -49,9 +49,10 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=100)
     parser.add_argument("--novel-targets", type=int, default=0)
     parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    world, forward, effect = shipped_matcher()
+    world, forward, effect = shipped_matcher(args.world)
     rows = []
     for spec in ["", *args.settings]:
         report = evaluate_matching(

@@ -64,6 +64,13 @@ def match_command(
     database: DatabaseOption = None,
     targets: Annotated[int, typer.Option(min=1, help="evaluate: hidden targets.")] = 200,
     novel_targets: Annotated[int, typer.Option(help="evaluate: targets with a new toner.")] = 50,
+    world: Annotated[
+        str,
+        typer.Option(
+            help="evaluate: shop (batches and application vary), standard-pigments (no batch "
+            "differs) or controlled (only the instrument's reading varies)."
+        ),
+    ] = "shop",
     seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
     json_output: JsonOption = False,
 ) -> None:
@@ -75,7 +82,9 @@ def match_command(
     from flakelab.match.search import MatchSettings, match
 
     if target == "evaluate":
-        _evaluate(library, instrument, model, database, targets, novel_targets, seed, json_output)
+        _evaluate(
+            library, instrument, model, database, targets, novel_targets, seed, world, json_output
+        )
         return
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
@@ -143,12 +152,13 @@ def _print_match(report: dict) -> None:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
-def _evaluate(library, instrument, model, database, targets, novel_targets, seed, json_output):
-    from flakelab.cases.generator import World
-    from flakelab.match.evaluate import evaluate_matching
+def _evaluate(
+    library, instrument, model, database, targets, novel_targets, seed, world_name, json_output
+):
+    from flakelab.match.evaluate import evaluate_matching, harness_world
 
     lib, forward, effect = _setup(library, instrument, model, database)
-    world = World(lib, instrument)
+    world = harness_world(lib, instrument, world_name)
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(
@@ -162,6 +172,7 @@ def _evaluate(library, instrument, model, database, targets, novel_targets, seed
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name
+    report["world"] = world_name
     if json_output:
         print(json.dumps(report, indent=2))
         return
