@@ -63,6 +63,13 @@ def mixture(km, parts: dict[str, float]) -> np.ndarray:
     return x / x.sum()
 
 
+def recipe_row(names, recipe: dict[str, float]) -> np.ndarray:
+    """A recipe ``{toner: share}`` as a row over the library's toners ``names``."""
+    x = np.zeros(len(names))
+    x[[names.index(n) for n in recipe]] = list(recipe.values())
+    return x
+
+
 @pytest.mark.parametrize(
     "parts",
     [
@@ -343,8 +350,7 @@ def test_matcher_rebuilds_a_pearl_over_an_aluminium_base(hybrid):
         "Phthalo blue GS": 0.03,
         "Carbon black": 0.02,
     }
-    x = np.zeros(len(names))
-    x[[names.index(n) for n in recipe]] = list(recipe.values())
+    x = recipe_row(names, recipe)
     target = reflect(hybrid, x / x.sum())[0]
     effect = effect_mask(hybrid.library, hybrid.toners)
     assert match(target, hybrid, effect).candidates[0].de00.max() < 0.6
@@ -371,8 +377,7 @@ def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
     from flakelab.match.models import effect_mask
 
     names = hybrid.library.names
-    x = np.zeros(len(names))
-    x[[names.index(n) for n in recipe]] = list(recipe.values())
+    x = recipe_row(names, recipe)
     target = reflect(hybrid, x / x.sum())[0]
     effect = effect_mask(hybrid.library, hybrid.toners)
     assert match(target, hybrid, effect).candidates[0].de00.max() < 0.5
@@ -419,10 +424,8 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
         "Quinacridone magenta": 0.0054,
         "Iron oxide yellow": 0.0279,
     }
-    x = np.zeros((1, len(names)))
-    x[0, [names.index(n) for n in recipe]] = list(recipe.values())
     world = World(hybrid.library, "five-angle")
-    target = world.appearance(x / x.sum(), world.nominal(1))[0][0]
+    target = world.appearance(recipe_row(names, recipe)[None], world.nominal(1))[0][0]
     effect = effect_mask(hybrid.library, hybrid.toners)
     unswapped = match(target, hybrid, effect, settings=MatchSettings(swap_above=np.inf))
     assert unswapped.candidates[0].de00.max() > 1.0

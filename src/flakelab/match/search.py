@@ -15,7 +15,7 @@
    than ``swap_above``: every set one move from the best few recipes — a toner swapped for
    another of its kind, or a pigment added — optimised from its parent's amounts. The
    screen's importance misses a pigment whose job a near neighbour does almost as well (a
-   perylene maroon stood in for by quinacridone red and black, off by 2 ΔE00 at 75°).
+   bronze tinted with quinacridone magenta, matched with quinacridone red: off by 1.3 ΔE00).
 5. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry from
    colour-science, texture differences, the tolerance — plus a small penalty per toner, and
    return the best distinct candidates.
@@ -493,12 +493,14 @@ def _match(
     x = _weighable(x_refined.numpy().astype(float), settings)
     candidates = _judge(forward, x, spectra, texture, tolerance, settings)
     tried = len(subsets)
+    neighbours: list[tuple[int, ...]] = []
     if candidates and candidates[0].de00.max() > settings.swap_above:
         # 4. swap: one move from the best few recipes
         parents = np.array([[c.fractions.get(n, 0.0) for n in forward.toners] for c in candidates])
         neighbours, init = _neighbours(
             parents[: settings.swap_from], allowed & ~novel, effect, settings.max_pigments
         )
+    if neighbours:
         tried += len(neighbours)
         x_swapped = _refine(
             forward,
