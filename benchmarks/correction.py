@@ -9,7 +9,10 @@ corrected recipe is sprayed ``--sprays`` times, the same random streams for ever
 the defaults (the offset split by the library's physics). ``library=none`` corrects without
 the physics split (the whole offset weighted by ``OFFSET_WEIGHT``). ``--ceiling`` adds a row
 corrected from the spray-out as it would read without its own application and instrument
-noise, with the whole offset: what a perfect split of the offset could buy.
+noise, with the whole offset: what a perfect split of the offset could buy. The last row,
+"respray", sprays the car's own paint (the hidden formula from the factory's batches) with
+the same streams: what a correction that removed every batch difference and every error of
+the model would still face, each spray's own application.
 
     python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling] [--json]
         "library=none" "offset_weight=1.0" "persistent_sd=0.3" "extra_toners=0" ...
@@ -54,7 +57,7 @@ def main() -> None:
     world, forward, effect = shipped_matcher()
     known = World(world.library, "five-angle", exclude=forward.novel)
     rng = np.random.default_rng(args.seed)
-    specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling)]
+    specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling), "respray"]
     passed: dict[str, list[float]] = {s: [] for s in specs}
     worst: dict[str, list[float]] = {s: [] for s in specs}
     failed = 0
@@ -68,7 +71,10 @@ def main() -> None:
             continue
         failed += 1
         for spec in specs:
-            if spec == "none":
+            batches = t.car if spec == "respray" else None
+            if spec == "respray":
+                x = x_hidden
+            elif spec == "none":
                 x = recipe_vector(forward, best.fractions)
             elif spec == "ceiling":
                 calm = t.unsprayed(recipe_vector(forward, best.fractions))
@@ -83,7 +89,9 @@ def main() -> None:
                 )
                 x = recipe_vector(forward, fixed.fractions)
             # the same seeds for every setting: each sees the same sprays
-            des = [worst_de00(t.target, t.spray(x, np.random.default_rng(s))) for s in sprays]
+            des = [
+                worst_de00(t.target, t.spray(x, np.random.default_rng(s), batches)) for s in sprays
+            ]
             passed[spec].append(float(np.mean(np.array(des) <= SUCCESS_DE00)))
             worst[spec].append(float(np.median(des)))
     rows = [

@@ -316,8 +316,9 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
 
 def test_harness_worlds_take_the_shop_s_variation_away(hybrid):
     """In the controlled world only the instrument's reading varies, so the hidden formula's
-    own spray passes every time, within about the instrument's repeatability; in a shop's
-    world the batches and the application move it several times as far."""
+    own spray and the car's paint sprayed again pass every time, the first within about the
+    instrument's repeatability; in a shop's world the batches and the application move it
+    several times as far."""
     from flakelab.match.evaluate import evaluate_matching, harness_world
     from flakelab.match.models import effect_mask
     from flakelab.match.search import MatchError
@@ -329,6 +330,9 @@ def test_harness_worlds_take_the_shop_s_variation_away(hybrid):
         world = harness_world(hybrid.library, "five-angle", name)
         run = evaluate_matching(world, hybrid, effect, targets=5, seed=3, settings=hasty)
         oracle[name] = (run["oracle_success"], run["oracle_de00_median"])
+        assert run["after_one_perfect_correction"] >= run["first_shot_success"]
+        if name == "controlled":  # the car's own paint, sprayed again as it was
+            assert run["respray_success"] == 1.0
     assert oracle["controlled"][0] == 1.0
     assert oracle["controlled"][1] < 0.3
     assert oracle["shop"][1] > 2 * oracle["controlled"][1]
