@@ -76,8 +76,9 @@ def worst_de00(a, b) -> float:
 @dataclass
 class Trial:
     """One hidden formulation in the shop's world: the target as measured on the car (the
-    factory's batches and application), the shop's own batches, and one random stream per
-    spray-out (the first, its correction, the oracle), so that no spray depends on another."""
+    factory's batches ``car`` and application), the shop's own batches, and one random stream per
+    spray-out (the first, its correction, the oracle, the car's paint again), so that no
+    spray depends on another."""
 
     world: World
     target: NDArray
