@@ -71,9 +71,9 @@ def main() -> None:
             continue
         failed += 1
         for spec in specs:
-            batches = t.car if spec == "respray" else None
+            batches = None
             if spec == "respray":
-                x = x_hidden
+                x, batches = x_hidden, t.car
             elif spec == "none":
                 x = recipe_vector(forward, best.fractions)
             elif spec == "ceiling":

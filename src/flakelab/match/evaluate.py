@@ -28,7 +28,7 @@ from flakelab.cases.generator import Variation, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct
-from flakelab.match.search import MatchError, MatchSettings, match
+from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
 
 __all__ = [
     "evaluate_matching",
@@ -61,11 +61,6 @@ def harness_world(library, instrument: str = "five-angle", name: str = "shop") -
     if name not in HARNESS_WORLDS:
         raise MatchError(f"--world: expected one of {', '.join(HARNESS_WORLDS)}, got {name!r}")
     return World(library, instrument, replace(WorldSettings(), **HARNESS_WORLDS[name]))
-
-
-def recipe_vector(forward, fractions: dict[str, float]) -> NDArray:
-    """A recipe's fractions ``{toner: share}`` as a vector over the model's toners."""
-    return np.array([fractions.get(n, 0.0) for n in forward.toners])
 
 
 def worst_de00(a, b) -> float:

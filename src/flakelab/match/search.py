@@ -39,7 +39,15 @@ from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 
-__all__ = ["Candidate", "MatchResult", "MatchSettings", "match", "MatchError", "multi_angle_loss"]
+__all__ = [
+    "Candidate",
+    "MatchResult",
+    "MatchSettings",
+    "match",
+    "MatchError",
+    "multi_angle_loss",
+    "recipe_vector",
+]
 
 
 IMPORTANCE_FLOOR = 0.02
@@ -496,7 +504,7 @@ def _match(
     neighbours: list[tuple[int, ...]] = []
     if candidates and candidates[0].de00.max() > settings.swap_above:
         # 4. swap: one move from the best few recipes
-        parents = np.array([[c.fractions.get(n, 0.0) for n in forward.toners] for c in candidates])
+        parents = np.array([recipe_vector(forward, c.fractions) for c in candidates])
         neighbours, init = _neighbours(
             parents[: settings.swap_from], allowed & ~novel, effect, settings.max_pigments
         )
@@ -528,6 +536,11 @@ def _match(
         tried,
         notes,
     )
+
+
+def recipe_vector(forward, fractions: dict[str, float]) -> NDArray:
+    """A recipe's fractions ``{toner: share}`` as a vector over the model's toners."""
+    return np.array([fractions.get(n, 0.0) for n in forward.toners])
 
 
 def _weighable(x: NDArray, settings: MatchSettings) -> NDArray:
