@@ -33,7 +33,10 @@ FIGURES = (
 
 def parse_settings(spec: str) -> MatchSettings:
     """``"top_effects=2,sparsity=0.2"`` → MatchSettings (types from the dataclass)."""
-    types = {f.name: type(f.default) for f in dataclasses.fields(MatchSettings)}
+    types = {
+        f.name: float if f.default is None else type(f.default)
+        for f in dataclasses.fields(MatchSettings)
+    }
     values = {}
     for item in filter(None, (part.strip() for part in spec.split(","))):
         name, _, value = item.partition("=")

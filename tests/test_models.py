@@ -20,6 +20,7 @@ from flakelab.models.training import (
     TrainingConfig,
     _new_model,
     case_arrays,
+    effect_share_floor,
     evaluate_model,
     fit,
     flag_outliers,
@@ -150,6 +151,25 @@ def test_registry_promotes_only_a_better_model(trained, data, tmp_path):
     assert not second["promoted"] and second["held_out_de00"] > first["held_out_de00"]
     statuses = {(m["name"], m["version"]): m["status"] for m in list_models(engine)}
     assert statuses[("test", second["version"])] == "candidate"
+
+
+def test_effect_share_floor_is_where_the_effect_paints_of_the_cases_run_out(trained, data):
+    model, _ = trained
+    share = (data.x * data.effect).sum(1) / data.x.sum(1)
+    floor = model.info["effect_share_floor"]
+    # the generator's effect paints keep at least about half their weight in effect toners
+    assert 0.4 < floor <= np.min(share[share > 0]) + 0.05
+    assert np.sum((share > 0) & (share < floor)) <= max(1, 0.001 * share.size)
+    x = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.5, 0.5], [0.02, 0.0, 0.0, 0.98]])
+    assert effect_share_floor(x, np.array([1.0, 1.0, 0.0, 0.0])) == pytest.approx(0.02)
+    assert effect_share_floor(x[:2], np.array([1.0, 1.0, 0.0, 0.0])) == 0.0  # solids only
+    assert effect_share_floor(x, None) == 0.0
+
+
+@pytest.mark.parametrize("instrument", sorted(SHIPPED))
+def test_shipped_models_record_their_effect_share_floor(instrument):
+    # the demo cases' effect paints: effect toners are at least ~48 % of a recipe
+    assert 0.48 <= shipped_model(instrument).info["effect_share_floor"] <= 0.6
 
 
 def test_unknown_toner_in_a_recipe_is_an_error(trained):

@@ -42,6 +42,8 @@ class LearnedForward:
         self.geometries = model.geometries
         self.name = f"learned ({model.instrument}, {model.info.get('name', 'model')})"
         self.novel: tuple[str, ...] = ()
+        # the least effect-toner share of the training cases' effect paints (0: not recorded)
+        self.effect_share_floor = float(model.info.get("effect_share_floor", 0.0))
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         y = self.model.torch_forward(fractions.to(torch.float32)).to(fractions.dtype)

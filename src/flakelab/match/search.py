@@ -1,9 +1,9 @@
 """Recipe search: from a target measurement to ranked candidate formulations (DESIGN.md §6).
 
 1. **Screen**, one batch of restarts with a square-root sparsity penalty: free ones (one from
-   each effect toner, or none for a solid; every toner allowed) and one per effect base (each
-   effect toner alone and each pair, pigments free). Their best solutions say which effect
-   toners and pigments the target needs (:func:`_importance`).
+   each effect toner with every toner allowed, two solid ones with every pigment) and one per
+   effect base (each effect toner alone and each pair, pigments free). Their best solutions
+   say which effect toners and pigments the target needs (:func:`_importance`).
 2. **Subsets** (smart pruning, not enumeration of the library): every combination of the
    free restarts' three most important effect toners (a pearl over an aluminium base takes
    all three) × every combination of up to ``max_pigments`` of their most important
@@ -19,13 +19,19 @@
 5. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry from
    colour-science, texture differences, the tolerance — plus a small penalty per toner, and
    return the best distinct candidates.
+
+Throughout, a recipe outside the learned model's **support** — more than a solid, less effect
+toner than any effect paint it learned from (``effect_share_floor`` in its training record) —
+ranks after every recipe inside it, in the halving and in the judging, and the swap stage
+also tries it made solid: there the model's numbers are guesses that the optimiser exploits
+(:func:`outside_support`).
 """
 
 from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -46,6 +52,7 @@ __all__ = [
     "match",
     "MatchError",
     "multi_angle_loss",
+    "outside_support",
     "recipe_vector",
 ]
 
@@ -76,6 +83,7 @@ class MatchSettings:
     top_bases: int = 4
     swap_above: float = 0.6
     swap_from: int = 2
+    effect_floor: float | None = None  # None: the model's (its training cases' effect share)
     seed: int = 0
 
 
@@ -97,12 +105,14 @@ class Candidate:
     model: str
     novel: list[str]
     score: float
+    in_support: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "recipe": {k: round(v, 6) for k, v in self.fractions.items()},
             "model": self.model,
             "novel_toners": self.novel,
+            "in_model_support": self.in_support,
             "passes": self.passes,
             "failing_geometries": self.failing,
             "de00_max": float(self.de00.max()),
@@ -195,7 +205,8 @@ def _screen(
 ) -> tuple[NDArray, NDArray, list[tuple[int, ...] | None]]:
     """Restarts, all in one batch (a step costs about the same for 20 rows as for 140):
 
-    * free: one from each effect toner plus two solid starts, every toner allowed;
+    * free: one from each effect toner, every toner allowed, and two solid starts, every
+      pigment allowed;
     * with ``bases``, one per effect base — each effect toner alone and each pair — with
       every pigment free. The free restarts drift to blends of half a dozen aluminiums that
       the refinement's few effect toners cannot rebuild (and the learned model never saw);
@@ -206,7 +217,10 @@ def _screen(
     effects = np.flatnonzero(effect & allowed)
     starts = [*effects, None, None]
     rows: list[tuple[int, ...] | None] = [None] * len(starts)
-    masks = [allowed] * len(starts)
+    # solid starts search solids: free to take effect toners, they drift into traces of them
+    # that the learned model never saw (outside its support, ranked last)
+    solid = allowed & ~effect if np.any(allowed & ~effect) else allowed
+    masks = [allowed] * len(effects) + [solid, solid]
     if bases:
         for base in (c for size in (1, 2) for c in itertools.combinations(effects, size)):
             rows.append(base)
@@ -232,10 +246,12 @@ def _screen(
     return x.numpy().astype(float), loss.numpy(), rows
 
 
-def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -> torch.Tensor:
+def _refine(
+    forward, colour, init, mask, effect, target_lab, target_texture, settings
+) -> torch.Tensor:
     """Successive halving: a third of ``refine_steps`` on every subset, the rest on the
     ``refine_keep`` best so far (a subset far behind after a third rarely wins; the batch
-    shrinks and the search's time with it)."""
+    shrinks and the search's time with it), those outside the model's support last."""
     first = settings.refine_steps // 3
     logits, x, _ = _optimise(
         forward, colour, init, mask, target_lab, target_texture, settings, first, 0.0
@@ -245,15 +261,10 @@ def _refine(forward, colour, init, mask, target_lab, target_texture, settings) -
     mask = _prune(x, mask, settings.min_amount)
     with torch.no_grad():
         pruned = x * mask
-        loss = _loss(
-            forward,
-            colour,
-            pruned / pruned.sum(1, keepdim=True),
-            target_lab,
-            target_texture,
-            settings,
-        )
-    keep = torch.argsort(loss)[: settings.refine_keep]
+        pruned = pruned / pruned.sum(1, keepdim=True)
+        loss = _loss(forward, colour, pruned, target_lab, target_texture, settings)
+    outside = outside_support(pruned.numpy(), effect, settings.effect_floor)
+    keep = torch.as_tensor(np.lexsort((loss.numpy(), outside))[: settings.refine_keep])
     _, x, _ = _optimise(
         forward,
         colour,
@@ -434,6 +445,8 @@ def _match(
     """
     start = time.perf_counter()
     settings = settings or MatchSettings()
+    if settings.effect_floor is None:
+        settings = replace(settings, effect_floor=getattr(forward, "effect_share_floor", 0.0))
     tolerance = tolerance or tolerance_preset("refinish")
     T = len(forward.toners)
     effect = np.zeros(T, bool) if effect is None else np.asarray(effect, bool)
@@ -496,17 +509,26 @@ def _match(
         forward, colour, x_best, subset_mask, effect, target_lab, target_texture, settings
     )
     x_refined = _refine(
-        forward, colour, init, torch.as_tensor(subset_mask), target_lab, target_texture, settings
+        forward,
+        colour,
+        init,
+        torch.as_tensor(subset_mask),
+        effect,
+        target_lab,
+        target_texture,
+        settings,
     )
     x = _weighable(x_refined.numpy().astype(float), settings)
-    candidates = _judge(forward, x, spectra, texture, tolerance, settings)
+    candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
     tried = len(subsets)
     neighbours: list[tuple[int, ...]] = []
-    if candidates and candidates[0].de00.max() > settings.swap_above:
+    if candidates and (
+        candidates[0].de00.max() > settings.swap_above or not candidates[0].in_support
+    ):
         # 4. swap: one move from the best few recipes
         parents = np.array([recipe_vector(forward, c.fractions) for c in candidates])
         neighbours, init = _neighbours(
-            parents[: settings.swap_from], allowed & ~novel, effect, settings.max_pigments
+            parents[: settings.swap_from], allowed & ~novel, effect, settings
         )
     if neighbours:
         tried += len(neighbours)
@@ -515,13 +537,22 @@ def _match(
             colour,
             torch.as_tensor(np.log(init + 1e-6), dtype=forward.dtype),
             torch.as_tensor(init > 0),
+            effect,
             target_lab,
             target_texture,
             settings,
         )
         x = np.concatenate([x, _weighable(x_swapped.numpy().astype(float), settings)])
-        candidates = _judge(forward, x, spectra, texture, tolerance, settings)
+        candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
     notes = []
+    if candidates and not candidates[0].in_support:
+        best = recipe_vector(forward, candidates[0].fractions)
+        share = best[effect].sum()
+        notes.append(
+            f"the best recipe has {100 * share:.1f} % effect toners, less than any effect paint "
+            f"the model learned from ({100 * settings.effect_floor:.0f} %): its numbers are "
+            "extrapolated"
+        )
     if candidates and not candidates[0].passes:
         notes.append(
             "no candidate passes the tolerance: best achievable shown; fails at "
@@ -554,13 +585,17 @@ SWAP_ADDED_AMOUNT = 0.01
 
 
 def _neighbours(
-    parents: NDArray, candidates: NDArray, effect: NDArray, max_pigments: int
+    parents: NDArray, candidates: NDArray, effect: NDArray, settings: MatchSettings
 ) -> tuple[list[tuple[int, ...]], NDArray]:
     """Toner sets one move from each recipe ``parents[K, T]`` and their starting amounts
     ``[N, T]``: each toner swapped for a ``candidates`` toner of its kind (effect or pigment)
-    at the same amount and, below ``max_pigments``, each candidate pigment added at
-    :data:`SWAP_ADDED_AMOUNT`."""
+    at the same amount; below ``max_pigments``, each candidate pigment added at
+    :data:`SWAP_ADDED_AMOUNT`; and a recipe outside the model's support made solid (its trace
+    of effect toners dropped)."""
     sets: dict[tuple[int, ...], NDArray] = {}
+    for parent in parents[outside_support(parents, effect, settings.effect_floor)]:
+        solid = np.where(effect, 0.0, parent)
+        sets.setdefault(tuple(np.flatnonzero(solid > 0)), solid / solid.sum())
     for parent in parents:
         support = np.flatnonzero(parent > 0)
         for i in support:
@@ -568,7 +603,7 @@ def _neighbours(
                 x = parent.copy()
                 x[j], x[i] = x[i], 0.0
                 sets.setdefault(tuple(np.flatnonzero(x > 0)), x)
-        room = np.count_nonzero(parent[~effect]) < max_pigments
+        room = np.count_nonzero(parent[~effect]) < settings.max_pigments
         for j in np.flatnonzero(candidates & ~effect & (parent == 0) & room):
             x = parent.copy()
             x[j] = SWAP_ADDED_AMOUNT
@@ -582,7 +617,18 @@ def evaluate_recipes(forward, x: NDArray) -> tuple[NDArray, NDArray | None]:
     return R.double().numpy(), None if texture is None else texture.double().numpy()
 
 
-def _judge(forward, x, spectra, texture, tolerance, settings) -> list[Candidate]:
+def outside_support(x: NDArray, effect: NDArray, floor: float) -> NDArray:
+    """Recipes ``x[N, T]`` between a solid and ``floor``, the least effect-toner share of the
+    learned model's effect paints (``effect_share_floor`` in its training record). The model
+    never saw a case there, and the optimiser finds its guesses: a red solid matched with a
+    3 % trace of red pearl, predicted within 0.6 ΔE00 and sprayed at 1.1."""
+    share = x[:, np.asarray(effect, bool)].sum(1)
+    return (share > 0) & (share < floor)
+
+
+def _judge(forward, x, effect, spectra, texture, tolerance, settings) -> list[Candidate]:
+    """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
+    support rank after every one inside it."""
     R, tex = evaluate_recipes(forward, x)
     target_lab = reflectance_to_Lab(spectra)
     lab = reflectance_to_Lab(R)
@@ -592,8 +638,9 @@ def _judge(forward, x, spectra, texture, tolerance, settings) -> list[Candidate]
     if has_texture:
         target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
         score = score + settings.texture_weight * np.abs(tex[:, -2:] - target_tex[-2:]).sum(1)
+    outside = outside_support(x, effect, settings.effect_floor)
     chosen, seen = [], set()
-    for row in np.argsort(score):
+    for row in np.lexsort((score, outside)):
         key = tuple(np.flatnonzero(x[row] > 0))
         if key in seen:
             continue
@@ -628,6 +675,7 @@ def _judge(forward, x, spectra, texture, tolerance, settings) -> list[Candidate]
                 model=forward.name,
                 novel=[n for n in fractions if n in forward.novel],
                 score=float(score[row]),
+                in_support=not outside[row],
             )
         )
     return out

@@ -149,6 +149,22 @@ def case_arrays(
     )
 
 
+EFFECT_SUPPORT_QUANTILE = 0.001
+"""Share of a model's effect-paint cases allowed below its effect-share floor."""
+
+
+def effect_share_floor(x: NDArray, effect: NDArray | None) -> float:
+    """The effect toners' share of a recipe below which the cases ``x[N, T]`` hold (almost) no
+    effect paint: their :data:`EFFECT_SUPPORT_QUANTILE` quantile over the cases with any effect
+    toner; 0 without such cases. Between a solid and that share the model never saw a case,
+    and the matcher keeps its recipes out of there (``MatchSettings.effect_floor``)."""
+    if effect is None:
+        return 0.0
+    share = (x * effect).sum(1) / x.sum(1)
+    share = share[share > 0]
+    return float(np.quantile(share, EFFECT_SUPPORT_QUANTILE)) if share.size else 0.0
+
+
 def data_hash(data: CaseArrays) -> str:
     """SHA-256 of the training data (recipes, spectra, texture) — recorded with every model."""
     digest = hashlib.sha256()
@@ -416,6 +432,7 @@ def train_protocol(
             "trained_cases": int(clean.size),
             "outliers_dropped": int(outliers.sum()),
             "toner_cases": dict(zip(data.toners, (data.x[clean] > 0).sum(0).tolist(), strict=True)),
+            "effect_share_floor": effect_share_floor(data.x[clean], data.effect),
         }
     )
     return model, report
