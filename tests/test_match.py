@@ -437,20 +437,27 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     assert match(target, hybrid, effect).candidates[0].de00.max() < 0.3
 
 
-def test_matcher_keeps_to_the_model_s_support(hybrid):
-    """A red solid, as the physics makes it. The learned model never saw a paint between a
-    solid and about half effect toners; left free, the search finds its guess there, a 3 %
-    trace of aluminium that it predicts within 0.5 ΔE00 and the physics puts at 2.5. Kept to
-    the model's support, the best recipe is a solid that the physics also puts within 0.5."""
+@pytest.mark.parametrize(
+    "recipe",
+    [
+        {"Phthalo green": 0.705, "Perylene maroon": 0.132, "Bismuth vanadate yellow": 0.163},
+        {"DPP red": 0.38, "Transparent iron oxide red": 0.62},
+    ],
+)
+def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
+    """A solid, as the physics makes it. The learned model never saw a paint between a solid
+    and about half effect toners; left free, the search finds its guess there, a trace of
+    effect toner (the green: 0.6 % of aluminium and Xirallic, predicted within 0.4 ΔE00, 1.3
+    off by the physics). Kept to the model's support, the best recipe is a solid, and the
+    physics puts it at less than half the distance."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import worst_de00
     from flakelab.match.models import effect_mask
     from flakelab.match.search import outside_support, recipe_vector
 
-    names = hybrid.library.names
     effect = effect_mask(hybrid.library, hybrid.toners)
     world = World(hybrid.library, "five-angle")
-    x = recipe_row(names, {"DPP red": 0.38, "Transparent iron oxide red": 0.62})
+    x = recipe_row(hybrid.library.names, recipe)
     target = world.appearance(x[None], world.nominal(1))[0][0]
 
     def best(floor):
@@ -459,10 +466,10 @@ def test_matcher_keeps_to_the_model_s_support(hybrid):
         sprayed = world.appearance(recipe[None], world.nominal(1))[0][0]
         return result, recipe, worst_de00(target, sprayed)
 
-    free, free_recipe, free_physics = best(0.0)
-    assert 0 < free_recipe[effect].sum() < 0.1 and free_physics > 1.5
+    _, free_recipe, free_physics = best(0.0)
+    assert 0 < free_recipe[effect].sum() < 0.1
     assert outside_support(free_recipe[None], effect, hybrid.effect_share_floor)[0]
     kept, recipe, physics = best(None)  # the model's own floor
     assert kept.candidates[0].in_support and recipe[effect].sum() == 0.0
-    assert physics < 0.5
+    assert physics < 0.5 * free_physics and physics < 0.6
     assert not any("extrapolated" in note for note in kept.notes)
