@@ -70,6 +70,12 @@ def recipe_row(names, recipe: dict[str, float]) -> np.ndarray:
     return x
 
 
+def as_made(world, x: np.ndarray) -> np.ndarray:
+    """Reflectance ``[G, 31]`` of the recipe row ``x`` as the world's physics makes it, without
+    batch, application or instrument variation."""
+    return world.appearance(x[None], world.nominal(1))[0][0]
+
+
 @pytest.mark.parametrize(
     "parts",
     [
@@ -429,7 +435,7 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
         "Iron oxide yellow": 0.0279,
     }
     world = World(hybrid.library, "five-angle")
-    target = world.appearance(recipe_row(names, recipe)[None], world.nominal(1))[0][0]
+    target = as_made(world, recipe_row(names, recipe))
     effect = effect_mask(hybrid.library, hybrid.toners)
     unswapped = match(target, hybrid, effect, settings=MatchSettings(swap_above=np.inf))
     assert unswapped.candidates[0].de00.max() > 1.0
@@ -458,13 +464,12 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     effect = effect_mask(hybrid.library, hybrid.toners)
     world = World(hybrid.library, "five-angle")
     x = recipe_row(hybrid.library.names, recipe)
-    target = world.appearance(x[None], world.nominal(1))[0][0]
+    target = as_made(world, x)
 
     def best(floor):
         result = match(target, hybrid, effect, settings=MatchSettings(effect_floor=floor))
         recipe = recipe_vector(hybrid, result.candidates[0].fractions)
-        sprayed = world.appearance(recipe[None], world.nominal(1))[0][0]
-        return result, recipe, worst_de00(target, sprayed)
+        return result, recipe, worst_de00(target, as_made(world, recipe))
 
     _, free_recipe, free_physics = best(0.0)
     assert 0 < free_recipe[effect].sum() < 0.1

@@ -546,8 +546,7 @@ def _match(
         candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
     notes = []
     if candidates and not candidates[0].in_support:
-        best = recipe_vector(forward, candidates[0].fractions)
-        share = best[effect].sum()
+        share = recipe_vector(forward, candidates[0].fractions)[effect].sum()
         notes.append(
             f"the best recipe has {100 * share:.1f} % effect toners, less than any effect paint "
             f"the model learned from ({100 * settings.effect_floor:.0f} %): its numbers are "
