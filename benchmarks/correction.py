@@ -12,7 +12,11 @@ corrected from the spray-out as it would read without its own application and in
 noise, with the whole offset: what a perfect split of the offset could buy. The last row,
 "respray", sprays the car's own paint (the hidden formula from the factory's batches) with
 the same streams: what a correction that removed every batch difference and every error of
-the model would still face, each spray's own application.
+the model would still face, each spray's own application. ``persistent_offset`` is what the
+correction's prior σ_p (:data:`flakelab.match.correction.PERSISTENT_SD`) describes: the
+L*a*b* offset between the failed recipe mixed from the shop's batches, sprayed at the nominal
+application and read without noise, and the model's prediction for it (RMS and median
+absolute value over targets, geometries and components).
 
     python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling] [--json]
         "library=none" "offset_weight=1.0" "persistent_sd=0.3" "extra_toners=0" ...
@@ -24,10 +28,12 @@ import argparse
 import json
 
 import numpy as np
+import torch
 from rich.progress import track
 
 from _matcher import shipped_matcher
 from flakelab.cases.generator import World
+from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import SUCCESS_DE00, recipe_vector, trial, worst_de00
 from flakelab.match.search import match
@@ -43,6 +49,14 @@ def parse(spec: str) -> dict:
         else:
             out[name] = int(value) if name in ("extra_toners", "steps") else float(value)
     return out
+
+
+def persistent_offset(forward, t, x) -> np.ndarray:
+    """L*a*b* ``[G, 3]`` of ``x`` mixed from the shop's batches, sprayed at the nominal
+    application and read without noise, less the model's prediction for it."""
+    with torch.no_grad():
+        R = forward(torch.as_tensor(x[None], dtype=forward.dtype))[0][0].double().numpy()
+    return reflectance_to_Lab(t.unsprayed(x)) - reflectance_to_Lab(R)
 
 
 def main() -> None:
@@ -61,6 +75,7 @@ def main() -> None:
     passed: dict[str, list[float]] = {s: [] for s in specs}
     worst: dict[str, list[float]] = {s: [] for s in specs}
     failed = 0
+    offsets = []
     hidden = known.formulations(args.targets, rng)
     for x_hidden in track(hidden, description="targets", disable=args.json):
         t = trial(world, x_hidden, rng)
@@ -70,6 +85,7 @@ def main() -> None:
         if worst_de00(t.target, first) <= SUCCESS_DE00:
             continue
         failed += 1
+        offsets.append(persistent_offset(forward, t, recipe_vector(forward, best.fractions)))
         for spec in specs:
             batches = None
             if spec == "respray":
@@ -103,9 +119,19 @@ def main() -> None:
         }
         for spec in specs
     ]
+    offsets = np.array(offsets)
+    persistent = {
+        "rms": float(np.sqrt(np.mean(offsets**2))) if failed else None,
+        "median_abs": float(np.median(np.abs(offsets))) if failed else None,
+    }
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json.dumps({"rows": rows, "persistent_offset": persistent}, indent=2))
         return
+    if failed:
+        print(
+            f"persistent offset per L*a*b* component: RMS {persistent['rms']:.2f}, "
+            f"median |offset| {persistent['median_abs']:.2f}"
+        )
     for row in rows:
         print(
             f"{row['setting']:>32}  pass {row['pass_rate']:.3f}  "
