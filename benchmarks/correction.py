@@ -28,7 +28,6 @@ import argparse
 import json
 
 import numpy as np
-import torch
 from rich.progress import track
 
 from _matcher import shipped_matcher
@@ -36,7 +35,7 @@ from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import SUCCESS_DE00, recipe_vector, trial, worst_de00
-from flakelab.match.search import match
+from flakelab.match.search import evaluate_recipes, match
 
 
 def parse(spec: str) -> dict:
@@ -51,12 +50,11 @@ def parse(spec: str) -> dict:
     return out
 
 
-def persistent_offset(forward, t, x) -> np.ndarray:
-    """L*a*b* ``[G, 3]`` of ``x`` mixed from the shop's batches, sprayed at the nominal
-    application and read without noise, less the model's prediction for it."""
-    with torch.no_grad():
-        R = forward(torch.as_tensor(x[None], dtype=forward.dtype))[0][0].double().numpy()
-    return reflectance_to_Lab(t.unsprayed(x)) - reflectance_to_Lab(R)
+def persistent_offset(forward, x, calm) -> np.ndarray:
+    """L*a*b* ``[G, 3]`` of recipe ``x`` as ``calm`` read it (mixed from the shop's batches,
+    sprayed at the nominal application, read without noise), less the model's prediction."""
+    R, _ = evaluate_recipes(forward, x[None])
+    return reflectance_to_Lab(calm) - reflectance_to_Lab(R[0])
 
 
 def main() -> None:
@@ -81,19 +79,20 @@ def main() -> None:
         t = trial(world, x_hidden, rng)
         sprays = t.streams[1].bit_generator.seed_seq.spawn(args.sprays)
         best = match(t.target, forward, effect).candidates[0]
-        first = t.spray(recipe_vector(forward, best.fractions), t.streams[0])
+        x_best = recipe_vector(forward, best.fractions)
+        first = t.spray(x_best, t.streams[0])
         if worst_de00(t.target, first) <= SUCCESS_DE00:
             continue
         failed += 1
-        offsets.append(persistent_offset(forward, t, recipe_vector(forward, best.fractions)))
+        calm = t.unsprayed(x_best)
+        offsets.append(persistent_offset(forward, x_best, calm))
         for spec in specs:
             batches = None
             if spec == "respray":
                 x, batches = x_hidden, t.car
             elif spec == "none":
-                x = recipe_vector(forward, best.fractions)
+                x = x_best
             elif spec == "ceiling":
-                calm = t.unsprayed(recipe_vector(forward, best.fractions))
                 fixed = correct(forward, t.target, best.fractions, calm, mode="reformulate",
                                 offset_weight=1.0)  # fmt: skip
                 x = recipe_vector(forward, fixed.fractions)
