@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from rich.progress import Progress
-
+from flakelab.cli.common import progress_bar
 from flakelab.physics.fast import ATLAS_DEPTHS, ATLAS_SPREADS, atlas_path, build_atlas
 
 
@@ -21,7 +20,7 @@ def main() -> None:
     parser.add_argument("--photons", type=int, default=100_000)
     parser.add_argument("--seed", type=int, default=2026)
     args = parser.parse_args()
-    with Progress() as progress:
+    with progress_bar() as progress:
         task = progress.add_task(
             "Monte Carlo runs", total=ATLAS_SPREADS.size * ATLAS_DEPTHS.size * 2
         )

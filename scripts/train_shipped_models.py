@@ -20,9 +20,8 @@ import argparse
 import json
 from pathlib import Path
 
-from rich.progress import Progress
-
 from flakelab.cases.generator import World, WorldSettings
+from flakelab.cli.common import progress_bar
 from flakelab.io import read_library
 from flakelab.models.registry import shipped_model_path
 from flakelab.models.training import (
@@ -61,14 +60,19 @@ def main() -> None:
         kinds = TRAINING_KINDS.get(instrument)
         settings = WorldSettings(kinds=kinds) if kinds else WorldSettings()
         world = World(library, instrument, settings, exclude=NOVEL_TONERS)
-        cases = [c for batch in world.cases(n, args.seed) for c in batch]
-        data = case_arrays(cases, library.names, effect)
         rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
         config = TrainingConfig.per_stage(
             epochs, rate, batch_size=batch_size, seed=args.seed, screening=SCREENING
         )
-        with Progress() as progress:
-            task = progress.add_task(f"{instrument}: {n} cases", total=protocol_epochs(config))
+        with progress_bar() as progress:
+            task = progress.add_task(f"{instrument}: generating cases", total=n)
+            cases = []
+            for batch in world.cases(n, args.seed):
+                cases.extend(batch)
+                progress.advance(task, len(batch))
+            data = case_arrays(cases, library.names, effect)
+            epochs_total = protocol_epochs(config)
+            task = progress.add_task(f"{instrument}: training epochs", total=epochs_total)
             model, report = train_protocol(
                 data, config, progress=lambda k, task=task: progress.advance(task, k)
             )

@@ -175,3 +175,18 @@ def test_validate_scaling_reproduces_the_papers_observations(tmp_path):
 def test_validate_scaling_rejects_bad_spreads():
     run = flakelab("validate", "scaling", "--spreads", "0,90", "--plots", "")
     assert run.returncode == 2 and "--spreads" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_progress_off_a_terminal_logs_a_line_per_tenth_and_nothing_when_disabled(capsys):
+    from flakelab.cli.common import progress_bar
+
+    with progress_bar() as bar:
+        task = bar.add_task("work", total=40)
+        for _ in range(40):
+            bar.advance(task)
+    with progress_bar(disable=True) as bar:
+        task = bar.add_task("quiet", total=40)
+        bar.advance(task, 40)
+    lines = capsys.readouterr().err.splitlines()
+    assert [ln.split()[1] for ln in lines] == [f"{4 * k}/40" for k in range(1, 11)]
+    assert lines[-1].startswith("work: 40/40 (100 %)") and "left" not in lines[-1]

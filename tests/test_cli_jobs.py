@@ -18,6 +18,8 @@ def test_generate_train_register_list_and_evaluate(tmp_path):
     cases, database = tmp_path / "cases.csv", str(tmp_path / "shop.db")
     run = flakelab("cases", "generate", "--n", "120", "--seed", "5", "--out", str(cases))
     assert run.returncode == 0, run.stderr
+    # off a terminal the progress is logged as lines, the last one the whole count
+    assert "generating cases: 120/120 (100 %)" in run.stderr
     run = flakelab("train", str(cases), "--epochs", "3", "--hidden", "16", "--database", database,
                    "--out", str(tmp_path / "m.pt"), "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr

@@ -6,11 +6,19 @@ import functools
 import os
 import sys
 from collections.abc import Callable
+from datetime import timedelta
 from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeRemainingColumn,
+)
 
 from flakelab.errors import FlakelabError
 
@@ -56,10 +64,43 @@ SampleOption = Annotated[
 ]
 
 
-def progress_bar(disable: bool = False) -> Progress:
-    """A progress bar on stderr (hidden when stderr is not a terminal or ``disable``)."""
-    return Progress(
+class LoggedProgress(Progress):
+    """Rich's live bar on a terminal; elsewhere (a log file, ``nohup``, CI) one plain line per
+    tenth of each task on the same console, so that a long run is never blind."""
+
+    def __init__(self, *columns: Any, log: bool, **kwargs: Any) -> None:
+        super().__init__(*columns, **kwargs)
+        self.log_lines = log
+        self._tenths_logged: dict[TaskID, int] = {}
+
+    def advance(self, task_id: TaskID, advance: float = 1) -> None:
+        super().advance(task_id, advance)
+        if self.log_lines:
+            self._log_tenth(task_id)
+
+    def _log_tenth(self, task_id: TaskID) -> None:
+        task = next(t for t in self.tasks if t.id == task_id)
+        if not task.total:
+            return
+        tenth = int(10 * min(task.completed, task.total) / task.total)
+        if tenth <= self._tenths_logged.get(task_id, 0):
+            return
+        self._tenths_logged[task_id] = tenth
+        line = (
+            f"{task.description}: {task.completed:g}/{task.total:g} "
+            f"({100 * task.completed / task.total:.0f} %), "
+            f"{timedelta(seconds=round(task.elapsed or 0))} elapsed"
+        )
+        if task.completed < task.total and task.time_remaining is not None:
+            line += f", about {timedelta(seconds=round(task.time_remaining))} left"
+        self.console.print(line, highlight=False, markup=False, soft_wrap=True)
+
+
+def progress_bar(disable: bool = False) -> LoggedProgress:
+    """Progress on stderr: a live bar on a terminal, a line per tenth of the work elsewhere,
+    nothing when ``disable`` (machine-readable output)."""
+    return LoggedProgress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
         TimeRemainingColumn(), console=errors, disable=disable or not errors.is_terminal,
-        transient=True,
+        transient=True, log=not disable and not errors.is_terminal,
     )  # fmt: skip
