@@ -10,7 +10,8 @@ matcher handles with the physics scaling (hybrid path).
 The five-angle model learns from 120,000 cases, twice the hybrid paper's database for
 five-geometry instruments: held-out accuracy grows with the cases far more than with the
 network's width or the epochs, and pearls most (README, "Cases and the learned model");
-the MA-T12 model learns from 30,000 (12 geometries make each case costlier). A quarter of
+the MA-T12 model learns from 60,000 (12 geometries make each case costlier: 40 min
+here, 3.0 GB peak). A quarter of
 both models' cases are pearls.
 """
 
@@ -33,7 +34,7 @@ from flakelab.models.training import (
 
 NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 """Demo toners absent from the shipped models' training cases."""
-SETTINGS = {"five-angle": (120_000, 150, 256), "ma-t12": (30_000, 150, 256)}
+SETTINGS = {"five-angle": (120_000, 150, 256), "ma-t12": (60_000, 150, 256)}
 """Cases, epochs per stage and batch size for each shipped instrument (CPU time on a 2-core
 machine); the learning rate scales with the batch (2e-3 at 128)."""
 SCREENING = "cross-validation"
