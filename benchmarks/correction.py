@@ -28,10 +28,10 @@ import argparse
 import json
 
 import numpy as np
-from rich.progress import track
 
 from _matcher import shipped_matcher
 from flakelab.cases.generator import World
+from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import SUCCESS_DE00, recipe_vector, trial, worst_de00
@@ -75,7 +75,8 @@ def main() -> None:
     failed = 0
     offsets = []
     hidden = known.formulations(args.targets, rng)
-    for x_hidden in track(hidden, description="targets", disable=args.json):
+    # progress on stderr even with --json: these runs are long, their output usually a file
+    for x_hidden in tracked(hidden, "targets"):
         t = trial(world, x_hidden, rng)
         sprays = t.streams[1].bit_generator.seed_seq.spawn(args.sprays)
         best = match(t.target, forward, effect).candidates[0]

@@ -178,7 +178,7 @@ def test_validate_scaling_rejects_bad_spreads():
 
 
 def test_progress_off_a_terminal_logs_a_line_per_tenth_and_nothing_when_disabled(capsys):
-    from flakelab.cli.common import progress_bar
+    from flakelab.cli.common import progress_bar, tracked
 
     with progress_bar() as bar:
         task = bar.add_task("work", total=40)
@@ -190,3 +190,6 @@ def test_progress_off_a_terminal_logs_a_line_per_tenth_and_nothing_when_disabled
     lines = capsys.readouterr().err.splitlines()
     assert [ln.split()[1] for ln in lines] == [f"{4 * k}/40" for k in range(1, 11)]
     assert lines[-1].startswith("work: 40/40 (100 %)") and "left" not in lines[-1]
+    # the iterator form yields every item in order and ends on the whole count
+    assert list(tracked("abcde", "each")) == list("abcde")
+    assert capsys.readouterr().err.splitlines()[-1].startswith("each: 5/5 (100 %)")

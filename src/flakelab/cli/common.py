@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from datetime import timedelta
 from typing import Annotated, Any, TypeVar
 
@@ -26,6 +26,7 @@ console = Console(width=None if sys.stdout.isatty() else 110)
 errors = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
+T = TypeVar("T")
 
 
 def reports_errors(command: F) -> F:
@@ -104,3 +105,12 @@ def progress_bar(disable: bool = False) -> LoggedProgress:
         TimeRemainingColumn(), console=errors, disable=disable or not errors.is_terminal,
         transient=True, log=not disable and not errors.is_terminal,
     )  # fmt: skip
+
+
+def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iterator[T]:
+    """``items`` one by one, with :func:`progress_bar`'s progress."""
+    with progress_bar(disable) as bar:
+        task = bar.add_task(description, total=len(items))
+        for item in items:
+            yield item
+            bar.advance(task)
