@@ -19,7 +19,7 @@ application and read without noise, and the model's prediction for it (RMS and m
 absolute value over targets, geometries and components).
 
     python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling] [--json]
-        "library=none" "offset_weight=1.0" "persistent_sd=0.3" "extra_toners=0" ...
+        "library=none" "offset_weight=1.0" "persistent_sd=0.3" "noise_sd=0.05" ...
 """
 
 from __future__ import annotations
