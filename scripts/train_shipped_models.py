@@ -10,9 +10,8 @@ matcher handles with the physics scaling (hybrid path).
 The five-angle model learns from 120,000 cases, twice the hybrid paper's database for
 five-geometry instruments: held-out accuracy grows with the cases far more than with the
 network's width or the epochs, and pearls most (README, "Cases and the learned model");
-the MA-T12 model learns from 60,000 (12 geometries make each case costlier: 40 min
-here, 3.0 GB peak). A quarter of
-both models' cases are pearls.
+the MA-T12 model learns from 60,000 (12 geometries make each case costlier: 40 min here,
+3.0 GB peak). A quarter of both models' cases are pearls.
 """
 
 from __future__ import annotations

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flakelab.cli.common import progress_bar, tracked
 from flakelab.core import compare, tolerance_preset
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_measurements, write_measurements
@@ -178,8 +179,6 @@ def test_validate_scaling_rejects_bad_spreads():
 
 
 def test_progress_off_a_terminal_logs_a_line_per_tenth_and_nothing_when_disabled(capsys):
-    from flakelab.cli.common import progress_bar, tracked
-
     with progress_bar() as bar:
         task = bar.add_task("work", total=40)
         for _ in range(40):
