@@ -52,11 +52,17 @@ def main() -> None:
     parser.add_argument("--instrument", choices=sorted(SETTINGS), action="append")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--out", type=Path, help="folder for the model files (default: shipped)")
+    parser.add_argument(
+        "--cases", type=int, help="number of training cases (default: the shipped model's)"
+    )
     args = parser.parse_args()
+    if args.cases is not None and args.cases < 1:
+        parser.error(f"--cases: {args.cases} is not a positive number of cases")
     library = read_library(None)
     effect = [t.kind != "pigment" for t in library.toners]
     for instrument in args.instrument or sorted(SETTINGS):
         n, epochs, batch_size = SETTINGS[instrument]
+        n = args.cases if args.cases is not None else n
         kinds = TRAINING_KINDS.get(instrument)
         settings = WorldSettings(kinds=kinds) if kinds else WorldSettings()
         world = World(library, instrument, settings, exclude=NOVEL_TONERS)
