@@ -18,7 +18,8 @@ L*a*b* offset between the failed recipe mixed from the shop's batches, sprayed a
 application and read without noise, and the model's prediction for it (RMS and median
 absolute value over targets, geometries and components).
 
-    python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling] [--json]
+    python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling]
+        [--model FILE] [--json]
         "library=none" "offset_weight=1.0" "persistent_sd=0.3" "noise_sd=0.05" ...
 """
 
@@ -64,9 +65,10 @@ def main() -> None:
     parser.add_argument("--sprays", type=int, default=6)
     parser.add_argument("--seed", type=int, default=77)
     parser.add_argument("--ceiling", action="store_true")
+    parser.add_argument("--model", help="five-angle model file (default: the shipped one)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    world, forward, effect = shipped_matcher()
+    world, forward, effect = shipped_matcher(model=args.model)
     known = World(world.library, "five-angle", exclude=forward.novel)
     rng = np.random.default_rng(args.seed)
     specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling), "respray"]
