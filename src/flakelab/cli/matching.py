@@ -74,8 +74,11 @@ def match_command(
     seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
     json_output: JsonOption = False,
 ) -> None:
-    """Match a target: ranked recipes with predicted ΔL*, ΔC*, ΔH*, ΔE00 per geometry, grams
-    for the can and pass/fail. ``flakelab match evaluate`` runs the evaluation harness."""
+    """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
+
+    Each candidate comes with its predicted ΔL*, ΔC*, ΔH* and ΔE00 per geometry
+    and the model that produced them.
+    'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.data import example_path
     from flakelab.io import read_measurement
     from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
@@ -209,8 +212,11 @@ def correct_command(
     ] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Correct a recipe from the measured spray-out (Jacobian of the model at the recipe,
-    applied to the observed offset)."""
+    """Correct a recipe from its measured spray-out.
+
+    The model's local behaviour around the recipe, applied to the part of the
+    spray-out's offset from the prediction that persists: the library's physics
+    splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import delta_E
     from flakelab.io import read_measurement
