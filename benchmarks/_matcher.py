@@ -19,3 +19,15 @@ def shipped_matcher(world: str = "shop", model: str | None = None):
         forward,
         effect_mask(library, forward.toners),
     )
+
+
+def seeds_from(text: str) -> list[int]:
+    """``"77"``, ``"77,78"`` or ``"81-86"`` (and mixtures) → seeds."""
+    seeds = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        first, _, last = part.partition("-")
+        try:
+            seeds.extend(range(int(first), int(last or first) + 1))
+        except ValueError:
+            raise SystemExit(f"--seed: {part!r} is not a seed or a range of seeds") from None
+    return seeds

@@ -35,7 +35,7 @@ import json
 
 import numpy as np
 
-from _matcher import shipped_matcher
+from _matcher import seeds_from, shipped_matcher
 from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -61,18 +61,6 @@ def persistent_offset(forward, x, calm) -> np.ndarray:
     sprayed at the nominal application, read without noise), less the model's prediction."""
     R, _ = evaluate_recipes(forward, x[None])
     return reflectance_to_Lab(calm) - reflectance_to_Lab(R[0])
-
-
-def seeds_from(text: str) -> list[int]:
-    """``"77"``, ``"77,78"`` or ``"81-86"`` (and mixtures) → seeds."""
-    seeds = []
-    for part in filter(None, (p.strip() for p in text.split(","))):
-        first, _, last = part.partition("-")
-        try:
-            seeds.extend(range(int(first), int(last or first) + 1))
-        except ValueError:
-            raise SystemExit(f"--seed: {part!r} is not a seed or a range of seeds") from None
-    return seeds
 
 
 def failed_first_shots(seed: int, targets: int, world, forward, effect):
