@@ -43,6 +43,39 @@ def statistics(de: np.ndarray) -> dict[str, float]:
     }
 
 
+def matched_and_hidden(
+    world: World, forward, effect, seeds: list[int], targets: int, candidates: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """For ``targets`` hidden formulations per seed, made and measured as in the harness: the
+    recipes ``[N·candidates, T]`` the matcher proposes (its best ``candidates``) and the hidden
+    formulations ``[N, T]``."""
+    known = World(world.library, world.instrument, exclude=forward.novel)
+    matched, hidden = [], []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        for x_hidden in tracked(known.formulations(targets, rng), f"targets (seed {seed})"):
+            t = trial(world, x_hidden, rng)
+            proposed = match(t.target, forward, effect).candidates[:candidates]
+            matched += [recipe_vector(forward, c.fractions) for c in proposed]
+            hidden.append(x_hidden)
+    return np.array(matched), np.array(hidden)
+
+
+def measure(world: World, forward, effect, args) -> dict:
+    """The model's own error at matched recipes and at hidden formulas, and their ratio."""
+    matched, hidden = matched_and_hidden(
+        world, forward, effect, seeds_from(args.seed), args.targets
+    )
+    at_matches = statistics(own_error(world, forward, matched))
+    at_hidden = statistics(own_error(world, forward, hidden))
+    return {
+        "targets": len(hidden),
+        "at_matched_recipes": at_matches,
+        "at_hidden_formulas": at_hidden,
+        "mean_ratio": at_matches["de00_mean"] / at_hidden["de00_mean"],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=60, help="per seed")
@@ -51,24 +84,7 @@ def main() -> None:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     world, forward, effect = shipped_matcher(model=args.model)
-    known = World(world.library, "five-angle", exclude=forward.novel)
-    matched, hidden = [], []
-    for seed in seeds_from(args.seed):
-        rng = np.random.default_rng(seed)
-        for x_hidden in tracked(known.formulations(args.targets, rng), f"targets (seed {seed})"):
-            t = trial(world, x_hidden, rng)
-            best = match(t.target, forward, effect).candidates[0]
-            matched.append(recipe_vector(forward, best.fractions))
-            hidden.append(x_hidden)
-    at_matches = statistics(own_error(world, forward, np.array(matched)))
-    at_hidden = statistics(own_error(world, forward, np.array(hidden)))
-    report = {
-        "model": args.model or "shipped",
-        "targets": len(matched),
-        "at_matched_recipes": at_matches,
-        "at_hidden_formulas": at_hidden,
-        "mean_ratio": at_matches["de00_mean"] / at_hidden["de00_mean"],
-    }
+    report = {"model": args.model or "shipped", **measure(world, forward, effect, args)}
     if args.json:
         print(json.dumps(report, indent=2))
         return
