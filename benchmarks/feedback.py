@@ -6,12 +6,13 @@ lie where the matcher takes the model, which is where the optimiser finds the mo
 loop: for hidden targets made as in ``flakelab match evaluate`` (seeds apart from the
 evaluation's), the matcher proposes its best candidates; each is sprayed once in the shop's
 world (batches, application, instrument) and kept as a case; the model is then adapted to
-those cases with the protocol's adaptation phase (``TrainingConfig.adapt_epochs`` at
-``adapt_learning_rate``), mixed with fresh cases from its own training mix (``--replay`` per
-feedback case) so that it keeps what it knew; ``--control`` adapts on as many fresh cases
-alone, to tell the feedback's effect from that of more training. It reports the model's own
-error at matched recipes and at hidden formulas (seeds 81 and 82, as ``matched_error.py``)
-before and after, and writes the adapted model for the other benchmarks' ``--model``.
+those cases for ``--epochs`` at the protocol's adaptation rate (``adapt_learning_rate``; its
+150 ``adapt_epochs`` fit a few thousand cases too closely), mixed with fresh cases from its
+own training mix (``--replay`` per feedback case) so that it keeps what it knew;
+``--control`` adapts on as many fresh cases alone, to tell the feedback's effect from that of
+more training. It reports the model's own error at matched recipes and at hidden formulas
+(seeds 81 and 82, as ``matched_error.py``) before and after, and writes the adapted model for
+the other benchmarks' ``--model``.
 
     python benchmarks/feedback.py [--targets 400] [--seed 501] [--out FILE] [--json]
 """

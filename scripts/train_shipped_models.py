@@ -7,6 +7,10 @@ matcher handles with the physics scaling (hybrid path).
 
     python scripts/train_shipped_models.py [--instrument five-angle]
 
+``--seed`` draws the cases and the network alike; ``--network-seed`` draws the network (its
+weights, splits and batches) alone, on the same cases, and ``--screening`` changes the outlier
+screen: how much a model owes to its network's draw (README, "Cases and the learned model").
+
 The five-angle model learns from 120,000 cases, twice the hybrid paper's database for
 five-geometry instruments: held-out accuracy grows with the cases far more than with the
 network's width or the epochs, and pearls most (README, "Cases and the learned model");
@@ -25,6 +29,7 @@ from flakelab.cli.common import progress_bar
 from flakelab.io import read_library
 from flakelab.models.registry import shipped_model_path
 from flakelab.models.training import (
+    SCREENINGS,
     TrainingConfig,
     case_arrays,
     protocol_epochs,
@@ -51,6 +56,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--instrument", choices=sorted(SETTINGS), action="append")
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--network-seed", type=int, help="network's seed (default: --seed)")
+    parser.add_argument("--screening", choices=SCREENINGS, default=SCREENING)
     parser.add_argument("--out", type=Path, help="folder for the model files (default: shipped)")
     parser.add_argument(
         "--cases", type=int, help="number of training cases (default: the shipped model's)"
@@ -68,7 +75,11 @@ def main() -> None:
         world = World(library, instrument, settings, exclude=NOVEL_TONERS)
         rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
         config = TrainingConfig.per_stage(
-            epochs, rate, batch_size=batch_size, seed=args.seed, screening=SCREENING
+            epochs,
+            rate,
+            batch_size=batch_size,
+            seed=args.seed if args.network_seed is None else args.network_seed,
+            screening=args.screening,
         )
         with progress_bar() as progress:
             task = progress.add_task(f"{instrument}: generating cases", total=n)
@@ -87,6 +98,7 @@ def main() -> None:
                 "name": f"demo-{instrument}",
                 "novel_toners": list(NOVEL_TONERS),
                 "generator_seed": args.seed,
+                "network_seed": config.seed,
                 "cases": n,
                 "training_kinds": settings.kinds,
             }
