@@ -73,3 +73,22 @@ def test_realism_json_reports_the_shop_statistics():
     for key in ("remeasure_de00_median", "respray_de00_median", "batch_strength_sd",
                 "weathered_target_de00_median"):  # fmt: skip
         assert key in report["realistic_ranges"] and report[key] > 0
+
+
+def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path):
+    cases = tmp_path / "cases.csv"
+    run = flakelab("cases", "generate", "--n", "60", "--seed", "6", "--out", str(cases))
+    assert run.returncode == 0, run.stderr
+    run = flakelab("train", str(cases), "--epochs", "2", "--hidden", "8", "--no-register",
+                   "--adapt", "synthetic shop", "--adapt-epochs", "2", "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    tail = json.loads(run.stdout)["loss_log_tail"]
+    # the final training's last fine-tuning epoch, then exactly two epochs of adaptation
+    assert [(e["stage"], e["epoch"]) for e in tail] == [
+        ("final fine-tune", 1),
+        ("adapt synthetic shop", 0),
+        ("adapt synthetic shop", 1),
+    ]
+    run = flakelab("train", str(cases), "--no-register", "--adapt", "synthetic shop",
+                   "--adapt-epochs", "0")  # fmt: skip
+    assert run.returncode != 0 and "--adapt-epochs" in run.stderr

@@ -175,10 +175,18 @@ def train(
     batch_size: Annotated[int, typer.Option(min=1, help="Cases per optimiser step.")] = 128,
     colour_weight: Annotated[
         float | None,
-        typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term [default: 0.02]."),
+        typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term (default: 0.02)."),
     ] = None,
     holdout: Annotated[float, typer.Option(help="Share of cases held out to judge it.")] = 0.1,
     adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
+    adapt_epochs: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Epochs of the adaptation (default: the paper's 150); fewer when the shop "
+            "has only a few thousand cases, which 150 fit too closely.",
+        ),
+    ] = None,
     screening: Annotated[
         str,
         typer.Option(
@@ -227,6 +235,8 @@ def train(
     )
     if colour_weight is not None:
         config = replace(config, colour_weight=colour_weight)
+    if adapt_epochs is not None:
+        config = replace(config, adapt_epochs=adapt_epochs)
     stages = protocol_epochs(config, adapt is not None)
     with progress_bar(disable=json_output) as bar:
         task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
