@@ -6,8 +6,9 @@ lie where the matcher takes the model, which is where the optimiser finds the mo
 loop: for hidden targets made as in ``flakelab match evaluate`` (seeds apart from the
 evaluation's), the matcher proposes its best candidates; each is sprayed once in the shop's
 world (batches, application, instrument) and kept as a case; the model is then adapted to
-those cases for ``--epochs`` at the protocol's adaptation rate (``adapt_learning_rate``; its
-150 ``adapt_epochs`` fit a few thousand cases too closely), mixed with fresh cases from its
+those cases (``flakelab.models.training.adapt_model``) for ``--epochs`` at the protocol's
+adaptation rate (its 150 ``adapt_epochs`` fit a few thousand cases too closely; with
+``--validation`` a share of the cases chooses the epoch instead), mixed with fresh cases from its
 own training mix (``--replay`` per feedback case) so that it keeps what it knew;
 ``--control`` adapts on as many fresh cases alone, to tell the feedback's effect from that of
 more training. It reports the model's own error at matched recipes and at hidden formulas
@@ -20,9 +21,8 @@ the other benchmarks' ``--model``.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +31,7 @@ from _matcher import seeds_from, shipped_matcher
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.match.models import forward_for
 from flakelab.models.network import ForwardModel
-from flakelab.models.training import CaseArrays, TrainingConfig, case_arrays, fit
+from flakelab.models.training import CaseArrays, adapt_model, case_arrays, recorded_config
 from matched_error import matched_and_hidden, measure
 
 
@@ -71,31 +71,6 @@ def joined(a: CaseArrays, b: CaseArrays) -> CaseArrays:
     )
 
 
-def adapted(model: ForwardModel, data: CaseArrays, seed: int, epochs: int) -> ForwardModel:
-    """A copy of ``model`` after ``epochs`` of the protocol's adaptation phase on ``data``."""
-    names = {f.name for f in fields(TrainingConfig)}
-    recorded = {k: v for k, v in model.info.get("config", {}).items() if k in names}
-    config = replace(
-        TrainingConfig(**recorded), hidden=tuple(model.hidden), seed=seed, adapt_epochs=epochs
-    )
-    network = copy.deepcopy(model.network).requires_grad_(True)
-    new = replace(model, network=network, info=dict(model.info))
-    log: list[dict] = []
-    rows = np.arange(len(data.x))
-    fit(
-        [new],
-        data,
-        [rows],
-        config.adapt_epochs,
-        config.adapt_learning_rate,
-        config,
-        log,
-        ["feedback"],
-    )
-    new.info["feedback_cases"] = int(len(data.x))
-    return new
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=400, help="feedback targets")
@@ -104,6 +79,13 @@ def main() -> None:
         "--replay", type=float, default=30.0, help="fresh training-mix cases per feedback case"
     )
     parser.add_argument("--epochs", type=int, default=30, help="adaptation epochs")
+    parser.add_argument(
+        "--validation",
+        type=float,
+        default=0.0,
+        help="share of the cases that choose the epoch (flakelab model adapt's default 0.2); "
+        "0: every epoch runs, as the paper",
+    )
     parser.add_argument("--seed", type=int, default=501, help="seed of the feedback targets")
     parser.add_argument("--eval-seed", default="81,82", help="matched_error.py's seeds")
     parser.add_argument("--eval-targets", type=int, default=60, help="per evaluation seed")
@@ -133,7 +115,13 @@ def main() -> None:
     else:
         feedback = sprayed_cases(world, x, model.effect, rng)
         data = joined(feedback, replay_cases(model, world, replay, seed=args.seed + 1))
-    new = adapted(model, data, args.seed, args.epochs)
+    config = replace(
+        recorded_config(model),
+        seed=args.seed,
+        adapt_epochs=args.epochs,
+        adapt_validation=args.validation,
+    )
+    new, adaptation = adapt_model(model, data, config, stage="feedback")
     after = measure(world, forward_for(new, world.library), effect, evaluation)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -144,6 +132,7 @@ def main() -> None:
         "control": args.control,
         "feedback_cases": 0 if args.control else len(x),
         "replay_cases": len(data.x) - (0 if args.control else len(x)),
+        "adaptation": {k: v for k, v in adaptation.items() if k != "log"},
         "before": before,
         "after": after,
         "out": str(args.out) if args.out else None,

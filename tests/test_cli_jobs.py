@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from flakelab.data import example_path
 
 
@@ -92,3 +94,38 @@ def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path):
     run = flakelab("train", str(cases), "--no-register", "--adapt", "synthetic shop",
                    "--adapt-epochs", "0")  # fmt: skip
     assert run.returncode != 0 and "--adapt-epochs" in run.stderr
+
+
+def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path):
+    cases, database = str(tmp_path / "cases.db"), str(tmp_path / "models.db")
+    habits = ("--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005")
+    run = flakelab("cases", "generate", "--n", "500", "--seed", "21", "--shop", "shop A",
+                   *habits, "--out", cases)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    run = flakelab("cases", "generate", "--n", "100", "--seed", "22", "--out", cases)
+    assert run.returncode == 0, run.stderr
+    run = flakelab("model", "adapt", cases, "--shop", "shop A", "--database", database, "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    # 500 of shop A's cases: those with toners new to the model left to the physics, a tenth
+    # of the rest held out to judge, a fifth of what remains to choose the epoch
+    parts = ("left_out_new_toners", "validation_cases", "cases")
+    assert report["held_out"]["cases"] + sum(report[k] for k in parts) == 500
+    assert report["left_out_new_toners"] > 0
+    held_out = report["held_out"]
+    assert held_out["after"]["de00_mean"] < held_out["before"]["de00_mean"] - 0.2
+    assert report["registry"]["promoted"] is True
+    assert report["registry"]["incumbent_de00"] == pytest.approx(held_out["before"]["de00_mean"])
+    # the promoted model is now the current one: a second adaptation starts from it
+    run = flakelab("model", "adapt", cases, "--shop", "shop A", "--database", database,
+                   "--epochs", "5", "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    again = json.loads(run.stdout)["held_out"]["before"]["de00_mean"]
+    assert again == pytest.approx(held_out["after"]["de00_mean"])
+
+    run = flakelab("model", "adapt", cases, "--shop", "shop B", "--database", database)
+    assert run.returncode == 2 and "no cases from shop 'shop B'" in run.stderr
+    run = flakelab("model", "adapt", cases, "--validation", "0.95", "--database", database)
+    assert run.returncode == 2 and "--validation" in run.stderr
+    listed = json.loads(flakelab("model", "list", "--database", database, "--json").stdout)
+    assert len(listed["registered"]) == 2

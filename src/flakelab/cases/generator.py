@@ -15,7 +15,11 @@ Sources of variation (all in :class:`WorldSettings`):
   reflectance;
 * instrument: smooth multiplicative noise 0.1 % per band, a gain error 0.12 % per geometry
   per reading, additive 2·10⁻⁴;
-* the colorist's recipe: the formulation's toners with amounts off by logN(0, 5 %).
+* the colorist's recipe: the formulation's toners with amounts off by logN(0, 5 %);
+* the shop's own habits (``shop_*``, none by default): its sprayer's mean film build and
+  flake spread against the factory's, and its instrument's gain against the instrument the
+  shipped model learned from. These are what the protocol's adaptation phase is for
+  (``flakelab model adapt``): every case of one shop carries them, no case of another does.
 
 They were set so that ``World.realism`` lands in the ranges a shop sees (issue 4).
 """
@@ -75,6 +79,9 @@ class WorldSettings:
     weathered_share: float = 0.5
     accept_de00: float = 1.0
     correct_de00: float = 2.5
+    shop_film_build: float = 1.0
+    shop_spread: float = 1.0
+    shop_gain: float = 0.0
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
     )
@@ -150,12 +157,14 @@ class World:
         return x / x.sum()
 
     # -- appearance -----------------------------------------------------------------------
-    def variation(self, n: int, rng: np.random.Generator) -> Variation:
+    def variation(self, n: int, rng: np.random.Generator, at_shop: bool = True) -> Variation:
+        """Batches and application of ``n`` sprays, at the shop or (``at_shop=False``) at
+        the factory, which has none of the shop's habits."""
         s = self.settings
         T = len(self.library.toners)
         strength = rng.normal(1.0, s.batch_strength_sd, (n, T))
         hue_shift = rng.normal(0.0, s.batch_hue_shift_nm, n)
-        return Variation(strength, hue_shift, *self.application(n, rng))
+        return Variation(strength, hue_shift, *self.application(n, rng, at_shop))
 
     def nominal(self, n: int) -> Variation:
         """No batch or application variation: the formulation as the library describes it."""
@@ -182,13 +191,13 @@ class World:
         return faded, rng.uniform(*self.settings.haze_range, fractions.shape[0])
 
     def measure(self, R: NDArray, rng: np.random.Generator) -> NDArray:
-        """One instrument reading of reflectance ``[F, G, W]``: smooth band noise, a gain
-        error per geometry and an offset."""
+        """One reading of reflectance ``[F, G, W]`` by the shop's instrument: smooth band
+        noise, a gain error per geometry, the instrument's own gain and an offset."""
         s = self.settings
         F, G, W = R.shape
         smooth = _smooth_noise(rng, (F, G, W)) * s.noise_band
         gain = rng.normal(0, s.noise_gain, (F, G, 1))
-        return R * (1 + smooth + gain) + rng.normal(0, s.noise_offset, (F, G, 1))
+        return R * (1 + smooth + gain + s.shop_gain) + rng.normal(0, s.noise_offset, (F, G, 1))
 
     # -- cases ----------------------------------------------------------------------------
     def cases(
@@ -216,7 +225,7 @@ class World:
     def _batch(self, size, rng, shop, start, offset, seed) -> list[Case]:
         s = self.settings
         hidden = self.formulations(size, rng)
-        oem = self.variation(size, rng)
+        oem = self.variation(size, rng, at_shop=False)
         weathered = rng.random(size) < s.weathered_share
         aged, haze = self.weather(hidden, rng)
         aged = np.where(weathered[:, None], aged, hidden)
@@ -312,12 +321,16 @@ class World:
         nominal, _ = self.appearance(fractions, self.nominal(n))
         return delta_E(reflectance_to_Lab(self.measure(R, rng)), reflectance_to_Lab(nominal))
 
-    def application(self, n: int, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
-        """One spraying: relative film build and flake-spread scale ``[n]`` each."""
+    def application(
+        self, n: int, rng: np.random.Generator, at_shop: bool = True
+    ) -> tuple[NDArray, NDArray]:
+        """One spraying: relative film build and flake-spread scale ``[n]`` each, about the
+        shop's habits (``at_shop``) or the factory's."""
         s = self.settings
+        film, spread = (s.shop_film_build, s.shop_spread) if at_shop else (1.0, 1.0)
         return (
-            rng.normal(1.0, s.film_build_sd, n).clip(0.7, 1.3),
-            np.exp(rng.normal(0.0, s.spread_sd, n)),
+            rng.normal(film, s.film_build_sd, n).clip(0.7, 1.3),
+            np.exp(rng.normal(np.log(spread), s.spread_sd, n)),
         )
 
 

@@ -16,7 +16,7 @@ from flakelab.cli.common import JsonOption, console, errors, progress_bar, repor
 from flakelab.errors import FlakelabError
 
 cases_app = typer.Typer(help="Refinish cases: generate, import, export, realism.")
-model_app = typer.Typer(help="Learned forward models: list and evaluate.")
+model_app = typer.Typer(help="Learned forward models: list, evaluate and adapt to a shop.")
 
 DatabaseOption = Annotated[
     str | None,
@@ -66,14 +66,36 @@ def generate(
     shop: Annotated[
         str, typer.Option(help="Shop name recorded with the cases.")
     ] = "synthetic shop",
+    shop_film_build: Annotated[
+        float,
+        typer.Option(min=0.8, max=1.2, help="The shop's mean film build against the factory's."),
+    ] = 1.0,
+    shop_spread: Annotated[
+        float,
+        typer.Option(
+            min=0.8,
+            max=1.2,
+            help="The shop's mean flake spread against the factory's (<1: "
+            "flakes lie flatter, brighter face, darker flop).",
+        ),
+    ] = 1.0,
+    shop_gain: Annotated[
+        float,
+        typer.Option(
+            min=-0.05, max=0.05, help="The shop instrument's gain against the reference's."
+        ),
+    ] = 0.0,
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
     from flakelab.cases.database import add_cases, open_database
     from flakelab.cases.exchange import write_cases
-    from flakelab.cases.generator import World
+    from flakelab.cases.generator import World, WorldSettings
     from flakelab.io import read_library
 
-    world = World(read_library(library), instrument)
+    habits = WorldSettings(
+        shop_film_build=shop_film_build, shop_spread=shop_spread, shop_gain=shop_gain
+    )
+    world = World(read_library(library), instrument, habits)
     to_file = out is not None and _is_case_file(out)
     engine = None if to_file else open_database(out if out is not None else database)
     collected = []
@@ -183,10 +205,18 @@ def train(
         int | None,
         typer.Option(
             min=1,
-            help="Epochs of the adaptation (default: the paper's 150); fewer when the shop "
-            "has only a few thousand cases, which 150 fit too closely.",
+            help="Epochs of the adaptation (default: the paper's 150).",
         ),
     ] = None,
+    adapt_validation: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=0.9,
+            help="Share of the shop's cases held out to choose the adaptation's epoch; the "
+            "model keeps its best there (0: run every epoch, as the paper).",
+        ),
+    ] = 0.2,
     screening: Annotated[
         str,
         typer.Option(
@@ -231,6 +261,7 @@ def train(
         finetune_epochs=epochs,
         batch_size=batch_size,
         screening=screening,
+        adapt_validation=adapt_validation,
         seed=seed,
     )
     if colour_weight is not None:
@@ -346,6 +377,130 @@ def evaluate(
         style="bold",
     )
     console.print(table)
+
+
+@model_app.command("adapt")
+@reports_errors
+def adapt(
+    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
+    shop: Annotated[
+        str | None, typer.Option(help="Only this shop's cases (default: every case given).")
+    ] = None,
+    model: Annotated[
+        str | None, typer.Option("--model", "-m", help="Model file (default: current).")
+    ] = None,
+    instrument: InstrumentOption = "five-angle",
+    library: LibraryOption = None,
+    database: DatabaseOption = None,
+    epochs: Annotated[
+        int | None, typer.Option(min=1, help="Adaptation epochs (default: the paper's 150).")
+    ] = None,
+    validation: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=0.9,
+            help="Share of the cases held out to choose the epoch; the model keeps its best "
+            "there, never worse than it started (0: run every epoch, as the paper).",
+        ),
+    ] = 0.2,
+    holdout: Annotated[
+        float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
+    ] = 0.1,
+    seed: Annotated[int, typer.Option(help="Seed of the splits and the adaptation.")] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the model here.")
+    ] = None,
+    register_model: Annotated[
+        bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
+    ] = True,
+    json_output: JsonOption = False,
+) -> None:
+    """Adapt a trained model (default: the current one) to one shop's cases: the training
+    protocol's adaptation phase, for the sprayers and instrument of one shop."""
+    from flakelab.cases.database import open_database
+    from flakelab.io import read_library
+    from flakelab.models.registry import current_model, load_model_file, register
+    from flakelab.models.training import (
+        adapt_model,
+        case_arrays,
+        evaluate_model,
+        recorded_config,
+    )
+
+    lib = read_library(library)
+    engine = open_database(database) if register_model else _maybe_engine(database)
+    base = load_model_file(model) if model else current_model(engine, instrument)
+    chosen = [
+        c
+        for c in load_cases(cases)
+        if c.geometry_names == base.geometries and (shop is None or c.shop == shop)
+    ]
+    if not chosen:
+        whose = f"shop {shop!r}" if shop else "any shop"
+        raise FlakelabError(
+            f"{cases}: no cases from {whose} with the model's geometries {base.geometries}"
+        )
+    novel = set(base.info.get("novel_toners", ()))
+    known = [c for c in chosen if not novel & set(c.recipe)]
+    rng = np.random.default_rng(seed)
+    held = rng.random(len(known)) < holdout
+    if held.all() or not held.any():
+        raise FlakelabError(
+            f"{cases}: {len(known)} cases are too few to hold out {holdout:.0%} of them"
+        )
+    effect = [t.kind != "pigment" for t in lib.toners]
+    data = case_arrays([c for c, h in zip(known, held, strict=True) if not h], lib.names, effect)
+    held_out = case_arrays([c for c, h in zip(known, held, strict=True) if h], lib.names, effect)
+    config = replace(recorded_config(base), adapt_validation=validation, seed=seed)
+    if epochs is not None:
+        config = replace(config, adapt_epochs=epochs)
+    stage = f"adapt {shop or cases}"
+    with progress_bar(disable=json_output) as bar:
+        task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=config.adapt_epochs)
+        new, report = adapt_model(
+            base, data, config, stage=stage, progress=lambda k: bar.advance(task, k)
+        )
+    new.info["adaptation"]["shop"] = shop
+    before = evaluate_model(base, held_out)
+    after = evaluate_model(new, held_out)
+    summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
+    summary |= {
+        "model": model or f"current {instrument}",
+        "shop": shop,
+        "left_out_new_toners": len(chosen) - len(known),
+        "held_out": {
+            "cases": after["cases"],
+            "before": {k: before[k] for k in ("de00_mean", "de00_p95", "de00_max")},
+            "after": {k: after[k] for k in ("de00_mean", "de00_p95", "de00_max")},
+        },
+    }
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_bytes(new.to_bytes())
+        summary["file"] = str(out)
+    if register_model:
+        summary["registry"] = register(engine, new, held_out, metrics=summary["held_out"])
+    if json_output:
+        print(json.dumps(summary, indent=2))
+        return
+    table = Table(title=f"{summary['model']} adapted to {data.x.shape[0]} cases ({stage})")
+    for column in ("held-out ΔE00", "mean", "p95", "max"):
+        table.add_column(column, justify="right")
+    for name in ("before", "after"):
+        v = summary["held_out"][name]
+        table.add_row(name, f"{v['de00_mean']:.3f}", f"{v['de00_p95']:.3f}", f"{v['de00_max']:.3f}")
+    console.print(table)
+    kept = summary["kept_epochs"]
+    errors.print(
+        f"kept epoch {kept} of {summary['epochs']}"
+        + (f" (chosen on {summary['validation_cases']} cases)" if validation else ""),
+        highlight=False,
+    )
+    if "registry" in summary:
+        r = summary["registry"]
+        verdict = "promoted" if r["promoted"] else "kept as a candidate (the current one is better)"
+        errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
 
 
 def _maybe_engine(database: str | None):

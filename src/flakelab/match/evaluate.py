@@ -100,7 +100,7 @@ class Trial:
 
 
 def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
-    oem, shop = world.variation(1, rng), world.variation(1, rng)
+    oem, shop = world.variation(1, rng, at_shop=False), world.variation(1, rng)
     streams = rng.spawn(3)
     # the respray's stream comes from the oracle's, so that adding it changed no other spray
     streams.append(streams[2].spawn(1)[0])

@@ -24,15 +24,22 @@ angles, where the eye (and ΔE00) is most sensitive and where the spread is larg
    ``outlier_threshold`` robust standard deviations (median/MAD of the judging errors) above
    their median.
 4. Train the final model on the cleaned cases (one session).
-5. Optionally adapt it to one shop or instrument (``adapt_epochs`` on that shop's cases).
+5. Optionally adapt it to one shop or instrument (``adapt_epochs`` on that shop's cases at
+   ``adapt_learning_rate``; :func:`adapt`, or :func:`adapt_model` for a model already
+   trained, such as the shipped one). The paper runs all 150 epochs; a shop with a few
+   thousand cases is fitted too closely by them (``benchmarks/adaptation.py``), so by default
+   ``adapt_validation`` of the shop's cases are held out and the model keeps the epoch that
+   predicts them best, its starting weights included: adaptation never leaves it worse there
+   than it found it. ``adapt_validation=0`` runs the paper's phase as written.
 """
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 import torch
@@ -57,6 +64,9 @@ __all__ = [
     "data_hash",
     "SCREENINGS",
     "protocol_epochs",
+    "adapt",
+    "adapt_model",
+    "recorded_config",
 ]
 
 SCREENINGS = ("sequential", "cross-validation")
@@ -77,6 +87,7 @@ class TrainingConfig:
     outlier_threshold: float = 6.0
     adapt_epochs: int = 150
     adapt_learning_rate: float = 2e-4
+    adapt_validation: float = 0.2
     seed: int = 0
 
     @classmethod
@@ -105,6 +116,17 @@ class CaseArrays:
     geometries: tuple[str, ...]
     instrument: str
     effect: NDArray | None = None
+
+    def subset(self, rows: NDArray) -> CaseArrays:
+        """The cases at ``rows``."""
+        return replace(
+            self,
+            x=self.x[rows],
+            R=self.R[rows],
+            texture=self.texture[rows],
+            case_ids=tuple(self.case_ids[i] for i in rows),
+            shops=tuple(self.shops[i] for i in rows),
+        )
 
 
 def case_arrays(
@@ -216,9 +238,14 @@ def fit(
     log: list,
     stages: Sequence[str],
     progress: Callable[[int], None] | None = None,
-) -> None:
+    validation: Sequence[NDArray] | None = None,
+) -> list[int] | None:
     """Adam on the loss of the module notes, cosine decay within the stage, for K models at
     once, model k on the cases ``rows[k]`` (logged as ``stages[k]``).
+
+    With ``validation`` (rows per model), each model is judged after every epoch by its mean
+    ΔE00 on those cases (logged as ``validation_de00``) and ends with the weights of its best
+    epoch, its starting weights included; returns the epochs each kept model trained.
 
     One :class:`StackedNetwork` carries the K networks. The loss is the sum of the models'
     losses and Adam is elementwise, so each model trains as it would alone; the fold models
@@ -227,7 +254,7 @@ def fit(
     random."""
     sizes = [r.size for r in rows]
     if epochs <= 0 or min(sizes) == 0:
-        return
+        return None
     generator = torch.Generator().manual_seed(config.seed + len(log))
     x = _stack_rows([_standard_inputs(m, data.x[r]) for m, r in zip(models, rows, strict=True)])
     y = _stack_rows([_standard_targets(m, data, r) for m, r in zip(models, rows, strict=True)])
@@ -239,6 +266,7 @@ def fit(
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=epochs)
     per_epoch = min(sizes)
     stack = torch.arange(len(models))[:, None]
+    best = None if validation is None else _BestEpoch(models, data, validation, network)
     for epoch in range(epochs):
         order = torch.stack([torch.randperm(n, generator=generator)[:per_epoch] for n in sizes])
         totals = torch.zeros(len(models))
@@ -253,11 +281,48 @@ def fit(
             optimiser.step()
             totals += losses.detach() * batch.shape[1]
         schedule.step()
-        for stage, total in zip(stages, totals.tolist(), strict=True):
-            log.append({"stage": stage, "epoch": epoch, "loss": total / per_epoch})
+        scores = best.update(epoch + 1) if best else [None] * len(models)
+        for stage, total, score in zip(stages, totals.tolist(), scores, strict=True):
+            entry = {"stage": stage, "epoch": epoch, "loss": total / per_epoch}
+            log.append(entry if score is None else entry | {"validation_de00": score})
         if progress:
             progress(len(models))
+    if best:
+        best.restore()
     network.copy_into([m.network for m in models])
+    return None if best is None else best.epochs.tolist()
+
+
+class _BestEpoch:
+    """Each of a :class:`StackedNetwork`'s models' weights at its lowest mean ΔE00 on its
+    validation rows so far, starting from the weights it had before training."""
+
+    def __init__(self, models, data: CaseArrays, rows: Sequence[NDArray], network) -> None:
+        self.models, self.data, self.rows, self.network = models, data, rows, network
+        self.weights = [p.detach().clone() for p in network.parameters()]
+        self.scores = self.judge()
+        self.epochs = np.zeros(len(models), int)
+
+    def judge(self) -> NDArray:
+        self.network.copy_into([m.network for m in self.models])
+        pairs = zip(self.models, self.rows, strict=True)
+        return np.array([_residual_error(m, self.data, r).mean() for m, r in pairs])
+
+    def update(self, epoch: int) -> list[float]:
+        scores = self.judge()
+        better = scores < self.scores
+        mask = torch.as_tensor(better)
+        with torch.no_grad():
+            for kept, weight in zip(self.weights, self.network.parameters(), strict=True):
+                kept[mask] = weight[mask]
+        self.scores = np.where(better, scores, self.scores)
+        self.epochs[better] = epoch
+        return scores.tolist()
+
+    def restore(self) -> None:
+        with torch.no_grad():
+            for kept, weight in zip(self.weights, self.network.parameters(), strict=True):
+                weight.copy_(kept)
 
 
 def _standard_inputs(model: ForwardModel, fractions: NDArray) -> torch.Tensor:
@@ -403,27 +468,19 @@ def train_protocol(
     clean = np.flatnonzero(~outliers)
     model = _new_model(data, config, clean)
     _train_stage([model], data, [clean], config, log, ["final"], progress)
+    adaptation = None
     if adapt_shop is not None:
         shop_rows = np.flatnonzero((np.array(data.shops) == adapt_shop) & ~outliers)
         if shop_rows.size == 0:
             raise ModelError(f"--adapt: no cases from shop {adapt_shop!r}")
-        fit(
-            [model],
-            data,
-            [shop_rows],
-            config.adapt_epochs,
-            config.adapt_learning_rate,
-            config,
-            log,
-            [f"adapt {adapt_shop}"],
-            progress,
-        )
+        adaptation = adapt(model, data, shop_rows, config, log, f"adapt {adapt_shop}", progress)
     report = {
         "cases": n,
         "outliers": int(outliers.sum()),
         "outlier_case_ids": [data.case_ids[i] for i in np.flatnonzero(outliers)],
         "seconds": time.perf_counter() - start,
         "final_loss": log[-1]["loss"],
+        "adaptation": adaptation,
         "log": log,
     }
     model.info.update(
@@ -436,6 +493,83 @@ def train_protocol(
         }
     )
     return model, report
+
+
+def adapt(
+    model: ForwardModel,
+    data: CaseArrays,
+    rows: NDArray,
+    config: TrainingConfig,
+    log: list,
+    stage: str = "adapt",
+    progress: Callable[[int], None] | None = None,
+) -> dict:
+    """Protocol step 5 on the cases ``rows`` of one shop, ``model`` changed in place; with
+    ``config.adapt_validation`` > 0 that share of them (seeded) judges every epoch and the
+    best is kept (module notes). Returns what it did."""
+    share = config.adapt_validation
+    if not 0 <= share < 1:
+        raise ModelError(f"adapt_validation: expected a share in [0, 1), got {share}")
+    held = round(share * rows.size)
+    if share > 0 and not 1 <= held < rows.size:
+        raise ModelError(
+            f"adaptation: {rows.size} cases are too few to hold out {share:.0%} of them to "
+            "choose the epoch; bring more cases or adapt without validation (0)"
+        )
+    shuffled = np.random.default_rng([config.seed, rows.size]).permutation(rows)
+    train, validation = (shuffled[held:], shuffled[:held]) if held else (rows, None)
+    kept = fit(
+        [model],
+        data,
+        [train],
+        config.adapt_epochs,
+        config.adapt_learning_rate,
+        config,
+        log,
+        [stage],
+        progress,
+        validation=None if validation is None else [validation],
+    )
+    scores = [e["validation_de00"] for e in log if e["stage"] == stage and "validation_de00" in e]
+    return {
+        "cases": int(train.size),
+        "validation_cases": int(held),
+        "epochs": config.adapt_epochs,
+        "kept_epochs": config.adapt_epochs if kept is None else kept[0],
+        "validation_de00_best": None if validation is None else float(min(scores)),
+    }
+
+
+def adapt_model(
+    model: ForwardModel,
+    data: CaseArrays,
+    config: TrainingConfig | None = None,
+    *,
+    stage: str = "adapt",
+    progress: Callable[[int], None] | None = None,
+) -> tuple[ForwardModel, dict]:
+    """A copy of a trained ``model`` adapted to all of ``data`` (one shop's cases) by
+    :func:`adapt`; ``config`` defaults to the one the model was trained with. Returns it and
+    a report (what :func:`adapt` did, the loss log)."""
+    if data.geometries != model.geometries:
+        raise ModelError(
+            f"cases: geometries {data.geometries} differ from the model's {model.geometries}"
+        )
+    config = config or recorded_config(model)
+    data = replace(data, x=_align_toners(model, data), toners=model.toners)
+    network = copy.deepcopy(model.network).requires_grad_(True)
+    new = replace(model, network=network, info=copy.deepcopy(model.info))
+    log: list[dict] = []
+    report = adapt(new, data, np.arange(data.x.shape[0]), config, log, stage, progress)
+    new.info["adaptation"] = report | {"stage": stage, "data_hash": data_hash(data)}
+    return new, report | {"log": log}
+
+
+def recorded_config(model: ForwardModel) -> TrainingConfig:
+    """The :class:`TrainingConfig` a model was trained with (defaults where it recorded none)."""
+    names = {f.name for f in fields(TrainingConfig)}
+    recorded = {k: v for k, v in model.info.get("config", {}).items() if k in names}
+    return replace(TrainingConfig(**recorded), hidden=tuple(model.hidden))
 
 
 def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None) -> dict:

@@ -1,0 +1,140 @@
+"""The adaptation phase for one shop: how many of its cases it takes, and what the paper's 150
+epochs and the default's best epoch do.
+
+A shop has habits the generated world it learned from lacks (``WorldSettings.shop_*``): by
+default one that sprays 5 % more film, lays its flakes 4 % flatter and whose instrument reads
+0.5 % high. The shipped model is adapted (``flakelab model adapt``'s library call) to the
+first N of that shop's cases (``--cases``) in two ways:
+
+* ``every epoch``: the paper's phase, all ``--epochs`` at the adaptation rate;
+* ``best epoch``: the default, a fifth of the cases held out and the best epoch kept.
+
+Each is judged by its ΔE00 (mean over cases × geometries) on ``--test`` fresh cases of the
+same shop and of the generated world (what the shop's model forgets, which it does not need),
+over ``--repeats`` adaptation seeds (mean ± s.d.). The baseline is the shipped model on the
+same cases. ``--no-habits`` runs a shop without habits of its own, where adaptation has
+nothing to learn and can only fit noise.
+
+    python benchmarks/adaptation.py [--cases 200,500,2000,5000] [--repeats 3] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from _matcher import seeds_from
+from flakelab.cases.generator import World, WorldSettings
+from flakelab.io import read_library
+from flakelab.models.registry import shipped_model
+from flakelab.models.training import (
+    CaseArrays,
+    adapt_model,
+    case_arrays,
+    evaluate_model,
+    recorded_config,
+)
+
+VARIANTS = {"every epoch": 0.0, "best epoch": 0.2}
+"""Adaptation variants: the share of the shop's cases that chooses the epoch."""
+
+
+def shop_cases(model, settings: WorldSettings, n: int, seed: int) -> CaseArrays:
+    """``n`` cases of a shop with ``settings``' habits, without toners new to ``model``."""
+    library = read_library(None)
+    novel = tuple(model.info.get("novel_toners", ()))
+    world = World(library, model.instrument, settings, exclude=novel)
+    cases = [c for batch in world.cases(n, seed, shop="benchmark shop") for c in batch]
+    return case_arrays(cases, library.names, model.effect)
+
+
+def error(model, cases: CaseArrays) -> float:
+    return evaluate_model(model, cases)["de00_mean"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", default="200,500,2000,5000", help="shop cases to adapt on")
+    parser.add_argument("--test", type=int, default=1000, help="fresh cases to judge on")
+    parser.add_argument("--epochs", type=int, default=150, help="adaptation epochs")
+    parser.add_argument("--repeats", type=int, default=3, help="adaptation seeds")
+    parser.add_argument("--seed", type=int, default=21, help="seed of the shop's cases")
+    parser.add_argument("--film-build", type=float, default=1.05)
+    parser.add_argument("--spread", type=float, default=0.96)
+    parser.add_argument("--gain", type=float, default=0.005)
+    parser.add_argument("--no-habits", action="store_true", help="a shop like the world")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    sizes = seeds_from(args.cases)
+
+    model = shipped_model("five-angle")
+    habits = WorldSettings(
+        shop_film_build=args.film_build, shop_spread=args.spread, shop_gain=args.gain
+    )
+    shop = WorldSettings() if args.no_habits else habits
+    all_cases = shop_cases(model, shop, max(sizes), args.seed)
+    shop_test = shop_cases(model, shop, args.test, args.seed + 1)
+    world_test = shop_cases(model, WorldSettings(), args.test, args.seed + 2)
+    report = {
+        "shop": "no habits"
+        if args.no_habits
+        else {"film_build": args.film_build, "spread": args.spread, "gain": args.gain},  # fmt: skip
+        "epochs": args.epochs,
+        "test_cases": args.test,
+        "shipped": {"shop": error(model, shop_test), "world": error(model, world_test)},
+        "rows": [],
+    }
+    for n in sizes:
+        cases = all_cases.subset(np.arange(n))
+        for variant, share in VARIANTS.items():
+            runs = []
+            for repeat in range(args.repeats):
+                config = replace(
+                    recorded_config(model),
+                    adapt_epochs=args.epochs,
+                    adapt_validation=share,
+                    seed=repeat,
+                )
+                start = time.perf_counter()
+                adapted, adaptation = adapt_model(model, cases, config)
+                seconds = time.perf_counter() - start
+                scores = (error(adapted, shop_test), error(adapted, world_test))
+                runs.append((*scores, adaptation["kept_epochs"], seconds))
+            shop_error, world_error, kept, seconds = np.array(runs).T
+            report["rows"].append(
+                {
+                    "cases": n,
+                    "variant": variant,
+                    "shop_de00_mean": float(shop_error.mean()),
+                    "shop_de00_sd": float(shop_error.std(ddof=1)) if args.repeats > 1 else 0.0,
+                    "world_de00_mean": float(world_error.mean()),
+                    "kept_epochs": kept.astype(int).tolist(),
+                    "seconds": float(seconds.mean()),
+                }
+            )
+            row = report["rows"][-1]
+            if not args.json:
+                print(
+                    f"{n:6d} cases  {variant:11s}  shop {row['shop_de00_mean']:.3f} ± "
+                    f"{row['shop_de00_sd']:.3f}  world {row['world_de00_mean']:.3f}  "
+                    f"kept {row['kept_epochs']}  {row['seconds']:.1f} s",
+                    flush=True,
+                )
+    report["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return
+    shipped = report["shipped"]
+    print(
+        f"shipped, unadapted: shop {shipped['shop']:.3f}  world {shipped['world']:.3f} "
+        f"(ΔE00 mean on {args.test} fresh cases each); peak RSS {report['peak_rss_mb']:.0f} MB"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,106 @@
+"""The protocol's adaptation phase: a trained model taught one shop's habits."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from flakelab.cases.generator import World, WorldSettings
+from flakelab.io import read_library
+from flakelab.models.network import ModelError
+from flakelab.models.registry import shipped_model
+from flakelab.models.training import (
+    adapt_model,
+    case_arrays,
+    evaluate_model,
+    fit,
+    recorded_config,
+)
+
+SHOP_HABITS = WorldSettings(shop_film_build=1.05, shop_spread=0.96, shop_gain=0.005)
+"""A shop that sprays a little wetter (thicker film, flatter flakes) than the factory and
+whose instrument reads half a percent high."""
+
+
+@pytest.fixture(scope="module")
+def model():
+    return shipped_model("five-angle")
+
+
+def shop_cases(model, settings: WorldSettings, n: int, seed: int):
+    library = read_library(None)
+    world = World(library, "five-angle", settings, exclude=tuple(model.info["novel_toners"]))
+    cases = [c for batch in world.cases(n, seed, shop="shop A") for c in batch]
+    return case_arrays(cases, library.names, model.effect)
+
+
+def test_a_shops_habits_are_drawn_about_its_own_means():
+    world = World(read_library(None), "five-angle", SHOP_HABITS)
+    rng = np.random.default_rng(3)
+    n = 20000
+    film, spread = world.application(n, rng)
+    factory_film, factory_spread = world.application(n, rng, at_shop=False)
+    assert film.mean() == pytest.approx(1.05, abs=4 * 0.04 / n**0.5)
+    assert np.exp(np.log(spread).mean()) == pytest.approx(0.96, rel=4 * 0.02 / n**0.5)
+    assert factory_film.mean() == pytest.approx(1.0, abs=4 * 0.04 / n**0.5)
+    assert np.exp(np.log(factory_spread).mean()) == pytest.approx(1.0, rel=4 * 0.02 / n**0.5)
+    R = np.full((n, 5, 31), 0.4)
+    # the instrument's gain on top of its per-reading gain error (mean zero)
+    assert world.measure(R, rng).mean() / 0.4 == pytest.approx(1.005, abs=2e-4)
+
+
+def test_adaptation_learns_a_shops_habits(model):
+    train = shop_cases(model, SHOP_HABITS, 600, 21)
+    fresh = shop_cases(model, SHOP_HABITS, 400, 22)
+    adapted, report = adapt_model(model, train, replace(recorded_config(model), seed=1))
+    before = evaluate_model(model, fresh)["de00_mean"]
+    after = evaluate_model(adapted, fresh)["de00_mean"]
+    # the shipped model sees the shop's paints about 0.4 ΔE00 off; after: within about 0.1
+    # of what it scores in the world it learned (0.68)
+    assert before > 1.0 and after < before - 0.25
+    assert report["validation_cases"] == 120 and 0 < report["kept_epochs"] <= 150
+    assert adapted.info["adaptation"]["cases"] == 480
+    # the copy is adapted, not the model it came from
+    assert evaluate_model(model, fresh)["de00_mean"] == before
+
+
+def test_keeping_the_best_epoch_never_leaves_the_model_worse_where_it_is_judged(model):
+    # a shop with no habits of its own: its cases teach nothing the model lacks, and all 150
+    # epochs fit their noise
+    cases = shop_cases(model, WorldSettings(), 500, 31)
+    fresh = shop_cases(model, WorldSettings(), 400, 32)
+    train, validation = np.arange(400), np.arange(400, 500)
+    config = recorded_config(model)
+    held = cases.subset(validation)
+    start = evaluate_model(model, held)["de00_mean"]
+    kept_model, every_epoch = copy.deepcopy(model), copy.deepcopy(model)
+    log: list[dict] = []
+    kept = fit([kept_model], cases, [train], 150, 2e-4, config, log, ["a"], validation=[validation])
+    fit([every_epoch], cases, [train], 150, 2e-4, config, [], ["a"])
+    scores = [entry["validation_de00"] for entry in log]
+    best = min([start, *scores])
+    assert evaluate_model(kept_model, held)["de00_mean"] == pytest.approx(best, rel=1e-5)
+    assert best <= start
+    assert kept[0] == (0 if best == start else 1 + int(np.argmin(scores)))
+    untouched = evaluate_model(model, fresh)["de00_mean"]
+    assert evaluate_model(every_epoch, fresh)["de00_mean"] > untouched + 0.03
+    assert evaluate_model(kept_model, fresh)["de00_mean"] < untouched + 0.01
+
+
+def test_too_few_cases_to_choose_the_epoch_is_an_error(model):
+    cases = shop_cases(model, SHOP_HABITS, 3, 41)
+    with pytest.raises(ModelError, match="too few"):
+        adapt_model(model, cases, replace(recorded_config(model), adapt_validation=0.1))
+    with pytest.raises(ModelError, match=r"adapt_validation.*\[0, 1\)"):
+        adapt_model(model, cases, replace(recorded_config(model), adapt_validation=1.0))
+
+
+def test_without_validation_every_epoch_runs(model):
+    cases = shop_cases(model, SHOP_HABITS, 40, 42)
+    config = replace(recorded_config(model), adapt_validation=0.0, adapt_epochs=3)
+    _, report = adapt_model(model, cases, config)
+    assert report["kept_epochs"] == 3 and report["validation_cases"] == 0
+    assert [e["epoch"] for e in report["log"]] == [0, 1, 2]
