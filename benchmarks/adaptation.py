@@ -2,9 +2,9 @@
 epochs and the default's best epoch do.
 
 A shop has habits the generated world it learned from lacks (``WorldSettings.shop_*``): by
-default one that sprays 5 % more film, lays its flakes 4 % flatter and whose instrument reads
-0.5 % high. The shipped model is adapted (``flakelab model adapt``'s library call) to the
-first N of that shop's cases (``--cases``) in two ways:
+default ``SHOP_WITH_HABITS``, which sprays 5 % more film, lays its flakes 4 % flatter and
+whose instrument reads 0.5 % high. The shipped model is adapted (``flakelab model adapt``'s
+library call) to the first N of that shop's cases (``--cases``) in two ways:
 
 * ``every epoch``: the paper's phase, all ``--epochs`` at the adaptation rate;
 * ``best epoch``: the default, a fifth of the cases held out and the best epoch kept.
@@ -29,7 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from _matcher import seeds_from
-from flakelab.cases.generator import World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.io import read_library
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import (
@@ -64,9 +64,9 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=150, help="adaptation epochs")
     parser.add_argument("--repeats", type=int, default=3, help="adaptation seeds")
     parser.add_argument("--seed", type=int, default=21, help="seed of the shop's cases")
-    parser.add_argument("--film-build", type=float, default=1.05)
-    parser.add_argument("--spread", type=float, default=0.96)
-    parser.add_argument("--gain", type=float, default=0.005)
+    parser.add_argument("--film-build", type=float, default=SHOP_WITH_HABITS["shop_film_build"])
+    parser.add_argument("--spread", type=float, default=SHOP_WITH_HABITS["shop_spread"])
+    parser.add_argument("--gain", type=float, default=SHOP_WITH_HABITS["shop_gain"])
     parser.add_argument("--no-habits", action="store_true", help="a shop like the world")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from flakelab.cases.generator import World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.io import read_library
 from flakelab.models.network import ModelError
 from flakelab.models.registry import shipped_model
@@ -20,9 +20,7 @@ from flakelab.models.training import (
     recorded_config,
 )
 
-SHOP_HABITS = WorldSettings(shop_film_build=1.05, shop_spread=0.96, shop_gain=0.005)
-"""A shop that sprays a little wetter (thicker film, flatter flakes) than the factory and
-whose instrument reads half a percent high."""
+SHOP_HABITS = WorldSettings(**SHOP_WITH_HABITS)
 
 
 @pytest.fixture(scope="module")

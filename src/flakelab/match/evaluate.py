@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from flakelab.cases.generator import Variation, World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct
@@ -49,11 +49,13 @@ HARNESS_WORLDS = {
     "shop": {},
     "standard-pigments": _NO_BATCHES,
     "controlled": {**_NO_BATCHES, "film_build_sd": 0.0, "spread_sd": 0.0},
+    "shop-with-habits": SHOP_WITH_HABITS,
 }
 """The harness's worlds, as changes to the generator's settings: a real shop's (batches and
 application vary); the hybrid paper's "standardised pigments" (its 85 % first shot: no batch
 differs from another, each spray's application still varies); controlled (only the
-instrument's reading varies)."""
+instrument's reading varies); a real shop with habits of its own (``SHOP_WITH_HABITS``),
+which the model learns by adaptation (``flakelab model adapt``)."""
 
 
 def harness_world(library, instrument: str = "five-angle", name: str = "shop") -> World:
@@ -93,10 +95,13 @@ class Trial:
         return self.world.measure(R, stream)[0]
 
     def unsprayed(self, x: NDArray) -> NDArray:
-        """``x`` mixed from the shop's batches at the nominal application, read without
+        """``x`` mixed from the shop's batches at the shop's mean application, read without
         noise ``[G, 31]``: a spray-out without its own application and instrument noise."""
-        variation = Variation(self.shop.strength, self.shop.hue_shift, np.ones(1), np.ones(1))
-        return self.world.appearance(x[None], variation)[0][0]
+        s = self.world.settings
+        film, spread = np.full(1, s.shop_film_build), np.full(1, s.shop_spread)
+        variation = Variation(self.shop.strength, self.shop.hue_shift, film, spread)
+        R = self.world.appearance(x[None], variation)[0][0]
+        return R * (1 + s.shop_gain)
 
 
 def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
