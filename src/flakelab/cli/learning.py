@@ -33,10 +33,32 @@ InstrumentOption = Annotated[
 LibraryOption = Annotated[
     Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
 ]
+ModelFileOption = Annotated[
+    str | None, typer.Option("--model", "-m", help="Model file (default: current).")
+]
 
 
 def _is_case_file(path: Path) -> bool:
     return path.suffix.lower() in (".csv", ".cxf", ".xml")
+
+
+def split_held_out(cases: list, source: str, holdout: float, seed: int, library):
+    """Training and held-out arrays of ``cases``, each held out with probability ``holdout``
+    (seeded), both non-empty."""
+    from flakelab.models.training import case_arrays
+
+    held = np.random.default_rng(seed).random(len(cases)) < holdout
+    if held.all() or not held.any():
+        raise FlakelabError(
+            f"{source}: {len(cases)} cases are too few to hold out {holdout:.0%} of them"
+        )
+    effect = [t.kind != "pigment" for t in library.toners]
+
+    def arrays(kept: bool):
+        chosen = [c for c, h in zip(cases, held, strict=True) if h == kept]
+        return case_arrays(chosen, library.names, effect)
+
+    return arrays(False), arrays(True)
 
 
 def load_cases(source: str) -> list:
@@ -234,7 +256,6 @@ def train(
     from flakelab.models.training import (
         SCREENINGS,
         TrainingConfig,
-        case_arrays,
         evaluate_model,
         protocol_epochs,
         train_protocol,
@@ -249,11 +270,7 @@ def train(
     chosen = [c for c in load_cases(cases) if c.instrument == instrument]
     if not chosen:
         raise FlakelabError(f"{cases}: no cases from instrument {instrument!r}")
-    effect = [t.kind != "pigment" for t in lib.toners]
-    rng = np.random.default_rng(seed)
-    held = rng.random(len(chosen)) < holdout
-    data = case_arrays([c for c, h in zip(chosen, held, strict=True) if not h], lib.names, effect)
-    held_out = case_arrays([c for c, h in zip(chosen, held, strict=True) if h], lib.names, effect)
+    data, held_out = split_held_out(chosen, cases, holdout, seed, lib)
     sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
     config = TrainingConfig(
         hidden=sizes,
@@ -326,9 +343,7 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
 @reports_errors
 def evaluate(
     cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
-    model: Annotated[
-        str | None, typer.Option("--model", "-m", help="Model file (default: current).")
-    ] = None,
+    model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
     database: DatabaseOption = None,
@@ -364,19 +379,8 @@ def evaluate(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    table = Table(title=f"{report['model']} on {report['cases']} cases")
-    for column in ("geometry", "ΔE00 mean", "p95", "max"):
-        table.add_column(column, justify="right")
-    for g, v in report["per_geometry"].items():
-        table.add_row(g, f"{v['de00_mean']:.2f}", f"{v['de00_p95']:.2f}", f"{v['de00_max']:.2f}")
-    table.add_row(
-        "all",
-        f"{report['de00_mean']:.2f}",
-        f"{report['de00_p95']:.2f}",
-        f"{report['de00_max']:.2f}",
-        style="bold",
-    )
-    console.print(table)
+    rows = {**report["per_geometry"], "all": report}
+    console.print(_de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
 
 
 @model_app.command("adapt")
@@ -386,9 +390,7 @@ def adapt(
     shop: Annotated[
         str | None, typer.Option(help="Only this shop's cases (default: every case given).")
     ] = None,
-    model: Annotated[
-        str | None, typer.Option("--model", "-m", help="Model file (default: current).")
-    ] = None,
+    model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
     database: DatabaseOption = None,
@@ -423,7 +425,6 @@ def adapt(
     from flakelab.models.registry import current_model, load_model_file, register
     from flakelab.models.training import (
         adapt_model,
-        case_arrays,
         evaluate_model,
         recorded_config,
     )
@@ -443,15 +444,7 @@ def adapt(
         )
     novel = set(base.info.get("novel_toners", ()))
     known = [c for c in chosen if not novel & set(c.recipe)]
-    rng = np.random.default_rng(seed)
-    held = rng.random(len(known)) < holdout
-    if held.all() or not held.any():
-        raise FlakelabError(
-            f"{cases}: {len(known)} cases are too few to hold out {holdout:.0%} of them"
-        )
-    effect = [t.kind != "pigment" for t in lib.toners]
-    data = case_arrays([c for c, h in zip(known, held, strict=True) if not h], lib.names, effect)
-    held_out = case_arrays([c for c, h in zip(known, held, strict=True) if h], lib.names, effect)
+    data, held_out = split_held_out(known, cases, holdout, seed, lib)
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed)
     if epochs is not None:
         config = replace(config, adapt_epochs=epochs)
@@ -484,13 +477,8 @@ def adapt(
     if json_output:
         print(json.dumps(summary, indent=2))
         return
-    table = Table(title=f"{summary['model']} adapted to {data.x.shape[0]} cases ({stage})")
-    for column in ("held-out ΔE00", "mean", "p95", "max"):
-        table.add_column(column, justify="right")
-    for name in ("before", "after"):
-        v = summary["held_out"][name]
-        table.add_row(name, f"{v['de00_mean']:.3f}", f"{v['de00_p95']:.3f}", f"{v['de00_max']:.3f}")
-    console.print(table)
+    title = f"{summary['model']} adapted to {summary['cases']} cases ({stage})"
+    console.print(_de00_table(title, "held out", summary["held_out"], ("before", "after")))
     kept = summary["kept_epochs"]
     errors.print(
         f"kept epoch {kept} of {summary['epochs']}"
@@ -501,6 +489,22 @@ def adapt(
         r = summary["registry"]
         verdict = "promoted" if r["promoted"] else "kept as a candidate (the current one is better)"
         errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
+
+
+def _de00_table(title: str, label: str, stats: dict, names=None) -> Table:
+    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold)."""
+    names = list(stats) if names is None else list(names)
+    table = Table(title=title)
+    for column in (label, "ΔE00 mean", "p95", "max"):
+        table.add_column(column, justify="right")
+    for name in names:
+        v = stats[name]
+        table.add_row(
+            name,
+            *(f"{v[k]:.3f}" for k in ("de00_mean", "de00_p95", "de00_max")),
+            style="bold" if name == names[-1] else None,
+        )
+    return table
 
 
 def _maybe_engine(database: str | None):
