@@ -82,7 +82,9 @@ def test_keeping_the_best_epoch_never_leaves_the_model_worse_where_it_is_judged(
     best = min([start, *scores])
     assert evaluate_model(kept_model, held)["de00_mean"] == pytest.approx(best, rel=1e-5)
     assert best <= start
-    assert kept[0] == (0 if best == start else 1 + int(np.argmin(scores)))
+    epochs, kept_scores = kept
+    assert epochs[0] == (0 if best == start else 1 + int(np.argmin(scores)))
+    assert kept_scores[0] == pytest.approx(best, rel=1e-5)
     untouched = evaluate_model(model, fresh)["de00_mean"]
     assert evaluate_model(every_epoch, fresh)["de00_mean"] > untouched + 0.03
     assert evaluate_model(kept_model, fresh)["de00_mean"] < untouched + 0.01

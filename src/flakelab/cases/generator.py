@@ -173,10 +173,12 @@ class World:
         hue_shift = rng.normal(0.0, s.batch_hue_shift_nm, n)
         return Variation(strength, hue_shift, *self.application(n, rng, at_shop))
 
-    def nominal(self, n: int) -> Variation:
-        """No batch or application variation: the formulation as the library describes it."""
+    def nominal(self, n: int, at_shop: bool = False) -> Variation:
+        """No batch or application variation: the formulation as the library describes it,
+        sprayed at the factory's (or ``at_shop``, the shop's) mean application."""
         T = len(self.library.toners)
-        return Variation(np.ones((n, T)), np.zeros(n), np.ones(n), np.ones(n))
+        film, spread = self._mean_application(at_shop)
+        return Variation(np.ones((n, T)), np.zeros(n), np.full(n, film), np.full(n, spread))
 
     def appearance(self, fractions: NDArray, variation: Variation) -> tuple[NDArray, NDArray]:
         """Reflectance factors ``[F, G, 31]`` (π·BRDF) and texture readings ``[F, 8]``."""
@@ -334,11 +336,16 @@ class World:
         """One spraying: relative film build and flake-spread scale ``[n]`` each, about the
         shop's habits (``at_shop``) or the factory's."""
         s = self.settings
-        film, spread = (s.shop_film_build, s.shop_spread) if at_shop else (1.0, 1.0)
+        film, spread = self._mean_application(at_shop)
         return (
             rng.normal(film, s.film_build_sd, n).clip(0.7, 1.3),
             np.exp(rng.normal(np.log(spread), s.spread_sd, n)),
         )
+
+    def _mean_application(self, at_shop: bool) -> tuple[float, float]:
+        """Mean film build and flake spread at the shop (its habits) or at the factory."""
+        s = self.settings
+        return (s.shop_film_build, s.shop_spread) if at_shop else (1.0, 1.0)
 
 
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:

@@ -33,6 +33,8 @@ InstrumentOption = Annotated[
 LibraryOption = Annotated[
     Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
 ]
+DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
+"""What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
 ModelFileOption = Annotated[
     str | None, typer.Option("--model", "-m", help="Model file (default: current).")
 ]
@@ -294,7 +296,7 @@ def train(
     model.info["name"] = instrument
     metrics = evaluate_model(model, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
-    summary["held_out"] = {k: metrics[k] for k in ("cases", "de00_mean", "de00_p95", "de00_max")}
+    summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(model.to_bytes())
@@ -464,8 +466,8 @@ def adapt(
         "left_out_new_toners": len(chosen) - len(known),
         "held_out": {
             "cases": after["cases"],
-            "before": {k: before[k] for k in ("de00_mean", "de00_p95", "de00_max")},
-            "after": {k: after[k] for k in ("de00_mean", "de00_p95", "de00_max")},
+            "before": {k: before[k] for k in DE00_STATISTICS},
+            "after": {k: after[k] for k in DE00_STATISTICS},
         },
     }
     if out is not None:
@@ -501,7 +503,7 @@ def _de00_table(title: str, label: str, stats: dict, names=None) -> Table:
         v = stats[name]
         table.add_row(
             name,
-            *(f"{v[k]:.3f}" for k in ("de00_mean", "de00_p95", "de00_max")),
+            *(f"{v[k]:.3f}" for k in DE00_STATISTICS),
             style="bold" if name == names[-1] else None,
         )
     return table

@@ -97,11 +97,10 @@ class Trial:
     def unsprayed(self, x: NDArray) -> NDArray:
         """``x`` mixed from the shop's batches at the shop's mean application, read without
         noise ``[G, 31]``: a spray-out without its own application and instrument noise."""
-        s = self.world.settings
-        film, spread = np.full(1, s.shop_film_build), np.full(1, s.shop_spread)
-        variation = Variation(self.shop.strength, self.shop.hue_shift, film, spread)
+        mean = self.world.nominal(1, at_shop=True)
+        variation = replace(mean, strength=self.shop.strength, hue_shift=self.shop.hue_shift)
         R = self.world.appearance(x[None], variation)[0][0]
-        return R * (1 + s.shop_gain)
+        return R * (1 + self.world.settings.shop_gain)
 
 
 def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:

@@ -239,13 +239,14 @@ def fit(
     stages: Sequence[str],
     progress: Callable[[int], None] | None = None,
     validation: Sequence[NDArray] | None = None,
-) -> list[int] | None:
+) -> tuple[list[int], list[float]] | None:
     """Adam on the loss of the module notes, cosine decay within the stage, for K models at
     once, model k on the cases ``rows[k]`` (logged as ``stages[k]``).
 
     With ``validation`` (rows per model), each model is judged after every epoch by its mean
     ΔE00 on those cases (logged as ``validation_de00``) and ends with the weights of its best
-    epoch, its starting weights included; returns the epochs each kept model trained.
+    epoch, its starting weights included; returns the epochs each kept model trained and its
+    validation ΔE00.
 
     One :class:`StackedNetwork` carries the K networks. The loss is the sum of the models'
     losses and Adam is elementwise, so each model trains as it would alone; the fold models
@@ -290,7 +291,7 @@ def fit(
     if best:
         best.restore()
     network.copy_into([m.network for m in models])
-    return None if best is None else best.epochs.tolist()
+    return None if best is None else (best.epochs.tolist(), best.scores.tolist())
 
 
 class _BestEpoch:
@@ -530,13 +531,12 @@ def adapt(
         progress,
         validation=None if validation is None else [validation],
     )
-    scores = [e["validation_de00"] for e in log if e["stage"] == stage and "validation_de00" in e]
     return {
         "cases": int(train.size),
         "validation_cases": int(held),
         "epochs": config.adapt_epochs,
-        "kept_epochs": config.adapt_epochs if kept is None else kept[0],
-        "validation_de00_best": None if validation is None else float(min(scores)),
+        "kept_epochs": config.adapt_epochs if kept is None else kept[0][0],
+        "validation_de00_best": None if kept is None else kept[1][0],
     }
 
 
@@ -557,8 +557,7 @@ def adapt_model(
         )
     config = config or recorded_config(model)
     data = replace(data, x=_align_toners(model, data), toners=model.toners)
-    network = copy.deepcopy(model.network).requires_grad_(True)
-    new = replace(model, network=network, info=copy.deepcopy(model.info))
+    new = replace(model, network=copy.deepcopy(model.network), info=copy.deepcopy(model.info))
     log: list[dict] = []
     report = adapt(new, data, np.arange(data.x.shape[0]), config, log, stage, progress)
     new.info["adaptation"] = report | {"stage": stage, "data_hash": data_hash(data)}
