@@ -129,3 +129,40 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path)
     assert run.returncode == 2 and "--validation" in run.stderr
     listed = json.loads(flakelab("model", "list", "--database", database, "--json").stdout)
     assert len(listed["registered"]) == 2
+
+
+def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
+    cases, habits = str(tmp_path / "cases.db"), tmp_path / "habits.json"
+    run = flakelab("cases", "generate", "--n", "300", "--seed", "23", "--shop", "shop A",
+                   "--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005",
+                   "--out", cases)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    run = flakelab("cases", "generate", "--n", "100", "--seed", "24", "--out", cases)
+    assert run.returncode == 0, run.stderr
+    run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["cases"] == 300 and report["shop"] == "shop A"
+    assert report["flake_spread"] == pytest.approx(-0.04, abs=0.006)
+    assert report["instrument_gain"] == pytest.approx(0.005, abs=0.003)
+    assert json.loads(habits.read_text())["flake_spread"] == report["flake_spread"]
+    text = flakelab("cases", "habits", cases, "--shop", "shop A")
+    assert text.returncode == 0 and "flakes lie flatter" in text.stdout
+
+    target = str(example_path("target"))
+    run = flakelab("match", "--example", "--candidates", "1", "--habits", str(habits), "--json")
+    assert run.returncode == 0, run.stderr
+    assert any("aimed off for the shop's habits" in n for n in json.loads(run.stdout)["notes"])
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"
+    run = flakelab("correct", target, "--recipe", str(recipe), "--sprayed",
+                   str(example_path("sprayout")), "--habits", str(habits), "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["habits"]["cases"] == 300
+
+    run = flakelab("cases", "habits", cases, "--shop", "shop B")
+    assert run.returncode == 2 and "no cases from shop 'shop B'" in run.stderr
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(json.loads(habits.read_text()) | {"film_build": "lots"}))
+    run = flakelab("match", "--example", "--habits", str(bad))
+    assert run.returncode == 2 and "bad.json" in run.stderr and "film_build" in run.stderr
+    assert "Traceback" not in run.stderr

@@ -76,6 +76,21 @@ def load_cases(source: str) -> list:
     return list(iter_cases(open_database(source)))
 
 
+def shop_cases(source: str, shop: str | None, geometries) -> list:
+    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries``."""
+    chosen = [
+        c
+        for c in load_cases(source)
+        if c.geometry_names == tuple(geometries) and (shop is None or c.shop == shop)
+    ]
+    if not chosen:
+        whose = f"shop {shop!r}" if shop else "any shop"
+        raise FlakelabError(
+            f"{source}: no cases from {whose} with the model's geometries {tuple(geometries)}"
+        )
+    return chosen
+
+
 @cases_app.command("generate")
 @reports_errors
 def generate(
@@ -203,6 +218,63 @@ def realism(
     for key in ("exact_model_de00_mean", "exact_model_de00_p95"):
         table.add_row(key, f"{report[key]:.3f}", "(the cases' noise floor)")
     console.print(table)
+
+
+@cases_app.command("habits")
+@reports_errors
+def habits(
+    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
+    shop: Annotated[
+        str | None, typer.Option(help="Only this shop's cases (default: every case given).")
+    ] = None,
+    model: ModelFileOption = None,
+    instrument: InstrumentOption = "five-angle",
+    library: LibraryOption = None,
+    database: DatabaseOption = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Write them as a habits file (match/correct --habits)."),
+    ] = None,
+    json_output: JsonOption = False,
+) -> None:
+    """A shop's habits from its spray-outs: mean film build, flake alignment and instrument
+    gain against the model's cases (by the physics of application)."""
+    from flakelab.io import read_library
+    from flakelab.match.habits import estimate_habits, write_habits
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import current_model, load_model_file
+    from flakelab.models.training import case_arrays
+
+    lib = read_library(library)
+    learned = (
+        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
+    )
+    forward = forward_for(learned, lib)
+    data = case_arrays(shop_cases(cases, shop, learned.geometries), lib.names)
+    found = replace(estimate_habits(forward, lib, data.x, data.R), shop=shop)
+    if out is not None:
+        write_habits(found, out)
+    report = found.report() | {"file": str(out) if out else None}
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"Habits of {shop or cases} against {model or 'the current model'}")
+    for column in ("habit", "estimate", "± s.e.", "meaning"):
+        table.add_column(column, justify="right")
+    spread = "flatter" if found.flake_spread < 0 else "less flat"
+    gain = "high" if found.instrument_gain > 0 else "low"
+    film = "more" if found.film_build > 0 else "less"
+    rows = (
+        ("film build", "film_build", f"{film} film than the model's cases", ".1%"),
+        ("flake spread", "flake_spread", f"flakes lie {spread}", ".1%"),
+        ("instrument gain", "instrument_gain", f"the instrument reads {gain}", ".2%"),
+    )
+    for name, key, meaning, fmt in rows:
+        table.add_row(name, f"{report[key]:+{fmt}}", f"{report[key + '_se']:{fmt}}", meaning)
+    console.print(table)
+    errors.print(
+        f"from {found.cases} spray-outs" + (f"; written to {out}" if out else ""), highlight=False
+    )
 
 
 def train(
@@ -434,16 +506,7 @@ def adapt(
     lib = read_library(library)
     engine = open_database(database) if register_model else _maybe_engine(database)
     base = load_model_file(model) if model else current_model(engine, instrument)
-    chosen = [
-        c
-        for c in load_cases(cases)
-        if c.geometry_names == base.geometries and (shop is None or c.shop == shop)
-    ]
-    if not chosen:
-        whose = f"shop {shop!r}" if shop else "any shop"
-        raise FlakelabError(
-            f"{cases}: no cases from {whose} with the model's geometries {base.geometries}"
-        )
+    chosen = shop_cases(cases, shop, base.geometries)
     novel = set(base.info.get("novel_toners", ()))
     known = [c for c in chosen if not novel & set(c.recipe)]
     data, held_out = split_held_out(known, cases, holdout, seed, lib)

@@ -18,6 +18,14 @@ ModelOption = Annotated[
     Path | None,
     typer.Option("--model", "-m", help="Model file (default: current for the instrument)."),
 ]
+HabitsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--habits",
+        help="The shop's habits file ('flakelab cases habits --out'): recipes are aimed off "
+        "for its film build, flake alignment and instrument.",
+    ),
+]
 ToleranceOption = Annotated[
     str, typer.Option("--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or file.")
 ]
@@ -34,6 +42,24 @@ def _setup(library: Path | None, instrument: str, model: Path | None, database: 
     )
     forward = forward_for(learned, lib)
     return lib, forward, effect_mask(lib, forward.toners)
+
+
+def _habits(path: Path | None, forward):
+    """The shop's habits from ``path`` (None: none), with a warning when they were measured
+    against another model than ``forward``."""
+    if path is None:
+        return None
+    from flakelab.cli.common import errors
+    from flakelab.match.habits import read_habits
+
+    found = read_habits(path)
+    if found.model and found.model != forward.name:
+        errors.print(
+            f"[yellow]warning:[/] {path}: habits measured against {found.model!r}, "
+            f"not {forward.name!r}",
+            highlight=False,
+        )
+    return found
 
 
 def _tolerance(spec: str):
@@ -72,6 +98,7 @@ def match_command(
         ),
     ] = "shop",
     seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
+    habits: HabitsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
@@ -86,7 +113,16 @@ def match_command(
 
     if target == "evaluate":
         _evaluate(
-            library, instrument, model, database, targets, novel_targets, seed, world, json_output
+            library,
+            instrument,
+            model,
+            database,
+            targets,
+            novel_targets,
+            seed,
+            world,
+            habits,
+            json_output,
         )
         return
     if (target is None) == (not example):
@@ -102,6 +138,8 @@ def match_command(
         effect,
         tolerance=tol,
         settings=MatchSettings(candidates=candidates, seed=seed),
+        habits=_habits(habits, forward),
+        library=lib,
     )
     report = result.to_dict()
     for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
@@ -156,12 +194,22 @@ def _print_match(report: dict) -> None:
 
 
 def _evaluate(
-    library, instrument, model, database, targets, novel_targets, seed, world_name, json_output
+    library,
+    instrument,
+    model,
+    database,
+    targets,
+    novel_targets,
+    seed,
+    world_name,
+    habits_file,
+    json_output,
 ):
     from flakelab.match.evaluate import evaluate_matching, harness_world
 
     lib, forward, effect = _setup(library, instrument, model, database)
     world = harness_world(lib, instrument, world_name)
+    habits = _habits(habits_file, forward)
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(
@@ -172,10 +220,12 @@ def _evaluate(
             seed=seed,
             novel=forward.novel,
             novel_targets=novel_targets if forward.novel else 0,
+            habits=habits,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name
     report["world"] = world_name
+    report["habits"] = habits and habits.report()
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -210,6 +260,7 @@ def correct_command(
             show_default="flakelab.match.correction.EXTRA_TONERS_TRIED",
         ),
     ] = None,
+    habits: HabitsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Correct a recipe from its measured spray-out.
@@ -244,6 +295,7 @@ def correct_command(
     extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
+    shop_habits = _habits(habits, forward)
     correction = correct(
         forward,
         target_R,
@@ -253,6 +305,7 @@ def correct_command(
         library=lib,
         offset_weight=offset_weight,
         extra_toners=extra_toners,
+        habits=shop_habits,
     )
     target_lab = reflectance_to_Lab(target_R)
     before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
@@ -270,6 +323,7 @@ def correct_command(
     report["spray_application"] = correction.application and {
         name: round(value, 4) for name, value in correction.application.items()
     }
+    report["habits"] = shop_habits and shop_habits.report()
     report["expected_de00"] = delta_E(target_lab, correction.expected_lab).round(3).tolist()
     report["geometries"] = list(forward.geometries)
     if json_output:
@@ -307,4 +361,6 @@ def _print_correction(report: dict) -> None:
             "the spray-out's offset from the model persists, except what this spray's "
             f"application explains (film build {film:+.1%}, flake spread {spread:+.1%})"
         )
+        if report["habits"]:
+            assumed += " beyond the shop's habits, which persist"
     console.print(f"expected ΔE00 assumes {assumed}", highlight=False)

@@ -31,6 +31,7 @@ loss by more than :data:`EXTRA_TONER_GAIN`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -48,7 +49,11 @@ from flakelab.physics.application import (
     sprayed_reflectance,
 )
 
+if TYPE_CHECKING:
+    from flakelab.match.habits import ShopHabits
+
 __all__ = [
+    "aim_off",
     "correct",
     "Correction",
     "CORRECTION_MODES",
@@ -82,6 +87,9 @@ EXTRA_TONER_GAIN = 0.15
 to join."""
 
 NEW_TONER_START = 0.002
+
+AIM_STEPS = 150
+"""Adam steps of :func:`aim_off`: a small move from a recipe already matched."""
 
 
 def _vector(forward, recipe: dict[str, float]) -> NDArray:
@@ -168,12 +176,15 @@ def correct(
     persistent_sd: float = PERSISTENT_SD,
     noise_sd: float = NOISE_SD,
     extra_toners: int = EXTRA_TONERS_TRIED,
+    habits: ShopHabits | None = None,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
     ``extra_toners`` toners outside the recipe are tried (0: the recipe's toners only).
     With ``library`` (in the model's toner order) the offset is split by the physics of the
-    spray's application; ``offset_weight`` weights the whole offset instead."""
+    spray's application; ``offset_weight`` weights the whole offset instead. With the shop's
+    ``habits`` (:func:`~flakelab.match.habits.estimate_habits`) the application is split
+    about the shop's mean: the habits' part of the offset persists."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
@@ -189,20 +200,97 @@ def correct(
     if library is None or offset_weight is not None:
         persistent = (OFFSET_WEIGHT if offset_weight is None else offset_weight) * raw
     else:
+        mean = np.zeros(2) if habits is None else habits.theta[:2]
+        expected = np.zeros_like(raw)
+        if habits is not None:
+            R = R0.double().numpy()
+            expected = habits.offset(library, x_recipe[None], R, forward.geometries)[0]
         sensitivity = application_sensitivity(library, x_recipe, forward.geometries)
-        persistent, sigmas = split_offset(raw, sensitivity, persistent_sd, noise_sd)
-        film, spread = sigmas * [FILM_BUILD_SD, SPREAD_SD]
+        persistent, sigmas = split_offset(raw - expected, sensitivity, persistent_sd, noise_sd)
+        persistent = persistent + expected
+        film, spread = mean + sigmas * [FILM_BUILD_SD, SPREAD_SD]
         application = dict(
             zip(APPLICATION_PARAMETERS, (float(film), float(np.expm1(spread))), strict=True)
         )
+    return _recipe_for_offset(
+        forward, target, x_recipe, persistent, mode, steps, max_addition, extra_toners, application
+    )
+
+
+def aim_off(
+    forward,
+    target: NDArray,
+    recipes: NDArray,
+    habits: ShopHabits,
+    library: Library,
+    *,
+    steps: int = AIM_STEPS,
+) -> tuple[NDArray, NDArray]:
+    """The recipes ``[K, T]`` that land on ``target`` [G, 31] when sprayed and read with the
+    shop's ``habits``, and what they should then measure (L*a*b* ``[K, G, 3]``): each of
+    ``recipes[K, T]`` (matches by the model, which knows no habits) reformulated with its own
+    toners for the habits' offset at it, which persists as a correction's persistent offset
+    does."""
+    with torch.no_grad():
+        R = forward(torch.as_tensor(recipes, dtype=forward.dtype))[0].double().numpy()
+    expected = habits.offset(library, recipes, R, forward.geometries)
+    colour = TorchColour(dtype=forward.dtype)
+    x0 = torch.as_tensor(recipes, dtype=forward.dtype)
+    target_lab = colour.lab(torch.as_tensor(target, dtype=forward.dtype))
+    offset = torch.as_tensor(expected, dtype=forward.dtype)
+    x, _, lab, _ = _optimise(
+        colour, forward, x0, x0 > 0, target_lab, offset, "reformulate", steps, 0
+    )
+    return x.double().numpy(), lab.double().numpy()
+
+
+def _recipe_for_offset(
+    forward,
+    target: NDArray,
+    x_recipe: NDArray,
+    persistent: NDArray,
+    mode: str,
+    steps: int,
+    max_addition: float,
+    extra_toners: int,
+    application: dict[str, float] | None = None,
+) -> Correction:
+    """The recipe near ``x_recipe`` whose prediction plus the ``persistent`` L*a*b* offset
+    ``[G, 3]`` best matches ``target``, with at most one toner joining it."""
+    colour = TorchColour(dtype=forward.dtype)
+    x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     offset = torch.as_tensor(persistent, dtype=forward.dtype)
     target_lab = colour.lab(torch.as_tensor(target, dtype=forward.dtype))
     extra = _extra_candidates(forward, colour, x0, target_lab, offset, extra_toners)
     used = (x0 > 0).repeat(1 + len(extra), 1)
     used[torch.arange(1, 1 + len(extra)), extra] = True
+    final, added, lab, loss = _optimise(
+        colour, forward, x0, used, target_lab, offset, mode, steps, max_addition
+    )
+    loss[1:] += EXTRA_TONER_GAIN
+    row = int(np.argmin(loss))
+    x = final[row].double().numpy()
+    fractions = {forward.toners[i]: float(x[i]) for i in np.argsort(-x) if x[i] > 1e-6}
+    additions = {}
+    if mode == "additions":
+        a = added[row].double().numpy()
+        additions = {forward.toners[i]: float(a[i]) for i in np.flatnonzero(a > 1e-4)}
+    return Correction(
+        fractions,
+        additions,
+        lab[row].double().numpy(),
+        forward.toners[extra[row - 1]] if row else None,
+        application,
+    )
+
+
+def _optimise(colour, forward, x0, used, target_lab, offset, mode, steps, max_addition):
+    """Adam over every row of ``used[N, T]`` at once, each from ``x0`` (one row, or one per
+    row): new amounts of the used toners (``reformulate``) or additions to ``x0``; returns
+    the mixes ``[N, T]``, the additions, L*a*b* with ``offset`` and the loss ``[N]``."""
     if mode == "reformulate":
         start = torch.where(x0 > 0, x0, torch.full_like(x0, NEW_TONER_START))
-        variable = torch.log(start).repeat(len(used), 1).requires_grad_(True)
+        variable = torch.log(start).expand(len(used), -1).clone().requires_grad_(True)
     else:
         variable = torch.full(used.shape, -6.0, dtype=forward.dtype).requires_grad_(True)
     optimiser = torch.optim.Adam([variable], lr=0.05)
@@ -226,18 +314,4 @@ def correct(
         final = mixed()
         lab = colour.lab(forward(final)[0]) + offset
         loss = multi_angle_loss(colour, target_lab, lab).numpy()
-    loss[1:] += EXTRA_TONER_GAIN
-    row = int(np.argmin(loss))
-    x = final[row].double().numpy()
-    fractions = {forward.toners[i]: float(x[i]) for i in np.argsort(-x) if x[i] > 1e-6}
-    added = {}
-    if mode == "additions":
-        a = additions()[row].detach().double().numpy()
-        added = {forward.toners[i]: float(a[i]) for i in np.flatnonzero(a > 1e-4)}
-    return Correction(
-        fractions,
-        added,
-        lab[row].double().numpy(),
-        forward.toners[extra[row - 1]] if row else None,
-        application,
-    )
+        return final, additions().detach(), lab, loss

@@ -28,6 +28,7 @@ from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSe
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct
+from flakelab.match.habits import ShopHabits
 from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
 
 __all__ = [
@@ -112,11 +113,13 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     return Trial(world, world.measure(R_target, rng)[0], oem, shop, streams)
 
 
-def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
+def _one(world: World, forward, effect, x_hidden, rng, settings, habits) -> dict:
     t = trial(world, x_hidden, rng)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
     start = time.perf_counter()
-    result = match(t.target, forward, effect, settings=settings)
+    result = match(
+        t.target, forward, effect, settings=settings, habits=habits, library=world.library
+    )
     latency = time.perf_counter() - start
     best = result.candidates[0]
     x = recipe_vector(forward, best.fractions)
@@ -125,7 +128,13 @@ def _one(world: World, forward, effect, x_hidden, rng, settings) -> dict:
     corrected_de = first_de
     if first_de > SUCCESS_DE00:
         recipe = correct(
-            forward, t.target, best.fractions, first, mode="reformulate", library=world.library
+            forward,
+            t.target,
+            best.fractions,
+            first,
+            mode="reformulate",
+            library=world.library,
+            habits=habits,
         ).fractions
         corrected = recipe_vector(forward, recipe)
         corrected_de = worst_de00(t.target, t.spray(corrected, correction_rng))
@@ -152,9 +161,12 @@ def evaluate_matching(
     novel: tuple[str, ...] = (),
     novel_targets: int = 0,
     settings: MatchSettings | None = None,
+    habits: ShopHabits | None = None,
     progress: Callable[[], None] | None = None,
 ) -> dict:
-    """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world."""
+    """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
+    With the shop's ``habits`` every match is aimed off for them and the
+    correction splits the offset about them."""
     settings = settings or MatchSettings()
     rng = np.random.default_rng(seed)
     names = list(world.library.names)
@@ -163,7 +175,7 @@ def evaluate_matching(
     hidden = known.formulations(targets, rng)
     rows = []
     for x in hidden:
-        rows.append(_one(world, forward, effect, x, rng, settings))
+        rows.append(_one(world, forward, effect, x, rng, settings, habits))
         if progress:
             progress()
     novel_rows = []
@@ -172,7 +184,7 @@ def evaluate_matching(
             x[names.index(novel[int(rng.integers(len(novel)))])] = np.exp(
                 rng.uniform(np.log(0.01), np.log(0.08))
             )
-            novel_rows.append(_one(world, forward, effect, x / x.sum(), rng, settings))
+            novel_rows.append(_one(world, forward, effect, x / x.sum(), rng, settings, habits))
             if progress:
                 progress()
 

@@ -439,11 +439,16 @@ def _match(
     tolerance: Tolerance | None = None,
     settings: MatchSettings | None = None,
     allowed: NDArray | None = None,
+    habits=None,
+    library=None,
 ) -> MatchResult:
     """Ranked candidate recipes for ``target`` (a Measurement or reflectance ``[G, 31]``).
 
     ``effect[T]`` marks effect toners (aluminium, pearls); ``allowed[T]`` restricts the
-    toners the search may use (default: all).
+    toners the search may use (default: all). With the shop's ``habits``
+    (:class:`~flakelab.match.habits.ShopHabits`, and the ``library`` whose physics says
+    what they do) every candidate is aimed off for them, and its numbers are what the shop
+    should measure.
     """
     start = time.perf_counter()
     settings = settings or MatchSettings()
@@ -547,6 +552,11 @@ def _match(
         x = np.concatenate([x, _weighable(x_swapped.numpy().astype(float), settings)])
         candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
     notes = []
+    if habits is not None and candidates:
+        candidates = _aimed_off(
+            forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
+        )
+        notes.append(f"aimed off for the shop's habits: {habits.describe()}")
     if candidates and not candidates[0].in_support:
         share = recipe_vector(forward, candidates[0].fractions)[effect].sum()
         notes.append(
@@ -627,12 +637,27 @@ def outside_support(x: NDArray, effect: NDArray, floor: float) -> NDArray:
     return (share > 0) & (share < floor)
 
 
-def _judge(forward, x, effect, spectra, texture, tolerance, settings) -> list[Candidate]:
+def _aimed_off(forward, candidates, effect, spectra, texture, tolerance, settings, habits, library):
+    """``candidates`` aimed off for the shop's ``habits`` and judged by what the shop should
+    measure (:func:`~flakelab.match.correction.aim_off`)."""
+    from flakelab.match.correction import aim_off  # the correction builds on the search
+
+    x = np.array([recipe_vector(forward, c.fractions) for c in candidates])
+    x = _weighable(aim_off(forward, spectra, x, habits, library)[0], settings)
+    R, _ = evaluate_recipes(forward, x)
+    offset = habits.offset(library, x, R, forward.geometries)
+    return _judge(forward, x, effect, spectra, texture, tolerance, settings, offset)
+
+
+def _judge(
+    forward, x, effect, spectra, texture, tolerance, settings, offset=None
+) -> list[Candidate]:
     """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
-    support rank after every one inside it."""
+    support rank after every one inside it. ``offset[N, G, 3]`` is added to the predicted
+    L*a*b* (the shop's habits)."""
     R, tex = evaluate_recipes(forward, x)
     target_lab = reflectance_to_Lab(spectra)
-    lab = reflectance_to_Lab(R)
+    lab = reflectance_to_Lab(R) + (0.0 if offset is None else offset)
     de = delta_E(target_lab[None], lab)
     score = de.max(1) + de.mean(1) + settings.toner_penalty * (x > 0).sum(1)
     has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)

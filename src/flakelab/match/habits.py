@@ -1,0 +1,235 @@
+"""A shop's habits, read from its case history by the physics of application.
+
+Every shop sprays a little differently from the cases a model learned: its gun, pressure and
+viscosity lay a little more or less film, its flakes a little flatter or less flat, and its
+instrument reads a little high or low. Over many spray-outs these habits show as an offset
+between what was measured and what the model predicts for the recipe that was mixed, in the
+directions the physics says each habit moves each recipe's colour
+(:mod:`flakelab.physics.application`): film build changes how a low-hiding colour covers,
+flake spread a metallic's flop, the instrument's gain every lightness alike.
+
+The habits θ = (relative film build, log flake-spread scale, relative instrument gain) are
+the generalised least-squares fit of every case's L*a*b* offset at every geometry,
+offset_i = f_i(θ) + e_i, with f_i(θ) the L*a*b* change the physics predicts for recipe i
+sprayed at θ, and e_i ~ N(0, S_i Σ_a S_iᵀ + (σ_p² + σ_n²) I): the spray's own application
+(one sigma :data:`~flakelab.physics.application.FILM_BUILD_SD`,
+:data:`~flakelab.physics.application.SPREAD_SD`, sensitivities S_i), the batches' and the
+model's error and the reading (:data:`~flakelab.match.correction.PERSISTENT_SD`,
+:data:`~flakelab.match.correction.NOISE_SD`). f is not linear over a few sigmas of film build:
+Gauss–Newton relinearises it at θ. Standard errors are the sandwich (robust) estimate,
+since the persistent offsets are heavy-tailed, not Gaussian.
+
+Where a model was adapted to the shop, it learned the habits already: measured against it,
+they come out near zero. The correction and the matcher take them as the shop's mean
+application (:meth:`ShopHabits.offset`): a spray-out's offset along them persists at the next
+spray.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from os import PathLike
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.errors import FlakelabError, MeasurementFileError
+from flakelab.io.records import write_atomically
+from flakelab.library.toners import Library
+from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
+from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_reflectance
+
+__all__ = [
+    "ShopHabits",
+    "HABITS",
+    "HABITS_FORMAT",
+    "MIN_HABIT_CASES",
+    "estimate_habits",
+    "read_habits",
+    "write_habits",
+]
+
+HABITS_FORMAT = "flakelab-shop-habits"
+"""The ``format`` of a habits file: the JSON of :meth:`ShopHabits.report` with ``shop``."""
+
+HABITS = ("film build", "flake spread", "instrument gain")
+"""The habits, in the order of :attr:`ShopHabits.theta`."""
+
+MIN_HABIT_CASES = 20
+"""Fewer spray-outs than this cannot tell three habits from one batch's or spray's accident."""
+
+_STEP = np.array([0.01, 0.01, 0.001])
+"""Central-difference steps for the habits' Jacobian (film, log spread, gain)."""
+
+_ITERATIONS = 4
+"""Gauss–Newton steps: the estimate settles to 10⁻⁴ in two or three."""
+
+
+@dataclass(frozen=True)
+class ShopHabits:
+    """A shop's habits against a model: ``theta`` = (relative film build, log flake-spread
+    scale, relative instrument gain), ``standard_error`` of each, from ``cases`` spray-outs,
+    measured against the model named ``model``."""
+
+    theta: NDArray
+    standard_error: NDArray
+    cases: int
+    model: str = ""
+    shop: str | None = None
+
+    @classmethod
+    def none(cls) -> ShopHabits:
+        """A shop that sprays and reads as the model's cases did."""
+        return cls(np.zeros(3), np.zeros(3), 0)
+
+    @property
+    def film_build(self) -> float:
+        """Relative film build: 0.05 is 5 % more film than the model's cases."""
+        return float(self.theta[0])
+
+    @property
+    def flake_spread(self) -> float:
+        """Relative spread of the flakes' orientation: −0.04 is 4 % flatter."""
+        return float(np.expm1(self.theta[1]))
+
+    @property
+    def instrument_gain(self) -> float:
+        """Relative gain of the shop's instrument: 0.005 reads 0.5 % high."""
+        return float(self.theta[2])
+
+    def report(self) -> dict:
+        """The habits and their standard errors as the CLI and the JSON report them."""
+        se = self.standard_error
+        return {
+            "film_build": self.film_build,
+            "film_build_se": float(se[0]),
+            "flake_spread": self.flake_spread,
+            "flake_spread_se": float(se[1] * np.exp(self.theta[1])),
+            "instrument_gain": self.instrument_gain,
+            "instrument_gain_se": float(se[2]),
+            "cases": self.cases,
+            "model": self.model,
+            "shop": self.shop,
+        }
+
+    def describe(self) -> str:
+        """The habits in a colorist's words, with their standard errors."""
+        r = self.report()
+        spread = "flatter" if self.flake_spread < 0 else "less flat"
+        return (
+            f"film build {self.film_build:+.1%} ± {r['film_build_se']:.1%}, flakes "
+            f"{abs(self.flake_spread):.1%} ± {r['flake_spread_se']:.1%} {spread}, instrument "
+            f"reads {self.instrument_gain:+.2%} ± {r['instrument_gain_se']:.2%} "
+            f"({self.cases} spray-outs)"
+        )
+
+    def offset(
+        self, library: Library, fractions: NDArray, reflectance: NDArray, geometries
+    ) -> NDArray:
+        """L*a*b* change ``[F, G, 3]`` that these habits make to recipes ``fractions[F, T]``
+        whose model prediction is ``reflectance[F, G, 31]``: the physics' change of colour
+        between the habits' and the nominal application, plus the instrument's gain on the
+        prediction."""
+        return _offsets(self.theta[None], library, fractions, reflectance, geometries)[0]
+
+
+def _offsets(thetas: NDArray, library: Library, x: NDArray, R: NDArray, geometries) -> NDArray:
+    """``[P, F, G, 3]`` L*a*b* changes for P habit vectors at once (one physics call)."""
+    P, F = len(thetas), len(x)
+    film = np.concatenate([np.ones(F), np.repeat(1 + thetas[:, 0], F)])
+    spread = np.concatenate([np.ones(F), np.repeat(np.exp(thetas[:, 1]), F)])
+    sprayed = sprayed_reflectance(library, np.tile(x, (P + 1, 1)), geometries, film, spread)
+    lab = reflectance_to_Lab(sprayed).reshape(P + 1, F, len(geometries), 3)
+    gain = reflectance_to_Lab(R[None] * (1 + thetas[:, 2, None, None, None])) - reflectance_to_Lab(
+        R
+    )
+    return lab[1:] - lab[:1] + gain
+
+
+def estimate_habits(
+    forward,
+    library: Library,
+    fractions: NDArray,
+    sprayouts: NDArray,
+    *,
+    persistent_sd: float = PERSISTENT_SD,
+    noise_sd: float = NOISE_SD,
+) -> ShopHabits:
+    """The habits of the shop whose recipes ``fractions[N, T]`` (in ``forward``'s toner
+    order) measured ``sprayouts[N, G, 31]``, against ``forward``'s predictions (module
+    notes)."""
+    N = len(fractions)
+    if N < MIN_HABIT_CASES:
+        raise FlakelabError(
+            f"shop habits: {N} spray-outs; at least {MIN_HABIT_CASES} are needed to tell "
+            "the shop's habits from one spray's accident"
+        )
+    with torch.no_grad():
+        R = forward(torch.as_tensor(fractions, dtype=forward.dtype))[0].double().numpy()
+    geometries = forward.geometries
+    offset = (reflectance_to_Lab(sprayouts) - reflectance_to_Lab(R)).reshape(N, -1)
+    spray_sd = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0])
+    residual_var = persistent_sd**2 + noise_sd**2
+    theta = np.zeros(3)
+    for _ in range(_ITERATIONS):
+        # θ itself and θ ± one step along each habit, in one physics call
+        thetas = np.concatenate([theta[None], theta + np.diag(_STEP), theta - np.diag(_STEP)])
+        f = _offsets(thetas, library, fractions, R, geometries).reshape(7, N, -1)
+        S = ((f[1:4] - f[4:7]) / (2 * _STEP[:, None, None])).transpose(1, 2, 0)  # [N, D, 3]
+        C = np.einsum("ndk,k,nek->nde", S, spray_sd**2, S) + residual_var * np.eye(S.shape[1])
+        r = offset - f[0]
+        weighted = np.linalg.solve(C, S)  # C⁻¹S
+        H = np.einsum("ndk,ndl->kl", S, weighted)
+        step = np.linalg.solve(H, np.einsum("ndk,nd->k", weighted, r))
+        theta = theta + step
+    scores = np.einsum("ndk,nd->nk", weighted, r - S @ step)
+    H_inv = np.linalg.inv(H)
+    covariance = H_inv @ (scores.T @ scores) @ H_inv
+    return ShopHabits(theta, np.sqrt(np.diag(covariance)), N, getattr(forward, "name", ""))
+
+
+def write_habits(habits: ShopHabits, path: str | PathLike) -> None:
+    """Write ``habits`` as a JSON habits file (atomically)."""
+    document = {"format": HABITS_FORMAT, "version": 1, **habits.report()}
+    write_atomically(path, lambda p: p.write_text(json.dumps(document, indent=2) + "\n"))
+
+
+def read_habits(path: str | PathLike) -> ShopHabits:
+    """A habits file written by :func:`write_habits` (``flakelab cases habits --out``)."""
+    try:
+        document = json.loads(open(path, encoding="utf-8").read())  # noqa: SIM115
+    except FileNotFoundError:
+        raise MeasurementFileError(path, "no such file") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise MeasurementFileError(path, f"not a JSON habits file ({error})") from None
+    if not isinstance(document, dict) or document.get("format") != HABITS_FORMAT:
+        raise MeasurementFileError(path, f"expected {HABITS_FORMAT!r}", field="format")
+
+    def number(key: str, low: float, high: float) -> float:
+        value = document.get(key)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise MeasurementFileError(path, f"expected a number, got {value!r}", field=key)
+        if not low <= value <= high:
+            raise MeasurementFileError(path, f"expected {low} to {high}, got {value}", field=key)
+        return float(value)
+
+    spread = number("flake_spread", -0.5, 0.5)
+    theta = np.array(
+        [number("film_build", -0.5, 0.5), np.log1p(spread), number("instrument_gain", -0.1, 0.1)]
+    )
+    se = np.array(
+        [
+            number("film_build_se", 0, np.inf),
+            number("flake_spread_se", 0, np.inf) / (1 + spread),
+            number("instrument_gain_se", 0, np.inf),
+        ]
+    )
+    cases = number("cases", 0, np.inf)
+    model, shop = document.get("model", ""), document.get("shop")
+    for key, value in (("model", model), ("shop", shop)):
+        if value is not None and not isinstance(value, str):
+            raise MeasurementFileError(path, f"expected text, got {value!r}", field=key)
+    return ShopHabits(theta, se, int(cases), model, shop)

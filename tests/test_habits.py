@@ -1,0 +1,158 @@
+"""A shop's habits read from its spray-outs, and recipes aimed off for them."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
+from flakelab.errors import FlakelabError, MeasurementFileError
+from flakelab.io import read_library
+from flakelab.match.correction import aim_off, correct
+from flakelab.match.evaluate import worst_de00
+from flakelab.match.habits import ShopHabits, estimate_habits, read_habits, write_habits
+from flakelab.match.models import effect_mask, forward_for
+from flakelab.match.search import MatchSettings, match, recipe_vector
+from flakelab.models.registry import shipped_model
+from flakelab.models.training import case_arrays
+
+TRUE_SPREAD = SHOP_WITH_HABITS["shop_spread"] - 1
+TRUE_GAIN = SHOP_WITH_HABITS["shop_gain"]
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    library = read_library(None)
+    model = shipped_model("five-angle")
+    return library, forward_for(model, library), tuple(model.info.get("novel_toners", ()))
+
+
+def shop_world(shipped, habits: bool) -> World:
+    library, _, novel = shipped
+    settings = WorldSettings(**SHOP_WITH_HABITS) if habits else WorldSettings()
+    return World(library, "five-angle", settings, exclude=novel)
+
+
+def habits_of(shipped, habits: bool, n: int = 500) -> ShopHabits:
+    library, forward, _ = shipped
+    world = shop_world(shipped, habits)
+    cases = [c for batch in world.cases(n, 31, shop="shop") for c in batch]
+    data = case_arrays(cases, library.names)
+    return estimate_habits(forward, library, data.x, data.R)
+
+
+def test_a_shops_habits_are_read_from_its_sprayouts(shipped):
+    found = habits_of(shipped, habits=True)
+    # measured: flakes 4.0 % ± 0.1 flatter, instrument +0.73 % ± 0.09, film +6.4 % ± 2.6
+    # (over five seeds of 500 cases the gain came out 0.0056–0.0073: biased high by about
+    # one standard error)
+    assert found.flake_spread == pytest.approx(TRUE_SPREAD, abs=0.004)
+    assert found.instrument_gain == pytest.approx(TRUE_GAIN, abs=0.003)
+    assert found.film_build == pytest.approx(SHOP_WITH_HABITS["shop_film_build"] - 1, abs=0.05)
+    # each within three of its standard errors of the truth
+    truth = np.array([0.05, np.log1p(TRUE_SPREAD), TRUE_GAIN])
+    assert np.all(np.abs(found.theta - truth) < 3 * found.standard_error)
+    assert found.cases == 500
+
+
+def test_a_shop_like_the_models_cases_has_no_habits(shipped):
+    found = habits_of(shipped, habits=False)
+    assert abs(found.flake_spread) < 0.004 and abs(found.instrument_gain) < 0.002
+    assert np.all(np.abs(found.theta) < 3 * found.standard_error)
+
+
+def test_too_few_sprayouts_are_refused(shipped):
+    library, forward, _ = shipped
+    x = np.zeros((5, len(library.names)))
+    x[:, 0] = 1
+    with pytest.raises(FlakelabError, match="at least 20"):
+        estimate_habits(forward, library, x, np.full((5, len(forward.geometries), 31), 0.3))
+
+
+def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
+    habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]),
+                        500, "shipped", "shop A")  # fmt: skip
+    path = tmp_path / "habits.json"
+    write_habits(habits, path)
+    back = read_habits(path)
+    np.testing.assert_allclose(back.theta, habits.theta)
+    np.testing.assert_allclose(back.standard_error, habits.standard_error)
+    assert (back.cases, back.model, back.shop) == (500, "shipped", "shop A")
+    document = json.loads(path.read_text())
+    for key, value, problem in (
+        ("film_build", "more", "expected a number"),
+        ("instrument_gain", 0.5, "expected -0.1 to 0.1"),
+        ("format", "other", "flakelab-shop-habits"),
+    ):
+        bad = tmp_path / f"bad-{key}.json"
+        bad.write_text(json.dumps(document | {key: value}))
+        with pytest.raises(MeasurementFileError, match=problem) as error:
+            read_habits(bad)
+        assert key in str(error.value) and bad.name in str(error.value)
+    with pytest.raises(MeasurementFileError, match="not a JSON habits file"):
+        (tmp_path / "broken.json").write_text("{")
+        read_habits(tmp_path / "broken.json")
+
+
+def test_without_habits_the_correction_is_unchanged(shipped):
+    library, forward, _ = shipped
+    world = shop_world(shipped, habits=False)
+    rng = np.random.default_rng(3)
+    x = world.formulations(1, rng)[0]
+    target = world.measure(world.appearance(x[None], world.variation(1, rng))[0], rng)[0]
+    sprayed = world.measure(world.appearance(x[None], world.variation(1, rng))[0], rng)[0]
+    recipe = {n: v for n, v in zip(library.names, x, strict=True) if v > 0}
+    plain = correct(forward, target, recipe, sprayed, library=library, extra_toners=0)
+    none = correct(forward, target, recipe, sprayed, library=library, extra_toners=0,
+                   habits=ShopHabits.none())  # fmt: skip
+    assert plain.fractions == pytest.approx(none.fractions, abs=1e-9)
+    assert plain.application == pytest.approx(none.application)
+
+
+def test_a_sprayout_reading_as_predicted_in_a_shop_with_habits_undid_them(shipped):
+    """A spray-out that measures exactly what the model predicts, in a shop whose habits
+    move the colour, was a spray whose own application cancelled the habits: the split
+    finds its flake spread near nominal, not at the shop's mean."""
+    library, forward, _ = shipped
+    x = np.zeros(len(library.names))
+    x[library.names.index("Al medium")], x[library.names.index("Phthalo blue GS")] = 0.9, 0.1
+    habits = ShopHabits(np.array([0.05, np.log(0.96), 0.0]), np.zeros(3), 100)
+    with torch.no_grad():
+        R = forward(torch.as_tensor(x[None], dtype=forward.dtype))[0].double().numpy()
+    expected = habits.offset(library, x[None], R, forward.geometries)[0]
+    assert np.abs(expected).max() > 0.5  # the habits move this metallic visibly
+    recipe = {n: v for n, v in zip(library.names, x, strict=True) if v > 0}
+    result = correct(forward, R[0], recipe, R[0], library=library, extra_toners=0,
+                     habits=habits, steps=1)  # fmt: skip
+    assert result.application["flake spread"] == pytest.approx(0.0, abs=0.01)
+    # film build hardly moves a hiding metallic: the split leaves it near the shop's mean
+    assert result.application["film build"] == pytest.approx(0.05, abs=0.01)
+    without = correct(forward, R[0], recipe, R[0], library=library, extra_toners=0, steps=1)
+    assert without.application == pytest.approx({"film build": 0.0, "flake spread": 0.0})
+
+
+def test_aimed_off_recipes_land_nearer_the_target_in_a_shop_with_habits(shipped):
+    library, forward, _ = shipped
+    world = shop_world(shipped, habits=True)
+    habits = ShopHabits(np.array([0.05, np.log(0.96), 0.005]), np.zeros(3), 500)
+    rng = np.random.default_rng(11)
+    hidden = world.formulations(4, rng)
+    factory = world.nominal(4)
+    targets = world.appearance(hidden, factory)[0] * 1.0
+    effect = effect_mask(library, forward.toners)
+    plain, aimed = [], []
+    for target in targets:
+        best = match(target, forward, effect, settings=MatchSettings(candidates=1))
+        x = recipe_vector(forward, best.candidates[0].fractions)
+        x_aimed, _ = aim_off(forward, target, x[None], habits, library)
+        # sprayed at the shop's mean, read by its instrument without noise
+        at_shop = world.nominal(2, at_shop=True)
+        R = world.appearance(np.stack([x, x_aimed[0]]), at_shop)[0] * (1 + TRUE_GAIN)
+        plain.append(worst_de00(target, R[0]))
+        aimed.append(worst_de00(target, R[1]))
+    # measured: plain 1.36 mean, aimed 0.37
+    assert np.mean(aimed) < 0.6 * np.mean(plain)
+    assert sum(a < p for a, p in zip(aimed, plain, strict=True)) >= 3
