@@ -35,8 +35,8 @@ from flakelab.models.registry import shipped_model
 from flakelab.models.training import (
     CaseArrays,
     adapt_model,
-    case_arrays,
     evaluate_model,
+    generated_case_arrays,
     recorded_config,
 )
 
@@ -49,8 +49,7 @@ def shop_cases(model, settings: WorldSettings, n: int, seed: int) -> CaseArrays:
     library = read_library(None)
     novel = tuple(model.info.get("novel_toners", ()))
     world = World(library, model.instrument, settings, exclude=novel)
-    cases = [c for batch in world.cases(n, seed, shop="benchmark shop") for c in batch]
-    return case_arrays(cases, library.names, model.effect)
+    return generated_case_arrays(world, n, seed, shop="benchmark shop")
 
 
 def error(model, cases: CaseArrays) -> float:

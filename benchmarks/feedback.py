@@ -31,7 +31,12 @@ from _matcher import seeds_from, shipped_matcher
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.match.models import forward_for
 from flakelab.models.network import ForwardModel
-from flakelab.models.training import CaseArrays, adapt_model, case_arrays, recorded_config
+from flakelab.models.training import (
+    CaseArrays,
+    adapt_model,
+    generated_case_arrays,
+    recorded_config,
+)
 from matched_error import matched_and_hidden, measure
 
 
@@ -56,8 +61,7 @@ def replay_cases(model: ForwardModel, world: World, n: int, seed: int) -> CaseAr
     kinds = model.info.get("training_kinds") or WorldSettings().kinds
     novel = tuple(model.info.get("novel_toners", ()))
     training = World(world.library, world.instrument, WorldSettings(kinds=kinds), exclude=novel)
-    cases = [c for batch in training.cases(n, seed) for c in batch]
-    return case_arrays(cases, world.library.names, model.effect)
+    return generated_case_arrays(training, n, seed)
 
 
 def joined(a: CaseArrays, b: CaseArrays) -> CaseArrays:

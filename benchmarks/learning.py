@@ -26,8 +26,8 @@ from flakelab.io import read_library
 from flakelab.models.training import (
     SCREENINGS,
     TrainingConfig,
-    case_arrays,
     evaluate_model,
+    generated_case_arrays,
     train_protocol,
 )
 from timing import best_time
@@ -106,12 +106,10 @@ def main() -> None:
         return
 
     library = read_library(None)
-    effect = [t.kind != "pigment" for t in library.toners]
     world = World(library, args.instrument)
     start = time.perf_counter()
-    cases = [c for batch in world.cases(args.cases, args.seed) for c in batch]
+    data = generated_case_arrays(world, args.cases, args.seed)
     generate_s = time.perf_counter() - start
-    data = case_arrays(cases, library.names, effect)
     config = TrainingConfig.per_stage(
         args.epochs,
         args.learning_rate,
@@ -123,9 +121,7 @@ def main() -> None:
     start = time.perf_counter()
     model, report = train_protocol(data, config)
     train_s = time.perf_counter() - start
-    held = case_arrays(
-        [c for b in world.cases(500, args.seed + 1) for c in b], library.names, effect
-    )
+    held = generated_case_arrays(world, 500, args.seed + 1)
     metrics = evaluate_model(model, held)
     result = {
         "cases": args.cases,

@@ -24,7 +24,12 @@ from flakelab.core.difference import delta_E
 from flakelab.io import read_library
 from flakelab.match.models import forward_for
 from flakelab.match.search import evaluate_recipes
-from flakelab.models.training import TrainingConfig, _new_model, _train_stage, case_arrays
+from flakelab.models.training import (
+    TrainingConfig,
+    _new_model,
+    _train_stage,
+    generated_case_arrays,
+)
 
 NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 EVALUATION = (500, 987)
@@ -32,11 +37,8 @@ EVALUATION = (500, 987)
 
 
 def train_once(library, cases: int, config: TrainingConfig):
-    effect = [t.kind != "pigment" for t in library.toners]
     world = World(library, "five-angle", exclude=NOVEL_TONERS)
-    data = case_arrays(
-        [c for b in world.cases(cases, config.seed) for c in b], library.names, effect
-    )
+    data = generated_case_arrays(world, cases, config.seed)
     rows = [np.arange(data.x.shape[0])]
     model = _new_model(data, config, rows[0])
     _train_stage([model], data, rows, config, [], ["fit"], None)
@@ -47,7 +49,7 @@ def train_once(library, cases: int, config: TrainingConfig):
 def judge(library, model) -> dict[str, float]:
     world = World(library, "five-angle")
     n, seed = EVALUATION
-    data = case_arrays([c for b in world.cases(n, seed) for c in b], library.names)
+    data = generated_case_arrays(world, n, seed)
     predicted, _ = evaluate_recipes(forward_for(model, library), data.x)
     nominal, _ = world.appearance(data.x, world.nominal(n))
     lab = reflectance_to_Lab(predicted)

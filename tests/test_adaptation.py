@@ -14,9 +14,9 @@ from flakelab.models.network import ModelError
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import (
     adapt_model,
-    case_arrays,
     evaluate_model,
     fit,
+    generated_case_arrays,
     recorded_config,
 )
 
@@ -31,8 +31,7 @@ def model():
 def shop_cases(model, settings: WorldSettings, n: int, seed: int):
     library = read_library(None)
     world = World(library, "five-angle", settings, exclude=tuple(model.info["novel_toners"]))
-    cases = [c for batch in world.cases(n, seed, shop="shop A") for c in batch]
-    return case_arrays(cases, library.names, model.effect)
+    return generated_case_arrays(world, n, seed, shop="shop A")
 
 
 def test_a_shops_habits_are_drawn_about_its_own_means():

@@ -17,7 +17,7 @@ from flakelab.match.habits import ShopHabits, estimate_habits, read_habits, writ
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.search import MatchSettings, match, recipe_vector
 from flakelab.models.registry import shipped_model
-from flakelab.models.training import case_arrays
+from flakelab.models.training import generated_case_arrays
 
 TRUE_SPREAD = SHOP_WITH_HABITS["shop_spread"] - 1
 TRUE_GAIN = SHOP_WITH_HABITS["shop_gain"]
@@ -39,8 +39,7 @@ def shop_world(shipped, habits: bool) -> World:
 def habits_of(shipped, habits: bool, n: int = 500) -> ShopHabits:
     library, forward, _ = shipped
     world = shop_world(shipped, habits)
-    cases = [c for batch in world.cases(n, 31, shop="shop") for c in batch]
-    data = case_arrays(cases, library.names)
+    data = generated_case_arrays(world, n, 31)
     return estimate_habits(forward, library, data.x, data.R)
 
 

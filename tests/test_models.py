@@ -19,11 +19,11 @@ from flakelab.models.training import (
     CaseArrays,
     TrainingConfig,
     _new_model,
-    case_arrays,
     effect_share_floor,
     evaluate_model,
     fit,
     flag_outliers,
+    generated_case_arrays,
     protocol_epochs,
     train_protocol,
 )
@@ -52,9 +52,7 @@ QUICK = TrainingConfig(hidden=(64, 64), epochs=100, finetune_epochs=30, batch_si
 
 @pytest.fixture(scope="module")
 def data() -> CaseArrays:
-    world = World(SMALL, "five-angle")
-    cases = [c for b in world.cases(400, seed=21) for c in b]
-    return case_arrays(cases, SMALL.names, [t.kind != "pigment" for t in SMALL.toners])
+    return generated_case_arrays(World(SMALL, "five-angle"), 400, seed=21)
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,12 @@ C = S·Sᵀ + (σ_p² + σ_n²)·I. Without the library (or with an explicit ``o
 whole offset is weighted by one share, ``offset_weight`` (a shrinkage estimate).
 ``benchmarks/correction.py`` measures what each choice buys.
 
+A shop with habits of its own (:mod:`flakelab.match.habits`: its film build, flake alignment
+and instrument differ from the model's cases) sprays about its own mean, not the model's:
+the habits' offset at the recipe persists, and only the deviation from it is split.
+:func:`aim_off` uses the same optimisation before the first spray, to aim a recipe matched
+by the model off for the habits.
+
 When the recipe's own toners cannot move the colour where it must go (a one-toner silver
 that came out too blue), one more toner may join: the few whose first-order effect on the
 loss is most favourable are tried in the same batch, and one is kept only when it lowers the

@@ -46,6 +46,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.cases.case import Case
+from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.measurement import TEXTURE_READINGS
@@ -53,6 +54,7 @@ from flakelab.core.torch_colour import TorchColour
 from flakelab.models.network import ForwardModel, ModelError, StackedNetwork, build_network
 
 __all__ = [
+    "generated_case_arrays",
     "TrainingConfig",
     "CaseArrays",
     "case_arrays",
@@ -127,6 +129,17 @@ class CaseArrays:
             case_ids=tuple(self.case_ids[i] for i in rows),
             shops=tuple(self.shops[i] for i in rows),
         )
+
+
+def generated_case_arrays(
+    world: World, n: int, seed: int, *, shop: str = "synthetic shop"
+) -> CaseArrays:
+    """``n`` cases of the generated ``world`` (:meth:`~flakelab.cases.generator.World.cases`,
+    reproducible from ``seed``) as arrays in its library's toner order, effect toners
+    marked."""
+    cases = [c for batch in world.cases(n, seed, shop=shop) for c in batch]
+    effect = [t.kind != "pigment" for t in world.library.toners]
+    return case_arrays(cases, world.library.names, effect)
 
 
 def case_arrays(
