@@ -35,6 +35,10 @@ LibraryOption = Annotated[
 ]
 DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
 """What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
+CasesArgument = Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")]
+ShopOption = Annotated[
+    str | None, typer.Option(help="Only this shop's cases (default: every case given).")
+]
 ModelFileOption = Annotated[
     str | None, typer.Option("--model", "-m", help="Model file (default: current).")
 ]
@@ -223,10 +227,8 @@ def realism(
 @cases_app.command("habits")
 @reports_errors
 def habits(
-    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
-    shop: Annotated[
-        str | None, typer.Option(help="Only this shop's cases (default: every case given).")
-    ] = None,
+    cases: CasesArgument,
+    shop: ShopOption = None,
     model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
@@ -278,7 +280,7 @@ def habits(
 
 
 def train(
-    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
+    cases: CasesArgument,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
     out: Annotated[
@@ -416,7 +418,7 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
 @model_app.command("evaluate")
 @reports_errors
 def evaluate(
-    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
+    cases: CasesArgument,
     model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
@@ -460,10 +462,8 @@ def evaluate(
 @model_app.command("adapt")
 @reports_errors
 def adapt(
-    cases: Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")],
-    shop: Annotated[
-        str | None, typer.Option(help="Only this shop's cases (default: every case given).")
-    ] = None,
+    cases: CasesArgument,
+    shop: ShopOption = None,
     model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
