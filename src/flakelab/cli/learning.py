@@ -58,11 +58,10 @@ def split_held_out(cases: list, source: str, holdout: float, seed: int, library)
         raise FlakelabError(
             f"{source}: {len(cases)} cases are too few to hold out {holdout:.0%} of them"
         )
-    effect = [t.kind != "pigment" for t in library.toners]
 
     def arrays(kept: bool):
         chosen = [c for c, h in zip(cases, held, strict=True) if h == kept]
-        return case_arrays(chosen, library.names, effect)
+        return case_arrays(chosen, library.names, library.effect)
 
     return arrays(False), arrays(True)
 

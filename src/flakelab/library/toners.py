@@ -197,6 +197,11 @@ class Library:
     def names(self) -> tuple[str, ...]:
         return tuple(t.name for t in self.toners)
 
+    @property
+    def effect(self) -> NDArray:
+        """Which toners are effect toners (aluminium, pearl), in the recipe vector order."""
+        return np.array([t.kind != "pigment" for t in self.toners])
+
     def __getitem__(self, name: str) -> Toner:
         for toner in self.toners:
             if toner.name == name:

@@ -43,7 +43,6 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
@@ -52,7 +51,7 @@ from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
     FILM_BUILD_SD,
     SPREAD_SD,
-    sprayed_reflectance,
+    sprayed_lab,
 )
 
 if TYPE_CHECKING:
@@ -150,8 +149,7 @@ def application_sensitivity(library: Library, x: NDArray, geometries) -> NDArray
     physics)."""
     film = np.array([1 + FILM_BUILD_SD, 1 - FILM_BUILD_SD, 1.0, 1.0])
     spread = np.exp([0.0, 0.0, SPREAD_SD, -SPREAD_SD])
-    R = sprayed_reflectance(library, np.repeat(x[None], 4, axis=0), geometries, film, spread)
-    lab = reflectance_to_Lab(R).reshape(2, 2, len(geometries), 3)
+    lab = sprayed_lab(library, x[None], geometries, film, spread).reshape(2, 2, -1, 3)
     return (lab[:, 0] - lab[:, 1]) / 2
 
 

@@ -40,11 +40,10 @@ from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
-from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_reflectance
+from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
 
 __all__ = [
     "ShopHabits",
-    "HABITS",
     "HABITS_FORMAT",
     "MIN_HABIT_CASES",
     "estimate_habits",
@@ -54,9 +53,6 @@ __all__ = [
 
 HABITS_FORMAT = "flakelab-shop-habits"
 """The ``format`` of a habits file: the JSON of :meth:`ShopHabits.report` with ``shop``."""
-
-HABITS = ("film build", "flake spread", "instrument gain")
-"""The habits, in the order of :attr:`ShopHabits.theta`."""
 
 MIN_HABIT_CASES = 20
 """Fewer spray-outs than this cannot tell three habits from one batch's or spray's accident."""
@@ -138,15 +134,11 @@ class ShopHabits:
 
 def _offsets(thetas: NDArray, library: Library, x: NDArray, R: NDArray, geometries) -> NDArray:
     """``[P, F, G, 3]`` L*a*b* changes for P habit vectors at once (one physics call)."""
-    P, F = len(thetas), len(x)
-    film = np.concatenate([np.ones(F), np.repeat(1 + thetas[:, 0], F)])
-    spread = np.concatenate([np.ones(F), np.repeat(np.exp(thetas[:, 1]), F)])
-    sprayed = sprayed_reflectance(library, np.tile(x, (P + 1, 1)), geometries, film, spread)
-    lab = reflectance_to_Lab(sprayed).reshape(P + 1, F, len(geometries), 3)
-    gain = reflectance_to_Lab(R[None] * (1 + thetas[:, 2, None, None, None])) - reflectance_to_Lab(
-        R
-    )
-    return lab[1:] - lab[:1] + gain
+    film = np.concatenate([[1.0], 1 + thetas[:, 0]])  # the nominal application first
+    spread = np.concatenate([[1.0], np.exp(thetas[:, 1])])
+    lab = sprayed_lab(library, x, geometries, film, spread)
+    gained = reflectance_to_Lab(R[None] * (1 + thetas[:, 2, None, None, None]))
+    return lab[1:] - lab[:1] + gained - reflectance_to_Lab(R)
 
 
 def estimate_habits(
@@ -203,6 +195,8 @@ def read_habits(path: str | PathLike) -> ShopHabits:
         document = json.loads(open(path, encoding="utf-8").read())  # noqa: SIM115
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
+    except OSError as error:
+        raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise MeasurementFileError(path, f"not a JSON habits file ({error})") from None
     if not isinstance(document, dict) or document.get("format") != HABITS_FORMAT:

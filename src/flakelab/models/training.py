@@ -138,8 +138,7 @@ def generated_case_arrays(
     reproducible from ``seed``) as arrays in its library's toner order, effect toners
     marked."""
     cases = [c for batch in world.cases(n, seed, shop=shop) for c in batch]
-    effect = [t.kind != "pigment" for t in world.library.toners]
-    return case_arrays(cases, world.library.names, effect)
+    return case_arrays(cases, world.library.names, world.library.effect)
 
 
 def case_arrays(

@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.geometry import Geometry
 from flakelab.library.toners import Library
 from flakelab.physics.fast import predict
@@ -26,6 +27,7 @@ __all__ = [
     "APPLICATION_PARAMETERS",
     "sprayed_layer",
     "sprayed_reflectance",
+    "sprayed_lab",
 ]
 
 FILM_BUILD_SD = 0.04
@@ -57,3 +59,24 @@ def sprayed_reflectance(
     ``film[F]`` and flake-spread scale ``spread[F]`` (the library's batches, fast model)."""
     layer = layer_from_fractions(library, fractions)
     return np.pi * predict(sprayed_layer(layer, library, film, spread), geometries)
+
+
+def sprayed_lab(
+    library: Library,
+    fractions: NDArray,
+    geometries: tuple[Geometry, ...],
+    film: ArrayLike,
+    spread: ArrayLike,
+) -> NDArray[np.float64]:
+    """CIELAB ``[P, F, G, 3]`` of every recipe ``fractions[F, T]`` sprayed at each of P
+    applications, relative film build ``film[P]`` and flake-spread scale ``spread[P]`` (one
+    physics call)."""
+    P, F = len(np.atleast_1d(film)), len(fractions)
+    R = sprayed_reflectance(
+        library,
+        np.tile(fractions, (P, 1)),
+        geometries,
+        np.repeat(film, F),
+        np.repeat(spread, F),
+    )
+    return reflectance_to_Lab(R).reshape(P, F, len(geometries), 3)
