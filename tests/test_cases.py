@@ -9,12 +9,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from alembic.autogenerate import compare_metadata
+from alembic.migration import MigrationContext
 from sqlalchemy import inspect
 
 from flakelab.cases.case import Case, CaseError
 from flakelab.cases.database import add_cases, count_cases, iter_cases, open_database
 from flakelab.cases.exchange import read_cases, write_cases
 from flakelab.cases.generator import World
+from flakelab.cases.schema import Base
 from flakelab.io import read_library
 
 
@@ -92,7 +95,11 @@ def test_database_round_trip_and_migrations(cases, tmp_path):
     engine = open_database(url)
     assert add_cases(engine, cases) == len(cases)
     engine = open_database(url)  # reopening applies no migration twice
-    assert {"cases", "models", "alembic_version"} <= set(inspect(engine).get_table_names())
+    assert {"cases", "models", "shop_habits", "alembic_version"} <= set(
+        inspect(engine).get_table_names()
+    )
+    with engine.connect() as connection:  # the migrations build exactly the schema's tables
+        assert compare_metadata(MigrationContext.configure(connection), Base.metadata) == []
     back = list(iter_cases(engine))
     assert [c.case_id for c in back] == [c.case_id for c in cases]
     np.testing.assert_allclose(back[3].sprayout, cases[3].sprayout, rtol=1e-6)

@@ -161,6 +161,26 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
 
     run = flakelab("cases", "habits", cases, "--shop", "shop B")
     assert run.returncode == 2 and "no cases from shop 'shop B'" in run.stderr
+
+    # stored in the database for the shop, and used by name
+    run = flakelab("cases", "habits", cases, "--save", "--database", cases)
+    assert run.returncode == 2 and "cases of 2 shops" in run.stderr
+    run = flakelab("cases", "habits", cases, "--shop", "shop A", "--save", "--database", cases)
+    assert run.returncode == 0, run.stderr
+    shops = json.loads(flakelab("cases", "shops", "--database", cases, "--json").stdout)
+    assert [(s["shop"], s["cases"]) for s in shops["shops"]] == [
+        ("shop A", 300),
+        ("synthetic shop", 100),
+    ]
+    assert shops["shops"][0]["habits"]["flake_spread"] == report["flake_spread"]
+    assert shops["shops"][1]["habits"] is None
+    run = flakelab("match", "--example", "--candidates", "1", "--shop", "shop A",
+                   "--database", cases, "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert any("flakes 4.0%" in n for n in json.loads(run.stdout)["notes"])
+    assert "warning" not in run.stderr  # read against the model in use
+    run = flakelab("match", "--example", "--shop", "synthetic shop", "--database", cases)
+    assert run.returncode == 2 and "no habits stored for shop 'synthetic shop'" in run.stderr
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(json.loads(habits.read_text()) | {"film_build": "lots"}))
     run = flakelab("match", "--example", "--habits", str(bad))

@@ -2,18 +2,29 @@
 
 from __future__ import annotations
 
+import copy
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
+from flakelab.cases.database import open_database
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io import read_library
 from flakelab.match.correction import aim_off, correct
 from flakelab.match.evaluate import worst_de00
-from flakelab.match.habits import ShopHabits, estimate_habits, read_habits, write_habits
+from flakelab.match.habits import (
+    ShopHabits,
+    estimate_habits,
+    list_habits,
+    read_habits,
+    save_habits,
+    stored_habits,
+    write_habits,
+)
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.search import MatchSettings, match, recipe_vector
 from flakelab.models.registry import shipped_model
@@ -94,6 +105,44 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
     with pytest.raises(MeasurementFileError, match="not a JSON habits file"):
         (tmp_path / "broken.json").write_text("{")
         read_habits(tmp_path / "broken.json")
+
+
+def test_stored_habits_are_the_latest_against_the_model_in_use(tmp_path):
+    engine = open_database(tmp_path / "shop.db")
+    with pytest.raises(FlakelabError, match="no habits stored for shop 'shop A'"):
+        stored_habits(engine, "shop A")
+
+    def habits(film: float, model: str) -> ShopHabits:
+        return ShopHabits(np.array([film, -0.04, 0.005]), np.full(3, 0.01), 100, model, "shop A")
+
+    save_habits(engine, habits(0.01, "model 1"), "five-angle")
+    save_habits(engine, habits(0.02, "model 2"), "five-angle")
+    save_habits(engine, habits(0.03, "model 1"), "five-angle")
+    save_habits(engine, replace(habits(0.09, "model 1"), shop="shop B"), "five-angle")
+    assert stored_habits(engine, "shop A", "model 1").film_build == pytest.approx(0.03)
+    assert stored_habits(engine, "shop A", "model 2").film_build == pytest.approx(0.02)
+    # against a model it was never read for: the latest, which names its own model
+    assert stored_habits(engine, "shop A", "model 3").model == "model 1"
+    back = stored_habits(engine, "shop B")
+    np.testing.assert_allclose(back.theta, [0.09, -0.04, 0.005])
+    np.testing.assert_allclose(back.standard_error, 0.01)
+    assert [h["shop"] for h in list_habits(open_database(tmp_path / "shop.db"))] == [
+        "shop A",
+        "shop B",
+    ]
+    with pytest.raises(FlakelabError, match="name the shop"):
+        save_habits(engine, replace(back, shop=None), "five-angle")
+
+
+def test_an_adapted_model_is_told_from_its_base(shipped):
+    _, forward, _ = shipped
+    model = forward.model
+    assert model.fingerprint == shipped_model("five-angle").fingerprint  # the same weights
+    adapted = replace(model, network=copy.deepcopy(model.network))
+    with torch.no_grad():
+        next(adapted.network.parameters())[0, 0] += 1e-3
+    assert adapted.info["name"] == model.info["name"]
+    assert adapted.fingerprint != model.fingerprint
 
 
 def test_without_habits_the_correction_is_unchanged(shipped):

@@ -30,6 +30,7 @@ __all__ = [
     "add_cases",
     "iter_cases",
     "count_cases",
+    "shop_summary",
     "DatabaseError",
 ]
 
@@ -153,3 +154,24 @@ def iter_cases(
 def count_cases(engine: Engine) -> int:
     with Session(engine) as session:
         return int(session.scalar(select(func.count(CaseRow.id))) or 0)
+
+
+def shop_summary(engine: Engine) -> list[dict]:
+    """Every shop in the database: its cases by outcome, and the first and last case's time."""
+    query = select(
+        CaseRow.shop,
+        CaseRow.outcome,
+        func.count(CaseRow.id),
+        func.min(CaseRow.created_at),
+        func.max(CaseRow.created_at),
+    ).group_by(CaseRow.shop, CaseRow.outcome)
+    shops: dict[str, dict] = {}
+    with Session(engine) as session:
+        for shop, outcome, n, first, last in session.execute(query):
+            entry = shops.setdefault(
+                shop, {"shop": shop, "cases": 0, "outcomes": {}, "first": first, "last": last}
+            )
+            entry["cases"] += n
+            entry["outcomes"][outcome] = n
+            entry["first"], entry["last"] = min(entry["first"], first), max(entry["last"], last)
+    return [shops[name] for name in sorted(shops)]

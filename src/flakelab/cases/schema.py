@@ -1,4 +1,4 @@
-"""Database tables (SQLAlchemy 2): cases and the model registry.
+"""Database tables (SQLAlchemy 2): cases, the model registry and the shops' habits.
 
 Spectra are stored as little-endian float32 arrays (``[G, 31]``), recipes and texture
 readings as JSON; geometry names travel with every case, so cases from different instruments
@@ -12,7 +12,7 @@ from datetime import datetime
 from sqlalchemy import JSON, Boolean, DateTime, Float, Integer, LargeBinary, String
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-__all__ = ["Base", "CaseRow", "ModelRow"]
+__all__ = ["Base", "CaseRow", "ModelRow", "HabitsRow"]
 
 
 class Base(DeclarativeBase):
@@ -52,4 +52,18 @@ class ModelRow(Base):
     metrics: Mapped[dict] = mapped_column(JSON)
     held_out_de00: Mapped[float] = mapped_column(Float)
     artefact: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class HabitsRow(Base):
+    """A shop's habits read from its spray-outs against one model (``flakelab cases habits
+    --save``); every reading is kept, the latest is used."""
+
+    __tablename__ = "shop_habits"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    shop: Mapped[str] = mapped_column(String(120), index=True)
+    model: Mapped[str] = mapped_column(String(80))
+    instrument: Mapped[str] = mapped_column(String(60))
+    report: Mapped[dict] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

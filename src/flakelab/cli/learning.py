@@ -236,12 +236,19 @@ def habits(
         Path | None,
         typer.Option("--out", "-o", help="Write them as a habits file (match/correct --habits)."),
     ] = None,
+    save: Annotated[
+        bool,
+        typer.Option(
+            "--save", help="Store them in the database for the shop (match/correct --shop)."
+        ),
+    ] = False,
     json_output: JsonOption = False,
 ) -> None:
     """A shop's habits from its spray-outs: mean film build, flake alignment and instrument
     gain against the model's cases (by the physics of application)."""
+    from flakelab.cases.database import open_database
     from flakelab.io import read_library
-    from flakelab.match.habits import estimate_habits, write_habits
+    from flakelab.match.habits import estimate_habits, save_habits, write_habits
     from flakelab.match.models import forward_for
     from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import case_arrays
@@ -251,11 +258,20 @@ def habits(
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
     forward = forward_for(learned, lib)
-    data = case_arrays(shop_cases(cases, shop, learned.geometries), lib.names)
-    found = replace(estimate_habits(forward, lib, data.x, data.R), shop=shop)
+    chosen = shop_cases(cases, shop, learned.geometries)
+    shops = {c.shop for c in chosen}
+    if save and shop is None and len(shops) > 1:
+        raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
+    data = case_arrays(chosen, lib.names)
+    found = replace(
+        estimate_habits(forward, lib, data.x, data.R),
+        shop=shop or (shops.pop() if len(shops) == 1 else None),
+    )
     if out is not None:
         write_habits(found, out)
-    report = found.report() | {"file": str(out) if out else None}
+    if save:
+        save_habits(open_database(database), found, learned.instrument)
+    report = found.report() | {"file": str(out) if out else None, "saved": save}
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -274,8 +290,47 @@ def habits(
         table.add_row(name, f"{report[key]:+{fmt}}", f"{report[key + '_se']:{fmt}}", meaning)
     console.print(table)
     errors.print(
-        f"from {found.cases} spray-outs" + (f"; written to {out}" if out else ""), highlight=False
+        f"from {found.cases} spray-outs"
+        + (f"; written to {out}" if out else "")
+        + (f"; stored for {found.shop!r}" if save else ""),
+        highlight=False,
     )
+
+
+@cases_app.command("shops")
+@reports_errors
+def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
+    """The shops in the database: their cases by outcome and their stored habits."""
+    from flakelab.cases.case import OUTCOMES
+    from flakelab.cases.database import open_database, shop_summary
+    from flakelab.match.habits import ShopHabits, list_habits
+
+    engine = open_database(database)
+    habits = {h["shop"]: h for h in list_habits(engine)}
+    rows = [
+        s | {"first": s["first"].isoformat(), "last": s["last"].isoformat()}
+        for s in shop_summary(engine)
+    ]
+    for row in rows:
+        row["habits"] = habits.pop(row["shop"], None)
+    rows += [{"shop": name, "cases": 0, "habits": h} for name, h in habits.items()]
+    if json_output:
+        print(json.dumps({"shops": rows}, indent=2))
+        return
+    table = Table(title=f"Shops in {engine.url}")
+    for column in ("shop", "cases", " / ".join(OUTCOMES), "last case", "habits"):
+        table.add_column(column)
+    for row in rows:
+        outcomes = row.get("outcomes", {})
+        h = row["habits"]
+        table.add_row(
+            row["shop"],
+            str(row["cases"]),
+            " / ".join(str(outcomes.get(k, 0)) for k in OUTCOMES),
+            row.get("last", "")[:10],
+            "" if h is None else f"{ShopHabits.from_report(h).describe()}, {h['created_at'][:10]}",
+        )
+    console.print(table)
 
 
 def train(

@@ -26,6 +26,14 @@ HabitsOption = Annotated[
         "for its film build, flake alignment and instrument.",
     ),
 ]
+HabitsShopOption = Annotated[
+    str | None,
+    typer.Option(
+        "--shop",
+        help="Aim recipes off for this shop's habits as stored in the database "
+        "('flakelab cases habits --shop NAME --save').",
+    ),
+]
 ToleranceOption = Annotated[
     str, typer.Option("--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or file.")
 ]
@@ -44,19 +52,27 @@ def _setup(library: Path | None, instrument: str, model: Path | None, database: 
     return lib, forward, effect_mask(lib, forward.toners)
 
 
-def _habits(path: Path | None, forward):
-    """The shop's habits from ``path`` (None: none), with a warning when they were measured
-    against another model than ``forward``."""
-    if path is None:
+def _habits(path: Path | None, shop: str | None, database: str | None, forward):
+    """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
+    none), with a warning when they were measured against another model than ``forward``."""
+    if path is None and shop is None:
         return None
+    if path is not None and shop is not None:
+        raise FlakelabError("--habits and --shop: expected one of them, not both")
+    from flakelab.cases.database import open_database
     from flakelab.cli.common import errors
-    from flakelab.match.habits import read_habits
+    from flakelab.match.habits import read_habits, stored_habits
 
-    found = read_habits(path)
-    if found.model and found.model != forward.name:
+    found = (
+        read_habits(path)
+        if path
+        else stored_habits(open_database(database), shop, forward.model_id)
+    )
+    if found.model != forward.model_id:
         errors.print(
-            f"[yellow]warning:[/] {path}: habits measured against {found.model!r}, "
-            f"not {forward.name!r}",
+            f"[yellow]warning:[/] {path or shop}: habits measured against "
+            f"{found.model or 'an unnamed model'}, not {forward.model_id}: read them again "
+            "against this model",
             highlight=False,
         )
     return found
@@ -99,6 +115,7 @@ def match_command(
     ] = "shop",
     seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
     habits: HabitsOption = None,
+    shop: HabitsShopOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
@@ -113,16 +130,17 @@ def match_command(
 
     if target == "evaluate":
         _evaluate(
-            library,
-            instrument,
-            model,
-            database,
-            targets,
-            novel_targets,
-            seed,
-            world,
-            habits,
-            json_output,
+            library=library,
+            instrument=instrument,
+            model=model,
+            database=database,
+            targets=targets,
+            novel_targets=novel_targets,
+            seed=seed,
+            world_name=world,
+            habits_file=habits,
+            shop=shop,
+            json_output=json_output,
         )
         return
     if (target is None) == (not example):
@@ -138,7 +156,7 @@ def match_command(
         effect,
         tolerance=tol,
         settings=MatchSettings(candidates=candidates, seed=seed),
-        habits=_habits(habits, forward),
+        habits=_habits(habits, shop, database, forward),
         library=lib,
     )
     report = result.to_dict()
@@ -194,6 +212,7 @@ def _print_match(report: dict) -> None:
 
 
 def _evaluate(
+    *,
     library,
     instrument,
     model,
@@ -203,13 +222,14 @@ def _evaluate(
     seed,
     world_name,
     habits_file,
+    shop,
     json_output,
 ):
     from flakelab.match.evaluate import evaluate_matching, harness_world
 
     lib, forward, effect = _setup(library, instrument, model, database)
     world = harness_world(lib, instrument, world_name)
-    habits = _habits(habits_file, forward)
+    habits = _habits(habits_file, shop, database, forward)
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(
@@ -261,6 +281,7 @@ def correct_command(
         ),
     ] = None,
     habits: HabitsOption = None,
+    shop: HabitsShopOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Correct a recipe from its measured spray-out.
@@ -295,7 +316,7 @@ def correct_command(
     extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
-    shop_habits = _habits(habits, forward)
+    shop_habits = _habits(habits, shop, database, forward)
     correction = correct(
         forward,
         target_R,

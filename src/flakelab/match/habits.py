@@ -29,12 +29,16 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from os import PathLike
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
+from sqlalchemy import Engine, select
+from sqlalchemy.orm import Session
 
+from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
@@ -49,6 +53,9 @@ __all__ = [
     "estimate_habits",
     "read_habits",
     "write_habits",
+    "save_habits",
+    "stored_habits",
+    "list_habits",
 ]
 
 HABITS_FORMAT = "flakelab-shop-habits"
@@ -80,6 +87,20 @@ class ShopHabits:
     def none(cls) -> ShopHabits:
         """A shop that sprays and reads as the model's cases did."""
         return cls(np.zeros(3), np.zeros(3), 0)
+
+    @classmethod
+    def from_report(cls, report: dict) -> ShopHabits:
+        """The habits :meth:`report` gave (checked by the reader that hands it over)."""
+        spread = report["flake_spread"]
+        theta = np.array([report["film_build"], np.log1p(spread), report["instrument_gain"]])
+        se = np.array(
+            [
+                report["film_build_se"],
+                report["flake_spread_se"] / (1 + spread),
+                report["instrument_gain_se"],
+            ]
+        )
+        return cls(theta, se, int(report["cases"]), report.get("model") or "", report.get("shop"))
 
     @property
     def film_build(self) -> float:
@@ -180,7 +201,7 @@ def estimate_habits(
     scores = np.einsum("ndk,nd->nk", weighted, r - S @ step)
     H_inv = np.linalg.inv(H)
     covariance = H_inv @ (scores.T @ scores) @ H_inv
-    return ShopHabits(theta, np.sqrt(np.diag(covariance)), N, getattr(forward, "name", ""))
+    return ShopHabits(theta, np.sqrt(np.diag(covariance)), N, getattr(forward, "model_id", ""))
 
 
 def write_habits(habits: ShopHabits, path: str | PathLike) -> None:
@@ -202,28 +223,69 @@ def read_habits(path: str | PathLike) -> ShopHabits:
     if not isinstance(document, dict) or document.get("format") != HABITS_FORMAT:
         raise MeasurementFileError(path, f"expected {HABITS_FORMAT!r}", field="format")
 
-    def number(key: str, low: float, high: float) -> float:
+    for key, low, high in _RANGES:
         value = document.get(key)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise MeasurementFileError(path, f"expected a number, got {value!r}", field=key)
         if not low <= value <= high:
             raise MeasurementFileError(path, f"expected {low} to {high}, got {value}", field=key)
-        return float(value)
-
-    spread = number("flake_spread", -0.5, 0.5)
-    theta = np.array(
-        [number("film_build", -0.5, 0.5), np.log1p(spread), number("instrument_gain", -0.1, 0.1)]
-    )
-    se = np.array(
-        [
-            number("film_build_se", 0, np.inf),
-            number("flake_spread_se", 0, np.inf) / (1 + spread),
-            number("instrument_gain_se", 0, np.inf),
-        ]
-    )
-    cases = number("cases", 0, np.inf)
-    model, shop = document.get("model", ""), document.get("shop")
-    for key, value in (("model", model), ("shop", shop)):
+    for key in ("model", "shop"):
+        value = document.get(key)
         if value is not None and not isinstance(value, str):
             raise MeasurementFileError(path, f"expected text, got {value!r}", field=key)
-    return ShopHabits(theta, se, int(cases), model, shop)
+    return ShopHabits.from_report(document)
+
+
+_RANGES = (
+    ("film_build", -0.5, 0.5),
+    ("flake_spread", -0.5, 0.5),
+    ("instrument_gain", -0.1, 0.1),
+    ("film_build_se", 0, np.inf),
+    ("flake_spread_se", 0, np.inf),
+    ("instrument_gain_se", 0, np.inf),
+    ("cases", 0, np.inf),
+)
+"""The fields of a habits report and the values a habits file may give them."""
+
+
+def save_habits(engine: Engine, habits: ShopHabits, instrument: str) -> None:
+    """Store ``habits`` (of a named shop) in the database; earlier readings are kept."""
+    if not habits.shop:
+        raise FlakelabError("shop habits: name the shop whose habits are stored (--shop)")
+    with Session(engine) as session, session.begin():
+        session.add(
+            HabitsRow(
+                shop=habits.shop,
+                model=habits.model,
+                instrument=instrument,
+                report=habits.report(),
+                created_at=datetime.now(UTC),
+            )
+        )
+
+
+def stored_habits(engine: Engine, shop: str, model: str = "") -> ShopHabits:
+    """The latest habits stored for ``shop``: those measured against ``model`` when there
+    are any, else the latest against any model (check :attr:`ShopHabits.model`)."""
+    with Session(engine) as session:
+        rows = session.scalars(
+            select(HabitsRow).where(HabitsRow.shop == shop).order_by(HabitsRow.id.desc())
+        ).all()
+    if not rows:
+        raise FlakelabError(
+            f"{engine.url}: no habits stored for shop {shop!r}; read them from its cases with "
+            f"flakelab cases habits CASES --shop {shop!r} --save"
+        )
+    row = next((r for r in rows if r.model == model), rows[0])
+    return ShopHabits.from_report(row.report)
+
+
+def list_habits(engine: Engine) -> list[dict]:
+    """The latest stored habits of every shop, with when they were read."""
+    with Session(engine) as session:
+        rows = session.scalars(select(HabitsRow).order_by(HabitsRow.id)).all()
+        latest = {r.shop: r for r in rows}
+        return [
+            r.report | {"instrument": r.instrument, "created_at": r.created_at.isoformat()}
+            for r in latest.values()
+        ]

@@ -9,6 +9,7 @@ with the weights. Log reflectance makes the loss relative, as colour differences
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from collections.abc import Mapping, Sequence
@@ -174,6 +175,18 @@ class ForwardModel:
             for start in range(0, x.shape[0], batch):
                 out.append(self.torch_forward(torch.from_numpy(x[start : start + batch])).numpy())
         return self.decode_targets(np.concatenate(out).astype(float))
+
+    @property
+    def fingerprint(self) -> str:
+        """12 hex digits of the SHA-256 of the weights and normalisation: tells a model from
+        its adapted or retrained versions, which keep its name."""
+        digest = hashlib.sha256()
+        for key, tensor in sorted(self.network.state_dict().items()):
+            digest.update(key.encode())
+            digest.update(tensor.detach().cpu().numpy().astype("<f4").tobytes())
+        for key in ("x_mean", "x_std", "y_mean", "y_std"):
+            digest.update(np.asarray(getattr(self, key), "<f4").tobytes())
+        return digest.hexdigest()[:12]
 
     # -- storage -------------------------------------------------------------------------
     def to_bytes(self) -> bytes:
