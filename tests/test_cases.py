@@ -11,10 +11,16 @@ import numpy as np
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
-from sqlalchemy import inspect
+from sqlalchemy import create_engine, inspect
 
 from flakelab.cases.case import Case, CaseError
-from flakelab.cases.database import add_cases, count_cases, iter_cases, open_database
+from flakelab.cases.database import (
+    add_cases,
+    count_cases,
+    iter_cases,
+    migrate,
+    open_database,
+)
 from flakelab.cases.exchange import read_cases, write_cases
 from flakelab.cases.generator import World
 from flakelab.cases.schema import Base
@@ -103,6 +109,17 @@ def test_database_round_trip_and_migrations(cases, tmp_path):
     back = list(iter_cases(engine))
     assert [c.case_id for c in back] == [c.case_id for c in cases]
     np.testing.assert_allclose(back[3].sprayout, cases[3].sprayout, rtol=1e-6)
+
+
+def test_an_older_database_is_migrated_with_its_cases(cases, tmp_path):
+    url = f"sqlite:///{tmp_path / 'old.db'}"
+    engine = create_engine(url)
+    migrate(engine, "0001")  # the first release's schema: no shop habits
+    assert "shop_habits" not in inspect(engine).get_table_names()
+    add_cases(engine, cases[:7])
+    engine = open_database(url)
+    assert "shop_habits" in inspect(engine).get_table_names()
+    assert [c.case_id for c in iter_cases(engine)] == [c.case_id for c in cases[:7]]
 
 
 def test_a_duplicate_case_stores_nothing(cases, tmp_path):

@@ -27,6 +27,7 @@ from flakelab.errors import FlakelabError
 __all__ = [
     "default_url",
     "open_database",
+    "migrate",
     "add_cases",
     "iter_cases",
     "count_cases",
@@ -71,17 +72,22 @@ def open_database(url: str | os.PathLike | None = None) -> Engine:
         engine = create_engine(url)
         if engine.dialect.name == "sqlite":
             event.listen(engine, "connect", _sqlite_pragmas)
-        config = Config()
-        config.set_main_option("script_location", str(MIGRATIONS))
-        with engine.begin() as connection:
-            config.attributes["connection"] = connection
-            command.upgrade(config, "head")
+        migrate(engine)
     except SQLAlchemyError as error:
         raise DatabaseError(
             f"{url}: cannot open the database: {error.__class__.__name__}: "
             f"{str(error).splitlines()[0]}"
         ) from None
     return engine
+
+
+def migrate(engine: Engine, revision: str = "head") -> None:
+    """Bring the database's schema to ``revision`` through the shipped migrations."""
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS))
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.upgrade(config, revision)
 
 
 def _row(case: Case) -> CaseRow:
