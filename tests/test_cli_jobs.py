@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from flakelab.data import example_path
@@ -139,9 +140,14 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     assert run.returncode == 0, run.stderr
     run = flakelab("cases", "generate", "--n", "100", "--seed", "24", "--out", cases)
     assert run.returncode == 0, run.stderr
-    run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json")
+    figure = tmp_path / "habits.png"
+    run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json",
+                   "--plot", str(figure))  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
+    explained = report["explained"]
+    assert np.mean(explained["de00_habits"]) < 0.8 * np.mean(explained["de00_model"])
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert report["cases"] == 300 and report["shop"] == "shop A"
     assert report["flake_spread"] == pytest.approx(-0.04, abs=0.006)
     assert report["instrument_gain"] == pytest.approx(0.005, abs=0.003)

@@ -242,13 +242,17 @@ def habits(
             "--save", help="Store them in the database for the shop (match/correct --shop)."
         ),
     ] = False,
+    plot: Annotated[
+        Path | None,
+        typer.Option(help="Figure (PNG/PDF/SVG): the spray-outs' offsets and the habits'."),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """A shop's habits from its spray-outs: mean film build, flake alignment and instrument
     gain against the model's cases (by the physics of application)."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
-    from flakelab.match.habits import estimate_habits, save_habits, write_habits
+    from flakelab.match.habits import estimate_habits, habits_fit, save_habits, write_habits
     from flakelab.match.models import forward_for
     from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import case_arrays
@@ -267,11 +271,20 @@ def habits(
         estimate_habits(forward, lib, data.x, data.R),
         shop=shop or (shops.pop() if len(shops) == 1 else None),
     )
+    fit = habits_fit(forward, lib, found, data.x, data.R)
     if out is not None:
         write_habits(found, out)
     if save:
         save_habits(open_database(database), found, learned.instrument)
-    report = found.report() | {"file": str(out) if out else None, "saved": save}
+    if plot is not None:
+        from flakelab.render.plots import plot_habits
+
+        plot_habits(fit, plot, title=f"Habits of {found.shop or cases}: {found.describe()}")
+    report = found.report() | {
+        "file": str(out) if out else None,
+        "saved": save,
+        "explained": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in fit.items()},
+    }
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -289,12 +302,25 @@ def habits(
     for name, key, meaning, fmt in rows:
         table.add_row(name, f"{report[key]:+{fmt}}", f"{report[key + '_se']:{fmt}}", meaning)
     console.print(table)
+    console.print(_explained_table(fit))
     errors.print(
         f"from {found.cases} spray-outs"
         + (f"; written to {out}" if out else "")
         + (f"; stored for {found.shop!r}" if save else ""),
         highlight=False,
     )
+
+
+def _explained_table(fit: dict) -> Table:
+    """Per geometry: the spray-outs' mean ΔE00 from the model alone and with the habits."""
+    table = Table(title="Mean ΔE00 of the spray-outs from the model")
+    table.add_column("")
+    for name in [*fit["geometries"], "mean"]:
+        table.add_column(name, justify="right")
+    for label, key in (("model alone", "de00_model"), ("with the habits", "de00_habits")):
+        values = [*fit[key], fit[key].mean()]
+        table.add_row(label, *(f"{v:.2f}" for v in values))
+    return table
 
 
 @cases_app.command("shops")

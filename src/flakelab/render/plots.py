@@ -1,4 +1,5 @@
-"""Plots of multi-angle measurements: spectra per geometry, L* and C* versus aspecular angle."""
+"""Plots of multi-angle measurements: spectra per geometry, L* and C* versus aspecular angle;
+the scaling experiment; a shop's habits against its spray-outs."""
 
 from __future__ import annotations
 
@@ -12,10 +13,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E402
+from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
-__all__ = ["plot_measurements", "plot_scaling"]
+__all__ = ["plot_measurements", "plot_scaling", "plot_habits"]
 
 
 def plot_measurements(
@@ -127,6 +129,37 @@ def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
     )
     span.legend(fontsize=7)
     figure.suptitle(f"Scaling experiment, orientation spread {series.spread_deg:g}°")
+    figure.tight_layout()
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
+    plt.close(figure)
+
+
+def plot_habits(fit: dict, path: str | PathLike, *, title: str = "", dpi: int = 120) -> None:
+    """What a shop's habits explain (:func:`~flakelab.match.habits.habits_fit`): the mean
+    ΔL*, Δa*, Δb* of its spray-outs from the model (points) and the habits' mean offset (line)
+    against aspecular angle, and the mean ΔE00 per geometry from the model alone and with
+    the habits."""
+    names = fit["geometries"]
+    aspecular = np.array([Geometry.parse(n).aspecular for n in names])
+    order = np.argsort(aspecular)
+    figure, axes = plt.subplots(1, 4, figsize=(16, 3.8))
+    for axis in axes[1:3]:  # one scale: a small Δa* is not drawn as large as ΔL*
+        axis.sharey(axes[0])
+    for k, (axis, label) in enumerate(zip(axes[:3], ("ΔL*", "Δa*", "Δb*"), strict=True)):
+        axis.axhline(0, color="0.7", lw=0.8)
+        axis.plot(aspecular[order], fit["offset_measured"][order, k], "o", label="spray-outs")
+        axis.plot(aspecular[order], fit["offset_habits"][order, k], "-", label="habits")
+        axis.set(xlabel="aspecular angle [°]", ylabel=f"mean {label} from the model")
+    axes[0].legend(fontsize=8)
+    bars = axes[3]
+    position = np.arange(len(names))
+    bars.bar(position - 0.2, fit["de00_model"][order], 0.4, label="model alone")
+    bars.bar(position + 0.2, fit["de00_habits"][order], 0.4, label="with the habits")
+    bars.set_xticks(position, [names[i] for i in order], rotation=45, fontsize=8)
+    bars.set(ylabel="mean ΔE00 of the spray-outs")
+    bars.legend(fontsize=8)
+    figure.suptitle(title or f"Shop habits against {fit['cases']} spray-outs")
     figure.tight_layout()
     fmt = Path(path).suffix.lstrip(".") or "png"
     write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
