@@ -138,8 +138,15 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
                    "--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005",
                    "--out", cases)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = flakelab("cases", "generate", "--n", "100", "--seed", "24", "--out", cases)
+    run = flakelab("cases", "generate", "--n", "100", "--seed", "24", "--out", cases,
+                   "--start", "2026-06-01")  # fmt: skip
     assert run.returncode == 0, run.stderr
+    run = flakelab("cases", "habits", cases, "--since", "2026-06-01", "--json")
+    assert run.returncode == 0, run.stderr
+    assert (json.loads(run.stdout)["cases"], json.loads(run.stdout)["shop"]) == (
+        100,
+        "synthetic shop",
+    )
     figure = tmp_path / "habits.png"
     run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json",
                    "--plot", str(figure))  # fmt: skip
@@ -149,6 +156,7 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     assert np.mean(explained["de00_habits"]) < 0.8 * np.mean(explained["de00_model"])
     assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert report["cases"] == 300 and report["shop"] == "shop A"
+    assert report["drift"]["changed"] == []  # the same habits in both halves of its cases
     assert report["flake_spread"] == pytest.approx(-0.04, abs=0.006)
     assert report["instrument_gain"] == pytest.approx(0.005, abs=0.003)
     assert json.loads(habits.read_text())["flake_spread"] == report["flake_spread"]

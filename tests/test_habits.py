@@ -17,8 +17,10 @@ from flakelab.io import read_library
 from flakelab.match.correction import aim_off, correct
 from flakelab.match.evaluate import worst_de00
 from flakelab.match.habits import (
+    DRIFT_Z,
     ShopHabits,
     estimate_habits,
+    habits_drift,
     habits_fit,
     list_habits,
     read_habits,
@@ -102,6 +104,24 @@ def test_the_habits_explain_the_shops_flop_and_nothing_where_it_has_none(
     data, found = plain_shop
     fit = habits_fit(forward, library, found, data.x, data.R)
     assert fit["de00_habits"].mean() == pytest.approx(fit["de00_model"].mean(), rel=0.02)
+
+
+def test_a_change_of_habits_over_the_cases_is_seen_and_a_steady_shop_is_not(
+    shipped, habits_shop, plain_shop
+):
+    library, forward, _ = shipped
+    steady = habits_drift(forward, library, habits_shop[0].x, habits_shop[0].R)
+    assert not steady["changed"].any()
+    # a shop that took to spraying its flakes flatter half-way through its cases
+    before, after = plain_shop[0], habits_shop[0]
+    x = np.concatenate([before.x[:250], after.x[:250]])
+    R = np.concatenate([before.R[:250], after.R[:250]])
+    changed = habits_drift(forward, library, x, R)
+    assert changed["changed"][1] and changed["z"][1] < -DRIFT_Z  # flake spread, flatter
+    assert changed["late"].flake_spread == pytest.approx(TRUE_SPREAD, abs=0.006)
+    assert abs(changed["early"].flake_spread) < 0.006
+    with pytest.raises(FlakelabError, match="at least 100"):
+        habits_drift(forward, library, x[:60], R[:60])
 
 
 def test_too_few_sprayouts_are_refused(shipped):

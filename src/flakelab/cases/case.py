@@ -27,7 +27,8 @@ class CaseError(FlakelabError):
 @dataclass(frozen=True, eq=False)
 class Case:
     """Spectra on the storage grid, ``[G, 31]`` reflectance factors; ``recipe`` maps toner
-    names to mass fractions (summing to 1); textures map :data:`TEXTURE_READINGS` names."""
+    names to mass fractions (summing to 1); textures map :data:`TEXTURE_READINGS` names;
+    ``created_at`` without a time zone is taken as UTC."""
 
     case_id: str
     geometries: tuple[Geometry, ...]
@@ -64,6 +65,8 @@ class Case:
             raise CaseError(f"{where}: recipe: expected non-negative amounts with a positive sum")
         total = sum(amounts.values())
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
+        if self.created_at.tzinfo is None:  # SQLite and some case files keep no zone
+            object.__setattr__(self, "created_at", self.created_at.replace(tzinfo=UTC))
         if self.outcome not in OUTCOMES:
             raise CaseError(
                 f"{where}: outcome: expected one of {', '.join(OUTCOMES)}, got {self.outcome!r}"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import replace
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -38,6 +39,21 @@ DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
 CasesArgument = Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")]
 ShopOption = Annotated[
     str | None, typer.Option(help="Only this shop's cases (default: every case given).")
+]
+SinceOption = Annotated[
+    datetime | None,
+    typer.Option(
+        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
+        help="Only cases made on or after this date (UTC), e.g. since the shop's new gun.",
+    ),
+]
+StartOption = Annotated[
+    datetime | None,
+    typer.Option(
+        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
+        help="Date and time (UTC) of the first generated case.",
+        show_default="2026-01-01",
+    ),
 ]
 ModelFileOption = Annotated[
     str | None, typer.Option("--model", "-m", help="Model file (default: current).")
@@ -79,17 +95,23 @@ def load_cases(source: str) -> list:
     return list(iter_cases(open_database(source)))
 
 
-def shop_cases(source: str, shop: str | None, geometries) -> list:
-    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries``."""
+def shop_cases(source: str, shop: str | None, geometries, since: datetime | None = None) -> list:
+    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries``, made
+    at or after ``since`` (None: any time; without a zone: UTC)."""
+    if since is not None and since.tzinfo is None:
+        since = since.replace(tzinfo=UTC)
     chosen = [
         c
         for c in load_cases(source)
-        if c.geometry_names == tuple(geometries) and (shop is None or c.shop == shop)
+        if c.geometry_names == tuple(geometries)
+        and (shop is None or c.shop == shop)
+        and (since is None or c.created_at >= since)
     ]
     if not chosen:
         whose = f"shop {shop!r}" if shop else "any shop"
+        when = f" since {since.isoformat()}" if since else ""
         raise FlakelabError(
-            f"{source}: no cases from {whose} with the model's geometries {tuple(geometries)}"
+            f"{source}: no cases from {whose}{when} with the model's geometries {tuple(geometries)}"
         )
     return chosen
 
@@ -127,6 +149,7 @@ def generate(
             min=-0.05, max=0.05, help="The shop instrument's gain against the reference's."
         ),
     ] = 0.0,
+    start: StartOption = None,
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
     from flakelab.cases.database import add_cases, open_database
@@ -143,7 +166,8 @@ def generate(
     collected = []
     with progress_bar() as bar:
         task = bar.add_task("generating cases", total=n)
-        for batch in world.cases(n, seed, shop=shop):
+        first = start and (start if start.tzinfo else start.replace(tzinfo=UTC))
+        for batch in world.cases(n, seed, shop=shop, start=first):
             if to_file:
                 collected.extend(batch)
             else:
@@ -228,6 +252,7 @@ def realism(
 def habits(
     cases: CasesArgument,
     shop: ShopOption = None,
+    since: SinceOption = None,
     model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
@@ -252,7 +277,14 @@ def habits(
     gain against the model's cases (by the physics of application)."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
-    from flakelab.match.habits import estimate_habits, habits_fit, save_habits, write_habits
+    from flakelab.match.habits import (
+        MIN_DRIFT_CASES,
+        estimate_habits,
+        habits_drift,
+        habits_fit,
+        save_habits,
+        write_habits,
+    )
     from flakelab.match.models import forward_for
     from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import case_arrays
@@ -262,7 +294,7 @@ def habits(
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
     forward = forward_for(learned, lib)
-    chosen = shop_cases(cases, shop, learned.geometries)
+    chosen = sorted(shop_cases(cases, shop, learned.geometries, since), key=_made)
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
@@ -272,6 +304,7 @@ def habits(
         shop=shop or (shops.pop() if len(shops) == 1 else None),
     )
     fit = habits_fit(forward, lib, found, data.x, data.R)
+    drift = habits_drift(forward, lib, data.x, data.R) if len(chosen) >= MIN_DRIFT_CASES else None
     if out is not None:
         write_habits(found, out)
     if save:
@@ -284,6 +317,7 @@ def habits(
         "file": str(out) if out else None,
         "saved": save,
         "explained": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in fit.items()},
+        "drift": drift and _drift_report(drift, chosen),
     }
     if json_output:
         print(json.dumps(report, indent=2))
@@ -303,12 +337,40 @@ def habits(
         table.add_row(name, f"{report[key]:+{fmt}}", f"{report[key + '_se']:{fmt}}", meaning)
     console.print(table)
     console.print(_explained_table(fit))
+    if report["drift"] and report["drift"]["changed"]:
+        errors.print(f"[yellow]warning:[/] {report['drift']['message']}", highlight=False)
     errors.print(
         f"from {found.cases} spray-outs"
         + (f"; written to {out}" if out else "")
         + (f"; stored for {found.shop!r}" if save else ""),
         highlight=False,
     )
+
+
+def _made(case):
+    return case.created_at
+
+
+def _drift_report(drift: dict, chosen: list) -> dict:
+    """The habits of the earlier and later half of the cases, and what changed between."""
+    split = chosen[len(chosen) // 2].created_at
+    names = ("film_build", "flake_spread", "instrument_gain")
+    changed = [n for n, c in zip(names, drift["changed"], strict=True) if c]
+    early, late = drift["early"].report(), drift["late"].report()
+    message = (
+        "the habits changed over these cases: "
+        + ", ".join(f"{n.replace('_', ' ')} {early[n]:+.2%} → {late[n]:+.2%}" for n in changed)
+        + f" (before and after {split:%Y-%m-%d %H:%M}); read them from the recent cases "
+        "with --since"
+    )
+    return {
+        "split_at": split.isoformat(),
+        "early": early,
+        "late": late,
+        "z": dict(zip(names, drift["z"].round(2).tolist(), strict=True)),
+        "changed": changed,
+        "message": message if changed else None,
+    }
 
 
 def _explained_table(fit: dict) -> Table:
@@ -544,6 +606,7 @@ def evaluate(
 def adapt(
     cases: CasesArgument,
     shop: ShopOption = None,
+    since: SinceOption = None,
     model: ModelFileOption = None,
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
@@ -586,7 +649,7 @@ def adapt(
     lib = read_library(library)
     engine = open_database(database) if register_model else _maybe_engine(database)
     base = load_model_file(model) if model else current_model(engine, instrument)
-    chosen = shop_cases(cases, shop, base.geometries)
+    chosen = shop_cases(cases, shop, base.geometries, since)
     novel = set(base.info.get("novel_toners", ()))
     known = [c for c in chosen if not novel & set(c.recipe)]
     data, held_out = split_held_out(known, cases, holdout, seed, lib)
