@@ -3,7 +3,8 @@
 The shop (by default ``SHOP_WITH_HABITS``: 5 % more film, flakes 4 % flatter, instrument
 0.5 % high) gives its first N cases (``--cases``); its habits are estimated against the
 shipped model (``flakelab cases habits``' library call), for ``--repeats`` draws of the
-shop's cases. Each estimate is judged two ways:
+shop's cases, with the prior ``PRIOR_SD`` (``--no-prior``: without). Each estimate is judged
+two ways:
 
 * against the truth: the habits' mean ± s.d. over the draws, and the share of draws whose
   truth lies within two standard errors the estimate states (its coverage);
@@ -14,7 +15,8 @@ shop's cases. Each estimate is judged two ways:
 That last figure compares with ``benchmarks/adaptation.py``, which retrains the network on
 the same shop's cases. ``--no-habits`` runs a shop without habits of its own.
 
-    python benchmarks/habits.py [--cases 20,50,100,200,500,2000] [--repeats 5] [--json]
+    python benchmarks/habits.py [--cases 20,50,100,200,500,2000] [--repeats 5] [--no-prior]
+        [--no-habits] [--json]
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
-from flakelab.match.habits import ShopHabits, estimate_habits
+from flakelab.match.habits import PRIOR_SD, ShopHabits, estimate_habits
 from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import CaseArrays, generated_case_arrays
@@ -58,9 +60,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="draws of the shop's cases")
     parser.add_argument("--seed", type=int, default=21, help="seed of the first draw")
     parser.add_argument("--no-habits", action="store_true", help="a shop like the world")
+    parser.add_argument("--no-prior", action="store_true", help="read without PRIOR_SD")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     sizes = seeds_from(args.cases)
+    prior = None if args.no_prior else PRIOR_SD
 
     library = read_library(None)
     model = shipped_model("five-angle")
@@ -79,6 +83,7 @@ def main() -> None:
     true_habits = ShopHabits(truth, np.zeros(3), 0)
     report = {
         "shop": habits or "no habits",
+        "prior_sd": None if prior is None else prior.tolist(),
         "test_cases": args.test,
         "model_alone_de00": error(forward, library, test, None),
         "true_habits_de00": error(forward, library, test, true_habits),
@@ -89,7 +94,7 @@ def main() -> None:
         for cases in draws:
             cases = cases.subset(np.arange(n))
             start = time.perf_counter()
-            found = estimate_habits(forward, library, cases.x, cases.R)
+            found = estimate_habits(forward, library, cases.x, cases.R, prior_sd=prior)
             seconds.append(time.perf_counter() - start)
             estimates.append((found.theta, found.standard_error))
             errors.append(error(forward, library, test, found))

@@ -18,7 +18,9 @@ from flakelab.match.correction import aim_off, correct
 from flakelab.match.evaluate import worst_de00
 from flakelab.match.habits import (
     DRIFT_Z,
+    PRIOR_SD,
     ShopHabits,
+    _with_prior,
     estimate_habits,
     habits_drift,
     habits_fit,
@@ -104,6 +106,38 @@ def test_the_habits_explain_the_shops_flop_and_nothing_where_it_has_none(
     data, found = plain_shop
     fit = habits_fit(forward, library, found, data.x, data.R)
     assert fit["de00_habits"].mean() == pytest.approx(fit["de00_model"].mean(), rel=0.02)
+
+
+def test_the_prior_draws_a_small_shops_habits_towards_none(shipped, plain_shop, habits_shop):
+    library, forward, _ = shipped
+    few = plain_shop[0].subset(np.arange(20))
+    free = estimate_habits(forward, library, few.x, few.R, prior_sd=None)
+    drawn = estimate_habits(forward, library, few.x, few.R)
+    vague = estimate_habits(forward, library, few.x, few.R, prior_sd=np.full(3, 1e6))
+    np.testing.assert_allclose(vague.theta, free.theta, atol=1e-9)
+    assert np.all(drawn.standard_error < free.standard_error)
+    # the least well read habit, drawn in nearly as one number alone would be: by
+    # prior² / (prior² + se²) (0.93 here; its correlation with the others moves it by 1 %)
+    shrink = PRIOR_SD[0] ** 2 / (PRIOR_SD[0] ** 2 + free.standard_error[0] ** 2)
+    assert drawn.film_build / free.film_build == pytest.approx(shrink, rel=0.03)
+    assert abs(drawn.film_build) < abs(free.film_build)
+    # with 500 spray-outs the prior weighs (almost) nothing
+    many = habits_shop[0]
+    free = estimate_habits(forward, library, many.x, many.R, prior_sd=None)
+    drawn = habits_shop[1]
+    assert np.all(np.abs(drawn.theta - free.theta) < 0.2 * free.standard_error)
+
+
+def test_the_prior_combines_as_least_squares_with_the_prior_as_observations():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(3, 3))
+    covariance, theta, prior_sd = A @ A.T * 1e-3 + 1e-4 * np.eye(3), rng.normal(size=3), 0.05
+    mean, posterior = _with_prior(theta, covariance, np.full(3, prior_sd))
+    root = np.linalg.cholesky(np.linalg.inv(covariance)).T  # rootᵀ root = covariance⁻¹
+    design = np.vstack([root, np.eye(3) / prior_sd])
+    solution = np.linalg.lstsq(design, np.concatenate([root @ theta, np.zeros(3)]), rcond=None)
+    np.testing.assert_allclose(mean, solution[0], rtol=1e-10)
+    np.testing.assert_allclose(posterior, np.linalg.inv(design.T @ design), rtol=1e-10)
 
 
 def test_a_change_of_habits_over_the_cases_is_seen_and_a_steady_shop_is_not(

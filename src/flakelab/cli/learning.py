@@ -271,6 +271,13 @@ def habits(
         Path | None,
         typer.Option(help="Figure (PNG/PDF/SVG): the spray-outs' offsets and the habits'."),
     ] = None,
+    prior: Annotated[
+        bool,
+        typer.Option(
+            "--prior/--no-prior",
+            help="Draw habits read from few spray-outs towards none (PRIOR_SD).",
+        ),
+    ] = True,
     json_output: JsonOption = False,
 ) -> None:
     """A shop's habits from its spray-outs: mean film build, flake alignment and instrument
@@ -279,6 +286,7 @@ def habits(
     from flakelab.io import read_library
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
+        PRIOR_SD,
         estimate_habits,
         habits_drift,
         habits_fit,
@@ -300,7 +308,7 @@ def habits(
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
     data = case_arrays(chosen, lib.names)
     found = replace(
-        estimate_habits(forward, lib, data.x, data.R),
+        estimate_habits(forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None),
         shop=shop or (shops.pop() if len(shops) == 1 else None),
     )
     fit = habits_fit(forward, lib, found, data.x, data.R)

@@ -17,7 +17,9 @@ sprayed at θ, and e_i ~ N(0, S_i Σ_a S_iᵀ + (σ_p² + σ_n²) I): the spray'
 model's error and the reading (:data:`~flakelab.match.correction.PERSISTENT_SD`,
 :data:`~flakelab.match.correction.NOISE_SD`). f is not linear over a few sigmas of film build:
 Gauss–Newton relinearises it at θ. Standard errors are the sandwich (robust) estimate,
-since the persistent offsets are heavy-tailed, not Gaussian.
+since the persistent offsets are heavy-tailed, not Gaussian. The estimate is then combined
+with a prior, no habits ± :data:`PRIOR_SD`, by precisions: a small shop's poorly read film
+build is drawn towards none.
 
 Where a model was adapted to the shop, it learned the habits already: measured against it,
 they come out near zero. The correction and the matcher take them as the shop's mean
@@ -51,6 +53,7 @@ __all__ = [
     "ShopHabits",
     "HABITS_FORMAT",
     "MIN_HABIT_CASES",
+    "PRIOR_SD",
     "estimate_habits",
     "habits_fit",
     "habits_drift",
@@ -68,6 +71,12 @@ HABITS_FORMAT = "flakelab-shop-habits"
 
 MIN_HABIT_CASES = 20
 """Fewer spray-outs than this cannot tell three habits from one batch's or spray's accident."""
+
+PRIOR_SD = np.array([0.10, 0.10, 0.01])
+"""How far a shop's habits may lie from the model's cases before any of its spray-outs are
+read (film build, log flake spread, instrument gain): a tenth more or less film or flake
+spread, a per cent of gain. With few spray-outs the film build, which only low-hiding
+colours show, is drawn towards none; with hundreds the prior weighs nothing."""
 
 _STEP = np.array([0.01, 0.01, 0.001])
 """Central-difference steps for the habits' Jacobian (film, log spread, gain)."""
@@ -175,10 +184,11 @@ def estimate_habits(
     *,
     persistent_sd: float = PERSISTENT_SD,
     noise_sd: float = NOISE_SD,
+    prior_sd: NDArray | None = PRIOR_SD,
 ) -> ShopHabits:
     """The habits of the shop whose recipes ``fractions[N, T]`` (in ``forward``'s toner
     order) measured ``sprayouts[N, G, 31]``, against ``forward``'s predictions (module
-    notes)."""
+    notes), drawn towards none by ``prior_sd`` (:data:`PRIOR_SD`; None: no prior)."""
     N = len(fractions)
     if N < MIN_HABIT_CASES:
         raise FlakelabError(
@@ -206,7 +216,17 @@ def estimate_habits(
     scores = np.einsum("ndk,nd->nk", weighted, r - S @ step)
     H_inv = np.linalg.inv(H)
     covariance = H_inv @ (scores.T @ scores) @ H_inv
+    if prior_sd is not None:
+        theta, covariance = _with_prior(theta, covariance, np.asarray(prior_sd, float))
     return ShopHabits(theta, np.sqrt(np.diag(covariance)), N, getattr(forward, "model_id", ""))
+
+
+def _with_prior(theta: NDArray, covariance: NDArray, prior_sd: NDArray):
+    """The estimate ``theta`` (``covariance``) combined with the prior N(0, diag(prior_sd²))
+    by their precisions (the Gaussian posterior's mean and covariance)."""
+    precision = np.linalg.inv(covariance)
+    posterior = np.linalg.inv(precision + np.diag(prior_sd**-2.0))
+    return posterior @ precision @ theta, posterior
 
 
 DRIFT_Z = 4.0
@@ -238,8 +258,8 @@ def habits_drift(
             "to tell whether the habits changed"
         )
     half = len(fractions) // 2
-    early = estimate_habits(forward, library, fractions[:half], sprayouts[:half])
-    late = estimate_habits(forward, library, fractions[half:], sprayouts[half:])
+    early = estimate_habits(forward, library, fractions[:half], sprayouts[:half], prior_sd=None)
+    late = estimate_habits(forward, library, fractions[half:], sprayouts[half:], prior_sd=None)
     z = (late.theta - early.theta) / np.hypot(early.standard_error, late.standard_error)
     return {"early": early, "late": late, "z": z, "changed": np.abs(z) > DRIFT_Z}
 
