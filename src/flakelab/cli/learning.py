@@ -6,6 +6,7 @@ import json
 import os
 from dataclasses import replace
 from datetime import UTC, datetime
+from operator import attrgetter
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -302,7 +303,8 @@ def habits(
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
     forward = forward_for(learned, lib)
-    chosen = sorted(shop_cases(cases, shop, learned.geometries, since), key=_made)
+    chosen = shop_cases(cases, shop, learned.geometries, since)
+    chosen.sort(key=attrgetter("created_at"))  # in the order made: the change check halves it
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
@@ -355,15 +357,12 @@ def habits(
     )
 
 
-def _made(case):
-    return case.created_at
-
-
 def _drift_report(drift: dict, chosen: list) -> dict:
     """The habits of the earlier and later half of the cases, and what changed between."""
+    from flakelab.match.habits import HABITS
+
     split = chosen[len(chosen) // 2].created_at
-    names = ("film_build", "flake_spread", "instrument_gain")
-    changed = [n for n, c in zip(names, drift["changed"], strict=True) if c]
+    changed = [n for n, c in zip(HABITS, drift["changed"], strict=True) if c]
     early, late = drift["early"].report(), drift["late"].report()
     message = (
         "the habits changed over these cases: "
@@ -375,7 +374,7 @@ def _drift_report(drift: dict, chosen: list) -> dict:
         "split_at": split.isoformat(),
         "early": early,
         "late": late,
-        "z": dict(zip(names, drift["z"].round(2).tolist(), strict=True)),
+        "z": dict(zip(HABITS, drift["z"].round(2).tolist(), strict=True)),
         "changed": changed,
         "message": message if changed else None,
     }

@@ -54,6 +54,7 @@ __all__ = [
     "HABITS_FORMAT",
     "MIN_HABIT_CASES",
     "PRIOR_SD",
+    "HABITS",
     "estimate_habits",
     "habits_fit",
     "habits_drift",
@@ -71,6 +72,9 @@ HABITS_FORMAT = "flakelab-shop-habits"
 
 MIN_HABIT_CASES = 20
 """Fewer spray-outs than this cannot tell three habits from one batch's or spray's accident."""
+
+HABITS = ("film_build", "flake_spread", "instrument_gain")
+"""The habits' names in :meth:`ShopHabits.report`, in the order of ``theta``."""
 
 PRIOR_SD = np.array([0.10, 0.10, 0.01])
 """How far a shop's habits may lie from the model's cases before any of its spray-outs are
