@@ -160,6 +160,14 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     assert report["flake_spread"] == pytest.approx(-0.04, abs=0.006)
     assert report["instrument_gain"] == pytest.approx(0.005, abs=0.003)
     assert json.loads(habits.read_text())["flake_spread"] == report["flake_spread"]
+    # the habits added to the model's predictions of the shop's cases (and the other's)
+    evaluated = {}
+    for extra in ((), ("--habits", str(habits))):
+        run = flakelab("model", "evaluate", cases, "--json", *extra)
+        assert run.returncode == 0, run.stderr
+        evaluated[bool(extra)] = json.loads(run.stdout)
+    assert evaluated[True]["habits"]["shop"] == "shop A" and evaluated[False]["habits"] is None
+    assert evaluated[True]["de00_mean"] < 0.9 * evaluated[False]["de00_mean"]
     text = flakelab("cases", "habits", cases, "--shop", "shop A")
     assert text.returncode == 0 and "flakes lie flatter" in text.stdout
 

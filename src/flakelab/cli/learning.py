@@ -572,6 +572,14 @@ def evaluate(
     instrument: InstrumentOption = "five-angle",
     library: LibraryOption = None,
     database: DatabaseOption = None,
+    habits: Annotated[
+        Path | None,
+        typer.Option(
+            "--habits",
+            help="A shop's habits file ('flakelab cases habits --out'): its offset is added "
+            "to the predictions, as the matcher aims off for it.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs."""
@@ -586,21 +594,29 @@ def evaluate(
     chosen = [c for c in load_cases(cases) if c.geometry_names == forward.geometries]
     if not chosen:
         raise FlakelabError(f"{cases}: no cases with the model's geometries {forward.geometries}")
+    from flakelab.cli.matching import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.models import forward_for
     from flakelab.match.search import evaluate_recipes
 
     matcher = forward_for(forward, lib)
     data = case_arrays(chosen, lib.names)
+    shop_habits = habits_for(habits, None, database, matcher)
+
+    def habits_offset(x, R):
+        return shop_habits.offset(lib, x, R, matcher.geometries)
+
+    offset = habits_offset if shop_habits else None
     if isinstance(matcher, LearnedForward) and matcher.novel:
-        report = evaluate_model(forward, data, lambda x: evaluate_recipes(matcher, x))
+        report = evaluate_model(forward, data, lambda x: evaluate_recipes(matcher, x), offset)
         novel = np.isin(np.array(lib.names), matcher.novel)
         report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
         report["new_toners"] = list(matcher.novel)
     else:
-        report = evaluate_model(forward, data)
+        report = evaluate_model(forward, data, lab_offset=offset)
     report["model"] = model or f"current {instrument}"
     report["forward"] = matcher.name
+    report["habits"] = shop_habits and shop_habits.report()
     if json_output:
         print(json.dumps(report, indent=2))
         return

@@ -52,7 +52,7 @@ def _setup(library: Path | None, instrument: str, model: Path | None, database: 
     return lib, forward, effect_mask(lib, forward.toners)
 
 
-def _habits(path: Path | None, shop: str | None, database: str | None, forward):
+def habits_for(path: Path | None, shop: str | None, database: str | None, forward):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``."""
     if path is None and shop is None:
@@ -156,7 +156,7 @@ def match_command(
         effect,
         tolerance=tol,
         settings=MatchSettings(candidates=candidates, seed=seed),
-        habits=_habits(habits, shop, database, forward),
+        habits=habits_for(habits, shop, database, forward),
         library=lib,
     )
     report = result.to_dict()
@@ -229,7 +229,7 @@ def _evaluate(
 
     lib, forward, effect = _setup(library, instrument, model, database)
     world = harness_world(lib, instrument, world_name)
-    habits = _habits(habits_file, shop, database, forward)
+    habits = habits_for(habits_file, shop, database, forward)
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(
@@ -316,7 +316,7 @@ def correct_command(
     extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
-    shop_habits = _habits(habits, shop, database, forward)
+    shop_habits = habits_for(habits, shop, database, forward)
     correction = correct(
         forward,
         target_R,

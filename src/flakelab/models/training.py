@@ -583,10 +583,11 @@ def recorded_config(model: ForwardModel) -> TrainingConfig:
     return replace(TrainingConfig(**recorded), hidden=tuple(model.hidden))
 
 
-def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None) -> dict:
+def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None, lab_offset=None) -> dict:
     """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
     geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
-    model's own prediction (the matcher's hybrid forward, for toners new to the model)."""
+    model's own prediction (the matcher's hybrid forward, for toners new to the model);
+    ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits)."""
     if data.geometries != model.geometries:
         missing = sorted(set(model.geometries) - set(data.geometries))
         if missing:
@@ -597,7 +598,8 @@ def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None) -> dict:
     start = time.perf_counter()
     R, texture = (predict or model.predict)(x)
     seconds = time.perf_counter() - start
-    de = delta_E(reflectance_to_Lab(data.R), reflectance_to_Lab(R))
+    predicted = reflectance_to_Lab(R) + (0.0 if lab_offset is None else lab_offset(x, R))
+    de = delta_E(reflectance_to_Lab(data.R), predicted)
     per_geometry = {
         g: {
             "de00_mean": float(de[:, i].mean()),
