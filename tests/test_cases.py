@@ -15,6 +15,7 @@ from sqlalchemy import create_engine, inspect
 
 from flakelab.cases.case import Case, CaseError
 from flakelab.cases.database import (
+    DatabaseError,
     add_cases,
     count_cases,
     iter_cases,
@@ -120,6 +121,18 @@ def test_an_older_database_is_migrated_with_its_cases(cases, tmp_path):
     engine = open_database(url)
     assert "shop_habits" in inspect(engine).get_table_names()
     assert [c.case_id for c in iter_cases(engine)] == [c.case_id for c in cases[:7]]
+
+
+def test_a_database_that_cannot_be_opened_is_named(tmp_path):
+    junk = tmp_path / "junk.db"
+    junk.write_text("not a database")
+    # a file that is no database, and a server that is not there (or whose driver is not
+    # installed): both named, neither an internal error
+    for url in (junk, "postgresql://nobody@127.0.0.1:1/flakelab"):
+        with pytest.raises(DatabaseError, match="cannot open the database") as error:
+            open_database(url)
+        assert str(url).split("/")[-1] in str(error.value)
+    assert junk.read_text() == "not a database"  # left as it was
 
 
 def test_a_duplicate_case_stores_nothing(cases, tmp_path):

@@ -208,3 +208,16 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     run = flakelab("match", "--example", "--habits", str(bad))
     assert run.returncode == 2 and "bad.json" in run.stderr and "film_build" in run.stderr
     assert "Traceback" not in run.stderr
+
+
+def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
+    # a server that is not there, or whose driver is not installed: named, exit 2
+    run = flakelab("cases", "shops", "--database", "postgresql://nobody@127.0.0.1:1/x")
+    assert run.returncode == 2 and "127.0.0.1:1/x" in run.stderr
+    assert "internal error" not in run.stderr
+    # a message quoting brackets is printed as it is, not read as terminal markup
+    recipe = tmp_path / "recipe.json"
+    recipe.write_text(json.dumps({"[bold]Perylene": 10}))
+    run = flakelab("correct", str(example_path("target")), "--recipe", str(recipe),
+                   "--sprayed", str(example_path("sprayout")))  # fmt: skip
+    assert run.returncode == 2 and "unknown toner '[bold]Perylene'" in run.stderr

@@ -78,6 +78,11 @@ def open_database(url: str | os.PathLike | None = None) -> Engine:
             f"{url}: cannot open the database: {error.__class__.__name__}: "
             f"{str(error).splitlines()[0]}"
         ) from None
+    except ImportError as error:  # the URL's driver (psycopg for PostgreSQL) is not installed
+        raise DatabaseError(
+            f"{url}: cannot open the database: its driver is not installed ({error}); for "
+            "PostgreSQL: pip install 'flakelab[postgres]'"
+        ) from None
     return engine
 
 

@@ -11,6 +11,7 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -40,13 +41,16 @@ def reports_errors(command: F) -> F:
             raise
         except (FlakelabError, ValueError, KeyError, OSError) as error:
             message = error.args[0] if isinstance(error, KeyError) and error.args else error
-            errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+            # escaped: a message may quote brackets (a CSV cell, "flakelab[postgres]")
+            errors.print(
+                f"[bold red]error:[/] {escape(str(message))}", highlight=False, soft_wrap=True
+            )
             raise typer.Exit(2) from None
         except Exception as error:  # pragma: no cover - a bug, reported without a traceback
             if os.environ.get("FLAKELAB_DEBUG"):
                 raise
             errors.print(
-                f"[bold red]internal error:[/] {type(error).__name__}: {error} "
+                f"[bold red]internal error:[/] {type(error).__name__}: {escape(str(error))} "
                 "(set FLAKELAB_DEBUG=1 for a traceback and please report it)",
                 highlight=False,
                 soft_wrap=True,
