@@ -27,14 +27,11 @@ import resource
 import time
 
 import numpy as np
-import torch
 
 from _matcher import seeds_from
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
-from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E
 from flakelab.io import read_library
-from flakelab.match.habits import PRIOR_SD, ShopHabits, estimate_habits
+from flakelab.match.habits import PRIOR_SD, ShopHabits, estimate_habits, habits_fit
 from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import CaseArrays, generated_case_arrays
@@ -43,14 +40,9 @@ KEYS = ("film_build", "log_flake_spread", "instrument_gain")
 """The habits as estimated (``ShopHabits.theta``)."""
 
 
-def error(forward, library, cases: CaseArrays, habits: ShopHabits | None) -> float:
-    """ΔE00 mean of the model's predictions (plus the habits' offset) against the cases."""
-    with torch.no_grad():
-        R = forward(torch.as_tensor(cases.x, dtype=forward.dtype))[0].double().numpy()
-    lab = reflectance_to_Lab(R)
-    if habits is not None:
-        lab = lab + habits.offset(library, cases.x, R, forward.geometries)
-    return float(delta_E(reflectance_to_Lab(cases.R), lab).mean())
+def error(forward, library, cases: CaseArrays, habits: ShopHabits) -> float:
+    """ΔE00 mean of the model's predictions plus the habits' offset against the cases."""
+    return float(habits_fit(forward, library, habits, cases.x, cases.R)["de00_habits"].mean())
 
 
 def main() -> None:
@@ -85,7 +77,7 @@ def main() -> None:
         "shop": habits or "no habits",
         "prior_sd": None if prior is None else prior.tolist(),
         "test_cases": args.test,
-        "model_alone_de00": error(forward, library, test, None),
+        "model_alone_de00": error(forward, library, test, ShopHabits.none()),
         "true_habits_de00": error(forward, library, test, true_habits),
         "rows": [],
     }

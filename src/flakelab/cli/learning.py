@@ -284,7 +284,6 @@ def habits(
     """A shop's habits from its spray-outs: mean film build, flake alignment and instrument
     gain against the model's cases (by the physics of application)."""
     from flakelab.cases.database import open_database
-    from flakelab.io import read_library
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
         PRIOR_SD,
@@ -294,15 +293,10 @@ def habits(
         save_habits,
         write_habits,
     )
-    from flakelab.match.models import forward_for
-    from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import case_arrays
 
-    lib = read_library(library)
-    learned = (
-        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
-    )
-    forward = forward_for(learned, lib)
+    lib, forward = learned_forward(library, instrument, model, database)
+    learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)
     chosen.sort(key=attrgetter("created_at"))  # in the order made: the change check halves it
     shops = {c.shop for c in chosen}
@@ -736,6 +730,20 @@ def _de00_table(title: str, label: str, stats: dict, names=None) -> Table:
             style="bold" if name == names[-1] else None,
         )
     return table
+
+
+def learned_forward(library: Path | None, instrument: str, model, database: str | None):
+    """The toner library and the matcher's forward of the model file ``model``, else of the
+    current model for the instrument (the promoted one in the database, else the shipped)."""
+    from flakelab.io import read_library
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import current_model, load_model_file
+
+    lib = read_library(library)
+    learned = (
+        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
+    )
+    return lib, forward_for(learned, lib)
 
 
 def _maybe_engine(database: str | None):

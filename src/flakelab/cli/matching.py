@@ -11,7 +11,12 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import JsonOption, console, progress_bar
-from flakelab.cli.learning import DatabaseOption, InstrumentOption, LibraryOption, _maybe_engine
+from flakelab.cli.learning import (
+    DatabaseOption,
+    InstrumentOption,
+    LibraryOption,
+    learned_forward,
+)
 from flakelab.errors import FlakelabError
 
 ModelOption = Annotated[
@@ -40,15 +45,9 @@ ToleranceOption = Annotated[
 
 
 def _setup(library: Path | None, instrument: str, model: Path | None, database: str | None):
-    from flakelab.io import read_library
-    from flakelab.match.models import effect_mask, forward_for
-    from flakelab.models.registry import current_model, load_model_file
+    from flakelab.match.models import effect_mask
 
-    lib = read_library(library)
-    learned = (
-        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
-    )
-    forward = forward_for(learned, lib)
+    lib, forward = learned_forward(library, instrument, model, database)
     return lib, forward, effect_mask(lib, forward.toners)
 
 

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
-from flakelab.match.search import multi_angle_loss
+from flakelab.match.search import evaluate_recipes, multi_angle_loss
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
     FILM_BUILD_SD,
@@ -238,8 +238,7 @@ def aim_off(
     ``recipes[K, T]`` (matches by the model, which knows no habits) reformulated with its own
     toners for the habits' offset at it, which persists as a correction's persistent offset
     does."""
-    with torch.no_grad():
-        R = forward(torch.as_tensor(recipes, dtype=forward.dtype))[0].double().numpy()
+    R = evaluate_recipes(forward, recipes)[0]
     expected = habits.offset(library, recipes, R, forward.geometries)
     colour = TorchColour(dtype=forward.dtype)
     x0 = torch.as_tensor(recipes, dtype=forward.dtype)

@@ -35,7 +35,6 @@ from datetime import UTC, datetime
 from os import PathLike
 
 import numpy as np
-import torch
 from numpy.typing import NDArray
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
@@ -47,6 +46,7 @@ from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
+from flakelab.match.search import evaluate_recipes
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
 
 __all__ = [
@@ -199,8 +199,7 @@ def estimate_habits(
             f"shop habits: {N} spray-outs; at least {MIN_HABIT_CASES} are needed to tell "
             "the shop's habits from one spray's accident"
         )
-    with torch.no_grad():
-        R = forward(torch.as_tensor(fractions, dtype=forward.dtype))[0].double().numpy()
+    R = evaluate_recipes(forward, fractions)[0]
     geometries = forward.geometries
     offset = (reflectance_to_Lab(sprayouts) - reflectance_to_Lab(R)).reshape(N, -1)
     spray_sd = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0])
@@ -276,8 +275,7 @@ def habits_fit(
     prediction alone and with the habits' offset, and the mean L*a*b* offset measured and
     the habits' mean offset. On the cases the habits were read from, the ΔE00 with them is
     optimistic by about 3 parameters in N·G·3 values: little."""
-    with torch.no_grad():
-        R = forward(torch.as_tensor(fractions, dtype=forward.dtype))[0].double().numpy()
+    R = evaluate_recipes(forward, fractions)[0]
     predicted, measured = reflectance_to_Lab(R), reflectance_to_Lab(sprayouts)
     offset = habits.offset(library, fractions, R, forward.geometries)
     return {
