@@ -45,6 +45,11 @@ def test_generator_is_reproducible_and_labelled_synthetic(world, cases):
     assert all(c.synthetic for c in cases)
     other = next(world.cases(5, seed=8))
     assert not np.allclose(other[0].target, cases[0].target)
+    # case i is the same whatever n: the first 40 of 300, and cases of a block cut short
+    longer = [c for batch in world.cases(300, seed=7) for c in batch]
+    assert [c.case_id for c in longer[:40]] == [c.case_id for c in cases]
+    np.testing.assert_array_equal(longer[39].sprayout, cases[-1].sprayout)
+    assert longer[280].case_id == next(world.cases(281, seed=7, batch=281))[280].case_id
 
 
 def test_recipes_are_fractions_of_library_toners(world, cases):

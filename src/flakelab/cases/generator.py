@@ -224,15 +224,17 @@ class World:
         pending: list[Case] = []
         for first in range(0, n, CHUNK):
             rng = np.random.default_rng([seed, first // CHUNK])
-            pending += self._batch(min(CHUNK, n - first), rng, shop, start, first, seed)
+            pending += self._batch(rng, shop, start, first)[: n - first]
             while len(pending) >= batch:
                 yield pending[:batch]
                 pending = pending[batch:]
         if pending:
             yield pending
 
-    def _batch(self, size, rng, shop, start, offset, seed) -> list[Case]:
-        s = self.settings
+    def _batch(self, rng, shop, start, offset) -> list[Case]:
+        """One block of :data:`CHUNK` cases, drawn whole whatever part of it is kept: a block
+        cut short would draw each array at another size, and so other cases."""
+        s, size = self.settings, CHUNK
         hidden = self.formulations(size, rng)
         oem = self.variation(size, rng, at_shop=False)
         weathered = rng.random(size) < s.weathered_share
