@@ -1,15 +1,19 @@
-"""Whether a change of a shop's habits is seen: false alarms in steady shops, and changes found.
+"""Whether a change of a shop's habits is seen, and where: false alarms in steady shops, and
+changes found and placed.
 
 For each number of spray-outs (``--cases``) and ``--repeats`` draws, the cases of a steady
-shop (without habits, and with ``SHOP_WITH_HABITS``) and of a shop that changed half-way
-(its first half without habits, its second with them: 5 % more film, flakes 4 % flatter,
-instrument 0.5 % high) are split in time order and read apart
-(:func:`flakelab.match.habits.habits_drift`, against the shipped model). Printed per size:
-the largest |z| of any habit in the steady shops and the share of them flagged (false
-alarms, at |z| > ``DRIFT_Z``), and for the changed shop the share flagged and the mean z
-of each habit.
+shop (without habits, and with ``SHOP_WITH_HABITS``) and of shops that changed part-way
+(``--at``: at that share of their cases; before it without habits, after it with them: 5 %
+more film, flakes 4 % flatter, instrument 0.5 % high) are read in time order by
+:func:`flakelab.match.habits.habits_drift`, against the shipped model. Two ways are
+compared on the same cases: the scan of every split (the default, :func:`change_scan`) and
+the baseline of the same run, the two halves. Printed per size: the largest |z| of any habit
+in the steady shops (and its 90th percentile over them) and the share of them flagged
+(false alarms, at |z| > ``DRIFT_Z``); for each changed shop the share flagged, the median
+distance in cases of the split found from the change, and the mean z of each habit.
 
-    python benchmarks/habits_drift.py [--cases 100,200,400,1000] [--repeats 5] [--json]
+    python benchmarks/habits_drift.py [--cases 100,200,400,1000] [--at 0.5,0.8] [--repeats 5]
+        [--json]
 
 ``flakelab cases habits`` looks for a change from ``MIN_DRIFT_CASES`` (100) spray-outs on;
 smaller sizes (from 40) show why.
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import time
 
 import numpy as np
@@ -35,25 +40,50 @@ LEAST = 2 * MIN_HABIT_CASES
 """Sizes below the command's own floor (``MIN_DRIFT_CASES``) may be tried: each half must
 still be readable."""
 
+WAYS = ("scan", "halves")
 
-def joined(first: CaseArrays, second: CaseArrays, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Recipes and spray-outs of ``n`` cases: the first half from ``first``, the rest from
+
+def joined(first: CaseArrays, second: CaseArrays, n: int, at: int) -> tuple[np.ndarray, ...]:
+    """Recipes and spray-outs of ``n`` cases: the first ``at`` from ``first``, the rest from
     ``second``."""
-    half = n // 2
     return (
-        np.concatenate([first.x[:half], second.x[: n - half]]),
-        np.concatenate([first.R[:half], second.R[: n - half]]),
+        np.concatenate([first.x[:at], second.x[at:n]]),
+        np.concatenate([first.R[:at], second.R[at:n]]),
     )
+
+
+def drift(forward, library, x, R, way: str) -> dict:
+    split = None if way == "scan" else len(x) // 2
+    return habits_drift(forward, library, x, R, minimum=LEAST, split=split)
+
+
+def summary(steady: list[dict], changed: dict[float, list[dict]], n: int) -> dict:
+    """One way's figures at one size."""
+    largest = [np.abs(d["z"]).max() for d in steady]
+    row = {
+        "steady_max_abs_z": float(max(largest)),
+        "steady_p90_abs_z": float(np.percentile(largest, 90)),
+        "steady_flagged": float(np.mean([d["changed"].any() for d in steady])),
+    }
+    for at, found in changed.items():
+        row[f"changed_at_{at:g}"] = {
+            "flagged": float(np.mean([d["changed"].any() for d in found])),
+            "split_error_cases": float(np.median([abs(d["split"] - round(at * n)) for d in found])),
+            "mean_z": np.mean([d["z"] for d in found], 0).round(2).tolist(),
+        }
+    return row
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", default="100,200,400,1000", help="spray-outs read")
+    parser.add_argument("--at", default="0.5,0.8", help="where the changed shops changed")
     parser.add_argument("--repeats", type=int, default=5, help="draws of each shop's cases")
     parser.add_argument("--seed", type=int, default=100, help="seed of the first draw")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     sizes = seeds_from(args.cases)
+    positions = [float(a) for a in args.at.split(",")]
     start = time.perf_counter()
     library = read_library(None)
     forward = forward_for(shipped_model("five-angle"), library)
@@ -66,37 +96,46 @@ def main() -> None:
     plain, with_habits = draws({}), draws(SHOP_WITH_HABITS)
     rows = []
     for n in sizes:
-        steady = [
-            habits_drift(forward, library, c.x[:n], c.R[:n], minimum=LEAST)
-            for c in (*plain, *with_habits)
-        ]
-        changed = [
-            habits_drift(forward, library, *joined(a, b, n), minimum=LEAST)
-            for a, b in zip(plain, with_habits, strict=True)
-        ]
-        rows.append(
-            {
-                "cases": n,
-                "steady_max_abs_z": float(max(np.abs(d["z"]).max() for d in steady)),
-                "steady_flagged": float(np.mean([d["changed"].any() for d in steady])),
-                "changed_flagged": float(np.mean([d["changed"].any() for d in changed])),
-                "changed_mean_z": np.mean([d["z"] for d in changed], 0).round(2).tolist(),
+        row: dict = {"cases": n}
+        for way in WAYS:
+            steady = [
+                drift(forward, library, c.x[:n], c.R[:n], way) for c in (*plain, *with_habits)
+            ]
+            changed = {
+                at: [
+                    drift(forward, library, *joined(a, b, n, round(at * n)), way)
+                    for a, b in zip(plain, with_habits, strict=True)
+                ]
+                for at in positions
             }
-        )
+            row[way] = summary(steady, changed, n)
+        rows.append(row)
         if not args.json:
-            r = rows[-1]
-            print(
-                f"{n:5d} cases  steady shops: max |z| {r['steady_max_abs_z']:.2f}, flagged "
-                f"{r['steady_flagged']:.0%}  changed shop: flagged {r['changed_flagged']:.0%}, "
-                f"mean z film/spread/gain {r['changed_mean_z']}",
-                flush=True,
-            )
+            print_row(row, positions)
     report = {"drift_z": DRIFT_Z, "repeats": args.repeats, "rows": rows}
     report["seconds"] = time.perf_counter() - start
+    report["peak_rss_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     if args.json:
         print(json.dumps(report, indent=2))
         return
-    print(f"threshold |z| > {DRIFT_Z:g}; {report['seconds']:.0f} s")
+    print(f"threshold |z| > {DRIFT_Z:g}; {report['seconds']:.0f} s, {report['peak_rss_gb']:.2f} GB")
+
+
+def print_row(row: dict, positions: list[float]) -> None:
+    for way in WAYS:
+        r = row[way]
+        line = (
+            f"{row['cases']:5d} cases {way:6s}  steady: max |z| {r['steady_max_abs_z']:.2f} "
+            f"(90 % under {r['steady_p90_abs_z']:.2f}), "
+            f"flagged {r['steady_flagged']:.0%}"
+        )
+        for at in positions:
+            c = r[f"changed_at_{at:g}"]
+            line += (
+                f"  changed at {at:g}: flagged {c['flagged']:.0%}, split off by "
+                f"{c['split_error_cases']:.0f}, z {c['mean_z']}"
+            )
+        print(line, flush=True)
 
 
 if __name__ == "__main__":

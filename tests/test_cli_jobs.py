@@ -147,6 +147,12 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
         100,
         "synthetic shop",
     )
+    # read together, the two shops' cases show a change where the second shop's begin
+    run = flakelab("cases", "habits", cases, "--json")
+    assert run.returncode == 0, run.stderr
+    drift = json.loads(run.stdout)["drift"]
+    assert "flake_spread" in drift["changed"] and abs(drift["cases_before"] - 300) <= 5
+    assert "--since 2026-0" in drift["message"]
     figure = tmp_path / "habits.png"
     run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json",
                    "--plot", str(figure))  # fmt: skip

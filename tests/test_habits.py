@@ -12,6 +12,7 @@ import torch
 
 from flakelab.cases.database import open_database
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
+from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io import read_library
 from flakelab.match.correction import aim_off, correct
@@ -20,7 +21,10 @@ from flakelab.match.habits import (
     DRIFT_Z,
     PRIOR_SD,
     ShopHabits,
+    _case_terms,
+    _sandwich,
     _with_prior,
+    change_scan,
     estimate_habits,
     habits_drift,
     habits_fit,
@@ -172,11 +176,44 @@ def test_a_change_of_habits_over_the_cases_is_seen_and_a_steady_shop_is_not(
     x = np.concatenate([before.x[:250], after.x[:250]])
     R = np.concatenate([before.R[:250], after.R[:250]])
     changed = habits_drift(forward, library, x, R)
+    assert changed["split"] == pytest.approx(250, abs=5)
     assert changed["changed"][1] and changed["z"][1] < -DRIFT_Z  # flake spread, flatter
     assert changed["late"].flake_spread == pytest.approx(TRUE_SPREAD, abs=0.006)
     assert abs(changed["early"].flake_spread) < 0.006
     with pytest.raises(FlakelabError, match="at least 100"):
         habits_drift(forward, library, x[:60], R[:60])
+
+
+def test_a_late_change_is_placed_where_halves_would_blur_it(shipped, habits_shop, plain_shop):
+    library, forward, _ = shipped
+    # the change after 400 of 500 cases: the halves mix 150 old cases into the later half
+    x = np.concatenate([plain_shop[0].x[:400], habits_shop[0].x[400:]])
+    R = np.concatenate([plain_shop[0].R[:400], habits_shop[0].R[400:]])
+    found = habits_drift(forward, library, x, R)
+    halves = habits_drift(forward, library, x, R, split=250)
+    assert found["split"] == pytest.approx(400, abs=5)
+    assert found["changed"][1] and found["z"][1] < 1.5 * halves["z"][1]
+    assert found["late"].flake_spread == pytest.approx(TRUE_SPREAD, abs=0.008)
+
+
+def test_the_scan_sums_give_each_split_the_step_of_its_own_cases(shipped, habits_shop):
+    library, forward, _ = shipped
+    x, R = habits_shop[0].x[:120], habits_shop[0].R[:120]
+    splits, z = change_scan(forward, library, x, R, least=30)
+    assert splits[0] == 30 and splits[-1] == 90
+    # independently: each side's step and sandwich errors from its own cases' terms
+    pooled = estimate_habits(forward, library, x, R, prior_sd=None).theta
+    predicted = evaluate_recipes(forward, x)[0]
+    offset = (reflectance_to_Lab(R) - reflectance_to_Lab(predicted)).reshape(len(x), -1)
+    score, information = _case_terms(pooled, library, x, predicted, offset, forward.geometries)
+    for k in (30, 71, 90):
+        sides = []
+        for part in (slice(0, k), slice(k, None)):
+            H = information[part].sum(0)
+            step = np.linalg.solve(H, score[part].sum(0))
+            sides.append((step, np.diag(_sandwich(H, score[part] - information[part] @ step))))
+        expected = (sides[1][0] - sides[0][0]) / np.sqrt(sides[0][1] + sides[1][1])
+        np.testing.assert_allclose(z[k - 30], expected, rtol=1e-8)
 
 
 def test_too_few_sprayouts_are_refused(shipped):

@@ -298,7 +298,7 @@ def habits(
     lib, forward = learned_forward(library, instrument, model, database)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)
-    chosen.sort(key=attrgetter("created_at"))  # in the order made: the change check halves it
+    chosen.sort(key=attrgetter("created_at"))  # in the order made: the change check splits it
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
@@ -352,20 +352,22 @@ def habits(
 
 
 def _drift_report(drift: dict, chosen: list) -> dict:
-    """The habits of the earlier and later half of the cases, and what changed between."""
+    """Where the habits changed over the cases, and the habits before and after."""
     from flakelab.match.habits import HABITS
 
-    split = chosen[len(chosen) // 2].created_at
+    split = chosen[drift["split"]].created_at
     changed = [n for n, c in zip(HABITS, drift["changed"], strict=True) if c]
     early, late = drift["early"].report(), drift["late"].report()
     message = (
         "the habits changed over these cases: "
         + ", ".join(f"{n.replace('_', ' ')} {early[n]:+.2%} → {late[n]:+.2%}" for n in changed)
-        + f" (before and after {split:%Y-%m-%d %H:%M}); read them from the recent cases "
-        "with --since"
+        + f" from about {split:%Y-%m-%d %H:%M} (the last {len(chosen) - drift['split']} of "
+        f"{len(chosen)} cases); read them from those cases with --since "
+        f"{split:%Y-%m-%dT%H:%M:%S}"
     )
     return {
         "split_at": split.isoformat(),
+        "cases_before": drift["split"],
         "early": early,
         "late": late,
         "z": dict(zip(HABITS, drift["z"].round(2).tolist(), strict=True)),

@@ -25,6 +25,11 @@ Where a model was adapted to the shop, it learned the habits already: measured a
 they come out near zero. The correction and the matcher take them as the shop's mean
 application (:meth:`ShopHabits.offset`): a spray-out's offset along them persists at the next
 spray.
+
+Habits change (a new gun, painter or instrument). :func:`habits_drift` scans every split
+of a shop's cases in time order for the one where the earlier and later habits differ most
+(:func:`change_scan`, all splits from one pass of cumulative sums) and flags a habit whose
+two sides differ by more than :data:`DRIFT_Z` standard errors of the difference.
 """
 
 from __future__ import annotations
@@ -60,6 +65,8 @@ __all__ = [
     "habits_drift",
     "DRIFT_Z",
     "MIN_DRIFT_CASES",
+    "MIN_SEGMENT_CASES",
+    "change_scan",
     "read_habits",
     "write_habits",
     "save_habits",
@@ -200,28 +207,53 @@ def estimate_habits(
             "the shop's habits from one spray's accident"
         )
     R = evaluate_recipes(forward, fractions)[0]
-    geometries = forward.geometries
     offset = (reflectance_to_Lab(sprayouts) - reflectance_to_Lab(R)).reshape(N, -1)
-    spray_sd = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0])
-    residual_var = persistent_sd**2 + noise_sd**2
     theta = np.zeros(3)
     for _ in range(_ITERATIONS):
-        # θ itself and θ ± one step along each habit, in one physics call
-        thetas = np.concatenate([theta[None], theta + np.diag(_STEP), theta - np.diag(_STEP)])
-        f = _offsets(thetas, library, fractions, R, geometries).reshape(7, N, -1)
-        S = ((f[1:4] - f[4:7]) / (2 * _STEP[:, None, None])).transpose(1, 2, 0)  # [N, D, 3]
-        C = np.einsum("ndk,k,nek->nde", S, spray_sd**2, S) + residual_var * np.eye(S.shape[1])
-        r = offset - f[0]
-        weighted = np.linalg.solve(C, S)  # C⁻¹S
-        H = np.einsum("ndk,ndl->kl", S, weighted)
-        step = np.linalg.solve(H, np.einsum("ndk,nd->k", weighted, r))
+        score, information = _case_terms(
+            theta, library, fractions, R, offset, forward.geometries, persistent_sd, noise_sd
+        )
+        H = information.sum(0)
+        step = np.linalg.solve(H, score.sum(0))
         theta = theta + step
-    scores = np.einsum("ndk,nd->nk", weighted, r - S @ step)
-    H_inv = np.linalg.inv(H)
-    covariance = H_inv @ (scores.T @ scores) @ H_inv
+    covariance = _sandwich(H, score - information @ step)
     if prior_sd is not None:
         theta, covariance = _with_prior(theta, covariance, np.asarray(prior_sd, float))
     return ShopHabits(theta, np.sqrt(np.diag(covariance)), N, getattr(forward, "model_id", ""))
+
+
+def _case_terms(
+    theta: NDArray,
+    library: Library,
+    fractions: NDArray,
+    R: NDArray,
+    offset: NDArray,
+    geometries,
+    persistent_sd: float = PERSISTENT_SD,
+    noise_sd: float = NOISE_SD,
+) -> tuple[NDArray, NDArray]:
+    """Each case's share of the Gauss–Newton step from ``theta`` (module notes): its score
+    Sᵢᵀ Cᵢ⁻¹ rᵢ ``[N, 3]`` and information Sᵢᵀ Cᵢ⁻¹ Sᵢ ``[N, 3, 3]``, for the L*a*b*
+    ``offset[N, G·3]`` of its spray-out from the model's prediction ``R``. Sums over any
+    run of cases give that run's step, so every split of the cases is read from one pass."""
+    N = len(fractions)
+    # θ itself and θ ± one step along each habit, in one physics call
+    thetas = np.concatenate([theta[None], theta + np.diag(_STEP), theta - np.diag(_STEP)])
+    f = _offsets(thetas, library, fractions, R, geometries).reshape(7, N, -1)
+    S = ((f[1:4] - f[4:7]) / (2 * _STEP[:, None, None])).transpose(1, 2, 0)  # [N, D, 3]
+    spray_sd = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0])
+    residual_var = persistent_sd**2 + noise_sd**2
+    C = np.einsum("ndk,k,nek->nde", S, spray_sd**2, S) + residual_var * np.eye(S.shape[1])
+    weighted = np.linalg.solve(C, S)  # C⁻¹S
+    score = np.einsum("ndk,nd->nk", weighted, offset - f[0])
+    return score, np.einsum("ndk,ndl->nkl", S, weighted)
+
+
+def _sandwich(information: NDArray, scores: NDArray) -> NDArray:
+    """The sandwich covariance H⁻¹ (Σ sᵢsᵢᵀ) H⁻¹ from the summed ``information`` H and each
+    case's ``scores`` sᵢ at the estimate: robust to the heavy-tailed persistent offsets."""
+    H_inv = np.linalg.inv(information)
+    return H_inv @ (scores.T @ scores) @ H_inv
 
 
 def _with_prior(theta: NDArray, covariance: NDArray, prior_sd: NDArray):
@@ -232,16 +264,22 @@ def _with_prior(theta: NDArray, covariance: NDArray, prior_sd: NDArray):
     return posterior @ precision @ theta, posterior
 
 
-DRIFT_Z = 4.0
-"""A habit whose earlier and later halves differ by more than this many standard errors of
-the difference has changed over the cases (a new gun, painter or instrument): the sandwich
-errors are not exact, so the bar sits above the usual 3."""
+DRIFT_Z = 4.5
+"""A habit whose earlier and later sides differ by more than this many standard errors of
+the difference has changed over the cases (a new gun, painter or instrument). The scan
+takes the largest of every split, and the sandwich errors are not exact, so the bar sits
+well above the usual 3: the largest |z| of 40 steady shops of 1,000 cases was 3.96
+(``python benchmarks/habits_drift.py``)."""
 
 
 MIN_DRIFT_CASES = 100
-"""Fewer spray-outs than this are not split in two to look for a change: with 20 a half the
-sandwich errors run small, the largest |z| of 80 steady shops 3.77 against 3.04 with 50 a
-half (``python benchmarks/habits_drift.py --cases 40,100 --repeats 40``)."""
+"""Fewer spray-outs than this are not searched for a change: with 20 a side the sandwich
+errors run small (the largest |z| of 80 steady shops split in halves: 3.77 at 40 cases,
+3.04 at 100; ``python benchmarks/habits_drift.py``)."""
+
+MIN_SEGMENT_CASES = 40
+"""The fewest spray-outs on either side of a change the scan considers: each side's habits
+and their sandwich errors must be read from enough cases to be trusted."""
 
 
 def habits_drift(
@@ -251,20 +289,71 @@ def habits_drift(
     sprayouts: NDArray,
     *,
     minimum: int = MIN_DRIFT_CASES,
+    split: int | None = None,
 ) -> dict:
-    """Whether the habits changed over cases given in time order: the habits of the earlier
-    and the later half, and for each habit the difference in standard errors (``z``) and
-    whether it exceeds :data:`DRIFT_Z`. Fewer than ``minimum`` cases are refused."""
+    """Whether the habits changed over cases given in time order, and where: the split of
+    the cases at which the earlier and later habits differ most (:func:`change_scan`; or the
+    given ``split``), the habits on either side, and for each habit the difference in
+    standard errors (``z``) and whether it exceeds :data:`DRIFT_Z`. Fewer than ``minimum``
+    cases are refused."""
     if len(fractions) < minimum:
         raise FlakelabError(
             f"shop habits: {len(fractions)} spray-outs; at least {minimum} are needed "
             "to tell whether the habits changed"
         )
-    half = len(fractions) // 2
-    early = estimate_habits(forward, library, fractions[:half], sprayouts[:half], prior_sd=None)
-    late = estimate_habits(forward, library, fractions[half:], sprayouts[half:], prior_sd=None)
+    if split is None:
+        splits, z = change_scan(forward, library, fractions, sprayouts)
+        split = int(splits[np.abs(z).max(1).argmax()])
+    early = estimate_habits(forward, library, fractions[:split], sprayouts[:split], prior_sd=None)
+    late = estimate_habits(forward, library, fractions[split:], sprayouts[split:], prior_sd=None)
     z = (late.theta - early.theta) / np.hypot(early.standard_error, late.standard_error)
-    return {"early": early, "late": late, "z": z, "changed": np.abs(z) > DRIFT_Z}
+    return {"split": split, "early": early, "late": late, "z": z, "changed": np.abs(z) > DRIFT_Z}
+
+
+def change_scan(
+    forward,
+    library: Library,
+    fractions: NDArray,
+    sprayouts: NDArray,
+    least: int = MIN_SEGMENT_CASES,
+) -> tuple[NDArray, NDArray]:
+    """Every split of cases in time order, ``least`` or more (at most half) on either side,
+    and for each the difference of the later and earlier habits in standard errors
+    ``z[K, 3]``. Each side's habits are one Gauss–Newton step from those of all the cases,
+    with sandwich errors: the cases' terms are summed once, cumulatively, so all N splits
+    cost one fit."""
+    N = len(fractions)
+    least = min(least, N // 2)
+    pooled = estimate_habits(forward, library, fractions, sprayouts, prior_sd=None).theta
+    R = evaluate_recipes(forward, fractions)[0]
+    offset = (reflectance_to_Lab(sprayouts) - reflectance_to_Lab(R)).reshape(N, -1)
+    g, B = _case_terms(pooled, library, fractions, R, offset, forward.geometries)
+    terms = (
+        g,
+        B,
+        np.einsum("nj,nk->njk", g, g),
+        np.einsum("nj,nkl->njkl", g, B),
+        np.einsum("njm,nkl->njmkl", B, B),
+    )
+    prefix = [np.concatenate([np.zeros((1, *t.shape[1:])), np.cumsum(t, 0)]) for t in terms]
+    splits = np.arange(least, N - least + 1)
+    early = _segment_fits([p[splits] for p in prefix])
+    late = _segment_fits([p[-1] - p[splits] for p in prefix])
+    z = (late[0] - early[0]) / np.sqrt(early[1] + late[1])
+    return splits, z
+
+
+def _segment_fits(sums: list[NDArray]) -> tuple[NDArray, NDArray]:
+    """The Gauss–Newton step ``[K, 3]`` and its sandwich variances ``[K, 3]`` of K runs of
+    cases from their summed terms (:func:`change_scan`): Σ(gᵢ − Bᵢt)(gᵢ − Bᵢt)ᵀ expanded in
+    the sums of gᵢgᵢᵀ, gᵢ⊗Bᵢ and Bᵢ⊗Bᵢ."""
+    g, B, gg, gB, BB = sums
+    H_inv = np.linalg.inv(B)
+    t = np.einsum("kij,kj->ki", H_inv, g)
+    cross = np.einsum("kjil,kl->kji", gB, t)
+    meat = gg - cross - cross.transpose(0, 2, 1) + np.einsum("kjmil,km,kl->kji", BB, t, t)
+    covariance = H_inv @ meat @ H_inv.transpose(0, 2, 1)
+    return t, np.diagonal(covariance, axis1=1, axis2=2)
 
 
 def habits_fit(
