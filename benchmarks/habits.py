@@ -14,9 +14,12 @@ two ways:
 
 That last figure compares with ``benchmarks/adaptation.py``, which retrains the network on
 the same shop's cases. ``--no-habits`` runs a shop without habits of its own.
+``--against physics`` reads the habits against the world's own physics at its nominal
+application instead of the learned model: the estimator alone, without the model's error
+(a bias there is the estimator's; a bias only against the model is the model's).
 
     python benchmarks/habits.py [--cases 20,50,100,200,500,2000] [--repeats 5] [--no-prior]
-        [--no-habits] [--json]
+        [--no-habits] [--against model|physics] [--json]
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import resource
 import time
 
 import numpy as np
+import torch
 
 from _matcher import seeds_from
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
@@ -38,6 +42,25 @@ from flakelab.models.training import CaseArrays, generated_case_arrays
 
 KEYS = ("film_build", "log_flake_spread", "instrument_gain")
 """The habits as estimated (``ShopHabits.theta``)."""
+
+
+class WorldPhysics:
+    """The generated world's physics at its nominal application, as a forward model: what
+    the habits are read against with ``--against physics``."""
+
+    dtype = torch.float64
+    novel: tuple[str, ...] = ()
+    model_id = "the world's physics"
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.toners = world.library.names
+        self.geometries = world.geometries
+
+    def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, None]:
+        x = fractions.double().numpy()
+        R, _ = self.world.appearance(x, self.world.nominal(len(x)))
+        return torch.as_tensor(R), None
 
 
 def error(forward, library, cases: CaseArrays, habits: ShopHabits) -> float:
@@ -53,6 +76,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=21, help="seed of the first draw")
     parser.add_argument("--no-habits", action="store_true", help="a shop like the world")
     parser.add_argument("--no-prior", action="store_true", help="read without PRIOR_SD")
+    parser.add_argument("--against", choices=("model", "physics"), default="model")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     sizes = seeds_from(args.cases)
@@ -63,6 +87,8 @@ def main() -> None:
     forward = forward_for(model, library)
     habits = {} if args.no_habits else SHOP_WITH_HABITS
     world = World(library, "five-angle", WorldSettings(**habits), exclude=forward.novel)
+    if args.against == "physics":
+        forward = WorldPhysics(world)
     truth = np.array(
         [
             habits.get("shop_film_build", 1.0) - 1,
@@ -75,6 +101,7 @@ def main() -> None:
     true_habits = ShopHabits(truth, np.zeros(3), 0)
     report = {
         "shop": habits or "no habits",
+        "against": args.against,
         "prior_sd": None if prior is None else prior.tolist(),
         "test_cases": args.test,
         "model_alone_de00": error(forward, library, test, ShopHabits.none()),
