@@ -160,7 +160,10 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     report = json.loads(run.stdout)
     explained = report["explained"]
     assert np.mean(explained["de00_habits"]) < 0.8 * np.mean(explained["de00_model"])
-    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    png = figure.read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+    assert height > 0.4 * width  # a second row: the change scan of 300 cases
     assert report["cases"] == 300 and report["shop"] == "shop A"
     assert report["drift"]["changed"] == []  # the same habits in both halves of its cases
     assert report["flake_spread"] == pytest.approx(-0.04, abs=0.006)

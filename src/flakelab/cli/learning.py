@@ -316,7 +316,12 @@ def habits(
     if plot is not None:
         from flakelab.render.plots import plot_habits
 
-        plot_habits(fit, plot, title=f"Habits of {found.shop or cases}: {found.describe()}")
+        plot_habits(
+            fit,
+            plot,
+            title=f"Habits of {found.shop or cases}: {found.describe()}",
+            scan=drift and _scan_for_plot(drift, chosen),
+        )
     report = found.report() | {
         "file": str(out) if out else None,
         "saved": save,
@@ -349,6 +354,19 @@ def habits(
         + (f"; stored for {found.shop!r}" if save else ""),
         highlight=False,
     )
+
+
+def _scan_for_plot(drift: dict, chosen: list) -> dict:
+    """The change scan by the time of each split, for :func:`~flakelab.render.plots.plot_habits`."""
+    from flakelab.match.habits import DRIFT_Z, HABITS
+
+    return {
+        "when": [chosen[k].created_at for k in drift["scan"]["splits"]],
+        "z": drift["scan"]["z"],
+        "names": [name.replace("_", " ") for name in HABITS],
+        "bar": DRIFT_Z,
+        "split_when": chosen[drift["split"]].created_at,
+    }
 
 
 def _drift_report(drift: dict, chosen: list) -> dict:

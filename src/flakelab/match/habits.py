@@ -292,22 +292,25 @@ def habits_drift(
     split: int | None = None,
 ) -> dict:
     """Whether the habits changed over cases given in time order, and where: the split of
-    the cases at which the earlier and later habits differ most (:func:`change_scan`; or the
-    given ``split``), the habits on either side, and for each habit the difference in
-    standard errors (``z``) and whether it exceeds :data:`DRIFT_Z`. Fewer than ``minimum``
-    cases are refused."""
+    the cases at which the earlier and later habits differ most (:func:`change_scan`, whose
+    ``splits`` and ``z`` come back as ``scan``; or the given ``split``), the habits on either
+    side read in full, and for each habit the difference in standard errors (``z``) and
+    whether it exceeds :data:`DRIFT_Z`. Fewer than ``minimum`` cases are refused."""
     if len(fractions) < minimum:
         raise FlakelabError(
             f"shop habits: {len(fractions)} spray-outs; at least {minimum} are needed "
             "to tell whether the habits changed"
         )
+    scan = None
     if split is None:
-        splits, z = change_scan(forward, library, fractions, sprayouts)
-        split = int(splits[np.abs(z).max(1).argmax()])
+        splits, scanned = change_scan(forward, library, fractions, sprayouts)
+        split = int(splits[np.abs(scanned).max(1).argmax()])
+        scan = {"splits": splits, "z": scanned}
     early = estimate_habits(forward, library, fractions[:split], sprayouts[:split], prior_sd=None)
     late = estimate_habits(forward, library, fractions[split:], sprayouts[split:], prior_sd=None)
     z = (late.theta - early.theta) / np.hypot(early.standard_error, late.standard_error)
-    return {"split": split, "early": early, "late": late, "z": z, "changed": np.abs(z) > DRIFT_Z}
+    changed = np.abs(z) > DRIFT_Z
+    return {"split": split, "early": early, "late": late, "z": z, "changed": changed, "scan": scan}
 
 
 def change_scan(

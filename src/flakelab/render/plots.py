@@ -135,15 +135,42 @@ def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
     plt.close(figure)
 
 
-def plot_habits(fit: dict, path: str | PathLike, *, title: str = "", dpi: int = 120) -> None:
+def _plot_change_scan(axis, scan: dict) -> None:
+    """Each habit's z (later habits against earlier) at every split of the cases in time."""
+    for k, name in enumerate(scan["names"]):
+        axis.plot(scan["when"], scan["z"][:, k], "-", lw=1.2, label=name)
+    for sign in (-1, 1):
+        axis.axhline(sign * scan["bar"], color="0.5", ls="--", lw=0.8)
+    axis.axvline(scan["split_when"], color="k", lw=0.8, label="likeliest change")
+    axis.set(
+        xlabel="split: the first case of the later habits",
+        ylabel="later − earlier [s.e.]",
+        title="Did the habits change? Each split of the cases in time order",
+    )
+    axis.legend(fontsize=8, ncol=4)
+
+
+def plot_habits(
+    fit: dict,
+    path: str | PathLike,
+    *,
+    title: str = "",
+    scan: dict | None = None,
+    dpi: int = 120,
+) -> None:
     """What a shop's habits explain (:func:`~flakelab.match.habits.habits_fit`): the mean
     ΔL*, Δa*, Δb* of its spray-outs from the model (points) and the habits' mean offset (line)
     against aspecular angle, and the mean ΔE00 per geometry from the model alone and with
-    the habits."""
+    the habits. With ``scan`` a second row shows the change scan
+    (:func:`~flakelab.match.habits.change_scan`): each habit's later-minus-earlier z
+    (``z[K, H]``, habits ``names``) at the time of every split (``when[K]``), the bar ``±bar``
+    and the split found (``split_when``)."""
     names = fit["geometries"]
     aspecular = np.array([Geometry.parse(n).aspecular for n in names])
     order = np.argsort(aspecular)
-    figure, axes = plt.subplots(1, 4, figsize=(16, 3.8))
+    figure = plt.figure(figsize=(16, 3.8 if scan is None else 7.4))
+    grid = figure.add_gridspec(1 if scan is None else 2, 4)
+    axes = [figure.add_subplot(grid[0, i]) for i in range(4)]
     for axis in axes[1:3]:  # one scale: a small Δa* is not drawn as large as ΔL*
         axis.sharey(axes[0])
     for k, (axis, label) in enumerate(zip(axes[:3], ("ΔL*", "Δa*", "Δb*"), strict=True)):
@@ -159,6 +186,8 @@ def plot_habits(fit: dict, path: str | PathLike, *, title: str = "", dpi: int = 
     bars.set_xticks(position, [names[i] for i in order], rotation=45, fontsize=8)
     bars.set(ylabel="mean ΔE00 of the spray-outs")
     bars.legend(fontsize=8)
+    if scan is not None:
+        _plot_change_scan(figure.add_subplot(grid[1, :]), scan)
     figure.suptitle(title or f"Shop habits against {fit['cases']} spray-outs")
     figure.tight_layout()
     fmt = Path(path).suffix.lstrip(".") or "png"
