@@ -147,12 +147,17 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
         100,
         "synthetic shop",
     )
-    # read together, the two shops' cases show a change where the second shop's begin
-    run = flakelab("cases", "habits", cases, "--json")
+    # read together, the two shops' cases show a change where the second shop's begin, and
+    # the habits read over it say so wherever they are used
+    mixed = str(tmp_path / "mixed.json")
+    run = flakelab("cases", "habits", cases, "--json", "--out", mixed)
     assert run.returncode == 0, run.stderr
     drift = json.loads(run.stdout)["drift"]
     assert "flake_spread" in drift["changed"] and abs(drift["cases_before"] - 300) <= 5
     assert "--since 2026-0" in drift["message"]
+    assert json.loads(run.stdout)["changed_since"] == drift["split_at"]
+    run = flakelab("match", "--example", "--candidates", "1", "--habits", mixed, "--json")
+    assert run.returncode == 0 and "habits read over a change" in " ".join(run.stderr.split())
     figure = tmp_path / "habits.png"
     run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json",
                    "--plot", str(figure))  # fmt: skip

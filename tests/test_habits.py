@@ -226,18 +226,20 @@ def test_too_few_sprayouts_are_refused(shipped):
 
 def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]),
-                        500, "shipped", "shop A")  # fmt: skip
+                        500, "shipped", "shop A", "2026-03-01T00:37:00+00:00")  # fmt: skip
     path = tmp_path / "habits.json"
     write_habits(habits, path)
     back = read_habits(path)
     np.testing.assert_allclose(back.theta, habits.theta)
     np.testing.assert_allclose(back.standard_error, habits.standard_error)
     assert (back.cases, back.model, back.shop) == (500, "shipped", "shop A")
+    assert back.changed_since == habits.changed_since
     document = json.loads(path.read_text())
     for key, value, problem in (
         ("film_build", "more", "expected a number"),
         ("instrument_gain", 0.5, "expected -0.1 to 0.1"),
         ("format", "other", "flakelab-shop-habits"),
+        ("changed_since", 20260301, "expected text"),
     ):
         bad = tmp_path / f"bad-{key}.json"
         bad.write_text(json.dumps(document | {key: value}))

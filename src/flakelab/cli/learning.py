@@ -309,6 +309,8 @@ def habits(
     )
     fit = habits_fit(forward, lib, found, data.x, data.R)
     drift = habits_drift(forward, lib, data.x, data.R) if len(chosen) >= MIN_DRIFT_CASES else None
+    if drift and drift["changed"].any():  # kept with the habits, so that their users are told
+        found = replace(found, changed_since=chosen[drift["split"]].created_at.isoformat())
     if out is not None:
         write_habits(found, out)
     if save:

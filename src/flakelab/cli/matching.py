@@ -53,7 +53,8 @@ def _setup(library: Path | None, instrument: str, model: Path | None, database: 
 
 def habits_for(path: Path | None, shop: str | None, database: str | None, forward):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
-    none), with a warning when they were measured against another model than ``forward``."""
+    none), with a warning when they were measured against another model than ``forward``, or
+    over a change of the shop's habits."""
     if path is None and shop is None:
         return None
     if path is not None and shop is not None:
@@ -72,6 +73,13 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
             f"[yellow]warning:[/] {path or shop}: habits measured against "
             f"{found.model or 'an unnamed model'}, not {forward.model_id}: read them again "
             "against this model",
+            highlight=False,
+        )
+    if found.changed_since:
+        errors.print(
+            f"[yellow]warning:[/] {path or shop}: habits read over a change of the shop's "
+            f"habits, from about {found.changed_since[:16].replace('T', ' ')}: read them again "
+            f"from the recent cases (flakelab cases habits --since {found.changed_since[:19]})",
             highlight=False,
         )
     return found

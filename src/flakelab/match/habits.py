@@ -100,13 +100,15 @@ _ITERATIONS = 4
 class ShopHabits:
     """A shop's habits against a model: ``theta`` = (relative film build, log flake-spread
     scale, relative instrument gain), ``standard_error`` of each, from ``cases`` spray-outs,
-    measured against the model named ``model``."""
+    measured against the model named ``model``. ``changed_since``: the time (ISO 8601) from
+    which those cases showed other habits (:func:`habits_drift`), None where none was seen."""
 
     theta: NDArray
     standard_error: NDArray
     cases: int
     model: str = ""
     shop: str | None = None
+    changed_since: str | None = None
 
     @classmethod
     def none(cls) -> ShopHabits:
@@ -125,7 +127,14 @@ class ShopHabits:
                 report["instrument_gain_se"],
             ]
         )
-        return cls(theta, se, int(report["cases"]), report.get("model") or "", report.get("shop"))
+        return cls(
+            theta,
+            se,
+            int(report["cases"]),
+            report.get("model") or "",
+            report.get("shop"),
+            report.get("changed_since"),
+        )
 
     @property
     def film_build(self) -> float:
@@ -155,6 +164,7 @@ class ShopHabits:
             "cases": self.cases,
             "model": self.model,
             "shop": self.shop,
+            "changed_since": self.changed_since,
         }
 
     def describe(self) -> str:
@@ -405,7 +415,7 @@ def read_habits(path: str | PathLike) -> ShopHabits:
             raise MeasurementFileError(path, f"expected a number, got {value!r}", field=key)
         if not low <= value <= high:
             raise MeasurementFileError(path, f"expected {low} to {high}, got {value}", field=key)
-    for key in ("model", "shop"):
+    for key in ("model", "shop", "changed_since"):
         value = document.get(key)
         if value is not None and not isinstance(value, str):
             raise MeasurementFileError(path, f"expected text, got {value!r}", field=key)
