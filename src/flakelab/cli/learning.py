@@ -368,6 +368,7 @@ def _scan_for_plot(drift: dict, chosen: list) -> dict:
         "names": [name.replace("_", " ") for name in HABITS],
         "bar": DRIFT_Z,
         "split_when": chosen[drift["split"]].created_at,
+        "changed": bool(drift["changed"].any()),
     }
 
 

@@ -141,7 +141,10 @@ def _plot_change_scan(axis, scan: dict) -> None:
         axis.plot(scan["when"], scan["z"][:, k], "-", lw=1.2, label=name)
     for sign in (-1, 1):
         axis.axhline(sign * scan["bar"], color="0.5", ls="--", lw=0.8)
-    axis.axvline(scan["split_when"], color="k", lw=0.8, label="likeliest change")
+    if scan["changed"]:
+        axis.axvline(scan["split_when"], color="k", lw=0.8, label="change found")
+    else:  # the split of the largest difference, under the bar: no change
+        axis.axvline(scan["split_when"], color="0.5", lw=0.8, ls=":", label="largest, no change")
     axis.set(
         xlabel="split: the first case of the later habits",
         ylabel="later − earlier [s.e.]",
@@ -164,7 +167,7 @@ def plot_habits(
     the habits. With ``scan`` a second row shows the change scan
     (:func:`~flakelab.match.habits.change_scan`): each habit's later-minus-earlier z
     (``z[K, H]``, habits ``names``) at the time of every split (``when[K]``), the bar ``±bar``
-    and the split found (``split_when``)."""
+    and the split found (``split_when``; ``changed``: whether it passes the bar)."""
     names = fit["geometries"]
     aspecular = np.array([Geometry.parse(n).aspecular for n in names])
     order = np.argsort(aspecular)
