@@ -240,6 +240,7 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
         ("instrument_gain", 0.5, "expected -0.1 to 0.1"),
         ("format", "other", "flakelab-shop-habits"),
         ("changed_since", 20260301, "expected text"),
+        ("changed_since", "last March", "expected an ISO 8601 time"),
     ):
         bad = tmp_path / f"bad-{key}.json"
         bad.write_text(json.dumps(document | {key: value}))

@@ -358,6 +358,11 @@ def habits(
     )
 
 
+def since_option(when: datetime) -> str:
+    """The ``--since`` that reads the cases made at ``when`` and after."""
+    return f"--since {when:%Y-%m-%dT%H:%M:%S}"
+
+
 def _scan_for_plot(drift: dict, chosen: list) -> dict:
     """The change scan by the time of each split, for :func:`~flakelab.render.plots.plot_habits`."""
     from flakelab.match.habits import DRIFT_Z, HABITS
@@ -383,8 +388,7 @@ def _drift_report(drift: dict, chosen: list) -> dict:
         "the habits changed over these cases: "
         + ", ".join(f"{n.replace('_', ' ')} {early[n]:+.2%} → {late[n]:+.2%}" for n in changed)
         + f" from about {split:%Y-%m-%d %H:%M} (the last {len(chosen) - drift['split']} of "
-        f"{len(chosen)} cases); read them from those cases with --since "
-        f"{split:%Y-%m-%dT%H:%M:%S}"
+        f"{len(chosen)} cases); read them from those cases with {since_option(split)}"
     )
     return {
         "split_at": split.isoformat(),

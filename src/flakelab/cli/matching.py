@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from datetime import datetime
 from pathlib import Path
 from typing import Annotated
 
@@ -16,6 +17,7 @@ from flakelab.cli.learning import (
     InstrumentOption,
     LibraryOption,
     learned_forward,
+    since_option,
 )
 from flakelab.errors import FlakelabError
 
@@ -76,10 +78,11 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
             highlight=False,
         )
     if found.changed_since:
+        since = datetime.fromisoformat(found.changed_since)
         errors.print(
             f"[yellow]warning:[/] {path or shop}: habits read over a change of the shop's "
-            f"habits, from about {found.changed_since[:16].replace('T', ' ')}: read them again "
-            f"from the recent cases (flakelab cases habits --since {found.changed_since[:19]})",
+            f"habits, from about {since:%Y-%m-%d %H:%M}: read them again from the recent "
+            f"cases (flakelab cases habits {since_option(since)})",
             highlight=False,
         )
     return found

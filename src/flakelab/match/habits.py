@@ -210,6 +210,28 @@ def estimate_habits(
     """The habits of the shop whose recipes ``fractions[N, T]`` (in ``forward``'s toner
     order) measured ``sprayouts[N, G, 31]``, against ``forward``'s predictions (module
     notes), drawn towards none by ``prior_sd`` (:data:`PRIOR_SD`; None: no prior)."""
+    theta, covariance, _, _ = _gauss_newton(
+        forward, library, fractions, sprayouts, persistent_sd, noise_sd
+    )
+    if prior_sd is not None:
+        theta, covariance = _with_prior(theta, covariance, np.asarray(prior_sd, float))
+    return ShopHabits(
+        theta, np.sqrt(np.diag(covariance)), len(fractions), getattr(forward, "model_id", "")
+    )
+
+
+def _gauss_newton(
+    forward,
+    library: Library,
+    fractions: NDArray,
+    sprayouts: NDArray,
+    persistent_sd: float = PERSISTENT_SD,
+    noise_sd: float = NOISE_SD,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The habits' GLS estimate θ without a prior and its sandwich covariance (module
+    notes), with the model's prediction ``R[N, G, 31]`` and the spray-outs' L*a*b* offsets
+    from it ``[N, G·3]`` that they were read from. Fewer than :data:`MIN_HABIT_CASES`
+    spray-outs are refused."""
     N = len(fractions)
     if N < MIN_HABIT_CASES:
         raise FlakelabError(
@@ -226,10 +248,7 @@ def estimate_habits(
         H = information.sum(0)
         step = np.linalg.solve(H, score.sum(0))
         theta = theta + step
-    covariance = _sandwich(H, score - information @ step)
-    if prior_sd is not None:
-        theta, covariance = _with_prior(theta, covariance, np.asarray(prior_sd, float))
-    return ShopHabits(theta, np.sqrt(np.diag(covariance)), N, getattr(forward, "model_id", ""))
+    return theta, _sandwich(H, score - information @ step), R, offset
 
 
 def _case_terms(
@@ -337,9 +356,7 @@ def change_scan(
     cost one fit."""
     N = len(fractions)
     least = min(least, N // 2)
-    pooled = estimate_habits(forward, library, fractions, sprayouts, prior_sd=None).theta
-    R = evaluate_recipes(forward, fractions)[0]
-    offset = (reflectance_to_Lab(sprayouts) - reflectance_to_Lab(R)).reshape(N, -1)
+    pooled, _, R, offset = _gauss_newton(forward, library, fractions, sprayouts)
     g, B = _case_terms(pooled, library, fractions, R, offset, forward.geometries)
     terms = (
         g,
@@ -419,6 +436,15 @@ def read_habits(path: str | PathLike) -> ShopHabits:
         value = document.get(key)
         if value is not None and not isinstance(value, str):
             raise MeasurementFileError(path, f"expected text, got {value!r}", field=key)
+    if document.get("changed_since") is not None:
+        try:
+            datetime.fromisoformat(document["changed_since"])
+        except ValueError:
+            raise MeasurementFileError(
+                path,
+                f"expected an ISO 8601 time, got {document['changed_since']!r}",
+                field="changed_since",
+            ) from None
     return ShopHabits.from_report(document)
 
 
