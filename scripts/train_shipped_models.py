@@ -62,7 +62,12 @@ def main() -> None:
     parser.add_argument(
         "--cases", type=int, help="number of training cases (default: the shipped model's)"
     )
+    parser.add_argument(
+        "--members", type=int, default=1, help="networks averaged as an ensemble (default: 1)"
+    )
     args = parser.parse_args()
+    if args.members < 1:
+        parser.error(f"--members: {args.members} is not a positive number of networks")
     if args.cases is not None and args.cases < 1:
         parser.error(f"--cases: {args.cases} is not a positive number of cases")
     library = read_library(None)
@@ -80,6 +85,7 @@ def main() -> None:
             batch_size=batch_size,
             seed=args.seed if args.network_seed is None else args.network_seed,
             screening=args.screening,
+            members=args.members,
         )
         with progress_bar() as progress:
             task = progress.add_task(f"{instrument}: generating cases", total=n)

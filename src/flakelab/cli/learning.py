@@ -492,6 +492,15 @@ def train(
             "the fifth as yardstick) or cross-validation (five fold models, 5x the work)."
         ),
     ] = "sequential",
+    members: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Networks trained side by side on the cleaned cases and averaged (an "
+            "ensemble: less error where the cases are few, and their disagreement reported "
+            "with every prediction; costs that many times the inference).",
+        ),
+    ] = 1,
     seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
     json_output: JsonOption = False,
 ) -> None:
@@ -525,6 +534,7 @@ def train(
         batch_size=batch_size,
         screening=screening,
         adapt_validation=adapt_validation,
+        members=members,
         seed=seed,
     )
     if colour_weight is not None:
@@ -702,7 +712,8 @@ def adapt(
         config = replace(config, adapt_epochs=epochs)
     stage = f"adapt {shop or cases}"
     with progress_bar(disable=json_output) as bar:
-        task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=config.adapt_epochs)
+        total = config.adapt_epochs * base.members  # an ensemble's members adapt side by side
+        task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=total)
         new, report = adapt_model(
             base, data, config, stage=stage, progress=lambda k: bar.advance(task, k)
         )

@@ -207,10 +207,15 @@ def _print_match(report: dict) -> None:
         for line in c["weights_g"]:
             table.add_row(line["toner"], f"{line['grams']:.1f}", f"{line['cumulative']:.1f}")
         geo = Table(box=box.SIMPLE, show_header=True)
-        for column in ("geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"):
+        keys = ["L", "a", "b", "dL", "dC", "dH", "dE00"]
+        columns = ["geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"]
+        if all("model_spread" in v for v in c["geometries"].values()):
+            keys.append("model_spread")
+            columns.append("± model")  # the ensemble's members' disagreement
+        for column in columns:
             geo.add_column(column, justify="right")
         for g, v in c["geometries"].items():
-            geo.add_row(g, *(f"{v[k]:.2f}" for k in ("L", "a", "b", "dL", "dC", "dH", "dE00")))
+            geo.add_row(g, *(f"{v[k]:.2f}" for k in keys))
         console.print(table)
         console.print(geo)
         extra = f"model: {c['model']}; rounding to the scale costs ΔE00 {c['rounding_de00']:.3f}"

@@ -54,6 +54,15 @@ class LearnedForward:
         R = torch.exp(log_R).reshape(-1, len(self.geometries), 31)
         return R, y[:, spectral:]
 
+    @property
+    def members(self) -> int:
+        """Networks the learned model averages (1: no spread to report)."""
+        return self.model.members
+
+    def member_reflectance(self, x: NDArray) -> NDArray:
+        """Each member's reflectance ``[K, N, G, 31]`` for recipes ``x[N, T]``."""
+        return self.model.predict_members(x)
+
 
 class _PhysicsRatio(torch.autograd.Function):
     """R_phys(x)/R_phys(x_known) with a finite-difference Jacobian on the used columns."""
@@ -158,6 +167,18 @@ class HybridForward(LearnedForward):
             physics = torch.as_tensor(physics, dtype=R.dtype)
             R = torch.exp((1 - w) * torch.log(R) + w * torch.log(physics))
         return R * _PhysicsRatio.apply(fractions, self).to(R.dtype), texture
+
+    def member_reflectance(self, x: NDArray) -> NDArray:
+        """Each member's reflectance ``[K, N, G, 31]`` through the hybrid path: the members
+        differ in the learned base only, by the factor each puts on the base's mean, and
+        only as far as the base is learned (not where the physics base takes over)."""
+        base = self.base_fractions(x)
+        members = self.model.predict_members(base)
+        factor = members / self.model.predict(base)[0][None]
+        with torch.no_grad():
+            R, _ = self(torch.as_tensor(x, dtype=self.dtype))
+        learned = 1 - self._physics_trust(x[:, self._novel_mask].sum(axis=1))
+        return R.double().numpy()[None] * factor ** learned[None, :, None, None]
 
     @staticmethod
     def _physics_trust(share: NDArray) -> NDArray:

@@ -107,6 +107,7 @@ class Candidate:
     novel: list[str]
     score: float
     in_support: bool = True
+    spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -128,6 +129,7 @@ class Candidate:
                     "dH": round(float(self.dLCH[i, 2]), 3),
                     "dE00": round(float(self.de00[i]), 3),
                 }
+                | ({} if self.spread is None else {"model_spread": round(float(self.spread[i]), 3)})
                 for i, g in enumerate(self.geometries)
             },
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
@@ -628,6 +630,16 @@ def evaluate_recipes(forward, x: NDArray) -> tuple[NDArray, NDArray | None]:
     return R.double().numpy(), None if texture is None else texture.double().numpy()
 
 
+def model_spread(forward, x: NDArray, lab: NDArray) -> NDArray | None:
+    """How far an ensemble's members disagree on recipes ``x[N, T]`` predicted at ``lab``
+    ``[N, G, 3]``: the root mean square over members of each member's ΔE00 from ``lab``,
+    ``[N, G]``; None for a single network, which cannot say."""
+    if getattr(forward, "members", 1) < 2:
+        return None
+    members = reflectance_to_Lab(forward.member_reflectance(x))
+    return np.sqrt(np.mean(delta_E(lab[None], members) ** 2, axis=0))
+
+
 def outside_support(x: NDArray, effect: NDArray, floor: float) -> NDArray:
     """Recipes ``x[N, T]`` between a solid and ``floor``, the least effect-toner share of the
     learned model's effect paints (``effect_share_floor`` in its training record). The model
@@ -674,8 +686,10 @@ def _judge(
         chosen.append(row)
         if len(chosen) == settings.candidates:
             break
+    rows = np.array(chosen, int)
+    spread = model_spread(forward, x[rows], reflectance_to_Lab(R[rows]))
     out = []
-    for row in chosen:
+    for i, row in enumerate(chosen):
         dlch = delta_LCH(target_lab, lab[row])
         passed = tolerance.passes(forward.geometries, de00=de[row], dLCH=dlch)
         fractions = {
@@ -702,6 +716,7 @@ def _judge(
                 novel=[n for n in fractions if n in forward.novel],
                 score=float(score[row]),
                 in_support=not outside[row],
+                spread=None if spread is None else spread[i],
             )
         )
     return out

@@ -9,11 +9,12 @@ with the weights. Log reflectance makes the loss relative, as colour differences
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import io
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -75,6 +76,10 @@ class StackedNetwork(nn.Module):
                 x = nn.functional.silu(x)
         return x
 
+    @property
+    def members(self) -> int:
+        return self.weights[0].shape[0]
+
     def copy_into(self, networks: Sequence[nn.Module]) -> None:
         """Write the trained weights back into the K separate networks."""
         with torch.no_grad():
@@ -87,7 +92,12 @@ class StackedNetwork(nn.Module):
 
 @dataclass
 class ForwardModel:
-    """A trained network with everything needed to use it."""
+    """A trained network with everything needed to use it.
+
+    The network is one MLP or, for an *ensemble*, a :class:`StackedNetwork` of K members
+    trained on the same cases from different draws; the ensemble predicts the members' mean
+    log reflectance, and their disagreement (:meth:`member_outputs`) says where the cases
+    taught the model too little to trust it."""
 
     toners: tuple[str, ...]
     geometries: tuple[str, ...]
@@ -101,6 +111,37 @@ class ForwardModel:
     info: dict
     effect: NDArray | None = None
     _constants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def members(self) -> int:
+        """How many networks the model averages (1: a single MLP)."""
+        return self.network.members if isinstance(self.network, StackedNetwork) else 1
+
+    @classmethod
+    def ensemble(cls, models: Sequence[ForwardModel]) -> ForwardModel:
+        """One model averaging ``models``: networks of one shape trained with the same
+        standardisation (the same cases); the first one's record is kept."""
+        first = models[0]
+        for other in models[1:]:
+            if other.hidden != first.hidden or other.toners != first.toners:
+                raise ModelError("ensemble: members differ in shape or toners")
+            for name in ("x_mean", "x_std", "y_mean", "y_std"):
+                if not np.array_equal(getattr(other, name), getattr(first, name)):
+                    raise ModelError(f"ensemble: members differ in standardisation ({name})")
+        if len(models) == 1:
+            return first
+        return replace(first, network=StackedNetwork([m.network for m in models]))
+
+    def split_members(self) -> list[ForwardModel]:
+        """The members as single models (copies), sharing this model's record."""
+        if self.members == 1:
+            return [replace(self, network=copy.deepcopy(self.network))]
+        networks = [
+            build_network(self.x_mean.size, self.y_mean.size, self.hidden)
+            for _ in range(self.members)
+        ]
+        self.network.copy_into(networks)
+        return [replace(self, network=net) for net in networks]
 
     @property
     def spectral_outputs(self) -> int:
@@ -146,13 +187,27 @@ class ForwardModel:
         return np.zeros(len(self.toners)) if self.effect is None else np.asarray(self.effect, float)
 
     def torch_forward(self, fractions: torch.Tensor) -> torch.Tensor:
-        """Differentiable: fractions ``[N, T]`` → outputs (log R, texture), de-standardised."""
+        """Differentiable: fractions ``[N, T]`` → outputs (log R, texture), de-standardised;
+        an ensemble's members averaged."""
+        y = self._standard_outputs(fractions)
+        if y.dim() == 3:
+            y = y.mean(dim=0)
+        return y * self._constant("y_std", y.dtype) + self._constant("y_mean", y.dtype)
+
+    def member_outputs(self, fractions: torch.Tensor) -> torch.Tensor:
+        """Each member's outputs ``[K, N, outputs]``, de-standardised (K = 1: one model)."""
+        y = self._standard_outputs(fractions)
+        y = y if y.dim() == 3 else y[None]
+        return y * self._constant("y_std", y.dtype) + self._constant("y_mean", y.dtype)
+
+    def _standard_outputs(self, fractions: torch.Tensor) -> torch.Tensor:
         dtype = fractions.dtype
         x = (self.features(fractions) - self._constant("x_mean", dtype)) / self._constant(
             "x_std", dtype
         )
-        y = self.network(x)
-        return y * self._constant("y_std", y.dtype) + self._constant("y_mean", y.dtype)
+        if self.members > 1:
+            x = x.expand(self.members, *x.shape)
+        return self.network(x)
 
     def _constant(self, name: str, dtype: torch.dtype) -> torch.Tensor:
         """The standardisation statistics and effect mask as tensors, made once per dtype:
@@ -166,15 +221,24 @@ class ForwardModel:
 
     def predict(self, fractions: ArrayLike, batch: int = 16384) -> tuple[NDArray, NDArray]:
         """Reflectance factors ``[N, G, 31]`` and texture readings ``[N, 8]``."""
+        return self.decode_targets(self._batched(self.torch_forward, fractions, batch, 0))
+
+    def predict_members(self, fractions: ArrayLike, batch: int = 16384) -> NDArray:
+        """Each member's reflectance factors ``[K, N, G, 31]``."""
+        y = self._batched(self.member_outputs, fractions, batch, 1)
+        return np.stack([self.decode_targets(member)[0] for member in y])
+
+    def _batched(self, forward, fractions: ArrayLike, batch: int, axis: int) -> NDArray:
         x = np.atleast_2d(np.asarray(fractions, dtype=np.float32))
         if x.shape[1] != len(self.toners):
             raise ModelError(f"fractions: expected {len(self.toners)} columns, got {x.shape[1]}")
         self.network.eval()
-        out = []
         with torch.no_grad():
-            for start in range(0, x.shape[0], batch):
-                out.append(self.torch_forward(torch.from_numpy(x[start : start + batch])).numpy())
-        return self.decode_targets(np.concatenate(out).astype(float))
+            out = [
+                forward(torch.from_numpy(x[start : start + batch])).numpy()
+                for start in range(0, x.shape[0], batch)
+            ]
+        return np.concatenate(out, axis=axis).astype(float)
 
     @property
     def fingerprint(self) -> str:
@@ -198,6 +262,7 @@ class ForwardModel:
             "geometries": list(self.geometries),
             "instrument": self.instrument,
             "hidden": list(self.hidden),
+            "members": self.members,
             "texture": list(TEXTURE_READINGS),
             "info": self.info,
             "effect": self.effect_mask().tolist(),
@@ -227,8 +292,20 @@ class ForwardModel:
         if meta.get("format") != "flakelab-model":
             raise ModelError(f"{source}: format: expected 'flakelab-model'")
         outputs = len(meta["geometries"]) * WAVELENGTHS.size + len(meta["texture"])
-        network = build_network(2 * len(meta["toners"]), outputs, meta["hidden"])
-        network.load_state_dict(stored["state"])
+        members = meta.get("members", 1)
+        if not isinstance(members, int) or members < 1:
+            raise ModelError(
+                f"{source}: members: expected a positive whole number, got {members!r}"
+            )
+        networks = [
+            build_network(2 * len(meta["toners"]), outputs, meta["hidden"]) for _ in range(members)
+        ]
+        network = networks[0] if members == 1 else StackedNetwork(networks)
+        try:
+            network.load_state_dict(stored["state"])
+        except RuntimeError as error:
+            first = str(error).splitlines()[0]
+            raise ModelError(f"{source}: weights do not fit the recorded shape ({first})") from None
         norm = {k: v.numpy().astype(float) for k, v in stored["norm"].items()}
         return cls(
             tuple(meta["toners"]),

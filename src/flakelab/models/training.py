@@ -90,6 +90,7 @@ class TrainingConfig:
     adapt_epochs: int = 150
     adapt_learning_rate: float = 2e-4
     adapt_validation: float = 0.2
+    members: int = 1
     seed: int = 0
 
     @classmethod
@@ -429,7 +430,8 @@ def protocol_epochs(config: TrainingConfig, adapt: bool = False) -> int:
     """Model-epochs the protocol runs (what it reports to ``progress``)."""
     sessions = config.folds - 1 if config.screening == "sequential" else config.folds
     per_session = config.epochs + config.finetune_epochs
-    return (sessions + 1) * per_session + (config.adapt_epochs if adapt else 0)
+    adapting = config.adapt_epochs * config.members if adapt else 0
+    return (sessions + config.members) * per_session + adapting
 
 
 def _screen_sequentially(data, config, partitions, log, progress) -> NDArray[np.bool_]:
@@ -456,6 +458,19 @@ def _screen_by_cross_validation(
     return flag_outliers(errors, config.outlier_threshold)
 
 
+def _train_final(data, config, clean, log, progress) -> ForwardModel:
+    """The final training on the cleaned cases: one model, or ``config.members`` side by side
+    from seeds ``seed``, ``seed + 1``, … (member 1 starts as the single model would), averaged
+    as an ensemble."""
+    members = [
+        _new_model(data, replace(config, seed=config.seed + k), clean)
+        for k in range(config.members)
+    ]
+    names = ["final"] if config.members == 1 else [f"final {k + 1}" for k in range(config.members)]
+    _train_stage(members, data, [clean] * config.members, config, log, names, progress)
+    return ForwardModel.ensemble(members)
+
+
 def train_protocol(
     data: CaseArrays,
     config: TrainingConfig = TrainingConfig(),
@@ -479,8 +494,7 @@ def train_protocol(
     else:
         outliers = _screen_by_cross_validation(data, config, partitions, train_rows, log, progress)
     clean = np.flatnonzero(~outliers)
-    model = _new_model(data, config, clean)
-    _train_stage([model], data, [clean], config, log, ["final"], progress)
+    model = _train_final(data, config, clean, log, progress)
     adaptation = None
     if adapt_shop is not None:
         shop_rows = np.flatnonzero((np.array(data.shops) == adapt_shop) & ~outliers)
@@ -531,25 +545,30 @@ def adapt(
         )
     shuffled = np.random.default_rng([config.seed, rows.size]).permutation(rows)
     train, validation = (shuffled[held:], shuffled[:held]) if held else (rows, None)
+    # an ensemble adapts member by member, side by side, each keeping its own best epoch
+    K = model.members
+    members = [model] if K == 1 else model.split_members()
     kept = fit(
-        [model],
+        members,
         data,
-        [train],
+        [train] * K,
         config.adapt_epochs,
         config.adapt_learning_rate,
         config,
         log,
-        [stage],
+        [stage] if K == 1 else [f"{stage} {k + 1}" for k in range(K)],
         progress,
-        validation=None if validation is None else [validation],
+        validation=None if validation is None else [validation] * K,
     )
+    if K > 1:
+        model.network = ForwardModel.ensemble(members).network
     return {
         "cases": int(train.size),
         "validation_cases": int(held),
         "epochs": config.adapt_epochs,
         "kept_epochs": config.adapt_epochs if kept is None else kept[0][0],
         "validation_de00_best": None if kept is None else kept[1][0],
-    }
+    } | ({} if kept is None or K == 1 else {"member_kept_epochs": kept[0]})
 
 
 def adapt_model(

@@ -1,0 +1,166 @@
+"""Ensembles of the learned model: members trained side by side, averaged, and their spread."""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from flakelab.cases.generator import World
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.io import read_library
+from flakelab.match.models import forward_for
+from flakelab.match.search import evaluate_recipes, match, model_spread
+from flakelab.models.network import ForwardModel, ModelError
+from flakelab.models.registry import shipped_model
+from flakelab.models.training import (
+    TrainingConfig,
+    adapt_model,
+    generated_case_arrays,
+    protocol_epochs,
+    train_protocol,
+)
+from test_models import SMALL
+
+QUICK = TrainingConfig(hidden=(32, 32), epochs=40, finetune_epochs=10, batch_size=16, seed=3)
+LIBRARY = read_library(None)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return generated_case_arrays(World(SMALL, "five-angle"), 300, seed=5)
+
+
+@pytest.fixture(scope="module")
+def ensemble(data):
+    return train_protocol(data, replace(QUICK, members=3))
+
+
+def _log_reflectance(model: ForwardModel, x: np.ndarray) -> np.ndarray:
+    return np.log(model.predict(x)[0])
+
+
+def test_an_ensemble_predicts_its_members_mean_log_reflectance(ensemble, data):
+    model, _ = ensemble
+    members = model.split_members()
+    assert model.members == 3 and len(members) == 3
+    x = data.x[:40]
+    mean = np.mean([_log_reflectance(m, x) for m in members], axis=0)
+    np.testing.assert_allclose(_log_reflectance(model, x), mean, atol=1e-5)
+    # the members are different networks, not one network three times
+    assert np.abs(_log_reflectance(members[0], x) - _log_reflectance(members[1], x)).max() > 1e-3
+
+
+def test_an_ensemble_errs_no_more_than_its_members_on_average(ensemble, data):
+    """Jensen: the squared error of the members' mean log reflectance is at most the mean of
+    their squared errors, case by case."""
+    model, _ = ensemble
+    measured = np.log(np.maximum(data.R, 1e-3))
+    mean_error = ((_log_reflectance(model, data.x) - measured) ** 2).mean(axis=(1, 2))
+    member_errors = [
+        ((_log_reflectance(m, data.x) - measured) ** 2).mean(axis=(1, 2))
+        for m in model.split_members()
+    ]
+    assert np.all(mean_error <= np.mean(member_errors, axis=0) + 1e-9)
+
+
+def test_the_protocol_trains_every_member_on_the_cleaned_cases(ensemble):
+    model, report = ensemble
+    stages = list(dict.fromkeys(entry["stage"] for entry in report["log"]))
+    assert stages[-6:] == ["final 1", "final 2", "final 3"] + [
+        f"final {k} fine-tune" for k in (1, 2, 3)
+    ]
+    assert len(report["log"]) == protocol_epochs(replace(QUICK, members=3))
+    assert model.info["config"]["members"] == 3
+
+
+def test_an_ensemble_survives_a_round_trip_through_bytes(ensemble, data):
+    model, _ = ensemble
+    again = ForwardModel.from_bytes(model.to_bytes())
+    assert again.members == 3 and again.fingerprint == model.fingerprint
+    np.testing.assert_allclose(again.predict(data.x[:20])[0], model.predict(data.x[:20])[0])
+
+
+def test_a_model_file_with_a_wrong_member_count_is_refused(ensemble):
+    model, _ = ensemble
+    for members, problem in ((2, "weights do not fit"), ("three", "members: expected")):
+        stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
+        stored["meta"] = json.dumps(json.loads(stored["meta"]) | {"members": members})
+        buffer = io.BytesIO()
+        torch.save(stored, buffer)
+        with pytest.raises(ModelError, match=f"m.pt: {problem}"):
+            ForwardModel.from_bytes(buffer.getvalue(), source="m.pt")
+
+
+def test_members_of_another_standardisation_do_not_make_an_ensemble(ensemble, data):
+    model, _ = ensemble
+    member = model.split_members()[0]
+    shifted = replace(member, y_mean=member.y_mean + 0.1)
+    with pytest.raises(ModelError, match="standardisation"):
+        ForwardModel.ensemble([member, shifted])
+
+
+def test_an_adapted_ensemble_keeps_its_members_each_at_its_best_epoch(ensemble, data):
+    model, _ = ensemble
+    config = replace(QUICK, members=3, adapt_epochs=4, adapt_validation=0.25)
+    adapted, report = adapt_model(model, data.subset(np.arange(80)), config)
+    assert adapted.members == 3 and len(report["member_kept_epochs"]) == 3
+    assert {e["stage"] for e in report["log"]} == {"adapt 1", "adapt 2", "adapt 3"}
+    # the copy is adapted, not the model it came from
+    assert model.fingerprint != adapted.fingerprint or report["member_kept_epochs"] == [0, 0, 0]
+
+
+@pytest.fixture(scope="module")
+def hybrid_ensemble():
+    """The shipped model beside a copy of it with perturbed weights: an ensemble of two
+    whose members disagree, through the hybrid path for the demo library's new toners."""
+    base = shipped_model("five-angle")
+    other = replace(base, network=copy.deepcopy(base.network))
+    generator = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for p in other.network.parameters():
+            p.add_(0.01 * torch.randn(p.shape, generator=generator))
+    return forward_for(ForwardModel.ensemble([base, other]), LIBRARY)
+
+
+def test_the_hybrid_members_average_to_the_hybrid_prediction(hybrid_ensemble):
+    forward = hybrid_ensemble
+    assert forward.novel and forward.members == 2
+    x = np.random.default_rng(1).dirichlet(np.full(len(LIBRARY.names), 0.3), 8)
+    members = forward.member_reflectance(x)
+    R, _ = evaluate_recipes(forward, x)
+    np.testing.assert_allclose(np.exp(np.log(members).mean(0)), R, rtol=1e-5)
+    spread = model_spread(forward, x, reflectance_to_Lab(R))
+    np.testing.assert_allclose(
+        spread,
+        np.sqrt(np.mean(delta_E(reflectance_to_Lab(R)[None], reflectance_to_Lab(members)) ** 2, 0)),
+    )
+    assert spread.min() > 0.0
+
+
+def test_no_spread_where_the_physics_base_takes_over(hybrid_ensemble):
+    forward = hybrid_ensemble
+    x = np.zeros((1, len(LIBRARY.names)))
+    x[0, [LIBRARY.names.index(n) for n in forward.novel]] = 0.5
+    members = forward.member_reflectance(x)
+    np.testing.assert_allclose(members[0], members[1], rtol=1e-12)
+
+
+def test_a_single_network_reports_no_spread_and_an_ensemble_does(hybrid_ensemble):
+    from flakelab.data import example_path
+    from flakelab.io import read_measurement
+    from flakelab.match.models import effect_mask
+
+    target = read_measurement(example_path("target"))
+    single = forward_for(shipped_model("five-angle"), LIBRARY)
+    effect = effect_mask(LIBRARY, single.toners)
+    assert model_spread(single, np.eye(len(LIBRARY.names))[:2], np.zeros((2, 5, 3))) is None
+    result = match(target, hybrid_ensemble, effect)
+    best = result.to_dict()["candidates"][0]
+    assert all(v["model_spread"] > 0 for v in best["geometries"].values())
