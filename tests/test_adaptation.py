@@ -66,7 +66,8 @@ def test_adaptation_learns_a_shops_habits(model):
 
 def test_keeping_the_best_epoch_never_leaves_the_model_worse_where_it_is_judged(model):
     # a shop with no habits of its own: its cases teach nothing the model lacks, and all 150
-    # epochs fit their noise
+    # epochs fit their noise (one network: the shipped ensemble's first)
+    model = model.split_members()[0]
     cases = shop_cases(model, WorldSettings(), 500, 31)
     fresh = shop_cases(model, WorldSettings(), 400, 32)
     train, validation = np.arange(400), np.arange(400, 500)
@@ -102,4 +103,8 @@ def test_without_validation_every_epoch_runs(model):
     config = replace(recorded_config(model), adapt_validation=0.0, adapt_epochs=3)
     _, report = adapt_model(model, cases, config)
     assert report["kept_epochs"] == 3 and report["validation_cases"] == 0
-    assert [e["epoch"] for e in report["log"]] == [0, 1, 2]
+    # every member of the shipped ensemble runs every epoch
+    stages = [f"adapt {k + 1}" for k in range(model.members)] if model.members > 1 else ["adapt"]
+    for stage in stages:
+        assert [e["epoch"] for e in report["log"] if e["stage"] == stage] == [0, 1, 2]
+    assert len(report["log"]) == 3 * model.members

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import io
 import json
 from dataclasses import replace
@@ -118,15 +117,10 @@ def test_an_adapted_ensemble_keeps_its_members_each_at_its_best_epoch(ensemble, 
 
 @pytest.fixture(scope="module")
 def hybrid_ensemble():
-    """The shipped model beside a copy of it with perturbed weights: an ensemble of two
-    whose members disagree, through the hybrid path for the demo library's new toners."""
-    base = shipped_model("five-angle")
-    other = replace(base, network=copy.deepcopy(base.network))
-    generator = torch.Generator().manual_seed(0)
-    with torch.no_grad():
-        for p in other.network.parameters():
-            p.add_(0.01 * torch.randn(p.shape, generator=generator))
-    return forward_for(ForwardModel.ensemble([base, other]), LIBRARY)
+    """Two of the shipped ensemble's members as an ensemble of their own, through the hybrid
+    path for the demo library's new toners."""
+    members = shipped_model("five-angle").split_members()
+    return forward_for(ForwardModel.ensemble(members[:2]), LIBRARY)
 
 
 def test_the_hybrid_members_average_to_the_hybrid_prediction(hybrid_ensemble):
@@ -158,9 +152,17 @@ def test_a_single_network_reports_no_spread_and_an_ensemble_does(hybrid_ensemble
     from flakelab.match.models import effect_mask
 
     target = read_measurement(example_path("target"))
-    single = forward_for(shipped_model("five-angle"), LIBRARY)
+    single = forward_for(shipped_model("five-angle").split_members()[0], LIBRARY)
     effect = effect_mask(LIBRARY, single.toners)
     assert model_spread(single, np.eye(len(LIBRARY.names))[:2], np.zeros((2, 5, 3))) is None
     result = match(target, hybrid_ensemble, effect)
     best = result.to_dict()["candidates"][0]
     assert all(v["model_spread"] > 0 for v in best["geometries"].values())
+
+
+def test_fitting_an_ensemble_as_one_network_is_refused(ensemble, data):
+    from flakelab.models.training import fit
+
+    model, _ = ensemble
+    with pytest.raises(ModelError, match="ensemble of 3 networks.*split_members"):
+        fit([model], data, [np.arange(10)], 1, 1e-3, QUICK, [], ["a"])

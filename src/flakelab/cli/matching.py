@@ -224,6 +224,12 @@ def _print_match(report: dict) -> None:
         console.print(extra, highlight=False)
     for note in report["notes"]:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
+    if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
+        console.print(
+            "± model: how far the networks of the model's ensemble disagree (ΔE00 about their "
+            "mean); where it is large, the prediction deserves less trust.",
+            highlight=False,
+        )
 
 
 def _evaluate(

@@ -157,7 +157,7 @@ def reflectance_to_Lab(
 
     Examples
     --------
-    >>> np.round(reflectance_to_Lab(np.full(31, 0.5)), 3)
+    >>> np.round(reflectance_to_Lab(np.full(31, 0.5)), 3) + 0.0  # + 0.0: no negative zero
     array([ 76.069,   0.   ,   0.   ])
     """
     XYZ = reflectance_to_XYZ(reflectance, wavelengths, conditions)

@@ -500,9 +500,13 @@ def _match(
         x_screen = np.concatenate([x_screen, x_all])
         screen_loss = np.concatenate([screen_loss, loss_all])
         bases += bases_all
+    # the screen's best rows, those outside the model's support after every one inside it:
+    # a near-black target's best free rows can all be black with a trace of aluminium, and
+    # the solid restarts must still seed the refinement
+    outside = outside_support(x_screen, effect, settings.effect_floor)
     free = np.array([base is None for base in bases])
-    best = np.flatnonzero(free)[np.argsort(screen_loss[free])[:3]]
-    top = np.flatnonzero(~free)[np.argsort(screen_loss[~free])[: settings.top_bases]]
+    best = _ranked(np.flatnonzero(free), screen_loss, outside)[:3]
+    top = _ranked(np.flatnonzero(~free), screen_loss, outside)[: settings.top_bases]
     x_best = x_screen[np.concatenate([best, top])]
     importance = _importance(forward, colour, x_best, target_lab, target_texture, settings)
     n = best.size
@@ -585,6 +589,11 @@ def _match(
 def recipe_vector(forward, fractions: dict[str, float]) -> NDArray:
     """A recipe's fractions ``{toner: share}`` as a vector over the model's toners."""
     return np.array([fractions.get(n, 0.0) for n in forward.toners])
+
+
+def _ranked(rows: NDArray, loss: NDArray, outside: NDArray) -> NDArray:
+    """``rows`` by ``loss``, those ``outside`` the model's support last."""
+    return rows[np.lexsort((loss[rows], outside[rows]))]
 
 
 def _weighable(x: NDArray, settings: MatchSettings) -> NDArray:

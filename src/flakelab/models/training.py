@@ -266,6 +266,12 @@ def fit(
     of the protocol share each step's fixed cost instead. Folds differ by at most one case:
     an epoch draws the smallest fold's count from each, leaving out at most one case at
     random."""
+    ensembles = [m.members for m in models if m.members > 1]
+    if ensembles:
+        raise ModelError(
+            f"fit: a model is an ensemble of {ensembles[0]} networks; fit its members "
+            "(ForwardModel.split_members) side by side"
+        )
     sizes = [r.size for r in rows]
     if epochs <= 0 or min(sizes) == 0:
         return None
