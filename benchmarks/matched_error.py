@@ -9,6 +9,7 @@ target's hidden formula. Their ratio says how much of the model's error the opti
 finds.
 
     python benchmarks/matched_error.py [--targets 60] [--seed 81,82] [--model FILE] [--json]
+        [--settings "model_risk=1"]
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.evaluate import recipe_vector, trial
-from flakelab.match.search import evaluate_recipes, match
+from flakelab.match.search import MatchSettings, evaluate_recipes, match
+from match_variants import parse_settings
 
 
 def own_error(world: World, forward, x: np.ndarray) -> np.ndarray:
@@ -44,7 +46,13 @@ def statistics(de: np.ndarray) -> dict[str, float]:
 
 
 def matched_and_hidden(
-    world: World, forward, effect, seeds: list[int], targets: int, candidates: int = 1
+    world: World,
+    forward,
+    effect,
+    seeds: list[int],
+    targets: int,
+    candidates: int = 1,
+    settings: MatchSettings | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """For ``targets`` hidden formulations per seed, made and measured as in the harness: the
     recipes ``[N·candidates, T]`` the matcher proposes (its best ``candidates``) and the hidden
@@ -55,16 +63,16 @@ def matched_and_hidden(
         rng = np.random.default_rng(seed)
         for x_hidden in tracked(known.formulations(targets, rng), f"targets (seed {seed})"):
             t = trial(world, x_hidden, rng)
-            proposed = match(t.target, forward, effect).candidates[:candidates]
+            proposed = match(t.target, forward, effect, settings=settings).candidates[:candidates]
             matched += [recipe_vector(forward, c.fractions) for c in proposed]
             hidden.append(x_hidden)
     return np.array(matched), np.array(hidden)
 
 
-def measure(world: World, forward, effect, args) -> dict:
+def measure(world: World, forward, effect, args, settings: MatchSettings | None = None) -> dict:
     """The model's own error at matched recipes and at hidden formulas, and their ratio."""
     matched, hidden = matched_and_hidden(
-        world, forward, effect, seeds_from(args.seed), args.targets
+        world, forward, effect, seeds_from(args.seed), args.targets, settings=settings
     )
     at_matches = statistics(own_error(world, forward, matched))
     at_hidden = statistics(own_error(world, forward, hidden))
@@ -81,10 +89,16 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=60, help="per seed")
     parser.add_argument("--seed", default="81,82", help="one seed, a list or a range")
     parser.add_argument("--model", help="five-angle model file (default: the shipped one)")
+    parser.add_argument("--settings", default="", help="matcher settings, e.g. model_risk=0")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     world, forward, effect = shipped_matcher(model=args.model)
-    report = {"model": args.model or "shipped", **measure(world, forward, effect, args)}
+    settings = parse_settings(args.settings)
+    report = {
+        "model": args.model or "shipped",
+        "settings": args.settings or "defaults",
+        **measure(world, forward, effect, args, settings),
+    }
     if args.json:
         print(json.dumps(report, indent=2))
         return

@@ -166,3 +166,59 @@ def test_fitting_an_ensemble_as_one_network_is_refused(ensemble, data):
     model, _ = ensemble
     with pytest.raises(ModelError, match="ensemble of 3 networks.*split_members"):
         fit([model], data, [np.arange(10)], 1, 1e-3, QUICK, [], ["a"])
+
+
+def test_the_model_risk_is_the_members_rms_cie94_from_their_mean(hybrid_ensemble):
+    """The matcher's model-risk term, in torch, against colour-science's CIE 1994 on the
+    numpy path, for recipes without new toners (where the learned members are the whole
+    prediction) and the single-network case, where it has nothing to measure."""
+    import colour
+
+    from flakelab.core.torch_colour import TorchColour
+    from flakelab.match.search import model_risk
+
+    forward = hybrid_ensemble
+    known = np.array([n not in forward.novel for n in LIBRARY.names])
+    x = np.random.default_rng(2).dirichlet(np.full(known.sum(), 0.3), 6)
+    x_full = np.zeros((6, len(LIBRARY.names)))
+    x_full[:, known] = x
+    members = forward.member_reflectance(x_full)
+    mean_lab = reflectance_to_Lab(evaluate_recipes(forward, x_full)[0])
+    de94 = colour.delta_E(mean_lab[None], reflectance_to_Lab(members), method="CIE 1994")
+    expected = np.sqrt(np.mean(de94**2, axis=0)).mean(axis=1)
+    colour_t = TorchColour(dtype=forward.dtype)
+    R, _, members_t = forward.with_members(torch.as_tensor(x_full, dtype=forward.dtype))
+    np.testing.assert_allclose(R.numpy(), evaluate_recipes(forward, x_full)[0], rtol=1e-5)
+    risk = model_risk(colour_t, members_t)
+    np.testing.assert_allclose(risk.numpy(), expected, rtol=2e-3, atol=2e-3)
+    assert expected.min() > 0.01
+    single = forward_for(shipped_model("five-angle").split_members()[0], LIBRARY)
+    alone = model_risk(colour_t, single.with_members(torch.as_tensor(x_full))[2])
+    assert alone.abs().max() < 2e-3  # one member: no disagreement but the root's floor
+
+
+def test_the_objective_adds_the_weighed_model_risk_for_an_ensemble_only(hybrid_ensemble):
+    """The search's objective with ``model_risk`` w is the colour objective plus w times the
+    members' disagreement, through the hybrid path too (recipes with a new toner); a single
+    network's objective is left as it was."""
+    from flakelab.core.torch_colour import TorchColour
+    from flakelab.data import example_path
+    from flakelab.io import read_measurement
+    from flakelab.match.search import MatchSettings, _loss, _target_spectra, model_risk
+
+    colour_t = TorchColour(dtype=hybrid_ensemble.dtype)
+    single = forward_for(shipped_model("five-angle").split_members()[0], LIBRARY)
+    spectra, _, _ = _target_spectra(read_measurement(example_path("target")), hybrid_ensemble)
+    target_lab = colour_t.lab(torch.as_tensor(spectra, dtype=hybrid_ensemble.dtype))
+    x = np.random.default_rng(3).dirichlet(np.full(len(LIBRARY.names), 0.3), 6)
+    x = torch.as_tensor(x, dtype=hybrid_ensemble.dtype)
+    assert x[:, [LIBRARY.names.index(n) for n in hybrid_ensemble.novel]].min() > 0
+
+    def objective(forward, weight):
+        return _loss(forward, colour_t, x, target_lab, None, MatchSettings(model_risk=weight))
+
+    risk = model_risk(colour_t, hybrid_ensemble.with_members(x)[2])
+    added = objective(hybrid_ensemble, 2.0) - objective(hybrid_ensemble, 0.0)
+    np.testing.assert_allclose(added.numpy(), 2.0 * risk.numpy(), rtol=1e-4)
+    assert risk.min() > 0.01
+    np.testing.assert_array_equal(objective(single, 2.0).numpy(), objective(single, 0.0).numpy())

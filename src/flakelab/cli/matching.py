@@ -124,6 +124,16 @@ def match_command(
         ),
     ] = "shop",
     seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
+    model_risk: Annotated[
+        float | None,
+        typer.Option(
+            min=0.0,
+            help="Weight of the model ensemble's disagreement (ΔE94) in the search's objective: "
+            "steers recipes to where the learned model's networks agree (0: the closest "
+            "predicted match, wherever the model is unsure).",
+            show_default="flakelab.match.search.MatchSettings.model_risk",
+        ),
+    ] = None,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     json_output: JsonOption = False,
@@ -138,6 +148,7 @@ def match_command(
     from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
     from flakelab.match.search import MatchSettings, match
 
+    risk = {} if model_risk is None else {"model_risk": model_risk}
     if target == "evaluate":
         _evaluate(
             library=library,
@@ -150,6 +161,7 @@ def match_command(
             world_name=world,
             habits_file=habits,
             shop=shop,
+            settings=MatchSettings(**risk),  # the harness's own candidates and seeds
             json_output=json_output,
         )
         return
@@ -165,7 +177,7 @@ def match_command(
         forward,
         effect,
         tolerance=tol,
-        settings=MatchSettings(candidates=candidates, seed=seed),
+        settings=MatchSettings(candidates=candidates, seed=seed, **risk),
         habits=habits_for(habits, shop, database, forward),
         library=lib,
     )
@@ -244,6 +256,7 @@ def _evaluate(
     world_name,
     habits_file,
     shop,
+    settings,
     json_output,
 ):
     from flakelab.match.evaluate import evaluate_matching, harness_world
@@ -262,9 +275,11 @@ def _evaluate(
             novel=forward.novel,
             novel_targets=novel_targets if forward.novel else 0,
             habits=habits,
+            settings=settings,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name
+    report["model_risk"] = settings.model_risk
     report["world"] = world_name
     report["habits"] = habits and habits.report()
     if json_output:

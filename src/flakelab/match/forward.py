@@ -49,10 +49,13 @@ class LearnedForward:
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         y = self.model.torch_forward(fractions.to(torch.float32)).to(fractions.dtype)
-        spectral = self.model.spectral_outputs
-        log_R = torch.clamp(y[:, :spectral], np.log(LOG_FLOOR) - 3, LOG_CEILING)
-        R = torch.exp(log_R).reshape(-1, len(self.geometries), 31)
-        return R, y[:, spectral:]
+        return self._reflectance(y), y[:, self.model.spectral_outputs :]
+
+    def _reflectance(self, y: torch.Tensor) -> torch.Tensor:
+        """Reflectance ``[..., G, 31]`` from the model's outputs ``[..., outputs]``."""
+        log_R = y[..., : self.model.spectral_outputs]
+        R = torch.exp(torch.clamp(log_R, np.log(LOG_FLOOR) - 3, LOG_CEILING))
+        return R.reshape(*y.shape[:-1], len(self.geometries), 31)
 
     @property
     def members(self) -> int:
@@ -62,6 +65,16 @@ class LearnedForward:
     def member_reflectance(self, x: NDArray) -> NDArray:
         """Each member's reflectance ``[K, N, G, 31]`` for recipes ``x[N, T]``."""
         return self.model.predict_members(x)
+
+    def with_members(
+        self, fractions: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """Differentiable, in one pass: the prediction as :meth:`__call__` gives it, and each
+        member's reflectance ``[K, N, G, 31]`` (K = 1 for a single network), what the
+        matcher's model-risk term compares."""
+        y = self.model.member_outputs(fractions.to(torch.float32)).to(fractions.dtype)
+        mean = y.mean(dim=0)
+        return self._reflectance(mean), mean[:, self.model.spectral_outputs :], self._reflectance(y)
 
 
 class _PhysicsRatio(torch.autograd.Function):
@@ -148,13 +161,23 @@ class HybridForward(LearnedForward):
         return R / np.where(has_base[:, None, None], base, 1.0)
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        base, total = self._base(fractions)
+        R, texture = super().__call__(base)
+        return self._scaled(R, fractions, total), texture
+
+    def _base(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The learned base's fractions (new toners on their proxies, renormalised) and the
+        share ``[N, 1]`` they keep of the recipe."""
         base = fractions @ torch.as_tensor(self._substitute, dtype=fractions.dtype)
         total = base.sum(1, keepdim=True)
-        R, texture = super().__call__(base / torch.clamp(total, min=1e-9))
+        return base / torch.clamp(total, min=1e-9), total
+
+    def _scaled(self, R: torch.Tensor, fractions: torch.Tensor, total: torch.Tensor):
+        """The learned base's reflectance ``R`` scaled by the physics for the new toners."""
         x = fractions.detach().numpy()
         share = x[:, self._novel_mask].sum(axis=1)
         if not np.any(share > 1e-9):
-            return R, texture
+            return R
         R = torch.where(total[:, :, None] > 1e-6, R, torch.ones_like(R))
         trust = self._physics_trust(share)
         if np.any(trust > 0):
@@ -166,7 +189,17 @@ class HybridForward(LearnedForward):
             w = torch.as_tensor(trust[:, None, None], dtype=R.dtype)
             physics = torch.as_tensor(physics, dtype=R.dtype)
             R = torch.exp((1 - w) * torch.log(R) + w * torch.log(physics))
-        return R * _PhysicsRatio.apply(fractions, self).to(R.dtype), texture
+        return R * _PhysicsRatio.apply(fractions, self).to(R.dtype)
+
+    def with_members(
+        self, fractions: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """The hybrid prediction and the members of its learned base (new toners on their
+        proxies): the physics ratio multiplies every member alike, so their disagreement is
+        the base's."""
+        base, total = self._base(fractions)
+        R, texture, members = super().with_members(base)
+        return self._scaled(R, fractions, total), texture, members
 
     def member_reflectance(self, x: NDArray) -> NDArray:
         """Each member's reflectance ``[K, N, G, 31]`` through the hybrid path: the members

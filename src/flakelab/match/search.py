@@ -85,6 +85,7 @@ class MatchSettings:
     swap_above: float = 0.6
     swap_from: int = 2
     effect_floor: float | None = None  # None: the model's (its training cases' effect share)
+    model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
     seed: int = 0
 
 
@@ -177,11 +178,25 @@ def _loss(
     target_texture: torch.Tensor | None,
     settings: MatchSettings,
 ) -> torch.Tensor:
-    R, texture = forward(x)
+    risky = settings.model_risk and getattr(forward, "members", 1) > 1
+    R, texture, members = forward.with_members(x) if risky else (*forward(x), None)
     loss = multi_angle_loss(colour, target_lab, colour.lab(R))
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
+    if risky:
+        loss = loss + settings.model_risk * model_risk(colour, members)
     return loss
+
+
+def model_risk(colour: TorchColour, R: torch.Tensor) -> torch.Tensor:
+    """Differentiable: how far an ensemble's members, with reflectances ``R[K, N, G, 31]``,
+    disagree: the root mean square over members of each one's ΔE94 from their mean
+    (log-reflectance average, as the ensemble predicts), averaged over geometries, ``[N]``.
+    Where the members disagree the cases taught the model little, and the optimiser, free to
+    go there, finds the model's errors in its favour (``benchmarks/matched_error.py``)."""
+    mean = torch.exp(torch.log(R).mean(dim=0))
+    de2 = colour.delta_e94_squared(colour.lab(mean)[None], colour.lab(R))
+    return torch.sqrt(de2.mean(dim=0)).mean(dim=1)
 
 
 def _optimise(
