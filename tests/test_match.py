@@ -208,6 +208,59 @@ def test_offset_split_keeps_a_batch_offset():
     )
 
 
+def test_offset_split_with_a_prior_per_component_is_the_joint_least_squares():
+    """σ_p per geometry and component: the posterior means equal the joint least-squares
+    (MAP) solution of offset = S·a + p + n with a ~ N(0, 1), p ~ N(0, σ_p²), n ~ N(0, σ_n²),
+    solved directly as one stacked system (an independent route); a component whose σ_p is
+    wide keeps more of its offset."""
+    library, x, geometries = _blue_silver()
+    sensitivity = application_sensitivity(library, x, geometries)
+    offset = np.random.default_rng(4).normal(0.0, 0.5, (len(geometries), 3))
+    sd = np.random.default_rng(5).uniform(0.1, 1.0, offset.shape)
+    persistent, sigmas = split_offset(offset, sensitivity, sd, NOISE_SD)
+    S = sensitivity.reshape(len(sensitivity), -1).T
+    n, k = S.shape
+    # unknowns (a, p): rows a/1, p/σ_p, (offset - S a - p)/σ_n
+    A = np.block(
+        [
+            [np.eye(k), np.zeros((k, n))],
+            [np.zeros((n, k)), np.diag(1 / sd.ravel())],
+            [S / NOISE_SD, np.eye(n) / NOISE_SD],
+        ]
+    )
+    b = np.concatenate([np.zeros(k + n), offset.ravel() / NOISE_SD])
+    solution = np.linalg.lstsq(A, b, rcond=None)[0]
+    np.testing.assert_allclose(sigmas, solution[:k], atol=1e-9)
+    np.testing.assert_allclose(persistent.ravel(), solution[k:], atol=1e-9)
+    # one σ_p everywhere is the scalar prior
+    scalar, _ = split_offset(offset, sensitivity, 0.3)
+    np.testing.assert_allclose(split_offset(offset, sensitivity, np.full((5, 3), 0.3))[0], scalar)
+    wide = sd.copy()
+    wide[2, 1] = 5.0
+    assert abs(split_offset(offset, sensitivity, wide)[0][2, 1]) > abs(persistent[2, 1])
+
+
+def test_the_ensemble_s_spread_widens_the_persistent_prior_where_its_members_disagree():
+    from flakelab.match.correction import model_persistent_sd
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    library = read_library(None)
+    ensemble = forward_for(shipped_model("five-angle"), library)
+    single = forward_for(shipped_model("five-angle").split_members()[0], library)
+    x = np.zeros(len(library.names))
+    x[[library.names.index("Al medium"), library.names.index("Pearl interference red")]] = 0.5
+    assert model_persistent_sd(single, x, 2.0) == PERSISTENT_SD
+    assert model_persistent_sd(ensemble, x, 0.0) == PERSISTENT_SD
+    sd = model_persistent_sd(ensemble, x, 2.0)
+    members = reflectance_to_Lab(ensemble.member_reflectance(x[None]))[:, 0]
+    assert sd.shape == (5, 3) and np.all(sd > PERSISTENT_SD)
+    # widest where the members' L*a*b* spread most
+    assert np.unravel_index(sd.argmax(), sd.shape) == np.unravel_index(
+        members.std(0).argmax(), sd.shape
+    )
+
+
 def test_weighing_sums_to_the_can_at_the_scale_resolution():
     lines = weigh({"A": 0.7777, "B": 0.2, "C": 0.0223}, 250.0, 0.1)
     assert [ln.toner for ln in lines] == ["A", "B", "C"]

@@ -316,6 +316,15 @@ def correct_command(
             show_default="flakelab.match.correction.EXTRA_TONERS_TRIED",
         ),
     ] = None,
+    model_sd: Annotated[
+        float | None,
+        typer.Option(
+            min=0.0,
+            help="Widen the prior of the offset that persists by this many times the model "
+            "ensemble's disagreement at each geometry (0: one prior everywhere).",
+            show_default="flakelab.match.correction.MODEL_SD",
+        ),
+    ] = None,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     json_output: JsonOption = False,
@@ -347,7 +356,7 @@ def correct_command(
     target_R, _, _ = _target_spectra(read_measurement(target), forward)
     sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
-    from flakelab.match.correction import EXTRA_TONERS_TRIED
+    from flakelab.match.correction import EXTRA_TONERS_TRIED, MODEL_SD
 
     extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
     if extra_toners < 0:
@@ -363,6 +372,7 @@ def correct_command(
         offset_weight=offset_weight,
         extra_toners=extra_toners,
         habits=shop_habits,
+        model_sd=MODEL_SD if model_sd is None else model_sd,
     )
     target_lab = reflectance_to_Lab(target_R)
     before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
@@ -377,6 +387,7 @@ def correct_command(
         report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
     report["new_toner"] = correction.new_toner
     report["offset_weight"] = offset_weight
+    report["model_sd"] = MODEL_SD if model_sd is None else model_sd
     report["spray_application"] = correction.application and {
         name: round(value, 4) for name, value in correction.application.items()
     }

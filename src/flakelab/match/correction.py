@@ -43,6 +43,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
@@ -64,7 +65,9 @@ __all__ = [
     "CORRECTION_MODES",
     "OFFSET_WEIGHT",
     "PERSISTENT_SD",
+    "MODEL_SD",
     "NOISE_SD",
+    "model_persistent_sd",
     "split_offset",
 ]
 
@@ -85,6 +88,12 @@ seeds (``--seed 77,78,81-86``) σ_p from 0.2 to 0.8 correct alike (pass 0.677, 0
 NOISE_SD = 0.1
 """σ_n: the rest that does not persist (instrument, weighing), per component and geometry
 (``benchmarks/correction.py``, seeds 77 and 78: 0.1 better than 0.05 and 0.2)."""
+
+MODEL_SD = 0.0
+"""How far an ensemble's disagreement widens σ_p: at each geometry and L*a*b* component the
+prior's σ_p becomes √(σ_p² + (MODEL_SD·s)²), s the members' standard deviation there
+(:func:`model_persistent_sd`); where the members disagree, more of a spray-out's offset is
+likely the model's own error, which persists."""
 
 EXTRA_TONERS_TRIED = 8
 EXTRA_TONER_GAIN = 0.15
@@ -131,16 +140,28 @@ class Correction:
 def split_offset(
     offset: NDArray,
     sensitivity: NDArray,
-    persistent_sd: float = PERSISTENT_SD,
+    persistent_sd: float | NDArray = PERSISTENT_SD,
     noise_sd: float = NOISE_SD,
 ) -> tuple[NDArray, NDArray]:
     """The persistent part ``[G, 3]`` of a spray-out's L*a*b* ``offset`` from the model, and
     its application deviations ``[K]`` in sigmas, given the L*a*b* change of one sigma of each
-    application parameter ``sensitivity[K, G, 3]`` (posterior means; module notes)."""
+    application parameter ``sensitivity[K, G, 3]`` (posterior means; module notes).
+    ``persistent_sd`` is one σ_p, or one per geometry and component ``[G, 3]``."""
     S = sensitivity.reshape(len(sensitivity), -1).T
-    C = S @ S.T + (persistent_sd**2 + noise_sd**2) * np.eye(S.shape[0])
+    prior = np.broadcast_to(np.square(persistent_sd), offset.shape).reshape(-1)
+    C = S @ S.T + np.diag(prior + noise_sd**2)
     w = np.linalg.solve(C, offset.reshape(-1))
-    return (persistent_sd**2 * w).reshape(offset.shape), S.T @ w
+    return (prior * w).reshape(offset.shape), S.T @ w
+
+
+def model_persistent_sd(forward, x: NDArray, model_sd: float) -> float | NDArray:
+    """σ_p per geometry and L*a*b* component ``[G, 3]`` for recipe ``x[T]``: the prior's
+    σ_p widened by ``model_sd`` times the ensemble's members' standard deviation there, where
+    the model's own error (which persists) is likely larger; σ_p alone for one network."""
+    if not model_sd or getattr(forward, "members", 1) < 2:
+        return PERSISTENT_SD
+    members = reflectance_to_Lab(forward.member_reflectance(x[None]))[:, 0]
+    return np.sqrt(PERSISTENT_SD**2 + (model_sd * members.std(axis=0)) ** 2)
 
 
 def application_sensitivity(library: Library, x: NDArray, geometries) -> NDArray:
@@ -180,16 +201,19 @@ def correct(
     max_addition: float = 0.5,
     library: Library | None = None,
     offset_weight: float | None = None,
-    persistent_sd: float = PERSISTENT_SD,
+    persistent_sd: float | None = None,
     noise_sd: float = NOISE_SD,
     extra_toners: int = EXTRA_TONERS_TRIED,
     habits: ShopHabits | None = None,
+    model_sd: float = MODEL_SD,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
     ``extra_toners`` toners outside the recipe are tried (0: the recipe's toners only).
     With ``library`` (in the model's toner order) the offset is split by the physics of the
-    spray's application; ``offset_weight`` weights the whole offset instead. With the shop's
+    spray's application (σ_p widened by ``model_sd`` times an ensemble's disagreement,
+    unless ``persistent_sd`` fixes it); ``offset_weight`` weights the whole offset instead.
+    With the shop's
     ``habits`` (:func:`~flakelab.match.habits.estimate_habits`) the application is split
     about the shop's mean: the habits' part of the offset persists."""
     if mode not in CORRECTION_MODES:
@@ -213,6 +237,8 @@ def correct(
             R = R0.double().numpy()
             expected = habits.offset(library, x_recipe[None], R, forward.geometries)[0]
         sensitivity = application_sensitivity(library, x_recipe, forward.geometries)
+        if persistent_sd is None:
+            persistent_sd = model_persistent_sd(forward, x_recipe, model_sd)
         persistent, sigmas = split_offset(raw - expected, sensitivity, persistent_sd, noise_sd)
         persistent = persistent + expected
         film, spread = mean + sigmas * [FILM_BUILD_SD, SPREAD_SD]
