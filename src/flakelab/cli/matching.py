@@ -359,6 +359,7 @@ def correct_command(
     from flakelab.match.correction import EXTRA_TONERS_TRIED, MODEL_SD
 
     extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
+    model_sd = MODEL_SD if model_sd is None else model_sd
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
     shop_habits = habits_for(habits, shop, database, forward)
@@ -372,7 +373,7 @@ def correct_command(
         offset_weight=offset_weight,
         extra_toners=extra_toners,
         habits=shop_habits,
-        model_sd=MODEL_SD if model_sd is None else model_sd,
+        model_sd=model_sd,
     )
     target_lab = reflectance_to_Lab(target_R)
     before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
@@ -387,7 +388,7 @@ def correct_command(
         report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
     report["new_toner"] = correction.new_toner
     report["offset_weight"] = offset_weight
-    report["model_sd"] = MODEL_SD if model_sd is None else model_sd
+    report["model_sd"] = model_sd
     report["spray_application"] = correction.application and {
         name: round(value, 4) for name, value in correction.application.items()
     }

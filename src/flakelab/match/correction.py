@@ -216,9 +216,8 @@ def correct(
     With ``library`` (in the model's toner order) the offset is split by the physics of the
     spray's application (σ_p widened by ``model_sd`` times an ensemble's disagreement,
     unless ``persistent_sd`` fixes it); ``offset_weight`` weights the whole offset instead.
-    With the shop's
-    ``habits`` (:func:`~flakelab.match.habits.estimate_habits`) the application is split
-    about the shop's mean: the habits' part of the offset persists."""
+    With the shop's ``habits`` (:func:`~flakelab.match.habits.estimate_habits`) the
+    application is split about the shop's mean: the habits' part of the offset persists."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
