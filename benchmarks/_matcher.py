@@ -10,12 +10,14 @@ from flakelab.models.registry import load_model_file, shipped_model
 
 
 def shipped_matcher(world: str = "shop", model: str | None = None):
-    """The demo library's harness world (``flakelab match evaluate --world``), the forward of
-    the shipped model (or of the model file ``model``) and its effect-toner mask."""
+    """The demo library's harness world (``flakelab match evaluate --world``) for the
+    instrument of the shipped five-angle model (or of the model file ``model``), the model's
+    forward and its effect-toner mask."""
     library = read_library(None)
-    forward = forward_for(load_model_file(model) if model else shipped_model("five-angle"), library)
+    learned = load_model_file(model) if model else shipped_model("five-angle")
+    forward = forward_for(learned, library)
     return (
-        harness_world(library, "five-angle", world),
+        harness_world(library, learned.instrument, world),
         forward,
         effect_mask(library, forward.toners),
     )

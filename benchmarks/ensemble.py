@@ -40,7 +40,7 @@ from matched_error import measure
 def spread_calibration(library, forward) -> dict:
     """Does the members' spread point at the ensemble's own error? On the unseen cases, per
     case and geometry."""
-    world = World(library, "five-angle")
+    world = World(library, forward.model.instrument)
     n, seed = EVALUATION
     data = generated_case_arrays(world, n, seed)
     R, _ = evaluate_recipes(forward, data.x)

@@ -22,6 +22,7 @@ from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
+from flakelab.library import PAINT_FAMILIES
 from flakelab.match.models import forward_for
 from flakelab.match.search import evaluate_recipes
 from flakelab.models.training import (
@@ -47,7 +48,7 @@ def train_once(library, cases: int, config: TrainingConfig):
 
 
 def judge(library, model) -> dict[str, float]:
-    world = World(library, "five-angle")
+    world = World(library, model.instrument)
     n, seed = EVALUATION
     data = generated_case_arrays(world, n, seed)
     predicted, _ = evaluate_recipes(forward_for(model, library), data.x)
@@ -55,17 +56,13 @@ def judge(library, model) -> dict[str, float]:
     lab = reflectance_to_Lab(predicted)
     sprayout = delta_E(reflectance_to_Lab(data.R), lab)
     own = delta_E(reflectance_to_Lab(nominal), lab)
-    kinds = np.array([t.kind for t in library.toners])
-    pearl = data.x[:, kinds == "pearl"].sum(1) > 0
-    solid = data.x[:, kinds != "pigment"].sum(1) == 0
+    family = library.paint_families(data.x)
     return {
         "de00_mean": float(sprayout.mean()),
         "de00_p95": float(np.percentile(sprayout, 95)),
         "model_vs_nominal_de00_mean": float(own.mean()),
         "model_vs_nominal_de00_p95": float(np.percentile(own, 95)),
-        "model_vs_nominal_metallic": float(own[~pearl & ~solid].mean()),
-        "model_vs_nominal_pearl": float(own[pearl].mean()),
-        "model_vs_nominal_solid": float(own[solid].mean()),
+        **{f"model_vs_nominal_{f}": float(own[family == f].mean()) for f in PAINT_FAMILIES},
     }
 
 

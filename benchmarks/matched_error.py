@@ -88,7 +88,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=60, help="per seed")
     parser.add_argument("--seed", default="81,82", help="one seed, a list or a range")
-    parser.add_argument("--model", help="five-angle model file (default: the shipped one)")
+    parser.add_argument(
+        "--model", help="model file, judged in its instrument's world (default: shipped five-angle)"
+    )
     parser.add_argument("--settings", default="", help="matcher settings, e.g. model_risk=0")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()

@@ -11,6 +11,7 @@ import pytest
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.io import read_library, write_library
 from flakelab.library import (
+    PAINT_FAMILIES,
     AluminiumFlake,
     Library,
     LibraryError,
@@ -63,6 +64,19 @@ def test_demo_library_round_trips_and_has_the_families():
     assert [len(lib.of_kind(k)) for k in ("aluminium", "pigment", "pearl")] == [10, 20, 5]
     families = {t.family for t in lib.of_kind("pigment")}
     assert {"phthalocyanine", "quinacridone", "perylene", "iron oxide", "carbon"} <= families
+
+
+def test_a_recipe_is_a_pearl_with_any_pearl_a_solid_without_effect_toners():
+    lib = read_library()
+    recipes = [
+        {"Al medium": 0.8, "Phthalo blue GS": 0.2},
+        {"Al medium": 0.3, "Pearl silver white": 0.01, "Quinacridone red": 0.1},
+        {"Phthalo blue GS": 0.5, "Carbon black": 0.5},
+        {"Pearl silver white": 1.0},
+    ]
+    x = np.array([lib.fractions(r) for r in recipes])
+    assert lib.paint_families(x).tolist() == ["metallic", "pearl", "solid", "pearl"]
+    assert set(lib.paint_families(x)) <= set(PAINT_FAMILIES)
 
 
 def test_library_file_round_trip(tmp_path):

@@ -87,6 +87,21 @@ def test_training_learns_far_better_than_the_mean(trained, data):
     assert mean_model["de00_mean"] < 0.5 * baseline
 
 
+def test_the_figures_per_paint_family_make_up_the_whole(trained, data):
+    model, _ = trained
+    families = SMALL.paint_families(data.x)
+    report = evaluate_model(model, data, families=families)
+    per_family = report["per_family"]
+    assert set(per_family) == {"metallic", "pearl", "solid"}
+    assert sum(f["cases"] for f in per_family.values()) == report["cases"]
+    weighted = sum(f["cases"] * f["de00_mean"] for f in per_family.values()) / report["cases"]
+    assert weighted == pytest.approx(report["de00_mean"], rel=1e-9)
+    assert max(f["de00_max"] for f in per_family.values()) == report["de00_max"]
+    # each family's figures are those of its cases alone
+    alone = evaluate_model(model, data.subset(np.flatnonzero(families == "pearl")))
+    assert per_family["pearl"]["de00_p95"] == pytest.approx(alone["de00_p95"], rel=1e-6)
+
+
 @pytest.mark.parametrize("screening", SCREENINGS)
 def test_gross_errors_are_flagged_and_dropped(data, screening):
     bad_rows = [3, 50, 120, 200, 399]

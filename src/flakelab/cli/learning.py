@@ -638,13 +638,16 @@ def evaluate(
         return shop_habits.offset(lib, x, R, matcher.geometries)
 
     offset = habits_offset if shop_habits else None
+    families = lib.paint_families(data.x)
     if isinstance(matcher, LearnedForward) and matcher.novel:
-        report = evaluate_model(forward, data, lambda x: evaluate_recipes(matcher, x), offset)
+        report = evaluate_model(
+            forward, data, lambda x: evaluate_recipes(matcher, x), offset, families
+        )
         novel = np.isin(np.array(lib.names), matcher.novel)
         report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
         report["new_toners"] = list(matcher.novel)
     else:
-        report = evaluate_model(forward, data, lab_offset=offset)
+        report = evaluate_model(forward, data, lab_offset=offset, families=families)
     report["model"] = model or f"current {instrument}"
     report["forward"] = matcher.name
     report["habits"] = shop_habits and shop_habits.report()
@@ -653,6 +656,8 @@ def evaluate(
         return
     rows = {**report["per_geometry"], "all": report}
     console.print(_de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
+    families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
+    console.print(_de00_table("by paint family", "family (cases)", families, total=False))
 
 
 @model_app.command("adapt")
@@ -754,8 +759,9 @@ def adapt(
         errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
 
 
-def _de00_table(title: str, label: str, stats: dict, names=None) -> Table:
-    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold)."""
+def _de00_table(title: str, label: str, stats: dict, names=None, total: bool = True) -> Table:
+    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
+    where it is the ``total``)."""
     names = list(stats) if names is None else list(names)
     table = Table(title=title)
     for column in (label, "ΔE00 mean", "p95", "max"):
@@ -765,7 +771,7 @@ def _de00_table(title: str, label: str, stats: dict, names=None) -> Table:
         table.add_row(
             name,
             *(f"{v[k]:.3f}" for k in DE00_STATISTICS),
-            style="bold" if name == names[-1] else None,
+            style="bold" if total and name == names[-1] else None,
         )
     return table
 

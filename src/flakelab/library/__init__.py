@@ -7,6 +7,7 @@ from flakelab.library.optics import (
     pearl_reflectance,
 )
 from flakelab.library.toners import (
+    PAINT_FAMILIES,
     TONER_KINDS,
     AluminiumFlake,
     Binder,
@@ -18,5 +19,6 @@ from flakelab.library.toners import (
 
 __all__ = [
     "aluminium_refractive_index", "flake_reflectance", "fresnel_reflectance", "pearl_reflectance",
-    "TONER_KINDS", "AluminiumFlake", "Binder", "Library", "LibraryError", "Pearl", "Pigment",
+    "PAINT_FAMILIES", "TONER_KINDS",
+    "AluminiumFlake", "Binder", "Library", "LibraryError", "Pearl", "Pigment",
 ]  # fmt: skip

@@ -12,7 +12,7 @@ from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core.geometry import N_BINDER
 from flakelab.core.spectra import WAVELENGTHS
@@ -27,6 +27,7 @@ __all__ = [
     "Library",
     "LibraryError",
     "TONER_KINDS",
+    "PAINT_FAMILIES",
     "SUM_TOLERANCE",
 ]
 
@@ -173,6 +174,8 @@ class Binder:
 
 Toner = AluminiumFlake | Pigment | Pearl
 TONER_KINDS: dict[str, type] = {"aluminium": AluminiumFlake, "pigment": Pigment, "pearl": Pearl}
+PAINT_FAMILIES = ("metallic", "pearl", "solid")
+"""What a recipe makes (:meth:`Library.paint_families`): the generator's formulation kinds too."""
 
 
 @dataclass(frozen=True)
@@ -201,6 +204,15 @@ class Library:
     def effect(self) -> NDArray:
         """Which toners are effect toners (aluminium, pearl), in the recipe vector order."""
         return np.array([t.kind != "pigment" for t in self.toners])
+
+    def paint_families(self, fractions: ArrayLike) -> NDArray[np.str_]:
+        """The paint family of each recipe ``fractions[N, T]`` (library order): "pearl" with
+        any pearl in it, "solid" without effect toners, else "metallic"."""
+        used = np.atleast_2d(np.asarray(fractions, dtype=float)) > 0
+        kinds = np.array([t.kind for t in self.toners])
+        pearl = used[:, kinds == "pearl"].any(axis=1)
+        solid = ~used[:, kinds != "pigment"].any(axis=1)
+        return np.where(pearl, "pearl", np.where(solid, "solid", "metallic"))
 
     def __getitem__(self, name: str) -> Toner:
         for toner in self.toners:

@@ -608,11 +608,15 @@ def recorded_config(model: ForwardModel) -> TrainingConfig:
     return replace(TrainingConfig(**recorded), hidden=tuple(model.hidden))
 
 
-def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None, lab_offset=None) -> dict:
+def evaluate_model(
+    model: ForwardModel, data: CaseArrays, predict=None, lab_offset=None, families=None
+) -> dict:
     """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
     geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
     model's own prediction (the matcher's hybrid forward, for toners new to the model);
-    ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits)."""
+    ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits);
+    ``families[N]`` (:meth:`~flakelab.library.toners.Library.paint_families`) adds the figures per
+    paint family."""
     if data.geometries != model.geometries:
         missing = sorted(set(model.geometries) - set(data.geometries))
         if missing:
@@ -625,19 +629,10 @@ def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None, lab_offs
     seconds = time.perf_counter() - start
     predicted = reflectance_to_Lab(R) + (0.0 if lab_offset is None else lab_offset(x, R))
     de = delta_E(reflectance_to_Lab(data.R), predicted)
-    per_geometry = {
-        g: {
-            "de00_mean": float(de[:, i].mean()),
-            "de00_p95": float(np.percentile(de[:, i], 95)),
-            "de00_max": float(de[:, i].max()),
-        }
-        for i, g in enumerate(model.geometries)
-    }
-    return {
+    per_geometry = {g: _de00_summary(de[:, i]) for i, g in enumerate(model.geometries)}
+    report = {
         "cases": int(x.shape[0]),
-        "de00_mean": float(de.mean()),
-        "de00_p95": float(np.percentile(de, 95)),
-        "de00_max": float(de.max()),
+        **_de00_summary(de),
         "per_geometry": per_geometry,
         "texture_mae": dict(
             zip(
@@ -647,6 +642,25 @@ def evaluate_model(model: ForwardModel, data: CaseArrays, predict=None, lab_offs
             )
         ),
         "predict_seconds": seconds,
+    }
+    if families is not None:
+        families = np.asarray(families)
+        report["per_family"] = {
+            family: {
+                "cases": int(np.sum(families == family)),
+                **_de00_summary(de[families == family]),
+            }
+            for family in np.unique(families).tolist()
+        }
+    return report
+
+
+def _de00_summary(de: NDArray) -> dict[str, float]:
+    """Mean, 95th percentile and largest of the ΔE00 values ``de`` (any shape)."""
+    return {
+        "de00_mean": float(de.mean()),
+        "de00_p95": float(np.percentile(de, 95)),
+        "de00_max": float(de.max()),
     }
 
 
