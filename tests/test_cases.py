@@ -67,6 +67,10 @@ def test_generated_world_is_as_hard_as_a_shop(world):
     assert 0.02 <= report["batch_strength_sd"] <= 0.04
     assert 0.5 <= report["weathered_target_de00_median"] <= 2.0
     assert 0.3 <= report["exact_model_de00_mean"] <= report["exact_model_de00_p95"]
+    by_family = report["exact_model_de00_mean_by_family"]
+    assert min(by_family.values()) < report["exact_model_de00_mean"] < max(by_family.values())
+    # flake alignment varies from spray to spray in effect paints only
+    assert by_family["solid"] < min(by_family["metallic"], by_family["pearl"])
 
 
 def test_exact_model_floor_vanishes_without_variation(world):

@@ -311,6 +311,7 @@ class World:
         fresh_R, _ = self.appearance(x, self.nominal(n))
         weathered = self.worst_de00(fresh_R, weathered_R + haze[:, None, None])
         floor = self.exact_model_de00(x, rng)
+        families = self.library.paint_families(x)
         return {
             "remeasure_de00_median": float(np.median(remeasure)),
             "respray_de00_median": float(np.median(respray[metallic])),
@@ -319,6 +320,9 @@ class World:
             "weathered_target_de00_median": float(np.median(weathered)),
             "exact_model_de00_mean": float(floor.mean()),
             "exact_model_de00_p95": float(np.percentile(floor, 95)),
+            "exact_model_de00_mean_by_family": {
+                f: float(floor[families == f].mean()) for f in np.unique(families).tolist()
+            },
             "formulations": n,
             "seed": seed,
         }

@@ -245,6 +245,8 @@ def realism(
         table.add_row(key, f"{report[key]:.3f}", f"{lo}–{hi}")
     for key in ("exact_model_de00_mean", "exact_model_de00_p95"):
         table.add_row(key, f"{report[key]:.3f}", "(the cases' noise floor)")
+    for family, value in report["exact_model_de00_mean_by_family"].items():
+        table.add_row(f"exact_model_de00_mean, {family}s", f"{value:.3f}", "")
     console.print(table)
 
 
