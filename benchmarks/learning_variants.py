@@ -7,7 +7,11 @@ matcher's forward (hybrid for the new toners), against the measured spray-outs a
 the nominal physics of the recipes (the model's own error, without the cases' noise).
 
     python benchmarks/learning_variants.py [--cases 20000] [--hidden 100,100,100]
-        [--epochs 150] [--batch-size 128] [--learning-rate 2e-3] [--json]
+        [--epochs 150] [--batch-size 128] [--learning-rate 2e-3]
+        [--kinds metallic=0.6,pearl=0.25,solid=0.15] [--json]
+
+``--kinds`` sets the share of each paint family in the training cases (the evaluation
+cases keep the generator's default mix), as ``scripts/train_shipped_models.py`` does.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ import time
 
 import numpy as np
 
-from flakelab.cases.generator import World
+from flakelab.cases.generator import World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
@@ -37,8 +41,9 @@ EVALUATION = (500, 987)
 """Cases and seed of the README's unseen evaluation set."""
 
 
-def train_once(library, cases: int, config: TrainingConfig):
-    world = World(library, "five-angle", exclude=NOVEL_TONERS)
+def train_once(library, cases: int, config: TrainingConfig, kinds: dict[str, float] | None = None):
+    settings = WorldSettings(kinds=kinds) if kinds else WorldSettings()
+    world = World(library, "five-angle", settings, exclude=NOVEL_TONERS)
     data = generated_case_arrays(world, cases, config.seed)
     rows = [np.arange(data.x.shape[0])]
     model = _new_model(data, config, rows[0])
@@ -66,6 +71,21 @@ def judge(library, model) -> dict[str, float]:
     }
 
 
+def parse_kinds(text: str) -> dict[str, float]:
+    """``"metallic=0.6,pearl=0.25,solid=0.15"`` → shares of the paint families."""
+    kinds = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        name, _, share = part.partition("=")
+        try:
+            kinds[name.strip()] = float(share)
+        except ValueError:
+            raise SystemExit(f"--kinds: {part!r} is not family=share") from None
+    unknown = sorted(set(kinds) - set(PAINT_FAMILIES))
+    if unknown or not kinds or min(kinds.values()) < 0 or sum(kinds.values()) <= 0:
+        raise SystemExit(f"--kinds: expected shares of {', '.join(PAINT_FAMILIES)}, got {text!r}")
+    return kinds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", type=int, default=20_000)
@@ -74,8 +94,10 @@ def main() -> None:
     parser.add_argument("--batch-size", type=int, default=128)
     parser.add_argument("--learning-rate", type=float, default=2e-3, help="fine-tuning: a tenth")
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--kinds", help="paint families' shares, e.g. metallic=0.6,pearl=0.25")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    kinds = parse_kinds(args.kinds) if args.kinds else None
     config = TrainingConfig.per_stage(
         args.epochs,
         args.learning_rate,
@@ -85,7 +107,7 @@ def main() -> None:
     )
     library = read_library(None)
     start = time.perf_counter()
-    model = train_once(library, args.cases, config)
+    model = train_once(library, args.cases, config, kinds)
     result = {
         **{k: v for k, v in vars(args).items() if k != "json"},
         "train_seconds": time.perf_counter() - start,
