@@ -8,7 +8,7 @@ the nominal physics of the recipes (the model's own error, without the cases' no
 
     python benchmarks/learning_variants.py [--cases 20000] [--hidden 100,100,100]
         [--epochs 150] [--batch-size 128] [--learning-rate 2e-3]
-        [--kinds metallic=0.6,pearl=0.25,solid=0.15] [--json]
+        [--kinds metallic=0.6,pearl=0.25,solid=0.15] [--log-offset 0.01] [--json]
 
 ``--kinds`` sets the share of each paint family in the training cases (the evaluation
 cases keep the generator's default mix), as ``scripts/train_shipped_models.py`` does.
@@ -95,6 +95,7 @@ def main() -> None:
     parser.add_argument("--learning-rate", type=float, default=2e-3, help="fine-tuning: a tenth")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--kinds", help="paint families' shares, e.g. metallic=0.6,pearl=0.25")
+    parser.add_argument("--log-offset", type=float, default=0.0, help="log features (0: none)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     kinds = parse_kinds(args.kinds) if args.kinds else None
@@ -103,6 +104,7 @@ def main() -> None:
         args.learning_rate,
         hidden=tuple(int(h) for h in args.hidden.split(",")),
         batch_size=args.batch_size,
+        log_offset=args.log_offset,
         seed=args.seed,
     )
     library = read_library(None)

@@ -10,7 +10,8 @@ matcher handles with the physics scaling (hybrid path).
 ``--seed`` draws the cases and the network alike; ``--network-seed`` draws the network (its
 weights, splits and batches) alone, on the same cases, and ``--screening`` changes the outlier
 screen: how much a model owes to its network's draw (README, "Cases and the learned model");
-``--members 1`` trains one network instead of the ensemble.
+``--members 1`` trains one network instead of the ensemble; ``--log-offset`` adds log
+features (``flakelab train --log-offset``).
 
 Both models are ensembles of four networks trained on 120,000 cases, twice the hybrid
 paper's database: held-out accuracy grows with the cases far more than with the network's
@@ -70,7 +71,12 @@ def main() -> None:
     parser.add_argument(
         "--members", type=int, help="networks averaged as an ensemble (default: the shipped's)"
     )
+    parser.add_argument(
+        "--log-offset", type=float, default=0.0, help="log features, log(fraction + this)"
+    )
     args = parser.parse_args()
+    if not 0 <= args.log_offset <= 0.5:
+        parser.error(f"--log-offset: {args.log_offset} is not in [0, 0.5]")
     if args.members is not None and args.members < 1:
         parser.error(f"--members: {args.members} is not a positive number of networks")
     if args.cases is not None and args.cases < 1:
@@ -91,6 +97,7 @@ def main() -> None:
             seed=args.seed if args.network_seed is None else args.network_seed,
             screening=args.screening or screening,
             members=args.members or members,
+            log_offset=args.log_offset,
         )
         with progress_bar() as progress:
             task = progress.add_task(f"{instrument}: generating cases", total=n)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import io
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -73,6 +75,29 @@ def test_model_survives_a_round_trip_through_bytes(trained, data):
     b, tb = again.predict(data.x[:20])
     np.testing.assert_allclose(a, b, rtol=1e-6)
     np.testing.assert_allclose(ta, tb, rtol=1e-6, atol=1e-6)
+
+
+def test_log_features_widen_the_input_and_survive_storage(data):
+    config = replace(QUICK, epochs=2, finetune_epochs=1, log_offset=0.01)
+    model = _new_model(data, config, np.arange(50))
+    T = len(data.toners)
+    x = torch.as_tensor(data.x[:5])
+    features = model.features(x)
+    assert features.shape == (5, 3 * T)
+    np.testing.assert_allclose(features[:, 2 * T :], np.log(data.x[:5] + 0.01), rtol=1e-12)
+    again = ForwardModel.from_bytes(model.to_bytes())
+    assert again.log_offset == 0.01
+    np.testing.assert_allclose(again.predict(data.x[:5])[0], model.predict(data.x[:5])[0])
+    plain = _new_model(data, replace(config, log_offset=0.0), np.arange(50))
+    assert plain.features(x).shape == (5, 2 * T)
+    # a file whose log_offset is wrong, or disagrees with its weights, is refused
+    for offset, problem in (("0.01", "log_offset: expected"), (0.0, "weights do not fit")):
+        stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
+        stored["meta"] = json.dumps(json.loads(stored["meta"]) | {"log_offset": offset})
+        buffer = io.BytesIO()
+        torch.save(stored, buffer)
+        with pytest.raises(ModelError, match=f"m.pt: {problem}"):
+            ForwardModel.from_bytes(buffer.getvalue(), source="m.pt")
 
 
 def test_training_learns_far_better_than_the_mean(trained, data):

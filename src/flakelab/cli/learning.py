@@ -503,6 +503,15 @@ def train(
             "with every prediction; costs that many times the inference).",
         ),
     ] = 1,
+    log_offset: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=0.5,
+            help="Also feed the network log(fraction + this): a strong pigment's small "
+            "amounts spread out (0: fractions and amounts per unit effect pigment only).",
+        ),
+    ] = 0.0,
     seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
     json_output: JsonOption = False,
 ) -> None:
@@ -537,6 +546,7 @@ def train(
         screening=screening,
         adapt_validation=adapt_validation,
         members=members,
+        log_offset=log_offset,
         seed=seed,
     )
     if colour_weight is not None:

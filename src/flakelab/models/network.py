@@ -29,6 +29,8 @@ __all__ = ["ForwardModel", "StackedNetwork", "build_network", "LOG_FLOOR", "Mode
 
 EFFECT_OFFSET = 0.05
 """Added to the effect-pigment fraction in the ratio features (solids have none)."""
+FEATURE_BLOCKS = 2
+"""Input blocks of T features each without log features: fractions, per unit effect."""
 LOG_FLOOR = 1e-3
 """Reflectance factors are clipped here before the log (noise on black can go negative)."""
 LOG_CEILING = float(np.log(6.0))
@@ -110,6 +112,7 @@ class ForwardModel:
     y_std: NDArray
     info: dict
     effect: NDArray | None = None
+    log_offset: float = 0.0
     _constants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -178,10 +181,16 @@ class ForwardModel:
     # -- prediction ----------------------------------------------------------------------
     def features(self, fractions: torch.Tensor) -> torch.Tensor:
         """Fractions plus each toner's amount per unit effect pigment: in a metallic the dye
-        acts through κ/σ_f (DESIGN.md §3), a ratio an MLP would otherwise have to learn."""
+        acts through κ/σ_f (DESIGN.md §3), a ratio an MLP would otherwise have to learn. With
+        a ``log_offset`` also log(fraction + offset): a strong pigment changes the colour as
+        much from 0.3 % to 1 % as from 3 % to 10 % (Kubelka–Munk's K/S ratios), which fractions
+        alone put a hundredth of the input's range apart."""
         mask = self._constant("effect", fractions.dtype)
         effect = (fractions * mask).sum(dim=1, keepdim=True)
-        return torch.cat([fractions, fractions / (effect + EFFECT_OFFSET)], dim=1)
+        blocks = [fractions, fractions / (effect + EFFECT_OFFSET)]
+        if self.log_offset > 0:
+            blocks.append(torch.log(fractions + self.log_offset))
+        return torch.cat(blocks, dim=1)
 
     def effect_mask(self) -> NDArray:
         return np.zeros(len(self.toners)) if self.effect is None else np.asarray(self.effect, float)
@@ -266,6 +275,7 @@ class ForwardModel:
             "texture": list(TEXTURE_READINGS),
             "info": self.info,
             "effect": self.effect_mask().tolist(),
+            "log_offset": self.log_offset,
         }
         torch.save(
             {
@@ -297,9 +307,13 @@ class ForwardModel:
             raise ModelError(
                 f"{source}: members: expected a positive whole number, got {members!r}"
             )
-        networks = [
-            build_network(2 * len(meta["toners"]), outputs, meta["hidden"]) for _ in range(members)
-        ]
+        log_offset = meta.get("log_offset", 0.0)
+        if not isinstance(log_offset, int | float) or not 0 <= log_offset < 1:
+            raise ModelError(
+                f"{source}: log_offset: expected a number in [0, 1), got {log_offset!r}"
+            )
+        inputs = len(meta["toners"]) * (FEATURE_BLOCKS + (log_offset > 0))
+        networks = [build_network(inputs, outputs, meta["hidden"]) for _ in range(members)]
         network = networks[0] if members == 1 else StackedNetwork(networks)
         try:
             network.load_state_dict(stored["state"])
@@ -315,5 +329,6 @@ class ForwardModel:
             tuple(meta["hidden"]),
             info=meta["info"],
             effect=np.array(meta["effect"]),
+            log_offset=float(log_offset),
             **norm,
         )

@@ -91,6 +91,7 @@ class TrainingConfig:
     adapt_learning_rate: float = 2e-4
     adapt_validation: float = 0.2
     members: int = 1
+    log_offset: float = 0.0
     seed: int = 0
 
     @classmethod
@@ -222,6 +223,7 @@ def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> Forwa
         np.ones(1),
         {},
         data.effect,
+        config.log_offset,
     )
     y = probe.encode_targets(data.R[rows], data.texture[rows])
     x = probe.features(torch.as_tensor(data.x[rows])).numpy()
@@ -238,6 +240,7 @@ def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> Forwa
         y.std(0) + 1e-3,
         {"config": asdict(config)},
         data.effect,
+        config.log_offset,
     )
 
 
