@@ -62,6 +62,15 @@ def trained(data):
     return train_protocol(data, QUICK)
 
 
+def with_meta(model: ForwardModel, **changes) -> bytes:
+    """``model``'s file with entries of its metadata changed."""
+    stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
+    stored["meta"] = json.dumps(json.loads(stored["meta"]) | changes)
+    buffer = io.BytesIO()
+    torch.save(stored, buffer)
+    return buffer.getvalue()
+
+
 def corrupted(data: CaseArrays, rows: list[int]) -> CaseArrays:
     R = data.R.copy()
     R[rows] = R[rows][:, :, ::-1] * 2.5  # a gross error: wrong panel, reversed spectrum
@@ -92,12 +101,8 @@ def test_log_features_widen_the_input_and_survive_storage(data):
     assert plain.features(x).shape == (5, 2 * T)
     # a file whose log_offset is wrong, or disagrees with its weights, is refused
     for offset, problem in (("0.01", "log_offset: expected"), (0.0, "weights do not fit")):
-        stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
-        stored["meta"] = json.dumps(json.loads(stored["meta"]) | {"log_offset": offset})
-        buffer = io.BytesIO()
-        torch.save(stored, buffer)
         with pytest.raises(ModelError, match=f"m.pt: {problem}"):
-            ForwardModel.from_bytes(buffer.getvalue(), source="m.pt")
+            ForwardModel.from_bytes(with_meta(model, log_offset=offset), source="m.pt")
 
 
 def test_training_learns_far_better_than_the_mean(trained, data):
