@@ -30,6 +30,7 @@ from pathlib import Path
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library
+from flakelab.models.network import LOG_OFFSET_MAX
 from flakelab.models.registry import shipped_model_path
 from flakelab.models.training import (
     SCREENINGS,
@@ -75,8 +76,8 @@ def main() -> None:
         "--log-offset", type=float, default=0.0, help="log features, log(fraction + this)"
     )
     args = parser.parse_args()
-    if not 0 <= args.log_offset <= 0.5:
-        parser.error(f"--log-offset: {args.log_offset} is not in [0, 0.5]")
+    if not 0 <= args.log_offset <= LOG_OFFSET_MAX:
+        parser.error(f"--log-offset: {args.log_offset} is not in [0, {LOG_OFFSET_MAX}]")
     if args.members is not None and args.members < 1:
         parser.error(f"--members: {args.members} is not a positive number of networks")
     if args.cases is not None and args.cases < 1:

@@ -507,7 +507,6 @@ def train(
         float,
         typer.Option(
             min=0.0,
-            max=0.5,
             help="Also feed the network log(fraction + this): a strong pigment's small "
             "amounts spread out (0: fractions and amounts per unit effect pigment only).",
         ),
@@ -518,6 +517,7 @@ def train(
     """Train the learned forward model with the hybrid paper's protocol."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
+    from flakelab.models.network import LOG_OFFSET_MAX
     from flakelab.models.registry import register
     from flakelab.models.training import (
         SCREENINGS,
@@ -531,6 +531,8 @@ def train(
         raise FlakelabError(
             f"--screening: expected one of {', '.join(SCREENINGS)}, got {screening!r}"
         )
+    if log_offset > LOG_OFFSET_MAX:
+        raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
 
     lib = read_library(library)
     chosen = [c for c in load_cases(cases) if c.instrument == instrument]

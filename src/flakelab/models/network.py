@@ -25,12 +25,22 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 
-__all__ = ["ForwardModel", "StackedNetwork", "build_network", "LOG_FLOOR", "ModelError"]
+__all__ = [
+    "ForwardModel",
+    "StackedNetwork",
+    "build_network",
+    "LOG_FLOOR",
+    "LOG_OFFSET_MAX",
+    "ModelError",
+]
 
 EFFECT_OFFSET = 0.05
 """Added to the effect-pigment fraction in the ratio features (solids have none)."""
 FEATURE_BLOCKS = 2
 """Input blocks of T features each without log features: fractions, per unit effect."""
+LOG_OFFSET_MAX = 0.5
+"""The largest offset of the log features (:attr:`ForwardModel.log_offset`); beyond it they
+are nearly linear in the fractions, which the network has already."""
 LOG_FLOOR = 1e-3
 """Reflectance factors are clipped here before the log (noise on black can go negative)."""
 LOG_CEILING = float(np.log(6.0))
@@ -308,9 +318,10 @@ class ForwardModel:
                 f"{source}: members: expected a positive whole number, got {members!r}"
             )
         log_offset = meta.get("log_offset", 0.0)
-        if not isinstance(log_offset, int | float) or not 0 <= log_offset < 1:
+        if not isinstance(log_offset, int | float) or not 0 <= log_offset <= LOG_OFFSET_MAX:
             raise ModelError(
-                f"{source}: log_offset: expected a number in [0, 1), got {log_offset!r}"
+                f"{source}: log_offset: expected a number in [0, {LOG_OFFSET_MAX}], "
+                f"got {log_offset!r}"
             )
         inputs = len(meta["toners"]) * (FEATURE_BLOCKS + (log_offset > 0))
         networks = [build_network(inputs, outputs, meta["hidden"]) for _ in range(members)]
