@@ -1,5 +1,5 @@
-"""What the matcher benchmarks share: the five-angle model (shipped, or a file) on the demo
-library."""
+"""What the matcher benchmarks share: the shipped five-angle model, or any model file judged in
+its own instrument's world, on the demo library."""
 
 from __future__ import annotations
 
@@ -7,6 +7,10 @@ from flakelab.io import read_library
 from flakelab.match.evaluate import harness_world
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.models.registry import load_model_file, shipped_model
+
+MODEL_HELP = (
+    "model file, judged in the world of its own instrument (default: the shipped five-angle one)"
+)
 
 
 def shipped_matcher(world: str = "shop", model: str | None = None):

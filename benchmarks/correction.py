@@ -35,7 +35,7 @@ import json
 
 import numpy as np
 
-from _matcher import seeds_from, shipped_matcher
+from _matcher import MODEL_HELP, seeds_from, shipped_matcher
 from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -121,7 +121,7 @@ def main() -> None:
     parser.add_argument("--sprays", type=int, default=6)
     parser.add_argument("--seed", default="77", help="one seed, a list or a range: 77,78,81-86")
     parser.add_argument("--ceiling", action="store_true")
-    parser.add_argument("--model", help="five-angle model file (default: the shipped one)")
+    parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     seeds = seeds_from(args.seed)

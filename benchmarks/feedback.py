@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _matcher import seeds_from, shipped_matcher
+from _matcher import MODEL_HELP, seeds_from, shipped_matcher
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.match.models import forward_for
 from flakelab.models.network import ForwardModel
@@ -93,7 +93,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=501, help="seed of the feedback targets")
     parser.add_argument("--eval-seed", default="81,82", help="matched_error.py's seeds")
     parser.add_argument("--eval-targets", type=int, default=60, help="per evaluation seed")
-    parser.add_argument("--model", help="five-angle model file (default: the shipped one)")
+    parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument(
         "--control",
         action="store_true",

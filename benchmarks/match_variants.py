@@ -1,10 +1,10 @@
 """Matcher: what buys first-shot success — the search's settings, on the same targets.
 
 Runs the evaluation harness (``flakelab match evaluate``) with the shipped five-angle model
-(or ``--model FILE``) once per setting given, each a comma-separated list of
-:class:`MatchSettings` fields. Every run sees the same hidden targets and the same sprays
-(seeded), so rows differ only by the recipes the search proposed. The first row is the
-defaults: the baseline of the same run.
+(or ``--model FILE``, in its own instrument's world) once per setting given, each a
+comma-separated list of :class:`MatchSettings` fields. Every run sees the same hidden targets
+and the same sprays (seeded), so rows differ only by the recipes the search proposed. The
+first row is the defaults: the baseline of the same run.
 
     python benchmarks/match_variants.py [--targets 100] [--novel-targets 0] [--seed 4242]
         [--world shop] [--model FILE] [--json] "top_effects=2,top_pigments=5" "swap_above=inf" ...
@@ -16,7 +16,7 @@ import argparse
 import dataclasses
 import json
 
-from _matcher import shipped_matcher
+from _matcher import MODEL_HELP, shipped_matcher
 from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching
 from flakelab.match.search import MatchSettings
 
@@ -54,7 +54,7 @@ def main() -> None:
     parser.add_argument("--novel-targets", type=int, default=0)
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
-    parser.add_argument("--model", help="five-angle model file (default: the shipped one)")
+    parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     world, forward, effect = shipped_matcher(args.world, args.model)

@@ -19,7 +19,7 @@ import json
 
 import numpy as np
 
-from _matcher import seeds_from, shipped_matcher
+from _matcher import MODEL_HELP, seeds_from, shipped_matcher
 from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -88,9 +88,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=60, help="per seed")
     parser.add_argument("--seed", default="81,82", help="one seed, a list or a range")
-    parser.add_argument(
-        "--model", help="model file, judged in its instrument's world (default: shipped five-angle)"
-    )
+    parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument("--settings", default="", help="matcher settings, e.g. model_risk=0")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
