@@ -192,3 +192,23 @@ def test_progress_off_a_terminal_logs_a_line_per_tenth_and_nothing_when_disabled
     # the iterator form yields every item in order and ends on the whole count
     assert list(tracked("abcde", "each")) == list("abcde")
     assert capsys.readouterr().err.splitlines()[-1].startswith("each: 5/5 (100 %)")
+
+
+def _commands(command, path=()):
+    yield path, command
+    for name, sub in getattr(command, "commands", {}).items():
+        yield from _commands(sub, (*path, name))
+
+
+def test_help_texts_print_as_written():
+    """Typer renders help as Rich markup, where a unit in brackets ("[g]") is a style tag and
+    vanishes: every help text must read the same once rendered."""
+    import typer.main
+    from rich.text import Text
+
+    from flakelab.cli.main import app
+
+    for path, command in _commands(typer.main.get_command(app)):
+        texts = [command.help or ""] + [getattr(p, "help", None) or "" for p in command.params]
+        for text in texts:
+            assert Text.from_markup(text).plain == text, (" ".join(path), text)

@@ -108,7 +108,7 @@ def match_command(
     ] = None,
     library: LibraryOption = None,
     quantity: Annotated[str, typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg.")] = "250g",
-    resolution: Annotated[float, typer.Option(help="Scale resolution [g].")] = 0.1,
+    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
     tolerance: ToleranceOption = "refinish",
     candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
     instrument: InstrumentOption = "five-angle",
@@ -299,7 +299,7 @@ def correct_command(
     instrument: InstrumentOption = "five-angle",
     model: ModelOption = None,
     database: DatabaseOption = None,
-    resolution: Annotated[float, typer.Option(help="Scale resolution [g].")] = 0.1,
+    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
     offset_weight: Annotated[
         float | None,
         typer.Option(

@@ -53,7 +53,7 @@ def render_command(
     light: LightOption = 0.7,
     distance: Annotated[str, typer.Option(help="Observation distance, e.g. 0.5m, 2m.")] = "0.5m",
     aspecular: Annotated[float, typer.Option(help="panel: aspecular angle [°].")] = 45.0,
-    size: Annotated[int, typer.Option(min=16, max=8192, help="Image width [pixels].")] = 1024,
+    size: Annotated[int, typer.Option(min=16, max=8192, help="Image width in pixels.")] = 1024,
     no_texture: Annotated[bool, typer.Option("--no-texture", help="Colour only.")] = False,
     sample: SampleOption = None,
     conditions: ConditionsOption = "D65/10",
@@ -85,7 +85,7 @@ def render_grid_command(
     ] = None,
     output: OutputOption = Path("render-grid.png"),
     steps: Annotated[int, typer.Option(min=2, max=16, help="Steps of glint and coarseness.")] = 8,
-    tile: Annotated[int, typer.Option(min=16, max=512, help="Tile size [pixels].")] = 128,
+    tile: Annotated[int, typer.Option(min=16, max=512, help="Tile size in pixels.")] = 128,
     light: LightOption = 0.5,
     sample: SampleOption = None,
     conditions: ConditionsOption = "D65/10",
@@ -107,7 +107,7 @@ texture_app = typer.Typer(help="Appearance-based texture processes: closed loop 
 @reports_errors
 def texture_evaluate(
     points: Annotated[int, typer.Option(min=2, help="Prescribed values per process.")] = 9,
-    size: Annotated[int, typer.Option(min=64, help="Generated image side [pixels].")] = 1024,
+    size: Annotated[int, typer.Option(min=64, help="Generated image side in pixels.")] = 1024,
     seed: SeedOption = 100,
     json_output: JsonOption = False,
 ) -> None:
