@@ -287,10 +287,16 @@ def flakelab(*args: str) -> subprocess.CompletedProcess:
     )
 
 
-def test_match_example_gives_weighed_candidates_with_per_geometry_numbers():
-    run = flakelab("match", "--example", "--json", "--quantity", "250g", "--candidates", "2")
+def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_path):
+    from matplotlib.image import imread
+
+    picture = tmp_path / "side-by-side.png"
+    run = flakelab("match", "--example", "--json", "--quantity", "250g", "--candidates", "2",
+                   "--render", str(picture))  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
+    assert report["rendering"] == str(picture)
+    assert imread(picture).shape[0] > imread(picture).shape[1] / 2  # three bands, stacked
     assert report["geometries"] == ["45as15", "45as25", "45as45", "45as75", "45as110"]
     best = report["candidates"][0]
     assert sum(w["grams"] for w in best["weights_g"]) == pytest.approx(250.0)
@@ -318,6 +324,9 @@ def test_match_refuses_bad_input(tmp_path):
     assert run.returncode == 2 and str(bad) in run.stderr and "Traceback" not in run.stderr
     run = flakelab("match", "--example", "--quantity", "0g")
     assert run.returncode == 2 and "--quantity" in run.stderr
+    run = flakelab("match", "--example", "--render", str(tmp_path / "side-by-side.bmp"))
+    assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
+    assert not (tmp_path / "side-by-side.bmp").exists()
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
     run = flakelab("match", "--example", "--library", str(empty))
@@ -480,6 +489,11 @@ def test_matcher_finds_a_trace_tint_in_a_silver(hybrid, tint, amount):
     best = match(target, hybrid, effect_mask(hybrid.library, hybrid.toners)).candidates[0]
     assert best.de00.max() < 0.3
     assert tint in best.fractions
+    # the candidate as a reading: the colour the match judged, and the model that said so
+    reading = best.as_measurement("best")
+    assert reading.geometry_names == tuple(hybrid.geometries)
+    np.testing.assert_allclose(reading.lab(), best.lab, atol=1e-9)
+    assert reading.metadata["predicted by"] == best.model
 
 
 def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):

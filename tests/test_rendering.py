@@ -21,6 +21,7 @@ from flakelab.render.appearance import (
     parse_distance,
     render_curved,
     render_panel,
+    render_stack,
     texture_images,
 )
 from flakelab.texture.calibration import (
@@ -131,6 +132,18 @@ def test_curved_panel_shows_measured_colour_and_gloss(appearance):
                 assert delta_E00(got, lab) < 0.5, angle
     brightness = image[0].sum(axis=1)
     assert np.argmax(brightness) < 5  # the clearcoat's highlight sits at specular
+
+
+def test_a_stack_is_each_paints_curved_panel_in_one_texture_draw(appearance):
+    from dataclasses import replace
+
+    darker = replace(appearance, Lab=appearance.Lab - [5.0, 0.0, 0.0])
+    stack = render_stack([appearance, darker, appearance], band_px=24, width_px=96, seed=3)
+    assert stack.shape == (72, 96, 3)
+    np.testing.assert_array_equal(stack[:24], render_curved(appearance, (24, 96), seed=3))
+    np.testing.assert_array_equal(stack[24:48], render_curved(darker, (24, 96), seed=3))
+    np.testing.assert_array_equal(stack[48:], stack[:24])  # the same paint: the same band
+    assert stack[24:48].mean() < stack[:24].mean()
 
 
 def test_distance_softens_coarseness_and_dims_glints():

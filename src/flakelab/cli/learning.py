@@ -297,6 +297,10 @@ def habits(
     )
     from flakelab.models.training import case_arrays
 
+    if plot is not None:
+        from flakelab.render.plots import figure_format
+
+        figure_format(plot)
     lib, forward = learned_forward(library, instrument, model, database)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)

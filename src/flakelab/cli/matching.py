@@ -11,7 +11,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, console, progress_bar
+from flakelab.cli.common import JsonOption, console, errors, progress_bar
 from flakelab.cli.learning import (
     DatabaseOption,
     InstrumentOption,
@@ -136,6 +136,13 @@ def match_command(
     ] = None,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
+    render: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also draw the target and each candidate as curved panels side by side, as "
+            "predicted (PNG, PDF or SVG).",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
@@ -168,6 +175,10 @@ def match_command(
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
+    if render is not None:
+        from flakelab.render.plots import figure_format
+
+        figure_format(render)
     lib, forward, effect = _setup(library, instrument, model, database)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)
@@ -190,10 +201,29 @@ def match_command(
         entry["rounding_de00"] = rounding_cost(forward, candidate.fractions, lines)
     report["quantity_g"] = grams
     report["resolution_g"] = resolution
+    if render is not None:
+        _render_match(measurement.select(forward.geometries), result, render)
+        report["rendering"] = str(render)
     if json_output:
         print(json.dumps(report, indent=2))
         return
     _print_match(report)
+
+
+def _render_match(target, result, path: Path) -> None:
+    """The target as measured (at the model's geometries, as the candidates) above each
+    candidate as its model predicts it, curved panels in one texture draw."""
+    from flakelab.render import plot_rendering
+    from flakelab.render.appearance import appearance_of, render_stack
+
+    readings = [target] + [c.as_measurement(f"#{k}") for k, c in enumerate(result.candidates, 1)]
+    labels = ["target"] + [
+        f"#{k}  {'PASS' if c.passes else 'FAIL'}  max ΔE00 {c.de00.max():.2f}"
+        for k, c in enumerate(result.candidates, 1)
+    ]
+    image = render_stack([appearance_of(m) for m in readings])
+    plot_rendering(image, labels, path, title=f"{result.target}: target and candidates (predicted)")
+    errors.print(f"wrote {path}", highlight=False)
 
 
 def _print_match(report: dict) -> None:

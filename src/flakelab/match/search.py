@@ -41,7 +41,9 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, delta_LCH
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.geometry import parse_geometries
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
@@ -109,6 +111,18 @@ class Candidate:
     score: float
     in_support: bool = True
     spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
+
+    def as_measurement(self, sample: str) -> Measurement:
+        """The candidate's predicted reading, as the instrument would give it (to render, plot
+        or save), with the model that predicted it in its metadata."""
+        return Measurement(
+            sample=sample,
+            geometries=parse_geometries(self.geometries),
+            wavelengths=WAVELENGTHS,
+            reflectance=np.asarray(self.reflectance, float),
+            texture=self.texture,
+            metadata={"predicted by": self.model},
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -26,6 +26,7 @@ Pipeline (DESIGN.md §4):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,7 @@ __all__ = [
     "cardinal_spline",
     "render_panel",
     "render_curved",
+    "render_stack",
     "render_grid",
     "compose",
     "parse_distance",
@@ -281,6 +283,28 @@ def render_curved(
     columns = np.linspace(*CURVED_RANGE_DEG, size_px[1])
     options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
     return _render(appearance, columns, size_px, texture=texture, seed=seed, **options)
+
+
+def render_stack(
+    appearances: Sequence[Appearance],
+    band_px: int = 160,
+    width_px: int = 1024,
+    *,
+    diffuse_fraction: float = DIFFUSE_FRACTION,
+    distance_m: float = REFERENCE_DISTANCE_M,
+    gloss: float = 0.8,
+    texture: bool = True,
+    seed: int = 0,
+) -> NDArray:
+    """Curved panels of several paints, one band each from top to bottom, touching as panels
+    laid side by side in a light booth. Every band takes the same texture draw (``seed``), so
+    what differs from band to band is the paint, not the noise: ``[bands × band_px, width, 3]``."""
+    options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
+    bands = [
+        render_curved(a, (band_px, width_px), texture=texture, seed=seed, **options)
+        for a in appearances
+    ]
+    return np.concatenate(bands, axis=0)
 
 
 def render_grid(

@@ -17,7 +17,29 @@ from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
-__all__ = ["plot_measurements", "plot_scaling", "plot_habits"]
+__all__ = ["figure_format", "plot_measurements", "plot_scaling", "plot_habits", "plot_rendering"]
+
+
+def figure_format(path: str | PathLike) -> str:
+    """The format a figure file's suffix names (PNG without one); checked before any work,
+    so that a mistyped name does not cost a whole run."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    if fmt not in FigureCanvasBase.get_supported_filetypes():
+        raise ValueError(f"{path}: expected a figure file ending .png, .pdf, .svg or .jpg")
+    return fmt
+
+
+def _save(figure, path: str | PathLike, dpi: int) -> None:
+    """Lay ``figure`` out and write it atomically, in the format its suffix names, then
+    free it."""
+    try:
+        fmt = figure_format(path)
+        figure.tight_layout()
+        write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
+    finally:
+        plt.close(figure)
 
 
 def plot_measurements(
@@ -73,10 +95,7 @@ def plot_measurements(
         lightness_axis.grid(alpha=0.3)
         lightness_axis.set_xticks(np.unique(aspecular))
         lightness_axis.tick_params(axis="x", labelrotation=60, labelsize=8)
-    figure.tight_layout()
-    fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
-    write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
-    plt.close(figure)
+    _save(figure, path, dpi)
 
 
 def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
@@ -129,10 +148,7 @@ def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
     )
     span.legend(fontsize=7)
     figure.suptitle(f"Scaling experiment, orientation spread {series.spread_deg:g}°")
-    figure.tight_layout()
-    fmt = Path(path).suffix.lstrip(".") or "png"
-    write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
-    plt.close(figure)
+    _save(figure, path, dpi)
 
 
 def _plot_change_scan(axis, scan: dict) -> None:
@@ -192,7 +208,30 @@ def plot_habits(
     if scan is not None:
         _plot_change_scan(figure.add_subplot(grid[1, :]), scan)
     figure.suptitle(title or f"Shop habits against {fit['cases']} spray-outs")
-    figure.tight_layout()
-    fmt = Path(path).suffix.lstrip(".") or "png"
-    write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
-    plt.close(figure)
+    _save(figure, path, dpi)
+
+
+def plot_rendering(
+    image: np.ndarray,
+    labels: list[str],
+    path: str | PathLike,
+    *,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """A stack of curved panels (:func:`~flakelab.render.appearance.render_stack`), one band
+    per label from the top, with the aspecular angle along the bottom."""
+    from flakelab.core.colorimetry import encode_sRGB
+    from flakelab.render.appearance import CURVED_RANGE_DEG
+
+    rows, columns = image.shape[:2]
+    band = rows / len(labels)
+    figure, axis = plt.subplots(figsize=(11, 0.9 + 1.6 * len(labels)))
+    axis.imshow(encode_sRGB(image), extent=(*CURVED_RANGE_DEG, rows, 0), aspect="auto")
+    axis.set_yticks(band * (np.arange(len(labels)) + 0.5), labels)
+    axis.set_xticks(np.arange(0, CURVED_RANGE_DEG[1] + 1, 15))
+    axis.set_xlabel("aspecular angle [°]")
+    for k in range(1, len(labels)):
+        axis.axhline(k * band, color="white", lw=0.6)
+    axis.set_title(title)
+    _save(figure, path, dpi)
