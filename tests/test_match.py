@@ -315,6 +315,14 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert any(name.startswith("Al") for name in best["recipe"])
     assert best["de00_max"] < 2.0
     assert best["rounding_de00"] < 0.1
+    # the colorist's table carries the texture difference the JSON has
+    from flakelab.cli.common import console
+    from flakelab.cli.matching import _print_match
+
+    with console.capture() as printed:
+        _print_match(report)
+    row = next(ln for ln in printed.get().splitlines() if "predicted − target" in ln)
+    assert row.split()[3:] == [f"{v:+.2f}" for v in best["texture_delta"].values()]
 
 
 def test_match_refuses_bad_input(tmp_path):

@@ -260,6 +260,15 @@ def _print_match(report: dict) -> None:
             geo.add_row(g, *(f"{v[k]:.2f}" for k in keys))
         console.print(table)
         console.print(geo)
+        if c["texture_delta"]:
+            texture = Table(box=box.SIMPLE, show_header=True)
+            texture.add_column("texture")
+            for name in c["texture_delta"]:
+                texture.add_column(name, justify="right")
+            texture.add_row(
+                "predicted − target", *(f"{v:+.2f}" for v in c["texture_delta"].values())
+            )
+            console.print(texture)
         extra = f"model: {c['model']}; rounding to the scale costs ΔE00 {c['rounding_de00']:.3f}"
         if c["novel_toners"]:
             extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
