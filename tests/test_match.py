@@ -335,6 +335,8 @@ def test_match_refuses_bad_input(tmp_path):
     run = flakelab("match", "--example", "--render", str(tmp_path / "side-by-side.bmp"))
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
     assert not (tmp_path / "side-by-side.bmp").exists()
+    run = flakelab("match", "evaluate", "--render", str(tmp_path / "side-by-side.png"))
+    assert run.returncode == 2 and "--render" in run.stderr
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
     run = flakelab("match", "--example", "--library", str(empty))

@@ -157,6 +157,8 @@ def match_command(
 
     risk = {} if model_risk is None else {"model_risk": model_risk}
     if target == "evaluate":
+        if render is not None:
+            raise FlakelabError("--render: draws the candidates of one target, not the harness")
         _evaluate(
             library=library,
             instrument=instrument,
