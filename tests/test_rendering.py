@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -80,6 +81,21 @@ def test_anchor_fit_recovers_a_known_process():
 def test_closed_loop_returns_the_prescribed_texture(process):
     report = roundtrip(shipped_processes()[process], points=5, size_px=768, seed=7)
     assert report["rel_error_max"] <= 0.10, report
+
+
+def test_rendered_grain_is_as_strong_as_the_anchor_panels():
+    """The coarseness texture the renderer draws at each anchor's graininess has the contrast
+    of that anchor's physical flake image (both tone-mapped, within a factor 1.6), from the
+    bottom of the ladder up: graininess alone, a coefficient of variation, cannot tell a
+    faint pattern from a strong one, so the grey level must follow the anchors' brightness
+    (a grey level that fell to zero at G 2.64 drew no grain at all there)."""
+    from flakelab.render.appearance import _tone
+    from flakelab.texture.calibration import anchor_panels
+
+    for anchor in anchor_panels("coarseness", size_px=512, seed=0):
+        _, drawn = texture_images(1.0, anchor.value, (256, 512), seed=4)
+        ratio = drawn.std() / _tone(anchor.image).std()
+        assert 1 / 1.6 < ratio < 1.6, (anchor.value, ratio)
 
 
 def test_texture_sweeps_follow_per_column_values():
@@ -180,6 +196,27 @@ def test_render_commands_write_images_of_the_asked_size(tmp_path):
     run = flakelab("render-grid", "--steps", "3", "--tile", "32", "-o", str(tmp_path / "g.png"))
     assert run.returncode == 0, run.stderr
     assert imread(tmp_path / "g.png").shape[:2] == (96, 96)
+
+
+def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path):
+    import json
+    import shutil
+    from importlib.resources import files
+
+    from flakelab.texture.calibration import _SHIPPED
+
+    shipped = Path(str(files("flakelab.data") / _SHIPPED))
+    refitted = tmp_path / "processes.json"
+    shutil.copy(shipped, refitted)
+    document = json.loads(refitted.read_text())
+    document["coarseness"]["constants"][1] = [53.1, -655.3, -2.54]  # the form shipped before
+    refitted.write_text(json.dumps(document))
+    run = flakelab("texture", "fit", "-o", str(refitted), "--grey-only")
+    assert run.returncode == 0, run.stderr
+    got, want = (json.loads(f.read_text()) for f in (refitted, shipped))
+    np.testing.assert_allclose(got["coarseness"]["constants"], want["coarseness"]["constants"],
+                               rtol=1e-6)  # fmt: skip
+    assert got["glint"] == want["glint"]
 
 
 def test_render_refuses_bad_input_without_writing(tmp_path):

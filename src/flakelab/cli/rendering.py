@@ -138,6 +138,14 @@ def texture_fit(
         list[str] | None,
         typer.Option(help="Refit only this process (coarseness, glint); others kept from -o."),
     ] = None,
+    grey_only: Annotated[
+        bool,
+        typer.Option(
+            "--grey-only",
+            help="Refit only the coarseness grey level of the processes in -o to the anchors' "
+            "brightness, keeping every other control.",
+        ),
+    ] = False,
     seed: SeedOption = 0,
     json_output: JsonOption = False,
 ) -> None:
@@ -145,11 +153,18 @@ def texture_fit(
     from flakelab.texture.calibration import (
         fit_process,
         load_processes,
+        refit_grey,
         roundtrip,
         save_processes,
     )
     from flakelab.texture.generator import PROCESSES
 
+    if grey_only:
+        fitted = dict(load_processes(output))
+        fitted["coarseness"] = refit_grey(fitted["coarseness"], seed=seed)
+        save_processes(fitted, output)
+        errors.print(f"wrote {output} (coarseness grey level refitted)", highlight=False)
+        return
     names = process or list(PROCESSES)
     unknown = sorted(set(names) - set(PROCESSES))
     if unknown:

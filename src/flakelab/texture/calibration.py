@@ -60,6 +60,7 @@ __all__ = [
     "measure_texture",
     "histogram_statistics",
     "fit_process",
+    "refit_grey",
     "load_processes",
     "save_processes",
     "shipped_processes",
@@ -236,6 +237,8 @@ def fit_process(
     note(f"{process}: fitting the forms of size, grey level and sparkler over the ladder")
     constants = _fit_free_forms(process, constants, anchors, shape, seed + 1, iterations)
     constants = _fit_closed_loop(process, constants, values, per_anchor)
+    if process == "coarseness":
+        constants = _fit_grey_to_means(constants, anchors)
     fitted = TextureProcess(process, constants, (float(values[0]), float(values[-1])))
     mismatch = [_mismatch(process, fitted.controls(a.value), a, shape, seed + 1) for a in anchors]
     report = {
@@ -321,6 +324,44 @@ def _fit_closed_loop(
     best = constants.copy()
     best[rows] = least_squares(residuals, start, bounds=bounds).x.reshape(len(rows), 3)
     return best
+
+
+def _fit_grey_to_means(constants: NDArray, anchors: list[AnchorPanel]) -> NDArray:
+    """Coarseness: refit the grey level's (A, B, e) so that the process's mean grey (Campbell)
+    is each anchor's, in log, with the final forms of size, count and sparkler. The grey
+    levels its first form went through followed from the anchors' means with the controls
+    before the joint and closed-loop refits; after them that form no longer gave the
+    anchors' brightness (at the bottom of the ladder it fell below zero, and the rendered
+    grain vanished). Graininess does not depend on it, so the closed loop holds."""
+    values = np.array([a.value for a in anchors])
+    means = np.array([float(a.image.mean()) for a in anchors])
+
+    def residuals(grey_form):
+        trial = constants.copy()
+        trial[1] = grey_form
+        c = control_values("coarseness", trial, values)
+        return np.log(expected_mean(c["size"], c["grey"], c["count"], c["sparkler"]) / means)
+
+    low, high = _EXPONENTS["coarseness"]
+    fits = [
+        least_squares(
+            residuals, (0.0, 1.0, e0), bounds=([-np.inf, -np.inf, low], [np.inf, np.inf, high])
+        )
+        for e0 in (-1.0, 0.5, 1.0, 2.0)
+    ]
+    best = constants.copy()
+    best[1] = min(fits, key=lambda fit: fit.cost).x
+    return best
+
+
+def refit_grey(process: TextureProcess, *, anchor_px: int = 512, seed: int = 0) -> TextureProcess:
+    """A fitted coarseness process with its grey level refitted to the anchors' brightness
+    (:func:`_fit_grey_to_means`), its other controls kept."""
+    if process.process != "coarseness":
+        raise ValueError(f"{process.process}: only the coarseness grey level follows the anchors")
+    anchors = anchor_panels("coarseness", size_px=anchor_px, seed=seed)
+    constants = _fit_grey_to_means(process.constants, anchors)
+    return TextureProcess(process.process, constants, process.value_range)
 
 
 def roundtrip(
