@@ -77,6 +77,19 @@ def test_anchor_fit_recovers_a_known_process():
     assert again.mean() == pytest.approx(image.mean(), rel=0.05)
 
 
+def test_a_coarseness_form_stays_positive_across_its_ladder():
+    """The sparklers a fresh fit found per anchor: one large value at the bottom. A power law
+    fitted to them in linear units crossed zero at G 7 (clamped there, the closed loop missed
+    by 15 %); fitted to their logarithms it stays inside its domain over the whole ladder."""
+    from flakelab.texture.calibration import _fit_form, _power_law
+
+    values = np.array([2.64, 3.47, 4.76, 6.67, 8.69, 11.38, 14.6, 18.99, 22.13])
+    sparkler = np.array([1697.5, 145.5, 23.4, 24.7, 17.1, 21.6, 20.6, 22.1, 18.4])
+    form = _fit_form("coarseness", values, sparkler)
+    assert _power_law(np.geomspace(values[0], values[-1], 200), *form).min() > 10
+    assert _power_law(values[0], *form) > 500  # and still follows the bottom anchor
+
+
 @pytest.mark.parametrize("process", ["coarseness", "glint"])
 def test_closed_loop_returns_the_prescribed_texture(process):
     report = roundtrip(shipped_processes()[process], points=5, size_px=768, seed=7)

@@ -187,25 +187,35 @@ def _power_law(v, A, B, e):
     return A + B * v**e
 
 
+def _positive_power_law(v, A, B, e):
+    return np.log(np.maximum(_power_law(v, A, B, e), 1e-12))
+
+
 def _fit_form(process: str, values, raw):
-    """(A, B, e) of one control through the per-anchor fitted values (eq. 2 or 4)."""
+    """(A, B, e) of one control through the per-anchor fitted values (eq. 2 or 4). A power
+    law is fitted to the logarithms: positive at every anchor, and so (monotone) across the
+    ladder, where a fit in linear units, pulled by one large value, could cross zero inside
+    the range."""
     if process == "coarseness":
-        target = raw
+        target = np.log(raw)
+        form = _positive_power_law
     else:  # invert 1 + 100/(1 + exp(z)) and fit z = A + B·g^e
         y = np.clip(raw, 1.02, 100.5)
         target = np.log(100.0 / (y - 1.0) - 1.0)
+        form = _power_law
     low, high = _EXPONENTS[process]
-    best, best_cost = np.array([target.mean(), 0.0, 1.0]), np.inf
+    level = float(np.exp(target.mean())) if process == "coarseness" else target.mean()
+    best, best_cost = np.array([level, 0.0, 1.0]), np.inf
     for e0 in (-1.0, 0.5, 1.0, 2.0):
         if not low <= e0 <= high:
             continue
         bounds = ([-np.inf, -np.inf, low], [np.inf, np.inf, high])
-        start = (target.mean(), 0.0, e0)
+        start = (level, 0.0, e0)
         try:
-            constants, _ = curve_fit(_power_law, values, target, start, bounds=bounds, maxfev=20000)
+            constants, _ = curve_fit(form, values, target, start, bounds=bounds, maxfev=20000)
         except RuntimeError:
             continue
-        cost = np.sum((_power_law(values, *constants) - target) ** 2)
+        cost = np.sum((form(values, *constants) - target) ** 2)
         if cost < best_cost:
             best, best_cost = constants, cost
     return best
@@ -256,10 +266,16 @@ def _fit_free_forms(process, constants, anchors, shape, seed, iterations) -> NDA
     so that noise in single anchors' fits does not bend the forms."""
     free_rows = [0, 3] if process == "coarseness" else [0, 1, 3]
 
+    ends = np.array([anchors[0].value, anchors[-1].value])
+
     def ladder_loss(flat):
         trial = constants.copy()
         trial[free_rows] = flat.reshape(len(free_rows), 3)
         trial[:, 2] = np.clip(trial[:, 2], *_EXPONENTS[process])
+        if process == "coarseness" and np.any(
+            _power_law(ends, *trial[free_rows].T[..., None]) <= 0
+        ):
+            return _REFUSED  # a form that leaves its domain inside the ladder (monotone: its ends)
         total = 0.0
         for anchor in anchors:
             controls = control_values(process, trial, anchor.value)
