@@ -191,22 +191,27 @@ def evaluate_matching(
     def share(rs, key):
         return float(np.mean([r[key] <= SUCCESS_DE00 for r in rs])) if rs else None
 
-    oracle = share(rows, "oracle_de00")
+    def ratio(rate, limit):
+        return rate / limit if rate is not None and limit else None
+
+    oracle, novel_oracle = share(rows, "oracle_de00"), share(novel_rows, "oracle_de00")
     first, corrected = share(rows, "first_de00"), share(rows, "corrected_de00")
+    novel_first = share(novel_rows, "first_de00")
     latency = np.array([r["latency_s"] for r in rows + novel_rows])
     return {
         "targets": targets,
         "seed": seed,
         "first_shot_success": first,
         "after_one_correction": corrected,
-        "novel_toner_first_shot": share(novel_rows, "first_de00"),
+        "novel_toner_first_shot": novel_first,
         "novel_targets": len(novel_rows),
-        "novel_oracle_success": share(novel_rows, "oracle_de00"),
+        "novel_oracle_success": novel_oracle,
         "oracle_success": oracle,
         "respray_success": share(rows, "respray_de00"),
         "after_one_perfect_correction": share(rows, "first_or_respray_de00"),
-        "first_shot_vs_oracle": first / oracle if oracle else None,
-        "after_one_correction_vs_oracle": corrected / oracle if oracle else None,
+        "first_shot_vs_oracle": ratio(first, oracle),
+        "after_one_correction_vs_oracle": ratio(corrected, oracle),
+        "novel_toner_first_shot_vs_oracle": ratio(novel_first, novel_oracle),
         "first_shot_de00_median": float(np.median([r["first_de00"] for r in rows])),
         "oracle_de00_median": float(np.median([r["oracle_de00"] for r in rows])),
         "predicted_de00_median": float(np.median([r["predicted_de00"] for r in rows])),
