@@ -54,6 +54,18 @@ def test_compare_example_agrees_with_library_and_tolerance():
     )
 
 
+def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):
+    from matplotlib.image import imread
+
+    picture = tmp_path / "side-by-side.png"
+    run = flakelab("compare", "--example", "--render", picture)
+    assert run.returncode == 0, run.stderr
+    assert str(picture) in run.stderr and imread(picture).shape[2] in (3, 4)
+    run = flakelab("compare", "--example", "--render", tmp_path / "side-by-side.bmp")
+    assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
+    assert sorted(tmp_path.iterdir()) == [picture]
+
+
 def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files):
     result = flakelab("compare", ma_t12_files[0], ma_t12_files[0], "--json", "-t", "components")
     report = json.loads(result.stdout)

@@ -122,21 +122,48 @@ def compare(
     fail_on_reject: Annotated[
         bool, typer.Option("--fail-on-reject", help="Exit with status 1 when a geometry fails.")
     ] = False,
+    render: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also draw the reference above the sample as curved panels, at the geometries "
+            "they share (PNG, PDF or SVG)."
+        ),
+    ] = None,
 ) -> None:
     """Multi-angle colour difference of a sample against a reference, with pass/fail."""
     if not example and (reference is None or sample is None):
         raise FlakelabError("give a reference and a sample file, or --example")
+    if render is not None:
+        from flakelab.render.plots import figure_format
+
+        figure_format(render)
     tol = read_tolerance(tolerance)
     ref = _one_or_example(reference, "target", reference_sample)
     smp = _one_or_example(sample, "sprayout", sample_name)
     result = compare_measurements(ref, smp, tol, conditions=Conditions.parse(conditions))
     report = result.to_dict()
+    if render is not None:
+        _render_comparison(ref, smp, report, render, Conditions.parse(conditions))
     if as_json:
         print(json.dumps(report, indent=1))
     else:
         _print_comparison(report, tol)
     if fail_on_reject and not result.all_pass:
         raise typer.Exit(1)
+
+
+def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
+    from flakelab.render import plot_side_by_side
+
+    shared = [g["name"] for g in report["geometries"]]
+    failing = [g["name"] for g in report["geometries"] if not g["pass"]]
+    verdict = "FAIL at " + ", ".join(failing) if failing else "PASS"
+    labels = [f"reference: {ref.sample}", f"sample: {smp.sample}"]
+    title = f"{smp.sample} vs {ref.sample}: {verdict}"
+    plot_side_by_side(
+        [ref.select(shared), smp.select(shared)], labels, path, title=title, conditions=conditions
+    )
+    errors.print(f"wrote {path}", highlight=False)
 
 
 _LIMIT_LABELS = {"de00": "ΔE≤", "dL": "L≤", "dC": "C≤", "dH": "H≤"}

@@ -215,16 +215,15 @@ def match_command(
 def _render_match(target, result, path: Path) -> None:
     """The target as measured (at the model's geometries, as the candidates) above each
     candidate as its model predicts it, curved panels in one texture draw."""
-    from flakelab.render import plot_rendering
-    from flakelab.render.appearance import appearance_of, render_stack
+    from flakelab.render import plot_side_by_side
 
     readings = [target] + [c.as_measurement(f"#{k}") for k, c in enumerate(result.candidates, 1)]
     labels = ["target"] + [
         f"#{k}  {'PASS' if c.passes else 'FAIL'}  max ΔE00 {c.de00.max():.2f}"
         for k, c in enumerate(result.candidates, 1)
     ]
-    image = render_stack([appearance_of(m) for m in readings])
-    plot_rendering(image, labels, path, title=f"{result.target}: target and candidates (predicted)")
+    title = f"{result.target}: target and candidates (predicted)"
+    plot_side_by_side(readings, labels, path, title=title)
     errors.print(f"wrote {path}", highlight=False)
 
 

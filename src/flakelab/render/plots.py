@@ -17,7 +17,14 @@ from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
-__all__ = ["figure_format", "plot_measurements", "plot_scaling", "plot_habits", "plot_rendering"]
+__all__ = [
+    "figure_format",
+    "plot_measurements",
+    "plot_scaling",
+    "plot_habits",
+    "plot_rendering",
+    "plot_side_by_side",
+]
 
 
 def figure_format(path: str | PathLike) -> str:
@@ -235,3 +242,19 @@ def plot_rendering(
         axis.axhline(k * band, color="white", lw=0.6)
     axis.set_title(title)
     _save(figure, path, dpi)
+
+
+def plot_side_by_side(
+    readings: list[Measurement],
+    labels: list[str],
+    path: str | PathLike,
+    *,
+    title: str = "",
+    conditions: Conditions = D65_10,
+) -> None:
+    """Readings (measured or predicted) drawn as curved panels, one band each from the top,
+    in one texture draw (:func:`~flakelab.render.appearance.render_stack`)."""
+    from flakelab.render.appearance import appearance_of, render_stack
+
+    image = render_stack([appearance_of(m, conditions) for m in readings])
+    plot_rendering(image, labels, path, title=title)
