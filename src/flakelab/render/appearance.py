@@ -286,24 +286,13 @@ def render_curved(
 
 
 def render_stack(
-    appearances: Sequence[Appearance],
-    band_px: int = 160,
-    width_px: int = 1024,
-    *,
-    diffuse_fraction: float = DIFFUSE_FRACTION,
-    distance_m: float = REFERENCE_DISTANCE_M,
-    gloss: float = 0.8,
-    texture: bool = True,
-    seed: int = 0,
+    appearances: Sequence[Appearance], band_px: int = 160, width_px: int = 1024, **options
 ) -> NDArray:
     """Curved panels of several paints, one band each from top to bottom, touching as panels
-    laid side by side in a light booth. Every band takes the same texture draw (``seed``), so
-    what differs from band to band is the paint, not the noise: ``[bands × band_px, width, 3]``."""
-    options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
-    bands = [
-        render_curved(a, (band_px, width_px), texture=texture, seed=seed, **options)
-        for a in appearances
-    ]
+    laid side by side in a light booth: ``[bands × band_px, width, 3]``. Every band takes the
+    same ``options`` of :func:`render_curved`, its texture ``seed`` too, so what differs from
+    band to band is the paint, not the noise."""
+    bands = [render_curved(a, (band_px, width_px), **options) for a in appearances]
     return np.concatenate(bands, axis=0)
 
 
