@@ -166,10 +166,13 @@ class ForwardModel:
         return np.concatenate([R.reshape(R.shape[0], -1), np.asarray(texture, float)], axis=1)
 
     def decode_targets(self, y: NDArray) -> tuple[NDArray, NDArray]:
+        """Outputs ``[N, outputs]`` → reflectance factors ``[N, G, 31]`` and texture
+        ``[N, 8]``, in float64; the clip and exp run in ``y``'s own precision (the network's
+        float32), so a large batch is converted once, not three times."""
         G = len(self.geometries)
         log_R = np.clip(y[:, : self.spectral_outputs], np.log(LOG_FLOOR) - 3, LOG_CEILING)
-        R = np.exp(log_R).reshape(-1, G, WAVELENGTHS.size)
-        return R, y[:, self.spectral_outputs :]
+        R = np.exp(log_R, out=log_R).astype(float).reshape(-1, G, WAVELENGTHS.size)
+        return R, y[:, self.spectral_outputs :].astype(float)
 
     def fractions(self, recipes: Sequence[Mapping[str, float]]) -> NDArray:
         """Recipes ``{toner: amount}`` (any unit) → normalised fractions ``[N, T]``."""
@@ -257,7 +260,7 @@ class ForwardModel:
                 forward(torch.from_numpy(x[start : start + batch])).numpy()
                 for start in range(0, x.shape[0], batch)
             ]
-        return np.concatenate(out, axis=axis).astype(float)
+        return np.concatenate(out, axis=axis)
 
     @property
     def fingerprint(self) -> str:
