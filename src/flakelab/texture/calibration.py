@@ -77,6 +77,8 @@ _VALUE_WEIGHT = 20.0
 _SHIPPED = "texture-processes.json"
 _SMOOTHING_PX = GRAIN_SCALE_UM / 15.0  # the metric's smoothing at the camera's 15 µm pixels
 _EXPONENTS = {"coarseness": (-4.0, 4.0), "glint": (0.2, 4.0)}
+ANCHOR_PX = 512
+"""Side of the anchor panels the shipped processes were fitted to [pixels]."""
 """Bounds of e: outside them a power law turns into a step; glint's e near 0 into a log."""
 
 
@@ -225,7 +227,7 @@ def fit_process(
     process: str,
     *,
     size_px: int = 256,
-    anchor_px: int = 512,
+    anchor_px: int = ANCHOR_PX,
     seed: int = 0,
     iterations: int = 400,
     progress: Callable[[str], None] | None = None,
@@ -370,7 +372,9 @@ def _fit_grey_to_means(constants: NDArray, anchors: list[AnchorPanel]) -> NDArra
     return best
 
 
-def refit_grey(process: TextureProcess, *, anchor_px: int = 512, seed: int = 0) -> TextureProcess:
+def refit_grey(
+    process: TextureProcess, *, anchor_px: int = ANCHOR_PX, seed: int = 0
+) -> TextureProcess:
     """A fitted coarseness process with its grey level refitted to the anchors' brightness
     (:func:`_fit_grey_to_means`), its other controls kept."""
     if process.process != "coarseness":
