@@ -63,7 +63,13 @@ def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):
     assert str(picture) in run.stderr and imread(picture).shape[2] in (3, 4)
     run = flakelab("compare", "--example", "--render", tmp_path / "side-by-side.bmp")
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
-    assert sorted(tmp_path.iterdir()) == [picture]
+    target = read_measurement(example_path("target"))
+    lit_at_15 = tmp_path / "lit-at-15.csv"  # nothing lit at 45°: no curve to draw
+    write_measurements([target.select([g for g in target.geometry_names if g[:2] == "15"])],
+                       lit_at_15)  # fmt: skip
+    run = flakelab("compare", lit_at_15, lit_at_15, "--render", tmp_path / "none.png")
+    assert run.returncode == 2 and "--render" in run.stderr and "lit at 45°" in run.stderr
+    assert sorted(tmp_path.iterdir()) == [lit_at_15, picture]
 
 
 def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files):

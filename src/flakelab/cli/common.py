@@ -118,3 +118,16 @@ def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iter
         for item in items:
             yield item
             bar.advance(task)
+
+
+def draw_side_by_side(readings, labels: list[str], path, title: str, **options) -> None:
+    """``--render``: readings as curved panels one above the other
+    (:func:`~flakelab.render.plots.plot_side_by_side`); a reading the renderer cannot draw is
+    refused naming the option."""
+    from flakelab.render import plot_side_by_side
+
+    try:
+        plot_side_by_side(readings, labels, path, title=title, **options)
+    except ValueError as error:
+        raise FlakelabError(f"--render: {error}") from None
+    errors.print(f"wrote {path}", highlight=False)

@@ -16,6 +16,7 @@ from flakelab.cli.common import (
     JsonOption,
     SampleOption,
     console,
+    draw_side_by_side,
     errors,
     progress_bar,
     reports_errors,
@@ -153,17 +154,13 @@ def compare(
 
 
 def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
-    from flakelab.render import plot_side_by_side
-
     shared = [g["name"] for g in report["geometries"]]
     failing = [g["name"] for g in report["geometries"] if not g["pass"]]
     verdict = "FAIL at " + ", ".join(failing) if failing else "PASS"
     labels = [f"reference: {ref.sample}", f"sample: {smp.sample}"]
     title = f"{smp.sample} vs {ref.sample}: {verdict}"
-    plot_side_by_side(
-        [ref.select(shared), smp.select(shared)], labels, path, title=title, conditions=conditions
-    )
-    errors.print(f"wrote {path}", highlight=False)
+    readings = [ref.select(shared), smp.select(shared)]
+    draw_side_by_side(readings, labels, path, title, conditions=conditions)
 
 
 _LIMIT_LABELS = {"de00": "ΔE≤", "dL": "L≤", "dC": "C≤", "dH": "H≤"}

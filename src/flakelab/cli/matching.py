@@ -11,7 +11,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, console, errors, progress_bar
+from flakelab.cli.common import JsonOption, console, draw_side_by_side, errors, progress_bar
 from flakelab.cli.learning import (
     DatabaseOption,
     InstrumentOption,
@@ -62,7 +62,6 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
     if path is not None and shop is not None:
         raise FlakelabError("--habits and --shop: expected one of them, not both")
     from flakelab.cases.database import open_database
-    from flakelab.cli.common import errors
     from flakelab.match.habits import read_habits, stored_habits
 
     found = (
@@ -215,16 +214,12 @@ def match_command(
 def _render_match(target, result, path: Path) -> None:
     """The target as measured (at the model's geometries, as the candidates) above each
     candidate as its model predicts it, curved panels in one texture draw."""
-    from flakelab.render import plot_side_by_side
-
     readings = [target] + [c.as_measurement(f"#{k}") for k, c in enumerate(result.candidates, 1)]
     labels = ["target"] + [
         f"#{k}  {'PASS' if c.passes else 'FAIL'}  max ΔE00 {c.de00.max():.2f}"
         for k, c in enumerate(result.candidates, 1)
     ]
-    title = f"{result.target}: target and candidates (predicted)"
-    plot_side_by_side(readings, labels, path, title=title)
-    errors.print(f"wrote {path}", highlight=False)
+    draw_side_by_side(readings, labels, path, f"{result.target}: target and candidates (predicted)")
 
 
 def _print_match(report: dict) -> None:
