@@ -154,3 +154,18 @@ def test_a_failed_write_leaves_the_previous_file_intact(rich_measurement, tmp_pa
         write_measurements([shifted], path)
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["kept.cxf"]  # no temporary left behind
+
+
+def test_an_atomic_write_names_the_file_asked_for_when_it_cannot_write(tmp_path):
+    """Not the temporary file beside it; a folder is never replaced, nothing is left behind."""
+    from flakelab.io.records import write_atomically
+
+    (tmp_path / "panel.png").mkdir()
+    with pytest.raises(IsADirectoryError, match="panel.png"):
+        write_atomically(tmp_path / "panel.png", lambda t: t.write_text("x"))
+    missing = tmp_path / "missing" / "panel.png"
+    with pytest.raises(FileNotFoundError) as raised:
+        write_atomically(missing, lambda t: t.write_text("x"))
+    assert raised.value.filename == str(missing)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["panel.png"]
+    assert list((tmp_path / "panel.png").iterdir()) == []

@@ -6,6 +6,7 @@ format reports the same problems the same way (file, field, problem).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import re
@@ -209,7 +210,12 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
     """Write through a temporary file beside ``path`` and rename it into place, so a failure
     never leaves a half-written file and never destroys the previous one."""
     target = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
+    if not target.name or target.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "a folder, not a file to write", str(path))
+    try:
+        handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    except OSError as error:  # named by the file asked for, not the temporary one
+        raise OSError(error.errno, error.strerror, str(path)) from None
     os.close(handle)
     try:
         write(Path(temporary))
