@@ -71,6 +71,9 @@ def test_generated_world_is_as_hard_as_a_shop(world):
     assert min(by_family.values()) < report["exact_model_de00_mean"] < max(by_family.values())
     # flake alignment varies from spray to spray in effect paints only
     assert by_family["solid"] < min(by_family["metallic"], by_family["pearl"])
+    respray = report["respray_de00_median_by_family"]
+    assert respray["metallic"] == report["respray_de00_median"]  # the range: metallics
+    assert respray["solid"] < 0.5 * min(respray["metallic"], respray["pearl"])
 
 
 def test_exact_model_floor_vanishes_without_variation(world):

@@ -305,7 +305,6 @@ class World:
         first, _ = self.appearance(x, same_batch())
         second, _ = self.appearance(x, same_batch())
         respray = self.worst_de00(self.measure(first, rng), self.measure(second, rng))
-        metallic = x[:, self._aluminium].sum(1) > 0
         aged, haze = self.weather(x, rng)
         weathered_R, _ = self.appearance(aged, self.nominal(n))
         fresh_R, _ = self.appearance(x, self.nominal(n))
@@ -314,8 +313,12 @@ class World:
         families = self.library.paint_families(x)
         return {
             "remeasure_de00_median": float(np.median(remeasure)),
-            "respray_de00_median": float(np.median(respray[metallic])),
+            # the range is for metallics: aluminium without pearl (paint_families)
+            "respray_de00_median": float(np.median(respray[families == "metallic"])),
             "respray_de00_median_all": float(np.median(respray)),
+            "respray_de00_median_by_family": {
+                f: float(np.median(respray[families == f])) for f in np.unique(families).tolist()
+            },
             "batch_strength_sd": float(np.std(batch.strength)),
             "weathered_target_de00_median": float(np.median(weathered)),
             "exact_model_de00_mean": float(floor.mean()),

@@ -242,7 +242,10 @@ def realism(
     for column in ("statistic", "value", "realistic range"):
         table.add_column(column)
     for key, (lo, hi) in ranges.items():
-        table.add_row(key, f"{report[key]:.3f}", f"{lo}–{hi}")
+        shown = f"{lo}–{hi}" + (" (metallics)" if key == "respray_de00_median" else "")
+        table.add_row(key, f"{report[key]:.3f}", shown)
+    for family, value in report["respray_de00_median_by_family"].items():
+        table.add_row(f"respray_de00_median, {family}s", f"{value:.3f}", "")
     for key in ("exact_model_de00_mean", "exact_model_de00_p95"):
         table.add_row(key, f"{report[key]:.3f}", "(the cases' noise floor)")
     for family, value in report["exact_model_de00_mean_by_family"].items():
