@@ -120,6 +120,14 @@ def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iter
             bar.advance(task)
 
 
+def check_figure_file(path) -> None:
+    """A figure file's suffix, checked before any work (nothing to check without one)."""
+    if path is not None:
+        from flakelab.render.plots import figure_format
+
+        figure_format(path)
+
+
 def draw_side_by_side(readings, labels: list[str], path, title: str, **options) -> None:
     """``--render``: readings as curved panels one above the other
     (:func:`~flakelab.render.plots.plot_side_by_side`); a reading the renderer cannot draw is

@@ -14,7 +14,14 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, console, errors, progress_bar, reports_errors
+from flakelab.cli.common import (
+    JsonOption,
+    check_figure_file,
+    console,
+    errors,
+    progress_bar,
+    reports_errors,
+)
 from flakelab.errors import FlakelabError
 
 cases_app = typer.Typer(help="Refinish cases: generate, import, export, realism.")
@@ -300,10 +307,7 @@ def habits(
     )
     from flakelab.models.training import case_arrays
 
-    if plot is not None:
-        from flakelab.render.plots import figure_format
-
-        figure_format(plot)
+    check_figure_file(plot)
     lib, forward = learned_forward(library, instrument, model, database)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)

@@ -15,6 +15,7 @@ from flakelab.cli.common import (
     ConditionsOption,
     JsonOption,
     SampleOption,
+    check_figure_file,
     console,
     draw_side_by_side,
     errors,
@@ -134,17 +135,15 @@ def compare(
     """Multi-angle colour difference of a sample against a reference, with pass/fail."""
     if not example and (reference is None or sample is None):
         raise FlakelabError("give a reference and a sample file, or --example")
-    if render is not None:
-        from flakelab.render.plots import figure_format
-
-        figure_format(render)
+    check_figure_file(render)
     tol = read_tolerance(tolerance)
     ref = _one_or_example(reference, "target", reference_sample)
     smp = _one_or_example(sample, "sprayout", sample_name)
-    result = compare_measurements(ref, smp, tol, conditions=Conditions.parse(conditions))
+    light = Conditions.parse(conditions)
+    result = compare_measurements(ref, smp, tol, conditions=light)
     report = result.to_dict()
     if render is not None:
-        _render_comparison(ref, smp, report, render, Conditions.parse(conditions))
+        _render_comparison(ref, smp, report, render, light)
     if as_json:
         print(json.dumps(report, indent=1))
     else:

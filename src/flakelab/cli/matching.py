@@ -11,7 +11,14 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, console, draw_side_by_side, errors, progress_bar
+from flakelab.cli.common import (
+    JsonOption,
+    check_figure_file,
+    console,
+    draw_side_by_side,
+    errors,
+    progress_bar,
+)
 from flakelab.cli.learning import (
     DatabaseOption,
     InstrumentOption,
@@ -176,10 +183,7 @@ def match_command(
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
-    if render is not None:
-        from flakelab.render.plots import figure_format
-
-        figure_format(render)
+    check_figure_file(render)
     lib, forward, effect = _setup(library, instrument, model, database)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)

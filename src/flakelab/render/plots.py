@@ -231,7 +231,7 @@ def plot_rendering(
     from flakelab.core.colorimetry import encode_sRGB
     from flakelab.render.appearance import CURVED_RANGE_DEG
 
-    rows, columns = image.shape[:2]
+    rows = image.shape[0]
     band = rows / len(labels)
     figure, axis = plt.subplots(figsize=(11, 0.9 + 1.6 * len(labels)))
     axis.imshow(encode_sRGB(image), extent=(*CURVED_RANGE_DEG, rows, 0), aspect="auto")
