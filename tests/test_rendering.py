@@ -103,9 +103,9 @@ def test_rendered_grain_is_as_strong_as_the_anchor_panels():
     faint pattern from a strong one, so the grey level must follow the anchors' brightness
     (a grey level that fell to zero at G 2.64 drew no grain at all there)."""
     from flakelab.render.appearance import _tone
-    from flakelab.texture.calibration import anchor_panels
+    from flakelab.texture.calibration import ANCHOR_PX, anchor_panels
 
-    for anchor in anchor_panels("coarseness", size_px=512, seed=0):
+    for anchor in anchor_panels("coarseness", size_px=ANCHOR_PX, seed=0):
         _, drawn = texture_images(1.0, anchor.value, (256, 512), seed=4)
         ratio = drawn.std() / _tone(anchor.image).std()
         assert 1 / 1.6 < ratio < 1.6, (anchor.value, ratio)
