@@ -216,3 +216,30 @@ def test_the_objective_adds_the_weighed_model_risk_for_an_ensemble_only(hybrid_e
     np.testing.assert_allclose(added.numpy(), 2.0 * risk.numpy(), rtol=1e-4)
     assert risk.min() > 0.01
     np.testing.assert_array_equal(objective(single, 2.0).numpy(), objective(single, 0.0).numpy())
+
+
+def test_the_folded_network_computes_what_its_layers_do(ensemble, data):
+    """Standardise, run each member, de-standardise, average (:meth:`member_outputs`): the
+    folded network's one pass gives the same outputs and the same gradients with respect to
+    the recipe, which the matcher descends."""
+    model, _ = ensemble
+    x = torch.tensor(data.x[:40], dtype=torch.float32, requires_grad=True)
+    layer_by_layer = model.member_outputs(x).mean(dim=0)
+    folded = model.folded()(x)
+    torch.testing.assert_close(folded, layer_by_layer, atol=1e-4, rtol=1e-5)
+    weights = torch.linspace(-1, 1, folded.shape[1])  # every output's gradient counts
+    (by_layers,) = torch.autograd.grad((layer_by_layer * weights).sum(), x)
+    (by_fold,) = torch.autograd.grad((folded * weights).sum(), x)
+    torch.testing.assert_close(by_fold, by_layers, atol=1e-4, rtol=1e-4)
+
+
+def test_prediction_in_batches_is_prediction_at_once(ensemble, data):
+    model, _ = ensemble
+    R, texture = model.predict(data.x[:50])
+    R_batched, texture_batched = model.predict(data.x[:50], batch=7)
+    # float32 sums in another order: the last digits may differ
+    np.testing.assert_allclose(R_batched, R, rtol=2e-5)
+    np.testing.assert_allclose(texture_batched, texture, rtol=2e-5, atol=1e-5)
+    members = model.predict_members(data.x[:50], batch=7)
+    assert members.shape == (3, *R.shape)
+    np.testing.assert_allclose(np.log(members).mean(axis=0), np.log(R), atol=1e-5)

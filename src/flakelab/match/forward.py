@@ -20,7 +20,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.library.toners import Library
-from flakelab.models.network import LOG_CEILING, LOG_FLOOR, ForwardModel
+from flakelab.models.network import ForwardModel, reflectance_from_log
 from flakelab.physics.fast import predict
 from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
@@ -38,6 +38,7 @@ class LearnedForward:
         # a frozen copy: the matcher differentiates with respect to the recipe only, and
         # gradients for the weights would cost most of each backward pass (and pile up)
         self.model = replace(model, network=copy.deepcopy(model.network).requires_grad_(False))
+        self._forward = self.model.folded()
         self.toners = model.toners
         self.geometries = model.geometries
         self.name = f"learned ({model.instrument}, {model.info.get('name', 'model')})"
@@ -48,13 +49,12 @@ class LearnedForward:
         self.effect_share_floor = float(model.info.get("effect_share_floor", 0.0))
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-        y = self.model.torch_forward(fractions.to(torch.float32)).to(fractions.dtype)
+        y = self._forward(fractions.to(torch.float32)).to(fractions.dtype)
         return self._reflectance(y), y[:, self.model.spectral_outputs :]
 
     def _reflectance(self, y: torch.Tensor) -> torch.Tensor:
         """Reflectance ``[..., G, 31]`` from the model's outputs ``[..., outputs]``."""
-        log_R = y[..., : self.model.spectral_outputs]
-        R = torch.exp(torch.clamp(log_R, np.log(LOG_FLOOR) - 3, LOG_CEILING))
+        R = reflectance_from_log(y[..., : self.model.spectral_outputs])
         return R.reshape(*y.shape[:-1], len(self.geometries), 31)
 
     @property

@@ -13,7 +13,7 @@ import copy
 import hashlib
 import io
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -26,12 +26,14 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 
 __all__ = [
+    "FoldedNetwork",
     "ForwardModel",
     "StackedNetwork",
     "build_network",
     "LOG_FLOOR",
     "LOG_OFFSET_MAX",
     "ModelError",
+    "reflectance_from_log",
 ]
 
 EFFECT_OFFSET = 0.05
@@ -50,6 +52,12 @@ specular; an MLP far outside its data must not extrapolate to absurd values."""
 
 class ModelError(FlakelabError):
     """A model file or a model input that is wrong."""
+
+
+def reflectance_from_log(log_R: torch.Tensor) -> torch.Tensor:
+    """Reflectance factors from predicted log reflectance, clipped to what paint can read:
+    far below :data:`LOG_FLOOR` (black) and no higher than :data:`LOG_CEILING`."""
+    return torch.exp(torch.clamp(log_R, float(np.log(LOG_FLOOR)) - 3, LOG_CEILING))
 
 
 def build_network(inputs: int, outputs: int, hidden: Sequence[int] = (100, 100, 100)) -> nn.Module:
@@ -100,6 +108,36 @@ class StackedNetwork(nn.Module):
                 for linear, weight, bias in zip(linears, self.weights, self.biases, strict=True):
                     linear.weight.copy_(weight[k].T)
                     linear.bias.copy_(bias[k, 0])
+
+
+@dataclass(frozen=True)
+class FoldedNetwork:
+    """A model's prediction in as few operations as it takes, for inference and matching.
+
+    The input standardisation is folded into the first layer's weights, and the output
+    standardisation and the members' mean into one output layer: that layer is linear, so
+    the mean of K members' outputs is one product of their last hidden states side by side.
+    Equal to :meth:`ForwardModel.torch_forward` but for float32 rounding; it spares the
+    ``[K, N, outputs]`` intermediate and three passes over it, most of an ensemble's time
+    once the outputs outnumber the hidden units (MA-T12: 380 against 100)."""
+
+    features: Callable[[torch.Tensor], torch.Tensor]
+    hidden: tuple[tuple[torch.Tensor, torch.Tensor], ...]
+    """Each hidden layer's weights ``[K, in, out]`` and biases ``[K, 1, out]``."""
+    head_weight: torch.Tensor
+    """``[K × last hidden, outputs]``: the members' output layers stacked, scaled by y_std/K."""
+    head_bias: torch.Tensor
+
+    def __call__(self, fractions: torch.Tensor) -> torch.Tensor:
+        """Fractions ``[N, T]`` → outputs (log R, texture), de-standardised."""
+        x = self.features(fractions)
+        members = self.hidden[0][0].shape[0]
+        h = x.expand(members, *x.shape)
+        inplace = not torch.is_grad_enabled()  # no graph to keep: reuse each fresh product
+        for weight, bias in self.hidden:
+            h = nn.functional.silu(torch.baddbmm(bias, h, weight), inplace=inplace)
+        side_by_side = h.transpose(0, 1).reshape(x.shape[0], -1)
+        return torch.addmm(self.head_bias, side_by_side, self.head_weight)
 
 
 @dataclass
@@ -165,15 +203,6 @@ class ForwardModel:
         R = np.log(np.maximum(np.asarray(reflectance, dtype=float), LOG_FLOOR))
         return np.concatenate([R.reshape(R.shape[0], -1), np.asarray(texture, float)], axis=1)
 
-    def decode_targets(self, y: NDArray) -> tuple[NDArray, NDArray]:
-        """Outputs ``[N, outputs]`` → reflectance factors ``[N, G, 31]`` and texture
-        ``[N, 8]``, in float64; the clip and exp run in ``y``'s own precision (the network's
-        float32), so a large batch is converted once, not three times."""
-        G = len(self.geometries)
-        log_R = np.clip(y[:, : self.spectral_outputs], np.log(LOG_FLOOR) - 3, LOG_CEILING)
-        R = np.exp(log_R, out=log_R).astype(float).reshape(-1, G, WAVELENGTHS.size)
-        return R, y[:, self.spectral_outputs :].astype(float)
-
     def fractions(self, recipes: Sequence[Mapping[str, float]]) -> NDArray:
         """Recipes ``{toner: amount}`` (any unit) → normalised fractions ``[N, T]``."""
         x = np.zeros((len(recipes), len(self.toners)))
@@ -210,11 +239,35 @@ class ForwardModel:
 
     def torch_forward(self, fractions: torch.Tensor) -> torch.Tensor:
         """Differentiable: fractions ``[N, T]`` → outputs (log R, texture), de-standardised;
-        an ensemble's members averaged."""
-        y = self._standard_outputs(fractions)
-        if y.dim() == 3:
-            y = y.mean(dim=0)
-        return y * self._constant("y_std", y.dtype) + self._constant("y_mean", y.dtype)
+        an ensemble's members averaged. A caller evaluating one model many times keeps its
+        :meth:`folded` network instead of folding the weights on every call."""
+        return self.folded()(fractions)
+
+    def folded(self) -> FoldedNetwork:
+        """The network as it is now with the standardisation and ensemble mean folded in
+        (differentiable with respect to its weights; fold again after training)."""
+        dtype = torch.float32
+        (first_w, first_b), *inner, (last_w, last_b) = self._layers()
+        x_mean, x_std = self._constant("x_mean", dtype), self._constant("x_std", dtype)
+        y_mean, y_std = self._constant("y_mean", dtype), self._constant("y_std", dtype)
+        first = (first_w / x_std[:, None], first_b - ((x_mean / x_std) @ first_w)[:, None])
+        members = last_w.shape[0]
+        return FoldedNetwork(
+            self.features,
+            (first, *inner),
+            (last_w * (y_std / members)).reshape(-1, last_w.shape[-1]),
+            last_b.mean(dim=0)[0] * y_std + y_mean,
+        )
+
+    def _layers(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Each linear layer's weights ``[K, in, out]`` and biases ``[K, 1, out]``."""
+        if isinstance(self.network, StackedNetwork):
+            return list(zip(self.network.weights, self.network.biases, strict=True))
+        return [
+            (layer.weight.T[None], layer.bias[None, None])
+            for layer in self.network
+            if isinstance(layer, nn.Linear)
+        ]
 
     def member_outputs(self, fractions: torch.Tensor) -> torch.Tensor:
         """Each member's outputs ``[K, N, outputs]``, de-standardised (K = 1: one model)."""
@@ -241,26 +294,43 @@ class ForwardModel:
             self._constants[key] = torch.as_tensor(np.asarray(value), dtype=dtype)
         return self._constants[key]
 
-    def predict(self, fractions: ArrayLike, batch: int = 16384) -> tuple[NDArray, NDArray]:
-        """Reflectance factors ``[N, G, 31]`` and texture readings ``[N, 8]``."""
-        return self.decode_targets(self._batched(self.torch_forward, fractions, batch, 0))
+    def predict(self, fractions: ArrayLike, batch: int = 2048) -> tuple[NDArray, NDArray]:
+        """Reflectance factors ``[N, G, 31]`` and texture readings ``[N, 8]``, in float64.
+        Batches of about 2,000 keep an ensemble's hidden states in cache: on this two-core
+        machine 16,384 ran at two thirds of the speed (``benchmarks/learning.py``)."""
+        x = self._checked_fractions(fractions)
+        spectral = self.spectral_outputs
+        R = np.empty((x.shape[0], spectral))
+        texture = np.empty((x.shape[0], self.y_mean.size - spectral))
+        with torch.no_grad():
+            forward = self.folded()
+            for start in range(0, x.shape[0], batch):
+                y = forward(torch.from_numpy(x[start : start + batch]))
+                R[start : start + batch] = reflectance_from_log(y[:, :spectral]).numpy()
+                texture[start : start + batch] = y[:, spectral:].numpy()
+        return R.reshape(x.shape[0], len(self.geometries), WAVELENGTHS.size), texture
 
-    def predict_members(self, fractions: ArrayLike, batch: int = 16384) -> NDArray:
-        """Each member's reflectance factors ``[K, N, G, 31]``."""
-        y = self._batched(self.member_outputs, fractions, batch, 1)
-        return np.stack([self.decode_targets(member)[0] for member in y])
+    def predict_members(self, fractions: ArrayLike, batch: int = 2048) -> NDArray:
+        """Each member's reflectance factors ``[K, N, G, 31]``, in float64."""
+        x = self._checked_fractions(fractions)
+        spectral = self.spectral_outputs
+        with torch.no_grad():
+            log_R = torch.cat(
+                [
+                    self.member_outputs(torch.from_numpy(x[start : start + batch]))[..., :spectral]
+                    for start in range(0, x.shape[0], batch)
+                ],
+                dim=1,
+            )
+        R = reflectance_from_log(log_R).double().numpy()
+        return R.reshape(self.members, x.shape[0], len(self.geometries), WAVELENGTHS.size)
 
-    def _batched(self, forward, fractions: ArrayLike, batch: int, axis: int) -> NDArray:
+    def _checked_fractions(self, fractions: ArrayLike) -> NDArray:
         x = np.atleast_2d(np.asarray(fractions, dtype=np.float32))
         if x.shape[1] != len(self.toners):
             raise ModelError(f"fractions: expected {len(self.toners)} columns, got {x.shape[1]}")
         self.network.eval()
-        with torch.no_grad():
-            out = [
-                forward(torch.from_numpy(x[start : start + batch])).numpy()
-                for start in range(0, x.shape[0], batch)
-            ]
-        return np.concatenate(out, axis=axis)
+        return x
 
     @property
     def fingerprint(self) -> str:
