@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import inspect
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -230,3 +233,33 @@ def test_help_texts_print_as_written():
         texts = [command.help or ""] + [getattr(p, "help", None) or "" for p in command.params]
         for text in texts:
             assert Text.from_markup(text).plain == text, (" ".join(path), text)
+
+
+def test_help_shows_the_matchers_defaults_without_importing_torch():
+    """The defaults are the numbers the library uses, printed as numbers; the help of the main
+    job must not pay torch's import (over a second) to print them."""
+    from flakelab.match.correction import correct
+    from flakelab.match.search import MatchSettings
+
+    script = (
+        "import sys\nfrom flakelab.cli.main import app\n"
+        "for args in (['correct', '--help'], ['match', '--help']):\n"
+        "    try:\n        app(args)\n    except SystemExit:\n        pass\n"
+        "print('torch imported:', 'torch' in sys.modules)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "COLUMNS": "300"},
+        check=True,
+    )
+    assert "torch imported: False" in done.stdout
+    defaults = inspect.signature(correct).parameters
+    for option, value in (
+        ("--extra-toners", defaults["extra_toners"].default),
+        ("--model-sd", defaults["model_sd"].default),
+        ("--model-risk", MatchSettings().model_risk),
+    ):
+        row = re.split(r"\n│\s+-", done.stdout.split(option, 1)[1], maxsplit=1)[0]
+        assert f"[default: {value}]" in row, row

@@ -27,6 +27,7 @@ from flakelab.cli.learning import (
     since_option,
 )
 from flakelab.errors import FlakelabError
+from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 
 ModelOption = Annotated[
     Path | None,
@@ -131,15 +132,14 @@ def match_command(
     ] = "shop",
     seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
     model_risk: Annotated[
-        float | None,
+        float,
         typer.Option(
             min=0.0,
             help="Weight of the model ensemble's disagreement (ΔE94) in the search's objective: "
             "steers recipes to where the learned model's networks agree (0: the closest "
             "predicted match, wherever the model is unsure).",
-            show_default="flakelab.match.search.MatchSettings.model_risk",
         ),
-    ] = None,
+    ] = MatchSettings.model_risk,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     render: Annotated[
@@ -159,9 +159,8 @@ def match_command(
     from flakelab.data import example_path
     from flakelab.io import read_measurement
     from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
-    from flakelab.match.search import MatchSettings, match
+    from flakelab.match.search import match
 
-    risk = {} if model_risk is None else {"model_risk": model_risk}
     if target == "evaluate":
         if render is not None:
             raise FlakelabError("--render: draws the candidates of one target, not the harness")
@@ -176,7 +175,7 @@ def match_command(
             world_name=world,
             habits_file=habits,
             shop=shop,
-            settings=MatchSettings(**risk),  # the harness's own candidates and seeds
+            settings=MatchSettings(model_risk=model_risk),  # the harness's own candidates, seeds
             json_output=json_output,
         )
         return
@@ -193,7 +192,7 @@ def match_command(
         forward,
         effect,
         tolerance=tol,
-        settings=MatchSettings(candidates=candidates, seed=seed, **risk),
+        settings=MatchSettings(candidates=candidates, seed=seed, model_risk=model_risk),
         habits=habits_for(habits, shop, database, forward),
         library=lib,
     )
@@ -349,21 +348,16 @@ def correct_command(
         ),
     ] = None,
     extra_toners: Annotated[
-        int | None,
-        typer.Option(
-            help="Toners outside the recipe tried as one addition (0: none).",
-            show_default="flakelab.match.correction.EXTRA_TONERS_TRIED",
-        ),
-    ] = None,
+        int, typer.Option(help="Toners outside the recipe tried as one addition (0: none).")
+    ] = EXTRA_TONERS_TRIED,
     model_sd: Annotated[
-        float | None,
+        float,
         typer.Option(
             min=0.0,
             help="Widen the prior of the offset that persists by this many times the model "
             "ensemble's disagreement at each geometry (0: one prior everywhere).",
-            show_default="flakelab.match.correction.MODEL_SD",
         ),
-    ] = None,
+    ] = MODEL_SD,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     json_output: JsonOption = False,
@@ -395,10 +389,6 @@ def correct_command(
     target_R, _, _ = _target_spectra(read_measurement(target), forward)
     sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
-    from flakelab.match.correction import EXTRA_TONERS_TRIED, MODEL_SD
-
-    extra_toners = EXTRA_TONERS_TRIED if extra_toners is None else extra_toners
-    model_sd = MODEL_SD if model_sd is None else model_sd
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
     shop_habits = habits_for(habits, shop, database, forward)

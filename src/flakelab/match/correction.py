@@ -48,6 +48,7 @@ from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
 from flakelab.match.search import evaluate_recipes, multi_angle_loss
+from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
     FILM_BUILD_SD,
@@ -89,16 +90,6 @@ NOISE_SD = 0.1
 """σ_n: the rest that does not persist (instrument, weighing), per component and geometry
 (``benchmarks/correction.py``, seeds 77 and 78: 0.1 better than 0.05 and 0.2)."""
 
-MODEL_SD = 4.0
-"""How far an ensemble's disagreement widens σ_p: at each geometry and L*a*b* component the
-prior's σ_p becomes √(σ_p² + (MODEL_SD·s)²), s the members' standard deviation there
-(:func:`model_persistent_sd`); where the members disagree, more of a spray-out's offset is
-likely the model's own error, which persists. ``benchmarks/correction.py``, shipped ensemble:
-on the 190 failed first shots of seeds 77, 78, 81–86, 1 / 2 / 4 gave +0.011 / +0.017 /
-+0.023 (± 0.010–0.013, paired) over 0.686 without; on 205 of seeds 91–98, chosen beforehand,
-4 gave +0.014 ± 0.012 over 0.648 and 8 −0.006 ± 0.014."""
-
-EXTRA_TONERS_TRIED = 8
 EXTRA_TONER_GAIN = 0.15
 """Loss (:func:`~flakelab.match.search.multi_angle_loss`) a toner new to the recipe must save
 to join."""

@@ -47,6 +47,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
+from flakelab.match.settings import MatchSettings
 
 __all__ = [
     "Candidate",
@@ -67,28 +68,6 @@ than this is not worth a refinement."""
 
 class MatchError(FlakelabError):
     """A target or library the matcher cannot work with."""
-
-
-@dataclass(frozen=True)
-class MatchSettings:
-    candidates: int = 5
-    max_pigments: int = 4
-    screen_steps: int = 90
-    refine_steps: int = 150
-    refine_keep: int = 24
-    novel_threshold: float = 1.5
-    top_pigments: int = 5
-    top_effects: int = 3
-    sparsity: float = 0.4
-    toner_penalty: float = 0.05
-    texture_weight: float = 0.1
-    min_amount: float = 0.002
-    top_bases: int = 4
-    swap_above: float = 0.6
-    swap_from: int = 2
-    effect_floor: float | None = None  # None: the model's (its training cases' effect share)
-    model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
-    seed: int = 0
 
 
 @dataclass

@@ -122,8 +122,9 @@ class FoldedNetwork:
     once the outputs outnumber the hidden units (MA-T12: 380 against 100)."""
 
     features: Callable[[torch.Tensor], torch.Tensor]
-    hidden: tuple[tuple[torch.Tensor, torch.Tensor], ...]
-    """Each hidden layer's weights ``[K, in, out]`` and biases ``[K, 1, out]``."""
+    layers: tuple[tuple[torch.Tensor, torch.Tensor], ...]
+    """The layers before the output layer (each followed by SiLU): weights ``[K, in, out]``
+    and biases ``[K, 1, out]``, the first with the input standardisation folded in."""
     head_weight: torch.Tensor
     """``[K × last hidden, outputs]``: the members' output layers stacked, scaled by y_std/K."""
     head_bias: torch.Tensor
@@ -131,10 +132,10 @@ class FoldedNetwork:
     def __call__(self, fractions: torch.Tensor) -> torch.Tensor:
         """Fractions ``[N, T]`` → outputs (log R, texture), de-standardised."""
         x = self.features(fractions)
-        members = self.hidden[0][0].shape[0]
+        members = self.layers[0][0].shape[0]
         h = x.expand(members, *x.shape)
         inplace = not torch.is_grad_enabled()  # no graph to keep: reuse each fresh product
-        for weight, bias in self.hidden:
+        for weight, bias in self.layers:
             h = nn.functional.silu(torch.baddbmm(bias, h, weight), inplace=inplace)
         side_by_side = h.transpose(0, 1).reshape(x.shape[0], -1)
         return torch.addmm(self.head_bias, side_by_side, self.head_weight)
