@@ -117,9 +117,9 @@ class FoldedNetwork:
     The input standardisation is folded into the first layer's weights, and the output
     standardisation and the members' mean into one output layer: that layer is linear, so
     the mean of K members' outputs is one product of their last hidden states side by side.
-    Equal to :meth:`ForwardModel.torch_forward` but for float32 rounding; it spares the
-    ``[K, N, outputs]`` intermediate and three passes over it, most of an ensemble's time
-    once the outputs outnumber the hidden units (MA-T12: 380 against 100)."""
+    Equal to the mean of :meth:`ForwardModel.member_outputs` but for float32 rounding; it
+    spares the ``[K, N, outputs]`` intermediate and three passes over it, most of an
+    ensemble's time once the outputs outnumber the hidden units (MA-T12: 380 against 100)."""
 
     features: Callable[[torch.Tensor], torch.Tensor]
     layers: tuple[tuple[torch.Tensor, torch.Tensor], ...]
@@ -238,15 +238,11 @@ class ForwardModel:
     def effect_mask(self) -> NDArray:
         return np.zeros(len(self.toners)) if self.effect is None else np.asarray(self.effect, float)
 
-    def torch_forward(self, fractions: torch.Tensor) -> torch.Tensor:
-        """Differentiable: fractions ``[N, T]`` → outputs (log R, texture), de-standardised;
-        an ensemble's members averaged. A caller evaluating one model many times keeps its
-        :meth:`folded` network instead of folding the weights on every call."""
-        return self.folded()(fractions)
-
     def folded(self) -> FoldedNetwork:
-        """The network as it is now with the standardisation and ensemble mean folded in
-        (differentiable with respect to its weights; fold again after training)."""
+        """The model's prediction, differentiable: fractions ``[N, T]`` → outputs (log R,
+        texture), de-standardised, an ensemble's members averaged. Folded from the weights as
+        they are now (and differentiable with respect to them): fold again after training; a
+        caller evaluating one model many times keeps the folded network."""
         dtype = torch.float32
         (first_w, first_b), *inner, (last_w, last_b) = self._layers()
         x_mean, x_std = self._constant("x_mean", dtype), self._constant("x_std", dtype)
