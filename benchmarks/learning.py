@@ -51,7 +51,10 @@ def inference_rates(model, n: int = 200_000) -> dict[str, float]:
     }
 
 
-def layer_by_layer_predict(model, x: np.ndarray, batch: int = 16384) -> np.ndarray:
+def layer_by_layer_predict(
+    model, x: np.ndarray, batch: int = 16384
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reflectance and texture as ``predict`` computed them before the folded network."""
     x = torch.from_numpy(x.astype(np.float32))
     spectral = model.spectral_outputs
     with torch.no_grad():

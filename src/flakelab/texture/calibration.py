@@ -77,9 +77,9 @@ _VALUE_WEIGHT = 20.0
 _SHIPPED = "texture-processes.json"
 _SMOOTHING_PX = GRAIN_SCALE_UM / 15.0  # the metric's smoothing at the camera's 15 µm pixels
 _EXPONENTS = {"coarseness": (-4.0, 4.0), "glint": (0.2, 4.0)}
+"""Bounds of e: outside them a power law turns into a step; glint's e near 0 into a log."""
 ANCHOR_PX = 512
 """Side of the anchor panels the shipped processes were fitted to [pixels]."""
-"""Bounds of e: outside them a power law turns into a step; glint's e near 0 into a log."""
 
 
 @dataclass(frozen=True)
