@@ -373,11 +373,63 @@ def test_hybrid_leans_on_physics_where_a_recipe_is_mostly_new_toner(hybrid):
     x[0, names.index(hybrid.novel[0])] = 1.0
     x[1, names.index("Al medium")] = 1.0
     R = reflect(hybrid, x)
-    physics = hybrid._physics(x[:1])
+    physics = hybrid.physics.reflectance(x[:1])
     assert np.max(delta_E(reflectance_to_Lab(R[:1]), reflectance_to_Lab(physics))) < 0.01
     with torch.no_grad():
         learned = hybrid.model.predict(x[1:])[0]
     np.testing.assert_allclose(R[1:], learned, rtol=1e-5)
+
+
+def directional_derivatives(forward, x: np.ndarray, seed: int = 0) -> tuple[float, float]:
+    """d/dt of a random weighting of ``forward``'s reflectance along a random change of the
+    toners each recipe uses: by autograd through the model, and by a central difference."""
+    rng = np.random.default_rng(seed)
+    direction = np.where(x > 0, rng.normal(size=x.shape), 0.0)
+    weights = torch.as_tensor(rng.normal(size=(len(x), len(forward.geometries), 31)))
+    xt = torch.tensor(x, requires_grad=True)
+    (forward(xt)[0] * weights).sum().backward()
+    h = 1e-4  # smaller steps drown in the float32 network's rounding
+    central = (reflect(forward, x + h * direction) - reflect(forward, x - h * direction)) / (2 * h)
+    return float((xt.grad.numpy() * direction).sum()), float((central * weights.numpy()).sum())
+
+
+@pytest.fixture(scope="module")
+def physics():
+    from flakelab.match.forward import PhysicsForward
+
+    library = read_library(None)
+    return PhysicsForward(library, instrument_geometries("five-angle"))
+
+
+def test_the_physics_model_is_the_generated_world_s_nominal_paint(physics):
+    """The exact model of the harness (benchmarks/exact_model.py): the library's physics
+    equals the generator's paint with no batch or application variation, by its own path
+    (batch strengths, hue shift and the sprayed layer applied at their nominal values)."""
+    from flakelab.cases.generator import World
+
+    world = World(physics.library, "five-angle")
+    x = world.formulations(6, np.random.default_rng(5))
+    R_world, _ = world.appearance(x, world.nominal(len(x), at_shop=True))
+    np.testing.assert_allclose(reflect(physics, x), R_world, rtol=1e-12)
+
+
+def test_finite_difference_gradients_follow_the_model(physics, hybrid):
+    """Each recipe differentiated along its own toners only (rows of different toners in one
+    batch), the physics model and the hybrid's physics ratio for a new toner alike, agree
+    with a central difference along a random direction (forward differences: to 1 %)."""
+    names = physics.library.names
+    recipes = [
+        {"Al medium": 0.9, "Phthalo blue GS": 0.08, "Carbon black": 0.02},
+        {"Al fine": 0.95, "Quinacridone red": 0.05},
+        {"Al medium": 0.96, hybrid.novel[0]: 0.04},
+    ]
+    x = np.zeros((len(recipes), len(names)))
+    for row, recipe in enumerate(recipes):
+        x[row, [names.index(n) for n in recipe]] = list(recipe.values())
+    for forward in (physics, hybrid):
+        autograd, central = directional_derivatives(forward, x)
+        assert autograd == pytest.approx(central, rel=0.01)
+        assert abs(central) > 1.0  # the direction moves the colour: the check has teeth
 
 
 def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):

@@ -5,6 +5,10 @@
   toners marked new (DESIGN.md §3, §6): R = R_MLP(x_base) · R_phys(x) / R_phys(x_base), with
   each new toner standing in the base as its closest known toner; the physics ratio's
   derivatives come from finite differences on the new toners.
+* :class:`PhysicsForward` — the library's physics (the fast model) alone, derivatives by
+  finite differences on every toner a recipe uses: for a library without cases, and in the
+  harness the exact model of the generated world's nominal physics (what no learned model
+  can beat).
 * :class:`KubelkaMunkForward` — two-constant Kubelka–Munk with Saunderson for solids, from
   K and S per toner (e.g. measured pigment data).
 """
@@ -12,7 +16,7 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -25,7 +29,7 @@ from flakelab.physics.fast import predict
 from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
 
-__all__ = ["LearnedForward", "HybridForward", "KubelkaMunkForward"]
+__all__ = ["LearnedForward", "HybridForward", "PhysicsForward", "KubelkaMunkForward"]
 
 
 class LearnedForward:
@@ -77,21 +81,50 @@ class LearnedForward:
         return self._reflectance(mean), mean[:, self.model.spectral_outputs :], self._reflectance(y)
 
 
-class _PhysicsRatio(torch.autograd.Function):
-    """R_phys(x)/R_phys(x_known) with a finite-difference Jacobian on the used columns."""
+FINITE_DIFFERENCE_STEP = 1e-4
+"""Forward-difference step in a toner's fraction for the physics model's derivatives."""
+
+
+def finite_difference(
+    f: Callable[[NDArray], NDArray], x: NDArray, bump: NDArray
+) -> tuple[NDArray, NDArray]:
+    """``f(x)`` ``[N, ...]`` and its Jacobian ``[N, ..., T]`` with respect to the entries of
+    ``x[N, T]`` where ``bump[N, T]`` (zero elsewhere), by forward differences; the recipes
+    and each one-entry bump go through ``f`` in one call, since the layer model costs several
+    times more per recipe in small batches."""
+    rows, columns = np.nonzero(bump)
+    variants = x[rows]
+    variants[np.arange(rows.size), columns] += FINITE_DIFFERENCE_STEP
+    both = f(np.concatenate([x, variants]))
+    value, bumped = both[: len(x)], both[len(x) :]
+    jacobian = np.zeros((*value.shape, x.shape[1]))
+    jacobian[rows, ..., columns] = (bumped - value[rows]) / FINITE_DIFFERENCE_STEP
+    return value, jacobian
+
+
+class _WithJacobian(torch.autograd.Function):
+    """A numpy function of the recipes ``[N, T]`` whose ``jacobian(x)`` gives its value and
+    Jacobian ``[N, G, W, T]`` at once (:func:`finite_difference`)."""
 
     @staticmethod
-    def forward(ctx, fractions, hybrid):
-        x = fractions.detach().numpy()
-        ratio, jacobian = hybrid.physics_ratio(x)
+    def forward(ctx, fractions, jacobian):
+        value, J = jacobian(fractions.detach().numpy())
         ctx.dtype = fractions.dtype
-        ctx.save_for_backward(torch.as_tensor(jacobian))
-        return torch.as_tensor(ratio)
+        ctx.save_for_backward(torch.as_tensor(J))
+        return torch.as_tensor(value)
 
     @staticmethod
     def backward(ctx, grad):
-        (jacobian,) = ctx.saved_tensors  # [N, G, W, T]
-        return torch.einsum("ngw,ngwt->nt", grad.to(jacobian.dtype), jacobian).to(ctx.dtype), None
+        (J,) = ctx.saved_tensors
+        return torch.einsum("ngw,ngwt->nt", grad.to(J.dtype), J).to(ctx.dtype), None
+
+
+def _differentiable(fractions: torch.Tensor, value, jacobian) -> torch.Tensor:
+    """``value(x)`` for recipes ``fractions``, through :class:`_WithJacobian` only when a
+    gradient will be asked for (the Jacobian costs a physics call per toner used)."""
+    if torch.is_grad_enabled() and fractions.requires_grad:
+        return _WithJacobian.apply(fractions, jacobian)
+    return torch.as_tensor(value(fractions.detach().numpy()))
 
 
 class HybridForward(LearnedForward):
@@ -124,39 +157,39 @@ class HybridForward(LearnedForward):
             for j in np.flatnonzero(self._novel_mask)
         )
         self.name = f"hybrid: learned + physics scaling for {stand_ins}"
-        self._step = 1e-4
-
-    def _physics(self, x: NDArray) -> NDArray:
-        return np.pi * predict(layer_from_fractions(self.library, x), self.geometries)
+        self.physics = PhysicsForward(library, self.geometries)
 
     def base_fractions(self, x: NDArray) -> NDArray:
         """What the learned model sees: new toners moved onto their proxies, renormalised."""
         base = x @ self._substitute
         return base / np.maximum(base.sum(axis=-1, keepdims=True), 1e-12)
 
-    def physics_ratio(self, x: NDArray) -> tuple[NDArray, NDArray]:
-        """Ratio R_phys(x) / R_phys(x_base) ``[N, G, W]`` and its Jacobian ``[N, G, W, T]``
-        with respect to the new toners' amounts. Rows without new toners scale by one."""
+    def physics_ratio(self, x: NDArray) -> NDArray:
+        """Ratio R_phys(x) / R_phys(x_base) ``[N, G, W]``; rows without new toners scale by
+        one."""
+        ratio = np.ones((x.shape[0], len(self.geometries), 31))
+        rows = self._rows_with_new_toners(x)
+        if rows.size:
+            ratio[rows] = self._ratio(x[rows])
+        return ratio
+
+    def physics_ratio_and_jacobian(self, x: NDArray) -> tuple[NDArray, NDArray]:
+        """:meth:`physics_ratio` and its Jacobian ``[N, G, W, T]`` with respect to the new
+        toners' amounts."""
         ratio = np.ones((x.shape[0], len(self.geometries), 31))
         jacobian = np.zeros((*ratio.shape, x.shape[1]))
-        rows = np.flatnonzero(np.any(x[:, self._novel_mask] > 1e-9, axis=1))
-        if rows.size == 0:
-            return ratio, jacobian
-        xs = x[rows]
-        columns = np.flatnonzero(self._novel_mask & np.any(xs > 1e-9, axis=0))
-        # the recipes and each one-column bump in one physics call: the layer model costs
-        # several times more per recipe in small batches
-        variants = np.repeat(xs[None], columns.size + 1, axis=0)
-        variants[np.arange(1, columns.size + 1), :, columns] += self._step
-        ratios = self._ratio(variants.reshape(-1, x.shape[1])).reshape(-1, *ratio[rows].shape)
-        ratio[rows] = ratios[0]
-        for k, column in enumerate(columns, start=1):
-            jacobian[rows, ..., column] = (ratios[k] - ratios[0]) / self._step
+        rows = self._rows_with_new_toners(x)
+        if rows.size:
+            bump = (x[rows] > 1e-9) & self._novel_mask
+            ratio[rows], jacobian[rows] = finite_difference(self._ratio, x[rows], bump)
         return ratio, jacobian
+
+    def _rows_with_new_toners(self, x: NDArray) -> NDArray:
+        return np.flatnonzero(np.any(x[:, self._novel_mask] > 1e-9, axis=1))
 
     def _ratio(self, x: NDArray) -> NDArray:
         has_base = (x @ self._substitute).sum(axis=1) > 1e-6
-        both = self._physics(np.concatenate([x, self.base_fractions(x)])) + 1e-9
+        both = self.physics.reflectance(np.concatenate([x, self.base_fractions(x)])) + 1e-9
         R, base = both[: len(x)], both[len(x) :]
         return R / np.where(has_base[:, None, None], base, 1.0)
 
@@ -185,11 +218,12 @@ class HybridForward(LearnedForward):
             # on the physics base there (log-linear blend, no gradient through the blend)
             rows = np.flatnonzero(trust > 0)
             physics = np.ones_like(R.detach().numpy())
-            physics[rows] = self._physics(self.base_fractions(x[rows])) + 1e-9
+            physics[rows] = self.physics.reflectance(self.base_fractions(x[rows])) + 1e-9
             w = torch.as_tensor(trust[:, None, None], dtype=R.dtype)
             physics = torch.as_tensor(physics, dtype=R.dtype)
             R = torch.exp((1 - w) * torch.log(R) + w * torch.log(physics))
-        return R * _PhysicsRatio.apply(fractions, self).to(R.dtype)
+        ratio = _differentiable(fractions, self.physics_ratio, self.physics_ratio_and_jacobian)
+        return R * ratio.to(R.dtype)
 
     def with_members(
         self, fractions: torch.Tensor
@@ -244,6 +278,35 @@ def _proxies(library: Library, novel: NDArray) -> dict[int, int]:
         distance = np.sqrt(np.mean((spectra[:-1] - spectra[-1]) ** 2, axis=(1, 2)))
         proxies[int(j)] = candidates[int(np.argmin(distance))]
     return proxies
+
+
+class PhysicsForward:
+    """The library's physics alone (the fast model, DESIGN.md §3) at the library's nominal
+    application: every toner known, no cases needed, no texture readings. Derivatives by
+    forward differences on the toners each recipe uses, so a gradient step costs a physics
+    call per toner used; tens of times slower than the learned model."""
+
+    dtype = torch.float64
+
+    def __init__(self, library: Library, geometries: Sequence[str]) -> None:
+        self.library = library
+        self.toners = library.names
+        self.geometries = tuple(geometries)
+        self.name = f"physics ({library.name}, fast model)"
+        self.model_id = "physics"
+        self.novel: tuple[str, ...] = ()
+
+    def reflectance(self, x: NDArray) -> NDArray:
+        """Reflectance factors ``[N, G, 31]`` (π·BRDF) of recipes ``x[N, T]``."""
+        return np.pi * predict(layer_from_fractions(self.library, x), self.geometries)
+
+    def reflectance_and_jacobian(self, x: NDArray) -> tuple[NDArray, NDArray]:
+        return finite_difference(self.reflectance, x, x > 1e-9)
+
+    def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, None]:
+        x = fractions.to(torch.float64)
+        R = _differentiable(x, self.reflectance, self.reflectance_and_jacobian)
+        return R.to(fractions.dtype), None
 
 
 class KubelkaMunkForward:

@@ -1,0 +1,105 @@
+"""Matcher: how much of the harness's shortfall is the learned model's, and how much the world's.
+
+Runs the evaluation harness (``flakelab match evaluate``) twice on the same hidden targets
+and the same sprays: once with the shipped five-angle model (or ``--model FILE``, in its own
+instrument's world), the baseline of the same run, and once with the *exact* model, the
+generated world's own nominal physics (:class:`flakelab.match.forward.PhysicsForward`: the
+library's fast model, which the world sprays with batches and application varied about it).
+The search, the correction and the judging are the same; only the model differs. What the
+exact model still fails is the world's: the shop's toner batches, which no model of the
+library can know before a spray-out, and each spray's film build, flake alignment and
+instrument reading. Its derivatives come from finite differences, so a match takes tens of
+times longer than with the learned model.
+
+    python benchmarks/exact_model.py [--targets 200] [--novel-targets 50] [--seed 4242]
+        [--world shop] [--model FILE] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from _matcher import MODEL_HELP, shipped_matcher
+from flakelab.cli.common import progress_bar
+from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching
+from flakelab.match.forward import PhysicsForward
+
+FIGURES = (
+    "first_shot_success",
+    "after_one_correction",
+    "novel_toner_first_shot",
+    "novel_oracle_success",
+    "oracle_success",
+    "respray_success",
+    "after_one_perfect_correction",
+    "predicted_de00_median",
+    "first_shot_de00_median",
+    "latency_p50_s",
+    "latency_p95_s",
+)
+RATIOS = ("first_shot_success", "after_one_correction", "novel_toner_first_shot")
+
+
+def run(world, forward, effect, args, novel, label: str) -> dict:
+    """The harness's figures for ``forward`` and the command's wall time."""
+    total = args.targets + (args.novel_targets if novel else 0)
+    start = time.perf_counter()
+    with progress_bar(args.json) as bar:
+        task = bar.add_task(label, total=total)
+        report = evaluate_matching(
+            world,
+            forward,
+            effect,
+            targets=args.targets,
+            seed=args.seed,
+            novel=novel,
+            novel_targets=args.novel_targets,
+            progress=lambda: bar.advance(task),
+        )
+    return {
+        "model": forward.name,
+        **{k: report[k] for k in FIGURES},
+        "wall_s": time.perf_counter() - start,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--targets", type=int, default=200)
+    parser.add_argument("--novel-targets", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
+    parser.add_argument("--model", help=MODEL_HELP)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    world, learned, effect = shipped_matcher(args.world, args.model)
+    exact = PhysicsForward(world.library, world.geometries)
+    # the new-toner targets are drawn as for the learned model; the exact model knows them all
+    rows = {
+        "learned": run(world, learned, effect, args, learned.novel, "learned model"),
+        "exact": run(world, exact, effect, args, learned.novel, "exact model (physics)"),
+    }
+    ratios = {
+        f"{k}_learned_vs_exact": rows["learned"][k] / rows["exact"][k]
+        for k in RATIOS
+        if rows["learned"][k] is not None and rows["exact"][k]
+    }
+    if args.json:
+        print(json.dumps({"rows": rows, **ratios}, indent=2))
+        return
+    width = max(map(len, FIGURES)) + 2
+    print(f"{'':{width}}{'learned':>10}{'exact':>10}")
+    for k in (*FIGURES, "wall_s"):
+        values = [rows[m][k] for m in ("learned", "exact")]
+        cells = "".join(f"{'—' if v is None else f'{v:.3f}':>10}" for v in values)
+        print(f"{k:{width}}{cells}")
+    for k, v in ratios.items():
+        print(f"{k}: {v:.3f}")
+    print(f"learned: {rows['learned']['model']}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
