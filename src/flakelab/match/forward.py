@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from flakelab.core.geometry import Geometry
 from flakelab.library.toners import Library
 from flakelab.models.network import ForwardModel, reflectance_from_log
 from flakelab.physics.fast import predict
@@ -288,10 +289,10 @@ class PhysicsForward:
 
     dtype = torch.float64
 
-    def __init__(self, library: Library, geometries: Sequence[str]) -> None:
+    def __init__(self, library: Library, geometries: Sequence[str | Geometry]) -> None:
         self.library = library
         self.toners = library.names
-        self.geometries = tuple(geometries)
+        self.geometries = tuple(str(g) for g in geometries)  # names, as a learned model's
         self.name = f"physics ({library.name}, fast model)"
         self.model_id = "physics"
         self.novel: tuple[str, ...] = ()
