@@ -325,6 +325,21 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert row.split()[3:] == [f"{v:+.2f}" for v in best["texture_delta"].values()]
 
 
+def test_match_through_the_library_s_physics_alone_needs_no_model():
+    """``--physics``: the example matched through the library's physics, which predicts the
+    texture readings too; every number says where it came from, and a single physics model
+    reports no ensemble spread."""
+    run = flakelab("match", "--example", "--physics", "--json", "--candidates", "1")
+    assert run.returncode == 0, run.stderr
+    best = json.loads(run.stdout)["candidates"][0]
+    assert best["model"] == "physics (flakelab demo, fast model)"
+    assert best["passes"] and best["de00_max"] < 1.0
+    assert "model_spread" not in best["geometries"]["45as45"]
+    assert abs(best["texture_delta"]["G"]) < 1.0  # graininess predicted, and matched
+    run = flakelab("match", "--example", "--physics", "--model", "other.pt")
+    assert run.returncode == 2 and "--physics and --model" in run.stderr
+
+
 def test_match_refuses_bad_input(tmp_path):
     bad = tmp_path / "car.cxf"
     bad.write_text("<not cxf")
@@ -380,17 +395,31 @@ def test_hybrid_leans_on_physics_where_a_recipe_is_mostly_new_toner(hybrid):
     np.testing.assert_allclose(R[1:], learned, rtol=1e-5)
 
 
-def directional_derivatives(forward, x: np.ndarray, seed: int = 0) -> tuple[float, float]:
-    """d/dt of a random weighting of ``forward``'s reflectance along a random change of the
-    toners each recipe uses: by autograd through the model, and by a central difference."""
+def gradients(forward, x: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The gradient of a random weighting of ``forward``'s reflectance and texture readings
+    with respect to each toner each recipe uses: by autograd through the model, and by
+    central differences, one toner at a time."""
     rng = np.random.default_rng(seed)
-    direction = np.where(x > 0, rng.normal(size=x.shape), 0.0)
-    weights = torch.as_tensor(rng.normal(size=(len(x), len(forward.geometries), 31)))
+    weights = [torch.as_tensor(rng.normal(size=(len(x), len(forward.geometries), 31))), None]
+
+    def weighted(xt: torch.Tensor) -> torch.Tensor:
+        R, texture = forward(xt)
+        if weights[1] is None:
+            weights[1] = torch.as_tensor(rng.normal(size=texture.shape))
+        return (R * weights[0]).sum() + (texture * weights[1]).sum()
+
     xt = torch.tensor(x, requires_grad=True)
-    (forward(xt)[0] * weights).sum().backward()
+    weighted(xt).backward()
     h = 1e-4  # smaller steps drown in the float32 network's rounding
-    central = (reflect(forward, x + h * direction) - reflect(forward, x - h * direction)) / (2 * h)
-    return float((xt.grad.numpy() * direction).sum()), float((central * weights.numpy()).sum())
+    used = np.argwhere(x > 0)
+    central = []
+    for row, column in used:
+        step = np.zeros_like(x)
+        step[row, column] = h
+        with torch.no_grad():
+            ahead, behind = (weighted(torch.as_tensor(x + s * step)) for s in (1, -1))
+        central.append(float(ahead - behind) / (2 * h))
+    return xt.grad.numpy()[tuple(used.T)], np.array(central)
 
 
 @pytest.fixture(scope="module")
@@ -402,21 +431,26 @@ def physics():
 
 
 def test_the_physics_model_is_the_generated_world_s_nominal_paint(physics):
-    """The exact model of the harness (benchmarks/exact_model.py): the library's physics
-    equals the generator's paint with no batch or application variation, by its own path
-    (batch strengths, hue shift and the sprayed layer applied at their nominal values)."""
+    """The exact model of the harness (benchmarks/exact_model.py): the library's physics,
+    colour and texture readings, equals the generator's paint with no batch or application
+    variation, by its own path (batch strengths, hue shift and the sprayed layer applied at
+    their nominal values)."""
     from flakelab.cases.generator import World
 
     world = World(physics.library, "five-angle")
     x = world.formulations(6, np.random.default_rng(5))
-    R_world, _ = world.appearance(x, world.nominal(len(x), at_shop=True))
-    np.testing.assert_allclose(reflect(physics, x), R_world, rtol=1e-12)
+    R_world, texture_world = world.appearance(x, world.nominal(len(x), at_shop=True))
+    with torch.no_grad():
+        R, texture = physics(torch.as_tensor(x))
+    np.testing.assert_allclose(R.numpy(), R_world, rtol=1e-12)
+    np.testing.assert_allclose(texture.numpy(), texture_world, rtol=1e-12)
+    assert texture_world[:, 0].max() > 1  # sparkle: effect paints among them
 
 
 def test_finite_difference_gradients_follow_the_model(physics, hybrid):
     """Each recipe differentiated along its own toners only (rows of different toners in one
-    batch), the physics model and the hybrid's physics ratio for a new toner alike, agree
-    with a central difference along a random direction (forward differences: to 1 %)."""
+    batch), the physics model (colour and texture) and the hybrid's physics ratio for a new
+    toner alike, agree with central differences (forward differences: to 1 %)."""
     names = physics.library.names
     recipes = [
         {"Al medium": 0.9, "Phthalo blue GS": 0.08, "Carbon black": 0.02},
@@ -427,9 +461,10 @@ def test_finite_difference_gradients_follow_the_model(physics, hybrid):
     for row, recipe in enumerate(recipes):
         x[row, [names.index(n) for n in recipe]] = list(recipe.values())
     for forward in (physics, hybrid):
-        autograd, central = directional_derivatives(forward, x)
-        assert autograd == pytest.approx(central, rel=0.01)
-        assert abs(central) > 1.0  # the direction moves the colour: the check has teeth
+        autograd, central = gradients(forward, x)
+        scale = np.abs(central).max()
+        assert scale > 10.0  # the recipes' toners move the outputs: the check has teeth
+        np.testing.assert_allclose(autograd, central, rtol=0.01, atol=0.01 * scale)
 
 
 def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):

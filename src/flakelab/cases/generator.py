@@ -131,7 +131,6 @@ class World:
         self._organic = np.array(
             [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
         )
-        self._radius = np.array([t.radius_um for t in library.toners if t.kind != "pigment"])
 
     # -- formulations ---------------------------------------------------------------------
     def formulations(self, n: int, rng: np.random.Generator) -> NDArray:
@@ -190,7 +189,7 @@ class World:
             variation.spread,
         )
         R = np.pi * predict(layer, self.geometries)
-        return R, texture_readings(layer, self._radius)
+        return R, texture_readings(layer, self.library.flake_radii_um)
 
     def weather(self, fractions: NDArray, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
         """Faded fractions ``[F, T]`` and the clearcoat haze ``[F]`` of weathered targets."""

@@ -33,6 +33,15 @@ ModelOption = Annotated[
     Path | None,
     typer.Option("--model", "-m", help="Model file (default: current for the instrument)."),
 ]
+PhysicsOption = Annotated[
+    bool,
+    typer.Option(
+        "--physics",
+        help="Predict with the library's physics model alone (colour and texture), not a "
+        "learned model: no cases needed and every toner known, but a match takes ten to twenty "
+        "times as long.",
+    ),
+]
 HabitsOption = Annotated[
     Path | None,
     typer.Option(
@@ -54,10 +63,28 @@ ToleranceOption = Annotated[
 ]
 
 
-def _setup(library: Path | None, instrument: str, model: Path | None, database: str | None):
+def _setup(
+    library: Path | None,
+    instrument: str,
+    model: Path | None,
+    database: str | None,
+    physics: bool = False,
+):
+    """The library, the matcher's forward model (learned, or with ``physics`` the library's
+    physics alone) and the library's effect-toner mask."""
     from flakelab.match.models import effect_mask
 
-    lib, forward = learned_forward(library, instrument, model, database)
+    if physics:
+        from flakelab.core.geometry import instrument_geometries
+        from flakelab.io import read_library
+        from flakelab.match.forward import PhysicsForward
+
+        if model is not None:
+            raise FlakelabError("--physics and --model: expected one of them, not both")
+        lib = read_library(library)
+        forward = PhysicsForward(lib, instrument_geometries(instrument))
+    else:
+        lib, forward = learned_forward(library, instrument, model, database)
     return lib, forward, effect_mask(lib, forward.toners)
 
 
@@ -120,6 +147,7 @@ def match_command(
     candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
     instrument: InstrumentOption = "five-angle",
     model: ModelOption = None,
+    physics: PhysicsOption = False,
     database: DatabaseOption = None,
     targets: Annotated[int, typer.Option(min=1, help="evaluate: hidden targets.")] = 200,
     novel_targets: Annotated[int, typer.Option(help="evaluate: targets with a new toner.")] = 50,
@@ -168,6 +196,7 @@ def match_command(
             library=library,
             instrument=instrument,
             model=model,
+            physics=physics,
             database=database,
             targets=targets,
             novel_targets=novel_targets,
@@ -183,7 +212,7 @@ def match_command(
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
     check_figure_file(render)
-    lib, forward, effect = _setup(library, instrument, model, database)
+    lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)
     tol = _tolerance(tolerance)
@@ -287,6 +316,7 @@ def _evaluate(
     library,
     instrument,
     model,
+    physics,
     database,
     targets,
     novel_targets,
@@ -299,7 +329,7 @@ def _evaluate(
 ):
     from flakelab.match.evaluate import evaluate_matching, harness_world
 
-    lib, forward, effect = _setup(library, instrument, model, database)
+    lib, forward, effect = _setup(library, instrument, model, database, physics)
     world = harness_world(lib, instrument, world_name)
     habits = habits_for(habits_file, shop, database, forward)
     with progress_bar(json_output) as bar:
@@ -336,6 +366,7 @@ def correct_command(
     library: LibraryOption = None,
     instrument: InstrumentOption = "five-angle",
     model: ModelOption = None,
+    physics: PhysicsOption = False,
     database: DatabaseOption = None,
     resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
     offset_weight: Annotated[
@@ -374,7 +405,7 @@ def correct_command(
     from flakelab.match.correction import correct
     from flakelab.match.search import _target_spectra
 
-    lib, forward, _ = _setup(library, instrument, model, database)
+    lib, forward, _ = _setup(library, instrument, model, database, physics)
     try:
         grams = json.loads(recipe.read_text())
     except (OSError, ValueError) as error:

@@ -205,6 +205,12 @@ class Library:
         """Which toners are effect toners (aluminium, pearl), in the recipe vector order."""
         return np.array([t.kind != "pigment" for t in self.toners])
 
+    @property
+    def flake_radii_um(self) -> NDArray:
+        """Radius [µm] of each flake species, the effect toners in recipe order (the columns
+        of a layer's flake rates)."""
+        return np.array([t.radius_um for t in self.toners if t.kind != "pigment"])
+
     def paint_families(self, fractions: ArrayLike) -> NDArray[np.str_]:
         """The paint family of each recipe ``fractions[N, T]`` (library order): "pearl" with
         any pearl in it, "solid" without effect toners, else "metallic"."""

@@ -29,6 +29,7 @@ from flakelab.models.network import ForwardModel, reflectance_from_log
 from flakelab.physics.fast import predict
 from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
+from flakelab.texture.readings import texture_readings
 
 __all__ = ["LearnedForward", "HybridForward", "PhysicsForward", "KubelkaMunkForward"]
 
@@ -104,8 +105,8 @@ def finite_difference(
 
 
 class _WithJacobian(torch.autograd.Function):
-    """A numpy function of the recipes ``[N, T]`` whose ``jacobian(x)`` gives its value and
-    Jacobian ``[N, G, W, T]`` at once (:func:`finite_difference`)."""
+    """A numpy function of the recipes ``[N, T]`` whose ``jacobian(x)`` gives its value
+    ``[N, ...]`` and Jacobian ``[N, ..., T]`` at once (:func:`finite_difference`)."""
 
     @staticmethod
     def forward(ctx, fractions, jacobian):
@@ -117,7 +118,7 @@ class _WithJacobian(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad):
         (J,) = ctx.saved_tensors
-        return torch.einsum("ngw,ngwt->nt", grad.to(J.dtype), J).to(ctx.dtype), None
+        return torch.einsum("n...,n...t->nt", grad.to(J.dtype), J).to(ctx.dtype), None
 
 
 def _differentiable(fractions: torch.Tensor, value, jacobian) -> torch.Tensor:
@@ -282,10 +283,11 @@ def _proxies(library: Library, novel: NDArray) -> dict[int, int]:
 
 
 class PhysicsForward:
-    """The library's physics alone (the fast model, DESIGN.md §3) at the library's nominal
-    application: every toner known, no cases needed, no texture readings. Derivatives by
-    forward differences on the toners each recipe uses, so a gradient step costs a physics
-    call per toner used; tens of times slower than the learned model."""
+    """The library's physics alone (the fast model and the texture readings of its flakes,
+    DESIGN.md §3–4) at the library's nominal application: every toner known, no cases
+    needed. Derivatives by forward differences on the toners each recipe uses, so a gradient
+    step costs a physics call per toner used: ten to twenty times slower than the learned
+    model."""
 
     dtype = torch.float64
 
@@ -301,13 +303,22 @@ class PhysicsForward:
         """Reflectance factors ``[N, G, 31]`` (π·BRDF) of recipes ``x[N, T]``."""
         return np.pi * predict(layer_from_fractions(self.library, x), self.geometries)
 
-    def reflectance_and_jacobian(self, x: NDArray) -> tuple[NDArray, NDArray]:
-        return finite_difference(self.reflectance, x, x > 1e-9)
+    def outputs(self, x: NDArray) -> NDArray:
+        """Reflectance factors and texture readings of recipes ``x[N, T]`` side by side,
+        ``[N, G·31 + 8]``, as a learned model's outputs (its reflectance not in logs)."""
+        layer = layer_from_fractions(self.library, x)
+        R = np.pi * predict(layer, self.geometries)
+        texture = texture_readings(layer, self.library.flake_radii_um)
+        return np.concatenate([R.reshape(len(x), -1), texture], axis=1)
 
-    def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, None]:
+    def outputs_and_jacobian(self, x: NDArray) -> tuple[NDArray, NDArray]:
+        return finite_difference(self.outputs, x, x > 1e-9)
+
+    def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x = fractions.to(torch.float64)
-        R = _differentiable(x, self.reflectance, self.reflectance_and_jacobian)
-        return R.to(fractions.dtype), None
+        y = _differentiable(x, self.outputs, self.outputs_and_jacobian).to(fractions.dtype)
+        spectral = len(self.geometries) * 31
+        return y[:, :spectral].reshape(-1, len(self.geometries), 31), y[:, spectral:]
 
 
 class KubelkaMunkForward:
