@@ -3,14 +3,45 @@ its own instrument's world, on the demo library."""
 
 from __future__ import annotations
 
+import argparse
+
 from flakelab.io import read_library
-from flakelab.match.evaluate import harness_world
+from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching, harness_world
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.models.registry import load_model_file, shipped_model
 
 MODEL_HELP = (
     "model file, judged in the world of its own instrument (default: the shipped five-angle one)"
 )
+
+
+def add_harness_arguments(
+    parser: argparse.ArgumentParser, targets: int, novel_targets: int
+) -> None:
+    """The harness's options (``flakelab match evaluate``) with these default target counts,
+    the model file and ``--json``."""
+    parser.add_argument("--targets", type=int, default=targets)
+    parser.add_argument("--novel-targets", type=int, default=novel_targets)
+    parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
+    parser.add_argument("--model", help=MODEL_HELP)
+    parser.add_argument("--json", action="store_true")
+
+
+def run_harness(world, forward, effect, args, novel, settings=None, progress=None) -> dict:
+    """The harness's report for ``forward`` on the targets the options ``args`` name, those
+    with a new toner drawn from ``novel``."""
+    return evaluate_matching(
+        world,
+        forward,
+        effect,
+        targets=args.targets,
+        seed=args.seed,
+        novel=novel,
+        novel_targets=args.novel_targets,
+        settings=settings,
+        progress=progress,
+    )
 
 
 def shipped_matcher(world: str = "shop", model: str | None = None):

@@ -22,9 +22,8 @@ import json
 import sys
 import time
 
-from _matcher import MODEL_HELP, shipped_matcher
+from _matcher import add_harness_arguments, run_harness, shipped_matcher
 from flakelab.cli.common import progress_bar
-from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching
 from flakelab.match.forward import PhysicsForward
 
 FIGURES = (
@@ -49,15 +48,8 @@ def run(world, forward, effect, args, novel, label: str) -> dict:
     start = time.perf_counter()
     with progress_bar(args.json) as bar:
         task = bar.add_task(label, total=total)
-        report = evaluate_matching(
-            world,
-            forward,
-            effect,
-            targets=args.targets,
-            seed=args.seed,
-            novel=novel,
-            novel_targets=args.novel_targets,
-            progress=lambda: bar.advance(task),
+        report = run_harness(
+            world, forward, effect, args, novel, progress=lambda: bar.advance(task)
         )
     return {
         "model": forward.name,
@@ -68,12 +60,7 @@ def run(world, forward, effect, args, novel, label: str) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--targets", type=int, default=200)
-    parser.add_argument("--novel-targets", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=4242)
-    parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
-    parser.add_argument("--model", help=MODEL_HELP)
-    parser.add_argument("--json", action="store_true")
+    add_harness_arguments(parser, targets=200, novel_targets=50)
     args = parser.parse_args()
     world, learned, effect = shipped_matcher(args.world, args.model)
     exact = PhysicsForward(world.library, world.geometries)

@@ -16,8 +16,7 @@ import argparse
 import dataclasses
 import json
 
-from _matcher import MODEL_HELP, shipped_matcher
-from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching
+from _matcher import add_harness_arguments, run_harness, shipped_matcher
 from flakelab.match.search import MatchSettings
 
 FIGURES = (
@@ -50,26 +49,12 @@ def parse_settings(spec: str) -> MatchSettings:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("settings", nargs="*", help="e.g. top_effects=2,top_pigments=5")
-    parser.add_argument("--targets", type=int, default=100)
-    parser.add_argument("--novel-targets", type=int, default=0)
-    parser.add_argument("--seed", type=int, default=4242)
-    parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
-    parser.add_argument("--model", help=MODEL_HELP)
-    parser.add_argument("--json", action="store_true")
+    add_harness_arguments(parser, targets=100, novel_targets=0)
     args = parser.parse_args()
     world, forward, effect = shipped_matcher(args.world, args.model)
     rows = []
     for spec in ["", *args.settings]:
-        report = evaluate_matching(
-            world,
-            forward,
-            effect,
-            targets=args.targets,
-            seed=args.seed,
-            novel=forward.novel,
-            novel_targets=args.novel_targets,
-            settings=parse_settings(spec),
-        )
+        report = run_harness(world, forward, effect, args, forward.novel, parse_settings(spec))
         rows.append({"settings": spec or "defaults", **{k: report[k] for k in FIGURES}})
         if not args.json:
             print(rows[-1]["settings"], {k: report[k] for k in FIGURES}, flush=True)
