@@ -597,9 +597,11 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     """A bronze metallic tinted with 0.5 % quinacridone magenta, as the physics makes it: the
     screen's solutions carry its near neighbour quinacridone red instead, the magenta is never
     tried and the best recipe stays above the swap stage's trigger (ΔE00 1.29 with the
-    shipped ensemble). One move away from the best recipes, adding quinacridone violet beside
-    the red does the magenta's job (0.10); the single network shipped before it found the
-    magenta itself (0.68 → 0.19)."""
+    shipped ensemble; 1.32 as the physics makes that recipe). One move away from the best
+    recipes, a trace of a second pigment beside the red does the magenta's job, and the
+    physics agrees (0.19). Which pigment depends on the model's last digits: quinacridone
+    violet on one CPU, phthalo green yellowish on another, near-equal moves; the single
+    network shipped before found the magenta itself (0.68 → 0.19)."""
     from flakelab.cases.generator import World
     from flakelab.match.models import effect_mask
 
@@ -617,9 +619,11 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     assert unswapped.candidates[0].de00.max() > MatchSettings().swap_above
     assert "Quinacridone magenta" not in unswapped.candidates[0].fractions
     swapped = match(target, hybrid, effect).candidates[0]
-    added = set(swapped.fractions) - set(unswapped.candidates[0].fractions)
+    assert set(swapped.fractions) - set(unswapped.candidates[0].fractions)
     assert swapped.de00.max() < 0.3
-    assert added & {"Quinacridone magenta", "Quinacridone violet"}
+    # the swap's gain is the paint's, not the model's: the recipe as the physics makes it
+    made = as_made(world, recipe_row(names, swapped.fractions))
+    assert delta_E(reflectance_to_Lab(target), reflectance_to_Lab(made)).max() < 0.3
 
 
 @pytest.mark.parametrize(

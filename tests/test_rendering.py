@@ -227,8 +227,10 @@ def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path):
     run = flakelab("texture", "fit", "-o", str(refitted), "--grey-only")
     assert run.returncode == 0, run.stderr
     got, want = (json.loads(f.read_text()) for f in (refitted, shipped))
+    # rtol: refits on different CPUs stop a few 1e-6 apart (the least-squares fit's default
+    # tolerance over renders whose rounding differs); the form shipped before is far off
     np.testing.assert_allclose(got["coarseness"]["constants"], want["coarseness"]["constants"],
-                               rtol=1e-6)  # fmt: skip
+                               rtol=1e-4)  # fmt: skip
     assert got["glint"] == want["glint"]
 
 
