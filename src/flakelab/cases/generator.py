@@ -42,7 +42,7 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
-from flakelab.physics.fast import predict
+from flakelab.physics.fast import reflectance_factor
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.texture.readings import texture_readings
 
@@ -188,7 +188,7 @@ class World:
             variation.film,
             variation.spread,
         )
-        R = np.pi * predict(layer, self.geometries)
+        R = reflectance_factor(layer, self.geometries)
         return R, texture_readings(layer, self.library.flake_radii_um)
 
     def weather(self, fractions: NDArray, rng: np.random.Generator) -> tuple[NDArray, NDArray]:

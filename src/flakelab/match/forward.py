@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from flakelab.core.geometry import Geometry
 from flakelab.library.toners import Library
 from flakelab.models.network import ForwardModel, reflectance_from_log
-from flakelab.physics.fast import predict
+from flakelab.physics.fast import predict, reflectance_factor
 from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.texture.readings import texture_readings
@@ -301,13 +301,13 @@ class PhysicsForward:
 
     def reflectance(self, x: NDArray) -> NDArray:
         """Reflectance factors ``[N, G, 31]`` (π·BRDF) of recipes ``x[N, T]``."""
-        return np.pi * predict(layer_from_fractions(self.library, x), self.geometries)
+        return reflectance_factor(layer_from_fractions(self.library, x), self.geometries)
 
     def outputs(self, x: NDArray) -> NDArray:
         """Reflectance factors and texture readings of recipes ``x[N, T]`` side by side,
         ``[N, G·31 + 8]``, as a learned model's outputs (its reflectance not in logs)."""
         layer = layer_from_fractions(self.library, x)
-        R = np.pi * predict(layer, self.geometries)
+        R = reflectance_factor(layer, self.geometries)
         texture = texture_readings(layer, self.library.flake_radii_um)
         return np.concatenate([R.reshape(len(x), -1), texture], axis=1)
 

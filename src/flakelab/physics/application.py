@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.geometry import Geometry
 from flakelab.library.toners import Library
-from flakelab.physics.fast import predict
+from flakelab.physics.fast import reflectance_factor
 from flakelab.physics.layer import Layer, layer_from_fractions
 
 __all__ = [
@@ -58,7 +58,7 @@ def sprayed_reflectance(
     """Reflectance factors ``[F, G, W]`` of ``fractions[F, T]`` sprayed at relative film build
     ``film[F]`` and flake-spread scale ``spread[F]`` (the library's batches, fast model)."""
     layer = layer_from_fractions(library, fractions)
-    return np.pi * predict(sprayed_layer(layer, library, film, spread), geometries)
+    return reflectance_factor(sprayed_layer(layer, library, film, spread), geometries)
 
 
 def sprayed_lab(

@@ -52,6 +52,7 @@ __all__ = [
     "build_atlas",
     "single_collision",
     "predict",
+    "reflectance_factor",
     "flake_geometry",
 ]
 
@@ -323,3 +324,9 @@ def predict(layer: Layer, geometries: ArrayLike, atlas: FlakeAtlas | None = None
     ext_out = flakes + extinction[:, None, :] / geo["mu_out"][None, :, None]
     pearls = _pearl_channel(layer, geo, ext_in, ext_out)
     return aluminium + pearls + _diffuse_channel(layer, geo)
+
+
+def reflectance_factor(layer: Layer, geometries: ArrayLike) -> NDArray:
+    """Reflectance factors ``[F, G, W]`` of ``layer``: π·BRDF, what an instrument reads
+    against the perfect diffuser (whose BRDF is 1/π)."""
+    return np.pi * predict(layer, geometries)
