@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from flakelab.cases.case import Case
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
-from flakelab.core.geometry import Geometry, instrument_geometries
+from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
@@ -111,7 +111,7 @@ class World:
     def __init__(
         self,
         library: Library,
-        instrument: str = "five-angle",
+        instrument: str = DEFAULT_INSTRUMENT,
         settings: WorldSettings | None = None,
         exclude: tuple[str, ...] = (),
     ) -> None:

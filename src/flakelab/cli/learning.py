@@ -22,6 +22,7 @@ from flakelab.cli.common import (
     progress_bar,
     reports_errors,
 )
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 
 cases_app = typer.Typer(help="Refinish cases: generate, import, export, realism.")
@@ -133,7 +134,7 @@ def generate(
         Path | None, typer.Option("--out", "-o", help="CSV/CxF file or SQLite .db to write.")
     ] = None,
     database: DatabaseOption = None,
-    instrument: InstrumentOption = "five-angle",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     shop: Annotated[
         str, typer.Option(help="Shop name recorded with the cases.")
@@ -226,7 +227,7 @@ def export_cases(
 def realism(
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
     n: Annotated[int, typer.Option("--n", min=20, help="Formulations per statistic.")] = 400,
-    instrument: InstrumentOption = "five-angle",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     json_output: JsonOption = False,
 ) -> None:
@@ -267,7 +268,7 @@ def habits(
     shop: ShopOption = None,
     since: SinceOption = None,
     model: ModelFileOption = None,
-    instrument: InstrumentOption = "five-angle",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     database: DatabaseOption = None,
     out: Annotated[
@@ -464,7 +465,7 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
 
 def train(
     cases: CasesArgument,
-    instrument: InstrumentOption = "five-angle",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Also write the model here.")
@@ -625,7 +626,7 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
 def evaluate(
     cases: CasesArgument,
     model: ModelFileOption = None,
-    instrument: InstrumentOption = "five-angle",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     database: DatabaseOption = None,
     habits: Annotated[
@@ -692,7 +693,7 @@ def adapt(
     shop: ShopOption = None,
     since: SinceOption = None,
     model: ModelFileOption = None,
-    instrument: InstrumentOption = "five-angle",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     database: DatabaseOption = None,
     epochs: Annotated[
@@ -813,6 +814,17 @@ def learned_forward(library: Path | None, instrument: str, model, database: str 
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
     return lib, forward_for(learned, lib)
+
+
+def target_instrument(measurement, physics: bool, database: str | None) -> str:
+    """The instrument a target was read with, as far as a model can use it: the largest
+    geometry set it reads that has a current model (with ``physics``, any set known), else
+    the default."""
+    from flakelab.core.geometry import instrument_reading
+    from flakelab.models.registry import model_instruments
+
+    among = None if physics else model_instruments(_maybe_engine(database))
+    return instrument_reading(measurement.geometry_names, among) or DEFAULT_INSTRUMENT
 
 
 def _maybe_engine(database: str | None):

@@ -15,6 +15,7 @@ All direction vectors point away from the surface (toward lamp or detector).
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,10 +24,12 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "Geometry",
     "INSTRUMENT_GEOMETRIES",
+    "DEFAULT_INSTRUMENT",
     "N_BINDER",
     "parse_geometry",
     "parse_geometries",
     "instrument_geometries",
+    "instrument_reading",
     "directions",
     "refract_into_coating",
     "flake_angles",
@@ -130,6 +133,9 @@ INSTRUMENT_GEOMETRIES: dict[str, tuple[str, ...]] = {
 }
 """Geometry sets of common multi-angle instruments, in their export order."""
 
+DEFAULT_INSTRUMENT = "five-angle"
+"""The geometry set used where neither an option nor a measurement names one."""
+
 
 def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
     """Geometries of a named instrument (``byk-mac-i``, ``ma-t6``, ``ma-t12``, ``five-angle``)."""
@@ -139,6 +145,20 @@ def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
             f"expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got instrument {instrument!r}"
         )
     return parse_geometries(INSTRUMENT_GEOMETRIES[key])
+
+
+def instrument_reading(names: ArrayLike, among: Iterable[str] | None = None) -> str | None:
+    """The instrument whose geometries are all among ``names``, the one with most geometries
+    (an MA-T12 export reads every five-angle geometry too, and its twelve say more), chosen
+    from ``among`` (default: every one known; names of no known set are passed over).
+    None when no instrument's set is complete."""
+    read = {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
+    complete = [
+        key
+        for key in (INSTRUMENT_GEOMETRIES if among is None else among)
+        if key in INSTRUMENT_GEOMETRIES and read.issuperset(INSTRUMENT_GEOMETRIES[key])
+    ]
+    return max(complete, key=lambda key: len(INSTRUMENT_GEOMETRIES[key]), default=None)
 
 
 def _angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
@@ -59,7 +60,7 @@ instrument's reading varies); a real shop with habits of its own (``SHOP_WITH_HA
 which the model learns by adaptation (``flakelab model adapt``)."""
 
 
-def harness_world(library, instrument: str = "five-angle", name: str = "shop") -> World:
+def harness_world(library, instrument: str = DEFAULT_INSTRUMENT, name: str = "shop") -> World:
     """The generator's world for the harness named ``name`` (:data:`HARNESS_WORLDS`)."""
     if name not in HARNESS_WORLDS:
         raise MatchError(f"--world: expected one of {', '.join(HARNESS_WORLDS)}, got {name!r}")

@@ -430,6 +430,13 @@ def _target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
     )
 
 
+def _unused_geometries(target, forward) -> list[str]:
+    """The geometries a target measurement reads that the forward model does not predict."""
+    if isinstance(target, np.ndarray):
+        return []
+    return [g for g in target.geometry_names if g not in forward.geometries]
+
+
 def match(*args, **kwargs) -> MatchResult:
     """Ranked candidate recipes for a target; see :func:`_match` (run on one thread: the
     batches are small, and a second thread only adds contention)."""
@@ -566,6 +573,12 @@ def _match(
         x = np.concatenate([x, _weighable(x_swapped.numpy().astype(float), settings)])
         candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
     notes = []
+    unused = _unused_geometries(target, forward)
+    if unused:
+        notes.append(
+            f"left out of the match: the target's {', '.join(unused)}, which the model "
+            f"({forward.name}) does not predict"
+        )
     if habits is not None and candidates:
         candidates = _aimed_off(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library

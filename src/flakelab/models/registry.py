@@ -15,6 +15,7 @@ from sqlalchemy import Engine, func, select, update
 from sqlalchemy.orm import Session
 
 from flakelab.cases.schema import ModelRow
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.training import CaseArrays, evaluate_model
 
@@ -26,9 +27,10 @@ __all__ = [
     "list_models",
     "load_model_file",
     "current_model",
+    "model_instruments",
 ]
 
-SHIPPED = {"five-angle": "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
+SHIPPED = {DEFAULT_INSTRUMENT: "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
 """Shipped models per instrument (trained on generated cases for the demo library)."""
 
 
@@ -48,7 +50,7 @@ def load_model_file(path: str | Path) -> ForwardModel:
     return ForwardModel.from_bytes(path.read_bytes(), str(path))
 
 
-def shipped_model(instrument: str = "five-angle") -> ForwardModel:
+def shipped_model(instrument: str = DEFAULT_INSTRUMENT) -> ForwardModel:
     return load_model_file(shipped_model_path(instrument))
 
 
@@ -88,6 +90,17 @@ def current_model(engine: Engine | None, instrument: str) -> ForwardModel:
         if model is not None:
             return model
     return shipped_model(instrument)
+
+
+def model_instruments(engine: Engine | None) -> list[str]:
+    """The instruments that have a current model: shipped, or promoted in the database."""
+    promoted = []
+    if engine is not None:
+        with Session(engine) as session:
+            promoted = session.scalars(
+                select(ModelRow.name).where(ModelRow.status == "promoted").distinct()
+            ).all()
+    return list(dict.fromkeys([*SHIPPED, *promoted]))
 
 
 def register(

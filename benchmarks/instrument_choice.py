@@ -1,0 +1,113 @@
+"""Matcher: an MA-T12 reading matched with the MA-T12 model, or with the five-angle model.
+
+`flakelab match` takes the model of the largest geometry set the target reads (an MA-T12
+export reads every five-angle geometry too). This measures what that choice buys. Hidden
+formulations of the shop's harness world are read on the car at the MA-T12's twelve
+geometries; each target is matched twice, once with each shipped model (the five-angle model
+sees five of the twelve readings: the baseline of the same run), and each best recipe is
+sprayed with the *same* random stream (the shop's batches, one application, one reading)
+and judged at all twelve geometries, as the colorist's instrument judges it, and at the five.
+The recipes are also made by the world's nominal physics without batches, application or
+instrument noise: the model's and the search's share alone.
+
+    python benchmarks/instrument_choice.py [--targets 100] [--seed 4242] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import sys
+import time
+
+import numpy as np
+import torch
+
+from flakelab.cli.common import progress_bar
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
+from flakelab.core.measurement import Measurement
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.io import read_library
+from flakelab.match.evaluate import SUCCESS_DE00, harness_world, trial
+from flakelab.match.forward import PhysicsForward
+from flakelab.match.models import effect_mask, forward_for
+from flakelab.match.search import match, recipe_vector
+from flakelab.models.registry import shipped_model
+
+MODELS = ("ma-t12", "five-angle")
+FIVE = [INSTRUMENT_GEOMETRIES["ma-t12"].index(g) for g in INSTRUMENT_GEOMETRIES["five-angle"]]
+
+
+def worst(target: np.ndarray, reading: np.ndarray) -> tuple[float, float]:
+    """The largest ΔE00 over the twelve geometries and over the five-angle ones."""
+    de = delta_E(reflectance_to_Lab(target), reflectance_to_Lab(reading))
+    return float(de.max()), float(de[FIVE].max())
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--targets", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+
+    library = read_library(None)
+    world = harness_world(library, "ma-t12")
+    physics = PhysicsForward(library, world.geometries)
+    forwards = {name: forward_for(shipped_model(name), library) for name in MODELS}
+    rng = np.random.default_rng(args.seed)
+    rows: dict[str, list[tuple[float, ...]]] = {name: [] for name in MODELS}
+    start = time.perf_counter()
+    with progress_bar(args.json) as bar:
+        task = bar.add_task("matching MA-T12 targets with both models", total=args.targets)
+        for x_hidden in world.formulations(args.targets, rng):
+            t = trial(world, x_hidden, rng)
+            target = Measurement("target", world.geometries, WAVELENGTHS, t.target)
+            stream = t.streams[0]
+            for name, forward in forwards.items():
+                best = match(target, forward, effect_mask(library, forward.toners))
+                best = best.candidates[0]
+                x = recipe_vector(forward, best.fractions)
+                sprayed = t.spray(x, copy.deepcopy(stream))  # the same spray for both
+                with torch.no_grad():
+                    nominal = physics(torch.as_tensor(x[None], dtype=physics.dtype))[0]
+                rows[name].append((*worst(t.target, sprayed), *worst(t.target, nominal[0].numpy())))
+            bar.advance(task)
+    report = {"targets": args.targets, "seed": args.seed, "wall_s": time.perf_counter() - start}
+    for name, values in rows.items():
+        a = np.array(values)
+        report[name] = {
+            "first_shot_success_12": float(np.mean(a[:, 0] <= SUCCESS_DE00)),
+            "first_shot_success_5": float(np.mean(a[:, 1] <= SUCCESS_DE00)),
+            "sprayed_de00_median_12": float(np.median(a[:, 0])),
+            "nominal_de00_median_12": float(np.median(a[:, 2])),
+            "nominal_de00_median_5": float(np.median(a[:, 3])),
+            "nominal_success_12": float(np.mean(a[:, 2] <= SUCCESS_DE00)),
+        }
+    base, chosen = report["five-angle"], report["ma-t12"]
+    report["ratio_first_shot_12"] = (
+        chosen["first_shot_success_12"] / base["first_shot_success_12"]
+        if base["first_shot_success_12"]
+        else None
+    )
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    print(f"{args.targets} MA-T12 targets, seed {args.seed}, {report['wall_s']:.0f} s")
+    print(f"{'matched with':<14}{'pass@12':>9}{'pass@5':>8}{'sprayed@12':>12}"
+          f"{'nominal@12':>12}{'nominal@5':>11}")  # fmt: skip
+    for name in MODELS:
+        r = report[name]
+        print(f"{name:<14}{r['first_shot_success_12']:>9.3f}{r['first_shot_success_5']:>8.3f}"
+              f"{r['sprayed_de00_median_12']:>12.2f}{r['nominal_de00_median_12']:>12.2f}"
+              f"{r['nominal_de00_median_5']:>11.2f}")  # fmt: skip
+    print(f"first shot at twelve geometries, MA-T12 model / five-angle model: "
+          f"{report['ratio_first_shot_12']:.2f}")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
