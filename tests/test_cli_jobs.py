@@ -186,15 +186,12 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     assert text.returncode == 0 and "flakes lie flatter" in text.stdout
 
     target = str(example_path("target"))
-    # the shop reads with the five-angle instrument its cases came from
-    run = flakelab("match", "--example", "--instrument", "five-angle", "--candidates", "1",
-                   "--habits", str(habits), "--json")  # fmt: skip
+    run = flakelab("match", "--example", "--candidates", "1", "--habits", str(habits), "--json")
     assert run.returncode == 0, run.stderr
     assert any("aimed off for the shop's habits" in n for n in json.loads(run.stdout)["notes"])
     recipe = example_path("target").parent / "blue-metallic-recipe.json"
     run = flakelab("correct", target, "--recipe", str(recipe), "--sprayed",
-                   str(example_path("sprayout")), "--habits", str(habits), "--json",
-                   "--instrument", "five-angle")  # fmt: skip
+                   str(example_path("sprayout")), "--habits", str(habits), "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["habits"]["cases"] == 300
 
@@ -214,7 +211,7 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     assert shops["shops"][0]["habits"]["flake_spread"] == report["flake_spread"]
     assert shops["shops"][1]["habits"] is None
     run = flakelab("match", "--example", "--candidates", "1", "--shop", "shop A",
-                   "--database", cases, "--json", "--instrument", "five-angle")  # fmt: skip
+                   "--database", cases, "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert any("flakes 4.0%" in n for n in json.loads(run.stdout)["notes"])
     assert "warning" not in run.stderr  # read against the model in use

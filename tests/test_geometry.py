@@ -11,7 +11,6 @@ from flakelab.core.geometry import (
     directions,
     flake_angles,
     instrument_geometries,
-    instrument_reading,
     refract_into_coating,
 )
 
@@ -77,19 +76,6 @@ def test_instrument_sets():
     assert len(instrument_geometries("five-angle")) == 5
     with pytest.raises(ValueError, match="expected one of byk-mac-i"):
         instrument_geometries("ma-t99")
-
-
-def test_a_measurement_s_instrument_is_the_largest_set_it_reads_in_full():
-    ma_t12 = INSTRUMENT_GEOMETRIES["ma-t12"]
-    assert instrument_reading(ma_t12) == "ma-t12"
-    # an MA-T12 export reads every five-angle geometry too; without an MA-T12 model, those
-    assert instrument_reading(ma_t12, among=["five-angle"]) == "five-angle"
-    assert instrument_reading(INSTRUMENT_GEOMETRIES["byk-mac-i"]) in ("byk-mac-i", "ma-t6")
-    assert instrument_reading(INSTRUMENT_GEOMETRIES["byk-mac-i"], ["five-angle", "ma-t12"]) == (
-        "five-angle"
-    )
-    assert instrument_reading(["45as15", "45as45", "45as110"]) is None  # no set complete
-    assert instrument_reading(ma_t12, among=["shop A's own name"]) is None
 
 
 @pytest.mark.parametrize(

@@ -816,17 +816,6 @@ def learned_forward(library: Path | None, instrument: str, model, database: str 
     return lib, forward_for(learned, lib)
 
 
-def target_instrument(measurement, physics: bool, database: str | None) -> str:
-    """The instrument a target was read with, as far as a model can use it: the largest
-    geometry set it reads that has a current model (with ``physics``, any set known), else
-    the default."""
-    from flakelab.core.geometry import instrument_reading
-    from flakelab.models.registry import model_instruments
-
-    among = None if physics else model_instruments(_maybe_engine(database))
-    return instrument_reading(measurement.geometry_names, among) or DEFAULT_INSTRUMENT
-
-
 def _maybe_engine(database: str | None):
     """The database only when one is named or configured; the shipped model needs none."""
     from flakelab.cases.database import open_database

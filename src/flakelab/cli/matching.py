@@ -21,10 +21,10 @@ from flakelab.cli.common import (
 )
 from flakelab.cli.learning import (
     DatabaseOption,
+    InstrumentOption,
     LibraryOption,
     learned_forward,
     since_option,
-    target_instrument,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
@@ -57,16 +57,6 @@ HabitsShopOption = Annotated[
         "--shop",
         help="Aim recipes off for this shop's habits as stored in the database "
         "('flakelab cases habits --shop NAME --save').",
-    ),
-]
-TargetInstrumentOption = Annotated[
-    str | None,
-    typer.Option(
-        "--instrument",
-        "-i",
-        help="Geometry set: five-angle, ma-t12, byk-mac-i.",
-        show_default=f"the largest set the target reads that has a model; {DEFAULT_INSTRUMENT} "
-        "for the harness",
     ),
 ]
 ToleranceOption = Annotated[
@@ -156,7 +146,7 @@ def match_command(
     resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
     tolerance: ToleranceOption = "refinish",
     candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
-    instrument: TargetInstrumentOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     model: ModelOption = None,
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
@@ -205,7 +195,7 @@ def match_command(
             raise FlakelabError("--render: draws the candidates of one target, not the harness")
         _evaluate(
             library=library,
-            instrument=instrument or DEFAULT_INSTRUMENT,
+            instrument=instrument,
             model=model,
             physics=physics,
             database=database,
@@ -223,10 +213,9 @@ def match_command(
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
     check_figure_file(render)
+    lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)
-    instrument = instrument or target_instrument(measurement, physics, database)
-    lib, forward, effect = _setup(library, instrument, model, database, physics)
     tol = _tolerance(tolerance)
     result = match(
         measurement,
@@ -376,7 +365,7 @@ def correct_command(
         str, typer.Option(help="additions (can already mixed) or reformulate.")
     ] = "additions",
     library: LibraryOption = None,
-    instrument: TargetInstrumentOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     model: ModelOption = None,
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
@@ -417,8 +406,6 @@ def correct_command(
     from flakelab.match.correction import correct
     from flakelab.match.search import _target_spectra
 
-    target_reading = read_measurement(target)
-    instrument = instrument or target_instrument(target_reading, physics, database)
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     try:
         grams = json.loads(recipe.read_text())
@@ -431,7 +418,7 @@ def correct_command(
     except LibraryError as error:
         raise FlakelabError(f"{recipe}: {error}") from None
     total = float(sum(grams.values()))
-    target_R, _, _ = _target_spectra(target_reading, forward)
+    target_R, _, _ = _target_spectra(read_measurement(target), forward)
     sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     if extra_toners < 0:

@@ -15,7 +15,6 @@ All direction vectors point away from the surface (toward lamp or detector).
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +28,6 @@ __all__ = [
     "parse_geometry",
     "parse_geometries",
     "instrument_geometries",
-    "instrument_reading",
     "directions",
     "refract_into_coating",
     "flake_angles",
@@ -134,7 +132,9 @@ INSTRUMENT_GEOMETRIES: dict[str, tuple[str, ...]] = {
 """Geometry sets of common multi-angle instruments, in their export order."""
 
 DEFAULT_INSTRUMENT = "five-angle"
-"""The geometry set used where neither an option nor a measurement names one."""
+"""The geometry set (and so the shipped model) used where no option names one: five-angle
+readings are part of every common multi-angle instrument's set (benchmarks/instrument_choice.py:
+an MA-T12 target is matched no worse with it than with the MA-T12 model)."""
 
 
 def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
@@ -145,20 +145,6 @@ def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
             f"expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got instrument {instrument!r}"
         )
     return parse_geometries(INSTRUMENT_GEOMETRIES[key])
-
-
-def instrument_reading(names: ArrayLike, among: Iterable[str] | None = None) -> str | None:
-    """The instrument whose geometries are all among ``names``, the one with most geometries
-    (an MA-T12 export reads every five-angle geometry too, and its twelve say more), chosen
-    from ``among`` (default: every one known; names of no known set are passed over).
-    None when no instrument's set is complete."""
-    read = {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
-    complete = [
-        key
-        for key in (INSTRUMENT_GEOMETRIES if among is None else among)
-        if key in INSTRUMENT_GEOMETRIES and read.issuperset(INSTRUMENT_GEOMETRIES[key])
-    ]
-    return max(complete, key=lambda key: len(INSTRUMENT_GEOMETRIES[key]), default=None)
 
 
 def _angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:

@@ -576,8 +576,8 @@ def _match(
     unused = _unused_geometries(target, forward)
     if unused:
         notes.append(
-            f"left out of the match: the target's {', '.join(unused)}, which the model "
-            f"({forward.name}) does not predict"
+            f"left out of the match: the target's {', '.join(unused)}; the model predicts "
+            f"{', '.join(forward.geometries)}"
         )
     if habits is not None and candidates:
         candidates = _aimed_off(

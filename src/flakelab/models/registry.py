@@ -27,7 +27,6 @@ __all__ = [
     "list_models",
     "load_model_file",
     "current_model",
-    "model_instruments",
 ]
 
 SHIPPED = {DEFAULT_INSTRUMENT: "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
@@ -90,17 +89,6 @@ def current_model(engine: Engine | None, instrument: str) -> ForwardModel:
         if model is not None:
             return model
     return shipped_model(instrument)
-
-
-def model_instruments(engine: Engine | None) -> list[str]:
-    """The instruments that have a current model: shipped, or promoted in the database."""
-    promoted = []
-    if engine is not None:
-        with Session(engine) as session:
-            promoted = session.scalars(
-                select(ModelRow.name).where(ModelRow.status == "promoted").distinct()
-            ).all()
-    return list(dict.fromkeys([*SHIPPED, *promoted]))
 
 
 def register(
