@@ -51,12 +51,27 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     assert new <= {report["new_toner"]}
     assert max(report["expected_de00"]) < max(report["before_de00"])
     assert set(report["spray_application"]) == {"film build", "flake spread"}
+    # judged against the tolerance first: this spray-out already passes the body-shop default
+    assert max(report["before_de00"]) < 1.0 and report["sprayout_passes"] is True
+    assert any("already passes refinish" in note for note in report["notes"])
+    assert any("left out of the correction: the target's 15as-45" in n for n in report["notes"])
+    tight = tmp_path / "tight.toml"
+    tight.write_text('name = "tight"\n[default]\nde00 = 0.3\n')
+    run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
+                   "--tolerance", str(tight), "--json")  # fmt: skip
+    judged = json.loads(run.stdout)
+    assert judged["sprayout_passes"] is False and judged["tolerance"] == "tight"
+    assert judged["sprayout_failing"] == [
+        g for g, de in zip(judged["geometries"], judged["before_de00"], strict=True) if de > 0.3
+    ]
+    assert not any("already passes" in note for note in judged["notes"])
     # the table a colorist reads says the same: every addition with its grams
     text = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed))
     assert text.returncode == 0, text.stderr
     for toner, grams in report["add_g"].items():
         assert any(toner in ln and f"{grams:.1f}" in ln for ln in text.stdout.splitlines()), toner
     assert "flake spread" in text.stdout
+    assert "note: the spray-out already passes refinish" in text.stdout
 
 
 def test_correct_refuses_a_bad_recipe(tmp_path):

@@ -390,6 +390,7 @@ def correct_command(
             "ensemble's disagreement at each geometry (0: one prior everywhere).",
         ),
     ] = MODEL_SD,
+    tolerance: ToleranceOption = "refinish",
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     json_output: JsonOption = False,
@@ -400,12 +401,14 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.comparison import compare
     from flakelab.core.difference import delta_E
     from flakelab.io import read_measurement
     from flakelab.library import LibraryError
     from flakelab.match.correction import correct
-    from flakelab.match.search import _target_spectra
+    from flakelab.match.search import _target_spectra, left_out_note, unused_geometries
 
+    tol = _tolerance(tolerance)
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     try:
         grams = json.loads(recipe.read_text())
@@ -418,8 +421,12 @@ def correct_command(
     except LibraryError as error:
         raise FlakelabError(f"{recipe}: {error}") from None
     total = float(sum(grams.values()))
-    target_R, _, _ = _target_spectra(read_measurement(target), forward)
-    sprayed_R, _, _ = _target_spectra(read_measurement(sprayed), forward)
+    target_reading, sprayed_reading = read_measurement(target), read_measurement(sprayed)
+    target_R, _, _ = _target_spectra(target_reading, forward)
+    sprayed_R, _, _ = _target_spectra(sprayed_reading, forward)
+    judged = compare(
+        target_reading.select(forward.geometries), sprayed_reading.select(forward.geometries), tol
+    )
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
@@ -438,7 +445,21 @@ def correct_command(
     )
     target_lab = reflectance_to_Lab(target_R)
     before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
-    report = {"mode": mode, "before_de00": before.round(3).tolist()}
+    report = {
+        "mode": mode,
+        "before_de00": before.round(3).tolist(),
+        "tolerance": tol.name,
+        "sprayout_passes": judged.all_pass,
+        "sprayout_failing": [
+            g for g, ok in zip(judged.geometries, judged.passed, strict=True) if not ok
+        ],
+        "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
+    }
+    if judged.all_pass:
+        report["notes"].append(
+            f"the spray-out already passes {tol.name} at every geometry: the correction is "
+            "optional, a move toward the target's centre"
+        )
 
     def on_scale(share: float) -> float:
         return round(round(share * total / resolution) * resolution, 6)
@@ -478,7 +499,14 @@ def _print_correction(report: dict) -> None:
     geo.add_column("ΔE00")
     for name in report["geometries"]:
         geo.add_column(name, justify="right")
-    geo.add_row("spray-out", *(f"{v:.2f}" for v in report["before_de00"]))
+    failing = set(report["sprayout_failing"])
+    geo.add_row(
+        "spray-out",
+        *(
+            f"[red]{v:.2f}[/]" if g in failing else f"{v:.2f}"
+            for g, v in zip(report["geometries"], report["before_de00"], strict=True)
+        ),
+    )
     geo.add_row("expected", *(f"{v:.2f}" for v in report["expected_de00"]))
     console.print(table)
     console.print(geo)
@@ -494,3 +522,5 @@ def _print_correction(report: dict) -> None:
         if report["habits"]:
             assumed += " beyond the shop's habits, which persist"
     console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
+    for note in report["notes"]:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)

@@ -430,11 +430,22 @@ def _target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
     )
 
 
-def _unused_geometries(target, forward) -> list[str]:
+def unused_geometries(target, forward) -> list[str]:
     """The geometries a target measurement reads that the forward model does not predict."""
     if isinstance(target, np.ndarray):
         return []
     return [g for g in target.geometry_names if g not in forward.geometries]
+
+
+def left_out_note(unused: list[str], forward, job: str) -> list[str]:
+    """A note naming the target's geometries ``unused`` that the ``job`` leaves out (none:
+    no note)."""
+    if not unused:
+        return []
+    return [
+        f"left out of the {job}: the target's {', '.join(unused)}; the model predicts "
+        f"{', '.join(forward.geometries)}"
+    ]
 
 
 def match(*args, **kwargs) -> MatchResult:
@@ -572,13 +583,7 @@ def _match(
         )
         x = np.concatenate([x, _weighable(x_swapped.numpy().astype(float), settings)])
         candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
-    notes = []
-    unused = _unused_geometries(target, forward)
-    if unused:
-        notes.append(
-            f"left out of the match: the target's {', '.join(unused)}; the model predicts "
-            f"{', '.join(forward.geometries)}"
-        )
+    notes = left_out_note(unused_geometries(target, forward), forward, "match")
     if habits is not None and candidates:
         candidates = _aimed_off(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
