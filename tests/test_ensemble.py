@@ -198,11 +198,11 @@ def test_the_objective_adds_the_weighed_model_risk_for_an_ensemble_only(hybrid_e
     from flakelab.core.torch_colour import TorchColour
     from flakelab.data import example_path
     from flakelab.io import read_measurement
-    from flakelab.match.search import MatchSettings, _loss, _target_spectra, model_risk
+    from flakelab.match.search import MatchSettings, _loss, model_risk, target_spectra
 
     colour_t = TorchColour(dtype=hybrid_ensemble.dtype)
     single = forward_for(shipped_model("five-angle").split_members()[0], LIBRARY)
-    spectra, _, _ = _target_spectra(read_measurement(example_path("target")), hybrid_ensemble)
+    spectra, _, _ = target_spectra(read_measurement(example_path("target")), hybrid_ensemble)
     target_lab = colour_t.lab(torch.as_tensor(spectra, dtype=hybrid_ensemble.dtype))
     x = np.random.default_rng(3).dirichlet(np.full(len(LIBRARY.names), 0.3), 6)
     x = torch.as_tensor(x, dtype=hybrid_ensemble.dtype)

@@ -14,6 +14,7 @@ import torch
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
+from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library, read_measurement
 from flakelab.match.correction import (
     NOISE_SD,
@@ -24,7 +25,7 @@ from flakelab.match.correction import (
 )
 from flakelab.match.forward import KubelkaMunkForward
 from flakelab.match.recipe import RecipeError, parse_quantity, weigh
-from flakelab.match.search import MatchSettings, match
+from flakelab.match.search import MatchSettings, match, recipe_vector
 from flakelab.physics.application import SPREAD_SD, sprayed_reflectance
 
 OKUMURA = Path(__file__).resolve().parents[2] / "shared" / "data" / "pigment-km"
@@ -353,13 +354,64 @@ def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files
         + (", ".join(INSTRUMENT_GEOMETRIES["five-angle"]))
         in report["notes"]
     )
+    # the MA-T12 model says how the candidate looks there, apart from what was searched
+    left_out_numbers = report["candidates"][0]["left_out"]
+    assert left_out_numbers["model_id"].startswith("demo-ma-t12")
+    assert list(left_out_numbers["geometries"]) == left_out
+    target = read_measurement(ma_t12_files[0])
+    target_lab = reflectance_to_Lab(target.select(left_out).reflectance)
+    shown = left_out_numbers["geometries"].values()
+    lab = np.array([[v["L"], v["a"], v["b"]] for v in shown])
+    np.testing.assert_allclose([v["dE00"] for v in shown], delta_E(target_lab, lab), atol=2e-3)
+    limits = [tolerance_preset("refinish").limit(g).de00 for g in left_out]
+    assert [v["pass"] for v in shown] == [
+        v["dE00"] <= m for v, m in zip(shown, limits, strict=True)
+    ]
+    assert left_out_numbers["passes"] == all(v["pass"] for v in shown)
     from flakelab.match.models import forward_for
     from flakelab.models.registry import shipped_model
 
     ma_t12 = forward_for(shipped_model("ma-t12"), read_library(None))
-    result = match(read_measurement(ma_t12_files[0]), ma_t12, settings=MatchSettings(candidates=1))
+    result = match(target, ma_t12, settings=MatchSettings(candidates=1))
     assert result.geometries == INSTRUMENT_GEOMETRIES["ma-t12"]
     assert not any("left out" in note for note in result.notes)
+
+
+def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):
+    """The MA-T12 model's numbers for five-angle candidates at the example's seven other
+    geometries agree with the world's physics for those recipes (its own error, < 0.7 ΔE00;
+    the geometries mixed up, they would be some 20 off)."""
+    from flakelab.data import example_path
+    from flakelab.match.crosscheck import predict_left_out
+    from flakelab.match.forward import PhysicsForward
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    library, target = read_library(None), read_measurement(example_path("target"))
+    candidates = match(target, hybrid, settings=MatchSettings(candidates=2)).candidates
+    ma_t12 = forward_for(shipped_model("ma-t12"), library)
+    left_out = predict_left_out(candidates, target, hybrid, ma_t12, tolerance_preset("refinish"))
+    physics = PhysicsForward(library, instrument_geometries("ma-t12"))
+    rows = [physics.geometries.index(g) for g in left_out[0].geometries]
+    for candidate, numbers in zip(candidates, left_out, strict=True):
+        assert numbers.geometries == tuple(
+            g for g in target.geometry_names if g.startswith("15as")
+        ) + ("45as-15",)
+        made = reflectance_to_Lab(
+            reflect(physics, recipe_vector(physics, candidate.fractions))[0, rows]
+        )
+        assert delta_E(numbers.lab, made).max() < 0.7
+    # nothing left out, nothing to predict
+    assert (
+        predict_left_out(
+            candidates,
+            target.select(hybrid.geometries),
+            hybrid,
+            ma_t12,
+            tolerance_preset("refinish"),
+        )
+        == []
+    )
 
 
 def test_match_refuses_bad_input(tmp_path):

@@ -806,14 +806,21 @@ def learned_forward(library: Path | None, instrument: str, model, database: str 
     """The toner library and the matcher's forward of the model file ``model``, else of the
     current model for the instrument (the promoted one in the database, else the shipped)."""
     from flakelab.io import read_library
+
+    lib = read_library(library)
+    return lib, current_forward(lib, instrument, model, database)
+
+
+def current_forward(lib, instrument: str, model, database: str | None):
+    """The matcher's forward for the library ``lib``: of the model file ``model``, else of
+    the current model for the instrument."""
     from flakelab.match.models import forward_for
     from flakelab.models.registry import current_model, load_model_file
 
-    lib = read_library(library)
     learned = (
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
-    return lib, forward_for(learned, lib)
+    return forward_for(learned, lib)
 
 
 def _maybe_engine(database: str | None):

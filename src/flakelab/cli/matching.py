@@ -23,6 +23,7 @@ from flakelab.cli.learning import (
     DatabaseOption,
     InstrumentOption,
     LibraryOption,
+    current_forward,
     learned_forward,
     since_option,
 )
@@ -227,6 +228,14 @@ def match_command(
         library=lib,
     )
     report = result.to_dict()
+    if habits is None and shop is None:  # aimed-off candidates: their offsets are per geometry
+        other = _left_out_model(measurement, forward, lib, database, physics)
+        if other is not None:
+            from flakelab.match.crosscheck import predict_left_out
+
+            extra = predict_left_out(result.candidates, measurement, forward, other, tol)
+            for entry, left_out in zip(report["candidates"], extra, strict=True):
+                entry["left_out"] = left_out.to_dict()
     for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
         lines = weigh(candidate.fractions, grams, resolution)
         entry["weights_g"] = [
@@ -242,6 +251,35 @@ def match_command(
         print(json.dumps(report, indent=2))
         return
     _print_match(report)
+
+
+def _left_out_model(measurement, forward, library, database: str | None, physics: bool):
+    """A model that predicts geometries of ``measurement`` that ``forward`` left out: the
+    current model (with ``physics``, the library's physics) of the largest geometry set the
+    target reads in full. None when there is none."""
+    from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
+    from flakelab.match.search import unused_geometries
+    from flakelab.models.network import ModelError
+    from flakelab.models.registry import SHIPPED
+
+    unused = set(unused_geometries(measurement, forward))
+    read = set(measurement.geometry_names)
+    sets = [
+        name
+        for name in (INSTRUMENT_GEOMETRIES if physics else SHIPPED)
+        if unused & set(INSTRUMENT_GEOMETRIES[name]) and read >= set(INSTRUMENT_GEOMETRIES[name])
+    ]
+    if not sets:
+        return None
+    fullest = max(sets, key=lambda name: len(INSTRUMENT_GEOMETRIES[name]))
+    if physics:
+        from flakelab.match.forward import PhysicsForward
+
+        return PhysicsForward(library, instrument_geometries(fullest))
+    try:
+        return current_forward(library, fullest, None, database)
+    except ModelError:  # the user's library is not the one that model knows: no cross-check
+        return None
 
 
 def _render_match(target, result, path: Path) -> None:
@@ -287,8 +325,26 @@ def _print_match(report: dict) -> None:
             geo.add_column(column, justify="right")
         for g, v in c["geometries"].items():
             geo.add_row(g, *(f"{v[k]:.2f}" for k in keys))
+        left_out = c.get("left_out")
+        if left_out:  # predicted by another model, not searched: set apart, dimmed
+            geo.add_section()
+            for g, v in left_out["geometries"].items():
+                cells = [f"{v[k]:.2f}" for k in keys if k != "model_spread"]
+                cells[-1] = cells[-1] if v["pass"] else f"[red]{cells[-1]}[/]"
+                geo.add_row(f"{g} *", *cells, *([""] if "model_spread" in keys else []))
         console.print(table)
         console.print(geo)
+        if left_out:
+            verdict = (
+                "pass"
+                if left_out["passes"]
+                else "fail at " + ", ".join(left_out["failing_geometries"])
+            )
+            console.print(
+                f"* not searched: the target's other geometries, as the model "
+                f"{left_out['model_id']} predicts them: {verdict}",
+                highlight=False,
+            )
         if c["texture_delta"]:
             texture = Table(box=box.SIMPLE, show_header=True)
             texture.add_column("texture")
@@ -406,7 +462,7 @@ def correct_command(
     from flakelab.io import read_measurement
     from flakelab.library import LibraryError
     from flakelab.match.correction import correct
-    from flakelab.match.search import _target_spectra, left_out_note, unused_geometries
+    from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
     tol = _tolerance(tolerance)
     lib, forward, _ = _setup(library, instrument, model, database, physics)
@@ -422,8 +478,8 @@ def correct_command(
         raise FlakelabError(f"{recipe}: {error}") from None
     total = float(sum(grams.values()))
     target_reading, sprayed_reading = read_measurement(target), read_measurement(sprayed)
-    target_R, _, _ = _target_spectra(target_reading, forward)
-    sprayed_R, _, _ = _target_spectra(sprayed_reading, forward)
+    target_R, _, _ = target_spectra(target_reading, forward)
+    sprayed_R, _, _ = target_spectra(sprayed_reading, forward)
     judged = compare(
         target_reading.select(forward.geometries), sprayed_reading.select(forward.geometries), tol
     )

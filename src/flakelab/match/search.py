@@ -58,6 +58,9 @@ __all__ = [
     "multi_angle_loss",
     "outside_support",
     "recipe_vector",
+    "target_spectra",
+    "unused_geometries",
+    "left_out_note",
 ]
 
 
@@ -406,7 +409,7 @@ def _support(x: NDArray, effect: NDArray, settings: MatchSettings) -> tuple[int,
     return tuple(sorted(effects) + sorted(pigments))
 
 
-def _target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
+def target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
     """Reflectance ``[G, 31]`` of the target at the forward model's geometries."""
     if isinstance(target, np.ndarray):
         return target, {}, "target"
@@ -488,7 +491,7 @@ def _match(
     allowed = np.ones(T, bool) if allowed is None else np.asarray(allowed, bool)
     if not allowed.any():
         raise MatchError("library: no toners to match with")
-    spectra, texture, name = _target_spectra(target, forward)
+    spectra, texture, name = target_spectra(target, forward)
     colour = TorchColour(dtype=forward.dtype)
     target_lab = colour.lab(torch.as_tensor(spectra))
     target_texture = None

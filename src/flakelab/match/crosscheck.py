@@ -1,0 +1,99 @@
+"""A match's candidates predicted at the target's geometries that its model left out.
+
+An MA-T12 reads twelve geometries; the default five-angle model predicts five of them, and
+searches there (``benchmarks/instrument_choice.py``: its recipes pass at twelve geometries
+at least as often as the MA-T12 model's own). The colorist still wants to know how each
+candidate will look at the other seven: a model that predicts them (the MA-T12 one) says so,
+clearly apart from the numbers the search used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E, delta_LCH
+from flakelab.core.tolerance import Tolerance
+from flakelab.match.search import (
+    Candidate,
+    evaluate_recipes,
+    recipe_vector,
+    target_spectra,
+    unused_geometries,
+)
+
+__all__ = ["LeftOut", "predict_left_out"]
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """One candidate at the geometries its own model left out, as ``model`` (its
+    description; ``model_id``, which model file) predicts it."""
+
+    model: str
+    model_id: str
+    geometries: tuple[str, ...]
+    lab: NDArray
+    dLCH: NDArray
+    de00: NDArray
+    passed: NDArray
+
+    @property
+    def failing(self) -> list[str]:
+        return [g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.model,
+            "model_id": self.model_id,
+            "passes": not self.failing,
+            "failing_geometries": self.failing,
+            "geometries": {
+                g: {
+                    "L": round(float(self.lab[i, 0]), 3),
+                    "a": round(float(self.lab[i, 1]), 3),
+                    "b": round(float(self.lab[i, 2]), 3),
+                    "dL": round(float(self.dLCH[i, 0]), 3),
+                    "dC": round(float(self.dLCH[i, 1]), 3),
+                    "dH": round(float(self.dLCH[i, 2]), 3),
+                    "dE00": round(float(self.de00[i]), 3),
+                    "pass": bool(self.passed[i]),
+                }
+                for i, g in enumerate(self.geometries)
+            },
+        }
+
+
+def predict_left_out(
+    candidates: list[Candidate], target, forward, other, tolerance: Tolerance
+) -> list[LeftOut]:
+    """Each of ``candidates`` (matched through ``forward``) predicted by ``other`` at the
+    geometries of the ``target`` measurement that ``forward`` left out and ``other``
+    predicts, judged against ``tolerance``. Empty when there are none."""
+    left_out = [g for g in unused_geometries(target, forward) if g in other.geometries]
+    if not left_out or not candidates:
+        return []
+    rows = [list(other.geometries).index(g) for g in left_out]
+    spectra, _, _ = target_spectra(target, other)
+    target_lab = reflectance_to_Lab(spectra[rows])
+    x = np.array([recipe_vector(other, c.fractions) for c in candidates])
+    R, _ = evaluate_recipes(other, x)
+    lab = reflectance_to_Lab(R[:, rows])
+    de00 = delta_E(target_lab[None], lab)
+    dlch = delta_LCH(target_lab[None], lab)
+    return [
+        LeftOut(
+            other.name,
+            getattr(other, "model_id", other.name),
+            tuple(left_out),
+            lab[k],
+            dlch[k],
+            de00[k],
+            tolerance.passes(left_out, de00=de00[k], dLCH=dlch[k]),
+        )
+        for k in range(len(candidates))
+    ]
