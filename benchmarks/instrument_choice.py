@@ -8,7 +8,10 @@ sees five of the twelve readings: the baseline of the same run), and each best r
 sprayed with the *same* random stream (the shop's batches, one application, one reading)
 and judged at all twelve geometries, as the colorist's instrument judges it, and at the five.
 The recipes are also made by the world's nominal physics without batches, application or
-instrument noise: the model's and the search's share alone.
+instrument noise: the model's and the search's share alone. Last, what `flakelab match` shows
+under the five-angle model's candidates, the MA-T12 model's prediction at the seven geometries
+the search left out (`flakelab.match.crosscheck`), is set against those seven as sprayed: how
+often a recipe it flags fails there, and how often one it passes does.
 
     python benchmarks/instrument_choice.py [--targets 100] [--seed 4242] [--json]
 """
@@ -30,7 +33,9 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
+from flakelab.match.crosscheck import predict_left_out
 from flakelab.match.evaluate import SUCCESS_DE00, harness_world, trial
 from flakelab.match.forward import PhysicsForward
 from flakelab.match.models import effect_mask, forward_for
@@ -41,10 +46,13 @@ MODELS = ("ma-t12", "five-angle")
 FIVE = [INSTRUMENT_GEOMETRIES["ma-t12"].index(g) for g in INSTRUMENT_GEOMETRIES["five-angle"]]
 
 
-def worst(target: np.ndarray, reading: np.ndarray) -> tuple[float, float]:
-    """The largest ΔE00 over the twelve geometries and over the five-angle ones."""
+OTHERS = [i for i in range(len(INSTRUMENT_GEOMETRIES["ma-t12"])) if i not in FIVE]
+
+
+def worst(target: np.ndarray, reading: np.ndarray) -> tuple[float, float, float]:
+    """The largest ΔE00 over the twelve geometries, the five-angle ones and the other seven."""
     de = delta_E(reflectance_to_Lab(target), reflectance_to_Lab(reading))
-    return float(de.max()), float(de[FIVE].max())
+    return float(de.max()), float(de[FIVE].max()), float(de[OTHERS].max())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     forwards = {name: forward_for(shipped_model(name), library) for name in MODELS}
     rng = np.random.default_rng(args.seed)
     rows: dict[str, list[tuple[float, ...]]] = {name: [] for name in MODELS}
+    flagged = []  # the five-angle best recipe: the MA-T12 model's worst at the other seven
     start = time.perf_counter()
     with progress_bar(args.json) as bar:
         task = bar.add_task("matching MA-T12 targets with both models", total=args.targets)
@@ -70,6 +79,11 @@ def main(argv: list[str] | None = None) -> int:
             for name, forward in forwards.items():
                 best = match(target, forward, effect_mask(library, forward.toners))
                 best = best.candidates[0]
+                if name == "five-angle":
+                    shown = predict_left_out(
+                        [best], target, forward, forwards["ma-t12"], tolerance_preset("refinish")
+                    )
+                    flagged.append(float(shown[0].de00.max()))
                 x = recipe_vector(forward, best.fractions)
                 sprayed = t.spray(x, copy.deepcopy(stream))  # the same spray for both
                 with torch.no_grad():
@@ -83,10 +97,25 @@ def main(argv: list[str] | None = None) -> int:
             "first_shot_success_12": float(np.mean(a[:, 0] <= SUCCESS_DE00)),
             "first_shot_success_5": float(np.mean(a[:, 1] <= SUCCESS_DE00)),
             "sprayed_de00_median_12": float(np.median(a[:, 0])),
-            "nominal_de00_median_12": float(np.median(a[:, 2])),
-            "nominal_de00_median_5": float(np.median(a[:, 3])),
-            "nominal_success_12": float(np.mean(a[:, 2] <= SUCCESS_DE00)),
+            "nominal_de00_median_12": float(np.median(a[:, 3])),
+            "nominal_de00_median_5": float(np.median(a[:, 4])),
+            "nominal_success_12": float(np.mean(a[:, 3] <= SUCCESS_DE00)),
         }
+    predicted = np.array(flagged)
+    sprayed_others = np.array(rows["five-angle"])[:, 2]
+    fails = sprayed_others > SUCCESS_DE00
+    said_fail = predicted > SUCCESS_DE00
+    report["left_out_check"] = {
+        "predicted_fail_share": float(said_fail.mean()),
+        "sprayed_fail_share": float(fails.mean()),
+        "sprayed_fail_when_predicted_fail": float(fails[said_fail].mean())
+        if said_fail.any()
+        else None,
+        "sprayed_fail_when_predicted_pass": float(fails[~said_fail].mean())
+        if (~said_fail).any()
+        else None,
+        "correlation": float(np.corrcoef(predicted, sprayed_others)[0, 1]),
+    }
     base, chosen = report["five-angle"], report["ma-t12"]
     report["ratio_first_shot_12"] = (
         chosen["first_shot_success_12"] / base["first_shot_success_12"]
@@ -106,6 +135,13 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['nominal_de00_median_5']:>11.2f}")  # fmt: skip
     print(f"first shot at twelve geometries, MA-T12 model / five-angle model: "
           f"{report['ratio_first_shot_12']:.2f}")  # fmt: skip
+    check = report["left_out_check"]
+    print(f"five-angle recipes at the other seven geometries: the MA-T12 model flags "
+          f"{check['predicted_fail_share']:.3f} (worst ΔE00 > {SUCCESS_DE00}); sprayed, "
+          f"{check['sprayed_fail_share']:.3f} fail there: "
+          f"{check['sprayed_fail_when_predicted_fail']} of those flagged, "
+          f"{check['sprayed_fail_when_predicted_pass']} of the others; "
+          f"correlation {check['correlation']:.2f}")  # fmt: skip
     return 0
 
 
