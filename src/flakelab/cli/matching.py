@@ -326,7 +326,7 @@ def _print_match(report: dict) -> None:
         for g, v in c["geometries"].items():
             geo.add_row(g, *(f"{v[k]:.2f}" for k in keys))
         left_out = c.get("left_out")
-        if left_out:  # predicted by another model, not searched: set apart, dimmed
+        if left_out:  # predicted by another model, not searched: set apart, marked *
             geo.add_section()
             for g, v in left_out["geometries"].items():
                 cells = [f"{v[k]:.2f}" for k in keys if k != "model_spread"]

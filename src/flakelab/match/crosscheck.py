@@ -21,6 +21,7 @@ from flakelab.core.tolerance import Tolerance
 from flakelab.match.search import (
     Candidate,
     evaluate_recipes,
+    geometry_rows,
     recipe_vector,
     target_spectra,
     unused_geometries,
@@ -53,17 +54,12 @@ class LeftOut:
             "passes": not self.failing,
             "failing_geometries": self.failing,
             "geometries": {
-                g: {
-                    "L": round(float(self.lab[i, 0]), 3),
-                    "a": round(float(self.lab[i, 1]), 3),
-                    "b": round(float(self.lab[i, 2]), 3),
-                    "dL": round(float(self.dLCH[i, 0]), 3),
-                    "dC": round(float(self.dLCH[i, 1]), 3),
-                    "dH": round(float(self.dLCH[i, 2]), 3),
-                    "dE00": round(float(self.de00[i]), 3),
-                    "pass": bool(self.passed[i]),
-                }
-                for i, g in enumerate(self.geometries)
+                g: row | {"pass": bool(ok)}
+                for (g, row), ok in zip(
+                    geometry_rows(self.geometries, self.lab, self.dLCH, self.de00).items(),
+                    self.passed,
+                    strict=True,
+                )
             },
         }
 

@@ -73,6 +73,23 @@ class MatchError(FlakelabError):
     """A target or library the matcher cannot work with."""
 
 
+def geometry_rows(geometries, lab: NDArray, dLCH: NDArray, de00: NDArray) -> dict[str, dict]:
+    """A report's numbers per geometry: predicted L*a*b* ``lab[G, 3]``, its ΔL*, ΔC*, ΔH*
+    ``dLCH[G, 3]`` and ΔE00 ``de00[G]`` from the target, rounded."""
+    return {
+        g: {
+            "L": round(float(lab[i, 0]), 3),
+            "a": round(float(lab[i, 1]), 3),
+            "b": round(float(lab[i, 2]), 3),
+            "dL": round(float(dLCH[i, 0]), 3),
+            "dC": round(float(dLCH[i, 1]), 3),
+            "dH": round(float(dLCH[i, 2]), 3),
+            "dE00": round(float(de00[i]), 3),
+        }
+        for i, g in enumerate(geometries)
+    }
+
+
 @dataclass
 class Candidate:
     """One recipe with its predicted appearance and its differences to the target."""
@@ -117,17 +134,11 @@ class Candidate:
             "de00_max": float(self.de00.max()),
             "de00_mean": float(self.de00.mean()),
             "geometries": {
-                g: {
-                    "L": round(float(self.lab[i, 0]), 3),
-                    "a": round(float(self.lab[i, 1]), 3),
-                    "b": round(float(self.lab[i, 2]), 3),
-                    "dL": round(float(self.dLCH[i, 0]), 3),
-                    "dC": round(float(self.dLCH[i, 1]), 3),
-                    "dH": round(float(self.dLCH[i, 2]), 3),
-                    "dE00": round(float(self.de00[i]), 3),
-                }
+                g: row
                 | ({} if self.spread is None else {"model_spread": round(float(self.spread[i]), 3)})
-                for i, g in enumerate(self.geometries)
+                for i, (g, row) in enumerate(
+                    geometry_rows(self.geometries, self.lab, self.dLCH, self.de00).items()
+                )
             },
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
         }
