@@ -82,6 +82,10 @@ def test_correct_refuses_a_bad_recipe(tmp_path):
     assert run.returncode == 2 and "recipe.json" in run.stderr and "Traceback" not in run.stderr
     run = flakelab("correct", target, "--recipe", str(bad), "--sprayed", target, "--mode", "x")
     assert run.returncode == 2
+    recipe = str(example_path("target").parent / "blue-metallic-recipe.json")
+    run = flakelab("correct", target, "--recipe", recipe, "--sprayed", target, "--tolerance", "x")
+    assert run.returncode == 2 and "x: neither a tolerance preset" in run.stderr
+    assert "Traceback" not in run.stderr
 
 
 def test_realism_json_reports_the_shop_statistics():
