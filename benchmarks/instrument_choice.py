@@ -1,7 +1,8 @@
 """Matcher: an MA-T12 reading matched with the MA-T12 model, or with the five-angle model.
 
-`flakelab match` takes the model of the largest geometry set the target reads (an MA-T12
-export reads every five-angle geometry too). This measures what that choice buys. Hidden
+An MA-T12 export reads every five-angle geometry too, so either shipped model can match it;
+`flakelab match` takes the five-angle one unless `--instrument` says otherwise. This measures
+which matches such a target better. Hidden
 formulations of the shop's harness world are read on the car at the MA-T12's twelve
 geometries; each target is matched twice, once with each shipped model (the five-angle model
 sees five of the twelve readings: the baseline of the same run), and each best recipe is
@@ -25,7 +26,6 @@ import sys
 import time
 
 import numpy as np
-import torch
 
 from flakelab.cli.common import progress_bar
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -44,8 +44,6 @@ from flakelab.models.registry import shipped_model
 
 MODELS = ("ma-t12", "five-angle")
 FIVE = [INSTRUMENT_GEOMETRIES["ma-t12"].index(g) for g in INSTRUMENT_GEOMETRIES["five-angle"]]
-
-
 OTHERS = [i for i in range(len(INSTRUMENT_GEOMETRIES["ma-t12"])) if i not in FIVE]
 
 
@@ -86,9 +84,8 @@ def main(argv: list[str] | None = None) -> int:
                     flagged.append(float(shown[0].de00.max()))
                 x = recipe_vector(forward, best.fractions)
                 sprayed = t.spray(x, copy.deepcopy(stream))  # the same spray for both
-                with torch.no_grad():
-                    nominal = physics(torch.as_tensor(x[None], dtype=physics.dtype))[0]
-                rows[name].append((*worst(t.target, sprayed), *worst(t.target, nominal[0].numpy())))
+                nominal = physics.reflectance(x[None])[0]
+                rows[name].append((*worst(t.target, sprayed), *worst(t.target, nominal)))
             bar.advance(task)
     report = {"targets": args.targets, "seed": args.seed, "wall_s": time.perf_counter() - start}
     for name, values in rows.items():

@@ -457,8 +457,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.comparison import compare
-    from flakelab.core.difference import delta_E
+    from flakelab.core.difference import delta_E, delta_LCH
     from flakelab.io import read_measurement
     from flakelab.library import LibraryError
     from flakelab.match.correction import correct
@@ -480,9 +479,6 @@ def correct_command(
     target_reading, sprayed_reading = read_measurement(target), read_measurement(sprayed)
     target_R, _, _ = target_spectra(target_reading, forward)
     sprayed_R, _, _ = target_spectra(sprayed_reading, forward)
-    judged = compare(
-        target_reading.select(forward.geometries), sprayed_reading.select(forward.geometries), tol
-    )
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
@@ -499,19 +495,18 @@ def correct_command(
         habits=shop_habits,
         model_sd=model_sd,
     )
-    target_lab = reflectance_to_Lab(target_R)
-    before = delta_E(target_lab, reflectance_to_Lab(sprayed_R))
+    target_lab, sprayed_lab = reflectance_to_Lab(target_R), reflectance_to_Lab(sprayed_R)
+    before = delta_E(target_lab, sprayed_lab)
+    passed = tol.passes(forward.geometries, de00=before, dLCH=delta_LCH(target_lab, sprayed_lab))
     report = {
         "mode": mode,
         "before_de00": before.round(3).tolist(),
         "tolerance": tol.name,
-        "sprayout_passes": judged.all_pass,
-        "sprayout_failing": [
-            g for g, ok in zip(judged.geometries, judged.passed, strict=True) if not ok
-        ],
+        "sprayout_passes": bool(passed.all()),
+        "sprayout_failing": [g for g, ok in zip(forward.geometries, passed, strict=True) if not ok],
         "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
     }
-    if judged.all_pass:
+    if passed.all():
         report["notes"].append(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "
             "optional, a move toward the target's centre"

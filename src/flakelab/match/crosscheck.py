@@ -48,19 +48,15 @@ class LeftOut:
         return [g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok]
 
     def to_dict(self) -> dict[str, Any]:
+        rows = geometry_rows(self.geometries, self.lab, self.dLCH, self.de00)
+        for row, ok in zip(rows.values(), self.passed, strict=True):
+            row["pass"] = bool(ok)
         return {
             "model": self.model,
             "model_id": self.model_id,
             "passes": not self.failing,
             "failing_geometries": self.failing,
-            "geometries": {
-                g: row | {"pass": bool(ok)}
-                for (g, row), ok in zip(
-                    geometry_rows(self.geometries, self.lab, self.dLCH, self.de00).items(),
-                    self.passed,
-                    strict=True,
-                )
-            },
+            "geometries": rows,
         }
 
 
@@ -81,15 +77,9 @@ def predict_left_out(
     lab = reflectance_to_Lab(R[:, rows])
     de00 = delta_E(target_lab[None], lab)
     dlch = delta_LCH(target_lab[None], lab)
+    passed = tolerance.passes(left_out, de00=de00, dLCH=dlch)  # [candidates, geometries]
+    model_id = getattr(other, "model_id", other.name)
     return [
-        LeftOut(
-            other.name,
-            getattr(other, "model_id", other.name),
-            tuple(left_out),
-            lab[k],
-            dlch[k],
-            de00[k],
-            tolerance.passes(left_out, de00=de00[k], dLCH=dlch[k]),
-        )
+        LeftOut(other.name, model_id, tuple(left_out), lab[k], dlch[k], de00[k], passed[k])
         for k in range(len(candidates))
     ]

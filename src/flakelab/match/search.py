@@ -124,6 +124,10 @@ class Candidate:
         )
 
     def to_dict(self) -> dict[str, Any]:
+        rows = geometry_rows(self.geometries, self.lab, self.dLCH, self.de00)
+        if self.spread is not None:
+            for row, spread in zip(rows.values(), self.spread, strict=True):
+                row["model_spread"] = round(float(spread), 3)
         return {
             "recipe": {k: round(v, 6) for k, v in self.fractions.items()},
             "model": self.model,
@@ -133,13 +137,7 @@ class Candidate:
             "failing_geometries": self.failing,
             "de00_max": float(self.de00.max()),
             "de00_mean": float(self.de00.mean()),
-            "geometries": {
-                g: row
-                | ({} if self.spread is None else {"model_spread": round(float(self.spread[i]), 3)})
-                for i, (g, row) in enumerate(
-                    geometry_rows(self.geometries, self.lab, self.dLCH, self.de00).items()
-                )
-            },
+            "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
         }
 
