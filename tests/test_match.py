@@ -12,9 +12,9 @@ import pytest
 import torch
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E
+from flakelab.core.difference import delta_E, delta_E_CIE2000
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
-from flakelab.core.tolerance import tolerance_preset
+from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.io import read_library, read_measurement
 from flakelab.match.correction import (
     NOISE_SD,
@@ -106,6 +106,20 @@ def test_out_of_gamut_target_says_it_fails_and_where(km):
     assert not best.passes and best.failing == ["45as45"]
     assert result.notes and "45as45" in result.notes[0]
     assert set(best.fractions) <= {n for n, ok in zip(km.toners, allowed, strict=True) if ok}
+
+
+def test_candidates_are_judged_with_the_tolerance_s_weights(km):
+    """A tolerance file's kL, kC, kH weigh the candidates' ΔE00 and verdicts, as in compare."""
+    weighted = Tolerance("lightness-weighted", Limit(de00=1.0), kL=2.0, kC=1.0, kH=1.0)
+    green = reflect(km, mixture(km, {"Titanium White": 0.7, "Phthalo Green (Blue Shade)": 0.3}))
+    allowed = np.array(["Red" in n or "White" in n for n in km.toners])
+    result = match(green[0], km, allowed=allowed, tolerance=weighted,
+                   settings=MatchSettings(candidates=2))  # fmt: skip
+    for candidate in result.candidates:
+        expected = delta_E_CIE2000(candidate.target_lab, candidate.lab, kL=2.0)
+        np.testing.assert_allclose(candidate.de00, expected, rtol=1e-9)
+        assert not np.allclose(expected, delta_E(candidate.target_lab, candidate.lab))
+        assert candidate.passes == bool(np.all(expected <= 1.0))
 
 
 def test_correction_moves_the_sprayout_onto_the_target(km):

@@ -15,6 +15,7 @@ from flakelab.cli.common import (
     ConditionsOption,
     JsonOption,
     SampleOption,
+    ToleranceOption,
     check_figure_file,
     console,
     draw_side_by_side,
@@ -107,12 +108,7 @@ def inspect(
 def compare(
     reference: Annotated[Path | None, typer.Argument(help="Target / standard measurement.")] = None,
     sample: Annotated[Path | None, typer.Argument(help="Sample (spray-out) measurement.")] = None,
-    tolerance: Annotated[
-        str,
-        typer.Option(
-            "--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or TOML/JSON file."
-        ),
-    ] = "refinish",
+    tolerance: ToleranceOption = "refinish",
     reference_sample: Annotated[str | None, typer.Option("--reference-sample")] = None,
     sample_name: Annotated[str | None, typer.Option("--sample-name")] = None,
     conditions: ConditionsOption = "D65/10",

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh
-from flakelab.core.difference import delta_E, delta_E_CIE2000, delta_LCH
+from flakelab.core.difference import delta_E, delta_E_CIE2000
 from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance, tolerance_preset
@@ -147,8 +147,7 @@ def compare(
         )
     ref, smp = reference.select(common), sample.select(common)
     lab_ref, lab_smp = ref.lab(conditions), smp.lab(conditions)
-    de00 = delta_E_CIE2000(lab_ref, lab_smp, kL=tolerance.kL, kC=tolerance.kC, kH=tolerance.kH)
-    dLCH = delta_LCH(lab_ref, lab_smp)
+    de00, dLCH, passed = tolerance.judge(common, lab_ref, lab_smp)
     return Comparison(
         reference=reference,
         sample=sample,
@@ -158,7 +157,7 @@ def compare(
         dLCH=dLCH,
         de00=de00,
         de_other={m: delta_E(lab_ref, lab_smp, method=m) for m in also},
-        passed=tolerance.passes(common, de00=de00, dLCH=dLCH),
+        passed=passed,
         tolerance=tolerance,
         conditions=conditions,
     )

@@ -28,6 +28,7 @@ __all__ = [
     "parse_geometry",
     "parse_geometries",
     "instrument_geometries",
+    "instrument_name",
     "directions",
     "refract_into_coating",
     "flake_angles",
@@ -137,14 +138,20 @@ readings are part of every common multi-angle instrument's set (benchmarks/instr
 an MA-T12 target is matched no worse with it than with the MA-T12 model)."""
 
 
-def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
-    """Geometries of a named instrument (``byk-mac-i``, ``ma-t6``, ``ma-t12``, ``five-angle``)."""
+def instrument_name(instrument: str) -> str:
+    """The key of :data:`INSTRUMENT_GEOMETRIES` a user's spelling names (``MA-T12``, ``ma_t12``
+    → ``ma-t12``), as cases and models record it."""
     key = instrument.strip().lower().replace(" ", "-").replace("_", "-")
     if key not in INSTRUMENT_GEOMETRIES:
         raise ValueError(
             f"expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got instrument {instrument!r}"
         )
-    return parse_geometries(INSTRUMENT_GEOMETRIES[key])
+    return key
+
+
+def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
+    """Geometries of a named instrument (``byk-mac-i``, ``ma-t6``, ``ma-t12``, ``five-angle``)."""
+    return parse_geometries(INSTRUMENT_GEOMETRIES[instrument_name(instrument)])
 
 
 def _angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab
 from flakelab.core.geometry import Geometry
+from flakelab.core.spectra import WAVELENGTHS, resample
 
 __all__ = ["Measurement", "TEXTURE_READINGS", "flop_index", "FLOP_GEOMETRIES"]
 
@@ -131,6 +132,18 @@ class Measurement:
         L = self.lab(conditions)[:, 0]
         L15, L45, L110 = (L[self.index(name)] for name in FLOP_GEOMETRIES)
         return float(flop_index(L15, L45, L110))
+
+    def storage_spectra(self, geometries: tuple[Geometry, ...] | list[str]) -> NDArray[np.float64]:
+        """Reflectance ``[G, 31]`` at ``geometries``, in their order, on the storage grid
+        (400–700 nm in 10 nm, resampled by colour-science when the file used another)."""
+        wanted = [g if isinstance(g, Geometry) else Geometry.parse(g) for g in geometries]
+        missing = [g.name for g in wanted if g not in self.geometries]
+        if missing:
+            raise KeyError(f"{self.sample}: no geometries {', '.join(missing)}")
+        rows = [self.geometries.index(g) for g in wanted]
+        if np.array_equal(self.wavelengths, WAVELENGTHS):
+            return self.reflectance[rows].copy()
+        return resample(self.reflectance[rows], self.wavelengths)
 
     def select(self, geometries: tuple[Geometry, ...] | list[str]) -> Measurement:
         """The same measurement restricted to (and ordered as) ``geometries``."""

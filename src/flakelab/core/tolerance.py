@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from flakelab.core.difference import delta_E_CIE2000, delta_LCH
 from flakelab.core.geometry import Geometry
 
 __all__ = ["Limit", "Tolerance", "TOLERANCE_PRESETS", "tolerance_preset"]
@@ -95,6 +96,24 @@ class Tolerance:
         )
         observed = np.concatenate([de00[..., None], dLCH], axis=-1)
         return np.all(observed <= bounds, axis=-1)
+
+    def judge(
+        self, geometries: list[str] | tuple, Lab_reference: NDArray, Lab_sample: NDArray
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """ΔE00 ``[..., geometry]`` with this tolerance's kL, kC, kH, the components
+        ``[..., geometry, (ΔL*, ΔC*, ΔH*)]`` and pass/fail per geometry, of CIELAB arrays
+        ``[..., geometry, 3]`` (they broadcast: one reference against many samples).
+
+        Examples
+        --------
+        >>> tol = Tolerance("lightness", Limit(de00=1.0), kL=2.0)
+        >>> de00, _, passed = tol.judge(["45as45"], [[50.0, 0, 0]], [[51.5, 0, 0]])
+        >>> round(float(de00[0]), 2), bool(passed[0])
+        (0.71, True)
+        """
+        de00 = delta_E_CIE2000(Lab_reference, Lab_sample, kL=self.kL, kC=self.kC, kH=self.kH)
+        dLCH = delta_LCH(Lab_reference, Lab_sample)
+        return de00, dLCH, self.passes(geometries, de00=de00, dLCH=dLCH)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "tolerance") -> Tolerance:

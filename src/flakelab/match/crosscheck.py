@@ -16,7 +16,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E, delta_LCH
 from flakelab.core.tolerance import Tolerance
 from flakelab.match.search import (
     Candidate,
@@ -75,9 +74,7 @@ def predict_left_out(
     x = np.array([recipe_vector(other, c.fractions) for c in candidates])
     R, _ = evaluate_recipes(other, x)
     lab = reflectance_to_Lab(R[:, rows])
-    de00 = delta_E(target_lab[None], lab)
-    dlch = delta_LCH(target_lab[None], lab)
-    passed = tolerance.passes(left_out, de00=de00, dLCH=dlch)  # [candidates, geometries]
+    de00, dlch, passed = tolerance.judge(left_out, target_lab[None], lab)  # [candidates, G]
     model_id = getattr(other, "model_id", other.name)
     return [
         LeftOut(other.name, model_id, tuple(left_out), lab[k], dlch[k], de00[k], passed[k])

@@ -40,7 +40,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E, delta_LCH
+from flakelab.core.difference import delta_E
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -429,17 +429,7 @@ def target_spectra(target, forward) -> tuple[NDArray, dict[str, float], str]:
             f"{target.sample}: geometries {', '.join(missing)} missing: the model "
             f"({forward.name}) needs {', '.join(forward.geometries)}"
         )
-    if target.wavelengths.size != 31 or target.wavelengths[0] != 400:
-        from flakelab.core.spectra import resample
-
-        spectra = resample(target.reflectance, target.wavelengths)
-    else:
-        spectra = target.reflectance
-    return (
-        spectra[[names.index(g) for g in forward.geometries]],
-        dict(target.texture),
-        target.sample,
-    )
+    return target.storage_spectra(forward.geometries), dict(target.texture), target.sample
 
 
 def unused_geometries(target, forward) -> list[str]:
@@ -737,8 +727,7 @@ def _judge(
     spread = model_spread(forward, x[rows], reflectance_to_Lab(R[rows]))
     out = []
     for i, row in enumerate(chosen):
-        dlch = delta_LCH(target_lab, lab[row])
-        passed = tolerance.passes(forward.geometries, de00=de[row], dLCH=dlch)
+        de00, dlch, passed = tolerance.judge(forward.geometries, target_lab, lab[row])
         fractions = {
             forward.toners[j]: float(x[row, j]) for j in np.argsort(-x[row]) if x[row, j] > 0
         }
@@ -749,7 +738,7 @@ def _judge(
                 reflectance=R[row],
                 lab=lab[row],
                 target_lab=target_lab,
-                de00=de[row],
+                de00=de00,
                 dLCH=dlch,
                 texture={}
                 if tex is None
