@@ -6,6 +6,7 @@ import multiprocessing
 import subprocess
 import sys
 from dataclasses import replace
+from datetime import UTC
 
 import numpy as np
 import pytest
@@ -24,8 +25,13 @@ from flakelab.cases.database import (
 )
 from flakelab.cases.exchange import read_cases, write_cases
 from flakelab.cases.generator import World
+from flakelab.cases.record import case_from_readings, judged_outcome
 from flakelab.cases.schema import Base
-from flakelab.io import read_library
+from flakelab.core import compare
+from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
+from flakelab.data import example_path
+from flakelab.io import read_library, read_measurement
+from flakelab.models.training import case_arrays
 
 
 @pytest.fixture(scope="module")
@@ -200,3 +206,50 @@ def test_case_checks_its_fields():
         Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((2, 31)))
     with pytest.raises(CaseError, match="recipe"):
         Case("x", ("45as45",), {"A": -1.0}, np.ones((1, 31)), np.ones((1, 31)))
+
+
+def example_readings():
+    return read_measurement(example_path("target")), read_measurement(example_path("sprayout"))
+
+
+def test_a_recorded_spray_out_is_the_case_of_its_readings():
+    target, sprayout = example_readings()
+    library = read_library(None)
+    grams = {"Al medium": 194.0, "Phthalo blue GS": 16.6, "Carbon black": 3.6}
+    case = case_from_readings(target, sprayout, grams, "MA-T12", shop="Dupont",
+                              tolerance=tolerance_preset("refinish"))  # fmt: skip
+    assert case.instrument == "ma-t12" and case.geometry_names == target.geometry_names
+    np.testing.assert_array_equal(case.target, target.reflectance)
+    np.testing.assert_array_equal(case.sprayout, sprayout.reflectance)
+    assert case.recipe["Al medium"] == pytest.approx(194.0 / 214.2)
+    assert case.created_at == sprayout.measured_at.replace(tzinfo=UTC)
+    assert case.outcome == "accepted" and compare(target, sprayout).all_pass
+    assert case.target_texture == target.texture and not case.synthetic
+    # the training reads it as the generator's cases: the recipe's fractions, the spray-out
+    data = case_arrays([case], library.names)
+    assert data.x[0, library.names.index("Carbon black")] == pytest.approx(3.6 / 214.2)
+    # the same content gives the same id (the database refuses it twice); another shop not
+    again = case_from_readings(target, sprayout, grams, "ma-t12", shop="Dupont", outcome="rejected")
+    other = case_from_readings(target, sprayout, grams, "ma-t12", shop="Martin", outcome="rejected")
+    assert again.case_id == case.case_id != other.case_id
+
+
+def test_a_recorded_outcome_is_judged_as_compare_judges_it():
+    target, sprayout = example_readings()
+    tight = Tolerance("tight", Limit(de00=0.3))
+    case = case_from_readings(target, sprayout, {"Al medium": 1.0}, "five-angle", shop="Dupont",
+                              tolerance=tight)  # fmt: skip
+    expected = compare(target.select(case.geometry_names), sprayout, tight)
+    failing = expected.to_dict()["failing_geometries"]
+    assert failing and case.outcome == "corrected"
+    assert judged_outcome(case.target, case.sprayout, case.geometries, tight)[1] == failing
+    assert case.geometry_names == ("45as15", "45as25", "45as45", "45as75", "45as110")
+
+
+def test_recording_refuses_readings_without_the_instrument_s_geometries():
+    target, sprayout = example_readings()
+    five = sprayout.select(["45as15", "45as25", "45as45", "45as75", "45as110"])
+    with pytest.raises(CaseError, match=r"spray-out: .*no geometries 15as-45, 15as-30.*ma-t12"):
+        case_from_readings(target, five, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="accepted")
+    with pytest.raises(CaseError, match="outcome: expected auto or one of accepted"):
+        case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="ok")

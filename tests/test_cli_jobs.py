@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -86,6 +87,42 @@ def test_correct_refuses_a_bad_recipe(tmp_path):
     run = flakelab("correct", target, "--recipe", recipe, "--sprayed", target, "--tolerance", "x")
     assert run.returncode == 2 and "x: neither a tolerance preset" in run.stderr
     assert "Traceback" not in run.stderr
+
+
+def test_a_shop_records_its_spray_outs_once_each(tmp_path):
+    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
+    from flakelab.io import read_measurement
+
+    db, target, sprayed = tmp_path / "shop.db", example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    args = ("cases", "record", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
+            "-d", str(db))  # fmt: skip
+    run = flakelab(*args, "--shop", "Dupont", "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["outcome"] == "accepted" and report["sprayout_passes"] is True
+    five = INSTRUMENT_GEOMETRIES["five-angle"]
+    assert report["left_out"] == [g for g in INSTRUMENT_GEOMETRIES["ma-t12"] if g not in five]
+    # the same spray-out again is refused and stores nothing
+    again = flakelab(*args, "--shop", "Dupont")
+    assert again.returncode == 2 and "is already recorded" in again.stderr
+    # a recipe with a toner the library lacks names the file and the toner
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"Al medium": 100, "Unobtainium": 5}))
+    run = flakelab(*args[:3], "--recipe", str(bad), *args[5:], "--outcome", "rejected")
+    assert run.returncode == 2 and "bad.json" in run.stderr and "'Unobtainium'" in run.stderr
+    # the shop's name from the environment, the outcome as given, the MA-T12's geometries
+    env = dict(os.environ, FLAKELAB_SHOP="Martin")
+    run = flakelab(*args, "--outcome", "rejected", "-i", "ma-t12", env=env)
+    assert run.returncode == 0, run.stderr
+    assert "Traceback" not in again.stderr + run.stderr
+    stored = {c.shop: c for c in iter_cases(open_database(db))}
+    assert set(stored) == {"Dupont", "Martin"} and stored["Martin"].outcome == "rejected"
+    reading = read_measurement(sprayed)
+    stored_spectra = stored["Dupont"].sprayout  # the database keeps float32
+    np.testing.assert_allclose(stored_spectra, reading.select(five).reflectance, rtol=1e-6)
+    assert stored["Martin"].geometry_names == reading.geometry_names
 
 
 def test_realism_json_reports_the_shop_statistics():

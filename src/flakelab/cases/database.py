@@ -31,6 +31,7 @@ __all__ = [
     "add_cases",
     "iter_cases",
     "count_cases",
+    "case_exists",
     "shop_summary",
     "DatabaseError",
 ]
@@ -43,9 +44,10 @@ class DatabaseError(FlakelabError):
 
 
 def default_url() -> str:
-    """``FLAKELAB_DATABASE_URL`` or a SQLite file in the user's data folder."""
+    """``FLAKELAB_DATABASE_URL`` (a URL or, as ``--database`` takes, a SQLite file) or a
+    SQLite file in the user's data folder."""
     if url := os.environ.get("FLAKELAB_DATABASE_URL"):
-        return url
+        return url_for(url)
     base = Path(os.environ.get("XDG_DATA_HOME", Path.home() / ".local" / "share")) / "flakelab"
     base.mkdir(parents=True, exist_ok=True)
     return f"sqlite:///{base / 'flakelab.db'}"
@@ -160,6 +162,12 @@ def iter_cases(
     with Session(engine) as session:
         for row in session.scalars(query.execution_options(yield_per=batch)):
             yield _case(row)
+
+
+def case_exists(engine: Engine, case_id: str) -> bool:
+    """Whether a case with this id is stored."""
+    with Session(engine) as session:
+        return session.scalar(select(CaseRow.id).where(CaseRow.case_id == case_id)) is not None
 
 
 def count_cases(engine: Engine) -> int:

@@ -64,6 +64,12 @@ ConditionsOption = Annotated[
     str, typer.Option("--conditions", "-c", help="Illuminant/observer, e.g. D65/10, A/10, F11/10.")
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")]
+ToleranceOption = Annotated[
+    str,
+    typer.Option(
+        "--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or TOML/JSON file."
+    ),
+]
 SampleOption = Annotated[
     str | None, typer.Option("--sample", "-s", help="Sample name in a multi-sample file.")
 ]

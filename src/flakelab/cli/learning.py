@@ -16,6 +16,7 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    ToleranceOption,
     check_figure_file,
     console,
     errors,
@@ -102,6 +103,17 @@ def load_cases(source: str) -> list:
     if "://" not in source and not path.exists():
         raise FlakelabError(f"{source}: no such case file or database")
     return list(iter_cases(open_database(source)))
+
+
+def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
+    """Mass fractions in ``library`` order of a recipe file's ``grams``; a toner the library
+    lacks is named with the file."""
+    from flakelab.library import LibraryError
+
+    try:
+        return library.fractions(grams)
+    except LibraryError as error:
+        raise FlakelabError(f"{path}: {error}") from None
 
 
 def shop_cases(source: str, shop: str | None, geometries, since: datetime | None = None) -> list:
@@ -204,6 +216,109 @@ def import_cases(
     engine = open_database(database)
     count = add_cases(engine, cases)
     errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
+
+
+@cases_app.command("record")
+@reports_errors
+def record_case(
+    target: Annotated[Path, typer.Argument(help="Target measurement file (the car).")],
+    recipe: Annotated[
+        Path, typer.Option("--recipe", "-r", help="Recipe JSON {toner: grams} that was sprayed.")
+    ],
+    sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
+    outcome: Annotated[
+        str,
+        typer.Option(
+            help="auto (judged against --tolerance: accepted when the spray-out passes, "
+            "corrected when it goes to a correction), accepted, corrected or rejected."
+        ),
+    ] = "auto",
+    shop: Annotated[
+        str,
+        typer.Option(envvar="FLAKELAB_SHOP", help="Shop name recorded with the case."),
+    ] = "unknown",
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    library: LibraryOption = None,
+    tolerance: ToleranceOption = "refinish",
+    at: Annotated[
+        datetime | None,
+        typer.Option(
+            formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
+            help="When the spray-out was made (UTC).",
+            show_default="the spray-out file's date, else now",
+        ),
+    ] = None,
+    case_id: Annotated[
+        str | None,
+        typer.Option(help="Case id.", show_default="made from the readings and the recipe"),
+    ] = None,
+    database: DatabaseOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Record a spray-out as the shop's own case: target, recipe, spray-out and outcome.
+
+    The case joins the database, where 'cases habits', 'model adapt' and 'train' read it.
+    It is read at the instrument's geometries; the same spray-out recorded twice is refused."""
+    from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
+    from flakelab.cases.record import case_from_readings, judged_outcome
+    from flakelab.io import read_library, read_measurement, read_recipe, read_tolerance
+
+    tol = read_tolerance(tolerance)
+    lib = read_library(library)
+    grams = read_recipe(recipe)
+    fractions = recipe_fractions(lib, grams, recipe)
+    readings = {path: read_measurement(path) for path in (target, sprayed)}
+    case = case_from_readings(
+        readings[target],
+        readings[sprayed],
+        {name: share for name, share in zip(lib.names, fractions.tolist(), strict=True) if share},
+        instrument,
+        shop=shop,
+        outcome=outcome,
+        tolerance=tol,
+        created_at=at and (at if at.tzinfo else at.replace(tzinfo=UTC)),
+        case_id=case_id,
+    )
+    _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol)
+    engine = open_database(database)
+    if case_exists(engine, case.case_id):
+        raise FlakelabError(
+            f"{engine.url}: case {case.case_id} is already recorded (the same readings, recipe "
+            "and shop); nothing was stored"
+        )
+    add_cases(engine, [case])  # a writer between the check and here is refused by the database
+    left_out = [g for g in readings[target].geometry_names if g not in case.geometry_names]
+    report = {
+        "case_id": case.case_id,
+        "shop": case.shop,
+        "instrument": case.instrument,
+        "outcome": case.outcome,
+        "created_at": case.created_at.isoformat(),
+        "tolerance": tol.name,
+        "sprayout_passes": not failing,
+        "sprayout_failing": failing,
+        "recipe": {k: round(v, 6) for k, v in case.recipe.items()},
+        "left_out": left_out,
+        "database": str(engine.url),
+        "cases_in_database": count_cases(engine),
+    }
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    verdict = "passes" if not failing else f"fails {tol.name} at {', '.join(failing)}"
+    console.print(
+        f"recorded case [bold]{case.case_id}[/] for {case.shop!r}: {case.outcome} "
+        f"(the spray-out {verdict}), {case.instrument} at {case.created_at:%Y-%m-%d %H:%M}",
+        highlight=False,
+    )
+    if left_out:
+        console.print(
+            f"[yellow]note:[/] stored at the {case.instrument}'s geometries; the target's "
+            f"{', '.join(left_out)} are not kept (--instrument chooses)",
+            highlight=False,
+        )
+    count = report["cases_in_database"]
+    errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
 
 
 @cases_app.command("export")

@@ -13,6 +13,7 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    ToleranceOption,
     check_figure_file,
     console,
     draw_side_by_side,
@@ -25,6 +26,7 @@ from flakelab.cli.learning import (
     LibraryOption,
     current_forward,
     learned_forward,
+    recipe_fractions,
     since_option,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
@@ -59,9 +61,6 @@ HabitsShopOption = Annotated[
         help="Aim recipes off for this shop's habits as stored in the database "
         "('flakelab cases habits --shop NAME --save').",
     ),
-]
-ToleranceOption = Annotated[
-    str, typer.Option("--tolerance", "-t", help="Preset (refinish, de00-1.0, components) or file.")
 ]
 
 
@@ -124,13 +123,6 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
     return found
 
 
-def _tolerance(spec: str):
-    from flakelab.core.tolerance import TOLERANCE_PRESETS, tolerance_preset
-    from flakelab.io import read_tolerance
-
-    return tolerance_preset(spec) if spec in TOLERANCE_PRESETS else read_tolerance(spec)
-
-
 def match_command(
     target: Annotated[
         str | None,
@@ -187,7 +179,7 @@ def match_command(
     and the model that produced them.
     'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.data import example_path
-    from flakelab.io import read_measurement
+    from flakelab.io import read_measurement, read_tolerance
     from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
     from flakelab.match.search import match
 
@@ -217,7 +209,7 @@ def match_command(
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)
-    tol = _tolerance(tolerance)
+    tol = read_tolerance(tolerance)
     result = match(
         measurement,
         forward,
@@ -457,24 +449,14 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.difference import delta_E, delta_LCH
-    from flakelab.io import read_measurement
-    from flakelab.library import LibraryError
+    from flakelab.io import read_measurement, read_recipe, read_tolerance
     from flakelab.match.correction import correct
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
-    tol = _tolerance(tolerance)
+    tol = read_tolerance(tolerance)
     lib, forward, _ = _setup(library, instrument, model, database, physics)
-    try:
-        grams = json.loads(recipe.read_text())
-    except (OSError, ValueError) as error:
-        raise FlakelabError(f"{recipe}: expected a JSON object toner → grams ({error})") from None
-    if not isinstance(grams, dict):
-        raise FlakelabError(f"{recipe}: expected a JSON object toner → grams")
-    try:
-        x0 = lib.fractions(grams)  # unknown toners, negative or zero amounts: LibraryError
-    except LibraryError as error:
-        raise FlakelabError(f"{recipe}: {error}") from None
+    grams = read_recipe(recipe)
+    x0 = recipe_fractions(lib, grams, recipe)
     total = float(sum(grams.values()))
     target_reading, sprayed_reading = read_measurement(target), read_measurement(sprayed)
     target_R, _, _ = target_spectra(target_reading, forward)
@@ -495,9 +477,8 @@ def correct_command(
         habits=shop_habits,
         model_sd=model_sd,
     )
-    target_lab, sprayed_lab = reflectance_to_Lab(target_R), reflectance_to_Lab(sprayed_R)
-    before = delta_E(target_lab, sprayed_lab)
-    passed = tol.passes(forward.geometries, de00=before, dLCH=delta_LCH(target_lab, sprayed_lab))
+    target_lab = reflectance_to_Lab(target_R)
+    before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
     report = {
         "mode": mode,
         "before_de00": before.round(3).tolist(),
@@ -526,7 +507,8 @@ def correct_command(
         name: round(value, 4) for name, value in correction.application.items()
     }
     report["habits"] = shop_habits and shop_habits.report()
-    report["expected_de00"] = delta_E(target_lab, correction.expected_lab).round(3).tolist()
+    expected, _, _ = tol.judge(forward.geometries, target_lab, correction.expected_lab)
+    report["expected_de00"] = expected.round(3).tolist()
     report["geometries"] = list(forward.geometries)
     if json_output:
         print(json.dumps(report, indent=2))

@@ -1,0 +1,103 @@
+"""A shop's own case from its readings: the target, the recipe sprayed and the spray-out.
+
+This closes the colorist's loop (DESIGN.md §1, step 3): every spray-out that is measured
+joins the case database, where the shop's habits, the adaptation and the next training
+read it. The case is read at one instrument's geometries, on the storage grid, the way
+the generator writes its cases, so that a model of that instrument learns from it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from datetime import UTC, datetime
+
+import numpy as np
+
+from flakelab.cases.case import OUTCOMES, Case, CaseError
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.geometry import instrument_geometries, instrument_name
+from flakelab.core.measurement import Measurement
+from flakelab.core.tolerance import Tolerance
+
+__all__ = ["AUTO_OUTCOME", "case_from_readings", "judged_outcome", "reading_case_id"]
+
+AUTO_OUTCOME = "auto"
+"""Outcome chosen by the tolerance: a passing spray-out is accepted, a failing one goes to
+correction."""
+
+
+def reading_case_id(
+    target: np.ndarray, sprayout: np.ndarray, recipe: Mapping[str, float], shop: str
+) -> str:
+    """An id made from the case's content, so that the same spray-out recorded twice is
+    refused by the database rather than stored twice."""
+    digest = hashlib.sha256()
+    for spectra in (target, sprayout):
+        digest.update(np.round(spectra, 6).astype("<f8").tobytes())
+    digest.update(json.dumps(sorted(recipe.items()), sort_keys=True).encode())
+    digest.update(shop.encode())
+    return f"shop-{digest.hexdigest()[:16]}"
+
+
+def judged_outcome(
+    target: np.ndarray, sprayout: np.ndarray, geometries, tolerance: Tolerance
+) -> tuple[str, list[str]]:
+    """``accepted`` when the spray-out passes ``tolerance`` at every geometry, else
+    ``corrected``; with the geometries that fail."""
+    names = [g.name for g in geometries]
+    _, _, passed = tolerance.judge(names, reflectance_to_Lab(target), reflectance_to_Lab(sprayout))
+    failing = [g for g, ok in zip(names, passed, strict=True) if not ok]
+    return ("corrected" if failing else "accepted"), failing
+
+
+def case_from_readings(
+    target: Measurement,
+    sprayout: Measurement,
+    recipe: Mapping[str, float],
+    instrument: str,
+    *,
+    shop: str,
+    outcome: str = AUTO_OUTCOME,
+    tolerance: Tolerance | None = None,
+    created_at: datetime | None = None,
+    case_id: str | None = None,
+) -> Case:
+    """The case of one spray-out, read at ``instrument``'s geometries.
+
+    ``outcome`` is one of :data:`~flakelab.cases.case.OUTCOMES`, or ``auto`` to judge it
+    against ``tolerance``. ``created_at`` defaults to when the spray-out was measured (the
+    file's date), else now.
+    """
+    instrument = instrument_name(instrument)
+    geometries = instrument_geometries(instrument)
+    names = [g.name for g in geometries]
+    spectra = {}
+    for role, reading in (("target", target), ("spray-out", sprayout)):
+        try:
+            spectra[role] = reading.storage_spectra(names)
+        except KeyError as error:
+            raise CaseError(f"{role}: {error.args[0]}: the {instrument} reads them") from None
+    if outcome == AUTO_OUTCOME:
+        if tolerance is None:
+            raise CaseError("outcome: 'auto' needs a tolerance to judge the spray-out")
+        outcome, _ = judged_outcome(spectra["target"], spectra["spray-out"], geometries, tolerance)
+    elif outcome not in OUTCOMES:
+        raise CaseError(
+            f"outcome: expected {AUTO_OUTCOME} or one of {', '.join(OUTCOMES)}, got {outcome!r}"
+        )
+    when = created_at or sprayout.measured_at or datetime.now(UTC)
+    return Case(
+        case_id=case_id or reading_case_id(spectra["target"], spectra["spray-out"], recipe, shop),
+        geometries=geometries,
+        recipe=recipe,
+        target=spectra["target"],
+        sprayout=spectra["spray-out"],
+        target_texture=target.texture,
+        sprayout_texture=sprayout.texture,
+        instrument=instrument,
+        shop=shop,
+        outcome=outcome,
+        created_at=when,
+    )
