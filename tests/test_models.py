@@ -12,6 +12,7 @@ import torch
 
 from flakelab.cases.database import open_database
 from flakelab.cases.generator import World
+from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.io import read_library
 from flakelab.library import Library
 from flakelab.models.network import ForwardModel, ModelError
@@ -173,6 +174,28 @@ def test_models_trained_side_by_side_train_as_they_would_alone(data):
     untrained = _new_model(data, QUICK, a).predict(data.x[:50])[0]
     np.testing.assert_allclose(alone, beside, rtol=1e-4)
     assert np.abs(alone - untrained).max() > 100 * np.abs(alone - beside).max()
+
+
+def test_cases_without_texture_readings_teach_no_texture(data):
+    """A case whose instrument read no texture adds no texture error: a model that lacks half
+    its cases' texture learns texture as one that has all of it, not dragged toward zero."""
+    rows, held = np.arange(0, 300), np.arange(300, 400)
+    texture = data.texture.copy()
+    texture[rows[::2]] = np.nan
+    half = replace(data, texture=texture)
+    model = _new_model(half, QUICK, rows)
+    spectral = model.spectral_outputs
+    np.testing.assert_allclose(model.y_mean[spectral:], data.texture[rows[1::2]].mean(0))
+    (full,) = _fit_side_by_side(data, [rows], epochs=15)
+    (partial,) = _fit_side_by_side(half, [rows], epochs=15)
+    full_mae = evaluate_model(full, data.subset(held))["texture_mae"]
+    partial_mae = evaluate_model(partial, data.subset(held))["texture_mae"]
+    spread = data.texture[held].std(0)
+    for k, name in enumerate(TEXTURE_READINGS):
+        assert partial_mae[name] < full_mae[name] + 0.25 * spread[k], name
+    # held-out cases that read no texture are left out of its error, not counted as zero
+    unread = evaluate_model(partial, replace(half.subset(held), texture=np.full((100, 8), np.nan)))
+    assert set(unread["texture_mae"].values()) == {None}
 
 
 def test_robust_outlier_rule():

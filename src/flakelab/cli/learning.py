@@ -26,7 +26,7 @@ from flakelab.cli.common import (
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 
-cases_app = typer.Typer(help="Refinish cases: generate, import, export, realism.")
+cases_app = typer.Typer(help="Refinish cases: generate, record, import, export, realism.")
 model_app = typer.Typer(help="Learned forward models: list, evaluate and adapt to a shop.")
 
 DatabaseOption = Annotated[

@@ -109,7 +109,8 @@ class TrainingConfig:
 
 @dataclass(frozen=True)
 class CaseArrays:
-    """Recipes ``x[N, T]``, spray-out reflectance ``R[N, G, 31]``, texture ``tex[N, 8]``."""
+    """Recipes ``x[N, T]``, spray-out reflectance ``R[N, G, 31]``, texture ``tex[N, 8]``
+    (NaN where a case's instrument gave no such reading)."""
 
     x: NDArray
     R: NDArray
@@ -167,7 +168,7 @@ def case_arrays(
             x[index[name]] = amount
         xs.append(x)
         Rs.append(case.sprayout)
-        texs.append([case.sprayout_texture.get(k, 0.0) for k in TEXTURE_READINGS])
+        texs.append([case.sprayout_texture.get(k, np.nan) for k in TEXTURE_READINGS])
         ids.append(case.case_id)
         shops.append(case.shop)
     if not xs:
@@ -228,6 +229,7 @@ def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> Forwa
     y = probe.encode_targets(data.R[rows], data.texture[rows])
     x = probe.features(torch.as_tensor(data.x[rows])).numpy()
     network = build_network(x.shape[1], y.shape[1], config.hidden)
+    y_mean, y_std = _moments_of_readings(y)
     return ForwardModel(
         data.toners,
         data.geometries,
@@ -236,12 +238,22 @@ def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> Forwa
         tuple(config.hidden),
         x.mean(0),
         x.std(0) + 1e-3,
-        y.mean(0),
-        y.std(0) + 1e-3,
+        y_mean,
+        y_std + 1e-3,
         {"config": asdict(config)},
         data.effect,
         config.log_offset,
     )
+
+
+def _moments_of_readings(y: NDArray) -> tuple[NDArray, NDArray]:
+    """Mean and standard deviation of each output over the cases that read it (NaN: not
+    read); 0 and 1 for an output no case reads."""
+    read = ~np.isnan(y)
+    count = read.sum(0)
+    mean = np.where(read, y, 0.0).sum(0) / np.maximum(count, 1)
+    var = np.where(read, (y - mean) ** 2, 0.0).sum(0) / np.maximum(count, 1)
+    return mean, np.where(count > 0, np.sqrt(var), 1.0)
 
 
 def fit(
@@ -281,6 +293,8 @@ def fit(
     generator = torch.Generator().manual_seed(config.seed + len(log))
     x = _stack_rows([_standard_inputs(m, data.x[r]) for m, r in zip(models, rows, strict=True)])
     y = _stack_rows([_standard_targets(m, data, r) for m, r in zip(models, rows, strict=True)])
+    read = (~torch.isnan(y)).to(y.dtype)  # texture a case's instrument did not read: no error
+    y = torch.nan_to_num(y)
     colour_loss = (
         _colour_loss(models, [data.R[r] for r in rows]) if config.colour_weight > 0 else None
     )
@@ -297,7 +311,7 @@ def fit(
             batch = order[:, start : start + config.batch_size]
             optimiser.zero_grad()
             output = network(x[stack, batch])
-            losses = torch.mean((output - y[stack, batch]) ** 2, dim=(1, 2))
+            losses = torch.mean((output - y[stack, batch]) ** 2 * read[stack, batch], dim=(1, 2))
             if colour_loss is not None:
                 losses = losses + config.colour_weight * colour_loss(output, batch)
             losses.sum().backward()
@@ -637,13 +651,7 @@ def evaluate_model(
         "cases": int(x.shape[0]),
         **_de00_summary(de),
         "per_geometry": per_geometry,
-        "texture_mae": dict(
-            zip(
-                TEXTURE_READINGS,
-                np.abs(texture - data.texture).mean(0).round(4).tolist(),
-                strict=True,
-            )
-        ),
+        "texture_mae": _texture_mae(texture, data.texture),
         "predict_seconds": seconds,
     }
     if families is not None:
@@ -656,6 +664,17 @@ def evaluate_model(
             for family in np.unique(families).tolist()
         }
     return report
+
+
+def _texture_mae(predicted: NDArray, measured: NDArray) -> dict[str, float | None]:
+    """Mean absolute error of each texture reading over the cases that read it (None: no
+    case did)."""
+    read = ~np.isnan(measured)
+    error = np.where(read, np.abs(predicted - np.nan_to_num(measured)), 0.0).sum(0)
+    return {
+        name: round(float(total / n), 4) if n else None
+        for name, total, n in zip(TEXTURE_READINGS, error, read.sum(0), strict=True)
+    }
 
 
 def _de00_summary(de: NDArray) -> dict[str, float]:
