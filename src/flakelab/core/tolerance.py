@@ -109,7 +109,7 @@ class Tolerance:
         >>> tol = Tolerance("lightness", Limit(de00=1.0), kL=2.0)
         >>> de00, _, passed = tol.judge(["45as45"], [[50.0, 0, 0]], [[51.5, 0, 0]])
         >>> round(float(de00[0]), 2), bool(passed[0])
-        (0.71, True)
+        (0.75, True)
         """
         de00 = delta_E_CIE2000(Lab_reference, Lab_sample, kL=self.kL, kC=self.kC, kH=self.kH)
         dLCH = delta_LCH(Lab_reference, Lab_sample)
