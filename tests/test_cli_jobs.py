@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from flakelab.data import example_path
+from flakelab.io import read_recipe
 
 
 def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -42,11 +43,17 @@ def test_generate_train_register_list_and_evaluate(tmp_path):
 def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     target, sprayed = example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"
+    corrected = tmp_path / "corrected.json"
     run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
-                   "--json")  # fmt: skip
+                   "--recipe-out", str(corrected), "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert all(v > 0 for v in report["add_g"].values())
+    # the can after the additions: the recipe's grams plus what was added
+    before, after = json.loads(recipe.read_text()), read_recipe(corrected)
+    assert after == pytest.approx(
+        {t: before.get(t, 0) + report["add_g"].get(t, 0) for t in {*before, *report["add_g"]}}
+    )
     # the recipe's own toners, and at most one more, named as such
     new = set(report["add_g"]) - set(json.loads(recipe.read_text()))
     assert new <= {report["new_toner"]}

@@ -8,13 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flakelab.errors import MeasurementFileError
+from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io import (
     FORMATS,
     detect_format,
     read_measurement,
     read_measurements,
+    read_recipe,
     write_measurements,
+    write_recipe,
 )
 
 
@@ -169,3 +171,34 @@ def test_an_atomic_write_names_the_file_asked_for_when_it_cannot_write(tmp_path)
     assert raised.value.filename == str(missing)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["panel.png"]
     assert list((tmp_path / "panel.png").iterdir()) == []
+
+
+def test_a_recipe_file_round_trips_heaviest_first(tmp_path):
+    path = tmp_path / "recipe.json"
+    write_recipe({"Carbon black": 3.6, "Al medium": 194.0, "Phthalo blue GS": 16.6}, path)
+    assert list(read_recipe(path).items()) == [
+        ("Al medium", 194.0),
+        ("Phthalo blue GS", 16.6),
+        ("Carbon black", 3.6),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ('["Al medium", 10]', "expected a JSON object toner → grams"),
+        ("{}", "with at least one toner"),
+        ('{"Al medium": "ten"}', "Al medium: expected grams as a number, got 'ten'"),
+        ('{"Al medium": -3}', "Al medium: expected non-negative grams, got -3"),
+        ('{"Al medium": 0}', "the amounts sum to zero grams"),
+        ('{"Al medium": 10,', "expected a JSON object toner → grams (Expecting"),
+    ],
+)
+def test_bad_recipe_files_name_file_toner_and_problem(tmp_path, text, problem):
+    path = tmp_path / "recipe.json"
+    path.write_text(text)
+    with pytest.raises(FlakelabError, match=r"recipe\.json: ") as raised:
+        read_recipe(path)
+    assert problem in str(raised.value)
+    with pytest.raises(FlakelabError, match="no such recipe file"):
+        read_recipe(tmp_path / "missing.json")

@@ -15,7 +15,7 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, delta_E_CIE2000
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
-from flakelab.io import read_library, read_measurement
+from flakelab.io import read_library, read_measurement, read_recipe
 from flakelab.match.correction import (
     NOISE_SD,
     PERSISTENT_SD,
@@ -305,11 +305,16 @@ def flakelab(*args: str) -> subprocess.CompletedProcess:
 def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_path):
     from matplotlib.image import imread
 
-    picture = tmp_path / "side-by-side.png"
+    picture, recipe = tmp_path / "side-by-side.png", tmp_path / "second.json"
     run = flakelab("match", "--example", "--json", "--quantity", "250g", "--candidates", "2",
-                   "--render", str(picture))  # fmt: skip
+                   "--render", str(picture), "--recipe-out", str(recipe),
+                   "--pick", "2")  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
+    # the second candidate's grams, as correct and cases record read them back
+    written = read_recipe(recipe)
+    assert written == {w["toner"]: w["grams"] for w in report["candidates"][1]["weights_g"]}
+    assert sum(written.values()) == pytest.approx(250.0) and report["recipe_out"]["candidate"] == 2
     assert report["rendering"] == str(picture)
     assert imread(picture).shape[0] > imread(picture).shape[1] / 2  # three bands, stacked
     assert report["geometries"] == ["45as15", "45as25", "45as45", "45as75", "45as110"]

@@ -33,6 +33,14 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 
+RecipeOutOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--recipe-out",
+        help="Write the recipe as a file {toner: grams}, as 'correct --recipe' and "
+        "'cases record --recipe' read it.",
+    ),
+]
 ModelOption = Annotated[
     Path | None,
     typer.Option("--model", "-m", help="Model file (default: current for the instrument)."),
@@ -171,6 +179,10 @@ def match_command(
             "predicted (PNG, PDF or SVG).",
         ),
     ] = None,
+    recipe_out: RecipeOutOption = None,
+    pick: Annotated[
+        int, typer.Option(min=1, max=20, help="The candidate --recipe-out writes.")
+    ] = 1,
     json_output: JsonOption = False,
 ) -> None:
     """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
@@ -184,8 +196,10 @@ def match_command(
     from flakelab.match.search import match
 
     if target == "evaluate":
-        if render is not None:
-            raise FlakelabError("--render: draws the candidates of one target, not the harness")
+        if render is not None or recipe_out is not None:
+            raise FlakelabError(
+                "--render, --recipe-out: for the candidates of one target, not the harness"
+            )
         _evaluate(
             library=library,
             instrument=instrument,
@@ -206,6 +220,8 @@ def match_command(
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
     check_figure_file(render)
+    if pick > candidates:
+        raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)
@@ -236,6 +252,8 @@ def match_command(
         entry["rounding_de00"] = rounding_cost(forward, candidate.fractions, lines)
     report["quantity_g"] = grams
     report["resolution_g"] = resolution
+    if recipe_out is not None:
+        _write_candidate(report, pick, recipe_out)
     if render is not None:
         _render_match(measurement.select(forward.geometries), result, render)
         report["rendering"] = str(render)
@@ -243,6 +261,18 @@ def match_command(
         print(json.dumps(report, indent=2))
         return
     _print_match(report)
+
+
+def _write_candidate(report: dict, pick: int, path: Path) -> None:
+    """``--recipe-out``: candidate ``pick``'s weighed grams as a recipe file."""
+    from flakelab.io import write_recipe
+
+    if pick > len(report["candidates"]):
+        raise FlakelabError(f"--pick: the search found {len(report['candidates'])} candidates")
+    lines = report["candidates"][pick - 1]["weights_g"]
+    write_recipe({ln["toner"]: ln["grams"] for ln in lines if ln["grams"] > 0}, path)
+    report["recipe_out"] = {"file": str(path), "candidate": pick}
+    errors.print(f"wrote candidate #{pick}'s recipe to {path}", highlight=False)
 
 
 def _left_out_model(measurement, forward, library, database: str | None, physics: bool):
@@ -441,6 +471,7 @@ def correct_command(
     tolerance: ToleranceOption = "refinish",
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
+    recipe_out: RecipeOutOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Correct a recipe from its measured spray-out.
@@ -449,7 +480,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.io import read_measurement, read_recipe, read_tolerance
+    from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
@@ -500,6 +531,14 @@ def correct_command(
         report["add_g"] = {k: on_scale(v) for k, v in correction.added.items() if on_scale(v) > 0}
     else:
         report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
+    if recipe_out is not None:  # what the can holds after the additions, or the new recipe
+        corrected = report.get("recipe_g") or {
+            name: round(grams.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
+            for name in {**grams, **report["add_g"]}
+        }
+        write_recipe(corrected, recipe_out)
+        report["recipe_out"] = str(recipe_out)
+        errors.print(f"wrote the corrected recipe to {recipe_out}", highlight=False)
     report["new_toner"] = correction.new_toner
     report["offset_weight"] = offset_weight
     report["model_sd"] = model_sd

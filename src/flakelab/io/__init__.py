@@ -19,7 +19,7 @@ from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.json_document import read_json, write_json
 from flakelab.io.library_file import read_library, write_library
 from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
-from flakelab.io.recipe_file import read_recipe
+from flakelab.io.recipe_file import read_recipe, write_recipe
 from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
@@ -30,6 +30,7 @@ __all__ = [
     "write_measurements",
     "read_tolerance",
     "read_recipe",
+    "write_recipe",
     "read_library",
     "write_library",
 ]

@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 
 from flakelab.errors import FlakelabError
+from flakelab.io.records import write_atomically
 
-__all__ = ["read_recipe"]
+__all__ = ["read_recipe", "write_recipe"]
 
 
 def read_recipe(path: str | PathLike) -> dict[str, float]:
@@ -39,3 +41,12 @@ def read_recipe(path: str | PathLike) -> dict[str, float]:
     if sum(grams.values()) <= 0:
         raise FlakelabError(f"{path}: the amounts sum to zero grams")
     return {str(toner): float(amount) for toner, amount in grams.items()}
+
+
+def write_recipe(grams: Mapping[str, float], path: str | PathLike) -> None:
+    """Write grams per toner, heaviest first, atomically (:func:`read_recipe` reads it)."""
+    if not grams or any(not math.isfinite(g) or g < 0 for g in grams.values()):
+        raise FlakelabError(f"{path}: expected non-negative grams for at least one toner")
+    ordered = {name: round(float(g), 6) for name, g in sorted(grams.items(), key=lambda t: -t[1])}
+    text = json.dumps(ordered, indent=1, ensure_ascii=False) + "\n"
+    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
