@@ -99,7 +99,7 @@ def test_correct_refuses_a_bad_recipe(tmp_path):
 def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
-    from flakelab.io import read_measurement
+    from flakelab.io import read_measurement, write_measurements
 
     db, target, sprayed = tmp_path / "shop.db", example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"
@@ -119,17 +119,24 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     bad.write_text(json.dumps({"Al medium": 100, "Unobtainium": 5}))
     run = flakelab(*args[:3], "--recipe", str(bad), *args[5:], "--outcome", "rejected")
     assert run.returncode == 2 and "bad.json" in run.stderr and "'Unobtainium'" in run.stderr
-    # the shop's name from the environment, the outcome as given, the MA-T12's geometries
+    # the shop's name from the environment, the outcome as given, the MA-T12's geometries,
+    # target and spray-out as two samples of one file
+    both = tmp_path / "both.cxf"
+    target_reading, reading = read_measurement(target), read_measurement(sprayed)
+    write_measurements([target_reading, reading], both)
     env = dict(os.environ, FLAKELAB_SHOP="Martin")
-    run = flakelab(*args, "--outcome", "rejected", "-i", "ma-t12", env=env)
+    run = flakelab("cases", "record", str(both), "--recipe", str(recipe), "--sprayed", str(both),
+                   "--sprayed-sample", reading.sample, "-d", str(db), "--outcome", "rejected",
+                   "-i", "ma-t12", env=env)  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in again.stderr + run.stderr
     stored = {c.shop: c for c in iter_cases(open_database(db))}
     assert set(stored) == {"Dupont", "Martin"} and stored["Martin"].outcome == "rejected"
-    reading = read_measurement(sprayed)
     stored_spectra = stored["Dupont"].sprayout  # the database keeps float32
     np.testing.assert_allclose(stored_spectra, reading.select(five).reflectance, rtol=1e-6)
     assert stored["Martin"].geometry_names == reading.geometry_names
+    np.testing.assert_allclose(stored["Martin"].sprayout, reading.reflectance, rtol=1e-6)
+    np.testing.assert_allclose(stored["Martin"].target, target_reading.reflectance, rtol=1e-6)
 
 
 def test_realism_json_reports_the_shop_statistics():

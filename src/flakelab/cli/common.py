@@ -73,6 +73,13 @@ ToleranceOption = Annotated[
 SampleOption = Annotated[
     str | None, typer.Option("--sample", "-s", help="Sample name in a multi-sample file.")
 ]
+SprayedSampleOption = Annotated[
+    str | None,
+    typer.Option(
+        "--sprayed-sample",
+        help="The spray-out's sample name in a multi-sample file (default: its first).",
+    ),
+]
 
 
 class LoggedProgress(Progress):

@@ -16,6 +16,8 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    SampleOption,
+    SprayedSampleOption,
     ToleranceOption,
     check_figure_file,
     console,
@@ -226,6 +228,8 @@ def record_case(
         Path, typer.Option("--recipe", "-r", help="Recipe JSON {toner: grams} that was sprayed.")
     ],
     sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
+    sample: SampleOption = None,
+    sprayed_sample: SprayedSampleOption = None,
     outcome: Annotated[
         str,
         typer.Option(
@@ -267,10 +271,11 @@ def record_case(
     lib = read_library(library)
     grams = read_recipe(recipe)
     fractions = recipe_fractions(lib, grams, recipe)
-    readings = {path: read_measurement(path) for path in (target, sprayed)}
+    target_reading = read_measurement(target, sample)
+    sprayed_reading = read_measurement(sprayed, sprayed_sample)
     case = case_from_readings(
-        readings[target],
-        readings[sprayed],
+        target_reading,
+        sprayed_reading,
         {name: share for name, share in zip(lib.names, fractions.tolist(), strict=True) if share},
         instrument,
         shop=shop,
@@ -287,7 +292,7 @@ def record_case(
             "and shop); nothing was stored"
         )
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
-    left_out = [g for g in readings[target].geometry_names if g not in case.geometry_names]
+    left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
     report = {
         "case_id": case.case_id,
         "shop": case.shop,

@@ -13,6 +13,8 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    SampleOption,
+    SprayedSampleOption,
     ToleranceOption,
     check_figure_file,
     console,
@@ -139,9 +141,7 @@ def match_command(
     example: Annotated[
         bool, typer.Option("--example", help="Match the shipped example target.")
     ] = False,
-    sample: Annotated[
-        str | None, typer.Option("--sample", "-s", help="Sample in the file.")
-    ] = None,
+    sample: SampleOption = None,
     library: LibraryOption = None,
     quantity: Annotated[str, typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg.")] = "250g",
     resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
@@ -439,6 +439,8 @@ def correct_command(
     target: Annotated[Path, typer.Argument(help="Target measurement file.")],
     recipe: Annotated[Path, typer.Option("--recipe", "-r", help="Recipe JSON {toner: grams}.")],
     sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
+    sample: SampleOption = None,
+    sprayed_sample: SprayedSampleOption = None,
     mode: Annotated[
         str, typer.Option(help="additions (can already mixed) or reformulate.")
     ] = "additions",
@@ -489,7 +491,8 @@ def correct_command(
     grams = read_recipe(recipe)
     x0 = recipe_fractions(lib, grams, recipe)
     total = float(sum(grams.values()))
-    target_reading, sprayed_reading = read_measurement(target), read_measurement(sprayed)
+    target_reading = read_measurement(target, sample)
+    sprayed_reading = read_measurement(sprayed, sprayed_sample)
     target_R, _, _ = target_spectra(target_reading, forward)
     sprayed_R, _, _ = target_spectra(sprayed_reading, forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
