@@ -14,14 +14,16 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, inspect
 
-from flakelab.cases.case import Case, CaseError
+from flakelab.cases.case import Case, CaseError, worst_differences
 from flakelab.cases.database import (
     DatabaseError,
     add_cases,
     count_cases,
     iter_cases,
+    latest_cases,
     migrate,
     open_database,
+    remove_case,
 )
 from flakelab.cases.exchange import read_cases, write_cases
 from flakelab.cases.generator import World
@@ -253,3 +255,32 @@ def test_recording_refuses_readings_without_the_instrument_s_geometries():
         case_from_readings(target, five, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="accepted")
     with pytest.raises(CaseError, match="outcome: expected auto or one of accepted"):
         case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="ok")
+
+
+def test_the_newest_cases_come_first_and_one_can_be_removed(cases, tmp_path):
+    engine = open_database(tmp_path / "cases.db")
+    shops = [replace(c, shop="Dupont" if k % 3 else "Martin") for k, c in enumerate(cases[:12])]
+    add_cases(engine, shops)
+    newest = latest_cases(engine, 4)
+    assert [c.created_at for c in newest] == sorted((c.created_at for c in shops), reverse=True)[:4]
+    martin = latest_cases(engine, 100, shop="Martin")
+    assert [c.case_id for c in martin] == [c.case_id for c in shops[::3]][::-1]
+    removed = remove_case(engine, martin[0].case_id)
+    assert removed.case_id == martin[0].case_id and count_cases(engine) == 11
+    with pytest.raises(CaseError, match="no case 'nope'; nothing was removed"):
+        remove_case(engine, "nope")
+    assert count_cases(engine) == 11
+
+
+def test_worst_differences_are_each_case_s_largest_de00_where_it_lies(cases):
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+
+    target, sprayout = example_readings()  # twelve geometries among five-angle cases
+    twelve = case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x",
+                                outcome="accepted")  # fmt: skip
+    mixed = [*cases[:3], twelve, *cases[3:5]]
+    worst, where = worst_differences(mixed)
+    for case, de, geometry in zip(mixed, worst, where, strict=True):
+        each = delta_E(reflectance_to_Lab(case.target), reflectance_to_Lab(case.sprayout))
+        assert de == pytest.approx(each.max()) and geometry == case.geometry_names[each.argmax()]

@@ -137,6 +137,16 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     assert stored["Martin"].geometry_names == reading.geometry_names
     np.testing.assert_allclose(stored["Martin"].sprayout, reading.reflectance, rtol=1e-6)
     np.testing.assert_allclose(stored["Martin"].target, target_reading.reflectance, rtol=1e-6)
+    # the shop's history, newest first, and one case removed by its id
+    listed = json.loads(flakelab("cases", "list", "-d", str(db), "--json").stdout)["cases"]
+    assert {c["shop"] for c in listed} == {"Dupont", "Martin"}
+    dupont = next(c for c in listed if c["shop"] == "Dupont")
+    assert dupont["case_id"] == report["case_id"] and dupont["worst_de00"] < 0.5
+    run = flakelab("cases", "remove", report["case_id"], "-d", str(db))  # no terminal to ask
+    assert run.returncode == 2 and "confirm with --yes" in run.stderr
+    run = flakelab("cases", "remove", report["case_id"], "--yes", "-d", str(db))
+    assert run.returncode == 0 and f"removed case {report['case_id']}" in run.stderr
+    assert {c.shop for c in iter_cases(open_database(db))} == {"Martin"}
 
 
 def test_realism_json_reports_the_shop_statistics():

@@ -9,12 +9,14 @@ from datetime import UTC, datetime
 import numpy as np
 from numpy.typing import NDArray
 
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
 from flakelab.core.geometry import Geometry, parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 
-__all__ = ["Case", "CaseError", "OUTCOMES"]
+__all__ = ["Case", "CaseError", "OUTCOMES", "worst_differences"]
 
 OUTCOMES = ("accepted", "corrected", "rejected")
 """How a case ended: the spray-out passed, needed a correction, or was given up."""
@@ -81,3 +83,19 @@ class Case:
     @property
     def geometry_names(self) -> tuple[str, ...]:
         return tuple(g.name for g in self.geometries)
+
+
+def worst_differences(cases: list[Case]) -> tuple[np.ndarray, list[str]]:
+    """Each case's largest ΔE00 between target and spray-out, and the geometry where it lies
+    (all cases' geometries in one colour computation)."""
+    counts = np.array([len(c.geometries) for c in cases])
+    targets = np.concatenate([c.target for c in cases])
+    sprayouts = np.concatenate([c.sprayout for c in cases])
+    de = delta_E(reflectance_to_Lab(targets), reflectance_to_Lab(sprayouts))
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    worst = np.maximum.reduceat(de, starts)
+    where = [
+        c.geometry_names[int(np.argmax(de[start : start + len(c.geometries)]))]
+        for c, start in zip(cases, starts, strict=True)
+    ]
+    return worst, where

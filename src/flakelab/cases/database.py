@@ -32,6 +32,8 @@ __all__ = [
     "iter_cases",
     "count_cases",
     "case_exists",
+    "latest_cases",
+    "remove_case",
     "shop_summary",
     "DatabaseError",
 ]
@@ -162,6 +164,27 @@ def iter_cases(
     with Session(engine) as session:
         for row in session.scalars(query.execution_options(yield_per=batch)):
             yield _case(row)
+
+
+def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Case]:
+    """The ``n`` cases made last, newest first, of ``shop`` (None: every shop)."""
+    query = select(CaseRow).order_by(CaseRow.created_at.desc(), CaseRow.id.desc()).limit(n)
+    if shop is not None:
+        query = query.where(CaseRow.shop == shop)
+    with Session(engine) as session:
+        return [_case(row) for row in session.scalars(query)]
+
+
+def remove_case(engine: Engine, case_id: str) -> Case:
+    """Delete the case ``case_id`` (one transaction) and return it; an unknown id is an error
+    and deletes nothing."""
+    with Session(engine) as session, session.begin():
+        row = session.scalar(select(CaseRow).where(CaseRow.case_id == case_id))
+        if row is None:
+            raise CaseError(f"{engine.url}: no case {case_id!r}; nothing was removed")
+        case = _case(row)
+        session.delete(row)
+    return case
 
 
 def case_exists(engine: Engine, case_id: str) -> bool:

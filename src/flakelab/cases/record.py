@@ -21,7 +21,12 @@ from flakelab.core.geometry import instrument_geometries, instrument_name
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance
 
-__all__ = ["AUTO_OUTCOME", "case_from_readings", "judged_outcome", "reading_case_id"]
+__all__ = [
+    "AUTO_OUTCOME",
+    "case_from_readings",
+    "judged_outcome",
+    "reading_case_id",
+]
 
 AUTO_OUTCOME = "auto"
 """Outcome chosen by the tolerance: a passing spray-out is accepted, a failing one goes to

@@ -28,7 +28,9 @@ from flakelab.cli.common import (
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 
-cases_app = typer.Typer(help="Refinish cases: generate, record, import, export, realism.")
+cases_app = typer.Typer(
+    help="Refinish cases: generate, record, list, remove, import, export, realism."
+)
 model_app = typer.Typer(help="Learned forward models: list, evaluate and adapt to a shop.")
 
 DatabaseOption = Annotated[
@@ -324,6 +326,93 @@ def record_case(
         )
     count = report["cases_in_database"]
     errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
+
+
+@cases_app.command("list")
+@reports_errors
+def list_cases(
+    shop: Annotated[str | None, typer.Option(help="Only this shop's cases.")] = None,
+    last: Annotated[int, typer.Option(min=1, help="How many of the newest cases.")] = 20,
+    database: DatabaseOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """The newest cases: when, shop, outcome, recipe and how far each spray-out lay from its
+    target (worst ΔE00 and where)."""
+    from flakelab.cases.case import worst_differences
+    from flakelab.cases.database import latest_cases, open_database
+
+    engine = open_database(database)
+    cases = latest_cases(engine, last, shop=shop)
+    worst, where = worst_differences(cases) if cases else ([], [])
+    rows = [
+        {
+            "case_id": c.case_id,
+            "created_at": c.created_at.isoformat(),
+            "shop": c.shop,
+            "instrument": c.instrument,
+            "outcome": c.outcome,
+            "synthetic": c.synthetic,
+            "recipe": {k: round(v, 6) for k, v in sorted(c.recipe.items(), key=lambda t: -t[1])},
+            "worst_de00": round(float(de), 3),
+            "worst_geometry": g,
+        }
+        for c, de, g in zip(cases, worst, where, strict=True)
+    ]
+    if json_output:
+        print(json.dumps({"database": str(engine.url), "cases": rows}, indent=2))
+        return
+    shops = sorted({row["shop"] for row in rows})
+    whose = f"{shops[0]!r}" if len(shops) == 1 else "every shop"
+    if not rows:
+        errors.print(f"no cases of {shop or 'any shop'!r} in {engine.url}", highlight=False)
+        return
+    table = Table(title=f"Newest {len(rows)} cases of {whose} in {engine.url}")
+    for column in ("made", "case", "outcome", "worst ΔE00"):
+        table.add_column(column, no_wrap=True, justify="right" if "ΔE" in column else "left")
+    table.add_column("recipe (share)")
+    if len(shops) > 1:
+        table.add_column("shop")
+    for row in rows:
+        shares = list(row["recipe"].items())
+        recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:2])
+        cells = [
+            row["created_at"][:16].replace("T", " "),
+            row["case_id"],
+            row["outcome"],
+            f"{row['worst_de00']:.2f} {row['worst_geometry']}",
+            recipe + (f" +{len(shares) - 2}" if len(shares) > 2 else ""),
+        ]
+        if len(shops) > 1:
+            cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
+        table.add_row(*cells)
+    console.print(table)
+
+
+@cases_app.command("remove")
+@reports_errors
+def remove(
+    case_id: Annotated[str, typer.Argument(help="The case to remove ('cases list' shows ids).")],
+    yes: Annotated[bool, typer.Option("--yes", help="Remove without asking.")] = False,
+    database: DatabaseOption = None,
+) -> None:
+    """Remove one case recorded by mistake (the wrong spray-out or recipe)."""
+    import sys
+
+    from flakelab.cases.database import case_exists, open_database, remove_case
+
+    engine = open_database(database)
+    if not case_exists(engine, case_id):
+        raise FlakelabError(f"{engine.url}: no case {case_id!r}; nothing was removed")
+    if not yes:
+        if not sys.stdin.isatty():
+            raise FlakelabError(f"cases remove {case_id}: confirm with --yes")
+        typer.confirm(f"remove case {case_id} from {engine.url}?", abort=True)
+    case = remove_case(engine, case_id)
+    errors.print(
+        f"removed case {case.case_id} ({case.shop}, {case.outcome}, "
+        f"{case.created_at:%Y-%m-%d %H:%M}) from {engine.url}",
+        highlight=False,
+    )
 
 
 @cases_app.command("export")
