@@ -108,3 +108,15 @@ def test_without_validation_every_epoch_runs(model):
     for stage in stages:
         assert [e["epoch"] for e in report["log"] if e["stage"] == stage] == [0, 1, 2]
     assert len(report["log"]) == 3 * model.members
+
+
+def test_cases_with_the_model_s_new_toners_are_refused(model):
+    """A toner the model learned from too few cases standardises to inputs hundreds of s.d.
+    out: adapting on such cases blew the weights up to NaN. Now it is refused, naming it."""
+    world = World(read_library(None), "five-angle")
+    data = generated_case_arrays(world, 40, seed=9)
+    used = {t for t, column in zip(data.toners, data.x.T, strict=True) if column.any()}
+    new = [t for t in model.info["novel_toners"] if t in used]
+    assert new  # the seed draws some
+    with pytest.raises(ModelError, match=f"too few cases \\({', '.join(new)}\\)"):
+        adapt_model(model, data)

@@ -611,6 +611,13 @@ def adapt_model(
         )
     config = config or recorded_config(model)
     data = replace(data, x=_align_toners(model, data), toners=model.toners)
+    used = {t for t, column in zip(model.toners, data.x.T, strict=True) if np.any(column)}
+    novel = [t for t in model.info.get("novel_toners", ()) if t in used]
+    if novel:  # their inputs lie far outside what it learned from: gradients blow up to NaN
+        raise ModelError(
+            f"cases use toners the model knows from too few cases ({', '.join(novel)}); "
+            "leave those cases out of the adaptation, as 'flakelab model adapt' does"
+        )
     new = replace(model, network=copy.deepcopy(model.network), info=copy.deepcopy(model.info))
     log: list[dict] = []
     report = adapt(new, data, np.arange(data.x.shape[0]), config, log, stage, progress)
