@@ -149,6 +149,21 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     assert {c.shop for c in iter_cases(open_database(db))} == {"Martin"}
 
 
+def test_weigh_scales_a_recipe_to_another_can(tmp_path):
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"  # 250 g
+    grams, out = json.loads(recipe.read_text()), tmp_path / "1kg.json"
+    run = flakelab("weigh", str(recipe), "--quantity", "1kg", "--recipe-out", str(out), "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    # 250 g → 1 kg: every amount times four, already on a 0.1 g scale, so rounding costs 0
+    assert read_recipe(out) == pytest.approx({t: 4 * g for t, g in grams.items()})
+    assert report["weights_g"][-1]["cumulative"] == pytest.approx(1000.0)
+    assert report["rounding_de00"] == pytest.approx(0.0, abs=1e-6)
+    small = flakelab("weigh", str(recipe), "--quantity", "5g", "--resolution", "1")
+    assert small.returncode == 2 and "too small to weigh" in small.stderr
+    assert "Carbon black" in small.stderr and "Traceback" not in small.stderr
+
+
 def test_realism_json_reports_the_shop_statistics():
     run = flakelab("cases", "realism", "--n", "60", "--json")
     assert run.returncode == 0, run.stderr

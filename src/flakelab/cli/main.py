@@ -24,7 +24,7 @@ from flakelab.cli.common import (
     reports_errors,
 )
 from flakelab.cli.learning import cases_app, model_app, train
-from flakelab.cli.matching import correct_command, match_command
+from flakelab.cli.matching import correct_command, match_command, weigh_command
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
@@ -241,6 +241,7 @@ def plot(
 
 app.command("match")(reports_errors(match_command))
 app.command("correct")(reports_errors(correct_command))
+app.command("weigh")(reports_errors(weigh_command))
 app.add_typer(cases_app, name="cases")
 app.add_typer(model_app, name="model")
 app.command("train")(reports_errors(train))

@@ -558,6 +558,59 @@ def correct_command(
     _print_correction(report)
 
 
+def weigh_command(
+    recipe: Annotated[Path, typer.Argument(help="Recipe JSON {toner: grams} (any amount).")],
+    quantity: Annotated[str, typer.Option(help="Can size to weigh, e.g. 1kg, 250g.")] = "250g",
+    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
+    library: LibraryOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    model: ModelOption = None,
+    physics: PhysicsOption = False,
+    database: DatabaseOption = None,
+    recipe_out: RecipeOutOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Weigh a recipe for another can: grams per toner at the scale's resolution, cumulative
+    weights in pouring order, and the colour that rounding costs (ΔE00, by the model)."""
+    from flakelab.io import read_recipe, write_recipe
+    from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
+
+    grams = read_recipe(recipe)
+    can = parse_quantity(quantity)
+    lib, forward, _ = _setup(library, instrument, model, database, physics)
+    fractions = recipe_fractions(lib, grams, recipe)
+    shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
+    lines = weigh(shares, can, resolution)
+    report = {
+        "recipe": str(recipe),
+        "quantity_g": can,
+        "resolution_g": resolution,
+        "weights_g": [
+            {"toner": ln.toner, "grams": ln.grams, "cumulative": ln.cumulative} for ln in lines
+        ],
+        "rounding_de00": rounding_cost(forward, shares, lines),
+        "model": forward.name,
+    }
+    if recipe_out is not None:
+        write_recipe({ln.toner: ln.grams for ln in lines}, recipe_out)
+        report["recipe_out"] = str(recipe_out)
+        errors.print(f"wrote the weighed recipe to {recipe_out}", highlight=False)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"{recipe.name} for {can:g} g", box=box.SIMPLE_HEAVY, title_justify="left")
+    for column, justify in (("toner", "left"), ("g", "right"), ("cumul. g", "right")):
+        table.add_column(column, justify=justify)
+    for line in lines:
+        table.add_row(line.toner, f"{line.grams:.1f}", f"{line.cumulative:.1f}")
+    console.print(table)
+    console.print(
+        f"rounding to the scale's {resolution:g} g costs ΔE00 {report['rounding_de00']:.3f} "
+        f"({forward.name})",
+        highlight=False,
+    )
+
+
 def _print_correction(report: dict) -> None:
     """The correction as a colorist reads it: what to weigh, then the colour before/after."""
     grams = report.get("add_g", report.get("recipe_g", {}))
