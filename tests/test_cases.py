@@ -253,6 +253,8 @@ def test_recording_refuses_readings_without_the_instrument_s_geometries():
     five = sprayout.select(["45as15", "45as25", "45as45", "45as75", "45as110"])
     with pytest.raises(CaseError, match=r"spray-out: .*no geometries 15as-45, 15as-30.*ma-t12"):
         case_from_readings(target, five, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="accepted")
+    with pytest.raises(CaseError, match="reads exactly as the target .*same reading twice"):
+        case_from_readings(target, target, {"Al medium": 1.0}, "ma-t12", shop="x")
     with pytest.raises(CaseError, match="outcome: expected auto or one of accepted"):
         case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="ok")
 

@@ -84,6 +84,11 @@ def case_from_readings(
             spectra[role] = reading.storage_spectra(names)
         except KeyError as error:
             raise CaseError(f"{role}: {error.args[0]}: the {instrument} reads them") from None
+    if np.array_equal(spectra["target"], spectra["spray-out"]):
+        raise CaseError(
+            f"spray-out: {sprayout.sample!r} reads exactly as the target {target.sample!r}: the "
+            "same reading twice (in one file, name the spray-out's sample)"
+        )
     if outcome == AUTO_OUTCOME:
         if tolerance is None:
             raise CaseError("outcome: 'auto' needs a tolerance to judge the spray-out")
