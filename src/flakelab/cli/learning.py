@@ -29,7 +29,7 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 
 cases_app = typer.Typer(
-    help="Refinish cases: generate, record, list, remove, import, export, realism."
+    help="Refinish cases: generate, record, list, remove, import, export; realism, habits, shops."
 )
 model_app = typer.Typer(help="Learned forward models: list, evaluate and adapt to a shop.")
 
@@ -336,8 +336,10 @@ def list_cases(
     database: DatabaseOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """The newest cases: when, shop, outcome, recipe and how far each spray-out lay from its
-    target (worst ΔE00 and where)."""
+    """The newest cases: outcome, recipe and each spray-out's worst ΔE00 from its target.
+
+    Newest first, with when each was made, its id (for 'cases remove') and the geometry of
+    the worst ΔE00."""
     from flakelab.cases.case import worst_differences
     from flakelab.cases.database import latest_cases, open_database
 
@@ -503,8 +505,10 @@ def habits(
     ] = True,
     json_output: JsonOption = False,
 ) -> None:
-    """A shop's habits from its spray-outs: mean film build, flake alignment and instrument
-    gain against the model's cases (by the physics of application)."""
+    """A shop's habits from its spray-outs: film build, flake alignment, instrument gain.
+
+    Each as the shop's mean against the model's cases, read through the physics of
+    application."""
     from flakelab.cases.database import open_database
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,

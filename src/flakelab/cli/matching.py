@@ -570,8 +570,10 @@ def weigh_command(
     recipe_out: RecipeOutOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Weigh a recipe for another can: grams per toner at the scale's resolution, cumulative
-    weights in pouring order, and the colour that rounding costs (ΔE00, by the model)."""
+    """Weigh a recipe for another can, and what rounding to the scale costs in colour.
+
+    Grams per toner at the scale's resolution, cumulative weights in pouring order, and the
+    ΔE00 between the exact and the weighed recipe, both predicted by the model."""
     from flakelab.io import read_recipe, write_recipe
     from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
 
