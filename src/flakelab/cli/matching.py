@@ -43,6 +43,8 @@ RecipeOutOption = Annotated[
         "'cases record --recipe' read it.",
     ),
 ]
+QuantityOption = Annotated[str, typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg.")]
+ResolutionOption = Annotated[float, typer.Option(help="Scale resolution in grams.")]
 ModelOption = Annotated[
     Path | None,
     typer.Option("--model", "-m", help="Model file (default: current for the instrument)."),
@@ -143,8 +145,8 @@ def match_command(
     ] = False,
     sample: SampleOption = None,
     library: LibraryOption = None,
-    quantity: Annotated[str, typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg.")] = "250g",
-    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
+    quantity: QuantityOption = "250g",
+    resolution: ResolutionOption = 0.1,
     tolerance: ToleranceOption = "refinish",
     candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
@@ -449,7 +451,7 @@ def correct_command(
     model: ModelOption = None,
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
-    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
+    resolution: ResolutionOption = 0.1,
     offset_weight: Annotated[
         float | None,
         typer.Option(
@@ -560,8 +562,8 @@ def correct_command(
 
 def weigh_command(
     recipe: Annotated[Path, typer.Argument(help="Recipe JSON {toner: grams} (any amount).")],
-    quantity: Annotated[str, typer.Option(help="Can size to weigh, e.g. 1kg, 250g.")] = "250g",
-    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
+    quantity: QuantityOption = "250g",
+    resolution: ResolutionOption = 0.1,
     library: LibraryOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     model: ModelOption = None,
