@@ -10,8 +10,10 @@ import sys
 import numpy as np
 import pytest
 
+from flakelab.core import compare
+from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.data import example_path
-from flakelab.io import read_recipe
+from flakelab.io import read_measurement, read_recipe
 
 
 def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -63,6 +65,15 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     assert max(report["before_de00"]) < 1.0 and report["sprayout_passes"] is True
     assert any("already passes refinish" in note for note in report["notes"])
     assert any("left out of the correction: the target's 15as-45" in n for n in report["notes"])
+    # expected at those seven too, by the MA-T12 model; the spray-out's ΔE00 there as compare's
+    left_out = report["left_out"]
+    assert list(left_out["geometries"]) == [g for g in INSTRUMENT_GEOMETRIES["ma-t12"]
+                                            if g not in report["geometries"]]  # fmt: skip
+    assert left_out["model_id"].startswith("demo-ma-t12")
+    measured = compare(read_measurement(target), read_measurement(sprayed))
+    assert left_out["sprayout_de00"] == pytest.approx(
+        [measured.de00[measured.geometries.index(g)] for g in left_out["geometries"]], abs=1e-3
+    )
     tight = tmp_path / "tight.toml"
     tight.write_text('name = "tight"\n[default]\nde00 = 0.3\n')
     run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
@@ -98,8 +109,7 @@ def test_correct_refuses_a_bad_recipe(tmp_path):
 
 def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     from flakelab.cases.database import iter_cases, open_database
-    from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
-    from flakelab.io import read_measurement, write_measurements
+    from flakelab.io import write_measurements
 
     db, target, sprayed = tmp_path / "shop.db", example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"

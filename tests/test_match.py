@@ -433,6 +433,39 @@ def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_th
     )
 
 
+def test_a_correction_is_expected_at_the_geometries_it_left_out_as_their_model_moves_it(hybrid):
+    """Where the spray-out is exactly what the other model predicts for the recipe sprayed,
+    the correction's expected result there is that model's prediction for the corrected
+    recipe; with the recipe unchanged, the spray-out itself."""
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.data import example_path
+    from flakelab.match.crosscheck import expected_left_out
+    from flakelab.match.forward import PhysicsForward
+
+    library, target = read_library(None), read_measurement(example_path("target"))
+    other = PhysicsForward(library, instrument_geometries("ma-t12"))
+    before = {"Al medium": 0.8, "Phthalo blue GS": 0.15, "Carbon black": 0.05}
+    after = {"Al medium": 0.78, "Phthalo blue GS": 0.17, "Carbon black": 0.05}
+    R = reflect(other, np.array([recipe_vector(other, r) for r in (before, after)]))
+    sprayed = Measurement("sprayed", target.geometries, WAVELENGTHS, R[0])
+    refinish = tolerance_preset("refinish")
+    sprayed_de00, expected = expected_left_out(
+        target, sprayed, before, after, hybrid, other, refinish
+    )
+    left_out = [g for g in target.geometry_names if g not in hybrid.geometries]
+    rows = [other.geometries.index(g) for g in left_out]
+    target_lab = reflectance_to_Lab(target.storage_spectra(left_out))
+    assert expected.geometries == tuple(left_out)
+    np.testing.assert_allclose(expected.lab, reflectance_to_Lab(R[1, rows]), atol=1e-6)
+    np.testing.assert_allclose(sprayed_de00, delta_E(target_lab, reflectance_to_Lab(R[0, rows])))
+    _, unchanged = expected_left_out(target, sprayed, before, before, hybrid, other, refinish)
+    np.testing.assert_allclose(unchanged.de00, sprayed_de00, atol=1e-9)
+    # a spray-out read at the five geometries alone leaves nothing to expect
+    five = sprayed.select(hybrid.geometries)
+    assert expected_left_out(target, five, before, after, hybrid, other, refinish) is None
+
+
 def test_match_refuses_bad_input(tmp_path):
     bad = tmp_path / "car.cxf"
     bad.write_text("<not cxf")

@@ -486,6 +486,7 @@ def correct_command(
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct
+    from flakelab.match.crosscheck import expected_left_out
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
     tol = read_tolerance(tolerance)
@@ -554,6 +555,17 @@ def correct_command(
     expected, _, _ = tol.judge(forward.geometries, target_lab, correction.expected_lab)
     report["expected_de00"] = expected.round(3).tolist()
     report["geometries"] = list(forward.geometries)
+    other = (
+        None if shop_habits else _left_out_model(target_reading, forward, lib, database, physics)
+    )
+    found = other and expected_left_out(
+        target_reading, sprayed_reading, fractions, correction.fractions, forward, other, tol
+    )
+    if found:
+        sprayed_there, expected_there = found
+        report["left_out"] = expected_there.to_dict() | {
+            "sprayout_de00": sprayed_there.round(3).tolist()
+        }
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -615,6 +627,25 @@ def weigh_command(
     )
 
 
+def _left_out_correction_table(left_out: dict) -> Table:
+    """The spray-out and the correction's expected result at the geometries it left out."""
+    names = list(left_out["geometries"])
+    table = Table(box=box.SIMPLE, show_header=True)
+    table.add_column("ΔE00")
+    for name in names:
+        table.add_column(name, justify="right")
+    failing = set(left_out["failing_geometries"])
+    table.add_row("spray-out*", *(f"{v:.2f}" for v in left_out["sprayout_de00"]))
+    table.add_row(
+        "expected*",
+        *(
+            f"[red]{row['dE00']:.2f}[/]" if g in failing else f"{row['dE00']:.2f}"
+            for g, row in left_out["geometries"].items()
+        ),
+    )
+    return table
+
+
 def _print_correction(report: dict) -> None:
     """The correction as a colorist reads it: what to weigh, then the colour before/after."""
     grams = report.get("add_g", report.get("recipe_g", {}))
@@ -642,6 +673,14 @@ def _print_correction(report: dict) -> None:
     geo.add_row("expected", *(f"{v:.2f}" for v in report["expected_de00"]))
     console.print(table)
     console.print(geo)
+    if left_out := report.get("left_out"):
+        console.print(_left_out_correction_table(left_out))
+        console.print(
+            "* not corrected for: the target's other geometries; expected there: the spray-out "
+            f"as measured, moved by what the model {left_out['model_id']} predicts the "
+            "correction does",
+            highlight=False,
+        )
     application = report["spray_application"]
     if application is None:
         assumed = f"{report['offset_weight']:.0%} of the spray-out's offset from the model persists"

@@ -26,7 +26,7 @@ from flakelab.match.search import (
     unused_geometries,
 )
 
-__all__ = ["LeftOut", "predict_left_out"]
+__all__ = ["LeftOut", "predict_left_out", "expected_left_out"]
 
 
 @dataclass(frozen=True)
@@ -80,3 +80,38 @@ def predict_left_out(
         LeftOut(other.name, model_id, tuple(left_out), lab[k], dlch[k], de00[k], passed[k])
         for k in range(len(candidates))
     ]
+
+
+def expected_left_out(
+    target,
+    sprayed,
+    before: dict[str, float],
+    after: dict[str, float],
+    forward,
+    other,
+    tolerance: Tolerance,
+) -> tuple[NDArray, LeftOut] | None:
+    """A correction's expected result at the geometries of the ``target`` reading that
+    ``forward`` left out, where ``other`` predicts and the ``sprayed`` reading measured: the
+    spray-out as measured there, moved by what ``other`` predicts the change of recipe from
+    ``before`` to ``after`` does. The whole offset there is taken to persist (splitting off
+    this spray's application would need the correction's model of those geometries).
+    Returns the spray-out's ΔE00 there and the expected result; None where there are none."""
+    read = set(sprayed.geometry_names)
+    left_out = [
+        g for g in unused_geometries(target, forward) if g in other.geometries and g in read
+    ]
+    if not left_out:
+        return None
+    target_lab = reflectance_to_Lab(target.storage_spectra(left_out))
+    sprayed_lab = reflectance_to_Lab(sprayed.storage_spectra(left_out))
+    x = np.array([recipe_vector(other, before), recipe_vector(other, after)])
+    R, _ = evaluate_recipes(other, x)
+    lab = reflectance_to_Lab(R[:, [list(other.geometries).index(g) for g in left_out]])
+    expected = sprayed_lab + lab[1] - lab[0]
+    sprayed_de00, _, _ = tolerance.judge(left_out, target_lab, sprayed_lab)
+    de00, dlch, passed = tolerance.judge(left_out, target_lab, expected)
+    model_id = getattr(other, "model_id", other.name)
+    return sprayed_de00, LeftOut(
+        other.name, model_id, tuple(left_out), expected, dlch, de00, passed
+    )
