@@ -478,6 +478,12 @@ def test_match_refuses_bad_input(tmp_path):
     assert not (tmp_path / "side-by-side.bmp").exists()
     run = flakelab("match", "evaluate", "--render", str(tmp_path / "side-by-side.png"))
     assert run.returncode == 2 and "--render" in run.stderr
+    # an output file that cannot be written is refused before the search, not after it
+    run = flakelab("match", "--example", "--recipe-out", str(tmp_path / "no" / "r.json"))
+    assert run.returncode == 2 and f"--recipe-out: {tmp_path / 'no' / 'r.json'}" in run.stderr
+    assert "candidates" not in run.stdout
+    run = flakelab("match", "--example", "--pick", "4")
+    assert run.returncode == 2 and "--pick: expected one of the 3 candidates" in run.stderr
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
     run = flakelab("match", "--example", "--library", str(empty))

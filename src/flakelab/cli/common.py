@@ -7,6 +7,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from datetime import timedelta
+from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import typer
@@ -133,12 +134,21 @@ def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iter
             bar.advance(task)
 
 
-def check_figure_file(path) -> None:
-    """A figure file's suffix, checked before any work (nothing to check without one)."""
+def check_output_file(path, option: str) -> None:
+    """An output file's folder exists, checked before any work (nothing to check without
+    a file): a long job never ends in a file it cannot write."""
+    if path is not None and not Path(path).resolve().parent.is_dir():
+        raise FlakelabError(f"{option}: {path}: no folder {Path(path).resolve().parent}")
+
+
+def check_figure_file(path, option: str = "--render") -> None:
+    """A figure file's suffix and folder, checked before any work (nothing to check without
+    one)."""
     if path is not None:
         from flakelab.render.plots import figure_format
 
         figure_format(path)
+        check_output_file(path, option)
 
 
 def draw_side_by_side(readings, labels: list[str], path, title: str, **options) -> None:

@@ -521,7 +521,7 @@ def habits(
     )
     from flakelab.models.training import case_arrays
 
-    check_figure_file(plot)
+    check_figure_file(plot, "--plot")
     lib, forward = learned_forward(library, instrument, model, database)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)

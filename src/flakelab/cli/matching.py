@@ -17,6 +17,7 @@ from flakelab.cli.common import (
     SprayedSampleOption,
     ToleranceOption,
     check_figure_file,
+    check_output_file,
     console,
     draw_side_by_side,
     errors,
@@ -222,6 +223,7 @@ def match_command(
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
     check_figure_file(render)
+    check_output_file(recipe_out, "--recipe-out")
     if pick > candidates:
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     lib, forward, effect = _setup(library, instrument, model, database, physics)
@@ -490,6 +492,7 @@ def correct_command(
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
     tol = read_tolerance(tolerance)
+    check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     grams = read_recipe(recipe)
     x0 = recipe_fractions(lib, grams, recipe)
@@ -593,6 +596,7 @@ def weigh_command(
 
     grams = read_recipe(recipe)
     can = parse_quantity(quantity)
+    check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
