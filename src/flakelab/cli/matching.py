@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from datetime import datetime
 from pathlib import Path
 from typing import Annotated
@@ -250,9 +251,7 @@ def match_command(
                 entry["left_out"] = left_out.to_dict()
     for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
         lines = weigh(candidate.fractions, grams, resolution)
-        entry["weights_g"] = [
-            {"toner": ln.toner, "grams": ln.grams, "cumulative": ln.cumulative} for ln in lines
-        ]
+        entry["weights_g"] = [asdict(ln) for ln in lines]
         entry["rounding_de00"] = rounding_cost(forward, candidate.fractions, lines)
     report["quantity_g"] = grams
     report["resolution_g"] = resolution
@@ -331,16 +330,10 @@ def _print_match(report: dict) -> None:
             if c["passes"]
             else "[red]FAIL[/] at " + ", ".join(c["failing_geometries"])
         )
-        table = Table(
-            title=f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}",
-            box=box.SIMPLE_HEAVY,
-            title_justify="left",
+        table = _weights_table(
+            f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}",
+            c["weights_g"],
         )
-        table.add_column("toner")
-        table.add_column("g", justify="right")
-        table.add_column("cumul. g", justify="right")
-        for line in c["weights_g"]:
-            table.add_row(line["toner"], f"{line['grams']:.1f}", f"{line['cumulative']:.1f}")
         geo = Table(box=box.SIMPLE, show_header=True)
         keys = ["L", "a", "b", "dL", "dC", "dH", "dE00"]
         columns = ["geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"]
@@ -605,9 +598,7 @@ def weigh_command(
         "recipe": str(recipe),
         "quantity_g": can,
         "resolution_g": resolution,
-        "weights_g": [
-            {"toner": ln.toner, "grams": ln.grams, "cumulative": ln.cumulative} for ln in lines
-        ],
+        "weights_g": [asdict(ln) for ln in lines],
         "rounding_de00": rounding_cost(forward, shares, lines),
         "model": forward.name,
     }
@@ -618,17 +609,23 @@ def weigh_command(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    table = Table(title=f"{recipe.name} for {can:g} g", box=box.SIMPLE_HEAVY, title_justify="left")
-    for column, justify in (("toner", "left"), ("g", "right"), ("cumul. g", "right")):
-        table.add_column(column, justify=justify)
-    for line in lines:
-        table.add_row(line.toner, f"{line.grams:.1f}", f"{line.cumulative:.1f}")
-    console.print(table)
+    console.print(_weights_table(f"{recipe.name} for {can:g} g", report["weights_g"]))
     console.print(
         f"rounding to the scale's {resolution:g} g costs ΔE00 {report['rounding_de00']:.3f} "
         f"({forward.name})",
         highlight=False,
     )
+
+
+def _weights_table(title: str, weights_g: list[dict]) -> Table:
+    """What to pour: grams per toner and the cumulative weight on the scale."""
+    table = Table(title=title, box=box.SIMPLE_HEAVY, title_justify="left")
+    table.add_column("toner")
+    table.add_column("g", justify="right")
+    table.add_column("cumul. g", justify="right")
+    for line in weights_g:
+        table.add_row(line["toner"], f"{line['grams']:.1f}", f"{line['cumulative']:.1f}")
+    return table
 
 
 def _left_out_correction_table(left_out: dict) -> Table:
@@ -638,13 +635,12 @@ def _left_out_correction_table(left_out: dict) -> Table:
     table.add_column("ΔE00")
     for name in names:
         table.add_column(name, justify="right")
-    failing = set(left_out["failing_geometries"])
     table.add_row("spray-out*", *(f"{v:.2f}" for v in left_out["sprayout_de00"]))
     table.add_row(
         "expected*",
         *(
-            f"[red]{row['dE00']:.2f}[/]" if g in failing else f"{row['dE00']:.2f}"
-            for g, row in left_out["geometries"].items()
+            f"{row['dE00']:.2f}" if row["pass"] else f"[red]{row['dE00']:.2f}[/]"
+            for row in left_out["geometries"].values()
         ),
     )
     return table

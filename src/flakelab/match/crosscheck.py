@@ -22,7 +22,6 @@ from flakelab.match.search import (
     evaluate_recipes,
     geometry_rows,
     recipe_vector,
-    target_spectra,
     unused_geometries,
 )
 
@@ -59,6 +58,19 @@ class LeftOut:
         }
 
 
+def _predicted_lab(other, recipes: list[dict[str, float]], geometries: list[str]) -> NDArray:
+    """CIELAB ``[recipes, geometries, 3]`` of ``recipes`` as ``other`` predicts them."""
+    R, _ = evaluate_recipes(other, np.array([recipe_vector(other, r) for r in recipes]))
+    return reflectance_to_Lab(R[:, [list(other.geometries).index(g) for g in geometries]])
+
+
+def _left_out(other, geometries: list[str], lab, dlch, de00, passed) -> LeftOut:
+    return LeftOut(
+        other.name, getattr(other, "model_id", other.name), tuple(geometries), lab, dlch, de00,
+        passed,
+    )  # fmt: skip
+
+
 def predict_left_out(
     candidates: list[Candidate], target, forward, other, tolerance: Tolerance
 ) -> list[LeftOut]:
@@ -68,16 +80,11 @@ def predict_left_out(
     left_out = [g for g in unused_geometries(target, forward) if g in other.geometries]
     if not left_out or not candidates:
         return []
-    rows = [list(other.geometries).index(g) for g in left_out]
-    spectra, _, _ = target_spectra(target, other)
-    target_lab = reflectance_to_Lab(spectra[rows])
-    x = np.array([recipe_vector(other, c.fractions) for c in candidates])
-    R, _ = evaluate_recipes(other, x)
-    lab = reflectance_to_Lab(R[:, rows])
+    target_lab = reflectance_to_Lab(target.storage_spectra(left_out))
+    lab = _predicted_lab(other, [c.fractions for c in candidates], left_out)
     de00, dlch, passed = tolerance.judge(left_out, target_lab[None], lab)  # [candidates, G]
-    model_id = getattr(other, "model_id", other.name)
     return [
-        LeftOut(other.name, model_id, tuple(left_out), lab[k], dlch[k], de00[k], passed[k])
+        _left_out(other, left_out, lab[k], dlch[k], de00[k], passed[k])
         for k in range(len(candidates))
     ]
 
@@ -105,13 +112,8 @@ def expected_left_out(
         return None
     target_lab = reflectance_to_Lab(target.storage_spectra(left_out))
     sprayed_lab = reflectance_to_Lab(sprayed.storage_spectra(left_out))
-    x = np.array([recipe_vector(other, before), recipe_vector(other, after)])
-    R, _ = evaluate_recipes(other, x)
-    lab = reflectance_to_Lab(R[:, [list(other.geometries).index(g) for g in left_out]])
-    expected = sprayed_lab + lab[1] - lab[0]
+    lab_before, lab_after = _predicted_lab(other, [before, after], left_out)
+    expected = sprayed_lab + lab_after - lab_before
     sprayed_de00, _, _ = tolerance.judge(left_out, target_lab, sprayed_lab)
     de00, dlch, passed = tolerance.judge(left_out, target_lab, expected)
-    model_id = getattr(other, "model_id", other.name)
-    return sprayed_de00, LeftOut(
-        other.name, model_id, tuple(left_out), expected, dlch, de00, passed
-    )
+    return sprayed_de00, _left_out(other, left_out, expected, dlch, de00, passed)
