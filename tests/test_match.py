@@ -793,3 +793,115 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     assert kept.candidates[0].in_support and recipe[effect].sum() == 0.0
     assert physics < 0.5 * free_physics and physics < 0.6
     assert not any("extrapolated" in note for note in kept.notes)
+
+
+def test_objective_is_cie94_and_the_plain_multi_angle_one_for_de00_1():
+    """The search's ΔE94 is CIE 116-1995's (colour-science), and aimed at ΔE00 ≤ 1.0
+    everywhere the objective is the plain mean + half the worst ΔE94, to the last bit."""
+    import colour
+
+    from flakelab.core.torch_colour import TorchColour
+    from flakelab.match.objective import MatchObjective
+
+    rng = np.random.default_rng(5)
+    reference = rng.uniform([20, -60, -60], [90, 60, 60], (5, 3))
+    samples = reference + rng.normal(0, 3, (40, 5, 3))
+    ref_t, smp_t = torch.as_tensor(reference), torch.as_tensor(samples)
+    np.testing.assert_allclose(
+        TorchColour.delta_e94(ref_t, smp_t).numpy(),
+        colour.difference.delta_E_CIE1994(reference, samples),
+        rtol=1e-6,
+        atol=1e-5,  # the floor under the root, which keeps a perfect match's gradient finite
+    )
+    geometries = instrument_geometries("five-angle")
+    de = TorchColour.delta_e94(ref_t[None], smp_t)
+    plain = de.mean(dim=1) + 0.5 * de.max(dim=1).values
+    objective = MatchObjective(geometries, tolerance_preset("de00-1.0"))
+    assert torch.equal(objective.loss(ref_t, smp_t), plain)
+
+
+def test_objective_share_is_one_at_each_geometry_s_limit():
+    """A difference exactly at a geometry's limit is a share of 1, for ΔE00 limits (with kL)
+    and component limits alike, in the smooth objective and in the judging."""
+    from flakelab.match.objective import MatchObjective
+
+    geometries = instrument_geometries("five-angle")
+    weighted = Tolerance("w", Limit(de00=1.0), {"45as15": Limit(de00=1.5)}, kL=2.0)
+    for tolerance, move in (
+        (tolerance_preset("refinish"), [1, 0, 0]),  # ΔL* = ΔE00 limit
+        (weighted, [2, 0, 0]),  # ΔL* = kL × limit
+        (tolerance_preset("components"), [0, 1, 0]),  # ΔC* = Δa* here
+    ):
+        bounds = tolerance.bounds(geometries)
+        limit = np.where(np.isfinite(bounds[:, 0]), bounds[:, 0], bounds[:, 2])
+        step = np.outer(limit, move)
+        reference = np.array([50.0, 20.0, 0.0]) - step / 2  # ΔE00's S_L = 1: mean L* is 50
+        sample = reference + step
+        de00, dlch, _ = tolerance.judge(geometries, reference, sample)
+        judged = tolerance.share_of_limit(geometries, de00=de00, dLCH=dlch)
+        np.testing.assert_allclose(judged, 1.0, rtol=1e-9)
+        smooth = MatchObjective(geometries, tolerance).shares_of_limit(
+            torch.as_tensor(reference), torch.as_tensor(sample)[None]
+        )
+        np.testing.assert_allclose(smooth.numpy()[0], 1.0, rtol=1e-5)
+
+
+def test_share_of_limit_passes_exactly_where_the_tolerance_passes():
+    rng = np.random.default_rng(8)
+    geometries = instrument_geometries("five-angle")
+    mixed = Tolerance("mixed", Limit(de00=1.0, dH=0.5), {"45as15": Limit(dL=2.0, dC=1.0)})
+    for tolerance in (*(tolerance_preset(n) for n in ("refinish", "components")), mixed):
+        de00 = rng.uniform(0, 2, (500, len(geometries)))
+        dlch = rng.normal(0, 1, (500, len(geometries), 3))
+        passed = tolerance.passes(geometries, de00=de00, dLCH=dlch)
+        share = tolerance.share_of_limit(geometries, de00=de00, dLCH=dlch)
+        assert np.array_equal(share <= 1.0, passed) and 0 < passed.mean() < 1
+
+
+def test_search_and_correction_aim_at_the_tolerance(km):
+    """A target the allowed toners cannot reach (no brown to dull a white and phthalo blue)
+    forces a trade between lightness, chroma and hue: each tolerance's match, and each
+    tolerance's correction, is the best of the three by that tolerance's own judgement."""
+    parts = {"Titanium White": 0.75, "Phthalo Blue (Green Shade)": 0.15, "Burnt Sienna": 0.10}
+    target = reflect(km, mixture(km, parts))[0]
+    allowed = np.array([n in ("Titanium White", "Phthalo Blue (Green Shade)") for n in km.toners])
+    tolerances = {
+        "plain": tolerance_preset("de00-1.0"),
+        "lightness": Tolerance("lightness", Limit(de00=1.0), kL=2.0),
+        "components": tolerance_preset("components"),
+    }
+    geometries = km.geometries
+
+    def judged(tolerance, target_lab, lab) -> float:
+        de00, dlch, _ = tolerance.judge(geometries, target_lab, lab)
+        return float(tolerance.share_of_limit(geometries, de00=de00, dLCH=dlch).max())
+
+    matched = {
+        name: match(
+            target, km, allowed=allowed, tolerance=tol, settings=MatchSettings(candidates=1)
+        ).candidates[0]  # fmt: skip
+        for name, tol in tolerances.items()
+    }
+    sprayed = reflect(km, mixture(km, {"Titanium White": 0.8, "Phthalo Blue (Green Shade)": 0.2}))
+    recipe = {"Titanium White": 0.8, "Phthalo Blue (Green Shade)": 0.2}
+    corrected = {
+        name: correct(
+            km,
+            target,
+            recipe,
+            sprayed[0],
+            mode="reformulate",
+            extra_toners=0,
+            offset_weight=1.0,
+            tolerance=tol,
+        ).expected_lab  # fmt: skip
+        for name, tol in tolerances.items()
+    }
+    target_lab = reflectance_to_Lab(target)
+    for name, tol in tolerances.items():
+        by_match = {other: judged(tol, target_lab, c.lab) for other, c in matched.items()}
+        assert by_match[name] == pytest.approx(min(by_match.values()), rel=1e-6), (name, by_match)
+        by_correction = {other: judged(tol, target_lab, lab) for other, lab in corrected.items()}
+        assert by_correction[name] == pytest.approx(min(by_correction.values()), rel=1e-6)
+    # the trade is real: the three aims land on three different recipes
+    assert len({round(c.fractions["Titanium White"], 3) for c in matched.values()}) == 3

@@ -149,7 +149,15 @@ def match_command(
     library: LibraryOption = None,
     quantity: QuantityOption = "250g",
     resolution: ResolutionOption = 0.1,
-    tolerance: ToleranceOption = "refinish",
+    tolerance: Annotated[
+        str | None,
+        typer.Option(
+            "--tolerance",
+            "-t",
+            help="Preset (refinish, de00-1.0, components) or TOML/JSON file; the search aims at "
+            "it [default: refinish; evaluate: de00-1.0, ΔE00 ≤ 1.0 at every geometry].",
+        ),
+    ] = None,
     candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     model: ModelOption = None,
@@ -217,6 +225,7 @@ def match_command(
             habits_file=habits,
             shop=shop,
             settings=MatchSettings(model_risk=model_risk),  # the harness's own candidates, seeds
+            tolerance=tolerance,
             json_output=json_output,
         )
         return
@@ -230,7 +239,7 @@ def match_command(
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
     measurement = read_measurement(path, sample)
-    tol = read_tolerance(tolerance)
+    tol = read_tolerance(tolerance or "refinish")
     result = match(
         measurement,
         forward,
@@ -401,9 +410,13 @@ def _evaluate(
     habits_file,
     shop,
     settings,
+    tolerance,
     json_output,
 ):
-    from flakelab.match.evaluate import evaluate_matching, harness_world
+    from flakelab.io import read_tolerance
+    from flakelab.match.evaluate import HARNESS_TOLERANCE, evaluate_matching, harness_world
+
+    tol = read_tolerance(tolerance or HARNESS_TOLERANCE)
 
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     world = harness_world(lib, instrument, world_name)
@@ -420,6 +433,7 @@ def _evaluate(
             novel_targets=novel_targets if forward.novel else 0,
             habits=habits,
             settings=settings,
+            tolerance=tol,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name
@@ -509,6 +523,7 @@ def correct_command(
         extra_toners=extra_toners,
         habits=shop_habits,
         model_sd=model_sd,
+        tolerance=tol,
     )
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))

@@ -81,21 +81,34 @@ class Tolerance:
         name = geometry.name if isinstance(geometry, Geometry) else Geometry.parse(geometry).name
         return self.per_geometry.get(name, self.default)
 
+    def bounds(self, geometries: list[str] | tuple) -> NDArray[np.float64]:
+        """The limits ``[geometry, (ΔE00, |ΔL*|, |ΔC*|, |ΔH*|)]``, ∞ where unchecked."""
+        return np.array(
+            [
+                [np.inf if getattr(lim, k) is None else getattr(lim, k) for k in _LIMIT_FIELDS]
+                for lim in (self.limit(g) for g in geometries)
+            ]
+        )
+
     def passes(
         self, geometries: list[str] | tuple, *, de00: NDArray | list, dLCH: NDArray
     ) -> NDArray[np.bool_]:
         """Pass/fail per geometry given ΔE00 ``[geometry]`` and ``[geometry, (ΔL, ΔC, ΔH)]``."""
-        de00 = np.asarray(de00, dtype=float)
-        dLCH = np.abs(np.asarray(dLCH, dtype=float))
-        limits = [self.limit(g) for g in geometries]
-        bounds = np.array(
-            [
-                [np.inf if getattr(lim, k) is None else getattr(lim, k) for k in _LIMIT_FIELDS]
-                for lim in limits
-            ]
-        )
-        observed = np.concatenate([de00[..., None], dLCH], axis=-1)
-        return np.all(observed <= bounds, axis=-1)
+        return np.all(_observed(de00, dLCH) <= self.bounds(geometries), axis=-1)
+
+    def share_of_limit(
+        self, geometries: list[str] | tuple, *, de00: NDArray | list, dLCH: NDArray
+    ) -> NDArray[np.float64]:
+        """Each geometry's checked quantity furthest from passing, as a share of its limit
+        (≤ 1 passes): what ranks recipes for this tolerance, whatever its limits bound.
+
+        Examples
+        --------
+        >>> tol = Tolerance("shop", Limit(de00=1.0), {"45as15": Limit(de00=2.0)})
+        >>> tol.share_of_limit(["45as15", "45as45"], de00=[1.5, 1.5], dLCH=np.zeros((2, 3)))
+        array([0.75, 1.5 ])
+        """
+        return np.max(_observed(de00, dLCH) / self.bounds(geometries), axis=-1)
 
     def judge(
         self, geometries: list[str] | tuple, Lab_reference: NDArray, Lab_sample: NDArray
@@ -155,6 +168,12 @@ class Tolerance:
             "default": self.default.to_dict(),
             "geometries": {k: v.to_dict() for k, v in self.per_geometry.items()},
         }
+
+
+def _observed(de00: NDArray | list, dLCH: NDArray) -> NDArray[np.float64]:
+    """ΔE00 and |ΔL*|, |ΔC*|, |ΔH*| side by side ``[..., geometry, 4]``, as the limits."""
+    de00 = np.asarray(de00, dtype=float)
+    return np.concatenate([de00[..., None], np.abs(np.asarray(dLCH, dtype=float))], axis=-1)
 
 
 _NEAR_SPECULAR = ("15as-15", "15as15", "45as-15", "45as15")

@@ -50,13 +50,27 @@ class TorchColour:
         return torch.sqrt(TorchColour.delta_e94_squared(lab_ref, lab))
 
     @staticmethod
-    def delta_e94_squared(lab_ref: torch.Tensor, lab: torch.Tensor) -> torch.Tensor:
-        """ΔE94² (plus the floor): what a mean-squared loss needs, without a root to undo."""
+    def lch_differences(
+        lab_ref: torch.Tensor, lab: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """ΔL*, ΔC*ab, ΔH*ab² (clamped at 0) and the reference's C*ab, over ``[..., 3]``."""
         d = lab - lab_ref
         C1 = torch.sqrt((lab_ref[..., 1:] ** 2).sum(-1) + 1e-9)
         C2 = torch.sqrt((lab[..., 1:] ** 2).sum(-1) + 1e-9)
         dC = C2 - C1
-        d2 = d**2
-        dH2 = torch.clamp(d2[..., 1:].sum(-1) - dC**2, min=0.0)
+        dH2 = torch.clamp((d[..., 1:] ** 2).sum(-1) - dC**2, min=0.0)
+        return d[..., 0], dC, dH2, C1
+
+    @staticmethod
+    def delta_e94_squared(
+        lab_ref: torch.Tensor,
+        lab: torch.Tensor,
+        kL: float = 1.0,
+        kC: float = 1.0,
+        kH: float = 1.0,
+    ) -> torch.Tensor:
+        """ΔE94² (plus the floor) with parametric factors ``kL``, ``kC``, ``kH`` (CIE 116-1995):
+        what a mean-squared loss needs, without a root to undo."""
+        dL, dC, dH2, C1 = TorchColour.lch_differences(lab_ref, lab)
         SC, SH = 1 + 0.045 * C1, 1 + 0.015 * C1
-        return d2[..., 0] + (dC / SC) ** 2 + dH2 / SH**2 + 1e-6
+        return dL**2 / kL**2 + (dC / (kC * SC)) ** 2 + dH2 / (kH * SH) ** 2 + 1e-6

@@ -44,10 +44,11 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.torch_colour import TorchColour
+from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
-from flakelab.match.search import evaluate_recipes, multi_angle_loss
+from flakelab.match.objective import MatchObjective
+from flakelab.match.search import evaluate_recipes
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
@@ -91,7 +92,7 @@ NOISE_SD = 0.1
 (``benchmarks/correction.py``, seeds 77 and 78: 0.1 better than 0.05 and 0.2)."""
 
 EXTRA_TONER_GAIN = 0.15
-"""Loss (:func:`~flakelab.match.search.multi_angle_loss`) a toner new to the recipe must save
+"""Loss (:meth:`~flakelab.match.objective.MatchObjective.loss`) a toner new to the recipe must save
 to join."""
 
 NEW_TONER_START = 0.002
@@ -168,7 +169,7 @@ def application_sensitivity(library: Library, x: NDArray, geometries) -> NDArray
     return (lab[:, 0] - lab[:, 1]) / 2
 
 
-def _extra_candidates(forward, colour, x0, target_lab, offset, count) -> list[int]:
+def _extra_candidates(forward, objective, x0, target_lab, offset, count) -> list[int]:
     """Toners outside the recipe whose small addition lowers the loss fastest (the
     directional derivative of the renormalised mix, one backward pass)."""
     candidates = np.flatnonzero(
@@ -177,7 +178,7 @@ def _extra_candidates(forward, colour, x0, target_lab, offset, count) -> list[in
     if not count or not candidates.size:
         return []
     x = x0.clone().requires_grad_(True)
-    multi_angle_loss(colour, target_lab, colour.lab(forward(x)[0]) + offset).sum().backward()
+    objective.loss(target_lab, objective.lab(forward(x)[0]) + offset).sum().backward()
     g = x.grad[0]
     slope = (g - (g * x0[0]).sum()).numpy()
     steepest = candidates[np.argsort(slope[candidates])][:count]
@@ -200,6 +201,7 @@ def correct(
     extra_toners: int = EXTRA_TONERS_TRIED,
     habits: ShopHabits | None = None,
     model_sd: float = MODEL_SD,
+    tolerance: Tolerance | None = None,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
@@ -208,18 +210,20 @@ def correct(
     spray's application (σ_p widened by ``model_sd`` times an ensemble's disagreement,
     unless ``persistent_sd`` fixes it); ``offset_weight`` weights the whole offset instead.
     With the shop's ``habits`` (:func:`~flakelab.match.habits.estimate_habits`) the
-    application is split about the shop's mean: the habits' part of the offset persists."""
+    application is split about the shop's mean: the habits' part of the offset persists.
+    The corrected recipe aims at ``tolerance`` (default ΔE00 ≤ 1.0 at every geometry), as
+    the search does."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
         raise FlakelabError(f"--offset-weight: expected 0 to 1, got {offset_weight}")
-    colour = TorchColour(dtype=forward.dtype)
+    objective = MatchObjective(forward.geometries, tolerance, forward.dtype)
     x_recipe = _vector(forward, recipe)
     x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     with torch.no_grad():
         R0, _ = forward(x0)
-        measured = colour.lab(torch.as_tensor(sprayed, dtype=forward.dtype))
-        raw = (measured - colour.lab(R0)[0]).double().numpy()
+        measured = objective.lab(torch.as_tensor(sprayed, dtype=forward.dtype))
+        raw = (measured - objective.lab(R0)[0]).double().numpy()
     application = None
     if library is None or offset_weight is not None:
         persistent = (OFFSET_WEIGHT if offset_weight is None else offset_weight) * raw
@@ -239,7 +243,16 @@ def correct(
             zip(APPLICATION_PARAMETERS, (float(film), float(np.expm1(spread))), strict=True)
         )
     return _recipe_for_offset(
-        forward, target, x_recipe, persistent, mode, steps, max_addition, extra_toners, application
+        forward,
+        objective,
+        target,
+        x_recipe,
+        persistent,
+        mode,
+        steps,
+        max_addition,
+        extra_toners,
+        application,
     )
 
 
@@ -251,26 +264,28 @@ def aim_off(
     library: Library,
     *,
     steps: int = AIM_STEPS,
+    tolerance: Tolerance | None = None,
 ) -> tuple[NDArray, NDArray]:
     """The recipes ``[K, T]`` that land on ``target`` [G, 31] when sprayed and read with the
     shop's ``habits``, and what they should then measure (L*a*b* ``[K, G, 3]``): each of
     ``recipes[K, T]`` (matches by the model, which knows no habits) reformulated with its own
     toners for the habits' offset at it, which persists as a correction's persistent offset
-    does."""
+    does, aimed at ``tolerance``."""
     R = evaluate_recipes(forward, recipes)[0]
     expected = habits.offset(library, recipes, R, forward.geometries)
-    colour = TorchColour(dtype=forward.dtype)
+    objective = MatchObjective(forward.geometries, tolerance, forward.dtype)
     x0 = torch.as_tensor(recipes, dtype=forward.dtype)
-    target_lab = colour.lab(torch.as_tensor(target, dtype=forward.dtype))
+    target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
     offset = torch.as_tensor(expected, dtype=forward.dtype)
     x, _, lab, _ = _optimise(
-        colour, forward, x0, x0 > 0, target_lab, offset, "reformulate", steps, 0
+        objective, forward, x0, x0 > 0, target_lab, offset, "reformulate", steps, 0
     )
     return x.double().numpy(), lab.double().numpy()
 
 
 def _recipe_for_offset(
     forward,
+    objective: MatchObjective,
     target: NDArray,
     x_recipe: NDArray,
     persistent: NDArray,
@@ -281,16 +296,16 @@ def _recipe_for_offset(
     application: dict[str, float] | None = None,
 ) -> Correction:
     """The recipe near ``x_recipe`` whose prediction plus the ``persistent`` L*a*b* offset
-    ``[G, 3]`` best matches ``target``, with at most one toner joining it."""
-    colour = TorchColour(dtype=forward.dtype)
+    ``[G, 3]`` best matches ``target`` by ``objective``, with at most one toner joining
+    it."""
     x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     offset = torch.as_tensor(persistent, dtype=forward.dtype)
-    target_lab = colour.lab(torch.as_tensor(target, dtype=forward.dtype))
-    extra = _extra_candidates(forward, colour, x0, target_lab, offset, extra_toners)
+    target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
+    extra = _extra_candidates(forward, objective, x0, target_lab, offset, extra_toners)
     used = (x0 > 0).repeat(1 + len(extra), 1)
     used[torch.arange(1, 1 + len(extra)), extra] = True
     final, added, lab, loss = _optimise(
-        colour, forward, x0, used, target_lab, offset, mode, steps, max_addition
+        objective, forward, x0, used, target_lab, offset, mode, steps, max_addition
     )
     loss[1:] += EXTRA_TONER_GAIN
     row = int(np.argmin(loss))
@@ -309,7 +324,7 @@ def _recipe_for_offset(
     )
 
 
-def _optimise(colour, forward, x0, used, target_lab, offset, mode, steps, max_addition):
+def _optimise(objective, forward, x0, used, target_lab, offset, mode, steps, max_addition):
     """Adam over every row of ``used[N, T]`` at once, each from ``x0`` (one row, or one per
     row): new amounts of the used toners (``reformulate``) or additions to ``x0``; returns
     the mixes ``[N, T]``, the additions, L*a*b* with ``offset`` and the loss ``[N]``."""
@@ -331,12 +346,10 @@ def _optimise(colour, forward, x0, used, target_lab, offset, mode, steps, max_ad
 
     for _ in range(steps):
         optimiser.zero_grad()
-        multi_angle_loss(
-            colour, target_lab, colour.lab(forward(mixed())[0]) + offset
-        ).sum().backward()
+        objective.loss(target_lab, objective.lab(forward(mixed())[0]) + offset).sum().backward()
         optimiser.step()
     with torch.no_grad():
         final = mixed()
-        lab = colour.lab(forward(final)[0]) + offset
-        loss = multi_angle_loss(colour, target_lab, lab).numpy()
+        lab = objective.lab(forward(final)[0]) + offset
+        loss = objective.loss(target_lab, lab).numpy()
         return final, additions().detach(), lab, loss

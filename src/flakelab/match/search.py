@@ -17,9 +17,13 @@
    screen's importance misses a pigment whose job a near neighbour does almost as well (a
    bronze tinted with quinacridone magenta, matched with quinacridone red: off by 0.68 ΔE00,
    0.19 once the swap finds the magenta).
-5. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry from
-   colour-science, texture differences, the tolerance — plus a small penalty per toner, and
-   return the best distinct candidates.
+5. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry, texture
+   differences, the tolerance — plus a small penalty per toner, and return the best distinct
+   candidates.
+
+Every stage aims at the colorist's tolerance: the optimiser's loss and the judging's score
+count each geometry's error as a share of its limit, with the tolerance's kL, kC, kH
+(:mod:`flakelab.match.objective`).
 
 Throughout, a recipe outside the learned model's **support** — more than a solid, less effect
 toner than any effect paint it learned from (``effect_share_floor`` in its training record) —
@@ -47,6 +51,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
+from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
 from flakelab.match.settings import MatchSettings
 
 __all__ = [
@@ -55,7 +60,6 @@ __all__ = [
     "MatchSettings",
     "match",
     "MatchError",
-    "multi_angle_loss",
     "outside_support",
     "recipe_vector",
     "target_spectra",
@@ -168,16 +172,9 @@ def _masked_softmax(logits: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.softmax(logits.masked_fill(~mask, -1e4), dim=1)
 
 
-def multi_angle_loss(colour: TorchColour, target_lab: torch.Tensor, lab: torch.Tensor):
-    """The objective over geometries: mean CIE94 difference plus half the worst one, per
-    recipe ``lab[N, G, 3]`` against ``target_lab[G, 3]`` (smooth, unlike CIEDE2000)."""
-    de = colour.delta_e94(target_lab[None], lab)
-    return de.mean(dim=1) + 0.5 * de.max(dim=1).values
-
-
 def _loss(
     forward,
-    colour: TorchColour,
+    objective: MatchObjective,
     x: torch.Tensor,
     target_lab: torch.Tensor,
     target_texture: torch.Tensor | None,
@@ -185,11 +182,11 @@ def _loss(
 ) -> torch.Tensor:
     risky = settings.model_risk and getattr(forward, "members", 1) > 1
     R, texture, members = forward.with_members(x) if risky else (*forward(x), None)
-    loss = multi_angle_loss(colour, target_lab, colour.lab(R))
+    loss = objective.loss(target_lab, objective.lab(R))
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
     if risky:
-        loss = loss + settings.model_risk * model_risk(colour, members)
+        loss = loss + settings.model_risk * model_risk(objective, members)
     return loss
 
 
@@ -205,7 +202,7 @@ def model_risk(colour: TorchColour, R: torch.Tensor) -> torch.Tensor:
 
 
 def _optimise(
-    forward, colour, logits, mask, target_lab, target_texture, settings, steps, sparsity
+    forward, objective, logits, mask, target_lab, target_texture, settings, steps, sparsity
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Adam on the logits of every row at once; returns the logits, amounts and losses."""
     logits = logits.clone().requires_grad_(True)
@@ -213,18 +210,19 @@ def _optimise(
     for _ in range(steps):
         optimiser.zero_grad()
         x = _masked_softmax(logits, mask)
-        loss = _loss(forward, colour, x, target_lab, target_texture, settings)
+        loss = _loss(forward, objective, x, target_lab, target_texture, settings)
         if sparsity:
             loss = loss + sparsity * torch.sqrt(x + 1e-4).sum(1)
         loss.sum().backward()
         optimiser.step()
     with torch.no_grad():
         x = _masked_softmax(logits, mask)
-        return logits.detach(), x, _loss(forward, colour, x, target_lab, target_texture, settings)
+        loss = _loss(forward, objective, x, target_lab, target_texture, settings)
+        return logits.detach(), x, loss
 
 
 def _screen(
-    forward, colour, allowed, effect, target_lab, target_texture, settings, generator, bases
+    forward, objective, allowed, effect, target_lab, target_texture, settings, generator, bases
 ) -> tuple[NDArray, NDArray, list[tuple[int, ...] | None]]:
     """Restarts, all in one batch (a step costs about the same for 20 rows as for 140):
 
@@ -258,7 +256,7 @@ def _screen(
     logits[torch.as_tensor(based[:, None] & mask & effect[None])] = 2.0
     _, x, loss = _optimise(
         forward,
-        colour,
+        objective,
         logits,
         torch.as_tensor(mask),
         target_lab,
@@ -271,14 +269,14 @@ def _screen(
 
 
 def _refine(
-    forward, colour, init, mask, effect, target_lab, target_texture, settings
+    forward, objective, init, mask, effect, target_lab, target_texture, settings
 ) -> torch.Tensor:
     """Successive halving: a third of ``refine_steps`` on every subset, the rest on the
     ``refine_keep`` best so far (a subset far behind after a third rarely wins; the batch
     shrinks and the search's time with it), those outside the model's support last."""
     first = settings.refine_steps // 3
     logits, x, _ = _optimise(
-        forward, colour, init, mask, target_lab, target_texture, settings, first, 0.0
+        forward, objective, init, mask, target_lab, target_texture, settings, first, 0.0
     )
     # ranked as they would be weighed: an amount under ``min_amount`` is dropped, and a
     # subset whose loss rests on such traces must not push out one that does not
@@ -286,12 +284,12 @@ def _refine(
     with torch.no_grad():
         pruned = x * mask
         pruned = pruned / pruned.sum(1, keepdim=True)
-        loss = _loss(forward, colour, pruned, target_lab, target_texture, settings)
+        loss = _loss(forward, objective, pruned, target_lab, target_texture, settings)
     outside = outside_support(pruned.numpy(), effect, settings.effect_floor)
     keep = torch.as_tensor(np.lexsort((loss.numpy(), outside))[: settings.refine_keep])
     _, x, _ = _optimise(
         forward,
-        colour,
+        objective,
         logits[keep],
         mask[keep],
         target_lab,
@@ -330,7 +328,7 @@ def _subsets(
     return list(dict.fromkeys(tuple(sorted(s)) for s in subsets if s))
 
 
-def _importance(forward, colour, x_best, target_lab, target_texture, settings) -> NDArray:
+def _importance(forward, objective, x_best, target_lab, target_texture, settings) -> NDArray:
     """How much each toner matters to each of the screen's best solutions ``x_best[S, T]``:
     the rise in loss ``[S, T]`` when it is taken out (the rest renormalised). Amount alone
     misses a tint: 0.2 % of a red pigment can carry a whole colour in a silver metallic,
@@ -343,7 +341,7 @@ def _importance(forward, colour, x_best, target_lab, target_texture, settings) -
     with torch.no_grad():
         losses = _loss(
             forward,
-            colour,
+            objective,
             torch.as_tensor(np.concatenate([x_best, without]), dtype=forward.dtype),
             target_lab,
             target_texture,
@@ -375,7 +373,7 @@ STARTING_PIGMENT_LEVELS = (0.003, 0.02, 0.08)
 
 
 def _starts(
-    forward, colour, x_best, subset_mask, effect, target_lab, target_texture, settings
+    forward, objective, x_best, subset_mask, effect, target_lab, target_texture, settings
 ) -> torch.Tensor:
     """Starting logits ``[N, T]`` for each subset: the best, by loss, of the screen's best
     solutions restricted to it and generic starts with every pigment at one of
@@ -399,7 +397,7 @@ def _starts(
     with torch.no_grad():
         loss = _loss(
             forward,
-            colour,
+            objective,
             torch.as_tensor(flat, dtype=forward.dtype),
             target_lab,
             target_texture,
@@ -478,21 +476,23 @@ def _match(
     toners the search may use (default: all). With the shop's ``habits``
     (:class:`~flakelab.match.habits.ShopHabits`, and the ``library`` whose physics says
     what they do) every candidate is aimed off for them, and its numbers are what the shop
-    should measure.
+    should measure. The search aims at ``tolerance`` (default ΔE00 ≤ 1.0 at every
+    geometry, the harness's criterion) and judges by it
+    (:class:`~flakelab.match.objective.MatchObjective`).
     """
     start = time.perf_counter()
     settings = settings or MatchSettings()
     if settings.effect_floor is None:
         settings = replace(settings, effect_floor=getattr(forward, "effect_share_floor", 0.0))
-    tolerance = tolerance or tolerance_preset("refinish")
+    tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     T = len(forward.toners)
     effect = np.zeros(T, bool) if effect is None else np.asarray(effect, bool)
     allowed = np.ones(T, bool) if allowed is None else np.asarray(allowed, bool)
     if not allowed.any():
         raise MatchError("library: no toners to match with")
     spectra, texture, name = target_spectra(target, forward)
-    colour = TorchColour(dtype=forward.dtype)
-    target_lab = colour.lab(torch.as_tensor(spectra))
+    objective = MatchObjective(forward.geometries, tolerance, forward.dtype)
+    target_lab = objective.lab(torch.as_tensor(spectra))
     target_texture = None
     if texture and all(k in texture for k in TEXTURE_READINGS):
         target_texture = torch.as_tensor(
@@ -504,7 +504,7 @@ def _match(
     novel = np.array([n in forward.novel for n in forward.toners])
     x_screen, screen_loss, bases = _screen(
         forward,
-        colour,
+        objective,
         allowed & ~novel,
         effect,
         target_lab,
@@ -516,7 +516,7 @@ def _match(
     if novel.any() and float(screen_loss.min()) > settings.novel_threshold:
         x_all, loss_all, bases_all = _screen(
             forward,
-            colour,
+            objective,
             allowed,
             effect,
             target_lab,
@@ -536,7 +536,7 @@ def _match(
     best = _ranked(np.flatnonzero(free), screen_loss, outside)[:3]
     top = _ranked(np.flatnonzero(~free), screen_loss, outside)[: settings.top_bases]
     x_best = x_screen[np.concatenate([best, top])]
-    importance = _importance(forward, colour, x_best, target_lab, target_texture, settings)
+    importance = _importance(forward, objective, x_best, target_lab, target_texture, settings)
     n = best.size
     subsets = _subsets(x_best[:n], importance[:n], effect, settings)
     # the best effect bases, each with its own most important pigments
@@ -547,11 +547,11 @@ def _match(
     for row, subset in enumerate(subsets):
         subset_mask[row, list(subset)] = True
     init = _starts(
-        forward, colour, x_best, subset_mask, effect, target_lab, target_texture, settings
+        forward, objective, x_best, subset_mask, effect, target_lab, target_texture, settings
     )
     x_refined = _refine(
         forward,
-        colour,
+        objective,
         init,
         torch.as_tensor(subset_mask),
         effect,
@@ -575,7 +575,7 @@ def _match(
         tried += len(neighbours)
         x_swapped = _refine(
             forward,
-            colour,
+            objective,
             torch.as_tensor(np.log(init + 1e-6), dtype=forward.dtype),
             torch.as_tensor(init > 0),
             effect,
@@ -692,7 +692,7 @@ def _aimed_off(forward, candidates, effect, spectra, texture, tolerance, setting
     from flakelab.match.correction import aim_off  # the correction builds on the search
 
     x = np.array([recipe_vector(forward, c.fractions) for c in candidates])
-    x = _weighable(aim_off(forward, spectra, x, habits, library)[0], settings)
+    x = _weighable(aim_off(forward, spectra, x, habits, library, tolerance=tolerance)[0], settings)
     R, _ = evaluate_recipes(forward, x)
     offset = habits.offset(library, x, R, forward.geometries)
     return _judge(forward, x, effect, spectra, texture, tolerance, settings, offset)
@@ -707,8 +707,9 @@ def _judge(
     R, tex = evaluate_recipes(forward, x)
     target_lab = reflectance_to_Lab(spectra)
     lab = reflectance_to_Lab(R) + (0.0 if offset is None else offset)
-    de = delta_E(target_lab[None], lab)
-    score = de.max(1) + de.mean(1) + settings.toner_penalty * (x > 0).sum(1)
+    de00, dlch, passed = tolerance.judge(forward.geometries, target_lab[None], lab)
+    share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
+    score = share.max(1) + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
     has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
     if has_texture:
         target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
@@ -727,7 +728,7 @@ def _judge(
     spread = model_spread(forward, x[rows], reflectance_to_Lab(R[rows]))
     out = []
     for i, row in enumerate(chosen):
-        de00, dlch, passed = tolerance.judge(forward.geometries, target_lab, lab[row])
+        failing = [g for g, ok in zip(forward.geometries, passed[row], strict=True) if not ok]
         fractions = {
             forward.toners[j]: float(x[row, j]) for j in np.argsort(-x[row]) if x[row, j] > 0
         }
@@ -738,16 +739,16 @@ def _judge(
                 reflectance=R[row],
                 lab=lab[row],
                 target_lab=target_lab,
-                de00=de00,
-                dLCH=dlch,
+                de00=de00[row],
+                dLCH=dlch[row],
                 texture={}
                 if tex is None
                 else dict(zip(TEXTURE_READINGS, tex[row].tolist(), strict=True)),
                 texture_delta={}
                 if not has_texture
                 else {k: float(tex[row, i] - texture[k]) for i, k in enumerate(TEXTURE_READINGS)},
-                passes=bool(np.all(passed)),
-                failing=[g for g, ok in zip(forward.geometries, passed, strict=True) if not ok],
+                passes=not failing,
+                failing=failing,
                 model=forward.name,
                 novel=[n for n in fractions if n in forward.novel],
                 score=float(score[row]),
