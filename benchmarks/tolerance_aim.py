@@ -11,7 +11,7 @@ the share of sprays that pass for each aim, the paired difference and its standa
 over targets, and the recipes' own predicted share of the limit.
 
     python benchmarks/tolerance_aim.py [--targets 60] [--sprays 6] [--seed 4242]
-        [--tolerance refinish components lightness] [--json]
+        [--tolerance refinish components lightness] [--component-norm 8] [--json]
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+import flakelab.match.objective as objective
 from _matcher import shipped_matcher
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.match.evaluate import trial, worst_share
@@ -78,14 +79,22 @@ def main() -> None:
     parser.add_argument(
         "--tolerance", nargs="+", choices=list(TOLERANCES), default=list(TOLERANCES)
     )
+    parser.add_argument(
+        "--component-norm",
+        type=float,
+        default=objective.COMPONENT_NORM,
+        help="p of the smooth maximum over the components' shares of their limits",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    objective.COMPONENT_NORM = args.component_norm
     start = time.perf_counter()
     world, forward, effect = shipped_matcher("shop")
     report = {
         "targets": args.targets,
         "sprays": args.sprays,
         "seed": args.seed,
+        "component_norm": args.component_norm,
         "tolerances": {
             name: first_shots(world, forward, effect, TOLERANCES[name], args)
             for name in args.tolerance

@@ -339,10 +339,11 @@ def _print_match(report: dict) -> None:
             if c["passes"]
             else "[red]FAIL[/] at " + ", ".join(c["failing_geometries"])
         )
-        table = _weights_table(
-            f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}",
-            c["weights_g"],
+        header = (
+            f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}"
+            f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"
         )
+        table = _weights_table(None, c["weights_g"])
         geo = Table(box=box.SIMPLE, show_header=True)
         keys = ["L", "a", "b", "dL", "dC", "dH", "dE00"]
         columns = ["geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"]
@@ -360,6 +361,7 @@ def _print_match(report: dict) -> None:
                 cells = [f"{v[k]:.2f}" for k in keys if k != "model_spread"]
                 cells[-1] = cells[-1] if v["pass"] else f"[red]{cells[-1]}[/]"
                 geo.add_row(f"{g} *", *cells, *([""] if "model_spread" in keys else []))
+        console.print(header, highlight=False)
         console.print(table)
         console.print(geo)
         if left_out:
@@ -632,7 +634,7 @@ def weigh_command(
     )
 
 
-def _weights_table(title: str, weights_g: list[dict]) -> Table:
+def _weights_table(title: str | None, weights_g: list[dict]) -> Table:
     """What to pour: grams per toner and the cumulative weight on the scale."""
     table = Table(title=title, box=box.SIMPLE_HEAVY, title_justify="left")
     table.add_column("toner")

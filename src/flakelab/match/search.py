@@ -114,6 +114,7 @@ class Candidate:
     score: float
     in_support: bool = True
     spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
+    limit_share: NDArray | None = None  # each geometry's share of the tolerance's limit
 
     def as_measurement(self, sample: str) -> Measurement:
         """The candidate's predicted reading, as the instrument would give it (to render, plot
@@ -141,6 +142,9 @@ class Candidate:
             "failing_geometries": self.failing,
             "de00_max": float(self.de00.max()),
             "de00_mean": float(self.de00.mean()),
+            "limit_share_max": None
+            if self.limit_share is None
+            else round(float(self.limit_share.max()), 3),
             "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
         }
@@ -754,6 +758,7 @@ def _judge(
                 score=float(score[row]),
                 in_support=not outside[row],
                 spread=None if spread is None else spread[i],
+                limit_share=share[row],
             )
         )
     return out
