@@ -195,12 +195,12 @@ def test_the_objective_adds_the_weighed_model_risk_for_an_ensemble_only(hybrid_e
     """The search's objective with ``model_risk`` w is the colour objective plus w times the
     members' disagreement, through the hybrid path too (recipes with a new toner); a single
     network's objective is left as it was."""
-    from flakelab.core.torch_colour import TorchColour
     from flakelab.data import example_path
     from flakelab.io import read_measurement
+    from flakelab.match.objective import MatchObjective
     from flakelab.match.search import MatchSettings, _loss, model_risk, target_spectra
 
-    colour_t = TorchColour(dtype=hybrid_ensemble.dtype)
+    colour_t = MatchObjective(hybrid_ensemble.geometries, dtype=hybrid_ensemble.dtype)
     single = forward_for(shipped_model("five-angle").split_members()[0], LIBRARY)
     spectra, _, _ = target_spectra(read_measurement(example_path("target")), hybrid_ensemble)
     target_lab = colour_t.lab(torch.as_tensor(spectra, dtype=hybrid_ensemble.dtype))

@@ -155,7 +155,7 @@ def match_command(
             "--tolerance",
             "-t",
             help="Preset (refinish, de00-1.0, components) or TOML/JSON file; the search aims at "
-            "it [default: refinish; evaluate: de00-1.0, ΔE00 ≤ 1.0 at every geometry].",
+            "it (default: refinish; evaluate: de00-1.0, ΔE00 ≤ 1.0 at every geometry).",
         ),
     ] = None,
     candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,

@@ -106,7 +106,7 @@ class Tolerance:
         --------
         >>> tol = Tolerance("shop", Limit(de00=1.0), {"45as15": Limit(de00=2.0)})
         >>> tol.share_of_limit(["45as15", "45as45"], de00=[1.5, 1.5], dLCH=np.zeros((2, 3)))
-        array([0.75, 1.5 ])
+        array([ 0.75,  1.5 ])
         """
         return np.max(_observed(de00, dLCH) / self.bounds(geometries), axis=-1)
 
