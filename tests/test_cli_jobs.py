@@ -172,6 +172,9 @@ def test_weigh_scales_a_recipe_to_another_can(tmp_path):
     small = flakelab("weigh", str(recipe), "--quantity", "5g", "--resolution", "1")
     assert small.returncode == 2 and "too small to weigh" in small.stderr
     assert "Carbon black" in small.stderr and "Traceback" not in small.stderr
+    into_folder = flakelab("weigh", str(recipe), "--quantity", "1kg", "--recipe-out", tmp_path)
+    assert into_folder.returncode == 2 and "--recipe-out" in into_folder.stderr
+    assert "is a folder" in into_folder.stderr and "Traceback" not in into_folder.stderr
 
 
 def test_realism_json_reports_the_shop_statistics():

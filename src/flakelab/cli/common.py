@@ -135,10 +135,18 @@ def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iter
 
 
 def check_output_file(path, option: str) -> None:
-    """An output file's folder exists, checked before any work (nothing to check without
-    a file): a long job never ends in a file it cannot write."""
-    if path is not None and not Path(path).resolve().parent.is_dir():
-        raise FlakelabError(f"{option}: {path}: no folder {Path(path).resolve().parent}")
+    """An output file's folder exists and can be written, and the path is not a folder,
+    checked before any work (nothing to check without a file): a long job never ends in a
+    file it cannot write."""
+    if path is None:
+        return
+    target = Path(path).resolve()
+    if target.is_dir():
+        raise FlakelabError(f"{option}: {path}: is a folder, expected a file name")
+    if not target.parent.is_dir():
+        raise FlakelabError(f"{option}: {path}: no folder {target.parent}")
+    if not os.access(target.parent, os.W_OK | os.X_OK):
+        raise FlakelabError(f"{option}: {path}: folder {target.parent} cannot be written")
 
 
 def check_figure_file(path, option: str = "--render") -> None:
