@@ -58,6 +58,11 @@ def test_compare_reports_failing_geometries_only():
     smp = _grey_metallic({"45as15": 100, "45as45": 50.5, "45as110": 22})
     result = compare(ref, smp, "de00-1.0")
     assert result.to_dict()["failing_geometries"] == ["45as110"]
+    # the share of the limit used: ΔE00 itself against 1.0, above 1 only where it fails
+    np.testing.assert_allclose(result.limit_share, result.de00, rtol=1e-12)
+    assert [row["limit_share"] > 1 for row in result.to_dict()["geometries"]] == [
+        not ok for ok in result.passed
+    ]
     assert result.de00[0] == pytest.approx(0, abs=1e-9)
 
 

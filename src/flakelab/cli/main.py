@@ -168,7 +168,8 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
         highlight=False,
     )
     table = Table(box=box.SIMPLE_HEAD, collapse_padding=True)
-    for column in ("geometry", "L* ref", "L* smp", "ΔL*", "ΔC*", "ΔH*", "ΔE00", "limit", ""):
+    columns = ("geometry", "L* ref", "L* smp", "ΔL*", "ΔC*", "ΔH*", "ΔE00", "limit", "used", "")
+    for column in columns:
         table.add_column(column, justify="left" if column == "geometry" else "right", no_wrap=True)
     for g in report["geometries"]:
         limit = tol.limit(g["name"]).to_dict()
@@ -183,6 +184,7 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
             _fmt(g["dH"]),
             _fmt(g["de00"]),
             shown,
+            f"{g['limit_share']:.0%}",
             verdict,
         )
     console.print(table)

@@ -66,6 +66,7 @@ class Comparison:
     de00: NDArray[np.float64]
     de_other: dict[str, NDArray[np.float64]]
     passed: NDArray[np.bool_]
+    limit_share: NDArray[np.float64]  # per geometry, the share of its limit (≤ 1 passes)
     tolerance: Tolerance
     conditions: Conditions
 
@@ -92,6 +93,7 @@ class Comparison:
                 "dH": float(self.dLCH[i, 2]),
                 "de00": float(self.de00[i]),
                 **{f"de_{k}": float(v[i]) for k, v in self.de_other.items()},
+                "limit_share": float(self.limit_share[i]),
                 "pass": bool(self.passed[i]),
             }
             for i, name in enumerate(self.geometries)
@@ -113,6 +115,7 @@ class Comparison:
             "geometries": rows,
             "de00_max": self.de00_max,
             "de00_mean": self.de00_mean,
+            "limit_share_max": float(self.limit_share.max()),
             "pass": self.all_pass,
             "failing_geometries": [
                 g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok
@@ -158,6 +161,7 @@ def compare(
         de00=de00,
         de_other={m: delta_E(lab_ref, lab_smp, method=m) for m in also},
         passed=passed,
+        limit_share=tolerance.share_of_limit(common, de00=de00, dLCH=dLCH),
         tolerance=tolerance,
         conditions=conditions,
     )
