@@ -42,7 +42,7 @@ lightness weighted down (kL = 2, as in textile practice)."""
 def first_shots(world, forward, effect, tolerance: Tolerance, args) -> dict:
     """Per target, the pass rate of the recipe aimed at ``tolerance`` and of the one aimed at
     ΔE00 ≤ 1.0, sprayed on the same streams."""
-    baseline = tolerance_preset("de00-1.0")
+    baseline = tolerance_preset(objective.OBJECTIVE_DEFAULT)
     rng = np.random.default_rng(args.seed)
     rates = {"aimed": [], "baseline": []}
     predicted = {"aimed": [], "baseline": []}

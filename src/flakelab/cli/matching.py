@@ -416,9 +416,10 @@ def _evaluate(
     json_output,
 ):
     from flakelab.io import read_tolerance
-    from flakelab.match.evaluate import HARNESS_TOLERANCE, evaluate_matching, harness_world
+    from flakelab.match.evaluate import evaluate_matching, harness_world
+    from flakelab.match.objective import OBJECTIVE_DEFAULT
 
-    tol = read_tolerance(tolerance or HARNESS_TOLERANCE)
+    tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
 
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     world = harness_world(lib, instrument, world_name)

@@ -32,6 +32,7 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
+from flakelab.match.objective import OBJECTIVE_DEFAULT
 from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
 
 __all__ = [
@@ -39,7 +40,6 @@ __all__ = [
     "harness_world",
     "HARNESS_WORLDS",
     "SUCCESS_DE00",
-    "HARNESS_TOLERANCE",
     "Trial",
     "trial",
     "worst_de00",
@@ -49,9 +49,6 @@ __all__ = [
 
 SUCCESS_DE00 = 1.0
 """A spray-out succeeds when ΔE00 ≤ this at every geometry (the preset ``de00-1.0``)."""
-
-HARNESS_TOLERANCE = "de00-1.0"
-"""The harness's default judgement, issue 5's: ΔE00 ≤ :data:`SUCCESS_DE00` everywhere."""
 
 _NO_BATCHES = {"batch_strength_sd": 0.0, "batch_hue_shift_nm": 0.0}
 HARNESS_WORLDS = {
@@ -195,9 +192,10 @@ def evaluate_matching(
     """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
     With the shop's ``habits`` every match is aimed off for them and the
     correction splits the offset about them. Sprays are judged by ``tolerance`` (default
-    :data:`HARNESS_TOLERANCE`), which the matcher and the correction aim at."""
+    :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`), which the matcher and the
+    correction aim at."""
     settings = settings or MatchSettings()
-    tolerance = tolerance or tolerance_preset(HARNESS_TOLERANCE)
+    tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     rng = np.random.default_rng(seed)
     names = list(world.library.names)
     # hidden formulations draw only on toners the model knows (a new toner is added below)

@@ -26,7 +26,9 @@ from flakelab.core.torch_colour import TorchColour
 __all__ = ["MatchObjective", "OBJECTIVE_DEFAULT"]
 
 OBJECTIVE_DEFAULT = "de00-1.0"
-"""The tolerance an objective built without one stands for."""
+"""The tolerance that the search, the correction and the harness
+(:func:`~flakelab.match.evaluate.evaluate_matching`) aim at and judge by when given none:
+issue 5's ΔE00 ≤ 1.0 at every geometry."""
 
 COMPONENT_NORM = 2
 """The p of the p-norm over the components' shares of their limits. The verdict takes the

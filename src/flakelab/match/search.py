@@ -112,9 +112,9 @@ class Candidate:
     model: str
     novel: list[str]
     score: float
+    limit_share: NDArray  # each geometry's share of the tolerance's limit (≤ 1 passes)
     in_support: bool = True
     spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
-    limit_share: NDArray | None = None  # each geometry's share of the tolerance's limit
 
     def as_measurement(self, sample: str) -> Measurement:
         """The candidate's predicted reading, as the instrument would give it (to render, plot
@@ -142,9 +142,7 @@ class Candidate:
             "failing_geometries": self.failing,
             "de00_max": float(self.de00.max()),
             "de00_mean": float(self.de00.mean()),
-            "limit_share_max": None
-            if self.limit_share is None
-            else round(float(self.limit_share.max()), 3),
+            "limit_share_max": round(float(self.limit_share.max()), 3),
             "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
         }
