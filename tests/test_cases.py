@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import csv
 import multiprocessing
 import subprocess
 import sys
 from dataclasses import replace
 from datetime import UTC
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +16,7 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, inspect
 
-from flakelab.cases.case import Case, CaseError, worst_differences
+from flakelab.cases.case import Case, CaseError, cases_at, worst_differences
 from flakelab.cases.database import (
     DatabaseError,
     add_cases,
@@ -25,11 +27,12 @@ from flakelab.cases.database import (
     open_database,
     remove_case,
 )
-from flakelab.cases.exchange import read_cases, write_cases
+from flakelab.cases.exchange import CaseFileError, read_cases, write_cases
 from flakelab.cases.generator import World
 from flakelab.cases.record import case_from_readings, judged_outcome
 from flakelab.cases.schema import Base
 from flakelab.core import compare
+from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.data import example_path
 from flakelab.io import read_library, read_measurement
@@ -115,6 +118,57 @@ def test_case_files_round_trip(cases, tmp_path, suffix):
         assert b.recipe == pytest.approx(a.recipe, rel=1e-12)
         assert b.outcome == a.outcome and b.created_at == a.created_at
         assert b.sprayout_texture == pytest.approx(a.sprayout_texture, rel=1e-5)
+
+
+def test_one_case_file_holds_cases_of_several_geometry_sets(cases, tmp_path):
+    target, sprayout = example_readings()  # twelve geometries among five-angle cases
+    twelve = case_from_readings(target, sprayout, {"Al medium": 1.0}, shop="x", outcome="accepted")
+    mixed = [*cases[:2], twelve, cases[2]]
+    path = tmp_path / "mixed.csv"
+    write_cases(mixed, path)
+    back = read_cases(path)
+    assert [c.geometry_names for c in back] == [c.geometry_names for c in mixed]
+    for a, b in zip(mixed, back, strict=True):
+        np.testing.assert_allclose(b.sprayout, a.sprayout, rtol=1e-5, atol=1e-7)
+    # the five-angle rows leave the seven other geometries empty; a value there is refused
+    header, *rows = csv.reader(path.read_text().splitlines())
+    column = header.index("sprayout:15as45:550")
+    assert rows[1][column] == "" and rows[2][column] != ""
+
+    def rewritten(row: int, name: str, value: str) -> Path:
+        changed = [list(r) for r in rows]
+        changed[row][header.index(name)] = value
+        bad = tmp_path / "bad.csv"
+        with bad.open("w", newline="") as out:
+            csv.writer(out).writerows([header, *changed])
+        return bad
+
+    with pytest.raises(CaseFileError, match=r"bad.csv: row 3: sprayout:15as45:550: a value at"):
+        read_cases(rewritten(1, "sprayout:15as45:550", "0.5"))
+    five_and_one = "45as15;45as25;45as45;45as75;45as110;75as15"  # no columns for 75as15
+    with pytest.raises(CaseFileError, match="row 2: geometries: expected some of the file's"):
+        read_cases(rewritten(0, "geometries", five_and_one))
+
+
+def test_a_case_read_by_more_geometries_serves_each_model_within_them(cases):
+    target, sprayout = example_readings()
+    twelve = case_from_readings(target, sprayout, {"Al medium": 1.0}, shop="x", outcome="accepted")
+    five = INSTRUMENT_GEOMETRIES["five-angle"]
+    at_five = cases_at([cases[0], twelve], five)
+    assert at_five[0] is cases[0] and at_five[1].geometry_names == five
+    np.testing.assert_array_equal(at_five[1].sprayout, sprayout.select(five).reflectance)
+    np.testing.assert_array_equal(at_five[1].target, target.select(five).reflectance)
+    assert at_five[1].case_id == twelve.case_id and at_five[1].instrument == "ma-t12"
+    # a five-angle case cannot serve a model of twelve geometries
+    assert [c.case_id for c in cases_at([cases[0], twelve], twelve.geometry_names)] == [
+        twelve.case_id
+    ]
+    with pytest.raises(CaseError, match="not read at 15as-45, 15as-30"):
+        cases[0].at_geometries(INSTRUMENT_GEOMETRIES["ma-t12"])
+    # as training arrays they are five-angle cases, whichever instrument read them
+    data = case_arrays(at_five[::-1], read_library(None).names)
+    assert data.instrument == "five-angle" and data.geometries == five
+    np.testing.assert_array_equal(data.R[1], cases[0].sprayout)
 
 
 def test_database_round_trip_and_migrations(cases, tmp_path):
@@ -248,6 +302,21 @@ def test_a_recorded_outcome_is_judged_as_compare_judges_it():
     assert case.geometry_names == ("45as15", "45as25", "45as45", "45as75", "45as110")
 
 
+def test_a_recorded_case_keeps_every_geometry_both_readings_share():
+    target, sprayout = example_readings()
+    case = case_from_readings(target, sprayout, {"Al medium": 1.0}, shop="x", outcome="accepted")
+    assert case.instrument == "ma-t12" and case.geometry_names == INSTRUMENT_GEOMETRIES["ma-t12"]
+    # a spray-out read at six geometries: the case is a BYK-mac i's, in its export order
+    byk = INSTRUMENT_GEOMETRIES["byk-mac-i"]
+    six = replace(sprayout.select(byk[::-1]), instrument="BYK-mac i")
+    case = case_from_readings(target, six, {"Al medium": 1.0}, shop="x", outcome="accepted")
+    assert case.instrument == "byk-mac-i" and case.geometry_names == byk
+    np.testing.assert_array_equal(case.sprayout, sprayout.select(byk).reflectance)
+    # no geometry in common
+    with pytest.raises(CaseError, match="shares no geometry with the target"):
+        case_from_readings(target.select(["15as15"]), six, {"Al medium": 1.0}, shop="x")
+
+
 def test_recording_refuses_readings_without_the_instrument_s_geometries():
     target, sprayout = example_readings()
     five = sprayout.select(["45as15", "45as25", "45as45", "45as75", "45as110"])
@@ -279,8 +348,7 @@ def test_worst_differences_are_each_case_s_largest_de00_where_it_lies(cases):
     from flakelab.core.difference import delta_E
 
     target, sprayout = example_readings()  # twelve geometries among five-angle cases
-    twelve = case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x",
-                                outcome="accepted")  # fmt: skip
+    twelve = case_from_readings(target, sprayout, {"Al medium": 1.0}, shop="x", outcome="accepted")
     mixed = [*cases[:3], twelve, *cases[3:5]]
     worst, where = worst_differences(mixed)
     for case, de, geometry in zip(mixed, worst, where, strict=True):

@@ -119,8 +119,9 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["outcome"] == "accepted" and report["sprayout_passes"] is True
-    five = INSTRUMENT_GEOMETRIES["five-angle"]
-    assert report["left_out"] == [g for g in INSTRUMENT_GEOMETRIES["ma-t12"] if g not in five]
+    five, twelve = INSTRUMENT_GEOMETRIES["five-angle"], INSTRUMENT_GEOMETRIES["ma-t12"]
+    assert report["left_out"] == [] and report["geometries"] == list(twelve)
+    assert {"five-angle", "ma-t12"} <= set(report["read_by_models_of"])
     # the same spray-out again is refused and stores nothing
     again = flakelab(*args, "--shop", "Dupont")
     assert again.returncode == 2 and "is already recorded" in again.stderr
@@ -129,24 +130,34 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     bad.write_text(json.dumps({"Al medium": 100, "Unobtainium": 5}))
     run = flakelab(*args[:3], "--recipe", str(bad), *args[5:], "--outcome", "rejected")
     assert run.returncode == 2 and "bad.json" in run.stderr and "'Unobtainium'" in run.stderr
-    # the shop's name from the environment, the outcome as given, the MA-T12's geometries,
-    # target and spray-out as two samples of one file
+    # the shop's name from the environment, the outcome as given, the five-angle geometries
+    # alone, target and spray-out as two samples of one file
     both = tmp_path / "both.cxf"
     target_reading, reading = read_measurement(target), read_measurement(sprayed)
     write_measurements([target_reading, reading], both)
     env = dict(os.environ, FLAKELAB_SHOP="Martin")
     run = flakelab("cases", "record", str(both), "--recipe", str(recipe), "--sprayed", str(both),
                    "--sprayed-sample", reading.sample, "-d", str(db), "--outcome", "rejected",
-                   "-i", "ma-t12", env=env)  # fmt: skip
+                   "-i", "five-angle", env=env)  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in again.stderr + run.stderr
+    said = " ".join(run.stdout.split())
+    assert "models that learn from it: five-angle" in said
+    assert "the target's 15as-45, 15as-30" in said and "not kept (--instrument chooses)" in said
     stored = {c.shop: c for c in iter_cases(open_database(db))}
     assert set(stored) == {"Dupont", "Martin"} and stored["Martin"].outcome == "rejected"
     stored_spectra = stored["Dupont"].sprayout  # the database keeps float32
-    np.testing.assert_allclose(stored_spectra, reading.select(five).reflectance, rtol=1e-6)
-    assert stored["Martin"].geometry_names == reading.geometry_names
-    np.testing.assert_allclose(stored["Martin"].sprayout, reading.reflectance, rtol=1e-6)
-    np.testing.assert_allclose(stored["Martin"].target, target_reading.reflectance, rtol=1e-6)
+    np.testing.assert_allclose(stored_spectra, reading.reflectance, rtol=1e-6)
+    np.testing.assert_allclose(stored["Dupont"].target, target_reading.reflectance, rtol=1e-6)
+    assert stored["Martin"].geometry_names == five
+    at_five = reading.select(five).reflectance
+    np.testing.assert_allclose(stored["Martin"].sprayout, at_five, rtol=1e-6)
+    # the five-angle model is judged on both cases at its geometries, the MA-T12 model on one
+    for instrument, n, geometries in (("five-angle", 2, five), ("ma-t12", 1, twelve)):
+        run = flakelab("model", "evaluate", str(db), "-i", instrument, "--json")
+        assert run.returncode == 0, run.stderr
+        evaluated = json.loads(run.stdout)
+        assert evaluated["cases"] == n and set(evaluated["per_geometry"]) == set(geometries)
     # the shop's history, newest first, and one case removed by its id
     listed = json.loads(flakelab("cases", "list", "-d", str(db), "--json").stdout)["cases"]
     assert {c["shop"] for c in listed} == {"Dupont", "Martin"}

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 
 import numpy as np
@@ -16,7 +16,7 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 
-__all__ = ["Case", "CaseError", "OUTCOMES", "worst_differences"]
+__all__ = ["Case", "CaseError", "OUTCOMES", "cases_at", "worst_differences"]
 
 OUTCOMES = ("accepted", "corrected", "rejected")
 """How a case ended: the spray-out passed, needed a correction, or was given up."""
@@ -83,6 +83,34 @@ class Case:
     @property
     def geometry_names(self) -> tuple[str, ...]:
         return tuple(g.name for g in self.geometries)
+
+    def reads(self, geometries: Sequence[str]) -> bool:
+        """Whether the case was read at every one of ``geometries``."""
+        return set(geometries) <= set(self.geometry_names)
+
+    def at_geometries(self, geometries: Sequence[str]) -> Case:
+        """The case read at ``geometries`` alone, in their order: an MA-T12 case is a
+        five-angle case too. Its instrument and id stay those it was recorded with."""
+        names = self.geometry_names
+        if tuple(geometries) == names:
+            return self
+        missing = [g for g in geometries if g not in names]
+        if missing:
+            raise CaseError(f"case {self.case_id!r}: geometries: not read at {', '.join(missing)}")
+        rows = [names.index(g) for g in geometries]
+        return replace(
+            self,
+            geometries=tuple(geometries),
+            target=self.target[rows],
+            sprayout=self.sprayout[rows],
+        )
+
+
+def cases_at(cases: Iterable[Case], geometries: Sequence[str]) -> list[Case]:
+    """The cases read at every one of ``geometries``, each restricted to them: what a model of
+    that geometry set learns from, whatever instrument read the case."""
+    geometries = tuple(geometries)
+    return [c.at_geometries(geometries) for c in cases if c.reads(geometries)]
 
 
 def worst_differences(cases: list[Case]) -> tuple[np.ndarray, list[str]]:

@@ -152,13 +152,10 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
     return len(rows)
 
 
-def iter_cases(
-    engine: Engine, *, instrument: str | None = None, batch: int = 2000, limit: int | None = None
-) -> Iterator[Case]:
-    """Cases in insertion order, read in batches."""
+def iter_cases(engine: Engine, *, batch: int = 2000, limit: int | None = None) -> Iterator[Case]:
+    """Cases in insertion order, read in batches (``cases.case.cases_at`` picks those a model
+    of one geometry set reads)."""
     query = select(CaseRow).order_by(CaseRow.id)
-    if instrument:
-        query = query.where(CaseRow.instrument == instrument)
     if limit:
         query = query.limit(limit)
     with Session(engine) as session:

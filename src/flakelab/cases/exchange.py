@@ -1,10 +1,13 @@
 """Case histories as files: CSV (one row per case) and CxF3 (two samples per case).
 
 CSV columns: ``case_id, shop, instrument, conditions, outcome, synthetic, created_at,
-recipe`` (JSON object toner → amount), ``geometries`` (names joined by ``;``), then
-``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for every
-geometry and band (400–700 nm, 10 nm), then ``target:<reading>`` and
-``sprayout:<reading>`` texture readings (empty when not measured).
+recipe`` (JSON object toner → amount), ``geometries`` (the case's, names joined by ``;``),
+then ``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for
+every geometry of the file and band (400–700 nm, 10 nm), then ``target:<reading>`` and
+``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
+read at different geometry sets (an MA-T12's and a five-angle instrument's): its columns
+are every geometry any case was read at, and a case's cells at geometries it was not read
+at are empty.
 
 CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
 the case's fields ride as ``meta:`` tags on the target.
@@ -71,16 +74,11 @@ def write_cases(cases: list[Case], path: str | PathLike) -> None:
     if Path(path).suffix.lower() in (".cxf", ".xml"):
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
-    geometries = cases[0].geometry_names
+    geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
     buffer = io.StringIO()
     writer = csv.writer(buffer)
     writer.writerow(_header(geometries))
     for case in cases:
-        if case.geometry_names != geometries:
-            raise CaseFileError(
-                f"{path}: case {case.case_id!r}: geometries differ from the "
-                "first case's; write one instrument per CSV file"
-            )
         writer.writerow(
             [
                 case.case_id,
@@ -91,15 +89,24 @@ def write_cases(cases: list[Case], path: str | PathLike) -> None:
                 "1" if case.synthetic else "0",
                 case.created_at.isoformat(),
                 json.dumps(case.recipe),
-                ";".join(geometries),
-                *(f"{v:.6g}" for v in case.target.ravel()),
-                *(f"{v:.6g}" for v in case.sprayout.ravel()),
+                ";".join(case.geometry_names),
+                *_spectra_cells(case, case.target, geometries),
+                *_spectra_cells(case, case.sprayout, geometries),
                 *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
                 *(_fmt(case.sprayout_texture.get(t)) for t in TEXTURE_READINGS),
             ]
         )
     text = buffer.getvalue()
     write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
+
+
+def _spectra_cells(case: Case, spectra: np.ndarray, geometries: tuple[str, ...]) -> list[str]:
+    """A case's reflectance cells at the file's ``geometries``: empty where it was not read."""
+    own = {g: row for g, row in zip(case.geometry_names, spectra, strict=True)}
+    empty = [""] * WAVELENGTHS.size
+    return [
+        cell for g in geometries for cell in ([f"{v:.6g}" for v in own[g]] if g in own else empty)
+    ]
 
 
 def _fmt(value: float | None) -> str:
@@ -123,28 +130,58 @@ def read_cases(path: str | PathLike) -> list[Case]:
             f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)}"
         )
     header = rows[0]
+    columns = _file_geometries(path, header)
     cases = []
     for number, row in enumerate(rows[1:], start=2):
         if not any(cell.strip() for cell in row):
             continue
-        cases.append(_case_from_row(path, number, header, row))
+        cases.append(_case_from_row(path, number, header, columns, row))
     if not cases:
         raise CaseFileError(f"{path}: no cases after the header")
     return cases
 
 
-def _case_from_row(path: Path, number: int, header: list[str], row: list[str]) -> Case:
+def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
+    """The geometries whose columns the header holds, checked to be every column they need."""
+    spectral = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
+    geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
+    expected = _header(geometries)
+    if tuple(header) != expected:
+        missing = [c for c in expected if c not in header][:3]
+        extra = [c for c in header if c not in expected][:3]
+        raise CaseFileError(
+            f"{path}: row 1: expected the columns of geometries {';'.join(geometries) or 'none'}"
+            f" (missing e.g. {missing}, unexpected e.g. {extra})"
+        )
+    return geometries
+
+
+def _case_from_row(
+    path: Path, number: int, header: list[str], columns: tuple[str, ...], row: list[str]
+) -> Case:
     where = f"{path}: row {number}"
     if len(row) != len(header):
         raise CaseFileError(f"{where}: expected {len(header)} columns, got {len(row)}")
     cells = dict(zip(header, row, strict=True))
     geometries = tuple(g for g in cells["geometries"].split(";") if g)
-    expected = _header(geometries)
-    if tuple(header) != expected:
-        missing = [c for c in expected if c not in header][:3]
+    unknown = [g for g in geometries if g not in columns]
+    if unknown or not geometries:
         raise CaseFileError(
-            f"{where}: geometries: columns do not match {';'.join(geometries)}"
-            f" (missing e.g. {missing})"
+            f"{where}: geometries: expected some of the file's {';'.join(columns)}, "
+            f"got {cells['geometries']!r}"
+        )
+    unread = [
+        column
+        for role in ("target", "sprayout")
+        for g in columns
+        if g not in geometries
+        for column in (f"{role}:{g}:{int(w)}" for w in WAVELENGTHS)
+        if cells[column].strip()
+    ]
+    if unread:
+        raise CaseFileError(
+            f"{where}: {unread[0]}: a value at a geometry the row's geometries "
+            f"({cells['geometries']}) do not list; leave it empty"
         )
 
     def number_of(column: str) -> float:

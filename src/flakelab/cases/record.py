@@ -2,8 +2,9 @@
 
 This closes the colorist's loop (DESIGN.md §1, step 3): every spray-out that is measured
 joins the case database, where the shop's habits, the adaptation and the next training
-read it. The case is read at one instrument's geometries, on the storage grid, the way
-the generator writes its cases, so that a model of that instrument learns from it.
+read it. The case keeps every geometry that both readings share, on the storage grid, so
+that the model of each instrument whose geometries are among them learns from it: an MA-T12
+spray-out serves the MA-T12 model and the five-angle model alike (``cases_at``).
 """
 
 from __future__ import annotations
@@ -17,7 +18,12 @@ import numpy as np
 
 from flakelab.cases.case import OUTCOMES, Case, CaseError
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.geometry import instrument_geometries, instrument_name
+from flakelab.core.geometry import (
+    INSTRUMENT_GEOMETRIES,
+    instrument_name,
+    instrument_of,
+    parse_geometries,
+)
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance
 
@@ -26,6 +32,7 @@ __all__ = [
     "case_from_readings",
     "judged_outcome",
     "reading_case_id",
+    "shared_geometries",
 ]
 
 AUTO_OUTCOME = "auto"
@@ -57,11 +64,24 @@ def judged_outcome(
     return ("corrected" if failing else "accepted"), failing
 
 
+def shared_geometries(target: Measurement, sprayout: Measurement) -> tuple[str, ...]:
+    """The geometries both readings have, in the export order of the instrument whose set they
+    are (else the target's order)."""
+    names = tuple(g for g in target.geometry_names if g in set(sprayout.geometry_names))
+    if not names:
+        raise CaseError(
+            f"spray-out: {sprayout.sample!r} shares no geometry with the target "
+            f"{target.sample!r} ({', '.join(target.geometry_names)})"
+        )
+    instrument = instrument_of(names, target.instrument)
+    return INSTRUMENT_GEOMETRIES[instrument] if instrument else names
+
+
 def case_from_readings(
     target: Measurement,
     sprayout: Measurement,
     recipe: Mapping[str, float],
-    instrument: str,
+    instrument: str | None = None,
     *,
     shop: str,
     outcome: str = AUTO_OUTCOME,
@@ -69,15 +89,20 @@ def case_from_readings(
     created_at: datetime | None = None,
     case_id: str | None = None,
 ) -> Case:
-    """The case of one spray-out, read at ``instrument``'s geometries.
+    """The case of one spray-out, read at every geometry both readings share, or at
+    ``instrument``'s geometries alone when it is named.
 
     ``outcome`` is one of :data:`~flakelab.cases.case.OUTCOMES`, or ``auto`` to judge it
     against ``tolerance``. ``created_at`` defaults to when the spray-out was measured (the
     file's date), else now.
     """
-    instrument = instrument_name(instrument)
-    geometries = instrument_geometries(instrument)
-    names = [g.name for g in geometries]
+    if instrument is None:
+        names = shared_geometries(target, sprayout)
+        instrument = instrument_of(names, target.instrument) or target.instrument or "unknown"
+    else:
+        instrument = instrument_name(instrument)
+        names = INSTRUMENT_GEOMETRIES[instrument]
+    geometries = parse_geometries(names)
     spectra = {}
     for role, reading in (("target", target), ("spray-out", sprayout)):
         try:

@@ -25,7 +25,12 @@ from flakelab.cli.common import (
     progress_bar,
     reports_errors,
 )
-from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.geometry import (
+    DEFAULT_INSTRUMENT,
+    INSTRUMENT_GEOMETRIES,
+    instrument_name,
+    instruments_reading,
+)
 from flakelab.errors import FlakelabError
 
 cases_app = typer.Typer(
@@ -121,17 +126,21 @@ def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
 
 
 def shop_cases(source: str, shop: str | None, geometries, since: datetime | None = None) -> list:
-    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries``, made
-    at or after ``since`` (None: any time; without a zone: UTC)."""
+    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries`` (among
+    others: each is restricted to them), made at or after ``since`` (None: any time; without a
+    zone: UTC)."""
+    from flakelab.cases.case import cases_at
+
     if since is not None and since.tzinfo is None:
         since = since.replace(tzinfo=UTC)
-    chosen = [
-        c
-        for c in load_cases(source)
-        if c.geometry_names == tuple(geometries)
-        and (shop is None or c.shop == shop)
-        and (since is None or c.created_at >= since)
-    ]
+    chosen = cases_at(
+        (
+            c
+            for c in load_cases(source)
+            if (shop is None or c.shop == shop) and (since is None or c.created_at >= since)
+        ),
+        geometries,
+    )
     if not chosen:
         whose = f"shop {shop!r}" if shop else "any shop"
         when = f" since {since.isoformat()}" if since else ""
@@ -243,7 +252,15 @@ def record_case(
         str,
         typer.Option(envvar="FLAKELAB_SHOP", help="Shop name recorded with the case."),
     ] = "unknown",
-    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    instrument: Annotated[
+        str | None,
+        typer.Option(
+            "--instrument",
+            "-i",
+            help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
+            show_default="every geometry both readings share",
+        ),
+    ] = None,
     library: LibraryOption = None,
     tolerance: ToleranceOption = "refinish",
     at: Annotated[
@@ -264,7 +281,8 @@ def record_case(
     """Record a spray-out as the shop's own case: target, recipe, spray-out and outcome.
 
     The case joins the database, where 'cases habits', 'model adapt' and 'train' read it.
-    It is read at the instrument's geometries; the same spray-out recorded twice is refused."""
+    It keeps every geometry both readings share, so each model whose geometries are among
+    them learns from it; the same spray-out recorded twice is refused."""
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
     from flakelab.io import read_library, read_measurement, read_recipe, read_tolerance
@@ -295,10 +313,13 @@ def record_case(
         )
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
+    models = instruments_reading(case.geometry_names)
     report = {
         "case_id": case.case_id,
         "shop": case.shop,
         "instrument": case.instrument,
+        "geometries": list(case.geometry_names),
+        "read_by_models_of": list(models),
         "outcome": case.outcome,
         "created_at": case.created_at.isoformat(),
         "tolerance": tol.name,
@@ -318,10 +339,18 @@ def record_case(
         f"(the spray-out {verdict}), {case.instrument} at {case.created_at:%Y-%m-%d %H:%M}",
         highlight=False,
     )
+    if models:
+        console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
+    else:
+        console.print(
+            f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
+            f"{', '.join(case.geometry_names)} hold no instrument's whole set",
+            highlight=False,
+        )
     if left_out:
         console.print(
-            f"[yellow]note:[/] stored at the {case.instrument}'s geometries; the target's "
-            f"{', '.join(left_out)} are not kept (--instrument chooses)",
+            f"[yellow]note:[/] the target's {', '.join(left_out)} are not kept "
+            f"({'--instrument chooses' if instrument else 'the spray-out was not read there'})",
             highlight=False,
         )
     count = report["cases_in_database"]
@@ -422,13 +451,27 @@ def remove(
 def export_cases(
     target: Annotated[Path, typer.Argument(help="CSV or CxF3 file to write.")],
     database: DatabaseOption = None,
-    instrument: Annotated[str | None, typer.Option(help="Only this instrument's cases.")] = None,
+    instrument: Annotated[
+        str | None,
+        typer.Option(
+            "--instrument",
+            "-i",
+            help="Only the cases read at this instrument's geometries, at those alone.",
+            show_default="every case, at every geometry it was read at",
+        ),
+    ] = None,
 ) -> None:
     """Export case histories as CSV or CxF3."""
+    from flakelab.cases.case import cases_at
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import write_cases
 
-    cases = list(iter_cases(open_database(database), instrument=instrument))
+    cases = list(iter_cases(open_database(database)))
+    if instrument is not None:
+        try:
+            cases = cases_at(cases, INSTRUMENT_GEOMETRIES[instrument_name(instrument)])
+        except ValueError as error:
+            raise FlakelabError(f"--instrument: {error}") from None
     write_cases(cases, target)
     errors.print(f"wrote {len(cases)} cases to {target}", highlight=False)
 
@@ -739,7 +782,11 @@ def train(
     seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
     json_output: JsonOption = False,
 ) -> None:
-    """Train the learned forward model with the hybrid paper's protocol."""
+    """Train the learned forward model with the hybrid paper's protocol.
+
+    It learns from every case read at the instrument's geometries, whatever read it (an
+    MA-T12 case trains the five-angle model too)."""
+    from flakelab.cases.case import cases_at
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
     from flakelab.models.network import LOG_OFFSET_MAX
@@ -760,10 +807,18 @@ def train(
         raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
 
     lib = read_library(library)
-    chosen = [c for c in load_cases(cases) if c.instrument == instrument]
+    try:
+        instrument = instrument_name(instrument)
+    except ValueError as error:
+        raise FlakelabError(f"--instrument: {error}") from None
+    geometries = INSTRUMENT_GEOMETRIES[instrument]
+    chosen = cases_at(load_cases(cases), geometries)
     if not chosen:
-        raise FlakelabError(f"{cases}: no cases from instrument {instrument!r}")
-    data, held_out = split_held_out(chosen, cases, holdout, seed, lib)
+        raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
+    data, held_out = (
+        replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
+        for arrays in split_held_out(chosen, cases, holdout, seed, lib)
+    )
     sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
     config = TrainingConfig(
         hidden=sizes,
@@ -853,6 +908,7 @@ def evaluate(
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs."""
+    from flakelab.cases.case import cases_at
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import case_arrays, evaluate_model
@@ -861,7 +917,7 @@ def evaluate(
     forward = (
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
-    chosen = [c for c in load_cases(cases) if c.geometry_names == forward.geometries]
+    chosen = cases_at(load_cases(cases), forward.geometries)
     if not chosen:
         raise FlakelabError(f"{cases}: no cases with the model's geometries {forward.geometries}")
     from flakelab.cli.matching import habits_for

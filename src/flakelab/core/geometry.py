@@ -29,6 +29,8 @@ __all__ = [
     "parse_geometries",
     "instrument_geometries",
     "instrument_name",
+    "instrument_of",
+    "instruments_reading",
     "directions",
     "refract_into_coating",
     "flake_angles",
@@ -152,6 +154,27 @@ def instrument_name(instrument: str) -> str:
 def instrument_geometries(instrument: str) -> tuple[Geometry, ...]:
     """Geometries of a named instrument (``byk-mac-i``, ``ma-t6``, ``ma-t12``, ``five-angle``)."""
     return parse_geometries(INSTRUMENT_GEOMETRIES[instrument_name(instrument)])
+
+
+def _key(text: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", text.lower())
+
+
+def instrument_of(names: ArrayLike, hint: str | None = None) -> str | None:
+    """The instrument whose geometry set is exactly ``names`` (in any order); where two share
+    a set (``byk-mac-i``, ``ma-t6``), the one ``hint`` names (a file's instrument, e.g. "BYK-mac
+    i"), else the first; None when no instrument reads just these."""
+    wanted = {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
+    same = [k for k, v in INSTRUMENT_GEOMETRIES.items() if set(v) == wanted]
+    hinted = [k for k in same if hint and _key(k) in _key(hint)]
+    return (hinted or same or [None])[0]
+
+
+def instruments_reading(names: ArrayLike) -> tuple[str, ...]:
+    """The instruments whose every geometry is among ``names``: the models that can learn from
+    (and be judged on) a case read at ``names``."""
+    have = {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
+    return tuple(k for k, v in INSTRUMENT_GEOMETRIES.items() if set(v) <= have)
 
 
 def _angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:

@@ -49,6 +49,7 @@ from flakelab.cases.case import Case
 from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.geometry import instrument_of
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.torch_colour import TorchColour
 from flakelab.models.network import ForwardModel, ModelError, StackedNetwork, build_network
@@ -147,17 +148,20 @@ def generated_case_arrays(
 def case_arrays(
     cases: Iterable[Case], toners: Sequence[str], effect: Sequence[bool] | None = None
 ) -> CaseArrays:
-    """Stack cases of one instrument (one geometry set) into training arrays."""
+    """Stack cases of one geometry set into training arrays (:func:`~flakelab.cases.case.
+    cases_at` brings cases read by several instruments to one set); the arrays' instrument is
+    the one whose set it is, else the first case's."""
     index = {name: i for i, name in enumerate(toners)}
     xs, Rs, texs, ids, shops = [], [], [], [], []
     geometries = instrument = None
     for case in cases:
         if geometries is None:
-            geometries, instrument = case.geometry_names, case.instrument
+            geometries = case.geometry_names
+            instrument = instrument_of(geometries, case.instrument) or case.instrument
         elif case.geometry_names != geometries:
             raise ModelError(
                 f"case {case.case_id!r}: geometries {case.geometry_names} differ "
-                f"from the first case's {geometries}; train one instrument at a time"
+                f"from the first case's {geometries}; train one geometry set at a time"
             )
         x = np.zeros(len(toners))
         for name, amount in case.recipe.items():
