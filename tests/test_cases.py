@@ -262,6 +262,11 @@ def test_case_checks_its_fields():
         Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((2, 31)))
     with pytest.raises(CaseError, match="recipe"):
         Case("x", ("45as45",), {"A": -1.0}, np.ones((1, 31)), np.ones((1, 31)))
+    # texts no longer than the database's columns hold (PostgreSQL refuses a longer one)
+    with pytest.raises(CaseError, match="shop: expected a text of at most 120 characters"):
+        Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((1, 31)), shop="s" * 121)
+    with pytest.raises(CaseError, match="case_id: expected an id"):
+        Case(" ", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((1, 31)))
 
 
 def example_readings():

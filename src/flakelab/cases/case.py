@@ -16,10 +16,14 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 
-__all__ = ["Case", "CaseError", "OUTCOMES", "cases_at", "worst_differences"]
+__all__ = ["Case", "CaseError", "OUTCOMES", "TEXT_LENGTHS", "cases_at", "worst_differences"]
 
 OUTCOMES = ("accepted", "corrected", "rejected")
 """How a case ended: the spray-out passed, needed a correction, or was given up."""
+
+TEXT_LENGTHS = {"case_id": 64, "shop": 120, "instrument": 60, "conditions": 30}
+"""The longest text each field may hold: the database's column widths (PostgreSQL refuses a
+longer value; SQLite would keep it), checked with every case so that no store fails on one."""
 
 
 class CaseError(FlakelabError):
@@ -69,6 +73,15 @@ class Case:
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
         if self.created_at.tzinfo is None:  # SQLite and some case files keep no zone
             object.__setattr__(self, "created_at", self.created_at.replace(tzinfo=UTC))
+        for name, longest in TEXT_LENGTHS.items():
+            text = getattr(self, name)
+            if not isinstance(text, str) or len(text) > longest:
+                raise CaseError(
+                    f"{where}: {name}: expected a text of at most {longest} characters, "
+                    f"got {text!r}"
+                )
+        if not self.case_id.strip():
+            raise CaseError(f"{where}: case_id: expected an id, got an empty text")
         if self.outcome not in OUTCOMES:
             raise CaseError(
                 f"{where}: outcome: expected one of {', '.join(OUTCOMES)}, got {self.outcome!r}"

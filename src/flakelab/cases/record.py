@@ -16,7 +16,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from flakelab.cases.case import OUTCOMES, Case, CaseError
+from flakelab.cases.case import OUTCOMES, TEXT_LENGTHS, Case, CaseError
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
@@ -98,7 +98,10 @@ def case_from_readings(
     """
     if instrument is None:
         names = shared_geometries(target, sprayout)
-        instrument = instrument_of(names, target.instrument) or target.instrument or "unknown"
+        instrument = (
+            instrument_of(names, target.instrument)
+            or ((target.instrument or "unknown")[: TEXT_LENGTHS["instrument"]])
+        )
     else:
         instrument = instrument_name(instrument)
         names = INSTRUMENT_GEOMETRIES[instrument]

@@ -12,6 +12,8 @@ from datetime import datetime
 from sqlalchemy import JSON, Boolean, DateTime, Float, Integer, LargeBinary, String
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
+from flakelab.cases.case import TEXT_LENGTHS
+
 __all__ = ["Base", "CaseRow", "ModelRow", "HabitsRow"]
 
 
@@ -23,10 +25,10 @@ class CaseRow(Base):
     __tablename__ = "cases"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    case_id: Mapped[str] = mapped_column(String(64), unique=True, index=True)
-    shop: Mapped[str] = mapped_column(String(120), index=True)
-    instrument: Mapped[str] = mapped_column(String(60), index=True)
-    conditions: Mapped[str] = mapped_column(String(30))
+    case_id: Mapped[str] = mapped_column(String(TEXT_LENGTHS["case_id"]), unique=True, index=True)
+    shop: Mapped[str] = mapped_column(String(TEXT_LENGTHS["shop"]), index=True)
+    instrument: Mapped[str] = mapped_column(String(TEXT_LENGTHS["instrument"]), index=True)
+    conditions: Mapped[str] = mapped_column(String(TEXT_LENGTHS["conditions"]))
     outcome: Mapped[str] = mapped_column(String(20))
     synthetic: Mapped[bool] = mapped_column(Boolean)
     geometries: Mapped[list] = mapped_column(JSON)
