@@ -7,7 +7,7 @@ import multiprocessing
 import subprocess
 import sys
 from dataclasses import replace
-from datetime import UTC
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -320,6 +320,54 @@ def test_a_recorded_case_keeps_every_geometry_both_readings_share():
     # no geometry in common
     with pytest.raises(CaseError, match="shares no geometry with the target"):
         case_from_readings(target.select(["15as15"]), six, {"Al medium": 1.0}, shop="x")
+
+
+def test_a_manifest_records_each_row_as_record_would(tmp_path):
+    from flakelab.cases.manifest import ManifestError, cases_from_manifest
+    from flakelab.io import write_measurements, write_recipe
+
+    target, sprayout = example_readings()
+    byk = INSTRUMENT_GEOMETRIES["byk-mac-i"]
+    second = replace(sprayout.select(byk), sample="spray 2", instrument="BYK-mac i")
+    second = replace(second, reflectance=second.reflectance * 0.95)
+    write_measurements([target], tmp_path / "car.cxf")
+    write_measurements([sprayout, second], tmp_path / "sprays.cxf")
+    write_recipe({"Al medium": 194.0, "Phthalo blue GS": 16.6}, tmp_path / "shot.json")
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text(
+        "target,recipe,sprayed,sprayed_sample,shop,at\n"
+        f"car.cxf,shot.json,sprays.cxf,{sprayout.sample},,\n"
+        "car.cxf,shot.json,sprays.cxf,spray 2,Garage B,2026-11-23T10:00\n"
+    )
+    library, tol = read_library(None), tolerance_preset("refinish")
+    cases = cases_from_manifest(manifest, library, tolerance=tol, shop="Dupont")
+    grams = {"Al medium": 194.0 / 210.6, "Phthalo blue GS": 16.6 / 210.6}
+    expected = [
+        case_from_readings(target, sprayout, grams, shop="Dupont", tolerance=tol),
+        case_from_readings(
+            target,
+            second,
+            grams,
+            shop="Garage B",
+            tolerance=tol,
+            created_at=datetime(2026, 11, 23, 10, tzinfo=UTC),
+        ),  # fmt: skip
+    ]
+    for got, want in zip(cases, expected, strict=True):
+        assert got.case_id == want.case_id and got.geometry_names == want.geometry_names
+        assert (got.shop, got.outcome, got.created_at) == (want.shop, want.outcome, want.created_at)
+        np.testing.assert_allclose(got.sprayout, want.sprayout, rtol=1e-6)
+    assert cases[1].instrument == "byk-mac-i" and cases[1].outcome == "corrected"
+    # a bad row names the manifest, the row and the column; no case comes back
+    manifest.write_text(manifest.read_text() + "car.cxf,shot.json,sprays.cxf,spray 3,,\n")
+    with pytest.raises(ManifestError, match=r"manifest.csv: row 4: sprayed: .*no sample 'spray 3'"):
+        cases_from_manifest(manifest, library, tolerance=tol)
+    lines = manifest.read_text().splitlines()
+    manifest.write_text("\n".join([*lines[:3], lines[2]]) + "\n")
+    with pytest.raises(
+        ManifestError, match="row 4: case .*the same readings, recipe and shop as row 3"
+    ):
+        cases_from_manifest(manifest, library, tolerance=tol)
 
 
 def test_recording_refuses_readings_without_the_instrument_s_geometries():

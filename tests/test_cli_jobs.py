@@ -107,6 +107,32 @@ def test_correct_refuses_a_bad_recipe(tmp_path):
     assert "Traceback" not in run.stderr
 
 
+def test_a_shop_brings_its_history_in_one_transaction(tmp_path):
+    from flakelab.cases.database import count_cases, iter_cases, open_database
+
+    db, examples = tmp_path / "shop.db", example_path("target").parent
+    manifest = tmp_path / "history.csv"
+    car, recipe = examples / "blue-metallic-target.cxf", examples / "blue-metallic-recipe.json"
+    good = f"{car},{recipe},{example_path('sprayout')},Dupont"
+    manifest.write_text(f"target,recipe,sprayed,shop\n{good}\n{car},{recipe},nope.cxf,x\n")
+    run = flakelab("cases", "record-all", str(manifest), "-d", str(db))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "history.csv: row 3: sprayed: " in run.stderr and "nope.cxf: no such file" in run.stderr
+    assert count_cases(open_database(db)) == 0  # the good row was not stored either
+    manifest.write_text(f"target,recipe,sprayed,shop\n{good}\n")
+    run = flakelab("cases", "record-all", str(manifest), "-d", str(db), "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["recorded"] == 1 and report["outcomes"]["accepted"] == 1
+    assert report["cases_per_model"]["five-angle"] == report["cases_per_model"]["ma-t12"] == 1
+    (case,) = iter_cases(open_database(db))
+    assert case.case_id == report["cases"][0]["case_id"] and case.shop == "Dupont"
+    # the same history again is refused, naming the row, and stores nothing
+    run = flakelab("cases", "record-all", str(manifest), "-d", str(db))
+    assert run.returncode == 2 and "row 2: case " in run.stderr and "already recorded" in run.stderr
+    assert count_cases(open_database(db)) == 1
+
+
 def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.io import write_measurements

@@ -32,6 +32,7 @@ __all__ = [
     "iter_cases",
     "count_cases",
     "case_exists",
+    "existing_case_ids",
     "latest_cases",
     "remove_case",
     "shop_summary",
@@ -186,8 +187,18 @@ def remove_case(engine: Engine, case_id: str) -> Case:
 
 def case_exists(engine: Engine, case_id: str) -> bool:
     """Whether a case with this id is stored."""
+    return bool(existing_case_ids(engine, [case_id]))
+
+
+def existing_case_ids(engine: Engine, case_ids: Iterable[str]) -> set[str]:
+    """Those of ``case_ids`` already stored."""
+    wanted = list(case_ids)
+    found: set[str] = set()
     with Session(engine) as session:
-        return session.scalar(select(CaseRow.id).where(CaseRow.case_id == case_id)) is not None
+        for start in range(0, len(wanted), 500):  # within every database's parameter limit
+            chunk = wanted[start : start + 500]
+            found.update(session.scalars(select(CaseRow.case_id).where(CaseRow.case_id.in_(chunk))))
+    return found
 
 
 def count_cases(engine: Engine) -> int:

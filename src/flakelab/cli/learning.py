@@ -34,7 +34,8 @@ from flakelab.core.geometry import (
 from flakelab.errors import FlakelabError
 
 cases_app = typer.Typer(
-    help="Refinish cases: generate, record, list, remove, import, export; realism, habits, shops."
+    help="Refinish cases: generate, record, record-all, list, remove, import, export; "
+    "realism, habits, shops."
 )
 model_app = typer.Typer(help="Learned forward models: list, evaluate and adapt to a shop.")
 
@@ -353,6 +354,118 @@ def record_case(
             f"({'--instrument chooses' if instrument else 'the spray-out was not read there'})",
             highlight=False,
         )
+    count = report["cases_in_database"]
+    errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
+
+
+@cases_app.command("record-all")
+@reports_errors
+def record_all(
+    manifest: Annotated[
+        Path,
+        typer.Argument(
+            help="CSV manifest, one spray-out a row: target, recipe, sprayed files (paths "
+            "relative to it), and optionally sample, sprayed_sample, shop, outcome, at, case_id."
+        ),
+    ],
+    shop: Annotated[
+        str,
+        typer.Option(envvar="FLAKELAB_SHOP", help="Shop of the rows that name none."),
+    ] = "unknown",
+    instrument: Annotated[
+        str | None,
+        typer.Option(
+            "--instrument",
+            "-i",
+            help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
+            show_default="every geometry both readings of a row share",
+        ),
+    ] = None,
+    library: LibraryOption = None,
+    tolerance: ToleranceOption = "refinish",
+    database: DatabaseOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Record a shop's spray-out history from its instrument files: every row of a manifest
+    as 'cases record' records one, all in one transaction or none.
+
+    The first bad row is named with its column, and nothing is stored; so is a row already
+    recorded, or recorded twice in the manifest."""
+    from flakelab.cases.case import OUTCOMES, worst_differences
+    from flakelab.cases.database import add_cases, count_cases, existing_case_ids, open_database
+    from flakelab.cases.manifest import cases_from_manifest, read_manifest
+    from flakelab.io import read_library, read_tolerance
+
+    tol = read_tolerance(tolerance)
+    lib = read_library(library)
+    rows = [number for number, _ in read_manifest(manifest)]
+    with progress_bar(disable=json_output) as bar:
+        task = bar.add_task("reading the spray-outs", total=len(rows))
+        cases = cases_from_manifest(
+            manifest,
+            lib,
+            tolerance=tol,
+            shop=shop,
+            instrument=instrument,
+            progress=lambda k: bar.advance(task, k),
+        )
+    engine = open_database(database)
+    stored = existing_case_ids(engine, (c.case_id for c in cases))
+    if stored:
+        number, case = next((n, c) for n, c in zip(rows, cases, strict=True) if c.case_id in stored)
+        raise FlakelabError(
+            f"{manifest}: row {number}: case {case.case_id} is already recorded in {engine.url} "
+            f"({len(stored)} of the {len(cases)} rows are); nothing was stored"
+        )
+    add_cases(engine, cases)  # one transaction: a writer in between is refused whole
+    worst, where = worst_differences(cases)
+    recorded = [
+        {
+            "row": number,
+            "case_id": c.case_id,
+            "shop": c.shop,
+            "instrument": c.instrument,
+            "outcome": c.outcome,
+            "created_at": c.created_at.isoformat(),
+            "worst_de00": round(float(de), 3),
+            "worst_geometry": g,
+        }
+        for number, c, de, g in zip(rows, cases, worst, where, strict=True)
+    ]
+    learners = {
+        model: sum(model in instruments_reading(c.geometry_names) for c in cases)
+        for model in INSTRUMENT_GEOMETRIES
+    }
+    report = {
+        "manifest": str(manifest),
+        "recorded": len(cases),
+        "outcomes": {o: sum(c.outcome == o for c in cases) for o in OUTCOMES},
+        "cases_per_model": learners,
+        "tolerance": tol.name,
+        "cases": recorded,
+        "database": str(engine.url),
+        "cases_in_database": count_cases(engine),
+    }
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"Recorded {len(cases)} spray-outs from {manifest}")
+    table.add_column("row", justify="right")
+    for column in ("case", "shop", "outcome", "worst ΔE00", "instrument"):
+        table.add_column(column, no_wrap=column != "shop")
+    for row in recorded:
+        table.add_row(
+            str(row["row"]),
+            row["case_id"],
+            row["shop"],
+            row["outcome"],
+            f"{row['worst_de00']:.2f} {row['worst_geometry']}",
+            row["instrument"],
+        )
+    console.print(table)
+    counts = ", ".join(f"{n} {o}" for o, n in report["outcomes"].items() if n)
+    models = ", ".join(f"{m} {n}" for m, n in learners.items() if n) or "none"
+    console.print(f"outcomes: {counts}; cases each model learns from: {models}", highlight=False)
     count = report["cases_in_database"]
     errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
 

@@ -1,0 +1,170 @@
+"""A shop's spray-out history from its own instrument files, through a manifest.
+
+A shop that has been measuring its cars and spray-outs keeps the instrument's exports (MA-T12
+xlsx, CxF3, CSV, JSON) and the recipes it mixed. A manifest lists them, one spray-out per
+row, and ``flakelab cases record-all`` records every row as ``flakelab cases record`` would:
+in one transaction, or not at all.
+
+Manifest columns (CSV with a header; file paths relative to the manifest's folder):
+
+=================  ====================================================================
+``target``         measurement file of the car (required)
+``recipe``         recipe file ``{toner: grams}`` that was sprayed (required)
+``sprayed``        measurement file of the spray-out (required)
+``sample``         the car's sample in a multi-sample file (default: the file's first)
+``sprayed_sample`` the spray-out's sample (default: the file's first)
+``shop``           the shop (default: the command's ``--shop``)
+``outcome``        ``auto`` (judged against the tolerance), ``accepted``, ``corrected``
+                   or ``rejected`` (default ``auto``)
+``at``             when the spray-out was made, ISO 8601, UTC without a zone (default:
+                   the spray-out file's date)
+``case_id``        the case's id (default: made from the readings, recipe and shop)
+=================  ====================================================================
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from datetime import UTC, datetime
+from os import PathLike
+from pathlib import Path
+
+from flakelab.cases.case import Case
+from flakelab.cases.record import AUTO_OUTCOME, case_from_readings
+from flakelab.core.measurement import Measurement
+from flakelab.core.tolerance import Tolerance
+from flakelab.errors import FlakelabError
+from flakelab.io import read_measurement, read_recipe
+from flakelab.library import Library
+
+__all__ = ["MANIFEST_COLUMNS", "ManifestError", "cases_from_manifest", "read_manifest"]
+
+MANIFEST_COLUMNS = (
+    "target",
+    "recipe",
+    "sprayed",
+    "sample",
+    "sprayed_sample",
+    "shop",
+    "outcome",
+    "at",
+    "case_id",
+)
+REQUIRED_COLUMNS = ("target", "recipe", "sprayed")
+
+
+class ManifestError(FlakelabError):
+    """A manifest that is wrong: names the file, row, column and problem."""
+
+
+def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
+    """The manifest's rows ``(row number, {column: cell})``, blank rows skipped; the header
+    must name the required columns and no unknown one."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ManifestError(f"{path}: no such manifest file") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise ManifestError(f"{path}: cannot be read as a UTF-8 CSV manifest ({error})") from None
+    rows = list(csv.reader(text.splitlines()))
+    header = [cell.strip() for cell in rows[0]] if rows else []
+    unknown = [c for c in header if c not in MANIFEST_COLUMNS]
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if unknown or missing or len(set(header)) != len(header):
+        raise ManifestError(
+            f"{path}: row 1: expected a header with {', '.join(REQUIRED_COLUMNS)} and any of "
+            f"{', '.join(MANIFEST_COLUMNS[3:])}, each once (missing {missing}, unknown {unknown})"
+        )
+    entries = []
+    for number, row in enumerate(rows[1:], start=2):
+        if not any(cell.strip() for cell in row):
+            continue
+        if len(row) != len(header):
+            raise ManifestError(
+                f"{path}: row {number}: expected {len(header)} cells, got {len(row)}"
+            )
+        cells = {c: v.strip() for c, v in zip(header, row, strict=True)}
+        for column in REQUIRED_COLUMNS:
+            if not cells[column]:
+                raise ManifestError(f"{path}: row {number}: {column}: expected a file, got none")
+        entries.append((number, cells))
+    if not entries:
+        raise ManifestError(f"{path}: no spray-outs after the header")
+    return entries
+
+
+def cases_from_manifest(
+    path: str | PathLike,
+    library: Library,
+    *,
+    tolerance: Tolerance,
+    shop: str = "unknown",
+    instrument: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[Case]:
+    """Every row's case (:func:`~flakelab.cases.record.case_from_readings`); the first
+    problem names the manifest, row and column, and no case is returned. Two rows with the
+    same readings, recipe and shop are refused."""
+    path = Path(path)
+    folder = path.parent
+    readings: dict[tuple[Path, str], Measurement] = {}  # a car's file serves several rows
+
+    def reading(where: str, file: str, sample: str) -> Measurement:
+        key = (folder / file, sample)
+        if key not in readings:
+            try:
+                readings[key] = read_measurement(key[0], sample or None)
+            except (FlakelabError, OSError, KeyError) as error:
+                raise ManifestError(f"{where}: {error}") from None
+        return readings[key]
+
+    cases: list[Case] = []
+    first_row: dict[str, int] = {}
+    for number, cells in read_manifest(path):
+        where = f"{path}: row {number}"
+        target = reading(f"{where}: target", cells["target"], cells.get("sample", ""))
+        sprayed = reading(f"{where}: sprayed", cells["sprayed"], cells.get("sprayed_sample", ""))
+        try:
+            grams = read_recipe(folder / cells["recipe"])
+            fractions = library.fractions(grams)
+        except FlakelabError as error:
+            raise ManifestError(f"{where}: recipe: {error}") from None
+        when = _time(where, cells.get("at", ""))
+        try:
+            case = case_from_readings(
+                target,
+                sprayed,
+                {n: f for n, f in zip(library.names, fractions.tolist(), strict=True) if f},
+                instrument,
+                shop=cells.get("shop") or shop,
+                outcome=cells.get("outcome") or AUTO_OUTCOME,
+                tolerance=tolerance,
+                created_at=when,
+                case_id=cells.get("case_id") or None,
+            )
+        except (FlakelabError, ValueError) as error:
+            raise ManifestError(f"{where}: {error}") from None
+        if case.case_id in first_row:
+            raise ManifestError(
+                f"{where}: case {case.case_id}: the same readings, recipe and shop as row "
+                f"{first_row[case.case_id]} (or the same case_id)"
+            )
+        first_row[case.case_id] = number
+        cases.append(case)
+        if progress:
+            progress(1)
+    return cases
+
+
+def _time(where: str, cell: str) -> datetime | None:
+    if not cell:
+        return None
+    try:
+        when = datetime.fromisoformat(cell)
+    except ValueError:
+        raise ManifestError(
+            f"{where}: at: expected an ISO 8601 date and time, got {cell!r}"
+        ) from None
+    return when if when.tzinfo else when.replace(tzinfo=UTC)
