@@ -340,7 +340,9 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
         "car.cxf,shot.json,sprays.cxf,spray 2,Garage B,2026-11-23T10:00\n"
     )
     library, tol = read_library(None), tolerance_preset("refinish")
-    cases = cases_from_manifest(manifest, library, tolerance=tol, shop="Dupont")
+    numbered = cases_from_manifest(manifest, library, tolerance=tol, shop="Dupont")
+    assert [n for n, _ in numbered] == [2, 3]
+    cases = [c for _, c in numbered]
     grams = {"Al medium": 194.0 / 210.6, "Phthalo blue GS": 16.6 / 210.6}
     expected = [
         case_from_readings(target, sprayout, grams, shop="Dupont", tolerance=tol),

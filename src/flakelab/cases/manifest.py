@@ -35,7 +35,7 @@ from flakelab.cases.record import AUTO_OUTCOME, case_from_readings
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
-from flakelab.io import read_measurement, read_recipe
+from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.library import Library
 
 __all__ = ["MANIFEST_COLUMNS", "ManifestError", "cases_from_manifest", "read_manifest"]
@@ -103,31 +103,30 @@ def cases_from_manifest(
     shop: str = "unknown",
     instrument: str | None = None,
     progress: Callable[[int], None] | None = None,
-) -> list[Case]:
-    """Every row's case (:func:`~flakelab.cases.record.case_from_readings`); the first
-    problem names the manifest, row and column, and no case is returned. Two rows with the
-    same readings, recipe and shop are refused."""
+) -> list[tuple[int, Case]]:
+    """Every row's number and case (:func:`~flakelab.cases.record.case_from_readings`); the
+    first problem names the manifest, row and column, and no case is returned. Two rows with
+    the same readings, recipe and shop are refused."""
     path = Path(path)
-    folder = path.parent
-    readings: dict[tuple[Path, str], Measurement] = {}  # a car's file serves several rows
+    files: dict[Path, list[Measurement]] = {}  # a car's file serves several rows, read once
 
     def reading(where: str, file: str, sample: str) -> Measurement:
-        key = (folder / file, sample)
-        if key not in readings:
-            try:
-                readings[key] = read_measurement(key[0], sample or None)
-            except (FlakelabError, OSError, KeyError) as error:
-                raise ManifestError(f"{where}: {error}") from None
-        return readings[key]
+        name = path.parent / file
+        try:
+            if name not in files:
+                files[name] = read_measurements(name)
+            return pick_sample(files[name], sample or None, name)
+        except (FlakelabError, OSError, KeyError) as error:
+            raise ManifestError(f"{where}: {error}") from None
 
-    cases: list[Case] = []
+    cases: list[tuple[int, Case]] = []
     first_row: dict[str, int] = {}
     for number, cells in read_manifest(path):
         where = f"{path}: row {number}"
         target = reading(f"{where}: target", cells["target"], cells.get("sample", ""))
         sprayed = reading(f"{where}: sprayed", cells["sprayed"], cells.get("sprayed_sample", ""))
         try:
-            grams = read_recipe(folder / cells["recipe"])
+            grams = read_recipe(path.parent / cells["recipe"])
             fractions = library.fractions(grams)
         except FlakelabError as error:
             raise ManifestError(f"{where}: recipe: {error}") from None
@@ -152,7 +151,7 @@ def cases_from_manifest(
                 f"{first_row[case.case_id]} (or the same case_id)"
             )
         first_row[case.case_id] = number
-        cases.append(case)
+        cases.append((number, case))
         if progress:
             progress(1)
     return cases

@@ -398,10 +398,9 @@ def record_all(
 
     tol = read_tolerance(tolerance)
     lib = read_library(library)
-    rows = [number for number, _ in read_manifest(manifest)]
     with progress_bar(disable=json_output) as bar:
-        task = bar.add_task("reading the spray-outs", total=len(rows))
-        cases = cases_from_manifest(
+        task = bar.add_task("reading the spray-outs", total=len(read_manifest(manifest)))
+        numbered = cases_from_manifest(
             manifest,
             lib,
             tolerance=tol,
@@ -409,6 +408,7 @@ def record_all(
             instrument=instrument,
             progress=lambda k: bar.advance(task, k),
         )
+    rows, cases = [n for n, _ in numbered], [c for _, c in numbered]
     engine = open_database(database)
     stored = existing_case_ids(engine, (c.case_id for c in cases))
     if stored:

@@ -27,6 +27,7 @@ __all__ = [
     "detect_format",
     "read_measurements",
     "read_measurement",
+    "pick_sample",
     "write_measurements",
     "read_tolerance",
     "read_recipe",
@@ -111,7 +112,13 @@ def read_measurements(path: str | PathLike) -> list[Measurement]:
 
 def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:
     """One measurement: the sample named, or the file's first (standard) one."""
-    measurements = read_measurements(path)
+    return pick_sample(read_measurements(path), sample, path)
+
+
+def pick_sample(
+    measurements: list[Measurement], sample: str | None, path: str | PathLike
+) -> Measurement:
+    """The sample named among a file's ``measurements``, or the first (standard) one."""
     if sample is None:
         return measurements[0]
     for m in measurements:
