@@ -184,6 +184,7 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
         assert run.returncode == 0, run.stderr
         evaluated = json.loads(run.stdout)
         assert evaluated["cases"] == n and set(evaluated["per_geometry"]) == set(geometries)
+        assert evaluated["cases_left_out"] == 2 - n
     # the shop's history, newest first, and one case removed by its id
     listed = json.loads(flakelab("cases", "list", "-d", str(db), "--json").stdout)["cases"]
     assert {c["shop"] for c in listed} == {"Dupont", "Martin"}

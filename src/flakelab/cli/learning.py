@@ -925,7 +925,8 @@ def train(
     except ValueError as error:
         raise FlakelabError(f"--instrument: {error}") from None
     geometries = INSTRUMENT_GEOMETRIES[instrument]
-    chosen = cases_at(load_cases(cases), geometries)
+    loaded = load_cases(cases)
+    chosen = cases_at(loaded, geometries)
     if not chosen:
         raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
     data, held_out = (
@@ -958,6 +959,7 @@ def train(
     metrics = evaluate_model(model, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
+    summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(model.to_bytes())
@@ -1030,7 +1032,8 @@ def evaluate(
     forward = (
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
-    chosen = cases_at(load_cases(cases), forward.geometries)
+    loaded = load_cases(cases)
+    chosen = cases_at(loaded, forward.geometries)
     if not chosen:
         raise FlakelabError(f"{cases}: no cases with the model's geometries {forward.geometries}")
     from flakelab.cli.matching import habits_for
@@ -1059,9 +1062,16 @@ def evaluate(
     report["model"] = model or f"current {instrument}"
     report["forward"] = matcher.name
     report["habits"] = shop_habits and shop_habits.report()
+    report["cases_left_out"] = len(loaded) - len(chosen)
     if json_output:
         print(json.dumps(report, indent=2))
         return
+    if report["cases_left_out"]:
+        errors.print(
+            f"note: {report['cases_left_out']} of the {len(loaded)} cases were not read at the "
+            f"model's geometries and are left out",
+            highlight=False,
+        )
     rows = {**report["per_geometry"], "all": report}
     console.print(_de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
     families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
