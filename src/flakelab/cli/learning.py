@@ -51,6 +51,15 @@ DatabaseOption = Annotated[
 InstrumentOption = Annotated[
     str, typer.Option("--instrument", "-i", help="Geometry set: five-angle, ma-t12, byk-mac-i.")
 ]
+KeptGeometriesOption = Annotated[
+    str | None,
+    typer.Option(
+        "--instrument",
+        "-i",
+        help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
+        show_default="every geometry the car's reading and the spray-out's share",
+    ),
+]
 LibraryOption = Annotated[
     Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
 ]
@@ -253,15 +262,7 @@ def record_case(
         str,
         typer.Option(envvar="FLAKELAB_SHOP", help="Shop name recorded with the case."),
     ] = "unknown",
-    instrument: Annotated[
-        str | None,
-        typer.Option(
-            "--instrument",
-            "-i",
-            help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
-            show_default="every geometry both readings share",
-        ),
-    ] = None,
+    instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
     tolerance: ToleranceOption = "refinish",
     at: Annotated[
@@ -372,15 +373,7 @@ def record_all(
         str,
         typer.Option(envvar="FLAKELAB_SHOP", help="Shop of the rows that name none."),
     ] = "unknown",
-    instrument: Annotated[
-        str | None,
-        typer.Option(
-            "--instrument",
-            "-i",
-            help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
-            show_default="every geometry both readings of a row share",
-        ),
-    ] = None,
+    instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
     tolerance: ToleranceOption = "refinish",
     database: DatabaseOption = None,
