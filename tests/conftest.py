@@ -1,7 +1,15 @@
-"""Shared fixtures: the real reference data in ../shared/data (skipped when absent)."""
+"""Shared fixtures: the real reference data in ../shared/data (skipped when absent) and a
+live PostgreSQL for the database tests (skipped when none can be had)."""
 
 from __future__ import annotations
 
+import os
+import pwd
+import shutil
+import socket
+import subprocess
+import tempfile
+import uuid
 from datetime import datetime
 from pathlib import Path
 
@@ -45,3 +53,62 @@ def rich_measurement() -> Measurement:
         stored_lab=rng.uniform([10, -40, -40], [100, 40, 40], (4, 3)),
         metadata={"shop": "north"},
     )
+
+
+@pytest.fixture(scope="session")
+def postgres_server():
+    """A live PostgreSQL server's URL without a database name: FLAKELAB_TEST_POSTGRES_URL,
+    else a throwaway cluster started with this machine's initdb and pg_ctl (as the postgres
+    user when the tests run as root); skipped when neither is at hand."""
+    if url := os.environ.get("FLAKELAB_TEST_POSTGRES_URL"):
+        yield url.rstrip("/")
+        return
+    pytest.importorskip("psycopg", reason="PostgreSQL's driver: pip install 'flakelab[postgres]'")
+    initdb, pg_ctl = shutil.which("initdb"), shutil.which("pg_ctl")
+    if not (initdb and pg_ctl):
+        pytest.skip("no PostgreSQL here: neither FLAKELAB_TEST_POSTGRES_URL nor initdb/pg_ctl")
+    folder = Path(tempfile.mkdtemp(prefix="flakelab-postgres-"))  # /tmp: any user reaches it
+    as_user: list[str] = []
+    if os.geteuid() == 0:  # the server refuses to run as root
+        owner = pwd.getpwnam("postgres")
+        os.chown(folder, owner.pw_uid, owner.pw_gid)
+        as_user = ["runuser", "-u", "postgres", "--"]
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    data = folder / "data"
+    options = f"-p {port} -k {folder} -c listen_addresses=127.0.0.1 -c fsync=off"
+    try:
+        for command in (
+            [initdb, "-D", str(data), "--auth=trust", "-U", "flakelab", "--no-sync"],
+            [pg_ctl, "-D", str(data), "-o", options, "-l", str(folder / "log"), "-w", "start"],
+        ):
+            subprocess.run(as_user + command, check=True, capture_output=True, timeout=120)
+    except (subprocess.SubprocessError, OSError) as error:
+        shutil.rmtree(folder, ignore_errors=True)
+        pytest.skip(f"could not start a PostgreSQL server here: {error}")
+    try:
+        yield f"postgresql+psycopg://flakelab@127.0.0.1:{port}"
+    finally:
+        stop = [pg_ctl, "-D", str(data), "-m", "immediate", "stop"]
+        subprocess.run(as_user + stop, capture_output=True, timeout=120)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database_url(request, tmp_path):
+    """A new, empty database's URL: a SQLite file, and a database of its own on a live
+    PostgreSQL (dropped afterwards)."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'cases.db'}"
+        return
+    import psycopg
+
+    server = request.getfixturevalue("postgres_server")
+    name = f"flakelab_test_{uuid.uuid4().hex[:12]}"
+    admin = server.replace("postgresql+psycopg://", "postgresql://") + "/postgres"
+    with psycopg.connect(admin, autocommit=True) as connection:
+        connection.execute(f"CREATE DATABASE {name}")
+    yield f"{server}/{name}"
+    with psycopg.connect(admin, autocommit=True) as connection:
+        connection.execute(f"DROP DATABASE {name} WITH (FORCE)")  # the test's engines still hold it

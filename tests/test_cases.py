@@ -171,8 +171,8 @@ def test_a_case_read_by_more_geometries_serves_each_model_within_them(cases):
     np.testing.assert_array_equal(data.R[1], cases[0].sprayout)
 
 
-def test_database_round_trip_and_migrations(cases, tmp_path):
-    url = tmp_path / "cases.db"
+def test_database_round_trip_and_migrations(cases, database_url):
+    url = database_url
     engine = open_database(url)
     assert add_cases(engine, cases) == len(cases)
     engine = open_database(url)  # reopening applies no migration twice
@@ -184,10 +184,17 @@ def test_database_round_trip_and_migrations(cases, tmp_path):
     back = list(iter_cases(engine))
     assert [c.case_id for c in back] == [c.case_id for c in cases]
     np.testing.assert_allclose(back[3].sprayout, cases[3].sprayout, rtol=1e-6)
+    for a, b in zip(cases, back, strict=True):  # the recipe renormalised on reading
+        assert b.recipe == pytest.approx(a.recipe, rel=1e-15)
+        assert (b.sprayout_texture, b.created_at) == (a.sprayout_texture, a.created_at)
+    # a case at the widest texts the columns hold is stored and read back whole
+    long = replace(cases[0], case_id="i" * 64, shop="s" * 120, instrument="n" * 60)
+    add_cases(engine, [long])
+    assert latest_cases(engine, 1, shop="s" * 120)[0].instrument == "n" * 60
 
 
-def test_an_older_database_is_migrated_with_its_cases(cases, tmp_path):
-    url = f"sqlite:///{tmp_path / 'old.db'}"
+def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
+    url = database_url
     engine = create_engine(url)
     migrate(engine, "0001")  # the first release's schema: no shop habits
     assert "shop_habits" not in inspect(engine).get_table_names()
@@ -209,8 +216,8 @@ def test_a_database_that_cannot_be_opened_is_named(tmp_path):
     assert junk.read_text() == "not a database"  # left as it was
 
 
-def test_a_duplicate_case_stores_nothing(cases, tmp_path):
-    engine = open_database(tmp_path / "dup.db")
+def test_a_duplicate_case_stores_nothing(cases, database_url):
+    engine = open_database(database_url)
     add_cases(engine, cases[:5])
     with pytest.raises(CaseError, match="nothing was stored"):
         add_cases(engine, cases[5:10] + cases[:1])
@@ -225,8 +232,8 @@ def _write_batch(args):
         add_cases(engine, batch)
 
 
-def test_concurrent_writers_lose_no_case(tmp_path):
-    url = str(tmp_path / "shared.db")
+def test_concurrent_writers_lose_no_case(database_url):
+    url = database_url
     open_database(url)
     with multiprocessing.get_context("spawn").Pool(3) as pool:
         pool.map(_write_batch, [(url, s) for s in (1, 2, 3)])
@@ -239,7 +246,9 @@ def _cli(*args):
     )
 
 
-def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(cases, tmp_path):
+def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(
+    cases, tmp_path, database_url
+):
     good, bad = tmp_path / "good.csv", tmp_path / "bad.csv"
     write_cases(cases[:4], good)
     lines = good.read_text().splitlines()
@@ -247,7 +256,7 @@ def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(cases, 
     cells[20] = "abc"
     lines[3] = ",".join(cells)
     bad.write_text("\n".join(lines) + "\n")
-    database = str(tmp_path / "db.sqlite")
+    database = database_url
     assert _cli("cases", "import", str(good), "--database", database).returncode == 0
     run = _cli("cases", "import", str(bad), "--database", database)
     assert run.returncode == 2 and "Traceback" not in run.stderr
@@ -383,8 +392,8 @@ def test_recording_refuses_readings_without_the_instrument_s_geometries():
         case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="ok")
 
 
-def test_the_newest_cases_come_first_and_one_can_be_removed(cases, tmp_path):
-    engine = open_database(tmp_path / "cases.db")
+def test_the_newest_cases_come_first_and_one_can_be_removed(cases, database_url):
+    engine = open_database(database_url)
     shops = [replace(c, shop="Dupont" if k % 3 else "Martin") for k, c in enumerate(cases[:12])]
     add_cases(engine, shops)
     newest = latest_cases(engine, 4)

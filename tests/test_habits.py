@@ -255,8 +255,8 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
         read_habits(tmp_path / "broken.json")
 
 
-def test_stored_habits_are_the_latest_against_the_model_in_use(tmp_path):
-    engine = open_database(tmp_path / "shop.db")
+def test_stored_habits_are_the_latest_against_the_model_in_use(database_url):
+    engine = open_database(database_url)
     with pytest.raises(FlakelabError, match="no habits stored for shop 'shop A'"):
         stored_habits(engine, "shop A")
 
@@ -274,7 +274,7 @@ def test_stored_habits_are_the_latest_against_the_model_in_use(tmp_path):
     back = stored_habits(engine, "shop B")
     np.testing.assert_allclose(back.theta, [0.09, -0.04, 0.005])
     np.testing.assert_allclose(back.standard_error, 0.01)
-    assert [h["shop"] for h in list_habits(open_database(tmp_path / "shop.db"))] == [
+    assert [h["shop"] for h in list_habits(open_database(database_url))] == [
         "shop A",
         "shop B",
     ]

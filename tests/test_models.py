@@ -203,8 +203,8 @@ def test_robust_outlier_rule():
     assert np.flatnonzero(flag_outliers(errors, 6.0)).tolist() == [500, 501]
 
 
-def test_registry_promotes_only_a_better_model(trained, data, tmp_path):
-    engine = open_database(tmp_path / "models.db")
+def test_registry_promotes_only_a_better_model(trained, data, database_url):
+    engine = open_database(database_url)
     good, _ = trained
     torch.manual_seed(0)
     worse = ForwardModel.from_bytes(good.to_bytes())
