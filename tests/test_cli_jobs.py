@@ -135,6 +135,7 @@ def test_a_shop_brings_its_history_in_one_transaction(tmp_path):
 
 def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.exchange import read_cases
     from flakelab.io import write_measurements
 
     db, target, sprayed = tmp_path / "shop.db", example_path("target"), example_path("sprayout")
@@ -185,6 +186,16 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
         evaluated = json.loads(run.stdout)
         assert evaluated["cases"] == n and set(evaluated["per_geometry"]) == set(geometries)
         assert evaluated["cases_left_out"] == 2 - n
+    # a shop's history, or every case read at one geometry set, out to a file
+    out = tmp_path / "out.csv"
+    run = flakelab("cases", "export", str(out), "-d", str(db), "--shop", "Martin")
+    assert run.returncode == 0, run.stderr
+    assert [c.shop for c in read_cases(out)] == ["Martin"]
+    assert flakelab("cases", "export", str(out), "-d", str(db), "-i", "ma-t12").returncode == 0
+    assert [c.shop for c in read_cases(out)] == ["Dupont"]
+    run = flakelab("cases", "export", str(out), "-d", str(db), "--shop", "Nobody")
+    assert run.returncode == 2 and "no cases from shop 'Nobody'" in run.stderr
+    assert [c.shop for c in read_cases(out)] == ["Dupont"]  # the file is left as it was
     # the shop's history, newest first, and one case removed by its id
     listed = json.loads(flakelab("cases", "list", "-d", str(db), "--json").stdout)["cases"]
     assert {c["shop"] for c in listed} == {"Dupont", "Martin"}

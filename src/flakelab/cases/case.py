@@ -16,7 +16,15 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 
-__all__ = ["Case", "CaseError", "OUTCOMES", "TEXT_LENGTHS", "cases_at", "worst_differences"]
+__all__ = [
+    "Case",
+    "CaseError",
+    "OUTCOMES",
+    "TEXT_LENGTHS",
+    "cases_at",
+    "select_cases",
+    "worst_differences",
+]
 
 OUTCOMES = ("accepted", "corrected", "rejected")
 """How a case ended: the spray-out passed, needed a correction, or was given up."""
@@ -124,6 +132,25 @@ def cases_at(cases: Iterable[Case], geometries: Sequence[str]) -> list[Case]:
     that geometry set learns from, whatever instrument read the case."""
     geometries = tuple(geometries)
     return [c.at_geometries(geometries) for c in cases if c.reads(geometries)]
+
+
+def select_cases(
+    cases: Iterable[Case],
+    *,
+    shop: str | None = None,
+    since: datetime | None = None,
+    geometries: Sequence[str] | None = None,
+) -> list[Case]:
+    """The cases of ``shop`` made at or after ``since`` (without a zone: UTC), read at
+    ``geometries`` (:func:`cases_at`); None: any shop, any time, as read."""
+    if since is not None and since.tzinfo is None:
+        since = since.replace(tzinfo=UTC)
+    chosen = [
+        c
+        for c in cases
+        if (shop is None or c.shop == shop) and (since is None or c.created_at >= since)
+    ]
+    return chosen if geometries is None else cases_at(chosen, geometries)
 
 
 def worst_differences(cases: list[Case]) -> tuple[np.ndarray, list[str]]:

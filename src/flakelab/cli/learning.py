@@ -139,25 +139,20 @@ def shop_cases(source: str, shop: str | None, geometries, since: datetime | None
     """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries`` (among
     others: each is restricted to them), made at or after ``since`` (None: any time; without a
     zone: UTC)."""
-    from flakelab.cases.case import cases_at
+    from flakelab.cases.case import select_cases
 
-    if since is not None and since.tzinfo is None:
-        since = since.replace(tzinfo=UTC)
-    chosen = cases_at(
-        (
-            c
-            for c in load_cases(source)
-            if (shop is None or c.shop == shop) and (since is None or c.created_at >= since)
-        ),
-        geometries,
-    )
+    chosen = select_cases(load_cases(source), shop=shop, since=since, geometries=geometries)
     if not chosen:
-        whose = f"shop {shop!r}" if shop else "any shop"
-        when = f" since {since.isoformat()}" if since else ""
         raise FlakelabError(
-            f"{source}: no cases from {whose}{when} with the model's geometries {tuple(geometries)}"
+            f"{source}: no cases {_which(shop, since)} read at the model's "
+            f"geometries {tuple(geometries)}"
         )
     return chosen
+
+
+def _which(shop: str | None, since: datetime | None) -> str:
+    whose = f"from shop {shop!r}" if shop else "from any shop"
+    return whose + (f" since {since:%Y-%m-%d %H:%M}" if since else "")
 
 
 @cases_app.command("generate")
@@ -557,6 +552,8 @@ def remove(
 def export_cases(
     target: Annotated[Path, typer.Argument(help="CSV or CxF3 file to write.")],
     database: DatabaseOption = None,
+    shop: ShopOption = None,
+    since: SinceOption = None,
     instrument: Annotated[
         str | None,
         typer.Option(
@@ -567,17 +564,20 @@ def export_cases(
         ),
     ] = None,
 ) -> None:
-    """Export case histories as CSV or CxF3."""
-    from flakelab.cases.case import cases_at
+    """Export case histories as CSV or CxF3: a shop's, since a date, at one geometry set."""
+    from flakelab.cases.case import select_cases
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import write_cases
 
-    cases = list(iter_cases(open_database(database)))
-    if instrument is not None:
-        try:
-            cases = cases_at(cases, INSTRUMENT_GEOMETRIES[instrument_name(instrument)])
-        except ValueError as error:
-            raise FlakelabError(f"--instrument: {error}") from None
+    try:
+        geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_name(instrument)]
+    except ValueError as error:
+        raise FlakelabError(f"--instrument: {error}") from None
+    engine = open_database(database)
+    cases = select_cases(iter_cases(engine), shop=shop, since=since, geometries=geometries)
+    if not cases:
+        at = f" read at the {instrument}'s geometries" if instrument else ""
+        raise FlakelabError(f"{engine.url}: no cases {_which(shop, since)}{at}; nothing written")
     write_cases(cases, target)
     errors.print(f"wrote {len(cases)} cases to {target}", highlight=False)
 
