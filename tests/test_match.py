@@ -777,6 +777,13 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     # the swap's gain is the paint's, not the model's: the recipe as the physics makes it
     made = as_made(world, recipe_row(names, swapped.fractions))
     assert delta_E(reflectance_to_Lab(target), reflectance_to_Lab(made)).max() < 0.3
+    # the trigger is a share of the tolerance's limit: under ΔE00 ≤ 2.5 the unswapped best
+    # uses about half of it, and the swap stage does not run
+    wide = Tolerance("wide", Limit(de00=2.5))
+    loose = match(target, hybrid, effect, tolerance=wide).candidates[0]
+    never = match(target, hybrid, effect, tolerance=wide, settings=MatchSettings(swap_above=np.inf))
+    assert loose.limit_share.max() < MatchSettings().swap_above < loose.de00.max()
+    assert loose.fractions == never.candidates[0].fractions
 
 
 @pytest.mark.parametrize(

@@ -11,8 +11,9 @@
 3. **Optimise** all subsets at once (one batch through the forward model, autograd, Adam on
    masked softmax logits: amounts stay non-negative and sum to the can), by successive
    halving: a third of the steps on every subset, the rest on the ``refine_keep`` best.
-4. **Swap** (local search over toner sets), only when the best recipe is still off by more
-   than ``swap_above``: every set one move from the best few recipes — a toner swapped for
+4. **Swap** (local search over toner sets), only when the best recipe still uses more than
+   ``swap_above`` of the tolerance's limit somewhere (ΔE00 0.6 for the default ΔE00 ≤ 1.0):
+   every set one move from the best few recipes — a toner swapped for
    another of its kind, or a pigment added — optimised from its parent's amounts. The
    screen's importance misses a pigment whose job a near neighbour does almost as well (a
    bronze tinted with quinacridone magenta, matched with quinacridone red: off by 0.68 ΔE00,
@@ -566,7 +567,7 @@ def _match(
     tried = len(subsets)
     neighbours: list[tuple[int, ...]] = []
     if candidates and (
-        candidates[0].de00.max() > settings.swap_above or not candidates[0].in_support
+        candidates[0].limit_share.max() > settings.swap_above or not candidates[0].in_support
     ):
         # 4. swap: one move from the best few recipes
         parents = np.array([recipe_vector(forward, c.fractions) for c in candidates])

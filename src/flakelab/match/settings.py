@@ -28,7 +28,7 @@ class MatchSettings:
     texture_weight: float = 0.1
     min_amount: float = 0.002
     top_bases: int = 4
-    swap_above: float = 0.6
+    swap_above: float = 0.6  # share of the tolerance's limit that starts the swap stage
     swap_from: int = 2
     effect_floor: float | None = None  # None: the model's (its training cases' effect share)
     model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
