@@ -150,6 +150,14 @@ def shop_cases(source: str, shop: str | None, geometries, since: datetime | None
     return chosen
 
 
+def _instrument(name: str) -> str:
+    """``--instrument``'s key of :data:`INSTRUMENT_GEOMETRIES`, or an error naming the option."""
+    try:
+        return instrument_name(name)
+    except ValueError as error:
+        raise FlakelabError(f"--instrument: {error}") from None
+
+
 def _which(shop: str | None, since: datetime | None) -> str:
     whose = f"from shop {shop!r}" if shop else "from any shop"
     return whose + (f" since {since:%Y-%m-%d %H:%M}" if since else "")
@@ -284,6 +292,7 @@ def record_case(
     from flakelab.cases.record import case_from_readings, judged_outcome
     from flakelab.io import read_library, read_measurement, read_recipe, read_tolerance
 
+    instrument = instrument and _instrument(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
     grams = read_recipe(recipe)
@@ -377,13 +386,14 @@ def record_all(
     """Record a shop's spray-out history from its instrument files: every row of a manifest
     as 'cases record' records one, all in one transaction or none.
 
-    The first bad row is named with its column, and nothing is stored; so is a row already
-    recorded, or recorded twice in the manifest."""
+    The first bad row is named with its column and nothing is stored; a row already
+    recorded, or one the manifest lists twice, is refused the same way."""
     from flakelab.cases.case import OUTCOMES, worst_differences
     from flakelab.cases.database import add_cases, count_cases, existing_case_ids, open_database
     from flakelab.cases.manifest import cases_from_manifest, read_manifest
     from flakelab.io import read_library, read_tolerance
 
+    instrument = instrument and _instrument(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
     with progress_bar(disable=json_output) as bar:
@@ -569,10 +579,7 @@ def export_cases(
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import write_cases
 
-    try:
-        geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_name(instrument)]
-    except ValueError as error:
-        raise FlakelabError(f"--instrument: {error}") from None
+    geometries = instrument and INSTRUMENT_GEOMETRIES[_instrument(instrument)]
     engine = open_database(database)
     cases = select_cases(iter_cases(engine), shop=shop, since=since, geometries=geometries)
     if not cases:
@@ -913,10 +920,7 @@ def train(
         raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
 
     lib = read_library(library)
-    try:
-        instrument = instrument_name(instrument)
-    except ValueError as error:
-        raise FlakelabError(f"--instrument: {error}") from None
+    instrument = _instrument(instrument)
     geometries = INSTRUMENT_GEOMETRIES[instrument]
     loaded = load_cases(cases)
     chosen = cases_at(loaded, geometries)
