@@ -320,11 +320,14 @@ def test_a_recorded_case_keeps_every_geometry_both_readings_share():
     target, sprayout = example_readings()
     case = case_from_readings(target, sprayout, {"Al medium": 1.0}, shop="x", outcome="accepted")
     assert case.instrument == "ma-t12" and case.geometry_names == INSTRUMENT_GEOMETRIES["ma-t12"]
-    # a spray-out read at six geometries: the case is a BYK-mac i's, in its export order
+    # a spray-out read at six geometries: the case is that instrument's, in its export order
     byk = INSTRUMENT_GEOMETRIES["byk-mac-i"]
-    six = replace(sprayout.select(byk[::-1]), instrument="BYK-mac i")
+    six = replace(sprayout.select(byk[::-1]), instrument="X-Rite MA-T6")
     case = case_from_readings(target, six, {"Al medium": 1.0}, shop="x", outcome="accepted")
-    assert case.instrument == "byk-mac-i" and case.geometry_names == byk
+    assert case.instrument == "ma-t6" and case.geometry_names == byk  # named by the spray-out's
+    six = replace(six, instrument=None)
+    case = case_from_readings(target, six, {"Al medium": 1.0}, shop="x", outcome="accepted")
+    assert case.instrument == "byk-mac-i" and case.geometry_names == byk  # the first of the two
     np.testing.assert_array_equal(case.sprayout, sprayout.select(byk).reflectance)
     # no geometry in common
     with pytest.raises(CaseError, match="shares no geometry with the target"):

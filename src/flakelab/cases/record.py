@@ -73,8 +73,13 @@ def shared_geometries(target: Measurement, sprayout: Measurement) -> tuple[str, 
             f"spray-out: {sprayout.sample!r} shares no geometry with the target "
             f"{target.sample!r} ({', '.join(target.geometry_names)})"
         )
-    instrument = instrument_of(names, target.instrument)
+    instrument = instrument_of(names, _makers(target, sprayout))
     return INSTRUMENT_GEOMETRIES[instrument] if instrument else names
+
+
+def _makers(*readings: Measurement) -> str:
+    """The readings' instrument names, as one hint for :func:`instrument_of`."""
+    return " ".join(r.instrument for r in readings if r.instrument)
 
 
 def case_from_readings(
@@ -99,8 +104,12 @@ def case_from_readings(
     if instrument is None:
         names = shared_geometries(target, sprayout)
         instrument = (
-            instrument_of(names, target.instrument)
-            or ((target.instrument or "unknown")[: TEXT_LENGTHS["instrument"]])
+            instrument_of(names, _makers(target, sprayout))
+            or (
+                (target.instrument or sprayout.instrument or "unknown")[
+                    : TEXT_LENGTHS["instrument"]
+                ]
+            )
         )
     else:
         instrument = instrument_name(instrument)
