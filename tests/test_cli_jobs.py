@@ -186,6 +186,10 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
         evaluated = json.loads(run.stdout)
         assert evaluated["cases"] == n and set(evaluated["per_geometry"]) == set(geometries)
         assert evaluated["cases_left_out"] == 2 - n
+    run = flakelab("model", "evaluate", str(db), "--shop", "Martin", "--json")
+    assert run.returncode == 0 and json.loads(run.stdout)["cases"] == 1
+    run = flakelab("model", "evaluate", str(db), "-i", "ma-t12", "--shop", "Martin")
+    assert run.returncode == 2 and "no cases from shop 'Martin' read at the model's" in run.stderr
     # a shop's history, or every case read at one geometry set, out to a file
     out = tmp_path / "out.csv"
     run = flakelab("cases", "export", str(out), "-d", str(db), "--shop", "Martin")

@@ -1007,6 +1007,8 @@ def evaluate(
     cases: CasesArgument,
     model: ModelFileOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    shop: ShopOption = None,
+    since: SinceOption = None,
     library: LibraryOption = None,
     database: DatabaseOption = None,
     habits: Annotated[
@@ -1019,8 +1021,9 @@ def evaluate(
     ] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """ΔE00 of the model's predictions against the measured spray-outs."""
-    from flakelab.cases.case import cases_at
+    """ΔE00 of the model's predictions against the measured spray-outs (a shop's, since a
+    date: how the model does on them)."""
+    from flakelab.cases.case import cases_at, select_cases
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import case_arrays, evaluate_model
@@ -1029,10 +1032,13 @@ def evaluate(
     forward = (
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
-    loaded = load_cases(cases)
+    loaded = select_cases(load_cases(cases), shop=shop, since=since)
     chosen = cases_at(loaded, forward.geometries)
     if not chosen:
-        raise FlakelabError(f"{cases}: no cases with the model's geometries {forward.geometries}")
+        raise FlakelabError(
+            f"{cases}: no cases {_which(shop, since)} read at the model's geometries "
+            f"{forward.geometries}"
+        )
     from flakelab.cli.matching import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.models import forward_for
@@ -1060,6 +1066,7 @@ def evaluate(
     report["forward"] = matcher.name
     report["habits"] = shop_habits and shop_habits.report()
     report["cases_left_out"] = len(loaded) - len(chosen)
+    report["shop"], report["since"] = shop, since and since.isoformat()
     if json_output:
         print(json.dumps(report, indent=2))
         return
