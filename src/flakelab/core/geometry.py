@@ -14,6 +14,7 @@ All direction vectors point away from the surface (toward lamp or detector).
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 
@@ -76,6 +77,7 @@ class Geometry:
             )
 
     @classmethod
+    @functools.cache  # immutable, and parsed for every case read from a database
     def parse(cls, name: str) -> Geometry:
         """Parse an ASTM E2194/E2539 name such as ``45as15`` or ``45as25az90``."""
         match = _NAME.match(str(name))
