@@ -224,6 +224,22 @@ def test_a_duplicate_case_stores_nothing(cases, database_url):
     assert count_cases(engine) == 5
 
 
+def test_a_value_the_server_refuses_is_named_and_stores_nothing(cases, database_url, monkeypatch):
+    """Past the case's own checks (widened here), PostgreSQL refuses a text longer than its
+    column, as SQLite does not: the whole batch is refused, named, and nothing is stored."""
+    import flakelab.cases.case as case_module
+
+    engine = open_database(database_url)
+    monkeypatch.setitem(case_module.TEXT_LENGTHS, "shop", 1000)
+    batch = [cases[0], replace(cases[1], shop="s" * 200)]
+    if engine.dialect.name == "sqlite":
+        assert add_cases(engine, batch) == 2
+        return
+    with pytest.raises(DatabaseError, match="cannot store the cases: DataError: .*nothing was"):
+        add_cases(engine, batch)
+    assert count_cases(engine) == 0
+
+
 def _write_batch(args):
     url, seed = args
     world = World(read_library(None), "five-angle")

@@ -150,6 +150,11 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
             f"{engine.url}: a case id already exists; nothing was stored "
             f"({str(error.orig).splitlines()[0]})"
         ) from None
+    except SQLAlchemyError as error:  # e.g. a value the server refuses (DataError)
+        raise DatabaseError(
+            f"{engine.url}: cannot store the cases: {error.__class__.__name__}: "
+            f"{str(getattr(error, 'orig', error)).splitlines()[0]}; nothing was stored"
+        ) from None
     return len(rows)
 
 
