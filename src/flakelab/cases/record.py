@@ -103,14 +103,9 @@ def case_from_readings(
     """
     if instrument is None:
         names = shared_geometries(target, sprayout)
-        instrument = (
-            instrument_of(names, _makers(target, sprayout))
-            or (
-                (target.instrument or sprayout.instrument or "unknown")[
-                    : TEXT_LENGTHS["instrument"]
-                ]
-            )
-        )
+        named = target.instrument or sprayout.instrument or "unknown"
+        instrument = instrument_of(names, _makers(target, sprayout))
+        instrument = instrument or named[: TEXT_LENGTHS["instrument"]]
     else:
         instrument = instrument_name(instrument)
         names = INSTRUMENT_GEOMETRIES[instrument]
