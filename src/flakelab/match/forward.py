@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.geometry import Geometry
 from flakelab.library.toners import Library
-from flakelab.models.network import ForwardModel, reflectance_from_log
+from flakelab.models.network import LOG_FLOOR, ForwardModel, reflectance_from_log
 from flakelab.physics.fast import predict, reflectance_factor
 from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
@@ -191,7 +191,16 @@ class HybridForward(LearnedForward):
 
     def _ratio(self, x: NDArray) -> NDArray:
         has_base = (x @ self._substitute).sum(axis=1) > 1e-6
-        both = self.physics.reflectance(np.concatenate([x, self.base_fractions(x)])) + 1e-9
+        # the learned base's share of the answer lives on its own scale, floored at LOG_FLOOR
+        # as its training data were: a masstone of a strongly absorbing pigment reflects 1e-7
+        # in the physics, and a trace of a new toner multiplied that (and the model's floor
+        # with it) a thousandfold while the colour stayed black (4 % perylene red in
+        # quinacridone violet: R = 47 at 400 nm); where the physics base takes over, so does
+        # its own scale, and the floor goes
+        learned = 1 - self._physics_trust(x[:, self._novel_mask].sum(axis=1))
+        floor = LOG_FLOOR * np.tile(learned, 2)[:, None, None]
+        physics = self.physics.reflectance(np.concatenate([x, self.base_fractions(x)]))
+        both = np.maximum(physics, floor) + 1e-9
         R, base = both[: len(x)], both[len(x) :]
         return R / np.where(has_base[:, None, None], base, 1.0)
 
