@@ -25,7 +25,7 @@ Manifest columns (CSV with a header; file paths relative to the manifest's folde
 from __future__ import annotations
 
 import csv
-from collections.abc import Callable
+from collections.abc import Iterable
 from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
@@ -102,11 +102,13 @@ def cases_from_manifest(
     tolerance: Tolerance,
     shop: str = "unknown",
     instrument: str | None = None,
-    progress: Callable[[int], None] | None = None,
+    rows: Iterable[tuple[int, dict[str, str]]] | None = None,
 ) -> list[tuple[int, Case]]:
     """Every row's number and case (:func:`~flakelab.cases.record.case_from_readings`); the
     first problem names the manifest, row and column, and no case is returned. Two rows with
-    the same readings, recipe and shop are refused."""
+    the same readings, recipe and shop are refused. ``rows`` are the manifest's, as
+    :func:`read_manifest` gives them (read here when None; a caller may pass them through a
+    progress bar)."""
     path = Path(path)
     files: dict[Path, list[Measurement]] = {}  # a car's file serves several rows, read once
 
@@ -121,7 +123,7 @@ def cases_from_manifest(
 
     cases: list[tuple[int, Case]] = []
     first_row: dict[str, int] = {}
-    for number, cells in read_manifest(path):
+    for number, cells in read_manifest(path) if rows is None else rows:
         where = f"{path}: row {number}"
         target = reading(f"{where}: target", cells["target"], cells.get("sample", ""))
         sprayed = reading(f"{where}: sprayed", cells["sprayed"], cells.get("sprayed_sample", ""))
@@ -152,8 +154,6 @@ def cases_from_manifest(
             )
         first_row[case.case_id] = number
         cases.append((number, case))
-        if progress:
-            progress(1)
     return cases
 
 

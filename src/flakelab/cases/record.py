@@ -64,22 +64,21 @@ def judged_outcome(
     return ("corrected" if failing else "accepted"), failing
 
 
-def shared_geometries(target: Measurement, sprayout: Measurement) -> tuple[str, ...]:
-    """The geometries both readings have, in the export order of the instrument whose set they
-    are (else the target's order)."""
+def shared_geometries(
+    target: Measurement, sprayout: Measurement
+) -> tuple[tuple[str, ...], str | None]:
+    """The geometries both readings have, and the instrument whose set they are (told apart
+    by the readings' instrument names where two share a set; None when none reads just
+    these): in that instrument's export order, else in the target's."""
     names = tuple(g for g in target.geometry_names if g in set(sprayout.geometry_names))
     if not names:
         raise CaseError(
             f"spray-out: {sprayout.sample!r} shares no geometry with the target "
             f"{target.sample!r} ({', '.join(target.geometry_names)})"
         )
-    instrument = instrument_of(names, _makers(target, sprayout))
-    return INSTRUMENT_GEOMETRIES[instrument] if instrument else names
-
-
-def _makers(*readings: Measurement) -> str:
-    """The readings' instrument names, as one hint for :func:`instrument_of`."""
-    return " ".join(r.instrument for r in readings if r.instrument)
+    makers = " ".join(r.instrument for r in (target, sprayout) if r.instrument)
+    instrument = instrument_of(names, makers)
+    return (INSTRUMENT_GEOMETRIES[instrument] if instrument else names), instrument
 
 
 def case_from_readings(
@@ -102,9 +101,8 @@ def case_from_readings(
     file's date), else now.
     """
     if instrument is None:
-        names = shared_geometries(target, sprayout)
+        names, instrument = shared_geometries(target, sprayout)
         named = target.instrument or sprayout.instrument or "unknown"
-        instrument = instrument_of(names, _makers(target, sprayout))
         instrument = instrument or named[: TEXT_LENGTHS["instrument"]]
     else:
         instrument = instrument_name(instrument)

@@ -24,6 +24,7 @@ from flakelab.cli.common import (
     errors,
     progress_bar,
     reports_errors,
+    tracked,
 )
 from flakelab.core.geometry import (
     DEFAULT_INSTRUMENT,
@@ -396,16 +397,14 @@ def record_all(
     instrument = instrument and _instrument(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
-    with progress_bar(disable=json_output) as bar:
-        task = bar.add_task("reading the spray-outs", total=len(read_manifest(manifest)))
-        numbered = cases_from_manifest(
-            manifest,
-            lib,
-            tolerance=tol,
-            shop=shop,
-            instrument=instrument,
-            progress=lambda k: bar.advance(task, k),
-        )
+    numbered = cases_from_manifest(
+        manifest,
+        lib,
+        tolerance=tol,
+        shop=shop,
+        instrument=instrument,
+        rows=tracked(read_manifest(manifest), "reading the spray-outs", disable=json_output),
+    )
     rows, cases = [n for n, _ in numbered], [c for _, c in numbered]
     engine = open_database(database)
     stored = existing_case_ids(engine, (c.case_id for c in cases))
@@ -430,10 +429,8 @@ def record_all(
         }
         for number, c, de, g in zip(rows, cases, worst, where, strict=True)
     ]
-    learners = {
-        model: sum(model in instruments_reading(c.geometry_names) for c in cases)
-        for model in INSTRUMENT_GEOMETRIES
-    }
+    readers = [instruments_reading(c.geometry_names) for c in cases]
+    learners = {model: sum(model in r for r in readers) for model in INSTRUMENT_GEOMETRIES}
     report = {
         "manifest": str(manifest),
         "recorded": len(cases),

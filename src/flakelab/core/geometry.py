@@ -162,11 +162,15 @@ def _key(text: str) -> str:
     return re.sub(r"[^a-z0-9]", "", text.lower())
 
 
+def _name_set(names: ArrayLike) -> set[str]:
+    return {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
+
+
 def instrument_of(names: ArrayLike, hint: str | None = None) -> str | None:
     """The instrument whose geometry set is exactly ``names`` (in any order); where two share
     a set (``byk-mac-i``, ``ma-t6``), the one ``hint`` names (a file's instrument, e.g. "BYK-mac
     i"), else the first; None when no instrument reads just these."""
-    wanted = {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
+    wanted = _name_set(names)
     same = [k for k, v in INSTRUMENT_GEOMETRIES.items() if set(v) == wanted]
     hinted = [k for k in same if hint and _key(k) in _key(hint)]
     return (hinted or same or [None])[0]
@@ -175,7 +179,7 @@ def instrument_of(names: ArrayLike, hint: str | None = None) -> str | None:
 def instruments_reading(names: ArrayLike) -> tuple[str, ...]:
     """The instruments whose every geometry is among ``names``: the models that can learn from
     (and be judged on) a case read at ``names``."""
-    have = {Geometry.parse(str(n)).name for n in np.atleast_1d(names)}
+    have = _name_set(names)
     return tuple(k for k, v in INSTRUMENT_GEOMETRIES.items() if set(v) <= have)
 
 
