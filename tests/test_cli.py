@@ -60,19 +60,22 @@ def test_compare_example_agrees_with_library_and_tolerance():
 def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):
     from matplotlib.image import imread
 
-    picture = tmp_path / "side-by-side.png"
-    run = flakelab("compare", "--example", "--render", picture)
+    picture, chart = tmp_path / "side-by-side.png", tmp_path / "chart.png"
+    run = flakelab("compare", "--example", "--render", picture, "--plot", chart)
     assert run.returncode == 0, run.stderr
     assert str(picture) in run.stderr and imread(picture).shape[2] in (3, 4)
+    assert f"wrote {chart}" in run.stderr and imread(chart).shape[1] > imread(chart).shape[0]
     run = flakelab("compare", "--example", "--render", tmp_path / "side-by-side.bmp")
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
+    run = flakelab("compare", "--example", "--plot", tmp_path / "chart.bmp")
+    assert run.returncode == 2 and "chart.bmp" in run.stderr and ".png" in run.stderr
     target = read_measurement(example_path("target"))
     lit_at_15 = tmp_path / "lit-at-15.csv"  # nothing lit at 45°: no curve to draw
     write_measurements([target.select([g for g in target.geometry_names if g[:2] == "15"])],
                        lit_at_15)  # fmt: skip
     run = flakelab("compare", lit_at_15, lit_at_15, "--render", tmp_path / "none.png")
     assert run.returncode == 2 and "--render" in run.stderr and "lit at 45°" in run.stderr
-    assert sorted(tmp_path.iterdir()) == [lit_at_15, picture]
+    assert sorted(tmp_path.iterdir()) == [chart, lit_at_15, picture]
 
 
 def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files):

@@ -76,9 +76,14 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     )
     tight = tmp_path / "tight.toml"
     tight.write_text('name = "tight"\n[default]\nde00 = 0.3\n')
+    chart = tmp_path / "correction.svg"
     run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
-                   "--tolerance", str(tight), "--json")  # fmt: skip
+                   "--tolerance", str(tight), "--json", "--plot", str(chart))  # fmt: skip
     judged = json.loads(run.stdout)
+    # the chart: four panels, the twelve geometries along each
+    svg = chart.read_text()
+    assert judged["plot"] == str(chart) and svg.count('id="axes_') == 4
+    assert all(f"<!-- {g} -->" in svg for g in INSTRUMENT_GEOMETRIES["ma-t12"])
     assert judged["sprayout_passes"] is False and judged["tolerance"] == "tight"
     assert judged["sprayout_failing"] == [
         g for g, de in zip(judged["geometries"], judged["before_de00"], strict=True) if de > 0.3

@@ -306,9 +306,10 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     from matplotlib.image import imread
 
     picture, recipe = tmp_path / "side-by-side.png", tmp_path / "second.json"
+    chart = tmp_path / "chart.png"
     run = flakelab("match", "--example", "--json", "--quantity", "250g", "--candidates", "2",
                    "--render", str(picture), "--recipe-out", str(recipe),
-                   "--pick", "2")  # fmt: skip
+                   "--pick", "2", "--plot", str(chart))  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     # the second candidate's grams, as correct and cases record read them back
@@ -317,6 +318,7 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert sum(written.values()) == pytest.approx(250.0) and report["recipe_out"]["candidate"] == 2
     assert report["rendering"] == str(picture)
     assert imread(picture).shape[0] > imread(picture).shape[1] / 2  # three bands, stacked
+    assert report["plot"] == str(chart) and imread(chart).shape[1] > imread(chart).shape[0]
     assert report["geometries"] == ["45as15", "45as25", "45as45", "45as75", "45as110"]
     best = report["candidates"][0]
     assert sum(w["grams"] for w in best["weights_g"]) == pytest.approx(250.0)
@@ -476,8 +478,8 @@ def test_match_refuses_bad_input(tmp_path):
     run = flakelab("match", "--example", "--render", str(tmp_path / "side-by-side.bmp"))
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
     assert not (tmp_path / "side-by-side.bmp").exists()
-    run = flakelab("match", "evaluate", "--render", str(tmp_path / "side-by-side.png"))
-    assert run.returncode == 2 and "--render" in run.stderr
+    run = flakelab("match", "evaluate", "--plot", str(tmp_path / "chart.png"))
+    assert run.returncode == 2 and "--plot" in run.stderr
     # an output file that cannot be written is refused before the search, not after it
     run = flakelab("match", "--example", "--recipe-out", str(tmp_path / "no" / "r.json"))
     assert run.returncode == 2 and f"--recipe-out: {tmp_path / 'no' / 'r.json'}" in run.stderr

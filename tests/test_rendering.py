@@ -259,3 +259,48 @@ def test_texture_grid_keeps_one_colour_in_every_tile(appearance):
     plain = render_panel(appearance, 45.0, 8, diffuse_fraction=0.5, texture=False)
     reference = linear_sRGB_to_Lab(plain.mean(axis=(0, 1)))
     assert np.max(delta_E00(linear_sRGB_to_Lab(tiles), reference)) <= 0.5
+
+
+def test_the_difference_chart_draws_what_the_tolerance_judges(monkeypatch, tmp_path):
+    """Each sample's ΔL*, ΔC*, ΔH* and share of the limit, as Tolerance.judge gives them; the
+    limits as bands where the tolerance bounds a component; failing geometries ringed; a line
+    per illumination angle, dashed beyond the geometries set apart."""
+    import flakelab.render.plots as plots
+    from flakelab.core.tolerance import tolerance_preset
+
+    drawn = {}
+    monkeypatch.setattr(plots, "_save", lambda figure, path, dpi: drawn.update(figure=figure))
+    reference = read_measurement(example_path("target"))
+    names = reference.geometry_names  # MA-T12: six lit at 15°, six at 45°
+    lab_reference = reference.lab()
+    rng = np.random.default_rng(3)
+    samples = {"a": lab_reference + rng.normal(0, 0.6, lab_reference.shape),
+               "b": lab_reference + rng.normal(0, 1.2, lab_reference.shape)}  # fmt: skip
+    components = tolerance_preset("components")
+    plots.plot_differences(names, lab_reference, samples, components, tmp_path / "chart.png",
+                           apart=9)  # fmt: skip
+    dL, dC, dH, used = drawn["figure"].axes
+    for index, lab in enumerate(samples.values()):
+        de00, dLCH, passed = components.judge(names, lab_reference, lab)
+        share = components.share_of_limit(names, de00=de00, dLCH=dLCH)
+        for k, axis in enumerate((dL, dC, dH)):
+            lines = [ln for ln in axis.get_lines() if ln.get_color() == f"C{index}"]
+            # 15° light; 45° light up to the ninth geometry; the rest apart, dashed
+            assert [len(ln.get_xdata()) for ln in lines] == [6, 3, 3]
+            assert [ln.get_linestyle() for ln in lines] == ["-", "-", "--"]
+            assert np.allclose(np.concatenate([ln.get_ydata() for ln in lines]), dLCH[:, k])
+        ydata = [ln.get_ydata() for ln in used.get_lines() if ln.get_color() == f"C{index}"]
+        assert np.allclose(np.concatenate(ydata), 100 * share)
+        assert not passed.all() and passed.any()
+    rings = np.concatenate([c.get_offsets()[:, 0] for c in used.collections])
+    failing = [i for lab in samples.values() for i in np.flatnonzero(
+        ~components.judge(names, lab_reference, lab)[2])]  # fmt: skip
+    assert sorted(rings) == sorted(failing)
+    band = dL.collections[0].get_paths()[0].vertices[:, 1]
+    assert band.max() == pytest.approx(1.5) and band.min() == pytest.approx(-1.5)  # near specular
+    # a ΔE00 tolerance bounds no component: no band, the axis spans at least its limit
+    drawn.clear()
+    plots.plot_differences(names, lab_reference, {"a": samples["a"]},
+                           tolerance_preset("de00-1.0"), tmp_path / "chart.png")  # fmt: skip
+    dL = drawn["figure"].axes[0]
+    assert not dL.collections and dL.get_ylim()[1] >= 1.0

@@ -74,6 +74,14 @@ ToleranceOption = Annotated[
 SampleOption = Annotated[
     str | None, typer.Option("--sample", "-s", help="Sample name in a multi-sample file.")
 ]
+PlotOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--plot",
+        help="Also draw the multi-angle difference chart: ΔL*, ΔC*, ΔH* and the share of the "
+        "tolerance used at every geometry (PNG, PDF or SVG).",
+    ),
+]
 SprayedSampleOption = Annotated[
     str | None,
     typer.Option(
@@ -157,6 +165,16 @@ def check_figure_file(path, option: str = "--render") -> None:
 
         figure_format(path)
         check_output_file(path, option)
+
+
+def draw_differences(geometries, reference_lab, samples: dict, tolerance, path, title: str,
+                     **options) -> None:  # fmt: skip
+    """``--plot``: the multi-angle difference chart of ``samples`` (label → CIELAB
+    ``[G, 3]``) against the reference (:func:`~flakelab.render.plots.plot_differences`)."""
+    from flakelab.render.plots import plot_differences
+
+    plot_differences(geometries, reference_lab, samples, tolerance, path, title=title, **options)
+    errors.print(f"wrote {path}", highlight=False)
 
 
 def draw_side_by_side(readings, labels: list[str], path, title: str, **options) -> None:

@@ -14,10 +14,12 @@ from flakelab import __version__
 from flakelab.cli.common import (
     ConditionsOption,
     JsonOption,
+    PlotOption,
     SampleOption,
     ToleranceOption,
     check_figure_file,
     console,
+    draw_differences,
     draw_side_by_side,
     errors,
     progress_bar,
@@ -127,11 +129,13 @@ def compare(
             "they share (PNG, PDF or SVG)."
         ),
     ] = None,
+    plot: PlotOption = None,
 ) -> None:
     """Multi-angle colour difference of a sample against a reference, with pass/fail."""
     if not example and (reference is None or sample is None):
         raise FlakelabError("give a reference and a sample file, or --example")
     check_figure_file(render)
+    check_figure_file(plot, "--plot")
     tol = read_tolerance(tolerance)
     ref = _one_or_example(reference, "target", reference_sample)
     smp = _one_or_example(sample, "sprayout", sample_name)
@@ -140,6 +144,11 @@ def compare(
     report = result.to_dict()
     if render is not None:
         _render_comparison(ref, smp, report, render, light)
+    if plot is not None:
+        title = f"{smp.sample} vs {ref.sample} ({light}): {'PASS' if result.all_pass else 'FAIL'}"
+        samples = {smp.sample: result.lab_sample}
+        draw_differences(result.geometries, result.lab_reference, samples, tol, plot, title)
+        report["plot"] = str(plot)
     if as_json:
         print(json.dumps(report, indent=1))
     else:

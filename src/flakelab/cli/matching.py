@@ -14,12 +14,14 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    PlotOption,
     SampleOption,
     SprayedSampleOption,
     ToleranceOption,
     check_figure_file,
     check_output_file,
     console,
+    draw_differences,
     draw_side_by_side,
     errors,
     progress_bar,
@@ -191,6 +193,7 @@ def match_command(
             "predicted (PNG, PDF or SVG).",
         ),
     ] = None,
+    plot: PlotOption = None,
     recipe_out: RecipeOutOption = None,
     pick: Annotated[
         int, typer.Option(min=1, max=20, help="The candidate --recipe-out writes.")
@@ -208,9 +211,9 @@ def match_command(
     from flakelab.match.search import match
 
     if target == "evaluate":
-        if render is not None or recipe_out is not None:
+        if render is not None or plot is not None or recipe_out is not None:
             raise FlakelabError(
-                "--render, --recipe-out: for the candidates of one target, not the harness"
+                "--render, --plot, --recipe-out: for the candidates of one target, not the harness"
             )
         _evaluate(
             library=library,
@@ -233,6 +236,7 @@ def match_command(
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
     check_figure_file(render)
+    check_figure_file(plot, "--plot")
     check_output_file(recipe_out, "--recipe-out")
     if pick > candidates:
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
@@ -250,6 +254,7 @@ def match_command(
         library=lib,
     )
     report = result.to_dict()
+    extra = []
     if habits is None and shop is None:  # aimed-off candidates: their offsets are per geometry
         other = _left_out_model(measurement, forward, lib, database, physics)
         if other is not None:
@@ -269,6 +274,9 @@ def match_command(
     if render is not None:
         _render_match(measurement.select(forward.geometries), result, render)
         report["rendering"] = str(render)
+    if plot is not None:
+        _plot_match(measurement, result, extra, tol, plot)
+        report["plot"] = str(plot)
     if json_output:
         print(json.dumps(report, indent=2))
         return
@@ -325,6 +333,30 @@ def _render_match(target, result, path: Path) -> None:
         for k, c in enumerate(result.candidates, 1)
     ]
     draw_side_by_side(readings, labels, path, f"{result.target}: target and candidates (predicted)")
+
+
+def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
+    """Each candidate's predicted difference from the target at the searched geometries, then
+    at the target's others as the model that predicts them says (``left_out``)."""
+    import numpy as np
+
+    from flakelab.core.colorimetry import reflectance_to_Lab
+
+    if not result.candidates:
+        raise FlakelabError("--plot: the search found no candidate to draw")
+    searched = list(result.candidates[0].geometries)
+    others = list(left_out[0].geometries) if left_out else []
+    reference = result.candidates[0].target_lab
+    if others:
+        reference = np.concatenate([reference, reflectance_to_Lab(target.storage_spectra(others))])
+    samples = {
+        f"#{k}": np.concatenate([c.lab, *(x.lab for x in left_out[k - 1 : k])])
+        for k, c in enumerate(result.candidates, 1)
+    }
+    apart = f"not searched; predicted by {left_out[0].model_id}" if others else ""
+    draw_differences(searched + others, reference, samples, tolerance, path,
+                     f"{result.target}: candidates as predicted", apart=len(searched),
+                     apart_label=apart)  # fmt: skip
 
 
 def _print_match(report: dict) -> None:
@@ -488,6 +520,7 @@ def correct_command(
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     recipe_out: RecipeOutOption = None,
+    plot: PlotOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Correct a recipe from its measured spray-out.
@@ -503,6 +536,7 @@ def correct_command(
 
     tol = read_tolerance(tolerance)
     check_output_file(recipe_out, "--recipe-out")
+    check_figure_file(plot, "--plot")
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     grams = read_recipe(recipe)
     x0 = recipe_fractions(lib, grams, recipe)
@@ -580,10 +614,47 @@ def correct_command(
         report["left_out"] = expected_there.to_dict() | {
             "sprayout_de00": sprayed_there.round(3).tolist()
         }
+    if plot is not None:
+        samples = {
+            "spray-out (measured)": reflectance_to_Lab(sprayed_R),
+            "expected after the correction": correction.expected_lab,
+        }
+        _plot_correction(target_reading, sprayed_reading, target_lab, samples,
+                         found and found[1], forward, tol, plot)  # fmt: skip
+        report["plot"] = str(plot)
     if json_output:
         print(json.dumps(report, indent=2))
         return
     _print_correction(report)
+
+
+def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forward, tolerance,
+                     path: Path) -> None:  # fmt: skip
+    """The spray-out as measured and as the correction expects it (``samples``, CIELAB at the
+    model's geometries), against the target; then at the target's other geometries, where
+    ``left_out`` expects it."""
+    import numpy as np
+
+    from flakelab.core.colorimetry import reflectance_to_Lab
+
+    names = list(forward.geometries)
+    apart = ""
+    if left_out:
+        others = list(left_out.geometries)
+        names += others
+        target_there = reflectance_to_Lab(target.storage_spectra(others))
+        target_lab = np.concatenate([target_lab, target_there])
+        there = (reflectance_to_Lab(sprayed.storage_spectra(others)), left_out.lab)
+        samples = {
+            label: np.concatenate([lab_, more])
+            for (label, lab_), more in zip(samples.items(), there, strict=True)
+        }
+        apart = f"not in the correction; expected by {left_out.model_id}"
+    title = f"{sprayed.sample} against {target.sample}: the correction"
+    draw_differences(
+        names, target_lab, samples, tolerance, path, title, apart=len(forward.geometries),
+        apart_label=apart,
+    )  # fmt: skip
 
 
 def weigh_command(

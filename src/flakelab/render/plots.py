@@ -1,8 +1,11 @@
 """Plots of multi-angle measurements: spectra per geometry, L* and C* versus aspecular angle;
-the scaling experiment; a shop's habits against its spray-outs."""
+the multi-angle difference chart against a tolerance; the scaling experiment; a shop's habits
+against its spray-outs."""
 
 from __future__ import annotations
 
+import textwrap
+from collections.abc import Mapping, Sequence
 from os import PathLike
 from pathlib import Path
 
@@ -15,11 +18,13 @@ import numpy as np  # noqa: E402
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E402
 from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
+from flakelab.core.tolerance import Tolerance  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
 __all__ = [
     "figure_format",
     "plot_measurements",
+    "plot_differences",
     "plot_scaling",
     "plot_habits",
     "plot_rendering",
@@ -103,6 +108,93 @@ def plot_measurements(
         lightness_axis.set_xticks(np.unique(aspecular))
         lightness_axis.tick_params(axis="x", labelrotation=60, labelsize=8)
     _save(figure, path, dpi)
+
+
+DIFFERENCE_COMPONENTS = ("ΔL*", "ΔC*", "ΔH*")
+
+
+def plot_differences(
+    geometries: Sequence[str],
+    reference_lab: np.ndarray,
+    samples: Mapping[str, np.ndarray],
+    tolerance: Tolerance,
+    path: str | PathLike,
+    *,
+    title: str = "",
+    apart: int | None = None,
+    apart_label: str = "",
+    dpi: int = 120,
+) -> None:
+    """The multi-angle difference chart: ΔL*, ΔC*, ΔH* of each sample's CIELAB ``[G, 3]``
+    from the reference's at every geometry, inside the tolerance's limits where it bounds
+    them, and how much of each geometry's limit the difference uses (≤ 100 % passes; failing
+    geometries ringed), all as ``tolerance`` judges them. Geometries from index ``apart`` on
+    are drawn dashed with open markers beyond a dotted line, labelled ``apart_label``
+    (predicted by another model, say). Lines join geometries of one illumination angle."""
+    names = list(geometries)
+    x = np.arange(len(names))
+    apart = len(names) if apart is None else apart
+    groups = _geometry_groups(names, apart)
+    bounds = tolerance.bounds(names)
+    judged = {label: tolerance.judge(names, reference_lab, lab) for label, lab in samples.items()}
+    figure, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True)
+    component_axes = (axes[0, 0], axes[0, 1], axes[1, 0])
+    for k, (axis, label) in enumerate(zip(component_axes, DIFFERENCE_COMPONENTS, strict=True)):
+        limit = bounds[:, k + 1]
+        bounded = np.isfinite(limit)
+        if bounded.any():
+            shown = np.where(bounded, limit, np.nan)
+            axis.fill_between(x, -shown, shown, step="mid", color="0.88", label="limit")
+        axis.axhline(0.0, color="0.3", lw=0.8)
+        values = np.concatenate([dLCH[:, k] for _, dLCH, _ in judged.values()])
+        scale = np.max(limit[bounded]) if bounded.any() else np.min(bounds[:, 0])
+        span = 1.1 * max(np.max(np.abs(values), initial=0.0), scale if np.isfinite(scale) else 0)
+        axis.set_ylim(-span or -1.0, span or 1.0)  # the limits' scale, not the differences'
+        note = "" if bounded.any() else "  (no limit of its own)"
+        axis.set(ylabel=label, title=label + note)
+    used = axes[1, 1]
+    used.axhline(100.0, color="tab:red", lw=1.0, ls="--", label="limit")
+    used.set(ylabel="share of the limit used [%]", title=f"tolerance {tolerance.name}")
+    for index, (label, (de00, dLCH, passed)) in enumerate(judged.items()):
+        share = 100.0 * tolerance.share_of_limit(names, de00=de00, dLCH=dLCH)
+        colour = f"C{index}"
+        for k, axis in enumerate(component_axes):
+            _plot_series(axis, x, dLCH[:, k], groups, colour, label)
+        _plot_series(used, x, share, groups, colour, label)
+        used.scatter(
+            x[~passed], share[~passed], s=140, facecolors="none", edgecolors="tab:red", zorder=3
+        )
+    for axis in axes.flat:
+        if apart < len(names):
+            axis.axvline(apart - 0.5, color="0.4", ls=":", lw=1.0)
+        axis.grid(alpha=0.3)
+        axis.set_xticks(x, names, rotation=60, fontsize=8)
+    if apart < len(names):
+        used.annotate(textwrap.fill(apart_label, 28), (apart - 0.4, 1.0),
+                      xycoords=("data", "axes fraction"), xytext=(0, -6),
+                      textcoords="offset points", va="top", fontsize=7)  # fmt: skip
+    used.set_ylim(bottom=0.0, top=max(125.0, used.get_ylim()[1]))
+    axes[0, 0].legend(fontsize=7, frameon=False)
+    used.legend(fontsize=7, frameon=False)
+    figure.suptitle(title)
+    _save(figure, path, dpi)
+
+
+def _geometry_groups(names: list[str], apart: int) -> list[tuple[np.ndarray, bool]]:
+    """Runs of neighbouring geometries that one line joins (same illumination angle, same
+    side of ``apart``), each with whether it lies beyond ``apart``."""
+    keys = [(Geometry.parse(n).illumination, i >= apart) for i, n in enumerate(names)]
+    starts = [i for i in range(len(keys)) if i == 0 or keys[i] != keys[i - 1]]
+    ends = [*starts[1:], len(keys)]
+    return [(np.arange(a, b), keys[a][1]) for a, b in zip(starts, ends, strict=True)]
+
+
+def _plot_series(axis, x, y, groups, colour: str, label: str) -> None:
+    """One sample's values along the geometries, a line per group (dashed with open markers
+    beyond the chart's ``apart``), labelled once."""
+    for n, (rows, apart) in enumerate(groups):
+        axis.plot(x[rows], y[rows], "o--" if apart else "o-", color=colour,
+                  mfc="none" if apart else colour, label=None if n else label)  # fmt: skip
 
 
 def plot_scaling(series, path: str | PathLike, *, dpi: int = 120) -> None:
