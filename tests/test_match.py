@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -24,8 +25,14 @@ from flakelab.match.correction import (
     split_offset,
 )
 from flakelab.match.forward import KubelkaMunkForward
-from flakelab.match.recipe import RecipeError, parse_quantity, weigh
-from flakelab.match.search import MatchSettings, match, recipe_vector
+from flakelab.match.recipe import (
+    RecipeError,
+    parse_quantity,
+    weigh,
+    weigh_additions,
+    weigh_for_colour,
+)
+from flakelab.match.search import MatchSettings, evaluate_recipes, match, recipe_vector
 from flakelab.physics.application import SPREAD_SD, sprayed_reflectance
 
 OKUMURA = Path(__file__).resolve().parents[2] / "shared" / "data" / "pigment-km"
@@ -283,6 +290,64 @@ def test_weighing_sums_to_the_can_at_the_scale_resolution():
     assert all(abs(ln.grams * 10 - round(ln.grams * 10)) < 1e-9 for ln in lines)
     assert lines[-1].cumulative == pytest.approx(250.0)
     assert lines[0].grams == pytest.approx(194.4)
+
+
+def _largest_dE00(forward, names, exact, amounts) -> float:
+    """The largest ΔE00 over geometries between two mixes (grams of ``names``), predicted by
+    ``forward`` one mix at a time."""
+    lab = []
+    for grams in (exact, amounts):
+        x = recipe_vector(forward, dict(zip(names, grams, strict=True)))
+        lab.append(reflectance_to_Lab(evaluate_recipes(forward, x[None] / x.sum())[0][0]))
+    return float(delta_E(*lab).max())
+
+
+def test_weighing_for_colour_keeps_the_closest_rounding_never_worse_than_the_nearest(hybrid):
+    """Every rounding of a silver's blue and black down or up (the aluminium taking the
+    balance), tried one at a time: the weighing keeps the closest in colour to the exact
+    recipe, never further than the nearest grams, and in some recipes closer."""
+    names = ["Al medium", "Phthalo blue GS", "Carbon black"]
+    rng = np.random.default_rng(5)
+    gains = []
+    for _ in range(8):
+        shares = dict(zip(names, [1.0, rng.uniform(0.01, 0.05), rng.uniform(1e-3, 4e-3)],
+                          strict=True))  # fmt: skip
+        weighing = weigh_for_colour(hybrid, shares, 100.0, 0.1)
+        exact = 100.0 * np.array(list(shares.values())) / sum(shares.values())
+        costs = {}
+        steps = zip(np.floor(exact[1:] * 10), np.ceil(exact[1:] * 10), strict=True)
+        for blue, black in itertools.product(*steps):
+            grams = np.array([1000 - blue - black, blue, black]) / 10
+            costs[tuple(grams.round(6))] = _largest_dE00(hybrid, names, exact, grams)
+        best = min(costs, key=costs.get)
+        assert tuple(weighing.grams[n] for n in names) == pytest.approx(best)
+        assert weighing.rounding_de00 == pytest.approx(costs[best], abs=2e-4)
+        nearest = {ln.toner: ln.grams for ln in weigh(shares, 100.0, 0.1)}
+        assert weighing.nearest_de00 == pytest.approx(
+            costs[tuple(nearest[n] for n in names)], abs=2e-4
+        )
+        assert sum(weighing.grams.values()) == pytest.approx(100.0)
+        assert [ln.toner for ln in weighing.lines] == names  # pouring order: largest first
+        gains.append(weighing.nearest_de00 - weighing.rounding_de00)
+    assert min(gains) >= 0 and max(gains) > 0.01
+
+
+def test_additions_are_weighed_for_colour_and_what_rounds_to_nothing_is_left_out(hybrid):
+    can = {"Al medium": 230.0, "Phthalo blue GS": 12.0, "Carbon black": 0.8}
+    added = {"Phthalo blue GS": 0.0043, "Carbon black": 0.0011, "Indanthrone blue": 0.0001}
+    weighing = weigh_additions(hybrid, can, added, 0.1)
+    total = sum(can.values())
+    exact = {n: can.get(n, 0) + added.get(n, 0) * total for n in [*can, "Indanthrone blue"]}
+    assert set(weighing.grams) == {"Phthalo blue GS", "Carbon black"}  # 0.02 g: nothing
+    for name, grams in weighing.grams.items():
+        assert abs(grams - added[name] * total) < 0.1
+    names = list(exact)
+    after = [can.get(n, 0) + weighing.grams.get(n, 0) for n in names]
+    assert weighing.rounding_de00 == pytest.approx(
+        _largest_dE00(hybrid, names, list(exact.values()), after), abs=2e-4
+    )
+    assert weighing.rounding_de00 <= weighing.nearest_de00 and weighing.lines == []
+    assert weighing.lab_shift.shape == (len(hybrid.geometries), 3)
 
 
 def test_impossible_quantities_are_refused():

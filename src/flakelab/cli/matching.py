@@ -207,7 +207,7 @@ def match_command(
     'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.data import example_path
     from flakelab.io import read_measurement, read_tolerance
-    from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
+    from flakelab.match.recipe import parse_quantity
     from flakelab.match.search import match
 
     if target == "evaluate":
@@ -264,9 +264,7 @@ def match_command(
             for entry, left_out in zip(report["candidates"], extra, strict=True):
                 entry["left_out"] = left_out.to_dict()
     for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
-        lines = weigh(candidate.fractions, grams, resolution)
-        entry["weights_g"] = [asdict(ln) for ln in lines]
-        entry["rounding_de00"] = rounding_cost(forward, candidate.fractions, lines)
+        entry.update(_weighed(forward, candidate.fractions, grams, resolution))
     report["quantity_g"] = grams
     report["resolution_g"] = resolution
     if recipe_out is not None:
@@ -416,7 +414,7 @@ def _print_match(report: dict) -> None:
                 "predicted − target", *(f"{v:+.2f}" for v in c["texture_delta"].values())
             )
             console.print(texture)
-        extra = f"model: {c['model']}; rounding to the scale costs ΔE00 {c['rounding_de00']:.3f}"
+        extra = f"model: {c['model']}; {_rounding_text(c)}"
         if c["novel_toners"]:
             extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
         console.print(extra, highlight=False)
@@ -540,7 +538,6 @@ def correct_command(
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     grams = read_recipe(recipe)
     x0 = recipe_fractions(lib, grams, recipe)
-    total = float(sum(grams.values()))
     target_reading = read_measurement(target, sample)
     sprayed_reading = read_measurement(sprayed, sprayed_sample)
     target_R, _, _ = target_spectra(target_reading, forward)
@@ -577,14 +574,11 @@ def correct_command(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "
             "optional, a move toward the target's centre"
         )
-
-    def on_scale(share: float) -> float:
-        return round(round(share * total / resolution) * resolution, 6)
-
-    if mode == "additions":
-        report["add_g"] = {k: on_scale(v) for k, v in correction.added.items() if on_scale(v) > 0}
-    else:
-        report["recipe_g"] = {k: on_scale(v) for k, v in correction.fractions.items()}
+    weighing = _weigh_correction(forward, correction, mode, grams, resolution)
+    report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams
+    report["rounding_de00"] = weighing.rounding_de00
+    report["rounding_de00_nearest"] = weighing.nearest_de00
+    expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
     if recipe_out is not None:  # what the can holds after the additions, or the new recipe
         corrected = report.get("recipe_g") or {
             name: round(grams.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
@@ -600,7 +594,7 @@ def correct_command(
         name: round(value, 4) for name, value in correction.application.items()
     }
     report["habits"] = shop_habits and shop_habits.report()
-    expected, _, _ = tol.judge(forward.geometries, target_lab, correction.expected_lab)
+    expected, _, _ = tol.judge(forward.geometries, target_lab, expected_lab)
     report["expected_de00"] = expected.round(3).tolist()
     report["geometries"] = list(forward.geometries)
     other = (
@@ -617,7 +611,7 @@ def correct_command(
     if plot is not None:
         samples = {
             "spray-out (measured)": reflectance_to_Lab(sprayed_R),
-            "expected after the correction": correction.expected_lab,
+            "expected after the correction": expected_lab,
         }
         _plot_correction(target_reading, sprayed_reading, target_lab, samples,
                          found and found[1], forward, tol, plot)  # fmt: skip
@@ -626,6 +620,19 @@ def correct_command(
         print(json.dumps(report, indent=2))
         return
     _print_correction(report)
+
+
+def _weigh_correction(forward, correction, mode: str, can: dict[str, float], resolution: float):
+    """The correction on the scale: additions to the mixed ``can``, or the new recipe for a
+    can of its size (traces under half a scale step left out), each toner rounded as the
+    colour closest to the computed correction's asks."""
+    from flakelab.match.recipe import weigh_additions, weigh_for_colour
+
+    if mode == "additions":
+        return weigh_additions(forward, can, correction.added, resolution)
+    quantity = round(sum(can.values()) / resolution) * resolution
+    weighed = {k: v for k, v in correction.fractions.items() if v * quantity >= resolution / 2}
+    return weigh_for_colour(forward, weighed, quantity, resolution)
 
 
 def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forward, tolerance,
@@ -674,7 +681,7 @@ def weigh_command(
     Grams per toner at the scale's resolution, cumulative weights in pouring order, and the
     ΔE00 between the exact and the weighed recipe, both predicted by the model."""
     from flakelab.io import read_recipe, write_recipe
-    from flakelab.match.recipe import parse_quantity, rounding_cost, weigh
+    from flakelab.match.recipe import parse_quantity
 
     grams = read_recipe(recipe)
     can = parse_quantity(quantity)
@@ -682,28 +689,42 @@ def weigh_command(
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
-    lines = weigh(shares, can, resolution)
     report = {
         "recipe": str(recipe),
         "quantity_g": can,
         "resolution_g": resolution,
-        "weights_g": [asdict(ln) for ln in lines],
-        "rounding_de00": rounding_cost(forward, shares, lines),
+        **_weighed(forward, shares, can, resolution),
         "model": forward.name,
     }
     if recipe_out is not None:
-        write_recipe({ln.toner: ln.grams for ln in lines}, recipe_out)
+        write_recipe({ln["toner"]: ln["grams"] for ln in report["weights_g"]}, recipe_out)
         report["recipe_out"] = str(recipe_out)
         errors.print(f"wrote the weighed recipe to {recipe_out}", highlight=False)
     if json_output:
         print(json.dumps(report, indent=2))
         return
     console.print(_weights_table(f"{recipe.name} for {can:g} g", report["weights_g"]))
-    console.print(
-        f"rounding to the scale's {resolution:g} g costs ΔE00 {report['rounding_de00']:.3f} "
-        f"({forward.name})",
-        highlight=False,
-    )
+    console.print(f"{_rounding_text(report)} ({forward.name})", highlight=False)
+
+
+def _weighed(forward, fractions: dict[str, float], quantity_g: float, resolution: float) -> dict:
+    """The report's weights for a can: grams in pouring order, rounded to the scale as the
+    colour closest to the exact recipe's asks, and what that and the nearest grams cost."""
+    from flakelab.match.recipe import weigh_for_colour
+
+    weighing = weigh_for_colour(forward, fractions, quantity_g, resolution)
+    return {
+        "weights_g": [asdict(ln) for ln in weighing.lines],
+        "rounding_de00": weighing.rounding_de00,
+        "rounding_de00_nearest": weighing.nearest_de00,
+    }
+
+
+def _rounding_text(report: dict) -> str:
+    text = f"rounding to the scale costs ΔE00 {report['rounding_de00']:.3f}"
+    if report["rounding_de00_nearest"] > report["rounding_de00"] + 5e-4:
+        text += f" (the nearest grams: {report['rounding_de00_nearest']:.3f})"
+    return text
 
 
 def _weights_table(title: str | None, weights_g: list[dict]) -> Table:

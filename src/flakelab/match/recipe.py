@@ -1,8 +1,14 @@
 """Recipe output: grams per toner for a can, at the scale's resolution, and what rounding costs.
 
-Rounding uses the largest-remainder method, so the weighed amounts add up exactly to the can;
-the colour cost of rounding is the largest ΔE00 over geometries between the exact and the
-rounded recipe, both predicted by the same forward model.
+The colour cost of rounding is the largest ΔE00 over geometries between the exact and the
+weighed recipe, both predicted by the same forward model. The nearest grams (largest-remainder
+rounding, so that the weighed amounts add up exactly to the can) are not always the closest
+colour: 0.7 g of carbon black where 0.74 g was meant darkens a silver more than the tenth of
+a gram of blue beside it can, and rounding that blue down as well keeps the hue. With a model,
+:func:`weigh_for_colour` tries every rounding of each toner down or up to the scale (the
+largest toner taking the balance, so the can stays whole) in one batch and keeps the one
+whose colour is closest to the exact recipe's; the nearest grams are among those tried, so it
+never costs more. Additions to a mixed can (:func:`weigh_additions`) are rounded the same way.
 """
 
 from __future__ import annotations
@@ -16,7 +22,20 @@ from flakelab.core.difference import delta_E
 from flakelab.core.units import parse_amount
 from flakelab.errors import FlakelabError
 
-__all__ = ["RecipeLine", "weigh", "rounding_cost", "parse_quantity", "RecipeError"]
+__all__ = [
+    "RecipeLine",
+    "Weighing",
+    "weigh",
+    "weigh_for_colour",
+    "weigh_additions",
+    "parse_quantity",
+    "RecipeError",
+    "ROUNDINGS_VARIED",
+]
+
+ROUNDINGS_VARIED = 12
+"""At most this many toners, the smallest in the can, are tried rounded both down and up
+(2¹² roundings in one batch); the rest take their nearest grams."""
 
 
 class RecipeError(FlakelabError):
@@ -28,6 +47,21 @@ class RecipeLine:
     toner: str
     grams: float
     cumulative: float
+
+
+@dataclass(frozen=True)
+class Weighing:
+    """What to weigh, and its colour cost: the largest ΔE00 over geometries between the
+    weighed and the exact amounts (``rounding_de00``), and the same for the nearest grams
+    (``nearest_de00``), both predicted by one model; ``lab_shift[G, 3]`` the weighed minus
+    the exact amounts' CIELAB by that model. ``grams`` per toner; ``lines`` the recipe in
+    pouring order, for a whole can (empty for additions)."""
+
+    grams: dict[str, float]
+    rounding_de00: float
+    nearest_de00: float
+    lab_shift: np.ndarray
+    lines: list[RecipeLine]
 
 
 def parse_quantity(text: str) -> float:
@@ -60,25 +94,96 @@ def weigh(
             f"quantity: {quantity_g:g} g is too small to weigh {', '.join(small)} "
             f"at {resolution_g:g} g resolution; mix a larger can"
         )
-    order = np.argsort(-units, kind="stable")
-    grams = units[order] * resolution_g
-    return [
-        RecipeLine(names[i], round(float(g), 6), round(float(c), 6))
-        for i, g, c in zip(order, grams, np.cumsum(grams), strict=True)
-    ]
+    return _pouring_order(
+        {n: round(float(u) * resolution_g, 6) for n, u in zip(names, units, strict=True)}
+    )
 
 
-def rounding_cost(forward, fractions: dict[str, float], lines: list[RecipeLine]) -> float:
-    """Largest ΔE00 over geometries between the exact and the weighed recipe."""
+def weigh_for_colour(
+    forward, fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
+) -> Weighing:
+    """:func:`weigh`, with each toner rounded down or up to the scale as the colour closest to
+    the exact recipe's by ``forward`` asks (module notes)."""
+    nearest = weigh(fractions, quantity_g, resolution_g)
+    steps = int(round(quantity_g / resolution_g))
+    names = list(fractions)
+    share = np.array([fractions[n] for n in names], dtype=float)
+    exact = share / share.sum() * steps
+    by_name = {line.toner: line.grams for line in nearest}
+    nearest_units = np.array([round(by_name[n] / resolution_g) for n in names])
+    units = _whole_can_roundings(exact, nearest_units, steps)
+    best, cost, shift = _closest_colour(forward, names, exact, units)
+    grams = {n: round(float(u) * resolution_g, 6) for n, u in zip(names, units[best], strict=True)}
+    return Weighing(grams, float(cost[best]), float(cost[0]), shift, _pouring_order(grams))
+
+
+def weigh_additions(
+    forward, can: dict[str, float], added: dict[str, float], resolution_g: float = 0.1
+) -> Weighing:
+    """Grams to add to a mixed ``can`` (grams per toner) for ``added`` (each toner's
+    addition as a share of the can), each rounded down or up to the scale as the colour
+    closest to the exact additions' by ``forward`` asks; an addition rounded to nothing is
+    left out."""
+    names = list(dict.fromkeys([*can, *added]))
+    total = sum(can.values())
+    mixed = np.array([can.get(n, 0.0) for n in names])
+    exact = np.array([added.get(n, 0.0) * total / resolution_g for n in names])
+    nearest = np.round(exact)
+    options = np.stack([np.floor(exact), np.ceil(exact)])
+    units = _roundings(options, nearest, np.argsort(exact)[::-1][: np.count_nonzero(exact)])
+    amounts = mixed / resolution_g + units  # in scale steps, the can and its additions
+    best, cost, shift = _closest_colour(forward, names, mixed / resolution_g + exact, amounts)
+    grams = {
+        n: round(float(u) * resolution_g, 6)
+        for n, u in zip(names, units[best], strict=True)
+        if u > 0
+    }
+    return Weighing(grams, float(cost[best]), float(cost[0]), shift, [])
+
+
+def _whole_can_roundings(exact: np.ndarray, nearest: np.ndarray, steps: int) -> np.ndarray:
+    """Integer amounts ``[N, k]`` (the nearest first) summing to ``steps``: each toner but
+    the largest rounded down or up (at least one step), the largest taking the balance."""
+    largest = int(np.argmax(exact))
+    options = np.stack([np.floor(exact), np.ceil(exact)]).clip(min=1)
+    others = [i for i in np.argsort(exact) if i != largest]
+    units = _roundings(options, nearest, others)
+    units[:, largest] = steps - (units.sum(1) - units[:, largest])
+    return units[units[:, largest] >= 1]
+
+
+def _roundings(options: np.ndarray, nearest: np.ndarray, varied) -> np.ndarray:
+    """Every choice between ``options[0]`` and ``options[1]`` for the first
+    :data:`ROUNDINGS_VARIED` toners of ``varied``, the others at ``nearest``; the nearest
+    rounding first, no row twice."""
+    varied = np.asarray(varied, dtype=int)[:ROUNDINGS_VARIED]
+    bits = (np.arange(2 ** len(varied))[:, None] >> np.arange(len(varied))) & 1
+    units = np.repeat(nearest[None].astype(float), len(bits), axis=0)
+    units[:, varied] = options[bits, varied]
+    units = np.unique(units, axis=0)
+    return np.concatenate([nearest[None], units[np.any(units != nearest, axis=1)]])
+
+
+def _closest_colour(forward, names: list[str], exact: np.ndarray, amounts: np.ndarray):
+    """The row of ``amounts[N, k]`` (any units) whose colour by ``forward`` is closest to
+    that of ``exact[k]``, each row's cost (the largest ΔE00 over geometries), and the chosen
+    row's CIELAB minus the exact amounts'."""
     from flakelab.match.search import evaluate_recipes
 
-    index = {n: i for i, n in enumerate(forward.toners)}
-    x = np.zeros((2, len(forward.toners)))
-    for name, value in fractions.items():
-        x[0, index[name]] = value
-    total = sum(line.grams for line in lines)
-    for line in lines:
-        x[1, index[line.toner]] = line.grams / total
+    columns = [list(forward.toners).index(n) for n in names]
+    x = np.zeros((1 + len(amounts), len(forward.toners)))
+    x[:, columns] = np.concatenate([exact[None], amounts])
     R, _ = evaluate_recipes(forward, x / x.sum(1, keepdims=True))
     lab = reflectance_to_Lab(R)
-    return float(delta_E(lab[0], lab[1]).max())
+    cost = delta_E(lab[:1], lab[1:]).max(axis=1)
+    best = int(np.argmin(cost))
+    return best, cost, lab[1 + best] - lab[0]
+
+
+def _pouring_order(grams: dict[str, float]) -> list[RecipeLine]:
+    """The largest toner first, with the scale's running total."""
+    order = sorted(grams, key=lambda n: -grams[n])
+    running = np.cumsum([grams[n] for n in order])
+    return [
+        RecipeLine(n, grams[n], round(float(c), 6)) for n, c in zip(order, running, strict=True)
+    ]
