@@ -384,10 +384,10 @@ def record_all(
     database: DatabaseOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Record a shop's spray-out history from its instrument files: every row of a manifest
-    as 'cases record' records one, all in one transaction or none.
+    """Record a shop's spray-out history from its instrument files, all or none.
 
-    The first bad row is named with its column and nothing is stored; a row already
+    Every row of the manifest is recorded as 'cases record' records one, in one
+    transaction. The first bad row is named with its column and nothing is stored; a row already
     recorded, or one the manifest lists twice, is refused the same way."""
     from flakelab.cases.case import OUTCOMES, worst_differences
     from flakelab.cases.database import add_cases, count_cases, existing_case_ids, open_database
@@ -1018,8 +1018,10 @@ def evaluate(
     ] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """ΔE00 of the model's predictions against the measured spray-outs (a shop's, since a
-    date: how the model does on them)."""
+    """ΔE00 of the model's predictions against the measured spray-outs.
+
+    How the model does on all the cases, on a shop's (--shop), or on those since a date
+    (--since)."""
     from flakelab.cases.case import cases_at, select_cases
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, load_model_file
@@ -1113,8 +1115,9 @@ def adapt(
     ] = True,
     json_output: JsonOption = False,
 ) -> None:
-    """Adapt a trained model (default: the current one) to one shop's cases: the training
-    protocol's adaptation phase, for the sprayers and instrument of one shop."""
+    """Adapt a trained model (default: the current one) to one shop's cases.
+
+    The training protocol's adaptation phase, for the sprayers and instrument of one shop."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, load_model_file, register
