@@ -70,3 +70,57 @@ def test_lch_components_add_up_to_delta_E_ab_and_carry_sign():
     # a red made yellower turns counter-clockwise: positive ΔH
     assert delta_LCH([50, 40, 0], [50, 40, 5])[2] > 0
     assert delta_LCH([50, 40, 0], [50, 45, 0])[1] == pytest.approx(5)
+
+
+def _metameric_pair(seed: int = 2):
+    """A smooth paint spectrum and its metamer under D65/10: the spectrum plus a 'metameric
+    black', a spectral change the D65 weights do not see (Cohen and Kappauf)."""
+    from flakelab.core.colorimetry import tristimulus_weights
+
+    wavelengths = np.arange(400, 701, 10)
+    standard = 0.3 + 0.2 * np.sin((wavelengths - 400) / 60.0)
+    W = tristimulus_weights()  # [31, 3]
+    wiggle = 0.05 * np.cos((wavelengths - 400) / 25.0 + seed)
+    black = wiggle - W @ np.linalg.solve(W.T @ W, W.T @ wiggle)
+    return standard, standard + black
+
+
+def test_metamerism_index_is_the_corrected_difference_under_the_test_light():
+    """ISO 18314-4 by hand, from colour-science's own spectral tristimulus integration (an
+    independent path to the XYZ): the sample's XYZ under A scaled by the standard's over the
+    sample's under D65, then CIEDE2000 from the standard under A."""
+    from flakelab.core.difference import metamerism_index
+
+    standard, sample = _metameric_pair()
+    sample = 1.07 * sample + 0.01  # off in strength and tint too
+    shape = colour.SpectralShape(400, 700, 10)
+    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
+
+    def XYZ(R, illuminant):
+        sd = colour.SpectralDistribution(dict(zip(shape.wavelengths, R, strict=True)))
+        return colour.sd_to_XYZ(sd, cmfs, colour.SDS_ILLUMINANTS[illuminant], method="ASTM E308",
+                                shape=shape) / 100  # fmt: skip
+
+    corrected = XYZ(sample, "A") * XYZ(standard, "D65") / XYZ(sample, "D65")
+    white = colour.XYZ_to_xy(XYZ(np.ones(31), "A"))
+    by_hand = colour.difference.delta_E_CIE2000(
+        colour.XYZ_to_Lab(XYZ(standard, "A"), white), colour.XYZ_to_Lab(corrected, white)
+    )
+    assert metamerism_index(standard, sample, "A") == pytest.approx(by_hand, abs=1e-6)
+
+
+def test_a_metamer_matches_in_daylight_and_its_index_is_its_difference_under_the_test_light():
+    from flakelab.core.colorimetry import Conditions, reflectance_to_Lab
+    from flakelab.core.difference import METAMERISM_ILLUMINANTS, metamerism_indices
+
+    standard, metamer = _metameric_pair()
+    assert delta_E(reflectance_to_Lab(standard), reflectance_to_Lab(metamer)) < 1e-6
+    indices = metamerism_indices(np.stack([standard] * 2), np.stack([standard, metamer]))
+    assert list(indices) == list(METAMERISM_ILLUMINANTS)
+    for test, index in indices.items():
+        lab = [reflectance_to_Lab(R, conditions=Conditions(test)) for R in (standard, metamer)]
+        # no daylight difference to correct for: the index is the plain ΔE00 under the test light
+        assert index[1] == pytest.approx(float(delta_E(*lab)), abs=1e-6)
+        assert index[0] == pytest.approx(0.0, abs=1e-9) and index[1] > 0.2
+    # strength alone is no metamerism, whatever the light
+    assert metamerism_indices(standard, 0.7 * standard)["FL11"] == pytest.approx(0.0, abs=1e-9)

@@ -184,6 +184,15 @@ def match_command(
             "predicted match, wherever the model is unsure).",
         ),
     ] = MatchSettings.model_risk,
+    metamerism: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="Weight of the metamerism index against the target (ΔE00 after ISO 18314-4's "
+            "correction, under A, F11 and LED-B3) in the search's objective: steers recipes to "
+            "the car's own pigments (0: colour under D65/10 alone).",
+        ),
+    ] = MatchSettings.metamerism,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     render: Annotated[
@@ -227,7 +236,8 @@ def match_command(
             world_name=world,
             habits_file=habits,
             shop=shop,
-            settings=MatchSettings(model_risk=model_risk),  # the harness's own candidates, seeds
+            # the harness's own candidates and seeds
+            settings=MatchSettings(model_risk=model_risk, metamerism=metamerism),
             tolerance=tolerance,
             json_output=json_output,
         )
@@ -249,7 +259,9 @@ def match_command(
         forward,
         effect,
         tolerance=tol,
-        settings=MatchSettings(candidates=candidates, seed=seed, model_risk=model_risk),
+        settings=MatchSettings(
+            candidates=candidates, seed=seed, model_risk=model_risk, metamerism=metamerism
+        ),
         habits=habits_for(habits, shop, database, forward),
         library=lib,
     )
@@ -471,6 +483,7 @@ def _evaluate(
         )
     report["model"] = forward.name
     report["model_risk"] = settings.model_risk
+    report["metamerism_weight"] = settings.metamerism
     report["world"] = world_name
     report["habits"] = habits and habits.report()
     if json_output:

@@ -1,9 +1,19 @@
-"""Colour differences: one dispatcher over colour-science's formulae, plus CIELAB components.
+"""Colour differences: one dispatcher over colour-science's formulae, plus CIELAB components
+and the metamerism index.
 
 ``delta_E(Lab_1, Lab_2, method=...)`` with methods listed in :data:`DELTA_E_METHODS`; all
 broadcast over samples × geometries. CIEDE2000 with parametric factors kL, kC, kH
 (CIE 142-2001) is written out here because colour-science only offers kL ∈ {1, 2}; it is
 tested against colour-science for those cases and against Sharma et al. (2005).
+
+A recipe that matches the car in daylight need not match it under the body shop's tubes or
+a filament lamp, when its pigments are not the car's. :func:`metamerism_index` is the
+metamerism index for a change of illuminant of ISO 18314-4:2024 (colour-science's
+``XYZ_to_metamerism_index``): the sample's tristimulus values under the test illuminant
+corrected, component by component, by the ratio by which they differ from the standard's
+under the reference illuminant, then ΔE00 from the standard under the test illuminant. A
+pair that differs only in strength scores 0; a pair metameric under daylight scores what it
+becomes under the other light.
 """
 
 from __future__ import annotations
@@ -15,14 +25,29 @@ import colour
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flakelab.core.colorimetry import Lab_to_XYZ, white_point
+from flakelab.core.colorimetry import (
+    D65_10,
+    Conditions,
+    Lab_to_XYZ,
+    reflectance_to_XYZ,
+    white_point,
+)
+from flakelab.core.spectra import WAVELENGTHS
 
 __all__ = [
     "DELTA_E_METHODS",
+    "METAMERISM_ILLUMINANTS",
     "delta_E",
     "delta_E_CIE2000",
     "delta_LCH",
+    "metamerism_index",
+    "metamerism_indices",
 ]
+
+METAMERISM_ILLUMINANTS = ("A", "FL11", "LED-B3")
+"""Test illuminants of the metamerism index (DESIGN.md §2): a filament lamp (CIE A), the
+tri-band fluorescent tube of paint shops and showrooms (F11) and a phosphor-converted white
+LED (CIE LED-B3, 4,100 K)."""
 
 
 def delta_E_CIE2000(
@@ -164,3 +189,56 @@ def delta_LCH(Lab_reference: ArrayLike, Lab_sample: ArrayLike) -> NDArray[np.flo
     d_angle = np.arctan2(smp[..., 2], smp[..., 1]) - np.arctan2(ref[..., 2], ref[..., 1])
     dH = 2 * np.sqrt(C_ref * C_smp) * np.sin(d_angle / 2)
     return np.stack([smp[..., 0] - ref[..., 0], C_smp - C_ref, dH], axis=-1)
+
+
+def metamerism_index(
+    reflectance_standard: ArrayLike,
+    reflectance_sample: ArrayLike,
+    test: str,
+    reference: Conditions = D65_10,
+    wavelengths: ArrayLike = WAVELENGTHS,
+) -> NDArray[np.float64]:
+    """Metamerism index M_t ``[...]`` of reflectance pairs ``[..., wavelength]`` (they
+    broadcast) for a change from ``reference`` to the illuminant ``test`` (same observer):
+    ISO 18314-4:2024, multiplicative correction in XYZ, ΔE00 (module notes).
+
+    Examples
+    --------
+    >>> standard = np.linspace(0.1, 0.6, 31)
+    >>> round(float(metamerism_index(standard, 0.8 * standard, "A")), 9)  # strength only
+    0.0
+    """
+    test_conditions = Conditions(test, reference.observer)
+    standard = np.asarray(reflectance_standard, dtype=float)
+    sample = np.asarray(reflectance_sample, dtype=float)
+    XYZ = {
+        (name, which): reflectance_to_XYZ(R, wavelengths, conditions)
+        for name, R in (("standard", standard), ("sample", sample))
+        for which, conditions in (("test", test_conditions), ("reference", reference))
+    }
+    white = colour.XYZ_to_xy(white_point(wavelengths, test_conditions))
+    return np.asarray(
+        colour.difference.XYZ_to_metamerism_index(
+            XYZ["sample", "test"],
+            XYZ["standard", "test"],
+            XYZ["sample", "reference"],
+            XYZ["standard", "reference"],
+            correction="Multiplicative",
+            method="CIE 2000",
+            illuminant=white,
+        ),
+        dtype=float,
+    )
+
+
+def metamerism_indices(
+    reflectance_standard: ArrayLike,
+    reflectance_sample: ArrayLike,
+    reference: Conditions = D65_10,
+    tests: tuple[str, ...] = METAMERISM_ILLUMINANTS,
+) -> dict[str, NDArray[np.float64]]:
+    """:func:`metamerism_index` under each illuminant of ``tests``, by its name."""
+    return {
+        test: metamerism_index(reflectance_standard, reflectance_sample, test, reference)
+        for test in tests
+    }

@@ -12,8 +12,9 @@ import numpy as np
 import torch
 
 from flakelab.core.colorimetry import D65_10, Conditions, tristimulus_weights, white_point
+from flakelab.core.difference import METAMERISM_ILLUMINANTS
 
-__all__ = ["TorchColour"]
+__all__ = ["TorchColour", "TorchMetamerism"]
 
 _EPSILON = 216 / 24389
 _KAPPA = 24389 / 27
@@ -37,7 +38,10 @@ class TorchColour:
         self.lab_offset = torch.as_tensor((-16.0, 0.0, 0.0), dtype=dtype)
 
     def lab(self, R: torch.Tensor) -> torch.Tensor:
-        t = R.to(self.weights.dtype) @ self.weights
+        return self.lab_of_ratios(R.to(self.weights.dtype) @ self.weights)
+
+    def lab_of_ratios(self, t: torch.Tensor) -> torch.Tensor:
+        """CIELAB ``[..., 3]`` of tristimulus values over the white's, ``t = XYZ / XYZ_n``."""
         f = torch.where(
             t > _EPSILON, torch.clamp(t, min=_EPSILON) ** (1 / 3), (_KAPPA * t + 16) / 116
         )
@@ -74,3 +78,42 @@ class TorchColour:
         dL, dC, dH2, C1 = TorchColour.lch_differences(lab_ref, lab)
         SC, SH = 1 + 0.045 * C1, 1 + 0.015 * C1
         return dL**2 / kL**2 + (dC / (kC * SC)) ** 2 + dH2 / (kH * SH) ** 2 + 1e-6
+
+
+def _weights_over_white(conditions: Conditions) -> np.ndarray:
+    return np.array(tristimulus_weights(conditions=conditions)) / np.asarray(
+        white_point(conditions=conditions), float
+    )
+
+
+class TorchMetamerism(TorchColour):
+    """The metamerism index of reflectance tensors against a ``standard`` ``[G, 31]``, smooth,
+    for the optimiser: ISO 18314-4's multiplicative correction in XYZ, as
+    :func:`~flakelab.core.difference.metamerism_index`, with CIE94 for CIEDE2000."""
+
+    def __init__(
+        self,
+        standard: np.ndarray,
+        tests: tuple[str, ...] = METAMERISM_ILLUMINANTS,
+        reference: Conditions = D65_10,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        super().__init__(reference, dtype)
+        self.test_weights = torch.as_tensor(
+            np.stack([_weights_over_white(Conditions(t, reference.observer)) for t in tests]),
+            dtype=dtype,
+        )  # [K, 31, 3]
+        standard = torch.as_tensor(standard, dtype=dtype)
+        self.standard_reference = standard @ self.weights  # [G, 3]
+        self.standard_test_lab = self.lab_of_ratios(self._under_tests(standard))  # [K, G, 3]
+
+    def _under_tests(self, R: torch.Tensor) -> torch.Tensor:
+        """``t`` of ``R[..., G, 31]`` under each test illuminant, ``[..., K, G, 3]``."""
+        return torch.einsum("...gw,kwc->...kgc", R.to(self.test_weights.dtype), self.test_weights)
+
+    def indices(self, R: torch.Tensor) -> torch.Tensor:
+        """Smooth metamerism index ``[..., K, G]`` of ``R[..., G, 31]`` under each test
+        illuminant."""
+        ratio = self.standard_reference / (R.to(self.weights.dtype) @ self.weights)
+        corrected = self._under_tests(R) * ratio.unsqueeze(-3)
+        return self.delta_e94(self.standard_test_lab, self.lab_of_ratios(corrected))

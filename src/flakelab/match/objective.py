@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from flakelab.core.tolerance import Tolerance, tolerance_preset
-from flakelab.core.torch_colour import TorchColour
+from flakelab.core.torch_colour import TorchColour, TorchMetamerism
 
 __all__ = ["MatchObjective", "OBJECTIVE_DEFAULT"]
 
@@ -44,15 +44,18 @@ no spray passes there either way."""
 
 class MatchObjective(TorchColour):
     """CIELAB of reflectance tensors and, over ``geometries``, how far recipes are from
-    passing ``tolerance`` (default :data:`OBJECTIVE_DEFAULT`)."""
+    passing ``tolerance`` (default :data:`OBJECTIVE_DEFAULT`); with the target's ``spectra``
+    ``[G, 31]``, how metameric recipes are to it."""
 
     def __init__(
         self,
         geometries: list[str] | tuple,
         tolerance: Tolerance | None = None,
         dtype: torch.dtype = torch.float64,
+        spectra=None,
     ) -> None:
         super().__init__(dtype=dtype)
+        self.metamerism = None if spectra is None else TorchMetamerism(spectra, dtype=dtype)
         tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
         self.tolerance = tolerance
         self.k = (tolerance.kL, tolerance.kC, tolerance.kH)
@@ -82,3 +85,8 @@ class MatchObjective(TorchColour):
         ``target_lab[G, 3]``: the mean share of the limit plus half the worst."""
         share = self.shares_of_limit(target_lab[None], lab)
         return share.mean(dim=1) + 0.5 * share.max(dim=1).values
+
+    def metamerism_loss(self, R: torch.Tensor) -> torch.Tensor:
+        """The mean metamerism index ``[N]`` (ΔE, over test illuminants and geometries) of
+        recipes ``R[N, G, 31]`` against the target's spectra."""
+        return self.metamerism.indices(R).mean(dim=(-2, -1))

@@ -45,7 +45,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E
+from flakelab.core.difference import delta_E, metamerism_indices
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -116,6 +116,8 @@ class Candidate:
     limit_share: NDArray  # each geometry's share of the tolerance's limit (≤ 1 passes)
     in_support: bool = True
     spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
+    # the metamerism index against the target per test illuminant and geometry (ISO 18314-4)
+    metamerism: dict[str, NDArray] = field(default_factory=dict)
 
     def as_measurement(self, sample: str) -> Measurement:
         """The candidate's predicted reading, as the instrument would give it (to render, plot
@@ -146,6 +148,10 @@ class Candidate:
             "limit_share_max": round(float(self.limit_share.max()), 3),
             "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
+            "metamerism_index": {k: v.round(3).tolist() for k, v in self.metamerism.items()},
+            "metamerism_index_max": {
+                k: round(float(v.max()), 3) for k, v in self.metamerism.items()
+            },
         }
 
 
@@ -186,6 +192,8 @@ def _loss(
     risky = settings.model_risk and getattr(forward, "members", 1) > 1
     R, texture, members = forward.with_members(x) if risky else (*forward(x), None)
     loss = objective.loss(target_lab, objective.lab(R))
+    if settings.metamerism:
+        loss = loss + settings.metamerism * objective.metamerism_loss(R)
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
     if risky:
@@ -494,7 +502,8 @@ def _match(
     if not allowed.any():
         raise MatchError("library: no toners to match with")
     spectra, texture, name = target_spectra(target, forward)
-    objective = MatchObjective(forward.geometries, tolerance, forward.dtype)
+    aimed_at = spectra if settings.metamerism else None  # the target's spectra, not its colour
+    objective = MatchObjective(forward.geometries, tolerance, forward.dtype, aimed_at)
     target_lab = objective.lab(torch.as_tensor(spectra))
     target_texture = None
     if texture and all(k in texture for k in TEXTURE_READINGS):
@@ -713,6 +722,9 @@ def _judge(
     de00, dlch, passed = tolerance.judge(forward.geometries, target_lab[None], lab)
     share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
     score = share.max(1) + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
+    metamerism = metamerism_indices(spectra, R)  # [N, G] per test illuminant
+    if settings.metamerism:
+        score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
     has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
     if has_texture:
         target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
@@ -758,6 +770,7 @@ def _judge(
                 in_support=not outside[row],
                 spread=None if spread is None else spread[i],
                 limit_share=share[row],
+                metamerism={light: index[row] for light, index in metamerism.items()},
             )
         )
     return out
