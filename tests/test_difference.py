@@ -124,3 +124,29 @@ def test_a_metamer_matches_in_daylight_and_its_index_is_its_difference_under_the
         assert index[0] == pytest.approx(0.0, abs=1e-9) and index[1] > 0.2
     # strength alone is no metamerism, whatever the light
     assert metamerism_indices(standard, 0.7 * standard)["FL11"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_optimiser_s_metamerism_index_is_iso_18314_4_with_cie94():
+    """TorchMetamerism against the correction done by hand on colour-science's XYZ and CIE94
+    (graphic arts) from colour-science: the smooth index the search weighs."""
+    import torch
+
+    from flakelab.core.colorimetry import Conditions, reflectance_to_XYZ, white_point
+    from flakelab.core.difference import METAMERISM_ILLUMINANTS
+    from flakelab.core.torch_colour import TorchMetamerism
+
+    standard, metamer = _metameric_pair()
+    standards = np.stack([standard, 0.5 * standard + 0.05])  # two geometries
+    samples = np.stack([np.stack([metamer, 0.52 * standard + 0.04]), standards])  # two recipes
+    smooth = TorchMetamerism(standards).indices(torch.as_tensor(samples)).numpy()
+    assert smooth.shape == (2, 2, len(METAMERISM_ILLUMINANTS))  # recipes, geometries, lights
+    for k, light in enumerate(METAMERISM_ILLUMINANTS):
+        test = Conditions(light)
+        white = colour.XYZ_to_xy(white_point(conditions=test))
+        corrected = reflectance_to_XYZ(samples, conditions=test) * (
+            reflectance_to_XYZ(standards) / reflectance_to_XYZ(samples)
+        )
+        lab_standard = colour.XYZ_to_Lab(reflectance_to_XYZ(standards, conditions=test), white)
+        cie94 = colour.difference.delta_E_CIE1994(lab_standard, colour.XYZ_to_Lab(corrected, white))
+        assert smooth[..., k] == pytest.approx(cie94, abs=1e-3)  # the 1e-6 floor under the root
+    assert smooth[1].max() < 2e-3  # the standard against itself

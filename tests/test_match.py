@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E, delta_E_CIE2000
+from flakelab.core.difference import delta_E, delta_E_CIE2000, metamerism_indices
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.io import read_library, read_measurement, read_recipe
@@ -564,6 +564,30 @@ def hybrid():
     from flakelab.models.registry import shipped_model
 
     return forward_for(shipped_model("five-angle"), read_library(None))
+
+
+def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(hybrid):
+    """The example blue metallic is tinted with phthalo blue and indanthrone blue. Matched
+    on its colour in daylight alone, the best recipe is a metamer of phthalo green and
+    quinacridone violet (metamerism index about 2 under F11); with the index in the
+    objective it takes a blue, and its index falls below a third of that."""
+    from flakelab.data import example_path
+    from flakelab.match.models import effect_mask
+
+    target = read_measurement(example_path("target"))
+    effect = effect_mask(read_library(None), hybrid.toners)
+    best = {}
+    for weight in (0.0, 1.0):
+        settings = MatchSettings(candidates=1, metamerism=weight)
+        best[weight] = match(target, hybrid, effect, settings=settings).candidates[0]
+    worst = {w: max(v.max() for v in c.metamerism.values()) for w, c in best.items()}
+    assert worst[0.0] > 1.5 and worst[1.0] < worst[0.0] / 3
+    assert {"Phthalo blue GS", "Indanthrone blue"} & set(best[1.0].fractions)
+    assert best[1.0].passes  # in daylight it still matches
+    # what each candidate reports is the exact index of its prediction against the target
+    spectra = target.storage_spectra(hybrid.geometries)
+    exact = metamerism_indices(spectra, best[1.0].reflectance)
+    assert all(np.allclose(exact[k], best[1.0].metamerism[k]) for k in exact)
 
 
 def test_hybrid_stands_new_toners_in_as_a_known_toner_of_their_kind(hybrid):

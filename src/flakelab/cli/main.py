@@ -209,6 +209,9 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
         f"{verdict}",
         highlight=False,
     )
+    worst = "  ".join(f"{k} {v:.2f}" for k, v in report["metamerism_index_max"].items())
+    against = f"ISO 18314-4, ΔE00 from {report['conditions']}, worst geometry"
+    console.print(f"metamerism index ({against}): {worst}", highlight=False)
     if report["texture_difference"]:
         console.print(
             "texture Δ: "

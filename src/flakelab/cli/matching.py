@@ -430,6 +430,7 @@ def _print_match(report: dict) -> None:
         if c["novel_toners"]:
             extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
         console.print(extra, highlight=False)
+        console.print(_metamerism_text(c["metamerism_index_max"]), highlight=False)
     for note in report["notes"]:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
@@ -731,6 +732,12 @@ def _weighed(forward, fractions: dict[str, float], quantity_g: float, resolution
         "rounding_de00": weighing.rounding_de00,
         "rounding_de00_nearest": weighing.nearest_de00,
     }
+
+
+def _metamerism_text(worst: dict[str, float]) -> str:
+    """The worst geometry's metamerism index under each test illuminant, on one line."""
+    values = "  ".join(f"{light} {value:.2f}" for light, value in worst.items())
+    return f"metamerism index against the target (ISO 18314-4, ΔE00, worst geometry): {values}"
 
 
 def _rounding_text(report: dict) -> str:

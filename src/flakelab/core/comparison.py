@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh
-from flakelab.core.difference import delta_E, delta_E_CIE2000
+from flakelab.core.difference import delta_E, delta_E_CIE2000, metamerism_indices
 from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance, tolerance_preset
@@ -69,6 +69,7 @@ class Comparison:
     limit_share: NDArray[np.float64]  # per geometry, the share of its limit (≤ 1 passes)
     tolerance: Tolerance
     conditions: Conditions
+    metamerism: dict[str, NDArray[np.float64]]  # per test illuminant and geometry
 
     @property
     def de00_max(self) -> float:
@@ -94,6 +95,7 @@ class Comparison:
                 "de00": float(self.de00[i]),
                 **{f"de_{k}": float(v[i]) for k, v in self.de_other.items()},
                 "limit_share": float(self.limit_share[i]),
+                "metamerism_index": {k: float(v[i]) for k, v in self.metamerism.items()},
                 "pass": bool(self.passed[i]),
             }
             for i, name in enumerate(self.geometries)
@@ -116,6 +118,7 @@ class Comparison:
             "de00_max": self.de00_max,
             "de00_mean": self.de00_mean,
             "limit_share_max": float(self.limit_share.max()),
+            "metamerism_index_max": {k: float(v.max()) for k, v in self.metamerism.items()},
             "pass": self.all_pass,
             "failing_geometries": [
                 g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok
@@ -164,4 +167,7 @@ def compare(
         limit_share=tolerance.share_of_limit(common, de00=de00, dLCH=dLCH),
         tolerance=tolerance,
         conditions=conditions,
+        metamerism=metamerism_indices(
+            ref.storage_spectra(common), smp.storage_spectra(common), conditions
+        ),
     )

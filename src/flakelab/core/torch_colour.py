@@ -26,14 +26,19 @@ _F_TO_LAB = ((0.0, 500.0, 0.0), (116.0, -500.0, 200.0), (0.0, 0.0, -200.0))
 optimiser's backward pass (CIE 15:2018 eq. 8.1)."""
 
 
+def _weights_over_white(conditions: Conditions) -> np.ndarray:
+    """The ASTM E308 weights ``[31, 3]`` with the white point divided in."""
+    return np.array(tristimulus_weights(conditions=conditions)) / np.asarray(
+        white_point(conditions=conditions), float
+    )
+
+
 class TorchColour:
     """CIELAB of reflectance tensors ``[..., 31]`` under fixed conditions."""
 
     def __init__(self, conditions: Conditions = D65_10, dtype: torch.dtype = torch.float64) -> None:
-        weights = np.array(tristimulus_weights(conditions=conditions))
-        white = np.asarray(white_point(conditions=conditions), float)
         # the white point divided in once: t = R · (W / white)
-        self.weights = torch.as_tensor(weights / white, dtype=dtype)
+        self.weights = torch.as_tensor(_weights_over_white(conditions), dtype=dtype)
         self.f_to_lab = torch.as_tensor(_F_TO_LAB, dtype=dtype)
         self.lab_offset = torch.as_tensor((-16.0, 0.0, 0.0), dtype=dtype)
 
@@ -80,12 +85,6 @@ class TorchColour:
         return dL**2 / kL**2 + (dC / (kC * SC)) ** 2 + dH2 / (kH * SH) ** 2 + 1e-6
 
 
-def _weights_over_white(conditions: Conditions) -> np.ndarray:
-    return np.array(tristimulus_weights(conditions=conditions)) / np.asarray(
-        white_point(conditions=conditions), float
-    )
-
-
 class TorchMetamerism(TorchColour):
     """The metamerism index of reflectance tensors against a ``standard`` ``[G, 31]``, smooth,
     for the optimiser: ISO 18314-4's multiplicative correction in XYZ, as
@@ -99,21 +98,24 @@ class TorchMetamerism(TorchColour):
         dtype: torch.dtype = torch.float64,
     ) -> None:
         super().__init__(reference, dtype)
-        self.test_weights = torch.as_tensor(
-            np.stack([_weights_over_white(Conditions(t, reference.observer)) for t in tests]),
-            dtype=dtype,
-        )  # [K, 31, 3]
-        standard = torch.as_tensor(standard, dtype=dtype)
-        self.standard_reference = standard @ self.weights  # [G, 3]
-        self.standard_test_lab = self.lab_of_ratios(self._under_tests(standard))  # [K, G, 3]
+        lights = [reference] + [Conditions(t, reference.observer) for t in tests]
+        # one product for every light: t = R · [W_ref | W_1 | … | W_K], each over its white
+        self.all_weights = torch.as_tensor(
+            np.concatenate([_weights_over_white(c) for c in lights], axis=1), dtype=dtype
+        )  # [31, 3 (K + 1)]
+        t = self._ratios(torch.as_tensor(standard, dtype=dtype))
+        self.standard_reference = t[..., :1, :]  # [G, 1, 3]
+        self.standard_test_lab = self.lab_of_ratios(t[..., 1:, :])  # [G, K, 3]
 
-    def _under_tests(self, R: torch.Tensor) -> torch.Tensor:
-        """``t`` of ``R[..., G, 31]`` under each test illuminant, ``[..., K, G, 3]``."""
-        return torch.einsum("...gw,kwc->...kgc", R.to(self.test_weights.dtype), self.test_weights)
+    def _ratios(self, R: torch.Tensor) -> torch.Tensor:
+        """``t`` of ``R[..., G, 31]`` under the reference, then each test light: ``[..., G,
+        K + 1, 3]``."""
+        t = R.to(self.all_weights.dtype) @ self.all_weights
+        return t.reshape(*t.shape[:-1], -1, 3)
 
     def indices(self, R: torch.Tensor) -> torch.Tensor:
-        """Smooth metamerism index ``[..., K, G]`` of ``R[..., G, 31]`` under each test
+        """Smooth metamerism index ``[..., G, K]`` of ``R[..., G, 31]`` under each test
         illuminant."""
-        ratio = self.standard_reference / (R.to(self.weights.dtype) @ self.weights)
-        corrected = self._under_tests(R) * ratio.unsqueeze(-3)
+        t = self._ratios(R)
+        corrected = t[..., 1:, :] * (self.standard_reference / t[..., :1, :])
         return self.delta_e94(self.standard_test_lab, self.lab_of_ratios(corrected))

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E
+from flakelab.core.difference import delta_E, metamerism_indices
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.match.correction import correct
@@ -43,6 +43,7 @@ __all__ = [
     "Trial",
     "trial",
     "worst_de00",
+    "worst_metamerism",
     "worst_share",
     "recipe_vector",
 ]
@@ -118,6 +119,12 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     return Trial(world, world.measure(R_target, rng)[0], oem, shop, streams)
 
 
+def worst_metamerism(a: NDArray, b: NDArray) -> float:
+    """The largest metamerism index of reading ``b`` ``[G, 31]`` against ``a`` over test
+    illuminants and geometries (:func:`~flakelab.core.difference.metamerism_indices`)."""
+    return float(max(index.max() for index in metamerism_indices(a, b).values()))
+
+
 def worst_share(tolerance: Tolerance, geometries, a: NDArray, b: NDArray) -> float:
     """How far reading ``b`` ``[G, 31]`` is from passing ``tolerance`` against ``a``: the
     largest share of a limit over geometries (≤ 1 passes)."""
@@ -164,6 +171,8 @@ def _one(world: World, forward, effect, x_hidden, rng, settings, habits, toleran
     respray_share = share(t.spray(x_hidden, respray_rng, batches=t.car))
     return {
         "first_de00": worst_de00(t.target, first),
+        "first_metamerism": worst_metamerism(t.target, first),
+        "oracle_metamerism": worst_metamerism(t.target, oracle),
         "oracle_de00": worst_de00(t.target, oracle),
         "first": first_share,
         "corrected": min(first_share, corrected_share),
@@ -244,6 +253,8 @@ def evaluate_matching(
         "after_one_correction_vs_oracle": ratio(corrected, oracle),
         "novel_toner_first_shot_vs_oracle": ratio(novel_first, novel_oracle),
         "first_shot_de00_median": float(np.median([r["first_de00"] for r in rows])),
+        "first_shot_metamerism_median": float(np.median([r["first_metamerism"] for r in rows])),
+        "oracle_metamerism_median": float(np.median([r["oracle_metamerism"] for r in rows])),
         "oracle_de00_median": float(np.median([r["oracle_de00"] for r in rows])),
         "predicted_de00_median": float(np.median([r["predicted_de00"] for r in rows])),
         "latency_p50_s": float(np.percentile(latency, 50)),
