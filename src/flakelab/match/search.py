@@ -192,8 +192,8 @@ def _loss(
     risky = settings.model_risk and getattr(forward, "members", 1) > 1
     R, texture, members = forward.with_members(x) if risky else (*forward(x), None)
     loss = objective.loss(target_lab, objective.lab(R))
-    if settings.metamerism:
-        loss = loss + settings.metamerism * objective.metamerism_loss(R)
+    if objective.metamerism is not None:
+        loss = loss + objective.metamerism_loss(R)
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
     if risky:
@@ -502,8 +502,9 @@ def _match(
     if not allowed.any():
         raise MatchError("library: no toners to match with")
     spectra, texture, name = target_spectra(target, forward)
-    aimed_at = spectra if settings.metamerism else None  # the target's spectra, not its colour
-    objective = MatchObjective(forward.geometries, tolerance, forward.dtype, aimed_at)
+    objective = MatchObjective(
+        forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism
+    )
     target_lab = objective.lab(torch.as_tensor(spectra))
     target_texture = None
     if texture and all(k in texture for k in TEXTURE_READINGS):

@@ -32,7 +32,7 @@ class MatchSettings:
     swap_from: int = 2
     effect_floor: float | None = None  # None: the model's (its training cases' effect share)
     model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
-    metamerism: float = 0.0  # weight of the mean metamerism index (ΔE) in the objective
+    metamerism: float = 1.0  # weight of the mean metamerism index (ΔE) in the objective
     seed: int = 0
 
 
