@@ -6,6 +6,7 @@ import itertools
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -781,8 +782,9 @@ def test_harness_judges_by_its_tolerance(hybrid):
 
 def test_matcher_rebuilds_a_pearl_over_an_aluminium_base(hybrid):
     """A green pearl over an aluminium base: a target the learned model itself makes from
-    three effect toners must be matched to ΔE00 < 0.6 at every geometry. Bases of a single
-    effect toner cannot (ΔE00 ≈ 1.8): the screen's effect toners must be combined."""
+    three effect toners must be matched to ΔE00 < 0.6 at every geometry. On daylight colour
+    alone, bases of a single effect toner cannot (ΔE00 ≈ 1.8): the screen's effect toners must
+    be combined. (Weighing metamerism, even that narrow search gets within 0.6.)"""
     from flakelab.match.models import effect_mask
 
     names = hybrid.library.names
@@ -801,7 +803,7 @@ def test_matcher_rebuilds_a_pearl_over_an_aluminium_base(hybrid):
         target,
         hybrid,
         effect,
-        settings=MatchSettings(top_effects=1, top_bases=0, swap_above=np.inf),
+        settings=MatchSettings(top_effects=1, top_bases=0, swap_above=np.inf, metamerism=0.0),
     )
     assert single.candidates[0].de00.max() > 0.6
 
@@ -816,7 +818,8 @@ def test_matcher_rebuilds_a_pearl_over_an_aluminium_base(hybrid):
 def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
     """Two aluminiums the free screen never isolates: its restarts blend half a dozen
     aluminiums, and no three of them rebuild the blend (ΔE00 1.3 and 1.9 without the screen
-    of effect bases). The base screen tries every pair with the pigments free."""
+    of effect bases, on daylight colour alone; weighing metamerism, 0.01 and 0.87). The base
+    screen tries every pair with the pigments free."""
     from flakelab.match.models import effect_mask
 
     names = hybrid.library.names
@@ -825,7 +828,10 @@ def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
     effect = effect_mask(hybrid.library, hybrid.toners)
     assert match(target, hybrid, effect).candidates[0].de00.max() < 0.5
     free_only = match(
-        target, hybrid, effect, settings=MatchSettings(top_bases=0, swap_above=np.inf)
+        target,
+        hybrid,
+        effect,
+        settings=MatchSettings(top_bases=0, swap_above=np.inf, metamerism=0.0),
     )
     assert free_only.candidates[0].de00.max() > 1.0
 
@@ -865,7 +871,8 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     recipes, a trace of a second pigment beside the red does the magenta's job, and the
     physics agrees (0.19). Which pigment depends on the model's last digits: quinacridone
     violet on one CPU, phthalo green yellowish on another, near-equal moves; the single
-    network shipped before found the magenta itself (0.68 → 0.19)."""
+    network shipped before found the magenta itself (0.68 → 0.19). All on daylight colour
+    alone: weighing metamerism, the screen's own best recipe is within 0.2."""
     from flakelab.cases.generator import World
     from flakelab.match.models import effect_mask
 
@@ -879,10 +886,11 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     world = World(hybrid.library, "five-angle")
     target = as_made(world, recipe_row(names, recipe))
     effect = effect_mask(hybrid.library, hybrid.toners)
-    unswapped = match(target, hybrid, effect, settings=MatchSettings(swap_above=np.inf))
+    daylight = MatchSettings(metamerism=0.0)
+    unswapped = match(target, hybrid, effect, settings=replace(daylight, swap_above=np.inf))
     assert unswapped.candidates[0].de00.max() > MatchSettings().swap_above
     assert "Quinacridone magenta" not in unswapped.candidates[0].fractions
-    swapped = match(target, hybrid, effect).candidates[0]
+    swapped = match(target, hybrid, effect, settings=daylight).candidates[0]
     assert set(swapped.fractions) - set(unswapped.candidates[0].fractions)
     assert swapped.de00.max() < 0.3
     # the swap's gain is the paint's, not the model's: the recipe as the physics makes it
@@ -891,8 +899,10 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     # the trigger is a share of the tolerance's limit: under ΔE00 ≤ 2.5 the unswapped best
     # uses about half of it, and the swap stage does not run
     wide = Tolerance("wide", Limit(de00=2.5))
-    loose = match(target, hybrid, effect, tolerance=wide).candidates[0]
-    never = match(target, hybrid, effect, tolerance=wide, settings=MatchSettings(swap_above=np.inf))
+    loose = match(target, hybrid, effect, tolerance=wide, settings=daylight).candidates[0]
+    never = match(
+        target, hybrid, effect, tolerance=wide, settings=replace(daylight, swap_above=np.inf)
+    )
     assert loose.limit_share.max() < MatchSettings().swap_above < loose.de00.max()
     assert loose.fractions == never.candidates[0].fractions
 
@@ -909,7 +919,9 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     and about half effect toners; left free, the search finds its guess there, a trace of
     effect toner (the DPP red: 3.9 % of red pearl, predicted within 0.3 ΔE00, 1.3 off by the
     physics). Kept to the model's support, the best recipe is a solid (the DPP red: its own
-    recipe, 0.24 off), and the physics puts it at less than half the distance."""
+    recipe, 0.24 off), and the physics puts it at less than half the distance. On daylight
+    colour alone: for the DPP red, weighing metamerism keeps the search off that guess by
+    itself."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import worst_de00
     from flakelab.match.models import effect_mask
@@ -921,7 +933,8 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     target = as_made(world, x)
 
     def best(floor):
-        result = match(target, hybrid, effect, settings=MatchSettings(effect_floor=floor))
+        settings = MatchSettings(effect_floor=floor, metamerism=0.0)
+        result = match(target, hybrid, effect, settings=settings)
         recipe = recipe_vector(hybrid, result.candidates[0].fractions)
         return result, recipe, worst_de00(target, as_made(world, recipe))
 
