@@ -348,25 +348,34 @@ def _render_match(target, result, path: Path) -> None:
 def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
     """Each candidate's predicted difference from the target at the searched geometries, then
     at the target's others as the model that predicts them says (``left_out``)."""
+    if not result.candidates:
+        raise FlakelabError("--plot: the search found no candidate to draw")
+    samples = {f"#{k}": c.lab for k, c in enumerate(result.candidates, 1)}
+    chart = _with_left_out(
+        target, list(result.candidates[0].geometries), result.candidates[0].target_lab, samples,
+        left_out and left_out[0].geometries, [x.lab for x in left_out],
+    )  # fmt: skip
+    apart = f"not searched; predicted by {left_out[0].model_id}" if left_out else ""
+    draw_differences(*chart, tolerance, path, f"{result.target}: candidates as predicted",
+                     apart=len(result.candidates[0].geometries), apart_label=apart)  # fmt: skip
+
+
+def _with_left_out(target, names: list, reference_lab, samples: dict, others, there: list):
+    """A chart's geometries, reference and samples (label → CIELAB ``[G, 3]``), followed by
+    the target's ``others`` geometries, where each sample has its CIELAB in ``there`` (in the
+    samples' order) and the reference is the target as read."""
     import numpy as np
 
     from flakelab.core.colorimetry import reflectance_to_Lab
 
-    if not result.candidates:
-        raise FlakelabError("--plot: the search found no candidate to draw")
-    searched = list(result.candidates[0].geometries)
-    others = list(left_out[0].geometries) if left_out else []
-    reference = result.candidates[0].target_lab
-    if others:
-        reference = np.concatenate([reference, reflectance_to_Lab(target.storage_spectra(others))])
-    samples = {
-        f"#{k}": np.concatenate([c.lab, *(x.lab for x in left_out[k - 1 : k])])
-        for k, c in enumerate(result.candidates, 1)
+    if not others:
+        return names, reference_lab, samples
+    target_there = reflectance_to_Lab(target.storage_spectra(list(others)))
+    extended = {
+        label: np.concatenate([lab, more])
+        for (label, lab), more in zip(samples.items(), there, strict=True)
     }
-    apart = f"not searched; predicted by {left_out[0].model_id}" if others else ""
-    draw_differences(searched + others, reference, samples, tolerance, path,
-                     f"{result.target}: candidates as predicted", apart=len(searched),
-                     apart_label=apart)  # fmt: skip
+    return names + list(others), np.concatenate([reference_lab, target_there]), extended
 
 
 def _print_match(report: dict) -> None:
@@ -590,8 +599,7 @@ def correct_command(
         )
     weighing = _weigh_correction(forward, correction, mode, grams, resolution)
     report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams
-    report["rounding_de00"] = weighing.rounding_de00
-    report["rounding_de00_nearest"] = weighing.nearest_de00
+    report.update(_rounding_costs(weighing))
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
     if recipe_out is not None:  # what the can holds after the additions, or the new recipe
         corrected = report.get("recipe_g") or {
@@ -654,28 +662,17 @@ def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forwa
     """The spray-out as measured and as the correction expects it (``samples``, CIELAB at the
     model's geometries), against the target; then at the target's other geometries, where
     ``left_out`` expects it."""
-    import numpy as np
-
     from flakelab.core.colorimetry import reflectance_to_Lab
 
-    names = list(forward.geometries)
-    apart = ""
-    if left_out:
-        others = list(left_out.geometries)
-        names += others
-        target_there = reflectance_to_Lab(target.storage_spectra(others))
-        target_lab = np.concatenate([target_lab, target_there])
-        there = (reflectance_to_Lab(sprayed.storage_spectra(others)), left_out.lab)
-        samples = {
-            label: np.concatenate([lab_, more])
-            for (label, lab_), more in zip(samples.items(), there, strict=True)
-        }
-        apart = f"not in the correction; expected by {left_out.model_id}"
+    others = left_out.geometries if left_out else ()
+    there = (
+        [reflectance_to_Lab(sprayed.storage_spectra(list(others))), left_out.lab] if others else []
+    )
+    chart = _with_left_out(target, list(forward.geometries), target_lab, samples, others, there)
+    apart = f"not in the correction; expected by {left_out.model_id}" if left_out else ""
     title = f"{sprayed.sample} against {target.sample}: the correction"
-    draw_differences(
-        names, target_lab, samples, tolerance, path, title, apart=len(forward.geometries),
-        apart_label=apart,
-    )  # fmt: skip
+    draw_differences(*chart, tolerance, path, title, apart=len(forward.geometries),
+                     apart_label=apart)  # fmt: skip
 
 
 def weigh_command(
@@ -727,8 +724,12 @@ def _weighed(forward, fractions: dict[str, float], quantity_g: float, resolution
     from flakelab.match.recipe import weigh_for_colour
 
     weighing = weigh_for_colour(forward, fractions, quantity_g, resolution)
+    return {"weights_g": [asdict(ln) for ln in weighing.lines], **_rounding_costs(weighing)}
+
+
+def _rounding_costs(weighing) -> dict[str, float]:
+    """What rounding to the scale costs, as weighed and as the nearest grams would."""
     return {
-        "weights_g": [asdict(ln) for ln in weighing.lines],
         "rounding_de00": weighing.rounding_de00,
         "rounding_de00_nearest": weighing.nearest_de00,
     }

@@ -208,27 +208,10 @@ def metamerism_index(
     >>> round(float(metamerism_index(standard, 0.8 * standard, "A")), 9)  # strength only
     0.0
     """
-    test_conditions = Conditions(test, reference.observer)
-    standard = np.asarray(reflectance_standard, dtype=float)
-    sample = np.asarray(reflectance_sample, dtype=float)
-    XYZ = {
-        (name, which): reflectance_to_XYZ(R, wavelengths, conditions)
-        for name, R in (("standard", standard), ("sample", sample))
-        for which, conditions in (("test", test_conditions), ("reference", reference))
-    }
-    white = colour.XYZ_to_xy(white_point(wavelengths, test_conditions))
-    return np.asarray(
-        colour.difference.XYZ_to_metamerism_index(
-            XYZ["sample", "test"],
-            XYZ["standard", "test"],
-            XYZ["sample", "reference"],
-            XYZ["standard", "reference"],
-            correction="Multiplicative",
-            method="CIE 2000",
-            illuminant=white,
-        ),
-        dtype=float,
+    indices = metamerism_indices(
+        reflectance_standard, reflectance_sample, reference, (test,), wavelengths
     )
+    return indices[test]
 
 
 def metamerism_indices(
@@ -236,9 +219,28 @@ def metamerism_indices(
     reflectance_sample: ArrayLike,
     reference: Conditions = D65_10,
     tests: tuple[str, ...] = METAMERISM_ILLUMINANTS,
+    wavelengths: ArrayLike = WAVELENGTHS,
 ) -> dict[str, NDArray[np.float64]]:
-    """:func:`metamerism_index` under each illuminant of ``tests``, by its name."""
-    return {
-        test: metamerism_index(reflectance_standard, reflectance_sample, test, reference)
-        for test in tests
-    }
+    """:func:`metamerism_index` under each illuminant of ``tests``, by its name; the pair's
+    XYZ under ``reference`` taken once for all of them."""
+    standard = np.asarray(reflectance_standard, dtype=float)
+    sample = np.asarray(reflectance_sample, dtype=float)
+    XYZ_standard_r = reflectance_to_XYZ(standard, wavelengths, reference)
+    XYZ_sample_r = reflectance_to_XYZ(sample, wavelengths, reference)
+    indices = {}
+    for test in tests:
+        conditions = Conditions(test, reference.observer)
+        white = colour.XYZ_to_xy(white_point(wavelengths, conditions))
+        indices[test] = np.asarray(
+            colour.difference.XYZ_to_metamerism_index(
+                reflectance_to_XYZ(sample, wavelengths, conditions),
+                reflectance_to_XYZ(standard, wavelengths, conditions),
+                XYZ_sample_r,
+                XYZ_standard_r,
+                correction="Multiplicative",
+                method="CIE 2000",
+                illuminant=white,
+            ),
+            dtype=float,
+        )
+    return indices
