@@ -106,6 +106,12 @@ class TorchMetamerism(TorchColour):
         t = self._ratios(torch.as_tensor(standard, dtype=dtype))
         self.standard_reference = t[..., :1, :]  # [G, 1, 3]
         self.standard_test_lab = self.lab_of_ratios(t[..., 1:, :])  # [G, K, 3]
+        # CIE94's weights depend on the standard's chroma only, so they are fixed once:
+        # ΔE94² = ΔL² + (Δa² + Δb²) / SH² + ΔC² (1 / SC² − 1 / SH²), with ΔH² = Δa² + Δb² − ΔC²
+        self.standard_chroma = torch.sqrt((self.standard_test_lab[..., 1:] ** 2).sum(-1) + 1e-9)
+        SC, SH = 1 + 0.045 * self.standard_chroma, 1 + 0.015 * self.standard_chroma
+        self.lab_weights = torch.stack([torch.ones_like(SH), SH**-2, SH**-2], dim=-1)
+        self.chroma_weight = SC**-2 - SH**-2
 
     def _ratios(self, R: torch.Tensor) -> torch.Tensor:
         """``t`` of ``R[..., G, 31]`` under the reference, then each test light: ``[..., G,
@@ -116,6 +122,23 @@ class TorchMetamerism(TorchColour):
     def indices(self, R: torch.Tensor) -> torch.Tensor:
         """Smooth metamerism index ``[..., G, K]`` of ``R[..., G, 31]`` under each test
         illuminant."""
+        return self.lab_and_indices(R)[1]
+
+    def lab_and_indices(self, R: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """CIELAB ``[..., G, 3]`` of ``R[..., G, 31]`` under the reference and its smooth
+        metamerism index ``[..., G, K]`` under each test illuminant, from one product and one
+        CIELAB: the optimiser needs both at every step, and the reference's share of the work
+        is the same."""
         t = self._ratios(R)
-        corrected = t[..., 1:, :] * (self.standard_reference / t[..., :1, :])
-        return self.delta_e94(self.standard_test_lab, self.lab_of_ratios(corrected))
+        reference = t[..., :1, :]
+        corrected = t[..., 1:, :] * (self.standard_reference / reference)
+        lab = self.lab_of_ratios(torch.cat([reference, corrected], dim=-2))
+        return lab[..., 0, :], self._delta_e94(lab[..., 1:, :])
+
+    def _delta_e94(self, lab: torch.Tensor) -> torch.Tensor:
+        """:meth:`delta_e94` from the standard's CIELAB under the test illuminants, with its
+        weights fixed: a third of the operations, each of which the optimiser pays for twice
+        (forward and backward) at every step."""
+        d = lab - self.standard_test_lab
+        dC = torch.sqrt((lab[..., 1:] ** 2).sum(-1) + 1e-9) - self.standard_chroma
+        return torch.sqrt((d * d * self.lab_weights).sum(-1) + dC * dC * self.chroma_weight + 1e-6)

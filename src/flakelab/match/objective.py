@@ -23,8 +23,9 @@ shop's tubes. In the harness (200 + 50 targets, seed 4242, the shipped ensemble)
 0.855 / 0.835 / 0.86 / 0.875 and with a new toner 0.42 / 0.46 / 0.54 / 0.48, and left the
 first spray-out's worst metamerism index at a median of 0.49 / 0.40 / 0.34 / 0.29, against
 0.16 for the hidden formula itself sprayed (1 again after the smooth index was regrouped,
-float32's last digits moving some recipes: 0.59, 0.855, 0.52, 0.35); 1 costs about 0.3 s a
-match.
+float32's last digits moving some recipes: 0.59, 0.855, 0.52, 0.35). Weight 1 makes a match
+about a fifth slower (``benchmarks/metamerism_cost.py``: medians 0.84 s against 0.69 s on 15
+targets; a step of the objective 0.83 ms against 0.53 ms for 20 recipes).
 """
 
 from __future__ import annotations
@@ -101,6 +102,15 @@ class MatchObjective(TorchColour):
         ``target_lab[G, 3]``: the mean share of the limit plus half the worst."""
         share = self.shares_of_limit(target_lab[None], lab)
         return share.mean(dim=1) + 0.5 * share.max(dim=1).values
+
+    def recipe_loss(self, target_lab: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
+        """The objective ``[N]`` of recipes with reflectances ``R[N, G, 31]``: :meth:`loss`
+        of their colour against ``target_lab[G, 3]``, plus :meth:`metamerism_loss` where
+        the objective weighs it (both from one product with the weights)."""
+        if self.metamerism is None:
+            return self.loss(target_lab, self.lab(R))
+        lab, indices = self.metamerism.lab_and_indices(R)
+        return self.loss(target_lab, lab) + self.metamerism_weight * indices.mean(dim=(-2, -1))
 
     def metamerism_loss(self, R: torch.Tensor) -> torch.Tensor:
         """The weighed mean metamerism index ``[N]`` (ΔE, over test illuminants and

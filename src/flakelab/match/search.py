@@ -191,9 +191,7 @@ def _loss(
 ) -> torch.Tensor:
     risky = settings.model_risk and getattr(forward, "members", 1) > 1
     R, texture, members = forward.with_members(x) if risky else (*forward(x), None)
-    loss = objective.loss(target_lab, objective.lab(R))
-    if objective.metamerism is not None:
-        loss = loss + objective.metamerism_loss(R)
+    loss = objective.recipe_loss(target_lab, R)
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
     if risky:
