@@ -4,7 +4,8 @@ Hidden targets are made, matched and sprayed as in ``flakelab match evaluate``. 
 shot that fails (ΔE00 > 1 at some geometry) is corrected once per setting given — each a
 comma-separated list of :func:`flakelab.match.correction.correct` keywords — and every
 corrected recipe is sprayed ``--sprays`` times, the same random streams for every setting
-(one spray per target, as in the harness, is too noisy to rank settings). The first row is
+(one spray per target, as in the harness, is too noisy to rank settings); each row also gives
+the sprays' worst metamerism index against the target (median). The first row is
 "none": the first recipe sprayed again unchanged, the baseline of the same run; the second
 the defaults (the offset split by the library's physics). ``library=none`` corrects without
 the physics split (the whole offset weighted by ``OFFSET_WEIGHT``). ``--ceiling`` adds a row
@@ -40,7 +41,13 @@ from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.match.correction import correct
-from flakelab.match.evaluate import SUCCESS_DE00, recipe_vector, trial, worst_de00
+from flakelab.match.evaluate import (
+    SUCCESS_DE00,
+    recipe_vector,
+    trial,
+    worst_de00,
+    worst_metamerism,
+)
 from flakelab.match.search import evaluate_recipes, match
 
 
@@ -94,9 +101,10 @@ def corrected_recipe(spec: str, world, forward, t, best, x_best, first, x_hidden
     return recipe_vector(forward, fixed.fractions), None
 
 
-def summary(passed: dict[str, list[float]], worst: dict[str, list[float]], spec: str) -> dict:
+def summary(passed: dict, worst: dict, metameric: dict, spec: str) -> dict:
     """Pass rate over every failed first shot, its standard error, and its difference from the
-    defaults' with the paired standard error (the same targets and sprays)."""
+    defaults' with the paired standard error (the same targets and sprays); the median over
+    targets of each one's median worst ΔE00 and worst metamerism index over its sprays."""
     p, base = np.array(passed[spec]), np.array(passed["defaults"])
     n = p.size
     if n == 0:
@@ -111,6 +119,7 @@ def summary(passed: dict[str, list[float]], worst: dict[str, list[float]], spec:
         "vs_defaults": float(diff.mean()),
         "vs_defaults_se": float(diff.std(ddof=1) / np.sqrt(n)) if n > 1 else None,
         "median_worst_de00": float(np.median(worst[spec])),
+        "median_worst_metamerism": float(np.median(metameric[spec])),
     }
 
 
@@ -129,6 +138,7 @@ def main() -> None:
     specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling), "respray"]
     passed: dict[str, list[float]] = {s: [] for s in specs}
     worst: dict[str, list[float]] = {s: [] for s in specs}
+    metameric: dict[str, list[float]] = {s: [] for s in specs}
     offsets, per_seed = [], {}
     for seed in seeds:
         before = {s: len(passed[s]) for s in specs}
@@ -142,17 +152,18 @@ def main() -> None:
                     spec, world, forward, t, best, x_best, first, x_hidden
                 )
                 # the same seeds for every setting: each sees the same sprays
-                des = [
-                    worst_de00(t.target, t.spray(x, np.random.default_rng(s), batches))
-                    for s in sprays
-                ]
+                sprayed = [t.spray(x, np.random.default_rng(s), batches) for s in sprays]
+                des = [worst_de00(t.target, spray) for spray in sprayed]
                 passed[spec].append(float(np.mean(np.array(des) <= SUCCESS_DE00)))
                 worst[spec].append(float(np.median(des)))
+                metameric[spec].append(
+                    float(np.median([worst_metamerism(t.target, spray) for spray in sprayed]))
+                )
         per_seed[seed] = {
             s: float(np.mean(passed[s][before[s] :])) if len(passed[s]) > before[s] else None
             for s in specs
         }
-    rows = [summary(passed, worst, spec) for spec in specs]
+    rows = [summary(passed, worst, metameric, spec) for spec in specs]
     offsets = np.array(offsets)
     failed = len(offsets)
     persistent = {
@@ -179,7 +190,8 @@ def main() -> None:
         print(
             f"{row['setting']:>32}  pass {row['pass_rate']:.3f} ± {row['pass_rate_se']:.3f}  "
             f"vs defaults {row['vs_defaults']:+.3f} ± {row['vs_defaults_se']:.3f}  "
-            f"median worst ΔE00 {row['median_worst_de00']:.2f}"
+            f"median worst ΔE00 {row['median_worst_de00']:.2f}  "
+            f"metamerism {row['median_worst_metamerism']:.2f}"
         )
 
 

@@ -55,6 +55,15 @@ def test_compare_example_agrees_with_library_and_tolerance():
     assert flakelab("compare", "--example", "--fail-on-reject").returncode == (
         0 if report["pass"] else 1
     )
+    # the metamerism index under a booth's own lights, as the library computes it
+    booth = json.loads(flakelab("compare", "--example", "--json", "--lights", "A,F2").stdout)
+    lit = compare(read_measurement(example_path("target")),
+                  read_measurement(example_path("sprayout")), lights=("A", "FL2"))  # fmt: skip
+    assert booth["metamerism_index_max"] == pytest.approx(
+        {k: float(v.max()) for k, v in lit.metamerism.items()}
+    )
+    refused = flakelab("compare", "--example", "--conditions", "A/10", "--lights", "A")
+    assert refused.returncode == 2 and "--lights: A is the reference illuminant" in refused.stderr
 
 
 def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):

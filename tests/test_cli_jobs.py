@@ -50,6 +50,7 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
                    "--recipe-out", str(corrected), "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
+    measured = compare(read_measurement(target), read_measurement(sprayed))
     assert all(v > 0 for v in report["add_g"].values())
     # the can after the additions: the recipe's grams plus what was added
     before, after = json.loads(recipe.read_text()), read_recipe(corrected)
@@ -61,6 +62,12 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     assert new <= {report["new_toner"]}
     assert max(report["expected_de00"]) < max(report["before_de00"])
     assert set(report["spray_application"]) == {"film build", "flake spread"}
+    # the spray-out's metamerism index at the model's geometries, as compare has it there
+    at = [measured.geometries.index(g) for g in report["geometries"]]
+    assert report["sprayout_metamerism_index_max"] == pytest.approx(
+        {k: float(v[at].max()) for k, v in measured.metamerism.items()}, abs=1e-3
+    )
+    assert set(report["expected_metamerism_index_max"]) == {"A", "FL11", "LED-B3"}
     # judged against the tolerance first: this spray-out already passes the body-shop default
     assert max(report["before_de00"]) < 1.0 and report["sprayout_passes"] is True
     assert any("already passes refinish" in note for note in report["notes"])
@@ -70,7 +77,6 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     assert list(left_out["geometries"]) == [g for g in INSTRUMENT_GEOMETRIES["ma-t12"]
                                             if g not in report["geometries"]]  # fmt: skip
     assert left_out["model_id"].startswith("demo-ma-t12")
-    measured = compare(read_measurement(target), read_measurement(sprayed))
     assert left_out["sprayout_de00"] == pytest.approx(
         [measured.de00[measured.geometries.index(g)] for g in left_out["geometries"]], abs=1e-3
     )

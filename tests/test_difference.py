@@ -131,7 +131,12 @@ def test_the_optimiser_s_metamerism_index_is_iso_18314_4_with_cie94():
     (graphic arts) from colour-science: the smooth index the search weighs."""
     import torch
 
-    from flakelab.core.colorimetry import Conditions, reflectance_to_XYZ, white_point
+    from flakelab.core.colorimetry import (
+        Conditions,
+        reflectance_to_Lab,
+        reflectance_to_XYZ,
+        white_point,
+    )
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
     from flakelab.core.torch_colour import TorchMetamerism
 
@@ -150,3 +155,22 @@ def test_the_optimiser_s_metamerism_index_is_iso_18314_4_with_cie94():
         cie94 = colour.difference.delta_E_CIE1994(lab_standard, colour.XYZ_to_Lab(corrected, white))
         assert smooth[..., k] == pytest.approx(cie94, abs=1e-3)  # the 1e-6 floor under the root
     assert smooth[1].max() < 2e-3  # the standard against itself
+    # with the daylight colour from the same product: CIELAB as colour-science has it, and the
+    # index under lights of one's choosing the same as under the default set
+    lab, by_booth = TorchMetamerism(standards, ("FL2", "A")).lab_and_indices(
+        torch.as_tensor(samples)
+    )
+    assert lab.numpy() == pytest.approx(reflectance_to_Lab(samples), abs=1e-9)
+    assert by_booth.numpy()[..., 1] == pytest.approx(smooth[..., 0], abs=1e-12)
+
+
+def test_test_lights_are_read_as_a_booth_names_them():
+    from flakelab.core.difference import parse_lights
+
+    assert parse_lights("A, F2,LED-B3,A") == ("A", "FL2", "LED-B3")
+    with pytest.raises(ValueError, match="--lights: .*got 'F99'"):
+        parse_lights("A,F99")
+    with pytest.raises(ValueError, match="--lights: D65 is the reference illuminant"):
+        parse_lights("D65,A")
+    with pytest.raises(ValueError, match="--lights: expected test illuminants"):
+        parse_lights(" , ")

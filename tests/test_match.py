@@ -567,11 +567,9 @@ def hybrid():
     return forward_for(shipped_model("five-angle"), read_library(None))
 
 
-def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(hybrid):
-    """The example blue metallic is tinted with phthalo blue and indanthrone blue. Matched
-    on its colour in daylight alone, the best recipe is a metamer of phthalo green and
-    quinacridone violet (metamerism index about 2 under F11); with the index in the
-    objective it takes a blue, and its index falls below a third of that."""
+@pytest.fixture(scope="module")
+def example_by_metamerism(hybrid):
+    """The example target and its best candidate with metamerism weights 0 and 1."""
     from flakelab.data import example_path
     from flakelab.match.models import effect_mask
 
@@ -581,6 +579,17 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(hybrid)
     for weight in (0.0, 1.0):
         settings = MatchSettings(candidates=1, metamerism=weight)
         best[weight] = match(target, hybrid, effect, settings=settings).candidates[0]
+    return target, best
+
+
+def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
+    hybrid, example_by_metamerism
+):
+    """The example blue metallic is tinted with phthalo blue and indanthrone blue. Matched
+    on its colour in daylight alone, the best recipe is a metamer of phthalo green and
+    quinacridone violet (metamerism index about 2 under F11); with the index in the
+    objective it takes a blue, and its index falls below a third of that."""
+    target, best = example_by_metamerism
     worst = {w: max(v.max() for v in c.metamerism.values()) for w, c in best.items()}
     assert worst[0.0] > 1.5 and worst[1.0] < worst[0.0] / 3
     assert {"Phthalo blue GS", "Indanthrone blue"} & set(best[1.0].fractions)
@@ -589,6 +598,64 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(hybrid)
     spectra = target.storage_spectra(hybrid.geometries)
     exact = metamerism_indices(spectra, best[1.0].reflectance)
     assert all(np.allclose(exact[k], best[1.0].metamerism[k]) for k in exact)
+
+
+def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
+    """The daylight-only match of the example (phthalo green and quinacridone violet for the
+    car's blues), sprayed a little light: the correction moves amounts, and its expected
+    index stays where the spray-out's is, over the notice level; the colorist is told to match
+    again. The car's own blue sprayed the same way draws no such note."""
+    from flakelab.core.difference import METAMERISM_NOTICE
+    from flakelab.match.correction import metamerism_note
+
+    target, best = example_by_metamerism
+    spectra = target.storage_spectra(hybrid.geometries)
+    notes = {}
+    for weight, candidate in best.items():
+        sprayed = 1.03 * candidate.reflectance
+        fixed = correct(hybrid, spectra, candidate.fractions, sprayed, mode="reformulate",
+                        library=read_library(None))  # fmt: skip
+        before = metamerism_indices(spectra, sprayed)
+        assert set(fixed.metamerism) == set(before)
+        for light, index in fixed.metamerism.items():  # amounts alone hardly move it
+            assert index.max() == pytest.approx(before[light].max(), abs=0.25), light
+        notes[weight] = metamerism_note(before, fixed.metamerism)
+    assert max(v.max() for v in best[0.0].metamerism.values()) > METAMERISM_NOTICE
+    assert "FL11" in notes[0.0] and "match the target again" in notes[0.0]
+    assert notes[1.0] is None
+
+
+def test_a_correction_expects_the_metamerism_its_corrected_spray_out_shows(km):
+    """A stronger batch of phthalo blue makes the spray-out a weak metamer of the target; the
+    correction takes less of it, and the index it expects (its prediction times the spray-out's
+    spectral ratio to the model) is what the corrected spray-out, mixed from the same batch,
+    measures."""
+    parts = {"Titanium White": 0.75, "Phthalo Blue (Green Shade)": 0.15, "Burnt Sienna": 0.10}
+    x_target = mixture(km, parts)
+    target = reflect(km, x_target)[0]
+    strong = KubelkaMunkForward(km.toners, km.K.numpy().copy(), km.S.numpy())
+    strong.K[km.toners.index("Phthalo Blue (Green Shade)")] *= 1.25
+    sprayed = reflect(strong, x_target)[0]
+    before = metamerism_indices(target, sprayed)
+    assert min(v.max() for v in before.values()) > 0.3
+    recipe = {n: float(v) for n, v in zip(km.toners, x_target, strict=True) if v > 0}
+    for mode in ("reformulate", "additions"):
+        fixed = correct(km, target, recipe, sprayed, mode=mode, offset_weight=1.0)
+        x = np.array([fixed.fractions.get(n, 0.0) for n in km.toners])
+        measured = metamerism_indices(target, reflect(strong, x)[0])
+        for light, index in fixed.metamerism.items():
+            assert index.max() < 0.1 and measured[light].max() < 0.1, (mode, light)
+            assert index == pytest.approx(measured[light], abs=0.03), (mode, light)
+
+
+def test_the_search_weighs_metamerism_under_the_lights_it_is_given(km):
+    target = reflect(km, mixture(km, {"Titanium White": 0.8, "Pyrrole Red": 0.2}))[0]
+    lights = ("FL2", "FL12")
+    settings = MatchSettings(candidates=1, lights=lights)
+    best = match(target, km, settings=settings).candidates[0]
+    assert tuple(best.metamerism) == lights
+    exact = metamerism_indices(target, best.reflectance, tests=lights)
+    assert all(np.allclose(exact[k], best.metamerism[k]) for k in lights)
 
 
 def test_hybrid_stands_new_toners_in_as_a_known_toner_of_their_kind(hybrid):

@@ -65,6 +65,26 @@ ConditionsOption = Annotated[
     str, typer.Option("--conditions", "-c", help="Illuminant/observer, e.g. D65/10, A/10, F11/10.")
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")]
+LightsOption = Annotated[
+    str | None,
+    typer.Option(
+        "--lights",
+        help="Test illuminants of the metamerism index, comma-separated: any of "
+        "colour-science's (a US booth: A,F2,F12).",
+        show_default="A,F11,LED-B3",
+    ),
+]
+
+
+def lights_option(text: str | None, conditions=None) -> tuple[str, ...] | None:
+    """The test illuminants ``--lights`` names (None: the default ones), against the
+    reference ``conditions`` (default D65/10)."""
+    from flakelab.core.colorimetry import D65_10
+    from flakelab.core.difference import parse_lights
+
+    return None if text is None else parse_lights(text, conditions or D65_10)
+
+
 ToleranceOption = Annotated[
     str,
     typer.Option(

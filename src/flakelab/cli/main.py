@@ -14,6 +14,7 @@ from flakelab import __version__
 from flakelab.cli.common import (
     ConditionsOption,
     JsonOption,
+    LightsOption,
     PlotOption,
     SampleOption,
     ToleranceOption,
@@ -22,6 +23,7 @@ from flakelab.cli.common import (
     draw_differences,
     draw_side_by_side,
     errors,
+    lights_option,
     progress_bar,
     reports_errors,
 )
@@ -31,6 +33,7 @@ from flakelab.cli.rendering import render_command, render_grid_command, texture_
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
+from flakelab.core.difference import METAMERISM_ILLUMINANTS
 from flakelab.core.measurement import Measurement
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
@@ -114,6 +117,7 @@ def compare(
     reference_sample: Annotated[str | None, typer.Option("--reference-sample")] = None,
     sample_name: Annotated[str | None, typer.Option("--sample-name")] = None,
     conditions: ConditionsOption = "D65/10",
+    lights: LightsOption = None,
     as_json: JsonOption = False,
     example: Annotated[
         bool,
@@ -140,7 +144,10 @@ def compare(
     ref = _one_or_example(reference, "target", reference_sample)
     smp = _one_or_example(sample, "sprayout", sample_name)
     light = Conditions.parse(conditions)
-    result = compare_measurements(ref, smp, tol, conditions=light)
+    tests = lights_option(lights, light) or tuple(
+        t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
+    )
+    result = compare_measurements(ref, smp, tol, conditions=light, lights=tests)
     report = result.to_dict()
     if render is not None:
         _render_comparison(ref, smp, report, render, light)

@@ -14,6 +14,7 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    LightsOption,
     PlotOption,
     SampleOption,
     SprayedSampleOption,
@@ -24,6 +25,7 @@ from flakelab.cli.common import (
     draw_differences,
     draw_side_by_side,
     errors,
+    lights_option,
     progress_bar,
 )
 from flakelab.cli.learning import (
@@ -38,6 +40,16 @@ from flakelab.cli.learning import (
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
+
+MetamerismOption = Annotated[
+    float,
+    typer.Option(
+        min=0.0,
+        help="Weight of the metamerism index against the target (ΔE00 after ISO 18314-4's "
+        "correction, under the test lights) in the objective: steers recipes to the car's own "
+        "pigments (0: colour under D65/10 alone).",
+    ),
+]
 
 RecipeOutOption = Annotated[
     Path | None,
@@ -184,15 +196,8 @@ def match_command(
             "predicted match, wherever the model is unsure).",
         ),
     ] = MatchSettings.model_risk,
-    metamerism: Annotated[
-        float,
-        typer.Option(
-            min=0.0,
-            help="Weight of the metamerism index against the target (ΔE00 after ISO 18314-4's "
-            "correction, under A, F11 and LED-B3) in the search's objective: steers recipes to "
-            "the car's own pigments (0: colour under D65/10 alone).",
-        ),
-    ] = MatchSettings.metamerism,
+    metamerism: MetamerismOption = MatchSettings.metamerism,
+    lights: LightsOption = None,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     render: Annotated[
@@ -237,7 +242,9 @@ def match_command(
             habits_file=habits,
             shop=shop,
             # the harness's own candidates and seeds
-            settings=MatchSettings(model_risk=model_risk, metamerism=metamerism),
+            settings=MatchSettings(
+                model_risk=model_risk, metamerism=metamerism, lights=lights_option(lights)
+            ),
             tolerance=tolerance,
             json_output=json_output,
         )
@@ -260,7 +267,11 @@ def match_command(
         effect,
         tolerance=tol,
         settings=MatchSettings(
-            candidates=candidates, seed=seed, model_risk=model_risk, metamerism=metamerism
+            candidates=candidates,
+            seed=seed,
+            model_risk=model_risk,
+            metamerism=metamerism,
+            lights=lights_option(lights),
         ),
         habits=habits_for(habits, shop, database, forward),
         library=lib,
@@ -467,6 +478,7 @@ def _evaluate(
     tolerance,
     json_output,
 ):
+    from flakelab.core.difference import METAMERISM_ILLUMINANTS
     from flakelab.io import read_tolerance
     from flakelab.match.evaluate import evaluate_matching, harness_world
     from flakelab.match.objective import OBJECTIVE_DEFAULT
@@ -494,6 +506,7 @@ def _evaluate(
     report["model"] = forward.name
     report["model_risk"] = settings.model_risk
     report["metamerism_weight"] = settings.metamerism
+    report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
     report["world"] = world_name
     report["habits"] = habits and habits.report()
     if json_output:
@@ -538,6 +551,8 @@ def correct_command(
         ),
     ] = MODEL_SD,
     tolerance: ToleranceOption = "refinish",
+    metamerism: MetamerismOption = MatchSettings.metamerism,
+    lights: LightsOption = None,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     recipe_out: RecipeOutOption = None,
@@ -550,12 +565,14 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import METAMERISM_ILLUMINANTS, metamerism_indices
     from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
-    from flakelab.match.correction import correct
+    from flakelab.match.correction import correct, metamerism_note
     from flakelab.match.crosscheck import expected_left_out
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
     tol = read_tolerance(tolerance)
+    test_lights = lights_option(lights) or METAMERISM_ILLUMINANTS
     check_output_file(recipe_out, "--recipe-out")
     check_figure_file(plot, "--plot")
     lib, forward, _ = _setup(library, instrument, model, database, physics)
@@ -581,6 +598,8 @@ def correct_command(
         habits=shop_habits,
         model_sd=model_sd,
         tolerance=tol,
+        metamerism=metamerism,
+        lights=test_lights,
     )
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
@@ -618,6 +637,12 @@ def correct_command(
     report["habits"] = shop_habits and shop_habits.report()
     expected, _, _ = tol.judge(forward.geometries, target_lab, expected_lab)
     report["expected_de00"] = expected.round(3).tolist()
+    report["metamerism_weight"] = metamerism
+    sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
+    report["sprayout_metamerism_index_max"] = _worst_per_light(sprayed_metamerism)
+    report["expected_metamerism_index_max"] = _worst_per_light(correction.metamerism)
+    if note := metamerism_note(sprayed_metamerism, correction.metamerism):
+        report["notes"].append(note)
     report["geometries"] = list(forward.geometries)
     other = (
         None if shop_habits else _left_out_model(target_reading, forward, lib, database, physics)
@@ -735,10 +760,21 @@ def _rounding_costs(weighing) -> dict[str, float]:
     }
 
 
-def _metamerism_text(worst: dict[str, float]) -> str:
+def _worst_per_light(indices: dict) -> dict[str, float]:
+    """The worst geometry's metamerism index under each test illuminant."""
+    return {light: round(float(index.max()), 3) for light, index in indices.items()}
+
+
+def _metamerism_values(worst: dict[str, float]) -> str:
+    return "  ".join(f"{light} {value:.2f}" for light, value in worst.items())
+
+
+def _metamerism_text(worst: dict[str, float], label: str = "") -> str:
     """The worst geometry's metamerism index under each test illuminant, on one line."""
-    values = "  ".join(f"{light} {value:.2f}" for light, value in worst.items())
-    return f"metamerism index against the target (ISO 18314-4, ΔE00, worst geometry): {values}"
+    return (
+        "metamerism index against the target (ISO 18314-4, ΔE00, worst geometry): "
+        f"{label}{_metamerism_values(worst)}"
+    )
 
 
 def _rounding_text(report: dict) -> str:
@@ -824,5 +860,10 @@ def _print_correction(report: dict) -> None:
         if report["habits"]:
             assumed += " beyond the shop's habits, which persist"
     console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
+    console.print(
+        _metamerism_text(report["sprayout_metamerism_index_max"], "spray-out ")
+        + f"; expected {_metamerism_values(report['expected_metamerism_index_max'])}",
+        highlight=False,
+    )
     for note in report["notes"]:
         console.print(f"[yellow]note:[/] {note}", highlight=False)

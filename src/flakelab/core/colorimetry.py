@@ -21,6 +21,7 @@ __all__ = [
     "Conditions",
     "D65_10",
     "OBSERVERS",
+    "illuminant_name",
     "tristimulus_weights",
     "white_point",
     "reflectance_to_XYZ",
@@ -75,18 +76,28 @@ class Conditions:
         observer = observer.strip().rstrip("°").removesuffix("deg").strip()
         if not sep or not illuminant:
             raise ValueError(f"expected ILLUMINANT/OBSERVER such as 'D65/10', got {text!r}")
-        illuminant = illuminant.strip()
-        if illuminant not in colour.SDS_ILLUMINANTS and f"FL{illuminant[1:]}" in (
-            colour.SDS_ILLUMINANTS
-        ):
-            illuminant = f"FL{illuminant[1:]}"
-        return cls(illuminant, observer)
+        return cls(illuminant_name(illuminant), observer)
 
     def __str__(self) -> str:
         return f"{self.illuminant}/{self.observer}"
 
 
 D65_10 = Conditions()
+
+
+def illuminant_name(text: str) -> str:
+    """colour-science's name of the illuminant ``text``: ``F11`` (as instruments and light
+    booths write it) is ``FL11``.
+
+    Examples
+    --------
+    >>> illuminant_name("F11"), illuminant_name("LED-B3")
+    ('FL11', 'LED-B3')
+    """
+    name = text.strip()
+    if name not in colour.SDS_ILLUMINANTS and f"FL{name[1:]}" in colour.SDS_ILLUMINANTS:
+        return f"FL{name[1:]}"
+    return name
 
 
 @lru_cache(maxsize=32)

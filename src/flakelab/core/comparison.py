@@ -9,7 +9,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh
-from flakelab.core.difference import delta_E, delta_E_CIE2000, metamerism_indices
+from flakelab.core.difference import (
+    METAMERISM_ILLUMINANTS,
+    delta_E,
+    delta_E_CIE2000,
+    metamerism_indices,
+)
 from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance, tolerance_preset
@@ -136,8 +141,10 @@ def compare(
     *,
     conditions: Conditions = D65_10,
     also: tuple[str, ...] = ("CIE 1976", "CMC", "DIN99", "CAM16-UCS"),
+    lights: tuple[str, ...] = METAMERISM_ILLUMINANTS,
 ) -> Comparison:
-    """Compare ``sample`` with ``reference`` at every geometry both hold.
+    """Compare ``sample`` with ``reference`` at every geometry both hold; the metamerism index
+    from ``conditions`` to each of the test ``lights``.
 
     Raises
     ------
@@ -168,6 +175,6 @@ def compare(
         tolerance=tolerance,
         conditions=conditions,
         metamerism=metamerism_indices(
-            ref.storage_spectra(common), smp.storage_spectra(common), conditions
+            ref.storage_spectra(common), smp.storage_spectra(common), conditions, lights
         ),
     )

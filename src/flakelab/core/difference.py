@@ -29,6 +29,7 @@ from flakelab.core.colorimetry import (
     D65_10,
     Conditions,
     Lab_to_XYZ,
+    illuminant_name,
     reflectance_to_XYZ,
     white_point,
 )
@@ -37,17 +38,51 @@ from flakelab.core.spectra import WAVELENGTHS
 __all__ = [
     "DELTA_E_METHODS",
     "METAMERISM_ILLUMINANTS",
+    "METAMERISM_NOTICE",
     "delta_E",
     "delta_E_CIE2000",
     "delta_LCH",
     "metamerism_index",
     "metamerism_indices",
+    "parse_lights",
 ]
 
 METAMERISM_ILLUMINANTS = ("A", "FL11", "LED-B3")
 """Test illuminants of the metamerism index (DESIGN.md §2): a filament lamp (CIE A), the
 tri-band fluorescent tube of paint shops and showrooms (F11) and a phosphor-converted white
 LED (CIE LED-B3, 4,100 K)."""
+
+METAMERISM_NOTICE = 1.0
+"""A metamerism index (ΔE00) that a colorist notices under the test light: the harness's limit
+per geometry. The car's own paint, sprayed again in the harness's shop world, stays at a
+median of 0.16 at worst (``flakelab match evaluate``'s ``oracle_metamerism_median``)."""
+
+
+def parse_lights(text: str, reference: Conditions = D65_10) -> tuple[str, ...]:
+    """Test illuminants of the metamerism index from ``"A,F11,LED-B3"`` (a shop's booth:
+    ``"A,F2,F12"``; any of colour-science's illuminants), against ``reference``.
+
+    Examples
+    --------
+    >>> parse_lights("A, F2,LED-B3")
+    ('A', 'FL2', 'LED-B3')
+    """
+    names = [illuminant_name(part) for part in text.split(",") if part.strip()]
+    if not names:
+        raise ValueError(
+            f"--lights: expected test illuminants such as 'A,F11,LED-B3', got {text!r}"
+        )
+    for name in names:
+        try:
+            Conditions(name, reference.observer)
+        except ValueError as error:
+            raise ValueError(f"--lights: {error}") from None
+        if name == reference.illuminant:
+            raise ValueError(
+                f"--lights: {name} is the reference illuminant ({reference}); against itself "
+                "every index is 0"
+            )
+    return tuple(dict.fromkeys(names))
 
 
 def delta_E_CIE2000(

@@ -44,12 +44,17 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import (
+    METAMERISM_ILLUMINANTS,
+    METAMERISM_NOTICE,
+    metamerism_indices,
+)
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
 from flakelab.match.objective import MatchObjective
 from flakelab.match.search import evaluate_recipes
-from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD
+from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
     FILM_BUILD_SD,
@@ -69,6 +74,7 @@ __all__ = [
     "PERSISTENT_SD",
     "MODEL_SD",
     "NOISE_SD",
+    "metamerism_note",
     "model_persistent_sd",
     "split_offset",
 ]
@@ -123,13 +129,17 @@ class Correction:
     ``expected_lab[G, 3]`` what the corrected spray-out should measure (prediction + the
     persistent offset); ``new_toner`` the toner that joined the recipe, if one did;
     ``application`` the spray-out's estimated application deviation (relative film build,
-    relative flake spread), when the physics split the offset."""
+    relative flake spread), when the physics split the offset; ``metamerism`` the expected
+    metamerism index (:func:`_spectral_ratio`)."""
 
     fractions: dict[str, float]
     added: dict[str, float]
     expected_lab: NDArray
     new_toner: str | None = None
     application: dict[str, float] | None = None
+    # the corrected spray-out's expected metamerism index against the target, per test
+    # illuminant and geometry (when the correction weighs it)
+    metamerism: dict[str, NDArray] | None = None
 
 
 def split_offset(
@@ -169,7 +179,45 @@ def application_sensitivity(library: Library, x: NDArray, geometries) -> NDArray
     return (lab[:, 0] - lab[:, 1]) / 2
 
 
-def _extra_candidates(forward, objective, x0, target_lab, offset, count) -> list[int]:
+def _spectral_ratio(sprayed: NDArray, predicted: NDArray) -> NDArray:
+    """What the spray-out measured over what the model predicted for its recipe, wavelength by
+    wavelength ``[G, 31]``. A corrected recipe's spectra are expected at its prediction times
+    this ratio, as its colour is at its prediction plus the offset that persists: the
+    metamerism index, which the multiplicative correction of ISO 18314-4 already makes blind
+    to a difference in strength, is taken on them. With no change the expected index is the
+    spray-out's own."""
+    return np.asarray(sprayed, float) / np.maximum(np.asarray(predicted, float), 1e-6)
+
+
+def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -> str | None:
+    """What to tell the colorist when the corrected spray-out is still expected to be a
+    metamer of the target (worst index over :data:`METAMERISM_NOTICE` under some test light,
+    given the indices per light and geometry of the spray-out and of the correction)."""
+    light = max(expected, key=lambda name: expected[name].max())
+    if expected[light].max() <= METAMERISM_NOTICE:
+        return None
+    return (
+        f"the spray-out is a metamer of the target: under {light} its metamerism index is "
+        f"{sprayed[light].max():.2f} at worst (ΔE00 once the daylight difference is corrected) "
+        f"and the correction is expected to leave {expected[light].max():.2f}; a correction "
+        "changes amounts, not pigments: match the target again (flakelab match) for a recipe "
+        "of the car's own pigments"
+    )
+
+
+def _predicted(objective, forward, x, target_lab, offset, ratio):
+    """Predicted reflectances ``[N, G, 31]`` of mixes ``x[N, T]``, their expected L*a*b*
+    (prediction plus ``offset``) and their loss ``[N]``: the colour's, plus the metamerism
+    index of the prediction times the spectral ``ratio`` where the objective weighs it."""
+    R = forward(x)[0]
+    lab = objective.lab(R) + offset
+    loss = objective.loss(target_lab, lab)
+    if objective.metamerism is not None:
+        loss = loss + objective.metamerism_loss(R * ratio)
+    return R, lab, loss
+
+
+def _extra_candidates(forward, objective, x0, target_lab, offset, ratio, count) -> list[int]:
     """Toners outside the recipe whose small addition lowers the loss fastest (the
     directional derivative of the renormalised mix, one backward pass)."""
     candidates = np.flatnonzero(
@@ -178,7 +226,7 @@ def _extra_candidates(forward, objective, x0, target_lab, offset, count) -> list
     if not count or not candidates.size:
         return []
     x = x0.clone().requires_grad_(True)
-    objective.loss(target_lab, objective.lab(forward(x)[0]) + offset).sum().backward()
+    _predicted(objective, forward, x, target_lab, offset, ratio)[2].sum().backward()
     g = x.grad[0]
     slope = (g - (g * x0[0]).sum()).numpy()
     steepest = candidates[np.argsort(slope[candidates])][:count]
@@ -202,6 +250,8 @@ def correct(
     habits: ShopHabits | None = None,
     model_sd: float = MODEL_SD,
     tolerance: Tolerance | None = None,
+    metamerism: float = MatchSettings.metamerism,
+    lights: tuple[str, ...] | None = None,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
@@ -211,19 +261,23 @@ def correct(
     unless ``persistent_sd`` fixes it); ``offset_weight`` weights the whole offset instead.
     With the shop's ``habits`` (:func:`~flakelab.match.habits.estimate_habits`) the
     application is split about the shop's mean: the habits' part of the offset persists.
-    The corrected recipe aims at ``tolerance`` (default ΔE00 ≤ 1.0 at every geometry), as
-    the search does."""
+    The corrected recipe aims at ``tolerance`` (default ΔE00 ≤ 1.0 at every geometry) and
+    weighs its expected ``metamerism`` index under the test ``lights`` (default A, F11 and
+    LED-B3), as the search does."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
         raise FlakelabError(f"--offset-weight: expected 0 to 1, got {offset_weight}")
-    objective = MatchObjective(forward.geometries, tolerance, forward.dtype)
+    objective = MatchObjective(
+        forward.geometries, tolerance, forward.dtype, target, metamerism, lights
+    )
     x_recipe = _vector(forward, recipe)
     x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     with torch.no_grad():
         R0, _ = forward(x0)
         measured = objective.lab(torch.as_tensor(sprayed, dtype=forward.dtype))
         raw = (measured - objective.lab(R0)[0]).double().numpy()
+    ratio = _spectral_ratio(sprayed, R0[0].double().numpy())
     application = None
     if library is None or offset_weight is not None:
         persistent = (OFFSET_WEIGHT if offset_weight is None else offset_weight) * raw
@@ -253,6 +307,8 @@ def correct(
         max_addition,
         extra_toners,
         application,
+        ratio,
+        lights or METAMERISM_ILLUMINANTS,
     )
 
 
@@ -277,8 +333,8 @@ def aim_off(
     x0 = torch.as_tensor(recipes, dtype=forward.dtype)
     target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
     offset = torch.as_tensor(expected, dtype=forward.dtype)
-    x, _, lab, _ = _optimise(
-        objective, forward, x0, x0 > 0, target_lab, offset, "reformulate", steps, 0
+    x, _, lab, _, _ = _optimise(
+        objective, forward, x0, x0 > 0, target_lab, offset, None, "reformulate", steps, 0
     )
     return x.double().numpy(), lab.double().numpy()
 
@@ -293,19 +349,22 @@ def _recipe_for_offset(
     steps: int,
     max_addition: float,
     extra_toners: int,
-    application: dict[str, float] | None = None,
+    application: dict[str, float] | None,
+    spectral_ratio: NDArray,
+    lights: tuple[str, ...],
 ) -> Correction:
     """The recipe near ``x_recipe`` whose prediction plus the ``persistent`` L*a*b* offset
     ``[G, 3]`` best matches ``target`` by ``objective``, with at most one toner joining
-    it."""
+    it; its expected spectra are its prediction times ``spectral_ratio``."""
     x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     offset = torch.as_tensor(persistent, dtype=forward.dtype)
+    ratio = torch.as_tensor(spectral_ratio, dtype=forward.dtype)
     target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
-    extra = _extra_candidates(forward, objective, x0, target_lab, offset, extra_toners)
+    extra = _extra_candidates(forward, objective, x0, target_lab, offset, ratio, extra_toners)
     used = (x0 > 0).repeat(1 + len(extra), 1)
     used[torch.arange(1, 1 + len(extra)), extra] = True
-    final, added, lab, loss = _optimise(
-        objective, forward, x0, used, target_lab, offset, mode, steps, max_addition
+    final, added, lab, loss, R = _optimise(
+        objective, forward, x0, used, target_lab, offset, ratio, mode, steps, max_addition
     )
     loss[1:] += EXTRA_TONER_GAIN
     row = int(np.argmin(loss))
@@ -315,19 +374,25 @@ def _recipe_for_offset(
     if mode == "additions":
         a = added[row].double().numpy()
         additions = {forward.toners[i]: float(a[i]) for i in np.flatnonzero(a > 1e-4)}
+    expected = R[row].double().numpy() * spectral_ratio
     return Correction(
         fractions,
         additions,
         lab[row].double().numpy(),
         forward.toners[extra[row - 1]] if row else None,
         application,
+        metamerism_indices(target, expected, tests=lights),
     )
 
 
-def _optimise(objective, forward, x0, used, target_lab, offset, mode, steps, max_addition):
+def _optimise(
+    objective, forward, x0, used, target_lab, offset, ratio, mode, steps, max_addition
+):  # fmt: skip
     """Adam over every row of ``used[N, T]`` at once, each from ``x0`` (one row, or one per
     row): new amounts of the used toners (``reformulate``) or additions to ``x0``; returns
-    the mixes ``[N, T]``, the additions, L*a*b* with ``offset`` and the loss ``[N]``."""
+    the mixes ``[N, T]``, the additions, L*a*b* with ``offset``, the loss ``[N]`` (with the
+    metamerism of the predictions times the spectral ``ratio``, where the objective weighs
+    it) and the predicted reflectances."""
     if mode == "reformulate":
         start = torch.where(x0 > 0, x0, torch.full_like(x0, NEW_TONER_START))
         variable = torch.log(start).expand(len(used), -1).clone().requires_grad_(True)
@@ -346,10 +411,9 @@ def _optimise(objective, forward, x0, used, target_lab, offset, mode, steps, max
 
     for _ in range(steps):
         optimiser.zero_grad()
-        objective.loss(target_lab, objective.lab(forward(mixed())[0]) + offset).sum().backward()
+        _predicted(objective, forward, mixed(), target_lab, offset, ratio)[2].sum().backward()
         optimiser.step()
     with torch.no_grad():
         final = mixed()
-        lab = objective.lab(forward(final)[0]) + offset
-        loss = objective.loss(target_lab, lab).numpy()
-        return final, additions().detach(), lab, loss
+        R, lab, loss = _predicted(objective, forward, final, target_lab, offset, ratio)
+        return final, additions().detach(), lab, loss.numpy(), R

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E, metamerism_indices
+from flakelab.core.difference import METAMERISM_ILLUMINANTS, delta_E, metamerism_indices
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.match.correction import correct
@@ -119,10 +119,17 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     return Trial(world, world.measure(R_target, rng)[0], oem, shop, streams)
 
 
-def worst_metamerism(a: NDArray, b: NDArray) -> float:
+def worst_metamerism(a: NDArray, b: NDArray, lights: tuple[str, ...] | None = None) -> float:
     """The largest metamerism index of reading ``b`` ``[G, 31]`` against ``a`` over test
-    illuminants and geometries (:func:`~flakelab.core.difference.metamerism_indices`)."""
-    return float(max(index.max() for index in metamerism_indices(a, b).values()))
+    ``lights`` (default A, F11, LED-B3) and geometries
+    (:func:`~flakelab.core.difference.metamerism_indices`)."""
+    indices = metamerism_indices(a, b, tests=lights or METAMERISM_ILLUMINANTS)
+    return float(max(index.max() for index in indices.values()))
+
+
+def _median(values) -> float | None:
+    values = list(values)
+    return float(np.median(values)) if values else None
 
 
 def worst_share(tolerance: Tolerance, geometries, a: NDArray, b: NDArray) -> float:
@@ -154,6 +161,7 @@ def _one(world: World, forward, effect, x_hidden, rng, settings, habits, toleran
     x = recipe_vector(forward, best.fractions)
     first = t.spray(x, first_rng)
     first_share = corrected_share = share(first)
+    corrected_metamerism = None
     if first_share > 1.0:
         recipe = correct(
             forward,
@@ -164,15 +172,19 @@ def _one(world: World, forward, effect, x_hidden, rng, settings, habits, toleran
             library=world.library,
             habits=habits,
             tolerance=tolerance,
+            metamerism=settings.metamerism,
+            lights=settings.lights,
         ).fractions
-        corrected = recipe_vector(forward, recipe)
-        corrected_share = share(t.spray(corrected, correction_rng))
+        corrected = t.spray(recipe_vector(forward, recipe), correction_rng)
+        corrected_share = share(corrected)
+        corrected_metamerism = worst_metamerism(t.target, corrected, settings.lights)
     oracle = t.spray(x_hidden, oracle_rng)
     respray_share = share(t.spray(x_hidden, respray_rng, batches=t.car))
     return {
         "first_de00": worst_de00(t.target, first),
-        "first_metamerism": worst_metamerism(t.target, first),
-        "oracle_metamerism": worst_metamerism(t.target, oracle),
+        "first_metamerism": worst_metamerism(t.target, first, settings.lights),
+        "corrected_metamerism": corrected_metamerism,
+        "oracle_metamerism": worst_metamerism(t.target, oracle, settings.lights),
         "oracle_de00": worst_de00(t.target, oracle),
         "first": first_share,
         "corrected": min(first_share, corrected_share),
@@ -255,6 +267,13 @@ def evaluate_matching(
         "first_shot_de00_median": float(np.median([r["first_de00"] for r in rows])),
         "first_shot_metamerism_median": float(np.median([r["first_metamerism"] for r in rows])),
         "oracle_metamerism_median": float(np.median([r["oracle_metamerism"] for r in rows])),
+        # the failed first shots, their spray-outs before and after the correction
+        "correction_metamerism_before_median": _median(
+            r["first_metamerism"] for r in rows if r["corrected_metamerism"] is not None
+        ),
+        "correction_metamerism_median": _median(
+            r["corrected_metamerism"] for r in rows if r["corrected_metamerism"] is not None
+        ),
         "oracle_de00_median": float(np.median([r["oracle_de00"] for r in rows])),
         "predicted_de00_median": float(np.median([r["predicted_de00"] for r in rows])),
         "latency_p50_s": float(np.percentile(latency, 50)),

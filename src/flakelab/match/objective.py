@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from flakelab.core.difference import METAMERISM_ILLUMINANTS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour, TorchMetamerism
 
@@ -58,7 +59,8 @@ no spray passes there either way."""
 class MatchObjective(TorchColour):
     """CIELAB of reflectance tensors and, over ``geometries``, how far recipes are from
     passing ``tolerance`` (default :data:`OBJECTIVE_DEFAULT`); with the target's ``spectra``
-    ``[G, 31]`` and a ``metamerism`` weight, how metameric recipes are to it."""
+    ``[G, 31]`` and a ``metamerism`` weight, how metameric recipes are to it under the test
+    ``lights`` (default :data:`~flakelab.core.difference.METAMERISM_ILLUMINANTS`)."""
 
     def __init__(
         self,
@@ -67,11 +69,14 @@ class MatchObjective(TorchColour):
         dtype: torch.dtype = torch.float64,
         spectra=None,
         metamerism: float = 0.0,
+        lights: tuple[str, ...] | None = None,
     ) -> None:
         super().__init__(dtype=dtype)
         self.metamerism_weight = metamerism
         self.metamerism = (
-            TorchMetamerism(spectra, dtype=dtype) if spectra is not None and metamerism else None
+            TorchMetamerism(spectra, lights or METAMERISM_ILLUMINANTS, dtype=dtype)
+            if spectra is not None and metamerism
+            else None
         )
         tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
         self.tolerance = tolerance

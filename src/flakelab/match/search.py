@@ -45,7 +45,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E, metamerism_indices
+from flakelab.core.difference import METAMERISM_ILLUMINANTS, delta_E, metamerism_indices
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -501,7 +501,7 @@ def _match(
         raise MatchError("library: no toners to match with")
     spectra, texture, name = target_spectra(target, forward)
     objective = MatchObjective(
-        forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism
+        forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism, settings.lights
     )
     target_lab = objective.lab(torch.as_tensor(spectra))
     target_texture = None
@@ -721,7 +721,8 @@ def _judge(
     de00, dlch, passed = tolerance.judge(forward.geometries, target_lab[None], lab)
     share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
     score = share.max(1) + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
-    metamerism = metamerism_indices(spectra, R)  # [N, G] per test illuminant
+    # [N, G] per test illuminant
+    metamerism = metamerism_indices(spectra, R, tests=settings.lights or METAMERISM_ILLUMINANTS)
     if settings.metamerism:
         score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
     has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
