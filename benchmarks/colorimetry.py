@@ -7,14 +7,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 import colour
 import numpy as np
 
 from flakelab.core.colorimetry import D65_10, OBSERVERS, reflectance_to_Lab, white_point
 from flakelab.core.spectra import SHAPE_STORE
-from timing import best_time, measure_peak
+from timing import best_time, measure_peak, print_report
 
 
 def baseline_lab(R: np.ndarray) -> np.ndarray:
@@ -48,11 +47,7 @@ def main() -> None:
         "max_abs_Lab_difference": agreement,
         "peak_memory_mb": peak_mb,
     }
-    if args.json:
-        print(json.dumps(report, indent=1))
-    else:
-        for key, value in report.items():
-            print(f"{key:36s} {value:,.6g}")
+    print_report(report, args.json, ",.6g")
 
 
 if __name__ == "__main__":

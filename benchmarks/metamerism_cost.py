@@ -15,7 +15,6 @@ Two figures, each against a baseline measured in the same run:
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
@@ -26,7 +25,7 @@ from flakelab.match.evaluate import trial
 from flakelab.match.objective import MatchObjective
 from flakelab.match.search import match
 from flakelab.match.settings import MatchSettings
-from timing import best_time
+from timing import best_time, print_report
 
 STEPS = 200
 
@@ -91,11 +90,7 @@ def main() -> None:
         "match_s_with_metamerism_median": float(np.median(weighed)),
         "match_ratio_of_means": float(weighed.mean() / daylight.mean()),
     }
-    if args.json:
-        print(json.dumps(report, indent=1))
-    else:
-        for key, value in report.items():
-            print(f"{key:36s} {value:,.4g}")
+    print_report(report, args.json, ",.4g")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ was recorded is what was measured.
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import tempfile
 import time
@@ -30,6 +29,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library, write_measurements, write_recipe
+from timing import print_report
 
 
 def write_history(cases, folder: Path, per_file: int) -> Path:
@@ -109,11 +109,7 @@ def main() -> None:
         ),
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
-    if args.json:
-        print(json.dumps(report, indent=2))
-    else:
-        for key, value in report.items():
-            print(f"{key:28s} {value}")
+    print_report(report, args.json)
 
 
 if __name__ == "__main__":

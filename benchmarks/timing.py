@@ -1,7 +1,8 @@
-"""Timing and memory helpers shared by the benchmark scripts."""
+"""Timing, memory and report helpers shared by the benchmark scripts."""
 
 from __future__ import annotations
 
+import json
 import time
 import tracemalloc
 
@@ -25,3 +26,15 @@ def measure_peak(function, *args):
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return result, seconds, peak / 2**20
+
+
+def print_report(report: dict, as_json: bool, number_format: str = "") -> None:
+    """``report`` as JSON, or one ``name value`` line per figure (numbers in
+    ``number_format``, e.g. ``",.4g"``)."""
+    if as_json:
+        print(json.dumps(report, indent=1))
+        return
+    width = max(map(len, report)) + 2
+    for key, value in report.items():
+        shown = format(value, number_format) if isinstance(value, int | float) else value
+        print(f"{key:{width}s} {shown}")

@@ -826,6 +826,33 @@ def test_harness_worlds_take_the_shop_s_variation_away(hybrid):
         harness_world(hybrid.library, "five-angle", "paint shop")
 
 
+def test_harness_sprays_recipes_as_a_shop_weighs_them_when_given_a_scale(hybrid):
+    """On a 20 g can weighed to the gram the recipes lose their tints' proportions and spray
+    further from the target than as computed; the hidden formula's own spray is unchanged."""
+    from flakelab.match.evaluate import as_weighed, evaluate_matching, harness_world
+    from flakelab.match.models import effect_mask
+
+    world = harness_world(hybrid.library, "five-angle", "shop")
+    effect = effect_mask(hybrid.library, hybrid.toners)
+    hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
+    runs = {
+        scale: evaluate_matching(
+            world, hybrid, effect, targets=4, seed=2, settings=hasty, scale=scale
+        )  # fmt: skip
+        for scale in (None, (20.0, 1.0))
+    }
+    assert runs[(20.0, 1.0)]["weighed"] == {"quantity_g": 20.0, "resolution_g": 1.0}
+    assert runs[None]["weighed"] is None
+    assert runs[(20.0, 1.0)]["first_shot_de00_median"] > runs[None]["first_shot_de00_median"]
+    assert runs[(20.0, 1.0)]["oracle_de00_median"] == runs[None]["oracle_de00_median"]
+    shares = {"Al medium": 0.9, "Phthalo blue GS": 0.07, "Carbon black": 0.03}
+    mixed = as_weighed(hybrid, shares, (250.0, 0.1))
+    grams = np.array(list(mixed.values())) * 250.0
+    assert sum(mixed.values()) == pytest.approx(1.0)
+    assert grams == pytest.approx(np.round(grams * 10) / 10, abs=1e-9)  # whole scale steps
+    assert as_weighed(hybrid, shares, None) is shares
+
+
 def test_harness_judges_by_its_tolerance(hybrid):
     """The harness's verdicts follow its tolerance: ΔE00 ≤ 1.0 everywhere (the default) is
     the worst ΔE00 against 1.0; a tolerance no spray can fail is passed by every one."""

@@ -198,6 +198,14 @@ def match_command(
     ] = MatchSettings.model_risk,
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
+    weighed: Annotated[
+        bool,
+        typer.Option(
+            "--weighed",
+            help="evaluate: spray each recipe as weighed for --quantity on a scale of "
+            "--resolution, as a shop mixes it (default: as computed).",
+        ),
+    ] = False,
     habits: HabitsOption = None,
     shop: HabitsShopOption = None,
     render: Annotated[
@@ -246,9 +254,12 @@ def match_command(
                 model_risk=model_risk, metamerism=metamerism, lights=lights_option(lights)
             ),
             tolerance=tolerance,
+            scale=(parse_quantity(quantity), resolution) if weighed else None,
             json_output=json_output,
         )
         return
+    if weighed:
+        raise FlakelabError("--weighed: for the harness (flakelab match evaluate)")
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = parse_quantity(quantity)
@@ -476,6 +487,7 @@ def _evaluate(
     shop,
     settings,
     tolerance,
+    scale,
     json_output,
 ):
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
@@ -501,6 +513,7 @@ def _evaluate(
             habits=habits,
             settings=settings,
             tolerance=tol,
+            scale=scale,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name

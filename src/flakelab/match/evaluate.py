@@ -8,7 +8,8 @@ gets one correction and is sprayed again. The oracle is the hidden
 formulation itself sprayed and judged the same way — the limit that spray and measurement
 noise set. The respray is the car's own paint (the factory's batches) sprayed again: what a
 correction that removed every batch difference would still face, each spray's application.
-Novel-toner targets each contain one toner the learned model never saw.
+Novel-toner targets each contain one toner the learned model never saw. Recipes are sprayed
+as computed, or, given a scale, as a shop weighs them (rounded to its resolution).
 
 The issue's figures come from a real shop's world. Two calmer worlds (:data:`HARNESS_WORLDS`)
 say where the rest is lost: with the paper's "standardised pigments" no batch differs from
@@ -33,6 +34,7 @@ from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.objective import OBJECTIVE_DEFAULT
+from flakelab.match.recipe import weigh_for_colour
 from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
 
 __all__ = [
@@ -41,6 +43,7 @@ __all__ = [
     "HARNESS_WORLDS",
     "SUCCESS_DE00",
     "Trial",
+    "as_weighed",
     "trial",
     "worst_de00",
     "worst_metamerism",
@@ -139,7 +142,22 @@ def worst_share(tolerance: Tolerance, geometries, a: NDArray, b: NDArray) -> flo
     return float(tolerance.share_of_limit(geometries, de00=de00, dLCH=dlch).max())
 
 
-def _one(world: World, forward, effect, x_hidden, rng, settings, habits, tolerance) -> dict:
+def as_weighed(
+    forward, fractions: dict[str, float], scale: tuple[float, float] | None
+) -> dict[str, float]:
+    """``fractions`` as a shop mixes them: weighed for a can of ``scale`` = (grams,
+    resolution in grams), rounded for colour
+    (:func:`~flakelab.match.recipe.weigh_for_colour`); unchanged without a scale."""
+    if scale is None:
+        return fractions
+    grams = weigh_for_colour(forward, fractions, *scale).grams
+    total = sum(grams.values())
+    return {name: g / total for name, g in grams.items() if g > 0}
+
+
+def _one(
+    world: World, forward, effect, x_hidden, rng, settings, habits, tolerance, scale
+) -> dict:  # fmt: skip
     t = trial(world, x_hidden, rng)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
 
@@ -158,7 +176,8 @@ def _one(world: World, forward, effect, x_hidden, rng, settings, habits, toleran
     )
     latency = time.perf_counter() - start
     best = result.candidates[0]
-    x = recipe_vector(forward, best.fractions)
+    mixed = as_weighed(forward, best.fractions, scale)
+    x = recipe_vector(forward, mixed)
     first = t.spray(x, first_rng)
     first_share = corrected_share = share(first)
     corrected_metamerism = None
@@ -166,7 +185,7 @@ def _one(world: World, forward, effect, x_hidden, rng, settings, habits, toleran
         recipe = correct(
             forward,
             t.target,
-            best.fractions,
+            mixed,
             first,
             mode="reformulate",
             library=world.library,
@@ -175,6 +194,7 @@ def _one(world: World, forward, effect, x_hidden, rng, settings, habits, toleran
             metamerism=settings.metamerism,
             lights=settings.lights,
         ).fractions
+        recipe = as_weighed(forward, recipe, scale)
         corrected = t.spray(recipe_vector(forward, recipe), correction_rng)
         corrected_share = share(corrected)
         corrected_metamerism = worst_metamerism(t.target, corrected, settings.lights)
@@ -208,9 +228,12 @@ def evaluate_matching(
     settings: MatchSettings | None = None,
     habits: ShopHabits | None = None,
     tolerance: Tolerance | None = None,
+    scale: tuple[float, float] | None = None,
     progress: Callable[[], None] | None = None,
 ) -> dict:
     """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
+    With a ``scale`` (grams of the can, resolution in grams) every recipe is sprayed as
+    weighed on it (:func:`as_weighed`), the correction's too; without, as computed.
     With the shop's ``habits`` every match is aimed off for them and the
     correction splits the offset about them. Sprays are judged by ``tolerance`` (default
     :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`), which the matcher and the
@@ -224,7 +247,7 @@ def evaluate_matching(
     hidden = known.formulations(targets, rng)
     rows = []
     for x in hidden:
-        rows.append(_one(world, forward, effect, x, rng, settings, habits, tolerance))
+        rows.append(_one(world, forward, effect, x, rng, settings, habits, tolerance, scale))
         if progress:
             progress()
     novel_rows = []
@@ -234,7 +257,7 @@ def evaluate_matching(
                 rng.uniform(np.log(0.01), np.log(0.08))
             )
             novel_rows.append(
-                _one(world, forward, effect, x / x.sum(), rng, settings, habits, tolerance)
+                _one(world, forward, effect, x / x.sum(), rng, settings, habits, tolerance, scale)
             )
             if progress:
                 progress()
@@ -253,6 +276,7 @@ def evaluate_matching(
         "targets": targets,
         "seed": seed,
         "tolerance": tolerance.name,
+        "weighed": scale and {"quantity_g": scale[0], "resolution_g": scale[1]},
         "first_shot_success": first,
         "after_one_correction": corrected,
         "novel_toner_first_shot": novel_first,
