@@ -686,13 +686,12 @@ def _weigh_correction(forward, correction, mode: str, can: dict[str, float], res
     """The correction on the scale: additions to the mixed ``can``, or the new recipe for a
     can of its size (traces under half a scale step left out), each toner rounded as the
     colour closest to the computed correction's asks."""
-    from flakelab.match.recipe import weigh_additions, weigh_for_colour
+    from flakelab.match.recipe import weigh_additions, weigh_whole_can
 
     if mode == "additions":
         return weigh_additions(forward, can, correction.added, resolution)
     quantity = round(sum(can.values()) / resolution) * resolution
-    weighed = {k: v for k, v in correction.fractions.items() if v * quantity >= resolution / 2}
-    return weigh_for_colour(forward, weighed, quantity, resolution)
+    return weigh_whole_can(forward, correction.fractions, quantity, resolution)
 
 
 def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forward, tolerance,

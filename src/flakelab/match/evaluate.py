@@ -34,7 +34,7 @@ from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.objective import OBJECTIVE_DEFAULT
-from flakelab.match.recipe import weigh_for_colour
+from flakelab.match.recipe import weigh_whole_can
 from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
 
 __all__ = [
@@ -146,11 +146,11 @@ def as_weighed(
     forward, fractions: dict[str, float], scale: tuple[float, float] | None
 ) -> dict[str, float]:
     """``fractions`` as a shop mixes them: weighed for a can of ``scale`` = (grams,
-    resolution in grams), rounded for colour
-    (:func:`~flakelab.match.recipe.weigh_for_colour`); unchanged without a scale."""
+    resolution in grams), rounded for colour, traces under half a step left out
+    (:func:`~flakelab.match.recipe.weigh_whole_can`); unchanged without a scale."""
     if scale is None:
         return fractions
-    grams = weigh_for_colour(forward, fractions, *scale).grams
+    grams = weigh_whole_can(forward, fractions, *scale).grams
     total = sum(grams.values())
     return {name: g / total for name, g in grams.items() if g > 0}
 

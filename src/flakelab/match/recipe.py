@@ -27,6 +27,7 @@ __all__ = [
     "Weighing",
     "weigh",
     "weigh_for_colour",
+    "weigh_whole_can",
     "weigh_additions",
     "parse_quantity",
     "RecipeError",
@@ -115,6 +116,17 @@ def weigh_for_colour(
     best, cost, shift = _closest_colour(forward, names, exact, units)
     grams = {n: round(float(u) * resolution_g, 6) for n, u in zip(names, units[best], strict=True)}
     return Weighing(grams, float(cost[best]), float(cost[0]), shift, _pouring_order(grams))
+
+
+def weigh_whole_can(
+    forward, fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
+) -> Weighing:
+    """:func:`weigh_for_colour` for a can of ``quantity_g`` grams mixed afresh, the traces
+    under half a scale step left out (a correction's reformulation, or any computed recipe,
+    can carry amounts no scale weighs)."""
+    total = sum(fractions.values())
+    kept = {n: v for n, v in fractions.items() if v / total * quantity_g >= resolution_g / 2}
+    return weigh_for_colour(forward, kept, quantity_g, resolution_g)
 
 
 def weigh_additions(
