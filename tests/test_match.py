@@ -569,17 +569,19 @@ def hybrid():
 
 @pytest.fixture(scope="module")
 def example_by_metamerism(hybrid):
-    """The example target and its best candidate with metamerism weights 0 and 1."""
+    """The example target, its best candidate with metamerism weights 0 and 1, and the
+    search's notes with each."""
     from flakelab.data import example_path
     from flakelab.match.models import effect_mask
 
     target = read_measurement(example_path("target"))
     effect = effect_mask(read_library(None), hybrid.toners)
-    best = {}
+    best, notes = {}, {}
     for weight in (0.0, 1.0):
         settings = MatchSettings(candidates=1, metamerism=weight)
-        best[weight] = match(target, hybrid, effect, settings=settings).candidates[0]
-    return target, best
+        result = match(target, hybrid, effect, settings=settings)
+        best[weight], notes[weight] = result.candidates[0], result.notes
+    return target, best, notes
 
 
 def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
@@ -588,12 +590,16 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
     """The example blue metallic is tinted with phthalo blue and indanthrone blue. Matched
     on its colour in daylight alone, the best recipe is a metamer of phthalo green and
     quinacridone violet (metamerism index about 2 under F11); with the index in the
-    objective it takes a blue, and its index falls below a third of that."""
-    target, best = example_by_metamerism
+    objective it takes a blue, and its index falls below a third of that. The metamer is
+    named as such in the search's notes."""
+    target, best, notes = example_by_metamerism
     worst = {w: max(v.max() for v in c.metamerism.values()) for w, c in best.items()}
     assert worst[0.0] > 1.5 and worst[1.0] < worst[0.0] / 3
     assert {"Phthalo blue GS", "Indanthrone blue"} & set(best[1.0].fractions)
     assert best[1.0].passes  # in daylight it still matches
+    assert any("the best recipe is a metamer of the target" in n and "FL11" in n
+               for n in notes[0.0])  # fmt: skip
+    assert not any("metamer" in n for n in notes[1.0])
     # what each candidate reports is the exact index of its prediction against the target
     spectra = target.storage_spectra(hybrid.geometries)
     exact = metamerism_indices(spectra, best[1.0].reflectance)
@@ -608,7 +614,7 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     from flakelab.core.difference import METAMERISM_NOTICE
     from flakelab.match.correction import metamerism_note
 
-    target, best = example_by_metamerism
+    target, best, _ = example_by_metamerism
     spectra = target.storage_spectra(hybrid.geometries)
     notes = {}
     for weight, candidate in best.items():

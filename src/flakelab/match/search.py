@@ -45,7 +45,12 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import METAMERISM_ILLUMINANTS, delta_E, metamerism_indices
+from flakelab.core.difference import (
+    METAMERISM_ILLUMINANTS,
+    METAMERISM_NOTICE,
+    delta_E,
+    metamerism_indices,
+)
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -614,6 +619,8 @@ def _match(
             "no candidate passes the tolerance: best achievable shown; fails at "
             + ", ".join(candidates[0].failing)
         )
+    if candidates and (note := _metamer_note(candidates[0], settings)):
+        notes.append(note)
     return MatchResult(
         name,
         tuple(forward.geometries),
@@ -622,6 +629,25 @@ def _match(
         time.perf_counter() - start,
         tried,
         notes,
+    )
+
+
+def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
+    """A note when the best candidate is a metamer of the target: its index over
+    :data:`~flakelab.core.difference.METAMERISM_NOTICE` under some test light."""
+    light = max(best.metamerism, key=lambda name: best.metamerism[name].max())
+    worst = float(best.metamerism[light].max())
+    if worst <= METAMERISM_NOTICE:
+        return None
+    advice = (
+        "the search did not weigh it: --metamerism 0"
+        if not settings.metamerism
+        else f"--metamerism {settings.metamerism:g} weighed it; a larger weight, or the car's "
+        "own pigments in the library, may find a recipe that matches under both"
+    )
+    return (
+        f"the best recipe is a metamer of the target: its metamerism index under {light} is "
+        f"{worst:.2f} at worst, so it matches in daylight and not under that light ({advice})"
     )
 
 
