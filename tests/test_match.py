@@ -857,6 +857,10 @@ def test_harness_sprays_recipes_as_a_shop_weighs_them_when_given_a_scale(hybrid)
     assert sum(mixed.values()) == pytest.approx(1.0)
     assert grams == pytest.approx(np.round(grams * 10) / 10, abs=1e-9)  # whole scale steps
     assert as_weighed(hybrid, shares, None) is shares
+    # under one step of the scale a trace is left out (0.08 g of black on a 0.1 g scale): to
+    # the nearest it could round to nothing, which no scale weighs
+    traced = {"Al medium": 0.9, "Phthalo blue GS": 0.0997, "Carbon black": 0.08 / 250}
+    assert set(as_weighed(hybrid, traced, (250.0, 0.1))) == {"Al medium", "Phthalo blue GS"}
 
 
 def test_harness_judges_by_its_tolerance(hybrid):

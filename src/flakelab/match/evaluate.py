@@ -146,7 +146,7 @@ def as_weighed(
     forward, fractions: dict[str, float], scale: tuple[float, float] | None
 ) -> dict[str, float]:
     """``fractions`` as a shop mixes them: weighed for a can of ``scale`` = (grams,
-    resolution in grams), rounded for colour, traces under half a step left out
+    resolution in grams), rounded for colour, traces under a step left out
     (:func:`~flakelab.match.recipe.weigh_whole_can`); unchanged without a scale."""
     if scale is None:
         return fractions

@@ -122,10 +122,11 @@ def weigh_whole_can(
     forward, fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
 ) -> Weighing:
     """:func:`weigh_for_colour` for a can of ``quantity_g`` grams mixed afresh, the traces
-    under half a scale step left out (a correction's reformulation, or any computed recipe,
-    can carry amounts no scale weighs)."""
+    under one scale step left out (a correction's reformulation, or any computed recipe, can
+    carry amounts no scale weighs; under a whole step, rounding to the nearest could leave
+    one at nothing)."""
     total = sum(fractions.values())
-    kept = {n: v for n, v in fractions.items() if v / total * quantity_g >= resolution_g / 2}
+    kept = {n: v for n, v in fractions.items() if v / total * quantity_g >= resolution_g}
     return weigh_for_colour(forward, kept, quantity_g, resolution_g)
 
 
