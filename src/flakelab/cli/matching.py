@@ -578,14 +578,14 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.difference import METAMERISM_ILLUMINANTS, metamerism_indices
+    from flakelab.core.difference import metamerism_indices
     from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note
     from flakelab.match.crosscheck import expected_left_out
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
 
     tol = read_tolerance(tolerance)
-    test_lights = lights_option(lights) or METAMERISM_ILLUMINANTS
+    test_lights = lights_option(lights)
     check_output_file(recipe_out, "--recipe-out")
     check_figure_file(plot, "--plot")
     lib, forward, _ = _setup(library, instrument, model, database, physics)

@@ -253,17 +253,18 @@ def metamerism_indices(
     reflectance_standard: ArrayLike,
     reflectance_sample: ArrayLike,
     reference: Conditions = D65_10,
-    tests: tuple[str, ...] = METAMERISM_ILLUMINANTS,
+    tests: tuple[str, ...] | None = None,
     wavelengths: ArrayLike = WAVELENGTHS,
 ) -> dict[str, NDArray[np.float64]]:
-    """:func:`metamerism_index` under each illuminant of ``tests``, by its name; the pair's
-    XYZ under ``reference`` taken once for all of them."""
+    """:func:`metamerism_index` under each illuminant of ``tests`` (None:
+    :data:`METAMERISM_ILLUMINANTS`), by its name; the pair's XYZ under ``reference`` taken
+    once for all of them."""
     standard = np.asarray(reflectance_standard, dtype=float)
     sample = np.asarray(reflectance_sample, dtype=float)
     XYZ_standard_r = reflectance_to_XYZ(standard, wavelengths, reference)
     XYZ_sample_r = reflectance_to_XYZ(sample, wavelengths, reference)
     indices = {}
-    for test in tests:
+    for test in tests or METAMERISM_ILLUMINANTS:
         conditions = Conditions(test, reference.observer)
         white = colour.XYZ_to_xy(white_point(wavelengths, conditions))
         indices[test] = np.asarray(

@@ -86,18 +86,20 @@ class TorchColour:
 
 
 class TorchMetamerism(TorchColour):
-    """The metamerism index of reflectance tensors against a ``standard`` ``[G, 31]``, smooth,
-    for the optimiser: ISO 18314-4's multiplicative correction in XYZ, as
+    """The metamerism index of reflectance tensors against a ``standard`` ``[G, 31]`` under the
+    illuminants ``tests`` (None: :data:`~flakelab.core.difference.METAMERISM_ILLUMINANTS`),
+    smooth, for the optimiser: ISO 18314-4's multiplicative correction in XYZ, as
     :func:`~flakelab.core.difference.metamerism_index`, with CIE94 for CIEDE2000."""
 
     def __init__(
         self,
         standard: np.ndarray,
-        tests: tuple[str, ...] = METAMERISM_ILLUMINANTS,
+        tests: tuple[str, ...] | None = None,
         reference: Conditions = D65_10,
         dtype: torch.dtype = torch.float64,
     ) -> None:
         super().__init__(reference, dtype)
+        tests = tests or METAMERISM_ILLUMINANTS
         lights = [reference] + [Conditions(t, reference.observer) for t in tests]
         # one product for every light: t = R · [W_ref | W_1 | … | W_K], each over its white
         self.all_weights = torch.as_tensor(

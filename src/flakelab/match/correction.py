@@ -44,11 +44,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import (
-    METAMERISM_ILLUMINANTS,
-    METAMERISM_NOTICE,
-    metamerism_indices,
-)
+from flakelab.core.difference import METAMERISM_NOTICE, metamerism_indices
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
@@ -138,7 +134,7 @@ class Correction:
     new_toner: str | None = None
     application: dict[str, float] | None = None
     # the corrected spray-out's expected metamerism index against the target, per test
-    # illuminant and geometry (when the correction weighs it)
+    # illuminant and geometry (reported whether or not the correction weighed it)
     metamerism: dict[str, NDArray] | None = None
 
 
@@ -308,7 +304,7 @@ def correct(
         extra_toners,
         application,
         ratio,
-        lights or METAMERISM_ILLUMINANTS,
+        lights,
     )
 
 
@@ -351,7 +347,7 @@ def _recipe_for_offset(
     extra_toners: int,
     application: dict[str, float] | None,
     spectral_ratio: NDArray,
-    lights: tuple[str, ...],
+    lights: tuple[str, ...] | None,
 ) -> Correction:
     """The recipe near ``x_recipe`` whose prediction plus the ``persistent`` L*a*b* offset
     ``[G, 3]`` best matches ``target`` by ``objective``, with at most one toner joining

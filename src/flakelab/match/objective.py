@@ -33,7 +33,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from flakelab.core.difference import METAMERISM_ILLUMINANTS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour, TorchMetamerism
 
@@ -74,7 +73,7 @@ class MatchObjective(TorchColour):
         super().__init__(dtype=dtype)
         self.metamerism_weight = metamerism
         self.metamerism = (
-            TorchMetamerism(spectra, lights or METAMERISM_ILLUMINANTS, dtype=dtype)
+            TorchMetamerism(spectra, lights, dtype=dtype)
             if spectra is not None and metamerism
             else None
         )

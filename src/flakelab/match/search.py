@@ -46,7 +46,6 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import (
-    METAMERISM_ILLUMINANTS,
     METAMERISM_NOTICE,
     delta_E,
     metamerism_indices,
@@ -748,7 +747,7 @@ def _judge(
     share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
     score = share.max(1) + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
     # [N, G] per test illuminant
-    metamerism = metamerism_indices(spectra, R, tests=settings.lights or METAMERISM_ILLUMINANTS)
+    metamerism = metamerism_indices(spectra, R, tests=settings.lights)
     if settings.metamerism:
         score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
     has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
