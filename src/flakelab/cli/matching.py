@@ -684,7 +684,7 @@ def correct_command(
 
 def _weigh_correction(forward, correction, mode: str, can: dict[str, float], resolution: float):
     """The correction on the scale: additions to the mixed ``can``, or the new recipe for a
-    can of its size (traces under half a scale step left out), each toner rounded as the
+    can of its size (traces under one scale step left out), each toner rounded as the
     colour closest to the computed correction's asks."""
     from flakelab.match.recipe import weigh_additions, weigh_whole_can
 
