@@ -9,7 +9,7 @@ Two figures, each against a baseline measured in the same run:
 * whole matches of the harness's hidden targets (``flakelab match evaluate``'s world, seed
   ``--seed``) by the shipped model, with metamerism weight 0 (the baseline) and the default.
 
-    python benchmarks/metamerism_cost.py [--targets 15] [--seed 4242] [--json]
+    python benchmarks/metamerism_cost.py [--targets 15] [--seed 4242] [--model FILE] [--json]
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import time
 import numpy as np
 import torch
 
-from _matcher import shipped_matcher
+from _matcher import MODEL_HELP, shipped_matcher
 from flakelab.match.evaluate import trial
 from flakelab.match.objective import MatchObjective
 from flakelab.match.search import match
@@ -73,14 +73,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=15)
     parser.add_argument("--seed", type=int, default=4242)
+    parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
     torch.set_num_threads(1)  # as match runs
-    world, forward, effect = shipped_matcher()
+    world, forward, effect = shipped_matcher(model=args.model)
     rng = np.random.default_rng(args.seed)
     targets = [trial(world, x, rng).target for x in world.formulations(args.targets, rng)]
-    report: dict[str, float] = {"targets": args.targets, "seed": args.seed}
+    report: dict = {"model": forward.name, "geometries": len(forward.geometries)}
+    report |= {"targets": args.targets, "seed": args.seed}
     for rows in (20, 140):
         report |= objective_steps(forward, targets[0], rows, np.random.default_rng(0))
     daylight = match_seconds(targets, forward, effect, 0.0)

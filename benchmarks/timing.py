@@ -29,12 +29,12 @@ def measure_peak(function, *args):
 
 
 def print_report(report: dict, as_json: bool, number_format: str = "") -> None:
-    """``report`` as JSON, or one ``name value`` line per figure (numbers in
+    """``report`` as JSON, or one ``name value`` line per figure (fractional numbers in
     ``number_format``, e.g. ``",.4g"``)."""
     if as_json:
         print(json.dumps(report, indent=1))
         return
     width = max(map(len, report)) + 2
     for key, value in report.items():
-        shown = format(value, number_format) if isinstance(value, int | float) else value
+        shown = format(value, number_format) if isinstance(value, float) else value
         print(f"{key:{width}s} {shown}")
