@@ -784,9 +784,9 @@ def _metamerism_values(worst: dict[str, float]) -> str:
 def _metamerism_text(worst: dict[str, float], label: str = "") -> str:
     """The worst geometry's metamerism index under each test illuminant, on one line; a
     metamer (an index over the notice level) called one."""
-    from flakelab.core.difference import METAMERISM_NOTICE
+    from flakelab.core.difference import METAMERISM_NOTICE, worst_light
 
-    metamer = " (a metamer)" if max(worst.values()) > METAMERISM_NOTICE else ""
+    metamer = " (a metamer)" if worst_light(worst)[1] > METAMERISM_NOTICE else ""
     return (
         "metamerism index against the target (ISO 18314-4, ΔE00, worst geometry): "
         f"{label}{_metamerism_values(worst)}{metamer}"

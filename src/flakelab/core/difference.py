@@ -45,6 +45,7 @@ __all__ = [
     "metamerism_index",
     "metamerism_indices",
     "parse_lights",
+    "worst_light",
 ]
 
 METAMERISM_ILLUMINANTS = ("A", "FL11", "LED-B3")
@@ -56,6 +57,13 @@ METAMERISM_NOTICE = 1.0
 """A metamerism index (ΔE00) that a colorist notices under the test light: the harness's limit
 per geometry. The car's own paint, sprayed again in the harness's shop world, stays at a
 median of 0.16 at worst (``flakelab match evaluate``'s ``oracle_metamerism_median``)."""
+
+
+def worst_light(indices: dict[str, NDArray]) -> tuple[str, float]:
+    """The test light with the largest metamerism index anywhere in ``indices`` (per light,
+    as :func:`metamerism_indices` gives them), and that index."""
+    light = max(indices, key=lambda name: np.max(indices[name]))
+    return light, float(np.max(indices[light]))
 
 
 def parse_lights(text: str, reference: Conditions = D65_10) -> tuple[str, ...]:

@@ -44,7 +44,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import METAMERISM_NOTICE, metamerism_indices
+from flakelab.core.difference import METAMERISM_NOTICE, metamerism_indices, worst_light
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
@@ -189,13 +189,13 @@ def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -
     """What to tell the colorist when the corrected spray-out is still expected to be a
     metamer of the target (worst index over :data:`METAMERISM_NOTICE` under some test light,
     given the indices per light and geometry of the spray-out and of the correction)."""
-    light = max(expected, key=lambda name: expected[name].max())
-    if expected[light].max() <= METAMERISM_NOTICE:
+    light, worst = worst_light(expected)
+    if worst <= METAMERISM_NOTICE:
         return None
     return (
         f"the spray-out is a metamer of the target: under {light} its metamerism index is "
         f"{sprayed[light].max():.2f} at worst (ΔE00 once the daylight difference is corrected) "
-        f"and the correction is expected to leave {expected[light].max():.2f}; a correction "
+        f"and the correction is expected to leave {worst:.2f}; a correction "
         "changes amounts, not pigments: match the target again (flakelab match) for a recipe "
         "of the car's own pigments"
     )

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E, metamerism_indices
+from flakelab.core.difference import delta_E, metamerism_indices, worst_light
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.match.correction import correct
@@ -126,8 +126,7 @@ def worst_metamerism(a: NDArray, b: NDArray, lights: tuple[str, ...] | None = No
     """The largest metamerism index of reading ``b`` ``[G, 31]`` against ``a`` over test
     ``lights`` (default A, F11, LED-B3) and geometries
     (:func:`~flakelab.core.difference.metamerism_indices`)."""
-    indices = metamerism_indices(a, b, tests=lights)
-    return float(max(index.max() for index in indices.values()))
+    return worst_light(metamerism_indices(a, b, tests=lights))[1]
 
 
 def _median(values) -> float | None:

@@ -114,9 +114,12 @@ class MatchObjective(TorchColour):
         if self.metamerism is None:
             return self.loss(target_lab, self.lab(R))
         lab, indices = self.metamerism.lab_and_indices(R)
-        return self.loss(target_lab, lab) + self.metamerism_weight * indices.mean(dim=(-2, -1))
+        return self.loss(target_lab, lab) + self._weighed_mean(indices)
 
     def metamerism_loss(self, R: torch.Tensor) -> torch.Tensor:
         """The weighed mean metamerism index ``[N]`` (ΔE, over test illuminants and
         geometries) of recipes ``R[N, G, 31]`` against the target's spectra."""
-        return self.metamerism_weight * self.metamerism.indices(R).mean(dim=(-2, -1))
+        return self._weighed_mean(self.metamerism.indices(R))
+
+    def _weighed_mean(self, indices: torch.Tensor) -> torch.Tensor:
+        return self.metamerism_weight * indices.mean(dim=(-2, -1))

@@ -49,6 +49,7 @@ from flakelab.core.difference import (
     METAMERISM_NOTICE,
     delta_E,
     metamerism_indices,
+    worst_light,
 )
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
@@ -634,8 +635,7 @@ def _match(
 def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     """A note when the best candidate is a metamer of the target: its index over
     :data:`~flakelab.core.difference.METAMERISM_NOTICE` under some test light."""
-    light = max(best.metamerism, key=lambda name: best.metamerism[name].max())
-    worst = float(best.metamerism[light].max())
+    light, worst = worst_light(best.metamerism)
     if worst <= METAMERISM_NOTICE:
         return None
     advice = (
