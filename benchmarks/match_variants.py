@@ -26,6 +26,7 @@ FIGURES = (
     "oracle_success",
     "predicted_de00_median",
     "first_shot_de00_median",
+    "first_shot_metamerism_median",
     "latency_p50_s",
     "latency_p95_s",
 )

@@ -664,6 +664,42 @@ def test_the_search_weighs_metamerism_under_the_lights_it_is_given(km):
     assert all(np.allclose(exact[k], best.metamerism[k]) for k in lights)
 
 
+def test_the_optimiser_follows_the_metamerism_term_along_its_tangent_and_retakes_it():
+    """Between retakes the term is m(R0) + ∇m(R0)·(R − R0): exact, gradient too, where it was
+    taken, and wrong only to second order beside it; every ``every`` calls it is taken
+    afresh."""
+    from flakelab.match.objective import MatchObjective, MetamerismTangent
+
+    wavelengths = np.linspace(400, 700, 31)
+    target = 0.1 + 0.5 / (1 + np.exp((wavelengths[None] - [[520], [560]]) / 25))  # two blues
+    objective = MatchObjective(["45as45", "45as75"], spectra=target, metamerism=1.0)
+    rng = np.random.default_rng(5)
+    R0 = torch.tensor(rng.uniform(0.1, 0.7, (3, 2, 31)), requires_grad=True)
+    step = torch.as_tensor(rng.normal(0.0, 0.02, R0.shape))
+
+    tangent = MetamerismTangent(objective, every=3)
+    value = tangent(R0)
+    exact = objective.metamerism_loss(R0)
+    assert value.detach().numpy() == pytest.approx(exact.detach().numpy(), abs=1e-12)
+    (slope,) = torch.autograd.grad(value.sum(), R0)
+    (exact_slope,) = torch.autograd.grad(exact.sum(), R0)
+    assert slope.numpy() == pytest.approx(exact_slope.numpy(), abs=1e-12)
+    with torch.no_grad():
+        R0 = R0.detach()
+        errors = [
+            (tangent(R0 + h * step) - objective.metamerism_loss(R0 + h * step)).abs()
+            for h in (1.0, 0.5)
+        ]
+        moved = (objective.metamerism_loss(R0 + step) - objective.metamerism_loss(R0)).abs()
+        assert (errors[0] < 0.2 * moved).all()  # the first order follows the change
+        assert (errors[0] / errors[1]).numpy() == pytest.approx(4.0, rel=0.3)  # second order
+        # the fourth call takes it afresh, where it stands
+        R1 = R0 + 3 * step
+        assert tangent(R1).numpy() == pytest.approx(
+            objective.metamerism_loss(R1).numpy(), abs=1e-12
+        )
+
+
 def test_hybrid_stands_new_toners_in_as_a_known_toner_of_their_kind(hybrid):
     kinds = {t.name: t.kind for t in hybrid.library.toners}
     names = hybrid.library.names

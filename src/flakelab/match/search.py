@@ -57,7 +57,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
-from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
+from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
 from flakelab.match.settings import MatchSettings
 
 __all__ = [
@@ -193,10 +193,16 @@ def _loss(
     target_lab: torch.Tensor,
     target_texture: torch.Tensor | None,
     settings: MatchSettings,
+    tangent: MetamerismTangent | None = None,
 ) -> torch.Tensor:
+    """The search's loss ``[N]`` of amounts ``x[N, T]``; with a ``tangent``, its metamerism
+    term followed along that (an optimiser's step), else exact."""
     risky = settings.model_risk and getattr(forward, "members", 1) > 1
     R, texture, members = forward.with_members(x) if risky else (*forward(x), None)
-    loss = objective.recipe_loss(target_lab, R)
+    if tangent is None:
+        loss = objective.recipe_loss(target_lab, R)
+    else:
+        loss = objective.colour_loss(target_lab, R) + tangent(R)
     if target_texture is not None and texture is not None:
         loss = loss + settings.texture_weight * (texture[:, -2:] - target_texture[-2:]).abs().sum(1)
     if risky:
@@ -221,10 +227,15 @@ def _optimise(
     """Adam on the logits of every row at once; returns the logits, amounts and losses."""
     logits = logits.clone().requires_grad_(True)
     optimiser = torch.optim.Adam([logits], lr=0.08, fused=True)
+    tangent = (
+        MetamerismTangent(objective, settings.metamerism_every)
+        if objective.metamerism is not None and settings.metamerism_every > 1
+        else None
+    )
     for _ in range(steps):
         optimiser.zero_grad()
         x = _masked_softmax(logits, mask)
-        loss = _loss(forward, objective, x, target_lab, target_texture, settings)
+        loss = _loss(forward, objective, x, target_lab, target_texture, settings, tangent)
         if sparsity:
             loss = loss + sparsity * torch.sqrt(x + 1e-4).sum(1)
         loss.sum().backward()

@@ -33,6 +33,9 @@ class MatchSettings:
     effect_floor: float | None = None  # None: the model's (its training cases' effect share)
     model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
     metamerism: float = 1.0  # weight of the mean metamerism index (ΔE) in the objective
+    # the optimiser takes that term afresh every so many steps and follows its tangent
+    # between (1: exact at every step; :mod:`flakelab.match.objective` has the figures)
+    metamerism_every: int = 4
     # the index's test illuminants (colour-science names); None: A, F11 and LED-B3
     # (:data:`~flakelab.core.difference.METAMERISM_ILLUMINANTS`)
     lights: tuple[str, ...] | None = None
