@@ -60,8 +60,8 @@ def test_compare_example_agrees_with_library_and_tolerance():
     lit = compare(read_measurement(example_path("target")),
                   read_measurement(example_path("sprayout")), lights=("A", "FL2"))  # fmt: skip
     assert booth["metamerism_index_max"] == pytest.approx(
-        {k: float(v.max()) for k, v in lit.metamerism.items()}
-    )
+        {k: float(v.max()) for k, v in lit.metamerism.items()}, abs=5e-4
+    )  # to the thousandth, as every report gives it
     refused = flakelab("compare", "--example", "--conditions", "A/10", "--lights", "A")
     assert refused.returncode == 2 and "--lights: A is the reference illuminant" in refused.stderr
 

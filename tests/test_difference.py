@@ -174,3 +174,11 @@ def test_test_lights_are_read_as_a_booth_names_them():
         parse_lights("D65,A")
     with pytest.raises(ValueError, match="--lights: expected test illuminants"):
         parse_lights(" , ")
+
+
+def test_the_worst_light_and_the_worst_geometry_per_light_are_read_from_every_geometry():
+    from flakelab.core.difference import worst_light, worst_per_light
+
+    indices = {"A": np.array([[0.1, 0.51234], [0.2, 0.3]]), "FL11": np.array([[0.7, 0.1]])}
+    assert worst_light(indices) == ("FL11", pytest.approx(0.7))
+    assert worst_per_light(indices) == {"A": 0.512, "FL11": 0.7}

@@ -578,7 +578,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.difference import metamerism_indices
+    from flakelab.core.difference import metamerism_indices, worst_per_light
     from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note
     from flakelab.match.crosscheck import expected_left_out
@@ -652,8 +652,8 @@ def correct_command(
     report["expected_de00"] = expected.round(3).tolist()
     report["metamerism_weight"] = metamerism
     sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
-    report["sprayout_metamerism_index_max"] = _worst_per_light(sprayed_metamerism)
-    report["expected_metamerism_index_max"] = _worst_per_light(correction.metamerism)
+    report["sprayout_metamerism_index_max"] = worst_per_light(sprayed_metamerism)
+    report["expected_metamerism_index_max"] = worst_per_light(correction.metamerism)
     if note := metamerism_note(sprayed_metamerism, correction.metamerism):
         report["notes"].append(note)
     report["geometries"] = list(forward.geometries)
@@ -770,11 +770,6 @@ def _rounding_costs(weighing) -> dict[str, float]:
         "rounding_de00": weighing.rounding_de00,
         "rounding_de00_nearest": weighing.nearest_de00,
     }
-
-
-def _worst_per_light(indices: dict) -> dict[str, float]:
-    """The worst geometry's metamerism index under each test illuminant."""
-    return {light: round(float(index.max()), 3) for light, index in indices.items()}
 
 
 def _metamerism_values(worst: dict[str, float]) -> str:

@@ -14,6 +14,7 @@ from flakelab.core.difference import (
     delta_E,
     delta_E_CIE2000,
     metamerism_indices,
+    worst_per_light,
 )
 from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
@@ -123,7 +124,7 @@ class Comparison:
             "de00_max": self.de00_max,
             "de00_mean": self.de00_mean,
             "limit_share_max": float(self.limit_share.max()),
-            "metamerism_index_max": {k: float(v.max()) for k, v in self.metamerism.items()},
+            "metamerism_index_max": worst_per_light(self.metamerism),
             "pass": self.all_pass,
             "failing_geometries": [
                 g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok

@@ -46,6 +46,7 @@ __all__ = [
     "metamerism_indices",
     "parse_lights",
     "worst_light",
+    "worst_per_light",
 ]
 
 METAMERISM_ILLUMINANTS = ("A", "FL11", "LED-B3")
@@ -64,6 +65,12 @@ def worst_light(indices: dict[str, NDArray]) -> tuple[str, float]:
     as :func:`metamerism_indices` gives them), and that index."""
     light = max(indices, key=lambda name: np.max(indices[name]))
     return light, float(np.max(indices[light]))
+
+
+def worst_per_light(indices: dict[str, NDArray]) -> dict[str, float]:
+    """The worst geometry's metamerism index under each test light, to the thousandth, as
+    the reports give it."""
+    return {light: round(float(np.max(index)), 3) for light, index in indices.items()}
 
 
 def parse_lights(text: str, reference: Conditions = D65_10) -> tuple[str, ...]:

@@ -50,6 +50,7 @@ from flakelab.core.difference import (
     delta_E,
     metamerism_indices,
     worst_light,
+    worst_per_light,
 )
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
@@ -154,9 +155,7 @@ class Candidate:
             "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
             "metamerism_index": {k: v.round(3).tolist() for k, v in self.metamerism.items()},
-            "metamerism_index_max": {
-                k: round(float(v.max()), 3) for k, v in self.metamerism.items()
-            },
+            "metamerism_index_max": worst_per_light(self.metamerism),
         }
 
 
