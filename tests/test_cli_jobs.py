@@ -68,6 +68,7 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
         {k: float(v[at].max()) for k, v in measured.metamerism.items()}, abs=1e-3
     )
     assert set(report["expected_metamerism_index_max"]) == {"A", "FL11", "LED-B3"}
+    assert report["sprayout_metamer"] is (max(report["sprayout_metamerism_index_max"].values()) > 1)
     # judged against the tolerance first: this spray-out already passes the body-shop default
     assert max(report["before_de00"]) < 1.0 and report["sprayout_passes"] is True
     assert any("already passes refinish" in note for note in report["notes"])

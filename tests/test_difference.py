@@ -182,3 +182,12 @@ def test_the_worst_light_and_the_worst_geometry_per_light_are_read_from_every_ge
     indices = {"A": np.array([[0.1, 0.51234], [0.2, 0.3]]), "FL11": np.array([[0.7, 0.1]])}
     assert worst_light(indices) == ("FL11", pytest.approx(0.7))
     assert worst_per_light(indices) == {"A": 0.512, "FL11": 0.7}
+
+
+def test_a_metamer_is_judged_on_the_unrounded_index():
+    # 1.0004 under A: a metamer (over METAMERISM_NOTICE), though the report rounds it to 1.0
+    from flakelab.core.difference import METAMERISM_NOTICE, is_metamer, worst_per_light
+
+    indices = {"A": np.array([[0.2, METAMERISM_NOTICE + 4e-4]]), "FL11": np.array([[0.9]])}
+    assert is_metamer(indices) and worst_per_light(indices)["A"] == METAMERISM_NOTICE
+    assert not is_metamer({"A": np.array([[METAMERISM_NOTICE]]), "FL11": np.array([[0.9]])})

@@ -600,6 +600,7 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
     assert any("the best recipe is a metamer of the target" in n and "FL11" in n
                for n in notes[0.0])  # fmt: skip
     assert not any("metamer" in n for n in notes[1.0])
+    assert [best[w].to_dict()["metamer"] for w in (0.0, 1.0)] == [True, False]
     # what each candidate reports is the exact index of its prediction against the target
     spectra = target.storage_spectra(hybrid.geometries)
     exact = metamerism_indices(spectra, best[1.0].reflectance)
@@ -698,6 +699,52 @@ def test_the_optimiser_follows_the_metamerism_term_along_its_tangent_and_retakes
         assert tangent(R1).numpy() == pytest.approx(
             objective.metamerism_loss(R1).numpy(), abs=1e-12
         )
+
+
+def test_held_jacobian_follows_the_hybrid_physics_ratio_along_its_tangent(hybrid):
+    # the optimiser's steps take the new toners' physics ratio and its finite-difference
+    # Jacobian afresh every third step and follow the tangent between: where taken, value
+    # and gradient are the exact ones; beside it the error is a small part of the change
+    # (not second order: the fast model interpolates its flake atlas linearly, with kinks)
+    from flakelab.match.forward import HeldJacobian, LearnedForward, _differentiable, stepping
+
+    names = hybrid.library.names
+    novel, aluminium = names.index(hybrid.novel[0]), names.index("Al medium")
+    x0 = np.zeros((2, len(names)))
+    x0[0, [aluminium, names.index("Phthalo blue GS"), novel]] = 0.85, 0.1, 0.05
+    x0[1, [aluminium, names.index("Carbon black"), novel]] = 0.9, 0.07, 0.03
+    step = np.zeros_like(x0)
+    # more new toner: the Jacobian is the new toners' (the ratio's gradient always was)
+    step[:, novel] = 0.002
+    weights = torch.as_tensor(np.random.default_rng(3).uniform(size=(2, 5, 31)))
+
+    def ratio(x, held=None):
+        return _differentiable(x, hybrid.physics_ratio, hybrid.physics_ratio_and_jacobian, held)
+
+    held = HeldJacobian(every=3)
+    X = torch.tensor(x0, requires_grad=True)
+    value, exact = ratio(X, held), ratio(X)
+    assert value.detach().numpy() == pytest.approx(exact.detach().numpy(), abs=1e-12)
+    (slope,) = torch.autograd.grad((weights * value).sum(), X)
+    (exact_slope,) = torch.autograd.grad((weights * exact).sum(), X)
+    assert slope.numpy() == pytest.approx(exact_slope.numpy(), abs=1e-9)
+    assert np.any(slope.numpy()[:, novel] != 0)
+
+    def error(h):
+        x = torch.tensor(x0 + h * step, requires_grad=True)
+        return (ratio(x, held) - ratio(x)).abs().max().item()
+
+    for h in (1.0, 2.0):
+        moved = np.abs(hybrid.physics_ratio(x0 + h * step) - hybrid.physics_ratio(x0)).max()
+        assert error(h) < 0.1 * moved
+    assert error(3.0) == pytest.approx(0.0, abs=1e-12)  # the fourth call: taken afresh there
+    # a copy per optimiser run holds its own tangent; a forward without finite differences
+    # (the learned model) and every = 1 step exactly
+    stepped = stepping(hybrid, 4)
+    assert stepped.held.every == 4 and hybrid.held is None and stepped.model is hybrid.model
+    assert stepping(hybrid, 1) is hybrid
+    learned = LearnedForward(hybrid.model)
+    assert stepping(learned, 4) is learned
 
 
 def test_hybrid_stands_new_toners_in_as_a_known_toner_of_their_kind(hybrid):

@@ -461,7 +461,7 @@ def _print_match(report: dict) -> None:
         if c["novel_toners"]:
             extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
         console.print(extra, highlight=False)
-        console.print(_metamerism_text(c["metamerism_index_max"]), highlight=False)
+        console.print(_metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
     for note in report["notes"]:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
@@ -578,7 +578,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.difference import metamerism_indices, worst_per_light
+    from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
     from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note
     from flakelab.match.crosscheck import expected_left_out
@@ -653,6 +653,7 @@ def correct_command(
     report["metamerism_weight"] = metamerism
     sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
     report["sprayout_metamerism_index_max"] = worst_per_light(sprayed_metamerism)
+    report["sprayout_metamer"] = is_metamer(sprayed_metamerism)
     report["expected_metamerism_index_max"] = worst_per_light(correction.metamerism)
     if note := metamerism_note(sprayed_metamerism, correction.metamerism):
         report["notes"].append(note)
@@ -776,15 +777,13 @@ def _metamerism_values(worst: dict[str, float]) -> str:
     return "  ".join(f"{light} {value:.2f}" for light, value in worst.items())
 
 
-def _metamerism_text(worst: dict[str, float], label: str = "") -> str:
+def _metamerism_text(worst: dict[str, float], metamer: bool, label: str = "") -> str:
     """The worst geometry's metamerism index under each test illuminant, on one line; a
-    metamer (an index over the notice level) called one."""
-    from flakelab.core.difference import METAMERISM_NOTICE, worst_light
-
-    metamer = " (a metamer)" if worst_light(worst)[1] > METAMERISM_NOTICE else ""
+    ``metamer`` (as the report judged it, :func:`~flakelab.core.difference.is_metamer`)
+    called one."""
     return (
         "metamerism index against the target (ISO 18314-4, ΔE00, worst geometry): "
-        f"{label}{_metamerism_values(worst)}{metamer}"
+        f"{label}{_metamerism_values(worst)}{' (a metamer)' if metamer else ''}"
     )
 
 
@@ -872,7 +871,9 @@ def _print_correction(report: dict) -> None:
             assumed += " beyond the shop's habits, which persist"
     console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
     console.print(
-        _metamerism_text(report["sprayout_metamerism_index_max"], "spray-out ")
+        _metamerism_text(
+            report["sprayout_metamerism_index_max"], report["sprayout_metamer"], "spray-out "
+        )
         + f"; expected {_metamerism_values(report['expected_metamerism_index_max'])}",
         highlight=False,
     )

@@ -42,6 +42,7 @@ __all__ = [
     "delta_E",
     "delta_E_CIE2000",
     "delta_LCH",
+    "is_metamer",
     "metamerism_index",
     "metamerism_indices",
     "parse_lights",
@@ -65,6 +66,13 @@ def worst_light(indices: dict[str, NDArray]) -> tuple[str, float]:
     as :func:`metamerism_indices` gives them), and that index."""
     light = max(indices, key=lambda name: np.max(indices[name]))
     return light, float(np.max(indices[light]))
+
+
+def is_metamer(indices: dict[str, NDArray]) -> bool:
+    """Whether a recipe with these metamerism indices (per test light, as
+    :func:`metamerism_indices` gives them) is a metamer of its target: an index over
+    :data:`METAMERISM_NOTICE` under some test light, judged unrounded."""
+    return worst_light(indices)[1] > METAMERISM_NOTICE
 
 
 def worst_per_light(indices: dict[str, NDArray]) -> dict[str, float]:

@@ -44,7 +44,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import METAMERISM_NOTICE, metamerism_indices, worst_light
+from flakelab.core.difference import is_metamer, metamerism_indices, worst_light
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
@@ -187,11 +187,11 @@ def _spectral_ratio(sprayed: NDArray, predicted: NDArray) -> NDArray:
 
 def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -> str | None:
     """What to tell the colorist when the corrected spray-out is still expected to be a
-    metamer of the target (worst index over :data:`METAMERISM_NOTICE` under some test light,
+    metamer of the target (:func:`~flakelab.core.difference.is_metamer`, under some test light,
     given the indices per light and geometry of the spray-out and of the correction)."""
-    light, worst = worst_light(expected)
-    if worst <= METAMERISM_NOTICE:
+    if not is_metamer(expected):
         return None
+    light, worst = worst_light(expected)
     return (
         f"the spray-out is a metamer of the target: under {light} its metamerism index is "
         f"{sprayed[light].max():.2f} at worst (ΔE00 once the daylight difference is corrected) "

@@ -4,7 +4,8 @@
 * :class:`HybridForward` — the MLP for known toners, times the physics model's scaling for
   toners marked new (DESIGN.md §3, §6): R = R_MLP(x_base) · R_phys(x) / R_phys(x_base), with
   each new toner standing in the base as its closest known toner; the physics ratio's
-  derivatives come from finite differences on the new toners.
+  derivatives come from finite differences on the new toners, which an optimiser's steps
+  retake every few steps and follow along their tangent between (:func:`stepping`).
 * :class:`PhysicsForward` — the library's physics (the fast model) alone, derivatives by
   finite differences on every toner a recipe uses: for a library without cases, and in the
   harness the exact model of the generated world's nominal physics (what no learned model
@@ -31,7 +32,14 @@ from flakelab.physics.kubelka_munk import SAUNDERSON_K1, SAUNDERSON_K2
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.texture.readings import texture_readings
 
-__all__ = ["LearnedForward", "HybridForward", "PhysicsForward", "KubelkaMunkForward"]
+__all__ = [
+    "LearnedForward",
+    "HybridForward",
+    "PhysicsForward",
+    "KubelkaMunkForward",
+    "HeldJacobian",
+    "stepping",
+]
 
 
 class LearnedForward:
@@ -121,12 +129,66 @@ class _WithJacobian(torch.autograd.Function):
         return torch.einsum("n...,n...t->nt", grad.to(J.dtype), J).to(ctx.dtype), None
 
 
-def _differentiable(fractions: torch.Tensor, value, jacobian) -> torch.Tensor:
+def _differentiable(
+    fractions: torch.Tensor, value, jacobian, held: HeldJacobian | None = None
+) -> torch.Tensor:
     """``value(x)`` for recipes ``fractions``, through :class:`_WithJacobian` only when a
-    gradient will be asked for (the Jacobian costs a physics call per toner used)."""
+    gradient will be asked for (the Jacobian costs a physics call per toner used), or along
+    the tangent that ``held`` keeps."""
     if torch.is_grad_enabled() and fractions.requires_grad:
+        if held is not None:
+            return held(fractions, jacobian)
         return _WithJacobian.apply(fractions, jacobian)
     return torch.as_tensor(value(fractions.detach().numpy()))
+
+
+class HeldJacobian:
+    """A finite-difference function of the recipes for an optimiser: its value and Jacobian
+    taken afresh every ``every`` steps and followed along the tangent between,
+    ``f(x₀) + J(x₀)·(x − x₀)``.
+
+    The hybrid's physics ratio is what makes a match through new toners slow: a physics call
+    on the recipes, their bases and a bumped copy per new toner at every step, over half of
+    the slowest matches' time. Between retakes a step costs one product; the steps' rows and
+    masks stay fixed within one run of the optimiser, so one tangent serves them all. The
+    search ranks its rows by the exact value (no gradient asked: no tangent).
+
+    Harness, 200 targets + 50 with a new toner, seed 4242, one run each beside the Jacobian
+    at every step (2026-11-26, ``benchmarks/match_variants.py … "physics_every=1"``): MA-T12,
+    every 4th step / every step, first shot 0.505 / 0.505, after one correction 0.835 /
+    0.83, new toner 0.48 / 0.48, latency p50 1.19 / 1.26 s, p95 2.14 / 3.19 s; five-angle
+    0.575 / 0.58, 0.865 / 0.865, 0.58 / 0.60, p50 0.79 / 0.83 s, p95 1.48 / 2.09 s."""
+
+    def __init__(self, every: int) -> None:
+        self.every, self.calls = every, 0
+        self.start = self.value = self.slope = self.columns = None
+
+    def __call__(self, fractions: torch.Tensor, jacobian) -> torch.Tensor:
+        if self.calls % self.every == 0:
+            self._retake(fractions.detach().to(torch.float64), jacobian)
+        self.calls += 1
+        step = fractions.to(torch.float64)[:, self.columns] - self.start
+        return self.value + torch.einsum("n...t,nt->n...", self.slope, step)
+
+    def _retake(self, x: torch.Tensor, jacobian) -> None:
+        value, J = jacobian(x.numpy())
+        # only the bumped toners' columns: the new toners, a handful of the library's
+        self.columns = np.flatnonzero(np.any(J != 0, axis=tuple(range(J.ndim - 1))))
+        self.start = x[:, self.columns]
+        self.value = torch.as_tensor(value)
+        self.slope = torch.as_tensor(np.ascontiguousarray(J[..., self.columns]))
+
+
+def stepping(forward, every: int):
+    """``forward`` as an optimiser's steps use it: where it differentiates by finite
+    differences (the hybrid's physics ratio, the physics alone), a copy that holds its
+    Jacobian ``every`` steps (:class:`HeldJacobian`); otherwise, or with ``every`` 1,
+    ``forward`` itself. One copy per run of the optimiser: it keeps that run's tangent."""
+    if every <= 1 or not hasattr(forward, "held"):
+        return forward
+    held = copy.copy(forward)
+    held.held = HeldJacobian(every)
+    return held
 
 
 class HybridForward(LearnedForward):
@@ -141,6 +203,8 @@ class HybridForward(LearnedForward):
     When new toners make up most of the recipe, the base itself is mostly stand-ins, and the
     physics base R_phys(x_base) takes over from the learned one (:meth:`_physics_trust`).
     """
+
+    held: HeldJacobian | None = None  # an optimiser's tangent of the ratio (:func:`stepping`)
 
     def __init__(self, model: ForwardModel, library: Library, novel: Sequence[str]) -> None:
         super().__init__(model)
@@ -233,7 +297,9 @@ class HybridForward(LearnedForward):
             w = torch.as_tensor(trust[:, None, None], dtype=R.dtype)
             physics = torch.as_tensor(physics, dtype=R.dtype)
             R = torch.exp((1 - w) * torch.log(R) + w * torch.log(physics))
-        ratio = _differentiable(fractions, self.physics_ratio, self.physics_ratio_and_jacobian)
+        ratio = _differentiable(
+            fractions, self.physics_ratio, self.physics_ratio_and_jacobian, self.held
+        )
         return R * ratio.to(R.dtype)
 
     def with_members(
@@ -299,6 +365,7 @@ class PhysicsForward:
     model."""
 
     dtype = torch.float64
+    held: HeldJacobian | None = None  # an optimiser's tangent (:func:`stepping`)
 
     def __init__(self, library: Library, geometries: Sequence[str | Geometry]) -> None:
         self.library = library
@@ -325,7 +392,8 @@ class PhysicsForward:
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x = fractions.to(torch.float64)
-        y = _differentiable(x, self.outputs, self.outputs_and_jacobian).to(fractions.dtype)
+        y = _differentiable(x, self.outputs, self.outputs_and_jacobian, self.held)
+        y = y.to(fractions.dtype)
         spectral = len(self.geometries) * 31
         return y[:, :spectral].reshape(-1, len(self.geometries), 31), y[:, spectral:]
 

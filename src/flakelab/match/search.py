@@ -11,6 +11,9 @@
 3. **Optimise** all subsets at once (one batch through the forward model, autograd, Adam on
    masked softmax logits: amounts stay non-negative and sum to the can), by successive
    halving: a third of the steps on every subset, the rest on the ``refine_keep`` best.
+   The steps follow two tangents, retaken every few steps: the metamerism index's
+   (:class:`~flakelab.match.objective.MetamerismTangent`) and, through new toners, the
+   physics ratio's (:class:`~flakelab.match.forward.HeldJacobian`); rows are ranked exactly.
 4. **Swap** (local search over toner sets), only when the best recipe still uses more than
    ``swap_above`` of the tolerance's limit somewhere (ΔE00 0.6 for the default ΔE00 ≤ 1.0):
    every set one move from the best few recipes — a toner swapped for
@@ -46,8 +49,8 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import (
-    METAMERISM_NOTICE,
     delta_E,
+    is_metamer,
     metamerism_indices,
     worst_light,
     worst_per_light,
@@ -58,6 +61,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
+from flakelab.match.forward import stepping
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
 from flakelab.match.settings import MatchSettings
 
@@ -156,6 +160,7 @@ class Candidate:
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
             "metamerism_index": {k: v.round(3).tolist() for k, v in self.metamerism.items()},
             "metamerism_index_max": worst_per_light(self.metamerism),
+            "metamer": is_metamer(self.metamerism),
         }
 
 
@@ -223,7 +228,8 @@ def model_risk(colour: TorchColour, R: torch.Tensor) -> torch.Tensor:
 def _optimise(
     forward, objective, logits, mask, target_lab, target_texture, settings, steps, sparsity
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Adam on the logits of every row at once; returns the logits, amounts and losses."""
+    """Adam on the logits of every row at once; returns the logits, amounts and losses (the
+    last exact: the steps follow the tangents that ``settings`` ask for)."""
     logits = logits.clone().requires_grad_(True)
     optimiser = torch.optim.Adam([logits], lr=0.08, fused=True)
     tangent = (
@@ -231,10 +237,11 @@ def _optimise(
         if objective.metamerism is not None and settings.metamerism_every > 1
         else None
     )
+    step_forward = stepping(forward, settings.physics_every)
     for _ in range(steps):
         optimiser.zero_grad()
         x = _masked_softmax(logits, mask)
-        loss = _loss(forward, objective, x, target_lab, target_texture, settings, tangent)
+        loss = _loss(step_forward, objective, x, target_lab, target_texture, settings, tangent)
         if sparsity:
             loss = loss + sparsity * torch.sqrt(x + 1e-4).sum(1)
         loss.sum().backward()
@@ -645,9 +652,9 @@ def _match(
 def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     """A note when the best candidate is a metamer of the target: its index over
     :data:`~flakelab.core.difference.METAMERISM_NOTICE` under some test light."""
-    light, worst = worst_light(best.metamerism)
-    if worst <= METAMERISM_NOTICE:
+    if not is_metamer(best.metamerism):
         return None
+    light, worst = worst_light(best.metamerism)
     advice = (
         "the search did not weigh it: --metamerism 0"
         if not settings.metamerism

@@ -36,6 +36,10 @@ class MatchSettings:
     # the optimiser takes that term afresh every so many steps and follows its tangent
     # between (1: exact at every step; :mod:`flakelab.match.objective` has the figures)
     metamerism_every: int = 4
+    # likewise the Jacobian of what the search differentiates by finite differences (the
+    # hybrid's physics ratio for new toners, the physics alone; 1: at every step;
+    # :class:`~flakelab.match.forward.HeldJacobian`)
+    physics_every: int = 4
     # the index's test illuminants (colour-science names); None: A, F11 and LED-B3
     # (:data:`~flakelab.core.difference.METAMERISM_ILLUMINANTS`)
     lights: tuple[str, ...] | None = None
