@@ -22,10 +22,12 @@ absolute value over targets, geometries and components).
 ``--seed 77,78,81-86`` pools the failed first shots of several seeds (one seed's 20-odd are
 too few to choose a setting by: σ_p 0.2 won on seed 77 by 0.12 and ties over eight seeds).
 Each row gives its pass rate with its standard error and its difference from the defaults
-with the paired standard error (same targets, same sprays); ``per_seed`` in ``--json``.
+with the paired standard error (same targets, same sprays), and the median time a correction
+took; ``per_seed`` in ``--json``. ``--physics`` matches and corrects through the library's
+physics alone (``flakelab correct --physics``), e.g. to time ``"physics_every=1"``.
 
     python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling]
-        [--model FILE] [--json]
+        [--model FILE | --physics] [--json]
         "library=none" "offset_weight=1.0" "persistent_sd=0.3" "noise_sd=0.05" ...
 """
 
@@ -33,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 
 import numpy as np
 
@@ -48,6 +51,7 @@ from flakelab.match.evaluate import (
     worst_de00,
     worst_metamerism,
 )
+from flakelab.match.forward import PhysicsForward
 from flakelab.match.search import evaluate_recipes, match
 
 
@@ -59,7 +63,8 @@ def parse(spec: str) -> dict:
         if name == "library":  # library=none: no physics split, one weight for the offset
             out[name] = None
         else:
-            out[name] = int(value) if name in ("extra_toners", "steps") else float(value)
+            integer = name in ("extra_toners", "steps", "physics_every")
+            out[name] = int(value) if integer else float(value)
     return out
 
 
@@ -97,8 +102,14 @@ def corrected_recipe(spec: str, world, forward, t, best, x_best, first, x_hidden
                         mode="reformulate", offset_weight=1.0)  # fmt: skip
         return recipe_vector(forward, fixed.fractions), None
     keywords = {"library": world.library, **({} if spec == "defaults" else parse(spec))}
+    start = time.perf_counter()
     fixed = correct(forward, t.target, best.fractions, first, mode="reformulate", **keywords)
+    SECONDS.setdefault(spec, []).append(time.perf_counter() - start)
     return recipe_vector(forward, fixed.fractions), None
+
+
+SECONDS: dict[str, list[float]] = {}
+"""Each setting's correction times, in seconds (the settings that call :func:`correct`)."""
 
 
 def summary(passed: dict, worst: dict, metameric: dict, spec: str) -> dict:
@@ -120,6 +131,7 @@ def summary(passed: dict, worst: dict, metameric: dict, spec: str) -> dict:
         "vs_defaults_se": float(diff.std(ddof=1) / np.sqrt(n)) if n > 1 else None,
         "median_worst_de00": float(np.median(worst[spec])),
         "median_worst_metamerism": float(np.median(metameric[spec])),
+        "median_seconds": float(np.median(SECONDS[spec])) if spec in SECONDS else None,
     }
 
 
@@ -131,10 +143,13 @@ def main() -> None:
     parser.add_argument("--seed", default="77", help="one seed, a list or a range: 77,78,81-86")
     parser.add_argument("--ceiling", action="store_true")
     parser.add_argument("--model", help=MODEL_HELP)
+    parser.add_argument("--physics", action="store_true", help="the library's physics alone")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     seeds = seeds_from(args.seed)
     world, forward, effect = shipped_matcher(model=args.model)
+    if args.physics:
+        forward = PhysicsForward(world.library, forward.geometries)
     specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling), "respray"]
     passed: dict[str, list[float]] = {s: [] for s in specs}
     worst: dict[str, list[float]] = {s: [] for s in specs}
@@ -192,6 +207,7 @@ def main() -> None:
             f"vs defaults {row['vs_defaults']:+.3f} ± {row['vs_defaults_se']:.3f}  "
             f"median worst ΔE00 {row['median_worst_de00']:.2f}  "
             f"metamerism {row['median_worst_metamerism']:.2f}"
+            + (f"  {row['median_seconds']:.2f} s" if row["median_seconds"] is not None else "")
         )
 
 

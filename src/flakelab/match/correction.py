@@ -44,10 +44,16 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import is_metamer, metamerism_indices, worst_light
+from flakelab.core.difference import (
+    is_metamer,
+    metamerism_indices,
+    worst_light,
+    worst_per_light,
+)
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
+from flakelab.match.forward import stepping
 from flakelab.match.objective import MatchObjective
 from flakelab.match.search import evaluate_recipes
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
@@ -191,11 +197,13 @@ def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -
     given the indices per light and geometry of the spray-out and of the correction)."""
     if not is_metamer(expected):
         return None
-    light, worst = worst_light(expected)
+    light, _ = worst_light(expected)
+    # the figures as the report gives them (to the thousandth), so that note and report agree
+    before, after = worst_per_light(sprayed)[light], worst_per_light(expected)[light]
     return (
         f"the spray-out is a metamer of the target: under {light} its metamerism index is "
-        f"{sprayed[light].max():.2f} at worst (ΔE00 once the daylight difference is corrected) "
-        f"and the correction is expected to leave {worst:.2f}; a correction "
+        f"{before:.2f} at worst (ΔE00 once the daylight difference is corrected) "
+        f"and the correction is expected to leave {after:.2f}; a correction "
         "changes amounts, not pigments: match the target again (flakelab match) for a recipe "
         "of the car's own pigments"
     )
@@ -248,6 +256,7 @@ def correct(
     tolerance: Tolerance | None = None,
     metamerism: float = MatchSettings.metamerism,
     lights: tuple[str, ...] | None = None,
+    physics_every: int = MatchSettings.physics_every,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
@@ -259,7 +268,9 @@ def correct(
     application is split about the shop's mean: the habits' part of the offset persists.
     The corrected recipe aims at ``tolerance`` (default ΔE00 ≤ 1.0 at every geometry) and
     weighs its expected ``metamerism`` index under the test ``lights`` (default A, F11 and
-    LED-B3), as the search does."""
+    LED-B3), as the search does. Its optimiser holds what it differentiates by finite
+    differences ``physics_every`` steps, as the search's does
+    (:func:`~flakelab.match.forward.stepping`)."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
@@ -305,6 +316,7 @@ def correct(
         application,
         ratio,
         lights,
+        physics_every,
     )
 
 
@@ -330,7 +342,17 @@ def aim_off(
     target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
     offset = torch.as_tensor(expected, dtype=forward.dtype)
     x, _, lab, _, _ = _optimise(
-        objective, forward, x0, x0 > 0, target_lab, offset, None, "reformulate", steps, 0
+        objective,
+        forward,
+        x0,
+        x0 > 0,
+        target_lab,
+        offset,
+        None,
+        "reformulate",
+        steps,
+        0,
+        MatchSettings.physics_every,
     )
     return x.double().numpy(), lab.double().numpy()
 
@@ -348,6 +370,7 @@ def _recipe_for_offset(
     application: dict[str, float] | None,
     spectral_ratio: NDArray,
     lights: tuple[str, ...] | None,
+    physics_every: int,
 ) -> Correction:
     """The recipe near ``x_recipe`` whose prediction plus the ``persistent`` L*a*b* offset
     ``[G, 3]`` best matches ``target`` by ``objective``, with at most one toner joining
@@ -360,7 +383,17 @@ def _recipe_for_offset(
     used = (x0 > 0).repeat(1 + len(extra), 1)
     used[torch.arange(1, 1 + len(extra)), extra] = True
     final, added, lab, loss, R = _optimise(
-        objective, forward, x0, used, target_lab, offset, ratio, mode, steps, max_addition
+        objective,
+        forward,
+        x0,
+        used,
+        target_lab,
+        offset,
+        ratio,
+        mode,
+        steps,
+        max_addition,
+        physics_every,
     )
     loss[1:] += EXTRA_TONER_GAIN
     row = int(np.argmin(loss))
@@ -382,13 +415,14 @@ def _recipe_for_offset(
 
 
 def _optimise(
-    objective, forward, x0, used, target_lab, offset, ratio, mode, steps, max_addition
+    objective, forward, x0, used, target_lab, offset, ratio, mode, steps, max_addition, every
 ):  # fmt: skip
     """Adam over every row of ``used[N, T]`` at once, each from ``x0`` (one row, or one per
     row): new amounts of the used toners (``reformulate``) or additions to ``x0``; returns
     the mixes ``[N, T]``, the additions, L*a*b* with ``offset``, the loss ``[N]`` (with the
     metamerism of the predictions times the spectral ``ratio``, where the objective weighs
-    it) and the predicted reflectances."""
+    it) and the predicted reflectances. The steps hold a finite-difference Jacobian
+    ``every`` steps (:func:`~flakelab.match.forward.stepping`); the result is exact."""
     if mode == "reformulate":
         start = torch.where(x0 > 0, x0, torch.full_like(x0, NEW_TONER_START))
         variable = torch.log(start).expand(len(used), -1).clone().requires_grad_(True)
@@ -405,9 +439,10 @@ def _optimise(
         added = additions()
         return (x0 + added) / (1 + added.sum(1, keepdim=True))
 
+    step_forward = stepping(forward, every)
     for _ in range(steps):
         optimiser.zero_grad()
-        _predicted(objective, forward, mixed(), target_lab, offset, ratio)[2].sum().backward()
+        _predicted(objective, step_forward, mixed(), target_lab, offset, ratio)[2].sum().backward()
         optimiser.step()
     with torch.no_grad():
         final = mixed()

@@ -192,6 +192,7 @@ def _one(
             tolerance=tolerance,
             metamerism=settings.metamerism,
             lights=settings.lights,
+            physics_every=settings.physics_every,
         ).fractions
         recipe = as_weighed(forward, recipe, scale)
         corrected = t.spray(recipe_vector(forward, recipe), correction_rng)

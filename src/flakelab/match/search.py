@@ -654,7 +654,8 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     :data:`~flakelab.core.difference.METAMERISM_NOTICE` under some test light."""
     if not is_metamer(best.metamerism):
         return None
-    light, worst = worst_light(best.metamerism)
+    light, _ = worst_light(best.metamerism)
+    worst = worst_per_light(best.metamerism)[light]  # as the candidate's report gives it
     advice = (
         "the search did not weigh it: --metamerism 0"
         if not settings.metamerism
