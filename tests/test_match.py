@@ -615,9 +615,10 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     car's blues), without any of the car's blue and sprayed a little light: a correction that
     keeps its pigments moves amounts, and its expected index stays where the spray-out's is,
     over the notice level; the colorist is told to match again. The car's own blue sprayed
-    the same way draws no such note. (The daylight-only match itself may carry a trace of the
-    car's blue, which a correction can raise into a tint: it did with 120 refinement steps.)"""
-    from flakelab.core.difference import is_metamer
+    the same way draws no such note. The daylight-only match as the search finds it carries a
+    trace of the car's phthalo blue GS, which the correction raises into a tint (adding DPP
+    orange): there the metamer is cured (README: worst index under A 1.74 → 0.15)."""
+    from flakelab.core.difference import METAMERISM_NOTICE, is_metamer
     from flakelab.match.correction import metamerism_note
 
     target, best, _ = example_by_metamerism
@@ -625,13 +626,16 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     car = ("Phthalo blue GS", "Indanthrone blue")
     others = {n: v for n, v in best[0.0].fractions.items() if n not in car}
     metamer = {n: v / sum(others.values()) for n, v in others.items()}
-    notes, fixed = {}, {}
-    for name, recipe in {"metamer": metamer, "car": best[1.0].fractions}.items():
+    notes, fixed, befores = {}, {}, {}
+    recipes = {"metamer": metamer, "car": best[1.0].fractions, "found": best[0.0].fractions}
+    assert 0 < best[0.0].fractions[car[0]] < 0.01
+    for name, recipe in recipes.items():
         R = evaluate_recipes(hybrid, recipe_vector(hybrid, recipe)[None])[0][0]
         sprayed = 1.03 * R
+        extra = {} if name == "found" else {"extra_toners": 0}  # the default: up to 8 tried
         fixed[name] = correct(hybrid, spectra, recipe, sprayed, mode="reformulate",
-                              library=read_library(None), extra_toners=0)  # fmt: skip
-        before = metamerism_indices(spectra, sprayed)
+                              library=read_library(None), **extra)  # fmt: skip
+        before = befores[name] = metamerism_indices(spectra, sprayed)
         assert set(fixed[name].metamerism) == set(before)
         notes[name] = metamerism_note(before, fixed[name].metamerism)
         if name == "metamer":
@@ -640,6 +644,14 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
                 assert index.max() == pytest.approx(before[light].max(), abs=0.25), light
     assert "FL11" in notes["metamer"] and "match the target again" in notes["metamer"]
     assert notes["car"] is None
+    found = fixed["found"]
+    assert found.fractions[car[0]] > 5 * best[0.0].fractions[car[0]]
+    assert found.new_toner == "DPP orange"
+    assert max(v.max() for v in found.metamerism.values()) < METAMERISM_NOTICE / 2
+    assert (befores["found"]["A"].max(), found.metamerism["A"].max()) == pytest.approx(
+        (1.74, 0.15), abs=0.01
+    )
+    assert notes["found"] is None
 
 
 def test_a_correction_expects_the_metamerism_its_corrected_spray_out_shows(km):

@@ -203,9 +203,9 @@ def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -
     return (
         f"the spray-out is a metamer of the target: under {light} its metamerism index is "
         f"{before:.2f} at worst (ΔE00 once the daylight difference is corrected) "
-        f"and the correction is expected to leave {after:.2f}; a correction "
-        "changes amounts, not pigments: match the target again (flakelab match) for a recipe "
-        "of the car's own pigments"
+        f"and the correction is expected to leave {after:.2f}: this recipe's pigments (and the "
+        "one toner a correction may add) cannot match it under that light; match the target "
+        "again (flakelab match) for a recipe of the car's own pigments"
     )
 
 
