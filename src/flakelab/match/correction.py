@@ -197,9 +197,9 @@ def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -
     given the indices per light and geometry of the spray-out and of the correction)."""
     if not is_metamer(expected):
         return None
-    light, _ = worst_light(expected)
     # the figures as the report gives them (to the thousandth), so that note and report agree
-    before, after = worst_per_light(sprayed)[light], worst_per_light(expected)[light]
+    light, after = worst_light(worst_per_light(expected))
+    before = worst_per_light(sprayed)[light]
     return (
         f"the spray-out is a metamer of the target: under {light} its metamerism index is "
         f"{before:.2f} at worst (ΔE00 once the daylight difference is corrected) "

@@ -654,8 +654,8 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     :data:`~flakelab.core.difference.METAMERISM_NOTICE` under some test light."""
     if not is_metamer(best.metamerism):
         return None
-    light, _ = worst_light(best.metamerism)
-    worst = worst_per_light(best.metamerism)[light]  # as the candidate's report gives it
+    # the index as the candidate's report gives it (to the thousandth), as the table shows it
+    light, worst = worst_light(worst_per_light(best.metamerism))
     advice = (
         "the search did not weigh it: --metamerism 0"
         if not settings.metamerism
