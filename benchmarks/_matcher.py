@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from flakelab.io import read_library
+from flakelab.io import read_library, read_tolerance
 from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching, harness_world
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.models.registry import load_model_file, shipped_model
@@ -25,16 +25,21 @@ def add_harness_arguments(
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
     parser.add_argument("--model", help=MODEL_HELP)
+    parser.add_argument(
+        "--tolerance", help="preset or TOML/JSON file the sprays are judged by (default de00-1.0)"
+    )
     parser.add_argument("--json", action="store_true")
 
 
 def run_harness(world, forward, effect, args, novel, settings=None, progress=None) -> dict:
     """The harness's report for ``forward`` on the targets the options ``args`` name, those
     with a new toner drawn from ``novel``."""
+    tolerance = getattr(args, "tolerance", None)
     return evaluate_matching(
         world,
         forward,
         effect,
+        tolerance=read_tolerance(tolerance) if tolerance else None,
         targets=args.targets,
         seed=args.seed,
         novel=novel,

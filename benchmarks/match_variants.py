@@ -7,7 +7,7 @@ and the same sprays (seeded), so rows differ only by the recipes the search prop
 first row is the defaults: the baseline of the same run.
 
     python benchmarks/match_variants.py [--targets 100] [--novel-targets 0] [--seed 4242]
-        [--world shop] [--model FILE] [--json] "top_effects=2,top_pigments=5" "swap_above=inf" ...
+        [--world shop] [--model FILE] [--tolerance T] [--json] "top_effects=2" "swap_above=inf" ...
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ FIGURES = (
     "predicted_de00_median",
     "first_shot_de00_median",
     "first_shot_metamerism_median",
+    "first_shot_texture_within",
+    "first_shot_texture_share_p95",
     "latency_p50_s",
     "latency_p95_s",
 )

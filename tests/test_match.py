@@ -16,7 +16,7 @@ import torch
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, delta_E_CIE2000, metamerism_indices
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
-from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
+from flakelab.core.tolerance import Limit, TextureLimit, Tolerance, tolerance_preset
 from flakelab.io import read_library, read_measurement, read_recipe
 from flakelab.match.correction import (
     NOISE_SD,
@@ -582,6 +582,43 @@ def example_by_metamerism(hybrid):
         result = match(target, hybrid, effect, settings=settings)
         best[weight], notes[weight] = result.candidates[0], result.notes
     return target, best, notes
+
+
+def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(hybrid):
+    """Matched on colour alone, the example's candidates include one on coarse aluminium,
+    as close in colour as the rest and visibly grainier (ΔG about +1.8). The refinish
+    tolerance bounds |ΔG| by 1: that recipe then ranks out of the five, every candidate is
+    within the texture limits, and the colour-best recipe is still first. A limit no recipe
+    can meet fails them all on texture alone, and the search's note names the reading."""
+    from flakelab.data import example_path
+    from flakelab.match.models import effect_mask
+
+    target = read_measurement(example_path("target"))
+    effect = effect_mask(read_library(None), hybrid.toners)
+    refinish = tolerance_preset("refinish")
+    results = {
+        name: match(target, hybrid, effect, tolerance=tolerance)
+        for name, tolerance in [
+            ("colour", replace(refinish, texture=None)),
+            ("refinish", refinish),
+            ("tight", replace(refinish, texture=TextureLimit(G=0.01))),
+        ]
+    }
+    colour = results["colour"].candidates
+    grainy = [c for c in colour if c.texture_delta["G"] > refinish.texture.G]
+    assert grainy and all(c.passes and c.texture_share == {} for c in colour)
+    sets = {name: [set(c.fractions) for c in r.candidates] for name, r in results.items()}
+    assert all(set(c.fractions) not in sets["refinish"] for c in grainy)
+    for c in results["refinish"].candidates:
+        assert set(c.texture_share) == {"Si15", "Si45", "Si75", "SG", "G"}
+        assert max(c.texture_share.values()) <= 1 and c.failing_texture == []
+        assert c.texture_share["G"] == pytest.approx(abs(c.texture_delta["G"]))
+    assert sets["refinish"][0] == sets["colour"][0]
+    best = results["tight"].candidates[0]
+    assert best.failing == [] and best.failing_texture == ["G"] and not best.passes
+    assert best.failures() == ["texture G"] and best.to_dict()["failing_texture"] == ["G"]
+    assert any(n.endswith("fails at texture G") for n in results["tight"].notes)
+    assert results["refinish"].to_dict()["texture_limits"]["G"] == 1.0
 
 
 def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(

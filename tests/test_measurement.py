@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from flakelab.core import Geometry, Limit, Measurement, Tolerance, compare, flop_index
+from flakelab.core.tolerance import TextureLimit, tolerance_preset
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.io import read_tolerance
 
@@ -80,3 +81,51 @@ def test_tolerance_files_validated(tmp_path):
     good = tmp_path / "good.json"
     good.write_text('{"name": "j", "default": {"de00": 1.5}, "kL": 2}')
     assert read_tolerance(good).kL == 2 and read_tolerance(good).limit("45as15").de00 == 1.5
+    # a table where limits belong, a value where a table belongs: named, not a TypeError
+    for text, where in [
+        ("default = 1.0\n", "default: expected a table of limits"),
+        ("geometries = 2\n[default]\nde00 = 1\n", "geometries: expected a table"),
+        ("texture = 0.5\n[default]\nde00 = 1\n", "texture: expected a table of limits"),
+        ("[default]\nde00 = 1\n[texture]\nG = 0\n", "texture: expected a positive limit for G"),
+        ("[default]\nde00 = 1\n[texture]\ngraininess = 1\n", "expected keys among G, SG, Si"),
+    ]:
+        bad.write_text(text)
+        with pytest.raises(ValueError, match=where):
+            read_tolerance(bad)
+    bad.with_suffix(".json").write_text("[1.0]")
+    with pytest.raises(ValueError, match="expected a table with a default limit"):
+        read_tolerance(bad.with_suffix(".json"))
+
+
+def test_texture_limits_read_round_trip_and_bound_each_light_s_sparkle(tmp_path):
+    """``[texture]`` in a tolerance file bounds |ΔG|, |ΔSG| and, under each of the three
+    lights, |ΔSi| and |ΔSa|; what is not listed is not judged."""
+    path = tmp_path / "shop.toml"
+    path.write_text('[default]\nde00 = 1.0\n[texture]\nG = 0.8\nSi = 1.5\n')
+    tol = read_tolerance(path)
+    assert tol.texture == TextureLimit(G=0.8, Si=1.5)
+    assert Tolerance.from_dict(tol.to_dict()) == tol
+    assert read_tolerance("refinish").to_dict()["texture"] == {"G": 1.0, "SG": 0.5, "Si": 1.0}
+    reference = {"Sa15": 5.0, "Si15": 5.0, "Si45": 5.0, "Si75": 5.0, "SG": 1.6, "G": 3.0}
+    sample = {"Sa15": 9.0, "Si15": 6.8, "Si45": 5.3, "Si75": 3.8, "SG": 4.0, "G": 3.4}
+    shares = tol.texture_share(reference, sample)
+    assert shares == pytest.approx({"Si15": 1.2, "Si45": 0.2, "Si75": 0.8, "G": 0.5})
+    assert Tolerance("colour", Limit(de00=1.0)).texture_share(reference, sample) == {}
+
+
+def test_compare_judges_texture_where_the_tolerance_bounds_it():
+    """The same colour, one unit of graininess apart and a half: the refinish tolerance
+    (|ΔG| ≤ 1) fails it on texture alone, naming G; the colour-only de00-1.0 passes it."""
+    levels = {"45as15": 100, "45as45": 50, "45as110": 20}
+    reference = _grey_metallic(levels)
+    reference = Measurement(**{**vars(reference), "texture": {"SG": 2.0, "G": 3.0}})
+    grainier = Measurement(**{**vars(reference), "texture": {"SG": 2.1, "G": 4.5}})
+    judged = compare(reference, grainier, "refinish")
+    assert judged.passed.all() and not judged.all_pass
+    report = judged.to_dict()
+    assert report["failing_geometries"] == [] and report["failing_texture"] == ["G"]
+    assert report["texture_limit_share"] == pytest.approx({"SG": 0.2, "G": 1.5})
+    assert report["limit_share_max"] == pytest.approx(1.5) and not report["pass"]
+    assert compare(reference, grainier, "de00-1.0").all_pass
+    assert compare(reference, reference, "refinish").all_pass
+    assert tolerance_preset("refinish").texture is not None

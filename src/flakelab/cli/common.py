@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import typer
+from rich import box
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import (
@@ -21,6 +22,7 @@ from rich.progress import (
     TextColumn,
     TimeRemainingColumn,
 )
+from rich.table import Table
 
 from flakelab.errors import FlakelabError
 
@@ -208,3 +210,20 @@ def draw_side_by_side(readings, labels: list[str], path, title: str, **options) 
     except ValueError as error:
         raise FlakelabError(f"--render: {error}") from None
     errors.print(f"wrote {path}", highlight=False)
+
+
+def texture_table(
+    label: str, delta: dict[str, float], limits: dict[str, float], failing: list[str]
+) -> Table:
+    """Texture differences ``delta`` under a row ``label``, the tolerance's ``limits`` below
+    the readings it bounds, failing readings in red (the match's and compare's tables)."""
+    table = Table(box=box.SIMPLE, show_header=True)
+    table.add_column("texture")
+    for name in delta:
+        table.add_column(name, justify="right")
+    table.add_row(
+        label, *(f"[red]{v:+.2f}[/]" if k in failing else f"{v:+.2f}" for k, v in delta.items())
+    )
+    if limits:
+        table.add_row("limit ±", *(f"{limits[k]:.2f}" if k in limits else "" for k in delta))
+    return table

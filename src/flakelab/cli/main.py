@@ -26,6 +26,7 @@ from flakelab.cli.common import (
     lights_option,
     progress_bar,
     reports_errors,
+    texture_table,
 )
 from flakelab.cli.learning import cases_app, model_app, train
 from flakelab.cli.matching import correct_command, match_command, weigh_command
@@ -34,7 +35,7 @@ from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
 from flakelab.core.difference import METAMERISM_ILLUMINANTS
-from flakelab.core.measurement import Measurement
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
 from flakelab.io import read_measurement, read_measurements, read_tolerance, write_measurements
@@ -167,6 +168,7 @@ def compare(
 def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
     shared = [g["name"] for g in report["geometries"]]
     failing = [g["name"] for g in report["geometries"] if not g["pass"]]
+    failing += [f"texture {k}" for k in report["failing_texture"]]
     verdict = "FAIL at " + ", ".join(failing) if failing else "PASS"
     labels = [f"reference: {ref.sample}", f"sample: {smp.sample}"]
     title = f"{smp.sample} vs {ref.sample}: {verdict}"
@@ -204,11 +206,8 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
             verdict,
         )
     console.print(table)
-    verdict = (
-        "[green]PASS[/]"
-        if report["pass"]
-        else "[bold red]FAIL[/] at " + ", ".join(report["failing_geometries"])
-    )
+    failures = report["failing_geometries"] + [f"texture {k}" for k in report["failing_texture"]]
+    verdict = "[green]PASS[/]" if report["pass"] else "[bold red]FAIL[/] at " + ", ".join(failures)
     console.print(
         f"ΔE00 max {report['de00_max']:.2f}, mean {report['de00_mean']:.2f}   "
         f"flop index {_fmt(report['flop_index_reference'])} → "
@@ -220,9 +219,11 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
     against = f"ISO 18314-4, ΔE00 from {report['conditions']}, worst geometry"
     console.print(f"metamerism index ({against}): {worst}", highlight=False)
     if report["texture_difference"]:
+        bounds = dict(zip(TEXTURE_READINGS, tol.texture_bounds(), strict=True))
+        limits = {k: bounds[k] for k in report["texture_limit_share"]}
+        texture = report["texture_difference"]
         console.print(
-            "texture Δ: "
-            + "  ".join(f"{k} {v:+.2f}" for k, v in report["texture_difference"].items())
+            texture_table("sample − reference", texture, limits, report["failing_texture"])
         )
 
 

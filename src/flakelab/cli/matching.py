@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     progress_bar,
+    texture_table,
 )
 from flakelab.cli.learning import (
     DatabaseOption,
@@ -407,11 +408,8 @@ def _print_match(report: dict) -> None:
         f"tolerance {report['tolerance']})"
     )
     for rank, c in enumerate(report["candidates"], start=1):
-        verdict = (
-            "[green]PASS[/]"
-            if c["passes"]
-            else "[red]FAIL[/] at " + ", ".join(c["failing_geometries"])
-        )
+        failures = c["failing_geometries"] + [f"texture {k}" for k in c["failing_texture"]]
+        verdict = "[green]PASS[/]" if c["passes"] else "[red]FAIL[/] at " + ", ".join(failures)
         header = (
             f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}"
             f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"
@@ -449,14 +447,12 @@ def _print_match(report: dict) -> None:
                 highlight=False,
             )
         if c["texture_delta"]:
-            texture = Table(box=box.SIMPLE, show_header=True)
-            texture.add_column("texture")
-            for name in c["texture_delta"]:
-                texture.add_column(name, justify="right")
-            texture.add_row(
-                "predicted − target", *(f"{v:+.2f}" for v in c["texture_delta"].values())
+            limits = {k: report["texture_limits"][k] for k in c["texture_limit_share"]}
+            console.print(
+                texture_table(
+                    "predicted − target", c["texture_delta"], limits, c["failing_texture"]
+                )
             )
-            console.print(texture)
         extra = f"model: {c['model']}; {_rounding_text(c)}"
         if c["novel_toners"]:
             extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"

@@ -76,6 +76,12 @@ class Comparison:
     tolerance: Tolerance
     conditions: Conditions
     metamerism: dict[str, NDArray[np.float64]]  # per test illuminant and geometry
+    # each texture reading the tolerance bounds and both hold: |Δ| as a share of its limit
+    texture_share: dict[str, float]
+
+    @property
+    def failing_texture(self) -> list[str]:
+        return [k for k, share in self.texture_share.items() if share > 1]
 
     @property
     def de00_max(self) -> float:
@@ -87,7 +93,8 @@ class Comparison:
 
     @property
     def all_pass(self) -> bool:
-        return bool(self.passed.all())
+        """Every geometry and every texture reading the tolerance bounds passes."""
+        return bool(self.passed.all()) and not self.failing_texture
 
     def to_dict(self) -> dict[str, Any]:
         rows = [
@@ -123,7 +130,7 @@ class Comparison:
             "geometries": rows,
             "de00_max": self.de00_max,
             "de00_mean": self.de00_mean,
-            "limit_share_max": float(self.limit_share.max()),
+            "limit_share_max": float(max([self.limit_share.max(), *self.texture_share.values()])),
             "metamerism_index_max": worst_per_light(self.metamerism),
             "pass": self.all_pass,
             "failing_geometries": [
@@ -132,6 +139,8 @@ class Comparison:
             "flop_index_reference": flop_ref,
             "flop_index_sample": flop_smp,
             "texture_difference": texture,
+            "texture_limit_share": self.texture_share,
+            "failing_texture": self.failing_texture,
         }
 
 
@@ -178,4 +187,5 @@ def compare(
         metamerism=metamerism_indices(
             ref.storage_spectra(common), smp.storage_spectra(common), conditions, lights
         ),
+        texture_share=tolerance.texture_share(reference.texture, sample.texture),
     )

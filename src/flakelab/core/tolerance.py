@@ -1,4 +1,5 @@
-"""Multi-angle tolerances: per-geometry limits on ΔE00 or on |ΔL*|, |ΔC*|, |ΔH*| → pass/fail."""
+"""Multi-angle tolerances: per-geometry limits on ΔE00 or on |ΔL*|, |ΔC*|, |ΔH*|, and limits
+on texture differences (|ΔG|, |ΔSG|, |ΔSi|, |ΔSa|) → pass/fail."""
 
 from __future__ import annotations
 
@@ -11,10 +12,32 @@ from numpy.typing import NDArray
 
 from flakelab.core.difference import delta_E_CIE2000, delta_LCH
 from flakelab.core.geometry import Geometry
+from flakelab.core.measurement import TEXTURE_READINGS
 
-__all__ = ["Limit", "Tolerance", "TOLERANCE_PRESETS", "tolerance_preset"]
+__all__ = ["Limit", "TextureLimit", "Tolerance", "TOLERANCE_PRESETS", "tolerance_preset"]
 
 _LIMIT_FIELDS = ("de00", "dL", "dC", "dH")
+_TEXTURE_FIELDS = ("G", "SG", "Si", "Sa")
+
+
+def _check_limits(limits: Mapping[str, float | None]) -> None:
+    if all(v is None for v in limits.values()):
+        raise ValueError(f"expected at least one of {', '.join(limits)}, got none")
+    for k, v in limits.items():
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise ValueError(f"expected a positive limit for {k}, got {v!r}")
+
+
+def _limits_from_dict(cls, fields: tuple[str, ...], data: Mapping[str, Any], where: str):
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{where}: expected a table of limits ({', '.join(fields)}), got {data!r}")
+    unknown = [k for k in data if k not in fields]
+    if unknown:
+        raise ValueError(f"{where}: expected keys among {', '.join(fields)}, got {unknown}")
+    try:
+        return cls(**{k: None if v is None else float(v) for k, v in data.items()})
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{where}: {error}") from None
 
 
 @dataclass(frozen=True)
@@ -31,27 +54,67 @@ class Limit:
     dH: float | None = None
 
     def __post_init__(self) -> None:
-        values = [getattr(self, k) for k in _LIMIT_FIELDS]
-        if all(v is None for v in values):
-            raise ValueError(f"expected at least one of {', '.join(_LIMIT_FIELDS)}, got none")
-        for k, v in zip(_LIMIT_FIELDS, values, strict=True):
-            if v is not None and not (np.isfinite(v) and v > 0):
-                raise ValueError(f"expected a positive limit for {k}, got {v!r}")
+        _check_limits({k: getattr(self, k) for k in _LIMIT_FIELDS})
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "limit") -> Limit:
-        unknown = [k for k in data if k not in _LIMIT_FIELDS]
-        if unknown:
-            raise ValueError(
-                f"{where}: expected keys among {', '.join(_LIMIT_FIELDS)}, got {unknown}"
-            )
-        try:
-            return cls(**{k: None if v is None else float(v) for k, v in data.items()})
-        except (TypeError, ValueError) as error:
-            raise ValueError(f"{where}: {error}") from None
+        return _limits_from_dict(cls, _LIMIT_FIELDS, data, where)
 
     def to_dict(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in _LIMIT_FIELDS if getattr(self, k) is not None}
+
+
+@dataclass(frozen=True)
+class TextureLimit:
+    """Upper bounds on texture differences; ``None`` leaves a reading unchecked.
+
+    ``G`` bounds |ΔG| (graininess), ``SG`` |ΔSG| (sparkle grade), ``Si`` and ``Sa`` the
+    sparkle intensity's and area's |ΔSi|, |ΔSa| under each of the directional lights.
+
+    Examples
+    --------
+    >>> TextureLimit(G=1.0, Si=2.0).bounds().tolist()
+    [inf, 2.0, inf, 2.0, inf, 2.0, inf, 1.0]
+    """
+
+    G: float | None = None
+    SG: float | None = None
+    Si: float | None = None
+    Sa: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_limits({k: getattr(self, k) for k in _TEXTURE_FIELDS})
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "texture") -> TextureLimit:
+        return _limits_from_dict(cls, _TEXTURE_FIELDS, data, where)
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in _TEXTURE_FIELDS if getattr(self, k) is not None}
+
+    def bounds(self) -> NDArray[np.float64]:
+        """The limit on each of :data:`~flakelab.core.measurement.TEXTURE_READINGS` (Sa15 →
+        ``Sa``), ∞ where unchecked."""
+        limits = [getattr(self, reading.rstrip("0123456789")) for reading in TEXTURE_READINGS]
+        return np.array([np.inf if v is None else v for v in limits])
+
+    def share(
+        self, reference: Mapping[str, float], sample: Mapping[str, float]
+    ) -> dict[str, float]:
+        """|Δ| of each reading these limits bound and both readings hold, as a share of its
+        limit (≤ 1 passes).
+
+        Examples
+        --------
+        >>> TextureLimit(G=1.0).share({"G": 3.0, "SG": 2.0}, {"G": 4.5, "SG": 9.0})
+        {'G': 1.5}
+        """
+        bounds = dict(zip(TEXTURE_READINGS, self.bounds(), strict=True))
+        return {
+            k: abs(float(sample[k]) - float(reference[k])) / bounds[k]
+            for k in TEXTURE_READINGS
+            if k in reference and k in sample and np.isfinite(bounds[k])
+        }
 
 
 @dataclass(frozen=True)
@@ -72,6 +135,7 @@ class Tolerance:
     kL: float = 1.0
     kC: float = 1.0
     kH: float = 1.0
+    texture: TextureLimit | None = None  # None: colour alone is judged
 
     def __post_init__(self) -> None:
         normalised = {Geometry.parse(k).name: v for k, v in self.per_geometry.items()}
@@ -110,6 +174,21 @@ class Tolerance:
         """
         return np.max(_observed(de00, dLCH) / self.bounds(geometries), axis=-1)
 
+    def texture_bounds(self) -> NDArray[np.float64]:
+        """The limit on each texture reading, in
+        :data:`~flakelab.core.measurement.TEXTURE_READINGS` order; ∞ where unchecked."""
+        return (
+            np.full(len(TEXTURE_READINGS), np.inf)
+            if self.texture is None
+            else (self.texture.bounds())
+        )
+
+    def texture_share(
+        self, reference: Mapping[str, float], sample: Mapping[str, float]
+    ) -> dict[str, float]:
+        """:meth:`TextureLimit.share` of this tolerance's texture limits; empty without."""
+        return {} if self.texture is None else self.texture.share(reference, sample)
+
     def judge(
         self, geometries: list[str] | tuple, Lab_reference: NDArray, Lab_sample: NDArray
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
@@ -130,15 +209,23 @@ class Tolerance:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "tolerance") -> Tolerance:
-        """Build from ``{name, description, default: {...}, geometries: {name: {...}}, kL…}``."""
-        allowed = {"name", "description", "default", "geometries", "kL", "kC", "kH"}
+        """Build from ``{name, description, default: {...}, geometries: {name: {...}}, kL…,
+        texture: {G, SG, Si, Sa}}``."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"{source}: expected a table with a default limit, got {data!r}")
+        allowed = {"name", "description", "default", "geometries", "kL", "kC", "kH", "texture"}
         unknown = [k for k in data if k not in allowed]
         if unknown:
             raise ValueError(f"{source}: expected keys among {sorted(allowed)}, got {unknown}")
         if "default" not in data:
             raise ValueError(f"{source}: default: missing (e.g. default = {{ de00 = 1.0 }})")
         geometries = {}
-        for key, value in dict(data.get("geometries", {})).items():
+        per_geometry = data.get("geometries", {})
+        if not isinstance(per_geometry, Mapping):
+            raise ValueError(
+                f"{source}: geometries: expected a table of geometries, got {per_geometry!r}"
+            )
+        for key, value in per_geometry.items():
             try:
                 name = Geometry.parse(key).name
             except ValueError as error:
@@ -150,12 +237,16 @@ class Tolerance:
             if not isinstance(value, int | float) or value <= 0:
                 raise ValueError(f"{source}: {k}: expected a positive number, got {value!r}")
             weights[k] = float(value)
+        texture = data.get("texture")
+        if texture is not None:
+            texture = TextureLimit.from_dict(texture, f"{source}: texture")
         return cls(
             name=str(data.get("name", source)),
             default=Limit.from_dict(data["default"], f"{source}: default"),
             per_geometry=geometries,
             description=str(data.get("description", "")),
             **weights,
+            texture=texture,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -167,6 +258,7 @@ class Tolerance:
             "kH": self.kH,
             "default": self.default.to_dict(),
             "geometries": {k: v.to_dict() for k, v in self.per_geometry.items()},
+            **({} if self.texture is None else {"texture": self.texture.to_dict()}),
         }
 
 
@@ -177,6 +269,14 @@ def _observed(de00: NDArray | list, dLCH: NDArray) -> NDArray[np.float64]:
 
 
 _NEAR_SPECULAR = ("15as-15", "15as15", "45as-15", "45as15")
+
+REFINISH_TEXTURE = TextureLimit(G=1.0, SG=0.5, Si=1.0)
+"""The texture limits of the ``refinish`` tolerance, on flakelab's reading scales
+(:mod:`flakelab.texture.readings`; no instrument publishes its own). About seven times the
+largest differences between a factory and a shop spray-out of one formulation in the
+generated world (99th percentiles |ΔG| 0.11, |ΔSi| 0.14, |ΔSG| 0.07) and twenty times the
+shipped model's texture error (mean |ΔG| 0.04, |ΔSi| 0.06, |ΔSG| 0.03): a recipe fails on
+texture for its flakes, not for noise (``python benchmarks/texture_tolerance.py``)."""
 
 TOLERANCE_PRESETS: dict[str, Tolerance] = {
     t.name: t
@@ -191,8 +291,9 @@ TOLERANCE_PRESETS: dict[str, Tolerance] = {
             Limit(de00=1.0),
             {**{g: Limit(de00=1.5) for g in _NEAR_SPECULAR}, "45as25": Limit(de00=1.2)},
             description="flakelab's body-shop default: ΔE00 1.0, widened to 1.5 near specular "
-            "and 1.2 at 45as25 where flake sparkle makes readings less repeatable. "
-            "Not any OEM's specification.",
+            "and 1.2 at 45as25 where flake sparkle makes readings less repeatable; texture "
+            "|ΔG| ≤ 1.0, |ΔSi| ≤ 1.0, |ΔSG| ≤ 0.5. Not any OEM's specification.",
+            texture=REFINISH_TEXTURE,
         ),
         Tolerance(
             "components",

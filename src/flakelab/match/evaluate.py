@@ -1,10 +1,12 @@
 """Evaluation harness: hidden targets in the generator's world, matched, sprayed, judged.
 
 For each hidden formulation: the target is that paint sprayed with the factory's batches and
-application and measured; the matcher proposes a recipe; the recipe is "sprayed" with the
-shop's batches and a fresh application, measured and judged (ΔE00 ≤ 1.0 at every geometry,
-or another tolerance, which the matcher and the correction then aim at too); a failed spray
-gets one correction and is sprayed again. The oracle is the hidden
+application and measured, spectra and texture readings; the matcher proposes a recipe; the
+recipe is "sprayed" with the shop's batches and a fresh application, measured and judged
+(ΔE00 ≤ 1.0 at every geometry, or another tolerance, which the matcher and the correction
+then aim at too, its texture limits included); a failed spray gets one correction and is
+sprayed again. Whatever the tolerance, the report says how many first spray-outs keep within
+the refinish tolerance's texture limits. The oracle is the hidden
 formulation itself sprayed and judged the same way — the limit that spray and measurement
 noise set. The respray is the car's own paint (the factory's batches) sprayed again: what a
 correction that removed every batch difference would still face, each spray's application.
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,7 +32,9 @@ from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSe
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, metamerism_indices, worst_light
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.tolerance import Tolerance, tolerance_preset
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.tolerance import REFINISH_TEXTURE, Tolerance, tolerance_preset
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.objective import OBJECTIVE_DEFAULT
@@ -92,17 +96,31 @@ class Trial:
     car: Variation
     shop: Variation
     streams: list[np.random.Generator]
+    texture: dict[str, float] = field(default_factory=dict)  # the target's readings
+
+    def measurement(self) -> Measurement:
+        """The target as the shop's instrument gives it: spectra and texture readings."""
+        geometries = self.world.geometries
+        return Measurement("target", geometries, WAVELENGTHS, self.target, texture=self.texture)
 
     def spray(
         self, x: NDArray, stream: np.random.Generator, batches: Variation | None = None
     ) -> NDArray:
         """``x`` mixed from the shop's batches (or ``batches``), sprayed once and measured
         ``[G, 31]``."""
+        return self.sprayed(x, stream, batches)[0]
+
+    def sprayed(
+        self, x: NDArray, stream: np.random.Generator, batches: Variation | None = None
+    ) -> tuple[NDArray, dict[str, float]]:
+        """:meth:`spray`'s reading and the same spray-out's texture readings."""
         batches = batches or self.shop
         film, spread = self.world.application(1, stream)
         variation = Variation(batches.strength, batches.hue_shift, film, spread)
-        R, _ = self.world.appearance(x[None], variation)
-        return self.world.measure(R, stream)[0]
+        R, texture = self.world.appearance(x[None], variation)
+        return self.world.measure(R, stream)[0], dict(
+            zip(TEXTURE_READINGS, texture[0], strict=True)
+        )
 
     def unsprayed(self, x: NDArray) -> NDArray:
         """``x`` mixed from the shop's batches at the shop's mean application, read without
@@ -118,8 +136,9 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     streams = rng.spawn(3)
     # the respray's stream comes from the oracle's, so that adding it changed no other spray
     streams.append(streams[2].spawn(1)[0])
-    R_target, _ = world.appearance(x_hidden[None], oem)
-    return Trial(world, world.measure(R_target, rng)[0], oem, shop, streams)
+    R_target, texture = world.appearance(x_hidden[None], oem)
+    readings = dict(zip(TEXTURE_READINGS, texture[0].tolist(), strict=True))
+    return Trial(world, world.measure(R_target, rng)[0], oem, shop, streams, readings)
 
 
 def worst_metamerism(a: NDArray, b: NDArray, lights: tuple[str, ...] | None = None) -> float:
@@ -160,12 +179,17 @@ def _one(
     t = trial(world, x_hidden, rng)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
 
-    def share(sprayed: NDArray) -> float:
-        return worst_share(tolerance, forward.geometries, t.target, sprayed)
+    def share(sprayed: tuple[NDArray, dict]) -> float:
+        reading, texture = sprayed
+        colour = worst_share(tolerance, forward.geometries, t.target, reading)
+        return max([colour, *tolerance.texture_share(t.texture, texture).values()])
+
+    def texture_share(sprayed: tuple[NDArray, dict]) -> float:  # by refinish's limits
+        return max(REFINISH_TEXTURE.share(t.texture, sprayed[1]).values(), default=0.0)
 
     start = time.perf_counter()
     result = match(
-        t.target,
+        t.measurement(),
         forward,
         effect,
         tolerance=tolerance,
@@ -177,7 +201,7 @@ def _one(
     best = result.candidates[0]
     mixed = as_weighed(forward, best.fractions, scale)
     x = recipe_vector(forward, mixed)
-    first = t.spray(x, first_rng)
+    first = t.sprayed(x, first_rng)
     first_share = corrected_share = share(first)
     corrected_metamerism = None
     if first_share > 1.0:
@@ -185,7 +209,7 @@ def _one(
             forward,
             t.target,
             mixed,
-            first,
+            first[0],
             mode="reformulate",
             library=world.library,
             habits=habits,
@@ -195,17 +219,19 @@ def _one(
             physics_every=settings.physics_every,
         ).fractions
         recipe = as_weighed(forward, recipe, scale)
-        corrected = t.spray(recipe_vector(forward, recipe), correction_rng)
+        corrected = t.sprayed(recipe_vector(forward, recipe), correction_rng)
         corrected_share = share(corrected)
-        corrected_metamerism = worst_metamerism(t.target, corrected, settings.lights)
-    oracle = t.spray(x_hidden, oracle_rng)
-    respray_share = share(t.spray(x_hidden, respray_rng, batches=t.car))
+        corrected_metamerism = worst_metamerism(t.target, corrected[0], settings.lights)
+    oracle = t.sprayed(x_hidden, oracle_rng)
+    respray_share = share(t.sprayed(x_hidden, respray_rng, batches=t.car))
     return {
-        "first_de00": worst_de00(t.target, first),
-        "first_metamerism": worst_metamerism(t.target, first, settings.lights),
+        "first_de00": worst_de00(t.target, first[0]),
+        "first_metamerism": worst_metamerism(t.target, first[0], settings.lights),
         "corrected_metamerism": corrected_metamerism,
-        "oracle_metamerism": worst_metamerism(t.target, oracle, settings.lights),
-        "oracle_de00": worst_de00(t.target, oracle),
+        "oracle_metamerism": worst_metamerism(t.target, oracle[0], settings.lights),
+        "oracle_de00": worst_de00(t.target, oracle[0]),
+        "first_texture": texture_share(first),
+        "oracle_texture": texture_share(oracle),
         "first": first_share,
         "corrected": min(first_share, corrected_share),
         "oracle": share(oracle),
@@ -289,6 +315,12 @@ def evaluate_matching(
         "after_one_correction_vs_oracle": ratio(corrected, oracle),
         "novel_toner_first_shot_vs_oracle": ratio(novel_first, novel_oracle),
         "first_shot_de00_median": float(np.median([r["first_de00"] for r in rows])),
+        # first spray-outs within the refinish tolerance's texture limits, whatever judged
+        "first_shot_texture_within": share(rows, "first_texture"),
+        "oracle_texture_within": share(rows, "oracle_texture"),
+        "first_shot_texture_share_p95": float(
+            np.percentile([r["first_texture"] for r in rows], 95)
+        ),
         "first_shot_metamerism_median": float(np.median([r["first_metamerism"] for r in rows])),
         "oracle_metamerism_median": float(np.median([r["oracle_metamerism"] for r in rows])),
         # the failed first shots, their spray-outs before and after the correction

@@ -118,7 +118,7 @@ class Candidate:
     dLCH: NDArray
     texture: dict[str, float]
     texture_delta: dict[str, float]
-    passes: bool
+    passes: bool  # at every geometry and every texture reading the tolerance bounds
     failing: list[str]
     model: str
     novel: list[str]
@@ -128,6 +128,16 @@ class Candidate:
     spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
     # the metamerism index against the target per test illuminant and geometry (ISO 18314-4)
     metamerism: dict[str, NDArray] = field(default_factory=dict)
+    # each texture reading the tolerance bounds: |Δ| as a share of its limit (≤ 1 passes)
+    texture_share: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def failing_texture(self) -> list[str]:
+        return [k for k, share in self.texture_share.items() if share > 1]
+
+    def failures(self) -> list[str]:
+        """What fails the tolerance, as a colorist reads it: geometries, then ``texture G``…"""
+        return self.failing + [f"texture {k}" for k in self.failing_texture]
 
     def as_measurement(self, sample: str) -> Measurement:
         """The candidate's predicted reading, as the instrument would give it (to render, plot
@@ -153,11 +163,15 @@ class Candidate:
             "in_model_support": self.in_support,
             "passes": self.passes,
             "failing_geometries": self.failing,
+            "failing_texture": self.failing_texture,
             "de00_max": float(self.de00.max()),
             "de00_mean": float(self.de00.mean()),
-            "limit_share_max": round(float(self.limit_share.max()), 3),
+            "limit_share_max": round(
+                max([self.limit_share.max(), *self.texture_share.values()]), 3
+            ),
             "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
+            "texture_limit_share": {k: round(v, 3) for k, v in self.texture_share.items()},
             "metamerism_index": {k: v.round(3).tolist() for k, v in self.metamerism.items()},
             "metamerism_index_max": worst_per_light(self.metamerism),
             "metamer": is_metamer(self.metamerism),
@@ -173,12 +187,14 @@ class MatchResult:
     seconds: float
     subsets_tried: int
     notes: list[str] = field(default_factory=list)
+    texture_limits: dict[str, float] = field(default_factory=dict)  # the tolerance's, if any
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "target": self.target,
             "geometries": list(self.geometries),
             "tolerance": self.tolerance,
+            "texture_limits": self.texture_limits,
             "seconds": round(self.seconds, 3),
             "subsets_tried": self.subsets_tried,
             "notes": self.notes,
@@ -634,7 +650,7 @@ def _match(
     if candidates and not candidates[0].passes:
         notes.append(
             "no candidate passes the tolerance: best achievable shown; fails at "
-            + ", ".join(candidates[0].failing)
+            + ", ".join(candidates[0].failures())
         )
     if candidates and (note := _metamer_note(candidates[0], settings)):
         notes.append(note)
@@ -646,6 +662,11 @@ def _match(
         time.perf_counter() - start,
         tried,
         notes,
+        {
+            k: float(b)
+            for k, b in zip(TEXTURE_READINGS, tolerance.texture_bounds(), strict=True)
+            if np.isfinite(b)
+        },  # fmt: skip
     )
 
 
@@ -763,14 +784,21 @@ def _judge(
     lab = reflectance_to_Lab(R) + (0.0 if offset is None else offset)
     de00, dlch, passed = tolerance.judge(forward.geometries, target_lab[None], lab)
     share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
-    score = share.max(1) + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
+    has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
+    # [N, judged readings]: a texture limit ranks as one more geometry's would
+    bounds = tolerance.texture_bounds()
+    judged = np.isfinite(bounds) & bool(has_texture)
+    texture_share = np.zeros((len(x), judged.sum()))
+    if has_texture:
+        target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
+        texture_share = np.abs(tex - target_tex)[:, judged] / bounds[judged]
+    worst = np.max(np.concatenate([share, texture_share], axis=1), axis=1)
+    score = worst + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
     # [N, G] per test illuminant
     metamerism = metamerism_indices(spectra, R, tests=settings.lights)
     if settings.metamerism:
         score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
-    has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
     if has_texture:
-        target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
         score = score + settings.texture_weight * np.abs(tex[:, -2:] - target_tex[-2:]).sum(1)
     outside = outside_support(x, effect, settings.effect_floor)
     chosen, seen = [], set()
@@ -805,7 +833,7 @@ def _judge(
                 texture_delta={}
                 if not has_texture
                 else {k: float(tex[row, i] - texture[k]) for i, k in enumerate(TEXTURE_READINGS)},
-                passes=not failing,
+                passes=not failing and bool(np.all(texture_share[row] <= 1)),
                 failing=failing,
                 model=forward.name,
                 novel=[n for n in fractions if n in forward.novel],
@@ -814,6 +842,13 @@ def _judge(
                 spread=None if spread is None else spread[i],
                 limit_share=share[row],
                 metamerism={light: index[row] for light, index in metamerism.items()},
+                texture_share=dict(
+                    zip(
+                        np.array(TEXTURE_READINGS)[judged].tolist(),
+                        texture_share[row].tolist(),
+                        strict=True,
+                    )
+                ),
             )
         )
     return out
