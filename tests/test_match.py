@@ -1069,6 +1069,14 @@ def test_harness_judges_by_its_tolerance(hybrid):
                             tolerance=wide)  # fmt: skip
     assert run["tolerance"] == "wide"
     assert run["first_shot_success"] == run["oracle_success"] == 1.0
+    # the targets carry their texture: a graininess limit no effect paint's spray can meet
+    # fails every effect target, first shot and oracle alike; a solid reads no texture
+    tight = replace(wide, texture=TextureLimit(G=1e-6))
+    run = evaluate_matching(world, hybrid, effect, targets=3, seed=3, settings=hasty,
+                            tolerance=tight)  # fmt: skip
+    hidden = world.formulations(3, np.random.default_rng(3))
+    solid = np.mean(hybrid.library.paint_families(hidden) == "solid")
+    assert solid < 1 and run["first_shot_success"] == run["oracle_success"] == solid
 
 
 def test_matcher_rebuilds_a_pearl_over_an_aluminium_base(hybrid):

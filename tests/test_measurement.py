@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from flakelab.core import Geometry, Limit, Measurement, Tolerance, compare, flop_index
-from flakelab.core.tolerance import TextureLimit, tolerance_preset
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.tolerance import TextureLimit, tolerance_preset
 from flakelab.io import read_tolerance
 
 
@@ -101,7 +101,7 @@ def test_texture_limits_read_round_trip_and_bound_each_light_s_sparkle(tmp_path)
     """``[texture]`` in a tolerance file bounds |ΔG|, |ΔSG| and, under each of the three
     lights, |ΔSi| and |ΔSa|; what is not listed is not judged."""
     path = tmp_path / "shop.toml"
-    path.write_text('[default]\nde00 = 1.0\n[texture]\nG = 0.8\nSi = 1.5\n')
+    path.write_text("[default]\nde00 = 1.0\n[texture]\nG = 0.8\nSi = 1.5\n")
     tol = read_tolerance(path)
     assert tol.texture == TextureLimit(G=0.8, Si=1.5)
     assert Tolerance.from_dict(tol.to_dict()) == tol

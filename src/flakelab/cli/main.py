@@ -35,7 +35,7 @@ from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
 from flakelab.core.difference import METAMERISM_ILLUMINANTS
-from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.measurement import Measurement
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
 from flakelab.io import read_measurement, read_measurements, read_tolerance, write_measurements
@@ -219,8 +219,7 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
     against = f"ISO 18314-4, ΔE00 from {report['conditions']}, worst geometry"
     console.print(f"metamerism index ({against}): {worst}", highlight=False)
     if report["texture_difference"]:
-        bounds = dict(zip(TEXTURE_READINGS, tol.texture_bounds(), strict=True))
-        limits = {k: bounds[k] for k in report["texture_limit_share"]}
+        limits = {k: tol.texture_limits()[k] for k in report["texture_limit_share"]}
         texture = report["texture_difference"]
         console.print(
             texture_table("sample − reference", texture, limits, report["failing_texture"])

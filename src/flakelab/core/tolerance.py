@@ -174,14 +174,12 @@ class Tolerance:
         """
         return np.max(_observed(de00, dLCH) / self.bounds(geometries), axis=-1)
 
-    def texture_bounds(self) -> NDArray[np.float64]:
-        """The limit on each texture reading, in
-        :data:`~flakelab.core.measurement.TEXTURE_READINGS` order; ∞ where unchecked."""
-        return (
-            np.full(len(TEXTURE_READINGS), np.inf)
-            if self.texture is None
-            else (self.texture.bounds())
-        )
+    def texture_limits(self) -> dict[str, float]:
+        """The limit on each texture reading this tolerance bounds, by reading (Si15, …)."""
+        if self.texture is None:
+            return {}
+        bounds = zip(TEXTURE_READINGS, self.texture.bounds().tolist(), strict=True)
+        return {k: bound for k, bound in bounds if np.isfinite(bound)}
 
     def texture_share(
         self, reference: Mapping[str, float], sample: Mapping[str, float]
@@ -272,11 +270,11 @@ _NEAR_SPECULAR = ("15as-15", "15as15", "45as-15", "45as15")
 
 REFINISH_TEXTURE = TextureLimit(G=1.0, SG=0.5, Si=1.0)
 """The texture limits of the ``refinish`` tolerance, on flakelab's reading scales
-(:mod:`flakelab.texture.readings`; no instrument publishes its own). About seven times the
+(:mod:`flakelab.texture.readings`; no instrument publishes its own). Seven to ten times the
 largest differences between a factory and a shop spray-out of one formulation in the
-generated world (99th percentiles |ΔG| 0.11, |ΔSi| 0.14, |ΔSG| 0.07) and twenty times the
-shipped model's texture error (mean |ΔG| 0.04, |ΔSi| 0.06, |ΔSG| 0.03): a recipe fails on
-texture for its flakes, not for noise (``python benchmarks/texture_tolerance.py``)."""
+generated world (99th percentiles |ΔG| 0.11, |ΔSi| 0.14, |ΔSG| 0.07) and about twenty times
+the shipped model's texture error (mean |ΔG| 0.04, |ΔSi| 0.05, |ΔSG| 0.03): a recipe fails
+on texture for its flakes, not for noise (``python benchmarks/texture_tolerance.py``)."""
 
 TOLERANCE_PRESETS: dict[str, Tolerance] = {
     t.name: t

@@ -662,11 +662,7 @@ def _match(
         time.perf_counter() - start,
         tried,
         notes,
-        {
-            k: float(b)
-            for k, b in zip(TEXTURE_READINGS, tolerance.texture_bounds(), strict=True)
-            if np.isfinite(b)
-        },  # fmt: skip
+        tolerance.texture_limits(),
     )
 
 
@@ -786,12 +782,12 @@ def _judge(
     share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
     has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
     # [N, judged readings]: a texture limit ranks as one more geometry's would
-    bounds = tolerance.texture_bounds()
-    judged = np.isfinite(bounds) & bool(has_texture)
-    texture_share = np.zeros((len(x), judged.sum()))
+    limits = tolerance.texture_limits() if has_texture else {}
+    texture_share = np.zeros((len(x), len(limits)))
     if has_texture:
         target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
-        texture_share = np.abs(tex - target_tex)[:, judged] / bounds[judged]
+        judged = [TEXTURE_READINGS.index(k) for k in limits]
+        texture_share = np.abs(tex - target_tex)[:, judged] / np.array(list(limits.values()))
     worst = np.max(np.concatenate([share, texture_share], axis=1), axis=1)
     score = worst + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
     # [N, G] per test illuminant
@@ -842,13 +838,7 @@ def _judge(
                 spread=None if spread is None else spread[i],
                 limit_share=share[row],
                 metamerism={light: index[row] for light, index in metamerism.items()},
-                texture_share=dict(
-                    zip(
-                        np.array(TEXTURE_READINGS)[judged].tolist(),
-                        texture_share[row].tolist(),
-                        strict=True,
-                    )
-                ),
+                texture_share=dict(zip(limits, texture_share[row].tolist(), strict=True)),
             )
         )
     return out

@@ -1,0 +1,114 @@
+"""Texture limits against what varies by itself: where the refinish tolerance's sit.
+
+A texture limit should fail a recipe for its flakes, not for the spray gun or the model. For
+each bounded reading (G, SG, Si and Sa under every light) this prints, in the generated
+world of the demo library:
+
+* ``respray``: the same cans sprayed twice (application only);
+* ``factory_vs_shop``: one formulation sprayed by the factory and by a shop, each with its own
+  batches and application (what a perfect recipe meets);
+* ``model_error``: the shipped model's mean absolute texture error on generated cases it
+  never saw, through the matcher's forward (the hybrid, for toners new to the model): what
+  a candidate's predicted texture is off by;
+
+as 50th / 95th / 99th percentiles of |Δ| (largest over the lights for Si and Sa) and each
+limit as a multiple of the 99th percentile and of the model's error (a baseline measured in
+the same run).
+
+    python benchmarks/texture_tolerance.py [--formulations 2000] [--cases 500] [--seed 1]
+        [--tolerance refinish] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from flakelab.cases.generator import Variation, World
+from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.io import read_library, read_tolerance
+from flakelab.match.models import forward_for
+from flakelab.match.search import evaluate_recipes
+from flakelab.models.registry import shipped_model
+from flakelab.models.training import evaluate_model, generated_case_arrays
+
+FAMILIES = {name: [k for k in TEXTURE_READINGS if k.rstrip("0123456789") == name]
+            for name in ("G", "SG", "Si", "Sa")}  # fmt: skip
+
+
+def spread(a, b, effect: np.ndarray) -> dict[str, dict[str, float]]:
+    """Percentiles of |Δ| per reading family over the effect paints (solids read none)."""
+    difference = np.abs(a - b)[effect]
+    out = {}
+    for name, readings in FAMILIES.items():
+        worst = difference[:, [TEXTURE_READINGS.index(k) for k in readings]].max(1)
+        out[name] = {f"p{q}": float(np.percentile(worst, q)) for q in (50, 95, 99)}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--formulations", type=int, default=2000)
+    parser.add_argument("--cases", type=int, default=500)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--tolerance", default="refinish")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    tolerance = read_tolerance(args.tolerance)
+    if tolerance.texture is None:
+        raise SystemExit(f"{args.tolerance}: bounds no texture reading")
+    model = shipped_model("five-angle")
+    world = World(read_library(None), model.instrument)
+    rng = np.random.default_rng(args.seed)
+    x = world.formulations(args.formulations, rng)
+    effect = world.library.paint_families(x) != "solid"
+    batch = world.variation(len(x), rng)
+
+    def same_cans() -> Variation:
+        return Variation(batch.strength, batch.hue_shift, *world.application(len(x), rng))
+
+    respray = spread(world.appearance(x, same_cans())[1], world.appearance(x, same_cans())[1],
+                     effect)  # fmt: skip
+    factory = world.appearance(x, world.variation(len(x), rng, at_shop=False))[1]
+    shop = world.appearance(x, world.variation(len(x), rng))[1]
+    factory_vs_shop = spread(factory, shop, effect)
+    cases = generated_case_arrays(world, args.cases, args.seed + 1000)
+    matcher = forward_for(model, world.library)
+    predict = lambda x: evaluate_recipes(matcher, x)  # noqa: E731 as `model evaluate` does
+    mae = evaluate_model(model, cases, predict)["texture_mae"]
+    limits = tolerance.texture.to_dict()
+    model_error = {name: max(mae[k] for k in FAMILIES[name]) for name in limits}
+    report = {
+        "tolerance": tolerance.name,
+        "formulations": args.formulations,
+        "cases": args.cases,
+        "seed": args.seed,
+        "limits": limits,
+        "respray": {k: respray[k] for k in limits},
+        "factory_vs_shop": {k: factory_vs_shop[k] for k in limits},
+        "model_error": model_error,
+        "limit_over_factory_vs_shop_p99": {
+            k: limits[k] / factory_vs_shop[k]["p99"] for k in limits
+        },
+        "limit_over_model_error": {k: limits[k] / model_error[k] for k in limits},
+    }
+    if args.json:
+        print(json.dumps(report, indent=1))
+        return
+    print(
+        f"{tolerance.name}: {args.formulations} formulations, {args.cases} cases, seed {args.seed}"
+    )
+    for k, limit in limits.items():
+        fs, rs = factory_vs_shop[k], respray[k]
+        print(
+            f"  |Δ{k}| ≤ {limit:g}: respray p99 {rs['p99']:.3f}; factory vs shop p50 / p95 / p99 "
+            f"{fs['p50']:.3f} / {fs['p95']:.3f} / {fs['p99']:.3f}; model error "
+            f"{model_error[k]:.3f}; limit = {report['limit_over_factory_vs_shop_p99'][k]:.1f} × "
+            f"p99, {report['limit_over_model_error'][k]:.0f} × model error"
+        )
+
+
+if __name__ == "__main__":
+    main()
