@@ -330,6 +330,17 @@ def test_a_recorded_outcome_is_judged_as_compare_judges_it():
     assert failing and case.outcome == "corrected"
     assert judged_outcome(case.target, case.sprayout, case.geometries, tight)[1] == failing
     assert case.geometry_names == ("45as15", "45as25", "45as45", "45as75", "45as110")
+    # refinish bounds |ΔG| by 1: a spray-out 1.5 grainier fails on texture, as compare says,
+    # though its colour passes
+    refinish = tolerance_preset("refinish")
+    grainier = replace(sprayout, texture={**sprayout.texture, "G": sprayout.texture["G"] + 1.5})
+    case = case_from_readings(target, grainier, {"Al medium": 1.0}, "five-angle", shop="Dupont",
+                              tolerance=refinish)  # fmt: skip
+    assert compare(target, grainier, refinish).to_dict()["failing_texture"] == ["G"]
+    textures = (case.target_texture, case.sprayout_texture)
+    judged = judged_outcome(case.target, case.sprayout, case.geometries, refinish, textures)
+    assert case.outcome == "corrected" and judged == ("corrected", ["texture G"])
+    assert judged_outcome(case.target, case.sprayout, case.geometries, refinish)[0] == "accepted"
 
 
 def test_a_recorded_case_keeps_every_geometry_both_readings_share():

@@ -54,13 +54,20 @@ def reading_case_id(
 
 
 def judged_outcome(
-    target: np.ndarray, sprayout: np.ndarray, geometries, tolerance: Tolerance
+    target: np.ndarray,
+    sprayout: np.ndarray,
+    geometries,
+    tolerance: Tolerance,
+    textures: tuple[Mapping[str, float], Mapping[str, float]] = ({}, {}),
 ) -> tuple[str, list[str]]:
-    """``accepted`` when the spray-out passes ``tolerance`` at every geometry, else
-    ``corrected``; with the geometries that fail."""
+    """``accepted`` when the spray-out passes ``tolerance`` at every geometry and at every
+    texture reading it bounds that both ``textures`` (target's, spray-out's) hold, else
+    ``corrected``; with what fails (geometries, then ``texture G``…), as ``compare`` says."""
     names = [g.name for g in geometries]
     _, _, passed = tolerance.judge(names, reflectance_to_Lab(target), reflectance_to_Lab(sprayout))
     failing = [g for g, ok in zip(names, passed, strict=True) if not ok]
+    shares = tolerance.texture_share(*textures)
+    failing += [f"texture {k}" for k, share in shares.items() if share > 1]
     return ("corrected" if failing else "accepted"), failing
 
 
@@ -122,7 +129,10 @@ def case_from_readings(
     if outcome == AUTO_OUTCOME:
         if tolerance is None:
             raise CaseError("outcome: 'auto' needs a tolerance to judge the spray-out")
-        outcome, _ = judged_outcome(spectra["target"], spectra["spray-out"], geometries, tolerance)
+        textures = (target.texture, sprayout.texture)
+        outcome, _ = judged_outcome(
+            spectra["target"], spectra["spray-out"], geometries, tolerance, textures
+        )
     elif outcome not in OUTCOMES:
         raise CaseError(
             f"outcome: expected {AUTO_OUTCOME} or one of {', '.join(OUTCOMES)}, got {outcome!r}"

@@ -311,7 +311,8 @@ def record_case(
         created_at=at and (at if at.tzinfo else at.replace(tzinfo=UTC)),
         case_id=case_id,
     )
-    _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol)
+    textures = (case.target_texture, case.sprayout_texture)
+    _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol, textures)
     engine = open_database(database)
     if case_exists(engine, case.case_id):
         raise FlakelabError(
