@@ -11,6 +11,10 @@ world of the demo library:
   never saw, through the matcher's forward (the hybrid, for toners new to the model): what
   a candidate's predicted texture is off by;
 
+and ``new_toner_error``: the matcher's (hybrid) texture error at the world's nominal
+application for effect paints with and without one of the model's new toners (1–8 %, added
+as the harness adds it);
+
 as 50th / 95th / 99th percentiles of |Δ| (largest over the lights for Si and Sa) and each
 limit as a multiple of the 99th percentile and of the model's error (a baseline measured in
 the same run).
@@ -48,6 +52,17 @@ def spread(a, b, effect: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
+def with_new_toner(world, x, novel, rng) -> np.ndarray:
+    """``x`` with one of the ``novel`` toners added at 1–8 % and renormalised, as the
+    harness makes its new-toner targets."""
+    names, out = list(world.library.names), x.copy()
+    for row in out:
+        row[names.index(novel[int(rng.integers(len(novel)))])] = np.exp(
+            rng.uniform(np.log(0.01), np.log(0.08))
+        )
+    return out / out.sum(1, keepdims=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--formulations", type=int, default=2000)
@@ -78,6 +93,19 @@ def main() -> None:
     matcher = forward_for(model, world.library)
     predict = lambda x: evaluate_recipes(matcher, x)  # noqa: E731 as `model evaluate` does
     mae = evaluate_model(model, cases, predict)["texture_mae"]
+    known = World(world.library, world.instrument, exclude=matcher.novel)
+    without = known.formulations(len(x), rng)
+    with_new = with_new_toner(world, without, matcher.novel, rng)
+    flakes = world.library.paint_families(without) != "solid"
+    nominal = world.nominal(len(x), at_shop=True)
+    new_toner_error = {
+        label: {
+            name: float(np.abs(predict(xs)[1] - world.appearance(xs, nominal)[1])[flakes][
+                :, [TEXTURE_READINGS.index(k) for k in FAMILIES[name]]].mean())
+            for name in FAMILIES
+        }
+        for label, xs in (("without", without), ("with", with_new))
+    }  # fmt: skip
     limits = tolerance.texture.to_dict()
     model_error = {name: max(mae[k] for k in FAMILIES[name]) for name in limits}
     report = {
@@ -93,6 +121,7 @@ def main() -> None:
             k: limits[k] / factory_vs_shop[k]["p99"] for k in limits
         },
         "limit_over_model_error": {k: limits[k] / model_error[k] for k in limits},
+        "new_toner_error": new_toner_error,
     }
     if args.json:
         print(json.dumps(report, indent=1))
@@ -108,6 +137,9 @@ def main() -> None:
             f"{model_error[k]:.3f}; limit = {report['limit_over_factory_vs_shop_p99'][k]:.1f} × "
             f"p99, {report['limit_over_model_error'][k]:.0f} × model error"
         )
+    for label, errors in new_toner_error.items():
+        shown = ", ".join(f"|Δ{k}| {v:.3f}" for k, v in errors.items())
+        print(f"  hybrid's mean error, effect paints {label} a new toner: {shown}")
 
 
 if __name__ == "__main__":
