@@ -25,7 +25,7 @@ from flakelab.core.geometry import (
     parse_geometries,
 )
 from flakelab.core.measurement import Measurement
-from flakelab.core.tolerance import Tolerance
+from flakelab.core.tolerance import Tolerance, failures
 
 __all__ = [
     "AUTO_OUTCOME",
@@ -67,7 +67,7 @@ def judged_outcome(
     _, _, passed = tolerance.judge(names, reflectance_to_Lab(target), reflectance_to_Lab(sprayout))
     failing = [g for g, ok in zip(names, passed, strict=True) if not ok]
     shares = tolerance.texture_share(*textures)
-    failing += [f"texture {k}" for k, share in shares.items() if share > 1]
+    failing = failures(failing, [k for k, share in shares.items() if share > 1])
     return ("corrected" if failing else "accepted"), failing
 
 

@@ -36,6 +36,7 @@ from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe
 from flakelab.core.difference import METAMERISM_ILLUMINANTS
 from flakelab.core.measurement import Measurement
+from flakelab.core.tolerance import failures
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
 from flakelab.io import read_measurement, read_measurements, read_tolerance, write_measurements
@@ -167,8 +168,7 @@ def compare(
 
 def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
     shared = [g["name"] for g in report["geometries"]]
-    failing = [g["name"] for g in report["geometries"] if not g["pass"]]
-    failing += [f"texture {k}" for k in report["failing_texture"]]
+    failing = failures(report["failing_geometries"], report["failing_texture"])
     verdict = "FAIL at " + ", ".join(failing) if failing else "PASS"
     labels = [f"reference: {ref.sample}", f"sample: {smp.sample}"]
     title = f"{smp.sample} vs {ref.sample}: {verdict}"
@@ -206,8 +206,8 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
             verdict,
         )
     console.print(table)
-    failures = report["failing_geometries"] + [f"texture {k}" for k in report["failing_texture"]]
-    verdict = "[green]PASS[/]" if report["pass"] else "[bold red]FAIL[/] at " + ", ".join(failures)
+    failing = failures(report["failing_geometries"], report["failing_texture"])
+    verdict = "[green]PASS[/]" if report["pass"] else "[bold red]FAIL[/] at " + ", ".join(failing)
     console.print(
         f"ΔE00 max {report['de00_max']:.2f}, mean {report['de00_mean']:.2f}   "
         f"flop index {_fmt(report['flop_index_reference'])} → "

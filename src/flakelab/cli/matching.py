@@ -39,6 +39,7 @@ from flakelab.cli.learning import (
     since_option,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.tolerance import failures
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 
@@ -408,8 +409,8 @@ def _print_match(report: dict) -> None:
         f"tolerance {report['tolerance']})"
     )
     for rank, c in enumerate(report["candidates"], start=1):
-        failures = c["failing_geometries"] + [f"texture {k}" for k in c["failing_texture"]]
-        verdict = "[green]PASS[/]" if c["passes"] else "[red]FAIL[/] at " + ", ".join(failures)
+        failing = failures(c["failing_geometries"], c["failing_texture"])
+        verdict = "[green]PASS[/]" if c["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
         header = (
             f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}"
             f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"

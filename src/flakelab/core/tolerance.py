@@ -14,7 +14,14 @@ from flakelab.core.difference import delta_E_CIE2000, delta_LCH
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_READINGS
 
-__all__ = ["Limit", "TextureLimit", "Tolerance", "TOLERANCE_PRESETS", "tolerance_preset"]
+__all__ = [
+    "Limit",
+    "TextureLimit",
+    "Tolerance",
+    "TOLERANCE_PRESETS",
+    "failures",
+    "tolerance_preset",
+]
 
 _LIMIT_FIELDS = ("de00", "dL", "dC", "dH")
 _TEXTURE_FIELDS = ("G", "SG", "Si", "Sa")
@@ -308,3 +315,8 @@ def tolerance_preset(name: str) -> Tolerance:
     if name not in TOLERANCE_PRESETS:
         raise ValueError(f"expected a tolerance among {', '.join(TOLERANCE_PRESETS)}, got {name!r}")
     return TOLERANCE_PRESETS[name]
+
+
+def failures(geometries: list[str], texture: list[str]) -> list[str]:
+    """What fails a tolerance, as reports name it: the geometries, then ``texture G``…"""
+    return list(geometries) + [f"texture {reading}" for reading in texture]

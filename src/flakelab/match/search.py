@@ -58,7 +58,7 @@ from flakelab.core.difference import (
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.tolerance import Tolerance, tolerance_preset
+from flakelab.core.tolerance import Tolerance, failures, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.match.forward import stepping
@@ -136,8 +136,7 @@ class Candidate:
         return [k for k, share in self.texture_share.items() if share > 1]
 
     def failures(self) -> list[str]:
-        """What fails the tolerance, as a colorist reads it: geometries, then ``texture G``…"""
-        return self.failing + [f"texture {k}" for k in self.failing_texture]
+        return failures(self.failing, self.failing_texture)
 
     def as_measurement(self, sample: str) -> Measurement:
         """The candidate's predicted reading, as the instrument would give it (to render, plot
