@@ -66,8 +66,7 @@ def judged_outcome(
     names = [g.name for g in geometries]
     _, _, passed = tolerance.judge(names, reflectance_to_Lab(target), reflectance_to_Lab(sprayout))
     failing = [g for g, ok in zip(names, passed, strict=True) if not ok]
-    shares = tolerance.texture_share(*textures)
-    failing = failures(failing, [k for k, share in shares.items() if share > 1])
+    failing = failures(failing, tolerance.failing_texture(*textures))
     return ("corrected" if failing else "accepted"), failing
 
 

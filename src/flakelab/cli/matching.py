@@ -613,18 +613,26 @@ def correct_command(
     )
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
+    texture_failing = tol.failing_texture(target_reading.texture, sprayed_reading.texture)
+    failing = [g for g, ok in zip(forward.geometries, passed, strict=True) if not ok]
     report = {
         "mode": mode,
         "before_de00": before.round(3).tolist(),
         "tolerance": tol.name,
-        "sprayout_passes": bool(passed.all()),
-        "sprayout_failing": [g for g, ok in zip(forward.geometries, passed, strict=True) if not ok],
+        "sprayout_passes": not failing and not texture_failing,
+        "sprayout_failing": failures(failing, texture_failing),
         "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
     }
-    if passed.all():
+    if not failing:
         report["notes"].append(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "
             "optional, a move toward the target's centre"
+        )
+    if texture_failing:
+        report["notes"].append(
+            f"the spray-out's texture fails {tol.name} at {', '.join(texture_failing)}: the "
+            "correction aims at colour alone; a texture this far off asks for other effect "
+            "toners (match the target again)"
         )
     weighing = _weigh_correction(forward, correction, mode, grams, resolution)
     report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams

@@ -194,6 +194,12 @@ class Tolerance:
         """:meth:`TextureLimit.share` of this tolerance's texture limits; empty without."""
         return {} if self.texture is None else self.texture.share(reference, sample)
 
+    def failing_texture(
+        self, reference: Mapping[str, float], sample: Mapping[str, float]
+    ) -> list[str]:
+        """The texture readings over their limit (:meth:`texture_share` above 1)."""
+        return [k for k, share in self.texture_share(reference, sample).items() if share > 1]
+
     def judge(
         self, geometries: list[str] | tuple, Lab_reference: NDArray, Lab_sample: NDArray
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
