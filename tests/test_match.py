@@ -411,6 +411,10 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
         _print_match(report)
     row = next(ln for ln in printed.get().splitlines() if "predicted − target" in ln)
     assert row.split()[3:] == [f"{v:+.2f}" for v in best["texture_delta"].values()]
+    # and refinish's texture limits under the readings they bound (Si at each light, SG, G)
+    limits = next(ln for ln in printed.get().splitlines() if ln.strip().startswith("limit ±"))
+    assert limits.split()[2:] == ["1.00", "1.00", "1.00", "0.50", "1.00"]
+    assert report["texture_limits"] == {"Si15": 1.0, "Si45": 1.0, "Si75": 1.0, "SG": 0.5, "G": 1.0}
 
 
 def test_match_through_the_library_s_physics_alone_needs_no_model():
