@@ -623,6 +623,12 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     assert best.failures() == ["texture G"] and best.to_dict()["failing_texture"] == ["G"]
     assert any(n.endswith("fails at texture G") for n in results["tight"].notes)
     assert results["refinish"].to_dict()["texture_limits"]["G"] == 1.0
+    assert not any("texture" in n for n in results["refinish"].notes)
+    # a target read without texture: the limits cannot be judged, and the search says so
+    bare = match(replace(target, texture={}), hybrid, effect, tolerance=refinish,
+                 settings=MatchSettings(candidates=1))  # fmt: skip
+    assert bare.candidates[0].texture_share == {} and bare.candidates[0].passes
+    assert any("carries no texture readings: refinish's texture limits" in n for n in bare.notes)
 
 
 def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(

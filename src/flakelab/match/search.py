@@ -653,6 +653,12 @@ def _match(
         )
     if candidates and (note := _metamer_note(candidates[0], settings)):
         notes.append(note)
+    flakes = candidates and any(v > 0 for v in candidates[0].texture.values())
+    if tolerance.texture is not None and target_texture is None and flakes:
+        notes.append(
+            f"the target carries no texture readings: {tolerance.name}'s texture limits are "
+            "not judged (read it with an instrument that measures sparkle and graininess)"
+        )
     return MatchResult(
         name,
         tuple(forward.geometries),
