@@ -18,7 +18,7 @@ from flakelab.core.difference import (
 )
 from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
-from flakelab.core.tolerance import Tolerance, tolerance_preset
+from flakelab.core.tolerance import Tolerance, over_limit, tolerance_preset
 
 __all__ = ["Comparison", "compare", "describe"]
 
@@ -81,7 +81,7 @@ class Comparison:
 
     @property
     def failing_texture(self) -> list[str]:
-        return [k for k, share in self.texture_share.items() if share > 1]
+        return over_limit(self.texture_share)
 
     @property
     def de00_max(self) -> float:

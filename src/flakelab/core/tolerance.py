@@ -20,6 +20,7 @@ __all__ = [
     "Tolerance",
     "TOLERANCE_PRESETS",
     "failures",
+    "over_limit",
     "tolerance_preset",
 ]
 
@@ -198,7 +199,7 @@ class Tolerance:
         self, reference: Mapping[str, float], sample: Mapping[str, float]
     ) -> list[str]:
         """The texture readings over their limit (:meth:`texture_share` above 1)."""
-        return [k for k, share in self.texture_share(reference, sample).items() if share > 1]
+        return over_limit(self.texture_share(reference, sample))
 
     def judge(
         self, geometries: list[str] | tuple, Lab_reference: NDArray, Lab_sample: NDArray
@@ -326,3 +327,8 @@ def tolerance_preset(name: str) -> Tolerance:
 def failures(geometries: list[str], texture: list[str]) -> list[str]:
     """What fails a tolerance, as reports name it: the geometries, then ``texture G``…"""
     return list(geometries) + [f"texture {reading}" for reading in texture]
+
+
+def over_limit(shares: Mapping[str, float]) -> list[str]:
+    """The names whose share of their limit is above 1: what fails."""
+    return [name for name, share in shares.items() if share > 1]

@@ -58,7 +58,7 @@ from flakelab.core.difference import (
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.tolerance import Tolerance, failures, tolerance_preset
+from flakelab.core.tolerance import Tolerance, failures, over_limit, tolerance_preset
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.match.forward import stepping
@@ -133,7 +133,7 @@ class Candidate:
 
     @property
     def failing_texture(self) -> list[str]:
-        return [k for k, share in self.texture_share.items() if share > 1]
+        return over_limit(self.texture_share)
 
     def failures(self) -> list[str]:
         return failures(self.failing, self.failing_texture)
