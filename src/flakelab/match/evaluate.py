@@ -118,9 +118,8 @@ class Trial:
         film, spread = self.world.application(1, stream)
         variation = Variation(batches.strength, batches.hue_shift, film, spread)
         R, texture = self.world.appearance(x[None], variation)
-        return self.world.measure(R, stream)[0], dict(
-            zip(TEXTURE_READINGS, texture[0], strict=True)
-        )
+        readings = dict(zip(TEXTURE_READINGS, texture[0].tolist(), strict=True))
+        return self.world.measure(R, stream)[0], readings
 
     def unsprayed(self, x: NDArray) -> NDArray:
         """``x`` mixed from the shop's batches at the shop's mean application, read without
