@@ -4,9 +4,11 @@ A texture limit should fail a recipe for its flakes, not for the spray gun or th
 each bounded reading (G, SG, Si and Sa under every light) this prints, in the generated
 world of the demo library:
 
-* ``respray``: the same cans sprayed twice (application only);
+* ``remeasure``: one spray-out read twice (the instrument's texture noise: the glints and
+  grain of one spot of its camera, ``World.measure_texture``);
+* ``respray``: the same cans sprayed twice (application, and each read once);
 * ``factory_vs_shop``: one formulation sprayed by the factory and by a shop, each with its own
-  batches and application (what a perfect recipe meets);
+  batches and application, each read once (what a perfect recipe meets);
 * ``model_error``: the shipped model's mean absolute texture error on generated cases it
   never saw, through the matcher's forward (the hybrid, for toners new to the model): what
   a candidate's predicted texture is off by;
@@ -31,23 +33,20 @@ import json
 import numpy as np
 
 from flakelab.cases.generator import Variation, World
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.io import read_library, read_tolerance
 from flakelab.match.models import forward_for
 from flakelab.match.search import evaluate_recipes
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import evaluate_model, generated_case_arrays
 
-FAMILIES = {name: [k for k in TEXTURE_READINGS if k.rstrip("0123456789") == name]
-            for name in ("G", "SG", "Si", "Sa")}  # fmt: skip
-
 
 def spread(a, b, effect: np.ndarray) -> dict[str, dict[str, float]]:
     """Percentiles of |Δ| per reading family over the effect paints (solids read none)."""
     difference = np.abs(a - b)[effect]
     out = {}
-    for name, readings in FAMILIES.items():
-        worst = difference[:, [TEXTURE_READINGS.index(k) for k in readings]].max(1)
+    for name, columns in TEXTURE_FAMILIES.items():
+        worst = difference[:, columns].max(1)
         out[name] = {f"p{q}": float(np.percentile(worst, q)) for q in (50, 95, 99)}
     return out
 
@@ -84,10 +83,16 @@ def main() -> None:
     def same_cans() -> Variation:
         return Variation(batch.strength, batch.hue_shift, *world.application(len(x), rng))
 
-    respray = spread(world.appearance(x, same_cans())[1], world.appearance(x, same_cans())[1],
-                     effect)  # fmt: skip
-    factory = world.appearance(x, world.variation(len(x), rng, at_shop=False))[1]
-    shop = world.appearance(x, world.variation(len(x), rng))[1]
+    texture_rng = rng.spawn(1)[0]  # the instrument's texture noise, apart from the sprays
+
+    def read(variation: Variation) -> np.ndarray:  # one spray, read by the instrument
+        return world.measure_texture(world.appearance(x, variation)[1], texture_rng)
+
+    respray = spread(read(same_cans()), read(same_cans()), effect)
+    remeasure = spread(*[world.measure_texture(world.appearance(x, batch)[1], texture_rng)
+                         for _ in range(2)], effect)  # fmt: skip
+    factory = read(world.variation(len(x), rng, at_shop=False))
+    shop = read(world.variation(len(x), rng))
     factory_vs_shop = spread(factory, shop, effect)
     cases = generated_case_arrays(world, args.cases, args.seed + 1000)
     matcher = forward_for(model, world.library)
@@ -101,19 +106,22 @@ def main() -> None:
     new_toner_error = {
         label: {
             name: float(np.abs(predict(xs)[1] - world.appearance(xs, nominal)[1])[flakes][
-                :, [TEXTURE_READINGS.index(k) for k in FAMILIES[name]]].mean())
-            for name in FAMILIES
+                :, columns].mean())
+            for name, columns in TEXTURE_FAMILIES.items()
         }
         for label, xs in (("without", without), ("with", with_new))
     }  # fmt: skip
     limits = tolerance.texture.to_dict()
-    model_error = {name: max(mae[k] for k in FAMILIES[name]) for name in limits}
+    model_error = {
+        name: max(mae[TEXTURE_READINGS[i]] for i in TEXTURE_FAMILIES[name]) for name in limits
+    }
     report = {
         "tolerance": tolerance.name,
         "formulations": args.formulations,
         "cases": args.cases,
         "seed": args.seed,
         "limits": limits,
+        "remeasure": {k: remeasure[k] for k in limits},
         "respray": {k: respray[k] for k in limits},
         "factory_vs_shop": {k: factory_vs_shop[k] for k in limits},
         "model_error": model_error,
@@ -130,9 +138,10 @@ def main() -> None:
         f"{tolerance.name}: {args.formulations} formulations, {args.cases} cases, seed {args.seed}"
     )
     for k, limit in limits.items():
-        fs, rs = factory_vs_shop[k], respray[k]
+        fs, rs, ms = factory_vs_shop[k], respray[k], remeasure[k]
         print(
-            f"  |Δ{k}| ≤ {limit:g}: respray p99 {rs['p99']:.3f}; factory vs shop p50 / p95 / p99 "
+            f"  |Δ{k}| ≤ {limit:g}: remeasure p99 {ms['p99']:.3f}; respray p99 {rs['p99']:.3f}; "
+            f"factory vs shop p50 / p95 / p99 "
             f"{fs['p50']:.3f} / {fs['p95']:.3f} / {fs['p99']:.3f}; model error "
             f"{model_error[k]:.3f}; limit = {report['limit_over_factory_vs_shop_p99'][k]:.1f} × "
             f"p99, {report['limit_over_model_error'][k]:.0f} × model error"

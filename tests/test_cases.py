@@ -63,6 +63,22 @@ def test_generator_is_reproducible_and_labelled_synthetic(world, cases):
     assert longer[280].case_id == next(world.cases(281, seed=7, batch=281))[280].case_id
 
 
+def test_texture_readings_carry_their_own_noise_and_leave_the_colour_alone(world, cases):
+    coarser = World(world.library, world.instrument, replace(world.settings, grain_sd=0.1))
+    again = next(coarser.cases(40, seed=7, batch=40))
+    for a, b in zip(cases, again, strict=True):
+        np.testing.assert_array_equal(a.target, b.target)
+        np.testing.assert_array_equal(a.sprayout, b.sprayout)
+    effect = [i for i, c in enumerate(cases) if c.target_texture["G"] > 0]
+    assert effect and all(
+        cases[i].target_texture["G"] != again[i].target_texture["G"] for i in effect
+    )
+    # the instrument's reading of the panel, not the panel's expected readings
+    report = world.realism(n=200, seed=3)["remeasure_texture_median"]
+    assert report["G"] > 0 and report["SG"] > 0
+    assert report["SG"] < report["Si"]  # the grade, weighing lights by √(Sa·Si), is steadier
+
+
 def test_recipes_are_fractions_of_library_toners(world, cases):
     names = set(world.library.names)
     for case in cases:

@@ -411,10 +411,10 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
         _print_match(report)
     row = next(ln for ln in printed.get().splitlines() if "predicted − target" in ln)
     assert row.split()[3:] == [f"{v:+.2f}" for v in best["texture_delta"].values()]
-    # and refinish's texture limits under the readings they bound (Si at each light, SG, G)
+    # and refinish's texture limits under the readings they bound (SG, G)
     limits = next(ln for ln in printed.get().splitlines() if ln.strip().startswith("limit ±"))
-    assert limits.split()[2:] == ["1.00", "1.00", "1.00", "0.50", "1.00"]
-    assert report["texture_limits"] == {"Si15": 1.0, "Si45": 1.0, "Si75": 1.0, "SG": 0.5, "G": 1.0}
+    assert limits.split()[2:] == ["0.50", "1.00"]
+    assert report["texture_limits"] == {"SG": 0.5, "G": 1.0}
 
 
 def test_match_through_the_library_s_physics_alone_needs_no_model():
@@ -614,7 +614,7 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     sets = {name: [set(c.fractions) for c in r.candidates] for name, r in results.items()}
     assert all(set(c.fractions) not in sets["refinish"] for c in grainy)
     for c in results["refinish"].candidates:
-        assert set(c.texture_share) == {"Si15", "Si45", "Si75", "SG", "G"}
+        assert set(c.texture_share) == {"SG", "G"}
         assert max(c.texture_share.values()) <= 1 and c.failing_texture == []
         assert c.texture_share["G"] == pytest.approx(abs(c.texture_delta["G"]))
     assert sets["refinish"][0] == sets["colour"][0]

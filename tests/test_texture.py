@@ -41,3 +41,42 @@ def test_images_are_seeded_and_calibrated_to_a_white_diffuser():
 def test_unknown_light_is_refused():
     with pytest.raises(ValueError, match="light"):
         flake_image(population(10, 0.1), 30.0)
+
+
+def test_a_texture_reading_counts_the_glints_of_one_spot():
+    from flakelab.texture.readings import GLINT_SD, GLINT_SHARE, GRAIN_SD, counted_readings
+
+    expected = np.array([[6.0, 5.0, 2.0, 5.0, 0.5, 5.0, 0.0, 3.0], np.zeros(8)])
+    expected[0, 6] = np.sqrt(expected[0, [0, 2, 4]] * expected[0, [1, 3, 5]]).sum() / 6
+    many = np.repeat(expected, 20000, axis=0)
+    read = counted_readings(many, np.random.default_rng(7), glint_share=GLINT_SHARE,
+                            glint_sd=GLINT_SD, grain_sd=GRAIN_SD)  # fmt: skip
+    coating, bare = read[:20000], read[20000:]
+    assert not bare.any()  # no flakes, no glint and no grain
+    # unbiased, with the spread of a count: Var(Sa) = glint_share·Sa, sd(G)/G = grain_sd
+    np.testing.assert_allclose(coating.mean(0)[[0, 1, 2, 3, 7]], expected[0, [0, 1, 2, 3, 7]],
+                               rtol=0.01)  # fmt: skip
+    np.testing.assert_allclose(coating[:, [0, 2, 4]].var(0), GLINT_SHARE * expected[0, [0, 2, 4]],
+                               rtol=0.05)  # fmt: skip
+    assert coating[:, 7].std() / 3.0 == pytest.approx(GRAIN_SD, rel=0.05)
+    # fewer glints, a less certain mean brightness: Si at 75° varies most
+    assert coating[:, 5].std() > 2 * coating[:, 1].std()
+    # each reading's sparkle grade is its own Sa and Si's
+    grade = np.sqrt(coating[:, [0, 2, 4]] * coating[:, [1, 3, 5]]).sum(1) / 6
+    np.testing.assert_allclose(coating[:, 6], grade)
+
+
+def test_the_world_s_texture_noise_is_the_spot_to_spot_spread_of_rendered_images():
+    from flakelab.cases.generator import World
+    from flakelab.io import read_library
+    from flakelab.texture.images import flake_populations
+    from flakelab.texture.repeatability import fit_counting_noise, spot_readings
+
+    world = World(read_library(None))
+    x = world.formulations(40, np.random.default_rng(11))
+    x = x[world.library.paint_families(x) != "solid"][:3]
+    populations = flake_populations(world.layer(x, world.nominal(3)), world.library.flake_radii_um)
+    fitted = fit_counting_noise([spot_readings(p, 6, seed=100 * i)
+                                 for i, p in enumerate(populations)])  # fmt: skip
+    for name, value in fitted.items():
+        assert 0.5 < getattr(world.settings, name) / value < 2.0, name

@@ -38,13 +38,19 @@ from flakelab.cases.case import Case
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
 from flakelab.physics.fast import reflectance_factor
-from flakelab.physics.layer import layer_from_fractions
-from flakelab.texture.readings import texture_readings
+from flakelab.physics.layer import Layer, layer_from_fractions
+from flakelab.texture.readings import (
+    GLINT_SD,
+    GLINT_SHARE,
+    GRAIN_SD,
+    counted_readings,
+    texture_readings,
+)
 
 __all__ = ["WorldSettings", "World", "Variation", "CHUNK", "SHOP_WITH_HABITS"]
 
@@ -75,6 +81,9 @@ class WorldSettings:
     noise_band: float = 0.001
     noise_gain: float = 0.0012
     noise_offset: float = 2e-4
+    glint_share: float = GLINT_SHARE
+    glint_sd: float = GLINT_SD
+    grain_sd: float = GRAIN_SD
     recipe_error_sd: float = 0.05
     weathered_share: float = 0.5
     accept_de00: float = 1.0
@@ -179,15 +188,20 @@ class World:
         film, spread = self._mean_application(at_shop)
         return Variation(np.ones((n, T)), np.zeros(n), np.full(n, film), np.full(n, spread))
 
-    def appearance(self, fractions: NDArray, variation: Variation) -> tuple[NDArray, NDArray]:
-        """Reflectance factors ``[F, G, 31]`` (π·BRDF) and texture readings ``[F, 8]``."""
+    def layer(self, fractions: NDArray, variation: Variation) -> Layer:
+        """The basecoat of ``fractions`` mixed from ``variation``'s batches and sprayed."""
         layer = layer_from_fractions(self.library, fractions * variation.strength)
-        layer = sprayed_layer(
+        return sprayed_layer(
             replace(layer, absorption=_shift_spectra(layer.absorption, variation.hue_shift)),
             self.library,
             variation.film,
             variation.spread,
         )
+
+    def appearance(self, fractions: NDArray, variation: Variation) -> tuple[NDArray, NDArray]:
+        """Reflectance factors ``[F, G, 31]`` (π·BRDF) and expected texture readings
+        ``[F, 8]`` (:meth:`measure_texture` reads them)."""
+        layer = self.layer(fractions, variation)
         R = reflectance_factor(layer, self.geometries)
         return R, texture_readings(layer, self.library.flake_radii_um)
 
@@ -206,6 +220,15 @@ class World:
         smooth = _smooth_noise(rng, (F, G, W)) * s.noise_band
         gain = rng.normal(0, s.noise_gain, (F, G, 1))
         return R * (1 + smooth + gain + s.shop_gain) + rng.normal(0, s.noise_offset, (F, G, 1))
+
+    def measure_texture(self, texture: NDArray, rng: np.random.Generator) -> NDArray:
+        """One texture reading ``[F, 8]`` of coatings whose expected readings are
+        ``texture``: the glints and grain of one spot in the camera's field
+        (:func:`~flakelab.texture.readings.counted_readings`)."""
+        s = self.settings
+        return counted_readings(
+            texture, rng, glint_share=s.glint_share, glint_sd=s.glint_sd, grain_sd=s.grain_sd
+        )
 
     # -- cases ----------------------------------------------------------------------------
     def cases(
@@ -245,6 +268,10 @@ class World:
         recipe = self.colorist_recipe(hidden, rng)
         spray_R, spray_tex = self.appearance(recipe, self.variation(size, rng))
         sprayout = self.measure(spray_R, rng)
+        # texture noise from a stream of its own, so every case's colour stays as it was
+        texture_rng = rng.spawn(1)[0]
+        target_tex = self.measure_texture(target_tex, texture_rng)
+        spray_tex = self.measure_texture(spray_tex, texture_rng)
         worst = self.worst_de00(target, sprayout)
         outcome = np.where(
             worst <= s.accept_de00,
@@ -290,7 +317,7 @@ class World:
         """How hard the generated world is, in the quantities a shop knows (issue 4)."""
         rng = np.random.default_rng(seed)
         x = self.formulations(n, rng)
-        R, _ = self.appearance(x, self.variation(n, rng))
+        R, texture = self.appearance(x, self.variation(n, rng))
         index = [g.name for g in self.geometries].index("45as45")
         first_reading, second_reading = self.measure(R, rng), self.measure(R, rng)
         remeasure = delta_E(reflectance_to_Lab(first_reading), reflectance_to_Lab(second_reading))[
@@ -310,8 +337,17 @@ class World:
         weathered = self.worst_de00(fresh_R, weathered_R + haze[:, None, None])
         floor = self.exact_model_de00(x, rng)
         families = self.library.paint_families(x)
+        texture_rng = rng.spawn(1)[0]  # drawn apart: the colour figures stay as they were
+        texture_remeasure = np.abs(
+            self.measure_texture(texture, texture_rng) - self.measure_texture(texture, texture_rng)
+        )[families != "solid"]
         return {
             "remeasure_de00_median": float(np.median(remeasure)),
+            # effect paints' texture read twice: |Δ|, the largest over the lights for Sa, Si
+            "remeasure_texture_median": {
+                name: float(np.median(texture_remeasure[:, columns].max(1)))
+                for name, columns in TEXTURE_FAMILIES.items()
+            },
             # the issue's range is for metallics: aluminium without pearl (paint_families)
             "respray_de00_median": float(np.median(respray[families == "metallic"])),
             "respray_de00_median_all": float(np.median(respray)),

@@ -596,7 +596,8 @@ def realism(
     library: LibraryOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """How hard the generated world is: remeasure, respray, batch and weathering ΔE00."""
+    """How hard the generated world is: remeasure, respray, batch and weathering ΔE00, and
+    the texture readings' repeatability."""
     from flakelab.cases.generator import World
     from flakelab.io import read_library
 
@@ -623,6 +624,8 @@ def realism(
         table.add_row(key, f"{report[key]:.3f}", "(the cases' noise floor)")
     for family, value in report["exact_model_de00_mean_by_family"].items():
         table.add_row(f"exact_model_de00_mean, {family}s", f"{value:.3f}", "")
+    for reading, value in report["remeasure_texture_median"].items():
+        table.add_row(f"remeasure_texture_median, |Δ{reading}|", f"{value:.3f}", "(effect paints)")
     console.print(table)
 
 

@@ -13,7 +13,7 @@ from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectanc
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS, resample
 
-__all__ = ["Measurement", "TEXTURE_READINGS", "flop_index", "FLOP_GEOMETRIES"]
+__all__ = ["Measurement", "TEXTURE_READINGS", "TEXTURE_FAMILIES", "flop_index", "FLOP_GEOMETRIES"]
 
 TEXTURE_READINGS: tuple[str, ...] = (
     "Sa15",
@@ -27,6 +27,11 @@ TEXTURE_READINGS: tuple[str, ...] = (
 )
 """Texture readings: sparkle area Sa and intensity Si under directional light at 15°, 45°,
 75°, sparkle grade SG and graininess G under diffuse light (DESIGN.md §2, §4)."""
+TEXTURE_FAMILIES: dict[str, tuple[int, ...]] = {
+    family: tuple(i for i, k in enumerate(TEXTURE_READINGS) if k.rstrip("0123456789") == family)
+    for family in ("Sa", "Si", "SG", "G")
+}
+"""Columns of :data:`TEXTURE_READINGS` of each kind of reading (Sa: Sa15, Sa45, Sa75 …)."""
 
 FLOP_GEOMETRIES = ("45as15", "45as45", "45as110")
 

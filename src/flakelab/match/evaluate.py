@@ -118,8 +118,9 @@ class Trial:
         film, spread = self.world.application(1, stream)
         variation = Variation(batches.strength, batches.hue_shift, film, spread)
         R, texture = self.world.appearance(x[None], variation)
-        readings = dict(zip(TEXTURE_READINGS, texture[0].tolist(), strict=True))
-        return self.world.measure(R, stream)[0], readings
+        reading = self.world.measure(R, stream)[0]
+        # the texture noise from a child stream: the spray's colour stays as it was
+        return reading, texture_reading(self.world, texture, stream.spawn(1)[0])
 
     def unsprayed(self, x: NDArray) -> NDArray:
         """``x`` mixed from the shop's batches at the shop's mean application, read without
@@ -136,8 +137,15 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     # the respray's stream comes from the oracle's, so that adding it changed no other spray
     streams.append(streams[2].spawn(1)[0])
     R_target, texture = world.appearance(x_hidden[None], oem)
-    readings = dict(zip(TEXTURE_READINGS, texture[0].tolist(), strict=True))
-    return Trial(world, world.measure(R_target, rng)[0], oem, shop, streams, readings)
+    target = world.measure(R_target, rng)[0]
+    readings = texture_reading(world, texture, rng.spawn(1)[0])
+    return Trial(world, target, oem, shop, streams, readings)
+
+
+def texture_reading(world: World, texture: NDArray, rng: np.random.Generator) -> dict[str, float]:
+    """One reading, by name, of one coating's expected texture readings ``[1, 8]``."""
+    readings = world.measure_texture(texture, rng)[0]
+    return dict(zip(TEXTURE_READINGS, readings.tolist(), strict=True))
 
 
 def worst_metamerism(a: NDArray, b: NDArray, lights: tuple[str, ...] | None = None) -> float:

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter
 
-__all__ = ["FlakePopulation", "flake_image", "LIGHTS"]
+__all__ = ["FlakePopulation", "flake_image", "flake_populations", "LIGHTS"]
 
 LIGHTS = (15.0, 45.0, 75.0, "diffuse")
 """Lighting of the instrument's texture camera."""
@@ -44,6 +44,27 @@ class FlakePopulation:
     absorption: float = 0.0
     background: float = 0.02
     n: float = 1.5
+
+
+def flake_populations(layer, radius_um) -> list[FlakePopulation]:
+    """The flake population of each formulation of ``layer`` (a
+    :class:`~flakelab.physics.layer.Layer`), species of radius ``radius_um[S]``: what the
+    texture camera images, with the layer's film, mean dye absorption and index."""
+    radius = np.asarray(radius_um, dtype=float)
+    reflectance = layer.flake_reflectance[:, 0].mean(axis=1)  # at normal incidence, [S]
+    spreads = np.degrees(layer.spreads)
+    return [
+        FlakePopulation(
+            radius,
+            layer.flake_rate[i],
+            spreads[i],
+            reflectance,
+            thickness_um=float(layer.film[i]),
+            absorption=float(layer.absorption[i].mean()),
+            n=layer.n,
+        )
+        for i in range(layer.size)
+    ]
 
 
 def _place(population: FlakePopulation, area_um2: float, rng: np.random.Generator):

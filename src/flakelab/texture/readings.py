@@ -17,6 +17,12 @@ from the physics of a camera looking along the normal at a coating lit from 15°
 
 Scales are chosen so that readings fall in the instruments' usual ranges (Sa, Si up to about
 30, SG and G about 0–20). Issue 6 measures the same quantities on rendered flake images.
+
+A camera sees a finite field, so a reading is a sample (:func:`counted_readings`): it counts
+N = Sa/``glint_share`` glints (Poisson), Si is their mean brightness, ± its spread over one
+glint /√N, and G the contrast of a finite number of flake clusters, ± a relative spread.
+``benchmarks/texture_repeatability.py`` fits the three constants to the spot-to-spot spread of
+rendered images (:mod:`flakelab.texture.images`).
 """
 
 from __future__ import annotations
@@ -24,15 +30,29 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.physics.layer import Layer, orientation_pdf
 
-__all__ = ["texture_readings", "SPARKLE_LIGHTS", "CAMERA_SOLID_ANGLE"]
+__all__ = [
+    "texture_readings",
+    "counted_readings",
+    "SPARKLE_LIGHTS",
+    "CAMERA_SOLID_ANGLE",
+    "GLINT_SHARE",
+    "GLINT_SD",
+    "GRAIN_SD",
+]
 
 SPARKLE_LIGHTS = (15.0, 45.0, 75.0)
 """Directional light angles [degree] of the sparkle readings."""
 CAMERA_SOLID_ANGLE = 0.02
 """Acceptance of the camera pixel's glint cone, inside the binder [sr]."""
+GLINT_SHARE = 0.012
+"""Sa of one glint [% of the camera's field] (``benchmarks/texture_repeatability.py``)."""
+GLINT_SD = 0.57
+"""Spread of one glint's sparkle intensity, relative to Si (same benchmark)."""
+GRAIN_SD = 0.026
+"""Relative spread of G from one spot to the next (same benchmark)."""
 
 
 def texture_readings(layer: Layer, radius_um: ArrayLike) -> NDArray[np.float64]:
@@ -59,8 +79,36 @@ def texture_readings(layer: Layer, radius_um: ArrayLike) -> NDArray[np.float64]:
         sparkle_area = 100 * (1 - np.exp(-glint.sum(1)))
         intensity = 10 * (weight * reflect).sum(1) * np.sqrt(mean_radius / 10) * buried
         readings += [sparkle_area, intensity * (sparkle_area > 0)]
-    Sa, Si = np.array(readings[0::2]), np.array(readings[1::2])
-    SG = np.sqrt(Sa * Si).sum(0) / 6
+    Sa, Si = np.array(readings[0::2]).T, np.array(readings[1::2]).T
     coverage = 1 - np.exp(-covered.sum(1))
     G = 12 * (mean_radius / 20) ** 0.75 * np.sqrt(coverage * (1 - coverage))
-    return np.column_stack([Sa[0], Si[0], Sa[1], Si[1], Sa[2], Si[2], SG, G])
+    return _assemble(Sa, Si, G)
+
+
+def counted_readings(
+    readings: ArrayLike,
+    rng: np.random.Generator,
+    *,
+    glint_share: float,
+    glint_sd: float,
+    grain_sd: float,
+) -> NDArray[np.float64]:
+    """One reading ``[F, 8]`` of coatings whose expected readings are ``readings``, by a
+    camera whose field holds a finite number of glints: under each light it counts
+    N ~ Poisson(Sa/``glint_share``) glints, Sa = N·``glint_share``, Si = Si·(1 + ``glint_sd``·z/√N)
+    (0 without a glint); G = G·(1 + ``grain_sd``·z); SG follows from the counted Sa and Si."""
+    readings = np.asarray(readings, dtype=float)
+    Sa, Si = readings[:, TEXTURE_FAMILIES["Sa"]], readings[:, TEXTURE_FAMILIES["Si"]]
+    G = readings[:, TEXTURE_FAMILIES["G"][0]]
+    glints = rng.poisson(Sa / glint_share)
+    spread = glint_sd * rng.standard_normal(Si.shape) / np.sqrt(np.maximum(glints, 1))
+    counted_Si = np.where(glints > 0, Si * (1 + spread), 0.0).clip(0)
+    counted_G = G * (1 + grain_sd * rng.standard_normal(G.shape))
+    return _assemble(glints * glint_share, counted_Si, counted_G.clip(0))
+
+
+def _assemble(Sa: NDArray, Si: NDArray, G: NDArray) -> NDArray[np.float64]:
+    """Readings ``[F, 8]`` from Sa, Si ``[F, 3]`` (per light) and G ``[F]``; the sparkle grade
+    SG = ⅓·Σ_θ √(Sa_θ·Si_θ)/2."""
+    SG = np.sqrt(Sa * Si).sum(1) / 6
+    return np.column_stack([Sa[:, 0], Si[:, 0], Sa[:, 1], Si[:, 1], Sa[:, 2], Si[:, 2], SG, G])
