@@ -304,3 +304,30 @@ def test_the_difference_chart_draws_what_the_tolerance_judges(monkeypatch, tmp_p
                            tolerance_preset("de00-1.0"), tmp_path / "chart.png")  # fmt: skip
     dL = drawn["figure"].axes[0]
     assert not dL.collections and dL.get_ylim()[1] >= 1.0
+
+
+def test_the_difference_chart_draws_each_bounded_texture_reading_s_share(monkeypatch, tmp_path):
+    """Texture shares join the share panel right of the geometries, one column per bounded
+    reading, in each sample's colour; a reading over its limit is ringed."""
+    import flakelab.render.plots as plots
+    from flakelab.core.tolerance import tolerance_preset
+
+    drawn = {}
+    monkeypatch.setattr(plots, "_save", lambda figure, path, dpi: drawn.update(figure=figure))
+    reference = read_measurement(example_path("target"))
+    names, lab = reference.geometry_names, reference.lab()
+    texture = {"a": {"SG": 0.4, "G": 1.3}, "b": {"SG": 0.2, "G": 0.5}}
+    plots.plot_differences(names, lab, {"a": lab + 0.1, "b": lab - 0.1},
+                           tolerance_preset("refinish"), tmp_path / "c.png",
+                           texture=texture)  # fmt: skip
+    used = drawn["figure"].axes[3]
+    labels = [t.get_text() for t in used.get_xticklabels()]
+    assert labels == [*names, "texture SG", "texture G"]
+    for index, shares in enumerate(texture.values()):
+        marks = [ln for ln in used.get_lines() if ln.get_marker() == "s"][index]
+        assert np.allclose(marks.get_xdata(), [len(names) + 1, len(names) + 2])
+        assert np.allclose(marks.get_ydata(), [100 * shares["SG"], 100 * shares["G"]])
+    rings = np.concatenate([c.get_offsets() for c in used.collections if len(c.get_offsets())])
+    assert rings.tolist() == [[len(names) + 2, 130.0]]  # sample a's G, 1.3 of its limit
+    # the colour panels keep the geometries alone
+    assert [t.get_text() for t in drawn["figure"].axes[0].get_xticklabels()] == list(names)

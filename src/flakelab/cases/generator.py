@@ -14,7 +14,9 @@ Sources of variation (all in :class:`WorldSettings`):
 * weathering of targets: organic pigments fade 1–6 %, clearcoat haze adds 0.1–0.4 % flat
   reflectance;
 * instrument: smooth multiplicative noise 0.1 % per band, a gain error 0.12 % per geometry
-  per reading, additive 2·10⁻⁴;
+  per reading, additive 2·10⁻⁴; texture readings of one spot of the camera's field, glints
+  counted (Poisson) and grain sampled (:func:`~flakelab.texture.readings.counted_readings`),
+  drawn from a stream of their own so that no colour depends on them;
 * the colorist's recipe: the formulation's toners with amounts off by logN(0, 5 %);
 * the shop's own habits (``shop_*``, none by default): its sprayer's mean film build and
   flake spread against the factory's, and its instrument's gain against the instrument the

@@ -156,7 +156,8 @@ def compare(
     if plot is not None:
         title = f"{smp.sample} vs {ref.sample} ({light}): {'PASS' if result.all_pass else 'FAIL'}"
         samples = {smp.sample: result.lab_sample}
-        draw_differences(result.geometries, result.lab_reference, samples, tol, plot, title)
+        draw_differences(result.geometries, result.lab_reference, samples, tol, plot, title,
+                         texture={smp.sample: result.texture_share})  # fmt: skip
         report["plot"] = str(plot)
     if as_json:
         print(json.dumps(report, indent=1))

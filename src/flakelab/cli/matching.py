@@ -380,8 +380,10 @@ def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
         left_out and left_out[0].geometries, [x.lab for x in left_out],
     )  # fmt: skip
     apart = f"not searched; predicted by {left_out[0].model_id}" if left_out else ""
+    texture = {f"#{k}": c.texture_share for k, c in enumerate(result.candidates, 1)}
     draw_differences(*chart, tolerance, path, f"{result.target}: candidates as predicted",
-                     apart=len(result.candidates[0].geometries), apart_label=apart)  # fmt: skip
+                     apart=len(result.candidates[0].geometries), apart_label=apart,
+                     texture=texture)  # fmt: skip
 
 
 def _with_left_out(target, names: list, reference_lab, samples: dict, others, there: list):
@@ -704,7 +706,8 @@ def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forwa
                      path: Path) -> None:  # fmt: skip
     """The spray-out as measured and as the correction expects it (``samples``, CIELAB at the
     model's geometries), against the target; then at the target's other geometries, where
-    ``left_out`` expects it."""
+    ``left_out`` expects it. The measured spray-out's texture shares join the share panel
+    (the correction aims at colour alone)."""
     from flakelab.core.colorimetry import reflectance_to_Lab
 
     others = left_out.geometries if left_out else ()
@@ -714,8 +717,9 @@ def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forwa
     chart = _with_left_out(target, list(forward.geometries), target_lab, samples, others, there)
     apart = f"not in the correction; expected by {left_out.model_id}" if left_out else ""
     title = f"{sprayed.sample} against {target.sample}: the correction"
+    measured = {next(iter(samples)): tolerance.texture_share(target.texture, sprayed.texture)}
     draw_differences(*chart, tolerance, path, title, apart=len(forward.geometries),
-                     apart_label=apart)  # fmt: skip
+                     apart_label=apart, texture=measured)  # fmt: skip
 
 
 def weigh_command(

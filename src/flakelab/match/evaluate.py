@@ -138,7 +138,9 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     streams.append(streams[2].spawn(1)[0])
     R_target, texture = world.appearance(x_hidden[None], oem)
     target = world.measure(R_target, rng)[0]
-    readings = texture_reading(world, texture, rng.spawn(1)[0])
+    # the target's texture noise from a child of the first spray's stream: a child of rng
+    # would move every later target's streams (rng.spawn counts its children)
+    readings = texture_reading(world, texture, streams[0].spawn(1)[0])
     return Trial(world, target, oem, shop, streams, readings)
 
 

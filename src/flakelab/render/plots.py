@@ -123,6 +123,7 @@ def plot_differences(
     title: str = "",
     apart: int | None = None,
     apart_label: str = "",
+    texture: Mapping[str, Mapping[str, float]] | None = None,
     dpi: int = 120,
 ) -> None:
     """The multi-angle difference chart: ΔL*, ΔC*, ΔH* of each sample's CIELAB ``[G, 3]``
@@ -130,15 +131,20 @@ def plot_differences(
     them, and how much of each geometry's limit the difference uses (≤ 100 % passes; failing
     geometries ringed), all as ``tolerance`` judges them. Geometries from index ``apart`` on
     are drawn dashed with open markers beyond a dotted line, labelled ``apart_label``
-    (predicted by another model, say). Lines join geometries of one illumination angle."""
+    (predicted by another model, say). Lines join geometries of one illumination angle.
+    ``texture`` (sample label → reading → share of its limit, as
+    :meth:`~flakelab.core.tolerance.Tolerance.texture_share` gives it) adds the bounded
+    texture readings to the share panel, right of the geometries."""
     names = list(geometries)
     x = np.arange(len(names))
     apart = len(names) if apart is None else apart
     groups = _geometry_groups(names, apart)
     bounds = tolerance.bounds(names)
     judged = {label: tolerance.judge(names, reference_lab, lab) for label, lab in samples.items()}
-    figure, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True)
+    figure, axes = plt.subplots(2, 2, figsize=(12, 7.5))
     component_axes = (axes[0, 0], axes[0, 1], axes[1, 0])
+    for axis in component_axes[1:]:
+        axis.sharex(component_axes[0])
     for k, (axis, label) in enumerate(zip(component_axes, DIFFERENCE_COMPONENTS, strict=True)):
         limit = bounds[:, k + 1]
         bounded = np.isfinite(limit)
@@ -169,6 +175,8 @@ def plot_differences(
             axis.axvline(apart - 0.5, color="0.4", ls=":", lw=1.0)
         axis.grid(alpha=0.3)
         axis.set_xticks(x, names, rotation=60, fontsize=8)
+    if texture and any(texture.values()):
+        _plot_texture_shares(used, len(names), texture, list(samples))
     if apart < len(names):
         used.annotate(textwrap.fill(apart_label, 28), (apart - 0.4, 1.0),
                       xycoords=("data", "axes fraction"), xytext=(0, -6),
@@ -178,6 +186,25 @@ def plot_differences(
     used.legend(fontsize=7, frameon=False)
     figure.suptitle(title)
     _save(figure, path, dpi)
+
+
+def _plot_texture_shares(axis, start: int, texture, labels: list[str]) -> None:
+    """Each sample's texture shares (per cent of each bounded reading's limit) at positions
+    ``start`` + 1, …, beyond a dotted line, failing ones ringed, the samples' colours kept."""
+    readings = list(dict.fromkeys(k for shares in texture.values() for k in shares))
+    x = start + 1 + np.arange(len(readings))
+    for index, label in enumerate(labels):
+        shares = texture.get(label, {})
+        at = [i for i, k in enumerate(readings) if k in shares]
+        share = 100.0 * np.array([shares[readings[i]] for i in at])
+        axis.plot(x[at], share, "s", color=f"C{index}")
+        failing = share > 100.0
+        axis.scatter(x[at][failing], share[failing], s=140, facecolors="none",
+                     edgecolors="tab:red", zorder=3)  # fmt: skip
+    axis.axvline(start, color="0.4", ls=":", lw=1.0)
+    ticks = [*axis.get_xticks(), *x]
+    names = [t.get_text() for t in axis.get_xticklabels()] + [f"texture {k}" for k in readings]
+    axis.set_xticks(ticks, names, rotation=60, fontsize=8)
 
 
 def _geometry_groups(names: list[str], apart: int) -> list[tuple[np.ndarray, bool]]:
