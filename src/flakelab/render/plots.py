@@ -190,16 +190,18 @@ def plot_differences(
 
 def _plot_texture_shares(axis, start: int, texture, labels: list[str]) -> None:
     """Each sample's texture shares (per cent of each bounded reading's limit) at positions
-    ``start`` + 1, …, beyond a dotted line, failing ones ringed, the samples' colours kept."""
+    ``start`` + 1, …, beyond a dotted line, failing ones ringed, the samples' colours kept
+    and each set a little aside so that equal shares do not hide one another."""
     readings = list(dict.fromkeys(k for shares in texture.values() for k in shares))
     x = start + 1 + np.arange(len(readings))
     for index, label in enumerate(labels):
         shares = texture.get(label, {})
         at = [i for i, k in enumerate(readings) if k in shares]
         share = 100.0 * np.array([shares[readings[i]] for i in at])
-        axis.plot(x[at], share, "s", color=f"C{index}")
+        aside = x[at] + 0.15 * (index - (len(labels) - 1) / 2)
+        axis.plot(aside, share, "s", color=f"C{index}")
         failing = share > 100.0
-        axis.scatter(x[at][failing], share[failing], s=140, facecolors="none",
+        axis.scatter(aside[failing], share[failing], s=140, facecolors="none",
                      edgecolors="tab:red", zorder=3)  # fmt: skip
     axis.axvline(start, color="0.4", ls=":", lw=1.0)
     ticks = [*axis.get_xticks(), *x]
