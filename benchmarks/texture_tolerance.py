@@ -11,7 +11,8 @@ world of the demo library:
   batches and application, each read once (what a perfect recipe meets);
 * ``model_error``: the shipped model's mean absolute texture error on generated cases it
   never saw, through the matcher's forward (the hybrid, for toners new to the model): what
-  a candidate's predicted texture is off by;
+  a candidate's predicted texture is off by from a spray-out's reading (the reading's own
+  noise included);
 
 and ``new_toner_error``: the matcher's (hybrid) texture error at the world's nominal
 application for effect paints with and without one of the model's new toners (1–8 %, added

@@ -113,7 +113,8 @@ class Trial:
     def sprayed(
         self, x: NDArray, stream: np.random.Generator, batches: Variation | None = None
     ) -> tuple[NDArray, dict[str, float]]:
-        """:meth:`spray`'s reading and the same spray-out's texture readings."""
+        """:meth:`spray`'s reading and the same spray-out's texture readings, one spot's
+        (:meth:`World.measure_texture <flakelab.cases.generator.World.measure_texture>`)."""
         batches = batches or self.shop
         film, spread = self.world.application(1, stream)
         variation = Variation(batches.strength, batches.hue_shift, film, spread)
