@@ -286,7 +286,7 @@ REFINISH_TEXTURE = TextureLimit(G=1.0, SG=0.5)
 """The texture limits of the ``refinish`` tolerance, on flakelab's reading scales
 (:mod:`flakelab.texture.readings`; no instrument publishes its own). About 2.5 times the
 largest differences between a factory and a shop spray-out of one formulation in the
-generated world, each read once (99th percentiles |ΔG| 0.41, |ΔSG| 0.18), and twelve times
+generated world, each read once (99th percentiles |ΔG| 0.41, |ΔSG| 0.18), and 12–13 times
 the shipped model's texture error on generated cases (mean |ΔG| 0.08, |ΔSG| 0.04): a recipe
 fails on texture for its flakes, not for noise (``python benchmarks/texture_tolerance.py``).
 Sparkle intensity is left to SG: under a light that shows a coating few glints, Si is the
