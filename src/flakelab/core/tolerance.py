@@ -290,7 +290,7 @@ generated world, each read once (99th percentiles |ΔG| 0.41, |ΔSG| 0.18), and 
 the shipped model's texture error on generated cases (mean |ΔG| 0.08, |ΔSG| 0.04): a recipe
 fails on texture for its flakes, not for noise (``python benchmarks/texture_tolerance.py``).
 Sparkle intensity is left to SG: under a light that shows a coating few glints, Si is the
-mean of those few, and two readings of one panel differ by up to 4 (99th percentile); SG
+mean of those few, and two readings of one panel differ by 4 to 5 (99th percentile); SG
 weighs each light by √(Sa·Si), so it stays steady."""
 
 TOLERANCE_PRESETS: dict[str, Tolerance] = {
