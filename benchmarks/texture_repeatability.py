@@ -28,18 +28,7 @@ from flakelab.cases.generator import World
 from flakelab.core.measurement import TEXTURE_FAMILIES
 from flakelab.io import read_library
 from flakelab.texture.images import flake_populations
-from flakelab.texture.repeatability import fit_counting_noise, spot_readings
-
-
-def predicted_sd(constants: dict[str, float], mean: np.ndarray) -> np.ndarray:
-    """The counting model's sd ``[coatings, 7]`` at rendered mean readings ``[coatings, 7]``."""
-    Sa, Si, G = mean[:, 0:6:2], mean[:, 1:6:2], mean[:, 6:]
-    glints = np.maximum(Sa / constants["glint_share"], 1)
-    sd_Sa = np.sqrt(constants["glint_share"] * Sa)
-    sd_Si = constants["glint_sd"] * Si / np.sqrt(glints)
-    out = np.empty_like(mean)
-    out[:, 0:6:2], out[:, 1:6:2], out[:, 6:] = sd_Sa, sd_Si, constants["grain_sd"] * G
-    return out
+from flakelab.texture.repeatability import counting_sd, fit_counting_noise, spot_readings
 
 
 def main() -> None:
@@ -65,8 +54,10 @@ def main() -> None:
     settings = {k: getattr(world.settings, k) for k in fitted}
     stack = np.stack(spots)
     mean, sd = stack.mean(1), stack.std(1, ddof=1)
-    seen = np.concatenate([mean[:, 0:6:2] > 0] * 2 + [mean[:, 6:] > 0], axis=1)
-    log_ratio = np.abs(np.log(predicted_sd(settings, mean)[seen] / sd[seen]))
+    predicted = counting_sd(settings, mean)
+    # Sa, Si and G where the coating shows them (SG has no closed form)
+    seen = np.isfinite(predicted) & (mean > 0)
+    log_ratio = np.abs(np.log(predicted[seen] / sd[seen]))
 
     _, texture = world.appearance(x, world.nominal(len(x)))
     many = np.repeat(texture, 50, axis=0)

@@ -36,6 +36,7 @@ from flakelab.physics.layer import Layer, orientation_pdf
 __all__ = [
     "texture_readings",
     "counted_readings",
+    "assemble_readings",
     "SPARKLE_LIGHTS",
     "CAMERA_SOLID_ANGLE",
     "GLINT_SHARE",
@@ -82,7 +83,7 @@ def texture_readings(layer: Layer, radius_um: ArrayLike) -> NDArray[np.float64]:
     Sa, Si = np.array(readings[0::2]).T, np.array(readings[1::2]).T
     coverage = 1 - np.exp(-covered.sum(1))
     G = 12 * (mean_radius / 20) ** 0.75 * np.sqrt(coverage * (1 - coverage))
-    return _assemble(Sa, Si, G)
+    return assemble_readings(Sa, Si, G)
 
 
 def counted_readings(
@@ -104,11 +105,11 @@ def counted_readings(
     spread = glint_sd * rng.standard_normal(Si.shape) / np.sqrt(np.maximum(glints, 1))
     counted_Si = np.where(glints > 0, Si * (1 + spread), 0.0).clip(0)
     counted_G = G * (1 + grain_sd * rng.standard_normal(G.shape))
-    return _assemble(glints * glint_share, counted_Si, counted_G.clip(0))
+    return assemble_readings(glints * glint_share, counted_Si, counted_G.clip(0))
 
 
-def _assemble(Sa: NDArray, Si: NDArray, G: NDArray) -> NDArray[np.float64]:
-    """Readings ``[F, 8]`` from Sa, Si ``[F, 3]`` (per light) and G ``[F]``; the sparkle grade
-    SG = ⅓·Σ_θ √(Sa_θ·Si_θ)/2."""
+def assemble_readings(Sa: NDArray, Si: NDArray, G: NDArray) -> NDArray[np.float64]:
+    """Readings ``[F, 8]`` in :data:`~flakelab.core.measurement.TEXTURE_READINGS` order from
+    Sa, Si ``[F, 3]`` (per light) and G ``[F]``; the sparkle grade SG = ⅓·Σ_θ √(Sa_θ·Si_θ)/2."""
     SG = np.sqrt(Sa * Si).sum(1) / 6
     return np.column_stack([Sa[:, 0], Si[:, 0], Sa[:, 1], Si[:, 1], Sa[:, 2], Si[:, 2], SG, G])
