@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.difference import delta_E_CIE2000, delta_LCH
 from flakelab.core.geometry import Geometry
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 
 __all__ = [
     "Limit",
@@ -103,8 +103,11 @@ class TextureLimit:
     def bounds(self) -> NDArray[np.float64]:
         """The limit on each of :data:`~flakelab.core.measurement.TEXTURE_READINGS` (Sa15 →
         ``Sa``), ∞ where unchecked."""
-        limits = [getattr(self, reading.rstrip("0123456789")) for reading in TEXTURE_READINGS]
-        return np.array([np.inf if v is None else v for v in limits])
+        bounds = np.full(len(TEXTURE_READINGS), np.inf)
+        for family, columns in TEXTURE_FAMILIES.items():
+            if (limit := getattr(self, family)) is not None:
+                bounds[list(columns)] = limit
+        return bounds
 
     def share(
         self, reference: Mapping[str, float], sample: Mapping[str, float]
