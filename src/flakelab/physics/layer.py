@@ -85,6 +85,12 @@ class Layer:
         return np.asarray(scale, dtype=float)[:, None] * self.flake_sd[None, :]
 
     @property
+    def flake_normal_reflectance(self) -> NDArray[np.float64]:
+        """Each flake species' reflectance at normal incidence, mean over the bands ``[S]``
+        (what a glint's brightness scales with)."""
+        return self.flake_reflectance[:, 0].mean(axis=1)
+
+    @property
     def film(self) -> NDArray[np.float64]:
         """Basecoat thickness of each formulation ``[F]`` [µm]."""
         return np.broadcast_to(np.asarray(self.thickness, dtype=float), (self.size,))

@@ -51,8 +51,7 @@ def flake_populations(layer, radius_um) -> list[FlakePopulation]:
     :class:`~flakelab.physics.layer.Layer`), species of radius ``radius_um[S]``: what the
     texture camera images, with the layer's film, mean dye absorption and index."""
     radius = np.asarray(radius_um, dtype=float)
-    reflectance = layer.flake_reflectance[:, 0].mean(axis=1)  # at normal incidence, [S]
-    spreads = np.degrees(layer.spreads)
+    spreads, reflectance = np.degrees(layer.spreads), layer.flake_normal_reflectance
     return [
         FlakePopulation(
             radius,

@@ -69,7 +69,7 @@ def texture_readings(layer: Layer, radius_um: ArrayLike) -> NDArray[np.float64]:
     area = np.pi * radius**2
     per_area = rate / area * visible_depth  # N_A,s = φ/(πa²t)·d_vis [1/µm²]
     covered = per_area * area  # expected flake cover within the visible depth
-    reflect = layer.flake_reflectance[:, 0].mean(axis=1)  # [S]
+    reflect = layer.flake_normal_reflectance
     buried = np.exp(-2 * absorption * visible_depth)[:, 0]
     weight = covered / np.maximum(covered.sum(1, keepdims=True), 1e-12)
     mean_radius = (weight * radius).sum(1)
