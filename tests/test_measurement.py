@@ -7,7 +7,7 @@ import pytest
 
 from flakelab.core import Geometry, Limit, Measurement, Tolerance, compare, flop_index
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.tolerance import TextureLimit, tolerance_preset
+from flakelab.core.tolerance import TextureLimit, failing_geometries, tolerance_preset
 from flakelab.io import read_tolerance
 
 
@@ -52,6 +52,7 @@ def test_tolerance_component_limits_and_per_geometry_override():
         dLCH=np.array([[2.5, 0, 0], [0.9, -0.4, 5.0], [0.2, 0.6, 0]]),
     )
     assert passed.tolist() == [True, True, False]
+    assert failing_geometries(["45as15", "45as45", "45as75"], passed) == ["45as75"]
 
 
 def test_compare_reports_failing_geometries_only():

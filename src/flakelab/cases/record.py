@@ -25,7 +25,7 @@ from flakelab.core.geometry import (
     parse_geometries,
 )
 from flakelab.core.measurement import Measurement
-from flakelab.core.tolerance import Tolerance, failures
+from flakelab.core.tolerance import Tolerance, failing_geometries, failures
 
 __all__ = [
     "AUTO_OUTCOME",
@@ -65,8 +65,7 @@ def judged_outcome(
     ``corrected``; with what fails (geometries, then ``texture G``…), as ``compare`` says."""
     names = [g.name for g in geometries]
     _, _, passed = tolerance.judge(names, reflectance_to_Lab(target), reflectance_to_Lab(sprayout))
-    failing = [g for g, ok in zip(names, passed, strict=True) if not ok]
-    failing = failures(failing, tolerance.failing_texture(*textures))
+    failing = failures(failing_geometries(names, passed), tolerance.failing_texture(*textures))
     return ("corrected" if failing else "accepted"), failing
 
 

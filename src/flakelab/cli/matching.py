@@ -39,7 +39,7 @@ from flakelab.cli.learning import (
     since_option,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.tolerance import failures
+from flakelab.core.tolerance import failing_geometries, failures
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 
@@ -616,7 +616,7 @@ def correct_command(
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
     texture_failing = tol.failing_texture(target_reading.texture, sprayed_reading.texture)
-    failing = [g for g, ok in zip(forward.geometries, passed, strict=True) if not ok]
+    failing = failing_geometries(forward.geometries, passed)
     report = {
         "mode": mode,
         "before_de00": before.round(3).tolist(),

@@ -18,7 +18,7 @@ from flakelab.core.difference import (
 )
 from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
-from flakelab.core.tolerance import Tolerance, over_limit, tolerance_preset
+from flakelab.core.tolerance import Tolerance, failing_geometries, over_limit, tolerance_preset
 
 __all__ = ["Comparison", "compare", "describe"]
 
@@ -133,9 +133,7 @@ class Comparison:
             "limit_share_max": float(max([self.limit_share.max(), *self.texture_share.values()])),
             "metamerism_index_max": worst_per_light(self.metamerism),
             "pass": self.all_pass,
-            "failing_geometries": [
-                g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok
-            ],
+            "failing_geometries": failing_geometries(self.geometries, self.passed),
             "flop_index_reference": flop_ref,
             "flop_index_sample": flop_smp,
             "texture_difference": texture,

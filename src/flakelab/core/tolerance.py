@@ -3,12 +3,12 @@ on texture differences (|ΔG|, |ΔSG|, |ΔSi|, |ΔSa|) → pass/fail."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core.difference import delta_E_CIE2000, delta_LCH
 from flakelab.core.geometry import Geometry
@@ -19,6 +19,7 @@ __all__ = [
     "TextureLimit",
     "Tolerance",
     "TOLERANCE_PRESETS",
+    "failing_geometries",
     "failures",
     "over_limit",
     "tolerance_preset",
@@ -328,6 +329,11 @@ def tolerance_preset(name: str) -> Tolerance:
     if name not in TOLERANCE_PRESETS:
         raise ValueError(f"expected a tolerance among {', '.join(TOLERANCE_PRESETS)}, got {name!r}")
     return TOLERANCE_PRESETS[name]
+
+
+def failing_geometries(geometries: Sequence[str], passed: ArrayLike) -> list[str]:
+    """The geometries whose entry of ``passed`` (as :meth:`Tolerance.judge` gives it) is false."""
+    return [g for g, ok in zip(geometries, np.asarray(passed), strict=True) if not ok]
 
 
 def failures(geometries: list[str], texture: list[str]) -> list[str]:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.tolerance import Tolerance
+from flakelab.core.tolerance import Tolerance, failing_geometries
 from flakelab.match.search import (
     Candidate,
     evaluate_recipes,
@@ -43,7 +43,7 @@ class LeftOut:
 
     @property
     def failing(self) -> list[str]:
-        return [g for g, ok in zip(self.geometries, self.passed, strict=True) if not ok]
+        return failing_geometries(self.geometries, self.passed)
 
     def to_dict(self) -> dict[str, Any]:
         rows = geometry_rows(self.geometries, self.lab, self.dLCH, self.de00)

@@ -58,7 +58,13 @@ from flakelab.core.difference import (
 from flakelab.core.geometry import parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.tolerance import Tolerance, failures, over_limit, tolerance_preset
+from flakelab.core.tolerance import (
+    Tolerance,
+    failing_geometries,
+    failures,
+    over_limit,
+    tolerance_preset,
+)
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.match.forward import stepping
@@ -815,7 +821,7 @@ def _judge(
     spread = model_spread(forward, x[rows], reflectance_to_Lab(R[rows]))
     out = []
     for i, row in enumerate(chosen):
-        failing = [g for g, ok in zip(forward.geometries, passed[row], strict=True) if not ok]
+        failing = failing_geometries(forward.geometries, passed[row])
         fractions = {
             forward.toners[j]: float(x[row, j]) for j in np.argsort(-x[row]) if x[row, j] > 0
         }
