@@ -70,11 +70,11 @@ def main() -> None:
     _, texture = world.appearance(x, world.nominal(len(x)))
     si = TEXTURE_FAMILIES["Si"]
     rendered_si = mean[:, si] / mean[:, si[:1]]
-    model_si = texture[:, si] / texture[:, si[:1]]
+    world_si = texture[:, si] / texture[:, si[:1]]
     light_slope = {
         "fitted": fit_light_slope(spots),
         "rendered_si_over_si15_median": np.median(rendered_si, 0).round(3).tolist(),
-        "world_si_over_si15_median": np.median(model_si, 0).round(3).tolist(),
+        "world_si_over_si15_median": np.median(world_si, 0).round(3).tolist(),
     }
     many = np.repeat(texture, 50, axis=0)
     first, second = world.measure_texture(many, rng), world.measure_texture(many, rng)
