@@ -9,9 +9,8 @@ The spread between spots fits the counting model of
 sd(Si)/Si = glint_sd/√N with N = Sa/glint_share glints, sd(G)/G = grain_sd. The script prints
 the fitted constants, the world's (``WorldSettings``) and their ratio, and how well the model
 predicts each coating's spread (median |log ratio| of predicted to rendered sd); the rise of
-Si with the light's angle (slope k of 1 + k·log10(1/cos θ),
-:func:`flakelab.texture.repeatability.fit_light_slope`) fitted to the rendered means, and
-Si15 : Si45 : Si75 rendered and in the world's readings; then what
+Si with the light's angle (slope k of :func:`flakelab.texture.readings.light_factor`) fitted
+to the rendered means against the world's, with both Si15 : Si45 : Si75; then what
 the world's noise gives: |Δ| between two readings of one panel (50th / 95th / 99th
 percentiles over the effect paints, the largest over the lights for Sa and Si, each paint read
 50 times over) and the share of those pairs more than 1.0 apart.
@@ -31,6 +30,7 @@ from flakelab.cases.generator import World
 from flakelab.core.measurement import TEXTURE_FAMILIES
 from flakelab.io import read_library
 from flakelab.texture.images import flake_populations
+from flakelab.texture.readings import SPARKLE_LIGHT_SLOPE
 from flakelab.texture.repeatability import (
     counting_sd,
     fit_counting_noise,
@@ -73,6 +73,7 @@ def main() -> None:
     world_si = texture[:, si] / texture[:, si[:1]]
     light_slope = {
         "fitted": fit_light_slope(spots),
+        "world": SPARKLE_LIGHT_SLOPE,
         "rendered_si_over_si15_median": np.median(rendered_si, 0).round(3).tolist(),
         "world_si_over_si15_median": np.median(world_si, 0).round(3).tolist(),
     }
@@ -108,9 +109,9 @@ def main() -> None:
           f"{report['model_sd_within_factor_1_5']:.0%} (median |log ratio| "
           f"{report['model_sd_median_abs_log_ratio']:.2f})")  # fmt: skip
     print(f"  Si's rise with the light's angle, k of 1 + k·log10(1/cos θ): fitted "
-          f"{light_slope['fitted']:.3f}; Si15 : Si45 : Si75 rendered "
-          f"{light_slope['rendered_si_over_si15_median']}, world "
-          f"{light_slope['world_si_over_si15_median']}")  # fmt: skip
+          f"{light_slope['fitted']:.3f}, world {SPARKLE_LIGHT_SLOPE:.3f}; Si15 : Si45 : Si75 "
+          f"rendered {light_slope['rendered_si_over_si15_median']}, "
+          f"world {light_slope['world_si_over_si15_median']}")  # fmt: skip
     print("the same panel read twice by the world's instrument, |Δ| p50 / p95 / p99, and the "
           "share of panels whose two readings differ by more than 1.0:")  # fmt: skip
     for name, q in remeasure.items():

@@ -2,7 +2,7 @@
 
 A blue metallic from the demo library, made in the case generator's world (physics fast
 model, factory batches and application, instrument noise) and read at the MA-T12
-geometries with texture: the *target*. The *spray-out* is a colorist's first recipe for it
+geometries with texture, the texture as one spot of the camera's field reads it: the *target*. The *spray-out* is a colorist's first recipe for it
 (amounts off by a few per cent), mixed from the shop's batches and sprayed. Run:
 
     python scripts/make_examples.py
@@ -36,12 +36,14 @@ def main() -> None:
     library = read_library(None)
     world = World(library, "ma-t12")
     rng = np.random.default_rng(20261122)
+    texture_rng = rng.spawn(1)[0]  # a stream of its own: the colours stay as they were
     hidden = library.fractions(FORMULATION)[None]
     recipe = world.colorist_recipe(hidden, rng)
     OUT.mkdir(parents=True, exist_ok=True)
     for name, x in (("target", hidden), ("sprayout", recipe)):
         R, texture = world.appearance(x, world.variation(1, rng))
         measured = world.measure(R, rng)[0]
+        texture = world.measure_texture(texture, texture_rng)
         used = {library.names[i]: round(float(x[0, i]), 5) for i in np.flatnonzero(x[0])}
         measurement = Measurement(
             sample=f"Blue metallic {name} (synthetic)",

@@ -146,12 +146,16 @@ def test_the_prior_draws_a_small_shops_habits_towards_none(shipped, plain_shop, 
     shrink = PRIOR_SD[0] ** 2 / (PRIOR_SD[0] ** 2 + free.standard_error[0] ** 2)
     assert drawn.film_build / free.film_build == pytest.approx(shrink, rel=0.03)
     assert abs(drawn.film_build) < abs(free.film_build)
-    # with 500 spray-outs the prior weighs little: the well-read habits move by a tiny part
-    # of their error, the film build (read to ± 0.034 here) by prior² / (prior² + se²)
+    # with 500 spray-outs the prior weighs little: the well-read habits move by no more than
+    # their own prior alone would draw them, θ·se² / (prior² + se²), a tenth of their error at
+    # most (measured: gain 0.051 se against 0.063, spread 0.0001 against 0.0045), and the
+    # film build (read to ± 0.03 here) by prior² / (prior² + se²)
     many = habits_shop[0]
     free = estimate_habits(forward, library, many.x, many.R, prior_sd=None)
     drawn = habits_shop[1]
-    assert np.all(np.abs(drawn.theta - free.theta)[1:] < 0.05 * free.standard_error[1:])
+    alone = np.abs(free.theta) * free.standard_error**2 / (PRIOR_SD**2 + free.standard_error**2)
+    assert np.all(np.abs(drawn.theta - free.theta)[1:] <= alone[1:])
+    assert np.all(alone[1:] < 0.1 * free.standard_error[1:])
     shrink = PRIOR_SD[0] ** 2 / (PRIOR_SD[0] ** 2 + free.standard_error[0] ** 2)
     assert drawn.film_build / free.film_build == pytest.approx(shrink, rel=0.03)
 

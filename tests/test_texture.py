@@ -70,6 +70,7 @@ def test_the_world_s_texture_noise_is_the_spot_to_spot_spread_of_rendered_images
     from flakelab.cases.generator import World
     from flakelab.io import read_library
     from flakelab.texture.images import flake_populations
+    from flakelab.texture.readings import SPARKLE_LIGHT_SLOPE
     from flakelab.texture.repeatability import fit_counting_noise, fit_light_slope, spot_readings
 
     world = World(read_library(None))
@@ -80,6 +81,26 @@ def test_the_world_s_texture_noise_is_the_spot_to_spot_spread_of_rendered_images
     fitted = fit_counting_noise(spots)
     for name, value in fitted.items():
         assert 0.5 < getattr(world.settings, name) / value < 2.0, name
-    # a glint reads brighter under a lower light (Si ∝ 1 + k·log10(1/cos θ), k > 0), by about
-    # what 24 paints × 16 spots fit (0.49, benchmarks/texture_repeatability.py)
-    assert 0.25 < fit_light_slope(spots) < 1.0
+    # and the images' Si rises with the light's angle as the world's readings do
+    assert 0.5 < SPARKLE_LIGHT_SLOPE / fit_light_slope(spots) < 2.0
+
+
+def test_sparkle_intensity_rises_with_the_light_s_angle_and_nothing_else_does():
+    from flakelab.cases.generator import World
+    from flakelab.core.measurement import TEXTURE_FAMILIES
+    from flakelab.io import read_library
+    from flakelab.texture.readings import SPARKLE_LIGHT_SLOPE, SPARKLE_LIGHTS, light_factor
+
+    # a mirror shows the lamp's radiance, the white standard gets cos θ of its irradiance
+    assert light_factor(0.0) == 1.0
+    assert light_factor(60.0) == pytest.approx(1 + SPARKLE_LIGHT_SLOPE * np.log10(2.0))
+    world = World(read_library(None))
+    x = world.formulations(30, np.random.default_rng(3))
+    _, texture = world.appearance(x, world.nominal(30))
+    Si = texture[:, TEXTURE_FAMILIES["Si"]]
+    shows = Si[:, 0] > 0
+    assert shows.sum() > 10
+    # the same coating's Si under each light differs by the light's factor alone
+    factors = light_factor(np.array(SPARKLE_LIGHTS)) / light_factor(SPARKLE_LIGHTS[0])
+    np.testing.assert_allclose(Si[shows] / Si[shows, :1], np.tile(factors, (shows.sum(), 1)))
+    assert (np.diff(Si[shows], axis=1) > 0).all()

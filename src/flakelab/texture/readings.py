@@ -9,8 +9,11 @@ from the physics of a camera looking along the normal at a coating lit from 15°
   N_A = Σ_s N_s · d_vis with N_s = φ_s/(π a_s² t_s) and d_vis = 1/(σ_f + 2κ̄ + σ̄_s);
 * **sparkle area** Sa = 100·(1 − exp(−Σ_s N_A,s · π a_s² · p_s(θ_n) · Ω_cam)), the share of
   the image covered by glints (Ω_cam = 0.02 sr, the camera's acceptance in the binder);
-* **sparkle intensity** Si = 10·R̄·(a/10 µm)^½·exp(−2κ̄·d_vis): brighter for larger, more
-  reflective and less buried flakes;
+* **sparkle intensity** Si_θ = 10·R̄·(a/10 µm)^½·exp(−2κ̄·d_vis)·(1 + k·log10(1/cos θ)):
+  brighter for larger, more reflective and less buried flakes, and under a lower light: a
+  glint shows the lamp's radiance while the white standard it is read against receives
+  irradiance ∝ cos θ, and Si is logarithmic in the glint's brightness (k =
+  ``SPARKLE_LIGHT_SLOPE``, fitted to rendered images);
 * **sparkle grade** SG = ⅓·Σ_θ √(Sa_θ·Si_θ)/2;
 * **graininess** G (diffuse light): contrast of flake clusters at the mm scale,
   G = 12·(a/20 µm)^0.75·√(coverage·(1 − coverage)) with coverage = 1 − exp(−N_A·π a²).
@@ -38,6 +41,8 @@ __all__ = [
     "counted_readings",
     "assemble_readings",
     "SPARKLE_LIGHTS",
+    "SPARKLE_LIGHT_SLOPE",
+    "light_factor",
     "CAMERA_SOLID_ANGLE",
     "GLINT_SHARE",
     "GLINT_SD",
@@ -46,6 +51,10 @@ __all__ = [
 
 SPARKLE_LIGHTS = (15.0, 45.0, 75.0)
 """Directional light angles [degree] of the sparkle readings."""
+SPARKLE_LIGHT_SLOPE = 0.49
+"""Rise of Si per decade of 1/cos θ_light, relative to Si under normal light, fitted to
+rendered images, which read Si15 : Si45 : Si75 = 1 : 1.06 : 1.29
+(``benchmarks/texture_repeatability.py``)."""
 CAMERA_SOLID_ANGLE = 0.02
 """Acceptance of the camera pixel's glint cone, inside the binder [sr]."""
 GLINT_SHARE = 0.012
@@ -73,17 +82,24 @@ def texture_readings(layer: Layer, radius_um: ArrayLike) -> NDArray[np.float64]:
     buried = np.exp(-2 * absorption * visible_depth)[:, 0]
     weight = covered / np.maximum(covered.sum(1, keepdims=True), 1e-12)
     mean_radius = (weight * radius).sum(1)
+    normal_intensity = 10 * (weight * reflect).sum(1) * np.sqrt(mean_radius / 10) * buried
     readings = []
     for light in SPARKLE_LIGHTS:
         tilt = 0.5 * np.arcsin(np.sin(np.radians(light)) / layer.n)
         glint = covered * orientation_pdf(tilt, layer.spreads) * CAMERA_SOLID_ANGLE
         sparkle_area = 100 * (1 - np.exp(-glint.sum(1)))
-        intensity = 10 * (weight * reflect).sum(1) * np.sqrt(mean_radius / 10) * buried
+        intensity = normal_intensity * light_factor(light)
         readings += [sparkle_area, intensity * (sparkle_area > 0)]
     Sa, Si = np.array(readings[0::2]).T, np.array(readings[1::2]).T
     coverage = 1 - np.exp(-covered.sum(1))
     G = 12 * (mean_radius / 20) ** 0.75 * np.sqrt(coverage * (1 - coverage))
     return assemble_readings(Sa, Si, G)
+
+
+def light_factor(light: ArrayLike, slope: float = SPARKLE_LIGHT_SLOPE) -> NDArray[np.float64]:
+    """Si under a light at ``light`` degrees relative to Si under normal light:
+    1 + ``slope``·log10(1/cos θ)."""
+    return 1 + slope * np.log10(1 / np.cos(np.radians(light)))
 
 
 def counted_readings(

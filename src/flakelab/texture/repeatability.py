@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from flakelab.core.measurement import TEXTURE_FAMILIES
 from flakelab.texture.images import FlakePopulation, flake_image
 from flakelab.texture.metrics import graininess, sparkle
-from flakelab.texture.readings import SPARKLE_LIGHTS, assemble_readings
+from flakelab.texture.readings import SPARKLE_LIGHTS, assemble_readings, light_factor
 
 __all__ = ["spot_readings", "fit_counting_noise", "counting_sd", "fit_light_slope"]
 
@@ -65,15 +65,13 @@ def counting_sd(constants: dict[str, float], mean: NDArray) -> NDArray:
 
 
 def fit_light_slope(readings: list[NDArray]) -> float:
-    """Slope k of Si_θ ∝ 1 + k·log10(1/cos θ) from the spot readings ``[spots, 8]`` of several
-    coatings: least squares over coatings and lights of r_θ·(1 + k·l_0) = 1 + k·l_θ, with
-    r_θ = Si_θ/Si at the first light and l = log10(1/cos θ) (linear in k). A glint shows the
-    lamp's radiance while the white standard it is read against receives cos θ of the lamp's
-    irradiance, and Si is logarithmic in the glint's brightness (:mod:`~flakelab.texture.metrics`),
-    so rendered images read a higher Si under a lower light."""
+    """Slope k of Si_θ ∝ 1 + k·log10(1/cos θ) (:func:`~flakelab.texture.readings.light_factor`)
+    from the spot readings ``[spots, 8]`` of several coatings: least squares over coatings and
+    lights of r_θ·(1 + k·l_0) = 1 + k·l_θ, with r_θ = Si_θ/Si at the first light and
+    l = log10(1/cos θ) (linear in k)."""
     Si = np.stack(readings).mean(1)[:, _SI]
     seen = (Si > 0).all(1)
     ratio = Si[seen, 1:] / Si[seen, :1]
-    level = np.log10(1 / np.cos(np.radians(SPARKLE_LIGHTS)))  # l_θ
+    level = light_factor(np.array(SPARKLE_LIGHTS), 1.0) - 1  # l_θ
     a = level[1:] - ratio * level[0]
     return float(np.sum(a * (ratio - 1)) / np.sum(a * a))
