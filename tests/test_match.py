@@ -658,28 +658,43 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
 
 
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
-    """The daylight-only match of the example (phthalo green and quinacridone violet for the
-    car's blues), without any of the car's blue and sprayed a little light: a correction that
-    keeps its pigments moves amounts, and its expected index stays where the spray-out's is,
-    over the notice level; the colorist is told to match again. The car's own blue sprayed
-    the same way draws no such note. The daylight-only match as the search finds it carries a
-    trace of the car's phthalo blue GS, which the correction raises into a tint (adding DPP
-    orange): there the metamer is cured (README: worst index under A 1.74 → 0.15)."""
+    """The car's blues are phthalo blue GS and indanthrone (the match that weighs metamerism).
+    The daylight-only match of the example stands in phthalo green and quinacridone magenta
+    for them. Without either blue and sprayed a little light, a correction that keeps its
+    pigments moves amounts, its expected index stays over the notice level under every light,
+    and the colorist is told to match again; the car's own recipe sprayed the same way
+    draws no such note. The daylight-only match as the search finds it keeps the indanthrone
+    but not the GS: its correction (adding DPP orange) lowers the worst index under FL11 from
+    2.58 to 1.46 and still says to match again. With a trace of the GS instead (0.3 %), the
+    correction raises it into a tint (adding DPP red) and the metamer is cured (under A
+    2.63 → 0.14). A correction changes amounts and adds one toner: it cures a metamer only
+    where the recipe already carries the car's pigment that makes it one."""
     from flakelab.core.difference import METAMERISM_NOTICE, is_metamer
     from flakelab.match.correction import metamerism_note
 
     target, best, _ = example_by_metamerism
     spectra = target.storage_spectra(hybrid.geometries)
     car = ("Phthalo blue GS", "Indanthrone blue")
+    assert set(car) <= set(best[1.0].fractions)
     others = {n: v for n, v in best[0.0].fractions.items() if n not in car}
     metamer = {n: v / sum(others.values()) for n, v in others.items()}
+    traced = {n: 0.997 * v for n, v in metamer.items()} | {car[0]: 0.003}
+    recipes = {
+        "metamer": metamer,
+        "car": best[1.0].fractions,
+        "found": best[0.0].fractions,
+        "traced": traced,
+    }
+    assert car[0] not in best[0.0].fractions and car[1] in best[0.0].fractions
     notes, fixed, befores = {}, {}, {}
-    recipes = {"metamer": metamer, "car": best[1.0].fractions, "found": best[0.0].fractions}
-    assert 0 < best[0.0].fractions[car[0]] < 0.01
+
+    def worst(indices):
+        return max(v.max() for v in indices.values())
+
     for name, recipe in recipes.items():
         R = evaluate_recipes(hybrid, recipe_vector(hybrid, recipe)[None])[0][0]
         sprayed = 1.03 * R
-        extra = {} if name == "found" else {"extra_toners": 0}  # the default: up to 8 tried
+        extra = {"extra_toners": 0} if name in ("metamer", "car") else {}  # default: 8 tried
         fixed[name] = correct(hybrid, spectra, recipe, sprayed, mode="reformulate",
                               library=read_library(None), **extra)  # fmt: skip
         before = befores[name] = metamerism_indices(spectra, sprayed)
@@ -687,18 +702,26 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
         notes[name] = metamerism_note(before, fixed[name].metamerism)
         if name == "metamer":
             assert is_metamer(before)
-            for light, index in fixed[name].metamerism.items():  # amounts alone hardly move it
-                assert index.max() == pytest.approx(before[light].max(), abs=0.25), light
-    assert "FL11" in notes["metamer"] and "match the target again" in notes["metamer"]
+            # amounts alone leave it one under every light (A 2.72 → 2.50, FL11 1.88 → 2.16,
+            # LED-B3 1.44 → 1.43): they trade one light's index for another's
+            for light, index in fixed[name].metamerism.items():
+                assert index.max() > METAMERISM_NOTICE, light
+            assert worst(fixed[name].metamerism) == pytest.approx(worst(before), abs=0.25)
+    assert "under A" in notes["metamer"] and "match the target again" in notes["metamer"]
     assert notes["car"] is None
+
     found = fixed["found"]
-    assert found.fractions[car[0]] > 5 * best[0.0].fractions[car[0]]
-    assert found.new_toner == "DPP orange"
-    assert max(v.max() for v in found.metamerism.values()) < METAMERISM_NOTICE / 2
-    assert (befores["found"]["A"].max(), found.metamerism["A"].max()) == pytest.approx(
-        (1.74, 0.15), abs=0.01
+    assert found.new_toner == "DPP orange" and car[0] not in found.fractions
+    assert METAMERISM_NOTICE < worst(found.metamerism) < worst(befores["found"]) - 0.5
+    assert "FL11" in notes["found"] and "match the target again" in notes["found"]
+    cured = fixed["traced"]
+    assert cured.fractions[car[0]] > 10 * traced[car[0]]
+    assert cured.new_toner == "DPP red"
+    assert worst(cured.metamerism) < METAMERISM_NOTICE / 2
+    assert (befores["traced"]["A"].max(), cured.metamerism["A"].max()) == pytest.approx(
+        (2.63, 0.14), abs=0.01
     )
-    assert notes["found"] is None
+    assert notes["traced"] is None
 
 
 def test_a_correction_expects_the_metamerism_its_corrected_spray_out_shows(km):
