@@ -470,8 +470,10 @@ def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files
 
 def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):
     """The MA-T12 model's numbers for five-angle candidates at the example's seven other
-    geometries agree with the world's physics for those recipes (its own error, < 0.7 ΔE00;
-    the geometries mixed up, they would be some 20 off)."""
+    geometries agree with the world's physics for those recipes: within that model's held-out
+    p95 (1.66 ΔE00 on 500 unseen cases, README), and about as well as the same model agrees at
+    the five geometries the match saw (measured: at worst 1.06 and 0.27 left out, 0.97 and 0.36
+    seen). The geometries mixed up, they would be some 20 off."""
     from flakelab.data import example_path
     from flakelab.match.crosscheck import predict_left_out
     from flakelab.match.forward import PhysicsForward
@@ -484,14 +486,18 @@ def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_th
     left_out = predict_left_out(candidates, target, hybrid, ma_t12, tolerance_preset("refinish"))
     physics = PhysicsForward(library, instrument_geometries("ma-t12"))
     rows = [physics.geometries.index(g) for g in left_out[0].geometries]
+    seen = [physics.geometries.index(g) for g in hybrid.geometries]
     for candidate, numbers in zip(candidates, left_out, strict=True):
         assert numbers.geometries == tuple(
             g for g in target.geometry_names if g.startswith("15as")
         ) + ("45as-15",)
-        made = reflectance_to_Lab(
-            reflect(physics, recipe_vector(physics, candidate.fractions))[0, rows]
+        made = reflectance_to_Lab(reflect(physics, recipe_vector(physics, candidate.fractions))[0])
+        predicted = reflectance_to_Lab(
+            reflect(ma_t12, recipe_vector(ma_t12, candidate.fractions))[0]
         )
-        assert delta_E(numbers.lab, made).max() < 0.7
+        error = delta_E(numbers.lab, made[rows])
+        assert error.max() < 1.66
+        assert error.max() < 1.5 * delta_E(predicted[seen], made[seen]).max()
     # nothing left out, nothing to predict
     assert (
         predict_left_out(
