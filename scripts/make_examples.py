@@ -2,8 +2,9 @@
 
 A blue metallic from the demo library, made in the case generator's world (physics fast
 model, factory batches and application, instrument noise) and read at the MA-T12
-geometries with texture, the texture as one spot of the camera's field reads it: the *target*. The *spray-out* is a colorist's first recipe for it
-(amounts off by a few per cent), mixed from the shop's batches and sprayed. Run:
+geometries with texture, the texture as one spot of the camera's field reads it: the
+*target*. The *spray-out* is a colorist's first recipe for it (amounts off by a few per
+cent), mixed from the shop's batches and sprayed. Run:
 
     python scripts/make_examples.py
 """
