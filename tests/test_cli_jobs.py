@@ -146,6 +146,7 @@ def test_a_shop_brings_its_history_in_one_transaction(tmp_path):
     assert count_cases(open_database(db)) == 1
 
 
+@pytest.mark.slow  # a shop's whole workflow through the CLI, 0.8–1.7 min
 def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import read_cases
@@ -271,6 +272,7 @@ def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path):
     assert run.returncode != 0 and "--adapt-epochs" in run.stderr
 
 
+@pytest.mark.slow  # a shop's whole workflow through the CLI, 0.8–1.7 min
 def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path):
     cases, database = str(tmp_path / "cases.db"), str(tmp_path / "models.db")
     habits = ("--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005")
@@ -306,6 +308,7 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path)
     assert len(listed["registered"]) == 2
 
 
+@pytest.mark.slow  # a shop's whole workflow through the CLI, 0.8–1.7 min
 def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     cases, habits = str(tmp_path / "cases.db"), tmp_path / "habits.json"
     run = flakelab("cases", "generate", "--n", "300", "--seed", "23", "--shop", "shop A",
