@@ -810,6 +810,56 @@ def test_the_optimiser_follows_the_metamerism_term_along_its_tangent_and_retakes
         )
 
 
+@pytest.mark.parametrize("fused", [True, False])
+def test_the_search_s_adam_steps_as_torch_s_optimiser_class_does(fused):
+    """:class:`TensorAdam` calls the update that ``torch.optim.Adam`` calls: on a rugged loss
+    over a batch of rows, forty steps land on the class's logits to the last bit."""
+    from flakelab.match.adam import TensorAdam
+
+    start = torch.randn(7, 5, generator=torch.Generator().manual_seed(3))
+
+    def loss(logits):
+        x = torch.softmax(logits, dim=1)
+        return (torch.sin(9 * x) + (x - 0.3) ** 2).sum()
+
+    ours = start.clone().requires_grad_(True)
+    theirs = start.clone().requires_grad_(True)
+    adam = TensorAdam(ours, lr=0.08, fused=fused)
+    reference = torch.optim.Adam([theirs], lr=0.08, fused=fused)
+    for _ in range(40):
+        adam.step(loss(ours))
+        reference.zero_grad()
+        loss(theirs).backward()
+        reference.step()
+    assert not torch.equal(ours, start)
+    assert torch.equal(ours, theirs)
+
+
+def test_a_match_and_its_correction_do_not_import_torch_s_compiler():
+    """Every optimiser class of torch imports ``torch._dynamo`` (and sympy) when it is first
+    built: 1.8 s of a command line's first match, more than the rest of the search. The
+    search and the correction step through :class:`TensorAdam` instead."""
+    script = (
+        "import sys\n"
+        "from flakelab.data import example_path\n"
+        "from flakelab.io import read_library, read_measurement\n"
+        "from flakelab.match.correction import correct\n"
+        "from flakelab.match.models import effect_mask, forward_for\n"
+        "from flakelab.match.search import match, target_spectra\n"
+        "from flakelab.models.registry import shipped_model\n"
+        "library = read_library(None)\n"
+        "forward = forward_for(shipped_model('five-angle'), library)\n"
+        "target, sprayed = (read_measurement(example_path(n)) for n in ('target', 'sprayout'))\n"
+        "best = match(target, forward, effect_mask(library, forward.toners)).candidates[0]\n"
+        "aimed, made = (target_spectra(m, forward)[0] for m in (target, sprayed))\n"
+        "correct(forward, aimed, best.fractions, made, library=library)\n"
+        "print('torch._dynamo' in sys.modules, 'sympy' in sys.modules)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["False", "False"]
+
+
 def test_held_jacobian_follows_the_hybrid_physics_ratio_along_its_tangent(hybrid):
     # the optimiser's steps take the new toners' physics ratio and its finite-difference
     # Jacobian afresh every third step and follow the tangent between: where taken, value

@@ -53,6 +53,7 @@ from flakelab.core.difference import (
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
+from flakelab.match.adam import TensorAdam
 from flakelab.match.forward import stepping
 from flakelab.match.objective import MatchObjective
 from flakelab.match.search import evaluate_recipes
@@ -428,7 +429,7 @@ def _optimise(
         variable = torch.log(start).expand(len(used), -1).clone().requires_grad_(True)
     else:
         variable = torch.full(used.shape, -6.0, dtype=forward.dtype).requires_grad_(True)
-    optimiser = torch.optim.Adam([variable], lr=0.05)
+    optimiser = TensorAdam(variable, lr=0.05)
 
     def additions() -> torch.Tensor:
         return max_addition * torch.sigmoid(variable) * used
@@ -441,9 +442,8 @@ def _optimise(
 
     step_forward = stepping(forward, every)
     for _ in range(steps):
-        optimiser.zero_grad()
-        _predicted(objective, step_forward, mixed(), target_lab, offset, ratio)[2].sum().backward()
-        optimiser.step()
+        _, _, loss = _predicted(objective, step_forward, mixed(), target_lab, offset, ratio)
+        optimiser.step(loss.sum())
     with torch.no_grad():
         final = mixed()
         R, lab, loss = _predicted(objective, forward, final, target_lab, offset, ratio)

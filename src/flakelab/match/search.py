@@ -67,6 +67,7 @@ from flakelab.core.tolerance import (
 )
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
+from flakelab.match.adam import TensorAdam
 from flakelab.match.forward import stepping
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
 from flakelab.match.settings import MatchSettings
@@ -252,7 +253,7 @@ def _optimise(
     """Adam on the logits of every row at once; returns the logits, amounts and losses (the
     last exact: the steps follow the tangents that ``settings`` ask for)."""
     logits = logits.clone().requires_grad_(True)
-    optimiser = torch.optim.Adam([logits], lr=0.08, fused=True)
+    optimiser = TensorAdam(logits, lr=0.08, fused=True)
     tangent = (
         MetamerismTangent(objective, settings.metamerism_every)
         if objective.metamerism is not None and settings.metamerism_every > 1
@@ -260,13 +261,11 @@ def _optimise(
     )
     step_forward = stepping(forward, settings.physics_every)
     for _ in range(steps):
-        optimiser.zero_grad()
         x = _masked_softmax(logits, mask)
         loss = _loss(step_forward, objective, x, target_lab, target_texture, settings, tangent)
         if sparsity:
             loss = loss + sparsity * torch.sqrt(x + 1e-4).sum(1)
-        loss.sum().backward()
-        optimiser.step()
+        optimiser.step(loss.sum())
     with torch.no_grad():
         x = _masked_softmax(logits, mask)
         loss = _loss(forward, objective, x, target_lab, target_texture, settings)
