@@ -231,7 +231,6 @@ def match_command(
     'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.data import example_path
     from flakelab.io import read_measurement, read_tolerance
-    from flakelab.match.recipe import parse_quantity
     from flakelab.match.search import match
 
     if target == "evaluate":
@@ -256,7 +255,7 @@ def match_command(
                 model_risk=model_risk, metamerism=metamerism, lights=lights_option(lights)
             ),
             tolerance=tolerance,
-            scale=(parse_quantity(quantity), resolution) if weighed else None,
+            scale=_scale(quantity, resolution) if weighed else None,
             json_output=json_output,
         )
         return
@@ -264,7 +263,7 @@ def match_command(
         raise FlakelabError("--weighed: for the harness (flakelab match evaluate)")
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
-    grams = parse_quantity(quantity)
+    grams = _scale(quantity, resolution)[0]
     check_figure_file(render)
     check_figure_file(plot, "--plot")
     check_output_file(recipe_out, "--recipe-out")
@@ -739,10 +738,9 @@ def weigh_command(
     Grams per toner at the scale's resolution, cumulative weights in pouring order, and the
     ΔE00 between the exact and the weighed recipe, both predicted by the model."""
     from flakelab.io import read_recipe, write_recipe
-    from flakelab.match.recipe import parse_quantity
 
     grams = read_recipe(recipe)
-    can = parse_quantity(quantity)
+    can = _scale(quantity, resolution)[0]
     check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     fractions = recipe_fractions(lib, grams, recipe)
@@ -763,6 +761,15 @@ def weigh_command(
         return
     console.print(_weights_table(f"{recipe.name} for {can:g} g", report["weights_g"]))
     console.print(f"{_rounding_text(report)} ({forward.name})", highlight=False)
+
+
+def _scale(quantity: str, resolution: float) -> tuple[float, float]:
+    """The can in grams and the scale's resolution, checked that the scale can weigh it."""
+    from flakelab.match.recipe import check_scale, parse_quantity
+
+    grams = parse_quantity(quantity)
+    check_scale(grams, resolution)
+    return grams, resolution
 
 
 def _weighed(forward, fractions: dict[str, float], quantity_g: float, resolution: float) -> dict:

@@ -26,13 +26,19 @@ __all__ = [
     "RecipeLine",
     "Weighing",
     "weigh",
+    "check_scale",
     "weigh_for_colour",
     "weigh_whole_can",
     "weigh_additions",
     "parse_quantity",
     "RecipeError",
     "ROUNDINGS_VARIED",
+    "MAX_SCALE_STEPS",
 ]
+
+MAX_SCALE_STEPS = 10**9
+"""The most steps of its scale a can may take to weigh (100 t at 0.1 g): past it a quantity is
+a typing error, and the rounding's integer arithmetic would overflow."""
 
 ROUNDINGS_VARIED = 12
 """At most this many toners, the smallest in the can, are tried rounded both down and up
@@ -71,23 +77,35 @@ def parse_quantity(text: str) -> float:
     return parse_amount(text, units, "--quantity", "250g or 0.5kg", RecipeError)
 
 
-def weigh(
-    fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
-) -> list[RecipeLine]:
-    """Grams per toner (largest first, the usual pouring order) summing to ``quantity_g``."""
+def check_scale(quantity_g: float, resolution_g: float) -> int:
+    """How many steps of a scale of ``resolution_g`` weigh a can of ``quantity_g``; a
+    :class:`RecipeError` where the scale cannot weigh it, before any search is made for it."""
     if resolution_g <= 0 or not np.isfinite(resolution_g):
         raise RecipeError(f"resolution: expected a positive number of grams, got {resolution_g}")
     steps = quantity_g / resolution_g
+    if steps > MAX_SCALE_STEPS:
+        raise RecipeError(
+            f"quantity: {quantity_g:g} g is {steps:.3g} steps of the scale's {resolution_g:g} g; "
+            f"at most {MAX_SCALE_STEPS:.0e} (a larger scale resolution weighs a larger can)"
+        )
     if abs(steps - round(steps)) > 1e-6:
         raise RecipeError(
             f"quantity: {quantity_g:g} g is not a multiple of the scale's {resolution_g:g} g"
         )
+    return round(steps)
+
+
+def weigh(
+    fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
+) -> list[RecipeLine]:
+    """Grams per toner (largest first, the usual pouring order) summing to ``quantity_g``."""
+    steps = check_scale(quantity_g, resolution_g)
     names = list(fractions)
     x = np.array([fractions[n] for n in names], dtype=float)
     x = x / x.sum()
-    exact = x * round(steps)
+    exact = x * steps
     units = np.floor(exact).astype(int)
-    remainder = int(round(steps)) - units.sum()
+    remainder = steps - units.sum()
     units[np.argsort(-(exact - units))[:remainder]] += 1
     if np.any(units == 0):
         small = [n for n, u in zip(names, units, strict=True) if u == 0]
@@ -106,7 +124,7 @@ def weigh_for_colour(
     """:func:`weigh`, with each toner rounded down or up to the scale as the colour closest to
     the exact recipe's by ``forward`` asks (module notes)."""
     nearest = weigh(fractions, quantity_g, resolution_g)
-    steps = int(round(quantity_g / resolution_g))
+    steps = check_scale(quantity_g, resolution_g)
     names = list(fractions)
     share = np.array([fractions[n] for n in names], dtype=float)
     exact = share / share.sum() * steps
