@@ -129,6 +129,26 @@ def test_truncated_cxf_and_json_are_reported(rich_measurement, tmp_path):
             read_measurements(path)
 
 
+@pytest.mark.parametrize("bad", ["abc", "0.2o5", "nan"])
+def test_a_cxf_value_that_is_not_a_number_is_named_by_wavelength(rich_measurement, tmp_path, bad):
+    """xsdata leaves a spectrum it cannot convert as the element's text, with a warning; the
+    reader names the value itself at its wavelength, and nothing else is printed."""
+    import warnings
+
+    path = tmp_path / "m.cxf"
+    write_measurements([rich_measurement], path)
+    text = path.read_text()
+    start = text.index(">", text.index("<ns0:ReflectanceSpectrum")) + 1
+    end = text.index("<", start)
+    values = text[start:end].split()
+    values[3] = bad  # the fourth band: 430 nm
+    path.write_text(text[:start] + " ".join(values) + text[end:])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(MeasurementFileError, match=f"430 nm: expected a .*{bad}"):
+            read_measurements(path)
+
+
 def test_other_kinds_of_file_are_named(tmp_path):
     png = tmp_path / "photo.csv"
     png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))

@@ -18,6 +18,7 @@ import csv
 import io
 from datetime import datetime
 from os import PathLike
+from pathlib import Path
 
 import numpy as np
 
@@ -44,7 +45,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     """Read measurements from a CSV file in the layout above."""
     if text is None:
         try:
-            text = open(path, encoding="utf-8-sig").read()  # noqa: SIM115
+            text = Path(path).read_text(encoding="utf-8-sig")
         except UnicodeDecodeError as error:
             raise MeasurementFileError(path, f"not UTF-8 text ({error.reason})") from None
     lines = [

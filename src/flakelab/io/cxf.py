@@ -13,13 +13,15 @@ Layout written (and expected on reading):
 
 from __future__ import annotations
 
+import warnings
 from datetime import datetime
 from os import PathLike
+from pathlib import Path
 
 import colour_cxf
 import numpy as np
 from colour_cxf import cxf3
-from xsdata.exceptions import ParserError
+from xsdata.exceptions import ConverterWarning, ParserError
 from xsdata.models.datatype import XmlDateTime
 
 from flakelab import __version__
@@ -100,9 +102,12 @@ def _conditions_of(path: str | PathLike, spec: cxf3.ColorSpecification) -> Condi
 
 def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measurement]:
     """Read multi-angle reflectance measurements from a CxF3 file."""
-    data = open(path, "rb").read() if content is None else content  # noqa: SIM115
+    data = Path(path).read_bytes() if content is None else content
     try:
-        document = colour_cxf.read_cxf(data)
+        # a value xsdata cannot convert stays text and is named below, by field and wavelength
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConverterWarning)
+            document = colour_cxf.read_cxf(data)
     except (ParserError, ValueError, TypeError) as error:
         raise MeasurementFileError(path, f"not valid CxF3 XML ({error})") from None
     resources = document.resources
@@ -149,7 +154,9 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                 raise MeasurementFileError(
                     path, "no StartWL or WavelengthRange Increment", field=where
                 )
-            grid = start + wr.increment * np.arange(len(v.value), dtype=float)
+            # a spectrum with a value that is not a number comes as the element's text
+            spectrum = v.value.split() if isinstance(v.value, str) else v.value
+            grid = start + wr.increment * np.arange(len(spectrum), dtype=float)
             if wavelengths is None:
                 wavelengths = grid
             elif not np.array_equal(grid, wavelengths):
@@ -164,7 +171,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                     where=where,
                     sample=sample,
                     geometry=geometry,
-                    reflectance=parse_spectrum(path, v.value, grid, where),
+                    reflectance=parse_spectrum(path, spectrum, grid, where),
                     lab=lab,
                     measured_at=obj.creation_date.value.to_datetime()
                     if obj.creation_date and obj.creation_date.value

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 from datetime import datetime
 from os import PathLike
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,7 +53,7 @@ def _require(path: str | PathLike, mapping: Any, key: str, kind: type, where: st
 def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement]:
     """Read a flakelab JSON measurement document."""
     try:
-        document = json.loads(open(path, encoding="utf-8").read() if text is None else text)  # noqa: SIM115
+        document = json.loads(Path(path).read_text(encoding="utf-8") if text is None else text)
     except json.JSONDecodeError as error:
         raise MeasurementFileError(
             path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"

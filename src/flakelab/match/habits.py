@@ -38,6 +38,7 @@ import json
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -416,7 +417,7 @@ def write_habits(habits: ShopHabits, path: str | PathLike) -> None:
 def read_habits(path: str | PathLike) -> ShopHabits:
     """A habits file written by :func:`write_habits` (``flakelab cases habits --out``)."""
     try:
-        document = json.loads(open(path, encoding="utf-8").read())  # noqa: SIM115
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
     except OSError as error:
