@@ -118,6 +118,9 @@ def test_correct_refuses_a_bad_recipe(tmp_path):
     run = flakelab("correct", target, "--recipe", recipe, "--sprayed", target, "--tolerance", "x")
     assert run.returncode == 2 and "x: neither a tolerance preset" in run.stderr
     assert "Traceback" not in run.stderr
+    # a scale it cannot be weighed on is refused before the correction (was: division by zero)
+    run = flakelab("correct", target, "--recipe", recipe, "--sprayed", target, "--resolution", "0")
+    assert run.returncode == 2 and "resolution: expected a positive number" in run.stderr
 
 
 def test_a_shop_brings_its_history_in_one_transaction(tmp_path):

@@ -586,8 +586,9 @@ def correct_command(
     test_lights = lights_option(lights)
     check_output_file(recipe_out, "--recipe-out")
     check_figure_file(plot, "--plot")
-    lib, forward, _ = _setup(library, instrument, model, database, physics)
     grams = read_recipe(recipe)
+    _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
+    lib, forward, _ = _setup(library, instrument, model, database, physics)
     x0 = recipe_fractions(lib, grams, recipe)
     target_reading = read_measurement(target, sample)
     sprayed_reading = read_measurement(sprayed, sprayed_sample)
@@ -697,8 +698,18 @@ def _weigh_correction(forward, correction, mode: str, can: dict[str, float], res
 
     if mode == "additions":
         return weigh_additions(forward, can, correction.added, resolution)
+    return weigh_whole_can(forward, correction.fractions, _can_size(can, resolution), resolution)
+
+
+def _can_size(can: dict[str, float], resolution: float) -> float:
+    """The mixed ``can``'s size in grams, to the scale's resolution, checked that the scale
+    weighs it."""
+    from flakelab.match.recipe import check_resolution, check_scale
+
+    check_resolution(resolution)
     quantity = round(sum(can.values()) / resolution) * resolution
-    return weigh_whole_can(forward, correction.fractions, quantity, resolution)
+    check_scale(quantity, resolution)
+    return quantity
 
 
 def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forward, tolerance,

@@ -27,6 +27,7 @@ __all__ = [
     "Weighing",
     "weigh",
     "check_scale",
+    "check_resolution",
     "weigh_for_colour",
     "weigh_whole_can",
     "weigh_additions",
@@ -77,11 +78,16 @@ def parse_quantity(text: str) -> float:
     return parse_amount(text, units, "--quantity", "250g or 0.5kg", RecipeError)
 
 
+def check_resolution(resolution_g: float) -> None:
+    """A :class:`RecipeError` unless the scale's resolution is a positive number of grams."""
+    if not resolution_g > 0 or not np.isfinite(resolution_g):
+        raise RecipeError(f"resolution: expected a positive number of grams, got {resolution_g}")
+
+
 def check_scale(quantity_g: float, resolution_g: float) -> int:
     """How many steps of a scale of ``resolution_g`` weigh a can of ``quantity_g``; a
     :class:`RecipeError` where the scale cannot weigh it, before any search is made for it."""
-    if resolution_g <= 0 or not np.isfinite(resolution_g):
-        raise RecipeError(f"resolution: expected a positive number of grams, got {resolution_g}")
+    check_resolution(resolution_g)
     steps = quantity_g / resolution_g
     if steps > MAX_SCALE_STEPS:
         raise RecipeError(
