@@ -415,3 +415,10 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
     run = flakelab("correct", str(example_path("target")), "--recipe", str(recipe),
                    "--sprayed", str(example_path("sprayout")))  # fmt: skip
     assert run.returncode == 2 and "unknown toner '[bold]Perylene'" in run.stderr
+    # a case file that cannot be written is refused before the cases are generated, and a
+    # seed numpy cannot take is refused by name
+    run = flakelab("cases", "generate", "--n", "3", "--out", str(tmp_path / "no" / "c.csv"))
+    assert run.returncode == 2 and f"--out: {tmp_path / 'no' / 'c.csv'}: no folder" in run.stderr
+    assert "generating" not in run.stderr
+    run = flakelab("cases", "generate", "--n", "3", "--seed", "-1", "--out", str(recipe))
+    assert run.returncode == 2 and "'--seed'" in run.stderr and "Traceback" not in run.stderr

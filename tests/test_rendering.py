@@ -239,6 +239,9 @@ def test_render_refuses_bad_input_without_writing(tmp_path):
     for args, message in [
         (("--distance", "near"), "distance"),
         (("--light", "1.5"), "diffuse fraction"),
+        # the panel interpolates between measured angles; beyond them it would show the end
+        (("--view", "panel", "--aspecular", "130"), "within the measured -15–110°"),
+        (("--aspecular", "30"), "--aspecular: for --view panel"),  # the curved view sweeps
         ((str(tmp_path / "missing.cxf"),), "missing.cxf"),
     ]:
         run = flakelab("render", *args, "--size", "32", "-o", str(out))

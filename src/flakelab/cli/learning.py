@@ -20,6 +20,7 @@ from flakelab.cli.common import (
     SprayedSampleOption,
     ToleranceOption,
     check_figure_file,
+    check_output_file,
     console,
     errors,
     progress_bar,
@@ -168,7 +169,7 @@ def _which(shop: str | None, since: datetime | None) -> str:
 @reports_errors
 def generate(
     n: Annotated[int, typer.Option("--n", min=1, help="Number of cases.")] = 1000,
-    seed: Annotated[int, typer.Option(help="Seed of the generated world.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the generated world.")] = 0,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="CSV/CxF file or SQLite .db to write.")
     ] = None,
@@ -210,6 +211,8 @@ def generate(
     )
     world = World(read_library(library), instrument, habits)
     to_file = out is not None and _is_case_file(out)
+    if to_file:
+        check_output_file(out, "--out")  # before the cases are generated, not after
     engine = None if to_file else open_database(out if out is not None else database)
     collected = []
     with progress_bar() as bar:
@@ -590,7 +593,7 @@ def export_cases(
 @cases_app.command("realism")
 @reports_errors
 def realism(
-    seed: Annotated[int, typer.Option(help="Seed.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed.")] = 0,
     n: Annotated[int, typer.Option("--n", min=20, help="Formulations per statistic.")] = 400,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
@@ -893,7 +896,7 @@ def train(
             "amounts spread out (0: fractions and amounts per unit effect pigment only).",
         ),
     ] = 0.0,
-    seed: Annotated[int, typer.Option(help="Seed of splits and weights.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
     json_output: JsonOption = False,
 ) -> None:
     """Train the learned forward model with the hybrid paper's protocol.
@@ -1110,7 +1113,7 @@ def adapt(
     holdout: Annotated[
         float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
     ] = 0.1,
-    seed: Annotated[int, typer.Option(help="Seed of the splits and the adaptation.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the splits and the adaptation.")] = 0,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Also write the model here.")
     ] = None,

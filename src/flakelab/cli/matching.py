@@ -188,7 +188,9 @@ def match_command(
             "differs) or controlled (only the instrument's reading varies)."
         ),
     ] = "shop",
-    seed: Annotated[int, typer.Option(help="Seed (search restarts; evaluate: the world).")] = 0,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Seed (search restarts; evaluate: the world).")
+    ] = 0,
     model_risk: Annotated[
         float,
         typer.Option(

@@ -17,6 +17,7 @@ from flakelab.cli.common import (
     errors,
     reports_errors,
 )
+from flakelab.errors import FlakelabError
 
 OutputOption = Annotated[
     Path, typer.Option("--output", "-o", help="Image to write (.png, .jpg, .tif).")
@@ -24,7 +25,7 @@ OutputOption = Annotated[
 LightOption = Annotated[
     float, typer.Option("--light", help="Diffuse fraction of the light, 0 (spot) to 1 (dome).")
 ]
-SeedOption = Annotated[int, typer.Option(help="Seed of the texture.")]
+SeedOption = Annotated[int, typer.Option(min=0, help="Seed of the texture.")]
 
 
 class View(StrEnum):
@@ -52,7 +53,9 @@ def render_command(
     ),
     light: LightOption = 0.7,
     distance: Annotated[str, typer.Option(help="Observation distance, e.g. 0.5m, 2m.")] = "0.5m",
-    aspecular: Annotated[float, typer.Option(help="panel: aspecular angle [°].")] = 45.0,
+    aspecular: Annotated[
+        float | None, typer.Option(help="panel: aspecular angle [°] (default 45).")
+    ] = None,
     size: Annotated[int, typer.Option(min=16, max=8192, help="Image width in pixels.")] = 1024,
     no_texture: Annotated[bool, typer.Option("--no-texture", help="Colour only.")] = False,
     sample: SampleOption = None,
@@ -67,12 +70,15 @@ def render_command(
         save_image,
     )
 
+    if aspecular is not None and view is not View.panel:
+        raise FlakelabError("--aspecular: for --view panel (the curved panel sweeps 0–110°)")
     appearance = _appearance(measurement, sample, conditions)
     options = dict(
         diffuse_fraction=light, distance_m=parse_distance(distance), texture=not no_texture
     )
     if view is View.panel:
-        image = render_panel(appearance, aspecular, size, seed=seed, **options)
+        angle = 45.0 if aspecular is None else aspecular
+        image = render_panel(appearance, angle, size, seed=seed, **options)
     else:
         image = render_curved(appearance, (size // 2, size), seed=seed, **options)
     save_image(image, output)

@@ -263,7 +263,14 @@ def render_panel(
     texture: bool = True,
     seed: int = 0,
 ) -> NDArray:
-    """Flat panel seen at one aspecular angle: linear-light ``[size, size, 3]``."""
+    """Flat panel seen at one aspecular angle, within the measured ones: linear-light
+    ``[size, size, 3]``."""
+    low, high = appearance.aspecular[0], appearance.aspecular[-1]
+    if not low <= aspecular <= high:
+        raise ValueError(
+            f"aspecular: expected an angle within the measured {low:g}–{high:g}° of "
+            f"{appearance.name!r}, got {aspecular:g}°"
+        )
     columns = np.full(size_px, float(aspecular))
     options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
     return _render(appearance, columns, (size_px, size_px), texture=texture, seed=seed, **options)
