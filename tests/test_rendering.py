@@ -249,6 +249,10 @@ def test_render_refuses_bad_input_without_writing(tmp_path):
         assert "Traceback" not in run.stderr
     run = flakelab("render", "--size", "32", "-o", str(tmp_path / "x.bmp"))
     assert run.returncode == 2 and ".png" in run.stderr
+    missing = tmp_path / "no" / "x.png"
+    for command in ("render", "render-grid"):  # checked before the render, named as an option
+        run = flakelab(command, "-o", str(missing))
+        assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr
     assert list(tmp_path.iterdir()) == []
 
 

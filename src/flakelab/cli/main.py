@@ -255,6 +255,7 @@ def plot(
     """Spectra per geometry and L*, C* versus aspecular angle."""
     from flakelab.render.plots import plot_measurements
 
+    check_figure_file(output, "--output")
     plot_measurements(
         [read_measurement(path, sample)], output, conditions=Conditions.parse(conditions)
     )

@@ -13,6 +13,7 @@ from flakelab.cli.common import (
     ConditionsOption,
     JsonOption,
     SampleOption,
+    check_output_file,
     console,
     errors,
     reports_errors,
@@ -43,6 +44,14 @@ def _appearance(measurement: Path | None, sample: str | None, conditions: str):
     return appearance_of(read_measurement(path, sample), Conditions.parse(conditions))
 
 
+def check_image_file(path: Path) -> None:
+    """``--output``: an image format and a folder that can be written, before the render."""
+    from flakelab.render.appearance import image_format
+
+    image_format(path)
+    check_output_file(path, "--output")
+
+
 def render_command(
     measurement: Annotated[
         Path | None, typer.Argument(help="Measurement file (default: the shipped example).")
@@ -70,6 +79,7 @@ def render_command(
         save_image,
     )
 
+    check_image_file(output)
     if aspecular is not None and view is not View.panel:
         raise FlakelabError("--aspecular: for --view panel (the curved panel sweeps 0–110°)")
     appearance = _appearance(measurement, sample, conditions)
@@ -100,6 +110,7 @@ def render_grid_command(
     """Paper 001 Fig. 3: colour fixed, glint rises across, diffuse coarseness rises upward."""
     from flakelab.render.appearance import render_grid, save_image
 
+    check_image_file(output)
     appearance = _appearance(measurement, sample, conditions)
     image = render_grid(appearance, steps, tile, diffuse_fraction=light, seed=seed)
     save_image(image, output)
@@ -165,6 +176,7 @@ def texture_fit(
     )
     from flakelab.texture.generator import PROCESSES
 
+    check_output_file(output, "--output")  # before the fit, which takes minutes
     if grey_only:
         fitted = dict(load_processes(output))
         fitted["coarseness"] = refit_grey(fitted["coarseness"], seed=seed)

@@ -57,6 +57,7 @@ __all__ = [
     "render_panel",
     "render_curved",
     "render_stack",
+    "image_format",
     "render_grid",
     "compose",
     "parse_distance",
@@ -345,13 +346,19 @@ def parse_distance(text: str) -> float:
     return parse_amount(text, {"mm": 1e-3, "cm": 1e-2, "m": 1.0}, "--distance", "0.5m or 50cm")
 
 
+def image_format(path) -> str:
+    """The image format that ``path``'s suffix names (png, jpg, tif), else a ValueError."""
+    suffix = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
+    if suffix not in {"png", "jpg", "jpeg", "tif", "tiff"}:
+        raise ValueError(f"{path}: expected an image file ending .png, .jpg or .tif")
+    return suffix
+
+
 def save_image(image: NDArray, path) -> None:
     """Write a linear-light ``[rows, cols, 3]`` image as 8-bit sRGB (PNG, JPEG, TIFF by the
     file's suffix), atomically."""
     from matplotlib.image import imsave
 
-    suffix = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
-    if suffix not in {"png", "jpg", "jpeg", "tif", "tiff"}:
-        raise ValueError(f"{path}: expected an image file ending .png, .jpg or .tif")
+    suffix = image_format(path)
     pixels = np.round(encode_sRGB(image) * 255).astype(np.uint8)
     write_atomically(path, lambda temporary: imsave(temporary, pixels, format=suffix))
