@@ -276,3 +276,19 @@ def test_colour_loss_is_the_mean_squared_cie94_difference(trained, data):
     perfect = (model.encode_targets(data.R[:12], data.texture[:12]) - model.y_mean) / model.y_std
     exact = float(loss(torch.as_tensor(perfect, dtype=torch.float32)[None], rows)[0])
     assert exact < 1e-3 * value
+
+
+@pytest.mark.parametrize(
+    "settings, problem",
+    [
+        ({"hidden": (0, 5)}, "hidden: expected layer sizes of 1 or more"),
+        ({"hidden": ()}, "hidden: expected layer sizes of 1 or more"),
+        ({"epochs": 0}, "epochs: expected 1 or more, got 0"),
+        ({"members": 0}, "members: expected 1 or more"),
+    ],
+)
+def test_a_training_configuration_that_cannot_train_is_refused(settings, problem):
+    """A layer of no units trained to a useless model (``flakelab train --hidden 0,5`` ran 600
+    epochs), and no epochs ended in an IndexError after the data were read."""
+    with pytest.raises(ModelError, match=problem):
+        TrainingConfig(**settings)

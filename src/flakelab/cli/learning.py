@@ -847,7 +847,9 @@ def train(
     register_model: Annotated[
         bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
     ] = True,
-    epochs: Annotated[int, typer.Option(help="Epochs per stage (then as many fine-tuning).")] = 300,
+    epochs: Annotated[
+        int, typer.Option(min=1, help="Epochs per stage (then as many fine-tuning).")
+    ] = 300,
     hidden: Annotated[str, typer.Option(help="Hidden layer sizes.")] = "100,100,100",
     batch_size: Annotated[int, typer.Option(min=1, help="Cases per optimiser step.")] = 128,
     colour_weight: Annotated[
@@ -934,7 +936,12 @@ def train(
         replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
         for arrays in split_held_out(chosen, cases, holdout, seed, lib)
     )
-    sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
+    try:
+        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
+    except ValueError:
+        raise FlakelabError(
+            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
+        ) from None
     config = TrainingConfig(
         hidden=sizes,
         epochs=epochs,

@@ -180,7 +180,9 @@ def match_command(
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
     targets: Annotated[int, typer.Option(min=1, help="evaluate: hidden targets.")] = 200,
-    novel_targets: Annotated[int, typer.Option(help="evaluate: targets with a new toner.")] = 50,
+    novel_targets: Annotated[
+        int, typer.Option(min=0, help="evaluate: targets with a new toner.")
+    ] = 50,
     world: Annotated[
         str,
         typer.Option(

@@ -95,6 +95,13 @@ class TrainingConfig:
     log_offset: float = 0.0
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        if not self.hidden or any(size < 1 for size in self.hidden):
+            raise ModelError(f"hidden: expected layer sizes of 1 or more, got {self.hidden}")
+        for name in ("epochs", "finetune_epochs", "batch_size", "folds", "members"):
+            if getattr(self, name) < 1:
+                raise ModelError(f"{name}: expected 1 or more, got {getattr(self, name)}")
+
     @classmethod
     def per_stage(cls, epochs: int, learning_rate: float, **settings) -> TrainingConfig:
         """``epochs`` for training and for fine-tuning, which runs at a tenth of
