@@ -856,7 +856,9 @@ def train(
         float | None,
         typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term (default: 0.02)."),
     ] = None,
-    holdout: Annotated[float, typer.Option(help="Share of cases held out to judge it.")] = 0.1,
+    holdout: Annotated[
+        float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
+    ] = 0.1,
     adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
     adapt_epochs: Annotated[
         int | None,
@@ -925,6 +927,12 @@ def train(
     if log_offset > LOG_OFFSET_MAX:
         raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
 
+    try:
+        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
+    except ValueError:
+        raise FlakelabError(
+            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
+        ) from None
     lib = read_library(library)
     instrument = _instrument(instrument)
     geometries = INSTRUMENT_GEOMETRIES[instrument]
@@ -936,12 +944,6 @@ def train(
         replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
         for arrays in split_held_out(chosen, cases, holdout, seed, lib)
     )
-    try:
-        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
-    except ValueError:
-        raise FlakelabError(
-            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
-        ) from None
     config = TrainingConfig(
         hidden=sizes,
         epochs=epochs,
