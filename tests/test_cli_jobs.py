@@ -422,3 +422,17 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
     assert "generating" not in run.stderr
     run = flakelab("cases", "generate", "--n", "3", "--seed", "-1", "--out", str(recipe))
     assert run.returncode == 2 and "'--seed'" in run.stderr and "Traceback" not in run.stderr
+    # training settings: named before the cases are read (the case file here does not exist)
+    cases = str(tmp_path / "cases.csv")
+    for option, value, message in [
+        ("--hidden", "abc", "--hidden: expected layer sizes such as 100,100,100"),
+        ("--hidden", "0,5", "hidden: expected layer sizes of 1 or more"),
+        ("--holdout", "-0.5", "'--holdout'"),
+    ]:
+        run = flakelab("train", cases, option, value, "--no-register")
+        assert run.returncode == 2 and message in run.stderr, (option, value, run.stderr)
+    run = flakelab("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
+    assert run.returncode == 2 and "'--novel-targets'" in run.stderr
+    missing = tmp_path / "no" / "p.png"
+    run = flakelab("plot", str(example_path("target")), "-o", str(missing))
+    assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr

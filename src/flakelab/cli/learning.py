@@ -933,17 +933,7 @@ def train(
         raise FlakelabError(
             f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
         ) from None
-    lib = read_library(library)
-    instrument = _instrument(instrument)
-    geometries = INSTRUMENT_GEOMETRIES[instrument]
-    loaded = load_cases(cases)
-    chosen = cases_at(loaded, geometries)
-    if not chosen:
-        raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
-    data, held_out = (
-        replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
-        for arrays in split_held_out(chosen, cases, holdout, seed, lib)
-    )
+    # the settings are checked before the cases are read (TrainingConfig refuses its own)
     config = TrainingConfig(
         hidden=sizes,
         epochs=epochs,
@@ -959,6 +949,17 @@ def train(
         config = replace(config, colour_weight=colour_weight)
     if adapt_epochs is not None:
         config = replace(config, adapt_epochs=adapt_epochs)
+    lib = read_library(library)
+    instrument = _instrument(instrument)
+    geometries = INSTRUMENT_GEOMETRIES[instrument]
+    loaded = load_cases(cases)
+    chosen = cases_at(loaded, geometries)
+    if not chosen:
+        raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
+    data, held_out = (
+        replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
+        for arrays in split_held_out(chosen, cases, holdout, seed, lib)
+    )
     stages = protocol_epochs(config, adapt is not None)
     with progress_bar(disable=json_output) as bar:
         task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
