@@ -551,8 +551,10 @@ def test_match_refuses_bad_input(tmp_path):
     bad.write_text("<not cxf")
     run = flakelab("match", str(bad))
     assert run.returncode == 2 and str(bad) in run.stderr and "Traceback" not in run.stderr
+    run = flakelab("match", "--example", "--quantity", "0g")
+    assert run.returncode == 2 and "--quantity" in run.stderr
     # a can the scale cannot weigh is refused before the search, even before its model is
-    # looked for (0 g: at parsing, above)
+    # looked for
     run = flakelab("match", "--example", "--quantity", "1e30kg", "--model", str(tmp_path / "m.pt"))
     assert run.returncode == 2 and "1e+34 steps of the scale's 0.1 g" in run.stderr
     assert "m.pt" not in run.stderr
