@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import csv
+import io
+import json
 import multiprocessing
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -296,6 +299,74 @@ def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(
     assert count_cases(open_database(database)) == 4
 
 
+def _case_file_with(cases, tmp_path, name, edit):
+    """A case file of ``cases`` written as ``name`` and passed through ``edit`` (its text)."""
+    path = tmp_path / name
+    write_cases(cases, path)
+    path.write_text(edit(path.read_text()))
+    return path
+
+
+def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
+    first = cases[0]
+    recipe = json.dumps(first.recipe)
+
+    def cxf_recipe(value):
+        return lambda text: text.replace(f"Value='{recipe}'", f"Value='{value}'", 1)
+
+    flawed = {  # each was an internal error, or a silent loss, before
+        ("list.cxf", cxf_recipe("[1, 2]")): "recipe: expected a mapping toner → amount, got list",
+        (
+            "null.cxf",
+            cxf_recipe(json.dumps(dict.fromkeys(first.recipe))),
+        ): "expected a number, got None",
+        ("text.cxf", cxf_recipe(json.dumps(dict.fromkeys(first.recipe, "abc")))): "got 'abc'",
+        ("orphan.cxf", lambda t: t.replace(f'"{first.case_id}/target"', '"x/other"', 1)): (
+            f"sample '{first.case_id}/sprayout': no matching '{first.case_id}/target' sample"
+        ),
+        ("date.cxf", lambda t: re.sub(r'(meta:created_at" Value=")[^"]+', r"\1soon", t, count=1)): (
+            "meta tag created_at: expected an ISO 8601 date and time, got 'soon'"
+        ),
+        ("twice.csv", lambda t: t + t.splitlines()[1] + "\n"): (
+            f"row 5: case_id: '{first.case_id}' is also row 2's"
+        ),
+        ("nan.csv", lambda t: t.replace(t.splitlines()[1], _cell(t, 1, 12, "nan"))): (
+            r"nan.csv: row 2: target:[^:]+:430: expected a finite number"
+        ),
+        ("extra.csv", lambda t: "\n".join(line + ",1" for line in t.splitlines()) + "\n"): (
+            re.escape("(1 unexpected, e.g. ['1'])")
+        ),
+    }
+    for (name, edit), message in flawed.items():
+        path = _case_file_with(cases[:3], tmp_path, name, edit)
+        with pytest.raises(CaseFileError) as raised:
+            read_cases(path)
+        assert str(raised.value).startswith(f"{path}: "), name
+        assert re.search(message, str(raised.value)), (name, str(raised.value))
+        assert str(raised.value).count(str(path)) == 1  # named once, not twice
+
+
+def _cell(text: str, row: int, column: int, value: str) -> str:
+    """Row ``row`` of a CSV text with one cell replaced (its recipe holds quoted commas)."""
+    cells = list(csv.reader(io.StringIO(text)))[row]
+    cells[column] = value
+    out = io.StringIO()
+    csv.writer(out, lineterminator="").writerow(cells)
+    return out.getvalue()
+
+
+def test_importing_stored_cases_again_names_one_and_stores_nothing(cases, tmp_path, database_url):
+    old, new = tmp_path / "old.csv", tmp_path / "new.csv"
+    write_cases(cases[:3], old)
+    write_cases(cases[2:6], new)
+    assert _cli("cases", "import", str(old), "--database", database_url).returncode == 0
+    run = _cli("cases", "import", str(new), "--database", database_url)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert f"case '{cases[2].case_id}' is already stored" in run.stderr
+    assert "(1 of the file's 4 cases are); nothing was stored" in run.stderr
+    assert count_cases(open_database(database_url)) == 3
+
+
 def test_case_checks_its_fields():
     with pytest.raises(CaseError, match="outcome"):
         Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((1, 31)), outcome="maybe")
@@ -303,6 +374,13 @@ def test_case_checks_its_fields():
         Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((2, 31)))
     with pytest.raises(CaseError, match="recipe"):
         Case("x", ("45as45",), {"A": -1.0}, np.ones((1, 31)), np.ones((1, 31)))
+    with pytest.raises(CaseError, match="recipe: A: expected a number, got None"):
+        Case("x", ("45as45",), {"A": None}, np.ones((1, 31)), np.ones((1, 31)))
+    with pytest.raises(CaseError, match="recipe: expected a mapping toner → amount, got list"):
+        Case("x", ("45as45",), [1.0], np.ones((1, 31)), np.ones((1, 31)))
+    assert Case(
+        "x", ("45as45",), {"A": np.float32(3), "B": 1}, np.ones((1, 31)), np.ones((1, 31))
+    ).recipe == {"A": 0.75, "B": 0.25}
     # texts no longer than the database's columns hold (PostgreSQL refuses a longer one)
     with pytest.raises(CaseError, match="shop: expected a text of at most 120 characters"):
         Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((1, 31)), shop="s" * 121)

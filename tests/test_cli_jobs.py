@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -40,6 +41,17 @@ def test_generate_train_register_list_and_evaluate(tmp_path):
     run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["cases"] == 120
+    # a case whose toner the library lacks is named with the file it came from
+    from flakelab.cases.exchange import read_cases, write_cases
+
+    shop = tmp_path / "shop.csv"
+    first, *rest = read_cases(cases)
+    write_cases([*rest, replace(first, recipe={"Shop's own red": 1.0})], shop)
+    run = flakelab("model", "evaluate", str(shop), "--model", str(tmp_path / "m.pt"))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert f"{shop}: case '{first.case_id}': recipe: toner \"Shop's own red\" is not in" in (
+        " ".join(run.stderr.split())
+    )
 
 
 def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
+from numbers import Real
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +37,25 @@ longer value; SQLite would keep it), checked with every case so that no store fa
 
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
+
+
+def _recipe_amounts(where: str, recipe) -> dict[str, float]:
+    """A recipe's amounts as floats, checked: a mapping toner → a number ≥ 0, summing above 0."""
+    if not isinstance(recipe, Mapping):
+        raise CaseError(
+            f"{where}: recipe: expected a mapping toner → amount, got {type(recipe).__name__}"
+        )
+    if not recipe:
+        raise CaseError(f"{where}: recipe: expected at least one toner")
+    wrong = next(
+        (k for k, v in recipe.items() if isinstance(v, bool) or not isinstance(v, Real)), None
+    )
+    if wrong is not None:
+        raise CaseError(f"{where}: recipe: {wrong}: expected a number, got {recipe[wrong]!r}")
+    amounts = {str(k): float(v) for k, v in recipe.items()}
+    if any(not np.isfinite(v) or v < 0 for v in amounts.values()) or sum(amounts.values()) <= 0:
+        raise CaseError(f"{where}: recipe: expected non-negative amounts with a positive sum")
+    return amounts
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,11 +92,7 @@ class Case:
             if not np.all(np.isfinite(values)) or np.any(values < -0.05):
                 raise CaseError(f"{where}: {name}: expected finite reflectance factors ≥ −0.05")
             object.__setattr__(self, name, values)
-        if not self.recipe:
-            raise CaseError(f"{where}: recipe: expected at least one toner")
-        amounts = {str(k): float(v) for k, v in self.recipe.items()}
-        if any(not np.isfinite(v) or v < 0 for v in amounts.values()) or sum(amounts.values()) <= 0:
-            raise CaseError(f"{where}: recipe: expected non-negative amounts with a positive sum")
+        amounts = _recipe_amounts(where, self.recipe)
         total = sum(amounts.values())
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
         if self.created_at.tzinfo is None:  # SQLite and some case files keep no zone

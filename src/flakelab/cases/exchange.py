@@ -131,11 +131,18 @@ def read_cases(path: str | PathLike) -> list[Case]:
         )
     header = rows[0]
     columns = _file_geometries(path, header)
-    cases = []
+    cases, rows_of = [], {}
     for number, row in enumerate(rows[1:], start=2):
         if not any(cell.strip() for cell in row):
             continue
-        cases.append(_case_from_row(path, number, header, columns, row))
+        case = _case_from_row(path, number, header, columns, row)
+        if case.case_id in rows_of:
+            raise CaseFileError(
+                f"{path}: row {number}: case_id: {case.case_id!r} is also row "
+                f"{rows_of[case.case_id]}'s; a case id names one case"
+            )
+        rows_of[case.case_id] = number
+        cases.append(case)
     if not cases:
         raise CaseFileError(f"{path}: no cases after the header")
     return cases
@@ -147,11 +154,14 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
     geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
     expected = _header(geometries)
     if tuple(header) != expected:
-        missing = [c for c in expected if c not in header][:3]
-        extra = [c for c in header if c not in expected][:3]
+        missing = [c for c in expected if c not in header]
+        extra = [c for c in header if c not in expected]
+        wrong = [f"{len(missing)} missing, e.g. {missing[:3]}"] if missing else []
+        wrong += [f"{len(extra)} unexpected, e.g. {extra[:3]}"] if extra else []
+        wrong = wrong or ["in another order"]
         raise CaseFileError(
             f"{path}: row 1: expected the columns of geometries {';'.join(geometries) or 'none'}"
-            f" (missing e.g. {missing}, unexpected e.g. {extra})"
+            f" ({'; '.join(wrong)})"
         )
     return geometries
 
@@ -217,15 +227,18 @@ def _case_from_row(
         ) from None
     if cells["synthetic"] not in ("0", "1"):
         raise CaseFileError(f"{where}: synthetic: expected 0 or 1, got {cells['synthetic']!r}")
+    readings = {
+        "target": spectra("target"),
+        "sprayout": spectra("sprayout"),
+        "target_texture": texture("target"),
+        "sprayout_texture": texture("sprayout"),
+    }
     try:
         return Case(
             case_id=cells["case_id"],
             geometries=geometries,
             recipe=recipe,
-            target=spectra("target"),
-            sprayout=spectra("sprayout"),
-            target_texture=texture("target"),
-            sprayout_texture=texture("sprayout"),
+            **readings,
             instrument=cells["instrument"],
             shop=cells["shop"],
             conditions=cells["conditions"],
@@ -272,6 +285,18 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
 
 def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case]:
     by_name = {m.sample: m for m in measurements}
+    orphan = next(
+        (
+            n
+            for n in by_name
+            if n.endswith("/sprayout") and f"{n[: -len('/sprayout')]}/target" not in by_name
+        ),
+        None,
+    )
+    if orphan is not None:
+        raise CaseFileError(
+            f"{path}: sample {orphan!r}: no matching '{orphan[: -len('/sprayout')]}/target' sample"
+        )
     cases = []
     for name, target in by_name.items():
         if not name.endswith("/target"):
@@ -286,11 +311,25 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
         if missing:
             raise CaseFileError(f"{where}: missing meta tags {missing}")
         try:
+            recipe = json.loads(meta["recipe"])
+        except ValueError:
+            raise CaseFileError(
+                f"{where}: meta tag recipe: expected a JSON object toner → amount, "
+                f"got {meta['recipe']!r}"
+            ) from None
+        try:
+            created = datetime.fromisoformat(meta["created_at"])
+        except ValueError:
+            raise CaseFileError(
+                f"{where}: meta tag created_at: expected an ISO 8601 date and time, "
+                f"got {meta['created_at']!r}"
+            ) from None
+        try:
             cases.append(
                 Case(
                     case_id=case_id,
                     geometries=target.geometries,
-                    recipe=json.loads(meta["recipe"]),
+                    recipe=recipe,
                     target=target.reflectance,
                     sprayout=sprayout.reflectance,
                     target_texture=target.texture,
@@ -300,7 +339,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
                     conditions=meta.get("conditions", "D65/10"),
                     outcome=meta["outcome"],
                     synthetic=meta.get("synthetic") == "1",
-                    created_at=datetime.fromisoformat(meta["created_at"]),
+                    created_at=created,
                 )
             )
         except (CaseError, ValueError) as error:

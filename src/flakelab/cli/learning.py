@@ -95,11 +95,21 @@ def _is_case_file(path: Path) -> bool:
     return path.suffix.lower() in (".csv", ".cxf", ".xml")
 
 
+def source_arrays(source, cases: list, library, *, effect: bool = False):
+    """The training arrays of ``cases`` read from ``source``; a case the library cannot
+    encode (a toner it lacks) is named with the file or database it came from."""
+    from flakelab.models.network import ModelError
+    from flakelab.models.training import case_arrays
+
+    try:
+        return case_arrays(cases, library.names, library.effect if effect else None)
+    except ModelError as error:
+        raise FlakelabError(f"{source}: {error}") from None
+
+
 def split_held_out(cases: list, source: str, holdout: float, seed: int, library):
     """Training and held-out arrays of ``cases``, each held out with probability ``holdout``
     (seeded), both non-empty."""
-    from flakelab.models.training import case_arrays
-
     held = np.random.default_rng(seed).random(len(cases)) < holdout
     if held.all() or not held.any():
         raise FlakelabError(
@@ -108,7 +118,7 @@ def split_held_out(cases: list, source: str, holdout: float, seed: int, library)
 
     def arrays(kept: bool):
         chosen = [c for c, h in zip(cases, held, strict=True) if h == kept]
-        return case_arrays(chosen, library.names, library.effect)
+        return source_arrays(source, chosen, library, effect=True)
 
     return arrays(False), arrays(True)
 
@@ -239,12 +249,19 @@ def import_cases(
     database: DatabaseOption = None,
 ) -> None:
     """Import a shop's case history into the database (all cases or none)."""
-    from flakelab.cases.database import add_cases, open_database
+    from flakelab.cases.database import add_cases, existing_case_ids, open_database
     from flakelab.cases.exchange import read_cases
 
     cases = read_cases(source)
     engine = open_database(database)
-    count = add_cases(engine, cases)
+    stored = existing_case_ids(engine, (c.case_id for c in cases))
+    if stored:
+        first = next(c.case_id for c in cases if c.case_id in stored)
+        raise FlakelabError(
+            f"{source}: case {first!r} is already stored in {engine.url} ({len(stored)} of the "
+            f"file's {len(cases)} cases are); nothing was stored"
+        )
+    count = add_cases(engine, cases)  # one transaction: a writer in between is refused whole
     errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
 
 
@@ -679,7 +696,6 @@ def habits(
         save_habits,
         write_habits,
     )
-    from flakelab.models.training import case_arrays
 
     check_figure_file(plot, "--plot")
     lib, forward = learned_forward(library, instrument, model, database)
@@ -689,7 +705,7 @@ def habits(
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
-    data = case_arrays(chosen, lib.names)
+    data = source_arrays(cases, chosen, lib)
     found = replace(
         estimate_habits(forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None),
         shop=shop or (shops.pop() if len(shops) == 1 else None),
@@ -1042,7 +1058,7 @@ def evaluate(
     from flakelab.cases.case import cases_at, select_cases
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, load_model_file
-    from flakelab.models.training import case_arrays, evaluate_model
+    from flakelab.models.training import evaluate_model
 
     lib = read_library(library)
     forward = (
@@ -1061,7 +1077,7 @@ def evaluate(
     from flakelab.match.search import evaluate_recipes
 
     matcher = forward_for(forward, lib)
-    data = case_arrays(chosen, lib.names)
+    data = source_arrays(cases, chosen, lib)
     shop_habits = habits_for(habits, None, database, matcher)
 
     def habits_offset(x, R):
