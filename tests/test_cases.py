@@ -235,6 +235,42 @@ def test_a_database_that_cannot_be_opened_is_named(tmp_path):
     assert junk.read_text() == "not a database"  # left as it was
 
 
+def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch):
+    """A mistyped path must not leave an empty database behind and report no cases."""
+    missing = tmp_path / "shop.db"
+    for given in (missing, f"sqlite:///{missing}"):
+        with pytest.raises(DatabaseError, match="no such database file; nothing was created"):
+            open_database(given, must_exist=True)
+    monkeypatch.setenv("FLAKELAB_DATABASE_URL", str(missing))
+    with pytest.raises(DatabaseError, match="no such database file"):
+        open_database(must_exist=True)
+    assert not missing.exists()
+    for args in (
+        ("cases", "list"),
+        ("cases", "export", str(tmp_path / "x.csv")),
+        ("model", "list"),
+    ):
+        run = _cli(*args, "--database", str(missing))
+        assert run.returncode == 2 and "no such database file" in run.stderr, args
+    assert not missing.exists()
+    open_database(missing)  # a command that stores creates it
+    assert missing.is_file() and count_cases(open_database(missing, must_exist=True)) == 0
+
+
+def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases, tmp_path):
+    database = tmp_path / "shop.db"
+    add_cases(open_database(database), cases[:2])
+    for target, message in (
+        (tmp_path / "history.json", "expected a case file named .csv, .cxf, .xml"),
+        (tmp_path / "no" / "history.csv", "target: .* no folder"),
+    ):
+        run = _cli("cases", "export", str(target), "--database", str(database))
+        assert run.returncode == 2 and re.search(message, run.stderr), run.stderr
+        assert not target.exists()
+    with pytest.raises(CaseFileError, match="got the suffix '.json'"):
+        write_cases(cases[:2], tmp_path / "history.json")
+
+
 def test_a_duplicate_case_stores_nothing(cases, database_url):
     engine = open_database(database_url)
     add_cases(engine, cases[:5])

@@ -17,7 +17,8 @@ import numpy as np
 from alembic import command
 from alembic.config import Config
 from sqlalchemy import Engine, create_engine, event, func, select
-from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError, IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from flakelab.cases.case import Case, CaseError
@@ -70,9 +71,15 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor.close()
 
 
-def open_database(url: str | os.PathLike | None = None) -> Engine:
-    """An engine on an up-to-date database (migrations applied)."""
+def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = False) -> Engine:
+    """An engine on an up-to-date database (migrations applied). A SQLite file that does not
+    exist is created, unless ``must_exist`` and the file was named (here or by
+    ``FLAKELAB_DATABASE_URL``): commands that only read refuse it, since a mistyped path would
+    leave an empty database behind and report no cases, or the shipped model."""
+    named = url is not None or bool(os.environ.get("FLAKELAB_DATABASE_URL"))
     url = url_for(url) if url is not None else default_url()
+    if must_exist and named:  # the user data folder's own database is made on first use
+        _check_sqlite_file_exists(url)
     try:
         engine = create_engine(url)
         if engine.dialect.name == "sqlite":
@@ -89,6 +96,20 @@ def open_database(url: str | os.PathLike | None = None) -> Engine:
             "PostgreSQL: pip install 'flakelab[postgres]'"
         ) from None
     return engine
+
+
+def _check_sqlite_file_exists(url: str) -> None:
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        return  # create_engine names the malformed URL
+    file = parsed.database
+    if parsed.get_backend_name() == "sqlite" and file and file != ":memory:":
+        if not Path(file).is_file():
+            raise DatabaseError(
+                f"{url}: no such database file; nothing was created (the commands that store "
+                "cases or models create one)"
+            )
 
 
 def migrate(engine: Engine, revision: str = "head") -> None:

@@ -35,7 +35,9 @@ from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import write_atomically
 
-__all__ = ["read_cases", "write_cases", "CASE_FIELDS"]
+__all__ = ["read_cases", "write_cases", "is_case_file", "check_case_file_suffix", "CASE_FIELDS"]
+
+CASE_FILE_SUFFIXES = (".csv", ".cxf", ".xml")
 
 CASE_FIELDS = (
     "case_id",
@@ -67,10 +69,25 @@ def _header(geometries: tuple[str, ...]) -> tuple[str, ...]:
     return (*CASE_FIELDS, *spectra, *texture)
 
 
+def is_case_file(path: str | PathLike) -> bool:
+    """Whether a path names a case file (CSV or CxF3) by its suffix."""
+    return Path(path).suffix.lower() in CASE_FILE_SUFFIXES
+
+
+def check_case_file_suffix(path: str | PathLike) -> None:
+    """A case file to write is named .csv, .cxf or .xml (its format is read from the name)."""
+    if not is_case_file(path):
+        raise CaseFileError(
+            f"{path}: expected a case file named {', '.join(CASE_FILE_SUFFIXES)} "
+            "(CSV or CxF3), got the suffix {!r}".format(Path(path).suffix)
+        )
+
+
 def write_cases(cases: list[Case], path: str | PathLike) -> None:
     """Write cases as CSV or CxF3 (by extension), atomically."""
     if not cases:
         raise CaseFileError(f"{path}: expected at least one case to write, got none")
+    check_case_file_suffix(path)
     if Path(path).suffix.lower() in (".cxf", ".xml"):
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return

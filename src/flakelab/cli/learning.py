@@ -91,10 +91,6 @@ ModelFileOption = Annotated[
 ]
 
 
-def _is_case_file(path: Path) -> bool:
-    return path.suffix.lower() in (".csv", ".cxf", ".xml")
-
-
 def source_arrays(source, cases: list, library, *, effect: bool = False):
     """The training arrays of ``cases`` read from ``source``; a case the library cannot
     encode (a toner it lacks) is named with the file or database it came from."""
@@ -126,14 +122,14 @@ def split_held_out(cases: list, source: str, holdout: float, seed: int, library)
 def load_cases(source: str) -> list:
     """Cases from a CSV/CxF file, or from a database (URL or .db/.sqlite file)."""
     from flakelab.cases.database import iter_cases, open_database
-    from flakelab.cases.exchange import read_cases
+    from flakelab.cases.exchange import is_case_file, read_cases
 
     path = Path(source)
-    if _is_case_file(path):
+    if is_case_file(path):
         return read_cases(path)
     if "://" not in source and not path.exists():
         raise FlakelabError(f"{source}: no such case file or database")
-    return list(iter_cases(open_database(source)))
+    return list(iter_cases(open_database(source, must_exist=True)))
 
 
 def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
@@ -212,7 +208,7 @@ def generate(
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
     from flakelab.cases.database import add_cases, open_database
-    from flakelab.cases.exchange import write_cases
+    from flakelab.cases.exchange import is_case_file, write_cases
     from flakelab.cases.generator import World, WorldSettings
     from flakelab.io import read_library
 
@@ -220,7 +216,7 @@ def generate(
         shop_film_build=shop_film_build, shop_spread=shop_spread, shop_gain=shop_gain
     )
     world = World(read_library(library), instrument, habits)
-    to_file = out is not None and _is_case_file(out)
+    to_file = out is not None and is_case_file(out)
     if to_file:
         check_output_file(out, "--out")  # before the cases are generated, not after
     engine = None if to_file else open_database(out if out is not None else database)
@@ -501,7 +497,7 @@ def list_cases(
     from flakelab.cases.case import worst_differences
     from flakelab.cases.database import latest_cases, open_database
 
-    engine = open_database(database)
+    engine = open_database(database, must_exist=True)
     cases = latest_cases(engine, last, shop=shop)
     worst, where = worst_differences(cases) if cases else ([], [])
     rows = [
@@ -560,7 +556,7 @@ def remove(
 
     from flakelab.cases.database import case_exists, open_database, remove_case
 
-    engine = open_database(database)
+    engine = open_database(database, must_exist=True)
     if not case_exists(engine, case_id):
         raise FlakelabError(f"{engine.url}: no case {case_id!r}; nothing was removed")
     if not yes:
@@ -595,10 +591,12 @@ def export_cases(
     """Export case histories as CSV or CxF3: a shop's, since a date, at one geometry set."""
     from flakelab.cases.case import select_cases
     from flakelab.cases.database import iter_cases, open_database
-    from flakelab.cases.exchange import write_cases
+    from flakelab.cases.exchange import check_case_file_suffix, write_cases
 
+    check_case_file_suffix(target)
+    check_output_file(target, "target")  # before the database is read
     geometries = instrument and INSTRUMENT_GEOMETRIES[_instrument(instrument)]
-    engine = open_database(database)
+    engine = open_database(database, must_exist=True)
     cases = select_cases(iter_cases(engine), shop=shop, since=since, geometries=geometries)
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
@@ -824,7 +822,7 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
     from flakelab.cases.database import open_database, shop_summary
     from flakelab.match.habits import ShopHabits, list_habits
 
-    engine = open_database(database)
+    engine = open_database(database, must_exist=True)
     habits = {h["shop"]: h for h in list_habits(engine)}
     rows = [
         s | {"first": s["first"].isoformat(), "last": s["last"].isoformat()}
@@ -1009,7 +1007,7 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
     from flakelab.cases.database import open_database
     from flakelab.models.registry import SHIPPED, list_models
 
-    rows = list_models(open_database(database))
+    rows = list_models(open_database(database, must_exist=True))
     if json_output:
         print(json.dumps({"registered": rows, "shipped": list(SHIPPED)}, indent=2))
         return
@@ -1257,5 +1255,5 @@ def _maybe_engine(database: str | None):
     from flakelab.cases.database import open_database
 
     if database or os.environ.get("FLAKELAB_DATABASE_URL"):
-        return open_database(database)
+        return open_database(database, must_exist=True)
     return None

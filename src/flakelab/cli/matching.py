@@ -133,7 +133,7 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
     found = (
         read_habits(path)
         if path
-        else stored_habits(open_database(database), shop, forward.model_id)
+        else stored_habits(open_database(database, must_exist=True), shop, forward.model_id)
     )
     if found.model != forward.model_id:
         errors.print(
