@@ -443,6 +443,17 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
     ]:
         run = flakelab("train", cases, option, value, "--no-register")
         assert run.returncode == 2 and message in run.stderr, (option, value, run.stderr)
+    # every command's output file in a folder that is not there is refused before any work,
+    # as the others are (these three made the folder)
+    model, habits = tmp_path / "no" / "m.pt", tmp_path / "no" / "h.json"
+    for args, output in (
+        (("train", cases, "--no-register", "--out", str(model)), model),
+        (("model", "adapt", cases, "--no-register", "--out", str(model)), model),
+        (("cases", "habits", cases, "--out", str(habits)), habits),
+    ):
+        run = flakelab(*args)
+        assert run.returncode == 2 and f"--out: {output}: no folder" in run.stderr, args
+    assert not (tmp_path / "no").exists()
     run = flakelab("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
     assert run.returncode == 2 and "'--novel-targets'" in run.stderr
     missing = tmp_path / "no" / "p.png"

@@ -34,6 +34,7 @@ from flakelab.core.geometry import (
     instruments_reading,
 )
 from flakelab.errors import FlakelabError
+from flakelab.io.records import write_atomically
 
 cases_app = typer.Typer(
     help="Refinish cases: generate, record, record-all, list, remove, import, export; "
@@ -696,6 +697,7 @@ def habits(
     )
 
     check_figure_file(plot, "--plot")
+    check_output_file(out, "--out")
     lib, forward = learned_forward(library, instrument, model, database)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)
@@ -947,6 +949,7 @@ def train(
         raise FlakelabError(
             f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
         ) from None
+    check_output_file(out, "--out")
     # the settings are checked before the cases are read (TrainingConfig refuses its own)
     config = TrainingConfig(
         hidden=sizes,
@@ -986,8 +989,7 @@ def train(
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
     summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
     if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(model.to_bytes())
+        write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
         summary["file"] = str(out)
     if register_model:
         summary["registry"] = register(
@@ -1158,6 +1160,7 @@ def adapt(
         recorded_config,
     )
 
+    check_output_file(out, "--out")
     lib = read_library(library)
     engine = open_database(database) if register_model else _maybe_engine(database)
     base = load_model_file(model) if model else current_model(engine, instrument)
@@ -1190,8 +1193,7 @@ def adapt(
         },
     }
     if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(new.to_bytes())
+        write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))
         summary["file"] = str(out)
     if register_model:
         summary["registry"] = register(engine, new, held_out, metrics=summary["held_out"])
