@@ -135,7 +135,7 @@ def _bad_files(tmp_path: Path, source: Path) -> dict[str, tuple[Path, str]]:
         "NaN": (nan, "row 2, 400 nm: expected a finite number"),
         "wavelengths": (
             wrong,
-            "header: wavelengths expected increasing wavelengths with a constant step",
+            "header: expected increasing wavelengths with a constant step",
         ),
         "geometry": (unknown, "row 2, geometry: expected a geometry name"),
     }

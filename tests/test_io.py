@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -127,6 +128,39 @@ def test_truncated_cxf_and_json_are_reported(rich_measurement, tmp_path):
         path.write_bytes(path.read_bytes()[:-200])
         with pytest.raises(MeasurementFileError, match=problem):
             read_measurements(path)
+
+
+def test_a_json_document_s_every_flaw_is_named_by_its_field(rich_measurement, tmp_path):
+    path = tmp_path / "m.json"
+    write_measurements([rich_measurement], path)
+    good = json.loads(path.read_text())
+
+    def first(document):
+        return document["measurements"][0]
+
+    flawed = {  # each was read without a word, or named the wrong thing, before
+        "version: expected version 1 (the one this flakelab reads), got 2": lambda d: d.update(
+            version=2
+        ),
+        "measurements[0].instrument: expected a text, got dict": lambda d: first(d).update(
+            instrument={"serial": 1}
+        ),
+        "measurements[0]: expected an object, got int": lambda d: d["measurements"].insert(0, 5),
+        "measurements[0].geometries: expected at least one geometry": lambda d: first(d).update(
+            geometries=[]
+        ),
+        "json: measurements: expected list, got dict": lambda d: d.update(measurements={}),
+        "measurements[0].wavelengths: expected increasing": lambda d: first(d).update(
+            wavelengths=first(d)["wavelengths"][::-1]
+        ),
+    }
+    for message, edit in flawed.items():
+        document = json.loads(json.dumps(good))
+        edit(document)
+        path.write_text(json.dumps(document))
+        with pytest.raises(MeasurementFileError) as raised:
+            read_measurements(path)
+        assert message in str(raised.value), str(raised.value)
 
 
 @pytest.mark.parametrize("bad", ["abc", "0.2o5", "nan"])

@@ -37,15 +37,22 @@ from flakelab.io.records import (
 __all__ = ["read_json", "write_json", "FORMAT_NAME"]
 
 FORMAT_NAME = "flakelab-measurements"
+FORMAT_VERSION = 1
 
 
 def _require(path: str | PathLike, mapping: Any, key: str, kind: type, where: str) -> Any:
-    if not isinstance(mapping, dict) or key not in mapping:
+    if not isinstance(mapping, dict):
+        raise MeasurementFileError(
+            path, f"expected an object, got {type(mapping).__name__}", field=where
+        )
+    if key not in mapping:
         raise MeasurementFileError(path, f"missing key {key!r}", field=where)
     value = mapping[key]
     if not isinstance(value, kind):
         raise MeasurementFileError(
-            path, f"expected {kind.__name__}, got {type(value).__name__}", field=f"{where}.{key}"
+            path,
+            f"expected {kind.__name__}, got {type(value).__name__}",
+            field=f"{where}.{key}" if where else key,
         )
     return value
 
@@ -60,7 +67,14 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
         ) from None
     if not isinstance(document, dict) or document.get("format") != FORMAT_NAME:
         raise MeasurementFileError(path, f"expected a JSON object with format {FORMAT_NAME!r}")
-    items = _require(path, document, "measurements", list, "$")
+    if document.get("version", FORMAT_VERSION) != FORMAT_VERSION:  # a later flakelab's file
+        raise MeasurementFileError(
+            path,
+            f"expected version {FORMAT_VERSION} (the one this flakelab reads), "
+            f"got {document['version']!r}",
+            field="version",
+        )
+    items = _require(path, document, "measurements", list, "")
     results: list[Measurement] = []
     for n, item in enumerate(items):
         where = f"measurements[{n}]"
@@ -69,7 +83,12 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
             path, _require(path, item, "wavelengths", list, where), f"{where}.wavelengths"
         )
         readings = []
-        for k, g in enumerate(_require(path, item, "geometries", list, where)):
+        geometries = _require(path, item, "geometries", list, where)
+        if not geometries:
+            raise MeasurementFileError(
+                path, "expected at least one geometry", field=f"{where}.geometries"
+            )
+        for k, g in enumerate(geometries):
             gw = f"{where}.geometries[{k}]"
             geometry = parse_geometry_name(path, _require(path, g, "name", str, gw), f"{gw}.name")
             values = _require(path, g, "reflectance", list, gw)
@@ -108,11 +127,18 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
         metadata = item.get("metadata") or {}
         if not isinstance(metadata, dict):
             raise MeasurementFileError(path, "expected an object", field=f"{where}.metadata")
+        instrument = item.get("instrument")
+        if instrument is not None and not isinstance(instrument, str):
+            raise MeasurementFileError(
+                path,
+                f"expected a text, got {type(instrument).__name__}",
+                field=f"{where}.instrument",
+            )
         results += assemble(
             path,
             readings,
             wavelengths,
-            instrument=item.get("instrument"),
+            instrument=instrument,
             lab_conditions=conditions,
             texture={sample: texture},
             metadata={sample: {k: str(v) for k, v in metadata.items()}},
@@ -144,7 +170,7 @@ def measurement_to_dict(m: Measurement) -> dict[str, Any]:
 def write_json(measurements: list[Measurement], path: str | PathLike) -> None:
     document = {
         "format": FORMAT_NAME,
-        "version": 1,
+        "version": FORMAT_VERSION,
         "measurements": [measurement_to_dict(m) for m in measurements],
     }
     text = json.dumps(document, indent=1, ensure_ascii=False)

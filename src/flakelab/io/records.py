@@ -75,7 +75,7 @@ def parse_wavelength_header(
     try:
         shape_of(wavelengths)
     except ValueError as error:
-        raise MeasurementFileError(path, f"wavelengths {error}", field=where) from None
+        raise MeasurementFileError(path, str(error), field=where) from None
     if wavelengths[0] < 360 or wavelengths[-1] > 780:
         raise MeasurementFileError(
             path,
