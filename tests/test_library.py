@@ -20,6 +20,7 @@ from flakelab.library import (
     fresnel_reflectance,
     pearl_reflectance,
 )
+from flakelab.models.network import ModelError
 
 
 def test_aluminium_reflectance_in_air_matches_handbook_values():
@@ -119,6 +120,47 @@ def test_library_file_with_missing_spectrum_or_bad_field_is_rejected(tmp_path):
     path.write_text(json.dumps(data))
     with pytest.raises(LibraryError, match="absorption: expected 31 values"):
         read_library(path)
+
+
+def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
+    good = read_library().to_dict()
+    path = tmp_path / "shop.json"
+    flawed = {  # the first five were internal errors before; the rest did not name the file
+        "toners: expected a list of toner objects": lambda d: d.update(toners={"a": 1}),
+        "toners: expected a list of toner objects ": lambda d: d["toners"].append(5),
+        "wavelengths: expected 400–700 nm in 10 nm steps": lambda d: d.update(wavelengths="abc"),
+        "binder: expected an object": lambda d: d.update(binder=[1]),
+        "toners[0] (5): name: expected a text, got 5": lambda d: d["toners"][0].update(name=5),
+        "toners[0] (): name: expected a text, got ''": lambda d: d["toners"][0].update(name=""),
+        "binder: unknown fields ['colour']": lambda d: d["binder"].update(colour=1),
+        "binder: refractive_index: expected ≥ 1": lambda d: d["binder"].update(
+            refractive_index=0.5
+        ),
+        "toner names appear twice: ['Al fine bright']": lambda d: d["toners"].append(
+            d["toners"][0]
+        ),
+        "expected at least one toner": lambda d: d.update(toners=[]),
+    }
+    for message, edit in flawed.items():
+        data = json.loads(json.dumps(good))
+        edit(data)
+        path.write_text(json.dumps(data))
+        with pytest.raises(LibraryError) as raised:
+            read_library(path)
+        assert str(raised.value).startswith(f"{path}: ") and message.strip() in str(raised.value)
+
+
+def test_a_library_that_differs_from_the_model_says_how():
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    library, model = read_library(), shipped_model("five-angle")
+    pigments = Library("pigments", tuple(t for t in library.toners if t.kind == "pigment"))
+    with pytest.raises(ModelError, match=r"15 of the model's are not in the library \(e.g. \['Al"):
+        forward_for(model, pigments)
+    reversed_ = Library("reversed", library.toners[::-1])
+    with pytest.raises(ModelError, match="list the toners in another order"):
+        forward_for(model, reversed_)
 
 
 def test_duplicate_toner_names_rejected():

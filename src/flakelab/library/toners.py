@@ -46,6 +46,13 @@ def _positive(owner: str, name: str, value: float, *, upper: float | None = None
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
 
 
+def _is_storage_grid(wavelengths: Any) -> bool:
+    try:
+        return list(map(float, wavelengths)) == WAVELENGTHS.tolist()
+    except (TypeError, ValueError):
+        return False
+
+
 def _spectrum(owner: str, name: str, values: Any) -> NDArray:
     if values is None:
         raise LibraryError(
@@ -300,11 +307,16 @@ class Library:
                 f"{source}: expected format 'flakelab-library', got {data.get('format')!r}"
             )
         wavelengths = data.get("wavelengths", WAVELENGTHS.tolist())
-        if list(map(float, wavelengths)) != WAVELENGTHS.tolist():
+        if not _is_storage_grid(wavelengths):
             raise LibraryError(f"{source}: wavelengths: expected 400–700 nm in 10 nm steps")
+        items = data.get("toners", [])
+        if not isinstance(items, list) or not all(isinstance(t, Mapping) for t in items):
+            raise LibraryError(f"{source}: toners: expected a list of toner objects")
         toners = []
-        for i, item in enumerate(data.get("toners", [])):
+        for i, item in enumerate(items):
             where = f"{source}: toners[{i}] ({item.get('name', '?')})"
+            if not isinstance(item.get("name"), str) or not item["name"].strip():
+                raise LibraryError(f"{where}: name: expected a text, got {item.get('name')!r}")
             kind = item.get("kind")
             if kind not in TONER_KINDS:
                 raise LibraryError(
@@ -330,14 +342,19 @@ class Library:
                 raise LibraryError(f"{source}: {error}") from None
             except (TypeError, ValueError) as error:
                 raise LibraryError(f"{where}: {error}") from None
+        binder = data.get("binder", {})
+        if not isinstance(binder, Mapping):
+            raise LibraryError(f"{source}: binder: expected an object")
+        allowed = sorted(f.name for f in fields(Binder))
+        if unknown := sorted(set(binder) - set(allowed)):
+            raise LibraryError(f"{source}: binder: unknown fields {unknown} (expected {allowed})")
         try:
-            binder = Binder(**data["binder"]) if "binder" in data else Binder()
-        except TypeError as error:
-            raise LibraryError(f"{source}: binder: {error}") from None
-        return cls(
-            name=str(data.get("name", source)),
-            toners=tuple(toners),
-            binder=binder,
-            synthetic=bool(data.get("synthetic", False)),
-            description=str(data.get("description", "")),
-        )
+            return cls(
+                name=str(data.get("name", source)),
+                toners=tuple(toners),
+                binder=Binder(**binder),
+                synthetic=bool(data.get("synthetic", False)),
+                description=str(data.get("description", "")),
+            )
+        except LibraryError as error:
+            raise LibraryError(f"{source}: {error}") from None

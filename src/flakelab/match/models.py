@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from flakelab.library.toners import Library
@@ -19,13 +21,22 @@ def effect_mask(library: Library, toners) -> np.ndarray:
     return np.array([kinds.get(n) in ("aluminium", "pearl") for n in toners])
 
 
+def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:
+    """How a library's toner list differs from a model's, for a message."""
+    new, gone = [n for n in library if n not in model], [n for n in model if n not in library]
+    parts = [f"{len(new)} of the library's are not in the model (e.g. {new[:3]})"] if new else []
+    parts += (
+        [f"{len(gone)} of the model's are not in the library (e.g. {gone[:3]})"] if gone else []
+    )
+    return "differ in toners: " + "; ".join(parts) if parts else "list the toners in another order"
+
+
 def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
     """The learned model, or the hybrid when some library toners have too few cases."""
     if tuple(model.toners) != library.names:
-        missing = sorted(set(library.names) - set(model.toners))
         raise ModelError(
             f"library {library.name!r} and model {model.info.get('name', '?')} "
-            f"differ in toners (e.g. {missing[:3]}); train a model for this library"
+            f"{_toner_difference(library.names, model.toners)}; train a model for this library"
         )
     counts = model.info.get("toner_cases", {})
     novel = [n for n in library.names if counts.get(n, MIN_CASES) < MIN_CASES]
