@@ -539,6 +539,10 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
         ManifestError, match="row 4: case .*the same readings, recipe and shop as row 3"
     ):
         cases_from_manifest(manifest, library, tolerance=tol)
+    # a column named twice is said to be (it said "missing [], unknown []")
+    manifest.write_text("target,recipe,sprayed,shop,shop\n" + "\n".join(lines[1:]) + "\n")
+    with pytest.raises(ManifestError, match=r"row 1: .*each once \(twice \['shop'\]\)$"):
+        cases_from_manifest(manifest, library, tolerance=tol)
 
 
 def test_recording_refuses_readings_without_the_instrument_s_geometries():

@@ -72,10 +72,13 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
     header = [cell.strip() for cell in rows[0]] if rows else []
     unknown = [c for c in header if c not in MANIFEST_COLUMNS]
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
-    if unknown or missing or len(set(header)) != len(header):
+    twice = sorted({c for c in header if header.count(c) > 1})
+    if unknown or missing or twice:
+        found = {"missing": missing, "unknown": unknown, "twice": twice}
+        wrong = [f"{name} {columns}" for name, columns in found.items() if columns]
         raise ManifestError(
             f"{path}: row 1: expected a header with {', '.join(REQUIRED_COLUMNS)} and any of "
-            f"{', '.join(MANIFEST_COLUMNS[3:])}, each once (missing {missing}, unknown {unknown})"
+            f"{', '.join(MANIFEST_COLUMNS[3:])}, each once ({', '.join(wrong)})"
         )
     entries = []
     for number, row in enumerate(rows[1:], start=2):
