@@ -52,6 +52,8 @@ def test_compare_example_agrees_with_library_and_tolerance():
     for g in report["geometries"]:
         assert g["pass"] == (g["de00"] <= 1.0)
     assert report["pass"] == all(g["pass"] for g in report["geometries"])
+    assert report["not_compared"] == {"reference": [], "sample": []}  # both read at all twelve
+    assert "not compared" not in flakelab("compare", "--example").stdout
     assert flakelab("compare", "--example", "--fail-on-reject").returncode == (
         0 if report["pass"] else 1
     )
@@ -64,6 +66,18 @@ def test_compare_example_agrees_with_library_and_tolerance():
     )  # to the thousandth, as every report gives it
     refused = flakelab("compare", "--example", "--conditions", "A/10", "--lights", "A")
     assert refused.returncode == 2 and "--lights: A is the reference illuminant" in refused.stderr
+
+
+def test_compare_names_the_geometries_a_five_angle_spray_out_leaves_out(tmp_path):
+    target = read_measurement(example_path("target"))
+    five = tmp_path / "five.json"
+    write_measurements([read_measurement(example_path("sprayout")).select(
+        ["45as15", "45as25", "45as45", "45as75", "45as110"])], five)  # fmt: skip
+    run = flakelab("compare", str(example_path("target")), str(five))
+    assert run.returncode == 0, run.stderr
+    left = [g for g in target.geometry_names if g.startswith("15") or g == "45as-15"]
+    assert "not compared: 7 of the reference's geometries, which the sample lacks: " in run.stdout
+    assert ", ".join(left) in " ".join(run.stdout.split())
 
 
 def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):
@@ -206,9 +220,27 @@ def test_validate_scaling_reproduces_the_papers_observations(tmp_path):
     ]  # fmt: skip
 
 
-def test_validate_scaling_rejects_bad_spreads():
+def test_validate_scaling_rejects_bad_spreads_and_plots_before_the_monte_carlo(tmp_path):
     run = flakelab("validate", "scaling", "--spreads", "0,90", "--plots", "")
     assert run.returncode == 2 and "--spreads" in run.stderr and "Traceback" not in run.stderr
+    file = tmp_path / "plots.png"
+    file.write_bytes(b"")
+    for options, message in (
+        (("--spreads", "abc"), "--spreads: expected degrees such as 10,5,15, got 'abc'"),
+        (("--plots", str(file)), f"--plots: {file}: is a file, expected a folder"),
+        (("--plots", str(tmp_path / "no" / "plots")), "no folder"),
+    ):
+        run = flakelab("validate", "scaling", "--photons", "1000", *options)
+        assert run.returncode == 2 and message in run.stderr, run.stderr
+        assert "Monte Carlo" not in run.stderr  # refused before it ran
+
+
+def test_wrong_conditions_are_named_by_their_option():
+    for command in (("compare", "--example"), ("inspect", "--example")):
+        run = flakelab(*command, "--conditions", "D65/3")
+        said = " ".join(run.stderr.replace("│", " ").split())  # unwrapped from typer's box
+        assert run.returncode == 2 and "'--conditions' / '-c'" in said
+        assert "expected observer '2' or '10', got '3'" in said
 
 
 def test_progress_off_a_terminal_logs_a_line_per_tenth_and_nothing_when_disabled(capsys):

@@ -68,6 +68,15 @@ def test_compare_reports_failing_geometries_only():
     assert result.de00[0] == pytest.approx(0, abs=1e-9)
 
 
+def test_a_comparison_says_which_geometries_its_verdict_leaves_out():
+    ref = _grey_metallic({"45as15": 100, "45as45": 50, "45as110": 20})
+    smp = _grey_metallic({"45as-15": 120, "45as45": 50, "45as110": 20})
+    result = compare(ref, smp, "de00-1.0")
+    assert result.geometries == ("45as45", "45as110") and result.all_pass
+    assert result.to_dict()["not_compared"] == {"reference": ["45as15"], "sample": ["45as-15"]}
+    assert compare(ref, ref).not_compared == {"reference": [], "sample": []}
+
+
 def test_tolerance_files_validated(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[default]\nde00 = -1\n")

@@ -63,8 +63,25 @@ def reports_errors(command: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def _checked_conditions(text: str) -> str:
+    """``--conditions`` read before any work, so that a wrong one is named by its option."""
+    from flakelab.core.colorimetry import Conditions
+
+    try:
+        Conditions.parse(text)
+    except ValueError as error:
+        raise typer.BadParameter(str(error)) from None
+    return text
+
+
 ConditionsOption = Annotated[
-    str, typer.Option("--conditions", "-c", help="Illuminant/observer, e.g. D65/10, A/10, F11/10.")
+    str,
+    typer.Option(
+        "--conditions",
+        "-c",
+        help="Illuminant/observer, e.g. D65/10, A/10, F11/10.",
+        callback=_checked_conditions,
+    ),
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")]
 LightsOption = Annotated[

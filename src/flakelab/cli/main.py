@@ -207,6 +207,13 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
             verdict,
         )
     console.print(table)
+    for which, names in report["not_compared"].items():
+        if names:
+            console.print(
+                f"[yellow]not compared:[/] {len(names)} of the {which}'s geometries, which the "
+                f"{'sample' if which == 'reference' else 'reference'} lacks: {', '.join(names)}",
+                highlight=False,
+            )
     failing = failures(report["failing_geometries"], report["failing_texture"])
     verdict = "[green]PASS[/]" if report["pass"] else "[bold red]FAIL[/] at " + ", ".join(failing)
     console.print(
@@ -295,7 +302,16 @@ def validate_scaling(
     from flakelab.physics.scaling import run_series, scaling_report
     from flakelab.render.plots import plot_scaling
 
-    values = [float(v) for v in spreads.split(",") if v.strip()]
+    try:
+        values = [float(v) for v in spreads.split(",") if v.strip()]
+    except ValueError:
+        raise FlakelabError(
+            f"--spreads: expected degrees such as 10,5,15, got {spreads!r}"
+        ) from None
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise FlakelabError(f"--plots: {plots}: is a file, expected a folder for the figures")
+    if plots is not None and not plots.resolve().parent.is_dir():
+        raise FlakelabError(f"--plots: {plots}: no folder {plots.resolve().parent}")
     if not values or any(not 0 < v <= 45 for v in values):
         raise FlakelabError(f"--spreads: expected degrees in (0, 45], got {spreads!r}")
     series = []

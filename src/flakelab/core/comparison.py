@@ -84,6 +84,14 @@ class Comparison:
         return over_limit(self.texture_share)
 
     @property
+    def not_compared(self) -> dict[str, list[str]]:
+        """Each measurement's geometries the other lacks: a verdict covers only the rest."""
+        return {
+            "reference": [g for g in self.reference.geometry_names if g not in self.geometries],
+            "sample": [g for g in self.sample.geometry_names if g not in self.geometries],
+        }
+
+    @property
     def de00_max(self) -> float:
         return float(self.de00.max())
 
@@ -128,6 +136,7 @@ class Comparison:
             "conditions": str(self.conditions),
             "tolerance": self.tolerance.name,
             "geometries": rows,
+            "not_compared": self.not_compared,
             "de00_max": self.de00_max,
             "de00_mean": self.de00_mean,
             "limit_share_max": float(max([self.limit_share.max(), *self.texture_share.values()])),
