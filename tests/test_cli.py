@@ -80,6 +80,19 @@ def test_compare_names_the_geometries_a_five_angle_spray_out_leaves_out(tmp_path
     assert ", ".join(left) in " ".join(run.stdout.split())
 
 
+def test_a_file_of_several_samples_says_which_it_read(tmp_path):
+    both = tmp_path / "both.json"
+    target, sprayout = (read_measurement(example_path(k)) for k in ("target", "sprayout"))
+    write_measurements([target, sprayout], both)
+    run = flakelab("inspect", str(both), "--json")
+    assert run.returncode == 0 and json.loads(run.stdout)["sample"] == target.sample
+    note = " ".join(run.stderr.split())
+    assert f"note: {both} holds 2 samples; read its first, '{target.sample}' (--sample" in note
+    run = flakelab("inspect", str(both), "--sample", sprayout.sample, "--json")
+    assert json.loads(run.stdout)["sample"] == sprayout.sample and "note" not in run.stderr
+    assert "note" not in flakelab("inspect", "--example").stderr  # one sample: nothing to say
+
+
 def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):
     from matplotlib.image import imread
 

@@ -181,6 +181,22 @@ def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iter
             bar.advance(task)
 
 
+def read_sample(path, sample: str | None, option: str = "--sample"):
+    """One measurement of a file, as :func:`flakelab.io.read_measurement` reads it; when the
+    file holds several and none was named, says which one was taken (its first)."""
+    from flakelab.io import pick_sample, read_measurements
+
+    measurements = read_measurements(path)
+    chosen = pick_sample(measurements, sample, path)
+    if sample is None and len(measurements) > 1:
+        errors.print(
+            f"[yellow]note:[/] {escape(str(path))} holds {len(measurements)} samples; read its "
+            f"first, {escape(repr(chosen.sample))} ({option} names another)",
+            highlight=False,
+        )
+    return chosen
+
+
 def check_output_file(path, option: str) -> None:
     """An output file's folder exists and can be written, and the path is not a folder,
     checked before any work (nothing to check without a file): a long job never ends in a

@@ -24,6 +24,7 @@ from flakelab.cli.common import (
     console,
     errors,
     progress_bar,
+    read_sample,
     reports_errors,
     tracked,
 )
@@ -308,15 +309,15 @@ def record_case(
     them learns from it; the same spray-out recorded twice is refused."""
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
-    from flakelab.io import read_library, read_measurement, read_recipe, read_tolerance
+    from flakelab.io import read_library, read_recipe, read_tolerance
 
     instrument = instrument and _instrument(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
     grams = read_recipe(recipe)
     fractions = recipe_fractions(lib, grams, recipe)
-    target_reading = read_measurement(target, sample)
-    sprayed_reading = read_measurement(sprayed, sprayed_sample)
+    target_reading = read_sample(target, sample)
+    sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
     case = case_from_readings(
         target_reading,
         sprayed_reading,

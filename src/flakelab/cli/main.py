@@ -25,6 +25,7 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     progress_bar,
+    read_sample,
     reports_errors,
     texture_table,
 )
@@ -39,7 +40,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import failures
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
-from flakelab.io import read_measurement, read_measurements, read_tolerance, write_measurements
+from flakelab.io import read_measurements, read_tolerance, write_measurements
 
 app = typer.Typer(
     help="flakelab: match, predict and show the appearance of car paints.",
@@ -78,7 +79,7 @@ def _print_description(info: dict[str, Any]) -> None:
 
 
 def _one_or_example(path: Path | None, example: str, sample: str | None) -> Measurement:
-    return read_measurement(path if path is not None else example_path(example), sample)
+    return read_sample(path if path is not None else example_path(example), sample)
 
 
 @app.command()
@@ -100,7 +101,7 @@ def inspect(
         raise FlakelabError("give a measurement file, or --example")
     cond = Conditions.parse(conditions)
     source = path if path is not None else example_path("target")
-    measurements = read_measurements(source) if all_samples else [read_measurement(source, sample)]
+    measurements = read_measurements(source) if all_samples else [read_sample(source, sample)]
     infos = [describe(m, cond) for m in measurements]
     if as_json:
         out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
@@ -244,7 +245,7 @@ def convert(
     sample: SampleOption = None,
 ) -> None:
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
-    measurements = [read_measurement(source, sample)] if sample else read_measurements(source)
+    measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     write_measurements(measurements, target)
     errors.print(f"wrote {len(measurements)} measurement(s) to {target}", highlight=False)
 
@@ -263,9 +264,7 @@ def plot(
     from flakelab.render.plots import plot_measurements
 
     check_figure_file(output, "--output")
-    plot_measurements(
-        [read_measurement(path, sample)], output, conditions=Conditions.parse(conditions)
-    )
+    plot_measurements([read_sample(path, sample)], output, conditions=Conditions.parse(conditions))
     errors.print(f"wrote {output}", highlight=False)
 
 

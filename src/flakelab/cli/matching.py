@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     progress_bar,
+    read_sample,
     texture_table,
 )
 from flakelab.cli.learning import (
@@ -234,7 +235,7 @@ def match_command(
     and the model that produced them.
     'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.data import example_path
-    from flakelab.io import read_measurement, read_tolerance
+    from flakelab.io import read_tolerance
     from flakelab.match.search import match
 
     if target == "evaluate":
@@ -275,7 +276,7 @@ def match_command(
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
-    measurement = read_measurement(path, sample)
+    measurement = read_sample(path, sample)
     tol = read_tolerance(tolerance or "refinish")
     result = match(
         measurement,
@@ -581,7 +582,7 @@ def correct_command(
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
-    from flakelab.io import read_measurement, read_recipe, read_tolerance, write_recipe
+    from flakelab.io import read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note
     from flakelab.match.crosscheck import expected_left_out
     from flakelab.match.search import left_out_note, target_spectra, unused_geometries
@@ -594,8 +595,8 @@ def correct_command(
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
     lib, forward, _ = _setup(library, instrument, model, database, physics)
     x0 = recipe_fractions(lib, grams, recipe)
-    target_reading = read_measurement(target, sample)
-    sprayed_reading = read_measurement(sprayed, sprayed_sample)
+    target_reading = read_sample(target, sample)
+    sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
     target_R, _, _ = target_spectra(target_reading, forward)
     sprayed_R, _, _ = target_spectra(sprayed_reading, forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}

@@ -16,6 +16,7 @@ from flakelab.cli.common import (
     check_output_file,
     console,
     errors,
+    read_sample,
     reports_errors,
 )
 from flakelab.errors import FlakelabError
@@ -37,11 +38,10 @@ class View(StrEnum):
 def _appearance(measurement: Path | None, sample: str | None, conditions: str):
     from flakelab.core.colorimetry import Conditions
     from flakelab.data import example_path
-    from flakelab.io import read_measurement
     from flakelab.render.appearance import appearance_of
 
     path = measurement if measurement is not None else example_path("target")
-    return appearance_of(read_measurement(path, sample), Conditions.parse(conditions))
+    return appearance_of(read_sample(path, sample), Conditions.parse(conditions))
 
 
 def check_image_file(path: Path) -> None:
