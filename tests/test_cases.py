@@ -7,6 +7,7 @@ import io
 import json
 import multiprocessing
 import re
+import sqlite3
 import subprocess
 import sys
 from dataclasses import replace
@@ -218,9 +219,39 @@ def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
     migrate(engine, "0001")  # the first release's schema: no shop habits
     assert "shop_habits" not in inspect(engine).get_table_names()
     add_cases(engine, cases[:7])
+    engine.dispose()
     engine = open_database(url)
     assert "shop_habits" in inspect(engine).get_table_names()
     assert [c.case_id for c in iter_cases(engine)] == [c.case_id for c in cases[:7]]
+
+
+def test_a_connection_is_closed_when_its_work_ends(cases, database_url):
+    """Each command opens its own engine for a few transactions; none may leave connections
+    open for the collector (psycopg warns of every one deleted while still open)."""
+    engine = open_database(database_url)
+    add_cases(engine, cases[:2])
+    lent = engine.raw_connection()
+    connection = lent.dbapi_connection
+    assert _is_open(connection)
+    lent.close()  # given back: closed, not kept for reuse
+    assert not _is_open(connection)
+    assert count_cases(engine) == 2  # the next transaction opens its own
+
+
+def test_an_in_memory_database_keeps_its_cases_between_transactions(cases):
+    engine = open_database("sqlite://")  # lives in its one connection
+    add_cases(engine, cases[:3])
+    assert count_cases(engine) == 3
+
+
+def _is_open(connection) -> bool:
+    if hasattr(connection, "closed"):  # psycopg
+        return not connection.closed
+    try:  # sqlite3 has no flag: a closed connection refuses to work
+        connection.execute("select 1")
+    except sqlite3.ProgrammingError:
+        return False
+    return True
 
 
 def test_a_database_that_cannot_be_opened_is_named(tmp_path):

@@ -20,6 +20,7 @@ from sqlalchemy import Engine, create_engine, event, func, select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session
+from sqlalchemy.pool import NullPool, StaticPool
 
 from flakelab.cases.case import Case, CaseError
 from flakelab.cases.schema import CaseRow
@@ -81,7 +82,10 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     if must_exist and named:  # the user data folder's own database is made on first use
         _check_sqlite_file_exists(url)
     try:
-        engine = create_engine(url)
+        # a command holds its database for a few transactions: each connection is closed when
+        # its transaction ends, none is left open for the collector (psycopg warns of those);
+        # an in-memory SQLite database lives in its one connection, which is kept
+        engine = create_engine(url, poolclass=StaticPool if _in_memory(url) else NullPool)
         if engine.dialect.name == "sqlite":
             event.listen(engine, "connect", _sqlite_pragmas)
         migrate(engine)
@@ -96,6 +100,14 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             "PostgreSQL: pip install 'flakelab[postgres]'"
         ) from None
     return engine
+
+
+def _in_memory(url: str) -> bool:
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        return False
+    return parsed.get_backend_name() == "sqlite" and parsed.database in (None, "", ":memory:")
 
 
 def _check_sqlite_file_exists(url: str) -> None:
