@@ -91,6 +91,9 @@ def test_a_file_of_several_samples_says_which_it_read(tmp_path):
     run = flakelab("inspect", str(both), "--sample", sprayout.sample, "--json")
     assert json.loads(run.stdout)["sample"] == sprayout.sample and "note" not in run.stderr
     assert "note" not in flakelab("inspect", "--example").stderr  # one sample: nothing to say
+    run = flakelab("compare", str(both), str(both), "--sample-name", sprayout.sample)
+    note = " ".join(run.stderr.split())  # the option that names another is the command's own
+    assert "(--reference-sample names another)" in note and note.count("note:") == 1
 
 
 def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):

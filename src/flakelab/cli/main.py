@@ -78,8 +78,10 @@ def _print_description(info: dict[str, Any]) -> None:
         console.print("texture: " + "  ".join(f"{k} {v:.2f}" for k, v in info["texture"].items()))
 
 
-def _one_or_example(path: Path | None, example: str, sample: str | None) -> Measurement:
-    return read_sample(path if path is not None else example_path(example), sample)
+def _one_or_example(
+    path: Path | None, example: str, sample: str | None, option: str = "--sample"
+) -> Measurement:
+    return read_sample(path if path is not None else example_path(example), sample, option)
 
 
 @app.command()
@@ -117,8 +119,16 @@ def compare(
     reference: Annotated[Path | None, typer.Argument(help="Target / standard measurement.")] = None,
     sample: Annotated[Path | None, typer.Argument(help="Sample (spray-out) measurement.")] = None,
     tolerance: ToleranceOption = "refinish",
-    reference_sample: Annotated[str | None, typer.Option("--reference-sample")] = None,
-    sample_name: Annotated[str | None, typer.Option("--sample-name")] = None,
+    reference_sample: Annotated[
+        str | None,
+        typer.Option(
+            "--reference-sample", help="The reference's sample name in a multi-sample file."
+        ),
+    ] = None,
+    sample_name: Annotated[
+        str | None,
+        typer.Option("--sample-name", help="The sample's name in a multi-sample file."),
+    ] = None,
     conditions: ConditionsOption = "D65/10",
     lights: LightsOption = None,
     as_json: JsonOption = False,
@@ -144,8 +154,8 @@ def compare(
     check_figure_file(render)
     check_figure_file(plot, "--plot")
     tol = read_tolerance(tolerance)
-    ref = _one_or_example(reference, "target", reference_sample)
-    smp = _one_or_example(sample, "sprayout", sample_name)
+    ref = _one_or_example(reference, "target", reference_sample, "--reference-sample")
+    smp = _one_or_example(sample, "sprayout", sample_name, "--sample-name")
     light = Conditions.parse(conditions)
     tests = lights_option(lights, light) or tuple(
         t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
