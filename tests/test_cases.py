@@ -382,7 +382,9 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
         return lambda text: text.replace(f"Value='{recipe}'", f"Value='{value}'", 1)
 
     flawed = {  # each was an internal error, or a silent loss, before
-        ("list.cxf", cxf_recipe("[1, 2]")): "recipe: expected a mapping toner → amount, got list",
+        ("list.cxf", cxf_recipe("[1, 2]")): re.escape(
+            "meta tag recipe: expected a JSON object toner → amount, got '[1, 2]'"
+        ),
         (
             "null.cxf",
             cxf_recipe(json.dumps(dict.fromkeys(first.recipe))),

@@ -83,10 +83,16 @@ def test_tolerance_files_validated(tmp_path):
     with pytest.raises(ValueError, match="default: expected a positive limit for de00"):
         read_tolerance(bad)
     bad.write_text('[default]\nde00 = 1\n[geometries."45xx15"]\nde00 = 1\n')
-    with pytest.raises(ValueError, match="geometries: expected a geometry name"):
+    with pytest.raises(ValueError, match="geometries.45xx15: expected a geometry name"):
         read_tolerance(bad)
     bad.write_text("[default]\nde0 = 1\n")
     with pytest.raises(ValueError, match="expected keys among de00, dL, dC, dH"):
+        read_tolerance(bad)
+    bad.write_text('[default]\nde00 = "abc"\n')  # said "could not convert string to float"
+    with pytest.raises(ValueError, match="bad.toml: default: de00: expected a number, got 'abc'"):
+        read_tolerance(bad)
+    bad.write_bytes(b"\x89PNG\r\n")  # was an internal error
+    with pytest.raises(ValueError, match="bad.toml: not a UTF-8 text .* tolerance file"):
         read_tolerance(bad)
     good = tmp_path / "good.json"
     good.write_text('{"name": "j", "default": {"de00": 1.5}, "kL": 2}')

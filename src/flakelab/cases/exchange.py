@@ -230,18 +230,8 @@ def _case_from_row(
     def texture(role: str) -> dict[str, float]:
         return {t: number_of(f"{role}:{t}") for t in TEXTURE_READINGS if cells[f"{role}:{t}"]}
 
-    try:
-        recipe = json.loads(cells["recipe"])
-        if not isinstance(recipe, dict):
-            raise ValueError
-    except ValueError:
-        raise CaseFileError(f"{where}: recipe: expected a JSON object toner → amount") from None
-    try:
-        created = datetime.fromisoformat(cells["created_at"])
-    except ValueError:
-        raise CaseFileError(
-            f"{where}: created_at: expected an ISO 8601 date and time, got {cells['created_at']!r}"
-        ) from None
+    recipe = _recipe_field(f"{where}: recipe", cells["recipe"])
+    created = _date_field(f"{where}: created_at", cells["created_at"])
     if cells["synthetic"] not in ("0", "1"):
         raise CaseFileError(f"{where}: synthetic: expected 0 or 1, got {cells['synthetic']!r}")
     readings = {
@@ -265,6 +255,24 @@ def _case_from_row(
         )
     except (CaseError, ValueError) as error:
         raise CaseFileError(f"{where}: {error}") from None
+
+
+def _recipe_field(where: str, text: str) -> dict:
+    """A case's recipe as its file writes it: a JSON object toner → amount."""
+    try:
+        recipe = json.loads(text)
+    except ValueError:
+        recipe = None
+    if not isinstance(recipe, dict):
+        raise CaseFileError(f"{where}: expected a JSON object toner → amount, got {text!r}")
+    return recipe
+
+
+def _date_field(where: str, text: str) -> datetime:
+    try:
+        return datetime.fromisoformat(text)
+    except ValueError:
+        raise CaseFileError(f"{where}: expected an ISO 8601 date and time, got {text!r}") from None
 
 
 def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
@@ -327,20 +335,8 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
         missing = [k for k in ("recipe", "outcome", "created_at") if k not in meta]
         if missing:
             raise CaseFileError(f"{where}: missing meta tags {missing}")
-        try:
-            recipe = json.loads(meta["recipe"])
-        except ValueError:
-            raise CaseFileError(
-                f"{where}: meta tag recipe: expected a JSON object toner → amount, "
-                f"got {meta['recipe']!r}"
-            ) from None
-        try:
-            created = datetime.fromisoformat(meta["created_at"])
-        except ValueError:
-            raise CaseFileError(
-                f"{where}: meta tag created_at: expected an ISO 8601 date and time, "
-                f"got {meta['created_at']!r}"
-            ) from None
+        recipe = _recipe_field(f"{where}: meta tag recipe", meta["recipe"])
+        created = _date_field(f"{where}: meta tag created_at", meta["created_at"])
         try:
             cases.append(
                 Case(

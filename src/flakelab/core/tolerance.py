@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,16 @@ def _limits_from_dict(cls, fields: tuple[str, ...], data: Mapping[str, Any], whe
     unknown = [k for k in data if k not in fields]
     if unknown:
         raise ValueError(f"{where}: expected keys among {', '.join(fields)}, got {unknown}")
+    wrong = next(
+        (
+            k
+            for k, v in data.items()
+            if v is not None and (isinstance(v, bool) or not isinstance(v, Real))
+        ),
+        None,
+    )
+    if wrong is not None:
+        raise ValueError(f"{where}: {wrong}: expected a number, got {data[wrong]!r}")
     try:
         return cls(**{k: None if v is None else float(v) for k, v in data.items()})
     except (TypeError, ValueError) as error:
@@ -245,7 +256,7 @@ class Tolerance:
             try:
                 name = Geometry.parse(key).name
             except ValueError as error:
-                raise ValueError(f"{source}: geometries: {error}") from None
+                raise ValueError(f"{source}: geometries.{key}: {error}") from None
             geometries[name] = Limit.from_dict(value, f"{source}: geometries.{key}")
         weights = {}
         for k in ("kL", "kC", "kH"):

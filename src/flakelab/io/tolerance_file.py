@@ -37,7 +37,10 @@ def read_tolerance(name_or_path: str | PathLike) -> Tolerance:
             f"{name_or_path}: neither a tolerance preset ({', '.join(TOLERANCE_PRESETS)}) "
             f"nor a tolerance file"
         )
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise FlakelabError(f"{path}: not a UTF-8 text (TOML or JSON) tolerance file") from None
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as error:
