@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.ndimage import gaussian_filter
 from scipy.stats import spearmanr
 
 from flakelab.core.colorimetry import linear_sRGB_to_Lab
@@ -16,6 +17,7 @@ from flakelab.core.difference import delta_E_CIE2000 as delta_E00
 from flakelab.data import example_path
 from flakelab.io import read_measurement
 from flakelab.render.appearance import (
+    _periodic_blur,
     appearance_of,
     cardinal_spline,
     compose,
@@ -181,6 +183,20 @@ def test_distance_softens_coarseness_and_dims_glints():
     assert far[1].std() < 0.6 * near[1].std()  # diffuse pattern: contrast falls
     assert far[0].max() < near[0].max()  # glints: dimmer
     assert np.sum(far[0] > 0.1) <= np.sum(near[0] > 0.1)
+
+
+def test_from_far_off_the_coarseness_averages_out_without_running_out_of_memory():
+    """The eye's blur grows with the distance; a kernel wider than the image is applied in
+    Fourier space (at 1e9 m it was a 491 GiB kernel), the same blur where both apply."""
+    near = texture_images(3.0, 15.0, (128, 256), distance_m=0.5, seed=1)[1]
+    far = texture_images(3.0, 15.0, (128, 256), distance_m=1e9, seed=1)[1]
+    farther = texture_images(3.0, 15.0, (128, 256), distance_m=1e12, seed=1)[1]
+    assert far.std() < 1e-6 * near.std() and np.allclose(far, farther)  # flat: its mean alone
+    image = np.random.default_rng(2).random((64, 128))
+    for sigma in (3.0, 20.0):  # the filter's path, and the Fourier one (4σ beyond 64 rows)
+        np.testing.assert_allclose(
+            _periodic_blur(image, sigma), gaussian_filter(image, sigma, mode="wrap"), atol=2e-5
+        )
 
 
 def test_distance_parsing():

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicHermiteSpline
-from scipy.ndimage import gaussian_filter, gaussian_filter1d
+from scipy.ndimage import fourier_gaussian, gaussian_filter, gaussian_filter1d
 
 from flakelab.core.colorimetry import (
     D65_10,
@@ -200,8 +200,18 @@ def texture_images(
     c, c_strength = _texture_value(processes["coarseness"], _as_map(coarseness))
     grey = patch_image(**processes["coarseness"].controls(c), shape=shape, rng=rng)
     if blur > 0:
-        grey = gaussian_filter(grey, blur, mode="wrap")
+        grey = _periodic_blur(grey, blur)
     return directional, _tone(grey) * c_strength
+
+
+def _periodic_blur(image: NDArray, sigma: float) -> NDArray:
+    """Gaussian blur of a tileable image; a kernel wider than the image (a panel seen from far
+    off: σ grows with the distance) is applied in Fourier space, at the cost of any other."""
+    if 4 * sigma < min(image.shape):
+        return gaussian_filter(image, sigma, mode="wrap")
+    return np.fft.irfft2(
+        fourier_gaussian(np.fft.rfft2(image), sigma, n=image.shape[1]), image.shape
+    )
 
 
 def _gloss(aspecular: NDArray, level: float) -> NDArray:
