@@ -251,6 +251,13 @@ def test_validate_scaling_rejects_bad_spreads_and_plots_before_the_monte_carlo(t
         assert "Monte Carlo" not in run.stderr  # refused before it ran
 
 
+def test_texture_evaluate_refuses_an_image_no_machine_holds():
+    # 100,000² pixels was a MemoryError after the first process had been generated
+    run = flakelab("texture", "evaluate", "--size", "100000", "--points", "2")
+    said = " ".join(run.stderr.replace("│", " ").split())
+    assert run.returncode == 2 and "'--size': Input should be less than or equal to 8192" in said
+
+
 def test_wrong_conditions_are_named_by_their_option():
     for command in (("compare", "--example"), ("inspect", "--example")):
         run = flakelab(*command, "--conditions", "D65/3")

@@ -123,8 +123,10 @@ texture_app = typer.Typer(help="Appearance-based texture processes: closed loop 
 @texture_app.command("evaluate")
 @reports_errors
 def texture_evaluate(
-    points: Annotated[int, typer.Option(min=2, help="Prescribed values per process.")] = 9,
-    size: Annotated[int, typer.Option(min=64, help="Generated image side in pixels.")] = 1024,
+    points: Annotated[int, typer.Option(min=2, max=100, help="Prescribed values per process.")] = 9,
+    size: Annotated[
+        int, typer.Option(min=64, max=8192, help="Generated image side in pixels (as render).")
+    ] = 1024,
     seed: SeedOption = 100,
     json_output: JsonOption = False,
 ) -> None:
