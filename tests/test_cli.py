@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flakelab.cli.common import progress_bar, tracked
+from flakelab.cli.common import progress_bar, reports_errors, tracked
 from flakelab.core import compare, tolerance_preset
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_measurements, write_measurements
@@ -256,6 +256,21 @@ def test_texture_evaluate_refuses_an_image_no_machine_holds():
     run = flakelab("texture", "evaluate", "--size", "100000", "--points", "2")
     said = " ".join(run.stderr.replace("│", " ").split())
     assert run.returncode == 2 and "'--size': Input should be less than or equal to 8192" in said
+
+
+def test_a_job_too_large_for_memory_is_an_error_not_a_bug(capsys):
+    import typer
+
+    @reports_errors
+    def too_large():
+        np.empty(2**62, dtype=np.uint8)  # numpy refuses: no machine holds 4 EiB
+
+    with pytest.raises(typer.Exit) as exited:
+        too_large()
+    said = " ".join(capsys.readouterr().err.split())
+    assert exited.value.exit_code == 2  # not 70, the status of an internal error
+    assert "error: not enough memory for this job (Unable to allocate" in said
+    assert "ask for less" in said and "internal error" not in said
 
 
 def test_wrong_conditions_are_named_by_their_option():

@@ -49,6 +49,14 @@ def reports_errors(command: F) -> F:
                 f"[bold red]error:[/] {escape(str(message))}", highlight=False, soft_wrap=True
             )
             raise typer.Exit(2) from None
+        except MemoryError as error:  # a size or count this machine cannot hold
+            errors.print(
+                f"[bold red]error:[/] not enough memory for this job ({escape(str(error))}); "
+                "ask for less: a smaller size, count or batch",
+                highlight=False,
+                soft_wrap=True,
+            )
+            raise typer.Exit(2) from None
         except Exception as error:  # pragma: no cover - a bug, reported without a traceback
             if os.environ.get("FLAKELAB_DEBUG"):
                 raise
