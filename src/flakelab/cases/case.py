@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
-from numbers import Real
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,6 +14,7 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import Geometry, parse_geometries
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -47,9 +47,7 @@ def _recipe_amounts(where: str, recipe) -> dict[str, float]:
         )
     if not recipe:
         raise CaseError(f"{where}: recipe: expected at least one toner")
-    wrong = next(
-        (k for k, v in recipe.items() if isinstance(v, bool) or not isinstance(v, Real)), None
-    )
+    wrong = next((k for k, v in recipe.items() if not is_number(v)), None)
     if wrong is not None:
         raise CaseError(f"{where}: recipe: {wrong}: expected a number, got {recipe[wrong]!r}")
     amounts = {str(k): float(v) for k, v in recipe.items()}

@@ -79,7 +79,7 @@ def check_case_file_suffix(path: str | PathLike) -> None:
     if not is_case_file(path):
         raise CaseFileError(
             f"{path}: expected a case file named {', '.join(CASE_FILE_SUFFIXES)} "
-            "(CSV or CxF3), got the suffix {!r}".format(Path(path).suffix)
+            f"(CSV or CxF3), got the suffix {Path(path).suffix!r}"
         )
 
 

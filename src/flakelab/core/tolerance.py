@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -14,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from flakelab.core.difference import delta_E_CIE2000, delta_LCH
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
+from flakelab.core.units import is_number
 
 __all__ = [
     "Limit",
@@ -44,14 +44,7 @@ def _limits_from_dict(cls, fields: tuple[str, ...], data: Mapping[str, Any], whe
     unknown = [k for k in data if k not in fields]
     if unknown:
         raise ValueError(f"{where}: expected keys among {', '.join(fields)}, got {unknown}")
-    wrong = next(
-        (
-            k
-            for k, v in data.items()
-            if v is not None and (isinstance(v, bool) or not isinstance(v, Real))
-        ),
-        None,
-    )
+    wrong = next((k for k, v in data.items() if v is not None and not is_number(v)), None)
     if wrong is not None:
         raise ValueError(f"{where}: {wrong}: expected a number, got {data[wrong]!r}")
     try:

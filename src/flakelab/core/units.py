@@ -3,10 +3,17 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from numbers import Real
 
 import numpy as np
 
-__all__ = ["parse_amount"]
+__all__ = ["parse_amount", "is_number"]
+
+
+def is_number(value: object) -> bool:
+    """Whether a value read from a JSON or TOML file is a real number: JSON's ``true`` is a
+    Python bool, which is an int, but not an amount."""
+    return isinstance(value, Real) and not isinstance(value, bool)
 
 
 def parse_amount(

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 
+from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.io.records import write_atomically
 
@@ -34,7 +35,7 @@ def read_recipe(path: str | PathLike) -> dict[str, float]:
     if not isinstance(grams, dict) or not grams:
         raise FlakelabError(f"{path}: expected a JSON object toner → grams with at least one toner")
     for toner, amount in grams.items():
-        if isinstance(amount, bool) or not isinstance(amount, int | float):
+        if not is_number(amount):
             raise FlakelabError(f"{path}: {toner}: expected grams as a number, got {amount!r}")
         if not math.isfinite(amount) or amount < 0:
             raise FlakelabError(f"{path}: {toner}: expected non-negative grams, got {amount!r}")

@@ -48,6 +48,7 @@ from sqlalchemy.orm import Session
 from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
@@ -429,7 +430,7 @@ def read_habits(path: str | PathLike) -> ShopHabits:
 
     for key, low, high in _RANGES:
         value = document.get(key)
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not is_number(value):
             raise MeasurementFileError(path, f"expected a number, got {value!r}", field=key)
         if not low <= value <= high:
             raise MeasurementFileError(path, f"expected {low} to {high}, got {value}", field=key)
