@@ -215,8 +215,10 @@ def test_registry_promotes_only_a_better_model(trained, data, database_url):
     second = register(engine, worse, data, name="test")
     assert second["version"] == first["version"] + 1
     assert not second["promoted"] and second["held_out_de00"] > first["held_out_de00"]
-    statuses = {(m["name"], m["version"]): m["status"] for m in list_models(engine)}
-    assert statuses[("test", second["version"])] == "candidate"
+    listed = {(m["name"], m["version"]): m for m in list_models(engine)}
+    assert listed[("test", second["version"])]["status"] == "candidate"
+    # the sizes come from the database, not from reading every artefact
+    assert listed[("test", first["version"])]["size_kb"] == round(len(good.to_bytes()) / 1024, 1)
 
 
 def test_effect_share_floor_is_where_the_effect_paints_of_the_cases_run_out(trained, data):
