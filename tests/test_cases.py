@@ -11,7 +11,7 @@ import sqlite3
 import subprocess
 import sys
 from dataclasses import replace
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
@@ -211,6 +211,13 @@ def test_database_round_trip_and_migrations(cases, database_url):
     long = replace(cases[0], case_id="i" * 64, shop="s" * 120, instrument="n" * 60)
     add_cases(engine, [long])
     assert latest_cases(engine, 1, shop="s" * 120)[0].instrument == "n" * 60
+    # a time with an offset is the same instant read back (SQLite keeps no zone: it was
+    # stored as the local time and read as UTC, two hours late)
+    paris = timezone(timedelta(hours=2))
+    local = replace(cases[1], case_id="local", created_at=datetime(2026, 5, 4, 10, tzinfo=paris))
+    add_cases(engine, [local])
+    back = next(c for c in iter_cases(engine) if c.case_id == "local")
+    assert back.created_at == local.created_at and back.created_at.utcoffset() == timedelta(0)
 
 
 def test_an_older_database_is_migrated_with_its_cases(cases, database_url):

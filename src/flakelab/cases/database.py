@@ -148,7 +148,8 @@ def _row(case: Case) -> CaseRow:
         sprayout=case.sprayout.astype("<f4").tobytes(),
         target_texture=dict(case.target_texture),
         sprayout_texture=dict(case.sprayout_texture),
-        created_at=case.created_at,
+        # in UTC: SQLite keeps no zone, so an offset would otherwise be dropped, not applied
+        created_at=case.created_at.astimezone(UTC),
         updated_at=now,
     )
 
