@@ -20,7 +20,7 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, inspect
 
-from flakelab.cases.case import Case, CaseError, cases_at, worst_differences
+from flakelab.cases.case import Case, CaseError, cases_at, select_cases, worst_differences
 from flakelab.cases.database import (
     DatabaseError,
     add_cases,
@@ -218,6 +218,18 @@ def test_database_round_trip_and_migrations(cases, database_url):
     add_cases(engine, [local])
     back = next(c for c in iter_cases(engine) if c.case_id == "local")
     assert back.created_at == local.created_at and back.created_at.utcoffset() == timedelta(0)
+
+
+def test_the_database_chooses_a_shop_s_cases_since_a_date_as_select_cases_does(cases, database_url):
+    engine = open_database(database_url)
+    mixed = [replace(c, shop="Martin") if i % 3 == 0 else c for i, c in enumerate(cases)]
+    add_cases(engine, mixed)
+    middle = sorted(c.created_at for c in mixed)[len(mixed) // 2]
+    for shop, since in (("Martin", None), (None, middle), ("Martin", middle),
+                        (None, middle.replace(tzinfo=None)), ("nobody", None)):  # fmt: skip
+        chosen = [c.case_id for c in iter_cases(engine, shop=shop, since=since)]
+        assert chosen == [c.case_id for c in select_cases(mixed, shop=shop, since=since)]
+    assert 0 < len(list(iter_cases(engine, shop="Martin", since=middle))) < len(mixed) // 3
 
 
 def test_an_older_database_is_migrated_with_its_cases(cases, database_url):

@@ -192,10 +192,24 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
     return len(rows)
 
 
-def iter_cases(engine: Engine, *, batch: int = 2000, limit: int | None = None) -> Iterator[Case]:
-    """Cases in insertion order, read in batches (``cases.case.cases_at`` picks those a model
-    of one geometry set reads)."""
+def iter_cases(
+    engine: Engine,
+    *,
+    batch: int = 2000,
+    limit: int | None = None,
+    shop: str | None = None,
+    since: datetime | None = None,
+) -> Iterator[Case]:
+    """Cases in insertion order, read in batches: those of ``shop`` made at or after ``since``
+    (without a zone: UTC; None: any shop, any time), chosen by the database, so that one
+    shop's cases are read without the rest (``cases.case.cases_at`` picks those a model of
+    one geometry set reads)."""
     query = select(CaseRow).order_by(CaseRow.id)
+    if shop is not None:
+        query = query.where(CaseRow.shop == shop)
+    if since is not None:  # stored in UTC (SQLite keeps no zone)
+        utc = since if since.tzinfo is not None else since.replace(tzinfo=UTC)
+        query = query.where(CaseRow.created_at >= utc.astimezone(UTC))
     if limit:
         query = query.limit(limit)
     with Session(engine) as session:

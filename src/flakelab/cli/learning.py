@@ -121,8 +121,9 @@ def split_held_out(cases: list, source: str, holdout: float, seed: int, library)
     return arrays(False), arrays(True)
 
 
-def load_cases(source: str) -> list:
-    """Cases from a CSV/CxF file, or from a database (URL or .db/.sqlite file)."""
+def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
+    """Cases from a CSV/CxF file (all of them), or from a database (URL or .db/.sqlite file:
+    only those of ``shop`` made at or after ``since``, when given)."""
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import is_case_file, read_cases
 
@@ -131,7 +132,7 @@ def load_cases(source: str) -> list:
         return read_cases(path)
     if "://" not in source and not path.exists():
         raise FlakelabError(f"{source}: no such case file or database")
-    return list(iter_cases(open_database(source, must_exist=True)))
+    return list(iter_cases(open_database(source, must_exist=True), shop=shop, since=since))
 
 
 def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
@@ -151,7 +152,9 @@ def shop_cases(source: str, shop: str | None, geometries, since: datetime | None
     zone: UTC)."""
     from flakelab.cases.case import select_cases
 
-    chosen = select_cases(load_cases(source), shop=shop, since=since, geometries=geometries)
+    chosen = select_cases(
+        load_cases(source, shop, since), shop=shop, since=since, geometries=geometries
+    )
     if not chosen:
         raise FlakelabError(
             f"{source}: no cases {_which(shop, since)} read at the model's "
@@ -599,7 +602,9 @@ def export_cases(
     check_output_file(target, "target")  # before the database is read
     geometries = instrument and INSTRUMENT_GEOMETRIES[_instrument(instrument)]
     engine = open_database(database, must_exist=True)
-    cases = select_cases(iter_cases(engine), shop=shop, since=since, geometries=geometries)
+    cases = select_cases(
+        iter_cases(engine, shop=shop, since=since), shop=shop, since=since, geometries=geometries
+    )
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(f"{engine.url}: no cases {_which(shop, since)}{at}; nothing written")
@@ -1065,7 +1070,7 @@ def evaluate(
     forward = (
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
-    loaded = select_cases(load_cases(cases), shop=shop, since=since)
+    loaded = select_cases(load_cases(cases, shop, since), shop=shop, since=since)
     chosen = cases_at(loaded, forward.geometries)
     if not chosen:
         raise FlakelabError(
