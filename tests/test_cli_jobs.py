@@ -14,7 +14,7 @@ import pytest
 from flakelab.core import compare
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.data import example_path
-from flakelab.io import read_measurement, read_recipe
+from flakelab.io import read_measurement, read_recipe, write_measurements
 
 
 def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -456,6 +456,18 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
     assert not (tmp_path / "no").exists()
     run = flakelab("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
     assert run.returncode == 2 and "'--novel-targets'" in run.stderr
+    # a reading without every geometry the model predicts is named with its file
+    short = tmp_path / "short.json"
+    target = read_measurement(example_path("target"))
+    write_measurements([target.select(["45as15", "45as25", "45as45"])], short)
+    for args in (("match", str(short)),
+                 ("correct", str(example_path("target")), "--recipe",
+                  str(example_path("target").parent / "blue-metallic-recipe.json"),
+                  "--sprayed", str(short))):  # fmt: skip
+        run = flakelab(*args)
+        said = " ".join(run.stderr.split())
+        assert run.returncode == 2 and f"{short}: sample {target.sample}: geometries " in said
+        assert "45as75, 45as110 missing" in said, args
     missing = tmp_path / "no" / "p.png"
     run = flakelab("plot", str(example_path("target")), "-o", str(missing))
     assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr

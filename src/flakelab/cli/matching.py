@@ -154,6 +154,17 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
     return found
 
 
+def spectra_for_model(path, reading, forward):
+    """A reading's spectra at the model's geometries (:func:`~flakelab.match.search.
+    target_spectra`); a reading that lacks some is named with its file."""
+    from flakelab.match.search import MatchError, target_spectra
+
+    try:
+        return target_spectra(reading, forward)
+    except MatchError as error:
+        raise FlakelabError(f"{path}: sample {error}") from None
+
+
 def match_command(
     target: Annotated[
         str | None,
@@ -277,6 +288,7 @@ def match_command(
     lib, forward, effect = _setup(library, instrument, model, database, physics)
     path = example_path("target") if example else Path(target)
     measurement = read_sample(path, sample)
+    spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     tol = read_tolerance(tolerance or "refinish")
     result = match(
         measurement,
@@ -585,7 +597,7 @@ def correct_command(
     from flakelab.io import read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note
     from flakelab.match.crosscheck import expected_left_out
-    from flakelab.match.search import left_out_note, target_spectra, unused_geometries
+    from flakelab.match.search import left_out_note, unused_geometries
 
     tol = read_tolerance(tolerance)
     test_lights = lights_option(lights)
@@ -597,8 +609,8 @@ def correct_command(
     x0 = recipe_fractions(lib, grams, recipe)
     target_reading = read_sample(target, sample)
     sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
-    target_R, _, _ = target_spectra(target_reading, forward)
-    sprayed_R, _, _ = target_spectra(sprayed_reading, forward)
+    target_R, _, _ = spectra_for_model(target, target_reading, forward)
+    sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
