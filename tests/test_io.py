@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import shutil
 from pathlib import Path
@@ -119,6 +121,32 @@ def test_truncated_xlsx_is_reported(ma_t12_files, tmp_path):
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(MeasurementFileError, match="truncated or corrupt"):
         read_measurements(path)
+
+
+def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_measurement, tmp_path):
+    """Semicolons between cells and decimal commas, as Excel writes CSV in most of Europe."""
+    plain = tmp_path / "plain.csv"
+    write_measurements([rich_measurement], plain)
+    rows = list(csv.reader(plain.read_text().splitlines()))
+    european = tmp_path / "european.csv"
+    out = io.StringIO()
+    csv.writer(out, delimiter=";").writerows(
+        [cell.replace(".", ",") if _is_decimal(cell) else cell for cell in row] for row in rows
+    )
+    european.write_text(out.getvalue())
+    assert "0," in european.read_text()  # the numbers are written the European way
+    (back,) = read_measurements(european)
+    (expected,) = read_measurements(plain)
+    np.testing.assert_array_equal(back.reflectance, expected.reflectance)
+    assert back.texture == expected.texture and back.sample == expected.sample
+
+
+def _is_decimal(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return "." in cell
 
 
 def test_truncated_cxf_and_json_are_reported(rich_measurement, tmp_path):

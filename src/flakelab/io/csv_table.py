@@ -9,7 +9,9 @@ Columns, in any order after the first two:
 ``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
 ``lab_conditions``                optional, e.g. ``D65/10``
 
-Lines starting with ``#`` are comments. Comma, semicolon or tab separated (detected).
+Lines starting with ``#`` are comments. Comma, semicolon or tab separated (detected); a
+semicolon or tab separated file may write its numbers with a decimal comma (``0,2039``), as
+spreadsheets do in most of Europe.
 """
 
 from __future__ import annotations
@@ -39,6 +41,15 @@ from flakelab.io.records import (
 __all__ = ["read_csv", "write_csv"]
 
 _META = ("sample", "geometry", "L", "a", "b", "instrument", "measured_at", "lab_conditions")
+
+
+def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
+    """A row with its numeric cells' decimal commas read as points (``0,25`` → ``0.25``)."""
+    row = list(row)
+    for i in numeric:
+        if i < len(row):
+            row[i] = row[i].replace(",", ".")
+    return row
 
 
 def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]:
@@ -77,6 +88,9 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         raise MeasurementFileError(path, "no reflectance columns such as R400", field="header")
     wavelengths = parse_wavelength_header(path, [header[i] for i in spectral], "header")
     has_lab = all(k in columns for k in "Lab")
+    if delimiter != ",":  # the comma is free to be the decimal mark
+        numeric = [*spectral, *(columns[k] for k in (*"Lab", *TEXTURE_READINGS) if k in columns)]
+        rows[1:] = [_decimal_points(row, numeric) for row in rows[1:]]
 
     readings, texture, instruments, conditions = [], {}, set(), set()
     for number, row in enumerate(rows[1:], start=2):
