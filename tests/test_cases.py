@@ -400,7 +400,7 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
     def cxf_recipe(value):
         return lambda text: text.replace(f"Value='{recipe}'", f"Value='{value}'", 1)
 
-    flawed = {  # each was an internal error, or a silent loss, before
+    flawed = {  # before: list and null internal errors, the orphan dropped, a twice id read
         ("list.cxf", cxf_recipe("[1, 2]")): re.escape(
             "meta tag recipe: expected a JSON object toner → amount, got '[1, 2]'"
         ),

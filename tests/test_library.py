@@ -125,7 +125,7 @@ def test_library_file_with_missing_spectrum_or_bad_field_is_rejected(tmp_path):
 def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
     good = read_library().to_dict()
     path = tmp_path / "shop.json"
-    flawed = {  # the first five were internal errors before; the rest did not name the file
+    flawed = {  # before: the first two internal errors, the third unnamed, names 5 and "" read
         "toners: expected a list of toner objects": lambda d: d.update(toners={"a": 1}),
         "toners: expected a list of toner objects ": lambda d: d["toners"].append(5),
         "wavelengths: expected 400–700 nm in 10 nm steps": lambda d: d.update(wavelengths="abc"),
