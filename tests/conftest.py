@@ -23,6 +23,23 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MA_T12 = SHARED / "ma-t12"
 
 
+def _run_cli(*args: object) -> subprocess.CompletedProcess:
+    """The CLI run in this process, as a finished process (exit status, stdout, stderr): for
+    checks that end before any work, without a new interpreter's 3 s of imports each."""
+    from typer.testing import CliRunner
+
+    from flakelab.cli.main import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)
+
+
+@pytest.fixture(scope="session")
+def cli():
+    """Run the CLI in this process (:func:`_run_cli`)."""
+    return _run_cli
+
+
 @pytest.fixture(scope="session")
 def ma_t12_dir() -> Path:
     if not MA_T12.is_dir():

@@ -285,7 +285,7 @@ def test_a_database_that_cannot_be_opened_is_named(tmp_path):
     assert junk.read_text() == "not a database"  # left as it was
 
 
-def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch):
+def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch, cli):
     """A mistyped path must not leave an empty database behind and report no cases."""
     missing = tmp_path / "shop.db"
     for given in (missing, f"sqlite:///{missing}"):
@@ -300,21 +300,21 @@ def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path
         ("cases", "export", str(tmp_path / "x.csv")),
         ("model", "list"),
     ):
-        run = _cli(*args, "--database", str(missing))
+        run = cli(*args, "--database", str(missing))
         assert run.returncode == 2 and "no such database file" in run.stderr, args
     assert not missing.exists()
     open_database(missing)  # a command that stores creates it
     assert missing.is_file() and count_cases(open_database(missing, must_exist=True)) == 0
 
 
-def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases, tmp_path):
+def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases, tmp_path, cli):
     database = tmp_path / "shop.db"
     add_cases(open_database(database), cases[:2])
     for target, message in (
         (tmp_path / "history.json", "expected a case file named .csv, .cxf, .xml"),
         (tmp_path / "no" / "history.csv", "target: .* no folder"),
     ):
-        run = _cli("cases", "export", str(target), "--database", str(database))
+        run = cli("cases", "export", str(target), "--database", str(database))
         assert run.returncode == 2 and re.search(message, run.stderr), run.stderr
         assert not target.exists()
     with pytest.raises(CaseFileError, match="got the suffix '.json'"):
@@ -443,12 +443,14 @@ def _cell(text: str, row: int, column: int, value: str) -> str:
     return out.getvalue()
 
 
-def test_importing_stored_cases_again_names_one_and_stores_nothing(cases, tmp_path, database_url):
+def test_importing_stored_cases_again_names_one_and_stores_nothing(
+    cases, tmp_path, database_url, cli
+):
     old, new = tmp_path / "old.csv", tmp_path / "new.csv"
     write_cases(cases[:3], old)
     write_cases(cases[2:6], new)
-    assert _cli("cases", "import", str(old), "--database", database_url).returncode == 0
-    run = _cli("cases", "import", str(new), "--database", database_url)
+    assert cli("cases", "import", str(old), "--database", database_url).returncode == 0
+    run = cli("cases", "import", str(new), "--database", database_url)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert f"case '{cases[2].case_id}' is already stored" in run.stderr
     assert "(1 of the file's 4 cases are); nothing was stored" in run.stderr

@@ -68,30 +68,30 @@ def test_compare_example_agrees_with_library_and_tolerance():
     assert refused.returncode == 2 and "--lights: A is the reference illuminant" in refused.stderr
 
 
-def test_compare_names_the_geometries_a_five_angle_spray_out_leaves_out(tmp_path):
+def test_compare_names_the_geometries_a_five_angle_spray_out_leaves_out(tmp_path, cli):
     target = read_measurement(example_path("target"))
     five = tmp_path / "five.json"
     write_measurements([read_measurement(example_path("sprayout")).select(
         ["45as15", "45as25", "45as45", "45as75", "45as110"])], five)  # fmt: skip
-    run = flakelab("compare", str(example_path("target")), str(five))
+    run = cli("compare", str(example_path("target")), str(five))
     assert run.returncode == 0, run.stderr
     left = [g for g in target.geometry_names if g.startswith("15") or g == "45as-15"]
     assert "not compared: 7 of the reference's geometries, which the sample lacks: " in run.stdout
     assert ", ".join(left) in " ".join(run.stdout.split())
 
 
-def test_a_file_of_several_samples_says_which_it_read(tmp_path):
+def test_a_file_of_several_samples_says_which_it_read(tmp_path, cli):
     both = tmp_path / "both.json"
     target, sprayout = (read_measurement(example_path(k)) for k in ("target", "sprayout"))
     write_measurements([target, sprayout], both)
-    run = flakelab("inspect", str(both), "--json")
+    run = cli("inspect", str(both), "--json")
     assert run.returncode == 0 and json.loads(run.stdout)["sample"] == target.sample
     note = " ".join(run.stderr.split())
     assert f"note: {both} holds 2 samples; read its first, '{target.sample}' (--sample" in note
-    run = flakelab("inspect", str(both), "--sample", sprayout.sample, "--json")
+    run = cli("inspect", str(both), "--sample", sprayout.sample, "--json")
     assert json.loads(run.stdout)["sample"] == sprayout.sample and "note" not in run.stderr
-    assert "note" not in flakelab("inspect", "--example").stderr  # one sample: nothing to say
-    run = flakelab("compare", str(both), str(both), "--sample-name", sprayout.sample)
+    assert "note" not in cli("inspect", "--example").stderr  # one sample: nothing to say
+    run = cli("compare", str(both), str(both), "--sample-name", sprayout.sample)
     note = " ".join(run.stderr.split())  # the option that names another is the command's own
     assert "(--reference-sample names another)" in note and note.count("note:") == 1
 
@@ -236,8 +236,8 @@ def test_validate_scaling_reproduces_the_papers_observations(tmp_path):
     ]  # fmt: skip
 
 
-def test_validate_scaling_rejects_bad_spreads_and_plots_before_the_monte_carlo(tmp_path):
-    run = flakelab("validate", "scaling", "--spreads", "0,90", "--plots", "")
+def test_validate_scaling_rejects_bad_spreads_and_plots_before_the_monte_carlo(tmp_path, cli):
+    run = cli("validate", "scaling", "--spreads", "0,90", "--plots", "")
     assert run.returncode == 2 and "--spreads" in run.stderr and "Traceback" not in run.stderr
     file = tmp_path / "plots.png"
     file.write_bytes(b"")
@@ -246,14 +246,14 @@ def test_validate_scaling_rejects_bad_spreads_and_plots_before_the_monte_carlo(t
         (("--plots", str(file)), f"--plots: {file}: is a file, expected a folder"),
         (("--plots", str(tmp_path / "no" / "plots")), "no folder"),
     ):
-        run = flakelab("validate", "scaling", "--photons", "1000", *options)
+        run = cli("validate", "scaling", "--photons", "1000", *options)
         assert run.returncode == 2 and message in run.stderr, run.stderr
         assert "Monte Carlo" not in run.stderr  # refused before it ran
 
 
-def test_texture_evaluate_refuses_an_image_no_machine_holds():
+def test_texture_evaluate_refuses_an_image_no_machine_holds(cli):
     # 100,000² pixels was a MemoryError after the first process had been generated
-    run = flakelab("texture", "evaluate", "--size", "100000", "--points", "2")
+    run = cli("texture", "evaluate", "--size", "100000", "--points", "2")
     said = " ".join(run.stderr.replace("│", " ").split())
     assert run.returncode == 2 and "'--size': Input should be less than or equal to 8192" in said
 
@@ -273,9 +273,9 @@ def test_a_job_too_large_for_memory_is_an_error_not_a_bug(capsys):
     assert "ask for less" in said and "internal error" not in said
 
 
-def test_wrong_conditions_are_named_by_their_option():
+def test_wrong_conditions_are_named_by_their_option(cli):
     for command in (("compare", "--example"), ("inspect", "--example")):
-        run = flakelab(*command, "--conditions", "D65/3")
+        run = cli(*command, "--conditions", "D65/3")
         said = " ".join(run.stderr.replace("│", " ").split())  # unwrapped from typer's box
         assert run.returncode == 2 and "'--conditions' / '-c'" in said
         assert "expected observer '2' or '10', got '3'" in said

@@ -416,7 +416,7 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     assert "Traceback" not in run.stderr
 
 
-def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
+def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
     # a server that is not there, or whose driver is not installed: named, exit 2
     run = flakelab("cases", "shops", "--database", "postgresql://nobody@127.0.0.1:1/x")
     assert run.returncode == 2 and "127.0.0.1:1/x" in run.stderr
@@ -451,7 +451,7 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
         (("model", "adapt", cases, "--no-register", "--out", str(model)), model),
         (("cases", "habits", cases, "--out", str(habits)), habits),
     ):
-        run = flakelab(*args)
+        run = cli(*args)
         assert run.returncode == 2 and f"--out: {output}: no folder" in run.stderr, args
     assert not (tmp_path / "no").exists()
     run = flakelab("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
@@ -464,7 +464,7 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path):
                  ("correct", str(example_path("target")), "--recipe",
                   str(example_path("target").parent / "blue-metallic-recipe.json"),
                   "--sprayed", str(short))):  # fmt: skip
-        run = flakelab(*args)
+        run = cli(*args)
         said = " ".join(run.stderr.split())
         assert run.returncode == 2 and f"{short}: sample {target.sample}: geometries " in said
         assert "45as75, 45as110 missing" in said, args
