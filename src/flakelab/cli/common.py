@@ -44,31 +44,24 @@ def reports_errors(command: F) -> F:
             raise
         except (FlakelabError, ValueError, KeyError, OSError) as error:
             message = error.args[0] if isinstance(error, KeyError) and error.args else error
-            # escaped: a message may quote brackets (a CSV cell, "flakelab[postgres]")
-            errors.print(
-                f"[bold red]error:[/] {escape(str(message))}", highlight=False, soft_wrap=True
-            )
-            raise typer.Exit(2) from None
+            _stop("error", str(message), 2)
         except MemoryError as error:  # a size or count this machine cannot hold
-            errors.print(
-                f"[bold red]error:[/] not enough memory for this job ({escape(str(error))}); "
-                "ask for less: a smaller size, count or batch",
-                highlight=False,
-                soft_wrap=True,
-            )
-            raise typer.Exit(2) from None
+            _stop("error", f"not enough memory for this job ({error}); ask for less: a "
+                  "smaller size, count or batch", 2)  # fmt: skip
         except Exception as error:  # pragma: no cover - a bug, reported without a traceback
             if os.environ.get("FLAKELAB_DEBUG"):
                 raise
-            errors.print(
-                f"[bold red]internal error:[/] {type(error).__name__}: {escape(str(error))} "
-                "(set FLAKELAB_DEBUG=1 for a traceback and please report it)",
-                highlight=False,
-                soft_wrap=True,
-            )
-            raise typer.Exit(70) from None
+            _stop("internal error", f"{type(error).__name__}: {error} (set FLAKELAB_DEBUG=1 "
+                  "for a traceback and please report it)", 70)  # fmt: skip
 
     return wrapper  # type: ignore[return-value]
+
+
+def _stop(label: str, message: str, status: int) -> None:
+    """One line on stderr, then exit with ``status``; the message is escaped, since it may
+    quote brackets (a CSV cell, "flakelab[postgres]") that are not terminal markup."""
+    errors.print(f"[bold red]{label}:[/] {escape(message)}", highlight=False, soft_wrap=True)
+    raise typer.Exit(status) from None
 
 
 def _checked_conditions(text: str) -> str:
