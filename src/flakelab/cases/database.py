@@ -79,13 +79,18 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     leave an empty database behind and report no cases, or the shipped model."""
     named = url is not None or bool(os.environ.get("FLAKELAB_DATABASE_URL"))
     url = url_for(url) if url is not None else default_url()
-    if must_exist and named:  # the user data folder's own database is made on first use
-        _check_sqlite_file_exists(url)
+    file = _sqlite_file(url)
+    # the user data folder's own database is made on first use
+    if must_exist and named and file and not Path(file).is_file():
+        raise DatabaseError(
+            f"{url}: no such database file; nothing was created (the commands that store "
+            "cases or models create one)"
+        )
     try:
         # a command holds its database for a few transactions: each connection is closed when
         # its transaction ends, none is left open for the collector (psycopg warns of those);
         # an in-memory SQLite database lives in its one connection, which is kept
-        engine = create_engine(url, poolclass=StaticPool if _in_memory(url) else NullPool)
+        engine = create_engine(url, poolclass=StaticPool if file == "" else NullPool)
         if engine.dialect.name == "sqlite":
             event.listen(engine, "connect", _sqlite_pragmas)
         migrate(engine)
@@ -102,26 +107,16 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     return engine
 
 
-def _in_memory(url: str) -> bool:
+def _sqlite_file(url: str) -> str | None:
+    """The file a SQLite URL names: "" for an in-memory database, None for another kind of
+    database (or a malformed URL, which ``create_engine`` names)."""
     try:
         parsed = make_url(url)
     except ArgumentError:
-        return False
-    return parsed.get_backend_name() == "sqlite" and parsed.database in (None, "", ":memory:")
-
-
-def _check_sqlite_file_exists(url: str) -> None:
-    try:
-        parsed = make_url(url)
-    except ArgumentError:
-        return  # create_engine names the malformed URL
-    file = parsed.database
-    if parsed.get_backend_name() == "sqlite" and file and file != ":memory:":
-        if not Path(file).is_file():
-            raise DatabaseError(
-                f"{url}: no such database file; nothing was created (the commands that store "
-                "cases or models create one)"
-            )
+        return None
+    if parsed.get_backend_name() != "sqlite":
+        return None
+    return "" if parsed.database in (None, "", ":memory:") else parsed.database
 
 
 def migrate(engine: Engine, revision: str = "head") -> None:
