@@ -37,7 +37,8 @@ from flakelab.io.records import write_atomically
 
 __all__ = ["read_cases", "write_cases", "is_case_file", "check_case_file_suffix", "CASE_FIELDS"]
 
-CASE_FILE_SUFFIXES = (".csv", ".cxf", ".xml")
+CXF_SUFFIXES = (".cxf", ".xml")
+CASE_FILE_SUFFIXES = (".csv", *CXF_SUFFIXES)
 
 CASE_FIELDS = (
     "case_id",
@@ -88,7 +89,7 @@ def write_cases(cases: list[Case], path: str | PathLike) -> None:
     if not cases:
         raise CaseFileError(f"{path}: expected at least one case to write, got none")
     check_case_file_suffix(path)
-    if Path(path).suffix.lower() in (".cxf", ".xml"):
+    if Path(path).suffix.lower() in CXF_SUFFIXES:
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
     geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
@@ -135,7 +136,7 @@ def read_cases(path: str | PathLike) -> list[Case]:
     path = Path(path)
     if not path.exists():
         raise CaseFileError(f"{path}: no such file")
-    if path.suffix.lower() in (".cxf", ".xml"):
+    if path.suffix.lower() in CXF_SUFFIXES:
         return _from_measurements(path, read_cxf(path))
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -310,17 +311,11 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
 
 def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case]:
     by_name = {m.sample: m for m in measurements}
-    orphan = next(
-        (
-            n
-            for n in by_name
-            if n.endswith("/sprayout") and f"{n[: -len('/sprayout')]}/target" not in by_name
-        ),
-        None,
-    )
+    sprayed = [n.removesuffix("/sprayout") for n in by_name if n.endswith("/sprayout")]
+    orphan = next((case_id for case_id in sprayed if f"{case_id}/target" not in by_name), None)
     if orphan is not None:
         raise CaseFileError(
-            f"{path}: sample {orphan!r}: no matching '{orphan[: -len('/sprayout')]}/target' sample"
+            f"{path}: sample '{orphan}/sprayout': no matching '{orphan}/target' sample"
         )
     cases = []
     for name, target in by_name.items():
