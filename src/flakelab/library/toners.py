@@ -46,6 +46,18 @@ def _positive(owner: str, name: str, value: float, *, upper: float | None = None
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
 
 
+def _check_fields(where: str, settings: Mapping[str, Any], kind: type) -> None:
+    """A file's settings for a dataclass ``kind``: none it lacks, every one it needs."""
+    allowed = sorted(f.name for f in fields(kind))
+    if unknown := sorted(set(settings) - set(allowed)):
+        raise LibraryError(f"{where}: unknown fields {unknown} (expected {allowed})")
+    required = [
+        f.name for f in fields(kind) if f.default is MISSING and f.default_factory is MISSING
+    ]
+    if missing := sorted(set(required) - set(settings)):
+        raise LibraryError(f"{where}: missing fields {missing}")
+
+
 def _is_storage_grid(wavelengths: Any) -> bool:
     try:
         return list(map(float, wavelengths)) == WAVELENGTHS.tolist()
@@ -323,21 +335,10 @@ class Library:
                     f"{where}: kind: expected one of {', '.join(TONER_KINDS)}, got {kind!r}"
                 )
             cls_ = TONER_KINDS[kind]
-            allowed = {f.name for f in fields(cls_)}
-            unknown = sorted(set(item) - allowed - {"kind"})
-            if unknown:
-                raise LibraryError(
-                    f"{where}: unknown fields {unknown} (expected {sorted(allowed)})"
-                )
-            missing = sorted(
-                f.name
-                for f in fields(cls_)
-                if f.name not in item and f.default is MISSING and f.default_factory is MISSING
-            )
-            if missing:
-                raise LibraryError(f"{where}: missing fields {missing}")
+            settings = {k: v for k, v in item.items() if k != "kind"}
+            _check_fields(where, settings, cls_)
             try:
-                toners.append(cls_(**{k: v for k, v in item.items() if k != "kind"}))
+                toners.append(cls_(**settings))
             except LibraryError as error:
                 raise LibraryError(f"{source}: {error}") from None
             except (TypeError, ValueError) as error:
@@ -345,9 +346,7 @@ class Library:
         binder = data.get("binder", {})
         if not isinstance(binder, Mapping):
             raise LibraryError(f"{source}: binder: expected an object")
-        allowed = sorted(f.name for f in fields(Binder))
-        if unknown := sorted(set(binder) - set(allowed)):
-            raise LibraryError(f"{source}: binder: unknown fields {unknown} (expected {allowed})")
+        _check_fields(f"{source}: binder", binder, Binder)
         try:
             return cls(
                 name=str(data.get("name", source)),
