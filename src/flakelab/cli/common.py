@@ -198,12 +198,14 @@ def read_sample(path, sample: str | None, option: str = "--sample"):
     return chosen
 
 
-def check_output_file(path, option: str) -> None:
+def check_output_file(path, option: str, format_of: Callable | None = None) -> None:
     """An output file's folder exists and can be written, and the path is not a folder,
     checked before any work (nothing to check without a file): a long job never ends in a
-    file it cannot write."""
+    file it cannot write. ``format_of`` checks the suffix too (an image's, a figure's)."""
     if path is None:
         return
+    if format_of is not None:
+        format_of(path)
     target = Path(path).resolve()
     if target.is_dir():
         raise FlakelabError(f"{option}: {path}: is a folder, expected a file name")
@@ -219,8 +221,7 @@ def check_figure_file(path, option: str = "--render") -> None:
     if path is not None:
         from flakelab.render.plots import figure_format
 
-        figure_format(path)
-        check_output_file(path, option)
+        check_output_file(path, option, figure_format)
 
 
 def draw_differences(geometries, reference_lab, samples: dict, tolerance, path, title: str,

@@ -44,14 +44,6 @@ def _appearance(measurement: Path | None, sample: str | None, conditions: str):
     return appearance_of(read_sample(path, sample), Conditions.parse(conditions))
 
 
-def check_image_file(path: Path) -> None:
-    """``--output``: an image format and a folder that can be written, before the render."""
-    from flakelab.render.appearance import image_format
-
-    image_format(path)
-    check_output_file(path, "--output")
-
-
 def render_command(
     measurement: Annotated[
         Path | None, typer.Argument(help="Measurement file (default: the shipped example).")
@@ -73,13 +65,15 @@ def render_command(
 ) -> None:
     """Render a measured paint with its colour and texture (Kirchner et al.'s method)."""
     from flakelab.render.appearance import (
+        PANEL_ASPECULAR_DEG,
+        image_format,
         parse_distance,
         render_curved,
         render_panel,
         save_image,
     )
 
-    check_image_file(output)
+    check_output_file(output, "--output", image_format)  # before the render
     if aspecular is not None and view is not View.panel:
         raise FlakelabError("--aspecular: for --view panel (the curved panel sweeps 0–110°)")
     appearance = _appearance(measurement, sample, conditions)
@@ -87,7 +81,7 @@ def render_command(
         diffuse_fraction=light, distance_m=parse_distance(distance), texture=not no_texture
     )
     if view is View.panel:
-        angle = 45.0 if aspecular is None else aspecular
+        angle = PANEL_ASPECULAR_DEG if aspecular is None else aspecular
         image = render_panel(appearance, angle, size, seed=seed, **options)
     else:
         image = render_curved(appearance, (size // 2, size), seed=seed, **options)
@@ -108,9 +102,9 @@ def render_grid_command(
     seed: SeedOption = 0,
 ) -> None:
     """Paper 001 Fig. 3: colour fixed, glint rises across, diffuse coarseness rises upward."""
-    from flakelab.render.appearance import render_grid, save_image
+    from flakelab.render.appearance import image_format, render_grid, save_image
 
-    check_image_file(output)
+    check_output_file(output, "--output", image_format)  # before the render
     appearance = _appearance(measurement, sample, conditions)
     image = render_grid(appearance, steps, tile, diffuse_fraction=light, seed=seed)
     save_image(image, output)

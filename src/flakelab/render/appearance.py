@@ -74,6 +74,8 @@ GLOSS_WIDTH_DEG = 3.0
 """Angular half-width of the clearcoat's highlight around the specular direction."""
 SPARKLE_ANGLES = (15.0, 45.0, 75.0)
 CURVED_RANGE_DEG = (0.0, 110.0)
+PANEL_ASPECULAR_DEG = 45.0
+"""Where a flat panel (and the grid of texture tiles) is seen unless told: mid-flop."""
 _TENSION = 0.0  # cardinal spline tension: 0 is Catmull–Rom
 
 
@@ -265,7 +267,7 @@ def _mix(
 
 def render_panel(
     appearance: Appearance,
-    aspecular: float = 45.0,
+    aspecular: float = PANEL_ASPECULAR_DEG,
     size_px: int = 512,
     *,
     diffuse_fraction: float = DIFFUSE_FRACTION,
@@ -319,7 +321,7 @@ def render_grid(
     steps: int = 8,
     tile_px: int = 128,
     *,
-    aspecular: float = 45.0,
+    aspecular: float = PANEL_ASPECULAR_DEG,
     diffuse_fraction: float = 0.5,
     seed: int = 0,
     processes: dict[str, TextureProcess] | None = None,
