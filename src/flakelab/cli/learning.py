@@ -122,14 +122,15 @@ def split_held_out(cases: list, source: str, holdout: float, seed: int, library)
 
 
 def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
-    """Cases from a CSV/CxF file (all of them), or from a database (URL or .db/.sqlite file:
-    only those of ``shop`` made at or after ``since``, when given)."""
+    """The cases of ``shop`` made at or after ``since`` (None: any shop, any time) in a
+    CSV/CxF file, or in a database (URL or .db/.sqlite file), which chooses them itself."""
+    from flakelab.cases.case import select_cases
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import is_case_file, read_cases
 
     path = Path(source)
     if is_case_file(path):
-        return read_cases(path)
+        return select_cases(read_cases(path), shop=shop, since=since)
     if "://" not in source and not path.exists():
         raise FlakelabError(f"{source}: no such case file or database")
     return list(iter_cases(open_database(source, must_exist=True), shop=shop, since=since))
@@ -150,11 +151,9 @@ def shop_cases(source: str, shop: str | None, geometries, since: datetime | None
     """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries`` (among
     others: each is restricted to them), made at or after ``since`` (None: any time; without a
     zone: UTC)."""
-    from flakelab.cases.case import select_cases
+    from flakelab.cases.case import cases_at
 
-    chosen = select_cases(
-        load_cases(source, shop, since), shop=shop, since=since, geometries=geometries
-    )
+    chosen = cases_at(load_cases(source, shop, since), geometries)
     if not chosen:
         raise FlakelabError(
             f"{source}: no cases {_which(shop, since)} read at the model's "
@@ -602,9 +601,7 @@ def export_cases(
     check_output_file(target, "target")  # before the database is read
     geometries = instrument and INSTRUMENT_GEOMETRIES[_instrument(instrument)]
     engine = open_database(database, must_exist=True)
-    cases = select_cases(
-        iter_cases(engine, shop=shop, since=since), shop=shop, since=since, geometries=geometries
-    )
+    cases = select_cases(iter_cases(engine, shop=shop, since=since), geometries=geometries)
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(f"{engine.url}: no cases {_which(shop, since)}{at}; nothing written")
@@ -1061,7 +1058,7 @@ def evaluate(
 
     How the model does on all the cases, on a shop's (--shop), or on those since a date
     (--since)."""
-    from flakelab.cases.case import cases_at, select_cases
+    from flakelab.cases.case import cases_at
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import evaluate_model
@@ -1070,7 +1067,7 @@ def evaluate(
     forward = (
         load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
     )
-    loaded = select_cases(load_cases(cases, shop, since), shop=shop, since=since)
+    loaded = load_cases(cases, shop, since)
     chosen = cases_at(loaded, forward.geometries)
     if not chosen:
         raise FlakelabError(
