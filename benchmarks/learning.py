@@ -6,10 +6,13 @@ the whole protocol (five partitions, the outlier screen, final training, each se
 throughput, with held-out ΔE00 on 500 fresh cases. Baselines in the same run, per screening
 epoch: the cross-validation screen (five fold models side by side, each on four partitions)
 against the paper's sequential screen (one model on one partition per session, four
-sessions), and the fold models side by side against one at a time.
+sessions), and the fold models side by side against one at a time. With ``--device`` (a
+GPU), the protocol trains there, and an epoch of the final training there is timed against
+the same epoch on this machine's CPU.
 
     python benchmarks/learning.py [--cases 61000] [--epochs 300] [--batch-size 1024]
-        [--learning-rate 4e-3] [--screening sequential|cross-validation] [--json]
+        [--learning-rate 4e-3] [--screening sequential|cross-validation] [--members 1]
+        [--device cpu|cuda|auto] [--json]
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from flakelab.models.training import (
     evaluate_model,
     generated_case_arrays,
     train_protocol,
+    training_device,
 )
 from timing import best_time
 
@@ -102,6 +106,32 @@ def screening_rates(data, config: TrainingConfig, epochs: int = 2) -> dict[str, 
     }
 
 
+def device_rates(data, config: TrainingConfig, epochs: int = 2) -> dict[str, float]:
+    """Seconds per epoch of the final training (``config.members`` networks side by side on
+    every case) on the CPU and on ``config.device``: the baseline of the same run."""
+    from dataclasses import replace
+
+    from flakelab.models.training import _new_model, fit
+
+    rows = [np.arange(data.x.shape[0])] * config.members
+    names = [f"final {k}" for k in range(config.members)]
+
+    def seconds(device: str) -> float:
+        on = replace(config, device=device)
+        models = [_new_model(data, on, r) for r in rows]
+        fit(models, data, [r[:4096] for r in rows], 1, config.learning_rate, on, [], names)
+        start = time.perf_counter()
+        fit(models, data, rows, epochs, config.learning_rate, on, [], names)
+        return (time.perf_counter() - start) / epochs
+
+    cpu, device = seconds("cpu"), seconds(config.device)
+    return {
+        "final_epoch_seconds_cpu": cpu,
+        "final_epoch_seconds_device": device,
+        "device_speedup": cpu / device,
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", type=int, default=61_000)
@@ -112,6 +142,10 @@ def main() -> None:
     )
     parser.add_argument("--screening", choices=SCREENINGS, default=TrainingConfig.screening)
     parser.add_argument("--instrument", default="five-angle")
+    parser.add_argument(
+        "--members", type=int, default=1, help="networks of the final training (an ensemble)"
+    )
+    parser.add_argument("--device", default="cpu", help="cpu, cuda, cuda:N, mps or auto")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--inference-only",
@@ -139,8 +173,12 @@ def main() -> None:
         batch_size=args.batch_size,
         seed=args.seed,
         screening=args.screening,
+        members=args.members,
+        device=str(training_device(args.device)),
     )
     rates = screening_rates(data, config)
+    if config.device != "cpu":
+        rates |= device_rates(data, config)
     start = time.perf_counter()
     model, report = train_protocol(data, config)
     train_s = time.perf_counter() - start
@@ -152,6 +190,10 @@ def main() -> None:
         "batch_size": args.batch_size,
         "learning_rate": args.learning_rate,
         "screening": config.screening,
+        "members": config.members,
+        "device": config.device,
+        "device_name": torch.cuda.get_device_name() if config.device.startswith("cuda") else "",
+        "torch": torch.__version__,
         "colour_weight": config.colour_weight,
         "generate_seconds": generate_s,
         "protocol_seconds": train_s,

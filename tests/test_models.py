@@ -22,13 +22,16 @@ from flakelab.models.training import (
     CaseArrays,
     TrainingConfig,
     _new_model,
+    adapt_model,
     effect_share_floor,
     evaluate_model,
     fit,
     flag_outliers,
     generated_case_arrays,
     protocol_epochs,
+    recorded_config,
     train_protocol,
+    training_device,
 )
 
 LIBRARY = read_library(None)
@@ -287,6 +290,9 @@ def test_colour_loss_is_the_mean_squared_cie94_difference(trained, data):
         ({"hidden": ()}, "hidden: expected layer sizes of 1 or more"),
         ({"epochs": 0}, "epochs: expected 1 or more, got 0"),
         ({"members": 0}, "members: expected 1 or more"),
+        ({"device": "meta"}, "device: expected auto or one of cpu, cuda"),
+        ({"device": "gpu"}, "device: expected auto or one of cpu, cuda"),
+        ({"device": "cuda:7"}, "device: 'cuda:7' cannot be used here"),
     ],
 )
 def test_a_training_configuration_that_cannot_train_is_refused(settings, problem):
@@ -294,3 +300,64 @@ def test_a_training_configuration_that_cannot_train_is_refused(settings, problem
     epochs), and no epochs ended in an IndexError after the data were read."""
     with pytest.raises(ModelError, match=problem):
         TrainingConfig(**settings)
+
+
+def test_the_device_a_model_trained_on_is_not_carried_to_its_adaptation(trained):
+    """A model trained on a GPU is adapted on the CPU unless asked: the device is the
+    machine's, and a shop without that GPU must still adapt it."""
+    model, _ = trained
+    on_gpu = replace(model, info=model.info | {"config": model.info["config"] | {"device": "cuda"}})
+    assert recorded_config(on_gpu).device == "cpu"
+    assert recorded_config(on_gpu).seed == QUICK.seed
+
+
+def test_a_gpu_this_machine_lacks_is_refused_before_any_work(cli, tmp_path):
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    result = cli("train", str(tmp_path / "missing.csv"), "--device", "cuda")
+    assert result.returncode == 2
+    assert "'cuda' cannot be used here" in result.stderr
+    assert "missing.csv" not in result.stderr  # refused before the cases are read
+
+
+GPU = "cpu" if training_device("auto").type == "cpu" else str(training_device("auto"))
+needs_gpu = pytest.mark.skipif(GPU == "cpu", reason="torch sees no GPU here")
+
+
+@needs_gpu
+def test_training_on_a_gpu_matches_the_cpu(data):
+    """The batches and starting weights come from the CPU, so one epoch on the GPU gives the
+    CPU's model to float rounding, far closer than one epoch moves it; the model comes back
+    to the CPU."""
+    rows = [np.arange(0, 300)]
+    models = {}
+    for device in ("cpu", GPU):
+        config = replace(QUICK, device=device)
+        models[device] = [_new_model(data, config, r) for r in rows]
+        fit(models[device], data, rows, 1, 2e-3, config, [], ["model"])
+    cpu, gpu = (models[d][0].predict(data.x[:50])[0] for d in ("cpu", GPU))
+    untrained = _new_model(data, QUICK, rows[0]).predict(data.x[:50])[0]
+    assert {p.device.type for p in models[GPU][0].network.parameters()} == {"cpu"}
+    np.testing.assert_allclose(gpu, cpu, rtol=1e-3)
+    assert np.abs(cpu - untrained).max() > 100 * np.abs(gpu - cpu).max()
+
+
+@needs_gpu
+def test_the_protocol_and_adaptation_on_a_gpu_reach_the_cpus_accuracy(trained, data):
+    """The whole protocol on the GPU: the same outliers, a held-out error within a tenth of
+    the CPU's; adaptation with a validation share keeps its best epoch there too."""
+    held = np.arange(300, 400)
+    train = data.subset(np.arange(300))
+    cpu_model, cpu_report = train_protocol(train, QUICK)
+    gpu_model, gpu_report = train_protocol(train, replace(QUICK, device=GPU))
+    assert gpu_report["outliers"] == cpu_report["outliers"]
+    cpu_error = evaluate_model(cpu_model, data.subset(held))["de00_mean"]
+    gpu_error = evaluate_model(gpu_model, data.subset(held))["de00_mean"]
+    assert abs(gpu_error - cpu_error) < 0.1 * cpu_error
+    reports = [
+        adapt_model(gpu_model, data.subset(held), replace(QUICK, adapt_epochs=20, device=d))[1]
+        for d in ("cpu", GPU)
+    ]
+    best = [r["validation_de00_best"] for r in reports]
+    assert best[1] == pytest.approx(best[0], rel=0.05)
+    assert best[1] <= min(e["validation_de00"] for e in reports[1]["log"]) + 1e-9

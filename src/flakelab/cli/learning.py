@@ -93,6 +93,29 @@ ModelFileOption = Annotated[
 ]
 
 
+def _checked_device(name: str) -> str:
+    """``--device`` read before any work, so that a GPU this machine lacks is named at once."""
+    from flakelab.models.network import ModelError
+    from flakelab.models.training import training_device
+
+    try:
+        training_device(name)
+    except ModelError as error:
+        raise typer.BadParameter(str(error).removeprefix("device: ")) from None
+    return name
+
+
+DeviceOption = Annotated[
+    str,
+    typer.Option(
+        help="Where the networks train: cpu, cuda, cuda:N, mps, or auto (a GPU if torch sees "
+        "one). The seed gives the same batches and starting weights on every device; the "
+        "trained weights agree to float rounding.",
+        callback=_checked_device,
+    ),
+]
+
+
 def source_arrays(source, cases: list, library, *, effect: bool = False):
     """The training arrays of ``cases`` read from ``source``; a case the library cannot
     encode (a toner it lacks) is named with the file or database it came from."""
@@ -920,6 +943,7 @@ def train(
         ),
     ] = 0.0,
     seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
+    device: DeviceOption = "cpu",
     json_output: JsonOption = False,
 ) -> None:
     """Train the learned forward model with the hybrid paper's protocol.
@@ -964,6 +988,7 @@ def train(
         members=members,
         log_offset=log_offset,
         seed=seed,
+        device=device,
     )
     if colour_weight is not None:
         config = replace(config, colour_weight=colour_weight)
@@ -1143,6 +1168,7 @@ def adapt(
         float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
     ] = 0.1,
     seed: Annotated[int, typer.Option(min=0, help="Seed of the splits and the adaptation.")] = 0,
+    device: DeviceOption = "cpu",
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Also write the model here.")
     ] = None,
@@ -1171,7 +1197,7 @@ def adapt(
     novel = set(base.info.get("novel_toners", ()))
     known = [c for c in chosen if not novel & set(c.recipe)]
     data, held_out = split_held_out(known, cases, holdout, seed, lib)
-    config = replace(recorded_config(base), adapt_validation=validation, seed=seed)
+    config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
     if epochs is not None:
         config = replace(config, adapt_epochs=epochs)
     stage = f"adapt {shop or cases}"

@@ -36,11 +36,16 @@ def _weights_over_white(conditions: Conditions) -> np.ndarray:
 class TorchColour:
     """CIELAB of reflectance tensors ``[..., 31]`` under fixed conditions."""
 
-    def __init__(self, conditions: Conditions = D65_10, dtype: torch.dtype = torch.float64) -> None:
+    def __init__(
+        self,
+        conditions: Conditions = D65_10,
+        dtype: torch.dtype = torch.float64,
+        device: torch.device | str = "cpu",
+    ) -> None:
         # the white point divided in once: t = R · (W / white)
-        self.weights = torch.as_tensor(_weights_over_white(conditions), dtype=dtype)
-        self.f_to_lab = torch.as_tensor(_F_TO_LAB, dtype=dtype)
-        self.lab_offset = torch.as_tensor((-16.0, 0.0, 0.0), dtype=dtype)
+        self.weights = torch.as_tensor(_weights_over_white(conditions), dtype=dtype, device=device)
+        self.f_to_lab = torch.as_tensor(_F_TO_LAB, dtype=dtype, device=device)
+        self.lab_offset = torch.as_tensor((-16.0, 0.0, 0.0), dtype=dtype, device=device)
 
     def lab(self, R: torch.Tensor) -> torch.Tensor:
         return self.lab_of_ratios(R.to(self.weights.dtype) @ self.weights)

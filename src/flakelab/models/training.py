@@ -31,6 +31,10 @@ angles, where the eye (and ΔE00) is most sensitive and where the spread is larg
    ``adapt_validation`` of the shop's cases are held out and the model keeps the epoch that
    predicts them best, its starting weights included: adaptation never leaves it worse there
    than it found it. ``adapt_validation=0`` runs the paper's phase as written.
+
+Training runs on ``device`` (a GPU where torch has one); the batches are drawn and the
+networks initialised on the CPU, so a seed gives the same data order and starting weights on
+any device, and the trained model returns to the CPU.
 """
 
 from __future__ import annotations
@@ -70,6 +74,7 @@ __all__ = [
     "adapt",
     "adapt_model",
     "recorded_config",
+    "training_device",
 ]
 
 SCREENINGS = ("sequential", "cross-validation")
@@ -94,8 +99,10 @@ class TrainingConfig:
     members: int = 1
     log_offset: float = 0.0
     seed: int = 0
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
+        training_device(self.device)
         if not self.hidden or any(size < 1 for size in self.hidden):
             raise ModelError(f"hidden: expected layer sizes of 1 or more, got {self.hidden}")
         for name in ("epochs", "finetune_epochs", "batch_size", "folds", "members"):
@@ -113,6 +120,43 @@ class TrainingConfig:
             finetune_learning_rate=learning_rate / 10,
             **settings,
         )
+
+
+TRAINING_DEVICE_TYPES = ("cpu", "cuda", "mps", "xpu")
+"""Devices torch trains on (CUDA also names AMD's ROCm builds)."""
+
+
+def training_device(name: str) -> torch.device:
+    """The torch device called ``name`` (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"mps"``…), or
+    for ``"auto"`` the first GPU torch can use, else the CPU; refused when this machine or
+    this build of torch has no such device."""
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda")
+        return torch.device("mps" if torch.backends.mps.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        device = None
+    if device is None or device.type not in TRAINING_DEVICE_TYPES:
+        raise ModelError(
+            f"device: expected auto or one of {', '.join(TRAINING_DEVICE_TYPES)} (cuda:N for "
+            f"the N-th GPU), got {name!r}"
+        )
+    try:
+        torch.empty(1, device=device)
+    except (RuntimeError, AssertionError) as error:
+        detail = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise ModelError(
+            f"device: {name!r} cannot be used here ({detail}); torch {torch.__version__} sees "
+            + ", ".join(_devices_seen())
+        ) from None
+    return device
+
+
+def _devices_seen() -> list[str]:
+    cuda = [f"cuda:{i}" for i in range(torch.cuda.device_count())]
+    return ["cpu", *cuda, *(["mps"] if torch.backends.mps.is_available() else [])]
 
 
 @dataclass(frozen=True)
@@ -301,23 +345,27 @@ def fit(
     sizes = [r.size for r in rows]
     if epochs <= 0 or min(sizes) == 0:
         return None
+    device = training_device(config.device)
     generator = torch.Generator().manual_seed(config.seed + len(log))
     x = _stack_rows([_standard_inputs(m, data.x[r]) for m, r in zip(models, rows, strict=True)])
     y = _stack_rows([_standard_targets(m, data, r) for m, r in zip(models, rows, strict=True)])
     read = (~torch.isnan(y)).to(y.dtype)  # texture a case's instrument did not read: no error
-    y = torch.nan_to_num(y)
+    x, y, read = x.to(device), torch.nan_to_num(y).to(device), read.to(device)
     colour_loss = (
-        _colour_loss(models, [data.R[r] for r in rows]) if config.colour_weight > 0 else None
+        _colour_loss(models, [data.R[r] for r in rows], device)
+        if config.colour_weight > 0
+        else None
     )
-    network = StackedNetwork([m.network for m in models])
+    network = StackedNetwork([m.network for m in models]).to(device)
     optimiser = torch.optim.Adam(network.parameters(), lr=learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=epochs)
     per_epoch = min(sizes)
-    stack = torch.arange(len(models))[:, None]
+    stack = torch.arange(len(models), device=device)[:, None]
     best = None if validation is None else _BestEpoch(models, data, validation, network)
     for epoch in range(epochs):
         order = torch.stack([torch.randperm(n, generator=generator)[:per_epoch] for n in sizes])
-        totals = torch.zeros(len(models))
+        order = order.to(device)
+        totals = torch.zeros(len(models), device=device)
         for start in range(0, per_epoch, config.batch_size):
             batch = order[:, start : start + config.batch_size]
             optimiser.zero_grad()
@@ -359,7 +407,7 @@ class _BestEpoch:
     def update(self, epoch: int) -> list[float]:
         scores = self.judge()
         better = scores < self.scores
-        mask = torch.as_tensor(better)
+        mask = torch.as_tensor(better, device=self.weights[0].device)
         with torch.no_grad():
             for kept, weight in zip(self.weights, self.network.parameters(), strict=True):
                 kept[mask] = weight[mask]
@@ -389,23 +437,28 @@ def _stack_rows(arrays: Sequence[torch.Tensor]) -> torch.Tensor:
 
 
 def _colour_loss(
-    models: Sequence[ForwardModel], reflectance: Sequence[NDArray]
+    models: Sequence[ForwardModel],
+    reflectance: Sequence[NDArray],
+    device: torch.device | str = "cpu",
 ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """Per model, the mean squared CIE94 difference between standardised network outputs
     ``[K, B, outputs]`` and the measured ``reflectance[k] [N_k, G, 31]`` at ``rows [K, B]``
-    (the measured CIELAB computed once)."""
-    colour = TorchColour(dtype=torch.float32)
+    (the measured CIELAB computed once), on ``device``."""
+    colour = TorchColour(dtype=torch.float32, device=device)
     measured = _stack_rows(
-        [colour.lab(torch.as_tensor(np.maximum(R, 0.0), dtype=torch.float32)) for R in reflectance]
+        [
+            colour.lab(torch.as_tensor(np.maximum(R, 0.0), dtype=torch.float32, device=device))
+            for R in reflectance
+        ]
     )
     spectral = models[0].spectral_outputs
 
     def standard(name: str) -> torch.Tensor:
         values = [getattr(m, name)[:spectral] for m in models]
-        return torch.as_tensor(np.array(values), dtype=torch.float32)[:, None]
+        return torch.as_tensor(np.array(values), dtype=torch.float32, device=device)[:, None]
 
     scale, offset = standard("y_std"), standard("y_mean")
-    stack = torch.arange(len(models))[:, None]
+    stack = torch.arange(len(models), device=device)[:, None]
     geometry_bands = reflectance[0].shape[1:]
 
     def loss(output: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
@@ -638,7 +691,8 @@ def adapt_model(
 
 def recorded_config(model: ForwardModel) -> TrainingConfig:
     """The :class:`TrainingConfig` a model was trained with (defaults where it recorded none)."""
-    names = {f.name for f in fields(TrainingConfig)}
+    # the device it trained on is this machine's choice, not the model's
+    names = {f.name for f in fields(TrainingConfig)} - {"device"}
     recorded = {k: v for k, v in model.info.get("config", {}).items() if k in names}
     return replace(TrainingConfig(**recorded), hidden=tuple(model.hidden))
 
