@@ -40,7 +40,9 @@ any device, and the trained model returns to the CPU.
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
+import importlib.util
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, fields, replace
@@ -357,11 +359,14 @@ def fit(
         else None
     )
     network = StackedNetwork([m.network for m in models]).to(device)
-    optimiser = torch.optim.Adam(network.parameters(), lr=learning_rate)
+    # one kernel for every parameter's update on a GPU, where launches dominate the step
+    fused = device.type == "cuda"
+    optimiser = torch.optim.Adam(network.parameters(), lr=learning_rate, fused=fused)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=epochs)
     per_epoch = min(sizes)
     stack = torch.arange(len(models), device=device)[:, None]
     best = None if validation is None else _BestEpoch(models, data, validation, network)
+    batch_losses = _batch_losses_for(device)
     for epoch in range(epochs):
         order = torch.stack([torch.randperm(n, generator=generator)[:per_epoch] for n in sizes])
         order = order.to(device)
@@ -369,10 +374,9 @@ def fit(
         for start in range(0, per_epoch, config.batch_size):
             batch = order[:, start : start + config.batch_size]
             optimiser.zero_grad()
-            output = network(x[stack, batch])
-            losses = torch.mean((output - y[stack, batch]) ** 2 * read[stack, batch], dim=(1, 2))
-            if colour_loss is not None:
-                losses = losses + config.colour_weight * colour_loss(output, batch)
+            losses = batch_losses(
+                network, x, y, read, stack, batch, colour_loss, config.colour_weight
+            )
             losses.sum().backward()
             optimiser.step()
             totals += losses.detach() * batch.shape[1]
@@ -387,6 +391,27 @@ def fit(
         best.restore()
     network.copy_into([m.network for m in models])
     return None if best is None else (best.epochs.tolist(), best.scores.tolist())
+
+
+def _batch_losses(network, x, y, read, stack, batch, colour_loss, colour_weight) -> torch.Tensor:
+    """Each of the K models' loss (module notes) on its cases ``batch [K, B]``."""
+    output = network(x[stack, batch])
+    losses = torch.mean((output - y[stack, batch]) ** 2 * read[stack, batch], dim=(1, 2))
+    if colour_loss is not None:
+        losses = losses + colour_weight * colour_loss(output, batch)
+    return losses
+
+
+@functools.cache
+def _batch_losses_for(device: torch.device) -> Callable[..., torch.Tensor]:
+    """:func:`_batch_losses`, compiled for a CUDA GPU: there a step of this small network is
+    some 150 kernels of microseconds each, bound by their launches, and compiling fuses the
+    element-wise ones (the colour term's, chiefly). On the CPU it runs as written, where
+    compiling costs a minute and gains nothing (``benchmarks/learning.py --device``)."""
+    if device.type == "cuda" and importlib.util.find_spec("triton") is not None:
+        torch._dynamo.config.suppress_errors = True  # no compiler at hand: run it as written
+        return torch.compile(_batch_losses)
+    return _batch_losses
 
 
 class _BestEpoch:
