@@ -15,6 +15,7 @@ from flakelab.core import compare
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_recipe, write_measurements
+from flakelab.models.training import training_device
 
 
 def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -29,9 +30,10 @@ def test_generate_train_register_list_and_evaluate(tmp_path):
     # off a terminal the progress is logged as lines, the last one the whole count
     assert "generating cases: 120/120 (100 %)" in run.stderr
     run = flakelab("train", str(cases), "--epochs", "3", "--hidden", "16", "--database", database,
-                   "--out", str(tmp_path / "m.pt"), "--json")  # fmt: skip
+                   "--out", str(tmp_path / "m.pt"), "--device", "auto", "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
+    assert report["device"] == str(training_device("auto"))  # a GPU where torch sees one
     assert report["cases"] + report["held_out"]["cases"] == 120
     assert report["registry"]["version"] == 1
     # three epochs cannot beat the shipped model on the same held-out cases

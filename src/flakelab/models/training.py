@@ -618,6 +618,7 @@ def train_protocol(
         "outliers": int(outliers.sum()),
         "outlier_case_ids": [data.case_ids[i] for i in np.flatnonzero(outliers)],
         "seconds": time.perf_counter() - start,
+        "device": str(training_device(config.device)),
         "final_loss": log[-1]["loss"],
         "adaptation": adaptation,
         "log": log,
