@@ -324,8 +324,11 @@ def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases,
 def test_a_duplicate_case_stores_nothing(cases, database_url):
     engine = open_database(database_url)
     add_cases(engine, cases[:5])
-    with pytest.raises(CaseError, match="nothing was stored"):
+    stored = re.escape(f"case '{cases[0].case_id}' is already stored (1 of the 6 cases given)")
+    with pytest.raises(CaseError, match=f"{stored}; nothing was stored"):
         add_cases(engine, cases[5:10] + cases[:1])
+    with pytest.raises(CaseError, match=f"case '{cases[6].case_id}' is given twice; nothing"):
+        add_cases(engine, cases[5:8] + cases[6:7])
     assert count_cases(engine) == 5
 
 
@@ -453,8 +456,23 @@ def test_importing_stored_cases_again_names_one_and_stores_nothing(
     run = cli("cases", "import", str(new), "--database", database_url)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert f"case '{cases[2].case_id}' is already stored" in run.stderr
-    assert "(1 of the file's 4 cases are); nothing was stored" in run.stderr
+    assert "(1 of the 4 cases given); nothing was stored" in run.stderr
+    assert run.stderr.count(str(new)) == 1
     assert count_cases(open_database(database_url)) == 3
+
+
+def test_generating_into_a_database_that_holds_a_later_batch_says_what_stays(tmp_path, cli):
+    """``cases generate`` stores batch by batch: a clash in the second batch leaves the
+    first stored, and says so, where it used to say that nothing was stored."""
+    database = str(tmp_path / "shop.db")
+    world = World(read_library(None), "five-angle")
+    made = [case for batch in world.cases(520, seed=8) for case in batch]
+    add_cases(open_database(database), made[500:])
+    run = cli("cases", "generate", "--n", "520", "--seed", "8", "--database", database)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert f"case '{made[500].case_id}' is already stored (20 of the 20 cases given)" in run.stderr
+    assert "the 500 cases generated before it stay stored" in run.stderr
+    assert count_cases(open_database(database)) == 520
 
 
 def test_case_checks_its_fields():

@@ -9,6 +9,7 @@ Writes happen in one transaction per call: a batch is stored whole or not at all
 from __future__ import annotations
 
 import os
+from collections import Counter
 from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime
 from pathlib import Path
@@ -175,16 +176,28 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
         with Session(engine) as session, session.begin():
             session.add_all(rows)
     except IntegrityError as error:
-        raise CaseError(
-            f"{engine.url}: a case id already exists; nothing was stored "
-            f"({str(error.orig).splitlines()[0]})"
-        ) from None
+        clash = _clash(engine, rows, error)
+        raise CaseError(f"{engine.url}: {clash}; nothing was stored") from None
     except SQLAlchemyError as error:  # e.g. a value the server refuses (DataError)
         raise DatabaseError(
             f"{engine.url}: cannot store the cases: {error.__class__.__name__}: "
             f"{str(getattr(error, 'orig', error)).splitlines()[0]}; nothing was stored"
         ) from None
     return len(rows)
+
+
+def _clash(engine: Engine, rows: list[CaseRow], error: IntegrityError) -> str:
+    """Which case ids made the database refuse ``rows``: stored already (by another writer,
+    or an earlier run), or given twice."""
+    ids = [r.case_id for r in rows]
+    stored = existing_case_ids(engine, ids)
+    if stored:
+        first = next(i for i in ids if i in stored)
+        return f"case {first!r} is already stored ({len(stored)} of the {len(ids)} cases given)"
+    twice = [i for i, count in Counter(ids).items() if count > 1]
+    if twice:
+        return f"case {twice[0]!r} is given twice"
+    return f"a case id already exists ({str(error.orig).splitlines()[0]})"
 
 
 def iter_cases(

@@ -234,7 +234,7 @@ def generate(
     start: StartOption = None,
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
-    from flakelab.cases.database import add_cases, open_database
+    from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file, write_cases
     from flakelab.cases.generator import World, WorldSettings
     from flakelab.io import read_library
@@ -247,7 +247,7 @@ def generate(
     if to_file:
         check_output_file(out, "--out")  # before the cases are generated, not after
     engine = None if to_file else open_database(out if out is not None else database)
-    collected = []
+    collected, made = [], 0
     with progress_bar() as bar:
         task = bar.add_task("generating cases", total=n)
         first = start and (start if start.tzinfo else start.replace(tzinfo=UTC))
@@ -255,7 +255,8 @@ def generate(
             if to_file:
                 collected.extend(batch)
             else:
-                add_cases(engine, batch)
+                _store_generated(engine, batch, stored=made)
+            made += len(batch)
             bar.advance(task, len(batch))
     if to_file:
         write_cases(collected, out)
@@ -265,6 +266,21 @@ def generate(
     )
 
 
+def _store_generated(engine, batch: list, stored: int) -> None:
+    """One batch of ``cases generate`` stored; a clash says what the batches before it left."""
+    from flakelab.cases.case import CaseError
+    from flakelab.cases.database import add_cases
+
+    try:
+        add_cases(engine, batch)
+    except CaseError as error:
+        before = f"; the {stored} cases generated before it stay stored" if stored else ""
+        raise FlakelabError(
+            f"{error}{before}; a seed generates the same case ids every time: choose another "
+            "--seed or another database"
+        ) from None
+
+
 @cases_app.command("import")
 @reports_errors
 def import_cases(
@@ -272,19 +288,16 @@ def import_cases(
     database: DatabaseOption = None,
 ) -> None:
     """Import a shop's case history into the database (all cases or none)."""
-    from flakelab.cases.database import add_cases, existing_case_ids, open_database
+    from flakelab.cases.case import CaseError
+    from flakelab.cases.database import add_cases, open_database
     from flakelab.cases.exchange import read_cases
 
     cases = read_cases(source)
     engine = open_database(database)
-    stored = existing_case_ids(engine, (c.case_id for c in cases))
-    if stored:
-        first = next(c.case_id for c in cases if c.case_id in stored)
-        raise FlakelabError(
-            f"{source}: case {first!r} is already stored in {engine.url} ({len(stored)} of the "
-            f"file's {len(cases)} cases are); nothing was stored"
-        )
-    count = add_cases(engine, cases)  # one transaction: a writer in between is refused whole
+    try:
+        count = add_cases(engine, cases)  # one transaction: all of them or none
+    except CaseError as error:  # it names the case stored already
+        raise FlakelabError(f"{source}: {error}") from None
     errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
 
 
