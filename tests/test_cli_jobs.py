@@ -261,6 +261,15 @@ def test_weigh_scales_a_recipe_to_another_can(tmp_path):
     assert "is a folder" in into_folder.stderr and "Traceback" not in into_folder.stderr
 
 
+def test_weigh_takes_a_can_in_pounds(cli):
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"
+    run = cli("weigh", str(recipe), "--quantity", "1lb", "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["quantity_g"] == pytest.approx(453.6)
+    assert report["weights_g"][-1]["cumulative"] == pytest.approx(453.6)
+
+
 def test_realism_json_reports_the_shop_statistics():
     run = flakelab("cases", "realism", "--n", "60", "--json")
     assert run.returncode == 0, run.stderr

@@ -28,6 +28,7 @@ from flakelab.match.correction import (
 from flakelab.match.forward import KubelkaMunkForward
 from flakelab.match.recipe import (
     RecipeError,
+    can_on_scale,
     parse_quantity,
     weigh,
     weigh_additions,
@@ -362,6 +363,19 @@ def test_impossible_quantities_are_refused():
         with pytest.raises(RecipeError, match="--quantity"):
             parse_quantity(text)
     assert parse_quantity("0.5 kg") == 500.0 and parse_quantity("250g") == 250.0
+
+
+def test_a_can_in_pounds_or_ounces_is_weighed_to_the_scale():
+    """A pound is 453.59237 g, which no gram scale weighs: ``--quantity 1lb`` was refused as
+    "not a multiple of the scale's 0.1 g". Grams typed finer than the scale still are."""
+    assert can_on_scale("1lb", 0.1) == pytest.approx(453.6)
+    assert can_on_scale("8 oz", 1.0) == 227.0  # 226.796 g
+    assert can_on_scale("0.5 LB", 0.5) == 227.0  # 226.796 g
+    assert can_on_scale("250g", 0.1) == 250.0
+    with pytest.raises(RecipeError, match="multiple"):
+        can_on_scale("250.05g", 0.1)
+    with pytest.raises(RecipeError, match="less than the scale's 0.1 g"):
+        can_on_scale("0.001oz", 0.1)
 
 
 def flakelab(*args: str) -> subprocess.CompletedProcess:

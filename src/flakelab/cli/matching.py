@@ -62,7 +62,10 @@ RecipeOutOption = Annotated[
         "'cases record --recipe' read it.",
     ),
 ]
-QuantityOption = Annotated[str, typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg.")]
+QuantityOption = Annotated[
+    str,
+    typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg, 1lb (to the scale's nearest step)."),
+]
 ResolutionOption = Annotated[float, typer.Option(help="Scale resolution in grams.")]
 ModelOption = Annotated[
     Path | None,
@@ -793,11 +796,9 @@ def weigh_command(
 
 def _scale(quantity: str, resolution: float) -> tuple[float, float]:
     """The can in grams and the scale's resolution, checked that the scale can weigh it."""
-    from flakelab.match.recipe import check_scale, parse_quantity
+    from flakelab.match.recipe import can_on_scale
 
-    grams = parse_quantity(quantity)
-    check_scale(grams, resolution)
-    return grams, resolution
+    return can_on_scale(quantity, resolution), resolution
 
 
 def _weighed(forward, fractions: dict[str, float], quantity_g: float, resolution: float) -> dict:

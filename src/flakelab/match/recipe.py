@@ -32,6 +32,7 @@ __all__ = [
     "weigh_whole_can",
     "weigh_additions",
     "parse_quantity",
+    "can_on_scale",
     "RecipeError",
     "ROUNDINGS_VARIED",
     "MAX_SCALE_STEPS",
@@ -72,10 +73,32 @@ class Weighing:
     lines: list[RecipeLine]
 
 
+METRIC_MASS = {"kg": 1000.0, "g": 1.0}
+IMPERIAL_MASS = {"lb": 453.59237, "oz": 28.349523125}
+"""Grams in each unit a can may be given in (NIST SP 811: the international pound)."""
+
+
 def parse_quantity(text: str) -> float:
     """``250g``, ``0.5 kg``, ``1lb`` → grams."""
-    units = {"kg": 1000.0, "g": 1.0, "lb": 453.59237, "oz": 28.349523125}
+    units = METRIC_MASS | IMPERIAL_MASS
     return parse_amount(text, units, "--quantity", "250g or 0.5kg", RecipeError)
+
+
+def can_on_scale(text: str, resolution_g: float) -> float:
+    """The can ``text`` names, in grams, checked that a scale of ``resolution_g`` weighs it.
+    A can in pounds or ounces is the nearest whole number of the scale's steps (a pound,
+    453.59237 g, is 453.6 g on a 0.1 g scale); one in grams or kilograms must be one already,
+    since a can typed finer than the scale reads is more likely a mistyped scale."""
+    grams = parse_quantity(text)
+    check_resolution(resolution_g)
+    if text.strip().lower().endswith(tuple(IMPERIAL_MASS)):
+        grams = round(round(grams / resolution_g) * resolution_g, 9)
+    if grams <= 0:
+        raise RecipeError(
+            f"--quantity: {text} is less than the scale's {resolution_g:g} g; mix a larger can"
+        )
+    check_scale(grams, resolution_g)
+    return grams
 
 
 def check_resolution(resolution_g: float) -> None:
