@@ -120,20 +120,20 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     assert "note: the spray-out already passes refinish" in text.stdout
 
 
-def test_correct_refuses_a_bad_recipe(tmp_path):
+def test_correct_refuses_a_bad_recipe(tmp_path, cli):
     bad = tmp_path / "recipe.json"
     bad.write_text(json.dumps({"Al medium": -3}))
     target = str(example_path("target"))
-    run = flakelab("correct", target, "--recipe", str(bad), "--sprayed", target)
+    run = cli("correct", target, "--recipe", str(bad), "--sprayed", target)
     assert run.returncode == 2 and "recipe.json" in run.stderr and "Traceback" not in run.stderr
-    run = flakelab("correct", target, "--recipe", str(bad), "--sprayed", target, "--mode", "x")
+    run = cli("correct", target, "--recipe", str(bad), "--sprayed", target, "--mode", "x")
     assert run.returncode == 2
     recipe = str(example_path("target").parent / "blue-metallic-recipe.json")
-    run = flakelab("correct", target, "--recipe", recipe, "--sprayed", target, "--tolerance", "x")
+    run = cli("correct", target, "--recipe", recipe, "--sprayed", target, "--tolerance", "x")
     assert run.returncode == 2 and "x: neither a tolerance preset" in run.stderr
     assert "Traceback" not in run.stderr
     # a scale it cannot be weighed on is refused before the correction (was: division by zero)
-    run = flakelab("correct", target, "--recipe", recipe, "--sprayed", target, "--resolution", "0")
+    run = cli("correct", target, "--recipe", recipe, "--sprayed", target, "--resolution", "0")
     assert run.returncode == 2 and "resolution: expected a positive number" in run.stderr
 
 
@@ -429,21 +429,21 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
 
 def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
     # a server that is not there, or whose driver is not installed: named, exit 2
-    run = flakelab("cases", "shops", "--database", "postgresql://nobody@127.0.0.1:1/x")
+    run = cli("cases", "shops", "--database", "postgresql://nobody@127.0.0.1:1/x")
     assert run.returncode == 2 and "127.0.0.1:1/x" in run.stderr
     assert "internal error" not in run.stderr
     # a message quoting brackets is printed as it is, not read as terminal markup
     recipe = tmp_path / "recipe.json"
     recipe.write_text(json.dumps({"[bold]Perylene": 10}))
-    run = flakelab("correct", str(example_path("target")), "--recipe", str(recipe),
+    run = cli("correct", str(example_path("target")), "--recipe", str(recipe),
                    "--sprayed", str(example_path("sprayout")))  # fmt: skip
     assert run.returncode == 2 and "unknown toner '[bold]Perylene'" in run.stderr
     # a case file that cannot be written is refused before the cases are generated, and a
     # seed numpy cannot take is refused by name
-    run = flakelab("cases", "generate", "--n", "3", "--out", str(tmp_path / "no" / "c.csv"))
+    run = cli("cases", "generate", "--n", "3", "--out", str(tmp_path / "no" / "c.csv"))
     assert run.returncode == 2 and f"--out: {tmp_path / 'no' / 'c.csv'}: no folder" in run.stderr
     assert "generating" not in run.stderr
-    run = flakelab("cases", "generate", "--n", "3", "--seed", "-1", "--out", str(recipe))
+    run = cli("cases", "generate", "--n", "3", "--seed", "-1", "--out", str(recipe))
     assert run.returncode == 2 and "'--seed'" in run.stderr and "Traceback" not in run.stderr
     # training settings: named before the cases are read (the case file here does not exist)
     cases = str(tmp_path / "cases.csv")
@@ -452,7 +452,7 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
         ("--hidden", "0,5", "hidden: expected layer sizes of 1 or more"),
         ("--holdout", "-0.5", "'--holdout'"),
     ]:
-        run = flakelab("train", cases, option, value, "--no-register")
+        run = cli("train", cases, option, value, "--no-register")
         assert run.returncode == 2 and message in run.stderr, (option, value, run.stderr)
     # every command's output file in a folder that is not there is refused before any work,
     # as the others are (these three made the folder)
@@ -465,7 +465,7 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
         run = cli(*args)
         assert run.returncode == 2 and f"--out: {output}: no folder" in run.stderr, args
     assert not (tmp_path / "no").exists()
-    run = flakelab("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
+    run = cli("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
     assert run.returncode == 2 and "'--novel-targets'" in run.stderr
     # a reading without every geometry the model predicts is named with its file
     short = tmp_path / "short.json"
@@ -480,5 +480,5 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
         assert run.returncode == 2 and f"{short}: sample {target.sample}: geometries " in said
         assert "45as75, 45as110 missing" in said, args
     missing = tmp_path / "no" / "p.png"
-    run = flakelab("plot", str(example_path("target")), "-o", str(missing))
+    run = cli("plot", str(example_path("target")), "-o", str(missing))
     assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr

@@ -560,32 +560,32 @@ def test_a_correction_is_expected_at_the_geometries_it_left_out_as_their_model_m
     assert expected_left_out(target, five, before, after, hybrid, other, refinish) is None
 
 
-def test_match_refuses_bad_input(tmp_path):
+def test_match_refuses_bad_input(tmp_path, cli):
     bad = tmp_path / "car.cxf"
     bad.write_text("<not cxf")
-    run = flakelab("match", str(bad))
+    run = cli("match", str(bad))
     assert run.returncode == 2 and str(bad) in run.stderr and "Traceback" not in run.stderr
-    run = flakelab("match", "--example", "--quantity", "0g")
+    run = cli("match", "--example", "--quantity", "0g")
     assert run.returncode == 2 and "--quantity" in run.stderr
     # a can the scale cannot weigh is refused before the search, even before its model is
     # looked for
-    run = flakelab("match", "--example", "--quantity", "1e30kg", "--model", str(tmp_path / "m.pt"))
+    run = cli("match", "--example", "--quantity", "1e30kg", "--model", str(tmp_path / "m.pt"))
     assert run.returncode == 2 and "1e+34 steps of the scale's 0.1 g" in run.stderr
     assert "m.pt" not in run.stderr
-    run = flakelab("match", "--example", "--render", str(tmp_path / "side-by-side.bmp"))
+    run = cli("match", "--example", "--render", str(tmp_path / "side-by-side.bmp"))
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
     assert not (tmp_path / "side-by-side.bmp").exists()
-    run = flakelab("match", "evaluate", "--plot", str(tmp_path / "chart.png"))
+    run = cli("match", "evaluate", "--plot", str(tmp_path / "chart.png"))
     assert run.returncode == 2 and "--plot" in run.stderr
     # an output file that cannot be written is refused before the search, not after it
-    run = flakelab("match", "--example", "--recipe-out", str(tmp_path / "no" / "r.json"))
+    run = cli("match", "--example", "--recipe-out", str(tmp_path / "no" / "r.json"))
     assert run.returncode == 2 and f"--recipe-out: {tmp_path / 'no' / 'r.json'}" in run.stderr
     assert "candidates" not in run.stdout
-    run = flakelab("match", "--example", "--pick", "4")
+    run = cli("match", "--example", "--pick", "4")
     assert run.returncode == 2 and "--pick: expected one of the 3 candidates" in run.stderr
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
-    run = flakelab("match", "--example", "--library", str(empty))
+    run = cli("match", "--example", "--library", str(empty))
     assert run.returncode == 2 and "at least one toner" in run.stderr
 
 

@@ -250,7 +250,7 @@ def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path):
     assert got["glint"] == want["glint"]
 
 
-def test_render_refuses_bad_input_without_writing(tmp_path):
+def test_render_refuses_bad_input_without_writing(tmp_path, cli):
     out = tmp_path / "x.png"
     for args, message in [
         (("--distance", "near"), "distance"),
@@ -260,14 +260,14 @@ def test_render_refuses_bad_input_without_writing(tmp_path):
         (("--aspecular", "30"), "--aspecular: for --view panel"),  # the curved view sweeps
         ((str(tmp_path / "missing.cxf"),), "missing.cxf"),
     ]:
-        run = flakelab("render", *args, "--size", "32", "-o", str(out))
+        run = cli("render", *args, "--size", "32", "-o", str(out))
         assert run.returncode == 2 and message in run.stderr, run.stderr
         assert "Traceback" not in run.stderr
-    run = flakelab("render", "--size", "32", "-o", str(tmp_path / "x.bmp"))
+    run = cli("render", "--size", "32", "-o", str(tmp_path / "x.bmp"))
     assert run.returncode == 2 and ".png" in run.stderr
     missing = tmp_path / "no" / "x.png"
     for command in ("render", "render-grid"):  # checked before the render, named as an option
-        run = flakelab(command, "-o", str(missing))
+        run = cli(command, "-o", str(missing))
         assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr
     assert list(tmp_path.iterdir()) == []
 

@@ -145,20 +145,30 @@ def training_device(name: str) -> torch.device:
             f"device: expected auto or one of {', '.join(TRAINING_DEVICE_TYPES)} (cuda:N for "
             f"the N-th GPU), got {name!r}"
         )
-    try:
-        torch.empty(1, device=device)
-    except (RuntimeError, AssertionError) as error:
-        detail = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise ModelError(
-            f"device: {name!r} cannot be used here ({detail}); torch {torch.__version__} sees "
-            + ", ".join(_devices_seen())
-        ) from None
-    return device
+    seen = _devices_seen()
+    if device.type not in {d.split(":")[0] for d in seen}:
+        detail = f"no {device.type.upper()} device"
+    else:
+        try:
+            torch.empty(1, device=device)
+            return device
+        except (RuntimeError, AssertionError) as error:  # a GPU index past the last
+            detail = str(error).strip().splitlines()[0][:200]
+    raise ModelError(
+        f"device: {name!r} cannot be used here ({detail}); torch {torch.__version__} sees "
+        + ", ".join(seen)
+    )
 
 
 def _devices_seen() -> list[str]:
     cuda = [f"cuda:{i}" for i in range(torch.cuda.device_count())]
-    return ["cpu", *cuda, *(["mps"] if torch.backends.mps.is_available() else [])]
+    xpu = hasattr(torch, "xpu") and torch.xpu.is_available()
+    return [
+        "cpu",
+        *cuda,
+        *(["mps"] if torch.backends.mps.is_available() else []),
+        *(["xpu"] if xpu else []),
+    ]
 
 
 @dataclass(frozen=True)
