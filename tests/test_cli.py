@@ -171,9 +171,9 @@ def _bad_files(tmp_path: Path, source: Path) -> dict[str, tuple[Path, str]]:
     }
 
 
-def test_bad_files_exit_nonzero_with_one_line_naming_file_and_problem(ma_t12_files, tmp_path):
+def test_bad_files_exit_nonzero_with_one_line_naming_file_and_problem(ma_t12_files, tmp_path, cli):
     for label, (path, problem) in _bad_files(tmp_path, ma_t12_files[0]).items():
-        result = flakelab("inspect", path)
+        result = cli("inspect", path)
         assert result.returncode == 2, label
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1, (label, result.stderr)
@@ -181,13 +181,13 @@ def test_bad_files_exit_nonzero_with_one_line_naming_file_and_problem(ma_t12_fil
         assert "Traceback" not in result.stderr + result.stdout
 
 
-def test_bad_options_exit_nonzero_without_traceback():
+def test_bad_options_exit_nonzero_without_traceback(cli):
     for args, problem in (
         (("inspect", "--example", "-c", "D66/10"), "expected an illuminant"),
         (("compare", "--example", "-t", "no-such"), "neither a tolerance preset"),
         (("inspect",), "give a measurement file"),
     ):
-        result = flakelab(*args)
+        result = cli(*args)
         assert result.returncode == 2 and problem in result.stderr, result.stderr
         assert "Traceback" not in result.stderr
 
