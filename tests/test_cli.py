@@ -192,6 +192,16 @@ def test_bad_options_exit_nonzero_without_traceback(cli):
         assert "Traceback" not in result.stderr
 
 
+def test_a_reader_that_stops_reading_stops_the_command_quietly():
+    """``flakelab … --json | head`` : the pipe's reader gone, the command ends as the shell's
+    tools do (status 128 + SIGPIPE) instead of printing an error about its own output."""
+    command = [sys.executable, "-m", "flakelab.cli.main", "inspect", "--example", "--json"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()
+    said = process.stderr.read().decode()
+    assert process.wait(timeout=120) == 141 and said == ""
+
+
 def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path):
     existing = tmp_path / "out.bmp"
     existing.write_text("keep me")

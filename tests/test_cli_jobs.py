@@ -15,6 +15,7 @@ from flakelab.core import compare
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_recipe, write_measurements
+from flakelab.models.registry import load_model_file
 from flakelab.models.training import training_device
 
 
@@ -23,7 +24,7 @@ def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess
                           capture_output=True, text=True, env=env)  # fmt: skip
 
 
-def test_generate_train_register_list_and_evaluate(tmp_path):
+def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     cases, database = tmp_path / "cases.csv", str(tmp_path / "shop.db")
     run = flakelab("cases", "generate", "--n", "120", "--seed", "5", "--out", str(cases))
     assert run.returncode == 0, run.stderr
@@ -40,6 +41,19 @@ def test_generate_train_register_list_and_evaluate(tmp_path):
     assert report["registry"]["promoted"] is False
     listed = json.loads(flakelab("model", "list", "--database", database, "--json").stdout)
     assert [(m["version"], m["status"]) for m in listed["registered"]] == [(1, "candidate")]
+    # a candidate, never promoted, is taken out of the registry as the model it trained
+    run = cli(
+        "model", "show", "five-angle:1", "-d", database, "--out", tmp_path / "v1.pt", "--json"
+    )
+    assert run.returncode == 0, run.stderr
+    card = json.loads(run.stdout)
+    assert card["source"].endswith("five-angle v1") and card["hidden"] == [16]
+    assert card["trained_cases"] + report["outliers"] == report["cases"]
+    trained, taken_out = (load_model_file(tmp_path / f) for f in ("m.pt", "v1.pt"))
+    x = np.eye(len(trained.toners))[:5]
+    np.testing.assert_array_equal(taken_out.predict(x)[0], trained.predict(x)[0])
+    run = cli("model", "show", "five-angle:2", "-d", database)
+    assert run.returncode == 2 and "no version 2 of model 'five-angle' (versions 1)" in run.stderr
     run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["cases"] == 120

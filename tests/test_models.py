@@ -361,3 +361,23 @@ def test_the_protocol_and_adaptation_on_a_gpu_reach_the_cpus_accuracy(trained, d
     best = [r["validation_de00_best"] for r in reports]
     assert best[1] == pytest.approx(best[0], rel=0.05)
     assert best[1] <= min(e["validation_de00"] for e in reports[1]["log"]) + 1e-9
+
+
+def test_a_models_card_tells_what_it_learned_from(cli, tmp_path):
+    """``flakelab model show``: the shipped model's toners with the cases that taught each;
+    the toners it met in no case are those the physics scaling stands in for."""
+    run = cli("model", "show", "five-angle", "--json")
+    assert run.returncode == 0, run.stderr
+    card = json.loads(run.stdout)
+    model = shipped_model("five-angle")
+    assert card["source"] == "shipped" and card["toners"] == list(model.toners)
+    assert card["members"] == model.members and card["geometries"] == list(model.geometries)
+    unseen = [t for t, n in card["toner_cases"].items() if n == 0]
+    assert unseen and sorted(unseen) == sorted(card["novel_toners"])
+    for spec, problem in (
+        ("nonsense", "MODEL: expected a model file, NAME:VERSION"),
+        (str(tmp_path / "m.pt"), "no such model file"),
+        ("byk-mac-i", "no shipped model for 'byk-mac-i'"),
+    ):
+        run = cli("model", "show", spec)
+        assert run.returncode == 2 and problem in run.stderr, (spec, run.stderr)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import os
+import signal
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from datetime import timedelta
@@ -39,9 +40,14 @@ def reports_errors(command: F) -> F:
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            return command(*args, **kwargs)
+            result = command(*args, **kwargs)
+            sys.stdout.flush()  # a reader gone (| head) is met here, not at the exit
+            return result
         except (typer.Exit, typer.Abort):
             raise
+        except BrokenPipeError:  # stop quietly, as the shell's tools do (Python docs, signal)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise typer.Exit(128 + signal.SIGPIPE) from None
         except (FlakelabError, ValueError, KeyError, OSError) as error:
             message = error.args[0] if isinstance(error, KeyError) and error.args else error
             _stop("error", str(message), 2)

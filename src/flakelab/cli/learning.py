@@ -41,7 +41,7 @@ cases_app = typer.Typer(
     help="Refinish cases: generate, record, record-all, list, remove, import, export; "
     "realism, habits, shops."
 )
-model_app = typer.Typer(help="Learned forward models: list, evaluate and adapt to a shop.")
+model_app = typer.Typer(help="Learned forward models: list, show, evaluate and adapt to a shop.")
 
 DatabaseOption = Annotated[
     str | None,
@@ -1070,6 +1070,105 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
     for name in SHIPPED:
         table.add_row(name, "shipped", "default", "", "", "", "")
     console.print(table)
+
+
+@model_app.command("show")
+@reports_errors
+def show_model(
+    model: Annotated[
+        str,
+        typer.Argument(
+            help="A model file, a registered version NAME:VERSION (see 'flakelab model list'), "
+            "or an instrument (five-angle, ma-t12) for its current model."
+        ),
+    ],
+    database: DatabaseOption = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Also write the model to this file: a registered version taken out of the "
+            "database, for --model or another shop.",
+        ),
+    ] = None,
+    json_output: JsonOption = False,
+) -> None:
+    """What a model is and what it learned from: network, toners and their cases, training."""
+    from flakelab.models.registry import model_card
+
+    check_output_file(out, "--out")
+    chosen, source = _model_by_name(model, database)
+    card = {"source": source, **model_card(chosen)}
+    if out is not None:
+        write_atomically(out, lambda p: p.write_bytes(chosen.to_bytes()))
+        card["file"] = str(out)
+    if json_output:
+        print(json.dumps(card, indent=2, default=str))
+        return
+    console.print(_model_card_table(card))
+
+
+def _model_by_name(spec: str, database: str | None):
+    """The model ``spec`` names (``model show``'s argument) and where it was found."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import (
+        load_model_file,
+        promoted_model,
+        registered_model,
+        shipped_model,
+    )
+
+    path = Path(spec)
+    if path.exists() or path.suffix == ".pt":
+        return load_model_file(path), str(path)
+    name, colon, version = spec.rpartition(":")
+    if colon and version.isdigit():
+        engine = open_database(database, must_exist=True)
+        return registered_model(engine, name, int(version)), f"{engine.url}: {name} v{version}"
+    if spec in INSTRUMENT_GEOMETRIES:  # the current model: promoted, else shipped
+        engine = _maybe_engine(database)
+        promoted = engine and promoted_model(engine, spec)
+        if promoted:
+            return promoted, f"{engine.url}: {promoted.info.get('name', spec)}, promoted"
+        return shipped_model(spec), "shipped"
+    raise FlakelabError(
+        f"MODEL: expected a model file, NAME:VERSION of 'flakelab model list' or an "
+        f"instrument ({', '.join(INSTRUMENT_GEOMETRIES)}), got {spec!r}"
+    )
+
+
+def _model_card_table(card: dict) -> Table:
+    training = card["training"]
+    cases = card["toner_cases"]
+    rows = {
+        "source": card["source"],
+        "instrument": f"{card['instrument']}: {', '.join(card['geometries'])}",
+        "network": f"{' × '.join(map(str, card['hidden']))} SiLU"
+        + (f", an ensemble of {card['members']}" if card["members"] > 1 else "")
+        + (f", log features (offset {card['log_offset']:g})" if card["log_offset"] else ""),
+        "trained on": f"{card['trained_cases']} cases ({card['outliers_dropped']} outliers "
+        f"dropped), data {card['data_hash'][:12]}"
+        if card["trained_cases"] is not None
+        else "not recorded",
+        "training": ", ".join(f"{k} {v}" for k, v in training.items()) or "not recorded",
+        "toners": ", ".join(f"{t} ({cases[t]})" if t in cases else t for t in card["toners"]),
+        "new toners (physics scaling)": ", ".join(card["novel_toners"]) or "none",
+    }
+    if card["adaptation"]:
+        adaptation = card["adaptation"]
+        rows["adapted"] = (
+            f"{adaptation.get('stage', '')}: {adaptation.get('cases')} cases, kept epoch "
+            f"{adaptation.get('kept_epochs')} of {adaptation.get('epochs')}"
+        )
+    if "file" in card:
+        rows["written to"] = card["file"]
+    table = Table(title=f"Model {card['name']}", show_header=False)
+    table.add_column(style="bold")
+    table.add_column(overflow="fold")
+    for key, value in rows.items():
+        table.add_row(key, str(value))
+    return table
 
 
 @model_app.command("evaluate")

@@ -27,6 +27,8 @@ __all__ = [
     "list_models",
     "load_model_file",
     "current_model",
+    "registered_model",
+    "model_card",
 ]
 
 SHIPPED = {DEFAULT_INSTRUMENT: "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
@@ -93,6 +95,45 @@ def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
         return (
             None if row is None else ForwardModel.from_bytes(row.artefact, f"{name} v{row.version}")
         )
+
+
+def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
+    """Version ``version`` of the registered model ``name``, whatever its status."""
+    with Session(engine) as session:
+        artefact = session.scalar(
+            select(ModelRow.artefact).where(ModelRow.name == name, ModelRow.version == version)
+        )
+        if artefact is None:
+            versions = session.scalars(
+                select(ModelRow.version).where(ModelRow.name == name).order_by(ModelRow.version)
+            ).all()
+            held = f"versions {', '.join(map(str, versions))}" if versions else "no versions"
+            raise ModelError(f"{engine.url}: no version {version} of model {name!r} ({held})")
+    return ForwardModel.from_bytes(artefact, f"{name} v{version}")
+
+
+def model_card(model: ForwardModel) -> dict:
+    """What a model is and what it learned from: its network, instrument and toners (with
+    the cases that taught each), the training settings and data, any adaptation."""
+    info = model.info
+    config = info.get("config", {})
+    return {
+        "name": info.get("name", model.instrument),
+        "instrument": model.instrument,
+        "geometries": list(model.geometries),
+        "hidden": list(model.hidden),
+        "members": model.members,
+        "log_offset": model.log_offset,
+        "toners": list(model.toners),
+        "toner_cases": info.get("toner_cases", {}),
+        "novel_toners": info.get("novel_toners", []),
+        "trained_cases": info.get("trained_cases"),
+        "outliers_dropped": info.get("outliers_dropped"),
+        "data_hash": info.get("data_hash", ""),
+        "effect_share_floor": info.get("effect_share_floor"),
+        "training": {k: v for k, v in config.items() if k != "hidden"},
+        "adaptation": info.get("adaptation"),
+    }
 
 
 def current_model(engine: Engine | None, instrument: str) -> ForwardModel:
