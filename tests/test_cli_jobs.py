@@ -56,7 +56,12 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     assert run.returncode == 2 and "no version 2 of model 'five-angle' (versions 1)" in run.stderr
     run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
     assert run.returncode == 0, run.stderr
-    assert json.loads(run.stdout)["cases"] == 120
+    by_file = json.loads(run.stdout)
+    assert by_file["cases"] == 120
+    # --model takes a registered version as it takes a file
+    run = cli("model", "evaluate", str(cases), "--model", "five-angle:1", "-d", database, "--json")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["de00_mean"] == by_file["de00_mean"]
     # a case whose toner the library lacks is named with the file it came from
     from flakelab.cases.exchange import read_cases, write_cases
 

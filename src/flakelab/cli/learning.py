@@ -89,7 +89,12 @@ StartOption = Annotated[
     ),
 ]
 ModelFileOption = Annotated[
-    str | None, typer.Option("--model", "-m", help="Model file (default: current).")
+    str | None,
+    typer.Option(
+        "--model",
+        "-m",
+        help="Model file, or a registered version NAME:VERSION (default: current).",
+    ),
 ]
 
 
@@ -1098,7 +1103,7 @@ def show_model(
     from flakelab.models.registry import model_card
 
     check_output_file(out, "--out")
-    chosen, source = _model_by_name(model, database)
+    chosen, source = named_model(model, database)
     card = {"source": source, **model_card(chosen)}
     if out is not None:
         write_atomically(out, lambda p: p.write_bytes(chosen.to_bytes()))
@@ -1109,8 +1114,19 @@ def show_model(
     console.print(_model_card_table(card))
 
 
-def _model_by_name(spec: str, database: str | None):
-    """The model ``spec`` names (``model show``'s argument) and where it was found."""
+def chosen_model(model: str | Path | None, instrument: str, database: str | None):
+    """The model ``--model`` names (:func:`named_model`), else the instrument's current one
+    (the promoted one in the database, else the shipped)."""
+    from flakelab.models.registry import current_model
+
+    if model is None:
+        return current_model(_maybe_engine(database), instrument)
+    return named_model(str(model), database, "--model")[0]
+
+
+def named_model(spec: str, database: str | None, label: str = "MODEL"):
+    """The model ``spec`` names, a file, a registered version ``NAME:VERSION`` or an
+    instrument's current model, and where it was found."""
     from flakelab.cases.database import open_database
     from flakelab.models.registry import (
         load_model_file,
@@ -1133,7 +1149,7 @@ def _model_by_name(spec: str, database: str | None):
             return promoted, f"{engine.url}: {promoted.info.get('name', spec)}, promoted"
         return shipped_model(spec), "shipped"
     raise FlakelabError(
-        f"MODEL: expected a model file, NAME:VERSION of 'flakelab model list' or an "
+        f"{label}: expected a model file, NAME:VERSION of 'flakelab model list' or an "
         f"instrument ({', '.join(INSTRUMENT_GEOMETRIES)}), got {spec!r}"
     )
 
@@ -1197,13 +1213,10 @@ def evaluate(
     (--since)."""
     from flakelab.cases.case import cases_at
     from flakelab.io import read_library
-    from flakelab.models.registry import current_model, load_model_file
     from flakelab.models.training import evaluate_model
 
     lib = read_library(library)
-    forward = (
-        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
-    )
+    forward = chosen_model(model, instrument, database)
     loaded = load_cases(cases, shop, since)
     chosen = cases_at(loaded, forward.geometries)
     if not chosen:
@@ -1294,7 +1307,7 @@ def adapt(
     The training protocol's adaptation phase, for the sprayers and instrument of one shop."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
-    from flakelab.models.registry import current_model, load_model_file, register
+    from flakelab.models.registry import current_model, register
     from flakelab.models.training import (
         adapt_model,
         evaluate_model,
@@ -1304,7 +1317,10 @@ def adapt(
     check_output_file(out, "--out")
     lib = read_library(library)
     engine = open_database(database) if register_model else _maybe_engine(database)
-    base = load_model_file(model) if model else current_model(engine, instrument)
+    if model:
+        base = named_model(model, database, "--model")[0]
+    else:  # the database the new version goes to holds the current model
+        base = current_model(engine, instrument)
     chosen = shop_cases(cases, shop, base.geometries, since)
     novel = set(base.info.get("novel_toners", ()))
     known = [c for c in chosen if not novel & set(c.recipe)]
@@ -1385,12 +1401,8 @@ def current_forward(lib, instrument: str, model, database: str | None):
     """The matcher's forward for the library ``lib``: of the model file ``model``, else of
     the current model for the instrument."""
     from flakelab.match.models import forward_for
-    from flakelab.models.registry import current_model, load_model_file
 
-    learned = (
-        load_model_file(model) if model else current_model(_maybe_engine(database), instrument)
-    )
-    return forward_for(learned, lib)
+    return forward_for(chosen_model(model, instrument, database), lib)
 
 
 def _maybe_engine(database: str | None):

@@ -69,7 +69,12 @@ QuantityOption = Annotated[
 ResolutionOption = Annotated[float, typer.Option(help="Scale resolution in grams.")]
 ModelOption = Annotated[
     Path | None,
-    typer.Option("--model", "-m", help="Model file (default: current for the instrument)."),
+    typer.Option(
+        "--model",
+        "-m",
+        help="Model file, or a registered version NAME:VERSION (default: current for the "
+        "instrument).",
+    ),
 ]
 PhysicsOption = Annotated[
     bool,
