@@ -54,6 +54,16 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     np.testing.assert_array_equal(taken_out.predict(x)[0], trained.predict(x)[0])
     run = cli("model", "show", "five-angle:2", "-d", database)
     assert run.returncode == 2 and "no version 2 of model 'five-angle' (versions 1)" in run.stderr
+    # promoted by hand, it is the current model; retired, the shipped one is again
+    run = cli("model", "promote", "five-angle:1", "-d", database)
+    assert run.returncode == 0 and "five-angle v1 promoted" in run.stderr
+    current = ("model", "show", "five-angle", "-d", database, "--json")
+    assert json.loads(cli(*current).stdout)["source"].endswith("promoted")
+    run = cli("model", "retire", "five-angle:1", "-d", database)
+    assert run.returncode == 0 and "the shipped model is current again" in run.stderr
+    assert json.loads(cli(*current).stdout)["source"] == "shipped"
+    run = cli("model", "promote", "five-angle", "-d", database)
+    assert run.returncode == 2 and "VERSION: expected NAME:VERSION" in run.stderr
     run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
     assert run.returncode == 0, run.stderr
     by_file = json.loads(run.stdout)

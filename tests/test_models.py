@@ -16,7 +16,15 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.io import read_library
 from flakelab.library import Library
 from flakelab.models.network import ForwardModel, ModelError
-from flakelab.models.registry import SHIPPED, list_models, register, shipped_model
+from flakelab.models.registry import (
+    SHIPPED,
+    list_models,
+    promote,
+    promoted_model,
+    register,
+    retire,
+    shipped_model,
+)
 from flakelab.models.training import (
     SCREENINGS,
     CaseArrays,
@@ -222,6 +230,26 @@ def test_registry_promotes_only_a_better_model(trained, data, database_url):
     assert listed[("test", second["version"])]["status"] == "candidate"
     # the sizes come from the database, not from reading every artefact
     assert listed[("test", first["version"])]["size_kb"] == round(len(good.to_bytes()) / 1024, 1)
+
+
+def test_a_version_is_promoted_and_retired_by_hand(trained, data, database_url):
+    """A rollback: any registered version is made the current model, the one promoted before
+    retired; retiring the promoted one leaves none promoted (the shipped model is current)."""
+    engine = open_database(database_url)
+    model, _ = trained
+    first, second = (register(engine, model, data, name="hand")["version"] for _ in range(2))
+
+    def statuses() -> dict[int, str]:
+        return {m["version"]: m["status"] for m in list_models(engine) if m["name"] == "hand"}
+
+    assert promote(engine, "hand", first)["version"] == first
+    assert statuses()[first] == "promoted" and statuses()[second] != "promoted"
+    assert promote(engine, "hand", second)["retired"] == first
+    assert statuses() == {first: "retired", second: "promoted"}
+    assert retire(engine, "hand", second)["was"] == "promoted"
+    assert promoted_model(engine, "hand") is None
+    with pytest.raises(ModelError, match=f"no version 99 of model 'hand' \\(versions {first}, "):
+        promote(engine, "hand", 99)
 
 
 def test_effect_share_floor_is_where_the_effect_paints_of_the_cases_run_out(trained, data):

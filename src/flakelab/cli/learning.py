@@ -41,7 +41,9 @@ cases_app = typer.Typer(
     help="Refinish cases: generate, record, record-all, list, remove, import, export; "
     "realism, habits, shops."
 )
-model_app = typer.Typer(help="Learned forward models: list, show, evaluate and adapt to a shop.")
+model_app = typer.Typer(
+    help="Learned forward models: list, show, evaluate, adapt to a shop; promote and retire."
+)
 
 DatabaseOption = Annotated[
     str | None,
@@ -1138,10 +1140,11 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
     path = Path(spec)
     if path.exists() or path.suffix == ".pt":
         return load_model_file(path), str(path)
-    name, colon, version = spec.rpartition(":")
-    if colon and version.isdigit():
+    registered = _name_and_version(spec)
+    if registered:
         engine = open_database(database, must_exist=True)
-        return registered_model(engine, name, int(version)), f"{engine.url}: {name} v{version}"
+        name, version = registered
+        return registered_model(engine, name, version), f"{engine.url}: {name} v{version}"
     if spec in INSTRUMENT_GEOMETRIES:  # the current model: promoted, else shipped
         engine = _maybe_engine(database)
         promoted = engine and promoted_model(engine, spec)
@@ -1152,6 +1155,53 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
         f"{label}: expected a model file, NAME:VERSION of 'flakelab model list' or an "
         f"instrument ({', '.join(INSTRUMENT_GEOMETRIES)}), got {spec!r}"
     )
+
+
+def _name_and_version(spec: str) -> tuple[str, int] | None:
+    """``NAME:VERSION`` of a registered model (``flakelab model list``), else None."""
+    name, colon, version = spec.rpartition(":")
+    return (name, int(version)) if colon and name and version.isdigit() else None
+
+
+VersionArgument = Annotated[
+    str, typer.Argument(help="A registered version NAME:VERSION (see 'flakelab model list').")
+]
+
+
+@model_app.command("promote")
+@reports_errors
+def promote_model(version: VersionArgument, database: DatabaseOption = None) -> None:
+    """Make a registered version the current model by hand, retiring the one before.
+
+    An override of the automatic promotion (a version is promoted when it beats the current
+    one on the same held-out cases): a rollback after a new version misbehaves in the shop."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import promote
+
+    engine = open_database(database, must_exist=True)
+    done = promote(engine, *_registered_version(version))
+    retired = f"; v{done['retired']} retired" if done["retired"] else ""
+    errors.print(f"{engine.url}: {done['name']} v{done['version']} promoted{retired}")
+
+
+@model_app.command("retire")
+@reports_errors
+def retire_model(version: VersionArgument, database: DatabaseOption = None) -> None:
+    """Take a registered version out of use; a promoted one leaves the shipped model current."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import retire
+
+    engine = open_database(database, must_exist=True)
+    done = retire(engine, *_registered_version(version))
+    current = "; the shipped model is current again" if done["was"] == "promoted" else ""
+    errors.print(f"{engine.url}: {done['name']} v{done['version']} retired{current}")
+
+
+def _registered_version(spec: str) -> tuple[str, int]:
+    registered = _name_and_version(spec)
+    if registered is None:
+        raise FlakelabError(f"VERSION: expected NAME:VERSION, such as five-angle:2, got {spec!r}")
+    return registered
 
 
 def _model_card_table(card: dict) -> Table:

@@ -29,6 +29,8 @@ __all__ = [
     "current_model",
     "registered_model",
     "model_card",
+    "promote",
+    "retire",
 ]
 
 SHIPPED = {DEFAULT_INSTRUMENT: "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
@@ -89,9 +91,7 @@ def list_models(engine: Engine) -> list[dict]:
 
 def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
     with Session(engine) as session:
-        row = session.scalars(
-            select(ModelRow).where(ModelRow.name == name, ModelRow.status == "promoted")
-        ).first()
+        row = _promoted_row(session, name)
         return (
             None if row is None else ForwardModel.from_bytes(row.artefact, f"{name} v{row.version}")
         )
@@ -100,16 +100,51 @@ def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
 def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
     """Version ``version`` of the registered model ``name``, whatever its status."""
     with Session(engine) as session:
-        artefact = session.scalar(
-            select(ModelRow.artefact).where(ModelRow.name == name, ModelRow.version == version)
-        )
-        if artefact is None:
-            versions = session.scalars(
-                select(ModelRow.version).where(ModelRow.name == name).order_by(ModelRow.version)
-            ).all()
-            held = f"versions {', '.join(map(str, versions))}" if versions else "no versions"
-            raise ModelError(f"{engine.url}: no version {version} of model {name!r} ({held})")
-    return ForwardModel.from_bytes(artefact, f"{name} v{version}")
+        row = _version_row(session, engine, name, version)
+        return ForwardModel.from_bytes(row.artefact, f"{name} v{version}")
+
+
+def promote(engine: Engine, name: str, version: int) -> dict:
+    """Make a registered version the current model by hand, the one promoted before retired:
+    an operator's override of the automatic promotion, such as a rollback after a new version
+    misbehaves in the shop. Returns what changed."""
+    with Session(engine) as session, session.begin():
+        row = _version_row(session, engine, name, version)
+        before = _promoted_row(session, name)
+        if before is not None and before is not row:
+            before.status = "retired"
+        row.status = "promoted"
+        retired = None if before is None or before is row else before.version
+        return {"name": name, "version": version, "status": row.status, "retired": retired}
+
+
+def retire(engine: Engine, name: str, version: int) -> dict:
+    """Take a registered version out of use; when it was the promoted one, the instrument's
+    shipped model is current again until another is promoted."""
+    with Session(engine) as session, session.begin():
+        row = _version_row(session, engine, name, version)
+        was = row.status
+        row.status = "retired"
+        return {"name": name, "version": version, "status": row.status, "was": was}
+
+
+def _version_row(session: Session, engine: Engine, name: str, version: int) -> ModelRow:
+    row = session.scalars(
+        select(ModelRow).where(ModelRow.name == name, ModelRow.version == version)
+    ).first()
+    if row is None:
+        versions = session.scalars(
+            select(ModelRow.version).where(ModelRow.name == name).order_by(ModelRow.version)
+        ).all()
+        held = f"versions {', '.join(map(str, versions))}" if versions else "no versions"
+        raise ModelError(f"{engine.url}: no version {version} of model {name!r} ({held})")
+    return row
+
+
+def _promoted_row(session: Session, name: str) -> ModelRow | None:
+    return session.scalars(
+        select(ModelRow).where(ModelRow.name == name, ModelRow.status == "promoted")
+    ).first()
 
 
 def model_card(model: ForwardModel) -> dict:
