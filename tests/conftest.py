@@ -34,6 +34,21 @@ def _run_cli(*args: object) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def user_data_folder(tmp_path_factory) -> Path:
+    """A user data folder of the test session's own: the commands that name no database use
+    the one there, and the current model is the one promoted there (else the shipped one), so
+    the tests neither read nor write the user's own."""
+    folder = tmp_path_factory.mktemp("user-data")
+    before = os.environ.get("XDG_DATA_HOME")
+    os.environ["XDG_DATA_HOME"] = str(folder)
+    yield folder
+    if before is None:
+        del os.environ["XDG_DATA_HOME"]
+    else:
+        os.environ["XDG_DATA_HOME"] = before
+
+
 @pytest.fixture(scope="session")
 def cli():
     """Run the CLI in this process (:func:`_run_cli`)."""

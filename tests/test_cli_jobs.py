@@ -85,6 +85,24 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     )
 
 
+def test_a_model_promoted_in_the_user_data_folder_is_the_current_one(tmp_path, cli, monkeypatch):
+    """'flakelab train' registers in the user data folder's database when none is named, and
+    what it promotes there is the model 'match' and the others use without --database (they
+    used to ignore it and take the shipped model); on a fresh machine that folder has none."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monkeypatch.delenv("FLAKELAB_DATABASE_URL", raising=False)
+    current = ("model", "show", "five-angle", "--json")
+    assert json.loads(cli(*current).stdout)["source"] == "shipped"
+    assert not (tmp_path / "data" / "flakelab" / "flakelab.db").exists()  # read, not made
+    cases = tmp_path / "cases.csv"
+    assert cli("cases", "generate", "--n", "40", "--seed", "2", "--out", cases).returncode == 0
+    run = cli("train", cases, "--epochs", "1", "--hidden", "8", "--json")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(cli(*current).stdout)["source"] == "shipped"  # a candidate, not promoted
+    assert cli("model", "promote", "five-angle:1").returncode == 0
+    assert json.loads(cli(*current).stdout)["source"].endswith("five-angle, promoted")
+
+
 def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     target, sprayed = example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"

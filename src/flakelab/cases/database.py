@@ -36,6 +36,7 @@ __all__ = [
     "count_cases",
     "case_exists",
     "existing_case_ids",
+    "user_database_file",
     "latest_cases",
     "remove_case",
     "shop_summary",
@@ -54,9 +55,16 @@ def default_url() -> str:
     SQLite file in the user's data folder."""
     if url := os.environ.get("FLAKELAB_DATABASE_URL"):
         return url_for(url)
-    base = Path(os.environ.get("XDG_DATA_HOME", Path.home() / ".local" / "share")) / "flakelab"
-    base.mkdir(parents=True, exist_ok=True)
-    return f"sqlite:///{base / 'flakelab.db'}"
+    file = user_database_file()
+    file.parent.mkdir(parents=True, exist_ok=True)
+    return f"sqlite:///{file}"
+
+
+def user_database_file() -> Path:
+    """The SQLite file in the user's data folder (XDG), the database of the commands that
+    name none; it need not exist yet."""
+    base = Path(os.environ.get("XDG_DATA_HOME", Path.home() / ".local" / "share"))
+    return base / "flakelab" / "flakelab.db"
 
 
 def url_for(target: str | os.PathLike) -> str:

@@ -1456,9 +1456,11 @@ def current_forward(lib, instrument: str, model, database: str | None):
 
 
 def _maybe_engine(database: str | None):
-    """The database only when one is named or configured; the shipped model needs none."""
-    from flakelab.cases.database import open_database
+    """The database named or configured, else the user data folder's own where it exists
+    (where 'flakelab train' registers and promotes by default); none on a fresh machine,
+    whose shipped model needs none."""
+    from flakelab.cases.database import open_database, user_database_file
 
     if database or os.environ.get("FLAKELAB_DATABASE_URL"):
         return open_database(database, must_exist=True)
-    return None
+    return open_database() if user_database_file().is_file() else None
