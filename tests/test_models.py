@@ -405,6 +405,7 @@ def test_a_models_card_tells_what_it_learned_from(cli, tmp_path):
     for spec, problem in (
         ("nonsense", "MODEL: expected a model file, NAME:VERSION"),
         (str(tmp_path / "m.pt"), "no such model file"),
+        (str(tmp_path), "a folder, not a model file"),
         ("byk-mac-i", "no shipped model for 'byk-mac-i'"),
     ):
         run = cli("model", "show", spec)

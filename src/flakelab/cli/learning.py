@@ -1213,7 +1213,7 @@ def _model_card_table(card: dict) -> Table:
         "network": f"{' × '.join(map(str, card['hidden']))} SiLU"
         + (f", an ensemble of {card['members']}" if card["members"] > 1 else "")
         + (f", log features (offset {card['log_offset']:g})" if card["log_offset"] else ""),
-        "trained on": f"{card['trained_cases']} cases ({card['outliers_dropped']} outliers "
+        "trained on": f"{card['trained_cases']:,} cases ({card['outliers_dropped']} outliers "
         f"dropped), data {card['data_hash'][:12]}"
         if card["trained_cases"] is not None
         else "not recorded",

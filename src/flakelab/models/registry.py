@@ -50,6 +50,8 @@ def load_model_file(path: str | Path) -> ForwardModel:
     path = Path(path)
     if not path.exists():
         raise ModelError(f"{path}: no such model file")
+    if path.is_dir():
+        raise ModelError(f"{path}: a folder, not a model file")
     return ForwardModel.from_bytes(path.read_bytes(), str(path))
 
 
