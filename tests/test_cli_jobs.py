@@ -47,7 +47,7 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     )
     assert run.returncode == 0, run.stderr
     card = json.loads(run.stdout)
-    assert card["source"].endswith("five-angle v1") and card["hidden"] == [16]
+    assert "five-angle v1, candidate, held-out ΔE00 " in card["source"] and card["hidden"] == [16]
     assert card["trained_cases"] + report["outliers"] == report["cases"]
     trained, taken_out = (load_model_file(tmp_path / f) for f in ("m.pt", "v1.pt"))
     x = np.eye(len(trained.toners))[:5]

@@ -1131,6 +1131,7 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
     instrument's current model, and where it was found."""
     from flakelab.cases.database import open_database
     from flakelab.models.registry import (
+        list_models,
         load_model_file,
         promoted_model,
         registered_model,
@@ -1144,7 +1145,12 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
     if registered:
         engine = open_database(database, must_exist=True)
         name, version = registered
-        return registered_model(engine, name, version), f"{engine.url}: {name} v{version}"
+        model = registered_model(engine, name, version)
+        row = next(m for m in list_models(engine) if (m["name"], m["version"]) == registered)
+        return model, (
+            f"{engine.url}: {name} v{version}, {row['status']}, held-out ΔE00 "
+            f"{row['held_out_de00']:.3f} when registered ({row['created_at'][:10]})"
+        )
     if spec in INSTRUMENT_GEOMETRIES:  # the current model: promoted, else shipped
         engine = _maybe_engine(database)
         promoted = engine and promoted_model(engine, spec)
