@@ -5,7 +5,7 @@
 #   bash scripts/gpu_check.sh prepare   # here, with network: wheels of what such a machine lacks
 #   bash scripts/gpu_check.sh           # there, from the repository root, wheels carried along
 #
-# The wheels go to .devwheels/ (ignored by git; add it to .git/info/exclude). They are for
+# The wheels go to .devwheels/ (ignored by git). They are for
 # CPython 3.12 on x86-64 Linux, as the lent GPU machines have; set PYTHON_VERSION otherwise.
 # flakelab is not installed there (its torch pin would replace the machine's CUDA build):
 # it runs from src/ on PYTHONPATH. Outputs go to $OUT (default: ./gpu-out).
