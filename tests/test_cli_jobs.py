@@ -58,10 +58,13 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     run = cli("model", "promote", "five-angle:1", "-d", database)
     assert run.returncode == 0 and "five-angle v1 promoted" in run.stderr
     current = ("model", "show", "five-angle", "-d", database, "--json")
+    listing = ("model", "list", "-d", database, "--json")
     assert json.loads(cli(*current).stdout)["source"].endswith("promoted")
+    assert json.loads(cli(*listing).stdout)["current"]["five-angle"] == "v1"
     run = cli("model", "retire", "five-angle:1", "-d", database)
     assert run.returncode == 0 and "the shipped model is current again" in run.stderr
     assert json.loads(cli(*current).stdout)["source"] == "shipped"
+    assert json.loads(cli(*listing).stdout)["current"]["five-angle"] == "shipped"
     run = cli("model", "promote", "five-angle", "-d", database)
     assert run.returncode == 2 and "VERSION: expected NAME:VERSION" in run.stderr
     run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")

@@ -1058,8 +1058,12 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
     from flakelab.models.registry import SHIPPED, list_models
 
     rows = list_models(open_database(database, must_exist=True))
+    promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}
+    current = {name: promoted.get(name, "shipped") for name in sorted({*SHIPPED, *promoted})}
     if json_output:
-        print(json.dumps({"registered": rows, "shipped": list(SHIPPED)}, indent=2))
+        print(
+            json.dumps({"registered": rows, "shipped": list(SHIPPED), "current": current}, indent=2)
+        )
         return
     table = Table(title="Models")
     for column in ("name", "version", "status", "held-out ΔE00", "toners", "data", "created"):
@@ -1074,8 +1078,9 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
             r["data_hash"],
             r["created_at"][:19],
         )
-    for name in SHIPPED:
-        table.add_row(name, "shipped", "default", "", "", "", "")
+    for name in SHIPPED:  # the current model while none of its name is promoted
+        status = "current" if current[name] == "shipped" else "fallback"
+        table.add_row(name, "shipped", status, "", "", "", "")
     console.print(table)
 
 
