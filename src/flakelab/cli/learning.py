@@ -1136,11 +1136,10 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
     instrument's current model, and where it was found."""
     from flakelab.cases.database import open_database
     from flakelab.models.registry import (
+        current_model_and_source,
         list_models,
         load_model_file,
-        promoted_model,
         registered_model,
-        shipped_model,
     )
 
     path = Path(spec)
@@ -1151,17 +1150,13 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
         engine = open_database(database, must_exist=True)
         name, version = registered
         model = registered_model(engine, name, version)
-        row = next(m for m in list_models(engine) if (m["name"], m["version"]) == registered)
+        (row,) = list_models(engine, name, version)
         return model, (
             f"{engine.url}: {name} v{version}, {row['status']}, held-out ΔE00 "
             f"{row['held_out_de00']:.3f} when registered ({row['created_at'][:10]})"
         )
-    if spec in INSTRUMENT_GEOMETRIES:  # the current model: promoted, else shipped
-        engine = _maybe_engine(database)
-        promoted = engine and promoted_model(engine, spec)
-        if promoted:
-            return promoted, f"{engine.url}: {promoted.info.get('name', spec)}, promoted"
-        return shipped_model(spec), "shipped"
+    if spec in INSTRUMENT_GEOMETRIES:
+        return current_model_and_source(_maybe_engine(database), spec)
     raise FlakelabError(
         f"{label}: expected a model file, NAME:VERSION of 'flakelab model list' or an "
         f"instrument ({', '.join(INSTRUMENT_GEOMETRIES)}), got {spec!r}"

@@ -11,7 +11,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from pathlib import Path
 
-from sqlalchemy import Engine, func, select, update
+from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
 from flakelab.cases.schema import ModelRow
@@ -27,6 +27,7 @@ __all__ = [
     "list_models",
     "load_model_file",
     "current_model",
+    "current_model_and_source",
     "registered_model",
     "model_card",
     "promote",
@@ -59,9 +60,10 @@ def shipped_model(instrument: str = DEFAULT_INSTRUMENT) -> ForwardModel:
     return load_model_file(shipped_model_path(instrument))
 
 
-def list_models(engine: Engine) -> list[dict]:
-    """Every registered version, without reading the artefacts (the database gives their
-    sizes): a registry of many versions lists as fast as one of few."""
+def list_models(engine: Engine, name: str | None = None, version: int | None = None) -> list[dict]:
+    """Every registered version (of ``name``; only ``version``), without reading the
+    artefacts (the database gives their sizes): a registry of many versions lists as fast as
+    one of few."""
     columns = (
         ModelRow.name,
         ModelRow.version,
@@ -73,8 +75,13 @@ def list_models(engine: Engine) -> list[dict]:
         ModelRow.created_at,
         func.length(ModelRow.artefact).label("size"),
     )
+    query = select(*columns).order_by(ModelRow.name, ModelRow.version)
+    if name is not None:
+        query = query.where(ModelRow.name == name)
+    if version is not None:
+        query = query.where(ModelRow.version == version)
     with Session(engine) as session:
-        rows = session.execute(select(*columns).order_by(ModelRow.name, ModelRow.version))
+        rows = session.execute(query)
         return [
             {
                 "name": r.name,
@@ -112,11 +119,8 @@ def promote(engine: Engine, name: str, version: int) -> dict:
     misbehaves in the shop. Returns what changed."""
     with Session(engine) as session, session.begin():
         row = _version_row(session, engine, name, version)
-        before = _promoted_row(session, name)
-        if before is not None and before is not row:
-            before.status = "retired"
+        retired = _retire_promoted(session, name, keep=row)
         row.status = "promoted"
-        retired = None if before is None or before is row else before.version
         return {"name": name, "version": version, "status": row.status, "retired": retired}
 
 
@@ -143,10 +147,24 @@ def _version_row(session: Session, engine: Engine, name: str, version: int) -> M
     return row
 
 
+def _promoted_rows(session: Session, name: str) -> list[ModelRow]:
+    return list(
+        session.scalars(
+            select(ModelRow).where(ModelRow.name == name, ModelRow.status == "promoted")
+        )
+    )
+
+
 def _promoted_row(session: Session, name: str) -> ModelRow | None:
-    return session.scalars(
-        select(ModelRow).where(ModelRow.name == name, ModelRow.status == "promoted")
-    ).first()
+    return next(iter(_promoted_rows(session, name)), None)
+
+
+def _retire_promoted(session: Session, name: str, keep: ModelRow | None = None) -> int | None:
+    """Retire the version of ``name`` promoted so far (but ``keep``); returns its number."""
+    retired = [row for row in _promoted_rows(session, name) if row is not keep]
+    for row in retired:
+        row.status = "retired"
+    return max((row.version for row in retired), default=None)
 
 
 def model_card(model: ForwardModel) -> dict:
@@ -175,11 +193,17 @@ def model_card(model: ForwardModel) -> dict:
 
 def current_model(engine: Engine | None, instrument: str) -> ForwardModel:
     """The promoted model for the instrument, else the shipped one."""
+    return current_model_and_source(engine, instrument)[0]
+
+
+def current_model_and_source(engine: Engine | None, instrument: str) -> tuple[ForwardModel, str]:
+    """:func:`current_model`, and where it comes from: ``"shipped"``, or the database and
+    the promoted version's name."""
     if engine is not None:
         model = promoted_model(engine, instrument)
         if model is not None:
-            return model
-    return shipped_model(instrument)
+            return model, f"{engine.url}: {model.info.get('name', instrument)}, promoted"
+    return shipped_model(instrument), "shipped"
 
 
 def register(
@@ -199,23 +223,19 @@ def register(
         incumbent_score = evaluate_model(incumbent, held_out)["de00_mean"]
     except ModelError:
         incumbent_score = float("inf")
-    promote = score < incumbent_score
+    better = score < incumbent_score
     with Session(engine) as session, session.begin():
         version = (
             session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == name)) or 0
         ) + 1
-        if promote:
-            session.execute(
-                update(ModelRow)
-                .where(ModelRow.name == name, ModelRow.status == "promoted")
-                .values(status="retired")
-            )
+        if better:
+            _retire_promoted(session, name)
         session.add(
             ModelRow(
                 name=name,
                 version=version,
                 instrument=model.instrument,
-                status="promoted" if promote else "candidate",
+                status="promoted" if better else "candidate",
                 toners=list(model.toners),
                 data_hash=model.info.get("data_hash", ""),
                 metrics=metrics or {},
@@ -229,5 +249,5 @@ def register(
         "version": version,
         "held_out_de00": score,
         "incumbent_de00": incumbent_score,
-        "promoted": promote,
+        "promoted": better,
     }
