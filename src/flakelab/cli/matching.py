@@ -729,10 +729,9 @@ def _weigh_correction(forward, correction, mode: str, can: dict[str, float], res
 def _can_size(can: dict[str, float], resolution: float) -> float:
     """The mixed ``can``'s size in grams, to the scale's resolution, checked that the scale
     weighs it."""
-    from flakelab.match.recipe import check_resolution, check_scale
+    from flakelab.match.recipe import check_scale, to_scale
 
-    check_resolution(resolution)
-    quantity = round(sum(can.values()) / resolution) * resolution
+    quantity = to_scale(sum(can.values()), resolution)
     check_scale(quantity, resolution)
     return quantity
 

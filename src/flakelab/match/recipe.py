@@ -33,6 +33,7 @@ __all__ = [
     "weigh_additions",
     "parse_quantity",
     "can_on_scale",
+    "to_scale",
     "RecipeError",
     "ROUNDINGS_VARIED",
     "MAX_SCALE_STEPS",
@@ -90,15 +91,20 @@ def can_on_scale(text: str, resolution_g: float) -> float:
     453.59237 g, is 453.6 g on a 0.1 g scale); one in grams or kilograms must be one already,
     since a can typed finer than the scale reads is more likely a mistyped scale."""
     grams = parse_quantity(text)
-    check_resolution(resolution_g)
     if text.strip().lower().endswith(tuple(IMPERIAL_MASS)):
-        grams = round(round(grams / resolution_g) * resolution_g, 9)
+        grams = to_scale(grams, resolution_g)
     if grams <= 0:
         raise RecipeError(
             f"--quantity: {text} is less than the scale's {resolution_g:g} g; mix a larger can"
         )
     check_scale(grams, resolution_g)
     return grams
+
+
+def to_scale(grams: float, resolution_g: float) -> float:
+    """``grams`` as the nearest whole number of a scale's steps of ``resolution_g``."""
+    check_resolution(resolution_g)
+    return round(round(grams / resolution_g) * resolution_g, 9)
 
 
 def check_resolution(resolution_g: float) -> None:
