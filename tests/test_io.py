@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -209,6 +210,36 @@ def test_a_cxf_value_that_is_not_a_number_is_named_by_wavelength(rich_measuremen
         warnings.simplefilter("error")
         with pytest.raises(MeasurementFileError, match=f"430 nm: expected a .*{bad}"):
             read_measurements(path)
+
+
+@pytest.mark.parametrize(
+    ("good", "bad", "message"),
+    [  # each was an internal error (a text met in arithmetic), or read without a word
+        ('StartWL="400"', 'StartWL="[]"', "CS_45as15, StartWL: expected a number, got '[]'"),
+        ('Increment="10"', 'Increment="abc"', "WavelengthRange Increment: expected a number"),
+        (
+            'Increment="10"',
+            'Increment="20"',
+            "expected wavelengths within 360–780 nm, got 400–1000",
+        ),
+        ("<ns0:L>", "<ns0:L>x", "ColorCIELab CS_45as15, L: expected a number, got 'x"),
+        (
+            ":06:07</ns0:CreationDate>",
+            ":06:nan</ns0:CreationDate>",
+            "CreationDate: expected an xs:",
+        ),
+    ],
+)
+def test_a_cxf_attribute_or_element_that_is_not_a_number_is_named(
+    rich_measurement, tmp_path, good, bad, message
+):
+    path = tmp_path / "m.cxf"
+    write_measurements([rich_measurement], path)
+    text = path.read_text()
+    assert good in text
+    path.write_text(text.replace(good, bad))
+    with pytest.raises(MeasurementFileError, match=re.escape(message)):
+        read_measurements(path)
 
 
 def test_other_kinds_of_file_are_named(tmp_path):

@@ -118,8 +118,19 @@ def test_library_file_with_missing_spectrum_or_bad_field_is_rejected(tmp_path):
     data["toners"][0]["radius_um"] = 5
     data["toners"][15]["absorption"] = data["toners"][15]["absorption"][:30]
     path.write_text(json.dumps(data))
-    with pytest.raises(LibraryError, match="absorption: expected 31 values"):
+    with pytest.raises(LibraryError, match=r"absorption: expected 31 numbers .*, got 30 values"):
         read_library(path)
+
+
+def _setting(*keys, value):
+    """An edit of a library file's structure: the item at ``keys`` set to ``value``."""
+
+    def edit(data):
+        for key in keys[:-1]:
+            data = data[key]
+        data[keys[-1]] = value
+
+    return edit
 
 
 def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
@@ -140,6 +151,26 @@ def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
             d["toners"][0]
         ),
         "expected at least one toner": lambda d: d.update(toners=[]),
+        # before: an internal error (unhashable type), then messages that named no field
+        "toners[0] (Al fine bright): kind: expected one of aluminium, pigment, pearl, got {}": (
+            _setting("toners", 0, "kind", value={})
+        ),
+        "Quinacridone magenta: absorption, 420 nm: expected a number, got 'x'": (
+            _setting("toners", 15, "absorption", 2, value="x")
+        ),
+        "Quinacridone magenta: g: expected a value in (−1, 1), got 'x'": (
+            _setting("toners", 15, "g", value="x")
+        ),
+        "Quinacridone magenta: family: expected a text, got {}": (
+            _setting("toners", 15, "family", value={})
+        ),
+        "binder: primer_reflectance, 690 nm: expected a number, got []": (
+            _setting("binder", "primer_reflectance", 29, value=[])
+        ),
+        # before: accepted, and the physics' prediction came out NaN
+        "Quinacridone magenta: absorption, 690 nm: expected a value from 0 to 10000, got 1e+308": (
+            _setting("toners", 15, "absorption", 29, value=1e308)
+        ),
     }
     for message, edit in flawed.items():
         data = json.loads(json.dumps(good))

@@ -32,6 +32,7 @@ from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
     assemble,
+    checked_wavelengths,
     parse_conditions,
     parse_number,
     parse_spectrum,
@@ -134,10 +135,11 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         sample = obj.name or obj.id
         values = obj.color_values.choice if obj.color_values else []
         labs = {
-            v.color_specification: np.array([v.l, v.a, v.b], dtype=float)
+            v.color_specification: _lab_of(path, sample, v)
             for v in values
             if isinstance(v, cxf3.ColorCielab)
         }
+        measured_at = _creation_date(path, sample, obj.creation_date)
         for v in values:
             if not isinstance(v, cxf3.ReflectanceSpectrum):
                 continue
@@ -154,11 +156,15 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                 raise MeasurementFileError(
                     path, "no StartWL or WavelengthRange Increment", field=where
                 )
+            start = parse_number(path, start, f"{where}, StartWL")
+            increment = parse_number(
+                path, wr.increment, f"ColorSpecification {spec.id}, WavelengthRange Increment"
+            )
             # a spectrum with a value that is not a number comes as the element's text
             spectrum = v.value.split() if isinstance(v.value, str) else v.value
-            grid = start + wr.increment * np.arange(len(spectrum), dtype=float)
+            grid = start + increment * np.arange(len(spectrum), dtype=float)
             if wavelengths is None:
-                wavelengths = grid
+                wavelengths = checked_wavelengths(path, grid, where)
             elif not np.array_equal(grid, wavelengths):
                 raise MeasurementFileError(
                     path, "spectra on different wavelength grids", field=where
@@ -173,9 +179,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                     geometry=geometry,
                     reflectance=parse_spectrum(path, spectrum, grid, where),
                     lab=lab,
-                    measured_at=obj.creation_date.value.to_datetime()
-                    if obj.creation_date and obj.creation_date.value
-                    else None,
+                    measured_at=measured_at,
                 )
             )
         for collection in obj.tag_collection:
@@ -202,6 +206,28 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         texture=texture,
         metadata=metadata,
     )
+
+
+def _lab_of(path: str | PathLike, sample: str, value: cxf3.ColorCielab) -> np.ndarray:
+    """An Object's stored CIELAB at one geometry, each component a finite number."""
+    where = f"Object {sample!r}, ColorCIELab {value.color_specification}"
+    return np.array([parse_number(path, c, f"{where}, {name}") for c, name in
+                     ((value.l, "L"), (value.a, "A"), (value.b, "B"))])  # fmt: skip
+
+
+def _creation_date(
+    path: str | PathLike, sample: str, date: cxf3.CreationDate | None
+) -> datetime | None:
+    """An Object's CreationDate; xsdata leaves one it cannot read as text."""
+    if date is None or date.value is None:
+        return None
+    if not isinstance(date.value, XmlDateTime):
+        raise MeasurementFileError(
+            path,
+            f"expected an xs:dateTime, got {date.value!r}",
+            field=f"Object {sample!r}, CreationDate",
+        )
+    return date.value.to_datetime()
 
 
 def _xml_datetime(moment: datetime | None) -> cxf3.CreationDate:

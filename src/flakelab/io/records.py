@@ -71,7 +71,11 @@ def parse_wavelength_header(
                 field=f"{where}, column {i + 1}",
             )
         values.append(float(match[1]))
-    wavelengths = np.array(values)
+    return checked_wavelengths(path, np.array(values), where)
+
+
+def checked_wavelengths(path: str | PathLike, wavelengths: np.ndarray, where: str) -> np.ndarray:
+    """``wavelengths`` [nm] of a file, checked to form a regular grid within 360–780 nm."""
     try:
         shape_of(wavelengths)
     except ValueError as error:

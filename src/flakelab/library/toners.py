@@ -7,6 +7,7 @@ by name and turns recipes into validated mass fractions. Spectra live on the sto
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
@@ -34,14 +35,20 @@ __all__ = [
 SUM_TOLERANCE = 1e-6
 """Relative tolerance on recipe amounts summing to the can [-]."""
 
+MAX_COEFFICIENT = 1e4
+"""Largest specific absorption or scattering a library may give [1/µm per unit mass
+fraction]: a full-strength layer 0.1 nm deep, a thousand times the strongest real pigment's
+(carbon black's K is about 13). Larger values only come from a typing slip, and overflow the
+optics (a value of 1e308 made the prediction NaN)."""
+
 
 class LibraryError(FlakelabError):
     """A toner library or a recipe that is wrong: names the toner, the field and the problem."""
 
 
 def _positive(owner: str, name: str, value: float, *, upper: float | None = None) -> None:
-    if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
-        raise LibraryError(f"{owner}: {name}: expected a positive number, got {value!r}")
+    if not (_is_number(value) and np.isfinite(value) and value > 0):
+        raise LibraryError(f"{owner}: {name}: expected a positive number, got {_shown(value)}")
     if upper is not None and value > upper:
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
 
@@ -65,21 +72,46 @@ def _is_storage_grid(wavelengths: Any) -> bool:
         return False
 
 
-def _spectrum(owner: str, name: str, values: Any) -> NDArray:
+def _spectrum(owner: str, name: str, values: Any, upper: float = MAX_COEFFICIENT) -> NDArray:
+    """A toner's spectrum on the storage grid: finite numbers from 0 to ``upper``."""
+    expected = f"{WAVELENGTHS.size} numbers (400–700 nm, 10 nm)"
     if values is None:
-        raise LibraryError(
-            f"{owner}: {name}: missing spectrum ({WAVELENGTHS.size} values, 400–700 nm)"
-        )
+        raise LibraryError(f"{owner}: {name}: missing spectrum ({expected})")
+    if not isinstance(values, list | tuple | np.ndarray):
+        raise LibraryError(f"{owner}: {name}: expected {expected}, got {_shown(values)}")
+    if len(values) != WAVELENGTHS.size:
+        raise LibraryError(f"{owner}: {name}: expected {expected}, got {len(values)} values")
+    if not isinstance(values, np.ndarray):
+        for value, wavelength in zip(values, WAVELENGTHS, strict=True):
+            if not _is_number(value):
+                raise LibraryError(
+                    f"{owner}: {name}, {wavelength:g} nm: expected a number, got {_shown(value)}"
+                )
     array = np.asarray(values, dtype=float)
-    if array.shape != WAVELENGTHS.shape:
+    wrong = ~(np.isfinite(array) & (array >= 0) & (array <= upper))
+    if np.any(wrong):
+        i = int(np.argmax(wrong))
         raise LibraryError(
-            f"{owner}: {name}: expected {WAVELENGTHS.size} values (400–700 nm, 10 nm), "
-            f"got {array.size}"
+            f"{owner}: {name}, {WAVELENGTHS[i]:g} nm: expected a value from 0 to {upper:g}, "
+            f"got {array[i]!r}"
         )
-    if not np.all(np.isfinite(array)) or np.any(array < 0):
-        raise LibraryError(f"{owner}: {name}: expected finite non-negative values")
     array.setflags(write=False)
     return array
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def _shown(value: Any) -> str:
+    """A bad value as a message quotes it: short."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:57]}…"
+
+
+def _text(owner: str, name: str, value: Any) -> None:
+    if not isinstance(value, str):
+        raise LibraryError(f"{owner}: {name}: expected a text, got {_shown(value)}")
 
 
 @dataclass(frozen=True)
@@ -105,6 +137,7 @@ class AluminiumFlake:
         _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
         _positive(self.name, "surface_quality", self.surface_quality, upper=1)
         _positive(self.name, "volume_fraction", self.volume_fraction, upper=0.6)
+        _text(self.name, "description", self.description)
 
 
 @dataclass(frozen=True)
@@ -125,8 +158,10 @@ class Pigment:
         object.__setattr__(self, "scattering", _spectrum(self.name, "scattering", self.scattering))
         if not np.any(self.absorption > 0) and not np.any(self.scattering > 0):
             raise LibraryError(f"{self.name}: absorption and scattering are both all zero")
-        if not -1 < self.g < 1:
-            raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {self.g!r}")
+        if not (_is_number(self.g) and -1 < self.g < 1):
+            raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {_shown(self.g)}")
+        _text(self.name, "family", self.family)
+        _text(self.name, "description", self.description)
 
     @property
     def transparent(self) -> bool:
@@ -160,11 +195,12 @@ class Pearl:
         _positive(self.name, "substrate_nm", self.substrate_nm, upper=5000)
         _positive(self.name, "radius_um", self.radius_um, upper=100)
         _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
-        if self.substrate not in SUBSTRATE_INDEX:
+        if not isinstance(self.substrate, str) or self.substrate not in SUBSTRATE_INDEX:
             raise LibraryError(
                 f"{self.name}: substrate: expected one of {', '.join(SUBSTRATE_INDEX)}, "
-                f"got {self.substrate!r}"
+                f"got {_shown(self.substrate)}"
             )
+        _text(self.name, "description", self.description)
 
 
 @dataclass(frozen=True)
@@ -185,9 +221,7 @@ class Binder:
                 f"binder: refractive_index: expected ≥ 1, got {self.refractive_index}"
             )
         _positive("binder", "thickness_um", self.thickness_um, upper=200)
-        primer = _spectrum("binder", "primer_reflectance", self.primer_reflectance)
-        if np.any(primer > 1):
-            raise LibraryError("binder: primer_reflectance: expected values in [0, 1]")
+        primer = _spectrum("binder", "primer_reflectance", self.primer_reflectance, upper=1)
         object.__setattr__(self, "primer_reflectance", primer)
 
 
@@ -330,9 +364,9 @@ class Library:
             if not isinstance(item.get("name"), str) or not item["name"].strip():
                 raise LibraryError(f"{where}: name: expected a text, got {item.get('name')!r}")
             kind = item.get("kind")
-            if kind not in TONER_KINDS:
+            if not isinstance(kind, str) or kind not in TONER_KINDS:
                 raise LibraryError(
-                    f"{where}: kind: expected one of {', '.join(TONER_KINDS)}, got {kind!r}"
+                    f"{where}: kind: expected one of {', '.join(TONER_KINDS)}, got {_shown(kind)}"
                 )
             cls_ = TONER_KINDS[kind]
             settings = {k: v for k, v in item.items() if k != "kind"}
@@ -341,8 +375,6 @@ class Library:
                 toners.append(cls_(**settings))
             except LibraryError as error:
                 raise LibraryError(f"{source}: {error}") from None
-            except (TypeError, ValueError) as error:
-                raise LibraryError(f"{where}: {error}") from None
         binder = data.get("binder", {})
         if not isinstance(binder, Mapping):
             raise LibraryError(f"{source}: binder: expected an object")
