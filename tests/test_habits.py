@@ -223,6 +223,33 @@ def test_the_scan_sums_give_each_split_the_step_of_its_own_cases(shipped, habits
         np.testing.assert_allclose(z[k - 30], expected, rtol=1e-8)
 
 
+def test_a_shop_of_solids_shows_no_flake_spread_and_is_told_so(shipped, habits_shop, tmp_path):
+    """Solids have no flakes: their spray-outs cannot show the flake spread, whose row and
+    column of the information are zero (the fit stopped at "Singular matrix" before)."""
+    library, forward, _ = shipped
+    solid = library.paint_families(habits_shop[0].x) == "solid"
+    x, R = habits_shop[0].x[solid], habits_shop[0].R[solid]
+    assert solid.sum() >= 40
+    found = estimate_habits(forward, library, x, R)
+    # flake spread: the prior's none ± 0.1; film build and gain read as in the whole shop
+    assert found.flake_spread == 0 and found.standard_error[1] == pytest.approx(PRIOR_SD[1])
+    truth = np.array([SHOP_WITH_HABITS["shop_film_build"] - 1, TRUE_GAIN])
+    assert np.all(np.abs(found.theta[[0, 2]] - truth) < 3 * found.standard_error[[0, 2]])
+    assert np.all(found.standard_error[[0, 2]] < PRIOR_SD[[0, 2]])
+    bare = estimate_habits(forward, library, x, R, prior_sd=None)
+    assert bare.flake_spread == 0 and np.isinf(bare.standard_error[1])
+    assert bare.report()["flake_spread_se"] is None
+    assert "flakes not shown by these spray-outs" in bare.describe()
+    path = tmp_path / "solids.json"
+    write_habits(bare, path)
+    assert "Infinity" not in path.read_text()  # JSON has none; null says "not shown"
+    back = read_habits(path)
+    assert np.isinf(back.standard_error[1]) and back.theta[1] == 0
+    # a change of the flake spread cannot be seen in them: z = 0, not NaN
+    splits, z = change_scan(forward, library, x, R, least=20)
+    assert np.all(z[:, 1] == 0) and np.all(np.isfinite(z))
+
+
 def test_too_few_sprayouts_are_refused(shipped):
     library, forward, _ = shipped
     x = np.zeros((5, len(library.names)))
@@ -243,7 +270,8 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
     assert back.changed_since == habits.changed_since
     document = json.loads(path.read_text())
     for key, value, problem in (
-        ("film_build", "more", "expected a number"),
+        ("film_build", "more", "expected a finite number"),
+        ("film_build_se", float("inf"), "expected a finite number"),  # written as Infinity
         ("instrument_gain", 0.5, "expected -0.1 to 0.1"),
         ("format", "other", "flakelab-shop-habits"),
         ("changed_since", 20260301, "expected text"),

@@ -794,7 +794,11 @@ def habits(
         ("instrument gain", "instrument_gain", f"the instrument reads {gain}", ".2%"),
     )
     for name, key, meaning, fmt in rows:
-        table.add_row(name, f"{report[key]:+{fmt}}", f"{report[key + '_se']:{fmt}}", meaning)
+        se = report[key + "_se"]
+        if se is None:  # no spray-out moves with it (flake spread, in a shop of solids)
+            table.add_row(name, f"{report[key]:+{fmt}}", "", "not shown by these spray-outs")
+        else:
+            table.add_row(name, f"{report[key]:+{fmt}}", f"{se:{fmt}}", meaning)
     console.print(table)
     console.print(_explained_table(fit))
     if report["drift"] and report["drift"]["changed"]:

@@ -7,7 +7,6 @@ by name and turns recipes into validated mass fractions. Spectra live on the sto
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
@@ -17,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core.geometry import N_BINDER
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.library.optics import SUBSTRATE_INDEX
 
@@ -47,7 +47,7 @@ class LibraryError(FlakelabError):
 
 
 def _positive(owner: str, name: str, value: float, *, upper: float | None = None) -> None:
-    if not (_is_number(value) and np.isfinite(value) and value > 0):
+    if not (is_number(value) and np.isfinite(value) and value > 0):
         raise LibraryError(f"{owner}: {name}: expected a positive number, got {_shown(value)}")
     if upper is not None and value > upper:
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
@@ -83,7 +83,7 @@ def _spectrum(owner: str, name: str, values: Any, upper: float = MAX_COEFFICIENT
         raise LibraryError(f"{owner}: {name}: expected {expected}, got {len(values)} values")
     if not isinstance(values, np.ndarray):
         for value, wavelength in zip(values, WAVELENGTHS, strict=True):
-            if not _is_number(value):
+            if not is_number(value):
                 raise LibraryError(
                     f"{owner}: {name}, {wavelength:g} nm: expected a number, got {_shown(value)}"
                 )
@@ -97,10 +97,6 @@ def _spectrum(owner: str, name: str, values: Any, upper: float = MAX_COEFFICIENT
         )
     array.setflags(write=False)
     return array
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
 def _shown(value: Any) -> str:
@@ -158,7 +154,7 @@ class Pigment:
         object.__setattr__(self, "scattering", _spectrum(self.name, "scattering", self.scattering))
         if not np.any(self.absorption > 0) and not np.any(self.scattering > 0):
             raise LibraryError(f"{self.name}: absorption and scattering are both all zero")
-        if not (_is_number(self.g) and -1 < self.g < 1):
+        if not (is_number(self.g) and -1 < self.g < 1):
             raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {_shown(self.g)}")
         _text(self.name, "family", self.family)
         _text(self.name, "description", self.description)

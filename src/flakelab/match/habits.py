@@ -97,6 +97,10 @@ _STEP = np.array([0.01, 0.01, 0.001])
 _ITERATIONS = 4
 """Gauss–Newton steps: the estimate settles to 10⁻⁴ in two or three."""
 
+_SHOWN = 1e-12
+"""A habit whose information is below this share of the largest is not shown by the
+spray-outs (flake spread in a shop of solids: exactly none)."""
+
 
 @dataclass(frozen=True)
 class ShopHabits:
@@ -122,13 +126,9 @@ class ShopHabits:
         """The habits :meth:`report` gave (checked by the reader that hands it over)."""
         spread = report["flake_spread"]
         theta = np.array([report["film_build"], np.log1p(spread), report["instrument_gain"]])
-        se = np.array(
-            [
-                report["film_build_se"],
-                report["flake_spread_se"] / (1 + spread),
-                report["instrument_gain_se"],
-            ]
-        )
+        # a habit its spray-outs did not show has no standard error (null): infinite
+        se = np.array([report[f"{habit}_se"] for habit in HABITS], dtype=float)
+        se = np.where(np.isnan(se), np.inf, se) / [1, 1 + spread, 1]
         return cls(
             theta,
             se,
@@ -155,14 +155,14 @@ class ShopHabits:
 
     def report(self) -> dict:
         """The habits and their standard errors as the CLI and the JSON report them."""
-        se = self.standard_error
+        se = [_finite_or_none(v) for v in self.standard_error * [1, np.exp(self.theta[1]), 1]]
         return {
             "film_build": self.film_build,
-            "film_build_se": float(se[0]),
+            "film_build_se": se[0],
             "flake_spread": self.flake_spread,
-            "flake_spread_se": float(se[1] * np.exp(self.theta[1])),
+            "flake_spread_se": se[1],
             "instrument_gain": self.instrument_gain,
-            "instrument_gain_se": float(se[2]),
+            "instrument_gain_se": se[2],
             "cases": self.cases,
             "model": self.model,
             "shop": self.shop,
@@ -173,12 +173,18 @@ class ShopHabits:
         """The habits in a colorist's words, with their standard errors."""
         r = self.report()
         spread = "flatter" if self.flake_spread < 0 else "less flat"
-        return (
-            f"film build {self.film_build:+.1%} ± {r['film_build_se']:.1%}, flakes "
-            f"{abs(self.flake_spread):.1%} ± {r['flake_spread_se']:.1%} {spread}, instrument "
-            f"reads {self.instrument_gain:+.2%} ± {r['instrument_gain_se']:.2%} "
-            f"({self.cases} spray-outs)"
+        words = (
+            ("film build", f"{self.film_build:+.1%}", "{:.1%}", r["film_build_se"]),
+            ("flakes", f"{abs(self.flake_spread):.1%}", "{:.1%} " + spread, r["flake_spread_se"]),
+            ("instrument reads", f"{self.instrument_gain:+.2%}", "{:.2%}", r["instrument_gain_se"]),
         )
+        parts = [
+            f"{name} not shown by these spray-outs"
+            if se is None
+            else f"{name} {value} ± " + error.format(se)
+            for name, value, error, se in words
+        ]
+        return f"{', '.join(parts)} ({self.cases} spray-outs)"
 
     def offset(
         self, library: Library, fractions: NDArray, reflectance: NDArray, geometries
@@ -188,6 +194,11 @@ class ShopHabits:
         between the habits' and the nominal application, plus the instrument's gain on the
         prediction."""
         return _offsets(self.theta[None], library, fractions, reflectance, geometries)[0]
+
+
+def _finite_or_none(value: float) -> float | None:
+    """A standard error as a report gives it: None (JSON null) for a habit not shown."""
+    return float(value) if np.isfinite(value) else None
 
 
 def _offsets(thetas: NDArray, library: Library, x: NDArray, R: NDArray, geometries) -> NDArray:
@@ -248,7 +259,7 @@ def _gauss_newton(
             theta, library, fractions, R, offset, forward.geometries, persistent_sd, noise_sd
         )
         H = information.sum(0)
-        step = np.linalg.solve(H, score.sum(0))
+        step = _shown_inverse(H)[0] @ score.sum(0)
         theta = theta + step
     return theta, _sandwich(H, score - information @ step), R, offset
 
@@ -283,14 +294,32 @@ def _case_terms(
 def _sandwich(information: NDArray, scores: NDArray) -> NDArray:
     """The sandwich covariance H⁻¹ (Σ sᵢsᵢᵀ) H⁻¹ from the summed ``information`` H and each
     case's ``scores`` sᵢ at the estimate: robust to the heavy-tailed persistent offsets."""
-    H_inv = np.linalg.inv(information)
-    return H_inv @ (scores.T @ scores) @ H_inv
+    H_inv, shown = _shown_inverse(information)
+    return _unshown_infinite(H_inv @ (scores.T @ scores) @ H_inv, shown)
+
+
+def _shown_inverse(H: NDArray) -> tuple[NDArray, NDArray]:
+    """The inverse of information ``H[..., 3, 3]`` over the habits the spray-outs show, zero
+    for those they do not (``shown[..., 3]``): a shop of solids shows no flake spread, and
+    its H has a row and column of zeros there. A habit that is not shown is read as none."""
+    d = np.diagonal(H, axis1=-2, axis2=-1)
+    shown = d > _SHOWN * d.max(-1, keepdims=True)
+    both = shown[..., :, None] & shown[..., None, :]
+    # the block of habits shown, with the identity for the others, is block-diagonal
+    inverse = np.linalg.inv(np.where(both, H, np.eye(H.shape[-1])))
+    return np.where(both, inverse, 0.0), shown
+
+
+def _unshown_infinite(covariance: NDArray, shown: NDArray) -> NDArray:
+    """``covariance[..., 3, 3]`` with an infinite variance for each habit not ``shown``."""
+    eye = np.eye(covariance.shape[-1], dtype=bool)
+    return np.where(eye & ~shown[..., None, :], np.inf, covariance)
 
 
 def _with_prior(theta: NDArray, covariance: NDArray, prior_sd: NDArray):
     """The estimate ``theta`` (``covariance``) combined with the prior N(0, diag(prior_sd²))
     by their precisions (the Gaussian posterior's mean and covariance)."""
-    precision = np.linalg.inv(covariance)
+    precision = _shown_inverse(np.where(np.isinf(covariance), 0.0, covariance))[0]
     posterior = np.linalg.inv(precision + np.diag(prior_sd**-2.0))
     return posterior @ precision @ theta, posterior
 
@@ -380,11 +409,11 @@ def _segment_fits(sums: list[NDArray]) -> tuple[NDArray, NDArray]:
     cases from their summed terms (:func:`change_scan`): Σ(gᵢ − Bᵢt)(gᵢ − Bᵢt)ᵀ expanded in
     the sums of gᵢgᵢᵀ, gᵢ⊗Bᵢ and Bᵢ⊗Bᵢ."""
     g, B, gg, gB, BB = sums
-    H_inv = np.linalg.inv(B)
+    H_inv, shown = _shown_inverse(B)
     t = np.einsum("kij,kj->ki", H_inv, g)
     cross = np.einsum("kjil,kl->kji", gB, t)
     meat = gg - cross - cross.transpose(0, 2, 1) + np.einsum("kjmil,km,kl->kji", BB, t, t)
-    covariance = H_inv @ meat @ H_inv.transpose(0, 2, 1)
+    covariance = _unshown_infinite(H_inv @ meat @ H_inv.transpose(0, 2, 1), shown)
     return t, np.diagonal(covariance, axis1=1, axis2=2)
 
 
@@ -430,8 +459,10 @@ def read_habits(path: str | PathLike) -> ShopHabits:
 
     for key, low, high in _RANGES:
         value = document.get(key)
-        if not is_number(value):
-            raise MeasurementFileError(path, f"expected a number, got {value!r}", field=key)
+        if key.endswith("_se") and key in document and value is None:
+            continue  # a habit its spray-outs did not show
+        if not is_number(value) or not np.isfinite(value):
+            raise MeasurementFileError(path, f"expected a finite number, got {value!r}", field=key)
         if not low <= value <= high:
             raise MeasurementFileError(path, f"expected {low} to {high}, got {value}", field=key)
     for key in ("model", "shop", "changed_since"):
