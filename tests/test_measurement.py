@@ -104,6 +104,9 @@ def test_tolerance_files_validated(tmp_path):
         ("texture = 0.5\n[default]\nde00 = 1\n", "texture: expected a table of limits"),
         ("[default]\nde00 = 1\n[texture]\nG = 0\n", "texture: expected a positive limit for G"),
         ("[default]\nde00 = 1\n[texture]\ngraininess = 1\n", "expected keys among G, SG, Si"),
+        # tighter than any instrument can judge; 1e-320 overflowed the share of the limit
+        ("[default]\ndE00 = 1\n", "expected keys among de00"),
+        ("[default]\ndL = 1e-320\n", "expected a limit for dL of at least 0.01, got 1e-320"),
     ]:
         bad.write_text(text)
         with pytest.raises(ValueError, match=where):

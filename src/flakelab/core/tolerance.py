@@ -30,6 +30,12 @@ _LIMIT_FIELDS = ("de00", "dL", "dC", "dH")
 _TEXTURE_FIELDS = ("G", "SG", "Si", "Sa")
 
 
+MIN_LIMIT = 0.01
+"""The tightest limit a tolerance file may set (ΔE00, |ΔL*|, |ΔC*|, |ΔH*| or a texture reading):
+an instrument's own repeatability is 0.02–0.10 ΔE00, so a tighter one could not be judged;
+1e-320 overflowed the share of the limit."""
+
+
 def _check_limits(limits: Mapping[str, float | None]) -> None:
     if all(v is None for v in limits.values()):
         raise ValueError(f"expected at least one of {', '.join(limits)}, got none")
@@ -47,6 +53,11 @@ def _limits_from_dict(cls, fields: tuple[str, ...], data: Mapping[str, Any], whe
     wrong = next((k for k, v in data.items() if v is not None and not is_number(v)), None)
     if wrong is not None:
         raise ValueError(f"{where}: {wrong}: expected a number, got {data[wrong]!r}")
+    tight = next((k for k, v in data.items() if v is not None and 0 < v < MIN_LIMIT), None)
+    if tight is not None:
+        raise ValueError(
+            f"{where}: expected a limit for {tight} of at least {MIN_LIMIT}, got {data[tight]!r}"
+        )
     try:
         return cls(**{k: None if v is None else float(v) for k, v in data.items()})
     except (TypeError, ValueError) as error:
