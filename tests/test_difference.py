@@ -174,6 +174,9 @@ def test_test_lights_are_read_as_a_booth_names_them():
         parse_lights("D65,A")
     with pytest.raises(ValueError, match="--lights: expected test illuminants"):
         parse_lights(" , ")
+    for typo in ("-1", "A1", "X11"):  # read as FL1 and FL11 before, silently
+        with pytest.raises(ValueError, match=f"--lights: .*got '{typo}'"):
+            parse_lights(typo)
 
 
 def test_the_worst_light_and_the_worst_geometry_per_light_are_read_from_every_geometry():

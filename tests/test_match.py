@@ -570,7 +570,10 @@ def test_match_refuses_bad_input(tmp_path, cli):
     # a can the scale cannot weigh is refused before the search, even before its model is
     # looked for
     run = cli("match", "--example", "--quantity", "1e30kg", "--model", str(tmp_path / "m.pt"))
-    assert run.returncode == 2 and "1e+34 steps of the scale's 0.1 g" in run.stderr
+    assert (
+        run.returncode == 2
+        and "1e+33 g is more than 1e+09 steps of the scale's 0.1 g" in run.stderr
+    )
     assert "m.pt" not in run.stderr
     run = cli("match", "--example", "--render", str(tmp_path / "side-by-side.bmp"))
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr

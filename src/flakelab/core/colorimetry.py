@@ -91,12 +91,18 @@ def illuminant_name(text: str) -> str:
 
     Examples
     --------
-    >>> illuminant_name("F11"), illuminant_name("LED-B3")
-    ('FL11', 'LED-B3')
+    >>> illuminant_name("F11"), illuminant_name("LED-B3"), illuminant_name("-1")
+    ('FL11', 'LED-B3', '-1')
     """
     name = text.strip()
-    if name not in colour.SDS_ILLUMINANTS and f"FL{name[1:]}" in colour.SDS_ILLUMINANTS:
-        return f"FL{name[1:]}"
+    # only an F: "-1" and "X1" are no fluorescent lamp (they read as FL1 before)
+    fluorescent = f"FL{name[1:]}"
+    if (
+        name[:1] == "F"
+        and name not in colour.SDS_ILLUMINANTS
+        and fluorescent in colour.SDS_ILLUMINANTS
+    ):
+        return fluorescent
     return name
 
 

@@ -118,10 +118,10 @@ def check_scale(quantity_g: float, resolution_g: float) -> int:
     :class:`RecipeError` where the scale cannot weigh it, before any search is made for it."""
     check_resolution(resolution_g)
     steps = quantity_g / resolution_g
-    if steps > MAX_SCALE_STEPS:
+    if not steps <= MAX_SCALE_STEPS:  # inf too: 1e308 g on a 0.1 g scale
         raise RecipeError(
-            f"quantity: {quantity_g:g} g is {steps:.3g} steps of the scale's {resolution_g:g} g; "
-            f"at most {MAX_SCALE_STEPS:.0e} (a larger scale resolution weighs a larger can)"
+            f"quantity: {quantity_g:g} g is more than {MAX_SCALE_STEPS:.0e} steps of the "
+            f"scale's {resolution_g:g} g (a larger scale resolution weighs a larger can)"
         )
     if abs(steps - round(steps)) > 1e-6:
         raise RecipeError(
