@@ -359,6 +359,8 @@ def test_impossible_quantities_are_refused():
         weigh({"A": 1.0}, 10.05, 0.1)
     with pytest.raises(RecipeError, match="steps of the scale"):  # 1e30 kg: a typing error
         weigh({"A": 0.5, "B": 0.5}, parse_quantity("1e30kg"), 0.1)
+    with pytest.raises(RecipeError, match="1e[+]308 g is more than 1e[+]09 steps"):  # not "inf"
+        weigh({"A": 0.5, "B": 0.5}, 1e308, 0.1)
     for text in ("0g", "-5g", "lots"):
         with pytest.raises(RecipeError, match="--quantity"):
             parse_quantity(text)
