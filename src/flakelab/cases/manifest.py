@@ -121,7 +121,7 @@ def cases_from_manifest(
             if name not in files:
                 files[name] = read_measurements(name)
             return pick_sample(files[name], sample or None, name)
-        except (FlakelabError, OSError, KeyError) as error:
+        except (FlakelabError, OSError, KeyError, ValueError) as error:  # ValueError: a NUL
             raise ManifestError(f"{where}: {error}") from None
 
     cases: list[tuple[int, Case]] = []
@@ -133,7 +133,7 @@ def cases_from_manifest(
         try:
             grams = read_recipe(path.parent / cells["recipe"])
             fractions = library.fractions(grams)
-        except FlakelabError as error:
+        except (FlakelabError, ValueError) as error:
             raise ManifestError(f"{where}: recipe: {error}") from None
         when = _time(where, cells.get("at", ""))
         try:
