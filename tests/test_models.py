@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -115,6 +116,68 @@ def test_log_features_widen_the_input_and_survive_storage(data):
     for offset, problem in (("0.01", "log_offset: expected"), (0.0, "weights do not fit")):
         with pytest.raises(ModelError, match=f"m.pt: {problem}"):
             ForwardModel.from_bytes(with_meta(model, log_offset=offset), source="m.pt")
+
+
+def _with_stored(model: ForwardModel, edit) -> bytes:
+    """``model``'s file after ``edit`` of its stored dictionary (meta, state, norm)."""
+    stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
+    edit(stored)
+    buffer = io.BytesIO()
+    torch.save(stored, buffer)
+    return buffer.getvalue()
+
+
+def _set_info(**changes):
+    def edit(stored):
+        meta = json.loads(stored["meta"])
+        meta["info"] |= changes
+        stored["meta"] = json.dumps(meta)
+
+    return edit
+
+
+def _set_tensor(part: str, key: str, value: float, cut: bool = False):
+    def edit(stored):
+        tensor = stored[part][key].clone()
+        tensor.view(-1)[3] = value
+        stored[part][key] = tensor[:-1] if cut else tensor
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("edit", "problem"),
+    [  # each was an internal error (a shape or type met in arithmetic), or predicted NaN
+        (_set_info(toner_cases={"Al medium": "many"}), "info.toner_cases: expected the model's"),
+        (_set_info(novel_toners=["Unobtainium"]), "info.novel_toners: expected a list of"),
+        (_set_info(effect_share_floor="x"), "info.effect_share_floor: expected a share"),
+        (_set_tensor("norm", "x_mean", 0.0, cut=True), "norm x_mean: expected 70 numbers, got"),
+        (_set_tensor("norm", "y_std", 0.0), "norm y_std: expected positive finite numbers"),
+        (_set_tensor("norm", "y_mean", np.nan), "norm y_mean: expected finite numbers"),
+        (_set_tensor("state", "weights.0", np.nan), "weights: expected finite numbers"),
+    ],
+)
+def test_a_damaged_model_file_is_named_by_its_field(edit, problem):
+    shipped = shipped_model("five-angle")
+    with pytest.raises(ModelError, match=f"^m.pt: {re.escape(problem)}"):
+        ForwardModel.from_bytes(_with_stored(shipped, edit), source="m.pt")
+
+
+@pytest.mark.parametrize(
+    ("changes", "problem"),
+    [
+        ({"toners": ["A", "A"]}, "toners: expected a list of distinct toner names"),
+        ({"geometries": ["45as15", "45xx25"]}, "geometries: expected a geometry name"),
+        ({"hidden": [100, 10**9]}, "hidden: expected a list of layer widths from 1 to 4096"),
+        ({"members": 10**6}, "members: expected a whole number from 1 to 64"),
+        ({"texture": ["G"]}, "texture: expected the readings"),
+        ({"effect": [1]}, "effect: expected 35 flags of 0 or 1, one a toner"),
+    ],
+)
+def test_a_model_file_s_description_is_checked_before_its_network_is_built(changes, problem):
+    shipped = shipped_model("five-angle")
+    with pytest.raises(ModelError, match=f"^m.pt: {re.escape(problem)}"):
+        ForwardModel.from_bytes(with_meta(shipped, **changes), source="m.pt")
 
 
 def test_training_learns_far_better_than_the_mean(trained, data):

@@ -21,8 +21,10 @@ import torch
 from numpy.typing import ArrayLike, NDArray
 from torch import nn
 
+from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -43,6 +45,11 @@ FEATURE_BLOCKS = 2
 LOG_OFFSET_MAX = 0.5
 """The largest offset of the log features (:attr:`ForwardModel.log_offset`); beyond it they
 are nearly linear in the fractions, which the network has already."""
+MAX_HIDDEN = 4096
+"""The widest hidden layer a model file may give: forty times the default, far wider than a
+forward model of a few dozen toners needs; a corrupt width would allocate its weights."""
+MAX_MEMBERS = 64
+"""The most networks a model file's ensemble may have (the shipped ones have four)."""
 LOG_FLOOR = 1e-3
 """Reflectance factors are clipped here before the log (noise on black can go negative)."""
 LOG_CEILING = float(np.log(6.0))
@@ -58,6 +65,106 @@ def reflectance_from_log(log_R: torch.Tensor) -> torch.Tensor:
     """Reflectance factors from predicted log reflectance, clipped to what paint can read:
     far below :data:`LOG_FLOOR` (black) and no higher than :data:`LOG_CEILING`."""
     return torch.exp(torch.clamp(log_R, float(np.log(LOG_FLOOR)) - 3, LOG_CEILING))
+
+
+def _check_meta(meta: dict, source: str) -> None:
+    """A model file's description: every field of the type the model needs, named when not
+    (a file edited by hand, or cut short)."""
+
+    def wrong(field: str, expected: str) -> ModelError:
+        shown = repr(meta.get(field, "nothing"))
+        shown = shown if len(shown) <= 60 else f"{shown[:57]}…"
+        return ModelError(f"{source}: {field}: expected {expected}, got {shown}")
+
+    def texts(value: object) -> bool:
+        return (
+            isinstance(value, list)
+            and bool(value)
+            and all(isinstance(v, str) and v.strip() for v in value)
+        )
+
+    if not texts(meta.get("toners")) or len(set(meta["toners"])) < len(meta["toners"]):
+        raise wrong("toners", "a list of distinct toner names")
+    if not texts(meta.get("geometries")):
+        raise wrong("geometries", "a list of geometry names")
+    for name in meta["geometries"]:
+        try:
+            Geometry.parse(name)
+        except ValueError as error:
+            raise ModelError(f"{source}: geometries: {error}") from None
+    if not isinstance(meta.get("instrument"), str):
+        raise wrong("instrument", "a text")
+    hidden = meta.get("hidden")
+    if not isinstance(hidden, list) or not all(
+        isinstance(h, int) and not isinstance(h, bool) and 0 < h <= MAX_HIDDEN for h in hidden
+    ):
+        raise wrong("hidden", f"a list of layer widths from 1 to {MAX_HIDDEN}")
+    if meta.get("texture") != list(TEXTURE_READINGS):
+        raise wrong("texture", f"the readings {', '.join(TEXTURE_READINGS)}")
+    if not isinstance(meta.get("info"), dict):
+        raise wrong("info", "an object")
+    _check_info(meta["info"], meta["toners"], source)
+    effect = meta.get("effect")
+    if (
+        not isinstance(effect, list)
+        or len(effect) != len(meta["toners"])
+        or any(e not in (0, 1) or isinstance(e, bool) for e in effect)
+    ):
+        raise wrong("effect", f"{len(meta['toners'])} flags of 0 or 1, one a toner")
+    members = meta.get("members", 1)
+    if not isinstance(members, int) or isinstance(members, bool) or not 0 < members <= MAX_MEMBERS:
+        raise wrong("members", f"a whole number from 1 to {MAX_MEMBERS}")
+    log_offset = meta.get("log_offset", 0.0)
+    if not is_number(log_offset) or not 0 <= log_offset <= LOG_OFFSET_MAX:
+        raise wrong("log_offset", f"a number in [0, {LOG_OFFSET_MAX}]")
+
+
+def _check_info(info: dict, toners: list[str], source: str) -> None:
+    """The parts of a model file's ``info`` that matching and the model card read."""
+
+    def wrong(field: str, expected: str) -> ModelError:
+        shown = repr(info[field])
+        shown = shown if len(shown) <= 60 else f"{shown[:57]}…"
+        return ModelError(f"{source}: info.{field}: expected {expected}, got {shown}")
+
+    cases = info.get("toner_cases", {})
+    if not isinstance(cases, dict) or not all(
+        t in toners and isinstance(n, int) and not isinstance(n, bool) and n >= 0
+        for t, n in cases.items()
+    ):
+        raise wrong("toner_cases", "the model's toners, each with a whole number of cases")
+    novel = info.get("novel_toners", [])
+    if not isinstance(novel, list) or not all(t in toners for t in novel):
+        raise wrong("novel_toners", "a list of the model's toners")
+    for key in ("name", "data_hash"):
+        if not isinstance(info.get(key, ""), str):
+            raise wrong(key, "a text")
+    floor = info.get("effect_share_floor", 0.0)
+    if not is_number(floor) or not 0 <= floor < 1:
+        raise wrong("effect_share_floor", "a share from 0 to 1")
+    for key in ("config", "adaptation"):
+        if not isinstance(info.get(key) or {}, dict):
+            raise wrong(key, "an object")
+
+
+def _checked_norm(norm: object, inputs: int, outputs: int, source: str) -> dict[str, NDArray]:
+    """A model file's standardisation: means and standard deviations of its inputs and
+    outputs, finite, of the network's sizes, the deviations positive."""
+    sizes = {"x_mean": inputs, "x_std": inputs, "y_mean": outputs, "y_std": outputs}
+    if not isinstance(norm, dict) or set(norm) != set(sizes):
+        raise ModelError(f"{source}: norm: expected {', '.join(sizes)}")
+    checked = {}
+    for key, size in sizes.items():
+        value = norm[key]
+        if not isinstance(value, torch.Tensor) or value.shape != (size,):
+            shape = tuple(value.shape) if isinstance(value, torch.Tensor) else type(value).__name__
+            raise ModelError(f"{source}: norm {key}: expected {size} numbers, got {shape}")
+        array = value.numpy().astype(float)
+        if not np.all(np.isfinite(array)) or (key.endswith("std") and np.any(array <= 0)):
+            what = "positive finite" if key.endswith("std") else "finite"
+            raise ModelError(f"{source}: norm {key}: expected {what} numbers")
+        checked[key] = array
+    return checked
 
 
 def build_network(inputs: int, outputs: int, hidden: Sequence[int] = (100, 100, 100)) -> nn.Module:
@@ -379,29 +486,23 @@ class ForwardModel:
             raise ModelError(
                 f"{source}: not a flakelab model file ({error.__class__.__name__})"
             ) from None
-        if meta.get("format") != "flakelab-model":
+        if not isinstance(meta, dict) or meta.get("format") != "flakelab-model":
             raise ModelError(f"{source}: format: expected 'flakelab-model'")
+        _check_meta(meta, source)
         outputs = len(meta["geometries"]) * WAVELENGTHS.size + len(meta["texture"])
         members = meta.get("members", 1)
-        if not isinstance(members, int) or members < 1:
-            raise ModelError(
-                f"{source}: members: expected a positive whole number, got {members!r}"
-            )
         log_offset = meta.get("log_offset", 0.0)
-        if not isinstance(log_offset, int | float) or not 0 <= log_offset <= LOG_OFFSET_MAX:
-            raise ModelError(
-                f"{source}: log_offset: expected a number in [0, {LOG_OFFSET_MAX}], "
-                f"got {log_offset!r}"
-            )
         inputs = len(meta["toners"]) * (FEATURE_BLOCKS + (log_offset > 0))
         networks = [build_network(inputs, outputs, meta["hidden"]) for _ in range(members)]
         network = networks[0] if members == 1 else StackedNetwork(networks)
         try:
             network.load_state_dict(stored["state"])
-        except RuntimeError as error:
+        except (RuntimeError, KeyError, TypeError, AttributeError) as error:
             first = str(error).splitlines()[0]
             raise ModelError(f"{source}: weights do not fit the recorded shape ({first})") from None
-        norm = {k: v.numpy().astype(float) for k, v in stored["norm"].items()}
+        if not all(torch.isfinite(t).all() for t in network.state_dict().values()):
+            raise ModelError(f"{source}: weights: expected finite numbers, got NaN or infinity")
+        norm = _checked_norm(stored.get("norm"), inputs, outputs, source)
         return cls(
             tuple(meta["toners"]),
             tuple(meta["geometries"]),
