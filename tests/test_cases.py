@@ -305,6 +305,9 @@ def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path
     assert not missing.exists()
     open_database(missing)  # a command that stores creates it
     assert missing.is_file() and count_cases(open_database(missing, must_exist=True)) == 0
+    for must_exist in (True, False):  # said "no such database file", or sqlite's own words
+        with pytest.raises(DatabaseError, match="a folder, not a database file"):
+            open_database(tmp_path, must_exist=must_exist)
 
 
 def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases, tmp_path, cli):

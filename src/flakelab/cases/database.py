@@ -90,6 +90,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     url = url_for(url) if url is not None else default_url()
     file = _sqlite_file(url)
     # the user data folder's own database is made on first use
+    if file and Path(file).is_dir():
+        raise DatabaseError(f"{url}: a folder, not a database file")
     if must_exist and named and file and not Path(file).is_file():
         raise DatabaseError(
             f"{url}: no such database file; nothing was created (the commands that store "
