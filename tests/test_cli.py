@@ -283,6 +283,21 @@ def test_a_job_too_large_for_memory_is_an_error_not_a_bug(capsys):
     assert "ask for less" in said and "internal error" not in said
 
 
+def test_a_file_the_system_refuses_is_named_first(tmp_path, capsys):
+    import typer
+
+    @reports_errors
+    def write_where_no_file_can_be():
+        (tmp_path / "gone" / "p.png").write_bytes(b"")
+
+    with pytest.raises(typer.Exit) as exited:
+        write_where_no_file_can_be()
+    said = " ".join(capsys.readouterr().err.split())
+    # it said "error: [Errno 2] No such file or directory: '…/gone/p.png'"
+    assert exited.value.exit_code == 2
+    assert said == f"error: {tmp_path / 'gone' / 'p.png'}: No such file or directory"
+
+
 def test_wrong_conditions_are_named_by_their_option(cli):
     for command in (("compare", "--example"), ("inspect", "--example")):
         run = cli(*command, "--conditions", "D65/3")

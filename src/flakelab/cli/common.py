@@ -49,8 +49,7 @@ def reports_errors(command: F) -> F:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(128 + signal.SIGPIPE) from None
         except (FlakelabError, ValueError, KeyError, OSError) as error:
-            message = error.args[0] if isinstance(error, KeyError) and error.args else error
-            _stop("error", str(message), 2)
+            _stop("error", _message(error), 2)
         except MemoryError as error:  # a size or count this machine cannot hold
             _stop("error", f"not enough memory for this job ({error}); ask for less: a "
                   "smaller size, count or batch", 2)  # fmt: skip
@@ -61,6 +60,16 @@ def reports_errors(command: F) -> F:
                   "for a traceback and please report it)", 70)  # fmt: skip
 
     return wrapper  # type: ignore[return-value]
+
+
+def _message(error: Exception) -> str:
+    """A user error's one line: a file's name first ("x.png: No such file or directory", not
+    "[Errno 2] No such file or directory: 'x.png'"), a missing key without its quotes."""
+    if isinstance(error, OSError) and error.filename is not None and error.strerror:
+        return f"{error.filename}: {error.strerror}"
+    if isinstance(error, KeyError) and error.args:
+        return str(error.args[0])
+    return str(error)
 
 
 def _stop(label: str, message: str, status: int) -> None:
