@@ -377,8 +377,11 @@ def test_colour_loss_is_the_mean_squared_cie94_difference(trained, data):
 @pytest.mark.parametrize(
     "settings, problem",
     [
-        ({"hidden": (0, 5)}, "hidden: expected layer sizes of 1 or more"),
-        ({"hidden": ()}, "hidden: expected layer sizes of 1 or more"),
+        ({"hidden": (0, 5)}, "hidden: expected layer sizes from 1 to 4096"),
+        ({"hidden": ()}, "hidden: expected layer sizes from 1 to 4096"),
+        # a model its own file would refuse (test_a_model_file_s_description_is_checked…)
+        ({"hidden": (100, 5000)}, "hidden: expected layer sizes from 1 to 4096"),
+        ({"members": 65}, "members: expected at most 64, got 65"),
         ({"epochs": 0}, "epochs: expected 1 or more, got 0"),
         ({"members": 0}, "members: expected 1 or more"),
         ({"device": "meta"}, "device: expected auto or one of cpu, cuda"),

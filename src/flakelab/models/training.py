@@ -58,7 +58,14 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import instrument_of
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.torch_colour import TorchColour
-from flakelab.models.network import ForwardModel, ModelError, StackedNetwork, build_network
+from flakelab.models.network import (
+    MAX_HIDDEN,
+    MAX_MEMBERS,
+    ForwardModel,
+    ModelError,
+    StackedNetwork,
+    build_network,
+)
 
 __all__ = [
     "generated_case_arrays",
@@ -105,8 +112,13 @@ class TrainingConfig:
 
     def __post_init__(self) -> None:
         training_device(self.device)
-        if not self.hidden or any(size < 1 for size in self.hidden):
-            raise ModelError(f"hidden: expected layer sizes of 1 or more, got {self.hidden}")
+        # the limits a model file is read with: what trains here loads everywhere
+        if not self.hidden or any(not 1 <= size <= MAX_HIDDEN for size in self.hidden):
+            raise ModelError(
+                f"hidden: expected layer sizes from 1 to {MAX_HIDDEN}, got {self.hidden}"
+            )
+        if self.members > MAX_MEMBERS:
+            raise ModelError(f"members: expected at most {MAX_MEMBERS}, got {self.members}")
         for name in ("epochs", "finetune_epochs", "batch_size", "folds", "members"):
             if getattr(self, name) < 1:
                 raise ModelError(f"{name}: expected 1 or more, got {getattr(self, name)}")
