@@ -282,6 +282,10 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
         with pytest.raises(MeasurementFileError, match=problem) as error:
             read_habits(bad)
         assert key in str(error.value) and bad.name in str(error.value)
+    bad = tmp_path / "no-se.json"
+    bad.write_text(json.dumps({k: v for k, v in document.items() if k != "film_build_se"}))
+    with pytest.raises(MeasurementFileError, match="film_build_se: missing"):
+        read_habits(bad)
     with pytest.raises(MeasurementFileError, match="not a JSON habits file"):
         (tmp_path / "broken.json").write_text("{")
         read_habits(tmp_path / "broken.json")

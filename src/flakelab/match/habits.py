@@ -459,7 +459,9 @@ def read_habits(path: str | PathLike) -> ShopHabits:
 
     for key, low, high in _RANGES:
         value = document.get(key)
-        if key.endswith("_se") and key in document and value is None:
+        if key not in document:
+            raise MeasurementFileError(path, "missing", field=key)
+        if key.endswith("_se") and value is None:
             continue  # a habit its spray-outs did not show
         if not is_number(value) or not np.isfinite(value):
             raise MeasurementFileError(path, f"expected a finite number, got {value!r}", field=key)
