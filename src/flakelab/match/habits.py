@@ -466,7 +466,8 @@ def read_habits(path: str | PathLike) -> ShopHabits:
         if not is_number(value) or not np.isfinite(value):
             raise MeasurementFileError(path, f"expected a finite number, got {value!r}", field=key)
         if not low <= value <= high:
-            raise MeasurementFileError(path, f"expected {low} to {high}, got {value}", field=key)
+            bounds = f"{low} or more" if high == np.inf else f"{low} to {high}"
+            raise MeasurementFileError(path, f"expected {bounds}, got {value}", field=key)
     for key in ("model", "shop", "changed_since"):
         value = document.get(key)
         if value is not None and not isinstance(value, str):
