@@ -358,6 +358,11 @@ class World:
             },
             "batch_strength_sd": float(np.std(batch.strength)),
             "weathered_target_de00_median": float(np.median(weathered)),
+            # paints black at every geometry (transparent organics alone over the dark
+            # primer): darker than any real paint under a clearcoat reads
+            "near_black_share": float(
+                np.mean((reflectance_to_Lab(fresh_R)[..., 0] < NEAR_BLACK_L).all(axis=1))
+            ),
             "exact_model_de00_mean": float(floor.mean()),
             "exact_model_de00_p95": float(np.percentile(floor, 95)),
             "exact_model_de00_mean_by_family": {
@@ -392,6 +397,11 @@ class World:
         """Mean film build and flake spread at the shop (its habits) or at the factory."""
         s = self.settings
         return (s.shop_film_build, s.shop_spread) if at_shop else (1.0, 1.0)
+
+
+NEAR_BLACK_L = 1.0
+"""A paint whose nominal L* is below this at every geometry is near-black
+(:meth:`World.realism`'s ``near_black_share``; ``benchmarks/near_black.py``)."""
 
 
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:

@@ -685,6 +685,8 @@ def realism(
         table.add_row(key, f"{report[key]:.3f}", shown)
     for family, value in report["respray_de00_median_by_family"].items():
         table.add_row(f"respray_de00_median, {family}s", f"{value:.3f}", "")
+    table.add_row("near_black_share", f"{report['near_black_share']:.3f}",
+                  "(nominal L* < 1 at every geometry: no real paint reads so dark)")  # fmt: skip
     for key in ("exact_model_de00_mean", "exact_model_de00_p95"):
         table.add_row(key, f"{report[key]:.3f}", "(the cases' noise floor)")
     for family, value in report["exact_model_de00_mean_by_family"].items():
