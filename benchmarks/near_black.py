@@ -15,6 +15,9 @@ any others:
   geometry), the measured spray-outs' reflectance there;
 * the model's ΔE00 against the measured spray-outs (issue 4's ``de00_mean``) and the noise
   floor (the nominal paint against them) with and without the near-black cases;
+* the solids' nominal L* quartiles, and how many hold a scattering (hiding) pigment: the
+  generator draws a solid's one to four pigments from the whole library, so a third of them
+  have none, and most of those are black;
 * for the solids, the mean ΔL* of the nominal paint minus the model's prediction per band
   of nominal L*: the model's bias.
 
@@ -63,6 +66,9 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
             "near_black": round(float(values[dark].mean()), 3) if dark.any() else None,
         }
 
+    hiding = np.array([t.kind == "pigment" and not t.transparent for t in library.toners])
+    with_hiding = (data.x[solid][:, hiding] > 0).any(axis=1)
+    solid_lightness = lightness[solid].mean(axis=1)
     bias = (nominal_lab - model_lab)[solid, :, 0].mean(axis=1)
     band = np.digitize(lightness[solid].mean(axis=1), BANDS[1:-1])
     return {
@@ -74,6 +80,13 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
         "near_black": int(dark.sum()),
         "near_black_share": round(float(dark.mean()), 4),
         "near_black_measured_R_median": float(np.median(data.R[dark])) if dark.any() else None,
+        # what makes them: solids drawn without any scattering (hiding) pigment
+        "solid_nominal_L_quartiles": np.percentile(solid_lightness, [25, 50, 75]).round(1).tolist(),
+        "solids_with_a_hiding_pigment": round(float(with_hiding.mean()), 3),
+        "near_black_share_of_solids": {
+            "with_a_hiding_pigment": round(float(dark[solid][with_hiding].mean()), 3),
+            "without": round(float(dark[solid][~with_hiding].mean()), 3),
+        },
         "de00_mean": split(error),
         "noise_floor_de00_mean": split(floor),
         "solid_bias_dL_by_nominal_L": {
@@ -105,6 +118,13 @@ def main() -> None:
         f"{report['near_black']} near-black (nominal L* < {args.black:g} at every geometry, "
         f"{report['near_black_share']:.1%} of the cases; measured R median "
         f"{report['near_black_measured_R_median']:.1e})"
+    )
+    shares = report["near_black_share_of_solids"]
+    print(
+        f"solids' nominal L* (mean over geometries) quartiles "
+        f"{report['solid_nominal_L_quartiles']}; {report['solids_with_a_hiding_pigment']:.0%} "
+        f"hold a scattering (hiding) pigment, of which {shares['with_a_hiding_pigment']:.0%} "
+        f"are near-black, against {shares['without']:.0%} of the others"
     )
     for name in ("de00_mean", "noise_floor_de00_mean"):
         row = report[name]
