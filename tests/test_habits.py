@@ -389,3 +389,13 @@ def test_aimed_off_recipes_land_nearer_the_target_in_a_shop_with_habits(shipped)
     # targets benchmarks/aim_off.py gives 1.42 → 0.73
     assert np.mean(aimed) < 0.7 * np.mean(plain)
     assert sum(a < p for a, p in zip(aimed, plain, strict=True)) >= 3
+
+
+def test_habits_saved_to_a_database_not_made_yet_create_it(cli, tmp_path):
+    cases = tmp_path / "shop.csv"
+    run = cli("cases", "generate", "--n", "25", "--seed", "4", "--shop", "shop A", "--out", cases)
+    assert run.returncode == 0, run.stderr
+    database = tmp_path / "new.db"
+    run = cli("cases", "habits", cases, "--shop", "shop A", "--save", "--database", database)
+    assert run.returncode == 0, run.stderr  # said "no such database file; nothing was created"
+    assert stored_habits(open_database(database, must_exist=True), "shop A").cases == 25

@@ -746,6 +746,8 @@ def habits(
 
     check_figure_file(plot, "--plot")
     check_output_file(out, "--out")
+    if save:  # a command that stores creates its database, as the others do
+        open_database(database)
     lib, forward = learned_forward(library, instrument, model, database)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)
