@@ -4,7 +4,20 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["FlakelabError", "MeasurementFileError"]
+__all__ = ["FlakelabError", "MeasurementFileError", "shown"]
+
+
+def shown(value: object, limit: int = 60) -> str:
+    """A bad value as a message quotes it: its repr, cut to ``limit`` characters (a whole
+    spectrum or object would bury the message).
+
+    Examples
+    --------
+    >>> shown("x"), shown(list(range(40)))
+    ("'x'", '[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16…')
+    """
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}…"
 
 
 class FlakelabError(ValueError):

@@ -358,8 +358,8 @@ class World:
             },
             "batch_strength_sd": float(np.std(batch.strength)),
             "weathered_target_de00_median": float(np.median(weathered)),
-            # paints black at every geometry (transparent organics alone over the dark
-            # primer): darker than any real paint under a clearcoat reads
+            # paints black at every geometry (solids of organics that absorb the whole
+            # spectrum between them, no hiding pigment): darker than any real paint reads
             "near_black_share": float(
                 np.mean((reflectance_to_Lab(fresh_R)[..., 0] < NEAR_BLACK_L).all(axis=1))
             ),

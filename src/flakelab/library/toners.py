@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from flakelab.core.geometry import N_BINDER
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, shown
 from flakelab.library.optics import SUBSTRATE_INDEX
 
 __all__ = [
@@ -37,9 +37,9 @@ SUM_TOLERANCE = 1e-6
 
 MAX_COEFFICIENT = 1e4
 """Largest specific absorption or scattering a library may give [1/µm per unit mass
-fraction]: a full-strength layer 0.1 nm deep, a thousand times the strongest real pigment's
-(carbon black's K is about 13). Larger values only come from a typing slip, and overflow the
-optics (a value of 1e308 made the prediction NaN)."""
+fraction]: light 0.1 nm deep in a full-strength layer, about 800 times the demo library's
+strongest (carbon black's K, 13). Larger values only come from a typing slip, and overflow
+the optics (a value of 1e308 made the prediction NaN)."""
 
 
 class LibraryError(FlakelabError):
@@ -48,7 +48,7 @@ class LibraryError(FlakelabError):
 
 def _positive(owner: str, name: str, value: float, *, upper: float | None = None) -> None:
     if not (is_number(value) and np.isfinite(value) and value > 0):
-        raise LibraryError(f"{owner}: {name}: expected a positive number, got {_shown(value)}")
+        raise LibraryError(f"{owner}: {name}: expected a positive number, got {shown(value)}")
     if upper is not None and value > upper:
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
 
@@ -78,14 +78,14 @@ def _spectrum(owner: str, name: str, values: Any, upper: float = MAX_COEFFICIENT
     if values is None:
         raise LibraryError(f"{owner}: {name}: missing spectrum ({expected})")
     if not isinstance(values, list | tuple | np.ndarray):
-        raise LibraryError(f"{owner}: {name}: expected {expected}, got {_shown(values)}")
+        raise LibraryError(f"{owner}: {name}: expected {expected}, got {shown(values)}")
     if len(values) != WAVELENGTHS.size:
         raise LibraryError(f"{owner}: {name}: expected {expected}, got {len(values)} values")
     if not isinstance(values, np.ndarray):
         for value, wavelength in zip(values, WAVELENGTHS, strict=True):
             if not is_number(value):
                 raise LibraryError(
-                    f"{owner}: {name}, {wavelength:g} nm: expected a number, got {_shown(value)}"
+                    f"{owner}: {name}, {wavelength:g} nm: expected a number, got {shown(value)}"
                 )
     array = np.asarray(values, dtype=float)
     wrong = ~(np.isfinite(array) & (array >= 0) & (array <= upper))
@@ -99,15 +99,9 @@ def _spectrum(owner: str, name: str, values: Any, upper: float = MAX_COEFFICIENT
     return array
 
 
-def _shown(value: Any) -> str:
-    """A bad value as a message quotes it: short."""
-    text = repr(value)
-    return text if len(text) <= 60 else f"{text[:57]}…"
-
-
 def _text(owner: str, name: str, value: Any) -> None:
     if not isinstance(value, str):
-        raise LibraryError(f"{owner}: {name}: expected a text, got {_shown(value)}")
+        raise LibraryError(f"{owner}: {name}: expected a text, got {shown(value)}")
 
 
 @dataclass(frozen=True)
@@ -155,7 +149,7 @@ class Pigment:
         if not np.any(self.absorption > 0) and not np.any(self.scattering > 0):
             raise LibraryError(f"{self.name}: absorption and scattering are both all zero")
         if not (is_number(self.g) and -1 < self.g < 1):
-            raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {_shown(self.g)}")
+            raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {shown(self.g)}")
         _text(self.name, "family", self.family)
         _text(self.name, "description", self.description)
 
@@ -194,7 +188,7 @@ class Pearl:
         if not isinstance(self.substrate, str) or self.substrate not in SUBSTRATE_INDEX:
             raise LibraryError(
                 f"{self.name}: substrate: expected one of {', '.join(SUBSTRATE_INDEX)}, "
-                f"got {_shown(self.substrate)}"
+                f"got {shown(self.substrate)}"
             )
         _text(self.name, "description", self.description)
 
@@ -362,7 +356,7 @@ class Library:
             kind = item.get("kind")
             if not isinstance(kind, str) or kind not in TONER_KINDS:
                 raise LibraryError(
-                    f"{where}: kind: expected one of {', '.join(TONER_KINDS)}, got {_shown(kind)}"
+                    f"{where}: kind: expected one of {', '.join(TONER_KINDS)}, got {shown(kind)}"
                 )
             cls_ = TONER_KINDS[kind]
             settings = {k: v for k, v in item.items() if k != "kind"}

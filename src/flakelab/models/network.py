@@ -25,7 +25,7 @@ from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, shown
 
 __all__ = [
     "FoldedNetwork",
@@ -72,9 +72,8 @@ def _check_meta(meta: dict, source: str) -> None:
     (a file edited by hand, or cut short)."""
 
     def wrong(field: str, expected: str) -> ModelError:
-        shown = repr(meta.get(field, "nothing"))
-        shown = shown if len(shown) <= 60 else f"{shown[:57]}…"
-        return ModelError(f"{source}: {field}: expected {expected}, got {shown}")
+        given = shown(meta[field]) if field in meta else "nothing"
+        return ModelError(f"{source}: {field}: expected {expected}, got {given}")
 
     def texts(value: object) -> bool:
         return (
@@ -123,9 +122,7 @@ def _check_info(info: dict, toners: list[str], source: str) -> None:
     """The parts of a model file's ``info`` that matching and the model card read."""
 
     def wrong(field: str, expected: str) -> ModelError:
-        shown = repr(info[field])
-        shown = shown if len(shown) <= 60 else f"{shown[:57]}…"
-        return ModelError(f"{source}: info.{field}: expected {expected}, got {shown}")
+        return ModelError(f"{source}: info.{field}: expected {expected}, got {shown(info[field])}")
 
     cases = info.get("toner_cases", {})
     if not isinstance(cases, dict) or not all(
