@@ -77,11 +77,11 @@ def trained(data):
 
 def with_meta(model: ForwardModel, **changes) -> bytes:
     """``model``'s file with entries of its metadata changed."""
-    stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
-    stored["meta"] = json.dumps(json.loads(stored["meta"]) | changes)
-    buffer = io.BytesIO()
-    torch.save(stored, buffer)
-    return buffer.getvalue()
+
+    def edit(stored):
+        stored["meta"] = json.dumps(json.loads(stored["meta"]) | changes)
+
+    return _with_stored(model, edit)
 
 
 def corrupted(data: CaseArrays, rows: list[int]) -> CaseArrays:
