@@ -182,6 +182,9 @@ def test_a_json_document_s_every_flaw_is_named_by_its_field(rich_measurement, tm
         "measurements[0].wavelengths: expected increasing": lambda d: first(d).update(
             wavelengths=first(d)["wavelengths"][::-1]
         ),
+        # an internal error before ('float' object has no attribute 'strip')
+        "measurements[0].lab_conditions: expected illuminant/observer such as 'D65/10', got "
+        "1e+308": lambda d: first(d).update(lab_conditions=1e308),
     }
     for message, edit in flawed.items():
         document = json.loads(json.dumps(good))

@@ -107,6 +107,10 @@ def test_tolerance_files_validated(tmp_path):
         # tighter than any instrument can judge; 1e-320 overflowed the share of the limit
         ("[default]\ndE00 = 1\n", "expected keys among de00"),
         ("[default]\ndL = 1e-320\n", "expected a limit for dL of at least 0.01, got 1e-320"),
+        # read before: a tolerance called "nan", kL = nan or true
+        ("name = nan\n[default]\nde00 = 1\n", "name: expected a text, got nan"),
+        ("kL = nan\n[default]\nde00 = 1\n", "kL: expected a positive number, got nan"),
+        ("kC = true\n[default]\nde00 = 1\n", "kC: expected a positive number, got True"),
     ]:
         bad.write_text(text)
         with pytest.raises(ValueError, match=where):

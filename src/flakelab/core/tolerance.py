@@ -265,9 +265,12 @@ class Tolerance:
         weights = {}
         for k in ("kL", "kC", "kH"):
             value = data.get(k, 1.0)
-            if not isinstance(value, int | float) or value <= 0:
+            if not is_number(value) or not np.isfinite(value) or value <= 0:
                 raise ValueError(f"{source}: {k}: expected a positive number, got {value!r}")
             weights[k] = float(value)
+        for k in ("name", "description"):
+            if not isinstance(data.get(k, ""), str):
+                raise ValueError(f"{source}: {k}: expected a text, got {data[k]!r}")
         texture = data.get("texture")
         if texture is not None:
             texture = TextureLimit.from_dict(texture, f"{source}: texture")

@@ -137,6 +137,10 @@ def parse_geometry_name(path: str | PathLike, value: object, where: str) -> Geom
 
 
 def parse_conditions(path: str | PathLike, text: str, where: str) -> Conditions:
+    if not isinstance(text, str):  # a JSON number or list where the text belongs
+        raise MeasurementFileError(
+            path, f"expected illuminant/observer such as 'D65/10', got {text!r}", field=where
+        )
     try:
         return Conditions.parse(text)
     except ValueError as error:

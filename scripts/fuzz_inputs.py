@@ -1,0 +1,233 @@
+"""Damage input files at random and feed them to the CLI: every one must be refused in one
+line naming the file (exit 2) or read (exit 0), never an internal error (exit 70), a
+traceback, a warning or a NaN in the output (the guide's "Bad input" standard).
+
+Each kind starts from a good file made here from the shipped example (or the demo library,
+the example recipe, a habits report, a tolerance file, generated cases, the shipped model)
+and damages it: text files by deleting, doubling or cutting lines, replacing numbers and
+names, inserting stray characters; JSON files by replacing or deleting one value anywhere
+in them; a model file by editing its description, standardisation or weights.
+
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,recipe,library,habits,tolerance,
+        cases,model] [--n 200] [--seed 0] [--show]
+
+It prints, per kind, how many damaged files were refused, read, and failed (with the file
+kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
+status is 1 when any failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import io
+import json
+import random
+import re
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+from typer.testing import CliRunner
+
+from flakelab.cli.main import app
+from flakelab.data import example_path
+from flakelab.io import read_library, read_measurement, write_measurements, write_recipe
+from flakelab.io.library_file import demo_library_path
+from flakelab.match.habits import ShopHabits, write_habits
+from flakelab.models.registry import shipped_model_path
+
+TOKENS = ("nan", "-1", "1e400", "", "abc", "0", "Infinity", "1e-320", "[]", "{}", "null", "true")
+"""What a damaged number becomes."""
+VALUES = (None, "x", -1, 0, 1e308, float("nan"), float("inf"), [], {}, True, [1, 2], {"a": 1})
+"""What a damaged JSON value becomes."""
+
+
+def damage_text(text: str, rng: random.Random) -> str:
+    lines = text.splitlines(keepends=True)
+    kind = rng.randrange(6)
+    if kind == 0 and lines:
+        del lines[rng.randrange(len(lines))]
+        return "".join(lines)
+    if kind == 1 and lines:
+        i = rng.randrange(len(lines))
+        return "".join([*lines[: i + 1], *lines[i:]])
+    if kind == 2 and (numbers := list(re.finditer(r"-?\d+\.?\d*(e-?\d+)?", text))):
+        m = rng.choice(numbers)
+        return text[: m.start()] + rng.choice(TOKENS) + text[m.end() :]
+    if kind == 3:
+        return text[: rng.randrange(len(text))]
+    if kind == 4 and (names := list(re.finditer(r"[A-Za-z_]\w*", text))):
+        m = rng.choice(names)
+        return text[: m.end()] + "x" + text[m.end() :]
+    i = rng.randrange(len(text))
+    return text[:i] + rng.choice([",", '"', ";", "\t", "<", ">", "\x00", "é", "\n"]) + text[i:]
+
+
+def damage_json(document, rng: random.Random):
+    """``document`` with one value anywhere replaced by a wrong one, or deleted."""
+    document = copy.deepcopy(document)
+    paths: list[list] = []
+
+    def walk(node, path):
+        paths.append(path)
+        items = (
+            node.items()
+            if isinstance(node, dict)
+            else enumerate(node)
+            if isinstance(node, list)
+            else ()
+        )
+        for key, value in items:
+            walk(value, [*path, key])
+
+    walk(document, [])
+    if len(paths) == 1:
+        return rng.choice(VALUES)
+    *parents, last = rng.choice(paths[1:])
+    parent = document
+    for key in parents:
+        parent = parent[key]
+    if isinstance(parent, dict) and rng.random() < 0.25:
+        del parent[last]
+    else:
+        parent[last] = copy.deepcopy(rng.choice(VALUES))
+    return document
+
+
+def damage_model(data: bytes, rng: random.Random) -> bytes:
+    stored = torch.load(io.BytesIO(data), weights_only=True)
+    part = rng.choice(("meta", "norm", "state"))
+    if part == "meta":
+        stored["meta"] = json.dumps(damage_json(json.loads(stored["meta"]), rng))
+    else:
+        key = rng.choice(list(stored[part]))
+        tensor = stored[part][key].clone()
+        if rng.random() < 0.3:
+            tensor = tensor[..., :-1]
+        else:
+            tensor.view(-1)[rng.randrange(tensor.numel())] = rng.choice(
+                (float("nan"), float("inf"), 0.0, -1.0, 1e30)
+            )
+        stored[part][key] = tensor
+    buffer = io.BytesIO()
+    torch.save(stored, buffer)
+    return buffer.getvalue()
+
+
+def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]]:
+    """Each kind's good file and the command that reads a file of its kind."""
+    target, sprayout = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    measurement = read_measurement(target)
+    write_measurements([measurement], work / "good.csv")
+    write_measurements([measurement], work / "good.json")
+    habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]), 200,
+                        "demo-five-angle", "shop A")  # fmt: skip
+    write_habits(habits, work / "habits.json")
+    tolerance = {"name": "shop", "kL": 1.0, "default": {"de00": 1.2},
+                 "geometries": {"45as15": {"dL": 2.0, "dC": 1.0, "dH": 0.8}},
+                 "texture": {"G": 1.0, "SG": 0.5}}  # fmt: skip
+    (work / "tolerance.json").write_text(json.dumps(tolerance))
+    write_recipe(json.loads(recipe.read_text()), work / "recipe.json")
+    CliRunner().invoke(
+        app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", str(work / "cases.csv")]
+    )
+    shutil.copy(shipped_model_path("five-angle"), work / "model.pt")
+    shutil.copy(demo_library_path(), work / "library.json")
+    read_library(work / "library.json")
+    return {
+        "cxf": (target, lambda p: ["inspect", str(p)]),
+        "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
+        "json": (work / "good.json", lambda p: ["inspect", str(p)]),
+        "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
+        "library": (work / "library.json",
+                    lambda p: ["weigh", str(recipe), "--library", str(p), "--physics"]),
+        "habits": (work / "habits.json",
+                   lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
+                              str(sprayout), "--habits", str(p), "--extra-toners", "0"]),
+        "tolerance": (work / "tolerance.json",
+                      lambda p: ["compare", str(target), str(sprayout), "-t", str(p)]),
+        "cases": (work / "cases.csv", lambda p: ["cases", "import", str(p), "-d", "sqlite://"]),
+        "model": (work / "model.pt", lambda p: ["weigh", str(recipe), "--model", str(p)]),
+    }  # fmt: skip
+
+
+def failure(result) -> str | None:
+    """What is wrong with how the CLI met a damaged file, or None."""
+    said = result.stdout + result.stderr
+    if result.exit_code == 70 or "internal error" in said:
+        return result.stderr.strip()[-300:]
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        return repr(result.exception)[:300]
+    if "Traceback" in said or "Warning" in said:
+        return said[-300:]
+    if result.exit_code == 0 and re.search(r"\bnan\b|\binf\b|Infinity", result.stdout, re.I):
+        return "NaN or infinity in the output"
+    if result.exit_code not in (0, 2):
+        return f"exit status {result.exit_code}"
+    return None
+
+
+def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path) -> dict:
+    runner, counts, messages, failed = CliRunner(), {"refused": 0, "read": 0}, {}, []
+    data = good.read_bytes()
+    for i in range(n):
+        damaged = work / f"{kind}-{i}{good.suffix}"
+        if kind == "model":
+            damaged.write_bytes(damage_model(data, rng))
+        elif good.suffix == ".json" and rng.random() < 0.7:
+            damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))
+        else:
+            damaged.write_text(damage_text(data.decode("utf-8"), rng), encoding="utf-8")
+        result = runner.invoke(app, command(damaged))
+        if problem := failure(result):
+            failed.append((damaged, problem))
+            continue
+        damaged.unlink()
+        if result.exit_code == 0:
+            counts["read"] += 1
+            continue
+        counts["refused"] += 1
+        line = result.stderr.strip().splitlines()[-1]
+        messages.setdefault(re.sub(r"\d+", "N", line.replace(str(damaged), "FILE"))[:120], line)
+    return {**counts, "failed": failed, "messages": messages}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--kinds", default="cxf,csv,json,recipe,library,habits,tolerance,cases,model"
+    )
+    parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--show", action="store_true", help="one refusal of each kind of message")
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="flakelab-fuzz-"))
+    kinds = good_files(work)
+    rng = random.Random(args.seed)
+    failures = 0
+    for kind in args.kinds.split(","):
+        if kind not in kinds:
+            parser.error(f"--kinds: {kind!r} is not one of {', '.join(kinds)}")
+        report = fuzz(kind, *kinds[kind], args.n, rng, work)
+        failures += len(report["failed"])
+        print(f"{kind:>9}: {report['refused']} refused, {report['read']} read, "
+              f"{len(report['failed'])} failed", flush=True)  # fmt: skip
+        for path, problem in report["failed"]:
+            print(f"           FAILED {path}: {problem}")
+        if args.show:
+            for line in report["messages"].values():
+                print(f"           {line[:150]}")
+    print(f"damaged files left in {work}" if failures else "", end="\n" if failures else "")
+    if not failures:
+        shutil.rmtree(work)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
