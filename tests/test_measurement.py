@@ -109,8 +109,9 @@ def test_tolerance_files_validated(tmp_path):
         ("[default]\ndL = 1e-320\n", "expected a limit for dL of at least 0.01, got 1e-320"),
         # read before: a tolerance called "nan", kL = nan or true
         ("name = nan\n[default]\nde00 = 1\n", "name: expected a text, got nan"),
-        ("kL = nan\n[default]\nde00 = 1\n", "kL: expected a positive number, got nan"),
-        ("kC = true\n[default]\nde00 = 1\n", "kC: expected a positive number, got True"),
+        ("kL = nan\n[default]\nde00 = 1\n", "kL: expected a number from 0.1 to 10.0, got nan"),
+        ("kC = true\n[default]\nde00 = 1\n", "kC: expected a number from 0.1 to 10.0, got True"),
+        ("kH = 1e-320\n[default]\nde00 = 1\n", "kH: expected a number from 0.1 to 10.0"),
     ]:
         bad.write_text(text)
         with pytest.raises(ValueError, match=where):

@@ -36,6 +36,11 @@ an instrument's own repeatability is 0.02–0.10 ΔE00, so a tighter one could n
 1e-320 overflowed the share of the limit."""
 
 
+PARAMETRIC_FACTORS = (0.1, 10.0)
+"""The kL, kC, kH a tolerance file may set: 1 under the reference conditions, 2 for the
+lightness of textiles; beyond these a factor comes from a slip (1e-320 overflowed ΔE00)."""
+
+
 def _check_limits(limits: Mapping[str, float | None]) -> None:
     if all(v is None for v in limits.values()):
         raise ValueError(f"expected at least one of {', '.join(limits)}, got none")
@@ -263,10 +268,13 @@ class Tolerance:
                 raise ValueError(f"{source}: geometries.{key}: {error}") from None
             geometries[name] = Limit.from_dict(value, f"{source}: geometries.{key}")
         weights = {}
+        low, high = PARAMETRIC_FACTORS
         for k in ("kL", "kC", "kH"):
             value = data.get(k, 1.0)
-            if not is_number(value) or not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{source}: {k}: expected a positive number, got {value!r}")
+            if not is_number(value) or not low <= value <= high:
+                raise ValueError(
+                    f"{source}: {k}: expected a number from {low} to {high}, got {value!r}"
+                )
             weights[k] = float(value)
         for k in ("name", "description"):
             if not isinstance(data.get(k, ""), str):
