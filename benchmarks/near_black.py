@@ -32,7 +32,7 @@ import json
 
 import numpy as np
 
-from flakelab.cases.generator import NEAR_BLACK_L, World
+from flakelab.cases.generator import NEAR_BLACK_L, World, near_black
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
@@ -57,7 +57,7 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
     error, floor = delta_E(measured_lab, model_lab), delta_E(measured_lab, nominal_lab)
     solid = library.paint_families(data.x) == "solid"
     lightness = nominal_lab[..., 0]
-    dark = solid & (lightness < black).all(axis=1)
+    dark = solid & near_black(nominal_lab, black)
 
     def split(values: np.ndarray) -> dict[str, float]:
         return {
@@ -70,7 +70,7 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
     with_hiding = (data.x[solid][:, hiding] > 0).any(axis=1)
     solid_lightness = lightness[solid].mean(axis=1)
     bias = (nominal_lab - model_lab)[solid, :, 0].mean(axis=1)
-    band = np.digitize(lightness[solid].mean(axis=1), BANDS[1:-1])
+    band = np.digitize(solid_lightness, BANDS[1:-1])
     return {
         "instrument": instrument,
         "cases": cases,

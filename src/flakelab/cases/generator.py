@@ -54,7 +54,15 @@ from flakelab.texture.readings import (
     texture_readings,
 )
 
-__all__ = ["WorldSettings", "World", "Variation", "CHUNK", "SHOP_WITH_HABITS"]
+__all__ = [
+    "WorldSettings",
+    "World",
+    "Variation",
+    "CHUNK",
+    "SHOP_WITH_HABITS",
+    "NEAR_BLACK_L",
+    "near_black",
+]
 
 CHUNK = 250
 """Cases drawn from one random stream (the unit of reproducibility)."""
@@ -360,9 +368,7 @@ class World:
             "weathered_target_de00_median": float(np.median(weathered)),
             # paints black at every geometry (solids of organics that absorb the whole
             # spectrum between them, no hiding pigment): darker than any real paint reads
-            "near_black_share": float(
-                np.mean((reflectance_to_Lab(fresh_R)[..., 0] < NEAR_BLACK_L).all(axis=1))
-            ),
+            "near_black_share": float(np.mean(near_black(reflectance_to_Lab(fresh_R)))),
             "exact_model_de00_mean": float(floor.mean()),
             "exact_model_de00_p95": float(np.percentile(floor, 95)),
             "exact_model_de00_mean_by_family": {
@@ -402,6 +408,11 @@ class World:
 NEAR_BLACK_L = 1.0
 """A paint whose nominal L* is below this at every geometry is near-black
 (:meth:`World.realism`'s ``near_black_share``; ``benchmarks/near_black.py``)."""
+
+
+def near_black(lab: NDArray, lightness: float = NEAR_BLACK_L) -> NDArray[np.bool_]:
+    """Which paints of CIELAB ``lab[F, G, 3]`` read below ``lightness`` at every geometry."""
+    return (lab[..., 0] < lightness).all(axis=-1)
 
 
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:
