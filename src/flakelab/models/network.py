@@ -67,13 +67,21 @@ def reflectance_from_log(log_R: torch.Tensor) -> torch.Tensor:
     return torch.exp(torch.clamp(log_R, float(np.log(LOG_FLOOR)) - 3, LOG_CEILING))
 
 
+def _field_error(
+    source: str, document: dict, field: str, expected: str, prefix: str = ""
+) -> ModelError:
+    """A model file's ``field`` (of its description, or of its ``info``: ``prefix``) named
+    with what it should be and what it is."""
+    given = shown(document[field]) if field in document else "nothing"
+    return ModelError(f"{source}: {prefix}{field}: expected {expected}, got {given}")
+
+
 def _check_meta(meta: dict, source: str) -> None:
     """A model file's description: every field of the type the model needs, named when not
     (a file edited by hand, or cut short)."""
 
     def wrong(field: str, expected: str) -> ModelError:
-        given = shown(meta[field]) if field in meta else "nothing"
-        return ModelError(f"{source}: {field}: expected {expected}, got {given}")
+        return _field_error(source, meta, field, expected)
 
     def texts(value: object) -> bool:
         return (
@@ -122,7 +130,7 @@ def _check_info(info: dict, toners: list[str], source: str) -> None:
     """The parts of a model file's ``info`` that matching and the model card read."""
 
     def wrong(field: str, expected: str) -> ModelError:
-        return ModelError(f"{source}: info.{field}: expected {expected}, got {shown(info[field])}")
+        return _field_error(source, info, field, expected, "info.")
 
     cases = info.get("toner_cases", {})
     if not isinstance(cases, dict) or not all(
