@@ -101,6 +101,7 @@ class WorldSettings:
     shop_film_build: float = 1.0
     shop_spread: float = 1.0
     shop_gain: float = 0.0
+    solid_white_share: float = 0.5
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
     )
@@ -147,6 +148,7 @@ class World:
             return [names.index(t.name) for t in library.of_kind(kind) if t.name not in exclude]
 
         self._aluminium, self._pearls, self._pigments = map(pool, ("aluminium", "pearl", "pigment"))
+        self._white, self._hiding = _hiding_bases(library, self._pigments)
         self._organic = np.array(
             [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
         )
@@ -172,14 +174,30 @@ class World:
                 x[i] = rng.uniform(0.3, 1.0)
             if rng.random() < 0.5 and self._aluminium:
                 x[rng.choice(self._aluminium)] = rng.uniform(0.05, 0.3)
+        elif kind == "solid" and self._hiding:
+            x[self._solid_base(rng)] = rng.uniform(0.3, 1.0)
         effect = x.sum()
-        count = rng.integers(0 if kind != "solid" else 1, 5)
-        for i in _pick(rng, self._pigments, count):
+        if kind != "solid":
+            low, high, most = 0, 5, 0.15
+        elif effect > 0:  # tints over the hiding base
+            low, high, most = 0, 4, 0.5
+        else:  # a library with no pigment that hides
+            low, high, most = 1, 5, 1.0
+        tints = [i for i in self._pigments if x[i] == 0]
+        for i in _pick(rng, tints, rng.integers(low, high)):
             # tinting strengths span two decades: log-uniform amounts
-            x[i] = np.exp(rng.uniform(np.log(0.003), np.log(0.15 if kind != "solid" else 1.0)))
+            x[i] = np.exp(rng.uniform(np.log(0.003), np.log(most)))
         if kind != "solid" and x.sum() - effect > 0.5 * x.sum():
             x[x > 0] *= np.where(np.isin(np.flatnonzero(x > 0), self._pigments), 0.5, 1.0)
         return x / x.sum()
+
+    def _solid_base(self, rng: np.random.Generator) -> int:
+        """A solid's hiding pigment: the library's white for ``solid_white_share`` of solids
+        (whites, greys and pastels are most of a shop's solids), else another that hides."""
+        others = [i for i in self._hiding if i != self._white]
+        if not others or rng.random() < self.settings.solid_white_share:
+            return self._white
+        return int(rng.choice(others))
 
     # -- appearance -----------------------------------------------------------------------
     def variation(self, n: int, rng: np.random.Generator, at_shop: bool = True) -> Variation:
@@ -413,6 +431,14 @@ NEAR_BLACK_L = 1.0
 def near_black(lab: NDArray, lightness: float = NEAR_BLACK_L) -> NDArray[np.bool_]:
     """Which paints of CIELAB ``lab[F, G, 3]`` read below ``lightness`` at every geometry."""
     return (lab[..., 0] < lightness).all(axis=-1)
+
+
+def _hiding_bases(library: Library, pool: list[int]) -> tuple[int | None, list[int]]:
+    """The whitest pigment of ``pool`` (indices into ``library``) that hides, and all that
+    hide (:attr:`~flakelab.library.toners.Pigment.hides`)."""
+    hiding = [i for i in pool if library.toners[i].hides]
+    white = max(hiding, key=lambda i: library.toners[i].whiteness, default=None)
+    return white, hiding
 
 
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:

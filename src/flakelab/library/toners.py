@@ -30,6 +30,7 @@ __all__ = [
     "TONER_KINDS",
     "PAINT_FAMILIES",
     "SUM_TOLERANCE",
+    "HIDING_COEFFICIENT",
 ]
 
 SUM_TOLERANCE = 1e-6
@@ -40,6 +41,11 @@ MAX_COEFFICIENT = 1e4
 fraction]: light 0.1 nm deep in a full-strength layer, about 800 times the demo library's
 strongest (carbon black's K, 13). Larger values only come from a typing slip, and overflow
 the optics (a value of 1e308 made the prediction NaN)."""
+HIDING_COEFFICIENT = 1.0
+"""Specific scattering (mean) or absorption (least) [1/µm per unit mass fraction] from which
+a pigment hides the primer by itself (:attr:`Pigment.hides`). The demo library splits
+cleanly at it: TiO2, the opaque iron oxides and BiVO4 scatter 1.6–9.3, carbon black absorbs
+12.8 at least; every other pigment scatters below 0.2 and absorbs below 0.5 somewhere."""
 
 
 class LibraryError(FlakelabError):
@@ -157,6 +163,22 @@ class Pigment:
     def transparent(self) -> bool:
         """True for a dye-like toner that absorbs but does not scatter."""
         return not np.any(self.scattering > 0)
+
+    @property
+    def hides(self) -> bool:
+        """True for a pigment that hides a basecoat's primer on its own: a white or an
+        opaque inorganic that scatters (mean S ≥ ``HIDING_COEFFICIENT``), or a black that
+        absorbs across the whole spectrum (least K ≥ ``HIDING_COEFFICIENT``)."""
+        return bool(
+            self.scattering.mean() >= HIDING_COEFFICIENT
+            or self.absorption.min() >= HIDING_COEFFICIENT
+        )
+
+    @property
+    def whiteness(self) -> float:
+        """Share of scattering in extinction, S / (K + S) averaged over wavelength: 1 for
+        a white, 0 for a dye."""
+        return float(self.scattering.mean() / (self.absorption + self.scattering).mean())
 
 
 @dataclass(frozen=True)
