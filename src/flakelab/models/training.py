@@ -431,10 +431,17 @@ def _batch_losses_for(device: torch.device) -> Callable[..., torch.Tensor]:
     CPU at batch 1024), bound by their launches, and compiling fuses the element-wise ones
     (the colour term's, chiefly). On the CPU it runs as written: compiling there cost 55 s on
     two cores and gained nothing measurable, and the CPU's numbers stay those it has always
-    given."""
+    given. Compiled for each shape it meets (``dynamic=False``: the full batches and an
+    epoch's last, for each stage's cases and networks): with dynamic shapes, torch 2.11's
+    compiled backward asserted a stride of the screen's case count on the final training's
+    (benchmarks/learning.py on an H100; the class of pytorch/pytorch#104653, too few guards
+    on the backward)."""
     if device.type == "cuda" and importlib.util.find_spec("triton") is not None:
         torch._dynamo.config.suppress_errors = True  # no compiler at hand: run it as written
-        return torch.compile(_batch_losses)
+        # a shape per stage and fold (a sequential screen trains its folds one by one)
+        limit = torch._dynamo.config.recompile_limit
+        torch._dynamo.config.recompile_limit = max(limit, 32)
+        return torch.compile(_batch_losses, dynamic=False)
     return _batch_losses
 
 
