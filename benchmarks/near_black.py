@@ -1,23 +1,24 @@
 """Near-black solids: how many of the generated cases they are, and what the model errs on them.
 
-A solid of transparent organic pigments whose absorption bands cover the spectrum between
-them (quinacridone red with a little phthalo blue) reads black in the world's physics, with
-reflectance factors down to 1e-29 and L* below 1 at every geometry: the world has no floor
-of reflectance (a clearcoat's haze, the binder's own scattering), which keeps any real paint
-above that. A white primer instead of the demo library's dark one leaves most of them black
-(``cases realism``'s ``near_black_share`` 0.0675 against 0.0775, seed 0). The learned model
-learns the logarithm of the reflectance above a floor (``flakelab.models.network.LOG_FLOOR``,
-1e-3), so it predicts those paints at about L* 0.8. This prints, on the cases of
-``flakelab cases generate --n 500 --seed 987`` (issue 4's evaluation, the shipped model) or
-any others:
+Until 2026-11-27 (stop 51) the generator drew a solid's one to four pigments from the whole
+library, so a third of its solids held no pigment that hides the primer, and 90 % of those
+were transparent organics whose absorption bands cover the spectrum between them
+(quinacridone red with a little phthalo blue): they read black, with reflectance factors
+down to 1e-29 and L* below 1 at every geometry, 7.75 % of ``cases realism``'s cases (seed
+0), and no real paint reads that. A solid is now built on a pigment that hides
+(:attr:`~flakelab.library.toners.Pigment.hides`: the white, an opaque iron oxide, BiVO4 or
+carbon black) with up to three tints; the near-black paints left are the blacks a shop
+sees. The learned model learns the logarithm of the reflectance above a floor
+(``flakelab.models.network.LOG_FLOOR``, 1e-3), so it predicts a paint darker than that at
+about L* 0.8. This prints, on the cases of ``flakelab cases generate --n 500 --seed 987``
+(issue 4's evaluation, the shipped model) or any others:
 
 * the share of the cases that are near-black (nominal L* below ``--black`` at every
   geometry), the measured spray-outs' reflectance there;
 * the model's ΔE00 against the measured spray-outs (issue 4's ``de00_mean``) and the noise
   floor (the nominal paint against them) with and without the near-black cases;
-* the solids' nominal L* quartiles, and how many hold a scattering (hiding) pigment: the
-  generator draws a solid's one to four pigments from the whole library, so a third of them
-  have none, and most of those are black;
+* the solids' nominal L* quartiles, how many hold a pigment that hides, and how many of
+  the near-black hold a black;
 * for the solids, the mean ΔL* of the nominal paint minus the model's prediction per band
   of nominal L*: the model's bias.
 
@@ -66,8 +67,12 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
             "near_black": round(float(values[dark].mean()), 3) if dark.any() else None,
         }
 
-    hiding = np.array([t.kind == "pigment" and not t.transparent for t in library.toners])
-    with_hiding = (data.x[solid][:, hiding] > 0).any(axis=1)
+    def holding(kind: str) -> np.ndarray:  # which solids hold a pigment that hides, or a black
+        pigments = np.array([t.kind == "pigment" and getattr(t, kind) for t in library.toners])
+        return (data.x[solid][:, pigments] > 0).any(axis=1)
+
+    with_hiding, with_black = holding("hides"), holding("black")
+    dark_solids = dark[solid]
     solid_lightness = lightness[solid].mean(axis=1)
     bias = (nominal_lab - model_lab)[solid, :, 0].mean(axis=1)
     band = np.digitize(solid_lightness, BANDS[1:-1])
@@ -80,13 +85,14 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
         "near_black": int(dark.sum()),
         "near_black_share": round(float(dark.mean()), 4),
         "near_black_measured_R_median": float(np.median(data.R[dark])) if dark.any() else None,
-        # what makes them: solids drawn without any scattering (hiding) pigment
+        # what makes them: a black, or (the generator before 2026-11-27) no hiding pigment
         "solid_nominal_L_quartiles": np.percentile(solid_lightness, [25, 50, 75]).round(1).tolist(),
         "solids_with_a_hiding_pigment": round(float(with_hiding.mean()), 3),
         "near_black_share_of_solids": {
-            "with_a_hiding_pigment": round(float(dark[solid][with_hiding].mean()), 3),
-            "without": round(float(dark[solid][~with_hiding].mean()), 3),
+            "with_a_hiding_pigment": _share(dark_solids[with_hiding]),
+            "without": _share(dark_solids[~with_hiding]),
         },
+        "near_black_holding_a_black": _share(with_black[dark_solids]),
         "de00_mean": split(error),
         "noise_floor_de00_mean": split(floor),
         "solid_bias_dL_by_nominal_L": {
@@ -97,6 +103,14 @@ def near_black_report(instrument: str, cases: int, seed: int, black: float) -> d
             for k in range(len(BANDS) - 1)
         },
     }
+
+
+def _share(flags: np.ndarray) -> float | None:
+    return round(float(flags.mean()), 3) if flags.size else None
+
+
+def _percent(share: float | None) -> str:
+    return "none" if share is None else f"{share:.0%}"
 
 
 def main() -> None:
@@ -117,14 +131,15 @@ def main() -> None:
         f"{report['model']}, {args.cases} cases of seed {args.seed}: {report['solids']} solids, "
         f"{report['near_black']} near-black (nominal L* < {args.black:g} at every geometry, "
         f"{report['near_black_share']:.1%} of the cases; measured R median "
-        f"{report['near_black_measured_R_median']:.1e})"
+        f"{report['near_black_measured_R_median'] or 0:.1e})"
     )
     shares = report["near_black_share_of_solids"]
     print(
         f"solids' nominal L* (mean over geometries) quartiles "
         f"{report['solid_nominal_L_quartiles']}; {report['solids_with_a_hiding_pigment']:.0%} "
-        f"hold a scattering (hiding) pigment, of which {shares['with_a_hiding_pigment']:.0%} "
-        f"are near-black, against {shares['without']:.0%} of the others"
+        f"hold a pigment that hides, of which {_percent(shares['with_a_hiding_pigment'])} "
+        f"are near-black, against {_percent(shares['without'])} of the others; "
+        f"{_percent(report['near_black_holding_a_black'])} of the near-black hold a black"
     )
     for name in ("de00_mean", "noise_floor_de00_mean"):
         row = report[name]

@@ -7,6 +7,12 @@ but imperfect match finds it; it is mixed from the shop's batches, sprayed with 
 application and measured (the *spray-out*). Every random draw comes from one seeded
 generator, so ``(n, seed)`` gives the same cases on every machine.
 
+Formulations (:meth:`World.formulations`, the family mix ``kinds``): a metallic is one or two
+aluminiums, a pearl one or two pearls (half of them over a little aluminium), each with up
+to four pigments at log-uniform amounts; a solid is a pigment that hides the primer — the
+library's white for ``solid_white_share`` of them, else an opaque iron oxide, BiVO4 or a
+black — with up to three tints.
+
 Sources of variation (all in :class:`WorldSettings`):
 * toner batches: strength × N(1, 3 %) per toner, hue drift of the pigment absorption by a
   shift of N(0, 1.5 nm);

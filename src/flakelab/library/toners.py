@@ -169,10 +169,13 @@ class Pigment:
         """True for a pigment that hides a basecoat's primer on its own: a white or an
         opaque inorganic that scatters (mean S ≥ ``HIDING_COEFFICIENT``), or a black that
         absorbs across the whole spectrum (least K ≥ ``HIDING_COEFFICIENT``)."""
-        return bool(
-            self.scattering.mean() >= HIDING_COEFFICIENT
-            or self.absorption.min() >= HIDING_COEFFICIENT
-        )
+        return bool(self.scattering.mean() >= HIDING_COEFFICIENT or self.black)
+
+    @property
+    def black(self) -> bool:
+        """True for a black: it absorbs across the whole spectrum (least K ≥
+        ``HIDING_COEFFICIENT``)."""
+        return bool(self.absorption.min() >= HIDING_COEFFICIENT)
 
     @property
     def whiteness(self) -> float:
