@@ -621,23 +621,23 @@ def example_by_metamerism(hybrid):
 
 
 def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(hybrid):
-    """A yellowish green metallic on fine aluminium, made as the harness makes its targets
-    (seed 11, the fifth of 40). Matched on colour alone, its candidates include two visibly
-    grainier (ΔG +1.25 and +1.76), as close in colour as the rest. The refinish tolerance
-    bounds |ΔG| by 1: those recipes then rank out of the five, every candidate is within the
-    texture limits, and the colour-best recipe is still first. A limit no recipe can meet
-    fails them all on texture alone, and the search's note names the reading. (The shipped
-    example served until the models learnt Si per light; its colour-only candidates are now
-    all within |ΔG| 0.45. Of 40 such targets, 7 had a grainy candidate; this one is the
-    first whose five refinish candidates all meet the limits.)"""
+    """A silver of fine bright aluminium and VMP, made as the harness makes its targets
+    (seed 11, the last of 40). Matched on colour alone, its candidates include one visibly
+    grainier (coarse bright aluminium with Xirallic, ΔG +1.66), as close in colour as the
+    fifth. The refinish tolerance bounds |ΔG| by 1: that recipe then ranks out of the five,
+    what fails the limit ranks after every candidate that meets it, and the colour-best
+    recipe is still first. A limit no recipe can meet fails them all on texture alone, and
+    the search's note names the reading. (Stop 51's model: of the 40 targets, 2 had a grainy
+    colour candidate; with the models before, 7, and the fifth served, whose refinish
+    candidates all met the limits.)"""
     from flakelab.match.evaluate import harness_world, trial
     from flakelab.match.models import effect_mask
 
     library = read_library(None)
     world = harness_world(library, "five-angle")
     rng = np.random.default_rng(11)
-    hidden = world.formulations(40, rng)[:5]
-    # the four trials before it are made only to draw the generator as the scan of 40 did
+    hidden = world.formulations(40, rng)
+    # the trials before it are made only to draw the generator as the scan of 40 did
     target = [trial(world, x, rng) for x in hidden][-1].measurement()
     effect = effect_mask(library, hybrid.toners)
     refinish = tolerance_preset("refinish")
@@ -654,10 +654,13 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     assert grainy and all(c.passes and c.texture_share == {} for c in colour)
     sets = {name: [set(c.fractions) for c in r.candidates] for name, r in results.items()}
     assert all(set(c.fractions) not in sets["refinish"] for c in grainy)
+    meets = []
     for c in results["refinish"].candidates:
         assert set(c.texture_share) == {"SG", "G"}
-        assert max(c.texture_share.values()) <= 1 and c.failing_texture == []
+        meets.append(max(c.texture_share.values()) <= 1)
+        assert meets[-1] == (c.failing_texture == [])
         assert c.texture_share["G"] == pytest.approx(abs(c.texture_delta["G"]))
+    assert sum(meets) >= 4 and meets == sorted(meets, reverse=True)
     assert sets["refinish"][0] == sets["colour"][0]
     best = results["tight"].candidates[0]
     assert best.failing == [] and best.failing_texture == ["G"] and not best.passes
@@ -699,23 +702,23 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
 
 
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
-    """The car's blues are phthalo blue GS and indanthrone (the match that weighs metamerism).
-    The daylight-only match of the example stands in phthalo green and quinacridone magenta
-    for them. Without either blue and sprayed a little light, a correction that keeps its
-    pigments moves amounts, its expected index stays over the notice level under every light,
-    and the colorist is told to match again; the car's own recipe sprayed the same way
-    draws no such note. The daylight-only match as the search finds it keeps the indanthrone
-    but not the GS: its correction (adding DPP orange) lowers the worst index under FL11 from
-    2.58 to 1.46 and still says to match again. With a trace of the GS instead (0.3 %), the
-    correction raises it into a tint (adding DPP red) and the metamer is cured (under A
-    2.63 → 0.14). A correction changes amounts and adds one toner: it cures a metamer only
-    where the recipe already carries the car's pigment that makes it one."""
+    """The car's blue is phthalo blue GS (the match that weighs metamerism). The daylight-only
+    match of the example stands in phthalo green and quinacridone violet for it. Sprayed a
+    little light, a correction that keeps its pigments moves amounts, its expected index
+    stays over the notice level under every light, and the colorist is told to match again;
+    the car's own recipe sprayed the same way draws no such note. Allowed to add a toner too,
+    the correction finds none that helps (worst index under FL11 2.42 → 2.49) and still says
+    to match again. With a trace of the GS (0.3 %), the correction raises it into a tint
+    (adding DPP red) and the metamer is cured (under A 1.96 → 0.10). A correction changes
+    amounts and adds one toner: it cures a metamer only where the recipe already carries the
+    car's pigment that makes it one. (Stop 51's model; the models before stood in phthalo
+    green and quinacridone magenta for the car's two blues, and kept the indanthrone.)"""
     from flakelab.core.difference import METAMERISM_NOTICE, is_metamer, worst_light
     from flakelab.match.correction import metamerism_note
 
     target, best, _ = example_by_metamerism
     spectra = target.storage_spectra(hybrid.geometries)
-    car = ("Phthalo blue GS", "Indanthrone blue")
+    car = ("Phthalo blue GS",)
     assert set(car) <= set(best[1.0].fractions)
     others = {n: v for n, v in best[0.0].fractions.items() if n not in car}
     metamer = {n: v / sum(others.values()) for n, v in others.items()}
@@ -726,7 +729,7 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
         "found": best[0.0].fractions,
         "traced": traced,
     }
-    assert car[0] not in best[0.0].fractions and car[1] in best[0.0].fractions
+    assert car[0] not in best[0.0].fractions
     notes, fixed, befores = {}, {}, {}
     for name, recipe in recipes.items():
         R = evaluate_recipes(hybrid, recipe_vector(hybrid, recipe)[None])[0][0]
@@ -739,30 +742,26 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
         notes[name] = metamerism_note(before, fixed[name].metamerism)
         if name == "metamer":
             assert is_metamer(before)
-            # amounts alone leave it one under every light (A 2.72 → 2.50, FL11 1.88 → 2.16,
-            # LED-B3 1.44 → 1.43): they trade one light's index for another's
+            # amounts alone leave it one under every light (A 2.01 → 2.02, FL11 2.42 → 2.49,
+            # LED-B3 1.45 → 1.49)
             for light, index in fixed[name].metamerism.items():
                 assert index.max() > METAMERISM_NOTICE, light
             assert worst_light(fixed[name].metamerism)[1] == pytest.approx(
                 worst_light(before)[1], abs=0.25
             )
-    assert "under A" in notes["metamer"] and "match the target again" in notes["metamer"]
+    assert "under FL11" in notes["metamer"] and "match the target again" in notes["metamer"]
     assert notes["car"] is None
 
-    found = fixed["found"]
-    assert found.new_toner == "DPP orange" and car[0] not in found.fractions
-    assert (
-        METAMERISM_NOTICE
-        < worst_light(found.metamerism)[1]
-        < (worst_light(befores["found"])[1] - 0.5)
-    )
+    found = fixed["found"]  # a toner may be added: none lifts the metamer
+    assert car[0] not in found.fractions
+    assert worst_light(found.metamerism)[1] > METAMERISM_NOTICE
     assert "FL11" in notes["found"] and "match the target again" in notes["found"]
     cured = fixed["traced"]
     assert cured.fractions[car[0]] > 10 * traced[car[0]]
     assert cured.new_toner == "DPP red"
     assert worst_light(cured.metamerism)[1] < METAMERISM_NOTICE / 2
     assert (befores["traced"]["A"].max(), cured.metamerism["A"].max()) == pytest.approx(
-        (2.63, 0.14), abs=0.01
+        (1.96, 0.10), abs=0.01
     )
     assert notes["traced"] is None
 
@@ -964,14 +963,16 @@ def test_hybrid_keeps_a_dark_masstone_dark(hybrid):
     """A trace of a new toner in a masstone of a strongly absorbing pigment: the physics
     reflects next to nothing there (1e-7), and its ratio, taken unfloored, carried 4 %
     perylene red in quinacridone violet to R = 47 at 400 nm (ΔE00 37 from the physics). On
-    the learned base's own floored scale it stays within the learned model's error."""
+    the learned base's own floored scale it stays within the learned model's error. Since
+    stop 51 the world's solids are built on a pigment that hides, so the masstones here are
+    tinted blacks (without the black, ΔE00 8.5: the models no longer learn organics alone)."""
     from flakelab.cases.generator import World
 
     names = hybrid.library.names
     world = World(hybrid.library, "five-angle")
     for recipe in (
-        {"Quinacridone violet": 0.963, "Perylene red": 0.037},
-        {"Phthalo green": 0.928, "Isoindoline yellow": 0.072},
+        {"Carbon black": 0.3, "Quinacridone violet": 0.663, "Perylene red": 0.037},
+        {"Carbon black": 0.3, "Phthalo green": 0.628, "Isoindoline yellow": 0.072},
     ):
         x = recipe_row(names, recipe)
         predicted = reflect(hybrid, x[None])[0]
@@ -1234,24 +1235,15 @@ def test_matcher_rebuilds_a_pearl_over_an_aluminium_base(hybrid):
 
 
 @pytest.mark.parametrize(
-    "recipe",
-    [
-        {"Al coarse": 0.65, "Al extra coarse": 0.345, "Titanium dioxide white": 0.005},
-        {
-            "Al medium": 0.5,
-            "Al VMP": 0.48,
-            "Indanthrone blue": 0.01,
-            "Bismuth vanadate yellow": 0.01,
-        },
-    ],
+    "recipe", [{"Al coarse": 0.65, "Al extra coarse": 0.345, "Titanium dioxide white": 0.005}]
 )
 def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
     """Two aluminiums the free screen never isolates: its restarts blend half a dozen
-    aluminiums, and no three of them rebuild the blend (ΔE00 1.39 and 2.08 without the screen
-    of effect bases, on daylight colour alone; weighing metamerism, 0.09 and 2.02; with it,
-    0.09 and 0.18). The base screen tries every pair with the pigments free. Of seven
-    two-aluminium blends tried on the shipped model, these two need it; the others' free
-    restarts reach 0.07–0.43."""
+    aluminiums, and no three of them rebuild the blend (ΔE00 1.39 without the screen of
+    effect bases, on daylight colour alone; weighing metamerism, 0.09; with it, 0.09). The
+    base screen tries every pair with the pigments free. Of seven two-aluminium blends tried
+    on the shipped model, two needed it; since stop 51's models the free restarts find the
+    second (Al medium and Al VMP with indanthrone blue and BiVO4) to 0.21 by themselves."""
     from flakelab.match.models import effect_mask
 
     names = hybrid.library.names
@@ -1339,22 +1331,18 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
 
 
 @pytest.mark.parametrize(
-    "recipe",
-    [
-        {"Quinacridone magenta": 0.6, "Quinacridone red": 0.3, "Perylene maroon": 0.1},
-        {"Iron oxide red": 0.5, "Carbon black": 0.05, "Perylene maroon": 0.45},
-    ],
+    "recipe", [{"Carbon black": 0.3, "Quinacridone magenta": 0.5, "Perylene maroon": 0.2}]
 )
 def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     """A solid, as the physics makes it. The learned model never saw a paint between a solid
     and about half effect toners; left free, the search finds its guess there, a trace of
-    effect toner (the maroon: 0.2 % of red pearl, predicted within 0.16 ΔE00, 0.37 off by the
-    physics; the black: 19 % of Al fine dark, 0.13 and 0.61). Kept to the model's support,
-    the best recipe is a solid (the maroon: its own toners, 0.08 off; the black: 0.08), and
-    the physics puts it at less than half the distance. On daylight colour alone: for the
-    maroon, weighing metamerism keeps the search off that guess by itself. Of eight lighter
-    solids tried (L* 10–55 at 45as45), the free search of the shipped model left only a
-    magenta tint with a trace (0.2 %, 0.49 off against 0.33 kept)."""
+    effect toner (this tinted black, stop 51's models: 6.5 % of effect toner, predicted
+    within 0.40 ΔE00, 0.43 off by the physics). Kept to the model's support, the best recipe
+    is a solid (0.085 off by the physics), less than half the distance. On daylight colour
+    alone. The models before stop 51 (trained on solids of organics alone) did this to a
+    maroon of iron oxide red, carbon black and perylene maroon and to a solid of quinacridones
+    without a white; the maroon is now matched as a solid when free too (0.42 off by the
+    physics), and organics alone no longer make a solid of the world."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import worst_de00
     from flakelab.match.models import effect_mask

@@ -8,12 +8,9 @@ import numpy as np
 
 from flakelab.library.toners import Library
 from flakelab.match.forward import HybridForward, LearnedForward
-from flakelab.models.network import ForwardModel, ModelError
+from flakelab.models.network import MIN_CASES, ForwardModel, ModelError
 
 __all__ = ["forward_for", "MIN_CASES", "effect_mask"]
-
-MIN_CASES = 20
-"""A toner with fewer training cases than this is new to the learned model: physics scales it."""
 
 
 def effect_mask(library: Library, toners) -> np.ndarray:
@@ -38,6 +35,5 @@ def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
             f"library {library.name!r} and model {model.info.get('name', '?')} "
             f"{_toner_difference(library.names, model.toners)}; train a model for this library"
         )
-    counts = model.info.get("toner_cases", {})
-    novel = [n for n in library.names if counts.get(n, MIN_CASES) < MIN_CASES]
+    novel = list(model.new_toners)
     return HybridForward(model, library, novel) if novel else LearnedForward(model)

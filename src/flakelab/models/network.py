@@ -34,10 +34,14 @@ __all__ = [
     "build_network",
     "LOG_FLOOR",
     "LOG_OFFSET_MAX",
+    "MIN_CASES",
     "ModelError",
     "reflectance_from_log",
 ]
 
+MIN_CASES = 20
+"""A toner with fewer training cases than this is new to a learned model: the matcher has
+physics scale it (:func:`flakelab.match.models.forward_for`)."""
 EFFECT_OFFSET = 0.05
 """Added to the effect-pigment fraction in the ratio features (solids have none)."""
 FEATURE_BLOCKS = 2
@@ -275,6 +279,13 @@ class ForwardModel:
     effect: NDArray | None = None
     log_offset: float = 0.0
     _constants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def new_toners(self) -> tuple[str, ...]:
+        """The toners it learned from fewer than ``MIN_CASES`` cases (a model that does not
+        record its cases per toner: none)."""
+        counts = self.info.get("toner_cases", {})
+        return tuple(n for n in self.toners if counts.get(n, MIN_CASES) < MIN_CASES)
 
     @property
     def members(self) -> int:

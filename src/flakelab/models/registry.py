@@ -11,6 +11,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
@@ -215,15 +216,24 @@ def register(
     metrics: dict | None = None,
 ) -> dict:
     """Store ``model`` as a new version and promote it if it beats the current one on
-    ``held_out``. Returns the version, both scores and whether it was promoted."""
+    ``held_out``, judged on the cases whose toners both learned (the network's answer for a
+    toner it never learned is no answer: the matcher has physics scale such toners). Returns
+    the version, both scores, the cases judged and whether it was promoted."""
     name = name or model.instrument
     score = evaluate_model(model, held_out)["de00_mean"]
+    judged, incumbent_score = held_out.x.shape[0], float("inf")
     try:
         incumbent = current_model(engine, model.instrument)
-        incumbent_score = evaluate_model(incumbent, held_out)["de00_mean"]
-    except ModelError:
-        incumbent_score = float("inf")
-    better = score < incumbent_score
+        both = _cases_without(held_out, {*model.new_toners, *incumbent.new_toners})
+        judged = both.x.shape[0]
+        if judged:
+            incumbent_score = evaluate_model(incumbent, both)["de00_mean"]
+            score = evaluate_model(model, both)["de00_mean"]
+        else:  # nothing shows that it is better
+            incumbent_score = None
+    except ModelError:  # no current model for this library and instrument: promote the first
+        judged = held_out.x.shape[0]
+    better = incumbent_score is not None and score < incumbent_score
     with Session(engine) as session, session.begin():
         version = (
             session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == name)) or 0
@@ -249,5 +259,12 @@ def register(
         "version": version,
         "held_out_de00": score,
         "incumbent_de00": incumbent_score,
+        "cases_judged": judged,
         "promoted": better,
     }
+
+
+def _cases_without(data: CaseArrays, toners: set[str]) -> CaseArrays:
+    """The cases of ``data`` whose recipes hold none of ``toners``."""
+    new = np.isin(np.array(data.toners), sorted(toners))
+    return data.subset(np.flatnonzero(~(data.x[:, new] > 0).any(axis=1)))
