@@ -154,7 +154,7 @@ class World:
             return [names.index(t.name) for t in library.of_kind(kind) if t.name not in exclude]
 
         self._aluminium, self._pearls, self._pigments = map(pool, ("aluminium", "pearl", "pigment"))
-        self._white, self._hiding = _hiding_bases(library, self._pigments)
+        self._white, self._other_bases = _solid_bases(library, self._pigments)
         self._organic = np.array(
             [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
         )
@@ -180,7 +180,7 @@ class World:
                 x[i] = rng.uniform(0.3, 1.0)
             if rng.random() < 0.5 and self._aluminium:
                 x[rng.choice(self._aluminium)] = rng.uniform(0.05, 0.3)
-        elif kind == "solid" and self._hiding:
+        elif kind == "solid" and self._white is not None:
             x[self._solid_base(rng)] = rng.uniform(0.3, 1.0)
         effect = x.sum()
         if kind != "solid":
@@ -200,10 +200,9 @@ class World:
     def _solid_base(self, rng: np.random.Generator) -> int:
         """A solid's hiding pigment: the library's white for ``solid_white_share`` of solids
         (whites, greys and pastels are most of a shop's solids), else another that hides."""
-        others = [i for i in self._hiding if i != self._white]
-        if not others or rng.random() < self.settings.solid_white_share:
+        if not self._other_bases or rng.random() < self.settings.solid_white_share:
             return self._white
-        return int(rng.choice(others))
+        return int(rng.choice(self._other_bases))
 
     # -- appearance -----------------------------------------------------------------------
     def variation(self, n: int, rng: np.random.Generator, at_shop: bool = True) -> Variation:
@@ -439,12 +438,12 @@ def near_black(lab: NDArray, lightness: float = NEAR_BLACK_L) -> NDArray[np.bool
     return (lab[..., 0] < lightness).all(axis=-1)
 
 
-def _hiding_bases(library: Library, pool: list[int]) -> tuple[int | None, list[int]]:
-    """The whitest pigment of ``pool`` (indices into ``library``) that hides, and all that
-    hide (:attr:`~flakelab.library.toners.Pigment.hides`)."""
+def _solid_bases(library: Library, pool: list[int]) -> tuple[int | None, list[int]]:
+    """The whitest pigment of ``pool`` (indices into ``library``) that hides, and the others
+    that hide (:attr:`~flakelab.library.toners.Pigment.hides`): a solid's bases."""
     hiding = [i for i in pool if library.toners[i].hides]
     white = max(hiding, key=lambda i: library.toners[i].whiteness, default=None)
-    return white, hiding
+    return white, [i for i in hiding if i != white]
 
 
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:

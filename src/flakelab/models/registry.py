@@ -220,19 +220,16 @@ def register(
     toner it never learned is no answer: the matcher has physics scale such toners). Returns
     the version, both scores, the cases judged and whether it was promoted."""
     name = name or model.instrument
-    score = evaluate_model(model, held_out)["de00_mean"]
-    judged, incumbent_score = held_out.x.shape[0], float("inf")
+    judged, incumbent_score = held_out, float("inf")
     try:
         incumbent = current_model(engine, model.instrument)
         both = _cases_without(held_out, {*model.new_toners, *incumbent.new_toners})
-        judged = both.x.shape[0]
-        if judged:
-            incumbent_score = evaluate_model(incumbent, both)["de00_mean"]
-            score = evaluate_model(model, both)["de00_mean"]
-        else:  # nothing shows that it is better
-            incumbent_score = None
+        # with no case whose toners both learned, nothing shows that it is better
+        incumbent_score = evaluate_model(incumbent, both)["de00_mean"] if len(both.x) else None
+        judged = both
     except ModelError:  # no current model for this library and instrument: promote the first
-        judged = held_out.x.shape[0]
+        pass
+    score = evaluate_model(model, judged if len(judged.x) else held_out)["de00_mean"]
     better = incumbent_score is not None and score < incumbent_score
     with Session(engine) as session, session.begin():
         version = (
@@ -259,7 +256,7 @@ def register(
         "version": version,
         "held_out_de00": score,
         "incumbent_de00": incumbent_score,
-        "cases_judged": judged,
+        "cases_judged": len(judged.x),
         "promoted": better,
     }
 
