@@ -21,6 +21,7 @@ from flakelab.core.spectra import WAVELENGTHS
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MA_T12 = SHARED / "ma-t12"
+PIGMENT_KM = SHARED / "pigment-km"
 
 
 def _run_cli(*args: object) -> subprocess.CompletedProcess:
@@ -53,6 +54,31 @@ def user_data_folder(tmp_path_factory) -> Path:
 def cli():
     """Run the CLI in this process (:func:`_run_cli`)."""
     return _run_cli
+
+
+def _pigment_km_rows(name: str, first_nm: int) -> dict[str, np.ndarray]:
+    """Rows ``name → values`` of a file of ../shared/data/pigment-km (tab-separated, first
+    band at ``first_nm``, 10 nm apart), each cut to flakelab's 400–700 nm grid; a row of two
+    spectra (Okumura's K then S) keeps both, one after the other."""
+    rows = {}
+    for line in (PIGMENT_KM / name).read_text().splitlines():
+        if not line.strip():
+            continue
+        label, *fields = [f for f in line.split("\t") if f.strip()]
+        values = np.array(fields, dtype=float)
+        bands = 40 if values.size == 80 else values.size  # Okumura's rows hold K and S
+        start = (int(WAVELENGTHS[0]) - first_nm) // 10
+        spectra = values.reshape(-1, bands)[:, start : start + WAVELENGTHS.size]
+        rows[label.strip().strip('"')] = spectra.ravel()
+    return rows
+
+
+@pytest.fixture(scope="session")
+def pigment_km():
+    """The reader of ../shared/data/pigment-km's files (:func:`_pigment_km_rows`)."""
+    if not PIGMENT_KM.is_dir():
+        pytest.skip(f"reference data not found at {PIGMENT_KM} (../shared/data is absent)")
+    return _pigment_km_rows
 
 
 @pytest.fixture(scope="session")

@@ -197,3 +197,29 @@ def test_a_library_that_differs_from_the_model_says_how():
 def test_duplicate_toner_names_rejected():
     with pytest.raises(LibraryError, match="appear twice"):
         Library("x", (AluminiumFlake("A", 5, 0.2, 10), AluminiumFlake("A", 6, 0.2, 10)))
+
+
+def test_the_demo_white_is_a_rutile_white(pigment_km):
+    """The demo library's titanium dioxide against two measurements of real rutile whites: its
+    K/S within × 2.5 of Okumura's titanium white at 400–440 nm, its band edge, and the world's
+    white masstone at 45as45 within 1.5 in a*, b* of Golden's titanium white masstone (an
+    independent reflectance). Its edge at 410 nm until stop 52 read 8–18 × Okumura's K/S at
+    410–430 nm, and a cream: a* −5.0, b* +8.1 against Golden's −1.0, +2.4."""
+    from flakelab.cases.generator import World
+    from flakelab.core.colorimetry import reflectance_to_Lab
+
+    library = read_library()
+    white = library["Titanium dioxide white"]
+    okumura = pigment_km("okumura_okumura.rs", first_nm=360)["Titanium White"]
+    edge = slice(0, 5)
+    ratio = (white.absorption / white.scattering)[edge] / (okumura[:31] / okumura[31:])[edge]
+    assert np.all((ratio > 1 / 2.5) & (ratio < 2.5)), ratio
+
+    world = World(library)
+    x = np.array([[t.name == white.name for t in library.toners]], dtype=float)
+    R, _ = world.appearance(x, world.nominal(1))
+    at_45 = [g.name for g in world.geometries].index("45as45")
+    lab = reflectance_to_Lab(R[0, at_45])
+    golden = pigment_km("cmt_Golden_HB.rs", first_nm=380)["1380-Titanium White - Tr2 (P.W. 6)"]
+    assert np.hypot(*(lab[1:] - reflectance_to_Lab(golden)[1:])) < 1.5
+    assert lab[0] > 90

@@ -7,7 +7,6 @@ import json
 import subprocess
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -37,22 +36,6 @@ from flakelab.match.recipe import (
 from flakelab.match.search import MatchSettings, evaluate_recipes, match, recipe_vector
 from flakelab.physics.application import SPREAD_SD, sprayed_reflectance
 
-OKUMURA = Path(__file__).resolve().parents[2] / "shared" / "data" / "pigment-km"
-
-
-def okumura() -> KubelkaMunkForward:
-    """K and S of 27 Golden acrylics (Okumura), 360–750 nm → the 400–700 nm grid."""
-    names, K, S = [], [], []
-    for line in (OKUMURA / "okumura_okumura.rs").read_text().splitlines():
-        if not line.strip():
-            continue
-        name, *values = line.split("\t")
-        values = np.array(values, dtype=float)
-        names.append(name.strip('"'))
-        K.append(values[4:35])
-        S.append(values[44:75])
-    return KubelkaMunkForward(names, np.array(K), np.array(S))
-
 
 def reflect(forward, x) -> np.ndarray:
     with torch.no_grad():
@@ -60,10 +43,11 @@ def reflect(forward, x) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def km() -> KubelkaMunkForward:
-    if not OKUMURA.exists():
-        pytest.skip("shared pigment data not present")
-    return okumura()
+def km(pigment_km) -> KubelkaMunkForward:
+    """K and S of 27 Golden acrylics (Okumura) on the 400–700 nm grid."""
+    rows = pigment_km("okumura_okumura.rs", first_nm=360)
+    K, S = np.split(np.array(list(rows.values())), 2, axis=1)
+    return KubelkaMunkForward(list(rows), K, S)
 
 
 def mixture(km, parts: dict[str, float]) -> np.ndarray:
