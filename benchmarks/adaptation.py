@@ -47,7 +47,7 @@ VARIANTS = {"every epoch": 0.0, "best epoch": 0.2}
 def shop_cases(model, settings: WorldSettings, n: int, seed: int) -> CaseArrays:
     """``n`` cases of a shop with ``settings``' habits, without toners new to ``model``."""
     library = read_library(None)
-    novel = tuple(model.info.get("novel_toners", ()))
+    novel = model.new_toners
     world = World(library, model.instrument, settings, exclude=novel)
     return generated_case_arrays(world, n, seed, shop="benchmark shop")
 

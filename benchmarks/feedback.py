@@ -59,7 +59,7 @@ def sprayed_cases(world: World, x: np.ndarray, effect, rng: np.random.Generator)
 def replay_cases(model: ForwardModel, world: World, n: int, seed: int) -> CaseArrays:
     """``n`` fresh cases from the model's own training mix (its recorded family shares)."""
     kinds = model.info.get("training_kinds") or WorldSettings().kinds
-    novel = tuple(model.info.get("novel_toners", ()))
+    novel = model.new_toners
     training = World(world.library, world.instrument, WorldSettings(kinds=kinds), exclude=novel)
     return generated_case_arrays(training, n, seed)
 

@@ -30,7 +30,7 @@ def model():
 
 def shop_cases(model, settings: WorldSettings, n: int, seed: int):
     library = read_library(None)
-    world = World(library, "five-angle", settings, exclude=tuple(model.info["novel_toners"]))
+    world = World(library, "five-angle", settings, exclude=model.new_toners)
     return generated_case_arrays(world, n, seed, shop="shop A")
 
 
@@ -116,7 +116,28 @@ def test_cases_with_the_model_s_new_toners_are_refused(model):
     world = World(read_library(None), "five-angle")
     data = generated_case_arrays(world, 40, seed=9)
     used = {t for t, column in zip(data.toners, data.x.T, strict=True) if column.any()}
-    new = [t for t in model.info["novel_toners"] if t in used]
+    new = [t for t in model.new_toners if t in used]
     assert new  # the seed draws some
     with pytest.raises(ModelError, match=f"too few cases \\({', '.join(new)}\\)"):
         adapt_model(model, data)
+
+
+def test_a_toner_met_in_too_few_cases_is_new_without_being_declared(model):
+    """A model trained by ``flakelab train`` declares no new toners; those it met in fewer
+    than ``MIN_CASES`` cases are new all the same. Adaptation and the model card read them
+    from its record of cases per toner, as the matcher does: they read the shipped models'
+    declared list alone, so a model that met a toner in 19 cases was adapted on its cases."""
+    from flakelab.models.network import MIN_CASES
+    from flakelab.models.registry import model_card
+
+    rare = "Perylene maroon"
+    info = {k: v for k, v in model.info.items() if k != "novel_toners"}
+    info["toner_cases"] = {**info["toner_cases"], rare: MIN_CASES - 1}
+    trained = replace(model, info=info)
+    assert set(trained.new_toners) == {rare, *model.new_toners}
+    assert rare in model_card(trained)["novel_toners"]
+    world = World(read_library(None), "five-angle", exclude=model.new_toners)
+    data = generated_case_arrays(world, 60, seed=9)
+    assert data.x[:, data.toners.index(rare)].any()  # the seed draws it
+    with pytest.raises(ModelError, match=f"too few cases \\({rare}\\)"):
+        adapt_model(trained, data)

@@ -47,7 +47,7 @@ TRUE_GAIN = SHOP_WITH_HABITS["shop_gain"]
 def shipped():
     library = read_library(None)
     model = shipped_model("five-angle")
-    return library, forward_for(model, library), tuple(model.info.get("novel_toners", ()))
+    return library, forward_for(model, library), model.new_toners
 
 
 def shop_world(shipped, habits: bool) -> World:

@@ -1386,7 +1386,7 @@ def adapt(
     else:  # the database the new version goes to holds the current model
         base = current_model(engine, instrument)
     chosen = shop_cases(cases, shop, base.geometries, since)
-    novel = set(base.info.get("novel_toners", ()))
+    novel = set(base.new_toners)
     known = [c for c in chosen if not novel & set(c.recipe)]
     data, held_out = split_held_out(known, cases, holdout, seed, lib)
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)

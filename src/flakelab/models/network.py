@@ -282,10 +282,14 @@ class ForwardModel:
 
     @property
     def new_toners(self) -> tuple[str, ...]:
-        """The toners it learned from fewer than ``MIN_CASES`` cases (a model that does not
-        record its cases per toner: none)."""
+        """The toners it learned from fewer than ``MIN_CASES`` cases, and those its trainer
+        kept out of its cases on purpose (``info.novel_toners``, the shipped models'): the
+        matcher's physics scaling stands in for them, and adaptation leaves them out."""
         counts = self.info.get("toner_cases", {})
-        return tuple(n for n in self.toners if counts.get(n, MIN_CASES) < MIN_CASES)
+        declared = set(self.info.get("novel_toners", ()))
+        return tuple(
+            n for n in self.toners if n in declared or counts.get(n, MIN_CASES) < MIN_CASES
+        )
 
     @property
     def members(self) -> int:

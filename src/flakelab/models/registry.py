@@ -182,7 +182,7 @@ def model_card(model: ForwardModel) -> dict:
         "log_offset": model.log_offset,
         "toners": list(model.toners),
         "toner_cases": info.get("toner_cases", {}),
-        "novel_toners": info.get("novel_toners", []),
+        "novel_toners": list(model.new_toners),
         "trained_cases": info.get("trained_cases"),
         "outliers_dropped": info.get("outliers_dropped"),
         "data_hash": info.get("data_hash", ""),

@@ -733,7 +733,7 @@ def adapt_model(
     config = config or recorded_config(model)
     data = replace(data, x=_align_toners(model, data), toners=model.toners)
     used = {t for t, column in zip(model.toners, data.x.T, strict=True) if np.any(column)}
-    novel = [t for t in model.info.get("novel_toners", ()) if t in used]
+    novel = [t for t in model.new_toners if t in used]
     if novel:  # their inputs lie far outside what it learned from: gradients blow up to NaN
         raise ModelError(
             f"cases use toners the model knows from too few cases ({', '.join(novel)}); "
