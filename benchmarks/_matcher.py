@@ -31,9 +31,12 @@ def add_harness_arguments(
     parser.add_argument("--json", action="store_true")
 
 
-def run_harness(world, forward, effect, args, novel, settings=None, progress=None) -> dict:
+def run_harness(
+    world, forward, effect, args, novel, settings=None, progress=None, target_texture=True
+) -> dict:
     """The harness's report for ``forward`` on the targets the options ``args`` name, those
-    with a new toner drawn from ``novel``."""
+    with a new toner drawn from ``novel``; without ``target_texture`` the matcher reads the
+    targets without their texture readings."""
     tolerance = getattr(args, "tolerance", None)
     return evaluate_matching(
         world,
@@ -45,6 +48,7 @@ def run_harness(world, forward, effect, args, novel, settings=None, progress=Non
         novel=novel,
         novel_targets=args.novel_targets,
         settings=settings,
+        target_texture=target_texture,
         progress=progress,
     )
 

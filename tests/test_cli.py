@@ -186,6 +186,7 @@ def test_bad_options_exit_nonzero_without_traceback(cli):
         (("inspect", "--example", "-c", "D66/10"), "expected an illuminant"),
         (("compare", "--example", "-t", "no-such"), "neither a tolerance preset"),
         (("inspect",), "give a measurement file"),
+        (("match", "--example", "--no-target-texture"), "for the harness"),
     ):
         result = cli(*args)
         assert result.returncode == 2 and problem in result.stderr, result.stderr

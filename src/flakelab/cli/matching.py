@@ -224,6 +224,23 @@ def match_command(
     ] = MatchSettings.model_risk,
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
+    solid_travel: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="A target without texture readings whose colour travels less than this "
+            "(ΔE00, the largest between two of its geometries) is a solid, matched with "
+            "pigments alone (0: never).",
+        ),
+    ] = MatchSettings.solid_travel,
+    target_texture: Annotated[
+        bool,
+        typer.Option(
+            "--target-texture/--no-target-texture",
+            help="evaluate: the matcher reads each target's texture readings (--no-target-"
+            "texture: as from a file without them; the sprays are judged as ever).",
+        ),
+    ] = True,
     weighed: Annotated[
         bool,
         typer.Option(
@@ -276,15 +293,21 @@ def match_command(
             shop=shop,
             # the harness's own candidates and seeds
             settings=MatchSettings(
-                model_risk=model_risk, metamerism=metamerism, lights=lights_option(lights)
+                model_risk=model_risk,
+                metamerism=metamerism,
+                lights=lights_option(lights),
+                solid_travel=solid_travel,
             ),
             tolerance=tolerance,
             scale=_scale(quantity, resolution) if weighed else None,
+            target_texture=target_texture,
             json_output=json_output,
         )
         return
-    if weighed:
-        raise FlakelabError("--weighed: for the harness (flakelab match evaluate)")
+    if weighed or not target_texture:
+        raise FlakelabError(
+            "--weighed, --no-target-texture: for the harness (flakelab match evaluate)"
+        )
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
     grams = _scale(quantity, resolution)[0]
@@ -309,6 +332,7 @@ def match_command(
             model_risk=model_risk,
             metamerism=metamerism,
             lights=lights_option(lights),
+            solid_travel=solid_travel,
         ),
         habits=habits_for(habits, shop, database, forward),
         library=lib,
@@ -511,6 +535,7 @@ def _evaluate(
     settings,
     tolerance,
     scale,
+    target_texture,
     json_output,
 ):
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
@@ -537,12 +562,14 @@ def _evaluate(
             settings=settings,
             tolerance=tol,
             scale=scale,
+            target_texture=target_texture,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name
     report["model_risk"] = settings.model_risk
     report["metamerism_weight"] = settings.metamerism
     report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
+    report["solid_travel"] = settings.solid_travel
     report["world"] = world_name
     report["habits"] = habits and habits.report()
     if json_output:

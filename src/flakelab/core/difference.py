@@ -37,6 +37,7 @@ from flakelab.core.spectra import WAVELENGTHS
 
 __all__ = [
     "DELTA_E_METHODS",
+    "colour_travel",
     "METAMERISM_ILLUMINANTS",
     "METAMERISM_NOTICE",
     "delta_E",
@@ -303,3 +304,17 @@ def metamerism_indices(
             dtype=float,
         )
     return indices
+
+
+def colour_travel(lab: ArrayLike) -> NDArray[np.float64]:
+    """How far a paint's colour travels over its geometries: the largest ΔE00 between two of
+    its CIELAB readings ``lab[..., G, 3]``. A solid's barely moves; a metallic's or pearl's
+    flop moves it tens of units.
+
+    Examples
+    --------
+    >>> round(float(colour_travel([[50, 0, 0], [52, 0, 0], [51, 1, 0]])), 2)
+    1.99
+    """
+    lab = np.asarray(lab, dtype=float)
+    return delta_E_CIE2000(lab[..., :, None, :], lab[..., None, :, :]).max(axis=(-2, -1))

@@ -158,6 +158,18 @@ def worst_metamerism(a: NDArray, b: NDArray, lights: tuple[str, ...] | None = No
     return worst_light(metamerism_indices(a, b, tests=lights))[1]
 
 
+def _by_family(rows: list[dict], share) -> dict[str, dict]:
+    """The targets of each paint family among ``rows`` and their first-shot success."""
+    families = sorted({r["family"] for r in rows})
+    return {
+        f: {
+            "targets": sum(r["family"] == f for r in rows),
+            "first_shot_success": share([r for r in rows if r["family"] == f], "first"),
+        }
+        for f in families
+    }
+
+
 def _median(values) -> float | None:
     values = list(values)
     return float(np.median(values)) if values else None
@@ -184,7 +196,8 @@ def as_weighed(
 
 
 def _one(
-    world: World, forward, effect, x_hidden, rng, settings, habits, tolerance, scale
+    world: World, forward, effect, x_hidden, rng, settings, habits, tolerance, scale,
+    target_texture=True,
 ) -> dict:  # fmt: skip
     t = trial(world, x_hidden, rng)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
@@ -198,8 +211,9 @@ def _one(
         return max(REFINISH_TEXTURE.share(t.texture, sprayed[1]).values(), default=0.0)
 
     start = time.perf_counter()
+    read = t.measurement() if target_texture else replace(t.measurement(), texture={})
     result = match(
-        t.measurement(),
+        read,
         forward,
         effect,
         tolerance=tolerance,
@@ -249,6 +263,7 @@ def _one(
         "first_or_respray": min(first_share, respray_share),
         "latency_s": latency,
         "predicted_de00": float(best.de00.max()),
+        "family": str(world.library.paint_families(x_hidden[None])[0]),
     }
 
 
@@ -265,6 +280,7 @@ def evaluate_matching(
     habits: ShopHabits | None = None,
     tolerance: Tolerance | None = None,
     scale: tuple[float, float] | None = None,
+    target_texture: bool = True,
     progress: Callable[[], None] | None = None,
 ) -> dict:
     """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
@@ -273,7 +289,8 @@ def evaluate_matching(
     With the shop's ``habits`` every match is aimed off for them and the
     correction splits the offset about them. Sprays are judged by ``tolerance`` (default
     :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`), which the matcher and the
-    correction aim at."""
+    correction aim at. Without ``target_texture`` the matcher reads each target without its
+    texture readings, as from a file that lacks them; the sprays are judged as ever."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     rng = np.random.default_rng(seed)
@@ -282,8 +299,14 @@ def evaluate_matching(
     known = World(world.library, world.instrument, world.settings, exclude=novel)
     hidden = known.formulations(targets, rng)
     rows = []
+
+    def one(x: NDArray) -> dict:
+        return _one(
+            world, forward, effect, x, rng, settings, habits, tolerance, scale, target_texture
+        )
+
     for x in hidden:
-        rows.append(_one(world, forward, effect, x, rng, settings, habits, tolerance, scale))
+        rows.append(one(x))
         if progress:
             progress()
     novel_rows = []
@@ -292,9 +315,7 @@ def evaluate_matching(
             x[names.index(novel[int(rng.integers(len(novel)))])] = np.exp(
                 rng.uniform(np.log(0.01), np.log(0.08))
             )
-            novel_rows.append(
-                _one(world, forward, effect, x / x.sum(), rng, settings, habits, tolerance, scale)
-            )
+            novel_rows.append(one(x / x.sum()))
             if progress:
                 progress()
 
@@ -314,6 +335,8 @@ def evaluate_matching(
         "tolerance": tolerance.name,
         "weighed": scale and {"quantity_g": scale[0], "resolution_g": scale[1]},
         "first_shot_success": first,
+        "first_shot_by_family": _by_family(rows, share),
+        "targets_read_texture": target_texture,
         "after_one_correction": corrected,
         "novel_toner_first_shot": novel_first,
         "novel_targets": len(novel_rows),

@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import (
+    colour_travel,
     delta_E,
     is_metamer,
     metamerism_indices,
@@ -560,7 +561,9 @@ def _match(
         target_texture = torch.as_tensor(
             [texture[k] for k in TEXTURE_READINGS], dtype=forward.dtype
         )
-    solid = _reads_solid(texture) and (allowed & ~effect).any()
+    solid = None
+    if (allowed & ~effect).any():  # pigments to match with
+        solid = _solid_reason(texture, target_lab.numpy(), settings.solid_travel)
     if solid:
         allowed = allowed & ~effect
     generator = torch.Generator().manual_seed(settings.seed)
@@ -652,10 +655,7 @@ def _match(
         candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
     notes = left_out_note(unused_geometries(target, forward), forward, "match")
     if solid:
-        notes.append(
-            f"the target's texture reads no flakes (G {texture['G']:.2f}, SG "
-            f"{texture['SG']:.2f}): a solid, matched with pigments alone"
-        )
+        notes.append(f"{solid}: a solid, matched with pigments alone")
     if habits is not None and candidates:
         candidates = _aimed_off(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
@@ -693,11 +693,24 @@ def _match(
     )
 
 
-def _reads_solid(texture: dict | None) -> bool:
-    """Whether a target's texture readings show no flakes (:data:`SOLID_TEXTURE`)."""
-    return bool(texture) and all(
-        k in texture and texture[k] < limit for k, limit in SOLID_TEXTURE.items()
-    )
+def _solid_reason(texture: dict | None, lab: NDArray, travel_limit: float) -> str | None:
+    """Why a target is a solid, or None: its texture readings show no flakes
+    (:data:`SOLID_TEXTURE`), or, read without them, its colour ``lab[G, 3]`` travels less
+    than ``travel_limit`` over the geometries
+    (:data:`~flakelab.match.settings.SOLID_TRAVEL`)."""
+    texture = texture or {}
+    if all(k in texture for k in SOLID_TEXTURE):
+        if all(texture[k] < limit for k, limit in SOLID_TEXTURE.items()):
+            G, SG = texture["G"], texture["SG"]
+            return f"the target's texture reads no flakes (G {G:.2f}, SG {SG:.2f})"
+        return None
+    travel = float(colour_travel(lab))
+    if lab.shape[0] > 1 and travel < travel_limit:
+        return (
+            f"the target has no texture readings and its colour travels {travel:.2f} ΔE00 over "
+            f"its geometries, under the {travel_limit:g} of a paint with flakes"
+        )
+    return None
 
 
 def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
