@@ -34,7 +34,7 @@ def run(world, forward, effect, args, settings: MatchSettings, label: str) -> di
             forward,
             effect,
             args,
-            (),
+            forward.novel,  # the hidden targets keep to the toners the model knows
             settings,
             progress=lambda: bar.advance(task),
             target_texture=False,
