@@ -37,9 +37,9 @@ from flakelab.core.spectra import WAVELENGTHS
 
 __all__ = [
     "DELTA_E_METHODS",
-    "colour_travel",
     "METAMERISM_ILLUMINANTS",
     "METAMERISM_NOTICE",
+    "colour_travel",
     "delta_E",
     "delta_E_CIE2000",
     "delta_LCH",

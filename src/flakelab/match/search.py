@@ -704,8 +704,10 @@ def _solid_reason(texture: dict | None, lab: NDArray, travel_limit: float) -> st
             G, SG = texture["G"], texture["SG"]
             return f"the target's texture reads no flakes (G {G:.2f}, SG {SG:.2f})"
         return None
+    if lab.shape[0] < 2:  # one geometry: no travel to read
+        return None
     travel = float(colour_travel(lab))
-    if lab.shape[0] > 1 and travel < travel_limit:
+    if travel < travel_limit:
         return (
             f"the target has no texture readings and its colour travels {travel:.2f} ΔE00 over "
             f"its geometries, under the {travel_limit:g} of a paint with flakes"
