@@ -4,7 +4,9 @@ its own instrument's world, on the demo library."""
 from __future__ import annotations
 
 import argparse
+import time
 
+from flakelab.cli.common import progress_bar
 from flakelab.io import read_library, read_tolerance
 from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching, harness_world
 from flakelab.match.models import effect_mask, forward_for
@@ -51,6 +53,28 @@ def run_harness(
         target_texture=target_texture,
         progress=progress,
     )
+
+
+def timed_harness(
+    world, forward, effect, args, novel, label: str, settings=None, target_texture=True
+) -> tuple[dict, float]:
+    """:func:`run_harness`'s report under a progress bar labelled ``label`` (none with
+    ``--json``), and the run's wall time in seconds."""
+    total = args.targets + (args.novel_targets if novel else 0)
+    start = time.perf_counter()
+    with progress_bar(args.json) as bar:
+        task = bar.add_task(label, total=total)
+        report = run_harness(
+            world,
+            forward,
+            effect,
+            args,
+            novel,
+            settings,
+            progress=lambda: bar.advance(task),
+            target_texture=target_texture,
+        )
+    return report, time.perf_counter() - start
 
 
 def shipped_matcher(world: str = "shop", model: str | None = None):

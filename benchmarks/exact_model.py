@@ -20,10 +20,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 
-from _matcher import add_harness_arguments, run_harness, shipped_matcher
-from flakelab.cli.common import progress_bar
+from _matcher import add_harness_arguments, shipped_matcher, timed_harness
 from flakelab.match.forward import PhysicsForward
 
 FIGURES = (
@@ -44,18 +42,8 @@ RATIOS = ("first_shot_success", "after_one_correction", "novel_toner_first_shot"
 
 def run(world, forward, effect, args, novel, label: str) -> dict:
     """The harness's figures for ``forward`` and the command's wall time."""
-    total = args.targets + (args.novel_targets if novel else 0)
-    start = time.perf_counter()
-    with progress_bar(args.json) as bar:
-        task = bar.add_task(label, total=total)
-        report = run_harness(
-            world, forward, effect, args, novel, progress=lambda: bar.advance(task)
-        )
-    return {
-        "model": forward.name,
-        **{k: report[k] for k in FIGURES},
-        "wall_s": time.perf_counter() - start,
-    }
+    report, seconds = timed_harness(world, forward, effect, args, novel, label)
+    return {"model": forward.name, **{k: report[k] for k in FIGURES}, "wall_s": seconds}
 
 
 def main() -> None:

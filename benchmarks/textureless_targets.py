@@ -15,31 +15,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from dataclasses import replace
 
-from _matcher import add_harness_arguments, run_harness, shipped_matcher
-from flakelab.cli.common import progress_bar
+from _matcher import add_harness_arguments, shipped_matcher, timed_harness
 from flakelab.match.settings import SOLID_TRAVEL, MatchSettings
 
 FIGURES = ("first_shot_success", "first_shot_by_family", "after_one_correction", "oracle_success")
 
 
 def run(world, forward, effect, args, settings: MatchSettings, label: str) -> dict:
-    start = time.perf_counter()
-    with progress_bar(args.json) as bar:
-        task = bar.add_task(label, total=args.targets)
-        report = run_harness(
-            world,
-            forward,
-            effect,
-            args,
-            forward.novel,  # the hidden targets keep to the toners the model knows
-            settings,
-            progress=lambda: bar.advance(task),
-            target_texture=False,
-        )
-    return {k: report[k] for k in FIGURES} | {"wall_s": time.perf_counter() - start}
+    # the hidden targets keep to the toners the model knows (forward.novel), as the harness's
+    report, seconds = timed_harness(
+        world, forward, effect, args, forward.novel, label, settings, target_texture=False
+    )
+    return {k: report[k] for k in FIGURES} | {"wall_s": seconds}
 
 
 def main() -> None:

@@ -56,20 +56,18 @@ def cli():
     return _run_cli
 
 
-def _pigment_km_rows(name: str, first_nm: int) -> dict[str, np.ndarray]:
+def _pigment_km_rows(name: str, first_nm: int, spectra: int = 1) -> dict[str, np.ndarray]:
     """Rows ``name → values`` of a file of ../shared/data/pigment-km (tab-separated, first
-    band at ``first_nm``, 10 nm apart), each cut to flakelab's 400–700 nm grid; a row of two
-    spectra (Okumura's K then S) keeps both, one after the other."""
+    band at ``first_nm``, 10 nm apart), each of its ``spectra`` (Okumura's rows: K, then S)
+    cut to flakelab's 400–700 nm grid, one after the other."""
     rows = {}
     for line in (PIGMENT_KM / name).read_text().splitlines():
         if not line.strip():
             continue
         label, *fields = [f for f in line.split("\t") if f.strip()]
-        values = np.array(fields, dtype=float)
-        bands = 40 if values.size == 80 else values.size  # Okumura's rows hold K and S
+        values = np.array(fields, dtype=float).reshape(spectra, -1)
         start = (int(WAVELENGTHS[0]) - first_nm) // 10
-        spectra = values.reshape(-1, bands)[:, start : start + WAVELENGTHS.size]
-        rows[label.strip().strip('"')] = spectra.ravel()
+        rows[label.strip().strip('"')] = values[:, start : start + WAVELENGTHS.size].ravel()
     return rows
 
 

@@ -45,7 +45,7 @@ def reflect(forward, x) -> np.ndarray:
 @pytest.fixture(scope="module")
 def km(pigment_km) -> KubelkaMunkForward:
     """K and S of 27 Golden acrylics (Okumura) on the 400–700 nm grid."""
-    rows = pigment_km("okumura_okumura.rs", first_nm=360)
+    rows = pigment_km("okumura_okumura.rs", first_nm=360, spectra=2)
     K, S = np.split(np.array(list(rows.values())), 2, axis=1)
     return KubelkaMunkForward(list(rows), K, S)
 
