@@ -30,6 +30,12 @@ def add_harness_arguments(
     parser.add_argument(
         "--tolerance", help="preset or TOML/JSON file the sprays are judged by (default de00-1.0)"
     )
+    parser.add_argument(
+        "--resprays",
+        type=int,
+        default=0,
+        help="each first recipe and hidden formula sprayed this many times more: the chances",
+    )
     parser.add_argument("--json", action="store_true")
 
 
@@ -51,6 +57,7 @@ def run_harness(
         novel_targets=args.novel_targets,
         settings=settings,
         target_texture=target_texture,
+        resprays=getattr(args, "resprays", 0),
         progress=progress,
     )
 

@@ -12,7 +12,7 @@ instrument reading. Its derivatives come from finite differences, so a match tak
 times longer than with the learned model.
 
     python benchmarks/exact_model.py [--targets 200] [--novel-targets 50] [--seed 4242]
-        [--world shop] [--model FILE] [--json]
+        [--world shop] [--model FILE] [--resprays K] [--json]
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ FIGURES = (
     "novel_toner_first_shot",
     "novel_oracle_success",
     "oracle_success",
+    "first_shot_chance",
+    "oracle_chance",
     "respray_success",
     "after_one_perfect_correction",
     "predicted_de00_median",

@@ -7,7 +7,11 @@ and the same sprays (seeded), so rows differ only by the recipes the search prop
 first row is the defaults: the baseline of the same run.
 
     python benchmarks/match_variants.py [--targets 100] [--novel-targets 0] [--seed 4242]
-        [--world shop] [--model FILE] [--tolerance T] [--json] "top_effects=2" "swap_above=inf" ...
+        [--world shop] [--model FILE] [--tolerance T] [--resprays K] [--json]
+        "top_effects=2" "swap_above=inf" ...
+
+With ``--resprays K`` each first recipe is sprayed K more times (paired with the hidden
+formula's sprays): ``first_shot_chance`` tells settings apart that one spray each cannot.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ FIGURES = (
     "after_one_correction",
     "novel_toner_first_shot",
     "oracle_success",
+    "first_shot_chance",
+    "oracle_chance",
     "predicted_de00_median",
     "first_shot_de00_median",
     "first_shot_metamerism_median",
@@ -58,9 +64,14 @@ def main() -> None:
     rows = []
     for spec in ["", *args.settings]:
         report = run_harness(world, forward, effect, args, forward.novel, parse_settings(spec))
-        rows.append({"settings": spec or "defaults", **{k: report[k] for k in FIGURES}})
+        figures = {k: report[k] for k in FIGURES}
+        if args.resprays:
+            figures["first_shot_chance_by_family"] = {
+                f: v["first_shot_chance"] for f, v in report["by_family"].items()
+            }
+        rows.append({"settings": spec or "defaults", **figures})
         if not args.json:
-            print(rows[-1]["settings"], {k: report[k] for k in FIGURES}, flush=True)
+            print(rows[-1]["settings"], figures, flush=True)
     if args.json:
         print(json.dumps(rows, indent=2))
 

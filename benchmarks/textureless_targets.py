@@ -20,7 +20,7 @@ from dataclasses import replace
 from _matcher import add_harness_arguments, shipped_matcher, timed_harness
 from flakelab.match.settings import SOLID_TRAVEL, MatchSettings
 
-FIGURES = ("first_shot_success", "first_shot_by_family", "after_one_correction", "oracle_success")
+FIGURES = ("first_shot_success", "by_family", "after_one_correction", "oracle_success")
 
 
 def run(world, forward, effect, args, settings: MatchSettings, label: str) -> dict:
@@ -58,7 +58,7 @@ def main() -> None:
     for name, row in rows.items():
         families = ", ".join(
             f"{f} {v['first_shot_success']:.3f} of {v['targets']}"
-            for f, v in row["first_shot_by_family"].items()
+            for f, v in row["by_family"].items()
         )
         print(
             f"{name:>18}: first shot {row['first_shot_success']:.3f} ({families}), after one "

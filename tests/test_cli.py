@@ -187,6 +187,8 @@ def test_bad_options_exit_nonzero_without_traceback(cli):
         (("compare", "--example", "-t", "no-such"), "neither a tolerance preset"),
         (("inspect",), "give a measurement file"),
         (("match", "--example", "--no-target-texture"), "for the harness"),
+        (("match", "--example", "--resprays", "5"), "for the harness"),
+        (("match", "evaluate", "--resprays", "-1"), "--resprays"),
     ):
         result = cli(*args)
         assert result.returncode == 2 and problem in result.stderr, result.stderr

@@ -1095,9 +1095,10 @@ def test_a_correction_through_the_physics_holds_its_jacobian_and_lands_where_the
 def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     """The hidden formula's spray is the same whichever recipes the matcher proposed (and
     whether they needed a correction, or it read the targets without texture), so two
-    matchers are judged against one oracle. The first shots per paint family add up."""
+    matchers are judged against one oracle; so are its resprays' chances. Resprays change no
+    spray the harness made without them. The rates per paint family add up."""
     from flakelab.cases.generator import World
-    from flakelab.match.evaluate import evaluate_matching
+    from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES, evaluate_matching
     from flakelab.match.models import effect_mask
 
     world = World(hybrid.library, "five-angle")
@@ -1107,19 +1108,30 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
         candidates=1, screen_steps=3, refine_steps=3, top_pigments=2, swap_above=np.inf
     )
     runs = [
-        evaluate_matching(world, hybrid, effect, targets=6, seed=1, settings=s, target_texture=t)
-        for s, t in ((careful, True), (hasty, True), (hasty, False))
+        evaluate_matching(
+            world, hybrid, effect, targets=6, seed=1, settings=s, target_texture=t, resprays=k
+        )
+        for s, t, k in ((careful, True, 4), (hasty, True, 4), (hasty, False, 0), (hasty, True, 0))
     ]
     # the careful matcher passes some targets first time, the hasty one needs corrections
     assert runs[0]["first_shot_success"] > runs[1]["first_shot_success"]
+    assert runs[0]["first_shot_chance"] > runs[1]["first_shot_chance"]
     assert runs[0]["oracle_de00_median"] == runs[1]["oracle_de00_median"]
     assert runs[2]["oracle_de00_median"] == runs[1]["oracle_de00_median"]
+    assert runs[0]["oracle_chance"] == runs[1]["oracle_chance"]
+    assert runs[3]["oracle_chance"] is None and runs[3]["resprays"] == 0
+    single = [k for k in runs[1] if k not in (*CHANCES, "resprays") and "latency" not in k]
+    assert {k: runs[3][k] for k in single if k != "by_family"} == {
+        k: runs[1][k] for k in single if k != "by_family"
+    }
     assert not runs[2]["targets_read_texture"]
     for run in runs:
-        families = run["first_shot_by_family"].values()
+        families = run["by_family"].values()
         assert sum(f["targets"] for f in families) == 6
-        passed = sum(f["targets"] * f["first_shot_success"] for f in families)
-        assert passed == pytest.approx(6 * run["first_shot_success"])
+        rates = [*FAMILY_FIGURES, *(CHANCES if run["resprays"] else ())]
+        for rate in rates:
+            passed = sum(f["targets"] * f[rate] for f in families)
+            assert passed == pytest.approx(6 * run[rate])
 
 
 def test_harness_worlds_take_the_shop_s_variation_away(hybrid):

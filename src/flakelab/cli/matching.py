@@ -241,6 +241,16 @@ def match_command(
             "texture: as from a file without them; the sprays are judged as ever).",
         ),
     ] = True,
+    resprays: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            max=1000,
+            help="evaluate: spray each first recipe and hidden formula this many times more, "
+            "and report the chance a spray passes (first_shot_chance, oracle_chance): the "
+            "one spray's luck averaged out.",
+        ),
+    ] = 0,
     weighed: Annotated[
         bool,
         typer.Option(
@@ -301,12 +311,13 @@ def match_command(
             tolerance=tolerance,
             scale=_scale(quantity, resolution) if weighed else None,
             target_texture=target_texture,
+            resprays=resprays,
             json_output=json_output,
         )
         return
-    if weighed or not target_texture:
+    if weighed or not target_texture or resprays:
         raise FlakelabError(
-            "--weighed, --no-target-texture: for the harness (flakelab match evaluate)"
+            "--weighed, --no-target-texture, --resprays: for the harness (flakelab match evaluate)"
         )
     if (target is None) == (not example):
         raise FlakelabError("expected a target file or --example (one of them)")
@@ -536,6 +547,7 @@ def _evaluate(
     tolerance,
     scale,
     target_texture,
+    resprays,
     json_output,
 ):
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
@@ -563,6 +575,7 @@ def _evaluate(
             tolerance=tol,
             scale=scale,
             target_texture=target_texture,
+            resprays=resprays,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name

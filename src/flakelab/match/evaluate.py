@@ -21,6 +21,7 @@ there fails through the matcher and its model alone.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -158,16 +159,30 @@ def worst_metamerism(a: NDArray, b: NDArray, lights: tuple[str, ...] | None = No
     return worst_light(metamerism_indices(a, b, tests=lights))[1]
 
 
-def _by_family(rows: list[dict], share) -> dict[str, dict]:
-    """The targets of each paint family among ``rows`` and their first-shot success."""
+FAMILY_FIGURES = {
+    "first_shot_success": "first",
+    "after_one_correction": "corrected",
+    "oracle_success": "oracle",
+    "respray_success": "respray",
+}
+"""The harness's rates reported per paint family, and the trial's figure each counts."""
+CHANCES = {"first_shot_chance": "first_chance", "oracle_chance": "oracle_chance"}
+"""With resprays, the chances reported (per paint family too), and the trial's figure each
+averages."""
+
+
+def _by_family(rows: list[dict], share, mean) -> dict[str, dict]:
+    """The targets of each paint family among ``rows`` and their rates
+    (:data:`FAMILY_FIGURES`, :data:`CHANCES`): a family's first shot is judged against its
+    own oracle."""
     families = sorted({r["family"] for r in rows})
-    return {
-        f: {
-            "targets": sum(r["family"] == f for r in rows),
-            "first_shot_success": share([r for r in rows if r["family"] == f], "first"),
-        }
-        for f in families
-    }
+    report = {}
+    for f in families:
+        mine = [r for r in rows if r["family"] == f]
+        rates = {name: share(mine, key) for name, key in FAMILY_FIGURES.items()}
+        chances = {name: mean(mine, key) for name, key in CHANCES.items()}
+        report[f] = {"targets": len(mine), **rates, **chances}
+    return report
 
 
 def _median(values) -> float | None:
@@ -197,7 +212,7 @@ def as_weighed(
 
 def _one(
     world: World, forward, effect, x_hidden, rng, settings, habits, tolerance, scale,
-    target_texture=True,
+    target_texture=True, resprays=0,
 ) -> dict:  # fmt: skip
     t = trial(world, x_hidden, rng)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
@@ -248,6 +263,12 @@ def _one(
         corrected_metamerism = worst_metamerism(t.target, corrected[0], settings.lights)
     oracle = t.sprayed(x_hidden, oracle_rng)
     respray_share = share(t.sprayed(x_hidden, respray_rng, batches=t.car))
+    # the first recipe and the hidden formula sprayed again, each pair from one stream (the
+    # same application and reading: a paired comparison); the streams are children of the
+    # respray's, drawn after it, so no other spray changes
+    again = respray_rng.spawn(resprays)
+    first_again = [share(t.sprayed(x, copy.deepcopy(s))) <= 1.0 for s in again]
+    oracle_again = [share(t.sprayed(x_hidden, s)) <= 1.0 for s in again]
     return {
         "first_de00": worst_de00(t.target, first[0]),
         "first_metamerism": worst_metamerism(t.target, first[0], settings.lights),
@@ -261,6 +282,8 @@ def _one(
         "oracle": share(oracle),
         "respray": respray_share,
         "first_or_respray": min(first_share, respray_share),
+        "first_chance": float(np.mean(first_again)) if resprays else None,
+        "oracle_chance": float(np.mean(oracle_again)) if resprays else None,
         "latency_s": latency,
         "predicted_de00": float(best.de00.max()),
         "family": str(world.library.paint_families(x_hidden[None])[0]),
@@ -281,6 +304,7 @@ def evaluate_matching(
     tolerance: Tolerance | None = None,
     scale: tuple[float, float] | None = None,
     target_texture: bool = True,
+    resprays: int = 0,
     progress: Callable[[], None] | None = None,
 ) -> dict:
     """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
@@ -290,7 +314,14 @@ def evaluate_matching(
     correction splits the offset about them. Sprays are judged by ``tolerance`` (default
     :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`), which the matcher and the
     correction aim at. Without ``target_texture`` the matcher reads each target without its
-    texture readings, as from a file that lacks them; the sprays are judged as ever."""
+    texture readings, as from a file that lacks them; the sprays are judged as ever.
+
+    With ``resprays`` = K, each target's first recipe and its hidden formula are sprayed K
+    more times, in pairs that share their application and reading: ``first_shot_chance`` and
+    ``oracle_chance`` are the chances that a spray passes, averaged over the targets. A
+    target's one first spray passes or fails by its own application's luck; the chance
+    averages that out, so two matchers (or paint families) compare with a fraction of the
+    noise of one spray each."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     rng = np.random.default_rng(seed)
@@ -302,8 +333,9 @@ def evaluate_matching(
 
     def one(x: NDArray) -> dict:
         return _one(
-            world, forward, effect, x, rng, settings, habits, tolerance, scale, target_texture
-        )
+            world, forward, effect, x, rng, settings, habits, tolerance, scale, target_texture,
+            resprays,
+        )  # fmt: skip
 
     for x in hidden:
         rows.append(one(x))
@@ -322,6 +354,9 @@ def evaluate_matching(
     def share(rs, key):
         return float(np.mean([r[key] <= 1.0 for r in rs])) if rs else None
 
+    def mean(rs, key):  # a chance over the resprays, averaged over targets
+        return float(np.mean([r[key] for r in rs])) if rs and resprays else None
+
     def ratio(rate, limit):
         return rate / limit if rate is not None and limit else None
 
@@ -335,7 +370,7 @@ def evaluate_matching(
         "tolerance": tolerance.name,
         "weighed": scale and {"quantity_g": scale[0], "resolution_g": scale[1]},
         "first_shot_success": first,
-        "first_shot_by_family": _by_family(rows, share),
+        "by_family": _by_family(rows, share, mean),
         "targets_read_texture": target_texture,
         "after_one_correction": corrected,
         "novel_toner_first_shot": novel_first,
@@ -367,4 +402,7 @@ def evaluate_matching(
         "predicted_de00_median": float(np.median([r["predicted_de00"] for r in rows])),
         "latency_p50_s": float(np.percentile(latency, 50)),
         "latency_p95_s": float(np.percentile(latency, 95)),
+        "resprays": resprays,
+        **{name: mean(rows, key) for name, key in CHANCES.items()},
+        "novel_toner_first_shot_chance": mean(novel_rows, "first_chance"),
     }
