@@ -10,12 +10,22 @@ from flakelab.library.toners import Library
 from flakelab.match.forward import HybridForward, LearnedForward
 from flakelab.models.network import MIN_CASES, ForwardModel, ModelError
 
-__all__ = ["forward_for", "MIN_CASES", "effect_mask"]
+__all__ = ["forward_for", "MIN_CASES", "effect_kinds", "effect_mask"]
+
+
+EFFECT_KINDS = ("aluminium", "pearl")
+"""The library's kinds of effect toner."""
 
 
 def effect_mask(library: Library, toners) -> np.ndarray:
     kinds = {t.name: t.kind for t in library.toners}
-    return np.array([kinds.get(n) in ("aluminium", "pearl") for n in toners])
+    return np.array([kinds.get(n) in EFFECT_KINDS for n in toners])
+
+
+def effect_kinds(library: Library, toners) -> tuple[str, ...]:
+    """Each of ``toners``' kind of effect toner ("aluminium", "pearl"; "" for a pigment)."""
+    kinds = {t.name: t.kind for t in library.toners}
+    return tuple(kinds.get(n) if kinds.get(n) in EFFECT_KINDS else "" for n in toners)
 
 
 def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:
@@ -36,4 +46,6 @@ def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
             f"{_toner_difference(library.names, model.toners)}; train a model for this library"
         )
     novel = list(model.new_toners)
-    return HybridForward(model, library, novel) if novel else LearnedForward(model)
+    forward = HybridForward(model, library, novel) if novel else LearnedForward(model)
+    forward.effect_kinds = effect_kinds(library, forward.toners)
+    return forward

@@ -30,9 +30,11 @@ count each geometry's error as a share of its limit, with the tolerance's kL, kC
 (:mod:`flakelab.match.objective`).
 
 Throughout, a recipe outside the learned model's **support** — more than a solid, less effect
-toner than any effect paint it learned from (``effect_share_floor`` in its training record) —
-ranks after every recipe inside it, in the halving and in the judging, and the swap stage
-also tries it made solid: there the model's numbers are guesses that the optimiser exploits
+toner than any effect paint it learned from (``effect_share_floor`` in its training record),
+or a trace of a kind of effect toner (aluminium in a pearl, under
+:data:`~flakelab.match.settings.EFFECT_TRACE`) — ranks after every recipe inside it, in the
+halving and in the judging, and the swap stage also tries it made solid or without its
+traces: there the model's numbers are guesses that the optimiser exploits
 (:func:`outside_support`).
 """
 
@@ -81,6 +83,7 @@ __all__ = [
     "MatchError",
     "SOLID_TEXTURE",
     "outside_support",
+    "trace_toners",
     "recipe_vector",
     "target_spectra",
     "unused_geometries",
@@ -341,12 +344,12 @@ def _refine(
     )
     # ranked as they would be weighed: an amount under ``min_amount`` is dropped, and a
     # subset whose loss rests on such traces must not push out one that does not
-    mask = _prune(x, mask, settings.min_amount)
+    mask = _prune(x, mask, effect, settings)
     with torch.no_grad():
         pruned = x * mask
         pruned = pruned / pruned.sum(1, keepdim=True)
         loss = _loss(forward, objective, pruned, target_lab, target_texture, settings)
-    outside = outside_support(pruned.numpy(), effect, settings.effect_floor)
+    outside = outside_support(pruned.numpy(), effect, settings)
     keep = torch.as_tensor(np.lexsort((loss.numpy(), outside))[: settings.refine_keep])
     _, x, _ = _optimise(
         forward,
@@ -362,10 +365,14 @@ def _refine(
     return x
 
 
-def _prune(x: torch.Tensor, mask: torch.Tensor, min_amount: float) -> torch.Tensor:
-    """``mask`` without the toners under ``min_amount`` in ``x`` (the largest always kept)."""
+def _prune(
+    x: torch.Tensor, mask: torch.Tensor, effect: NDArray, settings: MatchSettings
+) -> torch.Tensor:
+    """``mask`` without the toners under ``settings.min_amount`` in ``x`` and the traces of
+    effect toners (:func:`trace_toners`); the largest always kept."""
     largest = torch.nn.functional.one_hot(x.argmax(1), x.shape[1]).bool()
-    return mask & ((x >= min_amount) | largest)
+    trace = torch.as_tensor(trace_toners(x.numpy(), effect, settings))
+    return mask & (((x >= settings.min_amount) & ~trace) | largest)
 
 
 def _subsets(
@@ -545,6 +552,8 @@ def _match(
     settings = settings or MatchSettings()
     if settings.effect_floor is None:
         settings = replace(settings, effect_floor=getattr(forward, "effect_share_floor", 0.0))
+    if settings.effect_kinds is None and getattr(forward, "effect_kinds", None):
+        settings = replace(settings, effect_kinds=tuple(forward.effect_kinds))
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     T = len(forward.toners)
     effect = np.zeros(T, bool) if effect is None else np.asarray(effect, bool)
@@ -599,7 +608,7 @@ def _match(
     # the screen's best rows, those outside the model's support after every one inside it:
     # a near-black target's best free rows can all be black with a trace of aluminium, and
     # the solid restarts must still seed the refinement
-    outside = outside_support(x_screen, effect, settings.effect_floor)
+    outside = outside_support(x_screen, effect, settings)
     free = np.array([base is None for base in bases])
     best = _ranked(np.flatnonzero(free), screen_loss, outside)[:3]
     top = _ranked(np.flatnonzero(~free), screen_loss, outside)[: settings.top_bases]
@@ -662,11 +671,10 @@ def _match(
         )
         notes.append(f"aimed off for the shop's habits: {habits.describe()}")
     if candidates and not candidates[0].in_support:
-        share = recipe_vector(forward, candidates[0].fractions)[effect].sum()
         notes.append(
-            f"the best recipe has {100 * share:.1f} % effect toners, less than any effect paint "
-            f"the model learned from ({100 * settings.effect_floor:.0f} %): its numbers are "
-            "extrapolated"
+            _outside_note(
+                recipe_vector(forward, candidates[0].fractions), effect, forward.toners, settings
+            )
         )
     if candidates and not candidates[0].passes:
         notes.append(
@@ -763,9 +771,13 @@ def _neighbours(
     :data:`SWAP_ADDED_AMOUNT`; and a recipe outside the model's support made solid (its trace
     of effect toners dropped)."""
     sets: dict[tuple[int, ...], NDArray] = {}
-    for parent in parents[outside_support(parents, effect, settings.effect_floor)]:
-        solid = np.where(effect, 0.0, parent)
-        sets.setdefault(tuple(np.flatnonzero(solid > 0)), solid / solid.sum())
+    for parent in parents[outside_support(parents, effect, settings)]:
+        for kept in (
+            np.where(effect, 0.0, parent),
+            np.where(trace_toners(parent, effect, settings), 0.0, parent),
+        ):
+            if kept.any():
+                sets.setdefault(tuple(np.flatnonzero(kept > 0)), kept / kept.sum())
     for parent in parents:
         support = np.flatnonzero(parent > 0)
         for i in support:
@@ -797,13 +809,54 @@ def model_spread(forward, x: NDArray, lab: NDArray) -> NDArray | None:
     return np.sqrt(np.mean(delta_E(lab[None], members) ** 2, axis=0))
 
 
-def outside_support(x: NDArray, effect: NDArray, floor: float) -> NDArray:
-    """Recipes ``x[N, T]`` between a solid and ``floor``, the least effect-toner share of the
-    learned model's effect paints (``effect_share_floor`` in its training record). The model
-    never saw a case there, and the optimiser finds its guesses: a DPP red solid matched with
-    3.9 % of red pearl, predicted within 0.3 ΔE00 and 1.3 off by the physics."""
-    share = x[:, np.asarray(effect, bool)].sum(1)
-    return (share > 0) & (share < floor)
+def outside_support(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDArray:
+    """Recipes ``x[N, T]`` where the learned model never saw a case, and the optimiser finds
+    its guesses:
+
+    * between a solid and ``settings.effect_floor``, the least effect-toner share of the
+      model's effect paints (``effect_share_floor`` in its training record): a DPP red solid
+      matched with 3.9 % of red pearl, predicted within 0.3 ΔE00 and 1.3 off by the physics;
+    * with a trace of a kind of effect toner (:func:`trace_toners`): a green pearl matched
+      with 0.24 % of VMP aluminium, predicted within 1.2 ΔE00 and 8.5 off by the physics at
+      45as110, where the aluminium's scattered light outshines the pearl's."""
+    effect = np.asarray(effect, bool)
+    share = x[:, effect].sum(1)
+    return (share > 0) & (share < settings.effect_floor) | trace_toners(x, effect, settings).any(-1)
+
+
+def trace_toners(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDArray:
+    """Where recipes ``x[..., T]`` hold a kind of effect toner (``settings.effect_kinds``:
+    aluminium, pearl) at less than ``settings.effect_trace`` of the recipe, all together:
+    those toners ``[..., T]``. Without kinds (the physics alone, which has no support to
+    keep to), none."""
+    traces = np.zeros(np.shape(x), bool)
+    if settings.effect_kinds is None:
+        return traces
+    kinds = np.where(np.asarray(effect, bool), np.asarray(settings.effect_kinds, dtype=str), "")
+    for kind in set(kinds.tolist()) - {""}:
+        members = kinds == kind
+        share = x[..., members].sum(-1, keepdims=True)
+        traces |= members & (x > 0) & (share < settings.effect_trace)
+    return traces
+
+
+def _outside_note(x: NDArray, effect: NDArray, toners, settings: MatchSettings) -> str:
+    """Why the best recipe ``x[T]`` lies outside the model's support (:func:`outside_support`)."""
+    share = x[effect].sum()
+    if 0 < share < settings.effect_floor:
+        return (
+            f"the best recipe has {100 * share:.1f} % effect toners, less than any effect paint "
+            f"the model learned from ({100 * settings.effect_floor:.0f} %): its numbers are "
+            "extrapolated"
+        )
+    traces = ", ".join(
+        f"{toners[i]} {100 * x[i]:.1f} %" for i in np.flatnonzero(trace_toners(x, effect, settings))
+    )
+    return (
+        f"the best recipe holds a trace of effect toner ({traces}), under the "
+        f"{100 * settings.effect_trace:g} % of a kind of effect toner that any formula holds: "
+        "its numbers are extrapolated"
+    )
 
 
 def _aimed_off(forward, candidates, effect, spectra, texture, tolerance, settings, habits, library):
@@ -845,7 +898,7 @@ def _judge(
         score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
     if has_texture:
         score = score + settings.texture_weight * np.abs(tex[:, -2:] - target_tex[-2:]).sum(1)
-    outside = outside_support(x, effect, settings.effect_floor)
+    outside = outside_support(x, effect, settings)
     chosen, seen = [], set()
     for row in np.lexsort((score, outside)):
         key = tuple(np.flatnonzero(x[row] > 0))
