@@ -1257,7 +1257,9 @@ def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
     effect bases, on daylight colour alone; weighing metamerism, 0.09; with it, 0.09). The
     base screen tries every pair with the pigments free. Of seven two-aluminium blends tried
     on the shipped model, two needed it; since stop 51's models the free restarts find the
-    second (Al medium and Al VMP with indanthrone blue and BiVO4) to 0.21 by themselves."""
+    second (Al medium and Al VMP with indanthrone blue and BiVO4) to 0.21 by themselves, and
+    with stop 53's trace rule (EFFECT_TRACE) this one too (0.22, with 1.8 % of Al VMP for
+    the extra coarse), so the run without the base screen leaves that rule off."""
     from flakelab.match.models import effect_mask
 
     names = hybrid.library.names
@@ -1269,7 +1271,7 @@ def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
         target,
         hybrid,
         effect,
-        settings=MatchSettings(top_bases=0, swap_above=np.inf, metamerism=0.0),
+        settings=MatchSettings(top_bases=0, swap_above=np.inf, metamerism=0.0, effect_trace=0.0),
     )
     assert free_only.candidates[0].de00.max() > 1.0
 
@@ -1309,7 +1311,9 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     recipes, a trace of phthalo blue RS beside the green does the GS's job, and the physics
     agrees (0.09; 0.16). The same bronze tinted with 0.54 % quinacridone magenta, this test's
     target until the models learnt Si per light, now has the swap find the magenta itself
-    (0.66 → 0.12). All on daylight colour alone."""
+    (0.66 → 0.12). All on daylight colour alone, and without stop 53's trace rule
+    (EFFECT_TRACE), with which the search finds another base without the swap (Al fine and
+    Al fine dark with BiVO4, 0.17)."""
     from flakelab.cases.generator import World
     from flakelab.match.models import effect_mask
 
@@ -1323,7 +1327,7 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     world = World(hybrid.library, "five-angle")
     target = as_made(world, recipe_row(names, recipe))
     effect = effect_mask(hybrid.library, hybrid.toners)
-    daylight = MatchSettings(metamerism=0.0)
+    daylight = MatchSettings(metamerism=0.0, effect_trace=0.0)
     unswapped = match(target, hybrid, effect, settings=replace(daylight, swap_above=np.inf))
     assert unswapped.candidates[0].de00.max() > MatchSettings().swap_above
     assert "Phthalo blue GS" not in unswapped.candidates[0].fractions
