@@ -1257,9 +1257,7 @@ def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
     effect bases, on daylight colour alone; weighing metamerism, 0.09; with it, 0.09). The
     base screen tries every pair with the pigments free. Of seven two-aluminium blends tried
     on the shipped model, two needed it; since stop 51's models the free restarts find the
-    second (Al medium and Al VMP with indanthrone blue and BiVO4) to 0.21 by themselves, and
-    with stop 53's trace rule (EFFECT_TRACE) this one too (0.22, with 1.8 % of Al VMP for
-    the extra coarse), so the run without the base screen leaves that rule off."""
+    second (Al medium and Al VMP with indanthrone blue and BiVO4) to 0.21 by themselves."""
     from flakelab.match.models import effect_mask
 
     names = hybrid.library.names
@@ -1271,7 +1269,7 @@ def test_matcher_finds_a_two_aluminium_base(hybrid, recipe):
         target,
         hybrid,
         effect,
-        settings=MatchSettings(top_bases=0, swap_above=np.inf, metamerism=0.0, effect_trace=0.0),
+        settings=MatchSettings(top_bases=0, swap_above=np.inf, metamerism=0.0),
     )
     assert free_only.candidates[0].de00.max() > 1.0
 
@@ -1311,9 +1309,7 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     recipes, a trace of phthalo blue RS beside the green does the GS's job, and the physics
     agrees (0.09; 0.16). The same bronze tinted with 0.54 % quinacridone magenta, this test's
     target until the models learnt Si per light, now has the swap find the magenta itself
-    (0.66 → 0.12). All on daylight colour alone, and without stop 53's trace rule
-    (EFFECT_TRACE), with which the search finds another base without the swap (Al fine and
-    Al fine dark with BiVO4, 0.17)."""
+    (0.66 → 0.12). All on daylight colour alone."""
     from flakelab.cases.generator import World
     from flakelab.match.models import effect_mask
 
@@ -1327,7 +1323,7 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     world = World(hybrid.library, "five-angle")
     target = as_made(world, recipe_row(names, recipe))
     effect = effect_mask(hybrid.library, hybrid.toners)
-    daylight = MatchSettings(metamerism=0.0, effect_trace=0.0)
+    daylight = MatchSettings(metamerism=0.0)
     unswapped = match(target, hybrid, effect, settings=replace(daylight, swap_above=np.inf))
     assert unswapped.candidates[0].de00.max() > MatchSettings().swap_above
     assert "Phthalo blue GS" not in unswapped.candidates[0].fractions
@@ -1405,7 +1401,12 @@ def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import trial, worst_de00
     from flakelab.match.models import effect_mask
-    from flakelab.match.search import outside_support, recipe_vector, trace_toners
+    from flakelab.match.search import (
+        below_effect_floor,
+        outside_support,
+        recipe_vector,
+        trace_toners,
+    )
 
     effect = effect_mask(hybrid.library, hybrid.toners)
     names = list(hybrid.toners)
@@ -1422,6 +1423,7 @@ def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
     assert [names[i] for i in np.flatnonzero(traces.any(0))] == ["Al VMP", "Pearl silver white"]
     assert traces[0, names.index("Al VMP")] and not traces[1].any()
     assert outside_support(rows, effect, kinds).tolist() == [True, False, True, False]
+    assert not below_effect_floor(rows, effect, kinds).any()  # judged at the end alone
     no_kinds = MatchSettings(effect_floor=0.0)  # the physics alone: no support to keep to
     assert not outside_support(rows, effect, no_kinds).any()
 
