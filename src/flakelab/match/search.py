@@ -765,8 +765,9 @@ def _neighbours(
     """Toner sets one move from each recipe ``parents[K, T]`` and their starting amounts
     ``[N, T]``: each toner swapped for a ``candidates`` toner of its kind (effect or pigment)
     at the same amount; below ``max_pigments``, each candidate pigment added at
-    :data:`SWAP_ADDED_AMOUNT`; and a recipe outside the model's support made solid (its trace
-    of effect toners dropped)."""
+    :data:`SWAP_ADDED_AMOUNT`; and a recipe outside the model's support made solid (its
+    effect toners dropped) and without its traces of a kind of effect toner
+    (:func:`trace_toners`)."""
     sets: dict[tuple[int, ...], NDArray] = {}
     for parent in parents[outside_support(parents, effect, settings)]:
         for kept in (
@@ -859,9 +860,9 @@ def _outside_note(x: NDArray, effect: NDArray, toners, settings: MatchSettings) 
         f"{toners[i]} {100 * x[i]:.1f} %" for i in np.flatnonzero(trace_toners(x, effect, settings))
     )
     return (
-        f"the best recipe holds a trace of effect toner ({traces}), under the "
-        f"{100 * settings.effect_trace:g} % of a kind of effect toner that any formula holds: "
-        "its numbers are extrapolated"
+        f"the best recipe holds a trace of effect toner ({traces}); no recipe the model "
+        f"learned from held aluminium or pearl under {100 * settings.effect_trace:g} %: its "
+        "numbers are extrapolated"
     )
 
 
