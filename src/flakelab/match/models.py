@@ -17,15 +17,15 @@ EFFECT_KINDS = ("aluminium", "pearl")
 """The library's kinds of effect toner."""
 
 
-def effect_mask(library: Library, toners) -> np.ndarray:
-    kinds = {t.name: t.kind for t in library.toners}
-    return np.array([kinds.get(n) in EFFECT_KINDS for n in toners])
-
-
 def effect_kinds(library: Library, toners) -> tuple[str, ...]:
     """Each of ``toners``' kind of effect toner ("aluminium", "pearl"; "" for a pigment)."""
     kinds = {t.name: t.kind for t in library.toners}
     return tuple(kinds.get(n) if kinds.get(n) in EFFECT_KINDS else "" for n in toners)
+
+
+def effect_mask(library: Library, toners) -> np.ndarray:
+    """Which of ``toners`` are effect toners (:func:`effect_kinds`)."""
+    return np.array(effect_kinds(library, toners)) != ""
 
 
 def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:

@@ -849,8 +849,8 @@ def trace_toners(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDArra
 
 def _outside_note(x: NDArray, effect: NDArray, toners, settings: MatchSettings) -> str:
     """Why the best recipe ``x[T]`` lies outside the model's support (:func:`outside_support`)."""
-    share = x[effect].sum()
-    if 0 < share < settings.effect_floor:
+    if below_effect_floor(x[None], effect, settings)[0]:
+        share = x[effect].sum()
         return (
             f"the best recipe has {100 * share:.1f} % effect toners, less than any effect paint "
             f"the model learned from ({100 * settings.effect_floor:.0f} %): its numbers are "
