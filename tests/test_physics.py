@@ -27,7 +27,7 @@ from flakelab.physics.layer import (
     mean_projected_cosine,
 )
 from flakelab.physics.montecarlo import simulate
-from flakelab.physics.scaling import _de00
+from flakelab.physics.scaling import _de00, _lab
 
 W = WAVELENGTHS.size
 GEOMETRIES = ["45as-15", "45as15", "45as45", "45as110"]
@@ -162,6 +162,17 @@ class TestKubelkaMunk:
                 layer_reflectance(0.1, 2.0, 500.0, substrate), reflectance_infinite(0.1, 2.0)
             )
 
+    def test_a_layer_that_scatters_and_does_not_absorb_has_kubelka_s_limit(self):
+        """K = 0 (pearls alone: they scatter and do not absorb) is the limit of K → 0,
+        (R_g + (1 − R_g)SX) / (1 + (1 − R_g)SX); the hyperbolic form's b·coth(bSX) read 0
+        there, and such a layer reflected everything."""
+        S, X, Rg = 0.05, 30.0, np.array([0.0, 0.3, 0.9])
+        limit = (Rg + (1 - Rg) * S * X) / (1 + (1 - Rg) * S * X)
+        np.testing.assert_allclose(layer_reflectance(0.0, S, X, Rg), limit, rtol=1e-12)
+        np.testing.assert_allclose(layer_reflectance(1e-9, S, X, Rg), limit, rtol=1e-6)
+        # nor scatters: the substrate, through a clear layer
+        np.testing.assert_allclose(layer_reflectance(0.0, 0.0, X, Rg), Rg, atol=1e-9)
+
     def test_saunderson_round_trip(self):
         R = np.linspace(0.0, 0.95, 7)
         np.testing.assert_allclose(inverse_saunderson(saunderson(R)), R, atol=1e-12)
@@ -179,6 +190,19 @@ class TestFastModel:
         fast, mc = self.predict_and_trace({"Al medium": 0.95, "Phthalo blue GS": 0.05})
         de = _de00(mc.brdf, fast)
         assert de.mean() < 0.8 and de.max() < 1.5
+
+    def test_a_trace_of_black_in_a_pure_pearl_moves_it_little(self):
+        """A pearl alone and with 0.01 % of carbon black: under 1 ΔE00 apart by the fast
+        model, as by the Monte Carlo (0.6 L* at 45as110). Before the two-flux layer had its
+        K = 0 limit, the pure pearl lost its diffuse light: L* 3.7 at 45as110 against 12.6
+        with the trace and the Monte Carlo's 17.1."""
+        pure, pure_mc = self.predict_and_trace({"Pearl interference green": 1.0})
+        traced, _ = self.predict_and_trace(
+            {"Pearl interference green": 0.9999, "Carbon black": 0.0001}
+        )
+        assert _de00(pure, traced).max() < 1.0
+        flop = _lab(pure)[-1, 0], _lab(pure_mc.brdf)[-1, 0]  # L* at 45as110
+        assert abs(flop[0] - flop[1]) < 5.0
 
     def test_a_solid_colour_is_lambertian_under_the_fresnel_top(self):
         fast, _ = self.predict_and_trace({"Titanium dioxide white": 0.9, "Phthalo blue GS": 0.1})

@@ -64,8 +64,9 @@ def layer_reflectance(
 ) -> NDArray[np.float64]:
     """Reflectance of a layer (K, S [1/µm], thickness [µm]) over a substrate R_g.
 
-    Kubelka's hyperbolic solution; S → 0 becomes Beer–Lambert R_g·exp(−2KX), and a thick
-    layer tends to R∞ whatever the substrate.
+    Kubelka's hyperbolic solution; S → 0 becomes Beer–Lambert R_g·exp(−2KX), K → 0 (a layer
+    that scatters and does not absorb: pearls alone) (R_g + (1 − R_g)SX) / (1 + (1 − R_g)SX),
+    and a thick layer tends to R∞ whatever the substrate.
     """
     K = np.asarray(K, dtype=float)
     S = np.maximum(np.asarray(S, dtype=float), 1e-12)
@@ -73,9 +74,14 @@ def layer_reflectance(
     Rg = np.asarray(substrate, dtype=float)
     a = 1 + K / S
     b = np.sqrt(a**2 - 1)
-    bSX = np.minimum(b * S * X, 350.0)
-    coth = 1 / np.tanh(np.maximum(bSX, 1e-12))
-    return (1 - Rg * (a - b * coth)) / (a - Rg + b * coth)
+    bSX = b * S * X
+    # b·coth(bSX) tends to 1/(SX), not to 0, as K → 0: by its series where bSX is small
+    b_coth = np.where(
+        bSX < 1e-6,
+        (1 + bSX**2 / 3) / np.maximum(S * X, 1e-300),
+        b / np.tanh(np.maximum(bSX, 1e-300)),
+    )
+    return (1 - Rg * (a - b_coth)) / (a - Rg + b_coth)
 
 
 def saunderson(R: ArrayLike, k1: float = SAUNDERSON_K1, k2: float = SAUNDERSON_K2) -> NDArray:
