@@ -31,6 +31,7 @@ FIGURES = (
     "novel_oracle_success",
     "oracle_success",
     "first_shot_chance",
+    "after_one_correction_chance",
     "oracle_chance",
     "respray_success",
     "after_one_perfect_correction",

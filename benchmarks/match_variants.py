@@ -29,6 +29,7 @@ FIGURES = (
     "novel_toner_first_shot",
     "oracle_success",
     "first_shot_chance",
+    "after_one_correction_chance",
     "oracle_chance",
     "predicted_de00_median",
     "first_shot_de00_median",

@@ -16,7 +16,8 @@ features (``flakelab train --log-offset``).
 Both models are ensembles of four networks trained on 120,000 cases, twice the hybrid
 paper's database: held-out accuracy grows with the cases far more than with the network's
 width or the epochs, and pearls most (README, "Cases and the learned model"). The
-five-angle model took 23.0 min here (2026-11-27, stop 52; 21.5 min at stop 51), the MA-T12
+five-angle model took 23.0 min here (2026-11-27, stop 52; 21.5 min at stop 51; 44 min at
+stop 54, in an hour when the machine ran at half its pace), the MA-T12
 model, whose 12 geometries make each case costlier, 31.6 min (29.8 min at stop 51; 51 min
 on 2026-11-26, a quarter of it beside other work); 5.7 GB peak for the two. A quarter of
 both models' cases are pearls.

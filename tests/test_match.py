@@ -700,11 +700,12 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     note. Allowed to add a toner too, the correction finds none that helps (worst index
     under FL11 2.47 → 2.53) and still says to match again. With a trace of the GS (0.3 %),
     the correction raises it into a tint (adding carbon black) and the metamer is cured
-    (under A 1.98 → 0.17). A correction changes amounts and adds one toner: it cures a
+    (under A 1.94 → 0.26). A correction changes amounts and adds one toner: it cures a
     metamer only where the recipe already carries the car's pigment that makes it one.
-    (Stop 52's model. Stop 51's gave the same metamer with every toner allowed, and its
-    cure added DPP red, A 1.96 → 0.10; the models before stood in phthalo green and
-    quinacridone magenta for the car's two blues, and kept the indanthrone.)"""
+    (Stop 54's model; stop 52's cured A 1.98 → 0.17. Stop 51's gave the same metamer with
+    every toner allowed, and its cure added DPP red, A 1.96 → 0.10; the models before stood
+    in phthalo green and quinacridone magenta for the car's two blues, and kept the
+    indanthrone.)"""
     from flakelab.core.difference import METAMERISM_NOTICE, is_metamer, worst_light
     from flakelab.match.correction import metamerism_note
 
@@ -753,7 +754,7 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     assert cured.new_toner == "Carbon black"
     assert worst_light(cured.metamerism)[1] < METAMERISM_NOTICE / 2
     assert (befores["traced"]["A"].max(), cured.metamerism["A"].max()) == pytest.approx(
-        (1.98, 0.17), abs=0.01
+        (1.94, 0.26), abs=0.01
     )
     assert notes["traced"] is None
 
@@ -1096,7 +1097,8 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     """The hidden formula's spray is the same whichever recipes the matcher proposed (and
     whether they needed a correction, or it read the targets without texture), so two
     matchers are judged against one oracle; so are its resprays' chances. Resprays change no
-    spray the harness made without them. The rates per paint family add up."""
+    spray the harness made without them; the chance after one correction counts every first
+    shot that passed and some corrections. The rates per paint family add up."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES, evaluate_matching
     from flakelab.match.models import effect_mask
@@ -1120,6 +1122,9 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     assert runs[2]["oracle_de00_median"] == runs[1]["oracle_de00_median"]
     assert runs[0]["oracle_chance"] == runs[1]["oracle_chance"]
     assert runs[3]["oracle_chance"] is None and runs[3]["resprays"] == 0
+    # a correction's chance counts the first shots that passed, and some corrections pass
+    for run in runs[:2]:
+        assert run["first_shot_success"] < run["after_one_correction_chance"] <= 1.0
     single = [k for k in runs[1] if k not in (*CHANCES, "resprays") and "latency" not in k]
     assert {k: runs[3][k] for k in single if k != "by_family"} == {
         k: runs[1][k] for k in single if k != "by_family"
@@ -1391,13 +1396,13 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
 
 
 def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
-    """No formula holds less than 2.5 % of aluminium, or of pearl (EFFECT_TRACE), and the
-    learned model's guess there can be far off: left free, the search tops a pure green pearl
-    with 0.24 % of VMP aluminium, predicted within 1.2 ΔE00 of the car and 8.5 off by the
-    physics at 45as110, where the aluminium's scattered light outshines the pearl's. Kept to
-    the support, it matches with pearls alone (98 % of the green, 1.8 % of Xirallic silver:
-    1.8 off by the physics). A trace of a toner of the recipe's own kind (a third aluminium in
-    a metallic, Xirallic in a pearl) is none."""
+    """No formula holds less than 2.5 % of aluminium, or of pearl (EFFECT_TRACE). Left free,
+    the search tops a pure green pearl with 0.8 % of bright coarse aluminium, 1.26 ΔE00 off the
+    car by the world's physics; kept to the support, with the green pearl alone, 1.67 off. The
+    rule costs here: the model's guess at the trace is good. Stop 53 had found the traced
+    recipe 8.5 off, but that was the world's physics, whose pure pearls lacked their diffuse
+    light (tests/test_physics.py -k pure_pearl). A trace of a toner of the recipe's own kind
+    (a third aluminium in a metallic, Xirallic in a pearl) is none."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import trial, worst_de00
     from flakelab.match.models import effect_mask
@@ -1436,12 +1441,12 @@ def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
         recipe = recipe_vector(hybrid, result.candidates[0].fractions)
         return result, recipe, worst_de00(target.reflectance, as_made(world, recipe))
 
+    aluminium = [names.index(t.name) for t in hybrid.library.of_kind("aluminium")]
     _, free, free_physics = best(0.0)
-    assert 0 < free[names.index("Al VMP")] < 0.005 and free_physics > 5
+    assert 0 < free[aluminium].sum() < MatchSettings.effect_trace and free_physics < 1.5
     kept, recipe, physics = best(MatchSettings.effect_trace)
     assert not trace_toners(recipe, effect, kinds).any() and kept.candidates[0].in_support
-    aluminium = [names.index(t.name) for t in hybrid.library.of_kind("aluminium")]
-    assert recipe[aluminium].sum() == 0.0 and physics < min(2.0, 0.25 * free_physics)
+    assert recipe[aluminium].sum() == 0.0 and free_physics < physics < 2.0
 
 
 def test_objective_is_cie94_and_the_plain_multi_angle_one_for_de00_1():

@@ -166,9 +166,14 @@ FAMILY_FIGURES = {
     "respray_success": "respray",
 }
 """The harness's rates reported per paint family, and the trial's figure each counts."""
-CHANCES = {"first_shot_chance": "first_chance", "oracle_chance": "oracle_chance"}
+CHANCES = {
+    "first_shot_chance": "first_chance",
+    "after_one_correction_chance": "corrected_chance",
+    "oracle_chance": "oracle_chance",
+}
 """With resprays, the chances reported (per paint family too), and the trial's figure each
-averages."""
+averages. After one correction: 1 where the first spray passed, else the chance that the
+corrected recipe's spray passes (the correction made from that first spray-out)."""
 
 
 def _by_family(rows: list[dict], share, mean) -> dict[str, dict]:
@@ -242,7 +247,7 @@ def _one(
     x = recipe_vector(forward, mixed)
     first = t.sprayed(x, first_rng)
     first_share = corrected_share = share(first)
-    corrected_metamerism = None
+    corrected_metamerism, corrected_again = None, [True]
     if first_share > 1.0:
         recipe = correct(
             forward,
@@ -257,10 +262,14 @@ def _one(
             lights=settings.lights,
             physics_every=settings.physics_every,
         ).fractions
-        recipe = as_weighed(forward, recipe, scale)
-        corrected = t.sprayed(recipe_vector(forward, recipe), correction_rng)
+        x_corrected = recipe_vector(forward, as_weighed(forward, recipe, scale))
+        corrected = t.sprayed(x_corrected, correction_rng)
         corrected_share = share(corrected)
         corrected_metamerism = worst_metamerism(t.target, corrected[0], settings.lights)
+        # children of the correction's stream: no other spray changes
+        corrected_again = [
+            share(t.sprayed(x_corrected, s)) <= 1.0 for s in correction_rng.spawn(resprays)
+        ]
     oracle = t.sprayed(x_hidden, oracle_rng)
     respray_share = share(t.sprayed(x_hidden, respray_rng, batches=t.car))
     # the first recipe and the hidden formula sprayed again, each pair from one stream (the
@@ -283,6 +292,7 @@ def _one(
         "respray": respray_share,
         "first_or_respray": min(first_share, respray_share),
         "first_chance": float(np.mean(first_again)) if resprays else None,
+        "corrected_chance": float(np.mean(corrected_again)) if resprays else None,
         "oracle_chance": float(np.mean(oracle_again)) if resprays else None,
         "latency_s": latency,
         "predicted_de00": float(best.de00.max()),

@@ -814,9 +814,8 @@ def outside_support(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDA
     * between a solid and ``settings.effect_floor``, the least effect-toner share of the
       model's effect paints (``effect_share_floor`` in its training record): a DPP red solid
       matched with 3.9 % of red pearl, predicted within 0.3 ΔE00 and 1.3 off by the physics;
-    * with a trace of a kind of effect toner (:func:`trace_toners`): a green pearl matched
-      with 0.24 % of VMP aluminium, predicted within 1.2 ΔE00 and 8.5 off by the physics at
-      45as110, where the aluminium's scattered light outshines the pearl's."""
+    * with a trace of a kind of effect toner (:func:`trace_toners`), which no formula of the
+      world holds (:data:`~flakelab.match.settings.EFFECT_TRACE` says what it buys)."""
     return below_effect_floor(x, effect, settings) | trace_toners(x, effect, settings).any(-1)
 
 
