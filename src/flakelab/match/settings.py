@@ -26,10 +26,10 @@ a pearl (20,000 formulations, seed 11; pearls at least 36 %); the learned model 
 there. A trace of a toner of the recipe's own kind (a third aluminium in a metallic) is not
 one (:func:`~flakelab.match.search.outside_support`). The rule buys no pass: on issue 5's
 harness (100 targets, 20 resprays each, seed 4242, stop 54's model) every figure came out
-the same to the digit with it and without; a pure green pearl left free took 0.8 % of aluminium and
-matched 1.26 ΔE00 off by the world's physics, kept to the support 1.67. It was set at stop
-53 on a green pearl with 0.24 % of aluminium 8.5 off, which was the world's physics, whose
-pure pearls then lacked their diffuse light."""
+the same to the digit with it and without; a pure green pearl left free took 0.8 % of
+aluminium and matched 1.26 ΔE00 off by the world's physics, kept to the support 1.67. It
+was set at stop 53 on a green pearl with 0.24 % of aluminium 8.5 off, which was the world's
+physics, whose pure pearls then lacked their diffuse light."""
 
 
 @dataclass(frozen=True)
