@@ -206,6 +206,22 @@ class Tolerance:
         """
         return np.max(_observed(de00, dLCH) / self.bounds(geometries), axis=-1)
 
+    def share_unit(self, geometries: list[str] | tuple) -> float:
+        """The tightest ΔE00 limit over ``geometries`` (1 where none bounds ΔE00): a share of
+        the limit times this is in ΔE00 of the strictest geometry. The search weighs its
+        regularisers and thresholds against such shares, so that a wider tolerance spends
+        its error where it allows more and does not make the search care less for colour.
+
+        Examples
+        --------
+        >>> Tolerance("wide", Limit(de00=2.5), {"45as15": Limit(de00=4.0)}).share_unit(
+        ...     ["45as15", "45as45"]
+        ... )
+        2.5
+        """
+        de00 = self.bounds(geometries)[:, 0]
+        return float(de00.min()) if np.isfinite(de00).any() else 1.0
+
     def texture_limits(self) -> dict[str, float]:
         """The limit on each texture reading this tolerance bounds, by reading (Si15, …)."""
         if self.texture is None:

@@ -7,7 +7,12 @@ judgement, smooth: per geometry, ΔE94 with the tolerance's kL, kC, kH (CIEDE200
 weighting, without its discontinuities) as a share of the geometry's ΔE00 limit; where
 components are bounded, the root sum of squares of each component's share of its limit
 (:data:`COMPONENT_NORM`); the larger of the two where both are. Over
-geometries: the mean plus half the worst.
+geometries: the mean plus half the worst, times the tightest geometry's ΔE00 limit
+(:meth:`~flakelab.core.tolerance.Tolerance.share_unit`). The search's regularisers and
+thresholds (sparsity, texture, how much a toner must matter) are in those units: without
+that factor a tolerance of ΔE00 ≤ 2.5 shrank the colour term 2.5 times against them, and a
+bronze metallic that the search brings to 0.68 under ΔE00 ≤ 1.0 was left at 1.53 (stop 55;
+``tests/test_match.py -k swap_stage_finds``).
 
 With ΔE00 ≤ 1.0 at every geometry (the preset ``de00-1.0``, the harness's criterion) this is
 the plain multi-angle ΔE94 that the search used before tolerances steered it, to the last
@@ -92,6 +97,7 @@ class MatchObjective(TorchColour):
         tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
         self.tolerance = tolerance
         self.k = (tolerance.kL, tolerance.kC, tolerance.kH)
+        self.unit = tolerance.share_unit(geometries)
         # 1 / limit, 0 where a quantity is unchecked
         scale = 1.0 / tolerance.bounds(geometries)
         self.de00_scale = torch.as_tensor(scale[:, 0], dtype=dtype)
@@ -115,9 +121,10 @@ class MatchObjective(TorchColour):
 
     def loss(self, target_lab: torch.Tensor, lab: torch.Tensor) -> torch.Tensor:
         """The objective over geometries ``[N]`` of recipes ``lab[N, G, 3]`` against
-        ``target_lab[G, 3]``: the mean share of the limit plus half the worst."""
+        ``target_lab[G, 3]``: the mean share of the limit plus half the worst, in the
+        tightest geometry's ΔE00 (:meth:`~flakelab.core.tolerance.Tolerance.share_unit`)."""
         share = self.shares_of_limit(target_lab[None], lab)
-        return share.mean(dim=1) + 0.5 * share.max(dim=1).values
+        return (share.mean(dim=1) + 0.5 * share.max(dim=1).values) * self.unit
 
     def recipe_loss(self, target_lab: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
         """The objective ``[N]`` of recipes with reflectances ``R[N, G, 31]``: :meth:`loss`

@@ -896,8 +896,10 @@ def _judge(
         target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
         judged = [TEXTURE_READINGS.index(k) for k in limits]
         texture_share = np.abs(tex - target_tex)[:, judged] / np.array(list(limits.values()))
+    # in the objective's units (``share_unit``), against which the penalties are set
     worst = np.max(np.concatenate([share, texture_share], axis=1), axis=1)
-    score = worst + share.mean(1) + settings.toner_penalty * (x > 0).sum(1)
+    score = (worst + share.mean(1)) * tolerance.share_unit(forward.geometries)
+    score = score + settings.toner_penalty * (x > 0).sum(1)
     # [N, G] per test illuminant
     metamerism = metamerism_indices(spectra, R, tests=settings.lights)
     if settings.metamerism:
