@@ -473,9 +473,10 @@ def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files
 def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):
     """The MA-T12 model's numbers for five-angle candidates at the example's seven other
     geometries agree with the world's physics for those recipes: within that model's held-out
-    p95 (1.66 ΔE00 on 500 unseen cases, README), and about as well as the same model agrees at
-    the five geometries the match saw (measured: at worst 1.06 and 0.27 left out, 0.97 and 0.36
-    seen). The geometries mixed up, they would be some 20 off."""
+    p95 (1.70 ΔE00 on 500 unseen cases, README), and about as well as the same model agrees at
+    the five geometries the match saw (measured with stop 55's model: at worst 0.60 and 0.12
+    left out, 0.66 and 0.13 seen; stop 52's: 1.06 and 0.27, 0.97 and 0.36). The geometries
+    mixed up, they would be some 20 off."""
     from flakelab.data import example_path
     from flakelab.match.crosscheck import predict_left_out
     from flakelab.match.forward import PhysicsForward
@@ -498,7 +499,7 @@ def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_th
             reflect(ma_t12, recipe_vector(ma_t12, candidate.fractions))[0]
         )
         error = delta_E(numbers.lab, made[rows])
-        assert error.max() < 1.66
+        assert error.max() < 1.70
         assert error.max() < 1.5 * delta_E(predicted[seen], made[seen]).max()
     # nothing left out, nothing to predict
     assert (
