@@ -11,7 +11,7 @@ geometries: the mean plus half the worst, times the tightest geometry's ΔE00 li
 (:meth:`~flakelab.core.tolerance.Tolerance.share_unit`). The search's regularisers and
 thresholds (sparsity, texture, how much a toner must matter) are in those units: without
 that factor a tolerance of ΔE00 ≤ 2.5 shrank the colour term 2.5 times against them, and a
-bronze metallic that the search brings to 0.68 under ΔE00 ≤ 1.0 was left at 1.53 (stop 55;
+bronze metallic that the search brings to 1.23 under ΔE00 ≤ 1.0 was left at 1.53 (stop 55;
 ``tests/test_match.py -k swap_stage_finds``).
 
 With ΔE00 ≤ 1.0 at every geometry (the preset ``de00-1.0``, the harness's criterion) this is
