@@ -171,6 +171,16 @@ def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
         "Quinacridone magenta: absorption, 690 nm: expected a value from 0 to 10000, got 1e+308": (
             _setting("toners", 15, "absorption", 29, value=1e308)
         ),
+        # before: accepted, and the physics warned, came out NaN or counted infinite glints
+        "Al fine bright: orientation_sd_deg: expected at least 1.0, got 1e-320": (
+            _setting("toners", 0, "orientation_sd_deg", value=1e-320)
+        ),
+        "Al fine bright: thickness_um: expected at least 0.01, got 1e-300": (
+            _setting("toners", 0, "thickness_um", value=1e-300)
+        ),
+        "Pearl silver white: radius_um: expected at least 1.0, got 1e-12": (
+            _setting("toners", 30, "radius_um", value=1e-12)
+        ),
     }
     for message, edit in flawed.items():
         data = json.loads(json.dumps(good))

@@ -31,6 +31,9 @@ __all__ = [
     "PAINT_FAMILIES",
     "SUM_TOLERANCE",
     "HIDING_COEFFICIENT",
+    "FLAKE_RADIUS_MIN_UM",
+    "FLAKE_THICKNESS_MIN_UM",
+    "ORIENTATION_SD_MIN_DEG",
 ]
 
 SUM_TOLERANCE = 1e-6
@@ -41,6 +44,18 @@ MAX_COEFFICIENT = 1e4
 fraction]: light 0.1 nm deep in a full-strength layer, about 800 times the demo library's
 strongest (carbon black's K, 13). Larger values only come from a typing slip, and overflow
 the optics (a value of 1e308 made the prediction NaN)."""
+FLAKE_RADIUS_MIN_UM = 1.0
+"""Smallest flake radius a library may give [µm]. The flake model reflects by geometric
+optics, each flake a small mirror, which holds for flakes much wider than the light's
+wavelength (0.4–0.7 µm); the demo's smallest is 5 µm. A radius of 1e-320 µm counted
+infinitely many flakes in the texture readings (NaN)."""
+FLAKE_THICKNESS_MIN_UM = 0.01
+"""Thinnest aluminium flake a library may give [µm]: under about 10 nm aluminium lets
+light through, which the mirror model ignores (vacuum-metallised flakes, the thinnest made,
+are 20–50 nm; the demo's thinnest 50 nm). 1e-300 µm overflowed the flakes' layer."""
+ORIENTATION_SD_MIN_DEG = 1.0
+"""Narrowest spread of flake normals a library may give [degree], below any sprayed
+coating's (the demo's best aligned spread 5°). 1e-300° made a pearl's prediction NaN."""
 HIDING_COEFFICIENT = 1.0
 """Specific scattering (mean) or absorption (least) [1/µm per unit mass fraction] from which
 a pigment hides the primer by itself (:attr:`Pigment.hides`). The demo library splits
@@ -52,11 +67,19 @@ class LibraryError(FlakelabError):
     """A toner library or a recipe that is wrong: names the toner, the field and the problem."""
 
 
-def _positive(owner: str, name: str, value: float, *, upper: float | None = None) -> None:
+def _positive(
+    owner: str, name: str, value: float, *, lower: float = 0.0, upper: float | None = None
+) -> None:
     if not (is_number(value) and np.isfinite(value) and value > 0):
         raise LibraryError(f"{owner}: {name}: expected a positive number, got {shown(value)}")
+    if value < lower:
+        raise LibraryError(f"{owner}: {name}: expected at least {lower}, got {value!r}")
     if upper is not None and value > upper:
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
+
+
+def _spread(owner: str, value: float) -> None:
+    _positive(owner, "orientation_sd_deg", value, lower=ORIENTATION_SD_MIN_DEG, upper=45)
 
 
 def _check_fields(where: str, settings: Mapping[str, Any], kind: type) -> None:
@@ -128,9 +151,11 @@ class AluminiumFlake:
     kind = "aluminium"
 
     def __post_init__(self) -> None:
-        _positive(self.name, "radius_um", self.radius_um, upper=100)
-        _positive(self.name, "thickness_um", self.thickness_um, upper=2)
-        _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
+        _positive(self.name, "radius_um", self.radius_um, lower=FLAKE_RADIUS_MIN_UM, upper=100)
+        _positive(
+            self.name, "thickness_um", self.thickness_um, lower=FLAKE_THICKNESS_MIN_UM, upper=2
+        )
+        _spread(self.name, self.orientation_sd_deg)
         _positive(self.name, "surface_quality", self.surface_quality, upper=1)
         _positive(self.name, "volume_fraction", self.volume_fraction, upper=0.6)
         _text(self.name, "description", self.description)
@@ -208,8 +233,8 @@ class Pearl:
         _positive(self.name, "volume_fraction", self.volume_fraction, upper=0.6)
         _positive(self.name, "coating_nm", self.coating_nm, upper=1000)
         _positive(self.name, "substrate_nm", self.substrate_nm, upper=5000)
-        _positive(self.name, "radius_um", self.radius_um, upper=100)
-        _positive(self.name, "orientation_sd_deg", self.orientation_sd_deg, upper=45)
+        _positive(self.name, "radius_um", self.radius_um, lower=FLAKE_RADIUS_MIN_UM, upper=100)
+        _spread(self.name, self.orientation_sd_deg)
         if not isinstance(self.substrate, str) or self.substrate not in SUBSTRATE_INDEX:
             raise LibraryError(
                 f"{self.name}: substrate: expected one of {', '.join(SUBSTRATE_INDEX)}, "
