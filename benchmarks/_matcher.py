@@ -4,10 +4,14 @@ its own instrument's world, on the demo library."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
 import time
 
+from flakelab.cases.generator import World
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library, read_tolerance
+from flakelab.library import PAINT_FAMILIES
 from flakelab.match.evaluate import HARNESS_WORLDS, evaluate_matching, harness_world
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.models.registry import load_model_file, shipped_model
@@ -26,6 +30,11 @@ def add_harness_arguments(
     parser.add_argument("--novel-targets", type=int, default=novel_targets)
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--world", choices=list(HARNESS_WORLDS), default="shop")
+    parser.add_argument(
+        "--kinds",
+        type=parse_kinds,
+        help="the hidden targets' paint families, e.g. pearl=1 (default: the generator's mix)",
+    )
     parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument(
         "--tolerance", help="preset or TOML/JSON file the sprays are judged by (default de00-1.0)"
@@ -84,18 +93,43 @@ def timed_harness(
     return report, time.perf_counter() - start
 
 
-def shipped_matcher(world: str = "shop", model: str | None = None):
+def shipped_matcher(
+    world: str = "shop", model: str | None = None, kinds: dict[str, float] | None = None
+):
     """The demo library's harness world (``flakelab match evaluate --world``) for the
-    instrument of the shipped five-angle model (or of the model file ``model``), the model's
-    forward and its effect-toner mask."""
+    instrument of the shipped five-angle model (or of the model file ``model``), its hidden
+    targets drawn from the paint families ``kinds`` (default: the generator's mix), the
+    model's forward and its effect-toner mask."""
     library = read_library(None)
     learned = load_model_file(model) if model else shipped_model("five-angle")
     forward = forward_for(learned, library)
-    return (
-        harness_world(library, learned.instrument, world),
-        forward,
-        effect_mask(library, forward.toners),
-    )
+    harness = harness_world(library, learned.instrument, world)
+    if kinds:
+        settings = dataclasses.replace(harness.settings, kinds=kinds)
+        harness = World(library, learned.instrument, settings)
+    return harness, forward, effect_mask(library, forward.toners)
+
+
+def parse_kinds(text: str) -> dict[str, float]:
+    """``"metallic=0.6,pearl=0.25,solid=0.15"`` → shares of the paint families."""
+    kinds = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        name, _, share = part.partition("=")
+        try:
+            kinds[name.strip()] = float(share)
+        except ValueError:
+            raise SystemExit(f"--kinds: {part!r} is not family=share") from None
+    unknown = sorted(set(kinds) - set(PAINT_FAMILIES))
+    shares = list(kinds.values())
+    if (
+        unknown
+        or not kinds
+        or not all(map(math.isfinite, shares))
+        or min(shares) < 0
+        or sum(shares) <= 0
+    ):
+        raise SystemExit(f"--kinds: expected shares of {', '.join(PAINT_FAMILIES)}, got {text!r}")
+    return kinds
 
 
 def seeds_from(text: str) -> list[int]:

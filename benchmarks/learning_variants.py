@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from _matcher import parse_kinds
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -69,21 +70,6 @@ def judge(library, model) -> dict[str, float]:
         "model_vs_nominal_de00_p95": float(np.percentile(own, 95)),
         **{f"model_vs_nominal_{f}": float(own[family == f].mean()) for f in PAINT_FAMILIES},
     }
-
-
-def parse_kinds(text: str) -> dict[str, float]:
-    """``"metallic=0.6,pearl=0.25,solid=0.15"`` → shares of the paint families."""
-    kinds = {}
-    for part in filter(None, (p.strip() for p in text.split(","))):
-        name, _, share = part.partition("=")
-        try:
-            kinds[name.strip()] = float(share)
-        except ValueError:
-            raise SystemExit(f"--kinds: {part!r} is not family=share") from None
-    unknown = sorted(set(kinds) - set(PAINT_FAMILIES))
-    if unknown or not kinds or min(kinds.values()) < 0 or sum(kinds.values()) <= 0:
-        raise SystemExit(f"--kinds: expected shares of {', '.join(PAINT_FAMILIES)}, got {text!r}")
-    return kinds
 
 
 def main() -> None:

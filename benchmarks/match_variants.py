@@ -7,8 +7,11 @@ and the same sprays (seeded), so rows differ only by the recipes the search prop
 first row is the defaults: the baseline of the same run.
 
     python benchmarks/match_variants.py [--targets 100] [--novel-targets 0] [--seed 4242]
-        [--world shop] [--model FILE] [--tolerance T] [--resprays K] [--json]
-        "top_effects=2" "swap_above=inf" ...
+        [--world shop] [--kinds pearl=1] [--model FILE] [--tolerance T] [--resprays K]
+        [--json] "top_effects=2" "swap_above=inf" ...
+
+``--kinds`` draws the hidden targets from these paint families' shares (``pearl=1``: pearls
+alone), to compare settings on one family with all its targets.
 
 With ``--resprays K`` each first recipe is sprayed K more times (paired with the hidden
 formula's sprays): ``first_shot_chance`` tells settings apart that one spray each cannot.
@@ -31,6 +34,8 @@ FIGURES = (
     "first_shot_chance",
     "after_one_correction_chance",
     "oracle_chance",
+    "respray_success",
+    "after_one_perfect_correction",
     "predicted_de00_median",
     "first_shot_de00_median",
     "first_shot_metamerism_median",
@@ -61,7 +66,7 @@ def main() -> None:
     parser.add_argument("settings", nargs="*", help="e.g. top_effects=2,top_pigments=5")
     add_harness_arguments(parser, targets=100, novel_targets=0)
     args = parser.parse_args()
-    world, forward, effect = shipped_matcher(args.world, args.model)
+    world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
     rows = []
     for spec in ["", *args.settings]:
         report = run_harness(world, forward, effect, args, forward.novel, parse_settings(spec))
