@@ -27,7 +27,7 @@ took; ``per_seed`` in ``--json``. ``--physics`` matches and corrects through the
 physics alone (``flakelab correct --physics``), e.g. to time ``"physics_every=1"``.
 
     python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling]
-        [--model FILE | --physics] [--json]
+        [--kinds pearl=1] [--model FILE | --physics] [--json]
         "library=none" "offset_weight=1.0" "persistent_sd=0.3" "noise_sd=0.05" ...
 """
 
@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from _matcher import MODEL_HELP, seeds_from, shipped_matcher
+from _matcher import MODEL_HELP, parse_kinds, seeds_from, shipped_matcher
 from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -78,7 +78,7 @@ def persistent_offset(forward, x, calm) -> np.ndarray:
 def failed_first_shots(seed: int, targets: int, world, forward, effect):
     """Each target of ``seed`` whose first shot fails: its trial, best candidate, recipe
     vector, first spray-out and hidden formula."""
-    known = World(world.library, "five-angle", exclude=forward.novel)
+    known = World(world.library, world.instrument, world.settings, exclude=forward.novel)
     rng = np.random.default_rng(seed)
     hidden = known.formulations(targets, rng)
     # progress on stderr even with --json: these runs are long, their output usually a file
@@ -138,11 +138,14 @@ def main() -> None:
     parser.add_argument("--seed", default="77", help="one seed, a list or a range: 77,78,81-86")
     parser.add_argument("--ceiling", action="store_true")
     parser.add_argument("--model", help=MODEL_HELP)
+    parser.add_argument(
+        "--kinds", type=parse_kinds, help="the hidden targets' paint families, e.g. pearl=1"
+    )
     parser.add_argument("--physics", action="store_true", help="the library's physics alone")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     seeds = seeds_from(args.seed)
-    world, forward, effect = shipped_matcher(model=args.model)
+    world, forward, effect = shipped_matcher(model=args.model, kinds=args.kinds)
     if args.physics:
         forward = PhysicsForward(world.library, forward.geometries)
     specs = ["none", "defaults", *args.settings, *(["ceiling"] * args.ceiling), "respray"]
