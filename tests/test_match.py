@@ -554,6 +554,9 @@ def test_match_refuses_bad_input(tmp_path, cli):
     assert run.returncode == 2 and str(bad) in run.stderr and "Traceback" not in run.stderr
     run = cli("match", "--example", "--quantity", "0g")
     assert run.returncode == 2 and "--quantity" in run.stderr
+    # the unit apart from its number is a second target, and named as one
+    run = cli("match", "--example", "--quantity", "250", "g")
+    assert run.returncode == 2 and "not both (got --example and 'g')" in run.stderr
     # a can the scale cannot weigh is refused before the search, even before its model is
     # looked for
     run = cli("match", "--example", "--quantity", "1e30kg", "--model", str(tmp_path / "m.pt"))

@@ -319,8 +319,13 @@ def match_command(
         raise FlakelabError(
             "--weighed, --no-target-texture, --resprays: for the harness (flakelab match evaluate)"
         )
-    if (target is None) == (not example):
-        raise FlakelabError("expected a target file or --example (one of them)")
+    if target is not None and example:
+        # "--quantity 250 g" leaves its "g" here as the target
+        raise FlakelabError(
+            f"expected a target file or --example, not both (got --example and {target!r})"
+        )
+    if target is None and not example:
+        raise FlakelabError("expected a target file or --example")
     grams = _scale(quantity, resolution)[0]
     check_figure_file(render)
     check_figure_file(plot, "--plot")
