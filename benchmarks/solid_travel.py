@@ -39,8 +39,7 @@ def measured_travel(world: World, fractions: np.ndarray, rng: np.random.Generato
     return np.concatenate(travel)
 
 
-def family_travel(instrument: str, n: int, seed: int) -> dict[str, dict]:
-    library = read_library(None)
+def family_travel(library, instrument: str, n: int, seed: int) -> dict[str, dict]:
     world = World(library, instrument)
     rng = np.random.default_rng(seed)
     x = world.formulations(n, rng)
@@ -65,11 +64,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=11)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    library = read_library(None)
     result = {
         "solid_travel": SOLID_TRAVEL,
         "n": args.n,
         "seed": args.seed,
-        **{i: family_travel(i, args.n, args.seed) for i in INSTRUMENTS},
+        **{i: family_travel(library, i, args.n, args.seed) for i in INSTRUMENTS},
     }
     if args.json:
         print(json.dumps(result, indent=2))
