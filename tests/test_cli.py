@@ -19,17 +19,8 @@ from flakelab.data import example_path
 from flakelab.io import read_measurement, read_measurements, write_measurements
 
 
-def flakelab(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "flakelab.cli.main", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
-def test_inspect_json_carries_lab_per_geometry_and_flop_index(ma_t12_files):
-    result = flakelab("inspect", ma_t12_files[0], "--json")
+def test_inspect_json_carries_lab_per_geometry_and_flop_index(ma_t12_files, cli):
+    result = cli("inspect", ma_t12_files[0], "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     m = read_measurement(ma_t12_files[0])
@@ -39,8 +30,8 @@ def test_inspect_json_carries_lab_per_geometry_and_flop_index(ma_t12_files):
     assert report["flop_index"] == pytest.approx(m.flop_index())
 
 
-def test_compare_example_agrees_with_library_and_tolerance():
-    result = flakelab("compare", "--example", "--json", "--tolerance", "de00-1.0")
+def test_compare_example_agrees_with_library_and_tolerance(cli):
+    result = cli("compare", "--example", "--json", "--tolerance", "de00-1.0")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     direct = compare(
@@ -53,18 +44,18 @@ def test_compare_example_agrees_with_library_and_tolerance():
         assert g["pass"] == (g["de00"] <= 1.0)
     assert report["pass"] == all(g["pass"] for g in report["geometries"])
     assert report["not_compared"] == {"reference": [], "sample": []}  # both read at all twelve
-    assert "not compared" not in flakelab("compare", "--example").stdout
-    assert flakelab("compare", "--example", "--fail-on-reject").returncode == (
+    assert "not compared" not in cli("compare", "--example").stdout
+    assert cli("compare", "--example", "--fail-on-reject").returncode == (
         0 if report["pass"] else 1
     )
     # the metamerism index under a booth's own lights, as the library computes it
-    booth = json.loads(flakelab("compare", "--example", "--json", "--lights", "A,F2").stdout)
+    booth = json.loads(cli("compare", "--example", "--json", "--lights", "A,F2").stdout)
     lit = compare(read_measurement(example_path("target")),
                   read_measurement(example_path("sprayout")), lights=("A", "FL2"))  # fmt: skip
     assert booth["metamerism_index_max"] == pytest.approx(
         {k: float(v.max()) for k, v in lit.metamerism.items()}, abs=5e-4
     )  # to the thousandth, as every report gives it
-    refused = flakelab("compare", "--example", "--conditions", "A/10", "--lights", "A")
+    refused = cli("compare", "--example", "--conditions", "A/10", "--lights", "A")
     assert refused.returncode == 2 and "--lights: A is the reference illuminant" in refused.stderr
 
 
@@ -96,52 +87,52 @@ def test_a_file_of_several_samples_says_which_it_read(tmp_path, cli):
     assert "(--reference-sample names another)" in note and note.count("note:") == 1
 
 
-def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path):
+def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path, cli):
     from matplotlib.image import imread
 
     picture, chart = tmp_path / "side-by-side.png", tmp_path / "chart.png"
-    run = flakelab("compare", "--example", "--render", picture, "--plot", chart)
+    run = cli("compare", "--example", "--render", picture, "--plot", chart)
     assert run.returncode == 0, run.stderr
     assert str(picture) in run.stderr and imread(picture).shape[2] in (3, 4)
     assert f"wrote {chart}" in run.stderr and imread(chart).shape[1] > imread(chart).shape[0]
-    run = flakelab("compare", "--example", "--render", tmp_path / "side-by-side.bmp")
+    run = cli("compare", "--example", "--render", tmp_path / "side-by-side.bmp")
     assert run.returncode == 2 and "side-by-side.bmp" in run.stderr and ".png" in run.stderr
-    run = flakelab("compare", "--example", "--plot", tmp_path / "chart.bmp")
+    run = cli("compare", "--example", "--plot", tmp_path / "chart.bmp")
     assert run.returncode == 2 and "chart.bmp" in run.stderr and ".png" in run.stderr
     target = read_measurement(example_path("target"))
     lit_at_15 = tmp_path / "lit-at-15.csv"  # nothing lit at 45°: no curve to draw
     write_measurements([target.select([g for g in target.geometry_names if g[:2] == "15"])],
                        lit_at_15)  # fmt: skip
-    run = flakelab("compare", lit_at_15, lit_at_15, "--render", tmp_path / "none.png")
+    run = cli("compare", lit_at_15, lit_at_15, "--render", tmp_path / "none.png")
     assert run.returncode == 2 and "--render" in run.stderr and "lit at 45°" in run.stderr
     assert sorted(tmp_path.iterdir()) == [chart, lit_at_15, picture]
 
 
-def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files):
-    result = flakelab("compare", ma_t12_files[0], ma_t12_files[0], "--json", "-t", "components")
+def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files, cli):
+    result = cli("compare", ma_t12_files[0], ma_t12_files[0], "--json", "-t", "components")
     report = json.loads(result.stdout)
     assert report["pass"] and report["de00_max"] == pytest.approx(0, abs=1e-9)
 
 
-def test_user_tolerance_file(tmp_path):
+def test_user_tolerance_file(tmp_path, cli):
     toml = tmp_path / "shop.toml"
     toml.write_text('name = "shop"\n[default]\nde00 = 5.0\n[geometries."45as75"]\nde00 = 0.1\n')
-    report = json.loads(flakelab("compare", "--example", "--json", "-t", toml).stdout)
+    report = json.loads(cli("compare", "--example", "--json", "-t", toml).stdout)
     assert report["tolerance"] == "shop"
     assert report["failing_geometries"] == ["45as75"]
 
 
-def test_convert_then_inspect_gives_the_same_numbers(ma_t12_files, tmp_path):
+def test_convert_then_inspect_gives_the_same_numbers(ma_t12_files, tmp_path, cli):
     out = tmp_path / "converted.cxf"
-    assert flakelab("convert", ma_t12_files[1], out).returncode == 0
-    a = json.loads(flakelab("inspect", ma_t12_files[1], "--json").stdout)
-    b = json.loads(flakelab("inspect", out, "--json").stdout)
+    assert cli("convert", ma_t12_files[1], out).returncode == 0
+    a = json.loads(cli("inspect", ma_t12_files[1], "--json").stdout)
+    b = json.loads(cli("inspect", out, "--json").stdout)
     assert [g["L"] for g in a["geometries"]] == pytest.approx([g["L"] for g in b["geometries"]])
 
 
-def test_plot_writes_a_png(tmp_path):
+def test_plot_writes_a_png(tmp_path, cli):
     out = tmp_path / "flop.png"
-    result = flakelab("plot", example_path("target"), "-o", out)
+    result = cli("plot", example_path("target"), "-o", out)
     assert result.returncode == 0, result.stderr
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
 
@@ -205,19 +196,19 @@ def test_a_reader_that_stops_reading_stops_the_command_quietly():
     assert process.wait(timeout=120) == 141 and said == ""
 
 
-def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path):
+def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path, cli):
     existing = tmp_path / "out.bmp"
     existing.write_text("keep me")
-    result = flakelab("convert", example_path("target"), existing)
+    result = cli("convert", example_path("target"), existing)
     assert result.returncode == 2 and "unknown output extension" in result.stderr
     assert existing.read_text() == "keep me"
 
 
-def test_multi_sample_inspect_all(tmp_path):
+def test_multi_sample_inspect_all(tmp_path, cli):
     m = read_measurement(example_path("target"))
     path = tmp_path / "two.json"
     write_measurements([m, read_measurement(example_path("sprayout"))], path)
-    report = json.loads(flakelab("inspect", path, "--all", "--json").stdout)
+    report = json.loads(cli("inspect", path, "--all", "--json").stdout)
     assert [x["sample"] for x in report["measurements"]] == [
         x.sample for x in read_measurements(path)
     ]
@@ -228,8 +219,8 @@ def test_tolerance_presets_are_documented():
         assert tolerance_preset(name).description
 
 
-def test_validate_scaling_reproduces_the_papers_observations(tmp_path):
-    run = flakelab(
+def test_validate_scaling_reproduces_the_papers_observations(tmp_path, cli):
+    run = cli(
         "validate", "scaling", "--json", "--photons", "5000", "--spreads", "10,5",
         "--plots", str(tmp_path),
     )  # fmt: skip

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -19,19 +16,14 @@ from flakelab.models.registry import load_model_file
 from flakelab.models.training import training_device
 
 
-def flakelab(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flakelab.cli.main", *args],
-                          capture_output=True, text=True, env=env)  # fmt: skip
-
-
 def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     cases, database = tmp_path / "cases.csv", str(tmp_path / "shop.db")
-    run = flakelab("cases", "generate", "--n", "120", "--seed", "5", "--out", str(cases))
+    run = cli("cases", "generate", "--n", "120", "--seed", "5", "--out", str(cases))
     assert run.returncode == 0, run.stderr
     # off a terminal the progress is logged as lines, the last one the whole count
     assert "generating cases: 120/120 (100 %)" in run.stderr
-    run = flakelab("train", str(cases), "--epochs", "3", "--hidden", "16", "--database", database,
-                   "--out", str(tmp_path / "m.pt"), "--device", "auto", "--json")  # fmt: skip
+    run = cli("train", str(cases), "--epochs", "3", "--hidden", "16", "--database", database,
+              "--out", str(tmp_path / "m.pt"), "--device", "auto", "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["device"] == str(training_device("auto"))  # a GPU where torch sees one
@@ -39,7 +31,7 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     assert report["registry"]["version"] == 1
     # three epochs cannot beat the shipped model on the same held-out cases
     assert report["registry"]["promoted"] is False
-    listed = json.loads(flakelab("model", "list", "--database", database, "--json").stdout)
+    listed = json.loads(cli("model", "list", "--database", database, "--json").stdout)
     assert [(m["version"], m["status"]) for m in listed["registered"]] == [(1, "candidate")]
     # a candidate, never promoted, is taken out of the registry as the model it trained
     run = cli(
@@ -67,7 +59,7 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     assert json.loads(cli(*listing).stdout)["current"]["five-angle"] == "shipped"
     run = cli("model", "promote", "five-angle", "-d", database)
     assert run.returncode == 2 and "VERSION: expected NAME:VERSION" in run.stderr
-    run = flakelab("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
+    run = cli("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json")
     assert run.returncode == 0, run.stderr
     by_file = json.loads(run.stdout)
     assert by_file["cases"] == 120
@@ -81,7 +73,7 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     shop = tmp_path / "shop.csv"
     first, *rest = read_cases(cases)
     write_cases([*rest, replace(first, recipe={"Shop's own red": 1.0})], shop)
-    run = flakelab("model", "evaluate", str(shop), "--model", str(tmp_path / "m.pt"))
+    run = cli("model", "evaluate", str(shop), "--model", str(tmp_path / "m.pt"))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert f"{shop}: case '{first.case_id}': recipe: toner \"Shop's own red\" is not in" in (
         " ".join(run.stderr.split())
@@ -110,12 +102,12 @@ def test_a_model_promoted_in_the_user_data_folder_is_the_current_one(tmp_path, c
     assert json.loads(cli(*current).stdout)["source"].endswith("five-angle, promoted")
 
 
-def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
+def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path, cli):
     target, sprayed = example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"
     corrected = tmp_path / "corrected.json"
-    run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
-                   "--recipe-out", str(corrected), "--json")  # fmt: skip
+    run = cli("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
+              "--recipe-out", str(corrected), "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     measured = compare(read_measurement(target), read_measurement(sprayed))
@@ -152,8 +144,8 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     tight = tmp_path / "tight.toml"
     tight.write_text('name = "tight"\n[default]\nde00 = 0.3\n[texture]\nG = 0.01\n')
     chart = tmp_path / "correction.svg"
-    run = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
-                   "--tolerance", str(tight), "--json", "--plot", str(chart))  # fmt: skip
+    run = cli("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
+              "--tolerance", str(tight), "--json", "--plot", str(chart))  # fmt: skip
     judged = json.loads(run.stdout)
     # the chart: four panels, the twelve geometries along each
     svg = chart.read_text()
@@ -166,7 +158,7 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path):
     assert not any("already passes" in note for note in judged["notes"])
     assert any("texture fails tight at G" in note for note in judged["notes"])
     # the table a colorist reads says the same: every addition with its grams
-    text = flakelab("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed))
+    text = cli("correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed))
     assert text.returncode == 0, text.stderr
     for toner, grams in report["add_g"].items():
         assert any(toner in ln and f"{grams:.1f}" in ln for ln in text.stdout.splitlines()), toner
@@ -191,7 +183,7 @@ def test_correct_refuses_a_bad_recipe(tmp_path, cli):
     assert run.returncode == 2 and "resolution: expected a positive number" in run.stderr
 
 
-def test_a_shop_brings_its_history_in_one_transaction(tmp_path):
+def test_a_shop_brings_its_history_in_one_transaction(tmp_path, cli):
     from flakelab.cases.database import count_cases, iter_cases, open_database
 
     db, examples = tmp_path / "shop.db", example_path("target").parent
@@ -199,12 +191,12 @@ def test_a_shop_brings_its_history_in_one_transaction(tmp_path):
     car, recipe = examples / "blue-metallic-target.cxf", examples / "blue-metallic-recipe.json"
     good = f"{car},{recipe},{example_path('sprayout')},Dupont"
     manifest.write_text(f"target,recipe,sprayed,shop\n{good}\n{car},{recipe},nope.cxf,x\n")
-    run = flakelab("cases", "record-all", str(manifest), "-d", str(db))
+    run = cli("cases", "record-all", str(manifest), "-d", str(db))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "history.csv: row 3: sprayed: " in run.stderr and "nope.cxf: no such file" in run.stderr
     assert count_cases(open_database(db)) == 0  # the good row was not stored either
     manifest.write_text(f"target,recipe,sprayed,shop\n{good}\n")
-    run = flakelab("cases", "record-all", str(manifest), "-d", str(db), "--json")
+    run = cli("cases", "record-all", str(manifest), "-d", str(db), "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["recorded"] == 1 and report["outcomes"]["accepted"] == 1
@@ -212,13 +204,13 @@ def test_a_shop_brings_its_history_in_one_transaction(tmp_path):
     (case,) = iter_cases(open_database(db))
     assert case.case_id == report["cases"][0]["case_id"] and case.shop == "Dupont"
     # the same history again is refused, naming the row, and stores nothing
-    run = flakelab("cases", "record-all", str(manifest), "-d", str(db))
+    run = cli("cases", "record-all", str(manifest), "-d", str(db))
     assert run.returncode == 2 and "row 2: case " in run.stderr and "already recorded" in run.stderr
     assert count_cases(open_database(db)) == 1
 
 
 @pytest.mark.slow  # a shop's whole workflow through the CLI, 0.8–1.7 min
-def test_a_shop_records_its_spray_outs_once_each(tmp_path):
+def test_a_shop_records_its_spray_outs_once_each(tmp_path, cli):
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import read_cases
     from flakelab.io import write_measurements
@@ -227,7 +219,7 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     recipe = target.parent / "blue-metallic-recipe.json"
     args = ("cases", "record", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
             "-d", str(db))  # fmt: skip
-    run = flakelab(*args, "--shop", "Dupont", "--json")
+    run = cli(*args, "--shop", "Dupont", "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["outcome"] == "accepted" and report["sprayout_passes"] is True
@@ -235,22 +227,22 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     assert report["left_out"] == [] and report["geometries"] == list(twelve)
     assert {"five-angle", "ma-t12"} <= set(report["read_by_models_of"])
     # the same spray-out again is refused and stores nothing
-    again = flakelab(*args, "--shop", "Dupont")
+    again = cli(*args, "--shop", "Dupont")
     assert again.returncode == 2 and "is already recorded" in again.stderr
     # a recipe with a toner the library lacks names the file and the toner
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"Al medium": 100, "Unobtainium": 5}))
-    run = flakelab(*args[:3], "--recipe", str(bad), *args[5:], "--outcome", "rejected")
+    run = cli(*args[:3], "--recipe", str(bad), *args[5:], "--outcome", "rejected")
     assert run.returncode == 2 and "bad.json" in run.stderr and "'Unobtainium'" in run.stderr
     # the shop's name from the environment, the outcome as given, the five-angle geometries
     # alone, target and spray-out as two samples of one file
     both = tmp_path / "both.cxf"
     target_reading, reading = read_measurement(target), read_measurement(sprayed)
     write_measurements([target_reading, reading], both)
-    env = dict(os.environ, FLAKELAB_SHOP="Martin")
-    run = flakelab("cases", "record", str(both), "--recipe", str(recipe), "--sprayed", str(both),
-                   "--sprayed-sample", reading.sample, "-d", str(db), "--outcome", "rejected",
-                   "-i", "five-angle", env=env)  # fmt: skip
+    env = {"FLAKELAB_SHOP": "Martin"}
+    run = cli("cases", "record", str(both), "--recipe", str(recipe), "--sprayed", str(both),
+              "--sprayed-sample", reading.sample, "-d", str(db), "--outcome", "rejected",
+              "-i", "five-angle", env=env)  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in again.stderr + run.stderr
     said = " ".join(run.stdout.split())
@@ -266,51 +258,51 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path):
     np.testing.assert_allclose(stored["Martin"].sprayout, at_five, rtol=1e-6)
     # the five-angle model is judged on both cases at its geometries, the MA-T12 model on one
     for instrument, n, geometries in (("five-angle", 2, five), ("ma-t12", 1, twelve)):
-        run = flakelab("model", "evaluate", str(db), "-i", instrument, "--json")
+        run = cli("model", "evaluate", str(db), "-i", instrument, "--json")
         assert run.returncode == 0, run.stderr
         evaluated = json.loads(run.stdout)
         assert evaluated["cases"] == n and set(evaluated["per_geometry"]) == set(geometries)
         assert evaluated["cases_left_out"] == 2 - n
-    run = flakelab("model", "evaluate", str(db), "--shop", "Martin", "--json")
+    run = cli("model", "evaluate", str(db), "--shop", "Martin", "--json")
     assert run.returncode == 0 and json.loads(run.stdout)["cases"] == 1
-    run = flakelab("model", "evaluate", str(db), "-i", "ma-t12", "--shop", "Martin")
+    run = cli("model", "evaluate", str(db), "-i", "ma-t12", "--shop", "Martin")
     assert run.returncode == 2 and "no cases from shop 'Martin' read at the model's" in run.stderr
     # a shop's history, or every case read at one geometry set, out to a file
     out = tmp_path / "out.csv"
-    run = flakelab("cases", "export", str(out), "-d", str(db), "--shop", "Martin")
+    run = cli("cases", "export", str(out), "-d", str(db), "--shop", "Martin")
     assert run.returncode == 0, run.stderr
     assert [c.shop for c in read_cases(out)] == ["Martin"]
-    assert flakelab("cases", "export", str(out), "-d", str(db), "-i", "ma-t12").returncode == 0
+    assert cli("cases", "export", str(out), "-d", str(db), "-i", "ma-t12").returncode == 0
     assert [c.shop for c in read_cases(out)] == ["Dupont"]
-    run = flakelab("cases", "export", str(out), "-d", str(db), "--shop", "Nobody")
+    run = cli("cases", "export", str(out), "-d", str(db), "--shop", "Nobody")
     assert run.returncode == 2 and "no cases from shop 'Nobody'" in run.stderr
     assert [c.shop for c in read_cases(out)] == ["Dupont"]  # the file is left as it was
     # the shop's history, newest first, and one case removed by its id
-    listed = json.loads(flakelab("cases", "list", "-d", str(db), "--json").stdout)["cases"]
+    listed = json.loads(cli("cases", "list", "-d", str(db), "--json").stdout)["cases"]
     assert {c["shop"] for c in listed} == {"Dupont", "Martin"}
     dupont = next(c for c in listed if c["shop"] == "Dupont")
     assert dupont["case_id"] == report["case_id"] and dupont["worst_de00"] < 0.5
-    run = flakelab("cases", "remove", report["case_id"], "-d", str(db))  # no terminal to ask
+    run = cli("cases", "remove", report["case_id"], "-d", str(db))  # no terminal to ask
     assert run.returncode == 2 and "confirm with --yes" in run.stderr
-    run = flakelab("cases", "remove", report["case_id"], "--yes", "-d", str(db))
+    run = cli("cases", "remove", report["case_id"], "--yes", "-d", str(db))
     assert run.returncode == 0 and f"removed case {report['case_id']}" in run.stderr
     assert {c.shop for c in iter_cases(open_database(db))} == {"Martin"}
 
 
-def test_weigh_scales_a_recipe_to_another_can(tmp_path):
+def test_weigh_scales_a_recipe_to_another_can(tmp_path, cli):
     recipe = example_path("target").parent / "blue-metallic-recipe.json"  # 250 g
     grams, out = json.loads(recipe.read_text()), tmp_path / "1kg.json"
-    run = flakelab("weigh", str(recipe), "--quantity", "1kg", "--recipe-out", str(out), "--json")
+    run = cli("weigh", str(recipe), "--quantity", "1kg", "--recipe-out", str(out), "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     # 250 g → 1 kg: every amount times four, already on a 0.1 g scale, so rounding costs 0
     assert read_recipe(out) == pytest.approx({t: 4 * g for t, g in grams.items()})
     assert report["weights_g"][-1]["cumulative"] == pytest.approx(1000.0)
     assert report["rounding_de00"] == pytest.approx(0.0, abs=1e-6)
-    small = flakelab("weigh", str(recipe), "--quantity", "5g", "--resolution", "1")
+    small = cli("weigh", str(recipe), "--quantity", "5g", "--resolution", "1")
     assert small.returncode == 2 and "too small to weigh" in small.stderr
     assert "Carbon black" in small.stderr and "Traceback" not in small.stderr
-    into_folder = flakelab("weigh", str(recipe), "--quantity", "1kg", "--recipe-out", tmp_path)
+    into_folder = cli("weigh", str(recipe), "--quantity", "1kg", "--recipe-out", tmp_path)
     assert into_folder.returncode == 2 and "--recipe-out" in into_folder.stderr
     assert "is a folder" in into_folder.stderr and "Traceback" not in into_folder.stderr
 
@@ -324,8 +316,8 @@ def test_weigh_takes_a_can_in_pounds(cli):
     assert report["weights_g"][-1]["cumulative"] == pytest.approx(453.6)
 
 
-def test_realism_json_reports_the_shop_statistics():
-    run = flakelab("cases", "realism", "--n", "60", "--json")
+def test_realism_json_reports_the_shop_statistics(cli):
+    run = cli("cases", "realism", "--n", "60", "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     for key in ("remeasure_de00_median", "respray_de00_median", "batch_strength_sd",
@@ -333,12 +325,12 @@ def test_realism_json_reports_the_shop_statistics():
         assert key in report["realistic_ranges"] and report[key] > 0
 
 
-def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path):
+def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path, cli):
     cases = tmp_path / "cases.csv"
-    run = flakelab("cases", "generate", "--n", "60", "--seed", "6", "--out", str(cases))
+    run = cli("cases", "generate", "--n", "60", "--seed", "6", "--out", str(cases))
     assert run.returncode == 0, run.stderr
-    run = flakelab("train", str(cases), "--epochs", "2", "--hidden", "8", "--no-register",
-                   "--adapt", "synthetic shop", "--adapt-epochs", "2", "--json")  # fmt: skip
+    run = cli("train", str(cases), "--epochs", "2", "--hidden", "8", "--no-register",
+              "--adapt", "synthetic shop", "--adapt-epochs", "2", "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     tail = json.loads(run.stdout)["loss_log_tail"]
     # the final training's last fine-tuning epoch, then exactly two epochs of adaptation
@@ -347,21 +339,21 @@ def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path):
         ("adapt synthetic shop", 0),
         ("adapt synthetic shop", 1),
     ]
-    run = flakelab("train", str(cases), "--no-register", "--adapt", "synthetic shop",
-                   "--adapt-epochs", "0")  # fmt: skip
+    run = cli("train", str(cases), "--no-register", "--adapt", "synthetic shop",
+              "--adapt-epochs", "0")  # fmt: skip
     assert run.returncode != 0 and "--adapt-epochs" in run.stderr
 
 
 @pytest.mark.slow  # a shop's whole workflow through the CLI, 0.8–1.7 min
-def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path):
+def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path, cli):
     cases, database = str(tmp_path / "cases.db"), str(tmp_path / "models.db")
     habits = ("--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005")
-    run = flakelab("cases", "generate", "--n", "500", "--seed", "21", "--shop", "shop A",
-                   *habits, "--out", cases)  # fmt: skip
+    run = cli("cases", "generate", "--n", "500", "--seed", "21", "--shop", "shop A",
+              *habits, "--out", cases)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = flakelab("cases", "generate", "--n", "100", "--seed", "22", "--out", cases)
+    run = cli("cases", "generate", "--n", "100", "--seed", "22", "--out", cases)
     assert run.returncode == 0, run.stderr
-    run = flakelab("model", "adapt", cases, "--shop", "shop A", "--database", database, "--json")
+    run = cli("model", "adapt", cases, "--shop", "shop A", "--database", database, "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     # 500 of shop A's cases: those with toners new to the model left to the physics, a tenth
@@ -374,31 +366,31 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path)
     assert report["registry"]["promoted"] is True
     assert report["registry"]["incumbent_de00"] == pytest.approx(held_out["before"]["de00_mean"])
     # the promoted model is now the current one: a second adaptation starts from it
-    run = flakelab("model", "adapt", cases, "--shop", "shop A", "--database", database,
-                   "--epochs", "5", "--json")  # fmt: skip
+    run = cli("model", "adapt", cases, "--shop", "shop A", "--database", database,
+              "--epochs", "5", "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     again = json.loads(run.stdout)["held_out"]["before"]["de00_mean"]
     assert again == pytest.approx(held_out["after"]["de00_mean"])
 
-    run = flakelab("model", "adapt", cases, "--shop", "shop B", "--database", database)
+    run = cli("model", "adapt", cases, "--shop", "shop B", "--database", database)
     assert run.returncode == 2 and "no cases from shop 'shop B'" in run.stderr
-    run = flakelab("model", "adapt", cases, "--validation", "0.95", "--database", database)
+    run = cli("model", "adapt", cases, "--validation", "0.95", "--database", database)
     assert run.returncode == 2 and "--validation" in run.stderr
-    listed = json.loads(flakelab("model", "list", "--database", database, "--json").stdout)
+    listed = json.loads(cli("model", "list", "--database", database, "--json").stdout)
     assert len(listed["registered"]) == 2
 
 
 @pytest.mark.slow  # a shop's whole workflow through the CLI, 0.8–1.7 min
-def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
+def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cli):
     cases, habits = str(tmp_path / "cases.db"), tmp_path / "habits.json"
-    run = flakelab("cases", "generate", "--n", "300", "--seed", "23", "--shop", "shop A",
-                   "--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005",
-                   "--out", cases)  # fmt: skip
+    run = cli("cases", "generate", "--n", "300", "--seed", "23", "--shop", "shop A",
+              "--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005",
+              "--out", cases)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = flakelab("cases", "generate", "--n", "100", "--seed", "24", "--out", cases,
-                   "--start", "2026-06-01")  # fmt: skip
+    run = cli("cases", "generate", "--n", "100", "--seed", "24", "--out", cases,
+              "--start", "2026-06-01")  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = flakelab("cases", "habits", cases, "--since", "2026-06-01", "--json")
+    run = cli("cases", "habits", cases, "--since", "2026-06-01", "--json")
     assert run.returncode == 0, run.stderr
     assert (json.loads(run.stdout)["cases"], json.loads(run.stdout)["shop"]) == (
         100,
@@ -407,17 +399,17 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     # read together, the two shops' cases show a change where the second shop's begin, and
     # the habits read over it say so wherever they are used
     mixed = str(tmp_path / "mixed.json")
-    run = flakelab("cases", "habits", cases, "--json", "--out", mixed)
+    run = cli("cases", "habits", cases, "--json", "--out", mixed)
     assert run.returncode == 0, run.stderr
     drift = json.loads(run.stdout)["drift"]
     assert "flake_spread" in drift["changed"] and abs(drift["cases_before"] - 300) <= 5
     assert "--since 2026-0" in drift["message"]
     assert json.loads(run.stdout)["changed_since"] == drift["split_at"]
-    run = flakelab("match", "--example", "--candidates", "1", "--habits", mixed, "--json")
+    run = cli("match", "--example", "--candidates", "1", "--habits", mixed, "--json")
     assert run.returncode == 0 and "habits read over a change" in " ".join(run.stderr.split())
     figure = tmp_path / "habits.png"
-    run = flakelab("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json",
-                   "--plot", str(figure))  # fmt: skip
+    run = cli("cases", "habits", cases, "--shop", "shop A", "--out", str(habits), "--json",
+              "--plot", str(figure))  # fmt: skip
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     explained = report["explained"]
@@ -434,49 +426,49 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path):
     # the habits added to the model's predictions of the shop's cases (and the other's)
     evaluated = {}
     for extra in ((), ("--habits", str(habits))):
-        run = flakelab("model", "evaluate", cases, "--json", *extra)
+        run = cli("model", "evaluate", cases, "--json", *extra)
         assert run.returncode == 0, run.stderr
         evaluated[bool(extra)] = json.loads(run.stdout)
     assert evaluated[True]["habits"]["shop"] == "shop A" and evaluated[False]["habits"] is None
     assert evaluated[True]["de00_mean"] < 0.9 * evaluated[False]["de00_mean"]
-    text = flakelab("cases", "habits", cases, "--shop", "shop A")
+    text = cli("cases", "habits", cases, "--shop", "shop A")
     assert text.returncode == 0 and "flakes lie flatter" in text.stdout
 
     target = str(example_path("target"))
-    run = flakelab("match", "--example", "--candidates", "1", "--habits", str(habits), "--json")
+    run = cli("match", "--example", "--candidates", "1", "--habits", str(habits), "--json")
     assert run.returncode == 0, run.stderr
     assert any("aimed off for the shop's habits" in n for n in json.loads(run.stdout)["notes"])
     recipe = example_path("target").parent / "blue-metallic-recipe.json"
-    run = flakelab("correct", target, "--recipe", str(recipe), "--sprayed",
-                   str(example_path("sprayout")), "--habits", str(habits), "--json")  # fmt: skip
+    run = cli("correct", target, "--recipe", str(recipe), "--sprayed",
+              str(example_path("sprayout")), "--habits", str(habits), "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["habits"]["cases"] == 300
 
-    run = flakelab("cases", "habits", cases, "--shop", "shop B")
+    run = cli("cases", "habits", cases, "--shop", "shop B")
     assert run.returncode == 2 and "no cases from shop 'shop B'" in run.stderr
 
     # stored in the database for the shop, and used by name
-    run = flakelab("cases", "habits", cases, "--save", "--database", cases)
+    run = cli("cases", "habits", cases, "--save", "--database", cases)
     assert run.returncode == 2 and "cases of 2 shops" in run.stderr
-    run = flakelab("cases", "habits", cases, "--shop", "shop A", "--save", "--database", cases)
+    run = cli("cases", "habits", cases, "--shop", "shop A", "--save", "--database", cases)
     assert run.returncode == 0, run.stderr
-    shops = json.loads(flakelab("cases", "shops", "--database", cases, "--json").stdout)
+    shops = json.loads(cli("cases", "shops", "--database", cases, "--json").stdout)
     assert [(s["shop"], s["cases"]) for s in shops["shops"]] == [
         ("shop A", 300),
         ("synthetic shop", 100),
     ]
     assert shops["shops"][0]["habits"]["flake_spread"] == report["flake_spread"]
     assert shops["shops"][1]["habits"] is None
-    run = flakelab("match", "--example", "--candidates", "1", "--shop", "shop A",
-                   "--database", cases, "--json")  # fmt: skip
+    run = cli("match", "--example", "--candidates", "1", "--shop", "shop A",
+              "--database", cases, "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert any("flakes 4.0%" in n for n in json.loads(run.stdout)["notes"])
     assert "warning" not in run.stderr  # read against the model in use
-    run = flakelab("match", "--example", "--shop", "synthetic shop", "--database", cases)
+    run = cli("match", "--example", "--shop", "synthetic shop", "--database", cases)
     assert run.returncode == 2 and "no habits stored for shop 'synthetic shop'" in run.stderr
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(json.loads(habits.read_text()) | {"film_build": "lots"}))
-    run = flakelab("match", "--example", "--habits", str(bad))
+    run = cli("match", "--example", "--habits", str(bad))
     assert run.returncode == 2 and "bad.json" in run.stderr and "film_build" in run.stderr
     assert "Traceback" not in run.stderr
 
@@ -490,7 +482,7 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
     recipe = tmp_path / "recipe.json"
     recipe.write_text(json.dumps({"[bold]Perylene": 10}))
     run = cli("correct", str(example_path("target")), "--recipe", str(recipe),
-                   "--sprayed", str(example_path("sprayout")))  # fmt: skip
+              "--sprayed", str(example_path("sprayout")))  # fmt: skip
     assert run.returncode == 2 and "unknown toner '[bold]Perylene'" in run.stderr
     # a case file that cannot be written is refused before the cases are generated, and a
     # seed numpy cannot take is refused by name

@@ -365,6 +365,8 @@ def test_a_can_in_pounds_or_ounces_is_weighed_to_the_scale():
 
 
 def flakelab(*args: str) -> subprocess.CompletedProcess:
+    """The CLI in a new interpreter, as a user runs it: the main job once end to end (the other
+    tests run the CLI in-process, conftest's ``cli``)."""
     return subprocess.run(
         [sys.executable, "-m", "flakelab.cli.main", *args], capture_output=True, text=True
     )
@@ -419,25 +421,25 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert report["texture_limits"] == {"SG": 0.5, "G": 1.0}
 
 
-def test_match_through_the_library_s_physics_alone_needs_no_model():
+def test_match_through_the_library_s_physics_alone_needs_no_model(cli):
     """``--physics``: the example matched through the library's physics, which predicts the
     texture readings too; every number says where it came from, and a single physics model
     reports no ensemble spread."""
-    run = flakelab("match", "--example", "--physics", "--json", "--candidates", "1")
+    run = cli("match", "--example", "--physics", "--json", "--candidates", "1")
     assert run.returncode == 0, run.stderr
     best = json.loads(run.stdout)["candidates"][0]
     assert best["model"] == "physics (flakelab demo, fast model)"
     assert best["passes"] and best["de00_max"] < 1.0
     assert "model_spread" not in best["geometries"]["45as45"]
     assert abs(best["texture_delta"]["G"]) < 1.0  # graininess predicted, and matched
-    run = flakelab("match", "--example", "--physics", "--model", "other.pt")
+    run = cli("match", "--example", "--physics", "--model", "other.pt")
     assert run.returncode == 2 and "--physics and --model" in run.stderr
 
 
-def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files):
+def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files, cli):
     """A real MA-T12 export matched with the five-angle model (the default) says which seven
     of its twelve readings the match did not use; with the MA-T12 model it uses them all."""
-    run = flakelab("match", str(ma_t12_files[0]), "--json", "--candidates", "1")
+    run = cli("match", str(ma_t12_files[0]), "--json", "--candidates", "1")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["geometries"] == list(INSTRUMENT_GEOMETRIES["five-angle"])

@@ -3,8 +3,6 @@ definition, the fitted processes return the values asked of them, texture keeps 
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -208,26 +206,21 @@ def test_distance_parsing():
             parse_distance(bad)
 
 
-def flakelab(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flakelab.cli.main", *args],
-                          capture_output=True, text=True)  # fmt: skip
-
-
-def test_render_commands_write_images_of_the_asked_size(tmp_path):
+def test_render_commands_write_images_of_the_asked_size(tmp_path, cli):
     from matplotlib.image import imread
 
-    run = flakelab("render", "--view", "panel", "--size", "96", "-o", str(tmp_path / "p.png"))
+    run = cli("render", "--view", "panel", "--size", "96", "-o", str(tmp_path / "p.png"))
     assert run.returncode == 0, run.stderr
     assert imread(tmp_path / "p.png").shape[:2] == (96, 96)
-    run = flakelab("render", "--size", "128", "--distance", "2m", "-o", str(tmp_path / "c.png"))
+    run = cli("render", "--size", "128", "--distance", "2m", "-o", str(tmp_path / "c.png"))
     assert run.returncode == 0, run.stderr
     assert imread(tmp_path / "c.png").shape[:2] == (64, 128)
-    run = flakelab("render-grid", "--steps", "3", "--tile", "32", "-o", str(tmp_path / "g.png"))
+    run = cli("render-grid", "--steps", "3", "--tile", "32", "-o", str(tmp_path / "g.png"))
     assert run.returncode == 0, run.stderr
     assert imread(tmp_path / "g.png").shape[:2] == (96, 96)
 
 
-def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path):
+def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path, cli):
     import json
     import shutil
     from importlib.resources import files
@@ -240,7 +233,7 @@ def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path):
     document = json.loads(refitted.read_text())
     document["coarseness"]["constants"][1] = [53.1, -655.3, -2.54]  # the form shipped before
     refitted.write_text(json.dumps(document))
-    run = flakelab("texture", "fit", "-o", str(refitted), "--grey-only")
+    run = cli("texture", "fit", "-o", str(refitted), "--grey-only")
     assert run.returncode == 0, run.stderr
     got, want = (json.loads(f.read_text()) for f in (refitted, shipped))
     # rtol: refits on different CPUs stop a few 1e-6 apart (the least-squares fit's default
