@@ -40,7 +40,6 @@ import time
 import numpy as np
 
 from _matcher import MODEL_HELP, parse_kinds, seeds_from, shipped_matcher
-from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.match.correction import correct
@@ -78,7 +77,7 @@ def persistent_offset(forward, x, calm) -> np.ndarray:
 def failed_first_shots(seed: int, targets: int, world, forward, effect):
     """Each target of ``seed`` whose first shot fails: its trial, best candidate, recipe
     vector, first spray-out and hidden formula."""
-    known = World(world.library, world.instrument, world.settings, exclude=forward.novel)
+    known = world.without(forward.novel)
     rng = np.random.default_rng(seed)
     hidden = known.formulations(targets, rng)
     # progress on stderr even with --json: these runs are long, their output usually a file

@@ -95,7 +95,7 @@ def main() -> None:
     world, hybrid, _ = shipped_matcher("shop")
     library, names = world.library, list(world.library.names)
     rng = np.random.default_rng(args.seed)
-    known = World(library, world.instrument, world.settings, exclude=hybrid.novel)
+    known = world.without(hybrid.novel)
     x_known = known.formulations(args.recipes, rng)
     x = x_known.copy()
     chosen = rng.integers(len(hybrid.novel), size=args.recipes)

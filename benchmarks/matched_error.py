@@ -57,7 +57,7 @@ def matched_and_hidden(
     """For ``targets`` hidden formulations per seed, made and measured as in the harness: the
     recipes ``[N·candidates, T]`` the matcher proposes (its best ``candidates``) and the hidden
     formulations ``[N, T]``."""
-    known = World(world.library, world.instrument, exclude=forward.novel)
+    known = world.without(forward.novel)
     matched, hidden = [], []
     for seed in seeds:
         rng = np.random.default_rng(seed)

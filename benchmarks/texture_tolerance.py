@@ -99,7 +99,7 @@ def main() -> None:
     matcher = forward_for(model, world.library)
     predict = lambda x: evaluate_recipes(matcher, x)  # noqa: E731 as `model evaluate` does
     mae = evaluate_model(model, cases, predict)["texture_mae"]
-    known = World(world.library, world.instrument, world.settings, exclude=matcher.novel)
+    known = world.without(matcher.novel)
     without = known.formulations(len(x), rng)
     with_new = with_new_toner(world, without, matcher.novel, rng)
     flakes = world.library.paint_families(without) != "solid"

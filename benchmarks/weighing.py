@@ -29,7 +29,6 @@ import time
 import numpy as np
 
 from _matcher import shipped_matcher
-from flakelab.cases.generator import World
 from flakelab.match.evaluate import trial, worst_share
 from flakelab.match.recipe import (
     RecipeError,
@@ -104,7 +103,7 @@ def sprayed(world, forward, effect, targets: int, seed: int, grams: float, resol
 
     tolerance = tolerance_preset("de00-1.0")
     rng = np.random.default_rng(seed)
-    known = World(world.library, world.instrument, world.settings, exclude=forward.novel)
+    known = world.without(forward.novel)
     shares = {"computed": [], "nearest grams": [], "rounded for colour": []}
     for x_hidden in known.formulations(targets, rng):
         t = trial(world, x_hidden, rng)

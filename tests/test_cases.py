@@ -92,6 +92,19 @@ def test_recipes_are_fractions_of_library_toners(world, cases):
         assert 1 <= len(case.recipe) <= 6
 
 
+def test_a_world_without_some_toners_keeps_its_instrument_and_family_mix(world):
+    """Hidden targets drawn on the toners a model knows come from the harness's own world:
+    benchmarks that rebuilt it by hand once dropped its settings (a pearl-only world gave a
+    mix of families)."""
+    pearls = World(world.library, "ma-t12", replace(world.settings, kinds={"pearl": 1.0}))
+    left_out = tuple(t.name for t in world.library.of_kind("pearl")[:1])
+    known = pearls.without(left_out)
+    assert (known.instrument, known.settings) == ("ma-t12", pearls.settings)
+    x = known.formulations(200, np.random.default_rng(3))
+    assert set(world.library.paint_families(x)) == {"pearl"}
+    assert not x[:, world.library.names.index(left_out[0])].any()
+
+
 def test_generated_world_is_as_hard_as_a_shop(world):
     report = world.realism(n=200, seed=3)
     assert 0.02 <= report["remeasure_de00_median"] <= 0.10

@@ -159,6 +159,11 @@ class World:
             [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
         )
 
+    def without(self, toners: tuple[str, ...]) -> World:
+        """This world with ``toners`` left out of its formulations: the same library,
+        instrument and settings (hidden targets drawn only on the toners a model knows)."""
+        return World(self.library, self.instrument, self.settings, exclude=tuple(toners))
+
     # -- formulations ---------------------------------------------------------------------
     def formulations(self, n: int, rng: np.random.Generator) -> NDArray:
         """OEM-like mass fractions ``[n, T]``: an effect base and up to four pigments."""

@@ -337,7 +337,7 @@ def evaluate_matching(
     rng = np.random.default_rng(seed)
     names = list(world.library.names)
     # hidden formulations draw only on toners the model knows (a new toner is added below)
-    known = World(world.library, world.instrument, world.settings, exclude=novel)
+    known = world.without(novel)
     hidden = known.formulations(targets, rng)
     rows = []
 
