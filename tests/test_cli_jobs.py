@@ -404,6 +404,8 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cl
     # test_habits.py the placing); halves would put it 100 off
     assert "flake_spread" in drift["changed"] and abs(drift["cases_before"] - 300) <= 15
     assert "--since 2026-0" in drift["message"]
+    # film build shows in the low-hiding colours only: fewer cases' worth behind its z
+    assert drift["dof"]["film_build"] < drift["dof"]["flake_spread"]
     assert json.loads(run.stdout)["changed_since"] == drift["split_at"]
     run = cli("match", "--example", "--candidates", "1", "--habits", mixed, "--json")
     assert run.returncode == 0 and "habits read over a change" in " ".join(run.stderr.split())

@@ -853,6 +853,11 @@ def _drift_report(drift: dict, chosen: list) -> dict:
         "early": early,
         "late": late,
         "z": dict(zip(HABITS, drift["z"].round(2).tolist(), strict=True)),
+        # the Student's t degrees of freedom z was read with; null: a habit not shown
+        "dof": {
+            name: round(float(dof), 1) if np.isfinite(dof) else None
+            for name, dof in zip(HABITS, drift["dof"], strict=True)
+        },
         "changed": changed,
         "message": message if changed else None,
     }

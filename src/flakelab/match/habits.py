@@ -30,6 +30,15 @@ Habits change (a new gun, painter or instrument). :func:`habits_drift` scans eve
 of a shop's cases in time order for the one where the earlier and later habits differ most
 (:func:`change_scan`, all splits from one pass of cumulative sums) and flags a habit whose
 two sides differ by more than :data:`DRIFT_Z` standard errors of the difference.
+
+A sandwich variance is itself read from the cases, and from few of them where a habit shows in
+few: film build shows only in colours that hide the primer incompletely, a tenth of the cases,
+so 41 cases may hold four cases' worth of its information. Such a variance runs small as
+often as not, and a difference divided by it is Student's t, not normal. Each side's degrees
+of freedom are the effective number of cases behind its variance, (Σhᵢ)²/Σhᵢ² of the cases'
+information hᵢ along the habit (Satterthwaite's, for a sum of independent scaled χ²₁
+terms), the two sides' are joined by Welch–Satterthwaite, and z is reported as the normal
+deviate of the same tail probability (:func:`normal_equivalent`).
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
@@ -69,6 +79,7 @@ __all__ = [
     "MIN_DRIFT_CASES",
     "MIN_SEGMENT_CASES",
     "change_scan",
+    "normal_equivalent",
     "read_habits",
     "write_habits",
     "save_habits",
@@ -223,7 +234,7 @@ def estimate_habits(
     """The habits of the shop whose recipes ``fractions[N, T]`` (in ``forward``'s toner
     order) measured ``sprayouts[N, G, 31]``, against ``forward``'s predictions (module
     notes), drawn towards none by ``prior_sd`` (:data:`PRIOR_SD`; None: no prior)."""
-    theta, covariance, _, _ = _gauss_newton(
+    theta, covariance, *_ = _gauss_newton(
         forward, library, fractions, sprayouts, persistent_sd, noise_sd
     )
     if prior_sd is not None:
@@ -240,11 +251,11 @@ def _gauss_newton(
     sprayouts: NDArray,
     persistent_sd: float = PERSISTENT_SD,
     noise_sd: float = NOISE_SD,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """The habits' GLS estimate θ without a prior and its sandwich covariance (module
     notes), with the model's prediction ``R[N, G, 31]`` and the spray-outs' L*a*b* offsets
-    from it ``[N, G·3]`` that they were read from. Fewer than :data:`MIN_HABIT_CASES`
-    spray-outs are refused."""
+    from it ``[N, G·3]`` that they were read from, and each case's information ``[N, 3, 3]``
+    at the last step. Fewer than :data:`MIN_HABIT_CASES` spray-outs are refused."""
     N = len(fractions)
     if N < MIN_HABIT_CASES:
         raise FlakelabError(
@@ -261,7 +272,7 @@ def _gauss_newton(
         H = information.sum(0)
         step = _shown_inverse(H)[0] @ score.sum(0)
         theta = theta + step
-    return theta, _sandwich(H, score - information @ step), R, offset
+    return theta, _sandwich(H, score - information @ step), R, offset, information
 
 
 def _case_terms(
@@ -326,16 +337,17 @@ def _with_prior(theta: NDArray, covariance: NDArray, prior_sd: NDArray):
 
 DRIFT_Z = 4.5
 """A habit whose earlier and later sides differ by more than this many standard errors of
-the difference has changed over the cases (a new gun, painter or instrument). The scan
-takes the largest of every split, and the sandwich errors are not exact, so the bar sits
-well above the usual 3: the largest |z| of 40 steady shops of 1,000 cases was 3.96
-(``python benchmarks/habits_drift.py``)."""
+the difference (read as Student's t, module notes) has changed over the cases (a new gun,
+painter or instrument). The scan takes the largest of every split, so the bar sits well
+above the usual 3: the largest |z| of 40 steady shops of 1,000 cases was 4.20 (``python
+benchmarks/habits_drift.py``, 2026-11-28)."""
 
 
 MIN_DRIFT_CASES = 100
-"""Fewer spray-outs than this are not searched for a change: with 20 a side the sandwich
-errors run small (the largest |z| of 80 steady shops split in halves: 3.77 at 40 cases,
-3.04 at 100; ``python benchmarks/habits_drift.py``)."""
+"""Fewer spray-outs than this are not searched for a change: with 20 a side the habits and
+their errors are read from few cases' worth of information (the largest |z| of 80 steady
+shops split in halves: 3.22 at 40 cases, 2.31 at 100; ``python benchmarks/habits_drift.py
+--cases 40,100 --repeats 40 --at 0.5``, 2026-11-28)."""
 
 MIN_SEGMENT_CASES = 40
 """The fewest spray-outs on either side of a change the scan considers: each side's habits
@@ -366,11 +378,56 @@ def habits_drift(
         splits, scanned = change_scan(forward, library, fractions, sprayouts)
         split = int(splits[np.abs(scanned).max(1).argmax()])
         scan = {"splits": splits, "z": scanned}
-    early = estimate_habits(forward, library, fractions[:split], sprayouts[:split], prior_sd=None)
-    late = estimate_habits(forward, library, fractions[split:], sprayouts[split:], prior_sd=None)
-    z = (late.theta - early.theta) / np.hypot(early.standard_error, late.standard_error)
+    early, n_early = _read_side(forward, library, fractions[:split], sprayouts[:split])
+    late, n_late = _read_side(forward, library, fractions[split:], sprayouts[split:])
+    v_early, v_late = early.standard_error**2, late.standard_error**2
+    z, dof = normal_equivalent(late.theta - early.theta, v_early, n_early, v_late, n_late)
     changed = np.abs(z) > DRIFT_Z
-    return {"split": split, "early": early, "late": late, "z": z, "changed": changed, "scan": scan}
+    return {
+        "split": split,
+        "early": early,
+        "late": late,
+        "z": z,
+        "dof": dof,
+        "changed": changed,
+        "scan": scan,
+    }
+
+
+def _read_side(forward, library: Library, fractions: NDArray, sprayouts: NDArray):
+    """One side of a split: its habits without a prior, and the effective number of cases
+    behind each habit's variance (:func:`normal_equivalent`)."""
+    theta, covariance, _, _, information = _gauss_newton(forward, library, fractions, sprayouts)
+    h = np.diagonal(information, axis1=1, axis2=2)
+    habits = ShopHabits(
+        theta, np.sqrt(np.diag(covariance)), len(fractions), getattr(forward, "model_id", "")
+    )
+    return habits, _effective_cases(h.sum(0), (h**2).sum(0))
+
+
+def _effective_cases(total: NDArray, total_of_squares: NDArray) -> NDArray:
+    """Kish's effective number of cases (Σhᵢ)²/Σhᵢ² from the sums of the cases' information
+    hᵢ along each habit and of its squares: Satterthwaite's degrees of freedom of a variance
+    summed from them. NaN for a habit no case shows."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total_of_squares > 0, total**2 / total_of_squares, np.nan)
+
+
+def normal_equivalent(
+    difference: NDArray, v_early: NDArray, n_early: NDArray, v_late: NDArray, n_late: NDArray
+) -> tuple[NDArray, NDArray]:
+    """The ``difference`` of two sides' habits as the normal deviate z with the tail
+    probability of its Student's t, and the t's degrees of freedom (module notes): the
+    sides' variances ``v`` with ``n`` effective cases each are joined by Welch–Satterthwaite,
+    ν = (v₁ + v₂)² / (v₁²/n₁ + v₂²/n₂). A habit not shown on a side (infinite variance) has
+    z = 0; a t so far out that its tail underflows keeps its value."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        total = v_early + v_late
+        dof = total**2 / (v_early**2 / n_early + v_late**2 / n_late)
+        t = np.where(np.isfinite(total), difference / np.sqrt(total), 0.0)
+    tail = stats.t.sf(np.abs(t), np.where(np.isfinite(dof), dof, np.inf))
+    z = np.where(tail > 0, np.copysign(stats.norm.isf(tail), t), t)
+    return z, dof
 
 
 def change_scan(
@@ -381,26 +438,32 @@ def change_scan(
     least: int = MIN_SEGMENT_CASES,
 ) -> tuple[NDArray, NDArray]:
     """Every split of cases in time order, ``least`` or more (at most half) on either side,
-    and for each the difference of the later and earlier habits in standard errors
-    ``z[K, 3]``. Each side's habits are one Gauss–Newton step from those of all the cases,
-    with sandwich errors: the cases' terms are summed once, cumulatively, so all N splits
-    cost one fit."""
+    and for each the difference of the later and earlier habits in standard errors, as
+    normal deviates ``z[K, 3]`` (:func:`normal_equivalent`). Each side's habits are one
+    Gauss–Newton step from those of all the cases, with sandwich errors: the cases' terms
+    are summed once, cumulatively, so all N splits cost one fit."""
     N = len(fractions)
     least = min(least, N // 2)
-    pooled, _, R, offset = _gauss_newton(forward, library, fractions, sprayouts)
+    pooled, _, R, offset, _ = _gauss_newton(forward, library, fractions, sprayouts)
     g, B = _case_terms(pooled, library, fractions, R, offset, forward.geometries)
+    h = np.diagonal(B, axis1=1, axis2=2)
     terms = (
         g,
         B,
         np.einsum("nj,nk->njk", g, g),
         np.einsum("nj,nkl->njkl", g, B),
         np.einsum("njm,nkl->njmkl", B, B),
+        h,
+        h**2,
     )
     prefix = [np.concatenate([np.zeros((1, *t.shape[1:])), np.cumsum(t, 0)]) for t in terms]
     splits = np.arange(least, N - least + 1)
-    early = _segment_fits([p[splits] for p in prefix])
-    late = _segment_fits([p[-1] - p[splits] for p in prefix])
-    z = (late[0] - early[0]) / np.sqrt(early[1] + late[1])
+    early = [p[splits] for p in prefix]
+    late = [p[-1] - p[splits] for p in prefix]
+    (t_early, v_early), (t_late, v_late) = _segment_fits(early[:5]), _segment_fits(late[:5])
+    z, _ = normal_equivalent(
+        t_late - t_early, v_early, _effective_cases(*early[5:]), v_late, _effective_cases(*late[5:])
+    )
     return splits, z
 
 
