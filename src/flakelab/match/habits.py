@@ -33,8 +33,8 @@ two sides differ by more than :data:`DRIFT_Z` standard errors of the difference.
 
 A sandwich variance is itself read from the cases, and from few of them where a habit shows in
 few: film build shows only in colours that hide the primer incompletely, a tenth of the cases,
-so 41 cases may hold four cases' worth of its information. Such a variance runs small as
-often as not, and a difference divided by it is Student's t, not normal. Each side's degrees
+so 41 cases may hold four cases' worth of its information. Such a variance runs small more
+often than not, and a difference divided by it is Student's t, not normal. Each side's degrees
 of freedom are the effective number of cases behind its variance, (Σhᵢ)²/Σhᵢ² of the cases'
 information hᵢ along the habit (Satterthwaite's, for a sum of independent scaled χ²₁
 terms), the two sides' are joined by Welch–Satterthwaite, and z is reported as the normal
