@@ -234,14 +234,30 @@ def estimate_habits(
     """The habits of the shop whose recipes ``fractions[N, T]`` (in ``forward``'s toner
     order) measured ``sprayouts[N, G, 31]``, against ``forward``'s predictions (module
     notes), drawn towards none by ``prior_sd`` (:data:`PRIOR_SD`; None: no prior)."""
-    theta, covariance, *_ = _gauss_newton(
+    return _estimate(forward, library, fractions, sprayouts, persistent_sd, noise_sd, prior_sd)[0]
+
+
+def _estimate(
+    forward,
+    library: Library,
+    fractions: NDArray,
+    sprayouts: NDArray,
+    persistent_sd: float = PERSISTENT_SD,
+    noise_sd: float = NOISE_SD,
+    prior_sd: NDArray | None = PRIOR_SD,
+) -> tuple[ShopHabits, NDArray]:
+    """:func:`estimate_habits`, and the effective number of cases behind each habit's
+    variance (:func:`normal_equivalent`)."""
+    theta, covariance, _, _, information = _gauss_newton(
         forward, library, fractions, sprayouts, persistent_sd, noise_sd
     )
     if prior_sd is not None:
         theta, covariance = _with_prior(theta, covariance, np.asarray(prior_sd, float))
-    return ShopHabits(
+    habits = ShopHabits(
         theta, np.sqrt(np.diag(covariance)), len(fractions), getattr(forward, "model_id", "")
     )
+    h = np.diagonal(information, axis1=1, axis2=2)
+    return habits, _effective_cases(h.sum(0), (h**2).sum(0))
 
 
 def _gauss_newton(
@@ -378,8 +394,10 @@ def habits_drift(
         splits, scanned = change_scan(forward, library, fractions, sprayouts)
         split = int(splits[np.abs(scanned).max(1).argmax()])
         scan = {"splits": splits, "z": scanned}
-    early, n_early = _read_side(forward, library, fractions[:split], sprayouts[:split])
-    late, n_late = _read_side(forward, library, fractions[split:], sprayouts[split:])
+    (early, n_early), (late, n_late) = (
+        _estimate(forward, library, fractions[side], sprayouts[side], prior_sd=None)
+        for side in (slice(None, split), slice(split, None))
+    )
     v_early, v_late = early.standard_error**2, late.standard_error**2
     z, dof = normal_equivalent(late.theta - early.theta, v_early, n_early, v_late, n_late)
     changed = np.abs(z) > DRIFT_Z
@@ -392,17 +410,6 @@ def habits_drift(
         "changed": changed,
         "scan": scan,
     }
-
-
-def _read_side(forward, library: Library, fractions: NDArray, sprayouts: NDArray):
-    """One side of a split: its habits without a prior, and the effective number of cases
-    behind each habit's variance (:func:`normal_equivalent`)."""
-    theta, covariance, _, _, information = _gauss_newton(forward, library, fractions, sprayouts)
-    h = np.diagonal(information, axis1=1, axis2=2)
-    habits = ShopHabits(
-        theta, np.sqrt(np.diag(covariance)), len(fractions), getattr(forward, "model_id", "")
-    )
-    return habits, _effective_cases(h.sum(0), (h**2).sum(0))
 
 
 def _effective_cases(total: NDArray, total_of_squares: NDArray) -> NDArray:
@@ -458,26 +465,24 @@ def change_scan(
     )
     prefix = [np.concatenate([np.zeros((1, *t.shape[1:])), np.cumsum(t, 0)]) for t in terms]
     splits = np.arange(least, N - least + 1)
-    early = [p[splits] for p in prefix]
-    late = [p[-1] - p[splits] for p in prefix]
-    (t_early, v_early), (t_late, v_late) = _segment_fits(early[:5]), _segment_fits(late[:5])
-    z, _ = normal_equivalent(
-        t_late - t_early, v_early, _effective_cases(*early[5:]), v_late, _effective_cases(*late[5:])
-    )
+    t_early, v_early, n_early = _segment_fits([p[splits] for p in prefix])
+    t_late, v_late, n_late = _segment_fits([p[-1] - p[splits] for p in prefix])
+    z, _ = normal_equivalent(t_late - t_early, v_early, n_early, v_late, n_late)
     return splits, z
 
 
-def _segment_fits(sums: list[NDArray]) -> tuple[NDArray, NDArray]:
-    """The Gauss–Newton step ``[K, 3]`` and its sandwich variances ``[K, 3]`` of K runs of
-    cases from their summed terms (:func:`change_scan`): Σ(gᵢ − Bᵢt)(gᵢ − Bᵢt)ᵀ expanded in
-    the sums of gᵢgᵢᵀ, gᵢ⊗Bᵢ and Bᵢ⊗Bᵢ."""
-    g, B, gg, gB, BB = sums
+def _segment_fits(sums: list[NDArray]) -> tuple[NDArray, NDArray, NDArray]:
+    """The Gauss–Newton step ``[K, 3]``, its sandwich variances ``[K, 3]`` and their
+    effective cases ``[K, 3]`` of K runs of cases from their summed terms
+    (:func:`change_scan`): Σ(gᵢ − Bᵢt)(gᵢ − Bᵢt)ᵀ expanded in the sums of gᵢgᵢᵀ, gᵢ⊗Bᵢ and
+    Bᵢ⊗Bᵢ; the effective cases from those of the information's diagonal hᵢ and hᵢ²."""
+    g, B, gg, gB, BB, h, hh = sums
     H_inv, shown = _shown_inverse(B)
     t = np.einsum("kij,kj->ki", H_inv, g)
     cross = np.einsum("kjil,kl->kji", gB, t)
     meat = gg - cross - cross.transpose(0, 2, 1) + np.einsum("kjmil,km,kl->kji", BB, t, t)
     covariance = _unshown_infinite(H_inv @ meat @ H_inv.transpose(0, 2, 1), shown)
-    return t, np.diagonal(covariance, axis1=1, axis2=2)
+    return t, np.diagonal(covariance, axis1=1, axis2=2), _effective_cases(h, hh)
 
 
 def habits_fit(
