@@ -24,6 +24,7 @@ from flakelab.match.habits import (
     ShopHabits,
     _case_terms,
     _sandwich,
+    _small_sample_sandwich,
     _with_prior,
     change_scan,
     estimate_habits,
@@ -211,6 +212,53 @@ def test_a_difference_over_few_cases_information_is_read_as_students_t():
     # a habit one side does not show cannot have changed; a t far out keeps its value
     z, _ = normal_equivalent(np.array([0.0, 80.0]), np.array([np.inf, 0.0]), n[::2], v[:2], n[::2])
     assert z[0] == 0 and z[1] == 80.0
+
+
+def test_the_leverage_corrected_sandwich_matches_its_whitened_construction():
+    """Bell–McCaffrey from the cases' 3×3 terms against the N·D-dimensional construction:
+    hat matrix P, each residual block scaled by (I − P_ii)^-1/2, and the eigenvalues of GᵀG.
+    Film build is carried by three cases, as in a shop's low-hiding colours."""
+    rng = np.random.default_rng(11)
+    N, D = 30, 5
+    X = rng.normal(size=(N, D, 3))
+    X[3:, :, 0] *= 0.05  # film build: three cases hold nearly all its information
+    e = rng.normal(size=(N, D))
+    flat = X.reshape(N * D, 3)
+    H_inv = np.linalg.inv(flat.T @ flat)
+    residual = (e.reshape(-1) - flat @ H_inv @ flat.T @ e.reshape(-1)).reshape(N, D)
+    P = X @ H_inv @ X.transpose(0, 2, 1)  # each case's own block of the hat matrix
+    value, vector = np.linalg.eigh(np.eye(D) - P)
+    A = vector @ (value[:, :, None] ** -0.5 * vector.transpose(0, 2, 1))
+    adjusted = np.einsum("ndk,nde,ne->nk", X, A, residual)
+    expected_covariance = H_inv @ adjusted.T @ adjusted @ H_inv
+    expected_dof = []
+    for j in range(3):
+        u = np.einsum("nde,nek,k->nd", A, X, H_inv[:, j])  # A_i X_i H⁻¹ e_j, block by block
+        placed = np.zeros((N * D, N))
+        placed[np.arange(N * D), np.repeat(np.arange(N), D)] = u.reshape(-1)
+        G = placed - flat @ H_inv @ (flat.T @ placed)  # (I − P) applied to each column
+        lam = np.linalg.eigvalsh(G.T @ G)
+        expected_dof.append(lam.sum() ** 2 / (lam**2).sum())
+        assert lam.sum() == pytest.approx(H_inv[j, j], rel=1e-9)  # unbiased: E[V] = (H⁻¹)_jj
+    covariance, dof = _small_sample_sandwich(
+        np.einsum("ndk,ndl->nkl", X, X), np.einsum("ndk,nd->nk", X, residual)
+    )
+    np.testing.assert_allclose(covariance, expected_covariance, rtol=1e-9)
+    np.testing.assert_allclose(dof, expected_dof, rtol=1e-9)
+    assert dof[0] < 5 < 20 < dof[1]  # few cases' worth of film build, all cases' of the rest
+
+
+def test_the_leverage_corrected_sandwich_of_a_mean_is_the_textbook_one():
+    # every case reads each habit once, alike: each habit is a mean of n values, whose
+    # unbiased variance is s²/n with n − 1 degrees of freedom; a habit no case shows is told
+    n, values = 12, np.random.default_rng(3).normal(size=(12, 3))
+    values[:, 2] = 0.0
+    information = np.broadcast_to(np.diag([1.0, 1.0, 0.0]), (n, 3, 3))
+    residual = values - values.mean(0)
+    covariance, dof = _small_sample_sandwich(information, residual)
+    np.testing.assert_allclose(np.diag(covariance)[:2], values[:, :2].var(0, ddof=1) / n)
+    np.testing.assert_allclose(dof[:2], n - 1)
+    assert np.isinf(covariance[2, 2]) and np.isnan(dof[2])
 
 
 def test_a_steady_shops_last_cases_few_low_hiding_colours_raise_no_alarm(shipped):

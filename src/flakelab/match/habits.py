@@ -17,9 +17,10 @@ sprayed at θ, and e_i ~ N(0, S_i Σ_a S_iᵀ + (σ_p² + σ_n²) I): the spray'
 model's error and the reading (:data:`~flakelab.match.correction.PERSISTENT_SD`,
 :data:`~flakelab.match.correction.NOISE_SD`). f is not linear over a few sigmas of film build:
 Gauss–Newton relinearises it at θ. Standard errors are the sandwich (robust) estimate,
-since the persistent offsets are heavy-tailed, not Gaussian. The estimate is then combined
-with a prior, no habits ± :data:`PRIOR_SD`, by precisions: a small shop's poorly read film
-build is drawn towards none.
+since the persistent offsets are heavy-tailed, not Gaussian, each case's score freed of its
+own leverage (Bell and McCaffrey's CR2, :func:`_small_sample_sandwich`). The estimate is then
+combined with a prior, no habits ± :data:`PRIOR_SD`, by precisions: a small shop's poorly
+read film build is drawn towards none.
 
 Where a model was adapted to the shop, it learned the habits already: measured against it,
 they come out near zero. The correction and the matcher take them as the shop's mean
@@ -33,12 +34,15 @@ two sides differ by more than :data:`DRIFT_Z` standard errors of the difference.
 
 A sandwich variance is itself read from the cases, and from few of them where a habit shows in
 few: film build shows only in colours that hide the primer incompletely, a tenth of the cases,
-so 41 cases may hold four cases' worth of its information. Such a variance runs small more
-often than not, and a difference divided by it is Student's t, not normal. Each side's degrees
-of freedom are the effective number of cases behind its variance, (Σhᵢ)²/Σhᵢ² of the cases'
-information hᵢ along the habit (Satterthwaite's, for a sum of independent scaled χ²₁
-terms), the two sides' are joined by Welch–Satterthwaite, and z is reported as the normal
-deviate of the same tail probability (:func:`normal_equivalent`).
+so 41 cases may hold four cases' worth of its information. Such a variance runs small: each of
+those few cases pulls the fit towards itself (its leverage), and the variance is read from few
+values, so a difference divided by it is Student's t, not normal. Each side's variance is
+freed of the leverage and given Bell and McCaffrey's degrees of freedom (exact for a mean: n −
+1); the two sides' are joined by Welch–Satterthwaite, and z is reported as the normal deviate
+of the same tail probability (:func:`normal_equivalent`). The scan, which reads every split
+from cumulative sums, cannot follow each split's leverage: it takes the plain sandwich and
+Satterthwaite's degrees of freedom, the effective number of cases (Σhᵢ)²/Σhᵢ² of the cases'
+information hᵢ along the habit, to choose the split, and the split chosen is read in full.
 """
 
 from __future__ import annotations
@@ -248,7 +252,7 @@ def _estimate(
 ) -> tuple[ShopHabits, NDArray]:
     """:func:`estimate_habits`, and the effective number of cases behind each habit's
     variance (:func:`normal_equivalent`)."""
-    theta, covariance, _, _, information = _gauss_newton(
+    theta, covariance, dof, _, _ = _gauss_newton(
         forward, library, fractions, sprayouts, persistent_sd, noise_sd
     )
     if prior_sd is not None:
@@ -256,8 +260,7 @@ def _estimate(
     habits = ShopHabits(
         theta, np.sqrt(np.diag(covariance)), len(fractions), getattr(forward, "model_id", "")
     )
-    h = np.diagonal(information, axis1=1, axis2=2)
-    return habits, _effective_cases(h.sum(0), (h**2).sum(0))
+    return habits, dof
 
 
 def _gauss_newton(
@@ -268,10 +271,10 @@ def _gauss_newton(
     persistent_sd: float = PERSISTENT_SD,
     noise_sd: float = NOISE_SD,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
-    """The habits' GLS estimate θ without a prior and its sandwich covariance (module
-    notes), with the model's prediction ``R[N, G, 31]`` and the spray-outs' L*a*b* offsets
-    from it ``[N, G·3]`` that they were read from, and each case's information ``[N, 3, 3]``
-    at the last step. Fewer than :data:`MIN_HABIT_CASES` spray-outs are refused."""
+    """The habits' GLS estimate θ without a prior, its sandwich covariance and each habit's
+    degrees of freedom (:func:`_small_sample_sandwich`), with the model's prediction
+    ``R[N, G, 31]`` and the spray-outs' L*a*b* offsets from it ``[N, G·3]`` that they were
+    read from. Fewer than :data:`MIN_HABIT_CASES` spray-outs are refused."""
     N = len(fractions)
     if N < MIN_HABIT_CASES:
         raise FlakelabError(
@@ -288,7 +291,8 @@ def _gauss_newton(
         H = information.sum(0)
         step = _shown_inverse(H)[0] @ score.sum(0)
         theta = theta + step
-    return theta, _sandwich(H, score - information @ step), R, offset, information
+    covariance, dof = _small_sample_sandwich(information, score - information @ step)
+    return theta, covariance, dof, R, offset
 
 
 def _case_terms(
@@ -323,6 +327,45 @@ def _sandwich(information: NDArray, scores: NDArray) -> NDArray:
     case's ``scores`` sᵢ at the estimate: robust to the heavy-tailed persistent offsets."""
     H_inv, shown = _shown_inverse(information)
     return _unshown_infinite(H_inv @ (scores.T @ scores) @ H_inv, shown)
+
+
+def _small_sample_sandwich(information: NDArray, scores: NDArray) -> tuple[NDArray, NDArray]:
+    """The sandwich covariance with each case's score freed of its own leverage, and each
+    habit's Bell–McCaffrey degrees of freedom, from the cases' ``information`` Bᵢ ``[N, 3,
+    3]`` and ``scores`` sᵢ ``[N, 3]`` at the estimate (Bell & McCaffrey 2002, "CR2";
+    Imbens & Kolesár 2016, eq. 9).
+
+    A case that carries much of a habit's information pulls the fit towards itself, so its
+    residual, and the plain sandwich, run small: (1 − leverage)⁻¹ in variance. In whitened
+    coordinates, with M_i = H^-1/2 B_i H^-1/2 (H = ΣB_i) the case's leverage, its score
+    becomes H^1/2 (I − M_i)^-1/2 H^-1/2 s_i (the D×D adjustment of the whitened residual,
+    pushed through the case's design to 3×3), which makes the sandwich unbiased under the
+    working covariance. Its variance of habit j is then Σ λ_k χ²₁ with λ the eigenvalues of
+    GᵀG = diag(a_i) − Q Qᵀ, a_i = wᵀ(I − M_i)⁻¹M_i w, rows q_i = (I − M_i)^-1/2 M_i w,
+    w = H^-1/2 e_j, and its degrees of freedom (Σλ)²/Σλ² are read from traces in O(N).
+    A case that alone shows a habit (leverage 1) is fitted exactly and adds nothing; a
+    habit no case shows has an infinite variance and NaN degrees of freedom."""
+    H_inv, shown = _shown_inverse(information.sum(0))
+    value, vector = np.linalg.eigh(H_inv)
+    root = (vector * np.sqrt(value.clip(0))[None]) @ vector.T  # H^-1/2 on the habits shown
+    leverage, U = np.linalg.eigh(root @ information @ root)  # M_i = U_i diag(λ_i) U_iᵀ
+    free = 1 - leverage.clip(0, 1)
+    fitted = free < 1e-12
+    inv_root_free = np.where(fitted, 0.0, 1 / np.sqrt(np.where(fitted, 1.0, free)))
+    along = np.einsum("nki,kj->nij", U, root)  # U_iᵀ H^-1/2: [N, eigen, coordinate]
+    adjusted = np.einsum("nji,ni->nj", U, inv_root_free * np.einsum("nij,nj->ni", along, scores))
+    covariance = _unshown_infinite(root @ (adjusted.T @ adjusted) @ root, shown)
+    odds = np.where(fitted, 0.0, leverage / np.where(fitted, 1.0, free))  # λ/(1 − λ)
+    a = np.einsum("ni,nij->nj", odds, along**2)
+    q = np.einsum("nci,ni,nij->ncj", U, leverage * inv_root_free, along)  # [N, coord, habit]
+    qq = (q**2).sum(1)
+    trace = a.sum(0) - qq.sum(0)
+    trace_of_square = (
+        (a**2).sum(0) - 2 * (a * qq).sum(0) + (np.einsum("nij,nkj->jik", q, q) ** 2).sum((1, 2))
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dof = np.where(shown & (trace_of_square > 0), trace**2 / trace_of_square, np.nan)
+    return covariance, dof
 
 
 def _shown_inverse(H: NDArray) -> tuple[NDArray, NDArray]:
@@ -425,7 +468,7 @@ def normal_equivalent(
 ) -> tuple[NDArray, NDArray]:
     """The ``difference`` of two sides' habits as the normal deviate z with the tail
     probability of its Student's t, and the t's degrees of freedom (module notes): the
-    sides' variances ``v`` with ``n`` effective cases each are joined by Welch–Satterthwaite,
+    sides' variances ``v`` with ``n`` degrees of freedom each are joined by Welch–Satterthwaite,
     ν = (v₁ + v₂)² / (v₁²/n₁ + v₂²/n₂). A habit not shown on a side (infinite variance) has
     z = 0; a t so far out that its tail underflows keeps its value."""
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -451,7 +494,7 @@ def change_scan(
     are summed once, cumulatively, so all N splits cost one fit."""
     N = len(fractions)
     least = min(least, N // 2)
-    pooled, _, R, offset, _ = _gauss_newton(forward, library, fractions, sprayouts)
+    pooled, _, _, R, offset = _gauss_newton(forward, library, fractions, sprayouts)
     g, B = _case_terms(pooled, library, fractions, R, offset, forward.geometries)
     h = np.diagonal(B, axis1=1, axis2=2)
     terms = (
