@@ -398,15 +398,16 @@ DRIFT_Z = 4.5
 """A habit whose earlier and later sides differ by more than this many standard errors of
 the difference (read as Student's t, module notes) has changed over the cases (a new gun,
 painter or instrument). The scan takes the largest of every split, so the bar sits well
-above the usual 3: the largest |z| of 40 steady shops of 1,000 cases was 4.20 (``python
-benchmarks/habits_drift.py``, 2026-11-28)."""
+above the usual 3: the largest |z| of 40 steady shops of 1,000 cases was 4.00 (``python
+benchmarks/habits_drift.py``, 2026-11-28, stop 60)."""
 
 
 MIN_DRIFT_CASES = 100
 """Fewer spray-outs than this are not searched for a change: with 20 a side the habits and
 their errors are read from few cases' worth of information (the largest |z| of 80 steady
-shops split in halves: 3.22 at 40 cases, 2.31 at 100; ``python benchmarks/habits_drift.py
---cases 40,100 --repeats 40 --at 0.5``, 2026-11-28)."""
+shops split in halves: 3.13 at 40 cases, 2.28 at 100; ``python benchmarks/habits_drift.py
+--cases 40,100 --repeats 40 --at 0.5``, 2026-11-28, stop 60; 3.22 and 2.31 before each
+side was freed of its cases' leverage)."""
 
 MIN_SEGMENT_CASES = 40
 """The fewest spray-outs on either side of a change the scan considers: each side's habits
