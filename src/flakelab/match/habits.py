@@ -250,8 +250,8 @@ def _estimate(
     noise_sd: float = NOISE_SD,
     prior_sd: NDArray | None = PRIOR_SD,
 ) -> tuple[ShopHabits, NDArray]:
-    """:func:`estimate_habits`, and the effective number of cases behind each habit's
-    variance (:func:`normal_equivalent`)."""
+    """:func:`estimate_habits`, and the degrees of freedom of each habit's variance
+    (:func:`_small_sample_sandwich`, :func:`normal_equivalent`)."""
     theta, covariance, dof, _, _ = _gauss_newton(
         forward, library, fractions, sprayouts, persistent_sd, noise_sd
     )
@@ -322,18 +322,11 @@ def _case_terms(
     return score, np.einsum("ndk,ndl->nkl", S, weighted)
 
 
-def _sandwich(information: NDArray, scores: NDArray) -> NDArray:
-    """The sandwich covariance H⁻¹ (Σ sᵢsᵢᵀ) H⁻¹ from the summed ``information`` H and each
-    case's ``scores`` sᵢ at the estimate: robust to the heavy-tailed persistent offsets."""
-    H_inv, shown = _shown_inverse(information)
-    return _unshown_infinite(H_inv @ (scores.T @ scores) @ H_inv, shown)
-
-
 def _small_sample_sandwich(information: NDArray, scores: NDArray) -> tuple[NDArray, NDArray]:
     """The sandwich covariance with each case's score freed of its own leverage, and each
     habit's Bell–McCaffrey degrees of freedom, from the cases' ``information`` Bᵢ ``[N, 3,
-    3]`` and ``scores`` sᵢ ``[N, 3]`` at the estimate (Bell & McCaffrey 2002, "CR2";
-    Imbens & Kolesár 2016, eq. 9).
+    3]`` and ``scores`` sᵢ ``[N, 3]`` at the estimate (Bell & McCaffrey 2002, "CR2"; the
+    degrees of freedom as Imbens & Kolesár 2016 write them).
 
     A case that carries much of a habit's information pulls the fit towards itself, so its
     residual, and the plain sandwich, run small: (1 − leverage)⁻¹ in variance. In whitened
