@@ -344,11 +344,12 @@ def _small_sample_sandwich(information: NDArray, scores: NDArray) -> tuple[NDArr
     leverage, U = np.linalg.eigh(root @ information @ root)  # M_i = U_i diag(λ_i) U_iᵀ
     free = 1 - leverage.clip(0, 1)
     fitted = free < 1e-12
-    inv_root_free = np.where(fitted, 0.0, 1 / np.sqrt(np.where(fitted, 1.0, free)))
+    free = np.where(fitted, 1.0, free)  # the fitted directions are zeroed below
+    inv_root_free = np.where(fitted, 0.0, free**-0.5)
     along = np.einsum("nki,kj->nij", U, root)  # U_iᵀ H^-1/2: [N, eigen, coordinate]
     adjusted = np.einsum("nji,ni->nj", U, inv_root_free * np.einsum("nij,nj->ni", along, scores))
     covariance = _unshown_infinite(root @ (adjusted.T @ adjusted) @ root, shown)
-    odds = np.where(fitted, 0.0, leverage / np.where(fitted, 1.0, free))  # λ/(1 − λ)
+    odds = np.where(fitted, 0.0, leverage / free)  # λ/(1 − λ)
     a = np.einsum("ni,nij->nj", odds, along**2)
     q = np.einsum("nci,ni,nij->ncj", U, leverage * inv_root_free, along)  # [N, coord, habit]
     qq = (q**2).sum(1)
