@@ -638,8 +638,10 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
         for name, tolerance in [
             ("colour", replace(refinish, texture=None)),
             ("refinish", refinish),
-            # the best recipe comes within 0.0015 of the target's G (stop 52's model)
-            ("tight", replace(refinish, texture=TextureLimit(G=0.001))),
+            # no recipe comes this near: the best came within 0.0015 of the target's G
+            # (2.36) with stop 52's model, within 0.0007 with today's on an AMD EPYC, whose
+            # arithmetic ends the search a little elsewhere; a limit of 0.001 passed there
+            ("tight", replace(refinish, texture=TextureLimit(G=1e-5))),
         ]
     }
     colour = results["colour"].candidates
@@ -759,9 +761,10 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     assert cured.fractions[car[0]] > 10 * traced[car[0]]
     assert cured.new_toner == "Carbon black"
     assert worst_light(cured.metamerism)[1] < METAMERISM_NOTICE / 2
-    assert (befores["traced"]["A"].max(), cured.metamerism["A"].max()) == pytest.approx(
-        (1.94, 0.26), abs=0.01
-    )
+    # the spray-out's index is read, the cure's is where the search ends: 0.26 on the
+    # machines of stops 54-60, 0.246 on an AMD EPYC (stop 61), whose arithmetic differs
+    assert befores["traced"]["A"].max() == pytest.approx(1.94, abs=0.01)
+    assert cured.metamerism["A"].max() == pytest.approx(0.26, abs=0.03)
     assert notes["traced"] is None
 
 
