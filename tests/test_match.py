@@ -639,8 +639,9 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
             ("colour", replace(refinish, texture=None)),
             ("refinish", refinish),
             # no recipe comes this near: the best came within 0.0015 of the target's G
-            # (2.36) with stop 52's model, within 0.0007 with today's on an AMD EPYC, whose
-            # arithmetic ends the search a little elsewhere; a limit of 0.001 passed there
+            # (2.36) with stop 52's model, and within 0.0007 with the shipped one on an AMD
+            # EPYC (stop 61), whose arithmetic ends the search a little elsewhere: a limit
+            # of 0.001 passed there
             ("tight", replace(refinish, texture=TextureLimit(G=1e-5))),
         ]
     }
