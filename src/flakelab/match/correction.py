@@ -109,8 +109,8 @@ NEW_TONER_START = 0.002
 AIM_STEPS = 60
 """Adam steps of :func:`aim_off`: a small move from a recipe already matched. On 12 targets
 of the habits shop, sprayed at its mean, 0 / 30 / 60 / 150 / 300 steps landed at worst-
-geometry ΔE00 1.45 / 1.05 / 1.01 / 1.01 / 1.01 in 0.05 / 0.10 / 0.24 / 0.48 s
-(``benchmarks/aim_off.py``)."""
+geometry ΔE00 1.51 / 0.93 / 0.84 / 0.83 / 0.83 in 0.04 / 0.08 / 0.20 / 0.39 s
+(``benchmarks/aim_off.py``, stop 62)."""
 
 
 def _vector(forward, recipe: dict[str, float]) -> NDArray:
