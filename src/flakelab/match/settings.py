@@ -90,7 +90,9 @@ of a spray-out's offset is likely the model's own error, which persists.
 ``benchmarks/correction.py``, shipped ensemble: on the 190 failed first shots of seeds 77,
 78, 81–86, 1 / 2 / 4 gave +0.011 / +0.017 / +0.023 (± 0.010–0.013, paired) over 0.686
 without; on 205 of seeds 91–98, chosen beforehand, 4 gave +0.014 ± 0.012 over 0.648 and 8
-−0.006 ± 0.014."""
+−0.006 ± 0.014. In the mended world with the retrained ensemble (stop 61–62): +0.045 ± 0.014
+over 0.659 on 184 of seeds 77, 78, 81–86; +0.023 ± 0.015 over 0.679 on 181 of seeds 91–98,
+where 8 gave 0.010 ± 0.010 less than 4."""
 
 EXTRA_TONERS_TRIED = 8
 """Toners outside the recipe that :func:`~flakelab.match.correction.correct` tries as an
