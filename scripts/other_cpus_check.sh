@@ -21,24 +21,26 @@ while [[ $# -gt 0 && "$1" != "--" ]]; do variants+=("$1"); shift; done
 [[ "${1:-}" == "--" ]] && shift
 [[ ${#variants[@]} -eq 0 ]] && variants=(avx2 baseline)
 
-run_variant() {
-    case "$1" in
-        avx2)
-            env ATEN_CPU_CAPABILITY=avx2 MKL_ENABLE_INSTRUCTIONS=AVX2 OPENBLAS_CORETYPE=Haswell \
-                NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR" \
-                python -m pytest -q -p no:cacheprovider "${@:2}" ;;
-        baseline)
-            env ATEN_CPU_CAPABILITY=default MKL_ENABLE_INSTRUCTIONS=SSE4_2 MKL_CBWR=COMPATIBLE \
-                OPENBLAS_CORETYPE=Nehalem NPY_DISABLE_CPU_FEATURES="X86_V3 X86_V4 AVX512_ICL AVX512_SPR" \
-                OMP_NUM_THREADS=1 python -m pytest -q -p no:cacheprovider "${@:2}" ;;
-        *)
-            echo "unknown variant '$1' (known: avx2, baseline)" >&2; return 2 ;;
-    esac
-}
+# the environment that selects each variant's kernels
+declare -A settings=(
+    [avx2]='ATEN_CPU_CAPABILITY=avx2 MKL_ENABLE_INSTRUCTIONS=AVX2 OPENBLAS_CORETYPE=Haswell
+            NPY_DISABLE_CPU_FEATURES=X86_V4,AVX512_ICL,AVX512_SPR'
+    [baseline]='ATEN_CPU_CAPABILITY=default MKL_ENABLE_INSTRUCTIONS=SSE4_2 MKL_CBWR=COMPATIBLE
+                OPENBLAS_CORETYPE=Nehalem NPY_DISABLE_CPU_FEATURES=X86_V3,X86_V4,AVX512_ICL,AVX512_SPR
+                OMP_NUM_THREADS=1'
+)
+for variant in "${variants[@]}"; do
+    if [[ -z "${settings[$variant]:-}" ]]; then
+        echo "unknown variant '$variant' (known: ${!settings[*]})" >&2
+        exit 2
+    fi
+done
 
 failed=0
 for variant in "${variants[@]}"; do
-    run_variant "$variant" "$@" > "$OUT/$variant.txt" 2>&1
+    # shellcheck disable=SC2086  # the settings split into NAME=VALUE words on purpose
+    env ${settings[$variant]} python -m pytest -q -p no:cacheprovider "$@" \
+        > "$OUT/$variant.txt" 2>&1
     rc=$?
     echo "$variant: rc $rc, $(tail -n 1 "$OUT/$variant.txt")"
     [[ $rc -ne 0 ]] && failed=1
