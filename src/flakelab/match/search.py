@@ -867,21 +867,44 @@ def _outside_note(x: NDArray, effect: NDArray, toners, settings: MatchSettings) 
 
 def _aimed_off(forward, candidates, effect, spectra, texture, tolerance, settings, habits, library):
     """``candidates`` aimed off for the shop's ``habits`` and judged by what the shop should
-    measure (:func:`~flakelab.match.correction.aim_off`)."""
+    measure (:func:`~flakelab.match.correction.aim_off`). Each keeps its unaimed recipe where
+    that scores better with the habits' offset: the aim-off weighs colour alone, the judge
+    texture and metamerism too."""
     from flakelab.match.correction import aim_off  # the correction builds on the search
 
     x = np.array([recipe_vector(forward, c.fractions) for c in candidates])
-    x = _weighable(aim_off(forward, spectra, x, habits, library, tolerance=tolerance)[0], settings)
-    R, _ = evaluate_recipes(forward, x)
-    offset = habits.offset(library, x, R, forward.geometries)
-    return _judge(forward, x, effect, spectra, texture, tolerance, settings, offset)
+    aimed = aim_off(forward, spectra, x, habits, library, tolerance=tolerance)[0]
+    aimed = _weighable(aimed, settings)
+    both, K = np.concatenate([aimed, x]), len(x)
+    R, _ = evaluate_recipes(forward, both)
+    offset = habits.offset(library, both, R, forward.geometries)
+    score = _assessed(forward, both, spectra, texture, tolerance, settings, offset).score
+    rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
+    return _judge(forward, both[rows], effect, spectra, texture, tolerance, settings, offset[rows])
 
 
-def _judge(
-    forward, x, effect, spectra, texture, tolerance, settings, offset=None
-) -> list[Candidate]:
-    """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
-    support rank after every one inside it. ``offset[N, G, 3]`` is added to the predicted
+@dataclass(frozen=True)
+class _Assessment:
+    """Recipes ``x[N, T]`` as the judge sees them: predictions, differences from the target
+    per geometry, shares of the tolerance's limits, and the score that ranks them."""
+
+    R: NDArray
+    texture: NDArray | None
+    target_lab: NDArray
+    lab: NDArray
+    de00: NDArray
+    dLCH: NDArray
+    passed: NDArray
+    share: NDArray
+    texture_share: NDArray
+    limits: dict[str, float]
+    has_texture: bool
+    metamerism: dict[str, NDArray]
+    score: NDArray
+
+
+def _assessed(forward, x, spectra, texture, tolerance, settings, offset=None) -> _Assessment:
+    """Predict and score recipes ``x[N, T]``; ``offset[N, G, 3]`` is added to the predicted
     L*a*b* (the shop's habits)."""
     R, tex = evaluate_recipes(forward, x)
     target_lab = reflectance_to_Lab(spectra)
@@ -906,9 +929,22 @@ def _judge(
         score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
     if has_texture:
         score = score + settings.texture_weight * np.abs(tex[:, -2:] - target_tex[-2:]).sum(1)
+    return _Assessment(
+        R, tex, target_lab, lab, de00, dlch, passed, share, texture_share, limits,
+        bool(has_texture), metamerism, score,
+    )  # fmt: skip
+
+
+def _judge(
+    forward, x, effect, spectra, texture, tolerance, settings, offset=None
+) -> list[Candidate]:
+    """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
+    support rank after every one inside it. ``offset[N, G, 3]`` is added to the predicted
+    L*a*b* (the shop's habits)."""
+    a = _assessed(forward, x, spectra, texture, tolerance, settings, offset)
     outside = outside_support(x, effect, settings)
     chosen, seen = [], set()
-    for row in np.lexsort((score, outside)):
+    for row in np.lexsort((a.score, outside)):
         key = tuple(np.flatnonzero(x[row] > 0))
         if key in seen:
             continue
@@ -917,10 +953,10 @@ def _judge(
         if len(chosen) == settings.candidates:
             break
     rows = np.array(chosen, int)
-    spread = model_spread(forward, x[rows], reflectance_to_Lab(R[rows]))
+    spread = model_spread(forward, x[rows], reflectance_to_Lab(a.R[rows]))
     out = []
     for i, row in enumerate(chosen):
-        failing = failing_geometries(forward.geometries, passed[row])
+        failing = failing_geometries(forward.geometries, a.passed[row])
         fractions = {
             forward.toners[j]: float(x[row, j]) for j in np.argsort(-x[row]) if x[row, j] > 0
         }
@@ -928,27 +964,29 @@ def _judge(
             Candidate(
                 fractions=fractions,
                 geometries=tuple(forward.geometries),
-                reflectance=R[row],
-                lab=lab[row],
-                target_lab=target_lab,
-                de00=de00[row],
-                dLCH=dlch[row],
+                reflectance=a.R[row],
+                lab=a.lab[row],
+                target_lab=a.target_lab,
+                de00=a.de00[row],
+                dLCH=a.dLCH[row],
                 texture={}
-                if tex is None
-                else dict(zip(TEXTURE_READINGS, tex[row].tolist(), strict=True)),
+                if a.texture is None
+                else dict(zip(TEXTURE_READINGS, a.texture[row].tolist(), strict=True)),
                 texture_delta={}
-                if not has_texture
-                else {k: float(tex[row, i] - texture[k]) for i, k in enumerate(TEXTURE_READINGS)},
-                passes=not failing and bool(np.all(texture_share[row] <= 1)),
+                if not a.has_texture
+                else {
+                    k: float(a.texture[row, i] - texture[k]) for i, k in enumerate(TEXTURE_READINGS)
+                },
+                passes=not failing and bool(np.all(a.texture_share[row] <= 1)),
                 failing=failing,
                 model=forward.name,
                 novel=[n for n in fractions if n in forward.novel],
-                score=float(score[row]),
+                score=float(a.score[row]),
                 in_support=not outside[row],
                 spread=None if spread is None else spread[i],
-                limit_share=share[row],
-                metamerism={light: index[row] for light, index in metamerism.items()},
-                texture_share=dict(zip(limits, texture_share[row].tolist(), strict=True)),
+                limit_share=a.share[row],
+                metamerism={light: index[row] for light, index in a.metamerism.items()},
+                texture_share=dict(zip(a.limits, a.texture_share[row].tolist(), strict=True)),
             )
         )
     return out
