@@ -509,6 +509,9 @@ def test_habits_too_small_to_read_leave_the_recipes_as_they_are(shipped):
     offset = habits.offset(library, x, R, forward.geometries)
     np.testing.assert_allclose(lab, reflectance_to_Lab(R) + offset)
     assert delta_E(lab - offset, lab).max() < AIM_OFF_FLOOR
+    effect = effect_mask(library, forward.toners)
+    result = match(target, forward, effect, habits=habits, library=library)
+    assert any(n.startswith("not aimed off for the shop's habits") for n in result.notes)
 
 
 def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped):

@@ -663,10 +663,10 @@ def _match(
     if solid:
         notes.append(f"{solid}: a solid, matched with pigments alone")
     if habits is not None and candidates:
-        candidates = _aimed_off(
+        candidates, note = _aimed_off(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
         )
-        notes.append(f"aimed off for the shop's habits: {habits.describe()}")
+        notes.append(note)
     if candidates and not candidates[0].in_support:
         notes.append(
             _outside_note(
@@ -865,22 +865,34 @@ def _outside_note(x: NDArray, effect: NDArray, toners, settings: MatchSettings) 
     )
 
 
-def _aimed_off(forward, candidates, effect, spectra, texture, tolerance, settings, habits, library):
+def _aimed_off(
+    forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
+) -> tuple[list[Candidate], str]:
     """``candidates`` aimed off for the shop's ``habits`` and judged by what the shop should
-    measure (:func:`~flakelab.match.correction.aim_off`). Each keeps its unaimed recipe where
-    that scores better with the habits' offset: the aim-off weighs colour alone, the judge
-    texture and metamerism too."""
-    from flakelab.match.correction import aim_off  # the correction builds on the search
+    measure (:func:`~flakelab.match.correction.aim_off`), and a note of how many moved. Each
+    keeps its unaimed recipe where that scores better with the habits' offset: the aim-off
+    weighs colour alone, the judge texture and metamerism too."""
+    # the correction builds on the search
+    from flakelab.match.correction import AIM_OFF_FLOOR, aim_off
 
     x = np.array([recipe_vector(forward, c.fractions) for c in candidates])
     aimed = aim_off(forward, spectra, x, habits, library, tolerance=tolerance)[0]
-    aimed = _weighable(aimed, settings)
-    both, K = np.concatenate([aimed, x]), len(x)
+    both, K = np.concatenate([_weighable(aimed, settings), x]), len(x)
     R, _ = evaluate_recipes(forward, both)
     offset = habits.offset(library, both, R, forward.geometries)
     score = _assessed(forward, both, spectra, texture, tolerance, settings, offset).score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
-    return _judge(forward, both[rows], effect, spectra, texture, tolerance, settings, offset[rows])
+    chosen, offset = both[rows], offset[rows]
+    moved = int((np.abs(chosen - x).max(axis=1) > 1e-9).sum())  # renormalising moves ulps
+    if moved == 0:
+        note = (
+            "not aimed off for the shop's habits: they move no candidate by "
+            f"{AIM_OFF_FLOOR:g} ΔE00 or more, or aiming it scored worse ({habits.describe()})"
+        )
+    else:
+        some = "" if moved == K else f" ({moved} of {K} candidates)"
+        note = f"aimed off for the shop's habits{some}: {habits.describe()}"
+    return _judge(forward, chosen, effect, spectra, texture, tolerance, settings, offset), note
 
 
 @dataclass(frozen=True)
