@@ -439,8 +439,9 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cl
     target = str(example_path("target"))
     run = cli("match", "--example", "--candidates", "1", "--habits", str(habits), "--json")
     assert run.returncode == 0, run.stderr
-    notes = json.loads(run.stdout)["notes"]
-    assert any(n.startswith("aimed off for the shop's habits: ") for n in notes), notes
+    matched = json.loads(run.stdout)
+    assert any(n.startswith("aimed off for the shop's habits: ") for n in matched["notes"])
+    assert matched["candidates"][0]["aimed_off"] is True
     recipe = example_path("target").parent / "blue-metallic-recipe.json"
     run = cli("correct", target, "--recipe", str(recipe), "--sprayed",
               str(example_path("sprayout")), "--habits", str(habits), "--json")  # fmt: skip

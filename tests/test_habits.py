@@ -512,6 +512,8 @@ def test_habits_too_small_to_read_leave_the_recipes_as_they_are(shipped):
     effect = effect_mask(library, forward.toners)
     result = match(target, forward, effect, habits=habits, library=library)
     assert any(n.startswith("not aimed off for the shop's habits") for n in result.notes)
+    assert [c.aimed_off for c in result.candidates] == [False] * len(result.candidates)
+    assert match(target, forward, effect).candidates[0].to_dict()["aimed_off"] is None
 
 
 def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped):
@@ -532,6 +534,10 @@ def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped
     unaimed = _assessed(forward, x, target, None, tolerance, settings, offset).score
     # every candidate aimed off, as before stop 63, the best scored 0.926 against 0.891
     assert aimed.candidates[0].score <= unaimed.min() + 1e-9
+    # each candidate says whether it was aimed: those that were differ from every plain one
+    plain_recipes = [c.fractions for c in plain.candidates]
+    for c in aimed.candidates:
+        assert c.aimed_off is (c.fractions not in plain_recipes)
 
 
 def test_habits_saved_to_a_database_not_made_yet_create_it(cli, tmp_path):

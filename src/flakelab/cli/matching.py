@@ -480,6 +480,7 @@ def _print_match(report: dict) -> None:
         header = (
             f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}"
             f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"
+            + ("  aimed off for the shop's habits" if c.get("aimed_off") else "")
         )
         table = _weights_table(None, c["weights_g"])
         geo = Table(box=box.SIMPLE, show_header=True)

@@ -151,6 +151,8 @@ class Candidate:
     metamerism: dict[str, NDArray] = field(default_factory=dict)
     # each texture reading the tolerance bounds: |Δ| as a share of its limit (≤ 1 passes)
     texture_share: dict[str, float] = field(default_factory=dict)
+    # with the shop's habits: whether this recipe was aimed off for them (None: no habits)
+    aimed_off: bool | None = None
 
     @property
     def failing_texture(self) -> list[str]:
@@ -195,6 +197,7 @@ class Candidate:
             "metamerism_index": {k: v.round(3).tolist() for k, v in self.metamerism.items()},
             "metamerism_index_max": worst_per_light(self.metamerism),
             "metamer": is_metamer(self.metamerism),
+            "aimed_off": self.aimed_off,
         }
 
 
@@ -883,7 +886,8 @@ def _aimed_off(
     score = _assessed(forward, both, spectra, texture, tolerance, settings, offset).score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
     chosen, offset = both[rows], offset[rows]
-    moved = int((np.abs(chosen - x).max(axis=1) > 1e-9).sum())  # renormalising moves ulps
+    aimed = np.abs(chosen - x).max(axis=1) > 1e-9  # renormalising moves ulps
+    moved = int(aimed.sum())
     if moved == 0:
         note = (
             "not aimed off for the shop's habits: they move no candidate by "
@@ -892,7 +896,8 @@ def _aimed_off(
     else:
         some = "" if moved == K else f" ({moved} of {K} candidates)"
         note = f"aimed off for the shop's habits{some}: {habits.describe()}"
-    return _judge(forward, chosen, effect, spectra, texture, tolerance, settings, offset), note
+    judged = _judge(forward, chosen, effect, spectra, texture, tolerance, settings, offset, aimed)
+    return judged, note
 
 
 @dataclass(frozen=True)
@@ -948,11 +953,11 @@ def _assessed(forward, x, spectra, texture, tolerance, settings, offset=None) ->
 
 
 def _judge(
-    forward, x, effect, spectra, texture, tolerance, settings, offset=None
+    forward, x, effect, spectra, texture, tolerance, settings, offset=None, aimed=None
 ) -> list[Candidate]:
     """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
     support rank after every one inside it. ``offset[N, G, 3]`` is added to the predicted
-    L*a*b* (the shop's habits)."""
+    L*a*b* (the shop's habits); ``aimed[N]`` marks the recipes aimed off for them."""
     a = _assessed(forward, x, spectra, texture, tolerance, settings, offset)
     outside = outside_support(x, effect, settings)
     chosen, seen = [], set()
@@ -999,6 +1004,7 @@ def _judge(
                 limit_share=a.share[row],
                 metamerism={light: index[row] for light, index in a.metamerism.items()},
                 texture_share=dict(zip(a.limits, a.texture_share[row].tolist(), strict=True)),
+                aimed_off=None if aimed is None else bool(aimed[row]),
             )
         )
     return out
