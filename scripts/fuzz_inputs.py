@@ -8,8 +8,8 @@ and damages it: text files by deleting, doubling or cutting lines, replacing num
 names, inserting stray characters; JSON files by replacing or deleting one value anywhere
 in them; a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,recipe,library,habits,tolerance,
-        cases,model] [--n 200] [--seed 0] [--show]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,recipe,library,habits,habits-match,
+        tolerance,cases,model] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -150,6 +150,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "habits": (work / "habits.json",
                    lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
                               str(sprayout), "--habits", str(p), "--extra-toners", "0"]),
+        # the same file read by the match, which aims its candidates off for the habits
+        "habits-match": (work / "habits.json",
+                         lambda p: ["match", "--example", "--candidates", "1", "--habits",
+                                    str(p)]),
         "tolerance": (work / "tolerance.json",
                       lambda p: ["compare", str(target), str(sprayout), "-t", str(p)]),
         "cases": (work / "cases.csv", lambda p: ["cases", "import", str(p), "-d", "sqlite://"]),
@@ -201,7 +205,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--kinds", default="cxf,csv,json,recipe,library,habits,tolerance,cases,model"
+        "--kinds",
+        default="cxf,csv,json,recipe,library,habits,habits-match,tolerance,cases,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)

@@ -386,6 +386,13 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
         with pytest.raises(MeasurementFileError, match=problem) as error:
             read_habits(bad)
         assert key in str(error.value) and bad.name in str(error.value)
+    # a standard error wider than the habit's whole range reads as not shown (it printed as
+    # "± inf%" when 1e308 overflowed the percentage)
+    wide = tmp_path / "wide-se.json"
+    wide.write_text(json.dumps(document | {"instrument_gain_se": 1e308}))
+    back = read_habits(wide)
+    assert np.isinf(back.standard_error[2]) and back.report()["instrument_gain_se"] is None
+    assert "instrument reads not shown by these spray-outs" in back.describe()
     bad = tmp_path / "no-se.json"
     bad.write_text(json.dumps({k: v for k, v in document.items() if k != "film_build_se"}))
     with pytest.raises(MeasurementFileError, match="film_build_se: missing"):

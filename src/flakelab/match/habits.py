@@ -141,9 +141,11 @@ class ShopHabits:
         """The habits :meth:`report` gave (checked by the reader that hands it over)."""
         spread = report["flake_spread"]
         theta = np.array([report["film_build"], np.log1p(spread), report["instrument_gain"]])
-        # a habit its spray-outs did not show has no standard error (null): infinite
+        # a habit its spray-outs did not show has no standard error (null): infinite; so has
+        # one whose standard error is wider than the values it may take
         se = np.array([report[f"{habit}_se"] for habit in HABITS], dtype=float)
-        se = np.where(np.isnan(se), np.inf, se) / [1, 1 + spread, 1]
+        shown = se <= [_RANGE_WIDTH[habit] for habit in HABITS]  # False for NaN
+        se = np.where(shown, se, np.inf) / [1, 1 + spread, 1]
         return cls(
             theta,
             se,
@@ -600,6 +602,9 @@ _RANGES = (
     ("cases", 0, np.inf),
 )
 """The fields of a habits report and the values a habits file may give them."""
+
+_RANGE_WIDTH = {key: high - low for key, low, high in _RANGES if key in HABITS}
+"""The width of the values each habit may take: a standard error wider says nothing."""
 
 
 def save_habits(engine: Engine, habits: ShopHabits, instrument: str) -> None:
