@@ -536,9 +536,8 @@ def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped
     x = np.array([recipe_vector(forward, c.fractions) for c in plain.candidates])
     R = evaluate_recipes(forward, x)[0]
     offset = habits.offset(library, x, R, forward.geometries)
-    settings = replace(MatchSettings(), effect_floor=forward.effect_share_floor)
     tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
-    unaimed = _assessed(forward, x, target, None, tolerance, settings, offset).score
+    unaimed = _assessed(forward, x, target, None, tolerance, MatchSettings(), offset).score
     # every candidate aimed off, as before stop 63, the best scored 0.926 against 0.891
     assert aimed.candidates[0].score <= unaimed.min() + 1e-9
     # each candidate says whether it was aimed: those that were differ from every plain one
