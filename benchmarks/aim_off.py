@@ -15,19 +15,22 @@ With ``--offsets``, every candidate of the matches (targets of the ordinary shop
 against), how far the aim-off moves its prediction, and whether that comes nearer the target
 (worst geometry, prediction plus offset).
 
-    python benchmarks/aim_off.py --habits FILE [--targets 12] [--steps 0,30,60,150,300] [--json]
+    python benchmarks/aim_off.py --habits FILE [--targets 12] [--steps 0,30,60,150,300]
+        [--world-habits FILM,SPREAD,GAIN] [--json]
     python benchmarks/aim_off.py --habits FILE --offsets --targets 30 [--json]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 
 import numpy as np
 
 from _matcher import seeds_from, shipped_matcher
+from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import aim_off
@@ -43,6 +46,13 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=12)
     parser.add_argument("--steps", default="0,30,60,150,300", help="aim-off steps to try")
     parser.add_argument("--seed", type=int, default=5)
+    parser.add_argument(
+        "--world-habits",
+        type=parse_world_habits,
+        default=None,
+        help="the world's shop: film build, flake spread, gain, e.g. 1.015,0.99,0.0015 "
+        "(default: the shop-with-habits world's 1.05,0.96,0.005)",
+    )
     parser.add_argument("--offsets", action="store_true", help="offsets against the floor")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
@@ -51,6 +61,9 @@ def main() -> None:
         print_report(report, args.json, ".3f")
         return
     world, forward, effect = shipped_matcher("shop-with-habits")
+    if args.world_habits:
+        settings = dataclasses.replace(world.settings, **args.world_habits)
+        world = World(world.library, world.instrument, settings)
     habits = read_habits(args.habits)
     steps = seeds_from(args.steps)
     hidden = world.formulations(args.targets, np.random.default_rng(args.seed))
@@ -76,13 +89,29 @@ def main() -> None:
         for s in steps
     ]
     if args.json:
-        print(json.dumps({"targets": args.targets, "habits": habits.report(), "rows": rows}))
+        report = {"targets": args.targets, "world": world_habits(world), "habits": habits.report()}
+        print(json.dumps({**report, "rows": rows}))
         return
     for row in rows:
         print(
             f"{row['steps']:4d} steps  worst-geometry ΔE00 {row['de00_worst_mean']:.3f}  "
             f"{row['seconds']:.3f} s"
         )
+
+
+def parse_world_habits(text: str) -> dict[str, float]:
+    """``"1.015,0.99,0.0015"`` → the world's shop settings (film build, flake spread, gain)."""
+    try:
+        film, spread, gain = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected FILM,SPREAD,GAIN, got {text!r}") from None
+    return {"shop_film_build": film, "shop_spread": spread, "shop_gain": gain}
+
+
+def world_habits(world) -> dict[str, float]:
+    """The world's shop settings, as :func:`parse_world_habits` reads them."""
+    keys = ("shop_film_build", "shop_spread", "shop_gain")
+    return {key: getattr(world.settings, key) for key in keys}
 
 
 def offsets_report(habits, targets: int, seed: int) -> dict:
