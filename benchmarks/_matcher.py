@@ -49,11 +49,19 @@ def add_harness_arguments(
 
 
 def run_harness(
-    world, forward, effect, args, novel, settings=None, progress=None, target_texture=True
+    world,
+    forward,
+    effect,
+    args,
+    novel,
+    settings=None,
+    progress=None,
+    target_texture=True,
+    habits=None,
 ) -> dict:
     """The harness's report for ``forward`` on the targets the options ``args`` name, those
     with a new toner drawn from ``novel``; without ``target_texture`` the matcher reads the
-    targets without their texture readings."""
+    targets without their texture readings; with a shop's ``habits`` it aims off for them."""
     tolerance = getattr(args, "tolerance", None)
     return evaluate_matching(
         world,
@@ -68,11 +76,20 @@ def run_harness(
         target_texture=target_texture,
         resprays=getattr(args, "resprays", 0),
         progress=progress,
+        habits=habits,
     )
 
 
 def timed_harness(
-    world, forward, effect, args, novel, label: str, settings=None, target_texture=True
+    world,
+    forward,
+    effect,
+    args,
+    novel,
+    label: str,
+    settings=None,
+    target_texture=True,
+    habits=None,
 ) -> tuple[dict, float]:
     """:func:`run_harness`'s report under a progress bar labelled ``label`` (none with
     ``--json``), and the run's wall time in seconds."""
@@ -89,25 +106,55 @@ def timed_harness(
             settings,
             progress=lambda: bar.advance(task),
             target_texture=target_texture,
+            habits=habits,
         )
     return report, time.perf_counter() - start
 
 
 def shipped_matcher(
-    world: str = "shop", model: str | None = None, kinds: dict[str, float] | None = None
+    world: str = "shop",
+    model: str | None = None,
+    kinds: dict[str, float] | None = None,
+    shop_habits: dict[str, float] | None = None,
 ):
     """The demo library's harness world (``flakelab match evaluate --world``) for the
     instrument of the shipped five-angle model (or of the model file ``model``), its hidden
-    targets drawn from the paint families ``kinds`` (default: the generator's mix), the
-    model's forward and its effect-toner mask."""
+    targets drawn from the paint families ``kinds`` (default: the generator's mix) and its
+    shop given the habits ``shop_habits`` (:func:`parse_world_habits`), the model's forward
+    and its effect-toner mask."""
     library = read_library(None)
     learned = load_model_file(model) if model else shipped_model("five-angle")
     forward = forward_for(learned, library)
     harness = harness_world(library, learned.instrument, world)
-    if kinds:
-        settings = dataclasses.replace(harness.settings, kinds=kinds)
+    changes = {**({"kinds": kinds} if kinds else {}), **(shop_habits or {})}
+    if changes:
+        settings = dataclasses.replace(harness.settings, **changes)
         harness = World(library, learned.instrument, settings)
     return harness, forward, effect_mask(library, forward.toners)
+
+
+WORLD_HABITS_HELP = (
+    "the world's shop: film build, flake spread, instrument gain, e.g. 1.015,0.99,0.0015 "
+    "(default: those of --world)"
+)
+
+
+def parse_world_habits(text: str) -> dict[str, float]:
+    """``"1.015,0.99,0.0015"`` → the world's shop settings: film build and flake spread as
+    factors on the factory's, the instrument's gain as a fraction."""
+    try:
+        film, spread, gain = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected FILM,SPREAD,GAIN, got {text!r}") from None
+    if not (film > 0 and spread > 0 and math.isfinite(film * spread * gain)):
+        raise argparse.ArgumentTypeError(f"expected positive film and spread, got {text!r}")
+    return {"shop_film_build": film, "shop_spread": spread, "shop_gain": gain}
+
+
+def world_habits(world) -> dict[str, float]:
+    """The world's shop settings, as :func:`parse_world_habits` gives them."""
+    keys = ("shop_film_build", "shop_spread", "shop_gain")
+    return {key: getattr(world.settings, key) for key in keys}
 
 
 def parse_kinds(text: str) -> dict[str, float]:

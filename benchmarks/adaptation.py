@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import time
 from dataclasses import replace
 
@@ -39,6 +38,7 @@ from flakelab.models.training import (
     generated_case_arrays,
     recorded_config,
 )
+from timing import peak_rss_mb
 
 VARIANTS = {"every epoch": 0.0, "best epoch": 0.2}
 """Adaptation variants: the share of the shop's cases that chooses the epoch."""
@@ -124,7 +124,7 @@ def main() -> None:
                     f"kept {row['kept_epochs']}  {row['seconds']:.1f} s",
                     flush=True,
                 )
-    report["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    report["peak_rss_mb"] = peak_rss_mb()
     if args.json:
         print(json.dumps(report, indent=2))
         return

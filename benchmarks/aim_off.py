@@ -23,14 +23,18 @@ against), how far the aim-off moves its prediction, and whether that comes neare
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 
 import numpy as np
 
-from _matcher import seeds_from, shipped_matcher
-from flakelab.cases.generator import World
+from _matcher import (
+    WORLD_HABITS_HELP,
+    parse_world_habits,
+    seeds_from,
+    shipped_matcher,
+    world_habits,
+)
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import aim_off
@@ -49,9 +53,7 @@ def main() -> None:
     parser.add_argument(
         "--world-habits",
         type=parse_world_habits,
-        default=None,
-        help="the world's shop: film build, flake spread, gain, e.g. 1.015,0.99,0.0015 "
-        "(default: the shop-with-habits world's 1.05,0.96,0.005)",
+        help=WORLD_HABITS_HELP + " (here shop-with-habits: 1.05,0.96,0.005)",
     )
     parser.add_argument("--offsets", action="store_true", help="offsets against the floor")
     parser.add_argument("--json", action="store_true")
@@ -60,10 +62,7 @@ def main() -> None:
         report = offsets_report(read_habits(args.habits), args.targets, args.seed)
         print_report(report, args.json, ".3f")
         return
-    world, forward, effect = shipped_matcher("shop-with-habits")
-    if args.world_habits:
-        settings = dataclasses.replace(world.settings, **args.world_habits)
-        world = World(world.library, world.instrument, settings)
+    world, forward, effect = shipped_matcher("shop-with-habits", shop_habits=args.world_habits)
     habits = read_habits(args.habits)
     steps = seeds_from(args.steps)
     hidden = world.formulations(args.targets, np.random.default_rng(args.seed))
@@ -97,21 +96,6 @@ def main() -> None:
             f"{row['steps']:4d} steps  worst-geometry ΔE00 {row['de00_worst_mean']:.3f}  "
             f"{row['seconds']:.3f} s"
         )
-
-
-def parse_world_habits(text: str) -> dict[str, float]:
-    """``"1.015,0.99,0.0015"`` → the world's shop settings (film build, flake spread, gain)."""
-    try:
-        film, spread, gain = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected FILM,SPREAD,GAIN, got {text!r}") from None
-    return {"shop_film_build": film, "shop_spread": spread, "shop_gain": gain}
-
-
-def world_habits(world) -> dict[str, float]:
-    """The world's shop settings, as :func:`parse_world_habits` reads them."""
-    keys = ("shop_film_build", "shop_spread", "shop_gain")
-    return {key: getattr(world.settings, key) for key in keys}
 
 
 def offsets_report(habits, targets: int, seed: int) -> dict:

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import time
 
 import numpy as np
@@ -39,6 +38,7 @@ from flakelab.match.habits import PRIOR_SD, ShopHabits, estimate_habits, habits_
 from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import CaseArrays, generated_case_arrays
+from timing import peak_rss_mb
 
 KEYS = ("film_build", "log_flake_spread", "instrument_gain")
 """The habits as estimated (``ShopHabits.theta``)."""
@@ -138,7 +138,7 @@ def main() -> None:
                 f"{row['shop_de00_sd']:.3f}  {1000 * row['seconds']:.0f} ms",
                 flush=True,
             )
-    report["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    report["peak_rss_mb"] = peak_rss_mb()
     if args.json:
         print(json.dumps(report, indent=2))
         return

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import time
 
 import numpy as np
@@ -36,6 +35,7 @@ from flakelab.match.habits import DRIFT_Z, MIN_HABIT_CASES, habits_drift
 from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import CaseArrays, generated_case_arrays
+from timing import peak_rss_mb
 
 LEAST = 2 * MIN_HABIT_CASES
 """Sizes below the command's own floor (``MIN_DRIFT_CASES``) may be tried: each half must
@@ -117,7 +117,7 @@ def main() -> None:
             print_row(row, positions)
     report = {"drift_z": DRIFT_Z, "repeats": args.repeats, "rows": rows}
     report["seconds"] = time.perf_counter() - start
-    report["peak_rss_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    report["peak_rss_gb"] = peak_rss_mb() / 1024
     if args.json:
         print(json.dumps(report, indent=2))
         return

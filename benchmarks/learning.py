@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import time
 
 import numpy as np
@@ -36,7 +35,7 @@ from flakelab.models.training import (
     train_protocol,
     training_device,
 )
-from timing import best_time
+from timing import best_time, peak_rss_mb
 
 
 def inference_rates(model, n: int = 200_000) -> dict[str, float]:
@@ -206,7 +205,7 @@ def main() -> None:
         "generate_seconds": generate_s,
         "protocol_seconds": train_s,
         "protocol_minutes": train_s / 60,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "peak_rss_mb": peak_rss_mb(),
         "outliers_dropped": report["outliers"],
         **rates,
         **inference_rates(model),

@@ -14,7 +14,6 @@ was recorded is what was measured.
 from __future__ import annotations
 
 import argparse
-import resource
 import tempfile
 import time
 from pathlib import Path
@@ -29,7 +28,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library, write_measurements, write_recipe
-from timing import print_report
+from timing import peak_rss_mb, print_report
 
 
 def write_history(cases, folder: Path, per_file: int) -> Path:
@@ -107,7 +106,7 @@ def main() -> None:
         "outcomes_as_given": all(
             r.outcome == c.outcome for r, c in zip(recorded, cases, strict=True)
         ),
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "peak_rss_mb": round(peak_rss_mb(), 1),
     }
     print_report(report, args.json)
 

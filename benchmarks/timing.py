@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import resource
 import time
 import tracemalloc
 
@@ -26,6 +27,11 @@ def measure_peak(function, *args):
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return result, seconds, peak / 2**20
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory so far [MB] (Linux reports it in KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def print_report(report: dict, as_json: bool, number_format: str = "") -> None:

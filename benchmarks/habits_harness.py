@@ -1,0 +1,79 @@
+"""Matcher: what a shop's habits file buys in the harness, on the same targets and sprays.
+
+Runs the evaluation harness (``flakelab match evaluate``) twice in one shop's world: without
+habits, then aimed off for the habits file ``--habits`` (``flakelab cases habits CASES --out
+FILE``, read from that shop's cases). Both runs see the same hidden targets and the same
+sprays (seeded), so the rows differ only by the habits. The shop is ``--world``'s, or one
+given its own habits with ``--world-habits`` (film build and flake spread as factors on the
+factory's, instrument gain as a fraction): a shop with mild habits is
+``--world-habits 1.015,0.99,0.0015``.
+
+    python benchmarks/habits_harness.py --habits FILE [--world-habits FILM,SPREAD,GAIN]
+        [--world shop] [--targets 200] [--novel-targets 50] [--seed 4242] [--resprays K]
+        [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from _matcher import (
+    WORLD_HABITS_HELP,
+    add_harness_arguments,
+    parse_world_habits,
+    shipped_matcher,
+    timed_harness,
+    world_habits,
+)
+from flakelab.match.habits import read_habits
+from timing import peak_rss_mb
+
+FIGURES = (
+    "first_shot_success",
+    "after_one_correction",
+    "novel_toner_first_shot",
+    "oracle_success",
+    "respray_success",
+    "after_one_perfect_correction",
+    "first_shot_de00_median",
+    "latency_p50_s",
+    "latency_p95_s",
+)
+CHANCES = ("first_shot_chance", "after_one_correction_chance", "oracle_chance")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--habits", required=True, help="habits file (flakelab cases habits)")
+    parser.add_argument("--world-habits", type=parse_world_habits, help=WORLD_HABITS_HELP)
+    add_harness_arguments(parser, targets=200, novel_targets=50)
+    args = parser.parse_args()
+    habits = read_habits(args.habits)
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, shop_habits=args.world_habits
+    )
+    rows = []
+    for label, shop_habits in (("without habits", None), ("with its habits", habits)):
+        report, wall = timed_harness(
+            world, forward, effect, args, forward.novel, label, habits=shop_habits
+        )
+        figures = FIGURES + (CHANCES if args.resprays else ())
+        rows.append({"run": label, **{k: report[k] for k in figures}, "wall_s": wall})
+    summary = {
+        "world": world_habits(world),
+        "habits": habits.report(),
+        "rows": rows,
+        "peak_rss_gb": peak_rss_mb() / 1024,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return
+    print(f"world's shop {summary['world']}; habits read: {habits.describe()}")
+    for row in rows:
+        figures = "  ".join(f"{k} {v:.3f}" for k, v in row.items() if k != "run")
+        print(f"{row['run']:>16}  {figures}")
+
+
+if __name__ == "__main__":
+    main()
