@@ -134,8 +134,7 @@ def shipped_matcher(
 
 
 WORLD_HABITS_HELP = (
-    "the world's shop: film build, flake spread, instrument gain, e.g. 1.015,0.99,0.0015 "
-    "(default: those of --world)"
+    "the world's shop: film build, flake spread, instrument gain, e.g. 1.015,0.99,0.0015"
 )
 
 

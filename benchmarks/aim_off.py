@@ -53,7 +53,7 @@ def main() -> None:
     parser.add_argument(
         "--world-habits",
         type=parse_world_habits,
-        help=WORLD_HABITS_HELP + " (here shop-with-habits: 1.05,0.96,0.005)",
+        help=WORLD_HABITS_HELP + " (default: shop-with-habits's 1.05,0.96,0.005)",
     )
     parser.add_argument("--offsets", action="store_true", help="offsets against the floor")
     parser.add_argument("--json", action="store_true")

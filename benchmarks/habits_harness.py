@@ -46,7 +46,11 @@ CHANCES = ("first_shot_chance", "after_one_correction_chance", "oracle_chance")
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--habits", required=True, help="habits file (flakelab cases habits)")
-    parser.add_argument("--world-habits", type=parse_world_habits, help=WORLD_HABITS_HELP)
+    parser.add_argument(
+        "--world-habits",
+        type=parse_world_habits,
+        help=WORLD_HABITS_HELP + " (default: those of --world)",
+    )
     add_harness_arguments(parser, targets=200, novel_targets=50)
     args = parser.parse_args()
     habits = read_habits(args.habits)
