@@ -58,10 +58,12 @@ def run_harness(
     progress=None,
     target_texture=True,
     habits=None,
+    per_target=False,
 ) -> dict:
     """The harness's report for ``forward`` on the targets the options ``args`` name, those
     with a new toner drawn from ``novel``; without ``target_texture`` the matcher reads the
-    targets without their texture readings; with a shop's ``habits`` it aims off for them."""
+    targets without their texture readings; with a shop's ``habits`` it aims off for them;
+    with ``per_target`` the report keeps every target's trial."""
     tolerance = getattr(args, "tolerance", None)
     return evaluate_matching(
         world,
@@ -77,6 +79,7 @@ def run_harness(
         resprays=getattr(args, "resprays", 0),
         progress=progress,
         habits=habits,
+        per_target=per_target,
     )
 
 
@@ -90,6 +93,7 @@ def timed_harness(
     settings=None,
     target_texture=True,
     habits=None,
+    per_target=False,
 ) -> tuple[dict, float]:
     """:func:`run_harness`'s report under a progress bar labelled ``label`` (none with
     ``--json``), and the run's wall time in seconds."""
@@ -107,6 +111,7 @@ def timed_harness(
             progress=lambda: bar.advance(task),
             target_texture=target_texture,
             habits=habits,
+            per_target=per_target,
         )
     return report, time.perf_counter() - start
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 import argparse
 import json
 
+import numpy as np
+
 from _matcher import (
     WORLD_HABITS_HELP,
     add_harness_arguments,
@@ -41,6 +43,14 @@ FIGURES = (
     "latency_p95_s",
 )
 CHANCES = ("first_shot_chance", "after_one_correction_chance", "oracle_chance")
+PAIRED = {
+    "first_shot_success": lambda trial: float(trial["first"] <= 1.0),
+    "after_one_correction": lambda trial: float(trial["corrected"] <= 1.0),
+}
+PAIRED_CHANCES = {
+    "first_shot_chance": lambda trial: trial["first_chance"],
+    "after_one_correction_chance": lambda trial: trial["corrected_chance"],
+}
 
 
 def main() -> None:
@@ -57,17 +67,19 @@ def main() -> None:
     world, forward, effect = shipped_matcher(
         args.world, args.model, args.kinds, shop_habits=args.world_habits
     )
-    rows = []
+    rows, trials = [], []
     for label, shop_habits in (("without habits", None), ("with its habits", habits)):
         report, wall = timed_harness(
-            world, forward, effect, args, forward.novel, label, habits=shop_habits
+            world, forward, effect, args, forward.novel, label, habits=shop_habits, per_target=True
         )
         figures = FIGURES + (CHANCES if args.resprays else ())
         rows.append({"run": label, **{k: report[k] for k in figures}, "wall_s": wall})
+        trials.append(report["per_target"][: args.targets])
     summary = {
         "world": world_habits(world),
         "habits": habits.report(),
         "rows": rows,
+        "with_minus_without": paired_differences(*trials, chances=bool(args.resprays)),
         "peak_rss_gb": peak_rss_mb() / 1024,
     }
     if args.json:
@@ -75,8 +87,23 @@ def main() -> None:
         return
     print(f"world's shop {summary['world']}; habits read: {habits.describe()}")
     for row in rows:
-        figures = "  ".join(f"{k} {v:.3f}" for k, v in row.items() if k != "run")
+        figures = "  ".join(
+            f"{k} {'–' if v is None else format(v, '.3f')}" for k, v in row.items() if k != "run"
+        )
         print(f"{row['run']:>16}  {figures}")
+    for name, d in summary["with_minus_without"].items():
+        print(f"with − without habits, {name}: {d['mean']:+.3f} ± {d['se']:.3f} (paired)")
+
+
+def paired_differences(without: list[dict], with_habits: list[dict], chances: bool) -> dict:
+    """Each paired figure's mean difference over the same targets (with the habits − without)
+    and its standard error: the same targets and sprays, so the targets' own luck cancels."""
+    figures = {**PAIRED, **(PAIRED_CHANCES if chances else {})}
+    differences = {}
+    for name, figure in figures.items():
+        d = np.array([figure(b) - figure(a) for a, b in zip(without, with_habits, strict=True)])
+        differences[name] = {"mean": float(d.mean()), "se": float(d.std(ddof=1) / np.sqrt(len(d)))}
+    return differences
 
 
 if __name__ == "__main__":

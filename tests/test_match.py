@@ -1109,7 +1109,8 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     whether they needed a correction, or it read the targets without texture), so two
     matchers are judged against one oracle; so are its resprays' chances. Resprays change no
     spray the harness made without them; the chance after one correction counts every first
-    shot that passed and some corrections. The rates per paint family add up."""
+    shot that passed and some corrections. The rates per paint family add up, and so do the
+    targets' own trials (``per_target``)."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES, evaluate_matching
     from flakelab.match.models import effect_mask
@@ -1122,10 +1123,23 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     )
     runs = [
         evaluate_matching(
-            world, hybrid, effect, targets=6, seed=1, settings=s, target_texture=t, resprays=k
+            world,
+            hybrid,
+            effect,
+            targets=6,
+            seed=1,
+            settings=s,
+            target_texture=t,
+            resprays=k,
+            per_target=s is careful,
         )
         for s, t, k in ((careful, True, 4), (hasty, True, 4), (hasty, False, 0), (hasty, True, 0))
     ]
+    # every target's trial, kept for paired comparisons, makes up the rates
+    trials = runs[0].pop("per_target")
+    assert len(trials) == 6 and all("per_target" not in run for run in runs)
+    assert np.mean([t["first"] <= 1.0 for t in trials]) == runs[0]["first_shot_success"]
+    assert np.mean([t["first_chance"] for t in trials]) == runs[0]["first_shot_chance"]
     # the careful matcher passes some targets first time, the hasty one needs corrections
     assert runs[0]["first_shot_success"] > runs[1]["first_shot_success"]
     assert runs[0]["first_shot_chance"] > runs[1]["first_shot_chance"]

@@ -316,6 +316,7 @@ def evaluate_matching(
     target_texture: bool = True,
     resprays: int = 0,
     progress: Callable[[], None] | None = None,
+    per_target: bool = False,
 ) -> dict:
     """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
     With a ``scale`` (grams of the can, resolution in grams) every recipe is sprayed as
@@ -331,7 +332,9 @@ def evaluate_matching(
     ``oracle_chance`` are the chances that a spray passes, averaged over the targets. A
     target's one first spray passes or fails by its own application's luck; the chance
     averages that out, so two matchers (or paint families) compare with a fraction of the
-    noise of one spray each."""
+    noise of one spray each. With ``per_target`` the report keeps every target's trial
+    (``per_target``: the targets, then those with a new toner), for paired comparisons of
+    two runs on the same seed."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     rng = np.random.default_rng(seed)
@@ -415,4 +418,5 @@ def evaluate_matching(
         "resprays": resprays,
         **{name: mean(rows, key) for name, key in CHANCES.items()},
         "novel_toner_first_shot_chance": mean(novel_rows, "first_chance"),
+        **({"per_target": rows + novel_rows} if per_target else {}),
     }
