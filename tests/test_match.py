@@ -391,6 +391,11 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert report["plot"] == str(chart) and imread(chart).shape[1] > imread(chart).shape[0]
     assert report["geometries"] == ["45as15", "45as25", "45as45", "45as75", "45as110"]
     best = report["candidates"][0]
+    # ranked by the judge's score (worst and mean share, toners, metamerism, texture)
+    assert best["score"] <= report["candidates"][1]["score"]
+    # refinish's share unit is 1 (its tightest ΔE00 limit); the shares and penalties add
+    toners = MatchSettings().toner_penalty * len(best["recipe"])
+    assert best["score"] >= best["limit_share_max"] + toners - 1e-3
     assert sum(w["grams"] for w in best["weights_g"]) == pytest.approx(250.0)
     assert set(best["geometries"]["45as45"]) == {
         "L",

@@ -191,6 +191,7 @@ class Candidate:
             "limit_share_max": round(
                 max([self.limit_share.max(), *self.texture_share.values()]), 3
             ),
+            "score": round(self.score, 4),
             "geometries": rows,
             "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
             "texture_limit_share": {k: round(v, 3) for k, v in self.texture_share.items()},
