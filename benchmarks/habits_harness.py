@@ -39,6 +39,7 @@ FIGURES = (
     "respray_success",
     "after_one_perfect_correction",
     "first_shot_de00_median",
+    "first_shot_metamerism_median",
     "latency_p50_s",
     "latency_p95_s",
 )
