@@ -344,13 +344,16 @@ def aim_off(
     steps: int = AIM_STEPS,
     tolerance: Tolerance | None = None,
     floor: float = AIM_OFF_FLOOR,
+    metamerism: float = MatchSettings.metamerism,
+    lights: tuple[str, ...] | None = None,
 ) -> tuple[NDArray, NDArray]:
     """The recipes ``[K, T]`` that land on ``target`` [G, 31] when sprayed and read with the
     shop's ``habits``, and what they should then measure (L*a*b* ``[K, G, 3]``): each of
     ``recipes[K, T]`` (matches by the model, which knows no habits) reformulated with its own
     toners for the habits' offset at it, which persists as a correction's persistent offset
-    does, aimed at ``tolerance``. A recipe where that offset stays under ``floor`` (ΔE00) at
-    every geometry is left as it is."""
+    does, aimed at ``tolerance`` and weighing the prediction's ``metamerism`` index under the
+    test ``lights``, as the search does. A recipe where that offset stays under ``floor``
+    (ΔE00) at every geometry is left as it is."""
     R = evaluate_recipes(forward, recipes)[0]
     expected = habits.offset(library, recipes, R, forward.geometries)
     predicted = reflectance_to_Lab(R)
@@ -358,7 +361,9 @@ def aim_off(
     moved = delta_E(predicted, lab).max(axis=1) >= floor
     if not moved.any() or not steps:
         return x, lab
-    objective = MatchObjective(forward.geometries, tolerance, forward.dtype)
+    objective = MatchObjective(
+        forward.geometries, tolerance, forward.dtype, target, metamerism, lights
+    )
     x0 = torch.as_tensor(x[moved], dtype=forward.dtype)
     target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
     offset = torch.as_tensor(expected[moved], dtype=forward.dtype)
@@ -369,7 +374,7 @@ def aim_off(
         x0 > 0,
         target_lab,
         offset,
-        None,
+        torch.ones((), dtype=forward.dtype),  # the index of the prediction itself
         "reformulate",
         steps,
         0,

@@ -875,12 +875,15 @@ def _aimed_off(
     """``candidates`` aimed off for the shop's ``habits`` and judged by what the shop should
     measure (:func:`~flakelab.match.correction.aim_off`), and a note of how many moved. Each
     keeps its unaimed recipe where that scores better with the habits' offset: the aim-off
-    weighs colour alone, the judge texture and metamerism too."""
+    weighs colour and metamerism, the judge texture too."""
     # the correction builds on the search
     from flakelab.match.correction import AIM_OFF_FLOOR, aim_off
 
     x = np.array([recipe_vector(forward, c.fractions) for c in candidates])
-    aimed = aim_off(forward, spectra, x, habits, library, tolerance=tolerance)[0]
+    aimed = aim_off(
+        forward, spectra, x, habits, library, tolerance=tolerance,
+        metamerism=settings.metamerism, lights=settings.lights,
+    )[0]  # fmt: skip
     both, K = np.concatenate([_weighable(aimed, settings), x]), len(x)
     R, _ = evaluate_recipes(forward, both)
     offset = habits.offset(library, both, R, forward.geometries)
