@@ -111,8 +111,10 @@ NEW_TONER_START = 0.002
 AIM_STEPS = 60
 """Adam steps of :func:`aim_off`: a small move from a recipe already matched. On 12 targets
 of the habits shop, sprayed at its mean, 0 / 30 / 60 / 150 / 300 steps landed at worst-
-geometry ΔE00 1.51 / 0.93 / 0.84 / 0.83 / 0.83 in 0.04 / 0.08 / 0.20 / 0.39 s
-(``benchmarks/aim_off.py``, stop 62)."""
+geometry ΔE00 1.51 / 0.95 / 0.85 / 0.85 / 0.85 in 0.08 / 0.16 / 0.36 / 0.69 s, weighing the
+metamerism index (stop 64; at colour alone, stop 62: 1.51 / 0.93 / 0.84 / 0.83 / 0.83); in a
+shop with mild habits 30 targets landed at 0.42 / 0.30 / 0.28 / 0.29 after 0 / 30 / 60 / 150
+(``benchmarks/aim_off.py [--world-habits 1.015,0.99,0.0015 --targets 30]``)."""
 
 AIM_OFF_FLOOR = 0.05
 """Worst-geometry ΔE00 that the habits' offset at a recipe must reach for :func:`aim_off` to
