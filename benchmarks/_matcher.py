@@ -8,7 +8,7 @@ import dataclasses
 import math
 import time
 
-from flakelab.cases.generator import World
+from flakelab.cases.generator import SHOP_WITH_HABITS, World
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library, read_tolerance
 from flakelab.library import PAINT_FAMILIES
@@ -152,13 +152,12 @@ def parse_world_habits(text: str) -> dict[str, float]:
         raise argparse.ArgumentTypeError(f"expected FILM,SPREAD,GAIN, got {text!r}") from None
     if not (film > 0 and spread > 0 and math.isfinite(film * spread * gain)):
         raise argparse.ArgumentTypeError(f"expected positive film and spread, got {text!r}")
-    return {"shop_film_build": film, "shop_spread": spread, "shop_gain": gain}
+    return dict(zip(SHOP_WITH_HABITS, (film, spread, gain), strict=True))
 
 
 def world_habits(world) -> dict[str, float]:
     """The world's shop settings, as :func:`parse_world_habits` gives them."""
-    keys = ("shop_film_build", "shop_spread", "shop_gain")
-    return {key: getattr(world.settings, key) for key in keys}
+    return {key: getattr(world.settings, key) for key in SHOP_WITH_HABITS}
 
 
 def parse_kinds(text: str) -> dict[str, float]:

@@ -28,6 +28,7 @@ from _matcher import (
     timed_harness,
     world_habits,
 )
+from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES
 from flakelab.match.habits import read_habits
 from timing import peak_rss_mb
 
@@ -43,15 +44,8 @@ FIGURES = (
     "latency_p50_s",
     "latency_p95_s",
 )
-CHANCES = ("first_shot_chance", "after_one_correction_chance", "oracle_chance")
-PAIRED = {
-    "first_shot_success": lambda trial: float(trial["first"] <= 1.0),
-    "after_one_correction": lambda trial: float(trial["corrected"] <= 1.0),
-}
-PAIRED_CHANCES = {
-    "first_shot_chance": lambda trial: trial["first_chance"],
-    "after_one_correction_chance": lambda trial: trial["corrected_chance"],
-}
+PAIRED = ("first_shot_success", "after_one_correction")
+PAIRED_CHANCES = ("first_shot_chance", "after_one_correction_chance")
 
 
 def main() -> None:
@@ -73,7 +67,7 @@ def main() -> None:
         report, wall = timed_harness(
             world, forward, effect, args, forward.novel, label, habits=shop_habits, per_target=True
         )
-        figures = FIGURES + (CHANCES if args.resprays else ())
+        figures = FIGURES + (tuple(CHANCES) if args.resprays else ())
         rows.append({"run": label, **{k: report[k] for k in figures}, "wall_s": wall})
         trials.append(report["per_target"][: args.targets])
     summary = {
@@ -99,7 +93,10 @@ def main() -> None:
 def paired_differences(without: list[dict], with_habits: list[dict], chances: bool) -> dict:
     """Each paired figure's mean difference over the same targets (with the habits − without)
     and its standard error: the same targets and sprays, so the targets' own luck cancels."""
-    figures = {**PAIRED, **(PAIRED_CHANCES if chances else {})}
+    # a trial's rate is its worst share of the tolerance (≤ 1 passes), a chance its mean
+    figures = {name: lambda t, key=FAMILY_FIGURES[name]: float(t[key] <= 1.0) for name in PAIRED}
+    if chances:
+        figures |= {name: lambda t, key=CHANCES[name]: t[key] for name in PAIRED_CHANCES}
     differences = {}
     for name, figure in figures.items():
         d = np.array([figure(b) - figure(a) for a, b in zip(without, with_habits, strict=True)])

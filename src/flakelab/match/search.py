@@ -890,8 +890,8 @@ def _aimed_off(
     score = _assessed(forward, both, spectra, texture, tolerance, settings, offset).score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
     chosen, offset = both[rows], offset[rows]
-    aimed = np.abs(chosen - x).max(axis=1) > 1e-9  # renormalising moves ulps
-    moved = int(aimed.sum())
+    was_aimed = np.abs(chosen - x).max(axis=1) > 1e-9  # renormalising moves ulps
+    moved = int(was_aimed.sum())
     if moved == 0:
         note = (
             "not aimed off for the shop's habits: they move no candidate by "
@@ -900,7 +900,9 @@ def _aimed_off(
     else:
         some = "" if moved == K else f" ({moved} of {K} candidates)"
         note = f"aimed off for the shop's habits{some}: {habits.describe()}"
-    judged = _judge(forward, chosen, effect, spectra, texture, tolerance, settings, offset, aimed)
+    judged = _judge(
+        forward, chosen, effect, spectra, texture, tolerance, settings, offset, was_aimed
+    )
     return judged, note
 
 
