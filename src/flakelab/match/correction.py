@@ -228,13 +228,18 @@ def metamerism_note(sprayed: dict[str, NDArray], expected: dict[str, NDArray]) -
 def _predicted(objective, forward, x, target_lab, offset, ratio):
     """Predicted reflectances ``[N, G, 31]`` of mixes ``x[N, T]``, their expected L*a*b*
     (prediction plus ``offset``) and their loss ``[N]``: the colour's, plus the metamerism
-    index of the prediction times the spectral ``ratio`` where the objective weighs it."""
+    index of the prediction times the spectral ``ratio`` where the objective weighs it (None:
+    the prediction's own index)."""
     R = forward(x)[0]
-    lab = objective.lab(R) + offset
-    loss = objective.loss(target_lab, lab)
-    if objective.metamerism is not None:
-        loss = loss + objective.metamerism_loss(R * ratio)
-    return R, lab, loss
+    if objective.metamerism is None:
+        lab = objective.lab(R) + offset
+        return R, lab, objective.loss(target_lab, lab)
+    if ratio is None:
+        lab, metamerism = objective.lab_and_metamerism_loss(R)
+    else:
+        lab, metamerism = objective.lab(R), objective.metamerism_loss(R * ratio)
+    lab = lab + offset
+    return R, lab, objective.loss(target_lab, lab) + metamerism
 
 
 def _extra_candidates(forward, objective, x0, target_lab, offset, ratio, count) -> list[int]:
@@ -376,7 +381,7 @@ def aim_off(
         x0 > 0,
         target_lab,
         offset,
-        torch.ones((), dtype=forward.dtype),  # the index of the prediction itself
+        None,  # the index of the prediction itself
         "reformulate",
         steps,
         0,
@@ -449,9 +454,10 @@ def _optimise(
     """Adam over every row of ``used[N, T]`` at once, each from ``x0`` (one row, or one per
     row): new amounts of the used toners (``reformulate``) or additions to ``x0``; returns
     the mixes ``[N, T]``, the additions, L*a*b* with ``offset``, the loss ``[N]`` (with the
-    metamerism of the predictions times the spectral ``ratio``, where the objective weighs
-    it) and the predicted reflectances. The steps hold a finite-difference Jacobian
-    ``every`` steps (:func:`~flakelab.match.forward.stepping`); the result is exact."""
+    metamerism of the predictions times the spectral ``ratio`` (None: of the predictions),
+    where the objective weighs it) and the predicted reflectances. The steps hold a
+    finite-difference Jacobian ``every`` steps (:func:`~flakelab.match.forward.stepping`);
+    the result is exact."""
     if mode == "reformulate":
         start = torch.where(x0 > 0, x0, torch.full_like(x0, NEW_TONER_START))
         variable = torch.log(start).expand(len(used), -1).clone().requires_grad_(True)

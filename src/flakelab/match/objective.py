@@ -132,8 +132,14 @@ class MatchObjective(TorchColour):
         the objective weighs it (both from one product with the weights)."""
         if self.metamerism is None:
             return self.loss(target_lab, self.lab(R))
+        lab, metamerism = self.lab_and_metamerism_loss(R)
+        return self.loss(target_lab, lab) + metamerism
+
+    def lab_and_metamerism_loss(self, R: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """CIELAB ``[N, G, 3]`` of reflectances ``R[N, G, 31]`` and their
+        :meth:`metamerism_loss` ``[N]``, from one product with the weights."""
         lab, indices = self.metamerism.lab_and_indices(R)
-        return self.loss(target_lab, lab) + self._weighed_mean(indices)
+        return lab, self._weighed_mean(indices)
 
     def metamerism_loss(self, R: torch.Tensor) -> torch.Tensor:
         """The weighed mean metamerism index ``[N]`` (ΔE, over test illuminants and

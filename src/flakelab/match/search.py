@@ -887,9 +887,10 @@ def _aimed_off(
     both, K = np.concatenate([_weighable(aimed, settings), x]), len(x)
     R, _ = evaluate_recipes(forward, both)
     offset = habits.offset(library, both, R, forward.geometries)
-    score = _assessed(forward, both, spectra, texture, tolerance, settings, offset).score
+    assessed = _assessed(forward, both, spectra, texture, tolerance, settings, offset)
+    score = assessed.score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
-    chosen, offset = both[rows], offset[rows]
+    chosen = both[rows]
     was_aimed = np.abs(chosen - x).max(axis=1) > 1e-9  # renormalising moves ulps
     moved = int(was_aimed.sum())
     if moved == 0:
@@ -901,8 +902,9 @@ def _aimed_off(
         some = "" if moved == K else f" ({moved} of {K} candidates)"
         note = f"aimed off for the shop's habits{some}: {habits.describe()}"
     judged = _judge(
-        forward, chosen, effect, spectra, texture, tolerance, settings, offset, was_aimed
-    )
+        forward, chosen, effect, spectra, texture, tolerance, settings,
+        aimed=was_aimed, assessed=assessed.rows(rows),
+    )  # fmt: skip
     return judged, note
 
 
@@ -924,6 +926,20 @@ class _Assessment:
     has_texture: bool
     metamerism: dict[str, NDArray]
     score: NDArray
+
+    def rows(self, rows: NDArray) -> _Assessment:
+        """The assessment of the recipes ``x[rows]`` alone."""
+        return replace(
+            self,
+            R=self.R[rows],
+            texture=None if self.texture is None else self.texture[rows],
+            **{k: getattr(self, k)[rows] for k in _ROW_FIELDS},
+            metamerism={light: index[rows] for light, index in self.metamerism.items()},
+        )
+
+
+_ROW_FIELDS = ("lab", "de00", "dLCH", "passed", "share", "texture_share", "score")
+"""The fields of :class:`_Assessment` that hold one row per recipe in every case."""
 
 
 def _assessed(forward, x, spectra, texture, tolerance, settings, offset=None) -> _Assessment:
@@ -959,12 +975,18 @@ def _assessed(forward, x, spectra, texture, tolerance, settings, offset=None) ->
 
 
 def _judge(
-    forward, x, effect, spectra, texture, tolerance, settings, offset=None, aimed=None
-) -> list[Candidate]:
+    forward, x, effect, spectra, texture, tolerance, settings, offset=None, aimed=None,
+    assessed=None,
+) -> list[Candidate]:  # fmt: skip
     """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
     support rank after every one inside it. ``offset[N, G, 3]`` is added to the predicted
-    L*a*b* (the shop's habits); ``aimed[N]`` marks the recipes aimed off for them."""
-    a = _assessed(forward, x, spectra, texture, tolerance, settings, offset)
+    L*a*b* (the shop's habits); ``aimed[N]`` marks the recipes aimed off for them;
+    ``assessed``, where given, is their :func:`_assessed` already."""
+    a = (
+        assessed
+        if assessed is not None
+        else _assessed(forward, x, spectra, texture, tolerance, settings, offset)
+    )
     outside = outside_support(x, effect, settings)
     chosen, seen = [], set()
     for row in np.lexsort((a.score, outside)):
