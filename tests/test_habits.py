@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
@@ -15,6 +15,7 @@ from flakelab.cases.database import open_database
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, metamerism_indices
+from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io import read_library
@@ -569,6 +570,33 @@ def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped
     plain_recipes = [c.fractions for c in plain.candidates]
     for c in aimed.candidates:
         assert c.aimed_off is (c.fractions not in plain_recipes)
+
+
+def test_an_assessment_of_some_rows_is_that_of_those_recipes_alone(shipped):
+    # the aimed-off candidates are judged from the assessment that chose them (stop 65)
+    library, forward, _ = shipped
+    world = shop_world(shipped, habits=False)
+    x = world.formulations(6, np.random.default_rng(5))
+    spectra, readings = world.appearance(x[:1], world.nominal(1))
+    texture = dict(zip(TEXTURE_READINGS, readings[0] + 0.3, strict=True))
+    habits = ShopHabits(np.array([0.03, -0.02, 0.004]), np.zeros(3), 500)
+    offset = habits.offset(library, x, evaluate_recipes(forward, x)[0], forward.geometries)
+    tolerance, settings = tolerance_preset("refinish"), MatchSettings()
+    rows = np.array([4, 1, 1, 5])
+    part = _assessed(forward, x, spectra[0], texture, tolerance, settings, offset).rows(rows)
+    alone = _assessed(forward, x[rows], spectra[0], texture, tolerance, settings, offset[rows])
+    assert part.texture_share.shape == (4, 2) and part.texture_share.any()
+    # the model computes in float32, whose last digits move with the batch's size
+    for field in fields(part):
+        got, want = getattr(part, field.name), getattr(alone, field.name)
+        if isinstance(want, dict) and field.name == "metamerism":
+            assert got.keys() == want.keys()
+            for light in want:
+                np.testing.assert_allclose(got[light], want[light], rtol=1e-4, atol=1e-5)
+        elif isinstance(want, np.ndarray):
+            np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5, err_msg=field.name)
+        else:
+            assert got == want, field.name
 
 
 def test_habits_saved_to_a_database_not_made_yet_create_it(cli, tmp_path):
