@@ -3,10 +3,11 @@
 Runs the evaluation harness (``flakelab match evaluate``) twice in one shop's world: without
 habits, then aimed off for the habits file ``--habits`` (``flakelab cases habits CASES --out
 FILE``, read from that shop's cases). Both runs see the same hidden targets and the same
-sprays (seeded), so the rows differ only by the habits. The shop is ``--world``'s, or one
-given its own habits with ``--world-habits`` (film build and flake spread as factors on the
-factory's, instrument gain as a fraction): a shop with mild habits is
-``--world-habits 1.015,0.99,0.0015``.
+sprays (seeded), so the rows differ only by the habits; what the habits add to each target's
+match time is paired too, and each row records the machine's pace before it. The shop is
+``--world``'s, or one given its own habits with ``--world-habits`` (film build and flake
+spread as factors on the factory's, instrument gain as a fraction): a shop with mild habits
+is ``--world-habits 1.015,0.99,0.0015``.
 
     python benchmarks/habits_harness.py --habits FILE [--world-habits FILM,SPREAD,GAIN]
         [--world shop] [--targets 200] [--novel-targets 50] [--seed 4242] [--resprays K]
@@ -30,7 +31,7 @@ from _matcher import (
 )
 from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES
 from flakelab.match.habits import read_habits
-from timing import peak_rss_mb
+from timing import matmul_gflops, peak_rss_mb
 
 FIGURES = (
     "first_shot_success",
@@ -64,17 +65,23 @@ def main() -> None:
     )
     rows, trials = [], []
     for label, shop_habits in (("without habits", None), ("with its habits", habits)):
+        pace = matmul_gflops()
         report, wall = timed_harness(
             world, forward, effect, args, forward.novel, label, habits=shop_habits, per_target=True
         )
         figures = FIGURES + (tuple(CHANCES) if args.resprays else ())
-        rows.append({"run": label, **{k: report[k] for k in figures}, "wall_s": wall})
-        trials.append(report["per_target"][: args.targets])
+        rows.append(
+            {"run": label, **{k: report[k] for k in figures}, "wall_s": wall, "gflops": pace}
+        )
+        trials.append(report["per_target"])
     summary = {
         "world": world_habits(world),
         "habits": habits.report(),
         "rows": rows,
-        "with_minus_without": paired_differences(*trials, chances=bool(args.resprays)),
+        "with_minus_without": paired_differences(
+            *(t[: args.targets] for t in trials), chances=bool(args.resprays)
+        ),
+        "latency_with_minus_without_s": paired_latency(*trials),
         "peak_rss_gb": peak_rss_mb() / 1024,
     }
     if args.json:
@@ -88,6 +95,18 @@ def main() -> None:
         print(f"{row['run']:>16}  {figures}")
     for name, d in summary["with_minus_without"].items():
         print(f"with − without habits, {name}: {d['mean']:+.3f} ± {d['se']:.3f} (paired)")
+    d = summary["latency_with_minus_without_s"]
+    print(
+        f"with − without habits, latency per target: p50 {d['p50']:+.3f} s, p95 {d['p95']:+.3f} s"
+    )
+
+
+def paired_latency(without: list[dict], with_habits: list[dict]) -> dict:
+    """What the habits add to a match's time, target by target (every target, new toners'
+    too): the two runs' p50 latencies differ by the machine's pace between them as well, which
+    on this machine moves by the hour (each row's ``gflops`` says how far)."""
+    d = [b["latency_s"] - a["latency_s"] for a, b in zip(without, with_habits, strict=True)]
+    return {"p50": float(np.percentile(d, 50)), "p95": float(np.percentile(d, 95))}
 
 
 def paired_differences(without: list[dict], with_habits: list[dict], chances: bool) -> dict:

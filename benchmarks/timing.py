@@ -18,6 +18,19 @@ def best_time(function, *args, repeat: int = 3) -> float:
     return best
 
 
+def matmul_gflops(size: int = 2048, repeat: int = 10) -> float:
+    """The machine's pace now: GFLOP/s of a ``size``² float32 matrix product in torch, best
+    of ``repeat`` (the figure the README's timings quote). This machine's varies by the hour
+    and, by a fifth, from one second to the next (144–185 in four calls): a rough gauge, which
+    a benchmark comparing runs made one after another records before each."""
+    import torch  # only the benchmarks that match or learn need it
+
+    generator = torch.Generator().manual_seed(0)
+    a, b = (torch.randn(size, size, generator=generator) for _ in range(2))
+    torch.matmul(a, b)  # the first product allocates
+    return 2 * size**3 / best_time(torch.matmul, a, b, repeat=repeat) / 1e9
+
+
 def measure_peak(function, *args):
     """``function(*args)``'s result, wall time [s] and peak traced memory [MB]."""
     tracemalloc.start()

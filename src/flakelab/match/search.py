@@ -902,8 +902,8 @@ def _aimed_off(
         some = "" if moved == K else f" ({moved} of {K} candidates)"
         note = f"aimed off for the shop's habits{some}: {habits.describe()}"
     judged = _judge(
-        forward, chosen, effect, spectra, texture, tolerance, settings,
-        aimed=was_aimed, assessed=assessed.rows(rows),
+        forward, chosen, effect, spectra, texture, tolerance, settings, was_aimed,
+        assessed.rows(rows),
     )  # fmt: skip
     return judged, note
 
@@ -975,18 +975,13 @@ def _assessed(forward, x, spectra, texture, tolerance, settings, offset=None) ->
 
 
 def _judge(
-    forward, x, effect, spectra, texture, tolerance, settings, offset=None, aimed=None,
-    assessed=None,
-) -> list[Candidate]:  # fmt: skip
+    forward, x, effect, spectra, texture, tolerance, settings, aimed=None, assessed=None
+) -> list[Candidate]:
     """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
-    support rank after every one inside it. ``offset[N, G, 3]`` is added to the predicted
-    L*a*b* (the shop's habits); ``aimed[N]`` marks the recipes aimed off for them;
-    ``assessed``, where given, is their :func:`_assessed` already."""
-    a = (
-        assessed
-        if assessed is not None
-        else _assessed(forward, x, spectra, texture, tolerance, settings, offset)
-    )
+    support rank after every one inside it. ``assessed`` is their :func:`_assessed`, where
+    it is made already (with the shop's habits: ``aimed[N]`` marks the recipes aimed off
+    for them)."""
+    a = assessed or _assessed(forward, x, spectra, texture, tolerance, settings)
     outside = outside_support(x, effect, settings)
     chosen, seen = [], set()
     for row in np.lexsort((a.score, outside)):
