@@ -81,7 +81,11 @@ def main() -> None:
         "with_minus_without": paired_differences(
             *(t[: args.targets] for t in trials), chances=bool(args.resprays)
         ),
-        "latency_with_minus_without_s": paired_latency(*trials),
+        "latency_with_minus_without_s": {
+            "all": paired_latency(*trials),
+            "known_toners": paired_latency(*(t[: args.targets] for t in trials)),
+            "new_toner": paired_latency(*(t[args.targets :] for t in trials)),
+        },
         "peak_rss_gb": peak_rss_mb() / 1024,
     }
     if args.json:
@@ -95,10 +99,12 @@ def main() -> None:
         print(f"{row['run']:>16}  {figures}")
     for name, d in summary["with_minus_without"].items():
         print(f"with − without habits, {name}: {d['mean']:+.3f} ± {d['se']:.3f} (paired)")
-    d = summary["latency_with_minus_without_s"]
-    print(
-        f"with − without habits, latency per target: p50 {d['p50']:+.3f} s, p95 {d['p95']:+.3f} s"
-    )
+    for targets, d in summary["latency_with_minus_without_s"].items():
+        if d:
+            print(
+                f"with − without habits, latency per target ({targets.replace('_', ' ')}): "
+                f"p50 {d['p50']:+.3f} s, p95 {d['p95']:+.3f} s"
+            )
 
 
 def paired_latency(without: list[dict], with_habits: list[dict]) -> dict:
@@ -106,6 +112,8 @@ def paired_latency(without: list[dict], with_habits: list[dict]) -> dict:
     too): the two runs' p50 latencies differ by the machine's pace between them as well, which
     on this machine moves by the hour (each row's ``gflops`` says how far)."""
     d = [b["latency_s"] - a["latency_s"] for a, b in zip(without, with_habits, strict=True)]
+    if not d:
+        return {}
     return {"p50": float(np.percentile(d, 50)), "p95": float(np.percentile(d, 95))}
 
 
