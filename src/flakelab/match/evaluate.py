@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import copy
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -44,6 +44,8 @@ from flakelab.match.search import MatchError, MatchSettings, match, recipe_vecto
 
 __all__ = [
     "evaluate_matching",
+    "harness_match",
+    "harness_trials",
     "harness_world",
     "HARNESS_WORLDS",
     "SUCCESS_DE00",
@@ -215,11 +217,50 @@ def as_weighed(
     return {name: g / total for name, g in grams.items() if g > 0}
 
 
+def harness_trials(
+    world: World, targets: int, seed: int, novel: tuple[str, ...] = (), novel_targets: int = 0
+) -> Iterator[tuple[NDArray, Trial]]:
+    """The harness's hidden formulations ``[T]`` and their trials, as
+    :func:`evaluate_matching` draws them from ``seed``: ``targets`` of the toners the model
+    knows, then (with ``novel`` toners) ``novel_targets`` that each hold one of them."""
+    rng = np.random.default_rng(seed)
+    names = list(world.library.names)
+    # hidden formulations draw only on toners the model knows (a new toner is added below)
+    known = world.without(novel)
+    for x in known.formulations(targets, rng):
+        yield x, trial(world, x, rng)
+    if not (novel and novel_targets):
+        return
+    for x in known.formulations(novel_targets, rng):
+        x[names.index(novel[int(rng.integers(len(novel)))])] = np.exp(
+            rng.uniform(np.log(0.01), np.log(0.08))
+        )
+        x = x / x.sum()
+        yield x, trial(world, x, rng)
+
+
+def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target_texture=True):
+    """The harness's match of trial ``t``'s target, and its latency in seconds: the target
+    read (without its texture readings unless ``target_texture``) and matched."""
+    start = time.perf_counter()
+    read = t.measurement() if target_texture else replace(t.measurement(), texture={})
+    result = match(
+        read,
+        forward,
+        effect,
+        tolerance=tolerance,
+        settings=settings,
+        habits=habits,
+        library=t.world.library,
+    )
+    return result, time.perf_counter() - start
+
+
 def _one(
-    world: World, forward, effect, x_hidden, rng, settings, habits, tolerance, scale,
-    target_texture=True, resprays=0,
+    t: Trial, x_hidden, forward, effect, settings, habits, tolerance, scale, target_texture=True,
+    resprays=0,
 ) -> dict:  # fmt: skip
-    t = trial(world, x_hidden, rng)
+    world = t.world
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
 
     def share(sprayed: tuple[NDArray, dict]) -> float:
@@ -230,18 +271,7 @@ def _one(
     def texture_share(sprayed: tuple[NDArray, dict]) -> float:  # by refinish's limits
         return max(REFINISH_TEXTURE.share(t.texture, sprayed[1]).values(), default=0.0)
 
-    start = time.perf_counter()
-    read = t.measurement() if target_texture else replace(t.measurement(), texture={})
-    result = match(
-        read,
-        forward,
-        effect,
-        tolerance=tolerance,
-        settings=settings,
-        habits=habits,
-        library=world.library,
-    )
-    latency = time.perf_counter() - start
+    result, latency = harness_match(t, forward, effect, settings, habits, tolerance, target_texture)
     best = result.candidates[0]
     mixed = as_weighed(forward, best.fractions, scale)
     x = recipe_vector(forward, mixed)
@@ -337,32 +367,14 @@ def evaluate_matching(
     two runs on the same seed."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
-    rng = np.random.default_rng(seed)
-    names = list(world.library.names)
-    # hidden formulations draw only on toners the model knows (a new toner is added below)
-    known = world.without(novel)
-    hidden = known.formulations(targets, rng)
-    rows = []
-
-    def one(x: NDArray) -> dict:
-        return _one(
-            world, forward, effect, x, rng, settings, habits, tolerance, scale, target_texture,
-            resprays,
-        )  # fmt: skip
-
-    for x in hidden:
-        rows.append(one(x))
+    rows, novel_rows = [], []
+    for i, (x, t) in enumerate(harness_trials(world, targets, seed, novel, novel_targets)):
+        row = _one(
+            t, x, forward, effect, settings, habits, tolerance, scale, target_texture, resprays
+        )
+        (rows if i < targets else novel_rows).append(row)
         if progress:
             progress()
-    novel_rows = []
-    if novel and novel_targets:
-        for x in known.formulations(novel_targets, rng):
-            x[names.index(novel[int(rng.integers(len(novel)))])] = np.exp(
-                rng.uniform(np.log(0.01), np.log(0.08))
-            )
-            novel_rows.append(one(x / x.sum()))
-            if progress:
-                progress()
 
     def share(rs, key):
         return float(np.mean([r[key] <= 1.0 for r in rs])) if rs else None
