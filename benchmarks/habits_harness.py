@@ -4,20 +4,23 @@ Runs the evaluation harness (``flakelab match evaluate``) twice in one shop's wo
 habits, then aimed off for the habits file ``--habits`` (``flakelab cases habits CASES --out
 FILE``, read from that shop's cases). Both runs see the same hidden targets and the same
 sprays (seeded), so the rows differ only by the habits; what the habits add to each target's
-match time is paired too, and each row records the machine's pace before it. The shop is
-``--world``'s, or one given its own habits with ``--world-habits`` (film build and flake
-spread as factors on the factory's, instrument gain as a fraction): a shop with mild habits
-is ``--world-habits 1.015,0.99,0.0015``.
+match time is paired too, and each row records the machine's pace before it. The first
+``--latency-targets`` targets are matched again, without and with the habits in turn, for
+what the habits add to a match's time free of the machine's drift between the two runs.
+The shop is ``--world``'s, or one given its own habits with ``--world-habits`` (film build
+and flake spread as factors on the factory's, instrument gain as a fraction): a shop with
+mild habits is ``--world-habits 1.015,0.99,0.0015``.
 
     python benchmarks/habits_harness.py --habits FILE [--world-habits FILM,SPREAD,GAIN]
         [--world shop] [--targets 200] [--novel-targets 50] [--seed 4242] [--resprays K]
-        [--json]
+        [--latency-targets 40] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from itertools import islice
 
 import numpy as np
 
@@ -29,7 +32,8 @@ from _matcher import (
     timed_harness,
     world_habits,
 )
-from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES
+from flakelab.io import read_tolerance
+from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES, harness_match, harness_trials
 from flakelab.match.habits import read_habits
 from timing import matmul_gflops, peak_rss_mb
 
@@ -57,6 +61,13 @@ def main() -> None:
         type=parse_world_habits,
         help=WORLD_HABITS_HELP + " (default: those of --world)",
     )
+    parser.add_argument(
+        "--latency-targets",
+        type=int,
+        default=40,
+        help="the first this many targets matched again without and with the habits, "
+        "alternately, for their latency free of the machine's drift (0: none)",
+    )
     add_harness_arguments(parser, targets=200, novel_targets=50)
     args = parser.parse_args()
     habits = read_habits(args.habits)
@@ -81,6 +92,9 @@ def main() -> None:
         "with_minus_without": paired_differences(
             *(t[: args.targets] for t in trials), chances=bool(args.resprays)
         ),
+        "latency_interleaved_s": interleaved_latency(
+            world, forward, effect, habits, args, args.latency_targets
+        ),
         "latency_with_minus_without_s": {
             "all": paired_latency(*trials),
             "known_toners": paired_latency(*(t[: args.targets] for t in trials)),
@@ -99,12 +113,45 @@ def main() -> None:
         print(f"{row['run']:>16}  {figures}")
     for name, d in summary["with_minus_without"].items():
         print(f"with − without habits, {name}: {d['mean']:+.3f} ± {d['se']:.3f} (paired)")
+    if d := summary["latency_interleaved_s"]:
+        print(
+            f"latency, {d['targets']} targets matched alternately: p50 {d['without_p50']:.3f} s "
+            f"without habits, {d['with_p50']:.3f} s with; the habits add p50 "
+            f"{d['added_p50']:+.3f} s, p95 {d['added_p95']:+.3f} s"
+        )
     for targets, d in summary["latency_with_minus_without_s"].items():
         if d:
             print(
                 f"with − without habits, latency per target ({targets.replace('_', ' ')}): "
                 f"p50 {d['p50']:+.3f} s, p95 {d['p95']:+.3f} s"
             )
+
+
+def interleaved_latency(world, forward, effect, habits, args, count: int) -> dict:
+    """What the habits add to a match's time, free of the machine's drift: the harness's first
+    ``count`` targets, each matched without, with, with and without the habits in turn (the
+    harness's match, :func:`~flakelab.match.evaluate.harness_match`), each target's two times
+    of a kind averaged."""
+    if not count:
+        return {}
+    tolerance = read_tolerance(args.tolerance) if args.tolerance else None
+    times = []
+    trials = harness_trials(world, args.targets, args.seed, forward.novel, args.novel_targets)
+    for _, t in islice(trials, count):
+        seconds = [
+            harness_match(t, forward, effect, None, shop_habits, tolerance)[1]
+            for shop_habits in (None, habits, habits, None)
+        ]
+        times.append(((seconds[0] + seconds[3]) / 2, (seconds[1] + seconds[2]) / 2))
+    without, with_habits = np.array(times).T
+    added = with_habits - without
+    return {
+        "targets": len(times),
+        "without_p50": float(np.percentile(without, 50)),
+        "with_p50": float(np.percentile(with_habits, 50)),
+        "added_p50": float(np.percentile(added, 50)),
+        "added_p95": float(np.percentile(added, 95)),
+    }
 
 
 def paired_latency(without: list[dict], with_habits: list[dict]) -> dict:
