@@ -1169,6 +1169,33 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
             assert passed == pytest.approx(6 * run[rate])
 
 
+def test_harness_trials_hold_a_new_toner_only_where_the_harness_adds_one(hybrid):
+    """The harness's targets (:func:`~flakelab.match.evaluate.harness_trials`, which the
+    habits benchmark replays to time matches): those of known toners hold none of the new
+    ones, each target after them exactly one, at 1–8 % before the mix is renormalised; the
+    same seed draws the same targets, and adding targets with a new toner moves none before
+    them."""
+    from flakelab.cases.generator import World
+    from flakelab.match.evaluate import harness_trials
+
+    world = World(hybrid.library, "five-angle")
+    novel = hybrid.novel
+    columns = [list(hybrid.library.names).index(n) for n in novel]
+    drawn = list(harness_trials(world, 4, 7, novel, 3))
+    assert len(drawn) == 7
+    x = np.array([x for x, _ in drawn])
+    np.testing.assert_allclose(x.sum(axis=1), 1.0)
+    assert not x[:4, columns].any()
+    assert ((x[4:, columns] > 0).sum(axis=1) == 1).all()
+    share = x[4:, columns].max(axis=1)
+    assert (share >= 0.01 / 1.08).all() and (share <= 0.08).all()
+    again = list(harness_trials(world, 4, 7, novel, 0))
+    assert len(again) == 4
+    for (_, a), (_, b) in zip(drawn, again, strict=False):
+        np.testing.assert_array_equal(a.target, b.target)
+        assert a.texture == b.texture
+
+
 def test_harness_worlds_take_the_shop_s_variation_away(hybrid):
     """In the controlled world only the instrument's reading varies, so the hidden formula's
     own spray and the car's paint sprayed again pass every time, the first within about the
