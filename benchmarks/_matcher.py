@@ -64,12 +64,11 @@ def run_harness(
     with a new toner drawn from ``novel``; without ``target_texture`` the matcher reads the
     targets without their texture readings; with a shop's ``habits`` it aims off for them;
     with ``per_target`` the report keeps every target's trial."""
-    tolerance = getattr(args, "tolerance", None)
     return evaluate_matching(
         world,
         forward,
         effect,
-        tolerance=read_tolerance(tolerance) if tolerance else None,
+        tolerance=harness_tolerance(args),
         targets=args.targets,
         seed=args.seed,
         novel=novel,
@@ -81,6 +80,12 @@ def run_harness(
         habits=habits,
         per_target=per_target,
     )
+
+
+def harness_tolerance(args):
+    """The tolerance the options ``args`` name (``--tolerance``), or None: the harness's own."""
+    tolerance = getattr(args, "tolerance", None)
+    return read_tolerance(tolerance) if tolerance else None
 
 
 def timed_harness(

@@ -27,12 +27,12 @@ import numpy as np
 from _matcher import (
     WORLD_HABITS_HELP,
     add_harness_arguments,
+    harness_tolerance,
     parse_world_habits,
     shipped_matcher,
     timed_harness,
     world_habits,
 )
-from flakelab.io import read_tolerance
 from flakelab.match.evaluate import CHANCES, FAMILY_FIGURES, harness_match, harness_trials
 from flakelab.match.habits import read_habits
 from timing import matmul_gflops, peak_rss_mb
@@ -134,7 +134,7 @@ def interleaved_latency(world, forward, effect, habits, args, count: int) -> dic
     of a kind averaged."""
     if not count:
         return {}
-    tolerance = read_tolerance(args.tolerance) if args.tolerance else None
+    tolerance = harness_tolerance(args)
     times = []
     trials = harness_trials(world, args.targets, args.seed, forward.novel, args.novel_targets)
     for _, t in islice(trials, count):
@@ -155,9 +155,9 @@ def interleaved_latency(world, forward, effect, habits, args, count: int) -> dic
 
 
 def paired_latency(without: list[dict], with_habits: list[dict]) -> dict:
-    """What the habits add to a match's time, target by target (every target, new toners'
-    too): the two runs' p50 latencies differ by the machine's pace between them as well, which
-    on this machine moves by the hour (each row's ``gflops`` says how far)."""
+    """What the habits add to a match's time, trial by trial of the two runs: their p50
+    latencies differ by the machine's pace between them as well, which on this machine moves
+    by the hour (each row's ``gflops`` says how far)."""
     d = [b["latency_s"] - a["latency_s"] for a, b in zip(without, with_habits, strict=True)]
     if not d:
         return {}
