@@ -885,9 +885,9 @@ def _aimed_off(
         metamerism=settings.metamerism, lights=settings.lights,
     )[0]  # fmt: skip
     both, K = np.concatenate([_weighable(aimed, settings), x]), len(x)
-    R, _ = evaluate_recipes(forward, both)
-    offset = habits.offset(library, both, R, forward.geometries)
-    assessed = _assessed(forward, both, spectra, texture, tolerance, settings, offset)
+    predicted = evaluate_recipes(forward, both)
+    offset = habits.offset(library, both, predicted[0], forward.geometries)
+    assessed = _assessed(forward, both, spectra, texture, tolerance, settings, offset, predicted)
     score = assessed.score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
     chosen = both[rows]
@@ -931,21 +931,23 @@ class _Assessment:
         """The assessment of the recipes ``x[rows]`` alone."""
         return replace(
             self,
-            R=self.R[rows],
             texture=None if self.texture is None else self.texture[rows],
             **{k: getattr(self, k)[rows] for k in _ROW_FIELDS},
             metamerism={light: index[rows] for light, index in self.metamerism.items()},
         )
 
 
-_ROW_FIELDS = ("lab", "de00", "dLCH", "passed", "share", "texture_share", "score")
+_ROW_FIELDS = ("R", "lab", "de00", "dLCH", "passed", "share", "texture_share", "score")
 """The fields of :class:`_Assessment` that hold one row per recipe in every case."""
 
 
-def _assessed(forward, x, spectra, texture, tolerance, settings, offset=None) -> _Assessment:
+def _assessed(
+    forward, x, spectra, texture, tolerance, settings, offset=None, predicted=None
+) -> _Assessment:
     """Predict and score recipes ``x[N, T]``; ``offset[N, G, 3]`` is added to the predicted
-    L*a*b* (the shop's habits)."""
-    R, tex = evaluate_recipes(forward, x)
+    L*a*b* (the shop's habits); ``predicted``, where given, is their
+    :func:`evaluate_recipes` already."""
+    R, tex = predicted or evaluate_recipes(forward, x)
     target_lab = reflectance_to_Lab(spectra)
     lab = reflectance_to_Lab(R) + (0.0 if offset is None else offset)
     de00, dlch, passed = tolerance.judge(forward.geometries, target_lab[None], lab)
