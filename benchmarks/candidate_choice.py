@@ -29,7 +29,7 @@ import numpy as np
 from _matcher import shipped_matcher
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
-from flakelab.match.evaluate import SUCCESS_DE00, trial, worst_de00
+from flakelab.match.evaluate import SUCCESS_DE00, harness_trials, worst_de00
 from flakelab.match.search import MatchSettings, match, recipe_vector
 
 RULES = ("predicted error (today)", "chance to pass", "chance to pass, read", "hindsight")
@@ -72,11 +72,9 @@ def main() -> None:
     args = parser.parse_args()
     start = time.perf_counter()
     world, forward, effect = shipped_matcher("shop")
-    rng = np.random.default_rng(args.seed)
     chosen = {rule: [] for rule in RULES}
     changed = 0
-    for i, hidden in enumerate(world.formulations(args.targets, rng)):
-        t = trial(world, hidden, rng)
+    for i, (_, t) in enumerate(harness_trials(world, args.targets, args.seed, forward.novel)):
         result = match(t.target, forward, effect, settings=MatchSettings(candidates=5))
         candidates = [c for c in result.candidates if c.in_support] or result.candidates[:1]
         xs = np.array([recipe_vector(forward, c.fractions) for c in candidates])

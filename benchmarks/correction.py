@@ -45,8 +45,8 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import (
     SUCCESS_DE00,
+    harness_trials,
     recipe_vector,
-    trial,
     worst_de00,
     worst_metamerism,
 )
@@ -77,12 +77,9 @@ def persistent_offset(forward, x, calm) -> np.ndarray:
 def failed_first_shots(seed: int, targets: int, world, forward, effect):
     """Each target of ``seed`` whose first shot fails: its trial, best candidate, recipe
     vector, first spray-out and hidden formula."""
-    known = world.without(forward.novel)
-    rng = np.random.default_rng(seed)
-    hidden = known.formulations(targets, rng)
+    trials = harness_trials(world, targets, seed, forward.novel)
     # progress on stderr even with --json: these runs are long, their output usually a file
-    for x_hidden in tracked(hidden, f"targets (seed {seed})"):
-        t = trial(world, x_hidden, rng)
+    for x_hidden, t in tracked(trials, f"targets (seed {seed})", total=targets):
         best = match(t.target, forward, effect).candidates[0]
         x_best = recipe_vector(forward, best.fractions)
         first = t.spray(x_best, t.streams[0])

@@ -36,7 +36,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
 from flakelab.match.crosscheck import predict_left_out
-from flakelab.match.evaluate import SUCCESS_DE00, harness_world, trial
+from flakelab.match.evaluate import SUCCESS_DE00, harness_trials, harness_world
 from flakelab.match.forward import PhysicsForward
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.search import match, recipe_vector
@@ -64,14 +64,13 @@ def main(argv: list[str] | None = None) -> int:
     world = harness_world(library, "ma-t12")
     physics = PhysicsForward(library, world.geometries)
     forwards = {name: forward_for(shipped_model(name), library) for name in MODELS}
-    rng = np.random.default_rng(args.seed)
     rows: dict[str, list[tuple[float, ...]]] = {name: [] for name in MODELS}
     flagged = []  # the five-angle best recipe: the MA-T12 model's worst at the other seven
     start = time.perf_counter()
     with progress_bar(args.json) as bar:
         task = bar.add_task("matching MA-T12 targets with both models", total=args.targets)
-        for x_hidden in world.formulations(args.targets, rng):
-            t = trial(world, x_hidden, rng)
+        # the harness's targets: drawn on the toners both models know
+        for _, t in harness_trials(world, args.targets, args.seed, forwards["ma-t12"].novel):
             target = Measurement("target", world.geometries, WAVELENGTHS, t.target)
             stream = t.streams[0]
             for name, forward in forwards.items():

@@ -24,7 +24,7 @@ from flakelab.cases.generator import World
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
-from flakelab.match.evaluate import recipe_vector, trial
+from flakelab.match.evaluate import harness_trials, recipe_vector
 from flakelab.match.search import MatchSettings, evaluate_recipes, match
 from match_variants import parse_settings
 
@@ -57,12 +57,10 @@ def matched_and_hidden(
     """For ``targets`` hidden formulations per seed, made and measured as in the harness: the
     recipes ``[N·candidates, T]`` the matcher proposes (its best ``candidates``) and the hidden
     formulations ``[N, T]``."""
-    known = world.without(forward.novel)
     matched, hidden = [], []
     for seed in seeds:
-        rng = np.random.default_rng(seed)
-        for x_hidden in tracked(known.formulations(targets, rng), f"targets (seed {seed})"):
-            t = trial(world, x_hidden, rng)
+        trials = harness_trials(world, targets, seed, forward.novel)
+        for x_hidden, t in tracked(trials, f"targets (seed {seed})", total=targets):
             proposed = match(t.target, forward, effect, settings=settings).candidates[:candidates]
             matched += [recipe_vector(forward, c.fractions) for c in proposed]
             hidden.append(x_hidden)

@@ -25,7 +25,7 @@ import numpy as np
 import flakelab.match.objective as objective
 from _matcher import shipped_matcher
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
-from flakelab.match.evaluate import trial, worst_share
+from flakelab.match.evaluate import harness_trials, worst_share
 from flakelab.match.search import match, recipe_vector
 
 TOLERANCES = {
@@ -43,11 +43,9 @@ def first_shots(world, forward, effect, tolerance: Tolerance, args) -> dict:
     """Per target, the pass rate of the recipe aimed at ``tolerance`` and of the one aimed at
     ΔE00 ≤ 1.0, sprayed on the same streams."""
     baseline = tolerance_preset(objective.OBJECTIVE_DEFAULT)
-    rng = np.random.default_rng(args.seed)
     rates = {"aimed": [], "baseline": []}
     predicted = {"aimed": [], "baseline": []}
-    for i, hidden in enumerate(world.formulations(args.targets, rng)):
-        t = trial(world, hidden, rng)
+    for i, (_, t) in enumerate(harness_trials(world, args.targets, args.seed, forward.novel)):
         for key, aim in (("aimed", tolerance), ("baseline", baseline)):
             best = match(t.target, forward, effect, tolerance=aim).candidates[0]
             x = recipe_vector(forward, best.fractions)

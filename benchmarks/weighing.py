@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from _matcher import shipped_matcher
-from flakelab.match.evaluate import trial, worst_share
+from flakelab.match.evaluate import harness_trials, worst_share
 from flakelab.match.recipe import (
     RecipeError,
     parse_quantity,
@@ -102,11 +102,8 @@ def sprayed(world, forward, effect, targets: int, seed: int, grams: float, resol
     from flakelab.match.search import match, recipe_vector
 
     tolerance = tolerance_preset("de00-1.0")
-    rng = np.random.default_rng(seed)
-    known = world.without(forward.novel)
     shares = {"computed": [], "nearest grams": [], "rounded for colour": []}
-    for x_hidden in known.formulations(targets, rng):
-        t = trial(world, x_hidden, rng)
+    for _, t in harness_trials(world, targets, seed, forward.novel):
         found = match(t.target, forward, effect, tolerance=tolerance, library=world.library)
         best = found.candidates[0]
         nearest = {ln.toner: ln.grams for ln in weigh(best.fractions, grams, resolution)}

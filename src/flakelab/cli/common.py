@@ -6,7 +6,7 @@ import functools
 import os
 import signal
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from datetime import timedelta
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -188,10 +188,13 @@ def progress_bar(disable: bool = False) -> LoggedProgress:
     )  # fmt: skip
 
 
-def tracked(items: Sequence[T], description: str, disable: bool = False) -> Iterator[T]:
-    """``items`` one by one, with :func:`progress_bar`'s progress."""
+def tracked(
+    items: Iterable[T], description: str, disable: bool = False, total: int | None = None
+) -> Iterator[T]:
+    """``items`` one by one, with :func:`progress_bar`'s progress; ``total`` counts them
+    where ``items`` has no length (a generator)."""
     with progress_bar(disable) as bar:
-        task = bar.add_task(description, total=len(items))
+        task = bar.add_task(description, total=len(items) if total is None else total)
         for item in items:
             yield item
             bar.advance(task)
