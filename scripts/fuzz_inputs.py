@@ -4,12 +4,13 @@ traceback, a warning or a NaN in the output (the guide's "Bad input" standard).
 
 Each kind starts from a good file made here from the shipped example (or the demo library,
 the example recipe, a habits report, a tolerance file, generated cases, the shipped model)
-and damages it: text files by deleting, doubling or cutting lines, replacing numbers and
+and damages it: an MA-T12 export by editing its cells, rows, columns and sheets (or cutting
+its bytes short); text files by deleting, doubling or cutting lines, replacing numbers and
 names, inserting stray characters; JSON files by replacing or deleting one value anywhere
 in them; a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,recipe,library,habits,habits-match,
-        tolerance,cases,model] [--n 200] [--seed 0] [--show]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,recipe,library,habits,
+        habits-match,tolerance,cases,model] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -28,9 +29,11 @@ import shutil
 import sys
 import tempfile
 from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+import openpyxl
 import torch
 from typer.testing import CliRunner
 
@@ -45,6 +48,10 @@ TOKENS = ("nan", "-1", "1e400", "", "abc", "0", "Infinity", "1e-320", "[]", "{}"
 """What a damaged number becomes."""
 VALUES = (None, "x", -1, 0, 1e308, float("nan"), float("inf"), [], {}, True, [1, 2], {"a": 1})
 """What a damaged JSON value becomes."""
+CELLS = (None, "", "x", " 45as15 ", "45as15", "Name", "1,5", "=1/0", -1.0, 0, 1e308,
+         float("nan"), float("inf"), True, datetime(2020, 1, 1))  # fmt: skip
+"""What a damaged workbook cell becomes."""
+SHEET_NAMES = ("Spectral Data", "Spectral data", "Color Data", "Texture Data", "Sheet")
 
 
 def damage_text(text: str, rng: random.Random) -> str:
@@ -99,6 +106,38 @@ def damage_json(document, rng: random.Random):
     return document
 
 
+def damage_workbook(data: bytes, rng: random.Random) -> bytes:
+    """An MA-T12 export with one to three of: a cell replaced, a row or column deleted, a
+    junk row inserted, a sheet removed, renamed or copied; or the file's bytes cut short."""
+    if rng.random() < 0.1:
+        return data[: rng.randrange(len(data))]
+    workbook = openpyxl.load_workbook(io.BytesIO(data))
+    for _ in range(rng.randint(1, 3)):
+        sheet = rng.choice(workbook.worksheets)
+        row, column = rng.randint(1, sheet.max_row), rng.randint(1, sheet.max_column)
+        kind = rng.randrange(9)
+        if kind < 4:
+            sheet.cell(row, column).value = rng.choice(CELLS)
+        elif kind == 4:
+            sheet.delete_rows(row)
+        elif kind == 5:
+            sheet.delete_cols(column)
+        elif kind == 6:
+            sheet.insert_rows(row)
+            sheet.cell(row, 1).value = rng.choice(CELLS)
+        elif kind == 7 and len(workbook.worksheets) > 1:
+            workbook.remove(sheet)
+        else:
+            title = rng.choice(SHEET_NAMES)
+            if title not in workbook.sheetnames:
+                sheet.title = title
+            else:
+                workbook.copy_worksheet(sheet)
+    buffer = io.BytesIO()
+    workbook.save(buffer)
+    return buffer.getvalue()
+
+
 def damage_model(data: bytes, rng: random.Random) -> bytes:
     stored = torch.load(io.BytesIO(data), weights_only=True)
     part = rng.choice(("meta", "norm", "state"))
@@ -126,6 +165,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     measurement = read_measurement(target)
     write_measurements([measurement], work / "good.csv")
     write_measurements([measurement], work / "good.json")
+    write_measurements([measurement], work / "good.xlsx")
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]), 200,
                         "demo-five-angle", "shop A")  # fmt: skip
     write_habits(habits, work / "habits.json")
@@ -144,6 +184,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "cxf": (target, lambda p: ["inspect", str(p)]),
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
+        "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
         "library": (work / "library.json",
                     lambda p: ["weigh", str(recipe), "--library", str(p), "--physics"]),
@@ -184,6 +225,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
         damaged = work / f"{kind}-{i}{good.suffix}"
         if kind == "model":
             damaged.write_bytes(damage_model(data, rng))
+        elif kind == "xlsx":
+            damaged.write_bytes(damage_workbook(data, rng))
         elif good.suffix == ".json" and rng.random() < 0.7:
             damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))
         else:
@@ -206,7 +249,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--kinds",
-        default="cxf,csv,json,recipe,library,habits,habits-match,tolerance,cases,model",
+        default="cxf,csv,json,xlsx,recipe,library,habits,habits-match,tolerance,cases,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)

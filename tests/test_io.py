@@ -7,11 +7,13 @@ import io
 import json
 import re
 import shutil
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io import (
     FORMATS,
@@ -318,3 +320,74 @@ def test_bad_recipe_files_name_file_toner_and_problem(tmp_path, text, problem):
     assert problem in str(raised.value)
     with pytest.raises(FlakelabError, match="no such recipe file"):
         read_recipe(tmp_path / "missing.json")
+
+
+def test_the_cielab_limit_holds_every_reflectance_a_file_may_hold():
+    """LAB_LIMIT follows from REFLECTANCE_RANGE: a flat factor of 100 reads L* 522.4
+    (116 · 100^⅓ − 16), and no spectrum of factors at either end of the range, band by band
+    in blocks (the optimal colours), reaches the limit under D65/10 or A/2. Within it ΔE00
+    stays finite, without the overflow of an a* of 10³⁰⁸."""
+    import warnings
+
+    from flakelab.core.colorimetry import Conditions, reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+    from flakelab.io.records import LAB_LIMIT, REFLECTANCE_RANGE
+
+    low, high = REFLECTANCE_RANGE
+    band = np.arange(len(WAVELENGTHS))
+    blocks = [(i <= band) & (band < j) for i in band for j in range(i + 1, band.size + 1)]
+    ends = np.where(np.array(blocks), high, low)
+    spectra = np.concatenate([ends, high + low - ends])
+    flat = reflectance_to_Lab(np.full(band.size, high))[0]
+    np.testing.assert_allclose(flat, 116 * high ** (1 / 3) - 16)
+    for conditions in ("D65/10", "A/2"):
+        lab = reflectance_to_Lab(spectra, conditions=Conditions.parse(conditions))
+        assert np.abs(lab).max() < LAB_LIMIT
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isfinite(delta_E(np.array([LAB_LIMIT, LAB_LIMIT, -LAB_LIMIT]), np.zeros(3)))
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+def test_a_stored_cielab_no_reflectance_could_give_is_refused_by_its_cell(
+    fmt, rich_measurement, tmp_path
+):
+    """An a* of 10³⁰⁸ in a file: overflowed ΔE00 to NaN with a warning before (MA-T12 exports
+    fuzzed at stop 66); now refused, naming the cell, in every format that stores L*a*b*."""
+    from dataclasses import replace
+
+    lab = rich_measurement.stored_lab.copy()
+    lab[1, 1] = 1e308
+    path = tmp_path / f"out{FORMATS[fmt][2][0]}"
+    write_measurements([replace(rich_measurement, stored_lab=lab)], path)
+    with pytest.raises(MeasurementFileError) as raised:
+        read_measurements(path)
+    message = str(raised.value)
+    field = {"mat12-xlsx": "row 6, a:", "cxf": "ColorCIELab", "csv": "row 3, a:",
+             "json": "geometries[1].lab[1]:"}[fmt]  # fmt: skip
+    assert message.startswith(str(path)) and field in message, message
+    assert "expected a CIELAB value within ±2500, got 1e+308" in message, message
+
+
+def test_a_date_cell_whose_serial_is_no_date_reads_as_no_date(rich_measurement, tmp_path):
+    """openpyxl warns of a Date/Time cell formatted as a date whose serial no date has (a
+    warning on the command line before, fuzzed at stop 66); it reads as no date, as any
+    Date/Time that is not one does, and the spectra as written."""
+    import warnings
+
+    import openpyxl
+
+    path = tmp_path / "m.xlsx"
+    write_measurements([rich_measurement], path)
+    workbook = openpyxl.load_workbook(path)
+    for sheet in workbook.worksheets:
+        for row in sheet.iter_rows():
+            if isinstance(row[1].value, datetime):
+                row[1].value = 1e308
+                row[1].number_format = "yyyy-mm-dd h:mm:ss"
+    workbook.save(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        back = read_measurement(path)
+    assert back.measured_at is None
+    np.testing.assert_allclose(back.reflectance, rich_measurement.reflectance, atol=1e-9)

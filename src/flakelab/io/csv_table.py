@@ -32,6 +32,7 @@ from flakelab.io.records import (
     assemble,
     parse_conditions,
     parse_geometry_name,
+    parse_lab,
     parse_number,
     parse_spectrum,
     parse_wavelength_header,
@@ -106,7 +107,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
             raise MeasurementFileError(path, "empty sample name", field=f"{where}, sample")
         geometry = parse_geometry_name(path, row[columns["geometry"]], f"{where}, geometry")
         lab = (
-            np.array([parse_number(path, row[columns[k]], f"{where}, {k}") for k in "Lab"])
+            parse_lab(path, [row[columns[k]] for k in "Lab"], [f"{where}, {k}" for k in "Lab"])
             if has_lab and row[columns["L"]].strip()
             else None
         )

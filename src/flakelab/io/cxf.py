@@ -34,6 +34,7 @@ from flakelab.io.records import (
     assemble,
     checked_wavelengths,
     parse_conditions,
+    parse_lab,
     parse_number,
     parse_spectrum,
     write_atomically,
@@ -211,8 +212,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
 def _lab_of(path: str | PathLike, sample: str, value: cxf3.ColorCielab) -> np.ndarray:
     """An Object's stored CIELAB at one geometry, each component a finite number."""
     where = f"Object {sample!r}, ColorCIELab {value.color_specification}"
-    return np.array([parse_number(path, c, f"{where}, {name}") for c, name in
-                     ((value.l, "L"), (value.a, "A"), (value.b, "B"))])  # fmt: skip
+    return parse_lab(path, (value.l, value.a, value.b), [f"{where}, {k}" for k in "LAB"])
 
 
 def _creation_date(

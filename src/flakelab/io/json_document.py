@@ -19,8 +19,6 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from flakelab.core.measurement import Measurement
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
@@ -28,6 +26,7 @@ from flakelab.io.records import (
     assemble,
     parse_conditions,
     parse_geometry_name,
+    parse_lab,
     parse_number,
     parse_spectrum,
     parse_wavelength_header,
@@ -96,7 +95,7 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
             if lab is not None:
                 if not isinstance(lab, list) or len(lab) != 3:
                     raise MeasurementFileError(path, "expected [L, a, b]", field=f"{gw}.lab")
-                lab = np.array([parse_number(path, v, f"{gw}.lab") for v in lab])
+                lab = parse_lab(path, lab, [f"{gw}.lab[{i}]" for i in range(3)])
             readings.append(
                 Reading(
                     where=gw,

@@ -11,6 +11,7 @@ with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`. An op
 
 from __future__ import annotations
 
+import warnings
 import zipfile
 from datetime import datetime
 from os import PathLike
@@ -27,6 +28,7 @@ from flakelab.io.records import (
     assemble,
     parse_conditions,
     parse_geometry_name,
+    parse_lab,
     parse_number,
     parse_spectrum,
     parse_wavelength_header,
@@ -84,7 +86,13 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
     except (zipfile.BadZipFile, KeyError, OSError, ValueError) as error:
         raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
     try:
-        sheets = {ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook}
+        with warnings.catch_warnings():
+            # a Date/Time cell whose serial is no date: openpyxl warns and gives an error
+            # value, which reads as no date, as any other Date/Time that is not one does
+            warnings.filterwarnings("ignore", "Cell .* is marked as a date", UserWarning)
+            sheets = {
+                ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook
+            }
     except (zipfile.BadZipFile, OSError, ValueError, KeyError) as error:
         raise MeasurementFileError(path, f"truncated or corrupt workbook ({error})") from None
     finally:
@@ -168,8 +176,8 @@ def _read_color_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
         if len(row) < 6:
             raise MeasurementFileError(path, f"expected 6 columns, got {len(row)}", field=where)
         geometry = parse_geometry_name(path, row[2], f"{where}, Geometry")
-        lab = [parse_number(path, v, f"{where}, {k}") for v, k in zip(row[3:6], "Lab", strict=True)]
-        labs[(str(row[0]).strip(), geometry.name)] = np.array(lab)
+        lab = parse_lab(path, row[3:6], [f"{where}, {k}" for k in "Lab"])
+        labs[(str(row[0]).strip(), geometry.name)] = lab
     return labs
 
 

@@ -30,15 +30,23 @@ __all__ = [
     "assemble",
     "parse_wavelength_header",
     "parse_number",
+    "parse_lab",
     "parse_geometry_name",
     "parse_conditions",
     "write_atomically",
     "REFLECTANCE_RANGE",
+    "LAB_LIMIT",
 ]
 
 REFLECTANCE_RANGE = (-0.05, 100.0)
 """Accepted reflectance factors: small negatives from instrument noise on black; large values
 near specular on bright aluminium. Outside this a file is wrong, not the paint."""
+
+LAB_LIMIT = 2500.0
+"""The largest |L*|, |a*| or |b*| a stored reading may hold: reflectance factors within
+:data:`REFLECTANCE_RANGE` keep X/Xn, Y/Yn and Z/Zn within −0.05–100 under any illuminant, so
+L* within −45–523, |a*| up to 2,446 and |b*| up to 979 (CIE 15:2018 §8.2.1, with its linear
+segment below (6/29)³). Beyond it a file is wrong, not the paint."""
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
 
@@ -102,6 +110,18 @@ def parse_number(path: str | PathLike, value: object, where: str) -> float:
     if not math.isfinite(number):
         raise MeasurementFileError(path, f"expected a finite number, got {value!r}", field=where)
     return number
+
+
+def parse_lab(path: str | PathLike, values: Sequence[object], fields: Sequence[str]) -> np.ndarray:
+    """Stored CIELAB ``[3]`` from three cells named by ``fields``: finite numbers within
+    :data:`LAB_LIMIT`, or a :class:`MeasurementFileError` naming the cell."""
+    lab = np.array([parse_number(path, v, f) for v, f in zip(values, fields, strict=True)])
+    for value, where in zip(lab, fields, strict=True):
+        if abs(value) > LAB_LIMIT:
+            raise MeasurementFileError(
+                path, f"expected a CIELAB value within ±{LAB_LIMIT:g}, got {value:g}", field=where
+            )
+    return lab
 
 
 def parse_spectrum(
