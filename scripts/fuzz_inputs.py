@@ -3,14 +3,15 @@ line naming the file (exit 2) or read (exit 0), never an internal error (exit 70
 traceback, a warning or a NaN in the output (the guide's "Bad input" standard).
 
 Each kind starts from a good file made here from the shipped example (or the demo library,
-the example recipe, a habits report, a tolerance file, generated cases, the shipped model)
-and damages it: an MA-T12 export by editing its cells, rows, columns and sheets (or cutting
-its bytes short); text files by deleting, doubling or cutting lines, replacing numbers and
-names, inserting stray characters; JSON files by replacing or deleting one value anywhere
-in them; a model file by editing its description, standardisation or weights.
+the example recipe, a habits report, a tolerance file, generated cases in CSV and CxF3, the
+shipped model) and damages it: an MA-T12 export by editing its cells, rows, columns and
+sheets (or cutting its bytes short); text files by deleting, doubling or cutting lines,
+replacing numbers and names, inserting stray characters; JSON files by replacing or deleting
+one value anywhere in them; a model file by editing its description, standardisation or
+weights.
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,recipe,library,habits,
-        habits-match,tolerance,cases,model] [--n 200] [--seed 0] [--show]
+        habits-match,tolerance,cases,cases-cxf,model] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -44,7 +45,8 @@ from flakelab.io.library_file import demo_library_path
 from flakelab.match.habits import ShopHabits, write_habits
 from flakelab.models.registry import shipped_model_path
 
-TOKENS = ("nan", "-1", "1e400", "", "abc", "0", "Infinity", "1e-320", "[]", "{}", "null", "true")
+TOKENS = ("nan", "-1", "1e400", "1e300", "", "abc", "0", "Infinity", "1e-320", "[]", "{}", "null",
+          "true")  # fmt: skip
 """What a damaged number becomes."""
 VALUES = (None, "x", -1, 0, 1e308, float("nan"), float("inf"), [], {}, True, [1, 2], {"a": 1})
 """What a damaged JSON value becomes."""
@@ -174,9 +176,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
                  "texture": {"G": 1.0, "SG": 0.5}}  # fmt: skip
     (work / "tolerance.json").write_text(json.dumps(tolerance))
     write_recipe(json.loads(recipe.read_text()), work / "recipe.json")
-    CliRunner().invoke(
-        app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", str(work / "cases.csv")]
-    )
+    for suffix in ("csv", "cxf"):
+        CliRunner().invoke(
+            app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", f"{work}/cases.{suffix}"]
+        )
     shutil.copy(shipped_model_path("five-angle"), work / "model.pt")
     shutil.copy(demo_library_path(), work / "library.json")
     read_library(work / "library.json")
@@ -198,6 +201,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "tolerance": (work / "tolerance.json",
                       lambda p: ["compare", str(target), str(sprayout), "-t", str(p)]),
         "cases": (work / "cases.csv", lambda p: ["cases", "import", str(p), "-d", "sqlite://"]),
+        "cases-cxf": (work / "cases.cxf",
+                      lambda p: ["cases", "import", str(p), "-d", "sqlite://"]),
         "model": (work / "model.pt", lambda p: ["weigh", str(recipe), "--model", str(p)]),
     }  # fmt: skip
 
@@ -249,7 +254,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--kinds",
-        default="cxf,csv,json,xlsx,recipe,library,habits,habits-match,tolerance,cases,model",
+        default="cxf,csv,json,xlsx,recipe,library,habits,habits-match,tolerance,cases,"
+        "cases-cxf,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)
