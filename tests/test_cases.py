@@ -474,6 +474,14 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
         ("extra.csv", lambda t: "\n".join(line + ",1" for line in t.splitlines()) + "\n"): (
             re.escape("(1 unexpected, e.g. ['1'])")
         ),
+        # stored as float32's infinity and read back as a NaN ΔE00 before (stop 66)
+        ("huge.csv", lambda t: t.replace(t.splitlines()[1], _cell(t, 1, 12, "1e300"))): (
+            r"huge.csv: row 2: case '[^']+': target: expected reflectance factors in "
+            r"\[-0.05, 100\], got 1e\+300"
+        ),
+        ("grainy.csv", lambda t: t.replace(t.splitlines()[1], _cell(t, 1, _grain(t), "-1"))): (
+            re.escape("sprayout_texture: G: expected a texture reading in [0, 1000], got -1")
+        ),
     }
     for (name, edit), message in flawed.items():
         path = _case_file_with(cases[:3], tmp_path, name, edit)
@@ -482,6 +490,11 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
         assert str(raised.value).startswith(f"{path}: "), name
         assert re.search(message, str(raised.value)), (name, str(raised.value))
         assert str(raised.value).count(str(path)) == 1  # named once, not twice
+
+
+def _grain(text: str) -> int:
+    """The index of the spray-out's graininess in a case file's header."""
+    return next(csv.reader(io.StringIO(text))).index("sprayout:G")
 
 
 def _cell(text: str, row: int, column: int, value: str) -> str:

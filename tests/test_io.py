@@ -331,7 +331,7 @@ def test_the_cielab_limit_holds_every_reflectance_a_file_may_hold():
 
     from flakelab.core.colorimetry import Conditions, reflectance_to_Lab
     from flakelab.core.difference import delta_E
-    from flakelab.io.records import LAB_LIMIT, REFLECTANCE_RANGE
+    from flakelab.core.measurement import LAB_LIMIT, REFLECTANCE_RANGE
 
     low, high = REFLECTANCE_RANGE
     band = np.arange(len(WAVELENGTHS))
@@ -367,6 +367,27 @@ def test_a_stored_cielab_no_reflectance_could_give_is_refused_by_its_cell(
              "json": "geometries[1].lab[1]:"}[fmt]  # fmt: skip
     assert message.startswith(str(path)) and field in message, message
     assert "expected a CIELAB value within ±2500, got 1e+308" in message, message
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+@pytest.mark.parametrize("value", [1e300, -1.0])
+def test_a_texture_reading_no_instrument_gives_is_refused_by_its_cell(
+    fmt, value, rich_measurement, tmp_path
+):
+    """A graininess of 10³⁰⁰ was read and printed the match's share of its limit as a
+    300-digit percentage, after a NaN warning (fuzzed at stop 66); a negative one was read."""
+    from dataclasses import replace
+
+    path = tmp_path / f"out{FORMATS[fmt][2][0]}"
+    texture = {**rich_measurement.texture, "G": value}
+    write_measurements([replace(rich_measurement, texture=texture)], path)
+    with pytest.raises(MeasurementFileError) as raised:
+        read_measurements(path)
+    message = str(raised.value)
+    field = {"mat12-xlsx": "Texture Data, row 4, G:", "cxf": "Tag texture:G:",
+             "csv": "row 2, G:", "json": "measurements[0].texture.G:"}[fmt]  # fmt: skip
+    assert message.startswith(str(path)) and field in message, message
+    assert f"expected a texture reading in [0, 1000], got {value:g}" in message, message
 
 
 def test_a_date_cell_whose_serial_is_no_date_reads_as_no_date(rich_measurement, tmp_path):

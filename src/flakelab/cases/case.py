@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import Geometry, parse_geometries
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_RANGE, TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
@@ -37,6 +37,11 @@ longer value; SQLite would keep it), checked with every case so that no store fa
 
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
+
+
+def _first_outside(values: NDArray, low: float, high: float) -> float:
+    """The first of ``values`` outside [low, high] (NaN counts as outside)."""
+    return float(values.ravel()[np.flatnonzero(~((values >= low) & (values <= high)))[0]])
 
 
 def _recipe_amounts(where: str, recipe) -> dict[str, float]:
@@ -87,8 +92,12 @@ class Case:
                     f"{where}: {name}: expected {len(geometries)} × 31 reflectance values, "
                     f"got shape {values.shape}"
                 )
-            if not np.all(np.isfinite(values)) or np.any(values < -0.05):
-                raise CaseError(f"{where}: {name}: expected finite reflectance factors ≥ −0.05")
+            low, high = REFLECTANCE_RANGE
+            if not np.all((values >= low) & (values <= high)):  # NaN fails too
+                raise CaseError(
+                    f"{where}: {name}: expected reflectance factors in [{low:g}, {high:g}], got "
+                    f"{_first_outside(values, low, high):g}"
+                )
             object.__setattr__(self, name, values)
         amounts = _recipe_amounts(where, self.recipe)
         total = sum(amounts.values())
@@ -113,7 +122,15 @@ class Case:
             unknown = sorted(set(readings) - set(TEXTURE_READINGS))
             if unknown:
                 raise CaseError(f"{where}: {name}: unknown readings {unknown}")
-            object.__setattr__(self, name, {k: float(v) for k, v in readings.items()})
+            readings = {k: float(v) for k, v in readings.items()}
+            low, high = TEXTURE_RANGE
+            for k, v in readings.items():
+                if not low <= v <= high:  # NaN fails too
+                    raise CaseError(
+                        f"{where}: {name}: {k}: expected a texture reading in "
+                        f"[{low:g}, {high:g}], got {v:g}"
+                    )
+            object.__setattr__(self, name, readings)
 
     @property
     def geometry_names(self) -> tuple[str, ...]:

@@ -13,7 +13,16 @@ from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectanc
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS, resample
 
-__all__ = ["Measurement", "TEXTURE_READINGS", "TEXTURE_FAMILIES", "flop_index", "FLOP_GEOMETRIES"]
+__all__ = [
+    "Measurement",
+    "TEXTURE_READINGS",
+    "TEXTURE_FAMILIES",
+    "flop_index",
+    "FLOP_GEOMETRIES",
+    "REFLECTANCE_RANGE",
+    "LAB_LIMIT",
+    "TEXTURE_RANGE",
+]
 
 TEXTURE_READINGS: tuple[str, ...] = (
     "Sa15",
@@ -32,6 +41,21 @@ TEXTURE_FAMILIES: dict[str, tuple[int, ...]] = {
     for family in ("Sa", "Si", "SG", "G")
 }
 """Columns of :data:`TEXTURE_READINGS` of each kind of reading (Sa: Sa15, Sa45, Sa75 …)."""
+
+REFLECTANCE_RANGE = (-0.05, 100.0)
+"""Accepted reflectance factors: small negatives from instrument noise on black; large values
+near specular on bright aluminium. Outside this a file is wrong, not the paint."""
+
+LAB_LIMIT = 2500.0
+"""The largest |L*|, |a*| or |b*| a stored reading may hold: reflectance factors within
+:data:`REFLECTANCE_RANGE` keep X/Xn, Y/Yn and Z/Zn within −0.05–100 under any illuminant, so
+L* within −45–523, |a*| up to 2,446 and |b*| up to 979 (CIE 15:2018 §8.2.1, with its linear
+segment below (6/29)³). Beyond it a file is wrong, not the paint."""
+
+TEXTURE_RANGE = (0.0, 1000.0)
+"""Accepted texture readings: areas, intensities and grades are never negative, and an
+instrument's scales stay within tens (the generated world's reach 0–24). Outside this a file
+is wrong, not the paint."""
 
 FLOP_GEOMETRIES = ("45as15", "45as45", "45as110")
 

@@ -33,8 +33,8 @@ from flakelab.io.records import (
     parse_conditions,
     parse_geometry_name,
     parse_lab,
-    parse_number,
     parse_spectrum,
+    parse_texture,
     parse_wavelength_header,
     write_atomically,
 )
@@ -123,7 +123,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
                 ) from None
         for k in TEXTURE_READINGS:
             if k in columns and row[columns[k]].strip():
-                value = parse_number(path, row[columns[k]], f"{where}, {k}")
+                value = parse_texture(path, row[columns[k]], f"{where}, {k}")
                 previous = texture.setdefault(sample, {}).setdefault(k, value)
                 if previous != value:
                     raise MeasurementFileError(

@@ -37,6 +37,7 @@ from flakelab.io.records import (
     parse_lab,
     parse_number,
     parse_spectrum,
+    parse_texture,
     write_atomically,
 )
 
@@ -189,7 +190,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
             for tag in collection.tag:
                 key, value = tag.name or "", tag.value or ""
                 if key.startswith("texture:"):
-                    texture.setdefault(sample, {})[key[8:]] = parse_number(
+                    texture.setdefault(sample, {})[key[8:]] = parse_texture(
                         path, value, f"Object {sample!r}, Tag {key}"
                     )
                 elif key == "instrument":

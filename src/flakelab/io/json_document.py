@@ -27,8 +27,8 @@ from flakelab.io.records import (
     parse_conditions,
     parse_geometry_name,
     parse_lab,
-    parse_number,
     parse_spectrum,
+    parse_texture,
     parse_wavelength_header,
     write_atomically,
 )
@@ -119,7 +119,7 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
         texture = item.get("texture") or {}
         if not isinstance(texture, dict):
             raise MeasurementFileError(path, "expected an object", field=f"{where}.texture")
-        texture = {k: parse_number(path, v, f"{where}.texture.{k}") for k, v in texture.items()}
+        texture = {k: parse_texture(path, v, f"{where}.texture.{k}") for k, v in texture.items()}
         conditions = parse_conditions(
             path, item.get("lab_conditions", "D65/10"), f"{where}.lab_conditions"
         )

@@ -29,8 +29,8 @@ from flakelab.io.records import (
     parse_conditions,
     parse_geometry_name,
     parse_lab,
-    parse_number,
     parse_spectrum,
+    parse_texture,
     parse_wavelength_header,
     write_atomically,
 )
@@ -193,7 +193,7 @@ def _read_texture_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
     for number, row in _data_rows(rows, header):
         where = f"{_TEXTURE}, row {number}"
         values = {
-            k: parse_number(path, row[i], f"{where}, {k}")
+            k: parse_texture(path, row[i], f"{where}, {k}")
             for i, k in columns.items()
             if i < len(row) and row[i] not in (None, "")
         }

@@ -21,7 +21,13 @@ import numpy as np
 
 from flakelab.core.colorimetry import D65_10, Conditions
 from flakelab.core.geometry import Geometry
-from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.measurement import (
+    LAB_LIMIT,
+    REFLECTANCE_RANGE,
+    TEXTURE_RANGE,
+    TEXTURE_READINGS,
+    Measurement,
+)
 from flakelab.core.spectra import shape_of
 from flakelab.errors import MeasurementFileError
 
@@ -31,22 +37,11 @@ __all__ = [
     "parse_wavelength_header",
     "parse_number",
     "parse_lab",
+    "parse_texture",
     "parse_geometry_name",
     "parse_conditions",
     "write_atomically",
-    "REFLECTANCE_RANGE",
-    "LAB_LIMIT",
 ]
-
-REFLECTANCE_RANGE = (-0.05, 100.0)
-"""Accepted reflectance factors: small negatives from instrument noise on black; large values
-near specular on bright aluminium. Outside this a file is wrong, not the paint."""
-
-LAB_LIMIT = 2500.0
-"""The largest |L*|, |a*| or |b*| a stored reading may hold: reflectance factors within
-:data:`REFLECTANCE_RANGE` keep X/Xn, Y/Yn and Z/Zn within −0.05–100 under any illuminant, so
-L* within −45–523, |a*| up to 2,446 and |b*| up to 979 (CIE 15:2018 §8.2.1, with its linear
-segment below (6/29)³). Beyond it a file is wrong, not the paint."""
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
 
@@ -122,6 +117,18 @@ def parse_lab(path: str | PathLike, values: Sequence[object], fields: Sequence[s
                 path, f"expected a CIELAB value within ±{LAB_LIMIT:g}, got {value:g}", field=where
             )
     return lab
+
+
+def parse_texture(path: str | PathLike, value: object, where: str) -> float:
+    """A texture reading from a cell: a finite number within :data:`TEXTURE_RANGE`, or a
+    :class:`MeasurementFileError` naming the cell."""
+    reading = parse_number(path, value, where)
+    low, high = TEXTURE_RANGE
+    if not low <= reading <= high:
+        raise MeasurementFileError(
+            path, f"expected a texture reading in [{low:g}, {high:g}], got {reading:g}", field=where
+        )
+    return reading
 
 
 def parse_spectrum(
