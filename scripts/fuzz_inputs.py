@@ -7,10 +7,10 @@ the example recipe, a habits report, a tolerance file, generated cases in CSV an
 shipped model) and damages it: an MA-T12 export by editing its cells, rows, columns and
 sheets (or cutting its bytes short); text files by deleting, doubling or cutting lines,
 replacing numbers and names, inserting stray characters; JSON files by replacing or deleting
-one value anywhere in them; a model file by editing its description, standardisation or
-weights.
+one value anywhere in them (a target for the match, half the time, by values still readable
+but odd); a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,recipe,library,habits,
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,recipe,library,habits,
         habits-match,tolerance,cases,cases-cxf,model] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
@@ -39,6 +39,7 @@ import torch
 from typer.testing import CliRunner
 
 from flakelab.cli.main import app
+from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_RANGE
 from flakelab.data import example_path
 from flakelab.io import read_library, read_measurement, write_measurements, write_recipe
 from flakelab.io.library_file import demo_library_path
@@ -105,6 +106,26 @@ def damage_json(document, rng: random.Random):
         del parent[last]
     else:
         parent[last] = copy.deepcopy(rng.choice(VALUES))
+    return document
+
+
+def odd_target(document, rng: random.Random):
+    """A measurement document whose values stay readable but odd: one geometry's spectrum
+    black, at the range's ends or random within it, or one texture reading at its range's
+    ends, or the texture gone (what a match must meet without failing)."""
+    document = copy.deepcopy(document)
+    measurement = document["measurements"][0]
+    kind = rng.randrange(4)
+    if kind < 2:
+        geometry = rng.choice(measurement["geometries"])
+        low, high = REFLECTANCE_RANGE
+        level = rng.choice((0.0, low, high, None))
+        geometry["reflectance"] = [rng.uniform(0, high) if level is None else level
+                                   for _ in geometry["reflectance"]]  # fmt: skip
+    elif kind == 2:
+        measurement["texture"][rng.choice(list(measurement["texture"]))] = rng.choice(TEXTURE_RANGE)
+    else:
+        measurement["texture"] = {}
     return document
 
 
@@ -188,6 +209,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
+        # a damaged target read by the main job, whose search and tables meet every value
+        "target": (work / "good.json", lambda p: ["match", str(p), "--candidates", "1"]),
         "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
         "library": (work / "library.json",
                     lambda p: ["weigh", str(recipe), "--library", str(p), "--physics"]),
@@ -232,6 +255,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
             damaged.write_bytes(damage_model(data, rng))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
+        elif kind == "target" and rng.random() < 0.5:
+            damaged.write_text(json.dumps(odd_target(json.loads(data), rng)))
         elif good.suffix == ".json" and rng.random() < 0.7:
             damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))
         else:
@@ -254,7 +279,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--kinds",
-        default="cxf,csv,json,xlsx,recipe,library,habits,habits-match,tolerance,cases,"
+        default="cxf,csv,json,xlsx,target,recipe,library,habits,habits-match,tolerance,cases,"
         "cases-cxf,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
