@@ -102,6 +102,28 @@ def test_a_model_promoted_in_the_user_data_folder_is_the_current_one(tmp_path, c
     assert json.loads(cli(*current).stdout)["source"].endswith("five-angle, promoted")
 
 
+def test_correct_asks_about_a_spray_out_far_from_its_recipe_and_names_what_stays_failing(
+    tmp_path, cli
+):
+    """A white panel given as the blue metallic's spray-out (a file picked wrongly): the
+    correction asked for 250 g of blues and black without a word that it could not work."""
+    target = example_path("target")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    white = replace(read_measurement(example_path("sprayout")), stored_lab=None)
+    white = replace(white, reflectance=np.full_like(white.reflectance, 0.85))
+    write_measurements([white], tmp_path / "white.json")
+    run = cli("correct", str(target), "--recipe", str(recipe), "--sprayed",
+              str(tmp_path / "white.json"), "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    mismatch = [n for n in report["notes"] if "belong together" in n]
+    assert len(mismatch) == 1 and "from what the recipe predicts at 45as" in mismatch[0]
+    assert report["expected_failing"] == report["sprayout_failing"] == report["geometries"]
+    unreached = [n for n in report["notes"] if "expected to leave the spray-out failing" in n]
+    assert len(unreached) == 1 and "--mode reformulate" in unreached[0]
+    assert f"{max(report['expected_de00']):.2f} at worst" in unreached[0]
+
+
 def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path, cli):
     target, sprayed = example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"
@@ -121,6 +143,8 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path, cli)
     new = set(report["add_g"]) - set(json.loads(recipe.read_text()))
     assert new <= {report["new_toner"]}
     assert max(report["expected_de00"]) < max(report["before_de00"])
+    assert report["expected_failing"] == []
+    assert not any("belong together" in note for note in report["notes"])
     assert set(report["spray_application"]) == {"film build", "flake spread"}
     # the spray-out's metamerism index at the model's geometries, as compare has it there
     at = [measured.geometries.index(g) for g in report["geometries"]]

@@ -649,7 +649,7 @@ def correct_command(
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
     from flakelab.io import read_recipe, read_tolerance, write_recipe
-    from flakelab.match.correction import correct, metamerism_note
+    from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
     from flakelab.match.crosscheck import expected_left_out
     from flakelab.match.search import left_out_note, unused_geometries
 
@@ -701,6 +701,8 @@ def correct_command(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "
             "optional, a move toward the target's centre"
         )
+    if note := mismatch_note(forward, fractions, sprayed_R):
+        report["notes"].append(note)
     if texture_failing:
         report["notes"].append(
             f"the spray-out's texture fails {tol.name} at {', '.join(texture_failing)}: the "
@@ -726,8 +728,11 @@ def correct_command(
         name: round(value, 4) for name, value in correction.application.items()
     }
     report["habits"] = shop_habits and shop_habits.report()
-    expected, _, _ = tol.judge(forward.geometries, target_lab, expected_lab)
+    expected, _, expected_passed = tol.judge(forward.geometries, target_lab, expected_lab)
     report["expected_de00"] = expected.round(3).tolist()
+    report["expected_failing"] = failing_geometries(forward.geometries, expected_passed)
+    if failing and (note := unreached_note(tol, report["expected_failing"], expected, mode)):
+        report["notes"].append(note)
     report["metamerism_weight"] = metamerism
     sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
     report["sprayout_metamerism_index_max"] = worst_per_light(sprayed_metamerism)
@@ -942,7 +947,14 @@ def _print_correction(report: dict) -> None:
             for g, v in zip(report["geometries"], report["before_de00"], strict=True)
         ),
     )
-    geo.add_row("expected", *(f"{v:.2f}" for v in report["expected_de00"]))
+    still = set(report["expected_failing"])
+    geo.add_row(
+        "expected",
+        *(
+            f"[red]{v:.2f}[/]" if g in still else f"{v:.2f}"
+            for g, v in zip(report["geometries"], report["expected_de00"], strict=True)
+        ),
+    )
     console.print(table)
     console.print(geo)
     if left_out := report.get("left_out"):

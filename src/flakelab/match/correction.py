@@ -80,6 +80,9 @@ __all__ = [
     "MODEL_SD",
     "NOISE_SD",
     "metamerism_note",
+    "mismatch_note",
+    "unreached_note",
+    "SPRAYOUT_MISMATCH",
     "model_persistent_sd",
     "split_offset",
 ]
@@ -131,6 +134,50 @@ off anyway, their predictions moved by a median 0.075 and came no nearer the tar
 geometry −0.007 on average, farther for half of them), at 0.08 s a match. In the habits
 shop the offsets were 1.5 (median), 1.9 at most, and aiming off took the worst geometry
 0.69 nearer (``benchmarks/aim_off.py --offsets --targets 30``, stop 63)."""
+
+
+SPRAYOUT_MISMATCH = 5.0
+"""Worst-geometry ΔE00 between a spray-out and its recipe's prediction beyond which the
+correction asks whether they belong together: on 500 generated spray-outs the shipped
+five-angle model never saw (``flakelab cases generate --n 500 --seed 987``) that worst
+geometry read a median 0.79, 2.55 at the 99th percentile and 4.39 at most (stop 66). A
+spray-out farther off is more likely another panel's, recipe's or target's, and the
+correction would take its whole offset as the shop's."""
+
+
+def mismatch_note(forward, recipe: dict[str, float], sprayed: NDArray) -> str | None:
+    """What to tell the colorist when the spray-out ``sprayed[G, 31]`` lies further from the
+    prediction of the ``recipe`` it was mixed from than :data:`SPRAYOUT_MISMATCH`."""
+    R = evaluate_recipes(forward, _vector(forward, recipe)[None])[0][0]
+    de = delta_E(reflectance_to_Lab(R), reflectance_to_Lab(sprayed))
+    worst = int(np.argmax(de))
+    if de[worst] <= SPRAYOUT_MISMATCH:
+        return None
+    return (
+        f"the spray-out is ΔE00 {de[worst]:.1f} from what the recipe predicts at "
+        f"{forward.geometries[worst]} (spray-outs the model never saw stay within ΔE00 "
+        f"{SPRAYOUT_MISMATCH:g}): check that the spray-out, the recipe and the target belong "
+        "together; the correction takes the whole offset as this can's"
+    )
+
+
+def unreached_note(
+    tolerance: Tolerance, failing: list[str], expected_de00: NDArray, mode: str
+) -> str | None:
+    """What to tell the colorist when the corrected spray-out is still expected to fail the
+    ``tolerance`` at the ``failing`` geometries (ΔE00 ``expected_de00[G]``)."""
+    if not failing:
+        return None
+    further = (
+        "additions cannot take colour out of the can: --mode reformulate mixes it afresh, or "
+        if mode == "additions"
+        else ""
+    )
+    return (
+        f"the correction is expected to leave the spray-out failing {tolerance.name} at "
+        f"{', '.join(failing)} (ΔE00 {np.max(expected_de00):.2f} at worst): {further}match "
+        "the target again (flakelab match) for another recipe"
+    )
 
 
 def _vector(forward, recipe: dict[str, float]) -> NDArray:
