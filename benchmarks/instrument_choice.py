@@ -12,9 +12,14 @@ The recipes are also made by the world's nominal physics without batches, applic
 instrument noise: the model's and the search's share alone. Last, what `flakelab match` shows
 under the five-angle model's candidates, the MA-T12 model's prediction at the seven geometries
 the search left out (`flakelab.match.crosscheck`), is set against those seven as sprayed: how
-often a recipe it flags fails there, and how often one it passes does.
+often a recipe it flags fails there, and how often one it passes does. The targets are the
+harness's, drawn on the toners both models know; ``--new-toner-targets`` adds the harness's
+targets that hold one of their new toners, reported apart (``new_toner``). Each group's
+paired difference of the first shot at twelve geometries (MA-T12 model less five-angle) comes
+with its standard error over targets.
 
-    python benchmarks/instrument_choice.py [--targets 100] [--seed 4242] [--json]
+    python benchmarks/instrument_choice.py [--targets 100] [--new-toner-targets 0]
+        [--seed 4242] [--json]
 """
 
 from __future__ import annotations
@@ -53,9 +58,31 @@ def worst(target: np.ndarray, reading: np.ndarray) -> tuple[float, float, float]
     return float(de.max()), float(de[FIVE].max()), float(de[OTHERS].max())
 
 
+def rates(a: np.ndarray) -> dict[str, float]:
+    """First-shot pass rates and median worst ΔE00 of rows ``a`` (:func:`worst` of the spray,
+    then of the nominal recipe, per target)."""
+    return {
+        "first_shot_success_12": float(np.mean(a[:, 0] <= SUCCESS_DE00)),
+        "first_shot_success_5": float(np.mean(a[:, 1] <= SUCCESS_DE00)),
+        "sprayed_de00_median_12": float(np.median(a[:, 0])),
+        "nominal_de00_median_12": float(np.median(a[:, 3])),
+        "nominal_de00_median_5": float(np.median(a[:, 4])),
+        "nominal_success_12": float(np.mean(a[:, 3] <= SUCCESS_DE00)),
+    }
+
+
+def paired_difference(rows: dict[str, list], which: slice) -> dict[str, float]:
+    """The MA-T12 model's first shot at twelve geometries less the five-angle model's, paired
+    per target (the same spray), and its standard error over the targets ``which``."""
+    passed = {name: np.array(rows[name])[which, 0] <= SUCCESS_DE00 for name in MODELS}
+    d = passed["ma-t12"].astype(float) - passed["five-angle"]
+    return {"mean": float(d.mean()), "se": float(d.std(ddof=1) / np.sqrt(d.size))}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=100)
+    parser.add_argument("--new-toner-targets", type=int, default=0)
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
@@ -68,9 +95,10 @@ def main(argv: list[str] | None = None) -> int:
     flagged = []  # the five-angle best recipe: the MA-T12 model's worst at the other seven
     start = time.perf_counter()
     with progress_bar(args.json) as bar:
-        task = bar.add_task("matching MA-T12 targets with both models", total=args.targets)
-        # the harness's targets: drawn on the toners both models know
-        for _, t in harness_trials(world, args.targets, args.seed, forwards["ma-t12"].novel):
+        total = args.targets + args.new_toner_targets
+        task = bar.add_task("matching MA-T12 targets with both models", total=total)
+        novel = forwards["ma-t12"].novel
+        for _, t in harness_trials(world, args.targets, args.seed, novel, args.new_toner_targets):
             target = Measurement("target", world.geometries, WAVELENGTHS, t.target)
             stream = t.streams[0]
             for name, forward in forwards.items():
@@ -86,19 +114,25 @@ def main(argv: list[str] | None = None) -> int:
                 nominal = physics.reflectance(x[None])[0]
                 rows[name].append((*worst(t.target, sprayed), *worst(t.target, nominal)))
             bar.advance(task)
-    report = {"targets": args.targets, "seed": args.seed, "wall_s": time.perf_counter() - start}
+    report = {
+        "targets": args.targets,
+        "new_toner_targets": args.new_toner_targets,
+        "seed": args.seed,
+        "wall_s": time.perf_counter() - start,
+    }
+    known = slice(None, args.targets)
     for name, values in rows.items():
         a = np.array(values)
-        report[name] = {
-            "first_shot_success_12": float(np.mean(a[:, 0] <= SUCCESS_DE00)),
-            "first_shot_success_5": float(np.mean(a[:, 1] <= SUCCESS_DE00)),
-            "sprayed_de00_median_12": float(np.median(a[:, 0])),
-            "nominal_de00_median_12": float(np.median(a[:, 3])),
-            "nominal_de00_median_5": float(np.median(a[:, 4])),
-            "nominal_success_12": float(np.mean(a[:, 3] <= SUCCESS_DE00)),
-        }
-    predicted = np.array(flagged)
-    sprayed_others = np.array(rows["five-angle"])[:, 2]
+        report[name] = rates(a[known])
+        if args.new_toner_targets:
+            report[name]["new_toner"] = rates(a[args.targets :])
+    report["paired_difference_12"] = paired_difference(rows, known)
+    if args.new_toner_targets:
+        report["paired_difference_12_new_toner"] = paired_difference(
+            rows, slice(args.targets, None)
+        )
+    predicted = np.array(flagged)[known]
+    sprayed_others = np.array(rows["five-angle"])[known, 2]
     fails = sprayed_others > SUCCESS_DE00
     said_fail = predicted > SUCCESS_DE00
     report["left_out_check"] = {
@@ -129,8 +163,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:<14}{r['first_shot_success_12']:>9.3f}{r['first_shot_success_5']:>8.3f}"
               f"{r['sprayed_de00_median_12']:>12.2f}{r['nominal_de00_median_12']:>12.2f}"
               f"{r['nominal_de00_median_5']:>11.2f}")  # fmt: skip
+    d = report["paired_difference_12"]
     print(f"first shot at twelve geometries, MA-T12 model / five-angle model: "
-          f"{report['ratio_first_shot_12']:.2f}")  # fmt: skip
+          f"{report['ratio_first_shot_12']:.2f}, paired difference {d['mean']:+.3f} ± "
+          f"{d['se']:.3f}")  # fmt: skip
+    if args.new_toner_targets:
+        d = report["paired_difference_12_new_toner"]
+        print(f"{args.new_toner_targets} targets with a new toner: first shot at twelve "
+              f"{report['ma-t12']['new_toner']['first_shot_success_12']:.3f} / "
+              f"{report['five-angle']['new_toner']['first_shot_success_12']:.3f}, paired "
+              f"difference {d['mean']:+.3f} ± {d['se']:.3f}")  # fmt: skip
     check = report["left_out_check"]
     print(f"five-angle recipes at the other seven geometries: the MA-T12 model flags "
           f"{check['predicted_fail_share']:.3f} (worst ΔE00 > {SUCCESS_DE00}); sprayed, "
