@@ -211,7 +211,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
 
 
 def _lab_of(path: str | PathLike, sample: str, value: cxf3.ColorCielab) -> np.ndarray:
-    """An Object's stored CIELAB at one geometry, each component a finite number."""
+    """An Object's stored CIELAB at one geometry (:func:`~flakelab.io.records.parse_lab`)."""
     where = f"Object {sample!r}, ColorCIELab {value.color_specification}"
     return parse_lab(path, (value.l, value.a, value.b), [f"{where}, {k}" for k in "LAB"])
 

@@ -157,7 +157,7 @@ def mismatch_note(forward, recipe: dict[str, float], sprayed: NDArray) -> str | 
         f"the spray-out is ΔE00 {de[worst]:.1f} from what the recipe predicts at "
         f"{forward.geometries[worst]} (spray-outs the model never saw stay within ΔE00 "
         f"{SPRAYOUT_MISMATCH:g}): check that the spray-out, the recipe and the target belong "
-        "together; the correction takes the whole offset as this can's"
+        "together; the correction takes that offset as the can's own"
     )
 
 
