@@ -402,6 +402,30 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     assert len(listed["registered"]) == 2
 
 
+def test_a_mixed_up_sprayout_recorded_is_left_out_of_the_habits_by_name(tmp_path, cli):
+    """A white panel recorded as the blue metallic's spray-out, among 60 cases of a shop."""
+    cases = str(tmp_path / "cases.db")
+    run = cli("cases", "generate", "--n", "60", "--seed", "5", "--shop", "shop A", "--out", cases)
+    assert run.returncode == 0, run.stderr
+    white = replace(read_measurement(example_path("sprayout")), stored_lab=None)
+    white = replace(white, reflectance=np.full_like(white.reflectance, 0.85))
+    write_measurements([white], tmp_path / "white.json")
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"
+    run = cli("cases", "record", str(example_path("target")), "--recipe", str(recipe),
+              "--sprayed", str(tmp_path / "white.json"), "--shop", "shop A",
+              "--database", cases, "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    recorded = json.loads(run.stdout)["case_id"]
+    run = cli("cases", "habits", cases, "--shop", "shop A", "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["left_out_mismatched"] == [recorded] and report["cases"] == 60
+    run = cli("cases", "habits", cases, "--shop", "shop A")
+    assert run.returncode == 0 and "left out 1 spray-out(s) further than ΔE00 5" in " ".join(
+        run.stderr.split()
+    )
+
+
 def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cli):
     cases, habits = str(tmp_path / "cases.db"), tmp_path / "habits.json"
     run = cli("cases", "generate", "--n", "300", "--seed", "23", "--shop", "shop A",
@@ -445,6 +469,7 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cl
     width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
     assert height > 0.4 * width  # a second row: the change scan of 300 cases
     assert report["cases"] == 300 and report["shop"] == "shop A"
+    assert report["left_out_mismatched"] == []  # none of a shop's own spray-outs
     assert report["drift"]["changed"] == []  # the same habits in both halves of its cases
     assert report["flake_spread"] == pytest.approx(-0.04, abs=0.006)
     assert report["instrument_gain"] == pytest.approx(0.005, abs=0.003)

@@ -734,12 +734,14 @@ def habits(
     Each as the shop's mean against the model's cases, read through the physics of
     application."""
     from flakelab.cases.database import open_database
+    from flakelab.match.correction import SPRAYOUT_MISMATCH
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
         PRIOR_SD,
         estimate_habits,
         habits_drift,
         habits_fit,
+        mismatched_sprayouts,
         save_habits,
         write_habits,
     )
@@ -756,8 +758,19 @@ def habits(
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
     data = source_arrays(cases, chosen, lib)
+    prior_sd = PRIOR_SD if prior else None
+    mismatched = mismatched_sprayouts(forward, lib, data.x, data.R, prior_sd=prior_sd)
+    left_out = [c.case_id for c, m in zip(chosen, mismatched, strict=True) if m]
+    if left_out:  # mix-ups would pull the habits: read them from the others
+        if len(left_out) == len(chosen):
+            raise FlakelabError(
+                f"{cases}: every spray-out lies further than ΔE00 {SPRAYOUT_MISMATCH:g} from the "
+                "model's prediction of its recipe: are these the model's toners and geometries?"
+            )
+        chosen = [c for c, m in zip(chosen, mismatched, strict=True) if not m]
+        data = source_arrays(cases, chosen, lib)
     found = replace(
-        estimate_habits(forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None),
+        estimate_habits(forward, lib, data.x, data.R, prior_sd=prior_sd),
         shop=shop or (shops.pop() if len(shops) == 1 else None),
     )
     fit = habits_fit(forward, lib, found, data.x, data.R)
@@ -782,6 +795,7 @@ def habits(
         "saved": save,
         "explained": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in fit.items()},
         "drift": drift and _drift_report(drift, chosen),
+        "left_out_mismatched": left_out,
     }
     if json_output:
         print(json.dumps(report, indent=2))
@@ -807,6 +821,14 @@ def habits(
     console.print(_explained_table(fit))
     if report["drift"] and report["drift"]["changed"]:
         errors.print(f"[yellow]warning:[/] {report['drift']['message']}", highlight=False)
+    if left_out:
+        errors.print(
+            f"[yellow]warning:[/] left out {len(left_out)} spray-out(s) further than ΔE00 "
+            f"{SPRAYOUT_MISMATCH:g} from the model's prediction with these habits, likely "
+            f"mix-ups (another panel, recipe or target): {', '.join(left_out[:5])}"
+            + (" …" if len(left_out) > 5 else ""),
+            highlight=False,
+        )
     errors.print(
         f"from {found.cases} spray-outs"
         + (f"; written to {out}" if out else "")

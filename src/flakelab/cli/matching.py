@@ -701,7 +701,7 @@ def correct_command(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "
             "optional, a move toward the target's centre"
         )
-    if note := mismatch_note(forward, fractions, sprayed_R):
+    if note := mismatch_note(forward, fractions, sprayed_R, shop_habits, lib):
         report["notes"].append(note)
     if texture_failing:
         report["notes"].append(

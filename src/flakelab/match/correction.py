@@ -145,11 +145,22 @@ spray-out farther off is more likely another panel's, recipe's or target's, and 
 correction would take its whole offset as the shop's."""
 
 
-def mismatch_note(forward, recipe: dict[str, float], sprayed: NDArray) -> str | None:
+def mismatch_note(
+    forward,
+    recipe: dict[str, float],
+    sprayed: NDArray,
+    habits: ShopHabits | None = None,
+    library: Library | None = None,
+) -> str | None:
     """What to tell the colorist when the spray-out ``sprayed[G, 31]`` lies further from the
-    prediction of the ``recipe`` it was mixed from than :data:`SPRAYOUT_MISMATCH`."""
-    R = evaluate_recipes(forward, _vector(forward, recipe)[None])[0][0]
-    de = delta_E(reflectance_to_Lab(R), reflectance_to_Lab(sprayed))
+    prediction of the ``recipe`` it was mixed from (moved by the shop's ``habits``, given the
+    ``library``) than :data:`SPRAYOUT_MISMATCH`."""
+    x = _vector(forward, recipe)[None]
+    R = evaluate_recipes(forward, x)[0]
+    predicted = reflectance_to_Lab(R[0])
+    if habits is not None:
+        predicted = predicted + habits.offset(library, x, R, forward.geometries)[0]
+    de = delta_E(predicted, reflectance_to_Lab(sprayed))
     worst = int(np.argmax(de))
     if de[worst] <= SPRAYOUT_MISMATCH:
         return None
