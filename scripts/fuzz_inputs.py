@@ -3,15 +3,16 @@ line naming the file (exit 2) or read (exit 0), never an internal error (exit 70
 traceback, a warning or a NaN in the output (the guide's "Bad input" standard).
 
 Each kind starts from a good file made here from the shipped example (or the demo library,
-the example recipe, a habits report, a tolerance file, generated cases in CSV and CxF3, the
-shipped model) and damages it: an MA-T12 export by editing its cells, rows, columns and
-sheets (or cutting its bytes short); text files by deleting, doubling or cutting lines,
-replacing numbers and names, inserting stray characters; JSON files by replacing or deleting
-one value anywhere in them (a target for the match, half the time, by values still readable
-but odd); a model file by editing its description, standardisation or weights.
+the example recipe, a habits report, a tolerance file, generated cases in CSV and CxF3, a
+manifest of instrument files for `cases record-all`, the shipped model) and damages it: an
+MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short);
+text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
+stray characters; JSON files by replacing or deleting one value anywhere in them (a target
+for the match, half the time, by values still readable but odd); a model file by editing its
+description, standardisation or weights.
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,recipe,library,habits,
-        habits-match,tolerance,cases,cases-cxf,model] [--n 200] [--seed 0] [--show]
+        habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -202,6 +203,13 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
             app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", f"{work}/cases.{suffix}"]
         )
     shutil.copy(shipped_model_path("five-angle"), work / "model.pt")
+    for name, path in (("car.cxf", target), ("spray.cxf", sprayout), ("shot.json", recipe)):
+        shutil.copy(path, work / name)
+    (work / "manifest.csv").write_text(
+        "target,recipe,sprayed,shop,outcome,at,case_id\n"
+        "car.cxf,shot.json,spray.cxf,shop A,auto,2026-01-02T10:00:00,c1\n"
+        "car.cxf,shot.json,spray.cxf,shop A,corrected,2026-01-03 11:30:00,c2\n"
+    )
     shutil.copy(demo_library_path(), work / "library.json")
     read_library(work / "library.json")
     return {
@@ -226,6 +234,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "cases": (work / "cases.csv", lambda p: ["cases", "import", str(p), "-d", "sqlite://"]),
         "cases-cxf": (work / "cases.cxf",
                       lambda p: ["cases", "import", str(p), "-d", "sqlite://"]),
+        "manifest": (work / "manifest.csv",
+                     lambda p: ["cases", "record-all", str(p), "-d", "sqlite://"]),
         "model": (work / "model.pt", lambda p: ["weigh", str(recipe), "--model", str(p)]),
     }  # fmt: skip
 
@@ -280,7 +290,7 @@ def main() -> int:
     parser.add_argument(
         "--kinds",
         default="cxf,csv,json,xlsx,target,recipe,library,habits,habits-match,tolerance,cases,"
-        "cases-cxf,model",
+        "cases-cxf,manifest,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)
