@@ -17,6 +17,7 @@ from flakelab.models.training import (
     evaluate_model,
     fit,
     generated_case_arrays,
+    outlying_cases,
     recorded_config,
 )
 
@@ -62,6 +63,22 @@ def test_adaptation_learns_a_shops_habits(model):
     assert adapted.info["adaptation"]["cases"] == 480
     # the copy is adapted, not the model it came from
     assert evaluate_model(model, fresh)["de00_mean"] == before
+
+
+def test_mixed_up_sprayouts_among_a_shops_cases_are_flagged_before_adapting(model):
+    """Three white panels given as spray-outs among 400 cases of the habits shop: the three
+    are flagged, none of the shop's own, however far its habits move them (the screen is
+    against the shop's own spread of errors)."""
+    cases = shop_cases(model, SHOP_HABITS, 400, 23)
+    mixed = replace(
+        cases,
+        x=np.concatenate([cases.x, cases.x[:3]]),
+        R=np.concatenate([cases.R, np.full((3, *cases.R.shape[1:]), 0.85)]),
+        texture=np.concatenate([cases.texture, cases.texture[:3]]),
+    )
+    threshold = recorded_config(model).outlier_threshold
+    np.testing.assert_array_equal(np.flatnonzero(outlying_cases(model, mixed, threshold)),
+                                  [400, 401, 402])  # fmt: skip
 
 
 def test_keeping_the_best_epoch_never_leaves_the_model_worse_where_it_is_judged(model):

@@ -402,7 +402,7 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     assert len(listed["registered"]) == 2
 
 
-def test_a_mixed_up_sprayout_recorded_is_left_out_of_the_habits_by_name(tmp_path, cli):
+def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_name(tmp_path, cli):
     """A white panel recorded as the blue metallic's spray-out, among 60 cases of a shop."""
     cases = str(tmp_path / "cases.db")
     run = cli("cases", "generate", "--n", "60", "--seed", "5", "--shop", "shop A", "--out", cases)
@@ -423,6 +423,15 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_the_habits_by_name(tmp_path
     run = cli("cases", "habits", cases, "--shop", "shop A")
     assert run.returncode == 0 and "left out 1 spray-out(s) further than ΔE00 5" in " ".join(
         run.stderr.split()
+    )
+    # nor does it judge an adaptation to the shop, or choose its epoch
+    run = cli("model", "adapt", cases, "--shop", "shop A", "--epochs", "5", "--database", cases,
+              "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    adapted = json.loads(run.stdout)
+    assert adapted["outlier_case_ids"] == [recorded] and adapted["held_out"]["cases"] > 0
+    assert adapted["cases"] + adapted["validation_cases"] + adapted["held_out"]["cases"] == (
+        60 - adapted["left_out_new_toners"]
     )
 
 

@@ -1402,6 +1402,7 @@ def adapt(
     from flakelab.models.training import (
         adapt_model,
         evaluate_model,
+        outlying_cases,
         recorded_config,
     )
 
@@ -1415,8 +1416,11 @@ def adapt(
     chosen = shop_cases(cases, shop, base.geometries, since)
     novel = set(base.new_toners)
     known = [c for c in chosen if not novel & set(c.recipe)]
-    data, held_out = split_held_out(known, cases, holdout, seed, lib)
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
+    outlying = outlying_cases(base, source_arrays(cases, known, lib), config.outlier_threshold)
+    dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
+    known = [c for c, out in zip(known, outlying, strict=True) if not out]
+    data, held_out = split_held_out(known, cases, holdout, seed, lib)
     if epochs is not None:
         config = replace(config, adapt_epochs=epochs)
     stage = f"adapt {shop or cases}"
@@ -1433,7 +1437,9 @@ def adapt(
     summary |= {
         "model": model or f"current {instrument}",
         "shop": shop,
-        "left_out_new_toners": len(chosen) - len(known),
+        "left_out_new_toners": len(chosen) - len(known) - len(dropped),
+        "outliers": len(dropped),
+        "outlier_case_ids": dropped,
         "held_out": {
             "cases": after["cases"],
             "before": {k: before[k] for k in DE00_STATISTICS},
@@ -1450,6 +1456,13 @@ def adapt(
         return
     title = f"{summary['model']} adapted to {summary['cases']} cases ({stage})"
     console.print(_de00_table(title, "held out", summary["held_out"], ("before", "after")))
+    if dropped:
+        errors.print(
+            f"[yellow]warning:[/] left out {len(dropped)} case(s) whose error by the model lies "
+            f"more than {config.outlier_threshold:g} robust s.d. above the shop's, likely "
+            f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
+            highlight=False,
+        )
     kept = summary["kept_epochs"]
     errors.print(
         f"kept epoch {kept} of {summary['epochs']}"
