@@ -433,6 +433,18 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     assert adapted["cases"] + adapted["validation_cases"] + adapted["held_out"]["cases"] == (
         60 - adapted["left_out_new_toners"]
     )
+    # a history of new-toner cases alone leaves nothing to adapt to, and says why
+    from flakelab.cases.exchange import write_cases
+    from flakelab.cases.generator import World
+    from flakelab.io import read_library
+    from flakelab.models.registry import shipped_model
+
+    novel = set(shipped_model("five-angle").new_toners)
+    world = World(read_library(None), "five-angle")
+    made = [c for batch in world.cases(60, seed=9) for c in batch if novel & set(c.recipe)]
+    write_cases(made, tmp_path / "novel.csv")
+    run = cli("model", "adapt", str(tmp_path / "novel.csv"), "--database", cases)
+    assert run.returncode == 2 and f"every one of the {len(made)} cases uses a toner" in run.stderr
 
 
 def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cli):

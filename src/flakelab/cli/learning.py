@@ -1416,6 +1416,11 @@ def adapt(
     chosen = shop_cases(cases, shop, base.geometries, since)
     novel = set(base.new_toners)
     known = [c for c in chosen if not novel & set(c.recipe)]
+    if not known:
+        raise FlakelabError(
+            f"{cases}: every one of the {len(chosen)} cases uses a toner the model knows from "
+            f"too few cases ({', '.join(sorted(novel))}); nothing to adapt it to"
+        )
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
     outlying = outlying_cases(base, source_arrays(cases, known, lib), config.outlier_threshold)
     dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
