@@ -17,7 +17,10 @@ the model would still face, each spray's own application. ``persistent_offset`` 
 correction's prior σ_p (:data:`flakelab.match.correction.PERSISTENT_SD`) describes: the
 L*a*b* offset between the failed recipe mixed from the shop's batches, sprayed at the nominal
 application and read without noise, and the model's prediction for it (RMS and median
-absolute value over targets, geometries and components).
+absolute value over targets, geometries and components). ``defaults_foresight`` says how
+the defaults' expected ΔE00 foretells their sprays: the share of corrections expected to fail
+somewhere (what ``flakelab correct`` notes as ``expected_failing``) and the pass rate of
+those and of the others.
 
 ``--seed 77,78,81-86`` pools the failed first shots of several seeds (one seed's 20-odd are
 too few to choose a setting by: σ_p 0.2 won on seed 77 by 0.12 and ties over eight seeds).
@@ -42,6 +45,7 @@ import numpy as np
 from _matcher import MODEL_HELP, parse_kinds, seeds_from, shipped_matcher
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import (
     SUCCESS_DE00,
@@ -88,18 +92,31 @@ def failed_first_shots(seed: int, targets: int, world, forward, effect):
 
 
 def corrected_recipe(spec: str, world, forward, t, best, x_best, first, x_hidden):
-    """The recipe a setting sprays next, and the batches it is mixed from (None: the shop's)."""
+    """The recipe a setting sprays next, the batches it is mixed from (None: the shop's) and
+    what the correction expects it to measure (L*a*b* ``[G, 3]``; None: no correction)."""
     if spec == "respray":
-        return x_hidden, t.car
+        return x_hidden, t.car, None
     if spec == "none":
-        return x_best, None
+        return x_best, None, None
     if spec == "ceiling":
         fixed = correct(forward, t.target, best.fractions, t.unsprayed(x_best),
                         mode="reformulate", offset_weight=1.0)  # fmt: skip
-        return recipe_vector(forward, fixed.fractions), None
+        return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab
     keywords = {"library": world.library, **({} if spec == "defaults" else parse(spec))}
     fixed = correct(forward, t.target, best.fractions, first, mode="reformulate", **keywords)
-    return recipe_vector(forward, fixed.fractions), None
+    return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab
+
+
+def foresight(expected_fail: list[bool], passed: list[float]) -> dict:
+    """How the defaults' expected ΔE00 foretells their sprays: the share of corrections
+    expected to fail (ΔE00 > 1 somewhere, what ``flakelab correct`` notes as
+    ``expected_failing``) and the pass rate of those and of the others."""
+    fail, rate = np.array(expected_fail, bool), np.array(passed)
+    return {
+        "expected_fail_share": float(fail.mean()) if fail.size else None,
+        "pass_when_expected_fail": float(rate[fail].mean()) if fail.any() else None,
+        "pass_when_expected_pass": float(rate[~fail].mean()) if (~fail).any() else None,
+    }
 
 
 def summary(passed: dict, worst: dict, metameric: dict, seconds: dict, spec: str) -> dict:
@@ -149,7 +166,7 @@ def main() -> None:
     worst: dict[str, list[float]] = {s: [] for s in specs}
     metameric: dict[str, list[float]] = {s: [] for s in specs}
     seconds: dict[str, list[float]] = {s: [] for s in specs}  # the settings that correct
-    offsets, per_seed = [], {}
+    offsets, per_seed, expected_fail = [], {}, []
     for seed in seeds:
         before = {s: len(passed[s]) for s in specs}
         for t, best, x_best, first, x_hidden in failed_first_shots(
@@ -159,9 +176,12 @@ def main() -> None:
             sprays = t.streams[1].bit_generator.seed_seq.spawn(args.sprays)
             for spec in specs:
                 start = time.perf_counter()
-                x, batches = corrected_recipe(
+                x, batches, expected = corrected_recipe(
                     spec, world, forward, t, best, x_best, first, x_hidden
                 )
+                if spec == "defaults":
+                    lab = reflectance_to_Lab(t.target)
+                    expected_fail.append(bool(delta_E(lab, expected).max() > SUCCESS_DE00))
                 if spec not in ("none", "respray"):
                     seconds[spec].append(time.perf_counter() - start)
                 # the same seeds for every setting: each sees the same sprays
@@ -189,6 +209,7 @@ def main() -> None:
             "rows": rows,
             "per_seed": per_seed,
             "persistent_offset": persistent,
+            "defaults_foresight": foresight(expected_fail, passed["defaults"]),
         }
         print(json.dumps(report, indent=2))
         return
@@ -198,6 +219,11 @@ def main() -> None:
     print(
         f"seeds {args.seed}: {failed} failed first shots; persistent offset per L*a*b* "
         f"component: RMS {persistent['rms']:.2f}, median |offset| {persistent['median_abs']:.2f}"
+    )
+    seen = foresight(expected_fail, passed["defaults"])
+    print(
+        f"defaults expected to fail {seen['expected_fail_share']:.2f} of them; sprayed, those "
+        f"pass {seen['pass_when_expected_fail']}, the others {seen['pass_when_expected_pass']}"
     )
     for row in rows:
         print(
