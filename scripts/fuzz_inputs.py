@@ -8,11 +8,12 @@ manifest of instrument files for `cases record-all`, the shipped model) and dama
 MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short);
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
 stray characters; JSON files by replacing or deleting one value anywhere in them (a target
-for the match, half the time, by values still readable but odd); a model file by editing its
-description, standardisation or weights.
+for the match and a spray-out for the correction, half the time, by values still readable
+but odd); a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,recipe,library,habits,
-        habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200] [--seed 0] [--show]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,sprayout,recipe,library,
+        habits,habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200] [--seed 0]
+        [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -189,6 +190,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     measurement = read_measurement(target)
     write_measurements([measurement], work / "good.csv")
     write_measurements([measurement], work / "good.json")
+    write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]), 200,
                         "demo-five-angle", "shop A")  # fmt: skip
@@ -219,6 +221,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         # a damaged target read by the main job, whose search and tables meet every value
         "target": (work / "good.json", lambda p: ["match", str(p), "--candidates", "1"]),
+        # a damaged spray-out read by the correction, which meets it with the recipe's model
+        "sprayout": (work / "sprayout.json",
+                     lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
+                                str(p), "--extra-toners", "0"]),
         "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
         "library": (work / "library.json",
                     lambda p: ["weigh", str(recipe), "--library", str(p), "--physics"]),
@@ -265,7 +271,7 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
             damaged.write_bytes(damage_model(data, rng))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
-        elif kind == "target" and rng.random() < 0.5:
+        elif kind in ("target", "sprayout") and rng.random() < 0.5:
             damaged.write_text(json.dumps(odd_target(json.loads(data), rng)))
         elif good.suffix == ".json" and rng.random() < 0.7:
             damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))
@@ -289,8 +295,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--kinds",
-        default="cxf,csv,json,xlsx,target,recipe,library,habits,habits-match,tolerance,cases,"
-        "cases-cxf,manifest,model",
+        default="cxf,csv,json,xlsx,target,sprayout,recipe,library,habits,habits-match,tolerance,"
+        "cases,cases-cxf,manifest,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)

@@ -126,6 +126,26 @@ def test_a_metamer_matches_in_daylight_and_its_index_is_its_difference_under_the
     assert metamerism_indices(standard, 0.7 * standard)["FL11"] == pytest.approx(0.0, abs=1e-9)
 
 
+def test_a_sample_reading_black_has_its_plain_difference_as_its_index():
+    """A spray-out reading 0 at a geometry (a fuzzed file, stop 66) divided the
+    multiplicative correction by zero: a NaN index and colour-science's warning on the
+    command line. Its index is now the pair's plain ΔE00 under the test light."""
+    import warnings
+
+    from flakelab.core.colorimetry import Conditions, reflectance_to_Lab
+    from flakelab.core.difference import metamerism_indices
+
+    standard, _ = _metameric_pair()
+    black = np.zeros_like(standard)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        indices = metamerism_indices(np.stack([standard] * 2), np.stack([black, 0.9 * standard]))
+    for test, index in indices.items():
+        lab = [reflectance_to_Lab(R, conditions=Conditions(test)) for R in (standard, black)]
+        assert index[0] == pytest.approx(float(delta_E(*lab)), abs=1e-6) and index[0] > 30
+        assert index[1] == pytest.approx(0.0, abs=1e-9)  # the others as before
+
+
 def test_the_optimiser_s_metamerism_index_is_iso_18314_4_with_cie94():
     """TorchMetamerism against the correction done by hand on colour-science's XYZ and CIE94
     (graphic arts) from colour-science: the smooth index the search weighs."""

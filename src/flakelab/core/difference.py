@@ -273,6 +273,10 @@ def metamerism_index(
     return indices[test]
 
 
+_BLACK_XYZ = 1e-9
+"""The least tristimulus value (0–100 scale) that divides the multiplicative correction."""
+
+
 def metamerism_indices(
     reflectance_standard: ArrayLike,
     reflectance_sample: ArrayLike,
@@ -282,11 +286,13 @@ def metamerism_indices(
 ) -> dict[str, NDArray[np.float64]]:
     """:func:`metamerism_index` under each illuminant of ``tests`` (None:
     :data:`METAMERISM_ILLUMINANTS`), by its name; the pair's XYZ under ``reference`` taken
-    once for all of them."""
+    once for all of them. A sample that reads black under the reference (a tristimulus value
+    of 0) has no multiplicative correction: its value is taken at :data:`_BLACK_XYZ`, so
+    that its index is the pair's plain difference under the test light, not 0/0."""
     standard = np.asarray(reflectance_standard, dtype=float)
     sample = np.asarray(reflectance_sample, dtype=float)
     XYZ_standard_r = reflectance_to_XYZ(standard, wavelengths, reference)
-    XYZ_sample_r = reflectance_to_XYZ(sample, wavelengths, reference)
+    XYZ_sample_r = np.maximum(reflectance_to_XYZ(sample, wavelengths, reference), _BLACK_XYZ)
     indices = {}
     for test in tests or METAMERISM_ILLUMINANTS:
         conditions = Conditions(test, reference.observer)
