@@ -144,6 +144,17 @@ def test_a_sample_reading_black_has_its_plain_difference_as_its_index():
         lab = [reflectance_to_Lab(R, conditions=Conditions(test)) for R in (standard, black)]
         assert index[0] == pytest.approx(float(delta_E(*lab)), abs=1e-6) and index[0] > 30
         assert index[1] == pytest.approx(0.0, abs=1e-9)  # the others as before
+    # the optimiser's smooth index too: finite, with a finite gradient (the correction of a
+    # spray-out black at one geometry came out NaN at every geometry before)
+    import torch
+
+    from flakelab.core.torch_colour import TorchMetamerism
+
+    R = torch.tensor(np.stack([black, 0.9 * standard]), requires_grad=True)
+    smooth = TorchMetamerism(np.stack([standard] * 2)).indices(R)
+    (gradient,) = torch.autograd.grad(smooth.sum(), R)
+    assert torch.isfinite(smooth).all() and torch.isfinite(gradient).all()
+    assert float(smooth[0].min().detach()) > 30 and float(smooth[1].max().detach()) < 1e-2
 
 
 def test_the_optimiser_s_metamerism_index_is_iso_18314_4_with_cie94():

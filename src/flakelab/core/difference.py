@@ -36,6 +36,7 @@ from flakelab.core.colorimetry import (
 from flakelab.core.spectra import WAVELENGTHS
 
 __all__ = [
+    "BLACK_TRISTIMULUS",
     "DELTA_E_METHODS",
     "METAMERISM_ILLUMINANTS",
     "METAMERISM_NOTICE",
@@ -273,8 +274,9 @@ def metamerism_index(
     return indices[test]
 
 
-_BLACK_XYZ = 1e-9
-"""The least tristimulus value (0–100 scale) that divides the multiplicative correction."""
+BLACK_TRISTIMULUS = 1e-9
+"""The least tristimulus value (0–100 scale) that divides the multiplicative correction of
+the metamerism index: a sample reading black has none (0/0)."""
 
 
 def metamerism_indices(
@@ -287,12 +289,12 @@ def metamerism_indices(
     """:func:`metamerism_index` under each illuminant of ``tests`` (None:
     :data:`METAMERISM_ILLUMINANTS`), by its name; the pair's XYZ under ``reference`` taken
     once for all of them. A sample that reads black under the reference (a tristimulus value
-    of 0) has no multiplicative correction: its value is taken at :data:`_BLACK_XYZ`, so
+    of 0) has no multiplicative correction: its value is taken at :data:`BLACK_TRISTIMULUS`, so
     that its index is the pair's plain difference under the test light, not 0/0."""
     standard = np.asarray(reflectance_standard, dtype=float)
     sample = np.asarray(reflectance_sample, dtype=float)
     XYZ_standard_r = reflectance_to_XYZ(standard, wavelengths, reference)
-    XYZ_sample_r = np.maximum(reflectance_to_XYZ(sample, wavelengths, reference), _BLACK_XYZ)
+    XYZ_sample_r = np.maximum(reflectance_to_XYZ(sample, wavelengths, reference), BLACK_TRISTIMULUS)
     indices = {}
     for test in tests or METAMERISM_ILLUMINANTS:
         conditions = Conditions(test, reference.observer)

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from flakelab.core.colorimetry import D65_10, Conditions, tristimulus_weights, white_point
-from flakelab.core.difference import METAMERISM_ILLUMINANTS
+from flakelab.core.difference import BLACK_TRISTIMULUS, METAMERISM_ILLUMINANTS
 
 __all__ = ["TorchColour", "TorchMetamerism"]
 
@@ -138,7 +138,10 @@ class TorchMetamerism(TorchColour):
         is the same."""
         t = self._ratios(R)
         reference = t[..., :1, :]
-        corrected = t[..., 1:, :] * (self.standard_reference / reference)
+        # a sample reading black has no multiplicative correction (its 0/0 made the
+        # correction of a black spray-out NaN); as difference.metamerism_indices floors it
+        floor = BLACK_TRISTIMULUS / 100
+        corrected = t[..., 1:, :] * (self.standard_reference / reference.clamp_min(floor))
         lab = self.lab_of_ratios(torch.cat([reference, corrected], dim=-2))
         return lab[..., 0, :], self._delta_e94(lab[..., 1:, :])
 
