@@ -104,17 +104,20 @@ def test_mixed_up_sprayouts_are_left_out_and_the_habits_read_as_without_them(shi
     """Three white panels given as spray-outs among the habits shop's 500: none of its own
     spray-outs is taken for a mix-up (with their habits they read up to ΔE00 4.8 from the bare
     prediction), the three are, and the habits of the rest are those of the 500 alone."""
-    from flakelab.match.habits import mismatched_sprayouts
+    from flakelab.match.habits import screened_habits
 
     library, forward, _ = shipped
     data, clean = habits_shop
     white = np.full((3, *data.R.shape[1:]), 0.85)
     x, R = np.concatenate([data.x, data.x[:3]]), np.concatenate([data.R, white])
     assert estimate_habits(forward, library, x, R).instrument_gain > clean.instrument_gain + 0.002
-    mixed_up = mismatched_sprayouts(forward, library, x, R)
+    kept, mixed_up = screened_habits(forward, library, x, R)
     np.testing.assert_array_equal(np.flatnonzero(mixed_up), [500, 501, 502])
-    kept = estimate_habits(forward, library, x[~mixed_up], R[~mixed_up])
     np.testing.assert_array_equal(kept.theta, clean.theta)
+    assert kept.cases == 500
+    # a shop with no mix-up: its habits as estimate_habits reads them, and none left out
+    alone, none = screened_habits(forward, library, data.x, data.R)
+    assert not none.any() and np.array_equal(alone.theta, clean.theta)
 
 
 def test_a_shop_like_the_models_cases_has_no_habits(plain_shop):

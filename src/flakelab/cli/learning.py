@@ -738,11 +738,10 @@ def habits(
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
         PRIOR_SD,
-        estimate_habits,
         habits_drift,
         habits_fit,
-        mismatched_sprayouts,
         save_habits,
+        screened_habits,
         write_habits,
     )
 
@@ -758,21 +757,19 @@ def habits(
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
     data = source_arrays(cases, chosen, lib)
-    prior_sd = PRIOR_SD if prior else None
-    mismatched = mismatched_sprayouts(forward, lib, data.x, data.R, prior_sd=prior_sd)
-    left_out = [c.case_id for c, m in zip(chosen, mismatched, strict=True) if m]
-    if left_out:  # mix-ups would pull the habits: read them from the others
-        if len(left_out) == len(chosen):
-            raise FlakelabError(
-                f"{cases}: every spray-out lies further than ΔE00 {SPRAYOUT_MISMATCH:g} from the "
-                "model's prediction of its recipe: are these the model's toners and geometries?"
-            )
-        chosen = [c for c, m in zip(chosen, mismatched, strict=True) if not m]
-        data = source_arrays(cases, chosen, lib)
-    found = replace(
-        estimate_habits(forward, lib, data.x, data.R, prior_sd=prior_sd),
-        shop=shop or (shops.pop() if len(shops) == 1 else None),
+    found, mixed_up = screened_habits(
+        forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None
     )
+    if mixed_up.all():
+        raise FlakelabError(
+            f"{cases}: every spray-out lies further than ΔE00 {SPRAYOUT_MISMATCH:g} from the "
+            "model's prediction of its recipe: are these the model's toners and geometries?"
+        )
+    left_out = [c.case_id for c, m in zip(chosen, mixed_up, strict=True) if m]
+    if left_out:  # the habits were read from the others, and so is the rest
+        chosen = [c for c, m in zip(chosen, mixed_up, strict=True) if not m]
+        data = data.subset(np.flatnonzero(~mixed_up))
+    found = replace(found, shop=shop or (shops.pop() if len(shops) == 1 else None))
     fit = habits_fit(forward, lib, found, data.x, data.R)
     drift = habits_drift(forward, lib, data.x, data.R) if len(chosen) >= MIN_DRIFT_CASES else None
     if drift and drift["changed"].any():  # kept with the habits, so that their users are told

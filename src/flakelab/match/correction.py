@@ -81,6 +81,7 @@ __all__ = [
     "NOISE_SD",
     "metamerism_note",
     "mismatch_note",
+    "sprayout_mismatch",
     "unreached_note",
     "SPRAYOUT_MISMATCH",
     "model_persistent_sd",
@@ -145,6 +146,23 @@ spray-out farther off is more likely another panel's, recipe's or target's, and 
 correction would take its whole offset as the shop's."""
 
 
+def sprayout_mismatch(
+    forward,
+    fractions: NDArray,
+    sprayouts: NDArray,
+    habits: ShopHabits | None = None,
+    library: Library | None = None,
+) -> NDArray:
+    """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
+    recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
+    the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
+    R = evaluate_recipes(forward, fractions)[0]
+    predicted = reflectance_to_Lab(R)
+    if habits is not None:
+        predicted = predicted + habits.offset(library, fractions, R, forward.geometries)
+    return delta_E(predicted, reflectance_to_Lab(sprayouts))
+
+
 def mismatch_note(
     forward,
     recipe: dict[str, float],
@@ -156,11 +174,7 @@ def mismatch_note(
     prediction of the ``recipe`` it was mixed from (moved by the shop's ``habits``, given the
     ``library``) than :data:`SPRAYOUT_MISMATCH`."""
     x = _vector(forward, recipe)[None]
-    R = evaluate_recipes(forward, x)[0]
-    predicted = reflectance_to_Lab(R[0])
-    if habits is not None:
-        predicted = predicted + habits.offset(library, x, R, forward.geometries)[0]
-    de = delta_E(predicted, reflectance_to_Lab(sprayed))
+    de = sprayout_mismatch(forward, x, np.asarray(sprayed)[None], habits, library)[0]
     worst = int(np.argmax(de))
     if de[worst] <= SPRAYOUT_MISMATCH:
         return None

@@ -66,7 +66,12 @@ from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
-from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, SPRAYOUT_MISMATCH
+from flakelab.match.correction import (
+    NOISE_SD,
+    PERSISTENT_SD,
+    SPRAYOUT_MISMATCH,
+    sprayout_mismatch,
+)
 from flakelab.match.search import evaluate_recipes
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
 
@@ -77,7 +82,7 @@ __all__ = [
     "PRIOR_SD",
     "HABITS",
     "estimate_habits",
-    "mismatched_sprayouts",
+    "screened_habits",
     "habits_fit",
     "habits_drift",
     "DRIFT_Z",
@@ -244,19 +249,26 @@ def estimate_habits(
     return _estimate(forward, library, fractions, sprayouts, persistent_sd, noise_sd, prior_sd)[0]
 
 
-def mismatched_sprayouts(
+def screened_habits(
     forward, library: Library, fractions: NDArray, sprayouts: NDArray, *, prior_sd=PRIOR_SD
-) -> NDArray:
-    """Which of the spray-outs ``sprayouts[N, G, 31]`` of recipes ``fractions[N, T]`` lie
-    further than :data:`~flakelab.match.correction.SPRAYOUT_MISMATCH` (ΔE00, worst geometry)
-    from the model's prediction moved by the habits all of them show: mix-ups (another
-    panel's reading, recipe or target), which would pull the habits, not a shop's way of
-    spraying. Three white panels given as the spray-outs of three of 500 generated cases moved
-    the instrument's gain read from them from +0.15 % ± 0.07 to +0.76 % ± 0.44 (stop 66)."""
-    R = evaluate_recipes(forward, fractions)[0]
+) -> tuple[ShopHabits, NDArray]:
+    """:func:`estimate_habits` of the spray-outs ``sprayouts[N, G, 31]`` of recipes
+    ``fractions[N, T]`` that are not mix-ups, and which ``[N]`` are: those further than
+    :data:`~flakelab.match.correction.SPRAYOUT_MISMATCH` (ΔE00, worst geometry) from the
+    model's prediction moved by the habits all of them show (another panel's reading, recipe
+    or target), which would pull the habits, not a shop's way of spraying. Three white panels
+    given as the spray-outs of three of 500 generated cases moved the instrument's gain read
+    from them from +0.15 % ± 0.07 to +0.76 % ± 0.44 (stop 66). Where every one is a mix-up
+    the habits of all are returned, for the caller to refuse."""
     habits = estimate_habits(forward, library, fractions, sprayouts, prior_sd=prior_sd)
-    expected = reflectance_to_Lab(R) + habits.offset(library, fractions, R, forward.geometries)
-    return delta_E(expected, reflectance_to_Lab(sprayouts)).max(axis=1) > SPRAYOUT_MISMATCH
+    mismatch = sprayout_mismatch(forward, fractions, sprayouts, habits, library)
+    mixed_up = mismatch.max(axis=1) > SPRAYOUT_MISMATCH
+    if mixed_up.any() and not mixed_up.all():
+        kept = ~mixed_up
+        habits = estimate_habits(
+            forward, library, fractions[kept], sprayouts[kept], prior_sd=prior_sd
+        )
+    return habits, mixed_up
 
 
 def _estimate(
