@@ -12,7 +12,12 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import Geometry, parse_geometries
-from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_RANGE, TEXTURE_READINGS
+from flakelab.core.measurement import (
+    REFLECTANCE_RANGE,
+    TEXTURE_RANGE,
+    TEXTURE_READINGS,
+    outside,
+)
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
@@ -37,11 +42,6 @@ longer value; SQLite would keep it), checked with every case so that no store fa
 
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
-
-
-def _first_outside(values: NDArray, low: float, high: float) -> float:
-    """The first of ``values`` outside [low, high] (NaN counts as outside)."""
-    return float(values.ravel()[np.flatnonzero(~((values >= low) & (values <= high)))[0]])
 
 
 def _recipe_amounts(where: str, recipe) -> dict[str, float]:
@@ -92,11 +92,12 @@ class Case:
                     f"{where}: {name}: expected {len(geometries)} × 31 reflectance values, "
                     f"got shape {values.shape}"
                 )
-            low, high = REFLECTANCE_RANGE
-            if not np.all((values >= low) & (values <= high)):  # NaN fails too
+            bad = np.flatnonzero(outside(values, REFLECTANCE_RANGE))
+            if bad.size:
+                low, high = REFLECTANCE_RANGE
                 raise CaseError(
                     f"{where}: {name}: expected reflectance factors in [{low:g}, {high:g}], got "
-                    f"{_first_outside(values, low, high):g}"
+                    f"{values.ravel()[bad[0]]:g}"
                 )
             object.__setattr__(self, name, values)
         amounts = _recipe_amounts(where, self.recipe)
@@ -125,7 +126,7 @@ class Case:
             readings = {k: float(v) for k, v in readings.items()}
             low, high = TEXTURE_RANGE
             for k, v in readings.items():
-                if not low <= v <= high:  # NaN fails too
+                if outside(v, TEXTURE_RANGE):
                     raise CaseError(
                         f"{where}: {name}: {k}: expected a texture reading in "
                         f"[{low:g}, {high:g}], got {v:g}"

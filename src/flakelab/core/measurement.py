@@ -22,6 +22,7 @@ __all__ = [
     "REFLECTANCE_RANGE",
     "LAB_LIMIT",
     "TEXTURE_RANGE",
+    "outside",
 ]
 
 TEXTURE_READINGS: tuple[str, ...] = (
@@ -56,6 +57,15 @@ TEXTURE_RANGE = (0.0, 1000.0)
 """Accepted texture readings: areas, intensities and grades are never negative, and an
 instrument's scales stay within tens (the generated world's reach 0–24). Outside this a file
 is wrong, not the paint."""
+
+
+def outside(values, bounds: tuple[float, float]) -> NDArray[np.bool_]:
+    """Where ``values`` lie outside ``bounds`` (low, high; both accepted): what
+    :data:`REFLECTANCE_RANGE` and :data:`TEXTURE_RANGE` refuse. NaN lies outside."""
+    low, high = bounds
+    values = np.asarray(values, dtype=float)
+    return ~((values >= low) & (values <= high))
+
 
 FLOP_GEOMETRIES = ("45as15", "45as45", "45as110")
 

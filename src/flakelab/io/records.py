@@ -27,6 +27,7 @@ from flakelab.core.measurement import (
     TEXTURE_RANGE,
     TEXTURE_READINGS,
     Measurement,
+    outside,
 )
 from flakelab.core.spectra import shape_of
 from flakelab.errors import MeasurementFileError
@@ -123,8 +124,8 @@ def parse_texture(path: str | PathLike, value: object, where: str) -> float:
     """A texture reading from a cell: a finite number within :data:`TEXTURE_RANGE`, or a
     :class:`MeasurementFileError` naming the cell."""
     reading = parse_number(path, value, where)
-    low, high = TEXTURE_RANGE
-    if not low <= reading <= high:
+    if outside(reading, TEXTURE_RANGE):
+        low, high = TEXTURE_RANGE
         raise MeasurementFileError(
             path, f"expected a texture reading in [{low:g}, {high:g}], got {reading:g}", field=where
         )
@@ -145,7 +146,7 @@ def parse_spectrum(
         ]
     )
     low, high = REFLECTANCE_RANGE
-    bad = np.flatnonzero((spectrum < low) | (spectrum > high))
+    bad = np.flatnonzero(outside(spectrum, REFLECTANCE_RANGE))
     if bad.size:
         i = bad[0]
         raise MeasurementFileError(
