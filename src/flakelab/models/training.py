@@ -554,7 +554,7 @@ def outlying_cases(model: ForwardModel, data: CaseArrays, threshold: float) -> N
     they made a good adaptation (ΔE00 1.04 → 0.70 on 500 fresh cases of the shop) read as
     worse on the held-out cases, where one of them fell (1.82 → 1.83), and go unpromoted;
     left out, the adaptation is that of the shop's own cases, to the bit (stop 66)."""
-    data = replace(data, x=_align_toners(model, data), toners=model.toners)
+    data = _in_model_order(model, data)
     return flag_outliers(_residual_error(model, data, np.arange(data.x.shape[0])), threshold)
 
 
@@ -746,7 +746,7 @@ def adapt_model(
             f"cases: geometries {data.geometries} differ from the model's {model.geometries}"
         )
     config = config or recorded_config(model)
-    data = replace(data, x=_align_toners(model, data), toners=model.toners)
+    data = _in_model_order(model, data)
     used = {t for t, column in zip(model.toners, data.x.T, strict=True) if np.any(column)}
     novel = [t for t in model.new_toners if t in used]
     if novel:  # their inputs lie far outside what it learned from: gradients blow up to NaN
@@ -828,6 +828,11 @@ def _de00_summary(de: NDArray) -> dict[str, float]:
         "de00_p95": float(np.percentile(de, 95)),
         "de00_max": float(de.max()),
     }
+
+
+def _in_model_order(model: ForwardModel, data: CaseArrays) -> CaseArrays:
+    """``data`` with its recipes over ``model``'s toners, in its order."""
+    return replace(data, x=_align_toners(model, data), toners=model.toners)
 
 
 def _align_toners(model: ForwardModel, data: CaseArrays) -> NDArray:
