@@ -6,7 +6,9 @@ file in grams per spray-out, and a manifest naming them. Then times ``flakelab c
 record-all``'s library path (:func:`~flakelab.cases.manifest.cases_from_manifest`, then
 one transaction into a fresh SQLite file) against the baseline of the same run: the same
 cases imported from flakelab's own case CSV (``flakelab cases import``). Checks that what
-was recorded is what was measured.
+was recorded is what was measured, and times the check 'cases record-all' makes of each
+spray-out against its recipe's prediction (:func:`~flakelab.match.correction.
+recorded_checks`), with how many of the shop's own it would take for mix-ups.
 
     python benchmarks/record_history.py [--cases 500] [--per-file 10] [--seed 3] [--json]
 """
@@ -28,6 +30,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library, write_measurements, write_recipe
+from flakelab.match.correction import is_mismatched, recorded_checks
 from timing import peak_rss_mb, print_report
 
 
@@ -90,6 +93,10 @@ def main() -> None:
         import_s = time.perf_counter() - start
         stored = count_cases(engine)
 
+        start = time.perf_counter()
+        checks, _ = recorded_checks([c for _, c in numbered], library, engine)
+        check_s = time.perf_counter() - start
+
     recorded = [c for _, c in numbered]
     spectra_error = max(
         float(np.abs(r.sprayout - c.sprayout).max()) for r, c in zip(recorded, cases, strict=True)
@@ -102,6 +109,11 @@ def main() -> None:
         "record_all_cases_per_s": round(len(cases) / record_s, 1),
         "import_csv_s": round(import_s, 2),
         "record_all_vs_import_csv": round(record_s / import_s, 2),
+        "check_s": round(check_s, 2),
+        "check_vs_record_all": round(check_s / record_s, 3),
+        "from_prediction_de00_median": round(float(np.median([c["de00"] for c in checks])), 3),
+        "from_prediction_de00_max": max(c["de00"] for c in checks),
+        "taken_for_mix_ups": sum(map(is_mismatched, checks)),
         "max_spectra_difference": spectra_error,
         "outcomes_as_given": all(
             r.outcome == c.outcome for r, c in zip(recorded, cases, strict=True)

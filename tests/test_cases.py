@@ -675,11 +675,13 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
     manifest.write_text("target,recipe,sprayed,shop,shop\n" + "\n".join(lines[1:]) + "\n")
     with pytest.raises(ManifestError, match=r"row 1: .*each once \(twice \['shop'\]\)$"):
         cases_from_manifest(manifest, library, tolerance=tol)
-    # a NUL in a file's name (a corrupt export) is named by its row and column; it said only
-    # "embedded null byte"
+    # a NUL in a file's name (a corrupt export) is named by its row and column, in words a
+    # colorist reads (the system's own were "embedded null byte")
     for column, line in (("target", "car\0.cxf,shot.json,"), ("recipe", "car.cxf,sh\0ot.json,")):
         manifest.write_text(f"{lines[0]}\n{line}sprays.cxf,spray 2,,\n")
-        with pytest.raises(ManifestError, match=f"row 2: {column}: .*embedded null byte"):
+        with pytest.raises(
+            ManifestError, match=f"row 2: {column}: '.*': a file name cannot hold a NUL character$"
+        ):
             cases_from_manifest(manifest, library, tolerance=tol)
 
 

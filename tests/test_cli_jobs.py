@@ -416,14 +416,36 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
               "--database", cases, "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
     recorded = json.loads(run.stdout)["case_id"]
+    # recording it already says how far it lies from what its recipe predicts
+    check = json.loads(run.stdout)["from_prediction"]
+    assert check["de00"] > 50 and check["model"].startswith("demo-five-angle")
+    assert check["habits"] is False  # none stored for the shop yet
     run = cli("cases", "habits", cases, "--shop", "shop A", "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["left_out_mismatched"] == [recorded] and report["cases"] == 60
-    run = cli("cases", "habits", cases, "--shop", "shop A")
+    run = cli("cases", "habits", cases, "--shop", "shop A", "--save", "-d", cases)
     assert run.returncode == 0 and "left out 1 spray-out(s) further than ΔE00 5" in " ".join(
         run.stderr.split()
     )
+    # a history with another mix-up among good rows: recorded whole, the mix-up named by row,
+    # each checked against the model moved by the habits now stored for the shop
+    grey = replace(white, sample="grey", reflectance=np.full_like(white.reflectance, 0.3))
+    write_measurements([grey], tmp_path / "grey.json")
+    manifest = tmp_path / "history.csv"
+    manifest.write_text(
+        f"target,recipe,sprayed,shop\n{example_path('target')},{recipe},"
+        f"{example_path('sprayout')},shop A\n{example_path('target')},{recipe},grey.json,shop A\n"
+    )
+    run = cli("cases", "record-all", str(manifest), "-d", cases, "--json")
+    assert run.returncode == 0, run.stderr
+    history = json.loads(run.stdout)
+    assert history["mismatched_rows"] == [3] and history["recorded"] == 2
+    good, mixed = (row["from_prediction"] for row in history["cases"])
+    assert good["habits"] and mixed["habits"] and good["de00"] < 5 < mixed["de00"]
+    for row in history["cases"]:  # the shop's history as it was, for what follows
+        run = cli("cases", "remove", row["case_id"], "-d", cases, "--yes")
+        assert run.returncode == 0, run.stderr
     # nor does it judge an adaptation to the shop, or choose its epoch
     run = cli("model", "adapt", cases, "--shop", "shop A", "--epochs", "5", "--database", cases,
               "--json")  # fmt: skip

@@ -49,7 +49,7 @@ from flakelab.match.search import (
     recipe_vector,
 )
 from flakelab.models.registry import shipped_model
-from flakelab.models.training import evaluate_model, generated_case_arrays
+from flakelab.models.training import case_arrays, evaluate_model, generated_case_arrays
 
 TRUE_SPREAD = SHOP_WITH_HABITS["shop_spread"] - 1
 TRUE_GAIN = SHOP_WITH_HABITS["shop_gain"]
@@ -627,3 +627,47 @@ def test_habits_saved_to_a_database_not_made_yet_create_it(cli, tmp_path):
     run = cli("cases", "habits", cases, "--shop", "shop A", "--save", "--database", database)
     assert run.returncode == 0, run.stderr  # said "no such database file; nothing was created"
     assert stored_habits(open_database(database, must_exist=True), "shop A").cases == 25
+
+
+def test_recorded_sprayouts_are_checked_against_their_recipes_with_the_shops_stored_habits(
+    shipped, habits_shop, tmp_path
+):
+    """What 'cases record' tells a colorist: a habits shop's own spray-outs lie within
+    SPRAYOUT_MISMATCH of their recipes' prediction once its stored habits move it, a white
+    panel recorded as one does not; a library no model knows is named, not checked."""
+    from flakelab.match.correction import (
+        SPRAYOUT_MISMATCH,
+        is_mismatched,
+        recorded_checks,
+        sprayout_mismatch,
+    )
+    from flakelab.match.habits import save_habits
+
+    library, forward, _ = shipped
+    world = shop_world(shipped, habits=True)
+    cases = [c for batch in world.cases(120, seed=41, shop="shop A") for c in batch]
+    white = replace(cases[0], case_id="white", sprayout=np.full_like(cases[0].sprayout, 0.85))
+    cases.append(white)
+    bare, none = recorded_checks(cases, library)  # no database: the shipped model, no habits
+    assert none is None and not any(c["habits"] for c in bare)
+    engine = open_database(tmp_path / "shop.db")
+    save_habits(engine, replace(habits_shop[1], shop="shop A"), "five-angle")
+    moved, _ = recorded_checks(cases, library, engine)
+    assert all(c["habits"] and c["model"] == forward.model_id for c in moved)
+    assert [is_mismatched(c) for c in moved] == [False] * 120 + [True]
+    # the habits explain the shop's offsets: its own spray-outs lie nearer their prediction
+    # (measured: mean 1.58 → 0.93, worst 3.93 → 3.41)
+    own = np.array([[b["de00"], m["de00"]] for b, m in zip(bare[:120], moved, strict=False)])
+    assert own[:, 1].mean() < 0.8 * own[:, 0].mean() and own[:, 1].max() < SPRAYOUT_MISMATCH
+    # the check is the one the habits screen makes (the same prediction, the same habits)
+    data = case_arrays(cases, library.names)
+    expected = sprayout_mismatch(forward, data.x, data.R, habits_shop[1], library).max(axis=1)
+    np.testing.assert_allclose([c["de00"] for c in moved], expected, atol=6e-4)
+    # a case read at no instrument's whole set is not checked; nor are cases of a library the
+    # shipped models were not trained for, and the reason says which
+    partial = replace(cases[1], geometries=cases[1].geometries[:3],
+                      target=cases[1].target[:3], sprayout=cases[1].sprayout[:3])  # fmt: skip
+    assert recorded_checks([partial], library)[0] == [None]
+    other = replace(library, name="other", toners=library.toners[:-1])
+    checks, why = recorded_checks(cases[1:3], other)
+    assert checks == [None, None] and "library 'other'" in why

@@ -116,13 +116,18 @@ def cases_from_manifest(
     files: dict[Path, list[Measurement]] = {}  # a car's file serves several rows, read once
 
     def reading(where: str, file: str, sample: str) -> Measurement:
-        name = path.parent / file
+        name = _file(where, file)
         try:
             if name not in files:
                 files[name] = read_measurements(name)
             return pick_sample(files[name], sample or None, name)
-        except (FlakelabError, OSError, KeyError, ValueError) as error:  # ValueError: a NUL
+        except (FlakelabError, OSError, KeyError, ValueError) as error:
             raise ManifestError(f"{where}: {error}") from None
+
+    def _file(where: str, cell: str) -> Path:
+        if "\x00" in cell:  # the operating system's own words are "embedded null byte"
+            raise ManifestError(f"{where}: {cell!r}: a file name cannot hold a NUL character")
+        return path.parent / cell
 
     cases: list[tuple[int, Case]] = []
     first_row: dict[str, int] = {}
@@ -130,8 +135,9 @@ def cases_from_manifest(
         where = f"{path}: row {number}"
         target = reading(f"{where}: target", cells["target"], cells.get("sample", ""))
         sprayed = reading(f"{where}: sprayed", cells["sprayed"], cells.get("sprayed_sample", ""))
+        recipe = _file(f"{where}: recipe", cells["recipe"])
         try:
-            grams = read_recipe(path.parent / cells["recipe"])
+            grams = read_recipe(recipe)
             fractions = library.fractions(grams)
         except (FlakelabError, ValueError) as error:
             raise ManifestError(f"{where}: recipe: {error}") from None

@@ -355,6 +355,7 @@ def record_case(
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
     from flakelab.io import read_library, read_recipe, read_tolerance
+    from flakelab.match.correction import is_mismatched, mismatch_message, recorded_checks
 
     instrument = instrument and _instrument(instrument)
     tol = read_tolerance(tolerance)
@@ -385,6 +386,7 @@ def record_case(
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
     models = instruments_reading(case.geometry_names)
+    (check,), unchecked = recorded_checks([case], lib, _maybe_engine(database))
     report = {
         "case_id": case.case_id,
         "shop": case.shop,
@@ -398,6 +400,8 @@ def record_case(
         "sprayout_failing": failing,
         "recipe": {k: round(v, 6) for k, v in case.recipe.items()},
         "left_out": left_out,
+        "from_prediction": check,
+        "from_prediction_unchecked": unchecked,
         "database": str(engine.url),
         "cases_in_database": count_cases(engine),
     }
@@ -412,6 +416,21 @@ def record_case(
     )
     if models:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
+    if check is not None:
+        habits = " with the shop's habits" if check["habits"] else ""
+        console.print(
+            f"the spray-out from its recipe's prediction: ΔE00 {check['de00']:.2f} at "
+            f"{check['geometry']} ({check['model']}{habits})",
+            highlight=False,
+        )
+    elif unchecked:
+        console.print(f"[yellow]note:[/] not checked against a model: {unchecked}", highlight=False)
+    if is_mismatched(check):
+        errors.print(
+            f"[yellow]warning:[/] {mismatch_message(check['de00'], check['geometry'])}; it is "
+            f"recorded: 'cases habits' leaves it out, 'cases remove {case.case_id}' removes it",
+            highlight=False,
+        )
     else:
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
@@ -457,6 +476,7 @@ def record_all(
     from flakelab.cases.database import add_cases, count_cases, existing_case_ids, open_database
     from flakelab.cases.manifest import cases_from_manifest, read_manifest
     from flakelab.io import read_library, read_tolerance
+    from flakelab.match.correction import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
 
     instrument = instrument and _instrument(instrument)
     tol = read_tolerance(tolerance)
@@ -480,6 +500,7 @@ def record_all(
         )
     add_cases(engine, cases)  # one transaction: a writer in between is refused whole
     worst, where = worst_differences(cases)
+    checks, unchecked = recorded_checks(cases, lib, _maybe_engine(database))
     recorded = [
         {
             "row": number,
@@ -490,9 +511,11 @@ def record_all(
             "created_at": c.created_at.isoformat(),
             "worst_de00": round(float(de), 3),
             "worst_geometry": g,
+            "from_prediction": check,
         }
-        for number, c, de, g in zip(rows, cases, worst, where, strict=True)
+        for number, c, de, g, check in zip(rows, cases, worst, where, checks, strict=True)
     ]
+    mismatched = [row for row in recorded if is_mismatched(row["from_prediction"])]
     readers = [instruments_reading(c.geometry_names) for c in cases]
     learners = {model: sum(model in r for r in readers) for model in INSTRUMENT_GEOMETRIES}
     report = {
@@ -502,6 +525,8 @@ def record_all(
         "cases_per_model": learners,
         "tolerance": tol.name,
         "cases": recorded,
+        "mismatched_rows": [row["row"] for row in mismatched],
+        "from_prediction_unchecked": unchecked,
         "database": str(engine.url),
         "cases_in_database": count_cases(engine),
     }
@@ -510,21 +535,34 @@ def record_all(
         return
     table = Table(title=f"Recorded {len(cases)} spray-outs from {manifest}")
     table.add_column("row", justify="right")
-    for column in ("case", "shop", "outcome", "worst ΔE00", "instrument"):
+    for column in ("case", "shop", "outcome", "worst ΔE00", "from prediction", "instrument"):
         table.add_column(column, no_wrap=column != "shop")
     for row in recorded:
+        check = row["from_prediction"]
+        shown = "" if check is None else f"{check['de00']:.2f} {check['geometry']}"
         table.add_row(
             str(row["row"]),
             row["case_id"],
             row["shop"],
             row["outcome"],
             f"{row['worst_de00']:.2f} {row['worst_geometry']}",
+            f"[red]{shown}[/]" if is_mismatched(check) else shown,
             row["instrument"],
         )
     console.print(table)
     counts = ", ".join(f"{n} {o}" for o, n in report["outcomes"].items() if n)
     models = ", ".join(f"{m} {n}" for m, n in learners.items() if n) or "none"
     console.print(f"outcomes: {counts}; cases each model learns from: {models}", highlight=False)
+    if mismatched:
+        errors.print(
+            f"[yellow]warning:[/] {len(mismatched)} spray-out(s) further than ΔE00 "
+            f"{SPRAYOUT_MISMATCH:g} from what their recipe predicts, likely mix-ups (another "
+            f"panel, recipe or target), rows {', '.join(str(r['row']) for r in mismatched)}: "
+            "recorded all the same; 'cases habits' leaves them out, 'cases remove' removes them",
+            highlight=False,
+        )
+    elif unchecked:
+        console.print(f"[yellow]note:[/] not checked against a model: {unchecked}", highlight=False)
     count = report["cases_in_database"]
     errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
 
