@@ -699,8 +699,10 @@ def realism(
     library: LibraryOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """How hard the generated world is: remeasure, respray, batch and weathering ΔE00, and
-    the texture readings' repeatability."""
+    """How hard the generated world is: remeasure, respray, batch and weathering ΔE00.
+
+    Each beside the range a real shop shows, and the texture readings'
+    repeatability."""
     from flakelab.cases.generator import World
     from flakelab.io import read_library
 

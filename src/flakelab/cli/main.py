@@ -306,8 +306,10 @@ def validate_scaling(
         Path | None, typer.Option("--plots", help="Folder for the figures (one per spread).")
     ] = Path("scaling-plots"),
 ) -> None:
-    """The hybrid paper's scaling experiment (Table 1 dye series), Monte Carlo vs fast model
-    vs single-collision scaling."""
+    """The hybrid paper's scaling experiment: Monte Carlo, fast model and scaling.
+
+    Its Table 1 dye series, each reflectance by the reference Monte Carlo against the fast
+    model and the single-collision scaling."""
     from flakelab.physics.scaling import run_series, scaling_report
     from flakelab.render.plots import plot_scaling
 

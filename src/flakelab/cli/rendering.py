@@ -124,8 +124,10 @@ def texture_evaluate(
     seed: SeedOption = 100,
     json_output: JsonOption = False,
 ) -> None:
-    """Closed loop: generate images at prescribed coarseness and glint over the usable range,
-    measure them with the texture metrics, report the relative errors."""
+    """Closed loop: images made at prescribed coarseness and glint, measured back.
+
+    Over the usable range, each image measured with the texture metrics; the relative
+    errors reported."""
     from flakelab.texture.calibration import roundtrip, shipped_processes
 
     report = {
@@ -162,7 +164,7 @@ def texture_fit(
     seed: SeedOption = 0,
     json_output: JsonOption = False,
 ) -> None:
-    """Fit the processes to the anchor ladders (the shipped file: ``src/flakelab/data/``)."""
+    """Fit the processes to the anchor ladders (the shipped file: src/flakelab/data/)."""
     from flakelab.texture.calibration import (
         fit_process,
         load_processes,

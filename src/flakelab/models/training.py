@@ -553,7 +553,12 @@ def outlying_cases(model: ForwardModel, data: CaseArrays, threshold: float) -> N
     5). Three white panels among 403 of a shop's cases flagged exactly the three. Kept,
     they made a good adaptation (ΔE00 1.04 → 0.70 on 500 fresh cases of the shop) read as
     worse on the held-out cases, where one of them fell (1.82 → 1.83), and go unpromoted;
-    left out, the adaptation is that of the shop's own cases, to the bit (stop 66)."""
+    left out, the adaptation is that of the shop's own cases, to the bit (stop 66).
+
+    Relative to the shop's own spread, not :data:`~flakelab.match.correction.
+    SPRAYOUT_MISMATCH`'s absolute bound as the habits screen: that bound is taken from the
+    prediction moved by the shop's habits, and before adapting a shop's own spray-outs lie
+    from the bare model as far as its habits put them (the habits shop's up to ΔE00 4.8)."""
     data = _in_model_order(model, data)
     return flag_outliers(_residual_error(model, data, np.arange(data.x.shape[0])), threshold)
 
