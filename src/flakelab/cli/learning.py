@@ -135,20 +135,14 @@ def source_arrays(source, cases: list, library, *, effect: bool = False):
         raise FlakelabError(f"{source}: {error}") from None
 
 
-def split_held_out(cases: list, source: str, holdout: float, seed: int, library):
-    """Training and held-out arrays of ``cases``, each held out with probability ``holdout``
-    (seeded), both non-empty."""
-    held = np.random.default_rng(seed).random(len(cases)) < holdout
+def split_held_out(data, source: str, holdout: float, seed: int):
+    """Training and held-out cases of the arrays ``data``, each held out with probability
+    ``holdout`` (seeded), both non-empty."""
+    n = data.x.shape[0]
+    held = np.random.default_rng(seed).random(n) < holdout
     if held.all() or not held.any():
-        raise FlakelabError(
-            f"{source}: {len(cases)} cases are too few to hold out {holdout:.0%} of them"
-        )
-
-    def arrays(kept: bool):
-        chosen = [c for c, h in zip(cases, held, strict=True) if h == kept]
-        return source_arrays(source, chosen, library, effect=True)
-
-    return arrays(False), arrays(True)
+        raise FlakelabError(f"{source}: {n} cases are too few to hold out {holdout:.0%} of them")
+    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
 
 
 def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
@@ -1095,7 +1089,9 @@ def train(
         raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
     data, held_out = (
         replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
-        for arrays in split_held_out(chosen, cases, holdout, seed, lib)
+        for arrays in split_held_out(
+            source_arrays(cases, chosen, lib, effect=True), cases, holdout, seed
+        )
     )
     stages = protocol_epochs(config, adapt is not None)
     with progress_bar(disable=json_output) as bar:
@@ -1459,10 +1455,10 @@ def adapt(
             f"too few cases ({', '.join(sorted(novel))}); nothing to adapt it to"
         )
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
-    outlying = outlying_cases(base, source_arrays(cases, known, lib), config.outlier_threshold)
+    arrays = source_arrays(cases, known, lib, effect=True)
+    outlying = outlying_cases(base, arrays, config.outlier_threshold)
     dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
-    known = [c for c, out in zip(known, outlying, strict=True) if not out]
-    data, held_out = split_held_out(known, cases, holdout, seed, lib)
+    data, held_out = split_held_out(arrays.subset(np.flatnonzero(~outlying)), cases, holdout, seed)
     if epochs is not None:
         config = replace(config, adapt_epochs=epochs)
     stage = f"adapt {shop or cases}"
@@ -1479,7 +1475,7 @@ def adapt(
     summary |= {
         "model": model or f"current {instrument}",
         "shop": shop,
-        "left_out_new_toners": len(chosen) - len(known) - len(dropped),
+        "left_out_new_toners": len(chosen) - len(known),
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
         "held_out": {
