@@ -11,6 +11,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab import __version__
+from flakelab.cli.cases import cases_app
 from flakelab.cli.common import (
     ConditionsOption,
     JsonOption,
@@ -29,8 +30,8 @@ from flakelab.cli.common import (
     reports_errors,
     texture_table,
 )
-from flakelab.cli.learning import cases_app, model_app, train
 from flakelab.cli.matching import correct_command, match_command, weigh_command
+from flakelab.cli.models import model_app, train
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements

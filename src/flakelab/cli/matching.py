@@ -30,7 +30,7 @@ from flakelab.cli.common import (
     read_sample,
     texture_table,
 )
-from flakelab.cli.learning import (
+from flakelab.cli.sources import (
     DatabaseOption,
     InstrumentOption,
     LibraryOption,

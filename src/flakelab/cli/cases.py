@@ -1,14 +1,13 @@
-"""CLI: the case database, the case generator, training and the model registry."""
+"""CLI: ``flakelab cases``: the case database, the case generator and a shop's habits."""
 
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import replace
 from datetime import UTC, datetime
 from operator import attrgetter
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -28,175 +27,36 @@ from flakelab.cli.common import (
     reports_errors,
     tracked,
 )
+from flakelab.cli.sources import (
+    CasesArgument,
+    DatabaseOption,
+    InstrumentOption,
+    KeptGeometriesOption,
+    LibraryOption,
+    ModelFileOption,
+    ShopOption,
+    SinceOption,
+    StartOption,
+    existing_engine,
+    instrument_key,
+    learned_forward,
+    recipe_fractions,
+    shop_cases,
+    since_option,
+    source_arrays,
+    which_cases,
+)
 from flakelab.core.geometry import (
     DEFAULT_INSTRUMENT,
     INSTRUMENT_GEOMETRIES,
-    instrument_name,
     instruments_reading,
 )
 from flakelab.errors import FlakelabError
-from flakelab.io.records import write_atomically
 
 cases_app = typer.Typer(
     help="Refinish cases: generate, record, record-all, list, remove, import, export; "
     "realism, habits, shops."
 )
-model_app = typer.Typer(
-    help="Learned forward models: list, show, evaluate, adapt to a shop; promote and retire."
-)
-
-DatabaseOption = Annotated[
-    str | None,
-    typer.Option(
-        "--database",
-        "-d",
-        help="Database URL or SQLite file (default: FLAKELAB_DATABASE_URL or the "
-        "user data folder).",
-    ),
-]
-InstrumentOption = Annotated[
-    str, typer.Option("--instrument", "-i", help="Geometry set: five-angle, ma-t12, byk-mac-i.")
-]
-KeptGeometriesOption = Annotated[
-    str | None,
-    typer.Option(
-        "--instrument",
-        "-i",
-        help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
-        show_default="every geometry the car's reading and the spray-out's share",
-    ),
-]
-LibraryOption = Annotated[
-    Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
-]
-DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
-"""What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
-CasesArgument = Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")]
-ShopOption = Annotated[
-    str | None, typer.Option(help="Only this shop's cases (default: every case given).")
-]
-SinceOption = Annotated[
-    datetime | None,
-    typer.Option(
-        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
-        help="Only cases made on or after this date (UTC), e.g. since the shop's new gun.",
-    ),
-]
-StartOption = Annotated[
-    datetime | None,
-    typer.Option(
-        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
-        help="Date and time (UTC) of the first generated case.",
-        show_default="2026-01-01",
-    ),
-]
-ModelFileOption = Annotated[
-    str | None,
-    typer.Option(
-        "--model",
-        "-m",
-        help="Model file, or a registered version NAME:VERSION (default: current).",
-    ),
-]
-
-
-def _checked_device(name: str) -> str:
-    """``--device`` read before any work, so that a GPU this machine lacks is named at once."""
-    from flakelab.models.network import ModelError
-    from flakelab.models.training import training_device
-
-    try:
-        training_device(name)
-    except ModelError as error:
-        raise typer.BadParameter(str(error).removeprefix("device: ")) from None
-    return name
-
-
-DeviceOption = Annotated[
-    str,
-    typer.Option(
-        help="Where the networks train: cpu, cuda, cuda:N, mps, or auto (a GPU if torch sees "
-        "one). The seed gives the same batches and starting weights on every device; the "
-        "trained weights agree to float rounding.",
-        callback=_checked_device,
-    ),
-]
-
-
-def source_arrays(source, cases: list, library, *, effect: bool = False):
-    """The training arrays of ``cases`` read from ``source``; a case the library cannot
-    encode (a toner it lacks) is named with the file or database it came from."""
-    from flakelab.models.network import ModelError
-    from flakelab.models.training import case_arrays
-
-    try:
-        return case_arrays(cases, library.names, library.effect if effect else None)
-    except ModelError as error:
-        raise FlakelabError(f"{source}: {error}") from None
-
-
-def split_held_out(data, source: str, holdout: float, seed: int):
-    """Training and held-out cases of the arrays ``data``, each held out with probability
-    ``holdout`` (seeded), both non-empty."""
-    n = data.x.shape[0]
-    held = np.random.default_rng(seed).random(n) < holdout
-    if held.all() or not held.any():
-        raise FlakelabError(f"{source}: {n} cases are too few to hold out {holdout:.0%} of them")
-    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
-
-
-def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
-    """The cases of ``shop`` made at or after ``since`` (None: any shop, any time) in a
-    CSV/CxF file, or in a database (URL or .db/.sqlite file), which chooses them itself."""
-    from flakelab.cases.case import select_cases
-    from flakelab.cases.database import iter_cases, open_database
-    from flakelab.cases.exchange import is_case_file, read_cases
-
-    path = Path(source)
-    if is_case_file(path):
-        return select_cases(read_cases(path), shop=shop, since=since)
-    if "://" not in source and not path.exists():
-        raise FlakelabError(f"{source}: no such case file or database")
-    return list(iter_cases(open_database(source, must_exist=True), shop=shop, since=since))
-
-
-def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
-    """Mass fractions in ``library`` order of a recipe file's ``grams``; a toner the library
-    lacks is named with the file."""
-    from flakelab.library import LibraryError
-
-    try:
-        return library.fractions(grams)
-    except LibraryError as error:
-        raise FlakelabError(f"{path}: {error}") from None
-
-
-def shop_cases(source: str, shop: str | None, geometries, since: datetime | None = None) -> list:
-    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries`` (among
-    others: each is restricted to them), made at or after ``since`` (None: any time; without a
-    zone: UTC)."""
-    from flakelab.cases.case import cases_at
-
-    chosen = cases_at(load_cases(source, shop, since), geometries)
-    if not chosen:
-        raise FlakelabError(
-            f"{source}: no cases {_which(shop, since)} read at the model's "
-            f"geometries {tuple(geometries)}"
-        )
-    return chosen
-
-
-def _instrument(name: str) -> str:
-    """``--instrument``'s key of :data:`INSTRUMENT_GEOMETRIES`, or an error naming the option."""
-    try:
-        return instrument_name(name)
-    except ValueError as error:
-        raise FlakelabError(f"--instrument: {error}") from None
-
-
-def _which(shop: str | None, since: datetime | None) -> str:
-    whose = f"from shop {shop!r}" if shop else "from any shop"
-    return whose + (f" since {since:%Y-%m-%d %H:%M}" if since else "")
 
 
 @cases_app.command("generate")
@@ -351,7 +211,7 @@ def record_case(
     from flakelab.io import read_library, read_recipe, read_tolerance
     from flakelab.match.correction import is_mismatched, mismatch_message, recorded_checks
 
-    instrument = instrument and _instrument(instrument)
+    instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
     grams = read_recipe(recipe)
@@ -380,7 +240,7 @@ def record_case(
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
     models = instruments_reading(case.geometry_names)
-    (check,), unchecked = recorded_checks([case], lib, _maybe_engine(database))
+    (check,), unchecked = recorded_checks([case], lib, existing_engine(database))
     report = {
         "case_id": case.case_id,
         "shop": case.shop,
@@ -472,7 +332,7 @@ def record_all(
     from flakelab.io import read_library, read_tolerance
     from flakelab.match.correction import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
 
-    instrument = instrument and _instrument(instrument)
+    instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
     numbered = cases_from_manifest(
@@ -494,7 +354,7 @@ def record_all(
         )
     add_cases(engine, cases)  # one transaction: a writer in between is refused whole
     worst, where = worst_differences(cases)
-    checks, unchecked = recorded_checks(cases, lib, _maybe_engine(database))
+    checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
     recorded = [
         {
             "row": number,
@@ -674,12 +534,14 @@ def export_cases(
 
     check_case_file_suffix(target)
     check_output_file(target, "target")  # before the database is read
-    geometries = instrument and INSTRUMENT_GEOMETRIES[_instrument(instrument)]
+    geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     engine = open_database(database, must_exist=True)
     cases = select_cases(iter_cases(engine, shop=shop, since=since), geometries=geometries)
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
-        raise FlakelabError(f"{engine.url}: no cases {_which(shop, since)}{at}; nothing written")
+        raise FlakelabError(
+            f"{engine.url}: no cases {which_cases(shop, since)}{at}; nothing written"
+        )
     write_cases(cases, target)
     errors.print(f"wrote {len(cases)} cases to {target}", highlight=False)
 
@@ -868,11 +730,6 @@ def habits(
     )
 
 
-def since_option(when: datetime) -> str:
-    """The ``--since`` that reads the cases made at ``when`` and after."""
-    return f"--since {when:%Y-%m-%dT%H:%M:%S}"
-
-
 def _scan_for_plot(drift: dict, chosen: list) -> dict:
     """The change scan by the time of each split, for :func:`~flakelab.render.plots.plot_habits`."""
     from flakelab.match.habits import DRIFT_Z, HABITS
@@ -962,597 +819,3 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
             "" if h is None else f"{ShopHabits.from_report(h).describe()}, {h['created_at'][:10]}",
         )
     console.print(table)
-
-
-def train(
-    cases: CasesArgument,
-    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
-    library: LibraryOption = None,
-    out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write the model here.")
-    ] = None,
-    database: DatabaseOption = None,
-    register_model: Annotated[
-        bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
-    ] = True,
-    epochs: Annotated[
-        int, typer.Option(min=1, help="Epochs per stage (then as many fine-tuning).")
-    ] = 300,
-    hidden: Annotated[str, typer.Option(help="Hidden layer sizes.")] = "100,100,100",
-    batch_size: Annotated[int, typer.Option(min=1, help="Cases per optimiser step.")] = 128,
-    colour_weight: Annotated[
-        float | None,
-        typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term (default: 0.02)."),
-    ] = None,
-    holdout: Annotated[
-        float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
-    ] = 0.1,
-    adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
-    adapt_epochs: Annotated[
-        int | None,
-        typer.Option(
-            min=1,
-            help="Epochs of the adaptation (default: the paper's 150).",
-        ),
-    ] = None,
-    adapt_validation: Annotated[
-        float,
-        typer.Option(
-            min=0.0,
-            max=0.9,
-            help="Share of the shop's cases held out to choose the adaptation's epoch; the "
-            "model keeps its best there (0: run every epoch, as the paper).",
-        ),
-    ] = 0.2,
-    screening: Annotated[
-        str,
-        typer.Option(
-            help="Outlier screen: sequential (the paper's: one model, four partitions in turn, "
-            "the fifth as yardstick) or cross-validation (five fold models, 5x the work)."
-        ),
-    ] = "sequential",
-    members: Annotated[
-        int,
-        typer.Option(
-            min=1,
-            help="Networks trained side by side on the cleaned cases and averaged (an "
-            "ensemble: less error where the cases are few, and their disagreement reported "
-            "with every prediction; costs that many times the inference).",
-        ),
-    ] = 1,
-    log_offset: Annotated[
-        float,
-        typer.Option(
-            min=0.0,
-            help="Also feed the network log(fraction + this): a strong pigment's small "
-            "amounts spread out (0: fractions and amounts per unit effect pigment only).",
-        ),
-    ] = 0.0,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
-    device: DeviceOption = "cpu",
-    json_output: JsonOption = False,
-) -> None:
-    """Train the learned forward model with the hybrid paper's protocol.
-
-    It learns from every case read at the instrument's geometries, whatever read it (an
-    MA-T12 case trains the five-angle model too)."""
-    from flakelab.cases.case import cases_at
-    from flakelab.cases.database import open_database
-    from flakelab.io import read_library
-    from flakelab.models.network import LOG_OFFSET_MAX
-    from flakelab.models.registry import register
-    from flakelab.models.training import (
-        SCREENINGS,
-        TrainingConfig,
-        evaluate_model,
-        protocol_epochs,
-        train_protocol,
-    )
-
-    if screening not in SCREENINGS:
-        raise FlakelabError(
-            f"--screening: expected one of {', '.join(SCREENINGS)}, got {screening!r}"
-        )
-    if log_offset > LOG_OFFSET_MAX:
-        raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
-
-    try:
-        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
-    except ValueError:
-        raise FlakelabError(
-            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
-        ) from None
-    check_output_file(out, "--out")
-    # the settings are checked before the cases are read (TrainingConfig refuses its own)
-    config = TrainingConfig(
-        hidden=sizes,
-        epochs=epochs,
-        finetune_epochs=epochs,
-        batch_size=batch_size,
-        screening=screening,
-        adapt_validation=adapt_validation,
-        members=members,
-        log_offset=log_offset,
-        seed=seed,
-        device=device,
-    )
-    if colour_weight is not None:
-        config = replace(config, colour_weight=colour_weight)
-    if adapt_epochs is not None:
-        config = replace(config, adapt_epochs=adapt_epochs)
-    lib = read_library(library)
-    instrument = _instrument(instrument)
-    geometries = INSTRUMENT_GEOMETRIES[instrument]
-    loaded = load_cases(cases)
-    chosen = cases_at(loaded, geometries)
-    if not chosen:
-        raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
-    data, held_out = (
-        replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
-        for arrays in split_held_out(
-            source_arrays(cases, chosen, lib, effect=True), cases, holdout, seed
-        )
-    )
-    stages = protocol_epochs(config, adapt is not None)
-    with progress_bar(disable=json_output) as bar:
-        task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
-        model, report = train_protocol(
-            data, config, adapt_shop=adapt, progress=lambda k: bar.advance(task, k)
-        )
-    model.info["name"] = instrument
-    metrics = evaluate_model(model, held_out)
-    summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
-    summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
-    summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
-    if out is not None:
-        write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
-        summary["file"] = str(out)
-    if register_model:
-        summary["registry"] = register(
-            open_database(database), model, held_out, metrics=summary["held_out"]
-        )
-    summary["loss_log_tail"] = report["log"][-3:]
-    if json_output:
-        print(json.dumps(summary, indent=2, default=str))
-        return
-    console.print_json(json.dumps(summary, default=str))
-
-
-@model_app.command("list")
-@reports_errors
-def list_models(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
-    """Registered model versions."""
-    from flakelab.cases.database import open_database
-    from flakelab.models.registry import SHIPPED, list_models
-
-    rows = list_models(open_database(database, must_exist=True))
-    promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}
-    current = {name: promoted.get(name, "shipped") for name in sorted({*SHIPPED, *promoted})}
-    if json_output:
-        print(
-            json.dumps({"registered": rows, "shipped": list(SHIPPED), "current": current}, indent=2)
-        )
-        return
-    table = Table(title="Models")
-    for column in ("name", "version", "status", "held-out ΔE00", "toners", "data", "created"):
-        table.add_column(column)
-    for r in rows:
-        table.add_row(
-            r["name"],
-            str(r["version"]),
-            r["status"],
-            f"{r['held_out_de00']:.3f}",
-            str(r["toners"]),
-            r["data_hash"],
-            r["created_at"][:19],
-        )
-    for name in SHIPPED:  # the current model while none of its name is promoted
-        status = "current" if current[name] == "shipped" else "fallback"
-        table.add_row(name, "shipped", status, "", "", "", "")
-    console.print(table)
-
-
-@model_app.command("show")
-@reports_errors
-def show_model(
-    model: Annotated[
-        str,
-        typer.Argument(
-            help="A model file, a registered version NAME:VERSION (see 'flakelab model list'), "
-            "or an instrument (five-angle, ma-t12) for its current model."
-        ),
-    ],
-    database: DatabaseOption = None,
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            "-o",
-            help="Also write the model to this file: a registered version taken out of the "
-            "database, for --model or another shop.",
-        ),
-    ] = None,
-    json_output: JsonOption = False,
-) -> None:
-    """What a model is and what it learned from: network, toners and their cases, training."""
-    from flakelab.models.registry import model_card
-
-    check_output_file(out, "--out")
-    chosen, source = named_model(model, database)
-    card = {"source": source, **model_card(chosen)}
-    if out is not None:
-        write_atomically(out, lambda p: p.write_bytes(chosen.to_bytes()))
-        card["file"] = str(out)
-    if json_output:
-        print(json.dumps(card, indent=2, default=str))
-        return
-    console.print(_model_card_table(card))
-
-
-def chosen_model(model: str | Path | None, instrument: str, database: str | None):
-    """The model ``--model`` names (:func:`named_model`), else the instrument's current one
-    (the promoted one in the database, else the shipped)."""
-    from flakelab.models.registry import current_model
-
-    if model is None:
-        return current_model(_maybe_engine(database), instrument)
-    return named_model(str(model), database, "--model")[0]
-
-
-def named_model(spec: str, database: str | None, label: str = "MODEL"):
-    """The model ``spec`` names, a file, a registered version ``NAME:VERSION`` or an
-    instrument's current model, and where it was found."""
-    from flakelab.cases.database import open_database
-    from flakelab.models.registry import (
-        current_model_and_source,
-        list_models,
-        load_model_file,
-        registered_model,
-    )
-
-    path = Path(spec)
-    if path.exists() or path.suffix == ".pt":
-        return load_model_file(path), str(path)
-    registered = _name_and_version(spec)
-    if registered:
-        engine = open_database(database, must_exist=True)
-        name, version = registered
-        model = registered_model(engine, name, version)
-        (row,) = list_models(engine, name, version)
-        return model, (
-            f"{engine.url}: {name} v{version}, {row['status']}, held-out ΔE00 "
-            f"{row['held_out_de00']:.3f} when registered ({row['created_at'][:10]})"
-        )
-    if spec in INSTRUMENT_GEOMETRIES:
-        return current_model_and_source(_maybe_engine(database), spec)
-    raise FlakelabError(
-        f"{label}: expected a model file, NAME:VERSION of 'flakelab model list' or an "
-        f"instrument ({', '.join(INSTRUMENT_GEOMETRIES)}), got {spec!r}"
-    )
-
-
-def _name_and_version(spec: str) -> tuple[str, int] | None:
-    """``NAME:VERSION`` of a registered model (``flakelab model list``), else None."""
-    name, colon, version = spec.rpartition(":")
-    return (name, int(version)) if colon and name and version.isdigit() else None
-
-
-VersionArgument = Annotated[
-    str, typer.Argument(help="A registered version NAME:VERSION (see 'flakelab model list').")
-]
-
-
-@model_app.command("promote")
-@reports_errors
-def promote_model(version: VersionArgument, database: DatabaseOption = None) -> None:
-    """Make a registered version the current model by hand, retiring the one before.
-
-    An override of the automatic promotion (a version is promoted when it beats the current
-    one on the same held-out cases): a rollback after a new version misbehaves in the shop."""
-    from flakelab.cases.database import open_database
-    from flakelab.models.registry import promote
-
-    engine = open_database(database, must_exist=True)
-    done = promote(engine, *_registered_version(version))
-    retired = f"; v{done['retired']} retired" if done["retired"] else ""
-    errors.print(f"{engine.url}: {done['name']} v{done['version']} promoted{retired}")
-
-
-@model_app.command("retire")
-@reports_errors
-def retire_model(version: VersionArgument, database: DatabaseOption = None) -> None:
-    """Take a registered version out of use; a promoted one leaves the shipped model current."""
-    from flakelab.cases.database import open_database
-    from flakelab.models.registry import retire
-
-    engine = open_database(database, must_exist=True)
-    done = retire(engine, *_registered_version(version))
-    current = "; the shipped model is current again" if done["was"] == "promoted" else ""
-    errors.print(f"{engine.url}: {done['name']} v{done['version']} retired{current}")
-
-
-def _registered_version(spec: str) -> tuple[str, int]:
-    registered = _name_and_version(spec)
-    if registered is None:
-        raise FlakelabError(f"VERSION: expected NAME:VERSION, such as five-angle:2, got {spec!r}")
-    return registered
-
-
-def _model_card_table(card: dict) -> Table:
-    training = card["training"]
-    cases = card["toner_cases"]
-    rows = {
-        "source": card["source"],
-        "instrument": f"{card['instrument']}: {', '.join(card['geometries'])}",
-        "network": f"{' × '.join(map(str, card['hidden']))} SiLU"
-        + (f", an ensemble of {card['members']}" if card["members"] > 1 else "")
-        + (f", log features (offset {card['log_offset']:g})" if card["log_offset"] else ""),
-        "trained on": f"{card['trained_cases']:,} cases ({card['outliers_dropped']} outliers "
-        f"dropped), data {card['data_hash'][:12]}"
-        if card["trained_cases"] is not None
-        else "not recorded",
-        "training": ", ".join(f"{k} {v}" for k, v in training.items()) or "not recorded",
-        "toners": ", ".join(f"{t} ({cases[t]})" if t in cases else t for t in card["toners"]),
-        "new toners (physics scaling)": ", ".join(card["novel_toners"]) or "none",
-    }
-    if card["adaptation"]:
-        adaptation = card["adaptation"]
-        rows["adapted"] = (
-            f"{adaptation.get('stage', '')}: {adaptation.get('cases')} cases, kept epoch "
-            f"{adaptation.get('kept_epochs')} of {adaptation.get('epochs')}"
-        )
-    if "file" in card:
-        rows["written to"] = card["file"]
-    table = Table(title=f"Model {card['name']}", show_header=False)
-    table.add_column(style="bold")
-    table.add_column(overflow="fold")
-    for key, value in rows.items():
-        table.add_row(key, str(value))
-    return table
-
-
-@model_app.command("evaluate")
-@reports_errors
-def evaluate(
-    cases: CasesArgument,
-    model: ModelFileOption = None,
-    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
-    shop: ShopOption = None,
-    since: SinceOption = None,
-    library: LibraryOption = None,
-    database: DatabaseOption = None,
-    habits: Annotated[
-        Path | None,
-        typer.Option(
-            "--habits",
-            help="A shop's habits file ('flakelab cases habits --out'): its offset is added "
-            "to the predictions, as the matcher aims off for it.",
-        ),
-    ] = None,
-    json_output: JsonOption = False,
-) -> None:
-    """ΔE00 of the model's predictions against the measured spray-outs.
-
-    How the model does on all the cases, on a shop's (--shop), or on those since a date
-    (--since)."""
-    from flakelab.cases.case import cases_at
-    from flakelab.io import read_library
-    from flakelab.models.training import evaluate_model
-
-    lib = read_library(library)
-    forward = chosen_model(model, instrument, database)
-    loaded = load_cases(cases, shop, since)
-    chosen = cases_at(loaded, forward.geometries)
-    if not chosen:
-        raise FlakelabError(
-            f"{cases}: no cases {_which(shop, since)} read at the model's geometries "
-            f"{forward.geometries}"
-        )
-    from flakelab.cli.matching import habits_for
-    from flakelab.match.forward import LearnedForward
-    from flakelab.match.models import forward_for
-    from flakelab.match.search import evaluate_recipes
-
-    matcher = forward_for(forward, lib)
-    data = source_arrays(cases, chosen, lib)
-    shop_habits = habits_for(habits, None, database, matcher)
-
-    def habits_offset(x, R):
-        return shop_habits.offset(lib, x, R, matcher.geometries)
-
-    offset = habits_offset if shop_habits else None
-    families = lib.paint_families(data.x)
-    if isinstance(matcher, LearnedForward) and matcher.novel:
-        report = evaluate_model(
-            forward, data, lambda x: evaluate_recipes(matcher, x), offset, families
-        )
-        novel = np.isin(np.array(lib.names), matcher.novel)
-        report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
-        report["new_toners"] = list(matcher.novel)
-    else:
-        report = evaluate_model(forward, data, lab_offset=offset, families=families)
-    report["model"] = model or f"current {instrument}"
-    report["forward"] = matcher.name
-    report["habits"] = shop_habits and shop_habits.report()
-    report["cases_left_out"] = len(loaded) - len(chosen)
-    report["shop"], report["since"] = shop, since and since.isoformat()
-    if json_output:
-        print(json.dumps(report, indent=2))
-        return
-    if report["cases_left_out"]:
-        errors.print(
-            f"note: {report['cases_left_out']} of the {len(loaded)} cases were not read at the "
-            f"model's geometries and are left out",
-            highlight=False,
-        )
-    rows = {**report["per_geometry"], "all": report}
-    console.print(_de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
-    families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
-    console.print(_de00_table("by paint family", "family (cases)", families, total=False))
-
-
-@model_app.command("adapt")
-@reports_errors
-def adapt(
-    cases: CasesArgument,
-    shop: ShopOption = None,
-    since: SinceOption = None,
-    model: ModelFileOption = None,
-    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
-    library: LibraryOption = None,
-    database: DatabaseOption = None,
-    epochs: Annotated[
-        int | None, typer.Option(min=1, help="Adaptation epochs (default: the paper's 150).")
-    ] = None,
-    validation: Annotated[
-        float,
-        typer.Option(
-            min=0.0,
-            max=0.9,
-            help="Share of the cases held out to choose the epoch; the model keeps its best "
-            "there, never worse than it started (0: run every epoch, as the paper).",
-        ),
-    ] = 0.2,
-    holdout: Annotated[
-        float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
-    ] = 0.1,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the splits and the adaptation.")] = 0,
-    device: DeviceOption = "cpu",
-    out: Annotated[
-        Path | None, typer.Option("--out", "-o", help="Also write the model here.")
-    ] = None,
-    register_model: Annotated[
-        bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
-    ] = True,
-    json_output: JsonOption = False,
-) -> None:
-    """Adapt a trained model (default: the current one) to one shop's cases.
-
-    The training protocol's adaptation phase, for the sprayers and instrument of one shop."""
-    from flakelab.cases.database import open_database
-    from flakelab.io import read_library
-    from flakelab.models.registry import current_model, register
-    from flakelab.models.training import (
-        adapt_model,
-        evaluate_model,
-        outlying_cases,
-        recorded_config,
-    )
-
-    check_output_file(out, "--out")
-    lib = read_library(library)
-    engine = open_database(database) if register_model else _maybe_engine(database)
-    if model:
-        base = named_model(model, database, "--model")[0]
-    else:  # the database the new version goes to holds the current model
-        base = current_model(engine, instrument)
-    chosen = shop_cases(cases, shop, base.geometries, since)
-    novel = set(base.new_toners)
-    known = [c for c in chosen if not novel & set(c.recipe)]
-    if not known:
-        raise FlakelabError(
-            f"{cases}: every one of the {len(chosen)} cases uses a toner the model knows from "
-            f"too few cases ({', '.join(sorted(novel))}); nothing to adapt it to"
-        )
-    config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
-    arrays = source_arrays(cases, known, lib, effect=True)
-    outlying = outlying_cases(base, arrays, config.outlier_threshold)
-    dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
-    data, held_out = split_held_out(arrays.subset(np.flatnonzero(~outlying)), cases, holdout, seed)
-    if epochs is not None:
-        config = replace(config, adapt_epochs=epochs)
-    stage = f"adapt {shop or cases}"
-    with progress_bar(disable=json_output) as bar:
-        total = config.adapt_epochs * base.members  # an ensemble's members adapt side by side
-        task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=total)
-        new, report = adapt_model(
-            base, data, config, stage=stage, progress=lambda k: bar.advance(task, k)
-        )
-    new.info["adaptation"]["shop"] = shop
-    before = evaluate_model(base, held_out)
-    after = evaluate_model(new, held_out)
-    summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
-    summary |= {
-        "model": model or f"current {instrument}",
-        "shop": shop,
-        "left_out_new_toners": len(chosen) - len(known),
-        "outliers": len(dropped),
-        "outlier_case_ids": dropped,
-        "held_out": {
-            "cases": after["cases"],
-            "before": {k: before[k] for k in DE00_STATISTICS},
-            "after": {k: after[k] for k in DE00_STATISTICS},
-        },
-    }
-    if out is not None:
-        write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))
-        summary["file"] = str(out)
-    if register_model:
-        summary["registry"] = register(engine, new, held_out, metrics=summary["held_out"])
-    if json_output:
-        print(json.dumps(summary, indent=2))
-        return
-    title = f"{summary['model']} adapted to {summary['cases']} cases ({stage})"
-    console.print(_de00_table(title, "held out", summary["held_out"], ("before", "after")))
-    if dropped:
-        errors.print(
-            f"[yellow]warning:[/] left out {len(dropped)} case(s) whose error by the model lies "
-            f"more than {config.outlier_threshold:g} robust s.d. above the shop's, likely "
-            f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
-            highlight=False,
-        )
-    kept = summary["kept_epochs"]
-    errors.print(
-        f"kept epoch {kept} of {summary['epochs']}"
-        + (f" (chosen on {summary['validation_cases']} cases)" if validation else ""),
-        highlight=False,
-    )
-    if "registry" in summary:
-        r = summary["registry"]
-        verdict = "promoted" if r["promoted"] else "kept as a candidate (the current one is better)"
-        errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
-
-
-def _de00_table(title: str, label: str, stats: dict, names=None, total: bool = True) -> Table:
-    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
-    where it is the ``total``)."""
-    names = list(stats) if names is None else list(names)
-    table = Table(title=title)
-    for column in (label, "ΔE00 mean", "p95", "max"):
-        table.add_column(column, justify="right")
-    for name in names:
-        v = stats[name]
-        table.add_row(
-            name,
-            *(f"{v[k]:.3f}" for k in DE00_STATISTICS),
-            style="bold" if total and name == names[-1] else None,
-        )
-    return table
-
-
-def learned_forward(library: Path | None, instrument: str, model, database: str | None):
-    """The toner library and the matcher's forward of the model file ``model``, else of the
-    current model for the instrument (the promoted one in the database, else the shipped)."""
-    from flakelab.io import read_library
-
-    lib = read_library(library)
-    return lib, current_forward(lib, instrument, model, database)
-
-
-def current_forward(lib, instrument: str, model, database: str | None):
-    """The matcher's forward for the library ``lib``: of the model file ``model``, else of
-    the current model for the instrument."""
-    from flakelab.match.models import forward_for
-
-    return forward_for(chosen_model(model, instrument, database), lib)
-
-
-def _maybe_engine(database: str | None):
-    """The database named or configured, else the user data folder's own where it exists
-    (where 'flakelab train' registers and promotes by default); none on a fresh machine,
-    whose shipped model needs none."""
-    from flakelab.cases.database import open_database, user_database_file
-
-    if database or os.environ.get("FLAKELAB_DATABASE_URL"):
-        return open_database(database, must_exist=True)
-    return open_database() if user_database_file().is_file() else None

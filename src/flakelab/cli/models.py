@@ -1,0 +1,554 @@
+"""CLI: ``flakelab train`` and ``flakelab model``: training and the model registry."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from flakelab.cli.common import (
+    JsonOption,
+    check_output_file,
+    console,
+    errors,
+    progress_bar,
+    reports_errors,
+)
+from flakelab.cli.sources import (
+    DE00_STATISTICS,
+    CasesArgument,
+    DatabaseOption,
+    DeviceOption,
+    InstrumentOption,
+    LibraryOption,
+    ModelFileOption,
+    ShopOption,
+    SinceOption,
+    chosen_model,
+    de00_table,
+    existing_engine,
+    instrument_key,
+    load_cases,
+    name_and_version,
+    named_model,
+    shop_cases,
+    source_arrays,
+    split_held_out,
+    which_cases,
+)
+from flakelab.core.geometry import (
+    DEFAULT_INSTRUMENT,
+    INSTRUMENT_GEOMETRIES,
+)
+from flakelab.errors import FlakelabError
+from flakelab.io.records import write_atomically
+
+model_app = typer.Typer(
+    help="Learned forward models: list, show, evaluate, adapt to a shop; promote and retire."
+)
+
+
+def train(
+    cases: CasesArgument,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    library: LibraryOption = None,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the model here.")
+    ] = None,
+    database: DatabaseOption = None,
+    register_model: Annotated[
+        bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
+    ] = True,
+    epochs: Annotated[
+        int, typer.Option(min=1, help="Epochs per stage (then as many fine-tuning).")
+    ] = 300,
+    hidden: Annotated[str, typer.Option(help="Hidden layer sizes.")] = "100,100,100",
+    batch_size: Annotated[int, typer.Option(min=1, help="Cases per optimiser step.")] = 128,
+    colour_weight: Annotated[
+        float | None,
+        typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term (default: 0.02)."),
+    ] = None,
+    holdout: Annotated[
+        float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
+    ] = 0.1,
+    adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
+    adapt_epochs: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Epochs of the adaptation (default: the paper's 150).",
+        ),
+    ] = None,
+    adapt_validation: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=0.9,
+            help="Share of the shop's cases held out to choose the adaptation's epoch; the "
+            "model keeps its best there (0: run every epoch, as the paper).",
+        ),
+    ] = 0.2,
+    screening: Annotated[
+        str,
+        typer.Option(
+            help="Outlier screen: sequential (the paper's: one model, four partitions in turn, "
+            "the fifth as yardstick) or cross-validation (five fold models, 5x the work)."
+        ),
+    ] = "sequential",
+    members: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Networks trained side by side on the cleaned cases and averaged (an "
+            "ensemble: less error where the cases are few, and their disagreement reported "
+            "with every prediction; costs that many times the inference).",
+        ),
+    ] = 1,
+    log_offset: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="Also feed the network log(fraction + this): a strong pigment's small "
+            "amounts spread out (0: fractions and amounts per unit effect pigment only).",
+        ),
+    ] = 0.0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
+    device: DeviceOption = "cpu",
+    json_output: JsonOption = False,
+) -> None:
+    """Train the learned forward model with the hybrid paper's protocol.
+
+    It learns from every case read at the instrument's geometries, whatever read it (an
+    MA-T12 case trains the five-angle model too)."""
+    from flakelab.cases.case import cases_at
+    from flakelab.cases.database import open_database
+    from flakelab.io import read_library
+    from flakelab.models.network import LOG_OFFSET_MAX
+    from flakelab.models.registry import register
+    from flakelab.models.training import (
+        SCREENINGS,
+        TrainingConfig,
+        evaluate_model,
+        protocol_epochs,
+        train_protocol,
+    )
+
+    if screening not in SCREENINGS:
+        raise FlakelabError(
+            f"--screening: expected one of {', '.join(SCREENINGS)}, got {screening!r}"
+        )
+    if log_offset > LOG_OFFSET_MAX:
+        raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
+
+    try:
+        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
+    except ValueError:
+        raise FlakelabError(
+            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
+        ) from None
+    check_output_file(out, "--out")
+    # the settings are checked before the cases are read (TrainingConfig refuses its own)
+    config = TrainingConfig(
+        hidden=sizes,
+        epochs=epochs,
+        finetune_epochs=epochs,
+        batch_size=batch_size,
+        screening=screening,
+        adapt_validation=adapt_validation,
+        members=members,
+        log_offset=log_offset,
+        seed=seed,
+        device=device,
+    )
+    if colour_weight is not None:
+        config = replace(config, colour_weight=colour_weight)
+    if adapt_epochs is not None:
+        config = replace(config, adapt_epochs=adapt_epochs)
+    lib = read_library(library)
+    instrument = instrument_key(instrument)
+    geometries = INSTRUMENT_GEOMETRIES[instrument]
+    loaded = load_cases(cases)
+    chosen = cases_at(loaded, geometries)
+    if not chosen:
+        raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
+    data, held_out = (
+        replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
+        for arrays in split_held_out(
+            source_arrays(cases, chosen, lib, effect=True), cases, holdout, seed
+        )
+    )
+    stages = protocol_epochs(config, adapt is not None)
+    with progress_bar(disable=json_output) as bar:
+        task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
+        model, report = train_protocol(
+            data, config, adapt_shop=adapt, progress=lambda k: bar.advance(task, k)
+        )
+    model.info["name"] = instrument
+    metrics = evaluate_model(model, held_out)
+    summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
+    summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
+    summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
+    if out is not None:
+        write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
+        summary["file"] = str(out)
+    if register_model:
+        summary["registry"] = register(
+            open_database(database), model, held_out, metrics=summary["held_out"]
+        )
+    summary["loss_log_tail"] = report["log"][-3:]
+    if json_output:
+        print(json.dumps(summary, indent=2, default=str))
+        return
+    console.print_json(json.dumps(summary, default=str))
+
+
+@model_app.command("list")
+@reports_errors
+def list_models(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
+    """Registered model versions."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import SHIPPED, list_models
+
+    rows = list_models(open_database(database, must_exist=True))
+    promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}
+    current = {name: promoted.get(name, "shipped") for name in sorted({*SHIPPED, *promoted})}
+    if json_output:
+        print(
+            json.dumps({"registered": rows, "shipped": list(SHIPPED), "current": current}, indent=2)
+        )
+        return
+    table = Table(title="Models")
+    for column in ("name", "version", "status", "held-out ΔE00", "toners", "data", "created"):
+        table.add_column(column)
+    for r in rows:
+        table.add_row(
+            r["name"],
+            str(r["version"]),
+            r["status"],
+            f"{r['held_out_de00']:.3f}",
+            str(r["toners"]),
+            r["data_hash"],
+            r["created_at"][:19],
+        )
+    for name in SHIPPED:  # the current model while none of its name is promoted
+        status = "current" if current[name] == "shipped" else "fallback"
+        table.add_row(name, "shipped", status, "", "", "", "")
+    console.print(table)
+
+
+@model_app.command("show")
+@reports_errors
+def show_model(
+    model: Annotated[
+        str,
+        typer.Argument(
+            help="A model file, a registered version NAME:VERSION (see 'flakelab model list'), "
+            "or an instrument (five-angle, ma-t12) for its current model."
+        ),
+    ],
+    database: DatabaseOption = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Also write the model to this file: a registered version taken out of the "
+            "database, for --model or another shop.",
+        ),
+    ] = None,
+    json_output: JsonOption = False,
+) -> None:
+    """What a model is and what it learned from: network, toners and their cases, training."""
+    from flakelab.models.registry import model_card
+
+    check_output_file(out, "--out")
+    chosen, source = named_model(model, database)
+    card = {"source": source, **model_card(chosen)}
+    if out is not None:
+        write_atomically(out, lambda p: p.write_bytes(chosen.to_bytes()))
+        card["file"] = str(out)
+    if json_output:
+        print(json.dumps(card, indent=2, default=str))
+        return
+    console.print(_model_card_table(card))
+
+
+VersionArgument = Annotated[
+    str, typer.Argument(help="A registered version NAME:VERSION (see 'flakelab model list').")
+]
+
+
+@model_app.command("promote")
+@reports_errors
+def promote_model(version: VersionArgument, database: DatabaseOption = None) -> None:
+    """Make a registered version the current model by hand, retiring the one before.
+
+    An override of the automatic promotion (a version is promoted when it beats the current
+    one on the same held-out cases): a rollback after a new version misbehaves in the shop."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import promote
+
+    engine = open_database(database, must_exist=True)
+    done = promote(engine, *_registered_version(version))
+    retired = f"; v{done['retired']} retired" if done["retired"] else ""
+    errors.print(f"{engine.url}: {done['name']} v{done['version']} promoted{retired}")
+
+
+@model_app.command("retire")
+@reports_errors
+def retire_model(version: VersionArgument, database: DatabaseOption = None) -> None:
+    """Take a registered version out of use; a promoted one leaves the shipped model current."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import retire
+
+    engine = open_database(database, must_exist=True)
+    done = retire(engine, *_registered_version(version))
+    current = "; the shipped model is current again" if done["was"] == "promoted" else ""
+    errors.print(f"{engine.url}: {done['name']} v{done['version']} retired{current}")
+
+
+def _registered_version(spec: str) -> tuple[str, int]:
+    registered = name_and_version(spec)
+    if registered is None:
+        raise FlakelabError(f"VERSION: expected NAME:VERSION, such as five-angle:2, got {spec!r}")
+    return registered
+
+
+def _model_card_table(card: dict) -> Table:
+    training = card["training"]
+    cases = card["toner_cases"]
+    rows = {
+        "source": card["source"],
+        "instrument": f"{card['instrument']}: {', '.join(card['geometries'])}",
+        "network": f"{' × '.join(map(str, card['hidden']))} SiLU"
+        + (f", an ensemble of {card['members']}" if card["members"] > 1 else "")
+        + (f", log features (offset {card['log_offset']:g})" if card["log_offset"] else ""),
+        "trained on": f"{card['trained_cases']:,} cases ({card['outliers_dropped']} outliers "
+        f"dropped), data {card['data_hash'][:12]}"
+        if card["trained_cases"] is not None
+        else "not recorded",
+        "training": ", ".join(f"{k} {v}" for k, v in training.items()) or "not recorded",
+        "toners": ", ".join(f"{t} ({cases[t]})" if t in cases else t for t in card["toners"]),
+        "new toners (physics scaling)": ", ".join(card["novel_toners"]) or "none",
+    }
+    if card["adaptation"]:
+        adaptation = card["adaptation"]
+        rows["adapted"] = (
+            f"{adaptation.get('stage', '')}: {adaptation.get('cases')} cases, kept epoch "
+            f"{adaptation.get('kept_epochs')} of {adaptation.get('epochs')}"
+        )
+    if "file" in card:
+        rows["written to"] = card["file"]
+    table = Table(title=f"Model {card['name']}", show_header=False)
+    table.add_column(style="bold")
+    table.add_column(overflow="fold")
+    for key, value in rows.items():
+        table.add_row(key, str(value))
+    return table
+
+
+@model_app.command("evaluate")
+@reports_errors
+def evaluate(
+    cases: CasesArgument,
+    model: ModelFileOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    shop: ShopOption = None,
+    since: SinceOption = None,
+    library: LibraryOption = None,
+    database: DatabaseOption = None,
+    habits: Annotated[
+        Path | None,
+        typer.Option(
+            "--habits",
+            help="A shop's habits file ('flakelab cases habits --out'): its offset is added "
+            "to the predictions, as the matcher aims off for it.",
+        ),
+    ] = None,
+    json_output: JsonOption = False,
+) -> None:
+    """ΔE00 of the model's predictions against the measured spray-outs.
+
+    How the model does on all the cases, on a shop's (--shop), or on those since a date
+    (--since)."""
+    from flakelab.cases.case import cases_at
+    from flakelab.io import read_library
+    from flakelab.models.training import evaluate_model
+
+    lib = read_library(library)
+    forward = chosen_model(model, instrument, database)
+    loaded = load_cases(cases, shop, since)
+    chosen = cases_at(loaded, forward.geometries)
+    if not chosen:
+        raise FlakelabError(
+            f"{cases}: no cases {which_cases(shop, since)} read at the model's geometries "
+            f"{forward.geometries}"
+        )
+    from flakelab.cli.matching import habits_for
+    from flakelab.match.forward import LearnedForward
+    from flakelab.match.models import forward_for
+    from flakelab.match.search import evaluate_recipes
+
+    matcher = forward_for(forward, lib)
+    data = source_arrays(cases, chosen, lib)
+    shop_habits = habits_for(habits, None, database, matcher)
+
+    def habits_offset(x, R):
+        return shop_habits.offset(lib, x, R, matcher.geometries)
+
+    offset = habits_offset if shop_habits else None
+    families = lib.paint_families(data.x)
+    if isinstance(matcher, LearnedForward) and matcher.novel:
+        report = evaluate_model(
+            forward, data, lambda x: evaluate_recipes(matcher, x), offset, families
+        )
+        novel = np.isin(np.array(lib.names), matcher.novel)
+        report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
+        report["new_toners"] = list(matcher.novel)
+    else:
+        report = evaluate_model(forward, data, lab_offset=offset, families=families)
+    report["model"] = model or f"current {instrument}"
+    report["forward"] = matcher.name
+    report["habits"] = shop_habits and shop_habits.report()
+    report["cases_left_out"] = len(loaded) - len(chosen)
+    report["shop"], report["since"] = shop, since and since.isoformat()
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    if report["cases_left_out"]:
+        errors.print(
+            f"note: {report['cases_left_out']} of the {len(loaded)} cases were not read at the "
+            f"model's geometries and are left out",
+            highlight=False,
+        )
+    rows = {**report["per_geometry"], "all": report}
+    console.print(de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
+    families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
+    console.print(de00_table("by paint family", "family (cases)", families, total=False))
+
+
+@model_app.command("adapt")
+@reports_errors
+def adapt(
+    cases: CasesArgument,
+    shop: ShopOption = None,
+    since: SinceOption = None,
+    model: ModelFileOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    library: LibraryOption = None,
+    database: DatabaseOption = None,
+    epochs: Annotated[
+        int | None, typer.Option(min=1, help="Adaptation epochs (default: the paper's 150).")
+    ] = None,
+    validation: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=0.9,
+            help="Share of the cases held out to choose the epoch; the model keeps its best "
+            "there, never worse than it started (0: run every epoch, as the paper).",
+        ),
+    ] = 0.2,
+    holdout: Annotated[
+        float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
+    ] = 0.1,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the splits and the adaptation.")] = 0,
+    device: DeviceOption = "cpu",
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Also write the model here.")
+    ] = None,
+    register_model: Annotated[
+        bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
+    ] = True,
+    json_output: JsonOption = False,
+) -> None:
+    """Adapt a trained model (default: the current one) to one shop's cases.
+
+    The training protocol's adaptation phase, for the sprayers and instrument of one shop."""
+    from flakelab.cases.database import open_database
+    from flakelab.io import read_library
+    from flakelab.models.registry import current_model, register
+    from flakelab.models.training import (
+        adapt_model,
+        evaluate_model,
+        outlying_cases,
+        recorded_config,
+    )
+
+    check_output_file(out, "--out")
+    lib = read_library(library)
+    engine = open_database(database) if register_model else existing_engine(database)
+    if model:
+        base = named_model(model, database, "--model")[0]
+    else:  # the database the new version goes to holds the current model
+        base = current_model(engine, instrument)
+    chosen = shop_cases(cases, shop, base.geometries, since)
+    novel = set(base.new_toners)
+    known = [c for c in chosen if not novel & set(c.recipe)]
+    if not known:
+        raise FlakelabError(
+            f"{cases}: every one of the {len(chosen)} cases uses a toner the model knows from "
+            f"too few cases ({', '.join(sorted(novel))}); nothing to adapt it to"
+        )
+    config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
+    arrays = source_arrays(cases, known, lib, effect=True)
+    outlying = outlying_cases(base, arrays, config.outlier_threshold)
+    dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
+    data, held_out = split_held_out(arrays.subset(np.flatnonzero(~outlying)), cases, holdout, seed)
+    if epochs is not None:
+        config = replace(config, adapt_epochs=epochs)
+    stage = f"adapt {shop or cases}"
+    with progress_bar(disable=json_output) as bar:
+        total = config.adapt_epochs * base.members  # an ensemble's members adapt side by side
+        task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=total)
+        new, report = adapt_model(
+            base, data, config, stage=stage, progress=lambda k: bar.advance(task, k)
+        )
+    new.info["adaptation"]["shop"] = shop
+    before = evaluate_model(base, held_out)
+    after = evaluate_model(new, held_out)
+    summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
+    summary |= {
+        "model": model or f"current {instrument}",
+        "shop": shop,
+        "left_out_new_toners": len(chosen) - len(known),
+        "outliers": len(dropped),
+        "outlier_case_ids": dropped,
+        "held_out": {
+            "cases": after["cases"],
+            "before": {k: before[k] for k in DE00_STATISTICS},
+            "after": {k: after[k] for k in DE00_STATISTICS},
+        },
+    }
+    if out is not None:
+        write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))
+        summary["file"] = str(out)
+    if register_model:
+        summary["registry"] = register(engine, new, held_out, metrics=summary["held_out"])
+    if json_output:
+        print(json.dumps(summary, indent=2))
+        return
+    title = f"{summary['model']} adapted to {summary['cases']} cases ({stage})"
+    console.print(de00_table(title, "held out", summary["held_out"], ("before", "after")))
+    if dropped:
+        errors.print(
+            f"[yellow]warning:[/] left out {len(dropped)} case(s) whose error by the model lies "
+            f"more than {config.outlier_threshold:g} robust s.d. above the shop's, likely "
+            f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
+            highlight=False,
+        )
+    kept = summary["kept_epochs"]
+    errors.print(
+        f"kept epoch {kept} of {summary['epochs']}"
+        + (f" (chosen on {summary['validation_cases']} cases)" if validation else ""),
+        highlight=False,
+    )
+    if "registry" in summary:
+        r = summary["registry"]
+        verdict = "promoted" if r["promoted"] else "kept as a candidate (the current one is better)"
+        errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)

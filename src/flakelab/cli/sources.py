@@ -1,0 +1,288 @@
+"""CLI: what the case and model commands share: their options, and where they read
+cases and models from (a case file or database, the current or a named model)."""
+
+from __future__ import annotations
+
+import os
+from datetime import datetime
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
+from flakelab.errors import FlakelabError
+
+DatabaseOption = Annotated[
+    str | None,
+    typer.Option(
+        "--database",
+        "-d",
+        help="Database URL or SQLite file (default: FLAKELAB_DATABASE_URL or the "
+        "user data folder).",
+    ),
+]
+
+
+InstrumentOption = Annotated[
+    str, typer.Option("--instrument", "-i", help="Geometry set: five-angle, ma-t12, byk-mac-i.")
+]
+
+
+KeptGeometriesOption = Annotated[
+    str | None,
+    typer.Option(
+        "--instrument",
+        "-i",
+        help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
+        show_default="every geometry the car's reading and the spray-out's share",
+    ),
+]
+
+
+LibraryOption = Annotated[
+    Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
+]
+
+
+DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
+
+
+"""What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
+
+
+CasesArgument = Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")]
+
+
+ShopOption = Annotated[
+    str | None, typer.Option(help="Only this shop's cases (default: every case given).")
+]
+
+
+SinceOption = Annotated[
+    datetime | None,
+    typer.Option(
+        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
+        help="Only cases made on or after this date (UTC), e.g. since the shop's new gun.",
+    ),
+]
+
+
+StartOption = Annotated[
+    datetime | None,
+    typer.Option(
+        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
+        help="Date and time (UTC) of the first generated case.",
+        show_default="2026-01-01",
+    ),
+]
+
+
+ModelFileOption = Annotated[
+    str | None,
+    typer.Option(
+        "--model",
+        "-m",
+        help="Model file, or a registered version NAME:VERSION (default: current).",
+    ),
+]
+
+
+def _checked_device(name: str) -> str:
+    """``--device`` read before any work, so that a GPU this machine lacks is named at once."""
+    from flakelab.models.network import ModelError
+    from flakelab.models.training import training_device
+
+    try:
+        training_device(name)
+    except ModelError as error:
+        raise typer.BadParameter(str(error).removeprefix("device: ")) from None
+    return name
+
+
+DeviceOption = Annotated[
+    str,
+    typer.Option(
+        help="Where the networks train: cpu, cuda, cuda:N, mps, or auto (a GPU if torch sees "
+        "one). The seed gives the same batches and starting weights on every device; the "
+        "trained weights agree to float rounding.",
+        callback=_checked_device,
+    ),
+]
+
+
+def source_arrays(source, cases: list, library, *, effect: bool = False):
+    """The training arrays of ``cases`` read from ``source``; a case the library cannot
+    encode (a toner it lacks) is named with the file or database it came from."""
+    from flakelab.models.network import ModelError
+    from flakelab.models.training import case_arrays
+
+    try:
+        return case_arrays(cases, library.names, library.effect if effect else None)
+    except ModelError as error:
+        raise FlakelabError(f"{source}: {error}") from None
+
+
+def split_held_out(data, source: str, holdout: float, seed: int):
+    """Training and held-out cases of the arrays ``data``, each held out with probability
+    ``holdout`` (seeded), both non-empty."""
+    n = data.x.shape[0]
+    held = np.random.default_rng(seed).random(n) < holdout
+    if held.all() or not held.any():
+        raise FlakelabError(f"{source}: {n} cases are too few to hold out {holdout:.0%} of them")
+    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
+
+
+def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
+    """The cases of ``shop`` made at or after ``since`` (None: any shop, any time) in a
+    CSV/CxF file, or in a database (URL or .db/.sqlite file), which chooses them itself."""
+    from flakelab.cases.case import select_cases
+    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.exchange import is_case_file, read_cases
+
+    path = Path(source)
+    if is_case_file(path):
+        return select_cases(read_cases(path), shop=shop, since=since)
+    if "://" not in source and not path.exists():
+        raise FlakelabError(f"{source}: no such case file or database")
+    return list(iter_cases(open_database(source, must_exist=True), shop=shop, since=since))
+
+
+def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
+    """Mass fractions in ``library`` order of a recipe file's ``grams``; a toner the library
+    lacks is named with the file."""
+    from flakelab.library import LibraryError
+
+    try:
+        return library.fractions(grams)
+    except LibraryError as error:
+        raise FlakelabError(f"{path}: {error}") from None
+
+
+def shop_cases(source: str, shop: str | None, geometries, since: datetime | None = None) -> list:
+    """The cases of ``shop`` (None: every shop) in ``source`` read at ``geometries`` (among
+    others: each is restricted to them), made at or after ``since`` (None: any time; without a
+    zone: UTC)."""
+    from flakelab.cases.case import cases_at
+
+    chosen = cases_at(load_cases(source, shop, since), geometries)
+    if not chosen:
+        raise FlakelabError(
+            f"{source}: no cases {which_cases(shop, since)} read at the model's "
+            f"geometries {tuple(geometries)}"
+        )
+    return chosen
+
+
+def instrument_key(name: str) -> str:
+    """``--instrument``'s key of :data:`INSTRUMENT_GEOMETRIES`, or an error naming the option."""
+    try:
+        return instrument_name(name)
+    except ValueError as error:
+        raise FlakelabError(f"--instrument: {error}") from None
+
+
+def which_cases(shop: str | None, since: datetime | None) -> str:
+    """The cases ``shop`` and ``since`` choose, in words for a message."""
+    whose = f"from shop {shop!r}" if shop else "from any shop"
+    return whose + (f" since {since:%Y-%m-%d %H:%M}" if since else "")
+
+
+def since_option(when: datetime) -> str:
+    """The ``--since`` that reads the cases made at ``when`` and after."""
+    return f"--since {when:%Y-%m-%dT%H:%M:%S}"
+
+
+def chosen_model(model: str | Path | None, instrument: str, database: str | None):
+    """The model ``--model`` names (:func:`named_model`), else the instrument's current one
+    (the promoted one in the database, else the shipped)."""
+    from flakelab.models.registry import current_model
+
+    if model is None:
+        return current_model(existing_engine(database), instrument)
+    return named_model(str(model), database, "--model")[0]
+
+
+def named_model(spec: str, database: str | None, label: str = "MODEL"):
+    """The model ``spec`` names, a file, a registered version ``NAME:VERSION`` or an
+    instrument's current model, and where it was found."""
+    from flakelab.cases.database import open_database
+    from flakelab.models.registry import (
+        current_model_and_source,
+        list_models,
+        load_model_file,
+        registered_model,
+    )
+
+    path = Path(spec)
+    if path.exists() or path.suffix == ".pt":
+        return load_model_file(path), str(path)
+    registered = name_and_version(spec)
+    if registered:
+        engine = open_database(database, must_exist=True)
+        name, version = registered
+        model = registered_model(engine, name, version)
+        (row,) = list_models(engine, name, version)
+        return model, (
+            f"{engine.url}: {name} v{version}, {row['status']}, held-out ΔE00 "
+            f"{row['held_out_de00']:.3f} when registered ({row['created_at'][:10]})"
+        )
+    if spec in INSTRUMENT_GEOMETRIES:
+        return current_model_and_source(existing_engine(database), spec)
+    raise FlakelabError(
+        f"{label}: expected a model file, NAME:VERSION of 'flakelab model list' or an "
+        f"instrument ({', '.join(INSTRUMENT_GEOMETRIES)}), got {spec!r}"
+    )
+
+
+def name_and_version(spec: str) -> tuple[str, int] | None:
+    """``NAME:VERSION`` of a registered model (``flakelab model list``), else None."""
+    name, colon, version = spec.rpartition(":")
+    return (name, int(version)) if colon and name and version.isdigit() else None
+
+
+def de00_table(title: str, label: str, stats: dict, names=None, total: bool = True) -> Table:
+    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
+    where it is the ``total``)."""
+    names = list(stats) if names is None else list(names)
+    table = Table(title=title)
+    for column in (label, "ΔE00 mean", "p95", "max"):
+        table.add_column(column, justify="right")
+    for name in names:
+        v = stats[name]
+        table.add_row(
+            name,
+            *(f"{v[k]:.3f}" for k in DE00_STATISTICS),
+            style="bold" if total and name == names[-1] else None,
+        )
+    return table
+
+
+def learned_forward(library: Path | None, instrument: str, model, database: str | None):
+    """The toner library and the matcher's forward of the model file ``model``, else of the
+    current model for the instrument (the promoted one in the database, else the shipped)."""
+    from flakelab.io import read_library
+
+    lib = read_library(library)
+    return lib, current_forward(lib, instrument, model, database)
+
+
+def current_forward(lib, instrument: str, model, database: str | None):
+    """The matcher's forward for the library ``lib``: of the model file ``model``, else of
+    the current model for the instrument."""
+    from flakelab.match.models import forward_for
+
+    return forward_for(chosen_model(model, instrument, database), lib)
+
+
+def existing_engine(database: str | None):
+    """The database named or configured, else the user data folder's own where it exists
+    (where 'flakelab train' registers and promotes by default); none on a fresh machine,
+    whose shipped model needs none."""
+    from flakelab.cases.database import open_database, user_database_file
+
+    if database or os.environ.get("FLAKELAB_DATABASE_URL"):
+        return open_database(database, must_exist=True)
+    return open_database() if user_database_file().is_file() else None
