@@ -364,3 +364,23 @@ def test_help_shows_the_matchers_defaults_without_importing_torch():
     ):
         row = re.split(r"\n│\s+-", done.stdout.split(option, 1)[1], maxsplit=1)[0]
         assert f"[default: {value}]" in row, row
+
+
+def test_every_help_paragraph_prints_on_one_line_however_wide_the_terminal():
+    """Typer's Rich help kept a docstring's line breaks after its first paragraph, so a
+    terminal wider or narrower than the source showed ragged lines ("... in pouring order,
+    and the" / "ΔE00 between ..."): each paragraph is one line once the terminal holds it."""
+    import typer.main
+    from typer.testing import CliRunner
+
+    from flakelab.cli.main import app
+
+    runner = CliRunner()
+    for path, command in _commands(typer.main.get_command(app)):
+        paragraphs = [p for p in (command.help or "").split("\n\n") if p][1:]
+        if not paragraphs:
+            continue
+        shown = runner.invoke(app, [*path, "--help"], env={"COLUMNS": "2000"}).output
+        lines = [" ".join(line.split()) for line in shown.splitlines()]
+        for paragraph in paragraphs:
+            assert " ".join(paragraph.split()) in lines, (" ".join(path), paragraph)

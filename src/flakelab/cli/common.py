@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import inspect
 import os
 import signal
 import sys
@@ -280,3 +281,15 @@ def texture_table(
     if limits:
         table.add_row("limit ±", *(f"{limits[k]:.2f}" if k in limits else "" for k in delta))
     return table
+
+
+def reflow_help(app: typer.Typer) -> None:
+    """Give each command of ``app`` and of its groups its docstring as help, every paragraph
+    on one line: Typer's Rich help keeps the docstring's line breaks after the first
+    paragraph, and a terminal narrower or wider than the source then shows ragged lines."""
+    for info in app.registered_commands:
+        if info.help is None and info.callback is not None:
+            paragraphs = inspect.cleandoc(info.callback.__doc__ or "").split("\n\n")
+            info.help = "\n\n".join(" ".join(p.split("\n")) for p in paragraphs)
+    for group in app.registered_groups:
+        reflow_help(group.typer_instance)

@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     lights_option,
     progress_bar,
     read_sample,
+    reflow_help,
     reports_errors,
     texture_table,
 )
@@ -379,6 +380,9 @@ def main(
     if version:
         print(f"flakelab {__version__}")
         raise typer.Exit()
+
+
+reflow_help(app)  # after every command and group is registered
 
 
 def run() -> None:
