@@ -8,11 +8,11 @@ manifest of instrument files for `cases record-all`, the shipped model) and dama
 MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short);
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
 stray characters; JSON files by replacing or deleting one value anywhere in them (a target
-for the match and a spray-out for the correction, half the time, by values still readable
-but odd); a model file by editing its description, standardisation or weights.
+for the match and a spray-out for the correction and for `cases record`, half the time, by
+values still readable but odd); a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,sprayout,recipe,library,
-        habits,habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200] [--seed 0]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,sprayout,record,recipe,
+        library,habits,habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200] [--seed 0]
         [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
@@ -225,6 +225,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "sprayout": (work / "sprayout.json",
                      lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
                                 str(p), "--extra-toners", "0"]),
+        # the same recorded as a shop's case, and checked against its recipe's prediction
+        "record": (work / "sprayout.json",
+                   lambda p: ["cases", "record", str(target), "--recipe", str(recipe),
+                              "--sprayed", str(p), "-d", "sqlite://"]),
         "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
         "library": (work / "library.json",
                     lambda p: ["weigh", str(recipe), "--library", str(p), "--physics"]),
@@ -271,7 +275,7 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
             damaged.write_bytes(damage_model(data, rng))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
-        elif kind in ("target", "sprayout") and rng.random() < 0.5:
+        elif kind in ("target", "sprayout", "record") and rng.random() < 0.5:
             damaged.write_text(json.dumps(odd_target(json.loads(data), rng)))
         elif good.suffix == ".json" and rng.random() < 0.7:
             damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))
@@ -295,8 +299,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--kinds",
-        default="cxf,csv,json,xlsx,target,sprayout,recipe,library,habits,habits-match,tolerance,"
-        "cases,cases-cxf,manifest,model",
+        default="cxf,csv,json,xlsx,target,sprayout,record,recipe,library,habits,habits-match,"
+        "tolerance,cases,cases-cxf,manifest,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)
