@@ -115,8 +115,13 @@ def cases_from_manifest(
     path = Path(path)
     files: dict[Path, list[Measurement]] = {}  # a car's file serves several rows, read once
 
+    def named_file(where: str, cell: str) -> Path:
+        if "\x00" in cell:  # the operating system's own words are "embedded null byte"
+            raise ManifestError(f"{where}: {cell!r}: a file name cannot hold a NUL character")
+        return path.parent / cell
+
     def reading(where: str, file: str, sample: str) -> Measurement:
-        name = _file(where, file)
+        name = named_file(where, file)
         try:
             if name not in files:
                 files[name] = read_measurements(name)
@@ -124,18 +129,13 @@ def cases_from_manifest(
         except (FlakelabError, OSError, KeyError, ValueError) as error:
             raise ManifestError(f"{where}: {error}") from None
 
-    def _file(where: str, cell: str) -> Path:
-        if "\x00" in cell:  # the operating system's own words are "embedded null byte"
-            raise ManifestError(f"{where}: {cell!r}: a file name cannot hold a NUL character")
-        return path.parent / cell
-
     cases: list[tuple[int, Case]] = []
     first_row: dict[str, int] = {}
     for number, cells in read_manifest(path) if rows is None else rows:
         where = f"{path}: row {number}"
         target = reading(f"{where}: target", cells["target"], cells.get("sample", ""))
         sprayed = reading(f"{where}: sprayed", cells["sprayed"], cells.get("sprayed_sample", ""))
-        recipe = _file(f"{where}: recipe", cells["recipe"])
+        recipe = named_file(f"{where}: recipe", cells["recipe"])
         try:
             grams = read_recipe(recipe)
             fractions = library.fractions(grams)
