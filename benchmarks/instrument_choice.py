@@ -31,6 +31,7 @@ import sys
 import time
 
 import numpy as np
+from scipy import stats
 
 from flakelab.cli.common import progress_bar
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -145,6 +146,10 @@ def main(argv: list[str] | None = None) -> int:
         if (~said_fail).any()
         else None,
         "correlation": float(np.corrcoef(predicted, sprayed_others)[0, 1]),
+        # Pearson's follows the few largest ΔE00; the ranks say how well the order holds
+        "rank_correlation": float(stats.spearmanr(predicted, sprayed_others)[0]),
+        "predicted_worst_de00": np.round(predicted, 3).tolist(),
+        "sprayed_worst_de00": np.round(sprayed_others, 3).tolist(),
     }
     base, chosen = report["five-angle"], report["ma-t12"]
     report["ratio_first_shot_12"] = (
@@ -179,7 +184,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{check['sprayed_fail_share']:.3f} fail there: "
           f"{check['sprayed_fail_when_predicted_fail']} of those flagged, "
           f"{check['sprayed_fail_when_predicted_pass']} of the others; "
-          f"correlation {check['correlation']:.2f}")  # fmt: skip
+          f"correlation {check['correlation']:.2f}, of ranks "
+          f"{check['rank_correlation']:.2f}")  # fmt: skip
     return 0
 
 

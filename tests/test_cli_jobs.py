@@ -469,6 +469,37 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     assert run.returncode == 2 and f"every one of the {len(made)} cases uses a toner" in run.stderr
 
 
+def test_an_imported_history_names_its_likely_mix_ups(tmp_path, cli):
+    """A shop's history with one white panel among 40 generated spray-outs (some with a new
+    toner, which the hybrid predicts): the import stores all of them and names that one."""
+    from flakelab.cases.exchange import write_cases
+    from flakelab.cases.generator import World
+    from flakelab.io import read_library
+    from flakelab.io.library_file import demo_library_path
+
+    cases = [c for batch in World(read_library(None), "ma-t12").cases(40, seed=12) for c in batch]
+    cases[7] = replace(cases[7], sprayout=np.full_like(cases[7].sprayout, 0.85))
+    history = tmp_path / "history.cxf"
+    write_cases(cases, history)
+    run = cli("cases", "import", str(history), "-d", str(tmp_path / "a.db"))
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 0 and "imported 40 cases" in said
+    assert "1 spray-out(s) further than ΔE00 5 from what their recipe predicts" in said
+    assert cases[7].case_id in said
+    run = cli("cases", "import", str(history), "-d", str(tmp_path / "b.db"), "--no-check")
+    assert run.returncode == 0 and "further than" not in run.stderr
+    # a library without the history's toners cannot check it, and says why
+    library = json.loads(demo_library_path().read_text())
+    library["name"] = "other"
+    library["toners"] = library["toners"][:-1]
+    (tmp_path / "other.json").write_text(json.dumps(library))
+    run = cli("cases", "import", str(history), "-d", str(tmp_path / "c.db"),
+              "--library", str(tmp_path / "other.json"))  # fmt: skip
+    assert run.returncode == 0 and "not checked against a model: library 'other'" in " ".join(
+        run.stderr.split()
+    )
+
+
 def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cli):
     cases, habits = str(tmp_path / "cases.db"), tmp_path / "habits.json"
     run = cli("cases", "generate", "--n", "300", "--seed", "23", "--shop", "shop A",

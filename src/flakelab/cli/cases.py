@@ -147,12 +147,24 @@ def _store_generated(engine, batch: list, stored: int) -> None:
 def import_cases(
     source: Annotated[Path, typer.Argument(help="CSV or CxF3 case history.")],
     database: DatabaseOption = None,
+    library: LibraryOption = None,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check/--no-check",
+            help="Check each spray-out against its recipe's prediction by the current model "
+            "and name the likely mix-ups, as 'cases record' does.",
+        ),
+    ] = True,
 ) -> None:
     """Import a shop's case history into the database (all cases or none)."""
     from flakelab.cases.case import CaseError
     from flakelab.cases.database import add_cases, open_database
     from flakelab.cases.exchange import read_cases
+    from flakelab.io import read_library
+    from flakelab.match.correction import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
 
+    lib = read_library(library) if check else None
     cases = read_cases(source)
     engine = open_database(database)
     try:
@@ -160,6 +172,21 @@ def import_cases(
     except CaseError as error:  # it names the case stored already
         raise FlakelabError(f"{source}: {error}") from None
     errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
+    if lib is None:
+        return
+    checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
+    mismatched = [c.case_id for c, k in zip(cases, checks, strict=True) if is_mismatched(k)]
+    if mismatched:
+        shown = ", ".join(mismatched[:5]) + (" …" if len(mismatched) > 5 else "")
+        errors.print(
+            f"[yellow]warning:[/] {len(mismatched)} spray-out(s) further than ΔE00 "
+            f"{SPRAYOUT_MISMATCH:g} from what their recipe predicts, likely mix-ups (another "
+            f"panel, recipe or target): {shown}; 'cases habits' leaves them out, 'cases "
+            "remove' removes them",
+            highlight=False,
+        )
+    elif unchecked:
+        errors.print(f"note: not checked against a model: {unchecked}", highlight=False)
 
 
 @cases_app.command("record")

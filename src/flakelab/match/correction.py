@@ -214,7 +214,10 @@ def recorded_checks(
         for shop in sorted({cases[i].shop for i in rows}):
             mine = [i for i in rows if cases[i].shop == shop]
             habits = _stored_habits(engine, shop, forward.model_id)
-            worst, where = recorded_mismatch(forward, library, [cases[i] for i in mine], habits)
+            try:
+                worst, where = recorded_mismatch(forward, library, [cases[i] for i in mine], habits)
+            except ModelError as error:  # a toner the library lacks
+                return checks, str(error)
             for i, de, g in zip(mine, worst, where, strict=True):
                 checks[i] = {
                     "de00": round(float(de), 3),
