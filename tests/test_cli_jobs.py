@@ -420,6 +420,11 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     check = json.loads(run.stdout)["from_prediction"]
     assert check["de00"] > 50 and check["model"].startswith("demo-five-angle")
     assert check["habits"] is False  # none stored for the shop yet
+    # and the shop finds it later among all its cases, the only likely mix-up of the 61
+    run = cli("cases", "list", "-d", cases, "--last", "100", "--mix-ups", "--json")
+    assert run.returncode == 0, run.stderr
+    assert [row["case_id"] for row in json.loads(run.stdout)["cases"]] == [recorded]
+    assert json.loads(run.stdout)["cases"][0]["from_prediction"] == check
     run = cli("cases", "habits", cases, "--shop", "shop A", "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)

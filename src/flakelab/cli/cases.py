@@ -11,6 +11,7 @@ from typing import Annotated
 
 import numpy as np
 import typer
+from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
@@ -419,15 +420,13 @@ def record_all(
     for column in ("case", "shop", "outcome", "worst ΔE00", "from prediction", "instrument"):
         table.add_column(column, no_wrap=column != "shop")
     for row in recorded:
-        check = row["from_prediction"]
-        shown = "" if check is None else f"{check['de00']:.2f} {check['geometry']}"
         table.add_row(
             str(row["row"]),
             row["case_id"],
             row["shop"],
             row["outcome"],
             f"{row['worst_de00']:.2f} {row['worst_geometry']}",
-            f"[red]{shown}[/]" if is_mismatched(check) else shown,
+            _shown_check(row["from_prediction"]),
             row["instrument"],
         )
     console.print(table)
@@ -453,13 +452,30 @@ def record_all(
 def list_cases(
     shop: Annotated[str | None, typer.Option(help="Only this shop's cases.")] = None,
     last: Annotated[int, typer.Option(min=1, help="How many of the newest cases.")] = 20,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Also each spray-out's worst ΔE00 from its recipe's prediction by the current "
+            "model (with the shop's stored habits), as 'cases record' checks it.",
+        ),
+    ] = False,
+    mix_ups: Annotated[
+        bool,
+        typer.Option(
+            "--mix-ups",
+            help="Only the likely mix-ups among them: spray-outs further than SPRAYOUT_MISMATCH "
+            "from their recipe's prediction (checks them).",
+        ),
+    ] = False,
+    library: LibraryOption = None,
     database: DatabaseOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """The newest cases: outcome, recipe and each spray-out's worst ΔE00 from its target.
 
     Newest first, with when each was made, its id (for 'cases remove') and the geometry of
-    the worst ΔE00."""
+    the worst ΔE00; with --check, how far each spray-out lies from its recipe's prediction."""
     from flakelab.cases.case import worst_differences
     from flakelab.cases.database import latest_cases, open_database
 
@@ -480,18 +496,42 @@ def list_cases(
         }
         for c, de, g in zip(cases, worst, where, strict=True)
     ]
+    shops = sorted({c.shop for c in cases})
+    checked, unchecked = check or mix_ups, None
+    if checked and cases:
+        from flakelab.io import read_library
+        from flakelab.match.correction import is_mismatched, recorded_checks
+
+        checks, unchecked = recorded_checks(cases, read_library(library), engine)
+        for row, found in zip(rows, checks, strict=True):
+            row["from_prediction"] = found
+        if unchecked and mix_ups:
+            raise FlakelabError(f"--mix-ups: not checked against a model: {unchecked}")
+        if mix_ups:
+            rows = [row for row in rows if is_mismatched(row["from_prediction"])]
     if json_output:
-        print(json.dumps({"database": str(engine.url), "cases": rows}, indent=2))
+        report = {"database": str(engine.url), "cases": rows}
+        if checked:
+            report["from_prediction_unchecked"] = unchecked
+        print(json.dumps(report, indent=2))
         return
-    shops = sorted({row["shop"] for row in rows})
     whose = f"{shops[0]!r}" if len(shops) == 1 else "every shop"
     if not rows:
-        errors.print(f"no cases of {shop or 'any shop'!r} in {engine.url}", highlight=False)
+        which = "likely mix-ups among the cases" if cases else "cases"
+        errors.print(f"no {which} of {shop or 'any shop'!r} in {engine.url}", highlight=False)
         return
-    table = Table(title=f"Newest {len(rows)} cases of {whose} in {engine.url}")
+    title = "Likely mix-ups among the newest" if mix_ups else "Newest"
+    table = Table(
+        title=f"{title} {len(cases)} cases of {whose} in {engine.url}",
+        box=box.SIMPLE_HEAD,
+        collapse_padding=True,
+    )
     for column in ("made", "case", "outcome", "worst ΔE00"):
         table.add_column(column, no_wrap=True, justify="right" if "ΔE" in column else "left")
-    table.add_column("recipe (share)")
+    if checked:  # in the recipe's place, which --json keeps
+        table.add_column("from prediction", no_wrap=True, justify="right")
+    else:
+        table.add_column("recipe (share)")
     if len(shops) > 1:
         table.add_column("shop")
     for row in rows:
@@ -502,12 +542,28 @@ def list_cases(
             row["case_id"],
             row["outcome"],
             f"{row['worst_de00']:.2f} {row['worst_geometry']}",
-            recipe + (f" +{len(shares) - 2}" if len(shares) > 2 else ""),
         ]
+        if checked:
+            cells.append(_shown_check(row.get("from_prediction")))
+        else:
+            cells.append(recipe + (f" +{len(shares) - 2}" if len(shares) > 2 else ""))
         if len(shops) > 1:
             cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
         table.add_row(*cells)
     console.print(table)
+    if unchecked:
+        errors.print(f"note: not checked against a model: {unchecked}", highlight=False)
+
+
+def _shown_check(check: dict | None) -> str:
+    """A :func:`~flakelab.match.correction.recorded_checks` entry for a table: the worst ΔE00
+    and its geometry, red beyond SPRAYOUT_MISMATCH; empty where no model reads the case."""
+    from flakelab.match.correction import is_mismatched
+
+    if check is None:
+        return ""
+    shown = f"{check['de00']:.2f} {check['geometry']}"
+    return f"[red]{shown}[/]" if is_mismatched(check) else shown
 
 
 @cases_app.command("remove")
