@@ -30,7 +30,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library, write_measurements, write_recipe
-from flakelab.match.correction import is_mismatched, recorded_checks
+from flakelab.match.mixups import is_mismatched, recorded_checks
 from timing import peak_rss_mb, print_report
 
 

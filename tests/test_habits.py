@@ -635,13 +635,13 @@ def test_recorded_sprayouts_are_checked_against_their_recipes_with_the_shops_sto
     """What 'cases record' tells a colorist: a habits shop's own spray-outs lie within
     SPRAYOUT_MISMATCH of their recipes' prediction once its stored habits move it, a white
     panel recorded as one does not; a library no model knows is named, not checked."""
-    from flakelab.match.correction import (
+    from flakelab.match.habits import save_habits
+    from flakelab.match.mixups import (
         SPRAYOUT_MISMATCH,
         is_mismatched,
         recorded_checks,
         sprayout_mismatch,
     )
-    from flakelab.match.habits import save_habits
 
     library, forward, _ = shipped
     world = shop_world(shipped, habits=True)

@@ -163,7 +163,7 @@ def import_cases(
     from flakelab.cases.database import add_cases, open_database
     from flakelab.cases.exchange import read_cases
     from flakelab.io import read_library
-    from flakelab.match.correction import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
 
     lib = read_library(library) if check else None
     cases = read_cases(source)
@@ -237,7 +237,7 @@ def record_case(
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
     from flakelab.io import read_library, read_recipe, read_tolerance
-    from flakelab.match.correction import is_mismatched, mismatch_message, recorded_checks
+    from flakelab.match.mixups import is_mismatched, mismatch_message, recorded_checks
 
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
@@ -358,7 +358,7 @@ def record_all(
     from flakelab.cases.database import add_cases, count_cases, existing_case_ids, open_database
     from flakelab.cases.manifest import cases_from_manifest, read_manifest
     from flakelab.io import read_library, read_tolerance
-    from flakelab.match.correction import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
 
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
@@ -500,7 +500,7 @@ def list_cases(
     checked, unchecked = check or mix_ups, None
     if checked and cases:
         from flakelab.io import read_library
-        from flakelab.match.correction import is_mismatched, recorded_checks
+        from flakelab.match.mixups import is_mismatched, recorded_checks
 
         checks, unchecked = recorded_checks(cases, read_library(library), engine)
         for row, found in zip(rows, checks, strict=True):
@@ -556,9 +556,9 @@ def list_cases(
 
 
 def _shown_check(check: dict | None) -> str:
-    """A :func:`~flakelab.match.correction.recorded_checks` entry for a table: the worst ΔE00
+    """A :func:`~flakelab.match.mixups.recorded_checks` entry for a table: the worst ΔE00
     and its geometry, red beyond SPRAYOUT_MISMATCH; empty where no model reads the case."""
-    from flakelab.match.correction import is_mismatched
+    from flakelab.match.mixups import is_mismatched
 
     if check is None:
         return ""
@@ -713,7 +713,6 @@ def habits(
     Each as the shop's mean against the model's cases, read through the physics of
     application."""
     from flakelab.cases.database import open_database
-    from flakelab.match.correction import SPRAYOUT_MISMATCH
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
         PRIOR_SD,
@@ -723,6 +722,7 @@ def habits(
         screened_habits,
         write_habits,
     )
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
 
     check_figure_file(plot, "--plot")
     check_output_file(out, "--out")

@@ -66,12 +66,8 @@ from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
-from flakelab.match.correction import (
-    NOISE_SD,
-    PERSISTENT_SD,
-    SPRAYOUT_MISMATCH,
-    sprayout_mismatch,
-)
+from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
+from flakelab.match.mixups import SPRAYOUT_MISMATCH, sprayout_mismatch
 from flakelab.match.search import evaluate_recipes
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
 
@@ -254,7 +250,7 @@ def screened_habits(
 ) -> tuple[ShopHabits, NDArray]:
     """:func:`estimate_habits` of the spray-outs ``sprayouts[N, G, 31]`` of recipes
     ``fractions[N, T]`` that are not mix-ups, and which ``[N]`` are: those further than
-    :data:`~flakelab.match.correction.SPRAYOUT_MISMATCH` (ΔE00, worst geometry) from the
+    :data:`~flakelab.match.mixups.SPRAYOUT_MISMATCH` (ΔE00, worst geometry) from the
     model's prediction moved by the habits all of them show (another panel's reading, recipe
     or target), which would pull the habits, not a shop's way of spraying. Three white panels
     given as the spray-outs of three of 500 generated cases moved the instrument's gain read

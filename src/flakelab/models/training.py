@@ -555,10 +555,10 @@ def outlying_cases(model: ForwardModel, data: CaseArrays, threshold: float) -> N
     worse on the held-out cases, where one of them fell (1.82 → 1.83), and go unpromoted;
     left out, the adaptation is that of the shop's own cases, to the bit (stop 66).
 
-    Relative to the shop's own spread, not :data:`~flakelab.match.correction.
-    SPRAYOUT_MISMATCH`'s absolute bound as the habits screen: that bound is taken from the
-    prediction moved by the shop's habits, and before adapting a shop's own spray-outs lie
-    from the bare model as far as its habits put them (the habits shop's up to ΔE00 4.8)."""
+    Relative to the shop's own spread, not :data:`~flakelab.match.mixups.SPRAYOUT_MISMATCH`'s
+    absolute bound as the habits screen: that bound is taken from the prediction moved by the
+    shop's habits, and before adapting a shop's own spray-outs lie from the bare model as far
+    as its habits put them (the habits shop's up to ΔE00 4.8)."""
     data = _in_model_order(model, data)
     return flag_outliers(_residual_error(model, data, np.arange(data.x.shape[0])), threshold)
 

@@ -1,0 +1,148 @@
+"""Mix-ups: a spray-out far from what its recipe predicts (DESIGN.md §1, steps 3 and 4).
+
+A spray-out read from another panel, a recipe written down wrongly or a target picked from
+the wrong file lies further from its recipe's prediction than any spray-out the model never
+saw: :data:`SPRAYOUT_MISMATCH` bounds how far a shop's own may lie. The correction asks
+about one (:func:`~flakelab.match.correction.mismatch_note`), the habits leave them out
+(:func:`~flakelab.match.habits.screened_habits`), and a recorded or imported case is checked
+as it joins the database (:func:`recorded_checks`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.errors import FlakelabError
+from flakelab.library.toners import Library
+from flakelab.match.search import evaluate_recipes
+
+if TYPE_CHECKING:
+    from flakelab.match.habits import ShopHabits
+
+__all__ = [
+    "SPRAYOUT_MISMATCH",
+    "is_mismatched",
+    "mismatch_message",
+    "recorded_checks",
+    "recorded_mismatch",
+    "sprayout_mismatch",
+]
+
+SPRAYOUT_MISMATCH = 5.0
+"""Worst-geometry ΔE00 between a spray-out and its recipe's prediction beyond which the
+correction asks whether they belong together: on 500 generated spray-outs the shipped
+five-angle model never saw (``flakelab cases generate --n 500 --seed 987``) that worst
+geometry read a median 0.79, 2.55 at the 99th percentile and 4.39 at most (stop 66). A
+spray-out farther off is more likely another panel's, recipe's or target's, and the
+correction would take its whole offset as the shop's."""
+
+
+def sprayout_mismatch(
+    forward,
+    fractions: NDArray,
+    sprayouts: NDArray,
+    habits: ShopHabits | None = None,
+    library: Library | None = None,
+) -> NDArray:
+    """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
+    recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
+    the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
+    R = evaluate_recipes(forward, fractions)[0]
+    predicted = reflectance_to_Lab(R)
+    if habits is not None:
+        predicted = predicted + habits.offset(library, fractions, R, forward.geometries)
+    return delta_E(predicted, reflectance_to_Lab(sprayouts))
+
+
+def mismatch_message(de00: float, geometry: str) -> str:
+    """What a spray-out ``de00`` (worst, at ``geometry``) from its recipe's prediction, beyond
+    :data:`SPRAYOUT_MISMATCH`, asks of the colorist."""
+    return (
+        f"the spray-out is ΔE00 {de00:.1f} from what the recipe predicts at {geometry} "
+        f"(spray-outs the model never saw stay within ΔE00 {SPRAYOUT_MISMATCH:g}): check that "
+        "the spray-out, the recipe and the target belong together"
+    )
+
+
+def recorded_mismatch(
+    forward, library: Library, cases: list, habits: ShopHabits | None = None
+) -> tuple[NDArray, NDArray]:
+    """:func:`sprayout_mismatch` of recorded ``cases`` (:class:`~flakelab.cases.case.Case`)
+    at ``forward``'s geometries: each one's worst ΔE00 ``[N]`` and the index of its geometry
+    in ``forward.geometries``, NaN and −1 for a case not read at them all."""
+    from flakelab.cases.case import cases_at
+    from flakelab.models.training import case_arrays
+
+    worst, where = np.full(len(cases), np.nan), np.full(len(cases), -1)
+    read = np.array([c.reads(forward.geometries) for c in cases], bool)
+    if read.any():
+        data = case_arrays(cases_at(cases, forward.geometries), library.names)
+        de = sprayout_mismatch(forward, data.x, data.R, habits, library)
+        worst[read], where[read] = de.max(axis=1), de.argmax(axis=1)
+    return worst, where
+
+
+def recorded_checks(
+    cases: list, library: Library, engine=None
+) -> tuple[list[dict | None], str | None]:
+    """Each recorded case's spray-out against its recipe's prediction (:func:`recorded_
+    mismatch`) by the current model (in ``engine``, else the shipped) of an instrument that
+    reads it, the default one where it can, moved by the shop's habits stored against that
+    model: ``{de00, geometry, model, habits}``, None where no model reads the case; and why
+    none was checked where the library has no model."""
+    from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
+    from flakelab.match.models import forward_for
+    from flakelab.models.network import ModelError
+    from flakelab.models.registry import current_model
+
+    checks: list[dict | None] = [None] * len(cases)
+    for instrument in sorted(INSTRUMENT_GEOMETRIES, key=lambda k: k != DEFAULT_INSTRUMENT):
+        rows = [
+            i
+            for i, c in enumerate(cases)
+            if checks[i] is None and c.reads(INSTRUMENT_GEOMETRIES[instrument])
+        ]
+        if not rows:
+            continue
+        try:
+            forward = forward_for(current_model(engine, instrument), library)
+        except ModelError as error:
+            return checks, str(error)
+        for shop in sorted({cases[i].shop for i in rows}):
+            mine = [i for i in rows if cases[i].shop == shop]
+            habits = _stored_habits(engine, shop, forward.model_id)
+            try:
+                worst, where = recorded_mismatch(forward, library, [cases[i] for i in mine], habits)
+            except ModelError as error:  # a toner the library lacks
+                return checks, str(error)
+            for i, de, g in zip(mine, worst, where, strict=True):
+                checks[i] = {
+                    "de00": round(float(de), 3),
+                    "geometry": forward.geometries[g],
+                    "model": forward.model_id,
+                    "habits": habits is not None,
+                }
+    return checks, None
+
+
+def is_mismatched(check: dict | None) -> bool:
+    """Whether a :func:`recorded_checks` entry lies beyond :data:`SPRAYOUT_MISMATCH`."""
+    return check is not None and check["de00"] > SPRAYOUT_MISMATCH
+
+
+def _stored_habits(engine, shop: str, model_id: str) -> ShopHabits | None:
+    """The habits stored for ``shop`` against the model ``model_id``, else None."""
+    from flakelab.match.habits import stored_habits
+
+    if engine is None:
+        return None
+    try:
+        found = stored_habits(engine, shop, model_id)
+    except FlakelabError:  # none stored for the shop
+        return None
+    return found if found.model == model_id else None
