@@ -163,7 +163,7 @@ def import_cases(
     from flakelab.cases.database import add_cases, open_database
     from flakelab.cases.exchange import read_cases
     from flakelab.io import read_library
-    from flakelab.match.mixups import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
+    from flakelab.match.mixups import is_mismatched, recorded_checks
 
     lib = read_library(library) if check else None
     cases = read_cases(source)
@@ -177,17 +177,8 @@ def import_cases(
         return
     checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
     mismatched = [c.case_id for c, k in zip(cases, checks, strict=True) if is_mismatched(k)]
-    if mismatched:
-        shown = ", ".join(mismatched[:5]) + (" …" if len(mismatched) > 5 else "")
-        errors.print(
-            f"[yellow]warning:[/] {len(mismatched)} spray-out(s) further than ΔE00 "
-            f"{SPRAYOUT_MISMATCH:g} from what their recipe predicts, likely mix-ups (another "
-            f"panel, recipe or target): {shown}; 'cases habits' leaves them out, 'cases "
-            "remove' removes them",
-            highlight=False,
-        )
-    elif unchecked:
-        errors.print(f"note: not checked against a model: {unchecked}", highlight=False)
+    shown = ", ".join(mismatched[:5]) + (" …" if len(mismatched) > 5 else "")
+    _tell_mix_ups(len(mismatched), shown, unchecked)
 
 
 @cases_app.command("record")
@@ -358,7 +349,7 @@ def record_all(
     from flakelab.cases.database import add_cases, count_cases, existing_case_ids, open_database
     from flakelab.cases.manifest import cases_from_manifest, read_manifest
     from flakelab.io import read_library, read_tolerance
-    from flakelab.match.mixups import SPRAYOUT_MISMATCH, is_mismatched, recorded_checks
+    from flakelab.match.mixups import is_mismatched, recorded_checks
 
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
@@ -433,16 +424,8 @@ def record_all(
     counts = ", ".join(f"{n} {o}" for o, n in report["outcomes"].items() if n)
     models = ", ".join(f"{m} {n}" for m, n in learners.items() if n) or "none"
     console.print(f"outcomes: {counts}; cases each model learns from: {models}", highlight=False)
-    if mismatched:
-        errors.print(
-            f"[yellow]warning:[/] {len(mismatched)} spray-out(s) further than ΔE00 "
-            f"{SPRAYOUT_MISMATCH:g} from what their recipe predicts, likely mix-ups (another "
-            f"panel, recipe or target), rows {', '.join(str(r['row']) for r in mismatched)}: "
-            "recorded all the same; 'cases habits' leaves them out, 'cases remove' removes them",
-            highlight=False,
-        )
-    elif unchecked:
-        console.print(f"[yellow]note:[/] not checked against a model: {unchecked}", highlight=False)
+    _tell_mix_ups(len(mismatched), f"rows {', '.join(str(r['row']) for r in mismatched)}",
+                  unchecked)  # fmt: skip
     count = report["cases_in_database"]
     errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
 
@@ -551,7 +534,23 @@ def list_cases(
             cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
         table.add_row(*cells)
     console.print(table)
-    if unchecked:
+    _tell_mix_ups(0, "", unchecked)
+
+
+def _tell_mix_ups(count: int, which: str, unchecked: str | None) -> None:
+    """Warn of ``count`` likely mix-ups stored (``which`` names them), or say why none was
+    checked."""
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
+
+    if count:
+        errors.print(
+            f"[yellow]warning:[/] {count} spray-out(s) further than ΔE00 {SPRAYOUT_MISMATCH:g} "
+            f"from what their recipe predicts, likely mix-ups (another panel, recipe or "
+            f"target), {which}: stored all the same; 'cases habits' leaves them out, 'cases "
+            "remove' removes them",
+            highlight=False,
+        )
+    elif unchecked:
         errors.print(f"note: not checked against a model: {unchecked}", highlight=False)
 
 
