@@ -94,10 +94,10 @@ def recorded_checks(
     mismatch`) by the current model (in ``engine``, else the shipped) of an instrument that
     reads it, the default one where it can, moved by the shop's habits stored against that
     model: ``{de00, geometry, model, habits}``, None where no model reads the case; and why
-    none was checked where the library has no model."""
+    the rest went unchecked (no model for the library, a damaged one, a toner it lacks), else
+    None. It only advises, after the cases are stored, and so refuses nothing."""
     from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
     from flakelab.match.models import forward_for
-    from flakelab.models.network import ModelError
     from flakelab.models.registry import current_model
 
     checks: list[dict | None] = [None] * len(cases)
@@ -111,14 +111,14 @@ def recorded_checks(
             continue
         try:
             forward = forward_for(current_model(engine, instrument), library)
-        except ModelError as error:
+        except FlakelabError as error:
             return checks, str(error)
         for shop in sorted({cases[i].shop for i in rows}):
             mine = [i for i in rows if cases[i].shop == shop]
             habits = _stored_habits(engine, shop, forward.model_id)
             try:
                 worst, where = recorded_mismatch(forward, library, [cases[i] for i in mine], habits)
-            except ModelError as error:  # a toner the library lacks
+            except FlakelabError as error:  # a toner the library lacks
                 return checks, str(error)
             for i, de, g in zip(mine, worst, where, strict=True):
                 checks[i] = {
