@@ -19,6 +19,8 @@ import pytest
 from flakelab.core import Geometry, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 
+os.environ.pop("COLUMNS", None)  # the CLI's tables at their piped width, whatever a shell exports
+
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MA_T12 = SHARED / "ma-t12"
 PIGMENT_KM = SHARED / "pigment-km"

@@ -28,7 +28,9 @@ from rich.table import Table
 
 from flakelab.errors import FlakelabError
 
-console = Console(width=None if sys.stdout.isatty() else 110)
+console = Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
+"""Tables and reports: the terminal's width, else ``COLUMNS``, else 110 columns (piped
+output that wraps no row of the main job's tables)."""
 errors = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
