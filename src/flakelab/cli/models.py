@@ -20,17 +20,14 @@ from flakelab.cli.common import (
     reports_errors,
 )
 from flakelab.cli.sources import (
-    DE00_STATISTICS,
     CasesArgument,
     DatabaseOption,
-    DeviceOption,
     InstrumentOption,
     LibraryOption,
     ModelFileOption,
     ShopOption,
     SinceOption,
     chosen_model,
-    de00_table,
     existing_engine,
     instrument_key,
     load_cases,
@@ -38,15 +35,65 @@ from flakelab.cli.sources import (
     named_model,
     shop_cases,
     source_arrays,
-    split_held_out,
     which_cases,
 )
-from flakelab.core.geometry import (
-    DEFAULT_INSTRUMENT,
-    INSTRUMENT_GEOMETRIES,
-)
+from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
 from flakelab.errors import FlakelabError
 from flakelab.io.records import write_atomically
+
+DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
+"""What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
+
+
+def _checked_device(name: str) -> str:
+    """``--device`` read before any work, so that a GPU this machine lacks is named at once."""
+    from flakelab.models.network import ModelError
+    from flakelab.models.training import training_device
+
+    try:
+        training_device(name)
+    except ModelError as error:
+        raise typer.BadParameter(str(error).removeprefix("device: ")) from None
+    return name
+
+
+DeviceOption = Annotated[
+    str,
+    typer.Option(
+        help="Where the networks train: cpu, cuda, cuda:N, mps, or auto (a GPU if torch sees "
+        "one). The seed gives the same batches and starting weights on every device; the "
+        "trained weights agree to float rounding.",
+        callback=_checked_device,
+    ),
+]
+
+
+def split_held_out(data, source: str, holdout: float, seed: int):
+    """Training and held-out cases of the arrays ``data``, each held out with probability
+    ``holdout`` (seeded), both non-empty."""
+    n = data.x.shape[0]
+    held = np.random.default_rng(seed).random(n) < holdout
+    if held.all() or not held.any():
+        raise FlakelabError(f"{source}: {n} cases are too few to hold out {holdout:.0%} of them")
+    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
+
+
+def de00_table(title: str, label: str, stats: dict, names=None, total: bool = True) -> Table:
+    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
+    where it is the ``total``)."""
+    names = list(stats) if names is None else list(names)
+    table = Table(title=title)
+    for column in (label, "ΔE00 mean", "p95", "max"):
+        table.add_column(column, justify="right")
+    for name in names:
+        v = stats[name]
+        table.add_row(
+            name,
+            *(f"{v[k]:.3f}" for k in DE00_STATISTICS),
+            style="bold" if total and name == names[-1] else None,
+        )
+    return table
+
 
 model_app = typer.Typer(
     help="Learned forward models: list, show, evaluate, adapt to a shop; promote and retire."

@@ -10,7 +10,6 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.table import Table
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.errors import FlakelabError
@@ -45,12 +44,6 @@ KeptGeometriesOption = Annotated[
 LibraryOption = Annotated[
     Path | None, typer.Option("--library", "-l", help="Toner library file (default: demo).")
 ]
-
-
-DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
-
-
-"""What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
 
 
 CasesArgument = Annotated[str, typer.Argument(help="Case file (CSV/CxF) or database URL/file.")]
@@ -90,29 +83,6 @@ ModelFileOption = Annotated[
 ]
 
 
-def _checked_device(name: str) -> str:
-    """``--device`` read before any work, so that a GPU this machine lacks is named at once."""
-    from flakelab.models.network import ModelError
-    from flakelab.models.training import training_device
-
-    try:
-        training_device(name)
-    except ModelError as error:
-        raise typer.BadParameter(str(error).removeprefix("device: ")) from None
-    return name
-
-
-DeviceOption = Annotated[
-    str,
-    typer.Option(
-        help="Where the networks train: cpu, cuda, cuda:N, mps, or auto (a GPU if torch sees "
-        "one). The seed gives the same batches and starting weights on every device; the "
-        "trained weights agree to float rounding.",
-        callback=_checked_device,
-    ),
-]
-
-
 def source_arrays(source, cases: list, library, *, effect: bool = False):
     """The training arrays of ``cases`` read from ``source``; a case the library cannot
     encode (a toner it lacks) is named with the file or database it came from."""
@@ -123,16 +93,6 @@ def source_arrays(source, cases: list, library, *, effect: bool = False):
         return case_arrays(cases, library.names, library.effect if effect else None)
     except ModelError as error:
         raise FlakelabError(f"{source}: {error}") from None
-
-
-def split_held_out(data, source: str, holdout: float, seed: int):
-    """Training and held-out cases of the arrays ``data``, each held out with probability
-    ``holdout`` (seeded), both non-empty."""
-    n = data.x.shape[0]
-    held = np.random.default_rng(seed).random(n) < holdout
-    if held.all() or not held.any():
-        raise FlakelabError(f"{source}: {n} cases are too few to hold out {holdout:.0%} of them")
-    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
 
 
 def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
@@ -241,23 +201,6 @@ def name_and_version(spec: str) -> tuple[str, int] | None:
     """``NAME:VERSION`` of a registered model (``flakelab model list``), else None."""
     name, colon, version = spec.rpartition(":")
     return (name, int(version)) if colon and name and version.isdigit() else None
-
-
-def de00_table(title: str, label: str, stats: dict, names=None, total: bool = True) -> Table:
-    """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
-    where it is the ``total``)."""
-    names = list(stats) if names is None else list(names)
-    table = Table(title=title)
-    for column in (label, "ΔE00 mean", "p95", "max"):
-        table.add_column(column, justify="right")
-    for name in names:
-        v = stats[name]
-        table.add_row(
-            name,
-            *(f"{v[k]:.3f}" for k in DE00_STATISTICS),
-            style="bold" if total and name == names[-1] else None,
-        )
-    return table
 
 
 def learned_forward(library: Path | None, instrument: str, model, database: str | None):
