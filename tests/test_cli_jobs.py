@@ -270,7 +270,17 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path, cli):
     assert "Traceback" not in again.stderr + run.stderr
     said = " ".join(run.stdout.split())
     assert "models that learn from it: five-angle" in said
+    assert "no instrument's model learns from it" not in said
+    assert "the spray-out from its recipe's prediction: ΔE00 0.35 at 45as110" in said
     assert "the target's 15as-45, 15as-30" in said and "not kept (--instrument chooses)" in said
+    # a spray-out read at three geometries: no model learns from it, nor checks it
+    three = tmp_path / "three.cxf"
+    write_measurements([reading.select(["45as15", "45as45", "45as110"])], three)
+    run = cli("cases", "record", str(target), "--recipe", str(recipe), "--sprayed", str(three),
+              "-d", str(tmp_path / "three.db"))  # fmt: skip
+    said = " ".join(run.stdout.split())
+    assert run.returncode == 0 and "warning: no instrument's model learns from it" in said
+    assert "models that learn" not in said and "from its recipe's prediction" not in said
     stored = {c.shop: c for c in iter_cases(open_database(db))}
     assert set(stored) == {"Dupont", "Martin"} and stored["Martin"].outcome == "rejected"
     stored_spectra = stored["Dupont"].sprayout  # the database keeps float32

@@ -54,6 +54,15 @@ from flakelab.core.geometry import (
 )
 from flakelab.errors import FlakelabError
 
+CheckOption = Annotated[
+    bool,
+    typer.Option(
+        "--check/--no-check",
+        help="Check each spray-out against its recipe's prediction by the current model (with "
+        "the shop's stored habits) and name the likely mix-ups; it loads the model (about 2 s).",
+    ),
+]
+
 cases_app = typer.Typer(
     help="Refinish cases: generate, record, record-all, list, remove, import, export; "
     "realism, habits, shops."
@@ -149,14 +158,7 @@ def import_cases(
     source: Annotated[Path, typer.Argument(help="CSV or CxF3 case history.")],
     database: DatabaseOption = None,
     library: LibraryOption = None,
-    check: Annotated[
-        bool,
-        typer.Option(
-            "--check/--no-check",
-            help="Check each spray-out against its recipe's prediction by the current model "
-            "and name the likely mix-ups, as 'cases record' does.",
-        ),
-    ] = True,
+    check: CheckOption = True,
 ) -> None:
     """Import a shop's case history into the database (all cases or none)."""
     from flakelab.cases.case import CaseError
@@ -218,6 +220,7 @@ def record_case(
         typer.Option(help="Case id.", show_default="made from the readings and the recipe"),
     ] = None,
     database: DatabaseOption = None,
+    check: CheckOption = True,
     json_output: JsonOption = False,
 ) -> None:
     """Record a spray-out as the shop's own case: target, recipe, spray-out and outcome.
@@ -259,7 +262,9 @@ def record_case(
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
     models = instruments_reading(case.geometry_names)
-    (check,), unchecked = recorded_checks([case], lib, existing_engine(database))
+    found, unchecked = None, None
+    if check:
+        (found,), unchecked = recorded_checks([case], lib, existing_engine(database))
     report = {
         "case_id": case.case_id,
         "shop": case.shop,
@@ -273,7 +278,7 @@ def record_case(
         "sprayout_failing": failing,
         "recipe": {k: round(v, 6) for k, v in case.recipe.items()},
         "left_out": left_out,
-        "from_prediction": check,
+        "from_prediction": found,
         "from_prediction_unchecked": unchecked,
         "database": str(engine.url),
         "cases_in_database": count_cases(engine),
@@ -289,25 +294,25 @@ def record_case(
     )
     if models:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
-    if check is not None:
-        habits = " with the shop's habits" if check["habits"] else ""
-        console.print(
-            f"the spray-out from its recipe's prediction: ΔE00 {check['de00']:.2f} at "
-            f"{check['geometry']} ({check['model']}{habits})",
-            highlight=False,
-        )
-    elif unchecked:
-        console.print(f"[yellow]note:[/] not checked against a model: {unchecked}", highlight=False)
-    if is_mismatched(check):
-        errors.print(
-            f"[yellow]warning:[/] {mismatch_message(check['de00'], check['geometry'])}; it is "
-            f"recorded: 'cases habits' leaves it out, 'cases remove {case.case_id}' removes it",
-            highlight=False,
-        )
     else:
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
             f"{', '.join(case.geometry_names)} hold no instrument's whole set",
+            highlight=False,
+        )
+    if found is not None:
+        habits = " with the shop's habits" if found["habits"] else ""
+        console.print(
+            f"the spray-out from its recipe's prediction: ΔE00 {found['de00']:.2f} at "
+            f"{found['geometry']} ({found['model']}{habits})",
+            highlight=False,
+        )
+    elif unchecked:
+        console.print(f"[yellow]note:[/] not checked against a model: {unchecked}", highlight=False)
+    if is_mismatched(found):
+        errors.print(
+            f"[yellow]warning:[/] {mismatch_message(found['de00'], found['geometry'])}; it is "
+            f"recorded: 'cases habits' leaves it out, 'cases remove {case.case_id}' removes it",
             highlight=False,
         )
     if left_out:
@@ -338,6 +343,7 @@ def record_all(
     library: LibraryOption = None,
     tolerance: ToleranceOption = "refinish",
     database: DatabaseOption = None,
+    check: CheckOption = True,
     json_output: JsonOption = False,
 ) -> None:
     """Record a shop's spray-out history from its instrument files, all or none.
@@ -373,7 +379,9 @@ def record_all(
         )
     add_cases(engine, cases)  # one transaction: a writer in between is refused whole
     worst, where = worst_differences(cases)
-    checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
+    checks, unchecked = [None] * len(cases), None
+    if check:
+        checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
     recorded = [
         {
             "row": number,
@@ -384,9 +392,9 @@ def record_all(
             "created_at": c.created_at.isoformat(),
             "worst_de00": round(float(de), 3),
             "worst_geometry": g,
-            "from_prediction": check,
+            "from_prediction": found,
         }
-        for number, c, de, g, check in zip(rows, cases, worst, where, checks, strict=True)
+        for number, c, de, g, found in zip(rows, cases, worst, where, checks, strict=True)
     ]
     mismatched = [row for row in recorded if is_mismatched(row["from_prediction"])]
     readers = [instruments_reading(c.geometry_names) for c in cases]
