@@ -458,6 +458,10 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     assert history["mismatched_rows"] == [3] and history["recorded"] == 2
     good, mixed = (row["from_prediction"] for row in history["cases"])
     assert good["habits"] and mixed["habits"] and good["de00"] < 5 < mixed["de00"]
+    run = cli("cases", "record-all", str(manifest), "-d", str(tmp_path / "other.db"))
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 0 and "1 spray-out(s) further than ΔE00 5" in said
+    assert "rows 3: stored all the same" in said
     for row in history["cases"]:  # the shop's history as it was, for what follows
         run = cli("cases", "remove", row["case_id"], "-d", cases, "--yes")
         assert run.returncode == 0, run.stderr

@@ -416,18 +416,14 @@ def record_all(
         return
     table = Table(title=f"Recorded {len(cases)} spray-outs from {manifest}")
     table.add_column("row", justify="right")
-    for column in ("case", "shop", "outcome", "worst ΔE00", "from prediction", "instrument"):
+    columns = ("case", "shop", "outcome", "worst ΔE00", "from prediction", "instrument")
+    for column in columns if check else tuple(c for c in columns if c != "from prediction"):
         table.add_column(column, no_wrap=column != "shop")
     for row in recorded:
-        table.add_row(
-            str(row["row"]),
-            row["case_id"],
-            row["shop"],
-            row["outcome"],
-            f"{row['worst_de00']:.2f} {row['worst_geometry']}",
-            _shown_check(row["from_prediction"]),
-            row["instrument"],
-        )
+        cells = [str(row["row"]), row["case_id"], row["shop"], row["outcome"]]
+        cells.append(f"{row['worst_de00']:.2f} {row['worst_geometry']}")
+        cells += [_shown_check(row["from_prediction"])] if check else []
+        table.add_row(*cells, row["instrument"])
     console.print(table)
     counts = ", ".join(f"{n} {o}" for o, n in report["outcomes"].items() if n)
     models = ", ".join(f"{m} {n}" for m, n in learners.items() if n) or "none"
