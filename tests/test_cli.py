@@ -366,6 +366,28 @@ def test_help_shows_the_matchers_defaults_without_importing_torch():
         assert f"[default: {value}]" in row, row
 
 
+def test_a_record_without_its_check_does_not_import_torch(tmp_path):
+    """`cases record --no-check` is the record as it was before the check: torch's import and
+    the model (about 2 s and 280 MB) are the check's alone."""
+    from flakelab.data import example_path
+
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    args = ["cases", "record", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
+            "-d", str(tmp_path / "shop.db"), "--json"]  # fmt: skip
+    script = (
+        f"import sys\nfrom flakelab.cli.main import app\nargs = {args!r}\n"
+        "for extra in (['--no-check'], []):\n"
+        "    try:\n        app([*args, *extra, '--shop', str(extra)])\n"
+        "    except SystemExit:\n        pass\n"
+        "    print('torch imported:', 'torch' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("torch imported: False") == 1
+    assert done.stdout.rstrip().endswith("torch imported: True")  # the check's own
+
+
 def test_every_help_paragraph_prints_on_one_line_however_wide_the_terminal():
     """Typer's Rich help kept a docstring's line breaks after its first paragraph, so a
     terminal wider or narrower than the source showed ragged lines ("... in pouring order,

@@ -18,10 +18,9 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.errors import FlakelabError
-from flakelab.library.toners import Library
-from flakelab.match.search import evaluate_recipes
 
 if TYPE_CHECKING:
+    from flakelab.library.toners import Library
     from flakelab.match.habits import ShopHabits
 
 __all__ = [
@@ -52,6 +51,8 @@ def sprayout_mismatch(
     """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
     recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
     the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
+    from flakelab.match.search import evaluate_recipes  # torch's import: not for a bare record
+
     R = evaluate_recipes(forward, fractions)[0]
     predicted = reflectance_to_Lab(R)
     if habits is not None:
