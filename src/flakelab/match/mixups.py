@@ -33,8 +33,8 @@ __all__ = [
 ]
 
 SPRAYOUT_MISMATCH = 5.0
-"""Worst-geometry ΔE00 between a spray-out and its recipe's prediction beyond which the
-correction asks whether they belong together: on 500 generated spray-outs the shipped
+"""Worst-geometry ΔE00 between a spray-out and its recipe's prediction beyond which it is
+taken for a likely mix-up (module notes): on 500 generated spray-outs the shipped
 five-angle model never saw (``flakelab cases generate --n 500 --seed 987``) that worst
 geometry read a median 0.79, 2.55 at the 99th percentile and 4.39 at most (stop 66). A
 spray-out farther off is more likely another panel's, recipe's or target's, and the
