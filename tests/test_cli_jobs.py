@@ -430,6 +430,19 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     check = json.loads(run.stdout)["from_prediction"]
     assert check["de00"] > 50 and check["model"].startswith("demo-five-angle")
     assert check["habits"] is False  # none stored for the shop yet
+    # the model's figures on the shop's cases name it, and say what they are without it
+    run = cli("model", "evaluate", cases, "--json")
+    assert run.returncode == 0, run.stderr
+    evaluated = json.loads(run.stdout)
+    assert [m["case_id"] for m in evaluated["likely_mix_ups"]] == [recorded]
+    assert evaluated["likely_mix_ups"][0]["de00"] == pytest.approx(check["de00"], abs=1e-3)
+    without = evaluated["without_mix_ups"]
+    assert without["cases"] == evaluated["cases"] - 1 == 60
+    assert without["de00_max"] < 5 < evaluated["de00_max"]
+    assert without["de00_mean"] < evaluated["de00_mean"]
+    run = cli("model", "evaluate", cases)
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 0 and f"(another panel, recipe or target): {recorded}" in said
     # and the shop finds it later among all its cases, the only likely mix-up of the 61
     run = cli("cases", "list", "-d", cases, "--last", "100", "--mix-ups", "--json")
     assert run.returncode == 0, run.stderr

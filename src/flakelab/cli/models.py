@@ -425,6 +425,7 @@ def evaluate(
     (--since)."""
     from flakelab.cases.case import cases_at
     from flakelab.io import read_library
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
     from flakelab.models.training import evaluate_model
 
     lib = read_library(library)
@@ -449,16 +450,28 @@ def evaluate(
         return shop_habits.offset(lib, x, R, matcher.geometries)
 
     offset = habits_offset if shop_habits else None
-    families = lib.paint_families(data.x)
-    if isinstance(matcher, LearnedForward) and matcher.novel:
-        report = evaluate_model(
-            forward, data, lambda x: evaluate_recipes(matcher, x), offset, families
-        )
+    hybrid = isinstance(matcher, LearnedForward) and matcher.novel
+    predict = (lambda x: evaluate_recipes(matcher, x)) if hybrid else None
+
+    def evaluated(chosen_data, per_case: bool = False) -> dict:
+        families = lib.paint_families(chosen_data.x)
+        return evaluate_model(forward, chosen_data, predict, offset, families, per_case=per_case)
+
+    report = evaluated(data, per_case=True)
+    if hybrid:
         novel = np.isin(np.array(lib.names), matcher.novel)
         report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
         report["new_toners"] = list(matcher.novel)
-    else:
-        report = evaluate_model(forward, data, lab_offset=offset, families=families)
+    worst = np.array(report.pop("case_worst_de00"))
+    mixed_up = worst > SPRAYOUT_MISMATCH  # judged by the model evaluated, as the habits are
+    report["likely_mix_ups"] = [
+        {"case_id": data.case_ids[i], "de00": round(float(worst[i]), 3)}
+        for i in np.flatnonzero(mixed_up)
+    ]
+    report["without_mix_ups"] = None
+    if mixed_up.any() and not mixed_up.all():
+        without = evaluated(data.subset(np.flatnonzero(~mixed_up)))
+        report["without_mix_ups"] = {k: without[k] for k in ("cases", *DE00_STATISTICS)}
     report["model"] = model or f"current {instrument}"
     report["forward"] = matcher.name
     report["habits"] = shop_habits and shop_habits.report()
@@ -477,6 +490,21 @@ def evaluate(
     console.print(de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
     families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
     console.print(de00_table("by paint family", "family (cases)", families, total=False))
+    if mixed := report["likely_mix_ups"]:
+        named = ", ".join(m["case_id"] for m in mixed[:5]) + (" …" if len(mixed) > 5 else "")
+        without = report["without_mix_ups"]
+        rest = (
+            f"; without them ΔE00 mean {without['de00_mean']:.3f}, p95 "
+            f"{without['de00_p95']:.3f}, max {without['de00_max']:.3f}"
+            if without
+            else ""
+        )
+        errors.print(
+            f"[yellow]warning:[/] {len(mixed)} case(s) lie further than ΔE00 "
+            f"{SPRAYOUT_MISMATCH:g} from the model's prediction, likely mix-ups (another panel, "
+            f"recipe or target): {named}; the figures above include them{rest}",
+            highlight=False,
+        )
 
 
 @model_app.command("adapt")

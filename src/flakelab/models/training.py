@@ -775,14 +775,21 @@ def recorded_config(model: ForwardModel) -> TrainingConfig:
 
 
 def evaluate_model(
-    model: ForwardModel, data: CaseArrays, predict=None, lab_offset=None, families=None
+    model: ForwardModel,
+    data: CaseArrays,
+    predict=None,
+    lab_offset=None,
+    families=None,
+    *,
+    per_case: bool = False,
 ) -> dict:
     """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
     geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
     model's own prediction (the matcher's hybrid forward, for toners new to the model);
     ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits);
     ``families[N]`` (:meth:`~flakelab.library.toners.Library.paint_families`) adds the figures per
-    paint family."""
+    paint family; ``per_case`` each case's worst ΔE00 over its geometries
+    (``case_worst_de00``)."""
     if data.geometries != model.geometries:
         missing = sorted(set(model.geometries) - set(data.geometries))
         if missing:
@@ -803,6 +810,8 @@ def evaluate_model(
         "texture_mae": _texture_mae(texture, data.texture),
         "predict_seconds": seconds,
     }
+    if per_case:
+        report["case_worst_de00"] = de.max(axis=1).tolist()
     if families is not None:
         families = np.asarray(families)
         report["per_family"] = {
