@@ -453,25 +453,19 @@ def evaluate(
     hybrid = isinstance(matcher, LearnedForward) and matcher.novel
     predict = (lambda x: evaluate_recipes(matcher, x)) if hybrid else None
 
-    def evaluated(chosen_data, per_case: bool = False) -> dict:
-        families = lib.paint_families(chosen_data.x)
-        return evaluate_model(forward, chosen_data, predict, offset, families, per_case=per_case)
-
-    report = evaluated(data, per_case=True)
+    families = lib.paint_families(data.x)
+    # the mix-ups judged by the model evaluated, as the habits' screen judges them
+    report = evaluate_model(
+        forward, data, predict, offset, families, leave_out_above=SPRAYOUT_MISMATCH
+    )
     if hybrid:
         novel = np.isin(np.array(lib.names), matcher.novel)
         report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())
         report["new_toners"] = list(matcher.novel)
-    worst = np.array(report.pop("case_worst_de00"))
-    mixed_up = worst > SPRAYOUT_MISMATCH  # judged by the model evaluated, as the habits are
     report["likely_mix_ups"] = [
-        {"case_id": data.case_ids[i], "de00": round(float(worst[i]), 3)}
-        for i in np.flatnonzero(mixed_up)
+        {"case_id": data.case_ids[row], "de00": round(de00, 3)} for row, de00 in report.pop("above")
     ]
-    report["without_mix_ups"] = None
-    if mixed_up.any() and not mixed_up.all():
-        without = evaluated(data.subset(np.flatnonzero(~mixed_up)))
-        report["without_mix_ups"] = {k: without[k] for k in ("cases", *DE00_STATISTICS)}
+    report["without_mix_ups"] = report.pop("without_above")
     report["model"] = model or f"current {instrument}"
     report["forward"] = matcher.name
     report["habits"] = shop_habits and shop_habits.report()

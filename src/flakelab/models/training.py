@@ -781,15 +781,16 @@ def evaluate_model(
     lab_offset=None,
     families=None,
     *,
-    per_case: bool = False,
+    leave_out_above: float | None = None,
 ) -> dict:
     """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
     geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
     model's own prediction (the matcher's hybrid forward, for toners new to the model);
     ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits);
     ``families[N]`` (:meth:`~flakelab.library.toners.Library.paint_families`) adds the figures per
-    paint family; ``per_case`` each case's worst ΔE00 over its geometries
-    (``case_worst_de00``)."""
+    paint family. With ``leave_out_above``, the cases whose worst ΔE00 over their geometries
+    lies above it (``above``: ``[row, ΔE00]``) and the figures without them (``without_above``;
+    None where none or all lie above)."""
     if data.geometries != model.geometries:
         missing = sorted(set(model.geometries) - set(data.geometries))
         if missing:
@@ -810,8 +811,13 @@ def evaluate_model(
         "texture_mae": _texture_mae(texture, data.texture),
         "predict_seconds": seconds,
     }
-    if per_case:
-        report["case_worst_de00"] = de.max(axis=1).tolist()
+    if leave_out_above is not None:
+        worst = de.max(axis=1)
+        above = worst > leave_out_above
+        report["above"] = [[int(i), float(worst[i])] for i in np.flatnonzero(above)]
+        report["without_above"] = None
+        if above.any() and not above.all():
+            report["without_above"] = {"cases": int((~above).sum()), **_de00_summary(de[~above])}
     if families is not None:
         families = np.asarray(families)
         report["per_family"] = {
