@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -73,19 +72,15 @@ def mismatch_message(de00: float, geometry: str) -> str:
 def recorded_mismatch(
     forward, library: Library, cases: list, habits: ShopHabits | None = None
 ) -> tuple[NDArray, NDArray]:
-    """:func:`sprayout_mismatch` of recorded ``cases`` (:class:`~flakelab.cases.case.Case`)
-    at ``forward``'s geometries: each one's worst ΔE00 ``[N]`` and the index of its geometry
-    in ``forward.geometries``, NaN and −1 for a case not read at them all."""
+    """:func:`sprayout_mismatch` of recorded ``cases`` (:class:`~flakelab.cases.case.Case`),
+    each read at every one of ``forward``'s geometries (among others): each one's worst ΔE00
+    ``[N]`` and the index of its geometry in ``forward.geometries``."""
     from flakelab.cases.case import cases_at
     from flakelab.models.training import case_arrays
 
-    worst, where = np.full(len(cases), np.nan), np.full(len(cases), -1)
-    read = np.array([c.reads(forward.geometries) for c in cases], bool)
-    if read.any():
-        data = case_arrays(cases_at(cases, forward.geometries), library.names)
-        de = sprayout_mismatch(forward, data.x, data.R, habits, library)
-        worst[read], where[read] = de.max(axis=1), de.argmax(axis=1)
-    return worst, where
+    data = case_arrays(cases_at(cases, forward.geometries), library.names)
+    de = sprayout_mismatch(forward, data.x, data.R, habits, library)
+    return de.max(axis=1), de.argmax(axis=1)
 
 
 def recorded_checks(
