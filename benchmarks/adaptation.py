@@ -57,7 +57,7 @@ def error(model, cases: CaseArrays) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default="200,500,2000,5000", help="shop cases to adapt on")
     parser.add_argument("--test", type=int, default=1000, help="fresh cases to judge on")
     parser.add_argument("--epochs", type=int, default=150, help="adaptation epochs")

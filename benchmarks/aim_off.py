@@ -45,7 +45,7 @@ from timing import print_report
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--habits", required=True, help="habits file (flakelab cases habits)")
     parser.add_argument("--targets", type=int, default=12)
     parser.add_argument("--steps", default="0,30,60,150,300", help="aim-off steps to try")

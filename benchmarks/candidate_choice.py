@@ -63,7 +63,7 @@ def chances(world, candidates, xs, target_lab, draws: int, seed: int) -> tuple[n
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=150)
     parser.add_argument("--sprays", type=int, default=24, help="sprays of each candidate")
     parser.add_argument("--draws", type=int, default=64, help="draws for the chance to pass")

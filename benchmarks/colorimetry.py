@@ -26,7 +26,7 @@ def baseline_lab(R: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=100_000, help="spectra per run")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true")

@@ -144,7 +144,7 @@ def summary(passed: dict, worst: dict, metameric: dict, seconds: dict, spec: str
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("settings", nargs="*", help="e.g. offset_weight=1.0")
     parser.add_argument("--targets", type=int, default=60, help="per seed")
     parser.add_argument("--sprays", type=int, default=6)

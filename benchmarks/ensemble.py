@@ -71,7 +71,7 @@ def throughput(model, n: int = 200_000, repeats: int = 3) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", required=True, help="an ensemble model file")
     parser.add_argument("--matched", action="store_true", help="also the matched-recipe error")
     parser.add_argument("--targets", type=int, default=60, help="per seed, with --matched")

@@ -50,7 +50,7 @@ def run(world, forward, effect, args, novel, label: str) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=50)
     args = parser.parse_args()
     world, learned, effect = shipped_matcher(args.world, args.model, args.kinds)

@@ -76,7 +76,7 @@ def joined(a: CaseArrays, b: CaseArrays) -> CaseArrays:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=400, help="feedback targets")
     parser.add_argument("--candidates", type=int, default=3, help="recipes sprayed per target")
     parser.add_argument(

@@ -55,7 +55,7 @@ def one_process(repeat: int, with_class: bool) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=3, help="fresh processes of each kind")
     parser.add_argument("--repeat", type=int, default=3, help="later matches in each")
     parser.add_argument("--json", action="store_true")

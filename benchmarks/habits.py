@@ -69,7 +69,7 @@ def error(forward, library, cases: CaseArrays, habits: ShopHabits) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default="20,50,100,200,500,2000", help="shop cases read")
     parser.add_argument("--test", type=int, default=1000, help="fresh cases to judge on")
     parser.add_argument("--repeats", type=int, default=5, help="draws of the shop's cases")

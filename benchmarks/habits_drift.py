@@ -78,7 +78,7 @@ def summary(steady: list[dict], changed: dict[float, list[dict]], n: int) -> dic
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default="100,200,400,1000", help="spray-outs read")
     parser.add_argument("--at", default="0.5,0.8", help="where the changed shops changed")
     parser.add_argument("--repeats", type=int, default=5, help="draws of each shop's cases")

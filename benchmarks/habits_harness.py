@@ -54,7 +54,7 @@ PAIRED_CHANCES = ("first_shot_chance", "after_one_correction_chance")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--habits", required=True, help="habits file (flakelab cases habits)")
     parser.add_argument(
         "--world-habits",

@@ -73,7 +73,7 @@ def judge(library, model) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", type=int, default=20_000)
     parser.add_argument("--hidden", default="100,100,100")
     parser.add_argument("--epochs", type=int, default=150, help="per stage (and fine-tuning)")

@@ -62,7 +62,7 @@ def parse_settings(spec: str) -> MatchSettings:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("settings", nargs="*", help="e.g. top_effects=2,top_pigments=5")
     add_harness_arguments(parser, targets=100, novel_targets=0)
     args = parser.parse_args()

@@ -83,7 +83,7 @@ def measure(world: World, forward, effect, args, settings: MatchSettings | None 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=60, help="per seed")
     parser.add_argument("--seed", default="81,82", help="one seed, a list or a range")
     parser.add_argument("--model", help=MODEL_HELP)

@@ -82,7 +82,7 @@ def match_seconds(targets, forward, effect, settings: MatchSettings) -> np.ndarr
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=15)
     parser.add_argument("--seed", type=int, default=4242)
     parser.add_argument("--model", help=MODEL_HELP)

@@ -114,7 +114,7 @@ def _percent(share: float | None) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--instrument", default="five-angle", choices=("five-angle", "ma-t12"))
     parser.add_argument("--cases", type=int, default=500)
     parser.add_argument("--seed", type=int, default=987)

@@ -57,7 +57,7 @@ def random_fractions(library, n: int, seed: int) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=10_000, help="formulations per batch")
     parser.add_argument("--photons", type=int, default=200_000)
     parser.add_argument("--seed", type=int, default=0)

@@ -59,7 +59,7 @@ def family_travel(library, instrument: str, n: int, seed: int) -> dict[str, dict
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=20_000)
     parser.add_argument("--seed", type=int, default=11)
     parser.add_argument("--json", action="store_true")

@@ -40,7 +40,7 @@ from flakelab.texture.repeatability import (
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--coatings", type=int, default=24)
     parser.add_argument("--spots", type=int, default=16)
     parser.add_argument("--seed", type=int, default=5)

@@ -70,7 +70,7 @@ def first_shots(world, forward, effect, tolerance: Tolerance, args) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--targets", type=int, default=60)
     parser.add_argument("--sprays", type=int, default=6, help="sprays of each first recipe")
     parser.add_argument("--seed", type=int, default=4242)

@@ -296,7 +296,7 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--kinds",
         default="cxf,csv,json,xlsx,target,sprayout,record,recipe,library,habits,habits-match,"

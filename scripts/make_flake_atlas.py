@@ -16,7 +16,7 @@ from flakelab.physics.fast import ATLAS_DEPTHS, ATLAS_SPREADS, atlas_path, build
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--photons", type=int, default=100_000)
     parser.add_argument("--seed", type=int, default=2026)
     args = parser.parse_args()

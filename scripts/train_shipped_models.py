@@ -62,7 +62,7 @@ with angle, are the model's hardest family and get more cases."""
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--instrument", choices=sorted(SETTINGS), action="append")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--network-seed", type=int, help="network's seed (default: --seed)")
