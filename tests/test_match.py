@@ -414,7 +414,7 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert best["rounding_de00"] < 0.1
     # the colorist's table carries the texture difference the JSON has
     from flakelab.cli.common import console
-    from flakelab.cli.matching import _print_match
+    from flakelab.cli.match import _print_match
 
     with console.capture() as printed:
         _print_match(report)

@@ -31,9 +31,11 @@ from flakelab.cli.common import (
     reports_errors,
     texture_table,
 )
-from flakelab.cli.matching import correct_command, match_command, weigh_command
+from flakelab.cli.correct import correct_command
+from flakelab.cli.match import match_command
 from flakelab.cli.models import model_app, train
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
+from flakelab.cli.weigh import weigh_command
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
 from flakelab.core.comparison import describe

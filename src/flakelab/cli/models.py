@@ -437,7 +437,7 @@ def evaluate(
             f"{cases}: no cases {which_cases(shop, since)} read at the model's geometries "
             f"{forward.geometries}"
         )
-    from flakelab.cli.matching import habits_for
+    from flakelab.cli.matcher import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.models import forward_for
     from flakelab.match.search import evaluate_recipes

@@ -1,0 +1,345 @@
+"""CLI: correct a recipe from its measured spray-out."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich import box
+from rich.table import Table
+
+from flakelab.cli.common import (
+    JsonOption,
+    LightsOption,
+    PlotOption,
+    SampleOption,
+    SprayedSampleOption,
+    ToleranceOption,
+    check_figure_file,
+    check_output_file,
+    console,
+    draw_differences,
+    errors,
+    lights_option,
+    read_sample,
+)
+from flakelab.cli.matcher import (
+    HabitsOption,
+    HabitsShopOption,
+    MetamerismOption,
+    ModelOption,
+    PhysicsOption,
+    RecipeOutOption,
+    ResolutionOption,
+    habits_for,
+    left_out_model,
+    matcher_setup,
+    metamerism_text,
+    metamerism_values,
+    spectra_for_model,
+    with_left_out,
+)
+from flakelab.cli.sources import (
+    DatabaseOption,
+    InstrumentOption,
+    LibraryOption,
+    recipe_fractions,
+)
+from flakelab.cli.weigh import rounding_costs
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.tolerance import failing_geometries, failures
+from flakelab.errors import FlakelabError
+from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
+
+
+def correct_command(
+    target: Annotated[Path, typer.Argument(help="Target measurement file.")],
+    recipe: Annotated[Path, typer.Option("--recipe", "-r", help="Recipe JSON {toner: grams}.")],
+    sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
+    sample: SampleOption = None,
+    sprayed_sample: SprayedSampleOption = None,
+    mode: Annotated[
+        str, typer.Option(help="additions (can already mixed) or reformulate.")
+    ] = "additions",
+    library: LibraryOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    model: ModelOption = None,
+    physics: PhysicsOption = False,
+    database: DatabaseOption = None,
+    resolution: ResolutionOption = 0.1,
+    offset_weight: Annotated[
+        float | None,
+        typer.Option(
+            help="Weight the whole of the spray-out's offset from the model by this share "
+            "(0 to 1) instead of splitting off this spray's film build and flake alignment "
+            "by the library's physics.",
+            show_default="physics split",
+        ),
+    ] = None,
+    extra_toners: Annotated[
+        int, typer.Option(help="Toners outside the recipe tried as one addition (0: none).")
+    ] = EXTRA_TONERS_TRIED,
+    model_sd: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="Widen the prior of the offset that persists by this many times the model "
+            "ensemble's disagreement at each geometry (0: one prior everywhere).",
+        ),
+    ] = MODEL_SD,
+    tolerance: ToleranceOption = "refinish",
+    metamerism: MetamerismOption = MatchSettings.metamerism,
+    lights: LightsOption = None,
+    habits: HabitsOption = None,
+    shop: HabitsShopOption = None,
+    recipe_out: RecipeOutOption = None,
+    plot: PlotOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Correct a recipe from its measured spray-out.
+
+    The model's local behaviour around the recipe, applied to the part of the
+    spray-out's offset from the prediction that persists: the library's physics
+    splits off what the spray's own film build and flake alignment did."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
+    from flakelab.io import read_recipe, read_tolerance, write_recipe
+    from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
+    from flakelab.match.crosscheck import expected_left_out
+    from flakelab.match.search import left_out_note, unused_geometries
+
+    tol = read_tolerance(tolerance)
+    test_lights = lights_option(lights)
+    check_output_file(recipe_out, "--recipe-out")
+    check_figure_file(plot, "--plot")
+    grams = read_recipe(recipe)
+    _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
+    lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
+    x0 = recipe_fractions(lib, grams, recipe)
+    target_reading = read_sample(target, sample)
+    sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
+    target_R, _, _ = spectra_for_model(target, target_reading, forward)
+    sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)
+    fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
+    if extra_toners < 0:
+        raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
+    shop_habits = habits_for(habits, shop, database, forward)
+    correction = correct(
+        forward,
+        target_R,
+        fractions,
+        sprayed_R,
+        mode=mode,
+        library=lib,
+        offset_weight=offset_weight,
+        extra_toners=extra_toners,
+        habits=shop_habits,
+        model_sd=model_sd,
+        tolerance=tol,
+        metamerism=metamerism,
+        lights=test_lights,
+    )
+    target_lab = reflectance_to_Lab(target_R)
+    before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
+    texture_failing = tol.failing_texture(target_reading.texture, sprayed_reading.texture)
+    failing = failing_geometries(forward.geometries, passed)
+    report = {
+        "mode": mode,
+        "before_de00": before.round(3).tolist(),
+        "tolerance": tol.name,
+        "sprayout_passes": not failing and not texture_failing,
+        "sprayout_failing": failures(failing, texture_failing),
+        "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
+    }
+    if not failing:
+        report["notes"].append(
+            f"the spray-out already passes {tol.name} at every geometry: the correction is "
+            "optional, a move toward the target's centre"
+        )
+    if note := mismatch_note(forward, fractions, sprayed_R, shop_habits, lib):
+        report["notes"].append(note)
+    if texture_failing:
+        report["notes"].append(
+            f"the spray-out's texture fails {tol.name} at {', '.join(texture_failing)}: the "
+            "correction aims at colour alone; a texture this far off asks for other effect "
+            "toners (match the target again)"
+        )
+    weighing = _weigh_correction(forward, correction, mode, grams, resolution)
+    report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams
+    report.update(rounding_costs(weighing))
+    expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
+    if recipe_out is not None:  # what the can holds after the additions, or the new recipe
+        corrected = report.get("recipe_g") or {
+            name: round(grams.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
+            for name in {**grams, **report["add_g"]}
+        }
+        write_recipe(corrected, recipe_out)
+        report["recipe_out"] = str(recipe_out)
+        errors.print(f"wrote the corrected recipe to {recipe_out}", highlight=False)
+    report["new_toner"] = correction.new_toner
+    report["offset_weight"] = offset_weight
+    report["model_sd"] = model_sd
+    report["spray_application"] = correction.application and {
+        name: round(value, 4) for name, value in correction.application.items()
+    }
+    report["habits"] = shop_habits and shop_habits.report()
+    expected, _, expected_passed = tol.judge(forward.geometries, target_lab, expected_lab)
+    report["expected_de00"] = expected.round(3).tolist()
+    report["expected_failing"] = failing_geometries(forward.geometries, expected_passed)
+    if failing and (note := unreached_note(tol, report["expected_failing"], expected, mode)):
+        report["notes"].append(note)
+    report["metamerism_weight"] = metamerism
+    sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
+    report["sprayout_metamerism_index_max"] = worst_per_light(sprayed_metamerism)
+    report["sprayout_metamer"] = is_metamer(sprayed_metamerism)
+    report["expected_metamerism_index_max"] = worst_per_light(correction.metamerism)
+    if note := metamerism_note(sprayed_metamerism, correction.metamerism):
+        report["notes"].append(note)
+    report["geometries"] = list(forward.geometries)
+    other = None if shop_habits else left_out_model(target_reading, forward, lib, database, physics)
+    found = other and expected_left_out(
+        target_reading, sprayed_reading, fractions, correction.fractions, forward, other, tol
+    )
+    if found:
+        sprayed_there, expected_there = found
+        report["left_out"] = expected_there.to_dict() | {
+            "sprayout_de00": sprayed_there.round(3).tolist()
+        }
+    if plot is not None:
+        samples = {
+            "spray-out (measured)": reflectance_to_Lab(sprayed_R),
+            "expected after the correction": expected_lab,
+        }
+        _plot_correction(target_reading, sprayed_reading, target_lab, samples,
+                         found and found[1], forward, tol, plot)  # fmt: skip
+        report["plot"] = str(plot)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_correction(report)
+
+
+def _weigh_correction(forward, correction, mode: str, can: dict[str, float], resolution: float):
+    """The correction on the scale: additions to the mixed ``can``, or the new recipe for a
+    can of its size (traces under one scale step left out), each toner rounded as the
+    colour closest to the computed correction's asks."""
+    from flakelab.match.recipe import weigh_additions, weigh_whole_can
+
+    if mode == "additions":
+        return weigh_additions(forward, can, correction.added, resolution)
+    return weigh_whole_can(forward, correction.fractions, _can_size(can, resolution), resolution)
+
+
+def _can_size(can: dict[str, float], resolution: float) -> float:
+    """The mixed ``can``'s size in grams, to the scale's resolution, checked that the scale
+    weighs it."""
+    from flakelab.match.recipe import check_scale, to_scale
+
+    quantity = to_scale(sum(can.values()), resolution)
+    check_scale(quantity, resolution)
+    return quantity
+
+
+def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forward, tolerance,
+                     path: Path) -> None:  # fmt: skip
+    """The spray-out as measured and as the correction expects it (``samples``, CIELAB at the
+    model's geometries), against the target; then at the target's other geometries, where
+    ``left_out`` expects it. The measured spray-out's texture shares join the share panel
+    (the correction aims at colour alone)."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+
+    others = left_out.geometries if left_out else ()
+    there = (
+        [reflectance_to_Lab(sprayed.storage_spectra(list(others))), left_out.lab] if others else []
+    )
+    chart = with_left_out(target, list(forward.geometries), target_lab, samples, others, there)
+    apart = f"not in the correction; expected by {left_out.model_id}" if left_out else ""
+    title = f"{sprayed.sample} against {target.sample}: the correction"
+    measured = {next(iter(samples)): tolerance.texture_share(target.texture, sprayed.texture)}
+    draw_differences(*chart, tolerance, path, title, apart=len(forward.geometries),
+                     apart_label=apart, texture=measured)  # fmt: skip
+
+
+def _left_out_correction_table(left_out: dict) -> Table:
+    """The spray-out and the correction's expected result at the geometries it left out."""
+    names = list(left_out["geometries"])
+    table = Table(box=box.SIMPLE, show_header=True)
+    table.add_column("ΔE00")
+    for name in names:
+        table.add_column(name, justify="right")
+    table.add_row("spray-out*", *(f"{v:.2f}" for v in left_out["sprayout_de00"]))
+    table.add_row(
+        "expected*",
+        *(
+            f"{row['dE00']:.2f}" if row["pass"] else f"[red]{row['dE00']:.2f}[/]"
+            for row in left_out["geometries"].values()
+        ),
+    )
+    return table
+
+
+def _print_correction(report: dict) -> None:
+    """The correction as a colorist reads it: what to weigh, then the colour before/after."""
+    grams = report.get("add_g", report.get("recipe_g", {}))
+    title = "add to the mixed can" if report["mode"] == "additions" else "mix afresh"
+    table = Table(title=f"Correction: {title}", box=box.SIMPLE_HEAD)
+    table.add_column("toner")
+    table.add_column("g", justify="right")
+    for toner, g in grams.items():
+        label = f"{toner} [yellow](new to the recipe)[/]" if toner == report["new_toner"] else toner
+        table.add_row(label, f"{g:.1f}")
+    if not grams:
+        table.add_row("[dim]nothing to add on this scale[/]", "")
+    geo = Table(box=box.SIMPLE, show_header=True)
+    geo.add_column("ΔE00")
+    for name in report["geometries"]:
+        geo.add_column(name, justify="right")
+    failing = set(report["sprayout_failing"])
+    geo.add_row(
+        "spray-out",
+        *(
+            f"[red]{v:.2f}[/]" if g in failing else f"{v:.2f}"
+            for g, v in zip(report["geometries"], report["before_de00"], strict=True)
+        ),
+    )
+    still = set(report["expected_failing"])
+    geo.add_row(
+        "expected",
+        *(
+            f"[red]{v:.2f}[/]" if g in still else f"{v:.2f}"
+            for g, v in zip(report["geometries"], report["expected_de00"], strict=True)
+        ),
+    )
+    console.print(table)
+    console.print(geo)
+    if left_out := report.get("left_out"):
+        console.print(_left_out_correction_table(left_out))
+        console.print(
+            "* not corrected for: the target's other geometries; expected there: the spray-out "
+            f"as measured, moved by what the model {left_out['model_id']} predicts the "
+            "correction does",
+            highlight=False,
+        )
+    application = report["spray_application"]
+    if application is None:
+        assumed = f"{report['offset_weight']:.0%} of the spray-out's offset from the model persists"
+    else:
+        film, spread = application.values()
+        assumed = (
+            "the spray-out's offset from the model persists, except what this spray's "
+            f"application explains (film build {film:+.1%}, flake spread {spread:+.1%})"
+        )
+        if report["habits"]:
+            assumed += " beyond the shop's habits, which persist"
+    console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
+    console.print(
+        metamerism_text(
+            report["sprayout_metamerism_index_max"], report["sprayout_metamer"], "spray-out "
+        )
+        + f"; expected {metamerism_values(report['expected_metamerism_index_max'])}",
+        highlight=False,
+    )
+    for note in report["notes"]:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)

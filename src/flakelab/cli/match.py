@@ -1,0 +1,431 @@
+"""CLI: the main job — match a target (and the evaluation harness, ``match evaluate``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich import box
+from rich.table import Table
+
+from flakelab.cli.common import (
+    JsonOption,
+    LightsOption,
+    PlotOption,
+    SampleOption,
+    check_figure_file,
+    check_output_file,
+    console,
+    draw_differences,
+    draw_side_by_side,
+    errors,
+    lights_option,
+    progress_bar,
+    read_sample,
+    texture_table,
+)
+from flakelab.cli.matcher import (
+    HabitsOption,
+    HabitsShopOption,
+    MetamerismOption,
+    ModelOption,
+    PhysicsOption,
+    QuantityOption,
+    RecipeOutOption,
+    ResolutionOption,
+    habits_for,
+    left_out_model,
+    matcher_setup,
+    metamerism_text,
+    spectra_for_model,
+    with_left_out,
+)
+from flakelab.cli.sources import (
+    DatabaseOption,
+    InstrumentOption,
+    LibraryOption,
+)
+from flakelab.cli.weigh import rounding_text, scale_of, weighed_recipe, weights_table
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.tolerance import failures
+from flakelab.errors import FlakelabError
+from flakelab.match.settings import MatchSettings
+
+
+def match_command(
+    target: Annotated[
+        str | None,
+        typer.Argument(help="Target measurement file, or 'evaluate' for the evaluation harness."),
+    ] = None,
+    example: Annotated[
+        bool, typer.Option("--example", help="Match the shipped example target.")
+    ] = False,
+    sample: SampleOption = None,
+    library: LibraryOption = None,
+    quantity: QuantityOption = "250g",
+    resolution: ResolutionOption = 0.1,
+    tolerance: Annotated[
+        str | None,
+        typer.Option(
+            "--tolerance",
+            "-t",
+            help="Preset (refinish, de00-1.0, components) or TOML/JSON file; the search aims at "
+            "it (default: refinish; evaluate: de00-1.0, ΔE00 ≤ 1.0 at every geometry).",
+        ),
+    ] = None,
+    candidates: Annotated[int, typer.Option(min=1, max=20, help="Candidates to show.")] = 3,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    model: ModelOption = None,
+    physics: PhysicsOption = False,
+    database: DatabaseOption = None,
+    targets: Annotated[int, typer.Option(min=1, help="evaluate: hidden targets.")] = 200,
+    novel_targets: Annotated[
+        int, typer.Option(min=0, help="evaluate: targets with a new toner.")
+    ] = 50,
+    world: Annotated[
+        str,
+        typer.Option(
+            help="evaluate: shop (batches and application vary), standard-pigments (no batch "
+            "differs) or controlled (only the instrument's reading varies)."
+        ),
+    ] = "shop",
+    seed: Annotated[
+        int, typer.Option(min=0, help="Seed (search restarts; evaluate: the world).")
+    ] = 0,
+    model_risk: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="Weight of the model ensemble's disagreement (ΔE94) in the search's objective: "
+            "steers recipes to where the learned model's networks agree (0: the closest "
+            "predicted match, wherever the model is unsure).",
+        ),
+    ] = MatchSettings.model_risk,
+    metamerism: MetamerismOption = MatchSettings.metamerism,
+    lights: LightsOption = None,
+    solid_travel: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="A target without texture readings whose colour travels less than this "
+            "(ΔE00, the largest between two of its geometries) is a solid, matched with "
+            "pigments alone (0: never).",
+        ),
+    ] = MatchSettings.solid_travel,
+    target_texture: Annotated[
+        bool,
+        typer.Option(
+            "--target-texture/--no-target-texture",
+            help="evaluate: the matcher reads each target's texture readings (--no-target-"
+            "texture: as from a file without them; the sprays are judged as ever).",
+        ),
+    ] = True,
+    resprays: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            max=1000,
+            help="evaluate: spray each first recipe and hidden formula this many times more, "
+            "and report the chance a spray passes (first_shot_chance, oracle_chance): the "
+            "one spray's luck averaged out.",
+        ),
+    ] = 0,
+    weighed: Annotated[
+        bool,
+        typer.Option(
+            "--weighed",
+            help="evaluate: spray each recipe as weighed for --quantity on a scale of "
+            "--resolution, as a shop mixes it (default: as computed).",
+        ),
+    ] = False,
+    habits: HabitsOption = None,
+    shop: HabitsShopOption = None,
+    render: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also draw the target and each candidate as curved panels side by side, as "
+            "predicted (PNG, PDF or SVG).",
+        ),
+    ] = None,
+    plot: PlotOption = None,
+    recipe_out: RecipeOutOption = None,
+    pick: Annotated[
+        int, typer.Option(min=1, max=20, help="The candidate --recipe-out writes.")
+    ] = 1,
+    json_output: JsonOption = False,
+) -> None:
+    """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
+
+    Each candidate comes with its predicted ΔL*, ΔC*, ΔH* and ΔE00 per geometry
+    and the model that produced them.
+    'flakelab match evaluate' runs the evaluation harness."""
+    from flakelab.data import example_path
+    from flakelab.io import read_tolerance
+    from flakelab.match.search import match
+
+    if target == "evaluate":
+        if render is not None or plot is not None or recipe_out is not None:
+            raise FlakelabError(
+                "--render, --plot, --recipe-out: for the candidates of one target, not the harness"
+            )
+        _evaluate(
+            library=library,
+            instrument=instrument,
+            model=model,
+            physics=physics,
+            database=database,
+            targets=targets,
+            novel_targets=novel_targets,
+            seed=seed,
+            world_name=world,
+            habits_file=habits,
+            shop=shop,
+            # the harness's own candidates and seeds
+            settings=MatchSettings(
+                model_risk=model_risk,
+                metamerism=metamerism,
+                lights=lights_option(lights),
+                solid_travel=solid_travel,
+            ),
+            tolerance=tolerance,
+            scale=scale_of(quantity, resolution) if weighed else None,
+            target_texture=target_texture,
+            resprays=resprays,
+            json_output=json_output,
+        )
+        return
+    if weighed or not target_texture or resprays:
+        raise FlakelabError(
+            "--weighed, --no-target-texture, --resprays: for the harness (flakelab match evaluate)"
+        )
+    if target is not None and example:
+        # "--quantity 250 g" leaves its "g" here as the target
+        raise FlakelabError(
+            f"expected a target file or --example, not both (got --example and {target!r})"
+        )
+    if target is None and not example:
+        raise FlakelabError("expected a target file or --example")
+    grams = scale_of(quantity, resolution)[0]
+    check_figure_file(render)
+    check_figure_file(plot, "--plot")
+    check_output_file(recipe_out, "--recipe-out")
+    if pick > candidates:
+        raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
+    lib, forward, effect = matcher_setup(library, instrument, model, database, physics)
+    path = example_path("target") if example else Path(target)
+    measurement = read_sample(path, sample)
+    spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
+    tol = read_tolerance(tolerance or "refinish")
+    result = match(
+        measurement,
+        forward,
+        effect,
+        tolerance=tol,
+        settings=MatchSettings(
+            candidates=candidates,
+            seed=seed,
+            model_risk=model_risk,
+            metamerism=metamerism,
+            lights=lights_option(lights),
+            solid_travel=solid_travel,
+        ),
+        habits=habits_for(habits, shop, database, forward),
+        library=lib,
+    )
+    report = result.to_dict()
+    extra = []
+    if habits is None and shop is None:  # aimed-off candidates: their offsets are per geometry
+        other = left_out_model(measurement, forward, lib, database, physics)
+        if other is not None:
+            from flakelab.match.crosscheck import predict_left_out
+
+            extra = predict_left_out(result.candidates, measurement, forward, other, tol)
+            for entry, left_out in zip(report["candidates"], extra, strict=True):
+                entry["left_out"] = left_out.to_dict()
+    for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
+        entry.update(weighed_recipe(forward, candidate.fractions, grams, resolution))
+    report["quantity_g"] = grams
+    report["resolution_g"] = resolution
+    if recipe_out is not None:
+        _write_candidate(report, pick, recipe_out)
+    if render is not None:
+        _render_match(measurement.select(forward.geometries), result, render)
+        report["rendering"] = str(render)
+    if plot is not None:
+        _plot_match(measurement, result, extra, tol, plot)
+        report["plot"] = str(plot)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_match(report)
+
+
+def _write_candidate(report: dict, pick: int, path: Path) -> None:
+    """``--recipe-out``: candidate ``pick``'s weighed grams as a recipe file."""
+    from flakelab.io import write_recipe
+
+    if pick > len(report["candidates"]):
+        raise FlakelabError(f"--pick: the search found {len(report['candidates'])} candidates")
+    lines = report["candidates"][pick - 1]["weights_g"]
+    write_recipe({ln["toner"]: ln["grams"] for ln in lines if ln["grams"] > 0}, path)
+    report["recipe_out"] = {"file": str(path), "candidate": pick}
+    errors.print(f"wrote candidate #{pick}'s recipe to {path}", highlight=False)
+
+
+def _render_match(target, result, path: Path) -> None:
+    """The target as measured (at the model's geometries, as the candidates) above each
+    candidate as its model predicts it, curved panels in one texture draw."""
+    readings = [target] + [c.as_measurement(f"#{k}") for k, c in enumerate(result.candidates, 1)]
+    labels = ["target"] + [
+        f"#{k}  {'PASS' if c.passes else 'FAIL'}  max ΔE00 {c.de00.max():.2f}"
+        for k, c in enumerate(result.candidates, 1)
+    ]
+    draw_side_by_side(readings, labels, path, f"{result.target}: target and candidates (predicted)")
+
+
+def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
+    """Each candidate's predicted difference from the target at the searched geometries, then
+    at the target's others as the model that predicts them says (``left_out``)."""
+    if not result.candidates:
+        raise FlakelabError("--plot: the search found no candidate to draw")
+    samples = {f"#{k}": c.lab for k, c in enumerate(result.candidates, 1)}
+    chart = with_left_out(
+        target, list(result.candidates[0].geometries), result.candidates[0].target_lab, samples,
+        left_out and left_out[0].geometries, [x.lab for x in left_out],
+    )  # fmt: skip
+    apart = f"not searched; predicted by {left_out[0].model_id}" if left_out else ""
+    texture = {f"#{k}": c.texture_share for k, c in enumerate(result.candidates, 1)}
+    draw_differences(*chart, tolerance, path, f"{result.target}: candidates as predicted",
+                     apart=len(result.candidates[0].geometries), apart_label=apart,
+                     texture=texture)  # fmt: skip
+
+
+def _print_match(report: dict) -> None:
+    console.print(
+        f"[bold]{report['target']}[/] — {len(report['candidates'])} candidates "
+        f"({report['subsets_tried']} toner sets optimised in {report['seconds']:.2f} s, "
+        f"tolerance {report['tolerance']})"
+    )
+    for rank, c in enumerate(report["candidates"], start=1):
+        failing = failures(c["failing_geometries"], c["failing_texture"])
+        verdict = "[green]PASS[/]" if c["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
+        header = (
+            f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}"
+            f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"
+            + ("  aimed off for the shop's habits" if c.get("aimed_off") else "")
+        )
+        table = weights_table(None, c["weights_g"])
+        geo = Table(box=box.SIMPLE, show_header=True)
+        keys = ["L", "a", "b", "dL", "dC", "dH", "dE00"]
+        columns = ["geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"]
+        if all("model_spread" in v for v in c["geometries"].values()):
+            keys.append("model_spread")
+            columns.append("± model")  # the ensemble's members' disagreement
+        for column in columns:
+            geo.add_column(column, justify="right")
+        for g, v in c["geometries"].items():
+            geo.add_row(g, *(f"{v[k]:.2f}" for k in keys))
+        left_out = c.get("left_out")
+        if left_out:  # predicted by another model, not searched: set apart, marked *
+            geo.add_section()
+            for g, v in left_out["geometries"].items():
+                cells = [f"{v[k]:.2f}" for k in keys if k != "model_spread"]
+                cells[-1] = cells[-1] if v["pass"] else f"[red]{cells[-1]}[/]"
+                geo.add_row(f"{g} *", *cells, *([""] if "model_spread" in keys else []))
+        console.print(header, highlight=False)
+        console.print(table)
+        console.print(geo)
+        if left_out:
+            verdict = (
+                "pass"
+                if left_out["passes"]
+                else "fail at " + ", ".join(left_out["failing_geometries"])
+            )
+            console.print(
+                f"* not searched: the target's other geometries, as the model "
+                f"{left_out['model_id']} predicts them: {verdict}",
+                highlight=False,
+            )
+        if c["texture_delta"]:
+            limits = {k: report["texture_limits"][k] for k in c["texture_limit_share"]}
+            console.print(
+                texture_table(
+                    "predicted − target", c["texture_delta"], limits, c["failing_texture"]
+                )
+            )
+        extra = f"model: {c['model']}; {rounding_text(c)}"
+        if c["novel_toners"]:
+            extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
+        console.print(extra, highlight=False)
+        console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
+    for note in report["notes"]:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
+    if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
+        console.print(
+            "± model: how far the networks of the model's ensemble disagree (ΔE00 about their "
+            "mean); where it is large, the prediction deserves less trust.",
+            highlight=False,
+        )
+
+
+def _evaluate(
+    *,
+    library,
+    instrument,
+    model,
+    physics,
+    database,
+    targets,
+    novel_targets,
+    seed,
+    world_name,
+    habits_file,
+    shop,
+    settings,
+    tolerance,
+    scale,
+    target_texture,
+    resprays,
+    json_output,
+):
+    from flakelab.core.difference import METAMERISM_ILLUMINANTS
+    from flakelab.io import read_tolerance
+    from flakelab.match.evaluate import evaluate_matching, harness_world
+    from flakelab.match.objective import OBJECTIVE_DEFAULT
+
+    tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
+
+    lib, forward, effect = matcher_setup(library, instrument, model, database, physics)
+    world = harness_world(lib, instrument, world_name)
+    habits = habits_for(habits_file, shop, database, forward)
+    with progress_bar(json_output) as bar:
+        task = bar.add_task("matching hidden targets", total=targets + novel_targets)
+        report = evaluate_matching(
+            world,
+            forward,
+            effect,
+            targets=targets,
+            seed=seed,
+            novel=forward.novel,
+            novel_targets=novel_targets if forward.novel else 0,
+            habits=habits,
+            settings=settings,
+            tolerance=tol,
+            scale=scale,
+            target_texture=target_texture,
+            resprays=resprays,
+            progress=lambda: bar.advance(task),
+        )
+    report["model"] = forward.name
+    report["model_risk"] = settings.model_risk
+    report["metamerism_weight"] = settings.metamerism
+    report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
+    report["solid_travel"] = settings.solid_travel
+    report["world"] = world_name
+    report["habits"] = habits and habits.report()
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    console.print_json(json.dumps(report))

@@ -1,0 +1,222 @@
+"""CLI: what the match, correct and weigh commands share — their options, the matcher's
+forward model, the shop's habits, the toners a model leaves out."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from flakelab.cli.common import (
+    errors,
+)
+from flakelab.cli.sources import (
+    current_forward,
+    learned_forward,
+    since_option,
+)
+from flakelab.errors import FlakelabError
+
+MetamerismOption = Annotated[
+    float,
+    typer.Option(
+        min=0.0,
+        help="Weight of the metamerism index against the target (ΔE00 after ISO 18314-4's "
+        "correction, under the test lights) in the objective: steers recipes to the car's own "
+        "pigments (0: colour under D65/10 alone).",
+    ),
+]
+
+
+RecipeOutOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--recipe-out",
+        help="Write the recipe as a file {toner: grams}, as 'correct --recipe' and "
+        "'cases record --recipe' read it.",
+    ),
+]
+
+
+QuantityOption = Annotated[
+    str,
+    typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg, 1lb (to the scale's nearest step)."),
+]
+
+
+ResolutionOption = Annotated[float, typer.Option(help="Scale resolution in grams.")]
+
+
+ModelOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--model",
+        "-m",
+        help="Model file, or a registered version NAME:VERSION (default: current for the "
+        "instrument).",
+    ),
+]
+
+
+PhysicsOption = Annotated[
+    bool,
+    typer.Option(
+        "--physics",
+        help="Predict with the library's physics model alone (colour and texture), not a "
+        "learned model: no cases needed and every toner known, but a match takes ten to twenty "
+        "times as long.",
+    ),
+]
+
+
+HabitsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--habits",
+        help="The shop's habits file ('flakelab cases habits --out'): recipes are aimed off "
+        "for its film build, flake alignment and instrument.",
+    ),
+]
+
+
+HabitsShopOption = Annotated[
+    str | None,
+    typer.Option(
+        "--shop",
+        help="Aim recipes off for this shop's habits as stored in the database "
+        "('flakelab cases habits --shop NAME --save').",
+    ),
+]
+
+
+def matcher_setup(
+    library: Path | None,
+    instrument: str,
+    model: Path | None,
+    database: str | None,
+    physics: bool = False,
+):
+    """The library, the matcher's forward model (learned, or with ``physics`` the library's
+    physics alone) and the library's effect-toner mask."""
+    from flakelab.match.models import effect_mask
+
+    if physics:
+        from flakelab.core.geometry import instrument_geometries
+        from flakelab.io import read_library
+        from flakelab.match.forward import PhysicsForward
+
+        if model is not None:
+            raise FlakelabError("--physics and --model: expected one of them, not both")
+        lib = read_library(library)
+        forward = PhysicsForward(lib, instrument_geometries(instrument))
+    else:
+        lib, forward = learned_forward(library, instrument, model, database)
+    return lib, forward, effect_mask(lib, forward.toners)
+
+
+def habits_for(path: Path | None, shop: str | None, database: str | None, forward):
+    """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
+    none), with a warning when they were measured against another model than ``forward``, or
+    over a change of the shop's habits."""
+    if path is None and shop is None:
+        return None
+    if path is not None and shop is not None:
+        raise FlakelabError("--habits and --shop: expected one of them, not both")
+    from flakelab.cases.database import open_database
+    from flakelab.match.habits import read_habits, stored_habits
+
+    found = (
+        read_habits(path)
+        if path
+        else stored_habits(open_database(database, must_exist=True), shop, forward.model_id)
+    )
+    if found.model != forward.model_id:
+        errors.print(
+            f"[yellow]warning:[/] {path or shop}: habits measured against "
+            f"{found.model or 'an unnamed model'}, not {forward.model_id}: read them again "
+            "against this model",
+            highlight=False,
+        )
+    if found.changed_since:
+        since = datetime.fromisoformat(found.changed_since)
+        errors.print(
+            f"[yellow]warning:[/] {path or shop}: habits read over a change of the shop's "
+            f"habits, from about {since:%Y-%m-%d %H:%M}: read them again from the recent "
+            f"cases (flakelab cases habits {since_option(since)})",
+            highlight=False,
+        )
+    return found
+
+
+def spectra_for_model(path, reading, forward):
+    """A reading's spectra at the model's geometries (:func:`~flakelab.match.search.
+    target_spectra`); a reading that lacks some is named with its file."""
+    from flakelab.match.search import MatchError, target_spectra
+
+    try:
+        return target_spectra(reading, forward)
+    except MatchError as error:
+        raise FlakelabError(f"{path}: sample {error}") from None
+
+
+def left_out_model(measurement, forward, library, database: str | None, physics: bool):
+    """A model that predicts geometries of ``measurement`` that ``forward`` left out: the
+    current model (with ``physics``, the library's physics) of the largest geometry set the
+    target reads in full. None when there is none."""
+    from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
+    from flakelab.match.search import unused_geometries
+    from flakelab.models.network import ModelError
+    from flakelab.models.registry import SHIPPED
+
+    unused = set(unused_geometries(measurement, forward))
+    read = set(measurement.geometry_names)
+    sets = [
+        name
+        for name in (INSTRUMENT_GEOMETRIES if physics else SHIPPED)
+        if unused & set(INSTRUMENT_GEOMETRIES[name]) and read >= set(INSTRUMENT_GEOMETRIES[name])
+    ]
+    if not sets:
+        return None
+    fullest = max(sets, key=lambda name: len(INSTRUMENT_GEOMETRIES[name]))
+    if physics:
+        from flakelab.match.forward import PhysicsForward
+
+        return PhysicsForward(library, instrument_geometries(fullest))
+    try:
+        return current_forward(library, fullest, None, database)
+    except ModelError:  # the user's library is not the one that model knows: no cross-check
+        return None
+
+
+def with_left_out(target, names: list, reference_lab, samples: dict, others, there: list):
+    """A chart's geometries, reference and samples (label → CIELAB ``[G, 3]``), followed by
+    the target's ``others`` geometries, where each sample has its CIELAB in ``there`` (in the
+    samples' order) and the reference is the target as read."""
+    import numpy as np
+
+    from flakelab.core.colorimetry import reflectance_to_Lab
+
+    if not others:
+        return names, reference_lab, samples
+    target_there = reflectance_to_Lab(target.storage_spectra(list(others)))
+    extended = {
+        label: np.concatenate([lab, more])
+        for (label, lab), more in zip(samples.items(), there, strict=True)
+    }
+    return names + list(others), np.concatenate([reference_lab, target_there]), extended
+
+
+def metamerism_values(worst: dict[str, float]) -> str:
+    return "  ".join(f"{light} {value:.2f}" for light, value in worst.items())
+
+
+def metamerism_text(worst: dict[str, float], metamer: bool, label: str = "") -> str:
+    """The worst geometry's metamerism index under each test illuminant, on one line; a
+    ``metamer`` (as the report judged it, :func:`~flakelab.core.difference.is_metamer`)
+    called one."""
+    return (
+        "metamerism index against the target (ISO 18314-4, ΔE00, worst geometry): "
+        f"{label}{metamerism_values(worst)}{' (a metamer)' if metamer else ''}"
+    )
