@@ -10,6 +10,8 @@ import pytest
 
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.io import read_library
+from flakelab.match.habits import estimate_habits
+from flakelab.match.models import forward_for
 from flakelab.models.network import ModelError
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import (
@@ -53,7 +55,8 @@ def test_a_shops_habits_are_drawn_about_its_own_means():
 def test_adaptation_learns_a_shops_habits(model):
     train = shop_cases(model, SHOP_HABITS, 600, 21)
     fresh = shop_cases(model, SHOP_HABITS, 400, 22)
-    adapted, report = adapt_model(model, train, replace(recorded_config(model), seed=1))
+    config = replace(recorded_config(model), seed=1)
+    adapted, report = adapt_model(model, train, config, shop="shop A")
     before = evaluate_model(model, fresh)["de00_mean"]
     after = evaluate_model(adapted, fresh)["de00_mean"]
     # the shipped model sees the shop's paints about 0.4 ΔE00 off; after: within about 0.1
@@ -61,8 +64,25 @@ def test_adaptation_learns_a_shops_habits(model):
     assert before > 1.0 and after < before - 0.25
     assert report["validation_cases"] == 120 and 0 < report["kept_epochs"] <= 150
     assert adapted.info["adaptation"]["cases"] == 480
+    assert adapted.info["adaptation"]["shop"] == "shop A"
+    assert adapted.info["adaptation"]["from"] == model.identity != adapted.identity
     # the copy is adapted, not the model it came from
     assert evaluate_model(model, fresh)["de00_mean"] == before
+
+    # the shop's habits read against the model it came from: the adapted model has learned
+    # them, and adding them again costs about what adapting bought
+    library = read_library(None)
+    base, learned = forward_for(model, library), forward_for(adapted, library)
+    habits = estimate_habits(base, library, train.x, train.R)
+    twice = evaluate_model(adapted, fresh, lab_offset=lambda x, R: habits.offset(
+        library, x, R, learned.geometries))["de00_mean"]  # fmt: skip
+    assert twice > after + 0.2
+    assert habits.learned_by(learned) and not habits.learned_by(base)
+    # adapted to the shop: whatever model the habits were read against; not another shop's
+    assert replace(habits, model="an older model", shop="shop A").learned_by(learned)
+    assert not replace(habits, model="an older model", shop="shop B").learned_by(learned)
+    # read against the adapted model itself, they are what it has not learned: added
+    assert not estimate_habits(learned, library, train.x, train.R).learned_by(learned)
 
 
 def test_mixed_up_sprayouts_among_a_shops_cases_are_flagged_before_adapting(model):

@@ -385,6 +385,9 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     assert run.returncode == 0, run.stderr
     run = cli("cases", "generate", "--n", "100", "--seed", "22", "--out", cases)
     assert run.returncode == 0, run.stderr
+    habits_file = str(tmp_path / "habits.json")  # read against the shipped model
+    run = cli("cases", "habits", cases, "--shop", "shop A", "--out", habits_file)
+    assert run.returncode == 0, run.stderr
     run = cli("model", "adapt", cases, "--shop", "shop A", "--database", database, "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
@@ -397,6 +400,15 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     assert held_out["after"]["de00_mean"] < held_out["before"]["de00_mean"] - 0.2
     assert report["registry"]["promoted"] is True
     assert report["registry"]["incumbent_de00"] == pytest.approx(held_out["before"]["de00_mean"])
+    # the promoted model has learned the shop's habits read against the shipped one: they are
+    # not added to its predictions again
+    judged = [cli("model", "evaluate", cases, "--shop", "shop A", "--database", database, "--json",
+                  *extra) for extra in ((), ("--habits", habits_file))]  # fmt: skip
+    said = " ".join(judged[1].stderr.split())
+    assert "it has learned them, so they are not added again" in said
+    assert "habits measured against" not in said  # not the warning for other models' habits
+    plain, with_habits = (json.loads(run.stdout) for run in judged)
+    assert with_habits["habits"] is None and with_habits["de00_mean"] == plain["de00_mean"]
     # the promoted model is now the current one: a second adaptation starts from it
     run = cli("model", "adapt", cases, "--shop", "shop A", "--database", database,
               "--epochs", "5", "--json")  # fmt: skip

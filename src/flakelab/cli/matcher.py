@@ -119,7 +119,8 @@ def matcher_setup(
 def habits_for(path: Path | None, shop: str | None, database: str | None, forward):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``, or
-    over a change of the shop's habits."""
+    over a change of the shop's habits; None, with a note, where ``forward``'s model was
+    adapted to them (:meth:`~flakelab.match.habits.ShopHabits.learned_by`)."""
     if path is None and shop is None:
         return None
     if path is not None and shop is not None:
@@ -132,6 +133,15 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
         if path
         else stored_habits(open_database(database, must_exist=True), shop, forward.model_id)
     )
+    if found.learned_by(forward):
+        errors.print(
+            f"note: {path or shop}: habits read against {found.model}, and the model in use, "
+            f"{forward.model_id}, was adapted to the shop's cases: it has learned them, so "
+            "they are not added again (read them against this model for what it has not "
+            "learned)",
+            highlight=False,
+        )
+        return None
     if found.model != forward.model_id:
         errors.print(
             f"[yellow]warning:[/] {path or shop}: habits measured against "

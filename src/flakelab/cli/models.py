@@ -388,6 +388,7 @@ def _model_card_table(card: dict) -> Table:
         rows["adapted"] = (
             f"{adaptation.get('stage', '')}: {adaptation.get('cases')} cases, kept epoch "
             f"{adaptation.get('kept_epochs')} of {adaptation.get('epochs')}"
+            + (f", from {adaptation['from']}" if adaptation.get("from") else "")
         )
     if "file" in card:
         rows["written to"] = card["file"]
@@ -576,9 +577,8 @@ def adapt(
         total = config.adapt_epochs * base.members  # an ensemble's members adapt side by side
         task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=total)
         new, report = adapt_model(
-            base, data, config, stage=stage, progress=lambda k: bar.advance(task, k)
+            base, data, config, stage=stage, shop=shop, progress=lambda k: bar.advance(task, k)
         )
-    new.info["adaptation"]["shop"] = shop
     before = evaluate_model(base, held_out)
     after = evaluate_model(new, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}

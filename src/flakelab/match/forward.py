@@ -56,8 +56,7 @@ class LearnedForward:
         self.toners = model.toners
         self.geometries = model.geometries
         self.name = f"learned ({model.instrument}, {model.info.get('name', 'model')})"
-        # which model exactly: an adapted model keeps its base's name
-        self.model_id = f"{model.info.get('name', 'model')} {model.fingerprint}"
+        self.model_id = model.identity  # which model exactly: an adapted one keeps its name
         self.novel: tuple[str, ...] = ()
         # the least effect-toner share of the training cases' effect paints (0: not recorded)
         self.effect_share_floor = float(model.info.get("effect_share_floor", 0.0))

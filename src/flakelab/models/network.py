@@ -468,6 +468,12 @@ class ForwardModel:
             digest.update(np.asarray(getattr(self, key), "<f4").tobytes())
         return digest.hexdigest()[:12]
 
+    @property
+    def identity(self) -> str:
+        """Which model exactly: its name and :attr:`fingerprint` (what a shop's habits name
+        as the model they were read against)."""
+        return f"{self.info.get('name', 'model')} {self.fingerprint}"
+
     # -- storage -------------------------------------------------------------------------
     def to_bytes(self) -> bytes:
         buffer = io.BytesIO()

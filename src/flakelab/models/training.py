@@ -664,6 +664,8 @@ def train_protocol(
         if shop_rows.size == 0:
             raise ModelError(f"--adapt: no cases from shop {adapt_shop!r}")
         adaptation = adapt(model, data, shop_rows, config, log, f"adapt {adapt_shop}", progress)
+        # adapted from a network never stored: no "from"
+        model.info["adaptation"] = adaptation | {"stage": f"adapt {adapt_shop}", "shop": adapt_shop}
     report = {
         "cases": n,
         "outliers": int(outliers.sum()),
@@ -741,11 +743,15 @@ def adapt_model(
     config: TrainingConfig | None = None,
     *,
     stage: str = "adapt",
+    shop: str | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[ForwardModel, dict]:
-    """A copy of a trained ``model`` adapted to all of ``data`` (one shop's cases) by
+    """A copy of a trained ``model`` adapted to all of ``data`` (one ``shop``'s cases) by
     :func:`adapt`; ``config`` defaults to the one the model was trained with. Returns it and
-    a report (what :func:`adapt` did, the loss log)."""
+    a report (what :func:`adapt` did, the loss log). The copy records, in its
+    ``info["adaptation"]``, the ``shop`` and which model it was adapted ``from``: a shop's
+    habits read against that model are learned by it (:func:`~flakelab.match.habits.
+    learned_by`)."""
     if data.geometries != model.geometries:
         raise ModelError(
             f"cases: geometries {data.geometries} differ from the model's {model.geometries}"
@@ -762,7 +768,12 @@ def adapt_model(
     new = replace(model, network=copy.deepcopy(model.network), info=copy.deepcopy(model.info))
     log: list[dict] = []
     report = adapt(new, data, np.arange(data.x.shape[0]), config, log, stage, progress)
-    new.info["adaptation"] = report | {"stage": stage, "data_hash": data_hash(data)}
+    new.info["adaptation"] = report | {
+        "stage": stage,
+        "data_hash": data_hash(data),
+        "shop": shop,
+        "from": model.identity,
+    }
     return new, report | {"log": log}
 
 
