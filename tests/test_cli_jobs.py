@@ -12,7 +12,7 @@ from flakelab.core import compare
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_recipe, write_measurements
-from flakelab.models.registry import load_model_file
+from flakelab.models.registry import load_model_file, shipped_model
 from flakelab.models.training import training_device
 
 
@@ -409,6 +409,21 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     assert "habits measured against" not in said  # not the warning for other models' habits
     plain, with_habits = (json.loads(run.stdout) for run in judged)
     assert with_habits["habits"] is None and with_habits["de00_mean"] == plain["de00_mean"]
+    # the adapted model is shop A's own: the other shop's cases, and matches for another
+    # shop, stay with the shipped model; a match for shop A takes its model, no habits stored
+    run = cli("model", "evaluate", cases, "--shop", "synthetic shop", "--database", database,
+              "--json")  # fmt: skip
+    assert json.loads(run.stdout)["model_id"] == shipped_model("five-angle").identity
+    assert plain["model_id"] != shipped_model("five-angle").identity
+    run = cli("match", "--example", "--shop", "shop A", "--database", database, "--json")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["model_id"] == plain["model_id"]
+    run = cli("match", "--example", "--shop", "shop B", "--database", database)
+    assert (
+        run.returncode == 2
+        and "shop 'shop B' has neither habits stored nor a model of its own"
+        in " ".join(run.stderr.split())
+    )
     # the promoted model is now the current one: a second adaptation starts from it
     run = cli("model", "adapt", cases, "--shop", "shop A", "--database", database,
               "--epochs", "5", "--json")  # fmt: skip
@@ -421,7 +436,9 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     run = cli("model", "adapt", cases, "--validation", "0.95", "--database", database)
     assert run.returncode == 2 and "--validation" in run.stderr
     listed = json.loads(cli("model", "list", "--database", database, "--json").stdout)
-    assert len(listed["registered"]) == 2
+    assert [r["name"] for r in listed["registered"]] == ["five-angle @ shop A"] * 2
+    assert listed["current"]["five-angle"] == "shipped"
+    assert listed["current"]["five-angle @ shop A"] in ("v1", "v2")
 
 
 def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_name(tmp_path, cli):
@@ -636,7 +653,8 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cl
     assert any("flakes 4.0%" in n for n in json.loads(run.stdout)["notes"])
     assert "warning" not in run.stderr  # read against the model in use
     run = cli("match", "--example", "--shop", "synthetic shop", "--database", cases)
-    assert run.returncode == 2 and "no habits stored for shop 'synthetic shop'" in run.stderr
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 2 and "'synthetic shop' has neither habits stored nor a model" in said
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(json.loads(habits.read_text()) | {"film_build": "lots"}))
     run = cli("match", "--example", "--habits", str(bad))

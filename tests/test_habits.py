@@ -675,3 +675,42 @@ def test_recorded_sprayouts_are_checked_against_their_recipes_with_the_shops_sto
     other = replace(library, name="other", toners=library.toners[:-1])
     checks, why = recorded_checks(cases[1:3], other)
     assert checks == [None, None] and "library 'other'" in why
+
+
+def test_a_shops_own_model_is_current_for_that_shop_alone(shipped, tmp_path):
+    """A model registered for one shop (as 'model adapt --shop' registers it) checks that
+    shop's recorded spray-outs; another shop's, and the instrument's own, stay with the
+    instrument's current model (here the shipped one)."""
+    from flakelab.match.mixups import recorded_checks
+    from flakelab.models.registry import (
+        current_model,
+        current_model_and_source,
+        promote,
+        register,
+        shop_model_name,
+    )
+
+    library = shipped[0]
+    model = shipped_model("five-angle")
+    own = model.split_members()[0]  # any other model: the shipped ensemble's first network
+    world = shop_world(shipped, habits=False)
+    engine = open_database(tmp_path / "models.db")
+    entry = register(engine, own, generated_case_arrays(world, 30, 45), shop="shop A")
+    assert entry["name"] == shop_model_name("five-angle", "shop A") == "five-angle @ shop A"
+    if not entry["promoted"]:  # one network may not beat the ensemble on 30 cases
+        promote(engine, entry["name"], entry["version"])
+    assert current_model(engine, "five-angle", "shop A").identity == own.identity
+    assert current_model_and_source(engine, "five-angle", "shop A")[1].endswith(
+        "five-angle @ shop A, promoted"
+    )
+    for shop in ("shop B", None):
+        assert current_model_and_source(engine, "five-angle", shop)[1] == "shipped"
+    cases = [
+        c
+        for seed, shop in ((43, "shop A"), (44, "shop B"))
+        for batch in world.cases(10, seed=seed, shop=shop)
+        for c in batch
+    ]
+    checks, why = recorded_checks(cases, library, engine)
+    assert why is None
+    assert [c["model"] for c in checks] == [own.identity] * 10 + [model.identity] * 10

@@ -713,8 +713,8 @@ def habits(
 ) -> None:
     """A shop's habits from its spray-outs: film build, flake alignment, instrument gain.
 
-    Each as the shop's mean against the model's cases, read through the physics of
-    application."""
+    Each as the shop's mean against the model's cases (the current model, the shop's own with
+    --shop where one was adapted to it), read through the physics of application."""
     from flakelab.cases.database import open_database
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
@@ -731,7 +731,7 @@ def habits(
     check_output_file(out, "--out")
     if save:  # a command that stores creates its database, as the others do
         open_database(database)
-    lib, forward = learned_forward(library, instrument, model, database)
+    lib, forward = learned_forward(library, instrument, model, database, shop)
     learned = forward.model
     chosen = shop_cases(cases, shop, learned.geometries, since)
     chosen.sort(key=attrgetter("created_at"))  # in the order made: the change check splits it

@@ -116,7 +116,7 @@ def correct_command(
     check_figure_file(plot, "--plot")
     grams = read_recipe(recipe)
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
-    lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
+    lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
     x0 = recipe_fractions(lib, grams, recipe)
     target_reading = read_sample(target, sample)
     sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
@@ -198,7 +198,11 @@ def correct_command(
     if note := metamerism_note(sprayed_metamerism, correction.metamerism):
         report["notes"].append(note)
     report["geometries"] = list(forward.geometries)
-    other = None if shop_habits else left_out_model(target_reading, forward, lib, database, physics)
+    other = (
+        None
+        if shop_habits
+        else left_out_model(target_reading, forward, lib, database, physics, shop)
+    )
     found = other and expected_left_out(
         target_reading, sprayed_reading, fractions, correction.fractions, forward, other, tol
     )

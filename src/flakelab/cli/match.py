@@ -213,11 +213,12 @@ def match_command(
     check_output_file(recipe_out, "--recipe-out")
     if pick > candidates:
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
-    lib, forward, effect = matcher_setup(library, instrument, model, database, physics)
+    lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     path = example_path("target") if example else Path(target)
     measurement = read_sample(path, sample)
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     tol = read_tolerance(tolerance or "refinish")
+    shop_habits = habits_for(habits, shop, database, forward)
     result = match(
         measurement,
         forward,
@@ -231,13 +232,13 @@ def match_command(
             lights=lights_option(lights),
             solid_travel=solid_travel,
         ),
-        habits=habits_for(habits, shop, database, forward),
+        habits=shop_habits,
         library=lib,
     )
     report = result.to_dict()
     extra = []
-    if habits is None and shop is None:  # aimed-off candidates: their offsets are per geometry
-        other = left_out_model(measurement, forward, lib, database, physics)
+    if shop_habits is None:  # aimed-off candidates: their offsets are per geometry
+        other = left_out_model(measurement, forward, lib, database, physics, shop)
         if other is not None:
             from flakelab.match.crosscheck import predict_left_out
 
@@ -397,7 +398,7 @@ def _evaluate(
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
 
-    lib, forward, effect = matcher_setup(library, instrument, model, database, physics)
+    lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     world = harness_world(lib, instrument, world_name)
     habits = habits_for(habits_file, shop, database, forward)
     with progress_bar(json_output) as bar:

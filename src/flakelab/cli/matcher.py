@@ -85,8 +85,9 @@ HabitsShopOption = Annotated[
     str | None,
     typer.Option(
         "--shop",
-        help="Aim recipes off for this shop's habits as stored in the database "
-        "('flakelab cases habits --shop NAME --save').",
+        help="Match for this shop: with its own model where one was adapted to its cases "
+        "('flakelab model adapt --shop NAME'), and aimed off for its habits where they are "
+        "stored ('flakelab cases habits --shop NAME --save').",
     ),
 ]
 
@@ -97,9 +98,10 @@ def matcher_setup(
     model: Path | None,
     database: str | None,
     physics: bool = False,
+    shop: str | None = None,
 ):
-    """The library, the matcher's forward model (learned, or with ``physics`` the library's
-    physics alone) and the library's effect-toner mask."""
+    """The library, the matcher's forward model (learned: the current one for ``shop``, or
+    with ``physics`` the library's physics alone) and the library's effect-toner mask."""
     from flakelab.match.models import effect_mask
 
     if physics:
@@ -112,7 +114,7 @@ def matcher_setup(
         lib = read_library(library)
         forward = PhysicsForward(lib, instrument_geometries(instrument))
     else:
-        lib, forward = learned_forward(library, instrument, model, database)
+        lib, forward = learned_forward(library, instrument, model, database, shop)
     return lib, forward, effect_mask(lib, forward.toners)
 
 
@@ -120,19 +122,29 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``, or
     over a change of the shop's habits; None, with a note, where ``forward``'s model was
-    adapted to them (:meth:`~flakelab.match.habits.ShopHabits.learned_by`)."""
+    adapted to them (:meth:`~flakelab.match.habits.ShopHabits.learned_by`). A shop with a model
+    of its own (``forward``, adapted to its cases) need not have habits stored."""
     if path is None and shop is None:
         return None
     if path is not None and shop is not None:
         raise FlakelabError("--habits and --shop: expected one of them, not both")
     from flakelab.cases.database import open_database
-    from flakelab.match.habits import read_habits, stored_habits
+    from flakelab.match.habits import adaptation_of, read_habits, stored_habits
 
-    found = (
-        read_habits(path)
-        if path
-        else stored_habits(open_database(database, must_exist=True), shop, forward.model_id)
-    )
+    if path is not None:
+        found = read_habits(path)
+    else:
+        engine = open_database(database, must_exist=True)
+        try:
+            found = stored_habits(engine, shop, forward.model_id)
+        except FlakelabError:
+            if (adaptation_of(forward) or {}).get("shop") == shop:
+                return None  # the shop's own model, none stored: nothing it has not learned
+            raise FlakelabError(
+                f"{engine.url}: shop {shop!r} has neither habits stored nor a model of its own: "
+                f"read its habits with flakelab cases habits CASES --shop {shop!r} --save, or "
+                f"adapt a model to its cases with flakelab model adapt CASES --shop {shop!r}"
+            ) from None
     if found.learned_by(forward):
         errors.print(
             f"note: {path or shop}: habits read against {found.model}, and the model in use, "
@@ -171,10 +183,12 @@ def spectra_for_model(path, reading, forward):
         raise FlakelabError(f"{path}: sample {error}") from None
 
 
-def left_out_model(measurement, forward, library, database: str | None, physics: bool):
+def left_out_model(
+    measurement, forward, library, database: str | None, physics: bool, shop: str | None = None
+):
     """A model that predicts geometries of ``measurement`` that ``forward`` left out: the
-    current model (with ``physics``, the library's physics) of the largest geometry set the
-    target reads in full. None when there is none."""
+    current model for ``shop`` (with ``physics``, the library's physics) of the largest
+    geometry set the target reads in full. None when there is none."""
     from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
     from flakelab.match.search import unused_geometries
     from flakelab.models.network import ModelError
@@ -195,7 +209,7 @@ def left_out_model(measurement, forward, library, database: str | None, physics:
 
         return PhysicsForward(library, instrument_geometries(fullest))
     try:
-        return current_forward(library, fullest, None, database)
+        return current_forward(library, fullest, None, database, shop)
     except ModelError:  # the user's library is not the one that model knows: no cross-check
         return None
 

@@ -123,7 +123,10 @@ def train(
     holdout: Annotated[
         float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
     ] = 0.1,
-    adapt: Annotated[str | None, typer.Option(help="Adapt to this shop's cases.")] = None,
+    adapt: Annotated[
+        str | None,
+        typer.Option(help="Adapt to this shop's cases; registered as the shop's own model."),
+    ] = None,
     adapt_epochs: Annotated[
         int | None,
         typer.Option(
@@ -245,7 +248,7 @@ def train(
         summary["file"] = str(out)
     if register_model:
         summary["registry"] = register(
-            open_database(database), model, held_out, metrics=summary["held_out"]
+            open_database(database), model, held_out, shop=adapt, metrics=summary["held_out"]
         )
     summary["loss_log_tail"] = report["log"][-3:]
     if json_output:
@@ -422,15 +425,15 @@ def evaluate(
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs.
 
-    How the model does on all the cases, on a shop's (--shop), or on those since a date
-    (--since)."""
+    How the current model (the shop's own with --shop, where one was adapted to it) does on
+    all the cases, on a shop's (--shop), or on those since a date (--since)."""
     from flakelab.cases.case import cases_at
     from flakelab.io import read_library
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
     from flakelab.models.training import evaluate_model
 
     lib = read_library(library)
-    forward = chosen_model(model, instrument, database)
+    forward = chosen_model(model, instrument, database, shop)
     loaded = load_cases(cases, shop, since)
     chosen = cases_at(loaded, forward.geometries)
     if not chosen:
@@ -469,6 +472,7 @@ def evaluate(
     report["without_mix_ups"] = report.pop("without_above")
     report["model"] = model or f"current {instrument}"
     report["forward"] = matcher.name
+    report["model_id"] = matcher.model_id
     report["habits"] = shop_habits and shop_habits.report()
     report["cases_left_out"] = len(loaded) - len(chosen)
     report["shop"], report["since"] = shop, since and since.isoformat()
@@ -539,7 +543,10 @@ def adapt(
 ) -> None:
     """Adapt a trained model (default: the current one) to one shop's cases.
 
-    The training protocol's adaptation phase, for the sprayers and instrument of one shop."""
+    The training protocol's adaptation phase, for the sprayers and instrument of one shop. With
+    --shop the model is registered as that shop's own ('INSTRUMENT @ SHOP'): promoted, it is
+    current for that shop alone (match, correct, cases record and model evaluate with its
+    --shop), and another adaptation to the shop starts from it."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
     from flakelab.models.registry import current_model, register
@@ -555,8 +562,8 @@ def adapt(
     engine = open_database(database) if register_model else existing_engine(database)
     if model:
         base = named_model(model, database, "--model")[0]
-    else:  # the database the new version goes to holds the current model
-        base = current_model(engine, instrument)
+    else:  # the database the new version goes to holds the current model, the shop's own
+        base = current_model(engine, instrument, shop)
     chosen = shop_cases(cases, shop, base.geometries, since)
     novel = set(base.new_toners)
     known = [c for c in chosen if not novel & set(c.recipe)]
@@ -598,7 +605,9 @@ def adapt(
         write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))
         summary["file"] = str(out)
     if register_model:
-        summary["registry"] = register(engine, new, held_out, metrics=summary["held_out"])
+        summary["registry"] = register(
+            engine, new, held_out, shop=shop, metrics=summary["held_out"]
+        )
     if json_output:
         print(json.dumps(summary, indent=2))
         return

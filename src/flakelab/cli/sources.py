@@ -155,13 +155,16 @@ def since_option(when: datetime) -> str:
     return f"--since {when:%Y-%m-%dT%H:%M:%S}"
 
 
-def chosen_model(model: str | Path | None, instrument: str, database: str | None):
-    """The model ``--model`` names (:func:`named_model`), else the instrument's current one
-    (the promoted one in the database, else the shipped)."""
+def chosen_model(
+    model: str | Path | None, instrument: str, database: str | None, shop: str | None = None
+):
+    """The model ``--model`` names (:func:`named_model`), else the current one for ``shop``
+    on the instrument (promoted for the shop or the instrument in the database, else the
+    shipped: :func:`~flakelab.models.registry.current_model`)."""
     from flakelab.models.registry import current_model
 
     if model is None:
-        return current_model(existing_engine(database), instrument)
+        return current_model(existing_engine(database), instrument, shop)
     return named_model(str(model), database, "--model")[0]
 
 
@@ -203,21 +206,23 @@ def name_and_version(spec: str) -> tuple[str, int] | None:
     return (name, int(version)) if colon and name and version.isdigit() else None
 
 
-def learned_forward(library: Path | None, instrument: str, model, database: str | None):
+def learned_forward(
+    library: Path | None, instrument: str, model, database: str | None, shop: str | None = None
+):
     """The toner library and the matcher's forward of the model file ``model``, else of the
-    current model for the instrument (the promoted one in the database, else the shipped)."""
+    current model for ``shop`` on the instrument (:func:`chosen_model`)."""
     from flakelab.io import read_library
 
     lib = read_library(library)
-    return lib, current_forward(lib, instrument, model, database)
+    return lib, current_forward(lib, instrument, model, database, shop)
 
 
-def current_forward(lib, instrument: str, model, database: str | None):
+def current_forward(lib, instrument: str, model, database: str | None, shop: str | None = None):
     """The matcher's forward for the library ``lib``: of the model file ``model``, else of
-    the current model for the instrument."""
+    the current model for ``shop`` on the instrument."""
     from flakelab.match.models import forward_for
 
-    return forward_for(chosen_model(model, instrument, database), lib)
+    return forward_for(chosen_model(model, instrument, database, shop), lib)
 
 
 def existing_engine(database: str | None):

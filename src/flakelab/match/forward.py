@@ -414,6 +414,7 @@ class KubelkaMunkForward:
         self.K = torch.as_tensor(np.asarray(K, float))
         self.S = torch.as_tensor(np.asarray(S, float))
         self.name = "Kubelka–Munk (Saunderson)"
+        self.model_id = "kubelka-munk"
         self.novel: tuple[str, ...] = ()
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, None]:

@@ -213,8 +213,7 @@ class ShopHabits:
         the habits shop (film +5 %, flakes 4 % flatter, gain +0.5 %) the shipped model errs
         by ΔE00 1.04, 0.62 with the habits read from 2,000 others, 0.65 adapted to them
         (``model adapt``), and 1.03 adapted with the habits added again."""
-        model = getattr(forward, "model", None)  # the physics alone learns nothing
-        adaptation = model.info.get("adaptation") if model is not None else None
+        adaptation = adaptation_of(forward)
         if not adaptation or self.model == forward.model_id:
             return False
         to_shop = self.shop is not None and adaptation.get("shop") == self.shop
@@ -242,6 +241,14 @@ def _offsets(thetas: NDArray, library: Library, x: NDArray, R: NDArray, geometri
     lab = sprayed_lab(library, x, geometries, film, spread)
     gained = reflectance_to_Lab(R[None] * (1 + thetas[:, 2, None, None, None]))
     return lab[1:] - lab[:1] + gained - reflectance_to_Lab(R)
+
+
+def adaptation_of(forward) -> dict | None:
+    """What ``forward``'s model records of its adaptation (``shop``, and the model it came
+    ``from``: :func:`~flakelab.models.training.adapt_model`), None where it was not adapted
+    (the physics alone is never)."""
+    model = getattr(forward, "model", None)
+    return model.info.get("adaptation") if model is not None else None
 
 
 def estimate_habits(

@@ -212,10 +212,12 @@ class MatchResult:
     subsets_tried: int
     notes: list[str] = field(default_factory=list)
     texture_limits: dict[str, float] = field(default_factory=dict)  # the tolerance's, if any
+    model_id: str = ""  # which model exactly (name and fingerprint): an adapted one keeps its name
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "target": self.target,
+            "model_id": self.model_id,
             "geometries": list(self.geometries),
             "tolerance": self.tolerance,
             "texture_limits": self.texture_limits,
@@ -699,6 +701,7 @@ def _match(
         tried,
         notes,
         tolerance.texture_limits(),
+        forward.model_id,
     )
 
 
