@@ -418,6 +418,10 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     run = cli("match", "--example", "--shop", "shop A", "--database", database, "--json")
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["model_id"] == plain["model_id"]
+    shops = json.loads(cli("cases", "shops", "--database", database, "--json").stdout)["shops"]
+    assert [(s["shop"], s["cases"], s["models"]) for s in shops] == [
+        ("shop A", 0, ["five-angle @ shop A v1"])
+    ]
     run = cli("match", "--example", "--shop", "shop B", "--database", database)
     assert (
         run.returncode == 2

@@ -30,6 +30,7 @@ from flakelab.models.training import CaseArrays, evaluate_model
 
 __all__ = [
     "shop_model_name",
+    "shop_models",
     "shipped_model_path",
     "shipped_model",
     "register",
@@ -52,6 +53,16 @@ def shop_model_name(instrument: str, shop: str | None = None) -> str:
     """The registered name of the model current for ``shop`` on ``instrument`` (None: the
     instrument's, for every shop without one of its own)."""
     return instrument if shop is None else f"{instrument} @ {shop}"
+
+
+def shop_models(engine: Engine) -> dict[str, list[str]]:
+    """Each shop's own promoted models (:func:`shop_model_name`), as 'NAME vVERSION'."""
+    found: dict[str, list[str]] = {}
+    for row in list_models(engine):
+        instrument, at, shop = row["name"].partition(" @ ")
+        if at and row["status"] == "promoted":
+            found.setdefault(shop, []).append(f"{row['name']} v{row['version']}")
+    return found
 
 
 def shipped_model_path(instrument: str) -> Path:
