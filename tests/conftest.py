@@ -20,6 +20,7 @@ from flakelab.core import Geometry, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 
 os.environ.pop("COLUMNS", None)  # the CLI's tables at their piped width, whatever a shell exports
+os.environ.pop("FLAKELAB_SHOP", None)  # no workplace's shop but the one a test sets
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MA_T12 = SHARED / "ma-t12"

@@ -413,11 +413,18 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     # shop, stay with the shipped model; a match for shop A takes its model, no habits stored
     run = cli("model", "evaluate", cases, "--shop", "synthetic shop", "--database", database,
               "--json")  # fmt: skip
-    assert json.loads(run.stdout)["model_id"] == shipped_model("five-angle").identity
-    assert plain["model_id"] != shipped_model("five-angle").identity
+    shipped_id = shipped_model("five-angle").identity
+    assert json.loads(run.stdout)["model_id"] == shipped_id != plain["model_id"]
     run = cli("match", "--example", "--shop", "shop A", "--database", database, "--json")
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["model_id"] == plain["model_id"]
+    # the workplace's shop (FLAKELAB_SHOP) is --shop's default; it may have neither model nor
+    # habits, and a habits file then stands in for those stored
+    for workplace, model_id in (("shop A", plain["model_id"]), ("shop B", shipped_id)):
+        run = cli("match", "--example", "--candidates", "1", "--database", database,
+                  "--habits", habits_file, "--json", env={"FLAKELAB_SHOP": workplace})  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        assert json.loads(run.stdout)["model_id"] == model_id
     shops = json.loads(cli("cases", "shops", "--database", database, "--json").stdout)["shops"]
     assert [(s["shop"], s["cases"], s["models"]) for s in shops] == [
         ("shop A", 0, ["five-angle @ shop A v1"])

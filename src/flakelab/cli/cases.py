@@ -29,6 +29,7 @@ from flakelab.cli.common import (
     tracked,
 )
 from flakelab.cli.sources import (
+    WORKPLACE_SHOP,
     CasesArgument,
     DatabaseOption,
     InstrumentOption,
@@ -202,7 +203,7 @@ def record_case(
     ] = "auto",
     shop: Annotated[
         str,
-        typer.Option(envvar="FLAKELAB_SHOP", help="Shop name recorded with the case."),
+        typer.Option(envvar=WORKPLACE_SHOP, help="Shop name recorded with the case."),
     ] = "unknown",
     instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
@@ -337,7 +338,7 @@ def record_all(
     ],
     shop: Annotated[
         str,
-        typer.Option(envvar="FLAKELAB_SHOP", help="Shop of the rows that name none."),
+        typer.Option(envvar=WORKPLACE_SHOP, help="Shop of the rows that name none."),
     ] = "unknown",
     instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,

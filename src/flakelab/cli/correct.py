@@ -46,6 +46,7 @@ from flakelab.cli.sources import (
     InstrumentOption,
     LibraryOption,
     recipe_fractions,
+    workplace_shop,
 )
 from flakelab.cli.weigh import rounding_costs
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
@@ -116,6 +117,7 @@ def correct_command(
     check_figure_file(plot, "--plot")
     grams = read_recipe(recipe)
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
+    shop, named = workplace_shop(shop)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
     x0 = recipe_fractions(lib, grams, recipe)
     target_reading = read_sample(target, sample)
@@ -125,7 +127,7 @@ def correct_command(
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
-    shop_habits = habits_for(habits, shop, database, forward)
+    shop_habits = habits_for(habits, shop, database, forward, named=named)
     correction = correct(
         forward,
         target_R,

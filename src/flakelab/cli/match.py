@@ -46,6 +46,7 @@ from flakelab.cli.sources import (
     DatabaseOption,
     InstrumentOption,
     LibraryOption,
+    workplace_shop,
 )
 from flakelab.cli.weigh import rounding_text, scale_of, weighed_recipe, weights_table
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
@@ -213,12 +214,13 @@ def match_command(
     check_output_file(recipe_out, "--recipe-out")
     if pick > candidates:
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
+    shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     path = example_path("target") if example else Path(target)
     measurement = read_sample(path, sample)
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     tol = read_tolerance(tolerance or "refinish")
-    shop_habits = habits_for(habits, shop, database, forward)
+    shop_habits = habits_for(habits, shop, database, forward, named=named)
     result = match(
         measurement,
         forward,

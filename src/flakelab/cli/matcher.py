@@ -87,7 +87,8 @@ HabitsShopOption = Annotated[
         "--shop",
         help="Match for this shop: with its own model where one was adapted to its cases "
         "('flakelab model adapt --shop NAME'), and aimed off for its habits where they are "
-        "stored ('flakelab cases habits --shop NAME --save').",
+        "stored ('flakelab cases habits --shop NAME --save'). Default: the workplace's shop, "
+        "FLAKELAB_SHOP, which may have neither.",
     ),
 ]
 
@@ -118,15 +119,19 @@ def matcher_setup(
     return lib, forward, effect_mask(lib, forward.toners)
 
 
-def habits_for(path: Path | None, shop: str | None, database: str | None, forward):
+def habits_for(
+    path: Path | None, shop: str | None, database: str | None, forward, *, named: bool = True
+):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``, or
     over a change of the shop's habits; None, with a note, where ``forward``'s model was
     adapted to them (:meth:`~flakelab.match.habits.ShopHabits.learned_by`). A shop with a model
-    of its own (``forward``, adapted to its cases) need not have habits stored."""
+    of its own (``forward``, adapted to its cases) need not have habits stored; nor need the
+    workplace's shop where ``--shop`` ``named`` none (:func:`~flakelab.cli.sources.
+    workplace_shop`), and a habits file then stands in for its stored habits."""
     if path is None and shop is None:
         return None
-    if path is not None and shop is not None:
+    if path is not None and shop is not None and named:
         raise FlakelabError("--habits and --shop: expected one of them, not both")
     from flakelab.cases.database import open_database
     from flakelab.match.habits import adaptation_of, read_habits, stored_habits
@@ -138,7 +143,7 @@ def habits_for(path: Path | None, shop: str | None, database: str | None, forwar
         try:
             found = stored_habits(engine, shop, forward.model_id)
         except FlakelabError:
-            if (adaptation_of(forward) or {}).get("shop") == shop:
+            if not named or (adaptation_of(forward) or {}).get("shop") == shop:
                 return None  # the shop's own model, none stored: nothing it has not learned
             raise FlakelabError(
                 f"{engine.url}: shop {shop!r} has neither habits stored nor a model of its own: "

@@ -14,6 +14,20 @@ import typer
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.errors import FlakelabError
 
+WORKPLACE_SHOP = "FLAKELAB_SHOP"
+"""The environment variable naming a workplace's shop: the shop ``cases record`` records, and
+the one ``match`` and ``correct`` match for (its own model and habits) where ``--shop`` names
+none."""
+
+
+def workplace_shop(shop: str | None) -> tuple[str | None, bool]:
+    """The shop ``--shop`` names, else the workplace's (:data:`WORKPLACE_SHOP`), else None;
+    and whether ``--shop`` named it."""
+    if shop is not None:
+        return shop, True
+    return os.environ.get(WORKPLACE_SHOP) or None, False
+
+
 DatabaseOption = Annotated[
     str | None,
     typer.Option(
