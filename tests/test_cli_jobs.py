@@ -425,6 +425,11 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
                   "--habits", habits_file, "--json", env={"FLAKELAB_SHOP": workplace})  # fmt: skip
         assert run.returncode == 0, run.stderr
         assert json.loads(run.stdout)["model_id"] == model_id
+    fresh = {"FLAKELAB_SHOP": "shop A", "XDG_DATA_HOME": str(tmp_path / "fresh")}  # no database
+    run = cli("match", "--example", "--candidates", "1", "--json", env=fresh)
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["model_id"] == shipped_id
+    assert not (tmp_path / "fresh").exists()  # a match made no database on the way
     shops = json.loads(cli("cases", "shops", "--database", database, "--json").stdout)["shops"]
     assert [(s["shop"], s["cases"], s["models"]) for s in shops] == [
         ("shop A", 0, ["five-angle @ shop A v1"])

@@ -9,14 +9,8 @@ from typing import Annotated
 
 import typer
 
-from flakelab.cli.common import (
-    errors,
-)
-from flakelab.cli.sources import (
-    current_forward,
-    learned_forward,
-    since_option,
-)
+from flakelab.cli.common import errors
+from flakelab.cli.sources import current_forward, existing_engine, learned_forward, since_option
 from flakelab.errors import FlakelabError
 
 MetamerismOption = Annotated[
@@ -139,7 +133,10 @@ def habits_for(
     if path is not None:
         found = read_habits(path)
     else:
-        engine = open_database(database, must_exist=True)
+        # the workplace's shop reads, never makes, the user's database: a fresh one has none
+        engine = open_database(database, must_exist=True) if named else existing_engine(database)
+        if engine is None:
+            return None
         try:
             found = stored_habits(engine, shop, forward.model_id)
         except FlakelabError:
