@@ -42,12 +42,7 @@ from flakelab.cli.matcher import (
     spectra_for_model,
     with_left_out,
 )
-from flakelab.cli.sources import (
-    DatabaseOption,
-    InstrumentOption,
-    LibraryOption,
-    workplace_shop,
-)
+from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, workplace_shop
 from flakelab.cli.weigh import rounding_text, scale_of, weighed_recipe, weights_table
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.tolerance import failures

@@ -11,12 +11,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import (
-    JsonOption,
-    check_output_file,
-    console,
-    errors,
-)
+from flakelab.cli.common import JsonOption, check_output_file, console, errors
 from flakelab.cli.matcher import (
     ModelOption,
     PhysicsOption,
@@ -25,12 +20,7 @@ from flakelab.cli.matcher import (
     ResolutionOption,
     matcher_setup,
 )
-from flakelab.cli.sources import (
-    DatabaseOption,
-    InstrumentOption,
-    LibraryOption,
-    recipe_fractions,
-)
+from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, recipe_fractions
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 
 
