@@ -90,15 +90,14 @@ def recorded_checks(
     mismatch`) by the current model for its shop (in ``engine``, else the shipped) of an
     instrument that reads it, the default one where it can, moved by the shop's habits stored
     against that model: ``{de00, geometry, model, habits}``, None where no model reads the
-    case; and why
-    the rest went unchecked (no model for the library, a damaged one, a toner it lacks), else
-    None. It only advises, after the cases are stored, and so refuses nothing."""
+    case; and why the rest went unchecked (no model for the library, a damaged one, a toner it
+    lacks), else None. It only advises, after the cases are stored, and so refuses nothing."""
     from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
     from flakelab.match.models import forward_for
     from flakelab.models.registry import current_model_and_source
 
     checks: list[dict | None] = [None] * len(cases)
-    forwards: dict[str, object] = {}  # by where the model came from: shops share the default
+    forwards: dict[tuple[str, str], object] = {}  # shops without a model share the instrument's
     for instrument in sorted(INSTRUMENT_GEOMETRIES, key=lambda k: k != DEFAULT_INSTRUMENT):
         rows = [
             i
@@ -109,9 +108,9 @@ def recorded_checks(
             mine = [i for i in rows if cases[i].shop == shop]
             try:
                 model, source = current_model_and_source(engine, instrument, shop)
-                if source not in forwards:
-                    forwards[source] = forward_for(model, library)
-                forward = forwards[source]
+                if (instrument, source) not in forwards:
+                    forwards[instrument, source] = forward_for(model, library)
+                forward = forwards[instrument, source]
             except FlakelabError as error:
                 return checks, str(error)
             habits = _stored_habits(engine, shop, forward.model_id)

@@ -49,17 +49,21 @@ SHIPPED = {DEFAULT_INSTRUMENT: "demo-five-angle.pt", "ma-t12": "demo-ma-t12.pt"}
 """Shipped models per instrument (trained on generated cases for the demo library)."""
 
 
+_FOR_SHOP = " @ "
+"""Between the instrument and the shop in a shop's own model's registered name."""
+
+
 def shop_model_name(instrument: str, shop: str | None = None) -> str:
     """The registered name of the model current for ``shop`` on ``instrument`` (None: the
     instrument's, for every shop without one of its own)."""
-    return instrument if shop is None else f"{instrument} @ {shop}"
+    return instrument if shop is None else f"{instrument}{_FOR_SHOP}{shop}"
 
 
 def shop_models(engine: Engine) -> dict[str, list[str]]:
     """Each shop's own promoted models (:func:`shop_model_name`), as 'NAME vVERSION'."""
     found: dict[str, list[str]] = {}
     for row in list_models(engine):
-        instrument, at, shop = row["name"].partition(" @ ")
+        _, at, shop = row["name"].partition(_FOR_SHOP)
         if at and row["status"] == "promoted":
             found.setdefault(shop, []).append(f"{row['name']} v{row['version']}")
     return found
