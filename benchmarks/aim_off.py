@@ -40,7 +40,8 @@ from flakelab.core.difference import delta_E
 from flakelab.match.correction import aim_off
 from flakelab.match.evaluate import worst_de00
 from flakelab.match.habits import read_habits
-from flakelab.match.search import MatchSettings, evaluate_recipes, match, recipe_vector
+from flakelab.match.judging import evaluate_recipes, recipe_vector
+from flakelab.match.search import MatchSettings, match
 from timing import print_report
 
 

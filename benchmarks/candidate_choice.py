@@ -30,7 +30,8 @@ from _matcher import shipped_matcher
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.evaluate import SUCCESS_DE00, harness_trials, worst_de00
-from flakelab.match.search import MatchSettings, match, recipe_vector
+from flakelab.match.judging import recipe_vector
+from flakelab.match.search import MatchSettings, match
 
 RULES = ("predicted error (today)", "chance to pass", "chance to pass, read", "hindsight")
 

@@ -55,7 +55,8 @@ from flakelab.match.evaluate import (
     worst_metamerism,
 )
 from flakelab.match.forward import PhysicsForward
-from flakelab.match.search import evaluate_recipes, match
+from flakelab.match.judging import evaluate_recipes
+from flakelab.match.search import match
 
 
 def parse(spec: str) -> dict:

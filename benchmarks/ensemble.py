@@ -29,8 +29,8 @@ from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
+from flakelab.match.judging import evaluate_recipes, model_spread
 from flakelab.match.models import forward_for
-from flakelab.match.search import evaluate_recipes, model_spread
 from flakelab.models.registry import load_model_file
 from flakelab.models.training import generated_case_arrays
 from learning_variants import EVALUATION, judge

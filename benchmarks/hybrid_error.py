@@ -30,7 +30,7 @@ from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.forward import HybridForward
-from flakelab.match.search import evaluate_recipes
+from flakelab.match.judging import evaluate_recipes
 from flakelab.physics.fast import predict
 from flakelab.physics.layer import layer_from_fractions
 

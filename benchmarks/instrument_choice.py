@@ -44,8 +44,9 @@ from flakelab.io import read_library
 from flakelab.match.crosscheck import predict_left_out
 from flakelab.match.evaluate import SUCCESS_DE00, harness_trials, harness_world
 from flakelab.match.forward import PhysicsForward
+from flakelab.match.judging import recipe_vector
 from flakelab.match.models import effect_mask, forward_for
-from flakelab.match.search import match, recipe_vector
+from flakelab.match.search import match
 from flakelab.models.registry import shipped_model
 
 MODELS = ("ma-t12", "five-angle")

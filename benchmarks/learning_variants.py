@@ -28,8 +28,8 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
 from flakelab.library import PAINT_FAMILIES
+from flakelab.match.judging import evaluate_recipes
 from flakelab.match.models import forward_for
-from flakelab.match.search import evaluate_recipes
 from flakelab.models.training import (
     TrainingConfig,
     _new_model,

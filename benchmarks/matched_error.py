@@ -25,7 +25,8 @@ from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.evaluate import harness_trials, recipe_vector
-from flakelab.match.search import MatchSettings, evaluate_recipes, match
+from flakelab.match.judging import evaluate_recipes
+from flakelab.match.search import MatchSettings, match
 from match_variants import parse_settings
 
 

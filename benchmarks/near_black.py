@@ -37,8 +37,8 @@ from flakelab.cases.generator import NEAR_BLACK_L, World, near_black
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
+from flakelab.match.judging import evaluate_recipes
 from flakelab.match.models import forward_for
-from flakelab.match.search import evaluate_recipes
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import generated_case_arrays
 

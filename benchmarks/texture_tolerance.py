@@ -36,8 +36,8 @@ import numpy as np
 from flakelab.cases.generator import Variation, World
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.io import read_library, read_tolerance
+from flakelab.match.judging import evaluate_recipes
 from flakelab.match.models import forward_for
-from flakelab.match.search import evaluate_recipes
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import evaluate_model, generated_case_arrays
 

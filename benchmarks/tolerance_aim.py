@@ -26,7 +26,8 @@ import flakelab.match.objective as objective
 from _matcher import shipped_matcher
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.match.evaluate import harness_trials, worst_share
-from flakelab.match.search import match, recipe_vector
+from flakelab.match.judging import recipe_vector
+from flakelab.match.search import match
 
 TOLERANCES = {
     "refinish": tolerance_preset("refinish"),

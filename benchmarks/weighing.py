@@ -99,7 +99,8 @@ def sprayed(world, forward, effect, targets: int, seed: int, grams: float, resol
     """First-shot pass rates of the harness's best recipes sprayed as computed, as the nearest
     grams and as rounded for colour, each on the same stream; paired differences."""
     from flakelab.core.tolerance import tolerance_preset
-    from flakelab.match.search import match, recipe_vector
+    from flakelab.match.judging import recipe_vector
+    from flakelab.match.search import match
 
     tolerance = tolerance_preset("de00-1.0")
     shares = {"computed": [], "nearest grams": [], "rounded for colour": []}

@@ -12,8 +12,9 @@ from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_library
+from flakelab.match.judging import evaluate_recipes, model_spread
 from flakelab.match.models import forward_for
-from flakelab.match.search import evaluate_recipes, match, model_spread
+from flakelab.match.search import match
 from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import (

@@ -39,15 +39,10 @@ from flakelab.match.habits import (
     stored_habits,
     write_habits,
 )
+from flakelab.match.judging import assess, evaluate_recipes, recipe_vector
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.objective import OBJECTIVE_DEFAULT
-from flakelab.match.search import (
-    MatchSettings,
-    _assessed,
-    evaluate_recipes,
-    match,
-    recipe_vector,
-)
+from flakelab.match.search import MatchSettings, match
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import case_arrays, evaluate_model, generated_case_arrays
 
@@ -587,7 +582,7 @@ def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped
     R = evaluate_recipes(forward, x)[0]
     offset = habits.offset(library, x, R, forward.geometries)
     tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
-    unaimed = _assessed(forward, x, target, None, tolerance, MatchSettings(), offset).score
+    unaimed = assess(forward, x, target, None, tolerance, MatchSettings(), offset).score
     # every candidate aimed off, as before stop 63, the best scored 0.926 against 0.891
     assert aimed.candidates[0].score <= unaimed.min() + 1e-9
     # each candidate says whether it was aimed: those that were differ from every plain one
@@ -607,8 +602,8 @@ def test_an_assessment_of_some_rows_is_that_of_those_recipes_alone(shipped):
     offset = habits.offset(library, x, evaluate_recipes(forward, x)[0], forward.geometries)
     tolerance, settings = tolerance_preset("refinish"), MatchSettings()
     rows = np.array([4, 1, 1, 5])
-    part = _assessed(forward, x, spectra[0], texture, tolerance, settings, offset).rows(rows)
-    alone = _assessed(forward, x[rows], spectra[0], texture, tolerance, settings, offset[rows])
+    part = assess(forward, x, spectra[0], texture, tolerance, settings, offset).rows(rows)
+    alone = assess(forward, x[rows], spectra[0], texture, tolerance, settings, offset[rows])
     assert part.texture_share.shape == (4, 2) and part.texture_share.any()
     # the model computes in float32, whose last digits move with the batch's size
     for field in fields(part):

@@ -25,6 +25,7 @@ from flakelab.match.correction import (
     split_offset,
 )
 from flakelab.match.forward import KubelkaMunkForward
+from flakelab.match.judging import evaluate_recipes, recipe_vector
 from flakelab.match.recipe import (
     RecipeError,
     can_on_scale,
@@ -33,7 +34,7 @@ from flakelab.match.recipe import (
     weigh_additions,
     weigh_for_colour,
 )
-from flakelab.match.search import MatchSettings, evaluate_recipes, match, recipe_vector
+from flakelab.match.search import MatchSettings, match
 from flakelab.physics.application import SPREAD_SD, sprayed_reflectance
 
 
@@ -1427,8 +1428,9 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     and organics alone no longer make a solid of the world."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import worst_de00
+    from flakelab.match.judging import recipe_vector
     from flakelab.match.models import effect_mask
-    from flakelab.match.search import outside_support, recipe_vector
+    from flakelab.match.support import outside_support
 
     effect = effect_mask(hybrid.library, hybrid.toners)
     world = World(hybrid.library, "five-angle")
@@ -1466,13 +1468,9 @@ def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
     (a third aluminium in a metallic, Xirallic in a pearl) is none."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import trial, worst_de00
+    from flakelab.match.judging import recipe_vector
     from flakelab.match.models import effect_mask
-    from flakelab.match.search import (
-        below_effect_floor,
-        outside_support,
-        recipe_vector,
-        trace_toners,
-    )
+    from flakelab.match.support import below_effect_floor, outside_support, trace_toners
 
     effect = effect_mask(hybrid.library, hybrid.toners)
     names = list(hybrid.toners)

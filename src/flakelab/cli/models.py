@@ -443,8 +443,8 @@ def evaluate(
         )
     from flakelab.cli.matcher import habits_for
     from flakelab.match.forward import LearnedForward
+    from flakelab.match.judging import evaluate_recipes
     from flakelab.match.models import forward_for
-    from flakelab.match.search import evaluate_recipes
 
     matcher = forward_for(forward, lib)
     data = source_arrays(cases, chosen, lib)

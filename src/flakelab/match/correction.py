@@ -56,9 +56,9 @@ from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
 from flakelab.match.adam import TensorAdam
 from flakelab.match.forward import stepping
+from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import MatchObjective
-from flakelab.match.search import evaluate_recipes
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,

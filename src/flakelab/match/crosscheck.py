@@ -17,13 +17,8 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.tolerance import Tolerance, failing_geometries
-from flakelab.match.search import (
-    Candidate,
-    evaluate_recipes,
-    geometry_rows,
-    recipe_vector,
-    unused_geometries,
-)
+from flakelab.match.judging import Candidate, evaluate_recipes, geometry_rows, recipe_vector
+from flakelab.match.search import unused_geometries
 
 __all__ = ["LeftOut", "predict_left_out", "expected_left_out"]
 

@@ -38,9 +38,10 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import REFINISH_TEXTURE, Tolerance, tolerance_preset
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
+from flakelab.match.judging import recipe_vector
 from flakelab.match.objective import OBJECTIVE_DEFAULT
 from flakelab.match.recipe import weigh_whole_can
-from flakelab.match.search import MatchError, MatchSettings, match, recipe_vector
+from flakelab.match.search import MatchError, MatchSettings, match
 
 __all__ = [
     "evaluate_matching",

@@ -67,8 +67,8 @@ from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
+from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, sprayout_mismatch
-from flakelab.match.search import evaluate_recipes
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
 
 __all__ = [

@@ -50,7 +50,7 @@ def sprayout_mismatch(
     """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
     recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
     the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
-    from flakelab.match.search import evaluate_recipes  # torch's import: not for a bare record
+    from flakelab.match.judging import evaluate_recipes  # torch's import: not for a bare record
 
     R = evaluate_recipes(forward, fractions)[0]
     predicted = reflectance_to_Lab(R)

@@ -234,7 +234,7 @@ def _closest_colour(forward, names: list[str], exact: np.ndarray, amounts: np.nd
     """The row of ``amounts[N, k]`` (any units) whose colour by ``forward`` is closest to
     that of ``exact[k]``, each row's cost (the largest ΔE00 over geometries), and the chosen
     row's CIELAB minus the exact amounts'."""
-    from flakelab.match.search import evaluate_recipes
+    from flakelab.match.judging import evaluate_recipes
 
     columns = [list(forward.toners).index(n) for n in names]
     x = np.zeros((1 + len(amounts), len(forward.toners)))

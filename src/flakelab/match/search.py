@@ -23,7 +23,7 @@
    0.19 once the swap finds the magenta).
 5. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry, texture
    differences, the tolerance — plus a small penalty per toner, and return the best distinct
-   candidates.
+   candidates (:mod:`flakelab.match.judging`).
 
 Every stage aims at the colorist's tolerance: the optimiser's loss and the judging's score
 count each geometry's error as a share of its limit, with the tolerance's kL, kC, kH
@@ -35,57 +35,52 @@ toner than any effect paint it learned from (``effect_share_floor`` in its train
 does a recipe with a trace of a kind of effect toner (aluminium in a pearl, under
 :data:`~flakelab.match.settings.EFFECT_TRACE`). The swap stage also tries such a recipe
 made solid, or without its traces: there the model's numbers are guesses that the optimiser
-exploits (:func:`outside_support`).
+exploits (:mod:`flakelab.match.support`).
 """
 
 from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import replace
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import (
     colour_travel,
-    delta_E,
     is_metamer,
-    metamerism_indices,
     worst_light,
     worst_per_light,
 )
-from flakelab.core.geometry import parse_geometries
-from flakelab.core.measurement import TEXTURE_READINGS, Measurement
-from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import (
     Tolerance,
-    failing_geometries,
-    failures,
-    over_limit,
     tolerance_preset,
 )
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.match.adam import TensorAdam
 from flakelab.match.forward import stepping
+from flakelab.match.judging import (
+    Candidate,
+    MatchResult,
+    assess,
+    evaluate_recipes,
+    judge,
+    recipe_vector,
+)
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
 from flakelab.match.settings import MatchSettings
+from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
 
 __all__ = [
-    "Candidate",
-    "MatchResult",
     "MatchSettings",
     "match",
     "MatchError",
     "SOLID_TEXTURE",
-    "below_effect_floor",
-    "outside_support",
-    "trace_toners",
-    "recipe_vector",
+    "model_risk",
     "target_spectra",
     "unused_geometries",
     "left_out_note",
@@ -107,125 +102,6 @@ paint by the physics."""
 
 class MatchError(FlakelabError):
     """A target or library the matcher cannot work with."""
-
-
-def geometry_rows(geometries, lab: NDArray, dLCH: NDArray, de00: NDArray) -> dict[str, dict]:
-    """A report's numbers per geometry: predicted L*a*b* ``lab[G, 3]``, its ΔL*, ΔC*, ΔH*
-    ``dLCH[G, 3]`` and ΔE00 ``de00[G]`` from the target, rounded."""
-    return {
-        g: {
-            "L": round(float(lab[i, 0]), 3),
-            "a": round(float(lab[i, 1]), 3),
-            "b": round(float(lab[i, 2]), 3),
-            "dL": round(float(dLCH[i, 0]), 3),
-            "dC": round(float(dLCH[i, 1]), 3),
-            "dH": round(float(dLCH[i, 2]), 3),
-            "dE00": round(float(de00[i]), 3),
-        }
-        for i, g in enumerate(geometries)
-    }
-
-
-@dataclass
-class Candidate:
-    """One recipe with its predicted appearance and its differences to the target."""
-
-    fractions: dict[str, float]
-    geometries: tuple[str, ...]
-    reflectance: NDArray
-    lab: NDArray
-    target_lab: NDArray
-    de00: NDArray
-    dLCH: NDArray
-    texture: dict[str, float]
-    texture_delta: dict[str, float]
-    passes: bool  # at every geometry and every texture reading the tolerance bounds
-    failing: list[str]
-    model: str
-    novel: list[str]
-    score: float
-    limit_share: NDArray  # each geometry's share of the tolerance's limit (≤ 1 passes)
-    in_support: bool = True
-    spread: NDArray | None = None  # an ensemble's disagreement, ΔE00 per geometry
-    # the metamerism index against the target per test illuminant and geometry (ISO 18314-4)
-    metamerism: dict[str, NDArray] = field(default_factory=dict)
-    # each texture reading the tolerance bounds: |Δ| as a share of its limit (≤ 1 passes)
-    texture_share: dict[str, float] = field(default_factory=dict)
-    # with the shop's habits: whether this recipe was aimed off for them (None: no habits)
-    aimed_off: bool | None = None
-
-    @property
-    def failing_texture(self) -> list[str]:
-        return over_limit(self.texture_share)
-
-    def failures(self) -> list[str]:
-        return failures(self.failing, self.failing_texture)
-
-    def as_measurement(self, sample: str) -> Measurement:
-        """The candidate's predicted reading, as the instrument would give it (to render, plot
-        or save), with the model that predicted it in its metadata."""
-        return Measurement(
-            sample=sample,
-            geometries=parse_geometries(self.geometries),
-            wavelengths=WAVELENGTHS,
-            reflectance=np.asarray(self.reflectance, float),
-            texture=self.texture,
-            metadata={"predicted by": self.model},
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        rows = geometry_rows(self.geometries, self.lab, self.dLCH, self.de00)
-        if self.spread is not None:
-            for row, spread in zip(rows.values(), self.spread, strict=True):
-                row["model_spread"] = round(float(spread), 3)
-        return {
-            "recipe": {k: round(v, 6) for k, v in self.fractions.items()},
-            "model": self.model,
-            "novel_toners": self.novel,
-            "in_model_support": self.in_support,
-            "passes": self.passes,
-            "failing_geometries": self.failing,
-            "failing_texture": self.failing_texture,
-            "de00_max": float(self.de00.max()),
-            "de00_mean": float(self.de00.mean()),
-            "limit_share_max": round(
-                max([self.limit_share.max(), *self.texture_share.values()]), 3
-            ),
-            "score": round(self.score, 4),
-            "geometries": rows,
-            "texture_delta": {k: round(v, 3) for k, v in self.texture_delta.items()},
-            "texture_limit_share": {k: round(v, 3) for k, v in self.texture_share.items()},
-            "metamerism_index": {k: v.round(3).tolist() for k, v in self.metamerism.items()},
-            "metamerism_index_max": worst_per_light(self.metamerism),
-            "metamer": is_metamer(self.metamerism),
-            "aimed_off": self.aimed_off,
-        }
-
-
-@dataclass
-class MatchResult:
-    target: str
-    geometries: tuple[str, ...]
-    candidates: list[Candidate]
-    tolerance: str
-    seconds: float
-    subsets_tried: int
-    notes: list[str] = field(default_factory=list)
-    texture_limits: dict[str, float] = field(default_factory=dict)  # the tolerance's, if any
-    model_id: str = ""  # which model exactly (name and fingerprint): an adapted one keeps its name
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "target": self.target,
-            "model_id": self.model_id,
-            "geometries": list(self.geometries),
-            "tolerance": self.tolerance,
-            "texture_limits": self.texture_limits,
-            "seconds": round(self.seconds, 3),
-            "subsets_tried": self.subsets_tried,
-            "notes": self.notes,
-            "candidates": [c.to_dict() for c in self.candidates],
-        }
 
 
 def _masked_softmax(logits: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -640,7 +516,7 @@ def _match(
         settings,
     )
     x = _weighable(x_refined.numpy().astype(float), settings)
-    candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
+    candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     tried = len(subsets)
     neighbours: list[tuple[int, ...]] = []
     if candidates and (
@@ -664,7 +540,7 @@ def _match(
             settings,
         )
         x = np.concatenate([x, _weighable(x_swapped.numpy().astype(float), settings)])
-        candidates = _judge(forward, x, effect, spectra, texture, tolerance, settings)
+        candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     notes = left_out_note(unused_geometries(target, forward), forward, "match")
     if solid:
         notes.append(f"{solid}: a solid, matched with pigments alone")
@@ -675,7 +551,7 @@ def _match(
         notes.append(note)
     if candidates and not candidates[0].in_support:
         notes.append(
-            _outside_note(
+            outside_note(
                 recipe_vector(forward, candidates[0].fractions), effect, forward.toners, settings
             )
         )
@@ -746,11 +622,6 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     )
 
 
-def recipe_vector(forward, fractions: dict[str, float]) -> NDArray:
-    """A recipe's fractions ``{toner: share}`` as a vector over the model's toners."""
-    return np.array([fractions.get(n, 0.0) for n in forward.toners])
-
-
 def _ranked(rows: NDArray, loss: NDArray, outside: NDArray) -> NDArray:
     """``rows`` by ``loss``, those ``outside`` the model's support last."""
     return rows[np.lexsort((loss[rows], outside[rows]))]
@@ -774,7 +645,7 @@ def _neighbours(
     at the same amount; below ``max_pigments``, each candidate pigment added at
     :data:`SWAP_ADDED_AMOUNT`; and a recipe outside the model's support made solid (its
     effect toners dropped) and without its traces of a kind of effect toner
-    (:func:`trace_toners`)."""
+    (:func:`~flakelab.match.support.trace_toners`)."""
     sets: dict[tuple[int, ...], NDArray] = {}
     for parent in parents[outside_support(parents, effect, settings)]:
         for kept in (
@@ -798,80 +669,6 @@ def _neighbours(
     return list(sets), np.array(list(sets.values()))
 
 
-def evaluate_recipes(forward, x: NDArray) -> tuple[NDArray, NDArray | None]:
-    with torch.no_grad():
-        R, texture = forward(torch.as_tensor(x, dtype=forward.dtype))
-    return R.double().numpy(), None if texture is None else texture.double().numpy()
-
-
-def model_spread(forward, x: NDArray, lab: NDArray) -> NDArray | None:
-    """How far an ensemble's members disagree on recipes ``x[N, T]`` predicted at ``lab``
-    ``[N, G, 3]``: the root mean square over members of each member's ΔE00 from ``lab``,
-    ``[N, G]``; None for a single network, which cannot say."""
-    if getattr(forward, "members", 1) < 2:
-        return None
-    members = reflectance_to_Lab(forward.member_reflectance(x))
-    return np.sqrt(np.mean(delta_E(lab[None], members) ** 2, axis=0))
-
-
-def outside_support(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDArray:
-    """Recipes ``x[N, T]`` where the learned model never saw a case, and the optimiser finds
-    its guesses:
-
-    * between a solid and ``settings.effect_floor``, the least effect-toner share of the
-      model's effect paints (``effect_share_floor`` in its training record): a DPP red solid
-      matched with 3.9 % of red pearl, predicted within 0.3 ΔE00 and 1.3 off by the physics;
-    * with a trace of a kind of effect toner (:func:`trace_toners`), which no formula of the
-      world holds (:data:`~flakelab.match.settings.EFFECT_TRACE` says what it buys)."""
-    return below_effect_floor(x, effect, settings) | trace_toners(x, effect, settings).any(-1)
-
-
-def below_effect_floor(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDArray:
-    """Recipes ``x[N, T]`` between a solid and ``settings.effect_floor``: the part of
-    :func:`outside_support` that the halving and the screen's ranking keep to as well. A
-    trace of a kind of effect toner is judged at the end alone (and the swap stage tries the
-    recipe without it): kept from the halving too, it moved the search's paths everywhere
-    (the example's second and third candidates went from 0.24 and 0.32 to 0.42 and 0.52) for
-    no pass its chance could see."""
-    share = x[:, np.asarray(effect, bool)].sum(1)
-    return (share > 0) & (share < settings.effect_floor)
-
-
-def trace_toners(x: NDArray, effect: NDArray, settings: MatchSettings) -> NDArray:
-    """Where recipes ``x[..., T]`` hold a kind of effect toner (``settings.effect_kinds``:
-    aluminium, pearl) at less than ``settings.effect_trace`` of the recipe, all together:
-    those toners ``[..., T]``. Without kinds (the physics alone, which has no support to
-    keep to), none."""
-    traces = np.zeros(np.shape(x), bool)
-    if settings.effect_kinds is None:
-        return traces
-    kinds = np.where(np.asarray(effect, bool), np.asarray(settings.effect_kinds, dtype=str), "")
-    for kind in set(kinds.tolist()) - {""}:
-        members = kinds == kind
-        share = x[..., members].sum(-1, keepdims=True)
-        traces |= members & (x > 0) & (share < settings.effect_trace)
-    return traces
-
-
-def _outside_note(x: NDArray, effect: NDArray, toners, settings: MatchSettings) -> str:
-    """Why the best recipe ``x[T]`` lies outside the model's support (:func:`outside_support`)."""
-    if below_effect_floor(x[None], effect, settings)[0]:
-        share = x[effect].sum()
-        return (
-            f"the best recipe has {100 * share:.1f} % effect toners, less than any effect paint "
-            f"the model learned from ({100 * settings.effect_floor:.0f} %): its numbers are "
-            "extrapolated"
-        )
-    traces = ", ".join(
-        f"{toners[i]} {100 * x[i]:.1f} %" for i in np.flatnonzero(trace_toners(x, effect, settings))
-    )
-    return (
-        f"the best recipe holds a trace of effect toner ({traces}); no recipe the model "
-        f"learned from held aluminium or pearl under {100 * settings.effect_trace:g} %: its "
-        "numbers are extrapolated"
-    )
-
-
 def _aimed_off(
     forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
 ) -> tuple[list[Candidate], str]:
@@ -890,7 +687,7 @@ def _aimed_off(
     both, K = np.concatenate([_weighable(aimed, settings), x]), len(x)
     predicted = evaluate_recipes(forward, both)
     offset = habits.offset(library, both, predicted[0], forward.geometries)
-    assessed = _assessed(forward, both, spectra, texture, tolerance, settings, offset, predicted)
+    assessed = assess(forward, both, spectra, texture, tolerance, settings, offset, predicted)
     score = assessed.score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
     chosen = both[rows]
@@ -904,135 +701,8 @@ def _aimed_off(
     else:
         some = "" if moved == K else f" ({moved} of {K} candidates)"
         note = f"aimed off for the shop's habits{some}: {habits.describe()}"
-    judged = _judge(
+    judged = judge(
         forward, chosen, effect, spectra, texture, tolerance, settings, was_aimed,
         assessed.rows(rows),
     )  # fmt: skip
     return judged, note
-
-
-@dataclass(frozen=True)
-class _Assessment:
-    """Recipes ``x[N, T]`` as the judge sees them: predictions, differences from the target
-    per geometry, shares of the tolerance's limits, and the score that ranks them."""
-
-    R: NDArray
-    texture: NDArray | None
-    target_lab: NDArray
-    lab: NDArray
-    de00: NDArray
-    dLCH: NDArray
-    passed: NDArray
-    share: NDArray
-    texture_share: NDArray
-    limits: dict[str, float]
-    has_texture: bool
-    metamerism: dict[str, NDArray]
-    score: NDArray
-
-    def rows(self, rows: NDArray) -> _Assessment:
-        """The assessment of the recipes ``x[rows]`` alone."""
-        return replace(
-            self,
-            texture=None if self.texture is None else self.texture[rows],
-            **{k: getattr(self, k)[rows] for k in _ROW_FIELDS},
-            metamerism={light: index[rows] for light, index in self.metamerism.items()},
-        )
-
-
-_ROW_FIELDS = ("R", "lab", "de00", "dLCH", "passed", "share", "texture_share", "score")
-"""The fields of :class:`_Assessment` that hold one row per recipe in every case."""
-
-
-def _assessed(
-    forward, x, spectra, texture, tolerance, settings, offset=None, predicted=None
-) -> _Assessment:
-    """Predict and score recipes ``x[N, T]``; ``offset[N, G, 3]`` is added to the predicted
-    L*a*b* (the shop's habits); ``predicted``, where given, is their
-    :func:`evaluate_recipes` already."""
-    R, tex = predicted or evaluate_recipes(forward, x)
-    target_lab = reflectance_to_Lab(spectra)
-    lab = reflectance_to_Lab(R) + (0.0 if offset is None else offset)
-    de00, dlch, passed = tolerance.judge(forward.geometries, target_lab[None], lab)
-    share = tolerance.share_of_limit(forward.geometries, de00=de00, dLCH=dlch)
-    has_texture = tex is not None and texture and all(k in texture for k in TEXTURE_READINGS)
-    # [N, judged readings]: a texture limit ranks as one more geometry's would
-    limits = tolerance.texture_limits() if has_texture else {}
-    texture_share = np.zeros((len(x), len(limits)))
-    if has_texture:
-        target_tex = np.array([texture[k] for k in TEXTURE_READINGS])
-        judged = [TEXTURE_READINGS.index(k) for k in limits]
-        texture_share = np.abs(tex - target_tex)[:, judged] / np.array(list(limits.values()))
-    # in the objective's units (``share_unit``), against which the penalties are set
-    worst = np.max(np.concatenate([share, texture_share], axis=1), axis=1)
-    score = (worst + share.mean(1)) * tolerance.share_unit(forward.geometries)
-    score = score + settings.toner_penalty * (x > 0).sum(1)
-    # [N, G] per test illuminant
-    metamerism = metamerism_indices(spectra, R, tests=settings.lights)
-    if settings.metamerism:
-        score = score + settings.metamerism * np.mean(list(metamerism.values()), axis=(0, 2))
-    if has_texture:
-        score = score + settings.texture_weight * np.abs(tex[:, -2:] - target_tex[-2:]).sum(1)
-    return _Assessment(
-        R, tex, target_lab, lab, de00, dlch, passed, share, texture_share, limits,
-        bool(has_texture), metamerism, score,
-    )  # fmt: skip
-
-
-def _judge(
-    forward, x, effect, spectra, texture, tolerance, settings, aimed=None, assessed=None
-) -> list[Candidate]:
-    """The best distinct candidates of ``x[N, T]``, by score; recipes outside the model's
-    support rank after every one inside it. ``assessed`` is their :func:`_assessed`, where
-    it is made already (with the shop's habits: ``aimed[N]`` marks the recipes aimed off
-    for them)."""
-    a = assessed or _assessed(forward, x, spectra, texture, tolerance, settings)
-    outside = outside_support(x, effect, settings)
-    chosen, seen = [], set()
-    for row in np.lexsort((a.score, outside)):
-        key = tuple(np.flatnonzero(x[row] > 0))
-        if key in seen:
-            continue
-        seen.add(key)
-        chosen.append(row)
-        if len(chosen) == settings.candidates:
-            break
-    rows = np.array(chosen, int)
-    spread = model_spread(forward, x[rows], reflectance_to_Lab(a.R[rows]))
-    out = []
-    for i, row in enumerate(chosen):
-        failing = failing_geometries(forward.geometries, a.passed[row])
-        fractions = {
-            forward.toners[j]: float(x[row, j]) for j in np.argsort(-x[row]) if x[row, j] > 0
-        }
-        out.append(
-            Candidate(
-                fractions=fractions,
-                geometries=tuple(forward.geometries),
-                reflectance=a.R[row],
-                lab=a.lab[row],
-                target_lab=a.target_lab,
-                de00=a.de00[row],
-                dLCH=a.dLCH[row],
-                texture={}
-                if a.texture is None
-                else dict(zip(TEXTURE_READINGS, a.texture[row].tolist(), strict=True)),
-                texture_delta={}
-                if not a.has_texture
-                else {
-                    k: float(a.texture[row, i] - texture[k]) for i, k in enumerate(TEXTURE_READINGS)
-                },
-                passes=not failing and bool(np.all(a.texture_share[row] <= 1)),
-                failing=failing,
-                model=forward.name,
-                novel=[n for n in fractions if n in forward.novel],
-                score=float(a.score[row]),
-                in_support=not outside[row],
-                spread=None if spread is None else spread[i],
-                limit_share=a.share[row],
-                metamerism={light: index[row] for light, index in a.metamerism.items()},
-                texture_share=dict(zip(a.limits, a.texture_share[row].tolist(), strict=True)),
-                aimed_off=None if aimed is None else bool(aimed[row]),
-            )
-        )
-    return out

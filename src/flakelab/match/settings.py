@@ -28,7 +28,7 @@ EFFECT_TRACE = 0.025
 is a trace that no formula of the generated world holds: its least is 2.5 %, aluminium toning
 a pearl (20,000 formulations, seed 11; pearls at least 36 %); the learned model guesses
 there. A trace of a toner of the recipe's own kind (a third aluminium in a metallic) is not
-one (:func:`~flakelab.match.search.outside_support`). The rule buys no pass: on issue 5's
+one (:func:`~flakelab.match.support.outside_support`). The rule buys no pass: on issue 5's
 harness (100 targets, 20 resprays each, seed 4242, stop 54's model) every figure came out
 the same to the digit with it and without; a pure green pearl left free took 0.8 % of
 aluminium and matched 1.26 ΔE00 off by the world's physics, kept to the support 1.67. It
