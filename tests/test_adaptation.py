@@ -73,6 +73,7 @@ def test_adaptation_learns_a_shops_habits(model):
     # them, and adding them again costs about what adapting bought
     library = read_library(None)
     base, learned = forward_for(model, library), forward_for(adapted, library)
+    assert "adapted to shop A" in learned.name and "adapted" not in base.name  # as reported
     habits = estimate_habits(base, library, train.x, train.R)
     twice = evaluate_model(adapted, fresh, lab_offset=lambda x, R: habits.offset(
         library, x, R, learned.geometries))["de00_mean"]  # fmt: skip

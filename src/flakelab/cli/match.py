@@ -304,7 +304,8 @@ def _print_match(report: dict) -> None:
     console.print(
         f"[bold]{report['target']}[/] — {len(report['candidates'])} candidates "
         f"({report['subsets_tried']} toner sets optimised in {report['seconds']:.2f} s, "
-        f"tolerance {report['tolerance']})"
+        f"tolerance {report['tolerance']}, model {report['model_id']})",
+        highlight=False,
     )
     for rank, c in enumerate(report["candidates"], start=1):
         failing = failures(c["failing_geometries"], c["failing_texture"])

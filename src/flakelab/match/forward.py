@@ -55,7 +55,9 @@ class LearnedForward:
         self._forward = self.model.folded()
         self.toners = model.toners
         self.geometries = model.geometries
-        self.name = f"learned ({model.instrument}, {model.info.get('name', 'model')})"
+        self.name = (
+            f"learned ({model.instrument}, {model.info.get('name', 'model')}{_adapted(model)})"
+        )
         self.model_id = model.identity  # which model exactly: an adapted one keeps its name
         self.novel: tuple[str, ...] = ()
         # the least effect-toner share of the training cases' effect paints (0: not recorded)
@@ -194,6 +196,13 @@ def stepping(forward, every: int):
     return held
 
 
+def _adapted(model: ForwardModel) -> str:
+    """' adapted to SHOP' for a model adapted to a shop's cases, else nothing: an adapted
+    model keeps its base's name, and a forward's name says which the numbers came from."""
+    shop = (model.info.get("adaptation") or {}).get("shop")
+    return f" adapted to {shop}" if shop else ""
+
+
 class HybridForward(LearnedForward):
     """Learned base, physics scaling for ``novel`` toners (too few cases to learn them).
 
@@ -225,7 +234,7 @@ class HybridForward(LearnedForward):
             f"{names[j]} (as {names[self.proxies[j]]})" if j in self.proxies else names[j]
             for j in np.flatnonzero(self._novel_mask)
         )
-        self.name = f"hybrid: learned + physics scaling for {stand_ins}"
+        self.name = f"hybrid: learned{_adapted(model)} + physics scaling for {stand_ins}"
         self.physics = PhysicsForward(library, self.geometries)
 
     def base_fractions(self, x: NDArray) -> NDArray:
