@@ -682,6 +682,7 @@ def test_a_shops_own_model_is_current_for_that_shop_alone(shipped, tmp_path):
         current_model_and_source,
         promote,
         register,
+        retire,
         shop_model_name,
     )
 
@@ -709,3 +710,7 @@ def test_a_shops_own_model_is_current_for_that_shop_alone(shipped, tmp_path):
     checks, why = recorded_checks(cases, library, engine)
     assert why is None
     assert [c["model"] for c in checks] == [own.identity] * 10 + [model.identity] * 10
+    # retired, the shop's model leaves the instrument's current for the shop again
+    done = retire(engine, entry["name"], entry["version"])
+    assert (done["was"], done["shop"], done["current"]) == ("promoted", "shop A", "shipped")
+    assert current_model(engine, "five-angle", "shop A").identity == model.identity

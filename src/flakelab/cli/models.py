@@ -352,13 +352,16 @@ def promote_model(version: VersionArgument, database: DatabaseOption = None) -> 
 @model_app.command("retire")
 @reports_errors
 def retire_model(version: VersionArgument, database: DatabaseOption = None) -> None:
-    """Take a registered version out of use; a promoted one leaves the shipped model current."""
+    """Take a registered version out of use; a promoted one leaves the next in line current (a
+    shop's own model the instrument's, the instrument's the shipped one)."""
     from flakelab.cases.database import open_database
     from flakelab.models.registry import retire
 
     engine = open_database(database, must_exist=True)
     done = retire(engine, *_registered_version(version))
-    current = "; the shipped model is current again" if done["was"] == "promoted" else ""
+    now = "the shipped model" if done["current"] == "shipped" else done["current"]
+    whose = f" for shop {done['shop']!r}" if done["shop"] else ""
+    current = f"; {now} is current{whose} again" if done["was"] == "promoted" else ""
     errors.print(f"{engine.url}: {done['name']} v{done['version']} retired{current}")
 
 

@@ -30,7 +30,9 @@ from flakelab.models.training import CaseArrays, evaluate_model
 
 __all__ = [
     "shop_model_name",
+    "shop_of",
     "shop_models",
+    "serving_version",
     "shipped_model_path",
     "shipped_model",
     "register",
@@ -59,14 +61,35 @@ def shop_model_name(instrument: str, shop: str | None = None) -> str:
     return instrument if shop is None else f"{instrument}{_FOR_SHOP}{shop}"
 
 
+def shop_of(name: str) -> str | None:
+    """The shop whose own model the registered ``name`` is (:func:`shop_model_name`), else
+    None."""
+    _, at, shop = name.partition(_FOR_SHOP)
+    return shop if at else None
+
+
 def shop_models(engine: Engine) -> dict[str, list[str]]:
     """Each shop's own promoted models (:func:`shop_model_name`), as 'NAME vVERSION'."""
     found: dict[str, list[str]] = {}
     for row in list_models(engine):
-        _, at, shop = row["name"].partition(_FOR_SHOP)
-        if at and row["status"] == "promoted":
+        shop = shop_of(row["name"])
+        if shop is not None and row["status"] == "promoted":
             found.setdefault(shop, []).append(f"{row['name']} v{row['version']}")
     return found
+
+
+def serving_version(
+    engine: Engine, instrument: str, shop: str | None = None
+) -> tuple[str, int] | None:
+    """The registered name and version of the promoted model current for ``shop`` on the
+    instrument (the shop's own, else the instrument's); None where the shipped one is."""
+    names = [shop_model_name(instrument, shop)] if shop is not None else []
+    with Session(engine) as session:
+        for name in [*names, instrument]:
+            row = _promoted_row(session, name)
+            if row is not None:
+                return name, row.version
+    return None
 
 
 def shipped_model_path(instrument: str) -> Path:
@@ -156,13 +179,25 @@ def promote(engine: Engine, name: str, version: int) -> dict:
 
 
 def retire(engine: Engine, name: str, version: int) -> dict:
-    """Take a registered version out of use; when it was the promoted one, the instrument's
-    shipped model is current again until another is promoted."""
+    """Take a registered version out of use; when it was the promoted one, the next in line
+    is current again until another is promoted: for a shop's own model the instrument's, for
+    the instrument's the shipped one. Returns what changed and which is current now
+    (``current``: the registered 'NAME vVERSION', or ``"shipped"``)."""
     with Session(engine) as session, session.begin():
         row = _version_row(session, engine, name, version)
         was = row.status
         row.status = "retired"
-        return {"name": name, "version": version, "status": row.status, "was": was}
+        instrument = row.instrument
+    shop = shop_of(name)
+    now = serving_version(engine, instrument, shop)
+    return {
+        "name": name,
+        "version": version,
+        "status": "retired",
+        "was": was,
+        "shop": shop,
+        "current": "shipped" if now is None else f"{now[0]} v{now[1]}",
+    }
 
 
 def _version_row(session: Session, engine: Engine, name: str, version: int) -> ModelRow:
@@ -233,12 +268,10 @@ def current_model_and_source(
 ) -> tuple[ForwardModel, str]:
     """:func:`current_model`, and where it comes from: ``"shipped"``, or the database and
     the promoted version's registered name."""
-    if engine is not None:
-        names = [shop_model_name(instrument, shop)] if shop is not None else []
-        for name in [*names, instrument]:
-            model = promoted_model(engine, name)
-            if model is not None:
-                return model, f"{engine.url}: {name}, promoted"
+    serving = None if engine is None else serving_version(engine, instrument, shop)
+    if serving is not None:
+        name, version = serving
+        return registered_model(engine, name, version), f"{engine.url}: {name}, promoted"
     return shipped_model(instrument), "shipped"
 
 
