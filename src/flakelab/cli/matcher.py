@@ -141,7 +141,7 @@ def habits_for(
             found = stored_habits(engine, shop, forward.model_id)
         except FlakelabError:
             if not named or (adaptation_of(forward) or {}).get("shop") == shop:
-                return None  # the shop's own model, none stored: nothing it has not learned
+                return None  # the shop's own model learned them; a workplace may have none yet
             raise FlakelabError(
                 f"{engine.url}: shop {shop!r} has neither habits stored nor a model of its own: "
                 f"read its habits with flakelab cases habits CASES --shop {shop!r} --save, or "
