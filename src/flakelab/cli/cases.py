@@ -36,6 +36,7 @@ from flakelab.cli.sources import (
     KeptGeometriesOption,
     LibraryOption,
     ModelFileOption,
+    ShopModelOption,
     ShopOption,
     SinceOption,
     StartOption,
@@ -683,7 +684,7 @@ def realism(
 @reports_errors
 def habits(
     cases: CasesArgument,
-    shop: ShopOption = None,
+    shop: ShopModelOption = None,
     since: SinceOption = None,
     model: ModelFileOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,

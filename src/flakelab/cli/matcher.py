@@ -81,8 +81,8 @@ HabitsShopOption = Annotated[
         "--shop",
         help="Match for this shop: with its own model where one was adapted to its cases "
         "('flakelab model adapt --shop NAME'), and aimed off for its habits where they are "
-        "stored ('flakelab cases habits --shop NAME --save'). Default: the workplace's shop, "
-        "FLAKELAB_SHOP, which may have neither.",
+        "stored ('flakelab cases habits --shop NAME --save'). Default (not for 'match "
+        "evaluate'): the workplace's shop, FLAKELAB_SHOP, which may have neither.",
     ),
 ]
 

@@ -25,7 +25,7 @@ from flakelab.cli.sources import (
     InstrumentOption,
     LibraryOption,
     ModelFileOption,
-    ShopOption,
+    ShopModelOption,
     SinceOption,
     chosen_model,
     existing_engine,
@@ -412,7 +412,7 @@ def evaluate(
     cases: CasesArgument,
     model: ModelFileOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
-    shop: ShopOption = None,
+    shop: ShopModelOption = None,
     since: SinceOption = None,
     library: LibraryOption = None,
     database: DatabaseOption = None,
@@ -513,7 +513,13 @@ def evaluate(
 @reports_errors
 def adapt(
     cases: CasesArgument,
-    shop: ShopOption = None,
+    shop: Annotated[
+        str | None,
+        typer.Option(
+            help="Only this shop's cases; the model is then the shop's own, adapted from its "
+            "current one (default: every case given, the instrument's model)."
+        ),
+    ] = None,
     since: SinceOption = None,
     model: ModelFileOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,

@@ -68,6 +68,16 @@ ShopOption = Annotated[
 ]
 
 
+ShopModelOption = Annotated[
+    str | None,
+    typer.Option(
+        "--shop",
+        help="Only this shop's cases, against its own model where one was adapted to it "
+        "(default: every case given, against the instrument's current model).",
+    ),
+]
+
+
 SinceOption = Annotated[
     datetime | None,
     typer.Option(
