@@ -418,6 +418,7 @@ def _evaluate(
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name
+    report["model_id"] = forward.model_id
     report["model_risk"] = settings.model_risk
     report["metamerism_weight"] = settings.metamerism
     report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
