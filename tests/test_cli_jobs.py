@@ -736,3 +736,19 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
     missing = tmp_path / "no" / "p.png"
     run = cli("plot", str(example_path("target")), "-o", str(missing))
     assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr
+
+
+def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
+    """'match evaluate' reports which model exactly it judged, and matches in its generated
+    world whatever FLAKELAB_SHOP says (a shop named with --shop must have a model or habits)."""
+    fresh = {"FLAKELAB_SHOP": "shop Z", "XDG_DATA_HOME": str(tmp_path / "fresh")}
+    run = cli("match", "evaluate", "--targets", "1", "--novel-targets", "0", "--json", env=fresh)
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["model_id"] == shipped_model("five-angle").identity
+    assert report["habits"] is None
+    database = str(tmp_path / "empty.db")
+    assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", database).returncode == 0
+    run = cli("match", "evaluate", "--targets", "1", "--shop", "shop Z", "--database", database)
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 2 and "neither habits stored nor a model" in said
