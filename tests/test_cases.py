@@ -288,6 +288,25 @@ def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
     assert [c.case_id for c in iter_cases(engine)] == [c.case_id for c in cases[:7]]
 
 
+def test_a_shops_own_model_is_registered_under_the_longest_shop_name(cases, database_url):
+    """A shop's own model is registered as 'INSTRUMENT @ SHOP', the shop named as long as a
+    case may name it: too long for the 80 characters of the first schemas' column, which
+    PostgreSQL enforces. A database at 0002 keeps the models it holds through 0003."""
+    from flakelab.cases.case import TEXT_LENGTHS
+    from flakelab.models.registry import list_models, register, shipped_model
+    from flakelab.models.training import case_arrays
+
+    engine = create_engine(database_url)
+    migrate(engine, "0002")
+    model, held = shipped_model("five-angle"), case_arrays(cases, read_library(None).names)
+    register(engine, model, held)
+    engine.dispose()
+    engine = open_database(database_url)
+    shop = "s" * TEXT_LENGTHS["shop"]
+    assert register(engine, model, held, shop=shop)["name"] == f"five-angle @ {shop}"
+    assert [m["name"] for m in list_models(engine)] == ["five-angle", f"five-angle @ {shop}"]
+
+
 def test_a_connection_is_closed_when_its_work_ends(cases, database_url):
     """Each command opens its own engine for a few transactions; none may leave connections
     open for the collector (psycopg warns of every one deleted while still open)."""

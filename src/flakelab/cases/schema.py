@@ -14,6 +14,10 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 from flakelab.cases.case import TEXT_LENGTHS
 
+MODEL_NAME_LENGTH = 200
+"""A registered model's name: an instrument's, or 'INSTRUMENT @ SHOP' for a shop's own model
+(60 + 3 + 120 characters of :data:`~flakelab.cases.case.TEXT_LENGTHS`; migration 0003)."""
+
 __all__ = ["Base", "CaseRow", "ModelRow", "HabitsRow"]
 
 
@@ -45,7 +49,8 @@ class ModelRow(Base):
     __tablename__ = "models"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    name: Mapped[str] = mapped_column(String(80), index=True)
+    # a shop's own model is 'INSTRUMENT @ SHOP' (models.registry.shop_model_name)
+    name: Mapped[str] = mapped_column(String(MODEL_NAME_LENGTH), index=True)
     version: Mapped[int] = mapped_column(Integer)
     instrument: Mapped[str] = mapped_column(String(60))
     status: Mapped[str] = mapped_column(String(20))
