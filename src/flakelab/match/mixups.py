@@ -94,10 +94,10 @@ def recorded_checks(
     lacks), else None. It only advises, after the cases are stored, and so refuses nothing."""
     from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
     from flakelab.match.models import forward_for
-    from flakelab.models.registry import current_model_and_source
+    from flakelab.models.registry import current_model, serving_version
 
     checks: list[dict | None] = [None] * len(cases)
-    forwards: dict[tuple[str, str], object] = {}  # shops without a model share the instrument's
+    forwards: dict[tuple, object] = {}  # each model loaded once: shops without one share it
     for instrument in sorted(INSTRUMENT_GEOMETRIES, key=lambda k: k != DEFAULT_INSTRUMENT):
         rows = [
             i
@@ -107,10 +107,10 @@ def recorded_checks(
         for shop in sorted({cases[i].shop for i in rows}):
             mine = [i for i in rows if cases[i].shop == shop]
             try:
-                model, source = current_model_and_source(engine, instrument, shop)
-                if (instrument, source) not in forwards:
-                    forwards[instrument, source] = forward_for(model, library)
-                forward = forwards[instrument, source]
+                key = (instrument, engine and serving_version(engine, instrument, shop))
+                if key not in forwards:
+                    forwards[key] = forward_for(current_model(engine, instrument, shop), library)
+                forward = forwards[key]
             except FlakelabError as error:
                 return checks, str(error)
             habits = _stored_habits(engine, shop, forward.model_id)
