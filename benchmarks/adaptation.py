@@ -15,6 +15,12 @@ over ``--repeats`` adaptation seeds (mean ± s.d.). The baseline is the shipped 
 same cases. ``--no-habits`` runs a shop without habits of its own, where adaptation has
 nothing to learn and can only fit noise.
 
+Against both, the habits read from the same N cases (``flakelab cases habits``' library call,
+against the shipped model): the shipped model moved by them (``shipped_with_habits``), and
+each adapted model moved by them as well (``habits_again``), which counts the habits twice;
+the matcher no longer adds them to a model adapted to the shop
+(``ShopHabits.learned_by``, stop 68).
+
     python benchmarks/adaptation.py [--cases 200,500,2000,5000] [--repeats 3] [--json]
 """
 
@@ -30,6 +36,8 @@ import numpy as np
 from _matcher import seeds_from
 from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.io import read_library
+from flakelab.match.habits import PRIOR_SD, screened_habits
+from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import (
     CaseArrays,
@@ -52,8 +60,17 @@ def shop_cases(model, settings: WorldSettings, n: int, seed: int) -> CaseArrays:
     return generated_case_arrays(world, n, seed, shop="benchmark shop")
 
 
-def error(model, cases: CaseArrays) -> float:
-    return evaluate_model(model, cases)["de00_mean"]
+def error(model, cases: CaseArrays, habits=None) -> float:
+    """ΔE00 mean of ``model`` on ``cases``, its predictions moved by a shop's ``habits``."""
+    if habits is None:
+        return evaluate_model(model, cases)["de00_mean"]
+    library = read_library(None)
+    geometries = model.geometries
+
+    def offset(x, R):
+        return habits.offset(library, x, R, geometries)
+
+    return evaluate_model(model, cases, lab_offset=offset)["de00_mean"]
 
 
 def main() -> None:
@@ -88,8 +105,13 @@ def main() -> None:
         "shipped": {"shop": error(model, shop_test), "world": error(model, world_test)},
         "rows": [],
     }
+    library, report["habits"] = read_library(None), {}
     for n in sizes:
         cases = all_cases.subset(np.arange(n))
+        habits = screened_habits(forward_for(model, library), library, cases.x, cases.R,
+                                 prior_sd=PRIOR_SD)[0]  # fmt: skip
+        report["habits"][n] = habits.report() | {"shipped_with_habits": error(
+            model, shop_test, habits)}  # fmt: skip
         for variant, share in VARIANTS.items():
             runs = []
             for repeat in range(args.repeats):
@@ -103,8 +125,9 @@ def main() -> None:
                 adapted, adaptation = adapt_model(model, cases, config)
                 seconds = time.perf_counter() - start
                 scores = (error(adapted, shop_test), error(adapted, world_test))
-                runs.append((*scores, adaptation["kept_epochs"], seconds))
-            shop_error, world_error, kept, seconds = np.array(runs).T
+                again = error(adapted, shop_test, habits)
+                runs.append((*scores, again, adaptation["kept_epochs"], seconds))
+            shop_error, world_error, again, kept, seconds = np.array(runs).T
             report["rows"].append(
                 {
                     "cases": n,
@@ -112,6 +135,7 @@ def main() -> None:
                     "shop_de00_mean": float(shop_error.mean()),
                     "shop_de00_sd": float(shop_error.std(ddof=1)) if args.repeats > 1 else 0.0,
                     "world_de00_mean": float(world_error.mean()),
+                    "habits_again_de00_mean": float(again.mean()),
                     "kept_epochs": kept.astype(int).tolist(),
                     "seconds": float(seconds.mean()),
                 }
@@ -121,6 +145,7 @@ def main() -> None:
                 print(
                     f"{n:6d} cases  {variant:11s}  shop {row['shop_de00_mean']:.3f} ± "
                     f"{row['shop_de00_sd']:.3f}  world {row['world_de00_mean']:.3f}  "
+                    f"habits again {row['habits_again_de00_mean']:.3f}  "
                     f"kept {row['kept_epochs']}  {row['seconds']:.1f} s",
                     flush=True,
                 )
@@ -133,6 +158,8 @@ def main() -> None:
         f"shipped, unadapted: shop {shipped['shop']:.3f}  world {shipped['world']:.3f} "
         f"(ΔE00 mean on {args.test} fresh cases each); peak RSS {report['peak_rss_mb']:.0f} MB"
     )
+    for n, habits in report["habits"].items():
+        print(f"shipped with the habits of {n} cases: shop {habits['shipped_with_habits']:.3f}")
 
 
 if __name__ == "__main__":
