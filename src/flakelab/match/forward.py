@@ -199,7 +199,7 @@ def stepping(forward, every: int):
 def _adapted(model: ForwardModel) -> str:
     """' adapted to SHOP' for a model adapted to a shop's cases, else nothing: an adapted
     model keeps its base's name, and a forward's name says which the numbers came from."""
-    shop = (model.info.get("adaptation") or {}).get("shop")
+    shop = (model.adaptation or {}).get("shop")
     return f" adapted to {shop}" if shop else ""
 
 

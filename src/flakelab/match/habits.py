@@ -248,7 +248,7 @@ def adaptation_of(forward) -> dict | None:
     ``from``: :func:`~flakelab.models.training.adapt_model`), None where it was not adapted
     (the physics alone is never)."""
     model = getattr(forward, "model", None)
-    return model.info.get("adaptation") if model is not None else None
+    return model.adaptation if model is not None else None
 
 
 def estimate_habits(

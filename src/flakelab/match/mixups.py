@@ -94,7 +94,7 @@ def recorded_checks(
     lacks), else None. It only advises, after the cases are stored, and so refuses nothing."""
     from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
     from flakelab.match.models import forward_for
-    from flakelab.models.registry import current_model, serving_version
+    from flakelab.models.registry import serving_model, serving_version
 
     checks: list[dict | None] = [None] * len(cases)
     forwards: dict[tuple, object] = {}  # each model loaded once: shops without one share it
@@ -107,10 +107,11 @@ def recorded_checks(
         for shop in sorted({cases[i].shop for i in rows}):
             mine = [i for i in rows if cases[i].shop == shop]
             try:
-                key = (instrument, engine and serving_version(engine, instrument, shop))
-                if key not in forwards:
-                    forwards[key] = forward_for(current_model(engine, instrument, shop), library)
-                forward = forwards[key]
+                serving = engine and serving_version(engine, instrument, shop)
+                if (instrument, serving) not in forwards:
+                    model = serving_model(engine, instrument, serving)
+                    forwards[instrument, serving] = forward_for(model, library)
+                forward = forwards[instrument, serving]
             except FlakelabError as error:
                 return checks, str(error)
             habits = _stored_habits(engine, shop, forward.model_id)

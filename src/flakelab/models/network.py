@@ -469,6 +469,13 @@ class ForwardModel:
         return digest.hexdigest()[:12]
 
     @property
+    def adaptation(self) -> dict | None:
+        """What its adaptation to a shop's cases recorded (the ``shop``, the model it came
+        ``from``, epochs and cases: :func:`~flakelab.models.training.adapt_model`), None where
+        it was not adapted."""
+        return self.info.get("adaptation")
+
+    @property
     def identity(self) -> str:
         """Which model exactly: its name and :attr:`fingerprint` (what a shop's habits name
         as the model they were read against)."""

@@ -33,6 +33,7 @@ __all__ = [
     "shop_of",
     "shop_models",
     "serving_version",
+    "serving_model",
     "shipped_model_path",
     "shipped_model",
     "register",
@@ -253,7 +254,7 @@ def model_card(model: ForwardModel) -> dict:
         "data_hash": info.get("data_hash", ""),
         "effect_share_floor": info.get("effect_share_floor"),
         "training": {k: v for k, v in config.items() if k != "hidden"},
-        "adaptation": info.get("adaptation"),
+        "adaptation": model.adaptation,
     }
 
 
@@ -269,10 +270,16 @@ def current_model_and_source(
     """:func:`current_model`, and where it comes from: ``"shipped"``, or the database and
     the promoted version's registered name."""
     serving = None if engine is None else serving_version(engine, instrument, shop)
-    if serving is not None:
-        name, version = serving
-        return registered_model(engine, name, version), f"{engine.url}: {name}, promoted"
-    return shipped_model(instrument), "shipped"
+    source = "shipped" if serving is None else f"{engine.url}: {serving[0]}, promoted"
+    return serving_model(engine, instrument, serving), source
+
+
+def serving_model(
+    engine: Engine | None, instrument: str, serving: tuple[str, int] | None
+) -> ForwardModel:
+    """The model :func:`serving_version` names (None: the instrument's shipped one), for a
+    caller that keeps models by the version that serves and loads each once."""
+    return shipped_model(instrument) if serving is None else registered_model(engine, *serving)
 
 
 def register(

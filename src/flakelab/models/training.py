@@ -663,9 +663,10 @@ def train_protocol(
         shop_rows = np.flatnonzero((np.array(data.shops) == adapt_shop) & ~outliers)
         if shop_rows.size == 0:
             raise ModelError(f"--adapt: no cases from shop {adapt_shop!r}")
-        adaptation = adapt(model, data, shop_rows, config, log, f"adapt {adapt_shop}", progress)
+        stage = f"adapt {adapt_shop}"
+        adaptation = adapt(model, data, shop_rows, config, log, stage, progress)
         # adapted from a network never stored: no "from"
-        model.info["adaptation"] = adaptation | {"stage": f"adapt {adapt_shop}", "shop": adapt_shop}
+        model.info["adaptation"] = adaptation | {"stage": stage, "shop": adapt_shop}
     report = {
         "cases": n,
         "outliers": int(outliers.sum()),
