@@ -8,11 +8,17 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from flakelab.cases.database import open_database
 from flakelab.core import compare
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_recipe, write_measurements
-from flakelab.models.registry import load_model_file, shipped_model, shipped_model_path
+from flakelab.models.registry import (
+    load_model_file,
+    registered_model,
+    shipped_model,
+    shipped_model_path,
+)
 from flakelab.models.training import training_device
 
 
@@ -360,7 +366,9 @@ def test_realism_json_reports_the_shop_statistics(cli):
 
 def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path, cli):
     cases = tmp_path / "cases.csv"
-    run = cli("cases", "generate", "--n", "60", "--seed", "6", "--out", str(cases))
+    # enough cases that most of them use only toners the model learns from 20 or more: the
+    # adaptation leaves the others to the physics scaling
+    run = cli("cases", "generate", "--n", "300", "--seed", "6", "--out", str(cases))
     assert run.returncode == 0, run.stderr
     run = cli("train", str(cases), "--epochs", "2", "--hidden", "8", "--no-register",
               "--adapt", "synthetic shop", "--adapt-epochs", "2", "--json")  # fmt: skip
@@ -375,6 +383,46 @@ def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path, cli):
     run = cli("train", str(cases), "--no-register", "--adapt", "synthetic shop",
               "--adapt-epochs", "0")  # fmt: skip
     assert run.returncode != 0 and "--adapt-epochs" in run.stderr
+
+
+def test_training_with_adaptation_keeps_the_general_model_and_judges_the_shops_on_its_cases(
+    tmp_path, cli
+):
+    """train --adapt registers the general model under the instrument's name and the shop's
+    copy under the shop's, adapted from the general one and judged on the shop's own held-out
+    cases only (the shop's current model would otherwise be judged on other shops' cases)."""
+    cases, database = str(tmp_path / "cases.db"), str(tmp_path / "models.db")
+    run = cli("cases", "generate", "--n", "120", "--seed", "31", "--shop", "shop A",
+              "--shop-film-build", "1.05", "--out", cases)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    run = cli("cases", "generate", "--n", "120", "--seed", "32", "--out", cases)
+    assert run.returncode == 0, run.stderr
+    quick = ("--epochs", "2", "--hidden", "8", "--adapt-epochs", "2", "--holdout", "0.25")
+    run = cli("train", cases, *quick, "--adapt", "nobody", "-d", database)
+    assert run.returncode == 2 and "--adapt: no cases from shop 'nobody'" in run.stderr
+    assert not (tmp_path / "models.db").exists()  # refused before training, nothing stored
+    out = tmp_path / "shop.pt"
+    run = cli("train", cases, *quick, "--adapt", "shop A", "-d", database, "--out", str(out),
+              "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    summary = json.loads(run.stdout)
+    general, adaptation = summary["registry"], summary["adaptation"]
+    assert (general["name"], general["version"]) == ("five-angle", 1)
+    assert general["cases_judged"] <= summary["held_out"]["cases"]
+    shops_own = adaptation["registry"]
+    assert (shops_own["name"], shops_own["version"]) == ("five-angle @ shop A", 1)
+    # judged on shop A's held-out cases alone: fewer than all held out, and every one of them
+    # but those with a toner one of the two models knows from too few cases
+    assert 0 < shops_own["cases_judged"] <= adaptation["held_out"]["cases"]
+    assert adaptation["held_out"]["cases"] < summary["held_out"]["cases"]
+    assert adaptation["shop"] == "shop A" and adaptation["cases"] > 0
+    engine = open_database(database)
+    kept = registered_model(engine, "five-angle", 1)
+    shops = registered_model(engine, "five-angle @ shop A", 1)
+    assert shops.adaptation["from"] == kept.identity != shops.identity
+    assert shops.adaptation["shop"] == "shop A"
+    assert load_model_file(out).identity == shops.identity  # --out: the shop's model
+    assert kept.adaptation is None
 
 
 def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path, cli):

@@ -78,6 +78,32 @@ def split_held_out(data, source: str, holdout: float, seed: int):
     return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
 
 
+def check_shop_split(source: str, shop: str, data, held_out) -> None:
+    """Refuse to adapt to ``shop`` unless some of its cases are left to adapt to and some are
+    held out to judge the adapted model."""
+    counts = {name: part.shops.count(shop) for name, part in (("data", data), ("held", held_out))}
+    if not any(counts.values()):
+        raise FlakelabError(f"{source}: --adapt: no cases from shop {shop!r}")
+    if not all(counts.values()):
+        where = "held out" if counts["held"] else "left to adapt to"
+        raise FlakelabError(
+            f"{source}: --adapt: all {sum(counts.values())} of shop {shop!r}'s cases were "
+            f"{where}; it needs some of each (--holdout sets the share held out)"
+        )
+
+
+def judged_before_and_after(base, adapted, held_out) -> dict:
+    """ΔE00 statistics of a model ``before`` and ``after`` its adaptation, on ``held_out``."""
+    from flakelab.models.training import evaluate_model
+
+    before, after = (evaluate_model(m, held_out) for m in (base, adapted))
+    return {
+        "cases": after["cases"],
+        "before": {k: before[k] for k in DE00_STATISTICS},
+        "after": {k: after[k] for k in DE00_STATISTICS},
+    }
+
+
 def de00_table(title: str, label: str, stats: dict, names=None, total: bool = True) -> Table:
     """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
     where it is the ``total``)."""
@@ -125,7 +151,10 @@ def train(
     ] = 0.1,
     adapt: Annotated[
         str | None,
-        typer.Option(help="Adapt to this shop's cases; registered as the shop's own model."),
+        typer.Option(
+            help="Then adapt a copy to this shop's cases: registered as the shop's own model "
+            "(the general one is registered too) and written to --out."
+        ),
     ] = None,
     adapt_epochs: Annotated[
         int | None,
@@ -183,6 +212,7 @@ def train(
     from flakelab.models.training import (
         SCREENINGS,
         TrainingConfig,
+        adapt_to_shop,
         evaluate_model,
         protocol_epochs,
         train_protocol,
@@ -232,25 +262,46 @@ def train(
             source_arrays(cases, chosen, lib, effect=True), cases, holdout, seed
         )
     )
+    if adapt is not None:  # before the long training
+        check_shop_split(cases, adapt, data, held_out)
     stages = protocol_epochs(config, adapt is not None)
     with progress_bar(disable=json_output) as bar:
         task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
-        model, report = train_protocol(
-            data, config, adapt_shop=adapt, progress=lambda k: bar.advance(task, k)
-        )
-    model.info["name"] = instrument
+        advance = lambda k: bar.advance(task, k)  # noqa: E731
+        model, report = train_protocol(data, config, progress=advance)
+        model.info["name"] = instrument
+        if adapt is not None:  # step 5 on a copy: the general model is kept too
+            shop_model, adaptation = adapt_to_shop(
+                model, data, adapt, config, leave_out=report["outlier_case_ids"], progress=advance
+            )
     metrics = evaluate_model(model, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
     summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
+    engine = open_database(database) if register_model else None
+    if engine is not None:
+        summary["registry"] = register(engine, model, held_out, metrics=summary["held_out"])
+    log = report["log"]
+    if adapt is not None:
+        shop_held_out = held_out.of_shop(adapt)
+        summary["adaptation"] = {k: v for k, v in adaptation.items() if k != "log"} | {
+            "shop": adapt,
+            "held_out": judged_before_and_after(model, shop_model, shop_held_out),
+        }
+        if engine is not None:
+            summary["adaptation"]["registry"] = register(
+                engine,
+                shop_model,
+                shop_held_out,
+                shop=adapt,
+                metrics=summary["adaptation"]["held_out"],
+            )
+        log = log + adaptation["log"]
+        model = shop_model  # --out: the shop's model
     if out is not None:
         write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
         summary["file"] = str(out)
-    if register_model:
-        summary["registry"] = register(
-            open_database(database), model, held_out, shop=adapt, metrics=summary["held_out"]
-        )
-    summary["loss_log_tail"] = report["log"][-3:]
+    summary["loss_log_tail"] = log[-3:]
     if json_output:
         print(json.dumps(summary, indent=2, default=str))
         return
@@ -561,7 +612,6 @@ def adapt(
     from flakelab.models.registry import current_model, register
     from flakelab.models.training import (
         adapt_model,
-        evaluate_model,
         outlying_cases,
         recorded_config,
     )
@@ -595,8 +645,6 @@ def adapt(
         new, report = adapt_model(
             base, data, config, stage=stage, shop=shop, progress=lambda k: bar.advance(task, k)
         )
-    before = evaluate_model(base, held_out)
-    after = evaluate_model(new, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary |= {
         "model": model or f"current {instrument}",
@@ -604,11 +652,7 @@ def adapt(
         "left_out_new_toners": len(chosen) - len(known),
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
-        "held_out": {
-            "cases": after["cases"],
-            "before": {k: before[k] for k in DE00_STATISTICS},
-            "after": {k: after[k] for k in DE00_STATISTICS},
-        },
+        "held_out": judged_before_and_after(base, new, held_out),
     }
     if out is not None:
         write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))

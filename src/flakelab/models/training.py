@@ -25,15 +25,18 @@ angles, where the eye (and ΔE00) is most sensitive and where the spread is larg
    their median.
 4. Train the final model on the cleaned cases (one session).
 5. Optionally adapt it to one shop or instrument (``adapt_epochs`` on that shop's cases at
-   ``adapt_learning_rate``; :func:`adapt`, or :func:`adapt_model` for a model already
-   trained, such as the shipped one). The paper runs all 150 epochs; a shop with a few
-   thousand cases is fitted too closely by them (``benchmarks/adaptation.py``), so by default
-   ``adapt_validation`` of the shop's cases are held out and the model keeps the epoch that
-   predicts them best, its starting weights included: adaptation never leaves it worse there
-   than it found it. ``adapt_validation=0`` runs the paper's phase as written. Before it,
-   the shop's cases are screened as in step 3 by the model's own error
-   (:func:`outlying_cases`): a mix-up (another panel's reading recorded as the spray-out)
-   would otherwise land in the validation or held-out cases and judge the adaptation.
+   ``adapt_learning_rate``; :func:`adapt`): a copy of the model, which records the model it
+   came from and the shop, by :func:`adapt_to_shop` right after training, or
+   :func:`adapt_model` for any model already trained, such as the shipped one. The paper
+   runs all 150 epochs; a shop with a few thousand cases is fitted too closely by them
+   (``benchmarks/adaptation.py``), so by default ``adapt_validation`` of the shop's cases
+   are held out and the model keeps the epoch that predicts them best, its starting weights
+   included: adaptation never leaves it worse there than it found it.
+   ``adapt_validation=0`` runs the paper's phase as written. Before it, the shop's cases are
+   screened, by step 3's screen or, for a model already trained, as in step 3 by the
+   model's own error (:func:`outlying_cases`): a mix-up (another panel's reading recorded
+   as the spray-out) would otherwise land in the validation or held-out cases and judge the
+   adaptation.
 
 Training runs on ``device`` (a GPU where torch has one); the batches are drawn and the
 networks initialised on the CPU, so a seed gives the same data order and starting weights on
@@ -86,6 +89,7 @@ __all__ = [
     "protocol_epochs",
     "adapt",
     "adapt_model",
+    "adapt_to_shop",
     "recorded_config",
     "training_device",
 ]
@@ -212,6 +216,19 @@ class CaseArrays:
             case_ids=tuple(self.case_ids[i] for i in rows),
             shops=tuple(self.shops[i] for i in rows),
         )
+
+    def of_shop(self, shop: str) -> CaseArrays:
+        """The cases of ``shop``."""
+        return self.subset(np.flatnonzero(np.array(self.shops) == shop))
+
+    def without_toners(self, toners: Iterable[str]) -> CaseArrays:
+        """The cases whose recipes hold none of ``toners``."""
+        named = np.isin(np.array(self.toners), sorted(toners))
+        return self.subset(np.flatnonzero(~(self.x[:, named] > 0).any(axis=1)))
+
+    def without_cases(self, case_ids: Iterable[str]) -> CaseArrays:
+        """All but the cases ``case_ids``."""
+        return self.subset(np.flatnonzero(~np.isin(np.array(self.case_ids), list(case_ids))))
 
 
 def generated_case_arrays(
@@ -638,10 +655,10 @@ def train_protocol(
     data: CaseArrays,
     config: TrainingConfig = TrainingConfig(),
     *,
-    adapt_shop: str | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[ForwardModel, dict]:
-    """The full protocol; returns the final model and a report (outliers, losses, timings)."""
+    """The protocol's steps 1–4; returns the final model and a report (outliers, losses,
+    timings). Step 5 is :func:`adapt_to_shop` (or :func:`adapt_model`) on the model."""
     start = time.perf_counter()
     n = data.x.shape[0]
     if n < config.folds * 2:
@@ -658,15 +675,6 @@ def train_protocol(
         outliers = _screen_by_cross_validation(data, config, partitions, train_rows, log, progress)
     clean = np.flatnonzero(~outliers)
     model = _train_final(data, config, clean, log, progress)
-    adaptation = None
-    if adapt_shop is not None:
-        shop_rows = np.flatnonzero((np.array(data.shops) == adapt_shop) & ~outliers)
-        if shop_rows.size == 0:
-            raise ModelError(f"--adapt: no cases from shop {adapt_shop!r}")
-        stage = f"adapt {adapt_shop}"
-        adaptation = adapt(model, data, shop_rows, config, log, stage, progress)
-        # adapted from a network never stored: no "from"
-        model.info["adaptation"] = adaptation | {"stage": stage, "shop": adapt_shop}
     report = {
         "cases": n,
         "outliers": int(outliers.sum()),
@@ -674,7 +682,6 @@ def train_protocol(
         "seconds": time.perf_counter() - start,
         "device": str(training_device(config.device)),
         "final_loss": log[-1]["loss"],
-        "adaptation": adaptation,
         "log": log,
     }
     model.info.update(
@@ -776,6 +783,32 @@ def adapt_model(
         "from": model.identity,
     }
     return new, report | {"log": log}
+
+
+def adapt_to_shop(
+    model: ForwardModel,
+    data: CaseArrays,
+    shop: str,
+    config: TrainingConfig | None = None,
+    *,
+    leave_out: Iterable[str] = (),
+    progress: Callable[[int], None] | None = None,
+) -> tuple[ForwardModel, dict]:
+    """Protocol step 5 after :func:`train_protocol`: :func:`adapt_model` on ``shop``'s cases
+    of the ``data`` the model was trained on, but for those its screen dropped (``leave_out``,
+    case ids) and those with a toner it knows from too few cases (left to the physics scaling,
+    as in ``flakelab model adapt``). The report says how many of the latter were left out."""
+    cases = data.of_shop(shop).without_cases(leave_out)
+    usable = cases.without_toners(model.new_toners)
+    if usable.x.shape[0] == 0:
+        raise ModelError(
+            f"adaptation: no cases from shop {shop!r} to adapt to"
+            + (f" ({cases.x.shape[0]} use a toner it knows from too few)" if cases.x.size else "")
+        )
+    new, report = adapt_model(
+        model, usable, config, stage=f"adapt {shop}", shop=shop, progress=progress
+    )
+    return new, report | {"left_out_new_toners": cases.x.shape[0] - usable.x.shape[0]}
 
 
 def recorded_config(model: ForwardModel) -> TrainingConfig:
