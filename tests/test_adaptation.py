@@ -16,11 +16,14 @@ from flakelab.models.network import ModelError
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import (
     adapt_model,
+    adapt_to_shop,
+    adaptation_cases,
     evaluate_model,
     fit,
     generated_case_arrays,
     outlying_cases,
     recorded_config,
+    withhold_for_adaptation,
 )
 
 SHOP_HABITS = WorldSettings(**SHOP_WITH_HABITS)
@@ -84,6 +87,51 @@ def test_adaptation_learns_a_shops_habits(model):
     assert not replace(habits, model="an older model", shop="shop B").learned_by(learned)
     # read against the adapted model itself, they are what it has not learned: added
     assert not estimate_habits(learned, library, train.x, train.R).learned_by(learned)
+
+
+def test_the_cases_that_choose_the_adaptations_epoch_are_withheld_from_training(model):
+    """train --adapt: a share of the shop's cases is withheld from the general training and
+    chooses the epoch of the adaptation (cases the model learned would judge every epoch worse
+    than none); a mix-up among them is screened out, not allowed to choose."""
+    library = read_library(None)
+    others = World(library, "five-angle", WorldSettings(), exclude=model.new_toners)
+    data = shop_cases(model, SHOP_HABITS, 300, 24).joined(
+        generated_case_arrays(others, 100, 25, shop="shop B")
+    )
+    config = replace(recorded_config(model), seed=2)
+    rest, validation = withhold_for_adaptation(data, "shop A", config)
+    assert set(validation.shops) == {"shop A"} and len(validation.case_ids) == 60
+    assert not set(validation.case_ids) & set(rest.case_ids)
+    assert sorted(rest.case_ids + validation.case_ids) == sorted(data.case_ids)
+    validation = replace(validation, R=validation.R.copy())
+    validation.R[:2] = 0.85  # white panels recorded as two spray-outs
+    adapted, report = adapt_to_shop(model, rest, "shop A", config, validation=validation)
+    assert report["validation_outlier_case_ids"] == list(validation.case_ids[:2])
+    assert (report["cases"], report["validation_cases"]) == (240, 58)
+    assert adapted.adaptation["shop"] == "shop A" and adapted.adaptation["from"] == model.identity
+    fresh = shop_cases(model, SHOP_HABITS, 300, 26)
+    before, after = (evaluate_model(m, fresh)["de00_mean"] for m in (model, adapted))
+    assert after < before - 0.25
+
+
+def test_an_adaptation_is_judged_and_chosen_only_on_cases_the_model_never_learned(model):
+    """A model trained on a database, adapted to one shop's cases of it: those it learned are
+    adapted on but neither held out nor choosing the epoch (its error on them flatters it)."""
+    cases = shop_cases(model, SHOP_HABITS, 300, 27)
+    config = replace(recorded_config(model), seed=3)
+    learn, choose, held = adaptation_cases(model, cases, 0.1, config)  # it learned none
+    assert choose is None and len(learn.case_ids) + len(held.case_ids) == 300
+    trained = replace(model, learned=None)
+    trained.add_learned(cases.case_ids[:200])
+    learn, choose, held = adaptation_cases(trained, cases, 0.1, config)
+    assert not set(held.case_ids + choose.case_ids) & set(cases.case_ids[:200])
+    assert set(cases.case_ids[:200]) <= set(learn.case_ids)
+    assert sorted(learn.case_ids + choose.case_ids + held.case_ids) == sorted(cases.case_ids)
+    assert len(choose.case_ids) == round(0.2 * (100 - len(held.case_ids)))
+    trained.add_learned(cases.case_ids)
+    with pytest.raises(ModelError, match="learned from all 300 of these cases"):
+        adaptation_cases(trained, cases, 0.1, config)
+    assert model.learned is None  # the shipped model untouched
 
 
 def test_mixed_up_sprayouts_among_a_shops_cases_are_flagged_before_adapting(model):

@@ -99,6 +99,46 @@ def test_model_survives_a_round_trip_through_bytes(trained, data):
     np.testing.assert_allclose(ta, tb, rtol=1e-6, atol=1e-6)
 
 
+def test_a_model_records_the_cases_it_learned_from(trained, data):
+    """The protocol's model learned the cleaned cases, not the outliers it dropped; adapted,
+    it has learned the adaptation's cases too, not those that chose its epoch. The record
+    survives storage; a malformed one is refused; the shipped models have none."""
+    model, report = trained
+    outliers = set(report["outlier_case_ids"])
+    assert model.learned_from(data.case_ids).tolist() == [c not in outliers for c in data.case_ids]
+    fresh = generated_case_arrays(World(SMALL, "five-angle"), 100, seed=77)
+    assert not model.learned_from(fresh.case_ids).any()
+    config = replace(QUICK, adapt_epochs=2, adapt_validation=0.2)
+    adapted, adaptation = adapt_model(model, fresh, config)
+    assert adapted.learned_from(fresh.case_ids).sum() == adaptation["cases"] == 80
+    assert adapted.learned_from(data.case_ids).sum() == len(data.case_ids) - len(outliers)
+    assert not model.learned_from(fresh.case_ids).any()  # the model it came from unchanged
+    again = ForwardModel.from_bytes(adapted.to_bytes())
+    np.testing.assert_array_equal(again.learned, adapted.learned)
+    for bad, problem in ((torch.tensor([3, 1]), "sorted"), (torch.tensor([1.5]), "64-bit")):
+        edited = _with_stored(model, lambda stored, bad=bad: stored.update(learned=bad))
+        with pytest.raises(ModelError, match=f"m.pt: learned: expected .*{problem}"):
+            ForwardModel.from_bytes(edited, source="m.pt")
+    assert shipped_model("five-angle").learned is None
+
+
+def test_a_new_version_is_judged_on_cases_neither_model_learned(trained, data, database_url):
+    """Retrained on a grown database, a model is held-out judged against the current one on
+    cases the current one may have learned: those are left out, or it would be flattered."""
+    engine = open_database(database_url)
+    current, report = trained
+    fresh = generated_case_arrays(World(SMALL, "five-angle"), 60, seed=78)
+    first = register(engine, current, fresh)
+    promote(engine, first["name"], first["version"])
+    retrained = replace(ForwardModel.from_bytes(current.to_bytes()), learned=None)
+    judged = register(engine, retrained, data.joined(fresh))
+    # the current model learned data's cases but for the outliers it dropped
+    assert judged["cases_judged"] == len(fresh.case_ids) + report["outliers"]
+    # the same weights, judged on the same cases: no better, not promoted
+    assert judged["held_out_de00"] == pytest.approx(judged["incumbent_de00"])
+    assert not judged["promoted"]
+
+
 def test_log_features_widen_the_input_and_survive_storage(data):
     config = replace(QUICK, epochs=2, finetune_epochs=1, log_offset=0.01)
     model = _new_model(data, config, np.arange(50))

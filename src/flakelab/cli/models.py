@@ -69,13 +69,14 @@ DeviceOption = Annotated[
 
 
 def split_held_out(data, source: str, holdout: float, seed: int):
-    """Training and held-out cases of the arrays ``data``, each held out with probability
-    ``holdout`` (seeded), both non-empty."""
-    n = data.x.shape[0]
-    held = np.random.default_rng(seed).random(n) < holdout
-    if held.all() or not held.any():
-        raise FlakelabError(f"{source}: {n} cases are too few to hold out {holdout:.0%} of them")
-    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
+    """:func:`~flakelab.models.training.held_out_split`, its refusal naming ``source``."""
+    from flakelab.models.network import ModelError
+    from flakelab.models.training import held_out_split
+
+    try:
+        return held_out_split(data, holdout, seed)
+    except ModelError as error:
+        raise FlakelabError(f"{source}: {error}") from None
 
 
 def check_shop_split(source: str, shop: str, data, held_out) -> None:
@@ -216,6 +217,7 @@ def train(
         evaluate_model,
         protocol_epochs,
         train_protocol,
+        withhold_for_adaptation,
     )
 
     if screening not in SCREENINGS:
@@ -262,8 +264,10 @@ def train(
             source_arrays(cases, chosen, lib, effect=True), cases, holdout, seed
         )
     )
+    validation = None
     if adapt is not None:  # before the long training
         check_shop_split(cases, adapt, data, held_out)
+        data, validation = withhold_for_adaptation(data, adapt, config)
     stages = protocol_epochs(config, adapt is not None)
     with progress_bar(disable=json_output) as bar:
         task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
@@ -272,7 +276,13 @@ def train(
         model.info["name"] = instrument
         if adapt is not None:  # step 5 on a copy: the general model is kept too
             shop_model, adaptation = adapt_to_shop(
-                model, data, adapt, config, leave_out=report["outlier_case_ids"], progress=advance
+                model,
+                data,
+                adapt,
+                config,
+                leave_out=report["outlier_case_ids"],
+                validation=validation,
+                progress=advance,
             )
     metrics = evaluate_model(model, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
@@ -447,6 +457,8 @@ def _model_card_table(card: dict) -> Table:
             f"{adaptation.get('kept_epochs')} of {adaptation.get('epochs')}"
             + (f", from {adaptation['from']}" if adaptation.get("from") else "")
         )
+    learned = card["learned_cases"]
+    rows["cases it learned from"] = "not recorded" if learned is None else f"{learned:,}, recorded"
     if "file" in card:
         rows["written to"] = card["file"]
     table = Table(title=f"Model {card['name']}", show_header=False)
@@ -529,10 +541,18 @@ def evaluate(
     report["model_id"] = matcher.model_id
     report["habits"] = shop_habits and shop_habits.report()
     report["cases_left_out"] = len(loaded) - len(chosen)
+    report["cases_learned"] = int(forward.learned_from(data.case_ids).sum())
     report["shop"], report["since"] = shop, since and since.isoformat()
     if json_output:
         print(json.dumps(report, indent=2))
         return
+    if report["cases_learned"]:
+        errors.print(
+            f"[yellow]warning:[/] the model learned from {report['cases_learned']} of these "
+            f"{report['cases']} cases: its error on them flatters it (judge it on cases it has "
+            "not seen, e.g. --since its training)",
+            highlight=False,
+        )
     if report["cases_left_out"]:
         errors.print(
             f"note: {report['cases_left_out']} of the {len(loaded)} cases were not read at the "
@@ -609,9 +629,11 @@ def adapt(
     --shop), and another adaptation to the shop starts from it."""
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
+    from flakelab.models.network import ModelError
     from flakelab.models.registry import current_model, register
     from flakelab.models.training import (
         adapt_model,
+        adaptation_cases,
         outlying_cases,
         recorded_config,
     )
@@ -635,7 +657,11 @@ def adapt(
     arrays = source_arrays(cases, known, lib, effect=True)
     outlying = outlying_cases(base, arrays, config.outlier_threshold)
     dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
-    data, held_out = split_held_out(arrays.subset(np.flatnonzero(~outlying)), cases, holdout, seed)
+    screened = arrays.subset(np.flatnonzero(~outlying))
+    try:
+        data, validation, held_out = adaptation_cases(base, screened, holdout, config)
+    except ModelError as error:  # too few cases, or only those it learned
+        raise FlakelabError(f"{cases}: {error} (--model, --since)") from None
     if epochs is not None:
         config = replace(config, adapt_epochs=epochs)
     stage = f"adapt {shop or cases}"
@@ -643,15 +669,23 @@ def adapt(
         total = config.adapt_epochs * base.members  # an ensemble's members adapt side by side
         task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=total)
         new, report = adapt_model(
-            base, data, config, stage=stage, shop=shop, progress=lambda k: bar.advance(task, k)
+            base,
+            data,
+            config,
+            stage=stage,
+            shop=shop,
+            validation=validation,
+            progress=lambda k: bar.advance(task, k),
         )
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary |= {
         "model": model or f"current {instrument}",
+        "from": base.identity,
         "shop": shop,
         "left_out_new_toners": len(chosen) - len(known),
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
+        "learned_before": int(base.learned_from(screened.case_ids).sum()),
         "held_out": judged_before_and_after(base, new, held_out),
     }
     if out is not None:
@@ -671,6 +705,12 @@ def adapt(
             f"[yellow]warning:[/] left out {len(dropped)} case(s) whose error by the model lies "
             f"more than {config.outlier_threshold:g} robust s.d. above the shop's, likely "
             f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
+            highlight=False,
+        )
+    if summary["learned_before"]:
+        errors.print(
+            f"note: the model learned from {summary['learned_before']} of these cases: adapted "
+            "on, but held out and choosing the epoch only among the others",
             highlight=False,
         )
     kept = summary["kept_epochs"]

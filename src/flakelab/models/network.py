@@ -13,7 +13,7 @@ import copy
 import hashlib
 import io
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -32,6 +32,7 @@ __all__ = [
     "ForwardModel",
     "StackedNetwork",
     "build_network",
+    "case_fingerprints",
     "LOG_FLOOR",
     "LOG_OFFSET_MAX",
     "MIN_CASES",
@@ -176,6 +177,26 @@ def _checked_norm(norm: object, inputs: int, outputs: int, source: str) -> dict[
     return checked
 
 
+def case_fingerprints(case_ids: Iterable[str]) -> NDArray[np.int64]:
+    """64-bit BLAKE2b digests of case ids: a model records the cases it learned from by these
+    (8 bytes a case, where ids run to 36 characters), and two ids share one about once in
+    10^19 pairs."""
+    digests = (hashlib.blake2b(str(c).encode(), digest_size=8).digest() for c in case_ids)
+    return np.frombuffer(b"".join(digests), dtype="<i8").astype(np.int64)
+
+
+def _checked_learned(learned: object, source: str) -> NDArray | None:
+    """A model file's record of the cases it learned from: sorted distinct 64-bit integers."""
+    if learned is None:
+        return None
+    if not isinstance(learned, torch.Tensor) or learned.dtype != torch.int64 or learned.dim() != 1:
+        raise ModelError(f"{source}: learned: expected one row of 64-bit case fingerprints")
+    array = learned.numpy().copy()
+    if np.any(np.diff(array) <= 0):
+        raise ModelError(f"{source}: learned: expected the case fingerprints sorted, distinct")
+    return array
+
+
 def build_network(inputs: int, outputs: int, hidden: Sequence[int] = (100, 100, 100)) -> nn.Module:
     """MLP with SiLU activations (smooth, so matching gets useful gradients)."""
     layers: list[nn.Module] = []
@@ -278,6 +299,9 @@ class ForwardModel:
     info: dict
     effect: NDArray | None = None
     log_offset: float = 0.0
+    learned: NDArray | None = None
+    """:func:`case_fingerprints` of the cases it learned from, sorted; None where its trainer
+    recorded none (the shipped models: generated cases no shop holds)."""
     _constants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -290,6 +314,18 @@ class ForwardModel:
         return tuple(
             n for n in self.toners if n in declared or counts.get(n, MIN_CASES) < MIN_CASES
         )
+
+    def learned_from(self, case_ids: Sequence[str]) -> NDArray[np.bool_]:
+        """Which of the cases ``case_ids`` it learned from (trained or adapted on): its error
+        on them flatters it, so they neither judge it nor choose an adaptation's epoch."""
+        if self.learned is None:
+            return np.zeros(len(case_ids), dtype=bool)
+        return np.isin(case_fingerprints(case_ids), self.learned)
+
+    def add_learned(self, case_ids: Sequence[str]) -> None:
+        """Record that it learned from the cases ``case_ids`` too."""
+        known = np.empty(0, np.int64) if self.learned is None else self.learned
+        self.learned = np.union1d(known, case_fingerprints(case_ids))
 
     @property
     def members(self) -> int:
@@ -505,7 +541,8 @@ class ForwardModel:
                     k: torch.as_tensor(getattr(self, k), dtype=torch.float32)
                     for k in ("x_mean", "x_std", "y_mean", "y_std")
                 },
-            },
+            }
+            | ({} if self.learned is None else {"learned": torch.from_numpy(self.learned)}),
             buffer,
         )
         return buffer.getvalue()
@@ -536,6 +573,7 @@ class ForwardModel:
         if not all(torch.isfinite(t).all() for t in network.state_dict().values()):
             raise ModelError(f"{source}: weights: expected finite numbers, got NaN or infinity")
         norm = _checked_norm(stored.get("norm"), inputs, outputs, source)
+        learned = _checked_learned(stored.get("learned"), source)
         return cls(
             tuple(meta["toners"]),
             tuple(meta["geometries"]),
@@ -545,5 +583,6 @@ class ForwardModel:
             info=meta["info"],
             effect=np.array(meta["effect"]),
             log_offset=float(log_offset),
+            learned=learned,
             **norm,
         )

@@ -19,14 +19,13 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from pathlib import Path
 
-import numpy as np
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
 from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.models.network import ForwardModel, ModelError
-from flakelab.models.training import CaseArrays, evaluate_model
+from flakelab.models.training import CaseArrays, evaluate_model, unseen_by
 
 __all__ = [
     "shop_model_name",
@@ -250,6 +249,7 @@ def model_card(model: ForwardModel) -> dict:
         "toner_cases": info.get("toner_cases", {}),
         "novel_toners": list(model.new_toners),
         "trained_cases": info.get("trained_cases"),
+        "learned_cases": None if model.learned is None else int(model.learned.size),
         "outliers_dropped": info.get("outliers_dropped"),
         "data_hash": info.get("data_hash", ""),
         "effect_share_floor": info.get("effect_share_floor"),
@@ -294,14 +294,17 @@ def register(
     """Store ``model`` as a new version and promote it if it beats the current one (for
     ``shop``, a model adapted to its cases: :func:`shop_model_name`) on ``held_out``, judged
     on the cases whose toners both learned (the network's answer for a toner it never learned
-    is no answer: the matcher has physics scale such toners). Returns the version, both
-    scores, the cases judged and whether it was promoted."""
+    is no answer: the matcher has physics scale such toners) and neither learned from
+    (:func:`~flakelab.models.training.unseen_by`). Returns the version, both scores, the
+    cases judged and whether it was promoted."""
     name = name or shop_model_name(model.instrument, shop)
     judged, incumbent_score = held_out, float("inf")
     try:
         incumbent = current_model(engine, model.instrument, shop)
-        both = _cases_without(held_out, {*model.new_toners, *incumbent.new_toners})
-        # with no case whose toners both learned, nothing shows that it is better
+        both = unseen_by(held_out.without_toners({*model.new_toners, *incumbent.new_toners}),
+                         model, incumbent)  # fmt: skip
+        # with no case whose toners both learned, none neither learned, nothing shows that
+        # it is better
         incumbent_score = evaluate_model(incumbent, both)["de00_mean"] if len(both.x) else None
         judged = both
     except ModelError:  # no current model for this library and instrument: promote the first
@@ -336,9 +339,3 @@ def register(
         "cases_judged": len(judged.x),
         "promoted": better,
     }
-
-
-def _cases_without(data: CaseArrays, toners: set[str]) -> CaseArrays:
-    """The cases of ``data`` whose recipes hold none of ``toners``."""
-    new = np.isin(np.array(data.toners), sorted(toners))
-    return data.subset(np.flatnonzero(~(data.x[:, new] > 0).any(axis=1)))

@@ -90,6 +90,11 @@ __all__ = [
     "adapt",
     "adapt_model",
     "adapt_to_shop",
+    "adaptation_cases",
+    "adaptation_split",
+    "held_out_split",
+    "unseen_by",
+    "withhold_for_adaptation",
     "recorded_config",
     "training_device",
 ]
@@ -215,6 +220,19 @@ class CaseArrays:
             texture=self.texture[rows],
             case_ids=tuple(self.case_ids[i] for i in rows),
             shops=tuple(self.shops[i] for i in rows),
+        )
+
+    def joined(self, other: CaseArrays) -> CaseArrays:
+        """These cases, then ``other``'s, of the same toners and geometries."""
+        if (other.toners, other.geometries) != (self.toners, self.geometries):
+            raise ModelError("cases: expected the same toners and geometries to join them")
+        return replace(
+            self,
+            x=np.concatenate([self.x, other.x]),
+            R=np.concatenate([self.R, other.R]),
+            texture=np.concatenate([self.texture, other.texture]),
+            case_ids=self.case_ids + other.case_ids,
+            shops=self.shops + other.shops,
         )
 
     def of_shop(self, shop: str) -> CaseArrays:
@@ -675,6 +693,7 @@ def train_protocol(
         outliers = _screen_by_cross_validation(data, config, partitions, train_rows, log, progress)
     clean = np.flatnonzero(~outliers)
     model = _train_final(data, config, clean, log, progress)
+    model.add_learned([data.case_ids[i] for i in clean])
     report = {
         "cases": n,
         "outliers": int(outliers.sum()),
@@ -696,18 +715,9 @@ def train_protocol(
     return model, report
 
 
-def adapt(
-    model: ForwardModel,
-    data: CaseArrays,
-    rows: NDArray,
-    config: TrainingConfig,
-    log: list,
-    stage: str = "adapt",
-    progress: Callable[[int], None] | None = None,
-) -> dict:
-    """Protocol step 5 on the cases ``rows`` of one shop, ``model`` changed in place; with
-    ``config.adapt_validation`` > 0 that share of them (seeded) judges every epoch and the
-    best is kept (module notes). Returns what it did."""
+def adaptation_split(rows: NDArray, config: TrainingConfig) -> tuple[NDArray, NDArray | None]:
+    """The cases ``rows`` of a shop that its adaptation learns from, and the share
+    ``config.adapt_validation`` of them (seeded) held out to choose its epoch (None at 0)."""
     share = config.adapt_validation
     if not 0 <= share < 1:
         raise ModelError(f"adapt_validation: expected a share in [0, 1), got {share}")
@@ -718,7 +728,74 @@ def adapt(
             "choose the epoch; bring more cases or adapt without validation (0)"
         )
     shuffled = np.random.default_rng([config.seed, rows.size]).permutation(rows)
-    train, validation = (shuffled[held:], shuffled[:held]) if held else (rows, None)
+    return (shuffled[held:], shuffled[:held]) if held else (rows, None)
+
+
+def held_out_split(data: CaseArrays, holdout: float, seed: int) -> tuple[CaseArrays, CaseArrays]:
+    """The cases of ``data`` to learn from and those held out to judge, each held out with
+    probability ``holdout`` (seeded); both non-empty."""
+    n = data.x.shape[0]
+    held = np.random.default_rng(seed).random(n) < holdout
+    if held.all() or not held.any():
+        raise ModelError(f"{n} cases are too few to hold out {holdout:.0%} of them")
+    return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
+
+
+def adaptation_cases(
+    model: ForwardModel, data: CaseArrays, holdout: float, config: TrainingConfig
+) -> tuple[CaseArrays, CaseArrays | None, CaseArrays]:
+    """The cases of ``data`` to adapt ``model`` on, those that choose the epoch (None: a
+    share of the former, :func:`adaptation_split`) and those held out to judge it
+    (:func:`held_out_split`). Cases it learned from are adapted on, never held out or
+    choosing: its error on them flatters it, and every epoch would judge worse than none."""
+    seen = model.learned_from(data.case_ids)
+    if not seen.any():
+        learn, held_out = held_out_split(data, holdout, config.seed)
+        return learn, None, held_out
+    if seen.all():
+        raise ModelError(
+            f"the model learned from all {seen.size} of these cases, so none can judge its "
+            "adaptation: adapt a model that has not, or to cases it has not seen"
+        )
+    unseen, held_out = held_out_split(data.subset(np.flatnonzero(~seen)), holdout, config.seed)
+    rows, choosing = adaptation_split(np.arange(unseen.x.shape[0]), config)
+    learn = data.subset(np.flatnonzero(seen)).joined(unseen.subset(np.sort(rows)))
+    return learn, None if choosing is None else unseen.subset(np.sort(choosing)), held_out
+
+
+def withhold_for_adaptation(
+    data: CaseArrays, shop: str, config: TrainingConfig
+) -> tuple[CaseArrays, CaseArrays | None]:
+    """``data`` without the share of ``shop``'s cases that will choose the epoch of its
+    adaptation (:func:`adaptation_split`), and those cases: withheld from the training too,
+    since cases the model learned already judge every epoch of the adaptation worse than
+    none, the model as it came."""
+    rows = np.flatnonzero(np.array(data.shops) == shop)
+    validation = adaptation_split(rows, config)[1]
+    if validation is None:
+        return data, None
+    rest = np.setdiff1d(np.arange(data.x.shape[0]), validation)
+    return data.subset(rest), data.subset(np.sort(validation))
+
+
+def adapt(
+    model: ForwardModel,
+    data: CaseArrays,
+    rows: NDArray,
+    config: TrainingConfig,
+    log: list,
+    stage: str = "adapt",
+    progress: Callable[[int], None] | None = None,
+    *,
+    validation: NDArray | None = None,
+) -> dict:
+    """Protocol step 5 on the cases ``rows`` of one shop, ``model`` changed in place. The
+    cases ``validation`` (default: with ``config.adapt_validation`` > 0, that share of
+    ``rows``, :func:`adaptation_split`) judge every epoch and the best is kept (module
+    notes). Returns what it did."""
+    if validation is None:
+        rows, validation = adaptation_split(rows, config)
+    train = rows
     # an ensemble adapts member by member, side by side, each keeping its own best epoch
     K = model.members
     members = [model] if K == 1 else model.split_members()
@@ -736,9 +813,10 @@ def adapt(
     )
     if K > 1:
         model.network = ForwardModel.ensemble(members).network
+    model.add_learned([data.case_ids[i] for i in train])
     return {
         "cases": int(train.size),
-        "validation_cases": int(held),
+        "validation_cases": 0 if validation is None else int(validation.size),
         "epochs": config.adapt_epochs,
         "kept_epochs": config.adapt_epochs if kept is None else kept[0][0],
         "validation_de00_best": None if kept is None else kept[1][0],
@@ -752,10 +830,13 @@ def adapt_model(
     *,
     stage: str = "adapt",
     shop: str | None = None,
+    validation: CaseArrays | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[ForwardModel, dict]:
     """A copy of a trained ``model`` adapted to all of ``data`` (one ``shop``'s cases) by
-    :func:`adapt`; ``config`` defaults to the one the model was trained with. Returns it and
+    :func:`adapt`; ``config`` defaults to the one the model was trained with. ``validation``,
+    cases of the shop the model never saw, choose the epoch in place of a share of ``data``'s
+    (:func:`withhold_for_adaptation`). Returns it and
     a report (what :func:`adapt` did, the loss log). The copy records, in its
     ``info["adaptation"]``, the ``shop`` and which model it was adapted ``from``: a shop's
     habits read against that model are learned by it (:func:`~flakelab.match.habits.
@@ -765,7 +846,12 @@ def adapt_model(
             f"cases: geometries {data.geometries} differ from the model's {model.geometries}"
         )
     config = config or recorded_config(model)
+    n = data.x.shape[0]
     data = _in_model_order(model, data)
+    if validation is not None:
+        if validation.x.shape[0] == 0:
+            raise ModelError("adaptation: expected validation cases to choose the epoch, got none")
+        data = data.joined(_in_model_order(model, validation))
     used = {t for t, column in zip(model.toners, data.x.T, strict=True) if np.any(column)}
     novel = [t for t in model.new_toners if t in used]
     if novel:  # their inputs lie far outside what it learned from: gradients blow up to NaN
@@ -775,7 +861,8 @@ def adapt_model(
         )
     new = replace(model, network=copy.deepcopy(model.network), info=copy.deepcopy(model.info))
     log: list[dict] = []
-    report = adapt(new, data, np.arange(data.x.shape[0]), config, log, stage, progress)
+    rows, judging = np.arange(n), None if validation is None else np.arange(n, data.x.shape[0])
+    report = adapt(new, data, rows, config, log, stage, progress, validation=judging)
     new.info["adaptation"] = report | {
         "stage": stage,
         "data_hash": data_hash(data),
@@ -792,12 +879,16 @@ def adapt_to_shop(
     config: TrainingConfig | None = None,
     *,
     leave_out: Iterable[str] = (),
+    validation: CaseArrays | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[ForwardModel, dict]:
     """Protocol step 5 after :func:`train_protocol`: :func:`adapt_model` on ``shop``'s cases
     of the ``data`` the model was trained on, but for those its screen dropped (``leave_out``,
     case ids) and those with a toner it knows from too few cases (left to the physics scaling,
-    as in ``flakelab model adapt``). The report says how many of the latter were left out."""
+    as in ``flakelab model adapt``), the epoch chosen on the ``validation`` cases withheld
+    from its training (:func:`withhold_for_adaptation`; those screened as
+    :func:`outlying_cases` left out). The report says how many cases were left out."""
+    config = config or recorded_config(model)
     cases = data.of_shop(shop).without_cases(leave_out)
     usable = cases.without_toners(model.new_toners)
     if usable.x.shape[0] == 0:
@@ -805,10 +896,23 @@ def adapt_to_shop(
             f"adaptation: no cases from shop {shop!r} to adapt to"
             + (f" ({cases.x.shape[0]} use a toner it knows from too few)" if cases.x.size else "")
         )
+    screened = []
+    if validation is not None:
+        validation = validation.without_toners(model.new_toners)
+        outlying = outlying_cases(model, validation, config.outlier_threshold)
+        screened = [validation.case_ids[i] for i in np.flatnonzero(outlying)]
+        validation = validation.subset(np.flatnonzero(~outlying))
     new, report = adapt_model(
-        model, usable, config, stage=f"adapt {shop}", shop=shop, progress=progress
+        model,
+        usable,
+        config,
+        stage=f"adapt {shop}",
+        shop=shop,
+        validation=validation,
+        progress=progress,
     )
-    return new, report | {"left_out_new_toners": cases.x.shape[0] - usable.x.shape[0]}
+    left_out = {"left_out_new_toners": cases.x.shape[0] - usable.x.shape[0]}
+    return new, report | left_out | {"validation_outlier_case_ids": screened}
 
 
 def recorded_config(model: ForwardModel) -> TrainingConfig:
@@ -817,6 +921,16 @@ def recorded_config(model: ForwardModel) -> TrainingConfig:
     names = {f.name for f in fields(TrainingConfig)} - {"device"}
     recorded = {k: v for k, v in model.info.get("config", {}).items() if k in names}
     return replace(TrainingConfig(**recorded), hidden=tuple(model.hidden))
+
+
+def unseen_by(data: CaseArrays, *models: ForwardModel) -> CaseArrays:
+    """The cases of ``data`` none of ``models`` learned from (:meth:`ForwardModel.learned_from`):
+    a model retrained on a grown database is judged against the current one on cases held out
+    from it, which the current one may have learned."""
+    seen = np.zeros(len(data.case_ids), dtype=bool)
+    for model in models:
+        seen |= model.learned_from(data.case_ids)
+    return data.subset(np.flatnonzero(~seen))
 
 
 def evaluate_model(
