@@ -721,5 +721,12 @@ def adapt(
     )
     if "registry" in summary:
         r = summary["registry"]
-        verdict = "promoted" if r["promoted"] else "kept as a candidate (the current one is better)"
+        verdict = (
+            "promoted"
+            if r["promoted"]
+            else "kept as a candidate (the current one is better)"
+            if r["cases_judged"]
+            else "kept as a candidate: no held-out case that both models could be judged on "
+            "(whose toners both learned, that neither learned from)"
+        )
         errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)

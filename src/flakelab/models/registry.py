@@ -301,10 +301,10 @@ def register(
     judged, incumbent_score = held_out, float("inf")
     try:
         incumbent = current_model(engine, model.instrument, shop)
-        both = unseen_by(held_out.without_toners({*model.new_toners, *incumbent.new_toners}),
-                         model, incumbent)  # fmt: skip
-        # with no case whose toners both learned, none neither learned, nothing shows that
-        # it is better
+        comparable = held_out.without_toners({*model.new_toners, *incumbent.new_toners})
+        both = unseen_by(comparable, model, incumbent)
+        # with no case whose toners both learned and neither learned from, nothing shows
+        # that it is better
         incumbent_score = evaluate_model(incumbent, both)["de00_mean"] if len(both.x) else None
         judged = both
     except ModelError:  # no current model for this library and instrument: promote the first
