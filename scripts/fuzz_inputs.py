@@ -32,6 +32,7 @@ import shutil
 import sys
 import tempfile
 from collections.abc import Callable
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
@@ -46,7 +47,7 @@ from flakelab.data import example_path
 from flakelab.io import read_library, read_measurement, write_measurements, write_recipe
 from flakelab.io.library_file import demo_library_path
 from flakelab.match.habits import ShopHabits, write_habits
-from flakelab.models.registry import shipped_model_path
+from flakelab.models.registry import shipped_model
 
 TOKENS = ("nan", "-1", "1e400", "1e300", "", "abc", "0", "Infinity", "1e-320", "[]", "{}", "null",
           "true")  # fmt: skip
@@ -165,8 +166,19 @@ def damage_workbook(data: bytes, rng: random.Random) -> bytes:
 
 def damage_model(data: bytes, rng: random.Random) -> bytes:
     stored = torch.load(io.BytesIO(data), weights_only=True)
-    part = rng.choice(("meta", "norm", "state"))
-    if part == "meta":
+    part = rng.choice(("meta", "norm", "state", "learned"))
+    if part == "learned":  # the record of the cases it learned from
+        learned = stored["learned"]
+        stored["learned"] = rng.choice(
+            (
+                learned.flip(0),
+                learned.float(),
+                learned[:, None],
+                torch.cat([learned, learned[:1]]),
+                "c1,c2",
+            )
+        )
+    elif part == "meta":
         stored["meta"] = json.dumps(damage_json(json.loads(stored["meta"]), rng))
     else:
         key = rng.choice(list(stored[part]))
@@ -204,7 +216,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         CliRunner().invoke(
             app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", f"{work}/cases.{suffix}"]
         )
-    shutil.copy(shipped_model_path("five-angle"), work / "model.pt")
+    model = replace(shipped_model("five-angle"))  # a copy recording cases, as a shop's does
+    model.add_learned([f"case {i}" for i in range(50)])
+    (work / "model.pt").write_bytes(model.to_bytes())
     for name, path in (("car.cxf", target), ("spray.cxf", sprayout), ("shot.json", recipe)):
         shutil.copy(path, work / name)
     (work / "manifest.csv").write_text(

@@ -114,6 +114,7 @@ def main() -> None:
             model, report = train_protocol(
                 data, config, progress=lambda k, task=task: progress.advance(task, k)
             )
+        model.learned = None  # generated cases, which no shop holds: kept out of the file
         model.info.update(
             {
                 "name": f"demo-{instrument}",
