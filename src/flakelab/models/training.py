@@ -36,7 +36,10 @@ angles, where the eye (and ΔE00) is most sensitive and where the spread is larg
    screened, by step 3's screen or, for a model already trained, as in step 3 by the
    model's own error (:func:`outlying_cases`): a mix-up (another panel's reading recorded
    as the spray-out) would otherwise land in the validation or held-out cases and judge the
-   adaptation.
+   adaptation. A model records the cases it learned from (:attr:`ForwardModel.learned`);
+   they are adapted on but never judge it nor choose its epoch (:func:`adaptation_cases`,
+   :func:`withhold_for_adaptation`): its error on them flatters it, and every epoch would
+   judge worse than none.
 
 Training runs on ``device`` (a GPU where torch has one); the batches are drawn and the
 networks initialised on the CPU, so a seed gives the same data order and starting weights on
@@ -793,9 +796,9 @@ def adapt(
     cases ``validation`` (default: with ``config.adapt_validation`` > 0, that share of
     ``rows``, :func:`adaptation_split`) judge every epoch and the best is kept (module
     notes). Returns what it did."""
-    if validation is None:
-        rows, validation = adaptation_split(rows, config)
     train = rows
+    if validation is None:
+        train, validation = adaptation_split(rows, config)
     # an ensemble adapts member by member, side by side, each keeping its own best epoch
     K = model.members
     members = [model] if K == 1 else model.split_members()
