@@ -423,6 +423,23 @@ def test_training_with_adaptation_keeps_the_general_model_and_judges_the_shops_o
     assert shops.adaptation["shop"] == "shop A"
     assert load_model_file(out).identity == shops.identity  # --out: the shop's model
     assert kept.adaptation is None
+    # adapting the general model to the shop's cases again: those it learned are adapted on,
+    # only the others held out (the train's held-out cases and those that chose its epoch)
+    run = cli("model", "adapt", cases, "--shop", "shop A", "--model", "five-angle:1", "-d",
+              database, "--epochs", "2", "--no-register", "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    again = json.loads(run.stdout)
+    assert 0 < again["learned_before"] < again["cases"]
+    # judged on the cases it never learned, or warned that those it learned flatter it
+    judged = [cli("model", "evaluate", cases, "--model", "five-angle:1", "-d", database,
+                  "--json", *extra) for extra in ((), ("--unseen",))]  # fmt: skip
+    every, unseen = (json.loads(run.stdout) for run in judged)
+    assert every["cases"] == 240 and every["cases_learned"] == unseen["cases_learned"] > 0
+    assert unseen["cases"] == 240 - unseen["cases_learned"] and unseen["cases_left_out"] == 0
+    run = cli("model", "evaluate", cases, "--model", "five-angle:1", "-d", database)
+    assert f"learned from {every['cases_learned']} of these 240 cases" in " ".join(
+        run.stderr.split()
+    )
 
 
 def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path, cli):

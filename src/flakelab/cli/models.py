@@ -487,12 +487,21 @@ def evaluate(
             "to the predictions, as the matcher aims off for it.",
         ),
     ] = None,
+    unseen: Annotated[
+        bool,
+        typer.Option(
+            "--unseen",
+            help="Only the cases the model never learned from (its error on those it learned "
+            "flatters it); without it they are counted and warned of.",
+        ),
+    ] = False,
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs.
 
     How the current model (the shop's own with --shop, where one was adapted to it) does on
-    all the cases, on a shop's (--shop), or on those since a date (--since)."""
+    all the cases, on a shop's (--shop), on those since a date (--since), or on those it never
+    learned from (--unseen)."""
     from flakelab.cases.case import cases_at
     from flakelab.io import read_library
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
@@ -507,6 +516,15 @@ def evaluate(
             f"{cases}: no cases {which_cases(shop, since)} read at the model's geometries "
             f"{forward.geometries}"
         )
+    at_geometries = len(chosen)
+    learned = forward.learned_from([c.case_id for c in chosen])
+    if unseen:
+        if learned.all():
+            raise FlakelabError(
+                f"{cases}: the model learned from all {learned.size} cases "
+                f"{which_cases(shop, since)} read at its geometries: none is unseen"
+            )
+        chosen = [c for c, seen in zip(chosen, learned, strict=True) if not seen]
     from flakelab.cli.matcher import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.judging import evaluate_recipes
@@ -540,17 +558,24 @@ def evaluate(
     report["forward"] = matcher.name
     report["model_id"] = matcher.model_id
     report["habits"] = shop_habits and shop_habits.report()
-    report["cases_left_out"] = len(loaded) - len(chosen)
-    report["cases_learned"] = int(forward.learned_from(data.case_ids).sum())
+    report["cases_left_out"] = len(loaded) - at_geometries
+    # with --unseen, those left out; else those among the cases judged
+    report["cases_learned"] = int(learned.sum())
+    report["unseen"] = unseen
     report["shop"], report["since"] = shop, since and since.isoformat()
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    if report["cases_learned"]:
+    if report["cases_learned"] and unseen:
+        errors.print(
+            f"note: left out {report['cases_learned']} cases the model learned from",
+            highlight=False,
+        )
+    elif report["cases_learned"]:
         errors.print(
             f"[yellow]warning:[/] the model learned from {report['cases_learned']} of these "
-            f"{report['cases']} cases: its error on them flatters it (judge it on cases it has "
-            "not seen, e.g. --since its training)",
+            f"{report['cases']} cases: its error on them flatters it (--unseen judges it on "
+            "the others)",
             highlight=False,
         )
     if report["cases_left_out"]:
