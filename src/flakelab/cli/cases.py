@@ -777,18 +777,10 @@ def habits(
         "explained": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in fit.items()},
         "drift": drift and _drift_report(drift, chosen),
         "left_out_mismatched": left_out,
-        "cases_learned": int(learned.learned_from(data.case_ids).sum()),
     }
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    if report["cases_learned"]:
-        errors.print(
-            f"[yellow]warning:[/] the model learned from {report['cases_learned']} of these "
-            "cases: what it learned of the shop's habits is in its predictions already, so "
-            "they read smaller here (read them on cases it has not seen, e.g. --since)",
-            highlight=False,
-        )
     table = Table(title=f"Habits of {shop or cases} against {model or 'the current model'}")
     for column in ("habit", "estimate", "± s.e.", "meaning"):
         table.add_column(column, justify="right")

@@ -27,6 +27,7 @@ from flakelab.cli.sources import (
     ModelFileOption,
     ShopModelOption,
     SinceOption,
+    UnseenOption,
     chosen_model,
     existing_engine,
     instrument_key,
@@ -35,6 +36,7 @@ from flakelab.cli.sources import (
     named_model,
     shop_cases,
     source_arrays,
+    unseen_cases,
     which_cases,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
@@ -487,14 +489,7 @@ def evaluate(
             "to the predictions, as the matcher aims off for it.",
         ),
     ] = None,
-    unseen: Annotated[
-        bool,
-        typer.Option(
-            "--unseen",
-            help="Only the cases the model never learned from (its error on those it learned "
-            "flatters it); without it they are counted and warned of.",
-        ),
-    ] = False,
+    unseen: UnseenOption = False,
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs.
@@ -517,14 +512,9 @@ def evaluate(
             f"{forward.geometries}"
         )
     at_geometries = len(chosen)
-    learned = forward.learned_from([c.case_id for c in chosen])
     if unseen:
-        if learned.all():
-            raise FlakelabError(
-                f"{cases}: the model learned from all {learned.size} cases "
-                f"{which_cases(shop, since)} read at its geometries: none is unseen"
-            )
-        chosen = [c for c, seen in zip(chosen, learned, strict=True) if not seen]
+        which = f"{which_cases(shop, since)} read at its geometries"
+        chosen, learned = unseen_cases(forward, chosen, cases, which)
     from flakelab.cli.matcher import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.judging import evaluate_recipes
@@ -560,7 +550,7 @@ def evaluate(
     report["habits"] = shop_habits and shop_habits.report()
     report["cases_left_out"] = len(loaded) - at_geometries
     # with --unseen, those left out; else those among the cases judged
-    report["cases_learned"] = int(learned.sum())
+    report["cases_learned"] = learned if unseen else int(forward.learned_from(data.case_ids).sum())
     report["unseen"] = unseen
     report["shop"], report["since"] = shop, since and since.isoformat()
     if json_output:

@@ -87,6 +87,16 @@ SinceOption = Annotated[
 ]
 
 
+UnseenOption = Annotated[
+    bool,
+    typer.Option(
+        "--unseen",
+        help="Only the cases the model never learned from (its error on those it learned "
+        "flatters it); without it they are counted and warned of.",
+    ),
+]
+
+
 StartOption = Annotated[
     datetime | None,
     typer.Option(
@@ -172,6 +182,17 @@ def which_cases(shop: str | None, since: datetime | None) -> str:
     """The cases ``shop`` and ``since`` choose, in words for a message."""
     whose = f"from shop {shop!r}" if shop else "from any shop"
     return whose + (f" since {since:%Y-%m-%d %H:%M}" if since else "")
+
+
+def unseen_cases(model, chosen: list, source: str, which: str) -> tuple[list, int]:
+    """The cases of ``chosen`` that ``model`` never learned from, and how many it did; all
+    learned is refused (``which``: the cases, in words)."""
+    learned = model.learned_from([c.case_id for c in chosen])
+    if learned.all():
+        raise FlakelabError(
+            f"{source}: the model learned from all {learned.size} cases {which}: none is unseen"
+        )
+    return [c for c, seen in zip(chosen, learned, strict=True) if not seen], int(learned.sum())
 
 
 def since_option(when: datetime) -> str:
