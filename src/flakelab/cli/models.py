@@ -676,7 +676,7 @@ def adapt(
     try:
         data, validation, held_out = adaptation_cases(base, screened, holdout, config)
     except ModelError as error:  # too few cases, or only those it learned
-        raise FlakelabError(f"{cases}: {error} (--model, --since)") from None
+        raise FlakelabError(f"{cases}: {error}") from None
     if epochs is not None:
         config = replace(config, adapt_epochs=epochs)
     stage = f"adapt {shop or cases}"
