@@ -47,6 +47,7 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     card = json.loads(run.stdout)
     assert "five-angle v1, candidate, held-out ΔE00 " in card["source"] and card["hidden"] == [16]
     assert card["trained_cases"] + report["outliers"] == report["cases"]
+    assert card["learned_cases"] == card["trained_cases"]  # every case it learned, recorded
     trained, taken_out = (load_model_file(tmp_path / f) for f in ("m.pt", "v1.pt"))
     x = np.eye(len(trained.toners))[:5]
     np.testing.assert_array_equal(taken_out.predict(x)[0], trained.predict(x)[0])

@@ -511,6 +511,7 @@ def test_a_models_card_tells_what_it_learned_from(cli, tmp_path):
     model = shipped_model("five-angle")
     assert card["source"] == "shipped" and card["toners"] == list(model.toners)
     assert card["members"] == model.members and card["geometries"] == list(model.geometries)
+    assert card["learned_cases"] is None  # generated cases, no record kept
     unseen = [t for t, n in card["toner_cases"].items() if n == 0]
     assert unseen and sorted(unseen) == sorted(card["novel_toners"])
     for spec, problem in (
