@@ -636,6 +636,12 @@ def test_an_imported_history_names_its_likely_mix_ups(tmp_path, cli):
     assert cases[7].case_id in said
     run = cli("cases", "import", str(history), "-d", str(tmp_path / "b.db"), "--no-check")
     assert run.returncode == 0 and "further than" not in run.stderr
+    # a malformed library is refused, unused though it is, before anything is stored
+    (tmp_path / "bad.json").write_text('{"name": "bad", "toners": 3}')
+    run = cli("cases", "import", str(history), "-d", str(tmp_path / "d.db"), "--no-check",
+              "--library", str(tmp_path / "bad.json"))  # fmt: skip
+    assert run.returncode == 2 and "bad.json" in run.stderr
+    assert not (tmp_path / "d.db").exists()
     # a library without the history's toners cannot check it, and says why
     library = json.loads(demo_library_path().read_text())
     library["name"] = "other"

@@ -169,7 +169,8 @@ def import_cases(
     from flakelab.io import read_library
     from flakelab.match.mixups import is_mismatched, recorded_checks
 
-    lib = read_library(library) if check else None
+    # a library given is read, and refused if malformed, even where --no-check leaves it unused
+    lib = read_library(library) if check or library is not None else None
     cases = read_cases(source)
     engine = open_database(database)
     try:
@@ -177,7 +178,7 @@ def import_cases(
     except CaseError as error:  # it names the case stored already
         raise FlakelabError(f"{source}: {error}") from None
     errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
-    if lib is None:
+    if not check:
         return
     checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
     mismatched = [c.case_id for c, k in zip(cases, checks, strict=True) if is_mismatched(k)]
