@@ -238,9 +238,13 @@ class CaseArrays:
             shops=self.shops + other.shops,
         )
 
+    def shop_rows(self, shop: str) -> NDArray:
+        """The rows of ``shop``'s cases."""
+        return np.flatnonzero(np.array(self.shops) == shop)
+
     def of_shop(self, shop: str) -> CaseArrays:
         """The cases of ``shop``."""
-        return self.subset(np.flatnonzero(np.array(self.shops) == shop))
+        return self.subset(self.shop_rows(shop))
 
     def without_toners(self, toners: Iterable[str]) -> CaseArrays:
         """The cases whose recipes hold none of ``toners``."""
@@ -773,8 +777,7 @@ def withhold_for_adaptation(
     adaptation (:func:`adaptation_split`), and those cases: withheld from the training too,
     since cases the model learned already judge every epoch of the adaptation worse than
     none, the model as it came."""
-    rows = np.flatnonzero(np.array(data.shops) == shop)
-    validation = adaptation_split(rows, config)[1]
+    validation = adaptation_split(data.shop_rows(shop), config)[1]
     if validation is None:
         return data, None
     rest = np.setdiff1d(np.arange(data.x.shape[0]), validation)
@@ -897,7 +900,7 @@ def adapt_to_shop(
     if usable.x.shape[0] == 0:
         raise ModelError(
             f"adaptation: no cases from shop {shop!r} to adapt to"
-            + (f" ({cases.x.shape[0]} use a toner it knows from too few)" if cases.x.size else "")
+            + (f" ({cases.x.shape[0]} use a toner it knows from too few)" if cases.case_ids else "")
         )
     screened = []
     if validation is not None:
