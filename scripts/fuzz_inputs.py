@@ -244,8 +244,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
                    lambda p: ["cases", "record", str(target), "--recipe", str(recipe),
                               "--sprayed", str(p), "-d", "sqlite://"]),
         "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
+        # a can by volume, so that the toners' densities are used as well as read
         "library": (work / "library.json",
-                    lambda p: ["weigh", str(recipe), "--library", str(p), "--physics"]),
+                    lambda p: ["weigh", str(recipe), "--library", str(p), "--physics",
+                               "--quantity", "1qt"]),
         "habits": (work / "habits.json",
                    lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
                               str(sprayout), "--habits", str(p), "--extra-toners", "0"]),

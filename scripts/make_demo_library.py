@@ -149,10 +149,40 @@ PEARLS = [
 ]
 
 
+DENSITY_G_ML = {
+    "aluminium": 0.98,
+    "pearl": 1.02,
+    "organic": 0.98,
+    "iron oxide": 1.20,
+    "transparent iron oxide": 1.02,
+    "bismuth vanadate": 1.25,
+    "carbon": 0.97,
+    "titanium dioxide": 1.45,
+}
+"""Densities as sold [g/mL], typical of solventborne basecoat mixing toners (the pigment
+dispersed in resin and solvent): most are near 1, the heavy inorganic pigments denser. They
+weigh a can ordered by volume. Typical values, not measured."""
+
+
+def pigment_density(name: str, family: str) -> float:
+    if family == "iron oxide" and name.startswith("Transparent"):
+        return DENSITY_G_ML["transparent iron oxide"]
+    return DENSITY_G_ML.get(family, DENSITY_G_ML["organic"])
+
+
 def main() -> None:
     toners = [
         *(
-            AluminiumFlake(n, r, t, sd, q, volume_fraction=0.04 if t < 0.1 else 0.13, description=d)
+            AluminiumFlake(
+                n,
+                r,
+                t,
+                sd,
+                q,
+                volume_fraction=0.04 if t < 0.1 else 0.13,
+                description=d,
+                density_g_ml=DENSITY_G_ML["aluminium"],
+            )
             for n, r, t, sd, q, d in FLAKES
         ),
         *(
@@ -163,10 +193,14 @@ def main() -> None:
                 np.round(s, 6),
                 g=0.3 if np.any(s) else 0.0,
                 description="synthetic, shaped after the family's published absorption bands",
+                density_g_ml=pigment_density(n, fam),
             )
             for n, fam, k, s in PIGMENTS
         ),  # fmt: skip
-        *(Pearl(n, c, sub, sn, r, sd, description=d) for n, c, sub, sn, r, sd, d in PEARLS),
+        *(
+            Pearl(n, c, sub, sn, r, sd, description=d, density_g_ml=DENSITY_G_ML["pearl"])
+            for n, c, sub, sn, r, sd, d in PEARLS
+        ),
     ]
     library = Library(
         name="flakelab demo",
@@ -176,7 +210,8 @@ def main() -> None:
         ),
         synthetic=True,
         description="Synthetic demo refinish system: 10 aluminium flakes, 20 pigments, 5 pearls. "
-        "Spectra are shaped from published features, not measured (scripts/make_demo_library.py).",
+        "Spectra are shaped from published features, and densities typical of mixing toners, "
+        "not measured (scripts/make_demo_library.py).",
     )
     write_library(library, demo_library_path())
     print(f"wrote {len(toners)} toners to {demo_library_path()}")

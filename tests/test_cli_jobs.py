@@ -356,6 +356,32 @@ def test_weigh_takes_a_can_in_pounds(cli):
     assert report["weights_g"][-1]["cumulative"] == pytest.approx(453.6)
 
 
+def test_a_can_by_volume_is_weighed_from_the_toners_densities(tmp_path, cli):
+    """A quart of the example's recipe: the weighed toners fill 946.35 ml by their densities
+    (to the scale's step); a library without a density for one of them is refused, naming
+    it, by ``weigh`` and, before the search, by ``match``."""
+    from flakelab.io import read_library
+
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"
+    run = cli("weigh", str(recipe), "--quantity", "1qt", "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    lib = read_library()
+    filled = sum(w["grams"] / lib[w["toner"]].density_g_ml for w in report["weights_g"])
+    assert report["quantity_ml"] == pytest.approx(946.352946)
+    assert filled == pytest.approx(946.353, abs=0.1)
+    assert report["weights_g"][-1]["cumulative"] == pytest.approx(report["quantity_g"])
+    data = lib.to_dict()
+    del next(t for t in data["toners"] if t["name"] == "Carbon black")["density_g_ml"]
+    partial = tmp_path / "shop.json"
+    partial.write_text(json.dumps(data))
+    for command in (["weigh", str(recipe)], ["match", "--example"]):
+        run = cli(*command, "--library", str(partial), "--quantity", "0.5l")
+        assert run.returncode == 2 and "no density_g_ml for Carbon black" in run.stderr
+        assert "Traceback" not in run.stderr
+        assert cli(*command, "--library", str(partial), "--quantity", "250g").returncode == 0
+
+
 def test_realism_json_reports_the_shop_statistics(cli):
     run = cli("cases", "realism", "--n", "60", "--json")
     assert run.returncode == 0, run.stderr

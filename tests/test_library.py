@@ -91,6 +91,24 @@ def test_library_file_round_trip(tmp_path):
     )
 
 
+def test_densities_are_optional_and_a_can_by_volume_names_the_toners_without_one(tmp_path):
+    lib = read_library()
+    assert lib.densities(["Titanium dioxide white"]) == {"Titanium dioxide white": 1.45}
+    data = lib.to_dict()
+    for toner in data["toners"][:3]:
+        del toner["density_g_ml"]
+    path = tmp_path / "shop.json"
+    path.write_text(json.dumps(data))
+    partial = read_library(path)
+    assert partial["Al fine bright"].density_g_ml is None
+    assert partial.densities(["Carbon black"]) == {"Carbon black": 0.97}
+    with pytest.raises(LibraryError, match="no density_g_ml for Al fine bright, Al fine dark, so"):
+        partial.densities(["Al fine bright", "Carbon black", "Al fine dark"])
+    write_library(partial, path)  # what is not given is not written as null
+    assert "density_g_ml" not in json.loads(path.read_text())["toners"][0]
+    assert read_library(path)["Carbon black"].density_g_ml == 0.97
+
+
 def test_recipe_validation():
     lib = read_library()
     f = lib.fractions({"Al coarse": 60.0, "Phthalo blue GS": 40.0}, total=100.0)
@@ -180,6 +198,13 @@ def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
         ),
         "Pearl silver white: radius_um: expected at least 1.0, got 1e-12": (
             _setting("toners", 30, "radius_um", value=1e-12)
+        ),
+        # a density in g/L where g/mL is meant would weigh a litre as a tonne
+        "Carbon black: density_g_ml: expected at most 5.0, got 970": (
+            _setting("toners", 28, "density_g_ml", value=970)
+        ),
+        "Carbon black: density_g_ml: expected a positive number, got '0.97'": (
+            _setting("toners", 28, "density_g_ml", value="0.97")
         ),
     }
     for message, edit in flawed.items():

@@ -29,6 +29,7 @@ from flakelab.match.judging import evaluate_recipes, recipe_vector
 from flakelab.match.recipe import (
     RecipeError,
     can_on_scale,
+    order_can,
     parse_quantity,
     weigh,
     weigh_additions,
@@ -363,6 +364,36 @@ def test_a_can_in_pounds_or_ounces_is_weighed_to_the_scale():
         can_on_scale("250.05g", 0.1)
     with pytest.raises(RecipeError, match="less than the scale's 0.1 g"):
         can_on_scale("0.001oz", 0.1)
+
+
+def test_a_can_by_volume_weighs_what_its_toners_fill():
+    """A litre of a recipe weighs 1000 / Σ wᵢ/ρᵢ grams: the weighed toners' own volumes add
+    back up to the can ordered (within the scale's step), a dense white's can weighs more
+    than a silver's, and the US units are NIST's."""
+    from flakelab.io import read_library
+
+    lib = read_library()
+    silver = {"Al medium": 0.95, "Carbon black": 0.05}
+    white = {"Titanium dioxide white": 0.9, "Al fine": 0.1}
+    litre = order_can("1 L", 0.1)
+    assert litre.millilitres == 1000.0 and litre.grams is None
+    can = litre.for_toners(lib, lib.names)
+    for recipe in (silver, white):
+        grams = can.grams_for(recipe)
+        weighed = {line.toner: line.grams for line in weigh(recipe, grams, 0.1)}
+        volume = sum(g / lib[n].density_g_ml for n, g in weighed.items())
+        assert volume == pytest.approx(1000.0, abs=0.1 / 0.97)
+    assert can.grams_for(white) > 1.3 * can.grams_for(silver)
+    assert order_can("1qt", 0.1).millilitres == pytest.approx(946.352946)
+    assert order_can("1 pt", 0.1).millilitres == pytest.approx(473.176473)
+    assert order_can("500ml", 0.1).millilitres == order_can("0.5l", 0.1).millilitres
+    assert order_can("0.25kg", 0.1).grams == 250.0  # by mass, as before
+    with pytest.raises(RecipeError, match="--quantity"):
+        order_can("-1l", 0.1)
+    with pytest.raises(RecipeError, match="less than the scale's 1 g"):
+        order_can("0.5ml", 1.0).for_toners(lib, lib.names)
+    with pytest.raises(RecipeError, match="steps of the scale"):
+        order_can("1e9 l", 0.1).for_toners(lib, lib.names)
 
 
 def flakelab(*args: str) -> subprocess.CompletedProcess:
@@ -1232,26 +1263,33 @@ def test_harness_sprays_recipes_as_a_shop_weighs_them_when_given_a_scale(hybrid)
     world = harness_world(hybrid.library, "five-angle", "shop")
     effect = effect_mask(hybrid.library, hybrid.toners)
     hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
+    small = order_can("20g", 1.0)
     runs = {
         scale: evaluate_matching(
             world, hybrid, effect, targets=4, seed=2, settings=hasty, scale=scale
         )  # fmt: skip
-        for scale in (None, (20.0, 1.0))
+        for scale in (None, small)
     }
-    assert runs[(20.0, 1.0)]["weighed"] == {"quantity_g": 20.0, "resolution_g": 1.0}
+    assert runs[small]["weighed"] == {"quantity_g": 20.0, "resolution_g": 1.0}
     assert runs[None]["weighed"] is None
-    assert runs[(20.0, 1.0)]["first_shot_de00_median"] > runs[None]["first_shot_de00_median"]
-    assert runs[(20.0, 1.0)]["oracle_de00_median"] == runs[None]["oracle_de00_median"]
+    assert runs[small]["first_shot_de00_median"] > runs[None]["first_shot_de00_median"]
+    assert runs[small]["oracle_de00_median"] == runs[None]["oracle_de00_median"]
     shares = {"Al medium": 0.9, "Phthalo blue GS": 0.07, "Carbon black": 0.03}
-    mixed = as_weighed(hybrid, shares, (250.0, 0.1))
+    mixed = as_weighed(hybrid, shares, order_can("250g", 0.1))
     grams = np.array(list(mixed.values())) * 250.0
     assert sum(mixed.values()) == pytest.approx(1.0)
     assert grams == pytest.approx(np.round(grams * 10) / 10, abs=1e-9)  # whole scale steps
     assert as_weighed(hybrid, shares, None) is shares
+    quart = order_can("1qt", 0.1).for_toners(hybrid.library, hybrid.toners)
+    grams = np.array(list(as_weighed(hybrid, shares, quart).values())) * quart.grams_for(shares)
+    assert grams == pytest.approx(np.round(grams * 10) / 10, abs=1e-6)  # its own can, weighed
     # under one step of the scale a trace is left out (0.08 g of black on a 0.1 g scale): to
     # the nearest it could round to nothing, which no scale weighs
     traced = {"Al medium": 0.9, "Phthalo blue GS": 0.0997, "Carbon black": 0.08 / 250}
-    assert set(as_weighed(hybrid, traced, (250.0, 0.1))) == {"Al medium", "Phthalo blue GS"}
+    assert set(as_weighed(hybrid, traced, order_can("250g", 0.1))) == {
+        "Al medium",
+        "Phthalo blue GS",
+    }
 
 
 def test_harness_judges_by_its_tolerance(hybrid):

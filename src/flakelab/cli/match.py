@@ -43,7 +43,7 @@ from flakelab.cli.matcher import (
     with_left_out,
 )
 from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, workplace_shop
-from flakelab.cli.weigh import rounding_text, scale_of, weighed_recipe, weights_table
+from flakelab.cli.weigh import can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.tolerance import failures
 from flakelab.errors import FlakelabError
@@ -159,6 +159,7 @@ def match_command(
     'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.data import example_path
     from flakelab.io import read_tolerance
+    from flakelab.match.recipe import order_can
     from flakelab.match.search import match
 
     if target == "evaluate":
@@ -186,7 +187,7 @@ def match_command(
                 solid_travel=solid_travel,
             ),
             tolerance=tolerance,
-            scale=scale_of(quantity, resolution) if weighed else None,
+            scale=order_can(quantity, resolution) if weighed else None,
             target_texture=target_texture,
             resprays=resprays,
             json_output=json_output,
@@ -203,7 +204,7 @@ def match_command(
         )
     if target is None and not example:
         raise FlakelabError("expected a target file or --example")
-    grams = scale_of(quantity, resolution)[0]
+    can = order_can(quantity, resolution)
     check_figure_file(render)
     check_figure_file(plot, "--plot")
     check_output_file(recipe_out, "--recipe-out")
@@ -211,6 +212,7 @@ def match_command(
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
+    can = can.for_toners(lib, forward.toners)
     path = example_path("target") if example else Path(target)
     measurement = read_sample(path, sample)
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
@@ -243,8 +245,12 @@ def match_command(
             for entry, left_out in zip(report["candidates"], extra, strict=True):
                 entry["left_out"] = left_out.to_dict()
     for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
+        grams = can.grams_for(candidate.fractions)
         entry.update(weighed_recipe(forward, candidate.fractions, grams, resolution))
-    report["quantity_g"] = grams
+        entry["quantity_g"] = grams
+    report["quantity_g"] = can.grams  # by volume, each candidate weighs its own
+    if can.millilitres is not None:
+        report |= {"quantity": can.quantity, "quantity_ml": can.millilitres}
     report["resolution_g"] = resolution
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
@@ -315,7 +321,8 @@ def _print_match(report: dict) -> None:
             f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"
             + ("  aimed off for the shop's habits" if c.get("aimed_off") else "")
         )
-        table = weights_table(None, c["weights_g"])
+        table = weights_table(can_text(report | c) if "quantity_ml" in report else None,
+                              c["weights_g"])  # fmt: skip
         geo = Table(box=box.SIMPLE, show_header=True)
         keys = ["L", "a", "b", "dL", "dC", "dH", "dE00"]
         columns = ["geometry", "L*", "a*", "b*", "ΔL*", "ΔC*", "ΔH*", "ΔE00"]
@@ -398,6 +405,7 @@ def _evaluate(
 
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     world = harness_world(lib, instrument, world_name)
+    scale = scale and scale.for_toners(lib, forward.toners)
     habits = habits_for(habits_file, shop, database, forward)
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)

@@ -36,7 +36,10 @@ RecipeOutOption = Annotated[
 
 QuantityOption = Annotated[
     str,
-    typer.Option(help="Can size to weigh, e.g. 250g, 0.5kg, 1lb (to the scale's nearest step)."),
+    typer.Option(
+        help="Can size to weigh, e.g. 250g, 0.5kg, 1lb (to the scale's nearest step), or by "
+        "volume, e.g. 0.5l, 500ml, 1qt (weighed from the toners' densities in the library)."
+    ),
 ]
 
 

@@ -41,18 +41,19 @@ def weigh_command(
     Grams per toner at the scale's resolution, cumulative weights in pouring order, and the
     ΔE00 between the exact and the weighed recipe, both predicted by the model."""
     from flakelab.io import read_recipe, write_recipe
+    from flakelab.match.recipe import order_can
 
     grams = read_recipe(recipe)
-    can = scale_of(quantity, resolution)[0]
+    can = order_can(quantity, resolution)
     check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
+    can = can.for_toners(lib, shares)
     report = {
         "recipe": str(recipe),
-        "quantity_g": can,
-        "resolution_g": resolution,
-        **weighed_recipe(forward, shares, can, resolution),
+        **can_size(can, shares),
+        **weighed_recipe(forward, shares, can.grams_for(shares), resolution),
         "model": forward.name,
     }
     if recipe_out is not None:
@@ -62,15 +63,22 @@ def weigh_command(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    console.print(weights_table(f"{recipe.name} for {can:g} g", report["weights_g"]))
+    console.print(f"{recipe.name} for {can_text(report)}", highlight=False)
+    console.print(weights_table(None, report["weights_g"]))
     console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
 
 
-def scale_of(quantity: str, resolution: float) -> tuple[float, float]:
-    """The can in grams and the scale's resolution, checked that the scale can weigh it."""
-    from flakelab.match.recipe import can_on_scale
+def can_size(can, fractions: dict[str, float]) -> dict:
+    """The report's can for a recipe: its grams, and as ordered by volume."""
+    volume = {} if can.millilitres is None else {
+        "quantity": can.quantity, "quantity_ml": can.millilitres}  # fmt: skip
+    return {"quantity_g": can.grams_for(fractions), **volume, "resolution_g": can.resolution_g}
 
-    return can_on_scale(quantity, resolution), resolution
+
+def can_text(report: dict) -> str:
+    """``250 g``, or ``1qt (927.3 g)`` for a can ordered by volume."""
+    grams = f"{report['quantity_g']:g} g"
+    return grams if "quantity_ml" not in report else f"{report['quantity']} ({grams})"
 
 
 def weighed_recipe(

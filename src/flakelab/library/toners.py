@@ -2,12 +2,14 @@
 
 Every toner is a small frozen dataclass checked when built; a :class:`Library` holds them
 by name and turns recipes into validated mass fractions. Spectra live on the storage grid
-(:data:`~flakelab.core.spectra.WAVELENGTHS`). Files: ``flakelab.io.read_library``.
+(:data:`~flakelab.core.spectra.WAVELENGTHS`). Any toner may give its ``density_g_ml``
+[g/mL] as sold, from which a can ordered by volume is weighed (:meth:`Library.densities`).
+Files: ``flakelab.io.read_library``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
@@ -34,6 +36,7 @@ __all__ = [
     "FLAKE_RADIUS_MIN_UM",
     "FLAKE_THICKNESS_MIN_UM",
     "ORIENTATION_SD_MIN_DEG",
+    "DENSITY_RANGE_G_ML",
 ]
 
 SUM_TOLERANCE = 1e-6
@@ -56,6 +59,10 @@ are 20–50 nm; the demo's thinnest 50 nm). 1e-300 µm overflowed the flakes' la
 ORIENTATION_SD_MIN_DEG = 1.0
 """Narrowest spread of flake normals a library may give [degree], below any sprayed
 coating's (the demo's best aligned spread 5°). 1e-300° made a pearl's prediction NaN."""
+DENSITY_RANGE_G_ML = (0.5, 5.0)
+"""Densities a toner may give [g/mL]: mixing toners as sold are about 0.9 (aluminium pastes in
+solvent) to 1.6 (titanium dioxide whites). Outside this range the number is in another unit,
+such as 980 for g/L."""
 HIDING_COEFFICIENT = 1.0
 """Specific scattering (mean) or absorption (least) [1/µm per unit mass fraction] from which
 a pigment hides the primer by itself (:attr:`Pigment.hides`). The demo library splits
@@ -76,6 +83,13 @@ def _positive(
         raise LibraryError(f"{owner}: {name}: expected at least {lower}, got {value!r}")
     if upper is not None and value > upper:
         raise LibraryError(f"{owner}: {name}: expected at most {upper}, got {value!r}")
+
+
+def _density(owner: str, value: float | None) -> None:
+    """A toner's density as sold, if given: how a can by volume is weighed."""
+    if value is not None:
+        lower, upper = DENSITY_RANGE_G_ML
+        _positive(owner, "density_g_ml", value, lower=lower, upper=upper)
 
 
 def _spread(owner: str, value: float) -> None:
@@ -148,6 +162,7 @@ class AluminiumFlake:
     surface_quality: float = 1.0
     volume_fraction: float = 0.13
     description: str = ""
+    density_g_ml: float | None = None
     kind = "aluminium"
 
     def __post_init__(self) -> None:
@@ -159,6 +174,7 @@ class AluminiumFlake:
         _positive(self.name, "surface_quality", self.surface_quality, upper=1)
         _positive(self.name, "volume_fraction", self.volume_fraction, upper=0.6)
         _text(self.name, "description", self.description)
+        _density(self.name, self.density_g_ml)
 
 
 @dataclass(frozen=True)
@@ -172,6 +188,7 @@ class Pigment:
     scattering: NDArray[np.float64]
     g: float = 0.0
     description: str = ""
+    density_g_ml: float | None = None
     kind = "pigment"
 
     def __post_init__(self) -> None:
@@ -183,6 +200,7 @@ class Pigment:
             raise LibraryError(f"{self.name}: g: expected a value in (−1, 1), got {shown(self.g)}")
         _text(self.name, "family", self.family)
         _text(self.name, "description", self.description)
+        _density(self.name, self.density_g_ml)
 
     @property
     def transparent(self) -> bool:
@@ -223,6 +241,7 @@ class Pearl:
     orientation_sd_deg: float
     volume_fraction: float = 0.10
     description: str = ""
+    density_g_ml: float | None = None
     kind = "pearl"
 
     @property
@@ -241,6 +260,7 @@ class Pearl:
                 f"got {shown(self.substrate)}"
             )
         _text(self.name, "description", self.description)
+        _density(self.name, self.density_g_ml)
 
 
 @dataclass(frozen=True)
@@ -313,6 +333,17 @@ class Library:
         solid = ~used[:, kinds != "pigment"].any(axis=1)
         return np.where(pearl, "pearl", np.where(solid, "solid", "metallic"))
 
+    def densities(self, names: Iterable[str]) -> dict[str, float]:
+        """The density [g/mL] of each named toner, for a can ordered by volume; a
+        :class:`LibraryError` naming those the library gives none for."""
+        toners = [self[n] for n in names]
+        if missing := [t.name for t in toners if t.density_g_ml is None]:
+            raise LibraryError(
+                f"library {self.name!r}: no density_g_ml for {', '.join(missing)}, so a can "
+                "by volume cannot be weighed; give the can by mass (e.g. 250g)"
+            )
+        return {t.name: float(t.density_g_ml) for t in toners}
+
     def __getitem__(self, name: str) -> Toner:
         for toner in self.toners:
             if toner.name == name:
@@ -367,7 +398,8 @@ class Library:
             data = {"kind": t.kind}
             for f in fields(t):
                 value = getattr(t, f.name)
-                data[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
+                if value is not None:  # an optional field not given
+                    data[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
             return data
 
         return {

@@ -40,7 +40,7 @@ from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.judging import recipe_vector
 from flakelab.match.objective import OBJECTIVE_DEFAULT
-from flakelab.match.recipe import weigh_whole_can
+from flakelab.match.recipe import Can, weigh_whole_can
 from flakelab.match.search import MatchError, MatchSettings, match
 
 __all__ = [
@@ -205,15 +205,14 @@ def worst_share(tolerance: Tolerance, geometries, a: NDArray, b: NDArray) -> flo
     return float(tolerance.share_of_limit(geometries, de00=de00, dLCH=dlch).max())
 
 
-def as_weighed(
-    forward, fractions: dict[str, float], scale: tuple[float, float] | None
-) -> dict[str, float]:
-    """``fractions`` as a shop mixes them: weighed for a can of ``scale`` = (grams,
-    resolution in grams), rounded for colour, traces under a step left out
+def as_weighed(forward, fractions: dict[str, float], scale: Can | None) -> dict[str, float]:
+    """``fractions`` as a shop mixes them: weighed for the can ``scale`` orders on its scale,
+    rounded for colour, traces under a step left out
     (:func:`~flakelab.match.recipe.weigh_whole_can`); unchanged without a scale."""
     if scale is None:
         return fractions
-    grams = weigh_whole_can(forward, fractions, *scale).grams
+    can = scale.grams_for(fractions)
+    grams = weigh_whole_can(forward, fractions, can, scale.resolution_g).grams
     total = sum(grams.values())
     return {name: g / total for name, g in grams.items() if g > 0}
 
@@ -343,15 +342,15 @@ def evaluate_matching(
     settings: MatchSettings | None = None,
     habits: ShopHabits | None = None,
     tolerance: Tolerance | None = None,
-    scale: tuple[float, float] | None = None,
+    scale: Can | None = None,
     target_texture: bool = True,
     resprays: int = 0,
     progress: Callable[[], None] | None = None,
     per_target: bool = False,
 ) -> dict:
     """The harness's figures (issue 5); ``world`` generates and sprays in the shop's world.
-    With a ``scale`` (grams of the can, resolution in grams) every recipe is sprayed as
-    weighed on it (:func:`as_weighed`), the correction's too; without, as computed.
+    With a ``scale`` (the can a shop orders, on its scale) every recipe is sprayed as
+    weighed for it (:func:`as_weighed`), the correction's too; without, as computed.
     With the shop's ``habits`` every match is aimed off for them and the
     correction splits the offset about them. Sprays are judged by ``tolerance`` (default
     :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`), which the matcher and the
@@ -394,7 +393,7 @@ def evaluate_matching(
         "targets": targets,
         "seed": seed,
         "tolerance": tolerance.name,
-        "weighed": scale and {"quantity_g": scale[0], "resolution_g": scale[1]},
+        "weighed": scale and scale.to_dict(),
         "first_shot_success": first,
         "by_family": _by_family(rows, share, mean),
         "targets_read_texture": target_texture,

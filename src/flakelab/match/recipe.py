@@ -9,11 +9,16 @@ a gram of blue beside it can, and rounding that blue down as well keeps the hue.
 largest toner taking the balance, so the can stays whole) in one batch and keeps the one
 whose colour is closest to the exact recipe's; the nearest grams are among those tried, so it
 never costs more. Additions to a mixed can (:func:`weigh_additions`) are rounded the same way.
+
+A shop orders its can by mass or by volume (:class:`Can`). By volume, each recipe weighs its
+own: the toners' volumes add as they mix (mixing software assumes it), so V millilitres of a
+recipe of mass shares wᵢ and densities ρᵢ weigh V / Σ wᵢ/ρᵢ grams.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -25,6 +30,8 @@ from flakelab.errors import FlakelabError
 __all__ = [
     "RecipeLine",
     "Weighing",
+    "Can",
+    "order_can",
     "weigh",
     "check_scale",
     "check_resolution",
@@ -79,10 +86,84 @@ IMPERIAL_MASS = {"lb": 453.59237, "oz": 28.349523125}
 """Grams in each unit a can may be given in (NIST SP 811: the international pound)."""
 
 
+VOLUME = {"ml": 1.0, "l": 1000.0, "pt": 473.176473, "qt": 946.352946, "gal": 3785.411784}
+"""Millilitres in each unit a can may be ordered in by volume (NIST SP 811: US liquid pint,
+quart and gallon)."""
+
+QUANTITY_EXAMPLE = "250g, 0.5kg, 1lb or 0.5l"
+
+
 def parse_quantity(text: str) -> float:
     """``250g``, ``0.5 kg``, ``1lb`` → grams."""
     units = METRIC_MASS | IMPERIAL_MASS
-    return parse_amount(text, units, "--quantity", "250g or 0.5kg", RecipeError)
+    return parse_amount(text, units, "--quantity", QUANTITY_EXAMPLE, RecipeError)
+
+
+def is_volume(text: str) -> bool:
+    """Whether a quantity is typed in a unit of volume (``0.5l``, ``500 ml``, ``1qt``)."""
+    return text.strip().lower().replace(" ", "").endswith(tuple(VOLUME))
+
+
+@dataclass(frozen=True)
+class Can:
+    """The can a shop mixes, as ordered (``quantity``) for a scale of ``resolution_g``: by
+    mass, ``grams`` for every recipe; by volume, ``millilitres``, each recipe weighed from
+    its toners' ``densities`` [g/mL] (module notes)."""
+
+    quantity: str
+    resolution_g: float
+    grams: float | None = None
+    millilitres: float | None = None
+    densities: Mapping[str, float] = field(default_factory=dict, hash=False)
+
+    def for_toners(self, library, names: Iterable[str]) -> Can:
+        """A can by volume with the densities ``library`` gives the toners ``names`` its
+        recipes may hold, checked that the scale weighs it whatever they hold; a can by mass
+        unchanged."""
+        if self.millilitres is None:
+            return self
+        densities = library.densities(names)
+        can = Can(self.quantity, self.resolution_g, millilitres=self.millilitres,
+                  densities=densities)  # fmt: skip
+        for density in {min(densities.values()), max(densities.values())}:
+            can._on_scale(self.millilitres * density)
+        return can
+
+    def grams_for(self, fractions: Mapping[str, float]) -> float:
+        """The can's grams for a recipe of mass shares ``fractions``, to the scale's step."""
+        if self.grams is not None:
+            return self.grams
+        if missing := sorted(set(fractions) - set(self.densities)):
+            raise RecipeError(f"--quantity {self.quantity}: no density for {', '.join(missing)}")
+        total = sum(fractions.values())
+        specific_volume = sum(w / total / self.densities[n] for n, w in fractions.items())
+        return self._on_scale(self.millilitres / specific_volume)
+
+    def to_dict(self) -> dict[str, float]:
+        size = {"quantity_g": self.grams} if self.millilitres is None else {
+            "quantity_ml": self.millilitres}  # fmt: skip
+        return size | {"resolution_g": self.resolution_g}
+
+    def _on_scale(self, grams: float) -> float:
+        weighed = to_scale(grams, self.resolution_g)
+        if weighed <= 0:
+            raise RecipeError(
+                f"--quantity: {self.quantity} ({grams:.3g} g) is less than the scale's "
+                f"{self.resolution_g:g} g; mix a larger can"
+            )
+        check_scale(weighed, self.resolution_g)
+        return weighed
+
+
+def order_can(text: str, resolution_g: float) -> Can:
+    """The can ``text`` orders, by mass (checked that the scale weighs it, as
+    :func:`can_on_scale`) or by volume (its densities still to give:
+    :meth:`Can.with_densities`)."""
+    if is_volume(text):
+        check_resolution(resolution_g)
+        millilitres = parse_amount(text, VOLUME, "--quantity", QUANTITY_EXAMPLE, RecipeError)
+        return Can(text, resolution_g, millilitres=millilitres)
+    return Can(text, resolution_g, grams=can_on_scale(text, resolution_g))
 
 
 def can_on_scale(text: str, resolution_g: float) -> float:
