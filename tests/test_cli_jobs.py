@@ -197,6 +197,34 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path, cli)
     assert "note: the spray-out already passes refinish" in text.stdout
 
 
+def test_additions_are_for_what_is_left_in_the_can(tmp_path, cli):
+    """The spray-out took half the can: the same correction, half the grams of each addition
+    (to the scale's step), and the can afterwards holds the half left plus them. Without
+    ``--left`` the additions were for the whole can and overshot twofold."""
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"  # 250 g
+    args = ["correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed)]
+    whole = json.loads(cli(*args, "--json").stdout)
+    out = tmp_path / "after.json"
+    run = cli(*args, "--left", "125g", "--recipe-out", str(out), "--json")
+    assert run.returncode == 0, run.stderr
+    half = json.loads(run.stdout)
+    assert half["left_g"] == 125.0 and "left_g" not in whole
+    big = [t for t, g in whole["add_g"].items() if g >= 1.0]
+    assert big and all(half["add_g"][t] == pytest.approx(whole["add_g"][t] / 2, abs=0.1)
+                       for t in big)  # fmt: skip
+    mixed = json.loads(recipe.read_text())
+    assert read_recipe(out) == pytest.approx(
+        {t: mixed.get(t, 0) / 2 + half["add_g"].get(t, 0) for t in {*mixed, *half["add_g"]}}
+    )
+    for left, message in (("300g", "300 g is more than the 250 g the recipe mixed"),
+                          ("0g", "--left: expected a positive amount")):  # fmt: skip
+        run = cli(*args, "--left", left)
+        assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+    run = cli(*args, "--left", "100g", "--mode", "reformulate")
+    assert run.returncode == 2 and "--left: for --mode additions" in run.stderr
+
+
 def test_correct_refuses_a_bad_recipe(tmp_path, cli):
     bad = tmp_path / "recipe.json"
     bad.write_text(json.dumps({"Al medium": -3}))

@@ -70,6 +70,14 @@ def correct_command(
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
     resolution: ResolutionOption = 0.1,
+    left: Annotated[
+        str | None,
+        typer.Option(
+            help="What is left in the mixed can after the spray-out, e.g. 180g (or by volume, "
+            "0.2l): the additions are for it. Default: the whole recipe.",
+            show_default="the whole recipe",
+        ),
+    ] = None,
     offset_weight: Annotated[
         float | None,
         typer.Option(
@@ -117,9 +125,12 @@ def correct_command(
     check_figure_file(plot, "--plot")
     grams = read_recipe(recipe)
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
+    if left is not None and mode != "additions":
+        raise FlakelabError("--left: for --mode additions (a reformulation is mixed afresh)")
     shop, named = workplace_shop(shop)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
     x0 = recipe_fractions(lib, grams, recipe)
+    can = grams if left is None else _what_is_left(grams, left, resolution, lib, recipe)
     target_reading = read_sample(target, sample)
     sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
     target_R, _, _ = spectra_for_model(target, target_reading, forward)
@@ -168,14 +179,16 @@ def correct_command(
             "correction aims at colour alone; a texture this far off asks for other effect "
             "toners (match the target again)"
         )
-    weighing = _weigh_correction(forward, correction, mode, grams, resolution)
+    weighing = _weigh_correction(forward, correction, mode, can, resolution)
     report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams
     report.update(rounding_costs(weighing))
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
+    if left is not None:
+        report["left_g"] = round(sum(can.values()), 6)
     if recipe_out is not None:  # what the can holds after the additions, or the new recipe
         corrected = report.get("recipe_g") or {
-            name: round(grams.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
-            for name in {**grams, **report["add_g"]}
+            name: round(can.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
+            for name in {**can, **report["add_g"]}
         }
         write_recipe(corrected, recipe_out)
         report["recipe_out"] = str(recipe_out)
@@ -238,6 +251,23 @@ def _weigh_correction(forward, correction, mode: str, can: dict[str, float], res
     return weigh_whole_can(forward, correction.fractions, _can_size(can, resolution), resolution)
 
 
+def _what_is_left(
+    grams: dict[str, float], left: str, resolution: float, library, recipe: Path
+) -> dict[str, float]:
+    """The mixed can after the spray-out took some of it: the recipe's toners in its
+    proportions, ``left`` grams (or millilitres, by its toners' densities) in all."""
+    from flakelab.match.recipe import order_can
+
+    mixed = sum(grams.values())
+    shares = {name: g / mixed for name, g in grams.items() if g > 0}
+    remaining = order_can(left, resolution, "--left").for_toners(library, shares).grams_for(shares)
+    if remaining > mixed:
+        raise FlakelabError(
+            f"--left: {remaining:g} g is more than the {mixed:g} g the recipe mixed ({recipe})"
+        )
+    return {name: share * remaining for name, share in shares.items()}
+
+
 def _can_size(can: dict[str, float], resolution: float) -> float:
     """The mixed ``can``'s size in grams, to the scale's resolution, checked that the scale
     weighs it."""
@@ -290,6 +320,8 @@ def _print_correction(report: dict) -> None:
     """The correction as a colorist reads it: what to weigh, then the colour before/after."""
     grams = report.get("add_g", report.get("recipe_g", {}))
     title = "add to the mixed can" if report["mode"] == "additions" else "mix afresh"
+    if "left_g" in report:
+        title += f" ({report['left_g']:g} g left in it)"
     table = Table(title=f"Correction: {title}", box=box.SIMPLE_HEAD)
     table.add_column("toner")
     table.add_column("g", justify="right")

@@ -18,7 +18,7 @@ recipe of mass shares wᵢ and densities ρᵢ weigh V / Σ wᵢ/ρᵢ grams.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -93,10 +93,10 @@ quart and gallon)."""
 QUANTITY_EXAMPLE = "250g, 0.5kg, 1lb or 0.5l"
 
 
-def parse_quantity(text: str) -> float:
+def parse_quantity(text: str, option: str = "--quantity") -> float:
     """``250g``, ``0.5 kg``, ``1lb`` → grams."""
     units = METRIC_MASS | IMPERIAL_MASS
-    return parse_amount(text, units, "--quantity", QUANTITY_EXAMPLE, RecipeError)
+    return parse_amount(text, units, option, QUANTITY_EXAMPLE, RecipeError)
 
 
 def is_volume(text: str) -> bool:
@@ -108,13 +108,14 @@ def is_volume(text: str) -> bool:
 class Can:
     """The can a shop mixes, as ordered (``quantity``) for a scale of ``resolution_g``: by
     mass, ``grams`` for every recipe; by volume, ``millilitres``, each recipe weighed from
-    its toners' ``densities`` [g/mL] (module notes)."""
+    its toners' ``densities`` [g/mL] (module notes). ``option`` names it in messages."""
 
     quantity: str
     resolution_g: float
     grams: float | None = None
     millilitres: float | None = None
     densities: Mapping[str, float] = field(default_factory=dict, hash=False)
+    option: str = "--quantity"
 
     def for_toners(self, library, names: Iterable[str]) -> Can:
         """A can by volume with the densities ``library`` gives the toners ``names`` its
@@ -123,8 +124,7 @@ class Can:
         if self.millilitres is None:
             return self
         densities = library.densities(names)
-        can = Can(self.quantity, self.resolution_g, millilitres=self.millilitres,
-                  densities=densities)  # fmt: skip
+        can = replace(self, densities=densities)
         for density in {min(densities.values()), max(densities.values())}:
             can._on_scale(self.millilitres * density)
         return can
@@ -134,7 +134,7 @@ class Can:
         if self.grams is not None:
             return self.grams
         if missing := sorted(set(fractions) - set(self.densities)):
-            raise RecipeError(f"--quantity {self.quantity}: no density for {', '.join(missing)}")
+            raise RecipeError(f"{self.option} {self.quantity}: no density for {', '.join(missing)}")
         total = sum(fractions.values())
         specific_volume = sum(w / total / self.densities[n] for n, w in fractions.items())
         return self._on_scale(self.millilitres / specific_volume)
@@ -147,39 +147,39 @@ class Can:
     def _on_scale(self, grams: float) -> float:
         weighed = to_scale(grams, self.resolution_g)
         if weighed <= 0:
-            raise RecipeError(
-                f"--quantity: {self.quantity} ({grams:.3g} g) is less than the scale's "
-                f"{self.resolution_g:g} g; mix a larger can"
-            )
+            _under_a_step(self.option, f"{self.quantity} ({grams:.3g} g)", self.resolution_g)
         check_scale(weighed, self.resolution_g)
         return weighed
 
 
-def order_can(text: str, resolution_g: float) -> Can:
+def order_can(text: str, resolution_g: float, option: str = "--quantity") -> Can:
     """The can ``text`` orders, by mass (checked that the scale weighs it, as
     :func:`can_on_scale`) or by volume (its densities still to give:
-    :meth:`Can.with_densities`)."""
+    :meth:`Can.for_toners`); ``option`` names it in messages."""
     if is_volume(text):
         check_resolution(resolution_g)
-        millilitres = parse_amount(text, VOLUME, "--quantity", QUANTITY_EXAMPLE, RecipeError)
-        return Can(text, resolution_g, millilitres=millilitres)
-    return Can(text, resolution_g, grams=can_on_scale(text, resolution_g))
+        millilitres = parse_amount(text, VOLUME, option, QUANTITY_EXAMPLE, RecipeError)
+        return Can(text, resolution_g, millilitres=millilitres, option=option)
+    return Can(text, resolution_g, grams=can_on_scale(text, resolution_g, option), option=option)
 
 
-def can_on_scale(text: str, resolution_g: float) -> float:
+def can_on_scale(text: str, resolution_g: float, option: str = "--quantity") -> float:
     """The can ``text`` names, in grams, checked that a scale of ``resolution_g`` weighs it.
     A can in pounds or ounces is the nearest whole number of the scale's steps (a pound,
     453.59237 g, is 453.6 g on a 0.1 g scale); one in grams or kilograms must be one already,
     since a can typed finer than the scale reads is more likely a mistyped scale."""
-    grams = parse_quantity(text)
+    grams = parse_quantity(text, option)
     if text.strip().lower().endswith(tuple(IMPERIAL_MASS)):
         grams = to_scale(grams, resolution_g)
     if grams <= 0:
-        raise RecipeError(
-            f"--quantity: {text} is less than the scale's {resolution_g:g} g; mix a larger can"
-        )
+        _under_a_step(option, text, resolution_g)
     check_scale(grams, resolution_g)
     return grams
+
+
+def _under_a_step(option: str, amount: str, resolution_g: float) -> None:
+    advice = "; mix a larger can" if option == "--quantity" else ""
+    raise RecipeError(f"{option}: {amount} is less than the scale's {resolution_g:g} g{advice}")
 
 
 def to_scale(grams: float, resolution_g: float) -> float:
