@@ -50,10 +50,11 @@ def weigh_command(
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
     can = can.for_toners(lib, shares)
+    can_g = can.grams_for(shares)
     report = {
         "recipe": str(recipe),
-        **can_size(can, shares),
-        **weighed_recipe(forward, shares, can.grams_for(shares), resolution),
+        **can_size(can, can_g),
+        **weighed_recipe(forward, shares, can_g, resolution),
         "model": forward.name,
     }
     if recipe_out is not None:
@@ -68,11 +69,11 @@ def weigh_command(
     console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
 
 
-def can_size(can, fractions: dict[str, float]) -> dict:
-    """The report's can for a recipe: its grams, and as ordered by volume."""
+def can_size(can, grams: float) -> dict:
+    """The report's can: its ``grams`` for the recipe, and as ordered by volume."""
     volume = {} if can.millilitres is None else {
         "quantity": can.quantity, "quantity_ml": can.millilitres}  # fmt: skip
-    return {"quantity_g": can.grams_for(fractions), **volume, "resolution_g": can.resolution_g}
+    return {"quantity_g": grams, **volume, "resolution_g": can.resolution_g}
 
 
 def can_text(report: dict) -> str:
