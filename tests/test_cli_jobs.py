@@ -384,6 +384,31 @@ def test_weigh_takes_a_can_in_pounds(cli):
     assert report["weights_g"][-1]["cumulative"] == pytest.approx(453.6)
 
 
+def test_weigh_says_what_is_still_to_pour_after_a_toner_ran_over(tmp_path, cli):
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"  # 250 g
+    out = tmp_path / "held.json"
+    run = cli("weigh", str(recipe), "--poured", "Al medium=194", "--poured",
+              "Carbon black=5", "--recipe-out", str(out), "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    # 5 g of black where the recipe has 3.6 g in 250 g: 347.2 g holds it, to the next step
+    assert report["ran_over"] == ["Carbon black"] and report["quantity_g"] == 250.0
+    assert report["grown_g"] == pytest.approx(347.3)
+    held = read_recipe(out)
+    assert held["Carbon black"] == 5.0 and sum(held.values()) == pytest.approx(347.3)
+    assert report["to_pour_g"][-1]["cumulative"] == pytest.approx(347.3)
+    mixed = json.loads(recipe.read_text())
+    for toner, grams in mixed.items():  # the recipe's proportions, each within a step
+        assert abs(held[toner] - grams * 347.3 / 250.0) <= 0.1, toner
+    text = cli("weigh", str(recipe), "--poured", "Carbon black=5")
+    assert "Carbon black (5 g of 3.6 g) ran over; the can grows to 347.3 g" in text.stdout
+    for pair, message in (("Al medium", "expected NAME=GRAMS"),
+                          ("Al medium=-3", "expected NAME=GRAMS"),
+                          ("Al medum=100", "Al medum not in the recipe")):  # fmt: skip
+        run = cli("weigh", str(recipe), "--poured", pair)
+        assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+
+
 def test_a_can_by_volume_is_weighed_from_the_toners_densities(tmp_path, cli):
     """A quart of the example's recipe: the weighed toners fill 946.35 ml by their densities
     (to the scale's step); a library without a density for one of them is refused, naming

@@ -33,6 +33,7 @@ from flakelab.match.recipe import (
     parse_quantity,
     weigh,
     weigh_additions,
+    weigh_after_pouring,
     weigh_for_colour,
 )
 from flakelab.match.search import MatchSettings, match
@@ -336,6 +337,30 @@ def test_additions_are_weighed_for_colour_and_what_rounds_to_nothing_is_left_out
     )
     assert weighing.rounding_de00 <= weighing.nearest_de00 and weighing.lines == []
     assert weighing.lab_shift.shape == (len(hybrid.geometries), 3)
+
+
+def test_a_toner_that_ran_over_grows_the_can_to_keep_the_recipe_s_proportions(hybrid):
+    """2 g too much blue in a 250 g can: the can grows to the least whole step that holds
+    the blue at its share, the rest are poured up to theirs (each within a scale step),
+    and the scale's reading runs on from what is poured. On plan, the can stays 250 g."""
+    recipe = {"Al medium": 0.776, "Al fine bright": 0.106, "Phthalo blue GS": 0.0664,
+              "Indanthrone blue": 0.0372, "Carbon black": 0.0144}  # fmt: skip
+    poured = {"Al medium": 194.0, "Phthalo blue GS": 18.6}
+    grown, weighing = weigh_after_pouring(hybrid, recipe, 250.0, poured, 0.1)
+    needed = 18.6 / 0.0664  # 280.12 g
+    assert needed <= grown < needed + 0.1 and grown == pytest.approx(round(grown, 1))
+    held = {n: poured.get(n, 0.0) + weighing.grams.get(n, 0.0) for n in recipe}
+    for name, share in recipe.items():
+        assert abs(held[name] - share * grown) <= 0.1, name
+    assert weighing.grams.get("Phthalo blue GS", 0.0) == 0.0  # none of it is poured again
+    assert weighing.lines[0].cumulative == pytest.approx(212.6 + weighing.lines[0].grams)
+    assert weighing.lines[-1].cumulative == pytest.approx(sum(held.values()))
+    on_plan, rest = weigh_after_pouring(hybrid, recipe, 250.0, {"Al medium": 150.0}, 0.1)
+    assert on_plan == 250.0 and rest.grams["Al medium"] == pytest.approx(44.0)
+    with pytest.raises(RecipeError, match="--poured: Pearl silver white not in the recipe"):
+        weigh_after_pouring(hybrid, recipe, 250.0, {"Pearl silver white": 1.0}, 0.1)
+    with pytest.raises(RecipeError, match="sum to zero"):
+        weigh_after_pouring(hybrid, recipe, 250.0, {"Al medium": 0.0}, 0.1)
 
 
 def test_impossible_quantities_are_refused():

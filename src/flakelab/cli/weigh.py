@@ -22,6 +22,7 @@ from flakelab.cli.matcher import (
 )
 from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, recipe_fractions
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.errors import FlakelabError
 
 
 def weigh_command(
@@ -34,6 +35,14 @@ def weigh_command(
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
     recipe_out: RecipeOutOption = None,
+    poured: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="A toner already poured, as the scale read it: 'NAME=GRAMS' (repeat for "
+            "each). Prints what is still to pour; where one ran over, for the least larger "
+            "can that keeps the recipe's proportions.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Weigh a recipe for another can, and what rounding to the scale costs in colour.
@@ -51,6 +60,10 @@ def weigh_command(
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
     can = can.for_toners(lib, shares)
     can_g = can.grams_for(shares)
+    if poured:
+        _weigh_the_rest(forward, recipe, shares, can, can_g, poured_grams(poured), recipe_out,
+                        json_output)  # fmt: skip
+        return
     report = {
         "recipe": str(recipe),
         **can_size(can, can_g),
@@ -66,6 +79,64 @@ def weigh_command(
         return
     console.print(f"{recipe.name} for {can_text(report)}", highlight=False)
     console.print(weights_table(None, report["weights_g"]))
+    console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
+
+
+def poured_grams(pairs: list[str]) -> dict[str, float]:
+    """``--poured 'NAME=GRAMS'`` options → grams per toner."""
+    import math
+
+    grams = {}
+    for pair in pairs:
+        name, sep, amount = pair.rpartition("=")
+        try:
+            value = float(amount)
+        except ValueError:
+            value = math.nan
+        if not sep or not name.strip() or not (math.isfinite(value) and value >= 0):
+            raise FlakelabError(f"--poured: expected NAME=GRAMS (grams ≥ 0), got {pair!r}")
+        if name.strip() in grams:
+            raise FlakelabError(f"--poured: {name.strip()} given twice")
+        grams[name.strip()] = value
+    return grams
+
+
+def _weigh_the_rest(
+    forward, recipe: Path, shares, can, can_g: float, poured: dict, recipe_out, json_output
+) -> None:
+    """``weigh --poured``: what is still to pour, and the can's size, once some is poured."""
+    from flakelab.io import write_recipe
+    from flakelab.match.recipe import weigh_after_pouring
+
+    grown, weighing = weigh_after_pouring(forward, shares, can_g, poured, can.resolution_g)
+    total = sum(shares.values())
+    planned = {n: shares[n] / total * can_g for n in poured}
+    report = {
+        "recipe": str(recipe),
+        **can_size(can, can_g),
+        "poured_g": poured,
+        "grown_g": grown,
+        "ran_over": [n for n, g in poured.items() if g > planned[n] + can.resolution_g / 2],
+        "to_pour_g": [asdict(ln) for ln in weighing.lines],
+        **rounding_costs(weighing),
+        "model": forward.name,
+    }
+    if recipe_out is not None:  # what the can holds once the rest is poured
+        held = {n: poured.get(n, 0.0) + weighing.grams.get(n, 0.0) for n in {*poured, *shares}}
+        write_recipe({n: g for n, g in held.items() if g > 0}, recipe_out)
+        report["recipe_out"] = str(recipe_out)
+        errors.print(f"wrote what the can holds to {recipe_out}", highlight=False)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    over = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in report["ran_over"])
+    console.print(
+        f"{recipe.name} for {can_text(report)}: "
+        + (f"{over} ran over; the can grows to {grown:g} g" if over else "on plan")
+        + f"; {sum(poured.values()):g} g poured, still to pour:",
+        highlight=False,
+    )
+    console.print(weights_table(None, report["to_pour_g"]))
     console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
 
 

@@ -38,6 +38,7 @@ __all__ = [
     "weigh_for_colour",
     "weigh_whole_can",
     "weigh_additions",
+    "weigh_after_pouring",
     "parse_quantity",
     "can_on_scale",
     "to_scale",
@@ -288,6 +289,42 @@ def weigh_additions(
     return Weighing(grams, float(cost[best]), float(cost[0]), shift, [])
 
 
+def weigh_after_pouring(
+    forward,
+    fractions: dict[str, float],
+    quantity_g: float,
+    poured: dict[str, float],
+    resolution_g: float = 0.1,
+) -> tuple[float, Weighing]:
+    """What is still to pour for a can of ``quantity_g`` of ``fractions`` once ``poured``
+    (grams per toner on the scale so far) are in it, and the can's size: where a toner ran
+    over, the can grows to the least size, in whole steps of the scale, that holds it at the
+    recipe's proportions, so that the colour is kept by pouring more of the others rather
+    than lost. The rest is rounded as :func:`weigh_additions` rounds additions; ``lines``
+    continue the scale's reading from what is poured."""
+    steps = check_scale(quantity_g, resolution_g)
+    if unknown := sorted(set(poured) - set(fractions)):
+        raise RecipeError(
+            f"--poured: {', '.join(unknown)} not in the recipe ({', '.join(fractions)}); a "
+            "toner poured by mistake cannot be scaled away: correct the can after its "
+            "spray-out, or mix afresh"
+        )
+    if not poured or any(not (np.isfinite(g) and g >= 0) for g in poured.values()):
+        raise RecipeError(f"--poured: expected grams ≥ 0 for at least one toner, got {poured}")
+    if sum(poured.values()) <= 0:
+        raise RecipeError("--poured: the amounts poured sum to zero grams")
+    total = sum(fractions.values())
+    share = {n: v / total for n, v in fractions.items()}
+    needed = max(g / share[n] / resolution_g for n, g in poured.items())
+    grown = max(steps, int(np.ceil(round(needed, 6)))) * resolution_g
+    check_scale(grown, resolution_g)
+    in_can = sum(poured.values())
+    added = {n: max(share[n] * grown - poured.get(n, 0.0), 0.0) / in_can for n in share}
+    weighing = weigh_additions(forward, poured, added, resolution_g)
+    lines = _pouring_order(weighing.grams, start=in_can)
+    return round(grown, 9), replace(weighing, lines=lines)
+
+
 def _whole_can_roundings(exact: np.ndarray, nearest: np.ndarray, steps: int) -> np.ndarray:
     """Integer amounts ``[N, k]`` (the nearest first) summing to ``steps``: each toner but
     the largest rounded down or up (at least one step), the largest taking the balance."""
@@ -327,10 +364,10 @@ def _closest_colour(forward, names: list[str], exact: np.ndarray, amounts: np.nd
     return best, cost, lab[1 + best] - lab[0]
 
 
-def _pouring_order(grams: dict[str, float]) -> list[RecipeLine]:
-    """The largest toner first, with the scale's running total."""
+def _pouring_order(grams: dict[str, float], start: float = 0.0) -> list[RecipeLine]:
+    """The largest toner first, with the scale's running total from ``start``."""
     order = sorted(grams, key=lambda n: -grams[n])
-    running = np.cumsum([grams[n] for n in order])
+    running = start + np.cumsum([grams[n] for n in order])
     return [
         RecipeLine(n, grams[n], round(float(c), 6)) for n, c in zip(order, running, strict=True)
     ]
