@@ -225,6 +225,51 @@ def test_additions_are_for_what_is_left_in_the_can(tmp_path, cli):
     assert run.returncode == 2 and "--left: for --mode additions" in run.stderr
 
 
+def test_a_car_read_at_three_spots_is_matched_and_corrected_as_their_mean(tmp_path, cli):
+    """``--average``: the mean of a file's readings is matched, as a file of that mean alone
+    would be, and recorded as the case's target; a dirty spot (5 % darker) is named, and
+    readings of other geometries refused."""
+    target = read_measurement(example_path("target"))
+    rng = np.random.default_rng(3)
+    spots = [replace(target, sample=f"spot {i}", stored_lab=None,
+                     reflectance=target.reflectance * (1 + rng.normal(0, 0.003, (12, 31))))
+             for i in (1, 2, 3)]  # fmt: skip
+    write_measurements(spots, tmp_path / "spots.json")
+    mean = replace(spots[0], sample="mean", reflectance=np.mean([s.reflectance for s in spots], 0))
+    write_measurements([mean], tmp_path / "mean.json")
+    args = ["--candidates", "1", "--json"]
+    averaged = json.loads(cli("match", str(tmp_path / "spots.json"), "--average", *args).stdout)
+    alone = json.loads(cli("match", str(tmp_path / "mean.json"), *args).stdout)
+    assert averaged["candidates"][0]["weights_g"] == alone["candidates"][0]["weights_g"]
+    readings = averaged["target_readings"]
+    assert readings["readings"] == ["spot 1", "spot 2", "spot 3"]
+    assert readings["limit_share_max"] < 0.5 and not any("readings differ" in n
+                                                          for n in averaged["notes"])  # fmt: skip
+    dirty = [*spots[:2], replace(spots[2], reflectance=spots[2].reflectance * 0.95)]
+    write_measurements(dirty, tmp_path / "dirty.json")
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"
+    run = cli("correct", str(tmp_path / "dirty.json"), "--average", "--recipe", str(recipe),
+              "--sprayed", str(example_path("sprayout")), "--json")  # fmt: skip
+    report = json.loads(run.stdout)
+    assert report["target_readings"]["furthest"] == "spot 3"
+    assert any("readings differ: spot 3 lies" in n for n in report["notes"])
+    db = tmp_path / "shop.db"
+    run = cli("cases", "record", str(tmp_path / "spots.json"), "--average", "--recipe",
+              str(recipe), "--sprayed", str(example_path("sprayout")), "-d", str(db))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    from flakelab.cases.database import iter_cases
+
+    (case,) = iter_cases(open_database(db))
+    rows = [mean.geometry_names.index(g.name) for g in case.geometries]
+    np.testing.assert_allclose(case.target, mean.reflectance[rows], atol=1e-6)
+    odd = [*spots[:2], spots[2].select(list(spots[2].geometry_names[:5]))]
+    write_measurements(odd, tmp_path / "odd.json")
+    run = cli("match", str(tmp_path / "odd.json"), "--average")
+    assert run.returncode == 2 and "odd.json: reading 'spot 3': geometries" in run.stderr
+    run = cli("match", str(tmp_path / "spots.json"), "--average", "--sample", "spot 1")
+    assert run.returncode == 2 and "--sample and --average" in run.stderr
+
+
 def test_correct_refuses_a_bad_recipe(tmp_path, cli):
     bad = tmp_path / "recipe.json"
     bad.write_text(json.dumps({"Al medium": -3}))

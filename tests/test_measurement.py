@@ -153,3 +153,39 @@ def test_compare_judges_texture_where_the_tolerance_bounds_it():
     assert compare(reference, grainier, "de00-1.0").all_pass
     assert compare(reference, reference, "refinish").all_pass
     assert tolerance_preset("refinish").texture is not None
+
+
+def test_readings_of_one_surface_average_and_say_how_far_each_lies():
+    """Three readings of a grey: the mean's spectra are the readings' mean (resampled to the
+    storage grid where a file used another), texture averaged where all hold it; a reading
+    5 % darker is the furthest, and identical readings lie nowhere from their mean."""
+    from dataclasses import replace
+
+    from flakelab.core.comparison import spread_of_readings
+    from flakelab.core.measurement import mean_reading
+    from flakelab.errors import FlakelabError
+
+    base = _grey_metallic({"45as15": 90.0, "45as45": 50.0, "45as110": 20.0})
+    readings = [
+        replace(base, sample="a", texture={"G": 2.0, "Si15": 4.0}),
+        replace(base, sample="b", reflectance=base.reflectance * 1.01, texture={"G": 3.0}),
+        replace(base, sample="c", reflectance=base.reflectance * 0.95, texture={"G": 4.0}),
+    ]
+    mean = mean_reading(readings)
+    np.testing.assert_allclose(mean.reflectance, base.reflectance * (1 + 1.01 + 0.95) / 3)
+    assert mean.texture == {"G": 3.0} and mean.sample == "mean of 3 readings (a, b, c)"
+    spread = spread_of_readings(readings, mean, tolerance_preset("refinish"))
+    assert spread["furthest"] == "c" and spread["limit_share_max"] > 0.5
+    assert len(spread["de00_from_mean_max"]) == 3
+    same = [replace(base, sample=s) for s in "xyz"]
+    assert spread_of_readings(same, mean_reading(same), tolerance_preset("refinish"))[
+        "limit_share_max"
+    ] == pytest.approx(0.0, abs=1e-9)
+    fine = replace(base, sample="d", wavelengths=np.arange(400.0, 701.0, 5.0),
+                   reflectance=np.repeat(base.reflectance[:, :1], 61, axis=1))  # fmt: skip
+    np.testing.assert_allclose(mean_reading([base, fine]).reflectance, base.reflectance)
+    fewer = _grey_metallic({"45as15": 90.0, "45as45": 50.0})
+    with pytest.raises(FlakelabError, match="reading 'grey': geometries 45as15, 45as45 differ"):
+        mean_reading([readings[0], fewer])
+    with pytest.raises(FlakelabError, match="instrument 'ma-t12' differs from 'a'"):
+        mean_reading([readings[0], replace(base, instrument="ma-t12")])

@@ -15,6 +15,8 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    AverageOption,
+    AverageSprayedOption,
     JsonOption,
     SampleOption,
     SprayedSampleOption,
@@ -24,7 +26,7 @@ from flakelab.cli.common import (
     console,
     errors,
     progress_bar,
-    read_sample,
+    read_readings,
     reports_errors,
     tracked,
 )
@@ -196,6 +198,8 @@ def record_case(
     sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
     sample: SampleOption = None,
     sprayed_sample: SprayedSampleOption = None,
+    average: AverageOption = False,
+    average_sprayed: AverageSprayedOption = False,
     outcome: Annotated[
         str,
         typer.Option(
@@ -241,8 +245,8 @@ def record_case(
     lib = read_library(library)
     grams = read_recipe(recipe)
     fractions = recipe_fractions(lib, grams, recipe)
-    target_reading = read_sample(target, sample)
-    sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
+    target_reading = read_readings(target, sample, average)[0]
+    sprayed_reading = read_readings(sprayed, sprayed_sample, average_sprayed, "--sprayed-sample")[0]
     case = case_from_readings(
         target_reading,
         sprayed_reading,

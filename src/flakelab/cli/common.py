@@ -26,7 +26,7 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, MeasurementFileError
 
 console = Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
 """Tables and reports: the terminal's width, else ``COLUMNS``, else 110 columns (piped
@@ -132,6 +132,22 @@ ToleranceOption = Annotated[
 SampleOption = Annotated[
     str | None, typer.Option("--sample", "-s", help="Sample name in a multi-sample file.")
 ]
+AverageOption = Annotated[
+    bool,
+    typer.Option(
+        "--average",
+        help="Average every reading in the target file (the car read at a few spots beside "
+        "the repair) and use their mean; says how far each lies from it.",
+    ),
+]
+AverageSprayedOption = Annotated[
+    bool,
+    typer.Option(
+        "--average-sprayed",
+        help="Average every reading in the spray-out's file (the panel read at a few spots) "
+        "and use their mean.",
+    ),
+]
 PlotOption = Annotated[
     Path | None,
     typer.Option(
@@ -217,6 +233,38 @@ def read_sample(path, sample: str | None, option: str = "--sample"):
             highlight=False,
         )
     return chosen
+
+
+def read_readings(path, sample: str | None, average: bool, option: str = "--sample"):
+    """The measurement to use from ``path`` and the readings it stands for: with
+    ``average`` the mean of every reading in the file, else the one sample (its only
+    reading)."""
+    if not average:
+        chosen = read_sample(path, sample, option)
+        return chosen, [chosen]
+    from flakelab.core.measurement import mean_reading
+    from flakelab.io import read_measurements
+
+    if sample is not None:
+        raise FlakelabError(f"{option} and --average: expected one of them, not both")
+    readings = read_measurements(path)
+    try:
+        return mean_reading(readings), readings
+    except FlakelabError as error:
+        raise MeasurementFileError(path, str(error)) from None
+
+
+def readings_note(spread: dict, what: str = "target") -> str | None:
+    """A note where one of several readings lies far from their mean."""
+    from flakelab.core.comparison import READINGS_SPREAD_SHARE
+
+    if spread["limit_share_max"] <= READINGS_SPREAD_SHARE:
+        return None
+    return (
+        f"the {what}'s readings differ: {spread['furthest']} lies {spread['limit_share_max']:.0%} "
+        "of the tolerance from their mean at worst; the paint is uneven there, or a reading "
+        "was off: read it again"
+    )
 
 
 def check_output_file(path, option: str, format_of: Callable | None = None) -> None:

@@ -11,6 +11,8 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    AverageOption,
+    AverageSprayedOption,
     JsonOption,
     LightsOption,
     PlotOption,
@@ -23,7 +25,8 @@ from flakelab.cli.common import (
     draw_differences,
     errors,
     lights_option,
-    read_sample,
+    read_readings,
+    readings_note,
 )
 from flakelab.cli.matcher import (
     HabitsOption,
@@ -61,6 +64,8 @@ def correct_command(
     sprayed: Annotated[Path, typer.Option("--sprayed", help="Measurement of the spray-out.")],
     sample: SampleOption = None,
     sprayed_sample: SprayedSampleOption = None,
+    average: AverageOption = False,
+    average_sprayed: AverageSprayedOption = False,
     mode: Annotated[
         str, typer.Option(help="additions (can already mixed) or reformulate.")
     ] = "additions",
@@ -113,6 +118,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.comparison import spread_of_readings
     from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
     from flakelab.io import read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
@@ -131,8 +137,10 @@ def correct_command(
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
     x0 = recipe_fractions(lib, grams, recipe)
     can = grams if left is None else _what_is_left(grams, left, resolution, lib, recipe)
-    target_reading = read_sample(target, sample)
-    sprayed_reading = read_sample(sprayed, sprayed_sample, "--sprayed-sample")
+    target_reading, target_readings = read_readings(target, sample, average)
+    sprayed_reading, sprayed_readings = read_readings(
+        sprayed, sprayed_sample, average_sprayed, "--sprayed-sample"
+    )
     target_R, _, _ = spectra_for_model(target, target_reading, forward)
     sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
@@ -166,6 +174,15 @@ def correct_command(
         "sprayout_failing": failures(failing, texture_failing),
         "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
     }
+    averaged = {
+        "target": (average, target_readings, target_reading),
+        "sprayout": (average_sprayed, sprayed_readings, sprayed_reading),
+    }
+    for what, (wanted, readings, mean) in averaged.items():
+        if wanted:
+            report[f"{what}_readings"] = spread = spread_of_readings(readings, mean, tol)
+            if note := readings_note(spread, "spray-out" if what == "sprayout" else what):
+                report["notes"].append(note)
     if not failing:
         report["notes"].append(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "

@@ -11,6 +11,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    AverageOption,
     JsonOption,
     LightsOption,
     PlotOption,
@@ -23,7 +24,8 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     progress_bar,
-    read_sample,
+    read_readings,
+    readings_note,
     texture_table,
 )
 from flakelab.cli.matcher import (
@@ -59,6 +61,7 @@ def match_command(
         bool, typer.Option("--example", help="Match the shipped example target.")
     ] = False,
     sample: SampleOption = None,
+    average: AverageOption = False,
     library: LibraryOption = None,
     quantity: QuantityOption = "250g",
     resolution: ResolutionOption = 0.1,
@@ -163,9 +166,10 @@ def match_command(
     from flakelab.match.search import match
 
     if target == "evaluate":
-        if render is not None or plot is not None or recipe_out is not None:
+        if render is not None or plot is not None or recipe_out is not None or average:
             raise FlakelabError(
-                "--render, --plot, --recipe-out: for the candidates of one target, not the harness"
+                "--render, --plot, --recipe-out, --average: for the candidates of one target, "
+                "not the harness"
             )
         _evaluate(
             library=library,
@@ -214,7 +218,7 @@ def match_command(
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     can = can.for_toners(lib, forward.toners)
     path = example_path("target") if example else Path(target)
-    measurement = read_sample(path, sample)
+    measurement, readings = read_readings(path, sample, average)
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     tol = read_tolerance(tolerance or "refinish")
     shop_habits = habits_for(habits, shop, database, forward, named=named)
@@ -235,6 +239,12 @@ def match_command(
         library=lib,
     )
     report = result.to_dict()
+    if average:
+        from flakelab.core.comparison import spread_of_readings
+
+        report["target_readings"] = spread_of_readings(readings, measurement, tol)
+        if note := readings_note(report["target_readings"]):
+            report["notes"].append(note)
     extra = []
     if shop_habits is None:  # aimed-off candidates: their offsets are per geometry
         other = left_out_model(measurement, forward, lib, database, physics, shop)

@@ -20,7 +20,11 @@ from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance, failing_geometries, over_limit, tolerance_preset
 
-__all__ = ["Comparison", "compare", "describe"]
+__all__ = ["Comparison", "compare", "describe", "spread_of_readings", "READINGS_SPREAD_SHARE"]
+
+READINGS_SPREAD_SHARE = 0.5
+"""A reading further than this share of the tolerance from the mean of its fellows is worth a
+word: a recipe matching the mean leaves that spot at least this far off."""
 
 
 def describe(measurement: Measurement, conditions: Conditions = D65_10) -> dict[str, Any]:
@@ -196,3 +200,31 @@ def compare(
         ),
         texture_share=tolerance.texture_share(reference.texture, sample.texture),
     )
+
+
+def spread_of_readings(
+    readings: list[Measurement],
+    mean: Measurement,
+    tolerance: Tolerance,
+    conditions: Conditions = D65_10,
+) -> dict[str, Any]:
+    """How far each of several readings of one surface lies from their ``mean``: the largest
+    ΔE00 over the readings at each geometry, and the largest share of ``tolerance``'s limit,
+    with the reading that reaches it. Readings of one spot differ by the instrument's
+    repeatability (ΔE00 0.02–0.10); spots of one car differ more where its paint is uneven."""
+    geometries = list(mean.geometry_names)
+    lab_mean = mean.lab(conditions)
+    de00, shares = [], []
+    for reading in readings:
+        lab = reading.select(geometries).lab(conditions)
+        d, dLCH, _ = tolerance.judge(geometries, lab_mean, lab)
+        de00.append(d)
+        shares.append(tolerance.share_of_limit(geometries, de00=d, dLCH=dLCH).max())
+    furthest = int(np.argmax(shares))
+    return {
+        "readings": [r.sample for r in readings],
+        "geometries": geometries,
+        "de00_from_mean_max": np.max(de00, axis=0).round(3).tolist(),
+        "limit_share_max": float(shares[furthest]),
+        "furthest": readings[furthest].sample,
+    }

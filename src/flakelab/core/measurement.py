@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 
@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS, resample
+from flakelab.errors import FlakelabError
 
 __all__ = [
     "Measurement",
@@ -23,6 +24,7 @@ __all__ = [
     "LAB_LIMIT",
     "TEXTURE_RANGE",
     "outside",
+    "mean_reading",
 ]
 
 TEXTURE_READINGS: tuple[str, ...] = (
@@ -199,3 +201,39 @@ class Measurement:
             stored_lab_conditions=self.stored_lab_conditions,
             metadata=self.metadata,
         )
+
+
+def mean_reading(readings: Sequence[Measurement]) -> Measurement:
+    """The mean of several readings of one surface (a car read at a few spots beside the
+    repair, as colorists do): spectra averaged per geometry on the storage grid, texture
+    readings averaged where every reading has them. The readings must share their
+    geometries (the first's order is kept) and their instrument; a
+    :class:`~flakelab.errors.FlakelabError` names the reading that does not."""
+    if not readings:
+        raise FlakelabError("expected at least one reading to average, got none")
+    first = readings[0]
+    for reading in readings[1:]:
+        if set(reading.geometries) != set(first.geometries):
+            raise FlakelabError(
+                f"reading {reading.sample!r}: geometries {', '.join(reading.geometry_names)} "
+                f"differ from {first.sample!r}'s ({', '.join(first.geometry_names)}): "
+                "only readings of one instrument average"
+            )
+        if reading.instrument != first.instrument:
+            raise FlakelabError(
+                f"reading {reading.sample!r}: instrument {reading.instrument!r} differs from "
+                f"{first.sample!r}'s ({first.instrument!r})"
+            )
+    spectra = np.stack([r.storage_spectra(first.geometries) for r in readings])
+    shared = [k for k in first.texture if all(k in r.texture for r in readings)]
+    names = ", ".join(r.sample for r in readings)
+    return Measurement(
+        sample=f"mean of {len(readings)} readings ({names})",
+        geometries=first.geometries,
+        wavelengths=WAVELENGTHS,
+        reflectance=spectra.mean(axis=0),
+        texture={k: float(np.mean([r.texture[k] for r in readings])) for k in shared},
+        instrument=first.instrument,
+        measured_at=first.measured_at,
+        metadata={"averaged": names},
+    )
