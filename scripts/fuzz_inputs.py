@@ -11,9 +11,9 @@ stray characters; JSON files by replacing or deleting one value anywhere in them
 for the match and a spray-out for the correction and for `cases record`, half the time, by
 values still readable but odd); a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,sprayout,record,recipe,
-        library,habits,habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200] [--seed 0]
-        [--show]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,sprayout,record,
+        recipe,library,habits,habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200]
+        [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -204,6 +204,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     write_measurements([measurement], work / "good.json")
     write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
+    spots = [replace(measurement, sample=f"spot {i}", stored_lab=None) for i in (1, 2, 3)]
+    write_measurements(spots, work / "spots.json")
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]), 200,
                         "demo-five-angle", "shop A")  # fmt: skip
     write_habits(habits, work / "habits.json")
@@ -235,6 +237,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         # a damaged target read by the main job, whose search and tables meet every value
         "target": (work / "good.json", lambda p: ["match", str(p), "--candidates", "1"]),
+        # the car read at three spots, the readings averaged by the main job
+        "readings": (work / "spots.json",
+                     lambda p: ["match", str(p), "--average", "--candidates", "1"]),
         # a damaged spray-out read by the correction, which meets it with the recipe's model
         "sprayout": (work / "sprayout.json",
                      lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
@@ -315,7 +320,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--kinds",
-        default="cxf,csv,json,xlsx,target,sprayout,record,recipe,library,habits,habits-match,"
+        default="cxf,csv,json,xlsx,target,readings,sprayout,record,recipe,library,habits,habits-match,"
         "tolerance,cases,cases-cxf,manifest,model",
     )
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
