@@ -136,7 +136,10 @@ def _weigh_the_rest(
         + f"; {sum(poured.values()):g} g poured, still to pour:",
         highlight=False,
     )
-    console.print(weights_table(None, report["to_pour_g"]))
+    if report["to_pour_g"]:
+        console.print(weights_table(None, report["to_pour_g"]))
+    else:
+        console.print("nothing: the can is complete on this scale", highlight=False)
     console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
 
 

@@ -149,7 +149,7 @@ class Can:
         weighed = to_scale(grams, self.resolution_g)
         if weighed <= 0:
             _under_a_step(self.option, f"{self.quantity} ({grams:.3g} g)", self.resolution_g)
-        check_scale(weighed, self.resolution_g)
+        check_scale(weighed, self.resolution_g, self.option)
         return weighed
 
 
@@ -174,7 +174,7 @@ def can_on_scale(text: str, resolution_g: float, option: str = "--quantity") -> 
         grams = to_scale(grams, resolution_g)
     if grams <= 0:
         _under_a_step(option, text, resolution_g)
-    check_scale(grams, resolution_g)
+    check_scale(grams, resolution_g, option)
     return grams
 
 
@@ -195,19 +195,20 @@ def check_resolution(resolution_g: float) -> None:
         raise RecipeError(f"resolution: expected a positive number of grams, got {resolution_g}")
 
 
-def check_scale(quantity_g: float, resolution_g: float) -> int:
+def check_scale(quantity_g: float, resolution_g: float, what: str = "quantity") -> int:
     """How many steps of a scale of ``resolution_g`` weigh a can of ``quantity_g``; a
-    :class:`RecipeError` where the scale cannot weigh it, before any search is made for it."""
+    :class:`RecipeError` naming ``what`` where the scale cannot weigh it, before any search
+    is made for it."""
     check_resolution(resolution_g)
     steps = quantity_g / resolution_g
     if not steps <= MAX_SCALE_STEPS:  # inf too: 1e308 g on a 0.1 g scale
         raise RecipeError(
-            f"quantity: {quantity_g:g} g is more than {MAX_SCALE_STEPS:.0e} steps of the "
+            f"{what}: {quantity_g:g} g is more than {MAX_SCALE_STEPS:.0e} steps of the "
             f"scale's {resolution_g:g} g (a larger scale resolution weighs a larger can)"
         )
     if abs(steps - round(steps)) > 1e-6:
         raise RecipeError(
-            f"quantity: {quantity_g:g} g is not a multiple of the scale's {resolution_g:g} g"
+            f"{what}: {quantity_g:g} g is not a multiple of the scale's {resolution_g:g} g"
         )
     return round(steps)
 
