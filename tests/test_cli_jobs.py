@@ -447,9 +447,18 @@ def test_weigh_says_what_is_still_to_pour_after_a_toner_ran_over(tmp_path, cli):
         assert abs(held[toner] - grams * 347.3 / 250.0) <= 0.1, toner
     text = cli("weigh", str(recipe), "--poured", "Carbon black=5")
     assert "Carbon black (5 g of 3.6 g) ran over; the can grows to 347.3 g" in text.stdout
+    # a gram of a toner outside the recipe: diluted back to its colour, by the model
+    run = cli("weigh", str(recipe), "--poured", "Al medium=194", "--poured",
+              "Phthalo green=1", "--recipe-out", str(out), "--json")  # fmt: skip
+    stray = json.loads(run.stdout)
+    assert stray["not_in_recipe"] == ["Phthalo green"] and stray["ran_over"] == []
+    assert max(stray["expected_de00"]) < 0.3 < max(stray["as_planned_de00"])
+    assert stray["expected_failing"] == [] and read_recipe(out)["Phthalo green"] == 1.0
+    assert sum(read_recipe(out).values()) == pytest.approx(stray["grown_g"])
+    assert stray["to_pour_g"][-1]["cumulative"] == pytest.approx(stray["grown_g"])
     for pair, message in (("Al medium", "expected NAME=GRAMS"),
                           ("Al medium=-3", "expected NAME=GRAMS"),
-                          ("Al medum=100", "Al medum not in the recipe")):  # fmt: skip
+                          ("Al medum=100", "Al medum: not a toner the model knows")):  # fmt: skip
         run = cli("weigh", str(recipe), "--poured", pair)
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
 

@@ -363,6 +363,31 @@ def test_a_toner_that_ran_over_grows_the_can_to_keep_the_recipe_s_proportions(hy
         weigh_after_pouring(hybrid, recipe, 250.0, {"Al medium": 0.0}, 0.1)
 
 
+def test_a_toner_poured_by_mistake_is_diluted_back_to_the_recipe_s_colour(hybrid):
+    """A gram of phthalo green in the example's can: poured as planned, the rest leaves the
+    can ΔE00 0.8 off the recipe; the correction's additions bring it within 0.3, nothing
+    poured is taken back, and the miss it reports is what the model predicts for the can
+    as weighed, mix by mix."""
+    from flakelab.match.correction import correct_what_was_poured
+
+    recipe = {"Al fine bright": 26.5, "Al medium": 194.0, "Phthalo blue GS": 16.6,
+              "Indanthrone blue": 9.3, "Carbon black": 3.6}  # fmt: skip
+    poured = {"Al medium": 194.0, "Phthalo green": 1.0}
+    found = correct_what_was_poured(hybrid, recipe, 250.0, poured, 0.1)
+    assert found.as_planned_de00.max() > 0.5
+    assert found.expected_de00.shape == found.passes.shape == (len(hybrid.geometries),)
+    assert found.expected_de00.max() < 0.3 and found.passes.all()
+    grams = found.weighing.grams
+    assert all(g > 0 for g in grams.values()) and "Phthalo green" not in grams
+    held = {n: poured.get(n, 0.0) + grams.get(n, 0.0) for n in {*recipe, *poured}}
+    names = list(held)
+    assert found.expected_de00.max() == pytest.approx(
+        _largest_dE00(hybrid, names, [recipe.get(n, 0.0) for n in names], list(held.values())),
+        abs=1e-3,
+    )
+    assert found.weighing.lines[-1].cumulative == pytest.approx(sum(held.values()))
+
+
 def test_impossible_quantities_are_refused():
     with pytest.raises(RecipeError, match="too small"):
         weigh({"A": 0.999, "B": 0.001}, 10.0, 0.1)

@@ -104,19 +104,30 @@ def poured_grams(pairs: list[str]) -> dict[str, float]:
 def _weigh_the_rest(
     forward, recipe: Path, shares, can, can_g: float, poured: dict, recipe_out, json_output
 ) -> None:
-    """``weigh --poured``: what is still to pour, and the can's size, once some is poured."""
+    """``weigh --poured``: what is still to pour, and the can's size, once some is poured;
+    where a toner outside the recipe was poured, what brings the can back to its colour."""
     from flakelab.io import write_recipe
-    from flakelab.match.recipe import weigh_after_pouring
 
-    grown, weighing = weigh_after_pouring(forward, shares, can_g, poured, can.resolution_g)
+    if unknown := [n for n in poured if n not in forward.toners]:
+        raise FlakelabError(
+            f"--poured: {', '.join(unknown)}: not a toner the model knows ({recipe}'s toners: "
+            f"{', '.join(shares)})"
+        )
     total = sum(shares.values())
-    planned = {n: shares[n] / total * can_g for n in poured}
+    planned = {n: shares.get(n, 0.0) / total * can_g for n in poured}
+    strays = [n for n in poured if n not in shares]
+    weighing, report = _what_to_pour(forward, shares, can, can_g, poured, strays)
+    grown = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
     report = {
         "recipe": str(recipe),
         **can_size(can, can_g),
         "poured_g": poured,
         "grown_g": grown,
-        "ran_over": [n for n, g in poured.items() if g > planned[n] + can.resolution_g / 2],
+        "ran_over": [
+            n for n, g in poured.items() if n in shares and g > planned[n] + can.resolution_g / 2
+        ],
+        "not_in_recipe": strays,
+        **report,
         "to_pour_g": [asdict(ln) for ln in weighing.lines],
         **rounding_costs(weighing),
         "model": forward.name,
@@ -129,18 +140,67 @@ def _weigh_the_rest(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    over = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in report["ran_over"])
+    _print_the_rest(report, recipe, planned, forward.name)
+
+
+def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays: list[str]):
+    """The weighing of what is still to pour, and what the report adds for it: nothing on
+    plan or where a recipe's toner ran over; where ``strays`` outside the recipe were
+    poured, the ΔE00 by which the can is then expected to miss the recipe."""
+    from flakelab.core.tolerance import failing_geometries, tolerance_preset
+    from flakelab.match.correction import correct_what_was_poured
+    from flakelab.match.objective import OBJECTIVE_DEFAULT
+    from flakelab.match.recipe import weigh_after_pouring
+
+    if not strays:
+        return weigh_after_pouring(forward, shares, can_g, poured, can.resolution_g)[1], {}
+    tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
+    found = correct_what_was_poured(forward, shares, can_g, poured, can.resolution_g, tolerance)
+    return found.weighing, {
+        "tolerance": tolerance.name,
+        "geometries": list(forward.geometries),
+        "as_planned_de00": found.as_planned_de00.round(3).tolist(),
+        "expected_de00": found.expected_de00.round(3).tolist(),
+        "expected_failing": failing_geometries(forward.geometries, found.passes),
+    }
+
+
+def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> None:
+    poured, grown = report["poured_g"], report["grown_g"]
+    over = report["ran_over"]
+    if report["not_in_recipe"]:
+        state = (
+            f"{', '.join(report['not_in_recipe'])} is not in the recipe: the rest of the recipe "
+            "and what brings the can back to its colour by the model; the can grows to "
+            f"{grown:g} g"
+        )
+    elif over:
+        ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
+        state = f"{ran} ran over; the can grows to {grown:g} g"
+    else:
+        state = "on plan"
     console.print(
-        f"{recipe.name} for {can_text(report)}: "
-        + (f"{over} ran over; the can grows to {grown:g} g" if over else "on plan")
-        + f"; {sum(poured.values()):g} g poured, still to pour:",
+        f"{recipe.name} for {can_text(report)}: {state}; {sum(poured.values()):g} g poured, "
+        "still to pour:",
         highlight=False,
     )
     if report["to_pour_g"]:
         console.print(weights_table(None, report["to_pour_g"]))
     else:
         console.print("nothing: the can is complete on this scale", highlight=False)
-    console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
+    console.print(f"{rounding_text(report)} ({model})", highlight=False)
+    if "expected_de00" in report:
+        worst, planned_worst = max(report["expected_de00"]), max(report["as_planned_de00"])
+        text = (
+            f"expected to miss the recipe by ΔE00 {worst:.2f} at worst (by the model; "
+            f"{planned_worst:.2f} with the rest poured as planned)"
+        )
+        if report["expected_failing"]:
+            text = (
+                f"[yellow]note:[/] even so {text}, failing {report['tolerance']} at "
+                f"{', '.join(report['expected_failing'])}: mix afresh"
+            )
+        console.print(text, highlight=False)
 
 
 def can_size(can, grams: float) -> dict:

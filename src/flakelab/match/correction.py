@@ -36,7 +36,7 @@ loss by more than :data:`EXTRA_TONER_GAIN`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -51,14 +51,14 @@ from flakelab.core.difference import (
     worst_light,
     worst_per_light,
 )
-from flakelab.core.tolerance import Tolerance
+from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
 from flakelab.match.adam import TensorAdam
 from flakelab.match.forward import stepping
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
-from flakelab.match.objective import MatchObjective
+from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
@@ -69,11 +69,14 @@ from flakelab.physics.application import (
 
 if TYPE_CHECKING:
     from flakelab.match.habits import ShopHabits
+    from flakelab.match.recipe import Weighing
 
 __all__ = [
     "aim_off",
     "AIM_OFF_FLOOR",
     "correct",
+    "correct_what_was_poured",
+    "PouredCorrection",
     "Correction",
     "CORRECTION_MODES",
     "OFFSET_WEIGHT",
@@ -530,3 +533,58 @@ def _optimise(
         final = mixed()
         R, lab, loss = _predicted(objective, forward, final, target_lab, offset, ratio)
         return final, additions().detach(), lab, loss.numpy(), R
+
+
+@dataclass(frozen=True)
+class PouredCorrection:
+    """:func:`correct_what_was_poured`'s answer: the ``weighing`` of all still to pour
+    (``lines`` in pouring order from what is in the can), the ΔE00 per geometry by which
+    the can is then expected to miss the recipe (``expected_de00``) and whether each passes
+    (``passes``), and the same ΔE00 had the rest been poured as planned (``as_planned_de00``)."""
+
+    weighing: Weighing
+    expected_de00: NDArray
+    passes: NDArray
+    as_planned_de00: NDArray
+
+
+def correct_what_was_poured(
+    forward,
+    fractions: dict[str, float],
+    quantity_g: float,
+    poured: dict[str, float],
+    resolution_g: float = 0.1,
+    tolerance: Tolerance | None = None,
+) -> PouredCorrection:
+    """What to pour into a can that holds a toner outside the recipe (``poured``, grams per
+    toner; poured by mistake): the rest of the recipe's ``quantity_g`` as planned, plus
+    additions, at most half the can again, that bring the can's predicted colour back to the
+    recipe's (:func:`correct`, aimed at the recipe's own prediction: no spray-out has
+    measured the can, so no offset is split off), judged by ``tolerance`` (default
+    :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`). A toner the recipe lacks can only
+    be diluted: where even then the can misses, it is better mixed afresh."""
+    from flakelab.match.recipe import check_scale, pouring_order, weigh_additions
+
+    check_scale(quantity_g, resolution_g)
+    tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
+    total = sum(fractions.values())
+    planned = {n: v / total * quantity_g for n, v in fractions.items()}
+    can = {n: max(planned.get(n, 0.0), poured.get(n, 0.0)) for n in {*planned, *poured}}
+    R, _ = evaluate_recipes(forward, np.stack([_vector(forward, fractions), _vector(forward, can)]))
+    recipe_lab, can_lab = reflectance_to_Lab(R)
+    correction = correct(
+        forward, R[0], can, R[1], offset_weight=1.0, extra_toners=0, tolerance=tolerance
+    )
+    in_can, mixed = sum(poured.values()), sum(can.values())
+    to_pour = {
+        n: (can[n] - poured.get(n, 0.0) + correction.added.get(n, 0.0) * mixed) / in_can
+        for n in can
+    }
+    weighing = weigh_additions(forward, poured, to_pour, resolution_g)
+    held = {n: poured.get(n, 0.0) + weighing.grams.get(n, 0.0) for n in can}
+    R_held, _ = evaluate_recipes(forward, _vector(forward, held)[None])
+    miss, _, passes = tolerance.judge(forward.geometries, recipe_lab, reflectance_to_Lab(R_held[0]))
+    lines = pouring_order(weighing.grams, start=in_can)
+    return PouredCorrection(
+        replace(weighing, lines=lines), miss, passes, delta_E(recipe_lab, can_lab)
+    )

@@ -39,6 +39,7 @@ __all__ = [
     "weigh_whole_can",
     "weigh_additions",
     "weigh_after_pouring",
+    "pouring_order",
     "parse_quantity",
     "can_on_scale",
     "to_scale",
@@ -231,7 +232,7 @@ def weigh(
             f"quantity: {quantity_g:g} g is too small to weigh {', '.join(small)} "
             f"at {resolution_g:g} g resolution; mix a larger can"
         )
-    return _pouring_order(
+    return pouring_order(
         {n: round(float(u) * resolution_g, 6) for n, u in zip(names, units, strict=True)}
     )
 
@@ -251,7 +252,7 @@ def weigh_for_colour(
     units = _whole_can_roundings(exact, nearest_units, steps)
     best, cost, shift = _closest_colour(forward, names, exact, units)
     grams = {n: round(float(u) * resolution_g, 6) for n, u in zip(names, units[best], strict=True)}
-    return Weighing(grams, float(cost[best]), float(cost[0]), shift, _pouring_order(grams))
+    return Weighing(grams, float(cost[best]), float(cost[0]), shift, pouring_order(grams))
 
 
 def weigh_whole_can(
@@ -306,9 +307,8 @@ def weigh_after_pouring(
     steps = check_scale(quantity_g, resolution_g)
     if unknown := sorted(set(poured) - set(fractions)):
         raise RecipeError(
-            f"--poured: {', '.join(unknown)} not in the recipe ({', '.join(fractions)}); a "
-            "toner poured by mistake cannot be scaled away: correct the can after its "
-            "spray-out, or mix afresh"
+            f"--poured: {', '.join(unknown)} not in the recipe ({', '.join(fractions)}): "
+            "scaling cannot take it out (correction.correct_what_was_poured dilutes it)"
         )
     if not poured or any(not (np.isfinite(g) and g >= 0) for g in poured.values()):
         raise RecipeError(f"--poured: expected grams ≥ 0 for at least one toner, got {poured}")
@@ -322,7 +322,7 @@ def weigh_after_pouring(
     in_can = sum(poured.values())
     added = {n: max(share[n] * grown - poured.get(n, 0.0), 0.0) / in_can for n in share}
     weighing = weigh_additions(forward, poured, added, resolution_g)
-    lines = _pouring_order(weighing.grams, start=in_can)
+    lines = pouring_order(weighing.grams, start=in_can)
     return round(grown, 9), replace(weighing, lines=lines)
 
 
@@ -365,7 +365,7 @@ def _closest_colour(forward, names: list[str], exact: np.ndarray, amounts: np.nd
     return best, cost, lab[1 + best] - lab[0]
 
 
-def _pouring_order(grams: dict[str, float], start: float = 0.0) -> list[RecipeLine]:
+def pouring_order(grams: dict[str, float], start: float = 0.0) -> list[RecipeLine]:
     """The largest toner first, with the scale's running total from ``start``."""
     order = sorted(grams, key=lambda n: -grams[n])
     running = start + np.cumsum([grams[n] for n in order])
