@@ -386,6 +386,8 @@ def test_a_toner_poured_by_mistake_is_diluted_back_to_the_recipe_s_colour(hybrid
         abs=1e-3,
     )
     assert found.weighing.lines[-1].cumulative == pytest.approx(sum(held.values()))
+    with pytest.raises(RecipeError, match="sum to zero"):
+        correct_what_was_poured(hybrid, recipe, 250.0, {"Phthalo green": 0.0}, 0.1)
 
 
 def test_impossible_quantities_are_refused():

@@ -116,7 +116,7 @@ def _weigh_the_rest(
     total = sum(shares.values())
     planned = {n: shares.get(n, 0.0) / total * can_g for n in poured}
     strays = [n for n in poured if n not in shares]
-    weighing, report = _what_to_pour(forward, shares, can, can_g, poured, strays)
+    weighing, found = _what_to_pour(forward, shares, can, can_g, poured, strays)
     grown = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
     report = {
         "recipe": str(recipe),
@@ -127,7 +127,7 @@ def _weigh_the_rest(
             n for n, g in poured.items() if n in shares and g > planned[n] + can.resolution_g / 2
         ],
         "not_in_recipe": strays,
-        **report,
+        **found,
         "to_pour_g": [asdict(ln) for ln in weighing.lines],
         **rounding_costs(weighing),
         "model": forward.name,

@@ -563,9 +563,10 @@ def correct_what_was_poured(
     measured the can, so no offset is split off), judged by ``tolerance`` (default
     :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`). A toner the recipe lacks can only
     be diluted: where even then the can misses, it is better mixed afresh."""
-    from flakelab.match.recipe import check_scale, pouring_order, weigh_additions
+    from flakelab.match.recipe import check_poured, check_scale, pouring_order, weigh_additions
 
     check_scale(quantity_g, resolution_g)
+    check_poured(poured)
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     total = sum(fractions.values())
     planned = {n: v / total * quantity_g for n, v in fractions.items()}

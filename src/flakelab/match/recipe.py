@@ -40,6 +40,7 @@ __all__ = [
     "weigh_additions",
     "weigh_after_pouring",
     "pouring_order",
+    "check_poured",
     "parse_quantity",
     "can_on_scale",
     "to_scale",
@@ -310,10 +311,7 @@ def weigh_after_pouring(
             f"--poured: {', '.join(unknown)} not in the recipe ({', '.join(fractions)}): "
             "scaling cannot take it out (correction.correct_what_was_poured dilutes it)"
         )
-    if not poured or any(not (np.isfinite(g) and g >= 0) for g in poured.values()):
-        raise RecipeError(f"--poured: expected grams ≥ 0 for at least one toner, got {poured}")
-    if sum(poured.values()) <= 0:
-        raise RecipeError("--poured: the amounts poured sum to zero grams")
+    check_poured(poured)
     total = sum(fractions.values())
     share = {n: v / total for n, v in fractions.items()}
     needed = max(g / share[n] / resolution_g for n, g in poured.items())
@@ -324,6 +322,14 @@ def weigh_after_pouring(
     weighing = weigh_additions(forward, poured, added, resolution_g)
     lines = pouring_order(weighing.grams, start=in_can)
     return round(grown, 9), replace(weighing, lines=lines)
+
+
+def check_poured(poured: dict[str, float]) -> None:
+    """A :class:`RecipeError` unless ``poured`` gives grams ≥ 0, more than none in all."""
+    if not poured or any(not (np.isfinite(g) and g >= 0) for g in poured.values()):
+        raise RecipeError(f"--poured: expected grams ≥ 0 for at least one toner, got {poured}")
+    if sum(poured.values()) <= 0:
+        raise RecipeError("--poured: the amounts poured sum to zero grams")
 
 
 def _whole_can_roundings(exact: np.ndarray, nearest: np.ndarray, steps: int) -> np.ndarray:
