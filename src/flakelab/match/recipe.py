@@ -143,9 +143,10 @@ class Can:
         return self._on_scale(self.millilitres / specific_volume)
 
     def to_dict(self) -> dict[str, float]:
-        size = {"quantity_g": self.grams} if self.millilitres is None else {
-            "quantity_ml": self.millilitres}  # fmt: skip
-        return size | {"resolution_g": self.resolution_g}
+        """The can as ordered, by mass or by volume, and the scale's step."""
+        if self.millilitres is None:
+            return {"quantity_g": self.grams, "resolution_g": self.resolution_g}
+        return {"quantity_ml": self.millilitres, "resolution_g": self.resolution_g}
 
     def _on_scale(self, grams: float) -> float:
         weighed = to_scale(grams, self.resolution_g)
