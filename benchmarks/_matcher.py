@@ -8,6 +8,8 @@ import dataclasses
 import math
 import time
 
+import numpy as np
+
 from flakelab.cases.generator import SHOP_WITH_HABITS, World
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library, read_tolerance
@@ -141,6 +143,13 @@ def shipped_matcher(
         settings = dataclasses.replace(harness.settings, **changes)
         harness = World(library, learned.instrument, settings)
     return harness, forward, effect_mask(library, forward.toners)
+
+
+def generated_recipes(world, forward, n: int, rng) -> list[dict[str, float]]:
+    """``n`` of the world's OEM-like formulations as recipes {toner: share}."""
+    names = list(forward.toners)
+    x = world.formulations(n, rng)
+    return [{names[i]: float(row[i]) for i in np.flatnonzero(row > 0)} for row in x]
 
 
 WORLD_HABITS_HELP = (

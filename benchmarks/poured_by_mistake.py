@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from _matcher import shipped_matcher
+from _matcher import generated_recipes, shipped_matcher
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct_what_was_poured
@@ -100,9 +100,7 @@ def main() -> None:
 
     world, forward, _ = shipped_matcher("shop")
     rng = np.random.default_rng(args.seed)
-    x = world.formulations(args.recipes, rng)
-    names = list(forward.toners)
-    recipes = [{names[i]: float(row[i]) for i in np.flatnonzero(row > 0)} for row in x]
+    recipes = generated_recipes(world, forward, args.recipes, rng)
     rows = [one_can(world, forward, recipe, rng) for recipe in recipes]
     report = {"recipes": args.recipes, "seed": args.seed, "model": forward.name}
     report |= summary(rows)

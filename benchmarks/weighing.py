@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from _matcher import shipped_matcher
+from _matcher import generated_recipes, shipped_matcher
 from flakelab.match.evaluate import harness_trials, worst_share
 from flakelab.match.recipe import (
     RecipeError,
@@ -136,9 +136,7 @@ def main() -> None:
 
     world, forward, effect = shipped_matcher("shop")
     rng = np.random.default_rng(args.seed)
-    x = world.formulations(args.recipes, rng)
-    names = list(forward.toners)
-    recipes = [{names[i]: float(row[i]) for i in np.flatnonzero(row > 0)} for row in x]
+    recipes = generated_recipes(world, forward, args.recipes, rng)
     rows = {}
     for label, grams, resolution in cans(args.can):
         rows[f"{label} whole can"] = whole_cans(forward, recipes, grams, resolution)
