@@ -268,6 +268,20 @@ def test_a_car_read_at_three_spots_is_matched_and_corrected_as_their_mean(tmp_pa
     assert run.returncode == 2 and "odd.json: reading 'spot 3': geometries" in run.stderr
     run = cli("match", str(tmp_path / "spots.json"), "--average", "--sample", "spot 1")
     assert run.returncode == 2 and "--sample and --average" in run.stderr
+    # compare: the spray-out's panel read at three spots too, each file judged by its mean
+    run = cli("compare", str(tmp_path / "dirty.json"), str(tmp_path / "spots.json"),
+              "--average", "--average-sprayed", "--json")  # fmt: skip
+    compared = json.loads(run.stdout)
+    assert compared["reference_readings"]["furthest"] == "spot 3"
+    assert compared["sample_readings"]["limit_share_max"] < 0.5
+    from flakelab.core.comparison import compare as compare_readings
+    from flakelab.core.measurement import mean_reading
+
+    expected = compare_readings(mean_reading(dirty), mean_reading(spots))
+    assert compared["de00_max"] == pytest.approx(expected.de00_max, abs=1e-6)
+    run = cli("compare", str(tmp_path / "dirty.json"), str(tmp_path / "spots.json"),
+              "--average-sprayed", "--sample-name", "spot 1")  # fmt: skip
+    assert run.returncode == 2 and "--sample-name and --average-sprayed" in run.stderr
 
 
 def test_correct_refuses_a_bad_recipe(tmp_path, cli):

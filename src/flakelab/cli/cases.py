@@ -246,7 +246,9 @@ def record_case(
     grams = read_recipe(recipe)
     fractions = recipe_fractions(lib, grams, recipe)
     target_reading = read_readings(target, sample, average)[0]
-    sprayed_reading = read_readings(sprayed, sprayed_sample, average_sprayed, "--sprayed-sample")[0]
+    sprayed_reading = read_readings(
+        sprayed, sprayed_sample, average_sprayed, "--sprayed-sample", "--average-sprayed"
+    )[0]
     case = case_from_readings(
         target_reading,
         sprayed_reading,

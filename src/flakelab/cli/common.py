@@ -235,10 +235,16 @@ def read_sample(path, sample: str | None, option: str = "--sample"):
     return chosen
 
 
-def read_readings(path, sample: str | None, average: bool, option: str = "--sample"):
+def read_readings(
+    path,
+    sample: str | None,
+    average: bool,
+    option: str = "--sample",
+    average_option: str = "--average",
+):
     """The measurement to use from ``path`` and the readings it stands for: with
     ``average`` the mean of every reading in the file, else the one sample (its only
-    reading)."""
+    reading); ``option`` and ``average_option`` name the two in messages."""
     if not average:
         chosen = read_sample(path, sample, option)
         return chosen, [chosen]
@@ -246,7 +252,7 @@ def read_readings(path, sample: str | None, average: bool, option: str = "--samp
     from flakelab.io import read_measurements
 
     if sample is not None:
-        raise FlakelabError(f"{option} and --average: expected one of them, not both")
+        raise FlakelabError(f"{option} and {average_option}: expected one of them, not both")
     readings = read_measurements(path)
     try:
         return mean_reading(readings), readings

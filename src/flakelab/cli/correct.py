@@ -139,7 +139,7 @@ def correct_command(
     can = grams if left is None else _what_is_left(grams, left, resolution, lib, recipe)
     target_reading, target_readings = read_readings(target, sample, average)
     sprayed_reading, sprayed_readings = read_readings(
-        sprayed, sprayed_sample, average_sprayed, "--sprayed-sample"
+        sprayed, sprayed_sample, average_sprayed, "--sprayed-sample", "--average-sprayed"
     )
     target_R, _, _ = spectra_for_model(target, target_reading, forward)
     sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)

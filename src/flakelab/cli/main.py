@@ -13,6 +13,8 @@ from rich.table import Table
 from flakelab import __version__
 from flakelab.cli.cases import cases_app
 from flakelab.cli.common import (
+    AverageOption,
+    AverageSprayedOption,
     ConditionsOption,
     JsonOption,
     LightsOption,
@@ -26,7 +28,9 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     progress_bar,
+    read_readings,
     read_sample,
+    readings_note,
     reflow_help,
     reports_errors,
     texture_table,
@@ -38,9 +42,8 @@ from flakelab.cli.rendering import render_command, render_grid_command, texture_
 from flakelab.cli.weigh import weigh_command
 from flakelab.core.colorimetry import Conditions
 from flakelab.core.comparison import compare as compare_measurements
-from flakelab.core.comparison import describe
+from flakelab.core.comparison import describe, spread_of_readings
 from flakelab.core.difference import METAMERISM_ILLUMINANTS
-from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import failures
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
@@ -80,12 +83,6 @@ def _print_description(info: dict[str, Any]) -> None:
     console.print(line, highlight=False)
     if info["texture"]:
         console.print("texture: " + "  ".join(f"{k} {v:.2f}" for k, v in info["texture"].items()))
-
-
-def _one_or_example(
-    path: Path | None, example: str, sample: str | None, option: str = "--sample"
-) -> Measurement:
-    return read_sample(path if path is not None else example_path(example), sample, option)
 
 
 @app.command()
@@ -133,6 +130,8 @@ def compare(
         str | None,
         typer.Option("--sample-name", help="The sample's name in a multi-sample file."),
     ] = None,
+    average: AverageOption = False,
+    average_sprayed: AverageSprayedOption = False,
     conditions: ConditionsOption = "D65/10",
     lights: LightsOption = None,
     as_json: JsonOption = False,
@@ -158,14 +157,25 @@ def compare(
     check_figure_file(render)
     check_figure_file(plot, "--plot")
     tol = read_tolerance(tolerance)
-    ref = _one_or_example(reference, "target", reference_sample, "--reference-sample")
-    smp = _one_or_example(sample, "sprayout", sample_name, "--sample-name")
+    ref, ref_readings = read_readings(
+        reference or example_path("target"), reference_sample, average, "--reference-sample"
+    )
+    smp, smp_readings = read_readings(
+        sample or example_path("sprayout"), sample_name, average_sprayed, "--sample-name",
+        "--average-sprayed",
+    )  # fmt: skip
     light = Conditions.parse(conditions)
     tests = lights_option(lights, light) or tuple(
         t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
     )
     result = compare_measurements(ref, smp, tol, conditions=light, lights=tests)
     report = result.to_dict()
+    for key, wanted, readings, mean in (
+        ("reference_readings", average, ref_readings, ref),
+        ("sample_readings", average_sprayed, smp_readings, smp),
+    ):
+        if wanted:
+            report[key] = spread_of_readings(readings, mean, tol, light)
     if render is not None:
         _render_comparison(ref, smp, report, render, light)
     if plot is not None:
@@ -247,6 +257,16 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
         console.print(
             texture_table("sample − reference", texture, limits, report["failing_texture"])
         )
+    for what in ("reference", "sample"):
+        if spread := report.get(f"{what}_readings"):
+            console.print(
+                f"{what}: the mean of {len(spread['readings'])} readings, the furthest "
+                f"({spread['furthest']}) {spread['limit_share_max']:.0%} of the tolerance "
+                "from it",
+                highlight=False,
+            )
+            if note := readings_note(spread, what):
+                console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
 @app.command()
