@@ -273,6 +273,18 @@ def readings_note(spread: dict, what: str = "target") -> str | None:
     )
 
 
+def add_readings_spread(
+    report: dict, key: str, readings: list, mean, tolerance, what: str = "target"
+) -> None:
+    """With ``readings`` averaged into ``mean``: how far each lies from it, as
+    ``report[key]``, and a note in ``report["notes"]`` where one lies far."""
+    from flakelab.core.comparison import spread_of_readings
+
+    report[key] = spread = spread_of_readings(readings, mean, tolerance)
+    if note := readings_note(spread, what):
+        report["notes"].append(note)
+
+
 def check_output_file(path, option: str, format_of: Callable | None = None) -> None:
     """An output file's folder exists and can be written, and the path is not a folder,
     checked before any work (nothing to check without a file): a long job never ends in a

@@ -19,6 +19,7 @@ from flakelab.cli.common import (
     SampleOption,
     SprayedSampleOption,
     ToleranceOption,
+    add_readings_spread,
     check_figure_file,
     check_output_file,
     console,
@@ -26,7 +27,6 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     read_readings,
-    readings_note,
 )
 from flakelab.cli.matcher import (
     HabitsOption,
@@ -118,7 +118,6 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.comparison import spread_of_readings
     from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
     from flakelab.io import read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
@@ -174,15 +173,11 @@ def correct_command(
         "sprayout_failing": failures(failing, texture_failing),
         "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
     }
-    averaged = {
-        "target": (average, target_readings, target_reading),
-        "sprayout": (average_sprayed, sprayed_readings, sprayed_reading),
-    }
-    for what, (wanted, readings, mean) in averaged.items():
-        if wanted:
-            report[f"{what}_readings"] = spread = spread_of_readings(readings, mean, tol)
-            if note := readings_note(spread, "spray-out" if what == "sprayout" else what):
-                report["notes"].append(note)
+    if average:
+        add_readings_spread(report, "target_readings", target_readings, target_reading, tol)
+    if average_sprayed:
+        add_readings_spread(report, "sprayout_readings", sprayed_readings, sprayed_reading, tol,
+                            "spray-out")  # fmt: skip
     if not failing:
         report["notes"].append(
             f"the spray-out already passes {tol.name} at every geometry: the correction is "

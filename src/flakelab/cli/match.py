@@ -16,6 +16,7 @@ from flakelab.cli.common import (
     LightsOption,
     PlotOption,
     SampleOption,
+    add_readings_spread,
     check_figure_file,
     check_output_file,
     console,
@@ -25,7 +26,6 @@ from flakelab.cli.common import (
     lights_option,
     progress_bar,
     read_readings,
-    readings_note,
     texture_table,
 )
 from flakelab.cli.matcher import (
@@ -240,11 +240,7 @@ def match_command(
     )
     report = result.to_dict()
     if average:
-        from flakelab.core.comparison import spread_of_readings
-
-        report["target_readings"] = spread_of_readings(readings, measurement, tol)
-        if note := readings_note(report["target_readings"]):
-            report["notes"].append(note)
+        add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
     if shop_habits is None:  # aimed-off candidates: their offsets are per geometry
         other = left_out_model(measurement, forward, lib, database, physics, shop)
