@@ -7,13 +7,20 @@ from numbers import Real
 
 import numpy as np
 
-__all__ = ["parse_amount", "is_number"]
+__all__ = ["parse_amount", "is_number", "unit_of"]
 
 
 def is_number(value: object) -> bool:
     """Whether a value read from a JSON or TOML file is a real number: JSON's ``true`` is a
     Python bool, which is an int, but not an amount."""
     return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def unit_of(text: str, units: Mapping[str, float]) -> str:
+    """The unit among ``units`` that ``text`` is typed in (the longest that ends it, case
+    and spaces aside), else ``""``."""
+    value = text.strip().lower().replace(" ", "")
+    return max((u for u in units if value.endswith(u)), key=len, default="")
 
 
 def parse_amount(
@@ -26,7 +33,7 @@ def parse_amount(
     """``text`` in any of ``units`` (name → factor to the base unit; a bare number is in the
     base unit) as a positive finite number, else ``error`` naming ``option``."""
     value = text.strip().lower().replace(" ", "")
-    unit = max((u for u in units if value.endswith(u)), key=len, default="")
+    unit = unit_of(value, units)
     try:
         amount = float(value[: len(value) - len(unit)]) * units.get(unit, 1.0)
     except ValueError:

@@ -24,7 +24,7 @@ import numpy as np
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
-from flakelab.core.units import parse_amount
+from flakelab.core.units import parse_amount, unit_of
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -104,7 +104,7 @@ def parse_quantity(text: str, option: str = "--quantity") -> float:
 
 def is_volume(text: str) -> bool:
     """Whether a quantity is typed in a unit of volume (``0.5l``, ``500 ml``, ``1qt``)."""
-    return text.strip().lower().replace(" ", "").endswith(tuple(VOLUME))
+    return bool(unit_of(text, VOLUME))
 
 
 @dataclass(frozen=True)
@@ -173,7 +173,7 @@ def can_on_scale(text: str, resolution_g: float, option: str = "--quantity") -> 
     453.59237 g, is 453.6 g on a 0.1 g scale); one in grams or kilograms must be one already,
     since a can typed finer than the scale reads is more likely a mistyped scale."""
     grams = parse_quantity(text, option)
-    if text.strip().lower().endswith(tuple(IMPERIAL_MASS)):
+    if unit_of(text, IMPERIAL_MASS):
         grams = to_scale(grams, resolution_g)
     if grams <= 0:
         _under_a_step(option, text, resolution_g)
