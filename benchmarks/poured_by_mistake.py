@@ -52,18 +52,14 @@ def one_can(world, forward, recipe: dict, rng) -> dict:
     start = time.perf_counter()
     found = correct_what_was_poured(forward, recipe, CAN_G, poured, RESOLUTION_G)
     seconds = time.perf_counter() - start
-    planned = {n: max(v * CAN_G, poured.get(n, 0.0)) for n, v in recipe.items()} | {
-        stray: poured[stray]
-    }
-    held = {n: poured.get(n, 0.0) + found.weighing.grams.get(n, 0.0) for n in planned}
     return {
         "stray_g": poured[stray],
         "model_as_planned": float(found.as_planned_de00.max()),
         "model_after": float(found.expected_de00.max()),
-        "physics_as_planned": physics_worst(world, forward, recipe, planned),
-        "physics_after": physics_worst(world, forward, recipe, held),
+        "physics_as_planned": physics_worst(world, forward, recipe, found.as_planned),
+        "physics_after": physics_worst(world, forward, recipe, found.holds),
         "passes": bool(found.passes.all()),
-        "can_g": sum(held.values()),
+        "can_g": sum(found.holds.values()),
         "seconds": seconds,
     }
 

@@ -380,6 +380,7 @@ def test_a_toner_poured_by_mistake_is_diluted_back_to_the_recipe_s_colour(hybrid
     grams = found.weighing.grams
     assert all(g > 0 for g in grams.values()) and "Phthalo green" not in grams
     held = {n: poured.get(n, 0.0) + grams.get(n, 0.0) for n in {*recipe, *poured}}
+    assert found.holds == pytest.approx(held)
     names = list(held)
     assert found.expected_de00.max() == pytest.approx(
         _largest_dE00(hybrid, names, [recipe.get(n, 0.0) for n in names], list(held.values())),

@@ -538,13 +538,16 @@ def _optimise(
 @dataclass(frozen=True)
 class PouredCorrection:
     """:func:`correct_what_was_poured`'s answer: the ``weighing`` of all still to pour
-    (``lines`` in pouring order from what is in the can), the ΔE00 per geometry by which
-    the can is then expected to miss the recipe (``expected_de00``) and whether each passes
-    (``passes``), and the same ΔE00 had the rest been poured as planned (``as_planned_de00``)."""
+    (``lines`` in pouring order from what is in the can) and the grams the can then
+    ``holds``, the ΔE00 per geometry by which it is expected to miss the recipe
+    (``expected_de00``) and whether each passes (``passes``); the same ΔE00 had the rest been
+    poured as planned (``as_planned_de00``), and the grams of that can (``as_planned``)."""
 
     weighing: Weighing
+    holds: dict[str, float]
     expected_de00: NDArray
     passes: NDArray
+    as_planned: dict[str, float]
     as_planned_de00: NDArray
 
 
@@ -587,5 +590,5 @@ def correct_what_was_poured(
     miss, _, passes = tolerance.judge(forward.geometries, recipe_lab, reflectance_to_Lab(R_held[0]))
     lines = pouring_order(weighing.grams, start=in_can)
     return PouredCorrection(
-        replace(weighing, lines=lines), miss, passes, delta_E(recipe_lab, can_lab)
+        replace(weighing, lines=lines), held, miss, passes, can, delta_E(recipe_lab, can_lab)
     )
