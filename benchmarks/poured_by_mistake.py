@@ -12,7 +12,10 @@ drawn at random, 0.2 to 3 g (log-uniform). Each can is judged twice, the worst g
   no batch or instrument noise), which the model only learned: whether the dilution holds in
   the world the model was trained on, not only in the model.
 
-    python benchmarks/poured_by_mistake.py [--recipes 100] [--seed 11] [--json]
+With ``--most G`` each can is also diluted within a can of at most G grams (``weigh --poured
+--most``): what a bound on the can's size costs in colour.
+
+    python benchmarks/poured_by_mistake.py [--recipes 100] [--seed 11] [--most 300] [--json]
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ from flakelab.match.judging import recipe_vector
 
 CAN_G, RESOLUTION_G = 250.0, 0.1
 STRAY_G = (0.2, 3.0)
+ROWS = ("model_as_planned", "model_after", "model_within_most", "physics_as_planned",
+        "physics_after", "physics_within_most")  # fmt: skip
 
 
 def physics_worst(world, forward, recipe: dict, held: dict) -> float:
@@ -41,8 +46,9 @@ def physics_worst(world, forward, recipe: dict, held: dict) -> float:
     return float(delta_E(lab[0], lab[1]).max())
 
 
-def one_can(world, forward, recipe: dict, rng) -> dict:
-    """A can with a stray pigment, before and after the dilution, by model and physics."""
+def one_can(world, forward, recipe: dict, rng, most_g: float | None) -> dict:
+    """A can with a stray pigment, before and after the dilution (and within ``most_g``),
+    by model and physics."""
     pigments = [t.name for t in world.library.toners if t.kind == "pigment"]
     strays = [n for n in pigments if n not in recipe and n in forward.toners]
     stray = str(rng.choice(strays))
@@ -52,7 +58,17 @@ def one_can(world, forward, recipe: dict, rng) -> dict:
     start = time.perf_counter()
     found = correct_what_was_poured(forward, recipe, CAN_G, poured, RESOLUTION_G)
     seconds = time.perf_counter() - start
-    return {
+    row = {}
+    if most_g is not None:
+        bounded = correct_what_was_poured(
+            forward, recipe, CAN_G, poured, RESOLUTION_G, most_g=most_g
+        )
+        row = {
+            "model_within_most": float(bounded.expected_de00.max()),
+            "physics_within_most": physics_worst(world, forward, recipe, bounded.holds),
+            "can_g_within_most": sum(bounded.holds.values()),
+        }
+    return row | {
         "stray_g": poured[stray],
         "model_as_planned": float(found.as_planned_de00.max()),
         "model_after": float(found.expected_de00.max()),
@@ -69,7 +85,7 @@ def summary(rows: list[dict]) -> dict:
         return np.array([r[key] for r in rows])
 
     out = {"cans": len(rows)}
-    for key in ("model_as_planned", "model_after", "physics_as_planned", "physics_after"):
+    for key in [k for k in ROWS if k in rows[0]]:
         values = column(key)
         out[key] = {
             "median": round(float(np.median(values)), 3),
@@ -83,6 +99,8 @@ def summary(rows: list[dict]) -> dict:
     )
     out["can_g_median"] = round(float(np.median(column("can_g"))), 1)
     out["can_g_p90"] = round(float(np.percentile(column("can_g"), 90)), 1)
+    if "can_g_within_most" in rows[0]:
+        out["can_g_within_most_max"] = round(float(column("can_g_within_most").max()), 1)
     out["seconds_median"] = round(float(np.median(column("seconds"))), 3)
     return out
 
@@ -91,14 +109,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--recipes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--most", type=float, default=None, help="grams the can may hold")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
     world, forward, _ = shipped_matcher("shop")
     rng = np.random.default_rng(args.seed)
     recipes = generated_recipes(world, forward, args.recipes, rng)
-    rows = [one_can(world, forward, recipe, rng) for recipe in recipes]
-    report = {"recipes": args.recipes, "seed": args.seed, "model": forward.name}
+    rows = [one_can(world, forward, recipe, rng, args.most) for recipe in recipes]
+    report = {"recipes": args.recipes, "seed": args.seed, "most_g": args.most}
+    report["model"] = forward.name
     report |= summary(rows)
     if args.json:
         print(json.dumps(report, indent=2))
@@ -107,7 +127,7 @@ def main() -> None:
         f"{args.recipes} generated recipes, seed {args.seed}, 250 g cans, a stray pigment "
         f"{STRAY_G[0]}–{STRAY_G[1]} g; worst-geometry ΔE00 against the recipe"
     )
-    for key in ("model_as_planned", "model_after", "physics_as_planned", "physics_after"):
+    for key in [k for k in ROWS if k in report]:
         row = report[key]
         print(
             f"  {key:20s} median {row['median']:.2f}  p90 {row['p90']:.2f}  "
@@ -119,6 +139,9 @@ def main() -> None:
         f"{report['can_g_median']:.0f} g (p90 {report['can_g_p90']:.0f} g); "
         f"{report['seconds_median']:.2f} s a can"
     )
+    if args.most is not None:
+        largest = report["can_g_within_most_max"]
+        print(f"  within --most {args.most:g} g: the largest can {largest} g")
 
 
 if __name__ == "__main__":

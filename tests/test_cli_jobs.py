@@ -477,6 +477,58 @@ def test_weigh_says_what_is_still_to_pour_after_a_toner_ran_over(tmp_path, cli):
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
 
 
+def test_a_can_that_may_hold_at_most_so_much_is_weighed_within_it(tmp_path, cli):
+    """``weigh --poured --most``: 5 g of black needs a 347.3 g can at the recipe's
+    proportions; at most 300 g, the rest is poured and diluted as far as 300 g allows, and
+    the can as weighed holds no more, the miss between none and the rest poured as planned.
+    Within the bound the proportions are kept as without it; a bound below the can, or
+    without --poured, is refused."""
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"  # 250 g
+    out = tmp_path / "held.json"
+    args = ["weigh", str(recipe), "--poured", "Carbon black=5"]
+    run = cli(*args, "--most", "300g", "--recipe-out", str(out), "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["proportional_g"] == pytest.approx(347.3) and report["most_g"] == 300.0
+    assert 290.0 < report["grown_g"] <= 300.0
+    assert sum(read_recipe(out).values()) == pytest.approx(report["grown_g"])
+    assert 0 < max(report["expected_de00"]) < max(report["as_planned_de00"])
+    text = cli(*args, "--most", "300g")
+    assert "would grow to 347.3 g, more than --most 300 g" in text.stdout
+    roomy = json.loads(cli(*args, "--most", "400g", "--json").stdout)
+    assert roomy["grown_g"] == pytest.approx(347.3) and "expected_de00" not in roomy
+    for extra, message in ((["--most", "200g"], "--most: 200g is less than the can, 250 g"),
+                           (["--most", "0.1l"], "--most: 0.1l ("),
+                           (["--most", "lots"], "--most")):  # fmt: skip
+        run = cli(*args, *extra)
+        assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+    run = cli("weigh", str(recipe), "--most", "300g")
+    assert run.returncode == 2 and "--most: for --poured" in run.stderr
+
+
+def test_additions_fit_the_can_they_go_into(cli):
+    """``correct --most``: the example's additions come to 18 g; a can that holds at most
+    255 g takes 4.4 g at most (a scale step kept for each toner's rounding), with a note
+    that the correction is cut short; its expected miss is larger than the unbounded one's.
+    A bound the can already overfills, or one for a reformulation, is refused."""
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"  # 250 g
+    args = ["correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed)]
+    whole = json.loads(cli(*args, "--json").stdout)
+    run = cli(*args, "--most", "255g", "--json")
+    assert run.returncode == 0, run.stderr
+    cut = json.loads(run.stdout)
+    assert sum(whole["add_g"].values()) > 10.0 and 4.0 < sum(cut["add_g"].values()) <= 5.0
+    assert cut["most_g"] == 255.0 and any("cut short" in n for n in cut["notes"])
+    assert max(cut["expected_de00"]) > max(whole["expected_de00"])
+    assert not any("cut short" in n for n in whole["notes"])
+    for extra, message in ((["--most", "250g"], "--most: 250 g cannot hold the can"),
+                           (["--most", "300g", "--mode", "reformulate"],
+                            "--most: for --mode additions")):  # fmt: skip
+        run = cli(*args, *extra)
+        assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+
+
 def test_a_can_by_volume_is_weighed_from_the_toners_densities(tmp_path, cli):
     """A quart of the example's recipe: the weighed toners fill 946.35 ml by their densities
     (to the scale's step); a library without a density for one of them is refused, naming

@@ -391,6 +391,43 @@ def test_a_toner_poured_by_mistake_is_diluted_back_to_the_recipe_s_colour(hybrid
         correct_what_was_poured(hybrid, recipe, 250.0, {"Phthalo green": 0.0}, 0.1)
 
 
+def test_a_can_that_may_not_grow_is_diluted_only_as_far_as_it_holds(hybrid):
+    """``most_g``: the same stray gram of green in a can that may hold at most 260 g. The
+    can once weighed holds no more than that, however each toner rounds; the miss lies
+    between the unbounded dilution's and the rest poured as planned, since the additions
+    are the unbounded ones' direction cut short; a bound the rest alone overfills is
+    refused, naming the grams the can needs."""
+    from flakelab.match.correction import correct_what_was_poured
+
+    recipe = {"Al fine bright": 26.5, "Al medium": 194.0, "Phthalo blue GS": 16.6,
+              "Indanthrone blue": 9.3, "Carbon black": 3.6}  # fmt: skip
+    poured = {"Al medium": 194.0, "Phthalo green": 1.0}
+    free = correct_what_was_poured(hybrid, recipe, 250.0, poured, 0.1)
+    bounded = correct_what_was_poured(hybrid, recipe, 250.0, poured, 0.1, most_g=260.0)
+    assert sum(free.holds.values()) > 260.0 >= sum(bounded.holds.values()) > 255.0
+    worst = bounded.expected_de00.max()
+    assert free.expected_de00.max() < worst < bounded.as_planned_de00.max()
+    assert all(bounded.holds[n] >= g for n, g in poured.items())  # nothing taken back
+    with pytest.raises(RecipeError, match="--most: 251 g cannot hold the can: it needs 251.6 g"):
+        correct_what_was_poured(hybrid, recipe, 250.0, poured, 0.1, most_g=251.0)
+
+
+def test_addition_bounds_cut_a_row_short_along_its_own_direction():
+    """Each addition at most ``each`` of the can; a row over ``total`` scaled down whole,
+    so that its proportions (where the colour moves) stay; a row within it untouched."""
+    from flakelab.match.correction import AdditionBounds
+    from flakelab.match.recipe import room_for_additions
+
+    levels = torch.tensor([[1.0, 0.5, 0.0], [0.02, 0.02, 0.0]], dtype=torch.float64)
+    added = AdditionBounds(0.5, 0.1).apply(levels)
+    assert added[0].sum().item() == pytest.approx(0.1)
+    assert (added[0, 0] / added[0, 1]).item() == pytest.approx(2.0)
+    assert torch.equal(added[1], 0.5 * levels[1])
+    assert torch.equal(AdditionBounds(0.5).apply(levels), 0.5 * levels)
+    # 300 g at most for a 250 g can of five toners: 49.5 g of additions, a step kept for each
+    assert room_for_additions(300.0, 250.0, 5, 0.1) == pytest.approx(49.5 / 250.0)
+
+
 def test_impossible_quantities_are_refused():
     with pytest.raises(RecipeError, match="too small"):
         weigh({"A": 0.999, "B": 0.001}, 10.0, 0.1)

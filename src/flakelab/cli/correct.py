@@ -83,6 +83,14 @@ def correct_command(
             show_default="the whole recipe",
         ),
     ] = None,
+    most: Annotated[
+        str | None,
+        typer.Option(
+            help="The most the can may hold after the additions, e.g. 300g (or by volume, "
+            "0.35l, at the recipe's density): they are scaled down together to fit.",
+            show_default="no bound",
+        ),
+    ] = None,
     offset_weight: Annotated[
         float | None,
         typer.Option(
@@ -130,12 +138,15 @@ def correct_command(
     check_figure_file(plot, "--plot")
     grams = read_recipe(recipe)
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
-    if left is not None and mode != "additions":
-        raise FlakelabError("--left: for --mode additions (a reformulation is mixed afresh)")
+    for option, given in (("--left", left), ("--most", most)):
+        if given is not None and mode != "additions":
+            raise FlakelabError(f"{option}: for --mode additions (a reformulation is mixed afresh)")
     shop, named = workplace_shop(shop)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
     x0 = recipe_fractions(lib, grams, recipe)
     can = grams if left is None else _what_is_left(grams, left, resolution, lib, recipe)
+    most_g = None if most is None else _most_g(most, can, resolution, lib)
+    room = None if most_g is None else _room_in_can(most_g, can, resolution, extra_toners)
     target_reading, target_readings = read_readings(target, sample, average)
     sprayed_reading, sprayed_readings = read_readings(
         sprayed, sprayed_sample, average_sprayed, "--sprayed-sample", "--average-sprayed"
@@ -160,6 +171,7 @@ def correct_command(
         tolerance=tol,
         metamerism=metamerism,
         lights=test_lights,
+        max_total=room,
     )
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
@@ -197,6 +209,13 @@ def correct_command(
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
     if left is not None:
         report["left_g"] = round(sum(can.values()), 6)
+    if most_g is not None:
+        report["most_g"] = most_g
+        if sum(correction.added.values()) >= room * 0.99:  # traces under 1e-4 left out
+            report["notes"].append(
+                f"the additions fill the can to --most {most_g:g} g: the correction is cut "
+                "short there, as far as the can allows"
+            )
     if recipe_out is not None:  # what the can holds after the additions, or the new recipe
         corrected = report.get("recipe_g") or {
             name: round(can.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
@@ -278,6 +297,24 @@ def _what_is_left(
             f"--left: {remaining:g} g is more than the {mixed:g} g the recipe mixed ({recipe})"
         )
     return {name: share * remaining for name, share in shares.items()}
+
+
+def _most_g(most: str, can: dict[str, float], resolution: float, library) -> float:
+    """``--most`` in grams: by volume, at the density of the ``can``'s recipe."""
+    from flakelab.match.recipe import order_can
+
+    shares = {name: g for name, g in can.items() if g > 0}
+    return order_can(most, resolution, "--most").for_toners(library, shares).grams_for(shares)
+
+
+def _room_in_can(most_g: float, can: dict[str, float], resolution: float, extra: int) -> float:
+    """The share of the mixed ``can`` its additions may come to together under ``--most``: a
+    step of the scale kept for each toner's rounding (the recipe's and the one that may join
+    it, with ``extra`` toners tried)."""
+    from flakelab.match.recipe import room_for_additions
+
+    toners = sum(g > 0 for g in can.values()) + (extra > 0)
+    return room_for_additions(most_g, sum(can.values()), toners, resolution)
 
 
 def _can_size(can: dict[str, float], resolution: float) -> float:

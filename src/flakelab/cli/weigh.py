@@ -43,6 +43,15 @@ def weigh_command(
             "can that keeps the recipe's proportions.",
         ),
     ] = None,
+    most: Annotated[
+        str | None,
+        typer.Option(
+            help="With --poured: the most the can may hold once the rest is poured, e.g. 300g "
+            "(or by volume, 0.35l, at the recipe's density). A can that would grow past it "
+            "is brought as near the recipe's colour as it allows.",
+            show_default="no bound",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Weigh a recipe for another can, and what rounding to the scale costs in colour.
@@ -60,9 +69,12 @@ def weigh_command(
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
     can = can.for_toners(lib, shares)
     can_g = can.grams_for(shares)
+    if most is not None and not poured:
+        raise FlakelabError("--most: for --poured (how far a can may grow once poured)")
     if poured:
-        _weigh_the_rest(forward, recipe, shares, can, can_g, poured_grams(poured), recipe_out,
-                        json_output)  # fmt: skip
+        most_g = None if most is None else _most_the_can_holds(most, can, can_g, lib, shares)
+        _weigh_the_rest(forward, recipe, shares, can, can_g, poured_grams(poured), most_g,
+                        recipe_out, json_output)  # fmt: skip
         return
     report = {
         "recipe": str(recipe),
@@ -101,9 +113,23 @@ def poured_grams(pairs: list[str]) -> dict[str, float]:
     return grams
 
 
+def _most_the_can_holds(most: str, can, can_g: float, library, shares) -> float:
+    """``--most`` in grams (by volume, at the recipe's density), checked that it holds the
+    recipe's own can."""
+    from flakelab.match.recipe import order_can
+
+    most_can = order_can(most, can.resolution_g, "--most").for_toners(library, shares)
+    most_g = most_can.grams_for(shares)
+    if most_g < can_g:
+        amount = most if most_can.millilitres is None else f"{most} ({most_g:g} g)"
+        raise FlakelabError(f"--most: {amount} is less than the can, {can_g:g} g")
+    return most_g
+
+
 def _weigh_the_rest(
-    forward, recipe: Path, shares, can, can_g: float, poured: dict, recipe_out, json_output
-) -> None:
+    forward, recipe: Path, shares, can, can_g: float, poured: dict, most_g, recipe_out,
+    json_output,
+) -> None:  # fmt: skip
     """``weigh --poured``: what is still to pour, and the can's size, once some is poured;
     where a toner outside the recipe was poured, what brings the can back to its colour."""
     from flakelab.io import write_recipe
@@ -116,11 +142,12 @@ def _weigh_the_rest(
     total = sum(shares.values())
     planned = {n: shares.get(n, 0.0) / total * can_g for n in poured}
     strays = [n for n in poured if n not in shares]
-    weighing, found = _what_to_pour(forward, shares, can, can_g, poured, strays)
+    weighing, found = _what_to_pour(forward, shares, can, can_g, poured, strays, most_g)
     grown = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
     report = {
         "recipe": str(recipe),
         **can_size(can, can_g),
+        "most_g": most_g,
         "poured_g": poured,
         "grown_g": grown,
         "ran_over": [
@@ -143,25 +170,33 @@ def _weigh_the_rest(
     _print_the_rest(report, recipe, planned, forward.name)
 
 
-def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays: list[str]):
+def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most_g):
     """The weighing of what is still to pour, and what the report adds for it: nothing on
-    plan or where a recipe's toner ran over; where ``strays`` outside the recipe were
-    poured, the ΔE00 by which the can is then expected to miss the recipe."""
+    plan or where a recipe's toner ran over and the can may grow to keep the proportions;
+    where ``strays`` outside the recipe were poured, or the can may not grow to more than
+    ``most_g``, the ΔE00 by which it is then expected to miss the recipe."""
     from flakelab.core.tolerance import failing_geometries, tolerance_preset
     from flakelab.match.correction import correct_what_was_poured
     from flakelab.match.objective import OBJECTIVE_DEFAULT
     from flakelab.match.recipe import weigh_after_pouring
 
+    found = {}
     if not strays:
-        return weigh_after_pouring(forward, shares, can_g, poured, can.resolution_g)[1], {}
+        weighing = weigh_after_pouring(forward, shares, can_g, poured, can.resolution_g)[1]
+        proportional = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
+        if most_g is None or proportional <= most_g:
+            return weighing, found
+        found["proportional_g"] = proportional  # more than --most: diluted as far as it allows
     tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
-    found = correct_what_was_poured(forward, shares, can_g, poured, can.resolution_g, tolerance)
-    return found.weighing, {
+    poured_right = correct_what_was_poured(
+        forward, shares, can_g, poured, can.resolution_g, tolerance, most_g
+    )
+    return poured_right.weighing, found | {
         "tolerance": tolerance.name,
         "geometries": list(forward.geometries),
-        "as_planned_de00": found.as_planned_de00.round(3).tolist(),
-        "expected_de00": found.expected_de00.round(3).tolist(),
-        "expected_failing": failing_geometries(forward.geometries, found.passes),
+        "as_planned_de00": poured_right.as_planned_de00.round(3).tolist(),
+        "expected_de00": poured_right.expected_de00.round(3).tolist(),
+        "expected_failing": failing_geometries(forward.geometries, poured_right.passes),
     }
 
 
@@ -172,7 +207,14 @@ def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> No
         state = (
             f"{', '.join(report['not_in_recipe'])} is not in the recipe: the rest of the recipe "
             "and what brings the can back to its colour by the model; the can grows to "
-            f"{grown:g} g"
+            f"{grown:g} g" + (f" (--most {report['most_g']:g} g)" if report["most_g"] else "")
+        )
+    elif over and "proportional_g" in report:
+        ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
+        state = (
+            f"{ran} ran over; at the recipe's proportions the can would grow to "
+            f"{report['proportional_g']:g} g, more than --most {report['most_g']:g} g: the "
+            f"rest and what brings the can nearest its colour by the model, in {grown:g} g"
         )
     elif over:
         ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)

@@ -318,6 +318,7 @@ def correct(
     mode: str = "additions",
     steps: int = 300,
     max_addition: float = 0.5,
+    max_total: float | None = None,
     library: Library | None = None,
     offset_weight: float | None = None,
     persistent_sd: float | None = None,
@@ -331,7 +332,8 @@ def correct(
     physics_every: int = MatchSettings.physics_every,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
-    ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can;
+    ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can, and
+    all of them together at most ``max_total`` of it (None: no bound but each one's);
     ``extra_toners`` toners outside the recipe are tried (0: the recipe's toners only).
     With ``library`` (in the model's toner order) the offset is split by the physics of the
     spray's application (σ_p widened by ``model_sd`` times an ensemble's disagreement,
@@ -345,6 +347,8 @@ def correct(
     (:func:`~flakelab.match.forward.stepping`)."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
+    if max_total is not None and not max_total >= 0:
+        raise FlakelabError(f"max_total: expected a share ≥ 0 of the can, got {max_total}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
         raise FlakelabError(f"--offset-weight: expected 0 to 1, got {offset_weight}")
     objective = MatchObjective(
@@ -383,7 +387,7 @@ def correct(
         persistent,
         mode,
         steps,
-        max_addition,
+        AdditionBounds(max_addition, max_total),
         extra_toners,
         application,
         ratio,
@@ -435,7 +439,7 @@ def aim_off(
         None,  # the index of the prediction itself
         "reformulate",
         steps,
-        0,
+        AdditionBounds(0.0),
         MatchSettings.physics_every,
     )
     x[moved], lab[moved] = aimed.double().numpy(), aimed_lab.double().numpy()
@@ -450,7 +454,7 @@ def _recipe_for_offset(
     persistent: NDArray,
     mode: str,
     steps: int,
-    max_addition: float,
+    bounds: AdditionBounds,
     extra_toners: int,
     application: dict[str, float] | None,
     spectral_ratio: NDArray,
@@ -477,7 +481,7 @@ def _recipe_for_offset(
         ratio,
         mode,
         steps,
-        max_addition,
+        bounds,
         physics_every,
     )
     loss[1:] += EXTRA_TONER_GAIN
@@ -500,7 +504,7 @@ def _recipe_for_offset(
 
 
 def _optimise(
-    objective, forward, x0, used, target_lab, offset, ratio, mode, steps, max_addition, every
+    objective, forward, x0, used, target_lab, offset, ratio, mode, steps, bounds, every
 ):  # fmt: skip
     """Adam over every row of ``used[N, T]`` at once, each from ``x0`` (one row, or one per
     row): new amounts of the used toners (``reformulate``) or additions to ``x0``; returns
@@ -517,7 +521,7 @@ def _optimise(
     optimiser = TensorAdam(variable, lr=0.05)
 
     def additions() -> torch.Tensor:
-        return max_addition * torch.sigmoid(variable) * used
+        return bounds.apply(torch.sigmoid(variable) * used)
 
     def mixed() -> torch.Tensor:
         if mode == "reformulate":
@@ -533,6 +537,24 @@ def _optimise(
         final = mixed()
         R, lab, loss = _predicted(objective, forward, final, target_lab, offset, ratio)
         return final, additions().detach(), lab, loss.numpy(), R
+
+
+@dataclass(frozen=True)
+class AdditionBounds:
+    """How much a correction may add, as shares of the can: ``each`` toner at most, and all
+    together at most ``total`` (None: no bound but each one's), which a can's size sets."""
+
+    each: float = 0.5
+    total: float | None = None
+
+    def apply(self, levels: torch.Tensor) -> torch.Tensor:
+        """Additions ``[N, T]`` from ``levels`` in 0–1: each scaled to ``each``, and a row
+        over ``total`` scaled down whole, so its proportions (the colour's direction) stay."""
+        added = self.each * levels
+        if self.total is None:
+            return added
+        total = torch.as_tensor(self.total, dtype=added.dtype)
+        return added * total / added.sum(1, keepdim=True).clamp(min=total)
 
 
 @dataclass(frozen=True)
@@ -558,15 +580,25 @@ def correct_what_was_poured(
     poured: dict[str, float],
     resolution_g: float = 0.1,
     tolerance: Tolerance | None = None,
+    most_g: float | None = None,
 ) -> PouredCorrection:
     """What to pour into a can that holds a toner outside the recipe (``poured``, grams per
-    toner; poured by mistake): the rest of the recipe's ``quantity_g`` as planned, plus
-    additions, at most half the can again, that bring the can's predicted colour back to the
-    recipe's (:func:`correct`, aimed at the recipe's own prediction: no spray-out has
-    measured the can, so no offset is split off), judged by ``tolerance`` (default
-    :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`). A toner the recipe lacks can only
-    be diluted: where even then the can misses, it is better mixed afresh."""
-    from flakelab.match.recipe import check_poured, check_scale, pouring_order, weigh_additions
+    toner; poured by mistake) or too much of one of its own: the rest of the recipe's
+    ``quantity_g`` as planned, plus additions, each at most half the can again, that bring
+    the can's predicted colour back to the recipe's (:func:`correct`, aimed at the recipe's
+    own prediction: no spray-out has measured the can, so no offset is split off), judged by
+    ``tolerance`` (default :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`). With
+    ``most_g`` the can holds at most that many grams once weighed, and the additions are
+    scaled down together to fit (:func:`~flakelab.match.recipe.room_for_additions`). A toner
+    the recipe lacks can only be diluted: where even then the can misses, it is better mixed
+    afresh."""
+    from flakelab.match.recipe import (
+        check_poured,
+        check_scale,
+        pouring_order,
+        room_for_additions,
+        weigh_additions,
+    )
 
     check_scale(quantity_g, resolution_g)
     check_poured(poured)
@@ -574,12 +606,14 @@ def correct_what_was_poured(
     total = sum(fractions.values())
     planned = {n: v / total * quantity_g for n, v in fractions.items()}
     can = {n: max(planned.get(n, 0.0), poured.get(n, 0.0)) for n in {*planned, *poured}}
+    in_can, mixed = sum(poured.values()), sum(can.values())
+    room = None if most_g is None else room_for_additions(most_g, mixed, len(can), resolution_g)
     R, _ = evaluate_recipes(forward, np.stack([_vector(forward, fractions), _vector(forward, can)]))
     recipe_lab, can_lab = reflectance_to_Lab(R)
     correction = correct(
-        forward, R[0], can, R[1], offset_weight=1.0, extra_toners=0, tolerance=tolerance
-    )
-    in_can, mixed = sum(poured.values()), sum(can.values())
+        forward, R[0], can, R[1], offset_weight=1.0, extra_toners=0, tolerance=tolerance,
+        max_total=room,
+    )  # fmt: skip
     to_pour = {
         n: (can[n] - poured.get(n, 0.0) + correction.added.get(n, 0.0) * mixed) / in_can
         for n in can

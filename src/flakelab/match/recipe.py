@@ -41,6 +41,7 @@ __all__ = [
     "weigh_after_pouring",
     "pouring_order",
     "check_poured",
+    "room_for_additions",
     "parse_quantity",
     "can_on_scale",
     "to_scale",
@@ -323,6 +324,19 @@ def weigh_after_pouring(
     weighing = weigh_additions(forward, poured, added, resolution_g)
     lines = pouring_order(weighing.grams, start=in_can)
     return round(grown, 9), replace(weighing, lines=lines)
+
+
+def room_for_additions(most_g: float, can_g: float, toners: int, resolution_g: float) -> float:
+    """The share of a can of ``can_g`` that additions may come to together, so that it holds
+    at most ``most_g`` (``--most``) even when each of ``toners`` weighed is rounded up a step
+    on the scale; a :class:`RecipeError` where even no addition would fit."""
+    needed = can_g + toners * resolution_g
+    if not most_g >= needed:
+        raise RecipeError(
+            f"--most: {most_g:g} g cannot hold the can: it needs {needed:.1f} g ({can_g:.1f} g "
+            f"and a scale step for each of its {toners} toners' rounding)"
+        )
+    return (most_g - needed) / can_g
 
 
 def check_poured(poured: dict[str, float]) -> None:
