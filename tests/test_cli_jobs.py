@@ -282,6 +282,21 @@ def test_a_car_read_at_three_spots_is_matched_and_corrected_as_their_mean(tmp_pa
     run = cli("compare", str(tmp_path / "dirty.json"), str(tmp_path / "spots.json"),
               "--average-sprayed", "--sample-name", "spot 1")  # fmt: skip
     assert run.returncode == 2 and "--sample-name and --average-sprayed" in run.stderr
+    # inspect: the mean's colour, as a file of the mean alone describes it, and the dirty spot
+    run = cli("inspect", str(tmp_path / "dirty.json"), "--average", "--json")
+    inspected = json.loads(run.stdout)
+    alone = json.loads(cli("inspect", str(tmp_path / "mean.json"), "--json").stdout)
+    dirty_mean = mean_reading(dirty).lab()
+    assert [g["L"] for g in inspected["geometries"]] == pytest.approx(dirty_mean[:, 0], abs=1e-4)
+    assert [g["L"] for g in inspected["geometries"]] != pytest.approx(
+        [g["L"] for g in alone["geometries"]], abs=0.1
+    )  # the dirty spot darkens the mean
+    assert inspected["readings"]["furthest"] == "spot 3"
+    assert inspected["readings"]["tolerance"] == "refinish"
+    text = cli("inspect", str(tmp_path / "dirty.json"), "--average").stdout
+    assert "the mean of 3 readings, the furthest (spot 3)" in text and "readings differ" in text
+    run = cli("inspect", str(tmp_path / "spots.json"), "--average", "--all")
+    assert run.returncode == 2 and "--all and --average" in run.stderr
 
 
 def test_correct_refuses_a_bad_recipe(tmp_path, cli):

@@ -93,6 +93,23 @@ def inspect(
     ] = None,
     sample: SampleOption = None,
     all_samples: Annotated[bool, typer.Option("--all", help="Every sample in the file.")] = False,
+    average: Annotated[
+        bool,
+        typer.Option(
+            "--average",
+            help="The mean of every reading in the file, and how far each lies from it, "
+            "judged against --tolerance.",
+        ),
+    ] = False,
+    tolerance: Annotated[
+        str,
+        typer.Option(
+            "--tolerance",
+            "-t",
+            help="With --average: the tolerance the readings' spread is judged against "
+            "(preset or TOML/JSON file).",
+        ),
+    ] = "refinish",
     conditions: ConditionsOption = "D65/10",
     as_json: JsonOption = False,
     example: Annotated[
@@ -102,8 +119,21 @@ def inspect(
     """Per-geometry L*a*b*, C*, h, flake angles, flop index and texture of a measurement."""
     if path is None and not example:
         raise FlakelabError("give a measurement file, or --example")
+    if average and all_samples:
+        raise FlakelabError("--all and --average: expected one of them, not both")
     cond = Conditions.parse(conditions)
     source = path if path is not None else example_path("target")
+    if average:
+        tol = read_tolerance(tolerance)
+        mean, readings = read_readings(source, sample, average)
+        info = describe(mean, cond) | {"readings": spread_of_readings(readings, mean, tol, cond)}
+        info["readings"]["tolerance"] = tol.name
+        if as_json:
+            print(json.dumps(info, indent=1))
+            return
+        _print_description(info)
+        _print_readings_spread(info["readings"], "file")
+        return
     measurements = read_measurements(source) if all_samples else [read_sample(source, sample)]
     infos = [describe(m, cond) for m in measurements]
     if as_json:
@@ -259,14 +289,19 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
         )
     for what in ("reference", "sample"):
         if spread := report.get(f"{what}_readings"):
-            console.print(
-                f"{what}: the mean of {len(spread['readings'])} readings, the furthest "
-                f"({spread['furthest']}) {spread['limit_share_max']:.0%} of the tolerance "
-                "from it",
-                highlight=False,
-            )
-            if note := readings_note(spread, what):
-                console.print(f"[yellow]note:[/] {note}", highlight=False)
+            _print_readings_spread(spread, what)
+
+
+def _print_readings_spread(spread: dict, what: str) -> None:
+    """How far the furthest of the readings averaged lies from their mean, and a note where
+    it lies far."""
+    console.print(
+        f"{what}: the mean of {len(spread['readings'])} readings, the furthest "
+        f"({spread['furthest']}) {spread['limit_share_max']:.0%} of the tolerance from it",
+        highlight=False,
+    )
+    if note := readings_note(spread, what):
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
 @app.command()
