@@ -730,6 +730,28 @@ def test_the_newest_cases_come_first_and_one_can_be_removed(cases, database_url)
     assert count_cases(engine) == 11
 
 
+def test_a_case_is_found_by_any_unique_beginning_of_its_id(cases, database_url):
+    """Tables show ids shortened; ``find_case_id`` takes the whole id or any unique
+    beginning of one. A beginning of several names them and one of none says so; LIKE's
+    wildcards typed in an id match only themselves ('job-12_' would begin both job-12 ids,
+    'x_' would begin 'x%y')."""
+    from flakelab.cases.database import find_case_id, short_id
+
+    engine = open_database(database_url)
+    ids = ["job-12_a", "job-12xa", "job-13", "x%y"]
+    add_cases(engine, [replace(c, case_id=i) for c, i in zip(cases, ids, strict=False)])
+    assert find_case_id(engine, "job-13") == "job-13"
+    assert find_case_id(engine, "job-12_") == "job-12_a" and find_case_id(engine, "x%") == "x%y"
+    with pytest.raises(CaseError, match="'job-12' begins the ids of 2 cases") as raised:
+        find_case_id(engine, "job-12")
+    assert "job-12_a" in str(raised.value) and "job-12xa" in str(raised.value)
+    for given in ("x_", "%", "job-14"):
+        with pytest.raises(CaseError, match=f"no case '{given}'"):
+            find_case_id(engine, given)
+    assert short_id("39454a98-4d50-769d-0000-000000000004") == "39454a98-4d50"
+    assert short_id("shop-0f3a9c21d4e5b6a7") == "shop-0f3a9c21" and short_id("job-13") == "job-13"
+
+
 def test_worst_differences_are_each_case_s_largest_de00_where_it_lies(cases):
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import delta_E

@@ -426,7 +426,10 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path, cli):
     assert dupont["case_id"] == report["case_id"] and dupont["worst_de00"] < 0.5
     run = cli("cases", "remove", report["case_id"], "-d", str(db))  # no terminal to ask
     assert run.returncode == 2 and "confirm with --yes" in run.stderr
-    run = cli("cases", "remove", report["case_id"], "--yes", "-d", str(db))
+    shown = report["case_id"][:13]  # the table shows ids shortened; remove takes the beginning
+    table = cli("cases", "list", "-d", str(db)).stdout
+    assert shown in table and report["case_id"] not in table
+    run = cli("cases", "remove", shown, "--yes", "-d", str(db))
     assert run.returncode == 0 and f"removed case {report['case_id']}" in run.stderr
     assert {c.shop for c in iter_cases(open_database(db))} == {"Martin"}
 

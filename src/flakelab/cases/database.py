@@ -39,11 +39,19 @@ __all__ = [
     "user_database_file",
     "latest_cases",
     "remove_case",
+    "find_case_id",
+    "short_id",
+    "SHORT_ID_LENGTH",
     "shop_summary",
     "DatabaseError",
 ]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
+
+SHORT_ID_LENGTH = 13
+"""Characters of a case id that tables show: 48 random bits of a generated id
+(``39454a98-4d50``), 32 of a recorded one (``shop-0f3a9c21``), which tell apart the cases of
+any shop's database; :func:`find_case_id` takes any unique beginning."""
 
 
 class DatabaseError(FlakelabError):
@@ -254,6 +262,33 @@ def remove_case(engine: Engine, case_id: str) -> Case:
         case = _case(row)
         session.delete(row)
     return case
+
+
+def short_id(case_id: str) -> str:
+    """A case id as tables show it: its first :data:`SHORT_ID_LENGTH` characters."""
+    return case_id[:SHORT_ID_LENGTH]
+
+
+def find_case_id(engine: Engine, given: str) -> str:
+    """The stored case id that ``given`` is, or the one it begins (a shortened id, as tables
+    show it); a :class:`CaseError` naming the matches where none or several match."""
+    if case_exists(engine, given):
+        return given
+    if not given.strip():
+        raise CaseError(f"{engine.url}: expected a case id, got {given!r}")
+    escaped = given.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
+    query = select(CaseRow.case_id).where(CaseRow.case_id.like(f"{escaped}%", escape="\\"))
+    with Session(engine) as session:
+        found = list(session.scalars(query.order_by(CaseRow.case_id).limit(6)))
+    if not found:
+        raise CaseError(f"{engine.url}: no case {given!r}")
+    if len(found) > 1:
+        many = "more than five" if len(found) > 5 else str(len(found))
+        raise CaseError(
+            f"{engine.url}: {given!r} begins the ids of {many} cases ({', '.join(found[:5])}): "
+            "give more of it"
+        )
+    return found[0]
 
 
 def case_exists(engine: Engine, case_id: str) -> bool:

@@ -473,7 +473,7 @@ def list_cases(
     Newest first, with when each was made, its id (for 'cases remove') and the geometry of
     the worst ΔE00; with --check, how far each spray-out lies from its recipe's prediction."""
     from flakelab.cases.case import worst_differences
-    from flakelab.cases.database import latest_cases, open_database
+    from flakelab.cases.database import SHORT_ID_LENGTH, latest_cases, open_database, short_id
 
     engine = open_database(database, must_exist=True)
     cases = latest_cases(engine, last, shop=shop)
@@ -535,7 +535,7 @@ def list_cases(
         recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:2])
         cells = [
             row["created_at"][:16].replace("T", " "),
-            row["case_id"],
+            short_id(row["case_id"]),
             row["outcome"],
             f"{row['worst_de00']:.2f} {row['worst_geometry']}",
         ]
@@ -547,6 +547,13 @@ def list_cases(
             cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
         table.add_row(*cells)
     console.print(table)
+    if any(short_id(row["case_id"]) != row["case_id"] for row in rows):
+        errors.print(
+            f"ids shortened to their first {SHORT_ID_LENGTH} characters: 'cases remove' takes "
+            "any unique beginning of one; --json gives them whole",
+            style="dim",
+            highlight=False,
+        )
     _tell_mix_ups(0, "", unchecked)
 
 
@@ -581,18 +588,26 @@ def _shown_check(check: dict | None) -> str:
 @cases_app.command("remove")
 @reports_errors
 def remove(
-    case_id: Annotated[str, typer.Argument(help="The case to remove ('cases list' shows ids).")],
+    case_id: Annotated[
+        str,
+        typer.Argument(
+            help="The case to remove: its id, or any unique beginning of it ('cases "
+            "list' shows them)."
+        ),  # fmt: skip
+    ],
     yes: Annotated[bool, typer.Option("--yes", help="Remove without asking.")] = False,
     database: DatabaseOption = None,
 ) -> None:
     """Remove one case recorded by mistake (the wrong spray-out or recipe)."""
     import sys
 
-    from flakelab.cases.database import case_exists, open_database, remove_case
+    from flakelab.cases.database import find_case_id, open_database, remove_case
 
     engine = open_database(database, must_exist=True)
-    if not case_exists(engine, case_id):
-        raise FlakelabError(f"{engine.url}: no case {case_id!r}; nothing was removed")
+    try:
+        case_id = find_case_id(engine, case_id)
+    except FlakelabError as error:
+        raise FlakelabError(f"{error}; nothing was removed") from None
     if not yes:
         if not sys.stdin.isatty():
             raise FlakelabError(f"cases remove {case_id}: confirm with --yes")
