@@ -11,9 +11,9 @@ stray characters; JSON files by replacing or deleting one value anywhere in them
 for the match and a spray-out for the correction and for `cases record`, half the time, by
 values still readable but odd); a model file by editing its description, standardisation or weights.
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,sprayout,record,
-        recipe,library,habits,habits-match,tolerance,cases,cases-cxf,manifest,model] [--n 200]
-        [--seed 0] [--show]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
+        sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
+        manifest,model] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -240,6 +240,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # the car read at three spots, the readings averaged by the main job
         "readings": (work / "spots.json",
                      lambda p: ["match", str(p), "--average", "--candidates", "1"]),
+        "readings-inspect": (work / "spots.json", lambda p: ["inspect", str(p), "--average"]),
         # a damaged spray-out read by the correction, which meets it with the recipe's model
         "sprayout": (work / "sprayout.json",
                      lambda p: ["correct", str(target), "--recipe", str(recipe), "--sprayed",
@@ -249,6 +250,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
                    lambda p: ["cases", "record", str(target), "--recipe", str(recipe),
                               "--sprayed", str(p), "-d", "sqlite://"]),
         "recipe": (work / "recipe.json", lambda p: ["weigh", str(p)]),
+        # the same weighed after black ran over, or went in by mistake, into a bounded can
+        "poured": (work / "recipe.json",
+                   lambda p: ["weigh", str(p), "--poured", "Carbon black=5", "--most", "300g"]),
         # a can by volume, so that the toners' densities are used as well as read
         "library": (work / "library.json",
                     lambda p: ["weigh", str(recipe), "--library", str(p), "--physics",
@@ -280,7 +284,7 @@ def failure(result) -> str | None:
         return repr(result.exception)[:300]
     if "Traceback" in said or "Warning" in said:
         return said[-300:]
-    if result.exit_code == 0 and re.search(r"\bnan\b|\binf\b|Infinity", result.stdout, re.I):
+    if result.exit_code == 0 and re.search(r"\b(nan|inf|infinity)\b", result.stdout, re.I):
         return "NaN or infinity in the output"
     if result.exit_code not in (0, 2):
         return f"exit status {result.exit_code}"
@@ -318,11 +322,7 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument(
-        "--kinds",
-        default="cxf,csv,json,xlsx,target,readings,sprayout,record,recipe,library,habits,habits-match,"
-        "tolerance,cases,cases-cxf,manifest,model",
-    )
+    parser.add_argument("--kinds", help="comma-separated (default: every kind)")
     parser.add_argument("--n", type=int, default=200, help="damaged files of each kind")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--show", action="store_true", help="one refusal of each kind of message")
@@ -331,12 +331,12 @@ def main() -> int:
     kinds = good_files(work)
     rng = random.Random(args.seed)
     failures = 0
-    for kind in args.kinds.split(","):
+    for kind in args.kinds.split(",") if args.kinds else kinds:
         if kind not in kinds:
             parser.error(f"--kinds: {kind!r} is not one of {', '.join(kinds)}")
         report = fuzz(kind, *kinds[kind], args.n, rng, work)
         failures += len(report["failed"])
-        print(f"{kind:>9}: {report['refused']} refused, {report['read']} read, "
+        print(f"{kind:>16}: {report['refused']} refused, {report['read']} read, "
               f"{len(report['failed'])} failed", flush=True)  # fmt: skip
         for path, problem in report["failed"]:
             print(f"           FAILED {path}: {problem}")

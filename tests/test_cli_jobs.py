@@ -522,6 +522,13 @@ def test_a_can_that_may_hold_at_most_so_much_is_weighed_within_it(tmp_path, cli)
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
     run = cli("weigh", str(recipe), "--most", "300g")
     assert run.returncode == 2 and "--most: for --poured" in run.stderr
+    # black a trace of 1e-308 of the recipe: no scale weighs the can that would hold 5 g of
+    # it (was: an internal error converting an infinite can to steps; fuzz seed 31)
+    huge = tmp_path / "huge.json"
+    huge.write_text(json.dumps(json.loads(recipe.read_text()) | {"Al medium": 1e308}))
+    run = cli("weigh", str(huge), "--poured", "Carbon black=5")
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "--poured: Carbon black, 5 g, is 3.6e-308 of the recipe" in run.stderr
 
 
 def test_additions_fit_the_can_they_go_into(cli):

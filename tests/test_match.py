@@ -548,6 +548,53 @@ def test_match_example_gives_weighed_candidates_with_per_geometry_numbers(tmp_pa
     assert report["texture_limits"] == {"SG": 0.5, "G": 1.0}
 
 
+def test_a_match_keeps_to_the_toners_the_shop_has_and_to_few_pigments(cli):
+    """``--without`` a toner out of stock: no candidate holds it; ``--max-pigments 2``: none
+    holds more than two coloured toners. The example's candidates hold both otherwise, so
+    the options are what keeps them out; a misspelt toner is refused, naming the nearest."""
+    from flakelab.io import read_library
+
+    pigments = {t.name for t in read_library().toners if t.kind == "pigment"}
+    args = ["match", "--example", "--candidates", "2", "--json"]
+    free = json.loads(cli(*args).stdout)["candidates"]
+    assert all("Phthalo green" in c["recipe"] for c in free)
+    assert all(len(pigments & set(c["recipe"])) > 2 for c in free)
+    run = cli(*args, "--without", "Phthalo green", "--max-pigments", "2")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["without"] == ["Phthalo green"]
+    for candidate in report["candidates"]:
+        assert "Phthalo green" not in candidate["recipe"]
+        assert "Phthalo green" not in {w["toner"] for w in candidate["weights_g"]}
+        assert 1 <= len(pigments & set(candidate["recipe"])) <= 2
+    run = cli(*args, "--without", "Phthalo gren")
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "'Phthalo gren' is not a toner of the library (did you mean 'Phthalo green'?)" in (
+        run.stderr
+    )
+
+
+def test_a_correction_adds_no_toner_out_of_stock(cli):
+    """``correct --without``: the example's additions lead with 13.7 g of Al fine bright;
+    without it, the others are added and it is not, in additions and in a reformulation
+    (which leaves it out); no toner is brought in that is out of stock either."""
+    from flakelab.data import example_path
+
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    args = ["correct", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed), "--json"]
+    free = json.loads(cli(*args).stdout)
+    assert max(free["add_g"], key=free["add_g"].get) == "Al fine bright"
+    run = cli(*args, "--without", "Al fine bright")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["add_g"] and "Al fine bright" not in report["add_g"]
+    assert report["without"] == ["Al fine bright"]
+    reformulated = json.loads(cli(*args, "--without", "Al fine bright", "--mode",
+                                  "reformulate").stdout)  # fmt: skip
+    assert reformulated["recipe_g"] and "Al fine bright" not in reformulated["recipe_g"]
+
+
 def test_match_through_the_library_s_physics_alone_needs_no_model(cli):
     """``--physics``: the example matched through the library's physics, which predicts the
     texture readings too; every number says where it came from, and a single physics model

@@ -36,6 +36,7 @@ from flakelab.cli.matcher import (
     PhysicsOption,
     RecipeOutOption,
     ResolutionOption,
+    WithoutOption,
     habits_for,
     left_out_model,
     matcher_setup,
@@ -103,6 +104,7 @@ def correct_command(
     extra_toners: Annotated[
         int, typer.Option(help="Toners outside the recipe tried as one addition (0: none).")
     ] = EXTRA_TONERS_TRIED,
+    without: WithoutOption = None,
     model_sd: Annotated[
         float,
         typer.Option(
@@ -172,6 +174,7 @@ def correct_command(
         metamerism=metamerism,
         lights=test_lights,
         max_total=room,
+        without=without or (),
     )
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
@@ -225,6 +228,7 @@ def correct_command(
         report["recipe_out"] = str(recipe_out)
         errors.print(f"wrote the corrected recipe to {recipe_out}", highlight=False)
     report["new_toner"] = correction.new_toner
+    report["without"] = list(without or ())
     report["offset_weight"] = offset_weight
     report["model_sd"] = model_sd
     report["spray_application"] = correction.application and {

@@ -37,6 +37,7 @@ from flakelab.cli.matcher import (
     QuantityOption,
     RecipeOutOption,
     ResolutionOption,
+    WithoutOption,
     habits_for,
     left_out_model,
     matcher_setup,
@@ -104,6 +105,16 @@ def match_command(
     ] = MatchSettings.model_risk,
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
+    without: WithoutOption = None,
+    max_pigments: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            max=5,
+            help="The most coloured toners (pigments) a recipe may hold, besides its effect "
+            "toners: fewer are quicker to weigh and to correct.",
+        ),
+    ] = MatchSettings.max_pigments,
     solid_travel: Annotated[
         float,
         typer.Option(
@@ -164,12 +175,13 @@ def match_command(
     from flakelab.io import read_tolerance
     from flakelab.match.recipe import order_can
     from flakelab.match.search import match
+    from flakelab.match.stock import toners_allowed
 
     if target == "evaluate":
-        if render is not None or plot is not None or recipe_out is not None or average:
+        if render is not None or plot is not None or recipe_out is not None or average or without:
             raise FlakelabError(
-                "--render, --plot, --recipe-out, --average: for the candidates of one target, "
-                "not the harness"
+                "--render, --plot, --recipe-out, --average, --without: for the candidates of one "
+                "target, not the harness"
             )
         _evaluate(
             library=library,
@@ -189,6 +201,7 @@ def match_command(
                 metamerism=metamerism,
                 lights=lights_option(lights),
                 solid_travel=solid_travel,
+                max_pigments=max_pigments,
             ),
             tolerance=tolerance,
             scale=order_can(quantity, resolution) if weighed else None,
@@ -216,7 +229,8 @@ def match_command(
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
-    can = can.for_toners(lib, forward.toners)
+    allowed = toners_allowed(forward.toners, without or ())
+    can = can.for_toners(lib, [n for n, ok in zip(forward.toners, allowed, strict=True) if ok])
     path = example_path("target") if example else Path(target)
     measurement, readings = read_readings(path, sample, average)
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
@@ -234,11 +248,14 @@ def match_command(
             metamerism=metamerism,
             lights=lights_option(lights),
             solid_travel=solid_travel,
+            max_pigments=max_pigments,
         ),
+        allowed=allowed,
         habits=shop_habits,
         library=lib,
     )
     report = result.to_dict()
+    report["without"] = list(without or ())
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []

@@ -24,6 +24,16 @@ MetamerismOption = Annotated[
 ]
 
 
+WithoutOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--without",
+        help="A toner the recipe may not use: out of stock, or not in the shop's mixing bank "
+        "(repeat for each).",
+    ),
+]
+
+
 RecipeOutOption = Annotated[
     Path | None,
     typer.Option(

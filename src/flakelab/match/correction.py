@@ -36,6 +36,7 @@ loss by more than :data:`EXTRA_TONER_GAIN`.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -60,6 +61,7 @@ from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
+from flakelab.match.stock import toners_allowed
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
     FILM_BUILD_SD,
@@ -293,12 +295,14 @@ def _predicted(objective, forward, x, target_lab, offset, ratio):
     return R, lab, objective.loss(target_lab, lab) + metamerism
 
 
-def _extra_candidates(forward, objective, x0, target_lab, offset, ratio, count) -> list[int]:
-    """Toners outside the recipe whose small addition lowers the loss fastest (the
-    directional derivative of the renormalised mix, one backward pass)."""
-    candidates = np.flatnonzero(
-        (x0[0].numpy() == 0) & np.array([n not in forward.novel for n in forward.toners])
-    )
+def _extra_candidates(
+    forward, objective, x0, target_lab, offset, ratio, count, allowed
+) -> list[int]:  # fmt: skip
+    """Toners outside the recipe, ``allowed`` and known to the learned model, whose small
+    addition lowers the loss fastest (the directional derivative of the renormalised mix,
+    one backward pass)."""
+    known = np.array([n not in forward.novel for n in forward.toners])
+    candidates = np.flatnonzero((x0[0].numpy() == 0) & known & allowed)
     if not count or not candidates.size:
         return []
     x = x0.clone().requires_grad_(True)
@@ -330,6 +334,7 @@ def correct(
     metamerism: float = MatchSettings.metamerism,
     lights: tuple[str, ...] | None = None,
     physics_every: int = MatchSettings.physics_every,
+    without: Collection[str] = (),
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can, and
@@ -344,7 +349,8 @@ def correct(
     weighs its expected ``metamerism`` index under the test ``lights`` (default A, F11 and
     LED-B3), as the search does. Its optimiser holds what it differentiates by finite
     differences ``physics_every`` steps, as the search's does
-    (:func:`~flakelab.match.forward.stepping`)."""
+    (:func:`~flakelab.match.forward.stepping`). Toners ``without`` (out of stock) are
+    neither added nor brought in; a reformulation leaves them out."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if max_total is not None and not max_total >= 0:
@@ -355,6 +361,9 @@ def correct(
         forward.geometries, tolerance, forward.dtype, target, metamerism, lights
     )
     x_recipe = _vector(forward, recipe)
+    allowed = toners_allowed(forward.toners, without)
+    if mode == "reformulate" and not (allowed & (x_recipe > 0)).any():
+        raise FlakelabError("--without: leaves none of the recipe's toners to reformulate with")
     x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     with torch.no_grad():
         R0, _ = forward(x0)
@@ -393,6 +402,7 @@ def correct(
         ratio,
         lights,
         physics_every,
+        allowed,
     )
 
 
@@ -460,16 +470,20 @@ def _recipe_for_offset(
     spectral_ratio: NDArray,
     lights: tuple[str, ...] | None,
     physics_every: int,
+    allowed: NDArray,
 ) -> Correction:
     """The recipe near ``x_recipe`` whose prediction plus the ``persistent`` L*a*b* offset
     ``[G, 3]`` best matches ``target`` by ``objective``, with at most one toner joining
-    it; its expected spectra are its prediction times ``spectral_ratio``."""
+    it, ``allowed[T]`` toners only changed; its expected spectra are its prediction times
+    ``spectral_ratio``."""
     x0 = torch.as_tensor(x_recipe, dtype=forward.dtype)[None]
     offset = torch.as_tensor(persistent, dtype=forward.dtype)
     ratio = torch.as_tensor(spectral_ratio, dtype=forward.dtype)
     target_lab = objective.lab(torch.as_tensor(target, dtype=forward.dtype))
-    extra = _extra_candidates(forward, objective, x0, target_lab, offset, ratio, extra_toners)
-    used = (x0 > 0).repeat(1 + len(extra), 1)
+    extra = _extra_candidates(
+        forward, objective, x0, target_lab, offset, ratio, extra_toners, allowed
+    )
+    used = ((x0 > 0) & torch.as_tensor(allowed)).repeat(1 + len(extra), 1)
     used[torch.arange(1, 1 + len(extra)), extra] = True
     final, added, lab, loss, R = _optimise(
         objective,
@@ -554,7 +568,8 @@ class AdditionBounds:
         if self.total is None:
             return added
         total = torch.as_tensor(self.total, dtype=added.dtype)
-        return added * total / added.sum(1, keepdim=True).clamp(min=total)
+        # a row of nothing (no toner it may add) stays nothing, even at a total of 0
+        return added * total / added.sum(1, keepdim=True).clamp(min=max(self.total, 1e-12))
 
 
 @dataclass(frozen=True)

@@ -317,6 +317,13 @@ def weigh_after_pouring(
     total = sum(fractions.values())
     share = {n: v / total for n, v in fractions.items()}
     needed = max(g / share[n] / resolution_g for n, g in poured.items())
+    if not needed <= MAX_SCALE_STEPS:  # a trace of the recipe poured by the gram; inf too
+        over = max(poured, key=lambda n: poured[n] / share[n])
+        raise RecipeError(
+            f"--poured: {over}, {poured[over]:g} g, is {share[over]:.3g} of the recipe: the can "
+            f"that holds it at the recipe's proportions is more than {MAX_SCALE_STEPS:.0e} steps "
+            f"of the scale's {resolution_g:g} g; mix afresh"
+        )
     grown = max(steps, int(np.ceil(round(needed, 6)))) * resolution_g
     check_scale(grown, resolution_g)
     in_can = sum(poured.values())

@@ -1,0 +1,32 @@
+"""The shop's mixing bank: toners a recipe may not use, being out of stock or not stocked at
+all (``--without``). The search then matches with the others (its ``allowed`` mask), and a
+correction neither adds them nor brings one of them in.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.errors import FlakelabError
+
+__all__ = ["toners_allowed", "StockError"]
+
+
+class StockError(FlakelabError):
+    """A toner named as out of stock that the library does not hold."""
+
+
+def toners_allowed(toners: Sequence[str], without: Iterable[str] = ()) -> NDArray[np.bool_]:
+    """A mask over ``toners`` of those a recipe may use: every one but ``without``; a name
+    that is not one of ``toners`` is an error naming the nearest that is."""
+    without = list(without)
+    for name in without:
+        if name not in toners:
+            near = difflib.get_close_matches(name, toners, n=1, cutoff=0.6)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise StockError(f"--without: {name!r} is not a toner of the library{hint}")
+    return np.array([name not in without for name in toners], dtype=bool)
