@@ -454,6 +454,7 @@ def _evaluate(
     report["metamerism_weight"] = settings.metamerism
     report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
     report["solid_travel"] = settings.solid_travel
+    report["max_pigments"] = settings.max_pigments
     report["world"] = world_name
     report["habits"] = habits and habits.report()
     if json_output:
