@@ -763,3 +763,54 @@ def test_worst_differences_are_each_case_s_largest_de00_where_it_lies(cases):
     for case, de, geometry in zip(mixed, worst, where, strict=True):
         each = delta_E(reflectance_to_Lab(case.target), reflectance_to_Lab(case.sprayout))
         assert de == pytest.approx(each.max()) and geometry == case.geometry_names[each.argmax()]
+
+
+def test_the_nearest_cases_are_those_whose_spray_outs_lie_closest(cases, tmp_path, cli):
+    """A car read as one case's spray-out finds that case first, at ΔE00 0 and within
+    tolerance; the rest come in the order an independent loop puts them (colour-science's
+    CIEDE2000 case by case, the worst geometry, under de00-1.0 whose share is the ΔE00); its
+    recipe is written for a 250 g can in the case's proportions; a shop without cases and a
+    car not read at the instrument's geometries are refused, naming them."""
+    import colour
+
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.io import read_recipe, write_measurements
+
+    source = tmp_path / "cases.csv"
+    write_cases(cases, source)
+    chosen = cases[17]
+    car = Measurement(
+        sample="car",
+        geometries=chosen.geometries,
+        wavelengths=WAVELENGTHS,
+        reflectance=chosen.sprayout,
+        texture=dict(chosen.sprayout_texture),
+    )
+    write_measurements([car], tmp_path / "car.json")
+    out = tmp_path / "start.json"
+    run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-n", "6",
+              "-t", "de00-1.0", "--recipe-out", str(out), "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    nearest = report["nearest"]
+    assert report["cases_searched"] == len(cases)
+    assert nearest[0]["case_id"] == chosen.case_id and nearest[0]["sprayout_de00_max"] == 0.0
+    assert nearest[0]["passes"] and nearest[0]["texture_delta"] == dict.fromkeys(
+        chosen.sprayout_texture, 0.0
+    )
+    lab = reflectance_to_Lab(np.stack([c.sprayout for c in cases]))
+    worst = [colour.delta_E(lab[17], lab[i], method="CIE 2000").max() for i in range(len(cases))]
+    assert [c["case_id"] for c in nearest] == [cases[i].case_id for i in np.argsort(worst)[:6]]
+    assert [c["sprayout_de00_max"] for c in nearest] == pytest.approx(np.sort(worst)[:6], abs=1e-3)
+    grams = read_recipe(out)
+    assert sum(grams.values()) == pytest.approx(250.0)
+    for toner, share in chosen.recipe.items():
+        assert abs(grams.get(toner, 0.0) - 250.0 * share) <= 0.1, toner
+    text = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-t",
+               "de00-1.0").stdout  # fmt: skip
+    assert chosen.case_id[:13] in text and "already gave a panel within de00-1.0" in text
+    run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "--shop", "X")
+    assert run.returncode == 2 and "no cases from shop 'X'" in run.stderr
+    run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-i", "ma-t12")
+    assert run.returncode == 2 and "car.json: not read at 15as-45" in run.stderr

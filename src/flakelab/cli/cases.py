@@ -68,8 +68,8 @@ CheckOption = Annotated[
 ]
 
 cases_app = typer.Typer(
-    help="Refinish cases: generate, record, record-all, list, remove, import, export; "
-    "realism, habits, shops."
+    help="Refinish cases: generate, record, record-all, list, nearest, remove, import, "
+    "export; realism, habits, shops."
 )
 
 
@@ -583,6 +583,136 @@ def _shown_check(check: dict | None) -> str:
         return ""
     shown = f"{check['de00']:.2f} {check['geometry']}"
     return f"[red]{shown}[/]" if is_mismatched(check) else shown
+
+
+@cases_app.command("nearest")
+@reports_errors
+def nearest(
+    target: Annotated[Path, typer.Argument(help="Target measurement file (the car).")],
+    sample: SampleOption = None,
+    average: AverageOption = False,
+    database: Annotated[
+        str | None,
+        typer.Option(
+            "--database",
+            "-d",
+            help="Database URL or SQLite file, or a case file (CSV/CxF) (default: "
+            "FLAKELAB_DATABASE_URL or the user data folder).",
+        ),
+    ] = None,
+    shop: ShopOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    tolerance: ToleranceOption = "refinish",
+    count: Annotated[int, typer.Option("--count", "-n", min=1, help="Cases to show.")] = 5,
+    recipe_out: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write the recipe of case --pick, weighed for --quantity, as a file "
+            "{toner: grams} that 'weigh', 'correct' and 'cases record' read."
+        ),
+    ] = None,  # fmt: skip
+    pick: Annotated[int, typer.Option(min=1, help="The case --recipe-out writes.")] = 1,
+    quantity: Annotated[
+        str, typer.Option(help="Can --recipe-out weighs, e.g. 250g (or by volume, 0.5l).")
+    ] = "250g",
+    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
+    library: LibraryOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """The shop's recorded recipes whose spray-outs lie closest to a car, nearest first.
+
+    A recipe that already gave a panel near this colour, in this shop, is the surest
+    start: ranked by the worst geometry's share of --tolerance, the spray-out against the
+    target (the car each was mixed for, and texture, shown beside)."""
+    from flakelab.cases.database import default_url, short_id
+    from flakelab.cases.nearest import nearest_cases
+    from flakelab.io import read_library, read_tolerance, write_recipe
+    from flakelab.match.recipe import order_can, weigh
+
+    tol = read_tolerance(tolerance)
+    check_output_file(recipe_out, "--recipe-out")
+    if pick > count:
+        raise FlakelabError(f"--pick: expected one of the {count} cases shown, got {pick}")
+    geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
+    can = order_can(quantity, resolution)  # a can the scale cannot weigh: before the search
+    reading = read_readings(target, sample, average)[0]
+    if missing := [g for g in geometries if g not in reading.geometry_names]:
+        raise FlakelabError(
+            f"{target}: not read at {', '.join(missing)} ({instrument}'s geometries; "
+            "--instrument chooses)"
+        )
+    source = database or default_url()
+    cases = shop_cases(source, shop, geometries)
+    spectra = reading.storage_spectra(list(geometries))
+    found = nearest_cases(spectra, cases, tol, count, reading.texture)
+    report = {
+        "target": reading.sample,
+        "cases": source,
+        "cases_searched": len(cases),
+        "shop": shop,
+        "geometries": list(geometries),
+        "tolerance": tol.name,
+        "nearest": [near.to_dict() for near in found],
+    }
+    if recipe_out is not None:
+        if pick > len(found):
+            raise FlakelabError(f"--pick: expected one of the {len(found)} cases found, got {pick}")
+        fractions = dict(found[pick - 1].case.recipe)
+        grams = can.for_toners(read_library(library), fractions).grams_for(fractions)
+        write_recipe({ln.toner: ln.grams for ln in weigh(fractions, grams, resolution)}, recipe_out)
+        report["recipe_out"] = {"file": str(recipe_out), "case": pick, "quantity_g": grams}
+        errors.print(f"wrote case {pick}'s recipe, {grams:g} g, to {recipe_out}", highlight=False)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_nearest(report, short_id)
+
+
+def _print_nearest(report: dict, short_id) -> None:
+    """The nearest cases as a colorist reads them, and what to do next."""
+    rows = report["nearest"]
+    shops = sorted({row["shop"] for row in rows})
+    whose = f" of {shops[0]!r}" if len(shops) == 1 else ""
+    table = Table(
+        title=f"The {len(rows)} of {report['cases_searched']} cases{whose} whose spray-outs lie "
+        f"closest to {report['target']} ({report['tolerance']})",
+        box=box.SIMPLE_HEAD,
+        collapse_padding=True,
+    )
+    columns = ["#", "case", "made", "outcome", "spray-out ΔE00", "its car", "recipe (share)"]
+    for column in columns + (["shop"] if len(shops) > 1 else []):
+        right = column in ("#", "spray-out ΔE00", "its car")
+        wraps = column in ("recipe (share)", "shop")
+        table.add_column(column, justify="right" if right else "left", no_wrap=not wraps)
+    for k, row in enumerate(rows, 1):
+        shares = sorted(row["recipe"].items(), key=lambda item: -item[1])
+        recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:3])
+        colour = "green" if row["passes"] else "red"
+        cells = [
+            str(k),
+            short_id(row["case_id"]),
+            row["created_at"][:10],
+            row["outcome"],
+            f"[{colour}]{row['sprayout_de00_max']:.2f}[/] {row['worst_geometry']}",
+            f"{row['target_de00_max']:.2f}",
+            recipe + (f" +{len(shares) - 3}" if len(shares) > 3 else ""),
+        ]
+        table.add_row(*cells, *([row["shop"]] if len(shops) > 1 else []))
+    console.print(table)
+    passing = sum(row["passes"] for row in rows)
+    if passing:
+        console.print(
+            f"{passing} recipe{'s' * (passing != 1)} of the shop already gave a panel within "
+            f"{report['tolerance']} of this car: start from the first (--recipe-out), and "
+            "correct it from its spray-out",
+            highlight=False,
+        )
+    else:
+        console.print(
+            f"[yellow]note:[/] no recorded spray-out is within {report['tolerance']} of this "
+            "car: match it (flakelab match TARGET)",
+            highlight=False,
+        )
 
 
 @cases_app.command("remove")
