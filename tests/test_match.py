@@ -574,6 +574,35 @@ def test_a_match_keeps_to_the_toners_the_shop_has_and_to_few_pigments(cli):
     )
 
 
+def test_a_match_shows_the_shop_s_nearest_recorded_spray_outs(tmp_path, cli):
+    """``match --nearest 3``: the database's recorded spray-outs nearest the target, beside
+    the candidates, as ``cases nearest`` ranks them (the same function, the same cases);
+    a database without cases at the model's geometries gives a note, and one that is not
+    there is refused before the search."""
+    from flakelab.cases.database import add_cases, open_database
+    from flakelab.cases.generator import World
+    from flakelab.data import example_path
+    from flakelab.io import read_library
+
+    db = tmp_path / "shop.db"
+    world = World(read_library(None), "five-angle")
+    add_cases(open_database(db), [c for batch in world.cases(30, seed=4) for c in batch])
+    args = ["match", "--example", "--candidates", "1", "-d", str(db), "--json"]
+    run = cli(*args, "--nearest", "3")
+    assert run.returncode == 0, run.stderr
+    shown = json.loads(run.stdout)["recorded_nearest"]
+    alone = json.loads(cli("cases", "nearest", str(example_path("target")), "-d", str(db),
+                           "-n", "3", "--json").stdout)["nearest"]  # fmt: skip
+    assert len(shown) == 3 and shown == alone
+    assert [c["limit_share_max"] for c in shown] == sorted(c["limit_share_max"] for c in shown)
+    run = cli(*args, "--nearest", "3", "-i", "ma-t12")
+    report = json.loads(run.stdout)
+    assert report["recorded_nearest"] == []
+    assert any("--nearest: no recorded cases" in note for note in report["notes"])
+    run = cli("match", "--example", "--nearest", "3", "-d", str(tmp_path / "none.db"))
+    assert run.returncode == 2 and "no such database file" in run.stderr
+
+
 def test_a_correction_adds_no_toner_out_of_stock(cli):
     """``correct --without``: the example's additions lead with 13.7 g of Al fine bright;
     without it, the others are added and it is not, in additions and in a reformulation

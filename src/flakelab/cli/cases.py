@@ -624,7 +624,7 @@ def nearest(
     A recipe that already gave a panel near this colour, in this shop, is the surest
     start: ranked by the worst geometry's share of --tolerance, the spray-out against the
     target (the car each was mixed for, and texture, shown beside)."""
-    from flakelab.cases.database import default_url, short_id
+    from flakelab.cases.database import default_url
     from flakelab.cases.nearest import nearest_cases
     from flakelab.io import read_library, read_tolerance, write_recipe
     from flakelab.match.recipe import order_can, weigh
@@ -665,20 +665,43 @@ def nearest(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    _print_nearest(report, short_id)
+    _print_nearest(report)
 
 
-def _print_nearest(report: dict, short_id) -> None:
+def _print_nearest(report: dict) -> None:
     """The nearest cases as a colorist reads them, and what to do next."""
     rows = report["nearest"]
     shops = sorted({row["shop"] for row in rows})
     whose = f" of {shops[0]!r}" if len(shops) == 1 else ""
-    table = Table(
-        title=f"The {len(rows)} of {report['cases_searched']} cases{whose} whose spray-outs lie "
-        f"closest to {report['target']} ({report['tolerance']})",
-        box=box.SIMPLE_HEAD,
-        collapse_padding=True,
+    title = (
+        f"The {len(rows)} of {report['cases_searched']} cases{whose} whose spray-outs lie "
+        f"closest to {report['target']} ({report['tolerance']})"
     )
+    console.print(nearest_table(rows, title))
+    passing = sum(row["passes"] for row in rows)
+    if passing:
+        console.print(
+            f"{passing} recipe{'s' * (passing != 1)} of the shop already gave a panel within "
+            f"{report['tolerance']} of this car: start from the first (--recipe-out), and "
+            "correct it from its spray-out",
+            highlight=False,
+        )
+    else:
+        console.print(
+            f"[yellow]note:[/] no recorded spray-out is within {report['tolerance']} of this "
+            "car: match it (flakelab match TARGET)",
+            highlight=False,
+        )
+
+
+def nearest_table(rows: list[dict], title: str) -> Table:
+    """Recorded cases (:meth:`~flakelab.cases.nearest.NearCase.to_dict`) as a table: the
+    spray-out's worst ΔE00 from the target (green where it passes), its own car's, the
+    recipe; the shop where they come from several."""
+    from flakelab.cases.database import short_id
+
+    shops = sorted({row["shop"] for row in rows})
+    table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True)
     columns = ["#", "case", "made", "outcome", "spray-out ΔE00", "its car", "recipe (share)"]
     for column in columns + (["shop"] if len(shops) > 1 else []):
         right = column in ("#", "spray-out ΔE00", "its car")
@@ -698,21 +721,7 @@ def _print_nearest(report: dict, short_id) -> None:
             recipe + (f" +{len(shares) - 3}" if len(shares) > 3 else ""),
         ]
         table.add_row(*cells, *([row["shop"]] if len(shops) > 1 else []))
-    console.print(table)
-    passing = sum(row["passes"] for row in rows)
-    if passing:
-        console.print(
-            f"{passing} recipe{'s' * (passing != 1)} of the shop already gave a panel within "
-            f"{report['tolerance']} of this car: start from the first (--recipe-out), and "
-            "correct it from its spray-out",
-            highlight=False,
-        )
-    else:
-        console.print(
-            f"[yellow]note:[/] no recorded spray-out is within {report['tolerance']} of this "
-            "car: match it (flakelab match TARGET)",
-            highlight=False,
-        )
+    return table
 
 
 @cases_app.command("remove")

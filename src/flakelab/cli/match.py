@@ -106,6 +106,16 @@ def match_command(
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
     without: WithoutOption = None,
+    nearest: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            max=20,
+            help="Also show the N recorded cases of --database (the shop's, with --shop) whose "
+            "spray-outs lie closest to the target: panels measured, beside the candidates "
+            "predicted ('cases nearest').",
+        ),
+    ] = 0,
     max_pigments: Annotated[
         int,
         typer.Option(
@@ -171,6 +181,8 @@ def match_command(
     Each candidate comes with its predicted ΔL*, ΔC*, ΔH* and ΔE00 per geometry
     and the model that produced them.
     'flakelab match evaluate' runs the evaluation harness."""
+    from flakelab.cases.database import default_url
+    from flakelab.cases.nearest import nearest_cases
     from flakelab.data import example_path
     from flakelab.io import read_tolerance
     from flakelab.match.recipe import order_can
@@ -178,10 +190,10 @@ def match_command(
     from flakelab.match.stock import toners_allowed
 
     if target == "evaluate":
-        if render is not None or plot is not None or recipe_out is not None or average or without:
+        if render or plot or recipe_out or average or without or nearest:
             raise FlakelabError(
-                "--render, --plot, --recipe-out, --average, --without: for the candidates of one "
-                "target, not the harness"
+                "--render, --plot, --recipe-out, --average, --without, --nearest: for the "
+                "candidates of one target, not the harness"
             )
         _evaluate(
             library=library,
@@ -236,6 +248,7 @@ def match_command(
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     tol = read_tolerance(tolerance or "refinish")
     shop_habits = habits_for(habits, shop, database, forward, named=named)
+    recorded = _recorded_cases(database, shop, forward.geometries) if nearest else []
     result = match(
         measurement,
         forward,
@@ -256,6 +269,16 @@ def match_command(
     )
     report = result.to_dict()
     report["without"] = list(without or ())
+    if nearest:
+        report["recorded_nearest"] = [near.to_dict() for near in nearest_cases(
+            spectra_for_model(path, measurement, forward)[0], recorded, tol, nearest,
+            measurement.texture)] if recorded else []  # fmt: skip
+        if not recorded:
+            whose = f"of shop {shop!r} " if shop else ""
+            report["notes"].append(
+                f"--nearest: no recorded cases {whose}in {database or default_url()} read at "
+                f"the model's geometries ({', '.join(forward.geometries)})"
+            )
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
@@ -287,6 +310,17 @@ def match_command(
         print(json.dumps(report, indent=2))
         return
     _print_match(report)
+
+
+def _recorded_cases(database: str | None, shop: str | None, geometries) -> list:
+    """The cases of ``database`` (``shop``'s, where given) read at ``geometries``, each
+    restricted to them, read before the search: a database that is not there is refused
+    before the wait."""
+    from flakelab.cases.case import cases_at
+    from flakelab.cases.database import default_url
+    from flakelab.cli.sources import load_cases
+
+    return cases_at(load_cases(database or default_url(), shop), geometries)
 
 
 def _write_candidate(report: dict, pick: int, path: Path) -> None:
@@ -389,6 +423,11 @@ def _print_match(report: dict) -> None:
             extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
         console.print(extra, highlight=False)
         console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
+    if report.get("recorded_nearest"):
+        from flakelab.cli.cases import nearest_table
+
+        title = "Recorded spray-outs nearest the target (measured, not predicted)"
+        console.print(nearest_table(report["recorded_nearest"], title))
     for note in report["notes"]:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
