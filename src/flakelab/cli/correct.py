@@ -291,11 +291,11 @@ def _what_is_left(
 ) -> dict[str, float]:
     """The mixed can after the spray-out took some of it: the recipe's toners in its
     proportions, ``left`` grams (or millilitres, by its toners' densities) in all."""
-    from flakelab.match.recipe import order_can
+    from flakelab.match.recipe import recipe_grams
 
     mixed = sum(grams.values())
     shares = {name: g / mixed for name, g in grams.items() if g > 0}
-    remaining = order_can(left, resolution, "--left").for_toners(library, shares).grams_for(shares)
+    remaining = recipe_grams(left, resolution, library, shares, "--left")
     if remaining > mixed:
         raise FlakelabError(
             f"--left: {remaining:g} g is more than the {mixed:g} g the recipe mixed ({recipe})"
@@ -305,10 +305,11 @@ def _what_is_left(
 
 def _most_g(most: str, can: dict[str, float], resolution: float, library) -> float:
     """``--most`` in grams: by volume, at the density of the ``can``'s recipe."""
-    from flakelab.match.recipe import order_can
+    from flakelab.match.recipe import recipe_grams
 
-    shares = {name: g for name, g in can.items() if g > 0}
-    return order_can(most, resolution, "--most").for_toners(library, shares).grams_for(shares)
+    return recipe_grams(
+        most, resolution, library, {n: g for n, g in can.items() if g > 0}, "--most"
+    )
 
 
 def _room_in_can(most_g: float, can: dict[str, float], resolution: float, extra: int) -> float:

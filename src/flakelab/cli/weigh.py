@@ -116,12 +116,11 @@ def poured_grams(pairs: list[str]) -> dict[str, float]:
 def _most_the_can_holds(most: str, can, can_g: float, library, shares) -> float:
     """``--most`` in grams (by volume, at the recipe's density), checked that it holds the
     recipe's own can."""
-    from flakelab.match.recipe import order_can
+    from flakelab.match.recipe import is_volume, recipe_grams
 
-    most_can = order_can(most, can.resolution_g, "--most").for_toners(library, shares)
-    most_g = most_can.grams_for(shares)
+    most_g = recipe_grams(most, can.resolution_g, library, shares, "--most")
     if most_g < can_g:
-        amount = most if most_can.millilitres is None else f"{most} ({most_g:g} g)"
+        amount = f"{most} ({most_g:g} g)" if is_volume(most) else most
         raise FlakelabError(f"--most: {amount} is less than the can, {can_g:g} g")
     return most_g
 

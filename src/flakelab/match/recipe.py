@@ -32,6 +32,7 @@ __all__ = [
     "Weighing",
     "Can",
     "order_can",
+    "recipe_grams",
     "weigh",
     "check_scale",
     "check_resolution",
@@ -166,6 +167,15 @@ def order_can(text: str, resolution_g: float, option: str = "--quantity") -> Can
         millilitres = parse_amount(text, VOLUME, option, QUANTITY_EXAMPLE, RecipeError)
         return Can(text, resolution_g, millilitres=millilitres, option=option)
     return Can(text, resolution_g, grams=can_on_scale(text, resolution_g, option), option=option)
+
+
+def recipe_grams(
+    text: str, resolution_g: float, library, fractions: Mapping[str, float], option: str
+) -> float:
+    """An amount of a recipe of mass shares ``fractions`` typed by mass or volume (``--left``,
+    ``--most``), in grams to the scale's step: by volume, at the density its toners give
+    in ``library``."""
+    return order_can(text, resolution_g, option).for_toners(library, fractions).grams_for(fractions)
 
 
 def can_on_scale(text: str, resolution_g: float, option: str = "--quantity") -> float:
