@@ -336,6 +336,28 @@ def test_help_texts_print_as_written():
             assert Text.from_markup(text).plain == text, (" ".join(path), text)
 
 
+def test_the_command_line_starts_without_colour_science_or_torch():
+    """``flakelab --help`` and ``--version`` load neither colour-science (about a second:
+    it imports matplotlib and scipy) nor torch; ``flakelab.core`` hands out its names on
+    first use, and a name it lacks is an AttributeError, as a module's would be."""
+    script = (
+        "import sys\nfrom flakelab.cli.main import app\n"
+        "for args in (['--help'], ['--version'], ['cases', '--help'], ['model', '--help']):\n"
+        "    try:\n        app(args)\n    except SystemExit:\n        pass\n"
+        "heavy = ('colour', 'torch', 'matplotlib')\n"
+        "print('loaded:', sorted(m for m in heavy if m in sys.modules))\n"
+        "import flakelab.core as core\n"
+        "print('compare' in dir(core), core.compare.__module__, 'colour' in sys.modules)\n"
+        "try:\n    core.nothing\nexcept AttributeError as error:\n    print(error)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    assert "loaded: []" in done.stdout
+    assert "True flakelab.core.comparison True" in done.stdout
+    assert "module 'flakelab.core' has no attribute 'nothing'" in done.stdout
+
+
 def test_help_shows_the_matchers_defaults_without_importing_torch():
     """The defaults are the numbers the library uses, printed as numbers; the help of the main
     job must not pay torch's import (over a second) to print them."""

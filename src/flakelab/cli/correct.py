@@ -54,7 +54,6 @@ from flakelab.cli.sources import (
 )
 from flakelab.cli.weigh import rounding_costs
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.tolerance import failing_geometries, failures
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
 
@@ -129,6 +128,7 @@ def correct_command(
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
+    from flakelab.core.tolerance import failing_geometries, failures
     from flakelab.io import read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
     from flakelab.match.crosscheck import expected_left_out

@@ -40,14 +40,8 @@ from flakelab.cli.match import match_command
 from flakelab.cli.models import model_app, train
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.cli.weigh import weigh_command
-from flakelab.core.colorimetry import Conditions
-from flakelab.core.comparison import compare as compare_measurements
-from flakelab.core.comparison import describe, spread_of_readings
-from flakelab.core.difference import METAMERISM_ILLUMINANTS
-from flakelab.core.tolerance import failures
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
-from flakelab.io import read_measurements, read_tolerance, write_measurements
 
 app = typer.Typer(
     help="flakelab: match, predict and show the appearance of car paints.",
@@ -117,6 +111,10 @@ def inspect(
     ] = False,
 ) -> None:
     """Per-geometry L*a*b*, C*, h, flake angles, flop index and texture of a measurement."""
+    from flakelab.core.colorimetry import Conditions
+    from flakelab.core.comparison import describe, spread_of_readings
+    from flakelab.io import read_measurements, read_tolerance
+
     if path is None and not example:
         raise FlakelabError("give a measurement file, or --example")
     if average and all_samples:
@@ -182,6 +180,12 @@ def compare(
     plot: PlotOption = None,
 ) -> None:
     """Multi-angle colour difference of a sample against a reference, with pass/fail."""
+    from flakelab.core.colorimetry import Conditions
+    from flakelab.core.comparison import compare as compare_measurements
+    from flakelab.core.comparison import spread_of_readings
+    from flakelab.core.difference import METAMERISM_ILLUMINANTS
+    from flakelab.io import read_tolerance
+
     if not example and (reference is None or sample is None):
         raise FlakelabError("give a reference and a sample file, or --example")
     check_figure_file(render)
@@ -223,6 +227,8 @@ def compare(
 
 
 def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
+    from flakelab.core.tolerance import failures
+
     shared = [g["name"] for g in report["geometries"]]
     failing = failures(report["failing_geometries"], report["failing_texture"])
     verdict = "FAIL at " + ", ".join(failing) if failing else "PASS"
@@ -236,6 +242,8 @@ _LIMIT_LABELS = {"de00": "ΔE≤", "dL": "L≤", "dC": "C≤", "dH": "H≤"}
 
 
 def _print_comparison(report: dict[str, Any], tol: Any) -> None:
+    from flakelab.core.tolerance import failures
+
     console.print(
         f"[bold]{report['sample']}[/] vs [bold]{report['reference']}[/]  "
         f"({report['conditions']}, tolerance {report['tolerance']})",
@@ -314,6 +322,8 @@ def convert(
     sample: SampleOption = None,
 ) -> None:
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
+    from flakelab.io import read_measurements, write_measurements
+
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     write_measurements(measurements, target)
     errors.print(f"wrote {len(measurements)} measurement(s) to {target}", highlight=False)
@@ -330,6 +340,7 @@ def plot(
     conditions: ConditionsOption = "D65/10",
 ) -> None:
     """Spectra per geometry and L*, C* versus aspecular angle."""
+    from flakelab.core.colorimetry import Conditions
     from flakelab.render.plots import plot_measurements
 
     check_figure_file(output, "--output")

@@ -48,7 +48,6 @@ from flakelab.cli.matcher import (
 from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, workplace_shop
 from flakelab.cli.weigh import can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.tolerance import failures
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import MatchSettings
 
@@ -364,6 +363,8 @@ def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
 
 
 def _print_match(report: dict) -> None:
+    from flakelab.core.tolerance import failures
+
     console.print(
         f"[bold]{report['target']}[/] — {len(report['candidates'])} candidates "
         f"({report['subsets_tried']} toner sets optimised in {report['seconds']:.2f} s, "

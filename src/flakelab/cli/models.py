@@ -41,7 +41,6 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
 from flakelab.errors import FlakelabError
-from flakelab.io.records import write_atomically
 
 DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
 """What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
@@ -311,6 +310,8 @@ def train(
         log = log + adaptation["log"]
         model = shop_model  # --out: the shop's model
     if out is not None:
+        from flakelab.io.records import write_atomically
+
         write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
         summary["file"] = str(out)
     summary["loss_log_tail"] = log[-3:]
@@ -383,6 +384,8 @@ def show_model(
     chosen, source = named_model(model, database)
     card = {"source": source, **model_card(chosen)}
     if out is not None:
+        from flakelab.io.records import write_atomically
+
         write_atomically(out, lambda p: p.write_bytes(chosen.to_bytes()))
         card["file"] = str(out)
     if json_output:
@@ -704,6 +707,8 @@ def adapt(
         "held_out": judged_before_and_after(base, new, held_out),
     }
     if out is not None:
+        from flakelab.io.records import write_atomically
+
         write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))
         summary["file"] = str(out)
     if register_model:
