@@ -603,6 +603,46 @@ def test_a_match_shows_the_shop_s_nearest_recorded_spray_outs(tmp_path, cli):
     assert run.returncode == 2 and "no such database file" in run.stderr
 
 
+def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli):
+    """``match --all``: each reading matched as ``match --sample`` matches it, its best
+    recipe weighed into ``--recipe-dir`` (two samples named alike in two files); a reading
+    the model cannot read is named in its row and the rest go on; the options for one
+    target are refused with --all."""
+    from dataclasses import replace as replaced
+
+    from flakelab.data import example_path
+    from flakelab.io import read_measurement, read_recipe, write_measurements
+
+    target = read_measurement(example_path("target"))
+    darker = replaced(target, sample="door", reflectance=target.reflectance * 0.97)
+    odd = replaced(target, sample="door").select(list(target.geometry_names[:5]))
+    write_measurements([replaced(target, sample="door"), darker, odd], tmp_path / "cars.json")
+    folder = tmp_path / "recipes"
+    folder.mkdir()
+    args = ["match", str(tmp_path / "cars.json"), "--candidates", "1"]
+    run = cli(*args, "--all", "--recipe-dir", str(folder), "--json")
+    assert run.returncode == 0, run.stderr
+    reports = json.loads(run.stdout)["targets"]
+    assert "cars.json: sample" in reports[2]["error"] and "45as15" in reports[2]["error"]
+    alone = json.loads(cli("match", str(example_path("target")), "--candidates", "1",
+                           "--json").stdout)["candidates"][0]  # fmt: skip
+    assert reports[0]["candidates"][0]["weights_g"] == alone["weights_g"]
+    assert reports[1]["candidates"][0]["recipe"] != alone["recipe"]  # the darker one
+    assert sorted(p.name for p in folder.iterdir()) == ["door-2.json", "door.json"]
+    for report in reports[:2]:
+        written = read_recipe(report["recipe_out"])
+        assert written == {w["toner"]: w["grams"] for w in report["candidates"][0]["weights_g"]}
+        assert sum(written.values()) == pytest.approx(250.0)
+    text = cli(*args, "--all").stdout
+    assert "not read" in text and "of 3 samples matched within the tolerance" in text
+    for extra, message in ((["--all", "--sample", "door"], "for one target, not --all"),
+                           (["--recipe-dir", str(folder)], "--recipe-dir: for --all"),
+                           (["--all", "--recipe-dir", str(tmp_path / "cars.json")],
+                            "not a folder")):  # fmt: skip
+        run = cli(*args, *extra)
+        assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+
+
 def test_a_correction_adds_no_toner_out_of_stock(cli):
     """``correct --without``: the example's additions lead with 13.7 g of Al fine bright;
     without it, the others are added and it is not, in additions and in a reformulation

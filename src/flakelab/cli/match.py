@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     progress_bar,
     read_readings,
     texture_table,
+    tracked,
 )
 from flakelab.cli.matcher import (
     HabitsOption,
@@ -62,6 +63,22 @@ def match_command(
     ] = False,
     sample: SampleOption = None,
     average: AverageOption = False,
+    all_samples: Annotated[
+        bool,
+        typer.Option(
+            "--all",
+            help="Match every sample of the file, one after another (a colour collection, a "
+            "day's cars): a table of each one's best recipe and verdict; --json gives each "
+            "one's report.",
+        ),
+    ] = False,
+    recipe_dir: Annotated[
+        Path | None,
+        typer.Option(
+            help="With --all: write each sample's best recipe, weighed for --quantity, into "
+            "this folder as SAMPLE.json.",
+        ),
+    ] = None,
     library: LibraryOption = None,
     quantity: QuantityOption = "250g",
     resolution: ResolutionOption = 0.1,
@@ -232,6 +249,15 @@ def match_command(
         )
     if target is None and not example:
         raise FlakelabError("expected a target file or --example")
+    if all_samples and (sample or average or render or plot or recipe_out or nearest):
+        raise FlakelabError(
+            "--sample, --average, --render, --plot, --recipe-out, --nearest: for one target, "
+            "not --all (--recipe-dir writes every sample's best recipe)"
+        )
+    if recipe_dir is not None and not all_samples:
+        raise FlakelabError("--recipe-dir: for --all (--recipe-out writes one target's)")
+    if recipe_dir is not None and not recipe_dir.is_dir():
+        raise FlakelabError(f"--recipe-dir: {recipe_dir}: not a folder")
     can = order_can(quantity, resolution)
     check_figure_file(render)
     check_figure_file(plot, "--plot")
@@ -243,25 +269,34 @@ def match_command(
     allowed = toners_allowed(forward.toners, without or ())
     can = can.for_toners(lib, [n for n, ok in zip(forward.toners, allowed, strict=True) if ok])
     path = example_path("target") if example else Path(target)
-    measurement, readings = read_readings(path, sample, average)
-    spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     tol = read_tolerance(tolerance or "refinish")
     shop_habits = habits_for(habits, shop, database, forward, named=named)
+    settings = MatchSettings(
+        candidates=candidates,
+        seed=seed,
+        model_risk=model_risk,
+        metamerism=metamerism,
+        lights=lights_option(lights),
+        solid_travel=solid_travel,
+        max_pigments=max_pigments,
+    )
+    if all_samples:
+        from flakelab.io import read_measurements
+
+        search = dict(tolerance=tol, settings=settings, allowed=allowed, habits=shop_habits,
+                      library=lib)  # fmt: skip
+        _match_every_sample(read_measurements(path), path, forward, effect, search, can,
+                            recipe_dir, json_output)  # fmt: skip
+        return
+    measurement, readings = read_readings(path, sample, average)
+    spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
     recorded = _recorded_cases(database, shop, forward.geometries) if nearest else []
     result = match(
         measurement,
         forward,
         effect,
         tolerance=tol,
-        settings=MatchSettings(
-            candidates=candidates,
-            seed=seed,
-            model_risk=model_risk,
-            metamerism=metamerism,
-            lights=lights_option(lights),
-            solid_travel=solid_travel,
-            max_pigments=max_pigments,
-        ),
+        settings=settings,
         allowed=allowed,
         habits=shop_habits,
         library=lib,
@@ -289,14 +324,7 @@ def match_command(
             extra = predict_left_out(result.candidates, measurement, forward, other, tol)
             for entry, left_out in zip(report["candidates"], extra, strict=True):
                 entry["left_out"] = left_out.to_dict()
-    for candidate, entry in zip(result.candidates, report["candidates"], strict=True):
-        grams = can.grams_for(candidate.fractions)
-        entry.update(weighed_recipe(forward, candidate.fractions, grams, resolution))
-        entry["quantity_g"] = grams
-    report["quantity_g"] = can.grams  # by volume, each candidate weighs its own
-    if can.millilitres is not None:
-        report |= {"quantity": can.quantity, "quantity_ml": can.millilitres}
-    report["resolution_g"] = resolution
+    _weigh_candidates(report, result.candidates, forward, can)
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
     if render is not None:
@@ -309,6 +337,91 @@ def match_command(
         print(json.dumps(report, indent=2))
         return
     _print_match(report)
+
+
+def _weigh_candidates(report: dict, candidates, forward, can) -> None:
+    """Each candidate's grams for the ``can``, rounded for colour (by volume, each weighs its
+    own), into its entry of ``report``, and the can into ``report``."""
+    for candidate, entry in zip(candidates, report["candidates"], strict=True):
+        grams = can.grams_for(candidate.fractions)
+        entry.update(weighed_recipe(forward, candidate.fractions, grams, can.resolution_g))
+        entry["quantity_g"] = grams
+    report["quantity_g"] = can.grams
+    if can.millilitres is not None:
+        report |= {"quantity": can.quantity, "quantity_ml": can.millilitres}
+    report["resolution_g"] = can.resolution_g
+
+
+def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,
+                        json_output: bool) -> None:  # fmt: skip
+    """``match --all``: each reading of the file matched as ``match`` matches one (the
+    ``search``'s keywords), its best candidate weighed for the ``can`` (and written into
+    ``recipe_dir``); a reading the model cannot read is named in its row, and the rest go
+    on."""
+    from flakelab.io import write_recipe
+    from flakelab.match.search import match
+
+    reports, names = [], set()
+    for reading in tracked(readings, "matching every sample", json_output):
+        try:
+            spectra_for_model(path, reading, forward)
+        except FlakelabError as error:
+            reports.append({"target": reading.sample, "error": str(error)})
+            continue
+        result = match(reading, forward, effect, **search)
+        report = result.to_dict()
+        _weigh_candidates(report, result.candidates, forward, can)
+        if recipe_dir is not None:
+            best = recipe_dir / f"{_file_name(reading.sample, names)}.json"
+            write_recipe({w["toner"]: w["grams"] for w in report["candidates"][0]["weights_g"]},
+                         best)  # fmt: skip
+            report["recipe_out"] = str(best)
+        reports.append(report)
+    if json_output:
+        print(json.dumps({"file": str(path), "targets": reports}, indent=2))
+        return
+    _print_every_sample(path, reports)
+
+
+def _file_name(sample: str, taken: set[str]) -> str:
+    """A sample's name as a file name: what a file system takes, nothing else, and not one
+    already ``taken`` (two samples named alike get ``-2``, ``-3`` …); it joins them."""
+    import re
+
+    base = re.sub(r"[^\w.-]+", "_", sample).strip("._") or "sample"
+    name, k = base, 1
+    while name.lower() in taken:  # a file system may not tell the cases apart
+        k += 1
+        name = f"{base}-{k}"
+    taken.add(name.lower())
+    return name
+
+
+def _print_every_sample(path, reports: list[dict]) -> None:
+    """``match --all``'s table: each sample's best recipe, its worst predicted ΔE00 and
+    verdict."""
+    from flakelab.core.tolerance import failures
+
+    table = Table(title=f"The best recipe for each sample of {path}", box=box.SIMPLE_HEAD,
+                  collapse_padding=True)  # fmt: skip
+    for column in ("sample", "max ΔE00", "verdict", "best recipe (share)"):
+        table.add_column(column, justify="right" if "ΔE" in column else "left",
+                         no_wrap=column != "best recipe (share)")  # fmt: skip
+    for report in reports:
+        if "error" in report:
+            table.add_row(report["target"], "", "[red]not read[/]", report["error"])
+            continue
+        best = report["candidates"][0]
+        shares = sorted(best["recipe"].items(), key=lambda item: -item[1])
+        recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:3])
+        failing = failures(best["failing_geometries"], best["failing_texture"])
+        verdict = "[green]PASS[/]" if best["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
+        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict,
+                      recipe + (f" +{len(shares) - 3}" if len(shares) > 3 else ""))  # fmt: skip
+    console.print(table)
+    passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
+    console.print(f"{passing} of {len(reports)} samples matched within the tolerance, as "
+                  "predicted", highlight=False)  # fmt: skip
 
 
 def _recorded_cases(database: str | None, shop: str | None, geometries) -> list:
