@@ -28,6 +28,7 @@ from flakelab.cli.common import (
     progress_bar,
     read_readings,
     reports_errors,
+    shares_text,
     tracked,
 )
 from flakelab.cli.sources import (
@@ -531,8 +532,6 @@ def list_cases(
     if len(shops) > 1:
         table.add_column("shop")
     for row in rows:
-        shares = list(row["recipe"].items())
-        recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:2])
         cells = [
             row["created_at"][:16].replace("T", " "),
             short_id(row["case_id"]),
@@ -542,7 +541,7 @@ def list_cases(
         if checked:
             cells.append(_shown_check(row.get("from_prediction")))
         else:
-            cells.append(recipe + (f" +{len(shares) - 2}" if len(shares) > 2 else ""))
+            cells.append(shares_text(row["recipe"], 2))
         if len(shops) > 1:
             cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
         table.add_row(*cells)
@@ -708,8 +707,6 @@ def nearest_table(rows: list[dict], title: str) -> Table:
         wraps = column in ("recipe (share)", "shop")
         table.add_column(column, justify="right" if right else "left", no_wrap=not wraps)
     for k, row in enumerate(rows, 1):
-        shares = sorted(row["recipe"].items(), key=lambda item: -item[1])
-        recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:3])
         colour = "green" if row["passes"] else "red"
         cells = [
             str(k),
@@ -718,7 +715,7 @@ def nearest_table(rows: list[dict], title: str) -> Table:
             row["outcome"],
             f"[{colour}]{row['sprayout_de00_max']:.2f}[/] {row['worst_geometry']}",
             f"{row['target_de00_max']:.2f}",
-            recipe + (f" +{len(shares) - 3}" if len(shares) > 3 else ""),
+            shares_text(row["recipe"]),
         ]
         table.add_row(*cells, *([row["shop"]] if len(shops) > 1 else []))
     return table

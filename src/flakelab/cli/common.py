@@ -219,6 +219,14 @@ def tracked(
             bar.advance(task)
 
 
+def shares_text(recipe: dict[str, float], shown: int = 3) -> str:
+    """A recipe's largest ``shown`` mass shares for a table cell, ``Al medium 57%, …``, and
+    how many more it holds (``+2``)."""
+    shares = sorted(recipe.items(), key=lambda item: -item[1])
+    text = ", ".join(f"{name} {share:.0%}" for name, share in shares[:shown])
+    return text + (f" +{len(shares) - shown}" if len(shares) > shown else "")
+
+
 def read_sample(path, sample: str | None, option: str = "--sample"):
     """One measurement of a file, as :func:`flakelab.io.read_measurement` reads it; when the
     file holds several and none was named, says which one was taken (its first)."""

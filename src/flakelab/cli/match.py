@@ -26,6 +26,7 @@ from flakelab.cli.common import (
     lights_option,
     progress_bar,
     read_readings,
+    shares_text,
     texture_table,
     tracked,
 )
@@ -365,10 +366,10 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
     for reading in tracked(readings, "matching every sample", json_output):
         try:
             spectra_for_model(path, reading, forward)
-        except FlakelabError as error:
+            result = match(reading, forward, effect, **search)
+        except FlakelabError as error:  # this sample's: named in its row
             reports.append({"target": reading.sample, "error": str(error)})
             continue
-        result = match(reading, forward, effect, **search)
         report = result.to_dict()
         _weigh_candidates(report, result.candidates, forward, can)
         if recipe_dir is not None:
@@ -412,12 +413,10 @@ def _print_every_sample(path, reports: list[dict]) -> None:
             table.add_row(report["target"], "", "[red]not read[/]", report["error"])
             continue
         best = report["candidates"][0]
-        shares = sorted(best["recipe"].items(), key=lambda item: -item[1])
-        recipe = ", ".join(f"{name} {share:.0%}" for name, share in shares[:3])
         failing = failures(best["failing_geometries"], best["failing_texture"])
         verdict = "[green]PASS[/]" if best["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
         table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict,
-                      recipe + (f" +{len(shares) - 3}" if len(shares) > 3 else ""))  # fmt: skip
+                      shares_text(best["recipe"]))  # fmt: skip
     console.print(table)
     passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
     console.print(f"{passing} of {len(reports)} samples matched within the tolerance, as "
