@@ -207,10 +207,10 @@ def match_command(
     from flakelab.match.stock import toners_allowed
 
     if target == "evaluate":
-        if render or plot or recipe_out or average or without or nearest:
+        if render or plot or recipe_out or average or nearest:
             raise FlakelabError(
-                "--render, --plot, --recipe-out, --average, --without, --nearest: for the "
-                "candidates of one target, not the harness"
+                "--render, --plot, --recipe-out, --average, --nearest: for the candidates of "
+                "one target, not the harness"
             )
         _evaluate(
             library=library,
@@ -231,6 +231,7 @@ def match_command(
                 lights=lights_option(lights),
                 solid_travel=solid_travel,
                 max_pigments=max_pigments,
+                without=tuple(without or ()),
             ),
             tolerance=tolerance,
             scale=order_can(quantity, resolution) if weighed else None,
@@ -280,12 +281,12 @@ def match_command(
         lights=lights_option(lights),
         solid_travel=solid_travel,
         max_pigments=max_pigments,
+        without=tuple(without or ()),
     )
     if all_samples:
         from flakelab.io import read_measurements
 
-        search = dict(tolerance=tol, settings=settings, allowed=allowed, habits=shop_habits,
-                      library=lib)  # fmt: skip
+        search = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
         _match_every_sample(read_measurements(path), path, forward, effect, search, can,
                             recipe_dir, json_output)  # fmt: skip
         return
@@ -298,7 +299,6 @@ def match_command(
         effect,
         tolerance=tol,
         settings=settings,
-        allowed=allowed,
         habits=shop_habits,
         library=lib,
     )
@@ -575,11 +575,13 @@ def _evaluate(
     from flakelab.io import read_tolerance
     from flakelab.match.evaluate import evaluate_matching, harness_world
     from flakelab.match.objective import OBJECTIVE_DEFAULT
+    from flakelab.match.stock import toners_allowed
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
 
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     world = harness_world(lib, instrument, world_name)
+    toners_allowed(forward.toners, settings.without)  # a toner misspelt: before the targets
     scale = scale and scale.for_toners(lib, forward.toners)
     habits = habits_for(habits_file, shop, database, forward)
     with progress_bar(json_output) as bar:

@@ -291,6 +291,7 @@ def _one(
             metamerism=settings.metamerism,
             lights=settings.lights,
             physics_every=settings.physics_every,
+            without=settings.without,
         ).fractions
         x_corrected = recipe_vector(forward, as_weighed(forward, recipe, scale))
         corrected = t.sprayed(x_corrected, correction_rng)
@@ -327,6 +328,10 @@ def _one(
         "latency_s": latency,
         "predicted_de00": float(best.de00.max()),
         "family": str(world.library.paint_families(x_hidden[None])[0]),
+        # the car's paint holds a toner the shop is out of (settings.without)
+        "needs_missing": bool(
+            any(x_hidden[list(world.library.names).index(n)] > 0 for n in settings.without)
+        ),
     }
 
 
@@ -395,6 +400,13 @@ def evaluate_matching(
         "tolerance": tolerance.name,
         "weighed": scale and scale.to_dict(),
         "first_shot_success": first,
+        "without": list(settings.without),
+        # the targets whose paint holds a toner out of stock, and how they fared
+        "needing_missing_targets": sum(r["needs_missing"] for r in rows),
+        "needing_missing_first_shot": share([r for r in rows if r["needs_missing"]], "first"),
+        "needing_missing_after_one_correction": share(
+            [r for r in rows if r["needs_missing"]], "corrected"
+        ),
         "by_family": _by_family(rows, share, mean),
         "targets_read_texture": target_texture,
         "after_one_correction": corrected,

@@ -73,6 +73,7 @@ from flakelab.match.judging import (
 )
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
 from flakelab.match.settings import MatchSettings
+from flakelab.match.stock import toners_allowed
 from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
 
 __all__ = [
@@ -420,11 +421,11 @@ def _match(
     """Ranked candidate recipes for ``target`` (a Measurement or reflectance ``[G, 31]``).
 
     ``effect[T]`` marks effect toners (aluminium, pearls); ``allowed[T]`` restricts the
-    toners the search may use (default: all). With the shop's ``habits``
-    (:class:`~flakelab.match.habits.ShopHabits`, and the ``library`` whose physics says
-    what they do) every candidate is aimed off for them, and its numbers are what the shop
-    should measure. The search aims at ``tolerance`` (default ΔE00 ≤ 1.0 at every
-    geometry, the harness's criterion) and judges by it
+    toners the search may use (default: all), and so does ``settings.without``. With the
+    shop's ``habits`` (:class:`~flakelab.match.habits.ShopHabits`, and the ``library``
+    whose physics says what they do) every candidate is aimed off for them, and its numbers
+    are what the shop should measure. The search aims at ``tolerance`` (default ΔE00 ≤ 1.0
+    at every geometry, the harness's criterion) and judges by it
     (:class:`~flakelab.match.objective.MatchObjective`).
     """
     start = time.perf_counter()
@@ -437,8 +438,9 @@ def _match(
     T = len(forward.toners)
     effect = np.zeros(T, bool) if effect is None else np.asarray(effect, bool)
     allowed = np.ones(T, bool) if allowed is None else np.asarray(allowed, bool)
+    allowed = allowed & toners_allowed(forward.toners, settings.without)
     if not allowed.any():
-        raise MatchError("library: no toners to match with")
+        raise MatchError("library: no toners to match with (--without leaves none)")
     spectra, texture, name = target_spectra(target, forward)
     objective = MatchObjective(
         forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism, settings.lights

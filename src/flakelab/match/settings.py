@@ -79,6 +79,8 @@ class MatchSettings:
     lights: tuple[str, ...] | None = None
     # a target without texture readings whose colour travels less (ΔE00) is matched as a solid
     solid_travel: float = SOLID_TRAVEL
+    # toners out of stock: no recipe or correction uses them (:mod:`flakelab.match.stock`)
+    without: tuple[str, ...] = ()
     seed: int = 0
 
 
