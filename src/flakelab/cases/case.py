@@ -126,7 +126,7 @@ class Case:
             readings = {k: float(v) for k, v in readings.items()}
             low, high = TEXTURE_RANGE
             bad = np.flatnonzero(outside(list(readings.values()), TEXTURE_RANGE))
-            if bad.size:  # one check of every reading: a case database is read by the 10,000
+            if bad.size:  # every reading in one check: a database holds tens of thousands of cases
                 k = list(readings)[bad[0]]
                 raise CaseError(
                     f"{where}: {name}: {k}: expected a texture reading in "
