@@ -42,12 +42,14 @@ def main() -> None:
     args = parser.parse_args()
 
     world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
-    every, seconds_all = timed_harness(world, forward, effect, args, (), "every toner",
+    novel = forward.novel  # as the harness: the hidden targets hold only toners it knows
+    every, seconds_all = timed_harness(world, forward, effect, args, novel, "every toner",
                                        per_target=True)  # fmt: skip
     settings = replace(MatchSettings(), without=tuple(args.without))
-    lacking, seconds_without = timed_harness(world, forward, effect, args, (), "without",
+    lacking, seconds_without = timed_harness(world, forward, effect, args, novel, "without",
                                              settings=settings, per_target=True)  # fmt: skip
-    rows_all, rows_without = every["per_target"], lacking["per_target"]
+    rows_all = every["per_target"][: args.targets]  # the targets with a new toner apart
+    rows_without = lacking["per_target"][: args.targets]
     needing = [r["needs_missing"] for r in rows_without]
     report = {"without": args.without, "targets": args.targets, "seed": args.seed}
     report["targets_needing_it"] = int(sum(needing))
