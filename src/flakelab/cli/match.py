@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -206,6 +207,14 @@ def match_command(
     from flakelab.match.search import match
     from flakelab.match.stock import toners_allowed
 
+    search = MatchSettings(
+        model_risk=model_risk,
+        metamerism=metamerism,
+        lights=lights_option(lights),
+        solid_travel=solid_travel,
+        max_pigments=max_pigments,
+        without=tuple(without or ()),
+    )
     if target == "evaluate":
         if render or plot or recipe_out or average or nearest:
             raise FlakelabError(
@@ -224,15 +233,7 @@ def match_command(
             world_name=world,
             habits_file=habits,
             shop=shop,
-            # the harness's own candidates and seeds
-            settings=MatchSettings(
-                model_risk=model_risk,
-                metamerism=metamerism,
-                lights=lights_option(lights),
-                solid_travel=solid_travel,
-                max_pigments=max_pigments,
-                without=tuple(without or ()),
-            ),
+            settings=search,  # the harness's own candidates and seeds
             tolerance=tolerance,
             scale=order_can(quantity, resolution) if weighed else None,
             target_texture=target_texture,
@@ -273,21 +274,12 @@ def match_command(
     path = example_path("target") if example else Path(target)
     tol = read_tolerance(tolerance or "refinish")
     shop_habits = habits_for(habits, shop, database, forward, named=named)
-    settings = MatchSettings(
-        candidates=candidates,
-        seed=seed,
-        model_risk=model_risk,
-        metamerism=metamerism,
-        lights=lights_option(lights),
-        solid_travel=solid_travel,
-        max_pigments=max_pigments,
-        without=tuple(without or ()),
-    )
+    settings = replace(search, candidates=candidates, seed=seed)
     if all_samples:
         from flakelab.io import read_measurements
 
-        search = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
-        _match_every_sample(read_measurements(path), path, forward, effect, search, can,
+        keywords = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
+        _match_every_sample(read_measurements(path), path, forward, effect, keywords, can,
                             recipe_dir, json_output)  # fmt: skip
         return
     measurement, readings = read_readings(path, sample, average)
