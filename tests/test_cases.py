@@ -810,7 +810,18 @@ def test_the_nearest_cases_are_those_whose_spray_outs_lie_closest(cases, tmp_pat
     text = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-t",
                "de00-1.0").stdout  # fmt: skip
     assert chosen.case_id[:13] in text and "already gave a panel within de00-1.0" in text
-    run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "--shop", "X")
-    assert run.returncode == 2 and "no cases from shop 'X'" in run.stderr
+    # a database gives only its spray-outs until the nearest are known: the same cases
+    db = tmp_path / "shop.db"
+    add_cases(open_database(db), cases)
+    stored = json.loads(cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(db), "-n",
+                            "6", "-t", "de00-1.0", "--json").stdout)  # fmt: skip
+    assert stored["cases_searched"] == len(cases)  # spectra kept as float32 there
+    assert [c["case_id"] for c in stored["nearest"]] == [c["case_id"] for c in nearest]
+    assert [c["sprayout_de00_max"] for c in stored["nearest"]] == pytest.approx(
+        [c["sprayout_de00_max"] for c in nearest], abs=1e-3
+    )
+    for where in (source, db):
+        run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(where), "--shop", "X")
+        assert run.returncode == 2 and "no cases from shop 'X'" in run.stderr
     run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-i", "ma-t12")
     assert run.returncode == 2 and "car.json: not read at 15as-45" in run.stderr

@@ -38,6 +38,8 @@ __all__ = [
     "existing_case_ids",
     "user_database_file",
     "latest_cases",
+    "stored_sprayouts",
+    "cases_by_rows",
     "remove_case",
     "find_case_id",
     "short_id",
@@ -241,6 +243,34 @@ def iter_cases(
     with Session(engine) as session:
         for row in session.scalars(query.execution_options(yield_per=batch)):
             yield _case(row)
+
+
+def stored_sprayouts(
+    engine: Engine, geometries: tuple[str, ...], *, shop: str | None = None
+) -> tuple[list[int], np.ndarray]:
+    """The row ids and spray-outs ``[N, G, 31]`` of the cases (``shop``'s, where given) read
+    at every one of ``geometries``, restricted to them in their order: those columns alone,
+    without building each case (a fifth of the time; :func:`cases_by_rows` builds the few
+    that are wanted)."""
+    query = select(CaseRow.id, CaseRow.geometries, CaseRow.sprayout).order_by(CaseRow.id)
+    if shop is not None:
+        query = query.where(CaseRow.shop == shop)
+    wanted, ids, spectra = set(geometries), [], []
+    with Session(engine) as session:
+        for row_id, names, sprayout in session.execute(query):
+            if wanted <= set(names):
+                rows = [names.index(g) for g in geometries]
+                ids.append(row_id)
+                spectra.append(np.frombuffer(sprayout, "<f4").reshape(len(names), -1)[rows])
+    shape = (0, len(geometries), 0)
+    return ids, np.stack(spectra).astype(float) if spectra else np.zeros(shape)
+
+
+def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
+    """The cases of these row ids (:func:`stored_sprayouts`), in their order."""
+    with Session(engine) as session:
+        rows = {r.id: r for r in session.scalars(select(CaseRow).where(CaseRow.id.in_(row_ids)))}
+    return [_case(rows[i]) for i in row_ids]
 
 
 def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Case]:

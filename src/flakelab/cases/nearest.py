@@ -18,13 +18,15 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from sqlalchemy import Engine
 
 from flakelab.cases.case import Case, CaseError
+from flakelab.cases.database import cases_by_rows, stored_sprayouts
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import Tolerance
 
-__all__ = ["NearCase", "nearest_cases"]
+__all__ = ["NearCase", "nearest_cases", "nearest_stored_cases"]
 
 
 @dataclass(frozen=True)
@@ -77,23 +79,62 @@ def nearest_cases(
     geometries = cases[0].geometry_names
     if any(c.geometry_names != geometries for c in cases):
         raise CaseError("nearest_cases: expected every case at the same geometries")
+    sprayouts = np.stack([c.sprayout for c in cases])
+    order, judged = _ranked(target, sprayouts, geometries, tolerance, count)
+    return _near(target, [cases[i] for i in order], judged, tolerance, target_texture)
+
+
+def nearest_stored_cases(
+    engine: Engine,
+    target: NDArray,
+    geometries: tuple[str, ...],
+    tolerance: Tolerance,
+    count: int = 5,
+    *,
+    shop: str | None = None,
+    target_texture: dict[str, float] | None = None,
+) -> tuple[list[NearCase], int]:
+    """:func:`nearest_cases` among a database's cases (``shop``'s, where given) read at
+    ``geometries``, reading only their spray-outs and then the ``count`` cases found; and
+    how many were searched (none found where none was read there)."""
+    row_ids, sprayouts = stored_sprayouts(engine, tuple(geometries), shop=shop)
+    if not row_ids:
+        return [], 0
+    order, judged = _ranked(target, sprayouts, tuple(geometries), tolerance, count)
+    found = cases_by_rows(engine, [row_ids[i] for i in order])
+    chosen = [case.at_geometries(geometries) for case in found]
+    return _near(target, chosen, judged, tolerance, target_texture), len(row_ids)
+
+
+def _ranked(target, sprayouts: NDArray, geometries, tolerance: Tolerance, count: int):
+    """The ``count`` spray-outs ``[N, G, 31]`` nearest ``target`` by the worst geometry's
+    share of ``tolerance``'s limit (one colour computation for all), and their ΔE00, share
+    and verdict, in that order."""
     target_lab = reflectance_to_Lab(np.asarray(target, dtype=float))
-    sprayouts = reflectance_to_Lab(np.stack([c.sprayout for c in cases]))
-    de00, dLCH, passed = tolerance.judge(geometries, target_lab, sprayouts)
+    de00, dLCH, passed = tolerance.judge(geometries, target_lab, reflectance_to_Lab(sprayouts))
     shares = tolerance.share_of_limit(geometries, de00=de00, dLCH=dLCH).max(axis=1)
     order = np.argsort(shares, kind="stable")[:count]
-    cars = reflectance_to_Lab(np.stack([cases[i].target for i in order]))
+    return order, (de00[order], shares[order], passed[order].all(axis=1))
+
+
+def _near(target, cases: list[Case], judged, tolerance: Tolerance, target_texture):
+    """:class:`NearCase` of each case with its ``judged`` spray-out, and its own car's ΔE00
+    from the target."""
+    de00, shares, passes = judged
+    geometries = cases[0].geometry_names
+    target_lab = reflectance_to_Lab(np.asarray(target, dtype=float))
+    cars = reflectance_to_Lab(np.stack([case.target for case in cases]))
     cars_de00 = tolerance.judge(geometries, target_lab, cars)[0]
     return [
         NearCase(
-            cases[i],
-            de00[i],
-            float(shares[i]),
-            bool(passed[i].all()),
+            case,
+            de00[k],
+            float(shares[k]),
+            bool(passes[k]),
             cars_de00[k],
-            _texture_delta(cases[i].sprayout_texture, target_texture or {}),
-        )
-        for k, i in enumerate(order)
+            _texture_delta(case.sprayout_texture, target_texture or {}),
+        )  # fmt: skip
+        for k, case in enumerate(cases)
     ]
 
 

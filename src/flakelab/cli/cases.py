@@ -624,7 +624,6 @@ def nearest(
     start: ranked by the worst geometry's share of --tolerance, the spray-out against the
     target (the car each was mixed for, and texture, shown beside)."""
     from flakelab.cases.database import default_url
-    from flakelab.cases.nearest import nearest_cases
     from flakelab.io import read_library, read_tolerance, write_recipe
     from flakelab.match.recipe import order_can, recipe_grams, weigh
 
@@ -641,13 +640,18 @@ def nearest(
             "--instrument chooses)"
         )
     source = database or default_url()
-    cases = shop_cases(source, shop, geometries)
     spectra = reading.storage_spectra(list(geometries))
-    found = nearest_cases(spectra, cases, tol, count, reading.texture)
+    found, searched = recorded_nearest(source, shop, geometries, spectra, tol, count,
+                                       reading.texture)  # fmt: skip
+    if not searched:
+        raise FlakelabError(
+            f"{source}: no cases {which_cases(shop, None)} read at the geometries "
+            f"{tuple(geometries)}"
+        )
     report = {
         "target": reading.sample,
         "cases": source,
-        "cases_searched": len(cases),
+        "cases_searched": searched,
         "shop": shop,
         "geometries": list(geometries),
         "tolerance": tol.name,
@@ -665,6 +669,25 @@ def nearest(
         print(json.dumps(report, indent=2))
         return
     _print_nearest(report)
+
+
+def recorded_nearest(source: str, shop, geometries, spectra, tolerance, count: int, texture):
+    """The ``count`` recorded cases of ``source`` (a database, or a case file) whose
+    spray-outs lie closest to ``spectra`` at ``geometries``, and how many were searched; a
+    database gives only its spray-outs until the nearest are known."""
+    from flakelab.cases.case import cases_at
+    from flakelab.cases.database import open_database
+    from flakelab.cases.exchange import is_case_file
+    from flakelab.cases.nearest import nearest_cases, nearest_stored_cases
+    from flakelab.cli.sources import load_cases
+
+    if is_case_file(Path(source)):
+        cases = cases_at(load_cases(source, shop), geometries)
+        found = nearest_cases(spectra, cases, tolerance, count, texture) if cases else []
+        return found, len(cases)
+    engine = open_database(source, must_exist=True)
+    return nearest_stored_cases(engine, spectra, tuple(geometries), tolerance, count,
+                                shop=shop, target_texture=texture)  # fmt: skip
 
 
 def _print_nearest(report: dict) -> None:

@@ -200,7 +200,6 @@ def match_command(
     and the model that produced them.
     'flakelab match evaluate' runs the evaluation harness."""
     from flakelab.cases.database import default_url
-    from flakelab.cases.nearest import nearest_cases
     from flakelab.data import example_path
     from flakelab.io import read_tolerance
     from flakelab.match.recipe import order_can
@@ -284,7 +283,8 @@ def match_command(
         return
     measurement, readings = read_readings(path, sample, average)
     spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
-    recorded = _recorded_cases(database, shop, forward.geometries) if nearest else []
+    if nearest:  # a database that is not there: refused before the search's wait
+        _check_cases_source(database)
     result = match(
         measurement,
         forward,
@@ -297,10 +297,14 @@ def match_command(
     report = result.to_dict()
     report["without"] = list(without or ())
     if nearest:
-        report["recorded_nearest"] = [near.to_dict() for near in nearest_cases(
-            spectra_for_model(path, measurement, forward)[0], recorded, tol, nearest,
-            measurement.texture)] if recorded else []  # fmt: skip
-        if not recorded:
+        from flakelab.cli.cases import recorded_nearest
+
+        found, searched = recorded_nearest(
+            database or default_url(), shop, forward.geometries,
+            spectra_for_model(path, measurement, forward)[0], tol, nearest, measurement.texture,
+        )  # fmt: skip
+        report["recorded_nearest"] = [near.to_dict() for near in found]
+        if not searched:
             whose = f"of shop {shop!r} " if shop else ""
             report["notes"].append(
                 f"--nearest: no recorded cases {whose}in {database or default_url()} read at "
@@ -415,15 +419,14 @@ def _print_every_sample(path, reports: list[dict]) -> None:
                   "predicted", highlight=False)  # fmt: skip
 
 
-def _recorded_cases(database: str | None, shop: str | None, geometries) -> list:
-    """The cases of ``database`` (``shop``'s, where given) read at ``geometries``, each
-    restricted to them, read before the search: a database that is not there is refused
-    before the wait."""
-    from flakelab.cases.case import cases_at
-    from flakelab.cases.database import default_url
-    from flakelab.cli.sources import load_cases
+def _check_cases_source(database: str | None) -> None:
+    """The cases ``--nearest`` reads: a case file or a database that is there."""
+    from flakelab.cases.database import default_url, open_database
+    from flakelab.cases.exchange import is_case_file
 
-    return cases_at(load_cases(database or default_url(), shop), geometries)
+    source = database or default_url()
+    if not is_case_file(Path(source)):
+        open_database(source, must_exist=True)
 
 
 def _write_candidate(report: dict, pick: int, path: Path) -> None:
