@@ -625,14 +625,14 @@ def nearest(
     target (the car each was mixed for, and texture, shown beside)."""
     from flakelab.cases.database import default_url
     from flakelab.io import read_library, read_tolerance, write_recipe
-    from flakelab.match.recipe import order_can, recipe_grams, weigh
+    from flakelab.match.recipe import order_can, weigh
 
     tol = read_tolerance(tolerance)
     check_output_file(recipe_out, "--recipe-out")
     if pick > count:
         raise FlakelabError(f"--pick: expected one of the {count} cases shown, got {pick}")
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
-    order_can(quantity, resolution)  # a can the scale cannot weigh: refused before the search
+    can = order_can(quantity, resolution)  # a can the scale cannot weigh: before the search
     reading = read_readings(target, sample, average)[0]
     if missing := [g for g in geometries if g not in reading.geometry_names]:
         raise FlakelabError(
@@ -661,7 +661,7 @@ def nearest(
         if pick > len(found):
             raise FlakelabError(f"--pick: expected one of the {len(found)} cases found, got {pick}")
         fractions = dict(found[pick - 1].case.recipe)
-        grams = recipe_grams(quantity, resolution, read_library(library), fractions, "--quantity")
+        grams = can.for_toners(read_library(library), fractions).grams_for(fractions)
         write_recipe({ln.toner: ln.grams for ln in weigh(fractions, grams, resolution)}, recipe_out)
         report["recipe_out"] = {"file": str(recipe_out), "case": pick, "quantity_g": grams}
         errors.print(f"wrote case {pick}'s recipe, {grams:g} g, to {recipe_out}", highlight=False)

@@ -282,9 +282,12 @@ def match_command(
                             recipe_dir, json_output)  # fmt: skip
         return
     measurement, readings = read_readings(path, sample, average)
-    spectra_for_model(path, measurement, forward)  # a reading the model cannot read: named
-    if nearest:  # a database that is not there: refused before the search's wait
-        _check_cases_source(database)
+    spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
+    if nearest:  # before the search: a database that is not there is refused before the wait
+        from flakelab.cli.cases import recorded_nearest
+
+        found, searched = recorded_nearest(database or default_url(), shop, forward.geometries,
+                                           spectra, tol, nearest, measurement.texture)  # fmt: skip
     result = match(
         measurement,
         forward,
@@ -297,12 +300,6 @@ def match_command(
     report = result.to_dict()
     report["without"] = list(without or ())
     if nearest:
-        from flakelab.cli.cases import recorded_nearest
-
-        found, searched = recorded_nearest(
-            database or default_url(), shop, forward.geometries,
-            spectra_for_model(path, measurement, forward)[0], tol, nearest, measurement.texture,
-        )  # fmt: skip
         report["recorded_nearest"] = [near.to_dict() for near in found]
         if not searched:
             whose = f"of shop {shop!r} " if shop else ""
@@ -417,16 +414,6 @@ def _print_every_sample(path, reports: list[dict]) -> None:
     passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
     console.print(f"{passing} of {len(reports)} samples matched within the tolerance, as "
                   "predicted", highlight=False)  # fmt: skip
-
-
-def _check_cases_source(database: str | None) -> None:
-    """The cases ``--nearest`` reads: a case file or a database that is there."""
-    from flakelab.cases.database import default_url, open_database
-    from flakelab.cases.exchange import is_case_file
-
-    source = database or default_url()
-    if not is_case_file(Path(source)):
-        open_database(source, must_exist=True)
 
 
 def _write_candidate(report: dict, pick: int, path: Path) -> None:
