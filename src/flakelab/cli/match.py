@@ -49,7 +49,7 @@ from flakelab.cli.matcher import (
     with_left_out,
 )
 from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, workplace_shop
-from flakelab.cli.weigh import can_text, rounding_text, weighed_recipe, weights_table
+from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import MatchSettings
@@ -340,10 +340,7 @@ def _weigh_candidates(report: dict, candidates, forward, can) -> None:
         grams = can.grams_for(candidate.fractions)
         entry.update(weighed_recipe(forward, candidate.fractions, grams, can.resolution_g))
         entry["quantity_g"] = grams
-    report["quantity_g"] = can.grams
-    if can.millilitres is not None:
-        report |= {"quantity": can.quantity, "quantity_ml": can.millilitres}
-    report["resolution_g"] = can.resolution_g
+    report |= can_size(can, can.grams)
 
 
 def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,

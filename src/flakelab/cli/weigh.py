@@ -202,6 +202,7 @@ def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most
 def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> None:
     poured, grown = report["poured_g"], report["grown_g"]
     over = report["ran_over"]
+    ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
     if report["not_in_recipe"]:
         state = (
             f"{', '.join(report['not_in_recipe'])} is not in the recipe: the rest of the recipe "
@@ -209,14 +210,12 @@ def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> No
             f"{grown:g} g" + (f" (--most {report['most_g']:g} g)" if report["most_g"] else "")
         )
     elif over and "proportional_g" in report:
-        ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
         state = (
             f"{ran} ran over; at the recipe's proportions the can would grow to "
             f"{report['proportional_g']:g} g, more than --most {report['most_g']:g} g: the "
             f"rest and what brings the can nearest its colour by the model, in {grown:g} g"
         )
     elif over:
-        ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
         state = f"{ran} ran over; the can grows to {grown:g} g"
     else:
         state = "on plan"
