@@ -310,9 +310,7 @@ def train(
         log = log + adaptation["log"]
         model = shop_model  # --out: the shop's model
     if out is not None:
-        from flakelab.io.records import write_atomically
-
-        write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
+        _write_model(model, out)
         summary["file"] = str(out)
     summary["loss_log_tail"] = log[-3:]
     if json_output:
@@ -384,9 +382,7 @@ def show_model(
     chosen, source = named_model(model, database)
     card = {"source": source, **model_card(chosen)}
     if out is not None:
-        from flakelab.io.records import write_atomically
-
-        write_atomically(out, lambda p: p.write_bytes(chosen.to_bytes()))
+        _write_model(chosen, out)
         card["file"] = str(out)
     if json_output:
         print(json.dumps(card, indent=2, default=str))
@@ -707,9 +703,7 @@ def adapt(
         "held_out": judged_before_and_after(base, new, held_out),
     }
     if out is not None:
-        from flakelab.io.records import write_atomically
-
-        write_atomically(out, lambda p: p.write_bytes(new.to_bytes()))
+        _write_model(new, out)
         summary["file"] = str(out)
     if register_model:
         summary["registry"] = register(
@@ -750,3 +744,10 @@ def adapt(
             "(whose toners both learned, that neither learned from)"
         )
         errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
+
+
+def _write_model(model, out: Path) -> None:
+    """A model file at ``out``, written whole or not at all."""
+    from flakelab.io.records import write_atomically  # the file formats: not at start-up
+
+    write_atomically(out, lambda p: p.write_bytes(model.to_bytes()))
