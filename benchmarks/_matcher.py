@@ -61,11 +61,13 @@ def run_harness(
     target_texture=True,
     habits=None,
     per_target=False,
+    lots="standard",
 ) -> dict:
     """The harness's report for ``forward`` on the targets the options ``args`` name, those
     with a new toner drawn from ``novel``; without ``target_texture`` the matcher reads the
     targets without their texture readings; with a shop's ``habits`` it aims off for them;
-    with ``per_target`` the report keeps every target's trial."""
+    with ``per_target`` the report keeps every target's trial; ``lots`` says what the shop
+    knows of its tins (``flakelab match evaluate --lots``)."""
     return evaluate_matching(
         world,
         forward,
@@ -81,6 +83,7 @@ def run_harness(
         progress=progress,
         habits=habits,
         per_target=per_target,
+        lots=lots,
     )
 
 
@@ -101,6 +104,7 @@ def timed_harness(
     target_texture=True,
     habits=None,
     per_target=False,
+    lots="standard",
 ) -> tuple[dict, float]:
     """:func:`run_harness`'s report under a progress bar labelled ``label`` (none with
     ``--json``), and the run's wall time in seconds."""
@@ -119,6 +123,7 @@ def timed_harness(
             target_texture=target_texture,
             habits=habits,
             per_target=per_target,
+            lots=lots,
         )
     return report, time.perf_counter() - start
 

@@ -90,6 +90,7 @@ __all__ = [
     "unreached_note",
     "model_persistent_sd",
     "split_offset",
+    "application_sensitivities",
 ]
 
 CORRECTION_MODES = ("additions", "reformulate")
@@ -242,12 +243,18 @@ def model_persistent_sd(forward, x: NDArray, model_sd: float) -> float | NDArray
 
 def application_sensitivity(library: Library, x: NDArray, geometries) -> NDArray:
     """L*a*b* change ``[2, G, 3]`` of recipe ``x[T]`` per one sigma of film build and of
-    flake spread: half the difference between sprays one sigma either side (the library's
-    physics)."""
+    flake spread (:func:`application_sensitivities` of one recipe)."""
+    return application_sensitivities(library, x[None], geometries)[0]
+
+
+def application_sensitivities(library: Library, x: NDArray, geometries) -> NDArray:
+    """L*a*b* change ``[N, 2, G, 3]`` of each recipe ``x[N, T]`` per one sigma of film build
+    and of flake spread: half the difference between sprays one sigma either side (the
+    library's physics, one call)."""
     film = np.array([1 + FILM_BUILD_SD, 1 - FILM_BUILD_SD, 1.0, 1.0])
     spread = np.exp([0.0, 0.0, SPREAD_SD, -SPREAD_SD])
-    lab = sprayed_lab(library, x[None], geometries, film, spread).reshape(2, 2, -1, 3)
-    return (lab[:, 0] - lab[:, 1]) / 2
+    lab = sprayed_lab(library, x, geometries, film, spread).reshape(2, 2, len(x), -1, 3)
+    return np.moveaxis((lab[:, 0] - lab[:, 1]) / 2, 1, 0)
 
 
 def _spectral_ratio(sprayed: NDArray, predicted: NDArray) -> NDArray:

@@ -39,6 +39,7 @@ from flakelab.core.tolerance import REFINISH_TEXTURE, Tolerance, tolerance_prese
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.judging import recipe_vector
+from flakelab.match.lots import WithLots, calibrate_lots, calibration_recipes
 from flakelab.match.objective import OBJECTIVE_DEFAULT
 from flakelab.match.recipe import Can, weigh_whole_can
 from flakelab.match.search import MatchError, MatchSettings, match
@@ -49,6 +50,7 @@ __all__ = [
     "harness_trials",
     "harness_world",
     "HARNESS_WORLDS",
+    "LOT_MODES",
     "SUCCESS_DE00",
     "Trial",
     "as_weighed",
@@ -74,6 +76,14 @@ application vary); the hybrid paper's "standardised pigments" (its 85 % first sh
 differs from another, each spray's application still varies); controlled (only the
 instrument's reading varies); a real shop with habits of its own (``SHOP_WITH_HABITS``),
 which the model learns by adaptation (``flakelab model adapt``)."""
+
+
+LOT_MODES = ("standard", "calibrated", "known")
+"""What the harness's shop knows of its tins (:mod:`flakelab.match.lots`): nothing, every tin
+taken at the model's standard (the issue's figures); each tin's strength read from one
+calibration panel of its toner sprayed from the trial's tins (:func:`calibration_recipes
+<flakelab.match.lots.calibration_recipes>`); or the world's own strengths, the limit that
+calibration approaches (the tins' hue drift stays unknown in every mode)."""
 
 
 def harness_world(library, instrument: str = DEFAULT_INSTRUMENT, name: str = "shop") -> World:
@@ -127,6 +137,20 @@ class Trial:
         # the texture noise from a child stream: the spray's colour stays as it was
         return reading, texture_reading(self.world, texture, stream.spawn(1)[0])
 
+    def panels(self, x: NDArray) -> NDArray:
+        """Recipes ``x[N, T]`` mixed from the shop's tins, each sprayed once and measured
+        ``[N, G, 31]``, from a stream of their own (:func:`calibration_stream`): the shop's
+        calibration panels."""
+        stream = calibration_stream(self)
+        film, spread = self.world.application(len(x), stream)
+        tins = Variation(
+            np.repeat(self.shop.strength, len(x), axis=0),
+            np.repeat(self.shop.hue_shift, len(x)),
+            film,
+            spread,
+        )
+        return self.world.measure(self.world.appearance(x, tins)[0], stream)
+
     def unsprayed(self, x: NDArray) -> NDArray:
         """``x`` mixed from the shop's batches at the shop's mean application, read without
         noise ``[G, 31]``: a spray-out without its own application and instrument noise."""
@@ -147,6 +171,16 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     # would move every later target's streams (rng.spawn counts its children)
     readings = texture_reading(world, texture, streams[0].spawn(1)[0])
     return Trial(world, target, oem, shop, streams, readings)
+
+
+def calibration_stream(t: Trial) -> np.random.Generator:
+    """A stream for ``t``'s calibration panels that no other spray of the trial draws from:
+    a child of the first spray's stream by a key that counted spawning never reaches, so
+    that calibrating changes none of the other sprays."""
+    seeds = t.streams[0].bit_generator.seed_seq
+    return np.random.default_rng(
+        np.random.SeedSequence(seeds.entropy, spawn_key=(*seeds.spawn_key, 2**31 - 1))
+    )
 
 
 def texture_reading(world: World, texture: NDArray, rng: np.random.Generator) -> dict[str, float]:
@@ -191,6 +225,11 @@ def _by_family(rows: list[dict], share, mean) -> dict[str, dict]:
         chances = {name: mean(mine, key) for name, key in CHANCES.items()}
         report[f] = {"targets": len(mine), **rates, **chances}
     return report
+
+
+def _mean_or_none(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return float(np.mean(values)) if values else None
 
 
 def _median(values) -> float | None:
@@ -239,6 +278,23 @@ def harness_trials(
         yield x, trial(world, x, rng)
 
 
+def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None):
+    """``forward`` as trial ``t``'s shop predicts with it (:data:`LOT_MODES`: ``panels`` are
+    the calibration recipes of ``"calibrated"``), and the RMS of its tins' strengths' error
+    (None at the standard)."""
+    if lots == "standard":
+        return forward, None
+    order = [list(t.world.library.names).index(n) for n in forward.toners]
+    true = t.shop.strength[0][order]
+    strength = true
+    if lots == "calibrated":
+        found = calibrate_lots(forward, t.world.library, panels, t.panels(panels))
+        read = dict(zip(found.toners, found.strength, strict=True))
+        strength = np.array([read.get(n, 1.0) for n in forward.toners])
+    error = float(np.sqrt(np.mean((strength - true) ** 2)))
+    return WithLots(forward, strength), error
+
+
 def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target_texture=True):
     """The harness's match of trial ``t``'s target, and its latency in seconds: the target
     read (without its texture readings unless ``target_texture``) and matched."""
@@ -258,9 +314,10 @@ def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target
 
 def _one(
     t: Trial, x_hidden, forward, effect, settings, habits, tolerance, scale, target_texture=True,
-    resprays=0,
+    resprays=0, lots="standard", panels=None,
 ) -> dict:  # fmt: skip
     world = t.world
+    forward, lot_error = shop_forward(t, forward, lots, panels)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
 
     def share(sprayed: tuple[NDArray, dict]) -> float:
@@ -326,6 +383,7 @@ def _one(
         "corrected_chance": float(np.mean(corrected_again)) if resprays else None,
         "oracle_chance": float(np.mean(oracle_again)) if resprays else None,
         "latency_s": latency,
+        "lot_error": lot_error,
         "predicted_de00": float(best.de00.max()),
         "family": str(world.library.paint_families(x_hidden[None])[0]),
         # the car's paint holds a toner the shop is out of (settings.without)
@@ -350,6 +408,7 @@ def evaluate_matching(
     scale: Can | None = None,
     target_texture: bool = True,
     resprays: int = 0,
+    lots: str = "standard",
     progress: Callable[[], None] | None = None,
     per_target: bool = False,
 ) -> dict:
@@ -369,14 +428,19 @@ def evaluate_matching(
     averages that out, so two matchers (or paint families) compare with a fraction of the
     noise of one spray each. With ``per_target`` the report keeps every target's trial
     (``per_target``: the targets, then those with a new toner), for paired comparisons of
-    two runs on the same seed."""
+    two runs on the same seed. ``lots`` says what the shop knows of its tins
+    (:data:`LOT_MODES`)."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
+    if lots not in LOT_MODES:
+        raise MatchError(f"--lots: expected one of {', '.join(LOT_MODES)}, got {lots!r}")
+    panels = calibration_recipes(forward, world.library) if lots == "calibrated" else None
     rows, novel_rows = [], []
     for i, (x, t) in enumerate(harness_trials(world, targets, seed, novel, novel_targets)):
         row = _one(
-            t, x, forward, effect, settings, habits, tolerance, scale, target_texture, resprays
-        )
+            t, x, forward, effect, settings, habits, tolerance, scale, target_texture, resprays,
+            lots, panels,
+        )  # fmt: skip
         (rows if i < targets else novel_rows).append(row)
         if progress:
             progress()
@@ -440,6 +504,9 @@ def evaluate_matching(
         "latency_p50_s": float(np.percentile(latency, 50)),
         "latency_p95_s": float(np.percentile(latency, 95)),
         "resprays": resprays,
+        "lots": lots,
+        # the RMS error of the tins' strengths the shop matched with, mean over targets
+        "lot_strength_error_rms": _mean_or_none(r["lot_error"] for r in rows + novel_rows),
         **{name: mean(rows, key) for name, key in CHANCES.items()},
         "novel_toner_first_shot_chance": mean(novel_rows, "first_chance"),
         **({"per_target": rows + novel_rows} if per_target else {}),

@@ -1,0 +1,70 @@
+"""What knowing the shop's tins buys: the harness run on the same targets and sprays with every
+tin taken at the model's standard (the baseline, measured in the same run), with each tin's
+strength read from one calibration panel (``flakelab match evaluate --lots calibrated``), and
+with the world's own strengths (``--lots known``, the limit calibration approaches); the
+differences paired target by target.
+
+    python benchmarks/toner_lots.py [--targets 200] [--seed 4242] [--modes calibrated,known]
+        [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from _matcher import add_harness_arguments, shipped_matcher, timed_harness
+from flakelab.match.evaluate import LOT_MODES
+from timing import print_report
+
+
+def paired(base: list[dict], other: list[dict], key: str) -> dict:
+    """Pass rates of ``key`` (share ≤ 1) in both runs and their paired difference ± its
+    standard error."""
+    a = np.array([r[key] <= 1.0 for r in base], float)
+    b = np.array([r[key] <= 1.0 for r in other], float)
+    diff = b - a
+    return {
+        "standard": round(float(a.mean()), 3),
+        "with_lots": round(float(b.mean()), 3),
+        "difference": round(float(diff.mean()), 3),
+        "difference_se": round(float(diff.std(ddof=1) / np.sqrt(diff.size)), 3),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--modes", default="calibrated,known", help="lot modes against standard")
+    add_harness_arguments(parser, targets=200, novel_targets=0)
+    args = parser.parse_args()
+    modes = [m for m in args.modes.split(",") if m]
+    if not set(modes) <= set(LOT_MODES) - {"standard"}:
+        raise SystemExit(f"--modes: expected some of calibrated, known, got {args.modes!r}")
+
+    world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
+    runs = {}
+    for mode in ["standard", *modes]:
+        runs[mode] = timed_harness(world, forward, effect, args, forward.novel, mode,
+                                   per_target=True, lots=mode)  # fmt: skip
+    base = runs["standard"][0]["per_target"]
+    report = {"targets": args.targets, "novel_targets": args.novel_targets, "seed": args.seed,
+              "world": args.world}  # fmt: skip
+    for mode, (run, seconds) in runs.items():
+        report[mode] = {
+            "first_shot_success": run["first_shot_success"],
+            "after_one_correction": run["after_one_correction"],
+            "oracle_success": run["oracle_success"],
+            "lot_strength_error_rms": run["lot_strength_error_rms"],
+            "latency_p50_s": round(run["latency_p50_s"], 3),
+            "wall_s": round(seconds, 1),
+        }
+        if mode != "standard":
+            rows = run["per_target"]
+            report[mode]["first_shot_paired"] = paired(base, rows, "first")
+            report[mode]["after_one_correction_paired"] = paired(base, rows, "corrected")
+    print_report(report, args.json)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""Toner-lot files: the shop's tins and their strengths (:mod:`flakelab.library.lots`).
+
+::
+
+    {"format": "flakelab-toner-lots", "version": 1, "library": "flakelab demo",
+     "lots": [{"toner": "Phthalo blue GS", "strength": 1.031, "strength_sd": 0.006,
+               "lot": "B-2291", "panels": 1, "calibrated": "2026-11-29T10:12:00+00:00",
+               "model_id": "demo-five-angle 65a5a7b88eab"}]}
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, fields
+from os import PathLike
+from pathlib import Path
+
+from flakelab.core.units import is_number
+from flakelab.errors import FlakelabError
+from flakelab.io.records import write_atomically
+from flakelab.library.lots import TonerLot, TonerLots
+
+__all__ = ["LOTS_FORMAT", "read_lots", "write_lots"]
+
+LOTS_FORMAT = "flakelab-toner-lots"
+_VERSION = 1
+_TEXT_FIELDS = ("toner", "lot", "calibrated", "model_id")
+
+
+def read_lots(path: str | PathLike) -> TonerLots:
+    """The lots of a toner-lot file; names the file, the lot and the field of any problem."""
+    path = Path(path)
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FlakelabError(f"{path}: no such toner-lot file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise FlakelabError(f"{path}: expected a JSON toner-lot file ({error})") from None
+    if not isinstance(document, dict) or document.get("format") != LOTS_FORMAT:
+        raise FlakelabError(f"{path}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)")
+    if document.get("version") != _VERSION:
+        raise FlakelabError(f"{path}: version: expected {_VERSION}, got {document.get('version')!r}")
+    entries = document.get("lots")
+    if not isinstance(entries, list):
+        raise FlakelabError(f"{path}: lots: expected a list of lots")
+    lots = [_lot(path, i, entry) for i, entry in enumerate(entries)]
+    names = [lot.toner for lot in lots]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise FlakelabError(f"{path}: lots: more than one tin of {', '.join(twice)} (one per toner)")
+    library = document.get("library", "")
+    if not isinstance(library, str):
+        raise FlakelabError(f"{path}: library: expected a name, got {library!r}")
+    return TonerLots.of(lots, library)
+
+
+def _lot(path: Path, index: int, entry) -> TonerLot:
+    where = f"{path}: lots[{index}]"
+    if not isinstance(entry, dict):
+        raise FlakelabError(f"{where}: expected an object with toner and strength")
+    if isinstance(entry.get("toner"), str):
+        where += f" ({entry['toner']})"
+    known = {f.name for f in fields(TonerLot)}
+    unknown = sorted(set(entry) - known)
+    if unknown:
+        raise FlakelabError(f"{where}: {unknown[0]}: not a field of a lot (expected {', '.join(sorted(known))})")
+    for name, value in entry.items():
+        if name in _TEXT_FIELDS and not isinstance(value, str):
+            raise FlakelabError(f"{where}: {name}: expected text, got {value!r}")
+        if name == "panels" and not (isinstance(value, int) and not isinstance(value, bool)):
+            raise FlakelabError(f"{where}: panels: expected a whole number, got {value!r}")
+        if name in ("strength", "strength_sd") and not is_number(value):
+            raise FlakelabError(f"{where}: {name}: expected a number, got {value!r}")
+    if "toner" not in entry or "strength" not in entry:
+        raise FlakelabError(f"{where}: expected both 'toner' and 'strength'")
+    try:
+        return TonerLot(**entry)
+    except ValueError as error:
+        raise FlakelabError(f"{where}: {error}") from None
+
+
+def write_lots(lots: TonerLots, path: str | PathLike) -> None:
+    """Write ``lots`` atomically, by toner name (:func:`read_lots` reads them)."""
+    document = {
+        "format": LOTS_FORMAT,
+        "version": _VERSION,
+        "library": lots.library,
+        "lots": [asdict(lots.lots[name]) for name in sorted(lots.lots)],
+    }
+    text = json.dumps(document, indent=1, ensure_ascii=False) + "\n"
+    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
