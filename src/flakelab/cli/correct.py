@@ -28,6 +28,7 @@ from flakelab.cli.common import (
     lights_option,
     read_readings,
 )
+from flakelab.cli.lots import LotsOption, lots_report, shop_lots
 from flakelab.cli.matcher import (
     HabitsOption,
     HabitsShopOption,
@@ -104,6 +105,7 @@ def correct_command(
         int, typer.Option(help="Toners outside the recipe tried as one addition (0: none).")
     ] = EXTRA_TONERS_TRIED,
     without: WithoutOption = None,
+    lots: LotsOption = None,
     model_sd: Annotated[
         float,
         typer.Option(
@@ -145,6 +147,7 @@ def correct_command(
             raise FlakelabError(f"{option}: for --mode additions (a reformulation is mixed afresh)")
     shop, named = workplace_shop(shop)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
+    tins, forward, lot_notes = shop_lots(lots, lib, forward)
     x0 = recipe_fractions(lib, grams, recipe)
     can = grams if left is None else _what_is_left(grams, left, resolution, lib, recipe)
     most_g = None if most is None else _most_g(most, can, resolution, lib)
@@ -186,7 +189,9 @@ def correct_command(
         "tolerance": tol.name,
         "sprayout_passes": not failing and not texture_failing,
         "sprayout_failing": failures(failing, texture_failing),
-        "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction"),
+        "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction")
+        + lot_notes,
+        "lots": tins and lots_report(tins),
     }
     if average:
         add_readings_spread(report, "target_readings", target_readings, target_reading, tol)

@@ -31,6 +31,7 @@ from flakelab.cli.common import (
     texture_table,
     tracked,
 )
+from flakelab.cli.lots import lots_report, shop_lots
 from flakelab.cli.matcher import (
     HabitsOption,
     HabitsShopOption,
@@ -124,6 +125,16 @@ def match_command(
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
     without: WithoutOption = None,
+    lots: Annotated[
+        str | None,
+        typer.Option(
+            "--lots",
+            help="The shop's toner-lot file ('flakelab lots calibrate' writes it): recipes are "
+            "weighed for its tins' strengths. evaluate: what the harness's shop knows of its "
+            "tins: standard (nothing), calibrated (each read from one panel) or known.",
+            show_default="the model's standard tins",
+        ),
+    ] = None,
     nearest: Annotated[
         int,
         typer.Option(
@@ -237,6 +248,7 @@ def match_command(
             scale=order_can(quantity, resolution) if weighed else None,
             target_texture=target_texture,
             resprays=resprays,
+            lots=lots or "standard",
             json_output=json_output,
         )
         return
@@ -268,6 +280,7 @@ def match_command(
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
+    tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward)
     allowed = toners_allowed(forward.toners, without or ())
     can = can.for_toners(lib, [n for n, ok in zip(forward.toners, allowed, strict=True) if ok])
     path = example_path("target") if example else Path(target)
@@ -299,6 +312,8 @@ def match_command(
     )
     report = result.to_dict()
     report["without"] = list(without or ())
+    report["lots"] = tins and lots_report(tins)
+    report["notes"] += lot_notes
     if nearest:
         report["recorded_nearest"] = [near.to_dict() for near in found]
         if not searched:
@@ -462,6 +477,9 @@ def _print_match(report: dict) -> None:
         f"tolerance {report['tolerance']}, model {report['model_id']})",
         highlight=False,
     )
+    if report.get("lots"):
+        tins = ", ".join(f"{n} {100 * (s - 1):+.1f} %" for n, s in report["lots"].items())
+        console.print(f"weighed for the shop's tins: {tins}", highlight=False)
     for rank, c in enumerate(report["candidates"], start=1):
         failing = failures(c["failing_geometries"], c["failing_texture"])
         verdict = "[green]PASS[/]" if c["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
@@ -548,16 +566,20 @@ def _evaluate(
     scale,
     target_texture,
     resprays,
+    lots,
     json_output,
 ):
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
     from flakelab.io import read_tolerance
-    from flakelab.match.evaluate import evaluate_matching, harness_world
+    from flakelab.match.evaluate import LOT_MODES, evaluate_matching, harness_world
     from flakelab.match.objective import OBJECTIVE_DEFAULT
     from flakelab.match.stock import toners_allowed
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
-
+    if lots not in LOT_MODES:  # before the model: a file is for one target's match
+        raise FlakelabError(
+            f"--lots: evaluate: expected one of {', '.join(LOT_MODES)}, got {lots!r}"
+        )
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     world = harness_world(lib, instrument, world_name)
     toners_allowed(forward.toners, settings.without)  # a toner misspelt: before the targets
@@ -579,6 +601,7 @@ def _evaluate(
             scale=scale,
             target_texture=target_texture,
             resprays=resprays,
+            lots=lots,
             progress=lambda: bar.advance(task),
         )
     report["model"] = forward.name

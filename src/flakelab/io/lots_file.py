@@ -37,9 +37,13 @@ def read_lots(path: str | PathLike) -> TonerLots:
     except (OSError, UnicodeDecodeError, ValueError) as error:
         raise FlakelabError(f"{path}: expected a JSON toner-lot file ({error})") from None
     if not isinstance(document, dict) or document.get("format") != LOTS_FORMAT:
-        raise FlakelabError(f"{path}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)")
+        raise FlakelabError(
+            f"{path}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)"
+        )
     if document.get("version") != _VERSION:
-        raise FlakelabError(f"{path}: version: expected {_VERSION}, got {document.get('version')!r}")
+        raise FlakelabError(
+            f"{path}: version: expected {_VERSION}, got {document.get('version')!r}"
+        )
     entries = document.get("lots")
     if not isinstance(entries, list):
         raise FlakelabError(f"{path}: lots: expected a list of lots")
@@ -47,7 +51,9 @@ def read_lots(path: str | PathLike) -> TonerLots:
     names = [lot.toner for lot in lots]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise FlakelabError(f"{path}: lots: more than one tin of {', '.join(twice)} (one per toner)")
+        raise FlakelabError(
+            f"{path}: lots: more than one tin of {', '.join(twice)} (one per toner)"
+        )
     library = document.get("library", "")
     if not isinstance(library, str):
         raise FlakelabError(f"{path}: library: expected a name, got {library!r}")
@@ -63,7 +69,9 @@ def _lot(path: Path, index: int, entry) -> TonerLot:
     known = {f.name for f in fields(TonerLot)}
     unknown = sorted(set(entry) - known)
     if unknown:
-        raise FlakelabError(f"{where}: {unknown[0]}: not a field of a lot (expected {', '.join(sorted(known))})")
+        raise FlakelabError(
+            f"{where}: {unknown[0]}: not a field of a lot (expected {', '.join(sorted(known))})"
+        )
     for name, value in entry.items():
         if name in _TEXT_FIELDS and not isinstance(value, str):
             raise FlakelabError(f"{where}: {name}: expected text, got {value!r}")

@@ -45,9 +45,13 @@ class TonerLot:
         if not self.toner:
             raise ValueError("toner: expected a name")
         if not (math.isfinite(self.strength) and 0.5 <= self.strength <= 2.0):
-            raise ValueError(f"strength: expected 0.5–2 (a tin's strength against the standard), got {self.strength!r}")
+            raise ValueError(
+                f"strength: expected 0.5–2 (against the standard), got {self.strength!r}"
+            )
         if not (math.isfinite(self.strength_sd) and 0 < self.strength_sd <= 1):
-            raise ValueError(f"strength_sd: expected more than 0 and at most 1, got {self.strength_sd!r}")
+            raise ValueError(
+                f"strength_sd: expected more than 0 and at most 1, got {self.strength_sd!r}"
+            )
         if self.panels < 0:
             raise ValueError(f"panels: expected 0 or more, got {self.panels!r}")
 
@@ -72,14 +76,14 @@ class TonerLots:
         them: the tin's last reading, or the standard ± :data:`LOT_STRENGTH_SD`."""
         mean = np.log(self.strengths(names))
         sd = np.array(
-            [self.lots[n].strength_sd / self.lots[n].strength if n in self.lots else LOT_STRENGTH_SD for n in names]
+            [
+                self.lots[n].strength_sd / self.lots[n].strength
+                if n in self.lots
+                else LOT_STRENGTH_SD
+                for n in names
+            ]
         )
         return mean, sd
-
-    def unknown(self, names: Iterable[str]) -> list[str]:
-        """Toners of the lots that ``names`` (a library's) lacks."""
-        known = set(names)
-        return [n for n in self.lots if n not in known]
 
     def replaced(self, lots: Iterable[TonerLot]) -> TonerLots:
         """These lots, with ``lots`` read anew."""

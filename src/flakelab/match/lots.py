@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.errors import FlakelabError
-from flakelab.library.lots import LOT_STRENGTH_SD, TonerLots
+from flakelab.library.lots import TonerLots
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
 from flakelab.match.judging import evaluate_recipes

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from flakelab.errors import FlakelabError
 
-__all__ = ["toners_allowed", "StockError"]
+__all__ = ["toners_allowed", "StockError", "check_toners"]
 
 
 class StockError(FlakelabError):
@@ -24,9 +24,15 @@ def toners_allowed(toners: Sequence[str], without: Iterable[str] = ()) -> NDArra
     """A mask over ``toners`` of those a recipe may use: every one but ``without``; a name
     that is not one of ``toners`` is an error naming the nearest that is."""
     without = list(without)
-    for name in without:
-        if name not in toners:
-            near = difflib.get_close_matches(name, toners, n=1, cutoff=0.6)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise StockError(f"--without: {name!r} is not a toner of the library{hint}")
+    check_toners(without, toners, "--without: ")
     return np.array([name not in without for name in toners], dtype=bool)
+
+
+def check_toners(names: Iterable[str], toners: Sequence[str], where: str = "") -> None:
+    """Refuse the first of ``names`` that is not one of ``toners`` (a library's), naming the
+    nearest that is; ``where`` (a file, an option) begins the message."""
+    for name in names:
+        if name not in toners:
+            near = difflib.get_close_matches(name, list(toners), n=1, cutoff=0.6)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise StockError(f"{where}{name!r} is not a toner of the library{hint}")

@@ -1,0 +1,341 @@
+"""CLI: ``flakelab lots``: the shop's toner tins, read from calibration panels
+(:mod:`flakelab.match.lots`), and ``--lots`` for the commands that predict with them."""
+
+from __future__ import annotations
+
+import json
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich import box
+from rich.table import Table
+
+from flakelab.cli.common import (
+    AverageOption,
+    JsonOption,
+    SampleOption,
+    check_output_file,
+    console,
+    errors,
+    read_readings,
+    reports_errors,
+)
+from flakelab.cli.matcher import (
+    ModelOption,
+    PhysicsOption,
+    RecipeOutOption,
+    ResolutionOption,
+    matcher_setup,
+    spectra_for_model,
+)
+from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, recipe_fractions
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.errors import FlakelabError
+
+lots_app = typer.Typer(
+    help="The shop's toner tins: a calibration panel for a toner, its tin's strength read "
+    "from the panel's spray-out, the tins read so far. 'match --lots' and 'correct --lots' "
+    "then weigh for them.",
+    no_args_is_help=True,
+)
+
+LotsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--lots",
+        help="The shop's toner-lot file ('flakelab lots calibrate' writes it): each tin's "
+        "strength against the model's standard, which the recipe is weighed for.",
+    ),
+]
+
+
+def shop_lots(path: Path | None, library, forward):
+    """The lots of ``path`` (None: none) checked against ``library``, and ``forward`` for
+    them, with a note where they were read against another model than ``forward``'s."""
+    if path is None:
+        return None, forward, []
+    from flakelab.io.lots_file import read_lots
+    from flakelab.match.lots import with_lots
+    from flakelab.match.stock import check_toners
+
+    lots = read_lots(path)
+    check_toners(lots.lots, library.names, f"{path}: ")
+    others = sorted(
+        {lot.model_id for lot in lots.lots.values() if lot.model_id} - {forward.model_id}
+    )
+    notes = (
+        [f"the tins of {path} were read against model {', '.join(others)}, not this one "
+         f"({forward.model_id}): their strengths carry that model's errors on the panels"]
+        if others else []
+    )  # fmt: skip
+    return lots, with_lots(forward, lots), notes
+
+
+def lots_report(lots) -> dict[str, float]:
+    """The tins off the standard, by toner, as a report shows them."""
+    return {n: round(lot.strength, 4) for n, lot in sorted(lots.lots.items()) if lot.strength != 1}
+
+
+@lots_app.command("panel")
+@reports_errors
+def panel_command(
+    toner: Annotated[str, typer.Argument(help="The toner whose tin is to be read.")],
+    quantity: Annotated[
+        str, typer.Option(help="How much of the panel's paint to mix, e.g. 100g or 0.1l.")
+    ] = "100g",
+    resolution: ResolutionOption = 0.1,
+    library: LibraryOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    model: ModelOption = None,
+    physics: PhysicsOption = False,
+    database: DatabaseOption = None,
+    recipe_out: RecipeOutOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """The calibration panel for a toner's tin: an OEM-like paint of the toner and one
+    partner (an effect base, or the white of ISO 787-24's reduction), the pair and share
+    whose colour depends most on the tin, weighed for the can. Spray it, read it, and
+    'flakelab lots calibrate' reads the tin's strength from it."""
+    from flakelab.io import write_recipe
+    from flakelab.match.lots import calibration_recipes, mixed_with
+    from flakelab.match.recipe import can_on_scale, weigh_whole_can
+    from flakelab.match.stock import check_toners
+
+    check_output_file(recipe_out, "--recipe-out")
+    grams_can = can_on_scale(quantity, resolution)
+    lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
+    check_toners([toner], forward.toners)
+    x = calibration_recipes(forward, lib, (toner,))[0]
+    fractions = {n: float(v) for n, v in zip(forward.toners, x, strict=True) if v > 0}
+    weighing = weigh_whole_can(forward, fractions, grams_can, resolution)
+    stronger = mixed_with(_one_toner_stronger(forward.toners, toner, 1.01), x[None])
+    report = {
+        "toner": toner,
+        "recipe_g": weighing.grams,
+        "shares": {n: round(v, 4) for n, v in fractions.items()},
+        "de00_per_percent": _de00_between(forward, x[None], stronger).round(3).tolist(),
+        "geometries": list(forward.geometries),
+        "model": forward.name,
+    }
+    if recipe_out is not None:
+        write_recipe(weighing.grams, recipe_out)
+        report["recipe_out"] = str(recipe_out)
+        errors.print(f"wrote the panel's recipe to {recipe_out}", highlight=False)
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title=f"Calibration panel for {toner} ({grams_can:g} g)", box=box.SIMPLE)
+    table.add_column("toner")
+    table.add_column("g", justify="right")
+    for name, grams in weighing.grams.items():
+        table.add_row(name, f"{grams:.1f}")
+    console.print(table)
+    per = "  ".join(
+        f"{g} {d:.2f}"
+        for g, d in zip(report["geometries"], report["de00_per_percent"], strict=True)
+    )
+    console.print(f"ΔE00 for a tin 1 % stronger: {per}", highlight=False)
+
+
+def _one_toner_stronger(toners, toner: str, strength: float):
+    import numpy as np
+
+    return np.where(np.array(toners) == toner, strength, 1.0)
+
+
+def _de00_between(forward, x, z):
+    """ΔE00 per geometry ``[G]`` between one recipe ``x[1, T]`` and ``z[1, T]`` as predicted."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+    from flakelab.match.judging import evaluate_recipes
+
+    a, b = (reflectance_to_Lab(evaluate_recipes(forward, r)[0])[0] for r in (x, z))
+    return delta_E(a, b)
+
+
+@lots_app.command("calibrate")
+@reports_errors
+def calibrate_command(
+    sprayed: Annotated[Path, typer.Argument(help="Measurement of the panel's spray-out.")],
+    recipe: Annotated[
+        Path, typer.Option("--recipe", "-r", help="The panel's recipe {toner: grams}, as weighed.")
+    ],
+    lots: Annotated[
+        Path,
+        typer.Option(
+            "--lots", help="The shop's toner-lot file: read where it exists, and updated."
+        ),
+    ],
+    toner: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--toner",
+            help="A toner whose tin the panel reads (repeat for each; default: every toner of "
+            "the recipe, each starting from its tin's last reading).",
+            show_default="every toner of the recipe",
+        ),
+    ] = None,
+    lot: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--lot",
+            help="TONER=NUMBER: the tin's lot number. A number other than the one on file is a "
+            "new tin: it starts from the standard, not from the old tin's reading.",
+        ),
+    ] = None,
+    sample: SampleOption = None,
+    average: AverageOption = False,
+    library: LibraryOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    model: ModelOption = None,
+    physics: PhysicsOption = False,
+    database: DatabaseOption = None,
+    dry_run: Annotated[
+        bool, typer.Option("--dry-run", help="Show the reading; leave the lot file as it is.")
+    ] = False,
+    json_output: JsonOption = False,
+) -> None:
+    """Read the strength of the shop's tins from a panel's spray-out of a known recipe.
+
+    The panel's colour at every geometry is fitted by the tins' strengths, each drawn towards
+    its last reading (or the standard ± 3 %) as far as the panel leaves it unsure; the
+    spray's own film build and flake alignment are allowed for by the library's physics."""
+    from flakelab.io import read_recipe
+    from flakelab.io.lots_file import read_lots, write_lots
+    from flakelab.library.lots import TonerLot, TonerLots
+    from flakelab.match.lots import calibrate_lots
+    from flakelab.match.stock import check_toners
+
+    check_output_file(lots, "--lots")
+    numbers = _lot_numbers(lot or [])
+    grams = read_recipe(recipe)
+    lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
+    x = recipe_fractions(lib, grams, recipe)
+    for name in [*(toner or []), *numbers]:
+        check_toners([name], forward.toners, "--toner, --lot: ")
+        if grams.get(name, 0) <= 0:
+            raise FlakelabError(
+                f"{recipe}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
+            )
+    stored = read_lots(lots) if lots.exists() else TonerLots(library=lib.name)
+    check_toners(stored.lots, lib.names, f"{lots}: ")
+    new_tins = [
+        n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
+    ]
+    start = TonerLots({n: v for n, v in stored.lots.items() if n not in new_tins}, stored.library)
+    reading, _ = read_readings(sprayed, sample, average)
+    sprayed_R, _, _ = spectra_for_model(sprayed, reading, forward)
+    found = calibrate_lots(
+        forward, lib, x[None], sprayed_R[None], start, toners=tuple(toner) if toner else None
+    )
+    when = datetime.now(UTC).isoformat(timespec="seconds")
+    read = []
+    for i, name in enumerate(found.toners):
+        before = start.lots.get(name)
+        read.append(
+            TonerLot(
+                toner=name,
+                strength=float(found.strength[i]),
+                strength_sd=float(found.strength_sd[i]),
+                lot=numbers.get(name, before.lot if before else ""),
+                panels=(before.panels if before else 0) + 1,
+                calibrated=when,
+                model_id=forward.model_id,
+            )
+        )
+    updated = start.replaced(read)
+    if not dry_run:
+        write_lots(updated, lots)
+    report = {
+        "lots": str(lots),
+        "written": not dry_run,
+        "tins": [
+            {
+                "toner": t.toner,
+                "lot": t.lot,
+                "before": round(float(found.prior_strength[i]), 4),
+                "before_sd": round(float(found.prior_sd[i]), 4),
+                "strength": round(t.strength, 4),
+                "strength_sd": round(t.strength_sd, 4),
+                "new_tin": t.toner in new_tins,
+            }
+            for i, t in enumerate(read)
+        ],
+        "panel_de00_before": round(float(found.de00_before[0]), 3),
+        "panel_de00_after": round(float(found.de00_after[0]), 3),
+        "model": forward.name,
+        "model_id": forward.model_id,
+    }
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_calibration(report)
+
+
+def _lot_numbers(given: list[str]) -> dict[str, str]:
+    numbers = {}
+    for text in given:
+        name, sep, number = text.partition("=")
+        if not sep or not name.strip() or not number.strip():
+            raise FlakelabError(f"--lot: expected TONER=NUMBER, got {text!r}")
+        numbers[name.strip()] = number.strip()
+    return numbers
+
+
+def _print_calibration(report: dict) -> None:
+    table = Table(title="The shop's tins, read from the panel", box=box.SIMPLE)
+    for column in ("toner", "lot", "before", "now", "change"):
+        table.add_column(column, justify="left" if column in ("toner", "lot") else "right")
+    for t in report["tins"]:
+        before = "standard" if t["new_tin"] else f"{t['before']:.3f} ± {t['before_sd']:.3f}"
+        change = 100 * (t["strength"] - t["before"])
+        table.add_row(
+            t["toner"],
+            t["lot"],
+            before,
+            f"{t['strength']:.3f} ± {t['strength_sd']:.3f}",
+            f"{change:+.1f} %",
+        )
+    console.print(table)
+    console.print(
+        f"the panel's worst ΔE00 from the model: {report['panel_de00_before']:.2f} with the tins "
+        f"as they stood, {report['panel_de00_after']:.2f} as read",
+        highlight=False,
+    )
+    where = (
+        f"wrote {report['lots']}" if report["written"] else f"--dry-run: {report['lots']} unchanged"
+    )
+    errors.print(where, highlight=False)
+
+
+@lots_app.command("show")
+@reports_errors
+def show_command(
+    lots: Annotated[Path, typer.Argument(help="A toner-lot file.")],
+    json_output: JsonOption = False,
+) -> None:
+    """The tins of a toner-lot file: strength against the standard, how sure, when read."""
+    from dataclasses import asdict
+
+    from flakelab.io.lots_file import read_lots
+
+    found = read_lots(lots)
+    if json_output:
+        print(
+            json.dumps(
+                {"library": found.library, "lots": [asdict(t) for t in found.lots.values()]},
+                indent=2,
+            )
+        )
+        return
+    table = Table(title=f"Toner tins of {lots}", box=box.SIMPLE)
+    for column in ("toner", "lot", "strength", "panels", "read"):
+        table.add_column(column, justify="right" if column in ("strength", "panels") else "left")
+    for name in sorted(found.lots):
+        t = found.lots[name]
+        table.add_row(
+            name, t.lot, f"{t.strength:.3f} ± {t.strength_sd:.3f}", str(t.panels), t.calibrated[:10]
+        )
+    console.print(table)

@@ -1,0 +1,299 @@
+"""The shop's toner lots: predicting for its tins, reading them from panels, their file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
+from flakelab.errors import FlakelabError
+from flakelab.io import read_library
+from flakelab.io.lots_file import read_lots, write_lots
+from flakelab.library.lots import LOT_STRENGTH_SD, TonerLot, TonerLots
+from flakelab.match.forward import stepping
+from flakelab.match.judging import evaluate_recipes
+from flakelab.match.lots import (
+    TINT_SHARES,
+    WithLots,
+    calibrate_lots,
+    calibration_recipes,
+    mixed_with,
+)
+
+
+@pytest.fixture(scope="module")
+def library():
+    return read_library(None)
+
+
+@pytest.fixture(scope="module")
+def forward(library):
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    return forward_for(shipped_model("five-angle"), library)
+
+
+def _geometries(forward):
+    from flakelab.core.geometry import parse_geometry
+
+    return tuple(parse_geometry(g) for g in forward.geometries)
+
+
+def _recipe(names, **shares) -> np.ndarray:
+    x = np.zeros(len(names))
+    for name, share in shares.items():
+        x[list(names).index(name.replace("_", " "))] = share
+    return x / x.sum()
+
+
+def _strengths(names, **tins) -> np.ndarray:
+    return TonerLots.of([TonerLot(n.replace("_", " "), s) for n, s in tins.items()]).strengths(
+        names
+    )
+
+
+def test_tins_predict_as_the_standard_recipe_they_put_in_the_film(forward):
+    names = forward.toners
+    x = np.stack([
+        _recipe(names, Al_medium=0.8, Phthalo_blue_GS=0.15, Carbon_black=0.05),
+        _recipe(names, Titanium_dioxide_white=0.9, DPP_red=0.1),
+    ])  # fmt: skip
+    s = _strengths(names, Phthalo_blue_GS=1.08, Carbon_black=0.95)
+    tins = WithLots(forward, s)
+    expected = x * s / (x * s).sum(axis=1, keepdims=True)
+    assert np.allclose(evaluate_recipes(tins, x)[0], evaluate_recipes(forward, expected)[0])
+    assert not np.allclose(evaluate_recipes(tins, x)[0], evaluate_recipes(forward, x)[0])
+    # every tin alike stronger: the same ratios in the film, the same colour
+    uniform = WithLots(forward, np.full(len(names), 1.05))
+    assert np.allclose(evaluate_recipes(uniform, x)[0], evaluate_recipes(forward, x)[0], atol=1e-6)
+    assert np.allclose(tins.member_reflectance(x), forward.member_reflectance(expected))
+    # torch and numpy agree, and the gradient flows through the tins
+    z = torch.as_tensor(x, dtype=forward.dtype).requires_grad_(True)
+    tins(z)[0].sum().backward()
+    assert torch.all(torch.isfinite(z.grad)) and z.grad.abs().sum() > 0
+    assert np.allclose(mixed_with(s, z.detach()).numpy(), expected, atol=1e-6)
+
+
+def test_an_optimisers_held_jacobian_stays_with_its_copy(forward, library):
+    from flakelab.match.forward import HybridForward
+
+    assert isinstance(forward, HybridForward)  # the shipped model has new toners
+    tins = WithLots(forward, np.ones(len(forward.toners)))
+    held = stepping(tins, every=4)
+    assert held is not tins and held.forward.held is not None
+    assert tins.forward.held is None and forward.held is None
+
+
+def test_a_match_for_the_shops_tins_sprays_onto_the_target(forward, library):
+    """The learned model as the world: the target is a recipe of the standard tins; the shop's
+    tins differ by a few per cent. Matched for them, the recipe sprayed from them lands
+    on the target; matched for the standard, it lands off."""
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.match.models import effect_mask
+    from flakelab.match.search import MatchSettings, match
+
+    names = forward.toners
+    hidden = _recipe(names, Al_medium_bright=0.7, Phthalo_blue_GS=0.12, Phthalo_green=0.08,
+                     Perylene_maroon=0.05)  # fmt: skip
+    target = evaluate_recipes(forward, hidden[None])[0][0]
+    s = _strengths(names, Al_medium_bright=0.92, Phthalo_blue_GS=1.1, Phthalo_green=0.92,
+                   Perylene_maroon=1.08)  # fmt: skip
+    tins = WithLots(forward, s)
+    reading = Measurement("target", _geometries(forward), WAVELENGTHS, target)
+    settings = MatchSettings(candidates=1)
+    effect = effect_mask(library, names)
+
+    def sprayed_off(model) -> float:
+        best = match(reading, model, effect, settings=settings, library=library).candidates[0]
+        x = np.array([best.fractions.get(n, 0.0) for n in names])
+        sprayed = evaluate_recipes(tins, x[None])[0][0]
+        return float(delta_E(reflectance_to_Lab(target), reflectance_to_Lab(sprayed)).max())
+
+    for_standard, for_tins = sprayed_off(forward), sprayed_off(tins)
+    assert for_tins < 0.5 * for_standard and for_tins < 0.5
+
+
+def _panel_reading(forward, x, s):
+    """A panel read exactly as the model predicts it from tins ``s``."""
+    return evaluate_recipes(forward, mixed_with(s, x))[0]
+
+
+def test_calibration_reads_the_tins_a_panel_was_sprayed_from(forward, library):
+    names = forward.toners
+    panels = calibration_recipes(forward, library, ("Phthalo blue GS", "Carbon black"))
+    s = _strengths(names, Phthalo_blue_GS=1.05, Carbon_black=0.96)
+    found = calibrate_lots(forward, library, panels, _panel_reading(forward, panels, s))
+    read = dict(zip(found.toners, found.strength, strict=True))
+    sd = dict(zip(found.toners, found.strength_sd, strict=True))
+    for name, true in (("Phthalo blue GS", 1.05), ("Carbon black", 0.96)):
+        # most of the way from the standard to the tin: the prior (± 3 %) holds back the rest
+        assert abs(read[name] - true) < 0.35 * abs(true - 1)
+        assert sd[name] < LOT_STRENGTH_SD
+    # the panel read better than before, and its partners' tins barely moved
+    assert np.all(found.de00_after < found.de00_before)
+    for name in set(found.toners) - {"Phthalo blue GS", "Carbon black"}:
+        assert abs(read[name] - 1) < 0.01
+
+
+def test_more_panels_read_a_tin_more_surely_and_a_standard_panel_keeps_it_standard(
+    forward, library
+):
+    names = forward.toners
+    panel = calibration_recipes(forward, library, ("DPP red",))
+    standard = _panel_reading(forward, panel, np.ones(len(names)))
+    one = calibrate_lots(forward, library, panel, standard, toners=("DPP red",))
+    four = calibrate_lots(
+        forward, library, panel, standard, panels=np.array([4]), toners=("DPP red",)
+    )
+    assert one.strength[0] == pytest.approx(1.0, abs=1e-4)
+    assert four.strength_sd[0] < one.strength_sd[0] < LOT_STRENGTH_SD
+    # a tin read before starts there, and is drawn no further than the panel asks
+    lots = TonerLots.of([TonerLot("DPP red", 1.04, 0.002)])
+    again = calibrate_lots(forward, library, panel, standard, lots, toners=("DPP red",))
+    assert 1.0 < again.strength[0] < 1.04
+    assert again.prior_strength[0] == pytest.approx(1.04)
+
+
+def test_each_panel_is_an_oem_like_paint_of_the_toner_and_one_partner(forward, library):
+    kinds = {t.name: t.kind for t in library.toners}
+    panels = calibration_recipes(forward, library)
+    assert panels.shape == (len(forward.toners), len(forward.toners))
+    for name, x in zip(forward.toners, panels, strict=True):
+        held = [forward.toners[i] for i in np.flatnonzero(x)]
+        assert name in held and len(held) == 2
+        assert x.sum() == pytest.approx(1.0)
+        tint = min(x[x > 0])
+        assert any(tint == pytest.approx(share) for share in TINT_SHARES)
+        base = forward.toners[int(np.argmax(x))]
+        assert kinds[base] != "pigment" or base == "Titanium dioxide white"
+
+
+def test_calibrated_tins_lie_nearer_the_worlds_than_the_standard(forward, library):
+    from flakelab.match.evaluate import harness_trials, harness_world, shop_forward
+
+    world = harness_world(library, forward_instrument(forward))
+    panels = calibration_recipes(forward, library)
+    calibrated, standard = [], []
+    for _, t in harness_trials(world, 3, 4242, forward.novel):
+        _, error = shop_forward(t, forward, "calibrated", panels)
+        _, known = shop_forward(t, forward, "known", None)
+        calibrated.append(error)
+        standard.append(float(np.sqrt(np.mean((t.shop.strength[0] - 1) ** 2))))
+        assert known == 0.0
+    assert np.mean(calibrated) < 0.7 * np.mean(standard)
+
+
+def forward_instrument(forward) -> str:
+    return forward.model.instrument
+
+
+def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
+    lots = TonerLots.of(
+        [TonerLot("Phthalo blue GS", 1.031, 0.006, "B-2291", 2, "2026-11-29T10:12:00+00:00", "m")],
+        "flakelab demo",
+    )
+    path = tmp_path / "lots.json"
+    write_lots(lots, path)
+    assert read_lots(path) == lots
+
+    def refused(document, *words):
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(document) if not isinstance(document, str) else document)
+        with pytest.raises(FlakelabError) as error:
+            read_lots(bad)
+        assert str(bad) in str(error.value)
+        for word in words:
+            assert word in str(error.value)
+
+    good = json.loads(path.read_text())
+    lot = good["lots"][0]
+    refused("{", "JSON")
+    refused({**good, "format": "other"}, "format")
+    refused({**good, "version": 2}, "version")
+    refused({**good, "lots": {}}, "lots")
+    refused({**good, "lots": [{**lot, "strength": "strong"}]}, "lots[0]", "strength", "number")
+    refused({**good, "lots": [{**lot, "strength": 3.0}]}, "strength", "0.5–2")
+    refused({**good, "lots": [{**lot, "strength_sd": 0}]}, "strength_sd")
+    refused({**good, "lots": [{**lot, "panels": 1.5}]}, "panels")
+    refused({**good, "lots": [{**lot, "colour": 1}]}, "colour", "not a field")
+    refused({**good, "lots": [lot, lot]}, "more than one tin", "Phthalo blue GS")
+    refused({**good, "lots": [{"toner": "Phthalo blue GS"}]}, "strength")
+    with pytest.raises(FlakelabError, match="no such toner-lot file"):
+        read_lots(tmp_path / "missing.json")
+
+
+def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward, library):
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.io import write_measurements
+
+    panel, lots = tmp_path / "panel.json", tmp_path / "lots.json"
+    done = cli("lots", "panel", "Phthalo blue GS", "--recipe-out", panel, "--json")
+    assert done.returncode == 0, done.stderr
+    grams = json.loads(panel.read_text())
+    assert (
+        "Phthalo blue GS" in grams and len(grams) == 2 and sum(grams.values()) == pytest.approx(100)
+    )
+    x = library.fractions(grams)
+    s = _strengths(forward.toners, Phthalo_blue_GS=1.06)
+    reading = _panel_reading(forward, x[None], s)[0]
+    sprayed = tmp_path / "sprayed.json"
+    write_measurements([Measurement("panel", _geometries(forward), WAVELENGTHS, reading)], sprayed)
+
+    done = cli("lots", "calibrate", sprayed, "--recipe", panel, "--lots", lots,
+               "--lot", "Phthalo blue GS=B-1", "--toner", "Phthalo blue GS", "--json")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    tin = read_lots(lots).lots["Phthalo blue GS"]
+    assert 1.04 < tin.strength < 1.06 and tin.lot == "B-1" and tin.panels == 1
+    assert tin.model_id == forward.model_id
+
+    # a new tin (another lot number) starts from the standard; --dry-run leaves the file
+    before = lots.read_text()
+    done = cli("lots", "calibrate", sprayed, "--recipe", panel, "--lots", lots, "--dry-run",
+               "--lot", "Phthalo blue GS=B-2", "--toner", "Phthalo blue GS", "--json")  # fmt: skip
+    report = json.loads(done.stdout)
+    assert report["tins"][0]["new_tin"] and report["tins"][0]["before"] == 1.0
+    assert lots.read_text() == before
+
+    # match and correct weigh for the tins; every tin alike stronger changes nothing
+    with_tin = json.loads(cli("match", "--example", "--lots", lots, "--json").stdout)
+    plain = json.loads(cli("match", "--example", "--json").stdout)
+    assert with_tin["lots"] == {"Phthalo blue GS": pytest.approx(tin.strength, abs=1e-4)}
+    assert with_tin["candidates"][0]["weights_g"] != plain["candidates"][0]["weights_g"]
+    uniform = tmp_path / "uniform.json"
+    write_lots(TonerLots.of([TonerLot(n, 1.05) for n in forward.toners]), uniform)
+    alike = json.loads(cli("match", "--example", "--lots", uniform, "--json").stdout)
+    for a, b in zip(alike["candidates"], plain["candidates"], strict=True):
+        # the same recipes, to single precision's rounding of the renormalised recipe
+        assert [w["toner"] for w in a["weights_g"]] == [w["toner"] for w in b["weights_g"]]
+        assert np.allclose([w["grams"] for w in a["weights_g"]],
+                           [w["grams"] for w in b["weights_g"]], atol=0.3)  # fmt: skip
+    shown = json.loads(cli("lots", "show", lots, "--json").stdout)
+    assert shown["lots"][0]["toner"] == "Phthalo blue GS"
+
+
+def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):
+    panel = tmp_path / "panel.json"
+    panel.write_text(json.dumps({"Al VMP": 90.0, "Phthalo blue GS": 10.0}))
+    lots = tmp_path / "lots.json"
+    tin = {"toner": "Phthalo blu GS", "strength": 1.02}
+    lots.write_text(json.dumps({"format": "flakelab-toner-lots", "version": 1, "lots": [tin]}))
+    done = cli("match", "--example", "--lots", lots)
+    assert done.returncode == 2 and "did you mean 'Phthalo blue GS'" in done.stderr
+    done = cli("lots", "calibrate", "x.json", "--recipe", panel, "--lots", tmp_path / "n.json",
+               "--toner", "Carbon black")  # fmt: skip
+    assert done.returncode == 2 and "not in the panel's recipe" in done.stderr
+    done = cli("lots", "calibrate", "x.json", "--recipe", panel, "--lots", tmp_path / "n.json",
+               "--lot", "B-1")  # fmt: skip
+    assert done.returncode == 2 and "TONER=NUMBER" in done.stderr
+    done = cli("lots", "panel", "Phthalo blu")
+    assert done.returncode == 2 and "did you mean" in done.stderr
+    done = cli("match", "evaluate", "--targets", 1, "--lots", "guessed")
+    assert done.returncode == 2 and "standard, calibrated, known" in done.stderr
+    assert not (tmp_path / "n.json").exists()
