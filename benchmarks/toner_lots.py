@@ -1,11 +1,12 @@
 """What knowing the shop's tins buys: the harness run on the same targets and sprays with every
 tin taken at the model's standard (the baseline, measured in the same run), with each tin's
-strength read from one calibration panel (``flakelab match evaluate --lots calibrated``), and
-with the world's own strengths (``--lots known``, the limit calibration approaches); the
-differences paired target by target.
+strength read from one calibration panel against the model's prediction of it (``flakelab
+match evaluate --lots calibrated``) or against the paint maker's reading of it from the
+standard tins (``--lots referenced``), and with the world's own strengths (``--lots known``,
+the limit calibration approaches); the differences paired target by target.
 
-    python benchmarks/toner_lots.py [--targets 200] [--seed 4242] [--modes calibrated,known]
-        [--json]
+    python benchmarks/toner_lots.py [--targets 200] [--seed 4242]
+        [--modes calibrated,referenced,known] [--json]
 """
 
 from __future__ import annotations
@@ -35,12 +36,16 @@ def paired(base: list[dict], other: list[dict], key: str) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--modes", default="calibrated,known", help="lot modes against standard")
+    parser.add_argument(
+        "--modes", default="calibrated,referenced,known", help="lot modes against standard"
+    )
     add_harness_arguments(parser, targets=200, novel_targets=0)
     args = parser.parse_args()
     modes = [m for m in args.modes.split(",") if m]
     if not set(modes) <= set(LOT_MODES) - {"standard"}:
-        raise SystemExit(f"--modes: expected some of calibrated, known, got {args.modes!r}")
+        raise SystemExit(
+            f"--modes: expected some of {', '.join(LOT_MODES[1:])}, got {args.modes!r}"
+        )
 
     world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
     runs = {}

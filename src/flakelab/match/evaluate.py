@@ -78,12 +78,15 @@ instrument's reading varies); a real shop with habits of its own (``SHOP_WITH_HA
 which the model learns by adaptation (``flakelab model adapt``)."""
 
 
-LOT_MODES = ("standard", "calibrated", "known")
+LOT_MODES = ("standard", "calibrated", "referenced", "known")
 """What the harness's shop knows of its tins (:mod:`flakelab.match.lots`): nothing, every tin
 taken at the model's standard (the issue's figures); each tin's strength read from one
 calibration panel of its toner sprayed from the trial's tins (:func:`calibration_recipes
-<flakelab.match.lots.calibration_recipes>`); or the world's own strengths, the limit that
-calibration approaches (the tins' hue drift stays unknown in every mode)."""
+<flakelab.match.lots.calibration_recipes>`), against the model's prediction of the panel
+(``calibrated``) or against the paint maker's reading of the same panel from its standard
+tins (``referenced``: one spray each, at the factory, the same for every trial); or the
+world's own strengths, the limit that calibration approaches (the tins' hue drift stays
+unknown in every mode)."""
 
 
 def harness_world(library, instrument: str = DEFAULT_INSTRUMENT, name: str = "shop") -> World:
@@ -171,6 +174,17 @@ def trial(world: World, x_hidden: NDArray, rng: np.random.Generator) -> Trial:
     # would move every later target's streams (rng.spawn counts its children)
     readings = texture_reading(world, texture, streams[0].spawn(1)[0])
     return Trial(world, target, oem, shop, streams, readings)
+
+
+def standard_panels(world: World, panels: NDArray, seed: int) -> NDArray:
+    """The paint maker's readings ``[N, G, 31]`` of calibration ``panels[N, T]``, each sprayed
+    once from its standard tins at the factory's application: the same for every trial, from
+    a stream of ``seed``'s that no trial draws from."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(2**31 - 1,)))
+    film, spread = world.application(len(panels), rng, at_shop=False)
+    standard = world.nominal(len(panels))
+    tins = replace(standard, film=film, spread=spread)
+    return world.measure(world.appearance(panels, tins)[0], rng)
 
 
 def calibration_stream(t: Trial) -> np.random.Generator:
@@ -278,17 +292,19 @@ def harness_trials(
         yield x, trial(world, x, rng)
 
 
-def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None):
+def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None, standards=None):
     """``forward`` as trial ``t``'s shop predicts with it (:data:`LOT_MODES`: ``panels`` are
-    the calibration recipes of ``"calibrated"``), and the RMS of its tins' strengths' error
-    (None at the standard)."""
+    the calibration recipes, ``standards`` their readings from the standard tins), and the
+    RMS of its tins' strengths' error (None at the standard)."""
     if lots == "standard":
         return forward, None
     order = [list(t.world.library.names).index(n) for n in forward.toners]
     true = t.shop.strength[0][order]
     strength = true
-    if lots == "calibrated":
-        found = calibrate_lots(forward, t.world.library, panels, t.panels(panels))
+    if lots in ("calibrated", "referenced"):
+        found = calibrate_lots(
+            forward, t.world.library, panels, t.panels(panels), standards=standards
+        )
         read = dict(zip(found.toners, found.strength, strict=True))
         strength = np.array([read.get(n, 1.0) for n in forward.toners])
     error = float(np.sqrt(np.mean((strength - true) ** 2)))
@@ -314,10 +330,10 @@ def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target
 
 def _one(
     t: Trial, x_hidden, forward, effect, settings, habits, tolerance, scale, target_texture=True,
-    resprays=0, lots="standard", panels=None,
+    resprays=0, lots="standard", panels=None, standards=None,
 ) -> dict:  # fmt: skip
     world = t.world
-    forward, lot_error = shop_forward(t, forward, lots, panels)
+    forward, lot_error = shop_forward(t, forward, lots, panels, standards)
     first_rng, correction_rng, oracle_rng, respray_rng = t.streams
 
     def share(sprayed: tuple[NDArray, dict]) -> float:
@@ -434,12 +450,16 @@ def evaluate_matching(
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     if lots not in LOT_MODES:
         raise MatchError(f"--lots: expected one of {', '.join(LOT_MODES)}, got {lots!r}")
-    panels = calibration_recipes(forward, world.library) if lots == "calibrated" else None
+    panels = standards = None
+    if lots in ("calibrated", "referenced"):
+        panels = calibration_recipes(forward, world.library)
+    if lots == "referenced":
+        standards = standard_panels(world, panels, seed)
     rows, novel_rows = [], []
     for i, (x, t) in enumerate(harness_trials(world, targets, seed, novel, novel_targets)):
         row = _one(
             t, x, forward, effect, settings, habits, tolerance, scale, target_texture, resprays,
-            lots, panels,
+            lots, panels, standards,
         )  # fmt: skip
         (rows if i < targets else novel_rows).append(row)
         if progress:

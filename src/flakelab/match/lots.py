@@ -145,13 +145,17 @@ def _lab(forward, x: NDArray) -> NDArray:
     return reflectance_to_Lab(evaluate_recipes(forward, x)[0])
 
 
-def _whitened(forward, library: Library, x: NDArray, panels: NDArray) -> NDArray:
-    """The Cholesky factors' inverses ``[N, 3G, 3G]`` of each reading's covariance Cₙ."""
+def _whitened(
+    forward, library: Library, x: NDArray, sprays: NDArray, persistent_sd: float = PERSISTENT_SD
+) -> NDArray:
+    """The Cholesky factors' inverses ``[N, 3G, 3G]`` of each reading's covariance Cₙ: its
+    ``sprays[N]`` (Σ 1/k over the readings it is made of) each with its own application and
+    instrument noise, and the model's error ``persistent_sd``."""
     S = application_sensitivities(library, x, forward.geometries)  # [N, 2, G, 3]
     S = S.reshape(len(x), 2, -1).transpose(0, 2, 1)  # [N, 3G, 2]
-    k = np.asarray(panels, float)[:, None, None]
+    v = np.asarray(sprays, float)[:, None, None]
     eye = np.eye(S.shape[1])
-    C = S @ S.transpose(0, 2, 1) / k + (PERSISTENT_SD**2 + NOISE_SD**2 / k) * eye
+    C = v * (S @ S.transpose(0, 2, 1)) + (persistent_sd**2 + v * NOISE_SD**2) * eye
     return np.linalg.inv(np.linalg.cholesky(C))
 
 
@@ -163,11 +167,16 @@ def calibrate_lots(
     lots: TonerLots | None = None,
     panels: NDArray | None = None,
     toners: tuple[str, ...] | None = None,
+    standards: NDArray | None = None,
 ) -> LotCalibration:
     """The tins' strengths read from spray-outs ``readings[N, G, 31]`` of known ``recipes[N,
     T]`` (library order; each reading the mean of ``panels[N]`` spray-outs, default one),
     starting from ``lots`` (default: every tin at the standard). The ``toners`` fitted default
-    to every toner the recipes hold; the rest stay as ``lots`` has them (module notes)."""
+    to every toner the recipes hold; the rest stay as ``lots`` has them. With ``standards``,
+    readings ``[N, G, 31]`` of the same recipes from the standard's tins (the paint maker's
+    reference panels, each one spray), each panel is read against its standard's, as ISO
+    787-24 reads a pigment against its standard's reduction: the model's error on the panel,
+    which is the same for both, drops out (module notes)."""
     names = list(forward.toners)
     x = np.atleast_2d(np.asarray(recipes, float))
     x = x / x.sum(axis=1, keepdims=True)
@@ -180,7 +189,11 @@ def calibrate_lots(
     theta, sd = lots.prior(names)
     theta0, precision0 = theta[fitted].copy(), np.diag(1 / sd[fitted] ** 2)
     measured = reflectance_to_Lab(np.asarray(readings, float))
-    L = _whitened(forward, library, x, panels)
+    if standards is None:
+        L = _whitened(forward, library, x, 1 / panels)
+    else:  # the panel's offset from its standard's reading, about the model's standard panel
+        measured = measured - reflectance_to_Lab(np.asarray(standards, float)) + _lab(forward, x)
+        L = _whitened(forward, library, x, 1 / panels + 1, persistent_sd=0.0)
     before = _worst_de00(forward, theta, x, measured)
     scale = 1.0  # the covariance's scale, read from the residuals (module notes)
     for _ in range(2):
