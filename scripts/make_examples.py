@@ -4,7 +4,10 @@ A blue metallic from the demo library, made in the case generator's world (physi
 model, factory batches and application, instrument noise) and read at the MA-T12
 geometries with texture, the texture as one spot of the camera's field reads it: the
 *target*. The *spray-out* is a colorist's first recipe for it (amounts off by a few per
-cent), mixed from the shop's batches and sprayed. Run:
+cent), mixed from the shop's batches and sprayed. The *panel* is the calibration panel of
+a tin of phthalo blue GS 4 % stronger than the standard (``flakelab lots panel "Phthalo
+blue GS"``: 10 % of it in Al VMP), sprayed in the shop; the *panel standard* is the same
+recipe from the paint maker's standard tins, sprayed at the factory. Run:
 
     python scripts/make_examples.py
 """
@@ -63,6 +66,40 @@ def main() -> None:
         write_measurements([measurement], OUT / f"blue-metallic-{name}.cxf")
     grams = {k: round(v * 250, 1) for k, v in zip(library.names, recipe[0], strict=True) if v > 0}
     (OUT / "blue-metallic-recipe.json").write_text(json.dumps(grams, indent=1) + "\n")
+    make_panel(library, world)
+
+
+PANEL = {"Al VMP": 90.0, "Phthalo blue GS": 10.0}
+"""The calibration panel of phthalo blue GS, grams (``flakelab lots panel``'s for the shipped
+five-angle model)."""
+
+PANEL_TIN = ("Phthalo blue GS", 1.04)
+"""The example tin, and its strength against the standard."""
+
+
+def make_panel(library, world: World) -> None:
+    rng = np.random.default_rng(20261130)
+    x = library.fractions(PANEL)[None]
+    shop = world.variation(1, rng)
+    shop.strength[0, library.names.index(PANEL_TIN[0])] = PANEL_TIN[1]
+    factory = world.nominal(1)
+    factory.film[:], factory.spread[:] = world.application(1, rng, at_shop=False)
+    for name, tins, minute in (("panel", shop, 10), ("panel-standard", factory, 0)):
+        measured = world.measure(world.appearance(x, tins)[0], rng)[0]
+        measurement = Measurement(
+            sample=f"Phthalo blue GS {name} (synthetic)",
+            geometries=world.geometries,
+            wavelengths=WAVELENGTHS,
+            reflectance=measured,
+            instrument="X-Rite MA-T12 (synthetic example)",
+            measured_at=datetime(2026, 11, 30, 8, minute),
+            metadata={
+                "synthetic": "yes: scripts/make_examples.py",
+                "tins": "the shop's, phthalo blue GS 4 % strong" if name == "panel" else "standard",
+            },
+        )
+        write_measurements([measurement], OUT / f"phthalo-blue-{name}.cxf")
+    (OUT / "phthalo-blue-panel-recipe.json").write_text(json.dumps(PANEL, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -302,6 +302,28 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     assert shown["lots"][0]["toner"] == "Phthalo blue GS"
 
 
+def test_the_shipped_panel_is_the_one_lots_panel_gives_and_reads_against_its_standard(
+    cli, tmp_path
+):
+    """scripts/make_examples.py sprayed the panel lots panel gives from a tin 4 % strong: read
+    against the standard's panel, the tin comes out stronger than the standard, the reading
+    within two of its standard deviations of 1.04."""
+    from flakelab.data import example_path
+
+    examples = example_path("target").parent
+    recipe = examples / "phthalo-blue-panel-recipe.json"
+    done = cli("lots", "panel", "Phthalo blue GS", "--json")
+    assert json.loads(done.stdout)["recipe_g"] == json.loads(recipe.read_text())
+    lots = tmp_path / "tins.json"
+    done = cli("lots", "calibrate", examples / "phthalo-blue-panel.cxf", "--recipe", recipe,
+               "--standard", examples / "phthalo-blue-panel-standard.cxf", "--lots", lots,
+               "--json")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    tin = read_lots(lots).lots["Phthalo blue GS"]
+    assert 1.0 < tin.strength and abs(tin.strength - 1.04) < 2 * tin.strength_sd
+    assert json.loads(done.stdout)["against"] == "standard"
+
+
 def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):
     panel = tmp_path / "panel.json"
     panel.write_text(json.dumps({"Al VMP": 90.0, "Phthalo blue GS": 10.0}))
@@ -319,5 +341,5 @@ def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):
     done = cli("lots", "panel", "Phthalo blu")
     assert done.returncode == 2 and "did you mean" in done.stderr
     done = cli("match", "evaluate", "--targets", 1, "--lots", "guessed")
-    assert done.returncode == 2 and "standard, calibrated, known" in done.stderr
+    assert done.returncode == 2 and "standard, calibrated, referenced, known" in done.stderr
     assert not (tmp_path / "n.json").exists()

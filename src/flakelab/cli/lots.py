@@ -185,6 +185,19 @@ def calibrate_command(
             "new tin: it starts from the standard, not from the old tin's reading.",
         ),
     ] = None,
+    standard: Annotated[
+        Path | None,
+        typer.Option(
+            "--standard",
+            help="The paint maker's reading of the same panel sprayed from its standard tins: "
+            "the tin is read against it, as ISO 787-24 reads a pigment against its "
+            "standard's reduction, and the model's own error on the panel drops out.",
+            show_default="read against the model's prediction",
+        ),
+    ] = None,
+    standard_sample: Annotated[
+        str | None, typer.Option(help="Sample name in a multi-sample --standard file.")
+    ] = None,
     sample: SampleOption = None,
     average: AverageOption = False,
     library: LibraryOption = None,
@@ -227,9 +240,15 @@ def calibrate_command(
     start = TonerLots({n: v for n, v in stored.lots.items() if n not in new_tins}, stored.library)
     reading, _ = read_readings(sprayed, sample, average)
     sprayed_R, _, _ = spectra_for_model(sprayed, reading, forward)
-    found = calibrate_lots(
-        forward, lib, x[None], sprayed_R[None], start, toners=tuple(toner) if toner else None
-    )
+    standards = None
+    if standard is not None:
+        reference, _ = read_readings(standard, standard_sample, False, "--standard-sample")
+        standards = spectra_for_model(standard, reference, forward)[0][None]
+    elif standard_sample is not None:
+        raise FlakelabError("--standard-sample: for a --standard file")
+    fitted = tuple(toner) if toner else None
+    found = calibrate_lots(forward, lib, x[None], sprayed_R[None], start, toners=fitted,
+                           standards=standards)  # fmt: skip
     when = datetime.now(UTC).isoformat(timespec="seconds")
     read = []
     for i, name in enumerate(found.toners):
@@ -263,6 +282,7 @@ def calibrate_command(
             }
             for i, t in enumerate(read)
         ],
+        "against": "standard" if standard is not None else "model",
         "panel_de00_before": round(float(found.de00_before[0]), 3),
         "panel_de00_after": round(float(found.de00_after[0]), 3),
         "model": forward.name,
@@ -299,9 +319,10 @@ def _print_calibration(report: dict) -> None:
             f"{change:+.1f} %",
         )
     console.print(table)
+    against = "the model" if report["against"] == "model" else "the standard's panel"
     console.print(
-        f"the panel's worst ΔE00 from the model: {report['panel_de00_before']:.2f} with the tins "
-        f"as they stood, {report['panel_de00_after']:.2f} as read",
+        f"the panel's worst ΔE00 from {against}: {report['panel_de00_before']:.2f} with the "
+        f"tins as they stood, {report['panel_de00_after']:.2f} as read",
         highlight=False,
     )
     where = (

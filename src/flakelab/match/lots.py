@@ -251,7 +251,7 @@ def _worst_de00(forward, theta: NDArray, x: NDArray, measured: NDArray) -> NDArr
 
 
 def calibration_recipes(
-    forward, library: Library, toners: tuple[str, ...] | None = None, shortlist: int = 5
+    forward, library: Library, toners: tuple[str, ...] | None = None
 ) -> NDArray:
     """Each toner's calibration panel ``[len(toners), T]``, an OEM-like two-toner paint: a base
     (an effect toner, or the library's white, as ISO 787-24 reduces with it) tinted with a
@@ -276,9 +276,7 @@ def calibration_recipes(
             x[row, :, base] = 1 - np.asarray(TINT_SHARES)
             x[row, :, tint] = TINT_SHARES
         x = x.reshape(-1, len(names))
-        best = np.argsort(-_information(forward, x, k))[:shortlist]
-        full = _information(forward, x[best], k, library)
-        chosen.append(x[best[int(np.argmax(full))]])
+        chosen.append(x[int(np.argmax(_information(forward, library, x, k)))])
     return np.array(chosen)
 
 
@@ -288,14 +286,11 @@ def _white(library: Library) -> str | None:
     return max(hiding, key=lambda t: t.whiteness).name if hiding else None
 
 
-def _information(forward, x: NDArray, k: int, library: Library | None = None) -> NDArray:
-    """Fisher information ``[N]`` of each panel ``x[N, T]`` about toner ``k``'s log strength:
-    JᵀC⁻¹J with the readings' covariance given the ``library`` (its application's physics),
-    else with C = σ²·I (a cheap first ranking)."""
+def _information(forward, library: Library, x: NDArray, k: int) -> NDArray:
+    """Fisher information ``[N]`` of each panel ``x[N, T]`` about toner ``k``'s log strength,
+    JᵀC⁻¹J with C a reading's covariance (the spray's application by the ``library``'s
+    physics, the model's error, the instrument's noise)."""
     theta = np.zeros(x.shape[1])
-    measured = np.zeros((len(x), 1))
-    _, J = _residual_and_jacobian(forward, theta, np.array([k]), x, measured)
-    if library is None:
-        return np.sum(J[..., 0] ** 2, axis=1)
+    _, J = _residual_and_jacobian(forward, theta, np.array([k]), x, np.zeros((len(x), 1)))
     Jw = np.einsum("nij,nj->ni", _whitened(forward, library, x, np.ones(len(x))), J[..., 0])
     return np.sum(Jw**2, axis=1)
