@@ -4,7 +4,8 @@ traceback, a warning or a NaN in the output (the guide's "Bad input" standard).
 
 Each kind starts from a good file made here from the shipped example (or the demo library,
 the example recipe, a habits report, a tolerance file, generated cases in CSV and CxF3, a
-manifest of instrument files for `cases record-all`, the shipped model) and damages it: an
+manifest of instrument files for `cases record-all`, the shipped model, a toner-lot file, the
+example calibration panel's reading) and damages it: an
 MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short);
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
 stray characters; JSON files by replacing or deleting one value anywhere in them (a target
@@ -13,7 +14,7 @@ values still readable but odd); a model file by editing its description, standar
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
         sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
-        manifest,model] [--n 200] [--seed 0] [--show]
+        manifest,model,lots,panel] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -46,6 +47,8 @@ from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_RANGE
 from flakelab.data import example_path
 from flakelab.io import read_library, read_measurement, write_measurements, write_recipe
 from flakelab.io.library_file import demo_library_path
+from flakelab.io.lots_file import write_lots
+from flakelab.library.lots import TonerLot, TonerLots
 from flakelab.match.habits import ShopHabits, write_habits
 from flakelab.models.registry import shipped_model
 
@@ -230,6 +233,14 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     )
     shutil.copy(demo_library_path(), work / "library.json")
     read_library(work / "library.json")
+    tins = [TonerLot("Phthalo blue GS", 1.03, 0.01, "B-1", 1, "2026-11-30T08:00:00+00:00", "m"),
+            TonerLot("Al medium", 0.98)]  # fmt: skip
+    write_lots(TonerLots.of(tins, "flakelab demo"), work / "lots.json")
+    panel = target.parent / "phthalo-blue-panel.cxf"
+    write_measurements([read_measurement(panel)], work / "panel.json")
+    panel_recipe, standard = (
+        target.parent / f"phthalo-blue-panel{s}" for s in ("-recipe.json", "-standard.cxf")
+    )
     return {
         "cxf": (target, lambda p: ["inspect", str(p)]),
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
@@ -272,6 +283,14 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "manifest": (work / "manifest.csv",
                      lambda p: ["cases", "record-all", str(p), "-d", "sqlite://"]),
         "model": (work / "model.pt", lambda p: ["weigh", str(recipe), "--model", str(p)]),
+        # the shop's tins, which the main job weighs for
+        "lots": (work / "lots.json",
+                 lambda p: ["match", "--example", "--candidates", "1", "--lots", str(p)]),
+        # a calibration panel's spray-out, its tins read against the standard's panel
+        "panel": (work / "panel.json",
+                  lambda p: ["lots", "calibrate", str(p), "--recipe", str(panel_recipe),
+                             "--standard", str(standard), "--lots", str(work / "lots.json"),
+                             "--dry-run"]),
     }  # fmt: skip
 
 
