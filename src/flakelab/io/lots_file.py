@@ -17,7 +17,7 @@ from pathlib import Path
 
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
-from flakelab.io.records import write_atomically
+from flakelab.io.records import read_json_file, write_atomically
 from flakelab.library.lots import TonerLot, TonerLots
 
 __all__ = ["LOTS_FORMAT", "read_lots", "write_lots"]
@@ -30,12 +30,7 @@ _TEXT_FIELDS = ("toner", "lot", "calibrated", "model_id")
 def read_lots(path: str | PathLike) -> TonerLots:
     """The lots of a toner-lot file; names the file, the lot and the field of any problem."""
     path = Path(path)
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FlakelabError(f"{path}: no such toner-lot file") from None
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise FlakelabError(f"{path}: expected a JSON toner-lot file ({error})") from None
+    document = read_json_file(path, "toner-lot file", "a JSON toner-lot file")
     if not isinstance(document, dict) or document.get("format") != LOTS_FORMAT:
         raise FlakelabError(
             f"{path}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)"

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
-from flakelab.io.records import write_atomically
+from flakelab.io.records import read_json_file, write_atomically
 
 __all__ = ["read_recipe", "write_recipe"]
 
@@ -26,12 +26,7 @@ __all__ = ["read_recipe", "write_recipe"]
 def read_recipe(path: str | PathLike) -> dict[str, float]:
     """Grams per toner from a recipe file; names the file and toner of any problem."""
     path = Path(path)
-    try:
-        grams = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FlakelabError(f"{path}: no such recipe file") from None
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise FlakelabError(f"{path}: expected a JSON object toner → grams ({error})") from None
+    grams = read_json_file(path, "recipe file", "a JSON object toner → grams")
     if not isinstance(grams, dict) or not grams:
         raise FlakelabError(f"{path}: expected a JSON object toner → grams with at least one toner")
     for toner, amount in grams.items():

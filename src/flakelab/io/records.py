@@ -7,6 +7,7 @@ format reports the same problems the same way (file, field, problem).
 from __future__ import annotations
 
 import errno
+import json
 import math
 import os
 import re
@@ -30,7 +31,7 @@ from flakelab.core.measurement import (
     outside,
 )
 from flakelab.core.spectra import shape_of
-from flakelab.errors import MeasurementFileError
+from flakelab.errors import FlakelabError, MeasurementFileError
 
 __all__ = [
     "Reading",
@@ -234,6 +235,18 @@ def assemble(
             )
         )
     return measurements
+
+
+def read_json_file(path: Path, what: str, expected: str):
+    """The parsed contents of the JSON file ``path`` (a ``what``: "recipe file"), or a
+    :class:`~flakelab.errors.FlakelabError` naming it: missing, unreadable, or not JSON
+    (``expected`` says what it should hold)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FlakelabError(f"{path}: no such {what}") from None
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise FlakelabError(f"{path}: expected {expected} ({error})") from None
 
 
 def _umask() -> int:
