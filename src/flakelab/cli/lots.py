@@ -173,7 +173,7 @@ def calibrate_command(
         typer.Option(
             "--toner",
             help="A toner whose tin the panel reads (repeat for each; default: every toner of "
-            "the recipe, each starting from its tin's last reading).",
+            "the recipe, each starting from its tin's last reading); a --lot's toner too.",
             show_default="every toner of the recipe",
         ),
     ] = None,
@@ -246,9 +246,15 @@ def calibrate_command(
         standards = spectra_for_model(standard, reference, forward)[0][None]
     elif standard_sample is not None:
         raise FlakelabError("--standard-sample: for a --standard file")
-    fitted = tuple(toner) if toner else None
+    fitted = tuple(dict.fromkeys([*toner, *numbers])) if toner else None  # a new tin is read
     found = calibrate_lots(forward, lib, x[None], sprayed_R[None], start, toners=fitted,
                            standards=standards)  # fmt: skip
+    for name, strength in zip(found.toners, found.strength, strict=True):
+        if not 0.5 <= strength <= 2.0:
+            raise FlakelabError(
+                f"{sprayed}: the panel reads {name}'s tin at {strength:.2f} times the standard: "
+                f"not a spray-out of {recipe}'s recipe, or not of this library's toners"
+            )
     when = datetime.now(UTC).isoformat(timespec="seconds")
     read = []
     for i, name in enumerate(found.toners):
