@@ -219,6 +219,7 @@ def calibrate_command(
     from flakelab.io.lots_file import read_lots, write_lots
     from flakelab.library.lots import TonerLot, TonerLots
     from flakelab.match.lots import calibrate_lots
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
     from flakelab.match.stock import check_toners
 
     check_output_file(lots, "--lots")
@@ -249,6 +250,13 @@ def calibrate_command(
     fitted = tuple(dict.fromkeys([*toner, *numbers])) if toner else None  # a new tin is read
     found = calibrate_lots(forward, lib, x[None], sprayed_R[None], start, toners=fitted,
                            standards=standards)  # fmt: skip
+    if found.de00_before[0] > SPRAYOUT_MISMATCH:
+        against = f"{standard}'s reading" if standard is not None else "its recipe's prediction"
+        raise FlakelabError(
+            f"{sprayed}: the panel lies {found.de00_before[0]:.1f} ΔE00 from {against} at "
+            f"worst, beyond the {SPRAYOUT_MISMATCH:g} of a likely mix-up: is it a spray-out of "
+            f"{recipe}'s recipe? (the lot file is unchanged)"
+        )
     for name, strength in zip(found.toners, found.strength, strict=True):
         if not 0.5 <= strength <= 2.0:
             raise FlakelabError(
