@@ -255,6 +255,7 @@ def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
 def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward, library):
     from flakelab.core.measurement import Measurement
     from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.data import example_path
     from flakelab.io import write_measurements
 
     panel, lots = tmp_path / "panel.json", tmp_path / "lots.json"
@@ -298,6 +299,15 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
         assert [w["toner"] for w in a["weights_g"]] == [w["toner"] for w in b["weights_g"]]
         assert np.allclose([w["grams"] for w in a["weights_g"]],
                            [w["grams"] for w in b["weights_g"]], atol=0.3)  # fmt: skip
+    # weigh predicts the rounding's cost for the tins, and alike tins cost as the standard's
+    recipe = example_path("target").parent / "blue-metallic-recipe.json"
+    weigh = ("weigh", recipe, "--quantity", "100g", "--json")
+    weighed = json.loads(cli(*weigh, "--lots", lots).stdout)
+    standard = json.loads(cli(*weigh).stdout)
+    alike = json.loads(cli(*weigh, "--lots", uniform).stdout)
+    assert weighed["lots"] == with_tin["lots"] and standard["lots"] is None
+    assert weighed["rounding_de00"] != standard["rounding_de00"]
+    assert alike["rounding_de00"] == pytest.approx(standard["rounding_de00"], abs=2e-3)
     shown = json.loads(cli("lots", "show", lots, "--json").stdout)
     assert shown["lots"][0]["toner"] == "Phthalo blue GS"
 

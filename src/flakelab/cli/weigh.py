@@ -52,12 +52,21 @@ def weigh_command(
             show_default="no bound",
         ),
     ] = None,
+    lots: Annotated[
+        Path | None,
+        typer.Option(
+            "--lots",
+            help="The shop's toner-lot file: the rounding's colour cost (and, with --poured, "
+            "the dilution) predicted for its tins.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Weigh a recipe for another can, and what rounding to the scale costs in colour.
 
     Grams per toner at the scale's resolution, cumulative weights in pouring order, and the
     ΔE00 between the exact and the weighed recipe, both predicted by the model."""
+    from flakelab.cli.lots import lots_report, shop_lots
     from flakelab.io import read_recipe, write_recipe
     from flakelab.match.recipe import order_can
 
@@ -65,6 +74,7 @@ def weigh_command(
     can = order_can(quantity, resolution)
     check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
+    tins, forward, _ = shop_lots(lots, lib, forward)
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
     can = can.for_toners(lib, shares)
@@ -81,6 +91,7 @@ def weigh_command(
         **can_size(can, can_g),
         **weighed_recipe(forward, shares, can_g, resolution),
         "model": forward.name,
+        "lots": tins and lots_report(tins),
     }
     if recipe_out is not None:
         write_recipe({ln["toner"]: ln["grams"] for ln in report["weights_g"]}, recipe_out)
