@@ -154,7 +154,7 @@ class World:
             return [names.index(t.name) for t in library.of_kind(kind) if t.name not in exclude]
 
         self._aluminium, self._pearls, self._pigments = map(pool, ("aluminium", "pearl", "pigment"))
-        self._white, self._other_bases = _solid_bases(library, self._pigments)
+        self._white, self._other_bases = library.solid_bases(self._pigments)
         self._organic = np.array(
             [t.kind == "pigment" and t.family in ORGANIC_FAMILIES for t in library.toners]
         )
@@ -441,14 +441,6 @@ NEAR_BLACK_L = 1.0
 def near_black(lab: NDArray, lightness: float = NEAR_BLACK_L) -> NDArray[np.bool_]:
     """Which paints of CIELAB ``lab[F, G, 3]`` read below ``lightness`` at every geometry."""
     return (lab[..., 0] < lightness).all(axis=-1)
-
-
-def _solid_bases(library: Library, pool: list[int]) -> tuple[int | None, list[int]]:
-    """The whitest pigment of ``pool`` (indices into ``library``) that hides, and the others
-    that hide (:attr:`~flakelab.library.toners.Pigment.hides`): a solid's bases."""
-    hiding = [i for i in pool if library.toners[i].hides]
-    white = max(hiding, key=lambda i: library.toners[i].whiteness, default=None)
-    return white, [i for i in hiding if i != white]
 
 
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:

@@ -350,6 +350,15 @@ class Library:
                 return toner
         raise LibraryError(f"library {self.name!r}: unknown toner {name!r}")
 
+    def solid_bases(self, pool: Iterable[int] | None = None) -> tuple[int | None, list[int]]:
+        """The whitest pigment of ``pool`` (indices, default every toner) that hides, and the
+        others that hide (:attr:`Pigment.hides`): a solid's bases, and the white with which
+        ISO 787-24 reduces a pigment."""
+        pool = range(len(self.toners)) if pool is None else pool
+        hiding = [i for i in pool if self.toners[i].kind == "pigment" and self.toners[i].hides]
+        white = max(hiding, key=lambda i: self.toners[i].whiteness, default=None)
+        return white, [i for i in hiding if i != white]
+
     def of_kind(self, kind: str) -> tuple[Toner, ...]:
         if kind not in TONER_KINDS:
             raise LibraryError(

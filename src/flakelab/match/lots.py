@@ -269,11 +269,9 @@ def calibration_recipes(
     about its tin (module notes). ``toners`` default to every one of ``forward``'s."""
     names = list(forward.toners)
     toners = tuple(names) if toners is None else toners
-    by_name = {t.name: t for t in library.toners}
-    bases = [i for i, n in enumerate(names) if by_name[n].kind != "pigment"]
-    white = _white(library)
-    bases += [names.index(white)] if white in names else []
-    tints = [i for i, n in enumerate(names) if by_name[n].kind == "pigment"]
+    white = library.solid_bases()[0]
+    bases = [*np.flatnonzero(library.effect), *([] if white is None else [white])]
+    tints = np.flatnonzero(~library.effect).tolist()
     chosen = []
     for toner in toners:
         k = names.index(toner)
@@ -288,12 +286,6 @@ def calibration_recipes(
         x = x.reshape(-1, len(names))
         chosen.append(x[int(np.argmax(_information(forward, library, x, k)))])
     return np.array(chosen)
-
-
-def _white(library: Library) -> str | None:
-    """The library's white: the whitest pigment that hides (ISO 787-24 reduces with it)."""
-    hiding = [t for t in library.toners if t.kind == "pigment" and t.hides]
-    return max(hiding, key=lambda t: t.whiteness).name if hiding else None
 
 
 def _information(forward, library: Library, x: NDArray, k: int) -> NDArray:
