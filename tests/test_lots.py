@@ -265,6 +265,12 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     assert (
         "Phthalo blue GS" in grams and len(grams) == 2 and sum(grams.values()) == pytest.approx(100)
     )
+    # a can by volume, its grams at the panel's toners' densities (volumes add as they mix)
+    by_volume = json.loads(cli("lots", "panel", "Phthalo blue GS", "--quantity", "0.1l",
+                               "--json").stdout)["recipe_g"]  # fmt: skip
+    assert by_volume.keys() == grams.keys()
+    millilitres = sum(g / library[n].density_g_ml for n, g in grams.items())
+    assert sum(by_volume.values()) == pytest.approx(100 * 100 / millilitres, abs=0.5)
     x = library.fractions(grams)
     s = _strengths(forward.toners, Phthalo_blue_GS=1.06)
     reading = _panel_reading(forward, x[None], s)[0]

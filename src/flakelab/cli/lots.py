@@ -56,12 +56,9 @@ def shop_lots(path: Path | None, library, forward):
     them, with a note where they were read against another model than ``forward``'s."""
     if path is None:
         return None, forward, []
-    from flakelab.io.lots_file import read_lots
     from flakelab.match.lots import with_lots
-    from flakelab.match.stock import check_toners
 
-    lots = read_lots(path)
-    check_toners(lots.lots, library.names, f"{path}: ")
+    lots = _read_lots(path, library)
     others = sorted(
         {lot.model_id for lot in lots.lots.values() if lot.model_id} - {forward.model_id}
     )
@@ -71,6 +68,16 @@ def shop_lots(path: Path | None, library, forward):
         if others else []
     )  # fmt: skip
     return lots, with_lots(forward, lots), notes
+
+
+def _read_lots(path: Path, library):
+    """The lots of the file ``path``, each of a toner of ``library`` (a misspelt one named)."""
+    from flakelab.io.lots_file import read_lots
+    from flakelab.match.stock import check_toners
+
+    lots = read_lots(path)
+    check_toners(lots.lots, library.names, f"{path}: ")
+    return lots
 
 
 def lots_report(lots) -> dict[str, float]:
@@ -99,23 +106,24 @@ def panel_command(
     whose colour depends most on the tin, weighed for the can. Spray it, read it, and
     'flakelab lots calibrate' reads the tin's strength from it."""
     from flakelab.io import write_recipe
-    from flakelab.match.lots import calibration_recipes, mixed_with
-    from flakelab.match.recipe import can_on_scale, weigh_whole_can
+    from flakelab.match.lots import calibration_recipes, de00_per_percent
+    from flakelab.match.recipe import order_can, weigh_whole_can
     from flakelab.match.stock import check_toners
 
     check_output_file(recipe_out, "--recipe-out")
-    grams_can = can_on_scale(quantity, resolution)
+    can = order_can(quantity, resolution)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
     check_toners([toner], forward.toners)
     x = calibration_recipes(forward, lib, (toner,))[0]
     fractions = {n: float(v) for n, v in zip(forward.toners, x, strict=True) if v > 0}
+    grams_can = can.for_toners(lib, fractions).grams_for(fractions)
     weighing = weigh_whole_can(forward, fractions, grams_can, resolution)
-    stronger = mixed_with(_one_toner_stronger(forward.toners, toner, 1.01), x[None])
+    per_percent = de00_per_percent(forward, x, forward.toners.index(toner))
     report = {
         "toner": toner,
         "recipe_g": weighing.grams,
         "shares": {n: round(v, 4) for n, v in fractions.items()},
-        "de00_per_percent": _de00_between(forward, x[None], stronger).round(3).tolist(),
+        "de00_per_percent": per_percent.round(3).tolist(),
         "geometries": list(forward.geometries),
         "model": forward.name,
     }
@@ -137,22 +145,6 @@ def panel_command(
         for g, d in zip(report["geometries"], report["de00_per_percent"], strict=True)
     )
     console.print(f"ΔE00 for a tin 1 % stronger: {per}", highlight=False)
-
-
-def _one_toner_stronger(toners, toner: str, strength: float):
-    import numpy as np
-
-    return np.where(np.array(toners) == toner, strength, 1.0)
-
-
-def _de00_between(forward, x, z):
-    """ΔE00 per geometry ``[G]`` between one recipe ``x[1, T]`` and ``z[1, T]`` as predicted."""
-    from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.difference import delta_E
-    from flakelab.match.judging import evaluate_recipes
-
-    a, b = (reflectance_to_Lab(evaluate_recipes(forward, r)[0])[0] for r in (x, z))
-    return delta_E(a, b)
 
 
 @lots_app.command("calibrate")
@@ -216,7 +208,7 @@ def calibrate_command(
     its last reading (or the standard ± 3 %) as far as the panel leaves it unsure; the
     spray's own film build and flake alignment are allowed for by the library's physics."""
     from flakelab.io import read_recipe
-    from flakelab.io.lots_file import read_lots, write_lots
+    from flakelab.io.lots_file import write_lots
     from flakelab.library.lots import TonerLot, TonerLots
     from flakelab.match.lots import calibrate_lots
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
@@ -227,14 +219,13 @@ def calibrate_command(
     grams = read_recipe(recipe)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
     x = recipe_fractions(lib, grams, recipe)
+    check_toners([*(toner or []), *numbers], forward.toners, "--toner, --lot: ")
     for name in [*(toner or []), *numbers]:
-        check_toners([name], forward.toners, "--toner, --lot: ")
         if grams.get(name, 0) <= 0:
             raise FlakelabError(
                 f"{recipe}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
             )
-    stored = read_lots(lots) if lots.exists() else TonerLots(library=lib.name)
-    check_toners(stored.lots, lib.names, f"{lots}: ")
+    stored = _read_lots(lots, lib) if lots.exists() else TonerLots(library=lib.name)
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
     ]

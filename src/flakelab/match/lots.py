@@ -65,6 +65,7 @@ __all__ = [
     "WithLots",
     "calibrate_lots",
     "calibration_recipes",
+    "de00_per_percent",
     "mixed_with",
     "with_lots",
 ]
@@ -253,6 +254,14 @@ def _residual_and_jacobian(forward, theta, fitted, x, measured) -> tuple[NDArray
     lab = _lab(forward, z).reshape(P + 1, N, -1)
     residual = lab[0] - measured.reshape(N, -1)
     return residual, np.moveaxis((lab[1:] - lab[0]) / _STEP, 0, -1)
+
+
+def de00_per_percent(forward, x: NDArray, k: int) -> NDArray:
+    """ΔE00 per geometry ``[G]`` that a tin of toner ``k`` 1 % stronger moves panel ``x[T]``,
+    as predicted: what a reading of the panel says about the tin."""
+    stronger = np.ones(len(x))
+    stronger[k] = 1.01
+    return delta_E(_lab(forward, x[None]), _lab(forward, mixed_with(stronger, x[None])))[0]
 
 
 def _worst_de00(forward, theta: NDArray, x: NDArray, measured: NDArray) -> NDArray:
