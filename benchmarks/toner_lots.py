@@ -61,6 +61,7 @@ def main() -> None:
             "after_one_correction": run["after_one_correction"],
             "oracle_success": run["oracle_success"],
             "lot_strength_error_rms": run["lot_strength_error_rms"],
+            "lot_shade_error_rms_nm": run["lot_shade_error_rms_nm"],
             "latency_p50_s": round(run["latency_p50_s"], 3),
             "wall_s": round(seconds, 1),
         }

@@ -233,7 +233,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     )
     shutil.copy(demo_library_path(), work / "library.json")
     read_library(work / "library.json")
-    tins = [TonerLot("Phthalo blue GS", 1.03, 0.01, "B-1", 1, "2026-11-30T08:00:00+00:00", "m"),
+    tins = [TonerLot("Phthalo blue GS", 1.03, 0.01, "B-1", 1, "2026-11-30T08:00:00+00:00", "m",
+                     0.6, 0.4),
             TonerLot("Al medium", 0.98)]  # fmt: skip
     write_lots(TonerLots.of(tins, "flakelab demo"), work / "lots.json")
     panel = target.parent / "phthalo-blue-panel.cxf"

@@ -119,6 +119,78 @@ def test_a_match_for_the_shops_tins_sprays_onto_the_target(forward, library):
     assert for_tins < 0.5 * for_standard and for_tins < 0.5
 
 
+def test_a_tins_shade_is_the_worlds_hue_drift(library):
+    """The world drifts a batch by moving the mixed film's absorption along the wavelength
+    axis (World.layer); a tin's shade moves its pigment's, and predicts the same film."""
+    from dataclasses import replace
+
+    from flakelab.cases.generator import World
+    from flakelab.match.forward import PhysicsForward
+    from flakelab.models.network import LOG_FLOOR
+
+    world = World(library, "five-angle")
+    x = world.formulations(12, np.random.default_rng(7))
+    physics = PhysicsForward(library, [g.name for g in world.geometries])
+    drift = 1.3
+    shade = np.where(library.effect, 0.0, drift)
+    tins = WithLots(physics, np.ones(len(library.names)), shade, library)
+    R, standard = evaluate_recipes(tins, x)[0], evaluate_recipes(physics, x)[0]
+    nominal = world.nominal(len(x))
+    drifted = world.appearance(x, replace(nominal, hue_shift=np.full(len(x), drift)))[0]
+    above = (drifted > LOG_FLOOR) & (standard > LOG_FLOOR)  # the ratio's floor, as the hybrid's
+    assert above.mean() > 0.9
+    assert np.allclose(R[above], drifted[above], rtol=1e-9)
+    assert delta_E(reflectance_to_Lab(R), reflectance_to_Lab(standard)).max() > 0.3
+
+
+def test_a_shaded_tins_gradient_and_its_own_held_ratio(library):
+    from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_geometries
+    from flakelab.match.forward import PhysicsForward
+
+    names = library.names
+    physics = PhysicsForward(library, instrument_geometries(DEFAULT_INSTRUMENT))
+    shade = np.where(library.effect, 0.0, -1.1)
+    tins = WithLots(physics, _strengths(names, Phthalo_blue_GS=1.05), shade, library)
+    x = _recipe(names, Al_medium=0.8, Phthalo_blue_GS=0.15, DPP_red=0.05)
+    direction = _recipe(names, Phthalo_blue_GS=1.0) - _recipe(names, Al_medium=1.0)
+    z = torch.as_tensor(x[None], dtype=torch.float64).requires_grad_(True)
+    tins(z)[0].sum().backward()
+    h = 1e-5
+    ahead, back = (evaluate_recipes(tins, (x + k * h * direction)[None])[0] for k in (1, -1))
+    # the shade ratio is a constant to the gradient: its own change with the amounts is
+    # second order (0.8 % of this derivative), and its finite differences cost fourteen times
+    exact = (ahead.sum() - back.sum()) / (2 * h)
+    assert float(z.grad[0] @ torch.as_tensor(direction)) == pytest.approx(exact, rel=0.02)
+    held = stepping(tins, every=4)
+    assert held._held is not None and held.forward.held is not None
+    assert held._held is not held.forward.held and tins._held is None and physics.held is None
+
+
+def test_calibration_reads_a_tins_shade_and_its_strength_better_for_it(forward, library):
+    names = forward.toners
+    panels = calibration_recipes(forward, library, ("Phthalo blue GS", "DPP red"))
+    s = _strengths(names, Phthalo_blue_GS=1.04, DPP_red=0.97)
+    shade = np.zeros(len(names))
+    shade[[names.index("Phthalo blue GS"), names.index("DPP red")]] = (1.5, -1.2)
+    reading = evaluate_recipes(WithLots(forward, s, shade, library), panels)[0]
+    found = calibrate_lots(forward, library, panels, reading)
+    read = {n: (v, d, sd) for n, v, d, sd in zip(found.toners, found.strength, found.shade,
+                                                 found.shade_sd, strict=True)}  # fmt: skip
+    for name, true in (("Phthalo blue GS", 1.5), ("DPP red", -1.2)):
+        assert abs(read[name][1] - true) < 0.35 * abs(true) and read[name][2] < 1.5
+    # effect toners have no shade to read
+    assert not any(found.shaded[[library[n].kind != "pigment" for n in found.toners]])
+    blind = calibrate_lots(forward, library, panels, reading, shades=False)
+    assert np.all(blind.shade == 0)
+
+    def strength_error(result):
+        got = dict(zip(result.toners, result.strength, strict=True))
+        return abs(got["Phthalo blue GS"] - 1.04) + abs(got["DPP red"] - 0.97)
+
+    assert strength_error(found) < strength_error(blind)
+    assert found.de00_after.max() < blind.de00_after.max()
+
+
 def _panel_reading(forward, x, s):
     """A panel read exactly as the model predicts it from tins ``s``."""
     return evaluate_recipes(forward, mixed_with(s, x))[0]
@@ -189,11 +261,24 @@ def test_calibrated_tins_lie_nearer_the_worlds_than_the_standard(forward, librar
     for _, t in harness_trials(world, 3, 4242, forward.novel):
         calibrated.append(shop_forward(t, forward, "calibrated", panels)[1])
         referenced.append(shop_forward(t, forward, "referenced", panels, standards)[1])
-        standard.append(float(np.sqrt(np.mean((t.shop.strength[0] - 1) ** 2))))
-        assert shop_forward(t, forward, "known", None)[1] == 0.0
+        standard.append(
+            {
+                "strength": float(np.sqrt(np.mean((t.shop.strength[0] - 1) ** 2))),
+                "shade_nm": abs(float(t.shop.hue_shift[0])),
+            }
+        )
+        assert shop_forward(t, forward, "known", None)[1] == {"strength": 0.0, "shade_nm": 0.0}
+
+    def mean(errors, key):
+        return np.mean([e[key] for e in errors])
+
     # read against the model, its error on the panels stays in; against the standard's panels
     # it drops out (stop 72, 8 shops: 1.7 % and 1.1 % RMS against 3 % not read)
-    assert np.mean(referenced) < np.mean(calibrated) < 0.7 * np.mean(standard)
+    strength = [mean(e, "strength") for e in (referenced, calibrated, standard)]
+    assert strength[0] < strength[1] < 0.7 * strength[2]
+    # the shades read against the standard's panels; against the model alone, its own hue
+    # errors on each panel are read as shade (0.61 nm RMS against 0.66 unread, these three)
+    assert mean(referenced, "shade_nm") < 0.5 * mean(standard, "shade_nm")
 
 
 def test_a_standard_panel_takes_the_models_error_out(forward, library):
@@ -219,12 +304,18 @@ def forward_instrument(forward) -> str:
 
 def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
     lots = TonerLots.of(
-        [TonerLot("Phthalo blue GS", 1.031, 0.006, "B-2291", 2, "2026-11-29T10:12:00+00:00", "m")],
+        [TonerLot("Phthalo blue GS", 1.031, 0.006, "B-2291", 2, "2026-11-29T10:12:00+00:00", "m",
+                  0.8, 0.3)],
         "flakelab demo",
-    )
+    )  # fmt: skip
     path = tmp_path / "lots.json"
     write_lots(lots, path)
     assert read_lots(path) == lots
+    # a file written before shades were read: every tin at the standard's shade
+    old = tmp_path / "version-1.json"
+    tin = {"toner": "Phthalo blue GS", "strength": 1.02}
+    old.write_text(json.dumps({"format": "flakelab-toner-lots", "version": 1, "lots": [tin]}))
+    assert read_lots(old).shades(["Phthalo blue GS"]).tolist() == [0.0]
 
     def refused(document, *words):
         bad = tmp_path / "bad.json"
@@ -239,7 +330,9 @@ def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
     lot = good["lots"][0]
     refused("{", "JSON")
     refused({**good, "format": "other"}, "format")
-    refused({**good, "version": 2}, "version")
+    refused({**good, "version": 3}, "version")
+    refused({**good, "lots": [{**lot, "shade_nm": 12.0}]}, "shade_nm", "nm")
+    refused({**good, "lots": [{**lot, "shade_sd_nm": "wide"}]}, "shade_sd_nm", "number")
     refused({**good, "lots": {}}, "lots")
     refused({**good, "lots": [{**lot, "strength": "strong"}]}, "lots[0]", "strength", "number")
     refused({**good, "lots": [{**lot, "strength": 3.0}]}, "strength", "0.5–2")
@@ -261,6 +354,8 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     panel, lots = tmp_path / "panel.json", tmp_path / "lots.json"
     done = cli("lots", "panel", "Phthalo blue GS", "--recipe-out", panel, "--json")
     assert done.returncode == 0, done.stderr
+    # the panel tells the tin's shade too: 1 nm moves it at every geometry
+    assert min(json.loads(done.stdout)["de00_per_nm"]) > 0.05
     grams = json.loads(panel.read_text())
     assert (
         "Phthalo blue GS" in grams and len(grams) == 2 and sum(grams.values()) == pytest.approx(100)
@@ -295,7 +390,11 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     # match and correct weigh for the tins; every tin alike stronger changes nothing
     with_tin = json.loads(cli("match", "--example", "--lots", lots, "--json").stdout)
     plain = json.loads(cli("match", "--example", "--json").stdout)
-    assert with_tin["lots"] == {"Phthalo blue GS": pytest.approx(tin.strength, abs=1e-4)}
+    assert with_tin["lots"]["Phthalo blue GS"]["strength"] == pytest.approx(tin.strength, abs=1e-4)
+    # the panel was read as the model predicts the standard's shade
+    assert abs(tin.shade_nm) < 0.3 and with_tin["lots"]["Phthalo blue GS"]["shade_nm"] == round(
+        tin.shade_nm, 2
+    )
     assert with_tin["candidates"][0]["weights_g"] != plain["candidates"][0]["weights_g"]
     uniform = tmp_path / "uniform.json"
     write_lots(TonerLots.of([TonerLot(n, 1.05) for n in forward.toners]), uniform)

@@ -47,7 +47,7 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
-from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.spectra import shift_spectra
 from flakelab.library.toners import Library
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
 from flakelab.physics.fast import reflectance_factor
@@ -230,7 +230,7 @@ class World:
         """The basecoat of ``fractions`` mixed from ``variation``'s batches and sprayed."""
         layer = layer_from_fractions(self.library, fractions * variation.strength)
         return sprayed_layer(
-            replace(layer, absorption=_shift_spectra(layer.absorption, variation.hue_shift)),
+            replace(layer, absorption=shift_spectra(layer.absorption, variation.hue_shift)),
             self.library,
             variation.film,
             variation.spread,
@@ -446,17 +446,6 @@ def near_black(lab: NDArray, lightness: float = NEAR_BLACK_L) -> NDArray[np.bool
 def _pick(rng: np.random.Generator, pool: list[int], count: int) -> NDArray:
     """Up to ``count`` distinct toners from ``pool`` (fewer when the library has fewer)."""
     return rng.choice(pool, size=min(int(count), len(pool)), replace=False) if pool else []
-
-
-def _shift_spectra(spectra: NDArray, shift_nm: NDArray) -> NDArray:
-    """Spectra ``[F, W]`` moved along the wavelength axis by ``shift_nm[F]`` (edges held)."""
-    positions = WAVELENGTHS[None, :] - shift_nm[:, None]
-    step = WAVELENGTHS[1] - WAVELENGTHS[0]
-    index = np.clip((positions - WAVELENGTHS[0]) / step, 0, WAVELENGTHS.size - 1)
-    low = np.floor(index).astype(int).clip(0, WAVELENGTHS.size - 2)
-    frac = index - low
-    rows = np.arange(spectra.shape[0])[:, None]
-    return spectra[rows, low] * (1 - frac) + spectra[rows, low + 1] * frac
 
 
 def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int, int]) -> NDArray:

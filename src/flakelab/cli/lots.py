@@ -46,7 +46,7 @@ LotsOption = Annotated[
     typer.Option(
         "--lots",
         help="The shop's toner-lot file ('flakelab lots calibrate' writes it): each tin's "
-        "strength against the model's standard, which the recipe is weighed for.",
+        "strength and shade against the model's standard, which the recipe is weighed for.",
     ),
 ]
 
@@ -64,10 +64,10 @@ def shop_lots(path: Path | None, library, forward):
     )
     notes = (
         [f"the tins of {path} were read against model {', '.join(others)}, not this one "
-         f"({forward.model_id}): their strengths carry that model's errors on the panels"]
+         f"({forward.model_id}): their readings carry that model's errors on the panels"]
         if others else []
     )  # fmt: skip
-    return lots, with_lots(forward, lots), notes
+    return lots, with_lots(forward, lots, library), notes
 
 
 def _read_lots(path: Path, library):
@@ -80,9 +80,13 @@ def _read_lots(path: Path, library):
     return lots
 
 
-def lots_report(lots) -> dict[str, float]:
-    """The tins off the standard, by toner, as a report shows them."""
-    return {n: round(lot.strength, 4) for n, lot in sorted(lots.lots.items()) if lot.strength != 1}
+def lots_report(lots) -> dict[str, dict[str, float]]:
+    """The tins off the standard, by toner, as a report shows them: strength and shade."""
+    return {
+        n: {"strength": round(lot.strength, 4), "shade_nm": round(lot.shade_nm, 2)}
+        for n, lot in sorted(lots.lots.items())
+        if lot.strength != 1 or lot.shade_nm != 0
+    }
 
 
 @lots_app.command("panel")
@@ -104,9 +108,9 @@ def panel_command(
     """The calibration panel for a toner's tin: an OEM-like paint of the toner and one
     partner (an effect base, or the white of ISO 787-24's reduction), the pair and share
     whose colour depends most on the tin, weighed for the can. Spray it, read it, and
-    'flakelab lots calibrate' reads the tin's strength from it."""
+    'flakelab lots calibrate' reads the tin's strength and shade from it."""
     from flakelab.io import write_recipe
-    from flakelab.match.lots import calibration_recipes, de00_per_percent
+    from flakelab.match.lots import calibration_recipes, de00_per_nm, de00_per_percent
     from flakelab.match.recipe import order_can, weigh_whole_can
     from flakelab.match.stock import check_toners
 
@@ -118,12 +122,15 @@ def panel_command(
     fractions = {n: float(v) for n, v in zip(forward.toners, x, strict=True) if v > 0}
     grams_can = can.for_toners(lib, fractions).grams_for(fractions)
     weighing = weigh_whole_can(forward, fractions, grams_can, resolution)
-    per_percent = de00_per_percent(forward, x, forward.toners.index(toner))
+    k = forward.toners.index(toner)
+    per_percent = de00_per_percent(forward, x, k)
+    per_nm = None if lib[toner].kind != "pigment" else de00_per_nm(forward, lib, x, k)
     report = {
         "toner": toner,
         "recipe_g": weighing.grams,
         "shares": {n: round(v, 4) for n, v in fractions.items()},
         "de00_per_percent": per_percent.round(3).tolist(),
+        "de00_per_nm": None if per_nm is None else per_nm.round(3).tolist(),
         "geometries": list(forward.geometries),
         "model": forward.name,
     }
@@ -145,6 +152,9 @@ def panel_command(
         for g, d in zip(report["geometries"], report["de00_per_percent"], strict=True)
     )
     console.print(f"ΔE00 for a tin 1 % stronger: {per}", highlight=False)
+    if per_nm is not None:
+        per = "  ".join(f"{g} {d:.2f}" for g, d in zip(report["geometries"], per_nm, strict=True))
+        console.print(f"ΔE00 for a tin 1 nm off in shade: {per}", highlight=False)
 
 
 @lots_app.command("calibrate")
@@ -190,6 +200,14 @@ def calibrate_command(
     standard_sample: Annotated[
         str | None, typer.Option(help="Sample name in a multi-sample --standard file.")
     ] = None,
+    shade: Annotated[
+        bool,
+        typer.Option(
+            "--shade/--no-shade",
+            help="Read the pigments' shades beside the strengths; with --no-shade each tin "
+            "keeps the shade on file (a supplier's certificate, or the standard's).",
+        ),
+    ] = True,
     sample: SampleOption = None,
     average: AverageOption = False,
     library: LibraryOption = None,
@@ -202,14 +220,16 @@ def calibrate_command(
     ] = False,
     json_output: JsonOption = False,
 ) -> None:
-    """Read the strength of the shop's tins from a panel's spray-out of a known recipe.
+    """Read the strength and shade of the shop's tins from a panel's spray-out of a known
+    recipe.
 
-    The panel's colour at every geometry is fitted by the tins' strengths, each drawn towards
-    its last reading (or the standard ± 3 %) as far as the panel leaves it unsure; the
+    The panel's colour at every geometry is fitted by the tins' strengths and the pigments'
+    shades (their absorption a few nm off the standard's), each drawn towards its last
+    reading (or the standard ± 3 %, ± 1.5 nm) as far as the panel leaves it unsure; the
     spray's own film build and flake alignment are allowed for by the library's physics."""
     from flakelab.io import read_recipe
     from flakelab.io.lots_file import write_lots
-    from flakelab.library.lots import TonerLot, TonerLots
+    from flakelab.library.lots import MAX_SHADE_NM, TonerLot, TonerLots
     from flakelab.match.lots import calibrate_lots
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
     from flakelab.match.stock import check_toners
@@ -240,7 +260,7 @@ def calibrate_command(
         raise FlakelabError("--standard-sample: for a --standard file")
     fitted = tuple(dict.fromkeys([*toner, *numbers])) if toner else None  # a new tin is read
     found = calibrate_lots(forward, lib, x[None], sprayed_R[None], start, toners=fitted,
-                           standards=standards)  # fmt: skip
+                           standards=standards, shades=shade)  # fmt: skip
     if found.de00_before[0] > SPRAYOUT_MISMATCH:
         against = f"{standard}'s reading" if standard is not None else "its recipe's prediction"
         raise FlakelabError(
@@ -248,11 +268,12 @@ def calibrate_command(
             f"worst, beyond the {SPRAYOUT_MISMATCH:g} of a likely mix-up: is it a spray-out of "
             f"{recipe}'s recipe? (the lot file is unchanged)"
         )
-    for name, strength in zip(found.toners, found.strength, strict=True):
-        if not 0.5 <= strength <= 2.0:
+    for name, strength, nm in zip(found.toners, found.strength, found.shade, strict=True):
+        if not (0.5 <= strength <= 2.0 and abs(nm) <= MAX_SHADE_NM):
             raise FlakelabError(
-                f"{sprayed}: the panel reads {name}'s tin at {strength:.2f} times the standard: "
-                f"not a spray-out of {recipe}'s recipe, or not of this library's toners"
+                f"{sprayed}: the panel reads {name}'s tin at {strength:.2f} times the standard "
+                f"and {nm:+.1f} nm off its shade: not a spray-out of {recipe}'s recipe, or not "
+                "of this library's toners"
             )
     when = datetime.now(UTC).isoformat(timespec="seconds")
     read = []
@@ -267,6 +288,8 @@ def calibrate_command(
                 panels=(before.panels if before else 0) + 1,
                 calibrated=when,
                 model_id=forward.model_id,
+                shade_nm=float(found.shade[i]),
+                shade_sd_nm=float(found.shade_sd[i]),
             )
         )
     updated = start.replaced(read)
@@ -283,6 +306,10 @@ def calibrate_command(
                 "before_sd": round(float(found.prior_sd[i]), 4),
                 "strength": round(t.strength, 4),
                 "strength_sd": round(t.strength_sd, 4),
+                "shade_before_nm": round(float(found.prior_shade[i]), 2),
+                "shade_nm": round(t.shade_nm, 2),
+                "shade_sd_nm": round(t.shade_sd_nm, 2),
+                "shade_read": bool(found.shaded[i]),
                 "new_tin": t.toner in new_tins,
             }
             for i, t in enumerate(read)
@@ -311,17 +338,19 @@ def _lot_numbers(given: list[str]) -> dict[str, str]:
 
 def _print_calibration(report: dict) -> None:
     table = Table(title="The shop's tins, read from the panel", box=box.SIMPLE)
-    for column in ("toner", "lot", "before", "now", "change"):
+    for column in ("toner", "lot", "before", "now", "change", "shade"):
         table.add_column(column, justify="left" if column in ("toner", "lot") else "right")
     for t in report["tins"]:
         before = "standard" if t["new_tin"] else f"{t['before']:.3f} ± {t['before_sd']:.3f}"
         change = 100 * (t["strength"] - t["before"])
+        shade = f"{t['shade_nm']:+.2f} ± {t['shade_sd_nm']:.2f} nm" if t["shade_read"] else "—"
         table.add_row(
             t["toner"],
             t["lot"],
             before,
             f"{t['strength']:.3f} ± {t['strength_sd']:.3f}",
             f"{change:+.1f} %",
+            shade,
         )
     console.print(table)
     against = "the model" if report["against"] == "model" else "the standard's panel"
@@ -342,7 +371,8 @@ def show_command(
     lots: Annotated[Path, typer.Argument(help="A toner-lot file.")],
     json_output: JsonOption = False,
 ) -> None:
-    """The tins of a toner-lot file: strength against the standard, how sure, when read."""
+    """The tins of a toner-lot file: strength and shade against the standard, how sure, when
+    read."""
     from dataclasses import asdict
 
     from flakelab.io.lots_file import read_lots
@@ -357,11 +387,16 @@ def show_command(
         )
         return
     table = Table(title=f"Toner tins of {lots}", box=box.SIMPLE)
-    for column in ("toner", "lot", "strength", "panels", "read"):
-        table.add_column(column, justify="right" if column in ("strength", "panels") else "left")
+    for column in ("toner", "lot", "strength", "shade", "panels", "read"):
+        table.add_column(column, justify="left" if column in ("toner", "lot", "read") else "right")
     for name in sorted(found.lots):
         t = found.lots[name]
         table.add_row(
-            name, t.lot, f"{t.strength:.3f} ± {t.strength_sd:.3f}", str(t.panels), t.calibrated[:10]
+            name,
+            t.lot,
+            f"{t.strength:.3f} ± {t.strength_sd:.3f}",
+            f"{t.shade_nm:+.2f} ± {t.shade_sd_nm:.2f} nm",
+            str(t.panels),
+            t.calibrated[:10],
         )
     console.print(table)

@@ -479,7 +479,11 @@ def _print_match(report: dict) -> None:
         highlight=False,
     )
     if report.get("lots"):
-        tins = ", ".join(f"{n} {100 * (s - 1):+.1f} %" for n, s in report["lots"].items())
+        tins = ", ".join(
+            f"{n} {100 * (t['strength'] - 1):+.1f} %"
+            + (f" {t['shade_nm']:+.1f} nm" if t["shade_nm"] else "")
+            for n, t in report["lots"].items()
+        )
         console.print(f"weighed for the shop's tins: {tins}", highlight=False)
     for rank, c in enumerate(report["candidates"], start=1):
         failing = failures(c["failing_geometries"], c["failing_texture"])

@@ -17,6 +17,7 @@ __all__ = [
     "WAVELENGTHS_RENDER",
     "shape_of",
     "resample",
+    "shift_spectra",
 ]
 
 SHAPE_STORE = colour.SpectralShape(400, 700, 10)
@@ -79,3 +80,23 @@ def resample(
     msds = colour.MultiSpectralDistributions(flat.T, wl)
     msds = msds.copy().align(shape)
     return np.asarray(msds.values.T, dtype=float).reshape(*values.shape[:-1], -1)
+
+
+def shift_spectra(spectra: ArrayLike, shift_nm: ArrayLike) -> NDArray[np.float64]:
+    """Spectra ``[..., W]`` on the storage grid moved along the wavelength axis by
+    ``shift_nm[...]`` (longer for a positive shift; the two broadcast), linearly
+    interpolated, the edge bands held: a pigment batch's hue drift, its absorption band a
+    little off the standard's."""
+    spectra, shift = np.asarray(spectra, dtype=float), np.asarray(shift_nm, dtype=float)
+    rows = np.broadcast_shapes(spectra.shape[:-1], shift.shape)
+    spectra = np.broadcast_to(spectra, (*rows, spectra.shape[-1]))
+    shift = np.broadcast_to(shift, rows)
+    step = WAVELENGTHS[1] - WAVELENGTHS[0]
+    position = (WAVELENGTHS - shift[..., None] - WAVELENGTHS[0]) / step
+    index = np.clip(position, 0, WAVELENGTHS.size - 1)
+    low = np.floor(index).astype(int).clip(0, WAVELENGTHS.size - 2)
+    frac = index - low
+    return (
+        np.take_along_axis(spectra, low, -1) * (1 - frac)
+        + np.take_along_axis(spectra, low + 1, -1) * frac
+    )

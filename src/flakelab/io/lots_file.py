@@ -1,11 +1,14 @@
-"""Toner-lot files: the shop's tins and their strengths (:mod:`flakelab.library.lots`).
+"""Toner-lot files: the shop's tins, their strengths and shades (:mod:`flakelab.library.lots`).
 
 ::
 
-    {"format": "flakelab-toner-lots", "version": 1, "library": "flakelab demo",
+    {"format": "flakelab-toner-lots", "version": 2, "library": "flakelab demo",
      "lots": [{"toner": "Phthalo blue GS", "strength": 1.031, "strength_sd": 0.006,
                "lot": "B-2291", "panels": 1, "calibrated": "2026-11-29T10:12:00+00:00",
-               "model_id": "demo-five-angle 65a5a7b88eab"}]}
+               "model_id": "demo-five-angle 65a5a7b88eab", "shade_nm": 0.8,
+               "shade_sd_nm": 0.3}]}
+
+Version 1 files (before shades were read) are read with every tin at the standard's shade.
 """
 
 from __future__ import annotations
@@ -23,8 +26,10 @@ from flakelab.library.lots import TonerLot, TonerLots
 __all__ = ["LOTS_FORMAT", "read_lots", "write_lots"]
 
 LOTS_FORMAT = "flakelab-toner-lots"
-_VERSION = 1
+_VERSION = 2
+_READS = (1, 2)
 _TEXT_FIELDS = ("toner", "lot", "calibrated", "model_id")
+_NUMBER_FIELDS = ("strength", "strength_sd", "shade_nm", "shade_sd_nm")
 
 
 def read_lots(path: str | PathLike) -> TonerLots:
@@ -35,9 +40,10 @@ def read_lots(path: str | PathLike) -> TonerLots:
         raise FlakelabError(
             f"{path}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)"
         )
-    if document.get("version") != _VERSION:
+    if document.get("version") not in _READS:
         raise FlakelabError(
-            f"{path}: version: expected {_VERSION}, got {document.get('version')!r}"
+            f"{path}: version: expected {' or '.join(map(str, _READS))}, "
+            f"got {document.get('version')!r}"
         )
     entries = document.get("lots")
     if not isinstance(entries, list):
@@ -72,7 +78,7 @@ def _lot(path: Path, index: int, entry) -> TonerLot:
             raise FlakelabError(f"{where}: {name}: expected text, got {value!r}")
         if name == "panels" and not (isinstance(value, int) and not isinstance(value, bool)):
             raise FlakelabError(f"{where}: panels: expected a whole number, got {value!r}")
-        if name in ("strength", "strength_sd") and not is_number(value):
+        if name in _NUMBER_FIELDS and not is_number(value):
             raise FlakelabError(f"{where}: {name}: expected a number, got {value!r}")
     if "toner" not in entry or "strength" not in entry:
         raise FlakelabError(f"{where}: expected both 'toner' and 'strength'")

@@ -295,20 +295,26 @@ def harness_trials(
 def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None, standards=None):
     """``forward`` as trial ``t``'s shop predicts with it (:data:`LOT_MODES`: ``panels`` are
     the calibration recipes, ``standards`` their readings from the standard tins), and the
-    RMS of its tins' strengths' error (None at the standard)."""
+    RMS of its tins' strengths' and its pigments' shades' errors (None at the standard)."""
     if lots == "standard":
         return forward, None
-    order = [list(t.world.library.names).index(n) for n in forward.toners]
+    library = t.world.library
+    order = [list(library.names).index(n) for n in forward.toners]
     true = t.shop.strength[0][order]
-    strength = true
+    # the world's batches drift every pigment's absorption alike (World.layer)
+    true_shade = np.where(library.effect[order], 0.0, t.shop.hue_shift[0])
+    strength, shade = true, true_shade
     if lots in ("calibrated", "referenced"):
-        found = calibrate_lots(
-            forward, t.world.library, panels, t.panels(panels), standards=standards
-        )
-        read = dict(zip(found.toners, found.strength, strict=True))
-        strength = np.array([read.get(n, 1.0) for n in forward.toners])
-    error = float(np.sqrt(np.mean((strength - true) ** 2)))
-    return WithLots(forward, strength), error
+        found = calibrate_lots(forward, library, panels, t.panels(panels), standards=standards)
+        read = dict(zip(found.toners, zip(found.strength, found.shade, strict=True), strict=True))
+        strength = np.array([read.get(n, (1.0, 0.0))[0] for n in forward.toners])
+        shade = np.array([read.get(n, (1.0, 0.0))[1] for n in forward.toners])
+    pigments = ~library.effect[order]
+    error = {
+        "strength": float(np.sqrt(np.mean((strength - true) ** 2))),
+        "shade_nm": float(np.sqrt(np.mean((shade - true_shade)[pigments] ** 2))),
+    }
+    return WithLots(forward, strength, shade, library), error
 
 
 def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target_texture=True):
@@ -526,7 +532,12 @@ def evaluate_matching(
         "resprays": resprays,
         "lots": lots,
         # the RMS error of the tins' strengths the shop matched with, mean over targets
-        "lot_strength_error_rms": _mean_or_none(r["lot_error"] for r in rows + novel_rows),
+        "lot_strength_error_rms": _mean_or_none(
+            r["lot_error"]["strength"] for r in rows + novel_rows if r["lot_error"]
+        ),
+        "lot_shade_error_rms_nm": _mean_or_none(
+            r["lot_error"]["shade_nm"] for r in rows + novel_rows if r["lot_error"]
+        ),
         **{name: mean(rows, key) for name, key in CHANCES.items()},
         "novel_toner_first_shot_chance": mean(novel_rows, "first_chance"),
         **({"per_target": rows + novel_rows} if per_target else {}),

@@ -1,5 +1,5 @@
-"""The shop's toner lots in the matcher: predictions for its tins, and their strengths read
-from spray-outs of known recipes (:mod:`flakelab.library.lots`).
+"""The shop's toner lots in the matcher: predictions for its tins, and their strengths and
+shades read from spray-outs of known recipes (:mod:`flakelab.library.lots`).
 
 **Predicting.** A tin of strength s puts s times its toner's amount into the film
 (:func:`~flakelab.physics.layer.layer_from_fractions`, as the world's batches do), so the
@@ -9,11 +9,19 @@ a few per cent stronger differs mostly by what the renormalisation keeps, the ra
 :class:`WithLots` wraps any forward model so: the search, the judge and the correction then
 find the grams for the shop's tins.
 
+**Shade.** A pigment tin whose absorption band sits δ nm off the standard's (the world's
+batches drift so, :meth:`~flakelab.cases.generator.World.layer`) cannot be told to a learned
+model, which knows amounts only. As the hybrid path scales the learned base by the physics for
+new toners, :class:`WithLots` scales it by the physics' :func:`shade_ratio`,
+R_phys(x∘s, δ) / R_phys(x∘s, 0): the library's physics knows each pigment's absorption and
+moves it. The ratio is a constant to the gradient (its change with the amounts is second
+order) and, in an optimiser's steps, retaken every few.
+
 **Reading a tin.** The tinting-strength test of ISO 787-24 reduces the pigment with a
 standard white and compares the panel with the standard's. Here the model's prediction is
 the standard, the partner may be any toner of the library, and every toner of the panel's
 recipe is read at once: a spray-out's L*a*b* offset from the prediction at every geometry is
-fitted by the tins' log strengths θ, Gauss–Newton on
+fitted by the tins' log strengths and the pigments' shades θ, Gauss–Newton on
 
     ½ Σₙ rₙ(θ)ᵀ Cₙ⁻¹ rₙ(θ) + ½ (θ − θ₀)ᵀ Σ₀⁻¹ (θ − θ₀),
 
@@ -22,11 +30,11 @@ rₙ the predicted minus the measured L*a*b* of reading n (the mean of its panel
 (:func:`~flakelab.match.correction.split_offset`: the spray's film build and flake spread
 along the physics' sensitivities Sₙ, the model's error σ_p, the reading's σ_n, k panels
 averaged), θ₀ ± Σ₀ the tins' last readings or the standard ± :data:`~flakelab.library.lots.
-LOT_STRENGTH_SD`. Where the panels sit further from the model than C allows (χ² above its
-degrees of freedom), C is scaled up by the ratio and the fit run again, so the tins are not
-read more surely than the residuals warrant. The posterior's covariance is the inverse of
-the last step's normal matrix: a tin read from a panel that hardly depends on it keeps its
-prior.
+LOT_STRENGTH_SD` (± :data:`~flakelab.library.lots.LOT_SHADE_SD_NM` in shade). Where the
+panels sit further from the model than C allows (χ² above its degrees of freedom), C is
+scaled up by the ratio and the fit run again, so the tins are not read more surely than the
+residuals warrant. The posterior's covariance is the inverse of the last step's normal
+matrix: a tin read from a panel that hardly depends on it keeps its prior.
 
 **Against the standard's panel.** The model's error on a panel (σ_p) is the same whichever
 tin the panel was sprayed from. Given the paint maker's reading of the same panel from its
@@ -58,6 +66,9 @@ from flakelab.library.lots import TonerLots
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
 from flakelab.match.judging import evaluate_recipes
+from flakelab.models.network import LOG_FLOOR
+from flakelab.physics.fast import reflectance_factor
+from flakelab.physics.layer import layer_from_fractions
 
 __all__ = [
     "TINT_SHARES",
@@ -65,8 +76,10 @@ __all__ = [
     "WithLots",
     "calibrate_lots",
     "calibration_recipes",
+    "de00_per_nm",
     "de00_per_percent",
     "mixed_with",
+    "shade_ratio",
     "with_lots",
 ]
 
@@ -78,6 +91,9 @@ formulations`), and the learned model knows no other paints."""
 _STEP = 0.005
 """Finite-difference step in a tin's log strength (0.5 %): a learned model computes in single
 precision, and a strength is smooth at this scale."""
+
+_SHADE_STEP_NM = 0.1
+"""Central-difference step in a tin's shade [nm]."""
 
 _GAUSS_NEWTON_STEPS = 6
 
@@ -92,16 +108,46 @@ def mixed_with(strength: NDArray, fractions):
     return z / np.maximum(z.sum(-1, keepdims=True), 1e-12)
 
 
+def shade_ratio(library: Library, geometries, film: NDArray, shade: NDArray) -> NDArray:
+    """R_phys(film, shade) / R_phys(film) ``[N, G, 31]``: what tins of ``shade[N, T]`` or
+    ``[T]`` [nm] change in the reflectance of films ``film[N, T]`` (library order; the tins'
+    amounts), by the library's physics at its nominal application (module notes)."""
+    film = np.atleast_2d(np.asarray(film, float))
+    shaded, standard = (
+        np.maximum(
+            reflectance_factor(layer_from_fractions(library, film, s), geometries), LOG_FLOOR
+        )
+        for s in (shade, None)
+    )
+    return shaded / standard
+
+
 class WithLots:
     """``forward`` for recipes poured from tins of relative ``strength[T]`` (its toners'
-    order): every prediction is the standard lots' prediction of :func:`mixed_with`. The
-    rest (toners, geometries, model id, …) is ``forward``'s."""
+    order) and, with the ``library``, ``shade[T]`` [nm]: every prediction is the standard
+    lots' prediction of :func:`mixed_with`, times the physics' :func:`shade_ratio` for the
+    tins' shades. The rest (toners, geometries, model id, …) is ``forward``'s."""
 
-    def __init__(self, forward, strength: NDArray) -> None:
+    def __init__(
+        self,
+        forward,
+        strength: NDArray,
+        shade: NDArray | None = None,
+        library: Library | None = None,
+    ) -> None:
         self.forward = forward
         self.strength = np.asarray(strength, float)
-        off = int(np.sum(np.abs(self.strength - 1) > 1e-12))
+        self.shade = np.zeros_like(self.strength) if shade is None else np.asarray(shade, float)
+        self.library = library
+        self._held: _HeldRatio | None = None
+        if self.shaded and (library is None or tuple(forward.toners) != library.names):
+            raise ValueError("shade: the tins' shades need the library the model was made for")
+        off = int(np.sum((np.abs(self.strength - 1) > 1e-12) | (self.shade != 0)))
         self.name = f"{forward.name}, for the shop's tins ({off} read off the standard)"
+
+    @property
+    def shaded(self) -> bool:
+        return bool(np.any(self.shade != 0))
 
     def __getattr__(self, name: str):
         # only what this class does not define; guarded for copy, which asks before __init__
@@ -110,37 +156,82 @@ class WithLots:
         return getattr(self.forward, name)
 
     def __call__(self, fractions: torch.Tensor):
-        return self.forward(mixed_with(self.strength, fractions))
+        R, texture = self.forward(mixed_with(self.strength, fractions))
+        return self._shaded(R, fractions), texture
 
     def with_members(self, fractions: torch.Tensor):
-        return self.forward.with_members(mixed_with(self.strength, fractions))
+        R, texture, members = self.forward.with_members(mixed_with(self.strength, fractions))
+        if not self.shaded:
+            return R, texture, members
+        ratio = self._ratio(fractions)
+        return R * ratio.to(R.dtype), texture, members * ratio.to(members.dtype)
 
     def member_reflectance(self, x: NDArray) -> NDArray:
-        return self.forward.member_reflectance(mixed_with(self.strength, x))
+        members = self.forward.member_reflectance(mixed_with(self.strength, x))
+        return members * self.film_ratio(x)[None] if self.shaded else members
 
-    # an optimiser's held Jacobian (forward.stepping) belongs to the model it wraps
+    def film_ratio(self, x: NDArray) -> NDArray:
+        """:func:`shade_ratio` of recipes ``x[N, T]`` poured from these tins."""
+        return shade_ratio(self.library, self.geometries, x * self.strength, self.shade)
+
+    def _ratio(self, fractions: torch.Tensor) -> torch.Tensor:
+        """:meth:`film_ratio` for torch, a constant to the gradient: a shade's per-cent
+        effect on the reflectance changes with the amounts only in second order, and finite
+        differences on every toner used made a match fourteen times slower (9.4 s against
+        0.65 s, six harness targets). In an optimiser's steps it is retaken every few."""
+        x = fractions.detach().numpy()
+        if self._held is not None and fractions.requires_grad:
+            return self._held(x, self.film_ratio)
+        return torch.as_tensor(self.film_ratio(x))
+
+    def _shaded(self, R: torch.Tensor, fractions: torch.Tensor) -> torch.Tensor:
+        return R * self._ratio(fractions).to(R.dtype) if self.shaded else R
+
+    # an optimiser's held Jacobian (forward.stepping): the shades' own, and the wrapped
+    # model's for the model
     @property
     def held(self):
-        return self.forward.held
+        return self._held if self.shaded else self.forward.held
 
     @held.setter
     def held(self, value) -> None:
-        self.forward = copy.copy(self.forward)
-        self.forward.held = value
+        if hasattr(self.forward, "held"):
+            self.forward = copy.copy(self.forward)
+            self.forward.held = value
+        if self.shaded:
+            self._held = None if value is None else _HeldRatio(value.every)
 
 
-def with_lots(forward, lots: TonerLots | None):
-    """``forward`` for the shop's ``lots`` (itself where there are none)."""
+class _HeldRatio:
+    """:class:`WithLots`' shade ratio in an optimiser's steps: taken afresh every ``every``
+    steps (and whenever the rows change), held between."""
+
+    def __init__(self, every: int) -> None:
+        self.every, self.calls, self.value = every, 0, None
+
+    def __call__(self, x: NDArray, ratio) -> torch.Tensor:
+        if self.calls % self.every == 0 or self.value is None or len(self.value) != len(x):
+            self.value = torch.as_tensor(ratio(x))
+        self.calls += 1
+        return self.value
+
+
+def with_lots(forward, lots: TonerLots | None, library: Library | None = None):
+    """``forward`` for the shop's ``lots`` (itself where there are none); their shades need
+    the ``library``."""
     if lots is None or not lots.lots:
         return forward
-    return WithLots(forward, lots.strengths(forward.toners))
+    names = forward.toners
+    shade = lots.shades(names) if library is not None else None
+    return WithLots(forward, lots.strengths(names), shade, library)
 
 
 @dataclass(frozen=True)
 class LotCalibration:
-    """Tins read from spray-outs: each fitted toner's strength and its standard deviation,
-    where it stood before, and each reading's worst-geometry ΔE00 from the prediction
-    before (the tins as they stood) and after."""
+    """Tins read from spray-outs: each fitted toner's strength and shade [nm] with their
+    standard deviations, where they stood before, whether its shade was read (``shaded``: a
+    pigment's), and each reading's worst-geometry ΔE00 from the prediction before (the tins
+    as they stood) and after."""
 
     toners: tuple[str, ...]
     strength: NDArray
@@ -149,6 +240,11 @@ class LotCalibration:
     prior_sd: NDArray
     de00_before: NDArray
     de00_after: NDArray
+    shade: NDArray
+    shade_sd: NDArray
+    prior_shade: NDArray
+    prior_shade_sd: NDArray
+    shaded: NDArray
 
 
 def _lab(forward, x: NDArray) -> NDArray:
@@ -179,81 +275,133 @@ def calibrate_lots(
     panels: NDArray | None = None,
     toners: tuple[str, ...] | None = None,
     standards: NDArray | None = None,
+    shades: bool = True,
 ) -> LotCalibration:
-    """The tins' strengths read from spray-outs ``readings[N, G, 31]`` of known ``recipes[N,
-    T]`` (library order; each reading the mean of ``panels[N]`` spray-outs, default one),
-    starting from ``lots`` (default: every tin at the standard). The ``toners`` fitted default
-    to every toner the recipes hold; the rest stay as ``lots`` has them. With ``standards``,
-    readings ``[N, G, 31]`` of the same recipes from the standard's tins (the paint maker's
-    reference panels, each one spray), each panel is read against its standard's, as ISO
-    787-24 reads a pigment against its standard's reduction: the model's error on the panel,
-    which is the same for both, drops out (module notes)."""
+    """The tins' strengths, and with ``shades`` the pigments' shades, read from spray-outs
+    ``readings[N, G, 31]`` of known ``recipes[N, T]`` (library order; each reading the mean of
+    ``panels[N]`` spray-outs, default one), starting from ``lots`` (default: every tin at the
+    standard). The ``toners`` fitted default to every toner the recipes hold; the rest stay
+    as ``lots`` has them. With ``standards``, readings ``[N, G, 31]`` of the same recipes from
+    the standard's tins (the paint maker's reference panels, each one spray), each panel is
+    read against its standard's, as ISO 787-24 reads a pigment against its standard's
+    reduction: the model's error on the panel, which is the same for both, drops out (module
+    notes)."""
     names = list(forward.toners)
+    T = len(names)
     x = np.atleast_2d(np.asarray(recipes, float))
     x = x / x.sum(axis=1, keepdims=True)
     panels = np.ones(len(x)) if panels is None else np.asarray(panels, float)
     lots = lots or TonerLots()
     if toners is None:
-        fitted = np.flatnonzero(np.any(x > 0, axis=0))
+        toner_index = np.flatnonzero(np.any(x > 0, axis=0))
     else:
-        fitted = np.array([names.index(t) for t in toners], int)
-    theta, sd = lots.prior(names)
+        toner_index = np.array([names.index(t) for t in toners], int)
+    shaded = ~library.effect[toner_index] if shades else np.zeros(len(toner_index), bool)
+    fitted = np.concatenate([toner_index, T + toner_index[shaded]])
+    (log_s, log_sd), (shade, shade_sd) = lots.prior(names), lots.shade_prior(names)
+    theta, sd = np.concatenate([log_s, shade]), np.concatenate([log_sd, shade_sd])
     theta0, precision0 = theta[fitted].copy(), np.diag(1 / sd[fitted] ** 2)
+    tins = _Tins(forward, library, x)
     measured = reflectance_to_Lab(np.asarray(readings, float))
     if standards is None:
         L = _whitened(forward, library, x, 1 / panels)
     else:  # the panel's offset from its standard's reading, about the model's standard panel
         measured = measured - reflectance_to_Lab(np.asarray(standards, float)) + _lab(forward, x)
         L = _whitened(forward, library, x, 1 / panels + 1, persistent_sd=0.0)
-    before = _worst_de00(forward, theta, x, measured)
+    measured = measured.reshape(len(x), -1)
+    before = tins.worst_de00(theta, measured)
     scale = 1.0  # the covariance's scale, read from the residuals (module notes)
     for _ in range(2):
-        theta, normal, chi2 = _gauss_newton(forward, theta, fitted, x, measured, L / np.sqrt(scale),
+        theta, normal, chi2 = _gauss_newton(tins, theta, fitted, measured, L / np.sqrt(scale),
                                             theta0, precision0)  # fmt: skip
         scale = max(1.0, scale * chi2 / max(measured.size - len(fitted), 1))
     posterior_sd = np.sqrt(np.diag(np.linalg.inv(normal)))
-    strength = np.exp(theta[fitted])
+    n = len(toner_index)
+    strength = np.exp(theta[toner_index])
+    shade_sd = sd[T + toner_index].copy()
+    shade_sd[shaded] = posterior_sd[n:]
     return LotCalibration(
-        toners=tuple(names[i] for i in fitted),
+        toners=tuple(names[i] for i in toner_index),
         strength=strength,
-        strength_sd=strength * posterior_sd,
-        prior_strength=np.exp(theta0),
-        prior_sd=np.exp(theta0) / np.sqrt(np.diag(precision0)),
+        strength_sd=strength * posterior_sd[:n],
+        prior_strength=np.exp(theta0[:n]),
+        prior_sd=np.exp(theta0[:n]) / np.sqrt(np.diag(precision0)[:n]),
         de00_before=before,
-        de00_after=_worst_de00(forward, theta, x, measured),
+        de00_after=tins.worst_de00(theta, measured),
+        shade=theta[T + toner_index],
+        shade_sd=shade_sd,
+        prior_shade=shade[toner_index],
+        prior_shade_sd=sd[T + toner_index],
+        shaded=shaded,
     )
 
 
-def _gauss_newton(forward, theta, fitted, x, measured, L, theta0, precision0):
-    """The log strengths ``theta[T]`` that minimise the objective of the module notes with
+class _Tins:
+    """Predictions of panels ``x[N, T]`` for tins in states θ = (log strengths ``[T]``,
+    shades ``[T]`` nm), many states in one batch of the model and one of the physics."""
+
+    def __init__(self, forward, library: Library, x: NDArray) -> None:
+        self.forward, self.library, self.x = forward, library, x
+
+    def lab(self, states: NDArray) -> NDArray:
+        """Predicted L*a*b* ``[B, N, 3G]`` of the panels for each of ``states[B, 2T]``."""
+        B, (N, T) = len(states), self.x.shape
+        strength, shade = np.exp(states[:, :T]), states[:, T:]
+        z = mixed_with(strength[:, None, :], self.x[None]).reshape(-1, T)
+        R = evaluate_recipes(self.forward, z)[0].reshape(B, N, -1, 31)
+        rows = np.flatnonzero(np.any(shade != 0, axis=1))
+        if rows.size:
+            film = (self.x[None] * strength[rows, None, :]).reshape(-1, T)
+            ratio = shade_ratio(self.library, self.forward.geometries, film,
+                                np.repeat(shade[rows], N, axis=0))  # fmt: skip
+            R[rows] *= ratio.reshape(rows.size, N, *ratio.shape[1:])
+        return reflectance_to_Lab(R).reshape(B, N, -1)
+
+    def residual_and_jacobian(
+        self, theta: NDArray, fitted: NDArray, measured: NDArray
+    ) -> tuple[NDArray, NDArray]:
+        """Predicted minus ``measured`` L*a*b* ``[N, 3G]`` at ``theta[2T]``, and its
+        derivatives ``[N, 3G, P]`` with respect to the ``fitted`` entries: forward differences
+        in a log strength, central ones in a shade (the shift's interpolation bends at whole
+        bands, at 0 nm too)."""
+        T = self.x.shape[1]
+        shade = fitted >= T
+        steps = np.where(shade, _SHADE_STEP_NM, _STEP)
+        states = np.tile(theta, (1 + len(fitted) + int(shade.sum()), 1))
+        rows = np.arange(1, len(fitted) + 1)
+        states[rows, fitted] += steps
+        back = len(fitted) + 1 + np.arange(int(shade.sum()))
+        states[back, fitted[shade]] -= _SHADE_STEP_NM
+        lab = self.lab(states)
+        ahead = lab[rows] - lab[0]
+        ahead[shade] = lab[rows][shade] - lab[back]
+        J = ahead / np.where(shade, 2 * _SHADE_STEP_NM, _STEP)[:, None, None]
+        return lab[0] - measured, np.moveaxis(J, 0, -1)
+
+    def worst_de00(self, theta: NDArray, measured: NDArray) -> NDArray:
+        N = len(self.x)
+        lab = self.lab(theta[None])[0].reshape(N, -1, 3)
+        return delta_E(lab, measured.reshape(N, -1, 3)).max(axis=-1)
+
+
+def _gauss_newton(tins: _Tins, theta, fitted, measured, L, theta0, precision0):
+    """The tins' state ``theta[2T]`` that minimises the objective of the module notes with
     whitening ``L[N, 3G, 3G]``, the last normal matrix, and the whitened residuals' χ²."""
     theta = theta.copy()
+    limit = np.where(fitted >= len(theta) // 2, 2.0, 0.2)  # 20 % or 2 nm in one step at most
     for _ in range(_GAUSS_NEWTON_STEPS):
-        r, J = _residual_and_jacobian(forward, theta, fitted, x, measured)
+        r, J = tins.residual_and_jacobian(theta, fitted, measured)
         rw = np.einsum("nij,nj->ni", L, r).reshape(-1)
         Jw = np.einsum("nij,njp->nip", L, J).reshape(-1, len(fitted))
         normal = Jw.T @ Jw + precision0
         gradient = Jw.T @ rw + precision0 @ (theta[fitted] - theta0)
         step = np.linalg.solve(normal, -gradient)
-        theta[fitted] += np.clip(step, -0.2, 0.2)  # a tin 20 % off in one step at most
-        if np.max(np.abs(step)) < 1e-5:
+        theta[fitted] += np.clip(step, -limit, limit)
+        if np.max(np.abs(step) / limit) < 5e-5:
             break
-    r, _ = _residual_and_jacobian(forward, theta, fitted[:0], x, measured)
+    r, _ = tins.residual_and_jacobian(theta, fitted[:0], measured)
     chi2 = float(np.sum(np.einsum("nij,nj->ni", L, r) ** 2))
     return theta, normal, chi2
-
-
-def _residual_and_jacobian(forward, theta, fitted, x, measured) -> tuple[NDArray, NDArray]:
-    """Predicted minus measured L*a*b* ``[N, 3G]`` at log strengths ``theta[T]``, and its
-    derivatives ``[N, 3G, P]`` with respect to the ``fitted`` ones (forward differences, all
-    in one batch of the model)."""
-    N, P = len(x), len(fitted)
-    thetas = np.tile(theta, (P + 1, 1))
-    thetas[np.arange(1, P + 1), fitted] += _STEP
-    z = mixed_with(np.exp(thetas)[:, None, :], x[None]).reshape(-1, x.shape[1])
-    lab = _lab(forward, z).reshape(P + 1, N, -1)
-    residual = lab[0] - measured.reshape(N, -1)
-    return residual, np.moveaxis((lab[1:] - lab[0]) / _STEP, 0, -1)
 
 
 def de00_per_percent(forward, x: NDArray, k: int) -> NDArray:
@@ -264,9 +412,13 @@ def de00_per_percent(forward, x: NDArray, k: int) -> NDArray:
     return delta_E(_lab(forward, x[None]), _lab(forward, mixed_with(stronger, x[None])))[0]
 
 
-def _worst_de00(forward, theta: NDArray, x: NDArray, measured: NDArray) -> NDArray:
-    lab = _lab(forward, mixed_with(np.exp(theta), x))
-    return delta_E(lab, measured).max(axis=-1)
+def de00_per_nm(forward, library: Library, x: NDArray, k: int) -> NDArray:
+    """ΔE00 per geometry ``[G]`` that a tin of toner ``k`` 1 nm off the standard's shade moves
+    panel ``x[T]``, as predicted (zero for an effect toner, which has no shade)."""
+    shade = np.zeros(len(x))
+    shade[k] = 1.0
+    shaded = WithLots(forward, np.ones(len(x)), shade, library)
+    return delta_E(_lab(forward, x[None]), _lab(shaded, x[None]))[0]
 
 
 def calibration_recipes(
@@ -301,7 +453,7 @@ def _information(forward, library: Library, x: NDArray, k: int) -> NDArray:
     """Fisher information ``[N]`` of each panel ``x[N, T]`` about toner ``k``'s log strength,
     JᵀC⁻¹J with C a reading's covariance (the spray's application by the ``library``'s
     physics, the model's error, the instrument's noise)."""
-    theta = np.zeros(x.shape[1])
-    _, J = _residual_and_jacobian(forward, theta, np.array([k]), x, np.zeros((len(x), 1)))
+    theta = np.zeros(2 * x.shape[1])
+    _, J = _Tins(forward, library, x).residual_and_jacobian(theta, np.array([k]), 0.0)
     Jw = np.einsum("nij,nj->ni", _whitened(forward, library, x, np.ones(len(x))), J[..., 0])
     return np.sum(Jw**2, axis=1)

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core.geometry import N_BINDER, directions, refract_into_coating
-from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.spectra import WAVELENGTHS, shift_spectra
 from flakelab.library.optics import flake_reflectance, fresnel_reflectance, pearl_reflectance
 from flakelab.library.toners import AluminiumFlake, Library, Pearl
 
@@ -176,12 +176,16 @@ def _species_reflectance(toner: AluminiumFlake | Pearl, n_binder: float) -> NDAr
     )
 
 
-def layer_from_fractions(library: Library, fractions: ArrayLike) -> Layer:
+def layer_from_fractions(
+    library: Library, fractions: ArrayLike, shade_nm: ArrayLike | None = None
+) -> Layer:
     """The layer of each recipe: ``fractions[F, T]`` are mass fractions in library order.
 
     A toner's optical properties are those of the dry film when the recipe is that toner
     alone, so each one scales with its fraction: σ_f = x·φ/t for flakes and pearls,
     κ = Σ x·K, σ_s = Σ x·S for pigments (Beer–Lambert additivity, as in Kubelka–Munk).
+    With ``shade_nm[F, T]`` (or ``[T]``) each pigment's absorption is its batch's, moved
+    along the wavelength axis by that many nm (:func:`~flakelab.core.spectra.shift_spectra`).
     """
     x = np.atleast_2d(np.asarray(fractions, dtype=float))
     if x.shape[1] != len(library.toners):
@@ -198,6 +202,13 @@ def layer_from_fractions(library: Library, fractions: ArrayLike) -> Layer:
     S = np.array([toners[i].scattering for i in pigments]).reshape(-1, WAVELENGTHS.size)
     g = np.array([toners[i].g for i in pigments])
     xp = x[:, pigments]
+    shade = None if shade_nm is None else np.asarray(shade_nm, dtype=float)[..., pigments]
+    if shade is None or not shade.any():
+        absorption = xp @ K
+    elif shade.ndim == 1:  # one set of tins for every recipe: their spectra moved once
+        absorption = xp @ shift_spectra(K, shade)
+    else:
+        absorption = np.einsum("fp,fpw->fw", xp, shift_spectra(K, shade))
     scattering = xp @ S
     strength = xp @ S.mean(axis=1) if pigments else np.zeros(x.shape[0])
     asymmetry = np.where(
@@ -210,7 +221,7 @@ def layer_from_fractions(library: Library, fractions: ArrayLike) -> Layer:
             len(effect), REFLECTANCE_ANGLES.size, WAVELENGTHS.size
         ),
         flake_transmits=np.array([toners[i].kind == "pearl" for i in effect], dtype=bool),
-        absorption=xp @ K,
+        absorption=absorption,
         scattering=scattering,
         asymmetry=asymmetry,
         thickness=library.binder.thickness_um,
