@@ -1,9 +1,10 @@
 """What knowing the shop's tins buys: the harness run on the same targets and sprays with every
 tin taken at the model's standard (the baseline, measured in the same run), with each tin's
-strength read from one calibration panel against the model's prediction of it (``flakelab
-match evaluate --lots calibrated``) or against the paint maker's reading of it from the
-standard tins (``--lots referenced``), and with the world's own strengths (``--lots known``,
-the limit calibration approaches); the differences paired target by target.
+strength and shade read from one calibration panel against the model's prediction of it
+(``flakelab match evaluate --lots calibrated``) or against the paint maker's reading of it
+from the standard tins (``--lots referenced``), and with the world's own strengths and shade
+(``--lots known``, the limit calibration approaches); the differences paired target by
+target.
 
     python benchmarks/toner_lots.py [--targets 200] [--seed 4242]
         [--modes calibrated,referenced,known] [--json]

@@ -130,9 +130,10 @@ def match_command(
         typer.Option(
             "--lots",
             help="The shop's toner-lot file ('flakelab lots calibrate' writes it): recipes are "
-            "weighed for its tins' strengths. evaluate: what the harness's shop knows of its "
-            "tins: standard (nothing), calibrated (each read from one panel against the model), "
-            "referenced (against the paint maker's standard panel) or known.",
+            "weighed for its tins' strengths and shades. evaluate: what the harness's shop "
+            "knows of its tins: standard (nothing), calibrated (each read from one panel "
+            "against the model), referenced (against the paint maker's standard panel) or "
+            "known.",
             show_default="the model's standard tins",
         ),
     ] = None,

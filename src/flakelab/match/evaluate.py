@@ -80,13 +80,12 @@ which the model learns by adaptation (``flakelab model adapt``)."""
 
 LOT_MODES = ("standard", "calibrated", "referenced", "known")
 """What the harness's shop knows of its tins (:mod:`flakelab.match.lots`): nothing, every tin
-taken at the model's standard (the issue's figures); each tin's strength read from one
-calibration panel of its toner sprayed from the trial's tins (:func:`calibration_recipes
+taken at the model's standard (the issue's figures); each tin's strength and shade read from
+one calibration panel of its toner sprayed from the trial's tins (:func:`calibration_recipes
 <flakelab.match.lots.calibration_recipes>`), against the model's prediction of the panel
 (``calibrated``) or against the paint maker's reading of the same panel from its standard
 tins (``referenced``: one spray each, at the factory, the same for every trial); or the
-world's own strengths, the limit that calibration approaches (the tins' hue drift stays
-unknown in every mode)."""
+world's own strengths and hue drift, the limit that calibration approaches."""
 
 
 def harness_world(library, instrument: str = DEFAULT_INSTRUMENT, name: str = "shop") -> World:
