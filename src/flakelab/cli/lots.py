@@ -395,8 +395,18 @@ def show_command(
             name,
             t.lot,
             f"{t.strength:.3f} ± {t.strength_sd:.3f}",
-            f"{t.shade_nm:+.2f} ± {t.shade_sd_nm:.2f} nm",
+            _shade_text(t),
             str(t.panels),
             t.calibrated[:10],
         )
     console.print(table)
+
+
+def _shade_text(tin) -> str:
+    """A tin's shade as a table shows it: "not read" while it stands at the standard's prior
+    (every effect toner's, and a pigment's read --no-shade)."""
+    from flakelab.library.lots import LOT_SHADE_SD_NM
+
+    if tin.shade_nm == 0 and tin.shade_sd_nm == LOT_SHADE_SD_NM:
+        return "not read"
+    return f"{tin.shade_nm:+.2f} ± {tin.shade_sd_nm:.2f} nm"
