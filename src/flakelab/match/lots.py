@@ -113,13 +113,14 @@ def shade_ratio(library: Library, geometries, film: NDArray, shade: NDArray) -> 
     ``[T]`` [nm] change in the reflectance of films ``film[N, T]`` (library order; the tins'
     amounts), by the library's physics at its nominal application (module notes)."""
     film = np.atleast_2d(np.asarray(film, float))
-    shaded, standard = (
-        np.maximum(
-            reflectance_factor(layer_from_fractions(library, film, s), geometries), LOG_FLOOR
-        )
-        for s in (shade, None)
-    )
-    return shaded / standard
+    return _physics(library, geometries, film, shade) / _physics(library, geometries, film)
+
+
+def _physics(library: Library, geometries, film: NDArray, shade: NDArray | None = None):
+    """The library's physics of ``film[N, T]`` from tins of ``shade`` [nm], floored where the
+    learned model's training data were (as the hybrid's ratio is)."""
+    layer = layer_from_fractions(library, film, shade)
+    return np.maximum(reflectance_factor(layer, geometries), LOG_FLOOR)
 
 
 class WithLots:
@@ -344,18 +345,25 @@ class _Tins:
         self.forward, self.library, self.x = forward, library, x
 
     def lab(self, states: NDArray) -> NDArray:
-        """Predicted L*a*b* ``[B, N, 3G]`` of the panels for each of ``states[B, 2T]``."""
-        B, (N, T) = len(states), self.x.shape
-        strength, shade = np.exp(states[:, :T]), states[:, T:]
+        """Predicted L*a*b* ``[B, N, 3G]`` of the panels for each of ``states[B, 2T]``. The
+        learned model and the standard shade's physics see each distinct set of strengths
+        once: a Jacobian's shade steps share their strengths with the point."""
+        N, T = self.x.shape
+        log_strength, which = np.unique(states[:, :T], axis=0, return_inverse=True)
+        which, shade = which.reshape(-1), states[:, T:]
+        strength = np.exp(log_strength)
         z = mixed_with(strength[:, None, :], self.x[None]).reshape(-1, T)
-        R = evaluate_recipes(self.forward, z)[0].reshape(B, N, -1, 31)
+        R = evaluate_recipes(self.forward, z)[0].reshape(len(strength), N, -1, 31)[which]
         rows = np.flatnonzero(np.any(shade != 0, axis=1))
         if rows.size:
-            film = (self.x[None] * strength[rows, None, :]).reshape(-1, T)
-            ratio = shade_ratio(self.library, self.forward.geometries, film,
-                                np.repeat(shade[rows], N, axis=0))  # fmt: skip
-            R[rows] *= ratio.reshape(rows.size, N, *ratio.shape[1:])
-        return reflectance_to_Lab(R).reshape(B, N, -1)
+            film = self.x[None] * strength[:, None, :]  # [U, N, T]
+            geometries = self.forward.geometries
+            standard = _physics(self.library, geometries, film.reshape(-1, T))
+            standard = standard.reshape(len(strength), N, *standard.shape[1:])
+            shaded = _physics(self.library, geometries, film[which[rows]].reshape(-1, T),
+                              np.repeat(shade[rows], N, axis=0))  # fmt: skip
+            R[rows] *= shaded.reshape(rows.size, N, *shaded.shape[1:]) / standard[which[rows]]
+        return reflectance_to_Lab(R).reshape(len(states), N, -1)
 
     def residual_and_jacobian(
         self, theta: NDArray, fitted: NDArray, measured: NDArray

@@ -207,8 +207,9 @@ def layer_from_fractions(
         absorption = xp @ K
     elif shade.ndim == 1:  # one set of tins for every recipe: their spectra moved once
         absorption = xp @ shift_spectra(K, shade)
-    else:
-        absorption = np.einsum("fp,fpw->fw", xp, shift_spectra(K, shade))
+    else:  # each distinct set of tins' spectra moved once
+        shades, which = np.unique(shade, axis=0, return_inverse=True)
+        absorption = np.einsum("fp,fpw->fw", xp, shift_spectra(K, shades)[which.ravel()])
     scattering = xp @ S
     strength = xp @ S.mean(axis=1) if pigments else np.zeros(x.shape[0])
     asymmetry = np.where(
