@@ -221,6 +221,45 @@ class TestFastModel:
         f = predict(layer_from_fractions(self.library, x), ["45as15", "45as75"])
         assert np.all(np.diff(f[:, :, 20], axis=0) < 0)
 
+    def test_a_batch_predicts_each_formulation_as_it_would_alone(self):
+        """Rows with and without pearls, aluminium or pigment only, in one batch: each row as
+        if predicted alone (the pearl channel computes only the rows that hold pearls)."""
+        recipes = [
+            {"Al medium": 0.95, "Phthalo blue GS": 0.05},
+            {"Pearl interference green": 0.7, "Carbon black": 0.3},
+            {"Titanium dioxide white": 0.9, "Phthalo blue GS": 0.1},
+            {"Al coarse": 0.5, "Pearl interference green": 0.5},
+        ]
+        geometries = ["45as-15", "45as15", "45as45", "45as110"]
+        x = np.array([self.library.fractions(r) for r in recipes])
+        batch = predict(layer_from_fractions(self.library, x), geometries)
+        alone = [predict(layer_from_fractions(self.library, row), geometries)[0] for row in x]
+        np.testing.assert_allclose(batch, np.array(alone), rtol=1e-12)
+
+    def test_atlas_interpolation_is_multilinear(self):
+        """The compiled 16-corner interpolation agrees with scipy's multilinear interpolation
+        of the same table at random points (spread, depth per formulation; ρ, κ' per band)."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        from flakelab.physics.fast import _interpolate
+
+        rng = np.random.default_rng(5)
+        table = rng.normal(size=(4, 5, 6, 7, 3))  # [spread, depth, ρ, κ', G]
+        F, W = 9, 11
+        s, d = rng.uniform(0, 3, F), rng.uniform(0, 4, F)
+        r, k = rng.uniform(0, 5, (F, W)), rng.uniform(0, 6, (F, W))
+        cells = [
+            np.minimum(np.floor(v).astype(int), n - 2) for v, n in ((s, 4), (d, 5), (r, 6), (k, 7))
+        ]
+        got = _interpolate(table, cells[0], s - cells[0], cells[1], d - cells[1],
+                           cells[2], r - cells[2], cells[3], k - cells[3])  # fmt: skip
+        axes = [np.arange(n, dtype=float) for n in table.shape[:4]]
+        points = np.stack(np.broadcast_arrays(s[:, None], d[:, None], r, k), axis=-1)
+        want = np.stack(
+            [RegularGridInterpolator(axes, table[..., g])(points) for g in range(3)], axis=-1
+        )
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+
     def test_fractions_must_match_the_library(self):
         with pytest.raises(ValueError, match="columns"):
             layer_from_fractions(self.library, np.ones((1, 3)))
