@@ -413,6 +413,14 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     assert weighed["lots"] == with_tin["lots"] and standard["lots"] is None
     assert weighed["rounding_de00"] != standard["rounding_de00"]
     assert alike["rounding_de00"] == pytest.approx(standard["rounding_de00"], abs=2e-3)
+    assert weighed["notes"] == [] and standard["notes"] == []
+    # tins read against another model: every command that weighs for them says so
+    other = tmp_path / "other.json"
+    write_lots(TonerLots.of([TonerLot("Phthalo blue GS", 1.05, model_id="old-model")]), other)
+    poured = ("--poured", "Phthalo blue GS=1.0")
+    for args in (weigh, (*weigh, *poured), ("match", "--example", "--json")):
+        notes = json.loads(cli(*args, "--lots", other).stdout)["notes"]
+        assert any("read against model old-model" in n for n in notes), (args, notes)
     shown = json.loads(cli("lots", "show", lots, "--json").stdout)
     assert shown["lots"][0]["toner"] == "Phthalo blue GS"
 

@@ -74,7 +74,8 @@ def weigh_command(
     can = order_can(quantity, resolution)
     check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
-    tins, forward, _ = shop_lots(lots, lib, forward)
+    tins, forward, lot_notes = shop_lots(lots, lib, forward)
+    for_tins = {"lots": tins and lots_report(tins), "notes": lot_notes}
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}
     can = can.for_toners(lib, shares)
@@ -84,14 +85,14 @@ def weigh_command(
     if poured:
         most_g = None if most is None else _most_the_can_holds(most, can, can_g, lib, shares)
         _weigh_the_rest(forward, recipe, shares, can, can_g, poured_grams(poured), most_g,
-                        recipe_out, json_output)  # fmt: skip
+                        recipe_out, json_output, for_tins)  # fmt: skip
         return
     report = {
         "recipe": str(recipe),
         **can_size(can, can_g),
         **weighed_recipe(forward, shares, can_g, resolution),
         "model": forward.name,
-        "lots": tins and lots_report(tins),
+        **for_tins,
     }
     if recipe_out is not None:
         write_recipe({ln["toner"]: ln["grams"] for ln in report["weights_g"]}, recipe_out)
@@ -103,6 +104,12 @@ def weigh_command(
     console.print(f"{recipe.name} for {can_text(report)}", highlight=False)
     console.print(weights_table(None, report["weights_g"]))
     console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
+    _print_notes(report)
+
+
+def _print_notes(report: dict) -> None:
+    for note in report["notes"]:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
 def poured_grams(pairs: list[str]) -> dict[str, float]:
@@ -138,10 +145,11 @@ def _most_the_can_holds(most: str, can, can_g: float, library, shares) -> float:
 
 def _weigh_the_rest(
     forward, recipe: Path, shares, can, can_g: float, poured: dict, most_g, recipe_out,
-    json_output,
+    json_output, for_tins: dict,
 ) -> None:  # fmt: skip
     """``weigh --poured``: what is still to pour, and the can's size, once some is poured;
-    where a toner outside the recipe was poured, what brings the can back to its colour."""
+    where a toner outside the recipe was poured, what brings the can back to its colour
+    (``for_tins``: the report's entries for the shop's tins)."""
     from flakelab.io import write_recipe
 
     if unknown := [n for n in poured if n not in forward.toners]:
@@ -168,6 +176,7 @@ def _weigh_the_rest(
         "to_pour_g": [asdict(ln) for ln in weighing.lines],
         **rounding_costs(weighing),
         "model": forward.name,
+        **for_tins,
     }
     if recipe_out is not None:  # what the can holds once the rest is poured
         held = {n: poured.get(n, 0.0) + weighing.grams.get(n, 0.0) for n in {*poured, *shares}}
@@ -252,6 +261,7 @@ def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> No
                 f"{', '.join(report['expected_failing'])}: mix afresh"
             )
         console.print(text, highlight=False)
+    _print_notes(report)
 
 
 def can_size(can, grams: float) -> dict:
