@@ -6,7 +6,7 @@ geometries with texture, the texture as one spot of the camera's field reads it:
 *target*. The *spray-out* is a colorist's first recipe for it (amounts off by a few per
 cent), mixed from the shop's batches and sprayed. The *panel* is the calibration panel of
 a tin of phthalo blue GS 4 % stronger than the standard (``flakelab lots panel "Phthalo
-blue GS"``: 10 % of it in Al VMP), sprayed in the shop; the *panel standard* is the same
+blue GS"``: 10 % of it in Al coarse bright), sprayed in the shop; the *panel standard* is the same
 recipe from the paint maker's standard tins, sprayed at the factory. Run:
 
     python scripts/make_examples.py
@@ -69,7 +69,7 @@ def main() -> None:
     make_panel(library, world)
 
 
-PANEL = {"Al VMP": 90.0, "Phthalo blue GS": 10.0}
+PANEL = {"Al coarse bright": 90.0, "Phthalo blue GS": 10.0}
 """The calibration panel of phthalo blue GS, grams (``flakelab lots panel``'s for the shipped
 five-angle model)."""
 

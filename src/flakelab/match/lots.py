@@ -40,14 +40,25 @@ matrix: a tin read from a panel that hardly depends on it keeps its prior.
 tin the panel was sprayed from. Given the paint maker's reading of the same panel from its
 standard tins, rₙ compares the panel's offset from that reading with the offset the model
 predicts for the tins, and σ_p drops out of Cₙ, which then holds two sprays' application and
-noise (the shop's and the standard's). In the harness this reads the tins to 1.29 % RMS
-against 1.41 % from the model alone (``benchmarks/toner_lots.py``).
+noise (the shop's and the standard's). In the harness this reads the tins' strength to
+0.59 % RMS against 1.11 % from the model alone, and their shade to 0.29 nm against 0.75
+(``benchmarks/toner_lots.py``, stop 74).
 
 **Which panel.** :func:`calibration_recipes` makes each toner's panel an OEM-like paint of
 two toners, a base (an effect toner, or the white) tinted with a pigment, the pair and the
-share that say most about the tin: the largest Fisher information JᵀC⁻¹J for its θ. The
-generated world's darker solid bases (black, oxides) were tried as bases too: the model's
-errors there read black's tin 15 % off and the white's 6 % (stop 72).
+share that say most about the tin: D-optimal, the largest determinant of the posterior
+precision of its log strength and, a pigment's, its shade (the prior's plus the Fisher
+information JᵀC⁻¹J). Chosen for the strength alone (stop 73), 12 of the 20 pigments were
+tinted into Al VMP, 6 into Al coarse bright; chosen for both, 13 go into Al coarse bright,
+3 into the Xirallic and one each into Al VMP and Al extra coarse (the white's two stay),
+where a nanometre of shade shows more. In the harness, read against the standard's panels,
+the tins' strength then reads to 0.59 % RMS against 0.81 % and their shade to 0.29 nm
+against 0.32; against the model, 1.11 % and 0.75 nm against 1.05 % and 0.68
+(``benchmarks/toner_lots.py``, 2026-12-01). A panel of two toners tells the ratio of their
+strengths (the learned model sees proportions): where a base serves several panels, the
+ratios pin it, elsewhere the priors share each ratio between its two tins. The generated
+world's darker solid bases (black, oxides) were tried as bases too: the model's errors there
+read black's tin 15 % off and the white's 6 % (stop 72).
 """
 
 from __future__ import annotations
@@ -62,7 +73,7 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.errors import FlakelabError
-from flakelab.library.lots import TonerLots
+from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TonerLots
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
 from flakelab.match.judging import evaluate_recipes
@@ -458,10 +469,15 @@ def calibration_recipes(
 
 
 def _information(forward, library: Library, x: NDArray, k: int) -> NDArray:
-    """Fisher information ``[N]`` of each panel ``x[N, T]`` about toner ``k``'s log strength,
-    JᵀC⁻¹J with C a reading's covariance (the spray's application by the ``library``'s
-    physics, the model's error, the instrument's noise)."""
-    theta = np.zeros(2 * x.shape[1])
-    _, J = _Tins(forward, library, x).residual_and_jacobian(theta, np.array([k]), 0.0)
-    Jw = np.einsum("nij,nj->ni", _whitened(forward, library, x, np.ones(len(x))), J[..., 0])
-    return np.sum(Jw**2, axis=1)
+    """What each panel ``x[N, T]`` tells about toner ``k``'s tin ``[N]``: the log determinant
+    of the posterior precision of its log strength and, a pigment's, its shade (D-optimal:
+    the prior's precision plus the Fisher information JᵀC⁻¹J, C a reading's covariance: the
+    spray's application by the ``library``'s physics, the model's error, the instrument's
+    noise)."""
+    T = x.shape[1]
+    fitted = np.array([k] if library.effect[k] else [k, T + k])
+    theta = np.zeros(2 * T)
+    _, J = _Tins(forward, library, x).residual_and_jacobian(theta, fitted, 0.0)
+    Jw = np.einsum("nij,njp->nip", _whitened(forward, library, x, np.ones(len(x))), J)
+    prior = np.diag(1 / np.array([LOT_STRENGTH_SD, LOT_SHADE_SD_NM])[: len(fitted)] ** 2)
+    return np.linalg.slogdet(Jw.transpose(0, 2, 1) @ Jw + prior)[1]
