@@ -13,7 +13,7 @@ from flakelab.core.difference import delta_E
 from flakelab.errors import FlakelabError
 from flakelab.io import read_library
 from flakelab.io.lots_file import read_lots, write_lots
-from flakelab.library.lots import LOT_STRENGTH_SD, TonerLot, TonerLots
+from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TonerLot, TonerLots
 from flakelab.match.forward import stepping
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.lots import (
@@ -264,7 +264,7 @@ def test_a_pigments_panel_is_chosen_for_its_strength_and_shade_together(forward,
     for panel in (chosen, for_strength):
         read = calibrate_lots(forward, library, panel, _panel_reading(forward, panel, standard),
                               toners=("Phthalo blue GS",))  # fmt: skip
-        spread.append((read.strength_sd[0] / LOT_STRENGTH_SD, read.shade_sd[0] / 1.5))
+        spread.append((read.strength_sd[0] / LOT_STRENGTH_SD, read.shade_sd[0] / LOT_SHADE_SD_NM))
     (s_chosen, d_chosen), (s_other, d_other) = spread
     assert d_chosen < d_other and s_chosen * d_chosen < s_other * d_other
 
