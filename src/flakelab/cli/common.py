@@ -37,6 +37,12 @@ F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
 
 
+def print_notes(notes: list[str]) -> None:
+    """A report's notes, one line each, as every command prints them."""
+    for note in notes:
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
+
+
 def reports_errors(command: F) -> F:
     """Turn user-input problems into one line on stderr and exit status 2 (never a traceback)."""
 

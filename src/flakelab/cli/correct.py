@@ -26,6 +26,7 @@ from flakelab.cli.common import (
     draw_differences,
     errors,
     lights_option,
+    print_notes,
     read_readings,
 )
 from flakelab.cli.lots import LotsOption, lots_report, shop_lots
@@ -438,5 +439,4 @@ def _print_correction(report: dict) -> None:
         + f"; expected {metamerism_values(report['expected_metamerism_index_max'])}",
         highlight=False,
     )
-    for note in report["notes"]:
-        console.print(f"[yellow]note:[/] {note}", highlight=False)
+    print_notes(report["notes"])

@@ -25,6 +25,7 @@ from flakelab.cli.common import (
     draw_side_by_side,
     errors,
     lights_option,
+    print_notes,
     progress_bar,
     read_readings,
     shares_text,
@@ -544,8 +545,7 @@ def _print_match(report: dict) -> None:
 
         title = "Recorded spray-outs nearest the target (measured, not predicted)"
         console.print(nearest_table(report["recorded_nearest"], title))
-    for note in report["notes"]:
-        console.print(f"[yellow]note:[/] {note}", highlight=False)
+    print_notes(report["notes"])
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
         console.print(
             "± model: how far the networks of the model's ensemble disagree (ΔE00 about their "

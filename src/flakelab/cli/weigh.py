@@ -11,7 +11,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, check_output_file, console, errors
+from flakelab.cli.common import JsonOption, check_output_file, console, errors, print_notes
 from flakelab.cli.matcher import (
     ModelOption,
     PhysicsOption,
@@ -104,12 +104,7 @@ def weigh_command(
     console.print(f"{recipe.name} for {can_text(report)}", highlight=False)
     console.print(weights_table(None, report["weights_g"]))
     console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
-    _print_notes(report)
-
-
-def _print_notes(report: dict) -> None:
-    for note in report["notes"]:
-        console.print(f"[yellow]note:[/] {note}", highlight=False)
+    print_notes(report["notes"])
 
 
 def poured_grams(pairs: list[str]) -> dict[str, float]:
@@ -261,7 +256,7 @@ def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> No
                 f"{', '.join(report['expected_failing'])}: mix afresh"
             )
         console.print(text, highlight=False)
-    _print_notes(report)
+    print_notes(report["notes"])
 
 
 def can_size(can, grams: float) -> dict:
