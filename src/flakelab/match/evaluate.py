@@ -306,8 +306,7 @@ def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None, standards
     if lots in ("calibrated", "referenced"):
         found = calibrate_lots(forward, library, panels, t.panels(panels), standards=standards)
         read = dict(zip(found.toners, zip(found.strength, found.shade, strict=True), strict=True))
-        strength = np.array([read.get(n, (1.0, 0.0))[0] for n in forward.toners])
-        shade = np.array([read.get(n, (1.0, 0.0))[1] for n in forward.toners])
+        strength, shade = np.array([read.get(n, (1.0, 0.0)) for n in forward.toners]).T
     pigments = ~library.effect[order]
     error = {
         "strength": float(np.sqrt(np.mean((strength - true) ** 2))),

@@ -357,8 +357,9 @@ class _Tins:
 
     def lab(self, states: NDArray) -> NDArray:
         """Predicted L*a*b* ``[B, N, 3G]`` of the panels for each of ``states[B, 2T]``. The
-        learned model and the standard shade's physics see each distinct set of strengths
-        once: a Jacobian's shade steps share their strengths with the point."""
+        learned model sees each distinct set of strengths once (a Jacobian's shade steps share
+        their strengths with the point), the standard shade's physics only those that a
+        shaded state holds."""
         N, T = self.x.shape
         log_strength, which = np.unique(states[:, :T], axis=0, return_inverse=True)
         which, shade = which.reshape(-1), states[:, T:]
@@ -367,13 +368,14 @@ class _Tins:
         R = evaluate_recipes(self.forward, z)[0].reshape(len(strength), N, -1, 31)[which]
         rows = np.flatnonzero(np.any(shade != 0, axis=1))
         if rows.size:
-            film = self.x[None] * strength[:, None, :]  # [U, N, T]
+            needed, of_row = np.unique(which[rows], return_inverse=True)
+            film = self.x[None] * strength[needed, None, :]  # [U', N, T]
             geometries = self.forward.geometries
             standard = _physics(self.library, geometries, film.reshape(-1, T))
-            standard = standard.reshape(len(strength), N, *standard.shape[1:])
-            shaded = _physics(self.library, geometries, film[which[rows]].reshape(-1, T),
+            standard = standard.reshape(len(needed), N, *standard.shape[1:])
+            shaded = _physics(self.library, geometries, film[of_row].reshape(-1, T),
                               np.repeat(shade[rows], N, axis=0))  # fmt: skip
-            R[rows] *= shaded.reshape(rows.size, N, *shaded.shape[1:]) / standard[which[rows]]
+            R[rows] *= shaded.reshape(rows.size, N, *shaded.shape[1:]) / standard[of_row]
         return reflectance_to_Lab(R).reshape(len(states), N, -1)
 
     def residual_and_jacobian(
