@@ -22,6 +22,7 @@ from flakelab.match.lots import (
     calibrate_lots,
     calibration_recipes,
     mixed_with,
+    read_together,
 )
 
 
@@ -214,6 +215,20 @@ def test_calibration_reads_the_tins_a_panel_was_sprayed_from(forward, library):
         assert (read[name] - 1) * (true - 1) > 0 and sd[name] < LOT_STRENGTH_SD
         assert abs(shade[name]) < 0.05
     assert np.all(found.de00_after < found.de00_before)
+    # each panel's two tins, and no tins of different panels, are reported read together:
+    # their ratio surer than either strength, and within three of its deviations of the truth
+    pairs = {frozenset(p["toners"]): p for p in read_together(found)}
+    assert set(pairs) == {frozenset(names[i] for i in np.flatnonzero(x)) for x in panels}
+    for panel, (name, true) in zip(panels, tins, strict=True):
+        pair = pairs[frozenset(names[i] for i in np.flatnonzero(panel))]
+        ratio, ratio_sd = pair["ratio"], pair["ratio_sd"]
+        if pair["toners"][1] == name:
+            ratio, ratio_sd = 1 / ratio, ratio_sd / ratio**2
+        assert pair["correlation"] > 0.9 and ratio_sd / ratio < 0.5 * sd[name] / read[name]
+        assert abs(ratio - true) < 3 * ratio_sd
+    alone = calibrate_lots(forward, library, panels[:1], _panel_reading(forward, panels[:1], s),
+                           toners=("Phthalo blue GS",))  # fmt: skip
+    assert read_together(alone) == []
 
 
 def test_more_panels_read_a_tin_more_surely_and_a_standard_panel_keeps_it_standard(
@@ -459,7 +474,11 @@ def test_the_shipped_panel_is_the_one_lots_panel_gives_and_reads_against_its_sta
     examples = example_path("target").parent
     recipe = examples / "phthalo-blue-panel-recipe.json"
     done = cli("lots", "panel", "Phthalo blue GS", "--json")
-    assert json.loads(done.stdout)["recipe_g"] == json.loads(recipe.read_text())
+    panel = json.loads(done.stdout)
+    assert panel["recipe_g"] == json.loads(recipe.read_text())
+    # the partner's own panel pairs it with another tint, which tells the two tins apart
+    assert panel["partner"] == "Al coarse bright"
+    assert panel["partners_panel_partner"] not in ("Phthalo blue GS", "Al coarse bright")
     lots = tmp_path / "tins.json"
     done = cli("lots", "calibrate", examples / "phthalo-blue-panel.cxf", "--recipe", recipe,
                "--standard", examples / "phthalo-blue-panel-standard.cxf", "--lots", lots,
@@ -467,7 +486,13 @@ def test_the_shipped_panel_is_the_one_lots_panel_gives_and_reads_against_its_sta
     assert done.returncode == 0, done.stderr
     tin = read_lots(lots).lots["Phthalo blue GS"]
     assert 1.0 < tin.strength and abs(tin.strength - 1.04) < 2 * tin.strength_sd
-    assert json.loads(done.stdout)["against"] == "standard"
+    report = json.loads(done.stdout)
+    assert report["against"] == "standard"
+    # the panel reads the two tins' ratio: the script's shop drew Al coarse bright at 1.0014
+    (pair,) = report["read_together"]
+    assert pair["toners"] == ["Al coarse bright", "Phthalo blue GS"]
+    assert pair["ratio_sd"] < 0.5 * tin.strength_sd
+    assert abs(pair["ratio"] - 1.0014 / 1.04) < 2 * pair["ratio_sd"]
 
 
 def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):

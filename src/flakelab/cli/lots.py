@@ -123,6 +123,11 @@ def panel_command(
     grams_can = can.for_toners(lib, fractions).grams_for(fractions)
     weighing = weigh_whole_can(forward, fractions, grams_can, resolution)
     k = forward.toners.index(toner)
+    partner = next(n for n in fractions if n != toner)
+    partner_x = calibration_recipes(forward, lib, (partner,))[0]
+    partners_partner = next(
+        n for n, v in zip(forward.toners, partner_x, strict=True) if v > 0 and n != partner
+    )
     per_percent = de00_per_percent(forward, x, k)
     per_nm = None if lib[toner].kind != "pigment" else de00_per_nm(forward, lib, x, k)
     report = {
@@ -132,6 +137,8 @@ def panel_command(
         "de00_per_percent": per_percent.round(3).tolist(),
         "de00_per_nm": None if per_nm is None else per_nm.round(3).tolist(),
         "geometries": list(forward.geometries),
+        "partner": partner,
+        "partners_panel_partner": partners_partner,
         "model": forward.name,
     }
     if recipe_out is not None:
@@ -155,6 +162,25 @@ def panel_command(
     if per_nm is not None:
         per = "  ".join(f"{g} {d:.2f}" for g, d in zip(report["geometries"], per_nm, strict=True))
         console.print(f"ΔE00 for a tin 1 nm off in shade: {per}", highlight=False)
+    console.print(_partner_advice(toner, partner, partners_partner), highlight=False)
+
+
+def _partner_advice(toner: str, partner: str, partners_partner: str) -> str:
+    """What a panel of ``toner`` with ``partner`` reads, and how to read each tin alone."""
+    advice = (
+        f"The panel reads {toner}'s tin against {partner}'s: it tells how strong one is "
+        f"against the other better than how strong either is. "
+    )
+    if partners_partner != toner:
+        return advice + (
+            f"Read {partner}'s tin from its own panel too ('flakelab lots panel \"{partner}\"', "
+            f"with {partners_partner}), or hold it at its reading with "
+            f"'lots calibrate --toner \"{toner}\"'."
+        )
+    return advice + (
+        f"{partner}'s own panel is the same pair: hold {partner}'s tin at its reading with "
+        f"'lots calibrate --toner \"{toner}\"'."
+    )
 
 
 @lots_app.command("calibrate")
@@ -230,7 +256,7 @@ def calibrate_command(
     from flakelab.io import read_recipe
     from flakelab.io.lots_file import write_lots
     from flakelab.library.lots import MAX_SHADE_NM, TonerLot, TonerLots
-    from flakelab.match.lots import calibrate_lots
+    from flakelab.match.lots import calibrate_lots, read_together
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
     from flakelab.match.stock import check_toners
 
@@ -314,6 +340,15 @@ def calibrate_command(
             }
             for i, t in enumerate(read)
         ],
+        "read_together": [
+            {
+                **pair,
+                "correlation": round(pair["correlation"], 3),
+                "ratio": round(pair["ratio"], 4),
+                "ratio_sd": round(pair["ratio_sd"], 4),
+            }
+            for pair in read_together(found)
+        ],  # fmt: skip
         "against": "standard" if standard is not None else "model",
         "panel_de00_before": round(float(found.de00_before[0]), 3),
         "panel_de00_after": round(float(found.de00_after[0]), 3),
@@ -359,6 +394,14 @@ def _print_calibration(report: dict) -> None:
         f"tins as they stood, {report['panel_de00_after']:.2f} as read",
         highlight=False,
     )
+    for pair in report["read_together"]:
+        a, b = pair["toners"]
+        console.print(
+            f"{a} and {b} were read together (correlation {pair['correlation']:+.2f}): the "
+            f"panel tells their ratio, {pair['ratio']:.3f} ± {pair['ratio_sd']:.3f}, better "
+            f"than either's strength; a panel of either with another partner tells them apart",
+            highlight=False,
+        )
     where = (
         f"wrote {report['lots']}" if report["written"] else f"--dry-run: {report['lots']} unchanged"
     )

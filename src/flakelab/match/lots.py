@@ -90,6 +90,7 @@ __all__ = [
     "de00_per_nm",
     "de00_per_percent",
     "mixed_with",
+    "read_together",
     "shade_ratio",
     "with_lots",
 ]
@@ -107,6 +108,11 @@ _SHADE_STEP_NM = 0.1
 """Central-difference step in a tin's shade [nm]."""
 
 _GAUSS_NEWTON_STEPS = 6
+
+READ_TOGETHER = 0.5
+"""The correlation of two tins' strengths, as read, beyond which a report says that the
+readings told their ratio rather than each: a panel of two tins tells how strong one is
+against the other far better than how strong either is (the learned model sees proportions)."""
 
 
 def mixed_with(strength: NDArray, fractions):
@@ -242,8 +248,9 @@ def with_lots(forward, lots: TonerLots | None, library: Library | None = None):
 class LotCalibration:
     """Tins read from spray-outs: each fitted toner's strength and shade [nm] with their
     standard deviations, where they stood before, whether its shade was read (``shaded``: a
-    pigment's), and each reading's worst-geometry ΔE00 from the prediction before (the tins
-    as they stood) and after."""
+    pigment's), each reading's worst-geometry ΔE00 from the prediction before (the tins
+    as they stood) and after, and the posterior covariance of the log strengths ``[n, n]``
+    (two tins read from the same panels are strongly correlated: :func:`read_together`)."""
 
     toners: tuple[str, ...]
     strength: NDArray
@@ -257,6 +264,29 @@ class LotCalibration:
     prior_shade: NDArray
     prior_shade_sd: NDArray
     shaded: NDArray
+    log_strength_cov: NDArray
+
+
+def read_together(found: LotCalibration, threshold: float = READ_TOGETHER) -> list[dict]:
+    """The pairs of tins whose strengths ``found`` read correlated beyond ``threshold``, each
+    with the correlation and the ratio of the first's strength to the second's ± its standard
+    deviation: what the readings told of the pair, where each tin alone stays less sure."""
+    cov = found.log_strength_cov
+    sd = np.sqrt(np.diag(cov))
+    pairs = []
+    for i, j in zip(*np.triu_indices(len(sd), k=1), strict=True):
+        r = cov[i, j] / (sd[i] * sd[j])
+        if abs(r) < threshold:
+            continue
+        ratio = found.strength[i] / found.strength[j]
+        log_sd = np.sqrt(max(cov[i, i] + cov[j, j] - 2 * cov[i, j], 0.0))
+        pairs.append({
+            "toners": (found.toners[i], found.toners[j]),
+            "correlation": float(r),
+            "ratio": float(ratio),
+            "ratio_sd": float(ratio * log_sd),
+        })  # fmt: skip
+    return pairs
 
 
 def _lab(forward, x: NDArray) -> NDArray:
@@ -327,7 +357,8 @@ def calibrate_lots(
         theta, normal, chi2 = _gauss_newton(tins, theta, fitted, measured, L / np.sqrt(scale),
                                             theta0, precision0)  # fmt: skip
         scale = max(1.0, scale * chi2 / max(measured.size - len(fitted), 1))
-    posterior_sd = np.sqrt(np.diag(np.linalg.inv(normal)))
+    covariance = np.linalg.inv(normal)
+    posterior_sd = np.sqrt(np.diag(covariance))
     n = len(toner_index)
     strength = np.exp(theta[toner_index])
     shade_sd = sd[T + toner_index].copy()
@@ -345,6 +376,7 @@ def calibrate_lots(
         prior_shade=shade[toner_index],
         prior_shade_sd=sd[T + toner_index],
         shaded=shaded,
+        log_strength_cov=covariance[:n, :n],
     )
 
 
