@@ -23,6 +23,7 @@ from flakelab.match.lots import (
     calibration_recipes,
     mixed_with,
     read_together,
+    recorded,
 )
 
 
@@ -340,15 +341,73 @@ def forward_instrument(forward) -> str:
     return forward.model.instrument
 
 
+def test_panels_read_one_at_a_time_end_where_reading_them_at_once_does(forward, library):
+    """Phthalo blue's panel (with Al coarse bright) and then Al coarse bright's own (with
+    quinacridone violet), read one after the other as a shop sprays them: with the first
+    reading's correlations kept, the second moves phthalo blue's tin with Al coarse bright's
+    and every tin ends where the two panels read at once put it (Gaussian conditioning is
+    exact while the model is linear over the tins' spread); with each tin's own spread only,
+    phthalo blue stays where the first panel left it."""
+    names = forward.toners
+    panels = calibration_recipes(forward, library, ("Phthalo blue GS", "Al coarse bright"))
+    assert {names[i] for i in np.flatnonzero(panels[1])} == {"Al coarse bright",
+                                                              "Quinacridone violet"}  # fmt: skip
+    s = _strengths(names, Phthalo_blue_GS=1.05, Al_coarse_bright=0.96)
+    readings = _panel_reading(forward, panels, s)
+    joint = calibrate_lots(forward, library, panels, readings)
+    first = calibrate_lots(forward, library, panels[:1], readings[:1])
+
+    def after(lots):
+        second = calibrate_lots(forward, library, panels[1:], readings[1:], lots)
+        return second, second.tin("Phthalo blue GS")
+
+    read = recorded(TonerLots(), first)
+    correlated, tin = after(read)
+    marginal, alone = after(TonerLots(read.lots))  # each tin's own spread alone
+    assert correlated.moved == ("Phthalo blue GS",) and marginal.moved == ()
+    for name in joint.toners:
+        assert correlated.tin(name) == pytest.approx(joint.tin(name), rel=1e-3, abs=5e-4)
+    # the second panel pinned Al coarse bright, and with it phthalo blue: surer, and nearer
+    joint_tin = joint.tin("Phthalo blue GS")
+    assert alone == pytest.approx(first.tin("Phthalo blue GS"))
+    assert alone[1] > 1.1 * joint_tin[1] and tin[1] == pytest.approx(joint_tin[1], rel=1e-3)
+    assert abs(tin[0] - joint_tin[0]) < 0.1 * abs(alone[0] - joint_tin[0])
+
+
+def test_a_lot_files_correlations_must_hold_at_once():
+    tins = [TonerLot(n, 1.0) for n in ("A", "B", "C")]
+    strength = {n: (n, "strength") for n in "ABC"}
+    lots = TonerLots.of(tins)
+    held = TonerLots(lots.lots, correlations={(strength["A"], strength["B"]): 0.9})
+    cov = held.covariance(["A", "B", "C"])
+    assert cov[0, 1] == pytest.approx(0.9 * LOT_STRENGTH_SD**2) and cov[0, 2] == 0
+    assert held.read_with("A") == ["B"] and held.read_with("C") == []
+    assert held.without(["B"]).correlations == {}
+    with pytest.raises(ValueError, match="positive definite"):
+        TonerLots(lots.lots, correlations={(strength["A"], strength["B"]): 0.9,
+                                           (strength["A"], strength["C"]): 0.9,
+                                           (strength["B"], strength["C"]): -0.9})  # fmt: skip
+    with pytest.raises(ValueError, match="no tin"):
+        TonerLots(lots.lots, correlations={(strength["A"], ("D", "strength")): 0.5})
+
+
 def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
-    lots = TonerLots.of(
-        [TonerLot("Phthalo blue GS", 1.031, 0.006, "B-2291", 2, "2026-11-29T10:12:00+00:00", "m",
-                  0.8, 0.3)],
+    lots = TonerLots(
+        TonerLots.of(
+            [TonerLot("Phthalo blue GS", 1.031, 0.006, "B-2291", 2, "2026-11-29T10:12:00+00:00",
+                      "m", 0.8, 0.3), TonerLot("Al coarse bright", 0.97, 0.02)],
+        ).lots,
         "flakelab demo",
+        {(("Al coarse bright", "strength"), ("Phthalo blue GS", "strength")): 0.93},
     )  # fmt: skip
     path = tmp_path / "lots.json"
     write_lots(lots, path)
     assert read_lots(path) == lots
+    # a file written before correlations were kept: none
+    two = json.loads(path.read_text())
+    del two["correlations"]
+    (tmp_path / "version-2.json").write_text(json.dumps({**two, "version": 2}))
+    assert read_lots(tmp_path / "version-2.json").correlations == {}
     # a file written before shades were read: every tin at the standard's shade
     old = tmp_path / "version-1.json"
     tin = {"toner": "Phthalo blue GS", "strength": 1.02}
@@ -365,10 +424,21 @@ def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
             assert word in str(error.value)
 
     good = json.loads(path.read_text())
-    lot = good["lots"][0]
+    (lot,) = [tin for tin in good["lots"] if tin["toner"] == "Phthalo blue GS"]
+    pair = good["correlations"][0]
     refused("{", "JSON")
     refused({**good, "format": "other"}, "format")
-    refused({**good, "version": 3}, "version")
+    refused({**good, "version": 4}, "version")
+    refused({**good, "correlations": {}}, "correlations", "list")
+    refused({**good, "correlations": [{**pair, "r": 1.5}]}, "correlations", "r")
+    refused({**good, "correlations": [{**pair, "r": "high"}]}, "correlations[0]", "r", "number")
+    refused({**good, "correlations": [{**pair, "a": ["Al coarse bright", "hue"]}]}, "hue")
+    refused({**good, "correlations": [{**pair, "a": "Al coarse bright"}]}, "correlations[0]", "a")
+    refused({**good, "correlations": [{**pair, "a": ["Carbon black", "strength"]}]},
+            "Carbon black", "no tin")  # fmt: skip
+    refused({**good, "correlations": [pair, pair]}, "correlations[1]", "once")
+    refused({**good, "correlations": [{"a": pair["a"], "r": 0.5}]}, "correlations[0]", "a, b")
+    refused({**good, "colour": 1}, "colour", "not a field")
     refused({**good, "lots": [{**lot, "shade_nm": 12.0}]}, "shade_nm", "nm")
     refused({**good, "lots": [{**lot, "shade_sd_nm": "wide"}]}, "shade_sd_nm", "number")
     refused({**good, "lots": {}}, "lots")
@@ -461,6 +531,47 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
         assert any("read against model old-model" in n for n in notes), (args, notes)
     shown = json.loads(cli("lots", "show", lots, "--json").stdout)
     assert shown["lots"][0]["toner"] == "Phthalo blue GS"
+
+
+def test_cli_a_partners_own_panel_moves_the_tin_read_with_it(cli, tmp_path, forward, library):
+    """The shipped panel reads phthalo blue GS with Al coarse bright; Al coarse bright's own
+    panel (with quinacridone violet), read next, moves phthalo blue's tin with it, and the lot
+    file keeps who was read with whom."""
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.data import example_path
+    from flakelab.io import write_measurements
+
+    examples = example_path("target").parent
+    lots = tmp_path / "tins.json"
+    first = cli("lots", "calibrate", examples / "phthalo-blue-panel.cxf", "--recipe",
+                examples / "phthalo-blue-panel-recipe.json", "--lots", lots)  # fmt: skip
+    assert first.returncode == 0, first.stderr
+    assert "were read together" in first.stdout
+    shown = json.loads(cli("lots", "show", lots, "--json").stdout)["lots"]
+    assert {t["toner"]: t["read_with"] for t in shown} == {
+        "Al coarse bright": ["Phthalo blue GS"], "Phthalo blue GS": ["Al coarse bright"]
+    }  # fmt: skip
+    before = read_lots(lots).lots["Phthalo blue GS"]
+
+    recipe = tmp_path / "partner.json"
+    done = cli("lots", "panel", "Al coarse bright", "--recipe-out", recipe, "--json")
+    assert json.loads(done.stdout)["partner"] == "Quinacridone violet"
+    x = library.fractions(json.loads(recipe.read_text()))
+    reading = _panel_reading(forward, x[None], _strengths(forward.toners, Al_coarse_bright=1.03))
+    sprayed = tmp_path / "partner-sprayed.json"
+    write_measurements([Measurement("panel", _geometries(forward), WAVELENGTHS, reading[0])],
+                       sprayed)  # fmt: skip
+    done = cli("lots", "calibrate", sprayed, "--recipe", recipe, "--lots", lots, "--json")
+    assert done.returncode == 0, done.stderr
+    (moved,) = json.loads(done.stdout)["moved"]
+    after = read_lots(lots).lots["Phthalo blue GS"]
+    # Al coarse bright read stronger than the first panel left it: phthalo blue follows
+    assert moved["toner"] == "Phthalo blue GS" and moved["strength"] == round(after.strength, 4)
+    assert after.strength > before.strength and after.strength_sd < before.strength_sd
+    assert after.panels == before.panels == 1 and after.shade_nm != before.shade_nm
+    printed = cli("lots", "calibrate", sprayed, "--recipe", recipe, "--lots", lots, "--dry-run")
+    assert "moved with them" in printed.stdout and "Phthalo blue GS" in printed.stdout
 
 
 def test_the_shipped_panel_is_the_one_lots_panel_gives_and_reads_against_its_standard(

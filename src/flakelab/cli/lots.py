@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from datetime import UTC, datetime
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Annotated
 
 import typer
@@ -255,8 +256,8 @@ def calibrate_command(
     spray's own film build and flake alignment are allowed for by the library's physics."""
     from flakelab.io import read_recipe
     from flakelab.io.lots_file import write_lots
-    from flakelab.library.lots import MAX_SHADE_NM, TonerLot, TonerLots
-    from flakelab.match.lots import calibrate_lots, read_together
+    from flakelab.library.lots import MAX_SHADE_NM, TonerLots
+    from flakelab.match.lots import calibrate_lots, read_together, recorded
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
     from flakelab.match.stock import check_toners
 
@@ -275,7 +276,7 @@ def calibrate_command(
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
     ]
-    start = TonerLots({n: v for n, v in stored.lots.items() if n not in new_tins}, stored.library)
+    start = stored.without(new_tins)
     reading, _ = read_readings(sprayed, sample, average)
     sprayed_R, _, _ = spectra_for_model(sprayed, reading, forward)
     standards = None
@@ -302,23 +303,9 @@ def calibrate_command(
                 "of this library's toners"
             )
     when = datetime.now(UTC).isoformat(timespec="seconds")
-    read = []
-    for i, name in enumerate(found.toners):
-        before = start.lots.get(name)
-        read.append(
-            TonerLot(
-                toner=name,
-                strength=float(found.strength[i]),
-                strength_sd=float(found.strength_sd[i]),
-                lot=numbers.get(name, before.lot if before else ""),
-                panels=(before.panels if before else 0) + 1,
-                calibrated=when,
-                model_id=forward.model_id,
-                shade_nm=float(found.shade[i]),
-                shade_sd_nm=float(found.shade_sd[i]),
-            )
-        )
-    updated = start.replaced(read)
+    updated = recorded(start, found, when=when, model_id=forward.model_id, numbers=numbers)
+    read = [updated.lots[name] for name in found.toners]
+    moved = [updated.lots[name] for name in found.moved]
     if not dry_run:
         write_lots(updated, lots)
     report = {
@@ -339,6 +326,19 @@ def calibrate_command(
                 "new_tin": t.toner in new_tins,
             }
             for i, t in enumerate(read)
+        ],
+        "moved": [
+            {
+                "toner": t.toner,
+                "lot": t.lot,
+                "before": round(start.lots[t.toner].strength, 4),
+                "strength": round(t.strength, 4),
+                "strength_sd": round(t.strength_sd, 4),
+                "shade_before_nm": round(start.lots[t.toner].shade_nm, 2),
+                "shade_nm": round(t.shade_nm, 2),
+                "shade_sd_nm": round(t.shade_sd_nm, 2),
+            }
+            for t in moved
         ],
         "read_together": [
             {
@@ -388,6 +388,20 @@ def _print_calibration(report: dict) -> None:
             shade,
         )
     console.print(table)
+    if report["moved"]:
+        moved = Table(title="Tins read together with these before, moved with them", box=box.SIMPLE)
+        for column in ("toner", "lot", "before", "now", "change", "shade"):
+            moved.add_column(column, justify="left" if column in ("toner", "lot") else "right")
+        for t in report["moved"]:
+            moved.add_row(
+                t["toner"],
+                t["lot"],
+                f"{t['before']:.3f}",
+                f"{t['strength']:.3f} ± {t['strength_sd']:.3f}",
+                f"{100 * (t['strength'] - t['before']):+.1f} %",
+                _shade_text(SimpleNamespace(shade_nm=t["shade_nm"], shade_sd_nm=t["shade_sd_nm"])),
+            )
+        console.print(moved)
     against = "the model" if report["against"] == "model" else "the standard's panel"
     console.print(
         f"the panel's worst ΔE00 from {against}: {report['panel_de00_before']:.2f} with the "
@@ -424,14 +438,22 @@ def show_command(
     if json_output:
         print(
             json.dumps(
-                {"library": found.library, "lots": [asdict(t) for t in found.lots.values()]},
+                {
+                    "library": found.library,
+                    "lots": [
+                        {**asdict(t), "read_with": found.read_with(t.toner)}
+                        for t in found.lots.values()
+                    ],
+                },
                 indent=2,
             )
         )
         return
     table = Table(title=f"Toner tins of {lots}", box=box.SIMPLE)
-    for column in ("toner", "lot", "strength", "shade", "panels", "read"):
-        table.add_column(column, justify="left" if column in ("toner", "lot", "read") else "right")
+    for column in ("toner", "lot", "strength", "shade", "panels", "read", "read with"):
+        table.add_column(
+            column, justify="right" if column in ("strength", "shade", "panels") else "left"
+        )
     for name in sorted(found.lots):
         t = found.lots[name]
         table.add_row(
@@ -441,8 +463,15 @@ def show_command(
             _shade_text(t),
             str(t.panels),
             t.calibrated[:10],
+            ", ".join(found.read_with(name)),
         )
     console.print(table)
+    if any(found.read_with(name) for name in found.lots):
+        console.print(
+            "read with: tins read together, whose strengths' ratio is surer than either; a "
+            "panel of one moves the others with it",
+            highlight=False,
+        )
 
 
 def _shade_text(tin) -> str:

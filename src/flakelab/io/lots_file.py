@@ -6,9 +6,15 @@
      "lots": [{"toner": "Phthalo blue GS", "strength": 1.031, "strength_sd": 0.006,
                "lot": "B-2291", "panels": 1, "calibrated": "2026-11-29T10:12:00+00:00",
                "model_id": "demo-five-angle 65a5a7b88eab", "shade_nm": 0.8,
-               "shade_sd_nm": 0.3}]}
+               "shade_sd_nm": 0.3},
+              {"toner": "Al coarse bright", "strength": 0.975, ...}],
+     "correlations": [{"a": ["Al coarse bright", "strength"],
+                       "b": ["Phthalo blue GS", "strength"], "r": 0.93}]}
 
-Version 1 files (before shades were read) are read with every tin at the standard's shade.
+``correlations`` (version 3) are those between the tins' read quantities (log strength,
+shade) that calibrating left (two tins read from one panel are read together); a pair not
+listed is uncorrelated. Version 2 files have none; version 1 files (before shades were read)
+are read with every tin at the standard's shade.
 """
 
 from __future__ import annotations
@@ -26,8 +32,8 @@ from flakelab.library.lots import TonerLot, TonerLots
 __all__ = ["LOTS_FORMAT", "read_lots", "write_lots"]
 
 LOTS_FORMAT = "flakelab-toner-lots"
-_VERSION = 2
-_READS = (1, 2)
+_VERSION = 3
+_READS = (1, 2, 3)
 _TEXT_FIELDS = ("toner", "lot", "calibrated", "model_id")
 _NUMBER_FIELDS = ("strength", "strength_sd", "shade_nm", "shade_sd_nm")
 
@@ -58,7 +64,41 @@ def read_lots(path: str | PathLike) -> TonerLots:
     library = document.get("library", "")
     if not isinstance(library, str):
         raise FlakelabError(f"{path}: library: expected a name, got {library!r}")
-    return TonerLots.of(lots, library)
+    unknown = sorted(set(document) - {"format", "version", "library", "lots", "correlations"})
+    if unknown:
+        raise FlakelabError(f"{path}: {unknown[0]}: not a field of a toner-lot file")
+    correlations = _correlations(path, document.get("correlations", []))
+    try:
+        return TonerLots({lot.toner: lot for lot in lots}, library, correlations)
+    except ValueError as error:
+        raise FlakelabError(f"{path}: {error}") from None
+
+
+def _correlations(path: Path, entries) -> dict:
+    """The correlations of a file's ``correlations`` list, each pair sorted, once."""
+    if not isinstance(entries, list):
+        raise FlakelabError(f"{path}: correlations: expected a list of pairs")
+    found = {}
+    for index, entry in enumerate(entries):
+        where = f"{path}: correlations[{index}]"
+        if not isinstance(entry, dict) or set(entry) != {"a", "b", "r"}:
+            raise FlakelabError(f"{where}: expected an object with a, b and r")
+        pair = []
+        for side in ("a", "b"):
+            quantity = entry[side]
+            if not (isinstance(quantity, list) and len(quantity) == 2
+                    and all(isinstance(v, str) for v in quantity)):  # fmt: skip
+                raise FlakelabError(
+                    f"{where}: {side}: expected [toner, 'strength' or 'shade'], got {quantity!r}"
+                )
+            pair.append(tuple(quantity))
+        if not is_number(entry["r"]):
+            raise FlakelabError(f"{where}: r: expected a number, got {entry['r']!r}")
+        key = tuple(sorted(pair))
+        if key in found or key[0] == key[1]:
+            raise FlakelabError(f"{where}: {key[0]} and {key[1]}: a pair of two, listed once")
+        found[key] = float(entry["r"])
+    return found
 
 
 def _lot(path: Path, index: int, entry) -> TonerLot:
@@ -95,6 +135,9 @@ def write_lots(lots: TonerLots, path: str | PathLike) -> None:
         "version": _VERSION,
         "library": lots.library,
         "lots": [asdict(lots.lots[name]) for name in sorted(lots.lots)],
+        "correlations": [
+            {"a": list(a), "b": list(b), "r": r} for (a, b), r in sorted(lots.correlations.items())
+        ],
     }
     text = json.dumps(document, indent=1, ensure_ascii=False) + "\n"
     write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))

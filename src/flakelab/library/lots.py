@@ -24,7 +24,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LOT_SHADE_SD_NM", "LOT_STRENGTH_SD", "MAX_SHADE_NM", "TonerLot", "TonerLots"]
+__all__ = [
+    "LOT_SHADE_SD_NM",
+    "LOT_STRENGTH_SD",
+    "MAX_SHADE_NM",
+    "QUANTITIES",
+    "READ_TOGETHER",
+    "Quantity",
+    "TonerLot",
+    "TonerLots",
+]
 
 LOT_STRENGTH_SD = 0.03
 """Prior standard deviation of a tin's relative strength before any spray-out of it was
@@ -38,6 +47,11 @@ supplier certifies its batches' shade closer would set it so."""
 
 MAX_SHADE_NM = 10.0
 """The largest shade a tin may be read at [nm]: a batch further off is another pigment."""
+
+READ_TOGETHER = 0.5
+"""The correlation of two tins' strengths, as read, beyond which a report says that the
+readings told their ratio rather than each: a panel of two tins tells how strong one is
+against the other far better than how strong either is (the learned model sees proportions)."""
 
 
 @dataclass(frozen=True)
@@ -82,12 +96,48 @@ class TonerLot:
             raise ValueError(f"panels: expected 0 or more, got {self.panels!r}")
 
 
+QUANTITIES = ("strength", "shade")
+"""What a tin is read for; a calibration's parameters are each tin's log strength and shade,
+in this order (:meth:`TonerLots.covariance`)."""
+
+Quantity = tuple[str, str]
+"""One read quantity of one tin: (toner, ``"strength"`` or ``"shade"``)."""
+
+
 @dataclass(frozen=True)
 class TonerLots:
-    """The shop's tins by toner name; a toner without one pours at the standard (1.0)."""
+    """The shop's tins by toner name; a toner without one pours at the standard (1.0). The
+    ``correlations`` between the tins' read quantities (log strength, shade), by pair, sorted
+    within it: two tins read from the same panel are read together, and a later panel of one
+    tells about the other (:func:`~flakelab.match.lots.calibrate_lots`). A pair not listed is
+    uncorrelated."""
 
     lots: Mapping[str, TonerLot] = field(default_factory=dict)
     library: str = ""
+    correlations: Mapping[tuple[Quantity, Quantity], float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for (a, b), r in self.correlations.items():
+            for toner, quantity in (a, b):
+                if toner not in self.lots:
+                    raise ValueError(f"correlations: {toner!r} has no tin in the file")
+                if quantity not in QUANTITIES:
+                    raise ValueError(
+                        f"correlations: {quantity!r}: expected one of {', '.join(QUANTITIES)}"
+                    )
+            if not a < b:
+                raise ValueError(f"correlations: {a} and {b}: expected a pair sorted, once")
+            if not (math.isfinite(r) and -1 < r < 1):
+                raise ValueError(f"correlations: {a} and {b}: expected −1 < r < 1, got {r!r}")
+        if self.correlations:
+            names = sorted(self.lots)
+            try:
+                np.linalg.cholesky(self.covariance(names))
+            except np.linalg.LinAlgError:
+                raise ValueError(
+                    "correlations: they cannot all hold at once (the covariance they make is "
+                    "not positive definite)"
+                ) from None
 
     @classmethod
     def of(cls, lots: Iterable[TonerLot], library: str = "") -> TonerLots:
@@ -121,6 +171,75 @@ class TonerLots:
         )
         return mean, sd
 
-    def replaced(self, lots: Iterable[TonerLot]) -> TonerLots:
-        """These lots, with ``lots`` read anew."""
-        return TonerLots({**self.lots, **{lot.toner: lot for lot in lots}}, self.library)
+    def read_with(self, name: str, threshold: float = READ_TOGETHER) -> list[str]:
+        """The toners whose tins' strengths are correlated with ``name``'s beyond
+        ``threshold``: read together with it, their ratio surer than either."""
+        return sorted(
+            b[0] if a[0] == name else a[0]
+            for (a, b), r in self.correlations.items()
+            if name in (a[0], b[0]) and a[1] == b[1] == "strength" and abs(r) >= threshold
+        )
+
+    def covariance(self, names: Sequence[str]) -> NDArray:
+        """Covariance ``[2T, 2T]`` of the log strengths and then the shades of ``names``' tins,
+        as a calibration starts from it: :meth:`prior`'s and :meth:`shade_prior`'s deviations
+        with :attr:`correlations` between them."""
+        sd = np.concatenate([self.prior(names)[1], self.shade_prior(names)[1]])
+        index = {(n, q): i * len(names) + k for i, q in enumerate(QUANTITIES)
+                 for k, n in enumerate(names)}  # fmt: skip
+        r = np.eye(2 * len(names))
+        for (a, b), value in self.correlations.items():
+            if a in index and b in index:
+                r[index[a], index[b]] = r[index[b], index[a]] = value
+        return r * np.outer(sd, sd)
+
+    def without(self, names: Iterable[str]) -> TonerLots:
+        """These lots without the tins of ``names`` (new tins start from the standard,
+        correlated with none)."""
+        gone = set(names)
+        return TonerLots(
+            {n: lot for n, lot in self.lots.items() if n not in gone},
+            self.library,
+            {
+                pair: r
+                for pair, r in self.correlations.items()
+                if pair[0][0] not in gone and pair[1][0] not in gone
+            },  # fmt: skip
+        )
+
+    def replaced(
+        self, lots: Iterable[TonerLot], covariance: NDArray | None = None,
+        names: Sequence[str] = (),
+    ) -> TonerLots:  # fmt: skip
+        """These lots, with ``lots`` read anew; with a calibration's ``covariance`` ``[2T, 2T]``
+        over ``names``' log strengths and shades, the correlations it holds between the tins
+        on file replace those of ``names``' tins (the rest stay)."""
+        merged = {**self.lots, **{lot.toner: lot for lot in lots}}
+        if covariance is None:
+            return TonerLots(merged, self.library, self.correlations)
+        read = set(names)
+        kept = {pair: r for pair, r in self.correlations.items()
+                if pair[0][0] not in read and pair[1][0] not in read}  # fmt: skip
+        return TonerLots(merged, self.library, {**kept, **_correlations(covariance, names, merged)})
+
+
+CORRELATION_KEPT = 1e-6
+"""The smallest correlation a lot file keeps; a smaller one is taken as none (dropping more
+could leave the matrix of those kept not positive definite)."""
+
+
+def _correlations(
+    covariance: NDArray, names: Sequence[str], lots: Mapping[str, TonerLot]
+) -> dict[tuple[Quantity, Quantity], float]:
+    """The correlations of ``covariance`` ``[2T, 2T]`` (``names``' log strengths, then shades)
+    between quantities of tins in ``lots``, by sorted pair, those of at least
+    :data:`CORRELATION_KEPT`."""
+    keys = [(n, q) for q in QUANTITIES for n in names]
+    sd = np.sqrt(np.diag(covariance))
+    r = covariance / np.outer(sd, sd)
+    found = {}
+    for i, j in zip(*np.triu_indices(len(keys), k=1), strict=True):
+        a, b = sorted((keys[i], keys[j]))
+        if a[0] in lots and b[0] in lots and abs(r[i, j]) >= CORRELATION_KEPT:
+            found[a, b] = round(float(r[i, j]), 9)
+    return found

@@ -64,7 +64,8 @@ read black's tin 15 % off and the white's 6 % (stop 72).
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -73,7 +74,13 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.errors import FlakelabError
-from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TonerLots
+from flakelab.library.lots import (
+    LOT_SHADE_SD_NM,
+    LOT_STRENGTH_SD,
+    READ_TOGETHER,
+    TonerLot,
+    TonerLots,
+)
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
 from flakelab.match.judging import evaluate_recipes
@@ -91,6 +98,7 @@ __all__ = [
     "de00_per_percent",
     "mixed_with",
     "read_together",
+    "recorded",
     "shade_ratio",
     "with_lots",
 ]
@@ -108,11 +116,6 @@ _SHADE_STEP_NM = 0.1
 """Central-difference step in a tin's shade [nm]."""
 
 _GAUSS_NEWTON_STEPS = 6
-
-READ_TOGETHER = 0.5
-"""The correlation of two tins' strengths, as read, beyond which a report says that the
-readings told their ratio rather than each: a panel of two tins tells how strong one is
-against the other far better than how strong either is (the learned model sees proportions)."""
 
 
 def mixed_with(strength: NDArray, fractions):
@@ -249,8 +252,10 @@ class LotCalibration:
     """Tins read from spray-outs: each fitted toner's strength and shade [nm] with their
     standard deviations, where they stood before, whether its shade was read (``shaded``: a
     pigment's), each reading's worst-geometry ΔE00 from the prediction before (the tins
-    as they stood) and after, and the posterior covariance of the log strengths ``[n, n]``
-    (two tins read from the same panels are strongly correlated: :func:`read_together`)."""
+    as they stood) and after; and every toner's (``names``, the model's order) log strength
+    and shade ``theta[2T]`` with their posterior covariance ``[2T, 2T]``, which holds how the
+    tins were read together (:func:`read_together`), and the toners not fitted that moved
+    with them (``moved``)."""
 
     toners: tuple[str, ...]
     strength: NDArray
@@ -264,7 +269,24 @@ class LotCalibration:
     prior_shade: NDArray
     prior_shade_sd: NDArray
     shaded: NDArray
-    log_strength_cov: NDArray
+    names: tuple[str, ...]
+    theta: NDArray
+    covariance: NDArray
+    moved: tuple[str, ...]
+
+    @property
+    def log_strength_cov(self) -> NDArray:
+        """The posterior covariance ``[n, n]`` of the fitted toners' log strengths."""
+        k = [self.names.index(t) for t in self.toners]
+        return self.covariance[np.ix_(k, k)]
+
+    def tin(self, name: str) -> tuple[float, float, float, float]:
+        """Toner ``name``'s tin as read: strength ± its deviation, shade ± its deviation [nm]
+        (a tin :attr:`moved` by its correlations as well as a fitted one)."""
+        k, T = self.names.index(name), len(self.names)
+        sd = np.sqrt(np.diag(self.covariance))
+        strength = float(np.exp(self.theta[k]))
+        return strength, strength * float(sd[k]), float(self.theta[T + k]), float(sd[T + k])
 
 
 def read_together(found: LotCalibration, threshold: float = READ_TOGETHER) -> list[dict]:
@@ -340,9 +362,11 @@ def calibrate_lots(
         toner_index = np.array([names.index(t) for t in toners], int)
     shaded = ~library.effect[toner_index] if shades else np.zeros(len(toner_index), bool)
     fitted = np.concatenate([toner_index, T + toner_index[shaded]])
-    (log_s, log_sd), (shade, shade_sd) = lots.prior(names), lots.shade_prior(names)
-    theta, sd = np.concatenate([log_s, shade]), np.concatenate([log_sd, shade_sd])
-    theta0, precision0 = theta[fitted].copy(), np.diag(1 / sd[fitted] ** 2)
+    (log_s, _), (shade, _) = lots.prior(names), lots.shade_prior(names)
+    start, prior = np.concatenate([log_s, shade]), lots.covariance(names)
+    sd = np.sqrt(np.diag(prior))
+    theta, theta0 = start.copy(), start[fitted]
+    precision0 = np.linalg.inv(prior[np.ix_(fitted, fitted)])
     tins = _Tins(forward, library, x)
     measured = reflectance_to_Lab(np.asarray(readings, float))
     if standards is None:
@@ -357,27 +381,86 @@ def calibrate_lots(
         theta, normal, chi2 = _gauss_newton(tins, theta, fitted, measured, L / np.sqrt(scale),
                                             theta0, precision0)  # fmt: skip
         scale = max(1.0, scale * chi2 / max(measured.size - len(fitted), 1))
-    covariance = np.linalg.inv(normal)
+    theta, covariance = _conditioned(start, prior, fitted, theta, np.linalg.inv(normal))
     posterior_sd = np.sqrt(np.diag(covariance))
-    n = len(toner_index)
     strength = np.exp(theta[toner_index])
-    shade_sd = sd[T + toner_index].copy()
-    shade_sd[shaded] = posterior_sd[n:]
     return LotCalibration(
         toners=tuple(names[i] for i in toner_index),
         strength=strength,
-        strength_sd=strength * posterior_sd[:n],
-        prior_strength=np.exp(theta0[:n]),
-        prior_sd=np.exp(theta0[:n]) / np.sqrt(np.diag(precision0)[:n]),
+        strength_sd=strength * posterior_sd[toner_index],
+        prior_strength=np.exp(start[toner_index]),
+        prior_sd=np.exp(start[toner_index]) * sd[toner_index],
         de00_before=before,
         de00_after=tins.worst_de00(theta, measured),
         shade=theta[T + toner_index],
-        shade_sd=shade_sd,
+        shade_sd=posterior_sd[T + toner_index],
         prior_shade=shade[toner_index],
         prior_shade_sd=sd[T + toner_index],
         shaded=shaded,
-        log_strength_cov=covariance[:n, :n],
+        names=tuple(names),
+        theta=theta,
+        covariance=covariance,
+        moved=_moved(names, fitted, start, prior, theta, covariance),
     )
+
+
+def recorded(
+    lots: TonerLots,
+    found: LotCalibration,
+    *,
+    when: str = "",
+    model_id: str = "",
+    numbers: Mapping[str, str] | None = None,
+) -> TonerLots:
+    """``lots`` once calibration ``found`` was read from them: each tin it fitted read on
+    ``when`` against model ``model_id`` (one panel more; its lot number from ``numbers``, or
+    the one on file), each tin it :attr:`~LotCalibration.moved` at its new reading (its lot,
+    panels and model as they were), and the correlations the reading left."""
+    numbers = numbers or {}
+    tins = []
+    for name in found.toners:
+        before = lots.lots.get(name)
+        strength, strength_sd, shade, shade_sd = found.tin(name)
+        tins.append(TonerLot(
+            toner=name, strength=strength, strength_sd=strength_sd,
+            lot=numbers.get(name, before.lot if before else ""),
+            panels=(before.panels if before else 0) + 1, calibrated=when, model_id=model_id,
+            shade_nm=shade, shade_sd_nm=shade_sd,
+        ))  # fmt: skip
+    for name in found.moved:  # a tin moves only by the correlations on file: it is there
+        strength, strength_sd, shade, shade_sd = found.tin(name)
+        tins.append(replace(lots.lots[name], strength=strength, strength_sd=strength_sd,
+                            shade_nm=shade, shade_sd_nm=shade_sd, calibrated=when))  # fmt: skip
+    return lots.replaced(tins, found.covariance, found.names)
+
+
+def _conditioned(start, prior, fitted, theta, posterior) -> tuple[NDArray, NDArray]:
+    """Every tin's state ``[2T]`` and covariance ``[2T, 2T]`` once the ``fitted`` entries of
+    ``start`` (prior covariance ``prior``) were read at ``theta[fitted]`` ± ``posterior``. The
+    panels depend on the fitted entries alone, so the rest follow them as far as the prior
+    correlates them (Gaussian conditioning, as a Rauch–Tung–Striebel smoother carries a
+    state's update to its neighbours): reading a tin's own panel moves the tins read together
+    with it before, and reading all panels one at a time ends where reading them at once does
+    while the model is linear over the tins' spread."""
+    rest = np.setdiff1d(np.arange(len(start)), fitted)
+    gain = prior[np.ix_(rest, fitted)] @ np.linalg.inv(prior[np.ix_(fitted, fitted)])
+    theta = theta.copy()
+    theta[rest] = start[rest] + gain @ (theta[fitted] - start[fitted])
+    covariance = prior.copy()
+    covariance[np.ix_(fitted, fitted)] = posterior
+    covariance[np.ix_(rest, fitted)] = gain @ posterior
+    covariance[np.ix_(fitted, rest)] = (gain @ posterior).T
+    shrunk = prior[np.ix_(fitted, fitted)] - posterior
+    covariance[np.ix_(rest, rest)] = prior[np.ix_(rest, rest)] - gain @ shrunk @ gain.T
+    return theta, covariance
+
+
+def _moved(names, fitted, start, prior, theta, covariance) -> tuple[str, ...]:
+    """The toners not ``fitted`` whose tins a calibration moved (by their correlations)."""
+    T = len(names)
+    changed = (theta != start) | (np.diag(covariance) != np.diag(prior))
+    changed[fitted] = False
+    return tuple(names[k] for k in np.flatnonzero(changed[:T] | changed[T:]))
 
 
 class _Tins:
