@@ -236,7 +236,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     tins = [TonerLot("Phthalo blue GS", 1.03, 0.01, "B-1", 1, "2026-11-30T08:00:00+00:00", "m",
                      0.6, 0.4),
             TonerLot("Al medium", 0.98)]  # fmt: skip
-    write_lots(TonerLots.of(tins, "flakelab demo"), work / "lots.json")
+    read_with = {(("Al medium", "strength"), ("Phthalo blue GS", "strength")): 0.9}
+    write_lots(TonerLots(TonerLots.of(tins).lots, "flakelab demo", read_with), work / "lots.json")
     panel = target.parent / "phthalo-blue-panel.cxf"
     write_measurements([read_measurement(panel)], work / "panel.json")
     panel_recipe, standard = (
