@@ -553,6 +553,15 @@ def test_cli_a_partners_own_panel_moves_the_tin_read_with_it(cli, tmp_path, forw
         "Al coarse bright": ["Phthalo blue GS"], "Phthalo blue GS": ["Al coarse bright"]
     }  # fmt: skip
     before = read_lots(lots).lots["Phthalo blue GS"]
+    # the library tells the effect toner, which has no shade, from a pigment not read for it
+    rows = {
+        name: line
+        for line in cli("lots", "show", lots).stdout.splitlines()
+        for name in ("Al coarse bright", "Phthalo blue GS")
+        if line.strip().startswith(name)
+    }
+    aluminium, phthalo = rows["Al coarse bright"], rows["Phthalo blue GS"]
+    assert "—" in aluminium and "not read" not in aluminium and " nm" in phthalo
 
     recipe = tmp_path / "partner.json"
     done = cli("lots", "panel", "Al coarse bright", "--recipe-out", recipe, "--json")

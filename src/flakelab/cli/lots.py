@@ -426,15 +426,19 @@ def _print_calibration(report: dict) -> None:
 @reports_errors
 def show_command(
     lots: Annotated[Path, typer.Argument(help="A toner-lot file.")],
+    library: LibraryOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """The tins of a toner-lot file: strength and shade against the standard, how sure, when
-    read."""
+    read, and the tins each was read with. The library (default: demo) tells an effect toner,
+    which has no shade, from a pigment whose shade was not read."""
     from dataclasses import asdict
 
+    from flakelab.io import read_library
     from flakelab.io.lots_file import read_lots
 
     found = read_lots(lots)
+    kinds = {t.name: t.kind for t in read_library(library).toners}
     if json_output:
         print(
             json.dumps(
@@ -460,7 +464,7 @@ def show_command(
             name,
             t.lot,
             f"{t.strength:.3f} ± {t.strength_sd:.3f}",
-            _shade_text(t),
+            _shade_text(t, kinds.get(name)),
             str(t.panels),
             t.calibrated[:10],
             ", ".join(found.read_with(name)),
@@ -474,11 +478,14 @@ def show_command(
         )
 
 
-def _shade_text(tin) -> str:
-    """A tin's shade as a table shows it: "not read" while it stands at the standard's prior
-    (every effect toner's, and a pigment's read --no-shade)."""
+def _shade_text(tin, kind: str | None = None) -> str:
+    """A tin's shade as a table shows it: "—" for an effect toner (``kind`` not "pigment":
+    it has none), "not read" while it stands at the standard's prior (a pigment's read
+    --no-shade, or any toner's where the library does not know its kind)."""
     from flakelab.library.lots import LOT_SHADE_SD_NM
 
+    if kind is not None and kind != "pigment":
+        return "—"
     if tin.shade_nm == 0 and tin.shade_sd_nm == LOT_SHADE_SD_NM:
         return "not read"
     return f"{tin.shade_nm:+.2f} ± {tin.shade_sd_nm:.2f} nm"
