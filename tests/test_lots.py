@@ -582,6 +582,29 @@ def test_cli_a_partners_own_panel_moves_the_tin_read_with_it(cli, tmp_path, forw
     printed = cli("lots", "calibrate", sprayed, "--recipe", recipe, "--lots", lots, "--dry-run")
     assert "moved with them" in printed.stdout and "Phthalo blue GS" in printed.stdout
 
+    # both panels read at once end where reading them one after the other did
+    at_once = tmp_path / "at-once.json"
+    shipped = examples / "phthalo-blue-panel-recipe.json"
+    both = ("lots", "calibrate", examples / "phthalo-blue-panel.cxf", sprayed,
+            "--recipe", shipped, "--recipe", recipe)  # fmt: skip
+    done = cli(*both, "--lots", at_once, "--json")
+    assert done.returncode == 0, done.stderr
+    assert len(json.loads(done.stdout)["panels"]) == 2
+    one_by_one, together = read_lots(lots).lots, read_lots(at_once).lots
+    assert together.keys() == one_by_one.keys() == {
+        "Phthalo blue GS", "Al coarse bright", "Quinacridone violet"}  # fmt: skip
+    for name, tin in together.items():
+        assert tin.strength == pytest.approx(one_by_one[name].strength, abs=1e-4)
+        assert tin.shade_nm == pytest.approx(one_by_one[name].shade_nm, abs=1e-3)
+        assert tin.panels == one_by_one[name].panels == (2 if name == "Al coarse bright" else 1)
+    # a recipe short, or a panel that is no spray-out of its recipe: refused, the file kept
+    kept = at_once.read_text()
+    short = cli(*both[:-2], sprayed, "--lots", at_once)
+    assert short.returncode != 0 and "--recipe" in short.stderr and "(3)" in short.stderr
+    mixed_up = cli(*both[:3], example_path("target"), *both[4:], "--lots", at_once)
+    assert mixed_up.returncode != 0 and "blue-metallic-target" in mixed_up.stderr
+    assert "Traceback" not in mixed_up.stderr and at_once.read_text() == kept
+
 
 def test_the_shipped_panel_is_the_one_lots_panel_gives_and_reads_against_its_standard(
     cli, tmp_path

@@ -9,6 +9,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich import box
 from rich.table import Table
@@ -187,9 +188,20 @@ def _partner_advice(toner: str, partner: str, partners_partner: str) -> str:
 @lots_app.command("calibrate")
 @reports_errors
 def calibrate_command(
-    sprayed: Annotated[Path, typer.Argument(help="Measurement of the panel's spray-out.")],
+    sprayed: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Measurement of the panel's spray-out; several panels' are read at once, "
+            "each with its --recipe in the same order."
+        ),
+    ],
     recipe: Annotated[
-        Path, typer.Option("--recipe", "-r", help="The panel's recipe {toner: grams}, as weighed.")
+        list[Path],
+        typer.Option(
+            "--recipe",
+            "-r",
+            help="The panel's recipe {toner: grams}, as weighed (one for each spray-out).",
+        ),
     ],
     lots: Annotated[
         Path,
@@ -215,12 +227,13 @@ def calibrate_command(
         ),
     ] = None,
     standard: Annotated[
-        Path | None,
+        list[Path] | None,
         typer.Option(
             "--standard",
             help="The paint maker's reading of the same panel sprayed from its standard tins: "
             "the tin is read against it, as ISO 787-24 reads a pigment against its "
-            "standard's reduction, and the model's own error on the panel drops out.",
+            "standard's reduction, and the model's own error on the panel drops out (one for "
+            "each spray-out, or none).",
             show_default="read against the model's prediction",
         ),
     ] = None,
@@ -248,12 +261,13 @@ def calibrate_command(
     json_output: JsonOption = False,
 ) -> None:
     """Read the strength and shade of the shop's tins from a panel's spray-out of a known
-    recipe.
+    recipe, or from several panels' at once.
 
-    The panel's colour at every geometry is fitted by the tins' strengths and the pigments'
+    The panels' colour at every geometry is fitted by the tins' strengths and the pigments'
     shades (their absorption a few nm off the standard's), each drawn towards its last
-    reading (or the standard ± 3 %, ± 1.5 nm) as far as the panel leaves it unsure; the
-    spray's own film build and flake alignment are allowed for by the library's physics."""
+    reading (or the standard ± 3 %, ± 1.5 nm) as far as the panels leave it unsure; the
+    spray's own film build and flake alignment are allowed for by the library's physics.
+    Tins read together with these before move with them."""
     from flakelab.io import read_recipe
     from flakelab.io.lots_file import write_lots
     from flakelab.library.lots import MAX_SHADE_NM, TonerLots
@@ -263,47 +277,67 @@ def calibrate_command(
 
     check_output_file(lots, "--lots")
     numbers = _lot_numbers(lot or [])
-    grams = read_recipe(recipe)
+    if len(recipe) != len(sprayed):
+        raise FlakelabError(
+            f"--recipe: expected one for each spray-out ({len(sprayed)}), got {len(recipe)}"
+        )
+    if standard and len(standard) != len(sprayed):
+        raise FlakelabError(
+            f"--standard: expected one for each spray-out ({len(sprayed)}) or none, "
+            f"got {len(standard)}"
+        )
+    grams = [read_recipe(path) for path in recipe]
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
-    x = recipe_fractions(lib, grams, recipe)
+    x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
     check_toners([*(toner or []), *numbers], forward.toners, "--toner, --lot: ")
     for name in [*(toner or []), *numbers]:
-        if grams.get(name, 0) <= 0:
+        if all(g.get(name, 0) <= 0 for g in grams):
+            where = recipe[0] if len(recipe) == 1 else ", ".join(map(str, recipe))
             raise FlakelabError(
-                f"{recipe}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
+                f"{where}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
             )
     stored = _read_lots(lots, lib) if lots.exists() else TonerLots(library=lib.name)
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
     ]
     start = stored.without(new_tins)
-    reading, _ = read_readings(sprayed, sample, average)
-    sprayed_R, _, _ = spectra_for_model(sprayed, reading, forward)
+    sprayed_R = np.array([
+        spectra_for_model(path, read_readings(path, sample, average)[0], forward)[0]
+        for path in sprayed
+    ])  # fmt: skip
     standards = None
-    if standard is not None:
-        reference, _ = read_readings(standard, standard_sample, False, "--standard-sample")
-        standards = spectra_for_model(standard, reference, forward)[0][None]
+    if standard:
+        standards = np.array([
+            spectra_for_model(path, read_readings(path, standard_sample, False,
+                                                  "--standard-sample")[0], forward)[0]
+            for path in standard
+        ])  # fmt: skip
     elif standard_sample is not None:
         raise FlakelabError("--standard-sample: for a --standard file")
     fitted = tuple(dict.fromkeys([*toner, *numbers])) if toner else None  # a new tin is read
-    found = calibrate_lots(forward, lib, x[None], sprayed_R[None], start, toners=fitted,
+    found = calibrate_lots(forward, lib, x, sprayed_R, start, toners=fitted,
                            standards=standards, shades=shade)  # fmt: skip
-    if found.de00_before[0] > SPRAYOUT_MISMATCH:
-        against = f"{standard}'s reading" if standard is not None else "its recipe's prediction"
-        raise FlakelabError(
-            f"{sprayed}: the panel lies {found.de00_before[0]:.1f} ΔE00 from {against} at "
-            f"worst, beyond the {SPRAYOUT_MISMATCH:g} of a likely mix-up: is it a spray-out of "
-            f"{recipe}'s recipe? (the lot file is unchanged)"
-        )
+    for n, before in enumerate(found.de00_before):
+        if before > SPRAYOUT_MISMATCH:
+            against = f"{standard[n]}'s reading" if standard else "its recipe's prediction"
+            raise FlakelabError(
+                f"{sprayed[n]}: the panel lies {before:.1f} ΔE00 from {against} at worst, "
+                f"beyond the {SPRAYOUT_MISMATCH:g} of a likely mix-up: is it a spray-out of "
+                f"{recipe[n]}'s recipe? (the lot file is unchanged)"
+            )
+    where = sprayed[0] if len(sprayed) == 1 else ", ".join(map(str, sprayed))
     for name, strength, nm in zip(found.toners, found.strength, found.shade, strict=True):
         if not (0.5 <= strength <= 2.0 and abs(nm) <= MAX_SHADE_NM):
             raise FlakelabError(
-                f"{sprayed}: the panel reads {name}'s tin at {strength:.2f} times the standard "
-                f"and {nm:+.1f} nm off its shade: not a spray-out of {recipe}'s recipe, or not "
+                f"{where}: the panels read {name}'s tin at {strength:.2f} times the standard "
+                f"and {nm:+.1f} nm off its shade: not spray-outs of their recipes, or not "
                 "of this library's toners"
             )
     when = datetime.now(UTC).isoformat(timespec="seconds")
-    updated = recorded(start, found, when=when, model_id=forward.model_id, numbers=numbers)
+    held = np.count_nonzero(x, axis=0)  # the panels that hold each toner
+    counts = {name: int(held[forward.toners.index(name)]) for name in found.toners}
+    updated = recorded(start, found, when=when, model_id=forward.model_id, numbers=numbers,
+                       panels=counts)  # fmt: skip
     read = [updated.lots[name] for name in found.toners]
     moved = [updated.lots[name] for name in found.moved]
     if not dry_run:
@@ -350,8 +384,19 @@ def calibrate_command(
             for pair in read_together(found)
         ],  # fmt: skip
         "against": "standard" if standard is not None else "model",
-        "panel_de00_before": round(float(found.de00_before[0]), 3),
-        "panel_de00_after": round(float(found.de00_after[0]), 3),
+        "panels": [
+            {
+                "sprayed": str(path),
+                "recipe": str(r),
+                "de00_before": round(float(b), 3),
+                "de00_after": round(float(a), 3),
+            }
+            for path, r, b, a in zip(
+                sprayed, recipe, found.de00_before, found.de00_after, strict=True
+            )
+        ],  # fmt: skip
+        "panel_de00_before": round(float(found.de00_before.max()), 3),
+        "panel_de00_after": round(float(found.de00_after.max()), 3),
         "model": forward.name,
         "model_id": forward.model_id,
     }
@@ -372,7 +417,9 @@ def _lot_numbers(given: list[str]) -> dict[str, str]:
 
 
 def _print_calibration(report: dict) -> None:
-    table = Table(title="The shop's tins, read from the panel", box=box.SIMPLE)
+    several = len(report["panels"]) > 1
+    source = f"the {len(report['panels'])} panels" if several else "the panel"
+    table = Table(title=f"The shop's tins, read from {source}", box=box.SIMPLE)
     for column in ("toner", "lot", "before", "now", "change", "shade"):
         table.add_column(column, justify="left" if column in ("toner", "lot") else "right")
     for t in report["tins"]:
@@ -403,23 +450,54 @@ def _print_calibration(report: dict) -> None:
             )
         console.print(moved)
     against = "the model" if report["against"] == "model" else "the standard's panel"
-    console.print(
-        f"the panel's worst ΔE00 from {against}: {report['panel_de00_before']:.2f} with the "
-        f"tins as they stood, {report['panel_de00_after']:.2f} as read",
-        highlight=False,
-    )
-    for pair in report["read_together"]:
-        a, b = pair["toners"]
+    for panel in report["panels"]:
+        name = f" {panel['sprayed']}" if several else ""
         console.print(
-            f"{a} and {b} were read together (correlation {pair['correlation']:+.2f}): the "
-            f"panel tells their ratio, {pair['ratio']:.3f} ± {pair['ratio_sd']:.3f}, better "
-            f"than either's strength; a panel of either with another partner tells them apart",
+            f"the panel{name}'s worst ΔE00 from {against}: {panel['de00_before']:.2f} with the "
+            f"tins as they stood, {panel['de00_after']:.2f} as read",
             highlight=False,
         )
+    _print_read_together(report["read_together"], source, several)
     where = (
         f"wrote {report['lots']}" if report["written"] else f"--dry-run: {report['lots']} unchanged"
     )
     errors.print(where, highlight=False)
+
+
+MOST_PAIRS_PRINTED = 3
+"""Beyond this many pairs of tins read together a report names the tins, not each pair."""
+
+
+def _print_read_together(pairs: list[dict], source: str, several: bool) -> None:
+    """Which tins ``source`` read together, and what that tells: their ratios."""
+    if len(pairs) > MOST_PAIRS_PRINTED:
+        tins = sorted({name for pair in pairs for name in pair["toners"]})
+        console.print(
+            f"{len(tins)} tins were read together ({', '.join(tins)}): {source} tell their "
+            "strengths against each other (each pair's ratio in --json) better than against "
+            "the standard, as tins all alike stronger look the same in every panel",
+            highlight=False,
+        )
+        return
+    for pair in pairs:
+        a, b = pair["toners"]
+        advice = "" if several else "; a panel of either with another partner tells them apart"
+        console.print(
+            f"{a} and {b} were read together (correlation {pair['correlation']:+.2f}): "
+            f"{source} tell{'' if several else 's'} their ratio, {pair['ratio']:.3f} ± "
+            f"{pair['ratio_sd']:.3f}, better than either's strength{advice}",
+            highlight=False,
+        )
+
+
+READ_WITH_NAMED = 2
+"""How many of the tins a tin was read with ``lots show`` names before it counts the rest."""
+
+
+def _read_with_text(names: list[str]) -> str:
+    if len(names) <= READ_WITH_NAMED + 1:
+        return ", ".join(names)
+    return f"{', '.join(names[:READ_WITH_NAMED])} and {len(names) - READ_WITH_NAMED} more"
 
 
 @lots_app.command("show")
@@ -467,7 +545,7 @@ def show_command(
             _shade_text(t, kinds.get(name)),
             str(t.panels),
             t.calibrated[:10],
-            ", ".join(found.read_with(name)),
+            _read_with_text(found.read_with(name)),
         )
     console.print(table)
     if any(found.read_with(name) for name in found.lots):

@@ -428,12 +428,14 @@ def recorded(
     when: str = "",
     model_id: str = "",
     numbers: Mapping[str, str] | None = None,
+    panels: Mapping[str, int] | None = None,
 ) -> TonerLots:
     """``lots`` once calibration ``found`` was read from them: each tin it fitted read on
-    ``when`` against model ``model_id`` (one panel more; its lot number from ``numbers``, or
-    the one on file), each tin it :attr:`~LotCalibration.moved` at its new reading (its lot,
-    panels and model as they were), and the correlations the reading left."""
-    numbers = numbers or {}
+    ``when`` against model ``model_id`` (from ``panels`` more panels, default one; its lot
+    number from ``numbers``, or the one on file), each tin it :attr:`~LotCalibration.moved`
+    at its new reading (its lot, panels and model as they were), and the correlations the
+    reading left."""
+    numbers, panels = numbers or {}, panels or {}
     tins = []
     for name in found.toners:
         before = lots.lots.get(name)
@@ -441,7 +443,8 @@ def recorded(
         tins.append(TonerLot(
             toner=name, strength=strength, strength_sd=strength_sd,
             lot=numbers.get(name, before.lot if before else ""),
-            panels=(before.panels if before else 0) + 1, calibrated=when, model_id=model_id,
+            panels=(before.panels if before else 0) + panels.get(name, 1), calibrated=when,
+            model_id=model_id,
             shade_nm=shade, shade_sd_nm=shade_sd,
         ))  # fmt: skip
     for name in found.moved:  # a tin moves only by the correlations on file: it is there
