@@ -635,12 +635,53 @@ def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli):
         assert sum(written.values()) == pytest.approx(250.0)
     text = cli(*args, "--all").stdout
     assert "not read" in text and "of 3 samples matched within the tolerance" in text
-    for extra, message in ((["--all", "--sample", "door"], "for one target, not --all"),
+    # shared out over two processes (this one from the back, a worker from the front): every
+    # report the same but for its time
+    shared = json.loads(cli(*args, "--all", "--jobs", "2", "--json").stdout)["targets"]
+
+    def timeless(report):
+        return {k: v for k, v in report.items() if k not in ("seconds", "recipe_out")}
+
+    assert [timeless(r) for r in shared] == [timeless(r) for r in reports]
+    for extra, message in ((["--all", "--jobs", "0"], "--jobs: expected a whole number"),
+                           (["--jobs", "2"], "--jobs: for --all"),
+                           (["--all", "--sample", "door"], "for one target, not --all"),
                            (["--recipe-dir", str(folder)], "--recipe-dir: for --all"),
                            (["--all", "--recipe-dir", str(tmp_path / "cars.json")],
                             "not a folder")):  # fmt: skip
         run = cli(*args, *extra)
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+
+
+def test_readings_shared_out_over_processes_are_matched_as_alone():
+    """:func:`~flakelab.match.batch.match_readings` with a worker process beside this one: the
+    worker takes readings from the front while this process takes them from the back, and
+    every result is the one this process alone gives, in the readings' order, each counted
+    once; a reading the model refuses comes back as its error."""
+    from dataclasses import replace as replaced
+
+    from flakelab.cli.matcher import matcher_setup
+    from flakelab.data import example_path
+    from flakelab.errors import FlakelabError
+    from flakelab.io import read_measurement
+    from flakelab.match.batch import match_readings
+    from flakelab.match.settings import MatchSettings
+
+    _, forward, effect = matcher_setup(None, "five-angle", None, None)
+    target = read_measurement(example_path("target"))
+    readings = [replaced(target, sample=f"car {k}", reflectance=target.reflectance * (1 - k / 30))
+                for k in range(3)]  # fmt: skip
+    readings.insert(1, replaced(target, sample="five of six").select(target.geometry_names[:5]))
+    settings = MatchSettings(candidates=1)
+    done = []
+    alone = match_readings(readings, forward, effect, settings=settings)
+    shared = match_readings(readings, forward, effect, jobs=2, settings=settings,
+                            progress=lambda: done.append(1))  # fmt: skip
+    assert len(done) == len(readings)
+    assert isinstance(alone[1], FlakelabError) and str(shared[1]) == str(alone[1])
+    for a, b in zip(alone[::2] + alone[3:], shared[::2] + shared[3:], strict=True):
+        assert b.candidates[0].fractions == a.candidates[0].fractions
+        assert np.array_equal(b.candidates[0].reflectance, a.candidates[0].reflectance)
 
 
 def test_a_correction_adds_no_toner_out_of_stock(cli):

@@ -30,7 +30,6 @@ from flakelab.cli.common import (
     read_readings,
     shares_text,
     texture_table,
-    tracked,
 )
 from flakelab.cli.lots import lots_report, shop_lots
 from flakelab.cli.matcher import (
@@ -71,11 +70,21 @@ def match_command(
         bool,
         typer.Option(
             "--all",
-            help="Match every sample of the file, one after another (a colour collection, a "
-            "day's cars): a table of each one's best recipe and verdict; --json gives each "
-            "one's report.",
+            help="Match every sample of the file (a colour collection, a day's cars), shared "
+            "out over --jobs processes: a table of each one's best recipe and verdict; --json "
+            "gives each one's report.",
         ),
     ] = False,
+    jobs: Annotated[
+        int | None,
+        typer.Option(
+            "--jobs",
+            "-j",
+            help="With --all: how many processes match the samples (each the same recipes as "
+            "one process gives).",
+            show_default="one per 4 samples, up to the cores",
+        ),
+    ] = None,
     recipe_dir: Annotated[
         Path | None,
         typer.Option(
@@ -271,6 +280,8 @@ def match_command(
             "--sample, --average, --render, --plot, --recipe-out, --nearest: for one target, "
             "not --all (--recipe-dir writes every sample's best recipe)"
         )
+    if jobs is not None and not all_samples:
+        raise FlakelabError("--jobs: for --all (one target is matched in one process)")
     if recipe_dir is not None and not all_samples:
         raise FlakelabError("--recipe-dir: for --all (--recipe-out writes one target's)")
     if recipe_dir is not None and not recipe_dir.is_dir():
@@ -295,7 +306,7 @@ def match_command(
 
         keywords = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
         _match_every_sample(read_measurements(path), path, forward, effect, keywords, can,
-                            recipe_dir, json_output)  # fmt: skip
+                            recipe_dir, json_output, jobs)  # fmt: skip
         return
     measurement, readings = read_readings(path, sample, average)
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
@@ -362,21 +373,33 @@ def _weigh_candidates(report: dict, candidates, forward, can) -> None:
 
 
 def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,
-                        json_output: bool) -> None:  # fmt: skip
+                        json_output: bool, jobs: int | None = None) -> None:  # fmt: skip
     """``match --all``: each reading of the file matched as ``match`` matches one (the
-    ``search``'s keywords), its best candidate weighed for the ``can`` (and written into
-    ``recipe_dir``); a reading the model cannot read is named in its row, and the rest go
-    on."""
+    ``search``'s keywords), by ``jobs`` processes (default: as many as pay,
+    :func:`~flakelab.match.batch.workers_for`), its best candidate weighed for the ``can``
+    (and written into ``recipe_dir``); a reading the model cannot read is named in its row,
+    and the rest go on."""
     from flakelab.io import write_recipe
-    from flakelab.match.search import match
+    from flakelab.match.batch import match_readings, workers_for
 
-    reports, names = [], set()
-    for reading in tracked(readings, "matching every sample", json_output):
+    readable, refused = [], {}
+    for i, reading in enumerate(readings):
         try:
             spectra_for_model(path, reading, forward)
-            result = match(reading, forward, effect, **search)
+            readable.append(i)
         except FlakelabError as error:  # this sample's: named in its row
-            reports.append({"target": reading.sample, "error": str(error)})
+            refused[i] = error
+    with progress_bar(json_output) as bar:
+        task = bar.add_task("matching every sample", total=len(readable))
+        matched = match_readings([readings[i] for i in readable], forward, effect,
+                                 jobs=workers_for(len(readable), jobs),
+                                 progress=lambda: bar.advance(task), **search)  # fmt: skip
+    results = refused | dict(zip(readable, matched, strict=True))
+    reports, names = [], set()
+    for i, reading in enumerate(readings):
+        result = results[i]
+        if isinstance(result, FlakelabError):
+            reports.append({"target": reading.sample, "error": str(result)})
             continue
         report = result.to_dict()
         _weigh_candidates(report, result.candidates, forward, can)

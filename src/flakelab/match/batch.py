@@ -1,0 +1,94 @@
+"""Many targets matched at once (``flakelab match --all``): the readings of a file shared out
+over this process and worker processes.
+
+:func:`~flakelab.match.search.match` runs on one thread (its batches are small, and a second
+thread only adds contention), so a file of many readings leaves the other cores idle. Here
+``jobs − 1`` worker processes are given the forward model once and take readings from the
+front of the file while this process takes them from the back: a worker needs a few seconds
+to start (the imports, the model, the compiled physics from numba's cache), and this process
+matches meanwhile, so sharing out is never much slower than matching alone. Each result is
+the reading's own, bit for bit, whichever process matched it (a match depends on its target
+and ``settings.seed`` alone). Workers are started with ``spawn``, not ``fork``: a forked
+copy of a process whose OpenMP threads already ran may hang.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+
+from flakelab.errors import FlakelabError
+from flakelab.match.search import MatchResult, match
+
+__all__ = ["match_readings", "workers_for"]
+
+_worker: dict = {}
+
+
+def workers_for(readings: int, jobs: int | None = None) -> int:
+    """How many processes match ``readings`` readings: ``jobs`` where given, else one for each
+    core this process may use; never more than the readings."""
+    if jobs is not None and jobs < 1:
+        raise FlakelabError(f"--jobs: expected a whole number from 1, got {jobs}")
+    if jobs is None:
+        cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+        jobs = len(cores) if cores else os.cpu_count() or 1
+    return max(1, min(jobs, readings))
+
+
+def match_readings(
+    readings: Sequence,
+    forward,
+    effect,
+    *,
+    jobs: int = 1,
+    progress: Callable[[], None] | None = None,
+    **keywords,
+) -> list[MatchResult | FlakelabError]:
+    """Each reading's :func:`~flakelab.match.search.match` (``keywords`` as it takes them), or
+    the :class:`~flakelab.errors.FlakelabError` that refused it, in the readings' order,
+    matched by ``jobs`` processes, this one among them; ``progress`` is called as each is
+    done (from another thread for a worker's)."""
+    results: list = [None] * len(readings)
+    if jobs <= 1 or len(readings) <= 1:
+        for i, reading in enumerate(readings):
+            results[i] = _matched(reading, forward, effect, keywords)
+            if progress:
+                progress()
+        return results
+    with ProcessPoolExecutor(
+        max_workers=jobs - 1,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_start_worker,
+        initargs=(forward, effect, keywords),
+    ) as pool:
+        futures = [pool.submit(_match_in_worker, reading) for reading in readings]
+        if progress:
+            for future in futures:
+                future.add_done_callback(lambda f: f.cancelled() or progress())
+        for i in reversed(range(len(readings))):  # a reading no worker took yet is this one's
+            if futures[i].cancel():
+                results[i] = _matched(readings[i], forward, effect, keywords)
+                if progress:
+                    progress()
+        for i, future in enumerate(futures):
+            if not future.cancelled():
+                results[i] = future.result()
+    return results
+
+
+def _matched(reading, forward, effect, keywords: dict) -> MatchResult | FlakelabError:
+    try:
+        return match(reading, forward, effect, **keywords)
+    except FlakelabError as error:  # this reading's: the others go on
+        return error
+
+
+def _start_worker(forward, effect, keywords: dict) -> None:
+    _worker.update(forward=forward, effect=effect, keywords=keywords)
+
+
+def _match_in_worker(reading) -> MatchResult | FlakelabError:
+    return _matched(reading, _worker["forward"], _worker["effect"], _worker["keywords"])
