@@ -365,6 +365,10 @@ def test_panels_read_one_at_a_time_end_where_reading_them_at_once_does(forward, 
     correlated, tin = after(read)
     marginal, alone = after(TonerLots(read.lots))  # each tin's own spread alone
     assert correlated.moved == ("Phthalo blue GS",) and marginal.moved == ()
+    # a tin read again for its strength alone is a fitted one, though its shade moves too
+    again = calibrate_lots(forward, library, panels[:1], readings[:1], read, shades=False)
+    assert set(again.toners) == {"Phthalo blue GS", "Al coarse bright"} and again.moved == ()
+    assert recorded(read, again).lots["Phthalo blue GS"].panels == 2
     for name in joint.toners:
         assert correlated.tin(name) == pytest.approx(joint.tin(name), rel=1e-3, abs=5e-4)
     # the second panel pinned Al coarse bright, and with it phthalo blue: surer, and nearer

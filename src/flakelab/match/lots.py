@@ -476,11 +476,13 @@ def _conditioned(start, prior, fitted, theta, posterior) -> tuple[NDArray, NDArr
 
 
 def _moved(names, fitted, start, prior, theta, covariance) -> tuple[str, ...]:
-    """The toners not ``fitted`` whose tins a calibration moved (by their correlations)."""
+    """The toners none of whose quantities were ``fitted`` whose tins a calibration moved
+    (by their correlations; a tin read --no-shade whose shade moved is a fitted one)."""
     T = len(names)
     changed = (theta != start) | (np.diag(covariance) != np.diag(prior))
-    changed[fitted] = False
-    return tuple(names[k] for k in np.flatnonzero(changed[:T] | changed[T:]))
+    moved = changed[:T] | changed[T:]
+    moved[fitted % T] = False
+    return tuple(names[k] for k in np.flatnonzero(moved))
 
 
 class _Tins:
