@@ -586,6 +586,23 @@ def test_cli_a_partners_own_panel_moves_the_tin_read_with_it(cli, tmp_path, forw
     printed = cli("lots", "calibrate", sprayed, "--recipe", recipe, "--lots", lots, "--dry-run")
     assert "moved with them" in printed.stdout and "Phthalo blue GS" in printed.stdout
 
+    # the two panels asked for together: the same recipes, each file named for its toner
+    folder = tmp_path / "panels"
+    folder.mkdir()
+    done = cli("lots", "panel", "Phthalo blue GS", "Al coarse bright", "--recipe-dir", folder,
+               "--json")  # fmt: skip
+    both_panels = {p["toner"]: p for p in json.loads(done.stdout)["panels"]}
+    assert both_panels["Phthalo blue GS"]["partner_in_set"]
+    assert not both_panels["Al coarse bright"]["partner_in_set"]
+    assert json.loads((folder / "Al_coarse_bright.json").read_text()) == json.loads(
+        recipe.read_text()
+    )
+    assert json.loads((folder / "Phthalo_blue_GS.json").read_text()) == json.loads(
+        (examples / "phthalo-blue-panel-recipe.json").read_text()
+    )
+    refused = cli("lots", "panel", "Phthalo blue GS", "Carbon black", "--recipe-out", recipe)
+    assert refused.returncode != 0 and "--recipe-dir writes each" in refused.stderr
+
     # both panels read at once end where reading them one after the other did
     at_once = tmp_path / "at-once.json"
     shipped = examples / "phthalo-blue-panel-recipe.json"

@@ -375,3 +375,17 @@ def reflow_help(app: typer.Typer) -> None:
             info.help = "\n\n".join(" ".join(p.split("\n")) for p in paragraphs)
     for group in app.registered_groups:
         reflow_help(group.typer_instance)
+
+
+def file_name_for(sample: str, taken: set[str]) -> str:
+    """A sample's name as a file name: what a file system takes, nothing else, and not one
+    already ``taken`` (two samples named alike get ``-2``, ``-3`` …); it joins them."""
+    import re
+
+    base = re.sub(r"[^\w.-]+", "_", sample).strip("._") or "sample"
+    name, k = base, 1
+    while name.lower() in taken:  # a file system may not tell the cases apart
+        k += 1
+        name = f"{base}-{k}"
+    taken.add(name.lower())
+    return name

@@ -21,6 +21,7 @@ from flakelab.cli.common import (
     check_output_file,
     console,
     errors,
+    file_name_for,
     read_readings,
     reports_errors,
 )
@@ -94,7 +95,10 @@ def lots_report(lots) -> dict[str, dict[str, float]]:
 @lots_app.command("panel")
 @reports_errors
 def panel_command(
-    toner: Annotated[str, typer.Argument(help="The toner whose tin is to be read.")],
+    toner: Annotated[
+        list[str],
+        typer.Argument(help="The toner whose tin is to be read (several: a panel for each)."),
+    ],
     quantity: Annotated[
         str, typer.Option(help="How much of the panel's paint to mix, e.g. 100g or 0.1l.")
     ] = "100g",
@@ -105,21 +109,60 @@ def panel_command(
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
     recipe_out: RecipeOutOption = None,
+    recipe_dir: Annotated[
+        Path | None,
+        typer.Option(help="Write each panel's recipe into this folder as TONER.json."),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """The calibration panel for a toner's tin: an OEM-like paint of the toner and one
     partner (an effect base, or the white of ISO 787-24's reduction), the pair and share
     whose colour depends most on the tin, weighed for the can. Spray it, read it, and
-    'flakelab lots calibrate' reads the tin's strength and shade from it."""
+    'flakelab lots calibrate' reads the tin's strength and shade from it; several toners'
+    panels, sprayed together, are read at once."""
     from flakelab.io import write_recipe
-    from flakelab.match.lots import calibration_recipes, de00_per_nm, de00_per_percent
-    from flakelab.match.recipe import order_can, weigh_whole_can
+    from flakelab.match.recipe import order_can
     from flakelab.match.stock import check_toners
 
     check_output_file(recipe_out, "--recipe-out")
+    if recipe_out is not None and len(toner) > 1:
+        raise FlakelabError("--recipe-out: for one toner's panel (--recipe-dir writes each)")
+    if recipe_dir is not None and not recipe_dir.is_dir():
+        raise FlakelabError(f"--recipe-dir: {recipe_dir}: not a folder")
     can = order_can(quantity, resolution)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
-    check_toners([toner], forward.toners)
+    check_toners(toner, forward.toners)
+    toners = list(dict.fromkeys(toner))
+    reports, names = [], set()
+    for name in toners:
+        report = _panel_report(name, forward, lib, can, resolution)
+        report["partner_in_set"] = report["partner"] in toners
+        out = (
+            recipe_out if recipe_dir is None else recipe_dir / f"{file_name_for(name, names)}.json"
+        )
+        if out is not None:
+            write_recipe(report["recipe_g"], out)
+            report["recipe_out"] = str(out)
+            errors.print(f"wrote {name}'s panel recipe to {out}", highlight=False)
+        reports.append(report)
+    if json_output:
+        print(json.dumps(reports[0] if len(reports) == 1 else {"panels": reports}, indent=2))
+        return
+    for report in reports:
+        _print_panel(report)
+    if len(reports) > 1:
+        console.print(
+            f"Spray the {len(reports)} panels together and read them at once: 'flakelab lots "
+            "calibrate' takes each spray-out with its --recipe in the same order.",
+            highlight=False,
+        )
+
+
+def _panel_report(toner: str, forward, lib, can, resolution: float) -> dict:
+    """``toner``'s calibration panel, weighed for ``can``, and what its reading tells."""
+    from flakelab.match.lots import calibration_recipes, de00_per_nm, de00_per_percent
+    from flakelab.match.recipe import weigh_whole_can
+
     x = calibration_recipes(forward, lib, (toner,))[0]
     fractions = {n: float(v) for n, v in zip(forward.toners, x, strict=True) if v > 0}
     grams_can = can.for_toners(lib, fractions).grams_for(fractions)
@@ -127,52 +170,52 @@ def panel_command(
     k = forward.toners.index(toner)
     partner = next(n for n in fractions if n != toner)
     partner_x = calibration_recipes(forward, lib, (partner,))[0]
-    partners_partner = next(
-        n for n, v in zip(forward.toners, partner_x, strict=True) if v > 0 and n != partner
-    )
-    per_percent = de00_per_percent(forward, x, k)
     per_nm = None if lib[toner].kind != "pigment" else de00_per_nm(forward, lib, x, k)
-    report = {
+    return {
         "toner": toner,
+        "quantity_g": grams_can,
         "recipe_g": weighing.grams,
         "shares": {n: round(v, 4) for n, v in fractions.items()},
-        "de00_per_percent": per_percent.round(3).tolist(),
+        "de00_per_percent": de00_per_percent(forward, x, k).round(3).tolist(),
         "de00_per_nm": None if per_nm is None else per_nm.round(3).tolist(),
         "geometries": list(forward.geometries),
         "partner": partner,
-        "partners_panel_partner": partners_partner,
+        "partners_panel_partner": next(
+            n for n, v in zip(forward.toners, partner_x, strict=True) if v > 0 and n != partner
+        ),
         "model": forward.name,
     }
-    if recipe_out is not None:
-        write_recipe(weighing.grams, recipe_out)
-        report["recipe_out"] = str(recipe_out)
-        errors.print(f"wrote the panel's recipe to {recipe_out}", highlight=False)
-    if json_output:
-        print(json.dumps(report, indent=2))
-        return
-    table = Table(title=f"Calibration panel for {toner} ({grams_can:g} g)", box=box.SIMPLE)
+
+
+def _print_panel(report: dict) -> None:
+    toner = report["toner"]
+    title = f"Calibration panel for {toner} ({report['quantity_g']:g} g)"
+    table = Table(title=title, box=box.SIMPLE)
     table.add_column("toner")
     table.add_column("g", justify="right")
-    for name, grams in weighing.grams.items():
+    for name, grams in report["recipe_g"].items():
         table.add_row(name, f"{grams:.1f}")
     console.print(table)
-    per = "  ".join(
-        f"{g} {d:.2f}"
-        for g, d in zip(report["geometries"], report["de00_per_percent"], strict=True)
-    )
-    console.print(f"ΔE00 for a tin 1 % stronger: {per}", highlight=False)
-    if per_nm is not None:
-        per = "  ".join(f"{g} {d:.2f}" for g, d in zip(report["geometries"], per_nm, strict=True))
-        console.print(f"ΔE00 for a tin 1 nm off in shade: {per}", highlight=False)
-    console.print(_partner_advice(toner, partner, partners_partner), highlight=False)
+    for what, key in (("a tin 1 % stronger", "de00_per_percent"),
+                      ("a tin 1 nm off in shade", "de00_per_nm")):  # fmt: skip
+        if report[key] is not None:
+            per = "  ".join(f"{g} {d:.2f}" for g, d in zip(report["geometries"], report[key],
+                                                           strict=True))  # fmt: skip
+            console.print(f"ΔE00 for {what}: {per}", highlight=False)
+    console.print(_partner_advice(report), highlight=False)
 
 
-def _partner_advice(toner: str, partner: str, partners_partner: str) -> str:
-    """What a panel of ``toner`` with ``partner`` reads, and how to read each tin alone."""
+def _partner_advice(report: dict) -> str:
+    """What a panel of a toner with its partner reads, and how to read each tin alone."""
+    toner, partner, partners_partner = (
+        report["toner"], report["partner"], report["partners_panel_partner"]
+    )  # fmt: skip
     advice = (
         f"The panel reads {toner}'s tin against {partner}'s: it tells how strong one is "
         f"against the other better than how strong either is. "
     )
+    if report.get("partner_in_set"):
+        return advice + f"{partner}'s own panel is among these: read them at once."
     if partners_partner != toner:
         return advice + (
             f"Read {partner}'s tin from its own panel too ('flakelab lots panel \"{partner}\"', "

@@ -24,6 +24,7 @@ from flakelab.cli.common import (
     draw_differences,
     draw_side_by_side,
     errors,
+    file_name_for,
     lights_option,
     print_notes,
     progress_bar,
@@ -404,7 +405,7 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
         report = result.to_dict()
         _weigh_candidates(report, result.candidates, forward, can)
         if recipe_dir is not None:
-            best = recipe_dir / f"{_file_name(reading.sample, names)}.json"
+            best = recipe_dir / f"{file_name_for(reading.sample, names)}.json"
             write_recipe({w["toner"]: w["grams"] for w in report["candidates"][0]["weights_g"]},
                          best)  # fmt: skip
             report["recipe_out"] = str(best)
@@ -413,20 +414,6 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
         print(json.dumps({"file": str(path), "targets": reports}, indent=2))
         return
     _print_every_sample(path, reports)
-
-
-def _file_name(sample: str, taken: set[str]) -> str:
-    """A sample's name as a file name: what a file system takes, nothing else, and not one
-    already ``taken`` (two samples named alike get ``-2``, ``-3`` …); it joins them."""
-    import re
-
-    base = re.sub(r"[^\w.-]+", "_", sample).strip("._") or "sample"
-    name, k = base, 1
-    while name.lower() in taken:  # a file system may not tell the cases apart
-        k += 1
-        name = f"{base}-{k}"
-    taken.add(name.lower())
-    return name
 
 
 def _print_every_sample(path, reports: list[dict]) -> None:
