@@ -530,9 +530,11 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     other = tmp_path / "other.json"
     write_lots(TonerLots.of([TonerLot("Phthalo blue GS", 1.05, model_id="old-model")]), other)
     poured = ("--poured", "Phthalo blue GS=1.0")
-    for args in (weigh, (*weigh, *poured), ("match", "--example", "--json")):
+    every = ("match", example_path("target"), "--all", "--json")
+    for args in (weigh, (*weigh, *poured), ("match", "--example", "--json"), every):
         notes = json.loads(cli(*args, "--lots", other).stdout)["notes"]
         assert any("read against model old-model" in n for n in notes), (args, notes)
+    assert json.loads(cli(*every, "--lots", lots).stdout)["lots"] == with_tin["lots"]
     shown = json.loads(cli("lots", "show", lots, "--json").stdout)
     assert shown["lots"][0]["toner"] == "Phthalo blue GS"
 

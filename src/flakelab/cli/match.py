@@ -306,8 +306,9 @@ def match_command(
         from flakelab.io import read_measurements
 
         keywords = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
+        shop_tins = {"lots": tins and lots_report(tins), "notes": lot_notes}
         _match_every_sample(read_measurements(path), path, forward, effect, keywords, can,
-                            recipe_dir, json_output, jobs)  # fmt: skip
+                            recipe_dir, json_output, jobs, shop_tins)  # fmt: skip
         return
     measurement, readings = read_readings(path, sample, average)
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
@@ -374,12 +375,15 @@ def _weigh_candidates(report: dict, candidates, forward, can) -> None:
 
 
 def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,
-                        json_output: bool, jobs: int | None = None) -> None:  # fmt: skip
+                        json_output: bool, jobs: int | None = None,
+                        shop_tins: dict | None = None) -> None:  # fmt: skip
     """``match --all``: each reading of the file matched as ``match`` matches one (the
-    ``search``'s keywords), by ``jobs`` processes (default: as many as pay,
+    ``search``'s keywords), by ``jobs`` processes (default: one per core,
     :func:`~flakelab.match.batch.workers_for`), its best candidate weighed for the ``can``
     (and written into ``recipe_dir``); a reading the model cannot read is named in its row,
-    and the rest go on."""
+    and the rest go on. ``shop_tins`` (the tins weighed for, and their notes) head the
+    report."""
+    shop_tins = shop_tins or {"lots": None, "notes": []}
     from flakelab.io import write_recipe
     from flakelab.match.batch import match_readings, workers_for
 
@@ -411,9 +415,13 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
             report["recipe_out"] = str(best)
         reports.append(report)
     if json_output:
-        print(json.dumps({"file": str(path), "targets": reports}, indent=2))
+        print(json.dumps({"file": str(path), **shop_tins, "targets": reports}, indent=2))
         return
     _print_every_sample(path, reports)
+    if shop_tins["lots"]:
+        console.print(f"weighed for the shop's tins: {len(shop_tins['lots'])} read off the "
+                      "standard", highlight=False)  # fmt: skip
+    print_notes(shop_tins["notes"])
 
 
 def _print_every_sample(path, reports: list[dict]) -> None:
