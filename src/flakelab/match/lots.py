@@ -47,11 +47,12 @@ While the model is linear over the tins' spread, panels read one after another t
 where reading them at once does. Over the 35 panels of 40 harness shops
 (``benchmarks/lot_calibration.py``, stop 75) the strengths read to 1.22 % RMS one at a time
 against 1.135 % at once, and to 1.355 % with each tin's own spread alone (the lot file before
-stop 75); the shades to 0.80 and 0.79 nm against 0.76 at once. The shade's gap is the χ²
-scale's: without it (20 shops) the shades read to 0.744 nm at once and 0.745 one at a time,
-while with it 0.707 at once. Read from a whole shop's panels, the scale weighs the panels
-that sit far from the model less; one panel's dozen degrees of freedom read it too loosely
-to do so.
+stop 75); the shades to 0.80 and 0.79 nm against 0.76 at once. The shade's gap comes with
+the χ² scale: without it (20 shops) the shades read to 0.744 nm at once and 0.745 one at a
+time, with it 0.707 at once and 0.744 one at a time. Drawing a single panel's scale towards
+1 (a prior of 30 degrees of freedom) changed nothing (0.803 nm, 40 shops), so it is not
+the scale's noise on a dozen degrees of freedom; why one scale over a shop's panels helps
+the shade, and one per panel does not, is not yet understood.
 
 **Against the standard's panel.** The model's error on a panel (σ_p) is the same whichever
 tin the panel was sprayed from. Given the paint maker's reading of the same panel from its
