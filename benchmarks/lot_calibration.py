@@ -1,7 +1,9 @@
 """How well the shop's tins are read when its calibration panels are read one at a time, as
 a shop sprays them (``flakelab lots calibrate`` once per panel, the lot file carried between),
-against reading every panel at once (the harness's ``--lots calibrated``): with the lot
-file's correlations kept, and with each tin's own spread alone (the lot file before stop 75).
+against reading every panel at once (the harness's ``--lots calibrated``): as the lot file
+carries them now (the tins' correlations and the shop's misfit to the model pooled over its
+panels), without the pooled misfit, and with each tin's own spread alone (the lot file
+before stop 75).
 Each trial is a harness target's shop (its tins drawn by the world), every toner's D-optimal
 panel sprayed once from them and read against the model; the figures are the RMS error of
 the tins' strengths and of the pigments' shades, averaged over the trials, with each mode's
@@ -24,19 +26,26 @@ from flakelab.match.evaluate import harness_trials
 from flakelab.match.lots import calibrate_lots, calibration_recipes, recorded
 from timing import print_report
 
-MODES = ("at once", "one at a time", "one at a time, own spreads alone")
+MODES = {
+    # mode: (the correlations kept, the misfit pooled) between panels read one at a time
+    "at once": None,
+    "one at a time": (True, True),
+    "one at a time, misfit not pooled": (True, False),
+    "one at a time, own spreads alone": (False, False),
+}
 
 
 def read_tins(forward, library, panels, readings, mode: str) -> TonerLots:
     """The tins read from ``readings`` of ``panels`` in ``mode`` (:data:`MODES`)."""
-    if mode == "at once":
+    if MODES[mode] is None:
         return recorded(TonerLots(), calibrate_lots(forward, library, panels, readings))
+    correlated, pooled = MODES[mode]
     lots = TonerLots()
     for panel, reading in zip(panels, readings, strict=True):
         found = calibrate_lots(forward, library, panel[None], reading[None], lots)
         lots = recorded(lots, found)
-        if mode != "one at a time":
-            lots = TonerLots(lots.lots, lots.library)  # the correlations dropped
+        lots = TonerLots(lots.lots, lots.library, lots.correlations if correlated else {},
+                         lots.misfit if pooled else {})  # fmt: skip
     return lots
 
 

@@ -378,6 +378,32 @@ def test_panels_read_one_at_a_time_end_where_reading_them_at_once_does(forward, 
     assert abs(tin[0] - joint_tin[0]) < 0.1 * abs(alone[0] - joint_tin[0])
 
 
+def test_a_shops_misfit_to_the_model_is_pooled_over_its_panels(forward, library):
+    """A panel read against the model sits some χ² from it; the lot file pools that χ² over
+    the shop's panels (by model and what they were read against), and a later panel's
+    covariance is scaled by the pooled ratio, not by its own alone: a shop whose panels sat
+    four times the covariance from the model reads a panel that fits exactly as surely as
+    four times the covariance allows, not as surely as its own fit alone says."""
+    panel = calibration_recipes(forward, library, ("DPP red",))
+    s = _strengths(forward.toners, DPP_red=1.02)
+    exact = _panel_reading(forward, panel, s)
+    key = (forward.model_id, "model")
+    alone = calibrate_lots(forward, library, panel, exact)
+    shop = TonerLots(misfit={key: (400.0, 100)})
+    pooled = calibrate_lots(forward, library, panel, exact, shop)
+    assert alone.misfit[:2] == key and alone.misfit[2] < 0.05  # read as the model predicts
+    # what the panel reads, the two tins' ratio, is as sure as √3.6 times less (the prior
+    # holds each strength alone)
+    (ratio_alone,), (ratio_pooled,) = read_together(alone), read_together(pooled)
+    assert 1.5 < ratio_pooled["ratio_sd"] / ratio_alone["ratio_sd"] < np.sqrt(404 / 112) + 0.01
+    again = recorded(recorded(shop, pooled), alone)
+    assert again.misfit[key] == (400.0 + pooled.misfit[2] + alone.misfit[2],
+                                 100 + pooled.misfit[3] + alone.misfit[3])  # fmt: skip
+    against_standard = calibrate_lots(forward, library, panel, exact, shop, standards=exact)
+    assert against_standard.misfit[1] == "standard"
+    assert recorded(shop, against_standard).misfit[key] == (400.0, 100)
+
+
 def test_a_lot_files_correlations_must_hold_at_once():
     tins = [TonerLot(n, 1.0) for n in ("A", "B", "C")]
     strength = {n: (n, "strength") for n in "ABC"}
@@ -403,15 +429,17 @@ def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
         ).lots,
         "flakelab demo",
         {(("Al coarse bright", "strength"), ("Phthalo blue GS", "strength")): 0.93},
+        {("m", "model"): (31.5, 13), ("m", "standard"): (20.0, 26)},
     )  # fmt: skip
     path = tmp_path / "lots.json"
     write_lots(lots, path)
     assert read_lots(path) == lots
     # a file written before correlations were kept: none
     two = json.loads(path.read_text())
-    del two["correlations"]
+    del two["correlations"], two["misfit"]
     (tmp_path / "version-2.json").write_text(json.dumps({**two, "version": 2}))
     assert read_lots(tmp_path / "version-2.json").correlations == {}
+    assert read_lots(tmp_path / "version-2.json").misfit == {}
     # a file written before shades were read: every tin at the standard's shade
     old = tmp_path / "version-1.json"
     tin = {"toner": "Phthalo blue GS", "strength": 1.02}
@@ -443,6 +471,14 @@ def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
     refused({**good, "correlations": [pair, pair]}, "correlations[1]", "once")
     refused({**good, "correlations": [{"a": pair["a"], "r": 0.5}]}, "correlations[0]", "a, b")
     refused({**good, "colour": 1}, "colour", "not a field")
+    fit = good["misfit"][0]
+    refused({**good, "misfit": {}}, "misfit", "list")
+    refused({**good, "misfit": [{**fit, "against": "paint"}]}, "misfit", "against", "paint")
+    refused({**good, "misfit": [{**fit, "chi2": "large"}]}, "misfit[0]", "chi2", "number")
+    refused({**good, "misfit": [{**fit, "chi2": -1.0}]}, "misfit", "χ² ≥ 0")
+    refused({**good, "misfit": [{**fit, "dof": 1.5}]}, "misfit[0]", "dof", "whole number")
+    refused({**good, "misfit": [fit, fit]}, "misfit[1]", "twice")
+    refused({**good, "misfit": [{"model_id": "m"}]}, "misfit[0]", "against, chi2, dof")
     refused({**good, "lots": [{**lot, "shade_nm": 12.0}]}, "shade_nm", "nm")
     refused({**good, "lots": [{**lot, "shade_sd_nm": "wide"}]}, "shade_sd_nm", "number")
     refused({**good, "lots": {}}, "lots")

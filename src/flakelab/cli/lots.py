@@ -426,7 +426,8 @@ def calibrate_command(
             }
             for pair in read_together(found)
         ],  # fmt: skip
-        "against": "standard" if standard is not None else "model",
+        "against": "standard" if standard else "model",
+        "misfit": _misfit_report(updated, found.misfit[:2]),
         "panels": [
             {
                 "sprayed": str(path),
@@ -501,10 +502,24 @@ def _print_calibration(report: dict) -> None:
             highlight=False,
         )
     _print_read_together(report["read_together"], source, several)
+    misfit = report["misfit"]
+    console.print(
+        f"the shop's panels read against {against} so far sit χ²/dof = "
+        f"{misfit['chi2_per_dof']:.2f} from it over {misfit['dof']} degrees of freedom: "
+        f"their covariance is scaled by {max(1.0, misfit['chi2_per_dof']):.2f}",
+        highlight=False,
+    )
     where = (
         f"wrote {report['lots']}" if report["written"] else f"--dry-run: {report['lots']} unchanged"
     )
     errors.print(where, highlight=False)
+
+
+def _misfit_report(lots, key: tuple[str, str]) -> dict:
+    """The shop's pooled misfit to a model read against one thing (``key``), for a report."""
+    chi2, dof = lots.misfit.get(key, (0.0, 0))
+    return {"model_id": key[0], "against": key[1], "chi2_per_dof": round(chi2 / max(dof, 1), 3),
+            "dof": dof}  # fmt: skip
 
 
 MOST_PAIRS_PRINTED = 3
@@ -569,6 +584,7 @@ def show_command(
                         {**asdict(t), "read_with": found.read_with(t.toner)}
                         for t in found.lots.values()
                     ],
+                    "misfit": [_misfit_report(found, key) for key in sorted(found.misfit)],
                 },
                 indent=2,
             )
@@ -591,6 +607,13 @@ def show_command(
             _read_with_text(found.read_with(name)),
         )
     console.print(table)
+    for key in sorted(found.misfit):
+        misfit = _misfit_report(found, key)
+        console.print(
+            f"panels read against the {key[1]} ({key[0]}): χ²/dof {misfit['chi2_per_dof']:.2f} "
+            f"over {misfit['dof']} degrees of freedom",
+            highlight=False,
+        )
     if any(found.read_with(name) for name in found.lots):
         console.print(
             "read with: tins read together, whose strengths' ratio is surer than either; a "

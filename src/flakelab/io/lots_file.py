@@ -9,12 +9,16 @@
                "shade_sd_nm": 0.3},
               {"toner": "Al coarse bright", "strength": 0.975, ...}],
      "correlations": [{"a": ["Al coarse bright", "strength"],
-                       "b": ["Phthalo blue GS", "strength"], "r": 0.93}]}
+                       "b": ["Phthalo blue GS", "strength"], "r": 0.93}],
+     "misfit": [{"model_id": "demo-five-angle 65a5a7b88eab", "against": "model",
+                 "chi2": 31.2, "dof": 13}]}
 
 ``correlations`` (version 3) are those between the tins' read quantities (log strength,
 shade) that calibrating left (two tins read from one panel are read together); a pair not
-listed is uncorrelated. Version 2 files have none; version 1 files (before shades were read)
-are read with every tin at the standard's shade.
+listed is uncorrelated. ``misfit`` (version 3) is the χ² of the panels read so far about
+their covariance, by model and by what they were read against, with its degrees of freedom.
+Version 2 files have neither; version 1 files (before shades were read) are read with every
+tin at the standard's shade.
 """
 
 from __future__ import annotations
@@ -64,14 +68,39 @@ def read_lots(path: str | PathLike) -> TonerLots:
     library = document.get("library", "")
     if not isinstance(library, str):
         raise FlakelabError(f"{path}: library: expected a name, got {library!r}")
-    unknown = sorted(set(document) - {"format", "version", "library", "lots", "correlations"})
+    top_level = {"format", "version", "library", "lots", "correlations", "misfit"}
+    unknown = sorted(set(document) - top_level)
     if unknown:
         raise FlakelabError(f"{path}: {unknown[0]}: not a field of a toner-lot file")
     correlations = _correlations(path, document.get("correlations", []))
+    misfit = _misfit(path, document.get("misfit", []))
     try:
-        return TonerLots({lot.toner: lot for lot in lots}, library, correlations)
+        return TonerLots({lot.toner: lot for lot in lots}, library, correlations, misfit)
     except ValueError as error:
         raise FlakelabError(f"{path}: {error}") from None
+
+
+def _misfit(path: Path, entries) -> dict:
+    """The misfit of a file's ``misfit`` list, by (model id, read against), each once."""
+    if not isinstance(entries, list):
+        raise FlakelabError(f"{path}: misfit: expected a list of models' misfits")
+    found = {}
+    for index, entry in enumerate(entries):
+        where = f"{path}: misfit[{index}]"
+        if not isinstance(entry, dict) or set(entry) != {"model_id", "against", "chi2", "dof"}:
+            raise FlakelabError(f"{where}: expected an object with model_id, against, chi2, dof")
+        key = (entry["model_id"], entry["against"])
+        if not all(isinstance(v, str) for v in key):
+            raise FlakelabError(f"{where}: model_id, against: expected text, got {key!r}")
+        if not is_number(entry["chi2"]):
+            raise FlakelabError(f"{where}: chi2: expected a number, got {entry['chi2']!r}")
+        dof = entry["dof"]
+        if not isinstance(dof, int) or isinstance(dof, bool):
+            raise FlakelabError(f"{where}: dof: expected a whole number, got {dof!r}")
+        if key in found:
+            raise FlakelabError(f"{where}: {key[0]} read against the {key[1]}: listed twice")
+        found[key] = (float(entry["chi2"]), dof)
+    return found
 
 
 def _correlations(path: Path, entries) -> dict:
@@ -137,6 +166,10 @@ def write_lots(lots: TonerLots, path: str | PathLike) -> None:
         "lots": [asdict(lots.lots[name]) for name in sorted(lots.lots)],
         "correlations": [
             {"a": list(a), "b": list(b), "r": r} for (a, b), r in sorted(lots.correlations.items())
+        ],
+        "misfit": [
+            {"model_id": model_id, "against": against, "chi2": chi2, "dof": dof}
+            for (model_id, against), (chi2, dof) in sorted(lots.misfit.items())
         ],
     }
     text = json.dumps(document, indent=1, ensure_ascii=False) + "\n"

@@ -29,6 +29,7 @@ __all__ = [
     "LOT_STRENGTH_SD",
     "MAX_SHADE_NM",
     "QUANTITIES",
+    "READ_AGAINST",
     "READ_TOGETHER",
     "Quantity",
     "TonerLot",
@@ -96,6 +97,10 @@ class TonerLot:
             raise ValueError(f"panels: expected 0 or more, got {self.panels!r}")
 
 
+READ_AGAINST = ("model", "standard")
+"""What a panel is read against: the model's prediction of it, or the paint maker's reading
+of it from the standard tins (whose covariance holds no model error)."""
+
 QUANTITIES = ("strength", "shade")
 """What a tin is read for; a calibration's parameters are each tin's log strength and shade,
 in this order (:meth:`TonerLots.covariance`)."""
@@ -110,13 +115,27 @@ class TonerLots:
     ``correlations`` between the tins' read quantities (log strength, shade), by pair, sorted
     within it: two tins read from the same panel are read together, and a later panel of one
     tells about the other (:func:`~flakelab.match.lots.calibrate_lots`). A pair not listed is
-    uncorrelated."""
+    uncorrelated. ``misfit`` holds, by (model id, what the panels were read against), the
+    χ² of every panel read so far about its covariance and its degrees of freedom: a
+    calibration scales its panels' covariance by the shop's pooled ratio, not by its own
+    panels' alone (:func:`~flakelab.match.lots.calibrate_lots`)."""
 
     lots: Mapping[str, TonerLot] = field(default_factory=dict)
     library: str = ""
     correlations: Mapping[tuple[Quantity, Quantity], float] = field(default_factory=dict)
+    misfit: Mapping[tuple[str, str], tuple[float, int]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        for (model_id, against), (chi2, dof) in self.misfit.items():
+            if against not in READ_AGAINST:
+                raise ValueError(
+                    f"misfit: against: expected one of {', '.join(READ_AGAINST)}, got {against!r}"
+                )
+            if not (math.isfinite(chi2) and chi2 >= 0 and isinstance(dof, int) and dof >= 0):
+                raise ValueError(
+                    f"misfit ({model_id}, {against}): expected χ² ≥ 0 and a whole number of "
+                    f"degrees of freedom, got {chi2!r} and {dof!r}"
+                )
         for (a, b), r in self.correlations.items():
             for toner, quantity in (a, b):
                 if toner not in self.lots:
@@ -205,6 +224,7 @@ class TonerLots:
                 for pair, r in self.correlations.items()
                 if pair[0][0] not in gone and pair[1][0] not in gone
             },  # fmt: skip
+            self.misfit,
         )
 
     def replaced(
@@ -216,11 +236,19 @@ class TonerLots:
         on file replace those of ``names``' tins (the rest stay)."""
         merged = {**self.lots, **{lot.toner: lot for lot in lots}}
         if covariance is None:
-            return TonerLots(merged, self.library, self.correlations)
+            return TonerLots(merged, self.library, self.correlations, self.misfit)
         read = set(names)
         kept = {pair: r for pair, r in self.correlations.items()
                 if pair[0][0] not in read and pair[1][0] not in read}  # fmt: skip
-        return TonerLots(merged, self.library, {**kept, **_correlations(covariance, names, merged)})
+        correlations = {**kept, **_correlations(covariance, names, merged)}
+        return TonerLots(merged, self.library, correlations, self.misfit)
+
+    def with_misfit(self, model_id: str, against: str, chi2: float, dof: int) -> TonerLots:
+        """These lots with the panels' misfit to model ``model_id`` read ``against`` (one of
+        :data:`READ_AGAINST`) grown by ``chi2`` over ``dof`` more degrees of freedom."""
+        before = self.misfit.get((model_id, against), (0.0, 0))
+        misfit = {**self.misfit, (model_id, against): (before[0] + chi2, before[1] + dof)}
+        return TonerLots(self.lots, self.library, self.correlations, misfit)
 
 
 CORRELATION_KEPT = 1e-6

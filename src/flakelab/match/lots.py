@@ -33,7 +33,9 @@ averaged), θ₀ ± Σ₀ the tins' last readings or the standard ± :data:`~fla
 LOT_STRENGTH_SD` (± :data:`~flakelab.library.lots.LOT_SHADE_SD_NM` in shade). Where the
 panels sit further from the model than C allows (χ² above its degrees of freedom), C is
 scaled up by the ratio and the fit run again, so the tins are not read more surely than the
-residuals warrant. The posterior's covariance is the inverse of the last step's normal
+residuals warrant. The χ² and its degrees of freedom pool the shop's earlier panels read
+against the same model the same way (``TonerLots.misfit``): the model's misfit is the
+shop's, not one panel's. The posterior's covariance is the inverse of the last step's normal
 matrix: a tin read from a panel that hardly depends on it keeps its prior.
 
 **One panel at a time.** A shop sprays and reads its panels one by one, and the lot file
@@ -45,14 +47,13 @@ keeps it. Once a panel's own tins are read, every other tin follows them as far 
 Gaussian), and the file's correlations are replaced by the posterior's (:func:`recorded`).
 While the model is linear over the tins' spread, panels read one after another then end
 where reading them at once does. Over the 35 panels of 40 harness shops
-(``benchmarks/lot_calibration.py``, stop 75) the strengths read to 1.22 % RMS one at a time
-against 1.135 % at once, and to 1.355 % with each tin's own spread alone (the lot file before
-stop 75); the shades to 0.80 and 0.79 nm against 0.76 at once. The shade's gap comes with
-the χ² scale: without it (20 shops) the shades read to 0.744 nm at once and 0.745 one at a
-time, with it 0.707 at once and 0.744 one at a time. Drawing a single panel's scale towards
-1 (a prior of 30 degrees of freedom) changed nothing (0.803 nm, 40 shops), so it is not
-the scale's noise on a dozen degrees of freedom; why one scale over a shop's panels helps
-the shade, and one per panel does not, is not yet understood.
+(``benchmarks/lot_calibration.py``, stop 75) the strengths read to 1.19 % RMS one at a time
+and the shades to 0.748 nm, against 1.135 % and 0.757 nm at once; with each tin's own spread
+alone and each panel's misfit its own (the lot file before stop 75), 1.355 % and 0.787 nm.
+The pooled misfit is what brings the shade: with the correlations alone, 1.22 % and 0.80 nm.
+A single panel's χ² scale, drawn towards 1 by a prior of 30 degrees of freedom instead, did
+not help (0.803 nm): the model's misfit is the shop's, above 1, and one panel reads it
+poorly.
 
 **Against the standard's panel.** The model's error on a panel (σ_p) is the same whichever
 tin the panel was sprayed from. Given the paint maker's reading of the same panel from its
@@ -291,6 +292,7 @@ class LotCalibration:
     theta: NDArray
     covariance: NDArray
     moved: tuple[str, ...]
+    misfit: tuple[str, str, float, int]  # (model id, read against, χ², degrees of freedom)
 
     @property
     def log_strength_cov(self) -> NDArray:
@@ -394,11 +396,15 @@ def calibrate_lots(
         L = _whitened(forward, library, x, 1 / panels + 1, persistent_sd=0.0)
     measured = measured.reshape(len(x), -1)
     before = tins.worst_de00(theta, measured)
-    scale = 1.0  # the covariance's scale, read from the residuals (module notes)
+    against = "model" if standards is None else "standard"
+    pooled_chi2, pooled_dof = lots.misfit.get((forward.model_id, against), (0.0, 0))
+    dof = max(measured.size - len(fitted), 1)
+    scale = 1.0  # the covariance's scale, read from the residuals, the shop's earlier too
     for _ in range(2):
         theta, normal, chi2 = _gauss_newton(tins, theta, fitted, measured, L / np.sqrt(scale),
                                             theta0, precision0)  # fmt: skip
-        scale = max(1.0, scale * chi2 / max(measured.size - len(fitted), 1))
+        misfit = scale * chi2  # about the covariance unscaled
+        scale = max(1.0, (pooled_chi2 + misfit) / (pooled_dof + dof))
     theta, covariance = _conditioned(start, prior, fitted, theta, np.linalg.inv(normal))
     posterior_sd = np.sqrt(np.diag(covariance))
     strength = np.exp(theta[toner_index])
@@ -419,6 +425,7 @@ def calibrate_lots(
         theta=theta,
         covariance=covariance,
         moved=_moved(names, fitted, start, prior, theta, covariance),
+        misfit=(forward.model_id, against, float(misfit), int(dof)),
     )
 
 
@@ -435,7 +442,7 @@ def recorded(
     ``when`` against model ``model_id`` (from ``panels`` more panels, default one; its lot
     number from ``numbers``, or the one on file), each tin it :attr:`~LotCalibration.moved`
     at its new reading (its lot, panels and model as they were), and the correlations the
-    reading left."""
+    reading left, with the readings' χ² added to the shop's misfit to the model."""
     numbers, panels = numbers or {}, panels or {}
     tins = []
     for name in found.toners:
@@ -452,7 +459,7 @@ def recorded(
         strength, strength_sd, shade, shade_sd = found.tin(name)
         tins.append(replace(lots.lots[name], strength=strength, strength_sd=strength_sd,
                             shade_nm=shade, shade_sd_nm=shade_sd, calibrated=when))  # fmt: skip
-    return lots.replaced(tins, found.covariance, found.names)
+    return lots.replaced(tins, found.covariance, found.names).with_misfit(*found.misfit)
 
 
 def _conditioned(start, prior, fitted, theta, posterior) -> tuple[NDArray, NDArray]:
