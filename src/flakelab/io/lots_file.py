@@ -80,15 +80,22 @@ def read_lots(path: str | PathLike) -> TonerLots:
         raise FlakelabError(f"{path}: {error}") from None
 
 
+def _entries(path: Path, name: str, entries, keys: tuple[str, ...]):
+    """Each entry of a file's list ``name`` with where it is, every one an object of
+    ``keys`` exactly."""
+    if not isinstance(entries, list):
+        raise FlakelabError(f"{path}: {name}: expected a list")
+    for index, entry in enumerate(entries):
+        where = f"{path}: {name}[{index}]"
+        if not isinstance(entry, dict) or set(entry) != set(keys):
+            raise FlakelabError(f"{where}: expected an object with {', '.join(keys)}")
+        yield where, entry
+
+
 def _misfit(path: Path, entries) -> dict:
     """The misfit of a file's ``misfit`` list, by (model id, read against), each once."""
-    if not isinstance(entries, list):
-        raise FlakelabError(f"{path}: misfit: expected a list of models' misfits")
     found = {}
-    for index, entry in enumerate(entries):
-        where = f"{path}: misfit[{index}]"
-        if not isinstance(entry, dict) or set(entry) != {"model_id", "against", "chi2", "dof"}:
-            raise FlakelabError(f"{where}: expected an object with model_id, against, chi2, dof")
+    for where, entry in _entries(path, "misfit", entries, ("model_id", "against", "chi2", "dof")):
         key = (entry["model_id"], entry["against"])
         if not all(isinstance(v, str) for v in key):
             raise FlakelabError(f"{where}: model_id, against: expected text, got {key!r}")
@@ -105,13 +112,8 @@ def _misfit(path: Path, entries) -> dict:
 
 def _correlations(path: Path, entries) -> dict:
     """The correlations of a file's ``correlations`` list, each pair sorted, once."""
-    if not isinstance(entries, list):
-        raise FlakelabError(f"{path}: correlations: expected a list of pairs")
     found = {}
-    for index, entry in enumerate(entries):
-        where = f"{path}: correlations[{index}]"
-        if not isinstance(entry, dict) or set(entry) != {"a", "b", "r"}:
-            raise FlakelabError(f"{where}: expected an object with a, b and r")
+    for where, entry in _entries(path, "correlations", entries, ("a", "b", "r")):
         pair = []
         for side in ("a", "b"):
             quantity = entry[side]
