@@ -277,14 +277,10 @@ class LotCalibration:
     with them (``moved``)."""
 
     toners: tuple[str, ...]
-    strength: NDArray
-    strength_sd: NDArray
     prior_strength: NDArray
     prior_sd: NDArray
     de00_before: NDArray
     de00_after: NDArray
-    shade: NDArray
-    shade_sd: NDArray
     prior_shade: NDArray
     prior_shade_sd: NDArray
     shaded: NDArray
@@ -295,16 +291,40 @@ class LotCalibration:
     misfit: tuple[str, str, float, int]  # (model id, read against, χ², degrees of freedom)
 
     @property
+    def _index(self) -> NDArray:
+        return np.array([self.names.index(t) for t in self.toners], int)
+
+    @property
+    def _sd(self) -> NDArray:
+        return np.sqrt(np.diag(self.covariance))
+
+    @property
+    def strength(self) -> NDArray:
+        """The fitted toners' tins' strengths ``[n]``."""
+        return np.exp(self.theta[self._index])
+
+    @property
+    def strength_sd(self) -> NDArray:
+        return self.strength * self._sd[self._index]
+
+    @property
+    def shade(self) -> NDArray:
+        """The fitted toners' tins' shades ``[n]`` [nm] (a shade not read: as it stood)."""
+        return self.theta[len(self.names) + self._index]
+
+    @property
+    def shade_sd(self) -> NDArray:
+        return self._sd[len(self.names) + self._index]
+
+    @property
     def log_strength_cov(self) -> NDArray:
         """The posterior covariance ``[n, n]`` of the fitted toners' log strengths."""
-        k = [self.names.index(t) for t in self.toners]
-        return self.covariance[np.ix_(k, k)]
+        return self.covariance[np.ix_(self._index, self._index)]
 
     def tin(self, name: str) -> tuple[float, float, float, float]:
         """Toner ``name``'s tin as read: strength ± its deviation, shade ± its deviation [nm]
         (a tin :attr:`moved` by its correlations as well as a fitted one)."""
-        k, T = self.names.index(name), len(self.names)
-        sd = np.sqrt(np.diag(self.covariance))
+        k, T, sd = self.names.index(name), len(self.names), self._sd
         strength = float(np.exp(self.theta[k]))
         return strength, strength * float(sd[k]), float(self.theta[T + k]), float(sd[T + k])
 
@@ -405,19 +425,14 @@ def calibrate_lots(
                                             theta0, precision0)  # fmt: skip
         misfit = scale * chi2  # about the covariance unscaled
         scale = max(1.0, (pooled_chi2 + misfit) / (pooled_dof + dof))
-    theta, covariance = _conditioned(start, prior, fitted, theta, np.linalg.inv(normal))
-    posterior_sd = np.sqrt(np.diag(covariance))
-    strength = np.exp(theta[toner_index])
+    theta, covariance = _conditioned(start, prior, fitted, theta, np.linalg.inv(normal),
+                                     precision0)  # fmt: skip
     return LotCalibration(
         toners=tuple(names[i] for i in toner_index),
-        strength=strength,
-        strength_sd=strength * posterior_sd[toner_index],
         prior_strength=np.exp(start[toner_index]),
         prior_sd=np.exp(start[toner_index]) * sd[toner_index],
         de00_before=before,
         de00_after=tins.worst_de00(theta, measured),
-        shade=theta[T + toner_index],
-        shade_sd=posterior_sd[T + toner_index],
         prior_shade=shade[toner_index],
         prior_shade_sd=sd[T + toner_index],
         shaded=shaded,
@@ -462,16 +477,17 @@ def recorded(
     return lots.replaced(tins, found.covariance, found.names).with_misfit(*found.misfit)
 
 
-def _conditioned(start, prior, fitted, theta, posterior) -> tuple[NDArray, NDArray]:
+def _conditioned(start, prior, fitted, theta, posterior, precision) -> tuple[NDArray, NDArray]:
     """Every tin's state ``[2T]`` and covariance ``[2T, 2T]`` once the ``fitted`` entries of
-    ``start`` (prior covariance ``prior``) were read at ``theta[fitted]`` ± ``posterior``. The
+    ``start`` (prior covariance ``prior``, ``precision`` the inverse of its fitted block) were
+    read at ``theta[fitted]`` ± ``posterior``. The
     panels depend on the fitted entries alone, so the rest follow them as far as the prior
     correlates them (Gaussian conditioning, as a Rauch–Tung–Striebel smoother carries a
     state's update to its neighbours): reading a tin's own panel moves the tins read together
     with it before, and reading all panels one at a time ends where reading them at once does
     while the model is linear over the tins' spread."""
     rest = np.setdiff1d(np.arange(len(start)), fitted)
-    gain = prior[np.ix_(rest, fitted)] @ np.linalg.inv(prior[np.ix_(fitted, fitted)])
+    gain = prior[np.ix_(rest, fitted)] @ precision
     theta = theta.copy()
     theta[rest] = start[rest] + gain @ (theta[fitted] - start[fitted])
     covariance = prior.copy()
