@@ -3,10 +3,10 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from datetime import UTC, datetime
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Annotated
 
 import numpy as np
@@ -121,6 +121,7 @@ def panel_command(
     'flakelab lots calibrate' reads the tin's strength and shade from it; several toners'
     panels, sprayed together, are read at once."""
     from flakelab.io import write_recipe
+    from flakelab.match.lots import calibration_recipes
     from flakelab.match.recipe import order_can
     from flakelab.match.stock import check_toners
 
@@ -133,9 +134,14 @@ def panel_command(
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
     check_toners(toner, forward.toners)
     toners = list(dict.fromkeys(toner))
+
+    @functools.cache
+    def panel_of(name: str):  # a partner among the toners asked for: its panel chosen once
+        return calibration_recipes(forward, lib, (name,))[0]
+
     reports, names = [], set()
     for name in toners:
-        report = _panel_report(name, forward, lib, can, resolution)
+        report = _panel_report(name, panel_of, forward, lib, can, resolution)
         report["partner_in_set"] = report["partner"] in toners
         out = (
             recipe_out if recipe_dir is None else recipe_dir / f"{file_name_for(name, names)}.json"
@@ -158,18 +164,19 @@ def panel_command(
         )
 
 
-def _panel_report(toner: str, forward, lib, can, resolution: float) -> dict:
-    """``toner``'s calibration panel, weighed for ``can``, and what its reading tells."""
-    from flakelab.match.lots import calibration_recipes, de00_per_nm, de00_per_percent
+def _panel_report(toner: str, panel_of, forward, lib, can, resolution: float) -> dict:
+    """``toner``'s calibration panel (``panel_of`` a toner gives its panel's fractions),
+    weighed for ``can``, and what its reading tells."""
+    from flakelab.match.lots import de00_per_nm, de00_per_percent
     from flakelab.match.recipe import weigh_whole_can
 
-    x = calibration_recipes(forward, lib, (toner,))[0]
+    x = panel_of(toner)
     fractions = {n: float(v) for n, v in zip(forward.toners, x, strict=True) if v > 0}
     grams_can = can.for_toners(lib, fractions).grams_for(fractions)
     weighing = weigh_whole_can(forward, fractions, grams_can, resolution)
     k = forward.toners.index(toner)
     partner = next(n for n in fractions if n != toner)
-    partner_x = calibration_recipes(forward, lib, (partner,))[0]
+    partner_x = panel_of(partner)
     per_nm = None if lib[toner].kind != "pigment" else de00_per_nm(forward, lib, x, k)
     return {
         "toner": toner,
@@ -463,9 +470,7 @@ def _lot_numbers(given: list[str]) -> dict[str, str]:
 def _print_calibration(report: dict) -> None:
     several = len(report["panels"]) > 1
     source = f"the {len(report['panels'])} panels" if several else "the panel"
-    table = Table(title=f"The shop's tins, read from {source}", box=box.SIMPLE)
-    for column in ("toner", "lot", "before", "now", "change", "shade"):
-        table.add_column(column, justify="left" if column in ("toner", "lot") else "right")
+    table = _tins_table(f"The shop's tins, read from {source}")
     for t in report["tins"]:
         before = "standard" if t["new_tin"] else f"{t['before']:.3f} ± {t['before_sd']:.3f}"
         change = 100 * (t["strength"] - t["before"])
@@ -480,9 +485,7 @@ def _print_calibration(report: dict) -> None:
         )
     console.print(table)
     if report["moved"]:
-        moved = Table(title="Tins read together with these before, moved with them", box=box.SIMPLE)
-        for column in ("toner", "lot", "before", "now", "change", "shade"):
-            moved.add_column(column, justify="left" if column in ("toner", "lot") else "right")
+        moved = _tins_table("Tins read together with these before, moved with them")
         for t in report["moved"]:
             moved.add_row(
                 t["toner"],
@@ -490,7 +493,7 @@ def _print_calibration(report: dict) -> None:
                 f"{t['before']:.3f}",
                 f"{t['strength']:.3f} ± {t['strength_sd']:.3f}",
                 f"{100 * (t['strength'] - t['before']):+.1f} %",
-                _shade_text(SimpleNamespace(shade_nm=t["shade_nm"], shade_sd_nm=t["shade_sd_nm"])),
+                _shade_text(t["shade_nm"], t["shade_sd_nm"]),
             )
         console.print(moved)
     against = "the model" if report["against"] == "model" else "the standard's panel"
@@ -513,6 +516,14 @@ def _print_calibration(report: dict) -> None:
         f"wrote {report['lots']}" if report["written"] else f"--dry-run: {report['lots']} unchanged"
     )
     errors.print(where, highlight=False)
+
+
+def _tins_table(title: str) -> Table:
+    """A calibration's table of tins: each one's lot, strength before and now, and shade."""
+    table = Table(title=title, box=box.SIMPLE)
+    for column in ("toner", "lot", "before", "now", "change", "shade"):
+        table.add_column(column, justify="left" if column in ("toner", "lot") else "right")
+    return table
 
 
 def _misfit_report(lots, key: tuple[str, str]) -> dict:
@@ -601,7 +612,7 @@ def show_command(
             name,
             t.lot,
             f"{t.strength:.3f} ± {t.strength_sd:.3f}",
-            _shade_text(t, kinds.get(name)),
+            _shade_text(t.shade_nm, t.shade_sd_nm, kinds.get(name)),
             str(t.panels),
             t.calibrated[:10],
             _read_with_text(found.read_with(name)),
@@ -622,7 +633,7 @@ def show_command(
         )
 
 
-def _shade_text(tin, kind: str | None = None) -> str:
+def _shade_text(shade_nm: float, shade_sd_nm: float, kind: str | None = None) -> str:
     """A tin's shade as a table shows it: "—" for an effect toner (``kind`` not "pigment":
     it has none), "not read" while it stands at the standard's prior (a pigment's read
     --no-shade, or any toner's where the library does not know its kind)."""
@@ -630,6 +641,6 @@ def _shade_text(tin, kind: str | None = None) -> str:
 
     if kind is not None and kind != "pigment":
         return "—"
-    if tin.shade_nm == 0 and tin.shade_sd_nm == LOT_SHADE_SD_NM:
+    if shade_nm == 0 and shade_sd_nm == LOT_SHADE_SD_NM:
         return "not read"
-    return f"{tin.shade_nm:+.2f} ± {tin.shade_sd_nm:.2f} nm"
+    return f"{shade_nm:+.2f} ± {shade_sd_nm:.2f} nm"
