@@ -277,15 +277,48 @@ def test_the_database_chooses_a_shop_s_cases_since_a_date_as_select_cases_does(c
 
 
 def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
+    """A database of the first release (no shop habits, no tins) keeps its cases through
+    every migration; they record no tins, and cases that do are stored beside them."""
     url = database_url
     engine = create_engine(url)
-    migrate(engine, "0001")  # the first release's schema: no shop habits
+    migrate(engine, "0001")  # the first release's schema: no shop habits, no tins
     assert "shop_habits" not in inspect(engine).get_table_names()
-    add_cases(engine, cases[:7])
+    _store_as_the_first_release(engine, cases[:7])
     engine.dispose()
     engine = open_database(url)
     assert "shop_habits" in inspect(engine).get_table_names()
-    assert [c.case_id for c in iter_cases(engine)] == [c.case_id for c in cases[:7]]
+    stored = list(iter_cases(engine))
+    assert [c.case_id for c in stored] == [c.case_id for c in cases[:7]]
+    assert all(c.tins == {} for c in stored)
+    assert np.allclose(stored[3].sprayout, cases[3].sprayout, rtol=1e-6)
+    tinned = _with_tins(cases[7])
+    add_cases(engine, [tinned])
+    assert _tins_of(list(iter_cases(engine))[-1]) == _tins_of(tinned)
+
+
+def _store_as_the_first_release(engine, cases) -> None:
+    """Cases written as the first release wrote them: its columns only."""
+    from flakelab.cases.database import _row
+    from flakelab.cases.schema import CaseRow
+
+    first = [c.name for c in CaseRow.__table__.columns if c.name not in ("id", "tins")]
+    with engine.begin() as connection:
+        connection.execute(
+            CaseRow.__table__.insert(), [{k: getattr(_row(c), k) for k in first} for c in cases]
+        )
+
+
+def _with_tins(case):
+    """``case`` recorded with a tin of each of its toners, every one off the standard."""
+    tins = {
+        toner: {"lot": f"L-{i}", "strength": 1.0 + 0.01 * (i + 1), "shade_nm": -0.5 * i}
+        for i, toner in enumerate(case.recipe)
+    }
+    return replace(case, tins=tins)
+
+
+def _tins_of(case) -> dict:
+    return {k: (t.lot, t.strength, t.shade_nm) for k, t in case.tins.items()}
 
 
 def test_a_shops_own_model_is_registered_under_the_longest_shop_name(cases, database_url):

@@ -21,6 +21,7 @@ from flakelab.core.measurement import (
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
+from flakelab.library.lots import TonerLot
 
 __all__ = [
     "Case",
@@ -29,6 +30,7 @@ __all__ = [
     "TEXT_LENGTHS",
     "cases_at",
     "select_cases",
+    "tin_fields",
     "worst_differences",
 ]
 
@@ -61,11 +63,55 @@ def _recipe_amounts(where: str, recipe) -> dict[str, float]:
     return amounts
 
 
+TIN_FIELDS = ("lot", "strength", "shade_nm")
+"""What a case keeps of each tin it was poured from: the lot number and the shop's reading of
+its strength and shade (:class:`~flakelab.library.lots.TonerLot`)."""
+
+
+def tin_fields(tin: TonerLot) -> dict:
+    """A case's tin as stored and written: :data:`TIN_FIELDS`."""
+    return {name: getattr(tin, name) for name in TIN_FIELDS}
+
+
+def _tins(where: str, tins, recipe: Mapping[str, float]) -> dict[str, TonerLot]:
+    """A case's tins, checked: toner → a tin (or its :data:`TIN_FIELDS`) of a toner of the
+    recipe."""
+    if not isinstance(tins, Mapping):
+        raise CaseError(f"{where}: tins: expected a mapping toner → tin, got {type(tins).__name__}")
+    checked = {}
+    for toner, tin in tins.items():
+        if toner not in recipe:
+            raise CaseError(f"{where}: tins: {toner}: not a toner of the recipe")
+        if isinstance(tin, TonerLot):
+            checked[toner] = tin
+            continue
+        if not isinstance(tin, Mapping) or set(tin) - set(TIN_FIELDS):
+            raise CaseError(
+                f"{where}: tins: {toner}: expected an object of {', '.join(TIN_FIELDS)}, "
+                f"got {tin!r}"
+            )
+        numbers = ("strength", "shade_nm")
+        wrong = next((k for k in numbers if k in tin and not is_number(tin[k])), None)
+        if wrong or not isinstance(tin.get("lot", ""), str):
+            field_name = wrong or "lot"
+            raise CaseError(
+                f"{where}: tins: {toner}: {field_name}: expected a "
+                f"{'number' if wrong else 'text'}, got {tin[field_name]!r}"
+            )
+        try:
+            checked[toner] = TonerLot(toner, **tin)
+        except ValueError as error:
+            raise CaseError(f"{where}: tins: {toner}: {error}") from None
+    return checked
+
+
 @dataclass(frozen=True, eq=False)
 class Case:
     """Spectra on the storage grid, ``[G, 31]`` reflectance factors; ``recipe`` maps toner
     names to mass fractions (summing to 1); textures map :data:`TEXTURE_READINGS` names;
-    ``created_at`` without a time zone is taken as UTC."""
+    ``created_at`` without a time zone is taken as UTC. ``tins`` maps a toner of the recipe
+    to the tin it was poured from, as the shop had read it (none recorded: every toner at the
+    standard, as far as anyone knows)."""
 
     case_id: str
     geometries: tuple[Geometry, ...]
@@ -80,6 +126,7 @@ class Case:
     outcome: str = "accepted"
     synthetic: bool = False
     created_at: datetime = field(default_factory=lambda: datetime.now(UTC))
+    tins: Mapping[str, TonerLot] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         where = f"case {self.case_id!r}"
@@ -103,6 +150,7 @@ class Case:
         amounts = _recipe_amounts(where, self.recipe)
         total = sum(amounts.values())
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
+        object.__setattr__(self, "tins", _tins(where, self.tins, self.recipe))
         if self.created_at.tzinfo is None:  # SQLite and some case files keep no zone
             object.__setattr__(self, "created_at", self.created_at.replace(tzinfo=UTC))
         for name, longest in TEXT_LENGTHS.items():

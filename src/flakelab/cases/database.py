@@ -23,7 +23,7 @@ from sqlalchemy.exc import ArgumentError, IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session
 from sqlalchemy.pool import NullPool, StaticPool
 
-from flakelab.cases.case import Case, CaseError
+from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.cases.schema import CaseRow
 from flakelab.errors import FlakelabError
 
@@ -164,6 +164,7 @@ def _row(case: Case) -> CaseRow:
         sprayout=case.sprayout.astype("<f4").tobytes(),
         target_texture=dict(case.target_texture),
         sprayout_texture=dict(case.sprayout_texture),
+        tins={toner: tin_fields(tin) for toner, tin in case.tins.items()} or None,
         # in UTC: SQLite keeps no zone, so an offset would otherwise be dropped, not applied
         created_at=case.created_at.astimezone(UTC),
         updated_at=now,
@@ -186,6 +187,7 @@ def _case(row: CaseRow) -> Case:
         outcome=row.outcome,
         synthetic=row.synthetic,
         created_at=row.created_at,
+        tins=row.tins or {},
     )
 
 

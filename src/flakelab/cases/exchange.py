@@ -2,15 +2,17 @@
 
 CSV columns: ``case_id, shop, instrument, conditions, outcome, synthetic, created_at,
 recipe`` (JSON object toner → amount), ``geometries`` (the case's, names joined by ``;``),
-then ``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for
-every geometry of the file and band (400–700 nm, 10 nm), then ``target:<reading>`` and
+where any case records the tins it was poured from ``tins`` (JSON object toner → ``{lot,
+strength, shade_nm}``, empty for a case that records none), then ``target:<geometry>:<nm>``
+and ``sprayout:<geometry>:<nm>`` reflectance factors for every geometry of the file and band
+(400–700 nm, 10 nm), then ``target:<reading>`` and
 ``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
 read at different geometry sets (an MA-T12's and a five-angle instrument's): its columns
 are every geometry any case was read at, and a case's cells at geometries it was not read
 at are empty.
 
 CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
-the case's fields ride as ``meta:`` tags on the target.
+the case's fields ride as ``meta:`` tags on the target (``tins`` as the CSV's cell).
 
 Readers check every row and name the file, row and column of the first problem; nothing is
 returned from a bad file.
@@ -28,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.cases.case import Case, CaseError
+from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
@@ -52,14 +54,18 @@ CASE_FIELDS = (
     "geometries",
 )
 
+TINS_FIELD = "tins"
+"""The optional column after :data:`CASE_FIELDS`: the tins each case was poured from."""
+
 
 class CaseFileError(FlakelabError):
     """A case file that is wrong: names the file, row, column and problem."""
 
 
 @cache
-def _header(geometries: tuple[str, ...]) -> tuple[str, ...]:
-    """Column names for one geometry set (cached: every row of a file checks against it)."""
+def _header(geometries: tuple[str, ...], tins: bool = False) -> tuple[str, ...]:
+    """Column names for one geometry set, with the tins' column or without (cached: every row
+    of a file checks against it)."""
     spectra = [
         f"{role}:{g}:{int(w)}"
         for role in ("target", "sprayout")
@@ -67,7 +73,7 @@ def _header(geometries: tuple[str, ...]) -> tuple[str, ...]:
         for w in WAVELENGTHS
     ]
     texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
-    return (*CASE_FIELDS, *spectra, *texture)
+    return (*CASE_FIELDS, *((TINS_FIELD,) if tins else ()), *spectra, *texture)
 
 
 def is_case_file(path: str | PathLike) -> bool:
@@ -93,9 +99,10 @@ def write_cases(cases: list[Case], path: str | PathLike) -> None:
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
     geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
+    tins = any(c.tins for c in cases)
     buffer = io.StringIO()
     writer = csv.writer(buffer)
-    writer.writerow(_header(geometries))
+    writer.writerow(_header(geometries, tins))
     for case in cases:
         writer.writerow(
             [
@@ -108,6 +115,7 @@ def write_cases(cases: list[Case], path: str | PathLike) -> None:
                 case.created_at.isoformat(),
                 json.dumps(case.recipe),
                 ";".join(case.geometry_names),
+                *([_tins_cell(case)] if tins else []),
                 *_spectra_cells(case, case.target, geometries),
                 *_spectra_cells(case, case.sprayout, geometries),
                 *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
@@ -125,6 +133,11 @@ def _spectra_cells(case: Case, spectra: np.ndarray, geometries: tuple[str, ...])
     return [
         cell for g in geometries for cell in ([f"{v:.6g}" for v in own[g]] if g in own else empty)
     ]
+
+
+def _tins_cell(case: Case) -> str:
+    """A case's tins as its file writes them: a JSON object, empty where it records none."""
+    return json.dumps({k: tin_fields(t) for k, t in case.tins.items()}) if case.tins else ""
 
 
 def _fmt(value: float | None) -> str:
@@ -170,7 +183,7 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
     """The geometries whose columns the header holds, checked to be every column they need."""
     spectral = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
     geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
-    expected = _header(geometries)
+    expected = _header(geometries, TINS_FIELD in header)
     if tuple(header) != expected:
         missing = [c for c in expected if c not in header]
         extra = [c for c in header if c not in expected]
@@ -232,6 +245,7 @@ def _case_from_row(
         return {t: number_of(f"{role}:{t}") for t in TEXTURE_READINGS if cells[f"{role}:{t}"]}
 
     recipe = _recipe_field(f"{where}: recipe", cells["recipe"])
+    tins = _tins_field(f"{where}: tins", cells.get(TINS_FIELD, ""))
     created = _date_field(f"{where}: created_at", cells["created_at"])
     if cells["synthetic"] not in ("0", "1"):
         raise CaseFileError(f"{where}: synthetic: expected 0 or 1, got {cells['synthetic']!r}")
@@ -253,6 +267,7 @@ def _case_from_row(
             outcome=cells["outcome"],
             synthetic=cells["synthetic"] == "1",
             created_at=created,
+            tins=tins,
         )
     except (CaseError, ValueError) as error:
         raise CaseFileError(f"{where}: {error}") from None
@@ -267,6 +282,21 @@ def _recipe_field(where: str, text: str) -> dict:
     if not isinstance(recipe, dict):
         raise CaseFileError(f"{where}: expected a JSON object toner → amount, got {text!r}")
     return recipe
+
+
+def _tins_field(where: str, text: str) -> dict:
+    """A case's tins as its file writes them (:func:`_tins_cell`): none where empty."""
+    if not text.strip():
+        return {}
+    try:
+        tins = json.loads(text)
+    except ValueError:
+        tins = None
+    if not isinstance(tins, dict):
+        raise CaseFileError(
+            f"{where}: expected a JSON object toner → {{lot, strength, shade_nm}}, got {text!r}"
+        )
+    return tins
 
 
 def _date_field(where: str, text: str) -> datetime:
@@ -285,6 +315,7 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
         "synthetic": "1" if case.synthetic else "0",
         "created_at": case.created_at.isoformat(),
         "recipe": json.dumps(case.recipe),
+        **({TINS_FIELD: _tins_cell(case)} if case.tins else {}),
     }
     common = {
         "geometries": case.geometries,
@@ -332,6 +363,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
             raise CaseFileError(f"{where}: missing meta tags {missing}")
         recipe = _recipe_field(f"{where}: meta tag recipe", meta["recipe"])
         created = _date_field(f"{where}: meta tag created_at", meta["created_at"])
+        tins = _tins_field(f"{where}: meta tag tins", meta.get(TINS_FIELD, ""))
         try:
             cases.append(
                 Case(
@@ -348,6 +380,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
                     outcome=meta["outcome"],
                     synthetic=meta.get("synthetic") == "1",
                     created_at=created,
+                    tins=tins,
                 )
             )
         except (CaseError, ValueError) as error:

@@ -24,6 +24,10 @@ Sources of variation (all in :class:`WorldSettings`):
   counted (Poisson) and grain sampled (:func:`~flakelab.texture.readings.counted_readings`),
   drawn from a stream of their own so that no colour depends on them;
 * the colorist's recipe: the formulation's toners with amounts off by logN(0, 5 %);
+* the tins a shop records (``tins``, none by default): every tin of a spray-out read, as
+  ``flakelab lots`` reads one from a panel against the model, to ``tin_strength_read_sd``
+  and ``tin_shade_read_sd_nm`` (what that reading came to, ``benchmarks/toner_lots.py``), or
+  known exactly; drawn from a stream of their own, so the cases are the same either way;
 * the shop's own habits (``shop_*``, none by default): its sprayer's mean film build and
   flake spread against the factory's, and its instrument's gain against the instrument the
   shipped model learned from. These are what the protocol's adaptation phase is for
@@ -48,6 +52,7 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import shift_spectra
+from flakelab.library.lots import MAX_SHADE_NM, TonerLot
 from flakelab.library.toners import Library
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
 from flakelab.physics.fast import reflectance_factor
@@ -65,6 +70,7 @@ __all__ = [
     "World",
     "Variation",
     "CHUNK",
+    "TINS_RECORDED",
     "SHOP_WITH_HABITS",
     "NEAR_BLACK_L",
     "near_black",
@@ -82,6 +88,11 @@ ORGANIC_FAMILIES = (
     "indanthrone",
 )
 """Pigment families that fade in sunlight (inorganics — iron oxides, TiO2, carbon — hold)."""
+
+
+TINS_RECORDED = ("none", "read", "known")
+"""What a generated case records of the tins its recipe was poured from: nothing (as most
+shops), the shop's reading of each, or the world's own strength and shade."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +118,11 @@ class WorldSettings:
     shop_film_build: float = 1.0
     shop_spread: float = 1.0
     shop_gain: float = 0.0
+    tins: str = "none"
+    # a tin read from one panel against the model: RMS error over the harness's shops
+    # (README, *The shop's tins*, stop 74)
+    tin_strength_read_sd: float = 0.0111
+    tin_shade_read_sd_nm: float = 0.75
     solid_white_share: float = 0.5
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
@@ -304,12 +320,14 @@ class World:
         target_R = target_R + np.where(weathered, haze, 0.0)[:, None, None]
         target = self.measure(target_R, rng)
         recipe = self.colorist_recipe(hidden, rng)
-        spray_R, spray_tex = self.appearance(recipe, self.variation(size, rng))
+        shop_batches = self.variation(size, rng)
+        spray_R, spray_tex = self.appearance(recipe, shop_batches)
         sprayout = self.measure(spray_R, rng)
         # texture noise from a stream of its own, so every case's colour stays as it was
         texture_rng = rng.spawn(1)[0]
         target_tex = self.measure_texture(target_tex, texture_rng)
         spray_tex = self.measure_texture(spray_tex, texture_rng)
+        tins = self.recorded_tins(recipe, shop_batches, rng.spawn(1)[0])
         worst = self.worst_de00(target, sprayout)
         outcome = np.where(
             worst <= s.accept_de00,
@@ -335,9 +353,44 @@ class World:
                     outcome=str(outcome[i]),
                     synthetic=True,
                     created_at=start + timedelta(minutes=37 * (offset + i)),
+                    tins=tins[i],
                 )
             )
         return cases
+
+    def recorded_tins(
+        self, recipe: NDArray, batches: Variation, rng: np.random.Generator
+    ) -> list[dict[str, TonerLot]]:
+        """What each case records of the tins its ``recipe[F, T]`` was poured from
+        (``settings.tins``): nothing, the shop's reading of each tin (log strength and shade
+        off the batch by ``tin_*_read_sd``), or the batch itself. An effect toner has no
+        shade; a pigment's is the batch's drift."""
+        s, (F, T) = self.settings, recipe.shape
+        if s.tins not in TINS_RECORDED:
+            raise ValueError(f"tins: expected one of {', '.join(TINS_RECORDED)}, got {s.tins!r}")
+        if s.tins == "none":
+            return [{} for _ in range(F)]
+        strength = batches.strength
+        shade = np.where(self.library.effect[None, :], 0.0, batches.hue_shift[:, None])
+        if s.tins == "read":
+            strength = strength * np.exp(rng.normal(0, s.tin_strength_read_sd, (F, T)))
+            shade = shade + np.where(
+                self.library.effect[None, :], 0.0, rng.normal(0, s.tin_shade_read_sd_nm, (F, T))
+            )
+        strength = strength.clip(0.5, 2.0)  # a tin's readable range (TonerLot)
+        shade = shade.clip(-MAX_SHADE_NM, MAX_SHADE_NM)
+        names = self.library.names
+        return [
+            {
+                names[j]: TonerLot(
+                    names[j],
+                    strength=round(float(strength[i, j]), 5),
+                    shade_nm=round(float(shade[i, j]), 3),
+                )
+                for j in np.flatnonzero(recipe[i] > 0)
+            }
+            for i in range(F)
+        ]
 
     def colorist_recipe(self, hidden: NDArray, rng: np.random.Generator) -> NDArray:
         """The match a colorist mixes: every toner of the formulation, amounts off by

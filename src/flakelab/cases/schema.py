@@ -1,8 +1,9 @@
 """Database tables (SQLAlchemy 2): cases, the model registry and the shops' habits.
 
-Spectra are stored as little-endian float32 arrays (``[G, 31]``), recipes and texture
-readings as JSON; geometry names travel with every case, so cases from different instruments
-share one table. The schema evolves through Alembic migrations in ``migrations/``.
+Spectra are stored as little-endian float32 arrays (``[G, 31]``); recipes, texture readings
+and the tins a recipe was poured from as JSON. Geometry names travel with every case, so
+cases from different instruments share one table. The schema evolves through Alembic
+migrations in ``migrations/``.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ class CaseRow(Base):
     sprayout: Mapped[bytes] = mapped_column(LargeBinary)
     target_texture: Mapped[dict] = mapped_column(JSON)
     sprayout_texture: Mapped[dict] = mapped_column(JSON)
+    # toner → the tin's lot, strength and shade as the shop read it (migration 0004)
+    tins: Mapped[dict | None] = mapped_column(JSON, nullable=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
     updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 

@@ -108,15 +108,25 @@ def generate(
         ),
     ] = 0.0,
     start: StartOption = None,
+    tins: Annotated[
+        str,
+        typer.Option(
+            help="What each case records of the tins its recipe was poured from: none (as "
+            "most shops), read (the shop read every tin from a panel against the model, to "
+            "the error that reading has) or known (the world's own strengths and shades).",
+        ),
+    ] = "none",
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file, write_cases
-    from flakelab.cases.generator import World, WorldSettings
+    from flakelab.cases.generator import TINS_RECORDED, World, WorldSettings
     from flakelab.io import read_library
 
+    if tins not in TINS_RECORDED:
+        raise FlakelabError(f"--tins: expected one of {', '.join(TINS_RECORDED)}, got {tins!r}")
     habits = WorldSettings(
-        shop_film_build=shop_film_build, shop_spread=shop_spread, shop_gain=shop_gain
+        shop_film_build=shop_film_build, shop_spread=shop_spread, shop_gain=shop_gain, tins=tins
     )
     world = World(read_library(library), instrument, habits)
     to_file = out is not None and is_case_file(out)

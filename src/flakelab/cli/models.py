@@ -489,11 +489,21 @@ def evaluate(
         ),
     ] = None,
     unseen: UnseenOption = False,
+    no_tins: Annotated[
+        bool,
+        typer.Option(
+            "--no-tins",
+            help="Predict every case as poured from the standard tins, even where it records "
+            "the tins it was poured from (what a shop that reads no tins would be told).",
+        ),
+    ] = False,
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs.
 
-    How the current model (the shop's own with --shop, where one was adapted to it) does on
+    Cases that record the tins their recipe was poured from are predicted for those tins
+    (their strengths and shades, as 'flakelab match --lots' weighs for them). How the current
+    model (the shop's own with --shop, where one was adapted to it) does on
     all the cases, on a shop's (--shop), on those since a date (--since), or on those it never
     learned from (--unseen)."""
     from flakelab.cases.case import cases_at
@@ -517,10 +527,13 @@ def evaluate(
     from flakelab.cli.matcher import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.judging import evaluate_recipes
+    from flakelab.match.lots import WithLots
     from flakelab.match.models import forward_for
 
     matcher = forward_for(forward, lib)
     data = source_arrays(cases, chosen, lib)
+    if no_tins:
+        data = data.without_tins()
     shop_habits = habits_for(habits, None, database, matcher)
 
     def habits_offset(x, R):
@@ -533,8 +546,17 @@ def evaluate(
     families = lib.paint_families(data.x)
     # the mix-ups judged by the model evaluated, as the habits' screen judges them
     report = evaluate_model(
-        forward, data, predict, offset, families, leave_out_above=SPRAYOUT_MISMATCH
+        forward,
+        data,
+        predict,
+        offset,
+        families,
+        leave_out_above=SPRAYOUT_MISMATCH,
+        poured=lambda x, strength, shade: evaluate_recipes(
+            WithLots(matcher, strength, shade, lib), x
+        ),
     )
+    report["cases_with_tins"] = int(data.tins_recorded.sum())
     if hybrid:
         novel = np.isin(np.array(lib.names), matcher.novel)
         report["cases_with_new_toners"] = int((data.x[:, novel] > 0).any(1).sum())

@@ -202,7 +202,9 @@ def _devices_seen() -> list[str]:
 @dataclass(frozen=True)
 class CaseArrays:
     """Recipes ``x[N, T]``, spray-out reflectance ``R[N, G, 31]``, texture ``tex[N, 8]``
-    (NaN where a case's instrument gave no such reading)."""
+    (NaN where a case's instrument gave no such reading); where any case records the tins its
+    recipe was poured from, their ``strength[N, T]`` and ``shade[N, T]`` [nm] (1 and 0 for a
+    toner without a recorded tin: the standard, as far as the shop knew)."""
 
     x: NDArray
     R: NDArray
@@ -213,11 +215,30 @@ class CaseArrays:
     geometries: tuple[str, ...]
     instrument: str
     effect: NDArray | None = None
+    strength: NDArray | None = None
+    shade: NDArray | None = None
+
+    @property
+    def tins_recorded(self) -> NDArray[np.bool_]:
+        """Which cases record a tin of any toner ``[N]``."""
+        if self.strength is None:
+            return np.zeros(len(self.case_ids), dtype=bool)
+        return ((self.strength != 1) | (self.shade != 0)).any(axis=1)
+
+    def recorded_tins_only(self) -> CaseArrays:
+        """These cases without tin arrays where none records a tin."""
+        return self if self.tins_recorded.any() else self.without_tins()
+
+    def without_tins(self) -> CaseArrays:
+        """These cases as if no tin were recorded: every toner at the standard."""
+        return replace(self, strength=None, shade=None)
 
     def subset(self, rows: NDArray) -> CaseArrays:
         """The cases at ``rows``."""
         return replace(
             self,
+            strength=None if self.strength is None else self.strength[rows],
+            shade=None if self.shade is None else self.shade[rows],
             x=self.x[rows],
             R=self.R[rows],
             texture=self.texture[rows],
@@ -229,14 +250,23 @@ class CaseArrays:
         """These cases, then ``other``'s, of the same toners and geometries."""
         if (other.toners, other.geometries) != (self.toners, self.geometries):
             raise ModelError("cases: expected the same toners and geometries to join them")
+        tins = self.strength is not None or other.strength is not None
         return replace(
             self,
+            strength=np.concatenate([self.tins()[0], other.tins()[0]]) if tins else None,
+            shade=np.concatenate([self.tins()[1], other.tins()[1]]) if tins else None,
             x=np.concatenate([self.x, other.x]),
             R=np.concatenate([self.R, other.R]),
             texture=np.concatenate([self.texture, other.texture]),
             case_ids=self.case_ids + other.case_ids,
             shops=self.shops + other.shops,
         )
+
+    def tins(self) -> tuple[NDArray, NDArray]:
+        """``strength[N, T]`` and ``shade[N, T]``, the standard's where none is recorded."""
+        if self.strength is None:
+            return np.ones_like(self.x), np.zeros_like(self.x)
+        return self.strength, self.shade
 
     def shop_rows(self, shop: str) -> NDArray:
         """The rows of ``shop``'s cases."""
@@ -273,7 +303,7 @@ def case_arrays(
     cases_at` brings cases read by several instruments to one set); the arrays' instrument is
     the one whose set it is, else the first case's."""
     index = {name: i for i, name in enumerate(toners)}
-    xs, Rs, texs, ids, shops = [], [], [], [], []
+    xs, Rs, texs, ids, shops, tins = [], [], [], [], [], []
     geometries = instrument = None
     for case in cases:
         if geometries is None:
@@ -291,6 +321,10 @@ def case_arrays(
                     f"case {case.case_id!r}: recipe: toner {name!r} is not in the library"
                 )
             x[index[name]] = amount
+        strength, shade = np.ones(len(toners)), np.zeros(len(toners))
+        for name, tin in case.tins.items():
+            strength[index[name]], shade[index[name]] = tin.strength, tin.shade_nm
+        tins.append((strength, shade))
         xs.append(x)
         Rs.append(case.sprayout)
         texs.append([case.sprayout_texture.get(k, np.nan) for k in TEXTURE_READINGS])
@@ -308,7 +342,8 @@ def case_arrays(
         tuple(geometries),
         str(instrument),
         None if effect is None else np.asarray(effect, float),
-    )
+        *(np.array(column) for column in zip(*tins, strict=True)),
+    ).recorded_tins_only()
 
 
 EFFECT_SUPPORT_QUANTILE = 0.001
@@ -947,13 +982,16 @@ def evaluate_model(
     families=None,
     *,
     leave_out_above: float | None = None,
+    poured=None,
 ) -> dict:
     """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
     geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
     model's own prediction (the matcher's hybrid forward, for toners new to the model);
     ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits);
     ``families[N]`` (:meth:`~flakelab.library.toners.Library.paint_families`) adds the figures per
-    paint family. With ``leave_out_above``, the cases whose worst ΔE00 over their geometries
+    paint family. ``poured(x, strength, shade) → (R, texture)`` predicts recipes poured from the
+    tins the cases record (the matcher's :class:`~flakelab.match.lots.WithLots`), where they
+    record any. With ``leave_out_above``, the cases whose worst ΔE00 over their geometries
     lies above it (``above``: ``[row, ΔE00]``) and the figures without them (``without_above``;
     None where none or all lie above)."""
     if data.geometries != model.geometries:
@@ -962,9 +1000,13 @@ def evaluate_model(
             raise ModelError(f"cases lack the model's geometries {missing}")
         order = [data.geometries.index(g) for g in model.geometries]
         data = replace(data, R=data.R[:, order], geometries=model.geometries)
-    x = _align_toners(model, data)
+    data = _in_model_order(model, data)
+    x = data.x
     start = time.perf_counter()
-    R, texture = (predict or model.predict)(x)
+    if poured is not None and data.strength is not None:
+        R, texture = poured(x, data.strength, data.shade)
+    else:
+        R, texture = (predict or model.predict)(x)
     seconds = time.perf_counter() - start
     predicted = reflectance_to_Lab(R) + (0.0 if lab_offset is None else lab_offset(x, R))
     de = delta_E(reflectance_to_Lab(data.R), predicted)
@@ -1016,18 +1058,33 @@ def _de00_summary(de: NDArray) -> dict[str, float]:
 
 
 def _in_model_order(model: ForwardModel, data: CaseArrays) -> CaseArrays:
-    """``data`` with its recipes over ``model``'s toners, in its order."""
-    return replace(data, x=_align_toners(model, data), toners=model.toners)
+    """``data`` with its recipes (and tins) over ``model``'s toners, in its order."""
+    if data.toners == tuple(model.toners):
+        return data
+    strength, shade = data.tins()
+    tins = data.strength is not None
+    return replace(
+        data,
+        x=_align_toners(model, data),
+        toners=model.toners,
+        strength=_align_toners(model, data, strength, fill=1.0) if tins else None,
+        shade=_align_toners(model, data, shade) if tins else None,
+    )
 
 
-def _align_toners(model: ForwardModel, data: CaseArrays) -> NDArray:
+def _align_toners(
+    model: ForwardModel, data: CaseArrays, values: NDArray | None = None, fill: float = 0.0
+) -> NDArray:
+    """``values[N, T]`` (the recipes by default) over ``model``'s toners, ``fill`` where the
+    cases have none of a toner; a toner the cases use that the model lacks is refused."""
     index = {name: i for i, name in enumerate(model.toners)}
-    x = np.zeros((data.x.shape[0], len(model.toners)))
+    values = data.x if values is None else values
+    x = np.full((data.x.shape[0], len(model.toners)), fill)
     for j, name in enumerate(data.toners):
         used = data.x[:, j] > 0
         if name not in index:
             if np.any(used):
                 raise ModelError(f"cases use toner {name!r}, unknown to the model")
             continue
-        x[:, index[name]] = data.x[:, j]
+        x[:, index[name]] = values[:, j]
     return x
