@@ -31,12 +31,13 @@ from flakelab.cases.database import (
     open_database,
     remove_case,
 )
-from flakelab.cases.exchange import CaseFileError, read_cases, write_cases
+from flakelab.cases.exchange import CASE_FIELDS, CaseFileError, read_cases, write_cases
 from flakelab.cases.generator import World, near_black
 from flakelab.cases.record import case_from_readings, judged_outcome
 from flakelab.cases.schema import Base
 from flakelab.core import compare
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.data import example_path
@@ -182,6 +183,130 @@ def test_case_files_round_trip(cases, tmp_path, suffix):
         assert b.recipe == pytest.approx(a.recipe, rel=1e-12)
         assert b.outcome == a.outcome and b.created_at == a.created_at
         assert b.sprayout_texture == pytest.approx(a.sprayout_texture, rel=1e-5)
+
+
+@pytest.fixture(scope="module")
+def tinned(world) -> list[Case]:
+    """The ``cases`` fixture's cases as a shop that reads its tins records them."""
+    reading = World(world.library, world.instrument, replace(world.settings, tins="read"))
+    return [c for batch in reading.cases(40, seed=7, batch=16) for c in batch]
+
+
+def test_recording_the_tins_leaves_every_case_as_it_was(world, cases, tinned):
+    """The tins' readings come from a stream of their own: the cases are the same whether
+    they record them or not, and each records a tin of every toner of its recipe, near the
+    batch it was poured from (the world's own, ``known``)."""
+    knowing = World(world.library, world.instrument, replace(world.settings, tins="known"))
+    known = next(knowing.cases(40, seed=7, batch=40))
+    for plain, read, truth in zip(cases, tinned, known, strict=True):
+        assert plain.case_id == read.case_id == truth.case_id and plain.tins == {}
+        np.testing.assert_array_equal(plain.sprayout, read.sprayout)
+        assert plain.sprayout_texture == read.sprayout_texture
+        assert set(read.tins) == set(read.recipe) == set(truth.tins)
+    names, effect = world.library.names, world.library.effect
+    pairs = [
+        (c.tins[n], k.tins[n], effect[names.index(n)])
+        for c, k in zip(tinned, known, strict=True)
+        for n in c.tins
+    ]
+    strength = np.log([r.strength / t.strength for r, t, _ in pairs])
+    shade = np.array([r.shade_nm - t.shade_nm for r, t, e in pairs if not e])
+    assert all(r.shade_nm == t.shade_nm == 0 for r, t, e in pairs if e)  # flakes have no shade
+    # read to the errors the settings give (0.0111 in log strength, 0.75 nm), within sampling
+    assert 0.7 < strength.std() / world.settings.tin_strength_read_sd < 1.3
+    assert 0.7 < shade.std() / world.settings.tin_shade_read_sd_nm < 1.3
+    strengths = np.array([t.strength for _, t, _ in pairs])
+    assert 0.02 < strengths.std() < 0.04  # the batches' own spread (batch_strength_sd 0.03)
+
+
+def test_a_quiet_worlds_spray_outs_are_the_physics_of_their_recorded_tins(world):
+    """Without application or instrument noise a spray-out differs from its recipe's
+    nominal appearance by its tins alone: poured from the tins the case records (the world's
+    own), the library's physics predicts it to the renormalisation of the film (the learned
+    model knows recipes that sum to one, and so does the prediction for tins)."""
+    from flakelab.match.forward import PhysicsForward
+    from flakelab.match.judging import evaluate_recipes
+    from flakelab.match.lots import poured_from
+
+    quiet = replace(
+        world.settings, film_build_sd=0.0, spread_sd=0.0, noise_band=0.0, noise_gain=0.0,
+        noise_offset=0.0, tins="known",
+    )  # fmt: skip
+    made = next(World(world.library, world.instrument, quiet).cases(40, seed=3))
+    data = case_arrays(made, world.library.names)
+    physics = PhysicsForward(world.library, [g.name for g in world.geometries])
+    poured = poured_from(physics, world.library, data.strength, data.shade)
+    measured = reflectance_to_Lab(data.R)
+    standard, tins = (
+        delta_E(reflectance_to_Lab(evaluate_recipes(f, data.x)[0]), measured)
+        for f in (physics, poured)
+    )
+    assert standard.mean() > 0.25 and tins.mean() < 0.05 and np.median(tins) < 0.01
+    assert poured_from(physics, world.library, None, None) is physics
+
+
+def test_case_files_and_the_database_keep_the_tins(tinned, tmp_path, database_url):
+    for suffix in (".csv", ".cxf"):
+        path = tmp_path / f"tins{suffix}"
+        write_cases([*tinned[:5], replace(tinned[5], tins={})], path)
+        back = read_cases(path)
+        assert [_tins_of(c) for c in back] == [_tins_of(c) for c in tinned[:5]] + [{}]
+    engine = open_database(database_url)
+    add_cases(engine, tinned[:6])
+    assert [_tins_of(c) for c in iter_cases(engine)] == [_tins_of(c) for c in tinned[:6]]
+    data = case_arrays(tinned[:6], read_library(None).names)
+    assert data.tins_recorded.all() and data.subset([2]).strength.shape == (1, data.x.shape[1])
+    untinned = case_arrays([replace(c, tins={}) for c in tinned[:6]], data.toners)
+    assert untinned.strength is None and not untinned.tins_recorded.any()
+    joined = data.joined(untinned)
+    assert joined.tins_recorded.tolist() == [True] * 6 + [False] * 6
+
+
+def test_a_file_whose_cases_record_no_tins_has_no_tins_column(cases, tmp_path):
+    """Files written before cases kept tins read as they did, and are written as they were."""
+    path = tmp_path / "plain.csv"
+    write_cases(cases[:3], path)
+    header = next(csv.reader(io.StringIO(path.read_text())))
+    assert "tins" not in header and header[: len(CASE_FIELDS)] == list(CASE_FIELDS)
+    assert all(c.tins == {} for c in read_cases(path))
+
+
+def test_a_cases_tins_are_checked_and_a_bad_one_is_named():
+    spectra = np.ones((1, 31)), np.ones((1, 31))
+    bad = {
+        "tins: B: not a toner of the recipe": {"B": {"strength": 1.0}},
+        "tins: A: strength: expected a number, got 'strong'": {"A": {"strength": "strong"}},
+        "tins: A: strength: expected 0.5–2": {"A": {"strength": 3.0}},
+        "tins: A: shade_nm: expected −10 to 10 nm": {"A": {"shade_nm": 12.0}},
+        "tins: A: lot: expected a text, got 7": {"A": {"lot": 7}},
+        "tins: A: expected an object of lot, strength, shade_nm": {"A": {"colour": 1}},
+        "tins: expected a mapping toner → tin, got list": ["A"],
+    }
+    for message, tins in bad.items():
+        with pytest.raises(CaseError, match=re.escape(message)):
+            Case("x", ("45as45",), {"A": 1.0}, *spectra, tins=tins)
+    case = Case(
+        "x", ("45as45",), {"A": 1.0}, *spectra, tins={"A": {"lot": "B-1", "strength": 1.02}}
+    )
+    assert (case.tins["A"].lot, case.tins["A"].strength, case.tins["A"].shade_nm) == (
+        "B-1",
+        1.02,
+        0,
+    )
+
+
+def test_a_case_files_bad_tins_are_named_by_row(tinned, tmp_path):
+    path = tmp_path / "tins.csv"
+    write_cases(tinned[:3], path)
+    text = path.read_text()
+    column = next(csv.reader(io.StringIO(text))).index("tins")
+    for value, message in (
+        ("[1]", "row 3: tins: expected a JSON object toner → {lot, strength, shade_nm}, got '[1]'"),
+        (json.dumps({"Nothing": {"strength": 1}}), "row 3: case '"),
+    ):
+        path.write_text(text.replace(text.splitlines()[2], _cell(text, 2, column, value)))
+        with pytest.raises(CaseFileError, match=re.escape(message)):
+            read_cases(path)
 
 
 def test_one_case_file_holds_cases_of_several_geometry_sets(cases, tmp_path):

@@ -26,6 +26,7 @@ from flakelab.core.geometry import (
 )
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance, failing_geometries, failures
+from flakelab.library.lots import TonerLot
 
 __all__ = [
     "AUTO_OUTCOME",
@@ -97,13 +98,15 @@ def case_from_readings(
     tolerance: Tolerance | None = None,
     created_at: datetime | None = None,
     case_id: str | None = None,
+    tins: Mapping[str, TonerLot] | None = None,
 ) -> Case:
     """The case of one spray-out, read at every geometry both readings share, or at
     ``instrument``'s geometries alone when it is named.
 
     ``outcome`` is one of :data:`~flakelab.cases.case.OUTCOMES`, or ``auto`` to judge it
     against ``tolerance``. ``created_at`` defaults to when the spray-out was measured (the
-    file's date), else now.
+    file's date), else now. ``tins`` (the shop's lots, by toner) gives the case the tins of
+    its recipe's toners.
     """
     if instrument is None:
         names, instrument = shared_geometries(target, sprayout)
@@ -148,4 +151,5 @@ def case_from_readings(
         shop=shop,
         outcome=outcome,
         created_at=when,
+        tins={name: tin for name, tin in (tins or {}).items() if name in recipe},
     )

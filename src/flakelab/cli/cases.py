@@ -239,6 +239,15 @@ def record_case(
     ] = None,
     database: DatabaseOption = None,
     check: CheckOption = True,
+    lots: Annotated[
+        Path | None,
+        typer.Option(
+            "--lots",
+            help="The shop's toner-lot file ('flakelab lots calibrate'): the case records "
+            "the tins the recipe was poured from (lot, strength, shade), and a model is "
+            "judged on it for them.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Record a spray-out as the shop's own case: target, recipe, spray-out and outcome.
@@ -246,14 +255,17 @@ def record_case(
     The case joins the database, where 'cases habits', 'model adapt' and 'train' read it.
     It keeps every geometry both readings share, so each model whose geometries are among
     them learns from it; the same spray-out recorded twice is refused."""
+    from flakelab.cases.case import tin_fields
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
+    from flakelab.cli.lots import checked_lots
     from flakelab.io import read_library, read_recipe, read_tolerance
     from flakelab.match.mixups import is_mismatched, mismatch_message, recorded_checks
 
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
+    tins = checked_lots(lots, lib).lots if lots else None
     grams = read_recipe(recipe)
     fractions = recipe_fractions(lib, grams, recipe)
     target_reading = read_readings(target, sample, average)[0]
@@ -270,6 +282,7 @@ def record_case(
         tolerance=tol,
         created_at=at and (at if at.tzinfo else at.replace(tzinfo=UTC)),
         case_id=case_id,
+        tins=tins,
     )
     textures = (case.target_texture, case.sprayout_texture)
     _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol, textures)
@@ -292,6 +305,7 @@ def record_case(
         "geometries": list(case.geometry_names),
         "read_by_models_of": list(models),
         "outcome": case.outcome,
+        "tins": {name: tin_fields(tin) for name, tin in sorted(case.tins.items())},
         "created_at": case.created_at.isoformat(),
         "tolerance": tol.name,
         "sprayout_passes": not failing,
@@ -314,6 +328,8 @@ def record_case(
     )
     if models:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
+    if case.tins:
+        console.print(f"poured from the tins of {lots}: {', '.join(sorted(case.tins))}")
     else:
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "

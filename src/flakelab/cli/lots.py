@@ -61,7 +61,7 @@ def shop_lots(path: Path | None, library, forward):
         return None, forward, []
     from flakelab.match.lots import with_lots
 
-    lots = _read_lots(path, library)
+    lots = checked_lots(path, library)
     others = sorted(
         {lot.model_id for lot in lots.lots.values() if lot.model_id} - {forward.model_id}
     )
@@ -73,7 +73,7 @@ def shop_lots(path: Path | None, library, forward):
     return lots, with_lots(forward, lots, library), notes
 
 
-def _read_lots(path: Path, library):
+def checked_lots(path: Path, library):
     """The lots of the file ``path``, each of a toner of ``library`` (a misspelt one named)."""
     from flakelab.io.lots_file import read_lots
     from flakelab.match.stock import check_toners
@@ -346,7 +346,7 @@ def calibrate_command(
             raise FlakelabError(
                 f"{where}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
             )
-    stored = _read_lots(lots, lib) if lots.exists() else TonerLots(library=lib.name)
+    stored = checked_lots(lots, lib) if lots.exists() else TonerLots(library=lib.name)
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
     ]

@@ -527,7 +527,7 @@ def evaluate(
     from flakelab.cli.matcher import habits_for
     from flakelab.match.forward import LearnedForward
     from flakelab.match.judging import evaluate_recipes
-    from flakelab.match.lots import WithLots
+    from flakelab.match.lots import poured_from
     from flakelab.match.models import forward_for
 
     matcher = forward_for(forward, lib)
@@ -553,7 +553,7 @@ def evaluate(
         families,
         leave_out_above=SPRAYOUT_MISMATCH,
         poured=lambda x, strength, shade: evaluate_recipes(
-            WithLots(matcher, strength, shade, lib), x
+            poured_from(matcher, lib, strength, shade), x
         ),
     )
     report["cases_with_tins"] = int(data.tins_recorded.sum())

@@ -116,6 +116,7 @@ __all__ = [
     "de00_per_nm",
     "de00_per_percent",
     "mixed_with",
+    "poured_from",
     "read_together",
     "recorded",
     "shade_ratio",
@@ -254,6 +255,15 @@ class _HeldRatio:
             self.value = torch.as_tensor(ratio(x))
         self.calls += 1
         return self.value
+
+
+def poured_from(forward, library: Library, strength: NDArray | None, shade: NDArray | None):
+    """``forward`` for recipes each poured from its own tins, ``strength[N, T]`` and
+    ``shade[N, T]`` [nm] row by row (recorded cases: :class:`~flakelab.models.training.
+    CaseArrays`); itself where none are given."""
+    if strength is None:
+        return forward
+    return WithLots(forward, strength, shade, library)
 
 
 def with_lots(forward, lots: TonerLots | None, library: Library | None = None):

@@ -46,13 +46,16 @@ def sprayout_mismatch(
     sprayouts: NDArray,
     habits: ShopHabits | None = None,
     library: Library | None = None,
+    tins: tuple[NDArray, NDArray] | None = None,
 ) -> NDArray:
     """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
-    recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
-    the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
+    recipes ``fractions[N, T]`` they were mixed from (poured from ``tins``, strength and
+    shade ``[N, T]`` each, where the cases record them), moved by the shop's ``habits``
+    (given the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
     from flakelab.match.judging import evaluate_recipes  # torch's import: not for a bare record
+    from flakelab.match.lots import poured_from
 
-    R = evaluate_recipes(forward, fractions)[0]
+    R = evaluate_recipes(poured_from(forward, library, *(tins or (None, None))), fractions)[0]
     predicted = reflectance_to_Lab(R)
     if habits is not None:
         predicted = predicted + habits.offset(library, fractions, R, forward.geometries)
@@ -79,7 +82,8 @@ def recorded_mismatch(
     from flakelab.models.training import case_arrays
 
     data = case_arrays(cases_at(cases, forward.geometries), library.names)
-    de = sprayout_mismatch(forward, data.x, data.R, habits, library)
+    tins = None if data.strength is None else (data.strength, data.shade)
+    de = sprayout_mismatch(forward, data.x, data.R, habits, library, tins)
     return de.max(axis=1), de.argmax(axis=1)
 
 
