@@ -328,14 +328,15 @@ def record_case(
     )
     if models:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
-    if case.tins:
-        console.print(f"poured from the tins of {lots}: {', '.join(sorted(case.tins))}")
     else:
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
             f"{', '.join(case.geometry_names)} hold no instrument's whole set",
             highlight=False,
         )
+    if case.tins:
+        tins = ", ".join(f"{n} {t.lot or '(no lot number)'}" for n, t in sorted(case.tins.items()))
+        console.print(f"poured from the tins of {lots}: {tins}", highlight=False)
     if found is not None:
         habits = " with the shop's habits" if found["habits"] else ""
         console.print(
