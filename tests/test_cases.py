@@ -226,7 +226,7 @@ def test_a_quiet_worlds_spray_outs_are_the_physics_of_their_recorded_tins(world)
     model knows recipes that sum to one, and so does the prediction for tins)."""
     from flakelab.match.forward import PhysicsForward
     from flakelab.match.judging import evaluate_recipes
-    from flakelab.match.lots import poured_from
+    from flakelab.match.lots import at_standard_tins, poured_from
 
     quiet = replace(
         world.settings, film_build_sd=0.0, spread_sd=0.0, noise_band=0.0, noise_gain=0.0,
@@ -243,6 +243,13 @@ def test_a_quiet_worlds_spray_outs_are_the_physics_of_their_recorded_tins(world)
     )
     assert standard.mean() > 0.25 and tins.mean() < 0.05 and np.median(tins) < 0.01
     assert poured_from(physics, world.library, None, None) is physics
+    # what a model learns from: the cases at the standard tins, the inverse of the prediction
+    learned = at_standard_tins(data, world.library)
+    assert learned.strength is None and not learned.tins_recorded.any()
+    ratio_poured = evaluate_recipes(poured, data.x)[0] / data.R
+    ratio_learned = evaluate_recipes(physics, learned.x)[0] / learned.R
+    np.testing.assert_allclose(ratio_learned, ratio_poured, rtol=1e-9)
+    assert at_standard_tins(data.without_tins(), world.library).R is data.R
 
 
 def test_case_files_and_the_database_keep_the_tins(tinned, tmp_path, database_url):

@@ -1070,6 +1070,12 @@ def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):
     assert (poured["cases_with_tins"], standard["cases_with_tins"]) == (80, 0)
     assert poured["de00_mean"] < 0.8 * standard["de00_mean"]
     assert poured["de00_p95"] < standard["de00_p95"]
+    # a model learns them at the standard tins, unless told to take them as poured from it
+    for flag, tinned in (((), 80), (("--no-tins",), 0)):
+        run = cli("train", str(cases), "--epochs", "1", "--hidden", "8", "--no-register",
+                  *flag, "--json")  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        assert json.loads(run.stdout)["cases_with_tins"] == tinned
     run = cli("cases", "generate", "--n", "3", "--tins", "some", "-o", str(tmp_path / "x.csv"))
     assert run.returncode == 2 and "--tins: expected one of none, read, known" in run.stderr
 
@@ -1095,6 +1101,8 @@ def test_a_recorded_case_keeps_the_tins_its_recipe_was_poured_from(tmp_path, cli
     assert {n: (t.lot, t.strength, t.shade_nm) for n, t in case.tins.items()} == {
         used: ("B-7", 1.03, 0.4)
     }
+    listed = json.loads(cli("cases", "list", "-d", str(db), "--json").stdout)["cases"]
+    assert [row["tins"] for row in listed] == [expected]
     write_lots(TonerLots.of([TonerLot("Unobtainium", 1.0)]), lots)
     run = cli("cases", "record", str(target), "--recipe", str(recipe), "--sprayed", str(sprayed),
               "--lots", str(lots), "-d", str(tmp_path / "other.db"))  # fmt: skip

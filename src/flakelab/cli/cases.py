@@ -500,7 +500,7 @@ def list_cases(
 
     Newest first, with when each was made, its id (for 'cases remove') and the geometry of
     the worst ΔE00; with --check, how far each spray-out lies from its recipe's prediction."""
-    from flakelab.cases.case import worst_differences
+    from flakelab.cases.case import tin_fields, worst_differences
     from flakelab.cases.database import SHORT_ID_LENGTH, latest_cases, open_database, short_id
 
     engine = open_database(database, must_exist=True)
@@ -515,6 +515,7 @@ def list_cases(
             "outcome": c.outcome,
             "synthetic": c.synthetic,
             "recipe": {k: round(v, 6) for k, v in sorted(c.recipe.items(), key=lambda t: -t[1])},
+            "tins": {name: tin_fields(tin) for name, tin in sorted(c.tins.items())},
             "worst_de00": round(float(de), 3),
             "worst_geometry": g,
         }

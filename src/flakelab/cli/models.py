@@ -46,6 +46,25 @@ DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
 """What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
 
 
+NoTinsOption = Annotated[
+    bool,
+    typer.Option(
+        "--no-tins",
+        help="Take every case as poured from the standard tins, even where it records the "
+        "tins it was poured from (as a shop that reads none).",
+    ),
+]
+
+
+def recorded_tins_used(data, library, no_tins: bool):
+    """Cases as a model learns from them: at the standard tins (where they record tins:
+    :func:`~flakelab.match.lots.at_standard_tins`), or, with ``no_tins``, as if they
+    recorded none."""
+    from flakelab.match.lots import at_standard_tins
+
+    return data.without_tins() if no_tins else at_standard_tins(data, library)
+
+
 def _checked_device(name: str) -> str:
     """``--device`` read before any work, so that a GPU this machine lacks is named at once."""
     from flakelab.models.network import ModelError
@@ -200,12 +219,15 @@ def train(
     ] = 0.0,
     seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
     device: DeviceOption = "cpu",
+    no_tins: NoTinsOption = False,
     json_output: JsonOption = False,
 ) -> None:
     """Train the learned forward model with the hybrid paper's protocol.
 
     It learns from every case read at the instrument's geometries, whatever read it (an
-    MA-T12 case trains the five-angle model too)."""
+    MA-T12 case trains the five-angle model too). A case that records the tins its recipe
+    was poured from is learned as the standard tins would have sprayed it: the film its tins
+    put down, its spray-out without their shades."""
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
@@ -259,11 +281,12 @@ def train(
     chosen = cases_at(loaded, geometries)
     if not chosen:
         raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
+    arrays = source_arrays(cases, chosen, lib, effect=True)
+    tinned = int(arrays.tins_recorded.sum()) if not no_tins else 0
+    arrays = recorded_tins_used(arrays, lib, no_tins)
     data, held_out = (
-        replace(arrays, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
-        for arrays in split_held_out(
-            source_arrays(cases, chosen, lib, effect=True), cases, holdout, seed
-        )
+        replace(part, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
+        for part in split_held_out(arrays, cases, holdout, seed)
     )
     validation = None
     if adapt is not None:  # before the long training
@@ -289,6 +312,7 @@ def train(
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
     summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
+    summary["cases_with_tins"] = tinned
     engine = open_database(database) if register_model else None
     if engine is not None:
         summary["registry"] = register(engine, model, held_out, metrics=summary["held_out"])
@@ -489,14 +513,7 @@ def evaluate(
         ),
     ] = None,
     unseen: UnseenOption = False,
-    no_tins: Annotated[
-        bool,
-        typer.Option(
-            "--no-tins",
-            help="Predict every case as poured from the standard tins, even where it records "
-            "the tins it was poured from (what a shop that reads no tins would be told).",
-        ),
-    ] = False,
+    no_tins: NoTinsOption = False,
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs.
@@ -655,9 +672,13 @@ def adapt(
     register_model: Annotated[
         bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
     ] = True,
+    no_tins: NoTinsOption = False,
     json_output: JsonOption = False,
 ) -> None:
     """Adapt a trained model (default: the current one) to one shop's cases.
+
+    Cases that record their tins are learned as the standard tins would have sprayed them,
+    as 'train' learns them.
 
     The training protocol's adaptation phase, for the sprayers and instrument of one shop. With
     --shop the model is registered as that shop's own ('INSTRUMENT @ SHOP'): promoted, it is
@@ -691,6 +712,8 @@ def adapt(
         )
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
     arrays = source_arrays(cases, known, lib, effect=True)
+    tinned = int(arrays.tins_recorded.sum()) if not no_tins else 0
+    arrays = recorded_tins_used(arrays, lib, no_tins)
     outlying = outlying_cases(base, arrays, config.outlier_threshold)
     dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
     screened = arrays.subset(np.flatnonzero(~outlying))
@@ -722,6 +745,7 @@ def adapt(
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
         "learned_before": int(base.learned_from(screened.case_ids).sum()),
+        "cases_with_tins": tinned,
         "held_out": judged_before_and_after(base, new, held_out),
     }
     if out is not None:

@@ -104,6 +104,7 @@ from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
 from flakelab.match.judging import evaluate_recipes
 from flakelab.models.network import LOG_FLOOR
+from flakelab.models.training import CaseArrays
 from flakelab.physics.fast import reflectance_factor
 from flakelab.physics.layer import layer_from_fractions
 
@@ -111,6 +112,7 @@ __all__ = [
     "TINT_SHARES",
     "LotCalibration",
     "WithLots",
+    "at_standard_tins",
     "calibrate_lots",
     "calibration_recipes",
     "de00_per_nm",
@@ -264,6 +266,24 @@ def poured_from(forward, library: Library, strength: NDArray | None, shade: NDAr
     if strength is None:
         return forward
     return WithLots(forward, strength, shade, library)
+
+
+def at_standard_tins(data: CaseArrays, library: Library) -> CaseArrays:
+    """Recorded cases as if poured from the standard tins, what a model learns from: each
+    recipe the film its tins put down (:func:`mixed_with`), each spray-out divided by the
+    physics' :func:`shade_ratio` of its tins' shades; cases that record none are as they
+    were. The inverse of :func:`poured_from`'s prediction: a model that learns the standard
+    tins from them is asked for the shop's through :class:`WithLots`."""
+    if data.strength is None:
+        return data
+    film = data.x * data.strength
+    return replace(
+        data,
+        x=mixed_with(data.strength, data.x),
+        R=data.R / shade_ratio(library, data.geometries, film, data.shade),
+        strength=None,
+        shade=None,
+    )
 
 
 def with_lots(forward, lots: TonerLots | None, library: Library | None = None):

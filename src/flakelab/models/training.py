@@ -220,13 +220,14 @@ class CaseArrays:
 
     @property
     def tins_recorded(self) -> NDArray[np.bool_]:
-        """Which cases record a tin of any toner ``[N]``."""
+        """Which cases record a tin off the standard ``[N]`` (one read at the standard
+        predicts as none)."""
         if self.strength is None:
             return np.zeros(len(self.case_ids), dtype=bool)
         return ((self.strength != 1) | (self.shade != 0)).any(axis=1)
 
     def recorded_tins_only(self) -> CaseArrays:
-        """These cases without tin arrays where none records a tin."""
+        """These cases without tin arrays where none records a tin off the standard."""
         return self if self.tins_recorded.any() else self.without_tins()
 
     def without_tins(self) -> CaseArrays:
