@@ -5,13 +5,15 @@ on synthetic cases of the demo library generated with a fixed seed. Two demo ton
 kept out of the training cases on purpose — they are the library's "new" toners, which the
 matcher handles with the physics scaling (hybrid path).
 
-    python scripts/train_shipped_models.py [--instrument five-angle]
+    python scripts/train_shipped_models.py [--instrument five-angle] [--tins none|read|known]
 
 ``--seed`` draws the cases and the network alike; ``--network-seed`` draws the network (its
 weights, splits and batches) alone, on the same cases, and ``--screening`` changes the outlier
 screen: how much a model owes to its network's draw (README, "Cases and the learned model");
 ``--members 1`` trains one network instead of the ensemble; ``--log-offset`` adds log
-features (``flakelab train --log-offset``).
+features (``flakelab train --log-offset``); ``--tins read|known`` makes the training cases
+record their tins and learns them at the standard tins, as ``flakelab train`` learns such
+cases (:func:`~flakelab.match.lots.at_standard_tins`; default ``none``, the shipped files').
 
 Both models are ensembles of four networks trained on 120,000 cases, twice the hybrid
 paper's database: held-out accuracy grows with the cases far more than with the network's
@@ -29,9 +31,10 @@ import argparse
 import json
 from pathlib import Path
 
-from flakelab.cases.generator import World, WorldSettings
+from flakelab.cases.generator import TINS_RECORDED, World, WorldSettings
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library
+from flakelab.match.lots import at_standard_tins
 from flakelab.models.network import LOG_OFFSET_MAX
 from flakelab.models.registry import shipped_model_path
 from flakelab.models.training import (
@@ -77,6 +80,9 @@ def main() -> None:
     parser.add_argument(
         "--log-offset", type=float, default=0.0, help="log features, log(fraction + this)"
     )
+    parser.add_argument(
+        "--tins", choices=TINS_RECORDED, default="none", help="what the cases record of their tins"
+    )
     args = parser.parse_args()
     if not 0 <= args.log_offset <= LOG_OFFSET_MAX:
         parser.error(f"--log-offset: {args.log_offset} is not in [0, {LOG_OFFSET_MAX}]")
@@ -90,7 +96,7 @@ def main() -> None:
         n, epochs, batch_size, members, screening = SETTINGS[instrument]
         n = args.cases if args.cases is not None else n
         kinds = TRAINING_KINDS.get(instrument)
-        settings = WorldSettings(kinds=kinds) if kinds else WorldSettings()
+        settings = WorldSettings(tins=args.tins, **({"kinds": kinds} if kinds else {}))
         world = World(library, instrument, settings, exclude=NOVEL_TONERS)
         rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
         config = TrainingConfig.per_stage(
@@ -108,7 +114,7 @@ def main() -> None:
             for batch in world.cases(n, args.seed):
                 cases.extend(batch)
                 progress.advance(task, len(batch))
-            data = case_arrays(cases, library.names, effect)
+            data = at_standard_tins(case_arrays(cases, library.names, effect), library)
             epochs_total = protocol_epochs(config)
             task = progress.add_task(f"{instrument}: training epochs", total=epochs_total)
             model, report = train_protocol(
@@ -123,6 +129,7 @@ def main() -> None:
                 "network_seed": config.seed,
                 "cases": n,
                 "training_kinds": settings.kinds,
+                **({"training_tins": args.tins} if args.tins != "none" else {}),
             }
         )
         path = shipped_model_path(instrument)
