@@ -990,3 +990,41 @@ def test_the_nearest_cases_are_those_whose_spray_outs_lie_closest(cases, tmp_pat
         assert run.returncode == 2 and "no cases from shop 'X'" in run.stderr
     run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-i", "ma-t12")
     assert run.returncode == 2 and "car.json: not read at 15as-45" in run.stderr
+
+
+def test_a_manifest_row_records_the_tins_of_its_lot_file(tmp_path):
+    """A manifest spans weeks of tins: each row names the lot file the shop held when it
+    sprayed, and its case records the tins of its recipe's toners from it."""
+    from flakelab.cases.manifest import ManifestError, cases_from_manifest
+    from flakelab.io import write_measurements, write_recipe
+    from flakelab.io.lots_file import write_lots
+    from flakelab.library.lots import TonerLot, TonerLots
+
+    target, sprayout = example_readings()
+    write_measurements([target], tmp_path / "car.cxf")
+    write_measurements([sprayout], tmp_path / "spray.cxf")
+    write_recipe({"Al medium": 194.0, "Phthalo blue GS": 16.6}, tmp_path / "shot.json")
+    for name, strength in (("june.json", 1.02), ("july.json", 0.97)):
+        tins = [TonerLot("Phthalo blue GS", strength, 0.01, f"B-{name[:4]}", shade_nm=0.3),
+                TonerLot("Carbon black", 1.01, 0.01, "K-1")]  # fmt: skip
+        write_lots(TonerLots.of(tins), tmp_path / name)
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text(
+        "target,recipe,sprayed,lots,case_id\n"
+        "car.cxf,shot.json,spray.cxf,june.json,a\n"
+        "car.cxf,shot.json,spray.cxf,july.json,b\n"
+        "car.cxf,shot.json,spray.cxf,,c\n"
+    )
+    library, tol = read_library(None), tolerance_preset("refinish")
+    cases = [c for _, c in cases_from_manifest(manifest, library, tolerance=tol)]
+    assert [_tins_of(c) for c in cases] == [
+        {"Phthalo blue GS": ("B-june", 1.02, 0.3)},
+        {"Phthalo blue GS": ("B-july", 0.97, 0.3)},
+        {},
+    ]
+    write_lots(TonerLots.of([TonerLot("Unobtainium", 1.0)]), tmp_path / "july.json")
+    with pytest.raises(ManifestError, match=r"row 3: lots: .*july.json: toner 'Unobtainium'"):
+        cases_from_manifest(manifest, library, tolerance=tol)
+    (tmp_path / "july.json").write_text("{")
+    with pytest.raises(ManifestError, match=r"manifest.csv: row 3: lots: .*july.json"):
+        cases_from_manifest(manifest, library, tolerance=tol)

@@ -19,6 +19,8 @@ Manifest columns (CSV with a header; file paths relative to the manifest's folde
 ``at``             when the spray-out was made, ISO 8601, UTC without a zone (default:
                    the spray-out file's date)
 ``case_id``        the case's id (default: made from the readings, recipe and shop)
+``lots``           the shop's toner-lot file when it was sprayed (``flakelab lots``): the
+                   case records the tins of its recipe's toners (default: none)
 =================  ====================================================================
 """
 
@@ -36,7 +38,9 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
+from flakelab.io.lots_file import read_lots
 from flakelab.library import Library
+from flakelab.library.lots import TonerLot, TonerLots
 
 __all__ = ["MANIFEST_COLUMNS", "ManifestError", "cases_from_manifest", "read_manifest"]
 
@@ -50,6 +54,7 @@ MANIFEST_COLUMNS = (
     "outcome",
     "at",
     "case_id",
+    "lots",
 )
 REQUIRED_COLUMNS = ("target", "recipe", "sprayed")
 
@@ -114,6 +119,7 @@ def cases_from_manifest(
     progress bar)."""
     path = Path(path)
     files: dict[Path, list[Measurement]] = {}  # a car's file serves several rows, read once
+    lot_files: dict[Path, TonerLots] = {}  # so does a lot file
 
     def named_file(where: str, cell: str) -> Path:
         if "\x00" in cell:  # the operating system's own words are "embedded null byte"
@@ -129,6 +135,20 @@ def cases_from_manifest(
         except (FlakelabError, OSError, KeyError, ValueError) as error:
             raise ManifestError(f"{where}: {error}") from None
 
+    def tins(where: str, file: str) -> dict[str, TonerLot] | None:
+        if not file:
+            return None
+        name = named_file(where, file)
+        try:
+            if name not in lot_files:
+                lot_files[name] = read_lots(name)
+        except (FlakelabError, OSError) as error:
+            raise ManifestError(f"{where}: {error}") from None
+        unknown = sorted(set(lot_files[name].lots) - set(library.names))
+        if unknown:
+            raise ManifestError(f"{where}: {name}: toner {unknown[0]!r} is not in the library")
+        return dict(lot_files[name].lots)
+
     cases: list[tuple[int, Case]] = []
     first_row: dict[str, int] = {}
     for number, cells in read_manifest(path) if rows is None else rows:
@@ -142,6 +162,7 @@ def cases_from_manifest(
         except (FlakelabError, ValueError) as error:
             raise ManifestError(f"{where}: recipe: {error}") from None
         when = _time(where, cells.get("at", ""))
+        poured_from = tins(f"{where}: lots", cells.get("lots", ""))
         try:
             case = case_from_readings(
                 target,
@@ -153,6 +174,7 @@ def cases_from_manifest(
                 tolerance=tolerance,
                 created_at=when,
                 case_id=cells.get("case_id") or None,
+                tins=poured_from,
             )
         except (FlakelabError, ValueError) as error:
             raise ManifestError(f"{where}: {error}") from None

@@ -369,7 +369,8 @@ def record_all(
         Path,
         typer.Argument(
             help="CSV manifest, one spray-out a row: target, recipe, sprayed files (paths "
-            "relative to it), and optionally sample, sprayed_sample, shop, outcome, at, case_id."
+            "relative to it), and optionally sample, sprayed_sample, shop, outcome, at, case_id, "
+            "lots (the shop's toner-lot file then: the case records its tins)."
         ),
     ],
     shop: Annotated[
