@@ -59,10 +59,12 @@ NoTinsOption = Annotated[
 def recorded_tins_used(data, library, no_tins: bool):
     """Cases as a model learns from them: at the standard tins (where they record tins:
     :func:`~flakelab.match.lots.at_standard_tins`), or, with ``no_tins``, as if they
-    recorded none."""
+    recorded none; with how many of them record tins that were used."""
     from flakelab.match.lots import at_standard_tins
 
-    return data.without_tins() if no_tins else at_standard_tins(data, library)
+    if no_tins:
+        return data.without_tins(), 0
+    return at_standard_tins(data, library), int(data.tins_recorded.sum())
 
 
 def _checked_device(name: str) -> str:
@@ -282,8 +284,7 @@ def train(
     if not chosen:
         raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
     arrays = source_arrays(cases, chosen, lib, effect=True)
-    tinned = int(arrays.tins_recorded.sum()) if not no_tins else 0
-    arrays = recorded_tins_used(arrays, lib, no_tins)
+    arrays, tinned = recorded_tins_used(arrays, lib, no_tins)
     data, held_out = (
         replace(part, instrument=instrument)  # ma-t6 and byk-mac-i share their geometries
         for part in split_held_out(arrays, cases, holdout, seed)
@@ -712,8 +713,7 @@ def adapt(
         )
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
     arrays = source_arrays(cases, known, lib, effect=True)
-    tinned = int(arrays.tins_recorded.sum()) if not no_tins else 0
-    arrays = recorded_tins_used(arrays, lib, no_tins)
+    arrays, tinned = recorded_tins_used(arrays, lib, no_tins)
     outlying = outlying_cases(base, arrays, config.outlier_threshold)
     dropped = [c.case_id for c, out in zip(known, outlying, strict=True) if out]
     screened = arrays.subset(np.flatnonzero(~outlying))

@@ -46,16 +46,13 @@ def sprayout_mismatch(
     sprayouts: NDArray,
     habits: ShopHabits | None = None,
     library: Library | None = None,
-    tins: tuple[NDArray, NDArray] | None = None,
 ) -> NDArray:
     """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
-    recipes ``fractions[N, T]`` they were mixed from (poured from ``tins``, strength and
-    shade ``[N, T]`` each, where the cases record them), moved by the shop's ``habits``
-    (given the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
+    recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
+    the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
     from flakelab.match.judging import evaluate_recipes  # torch's import: not for a bare record
-    from flakelab.match.lots import poured_from
 
-    R = evaluate_recipes(poured_from(forward, library, *(tins or (None, None))), fractions)[0]
+    R = evaluate_recipes(forward, fractions)[0]
     predicted = reflectance_to_Lab(R)
     if habits is not None:
         predicted = predicted + habits.offset(library, fractions, R, forward.geometries)
@@ -79,11 +76,12 @@ def recorded_mismatch(
     each read at every one of ``forward``'s geometries (among others): each one's worst ΔE00
     ``[N]`` and the index of its geometry in ``forward.geometries``."""
     from flakelab.cases.case import cases_at
+    from flakelab.match.lots import poured_from
     from flakelab.models.training import case_arrays
 
     data = case_arrays(cases_at(cases, forward.geometries), library.names)
-    tins = None if data.strength is None else (data.strength, data.shade)
-    de = sprayout_mismatch(forward, data.x, data.R, habits, library, tins)
+    poured = poured_from(forward, library, data.strength, data.shade)  # the tins they record
+    de = sprayout_mismatch(poured, data.x, data.R, habits, library)
     return de.max(axis=1), de.argmax(axis=1)
 
 

@@ -252,10 +252,11 @@ class CaseArrays:
         if (other.toners, other.geometries) != (self.toners, self.geometries):
             raise ModelError("cases: expected the same toners and geometries to join them")
         tins = self.strength is not None or other.strength is not None
+        (strength, shade), (other_strength, other_shade) = self.tins(), other.tins()
         return replace(
             self,
-            strength=np.concatenate([self.tins()[0], other.tins()[0]]) if tins else None,
-            shade=np.concatenate([self.tins()[1], other.tins()[1]]) if tins else None,
+            strength=np.concatenate([strength, other_strength]) if tins else None,
+            shade=np.concatenate([shade, other_shade]) if tins else None,
             x=np.concatenate([self.x, other.x]),
             R=np.concatenate([self.R, other.R]),
             texture=np.concatenate([self.texture, other.texture]),
