@@ -1022,8 +1022,9 @@ def test_a_manifest_row_records_the_tins_of_its_lot_file(tmp_path):
         {"Phthalo blue GS": ("B-july", 0.97, 0.3)},
         {},
     ]
-    write_lots(TonerLots.of([TonerLot("Unobtainium", 1.0)]), tmp_path / "july.json")
-    with pytest.raises(ManifestError, match=r"row 3: lots: .*july.json: toner 'Unobtainium'"):
+    write_lots(TonerLots.of([TonerLot("Phthalo blu GS", 1.0)]), tmp_path / "july.json")
+    misspelt = r"row 3: lots: .*july.json: 'Phthalo blu GS' is not a toner .*'Phthalo blue GS'"
+    with pytest.raises(ManifestError, match=misspelt):
         cases_from_manifest(manifest, library, tolerance=tol)
     (tmp_path / "july.json").write_text("{")
     with pytest.raises(ManifestError, match=r"manifest.csv: row 3: lots: .*july.json"):

@@ -1546,9 +1546,9 @@ def test_harness_sprays_recipes_as_a_shop_weighs_them_when_given_a_scale(hybrid)
 def test_harness_counts_the_targets_that_need_a_toner_out_of_stock(hybrid):
     """``settings.without`` in the harness: the hidden formulas that hold the toner are
     counted and judged apart; an unknown toner is refused before any target."""
+    from flakelab.library import LibraryError
     from flakelab.match.evaluate import evaluate_matching, harness_trials, harness_world
     from flakelab.match.models import effect_mask
-    from flakelab.match.stock import StockError
 
     world = harness_world(hybrid.library, "five-angle", "shop")
     effect = effect_mask(hybrid.library, hybrid.toners)
@@ -1562,7 +1562,7 @@ def test_harness_counts_the_targets_that_need_a_toner_out_of_stock(hybrid):
     run = evaluate_matching(world, hybrid, effect, targets=6, seed=5, settings=hasty)
     assert run["without"] == [missing] and run["needing_missing_targets"] == needing
     assert 0.0 <= run["needing_missing_first_shot"] <= 1.0
-    with pytest.raises(StockError, match="'Al mediun' is not a toner"):
+    with pytest.raises(LibraryError, match="'Al mediun' is not a toner"):
         evaluate_matching(world, hybrid, effect, targets=1, seed=5,
                           settings=replace(hasty, without=("Al mediun",)))  # fmt: skip
 

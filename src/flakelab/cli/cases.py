@@ -258,14 +258,14 @@ def record_case(
     from flakelab.cases.case import tin_fields
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
-    from flakelab.cli.lots import checked_lots
     from flakelab.io import read_library, read_recipe, read_tolerance
+    from flakelab.io.lots_file import read_lots
     from flakelab.match.mixups import is_mismatched, mismatch_message, recorded_checks
 
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
-    tins = checked_lots(lots, lib).lots if lots else None
+    tins = read_lots(lots, lib.names).lots if lots else None
     grams = read_recipe(recipe)
     fractions = recipe_fractions(lib, grams, recipe)
     target_reading = read_readings(target, sample, average)[0]

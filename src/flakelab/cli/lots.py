@@ -59,9 +59,10 @@ def shop_lots(path: Path | None, library, forward):
     them, with a note where they were read against another model than ``forward``'s."""
     if path is None:
         return None, forward, []
+    from flakelab.io.lots_file import read_lots
     from flakelab.match.lots import with_lots
 
-    lots = checked_lots(path, library)
+    lots = read_lots(path, library.names)
     others = sorted(
         {lot.model_id for lot in lots.lots.values() if lot.model_id} - {forward.model_id}
     )
@@ -71,16 +72,6 @@ def shop_lots(path: Path | None, library, forward):
         if others else []
     )  # fmt: skip
     return lots, with_lots(forward, lots, library), notes
-
-
-def checked_lots(path: Path, library):
-    """The lots of the file ``path``, each of a toner of ``library`` (a misspelt one named)."""
-    from flakelab.io.lots_file import read_lots
-    from flakelab.match.stock import check_toners
-
-    lots = read_lots(path)
-    check_toners(lots.lots, library.names, f"{path}: ")
-    return lots
 
 
 def lots_report(lots) -> dict[str, dict[str, float]]:
@@ -121,9 +112,9 @@ def panel_command(
     'flakelab lots calibrate' reads the tin's strength and shade from it; several toners'
     panels, sprayed together, are read at once."""
     from flakelab.io import write_recipe
+    from flakelab.library import check_toners
     from flakelab.match.lots import calibration_recipes
     from flakelab.match.recipe import order_can
-    from flakelab.match.stock import check_toners
 
     check_output_file(recipe_out, "--recipe-out")
     if recipe_out is not None and len(toner) > 1:
@@ -319,11 +310,11 @@ def calibrate_command(
     spray's own film build and flake alignment are allowed for by the library's physics.
     Tins read together with these before move with them."""
     from flakelab.io import read_recipe
-    from flakelab.io.lots_file import write_lots
+    from flakelab.io.lots_file import read_lots, write_lots
+    from flakelab.library import check_toners
     from flakelab.library.lots import MAX_SHADE_NM, TonerLots
     from flakelab.match.lots import calibrate_lots, read_together, recorded
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
-    from flakelab.match.stock import check_toners
 
     check_output_file(lots, "--lots")
     numbers = _lot_numbers(lot or [])
@@ -346,7 +337,7 @@ def calibrate_command(
             raise FlakelabError(
                 f"{where}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
             )
-    stored = checked_lots(lots, lib) if lots.exists() else TonerLots(library=lib.name)
+    stored = read_lots(lots, lib.names) if lots.exists() else TonerLots(library=lib.name)
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
     ]

@@ -24,6 +24,7 @@ tin at the standard's shade.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, fields
 from os import PathLike
 from pathlib import Path
@@ -31,6 +32,7 @@ from pathlib import Path
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.io.records import read_json_file, write_atomically
+from flakelab.library import check_toners
 from flakelab.library.lots import TonerLot, TonerLots
 
 __all__ = ["LOTS_FORMAT", "read_lots", "write_lots"]
@@ -42,8 +44,10 @@ _TEXT_FIELDS = ("toner", "lot", "calibrated", "model_id")
 _NUMBER_FIELDS = ("strength", "strength_sd", "shade_nm", "shade_sd_nm")
 
 
-def read_lots(path: str | PathLike) -> TonerLots:
-    """The lots of a toner-lot file; names the file, the lot and the field of any problem."""
+def read_lots(path: str | PathLike, toners: Sequence[str] | None = None) -> TonerLots:
+    """The lots of a toner-lot file; names the file, the lot and the field of any problem.
+    With ``toners`` (a library's names), a tin of any other toner is refused, the nearest
+    named."""
     path = Path(path)
     document = read_json_file(path, "toner-lot file", "a JSON toner-lot file")
     if not isinstance(document, dict) or document.get("format") != LOTS_FORMAT:
@@ -60,6 +64,8 @@ def read_lots(path: str | PathLike) -> TonerLots:
         raise FlakelabError(f"{path}: lots: expected a list of lots")
     lots = [_lot(path, i, entry) for i, entry in enumerate(entries)]
     names = [lot.toner for lot in lots]
+    if toners is not None:
+        check_toners(names, toners, f"{path}: ")
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise FlakelabError(

@@ -15,10 +15,12 @@ from flakelab.library.toners import (
     LibraryError,
     Pearl,
     Pigment,
+    check_toners,
 )
 
 __all__ = [
     "aluminium_refractive_index", "flake_reflectance", "fresnel_reflectance", "pearl_reflectance",
     "PAINT_FAMILIES", "TONER_KINDS",
     "AluminiumFlake", "Binder", "Library", "LibraryError", "Pearl", "Pigment",
+    "check_toners",
 ]  # fmt: skip

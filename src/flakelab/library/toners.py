@@ -9,7 +9,8 @@ Files: ``flakelab.io.read_library``.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+import difflib
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
@@ -29,6 +30,7 @@ __all__ = [
     "Binder",
     "Library",
     "LibraryError",
+    "check_toners",
     "TONER_KINDS",
     "PAINT_FAMILIES",
     "SUM_TOLERANCE",
@@ -72,6 +74,16 @@ cleanly at it: TiO2, the opaque iron oxides and BiVO4 scatter 1.6–9.3, carbon 
 
 class LibraryError(FlakelabError):
     """A toner library or a recipe that is wrong: names the toner, the field and the problem."""
+
+
+def check_toners(names: Iterable[str], toners: Sequence[str], where: str = "") -> None:
+    """Refuse the first of ``names`` that is not one of ``toners`` (a library's or a model's),
+    naming the nearest that is; ``where`` (a file, an option) begins the message."""
+    for name in names:
+        if name not in toners:
+            near = difflib.get_close_matches(name, list(toners), n=1, cutoff=0.6)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise LibraryError(f"{where}{name!r} is not a toner of the library{hint}")
 
 
 def _positive(

@@ -5,19 +5,14 @@ correction neither adds them nor brings one of them in.
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from flakelab.errors import FlakelabError
+from flakelab.library import check_toners
 
-__all__ = ["toners_allowed", "StockError", "check_toners"]
-
-
-class StockError(FlakelabError):
-    """A toner named as out of stock that the library does not hold."""
+__all__ = ["toners_allowed"]
 
 
 def toners_allowed(toners: Sequence[str], without: Iterable[str] = ()) -> NDArray[np.bool_]:
@@ -26,13 +21,3 @@ def toners_allowed(toners: Sequence[str], without: Iterable[str] = ()) -> NDArra
     without = list(without)
     check_toners(without, toners, "--without: ")
     return np.array([name not in without for name in toners], dtype=bool)
-
-
-def check_toners(names: Iterable[str], toners: Sequence[str], where: str = "") -> None:
-    """Refuse the first of ``names`` that is not one of ``toners`` (a library's), naming the
-    nearest that is; ``where`` (a file, an option) begins the message."""
-    for name in names:
-        if name not in toners:
-            near = difflib.get_close_matches(name, list(toners), n=1, cutoff=0.6)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise StockError(f"{where}{name!r} is not a toner of the library{hint}")
