@@ -18,8 +18,14 @@ the same shop's cases. ``--no-habits`` runs a shop without habits of its own.
 application instead of the learned model: the estimator alone, without the model's error
 (a bias there is the estimator's; a bias only against the model is the model's).
 
+``--tins read|known`` makes the shop's cases record the tins they were poured from (as
+``cases generate --tins``): its habits are read at the standard tins, as ``flakelab cases
+habits`` reads them (:func:`~flakelab.match.lots.at_standard_tins`), and the fresh
+spray-outs are judged for their tins; with ``--no-tins`` the habits are read from the same
+cases taken as poured from the standard (``cases habits --no-tins``), the baseline.
+
     python benchmarks/habits.py [--cases 20,50,100,200,500,2000] [--repeats 5] [--no-prior]
-        [--no-habits] [--against model|physics] [--json]
+        [--no-habits] [--against model|physics] [--tins none|read|known [--no-tins]] [--json]
 """
 
 from __future__ import annotations
@@ -32,9 +38,10 @@ import numpy as np
 import torch
 
 from _matcher import seeds_from
-from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, TINS_RECORDED, World, WorldSettings
 from flakelab.io import read_library
 from flakelab.match.habits import PRIOR_SD, ShopHabits, estimate_habits, habits_fit
+from flakelab.match.lots import at_standard_tins
 from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import CaseArrays, generated_case_arrays
@@ -77,6 +84,8 @@ def main() -> None:
     parser.add_argument("--no-habits", action="store_true", help="a shop like the world")
     parser.add_argument("--no-prior", action="store_true", help="read without PRIOR_SD")
     parser.add_argument("--against", choices=("model", "physics"), default="model")
+    parser.add_argument("--tins", choices=TINS_RECORDED, default="none", help="cases record")
+    parser.add_argument("--no-tins", action="store_true", help="read as poured from standard")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     sizes = seeds_from(args.cases)
@@ -86,7 +95,8 @@ def main() -> None:
     model = shipped_model("five-angle")
     forward = forward_for(model, library)
     habits = {} if args.no_habits else SHOP_WITH_HABITS
-    world = World(library, "five-angle", WorldSettings(**habits), exclude=forward.novel)
+    settings = WorldSettings(**habits, tins=args.tins)
+    world = World(library, "five-angle", settings, exclude=forward.novel)
     if args.against == "physics":
         forward = WorldPhysics(world)
     truth = np.array(
@@ -96,12 +106,15 @@ def main() -> None:
             habits.get("shop_gain", 0.0),
         ]
     )
-    test = generated_case_arrays(world, args.test, args.seed + 1000)
+    test = at_standard_tins(generated_case_arrays(world, args.test, args.seed + 1000), library)
     draws = [generated_case_arrays(world, max(sizes), args.seed + r) for r in range(args.repeats)]
+    draws = [d.without_tins() if args.no_tins else at_standard_tins(d, library) for d in draws]
     true_habits = ShopHabits(truth, np.zeros(3), 0)
     report = {
         "shop": habits or "no habits",
         "against": args.against,
+        "tins": args.tins,
+        "read_at_the_tins": args.tins != "none" and not args.no_tins,
         "prior_sd": None if prior is None else prior.tolist(),
         "test_cases": args.test,
         "model_alone_de00": error(forward, library, test, ShopHabits.none()),

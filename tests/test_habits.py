@@ -121,6 +121,33 @@ def test_a_shop_like_the_models_cases_has_no_habits(plain_shop):
     assert np.all(np.abs(found.theta) < 3 * found.standard_error)
 
 
+def test_habits_read_at_the_tins_the_cases_record_leave_the_batches_out():
+    """A shop's cases that record the world's own tins, read at the standard tins against the
+    physics the world sprays by: the batches' strengths and shades no longer pass for film
+    build and gain. Measured on 300 cases, seeds 31–34: gain +0.22–0.29 % ± 0.11 without the
+    tins, +0.48–0.50 % ± 0.01 with them (truth +0.5 %); film build ± 1.6–2.1 % → ± 0.7–1.0 %."""
+    from flakelab.core.geometry import instrument_geometries
+    from flakelab.match.forward import PhysicsForward
+    from flakelab.match.lots import at_standard_tins
+
+    library = read_library(None)
+    physics = PhysicsForward(library, instrument_geometries("five-angle"))
+    world = World(library, "five-angle", WorldSettings(**SHOP_WITH_HABITS, tins="known"))
+    data = generated_case_arrays(world, 300, 31)
+    standard = data.without_tins()
+    at_tins = at_standard_tins(data, library)
+    without = estimate_habits(physics, library, standard.x, standard.R)
+    read = estimate_habits(physics, library, at_tins.x, at_tins.R)
+    film, gain = 0, 2
+    truth = np.array([SHOP_WITH_HABITS["shop_film_build"] - 1, TRUE_GAIN])
+    off = np.abs(read.theta[[film, gain]] - truth)
+    assert np.all(off < 3 * read.standard_error[[film, gain]])
+    assert off[1] < 0.0005 and off[1] < abs(without.instrument_gain - TRUE_GAIN) / 3
+    assert read.flake_spread == pytest.approx(TRUE_SPREAD, abs=0.004)  # tins hold no flakes
+    assert read.standard_error[film] < 0.6 * without.standard_error[film]
+    assert read.standard_error[gain] < 0.3 * without.standard_error[gain]
+
+
 def test_the_habits_explain_the_shops_flop_and_nothing_where_it_has_none(
     shipped, habits_shop, plain_shop
 ):

@@ -39,6 +39,7 @@ from flakelab.cli.sources import (
     KeptGeometriesOption,
     LibraryOption,
     ModelFileOption,
+    NoTinsOption,
     ShopModelOption,
     ShopOption,
     SinceOption,
@@ -47,6 +48,7 @@ from flakelab.cli.sources import (
     instrument_key,
     learned_forward,
     recipe_fractions,
+    recorded_tins_used,
     shop_cases,
     since_option,
     source_arrays,
@@ -921,12 +923,16 @@ def habits(
             help="Draw habits read from few spray-outs towards none (PRIOR_SD).",
         ),
     ] = True,
+    no_tins: NoTinsOption = False,
     json_output: JsonOption = False,
 ) -> None:
     """A shop's habits from its spray-outs: film build, flake alignment, instrument gain.
 
     Each as the shop's mean against the model's cases (the current model, the shop's own with
-    --shop where one was adapted to it), read through the physics of application."""
+    --shop where one was adapted to it), read through the physics of application. Cases that
+    record the tins their recipe was poured from are read at the standard tins, as the model
+    predicts for the tins ('match --lots'): the tins' strengths and shades are then not
+    taken for the shop's film build and gain."""
     from flakelab.cases.database import open_database
     from flakelab.match.habits import (
         MIN_DRIFT_CASES,
@@ -950,7 +956,7 @@ def habits(
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
-    data = source_arrays(cases, chosen, lib)
+    data, tinned = recorded_tins_used(source_arrays(cases, chosen, lib), lib, no_tins)
     found, mixed_up = screened_habits(
         forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None
     )
@@ -987,6 +993,7 @@ def habits(
         "explained": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in fit.items()},
         "drift": drift and _drift_report(drift, chosen),
         "left_out_mismatched": left_out,
+        "cases_with_tins": tinned,
     }
     if json_output:
         print(json.dumps(report, indent=2))
@@ -1022,6 +1029,7 @@ def habits(
         )
     errors.print(
         f"from {found.cases} spray-outs"
+        + (f", {tinned} of them read at the tins they record" if tinned else "")
         + (f"; written to {out}" if out else "")
         + (f"; stored for {found.shop!r}" if save else ""),
         highlight=False,

@@ -25,6 +25,7 @@ from flakelab.cli.sources import (
     InstrumentOption,
     LibraryOption,
     ModelFileOption,
+    NoTinsOption,
     ShopModelOption,
     SinceOption,
     UnseenOption,
@@ -34,6 +35,7 @@ from flakelab.cli.sources import (
     load_cases,
     name_and_version,
     named_model,
+    recorded_tins_used,
     shop_cases,
     source_arrays,
     unseen_cases,
@@ -44,27 +46,6 @@ from flakelab.errors import FlakelabError
 
 DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
 """What a ΔE00 summary of a model against cases shows (``evaluate_model``'s keys)."""
-
-
-NoTinsOption = Annotated[
-    bool,
-    typer.Option(
-        "--no-tins",
-        help="Take every case as poured from the standard tins, even where it records the "
-        "tins it was poured from (as a shop that reads none).",
-    ),
-]
-
-
-def recorded_tins_used(data, library, no_tins: bool):
-    """Cases as a model learns from them: at the standard tins (where they record tins:
-    :func:`~flakelab.match.lots.at_standard_tins`), or, with ``no_tins``, as if they
-    recorded none; with how many of them record tins that were used."""
-    from flakelab.match.lots import at_standard_tins
-
-    if no_tins:
-        return data.without_tins(), 0
-    return at_standard_tins(data, library), int(data.tins_recorded.sum())
 
 
 def _checked_device(name: str) -> str:

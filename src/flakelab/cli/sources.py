@@ -117,6 +117,16 @@ ModelFileOption = Annotated[
 ]
 
 
+NoTinsOption = Annotated[
+    bool,
+    typer.Option(
+        "--no-tins",
+        help="Take every case as poured from the standard tins, even where it records the "
+        "tins it was poured from (as a shop that reads none).",
+    ),
+]
+
+
 def source_arrays(source, cases: list, library, *, effect: bool = False):
     """The training arrays of ``cases`` read from ``source``; a case the library cannot
     encode (a toner it lacks) is named with the file or database it came from."""
@@ -127,6 +137,18 @@ def source_arrays(source, cases: list, library, *, effect: bool = False):
         return case_arrays(cases, library.names, library.effect if effect else None)
     except ModelError as error:
         raise FlakelabError(f"{source}: {error}") from None
+
+
+def recorded_tins_used(data, library, no_tins: bool):
+    """Cases as a model learns from them, and a shop's habits are read from them: at the
+    standard tins (where they record tins: :func:`~flakelab.match.lots.at_standard_tins`),
+    or, with ``no_tins``, as if they recorded none; with how many of them record tins that
+    were used."""
+    from flakelab.match.lots import at_standard_tins
+
+    if no_tins:
+        return data.without_tins(), 0
+    return at_standard_tins(data, library), int(data.tins_recorded.sum())
 
 
 def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
