@@ -730,7 +730,7 @@ def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path,
     run = cli("match", "--example", "--shop", "shop B", "--database", database)
     assert (
         run.returncode == 2
-        and "shop 'shop B' has neither habits stored nor a model of its own"
+        and "shop 'shop B' has no habits, tins or model of its own stored"
         in " ".join(run.stderr.split())
     )
     # the promoted model is now the current one: a second adaptation starts from it
@@ -971,7 +971,7 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cl
     assert "warning" not in run.stderr  # read against the model in use
     run = cli("match", "--example", "--shop", "synthetic shop", "--database", cases)
     said = " ".join(run.stderr.split())
-    assert run.returncode == 2 and "'synthetic shop' has neither habits stored nor a model" in said
+    assert run.returncode == 2 and "'synthetic shop' has no habits, tins or model" in said
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(json.loads(habits.read_text()) | {"film_build": "lots"}))
     run = cli("match", "--example", "--habits", str(bad))
@@ -1049,7 +1049,7 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
     assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", database).returncode == 0
     run = cli("match", "evaluate", "--targets", "1", "--shop", "shop Z", "--database", database)
     said = " ".join(run.stderr.split())
-    assert run.returncode == 2 and "neither habits stored nor a model" in said
+    assert run.returncode == 2 and "no habits, tins or model of its own" in said
 
 
 def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):

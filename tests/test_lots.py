@@ -722,3 +722,120 @@ def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):
     done = cli("match", "evaluate", "--targets", 1, "--lots", "guessed")
     assert done.returncode == 2 and "standard, calibrated, referenced, known" in done.stderr
     assert not (tmp_path / "n.json").exists()
+
+
+def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
+    cli, tmp_path, forward, library
+):
+    """``lots calibrate --shop`` reads the shop's stored tins and stores the next version;
+    ``match``, ``correct`` and ``cases record`` for the shop (named, or the workplace's) take
+    the latest; ``lots show`` shows and exports them, ``lots save`` stores a file's."""
+    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.data import example_path
+    from flakelab.io import write_measurements
+
+    db, shop = tmp_path / "shop.db", "Body shop A"
+    panel = tmp_path / "panel.json"
+    done = cli("lots", "panel", "Phthalo blue GS", "--recipe-out", panel)
+    assert done.returncode == 0, done.stderr
+    x = library.fractions(json.loads(panel.read_text()))
+    reading = _panel_reading(forward, x[None], _strengths(forward.toners, Phthalo_blue_GS=1.06))
+    sprayed = tmp_path / "sprayed.json"
+    write_measurements([Measurement("panel", _geometries(forward), WAVELENGTHS, reading[0])],
+                       sprayed)  # fmt: skip
+    calibrate = ("lots", "calibrate", sprayed, "--recipe", panel, "--toner", "Phthalo blue GS",
+                 "-d", db, "--json")  # fmt: skip
+
+    first = cli(*calibrate, "--shop", shop, "--lot", "Phthalo blue GS=B-1")
+    assert first.returncode == 0, first.stderr
+    first = json.loads(first.stdout)
+    assert (first["version"], first["shop"], first["lots"]) == (1, shop, None)
+    strength = first["tins"][0]["strength"]
+    assert 1.04 < strength < 1.07
+    # the workplace's shop reads on from the stored version: a second panel, version 2
+    second = cli(*calibrate, env={"FLAKELAB_SHOP": shop})
+    assert second.returncode == 0, second.stderr
+    second = json.loads(second.stdout)
+    assert second["version"] == 2 and second["tins"][0]["before"] == strength
+    assert second["tins"][0]["strength_sd"] < first["tins"][0]["strength_sd"]
+    # a dry run stores nothing
+    assert json.loads(cli(*calibrate, "--shop", shop, "--dry-run").stdout)["version"] is None
+
+    exported = tmp_path / "exported.json"
+    shown = json.loads(cli("lots", "show", "--shop", shop, "-d", db, "-o", exported,
+                           "--json").stdout)  # fmt: skip
+    assert shown["version"] == 2 and shown["lots"][0]["lot"] == "B-1"
+    tin = read_lots(exported).lots["Phthalo blue GS"]
+    assert tin.strength == shown["lots"][0]["strength"] and tin.panels == 2
+    assert round(tin.strength, 4) == second["tins"][0]["strength"]
+
+    # the shop's recipes are weighed for its stored tins, as for the file's
+    match = ("match", "--example", "--candidates", "1", "--json")
+    stored = cli(*match, "--shop", shop, "-d", db)
+    assert stored.returncode == 0, stored.stderr
+    stored = json.loads(stored.stdout)
+    from_file = json.loads(cli(*match, "--lots", exported, "-d", db).stdout)
+    plain = json.loads(cli(*match, "-d", db).stdout)
+    assert stored["lots"] == from_file["lots"] and plain["lots"] is None
+    assert stored["candidates"][0]["weights_g"] == from_file["candidates"][0]["weights_g"]
+    assert any(f"stored for shop {shop!r} (version 2" in n for n in stored["notes"])
+    target, sprayout = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    corrected = cli("correct", target, "--recipe", recipe, "--sprayed", sprayout, "-d", db,
+                    "--json", env={"FLAKELAB_SHOP": shop})  # fmt: skip
+    assert json.loads(corrected.stdout)["lots"] == stored["lots"]
+
+    # a case recorded for the shop records the stored tins of its recipe's toners
+    recorded_case = cli("cases", "record", target, "--recipe", recipe, "--sprayed", sprayout,
+                        "--shop", shop, "-d", db, "--json")  # fmt: skip
+    assert recorded_case.returncode == 0, recorded_case.stderr
+    report = json.loads(recorded_case.stdout)
+    assert list(report["tins"]) == ["Phthalo blue GS"] and "version 2" in report["tins_from"]
+    (case,) = iter_cases(open_database(db))
+    assert case.tins["Phthalo blue GS"].strength == tin.strength
+
+    # a file's tins stored for the shop become its next version; every shop is listed
+    other = tmp_path / "other.json"
+    write_lots(TonerLots.of([TonerLot("Carbon black", 0.97, 0.01, "K-9")]), other)
+    saved = json.loads(cli("lots", "save", other, "--shop", shop, "-d", db, "--json").stdout)
+    assert saved["version"] == 3
+    listed = json.loads(cli("lots", "show", "-d", db, "--json").stdout)["shops"]
+    assert [(s["shop"], s["version"], s["tins"]) for s in listed] == [(shop, 3, 1)]
+
+    # one place for the tins; a shop with none stored is told how to store them
+    both = cli(*calibrate, "--shop", shop, "--lots", other)
+    assert both.returncode == 2 and "--lots and --shop" in both.stderr
+    neither = cli(*calibrate)
+    assert neither.returncode == 2 and "--lots or --shop" in neither.stderr
+    nobody = cli("lots", "show", "--shop", "nobody", "-d", db)
+    assert nobody.returncode == 2 and "no tins stored for shop 'nobody'" in nobody.stderr
+    misspelt = tmp_path / "misspelt.json"
+    write_lots(TonerLots.of([TonerLot("Carbon blak", 0.97)]), misspelt)
+    refused = cli("lots", "save", misspelt, "--shop", shop, "-d", db)
+    assert refused.returncode == 2 and "did you mean 'Carbon black'" in refused.stderr
+    assert json.loads(cli("lots", "show", "-d", db, "--json").stdout)["shops"] == listed
+
+
+def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(tmp_path):
+    """Two workplaces that read panels against the same version: the second is refused, and
+    the first's stays the latest; every version is kept."""
+    from flakelab.cases.database import DatabaseError, open_database
+    from flakelab.cases.shop_lots import list_stored_lots, store_lots, stored_lots
+
+    engine = open_database(tmp_path / "shop.db")
+    assert stored_lots(engine, "A") is None
+    one = TonerLots.of([TonerLot("Phthalo blue GS", 1.02, 0.01, "B-1", shade_nm=0.4)])
+    two = TonerLots.of([TonerLot("Phthalo blue GS", 1.03, 0.008, "B-1", shade_nm=0.5)])
+    assert store_lots(engine, "A", one, None).version == 1
+    assert store_lots(engine, "A", two, 1).version == 2
+    with pytest.raises(DatabaseError, match="stored as version 2 by another reading since "
+                                            "version 1 was read: nothing was stored"):  # fmt: skip
+        store_lots(engine, "A", one, 1)
+    latest = stored_lots(engine, "A")
+    assert latest.version == 2 and latest.lots == two
+    assert store_lots(engine, "B", one, None).version == 1  # versions are per shop
+    assert [(s["shop"], s["version"]) for s in list_stored_lots(engine)] == [("A", 2), ("B", 1)]
+    with pytest.raises(FlakelabError, match="shop: expected a name of 1 to 120 characters"):
+        stored_lots(engine, "")

@@ -1,4 +1,4 @@
-"""Database tables (SQLAlchemy 2): cases, the model registry and the shops' habits.
+"""Database tables (SQLAlchemy 2): cases, the model registry, the shops' habits and tins.
 
 Spectra are stored as little-endian float32 arrays (``[G, 31]``); recipes, texture readings
 and the tins a recipe was poured from as JSON. Geometry names travel with every case, so
@@ -10,7 +10,16 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from sqlalchemy import JSON, Boolean, DateTime, Float, Integer, LargeBinary, String
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    Float,
+    Integer,
+    LargeBinary,
+    String,
+    UniqueConstraint,
+)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 from flakelab.cases.case import TEXT_LENGTHS
@@ -19,7 +28,7 @@ MODEL_NAME_LENGTH = 200
 """A registered model's name: an instrument's, or 'INSTRUMENT @ SHOP' for a shop's own model
 (60 + 3 + 120 characters of :data:`~flakelab.cases.case.TEXT_LENGTHS`; migration 0003)."""
 
-__all__ = ["Base", "CaseRow", "ModelRow", "HabitsRow"]
+__all__ = ["Base", "CaseRow", "ModelRow", "HabitsRow", "ShopLotsRow"]
 
 
 class Base(DeclarativeBase):
@@ -76,4 +85,20 @@ class HabitsRow(Base):
     model: Mapped[str] = mapped_column(String(80))
     instrument: Mapped[str] = mapped_column(String(60))
     report: Mapped[dict] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class ShopLotsRow(Base):
+    """A shop's toner tins as read so far (a toner-lot document, ``flakelab lots calibrate
+    --shop``); every version is kept, the latest is used. A version is one more than the one
+    it was read from, once per shop: two workplaces storing readings of the same version
+    clash instead of one losing the other's (migration 0005)."""
+
+    __tablename__ = "shop_lots"
+    __table_args__ = (UniqueConstraint("shop", "version", name="uq_shop_lots_shop_version"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    shop: Mapped[str] = mapped_column(String(TEXT_LENGTHS["shop"]), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    document: Mapped[dict] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

@@ -248,6 +248,7 @@ def record_case(
             help="The shop's toner-lot file ('flakelab lots calibrate'): the case records "
             "the tins the recipe was poured from (lot, strength, shade), and a model is "
             "judged on it for them.",
+            show_default="the tins stored for --shop in the database, where there are any",
         ),
     ] = None,
     json_output: JsonOption = False,
@@ -260,6 +261,7 @@ def record_case(
     from flakelab.cases.case import tin_fields
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
+    from flakelab.cases.shop_lots import stored_lots
     from flakelab.io import read_library, read_recipe, read_tolerance
     from flakelab.io.lots_file import read_lots
     from flakelab.match.mixups import is_mismatched, mismatch_message, recorded_checks
@@ -274,6 +276,9 @@ def record_case(
     sprayed_reading = read_readings(
         sprayed, sprayed_sample, average_sprayed, "--sprayed-sample", "--average-sprayed"
     )[0]
+    engine = open_database(database)
+    kept = None if lots else stored_lots(engine, shop, lib.names)  # the shop's, where stored
+    tins = kept.lots.lots if kept else tins
     case = case_from_readings(
         target_reading,
         sprayed_reading,
@@ -288,7 +293,6 @@ def record_case(
     )
     textures = (case.target_texture, case.sprayout_texture)
     _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol, textures)
-    engine = open_database(database)
     if case_exists(engine, case.case_id):
         raise FlakelabError(
             f"{engine.url}: case {case.case_id} is already recorded (the same readings, recipe "
@@ -308,6 +312,7 @@ def record_case(
         "read_by_models_of": list(models),
         "outcome": case.outcome,
         "tins": {name: tin_fields(tin) for name, tin in sorted(case.tins.items())},
+        "tins_from": str(lots) if lots else kept and kept.describe(),
         "created_at": case.created_at.isoformat(),
         "tolerance": tol.name,
         "sprayout_passes": not failing,
@@ -338,7 +343,7 @@ def record_case(
         )
     if case.tins:
         tins = ", ".join(f"{n} {t.lot or '(no lot number)'}" for n, t in sorted(case.tins.items()))
-        console.print(f"poured from the tins of {lots}: {tins}", highlight=False)
+        console.print(f"poured from {report['tins_from']}: {tins}", highlight=False)
     if found is not None:
         habits = " with the shop's habits" if found["habits"] else ""
         console.print(

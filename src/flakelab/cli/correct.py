@@ -148,7 +148,7 @@ def correct_command(
             raise FlakelabError(f"{option}: for --mode additions (a reformulation is mixed afresh)")
     shop, named = workplace_shop(shop)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
-    tins, forward, lot_notes = shop_lots(lots, lib, forward)
+    tins, forward, lot_notes = shop_lots(lots, lib, forward, shop, database)
     x0 = recipe_fractions(lib, grams, recipe)
     can = grams if left is None else _what_is_left(grams, left, resolution, lib, recipe)
     most_g = None if most is None else _most_g(most, can, resolution, lib)
@@ -162,7 +162,9 @@ def correct_command(
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
-    shop_habits = habits_for(habits, shop, database, forward, named=named)
+    shop_habits = habits_for(
+        habits, shop, database, forward, named=named, stored_tins=lots is None and tins is not None
+    )
     correction = correct(
         forward,
         target_R,

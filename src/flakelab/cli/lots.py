@@ -33,7 +33,15 @@ from flakelab.cli.matcher import (
     matcher_setup,
     spectra_for_model,
 )
-from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, recipe_fractions
+from flakelab.cli.sources import (
+    WORKPLACE_SHOP,
+    DatabaseOption,
+    InstrumentOption,
+    LibraryOption,
+    existing_engine,
+    recipe_fractions,
+    workplace_shop,
+)
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 
@@ -50,28 +58,59 @@ LotsOption = Annotated[
         "--lots",
         help="The shop's toner-lot file ('flakelab lots calibrate' writes it): each tin's "
         "strength and shade against the model's standard, which the recipe is weighed for.",
+        show_default="the shop's tins stored in the database (--shop), else the standard",
     ),
 ]
 
 
-def shop_lots(path: Path | None, library, forward):
-    """The lots of ``path`` (None: none) checked against ``library``, and ``forward`` for
-    them, with a note where they were read against another model than ``forward``'s."""
-    if path is None:
-        return None, forward, []
+ShopTinsOption = Annotated[
+    str | None,
+    typer.Option(
+        "--shop",
+        help="The shop whose tins are kept in the database (--database), shared by its "
+        "workplaces, instead of in a lot file. Default: the workplace's shop, FLAKELAB_SHOP, "
+        "where no lot file is named.",
+    ),
+]
+
+
+def shop_lots(
+    path: Path | None, library, forward, shop: str | None = None, database: str | None = None
+):
+    """The lots of ``path``, else those stored for ``shop`` in the database where it has
+    any (else none), checked against ``library``; ``forward`` for them; and notes: where
+    stored tins came from, and where they were read against another model than
+    ``forward``'s."""
     from flakelab.io.lots_file import read_lots
     from flakelab.match.lots import with_lots
 
-    lots = read_lots(path, library.names)
+    notes = []
+    if path is not None:
+        lots = read_lots(path, library.names)
+    elif (kept := stored_tins(shop, database, library)) is not None:
+        lots = kept.lots
+        notes.append(f"weighed for {kept.describe()}")
+    else:
+        return None, forward, []
     others = sorted(
         {lot.model_id for lot in lots.lots.values() if lot.model_id} - {forward.model_id}
     )
-    notes = (
-        [f"the tins of {path} were read against model {', '.join(others)}, not this one "
-         f"({forward.model_id}): their readings carry that model's errors on the panels"]
-        if others else []
-    )  # fmt: skip
+    if others:
+        notes.append(
+            f"the tins of {path or shop} were read against model {', '.join(others)}, not this "
+            f"one ({forward.model_id}): their readings carry that model's errors on the panels"
+        )
     return lots, with_lots(forward, lots, library), notes
+
+
+def stored_tins(shop: str | None, database: str | None, library):
+    """The latest tins stored for ``shop`` in the database named or configured (None: no
+    shop, no database yet, or none stored), each of a toner of ``library``."""
+    from flakelab.cases.shop_lots import stored_lots
+
+    if shop is None or (engine := existing_engine(database)) is None:
+        return None
+    return stored_lots(engine, shop, library.names)
 
 
 def lots_report(lots) -> dict[str, dict[str, float]]:
@@ -245,11 +284,12 @@ def calibrate_command(
         ),
     ],
     lots: Annotated[
-        Path,
+        Path | None,
         typer.Option(
             "--lots", help="The shop's toner-lot file: read where it exists, and updated."
         ),
-    ],
+    ] = None,
+    shop: ShopTinsOption = None,
     toner: Annotated[
         list[str] | None,
         typer.Option(
@@ -309,6 +349,8 @@ def calibrate_command(
     reading (or the standard ± 3 %, ± 1.5 nm) as far as the panels leave it unsure; the
     spray's own film build and flake alignment are allowed for by the library's physics.
     Tins read together with these before move with them."""
+    from flakelab.cases.database import open_database
+    from flakelab.cases.shop_lots import store_lots, stored_lots
     from flakelab.io import read_recipe
     from flakelab.io.lots_file import read_lots, write_lots
     from flakelab.library import check_toners
@@ -316,7 +358,9 @@ def calibrate_command(
     from flakelab.match.lots import calibrate_lots, read_together, recorded
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
 
-    check_output_file(lots, "--lots")
+    shop = _tins_kept(lots, shop)
+    if lots is not None:
+        check_output_file(lots, "--lots")
     numbers = _lot_numbers(lot or [])
     if len(recipe) != len(sprayed):
         raise FlakelabError(
@@ -328,6 +372,9 @@ def calibrate_command(
             f"got {len(standard)}"
         )
     grams = [read_recipe(path) for path in recipe]
+    # a command that stores creates its database, as the others do: before the model is
+    # looked for in it
+    engine = open_database(database) if shop is not None and not dry_run else None
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
     check_toners([*(toner or []), *numbers], forward.toners, "--toner, --lot: ")
@@ -337,7 +384,15 @@ def calibrate_command(
             raise FlakelabError(
                 f"{where}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
             )
-    stored = read_lots(lots, lib.names) if lots.exists() else TonerLots(library=lib.name)
+    kept = None  # the shop's tins stored in the database: the version read from
+    if engine is not None:
+        kept = stored_lots(engine, shop, lib.names)
+    elif lots is None:
+        kept = stored_tins(shop, database, lib)
+    if lots is not None and lots.exists():
+        stored = read_lots(lots, lib.names)
+    else:
+        stored = kept.lots if kept else TonerLots(library=lib.name)
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
     ]
@@ -364,7 +419,7 @@ def calibrate_command(
             raise FlakelabError(
                 f"{sprayed[n]}: the panel lies {before:.1f} ΔE00 from {against} at worst, "
                 f"beyond the {SPRAYOUT_MISMATCH:g} of a likely mix-up: is it a spray-out of "
-                f"{recipe[n]}'s recipe? (the lot file is unchanged)"
+                f"{recipe[n]}'s recipe? (the shop's tins are unchanged)"
             )
     where = sprayed[0] if len(sprayed) == 1 else ", ".join(map(str, sprayed))
     for name, strength, nm in zip(found.toners, found.strength, found.shade, strict=True):
@@ -381,10 +436,15 @@ def calibrate_command(
                        panels=counts)  # fmt: skip
     read = [updated.lots[name] for name in found.toners]
     moved = [updated.lots[name] for name in found.moved]
-    if not dry_run:
+    version = None
+    if not dry_run and lots is not None:
         write_lots(updated, lots)
+    elif not dry_run:
+        version = store_lots(engine, shop, updated, kept and kept.version).version
     report = {
-        "lots": str(lots),
+        "lots": lots and str(lots),
+        "shop": shop,
+        "version": version,
         "written": not dry_run,
         "tins": [
             {
@@ -448,6 +508,20 @@ def calibrate_command(
     _print_calibration(report)
 
 
+def _tins_kept(lots: Path | None, shop: str | None) -> str | None:
+    """The shop whose tins the database keeps, where no lot file ``lots`` is named: ``--shop``
+    or the workplace's; one of the two places, not both."""
+    shop, named = workplace_shop(shop)
+    if lots is not None and named:
+        raise FlakelabError("--lots and --shop: expected one place for the tins, not both")
+    if lots is None and shop is None:
+        raise FlakelabError(
+            "--lots or --shop: expected where the shop's tins are kept: a toner-lot file, or "
+            f"the database for a shop (--shop, or {WORKPLACE_SHOP})"
+        )
+    return None if lots is not None else shop
+
+
 def _lot_numbers(given: list[str]) -> dict[str, str]:
     numbers = {}
     for text in given:
@@ -503,10 +577,13 @@ def _print_calibration(report: dict) -> None:
         f"their covariance is scaled by {max(1.0, misfit['chi2_per_dof']):.2f}",
         highlight=False,
     )
-    where = (
-        f"wrote {report['lots']}" if report["written"] else f"--dry-run: {report['lots']} unchanged"
-    )
-    errors.print(where, highlight=False)
+    kept = report["lots"] or f"the tins of shop {report['shop']!r}"
+    if not report["written"]:
+        errors.print(f"--dry-run: {kept} unchanged", highlight=False)
+    elif report["lots"]:
+        errors.print(f"wrote {kept}", highlight=False)
+    else:
+        errors.print(f"stored {kept} as version {report['version']}", highlight=False)
 
 
 def _tins_table(title: str) -> Table:
@@ -563,36 +640,62 @@ def _read_with_text(names: list[str]) -> str:
 @lots_app.command("show")
 @reports_errors
 def show_command(
-    lots: Annotated[Path, typer.Argument(help="A toner-lot file.")],
+    lots: Annotated[
+        Path | None,
+        typer.Argument(
+            help="A toner-lot file.", show_default="the tins stored for --shop, or every shop's"
+        ),
+    ] = None,
+    shop: ShopTinsOption = None,
+    database: DatabaseOption = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Also write the tins shown as a toner-lot file."),
+    ] = None,
     library: LibraryOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """The tins of a toner-lot file: strength and shade against the standard, how sure, when
-    read, and the tins each was read with. The library (default: demo) tells an effect toner,
+    """The tins of a toner-lot file, or those stored for a shop: strength and shade against
+    the standard, how sure, when read, and the tins each was read with. Without either, the
+    shops whose tins the database keeps. The library (default: demo) tells an effect toner,
     which has no shade, from a pigment whose shade was not read."""
     from dataclasses import asdict
 
     from flakelab.io import read_library
-    from flakelab.io.lots_file import read_lots
+    from flakelab.io.lots_file import read_lots, write_lots
 
-    found = read_lots(lots)
-    kinds = {t.name: t.kind for t in read_library(library).toners}
+    check_output_file(out, "--out")
+    lib = read_library(library)
+    if lots is None and workplace_shop(shop)[0] is None:
+        _show_shops(database, json_output)
+        return
+    shop = _tins_kept(lots, shop)
+    kept = None if lots is not None else _stored_or_told(shop, database, lib)
+    found = read_lots(lots) if lots is not None else kept.lots
+    if out is not None:
+        write_lots(found, out)
+    kinds = {t.name: t.kind for t in lib.toners}
     if json_output:
         print(
             json.dumps(
                 {
                     "library": found.library,
+                    "shop": shop,
+                    "version": kept and kept.version,
+                    "saved_at": kept and kept.saved_at.isoformat(),
                     "lots": [
                         {**asdict(t), "read_with": found.read_with(t.toner)}
                         for t in found.lots.values()
                     ],
                     "misfit": [_misfit_report(found, key) for key in sorted(found.misfit)],
+                    "out": out and str(out),
                 },
                 indent=2,
             )
         )
         return
-    table = Table(title=f"Toner tins of {lots}", box=box.SIMPLE)
+    title = f"Toner tins of {lots}" if kept is None else f"Toner {kept.describe()[4:]}"
+    table = Table(title=title, box=box.SIMPLE)
     for column in ("toner", "lot", "strength", "shade", "panels", "read", "read with"):
         table.add_column(
             column, justify="right" if column in ("strength", "shade", "panels") else "left"
@@ -622,6 +725,89 @@ def show_command(
             "panel of one moves the others with it",
             highlight=False,
         )
+    if out is not None:
+        errors.print(f"wrote {out}", highlight=False)
+
+
+@lots_app.command("save")
+@reports_errors
+def save_command(
+    lots: Annotated[Path, typer.Argument(help="A toner-lot file ('flakelab lots calibrate').")],
+    shop: ShopTinsOption = None,
+    database: DatabaseOption = None,
+    library: LibraryOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Store a toner-lot file's tins in the database as the shop's latest, where each of its
+    workplaces finds them ('match', 'correct' and 'cases record' for the shop, 'lots
+    calibrate --shop'). The versions before are kept."""
+    from flakelab.cases.database import open_database
+    from flakelab.cases.shop_lots import store_lots, stored_lots
+    from flakelab.io import read_library
+    from flakelab.io.lots_file import read_lots
+
+    shop = _tins_kept(None, shop)
+    lib = read_library(library)
+    found = read_lots(lots, lib.names)
+    engine = open_database(database)
+    before = stored_lots(engine, shop)
+    saved = store_lots(engine, shop, found, before and before.version)
+    report = {
+        "lots": str(lots),
+        "shop": shop,
+        "version": saved.version,
+        "tins": len(found.lots),
+        "database": engine.url.render_as_string(hide_password=True),
+    }
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    errors.print(
+        f"stored the {report['tins']} tins of {lots} for shop {shop!r} as version "
+        f"{saved.version} in {report['database']}",
+        highlight=False,
+    )
+
+
+def _stored_or_told(shop: str, database: str | None, library):
+    """The latest tins stored for ``shop``; where there are none, an error saying how to
+    store them."""
+    kept = stored_tins(shop, database, library)
+    if kept is None:
+        raise FlakelabError(
+            f"no tins stored for shop {shop!r}: 'flakelab lots calibrate SPRAYED --recipe R "
+            f"--shop {shop!r}' reads them from panels, 'flakelab lots save FILE --shop "
+            f"{shop!r}' stores a lot file's"
+        )
+    return kept
+
+
+def _show_shops(database: str | None, json_output: bool) -> None:
+    """The shops whose tins the database keeps: each one's latest version."""
+    from flakelab.cases.shop_lots import list_stored_lots
+
+    engine = existing_engine(database)
+    shops = list_stored_lots(engine) if engine is not None else []
+    if json_output:
+        print(json.dumps({"shops": shops}, indent=2))
+        return
+    if not shops:
+        raise FlakelabError(
+            "no shop has tins stored in the database: name a toner-lot file, or store a "
+            "shop's tins ('flakelab lots calibrate --shop NAME', 'flakelab lots save FILE "
+            "--shop NAME')"
+        )
+    table = Table(title="Shops' tins in the database", box=box.SIMPLE)
+    for column in ("shop", "version", "tins", "saved"):
+        table.add_column(column, justify="left" if column == "shop" else "right")
+    for row in shops:
+        table.add_row(
+            row["shop"],
+            str(row["version"]),
+            str(row["tins"]),
+            row["saved_at"][:16].replace("T", " "),
+        )
+    console.print(table)
 
 
 def _shade_text(shade_nm: float, shade_sd_nm: float, kind: str | None = None) -> str:

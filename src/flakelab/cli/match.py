@@ -145,7 +145,7 @@ def match_command(
             "knows of its tins: standard (nothing), calibrated (each read from one panel "
             "against the model), referenced (against the paint maker's standard panel) or "
             "known.",
-            show_default="the model's standard tins",
+            show_default="the shop's tins stored in the database (--shop), else the standard",
         ),
     ] = None,
     nearest: Annotated[
@@ -295,12 +295,14 @@ def match_command(
         raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
-    tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward)
+    tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward, shop, database)
     allowed = toners_allowed(forward.toners, without or ())
     can = can.for_toners(lib, [n for n, ok in zip(forward.toners, allowed, strict=True) if ok])
     path = example_path("target") if example else Path(target)
     tol = read_tolerance(tolerance or "refinish")
-    shop_habits = habits_for(habits, shop, database, forward, named=named)
+    shop_habits = habits_for(
+        habits, shop, database, forward, named=named, stored_tins=lots is None and tins is not None
+    )
     settings = replace(search, candidates=candidates, seed=seed)
     if all_samples:
         from flakelab.io import read_measurements

@@ -93,9 +93,10 @@ HabitsShopOption = Annotated[
     typer.Option(
         "--shop",
         help="Match for this shop: with its own model where one was adapted to its cases "
-        "('flakelab model adapt --shop NAME'), and aimed off for its habits where they are "
-        "stored ('flakelab cases habits --shop NAME --save'). Default (not for 'match "
-        "evaluate'): the workplace's shop, FLAKELAB_SHOP, which may have neither.",
+        "('flakelab model adapt --shop NAME'), aimed off for its habits where they are "
+        "stored ('flakelab cases habits --shop NAME --save'), and weighed for its tins where "
+        "they are stored ('flakelab lots save FILE --shop NAME'). Default (not for 'match "
+        "evaluate'): the workplace's shop, FLAKELAB_SHOP, which may have none of them.",
     ),
 ]
 
@@ -127,15 +128,22 @@ def matcher_setup(
 
 
 def habits_for(
-    path: Path | None, shop: str | None, database: str | None, forward, *, named: bool = True
+    path: Path | None,
+    shop: str | None,
+    database: str | None,
+    forward,
+    *,
+    named: bool = True,
+    stored_tins: bool = False,
 ):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``, or
     over a change of the shop's habits; None, with a note, where ``forward``'s model was
     adapted to them (:meth:`~flakelab.match.habits.ShopHabits.learned_by`). A shop with a model
-    of its own (``forward``, adapted to its cases) need not have habits stored; nor need the
-    workplace's shop where ``--shop`` ``named`` none (:func:`~flakelab.cli.sources.
-    workplace_shop`), and a habits file then stands in for its stored habits."""
+    of its own (``forward``, adapted to its cases) or ``stored_tins`` need not have habits
+    stored; nor need the workplace's shop where ``--shop`` ``named`` none
+    (:func:`~flakelab.cli.sources.workplace_shop`), and a habits file then stands in for its
+    stored habits."""
     if path is None and shop is None:
         return None
     if path is not None and shop is not None and named:
@@ -153,11 +161,12 @@ def habits_for(
         try:
             found = stored_habits(engine, shop, forward.model_id)
         except FlakelabError:
-            if not named or (adaptation_of(forward) or {}).get("shop") == shop:
+            if not named or stored_tins or (adaptation_of(forward) or {}).get("shop") == shop:
                 return None  # the shop's own model learned them; a workplace may have none yet
             raise FlakelabError(
-                f"{engine.url}: shop {shop!r} has neither habits stored nor a model of its own: "
-                f"read its habits with flakelab cases habits CASES --shop {shop!r} --save, or "
+                f"{engine.url}: shop {shop!r} has no habits, tins or model of its own stored: "
+                f"read its habits with flakelab cases habits CASES --shop {shop!r} --save, "
+                f"its tins with flakelab lots calibrate PANEL --recipe R --shop {shop!r}, or "
                 f"adapt a model to its cases with flakelab model adapt CASES --shop {shop!r}"
             ) from None
     if found.learned_by(forward):

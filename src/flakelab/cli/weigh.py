@@ -12,6 +12,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import JsonOption, check_output_file, console, errors, print_notes
+from flakelab.cli.lots import ShopTinsOption
 from flakelab.cli.matcher import (
     ModelOption,
     PhysicsOption,
@@ -20,7 +21,13 @@ from flakelab.cli.matcher import (
     ResolutionOption,
     matcher_setup,
 )
-from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, recipe_fractions
+from flakelab.cli.sources import (
+    DatabaseOption,
+    InstrumentOption,
+    LibraryOption,
+    recipe_fractions,
+    workplace_shop,
+)
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 
@@ -58,8 +65,10 @@ def weigh_command(
             "--lots",
             help="The shop's toner-lot file: the rounding's colour cost (and, with --poured, "
             "the dilution) predicted for its tins.",
+            show_default="the shop's tins stored in the database (--shop), else the standard",
         ),
     ] = None,
+    shop: ShopTinsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Weigh a recipe for another can, and what rounding to the scale costs in colour.
@@ -74,7 +83,7 @@ def weigh_command(
     can = order_can(quantity, resolution)
     check_output_file(recipe_out, "--recipe-out")
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
-    tins, forward, lot_notes = shop_lots(lots, lib, forward)
+    tins, forward, lot_notes = shop_lots(lots, lib, forward, workplace_shop(shop)[0], database)
     for_tins = {"lots": tins and lots_report(tins), "notes": lot_notes}
     fractions = recipe_fractions(lib, grams, recipe)
     shares = {n: float(v) for n, v in zip(lib.names, fractions, strict=True) if v > 0}

@@ -35,7 +35,7 @@ from flakelab.io.records import read_json_file, write_atomically
 from flakelab.library import check_toners
 from flakelab.library.lots import TonerLot, TonerLots
 
-__all__ = ["LOTS_FORMAT", "read_lots", "write_lots"]
+__all__ = ["LOTS_FORMAT", "read_lots", "write_lots", "lots_document", "lots_from_document"]
 
 LOTS_FORMAT = "flakelab-toner-lots"
 _VERSION = 3
@@ -50,58 +50,64 @@ def read_lots(path: str | PathLike, toners: Sequence[str] | None = None) -> Tone
     named."""
     path = Path(path)
     document = read_json_file(path, "toner-lot file", "a JSON toner-lot file")
+    return lots_from_document(document, str(path), toners)
+
+
+def lots_from_document(document, where: str, toners: Sequence[str] | None = None) -> TonerLots:
+    """The lots of a toner-lot document (a file's JSON, or the database's copy), checked
+    as :func:`read_lots` checks a file; ``where`` (the file, the shop) begins every message."""
     if not isinstance(document, dict) or document.get("format") != LOTS_FORMAT:
         raise FlakelabError(
-            f"{path}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)"
+            f"{where}: format: expected {LOTS_FORMAT!r} (a file 'flakelab lots calibrate' writes)"
         )
     if document.get("version") not in _READS:
         raise FlakelabError(
-            f"{path}: version: expected {' or '.join(map(str, _READS))}, "
+            f"{where}: version: expected {' or '.join(map(str, _READS))}, "
             f"got {document.get('version')!r}"
         )
     entries = document.get("lots")
     if not isinstance(entries, list):
-        raise FlakelabError(f"{path}: lots: expected a list of lots")
-    lots = [_lot(path, i, entry) for i, entry in enumerate(entries)]
+        raise FlakelabError(f"{where}: lots: expected a list of lots")
+    lots = [_lot(where, i, entry) for i, entry in enumerate(entries)]
     names = [lot.toner for lot in lots]
     if toners is not None:
-        check_toners(names, toners, f"{path}: ")
+        check_toners(names, toners, f"{where}: ")
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise FlakelabError(
-            f"{path}: lots: more than one tin of {', '.join(twice)} (one per toner)"
+            f"{where}: lots: more than one tin of {', '.join(twice)} (one per toner)"
         )
     library = document.get("library", "")
     if not isinstance(library, str):
-        raise FlakelabError(f"{path}: library: expected a name, got {library!r}")
+        raise FlakelabError(f"{where}: library: expected a name, got {library!r}")
     top_level = {"format", "version", "library", "lots", "correlations", "misfit"}
     unknown = sorted(set(document) - top_level)
     if unknown:
-        raise FlakelabError(f"{path}: {unknown[0]}: not a field of a toner-lot file")
-    correlations = _correlations(path, document.get("correlations", []))
-    misfit = _misfit(path, document.get("misfit", []))
+        raise FlakelabError(f"{where}: {unknown[0]}: not a field of a toner-lot file")
+    correlations = _correlations(where, document.get("correlations", []))
+    misfit = _misfit(where, document.get("misfit", []))
     try:
         return TonerLots({lot.toner: lot for lot in lots}, library, correlations, misfit)
     except ValueError as error:
-        raise FlakelabError(f"{path}: {error}") from None
+        raise FlakelabError(f"{where}: {error}") from None
 
 
-def _entries(path: Path, name: str, entries, keys: tuple[str, ...]):
+def _entries(source: str, name: str, entries, keys: tuple[str, ...]):
     """Each entry of a file's list ``name`` with where it is, every one an object of
     ``keys`` exactly."""
     if not isinstance(entries, list):
-        raise FlakelabError(f"{path}: {name}: expected a list")
+        raise FlakelabError(f"{source}: {name}: expected a list")
     for index, entry in enumerate(entries):
-        where = f"{path}: {name}[{index}]"
+        where = f"{source}: {name}[{index}]"
         if not isinstance(entry, dict) or set(entry) != set(keys):
             raise FlakelabError(f"{where}: expected an object with {', '.join(keys)}")
         yield where, entry
 
 
-def _misfit(path: Path, entries) -> dict:
+def _misfit(source: str, entries) -> dict:
     """The misfit of a file's ``misfit`` list, by (model id, read against), each once."""
     found = {}
-    for where, entry in _entries(path, "misfit", entries, ("model_id", "against", "chi2", "dof")):
+    for where, entry in _entries(source, "misfit", entries, ("model_id", "against", "chi2", "dof")):
         key = (entry["model_id"], entry["against"])
         if not all(isinstance(v, str) for v in key):
             raise FlakelabError(f"{where}: model_id, against: expected text, got {key!r}")
@@ -116,10 +122,10 @@ def _misfit(path: Path, entries) -> dict:
     return found
 
 
-def _correlations(path: Path, entries) -> dict:
+def _correlations(source: str, entries) -> dict:
     """The correlations of a file's ``correlations`` list, each pair sorted, once."""
     found = {}
-    for where, entry in _entries(path, "correlations", entries, ("a", "b", "r")):
+    for where, entry in _entries(source, "correlations", entries, ("a", "b", "r")):
         pair = []
         for side in ("a", "b"):
             quantity = entry[side]
@@ -138,8 +144,8 @@ def _correlations(path: Path, entries) -> dict:
     return found
 
 
-def _lot(path: Path, index: int, entry) -> TonerLot:
-    where = f"{path}: lots[{index}]"
+def _lot(source: str, index: int, entry) -> TonerLot:
+    where = f"{source}: lots[{index}]"
     if not isinstance(entry, dict):
         raise FlakelabError(f"{where}: expected an object with toner and strength")
     if isinstance(entry.get("toner"), str):
@@ -167,7 +173,13 @@ def _lot(path: Path, index: int, entry) -> TonerLot:
 
 def write_lots(lots: TonerLots, path: str | PathLike) -> None:
     """Write ``lots`` atomically, by toner name (:func:`read_lots` reads them)."""
-    document = {
+    text = json.dumps(lots_document(lots), indent=1, ensure_ascii=False) + "\n"
+    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
+
+
+def lots_document(lots: TonerLots) -> dict:
+    """The toner-lot document of ``lots`` (a file's JSON), by toner name."""
+    return {
         "format": LOTS_FORMAT,
         "version": _VERSION,
         "library": lots.library,
@@ -180,5 +192,3 @@ def write_lots(lots: TonerLots, path: str | PathLike) -> None:
             for (model_id, against), (chi2, dof) in sorted(lots.misfit.items())
         ],
     }
-    text = json.dumps(document, indent=1, ensure_ascii=False) + "\n"
-    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))

@@ -1,0 +1,111 @@
+"""A shop's toner tins in the database, where every workplace of the shop finds them.
+
+A toner-lot file (:mod:`flakelab.io.lots_file`) serves one workplace; a shop whose colorists
+share a database keeps its tins there beside its cases and habits. ``flakelab lots calibrate
+--shop NAME`` reads the shop's latest tins, updates them from the panels and stores the next
+version; ``match``, ``correct`` and ``cases record`` for the shop (``--shop``, or the
+workplace's) take the latest. Every version is kept. A version is numbered one above the one
+it was read from, once per shop, so two workplaces that read panels against the same version
+at once cannot both store theirs: the second is refused and told to read its panels again,
+and neither reading is lost unseen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import UTC, datetime
+
+from sqlalchemy import Engine, select
+from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+from sqlalchemy.orm import Session
+
+from flakelab.cases.case import TEXT_LENGTHS
+from flakelab.cases.database import DatabaseError
+from flakelab.cases.schema import ShopLotsRow
+from flakelab.errors import FlakelabError
+from flakelab.io.lots_file import lots_document, lots_from_document
+from flakelab.library.lots import TonerLots
+
+__all__ = ["StoredLots", "stored_lots", "store_lots", "list_stored_lots"]
+
+
+@dataclass(frozen=True)
+class StoredLots:
+    """A shop's tins as stored: the lots, their version (1, 2, … per shop) and when."""
+
+    shop: str
+    lots: TonerLots
+    version: int
+    saved_at: datetime
+
+    def describe(self) -> str:
+        when = f"{self.saved_at:%Y-%m-%d %H:%M}"
+        return f"the tins stored for shop {self.shop!r} (version {self.version} of {when})"
+
+
+def _checked_shop(shop: str) -> str:
+    if not isinstance(shop, str) or not shop.strip() or len(shop) > TEXT_LENGTHS["shop"]:
+        raise FlakelabError(
+            f"shop: expected a name of 1 to {TEXT_LENGTHS['shop']} characters, got {shop!r}"
+        )
+    return shop
+
+
+def stored_lots(engine: Engine, shop: str, toners=None) -> StoredLots | None:
+    """The latest tins stored for ``shop`` (None: none), each of one of ``toners`` when given
+    (a library's names: another is refused, the nearest named)."""
+    with Session(engine) as session:
+        row = session.scalars(
+            select(ShopLotsRow)
+            .where(ShopLotsRow.shop == _checked_shop(shop))
+            .order_by(ShopLotsRow.version.desc())
+            .limit(1)
+        ).first()
+    if row is None:
+        return None
+    where = f"{engine.url}: the tins of shop {shop!r}, version {row.version}"
+    lots = lots_from_document(row.document, where, toners)
+    return StoredLots(shop, lots, row.version, row.created_at)
+
+
+def store_lots(engine: Engine, shop: str, lots: TonerLots, read_from: int | None) -> StoredLots:
+    """Store ``lots`` as the shop's next version after ``read_from`` (the version they were
+    read from; None: none was stored). Where another was stored after it meanwhile, nothing
+    is stored and the error says so."""
+    stored = StoredLots(_checked_shop(shop), lots, (read_from or 0) + 1, datetime.now(UTC))
+    row = ShopLotsRow(
+        shop=shop, version=stored.version, document=lots_document(lots), created_at=stored.saved_at
+    )
+    try:
+        with Session(engine) as session, session.begin():
+            session.add(row)
+    except IntegrityError:
+        latest = stored_lots(engine, shop)
+        raise DatabaseError(
+            f"{engine.url}: the tins of shop {shop!r} were stored as version "
+            f"{latest.version if latest else '?'} by another reading since version "
+            f"{read_from or 'none'} was read: nothing was stored; read the panels again "
+            "against the latest"
+        ) from None
+    except SQLAlchemyError as error:
+        raise DatabaseError(
+            f"{engine.url}: cannot store the tins of shop {shop!r}: {error.__class__.__name__}: "
+            f"{str(getattr(error, 'orig', error)).splitlines()[0]}; nothing was stored"
+        ) from None
+    return stored
+
+
+def list_stored_lots(engine: Engine) -> list[dict]:
+    """Every shop with tins stored: its latest version, how many tins and when."""
+    with Session(engine) as session:
+        rows = session.scalars(select(ShopLotsRow).order_by(ShopLotsRow.version)).all()
+        latest = {r.shop: r for r in rows}
+        return [
+            {
+                "shop": r.shop,
+                "version": r.version,
+                "tins": len(r.document.get("lots", [])),
+                "saved_at": r.created_at.isoformat(),
+            }
+            for r in sorted(latest.values(), key=lambda r: r.shop)
+        ]
