@@ -803,6 +803,8 @@ def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
     assert saved["version"] == 3
     listed = json.loads(cli("lots", "show", "-d", db, "--json").stdout)["shops"]
     assert [(s["shop"], s["version"], s["tins"]) for s in listed] == [(shop, 3, 1)]
+    shops = json.loads(cli("cases", "shops", "-d", db, "--json").stdout)["shops"]
+    assert [(s["shop"], s["cases"], s["tins"]["version"]) for s in shops] == [(shop, 1, 3)]
 
     # one place for the tins; a shop with none stored is told how to store them
     both = cli(*calibrate, "--shop", shop, "--lots", other)

@@ -1099,40 +1099,45 @@ def _explained_table(fit: dict) -> Table:
 @cases_app.command("shops")
 @reports_errors
 def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
-    """The shops in the database: their cases by outcome, their stored habits and their own
-    models (adapted to their cases: 'flakelab model adapt --shop')."""
+    """The shops in the database: their cases by outcome, their stored habits and tins, and
+    their own models (adapted to their cases: 'flakelab model adapt --shop')."""
     from flakelab.cases.case import OUTCOMES
     from flakelab.cases.database import open_database, shop_summary
+    from flakelab.cases.shop_lots import list_stored_lots
     from flakelab.match.habits import ShopHabits, list_habits
     from flakelab.models.registry import shop_models
 
     engine = open_database(database, must_exist=True)
     habits = {h["shop"]: h for h in list_habits(engine)}
+    tins = {t["shop"]: t for t in list_stored_lots(engine)}
     models = shop_models(engine)
     rows = [
         s | {"first": s["first"].isoformat(), "last": s["last"].isoformat()}
         for s in shop_summary(engine)
     ]
     named = {row["shop"] for row in rows}
-    rows += [{"shop": name, "cases": 0} for name in sorted({*habits, *models} - named)]
+    rows += [{"shop": name, "cases": 0} for name in sorted({*habits, *tins, *models} - named)]
     for row in rows:
         row["habits"] = habits.get(row["shop"])
+        row["tins"] = tins.get(row["shop"])
         row["models"] = models.get(row["shop"], [])
     if json_output:
         print(json.dumps({"shops": rows}, indent=2))
         return
     table = Table(title=f"Shops in {engine.url}")
-    for column in ("shop", "cases", " / ".join(OUTCOMES), "last case", "habits", "own model"):
+    columns = ("shop", "cases", " / ".join(OUTCOMES), "last case", "habits", "tins", "own model")
+    for column in columns:
         table.add_column(column)
     for row in rows:
         outcomes = row.get("outcomes", {})
-        h = row["habits"]
+        h, t = row["habits"], row["tins"]
         table.add_row(
             row["shop"],
             str(row["cases"]),
             " / ".join(str(outcomes.get(k, 0)) for k in OUTCOMES),
             row.get("last", "")[:10],
             "" if h is None else f"{ShopHabits.from_report(h).describe()}, {h['created_at'][:10]}",
+            "" if t is None else f"{t['tins']}, version {t['version']}, {t['saved_at'][:10]}",
             ", ".join(row["models"]),
         )
     console.print(table)
