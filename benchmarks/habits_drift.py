@@ -13,8 +13,13 @@ in the steady shops (and its 90th percentile over them) and the share of them fl
 and 90th percentile of the distance in cases of the split found from the change, and the
 mean z of each habit.
 
+``--tin-sprayouts K`` makes every shop's tins last K spray-outs (``WorldSettings``), so that
+a new tin of a toner moves every later case that uses it, as a change of habits would;
+``--tins read|known`` makes the cases record their tins, and ``--at-tins`` reads them at the
+standard tins, as ``flakelab cases habits`` does (else as poured from the standard).
+
     python benchmarks/habits_drift.py [--cases 100,200,400,1000] [--at 0.5,0.8] [--repeats 5]
-        [--json]
+        [--tin-sprayouts K] [--tins none|read|known] [--at-tins] [--json]
 
 ``flakelab cases habits`` looks for a change from ``MIN_DRIFT_CASES`` (100) spray-outs on;
 smaller sizes (from 40) show why.
@@ -29,9 +34,10 @@ import time
 import numpy as np
 
 from _matcher import seeds_from
-from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, TINS_RECORDED, World, WorldSettings
 from flakelab.io import read_library
 from flakelab.match.habits import DRIFT_Z, MIN_HABIT_CASES, habits_drift
+from flakelab.match.lots import at_standard_tins
 from flakelab.match.models import forward_for
 from flakelab.models.registry import shipped_model
 from flakelab.models.training import CaseArrays, generated_case_arrays
@@ -83,6 +89,9 @@ def main() -> None:
     parser.add_argument("--at", default="0.5,0.8", help="where the changed shops changed")
     parser.add_argument("--repeats", type=int, default=5, help="draws of each shop's cases")
     parser.add_argument("--seed", type=int, default=100, help="seed of the first draw")
+    parser.add_argument("--tin-sprayouts", type=int, default=1, help="spray-outs a tin serves")
+    parser.add_argument("--tins", choices=TINS_RECORDED, default="none", help="cases record")
+    parser.add_argument("--at-tins", action="store_true", help="read at the standard tins")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     sizes = seeds_from(args.cases)
@@ -92,9 +101,12 @@ def main() -> None:
     forward = forward_for(shipped_model("five-angle"), library)
 
     def draws(habits: dict) -> list[CaseArrays]:
-        world = World(library, "five-angle", WorldSettings(**habits), exclude=forward.novel)
-        n = max(sizes)
-        return [generated_case_arrays(world, n, args.seed + r) for r in range(args.repeats)]
+        settings = WorldSettings(**habits, tins=args.tins, tin_sprayouts=args.tin_sprayouts)
+        world = World(library, "five-angle", settings, exclude=forward.novel)
+        made = [
+            generated_case_arrays(world, max(sizes), args.seed + r) for r in range(args.repeats)
+        ]
+        return [at_standard_tins(d, library) if args.at_tins else d.without_tins() for d in made]
 
     plain, with_habits = draws({}), draws(SHOP_WITH_HABITS)
     rows = []
@@ -115,7 +127,14 @@ def main() -> None:
         rows.append(row)
         if not args.json:
             print_row(row, positions)
-    report = {"drift_z": DRIFT_Z, "repeats": args.repeats, "rows": rows}
+    report = {
+        "drift_z": DRIFT_Z,
+        "repeats": args.repeats,
+        "tin_sprayouts": args.tin_sprayouts,
+        "tins": args.tins,
+        "at_tins": args.at_tins,
+        "rows": rows,
+    }
     report["seconds"] = time.perf_counter() - start
     report["peak_rss_gb"] = peak_rss_mb() / 1024
     if args.json:

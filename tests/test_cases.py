@@ -10,6 +10,7 @@ import re
 import sqlite3
 import subprocess
 import sys
+from collections import Counter
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
@@ -219,18 +220,20 @@ def test_recording_the_tins_leaves_every_case_as_it_was(world, cases, tinned):
     assert 0.02 < strengths.std() < 0.04  # the batches' own spread (batch_strength_sd 0.03)
 
 
-def test_a_quiet_worlds_spray_outs_are_the_physics_of_their_recorded_tins(world):
+@pytest.mark.parametrize("sprayouts", [1, 8])
+def test_a_quiet_worlds_spray_outs_are_the_physics_of_their_recorded_tins(world, sprayouts):
     """Without application or instrument noise a spray-out differs from its recipe's
     nominal appearance by its tins alone: poured from the tins the case records (the world's
     own), the library's physics predicts it to the renormalisation of the film (the learned
-    model knows recipes that sum to one, and so does the prediction for tins)."""
+    model knows recipes that sum to one, and so does the prediction for tins). So too where
+    the tins last (8 spray-outs each) and each pigment's has a shade of its own."""
     from flakelab.match.forward import PhysicsForward
     from flakelab.match.judging import evaluate_recipes
     from flakelab.match.lots import at_standard_tins, poured_from
 
     quiet = replace(
         world.settings, film_build_sd=0.0, spread_sd=0.0, noise_band=0.0, noise_gain=0.0,
-        noise_offset=0.0, tins="known",
+        noise_offset=0.0, tins="known", tin_sprayouts=sprayouts,
     )  # fmt: skip
     made = next(World(world.library, world.instrument, quiet).cases(40, seed=3))
     data = case_arrays(made, world.library.names)
@@ -250,6 +253,46 @@ def test_a_quiet_worlds_spray_outs_are_the_physics_of_their_recorded_tins(world)
     ratio_learned = evaluate_recipes(physics, learned.x)[0] / learned.R
     np.testing.assert_allclose(ratio_learned, ratio_poured, rtol=1e-9)
     assert at_standard_tins(data.without_tins(), world.library).R is data.R
+
+
+def test_a_shops_lasting_tins_serve_its_spray_outs_in_turn(world):
+    """With tins that last K spray-outs, the cases that use a toner share its tin K at a
+    time, each tin its own strength and (a pigment's) shade; the shop's one reading of a tin
+    carries the same error into each of its cases; the cases are the same however many are
+    made, and whatever they record."""
+    K, n = 20, 500
+
+    def recording(tins: str, count: int = n) -> list:
+        settings = replace(world.settings, tin_sprayouts=K, tins=tins)
+        return [c for b in World(world.library, world.instrument, settings).cases(count, 3)
+                for c in b]  # fmt: skip
+
+    made = {t: recording(t) for t in ("known", "read", "none")} | {"fewer": recording("known", 300)}
+    known, read, plain = made["known"], made["read"], made["none"]
+    for a, b in zip(known, plain, strict=True):
+        assert a.case_id == b.case_id and np.array_equal(a.sprayout, b.sprayout)
+    assert [_tins_of(c) for c in made["fewer"]] == [_tins_of(c) for c in known[:300]]
+    names, effect = world.library.names, world.library.effect
+    used = Counter(name for c in known for name in c.recipe)
+    runs_checked = 0
+    for name, count in used.most_common(6):
+        tins = [c.tins[name] for c in known if name in c.recipe]
+        ratios = [r.tins[name].strength / k.tins[name].strength
+                  for r, k in zip(read, known, strict=True) if name in k.recipe]  # fmt: skip
+        # a new tin wherever the strength changes: runs of K, the first and last shorter
+        change = [0, *[i for i in range(1, count) if tins[i].strength != tins[i - 1].strength]]
+        runs = np.diff([*change, count])
+        assert np.all(runs[1:-1] == K) and runs[0] <= K and runs[-1] <= K
+        for start, length in zip(change, runs, strict=True):  # one reading of each tin
+            assert np.ptp(ratios[start : start + length]) < 1e-4
+        runs_checked += len(runs)
+    assert runs_checked > 20
+    strengths = [t.strength for c in known for t in c.tins.values()]
+    assert 0.02 < np.std(strengths) < 0.04
+    pigments = [
+        {t.shade_nm for n, t in c.tins.items() if not effect[names.index(n)]} for c in known
+    ]
+    assert sum(len(shades) > 1 for shades in pigments) > 100  # each pigment's tin its own
 
 
 def test_case_files_and_the_database_keep_the_tins(tinned, tmp_path, database_url):

@@ -24,6 +24,11 @@ Sources of variation (all in :class:`WorldSettings`):
   counted (Poisson) and grain sampled (:func:`~flakelab.texture.readings.counted_readings`),
   drawn from a stream of their own so that no colour depends on them;
 * the colorist's recipe: the formulation's toners with amounts off by logN(0, 5 %);
+* the shop's tins last (``tin_sprayouts``, 1 by default): with K > 1 each tin of a toner
+  serves K spray-outs that use it before the next is opened (each toner's first tin part
+  used), so the cases of a stretch share their tins' strengths and each pigment's own shade,
+  and a tin read once carries its reading's error into every case poured from it; drawn
+  from a stream of the seed's own (:class:`LastingTins`), whatever the chunks;
 * the tins a shop records (``tins``, none by default): every tin of a spray-out read, as
   ``flakelab lots`` reads one from a panel against the model, to ``tin_strength_read_sd``
   and ``tin_shade_read_sd_nm`` (what that reading came to, ``benchmarks/toner_lots.py``), or
@@ -71,6 +76,7 @@ __all__ = [
     "Variation",
     "CHUNK",
     "TINS_RECORDED",
+    "LastingTins",
     "SHOP_WITH_HABITS",
     "NEAR_BLACK_L",
     "near_black",
@@ -78,6 +84,13 @@ __all__ = [
 
 CHUNK = 250
 """Cases drawn from one random stream (the unit of reproducibility)."""
+
+TIN_STREAM = 7105
+"""The key of the stream a shop's lasting tins are drawn from (:class:`LastingTins`), beside
+the seed: apart from every chunk's."""
+
+TIN_BLOCK = 64
+"""Tins of one toner drawn from one stream: tin k's draws are the same whatever the chunk."""
 
 ORGANIC_FAMILIES = (
     "phthalocyanine",
@@ -123,6 +136,7 @@ class WorldSettings:
     # (README, *The shop's tins*, stop 74)
     tin_strength_read_sd: float = 0.0111
     tin_shade_read_sd_nm: float = 0.75
+    tin_sprayouts: int = 1
     solid_white_share: float = 0.5
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
@@ -138,8 +152,9 @@ model errs ΔE00 1.07 on its cases against 0.69 in the world it learned
 
 @dataclass(frozen=True)
 class Variation:
-    """Per-formulation draws: toner strength ``[F, T]``, hue shift ``[F]`` [nm], film build
-    ``[F]`` (relative), spread scale ``[F]``."""
+    """Per-formulation draws: toner strength ``[F, T]``, hue shift ``[F]`` [nm] of every
+    pigment alike (or ``[F, T]``, each pigment's own: lasting tins), film build ``[F]``
+    (relative), spread scale ``[F]``."""
 
     strength: NDArray
     hue_shift: NDArray
@@ -244,13 +259,13 @@ class World:
 
     def layer(self, fractions: NDArray, variation: Variation) -> Layer:
         """The basecoat of ``fractions`` mixed from ``variation``'s batches and sprayed."""
-        layer = layer_from_fractions(self.library, fractions * variation.strength)
-        return sprayed_layer(
-            replace(layer, absorption=shift_spectra(layer.absorption, variation.hue_shift)),
-            self.library,
-            variation.film,
-            variation.spread,
-        )
+        mixed = fractions * variation.strength
+        if variation.hue_shift.ndim == 2:  # each pigment's tin its own shade
+            layer = layer_from_fractions(self.library, mixed, shade_nm=variation.hue_shift)
+        else:
+            layer = layer_from_fractions(self.library, mixed)
+            layer = replace(layer, absorption=shift_spectra(layer.absorption, variation.hue_shift))
+        return sprayed_layer(layer, self.library, variation.film, variation.spread)
 
     def appearance(self, fractions: NDArray, variation: Variation) -> tuple[NDArray, NDArray]:
         """Reflectance factors ``[F, G, 31]`` (π·BRDF) and expected texture readings
@@ -298,18 +313,21 @@ class World:
         whatever ``n`` or ``batch`` (each block of :data:`CHUNK` draws from its own stream)."""
         start = start or datetime(2026, 1, 1, tzinfo=UTC)
         pending: list[Case] = []
+        tins = LastingTins(self, seed) if self.settings.tin_sprayouts > 1 else None
         for first in range(0, n, CHUNK):
             rng = np.random.default_rng([seed, first // CHUNK])
-            pending += self._batch(rng, shop, start, first)[: n - first]
+            pending += self._batch(rng, shop, start, first, tins)[: n - first]
             while len(pending) >= batch:
                 yield pending[:batch]
                 pending = pending[batch:]
         if pending:
             yield pending
 
-    def _batch(self, rng, shop, start, offset) -> list[Case]:
+    def _batch(self, rng, shop, start, offset, tins: LastingTins | None = None) -> list[Case]:
         """One block of :data:`CHUNK` cases, drawn whole whatever part of it is kept: a block
-        cut short would draw each array at another size, and so other cases."""
+        cut short would draw each array at another size, and so other cases. ``tins``: the
+        shop's lasting tins, which its spray-outs are poured from (None: a batch of each
+        toner for every spray-out)."""
         s, size = self.settings, CHUNK
         hidden = self.formulations(size, rng)
         oem = self.variation(size, rng, at_shop=False)
@@ -321,13 +339,17 @@ class World:
         target = self.measure(target_R, rng)
         recipe = self.colorist_recipe(hidden, rng)
         shop_batches = self.variation(size, rng)
+        reading = None
+        if tins is not None:  # the spray's application as drawn, from the shop's lasting tins
+            strength, shade, reading = tins.poured(recipe)
+            shop_batches = replace(shop_batches, strength=strength, hue_shift=shade)
         spray_R, spray_tex = self.appearance(recipe, shop_batches)
         sprayout = self.measure(spray_R, rng)
         # texture noise from a stream of its own, so every case's colour stays as it was
         texture_rng = rng.spawn(1)[0]
         target_tex = self.measure_texture(target_tex, texture_rng)
         spray_tex = self.measure_texture(spray_tex, texture_rng)
-        tins = self.recorded_tins(recipe, shop_batches, rng.spawn(1)[0])
+        recorded = self.recorded_tins(recipe, shop_batches, rng.spawn(1)[0], reading)
         worst = self.worst_de00(target, sprayout)
         outcome = np.where(
             worst <= s.accept_de00,
@@ -353,29 +375,38 @@ class World:
                     outcome=str(outcome[i]),
                     synthetic=True,
                     created_at=start + timedelta(minutes=37 * (offset + i)),
-                    tins=tins[i],
+                    tins=recorded[i],
                 )
             )
         return cases
 
     def recorded_tins(
-        self, recipe: NDArray, batches: Variation, rng: np.random.Generator
+        self,
+        recipe: NDArray,
+        batches: Variation,
+        rng: np.random.Generator,
+        reading: tuple[NDArray, NDArray] | None = None,
     ) -> list[dict[str, TonerLot]]:
         """What each case records of the tins its ``recipe[F, T]`` was poured from
         (``settings.tins``): nothing, the shop's reading of each tin (log strength and shade
         off the batch by ``tin_*_read_sd``), or the batch itself. An effect toner has no
-        shade; a pigment's is the batch's drift."""
+        shade; a pigment's is the batch's drift. ``reading``: each tin's reading errors in
+        standard deviations ``[F, T]`` (strength, shade), where a tin read once serves several
+        cases (:class:`LastingTins`); else drawn for each case from ``rng``."""
         s, (F, T) = self.settings, recipe.shape
         if s.tins not in TINS_RECORDED:
             raise ValueError(f"tins: expected one of {', '.join(TINS_RECORDED)}, got {s.tins!r}")
         if s.tins == "none":
             return [{} for _ in range(F)]
         strength = batches.strength
-        shade = np.where(self.library.effect[None, :], 0.0, batches.hue_shift[:, None])
+        drift = batches.hue_shift if batches.hue_shift.ndim == 2 else batches.hue_shift[:, None]
+        shade = np.where(self.library.effect[None, :], 0.0, drift)
         if s.tins == "read":
-            strength = strength * np.exp(rng.normal(0, s.tin_strength_read_sd, (F, T)))
+            if reading is None:
+                reading = (rng.normal(0, 1, (F, T)), rng.normal(0, 1, (F, T)))
+            strength = strength * np.exp(s.tin_strength_read_sd * reading[0])
             shade = shade + np.where(
-                self.library.effect[None, :], 0.0, rng.normal(0, s.tin_shade_read_sd_nm, (F, T))
+                self.library.effect[None, :], 0.0, s.tin_shade_read_sd_nm * reading[1]
             )
         strength = strength.clip(0.5, 2.0)  # a tin's readable range (TonerLot)
         shade = shade.clip(-MAX_SHADE_NM, MAX_SHADE_NM)
@@ -507,3 +538,42 @@ def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int, int]) -> NDAr
     kernel = np.array([1, 2, 3, 2, 1], dtype=float)
     kernel /= np.sqrt(np.sum(kernel**2))
     return sum(kernel[i] * raw[..., i : i + shape[-1]] for i in range(5))
+
+
+class LastingTins:
+    """A shop's tins as they last (``WorldSettings.tin_sprayouts`` = K > 1): each tin of a
+    toner serves K spray-outs that use it, then the next is opened. The toners' first tins
+    were opened at different times (each part used, by a uniform share of K), so the shop's
+    tins do not all change at once. Tin k of toner t has its own strength, shade (a
+    pigment's absorption moved, each pigment's own) and the errors of the shop's one reading
+    of it, drawn from the stream ``(seed, TIN_STREAM, t, k // TIN_BLOCK)``: the same whatever
+    the chunks. Spray-outs are poured in order (:meth:`poured`), as a shop uses its tins."""
+
+    def __init__(self, world: World, seed: int) -> None:
+        self.settings, self.seed = world.settings, seed
+        T = len(world.library.toners)
+        self.used = np.random.default_rng([seed, TIN_STREAM]).integers(
+            0, self.settings.tin_sprayouts, T
+        )
+
+    def poured(self, recipe: NDArray) -> tuple[NDArray, NDArray, tuple[NDArray, NDArray]]:
+        """The tins the spray-outs of ``recipe[F, T]`` are poured from, in order: strength
+        ``[F, T]``, shade ``[F, T]`` [nm] and the shop's reading errors in standard deviations
+        (strength, shade; each ``[F, T]``). A toner a recipe does not use serves it nothing."""
+        used = recipe > 0
+        before = self.used[None, :] + np.cumsum(used, axis=0) - used
+        self.used = self.used + used.sum(axis=0)
+        z = self._draws(before // self.settings.tin_sprayouts)
+        s = self.settings
+        strength = 1.0 + s.batch_strength_sd * z[..., 0]
+        return strength, s.batch_hue_shift_nm * z[..., 1], (z[..., 2], z[..., 3])
+
+    def _draws(self, tin: NDArray) -> NDArray:
+        """Four standard normal draws ``[F, T, 4]`` of each case's tin ``tin[F, T]``."""
+        z = np.empty((*tin.shape, 4))
+        for t in range(tin.shape[1]):  # a few streams of TIN_BLOCK tins per toner per chunk
+            for block in np.unique(tin[:, t] // TIN_BLOCK):
+                rows = tin[:, t] // TIN_BLOCK == block
+                drawn = np.random.default_rng([self.seed, TIN_STREAM, t, int(block)])
+                z[rows, t] = drawn.standard_normal((TIN_BLOCK, 4))[tin[rows, t] % TIN_BLOCK]
+        return z

@@ -118,6 +118,14 @@ def generate(
             "the error that reading has) or known (the world's own strengths and shades).",
         ),
     ] = "none",
+    tin_sprayouts: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Spray-outs each of the shop's tins serves before the next is opened: the "
+            "cases of a stretch share their tins (1: every spray-out from batches of its own).",
+        ),
+    ] = 1,
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
     from flakelab.cases.database import open_database
@@ -127,10 +135,14 @@ def generate(
 
     if tins not in TINS_RECORDED:
         raise FlakelabError(f"--tins: expected one of {', '.join(TINS_RECORDED)}, got {tins!r}")
-    habits = WorldSettings(
-        shop_film_build=shop_film_build, shop_spread=shop_spread, shop_gain=shop_gain, tins=tins
+    settings = WorldSettings(
+        shop_film_build=shop_film_build,
+        shop_spread=shop_spread,
+        shop_gain=shop_gain,
+        tins=tins,
+        tin_sprayouts=tin_sprayouts,
     )
-    world = World(read_library(library), instrument, habits)
+    world = World(read_library(library), instrument, settings)
     to_file = out is not None and is_case_file(out)
     if to_file:
         check_output_file(out, "--out")  # before the cases are generated, not after
