@@ -805,6 +805,26 @@ def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
     assert [(s["shop"], s["version"], s["tins"]) for s in listed] == [(shop, 3, 1)]
     shops = json.loads(cli("cases", "shops", "-d", db, "--json").stdout)["shops"]
     assert [(s["shop"], s["cases"], s["tins"]["version"]) for s in shops] == [(shop, 1, 3)]
+    # every version is kept: the history says what each changed, an old one is shown
+    history = json.loads(cli("lots", "history", "--shop", shop, "-d", db, "--json").stdout)
+    v1, v2, v3 = (v["changed"] for v in history["versions"])
+    blue, black = "Phthalo blue GS", "Carbon black"
+    assert [(c["toner"], c["before"], c["after"]["lot"]) for c in v1] == [(blue, None, "B-1")]
+    first_read = v1[0]["after"]["strength"]
+    assert [(c["toner"], c["before"]["strength"], c["after"]["strength"]) for c in v2] == [
+        (blue, first_read, tin.strength)
+    ]
+    assert [(c["toner"], c["before"] and c["before"]["strength"], c["after"]) for c in v3] == [
+        (black, None, {"lot": "K-9", "strength": 0.97, "shade_nm": 0.0}),
+        (blue, tin.strength, None),
+    ]
+    old = json.loads(cli("lots", "show", "--shop", shop, "-d", db, "--version", "1",
+                         "--json").stdout)  # fmt: skip
+    assert old["version"] == 1 and old["lots"][0]["strength"] == first_read
+    missing = cli("lots", "show", "--shop", shop, "-d", db, "--version", "9")
+    assert missing.returncode == 2 and "no version 9" in missing.stderr
+    text = cli("lots", "history", "--shop", shop, "-d", db)
+    assert text.returncode == 0 and "new tin (K-9) 0.970" in text.stdout
 
     # one place for the tins; a shop with none stored is told how to store them
     both = cli(*calibrate, "--shop", shop, "--lots", other)

@@ -26,7 +26,7 @@ from flakelab.errors import FlakelabError
 from flakelab.io.lots_file import lots_document, lots_from_document
 from flakelab.library.lots import TonerLots
 
-__all__ = ["StoredLots", "stored_lots", "store_lots", "list_stored_lots"]
+__all__ = ["StoredLots", "stored_lots", "store_lots", "lots_history", "list_stored_lots"]
 
 
 @dataclass(frozen=True)
@@ -51,21 +51,32 @@ def _checked_shop(shop: str) -> str:
     return shop
 
 
-def stored_lots(engine: Engine, shop: str, toners=None) -> StoredLots | None:
-    """The latest tins stored for ``shop`` (None: none), each of one of ``toners`` when given
-    (a library's names: another is refused, the nearest named)."""
+def stored_lots(
+    engine: Engine, shop: str, toners=None, version: int | None = None
+) -> StoredLots | None:
+    """The latest tins stored for ``shop``, or its ``version`` (None: none stored), each of
+    one of ``toners`` when given (a library's names: another is refused, the nearest
+    named)."""
+    query = select(ShopLotsRow).where(ShopLotsRow.shop == _checked_shop(shop))
+    if version is not None:
+        query = query.where(ShopLotsRow.version == version)
     with Session(engine) as session:
-        row = session.scalars(
-            select(ShopLotsRow)
-            .where(ShopLotsRow.shop == _checked_shop(shop))
-            .order_by(ShopLotsRow.version.desc())
-            .limit(1)
-        ).first()
-    if row is None:
-        return None
-    where = f"{engine.url}: the tins of shop {shop!r}, version {row.version}"
+        row = session.scalars(query.order_by(ShopLotsRow.version.desc()).limit(1)).first()
+    return None if row is None else _stored(engine, row, toners)
+
+
+def lots_history(engine: Engine, shop: str) -> list[StoredLots]:
+    """Every version of the tins stored for ``shop``, the first first."""
+    query = select(ShopLotsRow).where(ShopLotsRow.shop == _checked_shop(shop))
+    with Session(engine) as session:
+        rows = session.scalars(query.order_by(ShopLotsRow.version)).all()
+    return [_stored(engine, row) for row in rows]
+
+
+def _stored(engine: Engine, row: ShopLotsRow, toners=None) -> StoredLots:
+    where = f"{engine.url}: the tins of shop {row.shop!r}, version {row.version}"
     lots = lots_from_document(row.document, where, toners)
-    return StoredLots(shop, lots, row.version, row.created_at)
+    return StoredLots(row.shop, lots, row.version, row.created_at)
 
 
 def store_lots(engine: Engine, shop: str, lots: TonerLots, read_from: int | None) -> StoredLots:

@@ -648,6 +648,14 @@ def show_command(
     ] = None,
     shop: ShopTinsOption = None,
     database: DatabaseOption = None,
+    version: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="The version of the shop's tins ('lots history' lists them).",
+            show_default="the latest",
+        ),
+    ] = None,
     out: Annotated[
         Path | None,
         typer.Option("--out", "-o", help="Also write the tins shown as a toner-lot file."),
@@ -670,7 +678,9 @@ def show_command(
         _show_shops(database, json_output)
         return
     shop = _tins_kept(lots, shop)
-    kept = None if lots is not None else _stored_or_told(shop, database, lib)
+    if version is not None and lots is not None:
+        raise FlakelabError("--version: for the tins stored for a shop (--shop), not a file")
+    kept = None if lots is not None else _stored_or_told(shop, database, version)
     found = read_lots(lots) if lots is not None else kept.lots
     if out is not None:
         write_lots(found, out)
@@ -769,17 +779,81 @@ def save_command(
     )
 
 
-def _stored_or_told(shop: str, database: str | None, library):
-    """The latest tins stored for ``shop``; where there are none, an error saying how to
-    store them."""
-    kept = stored_tins(shop, database, library)
-    if kept is None:
-        raise FlakelabError(
-            f"no tins stored for shop {shop!r}: 'flakelab lots calibrate SPRAYED --recipe R "
-            f"--shop {shop!r}' reads them from panels, 'flakelab lots save FILE --shop "
-            f"{shop!r}' stores a lot file's"
-        )
-    return kept
+def _stored_or_told(shop: str, database: str | None, version: int | None = None):
+    """The latest tins stored for ``shop`` (or its ``version``), as stored; where there are
+    none, an error saying how to store them."""
+    from flakelab.cases.shop_lots import stored_lots
+
+    engine = existing_engine(database)
+    kept = engine and stored_lots(engine, shop, version=version)
+    if kept:
+        return kept
+    if version is not None and engine and stored_lots(engine, shop):
+        raise FlakelabError(f"--version: shop {shop!r} has no version {version} of its tins")
+    raise FlakelabError(
+        f"no tins stored for shop {shop!r}: 'flakelab lots calibrate SPRAYED --recipe R "
+        f"--shop {shop!r}' reads them from panels, 'flakelab lots save FILE --shop "
+        f"{shop!r}' stores a lot file's"
+    )
+
+
+@lots_app.command("history")
+@reports_errors
+def history_command(
+    shop: ShopTinsOption = None,
+    database: DatabaseOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Every version of a shop's tins stored in the database: when it was stored, and the
+    tins it changed against the version before (read again, or a new tin opened)."""
+    from flakelab.cases.shop_lots import lots_history
+
+    shop = _tins_kept(None, shop)
+    _stored_or_told(shop, database)
+    versions = lots_history(existing_engine(database), shop)
+    report = [
+        {
+            "version": v.version,
+            "saved_at": v.saved_at.isoformat(),
+            "tins": len(v.lots.lots),
+            "changed": _changed_tins(before and before.lots, v.lots),
+        }
+        for before, v in zip([None, *versions[:-1]], versions, strict=True)
+    ]
+    if json_output:
+        print(json.dumps({"shop": shop, "versions": report}, indent=2))
+        return
+    table = Table(title=f"Versions of the tins of shop {shop!r}", box=box.SIMPLE)
+    for column in ("version", "saved", "tins", "changed"):
+        table.add_column(column, justify="left" if column == "changed" else "right")
+    for row in report:
+        changed = "; ".join(_change_text(c) for c in row["changed"])
+        saved = row["saved_at"][:16].replace("T", " ")
+        table.add_row(str(row["version"]), saved, str(row["tins"]), changed)
+    console.print(table)
+
+
+def _changed_tins(before, after) -> list[dict]:
+    """The tins of ``after`` (lots) that ``before`` lacks or held otherwise, and those it
+    dropped: each with its lot, strength and shade, before and after (None: none)."""
+
+    def fields(lot):
+        return lot and {"lot": lot.lot, "strength": lot.strength, "shade_nm": lot.shade_nm}
+
+    old = before.lots if before is not None else {}
+    names = sorted({*old, *after.lots})
+    pairs = [(n, fields(old.get(n)), fields(after.lots.get(n))) for n in names]
+    return [{"toner": n, "before": b, "after": a} for n, b, a in pairs if b != a]
+
+
+def _change_text(change: dict) -> str:
+    before, after = change["before"], change["after"]
+    if after is None:
+        return f"{change['toner']} dropped"
+    lot = f" ({after['lot']})" if after["lot"] else ""
+    if before is None or before["lot"] != after["lot"]:
+        return f"{change['toner']} new tin{lot} {after['strength']:.3f}"
+    return f"{change['toner']}{lot} {before['strength']:.3f} → {after['strength']:.3f}"
 
 
 def _show_shops(database: str | None, json_output: bool) -> None:
