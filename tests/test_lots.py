@@ -840,13 +840,28 @@ def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
     assert json.loads(cli("lots", "show", "-d", db, "--json").stdout)["shops"] == listed
 
 
-def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(tmp_path):
-    """Two workplaces that read panels against the same version: the second is refused, and
-    the first's stays the latest; every version is kept."""
+def _store_read_from_the_first(args) -> bool:
+    """One workplace storing its reading of a shop's first version: whether it was stored."""
     from flakelab.cases.database import DatabaseError, open_database
-    from flakelab.cases.shop_lots import list_stored_lots, store_lots, stored_lots
+    from flakelab.cases.shop_lots import store_lots
 
-    engine = open_database(tmp_path / "shop.db")
+    url, strength = args
+    try:
+        store_lots(open_database(url), "C", TonerLots.of([TonerLot("Carbon black", strength)]), 1)
+    except DatabaseError:
+        return False
+    return True
+
+
+def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(database_url):
+    """Two workplaces that read panels against the same version: the second is refused, and
+    the first's stays the latest; every version is kept. Four at once: one is stored."""
+    import multiprocessing
+
+    from flakelab.cases.database import DatabaseError, open_database
+    from flakelab.cases.shop_lots import list_stored_lots, lots_history, store_lots, stored_lots
+
+    engine = open_database(database_url)
     assert stored_lots(engine, "A") is None
     one = TonerLots.of([TonerLot("Phthalo blue GS", 1.02, 0.01, "B-1", shade_nm=0.4)])
     two = TonerLots.of([TonerLot("Phthalo blue GS", 1.03, 0.008, "B-1", shade_nm=0.5)])
@@ -861,3 +876,11 @@ def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(tmp_p
     assert [(s["shop"], s["version"]) for s in list_stored_lots(engine)] == [("A", 2), ("B", 1)]
     with pytest.raises(FlakelabError, match="shop: expected a name of 1 to 120 characters"):
         stored_lots(engine, "")
+    store_lots(engine, "C", one, None)
+    strengths = (0.96, 0.97, 0.98, 0.99)
+    with multiprocessing.get_context("spawn").Pool(4) as pool:
+        stored = pool.map(_store_read_from_the_first, [(database_url, s) for s in strengths])
+    assert sum(stored) == 1
+    history = lots_history(engine, "C")
+    assert [v.version for v in history] == [1, 2] and history[0].lots == one
+    assert history[1].lots.lots["Carbon black"].strength == strengths[stored.index(True)]
