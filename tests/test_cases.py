@@ -293,6 +293,10 @@ def test_a_shops_lasting_tins_serve_its_spray_outs_in_turn(world):
         {t.shade_nm for n, t in c.tins.items() if not effect[names.index(n)]} for c in known
     ]
     assert sum(len(shades) > 1 for shades in pigments) > 100  # each pigment's tin its own
+    for wrong in (0, 2.5):
+        settings = replace(world.settings, tin_sprayouts=wrong)
+        with pytest.raises(ValueError, match="tin_sprayouts: expected a whole number from 1"):
+            next(World(world.library, world.instrument, settings).cases(5, 3))
 
 
 def test_case_files_and_the_database_keep_the_tins(tinned, tmp_path, database_url):

@@ -313,7 +313,7 @@ class World:
         whatever ``n`` or ``batch`` (each block of :data:`CHUNK` draws from its own stream)."""
         start = start or datetime(2026, 1, 1, tzinfo=UTC)
         pending: list[Case] = []
-        tins = LastingTins(self, seed) if self.settings.tin_sprayouts > 1 else None
+        tins = LastingTins(self, seed) if self.settings.tin_sprayouts != 1 else None
         for first in range(0, n, CHUNK):
             rng = np.random.default_rng([seed, first // CHUNK])
             pending += self._batch(rng, shop, start, first, tins)[: n - first]
@@ -551,6 +551,9 @@ class LastingTins:
 
     def __init__(self, world: World, seed: int) -> None:
         self.settings, self.seed = world.settings, seed
+        lasting = self.settings.tin_sprayouts
+        if not isinstance(lasting, int) or isinstance(lasting, bool) or lasting < 1:
+            raise ValueError(f"tin_sprayouts: expected a whole number from 1, got {lasting!r}")
         T = len(world.library.toners)
         self.used = np.random.default_rng([seed, TIN_STREAM]).integers(
             0, self.settings.tin_sprayouts, T
