@@ -407,16 +407,26 @@ def test_too_few_sprayouts_are_refused(shipped):
 
 def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]),
-                        500, "shipped", "shop A", "2026-03-01T00:37:00+00:00")  # fmt: skip
+                        500, "shipped", "shop A", "2026-03-01T00:37:00+00:00", 120)  # fmt: skip
     path = tmp_path / "habits.json"
     write_habits(habits, path)
     back = read_habits(path)
     np.testing.assert_allclose(back.theta, habits.theta)
     np.testing.assert_allclose(back.standard_error, habits.standard_error)
-    assert (back.cases, back.model, back.shop) == (500, "shipped", "shop A")
+    assert (back.cases, back.model, back.shop, back.cases_with_tins) == (
+        500,
+        "shipped",
+        "shop A",
+        120,
+    )
     assert back.changed_since == habits.changed_since
     document = json.loads(path.read_text())
+    older = tmp_path / "older.json"  # written before habits were read at the tins
+    older.write_text(json.dumps({k: v for k, v in document.items() if k != "cases_with_tins"}))
+    assert read_habits(older).cases_with_tins == 0
     for key, value, problem in (
+        ("cases_with_tins", 501, "expected a whole number from 0 to the cases"),
+        ("cases_with_tins", 1.5, "expected a whole number from 0 to the cases"),
         ("film_build", "more", "expected a finite number"),
         ("film_build_se", float("inf"), "expected a finite number"),  # written as Infinity
         ("instrument_gain", 0.5, "expected -0.1 to 0.1"),

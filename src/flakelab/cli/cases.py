@@ -973,7 +973,9 @@ def habits(
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
-    data, tinned = recorded_tins_used(source_arrays(cases, chosen, lib), lib, no_tins)
+    arrays = source_arrays(cases, chosen, lib)
+    tinned = np.zeros(len(chosen), dtype=bool) if no_tins else arrays.tins_recorded
+    data, _ = recorded_tins_used(arrays, lib, no_tins)
     found, mixed_up = screened_habits(
         forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None
     )
@@ -986,7 +988,12 @@ def habits(
     if left_out:  # the habits were read from the others, and so is the rest
         chosen = [c for c, m in zip(chosen, mixed_up, strict=True) if not m]
         data = data.subset(np.flatnonzero(~mixed_up))
-    found = replace(found, shop=shop or (shops.pop() if len(shops) == 1 else None))
+        tinned = tinned[~mixed_up]
+    found = replace(
+        found,
+        shop=shop or (shops.pop() if len(shops) == 1 else None),
+        cases_with_tins=int(tinned.sum()),
+    )
     fit = habits_fit(forward, lib, found, data.x, data.R)
     drift = habits_drift(forward, lib, data.x, data.R) if len(chosen) >= MIN_DRIFT_CASES else None
     if drift and drift["changed"].any():  # kept with the habits, so that their users are told
@@ -1010,7 +1017,6 @@ def habits(
         "explained": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in fit.items()},
         "drift": drift and _drift_report(drift, chosen),
         "left_out_mismatched": left_out,
-        "cases_with_tins": tinned,
     }
     if json_output:
         print(json.dumps(report, indent=2))
@@ -1046,7 +1052,11 @@ def habits(
         )
     errors.print(
         f"from {found.cases} spray-outs"
-        + (f", {tinned} of them read at the tins they record" if tinned else "")
+        + (
+            f", {found.cases_with_tins} of them read at the tins they record"
+            if found.cases_with_tins
+            else ""
+        )
         + (f"; written to {out}" if out else "")
         + (f"; stored for {found.shop!r}" if save else ""),
         highlight=False,

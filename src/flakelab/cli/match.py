@@ -301,7 +301,13 @@ def match_command(
     path = example_path("target") if example else Path(target)
     tol = read_tolerance(tolerance or "refinish")
     shop_habits = habits_for(
-        habits, shop, database, forward, named=named, stored_tins=lots is None and tins is not None
+        habits,
+        shop,
+        database,
+        forward,
+        named=named,
+        stored_tins=lots is None and tins is not None,
+        with_tins=tins is not None,
     )
     settings = replace(search, candidates=candidates, seed=seed)
     if all_samples:
@@ -610,7 +616,7 @@ def _evaluate(
     world = harness_world(lib, instrument, world_name)
     toners_allowed(forward.toners, settings.without)  # a toner misspelt: before the targets
     scale = scale and scale.for_toners(lib, forward.toners)
-    habits = habits_for(habits_file, shop, database, forward)
+    habits = habits_for(habits_file, shop, database, forward, with_tins=lots != "standard")
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(

@@ -135,6 +135,7 @@ def habits_for(
     *,
     named: bool = True,
     stored_tins: bool = False,
+    with_tins: bool = False,
 ):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``, or
@@ -143,7 +144,8 @@ def habits_for(
     of its own (``forward``, adapted to its cases) or ``stored_tins`` need not have habits
     stored; nor need the workplace's shop where ``--shop`` ``named`` none
     (:func:`~flakelab.cli.sources.workplace_shop`), and a habits file then stands in for its
-    stored habits."""
+    stored habits. Habits read at the standard tins (:attr:`~flakelab.match.habits.
+    ShopHabits.cases_with_tins`) but used ``with_tins`` False are used with a note."""
     if path is None and shop is None:
         return None
     if path is not None and shop is not None and named:
@@ -178,6 +180,14 @@ def habits_for(
             highlight=False,
         )
         return None
+    if found.cases_with_tins and not with_tins:
+        errors.print(
+            f"note: {path or shop}: habits read at the standard tins ({found.cases_with_tins} "
+            "of their cases record their tins), used here for recipes taken as poured from "
+            "the standard: they hold the model's own offset from the standard, which the "
+            "shop's tins (--lots, or those stored for the shop) would match",
+            highlight=False,
+        )
     if found.model != forward.model_id:
         errors.print(
             f"[yellow]warning:[/] {path or shop}: habits measured against "

@@ -533,7 +533,9 @@ def evaluate(
     data = source_arrays(cases, chosen, lib)
     if no_tins:
         data = data.without_tins()
-    shop_habits = habits_for(habits, None, database, matcher)
+    shop_habits = habits_for(
+        habits, None, database, matcher, with_tins=bool(data.tins_recorded.any())
+    )
 
     def habits_offset(x, R):
         return shop_habits.offset(lib, x, R, matcher.geometries)

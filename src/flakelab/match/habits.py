@@ -124,7 +124,11 @@ class ShopHabits:
     """A shop's habits against a model: ``theta`` = (relative film build, log flake-spread
     scale, relative instrument gain), ``standard_error`` of each, from ``cases`` spray-outs,
     measured against the model named ``model``. ``changed_since``: the time (ISO 8601) from
-    which those cases showed other habits (:func:`habits_drift`), None where none was seen."""
+    which those cases showed other habits (:func:`habits_drift`), None where none was seen.
+    ``cases_with_tins``: how many of the cases were read at the standard tins, recording the
+    tins they were poured from (:func:`~flakelab.match.lots.at_standard_tins`): habits so
+    read are the shop's against the model at the standard tins, as ``match --lots``
+    predicts."""
 
     theta: NDArray
     standard_error: NDArray
@@ -132,6 +136,7 @@ class ShopHabits:
     model: str = ""
     shop: str | None = None
     changed_since: str | None = None
+    cases_with_tins: int = 0
 
     @classmethod
     def none(cls) -> ShopHabits:
@@ -155,6 +160,7 @@ class ShopHabits:
             report.get("model") or "",
             report.get("shop"),
             report.get("changed_since"),
+            int(report.get("cases_with_tins") or 0),  # habits read before stop 77 have none
         )
 
     @property
@@ -186,6 +192,7 @@ class ShopHabits:
             "model": self.model,
             "shop": self.shop,
             "changed_since": self.changed_since,
+            "cases_with_tins": self.cases_with_tins,
         }
 
     def describe(self) -> str:
@@ -626,6 +633,17 @@ def read_habits(path: str | PathLike) -> ShopHabits:
         value = document.get(key)
         if value is not None and not isinstance(value, str):
             raise MeasurementFileError(path, f"expected text, got {value!r}", field=key)
+    tinned = document.get("cases_with_tins", 0)
+    if (
+        not isinstance(tinned, int)
+        or isinstance(tinned, bool)
+        or not 0 <= tinned <= document["cases"]
+    ):
+        raise MeasurementFileError(
+            path,
+            f"expected a whole number from 0 to the cases ({document['cases']}), got {tinned!r}",
+            field="cases_with_tins",
+        )
     if document.get("changed_since") is not None:
         try:
             datetime.fromisoformat(document["changed_since"])
