@@ -973,9 +973,7 @@ def habits(
     shops = {c.shop for c in chosen}
     if save and shop is None and len(shops) > 1:
         raise FlakelabError(f"{cases}: cases of {len(shops)} shops; name the one to save (--shop)")
-    arrays = source_arrays(cases, chosen, lib)
-    tinned = np.zeros(len(chosen), dtype=bool) if no_tins else arrays.tins_recorded
-    data, _ = recorded_tins_used(arrays, lib, no_tins)
+    data, tinned = recorded_tins_used(source_arrays(cases, chosen, lib), lib, no_tins)
     found, mixed_up = screened_habits(
         forward, lib, data.x, data.R, prior_sd=PRIOR_SD if prior else None
     )

@@ -163,13 +163,7 @@ def correct_command(
     if extra_toners < 0:
         raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
     shop_habits = habits_for(
-        habits,
-        shop,
-        database,
-        forward,
-        named=named,
-        stored_tins=lots is None and tins is not None,
-        with_tins=tins is not None,
+        habits, shop, database, forward, named=named, with_tins=tins is not None
     )
     correction = correct(
         forward,

@@ -87,7 +87,7 @@ def shop_lots(
     notes = []
     if path is not None:
         lots = read_lots(path, library.names)
-    elif (kept := stored_tins(shop, database, library)) is not None:
+    elif (kept := stored_tins(shop, database, library.names)) is not None:
         lots = kept.lots
         notes.append(f"weighed for {kept.describe()}")
     else:
@@ -103,14 +103,15 @@ def shop_lots(
     return lots, with_lots(forward, lots, library), notes
 
 
-def stored_tins(shop: str | None, database: str | None, library):
-    """The latest tins stored for ``shop`` in the database named or configured (None: no
-    shop, no database yet, or none stored), each of a toner of ``library``."""
+def stored_tins(shop: str | None, database: str | None, toners=None, version: int | None = None):
+    """The latest tins stored for ``shop`` (or its ``version``) in the database named or
+    configured (None: no shop, no database yet, or none stored), each of one of ``toners``
+    where given (a library's names)."""
     from flakelab.cases.shop_lots import stored_lots
 
     if shop is None or (engine := existing_engine(database)) is None:
         return None
-    return stored_lots(engine, shop, library.names)
+    return stored_lots(engine, shop, toners, version)
 
 
 def lots_report(lots) -> dict[str, dict[str, float]]:
@@ -388,7 +389,7 @@ def calibrate_command(
     if engine is not None:
         kept = stored_lots(engine, shop, lib.names)
     elif lots is None:
-        kept = stored_tins(shop, database, lib)
+        kept = stored_tins(shop, database, lib.names)
     if lots is not None and lots.exists():
         stored = read_lots(lots, lib.names)
     else:
@@ -782,13 +783,10 @@ def save_command(
 def _stored_or_told(shop: str, database: str | None, version: int | None = None):
     """The latest tins stored for ``shop`` (or its ``version``), as stored; where there are
     none, an error saying how to store them."""
-    from flakelab.cases.shop_lots import stored_lots
-
-    engine = existing_engine(database)
-    kept = engine and stored_lots(engine, shop, version=version)
+    kept = stored_tins(shop, database, version=version)
     if kept:
         return kept
-    if version is not None and engine and stored_lots(engine, shop):
+    if version is not None and stored_tins(shop, database):
         raise FlakelabError(f"--version: shop {shop!r} has no version {version} of its tins")
     raise FlakelabError(
         f"no tins stored for shop {shop!r}: 'flakelab lots calibrate SPRAYED --recipe R "

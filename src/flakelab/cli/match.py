@@ -301,13 +301,7 @@ def match_command(
     path = example_path("target") if example else Path(target)
     tol = read_tolerance(tolerance or "refinish")
     shop_habits = habits_for(
-        habits,
-        shop,
-        database,
-        forward,
-        named=named,
-        stored_tins=lots is None and tins is not None,
-        with_tins=tins is not None,
+        habits, shop, database, forward, named=named, with_tins=tins is not None
     )
     settings = replace(search, candidates=candidates, seed=seed)
     if all_samples:

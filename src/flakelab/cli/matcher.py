@@ -134,14 +134,13 @@ def habits_for(
     forward,
     *,
     named: bool = True,
-    stored_tins: bool = False,
     with_tins: bool = False,
 ):
     """The shop's habits from the file ``path`` or stored in the database for ``shop`` (None:
     none), with a warning when they were measured against another model than ``forward``, or
     over a change of the shop's habits; None, with a note, where ``forward``'s model was
     adapted to them (:meth:`~flakelab.match.habits.ShopHabits.learned_by`). A shop with a model
-    of its own (``forward``, adapted to its cases) or ``stored_tins`` need not have habits
+    of its own (``forward``, adapted to its cases) or tins stored need not have habits
     stored; nor need the workplace's shop where ``--shop`` ``named`` none
     (:func:`~flakelab.cli.sources.workplace_shop`), and a habits file then stands in for its
     stored habits. Habits read at the standard tins (:attr:`~flakelab.match.habits.
@@ -151,6 +150,7 @@ def habits_for(
     if path is not None and shop is not None and named:
         raise FlakelabError("--habits and --shop: expected one of them, not both")
     from flakelab.cases.database import open_database
+    from flakelab.cases.shop_lots import stored_lots
     from flakelab.match.habits import adaptation_of, read_habits, stored_habits
 
     if path is not None:
@@ -163,7 +163,8 @@ def habits_for(
         try:
             found = stored_habits(engine, shop, forward.model_id)
         except FlakelabError:
-            if not named or stored_tins or (adaptation_of(forward) or {}).get("shop") == shop:
+            own_model = (adaptation_of(forward) or {}).get("shop") == shop
+            if not named or own_model or stored_lots(engine, shop) is not None:
                 return None  # the shop's own model learned them; a workplace may have none yet
             raise FlakelabError(
                 f"{engine.url}: shop {shop!r} has no habits, tins or model of its own stored: "

@@ -294,7 +294,7 @@ def train(
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
     summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
-    summary["cases_with_tins"] = tinned
+    summary["cases_with_tins"] = int(tinned.sum())
     engine = open_database(database) if register_model else None
     if engine is not None:
         summary["registry"] = register(engine, model, held_out, metrics=summary["held_out"])
@@ -728,7 +728,7 @@ def adapt(
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
         "learned_before": int(base.learned_from(screened.case_ids).sum()),
-        "cases_with_tins": tinned,
+        "cases_with_tins": int(tinned.sum()),
         "held_out": judged_before_and_after(base, new, held_out),
     }
     if out is not None:

@@ -142,13 +142,12 @@ def source_arrays(source, cases: list, library, *, effect: bool = False):
 def recorded_tins_used(data, library, no_tins: bool):
     """Cases as a model learns from them, and a shop's habits are read from them: at the
     standard tins (where they record tins: :func:`~flakelab.match.lots.at_standard_tins`),
-    or, with ``no_tins``, as if they recorded none; with how many of them record tins that
-    were used."""
+    or, with ``no_tins``, as if they recorded none; with which of them record tins that
+    were used ``[N]``."""
     from flakelab.match.lots import at_standard_tins
 
-    if no_tins:
-        return data.without_tins(), 0
-    return at_standard_tins(data, library), int(data.tins_recorded.sum())
+    used = data.without_tins() if no_tins else data
+    return at_standard_tins(used, library), used.tins_recorded
 
 
 def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
