@@ -28,6 +28,7 @@ from flakelab.physics.layer import (
 )
 from flakelab.physics.montecarlo import simulate
 from flakelab.physics.scaling import _de00, _lab
+from flakelab.texture.readings import texture_readings
 
 W = WAVELENGTHS.size
 GEOMETRIES = ["45as-15", "45as15", "45as45", "45as110"]
@@ -223,7 +224,8 @@ class TestFastModel:
 
     def test_a_batch_predicts_each_formulation_as_it_would_alone(self):
         """Rows with and without pearls, aluminium or pigment only, in one batch: each row as
-        if predicted alone (the pearl channel computes only the rows that hold pearls)."""
+        if predicted alone, colour and texture (the pearl channel computes only the rows that
+        hold pearls, and a layer only the reflectance tables of the species its rows hold)."""
         recipes = [
             {"Al medium": 0.95, "Phthalo blue GS": 0.05},
             {"Pearl interference green": 0.7, "Carbon black": 0.3},
@@ -235,6 +237,10 @@ class TestFastModel:
         batch = predict(layer_from_fractions(self.library, x), geometries)
         alone = [predict(layer_from_fractions(self.library, row), geometries)[0] for row in x]
         np.testing.assert_allclose(batch, np.array(alone), rtol=1e-12)
+        radius = [t.radius_um for t in self.library.toners if t.kind in ("aluminium", "pearl")]
+        texture = texture_readings(layer_from_fractions(self.library, x), radius)
+        alone = [texture_readings(layer_from_fractions(self.library, row), radius)[0] for row in x]
+        np.testing.assert_allclose(texture, np.array(alone), rtol=1e-12)
 
     def test_atlas_interpolation_is_multilinear(self):
         """The compiled 16-corner interpolation agrees with scipy's multilinear interpolation

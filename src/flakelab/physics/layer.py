@@ -218,9 +218,7 @@ def layer_from_fractions(
     return Layer(
         flake_rate=x[:, effect] * per_rate,
         flake_sd=np.radians([toners[i].orientation_sd_deg for i in effect]),
-        flake_reflectance=np.array([species_reflectance(toners[i], n) for i in effect]).reshape(
-            len(effect), REFLECTANCE_ANGLES.size, WAVELENGTHS.size
-        ),
+        flake_reflectance=_tables_in_use(toners, effect, x[:, effect], n),
         flake_transmits=np.array([toners[i].kind == "pearl" for i in effect], dtype=bool),
         absorption=absorption,
         scattering=scattering,
@@ -229,6 +227,16 @@ def layer_from_fractions(
         primer=library.binder.primer_reflectance,
         n=n,
     )
+
+
+def _tables_in_use(toners, effect: list[int], rates: NDArray, n: float) -> NDArray:
+    """Reflectance tables ``[S, 91, W]`` of the effect toners ``effect``, zero for a species
+    that no recipe holds (``rates[F, S]``): it contributes nothing, and a pearl's table costs
+    0.1 s of transfer matrices the first time it is asked for."""
+    tables = np.zeros((len(effect), REFLECTANCE_ANGLES.size, WAVELENGTHS.size))
+    for s in np.flatnonzero(np.any(rates > 0, axis=0)):
+        tables[s] = species_reflectance(toners[effect[s]], n)
+    return tables
 
 
 def interface_directions(
