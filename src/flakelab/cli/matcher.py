@@ -144,7 +144,8 @@ def habits_for(
     stored; nor need the workplace's shop where ``--shop`` ``named`` none
     (:func:`~flakelab.cli.sources.workplace_shop`), and a habits file then stands in for its
     stored habits. Habits read at the standard tins (:attr:`~flakelab.match.habits.
-    ShopHabits.cases_with_tins`) but used ``with_tins`` False are used with a note."""
+    ShopHabits.cases_with_tins`) but used ``with_tins`` False, or read as poured from the
+    standard but used ``with_tins``, are used with a note."""
     if path is None and shop is None:
         return None
     if path is not None and shop is not None and named:
@@ -187,6 +188,14 @@ def habits_for(
             "of their cases record their tins), used here for recipes taken as poured from "
             "the standard: they hold the model's own offset from the standard, which the "
             "shop's tins (--lots, or those stored for the shop) would match",
+            highlight=False,
+        )
+    if found.cases and not found.cases_with_tins and with_tins:
+        errors.print(
+            f"note: {path or shop}: habits read as poured from the standard tins (none of "
+            f"their {found.cases} cases record their tins), used here for the shop's tins: "
+            "they hold what those cases' tins shared and lack the model's own offset from "
+            "the standard; read them from cases that record their tins",
             highlight=False,
         )
     if found.model != forward.model_id:
