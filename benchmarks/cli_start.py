@@ -72,8 +72,8 @@ def main() -> None:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
-    flakelab = shutil.which("flakelab") or str(Path(sys.executable).parent / "flakelab")
-    command = [sys.executable, flakelab, "match", "--example", "--json"]
+    entry = shutil.which("flakelab") or str(Path(sys.executable).parent / "flakelab")
+    command = [sys.executable, entry, "match", "--example", "--json"]
     baseline = [sys.executable, "-c", f"import {DEPENDENCIES}"]
     with tempfile.TemporaryDirectory() as folder:
         env = fresh_environment(folder)
