@@ -789,9 +789,9 @@ def _stored_or_told(shop: str, database: str | None, version: int | None = None)
     if version is not None and stored_tins(shop, database):
         raise FlakelabError(f"--version: shop {shop!r} has no version {version} of its tins")
     raise FlakelabError(
-        f"no tins stored for shop {shop!r}: 'flakelab lots calibrate SPRAYED --recipe R "
-        f"--shop {shop!r}' reads them from panels, 'flakelab lots save FILE --shop "
-        f"{shop!r}' stores a lot file's"
+        f"no tins stored for shop {shop!r}: flakelab lots calibrate SPRAYED --recipe R "
+        f"--shop {shop!r} reads them from panels, flakelab lots save FILE --shop {shop!r} "
+        "stores a lot file's"
     )
 
 
