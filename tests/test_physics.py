@@ -206,10 +206,11 @@ class TestFastModel:
         assert abs(flop[0] - flop[1]) < 5.0
 
     def test_a_solid_colour_is_lambertian_under_the_fresnel_top(self):
-        fast, _ = self.predict_and_trace({"Titanium dioxide white": 0.9, "Phthalo blue GS": 0.1})
-        _, _, T_in, T_out = interface_directions(
-            ["45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"]
-        )
+        geometries = ["45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"]
+        recipe = {"Titanium dioxide white": 0.9, "Phthalo blue GS": 0.1}
+        fast = predict(layer_from_fractions(self.library, self.library.fractions(recipe)),
+                       geometries)[0]  # fmt: skip
+        _, _, T_in, T_out = interface_directions(geometries)
         body = fast / (T_in * T_out)[:, None]
         np.testing.assert_allclose(body, np.broadcast_to(body[:1], body.shape), rtol=1e-9)
 
