@@ -524,7 +524,7 @@ def evaluate(
         which = f"{which_cases(shop, since)} read at its geometries"
         chosen, learned = unseen_cases(forward, chosen, cases, which)
     from flakelab.cli.matcher import habits_for
-    from flakelab.match.forward import LearnedForward
+    from flakelab.match.forward import LearnedForward, film_of
     from flakelab.match.judging import evaluate_recipes
     from flakelab.match.lots import poured_from
     from flakelab.match.models import forward_for
@@ -538,7 +538,9 @@ def evaluate(
     )
 
     def habits_offset(x, R):
-        return shop_habits.offset(lib, x, R, matcher.geometries)
+        # at the film each case's tins put down, where habits act and were read
+        film = film_of(poured_from(matcher, lib, data.strength, data.shade), x)
+        return shop_habits.offset(lib, film, R, matcher.geometries)
 
     offset = habits_offset if shop_habits else None
     hybrid = isinstance(matcher, LearnedForward) and matcher.novel

@@ -56,7 +56,7 @@ from flakelab.core.tolerance import Tolerance, tolerance_preset
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
 from flakelab.match.adam import TensorAdam
-from flakelab.match.forward import stepping
+from flakelab.match.forward import film_of, stepping
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
@@ -383,10 +383,11 @@ def correct(
     else:
         mean = np.zeros(2) if habits is None else habits.theta[:2]
         expected = np.zeros_like(raw)
+        film = film_of(forward, x_recipe[None])  # where the spray's application acts
         if habits is not None:
             R = R0.double().numpy()
-            expected = habits.offset(library, x_recipe[None], R, forward.geometries)[0]
-        sensitivity = application_sensitivity(library, x_recipe, forward.geometries)
+            expected = habits.offset(library, film, R, forward.geometries)[0]
+        sensitivity = application_sensitivity(library, film[0], forward.geometries)
         if persistent_sd is None:
             persistent_sd = model_persistent_sd(forward, x_recipe, model_sd)
         persistent, sigmas = split_offset(raw - expected, sensitivity, persistent_sd, noise_sd)
@@ -434,7 +435,7 @@ def aim_off(
     test ``lights``, as the search does. A recipe where that offset stays under ``floor``
     (ΔE00) at every geometry is left as it is."""
     R = evaluate_recipes(forward, recipes)[0]
-    expected = habits.offset(library, recipes, R, forward.geometries)
+    expected = habits.offset(library, film_of(forward, recipes), R, forward.geometries)
     predicted = reflectance_to_Lab(R)
     x, lab = np.array(recipes, float), predicted + expected
     moved = delta_E(predicted, lab).max(axis=1) >= floor

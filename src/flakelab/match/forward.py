@@ -39,6 +39,7 @@ __all__ = [
     "KubelkaMunkForward",
     "HeldJacobian",
     "stepping",
+    "film_of",
 ]
 
 
@@ -194,6 +195,16 @@ def stepping(forward, every: int):
     held = copy.copy(forward)
     held.held = HeldJacobian(every)
     return held
+
+
+def film_of(forward, fractions: NDArray) -> NDArray:
+    """What recipes ``fractions[N, T]`` put in the film when ``forward`` weighs for the
+    shop's tins (:meth:`WithLots.film <flakelab.match.lots.WithLots.film>`, their strengths),
+    the recipes themselves when it weighs for the standard tins: where the physics of
+    application acts, as a shop's habits were read (:func:`~flakelab.match.lots.
+    at_standard_tins`) and as its world sprays."""
+    film = getattr(forward, "film", None)
+    return np.asarray(fractions, float) if film is None else film(fractions)
 
 
 def _adapted(model: ForwardModel) -> str:

@@ -67,6 +67,7 @@ from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
+from flakelab.match.forward import film_of
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, sprayout_mismatch
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
@@ -588,7 +589,7 @@ def habits_fit(
     optimistic by about 3 parameters in N·G·3 values: little."""
     R = evaluate_recipes(forward, fractions)[0]
     predicted, measured = reflectance_to_Lab(R), reflectance_to_Lab(sprayouts)
-    offset = habits.offset(library, fractions, R, forward.geometries)
+    offset = habits.offset(library, film_of(forward, fractions), R, forward.geometries)
     return {
         "geometries": [str(g) for g in forward.geometries],
         "cases": len(fractions),

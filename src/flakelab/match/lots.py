@@ -213,6 +213,11 @@ class WithLots:
         members = self.forward.member_reflectance(mixed_with(self.strength, x))
         return members * self.film_ratio(x)[None] if self.shaded else members
 
+    def film(self, x: NDArray) -> NDArray:
+        """What recipes ``x[N, T]`` poured from these tins put in the film (:func:`mixed_with`),
+        in the standard tins' terms: where a shop's habits act."""
+        return mixed_with(self.strength, x)
+
     def film_ratio(self, x: NDArray) -> NDArray:
         """:func:`shade_ratio` of recipes ``x[N, T]`` poured from these tins."""
         return shade_ratio(self.library, self.geometries, x * self.strength, self.shade)

@@ -50,12 +50,15 @@ def sprayout_mismatch(
     """ΔE00 ``[N, G]`` of spray-outs ``sprayouts[N, G, 31]`` from the prediction of the
     recipes ``fractions[N, T]`` they were mixed from, moved by the shop's ``habits`` (given
     the ``library``): what :data:`SPRAYOUT_MISMATCH` bounds."""
-    from flakelab.match.judging import evaluate_recipes  # torch's import: not for a bare record
+    # torch's import: not for a bare record
+    from flakelab.match.forward import film_of
+    from flakelab.match.judging import evaluate_recipes
 
     R = evaluate_recipes(forward, fractions)[0]
     predicted = reflectance_to_Lab(R)
     if habits is not None:
-        predicted = predicted + habits.offset(library, fractions, R, forward.geometries)
+        film = film_of(forward, fractions)
+        predicted = predicted + habits.offset(library, film, R, forward.geometries)
     return delta_E(predicted, reflectance_to_Lab(sprayouts))
 
 

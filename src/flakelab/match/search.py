@@ -62,7 +62,7 @@ from flakelab.core.tolerance import (
 from flakelab.core.torch_colour import TorchColour
 from flakelab.errors import FlakelabError
 from flakelab.match.adam import TensorAdam
-from flakelab.match.forward import stepping
+from flakelab.match.forward import film_of, stepping
 from flakelab.match.judging import (
     Candidate,
     MatchResult,
@@ -688,7 +688,7 @@ def _aimed_off(
     )[0]  # fmt: skip
     both, K = np.concatenate([_weighable(aimed, settings), x]), len(x)
     predicted = evaluate_recipes(forward, both)
-    offset = habits.offset(library, both, predicted[0], forward.geometries)
+    offset = habits.offset(library, film_of(forward, both), predicted[0], forward.geometries)
     assessed = assess(forward, both, spectra, texture, tolerance, settings, offset, predicted)
     score = assessed.score
     rows = np.arange(K) + K * (score[K:] < score[:K])  # the unaimed row where it does better
