@@ -13,7 +13,7 @@ saw), for what the cases record of their tins:
 * ``none``: nothing (the issue's figure);
 * ``read``: each tin read from one panel against the model, to the error that reading has
   in the harness (1.11 % in strength, 0.75 nm in shade: README, *The shop's tins*);
-* ``read_against_standard``: against the paint maker's panel (0.59 %, 0.29 nm);
+* ``referenced``: against the paint maker's panel (0.59 %, 0.29 nm);
 * ``known``: the world's own batches (the limit a reading approaches);
 
 the model's ΔE00 mean, p95 and max over cases × geometries and its mean per paint family,
@@ -54,9 +54,7 @@ from flakelab.models.training import TrainingConfig, generated_case_arrays, trai
 RECORDED = {
     "none": WorldSettings(),
     "read": WorldSettings(tins="read"),
-    "read_against_standard": WorldSettings(
-        tins="read", tin_strength_read_sd=0.0059, tin_shade_read_sd_nm=0.29
-    ),
+    "referenced": WorldSettings(tins="referenced"),
     "known": WorldSettings(tins="known"),
 }
 """What the cases record of their tins, row by row (the harness's readings: README)."""

@@ -214,8 +214,23 @@ def test_recording_the_tins_leaves_every_case_as_it_was(world, cases, tinned):
     shade = np.array([r.shade_nm - t.shade_nm for r, t, e in pairs if not e])
     assert all(r.shade_nm == t.shade_nm == 0 for r, t, e in pairs if e)  # flakes have no shade
     # read to the errors the settings give (0.0111 in log strength, 0.75 nm), within sampling
-    assert 0.7 < strength.std() / world.settings.tin_strength_read_sd < 1.3
-    assert 0.7 < shade.std() / world.settings.tin_shade_read_sd_nm < 1.3
+    s = world.settings
+    assert 0.7 < strength.std() / s.tin_strength_read_sd < 1.3
+    assert 0.7 < shade.std() / s.tin_shade_read_sd_nm < 1.3
+    # read against the paint maker's panel: the same cases, the same draws, smaller errors
+    # (0.0059, 0.29 nm)
+    referencing = World(world.library, world.instrument, replace(s, tins="referenced"))
+    referenced = next(referencing.cases(40, seed=7, batch=40))
+    assert [c.case_id for c in referenced] == [c.case_id for c in known]
+    ref = list(zip([c.tins[n] for c in referenced for n in c.tins], pairs, strict=True))
+    ref_strength = np.log([r.strength / t.strength for r, (_, t, _) in ref])
+    np.testing.assert_allclose(
+        ref_strength, strength * s.tin_strength_referenced_sd / s.tin_strength_read_sd, atol=2e-4
+    )
+    ref_shade = np.array([r.shade_nm - t.shade_nm for r, (_, t, e) in ref if not e])
+    np.testing.assert_allclose(
+        ref_shade, shade * s.tin_shade_referenced_sd_nm / s.tin_shade_read_sd_nm, atol=2e-3
+    )
     strengths = np.array([t.strength for _, t, _ in pairs])
     assert 0.02 < strengths.std() < 0.04  # the batches' own spread (batch_strength_sd 0.03)
 

@@ -32,7 +32,8 @@ Sources of variation (all in :class:`WorldSettings`):
 * the tins a shop records (``tins``, none by default): every tin of a spray-out read, as
   ``flakelab lots`` reads one from a panel against the model, to ``tin_strength_read_sd``
   and ``tin_shade_read_sd_nm`` (what that reading came to, ``benchmarks/toner_lots.py``), or
-  known exactly; drawn from a stream of their own, so the cases are the same either way;
+  against the paint maker's panel (``referenced``, ``tin_*_referenced_sd``), or known
+  exactly; drawn from a stream of their own, so the cases are the same either way;
 * the shop's own habits (``shop_*``, none by default): its sprayer's mean film build and
   flake spread against the factory's, and its instrument's gain against the instrument the
   shipped model learned from. These are what the protocol's adaptation phase is for
@@ -103,9 +104,12 @@ ORGANIC_FAMILIES = (
 """Pigment families that fade in sunlight (inorganics — iron oxides, TiO2, carbon — hold)."""
 
 
-TINS_RECORDED = ("none", "read", "known")
+TINS_RECORDED = ("none", "read", "referenced", "known")
 """What a generated case records of the tins its recipe was poured from: nothing (as most
-shops), the shop's reading of each, or the world's own strength and shade."""
+shops), the shop's reading of each from a panel against the model (``read``; the harness's
+``--lots calibrated``) or against the paint maker's panel of the same toner from its
+standard tins (``referenced``, as the harness's), or the world's own strength and shade
+(``known``)."""
 
 
 @dataclass(frozen=True)
@@ -133,9 +137,11 @@ class WorldSettings:
     shop_gain: float = 0.0
     tins: str = "none"
     # a tin read from one panel against the model: RMS error over the harness's shops
-    # (README, *The shop's tins*, stop 74)
+    # (README, *The shop's tins*, stop 74); against the paint maker's panel, the same
     tin_strength_read_sd: float = 0.0111
     tin_shade_read_sd_nm: float = 0.75
+    tin_strength_referenced_sd: float = 0.0059
+    tin_shade_referenced_sd_nm: float = 0.29
     tin_sprayouts: int = 1
     solid_white_share: float = 0.5
     kinds: dict[str, float] = field(
@@ -389,7 +395,8 @@ class World:
     ) -> list[dict[str, TonerLot]]:
         """What each case records of the tins its ``recipe[F, T]`` was poured from
         (``settings.tins``): nothing, the shop's reading of each tin (log strength and shade
-        off the batch by ``tin_*_read_sd``), or the batch itself. An effect toner has no
+        off the batch by ``tin_*_read_sd``, or ``tin_*_referenced_sd`` read against the
+        paint maker's panel), or the batch itself. An effect toner has no
         shade; a pigment's is the batch's drift. ``reading``: each tin's reading errors in
         standard deviations ``[F, T]`` (strength, shade), where a tin read once serves several
         cases (:class:`LastingTins`); else drawn for each case from ``rng``."""
@@ -401,13 +408,16 @@ class World:
         strength = batches.strength
         drift = batches.hue_shift if batches.hue_shift.ndim == 2 else batches.hue_shift[:, None]
         shade = np.where(self.library.effect[None, :], 0.0, drift)
-        if s.tins == "read":
+        if s.tins in ("read", "referenced"):
             if reading is None:
                 reading = (rng.normal(0, 1, (F, T)), rng.normal(0, 1, (F, T)))
-            strength = strength * np.exp(s.tin_strength_read_sd * reading[0])
-            shade = shade + np.where(
-                self.library.effect[None, :], 0.0, s.tin_shade_read_sd_nm * reading[1]
+            strength_sd, shade_sd = (
+                (s.tin_strength_read_sd, s.tin_shade_read_sd_nm)
+                if s.tins == "read"
+                else (s.tin_strength_referenced_sd, s.tin_shade_referenced_sd_nm)
             )
+            strength = strength * np.exp(strength_sd * reading[0])
+            shade = shade + np.where(self.library.effect[None, :], 0.0, shade_sd * reading[1])
         strength = strength.clip(0.5, 2.0)  # a tin's readable range (TonerLot)
         shade = shade.clip(-MAX_SHADE_NM, MAX_SHADE_NM)
         names = self.library.names

@@ -115,7 +115,9 @@ def generate(
         typer.Option(
             help="What each case records of the tins its recipe was poured from: none (as "
             "most shops), read (the shop read every tin from a panel against the model, to "
-            "the error that reading has) or known (the world's own strengths and shades).",
+            "the error that reading has), referenced (against the paint maker's panel of the "
+            "toner, 'lots calibrate --standard') or known (the world's own strengths and "
+            "shades).",
         ),
     ] = "none",
     tin_sprayouts: Annotated[
