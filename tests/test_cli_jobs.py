@@ -1109,7 +1109,8 @@ def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):
         notes = [said for said in (at_tins, as_poured) if said in " ".join(run.stderr.split())]
         assert notes == ([noted] if noted else []), (habits_file, lots)
     run = cli("cases", "generate", "--n", "3", "--tins", "some", "-o", str(tmp_path / "x.csv"))
-    assert run.returncode == 2 and "--tins: expected one of none, read, referenced, known" in run.stderr
+    expected = "--tins: expected one of none, read, referenced, known"
+    assert run.returncode == 2 and expected in run.stderr
 
 
 def test_a_recorded_case_keeps_the_tins_its_recipe_was_poured_from(tmp_path, cli):

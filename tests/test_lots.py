@@ -825,6 +825,11 @@ def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
     assert missing.returncode == 2 and "no version 9" in missing.stderr
     text = cli("lots", "history", "--shop", shop, "-d", db)
     assert text.returncode == 0 and "new tin (K-9) 0.970" in text.stdout
+    drawn = tmp_path / "tins.png"
+    run = cli("lots", "history", "--shop", shop, "-d", db, "--plot", drawn)
+    assert run.returncode == 0 and drawn.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    run = cli("lots", "history", "--shop", shop, "-d", db, "--plot", tmp_path / "tins.bmp")
+    assert run.returncode == 2 and "tins.bmp" in run.stderr and ".png" in run.stderr
 
     # one place for the tins; a shop with none stored is told how to store them
     both = cli(*calibrate, "--shop", shop, "--lots", other)
@@ -851,6 +856,37 @@ def _store_read_from_the_first(args) -> bool:
     except DatabaseError:
         return False
     return True
+
+
+def test_a_shops_tins_through_its_versions_are_a_line_a_tin():
+    """What 'lots history --plot' draws: a tin lasts while consecutive versions hold its lot;
+    a new lot, or a toner back after a version without it, starts another; a shade never
+    read (an effect toner's, or a strength read alone) is not drawn."""
+    from dataclasses import replace
+    from datetime import UTC, datetime
+
+    from flakelab.cases.shop_lots import StoredLots, tins_through
+
+    blue, white = "Phthalo blue GS", "Titanium dioxide white"
+
+    def version(n, *tins):
+        return StoredLots("A", TonerLots.of(list(tins)), n, datetime(2026, 12, n, tzinfo=UTC))
+
+    first, second = (TonerLot(blue, 1.01, 0.02, "B-1", shade_nm=0.4, shade_sd_nm=0.1),
+                     TonerLot(blue, 0.97, 0.02, "B-2", shade_nm=-0.3, shade_sd_nm=0.1))  # fmt: skip
+    tins = tins_through([
+        version(1, first, TonerLot(white, 0.99)),
+        version(2, replace(first, strength=1.02, shade_nm=0.5), TonerLot(white, 0.98, 0.01)),
+        version(3, second),
+        version(4, second, TonerLot(white, 0.98, 0.01)),
+    ])  # fmt: skip
+    assert [(t["lot"], t["version"], t["strength"]) for t in tins[blue]] == [
+        ("B-1", [1, 2], [1.01, 1.02]), ("B-2", [3, 4], [0.97, 0.97])
+    ]  # fmt: skip
+    assert tins[blue][0]["shade_nm"] == [0.4, 0.5] and tins[blue][1]["shade_sd_nm"] == [0.1] * 2
+    assert [(t["lot"], t["version"]) for t in tins[white]] == [("", [1, 2]), ("", [4])]
+    assert tins[white][0]["shade_nm"] == [None, None]
+    assert tins[white][0]["strength_sd"] == [LOT_STRENGTH_SD, 0.01]
 
 
 def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(database_url):

@@ -26,7 +26,14 @@ from flakelab.errors import FlakelabError
 from flakelab.io.lots_file import lots_document, lots_from_document
 from flakelab.library.lots import TonerLots
 
-__all__ = ["StoredLots", "stored_lots", "store_lots", "lots_history", "list_stored_lots"]
+__all__ = [
+    "StoredLots",
+    "stored_lots",
+    "store_lots",
+    "lots_history",
+    "list_stored_lots",
+    "tins_through",
+]
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,30 @@ def lots_history(engine: Engine, shop: str) -> list[StoredLots]:
     with Session(engine) as session:
         rows = session.scalars(query.order_by(ShopLotsRow.version)).all()
     return [_stored(engine, row) for row in rows]
+
+
+def tins_through(versions: list[StoredLots]) -> dict[str, list[dict]]:
+    """Each toner's tins through the ``versions`` of a shop's tins (:func:`lots_history`):
+    a tin lasts while consecutive versions hold the same lot of the toner, and another
+    begins with a new lot or where the toner comes back after a version without it. Each
+    tin: its ``lot`` and, at every version that holds it, the ``version``, ``strength``,
+    ``strength_sd``, ``shade_nm`` and ``shade_sd_nm`` (None where its shade was never read:
+    :attr:`~flakelab.library.lots.TonerLot.shade_read`)."""
+    fields = ("version", "strength", "strength_sd", "shade_nm", "shade_sd_nm")
+    tins: dict[str, list[dict]] = {}
+    held: dict[str, int] = {}  # each toner's version last seen
+    for stored in versions:
+        for name, t in sorted(stored.lots.lots.items()):
+            series = tins.setdefault(name, [])
+            last = series[-1] if series else None
+            if last is None or last["lot"] != t.lot or held[name] != stored.version - 1:
+                series.append({"lot": t.lot, **{k: [] for k in fields}})
+            shade = (t.shade_nm, t.shade_sd_nm) if t.shade_read else (None, None)
+            values = (stored.version, t.strength, t.strength_sd, *shade)
+            for key, value in zip(fields, values, strict=True):
+                series[-1][key].append(value)
+            held[name] = stored.version
+    return tins
 
 
 def _stored(engine: Engine, row: ShopLotsRow, toners=None) -> StoredLots:

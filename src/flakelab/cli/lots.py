@@ -18,6 +18,7 @@ from flakelab.cli.common import (
     AverageOption,
     JsonOption,
     SampleOption,
+    check_figure_file,
     check_output_file,
     console,
     errors,
@@ -473,6 +474,7 @@ def calibrate_command(
                 "shade_before_nm": round(start.lots[t.toner].shade_nm, 2),
                 "shade_nm": round(t.shade_nm, 2),
                 "shade_sd_nm": round(t.shade_sd_nm, 2),
+                "shade_read": t.shade_read,
             }
             for t in moved
         ],
@@ -559,7 +561,7 @@ def _print_calibration(report: dict) -> None:
                 f"{t['before']:.3f}",
                 f"{t['strength']:.3f} ± {t['strength_sd']:.3f}",
                 f"{100 * (t['strength'] - t['before']):+.1f} %",
-                _shade_text(t["shade_nm"], t["shade_sd_nm"]),
+                _shade_text(t["shade_nm"], t["shade_sd_nm"], t["shade_read"]),
             )
         console.print(moved)
     against = "the model" if report["against"] == "model" else "the standard's panel"
@@ -717,7 +719,7 @@ def show_command(
             name,
             t.lot,
             f"{t.strength:.3f} ± {t.strength_sd:.3f}",
-            _shade_text(t.shade_nm, t.shade_sd_nm, kinds.get(name)),
+            _shade_text(t.shade_nm, t.shade_sd_nm, t.shade_read, kinds.get(name)),
             str(t.panels),
             t.calibrated[:10],
             _read_with_text(found.read_with(name)),
@@ -800,15 +802,29 @@ def _stored_or_told(shop: str, database: str | None, version: int | None = None)
 def history_command(
     shop: ShopTinsOption = None,
     database: DatabaseOption = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Also draw each toner's strength and shade, version by version, a new tin "
+            "marked (PNG, PDF or SVG).",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Every version of a shop's tins stored in the database: when it was stored, and the
     tins it changed against the version before (read again, or a new tin opened)."""
-    from flakelab.cases.shop_lots import lots_history
+    from flakelab.cases.shop_lots import lots_history, tins_through
 
+    check_figure_file(plot, "--plot")
     shop = _tins_kept(None, shop)
     _stored_or_told(shop, database)
     versions = lots_history(existing_engine(database), shop)
+    if plot is not None:
+        from flakelab.render.plots import plot_tins_history
+
+        plot_tins_history(tins_through(versions), plot, title=f"The tins of shop {shop!r}")
+        errors.print(f"wrote {plot}", highlight=False)
     report = [
         {
             "version": v.version,
@@ -882,14 +898,12 @@ def _show_shops(database: str | None, json_output: bool) -> None:
     console.print(table)
 
 
-def _shade_text(shade_nm: float, shade_sd_nm: float, kind: str | None = None) -> str:
+def _shade_text(shade_nm: float, shade_sd_nm: float, read: bool, kind: str | None = None) -> str:
     """A tin's shade as a table shows it: "—" for an effect toner (``kind`` not "pigment":
-    it has none), "not read" while it stands at the standard's prior (a pigment's read
-    --no-shade, or any toner's where the library does not know its kind)."""
-    from flakelab.library.lots import LOT_SHADE_SD_NM
-
+    it has none), "not read" while it stands at the standard's prior (``read`` False: a
+    pigment's read --no-shade, or any toner's where the library does not know its kind)."""
     if kind is not None and kind != "pigment":
         return "—"
-    if shade_nm == 0 and shade_sd_nm == LOT_SHADE_SD_NM:
+    if not read:
         return "not read"
     return f"{shade_nm:+.2f} ± {shade_sd_nm:.2f} nm"

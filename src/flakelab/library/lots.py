@@ -96,6 +96,12 @@ class TonerLot:
         if self.panels < 0:
             raise ValueError(f"panels: expected 0 or more, got {self.panels!r}")
 
+    @property
+    def shade_read(self) -> bool:
+        """Whether the tin's shade was read: it stands off the standard's prior (an effect
+        toner's never does, nor a pigment's read for its strength alone)."""
+        return not (self.shade_nm == 0 and self.shade_sd_nm == LOT_SHADE_SD_NM)
+
 
 READ_AGAINST = ("model", "standard")
 """What a panel is read against: the model's prediction of it, or the paint maker's reading

@@ -1,6 +1,6 @@
 """Plots of multi-angle measurements: spectra per geometry, L* and C* versus aspecular angle;
 the multi-angle difference chart against a tolerance; the scaling experiment; a shop's habits
-against its spray-outs."""
+against its spray-outs; a shop's tins version by version."""
 
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ __all__ = [
     "plot_differences",
     "plot_scaling",
     "plot_habits",
+    "plot_tins_history",
     "plot_rendering",
     "plot_side_by_side",
 ]
@@ -336,6 +337,40 @@ def plot_habits(
     if scan is not None:
         _plot_change_scan(figure.add_subplot(grid[1, :]), scan)
     figure.suptitle(title or f"Shop habits against {fit['cases']} spray-outs")
+    _save(figure, path, dpi)
+
+
+def plot_tins_history(
+    tins: Mapping[str, Sequence[Mapping]], path: str | PathLike, *, title: str = "", dpi: int = 120
+) -> None:
+    """A shop's tins version by version (``flakelab lots history --plot``): each toner's
+    strength against the standard and, where read, its shade [nm], with a bar of ± one
+    standard deviation, against the version of the shop's tins. ``tins``: each toner's tins
+    (:func:`~flakelab.cases.shop_lots.tins_through`); a tin is one line, a new tin of the
+    toner starts another (an open marker) in the toner's colour."""
+    figure, (strength, shade) = plt.subplots(1, 2, figsize=(13, 4.6), sharex=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    versions = sorted({v for runs in tins.values() for tin in runs for v in tin["version"]})
+    for k, (name, runs) in enumerate(sorted(tins.items())):
+        colour = colours[k % len(colours)]
+        for i, tin in enumerate(runs):
+            marker = dict(marker="o", mfc=colour if i == 0 else "white", color=colour, capsize=2)
+            label = name if i == 0 else None
+            strength.errorbar(tin["version"], tin["strength"], tin["strength_sd"], label=label,
+                              **marker)  # fmt: skip
+            read = [j for j, value in enumerate(tin["shade_nm"]) if value is not None]
+            if read:
+                shade.errorbar([tin["version"][j] for j in read],
+                               [tin["shade_nm"][j] for j in read],
+                               [tin["shade_sd_nm"][j] for j in read], **marker)  # fmt: skip
+    strength.axhline(1.0, color="0.6", lw=0.8)
+    shade.axhline(0.0, color="0.6", lw=0.8)
+    strength.set(xlabel="version", ylabel="strength against the standard (± 1 s.d.)")
+    shade.set(xlabel="version", ylabel="shade [nm] (± 1 s.d.; where read)")
+    strength.set_xticks(versions)
+    strength.legend(fontsize=8, ncol=2)
+    title = title or "A shop's tins, version by version"
+    figure.suptitle(f"{title} (open marker: a new tin)")
     _save(figure, path, dpi)
 
 
