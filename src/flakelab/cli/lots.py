@@ -813,7 +813,8 @@ def history_command(
     json_output: JsonOption = False,
 ) -> None:
     """Every version of a shop's tins stored in the database: when it was stored, and the
-    tins it changed against the version before (read again, or a new tin opened)."""
+    tins it changed against the version before (read again, or a new tin opened); with
+    --json, each toner's tins through the versions too (what --plot draws)."""
     from flakelab.cases.shop_lots import lots_history, tins_through
 
     check_figure_file(plot, "--plot")
@@ -835,7 +836,8 @@ def history_command(
         for before, v in zip([None, *versions[:-1]], versions, strict=True)
     ]
     if json_output:
-        print(json.dumps({"shop": shop, "versions": report}, indent=2))
+        tins = tins_through(versions)
+        print(json.dumps({"shop": shop, "versions": report, "tins": tins}, indent=2))
         return
     table = Table(title=f"Versions of the tins of shop {shop!r}", box=box.SIMPLE)
     for column in ("version", "saved", "tins", "changed"):
