@@ -809,7 +809,7 @@ def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
     history = json.loads(cli("lots", "history", "--shop", shop, "-d", db, "--json").stdout)
     v1, v2, v3 = (v["changed"] for v in history["versions"])
     blue, black = "Phthalo blue GS", "Carbon black"
-    tins = {name: [(t["lot"], t["version"]) for t in runs] for name, runs in history["tins"].items()}
+    tins = {n: [(t["lot"], t["version"]) for t in runs] for n, runs in history["tins"].items()}
     assert tins == {blue: [("B-1", [1, 2])], black: [("K-9", [3])]}
     assert [(c["toner"], c["before"], c["after"]["lot"]) for c in v1] == [(blue, None, "B-1")]
     first_read = v1[0]["after"]["strength"]
