@@ -18,14 +18,15 @@ the same shop's cases. ``--no-habits`` runs a shop without habits of its own.
 application instead of the learned model: the estimator alone, without the model's error
 (a bias there is the estimator's; a bias only against the model is the model's).
 
-``--tins read|known`` makes the shop's cases record the tins they were poured from (as
+``--tins read|referenced|known`` makes the shop's cases record the tins they were poured from (as
 ``cases generate --tins``): its habits are read at the standard tins, as ``flakelab cases
 habits`` reads them (:func:`~flakelab.match.lots.at_standard_tins`), and the fresh
 spray-outs are judged for their tins; with ``--no-tins`` the habits are read from the same
 cases taken as poured from the standard (``cases habits --no-tins``), the baseline.
 
     python benchmarks/habits.py [--cases 20,50,100,200,500,2000] [--repeats 5] [--no-prior]
-        [--no-habits] [--against model|physics] [--tins none|read|known [--no-tins]] [--json]
+        [--no-habits] [--against model|physics] [--tins none|read|referenced|known [--no-tins]]
+        [--json]
 """
 
 from __future__ import annotations

@@ -15,11 +15,12 @@ mean z of each habit.
 
 ``--tin-sprayouts K`` makes every shop's tins last K spray-outs (``WorldSettings``), so that
 a new tin of a toner moves every later case that uses it, as a change of habits would;
-``--tins read|known`` makes the cases record their tins, and ``--at-tins`` reads them at the
-standard tins, as ``flakelab cases habits`` does (else as poured from the standard).
+``--tins read|referenced|known`` makes the cases record their tins, and ``--at-tins`` reads
+them at the standard tins, as ``flakelab cases habits`` does (else as poured from the
+standard).
 
     python benchmarks/habits_drift.py [--cases 100,200,400,1000] [--at 0.5,0.8] [--repeats 5]
-        [--tin-sprayouts K] [--tins none|read|known] [--at-tins] [--json]
+        [--tin-sprayouts K] [--tins none|read|referenced|known] [--at-tins] [--json]
 
 ``flakelab cases habits`` looks for a change from ``MIN_DRIFT_CASES`` (100) spray-outs on;
 smaller sizes (from 40) show why.

@@ -565,9 +565,7 @@ class LastingTins:
         if not isinstance(lasting, int) or isinstance(lasting, bool) or lasting < 1:
             raise ValueError(f"tin_sprayouts: expected a whole number from 1, got {lasting!r}")
         T = len(world.library.toners)
-        self.used = np.random.default_rng([seed, TIN_STREAM]).integers(
-            0, self.settings.tin_sprayouts, T
-        )
+        self.used = np.random.default_rng([seed, TIN_STREAM]).integers(0, lasting, T)
 
     def poured(self, recipe: NDArray) -> tuple[NDArray, NDArray, tuple[NDArray, NDArray]]:
         """The tins the spray-outs of ``recipe[F, T]`` are poured from, in order: strength

@@ -676,10 +676,10 @@ def show_command(
     from flakelab.io.lots_file import read_lots, write_lots
 
     check_output_file(out, "--out")
-    lib = read_library(library)
     if lots is None and workplace_shop(shop)[0] is None:
         _show_shops(database, json_output)
         return
+    lib = read_library(library)
     shop = _tins_kept(lots, shop)
     if version is not None and lots is not None:
         raise FlakelabError("--version: for the tins stored for a shop (--shop), not a file")
@@ -790,7 +790,12 @@ def _stored_or_told(shop: str, database: str | None, version: int | None = None)
         return kept
     if version is not None and stored_tins(shop, database):
         raise FlakelabError(f"--version: shop {shop!r} has no version {version} of its tins")
-    raise FlakelabError(
+    raise _no_tins_stored(shop)
+
+
+def _no_tins_stored(shop: str) -> FlakelabError:
+    """The error for a shop with no tins stored, saying how to store them."""
+    return FlakelabError(
         f"no tins stored for shop {shop!r}: flakelab lots calibrate SPRAYED --recipe R "
         f"--shop {shop!r} reads them from panels, flakelab lots save FILE --shop {shop!r} "
         "stores a lot file's"
@@ -819,12 +824,15 @@ def history_command(
 
     check_figure_file(plot, "--plot")
     shop = _tins_kept(None, shop)
-    _stored_or_told(shop, database)
-    versions = lots_history(existing_engine(database), shop)
+    engine = existing_engine(database)
+    versions = lots_history(engine, shop) if engine is not None else []
+    if not versions:
+        raise _no_tins_stored(shop)
+    tins = tins_through(versions)
     if plot is not None:
         from flakelab.render.plots import plot_tins_history
 
-        plot_tins_history(tins_through(versions), plot, title=f"The tins of shop {shop!r}")
+        plot_tins_history(tins, plot, title=f"The tins of shop {shop!r}")
         errors.print(f"wrote {plot}", highlight=False)
     report = [
         {
@@ -836,7 +844,6 @@ def history_command(
         for before, v in zip([None, *versions[:-1]], versions, strict=True)
     ]
     if json_output:
-        tins = tins_through(versions)
         print(json.dumps({"shop": shop, "versions": report, "tins": tins}, indent=2))
         return
     table = Table(title=f"Versions of the tins of shop {shop!r}", box=box.SIMPLE)

@@ -229,12 +229,12 @@ def layer_from_fractions(
     )
 
 
-def _tables_in_use(toners, effect: list[int], rates: NDArray, n: float) -> NDArray:
+def _tables_in_use(toners, effect: list[int], fractions: NDArray, n: float) -> NDArray:
     """Reflectance tables ``[S, 91, W]`` of the effect toners ``effect``, zero for a species
-    that no recipe holds (``rates[F, S]``): it contributes nothing, and a pearl's table costs
-    0.1 s of transfer matrices the first time it is asked for."""
+    that no recipe holds (``fractions[F, S]`` of those toners): it contributes nothing, and
+    a pearl's table costs 0.1 s of transfer matrices the first time it is asked for."""
     tables = np.zeros((len(effect), REFLECTANCE_ANGLES.size, WAVELENGTHS.size))
-    for s in np.flatnonzero(np.any(rates > 0, axis=0)):
+    for s in np.flatnonzero(np.any(fractions > 0, axis=0)):
         tables[s] = species_reflectance(toners[effect[s]], n)
     return tables
 
