@@ -1251,6 +1251,30 @@ def test_hybrid_leans_on_physics_where_a_recipe_is_mostly_new_toner(hybrid):
     np.testing.assert_allclose(R[1:], learned, rtol=1e-5)
 
 
+def test_a_recipes_numbers_name_the_model_that_made_them(hybrid, example_by_metamerism):
+    """A recipe without new toners is the learned model's alone (its physics ratio is one:
+    the test above), so it is named so; one with a new toner names the physics scaling for
+    that toner and its stand-in only, not for every new toner of the library."""
+    from flakelab.match.forward import LearnedForward, model_name_for
+    from flakelab.match.lots import WithLots
+
+    learned = LearnedForward(hybrid.model).name
+    assert len(hybrid.novel) >= 2 and hybrid.learned_name == learned
+    assert model_name_for(hybrid, ["Al medium", "Phthalo blue GS"]) == learned
+    new, other = hybrid.novel[:2]
+    named = model_name_for(hybrid, ["Al medium", new])
+    proxy = hybrid.library.names[hybrid.proxies[hybrid.library.names.index(new)]]
+    assert named == f"hybrid: learned + physics scaling for {new} (as {proxy})"
+    assert other not in named and all(n in hybrid.name for n in hybrid.novel)
+    tins = WithLots(hybrid, np.full(len(hybrid.toners), 1.02))
+    off = f", for the shop's tins ({len(hybrid.toners)} read off the standard)"
+    assert model_name_for(tins, ["Al medium"]) == learned + off
+    assert model_name_for(tins, [new]) == named + off
+    # the search's candidates: the example's best holds no new toner
+    best = example_by_metamerism[1][0.0]
+    assert not best.novel and best.model == learned
+
+
 def test_hybrid_keeps_a_dark_masstone_dark(hybrid):
     """A trace of a new toner in a masstone of a strongly absorbing pigment: the physics
     reflects next to nothing there (1e-7), and its ratio, taken unfloored, carried 4 %

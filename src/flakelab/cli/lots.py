@@ -199,6 +199,7 @@ def panel_command(
 def _panel_report(toner: str, panel_of, forward, lib, can, resolution: float) -> dict:
     """``toner``'s calibration panel (``panel_of`` a toner gives its panel's fractions),
     weighed for ``can``, and what its reading tells."""
+    from flakelab.match.forward import model_name_for
     from flakelab.match.lots import de00_per_nm, de00_per_percent
     from flakelab.match.recipe import weigh_whole_can
 
@@ -222,7 +223,7 @@ def _panel_report(toner: str, panel_of, forward, lib, can, resolution: float) ->
         "partners_panel_partner": next(
             n for n, v in zip(forward.toners, partner_x, strict=True) if v > 0 and n != partner
         ),
-        "model": forward.name,
+        "model": model_name_for(forward, fractions),
     }
 
 

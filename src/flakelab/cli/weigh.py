@@ -77,6 +77,7 @@ def weigh_command(
     ΔE00 between the exact and the weighed recipe, both predicted by the model."""
     from flakelab.cli.lots import lots_report, shop_lots
     from flakelab.io import read_recipe, write_recipe
+    from flakelab.match.forward import model_name_for
     from flakelab.match.recipe import order_can
 
     grams = read_recipe(recipe)
@@ -100,7 +101,7 @@ def weigh_command(
         "recipe": str(recipe),
         **can_size(can, can_g),
         **weighed_recipe(forward, shares, can_g, resolution),
-        "model": forward.name,
+        "model": model_name_for(forward, shares),
         **for_tins,
     }
     if recipe_out is not None:
@@ -112,7 +113,7 @@ def weigh_command(
         return
     console.print(f"{recipe.name} for {can_text(report)}", highlight=False)
     console.print(weights_table(None, report["weights_g"]))
-    console.print(f"{rounding_text(report)} ({forward.name})", highlight=False)
+    console.print(f"{rounding_text(report)} ({report['model']})", highlight=False)
     print_notes(report["notes"])
 
 
@@ -155,6 +156,7 @@ def _weigh_the_rest(
     where a toner outside the recipe was poured, what brings the can back to its colour
     (``for_tins``: the report's entries for the shop's tins)."""
     from flakelab.io import write_recipe
+    from flakelab.match.forward import model_name_for
 
     if unknown := [n for n in poured if n not in forward.toners]:
         raise FlakelabError(
@@ -179,7 +181,7 @@ def _weigh_the_rest(
         **found,
         "to_pour_g": [asdict(ln) for ln in weighing.lines],
         **rounding_costs(weighing),
-        "model": forward.name,
+        "model": model_name_for(forward, {*shares, *poured}),  # strays poured in too
         **for_tins,
     }
     if recipe_out is not None:  # what the can holds once the rest is poured
@@ -190,7 +192,7 @@ def _weigh_the_rest(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    _print_the_rest(report, recipe, planned, forward.name)
+    _print_the_rest(report, recipe, planned)
 
 
 def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most_g):
@@ -223,7 +225,7 @@ def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most
     }
 
 
-def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> None:
+def _print_the_rest(report: dict, recipe: Path, planned: dict) -> None:
     poured, grown = report["poured_g"], report["grown_g"]
     over = report["ran_over"]
     ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
@@ -252,7 +254,7 @@ def _print_the_rest(report: dict, recipe: Path, planned: dict, model: str) -> No
         console.print(weights_table(None, report["to_pour_g"]))
     else:
         console.print("nothing: the can is complete on this scale", highlight=False)
-    console.print(f"{rounding_text(report)} ({model})", highlight=False)
+    console.print(f"{rounding_text(report)} ({report['model']})", highlight=False)
     if "expected_de00" in report:
         worst, planned_worst = max(report["expected_de00"]), max(report["as_planned_de00"])
         text = (

@@ -17,7 +17,7 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -40,6 +40,7 @@ __all__ = [
     "HeldJacobian",
     "stepping",
     "film_of",
+    "model_name_for",
 ]
 
 
@@ -207,6 +208,14 @@ def film_of(forward, fractions: NDArray) -> NDArray:
     return np.asarray(fractions, float) if film is None else film(fractions)
 
 
+def model_name_for(forward, toners: Iterable[str]) -> str:
+    """What predicts a recipe of ``toners``: a hybrid's learned model alone where the recipe
+    holds none of its new toners (its physics ratio is one there), with the physics scaling
+    for those it holds; any other forward's own name."""
+    name_for = getattr(forward, "name_for", None)
+    return forward.name if name_for is None else name_for(toners)
+
+
 def _adapted(model: ForwardModel) -> str:
     """' adapted to SHOP' for a model adapted to a shop's cases, else nothing: an adapted
     model keeps its base's name, and a forward's name says which the numbers came from."""
@@ -241,12 +250,22 @@ class HybridForward(LearnedForward):
             self._substitute[j] = 0.0
             if j in self.proxies:
                 self._substitute[j, self.proxies[j]] = 1.0
+        self.learned_name = self.name
+        self.name = self.name_for(self.novel)
+        self.physics = PhysicsForward(library, self.geometries)
+
+    def name_for(self, toners: Iterable[str]) -> str:
+        """:func:`model_name_for`: the physics scaling named for the new toners in
+        ``toners``, each with its proxy."""
+        names, recipe = self.library.names, set(toners)
+        held = [j for j in np.flatnonzero(self._novel_mask) if names[j] in recipe]
+        if not held:
+            return self.learned_name
         stand_ins = ", ".join(
             f"{names[j]} (as {names[self.proxies[j]]})" if j in self.proxies else names[j]
-            for j in np.flatnonzero(self._novel_mask)
+            for j in held
         )
-        self.name = f"hybrid: learned{_adapted(model)} + physics scaling for {stand_ins}"
-        self.physics = PhysicsForward(library, self.geometries)
+        return f"hybrid: learned{_adapted(self.model)} + physics scaling for {stand_ins}"
 
     def base_fractions(self, x: NDArray) -> NDArray:
         """What the learned model sees: new toners moved onto their proxies, renormalised."""

@@ -30,6 +30,7 @@ from flakelab.core.tolerance import (
     failures,
     over_limit,
 )
+from flakelab.match.forward import model_name_for
 from flakelab.match.support import outside_support
 
 __all__ = [
@@ -298,7 +299,7 @@ def judge(
                 },
                 passes=not failing and bool(np.all(a.texture_share[row] <= 1)),
                 failing=failing,
-                model=forward.name,
+                model=model_name_for(forward, fractions),
                 novel=[n for n in fractions if n in forward.novel],
                 score=float(a.score[row]),
                 in_support=not outside[row],

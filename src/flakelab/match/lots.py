@@ -102,6 +102,7 @@ from flakelab.library.lots import (
 )
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
+from flakelab.match.forward import model_name_for
 from flakelab.match.judging import evaluate_recipes
 from flakelab.models.network import LOG_FLOOR
 from flakelab.models.training import CaseArrays
@@ -186,7 +187,12 @@ class WithLots:
         if self.shaded and (library is None or tuple(forward.toners) != library.names):
             raise ValueError("shade: the tins' shades need the library the model was made for")
         off = int(np.sum((np.abs(self.strength - 1) > 1e-12) | (self.shade != 0)))
-        self.name = f"{forward.name}, for the shop's tins ({off} read off the standard)"
+        self._for_tins = f", for the shop's tins ({off} read off the standard)"
+        self.name = forward.name + self._for_tins
+
+    def name_for(self, toners) -> str:
+        """:func:`~flakelab.match.forward.model_name_for` ``forward``'s, for the tins."""
+        return model_name_for(self.forward, toners) + self._for_tins
 
     @property
     def shaded(self) -> bool:
