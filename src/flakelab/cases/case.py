@@ -136,8 +136,8 @@ class Case:
             values = np.asarray(getattr(self, name), dtype=float)
             if values.shape != (len(geometries), WAVELENGTHS.size):
                 raise CaseError(
-                    f"{where}: {name}: expected {len(geometries)} × 31 reflectance values, "
-                    f"got shape {values.shape}"
+                    f"{where}: {name}: expected {len(geometries)} × {WAVELENGTHS.size} reflectance "
+                    f"values, got shape {values.shape}"
                 )
             bad = np.flatnonzero(outside(values, REFLECTANCE_RANGE))
             if bad.size:

@@ -25,6 +25,7 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.geometry import Geometry
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
 from flakelab.models.network import LOG_FLOOR, ForwardModel, reflectance_from_log
 from flakelab.physics.fast import predict, reflectance_factor
@@ -72,7 +73,7 @@ class LearnedForward:
     def _reflectance(self, y: torch.Tensor) -> torch.Tensor:
         """Reflectance ``[..., G, 31]`` from the model's outputs ``[..., outputs]``."""
         R = reflectance_from_log(y[..., : self.model.spectral_outputs])
-        return R.reshape(*y.shape[:-1], len(self.geometries), 31)
+        return R.reshape(*y.shape[:-1], len(self.geometries), WAVELENGTHS.size)
 
     @property
     def members(self) -> int:
@@ -275,7 +276,7 @@ class HybridForward(LearnedForward):
     def physics_ratio(self, x: NDArray) -> NDArray:
         """Ratio R_phys(x) / R_phys(x_base) ``[N, G, W]``; rows without new toners scale by
         one."""
-        ratio = np.ones((x.shape[0], len(self.geometries), 31))
+        ratio = np.ones((x.shape[0], len(self.geometries), WAVELENGTHS.size))
         rows = self._rows_with_new_toners(x)
         if rows.size:
             ratio[rows] = self._ratio(x[rows])
@@ -284,7 +285,7 @@ class HybridForward(LearnedForward):
     def physics_ratio_and_jacobian(self, x: NDArray) -> tuple[NDArray, NDArray]:
         """:meth:`physics_ratio` and its Jacobian ``[N, G, W, T]`` with respect to the new
         toners' amounts."""
-        ratio = np.ones((x.shape[0], len(self.geometries), 31))
+        ratio = np.ones((x.shape[0], len(self.geometries), WAVELENGTHS.size))
         jacobian = np.zeros((*ratio.shape, x.shape[1]))
         rows = self._rows_with_new_toners(x)
         if rows.size:
@@ -437,7 +438,7 @@ class PhysicsForward:
         y = _differentiable(x, self.outputs, self.outputs_and_jacobian, self.held)
         y = y.to(fractions.dtype)
         spectral = len(self.geometries) * 31
-        return y[:, :spectral].reshape(-1, len(self.geometries), 31), y[:, spectral:]
+        return y[:, :spectral].reshape(-1, len(self.geometries), WAVELENGTHS.size), y[:, spectral:]
 
 
 class KubelkaMunkForward:

@@ -92,6 +92,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 from flakelab.library.lots import (
     LOT_SHADE_SD_NM,
@@ -567,7 +568,8 @@ class _Tins:
         which, shade = which.reshape(-1), states[:, T:]
         strength = np.exp(log_strength)
         z = mixed_with(strength[:, None, :], self.x[None]).reshape(-1, T)
-        R = evaluate_recipes(self.forward, z)[0].reshape(len(strength), N, -1, 31)[which]
+        R = evaluate_recipes(self.forward, z)[0]
+        R = R.reshape(len(strength), N, -1, WAVELENGTHS.size)[which]
         rows = np.flatnonzero(np.any(shade != 0, axis=1))
         if rows.size:
             needed, of_row = np.unique(which[rows], return_inverse=True)

@@ -69,10 +69,14 @@ class Layer:
         F, S = np.shape(self.flake_rate)
         if np.shape(self.absorption) != (F, WAVELENGTHS.size):
             raise ValueError(
-                f"absorption: expected shape ({F}, 31), got {np.shape(self.absorption)}"
+                f"absorption: expected shape ({F}, {WAVELENGTHS.size}), "
+                f"got {np.shape(self.absorption)}"
             )
         if np.shape(self.flake_reflectance) != (S, REFLECTANCE_ANGLES.size, WAVELENGTHS.size):
-            raise ValueError("flake_reflectance: expected one 91 × 31 table per flake species")
+            raise ValueError(
+                f"flake_reflectance: expected one {REFLECTANCE_ANGLES.size} × {WAVELENGTHS.size} "
+                "table per flake species"
+            )
 
     @property
     def size(self) -> int:
