@@ -31,6 +31,7 @@ from flakelab.cli.common import (
     shares_text,
     tracked,
 )
+from flakelab.cli.matcher import ResolutionOption
 from flakelab.cli.sources import (
     WORKPLACE_SHOP,
     CasesArgument,
@@ -60,6 +61,7 @@ from flakelab.core.geometry import (
     instruments_reading,
 )
 from flakelab.errors import FlakelabError
+from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
 CheckOption = Annotated[
     bool,
@@ -663,8 +665,8 @@ def nearest(
     pick: Annotated[int, typer.Option(min=1, help="The case --recipe-out writes.")] = 1,
     quantity: Annotated[
         str, typer.Option(help="Can --recipe-out weighs, e.g. 250g (or by volume, 0.5l).")
-    ] = "250g",
-    resolution: Annotated[float, typer.Option(help="Scale resolution in grams.")] = 0.1,
+    ] = CAN_QUANTITY,
+    resolution: ResolutionOption = SCALE_RESOLUTION_G,
     library: LibraryOption = None,
     json_output: JsonOption = False,
 ) -> None:

@@ -57,7 +57,12 @@ from flakelab.cli.sources import (
 from flakelab.cli.weigh import rounding_costs
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
-from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
+from flakelab.match.settings import (
+    EXTRA_TONERS_TRIED,
+    MODEL_SD,
+    SCALE_RESOLUTION_G,
+    MatchSettings,
+)
 
 
 def correct_command(
@@ -76,7 +81,7 @@ def correct_command(
     model: ModelOption = None,
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
-    resolution: ResolutionOption = 0.1,
+    resolution: ResolutionOption = SCALE_RESOLUTION_G,
     left: Annotated[
         str | None,
         typer.Option(

@@ -45,6 +45,7 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
+from flakelab.match.settings import SCALE_RESOLUTION_G
 
 lots_app = typer.Typer(
     help="The shop's toner tins: a calibration panel for a toner, its tin's strength read "
@@ -134,7 +135,7 @@ def panel_command(
     quantity: Annotated[
         str, typer.Option(help="How much of the panel's paint to mix, e.g. 100g or 0.1l.")
     ] = "100g",
-    resolution: ResolutionOption = 0.1,
+    resolution: ResolutionOption = SCALE_RESOLUTION_G,
     library: LibraryOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     model: ModelOption = None,

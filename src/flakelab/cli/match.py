@@ -54,7 +54,7 @@ from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
-from flakelab.match.settings import MatchSettings
+from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
 
 
 def match_command(
@@ -94,8 +94,8 @@ def match_command(
         ),
     ] = None,
     library: LibraryOption = None,
-    quantity: QuantityOption = "250g",
-    resolution: ResolutionOption = 0.1,
+    quantity: QuantityOption = CAN_QUANTITY,
+    resolution: ResolutionOption = SCALE_RESOLUTION_G,
     tolerance: Annotated[
         str | None,
         typer.Option(

@@ -30,12 +30,13 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
+from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
 
 def weigh_command(
     recipe: Annotated[Path, typer.Argument(help="Recipe JSON {toner: grams} (any amount).")],
-    quantity: QuantityOption = "250g",
-    resolution: ResolutionOption = 0.1,
+    quantity: QuantityOption = CAN_QUANTITY,
+    resolution: ResolutionOption = SCALE_RESOLUTION_G,
     library: LibraryOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     model: ModelOption = None,

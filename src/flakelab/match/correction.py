@@ -60,7 +60,12 @@ from flakelab.match.forward import film_of, stepping
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
-from flakelab.match.settings import EXTRA_TONERS_TRIED, MODEL_SD, MatchSettings
+from flakelab.match.settings import (
+    EXTRA_TONERS_TRIED,
+    MODEL_SD,
+    SCALE_RESOLUTION_G,
+    MatchSettings,
+)
 from flakelab.match.stock import toners_allowed
 from flakelab.physics.application import (
     APPLICATION_PARAMETERS,
@@ -601,7 +606,7 @@ def correct_what_was_poured(
     fractions: dict[str, float],
     quantity_g: float,
     poured: dict[str, float],
-    resolution_g: float = 0.1,
+    resolution_g: float = SCALE_RESOLUTION_G,
     tolerance: Tolerance | None = None,
     most_g: float | None = None,
 ) -> PouredCorrection:

@@ -26,6 +26,7 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.units import parse_amount, unit_of
 from flakelab.errors import FlakelabError
+from flakelab.match.settings import SCALE_RESOLUTION_G
 
 __all__ = [
     "RecipeLine",
@@ -228,7 +229,7 @@ def check_scale(quantity_g: float, resolution_g: float, what: str = "quantity") 
 
 
 def weigh(
-    fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
+    fractions: dict[str, float], quantity_g: float, resolution_g: float = SCALE_RESOLUTION_G
 ) -> list[RecipeLine]:
     """Grams per toner (largest first, the usual pouring order) summing to ``quantity_g``."""
     steps = check_scale(quantity_g, resolution_g)
@@ -251,7 +252,10 @@ def weigh(
 
 
 def weigh_for_colour(
-    forward, fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
+    forward,
+    fractions: dict[str, float],
+    quantity_g: float,
+    resolution_g: float = SCALE_RESOLUTION_G,
 ) -> Weighing:
     """:func:`weigh`, with each toner rounded down or up to the scale as the colour closest to
     the exact recipe's by ``forward`` asks (module notes)."""
@@ -269,7 +273,10 @@ def weigh_for_colour(
 
 
 def weigh_whole_can(
-    forward, fractions: dict[str, float], quantity_g: float, resolution_g: float = 0.1
+    forward,
+    fractions: dict[str, float],
+    quantity_g: float,
+    resolution_g: float = SCALE_RESOLUTION_G,
 ) -> Weighing:
     """:func:`weigh_for_colour` for a can of ``quantity_g`` grams mixed afresh, the traces
     under one scale step left out (a correction's reformulation, or any computed recipe, can
@@ -281,7 +288,10 @@ def weigh_whole_can(
 
 
 def weigh_additions(
-    forward, can: dict[str, float], added: dict[str, float], resolution_g: float = 0.1
+    forward,
+    can: dict[str, float],
+    added: dict[str, float],
+    resolution_g: float = SCALE_RESOLUTION_G,
 ) -> Weighing:
     """Grams to add to a mixed ``can`` (grams per toner) for ``added`` (each toner's
     addition as a share of the can), each rounded down or up to the scale as the colour
@@ -309,7 +319,7 @@ def weigh_after_pouring(
     fractions: dict[str, float],
     quantity_g: float,
     poured: dict[str, float],
-    resolution_g: float = 0.1,
+    resolution_g: float = SCALE_RESOLUTION_G,
 ) -> tuple[float, Weighing]:
     """What is still to pour for a can of ``quantity_g`` of ``fractions`` once ``poured``
     (grams per toner on the scale so far) are in it, and the can's size: where a toner ran

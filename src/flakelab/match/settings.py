@@ -8,7 +8,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["EFFECT_TRACE", "EXTRA_TONERS_TRIED", "MODEL_SD", "SOLID_TRAVEL", "MatchSettings"]
+__all__ = [
+    "CAN_QUANTITY",
+    "EFFECT_TRACE",
+    "EXTRA_TONERS_TRIED",
+    "MODEL_SD",
+    "SCALE_RESOLUTION_G",
+    "SOLID_TRAVEL",
+    "MatchSettings",
+]
+
+CAN_QUANTITY = "250g"
+"""The can a recipe is weighed for unless told (``--quantity``): a spot repair's worth."""
+
+SCALE_RESOLUTION_G = 0.1
+"""A paint-mixing scale's step [g] unless told (``--resolution``; issue 5's default)."""
 
 SOLID_TRAVEL = 2.4
 """A target read without texture whose colour travels less than this over its geometries
