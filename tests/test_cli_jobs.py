@@ -169,6 +169,10 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path, cli)
     assert list(left_out["geometries"]) == [g for g in INSTRUMENT_GEOMETRIES["ma-t12"]
                                             if g not in report["geometries"]]  # fmt: skip
     assert left_out["model_id"].startswith("demo-ma-t12")
+    # the expected figures' own model: the recipe and its additions hold no new toner, so the
+    # shipped five-angle model's learned base alone
+    assert report["model_id"].startswith("demo-five-angle")
+    assert report["model"] == "learned (five-angle, demo-five-angle)"
     assert left_out["sprayout_de00"] == pytest.approx(
         [measured.de00[measured.geometries.index(g)] for g in left_out["geometries"]], abs=1e-3
     )
@@ -195,6 +199,7 @@ def test_correct_adds_only_toner_and_expects_a_smaller_difference(tmp_path, cli)
         assert any(toner in ln and f"{grams:.1f}" in ln for ln in text.stdout.splitlines()), toner
     assert "flake spread" in text.stdout
     assert "note: the spray-out already passes refinish" in text.stdout
+    assert f"model: {report['model']}; rounding to the scale" in text.stdout
 
 
 def test_additions_are_for_what_is_left_in_the_can(tmp_path, cli):

@@ -54,7 +54,7 @@ from flakelab.cli.sources import (
     recipe_fractions,
     workplace_shop,
 )
-from flakelab.cli.weigh import rounding_costs
+from flakelab.cli.weigh import rounding_costs, rounding_text
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import (
@@ -140,6 +140,7 @@ def correct_command(
     from flakelab.io import read_recipe, read_tolerance, write_recipe
     from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
     from flakelab.match.crosscheck import expected_left_out
+    from flakelab.match.forward import model_name_for
     from flakelab.match.search import left_out_note, unused_geometries
 
     tol = read_tolerance(tolerance)
@@ -222,6 +223,8 @@ def correct_command(
     weighing = _weigh_correction(forward, correction, mode, can, resolution)
     report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams
     report.update(rounding_costs(weighing))
+    held = weighing.grams if mode != "additions" else {*fractions, *weighing.grams}
+    report["model"], report["model_id"] = model_name_for(forward, held), forward.model_id
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
     if left is not None:
         report["left_g"] = round(sum(can.values()), 6)
@@ -438,6 +441,7 @@ def _print_correction(report: dict) -> None:
         )
         if report["habits"]:
             assumed += " beyond the shop's habits, which persist"
+    console.print(f"model: {report['model']}; {rounding_text(report)}", highlight=False)
     console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
     console.print(
         metamerism_text(
