@@ -1275,6 +1275,25 @@ def test_a_recipes_numbers_name_the_model_that_made_them(hybrid, example_by_meta
     assert not best.novel and best.model == learned
 
 
+def test_every_samples_table_flags_a_best_recipe_with_new_toners():
+    """``match --all``'s table marks the best recipe of a sample that holds a toner new to
+    the learned model (its numbers are the physics scaling's), and only that one."""
+    from flakelab.cli.common import console
+    from flakelab.cli.match import _print_every_sample
+
+    def report(sample, recipe, novel):
+        best = {"recipe": recipe, "novel_toners": novel, "failing_geometries": [],
+                "failing_texture": [], "passes": True, "de00_max": 0.3}  # fmt: skip
+        return {"target": sample, "candidates": [best]}
+
+    reports = [report("door", {"Al medium": 0.9, "Perylene red": 0.1}, ["Perylene red"]),
+               report("hood", {"Al medium": 0.9, "Carbon black": 0.1}, [])]  # fmt: skip
+    with console.capture() as captured:
+        _print_every_sample("cars.json", reports)
+    rows = {line.split()[0]: line for line in captured.get().splitlines() if line.strip()}
+    assert "(new: Perylene red)" in rows["door"] and "new:" not in rows["hood"]
+
+
 def test_hybrid_keeps_a_dark_masstone_dark(hybrid):
     """A trace of a new toner in a masstone of a strongly absorbing pigment: the physics
     reflects next to nothing there (1e-7), and its ratio, taken unfloored, carried 4 %

@@ -443,8 +443,10 @@ def _print_every_sample(path, reports: list[dict]) -> None:
         best = report["candidates"][0]
         failing = failures(best["failing_geometries"], best["failing_texture"])
         verdict = "[green]PASS[/]" if best["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
-        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict,
-                      shares_text(best["recipe"]))  # fmt: skip
+        recipe = shares_text(best["recipe"])
+        if best["novel_toners"]:  # predicted by the physics scaling for them
+            recipe += f" [yellow](new: {', '.join(best['novel_toners'])})[/]"
+        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict, recipe)
     console.print(table)
     passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
     console.print(f"{passing} of {len(reports)} samples matched within the tolerance, as "
@@ -555,10 +557,8 @@ def _print_match(report: dict) -> None:
                     "predicted − target", c["texture_delta"], limits, c["failing_texture"]
                 )
             )
-        extra = f"model: {c['model']}; {rounding_text(c)}"
-        if c["novel_toners"]:
-            extra += f"; uses new toners {', '.join(c['novel_toners'])} (physics scaling)"
-        console.print(extra, highlight=False)
+        # a recipe with new toners is flagged by its model, which names their physics scaling
+        console.print(f"model: {c['model']}; {rounding_text(c)}", highlight=False)
         console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
     if report.get("recorded_nearest"):
         from flakelab.cli.cases import nearest_table
