@@ -70,6 +70,19 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     assert run.returncode == 0, run.stderr
     by_file = json.loads(run.stdout)
     assert by_file["cases"] == 120
+    # drawn: the same figures, and a figure file named that a plot cannot be is refused first
+    chart = tmp_path / "errors.png"
+    run = cli("model", "evaluate", str(cases), "--model", str(tmp_path / "m.pt"), "--json",
+              "--plot", str(chart))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    drawn = json.loads(run.stdout)
+    assert drawn.pop("plot") == str(chart) and chart.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert {k: v for k, v in drawn.items() if k != "predict_seconds"} == {
+        k: v for k, v in by_file.items() if k != "predict_seconds"
+    }
+    run = cli("model", "evaluate", str(cases), "--plot", str(tmp_path / "errors.bmp"))
+    assert run.returncode == 2 and "expected a figure file ending .png" in run.stderr
+    assert not (tmp_path / "errors.bmp").exists()
     # --model takes a registered version as it takes a file
     run = cli("model", "evaluate", str(cases), "--model", "five-angle:1", "-d", database, "--json")
     assert run.returncode == 0, run.stderr

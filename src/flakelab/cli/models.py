@@ -13,6 +13,7 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     JsonOption,
+    check_figure_file,
     check_output_file,
     console,
     errors,
@@ -496,6 +497,14 @@ def evaluate(
     ] = None,
     unseen: UnseenOption = False,
     no_tins: NoTinsOption = False,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Also draw the ΔE00 at each geometry per paint family, the predicted minus "
+            "the measured L*, and each case's worst ΔE00 (PNG, PDF or SVG).",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """ΔE00 of the model's predictions against the measured spray-outs.
@@ -508,8 +517,9 @@ def evaluate(
     from flakelab.cases.case import cases_at
     from flakelab.io import read_library
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
-    from flakelab.models.training import evaluate_model
+    from flakelab.models.training import error_summary, prediction_errors
 
+    check_figure_file(plot, "--plot")
     lib = read_library(library)
     forward = chosen_model(model, instrument, database, shop)
     loaded = load_cases(cases, shop, since)
@@ -548,17 +558,23 @@ def evaluate(
 
     families = lib.paint_families(data.x)
     # the mix-ups judged by the model evaluated, as the habits' screen judges them
-    report = evaluate_model(
+    found = prediction_errors(
         forward,
         data,
         predict,
         offset,
-        families,
-        leave_out_above=SPRAYOUT_MISMATCH,
         poured=lambda x, strength, shade: evaluate_recipes(
             poured_from(matcher, lib, strength, shade), x
         ),
     )
+    report = error_summary(found, families, leave_out_above=SPRAYOUT_MISMATCH)
+    if plot is not None:
+        from flakelab.render.plots import plot_model_errors
+
+        plot_model_errors(found, plot, families=families, mismatch=SPRAYOUT_MISMATCH,
+                          title=f"{matcher.model_id} on {cases}")  # fmt: skip
+        report["plot"] = str(plot)
+        errors.print(f"wrote {plot}", highlight=False)
     report["cases_with_tins"] = int(data.tins_recorded.sum())
     if hybrid:
         novel = np.isin(np.array(lib.names), matcher.novel)

@@ -85,6 +85,9 @@ __all__ = [
     "fit",
     "fold_rows",
     "evaluate_model",
+    "prediction_errors",
+    "error_summary",
+    "PredictionErrors",
     "flag_outliers",
     "outlying_cases",
     "data_hash",
@@ -976,26 +979,30 @@ def unseen_by(data: CaseArrays, *models: ForwardModel) -> CaseArrays:
     return data.subset(np.flatnonzero(~seen))
 
 
-def evaluate_model(
-    model: ForwardModel,
-    data: CaseArrays,
-    predict=None,
-    lab_offset=None,
-    families=None,
-    *,
-    leave_out_above: float | None = None,
-    poured=None,
-) -> dict:
-    """ΔE00 of predicted against measured spray-outs, over cases × geometries and per
-    geometry; mean absolute texture error. ``predict(x) → (R, texture)`` replaces the
-    model's own prediction (the matcher's hybrid forward, for toners new to the model);
-    ``lab_offset(x, R) → [N, G, 3]`` is added to the predicted L*a*b* (a shop's habits);
-    ``families[N]`` (:meth:`~flakelab.library.toners.Library.paint_families`) adds the figures per
-    paint family. ``poured(x, strength, shade) → (R, texture)`` predicts recipes poured from the
-    tins the cases record (the matcher's :class:`~flakelab.match.lots.WithLots`), where they
-    record any. With ``leave_out_above``, the cases whose worst ΔE00 over their geometries
-    lies above it (``above``: ``[row, ΔE00]``) and the figures without them (``without_above``;
-    None where none or all lie above)."""
+@dataclass(frozen=True)
+class PredictionErrors:
+    """A model's predictions of cases against their measured spray-outs
+    (:func:`prediction_errors`): L*a*b* ``[N, G, 3]`` both ways, ΔE00 ``[N, G]``, texture
+    readings ``[N, 8]`` (measured: NaN where a case read none), and the prediction's time."""
+
+    geometries: tuple[str, ...]
+    measured_lab: NDArray
+    predicted_lab: NDArray
+    de00: NDArray
+    texture: NDArray
+    measured_texture: NDArray
+    seconds: float
+
+
+def prediction_errors(
+    model: ForwardModel, data: CaseArrays, predict=None, lab_offset=None, *, poured=None
+) -> PredictionErrors:
+    """The model's predictions of ``data``'s recipes against their spray-outs, at the model's
+    geometries. ``predict(x) → (R, texture)`` replaces the model's own prediction (the
+    matcher's hybrid forward, for toners new to the model); ``lab_offset(x, R) → [N, G, 3]``
+    is added to the predicted L*a*b* (a shop's habits). ``poured(x, strength, shade) → (R,
+    texture)`` predicts recipes poured from the tins the cases record (the matcher's
+    :class:`~flakelab.match.lots.WithLots`), where they record any."""
     if data.geometries != model.geometries:
         missing = sorted(set(model.geometries) - set(data.geometries))
         if missing:
@@ -1011,14 +1018,28 @@ def evaluate_model(
         R, texture = (predict or model.predict)(x)
     seconds = time.perf_counter() - start
     predicted = reflectance_to_Lab(R) + (0.0 if lab_offset is None else lab_offset(x, R))
-    de = delta_E(reflectance_to_Lab(data.R), predicted)
-    per_geometry = {g: _de00_summary(de[:, i]) for i, g in enumerate(model.geometries)}
+    measured = reflectance_to_Lab(data.R)
+    return PredictionErrors(
+        tuple(model.geometries), measured, predicted, delta_E(measured, predicted),
+        np.asarray(texture), data.texture, seconds,
+    )  # fmt: skip
+
+
+def error_summary(
+    errors: PredictionErrors, families=None, *, leave_out_above: float | None = None
+) -> dict:
+    """ΔE00 over cases × geometries and per geometry; mean absolute texture error.
+    ``families[N]`` (:meth:`~flakelab.library.toners.Library.paint_families`) adds the figures
+    per paint family. With ``leave_out_above``, the cases whose worst ΔE00 over their
+    geometries lies above it (``above``: ``[row, ΔE00]``) and the figures without them
+    (``without_above``; None where none or all lie above)."""
+    de = errors.de00
     report = {
-        "cases": int(x.shape[0]),
+        "cases": int(de.shape[0]),
         **_de00_summary(de),
-        "per_geometry": per_geometry,
-        "texture_mae": _texture_mae(texture, data.texture),
-        "predict_seconds": seconds,
+        "per_geometry": {g: _de00_summary(de[:, i]) for i, g in enumerate(errors.geometries)},
+        "texture_mae": _texture_mae(errors.texture, errors.measured_texture),
+        "predict_seconds": errors.seconds,
     }
     if leave_out_above is not None:
         worst = de.max(axis=1)
@@ -1037,6 +1058,21 @@ def evaluate_model(
             for family in np.unique(families).tolist()
         }
     return report
+
+
+def evaluate_model(
+    model: ForwardModel,
+    data: CaseArrays,
+    predict=None,
+    lab_offset=None,
+    families=None,
+    *,
+    leave_out_above: float | None = None,
+    poured=None,
+) -> dict:
+    """:func:`error_summary` of the model's :func:`prediction_errors` on ``data``."""
+    errors = prediction_errors(model, data, predict, lab_offset, poured=poured)
+    return error_summary(errors, families, leave_out_above=leave_out_above)
 
 
 def _texture_mae(predicted: NDArray, measured: NDArray) -> dict[str, float | None]:

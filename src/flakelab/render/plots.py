@@ -28,6 +28,7 @@ __all__ = [
     "plot_scaling",
     "plot_habits",
     "plot_tins_history",
+    "plot_model_errors",
     "plot_rendering",
     "plot_side_by_side",
 ]
@@ -371,6 +372,71 @@ def plot_tins_history(
     strength.legend(fontsize=8, ncol=2)
     title = title or "A shop's tins, version by version"
     figure.suptitle(f"{title} (open marker: a new tin)")
+    _save(figure, path, dpi)
+
+
+def plot_model_errors(
+    errors,
+    path: str | PathLike,
+    *,
+    families: Sequence[str] | None = None,
+    mismatch: float | None = None,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """A model against measured spray-outs (``flakelab model evaluate --plot``;
+    ``errors``: :class:`~flakelab.models.training.PredictionErrors`): the ΔE00 of the cases at
+    each geometry as boxes (5–95 % whiskers, a diamond at the mean), one per paint family
+    (``families[N]``) side by side; the predicted minus the measured L* against the measured
+    at every geometry (a bias shows as a drift off zero);
+    and each case's worst ΔE00 over its geometries, with the bar above which a spray-out is
+    likely another panel's (``mismatch``)."""
+    names = list(errors.geometries)
+    de = np.asarray(errors.de00)
+    groups = np.asarray(families if families is not None else ["all cases"] * len(de))
+    kinds = sorted(set(groups.tolist()))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    figure, (boxes, lightness, worst) = plt.subplots(
+        1, 3, figsize=(17, 4.8), gridspec_kw={"width_ratios": [1.6, 1, 1]}
+    )
+    width = 0.8 / len(kinds)
+    for k, kind in enumerate(kinds):
+        rows = groups == kind
+        at = np.arange(len(names)) - 0.4 + width * (k + 0.5)
+        drawn = boxes.boxplot(
+            [de[rows, g] for g in range(len(names))], positions=at, widths=width * 0.9,
+            whis=(5, 95), showfliers=False, patch_artist=True, showmeans=True,
+            meanprops=dict(marker="D", markerfacecolor="white", markeredgecolor="black", ms=4),
+            medianprops=dict(color="black"),
+        )  # fmt: skip
+        for box in drawn["boxes"]:
+            box.set(facecolor=colours[k % len(colours)], alpha=0.6)
+        boxes.plot([], [], "s", color=colours[k % len(colours)], label=f"{kind} ({rows.sum()})")
+    boxes.set_xticks(np.arange(len(names)), names, rotation=45 if len(names) > 6 else 0)
+    boxes.set(ylabel="ΔE00, predicted against measured", ylim=(0, None))
+    boxes.legend(fontsize=8, title="cases", title_fontsize=8)
+    measured = errors.measured_lab[..., 0]
+    # the MA-T12's twelve geometries outnumber the colour cycle's ten
+    shades = colours if len(names) <= len(colours) else plt.cm.tab20(np.arange(len(names)))
+    for g, name in enumerate(names):
+        lightness.plot(measured[:, g], errors.predicted_lab[:, g, 0] - measured[:, g], ".", ms=3,
+                       alpha=0.5, color=shades[g], label=name)  # fmt: skip
+    lightness.axhline(0, color="0.5", lw=0.8)
+    lightness.set(xlabel="L* measured", ylabel="ΔL*, predicted − measured")
+    lightness.legend(fontsize=7, markerscale=3, ncol=2 if len(names) > 6 else 1)
+    per_case = de.max(axis=1)
+    worst.hist(per_case, bins=40, color="0.55")
+    if mismatch is not None:
+        above = int(np.sum(per_case > mismatch))
+        worst.axvline(mismatch, color="tab:red", ls="--", lw=1)
+        worst.text(mismatch, worst.get_ylim()[1] * 0.95, f"likely another panel's: {above} ",
+                   color="tab:red", fontsize=8, va="top", ha="right")  # fmt: skip
+    worst.set(xlabel="worst ΔE00 of a case over its geometries", ylabel="cases")
+    summary = (
+        f"ΔE00 mean {de.mean():.3f}, p95 {np.percentile(de, 95):.2f}, max {de.max():.2f} over "
+        f"{len(de)} cases × {len(names)} geometries"
+    )
+    figure.suptitle(f"{title}: {summary}" if title else summary)
     _save(figure, path, dpi)
 
 
