@@ -1063,6 +1063,18 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
     report = json.loads(run.stdout)
     assert report["model_id"] == shipped_model("five-angle").identity
     assert report["habits"] is None
+    # drawn: each spray's share of the targets that pass, as the report gives it
+    chart = tmp_path / "harness.svg"
+    run = cli("match", "evaluate", "--targets", "2", "--novel-targets", "1", "--json", "--plot",
+              str(chart), env=fresh)  # fmt: skip
+    drawn = json.loads(run.stdout)
+    svg = chart.read_text()
+    assert drawn["plot"] == str(chart) and "per_target" not in drawn
+    for name, key in (("first shot", "first_shot_success"),
+                      ("after one correction", "after_one_correction"),
+                      ("the hidden formula sprayed", "oracle_success"),
+                      ("new toner, first shot", "novel_toner_first_shot")):  # fmt: skip
+        assert f"<!-- {name}: {drawn[key]:.2f} -->" in svg, name
     database = str(tmp_path / "empty.db")
     assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", database).returncode == 0
     run = cli("match", "evaluate", "--targets", "1", "--shop", "shop Z", "--database", database)

@@ -15,7 +15,6 @@ from flakelab.cli.common import (
     AverageOption,
     JsonOption,
     LightsOption,
-    PlotOption,
     SampleOption,
     add_readings_spread,
     check_figure_file,
@@ -211,7 +210,16 @@ def match_command(
             "predicted (PNG, PDF or SVG).",
         ),
     ] = None,
-    plot: PlotOption = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Also draw the candidates' multi-angle difference chart: ΔL*, ΔC*, ΔH* and the "
+            "share of the tolerance used at every geometry. evaluate: each spray's worst share "
+            "of the tolerance over the targets, and the first shots sprayed against predicted "
+            "(PNG, PDF or SVG).",
+        ),
+    ] = None,
     recipe_out: RecipeOutOption = None,
     pick: Annotated[
         int, typer.Option(min=1, max=20, help="The candidate --recipe-out writes.")
@@ -239,10 +247,10 @@ def match_command(
         without=tuple(without or ()),
     )
     if target == "evaluate":
-        if render or plot or recipe_out or average or nearest:
+        if render or recipe_out or average or nearest:
             raise FlakelabError(
-                "--render, --plot, --recipe-out, --average, --nearest: for the candidates of "
-                "one target, not the harness"
+                "--render, --recipe-out, --average, --nearest: for the candidates of one "
+                "target, not the harness"
             )
         _evaluate(
             library=library,
@@ -262,6 +270,7 @@ def match_command(
             target_texture=target_texture,
             resprays=resprays,
             lots=lots or "standard",
+            plot=plot,
             json_output=json_output,
         )
         return
@@ -593,6 +602,7 @@ def _evaluate(
     target_texture,
     resprays,
     lots,
+    plot,
     json_output,
 ):
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
@@ -602,6 +612,7 @@ def _evaluate(
     from flakelab.match.stock import toners_allowed
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
+    check_figure_file(plot, "--plot")
     if lots not in LOT_MODES:  # before the model: a file is for one target's match
         raise FlakelabError(
             f"--lots: evaluate: expected one of {', '.join(LOT_MODES)}, got {lots!r}"
@@ -629,7 +640,15 @@ def _evaluate(
             resprays=resprays,
             lots=lots,
             progress=lambda: bar.advance(task),
+            per_target=plot is not None,
         )
+    if plot is not None:
+        from flakelab.render.plots import plot_harness
+
+        trials = report.pop("per_target")
+        plot_harness(trials[:targets], trials[targets:], plot, tolerance=tol.name,
+                     title=f"{forward.model_id}, {targets} targets (seed {seed})")  # fmt: skip
+        report["plot"] = str(plot)
     report["model"] = forward.name
     report["model_id"] = forward.model_id
     report["model_risk"] = settings.model_risk

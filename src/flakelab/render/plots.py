@@ -14,6 +14,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter  # noqa: E402
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E402
 from flakelab.core.geometry import Geometry  # noqa: E402
@@ -29,6 +30,7 @@ __all__ = [
     "plot_habits",
     "plot_tins_history",
     "plot_model_errors",
+    "plot_harness",
     "plot_rendering",
     "plot_side_by_side",
 ]
@@ -437,6 +439,64 @@ def plot_model_errors(
         f"{len(de)} cases × {len(names)} geometries"
     )
     figure.suptitle(f"{title}: {summary}" if title else summary)
+    _save(figure, path, dpi)
+
+
+HARNESS_CURVES = {
+    "first": "first shot",
+    "corrected": "after one correction",
+    "oracle": "the hidden formula sprayed",
+    "respray": "the car's own paint sprayed again",
+}
+"""The harness's sprays (:func:`~flakelab.match.evaluate.evaluate_matching`'s per-target
+keys) that :func:`plot_harness` draws, and their names."""
+
+
+def plot_harness(
+    rows: Sequence[Mapping],
+    novel_rows: Sequence[Mapping],
+    path: str | PathLike,
+    *,
+    tolerance: str,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """The match harness's targets (``flakelab match evaluate --plot``; ``rows``, then
+    ``novel_rows`` with a new toner: its per-target trials): the share of targets whose
+    worst share of the ``tolerance`` lies at or below each value, for each spray of
+    :data:`HARNESS_CURVES` (at 1 it reads the success rate; how far the failures miss reads
+    off to the right), and each first shot's worst ΔE00 sprayed against its model's
+    prediction, by paint family."""
+    figure, (shares, predicted) = plt.subplots(1, 2, figsize=(14, 5.2))
+    curves = [(rows, key, name) for key, name in HARNESS_CURVES.items()]
+    curves += [(novel_rows, "first", "new toner, first shot")] if novel_rows else []
+    for trials, key, name in curves:
+        values = np.sort([t[key] for t in trials])
+        rate = float(np.mean(values <= 1.0))
+        reached = np.arange(values.size + 1) / values.size  # from none below the least
+        shares.step(np.r_[values[0], values], reached, where="post", label=f"{name}: {rate:.2f}",
+                    ls="--" if trials is novel_rows else "-")  # fmt: skip
+    shares.axvline(1.0, color="0.4", lw=0.8)
+    shares.set_xscale("log")
+    shares.xaxis.set_major_locator(FixedLocator([0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20]))
+    shares.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+    shares.xaxis.set_minor_formatter(NullFormatter())
+    shares.set(xlabel=f"worst share of the tolerance {tolerance} (≤ 1 passes)",
+               ylabel="share of targets at or below", ylim=(0, 1.02))  # fmt: skip
+    shares.legend(fontsize=8, loc="upper left", title="passing", title_fontsize=8)
+    families = sorted({t["family"] for t in rows})
+    for family in families:
+        own = [t for t in rows if t["family"] == family]
+        predicted.plot([t["predicted_de00"] for t in own], [t["first_de00"] for t in own], ".",
+                       alpha=0.7, label=f"{family} ({len(own)})")  # fmt: skip
+    top = max(max(t["first_de00"] for t in rows), max(t["predicted_de00"] for t in rows))
+    predicted.plot([0, top], [0, top], color="0.6", lw=0.8)
+    predicted.set(xlabel="predicted worst ΔE00 of the recipe (the model's)",
+                  ylabel="sprayed worst ΔE00 (the world's)")  # fmt: skip
+    predicted.legend(fontsize=8)
+    figure.suptitle(
+        title or f"Match harness: {len(rows)} targets + {len(novel_rows)} with a new toner"
+    )
     _save(figure, path, dpi)
 
 
