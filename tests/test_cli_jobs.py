@@ -598,13 +598,24 @@ def test_a_can_by_volume_is_weighed_from_the_toners_densities(tmp_path, cli):
         assert cli(*command, "--library", str(partial), "--quantity", "250g").returncode == 0
 
 
-def test_realism_json_reports_the_shop_statistics(cli):
+def test_realism_json_reports_the_shop_statistics(tmp_path, cli):
     run = cli("cases", "realism", "--n", "60", "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     for key in ("remeasure_de00_median", "respray_de00_median", "batch_strength_sd",
                 "weathered_target_de00_median"):  # fmt: skip
         assert key in report["realistic_ranges"] and report[key] > 0
+    # drawn: the same draws, each panel titled with the figure the report gives
+    chart = tmp_path / "realism.svg"
+    drawn = json.loads(cli("cases", "realism", "--n", "60", "--json", "--plot", chart).stdout)
+    assert drawn.pop("plot") == str(chart) and drawn == report
+    svg = chart.read_text()
+    for key, shown in (("remeasure_de00_median", "median"),
+                       ("respray_de00_median", "median (metallics)"),
+                       ("batch_strength_sd", "s.d."),
+                       ("weathered_target_de00_median", "median")):  # fmt: skip
+        lo, hi = report["realistic_ranges"][key]
+        assert f"<!-- {shown} {report[key]:.3f}; real: {lo:g}–{hi:g} -->" in svg, key
 
 
 def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path, cli):

@@ -81,10 +81,22 @@ __all__ = [
     "SHOP_WITH_HABITS",
     "NEAR_BLACK_L",
     "near_black",
+    "REALISTIC_RANGES",
+    "RealismDraws",
 ]
 
 CHUNK = 250
 """Cases drawn from one random stream (the unit of reproducibility)."""
+
+REALISTIC_RANGES = {
+    "remeasure_de00_median": (0.02, 0.10),
+    "respray_de00_median": (0.3, 0.8),
+    "batch_strength_sd": (0.02, 0.04),
+    "weathered_target_de00_median": (0.5, 2.0),
+}
+"""What a real shop shows (issue 4): one panel read twice (instrument repeatability, at
+45as45); one recipe sprayed twice and read (the worst geometry; metallics); toner strength
+between batches (standard deviation); a weathered car against its fresh formula."""
 
 TIN_STREAM = 7105
 """The key of the stream a shop's lasting tins are drawn from (:class:`LastingTins`), beside
@@ -154,6 +166,57 @@ SHOP_WITH_HABITS = {"shop_film_build": 1.05, "shop_spread": 0.96, "shop_gain": 0
 than the factory, with flakes 4 % flatter, and its instrument reads 0.5 % high. The shipped
 model errs ΔE00 1.07 on its cases against 0.69 in the world it learned
 (``benchmarks/adaptation.py``)."""
+
+
+@dataclass(frozen=True)
+class RealismDraws:
+    """The draws behind :meth:`World.realism`, each formulation's: ΔE00 of one panel read
+    twice at 45as45 ``[n]``; the worst ΔE00 of one recipe sprayed twice from the same cans
+    ``[n]``; the batches' toner strengths ``[n, T]``; the worst ΔE00 of a weathered car against
+    its fresh formula ``[n]``; the cases' noise floor (:meth:`World.exact_model_de00`, ``[n,
+    G]``); each one's paint family; the effect paints' texture readings read twice, |Δ|
+    ``[effect, 8]``; which read black at every geometry (:func:`near_black`)."""
+
+    remeasure: NDArray
+    respray: NDArray
+    strength: NDArray
+    weathered: NDArray
+    floor: NDArray
+    families: NDArray
+    texture_remeasure: NDArray
+    near_black: NDArray
+    seed: int
+
+    def summary(self) -> dict:
+        """The medians and spreads :meth:`World.realism` reports."""
+        families, respray, floor = self.families, self.respray, self.floor
+        kinds = np.unique(families).tolist()
+        return {
+            "remeasure_de00_median": float(np.median(self.remeasure)),
+            # effect paints' texture read twice: |Δ|, the largest over the lights for Sa, Si
+            "remeasure_texture_median": {
+                name: float(np.median(self.texture_remeasure[:, columns].max(1)))
+                for name, columns in TEXTURE_FAMILIES.items()
+            },
+            # the issue's range is for metallics: aluminium without pearl (paint_families)
+            "respray_de00_median": float(np.median(respray[families == "metallic"])),
+            "respray_de00_median_all": float(np.median(respray)),
+            "respray_de00_median_by_family": {
+                f: float(np.median(respray[families == f])) for f in kinds
+            },
+            "batch_strength_sd": float(np.std(self.strength)),
+            "weathered_target_de00_median": float(np.median(self.weathered)),
+            # paints black at every geometry (solids of organics that absorb the whole
+            # spectrum between them, no hiding pigment): darker than any real paint reads
+            "near_black_share": float(np.mean(self.near_black)),
+            "exact_model_de00_mean": float(floor.mean()),
+            "exact_model_de00_p95": float(np.percentile(floor, 95)),
+            "exact_model_de00_mean_by_family": {
+                f: float(floor[families == f].mean()) for f in kinds
+            },
+            "formulations": int(respray.size),
+            "seed": self.seed,
+        }
 
 
 @dataclass(frozen=True)
@@ -446,7 +509,12 @@ class World:
 
     # -- realism --------------------------------------------------------------------------
     def realism(self, n: int = 400, seed: int = 0) -> dict[str, float]:
-        """How hard the generated world is, in the quantities a shop knows (issue 4)."""
+        """How hard the generated world is, in the quantities a shop knows (issue 4), beside
+        :data:`REALISTIC_RANGES`: :meth:`realism_draws` summarised."""
+        return self.realism_draws(n, seed).summary()
+
+    def realism_draws(self, n: int = 400, seed: int = 0) -> RealismDraws:
+        """What :meth:`realism` summarises, each of ``n`` formulations drawn with ``seed``."""
         rng = np.random.default_rng(seed)
         x = self.formulations(n, rng)
         R, texture = self.appearance(x, self.variation(n, rng))
@@ -468,37 +536,15 @@ class World:
         fresh_R, _ = self.appearance(x, self.nominal(n))
         weathered = self.worst_de00(fresh_R, weathered_R + haze[:, None, None])
         floor = self.exact_model_de00(x, rng)
-        families = self.library.paint_families(x)
+        families = np.asarray(self.library.paint_families(x))
         texture_rng = rng.spawn(1)[0]  # drawn apart: the colour figures stay as they were
         texture_remeasure = np.abs(
             self.measure_texture(texture, texture_rng) - self.measure_texture(texture, texture_rng)
         )[families != "solid"]
-        return {
-            "remeasure_de00_median": float(np.median(remeasure)),
-            # effect paints' texture read twice: |Δ|, the largest over the lights for Sa, Si
-            "remeasure_texture_median": {
-                name: float(np.median(texture_remeasure[:, columns].max(1)))
-                for name, columns in TEXTURE_FAMILIES.items()
-            },
-            # the issue's range is for metallics: aluminium without pearl (paint_families)
-            "respray_de00_median": float(np.median(respray[families == "metallic"])),
-            "respray_de00_median_all": float(np.median(respray)),
-            "respray_de00_median_by_family": {
-                f: float(np.median(respray[families == f])) for f in np.unique(families).tolist()
-            },
-            "batch_strength_sd": float(np.std(batch.strength)),
-            "weathered_target_de00_median": float(np.median(weathered)),
-            # paints black at every geometry (solids of organics that absorb the whole
-            # spectrum between them, no hiding pigment): darker than any real paint reads
-            "near_black_share": float(np.mean(near_black(reflectance_to_Lab(fresh_R)))),
-            "exact_model_de00_mean": float(floor.mean()),
-            "exact_model_de00_p95": float(np.percentile(floor, 95)),
-            "exact_model_de00_mean_by_family": {
-                f: float(floor[families == f].mean()) for f in np.unique(families).tolist()
-            },
-            "formulations": n,
-            "seed": seed,
-        }
+        return RealismDraws(
+            remeasure, respray, batch.strength, weathered, floor, families, texture_remeasure,
+            near_black(reflectance_to_Lab(fresh_R)), seed,
+        )  # fmt: skip
 
     def exact_model_de00(self, fractions: NDArray, rng: np.random.Generator) -> NDArray:
         """ΔE00 ``[F, G]`` between spray-outs of ``fractions`` (shop batches, application,

@@ -874,23 +874,35 @@ def realism(
     n: Annotated[int, typer.Option("--n", min=20, help="Formulations per statistic.")] = 400,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Also draw each statistic's draws beside the range a real shop shows (PNG, PDF "
+            "or SVG).",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """How hard the generated world is: remeasure, respray, batch and weathering ΔE00.
 
     Each beside the range a real shop shows, and the texture readings'
     repeatability."""
-    from flakelab.cases.generator import World
+    from flakelab.cases.generator import REALISTIC_RANGES, World
     from flakelab.io import read_library
 
-    report = World(read_library(library), instrument).realism(n, seed)
-    ranges = {
-        "remeasure_de00_median": (0.02, 0.10),
-        "respray_de00_median": (0.3, 0.8),
-        "batch_strength_sd": (0.02, 0.04),
-        "weathered_target_de00_median": (0.5, 2.0),
-    }
+    check_figure_file(plot, "--plot")
+    draws = World(read_library(library), instrument).realism_draws(n, seed)
+    report = draws.summary()
+    ranges = REALISTIC_RANGES
     report["realistic_ranges"] = ranges
+    if plot is not None:
+        from flakelab.render.plots import plot_realism
+
+        title = f"Generated world, {instrument} (seed {seed}, {n} formulations)"
+        plot_realism(draws, ranges, plot, title=title)
+        report["plot"] = str(plot)
+        errors.print(f"wrote {plot}", highlight=False)
     if json_output:
         print(json.dumps(report, indent=2))
         return

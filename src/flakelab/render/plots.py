@@ -31,6 +31,7 @@ __all__ = [
     "plot_tins_history",
     "plot_model_errors",
     "plot_harness",
+    "plot_realism",
     "plot_rendering",
     "plot_side_by_side",
 ]
@@ -497,6 +498,56 @@ def plot_harness(
     figure.suptitle(
         title or f"Match harness: {len(rows)} targets + {len(novel_rows)} with a new toner"
     )
+    _save(figure, path, dpi)
+
+
+def plot_realism(
+    draws,
+    ranges: Mapping[str, tuple[float, float]],
+    path: str | PathLike,
+    *,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """How hard the generated world is (``flakelab cases realism --plot``; ``draws``:
+    :class:`~flakelab.cases.generator.RealismDraws`): each statistic's draws, its median (its
+    standard deviation for the batches' strength) as a line, and the range a real shop shows
+    (``ranges``, :data:`~flakelab.cases.generator.REALISTIC_RANGES`) shaded."""
+    figure, axes = plt.subplots(1, 4, figsize=(18, 4.2))
+    families = np.asarray(draws.families)
+    panels = (
+        ("remeasure_de00_median", {"all": draws.remeasure},
+         "ΔE00, one panel read twice (45as45)"),
+        ("respray_de00_median", {f: draws.respray[families == f] for f in np.unique(families)},
+         "worst ΔE00, one recipe sprayed twice"),
+        ("batch_strength_sd", {"all": np.ravel(draws.strength) - 1},
+         "toner strength between batches − 1"),
+        ("weathered_target_de00_median", {"all": draws.weathered},
+         "worst ΔE00, weathered against fresh"),
+    )  # fmt: skip
+    for axis, (key, groups, label) in zip(axes, panels, strict=True):
+        lo, hi = ranges[key]
+        top = max(float(np.percentile(v, 99)) for v in groups.values())
+        bins = np.linspace(-top, top, 41) if key == "batch_strength_sd" else np.linspace(0, top, 41)
+        for name, values in groups.items():
+            axis.hist(values, bins=bins, histtype="step", lw=1.4, label=f"{name} ({values.size})")
+        if key == "batch_strength_sd":  # the range is a spread: ± one standard deviation
+            value = float(np.std(draws.strength))
+            for sign in (-1, 1):
+                axis.axvspan(sign * lo, sign * hi, color="tab:green", alpha=0.15)
+                axis.axvline(sign * value, color="black", lw=1)
+            shown = f"s.d. {value:.3f}"
+        else:
+            value = float(np.median(groups["metallic"] if "metallic" in groups else groups["all"]))
+            axis.axvspan(lo, hi, color="tab:green", alpha=0.15)
+            axis.axvline(value, color="black", lw=1)
+            shown = "median" + (" (metallics)" if "metallic" in groups else "") + f" {value:.3f}"
+        axis.set(xlabel=label, ylabel="tins" if key == "batch_strength_sd" else "formulations")
+        axis.set_title(f"{shown}; real: {lo:g}–{hi:g}", fontsize=10)
+        if len(groups) > 1:
+            axis.legend(fontsize=8)
+    shaded = "shaded: where a real shop's median lies (for the strength, its s.d.)"
+    figure.suptitle(f"{title or 'Generated world'}; {shaded}")
     _save(figure, path, dpi)
 
 
