@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 from dataclasses import replace
 
@@ -624,16 +625,37 @@ def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path, cli):
     # adaptation leaves the others to the physics scaling
     run = cli("cases", "generate", "--n", "300", "--seed", "6", "--out", str(cases))
     assert run.returncode == 0, run.stderr
+    log, chart = tmp_path / "losses.csv", tmp_path / "losses.svg"
     run = cli("train", str(cases), "--epochs", "2", "--hidden", "8", "--no-register",
-              "--adapt", "synthetic shop", "--adapt-epochs", "2", "--json")  # fmt: skip
+              "--adapt", "synthetic shop", "--adapt-epochs", "2", "--json",
+              "--loss-log", log, "--plot", chart)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    tail = json.loads(run.stdout)["loss_log_tail"]
+    report = json.loads(run.stdout)
+    tail = report["loss_log_tail"]
     # the final training's last fine-tuning epoch, then exactly two epochs of adaptation
     assert [(e["stage"], e["epoch"]) for e in tail] == [
         ("final fine-tune", 1),
         ("adapt synthetic shop", 0),
         ("adapt synthetic shop", 1),
     ]
+    # the whole log: four partitions and the final training, each two epochs and two of
+    # fine-tuning, then the adaptation's two, each judged on the shop's held-out cases
+    with open(log, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert report["loss_log"] == str(log) and len(rows) == 5 * 4 + 2
+    assert [(r["stage"], int(r["epoch"]), float(r["loss"])) for r in rows[-3:]] == [
+        (e["stage"], e["epoch"], pytest.approx(e["loss"])) for e in tail
+    ]
+    assert all(r["validation_de00"] == "" for r in rows[:-2])
+    assert all(float(r["validation_de00"]) > 0 for r in rows[-2:])
+    svg = chart.read_text()
+    assert report["plot"] == str(chart)
+    for stage in ("partition 1", "partition 4 fine-tune", "final", "adapt synthetic shop"):
+        assert f"<!-- {stage} -->" in svg, stage
+    assert "<!-- adapt synthetic shop: held-out ΔE00 -->" in svg
+    # refused before the training: a loss log in no folder
+    run = cli("train", str(cases), "--no-register", "--loss-log", tmp_path / "no" / "l.csv")
+    assert run.returncode == 2 and "--loss-log:" in run.stderr and "no folder" in run.stderr
     run = cli("train", str(cases), "--no-register", "--adapt", "synthetic shop",
               "--adapt-epochs", "0")  # fmt: skip
     assert run.returncode != 0 and "--adapt-epochs" in run.stderr
@@ -679,11 +701,15 @@ def test_training_with_adaptation_keeps_the_general_model_and_judges_the_shops_o
     assert kept.adaptation is None
     # adapting the general model to the shop's cases again: those it learned are adapted on,
     # only the others held out (the train's held-out cases and those that chose its epoch)
+    log = tmp_path / "adapt.csv"
     run = cli("model", "adapt", cases, "--shop", "shop A", "--model", "five-angle:1", "-d",
-              database, "--epochs", "2", "--no-register", "--json")  # fmt: skip
+              database, "--epochs", "2", "--no-register", "--json", "--loss-log", log)  # fmt: skip
     assert run.returncode == 0, run.stderr
     again = json.loads(run.stdout)
     assert 0 < again["learned_before"] < again["cases"]
+    with open(log, newline="") as handle:  # the adaptation's two epochs, as the stage it ran
+        rows = list(csv.DictReader(handle))
+    assert [(r["stage"], int(r["epoch"])) for r in rows] == [("adapt shop A", k) for k in (0, 1)]
     # judged on the cases it never learned, or warned that those it learned flatter it
     judged = [cli("model", "evaluate", cases, "--model", "five-angle:1", "-d", database,
                   "--json", *extra) for extra in ((), ("--unseen",))]  # fmt: skip

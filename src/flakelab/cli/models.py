@@ -131,6 +131,46 @@ model_app = typer.Typer(
 )
 
 
+LossLogOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--loss-log",
+        help="Also write every epoch's loss, stage by stage, as CSV (stage, epoch, loss, "
+        "validation_de00).",
+    ),
+]
+LossPlotOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--plot",
+        help="Also draw every stage's loss per epoch, and the held-out cases' ΔE00 where a "
+        "stage judged them (PNG, PDF or SVG).",
+    ),
+]
+
+
+def _check_loss_outputs(loss_log: Path | None, plot: Path | None) -> None:
+    """Before the training: a loss log or a figure that could not be written is refused."""
+    check_output_file(loss_log, "--loss-log")
+    check_figure_file(plot, "--plot")
+
+
+def _write_losses(log: list[dict], loss_log: Path | None, plot: Path | None, title: str,
+                  summary: dict) -> None:  # fmt: skip
+    """The whole log of losses to ``loss_log`` (CSV) and drawn to ``plot``, each named in
+    the ``summary``."""
+    if loss_log is not None:
+        from flakelab.io.loss_log import write_loss_log
+
+        write_loss_log(log, loss_log)
+        summary["loss_log"] = str(loss_log)
+    if plot is not None:
+        from flakelab.render.plots import plot_losses
+
+        plot_losses(log, plot, title=title)
+        summary["plot"] = str(plot)
+
+
 def train(
     cases: CasesArgument,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
@@ -204,6 +244,8 @@ def train(
     seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
     device: DeviceOption = "cpu",
     no_tins: NoTinsOption = False,
+    loss_log: LossLogOption = None,
+    plot: LossPlotOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Train the learned forward model with the hybrid paper's protocol.
@@ -241,6 +283,7 @@ def train(
             f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
         ) from None
     check_output_file(out, "--out")
+    _check_loss_outputs(loss_log, plot)
     # the settings are checked before the cases are read (TrainingConfig refuses its own)
     config = TrainingConfig(
         hidden=sizes,
@@ -320,6 +363,7 @@ def train(
         _write_model(model, out)
         summary["file"] = str(out)
     summary["loss_log_tail"] = log[-3:]
+    _write_losses(log, loss_log, plot, f"Training on {data.x.shape[0]} cases of {cases}", summary)
     if json_output:
         print(json.dumps(summary, indent=2, default=str))
         return
@@ -675,6 +719,8 @@ def adapt(
         bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
     ] = True,
     no_tins: NoTinsOption = False,
+    loss_log: LossLogOption = None,
+    plot: LossPlotOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Adapt a trained model (default: the current one) to one shop's cases.
@@ -698,6 +744,7 @@ def adapt(
     )
 
     check_output_file(out, "--out")
+    _check_loss_outputs(loss_log, plot)
     lib = read_library(library)
     engine = open_database(database) if register_model else existing_engine(database)
     if model:
@@ -756,6 +803,7 @@ def adapt(
         summary["registry"] = register(
             engine, new, held_out, shop=shop, metrics=summary["held_out"]
         )
+    _write_losses(report["log"], loss_log, plot, f"{stage}, {data.x.shape[0]} cases", summary)
     if json_output:
         print(json.dumps(summary, indent=2))
         return

@@ -32,6 +32,7 @@ __all__ = [
     "plot_model_errors",
     "plot_harness",
     "plot_realism",
+    "plot_losses",
     "plot_rendering",
     "plot_side_by_side",
 ]
@@ -548,6 +549,69 @@ def plot_realism(
             axis.legend(fontsize=8)
     shaded = "shaded: where a real shop's median lies (for the strength, its s.d.)"
     figure.suptitle(f"{title or 'Generated world'}; {shaded}")
+    _save(figure, path, dpi)
+
+
+def _epoch_steps(log: Sequence[Mapping]) -> list[int]:
+    """Each log entry's place on one time axis: stages trained one after another follow each
+    other; members trained side by side (their entries interleaved, epoch by epoch) share
+    their epochs."""
+    steps, step, now = [], -1, set()
+    previous = None
+    for entry in log:
+        side_by_side = (
+            previous is not None
+            and entry["epoch"] == previous["epoch"]
+            and entry["stage"] not in now
+        )
+        if not side_by_side:
+            step, now = step + 1, set()
+        now.add(entry["stage"])
+        steps.append(step)
+        previous = entry
+    return steps
+
+
+def plot_losses(
+    log: Sequence[Mapping], path: str | PathLike, *, title: str = "", dpi: int = 120
+) -> None:
+    """A training's losses (``flakelab train --plot``, ``model adapt --plot``; ``log``: its
+    entries, :func:`~flakelab.models.training.train_protocol`): each stage's loss per epoch on
+    one time axis, a stage's fine-tuning dashed in its colour, and where a stage judged held-out
+    cases their mean ΔE00 (right axis)."""
+    steps = np.array(_epoch_steps(log))
+    stages = list(dict.fromkeys(entry["stage"] for entry in log))
+    bases = list(dict.fromkeys(stage.removesuffix(" fine-tune") for stage in stages))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    figure, axis = plt.subplots(figsize=(12, 5.6))
+    judged = None
+    for stage in stages:
+        rows = [i for i, entry in enumerate(log) if entry["stage"] == stage]
+        base = stage.removesuffix(" fine-tune")
+        colour = colours[bases.index(base) % len(colours)]
+        fine = stage != base
+        axis.plot(steps[rows], [log[i]["loss"] for i in rows], color=colour,
+                  ls="--" if fine else "-", lw=1.2, label=stage)  # fmt: skip
+        scored = [i for i in rows if log[i].get("validation_de00") is not None]
+        if scored:
+            judged = judged or axis.twinx()
+            judged.plot(steps[scored], [log[i]["validation_de00"] for i in scored], ":",
+                        color=colour, lw=1.5, label=f"{stage}: held-out ΔE00")  # fmt: skip
+    axis.set_yscale("log")
+    axis.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    low, high = axis.get_ylim()
+    # within a decade the minor ticks are the only ones to read; across several, clutter
+    axis.yaxis.set_minor_formatter(FormatStrFormatter("%g") if high < 10 * low else NullFormatter())
+    axis.tick_params(axis="y", which="minor", labelsize=7)
+    axis.set(xlabel="epoch (stages one after another; members side by side)", ylabel="loss")
+    handles, labels = axis.get_legend_handles_labels()
+    if judged is not None:
+        judged.set_ylabel("held-out cases' mean ΔE00 (dotted)")
+        more = judged.get_legend_handles_labels()
+        handles, labels = handles + more[0], labels + more[1]
+    axis.legend(handles, labels, fontsize=7, ncol=4, loc="upper center",
+                bbox_to_anchor=(0.5, -0.14))  # fmt: skip
+    figure.suptitle(title or f"Training losses, {len(stages)} stages")
     _save(figure, path, dpi)
 
 
