@@ -392,9 +392,9 @@ def plot_model_errors(
     ``errors``: :class:`~flakelab.models.training.PredictionErrors`): the ΔE00 of the cases at
     each geometry as boxes (5–95 % whiskers, a diamond at the mean), one per paint family
     (``families[N]``) side by side; the predicted minus the measured L* against the measured
-    at every geometry (a bias shows as a drift off zero);
-    and each case's worst ΔE00 over its geometries, with the bar above which a spray-out is
-    likely another panel's (``mismatch``)."""
+    at every geometry (a bias shows as a drift off zero); and each case's worst ΔE00 over its
+    geometries, with the bar above which a spray-out is likely another panel's
+    (``mismatch``)."""
     names = list(errors.geometries)
     de = np.asarray(errors.de00)
     groups = np.asarray(families if families is not None else ["all cases"] * len(de))
