@@ -270,6 +270,29 @@ def test_sequential_screen_trains_one_model_a_session_per_partition(trained):
     assert len(report["log"]) == protocol_epochs(QUICK)
 
 
+def test_a_training_s_losses_lie_on_one_time_axis(data, tmp_path):
+    """What ``train --plot`` draws: stages trained one after another follow each other, epoch
+    by epoch; members trained side by side (their entries interleaved) share their epochs."""
+    from flakelab.render.plots import _epoch_steps, plot_losses
+
+    config = replace(QUICK, hidden=(4,), epochs=3, finetune_epochs=2, members=2)
+    _, report = train_protocol(data, config)
+    log = report["log"]
+    steps = _epoch_steps(log)
+    at = {}
+    for entry, step in zip(log, steps, strict=True):
+        at.setdefault(entry["stage"], []).append(step)
+    for stage, places in at.items():  # one step an epoch, in order
+        assert places == list(range(places[0], places[0] + len(places))), stage
+    order = [f"partition {k}{f}" for k in range(1, config.folds) for f in ("", " fine-tune")]
+    for before, after in zip(order, order[1:] + ["final 1"], strict=True):
+        assert at[after][0] == at[before][-1] + 1, (before, after)
+    assert at["final 1"] == at["final 2"] and at["final 1 fine-tune"] == at["final 2 fine-tune"]
+    assert max(steps) == 4 * (3 + 2) + (3 + 2) - 1
+    plot_losses(log, tmp_path / "losses.svg")
+    assert (tmp_path / "losses.svg").read_text().count("<!-- partition ") == 8
+
+
 def _fit_side_by_side(data, rows: list, epochs: int) -> list[ForwardModel]:
     models = [_new_model(data, QUICK, r) for r in rows]
     fit(models, data, rows, epochs, 2e-3, QUICK, [], [f"model {k}" for k in range(len(rows))])
