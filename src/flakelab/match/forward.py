@@ -437,7 +437,7 @@ class PhysicsForward:
         x = fractions.to(torch.float64)
         y = _differentiable(x, self.outputs, self.outputs_and_jacobian, self.held)
         y = y.to(fractions.dtype)
-        spectral = len(self.geometries) * 31
+        spectral = len(self.geometries) * WAVELENGTHS.size
         return y[:, :spectral].reshape(-1, len(self.geometries), WAVELENGTHS.size), y[:, spectral:]
 
 
