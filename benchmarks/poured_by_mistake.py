@@ -31,8 +31,10 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.match.correction import correct_what_was_poured
 from flakelab.match.judging import recipe_vector
+from flakelab.match.recipe import parse_quantity
+from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
-CAN_G, RESOLUTION_G = 250.0, 0.1
+CAN_G, RESOLUTION_G = parse_quantity(CAN_QUANTITY), SCALE_RESOLUTION_G
 STRAY_G = (0.2, 3.0)
 ROWS = ("model_as_planned", "model_after", "model_within_most", "physics_as_planned",
         "physics_after", "physics_within_most")  # fmt: skip
@@ -124,7 +126,7 @@ def main() -> None:
         print(json.dumps(report, indent=2))
         return
     print(
-        f"{args.recipes} generated recipes, seed {args.seed}, 250 g cans, a stray pigment "
+        f"{args.recipes} generated recipes, seed {args.seed}, {CAN_G:g} g cans, a stray pigment "
         f"{STRAY_G[0]}–{STRAY_G[1]} g; worst-geometry ΔE00 against the recipe"
     )
     for key in [k for k in ROWS if k in report]:

@@ -90,3 +90,14 @@ def test_unknown_illuminant_and_observer_rejected_with_message():
         Conditions.parse("D66/10")
     with pytest.raises(ValueError, match="expected observer"):
         Conditions.parse("D65/5")
+
+
+def test_the_defaults_name_the_conditions_and_tolerance_the_core_defines():
+    """The command line's defaults (named where nothing is imported) are what the core means
+    by its own: CIELAB under D65/10°, and a shipped tolerance preset."""
+    from flakelab.core.colorimetry import D65_10
+    from flakelab.core.defaults import DEFAULT_CONDITIONS, DEFAULT_TOLERANCE
+    from flakelab.core.tolerance import TOLERANCE_PRESETS
+
+    assert Conditions.parse(DEFAULT_CONDITIONS) == D65_10 == Conditions("D65", "10")
+    assert DEFAULT_TOLERANCE in TOLERANCE_PRESETS

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import Geometry, parse_geometries
 from flakelab.core.measurement import (
@@ -122,7 +123,7 @@ class Case:
     sprayout_texture: Mapping[str, float] = field(default_factory=dict)
     instrument: str = "unknown"
     shop: str = "unknown"
-    conditions: str = "D65/10"
+    conditions: str = DEFAULT_CONDITIONS
     outcome: str = "accepted"
     synthetic: bool = False
     created_at: datetime = field(default_factory=lambda: datetime.now(UTC))

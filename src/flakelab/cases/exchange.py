@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from flakelab.cases.case import Case, CaseError, tin_fields
+from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
@@ -376,7 +377,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
                     sprayout_texture=sprayout.texture,
                     instrument=target.instrument or "unknown",
                     shop=meta.get("shop", "unknown"),
-                    conditions=meta.get("conditions", "D65/10"),
+                    conditions=meta.get("conditions", DEFAULT_CONDITIONS),
                     outcome=meta["outcome"],
                     synthetic=meta.get("synthetic") == "1",
                     created_at=created,

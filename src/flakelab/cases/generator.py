@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 
 from flakelab.cases.case import Case
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
@@ -440,7 +441,7 @@ class World:
                     sprayout_texture=dict(zip(TEXTURE_READINGS, spray_tex[i], strict=True)),
                     instrument=self.instrument,
                     shop=shop,
-                    conditions="D65/10",
+                    conditions=DEFAULT_CONDITIONS,
                     outcome=str(outcome[i]),
                     synthetic=True,
                     created_at=start + timedelta(minutes=37 * (offset + i)),

@@ -55,6 +55,7 @@ from flakelab.cli.sources import (
     source_arrays,
     which_cases,
 )
+from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import (
     DEFAULT_INSTRUMENT,
     INSTRUMENT_GEOMETRIES,
@@ -242,7 +243,7 @@ def record_case(
     ] = "unknown",
     instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
-    tolerance: ToleranceOption = "refinish",
+    tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     at: Annotated[
         datetime | None,
         typer.Option(
@@ -402,7 +403,7 @@ def record_all(
     ] = "unknown",
     instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
-    tolerance: ToleranceOption = "refinish",
+    tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     database: DatabaseOption = None,
     check: CheckOption = True,
     json_output: JsonOption = False,
@@ -653,7 +654,7 @@ def nearest(
     ] = None,
     shop: ShopOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
-    tolerance: ToleranceOption = "refinish",
+    tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     count: Annotated[int, typer.Option("--count", "-n", min=1, help="Cases to show.")] = 5,
     recipe_out: Annotated[
         Path | None,

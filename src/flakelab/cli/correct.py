@@ -55,6 +55,7 @@ from flakelab.cli.sources import (
     workplace_shop,
 )
 from flakelab.cli.weigh import rounding_costs, rounding_text
+from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import (
@@ -120,7 +121,7 @@ def correct_command(
             "ensemble's disagreement at each geometry (0: one prior everywhere).",
         ),
     ] = MODEL_SD,
-    tolerance: ToleranceOption = "refinish",
+    tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
     habits: HabitsOption = None,

@@ -41,6 +41,7 @@ from flakelab.cli.match import match_command
 from flakelab.cli.models import model_app, train
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.cli.weigh import weigh_command
+from flakelab.core.defaults import DEFAULT_CONDITIONS, DEFAULT_TOLERANCE
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
 
@@ -104,8 +105,8 @@ def inspect(
             help="With --average: the tolerance the readings' spread is judged against "
             "(preset or TOML/JSON file).",
         ),
-    ] = "refinish",
-    conditions: ConditionsOption = "D65/10",
+    ] = DEFAULT_TOLERANCE,
+    conditions: ConditionsOption = DEFAULT_CONDITIONS,
     as_json: JsonOption = False,
     example: Annotated[
         bool, typer.Option("--example", help="Inspect the shipped example target.")
@@ -148,7 +149,7 @@ def inspect(
 def compare(
     reference: Annotated[Path | None, typer.Argument(help="Target / standard measurement.")] = None,
     sample: Annotated[Path | None, typer.Argument(help="Sample (spray-out) measurement.")] = None,
-    tolerance: ToleranceOption = "refinish",
+    tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     reference_sample: Annotated[
         str | None,
         typer.Option(
@@ -161,7 +162,7 @@ def compare(
     ] = None,
     average: AverageOption = False,
     average_sprayed: AverageSprayedOption = False,
-    conditions: ConditionsOption = "D65/10",
+    conditions: ConditionsOption = DEFAULT_CONDITIONS,
     lights: LightsOption = None,
     as_json: JsonOption = False,
     example: Annotated[
@@ -338,7 +339,7 @@ def plot(
         Path, typer.Option("--output", "-o", help="Image to write (.png, .svg, .pdf).")
     ],
     sample: SampleOption = None,
-    conditions: ConditionsOption = "D65/10",
+    conditions: ConditionsOption = DEFAULT_CONDITIONS,
 ) -> None:
     """Spectra per geometry and L*, C* versus aspecular angle."""
     from flakelab.core.colorimetry import Conditions

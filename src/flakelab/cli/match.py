@@ -51,6 +51,7 @@ from flakelab.cli.matcher import (
 )
 from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, workplace_shop
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
+from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
@@ -308,7 +309,7 @@ def match_command(
     allowed = toners_allowed(forward.toners, without or ())
     can = can.for_toners(lib, [n for n, ok in zip(forward.toners, allowed, strict=True) if ok])
     path = example_path("target") if example else Path(target)
-    tol = read_tolerance(tolerance or "refinish")
+    tol = read_tolerance(tolerance or DEFAULT_TOLERANCE)
     shop_habits = habits_for(
         habits, shop, database, forward, named=named, with_tins=tins is not None
     )

@@ -19,6 +19,7 @@ from flakelab.cli.common import (
     read_sample,
     reports_errors,
 )
+from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.errors import FlakelabError
 
 OutputOption = Annotated[
@@ -60,7 +61,7 @@ def render_command(
     size: Annotated[int, typer.Option(min=16, max=8192, help="Image width in pixels.")] = 1024,
     no_texture: Annotated[bool, typer.Option("--no-texture", help="Colour only.")] = False,
     sample: SampleOption = None,
-    conditions: ConditionsOption = "D65/10",
+    conditions: ConditionsOption = DEFAULT_CONDITIONS,
     seed: SeedOption = 0,
 ) -> None:
     """Render a measured paint with its colour and texture (Kirchner et al.'s method)."""
@@ -98,7 +99,7 @@ def render_grid_command(
     tile: Annotated[int, typer.Option(min=16, max=512, help="Tile size in pixels.")] = 128,
     light: LightOption = 0.5,
     sample: SampleOption = None,
-    conditions: ConditionsOption = "D65/10",
+    conditions: ConditionsOption = DEFAULT_CONDITIONS,
     seed: SeedOption = 0,
 ) -> None:
     """Paper 001 Fig. 3: colour fixed, glint rises across, diffuse coarseness rises upward."""

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh
+from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.difference import (
     METAMERISM_ILLUMINANTS,
     delta_E,
@@ -158,7 +159,7 @@ class Comparison:
 def compare(
     reference: Measurement,
     sample: Measurement,
-    tolerance: Tolerance | str = "refinish",
+    tolerance: Tolerance | str = DEFAULT_TOLERANCE,
     *,
     conditions: Conditions = D65_10,
     also: tuple[str, ...] = ("CIE 1976", "CMC", "DIN99", "CAM16-UCS"),

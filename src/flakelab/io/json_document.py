@@ -19,6 +19,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
+from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import Measurement
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
@@ -121,7 +122,7 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
             raise MeasurementFileError(path, "expected an object", field=f"{where}.texture")
         texture = {k: parse_texture(path, v, f"{where}.texture.{k}") for k, v in texture.items()}
         conditions = parse_conditions(
-            path, item.get("lab_conditions", "D65/10"), f"{where}.lab_conditions"
+            path, item.get("lab_conditions", DEFAULT_CONDITIONS), f"{where}.lab_conditions"
         )
         metadata = item.get("metadata") or {}
         if not isinstance(metadata, dict):

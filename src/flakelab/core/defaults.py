@@ -1,0 +1,15 @@
+"""What a command, a comparison or a case uses where nothing names it: the illuminant and
+observer of CIELAB, and the tolerance a colour is judged against.
+
+They live here, apart from :mod:`flakelab.core.colorimetry` and :mod:`flakelab.core.tolerance`
+where their meaning is defined, because this module imports nothing: the command line gives
+them as option defaults at start-up without paying for colour-science's import (about a
+second). The default instrument lives with the instrument sets,
+:data:`flakelab.core.geometry.DEFAULT_INSTRUMENT`."""
+
+DEFAULT_CONDITIONS = "D65/10"
+"""CIELAB under D65 with the CIE 1964 10° observer (automotive practice; DESIGN §2), as
+:meth:`flakelab.core.colorimetry.Conditions.parse` reads it."""
+
+DEFAULT_TOLERANCE = "refinish"
+"""flakelab's body-shop tolerance, one of :data:`flakelab.core.tolerance.TOLERANCE_PRESETS`."""
