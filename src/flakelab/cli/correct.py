@@ -138,10 +138,9 @@ def correct_command(
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
     from flakelab.core.tolerance import failing_geometries, failures
-    from flakelab.io import read_recipe, read_tolerance, write_recipe
+    from flakelab.io import read_recipe, read_tolerance
     from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
     from flakelab.match.crosscheck import expected_left_out
-    from flakelab.match.forward import model_name_for
     from flakelab.match.search import left_out_note, unused_geometries
 
     tol = read_tolerance(tolerance)
@@ -208,24 +207,10 @@ def correct_command(
     if average_sprayed:
         add_readings_spread(report, "sprayout_readings", sprayed_readings, sprayed_reading, tol,
                             "spray-out")  # fmt: skip
-    if not failing:
-        report["notes"].append(
-            f"the spray-out already passes {tol.name} at every geometry: the correction is "
-            "optional, a move toward the target's centre"
-        )
-    if note := mismatch_note(forward, fractions, sprayed_R, shop_habits, lib):
-        report["notes"].append(note)
-    if texture_failing:
-        report["notes"].append(
-            f"the spray-out's texture fails {tol.name} at {', '.join(texture_failing)}: the "
-            "correction aims at colour alone; a texture this far off asks for other effect "
-            "toners (match the target again)"
-        )
+    mismatch = mismatch_note(forward, fractions, sprayed_R, shop_habits, lib)
+    report["notes"] += _sprayout_notes(tol, failing, texture_failing, mismatch)
     weighing = _weigh_correction(forward, correction, mode, can, resolution)
-    report["add_g" if mode == "additions" else "recipe_g"] = weighing.grams
-    report.update(rounding_costs(weighing))
-    held = weighing.grams if mode != "additions" else {*fractions, *weighing.grams}
-    report["model"], report["model_id"] = model_name_for(forward, held), forward.model_id
+    report |= _weighing_report(weighing, forward, mode, fractions)
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
     if left is not None:
         report["left_g"] = round(sum(can.values()), 6)
@@ -236,32 +221,29 @@ def correct_command(
                 f"the additions fill the can to --most {most_g:g} g: the correction is cut "
                 "short there, as far as the can allows"
             )
-    if recipe_out is not None:  # what the can holds after the additions, or the new recipe
-        corrected = report.get("recipe_g") or {
-            name: round(can.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
-            for name in {**can, **report["add_g"]}
-        }
-        write_recipe(corrected, recipe_out)
-        report["recipe_out"] = str(recipe_out)
-        errors.print(f"wrote the corrected recipe to {recipe_out}", highlight=False)
-    report["new_toner"] = correction.new_toner
-    report["without"] = list(without or ())
-    report["offset_weight"] = offset_weight
-    report["model_sd"] = model_sd
-    report["spray_application"] = correction.application and {
-        name: round(value, 4) for name, value in correction.application.items()
+    if recipe_out is not None:
+        _write_corrected(report, can, recipe_out)
+    report |= {
+        "new_toner": correction.new_toner,
+        "without": list(without or ()),
+        "offset_weight": offset_weight,
+        "model_sd": model_sd,
+        "spray_application": correction.application
+        and {name: round(value, 4) for name, value in correction.application.items()},
+        "habits": shop_habits and shop_habits.report(),
     }
-    report["habits"] = shop_habits and shop_habits.report()
     expected, _, expected_passed = tol.judge(forward.geometries, target_lab, expected_lab)
     report["expected_de00"] = expected.round(3).tolist()
     report["expected_failing"] = failing_geometries(forward.geometries, expected_passed)
     if failing and (note := unreached_note(tol, report["expected_failing"], expected, mode)):
         report["notes"].append(note)
-    report["metamerism_weight"] = metamerism
     sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
-    report["sprayout_metamerism_index_max"] = worst_per_light(sprayed_metamerism)
-    report["sprayout_metamer"] = is_metamer(sprayed_metamerism)
-    report["expected_metamerism_index_max"] = worst_per_light(correction.metamerism)
+    report |= {
+        "metamerism_weight": metamerism,
+        "sprayout_metamerism_index_max": worst_per_light(sprayed_metamerism),
+        "sprayout_metamer": is_metamer(sprayed_metamerism),
+        "expected_metamerism_index_max": worst_per_light(correction.metamerism),
+    }
     if note := metamerism_note(sprayed_metamerism, correction.metamerism):
         report["notes"].append(note)
     report["geometries"] = list(forward.geometries)
@@ -290,6 +272,53 @@ def correct_command(
         print(json.dumps(report, indent=2))
         return
     _print_correction(report)
+
+
+def _sprayout_notes(tol, failing: list[str], texture_failing: list[str], mismatch) -> list[str]:
+    """What the spray-out's verdict says of the correction: optional where it passes, a
+    likely mix-up (``mismatch``), colour alone where its texture fails."""
+    notes = []
+    if not failing:
+        notes.append(
+            f"the spray-out already passes {tol.name} at every geometry: the correction is "
+            "optional, a move toward the target's centre"
+        )
+    if mismatch:
+        notes.append(mismatch)
+    if texture_failing:
+        notes.append(
+            f"the spray-out's texture fails {tol.name} at {', '.join(texture_failing)}: the "
+            "correction aims at colour alone; a texture this far off asks for other effect "
+            "toners (match the target again)"
+        )
+    return notes
+
+
+def _weighing_report(weighing, forward, mode: str, fractions: dict[str, float]) -> dict:
+    """The correction's grams on the scale, what rounding them costs, and the model behind
+    the figures (named for the toners the can holds after it)."""
+    from flakelab.match.forward import model_name_for
+
+    held = weighing.grams if mode != "additions" else {*fractions, *weighing.grams}
+    return {
+        "add_g" if mode == "additions" else "recipe_g": weighing.grams,
+        **rounding_costs(weighing),
+        "model": model_name_for(forward, held),
+        "model_id": forward.model_id,
+    }
+
+
+def _write_corrected(report: dict, can: dict[str, float], path: Path) -> None:
+    """Write what the can holds after the additions, or the new recipe, as a recipe file."""
+    from flakelab.io import write_recipe
+
+    corrected = report.get("recipe_g") or {
+        name: round(can.get(name, 0.0) + report["add_g"].get(name, 0.0), 6)
+        for name in {**can, **report["add_g"]}
+    }
+    write_recipe(corrected, path)
+    report["recipe_out"] = str(path)
+    errors.print(f"wrote the corrected recipe to {path}", highlight=False)
 
 
 def _weigh_correction(forward, correction, mode: str, can: dict[str, float], resolution: float):

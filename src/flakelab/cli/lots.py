@@ -354,18 +354,59 @@ def calibrate_command(
     spray's own film build and flake alignment are allowed for by the library's physics.
     Tins read together with these before move with them."""
     from flakelab.cases.database import open_database
-    from flakelab.cases.shop_lots import store_lots, stored_lots
     from flakelab.io import read_recipe
-    from flakelab.io.lots_file import read_lots, write_lots
     from flakelab.library import check_toners
-    from flakelab.library.lots import MAX_SHADE_NM, TonerLots
-    from flakelab.match.lots import calibrate_lots, read_together, recorded
-    from flakelab.match.mixups import SPRAYOUT_MISMATCH
+    from flakelab.match.lots import calibrate_lots, recorded
 
     shop = _tins_kept(lots, shop)
     if lots is not None:
         check_output_file(lots, "--lots")
     numbers = _lot_numbers(lot or [])
+    _check_one_for_each_panel(sprayed, recipe, standard)
+    grams = [read_recipe(path) for path in recipe]
+    # a command that stores creates its database, as the others do: before the model is
+    # looked for in it
+    engine = open_database(database) if shop is not None and not dry_run else None
+    lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
+    x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
+    check_toners([*(toner or []), *numbers], forward.toners, "--toner, --lot: ")
+    _check_in_the_panels([*(toner or []), *numbers], grams, recipe)
+    kept, stored = _tins_on_file(engine, lots, shop, database, lib)
+    new_tins = [
+        n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
+    ]
+    start = stored.without(new_tins)
+    sprayed_R = _panel_spectra(sprayed, sample, average, forward)
+    if standard_sample is not None and not standard:
+        raise FlakelabError("--standard-sample: for a --standard file")
+    standards = (
+        _panel_spectra(standard, standard_sample, False, forward, "--standard-sample")
+        if standard
+        else None
+    )
+    fitted = tuple(dict.fromkeys([*toner, *numbers])) if toner else None  # a new tin is read
+    found = calibrate_lots(forward, lib, x, sprayed_R, start, toners=fitted,
+                           standards=standards, shades=shade)  # fmt: skip
+    _check_the_panels_read(found, sprayed, recipe, standard)
+    held = np.count_nonzero(x, axis=0)  # the panels that hold each toner
+    counts = {name: int(held[forward.toners.index(name)]) for name in found.toners}
+    when = datetime.now(UTC).isoformat(timespec="seconds")
+    updated = recorded(start, found, when=when, model_id=forward.model_id, numbers=numbers,
+                       panels=counts)  # fmt: skip
+    version = None
+    if not dry_run:
+        version = _keep_tins(updated, lots, engine, shop, kept)
+    report = {"lots": lots and str(lots), "shop": shop, "version": version, "written": not dry_run}
+    report |= _calibration_report(found, start, updated, new_tins)
+    report |= _panels_report(found, sprayed, recipe)
+    report["model"], report["model_id"] = forward.name, forward.model_id
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    _print_calibration(report)
+
+
+def _check_one_for_each_panel(sprayed: list[Path], recipe: list[Path], standard) -> None:
     if len(recipe) != len(sprayed):
         raise FlakelabError(
             f"--recipe: expected one for each spray-out ({len(sprayed)}), got {len(recipe)}"
@@ -375,48 +416,49 @@ def calibrate_command(
             f"--standard: expected one for each spray-out ({len(sprayed)}) or none, "
             f"got {len(standard)}"
         )
-    grams = [read_recipe(path) for path in recipe]
-    # a command that stores creates its database, as the others do: before the model is
-    # looked for in it
-    engine = open_database(database) if shop is not None and not dry_run else None
-    lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
-    x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
-    check_toners([*(toner or []), *numbers], forward.toners, "--toner, --lot: ")
-    for name in [*(toner or []), *numbers]:
+
+
+def _check_in_the_panels(names: list[str], grams: list[dict], recipe: list[Path]) -> None:
+    """A tin named to be read is in one of the panels' recipes at least."""
+    for name in names:
         if all(g.get(name, 0) <= 0 for g in grams):
             where = recipe[0] if len(recipe) == 1 else ", ".join(map(str, recipe))
             raise FlakelabError(
                 f"{where}: {name!r} is not in the panel's recipe: its tin cannot be read from it"
             )
-    kept = None  # the shop's tins stored in the database: the version read from
+
+
+def _tins_on_file(engine, lots: Path | None, shop: str | None, database, lib):
+    """The shop's tins stored in the database (the version a reading starts from, or None),
+    and the tins the reading starts from: the lot file's where one is named."""
+    from flakelab.cases.shop_lots import stored_lots
+    from flakelab.io.lots_file import read_lots
+    from flakelab.library.lots import TonerLots
+
+    kept = None
     if engine is not None:
         kept = stored_lots(engine, shop, lib.names)
     elif lots is None:
         kept = stored_tins(shop, database, lib.names)
     if lots is not None and lots.exists():
-        stored = read_lots(lots, lib.names)
-    else:
-        stored = kept.lots if kept else TonerLots(library=lib.name)
-    new_tins = [
-        n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
-    ]
-    start = stored.without(new_tins)
-    sprayed_R = np.array([
-        spectra_for_model(path, read_readings(path, sample, average)[0], forward)[0]
-        for path in sprayed
+        return kept, read_lots(lots, lib.names)
+    return kept, kept.lots if kept else TonerLots(library=lib.name)
+
+
+def _panel_spectra(paths: list[Path], sample, average: bool, forward, option="--sample"):
+    """Each panel file's reflectance at the model's geometries ``[N, G·31]``."""
+    return np.array([
+        spectra_for_model(path, read_readings(path, sample, average, option)[0], forward)[0]
+        for path in paths
     ])  # fmt: skip
-    standards = None
-    if standard:
-        standards = np.array([
-            spectra_for_model(path, read_readings(path, standard_sample, False,
-                                                  "--standard-sample")[0], forward)[0]
-            for path in standard
-        ])  # fmt: skip
-    elif standard_sample is not None:
-        raise FlakelabError("--standard-sample: for a --standard file")
-    fitted = tuple(dict.fromkeys([*toner, *numbers])) if toner else None  # a new tin is read
-    found = calibrate_lots(forward, lib, x, sprayed_R, start, toners=fitted,
-                           standards=standards, shades=shade)  # fmt: skip
+
+
+def _check_the_panels_read(found, sprayed: list[Path], recipe: list[Path], standard) -> None:
+    """Panels that lie as far from their recipe as a mix-up, or read a tin beyond any a
+    supplier delivers, are refused: the shop's tins stay as they were."""
+    from flakelab.library.lots import MAX_SHADE_NM
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
+
     for n, before in enumerate(found.de00_before):
         if before > SPRAYOUT_MISMATCH:
             against = f"{standard[n]}'s reading" if standard else "its recipe's prediction"
@@ -433,23 +475,48 @@ def calibrate_command(
                 f"and {nm:+.1f} nm off its shade: not spray-outs of their recipes, or not "
                 "of this library's toners"
             )
-    when = datetime.now(UTC).isoformat(timespec="seconds")
-    held = np.count_nonzero(x, axis=0)  # the panels that hold each toner
-    counts = {name: int(held[forward.toners.index(name)]) for name in found.toners}
-    updated = recorded(start, found, when=when, model_id=forward.model_id, numbers=numbers,
-                       panels=counts)  # fmt: skip
+
+
+def _keep_tins(updated, lots: Path | None, engine, shop: str | None, kept) -> int | None:
+    """Write the tins as read to the lot file, or store them as the shop's next version in
+    the database (its number)."""
+    from flakelab.cases.shop_lots import store_lots
+    from flakelab.io.lots_file import write_lots
+
+    if lots is not None:
+        write_lots(updated, lots)
+        return None
+    return store_lots(engine, shop, updated, kept and kept.version).version
+
+
+def _panels_report(found, sprayed: list[Path], recipe: list[Path]) -> dict:
+    """Each panel's worst ΔE00 from what it was read against, with the tins as they stood
+    and as read, and the worst of them."""
+    return {
+        "panels": [
+            {
+                "sprayed": str(path),
+                "recipe": str(r),
+                "de00_before": round(float(b), 3),
+                "de00_after": round(float(a), 3),
+            }
+            for path, r, b, a in zip(
+                sprayed, recipe, found.de00_before, found.de00_after, strict=True
+            )
+        ],
+        "panel_de00_before": round(float(found.de00_before.max()), 3),
+        "panel_de00_after": round(float(found.de00_after.max()), 3),
+    }
+
+
+def _calibration_report(found, start, updated, new_tins: list[str]) -> dict:
+    """The tins a calibration read (before and as read), those it moved with them, the
+    pairs it read together and the shop's misfit to the model."""
+    from flakelab.match.lots import read_together
+
     read = [updated.lots[name] for name in found.toners]
     moved = [updated.lots[name] for name in found.moved]
-    version = None
-    if not dry_run and lots is not None:
-        write_lots(updated, lots)
-    elif not dry_run:
-        version = store_lots(engine, shop, updated, kept and kept.version).version
-    report = {
-        "lots": lots and str(lots),
-        "shop": shop,
-        "version": version,
-        "written": not dry_run,
+    return {
         "tins": [
             {
                 "toner": t.toner,
@@ -488,29 +555,10 @@ def calibrate_command(
                 "ratio_sd": round(pair["ratio_sd"], 4),
             }
             for pair in read_together(found)
-        ],  # fmt: skip
-        "against": "standard" if standard else "model",
+        ],
+        "against": found.misfit[1],  # "model" or "standard"
         "misfit": _misfit_report(updated, found.misfit[:2]),
-        "panels": [
-            {
-                "sprayed": str(path),
-                "recipe": str(r),
-                "de00_before": round(float(b), 3),
-                "de00_after": round(float(a), 3),
-            }
-            for path, r, b, a in zip(
-                sprayed, recipe, found.de00_before, found.de00_after, strict=True
-            )
-        ],  # fmt: skip
-        "panel_de00_before": round(float(found.de00_before.max()), 3),
-        "panel_de00_after": round(float(found.de00_after.max()), 3),
-        "model": forward.name,
-        "model_id": forward.model_id,
     }
-    if json_output:
-        print(json.dumps(report, indent=2))
-        return
-    _print_calibration(report)
 
 
 def _tins_kept(lots: Path | None, shop: str | None) -> str | None:
