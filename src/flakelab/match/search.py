@@ -429,11 +429,7 @@ def _match(
     (:class:`~flakelab.match.objective.MatchObjective`).
     """
     start = time.perf_counter()
-    settings = settings or MatchSettings()
-    if settings.effect_floor is None:
-        settings = replace(settings, effect_floor=getattr(forward, "effect_share_floor", 0.0))
-    if settings.effect_kinds is None and getattr(forward, "effect_kinds", None):
-        settings = replace(settings, effect_kinds=tuple(forward.effect_kinds))
+    settings = _settled(settings or MatchSettings(), forward)
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     T = len(forward.toners)
     effect = np.zeros(T, bool) if effect is None else np.asarray(effect, bool)
@@ -446,60 +442,20 @@ def _match(
         forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism, settings.lights
     )
     target_lab = objective.lab(torch.as_tensor(spectra))
-    target_texture = None
-    if texture and all(k in texture for k in TEXTURE_READINGS):
-        target_texture = torch.as_tensor(
-            [texture[k] for k in TEXTURE_READINGS], dtype=forward.dtype
-        )
+    target_texture = _texture_readings(texture, forward.dtype)
     solid = None
     if (allowed & ~effect).any():  # pigments to match with
         solid = _solid_reason(texture, target_lab.numpy(), settings.solid_travel)
     if solid:
         allowed = allowed & ~effect
     generator = torch.Generator().manual_seed(settings.seed)
-    # 1. screen: one restart per effect toner, plus solid starts; toners new to the learned
-    #    model (physics-scaled, slower) join only when the known ones cannot get close
+    # 1. screen, and the toner subsets its best rows suggest
     novel = np.array([n in forward.novel for n in forward.toners])
-    x_screen, screen_loss, bases = _screen(
-        forward,
-        objective,
-        allowed & ~novel,
-        effect,
-        target_lab,
-        target_texture,
-        settings,
-        generator,
-        bases=settings.top_bases > 0,
+    x_screen, screen_loss, bases = _screen_known_first(
+        forward, objective, allowed, novel, effect, target_lab, target_texture, settings, generator
     )
-    if novel.any() and float(screen_loss.min()) > settings.novel_threshold:
-        x_all, loss_all, bases_all = _screen(
-            forward,
-            objective,
-            allowed,
-            effect,
-            target_lab,
-            target_texture,
-            settings,
-            generator,
-            bases=False,
-        )
-        x_screen = np.concatenate([x_screen, x_all])
-        screen_loss = np.concatenate([screen_loss, loss_all])
-        bases += bases_all
-    # the screen's best rows, those outside the model's support after every one inside it:
-    # a near-black target's best free rows can all be black with a trace of aluminium, and
-    # the solid restarts must still seed the refinement
-    outside = below_effect_floor(x_screen, effect, settings)
-    free = np.array([base is None for base in bases])
-    best = _ranked(np.flatnonzero(free), screen_loss, outside)[:3]
-    top = _ranked(np.flatnonzero(~free), screen_loss, outside)[: settings.top_bases]
-    x_best = x_screen[np.concatenate([best, top])]
-    importance = _importance(forward, objective, x_best, target_lab, target_texture, settings)
-    n = best.size
-    subsets = _subsets(x_best[:n], importance[:n], effect, settings)
-    # the best effect bases, each with its own most important pigments
-    subsets += _base_subsets([bases[i] for i in top], importance[n:], effect, settings)
-    subsets = list(dict.fromkeys(subsets))
+    x_best, subsets = _subsets_to_refine(forward, objective, x_screen, screen_loss, bases,
+                                         effect, target_lab, target_texture, settings)  # fmt: skip
     # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
@@ -519,68 +475,141 @@ def _match(
     )
     x = _weighable(x_refined.numpy().astype(float), settings)
     candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
-    tried = len(subsets)
-    neighbours: list[tuple[int, ...]] = []
+    swapped = 0
     if candidates and (
         candidates[0].limit_share.max() > settings.swap_above or not candidates[0].in_support
     ):
         # 4. swap: one move from the best few recipes
-        parents = np.array([recipe_vector(forward, c.fractions) for c in candidates])
-        neighbours, init = _neighbours(
-            parents[: settings.swap_from], allowed & ~novel, effect, settings
-        )
-    if neighbours:
-        tried += len(neighbours)
-        x_swapped = _refine(
-            forward,
-            objective,
-            torch.as_tensor(np.log(init + 1e-6), dtype=forward.dtype),
-            torch.as_tensor(init > 0),
-            effect,
-            target_lab,
-            target_texture,
-            settings,
-        )
-        x = np.concatenate([x, _weighable(x_swapped.numpy().astype(float), settings)])
-        candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
-    notes = left_out_note(unused_geometries(target, forward), forward, "match")
-    if solid:
-        notes.append(f"{solid}: a solid, matched with pigments alone")
+        x_swapped, swapped = _swapped(forward, objective, candidates, allowed & ~novel, effect,
+                                      target_lab, target_texture, settings)  # fmt: skip
+        if swapped:
+            x = np.concatenate([x, x_swapped])
+            candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
+    habits_note = None
     if habits is not None and candidates:
-        candidates, note = _aimed_off(
+        candidates, habits_note = _aimed_off(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
         )
-        notes.append(note)
-    if candidates and not candidates[0].in_support:
-        notes.append(
-            outside_note(
-                recipe_vector(forward, candidates[0].fractions), effect, forward.toners, settings
-            )
-        )
-    if candidates and not candidates[0].passes:
-        notes.append(
-            "no candidate passes the tolerance: best achievable shown; fails at "
-            + ", ".join(candidates[0].failures())
-        )
-    if candidates and (note := _metamer_note(candidates[0], settings)):
-        notes.append(note)
-    flakes = candidates and any(v > 0 for v in candidates[0].texture.values())
-    if tolerance.texture is not None and target_texture is None and flakes:
-        notes.append(
-            f"the target carries no texture readings: {tolerance.name}'s texture limits are "
-            "not judged (read it with an instrument that measures sparkle and graininess)"
-        )
+    notes = _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
+                         target_texture is not None, settings)  # fmt: skip
     return MatchResult(
         name,
         tuple(forward.geometries),
         candidates,
         tolerance.name,
         time.perf_counter() - start,
-        tried,
+        len(subsets) + swapped,
         notes,
         tolerance.texture_limits(),
         forward.model_id,
     )
+
+
+def _settled(settings: MatchSettings, forward) -> MatchSettings:
+    """``settings`` with what they leave to the model filled in from it: the least effect
+    share of its training recipes and its effect toners' kinds."""
+    if settings.effect_floor is None:
+        settings = replace(settings, effect_floor=getattr(forward, "effect_share_floor", 0.0))
+    if settings.effect_kinds is None and getattr(forward, "effect_kinds", None):
+        settings = replace(settings, effect_kinds=tuple(forward.effect_kinds))
+    return settings
+
+
+def _texture_readings(texture: dict | None, dtype) -> torch.Tensor | None:
+    """The target's texture readings in :data:`TEXTURE_READINGS` order, or None unless it
+    carries every one of them."""
+    if not texture or not all(k in texture for k in TEXTURE_READINGS):
+        return None
+    return torch.as_tensor([texture[k] for k in TEXTURE_READINGS], dtype=dtype)
+
+
+def _subsets_to_refine(
+    forward, objective, x_screen, screen_loss, bases, effect, target_lab, target_texture, settings
+) -> tuple[NDArray, list[tuple[int, ...]]]:
+    """The screen's best rows ``[B, T]`` and the toner subsets drawn from them: the best free
+    rows' most important toners, and the best effect bases, each with its own most
+    important pigments."""
+    # those outside the model's support after every one inside it: a near-black target's
+    # best free rows can all be black with a trace of aluminium, and the solid restarts
+    # must still seed the refinement
+    outside = below_effect_floor(x_screen, effect, settings)
+    free = np.array([base is None for base in bases])
+    best = _ranked(np.flatnonzero(free), screen_loss, outside)[:3]
+    top = _ranked(np.flatnonzero(~free), screen_loss, outside)[: settings.top_bases]
+    x_best = x_screen[np.concatenate([best, top])]
+    importance = _importance(forward, objective, x_best, target_lab, target_texture, settings)
+    n = best.size
+    subsets = _subsets(x_best[:n], importance[:n], effect, settings)
+    subsets += _base_subsets([bases[i] for i in top], importance[n:], effect, settings)
+    return x_best, list(dict.fromkeys(subsets))
+
+
+def _screen_known_first(forward, objective, allowed, novel, effect, target_lab, target_texture,
+                        settings, generator):  # fmt: skip
+    """Step 1, the screen: one restart per effect toner, plus solid starts. Toners new to the
+    learned model (physics-scaled, slower) join only when the known ones cannot get close."""
+    args = (effect, target_lab, target_texture, settings, generator)
+    x, loss, bases = _screen(forward, objective, allowed & ~novel, *args,
+                             bases=settings.top_bases > 0)  # fmt: skip
+    if novel.any() and float(loss.min()) > settings.novel_threshold:
+        x_all, loss_all, bases_all = _screen(forward, objective, allowed, *args, bases=False)
+        x, loss = np.concatenate([x, x_all]), np.concatenate([loss, loss_all])
+        bases = bases + bases_all
+    return x, loss, bases
+
+
+def _swapped(forward, objective, candidates, allowed, effect, target_lab, target_texture,
+             settings) -> tuple[NDArray, int]:  # fmt: skip
+    """Step 4, the swap: every recipe one move (a toner in, out or exchanged) from the best
+    few ``candidates``, refined; and how many were tried."""
+    parents = np.array([recipe_vector(forward, c.fractions) for c in candidates])
+    neighbours, init = _neighbours(parents[: settings.swap_from], allowed, effect, settings)
+    if not neighbours:
+        return np.zeros((0, len(forward.toners))), 0
+    x = _refine(
+        forward,
+        objective,
+        torch.as_tensor(np.log(init + 1e-6), dtype=forward.dtype),
+        torch.as_tensor(init > 0),
+        effect,
+        target_lab,
+        target_texture,
+        settings,
+    )
+    return _weighable(x.numpy().astype(float), settings), len(neighbours)
+
+
+def _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
+                 texture_read: bool, settings) -> list[str]:  # fmt: skip
+    """What a match says beside its candidates: the geometries it left out, a solid, the
+    shop's habits, and of the best candidate whether it lies outside the model's support,
+    fails, is a metamer or was judged without the target's texture."""
+    notes = left_out_note(unused_geometries(target, forward), forward, "match")
+    if solid:
+        notes.append(f"{solid}: a solid, matched with pigments alone")
+    if habits_note:
+        notes.append(habits_note)
+    if not candidates:
+        return notes
+    best = candidates[0]
+    if not best.in_support:
+        notes.append(
+            outside_note(recipe_vector(forward, best.fractions), effect, forward.toners, settings)
+        )
+    if not best.passes:
+        notes.append(
+            "no candidate passes the tolerance: best achievable shown; fails at "
+            + ", ".join(best.failures())
+        )
+    if note := _metamer_note(best, settings):
+        notes.append(note)
+    flakes = any(v > 0 for v in best.texture.values())
+    if tolerance.texture is not None and not texture_read and flakes:
+        notes.append(
+            f"the target carries no texture readings: {tolerance.name}'s texture limits are "
+            "not judged (read it with an instrument that measures sparkle and graininess)"
+        )
+    return notes
 
 
 def _solid_reason(texture: dict | None, lab: NDArray, travel_limit: float) -> str | None:
