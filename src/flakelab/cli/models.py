@@ -598,6 +598,7 @@ def evaluate(
 
     offset = habits_offset if shop_habits else None
     hybrid = isinstance(matcher, LearnedForward) and matcher.novel
+    # a hybrid forward predicts its new toners by the physics, which the network alone lacks
     predict = (lambda x: evaluate_recipes(matcher, x)) if hybrid else None
 
     families = lib.paint_families(data.x)
@@ -640,7 +641,16 @@ def evaluate(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    if report["cases_learned"] and unseen:
+    _print_evaluation(report, len(loaded))
+
+
+def _print_evaluation(report: dict, loaded: int) -> None:
+    """The model's errors as tables by geometry and by paint family, with what the figures
+    leave out or flatter: cases it learned from, cases at other geometries, likely mix-ups
+    (``loaded``: the cases read)."""
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
+
+    if report["cases_learned"] and report["unseen"]:
         errors.print(
             f"note: left out {report['cases_learned']} cases the model learned from",
             highlight=False,
@@ -654,7 +664,7 @@ def evaluate(
         )
     if report["cases_left_out"]:
         errors.print(
-            f"note: {report['cases_left_out']} of the {len(loaded)} cases were not read at the "
+            f"note: {report['cases_left_out']} of the {loaded} cases were not read at the "
             f"model's geometries and are left out",
             highlight=False,
         )
