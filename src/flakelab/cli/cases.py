@@ -281,7 +281,7 @@ def record_case(
     from flakelab.cases.shop_lots import stored_lots
     from flakelab.io import read_library, read_recipe, read_tolerance
     from flakelab.io.lots_file import read_lots
-    from flakelab.match.mixups import is_mismatched, mismatch_message, recorded_checks
+    from flakelab.match.mixups import recorded_checks
 
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
@@ -344,22 +344,35 @@ def record_case(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    verdict = "passes" if not failing else f"fails {tol.name} at {', '.join(failing)}"
+    _print_recorded(report, chosen=instrument is not None)
+
+
+def _print_recorded(report: dict, chosen: bool) -> None:
+    """A recorded case as the shop reads it: its verdict, the models that learn from it, its
+    tins, how far the spray-out lies from its recipe's prediction, what was not kept
+    (``chosen``: the geometries were chosen by ``--instrument``)."""
+    from flakelab.match.mixups import is_mismatched, mismatch_message
+
+    failing, found, left_out = (
+        report[k] for k in ("sprayout_failing", "from_prediction", "left_out")
+    )
+    verdict = "passes" if not failing else f"fails {report['tolerance']} at {', '.join(failing)}"
+    case_id, at = report["case_id"], datetime.fromisoformat(report["created_at"])
     console.print(
-        f"recorded case [bold]{case.case_id}[/] for {case.shop!r}: {case.outcome} "
-        f"(the spray-out {verdict}), {case.instrument} at {case.created_at:%Y-%m-%d %H:%M}",
+        f"recorded case [bold]{case_id}[/] for {report['shop']!r}: {report['outcome']} "
+        f"(the spray-out {verdict}), {report['instrument']} at {at:%Y-%m-%d %H:%M}",
         highlight=False,
     )
-    if models:
+    if models := report["read_by_models_of"]:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
     else:
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
-            f"{', '.join(case.geometry_names)} hold no instrument's whole set",
+            f"{', '.join(report['geometries'])} hold no instrument's whole set",
             highlight=False,
         )
-    if case.tins:
-        tins = ", ".join(f"{n} {t.lot or '(no lot number)'}" for n, t in sorted(case.tins.items()))
+    if report["tins"]:
+        tins = ", ".join(f"{n} {t['lot'] or '(no lot number)'}" for n, t in report["tins"].items())
         console.print(f"poured from {report['tins_from']}: {tins}", highlight=False)
     if found is not None:
         habits = " with the shop's habits" if found["habits"] else ""
@@ -368,22 +381,22 @@ def record_case(
             f"{found['geometry']} ({found['model']}{habits})",
             highlight=False,
         )
-    elif unchecked:
+    elif unchecked := report["from_prediction_unchecked"]:
         console.print(f"[yellow]note:[/] not checked against a model: {unchecked}", highlight=False)
     if is_mismatched(found):
         errors.print(
             f"[yellow]warning:[/] {mismatch_message(found['de00'], found['geometry'])}; it is "
-            f"recorded: 'cases habits' leaves it out, 'cases remove {case.case_id}' removes it",
+            f"recorded: 'cases habits' leaves it out, 'cases remove {case_id}' removes it",
             highlight=False,
         )
     if left_out:
         console.print(
             f"[yellow]note:[/] the target's {', '.join(left_out)} are not kept "
-            f"({'--instrument chooses' if instrument else 'the spray-out was not read there'})",
+            f"({'--instrument chooses' if chosen else 'the spray-out was not read there'})",
             highlight=False,
         )
     count = report["cases_in_database"]
-    errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
+    errors.print(f"{count} case{'s' * (count != 1)} in {report['database']}", highlight=False)
 
 
 @cases_app.command("record-all")
