@@ -30,6 +30,7 @@ from flakelab.match.habits import (
     _with_prior,
     change_scan,
     estimate_habits,
+    habit_meaning,
     habits_drift,
     habits_fit,
     list_habits,
@@ -791,3 +792,14 @@ def test_a_shops_own_model_is_current_for_that_shop_alone(shipped, tmp_path):
     done = retire(engine, entry["name"], entry["version"])
     assert (done["was"], done["shop"], done["current"]) == ("promoted", "shop A", "shipped")
     assert current_model(engine, "five-angle", "shop A").identity == model.identity
+
+
+def test_a_habit_within_two_standard_errors_of_none_is_not_called_a_habit():
+    """The table of habits names a direction only where the estimate stands clear of its
+    noise: +1.2 % ± 4.8 % of film is not "more film" (the shop may spray less)."""
+    assert habit_meaning("film_build", 0.012, 0.048).startswith("not clear")
+    assert habit_meaning("film_build", -0.05, 0.01) == "less film than the model's cases"
+    assert habit_meaning("flake_spread", -0.04, 0.005) == "flakes lie flatter"
+    assert habit_meaning("flake_spread", 0.009, 0.005).startswith("not clear")  # 1.8 s.e.
+    assert habit_meaning("instrument_gain", 0.005, 0.002) == "the instrument reads high"
+    assert habit_meaning("flake_spread", -0.04, None) == "not shown by these spray-outs"

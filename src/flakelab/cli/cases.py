@@ -1049,46 +1049,7 @@ def habits(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    table = Table(title=f"Habits of {shop or cases} against {model or 'the current model'}")
-    for column in ("habit", "estimate", "± s.e.", "meaning"):
-        table.add_column(column, justify="right")
-    spread = "flatter" if found.flake_spread < 0 else "less flat"
-    gain = "high" if found.instrument_gain > 0 else "low"
-    film = "more" if found.film_build > 0 else "less"
-    rows = (
-        ("film build", "film_build", f"{film} film than the model's cases", ".1%"),
-        ("flake spread", "flake_spread", f"flakes lie {spread}", ".1%"),
-        ("instrument gain", "instrument_gain", f"the instrument reads {gain}", ".2%"),
-    )
-    for name, key, meaning, fmt in rows:
-        se = report[key + "_se"]
-        if se is None:  # no spray-out moves with it (flake spread, in a shop of solids)
-            table.add_row(name, f"{report[key]:+{fmt}}", "", "not shown by these spray-outs")
-        else:
-            table.add_row(name, f"{report[key]:+{fmt}}", f"{se:{fmt}}", meaning)
-    console.print(table)
-    console.print(_explained_table(fit))
-    if report["drift"] and report["drift"]["changed"]:
-        errors.print(f"[yellow]warning:[/] {report['drift']['message']}", highlight=False)
-    if left_out:
-        errors.print(
-            f"[yellow]warning:[/] left out {len(left_out)} spray-out(s) further than ΔE00 "
-            f"{SPRAYOUT_MISMATCH:g} from the model's prediction with these habits, likely "
-            f"mix-ups (another panel, recipe or target): {', '.join(left_out[:5])}"
-            + (" …" if len(left_out) > 5 else ""),
-            highlight=False,
-        )
-    errors.print(
-        f"from {found.cases} spray-outs"
-        + (
-            f", {found.cases_with_tins} of them read at the tins they record"
-            if found.cases_with_tins
-            else ""
-        )
-        + (f"; written to {out}" if out else "")
-        + (f"; stored for {found.shop!r}" if save else ""),
-        highlight=False,
-    )
+    _print_habits(report, fit, f"Habits of {shop or cases} against {model or 'the current model'}")
 
 
 def _scan_for_plot(drift: dict, chosen: list) -> dict:
@@ -1132,6 +1093,46 @@ def _drift_report(drift: dict, chosen: list) -> dict:
         "changed": changed,
         "message": message if changed else None,
     }
+
+
+def _print_habits(report: dict, fit: dict, title: str) -> None:
+    """A shop's habits as a table of estimates and meanings, how much of the spray-outs'
+    offsets they explain (``fit``), and what was left out or has changed."""
+    from flakelab.match.habits import habit_meaning
+    from flakelab.match.mixups import SPRAYOUT_MISMATCH
+
+    table = Table(title=title)
+    for column in ("habit", "estimate", "± s.e.", "meaning"):
+        table.add_column(column, justify="right")
+    rows = (("film build", "film_build", ".1%"), ("flake spread", "flake_spread", ".1%"),
+            ("instrument gain", "instrument_gain", ".2%"))  # fmt: skip
+    for name, key, fmt in rows:
+        se = report[key + "_se"]  # None: no spray-out moves with it (flakes, in a shop of solids)
+        meaning = habit_meaning(key, report[key], se)
+        table.add_row(name, f"{report[key]:+{fmt}}", "" if se is None else f"{se:{fmt}}", meaning)
+    console.print(table)
+    console.print(_explained_table(fit))
+    if report["drift"] and report["drift"]["changed"]:
+        errors.print(f"[yellow]warning:[/] {report['drift']['message']}", highlight=False)
+    if left_out := report["left_out_mismatched"]:
+        errors.print(
+            f"[yellow]warning:[/] left out {len(left_out)} spray-out(s) further than ΔE00 "
+            f"{SPRAYOUT_MISMATCH:g} from the model's prediction with these habits, likely "
+            f"mix-ups (another panel, recipe or target): {', '.join(left_out[:5])}"
+            + (" …" if len(left_out) > 5 else ""),
+            highlight=False,
+        )
+    errors.print(
+        f"from {report['cases']} spray-outs"
+        + (
+            f", {report['cases_with_tins']} of them read at the tins they record"
+            if report["cases_with_tins"]
+            else ""
+        )
+        + (f"; written to {report['file']}" if report["file"] else "")
+        + (f"; stored for {report['shop']!r}" if report["saved"] else ""),
+        highlight=False,
+    )
 
 
 def _explained_table(fit: dict) -> Table:

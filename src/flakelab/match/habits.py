@@ -82,6 +82,7 @@ __all__ = [
     "screened_habits",
     "habits_fit",
     "habits_drift",
+    "CLEAR_Z",
     "DRIFT_Z",
     "MIN_DRIFT_CASES",
     "MIN_SEGMENT_CASES",
@@ -442,6 +443,28 @@ def _with_prior(theta: NDArray, covariance: NDArray, prior_sd: NDArray):
     precision = _shown_inverse(np.where(np.isinf(covariance), 0.0, covariance))[0]
     posterior = np.linalg.inv(precision + np.diag(prior_sd**-2.0))
     return posterior @ precision @ theta, posterior
+
+
+CLEAR_Z = 2.0
+"""A habit whose estimate lies within this many standard errors of none (about 95 % of a
+Gaussian's draws) is not clear from the spray-outs: its sign may be their noise. The matcher
+still aims off for the estimate as read (:meth:`ShopHabits.offset`)."""
+
+
+def habit_meaning(key: str, value: float, se: float | None) -> str:
+    """What the estimate ``value`` ± ``se`` of the habit ``key`` (``film_build``,
+    ``flake_spread``, ``instrument_gain``) says in a colorist's words; nothing where no
+    spray-out moved with it (``se`` None) or where it lies within :data:`CLEAR_Z` standard
+    errors of none."""
+    if se is None:
+        return "not shown by these spray-outs"
+    if abs(value) <= CLEAR_Z * se:
+        return f"not clear from these spray-outs (within {CLEAR_Z:g} s.e. of none)"
+    return {
+        "film_build": f"{'more' if value > 0 else 'less'} film than the model's cases",
+        "flake_spread": f"flakes lie {'flatter' if value < 0 else 'less flat'}",
+        "instrument_gain": f"the instrument reads {'high' if value > 0 else 'low'}",
+    }[key]
 
 
 DRIFT_Z = 4.5
