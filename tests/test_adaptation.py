@@ -227,3 +227,20 @@ def test_a_toner_met_in_too_few_cases_is_new_without_being_declared(model):
     assert data.x[:, data.toners.index(rare)].any()  # the seed draws it
     with pytest.raises(ModelError, match=f"too few cases \\({rare}\\)"):
         adapt_model(trained, data)
+
+
+def test_the_kept_epoch_is_told_with_the_cases_that_chose_it():
+    """Epoch 0 is the model as it was, and the cases that chose it are named whether the
+    command or the adaptation held them out (``model adapt`` said nothing of them when the
+    adaptation split them off itself)."""
+    from flakelab.cli.models import _kept_epoch_text
+
+    summary = {"kept_epochs": 0, "epochs": 150, "validation_cases": 8}
+    assert _kept_epoch_text(summary) == (
+        "kept the model as it was: none of its 150 epochs did better on the 8 cases held out "
+        "to choose"
+    )
+    summary |= {"kept_epochs": 146, "validation_cases": 40}
+    assert _kept_epoch_text(summary) == "kept epoch 146 of 150 (chosen on 40 cases)"
+    summary |= {"kept_epochs": 150, "validation_cases": 0}
+    assert _kept_epoch_text(summary) == "kept epoch 150 of 150"

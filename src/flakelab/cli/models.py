@@ -257,11 +257,8 @@ def train(
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
-    from flakelab.models.network import LOG_OFFSET_MAX
     from flakelab.models.registry import register
     from flakelab.models.training import (
-        SCREENINGS,
-        TrainingConfig,
         adapt_to_shop,
         evaluate_model,
         protocol_epochs,
@@ -269,38 +266,11 @@ def train(
         withhold_for_adaptation,
     )
 
-    if screening not in SCREENINGS:
-        raise FlakelabError(
-            f"--screening: expected one of {', '.join(SCREENINGS)}, got {screening!r}"
-        )
-    if log_offset > LOG_OFFSET_MAX:
-        raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
-
-    try:
-        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
-    except ValueError:
-        raise FlakelabError(
-            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
-        ) from None
     check_output_file(out, "--out")
     _check_loss_outputs(loss_log, plot)
-    # the settings are checked before the cases are read (TrainingConfig refuses its own)
-    config = TrainingConfig(
-        hidden=sizes,
-        epochs=epochs,
-        finetune_epochs=epochs,
-        batch_size=batch_size,
-        screening=screening,
-        adapt_validation=adapt_validation,
-        members=members,
-        log_offset=log_offset,
-        seed=seed,
-        device=device,
-    )
-    if colour_weight is not None:
-        config = replace(config, colour_weight=colour_weight)
-    if adapt_epochs is not None:
-        config = replace(config, adapt_epochs=adapt_epochs)
+    # the settings are checked before the cases are read
+    config = _training_config(hidden, epochs, batch_size, screening, adapt_validation, members,
+                              log_offset, seed, device, colour_weight, adapt_epochs)  # fmt: skip
     lib = read_library(library)
     instrument = instrument_key(instrument)
     geometries = INSTRUMENT_GEOMETRIES[instrument]
@@ -368,6 +338,46 @@ def train(
         print(json.dumps(summary, indent=2, default=str))
         return
     console.print_json(json.dumps(summary, default=str))
+
+
+def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
+                     adapt_validation: float, members: int, log_offset: float, seed: int,
+                     device: str, colour_weight: float | None,
+                     adapt_epochs: int | None):  # fmt: skip
+    """``train``'s options as a :class:`~flakelab.models.training.TrainingConfig`, each
+    checked (the config refuses its own); the options left unset keep its defaults."""
+    from flakelab.models.network import LOG_OFFSET_MAX
+    from flakelab.models.training import SCREENINGS, TrainingConfig
+
+    if screening not in SCREENINGS:
+        raise FlakelabError(
+            f"--screening: expected one of {', '.join(SCREENINGS)}, got {screening!r}"
+        )
+    if log_offset > LOG_OFFSET_MAX:
+        raise FlakelabError(f"--log-offset: expected at most {LOG_OFFSET_MAX}, got {log_offset}")
+    try:
+        sizes = tuple(int(v) for v in hidden.split(",") if v.strip())
+    except ValueError:
+        raise FlakelabError(
+            f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
+        ) from None
+    config = TrainingConfig(
+        hidden=sizes,
+        epochs=epochs,
+        finetune_epochs=epochs,
+        batch_size=batch_size,
+        screening=screening,
+        adapt_validation=adapt_validation,
+        members=members,
+        log_offset=log_offset,
+        seed=seed,
+        device=device,
+    )
+    if colour_weight is not None:
+        config = replace(config, colour_weight=colour_weight)
+    if adapt_epochs is not None:
+        config = replace(config, adapt_epochs=adapt_epochs)
+    return config
 
 
 @model_app.command("list")
@@ -669,7 +679,9 @@ def _print_evaluation(report: dict, loaded: int) -> None:
             highlight=False,
         )
     rows = {**report["per_geometry"], "all": report}
-    console.print(de00_table(f"{report['model']} on {report['cases']} cases", "geometry", rows))
+    count = report["cases"]
+    title = f"{report['model']} on {count} case{'s' * (count != 1)}"
+    console.print(de00_table(title, "geometry", rows))
     families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
     console.print(de00_table("by paint family", "family (cases)", families, total=False))
     if mixed := report["likely_mix_ups"]:
@@ -817,12 +829,19 @@ def adapt(
     if json_output:
         print(json.dumps(summary, indent=2))
         return
+    _print_adaptation(summary, stage, config.outlier_threshold)
+
+
+def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
+    """An adaptation's held-out error before and after, the cases it left out (further than
+    ``threshold`` robust s.d.) or had learned before, the epoch it kept and its
+    registration."""
     title = f"{summary['model']} adapted to {summary['cases']} cases ({stage})"
     console.print(de00_table(title, "held out", summary["held_out"], ("before", "after")))
-    if dropped:
+    if dropped := summary["outlier_case_ids"]:
         errors.print(
             f"[yellow]warning:[/] left out {len(dropped)} case(s) whose error by the model lies "
-            f"more than {config.outlier_threshold:g} robust s.d. above the shop's, likely "
+            f"more than {threshold:g} robust s.d. above the shop's, likely "
             f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
             highlight=False,
         )
@@ -832,12 +851,7 @@ def adapt(
             "on, but held out and choosing the epoch only among the others",
             highlight=False,
         )
-    kept = summary["kept_epochs"]
-    errors.print(
-        f"kept epoch {kept} of {summary['epochs']}"
-        + (f" (chosen on {summary['validation_cases']} cases)" if validation else ""),
-        highlight=False,
-    )
+    errors.print(_kept_epoch_text(summary), highlight=False)
     if "registry" in summary:
         r = summary["registry"]
         verdict = (
@@ -849,6 +863,20 @@ def adapt(
             "(whose toners both learned, that neither learned from)"
         )
         errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
+
+
+def _kept_epoch_text(summary: dict) -> str:
+    """Which of an adaptation's epochs it kept, and on how many of the shop's cases that was
+    chosen (every epoch run where none were held out); epoch 0 is the model as it was."""
+    kept, epochs, judged = summary["kept_epochs"], summary["epochs"], summary["validation_cases"]
+    if not judged:
+        return f"kept epoch {kept} of {epochs}"
+    if kept == 0:
+        return (
+            f"kept the model as it was: none of its {epochs} epochs did better on the "
+            f"{judged} cases held out to choose"
+        )
+    return f"kept epoch {kept} of {epochs} (chosen on {judged} cases)"
 
 
 def _write_model(model, out: Path) -> None:

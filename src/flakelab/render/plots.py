@@ -438,7 +438,7 @@ def plot_model_errors(
     worst.set(xlabel="worst ΔE00 of a case over its geometries", ylabel="cases")
     summary = (
         f"ΔE00 mean {de.mean():.3f}, p95 {np.percentile(de, 95):.2f}, max {de.max():.2f} over "
-        f"{len(de)} cases × {len(names)} geometries"
+        f"{len(de)} case{'s' * (len(de) != 1)} × {len(names)} geometries"
     )
     figure.suptitle(f"{title}: {summary}" if title else summary)
     _save(figure, path, dpi)
