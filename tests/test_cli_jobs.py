@@ -722,6 +722,50 @@ def test_training_with_adaptation_keeps_the_general_model_and_judges_the_shops_o
     )
 
 
+def test_a_model_file_trained_elsewhere_is_registered_and_promoted_only_if_better(tmp_path, cli):
+    """A model adapted to shop A's cases at another workplace, registered as the shop's own:
+    judged on cases neither model learned from against the shipped one, it is promoted; the
+    same weights again, or the shipped model's, are refused with the registry unchanged."""
+    habits = ("--shop", "shop A", "--shop-film-build", "1.05", "--shop-spread", "0.96",
+              "--shop-gain", "0.005")  # fmt: skip
+    learned, judged = str(tmp_path / "learned.csv"), str(tmp_path / "judged.csv")
+    for seed, n, out in (("21", "300", learned), ("22", "100", judged)):
+        run = cli("cases", "generate", "--n", n, "--seed", seed, *habits, "--out", out)
+        assert run.returncode == 0, run.stderr
+    adapted, database = str(tmp_path / "adapted.pt"), str(tmp_path / "models.db")
+    run = cli("model", "adapt", learned, "--shop", "shop A", "--epochs", "10", "--no-register",
+              "--out", adapted)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    run = cli("model", "register", adapted, judged, "--shop", "shop A", "-d", database, "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    done = report["registry"]
+    assert done["name"] == "five-angle @ shop A" and done["version"] == 1
+    assert report["learned_from"] == 0 and report["cases"] == 100
+    # toners the adapted model learned from too few cases are left out of the judging
+    assert 50 < done["cases_judged"] < 100
+    assert done["held_out_de00"] < done["incumbent_de00"] - 0.1 and done["promoted"] is True
+    shipped = json.loads(cli("model", "evaluate", judged, "--json").stdout)
+    assert shipped["model_id"] == shipped_model("five-angle").identity  # the incumbent
+    listed = json.loads(cli("model", "list", "-d", database, "--json").stdout)
+    assert [(r["name"], r["version"], r["status"]) for r in listed["registered"]] == [
+        ("five-angle @ shop A", 1, "promoted")
+    ]
+    run = cli("model", "register", adapted, judged, "--shop", "shop A", "-d", database)
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 2 and "the same weights as five-angle @ shop A v1" in said
+    shipped_file = str(tmp_path / "shipped.pt")
+    assert cli("model", "show", "five-angle", "--out", shipped_file).returncode == 0
+    run = cli("model", "register", shipped_file, judged, "-d", database)
+    assert run.returncode == 2 and "the shipped five-angle model" in " ".join(run.stderr.split())
+    junk = tmp_path / "junk.pt"
+    junk.write_text("not a model")
+    run = cli("model", "register", str(junk), judged, "-d", database)
+    assert run.returncode == 2 and "junk.pt: not a flakelab model file" in run.stderr
+    again = json.loads(cli("model", "list", "-d", database, "--json").stdout)
+    assert again["registered"] == listed["registered"]
+
+
 def test_a_shop_adapts_the_current_model_to_its_habits_and_promotes_it(tmp_path, cli):
     """Adapted to shop A's cases and promoted, the model is shop A's own: the habits it
     learned are not added again, and other shops keep the shipped model."""

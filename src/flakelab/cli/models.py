@@ -127,7 +127,8 @@ def de00_table(title: str, label: str, stats: dict, names=None, total: bool = Tr
 
 
 model_app = typer.Typer(
-    help="Learned forward models: list, show, evaluate, adapt to a shop; promote and retire."
+    help="Learned forward models: list, show, evaluate, adapt to a shop; register a model file; "
+    "promote and retire."
 )
 
 
@@ -486,6 +487,76 @@ def retire_model(version: VersionArgument, database: DatabaseOption = None) -> N
     whose = f" for shop {done['shop']!r}" if done["shop"] else ""
     current = f"; {now} is current{whose} again" if done["was"] == "promoted" else ""
     errors.print(f"{engine.url}: {done['name']} v{done['version']} retired{current}")
+
+
+@model_app.command("register")
+@reports_errors
+def register_file(
+    model_file: Annotated[
+        Path,
+        typer.Argument(
+            help="A model file ('train --out', 'model adapt --out', 'model show --out'), "
+            "trained elsewhere: at a central lab, on a GPU machine, at another workplace."
+        ),
+    ],
+    cases: Annotated[
+        str,
+        typer.Argument(help="Case file (CSV/CxF) or database URL/file: the cases it is judged on."),
+    ],
+    shop: Annotated[
+        str | None,
+        typer.Option(
+            "--shop",
+            help="Register it as this shop's own model, judged on the shop's cases against the "
+            "model current for the shop (default: the instrument's, on every case given).",
+        ),
+    ] = None,
+    since: SinceOption = None,
+    library: LibraryOption = None,
+    database: DatabaseOption = None,
+    no_tins: NoTinsOption = False,
+    json_output: JsonOption = False,
+) -> None:
+    """Register a model file as a new version, promoted only if it beats the current model.
+
+    Both are judged on the cases given that neither learned from and whose toners both
+    learned, as 'train' judges a model it registers; a model file registered before is
+    refused, the registry unchanged."""
+    from flakelab.cases.database import open_database
+    from flakelab.io import read_library
+    from flakelab.models.registry import (
+        held_already,
+        load_model_file,
+        register,
+        shop_model_name,
+    )
+
+    model = load_model_file(model_file)
+    lib = read_library(library)
+    chosen = shop_cases(cases, shop, model.geometries, since)
+    data, tinned = recorded_tins_used(source_arrays(cases, chosen, lib), lib, no_tins)
+    data = replace(data, instrument=model.instrument)
+    engine = open_database(database)
+    name = shop_model_name(model.instrument, shop)
+    if held := held_already(engine, name, model):
+        raise FlakelabError(
+            f"{model_file}: the same weights as {held} in {engine.url}: nothing was stored"
+        )
+    done = register(engine, model, data, shop=shop)
+    report = {
+        "file": str(model_file),
+        "model": model.identity,
+        "shop": shop,
+        "cases": len(chosen),
+        "cases_with_tins": int(tinned.sum()),
+        "learned_from": int(model.learned_from(data.case_ids).sum()),
+        "registry": done,
+        "database": str(engine.url),
+    }
+    if json_output:
+        print(json.dumps(report, indent=2))
+        return
+    errors.print(_registry_verdict(done), highlight=False)
 
 
 def _registered_version(spec: str) -> tuple[str, int]:
@@ -853,16 +924,27 @@ def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
         )
     errors.print(_kept_epoch_text(summary), highlight=False)
     if "registry" in summary:
-        r = summary["registry"]
+        errors.print(_registry_verdict(summary["registry"]), highlight=False)
+
+
+def _registry_verdict(r: dict) -> str:
+    """A registration as :func:`~flakelab.models.registry.register` reports it, in words."""
+    if r["promoted"]:
+        verdict = "promoted"
+    elif r["cases_judged"]:
+        verdict = "kept as a candidate (no better than the current one)"
+    else:
         verdict = (
-            "promoted"
-            if r["promoted"]
-            else "kept as a candidate (the current one is better)"
-            if r["cases_judged"]
-            else "kept as a candidate: no held-out case that both models could be judged on "
+            "kept as a candidate: no held-out case that both models could be judged on "
             "(whose toners both learned, that neither learned from)"
         )
-        errors.print(f"registered {r['name']} v{r['version']}: {verdict}", highlight=False)
+    scores = ""
+    if r["cases_judged"] and r["incumbent_de00"] is not None:
+        scores = (
+            f" (ΔE00 mean {r['held_out_de00']:.3f} against the current one's "
+            f"{r['incumbent_de00']:.3f} on {r['cases_judged']} cases neither learned from)"
+        )
+    return f"registered {r['name']} v{r['version']}: {verdict}{scores}"
 
 
 def _kept_epoch_text(summary: dict) -> str:

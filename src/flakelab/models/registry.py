@@ -42,6 +42,7 @@ __all__ = [
     "current_model",
     "current_model_and_source",
     "registered_model",
+    "held_already",
     "model_card",
     "promote",
     "retire",
@@ -165,6 +166,26 @@ def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
     with Session(engine) as session:
         row = _version_row(session, engine, name, version)
         return ForwardModel.from_bytes(row.artefact, f"{name} v{version}")
+
+
+def held_already(engine: Engine, name: str, model: ForwardModel) -> str | None:
+    """Where the registry already holds ``model``'s weights and normalisation (its
+    :attr:`~flakelab.models.network.ForwardModel.fingerprint`): a registered version of
+    ``name`` ('NAME vN') or the shipped model of its instrument; None where it does not. A
+    model file registered again is the version it already is."""
+    fingerprint = model.fingerprint
+    if model.instrument in SHIPPED and shipped_model(model.instrument).fingerprint == fingerprint:
+        return f"the shipped {model.instrument} model"
+    with Session(engine) as session:
+        rows = session.execute(
+            select(ModelRow.version, ModelRow.artefact)
+            .where(ModelRow.name == name)
+            .order_by(ModelRow.version)
+        ).all()
+    for version, artefact in rows:
+        if ForwardModel.from_bytes(artefact, f"{name} v{version}").fingerprint == fingerprint:
+            return f"{name} v{version}"
+    return None
 
 
 def promote(engine: Engine, name: str, version: int) -> dict:
