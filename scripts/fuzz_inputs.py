@@ -14,7 +14,7 @@ values still readable but odd); a model file by editing its description, standar
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
         sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
-        manifest,model,lots,panel] [--n 200] [--seed 0] [--show]
+        manifest,model,model-register,lots,panel] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -285,6 +285,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "manifest": (work / "manifest.csv",
                      lambda p: ["cases", "record-all", str(p), "-d", "sqlite://"]),
         "model": (work / "model.pt", lambda p: ["weigh", str(recipe), "--model", str(p)]),
+        # the same registered against generated cases, judged against the current model
+        "model-register": (work / "model.pt",
+                           lambda p: ["model", "register", str(p), str(work / "cases.csv"),
+                                      "-d", "sqlite://"]),
         # the shop's tins, which the main job weighs for
         "lots": (work / "lots.json",
                  lambda p: ["match", "--example", "--candidates", "1", "--lots", str(p)]),
@@ -317,7 +321,7 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
     data = good.read_bytes()
     for i in range(n):
         damaged = work / f"{kind}-{i}{good.suffix}"
-        if kind == "model":
+        if kind.startswith("model"):
             damaged.write_bytes(damage_model(data, rng))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
