@@ -10,6 +10,7 @@ import re
 import sqlite3
 import subprocess
 import sys
+import time
 from collections import Counter
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta, timezone
@@ -35,7 +36,7 @@ from flakelab.cases.database import (
 from flakelab.cases.exchange import CASE_FIELDS, CaseFileError, read_cases, write_cases
 from flakelab.cases.generator import World, near_black
 from flakelab.cases.record import case_from_readings, judged_outcome
-from flakelab.cases.schema import Base
+from flakelab.cases.schema import Base, ModelRow
 from flakelab.core import compare
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -655,6 +656,67 @@ def test_concurrent_writers_lose_no_case(database_url):
     with multiprocessing.get_context("spawn").Pool(3) as pool:
         pool.map(_write_batch, [(url, s) for s in (1, 2, 3)])
     assert count_cases(open_database(url)) == 180
+
+
+def test_registrations_at_once_each_get_their_own_version(database_url):
+    """Six workplaces register a model at the same instant: six versions, numbered 1 to 6, and
+    one of them promoted. Before the registry judged again on a clash, PostgreSQL stored
+    three numbers twice and promoted two versions."""
+    from flakelab.models.registry import list_models
+
+    open_database(database_url)
+    start = time.time() + 20  # every process loaded and waiting
+    with multiprocessing.get_context("spawn").Pool(6) as pool:
+        versions = pool.map(_register_a_model, [(database_url, seed, start) for seed in range(6)])
+    assert sorted(versions) == [1, 2, 3, 4, 5, 6]
+    rows = list_models(open_database(database_url))
+    assert sorted(r["version"] for r in rows) == [1, 2, 3, 4, 5, 6]
+    assert sum(r["status"] == "promoted" for r in rows) <= 1
+
+
+def _register_a_model(args):
+    """The shipped model, its weights nudged by ``seed``, registered at ``start``."""
+    import torch
+
+    from flakelab.models.registry import register, shipped_model
+    from flakelab.models.training import case_arrays
+
+    url, seed, start = args
+    library = read_library(None)
+    cases = next(World(library, "five-angle").cases(20, seed=100 + seed, batch=20))
+    model = shipped_model("five-angle")
+    noise = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for weights in model.network.parameters():
+            weights.add_(1e-4 * torch.randn(weights.shape, generator=noise))
+    engine = open_database(url)
+    time.sleep(max(0.0, start - time.time()))
+    return register(engine, model, case_arrays(cases, library.names))["version"]
+
+
+def test_versions_stored_twice_are_numbered_afresh_by_the_migration(cases, database_url):
+    """A database whose registrations clashed before 0006 (two rows of one version, two
+    promoted) keeps every row: the later takes the next number, the last promoted stays."""
+    from flakelab.models.registry import list_models, register, shipped_model
+    from flakelab.models.training import case_arrays
+
+    engine = create_engine(database_url)
+    migrate(engine, "0005")
+    model, held = shipped_model("five-angle"), case_arrays(cases, read_library(None).names)
+    register(engine, model, held)  # version 1
+    models = ModelRow.__table__
+    with engine.begin() as connection:  # as a clash stored them
+        row = dict(connection.execute(models.select()).mappings().one())
+        del row["id"]
+        clashed = [row | {"status": s, "version": 2} for s in ("promoted", "promoted", "candidate")]
+        connection.execute(models.insert(), clashed)
+    engine.dispose()
+    engine = open_database(database_url)
+    rows = sorted(list_models(engine), key=lambda r: r["version"])
+    assert [(r["version"], r["status"]) for r in rows] == [
+        (1, "candidate"), (2, "retired"), (3, "promoted"), (4, "candidate")
+    ]  # fmt: skip
+    assert register(engine, model, held)["version"] == 5
 
 
 def _cli(*args):

@@ -59,6 +59,8 @@ class CaseRow(Base):
 
 class ModelRow(Base):
     __tablename__ = "models"
+    # one row per version of a name: registrations that run at once cannot share a number
+    __table_args__ = (UniqueConstraint("name", "version", name="uq_models_name_version"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     # a shop's own model is 'INSTRUMENT @ SHOP' (models.registry.shop_model_name)

@@ -20,6 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from sqlalchemy import Engine, func, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from flakelab.cases.schema import ModelRow
@@ -84,12 +85,16 @@ def serving_version(
 ) -> tuple[str, int] | None:
     """The registered name and version of the promoted model current for ``shop`` on the
     instrument (the shop's own, else the instrument's); None where the shipped one is."""
-    names = [shop_model_name(instrument, shop)] if shop is not None else []
     with Session(engine) as session:
-        for name in [*names, instrument]:
-            row = _promoted_row(session, name)
-            if row is not None:
-                return name, row.version
+        return _serving(session, instrument, shop)
+
+
+def _serving(session: Session, instrument: str, shop: str | None) -> tuple[str, int] | None:
+    names = [shop_model_name(instrument, shop)] if shop is not None else []
+    for name in [*names, instrument]:
+        row = _promoted_row(session, name)
+        if row is not None:
+            return name, row.version
     return None
 
 
@@ -303,6 +308,12 @@ def serving_model(
     return shipped_model(instrument) if serving is None else registered_model(engine, *serving)
 
 
+REGISTER_ATTEMPTS = 5
+"""How often :func:`register` judges and stores a model again when another registration of
+the same name lands first: its version number taken, or the current model changed since it
+was judged."""
+
+
 def register(
     engine: Engine,
     model: ForwardModel,
@@ -317,46 +328,79 @@ def register(
     on the cases whose toners both learned (the network's answer for a toner it never learned
     is no answer: the matcher has physics scale such toners) and neither learned from
     (:func:`~flakelab.models.training.unseen_by`). Returns the version, both scores, the
-    cases judged and whether it was promoted."""
+    cases judged and whether it was promoted.
+
+    Workplaces sharing a database may register at once: each version gets a number of its
+    own (the database refuses a second row of one name and version), and a registration that
+    finds its number taken, or another model current since it judged, judges again against
+    that one. Six registrations started at the same instant on PostgreSQL took three numbers
+    and promoted two versions at once before (``tests/test_cases.py``)."""
     name = name or shop_model_name(model.instrument, shop)
-    judged, incumbent_score = held_out, float("inf")
-    try:
-        incumbent = current_model(engine, model.instrument, shop)
-        comparable = held_out.without_toners({*model.new_toners, *incumbent.new_toners})
-        both = unseen_by(comparable, model, incumbent)
-        # with no case whose toners both learned and neither learned from, nothing shows
-        # that it is better
-        incumbent_score = evaluate_model(incumbent, both)["de00_mean"] if len(both.x) else None
-        judged = both
-    except ModelError:  # no current model for this library and instrument: promote the first
-        pass
-    score = evaluate_model(model, judged if len(judged.x) else held_out)["de00_mean"]
-    better = incumbent_score is not None and score < incumbent_score
-    with Session(engine) as session, session.begin():
-        version = (
-            session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == name)) or 0
-        ) + 1
-        if better:
-            _retire_promoted(session, name)
-        session.add(
-            ModelRow(
-                name=name,
-                version=version,
-                instrument=model.instrument,
-                status="promoted" if better else "candidate",
-                toners=list(model.toners),
-                data_hash=model.info.get("data_hash", ""),
-                metrics=metrics or {},
-                held_out_de00=score,
-                artefact=model.to_bytes(),
-                created_at=datetime.now(UTC),
-            )
+    for _ in range(REGISTER_ATTEMPTS):
+        serving = serving_version(engine, model.instrument, shop)
+        score, incumbent_score, judged, better = _judged(engine, model, held_out, serving)
+        row = ModelRow(
+            name=name,
+            instrument=model.instrument,
+            status="promoted" if better else "candidate",
+            toners=list(model.toners),
+            data_hash=model.info.get("data_hash", ""),
+            metrics=metrics or {},
+            held_out_de00=score,
+            artefact=model.to_bytes(),
+            created_at=datetime.now(UTC),
         )
-    return {
-        "name": name,
-        "version": version,
-        "held_out_de00": score,
-        "incumbent_de00": incumbent_score,
-        "cases_judged": len(judged.x),
-        "promoted": better,
-    }
+        try:
+            version = _stored(engine, row, shop, serving)
+        except IntegrityError:  # another registration took the number first
+            continue
+        if version is not None:
+            return {
+                "name": name,
+                "version": version,
+                "held_out_de00": score,
+                "incumbent_de00": incumbent_score,
+                "cases_judged": judged,
+                "promoted": better,
+            }
+    raise ModelError(
+        f"{engine.url}: {name}: other registrations landed {REGISTER_ATTEMPTS} times while "
+        "this one was judged; nothing was stored (register it again)"
+    )
+
+
+def _judged(engine: Engine, model: ForwardModel, held_out: CaseArrays, serving):
+    """``model``'s mean ΔE00 and the current one's (``serving``: :func:`serving_version`) on
+    the cases of ``held_out`` both can be judged on, their number, and whether ``model`` is
+    better. Where no case is comparable it is not; where the instrument has no current model
+    (none registered, none shipped) it is the first, and better."""
+    try:
+        incumbent = serving_model(engine, model.instrument, serving)
+    except ModelError:  # no shipped model for this instrument: the first one is promoted
+        return evaluate_model(model, held_out)["de00_mean"], None, len(held_out.x), True
+    comparable = held_out.without_toners({*model.new_toners, *incumbent.new_toners})
+    both = unseen_by(comparable, model, incumbent)
+    if not len(both.x):  # nothing shows that it is better
+        return evaluate_model(model, held_out)["de00_mean"], None, 0, False
+    score = evaluate_model(model, both)["de00_mean"]
+    incumbent_score = evaluate_model(incumbent, both)["de00_mean"]
+    return score, incumbent_score, len(both.x), score < incumbent_score
+
+
+def _stored(engine: Engine, row: ModelRow, shop: str | None, serving) -> int | None:
+    """Store ``row`` as its name's next version, retiring the promoted one where ``row`` is
+    promoted; its number, or None where the current model is no longer ``serving`` (it was
+    judged against another)."""
+    with Session(engine) as session, session.begin():
+        # the number before the current model: under READ COMMITTED each statement reads
+        # afresh, so a registration stored in between is seen by one of the two
+        version = (
+            session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == row.name)) or 0
+        ) + 1
+        if _serving(session, row.instrument, shop) != serving:
+            return None
+        if row.status == "promoted":
+            _retire_promoted(session, row.name)
+        row.version = version
+        session.add(row)
+    return version  # the row itself is expired once committed
