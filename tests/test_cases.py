@@ -658,6 +658,22 @@ def test_concurrent_writers_lose_no_case(database_url):
     assert count_cases(open_database(url)) == 180
 
 
+def test_workplaces_opening_a_new_database_at_once_all_find_it_ready(database_url):
+    """Four processes open a database no one has opened yet at the same instant: one builds
+    its tables, the others find them built (three were refused before, "table cases
+    already exists"), and each reads it."""
+    start = time.time() + 15  # every process loaded and waiting
+    with multiprocessing.get_context("spawn").Pool(4) as pool:
+        counted = pool.map(_open_and_count, [(database_url, start)] * 4)
+    assert counted == [0, 0, 0, 0]
+
+
+def _open_and_count(args):
+    url, start = args
+    time.sleep(max(0.0, start - time.time()))
+    return count_cases(open_database(url))
+
+
 def test_registrations_at_once_each_get_their_own_version(database_url):
     """Six workplaces register a model at the same instant: six versions, numbered 1 to 6, and
     one of them promoted. Before the registry judged again on a clash, PostgreSQL stored

@@ -138,8 +138,16 @@ def _sqlite_file(url: str) -> str | None:
     return "" if parsed.database in (None, "", ":memory:") else parsed.database
 
 
+MIGRATION_LOCK = 0x666C616B65
+"""PostgreSQL's advisory lock that migrations take in turn ("flake" in ASCII)."""
+
+
 def migrate(engine: Engine, revision: str = "head") -> None:
-    """Bring the database's schema to ``revision`` through the shipped migrations."""
+    """Bring the database's schema to ``revision`` through the shipped migrations, in one
+    transaction that holds the database's migration lock: workplaces opening a new database
+    at once build its tables one after another, and all but the first find them built (four
+    processes left three refused before, "table cases already exists", on SQLite and on
+    PostgreSQL)."""
     # imported here: alembic is a third of a second of every command's start, and a command
     # that opens no database (a match on a fresh machine) needs none of it
     from alembic import command
@@ -148,6 +156,10 @@ def migrate(engine: Engine, revision: str = "head") -> None:
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
     with engine.begin() as connection:
+        if engine.dialect.name == "sqlite":  # the write lock now, not at the first write
+            connection.exec_driver_sql("BEGIN IMMEDIATE")
+        elif engine.dialect.name == "postgresql":  # held until the transaction ends
+            connection.execute(select(func.pg_advisory_xact_lock(MIGRATION_LOCK)))
         config.attributes["connection"] = connection
         command.upgrade(config, revision)
 

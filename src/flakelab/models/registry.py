@@ -20,7 +20,6 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from sqlalchemy import Engine, func, select
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from flakelab.cases.schema import ModelRow
@@ -308,10 +307,10 @@ def serving_model(
     return shipped_model(instrument) if serving is None else registered_model(engine, *serving)
 
 
-REGISTER_ATTEMPTS = 5
-"""How often :func:`register` judges and stores a model again when another registration of
-the same name lands first: its version number taken, or the current model changed since it
-was judged."""
+REGISTER_ATTEMPTS = 20
+"""How often :func:`register` judges a model again when another registration promoted a
+model of its instrument while it was judging: each waiting registration loses once to each
+promotion, and eight registering at once took up to seven tries."""
 
 
 def register(
@@ -330,11 +329,12 @@ def register(
     (:func:`~flakelab.models.training.unseen_by`). Returns the version, both scores, the
     cases judged and whether it was promoted.
 
-    Workplaces sharing a database may register at once: each version gets a number of its
-    own (the database refuses a second row of one name and version), and a registration that
-    finds its number taken, or another model current since it judged, judges again against
-    that one. Six registrations started at the same instant on PostgreSQL took three numbers
-    and promoted two versions at once before (``tests/test_cases.py``)."""
+    Workplaces sharing a database may register at once: models are stored one at a time
+    (:func:`_stored`), each version with a number of its own (the database refuses a second
+    row of one name and version), and a registration that finds another model current than
+    the one it judged against judges again against that one. Six registrations started at
+    the same instant on PostgreSQL took three numbers twice and promoted two versions at
+    once before (``tests/test_cases.py``)."""
     name = name or shop_model_name(model.instrument, shop)
     for _ in range(REGISTER_ATTEMPTS):
         serving = serving_version(engine, model.instrument, shop)
@@ -350,10 +350,7 @@ def register(
             artefact=model.to_bytes(),
             created_at=datetime.now(UTC),
         )
-        try:
-            version = _stored(engine, row, shop, serving)
-        except IntegrityError:  # another registration took the number first
-            continue
+        version = _stored(engine, row, shop, serving)
         if version is not None:
             return {
                 "name": name,
@@ -387,13 +384,28 @@ def _judged(engine: Engine, model: ForwardModel, held_out: CaseArrays, serving):
     return score, incumbent_score, len(both.x), score < incumbent_score
 
 
+REGISTRY_LOCK = 0x666C616B66
+"""PostgreSQL's advisory lock that stores registered models one at a time."""
+
+
+def _store_lock(session: Session) -> None:
+    """Hold the database's lock for storing a model until the transaction ends, so that a
+    registration reads the last version and the current model as they are when it stores:
+    SQLite's write lock, taken now rather than at the first write; PostgreSQL's advisory
+    lock :data:`REGISTRY_LOCK`."""
+    dialect = session.get_bind().dialect.name
+    if dialect == "sqlite":
+        session.connection().exec_driver_sql("BEGIN IMMEDIATE")
+    elif dialect == "postgresql":
+        session.execute(select(func.pg_advisory_xact_lock(REGISTRY_LOCK)))
+
+
 def _stored(engine: Engine, row: ModelRow, shop: str | None, serving) -> int | None:
     """Store ``row`` as its name's next version, retiring the promoted one where ``row`` is
     promoted; its number, or None where the current model is no longer ``serving`` (it was
     judged against another)."""
     with Session(engine) as session, session.begin():
-        # the number before the current model: under READ COMMITTED each statement reads
-        # afresh, so a registration stored in between is seen by one of the two
+        _store_lock(session)
         version = (
             session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == row.name)) or 0
         ) + 1
