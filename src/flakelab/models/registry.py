@@ -197,6 +197,7 @@ def promote(engine: Engine, name: str, version: int) -> dict:
     an operator's override of the automatic promotion, such as a rollback after a new version
     misbehaves in the shop. Returns what changed."""
     with Session(engine) as session, session.begin():
+        _store_lock(session)  # not beside a registration promoting another
         row = _version_row(session, engine, name, version)
         retired = _retire_promoted(session, name, keep=row)
         row.status = "promoted"
@@ -209,6 +210,7 @@ def retire(engine: Engine, name: str, version: int) -> dict:
     the instrument's the shipped one. Returns what changed and which is current now
     (``current``: the registered 'NAME vVERSION', or ``"shipped"``)."""
     with Session(engine) as session, session.begin():
+        _store_lock(session)
         row = _version_row(session, engine, name, version)
         was = row.status
         row.status = "retired"
@@ -385,12 +387,14 @@ def _judged(engine: Engine, model: ForwardModel, held_out: CaseArrays, serving):
 
 
 REGISTRY_LOCK = 0x666C616B66
-"""PostgreSQL's advisory lock that stores registered models one at a time."""
+"""PostgreSQL's advisory lock under which models are stored, promoted and retired one at a
+time."""
 
 
 def _store_lock(session: Session) -> None:
-    """Hold the database's lock for storing a model until the transaction ends, so that a
-    registration reads the last version and the current model as they are when it stores:
+    """Hold the database's lock for storing, promoting or retiring a model until the
+    transaction ends, so that a registration reads the last version and the current model as
+    they are when it stores, and a promotion by hand does not cross it:
     SQLite's write lock, taken now rather than at the first write; PostgreSQL's advisory
     lock :data:`REGISTRY_LOCK`."""
     dialect = session.get_bind().dialect.name
