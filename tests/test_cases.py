@@ -674,6 +674,36 @@ def _open_and_count(args):
     return count_cases(open_database(url))
 
 
+def test_a_database_is_read_while_another_process_writes_to_it(tmp_path):
+    """A command opens an up-to-date SQLite database while another process holds a long
+    write (an import is one transaction): it reads at once, where waiting for the migrations'
+    write lock would give up after the 30 s busy timeout with "database is locked"."""
+    url = f"sqlite:///{tmp_path / 'shop.db'}"
+    open_database(url)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD_A_WRITE, url], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        assert count_cases(open_database(url)) == 0
+        assert holder.poll() is None  # the write still held
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+_HOLD_A_WRITE = """
+import sys, time
+from sqlalchemy import text
+from flakelab.cases.database import open_database
+with open_database(sys.argv[1]).begin() as connection:
+    connection.execute(text("INSERT INTO shop_habits (shop, model, instrument, report, "
+                            "created_at) VALUES ('s', 'm', 'i', '{}', '2026-01-01')"))
+    print("holding", flush=True)
+    time.sleep(120)
+"""
+
+
 def test_registrations_at_once_each_get_their_own_version(database_url):
     """Six workplaces register a model at the same instant: six versions, numbered 1 to 6, and
     one of them promoted. Before the registry judged again on a clash, PostgreSQL stored

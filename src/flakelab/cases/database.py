@@ -152,9 +152,19 @@ def migrate(engine: Engine, revision: str = "head") -> None:
     # that opens no database (a match on a fresh machine) needs none of it
     from alembic import command
     from alembic.config import Config
+    from alembic.runtime.migration import MigrationContext
+    from alembic.script import ScriptDirectory
 
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
+    wanted = revision
+    if revision == "head":
+        wanted = ScriptDirectory.from_config(config).get_current_head()
+    # an up-to-date database is read, not locked: a command would otherwise wait for a long
+    # write (an import of 61,000 cases is one transaction) before it could read
+    with engine.connect() as connection:
+        if MigrationContext.configure(connection).get_current_revision() == wanted:
+            return
     with engine.begin() as connection:
         if engine.dialect.name == "sqlite":  # the write lock now, not at the first write
             connection.exec_driver_sql("BEGIN IMMEDIATE")
