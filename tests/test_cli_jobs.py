@@ -724,8 +724,9 @@ def test_training_with_adaptation_keeps_the_general_model_and_judges_the_shops_o
 
 def test_a_model_file_trained_elsewhere_is_registered_and_promoted_only_if_better(tmp_path, cli):
     """A model adapted to shop A's cases at another workplace, registered as the shop's own:
-    judged on cases neither model learned from against the shipped one, it is promoted; the
-    same weights again, or the shipped model's, are refused with the registry unchanged."""
+    judged on the cases the shop's database records, which neither model learned from,
+    against the shipped one, it is promoted; the same weights again, or the shipped model's,
+    are refused with the registry unchanged."""
     habits = ("--shop", "shop A", "--shop-film-build", "1.05", "--shop-spread", "0.96",
               "--shop-gain", "0.005")  # fmt: skip
     learned, judged = str(tmp_path / "learned.csv"), str(tmp_path / "judged.csv")
@@ -736,7 +737,9 @@ def test_a_model_file_trained_elsewhere_is_registered_and_promoted_only_if_bette
     run = cli("model", "adapt", learned, "--shop", "shop A", "--epochs", "10", "--no-register",
               "--out", adapted)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = cli("model", "register", adapted, judged, "--shop", "shop A", "-d", database, "--json")
+    # judged on the cases the database records, where no others are given
+    assert cli("cases", "import", judged, "-d", database).returncode == 0
+    run = cli("model", "register", adapted, "--shop", "shop A", "-d", database, "--json")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     done = report["registry"]

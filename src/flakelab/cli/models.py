@@ -500,9 +500,12 @@ def register_file(
         ),
     ],
     cases: Annotated[
-        str,
-        typer.Argument(help="Case file (CSV/CxF) or database URL/file: the cases it is judged on."),
-    ],
+        str | None,
+        typer.Argument(
+            help="Case file (CSV/CxF) or database URL/file: the cases it is judged on.",
+            show_default="the cases recorded in --database",
+        ),
+    ] = None,
     shop: Annotated[
         str | None,
         typer.Option(
@@ -519,10 +522,10 @@ def register_file(
 ) -> None:
     """Register a model file as a new version, promoted only if it beats the current model.
 
-    Both are judged on the cases given that neither learned from and whose toners both
-    learned, as 'train' judges a model it registers; a model file registered before is
-    refused, the registry unchanged."""
-    from flakelab.cases.database import open_database
+    Both are judged on the cases given (by default those the database records) that neither
+    learned from and whose toners both learned, as 'train' judges a model it registers; a
+    model file registered before is refused, the registry unchanged."""
+    from flakelab.cases.database import default_url, open_database, url_for
     from flakelab.io import read_library
     from flakelab.models.registry import (
         held_already,
@@ -533,6 +536,7 @@ def register_file(
 
     model = load_model_file(model_file)
     lib = read_library(library)
+    cases = cases or (url_for(database) if database else default_url())
     chosen = shop_cases(cases, shop, model.geometries, since)
     data, tinned = recorded_tins_used(source_arrays(cases, chosen, lib), lib, no_tins)
     data = replace(data, instrument=model.instrument)
