@@ -493,6 +493,17 @@ def test_lot_files_round_trip_and_refuse_what_they_cannot_hold(tmp_path):
         read_lots(tmp_path / "missing.json")
 
 
+def test_a_harness_mode_given_for_one_target_is_named_as_such(cli):
+    """'match --lots' reads a toner-lot file, 'match evaluate --lots' takes what the harness's
+    shop knows of its tins: one given for the other is refused naming both."""
+    run = cli("match", "--example", "--lots", "calibrated")
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 2 and "calibrated: no such toner-lot file" in said
+    assert "'flakelab match evaluate --lots calibrated'" in said
+    run = cli("match", "evaluate", "--targets", "1", "--lots", "tins.json")
+    assert run.returncode == 2 and "expected one of standard, calibrated" in run.stderr
+
+
 def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward, library):
     from flakelab.core.measurement import Measurement
     from flakelab.core.spectra import WAVELENGTHS

@@ -76,6 +76,18 @@ ShopTinsOption = Annotated[
 ]
 
 
+def _check_not_a_harness_mode(path: Path) -> None:
+    """``--lots`` names a file for one target, and what the harness's shop knows of its tins
+    for 'match evaluate': a mode given for one target is named as such."""
+    from flakelab.match.evaluate import LOT_MODES
+
+    if str(path) in LOT_MODES and not path.exists():
+        raise FlakelabError(
+            f"--lots: {path}: no such toner-lot file; '{path}' says what the evaluation "
+            f"harness's shop knows of its tins ('flakelab match evaluate --lots {path}')"
+        )
+
+
 def shop_lots(
     path: Path | None, library, forward, shop: str | None = None, database: str | None = None
 ):
@@ -88,6 +100,7 @@ def shop_lots(
 
     notes = []
     if path is not None:
+        _check_not_a_harness_mode(path)
         lots = read_lots(path, library.names)
     elif (kept := stored_tins(shop, database, library.names)) is not None:
         lots = kept.lots
