@@ -312,7 +312,8 @@ def serving_model(
 REGISTER_ATTEMPTS = 20
 """How often :func:`register` judges a model again when another registration promoted a
 model of its instrument while it was judging: each waiting registration loses once to each
-promotion, and eight registering at once took up to seven tries."""
+promotion (eight registering at once on PostgreSQL, nudged copies of one model, ran out of
+five tries)."""
 
 
 def register(
