@@ -489,7 +489,7 @@ def record_all(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    table = Table(title=f"Recorded {len(cases)} spray-outs from {manifest}")
+    table = Table(title=f"Recorded {len(cases)} spray-outs from {manifest}", box=box.SIMPLE_HEAD)
     table.add_column("row", justify="right")
     columns = ("case", "shop", "outcome", "worst ΔE00", "from prediction", "instrument")
     for column in columns if check else tuple(c for c in columns if c != "from prediction"):
@@ -920,7 +920,9 @@ def realism(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    table = Table(title=f"Generated world realism (seed {seed}, {n} formulations)")
+    table = Table(
+        title=f"Generated world realism (seed {seed}, {n} formulations)", box=box.SIMPLE_HEAD
+    )
     for column in ("statistic", "value", "realistic range"):
         table.add_column(column)
     for key, (lo, hi) in ranges.items():
@@ -1101,7 +1103,7 @@ def _print_habits(report: dict, fit: dict, title: str) -> None:
     from flakelab.match.habits import habit_meaning
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
 
-    table = Table(title=title)
+    table = Table(title=title, box=box.SIMPLE_HEAD)
     for column in ("habit", "estimate", "± s.e.", "meaning"):
         table.add_column(column, justify="right")
     rows = (("film build", "film_build", ".1%"), ("flake spread", "flake_spread", ".1%"),
@@ -1137,7 +1139,7 @@ def _print_habits(report: dict, fit: dict, title: str) -> None:
 
 def _explained_table(fit: dict) -> Table:
     """Per geometry: the spray-outs' mean ΔE00 from the model alone and with the habits."""
-    table = Table(title="Mean ΔE00 of the spray-outs from the model")
+    table = Table(title="Mean ΔE00 of the spray-outs from the model", box=box.SIMPLE_HEAD)
     table.add_column("")
     for name in [*fit["geometries"], "mean"]:
         table.add_column(name, justify="right")
@@ -1175,7 +1177,7 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
     if json_output:
         print(json.dumps({"shops": rows}, indent=2))
         return
-    table = Table(title=f"Shops in {engine.url}")
+    table = Table(title=f"Shops in {engine.url}", box=box.SIMPLE_HEAD)
     columns = ("shop", "cases", " / ".join(OUTCOMES), "last case", "habits", "tins", "own model")
     for column in columns:
         table.add_column(column)

@@ -416,7 +416,10 @@ def validate_scaling(
 
 
 def _print_scaling(report: dict[str, Any]) -> None:
-    table = Table(title=f"Scaling experiment ({report['photons_per_spectrum']:,} photons/spectrum)")
+    table = Table(
+        title=f"Scaling experiment ({report['photons_per_spectrum']:,} photons/spectrum)",
+        box=box.SIMPLE_HEAD,
+    )
     table.add_column("figure")
     table.add_column("value", justify="right")
     table.add_column("goal")

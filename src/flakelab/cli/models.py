@@ -9,6 +9,7 @@ from typing import Annotated, Any
 
 import numpy as np
 import typer
+from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
@@ -113,7 +114,7 @@ def de00_table(title: str, label: str, stats: dict, names=None, total: bool = Tr
     """ΔE00 mean, p95 and max per row of ``stats`` (``names``, default all; the last bold
     where it is the ``total``)."""
     names = list(stats) if names is None else list(names)
-    table = Table(title=title)
+    table = Table(title=title, box=box.SIMPLE_HEAD)
     for column in (label, "ΔE00 mean", "p95", "max"):
         table.add_column(column, justify="right")
     for name in names:
@@ -396,7 +397,7 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
             json.dumps({"registered": rows, "shipped": list(SHIPPED), "current": current}, indent=2)
         )
         return
-    table = Table(title="Models")
+    table = Table(title="Models", box=box.SIMPLE_HEAD)
     for column in ("name", "version", "status", "held-out ΔE00", "toners", "data", "created"):
         table.add_column(column)
     for r in rows:
@@ -598,7 +599,7 @@ def _model_card_table(card: dict) -> Table:
     rows["cases it learned from"] = "not recorded" if learned is None else f"{learned:,}, recorded"
     if "file" in card:
         rows["written to"] = card["file"]
-    table = Table(title=f"Model {card['name']}", show_header=False)
+    table = Table(title=f"Model {card['name']}", show_header=False, box=box.SIMPLE)
     table.add_column(style="bold")
     table.add_column(overflow="fold")
     for key, value in rows.items():
