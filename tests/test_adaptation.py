@@ -244,3 +244,20 @@ def test_the_kept_epoch_is_told_with_the_cases_that_chose_it():
     assert _kept_epoch_text(summary) == "kept epoch 146 of 150 (chosen on 40 cases)"
     summary |= {"kept_epochs": 150, "validation_cases": 0}
     assert _kept_epoch_text(summary) == "kept epoch 150 of 150"
+
+
+def test_the_adaptations_progress_counts_its_cases_as_its_report_does():
+    """The bar counted the cases that choose the epoch among those adapted on (39 against
+    the report's 31) where the adaptation split them off itself."""
+    from types import SimpleNamespace
+
+    from flakelab.cli.models import _adapting_label
+    from flakelab.models.training import TrainingConfig
+
+    cases = SimpleNamespace(x=np.zeros((39, 3)))
+    config = TrainingConfig(adapt_validation=0.2)
+    assert _adapting_label(cases, None, config) == "adapting to 31 cases (8 more choose the epoch)"
+    withheld = SimpleNamespace(x=np.zeros((10, 3)))
+    assert _adapting_label(cases, withheld, config).startswith("adapting to 39 cases (10 more")
+    every_epoch = replace(config, adapt_validation=0.0)
+    assert _adapting_label(cases, None, every_epoch) == "adapting to 39 cases"

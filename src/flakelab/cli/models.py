@@ -872,7 +872,7 @@ def adapt(
     stage = f"adapt {shop or cases}"
     with progress_bar(disable=json_output) as bar:
         total = config.adapt_epochs * base.members  # an ensemble's members adapt side by side
-        task = bar.add_task(f"adapting to {data.x.shape[0]} cases", total=total)
+        task = bar.add_task(_adapting_label(data, validation, config), total=total)
         new, report = adapt_model(
             base,
             data,
@@ -906,6 +906,21 @@ def adapt(
         print(json.dumps(summary, indent=2))
         return
     _print_adaptation(summary, stage, config.outlier_threshold)
+
+
+def _adapting_label(data, validation, config) -> str:
+    """The progress bar's words: the cases adapted on and those that choose the epoch (split
+    off by the adaptation itself where ``validation`` is None), as its report counts them."""
+    from flakelab.models.training import adaptation_split
+
+    n = data.x.shape[0]
+    if validation is None:
+        choosing = adaptation_split(np.arange(n), config)[1]
+        k = 0 if choosing is None else choosing.size
+        n -= k
+    else:
+        k = validation.x.shape[0]
+    return f"adapting to {n} cases" + (f" ({k} more choose the epoch)" if k else "")
 
 
 def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
