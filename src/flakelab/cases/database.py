@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
-from sqlalchemy import Engine, create_engine, event, func, select
+from sqlalchemy import Connection, Engine, create_engine, event, func, select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session
@@ -29,6 +29,7 @@ __all__ = [
     "default_url",
     "open_database",
     "migrate",
+    "lock_database",
     "add_cases",
     "iter_cases",
     "count_cases",
@@ -142,6 +143,17 @@ MIGRATION_LOCK = 0x666C616B65
 """PostgreSQL's advisory lock that migrations take in turn ("flake" in ASCII)."""
 
 
+def lock_database(connection: Connection, key: int) -> None:
+    """Hold the lock ``key`` until ``connection``'s transaction ends, so that writers that
+    read before they write take their turns: SQLite's write lock (one for the whole file),
+    taken now rather than at the first write; on PostgreSQL the advisory lock ``key``."""
+    dialect = connection.dialect.name
+    if dialect == "sqlite":
+        connection.exec_driver_sql("BEGIN IMMEDIATE")
+    elif dialect == "postgresql":
+        connection.execute(select(func.pg_advisory_xact_lock(key)))
+
+
 def migrate(engine: Engine, revision: str = "head") -> None:
     """Bring the database's schema to ``revision`` through the shipped migrations, in one
     transaction that holds the database's migration lock: workplaces opening a new database
@@ -166,10 +178,7 @@ def migrate(engine: Engine, revision: str = "head") -> None:
         if MigrationContext.configure(connection).get_current_revision() == wanted:
             return
     with engine.begin() as connection:
-        if engine.dialect.name == "sqlite":  # the write lock now, not at the first write
-            connection.exec_driver_sql("BEGIN IMMEDIATE")
-        elif engine.dialect.name == "postgresql":  # held until the transaction ends
-            connection.execute(select(func.pg_advisory_xact_lock(MIGRATION_LOCK)))
+        lock_database(connection, MIGRATION_LOCK)
         config.attributes["connection"] = connection
         command.upgrade(config, revision)
 

@@ -540,7 +540,6 @@ def register_file(
     cases = cases or (url_for(database) if database else default_url())
     chosen = shop_cases(cases, shop, model.geometries, since)
     data, tinned = recorded_tins_used(source_arrays(cases, chosen, lib), lib, no_tins)
-    data = replace(data, instrument=model.instrument)
     engine = open_database(database)
     name = shop_model_name(model.instrument, shop)
     if held := held_already(engine, name, model):

@@ -22,6 +22,7 @@ from pathlib import Path
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
+from flakelab.cases.database import lock_database
 from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.models.network import ForwardModel, ModelError
@@ -339,6 +340,7 @@ def register(
     the same instant on PostgreSQL took three numbers twice and promoted two versions at
     once before (``tests/test_cases.py``)."""
     name = name or shop_model_name(model.instrument, shop)
+    artefact = model.to_bytes()
     for _ in range(REGISTER_ATTEMPTS):
         serving = serving_version(engine, model.instrument, shop)
         score, incumbent_score, judged, better = _judged(engine, model, held_out, serving)
@@ -350,7 +352,7 @@ def register(
             data_hash=model.info.get("data_hash", ""),
             metrics=metrics or {},
             held_out_de00=score,
-            artefact=model.to_bytes(),
+            artefact=artefact,
             created_at=datetime.now(UTC),
         )
         version = _stored(engine, row, shop, serving)
@@ -395,14 +397,8 @@ time."""
 def _store_lock(session: Session) -> None:
     """Hold the database's lock for storing, promoting or retiring a model until the
     transaction ends, so that a registration reads the last version and the current model as
-    they are when it stores, and a promotion by hand does not cross it:
-    SQLite's write lock, taken now rather than at the first write; PostgreSQL's advisory
-    lock :data:`REGISTRY_LOCK`."""
-    dialect = session.get_bind().dialect.name
-    if dialect == "sqlite":
-        session.connection().exec_driver_sql("BEGIN IMMEDIATE")
-    elif dialect == "postgresql":
-        session.execute(select(func.pg_advisory_xact_lock(REGISTRY_LOCK)))
+    they are when it stores, and a promotion by hand does not cross it."""
+    lock_database(session.connection(), REGISTRY_LOCK)
 
 
 def _stored(engine: Engine, row: ModelRow, shop: str | None, serving) -> int | None:
