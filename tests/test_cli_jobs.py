@@ -895,7 +895,7 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     report = json.loads(run.stdout)
     assert report["left_out_mismatched"] == [recorded] and report["cases"] == 60
     run = cli("cases", "habits", cases, "--shop", "shop A", "--save", "-d", cases)
-    assert run.returncode == 0 and "left out 1 spray-out(s) further than ΔE00 5" in " ".join(
+    assert run.returncode == 0 and "left out 1 spray-out further than ΔE00 5" in " ".join(
         run.stderr.split()
     )
     # a history with another mix-up among good rows: recorded whole, the mix-up named by row,
@@ -915,7 +915,7 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     assert good["habits"] and mixed["habits"] and good["de00"] < 5 < mixed["de00"]
     run = cli("cases", "record-all", str(manifest), "-d", str(tmp_path / "other.db"))
     said = " ".join(run.stderr.split())
-    assert run.returncode == 0 and "1 spray-out(s) further than ΔE00 5" in said
+    assert run.returncode == 0 and "1 spray-out further than ΔE00 5" in said
     assert "rows 3: stored all the same" in said
     for row in history["cases"]:  # the shop's history as it was, for what follows
         run = cli("cases", "remove", row["case_id"], "-d", cases, "--yes")
@@ -958,7 +958,7 @@ def test_an_imported_history_names_its_likely_mix_ups(tmp_path, cli):
     run = cli("cases", "import", str(history), "-d", str(tmp_path / "a.db"))
     said = " ".join(run.stderr.split())
     assert run.returncode == 0 and "imported 40 cases" in said
-    assert "1 spray-out(s) further than ΔE00 5 from what their recipe predicts" in said
+    assert "1 spray-out further than ΔE00 5 from what their recipe predicts" in said
     assert cases[7].case_id in said
     run = cli("cases", "import", str(history), "-d", str(tmp_path / "b.db"), "--no-check")
     assert run.returncode == 0 and "further than" not in run.stderr

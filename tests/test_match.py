@@ -863,7 +863,7 @@ def test_match_refuses_bad_input(tmp_path, cli):
     assert run.returncode == 2 and f"--recipe-out: {tmp_path / 'no' / 'r.json'}" in run.stderr
     assert "candidates" not in run.stdout
     run = cli("match", "--example", "--pick", "4")
-    assert run.returncode == 2 and "--pick: expected one of the 3 candidates" in run.stderr
+    assert run.returncode == 2 and "--pick: 4 is more than the 3 candidates shown" in run.stderr
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"format": "flakelab-library", "name": "x", "toners": []}))
     run = cli("match", "--example", "--library", str(empty))

@@ -61,6 +61,7 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     instruments_reading,
 )
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
@@ -179,7 +180,9 @@ def _store_generated(engine, batch: list, stored: int) -> None:
     try:
         add_cases(engine, batch)
     except CaseError as error:
-        before = f"; the {stored} cases generated before it stay stored" if stored else ""
+        before = ""
+        if stored:
+            before = f"; the {counted(stored, 'case')} generated before it stay stored"
         raise FlakelabError(
             f"{error}{before}; a seed generates the same case ids every time: choose another "
             "--seed or another database"
@@ -209,7 +212,8 @@ def import_cases(
         count = add_cases(engine, cases)  # one transaction: all of them or none
     except CaseError as error:  # it names the case stored already
         raise FlakelabError(f"{source}: {error}") from None
-    errors.print(f"imported {count} cases from {source} into {engine.url}", highlight=False)
+    imported = f"imported {counted(count, 'case')} from {source} into {engine.url}"
+    errors.print(imported, highlight=False)
     if not check:
         return
     checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
@@ -396,7 +400,7 @@ def _print_recorded(report: dict, chosen: bool) -> None:
             highlight=False,
         )
     count = report["cases_in_database"]
-    errors.print(f"{count} case{'s' * (count != 1)} in {report['database']}", highlight=False)
+    errors.print(f"{counted(count, 'case')} in {report['database']}", highlight=False)
 
 
 @cases_app.command("record-all")
@@ -506,7 +510,7 @@ def record_all(
     _tell_mix_ups(len(mismatched), f"rows {', '.join(str(r['row']) for r in mismatched)}",
                   unchecked)  # fmt: skip
     count = report["cases_in_database"]
-    errors.print(f"{count} case{'s' * (count != 1)} in {engine.url}", highlight=False)
+    errors.print(f"{counted(count, 'case')} in {engine.url}", highlight=False)
 
 
 @cases_app.command("list")
@@ -629,10 +633,10 @@ def _tell_mix_ups(count: int, which: str, unchecked: str | None) -> None:
 
     if count:
         errors.print(
-            f"[yellow]warning:[/] {count} spray-out(s) further than ΔE00 {SPRAYOUT_MISMATCH:g} "
-            f"from what their recipe predicts, likely mix-ups (another panel, recipe or "
-            f"target), {which}: stored all the same; 'cases habits' leaves them out, 'cases "
-            "remove' removes them",
+            f"[yellow]warning:[/] {counted(count, 'spray-out')} further than ΔE00 "
+            f"{SPRAYOUT_MISMATCH:g} from what their recipe predicts, likely mix-ups (another "
+            f"panel, recipe or target), {which}: stored all the same; 'cases habits' leaves them "
+            "out, 'cases remove' removes them",
             highlight=False,
         )
     elif unchecked:
@@ -696,7 +700,7 @@ def nearest(
     tol = read_tolerance(tolerance)
     check_output_file(recipe_out, "--recipe-out")
     if pick > count:
-        raise FlakelabError(f"--pick: expected one of the {count} cases shown, got {pick}")
+        raise FlakelabError(f"--pick: {pick} is more than the {counted(count, 'case')} shown")
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     can = order_can(quantity, resolution)  # a can the scale cannot weigh: before the search
     reading = read_readings(target, sample, average)[0]
@@ -769,7 +773,7 @@ def _print_nearest(report: dict) -> None:
     passing = sum(row["passes"] for row in rows)
     if passing:
         console.print(
-            f"{passing} recipe{'s' * (passing != 1)} of the shop already gave a panel within "
+            f"{counted(passing, 'recipe')} of the shop already gave a panel within "
             f"{report['tolerance']} of this car: start from the first (--recipe-out), and "
             "correct it from its spray-out",
             highlight=False,
@@ -1118,7 +1122,7 @@ def _print_habits(report: dict, fit: dict, title: str) -> None:
         errors.print(f"[yellow]warning:[/] {report['drift']['message']}", highlight=False)
     if left_out := report["left_out_mismatched"]:
         errors.print(
-            f"[yellow]warning:[/] left out {len(left_out)} spray-out(s) further than ΔE00 "
+            f"[yellow]warning:[/] left out {counted(len(left_out), 'spray-out')} further than ΔE00 "
             f"{SPRAYOUT_MISMATCH:g} from the model's prediction with these habits, likely "
             f"mix-ups (another panel, recipe or target): {', '.join(left_out[:5])}"
             + (" …" if len(left_out) > 5 else ""),

@@ -42,6 +42,7 @@ from flakelab.cli.models import model_app, train
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.cli.weigh import weigh_command
 from flakelab.core.defaults import DEFAULT_CONDITIONS, DEFAULT_TOLERANCE
+from flakelab.core.wording import counted
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
 
@@ -328,7 +329,7 @@ def convert(
 
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     write_measurements(measurements, target)
-    errors.print(f"wrote {len(measurements)} measurement(s) to {target}", highlight=False)
+    errors.print(f"wrote {counted(len(measurements), 'measurement')} to {target}", highlight=False)
 
 
 @app.command()

@@ -53,6 +53,7 @@ from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
 
@@ -302,7 +303,8 @@ def match_command(
     check_figure_file(plot, "--plot")
     check_output_file(recipe_out, "--recipe-out")
     if pick > candidates:
-        raise FlakelabError(f"--pick: expected one of the {candidates} candidates, got {pick}")
+        shown = counted(candidates, "candidate")
+        raise FlakelabError(f"--pick: {pick} is more than the {shown} shown (--candidates)")
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward, shop, database)
@@ -468,7 +470,8 @@ def _write_candidate(report: dict, pick: int, path: Path) -> None:
     from flakelab.io import write_recipe
 
     if pick > len(report["candidates"]):
-        raise FlakelabError(f"--pick: the search found {len(report['candidates'])} candidates")
+        found = counted(len(report["candidates"]), "candidate")
+        raise FlakelabError(f"--pick: the search found {found}")
     lines = report["candidates"][pick - 1]["weights_g"]
     write_recipe({ln["toner"]: ln["grams"] for ln in lines if ln["grams"] > 0}, path)
     report["recipe_out"] = {"file": str(path), "candidate": pick}
@@ -507,7 +510,7 @@ def _print_match(report: dict) -> None:
     from flakelab.core.tolerance import failures
 
     console.print(
-        f"[bold]{report['target']}[/] — {len(report['candidates'])} candidates "
+        f"[bold]{report['target']}[/] — {counted(len(report['candidates']), 'candidate')} "
         f"({report['subsets_tried']} toner sets optimised in {report['seconds']:.2f} s, "
         f"tolerance {report['tolerance']}, model {report['model_id']})",
         highlight=False,
@@ -647,8 +650,8 @@ def _evaluate(
         from flakelab.render.plots import plot_harness
 
         trials = report.pop("per_target")
-        plot_harness(trials[:targets], trials[targets:], plot, tolerance=tol.name,
-                     title=f"{forward.model_id}, {targets} targets (seed {seed})")  # fmt: skip
+        title = f"{forward.model_id}, {counted(targets, 'target')} (seed {seed})"
+        plot_harness(trials[:targets], trials[targets:], plot, tolerance=tol.name, title=title)
         report["plot"] = str(plot)
     report["model"] = forward.name
     report["model_id"] = forward.model_id

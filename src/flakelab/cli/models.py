@@ -44,6 +44,7 @@ from flakelab.cli.sources import (
     which_cases,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError
 
 DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
@@ -755,7 +756,7 @@ def _print_evaluation(report: dict, loaded: int) -> None:
         )
     rows = {**report["per_geometry"], "all": report}
     count = report["cases"]
-    title = f"{report['model']} on {count} case{'s' * (count != 1)}"
+    title = f"{report['model']} on {counted(count, 'case')}"
     console.print(de00_table(title, "geometry", rows))
     families = {f"{name} ({row['cases']})": row for name, row in report["per_family"].items()}
     console.print(de00_table("by paint family", "family (cases)", families, total=False))
@@ -769,7 +770,7 @@ def _print_evaluation(report: dict, loaded: int) -> None:
             else ""
         )
         errors.print(
-            f"[yellow]warning:[/] {len(mixed)} case(s) lie further than ΔE00 "
+            f"[yellow]warning:[/] {counted(len(mixed), 'case')} further than ΔE00 "
             f"{SPRAYOUT_MISMATCH:g} from the model's prediction, likely mix-ups (another panel, "
             f"recipe or target): {named}; the figures above include them{rest}",
             highlight=False,
@@ -919,7 +920,7 @@ def _adapting_label(data, validation, config) -> str:
         n -= k
     else:
         k = validation.x.shape[0]
-    return f"adapting to {n} cases" + (f" ({k} more choose the epoch)" if k else "")
+    return f"adapting to {counted(n, 'case')}" + (f" ({k} more choose the epoch)" if k else "")
 
 
 def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
@@ -930,8 +931,8 @@ def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
     console.print(de00_table(title, "held out", summary["held_out"], ("before", "after")))
     if dropped := summary["outlier_case_ids"]:
         errors.print(
-            f"[yellow]warning:[/] left out {len(dropped)} case(s) whose error by the model lies "
-            f"more than {threshold:g} robust s.d. above the shop's, likely "
+            f"[yellow]warning:[/] left out {counted(len(dropped), 'case')} whose error by the "
+            f"model lies more than {threshold:g} robust s.d. above the shop's, likely "
             f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
             highlight=False,
         )
@@ -974,10 +975,10 @@ def _kept_epoch_text(summary: dict) -> str:
         return f"kept epoch {kept} of {epochs}"
     if kept == 0:
         return (
-            f"kept the model as it was: none of its {epochs} epochs did better on the "
-            f"{judged} cases held out to choose"
+            f"kept the model as it was: none of its {counted(epochs, 'epoch')} did better on the "
+            f"{counted(judged, 'case')} held out to choose"
         )
-    return f"kept epoch {kept} of {epochs} (chosen on {judged} cases)"
+    return f"kept epoch {kept} of {epochs} (chosen on {counted(judged, 'case')})"
 
 
 def _write_model(model, out: Path) -> None:

@@ -67,6 +67,7 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import instrument_of
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.torch_colour import TorchColour
+from flakelab.core.wording import counted
 from flakelab.models.network import (
     MAX_HIDDEN,
     MAX_MEMBERS,
@@ -771,8 +772,8 @@ def adaptation_split(rows: NDArray, config: TrainingConfig) -> tuple[NDArray, ND
     held = round(share * rows.size)
     if share > 0 and not 1 <= held < rows.size:
         raise ModelError(
-            f"adaptation: {rows.size} cases are too few to hold out {share:.0%} of them to "
-            "choose the epoch; bring more cases or adapt without validation (0)"
+            f"adaptation: {counted(rows.size, 'case')}: too few to hold out {share:.0%} of them "
+            "to choose the epoch; bring more cases or adapt without validation (0)"
         )
     shuffled = np.random.default_rng([config.seed, rows.size]).permutation(rows)
     return (shuffled[held:], shuffled[:held]) if held else (rows, None)
@@ -784,7 +785,7 @@ def held_out_split(data: CaseArrays, holdout: float, seed: int) -> tuple[CaseArr
     n = data.x.shape[0]
     held = np.random.default_rng(seed).random(n) < holdout
     if held.all() or not held.any():
-        raise ModelError(f"{n} cases are too few to hold out {holdout:.0%} of them")
+        raise ModelError(f"{counted(n, 'case')}: too few to hold out {holdout:.0%} of them")
     return data.subset(np.flatnonzero(~held)), data.subset(np.flatnonzero(held))
 
 

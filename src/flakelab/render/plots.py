@@ -20,6 +20,7 @@ from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E4
 from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.core.tolerance import Tolerance  # noqa: E402
+from flakelab.core.wording import counted  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
 __all__ = [
@@ -438,7 +439,7 @@ def plot_model_errors(
     worst.set(xlabel="worst ΔE00 of a case over its geometries", ylabel="cases")
     summary = (
         f"ΔE00 mean {de.mean():.3f}, p95 {np.percentile(de, 95):.2f}, max {de.max():.2f} over "
-        f"{len(de)} case{'s' * (len(de) != 1)} × {len(names)} geometries"
+        f"{counted(len(de), 'case')} × {counted(len(names), 'geometry', 'geometries')}"
     )
     figure.suptitle(f"{title}: {summary}" if title else summary)
     _save(figure, path, dpi)
