@@ -61,7 +61,7 @@ def run_harness(
     target_texture=True,
     habits=None,
     per_target=False,
-    lots="standard",
+    lots="none",
 ) -> dict:
     """The harness's report for ``forward`` on the targets the options ``args`` name, those
     with a new toner drawn from ``novel``; without ``target_texture`` the matcher reads the
@@ -104,7 +104,7 @@ def timed_harness(
     target_texture=True,
     habits=None,
     per_target=False,
-    lots="standard",
+    lots="none",
 ) -> tuple[dict, float]:
     """:func:`run_harness`'s report under a progress bar labelled ``label`` (none with
     ``--json``), and the run's wall time in seconds."""

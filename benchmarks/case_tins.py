@@ -11,7 +11,7 @@ cases generate --n 500 --seed 987``, the shipped model of each instrument, cases
 saw), for what the cases record of their tins:
 
 * ``none``: nothing (the issue's figure);
-* ``read``: each tin read from one panel against the model, to the error that reading has
+* ``calibrated``: each tin read from one panel against the model, to the error that reading has
   in the harness (1.11 % in strength, 0.75 nm in shade: README, *The shop's tins*);
 * ``referenced``: against the paint maker's panel (0.59 %, 0.29 nm);
 * ``known``: the world's own batches (the limit a reading approaches);
@@ -53,7 +53,7 @@ from flakelab.models.training import TrainingConfig, generated_case_arrays, trai
 
 RECORDED = {
     "none": WorldSettings(),
-    "read": WorldSettings(tins="read"),
+    "calibrated": WorldSettings(tins="calibrated"),
     "referenced": WorldSettings(tins="referenced"),
     "known": WorldSettings(tins="known"),
 }
@@ -95,10 +95,10 @@ def tins_report(instrument: str, cases: int, seed: int) -> dict:
 
 def learning_report(instrument: str, cases: int, seed: int, train: int, epochs: int,
                     train_seed: int) -> dict:  # fmt: skip
-    """Two models trained on ``train`` cases recording their tins (read), learning them as
+    """Two models trained on ``train`` cases recording their tins (calibrated), learning them as
     poured from the standard or at the standard tins, judged on the issue's cases."""
     library = read_library(None)
-    world = World(library, instrument, RECORDED["read"])
+    world = World(library, instrument, RECORDED["calibrated"])
     data = generated_case_arrays(world, train, train_seed)
     judged = generated_case_arrays(world, cases, seed)
     measured = reflectance_to_Lab(judged.R)
@@ -157,7 +157,7 @@ def main() -> None:
             learning = report["learning"]
             print(
                 f"  models trained on {learning['train_cases']} cases recording their tins "
-                f"(read; {learning['epochs']} epochs a stage, seed {learning['train_seed']}):"
+                f"(calibrated; {learning['epochs']} epochs a stage, seed {learning['train_seed']}):"
             )
             for name, row in learning["models"].items():
                 print(f"    learned {name.replace('_', ' ')}: {row}")

@@ -18,15 +18,15 @@ the same shop's cases. ``--no-habits`` runs a shop without habits of its own.
 application instead of the learned model: the estimator alone, without the model's error
 (a bias there is the estimator's; a bias only against the model is the model's).
 
-``--tins read|referenced|known`` makes the shop's cases record the tins they were poured from (as
-``cases generate --tins``): its habits are read at the standard tins, as ``flakelab cases
+``--tins calibrated|referenced|known`` makes the shop's cases record the tins they were poured
+from (as ``cases generate --tins``): its habits are read at the standard tins, as ``flakelab cases
 habits`` reads them (:func:`~flakelab.match.lots.at_standard_tins`), and the fresh
 spray-outs are judged for their tins; with ``--no-tins`` the habits are read from the same
 cases taken as poured from the standard (``cases habits --no-tins``), the baseline.
 
     python benchmarks/habits.py [--cases 20,50,100,200,500,2000] [--repeats 5] [--no-prior]
-        [--no-habits] [--against model|physics] [--tins none|read|referenced|known [--no-tins]]
-        [--json]
+        [--no-habits] [--against model|physics]
+        [--tins none|calibrated|referenced|known [--no-tins]] [--json]
 """
 
 from __future__ import annotations
@@ -39,8 +39,9 @@ import numpy as np
 import torch
 
 from _matcher import seeds_from
-from flakelab.cases.generator import SHOP_WITH_HABITS, TINS_RECORDED, World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.io import read_library
+from flakelab.library.lots import TIN_KNOWLEDGE
 from flakelab.match.habits import PRIOR_SD, ShopHabits, estimate_habits, habits_fit
 from flakelab.match.lots import at_standard_tins
 from flakelab.match.models import forward_for
@@ -85,7 +86,7 @@ def main() -> None:
     parser.add_argument("--no-habits", action="store_true", help="a shop like the world")
     parser.add_argument("--no-prior", action="store_true", help="read without PRIOR_SD")
     parser.add_argument("--against", choices=("model", "physics"), default="model")
-    parser.add_argument("--tins", choices=TINS_RECORDED, default="none", help="cases record")
+    parser.add_argument("--tins", choices=TIN_KNOWLEDGE, default="none", help="cases record")
     parser.add_argument("--no-tins", action="store_true", help="read as poured from standard")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()

@@ -15,12 +15,12 @@ mean z of each habit.
 
 ``--tin-sprayouts K`` makes every shop's tins last K spray-outs (``WorldSettings``), so that
 a new tin of a toner moves every later case that uses it, as a change of habits would;
-``--tins read|referenced|known`` makes the cases record their tins, and ``--at-tins`` reads
+``--tins calibrated|referenced|known`` makes the cases record their tins, and ``--at-tins`` reads
 them at the standard tins, as ``flakelab cases habits`` does (else as poured from the
 standard).
 
     python benchmarks/habits_drift.py [--cases 100,200,400,1000] [--at 0.5,0.8] [--repeats 5]
-        [--tin-sprayouts K] [--tins none|read|referenced|known] [--at-tins] [--json]
+        [--tin-sprayouts K] [--tins none|calibrated|referenced|known] [--at-tins] [--json]
 
 ``flakelab cases habits`` looks for a change from ``MIN_DRIFT_CASES`` (100) spray-outs on;
 smaller sizes (from 40) show why.
@@ -35,8 +35,9 @@ import time
 import numpy as np
 
 from _matcher import seeds_from
-from flakelab.cases.generator import SHOP_WITH_HABITS, TINS_RECORDED, World, WorldSettings
+from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.io import read_library
+from flakelab.library.lots import TIN_KNOWLEDGE
 from flakelab.match.habits import DRIFT_Z, MIN_HABIT_CASES, habits_drift
 from flakelab.match.lots import at_standard_tins
 from flakelab.match.models import forward_for
@@ -91,7 +92,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="draws of each shop's cases")
     parser.add_argument("--seed", type=int, default=100, help="seed of the first draw")
     parser.add_argument("--tin-sprayouts", type=int, default=1, help="spray-outs a tin serves")
-    parser.add_argument("--tins", choices=TINS_RECORDED, default="none", help="cases record")
+    parser.add_argument("--tins", choices=TIN_KNOWLEDGE, default="none", help="cases record")
     parser.add_argument("--at-tins", action="store_true", help="read at the standard tins")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()

@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 
 from _matcher import add_harness_arguments, shipped_matcher, timed_harness
-from flakelab.match.evaluate import LOT_MODES
+from flakelab.library.lots import TIN_KNOWLEDGE
 from timing import print_report
 
 
@@ -38,22 +38,24 @@ def paired(base: list[dict], other: list[dict], key: str) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
-        "--modes", default="calibrated,referenced,known", help="lot modes against standard"
+        "--modes",
+        default="calibrated,referenced,known",
+        help="what the shop knows of its tins, each against none",
     )
     add_harness_arguments(parser, targets=200, novel_targets=0)
     args = parser.parse_args()
     modes = [m for m in args.modes.split(",") if m]
-    if not set(modes) <= set(LOT_MODES) - {"standard"}:
+    if not set(modes) <= set(TIN_KNOWLEDGE) - {"none"}:
         raise SystemExit(
-            f"--modes: expected some of {', '.join(LOT_MODES[1:])}, got {args.modes!r}"
+            f"--modes: expected some of {', '.join(TIN_KNOWLEDGE[1:])}, got {args.modes!r}"
         )
 
     world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
     runs = {}
-    for mode in ["standard", *modes]:
+    for mode in ["none", *modes]:
         runs[mode] = timed_harness(world, forward, effect, args, forward.novel, mode,
                                    per_target=True, lots=mode)  # fmt: skip
-    base = runs["standard"][0]["per_target"]
+    base = runs["none"][0]["per_target"]
     report = {"targets": args.targets, "novel_targets": args.novel_targets, "seed": args.seed,
               "world": args.world}  # fmt: skip
     for mode, (run, seconds) in runs.items():
@@ -66,7 +68,7 @@ def main() -> None:
             "latency_p50_s": round(run["latency_p50_s"], 3),
             "wall_s": round(seconds, 1),
         }
-        if mode != "standard":
+        if mode != "none":
             rows = run["per_target"]
             report[mode]["first_shot_paired"] = paired(base, rows, "first")
             report[mode]["after_one_correction_paired"] = paired(base, rows, "corrected")

@@ -5,13 +5,13 @@ on synthetic cases of the demo library generated with a fixed seed. Two demo ton
 kept out of the training cases on purpose — they are the library's "new" toners, which the
 matcher handles with the physics scaling (hybrid path).
 
-    python scripts/train_shipped_models.py [--instrument five-angle] [--tins none|read|known]
+    python scripts/train_shipped_models.py [--instrument five-angle] [--tins none|calibrated|known]
 
 ``--seed`` draws the cases and the network alike; ``--network-seed`` draws the network (its
 weights, splits and batches) alone, on the same cases, and ``--screening`` changes the outlier
 screen: how much a model owes to its network's draw (README, "Cases and the learned model");
 ``--members 1`` trains one network instead of the ensemble; ``--log-offset`` adds log
-features (``flakelab train --log-offset``); ``--tins read|known`` makes the training cases
+features (``flakelab train --log-offset``); ``--tins calibrated|known`` makes the training cases
 record their tins and learns them at the standard tins, as ``flakelab train`` learns such
 cases (:func:`~flakelab.match.lots.at_standard_tins`; default ``none``, the shipped files').
 
@@ -31,9 +31,10 @@ import argparse
 import json
 from pathlib import Path
 
-from flakelab.cases.generator import TINS_RECORDED, World, WorldSettings
+from flakelab.cases.generator import World, WorldSettings
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library
+from flakelab.library.lots import TIN_KNOWLEDGE
 from flakelab.match.lots import at_standard_tins
 from flakelab.models.network import LOG_OFFSET_MAX
 from flakelab.models.registry import shipped_model_path
@@ -81,7 +82,7 @@ def main() -> None:
         "--log-offset", type=float, default=0.0, help="log features, log(fraction + this)"
     )
     parser.add_argument(
-        "--tins", choices=TINS_RECORDED, default="none", help="what the cases record of their tins"
+        "--tins", choices=TIN_KNOWLEDGE, default="none", help="what the cases record of their tins"
     )
     args = parser.parse_args()
     if not 0 <= args.log_offset <= LOG_OFFSET_MAX:

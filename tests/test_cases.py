@@ -190,7 +190,7 @@ def test_case_files_round_trip(cases, tmp_path, suffix):
 @pytest.fixture(scope="module")
 def tinned(world) -> list[Case]:
     """The ``cases`` fixture's cases as a shop that reads its tins records them."""
-    reading = World(world.library, world.instrument, replace(world.settings, tins="read"))
+    reading = World(world.library, world.instrument, replace(world.settings, tins="calibrated"))
     return [c for batch in reading.cases(40, seed=7, batch=16) for c in batch]
 
 
@@ -283,8 +283,10 @@ def test_a_shops_lasting_tins_serve_its_spray_outs_in_turn(world):
         return [c for b in World(world.library, world.instrument, settings).cases(count, 3)
                 for c in b]  # fmt: skip
 
-    made = {t: recording(t) for t in ("known", "read", "none")} | {"fewer": recording("known", 300)}
-    known, read, plain = made["known"], made["read"], made["none"]
+    made = {t: recording(t) for t in ("known", "calibrated", "none")} | {
+        "fewer": recording("known", 300)
+    }
+    known, read, plain = made["known"], made["calibrated"], made["none"]
     for a, b in zip(known, plain, strict=True):
         assert a.case_id == b.case_id and np.array_equal(a.sprayout, b.sprayout)
     assert [_tins_of(c) for c in made["fewer"]] == [_tins_of(c) for c in known[:300]]

@@ -501,7 +501,7 @@ def test_a_harness_mode_given_for_one_target_is_named_as_such(cli):
     assert run.returncode == 2 and "calibrated: no such toner-lot file" in said
     assert "'flakelab match evaluate --lots calibrated'" in said
     run = cli("match", "evaluate", "--targets", "1", "--lots", "tins.json")
-    assert run.returncode == 2 and "expected one of standard, calibrated" in run.stderr
+    assert run.returncode == 2 and "expected one of none, calibrated" in run.stderr
 
 
 def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward, library):
@@ -731,7 +731,7 @@ def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):
     done = cli("lots", "panel", "Phthalo blu")
     assert done.returncode == 2 and "did you mean" in done.stderr
     done = cli("match", "evaluate", "--targets", 1, "--lots", "guessed")
-    assert done.returncode == 2 and "standard, calibrated, referenced, known" in done.stderr
+    assert done.returncode == 2 and "none, calibrated, referenced, known" in done.stderr
     assert not (tmp_path / "n.json").exists()
 
 

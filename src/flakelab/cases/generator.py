@@ -29,8 +29,9 @@ Sources of variation (all in :class:`WorldSettings`):
   used), so the cases of a stretch share their tins' strengths and each pigment's own shade,
   and a tin read once carries its reading's error into every case poured from it; drawn
   from a stream of the seed's own (:class:`LastingTins`), whatever the chunks;
-* the tins a shop records (``tins``, none by default): every tin of a spray-out read, as
-  ``flakelab lots`` reads one from a panel against the model, to ``tin_strength_read_sd``
+* the tins a shop records (``tins``, :data:`~flakelab.library.lots.TIN_KNOWLEDGE`, none by
+  default): every tin of a spray-out read, as ``flakelab lots`` reads one from a panel
+  against the model (``calibrated``), to ``tin_strength_read_sd``
   and ``tin_shade_read_sd_nm`` (what that reading came to, ``benchmarks/toner_lots.py``), or
   against the paint maker's panel (``referenced``, ``tin_*_referenced_sd``), or known
   exactly; drawn from a stream of their own, so the cases are the same either way;
@@ -59,7 +60,7 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import shift_spectra
-from flakelab.library.lots import MAX_SHADE_NM, TonerLot
+from flakelab.library.lots import MAX_SHADE_NM, TIN_KNOWLEDGE, TonerLot
 from flakelab.library.toners import Library
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
 from flakelab.physics.fast import reflectance_factor
@@ -77,7 +78,6 @@ __all__ = [
     "World",
     "Variation",
     "CHUNK",
-    "TINS_RECORDED",
     "LastingTins",
     "SHOP_WITH_HABITS",
     "NEAR_BLACK_L",
@@ -117,14 +117,6 @@ ORGANIC_FAMILIES = (
 """Pigment families that fade in sunlight (inorganics — iron oxides, TiO2, carbon — hold)."""
 
 
-TINS_RECORDED = ("none", "read", "referenced", "known")
-"""What a generated case records of the tins its recipe was poured from: nothing (as most
-shops), the shop's reading of each from a panel against the model (``read``; the harness's
-``--lots calibrated``) or against the paint maker's panel of the same toner from its
-standard tins (``referenced``, as the harness's), or the world's own strength and shade
-(``known``)."""
-
-
 @dataclass(frozen=True)
 class WorldSettings:
     """The size of every variation in the generated world (see the module notes)."""
@@ -148,7 +140,7 @@ class WorldSettings:
     shop_film_build: float = 1.0
     shop_spread: float = 1.0
     shop_gain: float = 0.0
-    tins: str = "none"
+    tins: str = "none"  # TIN_KNOWLEDGE
     # a tin read from one panel against the model: RMS error over the harness's shops
     # (README, *The shop's tins*, stop 74); against the paint maker's panel, the same
     tin_strength_read_sd: float = 0.0111
@@ -465,19 +457,19 @@ class World:
         standard deviations ``[F, T]`` (strength, shade), where a tin read once serves several
         cases (:class:`LastingTins`); else drawn for each case from ``rng``."""
         s, (F, T) = self.settings, recipe.shape
-        if s.tins not in TINS_RECORDED:
-            raise ValueError(f"tins: expected one of {', '.join(TINS_RECORDED)}, got {s.tins!r}")
+        if s.tins not in TIN_KNOWLEDGE:
+            raise ValueError(f"tins: expected one of {', '.join(TIN_KNOWLEDGE)}, got {s.tins!r}")
         if s.tins == "none":
             return [{} for _ in range(F)]
         strength = batches.strength
         drift = batches.hue_shift if batches.hue_shift.ndim == 2 else batches.hue_shift[:, None]
         shade = np.where(self.library.effect[None, :], 0.0, drift)
-        if s.tins in ("read", "referenced"):
+        if s.tins in ("calibrated", "referenced"):
             if reading is None:
                 reading = (rng.normal(0, 1, (F, T)), rng.normal(0, 1, (F, T)))
             strength_sd, shade_sd = (
                 (s.tin_strength_read_sd, s.tin_shade_read_sd_nm)
-                if s.tins == "read"
+                if s.tins == "calibrated"
                 else (s.tin_strength_referenced_sd, s.tin_shade_referenced_sd_nm)
             )
             strength = strength * np.exp(strength_sd * reading[0])

@@ -118,10 +118,10 @@ def generate(
         str,
         typer.Option(
             help="What each case records of the tins its recipe was poured from: none (as "
-            "most shops), read (the shop read every tin from a panel against the model, to "
-            "the error that reading has), referenced (against the paint maker's panel of the "
-            "toner, 'lots calibrate --standard') or known (the world's own strengths and "
-            "shades).",
+            "most shops), calibrated (the shop read every tin from a panel against the model, "
+            "to the error that reading has, as 'lots calibrate' does), referenced (against the "
+            "paint maker's panel of the toner, 'lots calibrate --standard') or known (the "
+            "world's own strengths and shades).",
         ),
     ] = "none",
     tin_sprayouts: Annotated[
@@ -136,11 +136,12 @@ def generate(
     """Generate synthetic refinish cases (labelled synthetic) and store them."""
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file, write_cases
-    from flakelab.cases.generator import TINS_RECORDED, World, WorldSettings
+    from flakelab.cases.generator import World, WorldSettings
     from flakelab.io import read_library
+    from flakelab.library.lots import TIN_KNOWLEDGE
 
-    if tins not in TINS_RECORDED:
-        raise FlakelabError(f"--tins: expected one of {', '.join(TINS_RECORDED)}, got {tins!r}")
+    if tins not in TIN_KNOWLEDGE:
+        raise FlakelabError(f"--tins: expected one of {', '.join(TIN_KNOWLEDGE)}, got {tins!r}")
     settings = WorldSettings(
         shop_film_build=shop_film_build,
         shop_spread=shop_spread,

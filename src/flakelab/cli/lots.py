@@ -79,9 +79,9 @@ ShopTinsOption = Annotated[
 def _check_not_a_harness_mode(path: Path) -> None:
     """``--lots`` names a file for one target, and what the harness's shop knows of its tins
     for 'match evaluate': a mode given for one target is named as such."""
-    from flakelab.match.evaluate import LOT_MODES
+    from flakelab.library.lots import TIN_KNOWLEDGE
 
-    if str(path) in LOT_MODES and not path.exists():
+    if str(path) in TIN_KNOWLEDGE and not path.exists():
         raise FlakelabError(
             f"--lots: {path}: no such toner-lot file; '{path}' says what the evaluation "
             f"harness's shop knows of its tins ('flakelab match evaluate --lots {path}')"

@@ -143,9 +143,9 @@ def match_command(
             "--lots",
             help="The shop's toner-lot file ('flakelab lots calibrate' writes it): recipes are "
             "weighed for its tins' strengths and shades. evaluate: what the harness's shop "
-            "knows of its tins: standard (nothing), calibrated (each read from one panel "
-            "against the model), referenced (against the paint maker's standard panel) or "
-            "known.",
+            "knows of its tins: none (every tin taken at the standard), calibrated (each read "
+            "from one panel against the model), referenced (against the paint maker's standard "
+            "panel) or known.",
             show_default="the shop's tins stored in the database (--shop), else the standard",
         ),
     ] = None,
@@ -271,7 +271,7 @@ def match_command(
             scale=order_can(quantity, resolution) if weighed else None,
             target_texture=target_texture,
             resprays=resprays,
-            lots=lots or "standard",
+            lots=lots or "none",
             plot=plot,
             json_output=json_output,
         )
@@ -611,21 +611,22 @@ def _evaluate(
 ):
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
     from flakelab.io import read_tolerance
-    from flakelab.match.evaluate import LOT_MODES, evaluate_matching, harness_world
+    from flakelab.library.lots import TIN_KNOWLEDGE
+    from flakelab.match.evaluate import evaluate_matching, harness_world
     from flakelab.match.objective import OBJECTIVE_DEFAULT
     from flakelab.match.stock import toners_allowed
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
     check_figure_file(plot, "--plot")
-    if lots not in LOT_MODES:  # before the model: a file is for one target's match
+    if lots not in TIN_KNOWLEDGE:  # before the model: a file is for one target's match
         raise FlakelabError(
-            f"--lots: evaluate: expected one of {', '.join(LOT_MODES)}, got {lots!r}"
+            f"--lots: evaluate: expected one of {', '.join(TIN_KNOWLEDGE)}, got {lots!r}"
         )
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     world = harness_world(lib, instrument, world_name)
     toners_allowed(forward.toners, settings.without)  # a toner misspelt: before the targets
     scale = scale and scale.for_toners(lib, forward.toners)
-    habits = habits_for(habits_file, shop, database, forward, with_tins=lots != "standard")
+    habits = habits_for(habits_file, shop, database, forward, with_tins=lots != "none")
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(

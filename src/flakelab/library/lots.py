@@ -103,6 +103,15 @@ class TonerLot:
         return not (self.shade_nm == 0 and self.shade_sd_nm == LOT_SHADE_SD_NM)
 
 
+TIN_KNOWLEDGE = ("none", "calibrated", "referenced", "known")
+"""What a shop knows of the tins its recipes are poured from, one vocabulary for the cases it
+records (``flakelab cases generate --tins``) and the harness's shop (``flakelab match evaluate
+--lots``): nothing, every tin taken at the standard (``none``, as most shops); each tin's
+strength and shade read from a calibration panel against the model's prediction of it
+(``calibrated``, as ``flakelab lots calibrate`` reads) or against the paint maker's reading of
+the same panel from its standard tins (``referenced``); or the tins' own strengths and shades
+(``known``, the limit that calibration approaches)."""
+
 READ_AGAINST = ("model", "standard")
 """What a panel is read against: the model's prediction of it, or the paint maker's reading
 of it from the standard tins (whose covariance holds no model error)."""

@@ -36,6 +36,7 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import REFINISH_TEXTURE, Tolerance, tolerance_preset
+from flakelab.library.lots import TIN_KNOWLEDGE
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.judging import recipe_vector
@@ -50,7 +51,6 @@ __all__ = [
     "harness_trials",
     "harness_world",
     "HARNESS_WORLDS",
-    "LOT_MODES",
     "SUCCESS_DE00",
     "Trial",
     "as_weighed",
@@ -76,16 +76,6 @@ application vary); the hybrid paper's "standardised pigments" (its 85 % first sh
 differs from another, each spray's application still varies); controlled (only the
 instrument's reading varies); a real shop with habits of its own (``SHOP_WITH_HABITS``),
 which the model learns by adaptation (``flakelab model adapt``)."""
-
-
-LOT_MODES = ("standard", "calibrated", "referenced", "known")
-"""What the harness's shop knows of its tins (:mod:`flakelab.match.lots`): nothing, every tin
-taken at the model's standard (the issue's figures); each tin's strength and shade read from
-one calibration panel of its toner sprayed from the trial's tins (:func:`calibration_recipes
-<flakelab.match.lots.calibration_recipes>`), against the model's prediction of the panel
-(``calibrated``) or against the paint maker's reading of the same panel from its standard
-tins (``referenced``: one spray each, at the factory, the same for every trial); or the
-world's own strengths and hue drift, the limit that calibration approaches."""
 
 
 def harness_world(library, instrument: str = DEFAULT_INSTRUMENT, name: str = "shop") -> World:
@@ -292,10 +282,13 @@ def harness_trials(
 
 
 def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None, standards=None):
-    """``forward`` as trial ``t``'s shop predicts with it (:data:`LOT_MODES`: ``panels`` are
-    the calibration recipes, ``standards`` their readings from the standard tins), and the
-    RMS of its tins' strengths' and its pigments' shades' errors (None at the standard)."""
-    if lots == "standard":
+    """``forward`` as trial ``t``'s shop predicts with it, knowing ``lots`` of its tins
+    (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`; ``none``: the issue's figures), and the
+    RMS of its tins' strengths' and its pigments' shades' errors (None at the standard).
+    ``panels`` are the calibration recipes (:func:`~flakelab.match.lots.calibration_recipes`),
+    one of each toner sprayed from the trial's tins; ``standards`` their readings from the
+    standard tins (one spray each, at the factory, the same for every trial)."""
+    if lots == "none":
         return forward, None
     library = t.world.library
     order = [list(library.names).index(n) for n in forward.toners]
@@ -334,7 +327,7 @@ def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target
 
 def _one(
     t: Trial, x_hidden, forward, effect, settings, habits, tolerance, scale, target_texture=True,
-    resprays=0, lots="standard", panels=None, standards=None,
+    resprays=0, lots="none", panels=None, standards=None,
 ) -> dict:  # fmt: skip
     world = t.world
     forward, lot_error = shop_forward(t, forward, lots, panels, standards)
@@ -428,7 +421,7 @@ def evaluate_matching(
     scale: Can | None = None,
     target_texture: bool = True,
     resprays: int = 0,
-    lots: str = "standard",
+    lots: str = "none",
     progress: Callable[[], None] | None = None,
     per_target: bool = False,
 ) -> dict:
@@ -449,11 +442,11 @@ def evaluate_matching(
     noise of one spray each. With ``per_target`` the report keeps every target's trial
     (``per_target``: the targets, then those with a new toner), for paired comparisons of
     two runs on the same seed. ``lots`` says what the shop knows of its tins
-    (:data:`LOT_MODES`)."""
+    (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`)."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
-    if lots not in LOT_MODES:
-        raise MatchError(f"--lots: expected one of {', '.join(LOT_MODES)}, got {lots!r}")
+    if lots not in TIN_KNOWLEDGE:
+        raise MatchError(f"--lots: expected one of {', '.join(TIN_KNOWLEDGE)}, got {lots!r}")
     panels = standards = None
     if lots in ("calibrated", "referenced"):
         panels = calibration_recipes(forward, world.library)
