@@ -1223,7 +1223,7 @@ def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):
         notes = [said for said in (at_tins, as_poured) if said in " ".join(run.stderr.split())]
         assert notes == ([noted] if noted else []), (habits_file, lots)
     run = cli("cases", "generate", "--n", "3", "--tins", "some", "-o", str(tmp_path / "x.csv"))
-    expected = "--tins: expected one of none, read, referenced, known"
+    expected = "--tins: expected one of none, calibrated, referenced, known"
     assert run.returncode == 2 and expected in run.stderr
 
 
