@@ -23,6 +23,7 @@ from sqlalchemy.pool import NullPool, StaticPool
 
 from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.cases.schema import CaseRow
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -249,7 +250,8 @@ def _clash(engine: Engine, rows: list[CaseRow], error: IntegrityError) -> str:
     stored = existing_case_ids(engine, ids)
     if stored:
         first = next(i for i in ids if i in stored)
-        return f"case {first!r} is already stored ({len(stored)} of the {len(ids)} cases given)"
+        given = counted(len(ids), "case")
+        return f"case {first!r} is already stored ({len(stored)} of the {given} given)"
     twice = [i for i, count in Counter(ids).items() if count > 1]
     if twice:
         return f"case {twice[0]!r} is given twice"

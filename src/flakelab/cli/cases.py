@@ -494,7 +494,8 @@ def record_all(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    table = Table(title=f"Recorded {len(cases)} spray-outs from {manifest}", box=box.SIMPLE_HEAD)
+    title = f"Recorded {counted(len(cases), 'spray-out')} from {manifest}"
+    table = Table(title=title, box=box.SIMPLE_HEAD)
     table.add_column("row", justify="right")
     columns = ("case", "shop", "outcome", "worst ΔE00", "from prediction", "instrument")
     for column in columns if check else tuple(c for c in columns if c != "from prediction"):
@@ -590,7 +591,7 @@ def list_cases(
         return
     title = "Likely mix-ups among the newest" if mix_ups else "Newest"
     table = Table(
-        title=f"{title} {len(cases)} cases of {whose} in {engine.url}",
+        title=f"{title} {counted(len(cases), 'case')} of {whose} in {engine.url}",
         box=box.SIMPLE_HEAD,
         collapse_padding=True,
     )
@@ -730,7 +731,8 @@ def nearest(
     }
     if recipe_out is not None:
         if pick > len(found):
-            raise FlakelabError(f"--pick: expected one of the {len(found)} cases found, got {pick}")
+            shown = counted(len(found), "case")
+            raise FlakelabError(f"--pick: {pick} is more than the {shown} found")
         fractions = dict(found[pick - 1].case.recipe)
         grams = can.for_toners(read_library(library), fractions).grams_for(fractions)
         write_recipe({ln.toner: ln.grams for ln in weigh(fractions, grams, resolution)}, recipe_out)
@@ -883,7 +885,7 @@ def export_cases(
             f"{engine.url}: no cases {which_cases(shop, since)}{at}; nothing written"
         )
     write_cases(cases, target)
-    errors.print(f"wrote {len(cases)} cases to {target}", highlight=False)
+    errors.print(f"wrote {counted(len(cases), 'case')} to {target}", highlight=False)
 
 
 @cases_app.command("realism")
@@ -1084,7 +1086,7 @@ def _drift_report(drift: dict, chosen: list) -> dict:
         "the habits changed over these cases: "
         + ", ".join(f"{n.replace('_', ' ')} {early[n]:+.2%} → {late[n]:+.2%}" for n in changed)
         + f" from about {split:%Y-%m-%d %H:%M} (the last {len(chosen) - drift['split']} of "
-        f"{len(chosen)} cases); read them from those cases with {since_option(split)}"
+        f"{counted(len(chosen), 'case')}); read them from those cases with {since_option(split)}"
     )
     return {
         "split_at": split.isoformat(),

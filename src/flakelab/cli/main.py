@@ -307,7 +307,7 @@ def _print_readings_spread(spread: dict, what: str) -> None:
     """How far the furthest of the readings averaged lies from their mean, and a note where
     it lies far."""
     console.print(
-        f"{what}: the mean of {len(spread['readings'])} readings, the furthest "
+        f"{what}: the mean of {counted(len(spread['readings']), 'reading')}, the furthest "
         f"({spread['furthest']}) {spread['limit_share_max']:.0%} of the tolerance from it",
         highlight=False,
     )

@@ -461,8 +461,9 @@ def _print_every_sample(path, reports: list[dict]) -> None:
         table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict, recipe)
     console.print(table)
     passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
-    console.print(f"{passing} of {len(reports)} samples matched within the tolerance, as "
-                  "predicted", highlight=False)  # fmt: skip
+    samples = counted(len(reports), "sample")
+    console.print(f"{passing} of {samples} matched within the tolerance, as predicted",
+                  highlight=False)  # fmt: skip
 
 
 def _write_candidate(report: dict, pick: int, path: Path) -> None:

@@ -854,8 +854,8 @@ def adapt(
     known = [c for c in chosen if not novel & set(c.recipe)]
     if not known:
         raise FlakelabError(
-            f"{cases}: every one of the {len(chosen)} cases uses a toner the model knows from "
-            f"too few cases ({', '.join(sorted(novel))}); nothing to adapt it to"
+            f"{cases}: every one of the {counted(len(chosen), 'case')} uses a toner the model "
+            f"knows from too few cases ({', '.join(sorted(novel))}); nothing to adapt it to"
         )
     config = replace(recorded_config(base), adapt_validation=validation, seed=seed, device=device)
     arrays = source_arrays(cases, known, lib, effect=True)

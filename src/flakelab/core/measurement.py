@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS, resample
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -228,7 +229,7 @@ def mean_reading(readings: Sequence[Measurement]) -> Measurement:
     shared = [k for k in first.texture if all(k in r.texture for r in readings)]
     names = ", ".join(r.sample for r in readings)
     return Measurement(
-        sample=f"mean of {len(readings)} readings ({names})",
+        sample=f"mean of {counted(len(readings), 'reading')} ({names})",
         geometries=first.geometries,
         wavelengths=WAVELENGTHS,
         reflectance=spectra.mean(axis=0),

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from flakelab.core.geometry import N_BINDER
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError, shown
 from flakelab.library.optics import SUBSTRATE_INDEX
 
@@ -135,7 +136,8 @@ def _spectrum(owner: str, name: str, values: Any, upper: float = MAX_COEFFICIENT
     if not isinstance(values, list | tuple | np.ndarray):
         raise LibraryError(f"{owner}: {name}: expected {expected}, got {shown(values)}")
     if len(values) != WAVELENGTHS.size:
-        raise LibraryError(f"{owner}: {name}: expected {expected}, got {len(values)} values")
+        got = counted(len(values), "value")
+        raise LibraryError(f"{owner}: {name}: expected {expected}, got {got}")
     if not isinstance(values, np.ndarray):
         for value, wavelength in zip(values, WAVELENGTHS, strict=True):
             if not is_number(value):

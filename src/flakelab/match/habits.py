@@ -63,6 +63,7 @@ from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.units import is_number
+from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
@@ -503,7 +504,7 @@ def habits_drift(
     whether it exceeds :data:`DRIFT_Z`. Fewer than ``minimum`` cases are refused."""
     if len(fractions) < minimum:
         raise FlakelabError(
-            f"shop habits: {len(fractions)} spray-outs; at least {minimum} are needed "
+            f"shop habits: {counted(len(fractions), 'spray-out')}; at least {minimum} are needed "
             "to tell whether the habits changed"
         )
     scan = None

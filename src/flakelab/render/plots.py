@@ -498,7 +498,8 @@ def plot_harness(
                   ylabel="sprayed worst ΔE00 (the world's)")  # fmt: skip
     predicted.legend(fontsize=8)
     figure.suptitle(
-        title or f"Match harness: {len(rows)} targets + {len(novel_rows)} with a new toner"
+        title
+        or f"Match harness: {counted(len(rows), 'target')} + {len(novel_rows)} with a new toner"
     )
     _save(figure, path, dpi)
 
