@@ -136,22 +136,18 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
     from flakelab.core.tolerance import failing_geometries, failures
     from flakelab.io import read_recipe, read_tolerance
-    from flakelab.match.correction import correct, metamerism_note, mismatch_note, unreached_note
-    from flakelab.match.crosscheck import expected_left_out
+    from flakelab.match.correction import correct, mismatch_note
     from flakelab.match.search import left_out_note, unused_geometries
 
+    _check_correction_options(mode, left, most, extra_toners)
     tol = read_tolerance(tolerance)
     test_lights = lights_option(lights)
     check_output_file(recipe_out, "--recipe-out")
     check_figure_file(plot, "--plot")
     grams = read_recipe(recipe)
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
-    for option, given in (("--left", left), ("--most", most)):
-        if given is not None and mode != "additions":
-            raise FlakelabError(f"{option}: for --mode additions (a reformulation is mixed afresh)")
     shop, named = workplace_shop(shop)
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics, shop)
     tins, forward, lot_notes = shop_lots(lots, lib, forward, shop, database)
@@ -166,8 +162,6 @@ def correct_command(
     target_R, _, _ = spectra_for_model(target, target_reading, forward)
     sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
-    if extra_toners < 0:
-        raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
     shop_habits = habits_for(
         habits, shop, database, forward, named=named, with_tins=tins is not None
     )
@@ -212,15 +206,7 @@ def correct_command(
     weighing = _weigh_correction(forward, correction, mode, can, resolution)
     report |= _weighing_report(weighing, forward, mode, fractions)
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed
-    if left is not None:
-        report["left_g"] = round(sum(can.values()), 6)
-    if most_g is not None:
-        report["most_g"] = most_g
-        if sum(correction.added.values()) >= room * 0.99:  # traces under 1e-4 left out
-            report["notes"].append(
-                f"the additions fill the can to --most {most_g:g} g: the correction is cut "
-                "short there, as far as the can allows"
-            )
+    _add_can_limits(report, can if left is not None else None, most_g, room, correction)
     if recipe_out is not None:
         _write_corrected(report, can, recipe_out)
     report |= {
@@ -232,34 +218,16 @@ def correct_command(
         and {name: round(value, 4) for name, value in correction.application.items()},
         "habits": shop_habits and shop_habits.report(),
     }
-    expected, _, expected_passed = tol.judge(forward.geometries, target_lab, expected_lab)
-    report["expected_de00"] = expected.round(3).tolist()
-    report["expected_failing"] = failing_geometries(forward.geometries, expected_passed)
-    if failing and (note := unreached_note(tol, report["expected_failing"], expected, mode)):
-        report["notes"].append(note)
-    sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=test_lights)
-    report |= {
-        "metamerism_weight": metamerism,
-        "sprayout_metamerism_index_max": worst_per_light(sprayed_metamerism),
-        "sprayout_metamer": is_metamer(sprayed_metamerism),
-        "expected_metamerism_index_max": worst_per_light(correction.metamerism),
-    }
-    if note := metamerism_note(sprayed_metamerism, correction.metamerism):
-        report["notes"].append(note)
+    _add_expected(report, tol, forward.geometries, target_lab, expected_lab, failing, mode)
+    _add_metamerism(report, target_R, sprayed_R, correction, metamerism, test_lights)
     report["geometries"] = list(forward.geometries)
     other = (
         None
         if shop_habits
         else left_out_model(target_reading, forward, lib, database, physics, shop)
     )
-    found = other and expected_left_out(
-        target_reading, sprayed_reading, fractions, correction.fractions, forward, other, tol
-    )
-    if found:
-        sprayed_there, expected_there = found
-        report["left_out"] = expected_there.to_dict() | {
-            "sprayout_de00": sprayed_there.round(3).tolist()
-        }
+    found = other and _add_left_out(report, target_reading, sprayed_reading, fractions,
+                                    correction, forward, other, tol)  # fmt: skip
     if plot is not None:
         samples = {
             "spray-out (measured)": reflectance_to_Lab(sprayed_R),
@@ -272,6 +240,77 @@ def correct_command(
         print(json.dumps(report, indent=2))
         return
     _print_correction(report)
+
+
+def _add_can_limits(report: dict, left: dict | None, most_g, room, correction) -> None:
+    """``--left`` (the grams ``left`` in the can) and ``--most`` (``most_g``, ``room`` for the
+    additions) into ``report``, with a note where the additions fill the can."""
+    if left is not None:
+        report["left_g"] = round(sum(left.values()), 6)
+    if most_g is not None:
+        report["most_g"] = most_g
+        if sum(correction.added.values()) >= room * 0.99:  # traces under 1e-4 left out
+            report["notes"].append(
+                f"the additions fill the can to --most {most_g:g} g: the correction is cut "
+                "short there, as far as the can allows"
+            )
+
+
+def _add_left_out(report, target, sprayed, fractions, correction, forward, other, tolerance):
+    """The spray-out and the corrected recipe at the target's geometries that ``forward``
+    leaves out, as the ``other`` model predicts them, into ``report``; the two comparisons
+    (None where the target has no such geometries)."""
+    from flakelab.match.crosscheck import expected_left_out
+
+    found = expected_left_out(
+        target, sprayed, fractions, correction.fractions, forward, other, tolerance
+    )
+    if found:
+        sprayed_there, expected_there = found
+        report["left_out"] = expected_there.to_dict() | {
+            "sprayout_de00": sprayed_there.round(3).tolist()
+        }
+    return found
+
+
+def _check_correction_options(mode: str, left, most, extra_toners: int) -> None:
+    """Options that do not fit the correction's ``mode``, refused before any file is read."""
+    for option, given in (("--left", left), ("--most", most)):
+        if given is not None and mode != "additions":
+            raise FlakelabError(f"{option}: for --mode additions (a reformulation is mixed afresh)")
+    if extra_toners < 0:
+        raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
+
+
+def _add_expected(report: dict, tol, geometries, target_lab, expected_lab, failing, mode) -> None:
+    """What the corrected recipe is expected to give against the target, into ``report``, and
+    a note where it still fails where the spray-out did (``failing``)."""
+    from flakelab.core.tolerance import failing_geometries
+    from flakelab.match.correction import unreached_note
+
+    expected, _, expected_passed = tol.judge(geometries, target_lab, expected_lab)
+    report["expected_de00"] = expected.round(3).tolist()
+    report["expected_failing"] = failing_geometries(geometries, expected_passed)
+    if failing and (note := unreached_note(tol, report["expected_failing"], expected, mode)):
+        report["notes"].append(note)
+
+
+def _add_metamerism(report: dict, target_R, sprayed_R, correction, weight, lights) -> None:
+    """The spray-out's and the corrected recipe's metamerism against the target under the
+    test ``lights`` (ISO 18314-4), into ``report``, with a note where the correction changes
+    it."""
+    from flakelab.core.difference import is_metamer, metamerism_indices, worst_per_light
+    from flakelab.match.correction import metamerism_note
+
+    sprayed_metamerism = metamerism_indices(target_R, sprayed_R, tests=lights)
+    report |= {
+        "metamerism_weight": weight,
+        "sprayout_metamerism_index_max": worst_per_light(sprayed_metamerism),
+        "sprayout_metamer": is_metamer(sprayed_metamerism),
+        "expected_metamerism_index_max": worst_per_light(correction.metamerism),
+    }
+    if note := metamerism_note(sprayed_metamerism, correction.metamerism):
+        report["notes"].append(note)
 
 
 def _sprayout_notes(tol, failing: list[str], texture_failing: list[str], mismatch) -> list[str]:

@@ -280,31 +280,10 @@ def match_command(
         raise FlakelabError(
             "--weighed, --no-target-texture, --resprays: for the harness (flakelab match evaluate)"
         )
-    if target is not None and example:
-        # "--quantity 250 g" leaves its "g" here as the target
-        raise FlakelabError(
-            f"expected a target file or --example, not both (got --example and {target!r})"
-        )
-    if target is None and not example:
-        raise FlakelabError("expected a target file or --example")
-    if all_samples and (sample or average or render or plot or recipe_out or nearest):
-        raise FlakelabError(
-            "--sample, --average, --render, --plot, --recipe-out, --nearest: for one target, "
-            "not --all (--recipe-dir writes every sample's best recipe)"
-        )
-    if jobs is not None and not all_samples:
-        raise FlakelabError("--jobs: for --all (one target is matched in one process)")
-    if recipe_dir is not None and not all_samples:
-        raise FlakelabError("--recipe-dir: for --all (--recipe-out writes one target's)")
-    if recipe_dir is not None and not recipe_dir.is_dir():
-        raise FlakelabError(f"--recipe-dir: {recipe_dir}: not a folder")
+    _check_target_options(target, example, all_samples, jobs, recipe_dir,
+                          for_one=(sample, average, render, plot, recipe_out, nearest))  # fmt: skip
     can = order_can(quantity, resolution)
-    check_figure_file(render)
-    check_figure_file(plot, "--plot")
-    check_output_file(recipe_out, "--recipe-out")
-    if pick > candidates:
-        shown = counted(candidates, "candidate")
-        raise FlakelabError(f"--pick: {pick} is more than the {shown} shown (--candidates)")
+    _check_output_options(render, plot, recipe_out, pick, candidates)
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward, shop, database)
@@ -345,24 +324,13 @@ def match_command(
     report["lots"] = tins and lots_report(tins)
     report["notes"] += lot_notes
     if nearest:
-        report["recorded_nearest"] = [near.to_dict() for near in found]
-        if not searched:
-            whose = f"of shop {shop!r} " if shop else ""
-            report["notes"].append(
-                f"--nearest: no recorded cases {whose}in {database or default_url()} read at "
-                f"the model's geometries ({', '.join(forward.geometries)})"
-            )
+        _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward)
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
     if shop_habits is None:  # aimed-off candidates: their offsets are per geometry
         other = left_out_model(measurement, forward, lib, database, physics, shop)
-        if other is not None:
-            from flakelab.match.crosscheck import predict_left_out
-
-            extra = predict_left_out(result.candidates, measurement, forward, other, tol)
-            for entry, left_out in zip(report["candidates"], extra, strict=True):
-                entry["left_out"] = left_out.to_dict()
+        extra = _add_left_out(report, result, measurement, forward, other, tol)
     _weigh_candidates(report, result.candidates, forward, can)
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
@@ -376,6 +344,69 @@ def match_command(
         print(json.dumps(report, indent=2))
         return
     _print_match(report)
+
+
+def _check_target_options(target, example, all_samples, jobs, recipe_dir, for_one) -> None:
+    """The target (a file or ``--example``) and the options of ``--all`` (``jobs``,
+    ``recipe_dir``), refused before any file is read where they do not fit together;
+    ``for_one`` holds the options of one target's match (--sample, --average, --render,
+    --plot, --recipe-out, --nearest), which ``--all`` refuses."""
+    if target is not None and example:
+        # "--quantity 250 g" leaves its "g" here as the target
+        raise FlakelabError(
+            f"expected a target file or --example, not both (got --example and {target!r})"
+        )
+    if target is None and not example:
+        raise FlakelabError("expected a target file or --example")
+    if all_samples and any(for_one):
+        raise FlakelabError(
+            "--sample, --average, --render, --plot, --recipe-out, --nearest: for one target, "
+            "not --all (--recipe-dir writes every sample's best recipe)"
+        )
+    if jobs is not None and not all_samples:
+        raise FlakelabError("--jobs: for --all (one target is matched in one process)")
+    if recipe_dir is not None and not all_samples:
+        raise FlakelabError("--recipe-dir: for --all (--recipe-out writes one target's)")
+    if recipe_dir is not None and not recipe_dir.is_dir():
+        raise FlakelabError(f"--recipe-dir: {recipe_dir}: not a folder")
+
+
+def _check_output_options(render, plot, recipe_out, pick: int, candidates: int) -> None:
+    """The files a match writes, refused before the search where they cannot be written, and
+    ``--pick`` beyond the candidates shown."""
+    check_figure_file(render)
+    check_figure_file(plot, "--plot")
+    check_output_file(recipe_out, "--recipe-out")
+    if pick > candidates:
+        shown = counted(candidates, "candidate")
+        raise FlakelabError(f"--pick: {pick} is more than the {shown} shown (--candidates)")
+
+
+def _add_recorded_nearest(report: dict, found, searched: bool, database: str, shop, forward):
+    """``--nearest``: the recorded cases ``found`` closest to the target, into ``report``, and a
+    note where no case of the ``database`` (of ``shop``) was read at the model's
+    geometries."""
+    report["recorded_nearest"] = [near.to_dict() for near in found]
+    if not searched:
+        whose = f"of shop {shop!r} " if shop else ""
+        report["notes"].append(
+            f"--nearest: no recorded cases {whose}in {database} read at the model's geometries "
+            f"({', '.join(forward.geometries)})"
+        )
+
+
+def _add_left_out(report: dict, result, measurement, forward, other, tolerance) -> list:
+    """Each candidate as the ``other`` model predicts it at the target's geometries that
+    ``forward`` leaves out, into its entry of ``report``; the predictions (none without
+    such a model)."""
+    if other is None:
+        return []
+    from flakelab.match.crosscheck import predict_left_out
+
+    extra = predict_left_out(result.candidates, measurement, forward, other, tolerance)
+    for entry, left_out in zip(report["candidates"], extra, strict=True):
+        entry["left_out"] = left_out.to_dict()
+    return extra
 
 
 def _weigh_candidates(report: dict, candidates, forward, can) -> None:
