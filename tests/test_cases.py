@@ -578,6 +578,25 @@ def test_a_database_that_cannot_be_opened_is_named(tmp_path):
     assert junk.read_text() == "not a database"  # left as it was
 
 
+def test_a_database_of_a_newer_flakelab_is_refused_and_left_as_it_is(cases, database_url):
+    """A database whose tables a later release migrated further is refused, naming the
+    migration it is at; before, every command stopped with "internal error: CommandError:
+    Can't locate revision"."""
+    from sqlalchemy import text
+
+    engine = open_database(database_url)
+    add_cases(engine, cases[:2])
+    with engine.begin() as connection:
+        connection.execute(text("UPDATE alembic_version SET version_num = 'ffff0099'"))
+    with pytest.raises(DatabaseError, match="built by a newer flakelab \\(migration 'ffff0099'"):
+        open_database(database_url)
+    with engine.connect() as connection:
+        assert connection.execute(text("SELECT version_num FROM alembic_version")).all() == [
+            ("ffff0099",)
+        ]
+    assert count_cases(engine) == 2
+
+
 def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch, cli):
     """A mistyped path must not leave an empty database behind and report no cases."""
     missing = tmp_path / "shop.db"
@@ -692,6 +711,41 @@ def test_a_database_is_read_while_another_process_writes_to_it(tmp_path):
     finally:
         holder.kill()
         holder.wait()
+
+
+def test_a_write_kept_waiting_by_another_process_is_refused_and_named(cases, tmp_path, cli,
+                                                                   monkeypatch):  # fmt: skip
+    """A write that waits past the busy timeout behind another process's write (an import)
+    is refused naming the database, what it was doing and why, and changes nothing: before,
+    'cases remove' stopped with "internal error: OperationalError: database is locked"."""
+    import flakelab.cases.database as database
+
+    monkeypatch.setattr(database, "BUSY_TIMEOUT_S", 1)  # 30 s in use
+    file = tmp_path / "shop.db"
+    url = f"sqlite:///{file}"
+    add_cases(open_database(url), cases[:3])
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD_A_WRITE, url], stdout=subprocess.PIPE, text=True
+    )
+    waiting = "another process has been writing to it for over 1 s"
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        engine = open_database(url)
+        with pytest.raises(DatabaseError, match=f"cannot remove case .*: {waiting}.*nothing was "
+                                                "removed"):  # fmt: skip
+            remove_case(engine, cases[0].case_id)
+        with pytest.raises(DatabaseError, match=f"cannot store the cases: {waiting}"):
+            add_cases(engine, cases[3:5])
+        run = cli("cases", "remove", cases[1].case_id, "--yes", "-d", str(file))
+        said = " ".join(run.stderr.split())
+        assert run.returncode == 2 and waiting in said and "internal error" not in said
+        assert holder.poll() is None  # the write still held: each gave up on its own
+    finally:
+        holder.kill()
+        holder.wait()
+    assert sorted(c.case_id for c in iter_cases(open_database(url))) == sorted(
+        c.case_id for c in cases[:3]
+    )
 
 
 _HOLD_A_WRITE = """

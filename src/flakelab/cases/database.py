@@ -11,13 +11,14 @@ from __future__ import annotations
 import os
 from collections import Counter
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 from sqlalchemy import Connection, Engine, create_engine, event, func, select
 from sqlalchemy.engine import make_url
-from sqlalchemy.exc import ArgumentError, IntegrityError, SQLAlchemyError
+from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session
 from sqlalchemy.pool import NullPool, StaticPool
 
@@ -31,6 +32,9 @@ __all__ = [
     "open_database",
     "migrate",
     "lock_database",
+    "write_transaction",
+    "refusal",
+    "BUSY_TIMEOUT_S",
     "add_cases",
     "iter_cases",
     "count_cases",
@@ -56,8 +60,41 @@ SHORT_ID_LENGTH = 13
 any shop's database; :func:`find_case_id` takes any unique beginning."""
 
 
+BUSY_TIMEOUT_S = 30
+"""How long a write to a SQLite file waits for another process's write to end before it gives
+up: an import or a generation writes each batch in one transaction, and SQLite lets one writer
+at a time."""
+
+
 class DatabaseError(FlakelabError):
     """The database cannot be opened or written; names the URL and the problem."""
+
+
+def refusal(error: SQLAlchemyError) -> str:
+    """Why the database refused a statement, in one line: SQLite's "database is locked" (a
+    write kept waiting past :data:`BUSY_TIMEOUT_S` behind another process's) says so and what
+    to do; anything else is the driver's first line."""
+    said = str(getattr(error, "orig", error)).splitlines()[0]
+    if isinstance(error, OperationalError) and "database is locked" in said:
+        return (
+            f"another process has been writing to it for over {BUSY_TIMEOUT_S} s (an import or "
+            "a generation writes each batch in one transaction); try again when it is done"
+        )
+    return f"{error.__class__.__name__}: {said}"
+
+
+@contextmanager
+def write_transaction(engine: Engine, doing: str, undone: str = "nothing was changed"):
+    """A session whose writes are one transaction, committed when the block ends. A database
+    that refuses it (locked by another process's long write, a server gone) is a
+    :class:`DatabaseError` naming the URL, what was being done (``doing``: "remove the
+    case") and that it was rolled back (``undone``); other errors (a duplicate's
+    ``IntegrityError``, the caller's own) pass through as raised."""
+    try:
+        with Session(engine) as session, session.begin():
+            yield session
+    except OperationalError as error:
+        raise DatabaseError(f"{engine.url}: cannot {doing}: {refusal(error)}; {undone}") from None
 
 
 def default_url() -> str:
@@ -86,7 +123,7 @@ def url_for(target: str | os.PathLike) -> str:
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor = dbapi_connection.cursor()
     cursor.execute("PRAGMA journal_mode=WAL")
-    cursor.execute("PRAGMA busy_timeout=30000")
+    cursor.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_S * 1000}")
     cursor.execute("PRAGMA foreign_keys=ON")
     cursor.close()
 
@@ -116,10 +153,7 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             event.listen(engine, "connect", _sqlite_pragmas)
         migrate(engine)
     except SQLAlchemyError as error:
-        raise DatabaseError(
-            f"{url}: cannot open the database: {error.__class__.__name__}: "
-            f"{str(error).splitlines()[0]}"
-        ) from None
+        raise DatabaseError(f"{url}: cannot open the database: {refusal(error)}") from None
     except ImportError as error:  # the URL's driver (psycopg for PostgreSQL) is not installed
         raise DatabaseError(
             f"{url}: cannot open the database: its driver is not installed ({error}); for "
@@ -170,14 +204,22 @@ def migrate(engine: Engine, revision: str = "head") -> None:
 
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
-    wanted = revision
-    if revision == "head":
-        wanted = ScriptDirectory.from_config(config).get_current_head()
+    script = ScriptDirectory.from_config(config)
+    wanted = script.get_current_head() if revision == "head" else revision
     # an up-to-date database is read, not locked: a command would otherwise wait for a long
     # write (an import of 61,000 cases is one transaction) before it could read
     with engine.connect() as connection:
-        if MigrationContext.configure(connection).get_current_revision() == wanted:
-            return
+        current = MigrationContext.configure(connection).get_current_revision()
+    if current == wanted:
+        return
+    if current is not None and current not in {s.revision for s in script.walk_revisions()}:
+        from flakelab import __version__
+
+        raise DatabaseError(
+            f"{engine.url}: its tables were built by a newer flakelab (migration {current!r}, "
+            f"which flakelab {__version__} does not have); open it with that flakelab or a "
+            "newer one; nothing was changed"
+        )
     with engine.begin() as connection:
         lock_database(connection, MIGRATION_LOCK)
         config.attributes["connection"] = connection
@@ -237,8 +279,7 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
         raise CaseError(f"{engine.url}: {clash}; nothing was stored") from None
     except SQLAlchemyError as error:  # e.g. a value the server refuses (DataError)
         raise DatabaseError(
-            f"{engine.url}: cannot store the cases: {error.__class__.__name__}: "
-            f"{str(getattr(error, 'orig', error)).splitlines()[0]}; nothing was stored"
+            f"{engine.url}: cannot store the cases: {refusal(error)}; nothing was stored"
         ) from None
     return len(rows)
 
@@ -323,7 +364,7 @@ def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Cas
 def remove_case(engine: Engine, case_id: str) -> Case:
     """Delete the case ``case_id`` (one transaction) and return it; an unknown id is an error
     and deletes nothing."""
-    with Session(engine) as session, session.begin():
+    with write_transaction(engine, f"remove case {case_id!r}", "nothing was removed") as session:
         row = session.scalar(select(CaseRow).where(CaseRow.case_id == case_id))
         if row is None:
             raise CaseError(f"{engine.url}: no case {case_id!r}; nothing was removed")

@@ -20,7 +20,7 @@ from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from flakelab.cases.case import TEXT_LENGTHS
-from flakelab.cases.database import DatabaseError
+from flakelab.cases.database import DatabaseError, refusal
 from flakelab.cases.schema import ShopLotsRow
 from flakelab.errors import FlakelabError
 from flakelab.io.lots_file import lots_document, lots_from_document
@@ -131,8 +131,8 @@ def store_lots(engine: Engine, shop: str, lots: TonerLots, read_from: int | None
         ) from None
     except SQLAlchemyError as error:
         raise DatabaseError(
-            f"{engine.url}: cannot store the tins of shop {shop!r}: {error.__class__.__name__}: "
-            f"{str(getattr(error, 'orig', error)).splitlines()[0]}; nothing was stored"
+            f"{engine.url}: cannot store the tins of shop {shop!r}: {refusal(error)}; nothing "
+            "was stored"
         ) from None
     return stored
 

@@ -59,6 +59,7 @@ from scipy import stats
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
+from flakelab.cases.database import write_transaction
 from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -700,7 +701,8 @@ def save_habits(engine: Engine, habits: ShopHabits, instrument: str) -> None:
     """Store ``habits`` (of a named shop) in the database; earlier readings are kept."""
     if not habits.shop:
         raise FlakelabError("shop habits: name the shop whose habits are stored (--shop)")
-    with Session(engine) as session, session.begin():
+    doing = f"store the habits of shop {habits.shop!r}"
+    with write_transaction(engine, doing, "nothing was stored") as session:
         session.add(
             HabitsRow(
                 shop=habits.shop,

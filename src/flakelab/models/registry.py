@@ -22,7 +22,7 @@ from pathlib import Path
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
-from flakelab.cases.database import lock_database
+from flakelab.cases.database import lock_database, write_transaction
 from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.models.network import ForwardModel, ModelError
@@ -197,7 +197,7 @@ def promote(engine: Engine, name: str, version: int) -> dict:
     """Make a registered version the current model by hand, the one promoted before retired:
     an operator's override of the automatic promotion, such as a rollback after a new version
     misbehaves in the shop. Returns what changed."""
-    with Session(engine) as session, session.begin():
+    with write_transaction(engine, f"promote {name} v{version}") as session:
         _store_lock(session)  # not beside a registration promoting another
         row = _version_row(session, engine, name, version)
         retired = _retire_promoted(session, name, keep=row)
@@ -210,7 +210,7 @@ def retire(engine: Engine, name: str, version: int) -> dict:
     is current again until another is promoted: for a shop's own model the instrument's, for
     the instrument's the shipped one. Returns what changed and which is current now
     (``current``: the registered 'NAME vVERSION', or ``"shipped"``)."""
-    with Session(engine) as session, session.begin():
+    with write_transaction(engine, f"retire {name} v{version}") as session:
         _store_lock(session)
         row = _version_row(session, engine, name, version)
         was = row.status
@@ -405,7 +405,7 @@ def _stored(engine: Engine, row: ModelRow, shop: str | None, serving) -> int | N
     """Store ``row`` as its name's next version, retiring the promoted one where ``row`` is
     promoted; its number, or None where the current model is no longer ``serving`` (it was
     judged against another)."""
-    with Session(engine) as session, session.begin():
+    with write_transaction(engine, f"register {row.name}", "nothing was stored") as session:
         _store_lock(session)
         version = (
             session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == row.name)) or 0
