@@ -10,11 +10,12 @@ MA-T12 export by editing its cells, rows, columns and sheets (or cutting its byt
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
 stray characters; JSON files by replacing or deleting one value anywhere in them (a target
 for the match and a spray-out for the correction and for `cases record`, half the time, by
-values still readable but odd); a model file by editing its description, standardisation or weights.
+values still readable but odd); a model file by editing its description, standardisation or
+weights; a shop's SQLite database by replacing one value of one case row.
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
         sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
-        manifest,model,model-register,lots,panel] [--n 200] [--seed 0] [--show]
+        manifest,model,model-register,lots,panel,database] [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -30,6 +31,7 @@ import json
 import random
 import re
 import shutil
+import sqlite3
 import sys
 import tempfile
 from collections.abc import Callable
@@ -167,6 +169,36 @@ def damage_workbook(data: bytes, rng: random.Random) -> bytes:
     return buffer.getvalue()
 
 
+CASE_COLUMNS = ("case_id", "shop", "instrument", "conditions", "outcome", "synthetic",
+                "geometries", "recipe", "target", "sprayout", "target_texture",
+                "sprayout_texture", "created_at", "updated_at", "tins")  # fmt: skip
+"""The columns of a case row that a damaged database changes."""
+CELL_VALUES = (None, "", "x", "nonsense", 5, -1.0, 1e308, b"ab", b"", "[1, 2]", '{"a": 1}',
+               '["45as15"]', '["zz"]', '{"Sa15": "x"}', "2026-13-45 25:00:00", "{",
+               "null")  # fmt: skip
+"""What a damaged database cell becomes."""
+
+
+def damage_database(data: bytes, rng: random.Random) -> bytes:
+    """A SQLite database with one value of one case row replaced (a value its column's
+    constraints refuse is drawn again)."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "shop.db"
+        path.write_bytes(data)
+        with sqlite3.connect(path) as connection:
+            rows = [r for (r,) in connection.execute("SELECT id FROM cases")]
+            while True:
+                column, value = rng.choice(CASE_COLUMNS), rng.choice(CELL_VALUES)
+                try:
+                    connection.execute(f"UPDATE cases SET {column} = ? WHERE id = ?",
+                                       (value, rng.choice(rows)))  # fmt: skip
+                    break
+                except sqlite3.IntegrityError:
+                    continue
+        connection.close()
+        return path.read_bytes()
+
+
 def damage_model(data: bytes, rng: random.Random) -> bytes:
     stored = torch.load(io.BytesIO(data), weights_only=True)
     part = rng.choice(("meta", "norm", "state", "learned"))
@@ -221,6 +253,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         CliRunner().invoke(
             app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", f"{work}/cases.{suffix}"]
         )
+    CliRunner().invoke(app, ["cases", "import", f"{work}/cases.csv", "-d", f"{work}/shop.db"])
     model = replace(shipped_model("five-angle"))  # a copy recording cases, as a shop's does
     model.add_learned([f"case {i}" for i in range(50)])
     (work / "model.pt").write_bytes(model.to_bytes())
@@ -289,6 +322,10 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "model-register": (work / "model.pt",
                            lambda p: ["model", "register", str(p), str(work / "cases.csv"),
                                       "-d", "sqlite://"]),
+        # a shop's database with one value of one case row replaced, as another tool or a
+        # hand might write it (SQLite keeps whatever it is given), read whole by an export
+        "database": (work / "shop.db",
+                     lambda p: ["cases", "export", str(work / "export.csv"), "-d", str(p)]),
         # the shop's tins, which the main job weighs for
         "lots": (work / "lots.json",
                  lambda p: ["match", "--example", "--candidates", "1", "--lots", str(p)]),
@@ -323,6 +360,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
         damaged = work / f"{kind}-{i}{good.suffix}"
         if kind.startswith("model"):
             damaged.write_bytes(damage_model(data, rng))
+        elif kind == "database":
+            damaged.write_bytes(damage_database(data, rng))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
         elif kind in ("target", "sprayout", "record") and rng.random() < 0.5:

@@ -597,6 +597,46 @@ def test_a_database_of_a_newer_flakelab_is_refused_and_left_as_it_is(cases, data
     assert count_cases(engine) == 2
 
 
+@pytest.mark.parametrize(
+    ("column", "value", "said"),
+    [
+        ("target", b"ab", "target: expected 5 × 31 float32 values (620 bytes) for its "
+                               "geometries, got 2 bytes"),
+        ("geometries", "5", "geometries: expected a list of geometry names, got 5"),
+        ("geometries", "nonsense", "(row 2): geometries: cannot be read as JSON"),
+        ("created_at", "garbage", "(row 2): created_at: cannot be read as DATETIME"),
+        ("created_at", 5, "(row 2): created_at: cannot be read as DATETIME"),
+        ("recipe", b"ab", "(row 2): recipe: cannot be read as JSON"),
+        ("target_texture", '{"Sa15": "x"}', "target_texture: Sa15: expected a number, got 'x'"),
+        ("recipe", "[1, 2]", "recipe: expected a mapping toner → amount, got list"),
+    ],
+)  # fmt: skip
+def test_a_damaged_case_row_is_named_and_can_be_removed(cases, tmp_path, cli, column, value, said):
+    """A row another tool wrote or a hand edited (SQLite keeps whatever it is given) is
+    refused naming the database, the case and the field, whether the damage shows as the row
+    is fetched (JSON, a date) or as its case is built; 'cases remove' still removes it.
+    Before, a read stopped with "buffer size must be a multiple of element size", "Expecting
+    value: line 1 column 1" or "Invalid isoformat string", naming nothing."""
+    file = tmp_path / "shop.db"
+    url = f"sqlite:///{file}"
+    add_cases(open_database(url), cases[:3])
+    with sqlite3.connect(file) as connection:
+        connection.execute(f"UPDATE cases SET {column} = ? WHERE id = 2", (value,))
+    damaged = cases[1].case_id
+    engine = open_database(url)
+    for read in (lambda: list(iter_cases(engine)), lambda: latest_cases(engine, 3)):
+        with pytest.raises(CaseError) as error:
+            read()
+        assert str(error.value).startswith(f"{url}: case '{damaged}'") and said in str(error.value)
+    run = cli("cases", "list", "-d", str(file))
+    assert run.returncode == 2 and damaged in run.stderr and "internal error" not in run.stderr
+    run = cli("cases", "remove", damaged, "--yes", "-d", str(file))
+    assert run.returncode == 0 and "its stored values could not be read" in " ".join(
+        run.stderr.split()
+    )
+    assert [c.case_id for c in iter_cases(engine)] == [cases[0].case_id, cases[2].case_id]
+
+
 def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch, cli):
     """A mistyped path must not leave an empty database behind and report no cases."""
     missing = tmp_path / "shop.db"

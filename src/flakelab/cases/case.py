@@ -106,6 +106,29 @@ def _tins(where: str, tins, recipe: Mapping[str, float]) -> dict[str, TonerLot]:
     return checked
 
 
+def _texture_readings(where: str, name: str, readings) -> dict[str, float]:
+    """A case's texture readings ``name`` (``target_texture``, ``sprayout_texture``), checked:
+    known readings, numbers, each in :data:`TEXTURE_RANGE`."""
+    if not isinstance(readings, Mapping):
+        raise CaseError(f"{where}: {name}: expected readings by name, got {readings!r}")
+    unknown = sorted(set(readings) - set(TEXTURE_READINGS))
+    if unknown:
+        raise CaseError(f"{where}: {name}: unknown readings {unknown}")
+    for k, v in readings.items():
+        if not is_number(v):
+            raise CaseError(f"{where}: {name}: {k}: expected a number, got {v!r}")
+    readings = {k: float(v) for k, v in readings.items()}
+    low, high = TEXTURE_RANGE
+    bad = np.flatnonzero(outside(list(readings.values()), TEXTURE_RANGE))
+    if bad.size:  # every reading in one check: a database holds tens of thousands of cases
+        k = list(readings)[bad[0]]
+        raise CaseError(
+            f"{where}: {name}: {k}: expected a texture reading in [{low:g}, {high:g}], got "
+            f"{readings[k]:g}"
+        )
+    return readings
+
+
 @dataclass(frozen=True, eq=False)
 class Case:
     """Spectra on the storage grid, ``[G, 31]`` reflectance factors; ``recipe`` maps toner
@@ -131,7 +154,10 @@ class Case:
 
     def __post_init__(self) -> None:
         where = f"case {self.case_id!r}"
-        geometries = parse_geometries([getattr(g, "name", g) for g in self.geometries])
+        try:
+            geometries = parse_geometries([getattr(g, "name", g) for g in self.geometries])
+        except (ValueError, TypeError) as error:
+            raise CaseError(f"{where}: geometries: {error}") from None
         object.__setattr__(self, "geometries", geometries)
         for name in ("target", "sprayout"):
             values = np.asarray(getattr(self, name), dtype=float)
@@ -168,20 +194,7 @@ class Case:
                 f"{where}: outcome: expected one of {', '.join(OUTCOMES)}, got {self.outcome!r}"
             )
         for name in ("target_texture", "sprayout_texture"):
-            readings = getattr(self, name)
-            unknown = sorted(set(readings) - set(TEXTURE_READINGS))
-            if unknown:
-                raise CaseError(f"{where}: {name}: unknown readings {unknown}")
-            readings = {k: float(v) for k, v in readings.items()}
-            low, high = TEXTURE_RANGE
-            bad = np.flatnonzero(outside(list(readings.values()), TEXTURE_RANGE))
-            if bad.size:  # every reading in one check: a database holds tens of thousands of cases
-                k = list(readings)[bad[0]]
-                raise CaseError(
-                    f"{where}: {name}: {k}: expected a texture reading in "
-                    f"[{low:g}, {high:g}], got {readings[k]:g}"
-                )
-            object.__setattr__(self, name, readings)
+            object.__setattr__(self, name, _texture_readings(where, name, getattr(self, name)))
 
     @property
     def geometry_names(self) -> tuple[str, ...]:

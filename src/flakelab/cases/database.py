@@ -16,7 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
-from sqlalchemy import Connection, Engine, create_engine, event, func, select
+from sqlalchemy import Connection, Engine, create_engine, delete, event, func, select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session
@@ -24,6 +24,7 @@ from sqlalchemy.pool import NullPool, StaticPool
 
 from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.cases.schema import CaseRow
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.wording import counted
 from flakelab.errors import FlakelabError
 
@@ -248,14 +249,26 @@ def _row(case: Case) -> CaseRow:
     )
 
 
-def _case(row: CaseRow) -> Case:
-    shape = (len(row.geometries), -1)
+def _case(row: CaseRow, url) -> Case:
+    """The case a row of the database at ``url`` holds; a value it holds damaged (written by
+    another tool, or edited by hand) is a :class:`CaseError` naming the database, the case
+    and the field."""
+    try:
+        return _case_of(row)
+    except (ValueError, TypeError) as error:
+        said = str(error)
+        where = f"case {row.case_id!r}: "
+        raise CaseError(f"{url}: {where}{said.removeprefix(where)}") from None
+
+
+def _case_of(row: CaseRow) -> Case:
+    names = _geometry_names(row.geometries)
     return Case(
         case_id=row.case_id,
-        geometries=tuple(row.geometries),
+        geometries=tuple(names),
         recipe=row.recipe,
-        target=np.frombuffer(row.target, "<f4").reshape(shape).astype(float),
-        sprayout=np.frombuffer(row.sprayout, "<f4").reshape(shape).astype(float),
+        target=_stored_spectra(row.target, "target", len(names)),
+        sprayout=_stored_spectra(row.sprayout, "sprayout", len(names)),
         target_texture=row.target_texture,
         sprayout_texture=row.sprayout_texture,
         instrument=row.instrument,
@@ -266,6 +279,70 @@ def _case(row: CaseRow) -> Case:
         created_at=row.created_at,
         tins=row.tins or {},
     )
+
+
+def _geometry_names(names) -> list[str]:
+    """A case's stored geometry names, checked to be a list of texts."""
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise CaseError(f"geometries: expected a list of geometry names, got {names!r}")
+    return names
+
+
+def _stored_spectra(blob, name: str, geometries: int) -> np.ndarray:
+    """A case's spectra ``[G, 31]`` from their stored bytes (little-endian float32)."""
+    size = geometries * WAVELENGTHS.size * 4
+    if isinstance(blob, memoryview | bytearray):  # as some drivers give a binary column
+        blob = bytes(blob)
+    if not isinstance(blob, bytes) or len(blob) != size:
+        got = f"{len(blob)} bytes" if isinstance(blob, bytes) else f"{type(blob).__name__}"
+        raise CaseError(
+            f"{name}: expected {geometries} × {WAVELENGTHS.size} float32 values ({size} bytes) "
+            f"for its geometries, got {got}"
+        )
+    return np.frombuffer(blob, "<f4").reshape(geometries, -1).astype(float)
+
+
+@contextmanager
+def _reading_cases(engine: Engine):
+    """A session that reads case rows. A value its column's type cannot read (JSON that is
+    not, a date that is not: SQLite keeps whatever was written) stops the read as it is
+    fetched, before the row is known: the rows are read again raw to name the case and the
+    field (:func:`_damaged_row`)."""
+    try:
+        with Session(engine) as session:
+            yield session
+    except FlakelabError:
+        raise
+    except (ValueError, TypeError) as error:
+        found = _damaged_row(engine) or f"a case cannot be read ({error})"
+        raise CaseError(f"{engine.url}: {found}; the database is left as it is") from None
+
+
+def _damaged_row(engine: Engine) -> str | None:
+    """The first case row holding a value its column's type cannot read, as "case ID (row
+    N): FIELD: PROBLEM", each raw value put through the type's own reading; None where every
+    one reads."""
+    table = CaseRow.__table__
+    readers = {
+        c.name: reader
+        for c in table.columns
+        if c.name not in ("id", "case_id")
+        and (reader := c.type.dialect_impl(engine.dialect).result_processor(engine.dialect, None))
+        is not None
+    }
+    names = ("id", "case_id", *readers)
+    query = f"SELECT {', '.join(names)} FROM {table.name} ORDER BY id"  # raw: as stored
+    with engine.connect() as connection:
+        for row_id, case_id, *values in connection.exec_driver_sql(query):
+            for name, value in zip(names[2:], values, strict=True):
+                try:
+                    readers[name](value)
+                except (ValueError, TypeError) as error:
+                    return (
+                        f"case {case_id!r} (row {row_id}): {name}: cannot be read as "
+                        f"{table.c[name].type} ({error}), got {str(value)[:40]!r}"
+                    )
+    return None
 
 
 def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
@@ -319,9 +396,9 @@ def iter_cases(
         query = query.where(CaseRow.created_at >= utc.astimezone(UTC))
     if limit:
         query = query.limit(limit)
-    with Session(engine) as session:
+    with _reading_cases(engine) as session:
         for row in session.scalars(query.execution_options(yield_per=batch)):
-            yield _case(row)
+            yield _case(row, engine.url)
 
 
 def stored_sprayouts(
@@ -331,25 +408,30 @@ def stored_sprayouts(
     at every one of ``geometries``, restricted to them in their order: those columns alone,
     without building each case (a fifth of the time; :func:`cases_by_rows` builds the few
     that are wanted)."""
-    query = select(CaseRow.id, CaseRow.geometries, CaseRow.sprayout).order_by(CaseRow.id)
+    columns = (CaseRow.id, CaseRow.case_id, CaseRow.geometries, CaseRow.sprayout)
+    query = select(*columns).order_by(CaseRow.id)
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
     wanted, ids, spectra = set(geometries), [], []
-    with Session(engine) as session:
-        for row_id, names, sprayout in session.execute(query):
-            if wanted <= set(names):
-                rows = [names.index(g) for g in geometries]
-                ids.append(row_id)
-                spectra.append(np.frombuffer(sprayout, "<f4").reshape(len(names), -1)[rows])
+    with _reading_cases(engine) as session:
+        for row_id, case_id, names, sprayout in session.execute(query):
+            try:
+                names = _geometry_names(names)
+                if wanted <= set(names):
+                    rows = [names.index(g) for g in geometries]
+                    spectra.append(_stored_spectra(sprayout, "sprayout", len(names))[rows])
+                    ids.append(row_id)
+            except CaseError as error:
+                raise CaseError(f"{engine.url}: case {case_id!r}: {error}") from None
     shape = (0, len(geometries), 0)
     return ids, np.stack(spectra).astype(float) if spectra else np.zeros(shape)
 
 
 def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
     """The cases of these row ids (:func:`stored_sprayouts`), in their order."""
-    with Session(engine) as session:
+    with _reading_cases(engine) as session:
         rows = {r.id: r for r in session.scalars(select(CaseRow).where(CaseRow.id.in_(row_ids)))}
-    return [_case(rows[i]) for i in row_ids]
+    return [_case(rows[i], engine.url) for i in row_ids]
 
 
 def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Case]:
@@ -357,19 +439,23 @@ def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Cas
     query = select(CaseRow).order_by(CaseRow.created_at.desc(), CaseRow.id.desc()).limit(n)
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
-    with Session(engine) as session:
-        return [_case(row) for row in session.scalars(query)]
+    with _reading_cases(engine) as session:
+        return [_case(row, engine.url) for row in session.scalars(query)]
 
 
-def remove_case(engine: Engine, case_id: str) -> Case:
-    """Delete the case ``case_id`` (one transaction) and return it; an unknown id is an error
-    and deletes nothing."""
+def remove_case(engine: Engine, case_id: str) -> Case | None:
+    """Delete the case ``case_id`` (one transaction) and return it, None where the row holds
+    values that cannot be read (a damaged case is removed all the same: it is the way out);
+    an unknown id is an error and deletes nothing."""
     with write_transaction(engine, f"remove case {case_id!r}", "nothing was removed") as session:
-        row = session.scalar(select(CaseRow).where(CaseRow.case_id == case_id))
-        if row is None:
+        row_id = session.scalar(select(CaseRow.id).where(CaseRow.case_id == case_id))
+        if row_id is None:
             raise CaseError(f"{engine.url}: no case {case_id!r}; nothing was removed")
-        case = _case(row)
-        session.delete(row)
+        try:
+            case = _case(session.get_one(CaseRow, row_id), engine.url)
+        except (ValueError, TypeError):
+            case = None
+        session.execute(delete(CaseRow).where(CaseRow.id == row_id))
     return case
 
 

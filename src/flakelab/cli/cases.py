@@ -845,11 +845,12 @@ def remove(
             raise FlakelabError(f"cases remove {case_id}: confirm with --yes")
         typer.confirm(f"remove case {case_id} from {engine.url}?", abort=True)
     case = remove_case(engine, case_id)
-    errors.print(
-        f"removed case {case.case_id} ({case.shop}, {case.outcome}, "
-        f"{case.created_at:%Y-%m-%d %H:%M}) from {engine.url}",
-        highlight=False,
+    what = (
+        "its stored values could not be read"
+        if case is None
+        else f"{case.shop}, {case.outcome}, {case.created_at:%Y-%m-%d %H:%M}"
     )
+    errors.print(f"removed case {case_id} ({what}) from {engine.url}", highlight=False)
 
 
 @cases_app.command("export")
