@@ -43,6 +43,7 @@ from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.data import example_path
+from flakelab.errors import FlakelabError
 from flakelab.io import read_library, read_measurement
 from flakelab.models.training import case_arrays
 
@@ -625,7 +626,7 @@ def test_a_damaged_case_row_is_named_and_can_be_removed(cases, tmp_path, cli, co
     damaged = cases[1].case_id
     engine = open_database(url)
     for read in (lambda: list(iter_cases(engine)), lambda: latest_cases(engine, 3)):
-        with pytest.raises(CaseError) as error:
+        with pytest.raises(FlakelabError) as error:  # the database's or the case's error
             read()
         assert str(error.value).startswith(f"{url}: case '{damaged}'") and said in str(error.value)
     run = cli("cases", "list", "-d", str(file))
@@ -635,6 +636,25 @@ def test_a_damaged_case_row_is_named_and_can_be_removed(cases, tmp_path, cli, co
         run.stderr.split()
     )
     assert [c.case_id for c in iter_cases(engine)] == [cases[0].case_id, cases[2].case_id]
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "said"),
+    [
+        ("created_at", "x", "model 'five-angle' (row 1): created_at: cannot be read as DATETIME"),
+        ("toners", "5", "model 'five-angle' v1: toners: expected a list of toner names, got 5"),
+    ],
+)
+def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):
+    """The registry's rows are read as the cases' are: a damaged one named (before, 'model
+    list' stopped with "internal error: TypeError: object of type 'int' has no len()")."""
+    file = tmp_path / "shop.db"
+    open_database(f"sqlite:///{file}")
+    assert _register_a_model((f"sqlite:///{file}", 0, 0.0)) == 1
+    with sqlite3.connect(file) as connection:
+        connection.execute(f"UPDATE models SET {column} = ?", (value,))
+    run = cli("model", "list", "-d", str(file))
+    assert run.returncode == 2 and said in " ".join(run.stderr.split())
 
 
 def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch, cli):

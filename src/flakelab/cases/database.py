@@ -34,6 +34,7 @@ __all__ = [
     "migrate",
     "lock_database",
     "write_transaction",
+    "reading_rows",
     "refusal",
     "BUSY_TIMEOUT_S",
     "add_cases",
@@ -303,43 +304,44 @@ def _stored_spectra(blob, name: str, geometries: int) -> np.ndarray:
 
 
 @contextmanager
-def _reading_cases(engine: Engine):
-    """A session that reads case rows. A value its column's type cannot read (JSON that is
-    not, a date that is not: SQLite keeps whatever was written) stops the read as it is
-    fetched, before the row is known: the rows are read again raw to name the case and the
-    field (:func:`_damaged_row`)."""
+def reading_rows(engine: Engine, row_class=CaseRow, what: str = "case", key: str = "case_id"):
+    """A session that reads rows of ``row_class``'s table. A value its column's type cannot
+    read (JSON that is not, a date that is not: SQLite keeps whatever was written) stops the
+    read as it is fetched, before the row is known: the rows are read again raw to name the
+    ``what`` (by its ``key`` column), the row and the field (:func:`_damaged_row`), in a
+    :class:`DatabaseError`; so is a value of the wrong kind met while reading."""
     try:
         with Session(engine) as session:
             yield session
     except FlakelabError:
         raise
     except (ValueError, TypeError) as error:
-        found = _damaged_row(engine) or f"a case cannot be read ({error})"
-        raise CaseError(f"{engine.url}: {found}; the database is left as it is") from None
+        found = _damaged_row(engine, row_class, what, key) or f"a {what} cannot be read ({error})"
+        raise DatabaseError(f"{engine.url}: {found}; the database is left as it is") from None
 
 
-def _damaged_row(engine: Engine) -> str | None:
-    """The first case row holding a value its column's type cannot read, as "case ID (row
-    N): FIELD: PROBLEM", each raw value put through the type's own reading; None where every
-    one reads."""
-    table = CaseRow.__table__
+def _damaged_row(engine: Engine, row_class, what: str, key: str) -> str | None:
+    """The first row holding a value its column's type cannot read, as "WHAT KEY (row N):
+    FIELD: PROBLEM", each raw value put through the type's own reading; None where every one
+    reads."""
+    table = row_class.__table__
     readers = {
         c.name: reader
         for c in table.columns
-        if c.name not in ("id", "case_id")
+        if c.name not in ("id", key)
         and (reader := c.type.dialect_impl(engine.dialect).result_processor(engine.dialect, None))
         is not None
     }
-    names = ("id", "case_id", *readers)
+    names = ("id", key, *readers)
     query = f"SELECT {', '.join(names)} FROM {table.name} ORDER BY id"  # raw: as stored
     with engine.connect() as connection:
-        for row_id, case_id, *values in connection.exec_driver_sql(query):
+        for row_id, label, *values in connection.exec_driver_sql(query):
             for name, value in zip(names[2:], values, strict=True):
                 try:
                     readers[name](value)
                 except (ValueError, TypeError) as error:
                     return (
-                        f"case {case_id!r} (row {row_id}): {name}: cannot be read as "
+                        f"{what} {label!r} (row {row_id}): {name}: cannot be read as "
                         f"{table.c[name].type} ({error}), got {str(value)[:40]!r}"
                     )
     return None
@@ -396,7 +398,7 @@ def iter_cases(
         query = query.where(CaseRow.created_at >= utc.astimezone(UTC))
     if limit:
         query = query.limit(limit)
-    with _reading_cases(engine) as session:
+    with reading_rows(engine) as session:
         for row in session.scalars(query.execution_options(yield_per=batch)):
             yield _case(row, engine.url)
 
@@ -413,7 +415,7 @@ def stored_sprayouts(
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
     wanted, ids, spectra = set(geometries), [], []
-    with _reading_cases(engine) as session:
+    with reading_rows(engine) as session:
         for row_id, case_id, names, sprayout in session.execute(query):
             try:
                 names = _geometry_names(names)
@@ -429,7 +431,7 @@ def stored_sprayouts(
 
 def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
     """The cases of these row ids (:func:`stored_sprayouts`), in their order."""
-    with _reading_cases(engine) as session:
+    with reading_rows(engine) as session:
         rows = {r.id: r for r in session.scalars(select(CaseRow).where(CaseRow.id.in_(row_ids)))}
     return [_case(rows[i], engine.url) for i in row_ids]
 
@@ -439,7 +441,7 @@ def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Cas
     query = select(CaseRow).order_by(CaseRow.created_at.desc(), CaseRow.id.desc()).limit(n)
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
-    with _reading_cases(engine) as session:
+    with reading_rows(engine) as session:
         return [_case(row, engine.url) for row in session.scalars(query)]
 
 

@@ -20,7 +20,7 @@ from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from flakelab.cases.case import TEXT_LENGTHS
-from flakelab.cases.database import DatabaseError, refusal
+from flakelab.cases.database import DatabaseError, reading_rows, refusal
 from flakelab.cases.schema import ShopLotsRow
 from flakelab.errors import FlakelabError
 from flakelab.io.lots_file import lots_document, lots_from_document
@@ -67,7 +67,7 @@ def stored_lots(
     query = select(ShopLotsRow).where(ShopLotsRow.shop == _checked_shop(shop))
     if version is not None:
         query = query.where(ShopLotsRow.version == version)
-    with Session(engine) as session:
+    with reading_rows(engine, ShopLotsRow, "tins of shop", "shop") as session:
         row = session.scalars(query.order_by(ShopLotsRow.version.desc()).limit(1)).first()
     return None if row is None else _stored(engine, row, toners)
 
@@ -75,7 +75,7 @@ def stored_lots(
 def lots_history(engine: Engine, shop: str) -> list[StoredLots]:
     """Every version of the tins stored for ``shop``, the first first."""
     query = select(ShopLotsRow).where(ShopLotsRow.shop == _checked_shop(shop))
-    with Session(engine) as session:
+    with reading_rows(engine, ShopLotsRow, "tins of shop", "shop") as session:
         rows = session.scalars(query.order_by(ShopLotsRow.version)).all()
     return [_stored(engine, row) for row in rows]
 
@@ -139,7 +139,7 @@ def store_lots(engine: Engine, shop: str, lots: TonerLots, read_from: int | None
 
 def list_stored_lots(engine: Engine) -> list[dict]:
     """Every shop with tins stored: its latest version, how many tins and when."""
-    with Session(engine) as session:
+    with reading_rows(engine, ShopLotsRow, "tins of shop", "shop") as session:
         rows = session.scalars(select(ShopLotsRow).order_by(ShopLotsRow.version)).all()
         latest = {r.shop: r for r in rows}
         return [

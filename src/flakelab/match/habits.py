@@ -57,9 +57,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 from sqlalchemy import Engine, select
-from sqlalchemy.orm import Session
 
-from flakelab.cases.database import write_transaction
+from flakelab.cases.database import reading_rows, write_transaction
 from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -717,7 +716,7 @@ def save_habits(engine: Engine, habits: ShopHabits, instrument: str) -> None:
 def stored_habits(engine: Engine, shop: str, model: str = "") -> ShopHabits:
     """The latest habits stored for ``shop``: those measured against ``model`` when there
     are any, else the latest against any model (check :attr:`ShopHabits.model`)."""
-    with Session(engine) as session:
+    with reading_rows(engine, HabitsRow, "habits of shop", "shop") as session:
         rows = session.scalars(
             select(HabitsRow).where(HabitsRow.shop == shop).order_by(HabitsRow.id.desc())
         ).all()
@@ -732,7 +731,7 @@ def stored_habits(engine: Engine, shop: str, model: str = "") -> ShopHabits:
 
 def list_habits(engine: Engine) -> list[dict]:
     """The latest stored habits of every shop, with when they were read."""
-    with Session(engine) as session:
+    with reading_rows(engine, HabitsRow, "habits of shop", "shop") as session:
         rows = session.scalars(select(HabitsRow).order_by(HabitsRow.id)).all()
         latest = {r.shop: r for r in rows}
         return [

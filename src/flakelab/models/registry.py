@@ -22,7 +22,12 @@ from pathlib import Path
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
-from flakelab.cases.database import lock_database, write_transaction
+from flakelab.cases.database import (
+    DatabaseError,
+    lock_database,
+    reading_rows,
+    write_transaction,
+)
 from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.models.network import ForwardModel, ModelError
@@ -85,7 +90,7 @@ def serving_version(
 ) -> tuple[str, int] | None:
     """The registered name and version of the promoted model current for ``shop`` on the
     instrument (the shop's own, else the instrument's); None where the shipped one is."""
-    with Session(engine) as session:
+    with _reading(engine) as session:
         return _serving(session, instrument, shop)
 
 
@@ -140,26 +145,32 @@ def list_models(engine: Engine, name: str | None = None, version: int | None = N
         query = query.where(ModelRow.name == name)
     if version is not None:
         query = query.where(ModelRow.version == version)
-    with Session(engine) as session:
-        rows = session.execute(query)
-        return [
-            {
-                "name": r.name,
-                "version": r.version,
-                "instrument": r.instrument,
-                "status": r.status,
-                "held_out_de00": r.held_out_de00,
-                "toners": len(r.toners),
-                "data_hash": r.data_hash[:12],
-                "created_at": r.created_at.isoformat(),
-                "size_kb": round(r.size / 1024, 1),
-            }
-            for r in rows
-        ]
+    with _reading(engine) as session:
+        rows = session.execute(query).all()
+    for r in rows:
+        if not isinstance(r.toners, list):
+            raise DatabaseError(
+                f"{engine.url}: model {r.name!r} v{r.version}: toners: expected a list of toner "
+                f"names, got {r.toners!r}"
+            )
+    return [
+        {
+            "name": r.name,
+            "version": r.version,
+            "instrument": r.instrument,
+            "status": r.status,
+            "held_out_de00": r.held_out_de00,
+            "toners": len(r.toners),
+            "data_hash": r.data_hash[:12],
+            "created_at": r.created_at.isoformat(),
+            "size_kb": round(r.size / 1024, 1),
+        }
+        for r in rows
+    ]
 
 
 def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
-    with Session(engine) as session:
+    with _reading(engine) as session:
         row = _promoted_row(session, name)
         return (
             None if row is None else ForwardModel.from_bytes(row.artefact, f"{name} v{row.version}")
@@ -168,7 +179,7 @@ def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
 
 def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
     """Version ``version`` of the registered model ``name``, whatever its status."""
-    with Session(engine) as session:
+    with _reading(engine) as session:
         row = _version_row(session, engine, name, version)
         return ForwardModel.from_bytes(row.artefact, f"{name} v{version}")
 
@@ -181,7 +192,7 @@ def held_already(engine: Engine, name: str, model: ForwardModel) -> str | None:
     fingerprint = model.fingerprint
     if model.instrument in SHIPPED and shipped_model(model.instrument).fingerprint == fingerprint:
         return f"the shipped {model.instrument} model"
-    with Session(engine) as session:
+    with _reading(engine) as session:
         rows = session.execute(
             select(ModelRow.version, ModelRow.artefact)
             .where(ModelRow.name == name)
@@ -392,6 +403,11 @@ def _judged(engine: Engine, model: ForwardModel, held_out: CaseArrays, serving):
 REGISTRY_LOCK = 0x666C616B66
 """PostgreSQL's advisory lock under which models are stored, promoted and retired one at a
 time."""
+
+
+def _reading(engine: Engine):
+    """A session reading the registry, whose damaged rows are named (:func:`reading_rows`)."""
+    return reading_rows(engine, ModelRow, "model", "name")
 
 
 def _store_lock(session: Session) -> None:
