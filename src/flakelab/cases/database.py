@@ -426,7 +426,7 @@ def stored_sprayouts(
             except CaseError as error:
                 raise CaseError(f"{engine.url}: case {case_id!r}: {error}") from None
     shape = (0, len(geometries), 0)
-    return ids, np.stack(spectra).astype(float) if spectra else np.zeros(shape)
+    return ids, np.stack(spectra) if spectra else np.zeros(shape)
 
 
 def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
