@@ -655,6 +655,11 @@ def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):
         connection.execute(f"UPDATE models SET {column} = ?", (value,))
     run = cli("model", "list", "-d", str(file))
     assert run.returncode == 2 and said in " ".join(run.stderr.split())
+    if column == "created_at":  # a promotion reads the rows it changes, in its transaction
+        run = cli("model", "promote", "five-angle:1", "-d", str(file))
+        assert run.returncode == 2 and f"cannot promote five-angle v1: {said}" in " ".join(
+            run.stderr.split()
+        )
 
 
 def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch, cli):

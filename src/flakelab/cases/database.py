@@ -86,17 +86,28 @@ def refusal(error: SQLAlchemyError) -> str:
 
 
 @contextmanager
-def write_transaction(engine: Engine, doing: str, undone: str = "nothing was changed"):
+def write_transaction(
+    engine: Engine, doing: str, undone: str = "nothing was changed", rows: tuple | None = None
+):
     """A session whose writes are one transaction, committed when the block ends. A database
     that refuses it (locked by another process's long write, a server gone) is a
     :class:`DatabaseError` naming the URL, what was being done (``doing``: "remove the
-    case") and that it was rolled back (``undone``); other errors (a duplicate's
-    ``IntegrityError``, the caller's own) pass through as raised."""
+    case") and that it was rolled back (``undone``); so is a row it reads that holds a value
+    its column cannot read, named as :func:`reading_rows` names it (``rows``: its row class,
+    what a row is and its key column). Other errors (a duplicate's ``IntegrityError``, the
+    caller's own) pass through as raised."""
     try:
         with Session(engine) as session, session.begin():
             yield session
     except OperationalError as error:
         raise DatabaseError(f"{engine.url}: cannot {doing}: {refusal(error)}; {undone}") from None
+    except FlakelabError:
+        raise
+    except (ValueError, TypeError) as error:
+        if rows is None:
+            raise
+        found = _damaged_row(engine, *rows) or f"a {rows[1]} cannot be read ({error})"
+        raise DatabaseError(f"{engine.url}: cannot {doing}: {found}; {undone}") from None
 
 
 def default_url() -> str:

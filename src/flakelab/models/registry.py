@@ -208,7 +208,7 @@ def promote(engine: Engine, name: str, version: int) -> dict:
     """Make a registered version the current model by hand, the one promoted before retired:
     an operator's override of the automatic promotion, such as a rollback after a new version
     misbehaves in the shop. Returns what changed."""
-    with write_transaction(engine, f"promote {name} v{version}") as session:
+    with write_transaction(engine, f"promote {name} v{version}", rows=_ROWS) as session:
         _store_lock(session)  # not beside a registration promoting another
         row = _version_row(session, engine, name, version)
         retired = _retire_promoted(session, name, keep=row)
@@ -221,7 +221,7 @@ def retire(engine: Engine, name: str, version: int) -> dict:
     is current again until another is promoted: for a shop's own model the instrument's, for
     the instrument's the shipped one. Returns what changed and which is current now
     (``current``: the registered 'NAME vVERSION', or ``"shipped"``)."""
-    with write_transaction(engine, f"retire {name} v{version}") as session:
+    with write_transaction(engine, f"retire {name} v{version}", rows=_ROWS) as session:
         _store_lock(session)
         row = _version_row(session, engine, name, version)
         was = row.status
@@ -405,9 +405,13 @@ REGISTRY_LOCK = 0x666C616B66
 time."""
 
 
+_ROWS = (ModelRow, "model", "name")
+"""The registry's rows as :func:`~flakelab.cases.database.reading_rows` names a damaged one."""
+
+
 def _reading(engine: Engine):
     """A session reading the registry, whose damaged rows are named (:func:`reading_rows`)."""
-    return reading_rows(engine, ModelRow, "model", "name")
+    return reading_rows(engine, *_ROWS)
 
 
 def _store_lock(session: Session) -> None:
@@ -421,7 +425,9 @@ def _stored(engine: Engine, row: ModelRow, shop: str | None, serving) -> int | N
     """Store ``row`` as its name's next version, retiring the promoted one where ``row`` is
     promoted; its number, or None where the current model is no longer ``serving`` (it was
     judged against another)."""
-    with write_transaction(engine, f"register {row.name}", "nothing was stored") as session:
+    with write_transaction(
+        engine, f"register {row.name}", "nothing was stored", rows=_ROWS
+    ) as session:
         _store_lock(session)
         version = (
             session.scalar(select(func.max(ModelRow.version)).where(ModelRow.name == row.name)) or 0
