@@ -268,9 +268,14 @@ def _case(row: CaseRow, url) -> Case:
     try:
         return _case_of(row)
     except (ValueError, TypeError) as error:
-        said = str(error)
-        where = f"case {row.case_id!r}: "
-        raise CaseError(f"{url}: {where}{said.removeprefix(where)}") from None
+        raise _in_case(url, row.case_id, error) from None
+
+
+def _in_case(url, case_id: str, error: Exception) -> CaseError:
+    """``error``, met reading case ``case_id`` of the database at ``url``, naming both (once:
+    a case's own checks name the case already)."""
+    where = f"case {case_id!r}: "
+    return CaseError(f"{url}: {where}{str(error).removeprefix(where)}")
 
 
 def _case_of(row: CaseRow) -> Case:
@@ -435,7 +440,7 @@ def stored_sprayouts(
                     spectra.append(_stored_spectra(sprayout, "sprayout", len(names))[rows])
                     ids.append(row_id)
             except CaseError as error:
-                raise CaseError(f"{engine.url}: case {case_id!r}: {error}") from None
+                raise _in_case(engine.url, case_id, error) from None
     shape = (0, len(geometries), 0)
     return ids, np.stack(spectra) if spectra else np.zeros(shape)
 
