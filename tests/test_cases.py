@@ -778,30 +778,36 @@ def test_a_database_is_read_while_another_process_writes_to_it(tmp_path):
         holder.wait()
 
 
-def test_a_write_kept_waiting_by_another_process_is_refused_and_named(cases, tmp_path, cli,
-                                                                   monkeypatch):  # fmt: skip
+def test_a_write_kept_waiting_by_another_process_is_refused_and_named(cases, cli, monkeypatch,
+                                                                   database_url):  # fmt: skip
     """A write that waits past the busy timeout behind another process's write (an import)
     is refused naming the database, what it was doing and why, and changes nothing: before,
-    'cases remove' stopped with "internal error: OperationalError: database is locked"."""
+    'cases remove' stopped with "internal error: OperationalError: database is locked" on
+    SQLite, and waited for ever on PostgreSQL."""
     import flakelab.cases.database as database
 
     monkeypatch.setattr(database, "BUSY_TIMEOUT_S", 1)  # 30 s in use
-    file = tmp_path / "shop.db"
-    url = f"sqlite:///{file}"
+    url = database_url
     add_cases(open_database(url), cases[:3])
+    held = cases[0].case_id
     holder = subprocess.Popen(
-        [sys.executable, "-c", _HOLD_A_WRITE, url], stdout=subprocess.PIPE, text=True
+        [sys.executable, "-c", _HOLD_A_CASE, url, held], stdout=subprocess.PIPE, text=True
     )
-    waiting = "another process has been writing to it for over 1 s"
+    waiting = (
+        "another process has been writing to it for over 1 s"
+        if url.startswith("sqlite")
+        else "another connection has held what this needs for over 1 s"
+    )
     try:
         assert holder.stdout.readline().strip() == "holding"
         engine = open_database(url)
         with pytest.raises(DatabaseError, match=f"cannot remove case .*: {waiting}.*nothing was "
                                                 "removed"):  # fmt: skip
-            remove_case(engine, cases[0].case_id)
-        with pytest.raises(DatabaseError, match=f"cannot store the cases: {waiting}"):
-            add_cases(engine, cases[3:5])
-        run = cli("cases", "remove", cases[1].case_id, "--yes", "-d", str(file))
+            remove_case(engine, held)
+        if url.startswith("sqlite"):  # one writer for the whole file; PostgreSQL's rows
+            with pytest.raises(DatabaseError, match=f"cannot store the cases: {waiting}"):
+                add_cases(engine, cases[3:5])
+        run = cli("cases", "remove", held, "--yes", "-d", url)
         said = " ".join(run.stderr.split())
         assert run.returncode == 2 and waiting in said and "internal error" not in said
         assert holder.poll() is None  # the write still held: each gave up on its own
@@ -811,6 +817,17 @@ def test_a_write_kept_waiting_by_another_process_is_refused_and_named(cases, tmp
     assert sorted(c.case_id for c in iter_cases(open_database(url))) == sorted(
         c.case_id for c in cases[:3]
     )
+
+
+_HOLD_A_CASE = """
+import sys, time
+from sqlalchemy import text
+from flakelab.cases.database import open_database
+with open_database(sys.argv[1]).begin() as connection:
+    connection.execute(text("DELETE FROM cases WHERE case_id = :id"), {"id": sys.argv[2]})
+    print("holding", flush=True)
+    time.sleep(120)
+"""
 
 
 _HOLD_A_WRITE = """

@@ -63,9 +63,13 @@ any shop's database; :func:`find_case_id` takes any unique beginning."""
 
 
 BUSY_TIMEOUT_S = 30
-"""How long a write to a SQLite file waits for another process's write to end before it gives
-up: an import or a generation writes each batch in one transaction, and SQLite lets one writer
-at a time."""
+"""How long a statement waits for another process's write to end before it gives up: on a
+SQLite file, whose one writer at a time may be an import or a generation writing each batch in
+one transaction (its busy timeout); on PostgreSQL, for a lock another connection holds, a row
+it changes or the registry's turn (its ``lock_timeout``), so that a command never hangs."""
+
+_LOCK_NOT_AVAILABLE = "55P03"
+"""PostgreSQL's SQLSTATE for a statement that gave up waiting for a lock (``lock_timeout``)."""
 
 
 class DatabaseError(FlakelabError):
@@ -81,6 +85,11 @@ def refusal(error: SQLAlchemyError) -> str:
         return (
             f"another process has been writing to it for over {BUSY_TIMEOUT_S} s (an import or "
             "a generation writes each batch in one transaction); try again when it is done"
+        )
+    if getattr(getattr(error, "orig", None), "sqlstate", None) == _LOCK_NOT_AVAILABLE:
+        return (
+            f"another connection has held what this needs for over {BUSY_TIMEOUT_S} s (a write "
+            "in progress, or a session left open in a transaction); try again when it is done"
         )
     return f"{error.__class__.__name__}: {said}"
 
@@ -103,10 +112,10 @@ def write_transaction(
         raise DatabaseError(f"{engine.url}: cannot {doing}: {refusal(error)}; {undone}") from None
     except FlakelabError:
         raise
-    except (ValueError, TypeError) as error:
-        if rows is None:
+    except (ValueError, TypeError):
+        found = None if rows is None else _damaged_row(engine, *rows)
+        if found is None:
             raise
-        found = _damaged_row(engine, *rows) or f"a {rows[1]} cannot be read ({error})"
         raise DatabaseError(f"{engine.url}: cannot {doing}: {found}; {undone}") from None
 
 
@@ -141,6 +150,13 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor.close()
 
 
+def _postgres_settings(dbapi_connection, _record) -> None:
+    cursor = dbapi_connection.cursor()
+    cursor.execute(f"SET lock_timeout = {BUSY_TIMEOUT_S * 1000}")
+    cursor.close()
+    dbapi_connection.commit()  # a SET in a transaction rolled back is undone
+
+
 def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = False) -> Engine:
     """An engine on an up-to-date database (migrations applied). A SQLite file that does not
     exist is created, unless ``must_exist`` and the file was named (here or by
@@ -164,6 +180,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
         engine = create_engine(url, poolclass=StaticPool if file == "" else NullPool)
         if engine.dialect.name == "sqlite":
             event.listen(engine, "connect", _sqlite_pragmas)
+        elif engine.dialect.name == "postgresql":
+            event.listen(engine, "connect", _postgres_settings)
         migrate(engine)
     except SQLAlchemyError as error:
         raise DatabaseError(f"{url}: cannot open the database: {refusal(error)}") from None
@@ -325,14 +343,17 @@ def reading_rows(engine: Engine, row_class=CaseRow, what: str = "case", key: str
     read (JSON that is not, a date that is not: SQLite keeps whatever was written) stops the
     read as it is fetched, before the row is known: the rows are read again raw to name the
     ``what`` (by its ``key`` column), the row and the field (:func:`_damaged_row`), in a
-    :class:`DatabaseError`; so is a value of the wrong kind met while reading."""
+    :class:`DatabaseError`. An error no stored value explains is flakelab's own and passes
+    through as raised, so that a bug does not pass for a damaged database."""
     try:
         with Session(engine) as session:
             yield session
     except FlakelabError:
         raise
-    except (ValueError, TypeError) as error:
-        found = _damaged_row(engine, row_class, what, key) or f"a {what} cannot be read ({error})"
+    except (ValueError, TypeError):
+        found = _damaged_row(engine, row_class, what, key)
+        if found is None:
+            raise
         raise DatabaseError(f"{engine.url}: {found}; the database is left as it is") from None
 
 

@@ -226,8 +226,9 @@ def correct_command(
         if shop_habits
         else left_out_model(target_reading, forward, lib, database, physics, shop)
     )
-    found = other and _add_left_out(report, target_reading, sprayed_reading, fractions,
-                                    correction, forward, other, tol)  # fmt: skip
+    found = other and _add_expected_left_out(
+        report, target_reading, sprayed_reading, fractions, correction, forward, other, tol
+    )
     if plot is not None:
         samples = {
             "spray-out (measured)": reflectance_to_Lab(sprayed_R),
@@ -256,7 +257,9 @@ def _add_can_limits(report: dict, left: dict | None, most_g, room, correction) -
             )
 
 
-def _add_left_out(report, target, sprayed, fractions, correction, forward, other, tolerance):
+def _add_expected_left_out(
+    report, target, sprayed, fractions, correction, forward, other, tolerance
+):
     """The spray-out and the corrected recipe at the target's geometries that ``forward``
     leaves out, as the ``other`` model predicts them, into ``report``; the two comparisons
     (None where the target has no such geometries)."""

@@ -330,7 +330,7 @@ def match_command(
     extra = []
     if shop_habits is None:  # aimed-off candidates: their offsets are per geometry
         other = left_out_model(measurement, forward, lib, database, physics, shop)
-        extra = _add_left_out(report, result, measurement, forward, other, tol)
+        extra = _add_predicted_left_out(report, result, measurement, forward, other, tol)
     _weigh_candidates(report, result.candidates, forward, can)
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
@@ -395,7 +395,7 @@ def _add_recorded_nearest(report: dict, found, searched: bool, database: str, sh
         )
 
 
-def _add_left_out(report: dict, result, measurement, forward, other, tolerance) -> list:
+def _add_predicted_left_out(report: dict, result, measurement, forward, other, tolerance) -> list:
     """Each candidate as the ``other`` model predicts it at the target's geometries that
     ``forward`` leaves out, into its entry of ``report``; the predictions (none without
     such a model)."""
