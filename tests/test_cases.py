@@ -638,6 +638,18 @@ def test_a_damaged_case_row_is_named_and_can_be_removed(cases, tmp_path, cli, co
     assert [c.case_id for c in iter_cases(engine)] == [cases[0].case_id, cases[2].case_id]
 
 
+def test_an_error_no_stored_value_explains_is_not_blamed_on_the_database(cases, tmp_path):
+    """A reading whose rows are all sound lets flakelab's own error through as raised: before,
+    a bug in the code that reads cases read "a case cannot be read (…); the database is left
+    as it is", as if the database were damaged."""
+    from flakelab.cases.database import reading_rows
+
+    engine = open_database(tmp_path / "shop.db")
+    add_cases(engine, cases[:2])
+    with pytest.raises(TypeError, match="a bug"), reading_rows(engine):
+        raise TypeError("a bug")
+
+
 @pytest.mark.parametrize(
     ("column", "value", "said"),
     [
