@@ -11,11 +11,13 @@ text files by deleting, doubling or cutting lines, replacing numbers and names, 
 stray characters; JSON files by replacing or deleting one value anywhere in them (a target
 for the match and a spray-out for the correction and for `cases record`, half the time, by
 values still readable but odd); a model file by editing its description, standardisation or
-weights; a shop's SQLite database by replacing one value of one case row.
+weights; a shop's SQLite database by replacing one value of one case row (or, for
+``database-shops``, of a row of its models, habits or tins).
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
         sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
-        manifest,model,model-register,lots,panel,database] [--n 200] [--seed 0] [--show]
+        manifest,model,model-register,lots,panel,database,database-shops]
+        [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
 kept under the work folder); ``--show`` prints one refusal of each kind of message. The exit
@@ -44,6 +46,7 @@ import openpyxl
 import torch
 from typer.testing import CliRunner
 
+from flakelab.cases.database import open_database
 from flakelab.cli.main import app
 from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_RANGE
 from flakelab.data import example_path
@@ -51,7 +54,7 @@ from flakelab.io import read_library, read_measurement, write_measurements, writ
 from flakelab.io.library_file import demo_library_path
 from flakelab.io.lots_file import write_lots
 from flakelab.library.lots import TonerLot, TonerLots
-from flakelab.match.habits import ShopHabits, write_habits
+from flakelab.match.habits import ShopHabits, save_habits, write_habits
 from flakelab.models.registry import shipped_model
 
 TOKENS = ("nan", "-1", "1e400", "1e300", "", "abc", "0", "Infinity", "1e-320", "[]", "{}", "null",
@@ -173,24 +176,33 @@ CASE_COLUMNS = ("case_id", "shop", "instrument", "conditions", "outcome", "synth
                 "geometries", "recipe", "target", "sprayout", "target_texture",
                 "sprayout_texture", "created_at", "updated_at", "tins")  # fmt: skip
 """The columns of a case row that a damaged database changes."""
+TABLE_COLUMNS = {
+    "cases": CASE_COLUMNS,
+    "models": ("name", "version", "instrument", "status", "toners", "data_hash", "metrics",
+               "held_out_de00", "artefact", "created_at"),
+    "shop_habits": ("shop", "model", "instrument", "report", "created_at"),
+    "shop_lots": ("shop", "version", "document", "created_at"),
+}  # fmt: skip
+"""The columns of each table's rows that a damaged database changes (``database-shops``)."""
 CELL_VALUES = (None, "", "x", "nonsense", 5, -1.0, 1e308, b"ab", b"", "[1, 2]", '{"a": 1}',
                '["45as15"]', '["zz"]', '{"Sa15": "x"}', "2026-13-45 25:00:00", "{",
                "null")  # fmt: skip
 """What a damaged database cell becomes."""
 
 
-def damage_database(data: bytes, rng: random.Random) -> bytes:
-    """A SQLite database with one value of one case row replaced (a value its column's
-    constraints refuse is drawn again)."""
+def damage_database(data: bytes, rng: random.Random, tables=("cases",)) -> bytes:
+    """A SQLite database with one value of one row of one of ``tables`` replaced (a value its
+    column's constraints refuse is drawn again)."""
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "shop.db"
         path.write_bytes(data)
         with sqlite3.connect(path) as connection:
-            rows = [r for (r,) in connection.execute("SELECT id FROM cases")]
+            table = rng.choice(tables)
+            rows = [r for (r,) in connection.execute(f"SELECT id FROM {table}")]
             while True:
-                column, value = rng.choice(CASE_COLUMNS), rng.choice(CELL_VALUES)
+                column, value = rng.choice(TABLE_COLUMNS[table]), rng.choice(CELL_VALUES)
                 try:
-                    connection.execute(f"UPDATE cases SET {column} = ? WHERE id = ?",
+                    connection.execute(f"UPDATE {table} SET {column} = ? WHERE id = ?",
                                        (value, rng.choice(rows)))  # fmt: skip
                     break
                 except sqlite3.IntegrityError:
@@ -276,6 +288,17 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     panel_recipe, standard = (
         target.parent / f"phthalo-blue-panel{s}" for s in ("-recipe.json", "-standard.cxf")
     )
+    shops = work / "shops.db"  # a row of each table: cases, a shop's model, habits and tins
+    shutil.copy(work / "shop.db", shops)
+    with torch.no_grad():  # the shop's own: weights of its own, as an adaptation gives
+        for weights in model.network.parameters():
+            weights.add_(1e-4)
+    (work / "shop-model.pt").write_bytes(model.to_bytes())
+    for command in (["model", "register", str(work / "shop-model.pt"), str(work / "cases.csv")],
+                    ["lots", "save", str(work / "lots.json")]):  # fmt: skip
+        made = CliRunner().invoke(app, [*command, "--shop", "synthetic shop", "-d", str(shops)])
+        assert made.exit_code == 0, made.output
+    save_habits(open_database(shops), replace(habits, shop="synthetic shop"), "five-angle")
     return {
         "cxf": (target, lambda p: ["inspect", str(p)]),
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
@@ -326,6 +349,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # hand might write it (SQLite keeps whatever it is given), read whole by an export
         "database": (work / "shop.db",
                      lambda p: ["cases", "export", str(work / "export.csv"), "-d", str(p)]),
+        # the same for any row of a database holding a shop's cases, model, habits and tins,
+        # every one read by the shops' summary
+        "database-shops": (shops, lambda p: ["cases", "shops", "-d", str(p)]),
         # the shop's tins, which the main job weighs for
         "lots": (work / "lots.json",
                  lambda p: ["match", "--example", "--candidates", "1", "--lots", str(p)]),
@@ -362,6 +388,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
             damaged.write_bytes(damage_model(data, rng))
         elif kind == "database":
             damaged.write_bytes(damage_database(data, rng))
+        elif kind == "database-shops":
+            damaged.write_bytes(damage_database(data, rng, tuple(TABLE_COLUMNS)))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
         elif kind in ("target", "sprayout", "record") and rng.random() < 0.5:

@@ -655,8 +655,12 @@ def test_an_error_no_stored_value_explains_is_not_blamed_on_the_database(cases, 
     [
         ("created_at", "x", "model 'five-angle' (row 1): created_at: cannot be read as DATETIME"),
         ("toners", "5", "model 'five-angle' v1: toners: expected a list of toner names, got 5"),
+        ("name", b"ab", "model b'ab' (row 1): name: cannot be read as VARCHAR(200) (expected "
+                        "text, got bytes)"),
+        ("version", "x", "(row 1): version: cannot be read as INTEGER (expected a whole number, "
+                         "got str)"),
     ],
-)
+)  # fmt: skip
 def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):
     """The registry's rows are read as the cases' are: a damaged one named (before, 'model
     list' stopped with "internal error: TypeError: object of type 'int' has no len()")."""
@@ -672,6 +676,47 @@ def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):
         assert run.returncode == 2 and f"cannot promote five-angle v1: {said}" in " ".join(
             run.stderr.split()
         )
+
+
+@pytest.mark.parametrize(
+    ("table", "column", "value", "said"),
+    [
+        ("shop_habits", "report", "[1, 2]", "habits of shop 'shop A' (row 1): report: expected a "
+                                            "habits report (a JSON object), got [1, 2]"),
+        ("shop_habits", "report", '{"a": 1}', "habits of shop 'shop A' (row 1): film_build: "
+                                              "missing"),
+        ("shop_habits", "shop", b"ab", "habits of shop b'ab' (row 1): shop: cannot be read as "
+                                       "VARCHAR(120) (expected text, got bytes)"),
+        ("shop_lots", "document", "5", "the tins of shop 'shop A', version 1: format: expected "
+                                       "'flakelab-toner-lots'"),
+        ("shop_lots", "version", 1.5, "tins of shop 'shop A' (row 1): version: cannot be read as "
+                                      "INTEGER (expected a whole number, got float)"),
+        ("cases", "created_at", b"ab", "(row 1): created_at: cannot be read as DATETIME"),
+    ],
+)  # fmt: skip
+def test_the_shops_summary_names_a_damaged_row_of_habits_or_tins(cases, tmp_path, cli, table,
+                                                                 column, value, said):  # fmt: skip
+    """'cases shops' reads every shop's cases, habits and tins; a damaged row of any is named
+    with its shop, row and field. Before, it stopped with "internal error: TypeError:
+    unsupported operand type(s) for |: 'list' and 'dict'", "AttributeError: 'int' object has
+    no attribute 'get'", "NotRenderableError: unable to render bytes" or "TypeError:
+    fromisoformat: argument must be str", or said only "film_build"."""
+    from flakelab.cases.shop_lots import store_lots
+    from flakelab.library.lots import TonerLot, TonerLots
+    from flakelab.match.habits import ShopHabits, save_habits
+
+    file = tmp_path / "shop.db"
+    engine = open_database(file)
+    add_cases(engine, cases[:2])
+    habits = ShopHabits(np.array([0.04, -0.04, 0.005]), np.full(3, 0.01), 100, "m", "shop A")
+    save_habits(engine, habits, "five-angle")
+    store_lots(engine, "shop A", TonerLots.of([TonerLot("Phthalo blue GS", 1.02)]), None)
+    assert cli("cases", "shops", "-d", str(file)).returncode == 0
+    with sqlite3.connect(file) as connection:
+        connection.execute(f"UPDATE {table} SET {column} = ? WHERE id = 1", (value,))
+    run = cli("cases", "shops", "-d", str(file))
+    said_there = " ".join(run.stderr.split())
+    assert run.returncode == 2 and f"{file}: " in said_there and said in said_there
 
 
 def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path, monkeypatch, cli):

@@ -365,7 +365,7 @@ def _damaged_row(engine: Engine, row_class, what: str, key: str) -> str | None:
     readers = {
         c.name: reader
         for c in table.columns
-        if c.name not in ("id", key)
+        if c.name != "id"
         and (reader := c.type.dialect_impl(engine.dialect).result_processor(engine.dialect, None))
         is not None
     }
@@ -512,7 +512,7 @@ def find_case_id(engine: Engine, given: str) -> str:
         raise CaseError(f"{engine.url}: expected a case id, got {given!r}")
     escaped = given.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
     query = select(CaseRow.case_id).where(CaseRow.case_id.like(f"{escaped}%", escape="\\"))
-    with Session(engine) as session:
+    with reading_rows(engine) as session:
         found = list(session.scalars(query.order_by(CaseRow.case_id).limit(6)))
     if not found:
         raise CaseError(f"{engine.url}: no case {given!r}")
@@ -534,7 +534,7 @@ def existing_case_ids(engine: Engine, case_ids: Iterable[str]) -> set[str]:
     """Those of ``case_ids`` already stored."""
     wanted = list(case_ids)
     found: set[str] = set()
-    with Session(engine) as session:
+    with reading_rows(engine) as session:
         for start in range(0, len(wanted), 500):  # within every database's parameter limit
             chunk = wanted[start : start + 500]
             found.update(session.scalars(select(CaseRow.case_id).where(CaseRow.case_id.in_(chunk))))
@@ -556,7 +556,7 @@ def shop_summary(engine: Engine) -> list[dict]:
         func.max(CaseRow.created_at),
     ).group_by(CaseRow.shop, CaseRow.outcome)
     shops: dict[str, dict] = {}
-    with Session(engine) as session:
+    with reading_rows(engine) as session:
         for shop, outcome, n, first, last in session.execute(query):
             entry = shops.setdefault(
                 shop, {"shop": shop, "cases": 0, "outcomes": {}, "first": first, "last": last}

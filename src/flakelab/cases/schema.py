@@ -17,8 +17,8 @@ from sqlalchemy import (
     Float,
     Integer,
     LargeBinary,
-    String,
     UniqueConstraint,
+    types,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -31,6 +31,45 @@ MODEL_NAME_LENGTH = 200
 __all__ = ["Base", "CaseRow", "ModelRow", "HabitsRow", "ShopLotsRow"]
 
 
+class _Kept(types.TypeDecorator):
+    """A column type whose reading refuses a value of another kind. SQLite keeps whatever a
+    statement gives any column (another tool's or a hand's: a shop name as bytes, a version
+    as text), and such a value would fail far from its row; refused as it is read, it is
+    named with its row and field (:func:`flakelab.cases.database.reading_rows`)."""
+
+    kinds: tuple[type, ...] = ()
+    expected = ""
+
+    def process_result_value(self, value, dialect):
+        if value is not None and (not isinstance(value, self.kinds) or isinstance(value, bool)):
+            raise ValueError(f"expected {self.expected}, got {type(value).__name__}")
+        return value
+
+
+class KeptString(_Kept):
+    """Text, as ``sqlalchemy.String``."""
+
+    impl = types.String
+    cache_ok = True  # each type says so itself (SQLAlchemy reads the class's own)
+    kinds, expected = (str,), "text"
+
+
+class KeptInteger(_Kept):
+    """A whole number, as ``sqlalchemy.Integer``."""
+
+    impl = Integer
+    cache_ok = True
+    kinds, expected = (int,), "a whole number"
+
+
+class KeptFloat(_Kept):
+    """A number, as ``sqlalchemy.Float``."""
+
+    impl = Float
+    cache_ok = True
+    kinds, expected = (int, float), "a number"
+
+
 class Base(DeclarativeBase):
     pass
 
@@ -39,11 +78,13 @@ class CaseRow(Base):
     __tablename__ = "cases"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    case_id: Mapped[str] = mapped_column(String(TEXT_LENGTHS["case_id"]), unique=True, index=True)
-    shop: Mapped[str] = mapped_column(String(TEXT_LENGTHS["shop"]), index=True)
-    instrument: Mapped[str] = mapped_column(String(TEXT_LENGTHS["instrument"]), index=True)
-    conditions: Mapped[str] = mapped_column(String(TEXT_LENGTHS["conditions"]))
-    outcome: Mapped[str] = mapped_column(String(20))
+    case_id: Mapped[str] = mapped_column(
+        KeptString(TEXT_LENGTHS["case_id"]), unique=True, index=True
+    )
+    shop: Mapped[str] = mapped_column(KeptString(TEXT_LENGTHS["shop"]), index=True)
+    instrument: Mapped[str] = mapped_column(KeptString(TEXT_LENGTHS["instrument"]), index=True)
+    conditions: Mapped[str] = mapped_column(KeptString(TEXT_LENGTHS["conditions"]))
+    outcome: Mapped[str] = mapped_column(KeptString(20))
     synthetic: Mapped[bool] = mapped_column(Boolean)
     geometries: Mapped[list] = mapped_column(JSON)
     recipe: Mapped[dict] = mapped_column(JSON)
@@ -64,14 +105,14 @@ class ModelRow(Base):
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     # a shop's own model is 'INSTRUMENT @ SHOP' (models.registry.shop_model_name)
-    name: Mapped[str] = mapped_column(String(MODEL_NAME_LENGTH), index=True)
-    version: Mapped[int] = mapped_column(Integer)
-    instrument: Mapped[str] = mapped_column(String(60))
-    status: Mapped[str] = mapped_column(String(20))
+    name: Mapped[str] = mapped_column(KeptString(MODEL_NAME_LENGTH), index=True)
+    version: Mapped[int] = mapped_column(KeptInteger)
+    instrument: Mapped[str] = mapped_column(KeptString(60))
+    status: Mapped[str] = mapped_column(KeptString(20))
     toners: Mapped[list] = mapped_column(JSON)
-    data_hash: Mapped[str] = mapped_column(String(64))
+    data_hash: Mapped[str] = mapped_column(KeptString(64))
     metrics: Mapped[dict] = mapped_column(JSON)
-    held_out_de00: Mapped[float] = mapped_column(Float)
+    held_out_de00: Mapped[float] = mapped_column(KeptFloat)
     artefact: Mapped[bytes] = mapped_column(LargeBinary)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
@@ -83,9 +124,9 @@ class HabitsRow(Base):
     __tablename__ = "shop_habits"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    shop: Mapped[str] = mapped_column(String(120), index=True)
-    model: Mapped[str] = mapped_column(String(80))
-    instrument: Mapped[str] = mapped_column(String(60))
+    shop: Mapped[str] = mapped_column(KeptString(120), index=True)
+    model: Mapped[str] = mapped_column(KeptString(80))
+    instrument: Mapped[str] = mapped_column(KeptString(60))
     report: Mapped[dict] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
@@ -100,7 +141,7 @@ class ShopLotsRow(Base):
     __table_args__ = (UniqueConstraint("shop", "version", name="uq_shop_lots_shop_version"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    shop: Mapped[str] = mapped_column(String(TEXT_LENGTHS["shop"]), index=True)
-    version: Mapped[int] = mapped_column(Integer)
+    shop: Mapped[str] = mapped_column(KeptString(TEXT_LENGTHS["shop"]), index=True)
+    version: Mapped[int] = mapped_column(KeptInteger)
     document: Mapped[dict] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

@@ -142,12 +142,13 @@ def list_stored_lots(engine: Engine) -> list[dict]:
     with reading_rows(engine, ShopLotsRow, "tins of shop", "shop") as session:
         rows = session.scalars(select(ShopLotsRow).order_by(ShopLotsRow.version)).all()
         latest = {r.shop: r for r in rows}
-        return [
-            {
-                "shop": r.shop,
-                "version": r.version,
-                "tins": len(r.document.get("lots", [])),
-                "saved_at": r.created_at.isoformat(),
-            }
-            for r in sorted(latest.values(), key=lambda r: r.shop)
-        ]
+    stored = (_stored(engine, r) for r in sorted(latest.values(), key=lambda r: r.shop))
+    return [
+        {
+            "shop": s.shop,
+            "version": s.version,
+            "tins": len(s.lots.lots),
+            "saved_at": s.saved_at.isoformat(),
+        }
+        for s in stored
+    ]

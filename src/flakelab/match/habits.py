@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 from scipy import stats
 from sqlalchemy import Engine, select
 
-from flakelab.cases.database import reading_rows, write_transaction
+from flakelab.cases.database import DatabaseError, reading_rows, write_transaction
 from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -642,43 +642,41 @@ def read_habits(path: str | PathLike) -> ShopHabits:
         raise MeasurementFileError(path, f"not a JSON habits file ({error})") from None
     if not isinstance(document, dict) or document.get("format") != HABITS_FORMAT:
         raise MeasurementFileError(path, f"expected {HABITS_FORMAT!r}", field="format")
+    if found := _report_problem(document):
+        raise MeasurementFileError(path, found[1], field=found[0])
+    return ShopHabits.from_report(document)
 
+
+def _report_problem(report: dict) -> tuple[str, str] | None:
+    """The first field of a habits report (a file's, or one stored in the database) that
+    holds what :meth:`ShopHabits.from_report` cannot take, and why; None where all can."""
     for key, low, high in _RANGES:
-        value = document.get(key)
-        if key not in document:
-            raise MeasurementFileError(path, "missing", field=key)
+        value = report.get(key)
+        if key not in report:
+            return key, "missing"
         if key.endswith("_se") and value is None:
             continue  # a habit its spray-outs did not show
         if not is_number(value) or not np.isfinite(value):
-            raise MeasurementFileError(path, f"expected a finite number, got {value!r}", field=key)
+            return key, f"expected a finite number, got {value!r}"
         if not low <= value <= high:
             bounds = f"{low} or more" if high == np.inf else f"{low} to {high}"
-            raise MeasurementFileError(path, f"expected {bounds}, got {value}", field=key)
+            return key, f"expected {bounds}, got {value}"
     for key in ("model", "shop", "changed_since"):
-        value = document.get(key)
+        value = report.get(key)
         if value is not None and not isinstance(value, str):
-            raise MeasurementFileError(path, f"expected text, got {value!r}", field=key)
-    tinned = document.get("cases_with_tins", 0)
-    if (
-        not isinstance(tinned, int)
-        or isinstance(tinned, bool)
-        or not 0 <= tinned <= document["cases"]
-    ):
-        raise MeasurementFileError(
-            path,
-            f"expected a whole number from 0 to the cases ({document['cases']}), got {tinned!r}",
-            field="cases_with_tins",
+            return key, f"expected text, got {value!r}"
+    tinned = report.get("cases_with_tins", 0)
+    whole = isinstance(tinned, int) and not isinstance(tinned, bool)
+    if not whole or not 0 <= tinned <= report["cases"]:
+        return "cases_with_tins", (
+            f"expected a whole number from 0 to the cases ({report['cases']}), got {tinned!r}"
         )
-    if document.get("changed_since") is not None:
+    if report.get("changed_since") is not None:
         try:
-            datetime.fromisoformat(document["changed_since"])
+            datetime.fromisoformat(report["changed_since"])
         except ValueError:
-            raise MeasurementFileError(
-                path,
-                f"expected an ISO 8601 time, got {document['changed_since']!r}",
-                field="changed_since",
-            ) from None
-    return ShopHabits.from_report(document)
+            return "changed_since", f"expected an ISO 8601 time, got {report['changed_since']!r}"
+    return None
 
 
 _RANGES = (
@@ -726,7 +724,7 @@ def stored_habits(engine: Engine, shop: str, model: str = "") -> ShopHabits:
             f"flakelab cases habits CASES --shop {shop!r} --save"
         )
     row = next((r for r in rows if r.model == model), rows[0])
-    return ShopHabits.from_report(row.report)
+    return ShopHabits.from_report(_stored_report(engine, row))
 
 
 def list_habits(engine: Engine) -> list[dict]:
@@ -735,6 +733,24 @@ def list_habits(engine: Engine) -> list[dict]:
         rows = session.scalars(select(HabitsRow).order_by(HabitsRow.id)).all()
         latest = {r.shop: r for r in rows}
         return [
-            r.report | {"instrument": r.instrument, "created_at": r.created_at.isoformat()}
+            _stored_report(engine, r)
+            | {"shop": r.shop, "instrument": r.instrument, "created_at": r.created_at.isoformat()}
             for r in latest.values()
         ]
+
+
+def _stored_report(engine: Engine, row: HabitsRow) -> dict:
+    """A stored habits row's report, checked as a habits file's is (another tool or a hand
+    may have written it): a :class:`DatabaseError` names the shop, the row and the field."""
+    report = row.report
+    found = (
+        ("report", f"expected a habits report (a JSON object), got {report!r:.40}")
+        if not isinstance(report, dict)
+        else _report_problem(report)
+    )
+    if found:
+        raise DatabaseError(
+            f"{engine.url}: habits of shop {row.shop!r} (row {row.id}): {found[0]}: {found[1]}; "
+            "the database is left as it is"
+        )
+    return report
