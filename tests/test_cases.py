@@ -462,6 +462,24 @@ def test_database_round_trip_and_migrations(cases, database_url):
     assert back.created_at == local.created_at and back.created_at.utcoffset() == timedelta(0)
 
 
+def test_a_new_migration_writes_the_types_the_columns_store_as():
+    """Alembic renders the tables' checked column types as plain SQLAlchemy types, so that a
+    migration made from the schema does not import it (before: "flakelab.cases.schema.
+    KeptString(length=120)")."""
+    from alembic.autogenerate import render_python_code
+    from alembic.operations import ops
+    from sqlalchemy import Column
+
+    from flakelab.cases.schema import HabitsRow, ModelRow, render_for_migration
+
+    columns = (HabitsRow.__table__.c.shop, ModelRow.__table__.c.version,
+               ModelRow.__table__.c.held_out_de00)  # fmt: skip
+    added = ops.UpgradeOps([ops.AddColumnOp("t", Column(c.name, c.type)) for c in columns])
+    code = render_python_code(added, render_item=render_for_migration)
+    assert "sa.String(length=120)" in code and "sa.Integer()" in code and "sa.Float()" in code
+    assert "flakelab" not in code
+
+
 def test_the_database_chooses_a_shop_s_cases_since_a_date_as_select_cases_does(cases, database_url):
     engine = open_database(database_url)
     mixed = [replace(c, shop="Martin") if i % 3 == 0 else c for i, c in enumerate(cases)]

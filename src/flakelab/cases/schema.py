@@ -70,6 +70,16 @@ class KeptFloat(_Kept):
     kinds, expected = (int, float), "a number"
 
 
+def render_for_migration(kind: str, obj, _context) -> str | bool:
+    """Alembic's ``render_item``: a checked column type written into a new migration as the
+    SQLAlchemy type it stores as (``sa.String(length=120)``), so that migrations do not
+    import this module, whose types may change after them; False for anything else, which
+    Alembic renders itself."""
+    if kind == "type" and isinstance(obj, _Kept):
+        return f"sa.{obj.impl!r}"
+    return False
+
+
 class Base(DeclarativeBase):
     pass
 

@@ -3,7 +3,7 @@
 from alembic import context
 from sqlalchemy import engine_from_config, pool
 
-from flakelab.cases.schema import Base
+from flakelab.cases.schema import Base, render_for_migration
 
 config = context.config
 target_metadata = Base.metadata
@@ -13,7 +13,7 @@ def run_migrations_online() -> None:
     connection = config.attributes.get("connection")
     if connection is not None:
         context.configure(connection=connection, target_metadata=target_metadata,
-                          render_as_batch=True)  # fmt: skip
+                          render_as_batch=True, render_item=render_for_migration)  # fmt: skip
         with context.begin_transaction():
             context.run_migrations()
         return
@@ -21,14 +21,15 @@ def run_migrations_online() -> None:
                                 prefix="sqlalchemy.", poolclass=pool.NullPool)  # fmt: skip
     with engine.connect() as connection:
         context.configure(connection=connection, target_metadata=target_metadata,
-                          render_as_batch=True)  # fmt: skip
+                          render_as_batch=True, render_item=render_for_migration)  # fmt: skip
         with context.begin_transaction():
             context.run_migrations()
 
 
 if context.is_offline_mode():
     context.configure(url=config.get_main_option("sqlalchemy.url"),
-                      target_metadata=target_metadata, literal_binds=True)  # fmt: skip
+                      target_metadata=target_metadata, literal_binds=True,
+                      render_item=render_for_migration)  # fmt: skip
     with context.begin_transaction():
         context.run_migrations()
 else:
