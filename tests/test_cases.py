@@ -712,13 +712,14 @@ def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):
         ("cases", "created_at", b"ab", "(row 1): created_at: cannot be read as DATETIME"),
     ],
 )  # fmt: skip
-def test_the_shops_summary_names_a_damaged_row_of_habits_or_tins(cases, tmp_path, cli, table,
-                                                                 column, value, said):  # fmt: skip
+def test_the_shops_summary_names_a_damaged_row_of_cases_habits_or_tins(cases, tmp_path, cli,
+                                                                      table, column, value,
+                                                                      said):  # fmt: skip
     """'cases shops' reads every shop's cases, habits and tins; a damaged row of any is named
     with its shop, row and field. Before, it stopped with "internal error: TypeError:
     unsupported operand type(s) for |: 'list' and 'dict'", "AttributeError: 'int' object has
     no attribute 'get'", "NotRenderableError: unable to render bytes" or "TypeError:
-    fromisoformat: argument must be str", or said only "film_build"."""
+    fromisoformat: argument must be str", or said only "shop" (a report without the field)."""
     from flakelab.cases.shop_lots import store_lots
     from flakelab.library.lots import TonerLot, TonerLots
     from flakelab.match.habits import ShopHabits, save_habits
