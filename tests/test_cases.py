@@ -696,6 +696,20 @@ def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):
         )
 
 
+def test_a_damaged_model_artefact_is_named_with_its_database(tmp_path, cli):
+    """A registered version whose stored weights another tool or a hand damaged is refused
+    naming the database as well as the model (before: "five-angle v1: not a flakelab model
+    file (IndexError)", which left the colorist to guess where it was stored)."""
+    file = tmp_path / "shop.db"
+    open_database(f"sqlite:///{file}")
+    assert _register_a_model((f"sqlite:///{file}", 0, 0.0)) == 1
+    with sqlite3.connect(file) as connection:
+        connection.execute("UPDATE models SET artefact = ?", (b"ab",))
+    run = cli("model", "show", "five-angle:1", "-d", str(file))
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 2 and f"sqlite:///{file}: five-angle v1: not a flakelab model" in said
+
+
 @pytest.mark.parametrize(
     ("table", "column", "value", "said"),
     [

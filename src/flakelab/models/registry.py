@@ -172,16 +172,20 @@ def list_models(engine: Engine, name: str | None = None, version: int | None = N
 def promoted_model(engine: Engine, name: str) -> ForwardModel | None:
     with _reading(engine) as session:
         row = _promoted_row(session, name)
-        return (
-            None if row is None else ForwardModel.from_bytes(row.artefact, f"{name} v{row.version}")
-        )
+        return None if row is None else _stored_model(engine, name, row.version, row.artefact)
 
 
 def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
     """Version ``version`` of the registered model ``name``, whatever its status."""
     with _reading(engine) as session:
         row = _version_row(session, engine, name, version)
-        return ForwardModel.from_bytes(row.artefact, f"{name} v{version}")
+        return _stored_model(engine, name, version, row.artefact)
+
+
+def _stored_model(engine: Engine, name: str, version: int, artefact: bytes) -> ForwardModel:
+    """A registered version's model read from its stored artefact; one another tool or a
+    hand damaged is named with the database, the name and the version."""
+    return ForwardModel.from_bytes(artefact, f"{engine.url}: {name} v{version}")
 
 
 def held_already(engine: Engine, name: str, model: ForwardModel) -> str | None:
@@ -199,7 +203,7 @@ def held_already(engine: Engine, name: str, model: ForwardModel) -> str | None:
             .order_by(ModelRow.version)
         ).all()
     for version, artefact in rows:
-        if ForwardModel.from_bytes(artefact, f"{name} v{version}").fingerprint == fingerprint:
+        if _stored_model(engine, name, version, artefact).fingerprint == fingerprint:
             return f"{name} v{version}"
     return None
 
