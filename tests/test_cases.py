@@ -22,10 +22,12 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, inspect
 
+from flakelab.cases import database as database_module
 from flakelab.cases.case import Case, CaseError, cases_at, select_cases, worst_differences
 from flakelab.cases.database import (
     DatabaseError,
     add_cases,
+    add_new_cases,
     count_cases,
     iter_cases,
     latest_cases,
@@ -1103,18 +1105,94 @@ def test_importing_stored_cases_again_names_one_and_stores_nothing(
     assert count_cases(open_database(database_url)) == 3
 
 
-def test_generating_into_a_database_that_holds_a_later_batch_says_what_stays(tmp_path, cli):
-    """``cases generate`` stores batch by batch: a clash in the second batch leaves the
-    first stored, and says so, where it used to say that nothing was stored."""
-    database = str(tmp_path / "shop.db")
-    world = World(read_library(None), "five-angle")
-    made = [case for batch in world.cases(520, seed=8) for case in batch]
+def test_generating_again_stores_only_the_cases_not_stored_yet(database_url, cli):
+    """A case the same generation stored already (here the last 20 of 520, as a run cut
+    short or a shorter one stores a seed's cases) is kept, not refused: the command goes on
+    where the earlier run stopped, and run a third time adds nothing. On PostgreSQL too,
+    whose stored times keep their zone and SQLite's do not."""
+    database = database_url
+    made = [
+        case for batch in World(read_library(None), "five-angle").cases(520, 8) for case in batch
+    ]
     add_cases(open_database(database), made[500:])
     run = cli("cases", "generate", "--n", "520", "--seed", "8", "--database", database)
+    assert run.returncode == 0, run.stderr
+    assert "wrote 500 synthetic cases" in run.stderr and "the other 20 were stored" in run.stderr
+    again = cli("cases", "generate", "--n", "520", "--seed", "8", "--database", database)
+    assert again.returncode == 0 and "all 520 synthetic cases (five-angle, seed 8)" in again.stderr
+    stored = list(iter_cases(open_database(database)))
+    assert sorted(c.case_id for c in stored) == sorted(c.case_id for c in made)
+
+
+def test_generating_into_a_database_holding_other_cases_of_its_ids_says_what_stays(tmp_path, cli):
+    """A stored case whose id the generation draws but which is another case (another shop,
+    here) is refused in its batch, naming the field that differs; the batches before stay."""
+    database = str(tmp_path / "shop.db")
+    made = [
+        case for batch in World(read_library(None), "five-angle").cases(520, 8) for case in batch
+    ]
+    add_cases(open_database(database), [replace(c, shop="shop B") for c in made[500:]])
+    run = cli("cases", "generate", "--n", "520", "--seed", "8", "--database", database)
     assert run.returncode == 2 and "Traceback" not in run.stderr
-    assert f"case '{made[500].case_id}' is already stored (20 of the 20 cases given)" in run.stderr
+    assert f"case '{made[500].case_id}' is already stored as another case (its shop differs)" in (
+        run.stderr
+    )
     assert "the 500 cases generated before it stay stored" in run.stderr
     assert count_cases(open_database(database)) == 520
+
+
+def test_an_interrupted_generation_to_a_file_writes_nothing(tmp_path, cli, monkeypatch):
+    out = tmp_path / "cases.csv"
+    monkeypatch.setattr(World, "_batch", lambda *args, **kwargs: _interrupt())
+    run = cli("cases", "generate", "--n", "600", "--seed", "9", "--out", out)
+    assert run.returncode == 130 and not out.exists()
+    assert f"interrupted: nothing was written to {out}" in run.stderr
+
+
+def _interrupt():
+    raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("during", ["generating", "storing"])
+def test_an_interrupted_generation_says_what_it_stored_and_goes_on_when_run_again(
+    tmp_path, cli, monkeypatch, during
+):
+    """A Ctrl-C while the third batch is generated (its first block of 250 cases), or once it
+    is stored but before the command knows: the line says how many cases are stored (500 a
+    batch), and the same command again stores the rest."""
+    database = str(tmp_path / "shop.db")
+    generate = ("cases", "generate", "--n", "1600", "--seed", "9", "--database", database)
+    calls = []
+
+    def cut_short(original, at: int):
+        def wrapper(*args, **kwargs):
+            calls.append(1)
+            if during == "generating" and len(calls) == at:
+                raise KeyboardInterrupt
+            result = original(*args, **kwargs)
+            if during == "storing" and len(calls) == at:
+                raise KeyboardInterrupt
+            return result
+
+        return wrapper
+
+    if during == "generating":
+        monkeypatch.setattr(World, "_batch", cut_short(World._batch, at=5))
+        expected = 1000  # four blocks of 250 (CHUNK) made, two batches stored
+    else:
+        monkeypatch.setattr(database_module, "add_new_cases", cut_short(add_new_cases, at=3))
+        expected = 1500
+    run = cli(*generate)
+    assert run.returncode == 130 and "Traceback" not in run.stderr
+    assert f"interrupted: {expected} of the 1600 cases are stored in sqlite:///{database}" in (
+        run.stderr
+    )
+    assert count_cases(open_database(database)) == expected
+    monkeypatch.undo()
+    again = cli(*generate)
+    assert again.returncode == 0, again.stderr
+    assert f"the other {expected} were stored already" in again.stderr
+    assert count_cases(open_database(database)) == 1600
 
 
 def test_case_checks_its_fields():

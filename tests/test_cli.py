@@ -277,6 +277,19 @@ def test_a_job_too_large_for_memory_is_an_error_not_a_bug(capsys):
     assert "ask for less" in said and "internal error" not in said
 
 
+def test_a_ctrl_c_stops_a_command_with_one_line_and_the_shells_status(capsys):
+    import typer
+
+    @reports_errors
+    def long_job():
+        raise KeyboardInterrupt
+
+    with pytest.raises(typer.Exit) as exited:
+        long_job()
+    assert exited.value.exit_code == 130  # 128 + SIGINT, as the shell's tools exit
+    assert capsys.readouterr().err.strip() == "interrupted: stopped before it finished"
+
+
 def test_a_file_the_system_refuses_is_named_first(tmp_path, capsys):
     import typer
 

@@ -43,6 +43,11 @@ TEXT_LENGTHS = {"case_id": 64, "shop": 120, "instrument": 60, "conditions": 30}
 longer value; SQLite would keep it), checked with every case so that no store fails on one."""
 
 
+def zoned(time: datetime) -> datetime:
+    """``time``, taken as UTC where it has no zone (SQLite and some case files keep none)."""
+    return time if time.tzinfo is not None else time.replace(tzinfo=UTC)
+
+
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
 
@@ -178,8 +183,7 @@ class Case:
         total = sum(amounts.values())
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
         object.__setattr__(self, "tins", _tins(where, self.tins, self.recipe))
-        if self.created_at.tzinfo is None:  # SQLite and some case files keep no zone
-            object.__setattr__(self, "created_at", self.created_at.replace(tzinfo=UTC))
+        object.__setattr__(self, "created_at", zoned(self.created_at))
         for name, longest in TEXT_LENGTHS.items():
             text = getattr(self, name)
             if not isinstance(text, str) or len(text) > longest:
@@ -238,8 +242,7 @@ def select_cases(
 ) -> list[Case]:
     """The cases of ``shop`` made at or after ``since`` (without a zone: UTC), read at
     ``geometries`` (:func:`cases_at`); None: any shop, any time, as read."""
-    if since is not None and since.tzinfo is None:
-        since = since.replace(tzinfo=UTC)
+    since = since and zoned(since)
     chosen = [
         c
         for c in cases

@@ -22,7 +22,7 @@ from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLA
 from sqlalchemy.orm import Session
 from sqlalchemy.pool import NullPool, StaticPool
 
-from flakelab.cases.case import Case, CaseError, tin_fields
+from flakelab.cases.case import Case, CaseError, tin_fields, zoned
 from flakelab.cases.schema import CaseRow
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.wording import counted
@@ -38,6 +38,7 @@ __all__ = [
     "refusal",
     "BUSY_TIMEOUT_S",
     "add_cases",
+    "add_new_cases",
     "iter_cases",
     "count_cases",
     "case_exists",
@@ -400,6 +401,54 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
     return len(rows)
 
 
+def add_new_cases(engine: Engine, cases: list[Case]) -> tuple[int, int]:
+    """Store those of ``cases`` not stored yet (one transaction) and return how many were
+    stored and how many were there already. A case already stored must be stored as given,
+    field by field (a generation cut short, or a shorter one of the same seed, stored it);
+    an id stored with another case is a :class:`CaseError` naming the id and the field,
+    and nothing is stored."""
+    ids = [c.case_id for c in cases]
+    stored = _stored_rows(engine, ids)
+    for case in cases:
+        if case.case_id in stored:
+            field = _differing_field(stored[case.case_id], _row(case))
+            if field is not None:
+                raise CaseError(
+                    f"{engine.url}: case {case.case_id!r} is already stored as another case "
+                    f"(its {field} differs); nothing was stored"
+                )
+    new = [c for c in cases if c.case_id not in stored]
+    return (add_cases(engine, new) if new else 0), len(cases) - len(new)
+
+
+_COMPARED = tuple(c.name for c in CaseRow.__table__.columns if c.name not in ("id", "updated_at"))
+"""The columns that make two stored cases the same case (not the row or the time it was
+stored)."""
+
+
+def _stored_rows(engine: Engine, case_ids: list[str]) -> dict[str, CaseRow]:
+    """The stored rows of those of ``case_ids`` already stored, by id."""
+    found: dict[str, CaseRow] = {}
+    with reading_rows(engine) as session:
+        for start in range(0, len(case_ids), 500):  # within every database's parameter limit
+            chunk = case_ids[start : start + 500]
+            rows = session.scalars(select(CaseRow).where(CaseRow.case_id.in_(chunk)))
+            found.update((row.case_id, row) for row in rows)
+    return found
+
+
+def _differing_field(stored: CaseRow, given: CaseRow) -> str | None:
+    """The first column in which ``stored`` holds another value than ``given``, else None;
+    times compared in UTC (SQLite keeps no zone)."""
+    for name in _COMPARED:
+        ours, theirs = getattr(stored, name), getattr(given, name)
+        if isinstance(ours, datetime) and isinstance(theirs, datetime):
+            ours, theirs = zoned(ours), zoned(theirs)  # aware times compare as instants
+        if ours != theirs:
+            return name
+    return None
+
+
 def _clash(engine: Engine, rows: list[CaseRow], error: IntegrityError) -> str:
     """Which case ids made the database refuse ``rows``: stored already (by another writer,
     or an earlier run), or given twice."""
@@ -431,8 +480,7 @@ def iter_cases(
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
     if since is not None:  # stored in UTC (SQLite keeps no zone)
-        utc = since if since.tzinfo is not None else since.replace(tzinfo=UTC)
-        query = query.where(CaseRow.created_at >= utc.astimezone(UTC))
+        query = query.where(CaseRow.created_at >= zoned(since).astimezone(UTC))
     if limit:
         query = query.limit(limit)
     with reading_rows(engine) as session:

@@ -28,11 +28,11 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Iterable
-from datetime import UTC, datetime
+from datetime import datetime
 from os import PathLike
 from pathlib import Path
 
-from flakelab.cases.case import Case
+from flakelab.cases.case import Case, zoned
 from flakelab.cases.record import AUTO_OUTCOME, case_from_readings
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance
@@ -194,4 +194,4 @@ def _time(where: str, cell: str) -> datetime | None:
         raise ManifestError(
             f"{where}: at: expected an ISO 8601 date and time, got {cell!r}"
         ) from None
-    return when if when.tzinfo else when.replace(tzinfo=UTC)
+    return zoned(when)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from datetime import UTC, datetime
+from datetime import datetime
 from operator import attrgetter
 from pathlib import Path
 from typing import Annotated
@@ -25,6 +25,7 @@ from flakelab.cli.common import (
     check_output_file,
     console,
     errors,
+    interrupted,
     progress_bar,
     read_readings,
     reports_errors,
@@ -133,7 +134,9 @@ def generate(
         ),
     ] = 1,
 ) -> None:
-    """Generate synthetic refinish cases (labelled synthetic) and store them."""
+    """Generate synthetic refinish cases (labelled synthetic) and store them. A database
+    takes them in batches of 500: the same command again, after a Ctrl-C, stores the rest."""
+    from flakelab.cases.case import zoned
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file, write_cases
     from flakelab.cases.generator import World, WorldSettings
@@ -153,41 +156,80 @@ def generate(
     to_file = out is not None and is_case_file(out)
     if to_file:
         check_output_file(out, "--out")  # before the cases are generated, not after
-    engine = None if to_file else open_database(out if out is not None else database)
-    collected, made = [], 0
-    with progress_bar() as bar:
-        task = bar.add_task("generating cases", total=n)
-        first = start and (start if start.tzinfo else start.replace(tzinfo=UTC))
-        for batch in world.cases(n, seed, shop=shop, start=first):
-            if to_file:
-                collected.extend(batch)
-            else:
-                _store_generated(engine, batch, stored=made)
-            made += len(batch)
-            bar.advance(task, len(batch))
+    batches = world.cases(n, seed, shop=shop, start=start and zoned(start))
     if to_file:
-        write_cases(collected, out)
-    where = out if out is not None else engine.url
-    errors.print(
-        f"wrote {n} synthetic cases ({instrument}, seed {seed}) to {where}", highlight=False
-    )
+        collected = []
+        with interrupted(f"nothing was written to {out}"), progress_bar() as bar:
+            task = bar.add_task("generating cases", total=n)
+            for batch in batches:
+                collected += batch
+                bar.advance(task, len(batch))
+            write_cases(collected, out)
+        errors.print(
+            f"wrote {n} synthetic cases ({instrument}, seed {seed}) to {out}",
+            highlight=False,
+            soft_wrap=True,
+        )
+        return
+    storing = _GeneratedStore(open_database(out if out is not None else database), n)
+    with interrupted(storing.interrupted), progress_bar() as bar:
+        task = bar.add_task("generating cases", total=n)
+        for batch in batches:
+            storing.store(batch)
+            bar.advance(task, len(batch))
+    errors.print(storing.summary(instrument, seed), highlight=False, soft_wrap=True)
 
 
-def _store_generated(engine, batch: list, stored: int) -> None:
-    """One batch of ``cases generate`` stored; a clash says what the batches before it left."""
-    from flakelab.cases.case import CaseError
-    from flakelab.cases.database import add_cases
+class _GeneratedStore:
+    """``cases generate``'s batches stored one transaction each. A case stored already, as
+    generated (a run of the same command cut short, or one with a smaller ``--n``), is kept
+    as it is: running the command again goes on where it stopped."""
 
-    try:
-        add_cases(engine, batch)
-    except CaseError as error:
-        before = ""
-        if stored:
-            before = f"; the {counted(stored, 'case')} generated before it stay stored"
-        raise FlakelabError(
-            f"{error}{before}; a seed generates the same case ids every time: choose another "
-            "--seed or another database"
-        ) from None
+    def __init__(self, engine, n: int):
+        self.engine, self.n = engine, n
+        self.added = self.found = 0
+        self.batch: list = []
+
+    def store(self, batch: list) -> None:
+        from flakelab.cases.case import CaseError
+        from flakelab.cases.database import add_new_cases
+
+        self.batch = batch
+        try:
+            added, found = add_new_cases(self.engine, batch)
+        except CaseError as error:
+            raise FlakelabError(
+                f"{error}{self._before()}; a seed generates the same case ids every time: choose "
+                "another --seed or another database"
+            ) from None
+        self.added, self.found, self.batch = self.added + added, self.found + found, []
+
+    def _before(self) -> str:
+        stored = self.added + self.found
+        return f"; the {counted(stored, 'case')} generated before it stay stored" if stored else ""
+
+    def interrupted(self) -> str:
+        """What a Ctrl-C left: the batches stored, and the one being stored if it landed."""
+        from flakelab.cases.database import existing_case_ids
+
+        ids = [case.case_id for case in self.batch]
+        landed = len(ids) if ids and existing_case_ids(self.engine, ids) else 0
+        stored = self.added + self.found + landed
+        return (
+            f"{stored} of the {counted(self.n, 'case')} are stored in {self.engine.url}; the "
+            "same command again stores the rest"
+        )
+
+    def summary(self, instrument: str, seed: int) -> str:
+        made = f"synthetic cases ({instrument}, seed {seed})"
+        if not self.found:
+            return f"wrote {self.added} {made} to {self.engine.url}"
+        if not self.added:
+            return f"all {self.n} {made} were stored in {self.engine.url} already; nothing added"
+        return (
+            f"wrote {self.added} {made} to {self.engine.url}; the other {self.found} were "
+            "stored already (by an earlier run of the same generation)"
+        )
 
 
 @cases_app.command("import")
@@ -280,7 +322,7 @@ def record_case(
     The case joins the database, where 'cases habits', 'model adapt' and 'train' read it.
     It keeps every geometry both readings share, so each model whose geometries are among
     them learns from it; the same spray-out recorded twice is refused."""
-    from flakelab.cases.case import tin_fields
+    from flakelab.cases.case import tin_fields, zoned
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
     from flakelab.cases.shop_lots import stored_lots
@@ -309,7 +351,7 @@ def record_case(
         shop=shop,
         outcome=outcome,
         tolerance=tol,
-        created_at=at and (at if at.tzinfo else at.replace(tzinfo=UTC)),
+        created_at=at and zoned(at),
         case_id=case_id,
         tins=tins,
     )

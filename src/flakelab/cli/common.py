@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from datetime import timedelta
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -54,6 +55,8 @@ def reports_errors(command: F) -> F:
             return result
         except (typer.Exit, typer.Abort):
             raise
+        except KeyboardInterrupt:
+            _stop("interrupted", "stopped before it finished", 130)
         except BrokenPipeError:  # stop quietly, as the shell's tools do (Python docs, signal)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(128 + signal.SIGPIPE) from None
@@ -69,6 +72,16 @@ def reports_errors(command: F) -> F:
                   "for a traceback and please report it)", 70)  # fmt: skip
 
     return wrapper  # type: ignore[return-value]
+
+
+@contextmanager
+def interrupted(left: str | Callable[[], str]) -> Iterator[None]:
+    """A Ctrl-C in the block stops the command with one line saying what it left behind
+    (``left``, or what it returns then) and exit status 130, as the shell's tools stop."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        _stop("interrupted", left() if callable(left) else left, 130)
 
 
 def _message(error: Exception) -> str:
