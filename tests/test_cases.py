@@ -820,19 +820,30 @@ def test_a_value_the_server_refuses_is_named_and_stores_nothing(cases, database_
     assert count_cases(engine) == 0
 
 
-def _write_batch(args):
-    url, seed = args
-    world = World(read_library(None), "five-angle")
+def _write_batches(args) -> tuple[int, int]:
+    """A seed's 60 cases stored 10 at a time from ``start``, by ``add_cases`` or, where
+    ``again``, by ``add_new_cases``: the cases it added and those it found stored."""
+    url, seed, again, start = args
+    batches = list(World(read_library(None), "five-angle").cases(60, seed, batch=10))
     engine = open_database(url)
-    for batch in world.cases(60, seed=seed, batch=10, shop=f"shop {seed}"):
-        add_cases(engine, batch)
+    time.sleep(max(0.0, start - time.time()))
+    if not again:
+        return sum(add_cases(engine, batch) for batch in batches), 0
+    counts = [add_new_cases(engine, batch) for batch in batches]
+    return sum(added for added, _ in counts), sum(found for _, found in counts)
 
 
 def test_concurrent_writers_lose_no_case(database_url):
+    """Four processes write from the same instant: two seeds' cases, and one seed's twice
+    (a generation started twice) by ``add_new_cases``, which finds what the other stored as
+    it would store it and goes on (it was refused "already stored" before it looked again)."""
     url = database_url
     open_database(url)
-    with multiprocessing.get_context("spawn").Pool(3) as pool:
-        pool.map(_write_batch, [(url, s) for s in (1, 2, 3)])
+    start = time.time() + 10  # every process loaded and waiting
+    with multiprocessing.get_context("spawn").Pool(4) as pool:
+        counts = pool.map(_write_batches, [(url, s, s == 3, start) for s in (1, 2, 3, 3)])
+    assert counts[:2] == [(60, 0), (60, 0)]
+    assert [sum(c) for c in counts[2:]] == [60, 60] and counts[2][0] + counts[3][0] == 60
     assert count_cases(open_database(url)) == 180
 
 

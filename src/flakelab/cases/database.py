@@ -406,9 +406,22 @@ def add_new_cases(engine: Engine, cases: list[Case]) -> tuple[int, int]:
     stored and how many were there already. A case already stored must be stored as given,
     field by field (a generation cut short, or a shorter one of the same seed, stored it);
     an id stored with another case is a :class:`CaseError` naming the id and the field,
-    and nothing is stored."""
-    ids = [c.case_id for c in cases]
-    stored = _stored_rows(engine, ids)
+    and nothing is stored. Where another writer stores some of them meanwhile (the same
+    generation run twice at once), they are looked at again."""
+    left = _ADD_NEW_ATTEMPTS
+    while True:
+        new = _not_stored(engine, cases)
+        try:
+            return (add_cases(engine, new) if new else 0), len(cases) - len(new)
+        except CaseError:
+            left -= 1
+            if not left:
+                raise
+
+
+def _not_stored(engine: Engine, cases: list[Case]) -> list[Case]:
+    """Those of ``cases`` not stored; a :class:`CaseError` where one is stored otherwise."""
+    stored = _stored_rows(engine, [c.case_id for c in cases])
     for case in cases:
         if case.case_id in stored:
             field = _differing_field(stored[case.case_id], _row(case))
@@ -417,8 +430,12 @@ def add_new_cases(engine: Engine, cases: list[Case]) -> tuple[int, int]:
                     f"{engine.url}: case {case.case_id!r} is already stored as another case "
                     f"(its {field} differs); nothing was stored"
                 )
-    new = [c for c in cases if c.case_id not in stored]
-    return (add_cases(engine, new) if new else 0), len(cases) - len(new)
+    return [c for c in cases if c.case_id not in stored]
+
+
+_ADD_NEW_ATTEMPTS = 3
+"""How many times :func:`add_new_cases` looks at which cases are stored: once, then again
+each time another writer stored some of them first."""
 
 
 _COMPARED = tuple(c.name for c in CaseRow.__table__.columns if c.name not in ("id", "updated_at"))
@@ -428,12 +445,17 @@ stored)."""
 
 def _stored_rows(engine: Engine, case_ids: list[str]) -> dict[str, CaseRow]:
     """The stored rows of those of ``case_ids`` already stored, by id."""
-    found: dict[str, CaseRow] = {}
+    return {row.case_id: row for row in _selected_by_id(engine, CaseRow, case_ids)}
+
+
+def _selected_by_id(engine: Engine, selected, case_ids: list[str]) -> list:
+    """``selected`` (the rows, or a column) of the stored cases among ``case_ids``, asked
+    500 ids at a time: within every database's limit on a statement's parameters."""
+    found = []
     with reading_rows(engine) as session:
-        for start in range(0, len(case_ids), 500):  # within every database's parameter limit
+        for start in range(0, len(case_ids), 500):
             chunk = case_ids[start : start + 500]
-            rows = session.scalars(select(CaseRow).where(CaseRow.case_id.in_(chunk)))
-            found.update((row.case_id, row) for row in rows)
+            found += session.scalars(select(selected).where(CaseRow.case_id.in_(chunk)))
     return found
 
 
@@ -580,13 +602,7 @@ def case_exists(engine: Engine, case_id: str) -> bool:
 
 def existing_case_ids(engine: Engine, case_ids: Iterable[str]) -> set[str]:
     """Those of ``case_ids`` already stored."""
-    wanted = list(case_ids)
-    found: set[str] = set()
-    with reading_rows(engine) as session:
-        for start in range(0, len(wanted), 500):  # within every database's parameter limit
-            chunk = wanted[start : start + 500]
-            found.update(session.scalars(select(CaseRow.case_id).where(CaseRow.case_id.in_(chunk))))
-    return found
+    return set(_selected_by_id(engine, CaseRow.case_id, list(case_ids)))
 
 
 def count_cases(engine: Engine) -> int:

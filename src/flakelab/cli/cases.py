@@ -209,12 +209,12 @@ class _GeneratedStore:
         return f"; the {counted(stored, 'case')} generated before it stay stored" if stored else ""
 
     def interrupted(self) -> str:
-        """What a Ctrl-C left: the batches stored, and the one being stored if it landed."""
+        """What a Ctrl-C left: the batches stored, and those of the batch being stored that
+        are there (all, where its transaction landed; else those stored before)."""
         from flakelab.cases.database import existing_case_ids
 
-        ids = [case.case_id for case in self.batch]
-        landed = len(ids) if ids and existing_case_ids(self.engine, ids) else 0
-        stored = self.added + self.found + landed
+        landed = existing_case_ids(self.engine, [case.case_id for case in self.batch])
+        stored = self.added + self.found + len(landed)
         return (
             f"{stored} of the {counted(self.n, 'case')} are stored in {self.engine.url}; the "
             "same command again stores the rest"
