@@ -679,6 +679,8 @@ def test_an_error_no_stored_value_explains_is_not_blamed_on_the_database(cases, 
                         "text, got bytes)"),
         ("version", "x", "(row 1): version: cannot be read as INTEGER (expected a whole number, "
                          "got str)"),
+        ("status", "x", "model 'five-angle' (row 1): status: cannot be read as VARCHAR(20) "
+                        "(expected one of candidate, promoted, retired, got 'x')"),
     ],
 )  # fmt: skip
 def test_a_damaged_model_row_is_named(tmp_path, cli, column, value, said):

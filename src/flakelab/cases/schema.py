@@ -24,6 +24,10 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 from flakelab.cases.case import TEXT_LENGTHS
 
+MODEL_STATUSES = ("candidate", "promoted", "retired")
+"""A registered version's status: stored and not current, the current one of its name, or
+current once (:mod:`flakelab.models.registry`)."""
+
 MODEL_NAME_LENGTH = 200
 """A registered model's name: an instrument's, or 'INSTRUMENT @ SHOP' for a shop's own model
 (60 + 3 + 120 characters of :data:`~flakelab.cases.case.TEXT_LENGTHS`; migration 0003)."""
@@ -52,6 +56,23 @@ class KeptString(_Kept):
     impl = types.String
     cache_ok = True  # each type says so itself (SQLAlchemy reads the class's own)
     kinds, expected = (str,), "text"
+
+
+class KeptChoice(KeptString):
+    """One of ``choices``, as ``sqlalchemy.String``: a value outside them is refused as it is
+    read, as one of another kind is."""
+
+    cache_ok = True
+
+    def __init__(self, length: int, choices: tuple[str, ...]):
+        super().__init__(length)
+        self.choices = choices
+
+    def process_result_value(self, value, dialect):
+        value = super().process_result_value(value, dialect)
+        if value is not None and value not in self.choices:
+            raise ValueError(f"expected one of {', '.join(self.choices)}, got {value!r}")
+        return value
 
 
 class KeptInteger(_Kept):
@@ -118,7 +139,7 @@ class ModelRow(Base):
     name: Mapped[str] = mapped_column(KeptString(MODEL_NAME_LENGTH), index=True)
     version: Mapped[int] = mapped_column(KeptInteger)
     instrument: Mapped[str] = mapped_column(KeptString(60))
-    status: Mapped[str] = mapped_column(KeptString(20))
+    status: Mapped[str] = mapped_column(KeptChoice(20, MODEL_STATUSES))
     toners: Mapped[list] = mapped_column(JSON)
     data_hash: Mapped[str] = mapped_column(KeptString(64))
     metrics: Mapped[dict] = mapped_column(JSON)
