@@ -33,7 +33,7 @@ from flakelab.match.models import forward_for
 from flakelab.models.training import (
     TrainingConfig,
     _new_model,
-    _train_stage,
+    _Stages,
     generated_case_arrays,
 )
 
@@ -48,7 +48,7 @@ def train_once(library, cases: int, config: TrainingConfig, kinds: dict[str, flo
     data = generated_case_arrays(world, cases, config.seed)
     rows = [np.arange(data.x.shape[0])]
     model = _new_model(data, config, rows[0])
-    _train_stage([model], data, rows, config, [], ["fit"], None)
+    _Stages(None, None).train([model], data, rows, config, ["fit"])
     model.info["toner_cases"] = dict(zip(data.toners, (data.x > 0).sum(0).tolist(), strict=True))
     return model
 

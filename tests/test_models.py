@@ -38,6 +38,7 @@ from flakelab.models.training import (
     flag_outliers,
     generated_case_arrays,
     protocol_epochs,
+    protocol_stages,
     recorded_config,
     train_protocol,
     training_device,
@@ -293,6 +294,73 @@ def test_a_training_s_losses_lie_on_one_time_axis(data, tmp_path):
     assert (tmp_path / "losses.svg").read_text().count("<!-- partition ") == 8
 
 
+def _weights(model: ForwardModel) -> list[np.ndarray]:
+    return [v.numpy() for _, v in sorted(model.network.state_dict().items())]
+
+
+@pytest.mark.parametrize(
+    ("screening", "cut", "kept"),
+    [  # stages of 4 and 3 epochs, a progress step per network an epoch
+        ("sequential", 3, 0),  # within the first stage: nothing kept
+        ("sequential", 13, 3),  # within partition 2's fine-tuning
+        ("sequential", 33, 8),  # within the final training: the outliers kept, not the screen
+        ("cross-validation", 30, 1),  # within the folds' fine-tuning: five networks kept
+    ],
+)
+def test_an_interrupted_protocol_goes_on_from_its_checkpoint_to_the_same_model(
+    data, tmp_path, screening, cut, kept
+):
+    """A training stopped after ``cut`` epochs and run again from its checkpoint ends with
+    the uninterrupted one's networks, log and outliers, bit for bit: each stage's batches
+    are seeded by the log's length and each starts a new optimiser."""
+    from flakelab.models.checkpoint import TrainingCheckpoint
+    from flakelab.models.training import data_hash
+
+    config = replace(
+        QUICK, hidden=(8,), epochs=4, finetune_epochs=3, members=2, screening=screening
+    )
+    whole, whole_report = train_protocol(data, config)
+    path = tmp_path / "run.ckpt"
+    seen = []
+
+    def stop_at_cut(epochs: int) -> None:
+        seen.append(epochs)
+        if sum(seen) >= cut:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train_protocol(data, config, progress=stop_at_cut, checkpoint=TrainingCheckpoint(
+            path, config, data_hash(data)))  # fmt: skip
+    checkpoint = TrainingCheckpoint(path, config, data_hash(data))
+    assert checkpoint.stages == kept and path.exists() == (kept > 0)
+    again, report = train_protocol(data, config, checkpoint=checkpoint)
+    for ours, theirs in zip(_weights(again), _weights(whole), strict=True):
+        np.testing.assert_array_equal(ours, theirs)
+    assert report["log"] == whole_report["log"]
+    assert report["outlier_case_ids"] == whole_report["outlier_case_ids"]
+
+
+def test_a_checkpoint_of_another_training_or_a_damaged_one_is_refused(data, tmp_path):
+    from flakelab.models.checkpoint import TrainingCheckpoint
+    from flakelab.models.training import data_hash
+
+    config = replace(QUICK, hidden=(8,), epochs=2, finetune_epochs=1)
+    path = tmp_path / "run.ckpt"
+    train_protocol(data, config, checkpoint=TrainingCheckpoint(path, config, data_hash(data)))
+    assert TrainingCheckpoint(path, config, data_hash(data)).stages == protocol_stages(config)
+    with pytest.raises(
+        ModelError, match=r"run.ckpt: the checkpoint of another training \(epochs 2, here 3\)"
+    ):
+        TrainingCheckpoint(path, replace(config, epochs=3), data_hash(data))
+    with pytest.raises(
+        ModelError, match=r"run.ckpt: the checkpoint of another training \(other cases\)"
+    ):
+        TrainingCheckpoint(path, config, data_hash(data.subset(np.arange(100))))
+    path.write_bytes(path.read_bytes()[:500])
+    with pytest.raises(ModelError, match=r"run.ckpt: not a flakelab training checkpoint \("):
+        TrainingCheckpoint(path, config, data_hash(data))
+
+
 def _fit_side_by_side(data, rows: list, epochs: int) -> list[ForwardModel]:
     models = [_new_model(data, QUICK, r) for r in rows]
     fit(models, data, rows, epochs, 2e-3, QUICK, [], [f"model {k}" for k in range(len(rows))])
@@ -480,6 +548,40 @@ def test_a_gpu_this_machine_lacks_is_refused_before_any_work(cli, tmp_path):
     assert result.returncode == 2
     assert "'cuda' cannot be used here" in result.stderr
     assert "missing.csv" not in result.stderr  # refused before the cases are read
+
+
+def test_cli_a_training_interrupted_goes_on_from_its_checkpoint(cli, tmp_path, monkeypatch):
+    """``train --checkpoint``: a Ctrl-C in the third stage says what the file keeps; the
+    same command again goes on from there, writes the model an uninterrupted training
+    writes, and removes the file."""
+    import flakelab.models.training as training
+
+    cases, checkpoint = tmp_path / "cases.csv", tmp_path / "run.ckpt"
+    assert cli("cases", "generate", "--n", "150", "--seed", "3", "--out", cases).returncode == 0
+    train = ("train", cases, "--epochs", "2", "--hidden", "8", "--no-register", "--json")
+    calls, fit_as_is = [], training.fit
+
+    def cut_in_the_third_stage(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return fit_as_is(*args, **kwargs)
+
+    monkeypatch.setattr(training, "fit", cut_in_the_third_stage)
+    run = cli(*train, "--checkpoint", checkpoint, "--out", tmp_path / "a.pt")
+    assert run.returncode == 130 and not (tmp_path / "a.pt").exists()
+    said = " ".join(run.stderr.split())
+    assert f"interrupted: {checkpoint} keeps 2 of the protocol's 10 stages; the same" in said
+    monkeypatch.undo()
+    run = cli(*train, "--checkpoint", checkpoint, "--out", tmp_path / "a.pt")
+    assert run.returncode == 0 and json.loads(run.stdout)["stages_resumed"] == 2
+    assert not checkpoint.exists()
+    assert cli(*train, "--out", tmp_path / "b.pt").returncode == 0
+    assert (tmp_path / "a.pt").read_bytes() == (tmp_path / "b.pt").read_bytes()
+    monkeypatch.setattr(training, "fit", cut_in_the_third_stage)
+    calls.clear()
+    run = cli(*train, "--out", tmp_path / "c.pt")
+    assert run.returncode == 130 and "nothing was written or registered" in run.stderr
 
 
 GPU = "cpu" if training_device("auto").type == "cpu" else str(training_device("auto"))

@@ -18,6 +18,7 @@ from flakelab.cli.common import (
     check_output_file,
     console,
     errors,
+    interrupted,
     progress_bar,
     reports_errors,
 )
@@ -249,6 +250,16 @@ def train(
     no_tins: NoTinsOption = False,
     loss_log: LossLogOption = None,
     plot: LossPlotOption = None,
+    checkpoint: Annotated[
+        Path | None,
+        typer.Option(
+            "--checkpoint",
+            help="Keep the protocol's progress in this file after each stage (a session's "
+            "training or its fine-tuning): the same command again, after an interruption, "
+            "goes on from the last stage kept, to the model it would have trained. Removed "
+            "once the command is done.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Train the learned forward model with the hybrid paper's protocol.
@@ -260,16 +271,20 @@ def train(
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import open_database
     from flakelab.io import read_library
+    from flakelab.models.checkpoint import TrainingCheckpoint
     from flakelab.models.registry import register
     from flakelab.models.training import (
         adapt_to_shop,
+        data_hash,
         evaluate_model,
         protocol_epochs,
+        protocol_stages,
         train_protocol,
         withhold_for_adaptation,
     )
 
     check_output_file(out, "--out")
+    check_output_file(checkpoint, "--checkpoint")
     _check_loss_outputs(loss_log, plot)
     # the settings are checked before the cases are read
     config = _training_config(hidden, epochs, batch_size, screening, adapt_validation, members,
@@ -291,11 +306,22 @@ def train(
     if adapt is not None:  # before the long training
         check_shop_split(cases, adapt, data, held_out)
         data, validation = withhold_for_adaptation(data, adapt, config)
-    stages = protocol_epochs(config, adapt is not None)
-    with progress_bar(disable=json_output) as bar:
-        task = bar.add_task(f"training on {data.x.shape[0]} cases", total=stages)
+    kept = checkpoint and TrainingCheckpoint(checkpoint, config, data_hash(data))
+    resumed = kept.stages if kept else 0
+
+    def left() -> str:  # what a Ctrl-C leaves
+        if not kept:
+            return "nothing was written or registered (--checkpoint FILE keeps a training's stages)"
+        return (
+            f"{kept.path} keeps {kept.stages} of the protocol's {protocol_stages(config)} stages; "
+            "the same command again goes on from there"
+        )
+
+    epochs = protocol_epochs(config, adapt is not None)
+    with interrupted(left), progress_bar(disable=json_output) as bar:
+        task = bar.add_task(f"training on {data.x.shape[0]} cases", total=epochs)
         advance = lambda k: bar.advance(task, k)  # noqa: E731
-        model, report = train_protocol(data, config, progress=advance)
+        model, report = train_protocol(data, config, progress=advance, checkpoint=kept)
         model.info["name"] = instrument
         if adapt is not None:  # step 5 on a copy: the general model is kept too
             shop_model, adaptation = adapt_to_shop(
@@ -312,6 +338,8 @@ def train(
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
     summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
     summary["cases_with_tins"] = int(tinned.sum())
+    if kept:
+        summary["stages_resumed"] = resumed  # kept by an earlier, interrupted run
     engine = open_database(database) if register_model else None
     if engine is not None:
         summary["registry"] = register(engine, model, held_out, metrics=summary["held_out"])
@@ -337,6 +365,8 @@ def train(
         summary["file"] = str(out)
     summary["loss_log_tail"] = log[-3:]
     _write_losses(log, loss_log, plot, f"Training on {data.x.shape[0]} cases of {cases}", summary)
+    if kept:
+        kept.remove()  # the model is written and registered: nothing left to go on with
     if json_output:
         print(json.dumps(summary, indent=2, default=str))
         return

@@ -68,6 +68,7 @@ from flakelab.core.geometry import instrument_of
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.torch_colour import TorchColour
 from flakelab.core.wording import counted
+from flakelab.models.checkpoint import TrainingCheckpoint
 from flakelab.models.network import (
     MAX_HIDDEN,
     MAX_MEMBERS,
@@ -83,6 +84,7 @@ __all__ = [
     "CaseArrays",
     "case_arrays",
     "train_protocol",
+    "protocol_stages",
     "fit",
     "fold_rows",
     "evaluate_model",
@@ -646,20 +648,51 @@ def outlying_cases(model: ForwardModel, data: CaseArrays, threshold: float) -> N
     return flag_outliers(_residual_error(model, data, np.arange(data.x.shape[0])), threshold)
 
 
-def _train_stage(models, data, rows, config, log, names, progress) -> None:
-    """``epochs`` at the learning rate, then ``finetune_epochs`` at the fine-tuning rate."""
-    fit(models, data, rows, config.epochs, config.learning_rate, config, log, names, progress)
-    fit(
-        models,
-        data,
-        rows,
-        config.finetune_epochs,
-        config.finetune_learning_rate,
-        config,
-        log,
-        [f"{name} fine-tune" for name in names],
-        progress,
-    )
+class _Stages:
+    """The protocol's stages (each a :func:`fit`) run in turn, each kept in ``checkpoint``
+    once done (None: none kept); those it kept already are not run again: the log is the
+    one it kept, and the last kept stage's networks are restored
+    (:mod:`flakelab.models.checkpoint`)."""
+
+    def __init__(self, checkpoint: TrainingCheckpoint | None, progress) -> None:
+        self.checkpoint, self.progress = checkpoint, progress
+        self.done = 0
+        self.kept = checkpoint.stages if checkpoint else 0
+        self.log: list[dict] = list(checkpoint.log) if checkpoint else []
+        self.outliers = checkpoint.outliers if checkpoint else None
+
+    def fit(self, models, data, rows, epochs, learning_rate, config, names) -> None:
+        self.done += 1
+        if self.done <= self.kept:
+            if self.done == self.kept:
+                self.checkpoint.restore(models)
+            if self.progress:
+                self.progress(epochs * len(models))
+            return
+        fit(models, data, rows, epochs, learning_rate, config, self.log, names, self.progress)
+        if self.checkpoint:
+            self.checkpoint.keep(self.done, self.log, models, self.outliers)
+
+    def train(self, models, data, rows, config, names) -> None:
+        """A session: ``epochs`` at the learning rate, then ``finetune_epochs`` at the
+        fine-tuning rate."""
+        self.fit(models, data, rows, config.epochs, config.learning_rate, config, names)
+        self.fit(
+            models,
+            data,
+            rows,
+            config.finetune_epochs,
+            config.finetune_learning_rate,
+            config,
+            [f"{name} fine-tune" for name in names],
+        )
+
+    def screened(self, judge: Callable[[], NDArray[np.bool_]]) -> NDArray[np.bool_]:
+        """The outliers ``judge`` finds, or those kept (a checkpoint past the screen keeps
+        the final training's networks, not the screen's)."""
+        if self.outliers is None:
+            self.outliers = judge()
+        return self.outliers
 
 
 def fold_rows(n: int, config: TrainingConfig) -> tuple[list[NDArray], list[NDArray]]:
@@ -680,31 +713,38 @@ def protocol_epochs(config: TrainingConfig, adapt: bool = False) -> int:
     return (sessions + config.members) * per_session + adapting
 
 
-def _screen_sequentially(data, config, partitions, log, progress) -> NDArray[np.bool_]:
+def _screen_sequentially(data, config, partitions, stages: _Stages) -> NDArray[np.bool_]:
     """The paper's screen: one model, a session on each partition but the last in turn; the
     last, unseen, sets the yardstick for every case's error."""
     *sessions, validation = partitions
     model = _new_model(data, config, np.concatenate(sessions))
     for k, rows in enumerate(sessions):
-        _train_stage([model], data, [rows], config, log, [f"partition {k + 1}"], progress)
-    errors = _residual_error(model, data, np.arange(data.x.shape[0]))
-    return flag_outliers(errors, config.outlier_threshold, reference=errors[validation])
+        stages.train([model], data, [rows], config, [f"partition {k + 1}"])
+
+    def judge() -> NDArray[np.bool_]:
+        errors = _residual_error(model, data, np.arange(data.x.shape[0]))
+        return flag_outliers(errors, config.outlier_threshold, reference=errors[validation])
+
+    return stages.screened(judge)
 
 
 def _screen_by_cross_validation(
-    data, config, partitions, train_rows, log, progress
+    data, config, partitions, train_rows, stages: _Stages
 ) -> NDArray[np.bool_]:
     """Every case judged by the fold model that did not train on its partition."""
     folds = [_new_model(data, config, rows) for rows in train_rows]
-    names = [f"fold {k + 1}" for k in range(config.folds)]
-    _train_stage(folds, data, train_rows, config, log, names, progress)
-    errors = np.zeros(data.x.shape[0])
-    for model, held in zip(folds, partitions, strict=True):
-        errors[held] = _residual_error(model, data, held)
-    return flag_outliers(errors, config.outlier_threshold)
+    stages.train(folds, data, train_rows, config, [f"fold {k + 1}" for k in range(config.folds)])
+
+    def judge() -> NDArray[np.bool_]:
+        errors = np.zeros(data.x.shape[0])
+        for model, held in zip(folds, partitions, strict=True):
+            errors[held] = _residual_error(model, data, held)
+        return flag_outliers(errors, config.outlier_threshold)
+
+    return stages.screened(judge)
 
 
-def _train_final(data, config, clean, log, progress) -> ForwardModel:
+def _train_final(data, config, clean, stages: _Stages) -> ForwardModel:
     """The final training on the cleaned cases: one model, or ``config.members`` side by side
     from seeds ``seed``, ``seed + 1``, … (member 1 starts as the single model would), averaged
     as an ensemble."""
@@ -713,8 +753,15 @@ def _train_final(data, config, clean, log, progress) -> ForwardModel:
         for k in range(config.members)
     ]
     names = ["final"] if config.members == 1 else [f"final {k + 1}" for k in range(config.members)]
-    _train_stage(members, data, [clean] * config.members, config, log, names, progress)
+    stages.train(members, data, [clean] * config.members, config, names)
     return ForwardModel.ensemble(members)
+
+
+def protocol_stages(config: TrainingConfig) -> int:
+    """The protocol's stages (a session's training or its fine-tuning, each one
+    :func:`fit`): two per screening session, two for the final training."""
+    sessions = config.folds - 1 if config.screening == "sequential" else 1
+    return 2 * (sessions + 1)
 
 
 def train_protocol(
@@ -722,9 +769,12 @@ def train_protocol(
     config: TrainingConfig = TrainingConfig(),
     *,
     progress: Callable[[int], None] | None = None,
+    checkpoint: TrainingCheckpoint | None = None,
 ) -> tuple[ForwardModel, dict]:
     """The protocol's steps 1–4; returns the final model and a report (outliers, losses,
-    timings). Step 5 is :func:`adapt_to_shop` (or :func:`adapt_model`) on the model."""
+    timings). Step 5 is :func:`adapt_to_shop` (or :func:`adapt_model`) on the model.
+    ``checkpoint``: where each stage is kept once done, and from which a training
+    interrupted before goes on (:class:`~flakelab.models.checkpoint.TrainingCheckpoint`)."""
     start = time.perf_counter()
     n = data.x.shape[0]
     if n < config.folds * 2:
@@ -734,13 +784,14 @@ def train_protocol(
             f"screening: expected one of {', '.join(SCREENINGS)}, got {config.screening!r}"
         )
     partitions, train_rows = fold_rows(n, config)
-    log: list[dict] = []
+    stages = _Stages(checkpoint, progress)
     if config.screening == "sequential":
-        outliers = _screen_sequentially(data, config, partitions, log, progress)
+        outliers = _screen_sequentially(data, config, partitions, stages)
     else:
-        outliers = _screen_by_cross_validation(data, config, partitions, train_rows, log, progress)
+        outliers = _screen_by_cross_validation(data, config, partitions, train_rows, stages)
     clean = np.flatnonzero(~outliers)
-    model = _train_final(data, config, clean, log, progress)
+    model = _train_final(data, config, clean, stages)
+    log = stages.log
     model.add_learned([data.case_ids[i] for i in clean])
     report = {
         "cases": n,
