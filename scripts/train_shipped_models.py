@@ -14,6 +14,8 @@ screen: how much a model owes to its network's draw (README, "Cases and the lear
 features (``flakelab train --log-offset``); ``--tins calibrated|known`` makes the training cases
 record their tins and learns them at the standard tins, as ``flakelab train`` learns such
 cases (:func:`~flakelab.match.lots.at_standard_tins`; default ``none``, the shipped files').
+``--checkpoints DIR`` keeps each training after every stage: run again after an
+interruption, it goes on from there to the same file (``flakelab train --checkpoint``).
 
 Both models are ensembles of four networks trained on 120,000 cases, twice the hybrid
 paper's database: held-out accuracy grows with the cases far more than with the network's
@@ -36,12 +38,14 @@ from flakelab.cli.common import progress_bar
 from flakelab.io import read_library
 from flakelab.library.lots import TIN_KNOWLEDGE
 from flakelab.match.lots import at_standard_tins
+from flakelab.models.checkpoint import TrainingCheckpoint
 from flakelab.models.network import LOG_OFFSET_MAX
 from flakelab.models.registry import shipped_model_path
 from flakelab.models.training import (
     SCREENINGS,
     TrainingConfig,
     case_arrays,
+    data_hash,
     protocol_epochs,
     train_protocol,
 )
@@ -84,6 +88,12 @@ def main() -> None:
     parser.add_argument(
         "--tins", choices=TIN_KNOWLEDGE, default="none", help="what the cases record of their tins"
     )
+    parser.add_argument(
+        "--checkpoints",
+        type=Path,
+        help="folder keeping each instrument's training after every stage (INSTRUMENT.ckpt): "
+        "run again after an interruption, a training goes on from its last kept stage",
+    )
     args = parser.parse_args()
     if not 0 <= args.log_offset <= LOG_OFFSET_MAX:
         parser.error(f"--log-offset: {args.log_offset} is not in [0, {LOG_OFFSET_MAX}]")
@@ -118,8 +128,14 @@ def main() -> None:
             data = at_standard_tins(case_arrays(cases, library.names, effect), library)
             epochs_total = protocol_epochs(config)
             task = progress.add_task(f"{instrument}: training epochs", total=epochs_total)
+            checkpoint = args.checkpoints and TrainingCheckpoint(
+                args.checkpoints / f"{instrument}.ckpt", config, data_hash(data)
+            )
             model, report = train_protocol(
-                data, config, progress=lambda k, task=task: progress.advance(task, k)
+                data,
+                config,
+                progress=lambda k, task=task: progress.advance(task, k),
+                checkpoint=checkpoint,
             )
         model.learned = None  # generated cases, which no shop holds: kept out of the file
         model.info.update(
@@ -137,6 +153,8 @@ def main() -> None:
         path = args.out / path.name if args.out else path
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(model.to_bytes())
+        if checkpoint:
+            checkpoint.remove()
         summary = {k: v for k, v in report.items() if k not in ("log", "outlier_case_ids")}
         print(json.dumps({"instrument": instrument, "file": str(path), **summary}))
 
