@@ -356,6 +356,11 @@ def test_a_checkpoint_of_another_training_or_a_damaged_one_is_refused(data, tmp_
         ModelError, match=r"run.ckpt: the checkpoint of another training \(other cases\)"
     ):
         TrainingCheckpoint(path, config, data_hash(data.subset(np.arange(100))))
+    stored = torch.load(path, weights_only=True)
+    stored["meta"] = json.dumps(json.loads(stored["meta"]) | {"outliers": [False] * 10})
+    torch.save(stored, path)
+    with pytest.raises(ModelError, match="keeps the outliers of 10 cases, where the training"):
+        train_protocol(data, config, checkpoint=TrainingCheckpoint(path, config, data_hash(data)))
     path.write_bytes(path.read_bytes()[:500])
     with pytest.raises(ModelError, match=r"run.ckpt: not a flakelab training checkpoint \("):
         TrainingCheckpoint(path, config, data_hash(data))

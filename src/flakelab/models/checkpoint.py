@@ -52,7 +52,7 @@ class TrainingCheckpoint:
             raise ModelError(
                 f"{self.path}: not a flakelab training checkpoint ({type(error).__name__})"
             ) from None
-        if meta.get("format") != CHECKPOINT_FORMAT or not isinstance(states, list):
+        if not _holds_a_training(meta, states):
             raise ModelError(f"{self.path}: not a flakelab training checkpoint")
         other = self._other_training(meta)
         if other:
@@ -88,6 +88,17 @@ class TrainingCheckpoint:
         write_atomically(self.path, lambda temporary: torch.save(saved, temporary))
         self.stages = stages
 
+    def check_fits(self, cases: int, stages: int) -> None:
+        """Refuse a file that keeps more stages than the training has, or outliers of another
+        number of cases (a file damaged where its readers cannot tell)."""
+        if self.stages > stages:
+            raise ModelError(f"{self.path}: keeps {self.stages} stages of a training of {stages}")
+        if self.outliers is not None and self.outliers.shape != (cases,):
+            raise ModelError(
+                f"{self.path}: keeps the outliers of {self.outliers.size} cases, where the "
+                f"training has {cases}"
+            )
+
     def restore(self, models: list[ForwardModel]) -> None:
         """The networks of the last kept stage into ``models`` (the same stage's)."""
         if len(self._states) != len(models):
@@ -103,3 +114,22 @@ class TrainingCheckpoint:
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def _holds_a_training(meta: dict, states) -> bool:
+    """Whether a checkpoint's contents are of the kinds :meth:`TrainingCheckpoint.keep`
+    writes."""
+    stages, log, outliers = meta["stages"], meta["log"], meta["outliers"]
+    return (
+        meta.get("format") == CHECKPOINT_FORMAT
+        and isinstance(states, list)
+        and all(isinstance(state, dict) for state in states)
+        and isinstance(stages, int)
+        and stages >= 0
+        and isinstance(log, list)
+        and all(isinstance(entry, dict) for entry in log)
+        and (
+            outliers is None
+            or (isinstance(outliers, list) and all(isinstance(o, bool) for o in outliers))
+        )
+    )

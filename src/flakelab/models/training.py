@@ -784,6 +784,8 @@ def train_protocol(
             f"screening: expected one of {', '.join(SCREENINGS)}, got {config.screening!r}"
         )
     partitions, train_rows = fold_rows(n, config)
+    if checkpoint is not None:
+        checkpoint.check_fits(n, protocol_stages(config))
     stages = _Stages(checkpoint, progress)
     if config.screening == "sequential":
         outliers = _screen_sequentially(data, config, partitions, stages)
