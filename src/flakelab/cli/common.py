@@ -56,7 +56,7 @@ def reports_errors(command: F) -> F:
         except (typer.Exit, typer.Abort):
             raise
         except KeyboardInterrupt:
-            _stop("interrupted", "stopped before it finished", 130)
+            stop_interrupted("stopped before it finished")
         except BrokenPipeError:  # stop quietly, as the shell's tools do (Python docs, signal)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(128 + signal.SIGPIPE) from None
@@ -77,11 +77,17 @@ def reports_errors(command: F) -> F:
 @contextmanager
 def interrupted(left: str | Callable[[], str]) -> Iterator[None]:
     """A Ctrl-C in the block stops the command with one line saying what it left behind
-    (``left``, or what it returns then) and exit status 130, as the shell's tools stop."""
+    (``left``, or what it returns then) (:func:`stop_interrupted`)."""
     try:
         yield
     except KeyboardInterrupt:
-        _stop("interrupted", left() if callable(left) else left, 130)
+        stop_interrupted(left() if callable(left) else left)
+
+
+def stop_interrupted(message: str) -> None:
+    """Stop a command that a Ctrl-C cut short: one line, exit status 130 (128 + SIGINT), as
+    the shell's tools stop."""
+    _stop("interrupted", message, 130)
 
 
 def _message(error: Exception) -> str:

@@ -29,6 +29,7 @@ from flakelab.cli.common import (
     progress_bar,
     read_readings,
     shares_text,
+    stop_interrupted,
     texture_table,
 )
 from flakelab.cli.lots import lots_report, shop_lots
@@ -697,5 +698,12 @@ def _evaluate(
     report["habits"] = habits and habits.report()
     if json_output:
         print(json.dumps(report, indent=2))
-        return
-    console.print_json(json.dumps(report))
+    else:
+        console.print_json(json.dumps(report))
+    if "targets_asked" in report:  # a Ctrl-C ended the run early
+        novel = report["novel_targets"]
+        judged = counted(report["targets"], "target") + (
+            f" and {novel} with a new toner" if novel else ""
+        )
+        asked = report["targets_asked"] + report["novel_targets_asked"]
+        stop_interrupted(f"{judged} of the {asked} asked for were judged; the figures are theirs")

@@ -442,7 +442,11 @@ def evaluate_matching(
     noise of one spray each. With ``per_target`` the report keeps every target's trial
     (``per_target``: the targets, then those with a new toner), for paired comparisons of
     two runs on the same seed. ``lots`` says what the shop knows of its tins
-    (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`)."""
+    (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`).
+
+    A Ctrl-C (KeyboardInterrupt) once a target is judged ends the run there: the report is
+    that of the targets judged (``targets``), with the counts asked for (``targets_asked``,
+    ``novel_targets_asked``)."""
     settings = settings or MatchSettings()
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     if lots not in TIN_KNOWLEDGE:
@@ -453,14 +457,21 @@ def evaluate_matching(
     if lots == "referenced":
         standards = standard_panels(world, panels, seed)
     rows, novel_rows = [], []
-    for i, (x, t) in enumerate(harness_trials(world, targets, seed, novel, novel_targets)):
-        row = _one(
-            t, x, forward, effect, settings, habits, tolerance, scale, target_texture, resprays,
-            lots, panels, standards,
-        )  # fmt: skip
-        (rows if i < targets else novel_rows).append(row)
-        if progress:
-            progress()
+    try:
+        for i, (x, t) in enumerate(harness_trials(world, targets, seed, novel, novel_targets)):
+            row = _one(
+                t, x, forward, effect, settings, habits, tolerance, scale, target_texture,
+                resprays, lots, panels, standards,
+            )  # fmt: skip
+            (rows if i < targets else novel_rows).append(row)
+            if progress:
+                progress()
+    except KeyboardInterrupt:  # a Ctrl-C ends the run early: the figures of the targets judged
+        if not rows:
+            raise
+        interrupted = {"targets_asked": targets, "novel_targets_asked": novel_targets}
+    else:
+        interrupted = {}
 
     def share(rs, key):
         return float(np.mean([r[key] <= 1.0 for r in rs])) if rs else None
@@ -476,7 +487,8 @@ def evaluate_matching(
     novel_first = share(novel_rows, "first")
     latency = np.array([r["latency_s"] for r in rows + novel_rows])
     return {
-        "targets": targets,
+        "targets": len(rows),
+        **interrupted,
         "seed": seed,
         "tolerance": tolerance.name,
         "weighed": scale and scale.to_dict(),
