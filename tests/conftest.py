@@ -42,6 +42,29 @@ def _run_cli(*args: object, env: dict[str, str] | None = None) -> subprocess.Com
     return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)
 
 
+def _interrupting(original, call: int, after: bool = False):
+    """``original``, raising KeyboardInterrupt (a Ctrl-C) at its ``call``-th call: before it
+    runs, or once it has run (``after``)."""
+    calls = []
+
+    def wrapper(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == call and not after:
+            raise KeyboardInterrupt
+        result = original(*args, **kwargs)
+        if len(calls) == call:
+            raise KeyboardInterrupt
+        return result
+
+    return wrapper
+
+
+@pytest.fixture
+def ctrl_c():
+    """A function wrapped to be interrupted at its n-th call (:func:`_interrupting`)."""
+    return _interrupting
+
+
 @pytest.fixture(scope="session", autouse=True)
 def user_data_folder(tmp_path_factory) -> Path:
     """A user data folder of the test session's own: the commands that name no database use

@@ -1154,46 +1154,28 @@ def test_generating_into_a_database_holding_other_cases_of_its_ids_says_what_sta
     assert count_cases(open_database(database)) == 520
 
 
-def test_an_interrupted_generation_to_a_file_writes_nothing(tmp_path, cli, monkeypatch):
+def test_an_interrupted_generation_to_a_file_writes_nothing(tmp_path, cli, monkeypatch, ctrl_c):
     out = tmp_path / "cases.csv"
-    monkeypatch.setattr(World, "_batch", lambda *args, **kwargs: _interrupt())
+    monkeypatch.setattr(World, "_batch", ctrl_c(World._batch, 2))
     run = cli("cases", "generate", "--n", "600", "--seed", "9", "--out", out)
     assert run.returncode == 130 and not out.exists()
     assert f"interrupted: nothing was written to {out}" in run.stderr
 
 
-def _interrupt():
-    raise KeyboardInterrupt
-
-
 @pytest.mark.parametrize("during", ["generating", "storing"])
 def test_an_interrupted_generation_says_what_it_stored_and_goes_on_when_run_again(
-    tmp_path, cli, monkeypatch, during
+    tmp_path, cli, monkeypatch, ctrl_c, during
 ):
     """A Ctrl-C while the third batch is generated (its first block of 250 cases), or once it
     is stored but before the command knows: the line says how many cases are stored (500 a
     batch), and the same command again stores the rest."""
     database = str(tmp_path / "shop.db")
     generate = ("cases", "generate", "--n", "1600", "--seed", "9", "--database", database)
-    calls = []
-
-    def cut_short(original, at: int):
-        def wrapper(*args, **kwargs):
-            calls.append(1)
-            if during == "generating" and len(calls) == at:
-                raise KeyboardInterrupt
-            result = original(*args, **kwargs)
-            if during == "storing" and len(calls) == at:
-                raise KeyboardInterrupt
-            return result
-
-        return wrapper
-
     if during == "generating":
-        monkeypatch.setattr(World, "_batch", cut_short(World._batch, at=5))
+        monkeypatch.setattr(World, "_batch", ctrl_c(World._batch, 5))
         expected = 1000  # four blocks of 250 (CHUNK) made, two batches stored
     else:
-        monkeypatch.setattr(database_module, "add_new_cases", cut_short(add_new_cases, at=3))
+        monkeypatch.setattr(database_module, "add_new_cases", ctrl_c(add_new_cases, 3, after=True))
         expected = 1500
     run = cli(*generate)
     assert run.returncode == 130 and "Traceback" not in run.stderr

@@ -1437,7 +1437,7 @@ def test_a_correction_through_the_physics_holds_its_jacobian_and_lands_where_the
     np.testing.assert_allclose(corrected[4], corrected[1], atol=0.002)
 
 
-def test_an_interrupted_harness_reports_the_targets_it_judged(hybrid, monkeypatch, cli):
+def test_an_interrupted_harness_reports_the_targets_it_judged(hybrid, monkeypatch, cli, ctrl_c):
     """A Ctrl-C during the third of four targets ends the run with the figures of the two
     judged: the same trials, and so the same rates, as those two in the whole run; the CLI
     prints them and says so, exit 130."""
@@ -1451,15 +1451,8 @@ def test_an_interrupted_harness_reports_the_targets_it_judged(hybrid, monkeypatc
     )
     run = dict(targets=4, seed=3, settings=hasty, per_target=True)
     whole = evaluate.evaluate_matching(world, hybrid, effect, **run)
-    calls, judged_as_is = [], evaluate._one
-
-    def cut_in_the_third(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return judged_as_is(*args, **kwargs)
-
-    monkeypatch.setattr(evaluate, "_one", cut_in_the_third)
+    judged_as_is = evaluate._one
+    monkeypatch.setattr(evaluate, "_one", ctrl_c(judged_as_is, 3))
     cut = evaluate.evaluate_matching(world, hybrid, effect, **run)
     assert (cut["targets"], cut["targets_asked"], whole["targets"]) == (2, 4, 4)
     assert "targets_asked" not in whole
@@ -1467,7 +1460,7 @@ def test_an_interrupted_harness_reports_the_targets_it_judged(hybrid, monkeypatc
         assert ours["first"] == theirs["first"] and ours["oracle"] == theirs["oracle"]
     first_two = [t["first"] <= 1.0 for t in whole["per_target"][:2]]
     assert cut["first_shot_success"] == np.mean(first_two)
-    calls.clear()
+    monkeypatch.setattr(evaluate, "_one", ctrl_c(judged_as_is, 3))
     said = cli("match", "evaluate", "--targets", "4", "--novel-targets", "0", "--json")
     assert said.returncode == 130 and json.loads(said.stdout)["targets"] == 2
     assert "interrupted: 2 targets of the 4 asked for were judged; the figures are theirs" in (

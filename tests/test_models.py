@@ -555,7 +555,7 @@ def test_a_gpu_this_machine_lacks_is_refused_before_any_work(cli, tmp_path):
     assert "missing.csv" not in result.stderr  # refused before the cases are read
 
 
-def test_cli_a_training_interrupted_goes_on_from_its_checkpoint(cli, tmp_path, monkeypatch):
+def test_cli_a_training_interrupted_goes_on_from_its_checkpoint(cli, tmp_path, monkeypatch, ctrl_c):
     """``train --checkpoint``: a Ctrl-C in the third stage says what the file keeps; the
     same command again goes on from there, writes the model an uninterrupted training
     writes, and removes the file."""
@@ -564,15 +564,8 @@ def test_cli_a_training_interrupted_goes_on_from_its_checkpoint(cli, tmp_path, m
     cases, checkpoint = tmp_path / "cases.csv", tmp_path / "run.ckpt"
     assert cli("cases", "generate", "--n", "150", "--seed", "3", "--out", cases).returncode == 0
     train = ("train", cases, "--epochs", "2", "--hidden", "8", "--no-register", "--json")
-    calls, fit_as_is = [], training.fit
-
-    def cut_in_the_third_stage(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return fit_as_is(*args, **kwargs)
-
-    monkeypatch.setattr(training, "fit", cut_in_the_third_stage)
+    fit_as_is = training.fit
+    monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 3))
     run = cli(*train, "--checkpoint", checkpoint, "--out", tmp_path / "a.pt")
     assert run.returncode == 130 and not (tmp_path / "a.pt").exists()
     said = " ".join(run.stderr.split())
@@ -583,8 +576,7 @@ def test_cli_a_training_interrupted_goes_on_from_its_checkpoint(cli, tmp_path, m
     assert not checkpoint.exists()
     assert cli(*train, "--out", tmp_path / "b.pt").returncode == 0
     assert (tmp_path / "a.pt").read_bytes() == (tmp_path / "b.pt").read_bytes()
-    monkeypatch.setattr(training, "fit", cut_in_the_third_stage)
-    calls.clear()
+    monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 3))
     run = cli(*train, "--out", tmp_path / "c.pt")
     assert run.returncode == 130 and "nothing was written or registered" in run.stderr
 
