@@ -579,6 +579,10 @@ def test_cli_a_training_interrupted_goes_on_from_its_checkpoint(cli, tmp_path, m
     monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 3))
     run = cli(*train, "--out", tmp_path / "c.pt")
     assert run.returncode == 130 and "nothing was written or registered" in run.stderr
+    monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 1))
+    run = cli(*train, "--checkpoint", checkpoint)
+    assert run.returncode == 130 and not checkpoint.exists()
+    assert f"no stage was done: {checkpoint} keeps none" in " ".join(run.stderr.split())
 
 
 GPU = "cpu" if training_device("auto").type == "cpu" else str(training_device("auto"))

@@ -312,6 +312,8 @@ def train(
     def left() -> str:  # what a Ctrl-C leaves
         if not kept:
             return "nothing was written or registered (--checkpoint FILE keeps a training's stages)"
+        if not kept.stages:
+            return f"no stage was done: {kept.path} keeps none; nothing was written or registered"
         return (
             f"{kept.path} keeps {kept.stages} of the protocol's {protocol_stages(config)} stages; "
             "the same command again goes on from there"
