@@ -786,7 +786,7 @@ def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases,
     add_cases(open_database(database), cases[:2])
     for target, message in (
         (tmp_path / "history.json", "expected a case file named .csv, .cxf, .xml"),
-        (tmp_path / "no" / "history.csv", "target: .* no folder"),
+        (tmp_path / "no" / "history.csv", "TARGET: .* no folder"),
     ):
         run = cli("cases", "export", str(target), "--database", str(database))
         assert run.returncode == 2 and re.search(message, run.stderr), run.stderr

@@ -204,6 +204,86 @@ def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path, cli
     assert existing.read_text() == "keep me"
 
 
+def _inputs(folder: Path) -> dict[str, Path]:
+    """Copies of the example's files, and files standing for a case file, a model and a lot
+    file: the output checks refuse them before any is read."""
+    shipped = {k: example_path(k) for k in ("target", "sprayout")}
+    shipped["recipe"] = shipped["target"].with_name("blue-metallic-recipe.json")
+    files = {k: folder / path.name for k, path in shipped.items()}
+    for kind, path in files.items():
+        path.write_bytes(shipped[kind].read_bytes())
+    for key, name in (("cases", "cases.csv"), ("model", "model.pt"), ("tins", "tins.json")):
+        files[key] = folder / name
+        files[key].write_text(f"{name}: to be kept\n")
+    return files
+
+
+# (arguments with {file} for the _inputs, the option refused, the file it names as read)
+WRITTEN_OVER_INPUTS = [
+    (["convert", "{target}", "{target}"], "TARGET", "SOURCE"),
+    (["match", "{target}", "--recipe-out", "{target}"], "--recipe-out", "TARGET"),
+    (["correct", "{target}", "--recipe", "{recipe}", "--sprayed", "{sprayout}",
+      "--recipe-out", "{recipe}"], "--recipe-out", "--recipe"),
+    (["correct", "{target}", "--recipe", "{recipe}", "--sprayed", "{sprayout}",
+      "--recipe-out", "{sprayout}"], "--recipe-out", "--sprayed"),
+    (["weigh", "{recipe}", "--recipe-out", "{recipe}"], "--recipe-out", "RECIPE"),
+    (["cases", "nearest", "{target}", "--recipe-out", "{target}"], "--recipe-out", "TARGET"),
+    (["cases", "export", "{cases}", "-d", "{cases}"], "TARGET", "--database"),
+    (["cases", "habits", "{cases}", "--out", "{cases}"], "--out", "CASES"),
+    (["train", "{cases}", "--loss-log", "{cases}"], "--loss-log", "CASES"),
+    (["model", "adapt", "{cases}", "--model", "{model}", "--out", "{model}"],
+     "--out", "--model"),
+    (["model", "show", "{model}", "--out", "{model}"], "--out", "MODEL"),
+    (["lots", "show", "{tins}", "--out", "{tins}"], "--out", "LOTS"),
+    (["lots", "calibrate", "{sprayout}", "--recipe", "{recipe}", "--lots", "{recipe}"],
+     "--lots", "--recipe"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("args", "option", "read"),
+    WRITTEN_OVER_INPUTS,
+    ids=[f"{a[0]} {o} {r}" for a, o, r in WRITTEN_OVER_INPUTS],
+)
+def test_an_output_that_is_a_file_the_command_reads_is_refused(tmp_path, cli, args, option,
+                                                               read):  # fmt: skip
+    """An output named as one of the command's inputs (a car's measurement, the recipe that
+    was sprayed, the cases) would lose what it holds: refused before any work, naming both,
+    the file as it was; through a link to it too."""
+    files = _inputs(tmp_path)
+    before = {path: path.read_bytes() for path in files.values()}
+    database = [] if args[0] == "convert" or "-d" in args else ["-d", tmp_path / "shop.db"]
+    run = cli(*[a.format(**files) for a in args], *database)
+    said = f"{option}: .* is also {read}, which this command reads"
+    assert run.returncode == 2 and re.search(said, run.stderr), run.stderr
+    assert {path: path.read_bytes() for path in files.values()} == before
+    assert not (tmp_path / "shop.db").exists()
+    link = tmp_path / "link"
+    link.symlink_to(files[re.search(r"\{(.+?)\}", args[-1])[1]])
+    linked = [*[a.format(**files) for a in args[:-1]], str(link)]
+    run = cli(*linked, *database)
+    assert run.returncode == 2 and re.search(said, run.stderr), run.stderr
+    assert {path: path.read_bytes() for path in files.values()} == before
+
+
+def test_two_outputs_of_one_file_are_refused(tmp_path, cli):
+    """A training's model, checkpoint and loss log each its own file: one written over
+    another (the checkpoint removed once the model is written) is refused before any work."""
+    cases = tmp_path / "cases.csv"
+    cases.write_text("kept\n")
+    for args, said in ((["--out", "m.pt", "--checkpoint", "m.pt"], "--checkpoint: m.pt is "
+                        "also --out, which this command writes too"),
+                       (["--checkpoint", "c", "--loss-log", "c"], "--loss-log: c is also "
+                        "--checkpoint"),
+                       (["--loss-log", "l.png", "--plot", "l.png"], "--plot: l.png is also "
+                        "--loss-log")):  # fmt: skip
+        run = cli("train", cases, "-d", tmp_path / "shop.db", *args)
+        assert run.returncode == 2 and said in run.stderr, run.stderr
+    assert cases.read_text() == "kept\n" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "cases.csv"
+    ]
+
+
 def test_multi_sample_inspect_all(tmp_path, cli):
     m = read_measurement(example_path("target"))
     path = tmp_path / "two.json"

@@ -605,9 +605,9 @@ def test_a_match_shows_the_shop_s_nearest_recorded_spray_outs(tmp_path, cli):
 
 def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli):
     """``match --all``: each reading matched as ``match --sample`` matches it, its best
-    recipe weighed into ``--recipe-dir`` (two samples named alike in two files); a reading
-    the model cannot read is named in its row and the rest go on; the options for one
-    target are refused with --all."""
+    recipe weighed into ``--recipe-dir`` (two samples named alike in two files, and none over
+    the file read); a reading the model cannot read is named in its row and the rest go on;
+    the options for one target are refused with --all."""
     from dataclasses import replace as replaced
 
     from flakelab.data import example_path
@@ -643,6 +643,13 @@ def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli):
         return {k: v for k, v in report.items() if k not in ("seconds", "recipe_out")}
 
     assert [timeless(r) for r in shared] == [timeless(r) for r in reports]
+    # the folder of the file read: a recipe named as that file is written beside it instead
+    beside = tmp_path / "door.json"
+    write_measurements([replaced(target, sample="door")], beside)
+    kept = beside.read_bytes()
+    run = cli("match", beside, "--candidates", "1", "--all", "--recipe-dir", tmp_path, "--json")
+    assert json.loads(run.stdout)["targets"][0]["recipe_out"] == str(tmp_path / "door-2.json")
+    assert beside.read_bytes() == kept
     for extra, message in ((["--all", "--jobs", "0"], "--jobs: expected a whole number"),
                            (["--jobs", "2"], "--jobs: for --all"),
                            (["--all", "--sample", "door"], "for one target, not --all"),

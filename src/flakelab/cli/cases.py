@@ -155,7 +155,8 @@ def generate(
     world = World(read_library(library), instrument, settings)
     to_file = out is not None and is_case_file(out)
     if to_file:
-        check_output_file(out, "--out")  # before the cases are generated, not after
+        # before the cases are generated, not after
+        check_output_file(out, "--out", reads={"--library": library})
     batches = world.cases(n, seed, shop=shop, start=start and zoned(start))
     if to_file:
         collected = []
@@ -742,7 +743,9 @@ def nearest(
     from flakelab.match.recipe import order_can, weigh
 
     tol = read_tolerance(tolerance)
-    check_output_file(recipe_out, "--recipe-out")
+    check_output_file(recipe_out, "--recipe-out", reads={
+        "TARGET": target, "--database": database, "--library": library,
+        "--tolerance": tolerance})  # fmt: skip
     if pick > count:
         raise FlakelabError(f"--pick: {pick} is more than the {counted(count, 'case')} shown")
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
@@ -918,7 +921,8 @@ def export_cases(
     from flakelab.cases.exchange import check_case_file_suffix, write_cases
 
     check_case_file_suffix(target)
-    check_output_file(target, "target")  # before the database is read
+    # before the database is read
+    check_output_file(target, "TARGET", reads={"--database": database})
     geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     engine = open_database(database, must_exist=True)
     cases = select_cases(iter_cases(engine, shop=shop, since=since), geometries=geometries)
@@ -1044,8 +1048,9 @@ def habits(
     )
     from flakelab.match.mixups import SPRAYOUT_MISMATCH
 
-    check_figure_file(plot, "--plot")
-    check_output_file(out, "--out")
+    reads = {"CASES": cases, "--model": model, "--library": library, "--database": database}
+    check_figure_file(plot, "--plot", reads=reads)
+    check_output_file(out, "--out", reads=reads, writes={"--plot": plot})
     if save:  # a command that stores creates its database, as the others do
         open_database(database)
     lib, forward = learned_forward(library, instrument, model, database, shop)

@@ -318,10 +318,21 @@ def add_readings_spread(
         report["notes"].append(note)
 
 
-def check_output_file(path, option: str, format_of: Callable | None = None) -> None:
+def check_output_file(
+    path,
+    option: str,
+    format_of: Callable | None = None,
+    *,
+    reads: dict[str, Any] | None = None,
+    writes: dict[str, Any] | None = None,
+) -> None:
     """An output file's folder exists and can be written, and the path is not a folder,
     checked before any work (nothing to check without a file): a long job never ends in a
-    file it cannot write. ``format_of`` checks the suffix too (an image's, a figure's)."""
+    file it cannot write. ``format_of`` checks the suffix too (an image's, a figure's).
+
+    Nor is it one of the files the command ``reads`` or another it ``writes`` (argument or
+    option name → path, paths or None): a car's measurement overwritten by its own recipe
+    would be lost."""
     if path is None:
         return
     if format_of is not None:
@@ -333,15 +344,51 @@ def check_output_file(path, option: str, format_of: Callable | None = None) -> N
         raise FlakelabError(f"{option}: {path}: no folder {target.parent}")
     if not os.access(target.parent, os.W_OK | os.X_OK):
         raise FlakelabError(f"{option}: {path}: folder {target.parent} cannot be written")
+    if what := _named_same_file(path, reads or {}, _existing_same_file):
+        raise FlakelabError(
+            f"{option}: {path} is also {what}, which this command reads: writing it would lose "
+            "what it holds; choose another file"
+        )
+    if what := _named_same_file(path, writes or {}, _same_path):
+        raise FlakelabError(
+            f"{option}: {path} is also {what}, which this command writes too: one would "
+            "replace the other; choose another file"
+        )
 
 
-def check_figure_file(path, option: str = "--render") -> None:
+def _named_same_file(path, files: dict[str, Any], same: Callable[[Any, Any], bool]) -> str | None:
+    """The name of the first of ``files`` (name → path, paths or None) that is ``path``."""
+    for name, given in files.items():
+        for other in given if isinstance(given, list | tuple) else [given]:
+            if other is not None and same(path, other):
+                return name
+    return None
+
+
+def _existing_same_file(a, b) -> bool:
+    """Whether two files that exist are one (through links too); False where one does not,
+    or is no path (a library's or a database's name)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _same_path(a, b) -> bool:
+    """Whether two paths, written or not yet, name one file."""
+    try:
+        return _existing_same_file(a, b) or Path(a).resolve() == Path(b).resolve()
+    except (OSError, ValueError, RuntimeError):
+        return False
+
+
+def check_figure_file(path, option: str = "--render", **others: dict[str, Any]) -> None:
     """A figure file's suffix and folder, checked before any work (nothing to check without
-    one)."""
+    one), and the ``others`` of :func:`check_output_file`."""
     if path is not None:
         from flakelab.render.plots import figure_format
 
-        check_output_file(path, option, figure_format)
+        check_output_file(path, option, figure_format, **others)
 
 
 def draw_differences(geometries, reference_lab, samples: dict, tolerance, path, title: str,
@@ -408,3 +455,18 @@ def file_name_for(sample: str, taken: set[str]) -> str:
         name = f"{base}-{k}"
     taken.add(name.lower())
     return name
+
+
+def names_read_in(folder: Path | None, reads: dict[str, Any], suffix: str = ".json") -> set[str]:
+    """The names (:func:`file_name_for`'s, without ``suffix``) of the files a command
+    ``reads`` (name → path, paths or None) that lie in ``folder``, where it writes a file per
+    sample as NAME``suffix``: taken, so that none of them is written over."""
+    if folder is None:
+        return set()
+    files = [Path(f) for given in reads.values() if given is not None
+             for f in (given if isinstance(given, list | tuple) else [given])]  # fmt: skip
+    return {
+        f.stem.lower()
+        for f in files
+        if f.suffix.lower() == suffix and f.is_file() and _existing_same_file(f.parent, folder)
+    }

@@ -144,8 +144,11 @@ def correct_command(
     _check_correction_options(mode, left, most, extra_toners)
     tol = read_tolerance(tolerance)
     test_lights = lights_option(lights)
-    check_output_file(recipe_out, "--recipe-out")
-    check_figure_file(plot, "--plot")
+    reads = {"TARGET": target, "--recipe": recipe, "--sprayed": sprayed, "--library": library,
+             "--model": model, "--database": database, "--lots": lots, "--habits": habits,
+             "--tolerance": tolerance}  # fmt: skip
+    check_output_file(recipe_out, "--recipe-out", reads=reads, writes={"--plot": plot})
+    check_figure_file(plot, "--plot", reads=reads)
     grams = read_recipe(recipe)
     _can_size(grams, resolution)  # before the model: a can the scale cannot weigh is a typo
     shop, named = workplace_shop(shop)

@@ -23,6 +23,7 @@ from flakelab.cli.common import (
     console,
     errors,
     file_name_for,
+    names_read_in,
     read_readings,
     reports_errors,
 )
@@ -171,7 +172,8 @@ def panel_command(
     from flakelab.match.lots import calibration_recipes
     from flakelab.match.recipe import order_can
 
-    check_output_file(recipe_out, "--recipe-out")
+    reads = {"--library": library, "--model": model, "--database": database}
+    check_output_file(recipe_out, "--recipe-out", reads=reads)
     if recipe_out is not None and len(toner) > 1:
         raise FlakelabError("--recipe-out: for one toner's panel (--recipe-dir writes each)")
     if recipe_dir is not None and not recipe_dir.is_dir():
@@ -185,7 +187,7 @@ def panel_command(
     def panel_of(name: str):  # a partner among the toners asked for: its panel chosen once
         return calibration_recipes(forward, lib, (name,))[0]
 
-    reports, names = [], set()
+    reports, names = [], names_read_in(recipe_dir, reads)
     for name in toners:
         report = _panel_report(name, panel_of, forward, lib, can, resolution)
         report["partner_in_set"] = report["partner"] in toners
@@ -372,8 +374,10 @@ def calibrate_command(
     from flakelab.match.lots import calibrate_lots, recorded
 
     shop = _tins_kept(lots, shop)
-    if lots is not None:
-        check_output_file(lots, "--lots")
+    if lots is not None:  # the lot file is read and updated; the panels' files only read
+        check_output_file(lots, "--lots", reads={
+            "SPRAYED": sprayed, "--recipe": recipe, "--standard": standard, "--library": library,
+            "--model": model, "--database": database})  # fmt: skip
     numbers = _lot_numbers(lot or [])
     _check_one_for_each_panel(sprayed, recipe, standard)
     grams = [read_recipe(path) for path in recipe]
@@ -738,7 +742,8 @@ def show_command(
     from flakelab.io import read_library
     from flakelab.io.lots_file import read_lots, write_lots
 
-    check_output_file(out, "--out")
+    check_output_file(out, "--out", reads={"LOTS": lots, "--library": library,
+                                           "--database": database})  # fmt: skip
     if lots is None and workplace_shop(shop)[0] is None:
         _show_shops(database, json_output)
         return

@@ -22,6 +22,7 @@ from flakelab.cli.common import (
     SampleOption,
     ToleranceOption,
     check_figure_file,
+    check_output_file,
     console,
     draw_differences,
     draw_side_by_side,
@@ -327,6 +328,7 @@ def convert(
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
     from flakelab.io import read_measurements, write_measurements
 
+    check_output_file(target, "TARGET", reads={"SOURCE": source})
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     write_measurements(measurements, target)
     errors.print(f"wrote {counted(len(measurements), 'measurement')} to {target}", highlight=False)

@@ -25,6 +25,7 @@ from flakelab.cli.common import (
     errors,
     file_name_for,
     lights_option,
+    names_read_in,
     print_notes,
     progress_bar,
     read_readings,
@@ -284,7 +285,10 @@ def match_command(
     _check_target_options(target, example, all_samples, jobs, recipe_dir,
                           for_one=(sample, average, render, plot, recipe_out, nearest))  # fmt: skip
     can = order_can(quantity, resolution)
-    _check_output_options(render, plot, recipe_out, pick, candidates)
+    reads = {"TARGET": None if example else target, "--library": library, "--model": model,
+             "--database": database, "--habits": habits, "--lots": lots,
+             "--tolerance": tolerance}  # fmt: skip
+    _check_output_options(render, plot, recipe_out, pick, candidates, reads)
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward, shop, database)
@@ -302,7 +306,8 @@ def match_command(
         keywords = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
         shop_tins = {"lots": tins and lots_report(tins), "notes": lot_notes}
         _match_every_sample(read_measurements(path), path, forward, effect, keywords, can,
-                            recipe_dir, json_output, jobs, shop_tins)  # fmt: skip
+                            recipe_dir, json_output, jobs, shop_tins,
+                            taken=names_read_in(recipe_dir, reads))  # fmt: skip
         return
     measurement, readings = read_readings(path, sample, average)
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
@@ -372,12 +377,15 @@ def _check_target_options(target, example, all_samples, jobs, recipe_dir, for_on
         raise FlakelabError(f"--recipe-dir: {recipe_dir}: not a folder")
 
 
-def _check_output_options(render, plot, recipe_out, pick: int, candidates: int) -> None:
-    """The files a match writes, refused before the search where they cannot be written, and
-    ``--pick`` beyond the candidates shown."""
-    check_figure_file(render)
-    check_figure_file(plot, "--plot")
-    check_output_file(recipe_out, "--recipe-out")
+def _check_output_options(render, plot, recipe_out, pick: int, candidates: int,
+                          reads: dict) -> None:  # fmt: skip
+    """The files a match writes, refused before the search where they cannot be written or
+    would replace a file it ``reads`` or another it writes, and ``--pick`` beyond the
+    candidates shown."""
+    check_figure_file(render, reads=reads)
+    check_figure_file(plot, "--plot", reads=reads, writes={"--render": render})
+    check_output_file(recipe_out, "--recipe-out", reads=reads,
+                      writes={"--render": render, "--plot": plot})  # fmt: skip
     if pick > candidates:
         shown = counted(candidates, "candidate")
         raise FlakelabError(f"--pick: {pick} is more than the {shown} shown (--candidates)")
@@ -422,13 +430,14 @@ def _weigh_candidates(report: dict, candidates, forward, can) -> None:
 
 def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,
                         json_output: bool, jobs: int | None = None,
-                        shop_tins: dict | None = None) -> None:  # fmt: skip
+                        shop_tins: dict | None = None, taken: set[str] = frozenset()
+                        ) -> None:  # fmt: skip
     """``match --all``: each reading of the file matched as ``match`` matches one (the
     ``search``'s keywords), by ``jobs`` processes (default: one per core,
     :func:`~flakelab.match.batch.workers_for`), its best candidate weighed for the ``can``
-    (and written into ``recipe_dir``); a reading the model cannot read is named in its row,
-    and the rest go on. ``shop_tins`` (the tins weighed for, and their notes) head the
-    report."""
+    (and written into ``recipe_dir``, under no name ``taken``); a reading the model cannot
+    read is named in its row, and the rest go on. ``shop_tins`` (the tins weighed for, and
+    their notes) head the report."""
     shop_tins = shop_tins or {"lots": None, "notes": []}
     from flakelab.io import write_recipe
     from flakelab.match.batch import match_readings, workers_for
@@ -446,7 +455,7 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
                                  jobs=workers_for(len(readable), jobs),
                                  progress=lambda: bar.advance(task), **search)  # fmt: skip
     results = refused | dict(zip(readable, matched, strict=True))
-    reports, names = [], set()
+    reports, names = [], set(taken)
     for i, reading in enumerate(readings):
         result = results[i]
         if isinstance(result, FlakelabError):

@@ -153,10 +153,21 @@ LossPlotOption = Annotated[
 ]
 
 
-def _check_loss_outputs(loss_log: Path | None, plot: Path | None) -> None:
-    """Before the training: a loss log or a figure that could not be written is refused."""
-    check_output_file(loss_log, "--loss-log")
-    check_figure_file(plot, "--plot")
+def _check_outputs(out: Path | None, loss_log: Path | None, plot: Path | None, reads: dict,
+                   checkpoint: Path | None = None) -> None:  # fmt: skip
+    """Before the training: a model file, a checkpoint, a loss log or a figure that could not
+    be written, or would be written over a file it ``reads`` or another it writes, is
+    refused."""
+    check_output_file(out, "--out", reads=reads)
+    check_output_file(checkpoint, "--checkpoint", reads=reads, writes={"--out": out})
+    check_output_file(loss_log, "--loss-log", reads=reads,
+                      writes={"--out": out, "--checkpoint": checkpoint})  # fmt: skip
+    check_figure_file(
+        plot,
+        "--plot",
+        reads=reads,
+        writes={"--out": out, "--checkpoint": checkpoint, "--loss-log": loss_log},
+    )
 
 
 def _write_losses(log: list[dict], loss_log: Path | None, plot: Path | None, title: str,
@@ -283,9 +294,8 @@ def train(
         withhold_for_adaptation,
     )
 
-    check_output_file(out, "--out")
-    check_output_file(checkpoint, "--checkpoint")
-    _check_loss_outputs(loss_log, plot)
+    reads = {"CASES": cases, "--library": library, "--database": database}
+    _check_outputs(out, loss_log, plot, reads, checkpoint)
     # the settings are checked before the cases are read
     config = _training_config(hidden, epochs, batch_size, screening, adapt_validation, members,
                               log_offset, seed, device, colour_weight, adapt_epochs)  # fmt: skip
@@ -474,7 +484,7 @@ def show_model(
     """What a model is and what it learned from: network, toners and their cases, training."""
     from flakelab.models.registry import model_card
 
-    check_output_file(out, "--out")
+    check_output_file(out, "--out", reads={"MODEL": model, "--database": database})
     chosen, source = named_model(model, database)
     card = {"source": source, **model_card(chosen)}
     if out is not None:
@@ -873,8 +883,8 @@ def adapt(
         recorded_config,
     )
 
-    check_output_file(out, "--out")
-    _check_loss_outputs(loss_log, plot)
+    reads = {"CASES": cases, "--model": model, "--library": library, "--database": database}
+    _check_outputs(out, loss_log, plot, reads)
     lib = read_library(library)
     engine = open_database(database) if register_model else existing_engine(database)
     if model:

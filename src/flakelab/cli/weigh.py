@@ -83,7 +83,9 @@ def weigh_command(
 
     grams = read_recipe(recipe)
     can = order_can(quantity, resolution)
-    check_output_file(recipe_out, "--recipe-out")
+    check_output_file(recipe_out, "--recipe-out", reads={
+        "RECIPE": recipe, "--library": library, "--model": model, "--database": database,
+        "--lots": lots})  # fmt: skip
     lib, forward, _ = matcher_setup(library, instrument, model, database, physics)
     tins, forward, lot_notes = shop_lots(lots, lib, forward, workplace_shop(shop)[0], database)
     for_tins = {"lots": tins and lots_report(tins), "notes": lot_notes}
