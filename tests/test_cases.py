@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import multiprocessing
+import os
 import re
 import sqlite3
 import subprocess
@@ -776,9 +777,13 @@ def test_a_command_that_reads_refuses_a_database_file_that_is_not_there(tmp_path
     assert not missing.exists()
     open_database(missing)  # a command that stores creates it
     assert missing.is_file() and count_cases(open_database(missing, must_exist=True)) == 0
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
     for must_exist in (True, False):  # said "no such database file", or sqlite's own words
         with pytest.raises(DatabaseError, match="a folder, not a database file"):
             open_database(tmp_path, must_exist=must_exist)
+        with pytest.raises(DatabaseError, match="not a regular file, so not a database file"):
+            open_database(pipe, must_exist=must_exist)  # not sqlite's "disk I/O error"
 
 
 def test_an_export_is_named_by_its_format_and_checked_before_the_database(cases, tmp_path, cli):

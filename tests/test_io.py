@@ -5,8 +5,10 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import re
 import shutil
+import stat
 from datetime import datetime
 from pathlib import Path
 
@@ -289,6 +291,59 @@ def test_an_atomic_write_names_the_file_asked_for_when_it_cannot_write(tmp_path)
     assert raised.value.filename == str(missing)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["panel.png"]
     assert list((tmp_path / "panel.png").iterdir()) == []
+
+
+def test_an_atomic_write_goes_through_a_link_and_keeps_the_file_s_permissions(tmp_path):
+    """A link written to stays a link, and the file it names holds what was written; a file
+    replaced keeps its mode (a private recipe stays private); a dangling link makes its
+    file."""
+    from flakelab.io import read_recipe, write_recipe
+
+    kept = tmp_path / "recipes" / "door.json"
+    kept.parent.mkdir()
+    write_recipe({"Al medium": 100.0}, kept)
+    kept.chmod(0o600)
+    link = tmp_path / "current.json"
+    link.symlink_to(kept)
+    write_recipe({"Al medium": 90.0, "Carbon black": 10.0}, link)
+    assert link.is_symlink() and link.resolve() == kept
+    assert read_recipe(kept) == {"Al medium": 90.0, "Carbon black": 10.0}
+    assert stat.S_IMODE(kept.stat().st_mode) == 0o600
+    dangling = tmp_path / "next.json"
+    dangling.symlink_to(tmp_path / "recipes" / "next.json")
+    write_recipe({"Al medium": 1.0}, dangling)
+    assert dangling.is_symlink() and read_recipe(tmp_path / "recipes" / "next.json")
+    assert sorted(p.name for p in kept.parent.iterdir()) == ["door.json", "next.json"]
+
+
+def test_a_named_pipe_is_written_into_not_replaced(tmp_path, cli):
+    """``--recipe-out`` to a named pipe (or /dev/stdout, /dev/null): the recipe goes down the
+    pipe, which stays one. Renamed over, it would become a regular file, and /dev/null
+    with it when the user is root."""
+    import threading
+
+    from flakelab.data import example_path
+    from flakelab.io import read_recipe
+
+    recipe = example_path("target").with_name("blue-metallic-recipe.json")
+    pipe = tmp_path / "scale"
+    os.mkfifo(pipe)
+    received = []
+
+    def read_the_pipe():
+        with open(pipe, encoding="utf-8") as reader:
+            received.append(reader.read())
+
+    reader = threading.Thread(target=read_the_pipe, daemon=True)
+    reader.start()
+    run = cli("weigh", recipe, "--quantity", "100g", "--recipe-out", pipe, "--json")
+    reader.join(timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert stat.S_ISFIFO(pipe.lstat().st_mode)
+    weighed = json.loads(received[0])
+    assert weighed == {w["toner"]: w["grams"] for w in json.loads(run.stdout)["weights_g"]}
+    assert sum(weighed.values()) == pytest.approx(100.0)
+    assert set(weighed) == set(read_recipe(recipe))
 
 
 def test_a_recipe_file_round_trips_heaviest_first(tmp_path):

@@ -169,6 +169,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     # the user data folder's own database is made on first use
     if file and Path(file).is_dir():
         raise DatabaseError(f"{url}: a folder, not a database file")
+    if file and Path(file).exists() and not Path(file).is_file():  # /dev/null, a pipe
+        raise DatabaseError(f"{url}: not a regular file, so not a database file")
     if must_exist and named and file and not Path(file).is_file():
         raise DatabaseError(
             f"{url}: no such database file; nothing was created (the commands that store "

@@ -340,9 +340,12 @@ def check_output_file(
     target = Path(path).resolve()
     if target.is_dir():
         raise FlakelabError(f"{option}: {path}: is a folder, expected a file name")
-    if not target.parent.is_dir():
+    if Path(path).exists() and not Path(path).is_file():  # /dev/null, a pipe: written into
+        if not os.access(path, os.W_OK):
+            raise FlakelabError(f"{option}: {path}: cannot be written")
+    elif not target.parent.is_dir():
         raise FlakelabError(f"{option}: {path}: no folder {target.parent}")
-    if not os.access(target.parent, os.W_OK | os.X_OK):
+    elif not os.access(target.parent, os.W_OK | os.X_OK):
         raise FlakelabError(f"{option}: {path}: folder {target.parent} cannot be written")
     if what := _named_same_file(path, reads or {}, _existing_same_file):
         raise FlakelabError(

@@ -11,6 +11,7 @@ import json
 import math
 import os
 import re
+import stat
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -257,10 +258,20 @@ def _umask() -> int:
 
 def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> None:
     """Write through a temporary file beside ``path`` and rename it into place, so a failure
-    never leaves a half-written file and never destroys the previous one."""
+    never leaves a half-written file and never destroys the previous one.
+
+    A link is written through: the file it names is replaced and the link stays. A file
+    there keeps its permissions. What is no regular file (``/dev/null``, ``/dev/stdout``, a
+    named pipe) is written into as it is: renamed over, it would be lost, and for a root user
+    ``/dev/null`` with it."""
     target = Path(path)
     if not target.name or target.is_dir():
         raise IsADirectoryError(errno.EISDIR, "a folder, not a file to write", str(path))
+    if target.exists() and not target.is_file():
+        write(target)
+        return
+    target = Path(os.path.realpath(target))
+    mode = stat.S_IMODE(target.stat().st_mode) if target.exists() else 0o666 & ~_umask()
     try:
         handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     except OSError as error:  # named by the file asked for, not the temporary one
@@ -268,7 +279,7 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
     os.close(handle)
     try:
         write(Path(temporary))
-        os.chmod(temporary, 0o666 & ~_umask())
+        os.chmod(temporary, mode)
         os.replace(temporary, target)
     finally:
         if os.path.exists(temporary):
