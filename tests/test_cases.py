@@ -619,6 +619,31 @@ def test_a_database_of_a_newer_flakelab_is_refused_and_left_as_it_is(cases, data
     assert count_cases(engine) == 2
 
 
+def test_another_applications_database_is_refused_and_left_as_it_is(database_url, cli):
+    """A path mistyped onto another application's database: refused by the commands that
+    read and those that store, naming its tables, and left without flakelab's tables beside
+    its own (before, a 'cases list' built them in). With Alembic's table of its own too."""
+    from sqlalchemy import create_engine, inspect, text
+    from sqlalchemy.pool import NullPool
+
+    foreign = create_engine(database_url, poolclass=NullPool)
+    with foreign.begin() as connection:
+        connection.execute(text("CREATE TABLE invoices (id INTEGER PRIMARY KEY, amount REAL)"))
+        connection.execute(text("INSERT INTO invoices (id, amount) VALUES (1, 12.5)"))
+    said = "holds another application's tables (invoices) and none of flakelab's"
+    for args in (("cases", "list"), ("cases", "generate", "--n", "2"), ("model", "list")):
+        run = cli(*args, "-d", database_url)
+        assert run.returncode == 2 and said in run.stderr, run.stderr
+    with foreign.begin() as connection:
+        connection.execute(text("CREATE TABLE alembic_version (version_num VARCHAR(32))"))
+        connection.execute(text("INSERT INTO alembic_version VALUES ('0a1b2c3d')"))
+    with pytest.raises(DatabaseError, match=re.escape("tables (alembic_version, invoices)")):
+        open_database(database_url)
+    assert sorted(inspect(foreign).get_table_names()) == ["alembic_version", "invoices"]
+    with foreign.connect() as connection:
+        assert connection.execute(text("SELECT id, amount FROM invoices")).all() == [(1, 12.5)]
+
+
 @pytest.mark.parametrize(
     ("column", "value", "said"),
     [

@@ -223,6 +223,20 @@ def lock_database(connection: Connection, key: int) -> None:
         connection.execute(select(func.pg_advisory_xact_lock(key)))
 
 
+def _other_applications_tables(connection: Connection, shown: int = 5) -> list[str]:
+    """The first ``shown`` tables of a database that holds none of flakelab's (a path
+    mistyped onto another application's SQLite file, a URL onto its database): built into,
+    it would gain flakelab's tables beside its own. Empty for a flakelab or a new database."""
+    from sqlalchemy import inspect
+
+    from flakelab.cases.schema import Base
+
+    tables = sorted(inspect(connection).get_table_names())
+    if set(tables) & set(Base.metadata.tables):
+        return []
+    return tables[:shown] + ([f"{len(tables) - shown} more"] if len(tables) > shown else [])
+
+
 def migrate(engine: Engine, revision: str = "head") -> None:
     """Bring the database's schema to ``revision`` through the shipped migrations, in one
     transaction that holds the database's migration lock: workplaces opening a new database
@@ -244,8 +258,14 @@ def migrate(engine: Engine, revision: str = "head") -> None:
     # write (an import of 61,000 cases is one transaction) before it could read
     with engine.connect() as connection:
         current = MigrationContext.configure(connection).get_current_revision()
-    if current == wanted:
-        return
+        if current == wanted:
+            return
+        others = _other_applications_tables(connection)
+    if others:
+        raise DatabaseError(
+            f"{engine.url}: holds another application's tables ({', '.join(others)}) and none "
+            "of flakelab's; nothing was changed: name a flakelab database, or a new one"
+        )
     if current is not None and current not in {s.revision for s in script.walk_revisions()}:
         from flakelab import __version__
 
