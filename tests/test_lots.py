@@ -504,7 +504,9 @@ def test_a_harness_mode_given_for_one_target_is_named_as_such(cli):
     assert run.returncode == 2 and "expected one of none, calibrated" in run.stderr
 
 
-def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward, library):
+def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(
+    cli, tmp_path, forward, library, monkeypatch
+):
     from flakelab.core.measurement import Measurement
     from flakelab.core.spectra import WAVELENGTHS
     from flakelab.data import example_path
@@ -545,6 +547,26 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(cli, tmp_path, forward
     report = json.loads(done.stdout)
     assert report["tins"][0]["new_tin"] and report["tins"][0]["before"] == 1.0
     assert lots.read_text() == before
+
+    # another workplace writes the shared file while this reading runs: its tins are kept
+    import flakelab.match.lots as lots_module
+
+    theirs = TonerLots.of([TonerLot("Carbon black", 0.98, lot="K-7")])
+
+    def read_while_another_writes(*args, **kwargs):
+        found = calibrate(*args, **kwargs)
+        write_lots(theirs, lots)
+        return found
+
+    calibrate = lots_module.calibrate_lots
+    monkeypatch.setattr(lots_module, "calibrate_lots", read_while_another_writes)
+    done = cli("lots", "calibrate", sprayed, "--recipe", panel, "--lots", lots,
+               "--toner", "Phthalo blue GS")  # fmt: skip
+    said = " ".join(done.stderr.split())
+    assert done.returncode == 2 and "was written by another reading while this one ran" in said
+    assert read_lots(lots) == theirs
+    monkeypatch.undo()
+    lots.write_text(before)
 
     # match and correct weigh for the tins; every tin alike stronger changes nothing
     with_tin = json.loads(cli("match", "--example", "--lots", lots, "--json").stdout)

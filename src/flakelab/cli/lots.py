@@ -388,6 +388,7 @@ def calibrate_command(
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
     check_toners([*(toner or []), *numbers], forward.toners, "--toner, --lot: ")
     _check_in_the_panels([*(toner or []), *numbers], grams, recipe)
+    as_read = _contents(lots)  # before it is read: a reading stored since is not written over
     kept, stored = _tins_on_file(engine, lots, shop, database, lib)
     new_tins = [
         n for n, number in numbers.items() if n in stored.lots and stored.lots[n].lot != number
@@ -412,7 +413,7 @@ def calibrate_command(
                        panels=counts)  # fmt: skip
     version = None
     if not dry_run:
-        version = _keep_tins(updated, lots, engine, shop, kept)
+        version = _keep_tins(updated, lots, engine, shop, kept, as_read)
     report = {"lots": lots and str(lots), "shop": shop, "version": version, "written": not dry_run}
     report |= _calibration_report(found, start, updated, new_tins)
     report |= _panels_report(found, sprayed, recipe)
@@ -494,16 +495,32 @@ def _check_the_panels_read(found, sprayed: list[Path], recipe: list[Path], stand
             )
 
 
-def _keep_tins(updated, lots: Path | None, engine, shop: str | None, kept) -> int | None:
-    """Write the tins as read to the lot file, or store them as the shop's next version in
-    the database (its number)."""
+def _keep_tins(updated, lots: Path | None, engine, shop: str | None, kept,
+               as_read: bytes | None) -> int | None:  # fmt: skip
+    """Write the tins as read to the lot file, unless another reading wrote it since it held
+    ``as_read``, or store them as the shop's next version in the database (its number)."""
     from flakelab.cases.shop_lots import store_lots
     from flakelab.io.lots_file import write_lots
 
-    if lots is not None:
-        write_lots(updated, lots)
+    if lots is None:
+        return store_lots(engine, shop, updated, kept and kept.version).version
+    if _contents(lots) != as_read:  # two workplaces sharing the file: the other's kept
+        raise FlakelabError(
+            f"--lots: {lots} was written by another reading while this one ran; nothing was "
+            "written: run the calibration again, from the tins as they are now"
+        )
+    write_lots(updated, lots)
+    return None
+
+
+def _contents(path: Path | None) -> bytes | None:
+    """A lot file's bytes (None where there is none yet)."""
+    try:
+        return None if path is None else path.read_bytes()
+    except FileNotFoundError:
         return None
-    return store_lots(engine, shop, updated, kept and kept.version).version
+    except OSError as error:
+        raise FlakelabError(f"--lots: {path}: cannot be read ({error.strerror})") from None
 
 
 def _panels_report(found, sprayed: list[Path], recipe: list[Path]) -> dict:
