@@ -1396,6 +1396,43 @@ def test_the_newest_cases_come_first_and_one_can_be_removed(cases, database_url)
     assert count_cases(engine) == 11
 
 
+def test_a_generation_stored_among_recorded_cases_is_taken_out_again(cases, database_url, cli):
+    """A generation stored by mistake in a shop's database: 'cases generate' says the
+    database holds recorded cases, and 'cases remove --synthetic' takes out every synthetic
+    case (of --shop alone, where given), in one transaction, and no recorded one."""
+    from flakelab.cases.database import remove_synthetic_cases, synthetic_cases
+
+    engine = open_database(database_url)
+    recorded = [replace(c, shop="Martin", synthetic=False) for c in cases[:5]]
+    add_cases(engine, recorded + [replace(c, shop="Dupont") for c in cases[5:8]])
+    run = cli("cases", "generate", "--n", "12", "--seed", "3", "-d", database_url)
+    assert run.returncode == 0, run.stderr
+    said = " ".join(run.stderr.split())
+    assert "also holds 5 recorded cases (Martin)" in said and "cases remove --synthetic" in said
+    assert synthetic_cases(engine) == {"Dupont": 3, "synthetic shop": 12}
+    assert synthetic_cases(engine, recorded=True) == {"Martin": 5}
+    run = cli("cases", "remove", "--synthetic", "-d", database_url)  # no terminal to ask
+    assert run.returncode == 2 and "confirm with --yes" in run.stderr and count_cases(engine) == 20
+    run = cli("cases", "remove", "--synthetic", "--shop", "synthetic shop", "--yes", "-d",
+              database_url)  # fmt: skip
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 0 and "removed 12 synthetic cases (synthetic shop 12)" in said
+    assert said.endswith("; its 5 recorded cases stay")
+    assert synthetic_cases(engine) == {"Dupont": 3}
+    assert remove_synthetic_cases(engine) == {"Dupont": 3}
+    assert [c.case_id for c in iter_cases(engine)] == [c.case_id for c in recorded]
+    assert remove_synthetic_cases(engine) == {} and count_cases(engine) == 5
+    run = cli("cases", "remove", "--synthetic", "--yes", "-d", database_url)
+    assert run.returncode == 0 and "no synthetic cases in" in run.stderr
+    one = recorded[0].case_id
+    for args, message in ((["--synthetic", one], "a case id or --synthetic"),
+                          ([], "a case id or --synthetic"),
+                          ([one, "--shop", "Martin"], "--shop: with --synthetic")):  # fmt: skip
+        run = cli("cases", "remove", *args, "--yes", "-d", database_url)
+        assert run.returncode == 2 and message in run.stderr, run.stderr
+    assert count_cases(engine) == 5
+
+
 def test_a_case_is_found_by_any_unique_beginning_of_its_id(cases, database_url):
     """Tables show ids shortened; ``find_case_id`` takes the whole id or any unique
     beginning of one. A beginning of several names them and one of none says so; LIKE's

@@ -48,6 +48,8 @@ __all__ = [
     "stored_sprayouts",
     "cases_by_rows",
     "remove_case",
+    "synthetic_cases",
+    "remove_synthetic_cases",
     "find_case_id",
     "short_id",
     "SHORT_ID_LENGTH",
@@ -588,6 +590,29 @@ def remove_case(engine: Engine, case_id: str) -> Case | None:
             case = None
         session.execute(delete(CaseRow).where(CaseRow.id == row_id))
     return case
+
+
+def synthetic_cases(engine: Engine, shop: str | None = None, *, recorded: bool = False) -> dict:
+    """How many synthetic cases (of ``shop``; None: of every shop) the database holds, by
+    shop; with ``recorded``, how many recorded ones (those that are not synthetic) instead."""
+    query = select(CaseRow.shop, func.count(CaseRow.id)).where(
+        CaseRow.synthetic.is_(not recorded), *([CaseRow.shop == shop] if shop else [])
+    )
+    with reading_rows(engine) as session:
+        return dict(session.execute(query.group_by(CaseRow.shop).order_by(CaseRow.shop)).all())
+
+
+def remove_synthetic_cases(engine: Engine, shop: str | None = None) -> dict[str, int]:
+    """Delete every synthetic case (of ``shop``; None: of every shop) in one transaction and
+    return how many, by shop: a generation stored by mistake among a shop's recorded cases,
+    taken out again. No recorded case is among them."""
+    where = (CaseRow.synthetic.is_(True), *([CaseRow.shop == shop] if shop else []))
+    with write_transaction(engine, "remove the synthetic cases", "nothing was removed",
+                           rows=(CaseRow, "case", "case_id")) as session:  # fmt: skip
+        query = select(CaseRow.shop, func.count(CaseRow.id)).where(*where).group_by(CaseRow.shop)
+        removed = dict(session.execute(query.order_by(CaseRow.shop)).all())
+        session.execute(delete(CaseRow).where(*where))
+    return removed
 
 
 def short_id(case_id: str) -> str:

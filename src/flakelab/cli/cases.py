@@ -179,6 +179,23 @@ def generate(
             storing.store(batch)
             bar.advance(task, len(batch))
     errors.print(storing.summary(instrument, seed), highlight=False, soft_wrap=True)
+    _note_recorded_cases(storing.engine)
+
+
+def _note_recorded_cases(engine) -> None:
+    """Where a generation went into a database that holds a shop's recorded cases: how the
+    synthetic ones are told apart and taken out again."""
+    from flakelab.cases.database import synthetic_cases
+
+    if recorded := synthetic_cases(engine, recorded=True):
+        shops = ", ".join(recorded)
+        errors.print(
+            f"[yellow]note:[/] {engine.url} also holds "
+            f"{counted(sum(recorded.values()), 'recorded case')} ({shops}): the generated ones "
+            "are labelled synthetic, which 'flakelab cases remove --synthetic' takes out again",
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 class _GeneratedStore:
@@ -866,29 +883,44 @@ def nearest_table(rows: list[dict], title: str) -> Table:
 @reports_errors
 def remove(
     case_id: Annotated[
-        str,
+        str | None,
         typer.Argument(
             help="The case to remove: its id, or any unique beginning of it ('cases "
-            "list' shows them)."
+            "list' shows them).",
+            show_default=False,
         ),  # fmt: skip
-    ],
+    ] = None,
+    synthetic: Annotated[
+        bool,
+        typer.Option(
+            "--synthetic",
+            help="Remove every synthetic case instead ('cases generate'), of --shop alone "
+            "where given; the recorded cases stay.",
+        ),
+    ] = False,
+    shop: Annotated[
+        str | None, typer.Option(help="With --synthetic: only this shop's synthetic cases.")
+    ] = None,
     yes: Annotated[bool, typer.Option("--yes", help="Remove without asking.")] = False,
     database: DatabaseOption = None,
 ) -> None:
-    """Remove one case recorded by mistake (the wrong spray-out or recipe)."""
-    import sys
-
+    """Remove one case recorded by mistake (the wrong spray-out or recipe), or every
+    synthetic case: a generation stored among the shop's recorded cases."""
     from flakelab.cases.database import find_case_id, open_database, remove_case
 
+    if (case_id is None) == (not synthetic):
+        raise FlakelabError("expected a case id or --synthetic (one of them)")
+    if shop is not None and not synthetic:
+        raise FlakelabError("--shop: with --synthetic (a case id names one case)")
     engine = open_database(database, must_exist=True)
+    if synthetic:
+        _remove_synthetic(engine, shop, yes)
+        return
     try:
         case_id = find_case_id(engine, case_id)
     except FlakelabError as error:
         raise FlakelabError(f"{error}; nothing was removed") from None
-    if not yes:
-        if not sys.stdin.isatty():
-            raise FlakelabError(f"cases remove {case_id}: confirm with --yes")
-        typer.confirm(f"remove case {case_id} from {engine.url}?", abort=True)
+    _confirm(f"remove case {case_id} from {engine.url}?", f"cases remove {case_id}", yes)
     case = remove_case(engine, case_id)
     what = (
         "its stored values could not be read"
@@ -896,6 +928,41 @@ def remove(
         else f"{case.shop}, {case.outcome}, {case.created_at:%Y-%m-%d %H:%M}"
     )
     errors.print(f"removed case {case_id} ({what}) from {engine.url}", highlight=False)
+
+
+def _confirm(question: str, command: str, yes: bool) -> None:
+    """Go on only with ``--yes``, or once the user says so at a terminal."""
+    import sys
+
+    if yes:
+        return
+    if not sys.stdin.isatty():
+        raise FlakelabError(f"{command}: confirm with --yes")
+    typer.confirm(question, abort=True)
+
+
+def _remove_synthetic(engine, shop: str | None, yes: bool) -> None:
+    """``cases remove --synthetic``: every synthetic case (of ``shop``), asked first with
+    how many of each shop."""
+    from flakelab.cases.database import remove_synthetic_cases, synthetic_cases
+
+    of = f" of shop {shop!r}" if shop else ""
+    held = synthetic_cases(engine, shop)
+    if not held:
+        errors.print(f"no synthetic cases{of} in {engine.url}; nothing was removed",
+                     highlight=False)  # fmt: skip
+        return
+    _confirm(f"remove {_by_shop(held)} from {engine.url}?", "cases remove --synthetic", yes)
+    removed = remove_synthetic_cases(engine, shop)
+    kept = sum(synthetic_cases(engine, recorded=True).values())
+    stay = f"; its {counted(kept, 'recorded case')} stay" if kept else ""
+    errors.print(f"removed {_by_shop(removed)} from {engine.url}{stay}", highlight=False)
+
+
+def _by_shop(counts: dict[str, int]) -> str:
+    """'520 synthetic cases (synthetic shop 500, north 20)'."""
+    shops = ", ".join(f"{shop} {n}" for shop, n in counts.items())
+    return f"{counted(sum(counts.values()), 'synthetic case')} ({shops})"
 
 
 @cases_app.command("export")
