@@ -1098,6 +1098,10 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
         ("nan.csv", lambda t: t.replace(t.splitlines()[1], _cell(t, 1, 12, "nan"))): (
             r"nan.csv: row 2: target:[^:]+:430: expected a finite number"
         ),
+        # the row's spectra are parsed at once; the cell that stops them is named
+        ("word.csv", lambda t: t.replace(t.splitlines()[2], _cell(t, 2, 50, "0,5"))): (
+            r"word.csv: row 3: target:[^:]+:\d+: expected a number, got '0,5'"
+        ),
         ("extra.csv", lambda t: "\n".join(line + ",1" for line in t.splitlines()) + "\n"): (
             re.escape("(1 unexpected, e.g. ['1'])")
         ),
@@ -1117,6 +1121,21 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
         assert str(raised.value).startswith(f"{path}: "), name
         assert re.search(message, str(raised.value)), (name, str(raised.value))
         assert str(raised.value).count(str(path)) == 1  # named once, not twice
+
+
+def test_a_case_file_is_read_line_by_line_and_told_so(cases, tmp_path):
+    """``read_cases`` reads a CSV row by row (a shop's 30,000 cases as one list of cells
+    took 1.5 GB) and tells ``progress`` of each line, as many as ``count_lines`` counts
+    beforehand for the bar."""
+    from flakelab.cases.exchange import count_lines
+
+    path = tmp_path / "history.csv"
+    write_cases(cases[:5], path)
+    told = []
+    read = read_cases(path, lambda: told.append(1))
+    assert [c.case_id for c in read] == [c.case_id for c in cases[:5]]
+    assert len(told) == count_lines(path) == 6
+    assert count_lines(tmp_path / "missing.csv") is None
 
 
 def _grain(text: str) -> int:

@@ -16,7 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
-from sqlalchemy import Connection, Engine, create_engine, delete, event, func, select
+from sqlalchemy import Connection, Engine, create_engine, delete, event, func, insert, select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session
@@ -283,8 +283,13 @@ def migrate(engine: Engine, revision: str = "head") -> None:
 
 
 def _row(case: Case) -> CaseRow:
+    return CaseRow(**_row_values(case))
+
+
+def _row_values(case: Case) -> dict:
+    """A case's row, column by column."""
     now = datetime.now(UTC)
-    return CaseRow(
+    return dict(
         case_id=case.case_id,
         shop=case.shop,
         instrument=case.instrument,
@@ -411,12 +416,14 @@ def _damaged_row(engine: Engine, row_class, what: str, key: str) -> str | None:
 
 def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
     """Store cases in one transaction; a duplicate case id rolls the whole batch back."""
-    rows = [_row(c) for c in cases]
-    try:
+    rows = [_row_values(c) for c in cases]
+    if not rows:
+        return 0
+    try:  # as one bulk insert: half the time of the ORM's objects, row by row
         with Session(engine) as session, session.begin():
-            session.add_all(rows)
+            session.execute(insert(CaseRow), rows)
     except IntegrityError as error:
-        clash = _clash(engine, rows, error)
+        clash = _clash(engine, [r["case_id"] for r in rows], error)
         raise CaseError(f"{engine.url}: {clash}; nothing was stored") from None
     except SQLAlchemyError as error:  # e.g. a value the server refuses (DataError)
         raise DatabaseError(
@@ -495,10 +502,9 @@ def _differing_field(stored: CaseRow, given: CaseRow) -> str | None:
     return None
 
 
-def _clash(engine: Engine, rows: list[CaseRow], error: IntegrityError) -> str:
-    """Which case ids made the database refuse ``rows``: stored already (by another writer,
-    or an earlier run), or given twice."""
-    ids = [r.case_id for r in rows]
+def _clash(engine: Engine, ids: list[str], error: IntegrityError) -> str:
+    """Which case ids made the database refuse the rows of ``ids``: stored already (by
+    another writer, or an earlier run), or given twice."""
     stored = existing_case_ids(engine, ids)
     if stored:
         first = next(i for i in ids if i in stored)

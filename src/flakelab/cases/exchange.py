@@ -23,8 +23,11 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
+from collections.abc import Callable, Iterable, Iterator
 from datetime import datetime
 from functools import cache
+from operator import itemgetter
 from os import PathLike
 from pathlib import Path
 
@@ -145,29 +148,50 @@ def _fmt(value: float | None) -> str:
     return "" if value is None else f"{value:.6g}"
 
 
-def read_cases(path: str | PathLike) -> list[Case]:
-    """All cases of a CSV or CxF3 case file."""
+def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None) -> list[Case]:
+    """All cases of a CSV or CxF3 case file; ``progress`` is called for each line of a CSV
+    file read."""
     path = Path(path)
     if not path.exists():
         raise CaseFileError(f"{path}: no such file")
     if path.suffix.lower() in CXF_SUFFIXES:
         return _from_measurements(path, read_cxf(path))
-    try:
-        text = path.read_text(encoding="utf-8-sig")
+    try:  # row by row: a shop's 60,000 cases as one list of cells took 3 GB
+        with path.open(encoding="utf-8-sig", newline="") as handle:
+            lines = handle if progress is None else _told(handle, progress)
+            return _cases_from_rows(path, csv.reader(lines))
     except UnicodeDecodeError:
         raise CaseFileError(f"{path}: not a UTF-8 text (CSV) file") from None
-    rows = list(csv.reader(io.StringIO(text)))
-    if not rows or rows[0][: len(CASE_FIELDS)] != list(CASE_FIELDS):
+
+
+def _told(lines: Iterable[str], progress: Callable[[], None]) -> Iterator[str]:
+    for line in lines:
+        progress()
+        yield line
+
+
+def count_lines(path: str | PathLike) -> int | None:
+    """The lines of a text file, counted in its bytes (a case file's rows, for a progress
+    bar: 0.1 s for 100 MB); None where it cannot be read."""
+    try:
+        with open(path, "rb") as handle:
+            return sum(chunk.count(b"\n") for chunk in iter(lambda: handle.read(1 << 20), b""))
+    except OSError:
+        return None
+
+
+def _cases_from_rows(path: Path, rows: Iterator[list[str]]) -> list[Case]:
+    header = next(rows, None)
+    if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
         raise CaseFileError(
             f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)}"
         )
-    header = rows[0]
-    columns = _file_geometries(path, header)
+    layout = _Layout(header, _file_geometries(path, header))
     cases, rows_of = [], {}
-    for number, row in enumerate(rows[1:], start=2):
+    for number, row in enumerate(rows, start=2):
         if not any(cell.strip() for cell in row):
             continue
-        case = _case_from_row(path, number, header, columns, row)
+        case = _case_from_row(path, number, layout, row)
         if case.case_id in rows_of:
             raise CaseFileError(
                 f"{path}: row {number}: case_id: {case.case_id!r} is also row "
@@ -178,6 +202,25 @@ def read_cases(path: str | PathLike) -> list[Case]:
     if not cases:
         raise CaseFileError(f"{path}: no cases after the header")
     return cases
+
+
+class _Layout:
+    """A case file's columns: its header, its geometries, and each role's spectral cells
+    for a row's geometries, taken from a row at once (found once per set of geometries)."""
+
+    def __init__(self, header: list[str], geometries: tuple[str, ...]) -> None:
+        self.header, self.geometries = header, geometries
+        self._index = {column: i for i, column in enumerate(header)}
+        self._spectral: dict = {}
+
+    def spectral(self, role: str, geometries: tuple[str, ...]):
+        """The column names of ``role``'s reflectance at ``geometries``, geometry by
+        geometry, and a function that takes their cells from a row."""
+        key = (role, geometries)
+        if key not in self._spectral:
+            names = [f"{role}:{g}:{int(w)}" for g in geometries for w in WAVELENGTHS]
+            self._spectral[key] = names, itemgetter(*(self._index[n] for n in names))
+        return self._spectral[key]
 
 
 def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
@@ -198,10 +241,9 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
     return geometries
 
 
-def _case_from_row(
-    path: Path, number: int, header: list[str], columns: tuple[str, ...], row: list[str]
-) -> Case:
+def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> Case:
     where = f"{path}: row {number}"
+    header, columns = layout.header, layout.geometries
     if len(row) != len(header):
         raise CaseFileError(f"{where}: expected {len(header)} columns, got {len(row)}")
     cells = dict(zip(header, row, strict=True))
@@ -233,14 +275,19 @@ def _case_from_row(
             raise CaseFileError(
                 f"{where}: {column}: expected a number, got {cells[column]!r}"
             ) from None
-        if not np.isfinite(value):
+        if not math.isfinite(value):
             raise CaseFileError(f"{where}: {column}: expected a finite number")
         return value
 
     def spectra(role: str) -> np.ndarray:
-        return np.array(
-            [[number_of(f"{role}:{g}:{int(w)}") for w in WAVELENGTHS] for g in geometries]
-        )
+        names, cells_of = layout.spectral(role, geometries)
+        try:  # numpy parses the row's cells at once; a cell it refuses is named one by one
+            values = np.array(cells_of(row), dtype=float)
+        except ValueError:
+            values = None
+        if values is None or not np.isfinite(values).all():
+            values = np.array([number_of(name) for name in names])
+        return values.reshape(len(geometries), WAVELENGTHS.size)
 
     def texture(role: str) -> dict[str, float]:
         return {t: number_of(f"{role}:{t}") for t in TEXTURE_READINGS if cells[f"{role}:{t}"]}
