@@ -43,6 +43,14 @@ OBSERVERS = {
 """Short observer names as instruments write them (``D65/10``) → colour-science names."""
 
 
+@lru_cache(maxsize=256)
+def is_illuminant(name: str) -> bool:
+    """Whether ``name`` is a key of ``colour.SDS_ILLUMINANTS``, as its mapping matches keys
+    (case and punctuation aside), remembered: the mapping takes a millisecond to tell, and
+    every reading of a file names its conditions (a shop's history, thousands of them)."""
+    return name in colour.SDS_ILLUMINANTS
+
+
 @dataclass(frozen=True)
 class Conditions:
     """Illuminant and observer of a colorimetric computation, e.g. ``D65/10``.
@@ -55,7 +63,7 @@ class Conditions:
     observer: str = "10"
 
     def __post_init__(self) -> None:
-        if self.illuminant not in colour.SDS_ILLUMINANTS:
+        if not is_illuminant(self.illuminant):
             raise ValueError(
                 f"expected an illuminant known to colour-science (D65, A, FL11, LED-B3 …), "
                 f"got {self.illuminant!r}"
@@ -97,11 +105,7 @@ def illuminant_name(text: str) -> str:
     name = text.strip()
     # only an F: "-1" and "X1" are no fluorescent lamp (they read as FL1 before)
     fluorescent = f"FL{name[1:]}"
-    if (
-        name[:1] == "F"
-        and name not in colour.SDS_ILLUMINANTS
-        and fluorescent in colour.SDS_ILLUMINANTS
-    ):
+    if name[:1] == "F" and not is_illuminant(name) and is_illuminant(fluorescent):
         return fluorescent
     return name
 
