@@ -346,6 +346,23 @@ def test_a_named_pipe_is_written_into_not_replaced(tmp_path, cli):
     assert set(weighed) == set(read_recipe(recipe))
 
 
+def test_a_spectrum_s_cells_read_at_once_are_those_read_one_by_one():
+    """numpy parses a reading's cells at once; a cell it cannot take as a finite number (or
+    a bool, which it would) is named as :func:`parse_number` names it."""
+    from flakelab.io.records import parse_number, parse_spectrum
+
+    wavelengths = np.arange(400.0, 710.0, 10.0)
+    cells = [" 0.5", "1e-3", "12", "+.25", "7_5", *["0.1"] * 26]
+    read = parse_spectrum("f.csv", cells, wavelengths, "sample s")
+    assert read.tolist() == [parse_number("f.csv", c, "") for c in cells]
+    flawed = {True: "got True", None: "got an empty cell", "0,5": "got '0,5'",
+              "inf": "expected a finite number, got 'inf'", "[]": "got '[]'"}  # fmt: skip
+    for bad, said in flawed.items():
+        with pytest.raises(MeasurementFileError, match="sample s, 550 nm: expected") as e:
+            parse_spectrum("f.csv", [*cells[:15], bad, *cells[16:]], wavelengths, "sample s")
+        assert said in str(e.value)
+
+
 def test_a_recipe_file_round_trips_heaviest_first(tmp_path):
     path = tmp_path / "recipe.json"
     write_recipe({"Carbon black": 3.6, "Al medium": 194.0, "Phthalo blue GS": 16.6}, path)

@@ -110,6 +110,18 @@ def parse_number(path: str | PathLike, value: object, where: str) -> float:
     return number
 
 
+def _numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
+    """Cells as finite floats, parsed by numpy at once (as :func:`parse_number` parses each:
+    a shop's history reads millions); None where one is not such a number, or is a bool."""
+    if any(isinstance(v, bool) for v in values):
+        return None
+    try:
+        numbers = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return numbers if numbers.ndim == 1 and np.isfinite(numbers).all() else None
+
+
 def parse_lab(path: str | PathLike, values: Sequence[object], fields: Sequence[str]) -> np.ndarray:
     """Stored CIELAB ``[3]`` from three cells named by ``fields``: finite numbers within
     :data:`LAB_LIMIT`, or a :class:`MeasurementFileError` naming the cell."""
@@ -141,12 +153,14 @@ def parse_spectrum(
         raise MeasurementFileError(
             path, f"expected {wavelengths.size} reflectance values, got {len(values)}", field=where
         )
-    spectrum = np.array(
-        [
-            parse_number(path, v, f"{where}, {wl:g} nm")
-            for v, wl in zip(values, wavelengths, strict=True)
-        ]
-    )
+    spectrum = _numbers_at_once(values)
+    if spectrum is None:  # the cell that stops it, named
+        spectrum = np.array(
+            [
+                parse_number(path, v, f"{where}, {wl:g} nm")
+                for v, wl in zip(values, wavelengths, strict=True)
+            ]
+        )
     low, high = REFLECTANCE_RANGE
     bad = np.flatnonzero(outside(spectrum, REFLECTANCE_RANGE))
     if bad.size:
