@@ -21,7 +21,6 @@ returned from a bad file.
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 from collections.abc import Callable, Iterable, Iterator
@@ -104,35 +103,39 @@ def write_cases(cases: list[Case], path: str | PathLike) -> None:
         return
     geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
     tins = any(c.tins for c in cases)
-    buffer = io.StringIO()
-    writer = csv.writer(buffer)
-    writer.writerow(_header(geometries, tins))
-    for case in cases:
-        writer.writerow(
-            [
-                case.case_id,
-                case.shop,
-                case.instrument,
-                case.conditions,
-                case.outcome,
-                "1" if case.synthetic else "0",
-                case.created_at.isoformat(),
-                json.dumps(case.recipe),
-                ";".join(case.geometry_names),
-                *([_tins_cell(case)] if tins else []),
-                *_spectra_cells(case, case.target, geometries),
-                *_spectra_cells(case, case.sprayout, geometries),
-                *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
-                *(_fmt(case.sprayout_texture.get(t)) for t in TEXTURE_READINGS),
-            ]
-        )
-    text = buffer.getvalue()
-    write_atomically(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
+
+    def write(temporary: Path) -> None:  # row by row, not the whole text first
+        with temporary.open("w", encoding="utf-8", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(_header(geometries, tins))
+            writer.writerows(_csv_row(case, geometries, tins) for case in cases)
+
+    write_atomically(path, write)
+
+
+def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool) -> list[str]:
+    """A case's row of a case file of ``geometries`` (and its tins' column, with ``tins``)."""
+    return [
+        case.case_id,
+        case.shop,
+        case.instrument,
+        case.conditions,
+        case.outcome,
+        "1" if case.synthetic else "0",
+        case.created_at.isoformat(),
+        json.dumps(case.recipe),
+        ";".join(case.geometry_names),
+        *([_tins_cell(case)] if tins else []),
+        *_spectra_cells(case, case.target, geometries),
+        *_spectra_cells(case, case.sprayout, geometries),
+        *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
+        *(_fmt(case.sprayout_texture.get(t)) for t in TEXTURE_READINGS),
+    ]
 
 
 def _spectra_cells(case: Case, spectra: np.ndarray, geometries: tuple[str, ...]) -> list[str]:
     """A case's reflectance cells at the file's ``geometries``: empty where it was not read."""
-    own = {g: row for g, row in zip(case.geometry_names, spectra, strict=True)}
+    own = dict(zip(case.geometry_names, spectra.tolist(), strict=True))  # floats: formatted faster
     empty = [""] * WAVELENGTHS.size
     return [
         cell for g in geometries for cell in ([f"{v:.6g}" for v in own[g]] if g in own else empty)
