@@ -1136,6 +1136,8 @@ def test_a_case_file_is_read_line_by_line_and_told_so(cases, tmp_path):
     assert [c.case_id for c in read] == [c.case_id for c in cases[:5]]
     assert len(told) == count_lines(path) == 6
     assert count_lines(tmp_path / "missing.csv") is None
+    write_cases(cases[:5], tmp_path / "history.cxf")
+    assert count_lines(tmp_path / "history.cxf") is None  # read as a whole: no lines told
 
 
 def _grain(text: str) -> int:
