@@ -740,6 +740,12 @@ def test_recorded_sprayouts_are_checked_against_their_recipes_with_the_shops_sto
     data = case_arrays(cases, library.names)
     expected = sprayout_mismatch(forward, data.x, data.R, habits_shop[1], library).max(axis=1)
     np.testing.assert_allclose([c["de00"] for c in moved], expected, atol=6e-4)
+    # checked a few at a time (a history of thousands is, to bound memory): the same checks
+    import flakelab.match.mixups as mixups
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(mixups, "CHECKED_AT_ONCE", 7)
+        assert recorded_checks(cases, library, engine)[0] == moved
     # a case read at no instrument's whole set is not checked; nor are cases of a library the
     # shipped models were not trained for, and the reason says which
     partial = replace(cases[1], geometries=cases[1].geometries[:3],

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -72,20 +73,30 @@ def mismatch_message(de00: float, geometry: str) -> str:
     )
 
 
+CHECKED_AT_ONCE = 4096
+"""Recorded cases :func:`recorded_mismatch` checks at once."""
+
+
 def recorded_mismatch(
     forward, library: Library, cases: list, habits: ShopHabits | None = None
 ) -> tuple[NDArray, NDArray]:
     """:func:`sprayout_mismatch` of recorded ``cases`` (:class:`~flakelab.cases.case.Case`),
     each read at every one of ``forward``'s geometries (among others): each one's worst ΔE00
-    ``[N]`` and the index of its geometry in ``forward.geometries``."""
+    ``[N]`` and the index of its geometry in ``forward.geometries``. In chunks of
+    :data:`CHECKED_AT_ONCE` cases: a shop's history of 30,000 at once peaked 175 MB higher."""
     from flakelab.cases.case import cases_at
     from flakelab.match.lots import poured_from
     from flakelab.models.training import case_arrays
 
-    data = case_arrays(cases_at(cases, forward.geometries), library.names)
-    poured = poured_from(forward, library, data.strength, data.shade)  # the tins they record
-    de = sprayout_mismatch(poured, data.x, data.R, habits, library)
-    return de.max(axis=1), de.argmax(axis=1)
+    worst, where = [], []
+    for start in range(0, len(cases), CHECKED_AT_ONCE):
+        chunk = cases_at(cases[start : start + CHECKED_AT_ONCE], forward.geometries)
+        data = case_arrays(chunk, library.names)
+        poured = poured_from(forward, library, data.strength, data.shade)  # the tins they record
+        de = sprayout_mismatch(poured, data.x, data.R, habits, library)
+        worst.append(de.max(axis=1))
+        where.append(de.argmax(axis=1))
+    return np.concatenate(worst), np.concatenate(where)
 
 
 def recorded_checks(
