@@ -1140,6 +1140,23 @@ def test_a_case_file_is_read_line_by_line_and_told_so(cases, tmp_path):
     assert count_lines(tmp_path / "history.cxf") is None  # read as a whole: no lines told
 
 
+def test_cases_streamed_into_a_csv_are_the_file_a_list_writes(cases, tmp_path):
+    """Given its columns, a CSV takes cases as a generator yields them (``cases generate
+    --out``: none held) and is the file their list makes; a case the columns do not hold,
+    or no case at all, is refused and nothing is written."""
+    listed, streamed = tmp_path / "listed.csv", tmp_path / "streamed.csv"
+    write_cases(cases[:6], listed)
+    columns = cases[0].geometry_names
+    write_cases(iter(cases[:6]), streamed, geometries=columns, tins=False)
+    assert streamed.read_bytes() == listed.read_bytes()
+    fewer = tmp_path / "fewer.csv"
+    with pytest.raises(CaseFileError, match=f"case '{cases[0].case_id}' read at {columns[-1]}"):
+        write_cases(iter(cases[:6]), fewer, geometries=columns[:-1], tins=False)
+    with pytest.raises(CaseFileError, match="expected at least one case to write, got none"):
+        write_cases(iter([]), fewer, geometries=columns, tins=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["listed.csv", "streamed.csv"]
+
+
 def _grain(text: str) -> int:
     """The index of the spray-out's graininess in a case file's header."""
     return next(csv.reader(io.StringIO(text))).index("sprayout:G")

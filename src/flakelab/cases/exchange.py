@@ -93,24 +93,52 @@ def check_case_file_suffix(path: str | PathLike) -> None:
         )
 
 
-def write_cases(cases: list[Case], path: str | PathLike) -> None:
-    """Write cases as CSV or CxF3 (by extension), atomically."""
-    if not cases:
-        raise CaseFileError(f"{path}: expected at least one case to write, got none")
+def write_cases(
+    cases: Iterable[Case],
+    path: str | PathLike,
+    *,
+    geometries: tuple[str, ...] | None = None,
+    tins: bool | None = None,
+) -> None:
+    """Write cases as CSV or CxF3 (by extension), atomically. Given the CSV's
+    ``geometries`` (their columns, in order) and whether it has a ``tins`` column, the
+    cases are written as they come (a generator's: none held); else they are read first."""
     check_case_file_suffix(path)
+    streamed = geometries is not None and tins is not None
+    if Path(path).suffix.lower() in CXF_SUFFIXES or not streamed:
+        cases = list(cases)
+        if not cases:
+            raise CaseFileError(f"{path}: expected at least one case to write, got none")
     if Path(path).suffix.lower() in CXF_SUFFIXES:
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
-    geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
-    tins = any(c.tins for c in cases)
+    if not streamed:
+        geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
+        tins = any(c.tins for c in cases)
 
     def write(temporary: Path) -> None:  # row by row, not the whole text first
         with temporary.open("w", encoding="utf-8", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow(_header(geometries, tins))
-            writer.writerows(_csv_row(case, geometries, tins) for case in cases)
+            written = 0
+            for case in cases:
+                if streamed:
+                    _check_columns_hold(path, case, geometries, tins)
+                writer.writerow(_csv_row(case, geometries, tins))
+                written += 1
+        if not written:  # the temporary file is removed: nothing written
+            raise CaseFileError(f"{path}: expected at least one case to write, got none")
 
     write_atomically(path, write)
+
+
+def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], tins: bool) -> None:
+    """A case streamed into a CSV of ``geometries`` (and a ``tins`` column or not) is one its
+    columns hold whole."""
+    beyond = [g for g in case.geometry_names if g not in geometries]
+    if beyond or (case.tins and not tins):
+        what = f"read at {', '.join(beyond)}" if beyond else "records its tins"
+        raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
 
 
 def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool) -> list[str]:

@@ -159,13 +159,16 @@ def generate(
         check_output_file(out, "--out", reads={"--library": library})
     batches = world.cases(n, seed, shop=shop, start=start and zoned(start))
     if to_file:
-        collected = []
         with interrupted(f"nothing was written to {out}"), progress_bar() as bar:
             task = bar.add_task("generating cases", total=n)
-            for batch in batches:
-                collected += batch
-                bar.advance(task, len(batch))
-            write_cases(collected, out)
+
+            def generated():  # written as they come (a CSV): none held
+                for batch in batches:
+                    yield from batch
+                    bar.advance(task, len(batch))
+
+            columns = tuple(g.name for g in world.geometries)
+            write_cases(generated(), out, geometries=columns, tins=tins != "none")
         errors.print(
             f"wrote {n} synthetic cases ({instrument}, seed {seed}) to {out}",
             highlight=False,
