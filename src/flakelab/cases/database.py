@@ -171,7 +171,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     # the user data folder's own database is made on first use
     if file and Path(file).is_dir():
         raise DatabaseError(f"{url}: a folder, not a database file")
-    if file and Path(file).exists() and not Path(file).is_file():  # /dev/null, a pipe
+    # /dev/null, a pipe (io.records.is_no_regular_file, whose package is not loaded here)
+    if file and Path(file).exists() and not Path(file).is_file():
         raise DatabaseError(f"{url}: not a regular file, so not a database file")
     if must_exist and named and file and not Path(file).is_file():
         raise DatabaseError(
@@ -601,24 +602,31 @@ def remove_case(engine: Engine, case_id: str) -> Case | None:
 def synthetic_cases(engine: Engine, shop: str | None = None, *, recorded: bool = False) -> dict:
     """How many synthetic cases (of ``shop``; None: of every shop) the database holds, by
     shop; with ``recorded``, how many recorded ones (those that are not synthetic) instead."""
-    query = select(CaseRow.shop, func.count(CaseRow.id)).where(
-        CaseRow.synthetic.is_(not recorded), *([CaseRow.shop == shop] if shop else [])
-    )
     with reading_rows(engine) as session:
-        return dict(session.execute(query.group_by(CaseRow.shop).order_by(CaseRow.shop)).all())
+        return _counted_by_shop(session, _synthetic_of(shop, not recorded))
 
 
 def remove_synthetic_cases(engine: Engine, shop: str | None = None) -> dict[str, int]:
     """Delete every synthetic case (of ``shop``; None: of every shop) in one transaction and
     return how many, by shop: a generation stored by mistake among a shop's recorded cases,
     taken out again. No recorded case is among them."""
-    where = (CaseRow.synthetic.is_(True), *([CaseRow.shop == shop] if shop else []))
+    where = _synthetic_of(shop)
     with write_transaction(engine, "remove the synthetic cases", "nothing was removed",
                            rows=(CaseRow, "case", "case_id")) as session:  # fmt: skip
-        query = select(CaseRow.shop, func.count(CaseRow.id)).where(*where).group_by(CaseRow.shop)
-        removed = dict(session.execute(query.order_by(CaseRow.shop)).all())
+        removed = _counted_by_shop(session, where)
         session.execute(delete(CaseRow).where(*where))
     return removed
+
+
+def _synthetic_of(shop: str | None, synthetic: bool = True) -> tuple:
+    """The conditions of the cases synthetic (or recorded) of ``shop`` (None: any shop)."""
+    return (CaseRow.synthetic.is_(synthetic), *([CaseRow.shop == shop] if shop else []))
+
+
+def _counted_by_shop(session: Session, where: tuple) -> dict[str, int]:
+    """The cases that meet ``where``, counted by shop."""
+    query = select(CaseRow.shop, func.count(CaseRow.id)).where(*where).group_by(CaseRow.shop)
+    return dict(session.execute(query.order_by(CaseRow.shop)).all())
 
 
 def short_id(case_id: str) -> str:

@@ -38,7 +38,7 @@ from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
-from flakelab.io.records import write_atomically
+from flakelab.io.records import numbers_at_once, write_atomically
 
 __all__ = ["read_cases", "write_cases", "is_case_file", "check_case_file_suffix", "CASE_FIELDS"]
 
@@ -315,11 +315,8 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
 
     def spectra(role: str) -> np.ndarray:
         names, cells_of = layout.spectral(role, geometries)
-        try:  # numpy parses the row's cells at once; a cell it refuses is named one by one
-            values = np.array(cells_of(row), dtype=float)
-        except ValueError:
-            values = None
-        if values is None or not np.isfinite(values).all():
+        values = numbers_at_once(cells_of(row))
+        if values is None:  # the cell that stops them, named
             values = np.array([number_of(name) for name in names])
         return values.reshape(len(geometries), WAVELENGTHS.size)
 

@@ -335,12 +335,14 @@ def check_output_file(
     would be lost."""
     if path is None:
         return
+    from flakelab.io.records import is_no_regular_file  # the file formats: not at start-up
+
     if format_of is not None:
         format_of(path)
     target = Path(path).resolve()
     if target.is_dir():
         raise FlakelabError(f"{option}: {path}: is a folder, expected a file name")
-    if Path(path).exists() and not Path(path).is_file():  # /dev/null, a pipe: written into
+    if is_no_regular_file(path):  # /dev/null, a pipe: written into, whatever its folder
         if not os.access(path, os.W_OK):
             raise FlakelabError(f"{option}: {path}: cannot be written")
     elif not target.parent.is_dir():
@@ -359,13 +361,17 @@ def check_output_file(
         )
 
 
+def _named_paths(files: dict[str, Any]) -> Iterator[tuple[str, Any]]:
+    """Each path of ``files`` (name → path, paths or None) with its name."""
+    for name, given in files.items():
+        for path in given if isinstance(given, list | tuple) else [given]:
+            if path is not None:
+                yield name, path
+
+
 def _named_same_file(path, files: dict[str, Any], same: Callable[[Any, Any], bool]) -> str | None:
     """The name of the first of ``files`` (name → path, paths or None) that is ``path``."""
-    for name, given in files.items():
-        for other in given if isinstance(given, list | tuple) else [given]:
-            if other is not None and same(path, other):
-                return name
-    return None
+    return next((name for name, other in _named_paths(files) if same(path, other)), None)
 
 
 def _existing_same_file(a, b) -> bool:
@@ -466,8 +472,7 @@ def names_read_in(folder: Path | None, reads: dict[str, Any], suffix: str = ".js
     sample as NAME``suffix``: taken, so that none of them is written over."""
     if folder is None:
         return set()
-    files = [Path(f) for given in reads.values() if given is not None
-             for f in (given if isinstance(given, list | tuple) else [given])]  # fmt: skip
+    files = [Path(path) for _, path in _named_paths(reads)]
     return {
         f.stem.lower()
         for f in files

@@ -44,6 +44,8 @@ __all__ = [
     "parse_geometry_name",
     "parse_conditions",
     "write_atomically",
+    "is_no_regular_file",
+    "numbers_at_once",
 ]
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
@@ -110,7 +112,7 @@ def parse_number(path: str | PathLike, value: object, where: str) -> float:
     return number
 
 
-def _numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
+def numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
     """Cells as finite floats, parsed by numpy at once (as :func:`parse_number` parses each:
     a shop's history reads millions); None where one is not such a number, or is a bool."""
     if any(isinstance(v, bool) for v in values):
@@ -153,7 +155,7 @@ def parse_spectrum(
         raise MeasurementFileError(
             path, f"expected {wavelengths.size} reflectance values, got {len(values)}", field=where
         )
-    spectrum = _numbers_at_once(values)
+    spectrum = numbers_at_once(values)
     if spectrum is None:  # the cell that stops it, named
         spectrum = np.array(
             [
@@ -270,6 +272,14 @@ def _umask() -> int:
     return mask
 
 
+def is_no_regular_file(path: str | PathLike) -> bool:
+    """Whether what lies at ``path`` (through links) is there and no regular file nor folder:
+    ``/dev/null``, ``/dev/stdout``, a named pipe. Such a file is written into, never renamed
+    over, and is no database."""
+    target = Path(path)
+    return target.exists() and not target.is_file() and not target.is_dir()
+
+
 def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> None:
     """Write through a temporary file beside ``path`` and rename it into place, so a failure
     never leaves a half-written file and never destroys the previous one.
@@ -281,7 +291,7 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
     target = Path(path)
     if not target.name or target.is_dir():
         raise IsADirectoryError(errno.EISDIR, "a folder, not a file to write", str(path))
-    if target.exists() and not target.is_file():
+    if is_no_regular_file(target):
         write(target)
         return
     target = Path(os.path.realpath(target))
