@@ -346,6 +346,47 @@ def test_a_named_pipe_is_written_into_not_replaced(tmp_path, cli):
     assert set(weighed) == set(read_recipe(recipe))
 
 
+def _run_cli_with_file_limit(limit_bytes: int, *args: object):
+    """The CLI in a process whose files may not grow past ``limit_bytes`` (RLIMIT_FSIZE): a
+    full disk as the kernel reports it (Python ignores SIGXFSZ, so a write fails, EFBIG)."""
+    import resource
+    import subprocess
+    import sys
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, resource.RLIM_INFINITY))
+
+    command = [sys.executable, "-m", "flakelab.cli.main", *map(str, args)]
+    return subprocess.run(command, capture_output=True, text=True, preexec_fn=limit, timeout=300)
+
+
+def test_a_file_the_disk_cannot_hold_is_named_and_nothing_is_half_written(tmp_path, cli):
+    """A case file or a training checkpoint that cannot be written whole: one line naming
+    the file asked for (not the temporary one, nor torch's internal error), the file there
+    before left as it was, no temporary file left behind."""
+    cases = tmp_path / "cases.csv"
+    assert cli("cases", "generate", "--n", "60", "--seed", "1", "--out", cases).returncode == 0
+    before = cases.read_bytes()
+    run = _run_cli_with_file_limit(
+        len(before) // 2, "cases", "generate", "--n", "60", "--seed", "2", "--out", cases
+    )
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip().splitlines() == [
+        f"error: {cases}: File too large while writing it; the file there is left as it was"
+    ]
+    assert cases.read_bytes() == before
+    checkpoint = tmp_path / "training.ckpt"
+    run = _run_cli_with_file_limit(
+        64_000, "train", cases, "--out", tmp_path / "m.pt", "--epochs", "1",
+        "--checkpoint", checkpoint, "--members", "1",
+    )  # fmt: skip
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip().splitlines()[-1] == (
+        f"error: {checkpoint}: File too large while writing it; no file was written"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cases.csv"]
+
+
 def test_a_spectrum_s_cells_read_at_once_are_those_read_one_by_one():
     """numpy parses a reading's cells at once; a cell it cannot take as a finite number (or
     a bool, which it would) is named as :func:`parse_number` names it."""

@@ -301,10 +301,22 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
     except OSError as error:  # named by the file asked for, not the temporary one
         raise OSError(error.errno, error.strerror, str(path)) from None
     os.close(handle)
+    existed = target.exists()
     try:
         write(Path(temporary))
         os.chmod(temporary, mode)
         os.replace(temporary, target)
+    except OSError as error:
+        raise _unwritten(error, path, temporary, existed) from None
     finally:
         if os.path.exists(temporary):
             os.unlink(temporary)
+
+
+def _unwritten(error: OSError, path: str | PathLike, temporary: str, existed: bool) -> OSError:
+    """A failure met writing the temporary file (a full disk, a size limit) named by the file
+    asked for, saying what is left there; one about another file keeps that file's name."""
+    if error.filename not in (None, temporary) or error.strerror is None:
+        return error
+    left = "the file there is left as it was" if existed else "no file was written"
+    return OSError(error.errno, f"{error.strerror} while writing it; {left}", str(path))

@@ -11,6 +11,7 @@ have. A file is kept for one training: the same settings on the same cases.
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import asdict
 from os import PathLike
@@ -85,7 +86,11 @@ class TrainingCheckpoint:
             "outliers": None if outliers is None else np.asarray(outliers).tolist(),
         }
         saved = {"meta": json.dumps(meta), "states": [m.network.state_dict() for m in models]}
-        write_atomically(self.path, lambda temporary: torch.save(saved, temporary))
+        # serialised in memory first: torch's writer reports a full disk as a RuntimeError
+        # without the file's name, a file write as an OSError that names it
+        buffer = io.BytesIO()
+        torch.save(saved, buffer)
+        write_atomically(self.path, lambda temporary: temporary.write_bytes(buffer.getvalue()))
         self.stages = stages
 
     def check_fits(self, cases: int, stages: int) -> None:
