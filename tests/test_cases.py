@@ -191,6 +191,39 @@ def test_case_files_round_trip(cases, tmp_path, suffix):
         assert b.sprayout_texture == pytest.approx(a.sprayout_texture, rel=1e-5)
 
 
+@pytest.mark.parametrize(
+    "separator, quoting",
+    [(";", csv.QUOTE_MINIMAL), ("\t", csv.QUOTE_MINIMAL), (";", csv.QUOTE_ALL)],
+)
+def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
+    tinned, tmp_path, separator, quoting
+):
+    """Semicolons (or tabs) between the cells and decimal commas in the readings, as a
+    spreadsheet saves a CSV in most of Europe (with a byte-order mark; every text cell
+    quoted, as LibreOffice may): the cases of the comma file, tins and all. A reading that is
+    no number is named as the file writes it; refused before: "expected a header"."""
+    original, saved = tmp_path / "history.csv", tmp_path / "history-eu.csv"
+    write_cases(tinned[:8], original)
+    rows = list(csv.reader(original.open(encoding="utf-8", newline="")))
+    readings = [i for i, name in enumerate(rows[0]) if name.startswith(("target:", "sprayout:"))]
+    for row in rows[1:]:
+        for i in readings:
+            row[i] = row[i].replace(".", ",")
+    assert any("," in rows[1][i] for i in readings)
+
+    def save(rows):
+        with saved.open("w", encoding="utf-8-sig", newline="") as handle:
+            csv.writer(handle, delimiter=separator, quoting=quoting).writerows(rows)
+
+    save(rows)
+    write_cases(read_cases(saved), tmp_path / "again.csv")
+    assert (tmp_path / "again.csv").read_bytes() == original.read_bytes()
+    rows[2][readings[40]] = "0,5x"
+    save(rows)
+    with pytest.raises(CaseFileError, match=f"row 3: {rows[0][readings[40]]}: .*got '0,5x'"):
+        read_cases(saved)
+
+
 @pytest.fixture(scope="module")
 def tinned(world) -> list[Case]:
     """The ``cases`` fixture's cases as a shop that reads its tins records them."""

@@ -9,7 +9,8 @@ and ``sprayout:<geometry>:<nm>`` reflectance factors for every geometry of the f
 ``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
 read at different geometry sets (an MA-T12's and a five-angle instrument's): its columns
 are every geometry any case was read at, and a case's cells at geometries it was not read
-at are empty.
+at are empty. A file saved by a spreadsheet in most of Europe, separated by semicolons (or
+tabs) with decimal commas in its readings, is read as well.
 
 CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
 the case's fields ride as ``meta:`` tags on the target (``tins`` as the CSV's cell).
@@ -21,8 +22,10 @@ returned from a bad file.
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
+import re
 from collections.abc import Callable, Iterable, Iterator
 from datetime import datetime
 from functools import cache
@@ -38,7 +41,7 @@ from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
-from flakelab.io.records import numbers_at_once, write_atomically
+from flakelab.io.records import decimal_points, numbers_at_once, write_atomically
 
 __all__ = ["read_cases", "write_cases", "is_case_file", "check_case_file_suffix", "CASE_FIELDS"]
 
@@ -190,7 +193,7 @@ def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None)
     try:  # row by row: 30,000 cases as one list of cells took 1.45 GB
         with path.open(encoding="utf-8-sig", newline="") as handle:
             lines = handle if progress is None else _told(handle, progress)
-            return _cases_from_rows(path, csv.reader(lines))
+            return _cases_from_lines(path, lines)
     except UnicodeDecodeError:
         raise CaseFileError(f"{path}: not a UTF-8 text (CSV) file") from None
 
@@ -214,13 +217,25 @@ def count_lines(path: str | PathLike) -> int | None:
         return None
 
 
-def _cases_from_rows(path: Path, rows: Iterator[list[str]]) -> list[Case]:
+_SEPARATOR = re.compile(r'"?case_id"?([,;\t])')
+"""The header's first column and the character after it: the file's separator."""
+
+
+def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
+    """A case file's cases, separated by commas, or by semicolons or tabs as a spreadsheet
+    in most of Europe saves them, with the decimal comma it then uses."""
+    lines = iter(lines)
+    first = next(lines, "")
+    found = _SEPARATOR.match(first)
+    separator = found.group(1) if found else ","
+    rows = csv.reader(itertools.chain([first], lines), delimiter=separator)
     header = next(rows, None)
     if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
         raise CaseFileError(
-            f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)}"
+            f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)} "
+            "(separated by commas, semicolons or tabs)"
         )
-    layout = _Layout(header, _file_geometries(path, header))
+    layout = _Layout(header, _file_geometries(path, header), decimal_comma=separator != ",")
     cases, rows_of = [], {}
     for number, row in enumerate(rows, start=2):
         if not any(cell.strip() for cell in row):
@@ -242,8 +257,10 @@ class _Layout:
     """A case file's columns: its header, its geometries, and each role's spectral cells
     for a row's geometries, taken from a row at once (found once per set of geometries)."""
 
-    def __init__(self, header: list[str], geometries: tuple[str, ...]) -> None:
-        self.header, self.geometries = header, geometries
+    def __init__(
+        self, header: list[str], geometries: tuple[str, ...], *, decimal_comma: bool = False
+    ) -> None:
+        self.header, self.geometries, self.decimal_comma = header, geometries, decimal_comma
         self._index = {column: i for i, column in enumerate(header)}
         self._spectral: dict = {}
 
@@ -304,7 +321,9 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
 
     def number_of(column: str) -> float:
         try:
-            value = float(cells[column])
+            value = float(
+                cells[column].replace(",", ".") if layout.decimal_comma else cells[column]
+            )
         except ValueError:
             raise CaseFileError(
                 f"{where}: {column}: expected a number, got {cells[column]!r}"
@@ -315,7 +334,8 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
 
     def spectra(role: str) -> np.ndarray:
         names, cells_of = layout.spectral(role, geometries)
-        values = numbers_at_once(cells_of(row))
+        read = cells_of(row)
+        values = numbers_at_once(decimal_points(read) if layout.decimal_comma else read)
         if values is None:  # the cell that stops them, named
             values = np.array([number_of(name) for name in names])
         return values.reshape(len(geometries), WAVELENGTHS.size)

@@ -30,6 +30,7 @@ from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
     assemble,
+    decimal_points,
     parse_conditions,
     parse_geometry_name,
     parse_lab,
@@ -45,11 +46,11 @@ _META = ("sample", "geometry", "L", "a", "b", "instrument", "measured_at", "lab_
 
 
 def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
-    """A row with its numeric cells' decimal commas read as points (``0,25`` → ``0.25``)."""
+    """A row with its numeric cells' decimal commas read as points (:func:`decimal_points`)."""
     row = list(row)
-    for i in numeric:
-        if i < len(row):
-            row[i] = row[i].replace(",", ".")
+    numeric = [i for i in numeric if i < len(row)]
+    for i, cell in zip(numeric, decimal_points([row[i] for i in numeric]), strict=True):
+        row[i] = cell
     return row
 
 

@@ -46,6 +46,7 @@ __all__ = [
     "write_atomically",
     "is_no_regular_file",
     "numbers_at_once",
+    "decimal_points",
 ]
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
@@ -122,6 +123,13 @@ def numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
     except (TypeError, ValueError):
         return None
     return numbers if numbers.ndim == 1 and np.isfinite(numbers).all() else None
+
+
+def decimal_points(cells: Sequence[str]) -> list[str]:
+    """Numeric cells with their decimal commas read as points (``0,25`` → ``0.25``): a
+    semicolon or tab separated file, as spreadsheets write it in most of Europe, leaves the
+    comma free to be the decimal mark."""
+    return [cell.replace(",", ".") for cell in cells]
 
 
 def parse_lab(path: str | PathLike, values: Sequence[object], fields: Sequence[str]) -> np.ndarray:
