@@ -224,6 +224,26 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
         read_cases(saved)
 
 
+def test_cases_exported_for_a_european_spreadsheet_read_back_as_they_were(tinned, tmp_path):
+    """``cases export --decimal-comma``: semicolons, decimal commas in the readings alone (the
+    tins' and recipe's JSON keep their points), a byte-order mark for the spreadsheet to
+    take it as UTF-8; read back, the comma file's cases. A CxF3 file has no such form."""
+    original, european = tmp_path / "history.csv", tmp_path / "history-eu.csv"
+    write_cases(tinned[:8], original)
+    write_cases(tinned[:8], european, decimal_comma=True)
+    text = european.read_bytes().decode("utf-8")
+    assert text.startswith("\ufeffcase_id;shop;instrument;")
+    row = next(csv.reader(io.StringIO(text.splitlines()[1]), delimiter=";"))
+    header = next(csv.reader(io.StringIO(text.splitlines()[0].lstrip("\ufeff")), delimiter=";"))
+    cells = dict(zip(header, row, strict=True))
+    assert "," in cells["target:45as15:400"] and "." not in cells["target:45as15:400"]
+    assert json.loads(cells["tins"]) and json.loads(cells["recipe"])
+    write_cases(read_cases(european), tmp_path / "again.csv")
+    assert (tmp_path / "again.csv").read_bytes() == original.read_bytes()
+    with pytest.raises(CaseFileError, match="a decimal comma is for a CSV file"):
+        write_cases(tinned[:8], tmp_path / "history.cxf", decimal_comma=True)
+
+
 @pytest.fixture(scope="module")
 def tinned(world) -> list[Case]:
     """The ``cases`` fixture's cases as a shop that reads its tins records them."""

@@ -102,11 +102,16 @@ def write_cases(
     *,
     geometries: tuple[str, ...] | None = None,
     tins: bool | None = None,
+    decimal_comma: bool = False,
 ) -> None:
     """Write cases as CSV or CxF3 (by extension), atomically. Given the CSV's
     ``geometries`` (their columns, in order) and whether it has a ``tins`` column, the
-    cases are written as they come (a generator's: none held); else they are read first."""
+    cases are written as they come (a generator's: none held); else they are read first.
+    With ``decimal_comma``, a CSV is a European spreadsheet's: cells separated by semicolons,
+    readings with a decimal comma, a byte-order mark for its encoding."""
     check_case_file_suffix(path)
+    if decimal_comma and Path(path).suffix.lower() in CXF_SUFFIXES:
+        raise CaseFileError(f"{path}: a decimal comma is for a CSV file; CxF3 writes points")
     streamed = geometries is not None and tins is not None
     if Path(path).suffix.lower() in CXF_SUFFIXES or not streamed:
         cases = list(cases)
@@ -119,15 +124,21 @@ def write_cases(
         geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
         tins = any(c.tins for c in cases)
 
+    readings = len(CASE_FIELDS) + tins  # the first cell of the readings
+
     def write(temporary: Path) -> None:  # row by row, not the whole text first
-        with temporary.open("w", encoding="utf-8", newline="") as handle:
-            writer = csv.writer(handle)
+        encoding = "utf-8-sig" if decimal_comma else "utf-8"
+        with temporary.open("w", encoding=encoding, newline="") as handle:
+            writer = csv.writer(handle, delimiter=";" if decimal_comma else ",")
             writer.writerow(_header(geometries, tins))
             written = 0
             for case in cases:
                 if streamed:
                     _check_columns_hold(path, case, geometries, tins)
-                writer.writerow(_csv_row(case, geometries, tins))
+                row = _csv_row(case, geometries, tins)
+                if decimal_comma:
+                    row[readings:] = [cell.replace(".", ",") for cell in row[readings:]]
+                writer.writerow(row)
                 written += 1
         if not written:  # the temporary file is removed: nothing written
             raise CaseFileError(f"{path}: expected at least one case to write, got none")

@@ -986,6 +986,14 @@ def export_cases(
             show_default="every case, at every geometry it was read at",
         ),
     ] = None,
+    decimal_comma: Annotated[
+        bool,
+        typer.Option(
+            "--decimal-comma",
+            help="A CSV as a spreadsheet opens it in most of Europe: cells separated by "
+            "semicolons, readings with a decimal comma ('cases import' reads it back).",
+        ),
+    ] = False,
 ) -> None:
     """Export case histories as CSV or CxF3: a shop's, since a date, at one geometry set."""
     from flakelab.cases.case import select_cases
@@ -993,6 +1001,8 @@ def export_cases(
     from flakelab.cases.exchange import check_case_file_suffix, write_cases
 
     check_case_file_suffix(target)
+    if decimal_comma and target.suffix.lower() != ".csv":
+        raise FlakelabError(f"--decimal-comma: {target} is a CxF3 file, which writes points")
     # before the database is read
     check_output_file(target, "TARGET", reads={"--database": database})
     geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
@@ -1003,7 +1013,7 @@ def export_cases(
         raise FlakelabError(
             f"{engine.url}: no cases {which_cases(shop, since)}{at}; nothing written"
         )
-    write_cases(cases, target)
+    write_cases(cases, target, decimal_comma=decimal_comma)
     errors.print(f"wrote {counted(len(cases), 'case')} to {target}", highlight=False)
 
 
