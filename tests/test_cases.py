@@ -1437,6 +1437,15 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
         assert (got.shop, got.outcome, got.created_at) == (want.shop, want.outcome, want.created_at)
         np.testing.assert_allclose(got.sprayout, want.sprayout, rtol=1e-6)
     assert cases[1].instrument == "byk-mac-i" and cases[1].outcome == "corrected"
+    # saved by a spreadsheet in most of Europe: semicolons, every cell quoted; refused before
+    # ("unknown ['target;recipe;sprayed;…']")
+    european = tmp_path / "manifest-eu.csv"
+    with european.open("w", encoding="utf-8-sig", newline="") as handle:
+        csv.writer(handle, delimiter=";", quoting=csv.QUOTE_ALL).writerows(
+            csv.reader(manifest.read_text().splitlines())
+        )
+    again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
+    assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
     # a bad row names the manifest, the row and the column; no case comes back
     manifest.write_text(manifest.read_text() + "car.cxf,shot.json,sprays.cxf,spray 3,,\n")
     with pytest.raises(ManifestError, match=r"manifest.csv: row 4: sprayed: .*no sample 'spray 3'"):

@@ -25,7 +25,6 @@ import csv
 import itertools
 import json
 import math
-import re
 from collections.abc import Callable, Iterable, Iterator
 from datetime import datetime
 from functools import cache
@@ -41,7 +40,12 @@ from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
-from flakelab.io.records import decimal_points, numbers_at_once, write_atomically
+from flakelab.io.records import (
+    csv_separator,
+    decimal_points,
+    numbers_at_once,
+    write_atomically,
+)
 
 __all__ = ["read_cases", "write_cases", "is_case_file", "check_case_file_suffix", "CASE_FIELDS"]
 
@@ -228,17 +232,12 @@ def count_lines(path: str | PathLike) -> int | None:
         return None
 
 
-_SEPARATOR = re.compile(r'"?case_id"?([,;\t])')
-"""The header's first column and the character after it: the file's separator."""
-
-
 def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
     """A case file's cases, separated by commas, or by semicolons or tabs as a spreadsheet
     in most of Europe saves them, with the decimal comma it then uses."""
     lines = iter(lines)
     first = next(lines, "")
-    found = _SEPARATOR.match(first)
-    separator = found.group(1) if found else ","
+    separator = csv_separator(first) or ","
     rows = csv.reader(itertools.chain([first], lines), delimiter=separator)
     header = next(rows, None)
     if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):

@@ -5,7 +5,8 @@ xlsx, CxF3, CSV, JSON) and the recipes it mixed. A manifest lists them, one spra
 row, and ``flakelab cases record-all`` records every row as ``flakelab cases record`` would:
 in one transaction, or not at all.
 
-Manifest columns (CSV with a header; file paths relative to the manifest's folder):
+Manifest columns (CSV with a header, separated by commas, or by semicolons or tabs as a
+spreadsheet in most of Europe saves it; file paths relative to the manifest's folder):
 
 =================  ====================================================================
 ``target``         measurement file of the car (required)
@@ -39,6 +40,7 @@ from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
+from flakelab.io.records import csv_separator
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
 
@@ -73,7 +75,9 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
         raise ManifestError(f"{path}: no such manifest file") from None
     except (OSError, UnicodeDecodeError) as error:
         raise ManifestError(f"{path}: cannot be read as a UTF-8 CSV manifest ({error})") from None
-    rows = list(csv.reader(text.splitlines()))
+    lines = text.splitlines()
+    separator = csv_separator(lines[0]) if lines else None
+    rows = list(csv.reader(lines, delimiter=separator or ","))
     header = [cell.strip() for cell in rows[0]] if rows else []
     unknown = [c for c in header if c not in MANIFEST_COLUMNS]
     missing = [c for c in REQUIRED_COLUMNS if c not in header]

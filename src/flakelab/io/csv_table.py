@@ -30,6 +30,7 @@ from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
     assemble,
+    csv_separator,
     decimal_points,
     parse_conditions,
     parse_geometry_name,
@@ -66,12 +67,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     ]
     if not lines:
         raise MeasurementFileError(path, "empty CSV file")
-    try:
-        delimiter = csv.Sniffer().sniff(lines[0], delimiters=",;\t").delimiter
-    except csv.Error:
+    delimiter = csv_separator(lines[0])
+    if delimiter is None:
         raise MeasurementFileError(
             path, "no comma, semicolon or tab separated header", field="header"
-        ) from None
+        )
     rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=delimiter))
     header = [h.strip() for h in rows[0]]
     columns = {h: i for i, h in enumerate(header)}

@@ -47,6 +47,7 @@ __all__ = [
     "is_no_regular_file",
     "numbers_at_once",
     "decimal_points",
+    "csv_separator",
 ]
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
@@ -123,6 +124,19 @@ def numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
     except (TypeError, ValueError):
         return None
     return numbers if numbers.ndim == 1 and np.isfinite(numbers).all() else None
+
+
+CSV_SEPARATORS = ",;\t"
+"""A CSV file's cell separators: the comma, and the semicolon or tab of a spreadsheet in most
+of Europe, where the comma is the decimal mark (:func:`decimal_points`)."""
+
+
+def csv_separator(header: str) -> str | None:
+    """The separator of a CSV file whose header line is ``header``: of
+    :data:`CSV_SEPARATORS`, the one it holds most (no column name holds one); None where it
+    holds none."""
+    found = max(CSV_SEPARATORS, key=header.count)
+    return found if found in header else None
 
 
 def decimal_points(cells: Sequence[str]) -> list[str]:
