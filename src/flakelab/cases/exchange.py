@@ -42,7 +42,7 @@ from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     csv_separator,
-    decimal_points,
+    decimal_point,
     numbers_at_once,
     write_atomically,
 )
@@ -331,9 +331,7 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
 
     def number_of(column: str) -> float:
         try:
-            value = float(
-                cells[column].replace(",", ".") if layout.decimal_comma else cells[column]
-            )
+            value = float(decimal_point(cells[column]) if layout.decimal_comma else cells[column])
         except ValueError:
             raise CaseFileError(
                 f"{where}: {column}: expected a number, got {cells[column]!r}"
@@ -345,7 +343,7 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
     def spectra(role: str) -> np.ndarray:
         names, cells_of = layout.spectral(role, geometries)
         read = cells_of(row)
-        values = numbers_at_once(decimal_points(read) if layout.decimal_comma else read)
+        values = numbers_at_once([decimal_point(c) for c in read] if layout.decimal_comma else read)
         if values is None:  # the cell that stops them, named
             values = np.array([number_of(name) for name in names])
         return values.reshape(len(geometries), WAVELENGTHS.size)

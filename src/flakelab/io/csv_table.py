@@ -31,7 +31,7 @@ from flakelab.io.records import (
     Reading,
     assemble,
     csv_separator,
-    decimal_points,
+    decimal_point,
     parse_conditions,
     parse_geometry_name,
     parse_lab,
@@ -47,11 +47,11 @@ _META = ("sample", "geometry", "L", "a", "b", "instrument", "measured_at", "lab_
 
 
 def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
-    """A row with its numeric cells' decimal commas read as points (:func:`decimal_points`)."""
+    """A row with its numeric cells' decimal commas read as points (``0,25`` → ``0.25``)."""
     row = list(row)
-    numeric = [i for i in numeric if i < len(row)]
-    for i, cell in zip(numeric, decimal_points([row[i] for i in numeric]), strict=True):
-        row[i] = cell
+    for i in numeric:
+        if i < len(row):
+            row[i] = decimal_point(row[i])
     return row
 
 

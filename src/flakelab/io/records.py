@@ -46,7 +46,7 @@ __all__ = [
     "write_atomically",
     "is_no_regular_file",
     "numbers_at_once",
-    "decimal_points",
+    "decimal_point",
     "csv_separator",
 ]
 
@@ -128,7 +128,7 @@ def numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
 
 CSV_SEPARATORS = ",;\t"
 """A CSV file's cell separators: the comma, and the semicolon or tab of a spreadsheet in most
-of Europe, where the comma is the decimal mark (:func:`decimal_points`)."""
+of Europe, where the comma is the decimal mark (:func:`decimal_point`)."""
 
 
 def csv_separator(header: str) -> str | None:
@@ -139,11 +139,11 @@ def csv_separator(header: str) -> str | None:
     return found if found in header else None
 
 
-def decimal_points(cells: Sequence[str]) -> list[str]:
-    """Numeric cells with their decimal commas read as points (``0,25`` → ``0.25``): a
+def decimal_point(cell: str) -> str:
+    """A numeric cell with its decimal comma read as a point (``0,25`` → ``0.25``): a
     semicolon or tab separated file, as spreadsheets write it in most of Europe, leaves the
     comma free to be the decimal mark."""
-    return [cell.replace(",", ".") for cell in cells]
+    return cell.replace(",", ".")
 
 
 def parse_lab(path: str | PathLike, values: Sequence[object], fields: Sequence[str]) -> np.ndarray:
