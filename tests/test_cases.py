@@ -672,6 +672,50 @@ def test_a_database_of_a_newer_flakelab_is_refused_and_left_as_it_is(cases, data
     assert count_cases(engine) == 2
 
 
+def test_a_database_url_s_password_is_hidden_as_sqlalchemy_hides_it(cli):
+    """A shop's PostgreSQL URL names its password; a message or report shows it as
+    SQLAlchemy's own rendering does. Before, a server that did not answer printed it: "error:
+    postgresql://flakelab:s3cret@…: cannot open the database"."""
+    from sqlalchemy.engine import make_url
+
+    from flakelab.core.wording import hidden_passwords
+
+    for url in (
+        "postgresql+psycopg://flakelab:s3cr%40t@db.shop:5432/cases",
+        "postgresql://:pw@h/d",
+        "postgresql://user@h/d",
+        f"sqlite:///{Path('/tmp/cases.db')}",
+    ):
+        hidden = make_url(url).render_as_string(hide_password=True)
+        assert hidden_passwords(f"{url}: cannot open the database") == (
+            f"{hidden}: cannot open the database"
+        )
+    down = "postgresql+psycopg://flakelab:s3cret@127.0.0.1:1/shop"
+    for args, env in (
+        (["cases", "list", "-d", down], None),
+        (["cases", "list"], {"FLAKELAB_DATABASE_URL": down}),
+        (["cases", "nearest", example_path("target"), "-d", down], None),
+    ):
+        run = cli(*args, env=env)
+        assert run.returncode == 2 and "s3cret" not in run.stderr, run.stderr
+        assert "postgresql+psycopg://flakelab:***@127.0.0.1:1/shop: " in run.stderr
+
+
+def test_a_report_on_a_database_shows_no_password(database_url, cases, cli):
+    """``cases nearest --json`` names the database it searched, without its password."""
+    if not database_url.startswith("postgresql"):
+        pytest.skip("a SQLite URL holds no password")
+    add_cases(open_database(database_url), cases[:12])
+    with_password = database_url.replace("://flakelab@", "://flakelab:s3cret@")
+    assert with_password != database_url  # trust authentication: the password is not asked
+    run = cli("cases", "nearest", example_path("target"), "-d", with_password, "--json")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["cases"] == database_url.replace(
+        "://flakelab@", "://flakelab:***@"
+    )
+    assert "s3cret" not in run.stdout + run.stderr
+
+
 def test_another_applications_database_is_refused_and_left_as_it_is(database_url, cli):
     """A path mistyped onto another application's database: refused by the commands that
     read and those that store, naming its tables, and left without flakelab's tables beside

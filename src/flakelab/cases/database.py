@@ -25,7 +25,7 @@ from sqlalchemy.pool import NullPool, StaticPool
 from flakelab.cases.case import Case, CaseError, tin_fields, zoned
 from flakelab.cases.schema import CaseRow
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.wording import counted
+from flakelab.core.wording import counted, hidden_passwords
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -168,15 +168,16 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     named = url is not None or bool(os.environ.get("FLAKELAB_DATABASE_URL"))
     url = url_for(url) if url is not None else default_url()
     file = _sqlite_file(url)
+    shown = hidden_passwords(url)
     # the user data folder's own database is made on first use
     if file and Path(file).is_dir():
-        raise DatabaseError(f"{url}: a folder, not a database file")
+        raise DatabaseError(f"{shown}: a folder, not a database file")
     # /dev/null, a pipe (io.records.is_no_regular_file, whose package is not loaded here)
     if file and Path(file).exists() and not Path(file).is_file():
-        raise DatabaseError(f"{url}: not a regular file, so not a database file")
+        raise DatabaseError(f"{shown}: not a regular file, so not a database file")
     if must_exist and named and file and not Path(file).is_file():
         raise DatabaseError(
-            f"{url}: no such database file; nothing was created (the commands that store "
+            f"{shown}: no such database file; nothing was created (the commands that store "
             "cases or models create one)"
         )
     try:
@@ -190,10 +191,10 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             event.listen(engine, "connect", _postgres_settings)
         migrate(engine)
     except SQLAlchemyError as error:
-        raise DatabaseError(f"{url}: cannot open the database: {refusal(error)}") from None
+        raise DatabaseError(f"{shown}: cannot open the database: {refusal(error)}") from None
     except ImportError as error:  # the URL's driver (psycopg for PostgreSQL) is not installed
         raise DatabaseError(
-            f"{url}: cannot open the database: its driver is not installed ({error}); for "
+            f"{shown}: cannot open the database: its driver is not installed ({error}); for "
             "PostgreSQL: pip install 'flakelab[postgres]'"
         ) from None
     return engine

@@ -62,7 +62,7 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     instruments_reading,
 )
-from flakelab.core.wording import counted
+from flakelab.core.wording import counted, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
@@ -789,7 +789,7 @@ def nearest(
         )
     report = {
         "target": reading.sample,
-        "cases": source,
+        "cases": hidden_passwords(source),
         "cases_searched": searched,
         "shop": shop,
         "geometries": list(geometries),

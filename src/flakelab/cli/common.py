@@ -27,6 +27,7 @@ from rich.progress import (
 )
 from rich.table import Table
 
+from flakelab.core.wording import hidden_passwords
 from flakelab.errors import FlakelabError, MeasurementFileError
 
 console = Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
@@ -102,8 +103,10 @@ def _message(error: Exception) -> str:
 
 def _stop(label: str, message: str, status: int) -> None:
     """One line on stderr, then exit with ``status``; the message is escaped, since it may
-    quote brackets (a CSV cell, "flakelab[postgres]") that are not terminal markup."""
-    errors.print(f"[bold red]{label}:[/] {escape(message)}", highlight=False, soft_wrap=True)
+    quote brackets (a CSV cell, "flakelab[postgres]") that are not terminal markup, and a
+    database URL it names shows no password (:func:`hidden_passwords`)."""
+    message = escape(hidden_passwords(message))
+    errors.print(f"[bold red]{label}:[/] {message}", highlight=False, soft_wrap=True)
     raise typer.Exit(status) from None
 
 

@@ -45,7 +45,7 @@ from flakelab.cli.sources import (
     which_cases,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
-from flakelab.core.wording import counted
+from flakelab.core.wording import counted, hidden_passwords
 from flakelab.errors import FlakelabError
 
 DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
@@ -376,7 +376,8 @@ def train(
         _write_model(model, out)
         summary["file"] = str(out)
     summary["loss_log_tail"] = log[-3:]
-    _write_losses(log, loss_log, plot, f"Training on {data.x.shape[0]} cases of {cases}", summary)
+    title = f"Training on {data.x.shape[0]} cases of {hidden_passwords(cases)}"
+    _write_losses(log, loss_log, plot, title, summary)
     if kept:
         kept.remove()  # the model is written and registered: nothing left to go on with
     if json_output:
@@ -486,7 +487,7 @@ def show_model(
 
     check_output_file(out, "--out", reads={"MODEL": model, "--database": database})
     chosen, source = named_model(model, database)
-    card = {"source": source, **model_card(chosen)}
+    card = {"source": hidden_passwords(source), **model_card(chosen)}
     if out is not None:
         _write_model(chosen, out)
         card["file"] = str(out)

@@ -1,5 +1,12 @@
-"""How a report counts things: "1 case", "3 cases". One place, so that no message reads
-"1 cases" or hedges with "case(s)". It imports nothing, like :mod:`flakelab.core.defaults`."""
+"""How a report words things. It counts them, "1 case", "3 cases", in one place, so that no
+message reads "1 cases" or hedges with "case(s)"; it hides the password of a database URL
+(a shop's PostgreSQL server) wherever one is shown. It imports nothing but the standard
+library, like :mod:`flakelab.core.defaults`."""
+
+import re
+
+_URL_PASSWORD = re.compile(r"\b([A-Za-z][A-Za-z0-9+.-]*://[^\s:/@]*:)[^\s/@]+@")
+"""A URL's ``scheme://user:`` and the password after it, up to its ``@``."""
 
 
 def counted(n: int, noun: str, plural: str | None = None) -> str:
@@ -7,3 +14,10 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
     "1 case", ``counted(2, "spray-out")`` "2 spray-outs"; ``plural`` where adding an "s"
     does not make it ("geometry", "geometries")."""
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def hidden_passwords(text: str) -> str:
+    """``text`` with the password of every URL in it shown as SQLAlchemy shows it
+    (``postgresql://flakelab:***@server/shop``): a message may be read over a colorist's
+    shoulder, pasted into a report or kept in a log."""
+    return _URL_PASSWORD.sub(r"\1***@", text)
