@@ -746,7 +746,7 @@ def evaluate(
         from flakelab.render.plots import plot_model_errors
 
         plot_model_errors(found, plot, families=families, mismatch=SPRAYOUT_MISMATCH,
-                          title=f"{matcher.model_id} on {cases}")  # fmt: skip
+                          title=f"{matcher.model_id} on {hidden_passwords(cases)}")  # fmt: skip
         report["plot"] = str(plot)
         errors.print(f"wrote {plot}", highlight=False)
     report["cases_with_tins"] = int(data.tins_recorded.sum())
