@@ -146,6 +146,27 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
     assert back.texture == expected.texture and back.sample == expected.sample
 
 
+def test_a_csv_written_for_a_european_spreadsheet_is_the_one_it_saves(rich_measurement, tmp_path):
+    """``convert … --decimal-comma`` writes the file the test above builds by hand (with the
+    byte-order mark a spreadsheet needs to read UTF-8), and reads back to full precision,
+    stored L*a*b* and texture too; another format has no such form."""
+    plain, european = tmp_path / "plain.csv", tmp_path / "european.csv"
+    write_measurements([rich_measurement], plain)
+    write_measurements([rich_measurement], european, decimal_comma=True)
+    rows = list(csv.reader(plain.read_text().splitlines()))
+    by_hand = io.StringIO()
+    csv.writer(by_hand, delimiter=";", lineterminator="\n").writerows(
+        [cell.replace(".", ",") if _is_decimal(cell) else cell for cell in row] for row in rows
+    )
+    assert european.read_text(encoding="utf-8") == "\ufeff" + by_hand.getvalue()
+    (back,) = read_measurements(european)
+    _assert_same(rich_measurement, back, metadata=False)  # a CSV holds no metadata
+    np.testing.assert_array_equal(back.reflectance, rich_measurement.reflectance)
+    with pytest.raises(MeasurementFileError, match="a decimal comma is for a CSV file, not json"):
+        write_measurements([rich_measurement], tmp_path / "m.json", decimal_comma=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["european.csv", "plain.csv"]
+
+
 def _is_decimal(cell: str) -> bool:
     try:
         float(cell)

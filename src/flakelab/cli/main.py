@@ -324,13 +324,21 @@ def convert(
     ],
     target: Annotated[Path, typer.Argument(help="File to write; format from the extension.")],
     sample: SampleOption = None,
+    decimal_comma: Annotated[
+        bool,
+        typer.Option(
+            "--decimal-comma",
+            help="A CSV as a spreadsheet opens it in most of Europe: cells separated by "
+            "semicolons, numbers with a decimal comma (flakelab reads it back).",
+        ),
+    ] = False,
 ) -> None:
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
     from flakelab.io import read_measurements, write_measurements
 
     check_output_file(target, "TARGET", reads={"SOURCE": source})
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
-    write_measurements(measurements, target)
+    write_measurements(measurements, target, decimal_comma=decimal_comma)
     errors.print(f"wrote {counted(len(measurements), 'measurement')} to {target}", highlight=False)
 
 

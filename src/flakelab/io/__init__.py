@@ -138,16 +138,24 @@ def format_for_path(path: str | PathLike) -> str:
 
 
 def write_measurements(
-    measurements: list[Measurement], path: str | PathLike, format: str | None = None
+    measurements: list[Measurement],
+    path: str | PathLike,
+    format: str | None = None,
+    *,
+    decimal_comma: bool = False,
 ) -> None:
-    """Write measurements; the format comes from ``format`` or the extension of ``path``."""
+    """Write measurements; the format comes from ``format`` or the extension of ``path``.
+    ``decimal_comma``: a CSV file as a spreadsheet in most of Europe opens it."""
     if not measurements:
         raise ValueError("expected at least one measurement to write, got none")
     name = format or format_for_path(path)
     if name not in FORMATS:
         raise ValueError(f"expected a format among {', '.join(FORMATS)}, got {name!r}")
+    if decimal_comma and name != "csv":
+        raise MeasurementFileError(path, f"a decimal comma is for a CSV file, not {name}")
+    options = {"decimal_comma": True} if decimal_comma else {}
     try:
-        FORMATS[name][1](measurements, path)
+        FORMATS[name][1](measurements, path, **options)
     except ValueError as error:
         if isinstance(error, MeasurementFileError):
             raise

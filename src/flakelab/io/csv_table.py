@@ -161,8 +161,12 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     )
 
 
-def write_csv(measurements: list[Measurement], path: str | PathLike) -> None:
-    """Write measurements in the CSV layout above (full float precision)."""
+def write_csv(
+    measurements: list[Measurement], path: str | PathLike, *, decimal_comma: bool = False
+) -> None:
+    """Write measurements in the CSV layout above (full float precision); with
+    ``decimal_comma``, as a spreadsheet in most of Europe opens it: cells separated by
+    semicolons, numbers with a decimal comma, a byte-order mark for its encoding."""
     wavelengths = measurements[0].wavelengths
     if any(not np.array_equal(m.wavelengths, wavelengths) for m in measurements):
         raise ValueError("expected all measurements on one wavelength grid for one CSV file")
@@ -172,19 +176,24 @@ def write_csv(measurements: list[Measurement], path: str | PathLike) -> None:
     header += ["L", "a", "b", "lab_conditions"] if with_lab else []
     header += ["instrument", "measured_at", *texture_keys]
 
+    def number(value: float) -> str:
+        text = repr(float(value))
+        return text.replace(".", ",") if decimal_comma else text
+
     buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
+    writer = csv.writer(buffer, delimiter=";" if decimal_comma else ",", lineterminator="\n")
     writer.writerow(header)
     for m in measurements:
         for i, g in enumerate(m.geometries):
-            row: list[object] = [m.sample, g.name, *(repr(float(v)) for v in m.reflectance[i])]
+            row: list[object] = [m.sample, g.name, *(number(v) for v in m.reflectance[i])]
             if with_lab:
                 lab = m.stored_lab[i] if m.stored_lab is not None else ("", "", "")
-                row += [*(repr(float(v)) if v != "" else "" for v in lab)]
+                row += [*(number(v) if v != "" else "" for v in lab)]
                 row += [str(m.stored_lab_conditions) if m.stored_lab is not None else ""]
             row += [m.instrument or "", m.measured_at.isoformat() if m.measured_at else ""]
-            row += [repr(m.texture[k]) if k in m.texture else "" for k in texture_keys]
+            row += [number(m.texture[k]) if k in m.texture else "" for k in texture_keys]
             writer.writerow(row)
+    encoding = "utf-8-sig" if decimal_comma else "utf-8"
     write_atomically(
-        path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding="utf-8")
+        path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding=encoding)
     )
