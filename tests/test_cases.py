@@ -11,7 +11,6 @@ import re
 import sqlite3
 import subprocess
 import sys
-import time
 from collections import Counter
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta, timezone
@@ -952,10 +951,10 @@ def test_a_value_the_server_refuses_is_named_and_stores_nothing(cases, database_
 def _write_batches(args) -> tuple[int, int]:
     """A seed's 60 cases stored 10 at a time from ``start``, by ``add_cases`` or, where
     ``again``, by ``add_new_cases``: the cases it added and those it found stored."""
-    url, seed, again, start = args
+    url, seed, again, ready = args
     batches = list(World(read_library(None), "five-angle").cases(60, seed, batch=10))
     engine = open_database(url)
-    time.sleep(max(0.0, start - time.time()))
+    ready.wait(timeout=300)
     if not again:
         return sum(add_cases(engine, batch) for batch in batches), 0
     counts = [add_new_cases(engine, batch) for batch in batches]
@@ -968,9 +967,10 @@ def test_concurrent_writers_lose_no_case(database_url):
     it would store it and goes on (it was refused "already stored" before it looked again)."""
     url = database_url
     open_database(url)
-    start = time.time() + 10  # every process loaded and waiting
-    with multiprocessing.get_context("spawn").Pool(4) as pool:
-        counts = pool.map(_write_batches, [(url, s, s == 3, start) for s in (1, 2, 3, 3)])
+    spawn = multiprocessing.get_context("spawn")
+    with spawn.Manager() as manager, spawn.Pool(4) as pool:
+        ready = manager.Barrier(4)  # every process loaded and waiting, then all at once
+        counts = pool.map(_write_batches, [(url, s, s == 3, ready) for s in (1, 2, 3, 3)])
     assert counts[:2] == [(60, 0), (60, 0)]
     assert [sum(c) for c in counts[2:]] == [60, 60] and counts[2][0] + counts[3][0] == 60
     assert count_cases(open_database(url)) == 180
@@ -980,15 +980,16 @@ def test_workplaces_opening_a_new_database_at_once_all_find_it_ready(database_ur
     """Four processes open a database no one has opened yet at the same instant: one builds
     its tables, the others find them built (three were refused before, "table cases
     already exists"), and each reads it."""
-    start = time.time() + 15  # every process loaded and waiting
-    with multiprocessing.get_context("spawn").Pool(4) as pool:
-        counted = pool.map(_open_and_count, [(database_url, start)] * 4)
+    spawn = multiprocessing.get_context("spawn")
+    with spawn.Manager() as manager, spawn.Pool(4) as pool:
+        ready = manager.Barrier(4)  # every process loaded and waiting, then all at once
+        counted = pool.map(_open_and_count, [(database_url, ready)] * 4)
     assert counted == [0, 0, 0, 0]
 
 
 def _open_and_count(args):
-    url, start = args
-    time.sleep(max(0.0, start - time.time()))
+    url, ready = args
+    ready.wait(timeout=300)
     return count_cases(open_database(url))
 
 
@@ -1081,9 +1082,10 @@ def test_registrations_at_once_each_get_their_own_version(database_url):
     from flakelab.models.registry import list_models
 
     open_database(database_url)
-    start = time.time() + 20  # every process loaded and waiting
-    with multiprocessing.get_context("spawn").Pool(6) as pool:
-        versions = pool.map(_register_a_model, [(database_url, seed, start) for seed in range(6)])
+    spawn = multiprocessing.get_context("spawn")
+    with spawn.Manager() as manager, spawn.Pool(6) as pool:
+        ready = manager.Barrier(6)  # every process loaded and waiting, then all at once
+        versions = pool.map(_register_a_model, [(database_url, seed, ready) for seed in range(6)])
     assert sorted(versions) == [1, 2, 3, 4, 5, 6]
     rows = list_models(open_database(database_url))
     assert sorted(r["version"] for r in rows) == [1, 2, 3, 4, 5, 6]
@@ -1091,13 +1093,14 @@ def test_registrations_at_once_each_get_their_own_version(database_url):
 
 
 def _register_a_model(args):
-    """The shipped model, its weights nudged by ``seed``, registered at ``start``."""
+    """The shipped model, its weights nudged by ``seed``, registered once every process
+    has reached ``ready``."""
     import torch
 
     from flakelab.models.registry import register, shipped_model
     from flakelab.models.training import case_arrays
 
-    url, seed, start = args
+    url, seed, ready = args
     library = read_library(None)
     cases = next(World(library, "five-angle").cases(20, seed=100 + seed, batch=20))
     model = shipped_model("five-angle")
@@ -1105,9 +1108,9 @@ def _register_a_model(args):
     with torch.no_grad():
         for weights in model.network.parameters():
             weights.add_(1e-4 * torch.randn(weights.shape, generator=noise))
-    engine = open_database(url)
-    time.sleep(max(0.0, start - time.time()))
-    return register(engine, model, case_arrays(cases, library.names))["version"]
+    engine, data = open_database(url), case_arrays(cases, library.names)
+    ready.wait(timeout=300)
+    return register(engine, model, data)["version"]
 
 
 def test_versions_stored_twice_are_numbered_afresh_by_the_migration(cases, database_url):
