@@ -544,6 +544,7 @@ def test_the_database_chooses_a_shop_s_cases_since_a_date_as_select_cases_does(c
                         (None, middle.replace(tzinfo=None)), ("nobody", None)):  # fmt: skip
         chosen = [c.case_id for c in iter_cases(engine, shop=shop, since=since)]
         assert chosen == [c.case_id for c in select_cases(mixed, shop=shop, since=since)]
+        assert count_cases(engine, shop=shop, since=since) == len(chosen)  # an export's bar
     assert 0 < len(list(iter_cases(engine, shop="Martin", since=middle))) < len(mixed) // 3
 
 
@@ -1235,6 +1236,9 @@ def test_a_case_file_is_read_line_by_line_and_told_so(cases, tmp_path):
     read = read_cases(path, lambda: told.append(1))
     assert [c.case_id for c in read] == [c.case_id for c in cases[:5]]
     assert len(told) == count_lines(path) == 6
+    written = []  # and written case by case, told so
+    write_cases(cases[:5], tmp_path / "again.csv", progress=lambda: written.append(1))
+    assert len(written) == 5 and (tmp_path / "again.csv").read_bytes() == path.read_bytes()
     assert count_lines(tmp_path / "missing.csv") is None
     write_cases(cases[:5], tmp_path / "history.cxf")
     assert count_lines(tmp_path / "history.cxf") is None  # read as a whole: no lines told

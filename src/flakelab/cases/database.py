@@ -530,11 +530,7 @@ def iter_cases(
     (without a zone: UTC; None: any shop, any time), chosen by the database, so that one
     shop's cases are read without the rest (``cases.case.cases_at`` picks those a model of
     one geometry set reads)."""
-    query = select(CaseRow).order_by(CaseRow.id)
-    if shop is not None:
-        query = query.where(CaseRow.shop == shop)
-    if since is not None:  # stored in UTC (SQLite keeps no zone)
-        query = query.where(CaseRow.created_at >= zoned(since).astimezone(UTC))
+    query = _of_shop_since(select(CaseRow).order_by(CaseRow.id), shop, since)
     if limit:
         query = query.limit(limit)
     with reading_rows(engine) as session:
@@ -667,9 +663,20 @@ def existing_case_ids(engine: Engine, case_ids: Iterable[str]) -> set[str]:
     return set(_selected_by_id(engine, CaseRow.case_id, list(case_ids)))
 
 
-def count_cases(engine: Engine) -> int:
+def count_cases(engine: Engine, *, shop: str | None = None, since: datetime | None = None) -> int:
+    """How many cases :func:`iter_cases` reads with the same ``shop`` and ``since``."""
+    query = _of_shop_since(select(func.count(CaseRow.id)), shop, since)
     with Session(engine) as session:
-        return int(session.scalar(select(func.count(CaseRow.id))) or 0)
+        return int(session.scalar(query) or 0)
+
+
+def _of_shop_since(query, shop: str | None, since: datetime | None):
+    """``query`` restricted to the cases of ``shop`` made at or after ``since`` (None: any)."""
+    if shop is not None:
+        query = query.where(CaseRow.shop == shop)
+    if since is not None:  # stored in UTC (SQLite keeps no zone)
+        query = query.where(CaseRow.created_at >= zoned(since).astimezone(UTC))
+    return query
 
 
 def shop_summary(engine: Engine) -> list[dict]:

@@ -107,12 +107,14 @@ def write_cases(
     geometries: tuple[str, ...] | None = None,
     tins: bool | None = None,
     decimal_comma: bool = False,
+    progress: Callable[[], None] | None = None,
 ) -> None:
     """Write cases as CSV or CxF3 (by extension), atomically. Given the CSV's
     ``geometries`` (their columns, in order) and whether it has a ``tins`` column, the
     cases are written as they come (a generator's: none held); else they are read first.
     With ``decimal_comma``, a CSV is a European spreadsheet's: cells separated by semicolons,
-    readings with a decimal comma, a byte-order mark for its encoding."""
+    readings with a decimal comma, a byte-order mark for its encoding. ``progress`` is
+    called for each case of a CSV written."""
     check_case_file_suffix(path)
     if decimal_comma and Path(path).suffix.lower() in CXF_SUFFIXES:
         raise CaseFileError(f"{path}: a decimal comma is for a CSV file; CxF3 writes points")
@@ -144,6 +146,8 @@ def write_cases(
                     row[readings:] = [cell.replace(".", ",") for cell in row[readings:]]
                 writer.writerow(row)
                 written += 1
+                if progress is not None:
+                    progress()
         if not written:  # the temporary file is removed: nothing written
             raise CaseFileError(f"{path}: expected at least one case to write, got none")
 

@@ -997,7 +997,7 @@ def export_cases(
 ) -> None:
     """Export case histories as CSV or CxF3: a shop's, since a date, at one geometry set."""
     from flakelab.cases.case import select_cases
-    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.database import count_cases, iter_cases, open_database
     from flakelab.cases.exchange import check_case_file_suffix, write_cases
 
     check_case_file_suffix(target)
@@ -1007,13 +1007,17 @@ def export_cases(
     check_output_file(target, "TARGET", reads={"--database": database})
     geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     engine = open_database(database, must_exist=True)
-    cases = select_cases(iter_cases(engine, shop=shop, since=since), geometries=geometries)
+    stored = count_cases(engine, shop=shop, since=since)  # 30,000 cases: 6 s to read
+    read = tracked(iter_cases(engine, shop=shop, since=since), "reading the cases", total=stored)
+    cases = select_cases(read, geometries=geometries)
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(
             f"{engine.url}: no cases {which_cases(shop, since)}{at}; nothing written"
         )
-    write_cases(cases, target, decimal_comma=decimal_comma)
+    with progress_bar() as bar:  # and 4 s to write
+        task = bar.add_task(f"writing {target.name}", total=len(cases))
+        write_cases(cases, target, decimal_comma=decimal_comma, progress=lambda: bar.advance(task))
     errors.print(f"wrote {counted(len(cases), 'case')} to {target}", highlight=False)
 
 
