@@ -702,10 +702,11 @@ def test_a_database_url_s_password_is_hidden_as_sqlalchemy_hides_it(cli):
 
 
 def test_a_report_on_a_database_shows_no_password(database_url, cases, cli):
-    """``cases nearest --json`` names the database it searched, without its password."""
+    """``cases nearest --json`` names the database it searched, and ``cases habits`` the
+    cases it read in its table's title, without the password."""
     if not database_url.startswith("postgresql"):
         pytest.skip("a SQLite URL holds no password")
-    add_cases(open_database(database_url), cases[:12])
+    add_cases(open_database(database_url), cases[:24])
     with_password = database_url.replace("://flakelab@", "://flakelab:s3cret@")
     assert with_password != database_url  # trust authentication: the password is not asked
     run = cli("cases", "nearest", example_path("target"), "-d", with_password, "--json")
@@ -714,6 +715,9 @@ def test_a_report_on_a_database_shows_no_password(database_url, cases, cli):
         "://flakelab@", "://flakelab:***@"
     )
     assert "s3cret" not in run.stdout + run.stderr
+    run = cli("cases", "habits", with_password)
+    assert run.returncode == 0, run.stderr
+    assert "s3cret" not in run.stdout + run.stderr and "flakelab:***@" in run.stdout
 
 
 def test_another_applications_database_is_refused_and_left_as_it_is(database_url, cli):

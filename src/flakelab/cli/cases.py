@@ -1179,7 +1179,7 @@ def habits(
         plot_habits(
             fit,
             plot,
-            title=f"Habits of {found.shop or cases}: {found.describe()}",
+            title=f"Habits of {found.shop or hidden_passwords(cases)}: {found.describe()}",
             scan=drift and _scan_for_plot(drift, chosen),
         )
     report = found.report() | {
@@ -1192,7 +1192,8 @@ def habits(
     if json_output:
         print(json.dumps(report, indent=2))
         return
-    _print_habits(report, fit, f"Habits of {shop or cases} against {model or 'the current model'}")
+    whose = shop or hidden_passwords(cases)
+    _print_habits(report, fit, f"Habits of {whose} against {model or 'the current model'}")
 
 
 def _scan_for_plot(drift: dict, chosen: list) -> dict:
