@@ -859,6 +859,14 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     cases = str(tmp_path / "cases.db")
     run = cli("cases", "generate", "--n", "60", "--seed", "5", "--shop", "shop A", "--out", cases)
     assert run.returncode == 0, run.stderr
+    # none of the newest five is a mix-up, and they are said to be only the newest ("no
+    # likely mix-ups among the cases" read as the whole history before)
+    run = cli("cases", "list", "-d", cases, "--last", "5", "--mix-ups", "--shop", "shop A")
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 0 and said.startswith(
+        "no likely mix-ups among the newest 5 cases of shop 'shop A' in "
+    )
+    assert said.endswith("(--last N checks more of them)")
     white = replace(read_measurement(example_path("sprayout")), stored_lab=None)
     white = replace(white, reflectance=np.full_like(white.reflectance, 0.85))
     write_measurements([white], tmp_path / "white.json")

@@ -650,9 +650,17 @@ def list_cases(
         print(json.dumps(report, indent=2))
         return
     whose = f"{shops[0]!r}" if len(shops) == 1 else "every shop"
-    if not rows:
-        which = "likely mix-ups among the cases" if cases else "cases"
-        errors.print(f"no {which} of {shop or 'any shop'!r} in {engine.url}", highlight=False)
+    if not rows:  # which cases were looked at: the newest alone, not the whole history
+        of = f"shop {shop!r}" if shop else "any shop"
+        newest = "the newest " if len(cases) == last else "the "
+        more = " (--last N checks more of them)" if len(cases) == last else ""
+        none = (
+            f"no likely mix-ups among {newest}{counted(len(cases), 'case')} of {of} in "
+            f"{engine.url}{more}"
+            if cases
+            else f"no cases of {of} in {engine.url}"
+        )
+        errors.print(none, highlight=False)
         return
     title = "Likely mix-ups among the newest" if mix_ups else "Newest"
     table = Table(
