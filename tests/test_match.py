@@ -440,6 +440,10 @@ def test_impossible_quantities_are_refused():
     for text in ("0g", "-5g", "lots"):
         with pytest.raises(RecipeError, match="--quantity"):
             parse_quantity(text)
+    # a decimal comma, or a thousands separator? not guessed, and said so
+    for text in ("1,5kg", "1,000g"):
+        with pytest.raises(RecipeError, match="write a decimal point, not a comma$"):
+            parse_quantity(text)
     assert parse_quantity("0.5 kg") == 500.0 and parse_quantity("250g") == 250.0
 
 

@@ -39,7 +39,9 @@ def parse_amount(
     try:
         amount = float(value[: len(value) - len(unit)]) * units.get(unit, 1.0)
     except ValueError:
-        raise error(f"{option}: expected an amount like {example}, got {text!r}") from None
+        # "1,5kg": a decimal comma, or a thousands separator ("1,000g")? Not guessed: said
+        point = "; write a decimal point, not a comma" if "," in value else ""
+        raise error(f"{option}: expected an amount like {example}, got {text!r}{point}") from None
     if not np.isfinite(amount) or amount <= 0:
         raise error(f"{option}: expected a positive amount, got {text!r}")
     return amount
