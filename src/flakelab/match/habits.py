@@ -375,37 +375,24 @@ def _case_terms(
     ``offset[N, G·3]`` of its spray-out from the model's prediction ``R``. Sums over any
     run of cases give that run's step, so every split of the cases is read from one pass;
     they are computed :data:`_CASES_AT_ONCE` cases at a time."""
+    # θ itself and θ ± one step along each habit, in one physics call a run
+    thetas = np.concatenate([theta[None], theta + np.diag(_STEP), theta - np.diag(_STEP)])
+    spray_var = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0]) ** 2
+    residual_var = persistent_sd**2 + noise_sd**2
+
+    def terms_of(run: slice) -> tuple[NDArray, NDArray]:
+        f = _offsets(thetas, library, fractions[run], R[run], geometries)
+        f = f.reshape(7, f.shape[1], -1)
+        S = ((f[1:4] - f[4:7]) / (2 * _STEP[:, None, None])).transpose(1, 2, 0)  # [N, D, 3]
+        C = np.einsum("ndk,k,nek->nde", S, spray_var, S) + residual_var * np.eye(S.shape[1])
+        weighted = np.linalg.solve(C, S)  # C⁻¹S
+        score = np.einsum("ndk,nd->nk", weighted, offset[run] - f[0])
+        return score, np.einsum("ndk,ndl->nkl", S, weighted)
+
     runs = [
-        _terms_of_cases(
-            theta, library, fractions[run], R[run], offset[run], geometries, persistent_sd, noise_sd
-        )  # fmt: skip
-        for run in (slice(i, i + _CASES_AT_ONCE) for i in range(0, len(fractions), _CASES_AT_ONCE))
+        terms_of(slice(i, i + _CASES_AT_ONCE)) for i in range(0, len(fractions), _CASES_AT_ONCE)
     ]
     return np.concatenate([s for s, _ in runs]), np.concatenate([i for _, i in runs])
-
-
-def _terms_of_cases(
-    theta: NDArray,
-    library: Library,
-    fractions: NDArray,
-    R: NDArray,
-    offset: NDArray,
-    geometries,
-    persistent_sd: float,
-    noise_sd: float,
-) -> tuple[NDArray, NDArray]:
-    """:func:`_case_terms` of a run of cases, in one physics call."""
-    N = len(fractions)
-    # θ itself and θ ± one step along each habit, in one physics call
-    thetas = np.concatenate([theta[None], theta + np.diag(_STEP), theta - np.diag(_STEP)])
-    f = _offsets(thetas, library, fractions, R, geometries).reshape(7, N, -1)
-    S = ((f[1:4] - f[4:7]) / (2 * _STEP[:, None, None])).transpose(1, 2, 0)  # [N, D, 3]
-    spray_sd = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0])
-    residual_var = persistent_sd**2 + noise_sd**2
-    C = np.einsum("ndk,k,nek->nde", S, spray_sd**2, S) + residual_var * np.eye(S.shape[1])
-    weighted = np.linalg.solve(C, S)  # C⁻¹S
-    score = np.einsum("ndk,nd->nk", weighted, offset - f[0])
-    return score, np.einsum("ndk,ndl->nkl", S, weighted)
 
 
 def _small_sample_sandwich(information: NDArray, scores: NDArray) -> tuple[NDArray, NDArray]:
