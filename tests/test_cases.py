@@ -221,6 +221,13 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
     save(rows)
     with pytest.raises(CaseFileError, match=f"row 3: {rows[0][readings[40]]}: .*got '0,5x'"):
         read_cases(saved)
+    # saved in the spreadsheet's default encoding (Windows-1252), a shop named Müller: told
+    # how to save it as UTF-8
+    rows[1][1] = "Müller"
+    with saved.open("w", encoding="cp1252", newline="") as handle:
+        csv.writer(handle, delimiter=separator, quoting=quoting).writerows(rows)
+    with pytest.raises(CaseFileError, match="not UTF-8 text; .* when asked for 'CSV UTF-8'$"):
+        read_cases(saved)
 
 
 def test_cases_exported_for_a_european_spreadsheet_read_back_as_they_were(tinned, tmp_path):
@@ -1501,6 +1508,10 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
         )
     again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
     assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
+    european.write_text("target;recipe;sprayed;shop\ncar.cxf;shot.json;sprays.cxf;Müller\n",
+                        encoding="cp1252")  # fmt: skip
+    with pytest.raises(ManifestError, match="manifest-eu.csv: not UTF-8 text; .*'CSV UTF-8'"):
+        cases_from_manifest(european, library, tolerance=tol)
     # a bad row names the manifest, the row and the column; no case comes back
     manifest.write_text(manifest.read_text() + "car.cxf,shot.json,sprays.cxf,spray 3,,\n")
     with pytest.raises(ManifestError, match=r"manifest.csv: row 4: sprayed: .*no sample 'spray 3'"):

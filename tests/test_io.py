@@ -138,6 +138,9 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
     csv.writer(out, delimiter=";").writerows(
         [cell.replace(".", ",") if _is_decimal(cell) else cell for cell in row] for row in rows
     )
+    european.write_text(out.getvalue().replace("rich;", "Müller;"), encoding="cp1252")
+    with pytest.raises(MeasurementFileError, match="when asked for 'CSV UTF-8'"):
+        read_measurements(european)  # the spreadsheet's default encoding: told how to save
     european.write_text(out.getvalue())
     assert "0," in european.read_text()  # the numbers are written the European way
     (back,) = read_measurements(european)
@@ -281,6 +284,27 @@ def test_other_kinds_of_file_are_named(tmp_path):
         read_measurements(empty)
     with pytest.raises(MeasurementFileError, match="no such file"):
         read_measurements(tmp_path / "missing.cxf")
+    mark = tmp_path / "mark.csv"  # a byte-order mark alone: an internal error before
+    mark.write_bytes(b"\xef\xbb\xbf\n")
+    with pytest.raises(MeasurementFileError, match="mark.csv: empty file"):
+        read_measurements(mark)
+    mark.write_bytes(b"\xc3")  # a character's first byte alone
+    with pytest.raises(MeasurementFileError, match="binary content"):
+        read_measurements(mark)
+
+
+def test_a_csv_whose_head_ends_inside_a_character_is_read(rich_measurement, tmp_path):
+    """The format is judged from a file's first 4,096 bytes; a 'ü' cut there by that count
+    had a valid UTF-8 file refused as "binary content"."""
+    plain = tmp_path / "plain.csv"
+    write_measurements([rich_measurement], plain)
+    for offset in (0, 1):  # the cut after the ü's first byte, and after the whole ü
+        comment = "# Türkis " + "x" * (4096 - len("# Türkis ") - 3 + offset) + "ü\n"
+        cut = tmp_path / f"cut{offset}.csv"
+        cut.write_text(comment + plain.read_text(encoding="utf-8"), encoding="utf-8")
+        assert cut.read_bytes()[4094 + offset : 4096 + offset] == "ü".encode()
+        (back,) = read_measurements(cut)
+        _assert_same(rich_measurement, back, metadata=False)
 
 
 def test_a_failed_write_leaves_the_previous_file_intact(rich_measurement, tmp_path):

@@ -41,6 +41,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
+    NOT_UTF8,
     csv_separator,
     decimal_point,
     numbers_at_once,
@@ -214,7 +215,7 @@ def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None)
             lines = handle if progress is None else _told(handle, progress)
             return _cases_from_lines(path, lines)
     except UnicodeDecodeError:
-        raise CaseFileError(f"{path}: not a UTF-8 text (CSV) file") from None
+        raise CaseFileError(f"{path}: {NOT_UTF8}") from None
 
 
 def _told(lines: Iterable[str], progress: Callable[[], None]) -> Iterator[str]:

@@ -40,7 +40,7 @@ from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
-from flakelab.io.records import csv_separator
+from flakelab.io.records import NOT_UTF8, csv_separator
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
 
@@ -73,8 +73,10 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
         text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise ManifestError(f"{path}: no such manifest file") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ManifestError(f"{path}: cannot be read as a UTF-8 CSV manifest ({error})") from None
+    except UnicodeDecodeError as error:
+        raise ManifestError(f"{path}: {NOT_UTF8} ({error.reason})") from None
+    except OSError as error:
+        raise ManifestError(f"{path}: cannot be read as a CSV manifest ({error})") from None
     lines = text.splitlines()
     separator = csv_separator(lines[0]) if lines else None
     rows = list(csv.reader(lines, delimiter=separator or ","))

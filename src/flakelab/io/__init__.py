@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import codecs
 import zipfile
 from collections.abc import Callable
 from os import PathLike
@@ -20,6 +21,7 @@ from flakelab.io.json_document import read_json, write_json
 from flakelab.io.library_file import read_library, write_library
 from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
+from flakelab.io.records import NOT_UTF8
 from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
@@ -82,16 +84,24 @@ def detect_format(path: str | PathLike) -> str:
         if head.startswith(magic):
             raise MeasurementFileError(path, f"not a measurement file: this is {kind}")
     text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if not text:  # a byte-order mark alone
+        raise MeasurementFileError(path, "empty file")
     if text.startswith(b"<"):
         if b"colorexchangeformat.com/CxF3" in head or b"<CxF" in head or b":CxF" in head:
             return "cxf"
         raise MeasurementFileError(path, "an XML file, but not CxF3 (no CxF3 namespace)")
     if text.startswith((b"{", b"[")):
         return "json"
-    try:
-        first_line = text.decode("utf-8").splitlines()[0].lower()
+    try:  # the head may end inside a character: not an error of the file
+        lines = codecs.getincrementaldecoder("utf-8")().decode(text).splitlines()
     except UnicodeDecodeError:
-        raise MeasurementFileError(path, "not a measurement file: binary content") from None
+        binary = b"\x00" in head or not any(d in head.split(b"\n")[0] for d in b",;\t")
+        raise MeasurementFileError(
+            path, "not a measurement file: binary content" if binary else NOT_UTF8
+        ) from None
+    if not lines:  # a character's first bytes alone
+        raise MeasurementFileError(path, "not a measurement file: binary content")
+    first_line = lines[0].lower()
     if (
         "geometry" in first_line
         or first_line.startswith("#")

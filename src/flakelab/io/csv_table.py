@@ -28,6 +28,7 @@ from flakelab.core.colorimetry import D65_10
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
+    NOT_UTF8,
     Reading,
     assemble,
     csv_separator,
@@ -61,7 +62,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         try:
             text = Path(path).read_text(encoding="utf-8-sig")
         except UnicodeDecodeError as error:
-            raise MeasurementFileError(path, f"not UTF-8 text ({error.reason})") from None
+            raise MeasurementFileError(path, f"{NOT_UTF8} ({error.reason})") from None
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]

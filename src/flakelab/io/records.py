@@ -48,6 +48,7 @@ __all__ = [
     "numbers_at_once",
     "decimal_point",
     "csv_separator",
+    "NOT_UTF8",
 ]
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
@@ -125,6 +126,10 @@ def numbers_at_once(values: Sequence[object]) -> np.ndarray | None:
         return None
     return numbers if numbers.ndim == 1 and np.isfinite(numbers).all() else None
 
+
+NOT_UTF8 = "not UTF-8 text; a spreadsheet saves a CSV as UTF-8 when asked for 'CSV UTF-8'"
+"""What a CSV file in another encoding is told (a spreadsheet's default, Windows-1252, for
+a shop named Müller)."""
 
 CSV_SEPARATORS = ",;\t"
 """A CSV file's cell separators: the comma, and the semicolon or tab of a spreadsheet in most
