@@ -62,7 +62,8 @@ _OTHER_KINDS = {
 def detect_format(path: str | PathLike) -> str:
     """Name of the measurement format of a file, judged by its content."""
     try:
-        head = Path(path).read_bytes()[:4096]
+        with open(path, "rb") as handle:  # the head alone, not the whole file
+            head = handle.read(4096)
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
     except IsADirectoryError:
