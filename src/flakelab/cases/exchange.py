@@ -92,13 +92,16 @@ def is_case_file(path: str | PathLike) -> bool:
     return Path(path).suffix.lower() in CASE_FILE_SUFFIXES
 
 
-def check_case_file_suffix(path: str | PathLike) -> None:
-    """A case file to write is named .csv, .cxf or .xml (its format is read from the name)."""
+def check_case_file_suffix(path: str | PathLike, *, decimal_comma: bool = False) -> None:
+    """A case file to write is named .csv, .cxf or .xml (its format is read from the name);
+    one with a ``decimal_comma`` is a CSV."""
     if not is_case_file(path):
         raise CaseFileError(
             f"{path}: expected a case file named {', '.join(CASE_FILE_SUFFIXES)} "
             f"(CSV or CxF3), got the suffix {Path(path).suffix!r}"
         )
+    if decimal_comma and Path(path).suffix.lower() in CXF_SUFFIXES:
+        raise CaseFileError(f"{path}: a decimal comma is for a CSV file; CxF3 writes points")
 
 
 def write_cases(
@@ -116,9 +119,7 @@ def write_cases(
     With ``decimal_comma``, a CSV is a European spreadsheet's: cells separated by semicolons,
     readings with a decimal comma, a byte-order mark for its encoding. ``progress`` is
     called for each case of a CSV written."""
-    check_case_file_suffix(path)
-    if decimal_comma and Path(path).suffix.lower() in CXF_SUFFIXES:
-        raise CaseFileError(f"{path}: a decimal comma is for a CSV file; CxF3 writes points")
+    check_case_file_suffix(path, decimal_comma=decimal_comma)
     streamed = geometries is not None and tins is not None
     if Path(path).suffix.lower() in CXF_SUFFIXES or not streamed:
         cases = list(cases)

@@ -1008,9 +1008,7 @@ def export_cases(
     from flakelab.cases.database import count_cases, iter_cases, open_database
     from flakelab.cases.exchange import check_case_file_suffix, write_cases
 
-    check_case_file_suffix(target)
-    if decimal_comma and target.suffix.lower() != ".csv":
-        raise FlakelabError(f"--decimal-comma: {target} is a CxF3 file, which writes points")
+    check_case_file_suffix(target, decimal_comma=decimal_comma)
     # before the database is read
     check_output_file(target, "TARGET", reads={"--database": database})
     geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
