@@ -708,11 +708,10 @@ def test_a_database_url_s_password_is_hidden_as_sqlalchemy_hides_it(cli):
         assert "postgresql+psycopg://flakelab:***@127.0.0.1:1/shop: " in run.stderr
 
 
+@pytest.mark.parametrize("database_url", ["postgresql"], indirect=True)  # SQLite's holds none
 def test_a_report_on_a_database_shows_no_password(database_url, cases, cli):
     """``cases nearest --json`` names the database it searched, and ``cases habits`` the
     cases it read in its table's title, without the password."""
-    if not database_url.startswith("postgresql"):
-        pytest.skip("a SQLite URL holds no password")
     add_cases(open_database(database_url), cases[:24])
     with_password = database_url.replace("://flakelab@", "://flakelab:s3cret@")
     assert with_password != database_url  # trust authentication: the password is not asked
