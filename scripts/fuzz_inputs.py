@@ -8,7 +8,8 @@ manifest of instrument files for `cases record-all`, the shipped model, a toner-
 example calibration panel's reading) and damages it: an
 MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short);
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
-stray characters; JSON files by replacing or deleting one value anywhere in them (a target
+stray characters, or in another encoding (a byte-order mark alone, Windows-1252, a cut
+inside a character); JSON files by replacing or deleting one value anywhere in them (a target
 for the match and a spray-out for the correction and for `cases record`, half the time, by
 values still readable but odd); a model file by editing its description, standardisation or
 weights; a shop's SQLite database by replacing one value of one case row (or, for
@@ -87,6 +88,22 @@ def damage_text(text: str, rng: random.Random) -> str:
         return text[: m.end()] + "x" + text[m.end() :]
     i = rng.randrange(len(text))
     return text[:i] + rng.choice([",", '"', ";", "\t", "<", ">", "\x00", "é", "\n"]) + text[i:]
+
+
+def damage_encoding(text: str, rng: random.Random) -> bytes:
+    """``text`` as a spreadsheet or a cut copy may leave its bytes: a byte-order mark alone
+    or before the text, the text in Windows-1252 with an 'é' in it, or cut inside one."""
+    kind = rng.randrange(4)
+    if kind == 0:
+        return b"\xef\xbb\xbf" + rng.choice((b"", b"\n"))
+    if kind == 1:
+        return b"\xef\xbb\xbf" + text.encode("utf-8")
+    i = rng.randrange(len(text))
+    accented = text[:i] + "é" + text[i:]
+    if kind == 2:
+        return accented.encode("cp1252", errors="replace")
+    data = accented.encode("utf-8")
+    return data[: len(text[:i].encode("utf-8")) + 1]  # the é's first byte, and no more
 
 
 def damage_json(document, rng: random.Random):
@@ -396,6 +413,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
             damaged.write_text(json.dumps(odd_target(json.loads(data), rng)))
         elif good.suffix == ".json" and rng.random() < 0.7:
             damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))
+        elif rng.random() < 0.15:
+            damaged.write_bytes(damage_encoding(data.decode("utf-8"), rng))
         else:
             damaged.write_text(damage_text(data.decode("utf-8"), rng), encoding="utf-8")
         result = runner.invoke(app, command(damaged))
