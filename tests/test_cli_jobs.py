@@ -906,6 +906,7 @@ def test_a_mixed_up_sprayout_recorded_is_left_out_of_habits_and_adaptation_by_na
     assert run.returncode == 0 and "left out 1 spray-out further than ΔE00 5" in " ".join(
         run.stderr.split()
     )
+    assert "reading the habits of 61 spray-outs: 3/3 (100 %)" in run.stderr  # its stages told
     # a history with another mix-up among good rows: recorded whole, the mix-up named by row,
     # each checked against the model moved by the habits now stored for the shop
     grey = replace(white, sample="grey", reflectance=np.full_like(white.reflectance, 0.3))
