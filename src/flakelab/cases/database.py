@@ -9,6 +9,8 @@ Writes happen in one transaction per call: a batch is stored whole or not at all
 from __future__ import annotations
 
 import os
+import sqlite3
+import time
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -147,10 +149,26 @@ def url_for(target: str | os.PathLike) -> str:
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor = dbapi_connection.cursor()
-    cursor.execute("PRAGMA journal_mode=WAL")
     cursor.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_S * 1000}")
+    _switch_to_wal(cursor)
     cursor.execute("PRAGMA foreign_keys=ON")
     cursor.close()
+
+
+def _switch_to_wal(cursor) -> None:
+    """``PRAGMA journal_mode=WAL``, tried again for up to :data:`BUSY_TIMEOUT_S`: workplaces
+    switching a new file at once meet each other's locks, and SQLite says "database is
+    locked" at once there, without the busy timeout's wait (one of four processes opening a
+    new database at once was refused so, now and then)."""
+    deadline = time.monotonic() + BUSY_TIMEOUT_S
+    while True:
+        try:
+            cursor.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as error:
+            if "locked" not in str(error) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.01)
 
 
 def _postgres_settings(dbapi_connection, _record) -> None:
