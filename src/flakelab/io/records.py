@@ -322,13 +322,13 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
         write(target)
         return
     target = Path(os.path.realpath(target))
-    mode = stat.S_IMODE(target.stat().st_mode) if target.exists() else 0o666 & ~_umask()
+    existed = target.exists()
+    mode = stat.S_IMODE(target.stat().st_mode) if existed else 0o666 & ~_umask()
     try:
         handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     except OSError as error:  # named by the file asked for, not the temporary one
         raise OSError(error.errno, error.strerror, str(path)) from None
     os.close(handle)
-    existed = target.exists()
     try:
         write(Path(temporary))
         os.chmod(temporary, mode)
