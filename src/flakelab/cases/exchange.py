@@ -42,7 +42,9 @@ from flakelab.errors import FlakelabError
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     NOT_UTF8,
+    csv_form,
     csv_separator,
+    decimal_comma_in,
     decimal_point,
     numbers_at_once,
     write_atomically,
@@ -134,10 +136,11 @@ def write_cases(
 
     readings = len(CASE_FIELDS) + tins  # the first cell of the readings
 
+    separator, encoding = csv_form(decimal_comma)
+
     def write(temporary: Path) -> None:  # row by row, not the whole text first
-        encoding = "utf-8-sig" if decimal_comma else "utf-8"
         with temporary.open("w", encoding=encoding, newline="") as handle:
-            writer = csv.writer(handle, delimiter=";" if decimal_comma else ",")
+            writer = csv.writer(handle, delimiter=separator)
             writer.writerow(_header(geometries, tins))
             written = 0
             for case in cases:
@@ -145,7 +148,7 @@ def write_cases(
                     _check_columns_hold(path, case, geometries, tins)
                 row = _csv_row(case, geometries, tins)
                 if decimal_comma:
-                    row[readings:] = [cell.replace(".", ",") for cell in row[readings:]]
+                    row[readings:] = [decimal_comma_in(cell) for cell in row[readings:]]
                 writer.writerow(row)
                 written += 1
                 if progress is not None:

@@ -31,7 +31,9 @@ from flakelab.io.records import (
     NOT_UTF8,
     Reading,
     assemble,
+    csv_form,
     csv_separator,
+    decimal_comma_in,
     decimal_point,
     parse_conditions,
     parse_geometry_name,
@@ -179,10 +181,11 @@ def write_csv(
 
     def number(value: float) -> str:
         text = repr(float(value))
-        return text.replace(".", ",") if decimal_comma else text
+        return decimal_comma_in(text) if decimal_comma else text
 
+    separator, encoding = csv_form(decimal_comma)
     buffer = io.StringIO()
-    writer = csv.writer(buffer, delimiter=";" if decimal_comma else ",", lineterminator="\n")
+    writer = csv.writer(buffer, delimiter=separator, lineterminator="\n")
     writer.writerow(header)
     for m in measurements:
         for i, g in enumerate(m.geometries):
@@ -194,7 +197,6 @@ def write_csv(
             row += [m.instrument or "", m.measured_at.isoformat() if m.measured_at else ""]
             row += [number(m.texture[k]) if k in m.texture else "" for k in texture_keys]
             writer.writerow(row)
-    encoding = "utf-8-sig" if decimal_comma else "utf-8"
     write_atomically(
         path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding=encoding)
     )

@@ -47,6 +47,8 @@ __all__ = [
     "is_no_regular_file",
     "numbers_at_once",
     "decimal_point",
+    "decimal_comma_in",
+    "csv_form",
     "csv_separator",
     "NOT_UTF8",
 ]
@@ -142,6 +144,19 @@ def csv_separator(header: str) -> str | None:
     holds none."""
     found = max(CSV_SEPARATORS, key=header.count)
     return found if found in header else None
+
+
+def csv_form(decimal_comma: bool) -> tuple[str, str]:
+    """The cell separator and encoding of a CSV written plain, or with ``decimal_comma`` as a
+    spreadsheet in most of Europe opens it: semicolons, and a byte-order mark for it to take
+    the file as UTF-8."""
+    return (";", "utf-8-sig") if decimal_comma else (",", "utf-8")
+
+
+def decimal_comma_in(cell: str) -> str:
+    """A number written with a decimal comma (``0.25`` → ``0,25``), as :func:`decimal_point`
+    reads it back."""
+    return cell.replace(".", ",")
 
 
 def decimal_point(cell: str) -> str:
