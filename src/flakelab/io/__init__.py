@@ -21,7 +21,7 @@ from flakelab.io.json_document import read_json, write_json
 from flakelab.io.library_file import read_library, write_library
 from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
-from flakelab.io.records import NOT_UTF8
+from flakelab.io.records import NOT_UTF8, csv_separator
 from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
@@ -96,7 +96,8 @@ def detect_format(path: str | PathLike) -> str:
     try:  # the head may end inside a character: not an error of the file
         lines = codecs.getincrementaldecoder("utf-8")().decode(text).splitlines()
     except UnicodeDecodeError:
-        binary = b"\x00" in head or not any(d in head.split(b"\n")[0] for d in b",;\t")
+        header = head.split(b"\n")[0].decode("latin-1")  # any byte, to look for separators
+        binary = b"\x00" in head or csv_separator(header) is None
         raise MeasurementFileError(
             path, "not a measurement file: binary content" if binary else NOT_UTF8
         ) from None
@@ -106,7 +107,7 @@ def detect_format(path: str | PathLike) -> str:
     if (
         "geometry" in first_line
         or first_line.startswith("#")
-        or any(d in first_line for d in ",;\t")
+        or csv_separator(first_line) is not None
     ):
         return "csv"
     raise MeasurementFileError(
