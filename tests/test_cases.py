@@ -708,6 +708,27 @@ def test_a_database_url_s_password_is_hidden_as_sqlalchemy_hides_it(cli):
         assert "postgresql+psycopg://flakelab:***@127.0.0.1:1/shop: " in run.stderr
 
 
+def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):
+    """``-d shop.db`` is named in messages and titles as the file the colorist gave, its path
+    (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an
+    in-memory database by its URL, a server's by its URL without the password."""
+    from flakelab.core.wording import database_label
+
+    file = tmp_path / "shop.db"
+    engine = open_database(file)
+    assert database_label(engine) == str(file.resolve())
+    assert database_label(create_engine("sqlite://")) == "sqlite://"
+    server = create_engine("postgresql+psycopg://flakelab:s3cret@db.shop:5432/cases")
+    assert database_label(server) == "postgresql+psycopg://flakelab:***@db.shop:5432/cases"
+    add_cases(engine, cases[:3])
+    listed = cli("cases", "list", "-d", file)
+    assert listed.returncode == 0 and f"in {file.resolve()}" in listed.stdout.replace("\n", "")
+    removed = cli("cases", "remove", "no-such-case", "-d", file, "--yes")
+    assert removed.returncode == 2
+    assert removed.stderr.startswith(f"error: {file.resolve()}: no case 'no-such-case'")
+    assert "sqlite:" not in listed.stdout + removed.stderr
+
+
 @pytest.mark.parametrize("database_url", ["postgresql"], indirect=True)  # SQLite's holds none
 def test_a_report_on_a_database_shows_no_password(database_url, cases, cli):
     """``cases nearest --json`` names the database it searched, and ``cases habits`` the
@@ -781,7 +802,7 @@ def test_a_damaged_case_row_is_named_and_can_be_removed(cases, tmp_path, cli, co
     for read in (lambda: list(iter_cases(engine)), lambda: latest_cases(engine, 3)):
         with pytest.raises(FlakelabError) as error:  # the database's or the case's error
             read()
-        assert str(error.value).startswith(f"{url}: case '{damaged}'") and said in str(error.value)
+        assert str(error.value).startswith(f"{file}: case '{damaged}'") and said in str(error.value)
     run = cli("cases", "list", "-d", str(file))
     assert run.returncode == 2 and damaged in run.stderr and "internal error" not in run.stderr
     run = cli("cases", "remove", damaged, "--yes", "-d", str(file))
@@ -844,7 +865,7 @@ def test_a_damaged_model_artefact_is_named_with_its_database(tmp_path, cli):
         connection.execute("UPDATE models SET artefact = ?", (b"ab",))
     run = cli("model", "show", "five-angle:1", "-d", str(file))
     said = " ".join(run.stderr.split())
-    assert run.returncode == 2 and f"sqlite:///{file}: five-angle v1: not a flakelab model" in said
+    assert run.returncode == 2 and f"{file}: five-angle v1: not a flakelab model" in said
 
 
 @pytest.mark.parametrize(
@@ -1366,7 +1387,7 @@ def test_an_interrupted_generation_says_what_it_stored_and_goes_on_when_run_agai
         expected = 1500
     run = cli(*generate)
     assert run.returncode == 130 and "Traceback" not in run.stderr
-    assert f"interrupted: {expected} of the 1600 cases are stored in sqlite:///{database}" in (
+    assert f"interrupted: {expected} of the 1600 cases are stored in {database}" in (
         run.stderr
     )
     assert count_cases(open_database(database)) == expected

@@ -27,7 +27,7 @@ from sqlalchemy.pool import NullPool, StaticPool
 from flakelab.cases.case import Case, CaseError, tin_fields, zoned
 from flakelab.cases.schema import CaseRow
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.wording import counted, hidden_passwords
+from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
 __all__ = [
@@ -114,14 +114,18 @@ def write_transaction(
         with Session(engine) as session, session.begin():
             yield session
     except OperationalError as error:
-        raise DatabaseError(f"{engine.url}: cannot {doing}: {refusal(error)}; {undone}") from None
+        raise DatabaseError(
+            f"{database_label(engine)}: cannot {doing}: {refusal(error)}; {undone}"
+        ) from None
     except FlakelabError:
         raise
     except (ValueError, TypeError):
         found = None if rows is None else _damaged_row(engine, *rows)
         if found is None:
             raise
-        raise DatabaseError(f"{engine.url}: cannot {doing}: {found}; {undone}") from None
+        raise DatabaseError(
+            f"{database_label(engine)}: cannot {doing}: {found}; {undone}"
+        ) from None
 
 
 def default_url() -> str:
@@ -186,7 +190,7 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     named = url is not None or bool(os.environ.get("FLAKELAB_DATABASE_URL"))
     url = url_for(url) if url is not None else default_url()
     file = _sqlite_file(url)
-    shown = hidden_passwords(url)
+    shown = file or hidden_passwords(url)  # as database_label names it once open
     # the user data folder's own database is made on first use
     if file and Path(file).is_dir():
         raise DatabaseError(f"{shown}: a folder, not a database file")
@@ -285,16 +289,17 @@ def migrate(engine: Engine, revision: str = "head") -> None:
         others = _other_applications_tables(connection)
     if others:
         raise DatabaseError(
-            f"{engine.url}: holds another application's tables ({', '.join(others)}) and none "
-            "of flakelab's; nothing was changed: name a flakelab database, or a new one"
+            f"{database_label(engine)}: holds another application's tables "
+            f"({', '.join(others)}) and none of flakelab's; nothing was changed: name a "
+            "flakelab database, or a new one"
         )
     if current is not None and current not in {s.revision for s in script.walk_revisions()}:
         from flakelab import __version__
 
         raise DatabaseError(
-            f"{engine.url}: its tables were built by a newer flakelab (migration {current!r}, "
-            f"which flakelab {__version__} does not have); open it with that flakelab or a "
-            "newer one; nothing was changed"
+            f"{database_label(engine)}: its tables were built by a newer flakelab (migration "
+            f"{current!r}, which flakelab {__version__} does not have); open it with that "
+            "flakelab or a newer one; nothing was changed"
         )
     with engine.begin() as connection:
         lock_database(connection, MIGRATION_LOCK)
@@ -329,21 +334,21 @@ def _row_values(case: Case) -> dict:
     )
 
 
-def _case(row: CaseRow, url) -> Case:
-    """The case a row of the database at ``url`` holds; a value it holds damaged (written by
+def _case(row: CaseRow, engine: Engine) -> Case:
+    """The case a row of ``engine``'s database holds; a value it holds damaged (written by
     another tool, or edited by hand) is a :class:`CaseError` naming the database, the case
     and the field."""
     try:
         return _case_of(row)
     except (ValueError, TypeError) as error:
-        raise _in_case(url, row.case_id, error) from None
+        raise _in_case(engine, row.case_id, error) from None
 
 
-def _in_case(url, case_id: str, error: Exception) -> CaseError:
-    """``error``, met reading case ``case_id`` of the database at ``url``, naming both (once:
-    a case's own checks name the case already)."""
+def _in_case(engine: Engine, case_id: str, error: Exception) -> CaseError:
+    """``error``, met reading case ``case_id`` of ``engine``'s database, naming both (once: a
+    case's own checks name the case already)."""
     where = f"case {case_id!r}: "
-    return CaseError(f"{url}: {where}{str(error).removeprefix(where)}")
+    return CaseError(f"{database_label(engine)}: {where}{str(error).removeprefix(where)}")
 
 
 def _case_of(row: CaseRow) -> Case:
@@ -404,7 +409,8 @@ def reading_rows(engine: Engine, row_class=CaseRow, what: str = "case", key: str
         found = _damaged_row(engine, row_class, what, key)
         if found is None:
             raise
-        raise DatabaseError(f"{engine.url}: {found}; the database is left as it is") from None
+        where = database_label(engine)
+        raise DatabaseError(f"{where}: {found}; the database is left as it is") from None
 
 
 def _damaged_row(engine: Engine, row_class, what: str, key: str) -> str | None:
@@ -444,10 +450,11 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
             session.execute(insert(CaseRow), rows)
     except IntegrityError as error:
         clash = _clash(engine, [r["case_id"] for r in rows], error)
-        raise CaseError(f"{engine.url}: {clash}; nothing was stored") from None
+        raise CaseError(f"{database_label(engine)}: {clash}; nothing was stored") from None
     except SQLAlchemyError as error:  # e.g. a value the server refuses (DataError)
         raise DatabaseError(
-            f"{engine.url}: cannot store the cases: {refusal(error)}; nothing was stored"
+            f"{database_label(engine)}: cannot store the cases: {refusal(error)}; "
+            "nothing was stored"
         ) from None
     return len(rows)
 
@@ -478,8 +485,8 @@ def _not_stored(engine: Engine, cases: list[Case]) -> list[Case]:
             field = _differing_field(stored[case.case_id], _row(case))
             if field is not None:
                 raise CaseError(
-                    f"{engine.url}: case {case.case_id!r} is already stored as another case "
-                    f"(its {field} differs); nothing was stored"
+                    f"{database_label(engine)}: case {case.case_id!r} is already stored as "
+                    f"another case (its {field} differs); nothing was stored"
                 )
     return [c for c in cases if c.case_id not in stored]
 
@@ -553,7 +560,7 @@ def iter_cases(
         query = query.limit(limit)
     with reading_rows(engine) as session:
         for row in session.scalars(query.execution_options(yield_per=batch)):
-            yield _case(row, engine.url)
+            yield _case(row, engine)
 
 
 def stored_sprayouts(
@@ -577,7 +584,7 @@ def stored_sprayouts(
                     spectra.append(_stored_spectra(sprayout, "sprayout", len(names))[rows])
                     ids.append(row_id)
             except CaseError as error:
-                raise _in_case(engine.url, case_id, error) from None
+                raise _in_case(engine, case_id, error) from None
     shape = (0, len(geometries), 0)
     return ids, np.stack(spectra) if spectra else np.zeros(shape)
 
@@ -586,7 +593,7 @@ def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
     """The cases of these row ids (:func:`stored_sprayouts`), in their order."""
     with reading_rows(engine) as session:
         rows = {r.id: r for r in session.scalars(select(CaseRow).where(CaseRow.id.in_(row_ids)))}
-    return [_case(rows[i], engine.url) for i in row_ids]
+    return [_case(rows[i], engine) for i in row_ids]
 
 
 def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Case]:
@@ -595,7 +602,7 @@ def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Cas
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
     with reading_rows(engine) as session:
-        return [_case(row, engine.url) for row in session.scalars(query)]
+        return [_case(row, engine) for row in session.scalars(query)]
 
 
 def remove_case(engine: Engine, case_id: str) -> Case | None:
@@ -605,9 +612,9 @@ def remove_case(engine: Engine, case_id: str) -> Case | None:
     with write_transaction(engine, f"remove case {case_id!r}", "nothing was removed") as session:
         row_id = session.scalar(select(CaseRow.id).where(CaseRow.case_id == case_id))
         if row_id is None:
-            raise CaseError(f"{engine.url}: no case {case_id!r}; nothing was removed")
+            raise CaseError(f"{database_label(engine)}: no case {case_id!r}; nothing was removed")
         try:
-            case = _case(session.get_one(CaseRow, row_id), engine.url)
+            case = _case(session.get_one(CaseRow, row_id), engine)
         except (ValueError, TypeError):
             case = None
         session.execute(delete(CaseRow).where(CaseRow.id == row_id))
@@ -655,18 +662,18 @@ def find_case_id(engine: Engine, given: str) -> str:
     if case_exists(engine, given):
         return given
     if not given.strip():
-        raise CaseError(f"{engine.url}: expected a case id, got {given!r}")
+        raise CaseError(f"{database_label(engine)}: expected a case id, got {given!r}")
     escaped = given.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
     query = select(CaseRow.case_id).where(CaseRow.case_id.like(f"{escaped}%", escape="\\"))
     with reading_rows(engine) as session:
         found = list(session.scalars(query.order_by(CaseRow.case_id).limit(6)))
     if not found:
-        raise CaseError(f"{engine.url}: no case {given!r}")
+        raise CaseError(f"{database_label(engine)}: no case {given!r}")
     if len(found) > 1:
         many = "more than five" if len(found) > 5 else str(len(found))
         raise CaseError(
-            f"{engine.url}: {given!r} begins the ids of {many} cases ({', '.join(found[:5])}): "
-            "give more of it"
+            f"{database_label(engine)}: {given!r} begins the ids of {many} cases "
+            f"({', '.join(found[:5])}): give more of it"
         )
     return found[0]
 

@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session
 from flakelab.cases.case import TEXT_LENGTHS
 from flakelab.cases.database import DatabaseError, reading_rows, refusal
 from flakelab.cases.schema import ShopLotsRow
+from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 from flakelab.io.lots_file import lots_document, lots_from_document
 from flakelab.library.lots import TonerLots
@@ -105,7 +106,7 @@ def tins_through(versions: list[StoredLots]) -> dict[str, list[dict]]:
 
 
 def _stored(engine: Engine, row: ShopLotsRow, toners=None) -> StoredLots:
-    where = f"{engine.url}: the tins of shop {row.shop!r}, version {row.version}"
+    where = f"{database_label(engine)}: the tins of shop {row.shop!r}, version {row.version}"
     lots = lots_from_document(row.document, where, toners)
     return StoredLots(row.shop, lots, row.version, row.created_at)
 
@@ -124,15 +125,15 @@ def store_lots(engine: Engine, shop: str, lots: TonerLots, read_from: int | None
     except IntegrityError:
         latest = stored_lots(engine, shop)
         raise DatabaseError(
-            f"{engine.url}: the tins of shop {shop!r} were stored as version "
+            f"{database_label(engine)}: the tins of shop {shop!r} were stored as version "
             f"{latest.version if latest else '?'} by another reading since version "
             f"{read_from or 'none'} was read: nothing was stored; read the panels again "
             "against the latest"
         ) from None
     except SQLAlchemyError as error:
         raise DatabaseError(
-            f"{engine.url}: cannot store the tins of shop {shop!r}: {refusal(error)}; nothing "
-            "was stored"
+            f"{database_label(engine)}: cannot store the tins of shop {shop!r}: "
+            f"{refusal(error)}; nothing was stored"
         ) from None
     return stored
 

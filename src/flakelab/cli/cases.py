@@ -62,7 +62,7 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     instruments_reading,
 )
-from flakelab.core.wording import counted, hidden_passwords
+from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
@@ -193,7 +193,7 @@ def _note_recorded_cases(engine) -> None:
     if recorded := synthetic_cases(engine, recorded=True):
         shops = ", ".join(recorded)
         errors.print(
-            f"[yellow]note:[/] {engine.url} also holds "
+            f"[yellow]note:[/] {database_label(engine)} also holds "
             f"{counted(sum(recorded.values()), 'recorded case')} ({shops}): the generated ones "
             "are labelled synthetic, which 'flakelab cases remove --synthetic' takes out again",
             highlight=False,
@@ -237,19 +237,23 @@ class _GeneratedStore:
         landed = existing_case_ids(self.engine, [case.case_id for case in self.batch])
         stored = self.added + self.found + len(landed)
         return (
-            f"{stored} of the {counted(self.n, 'case')} are stored in {self.engine.url}; the "
+            f"{stored} of the {counted(self.n, 'case')} are stored in "
+            f"{database_label(self.engine)}; the "
             "same command again stores the rest"
         )
 
     def summary(self, instrument: str, seed: int) -> str:
         made = f"synthetic cases ({instrument}, seed {seed})"
         if not self.found:
-            return f"wrote {self.added} {made} to {self.engine.url}"
+            return f"wrote {self.added} {made} to {database_label(self.engine)}"
         if not self.added:
-            return f"all {self.n} {made} were stored in {self.engine.url} already; nothing added"
+            return (
+                f"all {self.n} {made} were stored in {database_label(self.engine)} already; "
+                "nothing added"
+            )
         return (
-            f"wrote {self.added} {made} to {self.engine.url}; the other {self.found} were "
-            "stored already (by an earlier run of the same generation)"
+            f"wrote {self.added} {made} to {database_label(self.engine)}; the other "
+            f"{self.found} were stored already (by an earlier run of the same generation)"
         )
 
 
@@ -278,7 +282,7 @@ def import_cases(
         count = add_cases(engine, cases)  # one transaction: all of them or none
     except CaseError as error:  # it names the case stored already
         raise FlakelabError(f"{source}: {error}") from None
-    imported = f"imported {counted(count, 'case')} from {source} into {engine.url}"
+    imported = f"imported {counted(count, 'case')} from {source} into {database_label(engine)}"
     errors.print(imported, highlight=False)
     if not check:
         return
@@ -382,8 +386,8 @@ def record_case(
     _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol, textures)
     if case_exists(engine, case.case_id):
         raise FlakelabError(
-            f"{engine.url}: case {case.case_id} is already recorded (the same readings, recipe "
-            "and shop); nothing was stored"
+            f"{database_label(engine)}: case {case.case_id} is already recorded (the same "
+            "readings, recipe and shop); nothing was stored"
         )
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
@@ -519,7 +523,8 @@ def record_all(
     if stored:
         number, case = next((n, c) for n, c in zip(rows, cases, strict=True) if c.case_id in stored)
         raise FlakelabError(
-            f"{manifest}: row {number}: case {case.case_id} is already recorded in {engine.url} "
+            f"{manifest}: row {number}: case {case.case_id} is already recorded in "
+            f"{database_label(engine)} "
             f"({len(stored)} of the {len(cases)} rows are); nothing was stored"
         )
     add_cases(engine, cases)  # one transaction: a writer in between is refused whole
@@ -577,7 +582,7 @@ def record_all(
     _tell_mix_ups(len(mismatched), f"rows {', '.join(str(r['row']) for r in mismatched)}",
                   unchecked)  # fmt: skip
     count = report["cases_in_database"]
-    errors.print(f"{counted(count, 'case')} in {engine.url}", highlight=False)
+    errors.print(f"{counted(count, 'case')} in {database_label(engine)}", highlight=False)
 
 
 @cases_app.command("list")
@@ -656,15 +661,15 @@ def list_cases(
         more = " (--last N checks more of them)" if len(cases) == last else ""
         none = (
             f"no likely mix-ups among {newest}{counted(len(cases), 'case')} of {of} in "
-            f"{engine.url}{more}"
+            f"{database_label(engine)}{more}"
             if cases
-            else f"no cases of {of} in {engine.url}"
+            else f"no cases of {of} in {database_label(engine)}"
         )
         errors.print(none, highlight=False)
         return
     title = "Likely mix-ups among the newest" if mix_ups else "Newest"
     table = Table(
-        title=f"{title} {counted(len(cases), 'case')} of {whose} in {engine.url}",
+        title=f"{title} {counted(len(cases), 'case')} of {whose} in {database_label(engine)}",
         box=box.SIMPLE_HEAD,
         collapse_padding=True,
     )
@@ -933,14 +938,15 @@ def remove(
         case_id = find_case_id(engine, case_id)
     except FlakelabError as error:
         raise FlakelabError(f"{error}; nothing was removed") from None
-    _confirm(f"remove case {case_id} from {engine.url}?", f"cases remove {case_id}", yes)
+    where = database_label(engine)
+    _confirm(f"remove case {case_id} from {where}?", f"cases remove {case_id}", yes)
     case = remove_case(engine, case_id)
     what = (
         "its stored values could not be read"
         if case is None
         else f"{case.shop}, {case.outcome}, {case.created_at:%Y-%m-%d %H:%M}"
     )
-    errors.print(f"removed case {case_id} ({what}) from {engine.url}", highlight=False)
+    errors.print(f"removed case {case_id} ({what}) from {where}", highlight=False)
 
 
 def _confirm(question: str, command: str, yes: bool) -> None:
@@ -960,16 +966,16 @@ def _remove_synthetic(engine, shop: str | None, yes: bool) -> None:
     from flakelab.cases.database import remove_synthetic_cases, synthetic_cases
 
     of = f" of shop {shop!r}" if shop else ""
+    where = database_label(engine)
     held = synthetic_cases(engine, shop)
     if not held:
-        errors.print(f"no synthetic cases{of} in {engine.url}; nothing was removed",
-                     highlight=False)  # fmt: skip
+        errors.print(f"no synthetic cases{of} in {where}; nothing was removed", highlight=False)
         return
-    _confirm(f"remove {_by_shop(held)} from {engine.url}?", "cases remove --synthetic", yes)
+    _confirm(f"remove {_by_shop(held)} from {where}?", "cases remove --synthetic", yes)
     removed = remove_synthetic_cases(engine, shop)
     kept = sum(synthetic_cases(engine, recorded=True).values())
     stay = f"; its {counted(kept, 'recorded case')} stay" if kept else ""
-    errors.print(f"removed {_by_shop(removed)} from {engine.url}{stay}", highlight=False)
+    errors.print(f"removed {_by_shop(removed)} from {where}{stay}", highlight=False)
 
 
 def _by_shop(counts: dict[str, int]) -> str:
@@ -1019,7 +1025,7 @@ def export_cases(
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(
-            f"{engine.url}: no cases {which_cases(shop, since)}{at}; nothing written"
+            f"{database_label(engine)}: no cases {which_cases(shop, since)}{at}; nothing written"
         )
     with progress_bar() as bar:  # and 4 s to write
         task = bar.add_task(f"writing {target.name}", total=len(cases))
@@ -1334,7 +1340,7 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
     if json_output:
         print(json.dumps({"shops": rows}, indent=2))
         return
-    table = Table(title=f"Shops in {engine.url}", box=box.SIMPLE_HEAD)
+    table = Table(title=f"Shops in {database_label(engine)}", box=box.SIMPLE_HEAD)
     columns = ("shop", "cases", " / ".join(OUTCOMES), "last case", "habits", "tins", "own model")
     for column in columns:
         table.add_column(column)

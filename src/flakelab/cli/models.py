@@ -45,7 +45,7 @@ from flakelab.cli.sources import (
     which_cases,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
-from flakelab.core.wording import counted, hidden_passwords
+from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
 DE00_STATISTICS = ("de00_mean", "de00_p95", "de00_max")
@@ -515,7 +515,7 @@ def promote_model(version: VersionArgument, database: DatabaseOption = None) -> 
     engine = open_database(database, must_exist=True)
     done = promote(engine, *_registered_version(version))
     retired = f"; v{done['retired']} retired" if done["retired"] else ""
-    errors.print(f"{engine.url}: {done['name']} v{done['version']} promoted{retired}")
+    errors.print(f"{database_label(engine)}: {done['name']} v{done['version']} promoted{retired}")
 
 
 @model_app.command("retire")
@@ -531,7 +531,7 @@ def retire_model(version: VersionArgument, database: DatabaseOption = None) -> N
     now = "the shipped model" if done["current"] == "shipped" else done["current"]
     whose = f" for shop {done['shop']!r}" if done["shop"] else ""
     current = f"; {now} is current{whose} again" if done["was"] == "promoted" else ""
-    errors.print(f"{engine.url}: {done['name']} v{done['version']} retired{current}")
+    errors.print(f"{database_label(engine)}: {done['name']} v{done['version']} retired{current}")
 
 
 @model_app.command("register")
@@ -588,7 +588,8 @@ def register_file(
     name = shop_model_name(model.instrument, shop)
     if held := held_already(engine, name, model):
         raise FlakelabError(
-            f"{model_file}: the same weights as {held} in {engine.url}: nothing was stored"
+            f"{model_file}: the same weights as {held} in {database_label(engine)}: "
+            "nothing was stored"
         )
     done = register(engine, model, data, shop=shop)
     report = {

@@ -12,6 +12,7 @@ import numpy as np
 import typer
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
+from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 
 WORKPLACE_SHOP = "FLAKELAB_SHOP"
@@ -255,7 +256,7 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
         model = registered_model(engine, name, version)
         (row,) = list_models(engine, name, version)
         return model, (
-            f"{engine.url}: {name} v{version}, {row['status']}, held-out ΔE00 "
+            f"{database_label(engine)}: {name} v{version}, {row['status']}, held-out ΔE00 "
             f"{row['held_out_de00']:.3f} when registered ({row['created_at'][:10]})"
         )
     if spec in INSTRUMENT_GEOMETRIES:

@@ -1,7 +1,7 @@
 """How a report words things. It counts them, "1 case", "3 cases", in one place, so that no
 message reads "1 cases" or hedges with "case(s)"; it hides the password of a database URL
-(a shop's PostgreSQL server) wherever one is shown. It imports nothing but the standard
-library, like :mod:`flakelab.core.defaults`."""
+(a shop's PostgreSQL server) wherever one is shown, and names a SQLite database by its file.
+It imports nothing but the standard library, like :mod:`flakelab.core.defaults`."""
 
 import re
 
@@ -21,3 +21,14 @@ def hidden_passwords(text: str) -> str:
     (``postgresql://flakelab:***@server/shop``): a message may be read over a colorist's
     shoulder, pasted into a report or kept in a log."""
     return _URL_PASSWORD.sub(r"\1***@", text)
+
+
+def database_label(engine) -> str:
+    """How a message names the database of ``engine`` (a SQLAlchemy engine): a SQLite file by
+    its path, as every other file is named (``/home/anna/shop.db``, not the URL
+    ``sqlite:////home/anna/shop.db`` that ``--database shop.db`` became); any other database
+    by its URL, the password hidden as SQLAlchemy hides it."""
+    url = engine.url
+    if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
+        return url.database
+    return str(url)

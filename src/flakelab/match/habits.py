@@ -63,7 +63,7 @@ from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.units import is_number
-from flakelab.core.wording import counted
+from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import write_atomically
 from flakelab.library.toners import Library
@@ -735,8 +735,8 @@ def stored_habits(engine: Engine, shop: str, model: str = "") -> ShopHabits:
         ).all()
     if not rows:
         raise FlakelabError(
-            f"{engine.url}: no habits stored for shop {shop!r}; read them from its cases with "
-            f"flakelab cases habits CASES --shop {shop!r} --save"
+            f"{database_label(engine)}: no habits stored for shop {shop!r}; read them from its "
+            f"cases with flakelab cases habits CASES --shop {shop!r} --save"
         )
     row = next((r for r in rows if r.model == model), rows[0])
     return ShopHabits.from_report(_stored_report(engine, row))
@@ -765,7 +765,8 @@ def _stored_report(engine: Engine, row: HabitsRow) -> dict:
     )
     if found:
         raise DatabaseError(
-            f"{engine.url}: habits of shop {row.shop!r} (row {row.id}): {found[0]}: {found[1]}; "
+            f"{database_label(engine)}: habits of shop {row.shop!r} (row {row.id}): {found[0]}: "
+            f"{found[1]}; "
             "the database is left as it is"
         )
     return report

@@ -30,6 +30,7 @@ from flakelab.cases.database import (
 )
 from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.wording import database_label
 from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.training import CaseArrays, evaluate_model, unseen_by
 
@@ -150,8 +151,8 @@ def list_models(engine: Engine, name: str | None = None, version: int | None = N
     for r in rows:
         if not isinstance(r.toners, list):
             raise DatabaseError(
-                f"{engine.url}: model {r.name!r} v{r.version}: toners: expected a list of toner "
-                f"names, got {r.toners!r}"
+                f"{database_label(engine)}: model {r.name!r} v{r.version}: toners: expected a list "
+                f"of toner names, got {r.toners!r}"
             )
     return [
         {
@@ -185,7 +186,7 @@ def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
 def _stored_model(engine: Engine, name: str, version: int, artefact: bytes) -> ForwardModel:
     """A registered version's model read from its stored artefact; one another tool or a
     hand damaged is named with the database, the name and the version."""
-    return ForwardModel.from_bytes(artefact, f"{engine.url}: {name} v{version}")
+    return ForwardModel.from_bytes(artefact, f"{database_label(engine)}: {name} v{version}")
 
 
 def held_already(engine: Engine, name: str, model: ForwardModel) -> str | None:
@@ -252,7 +253,8 @@ def _version_row(session: Session, engine: Engine, name: str, version: int) -> M
             select(ModelRow.version).where(ModelRow.name == name).order_by(ModelRow.version)
         ).all()
         held = f"versions {', '.join(map(str, versions))}" if versions else "no versions"
-        raise ModelError(f"{engine.url}: no version {version} of model {name!r} ({held})")
+        where = database_label(engine)
+        raise ModelError(f"{where}: no version {version} of model {name!r} ({held})")
     return row
 
 
@@ -313,7 +315,7 @@ def current_model_and_source(
     """:func:`current_model`, and where it comes from: ``"shipped"``, or the database and
     the promoted version's registered name."""
     serving = None if engine is None else serving_version(engine, instrument, shop)
-    source = "shipped" if serving is None else f"{engine.url}: {serving[0]}, promoted"
+    source = "shipped" if serving is None else f"{database_label(engine)}: {serving[0]}, promoted"
     return serving_model(engine, instrument, serving), source
 
 
@@ -381,8 +383,8 @@ def register(
                 "promoted": better,
             }
     raise ModelError(
-        f"{engine.url}: {name}: other registrations landed {REGISTER_ATTEMPTS} times while "
-        "this one was judged; nothing was stored (register it again)"
+        f"{database_label(engine)}: {name}: other registrations landed {REGISTER_ATTEMPTS} times "
+        "while this one was judged; nothing was stored (register it again)"
     )
 
 
