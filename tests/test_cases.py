@@ -1387,7 +1387,7 @@ def test_an_interrupted_generation_says_what_it_stored_and_goes_on_when_run_agai
         expected = 1500
     run = cli(*generate)
     assert run.returncode == 130 and "Traceback" not in run.stderr
-    assert f"interrupted: {expected} of the 1600 cases are stored in {database}" in (run.stderr)
+    assert f"interrupted: {expected} of the 1600 cases are stored in {database}" in run.stderr
     assert count_cases(open_database(database)) == expected
     monkeypatch.undo()
     again = cli(*generate)
