@@ -429,6 +429,15 @@ def test_a_file_the_disk_cannot_hold_is_named_and_nothing_is_half_written(tmp_pa
     assert run.stderr.strip().splitlines()[-1] == (
         f"error: {checkpoint}: File too large while writing it; no file was written"
     )
+    from flakelab.data import example_path
+
+    workbook = tmp_path / "export.xlsx"  # openpyxl's sheet writers, left half done
+    run = _run_cli_with_file_limit(2048, "convert", example_path("target"), workbook)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip().splitlines() == [
+        f"error: {workbook}: cannot be written (File too large while writing it; no file was "
+        "written)"
+    ]  # before, "Exception ignored in: <generator …>" and a traceback followed
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cases.csv"]
 
 

@@ -11,6 +11,8 @@ with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`. An op
 
 from __future__ import annotations
 
+import gc
+import sys
 import warnings
 import zipfile
 from datetime import datetime
@@ -237,4 +239,23 @@ def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> N
             texture.append(
                 [m.sample, m.measured_at, None, *(m.texture.get(k) for k in TEXTURE_READINGS)]
             )
-    write_atomically(path, lambda temporary: workbook.save(Path(temporary)))
+    write_atomically(path, lambda temporary: _save(workbook, Path(temporary)))
+
+
+def _save(workbook: openpyxl.Workbook, path: Path) -> None:
+    """``workbook.save``. Where the disk refuses it, the sheet writers it leaves half done are
+    closed here, quietly: collected later, each tries to finish its XML in the file that
+    failed, and Python printed "Exception ignored in: <generator …>" and a traceback after
+    flakelab's one-line error."""
+    try:
+        workbook.save(path)
+        return
+    except OSError as error:
+        failure = error
+    quiet, sys.unraisablehook = sys.unraisablehook, lambda _unraisable: None
+    try:
+        failure.__traceback__ = failure.__context__ = None  # the frames holding the writers
+        gc.collect()
+    finally:
+        sys.unraisablehook = quiet
+    raise failure
