@@ -220,6 +220,25 @@ def test_render_commands_write_images_of_the_asked_size(tmp_path, cli):
     assert imread(tmp_path / "g.png").shape[:2] == (96, 96)
 
 
+def test_a_render_is_written_in_the_format_its_suffix_names(tmp_path, cli):
+    """Every suffix ``--output`` takes gives a file of its format and the same pixels (JPEG:
+    within its compression). Before, a ``.tif`` was refused "error: TIF": Pillow names
+    the format "TIFF"."""
+    from PIL import Image
+
+    pixels = {}
+    for name, fmt in (("r.png", "PNG"), ("r.tif", "TIFF"), ("r.TIFF", "TIFF"),
+                      ("r.jpg", "JPEG"), ("r.jpeg", "JPEG")):  # fmt: skip
+        run = cli("render", "--view", "panel", "--size", "32", "-o", str(tmp_path / name))
+        assert run.returncode == 0, run.stderr
+        with Image.open(tmp_path / name) as image:
+            assert image.format == fmt and image.size == (32, 32)
+            pixels[name] = np.asarray(image.convert("RGB"), dtype=float)
+    for lossless in ("r.tif", "r.TIFF"):
+        np.testing.assert_array_equal(pixels[lossless], pixels["r.png"])
+    assert np.abs(pixels["r.jpg"] - pixels["r.png"]).mean() < 8
+
+
 def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path, cli):
     import json
     import shutil

@@ -58,6 +58,7 @@ __all__ = [
     "render_curved",
     "render_stack",
     "image_format",
+    "IMAGE_FORMATS",
     "render_grid",
     "compose",
     "parse_distance",
@@ -358,12 +359,17 @@ def parse_distance(text: str) -> float:
     return parse_amount(text, {"mm": 1e-3, "cm": 1e-2, "m": 1.0}, "--distance", "0.5m or 50cm")
 
 
+IMAGE_FORMATS = {"png": "png", "jpg": "jpeg", "jpeg": "jpeg", "tif": "tiff", "tiff": "tiff"}
+"""An image file's suffix → the format Pillow writes it in: Pillow knows "tiff" and "jpeg",
+not "tif" (a ``.tif`` render was refused "error: TIF" before stop 86)."""
+
+
 def image_format(path) -> str:
-    """The image format that ``path``'s suffix names (png, jpg, tif), else a ValueError."""
+    """The image format that ``path``'s suffix names (png, jpeg, tiff), else a ValueError."""
     suffix = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
-    if suffix not in {"png", "jpg", "jpeg", "tif", "tiff"}:
+    if suffix not in IMAGE_FORMATS:
         raise ValueError(f"{path}: expected an image file ending .png, .jpg or .tif")
-    return suffix
+    return IMAGE_FORMATS[suffix]
 
 
 def save_image(image: NDArray, path) -> None:
@@ -371,6 +377,6 @@ def save_image(image: NDArray, path) -> None:
     file's suffix), atomically."""
     from matplotlib.image import imsave
 
-    suffix = image_format(path)
+    fmt = image_format(path)
     pixels = np.round(encode_sRGB(image) * 255).astype(np.uint8)
-    write_atomically(path, lambda temporary: imsave(temporary, pixels, format=suffix))
+    write_atomically(path, lambda temporary: imsave(temporary, pixels, format=fmt))
