@@ -438,6 +438,12 @@ def test_a_file_the_disk_cannot_hold_is_named_and_nothing_is_half_written(tmp_pa
         f"error: {workbook}: cannot be written (File too large while writing it; no file was "
         "written)"
     ]  # before, "Exception ignored in: <generator …>" and a traceback followed
+    figure = tmp_path / "plot.pdf"  # matplotlib's PDF stream, closed after the refusal
+    run = _run_cli_with_file_limit(2048, "plot", example_path("target"), "-o", figure)
+    assert run.returncode == 2, run.stderr  # before, 70: "internal error: error: Error -2 …"
+    assert run.stderr.strip().splitlines() == [
+        f"error: {figure}: File too large while writing it; no file was written"
+    ]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cases.csv"]
 
 

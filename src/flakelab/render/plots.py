@@ -56,9 +56,22 @@ def _save(figure, path: str | PathLike, dpi: int) -> None:
     try:
         fmt = figure_format(path)
         figure.tight_layout()
-        write_atomically(path, lambda temporary: figure.savefig(temporary, dpi=dpi, format=fmt))
+        write_atomically(path, lambda temporary: _savefig(figure, temporary, dpi, fmt))
     finally:
         plt.close(figure)
+
+
+def _savefig(figure, path: Path, dpi: int, fmt: str) -> None:
+    """``figure.savefig``, where a write the disk refused is raised as that ``OSError``:
+    matplotlib's PDF writer, closing its stream after it, fails again in zlib ("Error -2 while
+    flushing"), and that error, not the disk's, reached the user as an internal error."""
+    try:
+        figure.savefig(path, dpi=dpi, format=fmt)
+    except Exception as error:
+        refused = error.__context__
+        if isinstance(error, OSError) or not isinstance(refused, OSError):
+            raise
+        raise refused from None
 
 
 def plot_measurements(
