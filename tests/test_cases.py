@@ -33,6 +33,7 @@ from flakelab.cases.database import (
     latest_cases,
     migrate,
     open_database,
+    refusal,
     remove_case,
 )
 from flakelab.cases.exchange import CASE_FIELDS, CaseFileError, read_cases, write_cases
@@ -706,6 +707,31 @@ def test_a_database_url_s_password_is_hidden_as_sqlalchemy_hides_it(cli):
         run = cli(*args, env=env)
         assert run.returncode == 2 and "s3cret" not in run.stderr, run.stderr
         assert "postgresql+psycopg://flakelab:***@127.0.0.1:1/shop: " in run.stderr
+
+
+def test_a_sqlite_file_on_a_full_disk_is_refused_saying_so(tmp_path, monkeypatch):
+    """SQLite says "disk I/O error" when a full disk leaves no room for its -shm file, even
+    to read, which reads as a broken disk: the refusal says the disk is full and how full
+    (found on a 300 KiB tmpfs: 'cases list' refused so, and read again once room was made).
+    A disk with room, or a server's database, adds nothing."""
+    import shutil
+    from collections import namedtuple
+
+    from sqlalchemy.exc import OperationalError
+
+    engine = open_database(tmp_path / "shop.db")
+    server = create_engine("postgresql+psycopg://flakelab@db.shop/cases")
+    usage = namedtuple("usage", "total used free")
+    for said in ("disk I/O error", "database or disk is full"):
+        error = OperationalError("INSERT …", {}, sqlite3.OperationalError(said))
+        monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(300 << 10, 300 << 10, 0))
+        assert refusal(error, engine) == (
+            f"OperationalError: {said} (its disk is full, 0 KiB free: SQLite needs room beside "
+            "the file to write it, and even to read it; free some space and try again)"
+        )
+        assert refusal(error, server) == refusal(error) == f"OperationalError: {said}"
+        monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(1 << 40, 1 << 39, 1 << 39))
+        assert refusal(error, engine) == f"OperationalError: {said}"
 
 
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):

@@ -9,6 +9,7 @@ Writes happen in one transaction per call: a batch is stored whole or not at all
 from __future__ import annotations
 
 import os
+import shutil
 import sqlite3
 import time
 from collections import Counter
@@ -81,10 +82,11 @@ class DatabaseError(FlakelabError):
     """The database cannot be opened or written; names the URL and the problem."""
 
 
-def refusal(error: SQLAlchemyError) -> str:
+def refusal(error: SQLAlchemyError, engine: Engine | None = None) -> str:
     """Why the database refused a statement, in one line: SQLite's "database is locked" (a
     write kept waiting past :data:`BUSY_TIMEOUT_S` behind another process's) says so and what
-    to do; anything else is the driver's first line."""
+    to do; anything else is the driver's first line, and where ``engine``'s SQLite file lies
+    on a disk that is full, says so (:func:`_full_disk`)."""
     said = str(getattr(error, "orig", error)).splitlines()[0]
     if isinstance(error, OperationalError) and "database is locked" in said:
         return (
@@ -96,7 +98,28 @@ def refusal(error: SQLAlchemyError) -> str:
             f"another connection has held what this needs for over {BUSY_TIMEOUT_S} s (a write "
             "in progress, or a session left open in a transaction); try again when it is done"
         )
-    return f"{error.__class__.__name__}: {said}"
+    return f"{error.__class__.__name__}: {said}{_full_disk(engine)}"
+
+
+ROOM_NEEDED_BYTES = 1 << 20
+"""Free space below which a SQLite file's disk is called full when the file is refused: its
+shared-memory file alone takes 32 KiB, and a batch of cases a few hundred."""
+
+
+def _full_disk(engine: Engine | None) -> str:
+    """What the disk holding ``engine``'s SQLite file lacks, where it is full: SQLite calls
+    that "disk I/O error" when even a read cannot make its ``-shm`` file, which reads as a
+    broken disk; "" for another database, or a disk with room."""
+    file = _sqlite_file(str(engine.url)) if engine is not None else None
+    if not file:
+        return ""
+    free = shutil.disk_usage(Path(file).parent).free
+    if free >= ROOM_NEEDED_BYTES:
+        return ""
+    return (
+        f" (its disk is full, {free // 1024} KiB free: SQLite needs room beside the file to "
+        "write it, and even to read it; free some space and try again)"
+    )
 
 
 @contextmanager
@@ -115,7 +138,7 @@ def write_transaction(
             yield session
     except OperationalError as error:
         raise DatabaseError(
-            f"{database_label(engine)}: cannot {doing}: {refusal(error)}; {undone}"
+            f"{database_label(engine)}: cannot {doing}: {refusal(error, engine)}; {undone}"
         ) from None
     except FlakelabError:
         raise
@@ -202,6 +225,7 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             f"{shown}: no such database file; nothing was created (the commands that store "
             "cases or models create one)"
         )
+    engine = None
     try:
         # a command holds its database for a few transactions: each connection is closed when
         # its transaction ends, none is left open for the collector (psycopg warns of those);
@@ -213,7 +237,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             event.listen(engine, "connect", _postgres_settings)
         migrate(engine)
     except SQLAlchemyError as error:
-        raise DatabaseError(f"{shown}: cannot open the database: {refusal(error)}") from None
+        said = refusal(error, engine)
+        raise DatabaseError(f"{shown}: cannot open the database: {said}") from None
     except ImportError as error:  # the URL's driver (psycopg for PostgreSQL) is not installed
         raise DatabaseError(
             f"{shown}: cannot open the database: its driver is not installed ({error}); for "
@@ -453,7 +478,7 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
         raise CaseError(f"{database_label(engine)}: {clash}; nothing was stored") from None
     except SQLAlchemyError as error:  # e.g. a value the server refuses (DataError)
         raise DatabaseError(
-            f"{database_label(engine)}: cannot store the cases: {refusal(error)}; "
+            f"{database_label(engine)}: cannot store the cases: {refusal(error, engine)}; "
             "nothing was stored"
         ) from None
     return len(rows)

@@ -133,7 +133,7 @@ def store_lots(engine: Engine, shop: str, lots: TonerLots, read_from: int | None
     except SQLAlchemyError as error:
         raise DatabaseError(
             f"{database_label(engine)}: cannot store the tins of shop {shop!r}: "
-            f"{refusal(error)}; nothing was stored"
+            f"{refusal(error, engine)}; nothing was stored"
         ) from None
     return stored
 
