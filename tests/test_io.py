@@ -338,6 +338,19 @@ def test_an_atomic_write_names_the_file_asked_for_when_it_cannot_write(tmp_path)
     assert list((tmp_path / "panel.png").iterdir()) == []
 
 
+def test_an_atomic_write_takes_the_longest_name_the_file_system_takes(tmp_path):
+    """A file name of 250 characters, which the file system takes, is written: the
+    temporary file beside it, named after it, was eight characters longer and refused "File
+    name too long"; nothing is left beside it."""
+    from flakelab.io.records import write_atomically
+
+    longest = tmp_path / f"{'a' * 246}.csv"
+    longest.touch()
+    longest.unlink()  # the file system takes the name
+    write_atomically(longest, lambda t: t.write_text("x"))
+    assert longest.read_text() == "x" and [p.name for p in tmp_path.iterdir()] == [longest.name]
+
+
 def test_an_atomic_write_goes_through_a_link_and_keeps_the_file_s_permissions(tmp_path):
     """A link written to stays a link, and the file it names holds what was written; a file
     replaced keeps its mode (a private recipe stays private); a dangling link makes its

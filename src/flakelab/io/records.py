@@ -340,7 +340,9 @@ def write_atomically(path: str | PathLike, write: Callable[[Path], None]) -> Non
     existed = target.exists()
     mode = stat.S_IMODE(target.stat().st_mode) if existed else 0o666 & ~_umask()
     try:
-        handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+        # the name cut: with mkstemp's eight characters, a name near the file system's 255
+        # would make the temporary one too long, and a name the file system takes refused
+        handle, temporary = tempfile.mkstemp(prefix=f".{target.name[:100]}.", dir=target.parent)
     except OSError as error:  # named by the file asked for, not the temporary one
         raise OSError(error.errno, error.strerror, str(path)) from None
     os.close(handle)
