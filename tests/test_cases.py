@@ -734,6 +734,50 @@ def test_a_sqlite_file_on_a_full_disk_is_refused_saying_so(tmp_path, monkeypatch
         assert refusal(error, engine) == f"OperationalError: {said}"
 
 
+def test_a_database_in_a_folder_that_cannot_be_written_is_read_and_never_written(
+    cases, tmp_path, cli, monkeypatch
+):
+    """A shop's database on a read-only disk or share, or in another user's folder: SQLite
+    makes its -wal and -shm files beside the file even to read, and every command was refused
+    "unable to open database file" (found on a read-only tmpfs). It is now read through a
+    read-only, immutable connection that makes nothing beside it; a write is refused saying
+    why, and the cases stay. A new database there, or in no folder, is refused by name. (The
+    folder is made unwritable by os.access, as for a user who is not root: root writes any
+    folder whatever its mode.)"""
+    import os
+
+    folder = tmp_path / "share"
+    folder.mkdir()
+    file = folder / "shop.db"
+    add_cases(open_database(file), cases[:3])
+    csv_file = tmp_path / "more.csv"
+    write_cases(cases[3:5], csv_file)
+    access = os.access
+    monkeypatch.setattr(
+        database_module.os,
+        "access",
+        lambda path, mode: access(path, mode) and not (Path(path) == folder and mode & os.W_OK),
+    )
+    listed = cli("cases", "list", "-d", file, "--json")
+    assert listed.returncode == 0, listed.stderr
+    assert len(json.loads(listed.stdout)["cases"]) == 3
+    assert [p.name for p in folder.iterdir()] == ["shop.db"]  # no -wal, no -shm
+    imported = cli("cases", "import", csv_file, "-d", file, "--no-check")
+    assert (
+        imported.returncode == 2
+        and "cannot store the cases: attempt to write a readonly"
+        " database: the file, or its folder, cannot be written from here"
+        in imported.stderr
+    )
+    made = cli("cases", "generate", "--n", "2", "--database", folder / "new.db")
+    assert made.returncode == 2 and f"folder {folder} cannot be written" in made.stderr
+    nowhere = tmp_path / "no" / "new.db"
+    made = cli("cases", "generate", "--n", "2", "--database", nowhere)
+    assert made.returncode == 2 and f"{nowhere}: no folder {nowhere.parent}" in made.stderr
+    monkeypatch.undo()
+    assert count_cases(open_database(file)) == 3
+
+
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):
     """``-d shop.db`` is named in messages and titles as the file the colorist gave, its path
     (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an

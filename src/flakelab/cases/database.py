@@ -88,6 +88,11 @@ def refusal(error: SQLAlchemyError, engine: Engine | None = None) -> str:
     to do; anything else is the driver's first line, and where ``engine``'s SQLite file lies
     on a disk that is full, says so (:func:`_full_disk`)."""
     said = str(getattr(error, "orig", error)).splitlines()[0]
+    if isinstance(error, OperationalError) and "readonly database" in said:
+        return (
+            f"{said}: the file, or its folder, cannot be written from here (a read-only disk "
+            "or share, or another user's folder)"
+        )
     if isinstance(error, OperationalError) and "database is locked" in said:
         return (
             f"another process has been writing to it for over {BUSY_TIMEOUT_S} s (an import or "
@@ -113,7 +118,10 @@ def _full_disk(engine: Engine | None) -> str:
     file = _sqlite_file(str(engine.url)) if engine is not None else None
     if not file:
         return ""
-    free = shutil.disk_usage(Path(file).parent).free
+    try:
+        free = shutil.disk_usage(Path(file).parent).free
+    except OSError:  # no such folder: SQLite's own words say enough
+        return ""
     if free >= ROOM_NEEDED_BYTES:
         return ""
     return (
@@ -225,12 +233,15 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             f"{shown}: no such database file; nothing was created (the commands that store "
             "cases or models create one)"
         )
+    if file and not Path(file).exists():
+        _check_folder_for_a_new_file(Path(file), shown)
     engine = None
     try:
         # a command holds its database for a few transactions: each connection is closed when
         # its transaction ends, none is left open for the collector (psycopg warns of those);
         # an in-memory SQLite database lives in its one connection, which is kept
-        engine = create_engine(url, poolclass=StaticPool if file == "" else NullPool)
+        pool = StaticPool if file == "" else NullPool
+        engine = create_engine(url, poolclass=pool, **_read_only_connections(file))
         if engine.dialect.name == "sqlite":
             event.listen(engine, "connect", _sqlite_pragmas)
         elif engine.dialect.name == "postgresql":
@@ -245,6 +256,34 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             "PostgreSQL: pip install 'flakelab[postgres]'"
         ) from None
     return engine
+
+
+def _check_folder_for_a_new_file(file: Path, shown: str) -> None:
+    """A new SQLite file needs its folder to exist and to be written; SQLite says "unable to
+    open database file" for either."""
+    if not file.parent.is_dir():
+        raise DatabaseError(f"{shown}: no folder {file.parent}; nothing was created")
+    if not os.access(file.parent, os.W_OK | os.X_OK):
+        raise DatabaseError(
+            f"{shown}: folder {file.parent} cannot be written, so the database cannot be made "
+            "there; nothing was created"
+        )
+
+
+def _read_only_connections(file: str | None) -> dict:
+    """How to open a SQLite ``file`` whose folder cannot be written (a read-only disk or
+    share, another user's folder): through a read-only URI, since SQLite would make its
+    ``-wal`` and ``-shm`` files there even to read and was refused "unable to open database
+    file". Immutable (nothing changes it from here, so SQLite need not watch for changes)
+    unless a ``-wal`` file beside it holds changes a writer has not yet moved into the file,
+    which only a reader sharing the writer's ``-shm`` sees. Writes are refused "attempt to
+    write a readonly database". ``{}`` where the folder can be written, or for no file."""
+    if not file or not Path(file).is_file() or os.access(Path(file).parent, os.W_OK):
+        return {}
+    wal = Path(f"{file}-wal")
+    changes_pending = wal.is_file() and wal.stat().st_size > 0
+    uri = f"{Path(file).as_uri()}?mode=ro{'' if changes_pending else '&immutable=1'}"
+    return {"creator": lambda: sqlite3.connect(uri, uri=True, check_same_thread=False)}
 
 
 def _sqlite_file(url: str) -> str | None:
