@@ -45,6 +45,22 @@ def print_notes(notes: list[str]) -> None:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, a scheduler or service manager stopping the command),
+    raised where the command is, so that it stops as a Ctrl-C stops it: what it was writing
+    removed, a transaction rolled back, the line saying what it left. Python's default ends
+    the process on the spot, and left a temporary file the size of what was written."""
+
+
+def stop_on_sigterm() -> None:
+    """Make SIGTERM raise :class:`Terminated` in the main thread."""
+
+    def terminated(_signal, _frame):
+        raise Terminated
+
+    signal.signal(signal.SIGTERM, terminated)
+
+
 def reports_errors(command: F) -> F:
     """Turn user-input problems into one line on stderr and exit status 2 (never a traceback)."""
 
@@ -87,8 +103,10 @@ def interrupted(left: str | Callable[[], str]) -> Iterator[None]:
 
 def stop_interrupted(message: str) -> None:
     """Stop a command that a Ctrl-C cut short: one line, exit status 130 (128 + SIGINT), as
-    the shell's tools stop."""
-    _stop("interrupted", message, 130)
+    the shell's tools stop; 143 (128 + SIGTERM) and "terminated" for a SIGTERM."""
+    if isinstance(sys.exc_info()[1], Terminated):
+        _stop("terminated", message, 128 + signal.SIGTERM)
+    _stop("interrupted", message, 128 + signal.SIGINT)
 
 
 def _message(error: Exception) -> str:

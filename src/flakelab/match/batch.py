@@ -68,14 +68,18 @@ def match_readings(
         if progress:
             for future in futures:
                 future.add_done_callback(lambda f: f.cancelled() or progress())
-        for i in reversed(range(len(readings))):  # a reading no worker took yet is this one's
-            if futures[i].cancel():
-                results[i] = _matched(readings[i], forward, effect, keywords)
-                if progress:
-                    progress()
-        for i, future in enumerate(futures):
-            if not future.cancelled():
-                results[i] = future.result()
+        try:
+            for i in reversed(range(len(readings))):  # a reading no worker took yet is ours
+                if futures[i].cancel():
+                    results[i] = _matched(readings[i], forward, effect, keywords)
+                    if progress:
+                        progress()
+            for i, future in enumerate(futures):
+                if not future.cancelled():
+                    results[i] = future.result()
+        except BaseException:  # a Ctrl-C or SIGTERM: the readings no worker began are dropped,
+            pool.shutdown(cancel_futures=True)  # not all matched before the command stops
+            raise
     return results
 
 
