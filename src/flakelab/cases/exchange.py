@@ -46,6 +46,7 @@ from flakelab.io.records import (
     csv_separator,
     decimal_comma_in,
     decimal_point,
+    is_no_regular_file,
     numbers_at_once,
     write_atomically,
 )
@@ -230,9 +231,9 @@ def _told(lines: Iterable[str], progress: Callable[[], None]) -> Iterator[str]:
 
 def count_lines(path: str | PathLike) -> int | None:
     """The lines of a CSV case file, counted in its bytes, as :func:`read_cases` tells them
-    (for a progress bar: 0.1 s for 100 MB); None for a CxF3 file, or one that cannot be
-    read."""
-    if Path(path).suffix.lower() in CXF_SUFFIXES:
+    (for a progress bar: 0.1 s for 100 MB); None for a CxF3 file, one that cannot be read,
+    or a pipe (``/dev/stdin``, ``<(…)``), whose lines counting would consume."""
+    if Path(path).suffix.lower() in CXF_SUFFIXES or is_no_regular_file(path):
         return None
     try:
         with open(path, "rb") as handle:

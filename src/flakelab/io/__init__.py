@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import codecs
+import tempfile
 import zipfile
 from collections.abc import Callable
 from os import PathLike
@@ -21,7 +22,7 @@ from flakelab.io.json_document import read_json, write_json
 from flakelab.io.library_file import read_library, write_library
 from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
-from flakelab.io.records import NOT_UTF8, csv_separator
+from flakelab.io.records import NOT_UTF8, csv_separator, is_no_regular_file
 from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
@@ -119,7 +120,26 @@ def detect_format(path: str | PathLike) -> str:
 
 def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format."""
+    if is_no_regular_file(path):
+        return _read_through_a_copy(path)
     return FORMATS[detect_format(path)][0](path)
+
+
+def _read_through_a_copy(pipe: str | PathLike) -> list[Measurement]:
+    """The measurements a pipe (``/dev/stdin``, ``<(…)``) carries, read once into a
+    temporary file and read from there: its format is judged from its head and the reader
+    reads it from the start, and a pipe's head, read, is gone (the reader met the rest alone
+    and called it, say, a CSV file missing its 'sample' column). Errors name the pipe."""
+    with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
+        copy = Path(folder) / (Path(pipe).name or "input")
+        try:
+            copy.write_bytes(Path(pipe).read_bytes())
+        except OSError as error:
+            raise MeasurementFileError(pipe, f"cannot be read ({error.strerror})") from None
+        try:
+            return read_measurements(copy)
+        except MeasurementFileError as error:
+            raise MeasurementFileError(pipe, error.problem, field=error.field) from None
 
 
 def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:

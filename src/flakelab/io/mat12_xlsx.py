@@ -74,6 +74,28 @@ def _data_rows(rows: list[tuple], header: int) -> list[tuple[int, tuple]]:
     ]
 
 
+def _sheets(path: str | PathLike, handle) -> dict[str, list[tuple]]:
+    """Every sheet's rows of the workbook open in ``handle``. Read from a handle, not a path:
+    openpyxl refuses a path that does not end .xlsx (an internal error for a workbook named
+    otherwise, or read from a pipe), and the file was judged a workbook by its content."""
+    try:
+        workbook = openpyxl.load_workbook(handle, read_only=True, data_only=True)
+    except (zipfile.BadZipFile, KeyError, OSError, ValueError) as error:
+        raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
+    try:
+        with warnings.catch_warnings():
+            # a Date/Time cell whose serial is no date: openpyxl warns and gives an error
+            # value, which reads as no date, as any other Date/Time that is not one does
+            warnings.filterwarnings("ignore", "Cell .* is marked as a date", UserWarning)
+            return {
+                ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook
+            }
+    except (zipfile.BadZipFile, OSError, ValueError, KeyError) as error:
+        raise MeasurementFileError(path, f"truncated or corrupt workbook ({error})") from None
+    finally:
+        workbook.close()
+
+
 def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
     """Read every sample of an MA-T12 QC export.
 
@@ -84,21 +106,10 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         is not a regular grid, a non-numeric or NaN value, or an unknown geometry name.
     """
     try:
-        workbook = openpyxl.load_workbook(path, read_only=True, data_only=True)
-    except (zipfile.BadZipFile, KeyError, OSError, ValueError) as error:
-        raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
-    try:
-        with warnings.catch_warnings():
-            # a Date/Time cell whose serial is no date: openpyxl warns and gives an error
-            # value, which reads as no date, as any other Date/Time that is not one does
-            warnings.filterwarnings("ignore", "Cell .* is marked as a date", UserWarning)
-            sheets = {
-                ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook
-            }
-    except (zipfile.BadZipFile, OSError, ValueError, KeyError) as error:
-        raise MeasurementFileError(path, f"truncated or corrupt workbook ({error})") from None
-    finally:
-        workbook.close()
+        with open(path, "rb") as handle:
+            sheets = _sheets(path, handle)
+    except OSError as error:
+        raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
     if _SPECTRAL not in sheets:
         raise MeasurementFileError(
             path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'})"
