@@ -196,6 +196,30 @@ def test_a_reader_that_stops_reading_stops_the_command_quietly():
     assert process.wait(timeout=120) == 141 and said == ""
 
 
+def test_a_report_is_written_whole_whatever_the_standard_streams(tmp_path):
+    """Output in an encoding that cannot write ΔE00 (a redirected stream on Windows writes
+    cp1252) stopped the report half written, "'charmap' codec can't encode character 'Δ'":
+    it is written whole, in UTF-8. A closed stdout (``>&-``) stopped with a traceback, a
+    closed stdin with another: the command runs, as with /dev/null there."""
+    compare_example = [sys.executable, "-m", "flakelab.cli.main", "compare", "--example"]
+    legacy = {**os.environ, "PYTHONIOENCODING": "cp1252"}
+    run = subprocess.run(compare_example, capture_output=True, env=legacy, timeout=300)
+    assert run.returncode == 0, run.stderr.decode("utf-8", "replace")
+    assert "ΔE00" in run.stdout.decode("utf-8") and "PASS" in run.stdout.decode("utf-8")
+    closed = subprocess.run(compare_example, stderr=subprocess.PIPE, preexec_fn=lambda: os.close(1),
+                            timeout=300)  # fmt: skip
+    assert closed.returncode == 0 and closed.stderr == b""
+    database = tmp_path / "shop.db"
+    remove = [sys.executable, "-m", "flakelab.cli.main", "cases", "remove", "--synthetic", "-d",
+              str(database)]  # fmt: skip
+    generate = [*remove[:4], "generate", "--n", "2", "-d", str(database)]
+    assert subprocess.run(generate, capture_output=True, timeout=300).returncode == 0
+    asked = subprocess.run(remove, capture_output=True, text=True, preexec_fn=lambda: os.close(0),
+                           timeout=300)  # fmt: skip
+    assert asked.returncode == 2 and asked.stderr.startswith("error: cases remove --synthetic: "
+                                                            "confirm with --yes")  # fmt: skip
+
+
 def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path, cli):
     existing = tmp_path / "out.bmp"
     existing.write_text("keep me")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import inspect
 import os
@@ -30,6 +31,40 @@ from rich.table import Table
 from flakelab.core.wording import hidden_passwords
 from flakelab.errors import FlakelabError, MeasurementFileError
 
+
+def _open_closed_streams() -> None:
+    """A standard stream the caller closed (``flakelab … >&-``, a service started without
+    one) opened on ``/dev/null``: Python leaves it None, where the reports stopped with a
+    traceback, and the next file opened would take its descriptor, where stray output would
+    land."""
+    for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
+        if getattr(sys, name) is None:
+            with contextlib.suppress(OSError):
+                os.fstat(fd)
+                continue
+            null = os.open(os.devnull, os.O_RDWR)  # the lowest free descriptor: often fd
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+            setattr(sys, name, open(fd, mode, encoding="utf-8", closefd=False))
+
+
+def _encodable_output() -> None:
+    """Output written as UTF-8 where its encoding cannot write the reports' ΔE00, ° and ±
+    (a redirected stream on Windows, whose locale encoding is cp1252; a legacy terminal): the
+    report stopped half written, "'charmap' codec can't encode character 'Δ'". A terminal
+    keeps its encoding, with "?" for what it cannot show."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            "ΔE00 ° ± × – ‰".encode(stream.encoding or "ascii")
+        except (UnicodeEncodeError, LookupError):
+            with contextlib.suppress(AttributeError, OSError):  # not a text stream of ours
+                encoding = stream.encoding if stream.isatty() else "utf-8"
+                stream.reconfigure(encoding=encoding, errors="replace")
+
+
+_open_closed_streams()
+_encodable_output()
 console = Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
 """Tables and reports: the terminal's width, else ``COLUMNS``, else 110 columns (piped
 output that wraps no row of the main job's tables)."""
