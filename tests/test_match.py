@@ -17,6 +17,7 @@ from flakelab.core.difference import delta_E, delta_E_CIE2000, metamerism_indice
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
 from flakelab.core.tolerance import Limit, TextureLimit, Tolerance, tolerance_preset
 from flakelab.io import read_library, read_measurement, read_recipe
+from flakelab.match import batch
 from flakelab.match.correction import (
     NOISE_SD,
     PERSISTENT_SD,
@@ -607,7 +608,7 @@ def test_a_match_shows_the_shop_s_nearest_recorded_spray_outs(tmp_path, cli):
     assert run.returncode == 2 and "no such database file" in run.stderr
 
 
-def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli):
+def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli, monkeypatch):
     """``match --all``: each reading matched as ``match --sample`` matches it, its best
     recipe weighed into ``--recipe-dir`` (two samples named alike in two files, and none over
     the file read); a reading the model cannot read is named in its row and the rest go on;
@@ -647,6 +648,15 @@ def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli):
         return {k: v for k, v in report.items() if k not in ("seconds", "recipe_out")}
 
     assert [timeless(r) for r in shared] == [timeless(r) for r in reports]
+    # more processes than cores match no faster, 0.4 GB each: as many as the cores, and a note
+    with monkeypatch.context() as patched:
+        patched.setattr(batch, "usable_cores", lambda: 1)
+        assert (batch.workers_for(40, 40), batch.workers_for(40), batch.workers_for(1, 4)) == (
+            1, 1, 1)  # fmt: skip
+        capped = json.loads(cli(*args, "--all", "--jobs", "4", "--json").stdout)
+    assert capped["notes"] == ["--jobs 4: 1 process, one per core this machine lets it use; "
+                               "more would match no faster"]  # fmt: skip
+    assert [timeless(r) for r in capped["targets"]] == [timeless(r) for r in reports]
     # the folder of the file read: a recipe named as that file is written beside it instead
     beside = tmp_path / "door.json"
     write_measurements([replaced(target, sample="door")], beside)

@@ -440,7 +440,7 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
     their notes) head the report."""
     shop_tins = shop_tins or {"lots": None, "notes": []}
     from flakelab.io import write_recipe
-    from flakelab.match.batch import match_readings, workers_for
+    from flakelab.match.batch import match_readings, usable_cores, workers_for
 
     readable, refused = [], {}
     for i, reading in enumerate(readings):
@@ -449,11 +449,16 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
             readable.append(i)
         except FlakelabError as error:  # this sample's: named in its row
             refused[i] = error
+    workers = workers_for(len(readable), jobs)
+    if jobs is not None and jobs > workers == usable_cores():
+        shop_tins["notes"].append(f"--jobs {jobs}: {counted(workers, 'process', 'processes')}, "
+                                  "one per core this machine lets it use; more would match no "
+                                  "faster")  # fmt: skip
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching every sample", total=len(readable))
         matched = match_readings([readings[i] for i in readable], forward, effect,
-                                 jobs=workers_for(len(readable), jobs),
-                                 progress=lambda: bar.advance(task), **search)  # fmt: skip
+                                 jobs=workers, progress=lambda: bar.advance(task),
+                                 **search)  # fmt: skip
     results = refused | dict(zip(readable, matched, strict=True))
     reports, names = [], set(taken)
     for i, reading in enumerate(readings):
