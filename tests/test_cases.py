@@ -229,6 +229,12 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
         csv.writer(handle, delimiter=separator, quoting=quoting).writerows(rows)
     with pytest.raises(CaseFileError, match="not UTF-8 text; .* when asked for 'CSV UTF-8'$"):
         read_cases(saved)
+    # saved as its "Unicode Text" (UTF-16, a byte-order mark): read, Müller and all
+    with saved.open("w", encoding="utf-16", newline="") as handle:
+        csv.writer(handle, delimiter=separator, quoting=quoting).writerows([rows[0], rows[1]])
+    assert saved.read_bytes().startswith(b"\xff\xfe")
+    (read,) = read_cases(saved)
+    assert read.shop == "Müller" and read.recipe == tinned[0].recipe
 
 
 def test_cases_exported_for_a_european_spreadsheet_read_back_as_they_were(tinned, tmp_path):

@@ -149,6 +149,17 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
     (expected,) = read_measurements(plain)
     np.testing.assert_array_equal(back.reflectance, expected.reflectance)
     assert back.texture == expected.texture and back.sample == expected.sample
+    # its "Unicode Text": UTF-16 with a byte-order mark (either order), tab-separated;
+    # called "binary content" before
+    tabbed = io.StringIO()
+    csv.writer(tabbed, delimiter="\t").writerows(
+        [cell.replace(".", ",") if _is_decimal(cell) else cell for cell in row] for row in rows
+    )
+    for mark, encoding in ((b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be")):
+        european.write_bytes(mark + tabbed.getvalue().encode(encoding))
+        (back,) = read_measurements(european)
+        np.testing.assert_array_equal(back.reflectance, expected.reflectance)
+        assert back.sample == expected.sample and back.texture == expected.texture
 
 
 def test_a_csv_written_for_a_european_spreadsheet_is_the_one_it_saves(rich_measurement, tmp_path):

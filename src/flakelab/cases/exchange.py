@@ -48,6 +48,7 @@ from flakelab.io.records import (
     decimal_point,
     is_no_regular_file,
     numbers_at_once,
+    text_encoding,
     write_atomically,
 )
 
@@ -216,7 +217,7 @@ def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None)
     if path.suffix.lower() in CXF_SUFFIXES:
         return _from_measurements(path, read_cxf(path))
     try:  # row by row: 30,000 cases as one list of cells took 1.45 GB
-        with path.open(encoding="utf-8-sig", newline="") as handle:
+        with path.open(encoding=text_encoding(path), newline="") as handle:
             lines = handle if progress is None else _told(handle, progress)
             return _cases_from_lines(path, lines)
     except UnicodeDecodeError:

@@ -22,7 +22,13 @@ from flakelab.io.json_document import read_json, write_json
 from flakelab.io.library_file import read_library, write_library
 from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
-from flakelab.io.records import NOT_UTF8, csv_separator, is_no_regular_file
+from flakelab.io.records import (
+    NOT_UTF8,
+    UTF16_BOMS,
+    csv_separator,
+    is_no_regular_file,
+    text_encoding,
+)
 from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
@@ -120,26 +126,40 @@ def detect_format(path: str | PathLike) -> str:
 
 def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format."""
-    if is_no_regular_file(path):
+    if is_no_regular_file(path) or _is_utf16(path):
         return _read_through_a_copy(path)
     return FORMATS[detect_format(path)][0](path)
 
 
-def _read_through_a_copy(pipe: str | PathLike) -> list[Measurement]:
-    """The measurements a pipe (``/dev/stdin``, ``<(…)``) carries, read once into a
-    temporary file and read from there: its format is judged from its head and the reader
-    reads it from the start, and a pipe's head, read, is gone (the reader met the rest alone
-    and called it, say, a CSV file missing its 'sample' column). Errors name the pipe."""
+def _is_utf16(path: str | PathLike) -> bool:
+    try:
+        return text_encoding(path) == "utf-16"
+    except OSError:  # detect_format names it
+        return False
+
+
+def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
+    """The measurements of a pipe (``/dev/stdin``, ``<(…)``) or of UTF-16 text (a
+    spreadsheet's "Unicode Text"), read once into a temporary UTF-8 file and read from there.
+    A pipe's format is judged from its head and the reader reads it from the start, but its
+    head, once read, is gone (the reader met the rest alone and called it, say, a CSV file
+    missing its 'sample' column); UTF-16 was called "binary content". Errors name the
+    source."""
     with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
-        copy = Path(folder) / (Path(pipe).name or "input")
+        copy = Path(folder) / (Path(source).name or "input")
         try:
-            copy.write_bytes(Path(pipe).read_bytes())
+            data = Path(source).read_bytes()
+            if data.startswith(UTF16_BOMS):
+                data = data.decode("utf-16").encode("utf-8")
+            copy.write_bytes(data)
         except OSError as error:
-            raise MeasurementFileError(pipe, f"cannot be read ({error.strerror})") from None
+            raise MeasurementFileError(source, f"cannot be read ({error.strerror})") from None
+        except UnicodeDecodeError as error:
+            raise MeasurementFileError(source, f"not UTF-16 text ({error.reason})") from None
         try:
             return read_measurements(copy)
         except MeasurementFileError as error:
-            raise MeasurementFileError(pipe, error.problem, field=error.field) from None
+            raise MeasurementFileError(source, error.problem, field=error.field) from None
 
 
 def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:

@@ -87,9 +87,7 @@ def _sheets(path: str | PathLike, handle) -> dict[str, list[tuple]]:
             # a Date/Time cell whose serial is no date: openpyxl warns and gives an error
             # value, which reads as no date, as any other Date/Time that is not one does
             warnings.filterwarnings("ignore", "Cell .* is marked as a date", UserWarning)
-            return {
-                ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook
-            }
+            return {ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook}
     except (zipfile.BadZipFile, OSError, ValueError, KeyError) as error:
         raise MeasurementFileError(path, f"truncated or corrupt workbook ({error})") from None
     finally:

@@ -133,6 +133,20 @@ NOT_UTF8 = "not UTF-8 text; a spreadsheet saves a CSV as UTF-8 when asked for 'C
 """What a CSV file in another encoding is told (a spreadsheet's default, Windows-1252, for
 a shop named Müller)."""
 
+UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
+"""The byte-order marks of UTF-16 text: a spreadsheet's "Unicode Text", tab-separated."""
+
+
+def text_encoding(path: str | PathLike) -> str:
+    """The encoding to read a text file in: UTF-16 where it opens with that byte-order mark
+    (a spreadsheet's "Unicode Text"), else UTF-8, a byte-order mark skipped. A pipe is UTF-8:
+    its first bytes, once looked at, would be gone."""
+    if is_no_regular_file(path):
+        return "utf-8-sig"
+    with open(path, "rb") as handle:
+        return "utf-16" if handle.read(2) in UTF16_BOMS else "utf-8-sig"
+
+
 CSV_SEPARATORS = ",;\t"
 """A CSV file's cell separators: the comma, and the semicolon or tab of a spreadsheet in most
 of Europe, where the comma is the decimal mark (:func:`decimal_point`)."""
