@@ -92,12 +92,16 @@ def damage_text(text: str, rng: random.Random) -> str:
 
 def damage_encoding(text: str, rng: random.Random) -> bytes:
     """``text`` as a spreadsheet or a cut copy may leave its bytes: a byte-order mark alone
-    or before the text, the text in Windows-1252 with an 'é' in it, or cut inside one."""
-    kind = rng.randrange(4)
+    or before the text, the text in Windows-1252 with an 'é' in it, or cut inside one, or in
+    UTF-16 (a spreadsheet's "Unicode Text"), perhaps cut inside a character."""
+    kind = rng.randrange(5)
     if kind == 0:
         return b"\xef\xbb\xbf" + rng.choice((b"", b"\n"))
     if kind == 1:
         return b"\xef\xbb\xbf" + text.encode("utf-8")
+    if kind == 4:
+        data = text.encode("utf-16")
+        return data if rng.random() < 0.5 else data[: rng.randrange(2, len(data))]
     i = rng.randrange(len(text))
     accented = text[:i] + "é" + text[i:]
     if kind == 2:

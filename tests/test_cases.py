@@ -1607,6 +1607,10 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
         )
     again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
     assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
+    with european.open("w", encoding="utf-16", newline="") as handle:  # its "Unicode Text"
+        csv.writer(handle, delimiter="\t").writerows(csv.reader(manifest.read_text().splitlines()))
+    again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
+    assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
     european.write_text("target;recipe;sprayed;shop\ncar.cxf;shot.json;sprays.cxf;Müller\n",
                         encoding="cp1252")  # fmt: skip
     with pytest.raises(ManifestError, match="manifest-eu.csv: not UTF-8 text; .*'CSV UTF-8'"):

@@ -40,7 +40,7 @@ from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
-from flakelab.io.records import NOT_UTF8, csv_separator
+from flakelab.io.records import NOT_UTF8, csv_separator, text_encoding
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
 
@@ -70,7 +70,7 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
     must name the required columns and no unknown one."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = path.read_text(encoding=text_encoding(path))  # UTF-16: "Unicode Text"
     except FileNotFoundError:
         raise ManifestError(f"{path}: no such manifest file") from None
     except UnicodeDecodeError as error:
