@@ -439,6 +439,31 @@ def test_a_case_history_is_imported_from_a_pipe(tmp_path, cli):
     assert run.returncode == 0 and "imported 3 cases" in run.stderr, run.stderr
 
 
+def test_a_quote_left_open_is_named_by_its_row_in_every_csv(tmp_path, cli):
+    """A quote left open takes every line after it into one cell, past csv's limit of 131,072
+    characters: "internal error: Error: field larger than field limit" in the measurement,
+    case-history and manifest readers. Each now names the file and the row."""
+    from flakelab.cases.exchange import CaseFileError, read_cases
+    from flakelab.cases.manifest import ManifestError, read_manifest
+    from flakelab.data import example_path
+
+    left_open = '"' + "0.5," * 40_000  # a cell of 160,000 characters
+    measurements = tmp_path / "m.csv"
+    write_measurements(read_measurements(example_path("target")), measurements)
+    lines = measurements.read_text().splitlines()
+    measurements.write_text("\n".join([lines[0], lines[1], left_open, *lines[2:]]))
+    history = tmp_path / "h.csv"
+    assert cli("cases", "generate", "--n", "2", "--seed", "1", "--out", history).returncode == 0
+    history.write_text(history.read_text() + left_open)
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text(f"target,recipe,sprayed\n{left_open}\n")
+    for read, path, error, row in ((read_measurements, measurements, MeasurementFileError, 3),
+                                   (read_cases, history, CaseFileError, 4),
+                                   (read_manifest, manifest, ManifestError, 2)):  # fmt: skip
+        with pytest.raises(error, match=f"^{path}: row {row}: a cell longer than 131,072 "):
+            read(path)
+
+
 def test_a_named_pipe_is_written_into_not_replaced(tmp_path, cli):
     """``--recipe-out`` to a named pipe (or /dev/stdout, /dev/null): the recipe goes down the
     pipe, which stays one. Renamed over, it would become a regular file, and /dev/null

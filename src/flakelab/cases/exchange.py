@@ -43,6 +43,7 @@ from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     NOT_UTF8,
     csv_form,
+    csv_rows,
     csv_separator,
     decimal_comma_in,
     decimal_point,
@@ -249,7 +250,11 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
     lines = iter(lines)
     first = next(lines, "")
     separator = csv_separator(first) or ","
-    rows = csv.reader(itertools.chain([first], lines), delimiter=separator)
+
+    def refused(number: int, problem: str) -> CaseFileError:
+        return CaseFileError(f"{path}: row {number}: {problem}")
+
+    rows = csv_rows(itertools.chain([first], lines), separator, refused)
     header = next(rows, None)
     if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
         raise CaseFileError(

@@ -27,7 +27,6 @@ spreadsheet in most of Europe saves it; file paths relative to the manifest's fo
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Iterable
 from datetime import datetime
 from os import PathLike
@@ -40,7 +39,7 @@ from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
-from flakelab.io.records import NOT_UTF8, csv_separator, text_encoding
+from flakelab.io.records import NOT_UTF8, csv_rows, csv_separator, text_encoding
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
 
@@ -79,7 +78,11 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
         raise ManifestError(f"{path}: cannot be read as a CSV manifest ({error})") from None
     lines = text.splitlines()
     separator = csv_separator(lines[0]) if lines else None
-    rows = list(csv.reader(lines, delimiter=separator or ","))
+
+    def refused(number: int, problem: str) -> ManifestError:
+        return ManifestError(f"{path}: row {number}: {problem}")
+
+    rows = list(csv_rows(lines, separator or ",", refused))
     header = [cell.strip() for cell in rows[0]] if rows else []
     unknown = [c for c in header if c not in MANIFEST_COLUMNS]
     missing = [c for c in REQUIRED_COLUMNS if c not in header]

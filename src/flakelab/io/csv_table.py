@@ -32,6 +32,7 @@ from flakelab.io.records import (
     Reading,
     assemble,
     csv_form,
+    csv_rows,
     csv_separator,
     decimal_comma_in,
     decimal_point,
@@ -75,7 +76,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         raise MeasurementFileError(
             path, "no comma, semicolon or tab separated header", field="header"
         )
-    rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=delimiter))
+
+    def refused(number: int, problem: str) -> MeasurementFileError:
+        return MeasurementFileError(path, problem, field=f"row {number}")
+
+    rows = list(csv_rows(io.StringIO("\n".join(lines)), delimiter, refused))
     header = [h.strip() for h in rows[0]]
     columns = {h: i for i, h in enumerate(header)}
     for required in ("sample", "geometry"):

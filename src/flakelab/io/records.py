@@ -6,14 +6,16 @@ format reports the same problems the same way (file, field, problem).
 
 from __future__ import annotations
 
+import csv
 import errno
+import itertools
 import json
 import math
 import os
 import re
 import stat
 import tempfile
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from os import PathLike
@@ -50,6 +52,7 @@ __all__ = [
     "decimal_comma_in",
     "csv_form",
     "csv_separator",
+    "csv_rows",
     "NOT_UTF8",
 ]
 
@@ -158,6 +161,30 @@ def csv_separator(header: str) -> str | None:
     holds none."""
     found = max(CSV_SEPARATORS, key=header.count)
     return found if found in header else None
+
+
+def csv_rows(
+    lines: Iterable[str], delimiter: str, refused: Callable[[int, str], Exception]
+) -> Iterator[list[str]]:
+    """The rows of CSV ``lines`` as :func:`csv.reader` splits them. A row it cannot split is
+    raised as ``refused(row number, problem)`` makes it: a cell past csv's limit, which a
+    quote left open reaches by swallowing every line after it (an internal error before), or
+    a NUL."""
+    reader = csv.reader(lines, delimiter=delimiter)
+    for number in itertools.count(1):
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as error:
+            problem = str(error)
+            if "field limit" in problem:
+                problem = (
+                    f"a cell longer than {csv.field_size_limit():,} characters (a quote left "
+                    "open takes every line after it)"
+                )
+            raise refused(number, problem) from None
+        yield row
 
 
 def csv_form(decimal_comma: bool) -> tuple[str, str]:
