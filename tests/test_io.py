@@ -464,6 +464,35 @@ def test_a_quote_left_open_is_named_by_its_row_in_every_csv(tmp_path, cli):
             read(path)
 
 
+def test_json_nested_too_deeply_is_refused_by_name_in_every_reader(tmp_path, cli):
+    """``[[[[…`` a hundred thousand deep (a damaged or hostile file) stopped every JSON reader
+    with "internal error: RecursionError"; each now refuses it as JSON that does not parse,
+    naming the file."""
+    from flakelab.io import read_library
+    from flakelab.io.lots_file import read_lots
+    from flakelab.io.tolerance_file import read_tolerance
+    from flakelab.match.habits import read_habits
+
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    readers = (read_measurements, read_recipe, read_library, read_tolerance, read_lots,
+               read_habits)  # fmt: skip
+    for read in readers:
+        with pytest.raises(FlakelabError, match=f"^{deep}: .*nested too deeply to be read"):
+            read(deep)
+    from flakelab.cases.exchange import read_cases  # a case history's recipe cell, too
+
+    history = tmp_path / "history.csv"
+    assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", history).returncode == 0
+    rows = [*csv.reader(history.read_text().splitlines())]
+    rows[1][rows[0].index("recipe")] = "[" * 60_000 + "]" * 60_000
+    with history.open("w", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+    with pytest.raises(FlakelabError, match=f"^{history}: row 2: recipe: expected a JSON") as e:
+        read_cases(history)
+    assert len(str(e.value)) < len(str(history)) + 150  # the cell quoted cut, not 120,000 long
+
+
 def test_a_named_pipe_is_written_into_not_replaced(tmp_path, cli):
     """``--recipe-out`` to a named pipe (or /dev/stdout, /dev/null): the recipe goes down the
     pipe, which stays one. Renamed over, it would become a regular file, and /dev/null

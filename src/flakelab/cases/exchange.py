@@ -38,7 +38,7 @@ from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, shown
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     NOT_UTF8,
@@ -48,6 +48,7 @@ from flakelab.io.records import (
     decimal_comma_in,
     decimal_point,
     is_no_regular_file,
+    json_value,
     numbers_at_once,
     text_encoding,
     write_atomically,
@@ -399,11 +400,11 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
 def _recipe_field(where: str, text: str) -> dict:
     """A case's recipe as its file writes it: a JSON object toner → amount."""
     try:
-        recipe = json.loads(text)
+        recipe = json_value(text)
     except ValueError:
         recipe = None
     if not isinstance(recipe, dict):
-        raise CaseFileError(f"{where}: expected a JSON object toner → amount, got {text!r}")
+        raise CaseFileError(f"{where}: expected a JSON object toner → amount, got {shown(text)}")
     return recipe
 
 
@@ -412,12 +413,13 @@ def _tins_field(where: str, text: str) -> dict:
     if not text.strip():
         return {}
     try:
-        tins = json.loads(text)
+        tins = json_value(text)
     except ValueError:
         tins = None
     if not isinstance(tins, dict):
         raise CaseFileError(
-            f"{where}: expected a JSON object toner → {{lot, strength, shade_nm}}, got {text!r}"
+            f"{where}: expected a JSON object toner → {{lot, strength, shade_nm}}, got "
+            f"{shown(text)}"
         )
     return tins
 

@@ -25,6 +25,7 @@ from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
     assemble,
+    json_value,
     parse_conditions,
     parse_geometry_name,
     parse_lab,
@@ -60,7 +61,7 @@ def _require(path: str | PathLike, mapping: Any, key: str, kind: type, where: st
 def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement]:
     """Read a flakelab JSON measurement document."""
     try:
-        document = json.loads(Path(path).read_text(encoding="utf-8") if text is None else text)
+        document = json_value(Path(path).read_text(encoding="utf-8") if text is None else text)
     except json.JSONDecodeError as error:
         raise MeasurementFileError(
             path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"

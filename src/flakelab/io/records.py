@@ -53,6 +53,7 @@ __all__ = [
     "csv_form",
     "csv_separator",
     "csv_rows",
+    "json_value",
     "NOT_UTF8",
 ]
 
@@ -161,6 +162,16 @@ def csv_separator(header: str) -> str | None:
     holds none."""
     found = max(CSV_SEPARATORS, key=header.count)
     return found if found in header else None
+
+
+def json_value(text: str):
+    """``json.loads``. JSON nested deeper than Python's recursion reaches (a damaged or
+    hostile file: ``[[[[…`` a hundred thousand deep) is refused as any JSON that does not
+    parse, a :class:`json.JSONDecodeError`; it was an internal error, RecursionError."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise json.JSONDecodeError("nested too deeply to be read", text, 0) from None
 
 
 def csv_rows(
@@ -342,7 +353,7 @@ def read_json_file(path: Path, what: str, expected: str):
     :class:`~flakelab.errors.FlakelabError` naming it: missing, unreadable, or not JSON
     (``expected`` says what it should hold)."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        return json_value(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise FlakelabError(f"{path}: no such {what}") from None
     except (OSError, UnicodeDecodeError, ValueError) as error:
