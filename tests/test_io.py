@@ -480,6 +480,11 @@ def test_json_nested_too_deeply_is_refused_by_name_in_every_reader(tmp_path, cli
     for read in readers:
         with pytest.raises(FlakelabError, match=f"^{deep}: .*nested too deeply to be read"):
             read(deep)
+    deep_toml = tmp_path / "deep.toml"  # a library or tolerance in TOML, too
+    deep_toml.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    for read in (read_library, read_tolerance):
+        with pytest.raises(FlakelabError, match=f"^{deep_toml}: .*nested too deeply"):
+            read(deep_toml)
     from flakelab.cases.exchange import read_cases  # a case history's recipe cell, too
 
     history = tmp_path / "history.csv"

@@ -12,7 +12,7 @@ from importlib.resources import files
 from os import PathLike
 from pathlib import Path
 
-from flakelab.io.records import json_value, write_atomically
+from flakelab.io.records import json_value, toml_value, write_atomically
 from flakelab.library.toners import Library, LibraryError
 
 __all__ = ["read_library", "write_library", "demo_library_path"]
@@ -32,7 +32,7 @@ def read_library(path: str | PathLike | None = None) -> Library:
     except (OSError, UnicodeDecodeError) as error:
         raise LibraryError(f"{path}: cannot be read ({error})") from None
     try:
-        data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json_value(text)
+        data = toml_value(text) if path.suffix.lower() == ".toml" else json_value(text)
     except json.JSONDecodeError as error:
         raise LibraryError(
             f"{path}: line {error.lineno}, column {error.colno}: invalid JSON ({error.msg})"

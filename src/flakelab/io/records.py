@@ -15,6 +15,7 @@ import os
 import re
 import stat
 import tempfile
+import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -54,6 +55,7 @@ __all__ = [
     "csv_separator",
     "csv_rows",
     "json_value",
+    "toml_value",
     "NOT_UTF8",
 ]
 
@@ -172,6 +174,15 @@ def json_value(text: str):
         return json.loads(text)
     except RecursionError:
         raise json.JSONDecodeError("nested too deeply to be read", text, 0) from None
+
+
+def toml_value(text: str) -> dict:
+    """``tomllib.loads``, where arrays nested deeper than Python's recursion reaches are a
+    :class:`tomllib.TOMLDecodeError` as any TOML that does not parse (as :func:`json_value`)."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise tomllib.TOMLDecodeError("nested too deeply to be read") from None
 
 
 def csv_rows(

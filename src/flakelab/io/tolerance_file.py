@@ -23,7 +23,7 @@ from pathlib import Path
 
 from flakelab.core.tolerance import TOLERANCE_PRESETS, Tolerance
 from flakelab.errors import FlakelabError
-from flakelab.io.records import json_value
+from flakelab.io.records import json_value, toml_value
 
 __all__ = ["read_tolerance"]
 
@@ -43,7 +43,7 @@ def read_tolerance(name_or_path: str | PathLike) -> Tolerance:
     except UnicodeDecodeError:
         raise FlakelabError(f"{path}: not a UTF-8 text (TOML or JSON) tolerance file") from None
     try:
-        data = json_value(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        data = json_value(text) if path.suffix.lower() == ".json" else toml_value(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as error:
         raise FlakelabError(
             f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'} ({error})"
