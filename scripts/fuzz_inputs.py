@@ -71,7 +71,11 @@ SHEET_NAMES = ("Spectral Data", "Spectral data", "Color Data", "Texture Data", "
 
 def damage_text(text: str, rng: random.Random) -> str:
     lines = text.splitlines(keepends=True)
-    kind = rng.randrange(6)
+    kind = rng.randrange(8)
+    if kind >= 6:  # a quote left open before a long run of cells, or nesting 100,000 deep
+        i = rng.randrange(len(text))
+        inserted = '"' + "0.5," * 40_000 if kind == 6 else "[" * 100_000 + "]" * 100_000
+        return text[:i] + inserted + text[i:]
     if kind == 0 and lines:
         del lines[rng.randrange(len(lines))]
         return "".join(lines)

@@ -238,8 +238,7 @@ class _GeneratedStore:
         stored = self.added + self.found + len(landed)
         return (
             f"{stored} of the {counted(self.n, 'case')} are stored in "
-            f"{database_label(self.engine)}; the "
-            "same command again stores the rest"
+            f"{database_label(self.engine)}; the same command again stores the rest"
         )
 
     def summary(self, instrument: str, seed: int) -> str:
