@@ -234,7 +234,10 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             "cases or models create one)"
         )
     if file and not Path(file).exists():
-        _check_folder_for_a_new_file(Path(file), shown)
+        from flakelab.io.records import unwritable_folder  # the file formats: not at start-up
+
+        if problem := unwritable_folder(file):  # SQLite: "unable to open database file"
+            raise DatabaseError(f"{shown}: {problem}; nothing was created")
     engine = None
     try:
         # a command holds its database for a few transactions: each connection is closed when
@@ -258,18 +261,6 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
     return engine
 
 
-def _check_folder_for_a_new_file(file: Path, shown: str) -> None:
-    """A new SQLite file needs its folder to exist and to be written; SQLite says "unable to
-    open database file" for either."""
-    if not file.parent.is_dir():
-        raise DatabaseError(f"{shown}: no folder {file.parent}; nothing was created")
-    if not os.access(file.parent, os.W_OK | os.X_OK):
-        raise DatabaseError(
-            f"{shown}: folder {file.parent} cannot be written, so the database cannot be made "
-            "there; nothing was created"
-        )
-
-
 def _read_only_connections(file: str | None) -> dict:
     """How to open a SQLite ``file`` whose folder cannot be written (a read-only disk or
     share, another user's folder): through a read-only URI, since SQLite would make its
@@ -278,7 +269,9 @@ def _read_only_connections(file: str | None) -> dict:
     unless a ``-wal`` file beside it holds changes a writer has not yet moved into the file,
     which only a reader sharing the writer's ``-shm`` sees. Writes are refused "attempt to
     write a readonly database". ``{}`` where the folder can be written, or for no file."""
-    if not file or not Path(file).is_file() or os.access(Path(file).parent, os.W_OK):
+    from flakelab.io.records import unwritable_folder  # the file formats: not at start-up
+
+    if not file or not Path(file).is_file() or unwritable_folder(file) is None:
         return {}
     wal = Path(f"{file}-wal")
     changes_pending = wal.is_file() and wal.stat().st_size > 0

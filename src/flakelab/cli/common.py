@@ -391,7 +391,7 @@ def check_output_file(
     would be lost."""
     if path is None:
         return
-    from flakelab.io.records import is_no_regular_file  # the file formats: not at start-up
+    from flakelab.io.records import is_no_regular_file, unwritable_folder  # not at start-up
 
     if format_of is not None:
         format_of(path)
@@ -401,10 +401,8 @@ def check_output_file(
     if is_no_regular_file(path):  # /dev/null, a pipe: written into, whatever its folder
         if not os.access(path, os.W_OK):
             raise FlakelabError(f"{option}: {path}: cannot be written")
-    elif not target.parent.is_dir():
-        raise FlakelabError(f"{option}: {path}: no folder {target.parent}")
-    elif not os.access(target.parent, os.W_OK | os.X_OK):
-        raise FlakelabError(f"{option}: {path}: folder {target.parent} cannot be written")
+    elif problem := unwritable_folder(target):
+        raise FlakelabError(f"{option}: {path}: {problem}")
     if what := _named_same_file(path, reads or {}, _existing_same_file):
         raise FlakelabError(
             f"{option}: {path} is also {what}, which this command reads: writing it would lose "

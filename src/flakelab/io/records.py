@@ -48,6 +48,7 @@ __all__ = [
     "parse_conditions",
     "write_atomically",
     "is_no_regular_file",
+    "unwritable_folder",
     "numbers_at_once",
     "decimal_point",
     "decimal_comma_in",
@@ -375,6 +376,17 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def unwritable_folder(path: str | PathLike) -> str | None:
+    """Why no file can be made at ``path``: "no folder F", or "folder F cannot be written";
+    None where one can."""
+    folder = Path(path).resolve().parent
+    if not folder.is_dir():
+        return f"no folder {folder}"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"folder {folder} cannot be written"
+    return None
 
 
 def is_no_regular_file(path: str | PathLike) -> bool:
