@@ -40,7 +40,8 @@ def workers_for(readings: int, jobs: int | None = None) -> int:
     0.4 GB (``--jobs 40`` on two cores asked for 16 GB)."""
     if jobs is not None and jobs < 1:
         raise FlakelabError(f"--jobs: expected a whole number from 1, got {jobs}")
-    return max(1, min(jobs or usable_cores(), usable_cores(), readings))
+    cores = usable_cores()
+    return max(1, min(jobs or cores, cores, readings))
 
 
 def match_readings(

@@ -766,7 +766,6 @@ def _stored_report(engine: Engine, row: HabitsRow) -> dict:
     if found:
         raise DatabaseError(
             f"{database_label(engine)}: habits of shop {row.shop!r} (row {row.id}): {found[0]}: "
-            f"{found[1]}; "
-            "the database is left as it is"
+            f"{found[1]}; the database is left as it is"
         )
     return report
