@@ -187,13 +187,22 @@ def test_bad_options_exit_nonzero_without_traceback(cli):
 
 
 def test_a_reader_that_stops_reading_stops_the_command_quietly():
-    """``flakelab … --json | head`` : the pipe's reader gone, the command ends as the shell's
-    tools do (status 128 + SIGPIPE) instead of printing an error about its own output."""
-    command = [sys.executable, "-m", "flakelab.cli.main", "inspect", "--example", "--json"]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    process.stdout.close()
-    said = process.stderr.read().decode()
-    assert process.wait(timeout=120) == 141 and said == ""
+    """``flakelab … | head`` : the pipe's reader gone, the command ends as the shell's tools
+    do (status 128 + SIGPIPE) instead of printing an error about its own output, whether it
+    writes JSON or a table, and with ``2>&1`` too. A table (Rich's console) ended with
+    status 1, and one whose note went to a stderr gone too, with 1 as well."""
+    inspect = [sys.executable, "-m", "flakelab.cli.main", "inspect", "--example"]
+    for command in (inspect + ["--json"], inspect):
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        process.stdout.close()
+        said = process.stderr.read().decode()
+        assert process.wait(timeout=120) == 141 and said == "", command
+    for command, status in ((inspect, 141), (inspect[:-1] + ["no-such.csv"], 2)):
+        reader, writer = os.pipe()
+        os.close(reader)  # before the command writes a byte, to stdout or to stderr
+        process = subprocess.Popen(command, stdout=writer, stderr=writer)
+        os.close(writer)
+        assert process.wait(timeout=120) == status, command
 
 
 def test_a_report_is_written_whole_whatever_the_standard_streams(tmp_path):

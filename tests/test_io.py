@@ -584,14 +584,18 @@ def test_a_file_the_disk_cannot_hold_is_named_and_nothing_is_half_written(tmp_pa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cases.csv"]
 
 
-def test_a_command_stopped_by_sigterm_stops_as_a_ctrl_c_stops_it(tmp_path):
-    """``kill``, ``timeout`` or a service manager stop a command with SIGTERM: it ends as a
-    Ctrl-C ends it, one line and exit status 143, the file it was writing removed and the one
-    there before left as it was. Before, Python ended it on the spot, exit -15, and left the
+@pytest.mark.parametrize(("stop", "said_as"), [("SIGTERM", "terminated"), ("SIGHUP", "hung up")])
+def test_a_command_stopped_by_sigterm_stops_as_a_ctrl_c_stops_it(tmp_path, stop, said_as):
+    """``kill``, ``timeout`` or a service manager stop a command with SIGTERM, a closed
+    terminal or a dropped SSH session with SIGHUP: it ends as a Ctrl-C ends it, one line and
+    exit status 128 + the signal, the file it was writing removed and the one there before
+    left as it was. Before, Python ended it on the spot, exit -15 or -1, and left the
     temporary file beside it, as large as what had been written."""
     import signal
     import subprocess
     import sys
+
+    stop = getattr(signal, stop)
 
     cases = tmp_path / "cases.csv"
     cases.write_text("kept\n")
@@ -599,11 +603,11 @@ def test_a_command_stopped_by_sigterm_stops_as_a_ctrl_c_stops_it(tmp_path):
                "--seed", "1", "--out", str(cases)]  # fmt: skip
     run = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
     first = run.stderr.readline()  # the bar's first line: the file is being written
-    run.send_signal(signal.SIGTERM)
+    run.send_signal(stop)
     said = first + run.communicate(timeout=120)[1]
     assert "generating cases" in first, said
-    assert run.returncode == 128 + signal.SIGTERM, said
-    assert said.strip().splitlines()[-1].startswith("terminated: ") and "Traceback" not in said
+    assert run.returncode == 128 + stop, said
+    assert said.strip().splitlines()[-1].startswith(f"{said_as}: ") and "Traceback" not in said
     assert cases.read_text() == "kept\n" and [p.name for p in tmp_path.iterdir()] == [cases.name]
 
 

@@ -674,6 +674,45 @@ def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli, 
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
 
 
+def test_a_ctrl_c_stops_every_process_of_match_all_at_once_and_quietly(tmp_path):
+    """A Ctrl-C, or a closed terminal, signals every process of ``match --all --jobs 2``.
+    The worker printed a KeyboardInterrupt's traceback from wherever it was (its imports,
+    its wait for a reading), and multiprocessing's resource tracker, ended by a SIGHUP, a
+    warning and five KeyErrors. Now only the command's own line is said, as for one process,
+    and no process of the command is left."""
+    import os
+    import signal
+    import time
+    from dataclasses import replace as replaced
+
+    from flakelab.data import example_path
+    from flakelab.io import write_measurements
+
+    target = read_measurement(example_path("target"))
+    cars = tmp_path / "cars.json"
+    write_measurements([replaced(target, sample=f"car {i}") for i in range(12)], cars)
+    command = [sys.executable, "-m", "flakelab.cli.main", "match", str(cars), "--all", "--jobs",
+               "2", "--candidates", "1"]  # fmt: skip
+    for stop, said_as in ((signal.SIGINT, "interrupted"), (signal.SIGHUP, "hung up")):
+        run = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)  # fmt: skip
+        first = run.stderr.readline()  # the bar's first line: the worker is starting
+        os.killpg(run.pid, stop)  # as the terminal signals its foreground processes
+        said = first + run.communicate(timeout=120)[1]
+        assert "matching every sample" in first, said
+        assert run.returncode == 128 + stop, said
+        assert said.strip().splitlines()[-1] == f"{said_as}: stopped before it finished", said
+        assert "Traceback" not in said and "Warning" not in said, said
+        for _ in range(50):  # the worker and the tracker, gone with the command
+            try:
+                os.killpg(run.pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.1)
+        else:
+            pytest.fail(f"processes of the command left after {said_as}")
+
+
 def test_readings_shared_out_over_processes_are_matched_as_alone():
     """:func:`~flakelab.match.batch.match_readings` with a worker process beside this one: the
     worker takes readings from the front while this process takes them from the back, and

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import inspect
 import os
@@ -63,12 +64,22 @@ def _encodable_output() -> None:
                 stream.reconfigure(encoding=encoding, errors="replace")
 
 
+class _Console(Console):
+    """A console whose reader gone (``| head``) stops the command as every command stops
+    then: :func:`reports_errors` meets a :class:`BrokenPipeError` and exits 141. Rich's own
+    exits 1, and points stdout at ``/dev/null`` even where the pipe broken is stderr's."""
+
+    def on_broken_pipe(self) -> None:
+        self.quiet = True
+        raise BrokenPipeError(errno.EPIPE, os.strerror(errno.EPIPE))
+
+
 _open_closed_streams()
 _encodable_output()
-console = Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
+console = _Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
 """Tables and reports: the terminal's width, else ``COLUMNS``, else 110 columns (piped
 output that wraps no row of the main job's tables)."""
-errors = Console(stderr=True)
+errors = _Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
@@ -81,19 +92,27 @@ def print_notes(notes: list[str]) -> None:
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (``kill``, ``timeout``, a scheduler or service manager stopping the command),
-    raised where the command is, so that it stops as a Ctrl-C stops it: what it was writing
-    removed, a transaction rolled back, the line saying what it left. Python's default ends
-    the process on the spot, and left a temporary file the size of what was written."""
+    """SIGTERM (``kill``, ``timeout``, a scheduler or service manager stopping the command)
+    or SIGHUP (its terminal closed, its SSH session dropped), raised where the command is,
+    so that it stops as a Ctrl-C stops it: what it was writing removed, a transaction rolled
+    back, the line saying what it left. Python's default ends the process on the spot, and
+    left a temporary file the size of what was written."""
+
+    def __init__(self, signum: int = signal.SIGTERM) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
 
 
-def stop_on_sigterm() -> None:
-    """Make SIGTERM raise :class:`Terminated` in the main thread."""
+def stop_on_signals() -> None:
+    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread; a SIGHUP that
+    ``nohup`` ignores stays ignored."""
 
-    def terminated(_signal, _frame):
-        raise Terminated
+    def terminated(signum, _frame):
+        raise Terminated(signum)
 
     signal.signal(signal.SIGTERM, terminated)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+        signal.signal(signal.SIGHUP, terminated)
 
 
 def reports_errors(command: F) -> F:
@@ -138,9 +157,12 @@ def interrupted(left: str | Callable[[], str]) -> Iterator[None]:
 
 def stop_interrupted(message: str) -> None:
     """Stop a command that a Ctrl-C cut short: one line, exit status 130 (128 + SIGINT), as
-    the shell's tools stop; 143 (128 + SIGTERM) and "terminated" for a SIGTERM."""
-    if isinstance(sys.exc_info()[1], Terminated):
-        _stop("terminated", message, 128 + signal.SIGTERM)
+    the shell's tools stop; 143 (128 + SIGTERM) and "terminated" for a SIGTERM, 129 and "hung
+    up" for a SIGHUP."""
+    stopped = sys.exc_info()[1]
+    if isinstance(stopped, Terminated):
+        label = "hung up" if stopped.signum == signal.SIGHUP else "terminated"
+        _stop(label, message, 128 + stopped.signum)
     _stop("interrupted", message, 128 + signal.SIGINT)
 
 
@@ -159,7 +181,8 @@ def _stop(label: str, message: str, status: int) -> None:
     quote brackets (a CSV cell, "flakelab[postgres]") that are not terminal markup, and a
     database URL it names shows no password (:func:`hidden_passwords`)."""
     message = escape(hidden_passwords(message))
-    errors.print(f"[bold red]{label}:[/] {message}", highlight=False, soft_wrap=True)
+    with contextlib.suppress(OSError):  # stderr gone too (its terminal closed, | head)
+        errors.print(f"[bold red]{label}:[/] {message}", highlight=False, soft_wrap=True)
     raise typer.Exit(status) from None
 
 

@@ -34,7 +34,7 @@ from flakelab.cli.common import (
     readings_note,
     reflow_help,
     reports_errors,
-    stop_on_sigterm,
+    stop_on_signals,
     texture_table,
 )
 from flakelab.cli.correct import correct_command
@@ -473,7 +473,7 @@ reflow_help(app)  # after every command and group is registered
 
 def run() -> None:
     """Console entry point."""
-    stop_on_sigterm()
+    stop_on_signals()
     app(prog_name="flakelab")
 
 

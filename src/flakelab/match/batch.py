@@ -14,10 +14,15 @@ copy of a process whose OpenMP threads already ran may hang.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import multiprocessing
 import os
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+import signal
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import InvalidStateError, ProcessPoolExecutor
+from multiprocessing import resource_tracker
 
 from flakelab.errors import FlakelabError
 from flakelab.match.search import MatchResult, match
@@ -64,16 +69,20 @@ def match_readings(
             if progress:
                 progress()
         return results
-    with ProcessPoolExecutor(
-        max_workers=jobs - 1,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_start_worker,
-        initargs=(forward, effect, keywords),
-    ) as pool:
-        futures = [pool.submit(_match_in_worker, reading) for reading in readings]
+    with contextlib.ExitStack() as stack:
+        with _stops_ignored():  # what the workers start with: their stop is this process's
+            pool = stack.enter_context(
+                ProcessPoolExecutor(
+                    max_workers=jobs - 1,
+                    mp_context=multiprocessing.get_context("spawn"),
+                    initializer=_start_worker,
+                    initargs=(forward, effect, keywords),
+                )
+            )
+            futures = [pool.submit(_match_in_worker, reading) for reading in readings]
         if progress:
             for future in futures:
-                future.add_done_callback(lambda f: f.cancelled() or progress())
+                future.add_done_callback(functools.partial(_matched_by_a_worker, progress))
         try:
             for i in reversed(range(len(readings))):  # a reading no worker took yet is ours
                 if futures[i].cancel():
@@ -84,9 +93,68 @@ def match_readings(
                 if not future.cancelled():
                     results[i] = future.result()
         except BaseException:  # a Ctrl-C or SIGTERM: the readings no worker began are dropped,
-            pool.shutdown(cancel_futures=True)  # not all matched before the command stops
+            _end_workers(pool)  # and those begun abandoned, not all matched before it stops
             raise
     return results
+
+
+@contextlib.contextmanager
+def _stops_ignored() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP ignored while the workers (and multiprocessing's resource
+    tracker) are started, as they then keep ignoring them: a Ctrl-C, or a closed terminal,
+    signals every process of the command. Each worker then printed a KeyboardInterrupt's
+    traceback from wherever it was, and the tracker, ended by a SIGHUP, five more. This
+    process stops the pool instead: the readings no worker began are dropped."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    stops = [s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s]
+    handlers = {stop: signal.signal(stop, signal.SIG_IGN) for stop in stops}
+    try:
+        resource_tracker.ensure_running()
+        yield
+    finally:
+        for stop, handler in handlers.items():
+            signal.signal(stop, handler)
+
+
+def _matched_by_a_worker(progress: Callable[[], None], future) -> None:
+    """``progress`` called for a reading a worker matched, not for one cancelled or one whose
+    worker was ended (:func:`_end_workers`): the bar then showed more done after the line that
+    says the command stopped."""
+    if not future.cancelled() and future.exception() is None:
+        progress()
+
+
+def _end_workers(pool: ProcessPoolExecutor) -> None:
+    """The pool shut down without waiting, and each worker killed: it holds no file, and it
+    ignores the stops (:func:`_stops_ignored`), so the readings it had begun kept a Ctrl-C
+    waiting for seconds. Python 3.14 names this ``kill_workers``; before it, the workers are
+    the pool's private ``_processes``, which a shutdown forgets."""
+    if hasattr(pool, "kill_workers"):
+        pool.kill_workers()
+        return
+    manager = getattr(pool, "_executor_manager_thread", None)
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    _hush_cancelled_futures(manager)
+    for worker in workers:
+        with contextlib.suppress(OSError):
+            worker.kill()
+
+
+def _hush_cancelled_futures(manager: threading.Thread | None) -> None:
+    """Before Python 3.12 (gh-107219), the pool's manager thread, finding its workers ended,
+    sets an exception on futures already cancelled, and its InvalidStateError printed a
+    traceback after the line that says the command stopped."""
+    previous = threading.excepthook
+
+    def hook(args) -> None:
+        if args.thread is manager and issubclass(args.exc_type, InvalidStateError):
+            return
+        previous(args)
+
+    threading.excepthook = hook
 
 
 def _matched(reading, forward, effect, keywords: dict) -> MatchResult | FlakelabError:
