@@ -789,6 +789,8 @@ def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_p
     (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an
     in-memory database by its URL, a server's by its URL without the password."""
     from flakelab.core.wording import database_label
+    from flakelab.io.lots_file import write_lots
+    from flakelab.library.lots import TonerLot, TonerLots
 
     file = tmp_path / "shop.db"
     engine = open_database(file)
@@ -803,6 +805,24 @@ def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_p
     assert removed.returncode == 2
     assert removed.stderr.startswith(f"error: {file.resolve()}: no case 'no-such-case'")
     assert "sqlite:" not in listed.stdout + removed.stderr
+    assert database_label(f"sqlite:///{file}") == str(file)  # a URL not yet opened
+    assert database_label("postgresql://u:pw@h/db") == "postgresql://u:***@h/db"
+    # 'cases record' (its count of cases), 'lots save' and 'match --nearest' (its note) said
+    # the URL
+    near = cli("match", "--example", "--nearest", "2", "-i", "ma-t12", "-d", file, "--json")
+    assert f"in {file.resolve()} read at" in " ".join(json.loads(near.stdout)["notes"])
+    target, sprayout = example_path("target"), example_path("sprayout")
+    recipe = target.with_name("blue-metallic-recipe.json")
+    recorded = cli("cases", "record", target, "-r", recipe, "--sprayed", sprayout, "-d", file)
+    said = recorded.stderr.replace("\n", "")  # wrapped where the path is long
+    assert recorded.returncode == 0 and f"4 cases in {file.resolve()}" in said
+    tins = tmp_path / "tins.json"
+    write_lots(TonerLots.of([TonerLot("Carbon black", 0.97, 0.01, "K-9")]), tins)
+    saved = cli("lots", "save", tins, "--shop", "body shop", "-d", file)
+    assert saved.returncode == 0 and f"version 1 in {file.resolve()}" in saved.stderr.replace(
+        "\n", ""
+    )
+    assert "sqlite:" not in recorded.stderr + saved.stderr + near.stdout
 
 
 @pytest.mark.parametrize("database_url", ["postgresql"], indirect=True)  # SQLite's holds none

@@ -423,7 +423,8 @@ def record_case(
 def _print_recorded(report: dict, chosen: bool) -> None:
     """A recorded case as the shop reads it: its verdict, the models that learn from it, its
     tins, how far the spray-out lies from its recipe's prediction, what was not kept
-    (``chosen``: the geometries were chosen by ``--instrument``)."""
+    (``chosen``: the geometries were chosen by ``--instrument``), the cases now in its
+    database."""
     from flakelab.match.mixups import is_mismatched, mismatch_message
 
     failing, found, left_out = (
@@ -469,7 +470,8 @@ def _print_recorded(report: dict, chosen: bool) -> None:
             highlight=False,
         )
     count = report["cases_in_database"]
-    errors.print(f"{counted(count, 'case')} in {report['database']}", highlight=False)
+    errors.print(f"{counted(count, 'case')} in {database_label(report['database'])}",
+                 highlight=False)  # fmt: skip
 
 
 @cases_app.command("record-all")

@@ -45,6 +45,7 @@ from flakelab.cli.sources import (
     workplace_shop,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import SCALE_RESOLUTION_G
 
@@ -862,7 +863,7 @@ def save_command(
         return
     errors.print(
         f"stored the {report['tins']} tins of {lots} for shop {shop!r} as version "
-        f"{saved.version} in {report['database']}",
+        f"{saved.version} in {database_label(engine)}",
         highlight=False,
     )
 

@@ -55,7 +55,7 @@ from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.wording import counted
+from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
 
@@ -395,12 +395,14 @@ def _add_recorded_nearest(report: dict, found, searched: bool, database: str, sh
     """``--nearest``: the recorded cases ``found`` closest to the target, into ``report``, and a
     note where no case of the ``database`` (of ``shop``) was read at the model's
     geometries."""
+    from flakelab.cases.database import url_for
+
     report["recorded_nearest"] = [near.to_dict() for near in found]
     if not searched:
         whose = f"of shop {shop!r} " if shop else ""
         report["notes"].append(
-            f"--nearest: no recorded cases {whose}in {database} read at the model's geometries "
-            f"({', '.join(forward.geometries)})"
+            f"--nearest: no recorded cases {whose}in {database_label(url_for(database))} read "
+            f"at the model's geometries ({', '.join(forward.geometries)})"
         )
 
 

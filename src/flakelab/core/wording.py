@@ -24,11 +24,14 @@ def hidden_passwords(text: str) -> str:
 
 
 def database_label(engine) -> str:
-    """How a message names the database of ``engine`` (a SQLAlchemy engine): a SQLite file by
-    its path, as every other file is named (``/home/anna/shop.db``, not the URL
-    ``sqlite:////home/anna/shop.db`` that ``--database shop.db`` became); any other database
-    by its URL, the password hidden as SQLAlchemy hides it."""
-    url = engine.url
+    """How a message names the database of ``engine`` (a SQLAlchemy engine, or its URL): a
+    SQLite file by its path, as every other file is named (``/home/anna/shop.db``, not the
+    URL ``sqlite:////home/anna/shop.db`` that ``--database shop.db`` became); any other
+    database by its URL, the password hidden as SQLAlchemy hides it."""
+    url = getattr(engine, "url", engine)
+    if isinstance(url, str):
+        file = url.removeprefix("sqlite:///").partition("?")[0]
+        return file if url.startswith("sqlite:///") and file else hidden_passwords(url)
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         return url.database
     return str(url)
