@@ -784,6 +784,49 @@ def test_a_database_in_a_folder_that_cannot_be_written_is_read_and_never_written
     assert count_cases(open_database(file)) == 3
 
 
+@pytest.fixture
+def in_tokyo(monkeypatch):
+    """This process's local time is Tokyo's, UTC+9 with no summer time (a POSIX zone, which
+    needs no zone database)."""
+    import time
+
+    monkeypatch.setenv("TZ", "JST-9")
+    time.tzset()
+    yield
+    monkeypatch.undo()
+    time.tzset()
+
+
+def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cases, tmp_path,
+                                                                  cli):  # fmt: skip
+    """A case recorded at 09:15 in Tokyo is stored at 00:15 UTC, written so to JSON, and
+    shown at 09:15; a time without a zone in a case file or typed after --since is local
+    time. Before, every such time was taken as UTC and shown in UTC: the case read "00:15",
+    and ``--since 2026-12-03`` began at 09:00 there."""
+    from flakelab.core.times import shown_time
+
+    file = tmp_path / "shop.db"
+    target, sprayout = example_path("target"), example_path("sprayout")
+    recipe = target.with_name("blue-metallic-recipe.json")
+    recorded = cli("cases", "record", target, "-r", recipe, "--sprayed", sprayout, "--at",
+                   "2026-12-03 09:15:00", "-d", file, "--json")  # fmt: skip
+    assert json.loads(recorded.stdout)["created_at"] == "2026-12-03T00:15:00+00:00"
+    listed = cli("cases", "list", "-d", file)
+    assert "2026-12-03 09:15" in listed.stdout and "00:15" not in listed.stdout
+    assert shown_time("2026-12-03T00:15:00") == "2026-12-03 09:15"  # as SQLite keeps it
+    assert shown_time("2026-12-02T16:00:00+00:00", day=True) == "2026-12-03"
+    written = replace(cases[0], created_at=datetime(2026, 12, 3, 8, 0))  # a shop's file
+    assert written.created_at == datetime(2026, 12, 2, 23, 0, tzinfo=UTC)
+    add_cases(open_database(file), [written])
+    for since, kept in (("2026-12-03", 2), ("2026-12-03 08:30:00", 1)):
+        run = cli("cases", "list", "-d", file, "--json")
+        assert len(json.loads(run.stdout)["cases"]) == 2
+        out = tmp_path / f"since-{kept}.csv"
+        assert cli("cases", "export", "-d", file, "--since", since, out).returncode == 0
+        assert len(read_cases(out)) == kept, since
+    assert len(select_cases([written], since=datetime(2026, 12, 3, 8, 0))) == 1
+
+
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):
     """``-d shop.db`` is named in messages and titles as the file the colorist gave, its path
     (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an

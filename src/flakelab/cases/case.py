@@ -20,6 +20,7 @@ from flakelab.core.measurement import (
     outside,
 )
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.times import zoned_here
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.library.lots import TonerLot
@@ -41,11 +42,6 @@ OUTCOMES = ("accepted", "corrected", "rejected")
 TEXT_LENGTHS = {"case_id": 64, "shop": 120, "instrument": 60, "conditions": 30}
 """The longest text each field may hold: the database's column widths (PostgreSQL refuses a
 longer value; SQLite would keep it), checked with every case so that no store fails on one."""
-
-
-def zoned(time: datetime) -> datetime:
-    """``time``, taken as UTC where it has no zone (SQLite and some case files keep none)."""
-    return time if time.tzinfo is not None else time.replace(tzinfo=UTC)
 
 
 class CaseError(FlakelabError):
@@ -138,9 +134,10 @@ def _texture_readings(where: str, name: str, readings) -> dict[str, float]:
 class Case:
     """Spectra on the storage grid, ``[G, 31]`` reflectance factors; ``recipe`` maps toner
     names to mass fractions (summing to 1); textures map :data:`TEXTURE_READINGS` names;
-    ``created_at`` without a time zone is taken as UTC. ``tins`` maps a toner of the recipe
-    to the tin it was poured from, as the shop had read it (none recorded: every toner at the
-    standard, as far as anyone knows)."""
+    ``created_at`` without a time zone is taken as local time
+    (:func:`~flakelab.core.times.zoned_here`), and kept in UTC. ``tins`` maps a toner of the
+    recipe to the tin it was poured from, as the shop had read it (none recorded: every toner
+    at the standard, as far as anyone knows)."""
 
     case_id: str
     geometries: tuple[Geometry, ...]
@@ -183,7 +180,7 @@ class Case:
         total = sum(amounts.values())
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
         object.__setattr__(self, "tins", _tins(where, self.tins, self.recipe))
-        object.__setattr__(self, "created_at", zoned(self.created_at))
+        object.__setattr__(self, "created_at", zoned_here(self.created_at).astimezone(UTC))
         for name, longest in TEXT_LENGTHS.items():
             text = getattr(self, name)
             if not isinstance(text, str) or len(text) > longest:
@@ -240,9 +237,9 @@ def select_cases(
     since: datetime | None = None,
     geometries: Sequence[str] | None = None,
 ) -> list[Case]:
-    """The cases of ``shop`` made at or after ``since`` (without a zone: UTC), read at
+    """The cases of ``shop`` made at or after ``since`` (without a zone: local time), read at
     ``geometries`` (:func:`cases_at`); None: any shop, any time, as read."""
-    since = since and zoned(since)
+    since = since and zoned_here(since)
     chosen = [
         c
         for c in cases

@@ -25,9 +25,10 @@ from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLA
 from sqlalchemy.orm import Session
 from sqlalchemy.pool import NullPool, StaticPool
 
-from flakelab.cases.case import Case, CaseError, tin_fields, zoned
+from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.cases.schema import CaseRow
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.times import zoned, zoned_here
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
@@ -423,7 +424,7 @@ def _case_of(row: CaseRow) -> Case:
         conditions=row.conditions,
         outcome=row.outcome,
         synthetic=row.synthetic,
-        created_at=row.created_at,
+        created_at=zoned(row.created_at),
         tins=row.tins or {},
     )
 
@@ -757,7 +758,7 @@ def _of_shop_since(query, shop: str | None, since: datetime | None):
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
     if since is not None:  # stored in UTC (SQLite keeps no zone)
-        query = query.where(CaseRow.created_at >= zoned(since).astimezone(UTC))
+        query = query.where(CaseRow.created_at >= zoned_here(since).astimezone(UTC))
     return query
 
 

@@ -32,9 +32,10 @@ from datetime import datetime
 from os import PathLike
 from pathlib import Path
 
-from flakelab.cases.case import Case, zoned
+from flakelab.cases.case import Case
 from flakelab.cases.record import AUTO_OUTCOME, case_from_readings
 from flakelab.core.measurement import Measurement
+from flakelab.core.times import zoned_here
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
@@ -203,4 +204,4 @@ def _time(where: str, cell: str) -> datetime | None:
         raise ManifestError(
             f"{where}: at: expected an ISO 8601 date and time, got {cell!r}"
         ) from None
-    return zoned(when)
+    return zoned_here(when)

@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session
 from flakelab.cases.case import TEXT_LENGTHS
 from flakelab.cases.database import DatabaseError, reading_rows, refusal
 from flakelab.cases.schema import ShopLotsRow
+from flakelab.core.times import shown_time
 from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 from flakelab.io.lots_file import lots_document, lots_from_document
@@ -47,7 +48,7 @@ class StoredLots:
     saved_at: datetime
 
     def describe(self) -> str:
-        when = f"{self.saved_at:%Y-%m-%d %H:%M}"
+        when = shown_time(self.saved_at)
         return f"the tins stored for shop {self.shop!r} (version {self.version} of {when})"
 
 

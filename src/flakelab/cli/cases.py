@@ -34,6 +34,7 @@ from flakelab.cli.common import (
 )
 from flakelab.cli.matcher import ResolutionOption
 from flakelab.cli.sources import (
+    TIME_FORMATS,
     WORKPLACE_SHOP,
     CasesArgument,
     DatabaseOption,
@@ -54,6 +55,7 @@ from flakelab.cli.sources import (
     shop_cases,
     since_option,
     source_arrays,
+    typed_time,
     which_cases,
 )
 from flakelab.core.defaults import DEFAULT_TOLERANCE
@@ -62,6 +64,7 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     instruments_reading,
 )
+from flakelab.core.times import shown_time
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
@@ -136,7 +139,6 @@ def generate(
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them. A database
     takes them in batches of 500: the same command again, after a Ctrl-C, stores the rest."""
-    from flakelab.cases.case import zoned
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file, write_cases
     from flakelab.cases.generator import World, WorldSettings
@@ -157,7 +159,7 @@ def generate(
     if to_file:
         # before the cases are generated, not after
         check_output_file(out, "--out", reads={"--library": library})
-    batches = world.cases(n, seed, shop=shop, start=start and zoned(start))
+    batches = world.cases(n, seed, shop=shop, start=start)
     if to_file:
         with interrupted(f"nothing was written to {out}"), progress_bar() as bar:
             task = bar.add_task("generating cases", total=n)
@@ -320,8 +322,9 @@ def record_case(
     at: Annotated[
         datetime | None,
         typer.Option(
-            formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
-            help="When the spray-out was made (UTC).",
+            formats=TIME_FORMATS,
+            callback=typed_time,
+            help="When the spray-out was made (local time).",
             show_default="the spray-out file's date, else now",
         ),
     ] = None,
@@ -348,7 +351,7 @@ def record_case(
     The case joins the database, where 'cases habits', 'model adapt' and 'train' read it.
     It keeps every geometry both readings share, so each model whose geometries are among
     them learns from it; the same spray-out recorded twice is refused."""
-    from flakelab.cases.case import tin_fields, zoned
+    from flakelab.cases.case import tin_fields
     from flakelab.cases.database import add_cases, case_exists, count_cases, open_database
     from flakelab.cases.record import case_from_readings, judged_outcome
     from flakelab.cases.shop_lots import stored_lots
@@ -377,7 +380,7 @@ def record_case(
         shop=shop,
         outcome=outcome,
         tolerance=tol,
-        created_at=at and zoned(at),
+        created_at=at,
         case_id=case_id,
         tins=tins,
     )
@@ -434,7 +437,7 @@ def _print_recorded(report: dict, chosen: bool) -> None:
     case_id, at = report["case_id"], datetime.fromisoformat(report["created_at"])
     console.print(
         f"recorded case [bold]{case_id}[/] for {report['shop']!r}: {report['outcome']} "
-        f"(the spray-out {verdict}), {report['instrument']} at {at:%Y-%m-%d %H:%M}",
+        f"(the spray-out {verdict}), {report['instrument']} at {shown_time(at)}",
         highlight=False,
     )
     if models := report["read_by_models_of"]:
@@ -684,7 +687,7 @@ def list_cases(
         table.add_column("shop")
     for row in rows:
         cells = [
-            row["created_at"][:16].replace("T", " "),
+            shown_time(row["created_at"]),
             short_id(row["case_id"]),
             row["outcome"],
             f"{row['worst_de00']:.2f} {row['worst_geometry']}",
@@ -888,7 +891,7 @@ def nearest_table(rows: list[dict], title: str) -> Table:
         cells = [
             str(k),
             short_id(row["case_id"]),
-            row["created_at"][:10],
+            shown_time(row["created_at"], day=True),
             row["outcome"],
             f"[{colour}]{row['sprayout_de00_max']:.2f}[/] {row['worst_geometry']}",
             f"{row['target_de00_max']:.2f}",
@@ -945,7 +948,7 @@ def remove(
     what = (
         "its stored values could not be read"
         if case is None
-        else f"{case.shop}, {case.outcome}, {case.created_at:%Y-%m-%d %H:%M}"
+        else f"{case.shop}, {case.outcome}, {shown_time(case.created_at)}"
     )
     errors.print(f"removed case {case_id} ({what}) from {where}", highlight=False)
 
@@ -1242,7 +1245,7 @@ def _drift_report(drift: dict, chosen: list) -> dict:
     message = (
         "the habits changed over these cases: "
         + ", ".join(f"{n.replace('_', ' ')} {early[n]:+.2%} → {late[n]:+.2%}" for n in changed)
-        + f" from about {split:%Y-%m-%d %H:%M} (the last {len(chosen) - drift['split']} of "
+        + f" from about {shown_time(split)} (the last {len(chosen) - drift['split']} of "
         f"{counted(len(chosen), 'case')}); read them from those cases with {since_option(split)}"
     )
     return {
@@ -1348,13 +1351,19 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
     for row in rows:
         outcomes = row.get("outcomes", {})
         h, t = row["habits"], row["tins"]
+        read, saved = (
+            shown_time(h and h["created_at"], day=True),
+            shown_time(t and t["saved_at"], day=True),
+        )
+        habits = h and f"{ShopHabits.from_report(h).describe()}, {read}"
+        tins = t and f"{t['tins']}, version {t['version']}, {saved}"
         table.add_row(
             row["shop"],
             str(row["cases"]),
             " / ".join(str(outcomes.get(k, 0)) for k in OUTCOMES),
-            row.get("last", "")[:10],
-            "" if h is None else f"{ShopHabits.from_report(h).describe()}, {h['created_at'][:10]}",
-            "" if t is None else f"{t['tins']}, version {t['version']}, {t['saved_at'][:10]}",
+            shown_time(row.get("last"), day=True),
+            habits or "",
+            tins or "",
             ", ".join(row["models"]),
         )
     console.print(table)

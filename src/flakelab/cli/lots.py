@@ -45,6 +45,7 @@ from flakelab.cli.sources import (
     workplace_shop,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.core.times import shown_time
 from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import SCALE_RESOLUTION_G
@@ -807,7 +808,7 @@ def show_command(
             f"{t.strength:.3f} ± {t.strength_sd:.3f}",
             _shade_text(t.shade_nm, t.shade_sd_nm, t.shade_read, kinds.get(name)),
             str(t.panels),
-            t.calibrated[:10],
+            shown_time(t.calibrated, day=True),
             _read_with_text(found.read_with(name)),
         )
     console.print(table)
@@ -937,7 +938,7 @@ def history_command(
         table.add_column(column, justify="left" if column == "changed" else "right")
     for row in report:
         changed = "; ".join(_change_text(c) for c in row["changed"])
-        saved = row["saved_at"][:16].replace("T", " ")
+        saved = shown_time(row["saved_at"])
         table.add_row(str(row["version"]), saved, str(row["tins"]), changed)
     console.print(table)
 
@@ -988,7 +989,7 @@ def _show_shops(database: str | None, json_output: bool) -> None:
             row["shop"],
             str(row["version"]),
             str(row["tins"]),
-            row["saved_at"][:16].replace("T", " "),
+            shown_time(row["saved_at"]),
         )
     console.print(table)
 

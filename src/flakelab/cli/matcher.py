@@ -11,6 +11,7 @@ import typer
 
 from flakelab.cli.common import errors
 from flakelab.cli.sources import current_forward, existing_engine, learned_forward, since_option
+from flakelab.core.times import shown_time
 from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 
@@ -210,7 +211,7 @@ def habits_for(
         since = datetime.fromisoformat(found.changed_since)
         errors.print(
             f"[yellow]warning:[/] {path or shop}: habits read over a change of the shop's "
-            f"habits, from about {since:%Y-%m-%d %H:%M}: read them again from the recent "
+            f"habits, from about {shown_time(since)}: read them again from the recent "
             f"cases (flakelab cases habits {since_option(since)})",
             highlight=False,
         )

@@ -12,6 +12,7 @@ import numpy as np
 import typer
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
+from flakelab.core.times import shown_time, zoned, zoned_here
 from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 
@@ -79,11 +80,22 @@ ShopModelOption = Annotated[
 ]
 
 
+TIME_FORMATS = ["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"]
+"""How a date and time may be typed at the command line."""
+
+
+def typed_time(when: datetime | None) -> datetime | None:
+    """A date and time typed at the command line, in this machine's local time
+    (:func:`~flakelab.core.times.zoned_here`)."""
+    return when and zoned_here(when)
+
+
 SinceOption = Annotated[
     datetime | None,
     typer.Option(
-        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
-        help="Only cases made on or after this date (UTC), e.g. since the shop's new gun.",
+        formats=TIME_FORMATS,
+        callback=typed_time,
+        help="Only cases made on or after this date (local time), e.g. since the shop's new gun.",
     ),
 ]
 
@@ -101,9 +113,10 @@ UnseenOption = Annotated[
 StartOption = Annotated[
     datetime | None,
     typer.Option(
-        formats=["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"],
-        help="Date and time (UTC) of the first generated case.",
-        show_default="2026-01-01",
+        formats=TIME_FORMATS,
+        callback=typed_time,
+        help="Date and time (local time) of the first generated case.",
+        show_default="2026-01-01 00:00 UTC",
     ),
 ]
 
@@ -203,7 +216,7 @@ def instrument_key(name: str) -> str:
 def which_cases(shop: str | None, since: datetime | None) -> str:
     """The cases ``shop`` and ``since`` choose, in words for a message."""
     whose = f"from shop {shop!r}" if shop else "from any shop"
-    return whose + (f" since {since:%Y-%m-%d %H:%M}" if since else "")
+    return whose + (f" since {shown_time(since)}" if since else "")
 
 
 def unseen_cases(model, chosen: list, source: str, which: str) -> tuple[list, int]:
@@ -219,7 +232,7 @@ def unseen_cases(model, chosen: list, source: str, which: str) -> tuple[list, in
 
 def since_option(when: datetime) -> str:
     """The ``--since`` that reads the cases made at ``when`` and after."""
-    return f"--since {when:%Y-%m-%dT%H:%M:%S}"
+    return f"--since {zoned(when).astimezone():%Y-%m-%dT%H:%M:%S}"
 
 
 def chosen_model(
@@ -257,7 +270,8 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
         (row,) = list_models(engine, name, version)
         return model, (
             f"{database_label(engine)}: {name} v{version}, {row['status']}, held-out ΔE00 "
-            f"{row['held_out_de00']:.3f} when registered ({row['created_at'][:10]})"
+            f"{row['held_out_de00']:.3f} when registered "
+            f"({shown_time(row['created_at'], day=True)})"
         )
     if spec in INSTRUMENT_GEOMETRIES:
         return current_model_and_source(existing_engine(database), spec)
