@@ -186,6 +186,22 @@ def test_bad_options_exit_nonzero_without_traceback(cli):
         assert "Traceback" not in result.stderr
 
 
+def test_an_instrument_is_taken_as_the_instrument_spells_it(cli):
+    """``-i MA-T12``, as the instrument's label spells it, is ``ma-t12``: ``match`` refused it,
+    "no shipped model for 'MA-T12' (shipped: five-angle, ma-t12)"; a name of no instrument is
+    refused naming the instruments, not as one without a model."""
+    spelt = json.loads(cli("match", "--example", "-i", "MA T12", "--candidates", "1",
+                           "--json").stdout)  # fmt: skip
+    plain = json.loads(cli("match", "--example", "-i", "ma-t12", "--candidates", "1",
+                           "--json").stdout)  # fmt: skip
+    assert spelt["model_id"] == plain["model_id"] and "ma-t12" in spelt["model_id"]
+    assert spelt["candidates"][0]["recipe"] == plain["candidates"][0]["recipe"]
+    refused = cli("match", "--example", "-i", "mat99")
+    assert refused.returncode == 2 and refused.stderr.strip() == (
+        "error: instrument: expected one of byk-mac-i, ma-t6, ma-t12, five-angle, got 'mat99'"
+    )
+
+
 def test_a_reader_that_stops_reading_stops_the_command_quietly():
     """``flakelab … | head`` : the pipe's reader gone, the command ends as the shell's tools
     do (status 128 + SIGPIPE) instead of printing an error about its own output, whether it

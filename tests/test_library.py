@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import colour
 import numpy as np
@@ -119,6 +120,28 @@ def test_recipe_validation():
         lib.fractions({"Al coarse": -1.0})
     with pytest.raises(LibraryError, match="amounts sum to 90, expected the can's 100"):
         lib.fractions({"Al coarse": 50.0, "Phthalo blue GS": 40.0}, total=100.0)
+
+
+def test_a_toner_name_refused_names_the_one_it_likely_means():
+    """A name typed in lower case, or copied from a spreadsheet with a non-breaking space,
+    is refused naming the toner it means: the spelling alone was compared, case and all, and
+    both were refused without a hint. A misspelling is named as before; a name like none, not
+    at all."""
+    from flakelab.library import did_you_mean
+
+    lib = read_library()
+    for typed, meant in (
+        ("phthalo blue gs", "Phthalo blue GS"),
+        ("Al\xa0medium", "Al medium"),
+        ("  carbon  BLACK ", "Carbon black"),
+        ("Carbon blak", "Carbon black"),
+    ):
+        assert did_you_mean(typed, lib.names) == f" (did you mean {meant!r}?)", typed
+        with pytest.raises(LibraryError, match=re.escape(f"(did you mean {meant!r}?)")):
+            lib.fractions({typed: 1.0})
+        with pytest.raises(LibraryError, match=re.escape(f"(did you mean {meant!r}?)")):
+            lib[typed]  # noqa: B018
+    assert did_you_mean("Quinacridone gold", ["Al medium", "Carbon black"]) == ""
 
 
 def test_library_file_with_missing_spectrum_or_bad_field_is_rejected(tmp_path):

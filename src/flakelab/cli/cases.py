@@ -49,6 +49,7 @@ from flakelab.cli.sources import (
     StartOption,
     existing_engine,
     instrument_key,
+    instrument_spelled,
     learned_forward,
     recipe_fractions,
     recorded_tins_used,
@@ -1000,6 +1001,7 @@ def export_cases(
         typer.Option(
             "--instrument",
             "-i",
+            callback=instrument_spelled,
             help="Only the cases read at this instrument's geometries, at those alone.",
             show_default="every case, at every geometry it was read at",
         ),

@@ -41,8 +41,25 @@ DatabaseOption = Annotated[
 ]
 
 
+def instrument_spelled(name: str | None) -> str | None:
+    """``--instrument`` in the spelling cases and models record it (``MA-T12``, ``ma_t12`` →
+    ``ma-t12``): some commands took the instrument's own spelling, and ``match -i MA-T12`` was
+    refused "no shipped model for 'MA-T12' (shipped: five-angle, ma-t12)". A name of no
+    instrument is left for the command to refuse, naming those there are."""
+    try:
+        return name and instrument_name(name)
+    except ValueError:
+        return name
+
+
 InstrumentOption = Annotated[
-    str, typer.Option("--instrument", "-i", help="Geometry set: five-angle, ma-t12, byk-mac-i.")
+    str,
+    typer.Option(
+        "--instrument",
+        "-i",
+        callback=instrument_spelled,
+        help="Geometry set: five-angle, ma-t12, byk-mac-i.",
+    ),
 ]
 
 
@@ -51,6 +68,7 @@ KeptGeometriesOption = Annotated[
     typer.Option(
         "--instrument",
         "-i",
+        callback=instrument_spelled,
         help="Keep only this geometry set: five-angle, ma-t12, byk-mac-i.",
         show_default="every geometry the car's reading and the spray-out's share",
     ),

@@ -159,11 +159,13 @@ def _weigh_the_rest(
     where a toner outside the recipe was poured, what brings the can back to its colour
     (``for_tins``: the report's entries for the shop's tins)."""
     from flakelab.io import write_recipe
+    from flakelab.library import did_you_mean
     from flakelab.match.forward import model_name_for
 
     if unknown := [n for n in poured if n not in forward.toners]:
         raise FlakelabError(
-            f"--poured: {', '.join(unknown)}: not a toner the model knows ({recipe}'s toners: "
+            f"--poured: {', '.join(unknown)}: not a toner the model knows"
+            f"{did_you_mean(unknown[0], forward.toners)} ({recipe}'s toners: "
             f"{', '.join(shares)})"
         )
     total = sum(shares.values())

@@ -16,11 +16,12 @@ from flakelab.library.toners import (
     Pearl,
     Pigment,
     check_toners,
+    did_you_mean,
 )
 
 __all__ = [
     "aluminium_refractive_index", "flake_reflectance", "fresnel_reflectance", "pearl_reflectance",
     "PAINT_FAMILIES", "TONER_KINDS",
     "AluminiumFlake", "Binder", "Library", "LibraryError", "Pearl", "Pigment",
-    "check_toners",
+    "check_toners", "did_you_mean",
 ]  # fmt: skip

@@ -10,6 +10,7 @@ Files: ``flakelab.io.read_library``.
 from __future__ import annotations
 
 import difflib
+import unicodedata
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
@@ -32,6 +33,7 @@ __all__ = [
     "Library",
     "LibraryError",
     "check_toners",
+    "did_you_mean",
     "TONER_KINDS",
     "PAINT_FAMILIES",
     "SUM_TOLERANCE",
@@ -82,9 +84,25 @@ def check_toners(names: Iterable[str], toners: Sequence[str], where: str = "") -
     naming the nearest that is; ``where`` (a file, an option) begins the message."""
     for name in names:
         if name not in toners:
-            near = difflib.get_close_matches(name, list(toners), n=1, cutoff=0.6)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise LibraryError(f"{where}{name!r} is not a toner of the library{hint}")
+            raise LibraryError(
+                f"{where}{name!r} is not a toner of the library{did_you_mean(name, toners)}"
+            )
+
+
+def did_you_mean(name: str, toners: Iterable[str]) -> str:
+    """ " (did you mean 'Phthalo blue GS'?)": the toner of ``toners`` that ``name`` most
+    likely means, for the message that refuses it; "" where none is near. The same name but
+    for case and spaces ("phthalo blue gs", a spreadsheet's non-breaking space) comes first,
+    then the closest spelling; before, the spelling alone was compared, and a name typed in
+    lower case or copied from a spreadsheet was refused without a hint."""
+    keys = {_toner_key(t): t for t in toners}
+    key = _toner_key(name)
+    near = [key] if key in keys else difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
+    return f" (did you mean {keys[near[0]]!r}?)" if near else ""
+
+
+def _toner_key(name: str) -> str:
+    return " ".join(unicodedata.normalize("NFKC", name).casefold().split())
 
 
 def _positive(
@@ -362,7 +380,9 @@ class Library:
         for toner in self.toners:
             if toner.name == name:
                 return toner
-        raise LibraryError(f"library {self.name!r}: unknown toner {name!r}")
+        raise LibraryError(
+            f"library {self.name!r}: unknown toner {name!r}{did_you_mean(name, self.names)}"
+        )
 
     def solid_bases(self, pool: Iterable[int] | None = None) -> tuple[int | None, list[int]]:
         """The whitest pigment of ``pool`` (indices, default every toner) that hides, and the
@@ -401,7 +421,10 @@ class Library:
         names = self.names
         for name, amount in amounts.items():
             if name not in names:
-                raise LibraryError(f"recipe: unknown toner {name!r} (library {self.name!r})")
+                raise LibraryError(
+                    f"recipe: unknown toner {name!r} in library {self.name!r}"
+                    + did_you_mean(name, names)
+                )
             if not (isinstance(amount, int | float) and np.isfinite(amount)) or amount < 0:
                 raise LibraryError(
                     f"recipe: {name}: expected a non-negative amount, got {amount!r}"

@@ -68,6 +68,7 @@ from flakelab.core.geometry import instrument_of
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.torch_colour import TorchColour
 from flakelab.core.wording import counted
+from flakelab.library import did_you_mean
 from flakelab.models.checkpoint import TrainingCheckpoint
 from flakelab.models.network import (
     MAX_HIDDEN,
@@ -327,6 +328,7 @@ def case_arrays(
             if name not in index:
                 raise ModelError(
                     f"case {case.case_id!r}: recipe: toner {name!r} is not in the library"
+                    + did_you_mean(name, index)
                 )
             x[index[name]] = amount
         strength, shade = np.ones(len(toners)), np.zeros(len(toners))
