@@ -149,6 +149,16 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
     (expected,) = read_measurements(plain)
     np.testing.assert_array_equal(back.reflectance, expected.reflectance)
     assert back.texture == expected.texture and back.sample == expected.sample
+    # Excel's hint on its first line, which instrument software writes and Excel hides:
+    # refused before, "header: missing column 'sample'"
+    for hint, text in (("sep=;", out.getvalue()), ('"sep=,"', plain.read_text())):
+        hinted = tmp_path / "hinted.csv"
+        hinted.write_text(f"{hint}\r\n{text}")
+        (back,) = read_measurements(hinted)
+        np.testing.assert_array_equal(back.reflectance, expected.reflectance)
+    hinted.write_text("sep=;\n")
+    with pytest.raises(MeasurementFileError, match="hinted.csv: empty CSV file"):
+        read_measurements(hinted)
     # its "Unicode Text": UTF-16 with a byte-order mark (either order), tab-separated;
     # called "binary content" before
     tabbed = io.StringIO()

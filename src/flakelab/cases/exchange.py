@@ -49,6 +49,7 @@ from flakelab.io.records import (
     decimal_point,
     is_no_regular_file,
     json_value,
+    named_separator,
     numbers_at_once,
     text_encoding,
     write_atomically,
@@ -250,7 +251,9 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
     in most of Europe saves them, with the decimal comma it then uses."""
     lines = iter(lines)
     first = next(lines, "")
-    separator = csv_separator(first) or ","
+    named = named_separator(first)
+    first = next(lines, "") if named else first
+    separator = named or csv_separator(first) or ","
 
     def refused(number: int, problem: str) -> CaseFileError:
         return CaseFileError(f"{path}: row {number}: {problem}")

@@ -40,7 +40,13 @@ from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
-from flakelab.io.records import NOT_UTF8, csv_rows, csv_separator, text_encoding
+from flakelab.io.records import (
+    NOT_UTF8,
+    csv_rows,
+    csv_separator,
+    named_separator,
+    text_encoding,
+)
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
 
@@ -78,7 +84,9 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
     except OSError as error:
         raise ManifestError(f"{path}: cannot be read as a CSV manifest ({error})") from None
     lines = text.splitlines()
-    separator = csv_separator(lines[0]) if lines else None
+    named = lines and named_separator(lines[0])
+    lines = lines[1:] if named else lines
+    separator = named or (csv_separator(lines[0]) if lines else None)
 
     def refused(number: int, problem: str) -> ManifestError:
         return ManifestError(f"{path}: row {number}: {problem}")

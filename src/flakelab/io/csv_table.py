@@ -36,6 +36,7 @@ from flakelab.io.records import (
     csv_separator,
     decimal_comma_in,
     decimal_point,
+    named_separator,
     parse_conditions,
     parse_geometry_name,
     parse_lab,
@@ -69,9 +70,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]
+    named = lines and named_separator(lines[0])
+    lines = lines[1:] if named else lines
     if not lines:
         raise MeasurementFileError(path, "empty CSV file")
-    delimiter = csv_separator(lines[0])
+    delimiter = named or csv_separator(lines[0])
     if delimiter is None:
         raise MeasurementFileError(
             path, "no comma, semicolon or tab separated header", field="header"

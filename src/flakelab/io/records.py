@@ -54,6 +54,7 @@ __all__ = [
     "decimal_comma_in",
     "csv_form",
     "csv_separator",
+    "named_separator",
     "csv_rows",
     "json_value",
     "toml_value",
@@ -157,6 +158,18 @@ def text_encoding(path: str | PathLike) -> str:
 CSV_SEPARATORS = ",;\t"
 """A CSV file's cell separators: the comma, and the semicolon or tab of a spreadsheet in most
 of Europe, where the comma is the decimal mark (:func:`decimal_point`)."""
+
+
+_SEPARATOR_LINE = re.compile(r'"?sep=([,;\t])"?', re.IGNORECASE)
+
+
+def named_separator(line: str) -> str | None:
+    """The separator that a CSV file's first line names as Excel's hint does, ``sep=;``
+    (instrument software writes it for Excel, which hides the line), else None. The file's
+    header is the line after; before, the hint was taken for the header and every such file
+    was refused "missing column 'sample'"."""
+    found = _SEPARATOR_LINE.fullmatch(line.strip("\r\n "))
+    return found and found.group(1)
 
 
 def csv_separator(header: str) -> str | None:
