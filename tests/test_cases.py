@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -829,6 +830,40 @@ def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cas
         assert cli("cases", "export", "-d", file, "--since", since, out).returncode == 0
         assert len(read_cases(out)) == kept, since
     assert len(select_cases([written], since=datetime(2026, 12, 3, 8, 0))) == 1
+
+
+def test_a_database_on_a_network_share_keeps_sqlite_s_rollback_journal(
+    cases, tmp_path, monkeypatch
+):
+    """On a folder shared over a network (a NAS over NFS or SMB), SQLite's WAL cannot work:
+    its readers and writers share memory through the -shm file. A database there keeps the
+    rollback journal, one made in WAL before is switched back, and a note says why; on a
+    local disk, WAL as before. The share is found by the deepest mount point above the file
+    (``/mnt/nasty`` is not below ``/mnt/nas``; an escaped space is a space)."""
+    from flakelab.errors import Note
+    from flakelab.io import records
+    from flakelab.io.records import network_file_system
+
+    mounts = tmp_path / "mounts"
+    mounts.write_text("/dev/sda1 / ext4 rw 0 0\nnas:/export /mnt/nas nfs4 rw 0 0\n"
+                      "//nas/shop /mnt/nas/my\\040shop cifs rw 0 0\n")  # fmt: skip
+    paths = ("/mnt/nas/a.db", "/mnt/nas/my shop/a.db", "/mnt/nasty/a.db", "/home/a.db")
+    found = [network_file_system(path, mounts) for path in paths]
+    assert found == ["nfs4", "cifs", None, None]
+
+    def journal(file):
+        with contextlib.closing(sqlite3.connect(file)) as connection:
+            return connection.execute("PRAGMA journal_mode").fetchone()[0]
+
+    file = tmp_path / "shop.db"
+    add_cases(open_database(file), cases[:2])
+    assert journal(file) == "wal"
+    monkeypatch.setattr(records, "network_file_system", lambda path: "nfs4")
+    with pytest.warns(Note, match=r"shop.db lies on a network share \(nfs4\): SQLite keeps"):
+        engine = open_database(file)
+    add_cases(engine, cases[2:4])
+    assert count_cases(engine) == 4 and journal(file) == "delete"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mounts", "shop.db"]  # no -wal
 
 
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):

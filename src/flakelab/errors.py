@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["FlakelabError", "MeasurementFileError", "shown"]
+__all__ = ["FlakelabError", "MeasurementFileError", "Note", "shown"]
 
 
 def shown(value: object, limit: int = 60) -> str:
@@ -22,6 +22,11 @@ def shown(value: object, limit: int = 60) -> str:
 
 class FlakelabError(ValueError):
     """A problem with user input that flakelab can state in one line."""
+
+
+class Note(UserWarning):
+    """Something the user of a command should know that stops nothing (raised with
+    :func:`warnings.warn`); the command line prints it as a note."""
 
 
 class MeasurementFileError(FlakelabError):

@@ -8,10 +8,12 @@ Writes happen in one transaction per call: a batch is stored whole or not at all
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import sqlite3
 import time
+import warnings
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -30,7 +32,7 @@ from flakelab.cases.schema import CaseRow
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import zoned, zoned_here
 from flakelab.core.wording import counted, database_label, hidden_passwords
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, Note
 
 __all__ = [
     "default_url",
@@ -183,28 +185,50 @@ def url_for(target: str | os.PathLike) -> str:
     return text if "://" in text else f"sqlite:///{Path(text).resolve()}"
 
 
-def _sqlite_pragmas(dbapi_connection, _record) -> None:
+def _sqlite_pragmas(dbapi_connection, _record, journal: str = "WAL") -> None:
     cursor = dbapi_connection.cursor()
     cursor.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_S * 1000}")
-    _switch_to_wal(cursor)
+    _switch_journal(cursor, journal)
     cursor.execute("PRAGMA foreign_keys=ON")
     cursor.close()
 
 
-def _switch_to_wal(cursor) -> None:
-    """``PRAGMA journal_mode=WAL``, tried again for up to :data:`BUSY_TIMEOUT_S`: workplaces
+def _switch_journal(cursor, journal: str) -> None:
+    """``PRAGMA journal_mode=…``, tried again for up to :data:`BUSY_TIMEOUT_S`: workplaces
     switching a new file at once meet each other's locks, and SQLite says "database is
     locked" at once there, without the busy timeout's wait (one of four processes opening a
     new database at once was refused so, now and then)."""
     deadline = time.monotonic() + BUSY_TIMEOUT_S
     while True:
         try:
-            cursor.execute("PRAGMA journal_mode=WAL")
+            cursor.execute(f"PRAGMA journal_mode={journal}")
             return
         except sqlite3.OperationalError as error:
             if "locked" not in str(error) or time.monotonic() > deadline:
                 raise
             time.sleep(0.01)
+
+
+def _journal_for(file: str) -> str:
+    """WAL, but where the SQLite ``file`` lies on a folder shared over a network: WAL's readers
+    and writers share memory through its ``-shm`` file, which workplaces cannot share over a
+    network ("WAL does not work over a network filesystem", SQLite's WAL documentation), and
+    a database there could be read torn or corrupted. It keeps SQLite's rollback journal
+    there, with a note: the share must pass SQLite's file locks on, which many do poorly."""
+    from flakelab.io.records import network_file_system  # the file formats: not at start-up
+
+    share = network_file_system(file)
+    if share is None:
+        return "WAL"
+    warnings.warn(
+        f"{file} lies on a network share ({share}): SQLite keeps its rollback journal there, "
+        "since its WAL needs memory the workplaces cannot share over a network; for several "
+        "workplaces writing cases at once, a PostgreSQL server (FLAKELAB_DATABASE_URL) is "
+        "safer",
+        Note,
+        stacklevel=3,
+    )
+    return "DELETE"
 
 
 def _postgres_settings(dbapi_connection, _record) -> None:
@@ -247,7 +271,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
         pool = StaticPool if file == "" else NullPool
         engine = create_engine(url, poolclass=pool, **_read_only_connections(file))
         if engine.dialect.name == "sqlite":
-            event.listen(engine, "connect", _sqlite_pragmas)
+            journal = _journal_for(file) if file else "WAL"
+            event.listen(engine, "connect", functools.partial(_sqlite_pragmas, journal=journal))
         elif engine.dialect.name == "postgresql":
             event.listen(engine, "connect", _postgres_settings)
         migrate(engine)

@@ -9,6 +9,7 @@ import inspect
 import os
 import signal
 import sys
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from datetime import timedelta
@@ -30,7 +31,7 @@ from rich.progress import (
 from rich.table import Table
 
 from flakelab.core.wording import hidden_passwords
-from flakelab.errors import FlakelabError, MeasurementFileError
+from flakelab.errors import FlakelabError, MeasurementFileError, Note
 
 
 def _open_closed_streams() -> None:
@@ -80,6 +81,20 @@ console = _Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS"
 """Tables and reports: the terminal's width, else ``COLUMNS``, else 110 columns (piped
 output that wraps no row of the main job's tables)."""
 errors = _Console(stderr=True)
+
+
+def _show_note(message, category, filename, lineno, file=None, line=None) -> None:
+    """A :class:`~flakelab.errors.Note` from the library, on stderr as a command's note (not
+    in its report, which may be JSON); any other warning as Python shows it."""
+    if issubclass(category, Note):
+        with contextlib.suppress(OSError):
+            errors.print(f"[yellow]note:[/] {escape(str(message))}", highlight=False)
+        return
+    _python_shows_warning(message, category, filename, lineno, file, line)
+
+
+_python_shows_warning = warnings.showwarning
+warnings.showwarning = _show_note
 
 F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")

@@ -55,6 +55,7 @@ __all__ = [
     "csv_form",
     "csv_separator",
     "named_separator",
+    "network_file_system",
     "csv_rows",
     "json_value",
     "toml_value",
@@ -400,6 +401,34 @@ def unwritable_folder(path: str | PathLike) -> str | None:
     if not os.access(folder, os.W_OK | os.X_OK):
         return f"folder {folder} cannot be written"
     return None
+
+
+NETWORK_FILE_SYSTEMS = frozenset(
+    {"nfs", "nfs4", "cifs", "smb3", "smbfs", "9p", "afs", "ceph", "glusterfs", "lustre",
+     "fuse.sshfs", "fuse.glusterfs", "fuse.cephfs", "fuse.rclone"}
+)  # fmt: skip
+"""The file systems of a folder shared over a network (a NAS, another workplace's disk), as
+Linux names them in ``/proc/self/mounts``."""
+
+
+def network_file_system(
+    path: str | PathLike, mounts: str | PathLike = "/proc/self/mounts"
+) -> str | None:
+    """The network file system ``path`` lies on (``nfs4``, ``cifs``, …), by the deepest mount
+    point above it in ``mounts``; None on a local disk, or where the mounts cannot be read
+    (not Linux)."""
+    try:
+        mounts = Path(mounts).read_text().splitlines()
+    except OSError:
+        return None
+    target, deepest, kind = Path(path).resolve(), -1, None
+    for fields in (line.split() for line in mounts):
+        if len(fields) < 3:
+            continue
+        point = Path(re.sub(r"\\([0-7]{3})", lambda m: chr(int(m[1], 8)), fields[1]))  # \040
+        if (point == target or point in target.parents) and len(point.parts) > deepest:
+            deepest, kind = len(point.parts), fields[2]
+    return kind if kind in NETWORK_FILE_SYSTEMS else None
 
 
 def is_no_regular_file(path: str | PathLike) -> bool:
