@@ -820,6 +820,8 @@ def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cas
     assert "2026-12-03 09:15" in listed.stdout and "00:15" not in listed.stdout
     assert shown_time("2026-12-03T00:15:00") == "2026-12-03 09:15"  # as SQLite keeps it
     assert shown_time("2026-12-02T16:00:00+00:00", day=True) == "2026-12-03"
+    assert shown_time("2026-12-02", day=True) == "2026-12-02"  # a date alone: no hour to move
+    assert shown_time("last week", day=True) == "last week"  # a person's text, as written
     written = replace(cases[0], created_at=datetime(2026, 12, 3, 8, 0))  # a shop's file
     assert written.created_at == datetime(2026, 12, 2, 23, 0, tzinfo=UTC)
     add_cases(open_database(file), [written])

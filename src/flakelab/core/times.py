@@ -27,8 +27,18 @@ def zoned_here(time: datetime) -> datetime:
 
 def shown_time(when: datetime | str | None, *, day: bool = False) -> str:
     """A stored time (or its ISO 8601 text) as a report shows it: in local time, to the
-    minute, or to the ``day``; "" for none."""
+    minute, or to the ``day``; "" for none. A date alone, or text that is no ISO 8601 time
+    (a tin's "calibrated" as a person wrote it), is shown as written: a date has no hour to
+    move into another zone."""
     if not when:
         return ""
-    local = zoned(datetime.fromisoformat(when) if isinstance(when, str) else when).astimezone()
+    if isinstance(when, str):
+        try:
+            moment = datetime.fromisoformat(when)
+        except ValueError:
+            return when
+        if len(when) <= len("2026-12-03"):
+            return when
+        when = moment
+    local = zoned(when).astimezone()
     return f"{local:%Y-%m-%d}" if day else f"{local:%Y-%m-%d %H:%M}"
