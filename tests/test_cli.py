@@ -406,6 +406,39 @@ def test_a_job_too_large_for_memory_is_an_error_not_a_bug(capsys):
     assert "ask for less" in said and "internal error" not in said
 
 
+def test_a_library_s_key_error_is_a_fault_of_the_code_not_of_the_user(capsys):
+    """A KeyError a library raises (Pillow's ``KeyError('TIF')`` for a suffix it names
+    otherwise) is the code's fault: an internal error, status 70, asking to report it. It
+    read "error: TIF", status 2, as if the user's input were wrong. A geometry a file was
+    not read at is the user's: one line, status 2, the message as written."""
+    import typer
+
+    from flakelab.data import example_path
+    from flakelab.io import read_measurement
+
+    reading = read_measurement(example_path("target"))
+
+    @reports_errors
+    def bug():
+        return {"PNG": 1}["TIF"]
+
+    @reports_errors
+    def geometry_not_read():
+        return reading.index("45as60")
+
+    with pytest.raises(typer.Exit) as exited:
+        bug()
+    assert exited.value.exit_code == 70
+    assert capsys.readouterr().err.startswith("internal error: KeyError: 'TIF' (set FLAKELAB_")
+    with pytest.raises(typer.Exit) as exited:
+        geometry_not_read()
+    assert exited.value.exit_code == 2
+    said = capsys.readouterr().err.strip()
+    assert said == f"error: {reading.sample}: no geometry 45as60", said
+    with pytest.raises(KeyError):  # a lookup that finds nothing, as before
+        reading.storage_spectra(["45as60"])
+
+
 def test_a_ctrl_c_stops_a_command_with_one_line_and_the_shells_status(capsys):
     import typer
 

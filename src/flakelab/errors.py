@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["FlakelabError", "MeasurementFileError", "Note", "shown"]
+__all__ = ["FlakelabError", "MeasurementFileError", "MissingGeometryError", "Note", "shown"]
 
 
 def shown(value: object, limit: int = 60) -> str:
@@ -22,6 +22,15 @@ def shown(value: object, limit: int = 60) -> str:
 
 class FlakelabError(ValueError):
     """A problem with user input that flakelab can state in one line."""
+
+
+class MissingGeometryError(FlakelabError, KeyError):
+    """A geometry asked of a measurement that was not read there: a user's error (a file read
+    at other angles), and a :class:`KeyError` as a lookup that finds nothing is. The command
+    line takes a plain KeyError for a fault of the code: a library's (Pillow's ``KeyError('TIF')``
+    read "error: TIF", blaming the user)."""
+
+    __str__ = Exception.__str__  # the message as written, not quoted as KeyError quotes it
 
 
 class Note(UserWarning):

@@ -146,7 +146,7 @@ def reports_errors(command: F) -> F:
         except BrokenPipeError:  # stop quietly, as the shell's tools do (Python docs, signal)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(128 + signal.SIGPIPE) from None
-        except (FlakelabError, ValueError, KeyError, OSError) as error:
+        except (FlakelabError, ValueError, OSError) as error:  # not KeyError: see errors
             _stop("error", _message(error), 2)
         except MemoryError as error:  # a size or count this machine cannot hold
             _stop("error", f"not enough memory for this job ({error}); ask for less: a "

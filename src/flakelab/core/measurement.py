@@ -13,7 +13,7 @@ from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectanc
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS, resample
 from flakelab.core.wording import counted
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, MissingGeometryError
 
 __all__ = [
     "Measurement",
@@ -158,7 +158,7 @@ class Measurement:
         try:
             return self.geometries.index(g)
         except ValueError:
-            raise KeyError(f"{self.sample}: no geometry {g.name}") from None
+            raise MissingGeometryError(f"{self.sample}: no geometry {g.name}") from None
 
     def lab(self, conditions: Conditions = D65_10) -> NDArray[np.float64]:
         """CIELAB ``[geometry, 3]`` computed from the spectra (ASTM E308)."""
@@ -181,7 +181,7 @@ class Measurement:
         wanted = [g if isinstance(g, Geometry) else Geometry.parse(g) for g in geometries]
         missing = [g.name for g in wanted if g not in self.geometries]
         if missing:
-            raise KeyError(f"{self.sample}: no geometries {', '.join(missing)}")
+            raise MissingGeometryError(f"{self.sample}: no geometries {', '.join(missing)}")
         rows = [self.geometries.index(g) for g in wanted]
         if np.array_equal(self.wavelengths, WAVELENGTHS):
             return self.reflectance[rows].copy()
