@@ -198,7 +198,7 @@ def test_an_instrument_is_taken_as_the_instrument_spells_it(cli):
     assert spelt["candidates"][0]["recipe"] == plain["candidates"][0]["recipe"]
     refused = cli("match", "--example", "-i", "mat99")
     assert refused.returncode == 2 and refused.stderr.strip() == (
-        "error: instrument: expected one of byk-mac-i, ma-t6, ma-t12, five-angle, got 'mat99'"
+        "error: --instrument: expected one of byk-mac-i, ma-t6, ma-t12, five-angle, got 'mat99'"
     )
 
 

@@ -155,7 +155,7 @@ def generate(
         tins=tins,
         tin_sprayouts=tin_sprayouts,
     )
-    world = World(read_library(library), instrument, settings)
+    world = World(read_library(library), instrument_key(instrument), settings)
     to_file = out is not None and is_case_file(out)
     if to_file:
         # before the cases are generated, not after

@@ -147,9 +147,7 @@ def instrument_name(instrument: str) -> str:
     → ``ma-t12``), as cases and models record it."""
     key = instrument.strip().lower().replace(" ", "-").replace("_", "-")
     if key not in INSTRUMENT_GEOMETRIES:
-        raise ValueError(
-            f"expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got instrument {instrument!r}"
-        )
+        raise ValueError(f"expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got {instrument!r}")
     return key
 
 

@@ -29,7 +29,7 @@ from flakelab.cases.database import (
     write_transaction,
 )
 from flakelab.cases.schema import ModelRow
-from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
+from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_name
 from flakelab.core.wording import database_label
 from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.training import CaseArrays, evaluate_model, unseen_by
@@ -105,10 +105,10 @@ def _serving(session: Session, instrument: str, shop: str | None) -> tuple[str, 
 
 
 def shipped_model_path(instrument: str) -> Path:
-    if instrument not in INSTRUMENT_GEOMETRIES:  # no instrument at all, not one without a model
-        raise ModelError(
-            f"instrument: expected one of {', '.join(INSTRUMENT_GEOMETRIES)}, got {instrument!r}"
-        )
+    try:  # no instrument at all, not one without a model
+        instrument = instrument_name(instrument)
+    except ValueError as error:
+        raise ModelError(f"--instrument: {error}") from None
     if instrument not in SHIPPED:
         raise ModelError(
             f"instrument: no shipped model for {instrument!r} "
