@@ -106,6 +106,12 @@ def print_notes(notes: list[str]) -> None:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
+SIGHUP = getattr(signal, "SIGHUP", None)
+SIGPIPE = getattr(signal, "SIGPIPE", 13)
+"""Signals Windows lacks: no SIGHUP to stop on there, and its broken pipe is given the status
+the shell's tools give one elsewhere."""
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM (``kill``, ``timeout``, a scheduler or service manager stopping the command)
     or SIGHUP (its terminal closed, its SSH session dropped), raised where the command is,
@@ -126,8 +132,8 @@ def stop_on_signals() -> None:
         raise Terminated(signum)
 
     signal.signal(signal.SIGTERM, terminated)
-    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
-        signal.signal(signal.SIGHUP, terminated)
+    if SIGHUP is not None and signal.getsignal(SIGHUP) is not signal.SIG_IGN:  # none on Windows
+        signal.signal(SIGHUP, terminated)
 
 
 def reports_errors(command: F) -> F:
@@ -145,7 +151,7 @@ def reports_errors(command: F) -> F:
             stop_interrupted("stopped before it finished")
         except BrokenPipeError:  # stop quietly, as the shell's tools do (Python docs, signal)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            raise typer.Exit(128 + signal.SIGPIPE) from None
+            raise typer.Exit(128 + SIGPIPE) from None
         except (FlakelabError, ValueError, OSError) as error:  # not KeyError: see errors
             _stop("error", _message(error), 2)
         except MemoryError as error:  # a size or count this machine cannot hold
@@ -176,7 +182,7 @@ def stop_interrupted(message: str) -> None:
     up" for a SIGHUP."""
     stopped = sys.exc_info()[1]
     if isinstance(stopped, Terminated):
-        label = "hung up" if stopped.signum == signal.SIGHUP else "terminated"
+        label = "hung up" if stopped.signum == SIGHUP else "terminated"
         _stop(label, message, 128 + stopped.signum)
     _stop("interrupted", message, 128 + signal.SIGINT)
 
