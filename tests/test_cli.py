@@ -137,6 +137,22 @@ def test_plot_writes_a_png(tmp_path, cli):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
 
 
+def test_a_postscript_plot_says_in_a_note_that_it_drops_transparency(tmp_path):
+    """PostScript holds no transparency. Matplotlib said so in a bare line that named no file,
+    "The PostScript backend does not support transparency; …"; now a note names the file and
+    the formats that keep it. A PDF needs none."""
+    plot = [sys.executable, "-m", "flakelab.cli.main", "plot", str(example_path("target")), "-o"]
+    eps = subprocess.run([*plot, str(tmp_path / "flop.eps")], capture_output=True, text=True,
+                         timeout=300)  # fmt: skip
+    assert eps.returncode == 0 and (tmp_path / "flop.eps").read_bytes().startswith(b"%!PS")
+    said = " ".join(eps.stderr.split())
+    assert said.startswith(f"note: {tmp_path / 'flop.eps'}: PostScript holds no transparency")
+    assert "PostScript backend" not in said
+    pdf = subprocess.run([*plot, str(tmp_path / "flop.pdf")], capture_output=True, text=True,
+                         timeout=300)  # fmt: skip
+    assert pdf.returncode == 0 and "note" not in pdf.stderr
+
+
 def _bad_files(tmp_path: Path, source: Path) -> dict[str, tuple[Path, str]]:
     truncated = tmp_path / "truncated.xlsx"
     truncated.write_bytes(source.read_bytes()[:30_000])

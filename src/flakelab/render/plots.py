@@ -4,7 +4,9 @@ against its spray-outs; a shop's tins version by version."""
 
 from __future__ import annotations
 
+import logging
 import textwrap
+import warnings
 from collections.abc import Mapping, Sequence
 from os import PathLike
 from pathlib import Path
@@ -21,6 +23,7 @@ from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.core.tolerance import Tolerance  # noqa: E402
 from flakelab.core.wording import counted  # noqa: E402
+from flakelab.errors import Note  # noqa: E402
 from flakelab.io.records import write_atomically  # noqa: E402
 
 __all__ = [
@@ -56,15 +59,20 @@ def _save(figure, path: str | PathLike, dpi: int) -> None:
     try:
         fmt = figure_format(path)
         figure.tight_layout()
-        write_atomically(path, lambda temporary: _savefig(figure, temporary, dpi, fmt))
+        write_atomically(path, lambda temporary: _savefig(figure, temporary, dpi, fmt, path))
     finally:
         plt.close(figure)
 
 
-def _savefig(figure, path: Path, dpi: int, fmt: str) -> None:
+def _savefig(figure, path: Path, dpi: int, fmt: str, named: str | PathLike) -> None:
     """``figure.savefig``, where a write the disk refused is raised as that ``OSError``:
     matplotlib's PDF writer, closing its stream after it, fails again in zlib ("Error -2 while
-    flushing"), and that error, not the disk's, reached the user as an internal error."""
+    flushing"), and that error, not the disk's, reached the user as an internal error. The
+    transparency PostScript cannot hold is told as a :class:`~flakelab.errors.Note`, where
+    matplotlib's own line named neither the file (``named``) nor what to write instead."""
+    dropped = _DroppedTransparency()
+    postscript = logging.getLogger("matplotlib.backends.backend_ps")
+    postscript.addFilter(dropped)
     try:
         figure.savefig(path, dpi=dpi, format=fmt)
     except Exception as error:
@@ -72,6 +80,24 @@ def _savefig(figure, path: Path, dpi: int, fmt: str) -> None:
         if isinstance(error, OSError) or not isinstance(refused, OSError):
             raise
         raise refused from None
+    finally:
+        postscript.removeFilter(dropped)
+    if dropped.seen:
+        warnings.warn(f"{named}: PostScript holds no transparency, so the grid and the "
+                      "shaded areas are drawn opaque (PDF, SVG and PNG keep it)", Note,
+                      stacklevel=3)  # fmt: skip
+
+
+class _DroppedTransparency(logging.Filter):
+    """Matplotlib's PostScript writer logging that it drew transparent artists opaque."""
+
+    seen = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if "does not support transparency" in record.getMessage():
+            self.seen = True
+            return False
+        return True
 
 
 def plot_measurements(
