@@ -868,6 +868,28 @@ def test_a_database_on_a_network_share_keeps_sqlite_s_rollback_journal(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mounts", "shop.db"]  # no -wal
 
 
+def test_a_case_to_be_recorded_in_the_future_is_told():
+    """A case recorded more than a day from now (a year mistyped after --at, an instrument's
+    clock set wrong) stays the newest in every list: a note says so, naming where the time
+    came from. It is recorded at that time all the same; a time past says nothing."""
+    import warnings
+
+    from flakelab.errors import Note
+
+    target, sprayout = (read_measurement(example_path(k)) for k in ("target", "sprayout"))
+    recipe = {"Al medium": 1.0}
+    with pytest.warns(Note, match=r"2062-12-03 09:15, the time given, lies in the future"):
+        case = case_from_readings(target, sprayout, recipe, shop="x", outcome="accepted",
+                                  created_at=datetime(2062, 12, 3, 9, 15))  # fmt: skip
+    assert case.created_at.year == 2062
+    clock = replace(sprayout, measured_at=datetime(2063, 1, 1, 9, 15, tzinfo=UTC))
+    with pytest.warns(Note, match=r"read at 2063-01-01 \d\d:15, in the future \(the instrume"):
+        case_from_readings(target, clock, recipe, shop="x", outcome="accepted")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        case_from_readings(target, sprayout, recipe, shop="x", outcome="accepted")
+
+
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):
     """``-d shop.db`` is named in messages and titles as the file the colorist gave, its path
     (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import warnings
 from collections.abc import Mapping
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
@@ -25,7 +26,9 @@ from flakelab.core.geometry import (
     parse_geometries,
 )
 from flakelab.core.measurement import Measurement
+from flakelab.core.times import shown_time, zoned_here
 from flakelab.core.tolerance import Tolerance, failing_geometries, failures
+from flakelab.errors import Note
 from flakelab.library.lots import TonerLot
 
 __all__ = [
@@ -52,6 +55,23 @@ def reading_case_id(
     digest.update(json.dumps(sorted(recipe.items()), sort_keys=True).encode())
     digest.update(shop.encode())
     return f"shop-{digest.hexdigest()[:16]}"
+
+
+def _tell_a_time_to_come(when: datetime, *, typed: bool, sample: str) -> None:
+    """A :class:`~flakelab.errors.Note` where a case would be recorded more than a day from
+    now (``typed``: at a time given, else at the spray-out's date): a year mistyped, or an
+    instrument's clock set wrong. Such a case stays the newest, first in every list, and
+    ``--since`` keeps it whatever the date."""
+    if zoned_here(when) <= datetime.now(UTC) + timedelta(days=1):
+        return
+    said = (
+        f"{shown_time(when)}, the time given, lies in the future (a year mistyped?): the "
+        "case is recorded at it"
+        if typed
+        else f"{sample!r} was read at {shown_time(when)}, in the future (the instrument's "
+        "clock?): the case is recorded at it; --at records it at another time"
+    )
+    warnings.warn(said, Note, stacklevel=3)
 
 
 def judged_outcome(
@@ -139,6 +159,7 @@ def case_from_readings(
             f"outcome: expected {AUTO_OUTCOME} or one of {', '.join(OUTCOMES)}, got {outcome!r}"
         )
     when = created_at or sprayout.measured_at or datetime.now(UTC)
+    _tell_a_time_to_come(when, typed=created_at is not None, sample=sprayout.sample)
     return Case(
         case_id=case_id or reading_case_id(spectra["target"], spectra["spray-out"], recipe, shop),
         geometries=geometries,
