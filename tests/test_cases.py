@@ -223,6 +223,10 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
     hinted.write_bytes(f"sep={separator}\r\n".encode() + saved.read_bytes()[3:])
     write_cases(read_cases(hinted), tmp_path / "again.csv")
     assert (tmp_path / "again.csv").read_bytes() == original.read_bytes()
+    lines = saved.read_text(encoding="utf-8-sig").splitlines()  # empty cells at each end
+    hinted.write_text("\n".join(line + separator * 3 for line in lines) + "\n")
+    write_cases(read_cases(hinted), tmp_path / "again.csv")
+    assert (tmp_path / "again.csv").read_bytes() == original.read_bytes()
     rows[2][readings[40]] = "0,5x"
     save(rows)
     with pytest.raises(CaseFileError, match=f"row 3: {rows[0][readings[40]]}: .*got '0,5x'"):
@@ -1734,6 +1738,10 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
     again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
     assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
     european.write_text("sep=;\n" + european.read_text(encoding="utf-8-sig"))  # Excel's hint
+    again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
+    assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
+    hint, *lines = european.read_text().splitlines()  # and empty cells after the last
+    european.write_text("\n".join([hint, *(line + ";;" for line in lines)]) + "\n")
     again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
     assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
     with european.open("w", encoding="utf-16", newline="") as handle:  # its "Unicode Text"

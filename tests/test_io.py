@@ -159,6 +159,17 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
     hinted.write_text("sep=;\n")
     with pytest.raises(MeasurementFileError, match="hinted.csv: empty CSV file"):
         read_measurements(hinted)
+    # a sheet once used further right or lower: ";;;" at every line's end, blank rows ";;;;"
+    # between; refused before, "column '' appears twice"
+    lines = out.getvalue().splitlines()
+    widened = [line + ";;;" for line in lines]
+    hinted.write_text("\n".join([widened[0], ";" * 50, *widened[1:], ";;;;"]) + "\n")
+    (back,) = read_measurements(hinted)
+    np.testing.assert_array_equal(back.reflectance, expected.reflectance)
+    assert back.texture == expected.texture
+    hinted.write_text("\n".join([widened[0], lines[1] + ";;x"]) + "\n")  # a cell past them
+    with pytest.raises(MeasurementFileError, match="row 2: expected .* columns, got"):
+        read_measurements(hinted)
     # its "Unicode Text": UTF-16 with a byte-order mark (either order), tab-separated;
     # called "binary content" before
     tabbed = io.StringIO()

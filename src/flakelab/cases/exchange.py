@@ -47,11 +47,13 @@ from flakelab.io.records import (
     csv_separator,
     decimal_comma_in,
     decimal_point,
+    filled_width,
     is_no_regular_file,
     json_value,
     named_separator,
     numbers_at_once,
     text_encoding,
+    within,
     write_atomically,
 )
 
@@ -260,6 +262,8 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
 
     rows = csv_rows(itertools.chain([first], lines), separator, refused)
     header = next(rows, None)
+    width = filled_width(header or [])
+    header = header and header[:width]
     if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
         raise CaseFileError(
             f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)} "
@@ -270,7 +274,7 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
     for number, row in enumerate(rows, start=2):
         if not any(cell.strip() for cell in row):
             continue
-        case = _case_from_row(path, number, layout, row)
+        case = _case_from_row(path, number, layout, within(row, width))
         if case.case_id in rows_of:
             raise CaseFileError(
                 f"{path}: row {number}: case_id: {case.case_id!r} is also row "

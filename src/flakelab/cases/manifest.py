@@ -44,8 +44,10 @@ from flakelab.io.records import (
     NOT_UTF8,
     csv_rows,
     csv_separator,
+    filled_width,
     named_separator,
     text_encoding,
+    within,
 )
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
@@ -92,7 +94,8 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
         return ManifestError(f"{path}: row {number}: {problem}")
 
     rows = list(csv_rows(lines, separator or ",", refused))
-    header = [cell.strip() for cell in rows[0]] if rows else []
+    width = filled_width(rows[0]) if rows else 0
+    header = [cell.strip() for cell in rows[0][:width]] if rows else []
     unknown = [c for c in header if c not in MANIFEST_COLUMNS]
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     twice = sorted({c for c in header if header.count(c) > 1})
@@ -105,6 +108,7 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
         )
     entries = []
     for number, row in enumerate(rows[1:], start=2):
+        row = within(row, width)
         if not any(cell.strip() for cell in row):
             continue
         if len(row) != len(header):

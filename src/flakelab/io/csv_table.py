@@ -36,6 +36,7 @@ from flakelab.io.records import (
     csv_separator,
     decimal_comma_in,
     decimal_point,
+    filled_width,
     named_separator,
     parse_conditions,
     parse_geometry_name,
@@ -43,6 +44,7 @@ from flakelab.io.records import (
     parse_spectrum,
     parse_texture,
     parse_wavelength_header,
+    within,
     write_atomically,
 )
 
@@ -84,7 +86,8 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         return MeasurementFileError(path, problem, field=f"row {number}")
 
     rows = list(csv_rows(io.StringIO("\n".join(lines)), delimiter, refused))
-    header = [h.strip() for h in rows[0]]
+    width = filled_width(rows[0])
+    header = [h.strip() for h in rows[0][:width]]
     columns = {h: i for i, h in enumerate(header)}
     for required in ("sample", "geometry"):
         if required not in columns:
@@ -107,7 +110,9 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
 
     readings, texture, instruments, conditions = [], {}, set(), set()
     for number, row in enumerate(rows[1:], start=2):
-        where = f"row {number}"
+        where, row = f"row {number}", within(row, width)
+        if not any(cell.strip() for cell in row):  # a spreadsheet's blank row, ",,,,"
+            continue
         if len(row) != len(header):
             raise MeasurementFileError(
                 path,

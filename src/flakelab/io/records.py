@@ -54,8 +54,10 @@ __all__ = [
     "decimal_comma_in",
     "csv_form",
     "csv_separator",
+    "filled_width",
     "named_separator",
     "network_file_system",
+    "within",
     "csv_rows",
     "json_value",
     "toml_value",
@@ -222,6 +224,24 @@ def csv_rows(
                 )
             raise refused(number, problem) from None
         yield row
+
+
+def filled_width(header: Sequence[str]) -> int:
+    """The columns of a CSV ``header`` up to its last named one: a spreadsheet whose sheet
+    was once used further right writes ",,," at the end of every line, and such a file was
+    refused ("column '' appears twice", "expected 43 columns, got 46")."""
+    width = len(header)
+    while width and not header[width - 1].strip():
+        width -= 1
+    return width
+
+
+def within(row: list[str], width: int) -> list[str]:
+    """``row`` cut to ``width`` cells where every cell past them is empty (the spreadsheet's
+    trailing ",,," of :func:`filled_width`); else as it is, for its length to be refused."""
+    if len(row) > width and not any(cell.strip() for cell in row[width:]):
+        return row[:width]
+    return row
 
 
 def csv_form(decimal_comma: bool) -> tuple[str, str]:
