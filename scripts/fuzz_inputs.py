@@ -71,9 +71,12 @@ SHEET_NAMES = ("Spectral Data", "Spectral data", "Color Data", "Texture Data", "
 
 def damage_text(text: str, rng: random.Random) -> str:
     lines = text.splitlines(keepends=True)
-    kind = rng.randrange(9)
+    kind = rng.randrange(10)
     if kind == 8:  # Excel's hint on the first line, naming the file's separator or another
         return f"sep={rng.choice([',', ';', chr(9), '|'])}\r\n" + text
+    if kind == 9:  # the empty cells of a sheet once used further right, on some lines or all
+        cut = rng.randrange(len(lines) + 1)
+        return "".join([*lines[:cut], *(line.rstrip("\r\n") + ",,,\n" for line in lines[cut:])])
     if kind >= 6:  # a quote left open before a long run of cells, or nesting 100,000 deep
         i = rng.randrange(len(text))
         inserted = '"' + "0.5," * 40_000 if kind == 6 else "[" * 100_000 + "]" * 100_000
