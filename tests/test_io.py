@@ -11,6 +11,7 @@ import re
 import shutil
 import stat
 import time
+import warnings
 from datetime import datetime
 from pathlib import Path
 
@@ -128,6 +129,45 @@ def test_truncated_xlsx_is_reported(ma_t12_files, tmp_path):
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(MeasurementFileError, match="truncated or corrupt"):
         read_measurements(path)
+
+
+def test_spectra_in_percent_are_read_as_reflectance_factors(ma_t12_dir, ma_t12_files, tmp_path):
+    """Many instruments' exports write spectra in percent. Read as factors they gave L* of 274
+    with no word: now they are divided by 100, with a note naming the file and why. Where a
+    reading carries its L*a*b*, that decides, the darkest sample too; without one, a geometry
+    75° or more from specular reading above any paint's factor there. None of the 230 real
+    MA-T12 readings, in factors, is taken for percent (their farthest geometries read 0.89 at
+    most)."""
+    from dataclasses import replace
+
+    from flakelab.data import example_path
+    from flakelab.errors import Note
+    from flakelab.io import percent_evidence
+
+    real = read_measurements(ma_t12_dir / "all_samples_spectra.csv")
+    assert len(real) == 230 and not any(percent_evidence(m) for m in real)
+    for file in ma_t12_files:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Note)  # no note: the file is in factors
+            read_measurements(file)
+    measured = read_measurements(ma_t12_files[0])
+    darkest = min(measured, key=lambda m: m.reflectance.max())
+    percent = [replace(m, reflectance=m.reflectance * 100) for m in (darkest, *measured)]
+    written = tmp_path / "percent.json"  # the readings' L*a*b* beside the spectra
+    write_measurements(percent, written)
+    with pytest.warns(
+        Note,
+        match=r"percent.json: reflectance read as percent and divided by "
+        r"100 \(sample .*: its L\*a\*b\* is that of its spectra",
+    ):
+        back = read_measurements(written)
+    for read, original in zip(back, (darkest, *measured), strict=True):
+        np.testing.assert_allclose(read.reflectance, original.reflectance, rtol=1e-12)
+    target = read_measurement(example_path("target"))  # no L*a*b* beside it
+    write_measurements([replace(target, reflectance=target.reflectance * 100)], written)
+    with pytest.warns(Note, match=r"15as80 reads up to 3.9\d, a reflectance factor no paint"):
+        (back,) = read_measurements(written)
+    np.testing.assert_allclose(back.reflectance, target.reflectance, rtol=1e-12)
 
 
 def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_measurement, tmp_path):

@@ -9,13 +9,19 @@ from __future__ import annotations
 
 import codecs
 import tempfile
+import warnings
 import zipfile
 from collections.abc import Callable
+from dataclasses import replace
 from os import PathLike
 from pathlib import Path
 
+import numpy as np
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.measurement import Measurement
-from flakelab.errors import MeasurementFileError
+from flakelab.errors import MeasurementFileError, Note
 from flakelab.io.csv_table import read_csv, write_csv
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.json_document import read_json, write_json
@@ -125,10 +131,54 @@ def detect_format(path: str | PathLike) -> str:
 
 
 def read_measurements(path: str | PathLike) -> list[Measurement]:
-    """All measurements in a file, whatever its supported format."""
+    """All measurements in a file, whatever its supported format; spectra an instrument's
+    export wrote in percent read as reflectance factors (:func:`percent_evidence`)."""
     if is_no_regular_file(path) or _is_utf16(path):
         return _read_through_a_copy(path)
-    return FORMATS[detect_format(path)][0](path)
+    return _as_factors(path, FORMATS[detect_format(path)][0](path))
+
+
+PERCENT_SIGN = 2.0
+"""A reflectance factor no paint reaches 75° or more from the specular direction (a white
+reads 0.9 there, a fluorescent at most about 1.5): a reading above it there is in percent."""
+
+
+def percent_evidence(measurement: Measurement) -> str | None:
+    """Why ``measurement``'s spectra are in percent, not reflectance factors, as many
+    instruments' exports write them; None where nothing says so. Its stored L*a*b*, where it
+    has one, is that of its spectra divided by 100 and not that of its spectra; without one,
+    a geometry 75° or more from specular reads above :data:`PERCENT_SIGN`. A very dark paint
+    in percent with no L*a*b* beside it is not told from a light one in factors."""
+    R = measurement.reflectance
+    if measurement.stored_lab is not None:
+        conditions, stored = measurement.stored_lab_conditions, measurement.stored_lab
+        as_read = delta_E_CIE2000(reflectance_to_Lab(R, measurement.wavelengths, conditions),
+                                  stored)  # fmt: skip
+        as_percent = delta_E_CIE2000(
+            reflectance_to_Lab(R / 100, measurement.wavelengths, conditions), stored
+        )
+        if np.median(as_percent) < 1.0 < np.median(as_read) / 10:
+            return "its L*a*b* is that of its spectra divided by 100"
+        return None
+    far = np.array([abs(g.aspecular) >= 75 for g in measurement.geometries])
+    if far.any() and R[far].max() > PERCENT_SIGN:
+        i = int(np.flatnonzero(far)[np.argmax(R[far].max(axis=1))])
+        return (
+            f"{measurement.geometries[i].name} reads up to {R[i].max():.3g}, a reflectance "
+            "factor no paint reaches so far from specular"
+        )
+    return None
+
+
+def _as_factors(path: str | PathLike, measurements: list[Measurement]) -> list[Measurement]:
+    """``measurements`` with spectra in percent divided by 100, and a note naming the file."""
+    found = [(m, percent_evidence(m)) for m in measurements]
+    shown = next(((m.sample, why) for m, why in found if why), None)
+    if shown is None:
+        return measurements
+    warnings.warn(f"{path}: reflectance read as percent and divided by 100 (sample "
+                  f"{shown[0]!r}: {shown[1]})", Note, stacklevel=3)  # fmt: skip
+    return [replace(m, reflectance=m.reflectance / 100) if why else m for m, why in found]
 
 
 def _is_utf16(path: str | PathLike) -> bool:
