@@ -829,7 +829,11 @@ def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cas
     written = replace(cases[0], created_at=datetime(2026, 12, 3, 8, 0))  # a shop's file
     assert written.created_at == datetime(2026, 12, 2, 23, 0, tzinfo=UTC)
     add_cases(open_database(file), [written])
-    for since, kept in (("2026-12-03", 2), ("2026-12-03 08:30:00", 1)):
+    for since, kept in (
+        ("2026-12-03", 2),
+        ("2026-12-03 08:30:00", 1),
+        ("2026-12-02T22:00:00+00:00", 2),
+    ):  # as the JSON reports write it
         run = cli("cases", "list", "-d", file, "--json")
         assert len(json.loads(run.stdout)["cases"]) == 2
         out = tmp_path / f"since-{kept}.csv"

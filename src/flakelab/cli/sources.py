@@ -98,8 +98,9 @@ ShopModelOption = Annotated[
 ]
 
 
-TIME_FORMATS = ["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S"]
-"""How a date and time may be typed at the command line."""
+TIME_FORMATS = ["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M:%S%z"]
+"""How a date and time may be typed at the command line: local time, or with its zone as the
+JSON reports write it (``2026-02-10T08:17:00+00:00``, copied from one)."""
 
 
 def typed_time(when: datetime | None) -> datetime | None:
