@@ -699,6 +699,31 @@ def test_a_recipe_file_round_trips_heaviest_first(tmp_path):
     ]
 
 
+def test_json_and_toml_files_windows_writes_are_read(tmp_path, rich_measurement):
+    """A recipe, a library, a tolerance, a measurement JSON as Windows writes them: UTF-16
+    from PowerShell's ``>``, UTF-8 with the byte-order mark of an older Notepad. Both were
+    refused ("Unexpected UTF-8 BOM", "can't decode byte 0xff")."""
+    from flakelab.io import read_library, read_tolerance, write_library
+
+    recipe, library, tolerance = tmp_path / "r.json", tmp_path / "l.json", tmp_path / "t.toml"
+    measured = tmp_path / "m.json"
+    write_recipe({"Al medium": 194.0, "Carbon black": 3.6}, recipe)
+    write_library(read_library(), library)
+    tolerance.write_text('name = "shop"\ndefault = { de00 = 1.2 }\n')
+    write_measurements([rich_measurement], measured)
+    expected = (read_recipe(recipe), read_library(library).names, read_tolerance(tolerance).name,
+                read_measurements(measured)[0].reflectance)  # fmt: skip
+    texts = {path: path.read_text() for path in (recipe, library, tolerance, measured)}
+    for encoding in ("utf-16", "utf-16-be", "utf-8-sig"):
+        for path, text in texts.items():
+            mark = b"\xfe\xff" if encoding == "utf-16-be" else b""
+            path.write_bytes(mark + text.encode(encoding))
+        read = (read_recipe(recipe), read_library(library).names, read_tolerance(tolerance).name,
+                read_measurements(measured)[0].reflectance)  # fmt: skip
+        assert read[:3] == expected[:3], encoding
+        np.testing.assert_array_equal(read[3], expected[3])
+
+
 @pytest.mark.parametrize(
     ("text", "problem"),
     [

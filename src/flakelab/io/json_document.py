@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 from datetime import datetime
 from os import PathLike
-from pathlib import Path
 from typing import Any
 
 from flakelab.core.defaults import DEFAULT_CONDITIONS
@@ -32,6 +31,7 @@ from flakelab.io.records import (
     parse_spectrum,
     parse_texture,
     parse_wavelength_header,
+    text_of,
     write_atomically,
 )
 
@@ -61,7 +61,7 @@ def _require(path: str | PathLike, mapping: Any, key: str, kind: type, where: st
 def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement]:
     """Read a flakelab JSON measurement document."""
     try:
-        document = json_value(Path(path).read_text(encoding="utf-8") if text is None else text)
+        document = json_value(text_of(path) if text is None else text)
     except json.JSONDecodeError as error:
         raise MeasurementFileError(
             path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"

@@ -12,7 +12,7 @@ from importlib.resources import files
 from os import PathLike
 from pathlib import Path
 
-from flakelab.io.records import json_value, toml_value, write_atomically
+from flakelab.io.records import json_value, text_of, toml_value, write_atomically
 from flakelab.library.toners import Library, LibraryError
 
 __all__ = ["read_library", "write_library", "demo_library_path"]
@@ -26,7 +26,7 @@ def read_library(path: str | PathLike | None = None) -> Library:
     """Read and check a toner library; ``None`` gives the shipped demo library."""
     path = demo_library_path() if path is None else Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = text_of(path)
     except FileNotFoundError:
         raise LibraryError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as error:

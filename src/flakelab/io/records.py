@@ -62,6 +62,7 @@ __all__ = [
     "json_value",
     "toml_value",
     "NOT_UTF8",
+    "text_of",
 ]
 
 _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
@@ -156,6 +157,13 @@ def text_encoding(path: str | PathLike) -> str:
         return "utf-8-sig"
     with open(path, "rb") as handle:
         return "utf-16" if handle.read(2) in UTF16_BOMS else "utf-8-sig"
+
+
+def text_of(path: str | PathLike) -> str:
+    """A text file's contents in :func:`text_encoding`'s encoding: a JSON or TOML file that
+    Windows wrote is read as well as any, UTF-16 from PowerShell's ``>`` or UTF-8 with the
+    byte-order mark of an older Notepad (both were refused, "Unexpected UTF-8 BOM")."""
+    return Path(path).read_text(encoding=text_encoding(path))
 
 
 CSV_SEPARATORS = ",;\t"
@@ -399,7 +407,7 @@ def read_json_file(path: Path, what: str, expected: str):
     :class:`~flakelab.errors.FlakelabError` naming it: missing, unreadable, or not JSON
     (``expected`` says what it should hold)."""
     try:
-        return json_value(path.read_text(encoding="utf-8"))
+        return json_value(text_of(path))
     except FileNotFoundError:
         raise FlakelabError(f"{path}: no such {what}") from None
     except (OSError, UnicodeDecodeError, ValueError) as error:

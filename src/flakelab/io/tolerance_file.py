@@ -23,7 +23,7 @@ from pathlib import Path
 
 from flakelab.core.tolerance import TOLERANCE_PRESETS, Tolerance
 from flakelab.errors import FlakelabError
-from flakelab.io.records import json_value, toml_value
+from flakelab.io.records import json_value, text_of, toml_value
 
 __all__ = ["read_tolerance"]
 
@@ -39,7 +39,7 @@ def read_tolerance(name_or_path: str | PathLike) -> Tolerance:
             f"nor a tolerance file"
         )
     try:
-        text = path.read_text(encoding="utf-8")
+        text = text_of(path)
     except UnicodeDecodeError:
         raise FlakelabError(f"{path}: not a UTF-8 text (TOML or JSON) tolerance file") from None
     try:

@@ -51,7 +51,6 @@ import json
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,7 +64,7 @@ from flakelab.core.difference import delta_E
 from flakelab.core.units import is_number
 from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError, MeasurementFileError
-from flakelab.io.records import json_value, write_atomically
+from flakelab.io.records import json_value, text_of, write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
 from flakelab.match.forward import film_of
@@ -648,7 +647,7 @@ def write_habits(habits: ShopHabits, path: str | PathLike) -> None:
 def read_habits(path: str | PathLike) -> ShopHabits:
     """A habits file written by :func:`write_habits` (``flakelab cases habits --out``)."""
     try:
-        document = json_value(Path(path).read_text(encoding="utf-8"))
+        document = json_value(text_of(path))
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
     except OSError as error:
