@@ -826,6 +826,13 @@ def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cas
     assert shown_time("2026-12-02T16:00:00+00:00", day=True) == "2026-12-03"
     assert shown_time("2026-12-02", day=True) == "2026-12-02"  # a date alone: no hour to move
     assert shown_time("last week", day=True) == "last week"  # a person's text, as written
+    from flakelab.core.times import read_time
+
+    assert read_time(" 22.11.2026 09:30") == datetime(2026, 11, 22, 9, 30)  # as Excel saves it
+    assert read_time("3.12.2026") == datetime(2026, 12, 3)
+    for bad in ("11/22/2026 9:30", "31.02.2026", "22.11.26"):  # either way round; no such day
+        with pytest.raises(ValueError):
+            read_time(bad)
     written = replace(cases[0], created_at=datetime(2026, 12, 3, 8, 0))  # a shop's file
     assert written.created_at == datetime(2026, 12, 2, 23, 0, tzinfo=UTC)
     add_cases(open_database(file), [written])
@@ -1437,7 +1444,8 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
             f"sample '{first.case_id}/sprayout': no matching '{first.case_id}/target' sample"
         ),
         ("date.cxf", lambda t: re.sub(r'(meta:created_at" Value=")[^"]+', r"\1soon", t, count=1)): (
-            "meta tag created_at: expected an ISO 8601 date and time, got 'soon'"
+            "meta tag created_at: expected a date and time such as 2026-11-22T09:30 or "
+            "22.11.2026 09:30, got 'soon'"
         ),
         ("twice.csv", lambda t: t + t.splitlines()[1] + "\n"): (
             f"row 5: case_id: '{first.case_id}' is also row 2's"

@@ -38,6 +38,7 @@ from flakelab.cases.case import Case, CaseError, tin_fields
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import FlakelabError, shown
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
@@ -433,9 +434,9 @@ def _tins_field(where: str, text: str) -> dict:
 
 def _date_field(where: str, text: str) -> datetime:
     try:
-        return datetime.fromisoformat(text)
+        return read_time(text)
     except ValueError:
-        raise CaseFileError(f"{where}: expected an ISO 8601 date and time, got {text!r}") from None
+        raise CaseFileError(f"{where}: expected {TIME_EXPECTED}, got {text!r}") from None
 
 
 def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:

@@ -17,8 +17,8 @@ spreadsheet in most of Europe saves it; file paths relative to the manifest's fo
 ``shop``           the shop (default: the command's ``--shop``)
 ``outcome``        ``auto`` (judged against the tolerance), ``accepted``, ``corrected``
                    or ``rejected`` (default ``auto``)
-``at``             when the spray-out was made, ISO 8601, UTC without a zone (default:
-                   the spray-out file's date)
+``at``             when the spray-out was made, ISO 8601 or ``22.11.2026 09:30``, local
+                   time without a zone (default: the spray-out file's date)
 ``case_id``        the case's id (default: made from the readings, recipe and shop)
 ``lots``           the shop's toner-lot file when it was sprayed (``flakelab lots``): the
                    case records the tins of its recipe's toners (default: none)
@@ -35,7 +35,7 @@ from pathlib import Path
 from flakelab.cases.case import Case
 from flakelab.cases.record import AUTO_OUTCOME, case_from_readings
 from flakelab.core.measurement import Measurement
-from flakelab.core.times import zoned_here
+from flakelab.core.times import TIME_EXPECTED, read_time, zoned_here
 from flakelab.core.tolerance import Tolerance
 from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
@@ -211,9 +211,7 @@ def _time(where: str, cell: str) -> datetime | None:
     if not cell:
         return None
     try:
-        when = datetime.fromisoformat(cell)
+        when = read_time(cell)
     except ValueError:
-        raise ManifestError(
-            f"{where}: at: expected an ISO 8601 date and time, got {cell!r}"
-        ) from None
+        raise ManifestError(f"{where}: at: expected {TIME_EXPECTED}, got {cell!r}") from None
     return zoned_here(when)

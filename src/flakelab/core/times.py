@@ -9,9 +9,15 @@ times in local time: taken as UTC, a case recorded at 17:05 in Berlin read "16:0
 like :mod:`flakelab.core.wording`.
 """
 
+import re
 from datetime import UTC, datetime
 
-__all__ = ["shown_time", "zoned", "zoned_here"]
+__all__ = ["TIME_EXPECTED", "read_time", "shown_time", "zoned", "zoned_here"]
+
+TIME_EXPECTED = "a date and time such as 2026-11-22T09:30 or 22.11.2026 09:30"
+"""What a refused time cell should have held, in the words of every message."""
+
+_DAY_FIRST = re.compile(r"(\d{1,2})\.(\d{1,2})\.(\d{4})(?:[ T](\d{1,2}):(\d{2})(?::(\d{2}))?)?")
 
 
 def zoned(time: datetime) -> datetime:
@@ -42,3 +48,20 @@ def shown_time(when: datetime | str | None, *, day: bool = False) -> str:
         when = moment
     local = zoned(when).astimezone()
     return f"{local:%Y-%m-%d}" if day else f"{local:%Y-%m-%d %H:%M}"
+
+
+def read_time(text: str) -> datetime:
+    """A date and time as a person or a spreadsheet writes one in a file: ISO 8601
+    (``2026-11-22T09:30``), or day first with dots, as a spreadsheet in most of Europe shows
+    and saves a date typed into it (``22.11.2026 09:30``; refused before as no ISO 8601).
+    Anything else is a :class:`ValueError`, slashes among them: ``11/12/2026`` is the 12th of
+    November in one country and the 11th of December in the next."""
+    text = text.strip()
+    try:
+        return datetime.fromisoformat(text)
+    except ValueError:
+        found = _DAY_FIRST.fullmatch(text)
+        if found is None:
+            raise ValueError(f"expected {TIME_EXPECTED}, got {text!r}") from None
+        day, month, year, hour, minute, second = (int(g or 0) for g in found.groups())
+        return datetime(year, month, day, hour, minute, second)  # 31.02. refused here

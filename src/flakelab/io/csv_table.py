@@ -5,7 +5,7 @@ Columns, in any order after the first two:
 ``sample``, ``geometry``          required; geometry as an ASTM name (``45as15``)
 ``R400`` … ``R700``               reflectance factor per wavelength [0–1]; any regular grid
 ``L``, ``a``, ``b``               optional stored L*a*b* under ``lab_conditions`` (default D65/10)
-``instrument``, ``measured_at``   optional; ISO 8601 date-time
+``instrument``, ``measured_at``   optional; ISO 8601 date-time, or ``22.11.2026 09:30``
 ``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
 ``lab_conditions``                optional, e.g. ``D65/10``
 
@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import csv
 import io
-from datetime import datetime
 from os import PathLike
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import numpy as np
 
 from flakelab.core.colorimetry import D65_10
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     NOT_UTF8,
@@ -131,11 +131,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         measured_at = None
         if "measured_at" in columns and row[columns["measured_at"]].strip():
             try:
-                measured_at = datetime.fromisoformat(row[columns["measured_at"]].strip())
+                measured_at = read_time(row[columns["measured_at"]])
             except ValueError:
                 raise MeasurementFileError(
                     path,
-                    f"expected an ISO 8601 date-time, got {row[columns['measured_at']]!r}",
+                    f"expected {TIME_EXPECTED}, got {row[columns['measured_at']]!r}",
                     field=f"{where}, measured_at",
                 ) from None
         for k in TEXTURE_READINGS:
