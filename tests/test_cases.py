@@ -905,6 +905,26 @@ def test_a_case_to_be_recorded_in_the_future_is_told():
         case_from_readings(target, sprayout, recipe, shop="x", outcome="accepted")
 
 
+def test_a_shop_typed_with_stray_spaces_is_the_same_shop(cases, tmp_path, cli):
+    """ "Dupont " and "Dupont" were two shops, shown alike in every table, the shop's cases
+    split between them. A shop's name is stored and looked for without spaces at its ends
+    or runs of them, in Unicode's composed form (a decomposed "Müller" from a Mac's file
+    name is the same shop), whether it comes from an option, FLAKELAB_SHOP or a case file."""
+    file = tmp_path / "shop.db"
+    decomposed = "Mu\u0308ller  Lack "
+    assert replace(cases[0], shop=decomposed).shop == "Müller Lack"
+    add_cases(open_database(file), [replace(cases[0], shop=" Dupont")])
+    target, sprayout = example_path("target"), example_path("sprayout")
+    recipe = target.with_name("blue-metallic-recipe.json")
+    recorded = cli("cases", "record", target, "-r", recipe, "--sprayed", sprayout, "-d", file,
+                   "--json", env={"FLAKELAB_SHOP": "Dupont  "})  # fmt: skip
+    assert json.loads(recorded.stdout)["shop"] == "Dupont"
+    shops = json.loads(cli("cases", "shops", "-d", file, "--json").stdout)["shops"]
+    assert [(s["shop"], s["cases"]) for s in shops] == [("Dupont", 2)]
+    listed = json.loads(cli("cases", "list", "-d", file, "--shop", " Dupont ", "--json").stdout)
+    assert len(listed["cases"]) == 2
+
+
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):
     """``-d shop.db`` is named in messages and titles as the file the colorist gave, its path
     (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an

@@ -22,6 +22,7 @@ from flakelab.core.measurement import (
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import zoned_here
 from flakelab.core.units import is_number
+from flakelab.core.wording import tidy_name
 from flakelab.errors import FlakelabError
 from flakelab.library.lots import TonerLot
 
@@ -181,6 +182,8 @@ class Case:
         object.__setattr__(self, "recipe", {k: v / total for k, v in amounts.items()})
         object.__setattr__(self, "tins", _tins(where, self.tins, self.recipe))
         object.__setattr__(self, "created_at", zoned_here(self.created_at).astimezone(UTC))
+        if isinstance(self.shop, str):
+            object.__setattr__(self, "shop", tidy_name(self.shop))
         for name, longest in TEXT_LENGTHS.items():
             text = getattr(self, name)
             if not isinstance(text, str) or len(text) > longest:

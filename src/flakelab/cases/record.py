@@ -28,6 +28,7 @@ from flakelab.core.geometry import (
 from flakelab.core.measurement import Measurement
 from flakelab.core.times import shown_time, zoned_here
 from flakelab.core.tolerance import Tolerance, failing_geometries, failures
+from flakelab.core.wording import tidy_name
 from flakelab.errors import Note
 from flakelab.library.lots import TonerLot
 
@@ -128,6 +129,7 @@ def case_from_readings(
     file's date), else now. ``tins`` (the shop's lots, by toner) gives the case the tins of
     its recipe's toners.
     """
+    shop = tidy_name(shop)  # as the case stores it, for its id
     if instrument is None:
         names, instrument = shared_geometries(target, sprayout)
         named = target.instrument or sprayout.instrument or "unknown"

@@ -54,6 +54,7 @@ from flakelab.cli.sources import (
     recipe_fractions,
     recorded_tins_used,
     shop_cases,
+    shop_spelled,
     since_option,
     source_arrays,
     typed_time,
@@ -97,7 +98,7 @@ def generate(
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     shop: Annotated[
-        str, typer.Option(help="Shop name recorded with the cases.")
+        str, typer.Option(callback=shop_spelled, help="Shop name recorded with the cases.")
     ] = "synthetic shop",
     shop_film_build: Annotated[
         float,
@@ -315,7 +316,9 @@ def record_case(
     ] = "auto",
     shop: Annotated[
         str,
-        typer.Option(envvar=WORKPLACE_SHOP, help="Shop name recorded with the case."),
+        typer.Option(
+            envvar=WORKPLACE_SHOP, callback=shop_spelled, help="Shop name recorded with the case."
+        ),
     ] = "unknown",
     instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
@@ -491,7 +494,9 @@ def record_all(
     ],
     shop: Annotated[
         str,
-        typer.Option(envvar=WORKPLACE_SHOP, help="Shop of the rows that name none."),
+        typer.Option(
+            envvar=WORKPLACE_SHOP, callback=shop_spelled, help="Shop of the rows that name none."
+        ),
     ] = "unknown",
     instrument: KeptGeometriesOption = None,
     library: LibraryOption = None,
@@ -593,7 +598,9 @@ def record_all(
 @cases_app.command("list")
 @reports_errors
 def list_cases(
-    shop: Annotated[str | None, typer.Option(help="Only this shop's cases.")] = None,
+    shop: Annotated[
+        str | None, typer.Option(callback=shop_spelled, help="Only this shop's cases.")
+    ] = None,
     last: Annotated[int, typer.Option(min=1, help="How many of the newest cases.")] = 20,
     check: Annotated[
         bool,
@@ -922,7 +929,10 @@ def remove(
         ),
     ] = False,
     shop: Annotated[
-        str | None, typer.Option(help="With --synthetic: only this shop's synthetic cases.")
+        str | None,
+        typer.Option(
+            callback=shop_spelled, help="With --synthetic: only this shop's synthetic cases."
+        ),
     ] = None,
     yes: Annotated[bool, typer.Option("--yes", help="Remove without asking.")] = False,
     database: DatabaseOption = None,

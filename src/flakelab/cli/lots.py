@@ -42,6 +42,7 @@ from flakelab.cli.sources import (
     LibraryOption,
     existing_engine,
     recipe_fractions,
+    shop_spelled,
     workplace_shop,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
@@ -72,6 +73,7 @@ ShopTinsOption = Annotated[
     str | None,
     typer.Option(
         "--shop",
+        callback=shop_spelled,
         help="The shop whose tins are kept in the database (--database), shared by its "
         "workplaces, instead of in a lot file. Default: the workplace's shop, FLAKELAB_SHOP, "
         "where no lot file is named.",

@@ -10,7 +10,13 @@ from typing import Annotated
 import typer
 
 from flakelab.cli.common import errors
-from flakelab.cli.sources import current_forward, existing_engine, learned_forward, since_option
+from flakelab.cli.sources import (
+    current_forward,
+    existing_engine,
+    learned_forward,
+    shop_spelled,
+    since_option,
+)
 from flakelab.core.times import shown_time
 from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
@@ -94,6 +100,7 @@ HabitsShopOption = Annotated[
     str | None,
     typer.Option(
         "--shop",
+        callback=shop_spelled,
         help="Match for this shop: with its own model where one was adapted to its cases "
         "('flakelab model adapt --shop NAME'), aimed off for its habits where they are "
         "stored ('flakelab cases habits --shop NAME --save'), and weighed for its tins where "

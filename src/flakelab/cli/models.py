@@ -40,6 +40,7 @@ from flakelab.cli.sources import (
     named_model,
     recorded_tins_used,
     shop_cases,
+    shop_spelled,
     source_arrays,
     unseen_cases,
     which_cases,
@@ -212,6 +213,7 @@ def train(
     adapt: Annotated[
         str | None,
         typer.Option(
+            callback=shop_spelled,
             help="Then adapt a copy to this shop's cases: registered as the shop's own model "
             "(the general one is registered too) and written to --out."
         ),
@@ -555,6 +557,7 @@ def register_file(
         str | None,
         typer.Option(
             "--shop",
+            callback=shop_spelled,
             help="Register it as this shop's own model, judged on the shop's cases against the "
             "model current for the shop (default: the instrument's, on every case given).",
         ),
@@ -828,8 +831,9 @@ def adapt(
     shop: Annotated[
         str | None,
         typer.Option(
+            callback=shop_spelled,
             help="Only this shop's cases; the model is then the shop's own, adapted from its "
-            "current one (default: every case given, the instrument's model)."
+            "current one (default: every case given, the instrument's model).",
         ),
     ] = None,
     since: SinceOption = None,

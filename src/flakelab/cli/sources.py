@@ -13,7 +13,7 @@ import typer
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.core.times import shown_time, zoned, zoned_here
-from flakelab.core.wording import database_label
+from flakelab.core.wording import database_label, tidy_name
 from flakelab.errors import FlakelabError
 
 WORKPLACE_SHOP = "FLAKELAB_SHOP"
@@ -26,8 +26,13 @@ def workplace_shop(shop: str | None) -> tuple[str | None, bool]:
     """The shop ``--shop`` names, else the workplace's (:data:`WORKPLACE_SHOP`), else None;
     and whether ``--shop`` named it."""
     if shop is not None:
-        return shop, True
-    return os.environ.get(WORKPLACE_SHOP) or None, False
+        return tidy_name(shop), True
+    return shop_spelled(os.environ.get(WORKPLACE_SHOP)) or None, False
+
+
+def shop_spelled(shop: str | None) -> str | None:
+    """``--shop`` as shops are stored (:func:`~flakelab.core.wording.tidy_name`)."""
+    return shop if shop is None else tidy_name(shop)
 
 
 DatabaseOption = Annotated[
@@ -84,7 +89,8 @@ CasesArgument = Annotated[str, typer.Argument(help="Case file (CSV/CxF) or datab
 
 
 ShopOption = Annotated[
-    str | None, typer.Option(help="Only this shop's cases (default: every case given).")
+    str | None,
+    typer.Option(callback=shop_spelled, help="Only this shop's cases (default: every case given)."),
 ]
 
 
@@ -92,6 +98,7 @@ ShopModelOption = Annotated[
     str | None,
     typer.Option(
         "--shop",
+        callback=shop_spelled,
         help="Only this shop's cases, against its own model where one was adapted to it "
         "(default: every case given, against the instrument's current model).",
     ),

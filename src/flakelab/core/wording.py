@@ -4,6 +4,7 @@ message reads "1 cases" or hedges with "case(s)"; it hides the password of a dat
 It imports nothing but the standard library, like :mod:`flakelab.core.defaults`."""
 
 import re
+import unicodedata
 
 _URL_PASSWORD = re.compile(r"\b([A-Za-z][A-Za-z0-9+.-]*://[^\s:/@]*:)[^\s/@]+@")
 """A URL's ``scheme://user:`` and the password after it, up to its ``@``."""
@@ -35,3 +36,10 @@ def database_label(engine) -> str:
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         return url.database
     return str(url)
+
+
+def tidy_name(name: str) -> str:
+    """A name a person typed (a shop's), as it is stored and looked for: spaces at its ends
+    dropped and a run of them made one, in Unicode's composed form. "Dupont " and "Dupont"
+    were two shops, shown alike in every table, and a shop's cases were split between them."""
+    return " ".join(unicodedata.normalize("NFC", name).split())
