@@ -134,8 +134,12 @@ def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format; spectra an instrument's
     export wrote in percent read as reflectance factors (:func:`percent_evidence`)."""
     if is_no_regular_file(path) or _is_utf16(path):
-        return _read_through_a_copy(path)
-    return _as_factors(path, FORMATS[detect_format(path)][0](path))
+        return _as_factors(path, _read_through_a_copy(path))
+    return _as_factors(path, _read_as_written(path))
+
+
+def _read_as_written(path: str | PathLike) -> list[Measurement]:
+    return FORMATS[detect_format(path)][0](path)
 
 
 PERCENT_SIGN = 2.0
@@ -207,7 +211,7 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
         except UnicodeDecodeError as error:
             raise MeasurementFileError(source, f"not UTF-16 text ({error.reason})") from None
         try:
-            return read_measurements(copy)
+            return _read_as_written(copy)
         except MeasurementFileError as error:
             raise MeasurementFileError(source, error.problem, field=error.field) from None
 
