@@ -215,7 +215,7 @@ def train(
         typer.Option(
             callback=shop_spelled,
             help="Then adapt a copy to this shop's cases: registered as the shop's own model "
-            "(the general one is registered too) and written to --out."
+            "(the general one is registered too) and written to --out.",
         ),
     ] = None,
     adapt_epochs: Annotated[
