@@ -22,7 +22,6 @@ returned from a bad file.
 from __future__ import annotations
 
 import csv
-import itertools
 import json
 import math
 from collections.abc import Callable, Iterable, Iterator
@@ -44,17 +43,13 @@ from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     NOT_UTF8,
     csv_form,
-    csv_rows,
-    csv_separator,
     decimal_comma_in,
     decimal_point,
-    filled_width,
     is_no_regular_file,
     json_value,
-    named_separator,
     numbers_at_once,
+    spreadsheet_table,
     text_encoding,
-    within,
     write_atomically,
 )
 
@@ -252,19 +247,12 @@ def count_lines(path: str | PathLike) -> int | None:
 def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
     """A case file's cases, separated by commas, or by semicolons or tabs as a spreadsheet
     in most of Europe saves them, with the decimal comma it then uses."""
-    lines = iter(lines)
-    first = next(lines, "")
-    named = named_separator(first)
-    first = next(lines, "") if named else first
-    separator = named or csv_separator(first) or ","
 
     def refused(number: int, problem: str) -> CaseFileError:
         return CaseFileError(f"{path}: row {number}: {problem}")
 
-    rows = csv_rows(itertools.chain([first], lines), separator, refused)
-    header = next(rows, None)
-    width = filled_width(header or [])
-    header = header and header[:width]
+    separator, header, rows = spreadsheet_table(lines, refused)
+    separator = separator or ","
     if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
         raise CaseFileError(
             f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)} "
@@ -272,10 +260,8 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
         )
     layout = _Layout(header, _file_geometries(path, header), decimal_comma=separator != ",")
     cases, rows_of = [], {}
-    for number, row in enumerate(rows, start=2):
-        if not any(cell.strip() for cell in row):
-            continue
-        case = _case_from_row(path, number, layout, within(row, width))
+    for number, row in rows:
+        case = _case_from_row(path, number, layout, row)
         if case.case_id in rows_of:
             raise CaseFileError(
                 f"{path}: row {number}: case_id: {case.case_id!r} is also row "

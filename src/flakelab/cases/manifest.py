@@ -42,12 +42,8 @@ from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
 from flakelab.io.records import (
     NOT_UTF8,
-    csv_rows,
-    csv_separator,
-    filled_width,
-    named_separator,
+    spreadsheet_table,
     text_encoding,
-    within,
 )
 from flakelab.library import Library
 from flakelab.library.lots import TonerLot, TonerLots
@@ -85,17 +81,12 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
         raise ManifestError(f"{path}: {NOT_UTF8} ({error.reason})") from None
     except OSError as error:
         raise ManifestError(f"{path}: cannot be read as a CSV manifest ({error})") from None
-    lines = text.splitlines()
-    named = lines and named_separator(lines[0])
-    lines = lines[1:] if named else lines
-    separator = named or (csv_separator(lines[0]) if lines else None)
 
     def refused(number: int, problem: str) -> ManifestError:
         return ManifestError(f"{path}: row {number}: {problem}")
 
-    rows = list(csv_rows(lines, separator or ",", refused))
-    width = filled_width(rows[0]) if rows else 0
-    header = [cell.strip() for cell in rows[0][:width]] if rows else []
+    _, header, rows = spreadsheet_table(text.splitlines(), refused)
+    header = [cell.strip() for cell in header or []]
     unknown = [c for c in header if c not in MANIFEST_COLUMNS]
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     twice = sorted({c for c in header if header.count(c) > 1})
@@ -107,10 +98,7 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
             f"{', '.join(MANIFEST_COLUMNS[3:])}, each once ({', '.join(wrong)})"
         )
     entries = []
-    for number, row in enumerate(rows[1:], start=2):
-        row = within(row, width)
-        if not any(cell.strip() for cell in row):
-            continue
+    for number, row in rows:
         if len(row) != len(header):
             raise ManifestError(
                 f"{path}: row {number}: expected {len(header)} cells, got {len(row)}"

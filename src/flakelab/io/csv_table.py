@@ -32,19 +32,15 @@ from flakelab.io.records import (
     Reading,
     assemble,
     csv_form,
-    csv_rows,
-    csv_separator,
     decimal_comma_in,
     decimal_point,
-    filled_width,
-    named_separator,
     parse_conditions,
     parse_geometry_name,
     parse_lab,
     parse_spectrum,
     parse_texture,
     parse_wavelength_header,
-    within,
+    spreadsheet_table,
     write_atomically,
 )
 
@@ -72,22 +68,18 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]
-    named = lines and named_separator(lines[0])
-    lines = lines[1:] if named else lines
-    if not lines:
-        raise MeasurementFileError(path, "empty CSV file")
-    delimiter = named or csv_separator(lines[0])
-    if delimiter is None:
-        raise MeasurementFileError(
-            path, "no comma, semicolon or tab separated header", field="header"
-        )
 
     def refused(number: int, problem: str) -> MeasurementFileError:
         return MeasurementFileError(path, problem, field=f"row {number}")
 
-    rows = list(csv_rows(io.StringIO("\n".join(lines)), delimiter, refused))
-    width = filled_width(rows[0])
-    header = [h.strip() for h in rows[0][:width]]
+    delimiter, header, rows = spreadsheet_table(io.StringIO("\n".join(lines)), refused)
+    if header is None:
+        raise MeasurementFileError(path, "empty CSV file")
+    if delimiter is None:
+        raise MeasurementFileError(
+            path, "no comma, semicolon or tab separated header", field="header"
+        )
+    header = [h.strip() for h in header]
     columns = {h: i for i, h in enumerate(header)}
     for required in ("sample", "geometry"):
         if required not in columns:
@@ -106,13 +98,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     has_lab = all(k in columns for k in "Lab")
     if delimiter != ",":  # the comma is free to be the decimal mark
         numeric = [*spectral, *(columns[k] for k in (*"Lab", *TEXTURE_READINGS) if k in columns)]
-        rows[1:] = [_decimal_points(row, numeric) for row in rows[1:]]
+        rows = ((number, _decimal_points(row, numeric)) for number, row in rows)
 
     readings, texture, instruments, conditions = [], {}, set(), set()
-    for number, row in enumerate(rows[1:], start=2):
-        where, row = f"row {number}", within(row, width)
-        if not any(cell.strip() for cell in row):  # a spreadsheet's blank row, ",,,,"
-            continue
+    for number, row in rows:
+        where = f"row {number}"
         if len(row) != len(header):
             raise MeasurementFileError(
                 path,

@@ -58,6 +58,7 @@ __all__ = [
     "named_separator",
     "network_file_system",
     "within",
+    "spreadsheet_table",
     "csv_rows",
     "json_value",
     "toml_value",
@@ -250,6 +251,36 @@ def within(row: list[str], width: int) -> list[str]:
     if len(row) > width and not any(cell.strip() for cell in row[width:]):
         return row[:width]
     return row
+
+
+def spreadsheet_table(
+    lines: Iterable[str], refused: Callable[[int, str], Exception]
+) -> tuple[str | None, list[str] | None, Iterator[tuple[int, list[str]]]]:
+    """A CSV file's separator, header and rows, as a spreadsheet may have saved them: the
+    separator a first line ``sep=;`` names (:func:`named_separator`, that line then left
+    out), else the one its header holds most (:func:`csv_separator`; None where it holds
+    none, the file then split at commas); the header up to its last named column
+    (:func:`filled_width`), None where no line follows; and each row that is not blank,
+    with its number (the header's is 1), cut to the header's width where only empty cells
+    lie past it (:func:`within`). The measurement, case-history and manifest readers all
+    read their CSV through it."""
+    lines = iter(lines)
+    first = next(lines, None)
+    named = first is not None and named_separator(first)
+    first = next(lines, None) if named else first
+    separator = named or (None if first is None else csv_separator(first))
+    rows = csv_rows(itertools.chain([] if first is None else [first], lines), separator or ",",
+                    refused)  # fmt: skip
+    header = next(rows, None)
+    width = filled_width(header or [])
+
+    def filled_rows() -> Iterator[tuple[int, list[str]]]:
+        for number, row in enumerate(rows, start=2):
+            row = within(row, width)
+            if any(cell.strip() for cell in row):  # a spreadsheet's blank row, ",,,,"
+                yield number, row
+
+    return separator, header and header[:width], filled_rows()
 
 
 def csv_form(decimal_comma: bool) -> tuple[str, str]:
