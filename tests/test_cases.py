@@ -847,6 +847,15 @@ def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cas
         assert cli("cases", "export", "-d", file, "--since", since, out).returncode == 0
         assert len(read_cases(out)) == kept, since
     assert len(select_cases([written], since=datetime(2026, 12, 3, 8, 0))) == 1
+    from flakelab.models.registry import list_models, register, shipped_model
+    from flakelab.models.training import case_arrays
+
+    engine = open_database(file)  # a model's registration time too: shown as UTC before
+    register(engine, shipped_model("five-angle"), case_arrays(cases, read_library(None).names))
+    stored = list_models(engine)[0]["created_at"]
+    models = cli("model", "list", "-d", file).stdout
+    assert shown_time(stored) in models and stored[:16].replace("T", " ") not in models
+    assert shipped_model("ma-t12").info["data_hash"][:12] in models  # blank before
 
 
 def test_a_database_on_a_network_share_keeps_sqlite_s_rollback_journal(

@@ -46,6 +46,7 @@ from flakelab.cli.sources import (
     which_cases,
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
+from flakelab.core.times import shown_time
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
@@ -433,7 +434,7 @@ def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
 def list_models(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
     """Registered model versions."""
     from flakelab.cases.database import open_database
-    from flakelab.models.registry import SHIPPED, list_models
+    from flakelab.models.registry import SHIPPED, list_models, shipped_model
 
     rows = list_models(open_database(database, must_exist=True))
     promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}
@@ -454,11 +455,13 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
             f"{r['held_out_de00']:.3f}",
             str(r["toners"]),
             r["data_hash"],
-            r["created_at"][:19],
+            shown_time(r["created_at"]),
         )
     for name in SHIPPED:  # the current model while none of its name is promoted
         status = "current" if current[name] == "shipped" else "fallback"
-        table.add_row(name, "shipped", status, "", "", "", "")
+        shipped = shipped_model(name)  # 20 ms each: its toners and data, as a version's
+        toners, data = str(len(shipped.toners)), shipped.info.get("data_hash", "")[:12]
+        table.add_row(name, "shipped", status, "", toners, data, "")
     console.print(table)
 
 
