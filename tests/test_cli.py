@@ -619,3 +619,63 @@ def test_every_help_paragraph_prints_on_one_line_however_wide_the_terminal():
         lines = [" ".join(line.split()) for line in shown.splitlines()]
         for paragraph in paragraphs:
             assert " ".join(paragraph.split()) in lines, (" ".join(path), paragraph)
+
+
+def _table_like_the_case_list():
+    """A table as 'cases list' draws one: padding collapsed, unwrapped columns of times and
+    ids, and a recipe column that wraps."""
+    from rich import box
+    from rich.table import Table
+
+    table = Table(title="Newest cases", box=box.SIMPLE_HEAD, collapse_padding=True)
+    for column in ("made", "case", "worst ΔE00"):
+        table.add_column(column, no_wrap=True, justify="right" if "ΔE" in column else "left")
+    table.add_column("recipe (share)")
+    table.add_row(
+        "2026-01-02 00:03", "4790f3af-2a88", "1.69 45as110", "Al medium 98%, Phthalo blue GS 2%"
+    )
+    table.add_row("2026-01-01 23:26", "446c14c4-da82", "3.78 45as15",
+                  "Pearl interference red 55%, Pearl interference green 42% +2")  # fmt: skip
+    return table
+
+
+@pytest.mark.parametrize("width", [30, 50, 60, 80, 200])
+def test_a_table_too_wide_for_the_terminal_cuts_no_cell(width):
+    """However narrow the terminal, a table's cells are whole: its wrapping columns narrowed
+    to their longest word and no more, and drawn past the terminal's edge where that is not
+    narrow enough. Rich cut cells with an ellipsis ("2026-01-02 00:…", "Pearl interferen…"),
+    and at 40 columns left the recipe column out; where the table fits, it is Rich's own."""
+    import io
+
+    from rich.console import Console
+
+    from flakelab.cli.common import _Console
+
+    out = io.StringIO()
+    _Console(file=out, width=width, color_system=None).print(_table_like_the_case_list())
+    drawn = out.getvalue()
+    lines = drawn.splitlines()
+    assert "…" not in drawn
+    for cell in ("2026-01-02 00:03", "4790f3af-2a88", "1.69 45as110", "3.78 45as15"):
+        assert cell in drawn, (width, cell)  # on one line: these columns do not wrap
+    assert len(re.findall(r"\binterference\b", drawn)) == 2  # wrapped, no word cut
+    tightest = 16 + 13 + 12 + len("interference") + 5 + 5  # and the pads and borders
+    assert max(map(len, lines)) == tightest if width < tightest else max(map(len, lines)) <= width
+    if width == 200:  # room enough: drawn as Rich draws it
+        plain = io.StringIO()
+        Console(file=plain, width=width, color_system=None).print(_table_like_the_case_list())
+        assert drawn == plain.getvalue()
+
+
+def test_the_match_shows_every_number_whole_in_a_narrow_terminal(cli, monkeypatch):
+    """In a 60-column terminal the main job's per-geometry table read "62.…" and "-1…" for
+    L* and a*; every number of it is now whole, as its JSON report gives it."""
+    from flakelab.cli import common
+
+    report = json.loads(cli("match", "--example", "--json").stdout)["candidates"][0]
+    monkeypatch.setattr(common.console, "width", 60)
+    shown = cli("match", "--example").stdout
+    assert "…" not in shown
+    for name, g in report["geometries"].items():
+        row = next(line.split() for line in shown.splitlines() if line.split()[:1] == [name])
+        assert row[1:4] == [f"{g[k]:.2f}" for k in ("L", "a", "b")], name

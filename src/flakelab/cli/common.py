@@ -20,6 +20,7 @@ import typer
 from rich import box
 from rich.console import Console
 from rich.markup import escape
+from rich.measure import Measurement
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -28,6 +29,7 @@ from rich.progress import (
     TextColumn,
     TimeRemainingColumn,
 )
+from rich.segment import Segments
 from rich.table import Table
 
 from flakelab.core.wording import hidden_passwords
@@ -73,6 +75,77 @@ class _Console(Console):
     def on_broken_pipe(self) -> None:
         self.quiet = True
         raise BrokenPipeError(errno.EPIPE, os.strerror(errno.EPIPE))
+
+    def print(self, *objects: Any, **kwargs: Any) -> None:
+        """Print as Rich does, but cut no table's cell: a table too wide for the terminal
+        has its widest wrapping columns narrowed down to their longest word, and no more;
+        one that still does not fit is drawn past the terminal's edge. Rich cut cells with
+        an ellipsis: in a 70-column terminal the match's L*a*b* read "62.…" and "-1…", and in
+        80 a model's data hash and the correction's "spray-out" row were cut."""
+        if any(isinstance(o, Table) for o in objects):
+            objects = tuple(self._drawn_uncut(o) for o in objects)
+            kwargs["crop"] = False
+        super().print(*objects, **kwargs)
+
+    def _drawn_uncut(self, renderable: Any) -> Any:
+        if not isinstance(renderable, Table) or renderable.expand or renderable.width:
+            return renderable
+        with _columns_fitted(self, renderable) as width:
+            return Segments(self.render(renderable, self.options.update_width(width)))
+
+
+@contextmanager
+def _columns_fitted(console: Console, table: Table) -> Iterator[int]:
+    """``table`` with each column's width fixed for the console, as :meth:`_Console.print`
+    says; yields the table's width."""
+    wide = console.options.update_width(100_000)
+    most, least = [], []
+    for column in table.columns:
+        sizes = [Measurement.get(console, wide, cell) for cell in (column.header, *column.cells)]
+        most.append(max(m.maximum for m in sizes))
+        least.append(most[-1] if column.no_wrap else max(m.minimum for m in sizes))
+    paddings, counted = _cell_paddings(table)
+    borders = (2 if table.box and table.show_edge else 0) + (len(paddings) - 1 if table.box else 0)
+    widths = _narrowed(most, least, console.width - sum(paddings) - borders)
+    kept = [column.width for column in table.columns]
+    for column, width, padding, padded in zip(
+        table.columns, widths, paddings, counted, strict=True
+    ):
+        column.width = width + padding - padded
+    try:
+        yield sum(widths) + sum(paddings) + borders
+    finally:
+        for column, width in zip(table.columns, kept, strict=True):
+            column.width = width
+
+
+def _narrowed(widths: list[int], least: list[int], room: int) -> list[int]:
+    """``widths`` narrowed, the widest first, to fit ``room``, none below its ``least``."""
+    widths = list(widths)
+    while sum(widths) > room:
+        slack = [k for k, (w, low) in enumerate(zip(widths, least, strict=True)) if w > low]
+        if not slack:
+            break
+        widths[max(slack, key=widths.__getitem__)] -= 1
+    return widths
+
+
+def _cell_paddings(table: Table) -> tuple[list[int], list[int]]:
+    """The left and right padding of each column's cells as Rich pads them, and as its
+    column widths count them: where padding collapses, Rich's ``_get_padding_width`` counts
+    the first column's right padding alone, whose cells have their left one too."""
+    _, right, _, left = table.padding
+    last = len(table.columns) - 1
+    paddings, counted = [], []
+    for index in range(last + 1):
+        lead = max(0, left - right) if table.collapse_padding and index > 0 else left
+        counted_lead = 0 if table.collapse_padding else left
+        if index == 0 and not table.pad_edge:
+            lead = counted_lead = 0
+        trail = 0 if index == last and not table.pad_edge else right
+        paddings.append(lead + trail)
+        counted.append(counted_lead + trail)
+    return paddings, counted
 
 
 _open_closed_streams()
