@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import inspect
+import io
 import json
 import os
 import re
@@ -235,6 +237,52 @@ def test_a_reader_that_stops_reading_stops_the_command_quietly():
         process = subprocess.Popen(command, stdout=writer, stderr=writer)
         os.close(writer)
         assert process.wait(timeout=120) == status, command
+
+
+_A_LONG_TABLE = """
+import sys, typer
+from rich.table import Table
+from flakelab.cli.common import console, print_report, reports_errors
+
+@reports_errors
+def show():
+    rows = [(f"{row:013d}", "Al medium 98%, Phthalo blue GS 2%") for row in range(4000)]
+    if sys.argv[1:] == ["--json"]:
+        print_report({"cases": rows})
+        return
+    table = Table("case", "recipe")
+    for row in rows:
+        table.add_row(*row)
+    console.print(table)
+
+try:
+    show()
+except typer.Exit as stop:
+    sys.exit(stop.exit_code)
+"""
+
+
+def test_a_table_its_reader_leaves_half_way_stops_the_command(tmp_path):
+    """``flakelab cases list --last 3000 | head``: the reader gone after the first lines, the
+    table's write returns the part written, and Python's buffered stream counted the rest
+    written too; the command ended with status 0, its table lost past the pipe's 64 KiB. A
+    reader still reading, and a pipe the command writes nothing to, are no such end."""
+    for json_output in ([], ["--json"]):
+        process = subprocess.Popen([sys.executable, "-c", _A_LONG_TABLE, *json_output],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+        process.stdout.read(200)
+        process.stdout.close()
+        assert process.wait(timeout=120) == 141 and process.stderr.read() == b""  # 0 before
+    from flakelab.cli.common import reader_gone
+
+    reader, writer = os.pipe()
+    with os.fdopen(writer, "w") as stream, os.fdopen(reader) as still_reading:
+        assert not reader_gone(stream) and not reader_gone(still_reading)
+        still_reading.close()
+        assert reader_gone(stream)
+        with contextlib.suppress(BrokenPipeError):
+            stream.close()
+    assert not reader_gone(io.StringIO()) and not reader_gone(open(tmp_path / "f", "w"))
 
 
 def test_a_report_is_written_whole_whatever_the_standard_streams(tmp_path):
@@ -645,7 +693,6 @@ def test_a_table_too_wide_for_the_terminal_cuts_no_cell(width):
     to their longest word and no more, and drawn past the terminal's edge where that is not
     narrow enough. Rich cut cells with an ellipsis ("2026-01-02 00:…", "Pearl interferen…"),
     and at 40 columns left the recipe column out; where the table fits, it is Rich's own."""
-    import io
 
     from rich.console import Console
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from datetime import datetime
 from operator import attrgetter
@@ -26,6 +25,7 @@ from flakelab.cli.common import (
     console,
     errors,
     interrupted,
+    print_report,
     progress_bar,
     read_readings,
     reports_errors,
@@ -422,7 +422,7 @@ def record_case(
         "cases_in_database": count_cases(engine),
     }
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_recorded(report, chosen=instrument is not None)
 
@@ -572,7 +572,7 @@ def record_all(
         "cases_in_database": count_cases(engine),
     }
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     title = f"Recorded {counted(len(cases), 'spray-out')} from {manifest}"
     table = Table(title=title, box=box.SIMPLE_HEAD)
@@ -664,7 +664,7 @@ def list_cases(
         report = {"database": str(engine.url), "cases": rows}
         if checked:
             report["from_prediction_unchecked"] = unchecked
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     whose = f"{shops[0]!r}" if len(shops) == 1 else "every shop"
     if not rows:  # which cases were looked at: the newest alone, not the whole history
@@ -831,7 +831,7 @@ def nearest(
         report["recipe_out"] = {"file": str(recipe_out), "case": pick, "quantity_g": grams}
         errors.print(f"wrote case {pick}'s recipe, {grams:g} g, to {recipe_out}", highlight=False)
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_nearest(report)
 
@@ -1086,7 +1086,7 @@ def realism(
         report["plot"] = str(plot)
         errors.print(f"wrote {plot}", highlight=False)
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     table = Table(
         title=f"Generated world realism (seed {seed}, {n} formulations)", box=box.SIMPLE_HEAD
@@ -1227,7 +1227,7 @@ def habits(
         "left_out_mismatched": left_out,
     }
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     whose = shop or hidden_passwords(cases)
     _print_habits(report, fit, f"Habits of {whose} against {model or 'the current model'}")
@@ -1354,7 +1354,7 @@ def shops(database: DatabaseOption = None, json_output: JsonOption = False) -> N
         row["tins"] = tins.get(row["shop"])
         row["models"] = models.get(row["shop"], [])
     if json_output:
-        print(json.dumps({"shops": rows}, indent=2))
+        print_report({"shops": rows})
         return
     table = Table(title=f"Shops in {database_label(engine)}", box=box.SIMPLE_HEAD)
     columns = ("shop", "cases", " / ".join(OUTCOMES), "last case", "habits", "tins", "own model")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -27,6 +26,7 @@ from flakelab.cli.common import (
     errors,
     lights_option,
     print_notes,
+    print_report,
     read_readings,
 )
 from flakelab.cli.lots import LotsOption, lots_report, shop_lots
@@ -241,7 +241,7 @@ def correct_command(
                          found and found[1], forward, tol, plot)  # fmt: skip
         report["plot"] = str(plot)
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_correction(report)
 

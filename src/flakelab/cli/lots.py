@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import functools
-import json
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated
@@ -24,6 +23,7 @@ from flakelab.cli.common import (
     errors,
     file_name_for,
     names_read_in,
+    print_report,
     read_readings,
     reports_errors,
 )
@@ -204,7 +204,7 @@ def panel_command(
             errors.print(f"wrote {name}'s panel recipe to {out}", highlight=False)
         reports.append(report)
     if json_output:
-        print(json.dumps(reports[0] if len(reports) == 1 else {"panels": reports}, indent=2))
+        print_report(reports[0] if len(reports) == 1 else {"panels": reports})
         return
     for report in reports:
         _print_panel(report)
@@ -423,7 +423,7 @@ def calibrate_command(
     report |= _panels_report(found, sprayed, recipe)
     report["model"], report["model_id"] = forward.name, forward.model_id
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_calibration(report)
 
@@ -778,22 +778,19 @@ def show_command(
         write_lots(found, out)
     kinds = {t.name: t.kind for t in lib.toners}
     if json_output:
-        print(
-            json.dumps(
-                {
-                    "library": found.library,
-                    "shop": shop,
-                    "version": kept and kept.version,
-                    "saved_at": kept and kept.saved_at.isoformat(),
-                    "lots": [
-                        {**asdict(t), "read_with": found.read_with(t.toner)}
-                        for t in found.lots.values()
-                    ],
-                    "misfit": [_misfit_report(found, key) for key in sorted(found.misfit)],
-                    "out": out and str(out),
-                },
-                indent=2,
-            )
+        print_report(
+            {
+                "library": found.library,
+                "shop": shop,
+                "version": kept and kept.version,
+                "saved_at": kept and kept.saved_at.isoformat(),
+                "lots": [
+                    {**asdict(t), "read_with": found.read_with(t.toner)}
+                    for t in found.lots.values()
+                ],
+                "misfit": [_misfit_report(found, key) for key in sorted(found.misfit)],
+                "out": out and str(out),
+            }
         )
         return
     title = f"Toner tins of {lots}" if kept is None else f"Toner {kept.describe()[4:]}"
@@ -862,7 +859,7 @@ def save_command(
         "database": engine.url.render_as_string(hide_password=True),
     }
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     errors.print(
         f"stored the {report['tins']} tins of {lots} for shop {shop!r} as version "
@@ -933,7 +930,7 @@ def history_command(
         for before, v in zip([None, *versions[:-1]], versions, strict=True)
     ]
     if json_output:
-        print(json.dumps({"shop": shop, "versions": report, "tins": tins}, indent=2))
+        print_report({"shop": shop, "versions": report, "tins": tins})
         return
     table = Table(title=f"Versions of the tins of shop {shop!r}", box=box.SIMPLE)
     for column in ("version", "saved", "tins", "changed"):
@@ -975,7 +972,7 @@ def _show_shops(database: str | None, json_output: bool) -> None:
     engine = existing_engine(database)
     shops = list_stored_lots(engine) if engine is not None else []
     if json_output:
-        print(json.dumps({"shops": shops}, indent=2))
+        print_report({"shops": shops})
         return
     if not shops:
         raise FlakelabError(

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -28,6 +27,7 @@ from flakelab.cli.common import (
     draw_side_by_side,
     errors,
     lights_option,
+    print_report,
     progress_bar,
     read_readings,
     read_sample,
@@ -132,7 +132,7 @@ def inspect(
         info = describe(mean, cond) | {"readings": spread_of_readings(readings, mean, tol, cond)}
         info["readings"]["tolerance"] = tol.name
         if as_json:
-            print(json.dumps(info, indent=1))
+            print_report(info, indent=1)
             return
         _print_description(info)
         _print_readings_spread(info["readings"], "file")
@@ -141,7 +141,7 @@ def inspect(
     infos = [describe(m, cond) for m in measurements]
     if as_json:
         out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
-        print(json.dumps(out, indent=1))
+        print_report(out, indent=1)
         return
     for info in infos:
         _print_description(info)
@@ -224,7 +224,7 @@ def compare(
                          texture={smp.sample: result.texture_share})  # fmt: skip
         report["plot"] = str(plot)
     if as_json:
-        print(json.dumps(report, indent=1))
+        print_report(report, indent=1)
     else:
         _print_comparison(report, tol)
     if fail_on_reject and not result.all_pass:
@@ -422,7 +422,7 @@ def validate_scaling(
             plot_scaling(one, plots / f"scaling-spread-{one.spread_deg:g}.png")
         report["plots"] = sorted(str(p) for p in plots.glob("scaling-spread-*.png"))
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_scaling(report)
 

@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     lights_option,
     names_read_in,
     print_notes,
+    print_report,
     progress_bar,
     read_readings,
     shares_text,
@@ -347,7 +348,7 @@ def match_command(
         _plot_match(measurement, result, extra, tol, plot)
         report["plot"] = str(plot)
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_match(report)
 
@@ -477,7 +478,7 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
             report["recipe_out"] = str(best)
         reports.append(report)
     if json_output:
-        print(json.dumps({"file": str(path), **shop_tins, "targets": reports}, indent=2))
+        print_report({"file": str(path), **shop_tins, "targets": reports})
         return
     _print_every_sample(path, reports)
     if shop_tins["lots"]:
@@ -713,7 +714,7 @@ def _evaluate(
     report["world"] = world_name
     report["habits"] = habits and habits.report()
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
     else:
         console.print_json(json.dumps(report))
     if "targets_asked" in report:  # a Ctrl-C ended the run early

@@ -19,6 +19,7 @@ from flakelab.cli.common import (
     console,
     errors,
     interrupted,
+    print_report,
     progress_bar,
     reports_errors,
 )
@@ -384,7 +385,7 @@ def train(
     if kept:
         kept.remove()  # the model is written and registered: nothing left to go on with
     if json_output:
-        print(json.dumps(summary, indent=2, default=str))
+        print_report(summary, default=str)
         return
     console.print_json(json.dumps(summary, default=str))
 
@@ -440,9 +441,7 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
     promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}
     current = {name: promoted.get(name, "shipped") for name in sorted({*SHIPPED, *promoted})}
     if json_output:
-        print(
-            json.dumps({"registered": rows, "shipped": list(SHIPPED), "current": current}, indent=2)
-        )
+        print_report({"registered": rows, "shipped": list(SHIPPED), "current": current})
         return
     table = Table(title="Models", box=box.SIMPLE_HEAD)
     for column in ("name", "version", "status", "held-out ΔE00", "toners", "data", "created"):
@@ -497,7 +496,7 @@ def show_model(
         _write_model(chosen, out)
         card["file"] = str(out)
     if json_output:
-        print(json.dumps(card, indent=2, default=str))
+        print_report(card, default=str)
         return
     console.print(_model_card_table(card))
 
@@ -609,7 +608,7 @@ def register_file(
         "database": str(engine.url),
     }
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     errors.print(_registry_verdict(done), highlight=False)
 
@@ -775,7 +774,7 @@ def evaluate(
     report["unseen"] = unseen
     report["shop"], report["since"] = shop, since and since.isoformat()
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_evaluation(report, len(loaded))
 
@@ -954,7 +953,7 @@ def adapt(
         )
     _write_losses(report["log"], loss_log, plot, f"{stage}, {data.x.shape[0]} cases", summary)
     if json_output:
-        print(json.dumps(summary, indent=2))
+        print_report(summary)
         return
     _print_adaptation(summary, stage, config.outlier_threshold)
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -16,6 +15,7 @@ from flakelab.cli.common import (
     check_output_file,
     console,
     errors,
+    print_report,
     read_sample,
     reports_errors,
 )
@@ -137,7 +137,7 @@ def texture_evaluate(
     }
     report["roundtrip_rel_error_max"] = max(r["rel_error_max"] for r in report.values())
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     for name in ("coarseness", "glint"):
         r = report[name]
@@ -195,7 +195,7 @@ def texture_fit(
         reports[name]["roundtrip"] = roundtrip(fitted[name])
     save_processes(fitted, output)
     if json_output:
-        print(json.dumps(reports, indent=2))
+        print_report(reports)
     for name, r in reports.items():
         errors.print(f"{name}: closed-loop max error {r['roundtrip']['rel_error_max']:.3f}")
     errors.print(f"wrote {output}", highlight=False)

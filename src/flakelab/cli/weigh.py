@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 from typing import Annotated
@@ -11,7 +10,14 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, check_output_file, console, errors, print_notes
+from flakelab.cli.common import (
+    JsonOption,
+    check_output_file,
+    console,
+    errors,
+    print_notes,
+    print_report,
+)
 from flakelab.cli.lots import ShopTinsOption
 from flakelab.cli.matcher import (
     ModelOption,
@@ -112,7 +118,7 @@ def weigh_command(
         report["recipe_out"] = str(recipe_out)
         errors.print(f"wrote the weighed recipe to {recipe_out}", highlight=False)
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     console.print(f"{recipe.name} for {can_text(report)}", highlight=False)
     console.print(weights_table(None, report["weights_g"]))
@@ -195,7 +201,7 @@ def _weigh_the_rest(
         report["recipe_out"] = str(recipe_out)
         errors.print(f"wrote what the can holds to {recipe_out}", highlight=False)
     if json_output:
-        print(json.dumps(report, indent=2))
+        print_report(report)
         return
     _print_the_rest(report, recipe, planned)
 
