@@ -783,9 +783,13 @@ def test_recorded_sprayouts_are_checked_against_their_recipes_with_the_shops_sto
     partial = replace(cases[1], geometries=cases[1].geometries[:3],
                       target=cases[1].target[:3], sprayout=cases[1].sprayout[:3])  # fmt: skip
     assert recorded_checks([partial], library)[0] == [None]
-    other = replace(library, name="other", toners=library.toners[:-1])
-    checks, why = recorded_checks(cases[1:3], other)
+    renamed = tuple(replace(t, name=f"{t.name} 2") for t in library.toners)
+    checks, why = recorded_checks(cases[1:3], replace(library, name="other", toners=renamed))
     assert checks == [None, None] and "library 'other'" in why
+    # a library without a toner these cases do not use checks them as the whole one does
+    used = {name for c in cases[1:3] for name in c.recipe}
+    fewer = tuple(t for t in library.toners if t.name in used or t.kind != "pigment")
+    assert recorded_checks(cases[1:3], replace(library, name="fewer", toners=fewer))[0] == bare[1:3]
 
 
 def test_a_shops_own_model_is_current_for_that_shop_alone(shipped, tmp_path):

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 
 import colour
 import numpy as np
 import pytest
+import torch
 
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.io import read_library, write_library
@@ -239,17 +241,67 @@ def test_a_library_file_s_every_flaw_names_the_file(tmp_path):
         assert str(raised.value).startswith(f"{path}: ") and message.strip() in str(raised.value)
 
 
-def test_a_library_that_differs_from_the_model_says_how():
+def test_a_library_of_another_model_is_refused_and_says_how():
+    """A model that knows under half of a library's toners was trained for another one."""
     from flakelab.match.models import forward_for
     from flakelab.models.registry import shipped_model
 
     library, model = read_library(), shipped_model("five-angle")
-    pigments = Library("pigments", tuple(t for t in library.toners if t.kind == "pigment"))
-    with pytest.raises(ModelError, match=r"15 of the model's are not in the library \(e.g. \['Al"):
-        forward_for(model, pigments)
-    reversed_ = Library("reversed", library.toners[::-1])
-    with pytest.raises(ModelError, match="list the toners in another order"):
-        forward_for(model, reversed_)
+    renamed = Library("renamed", tuple(replace(t, name=f"{t.name} 2") for t in library.toners))
+    with pytest.raises(ModelError, match=r"35 of the library's are not in the model .*; 35 of"):
+        forward_for(model, renamed)
+
+
+def test_a_toner_added_to_the_library_after_training_is_a_new_toner():
+    """A toner the model was not trained with (a paint maker's new one, added to the shop's
+    library) is predicted as a new toner, through the hybrid, with a note naming it; a toner
+    the library lacks is never used, and the library's order is its own. Before, each was
+    refused: "train a model for this library". An added copy of a known toner predicts what
+    the known one predicts (the physics ratio between the two is one); the library without
+    a toner, or reversed, predicts what the full library does for the same recipe."""
+    from flakelab.errors import Note
+    from flakelab.match.forward import HybridForward
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    library, model = read_library(), shipped_model("five-angle")
+    full = forward_for(model, library)
+    blue = library.toners[library.names.index("Phthalo blue GS")]
+    added = Library("added", (*library.toners, replace(blue, name="Phthalo blue GS 2025")))
+    with pytest.warns(Note, match=r"1 toner\(s\) the model demo-five-angle was not trained "
+                      r"with.*'Phthalo blue GS 2025'"):  # fmt: skip
+        hybrid = forward_for(model, added)
+    assert isinstance(hybrid, HybridForward) and "Phthalo blue GS 2025" in hybrid.novel
+    assert "Phthalo blue GS 2025 (as Phthalo blue GS)" in hybrid.name_for(["Phthalo blue GS 2025"])
+    rng = np.random.default_rng(5)
+    x = rng.dirichlet(np.ones(4), size=6)  # aluminium, blue, maroon, violet
+    blue = rng.uniform(0.01, 0.25, size=6)  # under the 30 % where the physics base leads
+    x = np.insert(np.delete(x, 1, axis=1), 1, 0.0, axis=1)
+    x = x / x.sum(1, keepdims=True) * (1 - blue[:, None])
+    x[:, 1] = blue
+    chosen = ["Al medium", "Phthalo blue GS", "Perylene maroon", "Quinacridone violet"]
+
+    def predicted(forward, names):
+        fractions = np.zeros((len(x), len(forward.toners)))
+        fractions[:, [forward.toners.index(n) for n in names]] = x
+        with torch.no_grad():
+            return forward(torch.as_tensor(fractions, dtype=forward.dtype))[0].double().numpy()
+
+    known = predicted(full, chosen)
+    as_new = predicted(hybrid, ["Al medium", "Phthalo blue GS 2025", *chosen[2:]])
+    np.testing.assert_allclose(as_new, known, rtol=1e-4)
+    typo = Library(
+        "typo", tuple(replace(t, name=t.name.replace("GS", "G S")) for t in library.toners)
+    )
+    with pytest.warns(Note, match=r"'Phthalo blue G S' \(did you mean 'Phthalo blue GS'\?\)"):
+        forward_for(model, typo)
+    for other in (
+        Library("no Al VMP", tuple(t for t in library.toners if t.name != "Al VMP")),
+        Library("reversed", library.toners[::-1]),
+    ):
+        forward = forward_for(model, other)
+        assert forward.toners == other.names
+        np.testing.assert_allclose(predicted(forward, chosen), known, rtol=1e-5)
 
 
 def test_duplicate_toner_names_rejected():

@@ -51,12 +51,20 @@ class LearnedForward:
 
     dtype = torch.float32
 
-    def __init__(self, model: ForwardModel) -> None:
+    def __init__(self, model: ForwardModel, toners: Sequence[str] | None = None) -> None:
         # a frozen copy: the matcher differentiates with respect to the recipe only, and
         # gradients for the weights would cost most of each backward pass (and pile up)
         self.model = replace(model, network=copy.deepcopy(model.network).requires_grad_(False))
         self._forward = self.model.folded()
-        self.toners = model.toners
+        self.toners = tuple(model.toners if toners is None else toners)
+        # recipes over ``toners`` (a library's) as the model's inputs: a toner the model does
+        # not know goes in as none (a hybrid moves it onto a proxy first), one the library
+        # lacks is never used
+        self._inputs = (
+            None
+            if self.toners == tuple(model.toners)
+            else np.array([[a == b for b in model.toners] for a in self.toners], float)
+        )
         self.geometries = model.geometries
         self.name = (
             f"learned ({model.instrument}, {model.info.get('name', 'model')}{_adapted(model)})"
@@ -67,8 +75,16 @@ class LearnedForward:
         self.effect_share_floor = float(model.info.get("effect_share_floor", 0.0))
 
     def __call__(self, fractions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-        y = self._forward(fractions.to(torch.float32)).to(fractions.dtype)
+        y = self._forward(self._model_inputs(fractions).to(torch.float32)).to(fractions.dtype)
         return self._reflectance(y), y[:, self.model.spectral_outputs :]
+
+    def _model_inputs(self, fractions):
+        """Recipes ``[N, T]`` over :attr:`toners` as the model's inputs (torch or numpy)."""
+        if self._inputs is None:
+            return fractions
+        if isinstance(fractions, torch.Tensor):
+            return fractions @ torch.as_tensor(self._inputs, dtype=fractions.dtype)
+        return np.asarray(fractions) @ self._inputs
 
     def _reflectance(self, y: torch.Tensor) -> torch.Tensor:
         """Reflectance ``[..., G, 31]`` from the model's outputs ``[..., outputs]``."""
@@ -82,7 +98,7 @@ class LearnedForward:
 
     def member_reflectance(self, x: NDArray) -> NDArray:
         """Each member's reflectance ``[K, N, G, 31]`` for recipes ``x[N, T]``."""
-        return self.model.predict_members(x)
+        return self.model.predict_members(self._model_inputs(x))
 
     def with_members(
         self, fractions: torch.Tensor
@@ -90,7 +106,8 @@ class LearnedForward:
         """Differentiable, in one pass: the prediction as :meth:`__call__` gives it, and each
         member's reflectance ``[K, N, G, 31]`` (K = 1 for a single network), what the
         matcher's model-risk term compares."""
-        y = self.model.member_outputs(fractions.to(torch.float32)).to(fractions.dtype)
+        inputs = self._model_inputs(fractions).to(torch.float32)
+        y = self.model.member_outputs(inputs).to(fractions.dtype)
         mean = y.mean(dim=0)
         return self._reflectance(mean), mean[:, self.model.spectral_outputs :], self._reflectance(y)
 
@@ -240,7 +257,7 @@ class HybridForward(LearnedForward):
     held: HeldJacobian | None = None  # an optimiser's tangent of the ratio (:func:`stepping`)
 
     def __init__(self, model: ForwardModel, library: Library, novel: Sequence[str]) -> None:
-        super().__init__(model)
+        super().__init__(model, library.names)
         self.library = library
         self.novel = tuple(novel)
         names = library.names
@@ -360,8 +377,8 @@ class HybridForward(LearnedForward):
         differ in the learned base only, by the factor each puts on the base's mean, and
         only as far as the base is learned (not where the physics base takes over)."""
         base = self.base_fractions(x)
-        members = self.model.predict_members(base)
-        factor = members / self.model.predict(base)[0][None]
+        members = self.model.predict_members(self._model_inputs(base))
+        factor = members / self.model.predict(self._model_inputs(base))[0][None]
         with torch.no_grad():
             R, _ = self(torch.as_tensor(x, dtype=self.dtype))
         learned = 1 - self._physics_trust(x[:, self._novel_mask].sum(axis=1))

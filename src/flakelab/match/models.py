@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
 
-from flakelab.library.toners import Library
+from flakelab.errors import Note
+from flakelab.library.toners import Library, did_you_mean
 from flakelab.match.forward import HybridForward, LearnedForward
 from flakelab.models.network import MIN_CASES, ForwardModel, ModelError
 
@@ -39,13 +41,36 @@ def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:
 
 
 def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
-    """The learned model, or the hybrid when some library toners have too few cases."""
-    if tuple(model.toners) != library.names:
+    """The learned model, or the hybrid for the library's toners the model has too few
+    cases of, or none: a toner added to the library after the model was trained is such a
+    new toner (DESIGN.md §3), with a note. A model that knows under half of the library's
+    toners is one of another library, and refused."""
+    unknown = [n for n in library.names if n not in model.toners]
+    if len(unknown) * 2 > len(library.names):
         raise ModelError(
             f"library {library.name!r} and model {model.info.get('name', '?')} "
             f"{_toner_difference(library.names, model.toners)}; train a model for this library"
         )
-    novel = list(model.new_toners)
-    forward = HybridForward(model, library, novel) if novel else LearnedForward(model)
+    if unknown:
+        _tell_unknown(library, model, unknown)
+    novel = [n for n in library.names if n in model.new_toners or n in unknown]
+    if novel:
+        forward = HybridForward(model, library, novel)
+    else:
+        forward = LearnedForward(model, library.names)
     forward.effect_kinds = effect_kinds(library, forward.toners)
     return forward
+
+
+def _tell_unknown(library: Library, model: ForwardModel, unknown: Sequence[str]) -> None:
+    """A note naming the library's toners the model was not trained with, each with the
+    model's toner it may be a misspelling of."""
+    missing = [n for n in model.toners if n not in library.names]
+    named = ", ".join(f"{n!r}{did_you_mean(n, missing)}" for n in unknown)
+    warnings.warn(
+        f"library {library.name!r}: {len(unknown)} toner(s) the model "
+        f"{model.info.get('name', '?')} was not trained with, predicted as new toners (physics "
+        f"scaling around the learned base, flagged on each recipe): {named}",
+        Note,
+        stacklevel=3,
+    )
