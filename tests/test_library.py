@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import replace
+from importlib.resources import files
 
 import colour
 import numpy as np
@@ -333,3 +334,32 @@ def test_the_demo_white_is_a_rutile_white(pigment_km):
     golden = pigment_km("cmt_Golden_HB.rs", first_nm=380)["1380-Titanium White - Tr2 (P.W. 6)"]
     assert np.hypot(*(lab[1:] - reflectance_to_Lab(golden)[1:])) < 1.5
     assert lab[0] > 90
+
+
+def test_library_show_says_how_the_model_knows_each_toner(tmp_path, cli):
+    """'flakelab library show': the demo's two new toners stand in as the transparent iron
+    oxides (as the README says), every other toner learned from the cases its model's record
+    gives; a toner added to a library since is "added", standing in as its nearest known
+    toner (an exact copy: as the original), and a toner the library lacks is named."""
+    from flakelab.models.registry import shipped_model
+
+    report = json.loads(cli("library", "show", "--json").stdout)
+    counts = shipped_model("five-angle").info["toner_cases"]
+    standing = {r["toner"]: (r["standing"], r["stands_in_as"]) for r in report["toners"]}
+    assert standing.pop("Perylene red") == ("new", "Transparent iron oxide red")
+    assert standing.pop("Isoindoline yellow") == ("new", "Transparent iron oxide yellow")
+    assert set(standing.values()) == {("learned", None)}
+    assert all(r["cases"] == counts[r["toner"]] for r in report["toners"])
+    data = json.loads((files("flakelab.data") / "demo-library.json").read_text())
+    blue = next(t for t in data["toners"] if t["name"] == "Phthalo blue GS")
+    data["toners"] = [t for t in data["toners"] if t["name"] != "Al VMP"]
+    data["toners"].append({**blue, "name": "Phthalo blue 2026"})
+    path = tmp_path / "shop.json"
+    path.write_text(json.dumps(data))
+    shown = cli("library", "show", path)
+    assert shown.returncode == 0, shown.stderr
+    assert re.search(r"Phthalo blue 2026 .* 0 +added: as Phthalo blue GS", shown.stdout)
+    assert "the model's toners the library lacks (never used): Al VMP" in shown.stderr
+    path.write_text(json.dumps(data)[:-40])
+    broken = cli("library", "show", path)
+    assert broken.returncode == 2 and str(path) in broken.stderr

@@ -38,6 +38,7 @@ from flakelab.cli.common import (
     texture_table,
 )
 from flakelab.cli.correct import correct_command
+from flakelab.cli.library import library_app
 from flakelab.cli.lots import lots_app
 from flakelab.cli.match import match_command
 from flakelab.cli.models import model_app, train
@@ -368,6 +369,7 @@ app.command("weigh")(reports_errors(weigh_command))
 app.add_typer(cases_app, name="cases")
 app.add_typer(model_app, name="model")
 app.add_typer(lots_app, name="lots")
+app.add_typer(library_app, name="library")
 app.command("train")(reports_errors(train))
 app.command("render")(reports_errors(render_command))
 app.command("render-grid")(reports_errors(render_grid_command))

@@ -391,6 +391,13 @@ class HybridForward(LearnedForward):
         return t * t * (3 - 2 * t)
 
 
+def stand_ins(library: Library, novel: Sequence[str]) -> dict[str, str]:
+    """The known toner each of the ``novel`` toners stands in as in the hybrid's learned base
+    (:class:`HybridForward`); one with no known toner of its kind has none."""
+    mask = np.array([n in novel for n in library.names])
+    return {library.names[j]: library.names[i] for j, i in _proxies(library, mask).items()}
+
+
 def _proxies(library: Library, novel: NDArray) -> dict[int, int]:
     """For each new toner, the known toner of its kind closest in log spectrum when each
     makes up 10 % of a reference recipe (the library's first aluminium, else on its own)."""

@@ -9,10 +9,17 @@ import numpy as np
 
 from flakelab.errors import Note
 from flakelab.library.toners import Library, did_you_mean
-from flakelab.match.forward import HybridForward, LearnedForward
+from flakelab.match.forward import HybridForward, LearnedForward, stand_ins
 from flakelab.models.network import MIN_CASES, ForwardModel, ModelError
 
-__all__ = ["forward_for", "MIN_CASES", "effect_kinds", "effect_mask"]
+__all__ = [
+    "forward_for",
+    "MIN_CASES",
+    "effect_kinds",
+    "effect_mask",
+    "novel_toners",
+    "toner_standing",
+]
 
 
 EFFECT_KINDS = ("aluminium", "pearl")
@@ -40,6 +47,36 @@ def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:
     return "differ in toners: " + "; ".join(parts) if parts else "list the toners in another order"
 
 
+def novel_toners(library: Library, model: ForwardModel) -> list[str]:
+    """The library's toners the matcher predicts as new: those the model learned from too
+    few cases, and those it was not trained with."""
+    return [n for n in library.names if n in model.new_toners or n not in model.toners]
+
+
+def toner_standing(library: Library, model: ForwardModel) -> list[dict]:
+    """How ``model`` knows each of ``library``'s toners: the cases it learned it from (None
+    where its training record gives none), "learned", "new" (too few cases) or "added" (not
+    among the model's toners: added to the library since), and the known toner a new or an
+    added one stands in as (:func:`stand_ins`)."""
+    counts = model.info.get("toner_cases", {})
+    novel = novel_toners(library, model)
+    proxies = stand_ins(library, novel)
+    rows = []
+    for toner in library.toners:
+        known = toner.name in model.toners
+        standing = "learned" if toner.name not in novel else "new" if known else "added"
+        rows.append(
+            {
+                "toner": toner.name,
+                "kind": toner.kind,
+                "cases": counts.get(toner.name) if known else 0,
+                "standing": standing,
+                "stands_in_as": proxies.get(toner.name),
+            }
+        )
+    return rows
+
+
 def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
     """The learned model, or the hybrid for the library's toners the model has too few
     cases of, or none: a toner added to the library after the model was trained is such a
@@ -53,7 +90,7 @@ def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
         )
     if unknown:
         _tell_unknown(library, model, unknown)
-    novel = [n for n in library.names if n in model.new_toners or n in unknown]
+    novel = novel_toners(library, model)
     if novel:
         forward = HybridForward(model, library, novel)
     else:
