@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
@@ -32,7 +33,9 @@ from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_name
 from flakelab.core.wording import database_label
 from flakelab.models.network import ForwardModel, ModelError
-from flakelab.models.training import CaseArrays, evaluate_model, unseen_by
+
+if TYPE_CHECKING:  # training imports the generator and the physics: 0.7 s for 'model list'
+    from flakelab.models.training import CaseArrays
 
 __all__ = [
     "shop_model_name",
@@ -397,6 +400,8 @@ def _judged(engine: Engine, model: ForwardModel, held_out: CaseArrays, serving):
     the cases of ``held_out`` both can be judged on, their number, and whether ``model`` is
     better. Where no case is comparable it is not; where the instrument has no current model
     (none registered, none shipped) it is the first, and better."""
+    from flakelab.models.training import evaluate_model, unseen_by
+
     try:
         incumbent = serving_model(engine, model.instrument, serving)
     except ModelError:  # no shipped model for this instrument: the first one is promoted
