@@ -111,8 +111,8 @@ def reader_gone(stream: Any) -> bool:
     """Whether ``stream`` is a pipe whose reader has gone. A write the reader leaves half
     way returns the part written (POSIX), and CPython's buffered stream counts the rest
     written: ``flakelab cases list --last 3000 | head`` ended with status 0, its table lost
-    past the pipe's 64 KiB. Linux and macOS flag such a pipe's end as errored; Windows has no
-    ``poll``, and says no."""
+    past the pipe's 64 KiB. Linux flags such a pipe's writing end as errored (POLLERR); where
+    a system does not, or has no ``poll`` (Windows), this says no, as before."""
     try:
         descriptor = stream.fileno()
         if not stat.S_ISFIFO(os.fstat(descriptor).st_mode) or not hasattr(select, "poll"):
