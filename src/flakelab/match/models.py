@@ -44,7 +44,7 @@ def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:
     parts += (
         [f"{len(gone)} of the model's are not in the library (e.g. {gone[:3]})"] if gone else []
     )
-    return "differ in toners: " + "; ".join(parts) if parts else "list the toners in another order"
+    return "differ in toners: " + "; ".join(parts)
 
 
 def novel_toners(library: Library, model: ForwardModel) -> list[str]:

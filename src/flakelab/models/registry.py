@@ -34,7 +34,7 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_name
 from flakelab.core.wording import database_label
 from flakelab.models.network import ForwardModel, ModelError
 
-if TYPE_CHECKING:  # training imports the generator and the physics: 0.7 s for 'model list'
+if TYPE_CHECKING:  # training imports the generator and the physics: 0.3-0.6 s of 'model list'
     from flakelab.models.training import CaseArrays
 
 __all__ = [
