@@ -38,10 +38,10 @@ def show_library(
     ] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Each toner of a library: its kind and make-up, and how the model the matcher would use
-    knows it: learned, with the cases it learned it from; new, with too few of them; or
-    added to the library since the model was trained. A new or added toner is predicted by
-    the hybrid path, standing in as the known toner named."""
+    """Each toner of a library: its make-up (its kind and density too, with --json), and how
+    the model the matcher would use knows it: learned, with the cases it learned it from;
+    new, with too few of them; or added to the library since the model was trained. A new
+    or added toner is predicted by the hybrid path, standing in as the known toner named."""
     from flakelab.cli.sources import chosen_model
     from flakelab.io import read_library
     from flakelab.match.models import toner_standing
@@ -52,7 +52,7 @@ def show_library(
     by_name = {t.name: t for t in lib.toners}
     for row in rows:
         toner = by_name[row["toner"]]
-        row["make_up"] = make_up(toner)
+        row["make_up"] = _make_up(toner)
         row["density_g_ml"] = toner.density_g_ml
     unused = [n for n in chosen.toners if n not in lib.names]
     model_name = chosen.info.get("name", chosen.instrument)
@@ -90,7 +90,7 @@ def show_library(
         )
 
 
-def make_up(toner) -> str:
+def _make_up(toner) -> str:
     """A toner's make-up in a few words: a flake's size and alignment, a pigment's family, a
     pearl's coating."""
     if toner.kind == "aluminium":
