@@ -104,7 +104,7 @@ def print_report(report: Any, *, indent: int = 2, default: Callable | None = Non
     table's does (:func:`reader_gone`)."""
     print(json.dumps(report, indent=indent, default=default))
     if reader_gone(sys.stdout):
-        raise BrokenPipeError(errno.EPIPE, os.strerror(errno.EPIPE))
+        console.on_broken_pipe()
 
 
 def reader_gone(stream: Any) -> bool:

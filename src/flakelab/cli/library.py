@@ -44,7 +44,7 @@ def show_library(
     or added toner is predicted by the hybrid path, standing in as the known toner named."""
     from flakelab.cli.sources import chosen_model
     from flakelab.io import read_library
-    from flakelab.match.models import toner_standing
+    from flakelab.match.models import toner_standing, unused_toners
 
     lib = read_library(library)
     chosen = chosen_model(model, instrument, database, shop)
@@ -54,7 +54,7 @@ def show_library(
         toner = by_name[row["toner"]]
         row["make_up"] = _make_up(toner)
         row["density_g_ml"] = toner.density_g_ml
-    unused = [n for n in chosen.toners if n not in lib.names]
+    unused = unused_toners(lib, chosen)
     model_name = chosen.info.get("name", chosen.instrument)
     if json_output:
         print_report(

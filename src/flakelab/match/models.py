@@ -19,6 +19,7 @@ __all__ = [
     "effect_mask",
     "novel_toners",
     "toner_standing",
+    "unused_toners",
 ]
 
 
@@ -37,9 +38,15 @@ def effect_mask(library: Library, toners) -> np.ndarray:
     return np.array(effect_kinds(library, toners)) != ""
 
 
-def _toner_difference(library: Sequence[str], model: Sequence[str]) -> str:
+def unused_toners(library: Library, model: ForwardModel) -> list[str]:
+    """The model's toners the library lacks: the matcher never uses them."""
+    return [n for n in model.toners if n not in library.names]
+
+
+def _toner_difference(library: Library, model: ForwardModel) -> str:
     """How a library's toner list differs from a model's, for a message."""
-    new, gone = [n for n in library if n not in model], [n for n in model if n not in library]
+    new = [n for n in library.names if n not in model.toners]
+    gone = unused_toners(library, model)
     parts = [f"{len(new)} of the library's are not in the model (e.g. {new[:3]})"] if new else []
     parts += (
         [f"{len(gone)} of the model's are not in the library (e.g. {gone[:3]})"] if gone else []
@@ -86,7 +93,7 @@ def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
     if len(unknown) * 2 > len(library.names):
         raise ModelError(
             f"library {library.name!r} and model {model.info.get('name', '?')} "
-            f"{_toner_difference(library.names, model.toners)}; train a model for this library"
+            f"{_toner_difference(library, model)}; train a model for this library"
         )
     if unknown:
         _tell_unknown(library, model, unknown)
@@ -102,7 +109,7 @@ def forward_for(model: ForwardModel, library: Library) -> LearnedForward:
 def _tell_unknown(library: Library, model: ForwardModel, unknown: Sequence[str]) -> None:
     """A note naming the library's toners the model was not trained with, each with the
     model's toner it may be a misspelling of."""
-    missing = [n for n in model.toners if n not in library.names]
+    missing = unused_toners(library, model)
     named = ", ".join(f"{n!r}{did_you_mean(n, missing)}" for n in unknown)
     warnings.warn(
         f"library {library.name!r}: {len(unknown)} toner(s) the model "
