@@ -2014,3 +2014,86 @@ def test_a_manifest_row_records_the_tins_of_its_lot_file(tmp_path):
     (tmp_path / "july.json").write_text("{")
     with pytest.raises(ManifestError, match=r"manifest.csv: row 3: lots: .*july.json"):
         cases_from_manifest(manifest, library, tolerance=tol)
+
+
+CODES = ("Toyota 1G3", "Lexus 1G3", "NH-731P", "VW/Audi LY9B", "", "toyota 040")
+
+
+def _coded(cases: list[Case]) -> list[Case]:
+    """The cases, each with one of :data:`CODES` in turn, as a shop recorded them."""
+    return [replace(c, colour_code=CODES[i % len(CODES)]) for i, c in enumerate(cases)]
+
+
+def test_a_colour_code_finds_a_shops_cases_as_a_colorist_types_it(cases, database_url, tmp_path):
+    """The code on the car's plate, typed as a colorist types it, finds the shop's cases of
+    that colour: in the database (its own query), in a case file and among cases in memory
+    alike; '1G3' both makers' 1G3, 'Toyota 1G3' Toyota's alone, 'nh731p' Honda's 'NH-731P',
+    'toyota' every Toyota colour. The code survives the database and both case files."""
+    from flakelab.cases.case import has_colour_code
+    from flakelab.cases.nearest import nearest_stored_cases
+
+    coded = _coded(cases)
+    assert [c.colour_code for c in coded[:6]] == [
+        "TOYOTA 1G3", "LEXUS 1G3", "NH731P", "VW AUDI LY9B", "", "TOYOTA 040"
+    ]  # fmt: skip
+    engine = open_database(database_url)
+    add_cases(engine, coded)
+    expected = {
+        "1g3": {"TOYOTA 1G3", "LEXUS 1G3"},
+        "Toyota 1G3": {"TOYOTA 1G3"},
+        "nh731p": {"NH731P"},
+        "N.H. 731-P": set(),  # three words: not Honda's one
+        "toyota": {"TOYOTA 1G3", "TOYOTA 040"},
+        "audi": {"VW AUDI LY9B"},
+        "LY9B vw": {"VW AUDI LY9B"},
+        "1G": set(),  # a word is whole: no code begins so by chance
+    }
+    for asked, codes in expected.items():
+        chosen = [c.case_id for c in coded if has_colour_code(c.colour_code, asked)]
+        assert {c.colour_code for c in coded if c.case_id in chosen} == codes, asked
+        stored = latest_cases(engine, 100, colour_code=asked)
+        assert sorted(c.case_id for c in stored) == sorted(chosen), asked
+        assert count_cases(engine, colour_code=asked) == len(chosen)
+        assert [c.case_id for c in select_cases(coded, colour_code=asked)] == chosen
+        near, searched = nearest_stored_cases(
+            engine, coded[0].target, coded[0].geometry_names, tolerance_preset("refinish"),
+            count=3, colour_code=asked,
+        )  # fmt: skip
+        assert searched == len(chosen) and {n.case.colour_code for n in near} <= codes
+    assert [c.colour_code for c in iter_cases(engine)] == [c.colour_code for c in coded]
+    for name in ("cases.csv", "cases.cxf"):
+        write_cases(coded, tmp_path / name)
+        assert [c.colour_code for c in read_cases(tmp_path / name)] == [
+            c.colour_code for c in coded
+        ]
+    # a file of cases without codes keeps its columns as before
+    write_cases(cases, tmp_path / "plain.csv")
+    header = (tmp_path / "plain.csv").read_text().splitlines()[0].split(",")
+    assert "colour_code" not in header and header[len(CASE_FIELDS)].startswith("target:")
+    with pytest.raises(CaseError, match="colour_code: expected a text of at most 40"):
+        replace(cases[0], colour_code="X" * 41)
+
+
+def test_cases_stored_before_colour_codes_are_kept_without_one(cases, database_url):
+    """A database made before migration 0007 keeps its cases whole, each without a code, and
+    takes coded cases beside them."""
+    engine = create_engine(database_url)
+    migrate(engine, "0006")
+    table = inspect(engine).get_columns("cases")
+    assert "colour_code" not in {c["name"] for c in table}
+    with engine.begin() as connection:  # as the code before stored them
+        from sqlalchemy import MetaData, Table
+
+        old = Table("cases", MetaData(), autoload_with=connection)
+        rows = [database_module._row_values(c) for c in cases[:3]]
+        connection.execute(old.insert(), [{k: v for k, v in r.items() if k != "colour_code"}
+                                          for r in rows])  # fmt: skip
+    engine.dispose()
+    engine = open_database(database_url)
+    back = list(iter_cases(engine))
+    assert [c.case_id for c in back] == [c.case_id for c in cases[:3]]
+    assert all(c.colour_code == "" for c in back)
+    np.testing.assert_allclose(back[2].sprayout, cases[2].sprayout, rtol=1e-6)
+    add_cases(engine, _coded(cases[3:4]))
+    assert [c.case_id for c in latest_cases(engine, 9, colour_code="NH731P")] == []
+    assert [c.case_id for c in latest_cases(engine, 9, colour_code="toyota")] == [cases[3].case_id]

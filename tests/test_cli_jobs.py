@@ -361,6 +361,41 @@ def test_a_shop_brings_its_history_in_one_transaction(tmp_path, cli):
     assert count_cases(open_database(db)) == 1
 
 
+def test_a_shop_finds_its_recipes_by_the_colour_code_on_the_car(tmp_path, cli):
+    """The code on the car's plate goes with the case (``record --colour-code``, or a
+    manifest's column), and brings the shop's cases of that colour back: in ``cases list``,
+    ``cases nearest`` and ``match --colour-code``, whatever the case and dashes it is typed
+    with; a code of no letter or digit is refused."""
+    db, examples = str(tmp_path / "shop.db"), example_path("target").parent
+    car, recipe = str(examples / "blue-metallic-target.cxf"), examples / "blue-metallic-recipe.json"
+    run = cli("cases", "record", car, "-r", str(recipe), "--sprayed", str(example_path("sprayout")),
+              "-d", db, "--colour-code", "VW/Audi LY9B", "--no-check", "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["colour_code"] == "VW AUDI LY9B"
+    manifest = tmp_path / "history.csv"
+    manifest.write_text(
+        f"target,recipe,sprayed,shop,colour_code\n{car},{recipe},{example_path('sprayout')},"
+        "Dupont,NH-731P\n"
+    )
+    assert cli("cases", "record-all", str(manifest), "-d", db, "--no-check").returncode == 0
+    listed = json.loads(cli("cases", "list", "-d", db, "--colour-code", "ly9b", "--json").stdout)
+    assert [c["colour_code"] for c in listed["cases"]] == ["VW AUDI LY9B"]
+    text = cli("cases", "list", "-d", db, "--colour-code", "nh731p").stdout
+    assert "colour code" in text and "NH731P" in text and "LY9B" not in text
+    near = cli("cases", "nearest", car, "-d", db, "--colour-code", "NH 731P", "--json")
+    assert near.returncode == 2 and "no cases from any shop of colour code 'NH 731P'" in near.stderr
+    near = json.loads(cli("cases", "nearest", car, "-d", db, "--colour-code", "nh-731p",
+                          "--json").stdout)  # fmt: skip
+    assert near["cases_searched"] == 1 and near["nearest"][0]["colour_code"] == "NH731P"
+    matched = json.loads(cli("match", car, "-d", db, "--colour-code", "audi", "--candidates",
+                             "1", "--json").stdout)  # fmt: skip
+    assert [c["colour_code"] for c in matched["recorded_nearest"]] == ["VW AUDI LY9B"]
+    for command in (["cases", "list", "-d", db], ["match", car, "-d", db]):
+        run = cli(*command, "--colour-code", "-/-")
+        assert run.returncode == 2 and "'--colour-code'" in run.stderr
+        assert "expected a car maker's colour code" in run.stderr
+
+
 def test_a_shop_records_its_spray_outs_once_each(tmp_path, cli):
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import read_cases

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import unicodedata
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
@@ -32,6 +33,8 @@ __all__ = [
     "OUTCOMES",
     "TEXT_LENGTHS",
     "cases_at",
+    "colour_code_words",
+    "has_colour_code",
     "select_cases",
     "tin_fields",
     "worst_differences",
@@ -40,13 +43,38 @@ __all__ = [
 OUTCOMES = ("accepted", "corrected", "rejected")
 """How a case ended: the spray-out passed, needed a correction, or was given up."""
 
-TEXT_LENGTHS = {"case_id": 64, "shop": 120, "instrument": 60, "conditions": 30}
+TEXT_LENGTHS = {
+    "case_id": 64,
+    "shop": 120,
+    "instrument": 60,
+    "conditions": 30,
+    "colour_code": 40,
+}
 """The longest text each field may hold: the database's column widths (PostgreSQL refuses a
 longer value; SQLite would keep it), checked with every case so that no store fails on one."""
 
 
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
+
+
+_CODE_BREAKS = str.maketrans({c: " " for c in "/,;+&"})
+
+
+def colour_code_words(code: str) -> tuple[str, ...]:
+    """The words of a car maker's colour code as stored and looked for: upper case, each
+    word its letters and digits alone, so that the plate's 'NH-731P' and the 'nh731p' a
+    colorist types are one code. Spaces, '/', ',', ';', '+' and '&' part words
+    ('VW/Audi LY9B': VW, AUDI, LY9B)."""
+    words = unicodedata.normalize("NFC", code).translate(_CODE_BREAKS).upper().split()
+    return tuple(w for w in ("".join(c for c in word if c.isalnum()) for word in words) if w)
+
+
+def has_colour_code(code: str, asked: str) -> bool:
+    """Whether a case's ``code`` is the ``asked`` one: every word asked among its words, so
+    that '1G3' finds 'Toyota 1G3' and 'Lexus 1G3', 'Toyota 1G3' the first alone, and 'Toyota'
+    every Toyota colour."""
+    return set(colour_code_words(asked)) <= set(colour_code_words(code))
 
 
 def _recipe_amounts(where: str, recipe) -> dict[str, float]:
@@ -138,7 +166,9 @@ class Case:
     ``created_at`` without a time zone is taken as local time
     (:func:`~flakelab.core.times.zoned_here`), and kept in UTC. ``tins`` maps a toner of the
     recipe to the tin it was poured from, as the shop had read it (none recorded: every toner
-    at the standard, as far as anyone knows)."""
+    at the standard, as far as anyone knows). ``colour_code`` is the car maker's code for the
+    car's colour, as on its plate (with the maker where codes clash: 'Toyota 1G3'), kept as
+    its :func:`colour_code_words`; empty where none was recorded."""
 
     case_id: str
     geometries: tuple[Geometry, ...]
@@ -154,6 +184,7 @@ class Case:
     synthetic: bool = False
     created_at: datetime = field(default_factory=lambda: datetime.now(UTC))
     tins: Mapping[str, TonerLot] = field(default_factory=dict)
+    colour_code: str = ""
 
     def __post_init__(self) -> None:
         where = f"case {self.case_id!r}"
@@ -184,6 +215,8 @@ class Case:
         object.__setattr__(self, "created_at", zoned_here(self.created_at).astimezone(UTC))
         if isinstance(self.shop, str):
             object.__setattr__(self, "shop", tidy_name(self.shop))
+        if isinstance(self.colour_code, str):
+            object.__setattr__(self, "colour_code", " ".join(colour_code_words(self.colour_code)))
         for name, longest in TEXT_LENGTHS.items():
             text = getattr(self, name)
             if not isinstance(text, str) or len(text) > longest:
@@ -239,14 +272,18 @@ def select_cases(
     shop: str | None = None,
     since: datetime | None = None,
     geometries: Sequence[str] | None = None,
+    colour_code: str | None = None,
 ) -> list[Case]:
     """The cases of ``shop`` made at or after ``since`` (without a zone: local time), read at
-    ``geometries`` (:func:`cases_at`); None: any shop, any time, as read."""
+    ``geometries`` (:func:`cases_at`), for ``colour_code`` (:func:`has_colour_code`); None:
+    any shop, any time, as read, any colour."""
     since = since and zoned_here(since)
     chosen = [
         c
         for c in cases
-        if (shop is None or c.shop == shop) and (since is None or c.created_at >= since)
+        if (shop is None or c.shop == shop)
+        and (since is None or c.created_at >= since)
+        and (colour_code is None or has_colour_code(c.colour_code, colour_code))
     ]
     return chosen if geometries is None else cases_at(chosen, geometries)
 

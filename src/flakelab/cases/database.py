@@ -21,13 +21,23 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
-from sqlalchemy import Connection, Engine, create_engine, delete, event, func, insert, select
+from sqlalchemy import (
+    Connection,
+    Engine,
+    create_engine,
+    delete,
+    event,
+    func,
+    insert,
+    literal,
+    select,
+)
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session
 from sqlalchemy.pool import NullPool, StaticPool
 
-from flakelab.cases.case import Case, CaseError, tin_fields
+from flakelab.cases.case import Case, CaseError, colour_code_words, tin_fields
 from flakelab.cases.schema import CaseRow
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import zoned, zoned_here
@@ -411,6 +421,7 @@ def _row_values(case: Case) -> dict:
         target_texture=dict(case.target_texture),
         sprayout_texture=dict(case.sprayout_texture),
         tins={toner: tin_fields(tin) for toner, tin in case.tins.items()} or None,
+        colour_code=case.colour_code,
         # in UTC: SQLite keeps no zone, so an offset would otherwise be dropped, not applied
         created_at=case.created_at.astimezone(UTC),
         updated_at=now,
@@ -451,6 +462,7 @@ def _case_of(row: CaseRow) -> Case:
         synthetic=row.synthetic,
         created_at=zoned(row.created_at),
         tins=row.tins or {},
+        colour_code=row.colour_code,
     )
 
 
@@ -633,12 +645,13 @@ def iter_cases(
     limit: int | None = None,
     shop: str | None = None,
     since: datetime | None = None,
+    colour_code: str | None = None,
 ) -> Iterator[Case]:
     """Cases in insertion order, read in batches: those of ``shop`` made at or after ``since``
-    (without a zone: UTC; None: any shop, any time), chosen by the database, so that one
-    shop's cases are read without the rest (``cases.case.cases_at`` picks those a model of
-    one geometry set reads)."""
-    query = _of_shop_since(select(CaseRow).order_by(CaseRow.id), shop, since)
+    (without a zone: UTC), for ``colour_code`` (None: any shop, any time, any colour), chosen
+    by the database, so that one shop's cases are read without the rest
+    (``cases.case.cases_at`` picks those a model of one geometry set reads)."""
+    query = _chosen(select(CaseRow).order_by(CaseRow.id), shop, since, colour_code)
     if limit:
         query = query.limit(limit)
     with reading_rows(engine) as session:
@@ -647,16 +660,18 @@ def iter_cases(
 
 
 def stored_sprayouts(
-    engine: Engine, geometries: tuple[str, ...], *, shop: str | None = None
+    engine: Engine,
+    geometries: tuple[str, ...],
+    *,
+    shop: str | None = None,
+    colour_code: str | None = None,
 ) -> tuple[list[int], np.ndarray]:
-    """The row ids and spray-outs ``[N, G, 31]`` of the cases (``shop``'s, where given) read
-    at every one of ``geometries``, restricted to them in their order: those columns alone,
-    without building each case (a fifth of the time; :func:`cases_by_rows` builds the few
-    that are wanted)."""
+    """The row ids and spray-outs ``[N, G, 31]`` of the cases (``shop``'s, for
+    ``colour_code``, where given) read at every one of ``geometries``, restricted to them in
+    their order: those columns alone, without building each case (a fifth of the time;
+    :func:`cases_by_rows` builds the few that are wanted)."""
     columns = (CaseRow.id, CaseRow.case_id, CaseRow.geometries, CaseRow.sprayout)
-    query = select(*columns).order_by(CaseRow.id)
-    if shop is not None:
-        query = query.where(CaseRow.shop == shop)
+    query = _chosen(select(*columns).order_by(CaseRow.id), shop, None, colour_code)
     wanted, ids, spectra = set(geometries), [], []
     with reading_rows(engine) as session:
         for row_id, case_id, names, sprayout in session.execute(query):
@@ -679,11 +694,13 @@ def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
     return [_case(rows[i], engine) for i in row_ids]
 
 
-def latest_cases(engine: Engine, n: int, *, shop: str | None = None) -> list[Case]:
-    """The ``n`` cases made last, newest first, of ``shop`` (None: every shop)."""
+def latest_cases(
+    engine: Engine, n: int, *, shop: str | None = None, colour_code: str | None = None
+) -> list[Case]:
+    """The ``n`` cases made last, newest first, of ``shop``, for ``colour_code`` (None: every
+    shop, every colour)."""
     query = select(CaseRow).order_by(CaseRow.created_at.desc(), CaseRow.id.desc()).limit(n)
-    if shop is not None:
-        query = query.where(CaseRow.shop == shop)
+    query = _chosen(query, shop, None, colour_code)
     with reading_rows(engine) as session:
         return [_case(row, engine) for row in session.scalars(query)]
 
@@ -771,19 +788,32 @@ def existing_case_ids(engine: Engine, case_ids: Iterable[str]) -> set[str]:
     return set(_selected_by_id(engine, CaseRow.case_id, list(case_ids)))
 
 
-def count_cases(engine: Engine, *, shop: str | None = None, since: datetime | None = None) -> int:
-    """How many cases :func:`iter_cases` reads with the same ``shop`` and ``since``."""
-    query = _of_shop_since(select(func.count(CaseRow.id)), shop, since)
+def count_cases(
+    engine: Engine,
+    *,
+    shop: str | None = None,
+    since: datetime | None = None,
+    colour_code: str | None = None,
+) -> int:
+    """How many cases :func:`iter_cases` reads with the same ``shop``, ``since`` and
+    ``colour_code``."""
+    query = _chosen(select(func.count(CaseRow.id)), shop, since, colour_code)
     with Session(engine) as session:
         return int(session.scalar(query) or 0)
 
 
-def _of_shop_since(query, shop: str | None, since: datetime | None):
-    """``query`` restricted to the cases of ``shop`` made at or after ``since`` (None: any)."""
+def _chosen(query, shop: str | None, since: datetime | None, colour_code: str | None):
+    """``query`` restricted to the cases of ``shop`` made at or after ``since`` for
+    ``colour_code`` (None: any), as :func:`~flakelab.cases.case.select_cases` chooses them."""
     if shop is not None:
         query = query.where(CaseRow.shop == shop)
     if since is not None:  # stored in UTC (SQLite keeps no zone)
         query = query.where(CaseRow.created_at >= zoned_here(since).astimezone(UTC))
+    # stored as its words, each letters and digits alone: a word asked is ' WORD ' within
+    # ' CODE ' (no LIKE wildcard can be among them)
+    spaced = literal(" ") + CaseRow.colour_code + literal(" ")
+    for word in colour_code_words(colour_code or ""):
+        query = query.where(spaced.like(f"% {word} %"))
     return query
 
 

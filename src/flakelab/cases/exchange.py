@@ -2,10 +2,11 @@
 
 CSV columns: ``case_id, shop, instrument, conditions, outcome, synthetic, created_at,
 recipe`` (JSON object toner → amount), ``geometries`` (the case's, names joined by ``;``),
-where any case records the tins it was poured from ``tins`` (JSON object toner → ``{lot,
-strength, shade_nm}``, empty for a case that records none), then ``target:<geometry>:<nm>``
-and ``sprayout:<geometry>:<nm>`` reflectance factors for every geometry of the file and band
-(400–700 nm, 10 nm), then ``target:<reading>`` and
+where any case records the car maker's colour code ``colour_code`` (empty for a case that
+records none), where any case records the tins it was poured from ``tins`` (JSON object
+toner → ``{lot, strength, shade_nm}``, empty for a case that records none), then
+``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for every
+geometry of the file and band (400–700 nm, 10 nm), then ``target:<reading>`` and
 ``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
 read at different geometry sets (an MA-T12's and a five-angle instrument's): its columns
 are every geometry any case was read at, and a case's cells at geometries it was not read
@@ -13,7 +14,8 @@ at are empty. A file saved by a spreadsheet in most of Europe, separated by semi
 tabs) with decimal commas in its readings, is read as well.
 
 CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
-the case's fields ride as ``meta:`` tags on the target (``tins`` as the CSV's cell).
+the case's fields ride as ``meta:`` tags on the target (``tins`` as the CSV's cell;
+``colour_code`` where the case records one).
 
 Readers check every row and name the file, row and column of the first problem; nothing is
 returned from a bad file.
@@ -70,8 +72,12 @@ CASE_FIELDS = (
     "geometries",
 )
 
+CODE_FIELD = "colour_code"
+"""The first optional column after :data:`CASE_FIELDS`: each case's colour code."""
+
 TINS_FIELD = "tins"
-"""The optional column after :data:`CASE_FIELDS`: the tins each case was poured from."""
+"""The second optional column after :data:`CASE_FIELDS`: the tins each case was poured
+from."""
 
 
 class CaseFileError(FlakelabError):
@@ -79,9 +85,9 @@ class CaseFileError(FlakelabError):
 
 
 @cache
-def _header(geometries: tuple[str, ...], tins: bool = False) -> tuple[str, ...]:
-    """Column names for one geometry set, with the tins' column or without (cached: every row
-    of a file checks against it)."""
+def _header(geometries: tuple[str, ...], tins: bool = False, codes: bool = False) -> tuple:
+    """Column names for one geometry set, with the colour codes' and the tins' columns or
+    without (cached: every row of a file checks against it)."""
     spectra = [
         f"{role}:{g}:{int(w)}"
         for role in ("target", "sprayout")
@@ -89,7 +95,8 @@ def _header(geometries: tuple[str, ...], tins: bool = False) -> tuple[str, ...]:
         for w in WAVELENGTHS
     ]
     texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
-    return (*CASE_FIELDS, *((TINS_FIELD,) if tins else ()), *spectra, *texture)
+    optional = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins
+    return (*CASE_FIELDS, *optional, *spectra, *texture)
 
 
 def is_case_file(path: str | PathLike) -> bool:
@@ -115,12 +122,14 @@ def write_cases(
     *,
     geometries: tuple[str, ...] | None = None,
     tins: bool | None = None,
+    codes: bool = False,
     decimal_comma: bool = False,
     progress: Callable[[], None] | None = None,
 ) -> None:
     """Write cases as CSV or CxF3 (by extension), atomically. Given the CSV's
-    ``geometries`` (their columns, in order) and whether it has a ``tins`` column, the
-    cases are written as they come (a generator's: none held); else they are read first.
+    ``geometries`` (their columns, in order) and whether it has a ``tins`` column (and a
+    colour codes' one, with ``codes``), the cases are written as they come (a generator's:
+    none held); else they are read first.
     With ``decimal_comma``, a CSV is a European spreadsheet's: cells separated by semicolons,
     readings with a decimal comma, a byte-order mark for its encoding. ``progress`` is
     called for each case of a CSV written."""
@@ -136,20 +145,21 @@ def write_cases(
     if not streamed:
         geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
         tins = any(c.tins for c in cases)
+        codes = any(c.colour_code for c in cases)
 
-    readings = len(CASE_FIELDS) + tins  # the first cell of the readings
+    readings = len(CASE_FIELDS) + codes + tins  # the first cell of the readings
 
     separator, encoding = csv_form(decimal_comma)
 
     def write(temporary: Path) -> None:  # row by row, not the whole text first
         with temporary.open("w", encoding=encoding, newline="") as handle:
             writer = csv.writer(handle, delimiter=separator)
-            writer.writerow(_header(geometries, tins))
+            writer.writerow(_header(geometries, tins, codes))
             written = 0
             for case in cases:
                 if streamed:
-                    _check_columns_hold(path, case, geometries, tins)
-                row = _csv_row(case, geometries, tins)
+                    _check_columns_hold(path, case, geometries, tins, codes)
+                row = _csv_row(case, geometries, tins, codes)
                 if decimal_comma:
                     row[readings:] = [decimal_comma_in(cell) for cell in row[readings:]]
                 writer.writerow(row)
@@ -162,17 +172,24 @@ def write_cases(
     write_atomically(path, write)
 
 
-def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], tins: bool) -> None:
-    """A case streamed into a CSV of ``geometries`` (and a ``tins`` column or not) is one its
-    columns hold whole."""
+def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], tins: bool, codes: bool):
+    """A case streamed into a CSV of ``geometries`` (and ``tins`` and colour ``codes`` columns
+    or not) is one its columns hold whole."""
     beyond = [g for g in case.geometry_names if g not in geometries]
-    if beyond or (case.tins and not tins):
-        what = f"read at {', '.join(beyond)}" if beyond else "records its tins"
+    if beyond or (case.tins and not tins) or (case.colour_code and not codes):
+        what = (
+            f"read at {', '.join(beyond)}"
+            if beyond
+            else "records its tins"
+            if case.tins and not tins
+            else "records its colour code"
+        )
         raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
 
 
-def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool) -> list[str]:
-    """A case's row of a case file of ``geometries`` (and its tins' column, with ``tins``)."""
+def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool, codes: bool) -> list[str]:
+    """A case's row of a case file of ``geometries`` (and its colour code's and its tins'
+    columns, with ``codes`` and ``tins``)."""
     return [
         case.case_id,
         case.shop,
@@ -183,6 +200,7 @@ def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool) -> list[str]:
         case.created_at.isoformat(),
         json.dumps(case.recipe),
         ";".join(case.geometry_names),
+        *([case.colour_code] if codes else []),
         *([_tins_cell(case)] if tins else []),
         *_spectra_cells(case, case.target, geometries),
         *_spectra_cells(case, case.sprayout, geometries),
@@ -299,7 +317,7 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
     """The geometries whose columns the header holds, checked to be every column they need."""
     spectral = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
     geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
-    expected = _header(geometries, TINS_FIELD in header)
+    expected = _header(geometries, TINS_FIELD in header, CODE_FIELD in header)
     if tuple(header) != expected:
         missing = [c for c in expected if c not in header]
         extra = [c for c in header if c not in expected]
@@ -386,6 +404,7 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
             synthetic=cells["synthetic"] == "1",
             created_at=created,
             tins=tins,
+            colour_code=cells.get(CODE_FIELD, ""),
         )
     except (CaseError, ValueError) as error:
         raise CaseFileError(f"{where}: {error}") from None
@@ -435,6 +454,7 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
         "created_at": case.created_at.isoformat(),
         "recipe": json.dumps(case.recipe),
         **({TINS_FIELD: _tins_cell(case)} if case.tins else {}),
+        **({CODE_FIELD: case.colour_code} if case.colour_code else {}),
     }
     common = {
         "geometries": case.geometries,
@@ -500,6 +520,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
                     synthetic=meta.get("synthetic") == "1",
                     created_at=created,
                     tins=tins,
+                    colour_code=meta.get(CODE_FIELD, ""),
                 )
             )
         except (CaseError, ValueError) as error:

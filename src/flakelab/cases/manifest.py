@@ -22,6 +22,8 @@ spreadsheet in most of Europe saves it; file paths relative to the manifest's fo
 ``case_id``        the case's id (default: made from the readings, recipe and shop)
 ``lots``           the shop's toner-lot file when it was sprayed (``flakelab lots``): the
                    case records the tins of its recipe's toners (default: none)
+``colour_code``    the car maker's code for the car's colour, as on its plate ('Toyota
+                   1G3'; default: none)
 =================  ====================================================================
 """
 
@@ -61,6 +63,7 @@ MANIFEST_COLUMNS = (
     "at",
     "case_id",
     "lots",
+    "colour_code",
 )
 REQUIRED_COLUMNS = ("target", "recipe", "sprayed")
 
@@ -182,6 +185,7 @@ def cases_from_manifest(
                 created_at=when,
                 case_id=cells.get("case_id") or None,
                 tins=poured_from,
+                colour_code=cells.get("colour_code", ""),
             )
         except (FlakelabError, ValueError) as error:
             raise ManifestError(f"{where}: {error}") from None

@@ -48,6 +48,7 @@ class NearCase:
         return {
             "case_id": case.case_id,
             "shop": case.shop,
+            "colour_code": case.colour_code,
             "created_at": case.created_at.isoformat(),
             "outcome": case.outcome,
             "instrument": case.instrument,
@@ -92,12 +93,15 @@ def nearest_stored_cases(
     count: int = 5,
     *,
     shop: str | None = None,
+    colour_code: str | None = None,
     target_texture: dict[str, float] | None = None,
 ) -> tuple[list[NearCase], int]:
-    """:func:`nearest_cases` among a database's cases (``shop``'s, where given) read at
-    ``geometries``, reading only their spray-outs and then the ``count`` cases found; and
-    how many were searched (none found where none was read there)."""
-    row_ids, sprayouts = stored_sprayouts(engine, tuple(geometries), shop=shop)
+    """:func:`nearest_cases` among a database's cases (``shop``'s, for ``colour_code``, where
+    given) read at ``geometries``, reading only their spray-outs and then the ``count`` cases
+    found; and how many were searched (none found where none was read there)."""
+    row_ids, sprayouts = stored_sprayouts(
+        engine, tuple(geometries), shop=shop, colour_code=colour_code
+    )
     if not row_ids:
         return [], 0
     order, judged = _ranked(target, sprayouts, tuple(geometries), tolerance, count)

@@ -120,6 +120,7 @@ def case_from_readings(
     created_at: datetime | None = None,
     case_id: str | None = None,
     tins: Mapping[str, TonerLot] | None = None,
+    colour_code: str = "",
 ) -> Case:
     """The case of one spray-out, read at every geometry both readings share, or at
     ``instrument``'s geometries alone when it is named.
@@ -127,7 +128,7 @@ def case_from_readings(
     ``outcome`` is one of :data:`~flakelab.cases.case.OUTCOMES`, or ``auto`` to judge it
     against ``tolerance``. ``created_at`` defaults to when the spray-out was measured (the
     file's date), else now. ``tins`` (the shop's lots, by toner) gives the case the tins of
-    its recipe's toners.
+    its recipe's toners; ``colour_code`` the car maker's code for the car's colour.
     """
     shop = tidy_name(shop)  # as the case stores it, for its id
     if instrument is None:
@@ -175,4 +176,5 @@ def case_from_readings(
         outcome=outcome,
         created_at=when,
         tins={name: tin for name, tin in (tins or {}).items() if name in recipe},
+        colour_code=colour_code,
     )

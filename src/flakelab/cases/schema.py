@@ -125,6 +125,10 @@ class CaseRow(Base):
     sprayout_texture: Mapped[dict] = mapped_column(JSON)
     # toner → the tin's lot, strength and shade as the shop read it (migration 0004)
     tins: Mapped[dict | None] = mapped_column(JSON, nullable=True)
+    # the car maker's code for the colour, its words upper case; '' where none (migration 0007)
+    colour_code: Mapped[str] = mapped_column(
+        KeptString(TEXT_LENGTHS["colour_code"]), default="", server_default=""
+    )
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
     updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 

@@ -37,6 +37,7 @@ from flakelab.cli.sources import (
     TIME_FORMATS,
     WORKPLACE_SHOP,
     CasesArgument,
+    ColourCodeOption,
     DatabaseOption,
     InstrumentOption,
     KeptGeometriesOption,
@@ -47,6 +48,7 @@ from flakelab.cli.sources import (
     ShopOption,
     SinceOption,
     StartOption,
+    colour_code_spelled,
     existing_engine,
     instrument_key,
     instrument_spelled,
@@ -336,6 +338,15 @@ def record_case(
         str | None,
         typer.Option(help="Case id.", show_default="made from the readings and the recipe"),
     ] = None,
+    colour_code: Annotated[
+        str | None,
+        typer.Option(
+            callback=colour_code_spelled,
+            help="The car maker's code for the car's colour, as on its plate ('Toyota 1G3', "
+            "'LY9B'): 'cases list', 'nearest', 'export' and 'match' find the case by it.",
+            show_default="none",
+        ),
+    ] = None,
     database: DatabaseOption = None,
     check: CheckOption = True,
     lots: Annotated[
@@ -387,6 +398,7 @@ def record_case(
         created_at=at,
         case_id=case_id,
         tins=tins,
+        colour_code=colour_code or "",
     )
     textures = (case.target_texture, case.sprayout_texture)
     _, failing = judged_outcome(case.target, case.sprayout, case.geometries, tol, textures)
@@ -404,6 +416,7 @@ def record_case(
     report = {
         "case_id": case.case_id,
         "shop": case.shop,
+        "colour_code": case.colour_code,
         "instrument": case.instrument,
         "geometries": list(case.geometry_names),
         "read_by_models_of": list(models),
@@ -547,6 +560,7 @@ def record_all(
             "row": number,
             "case_id": c.case_id,
             "shop": c.shop,
+            "colour_code": c.colour_code,
             "instrument": c.instrument,
             "outcome": c.outcome,
             "created_at": c.created_at.isoformat(),
@@ -601,6 +615,7 @@ def list_cases(
     shop: Annotated[
         str | None, typer.Option(callback=shop_spelled, help="Only this shop's cases.")
     ] = None,
+    colour_code: ColourCodeOption = None,
     last: Annotated[int, typer.Option(min=1, help="How many of the newest cases.")] = 20,
     check: Annotated[
         bool,
@@ -630,13 +645,14 @@ def list_cases(
     from flakelab.cases.database import SHORT_ID_LENGTH, latest_cases, open_database, short_id
 
     engine = open_database(database, must_exist=True)
-    cases = latest_cases(engine, last, shop=shop)
+    cases = latest_cases(engine, last, shop=shop, colour_code=colour_code)
     worst, where = worst_differences(cases) if cases else ([], [])
     rows = [
         {
             "case_id": c.case_id,
             "created_at": c.created_at.isoformat(),
             "shop": c.shop,
+            "colour_code": c.colour_code,
             "instrument": c.instrument,
             "outcome": c.outcome,
             "synthetic": c.synthetic,
@@ -669,6 +685,7 @@ def list_cases(
     whose = f"{shops[0]!r}" if len(shops) == 1 else "every shop"
     if not rows:  # which cases were looked at: the newest alone, not the whole history
         of = f"shop {shop!r}" if shop else "any shop"
+        of += f" of colour code {colour_code!r}" if colour_code else ""
         newest = "the newest " if len(cases) == last else "the "
         more = " (--last N checks more of them)" if len(cases) == last else ""
         none = (
@@ -681,11 +698,14 @@ def list_cases(
         return
     title = "Likely mix-ups among the newest" if mix_ups else "Newest"
     table = Table(
-        title=f"{title} {counted(len(cases), 'case')} of {whose} in {database_label(engine)}",
+        title=f"{title} {counted(len(cases), 'case')} of {whose}"
+        + (f" of colour code {colour_code!r}" if colour_code else "")
+        + f" in {database_label(engine)}",
         box=box.SIMPLE_HEAD,
         collapse_padding=True,
     )
-    for column in ("made", "case", "outcome", "worst ΔE00"):
+    codes = any(row["colour_code"] for row in rows)
+    for column in ("made", "case", *(["colour code"] * codes), "outcome", "worst ΔE00"):
         table.add_column(column, no_wrap=True, justify="right" if "ΔE" in column else "left")
     if checked:  # in the recipe's place, which --json keeps
         table.add_column("from prediction", no_wrap=True, justify="right")
@@ -697,6 +717,7 @@ def list_cases(
         cells = [
             shown_time(row["created_at"]),
             short_id(row["case_id"]),
+            *([row["colour_code"]] * codes),
             row["outcome"],
             f"{row['worst_de00']:.2f} {row['worst_geometry']}",
         ]
@@ -762,6 +783,7 @@ def nearest(
         ),
     ] = None,
     shop: ShopOption = None,
+    colour_code: ColourCodeOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     count: Annotated[int, typer.Option("--count", "-n", min=1, help="Cases to show.")] = 5,
@@ -806,17 +828,18 @@ def nearest(
     source = database or default_url()
     spectra = reading.storage_spectra(list(geometries))
     found, searched = recorded_nearest(source, shop, geometries, spectra, tol, count,
-                                       reading.texture)  # fmt: skip
+                                       reading.texture, colour_code)  # fmt: skip
     if not searched:
         raise FlakelabError(
-            f"{source}: no cases {which_cases(shop, None)} read at the geometries "
-            f"{tuple(geometries)}"
+            f"{hidden_passwords(source)}: no cases {which_cases(shop, None, colour_code)} read "
+            f"at the geometries {tuple(geometries)}"
         )
     report = {
         "target": reading.sample,
         "cases": hidden_passwords(source),
         "cases_searched": searched,
         "shop": shop,
+        "colour_code": colour_code,
         "geometries": list(geometries),
         "tolerance": tol.name,
         "nearest": [near.to_dict() for near in found],
@@ -836,10 +859,13 @@ def nearest(
     _print_nearest(report)
 
 
-def recorded_nearest(source: str, shop, geometries, spectra, tolerance, count: int, texture):
-    """The ``count`` recorded cases of ``source`` (a database, or a case file) whose
-    spray-outs lie closest to ``spectra`` at ``geometries``, and how many were searched; a
-    database gives only its spray-outs until the nearest are known."""
+def recorded_nearest(
+    source: str, shop, geometries, spectra, tolerance, count: int, texture, colour_code=None
+):
+    """The ``count`` recorded cases of ``source`` (a database, or a case file; ``shop``'s, of
+    ``colour_code``, where given) whose spray-outs lie closest to ``spectra`` at
+    ``geometries``, and how many were searched; a database gives only its spray-outs until
+    the nearest are known."""
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file
@@ -847,12 +873,12 @@ def recorded_nearest(source: str, shop, geometries, spectra, tolerance, count: i
     from flakelab.cli.sources import load_cases
 
     if is_case_file(Path(source)):
-        cases = cases_at(load_cases(source, shop), geometries)
+        cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
         found = nearest_cases(spectra, cases, tolerance, count, texture) if cases else []
         return found, len(cases)
     engine = open_database(source, must_exist=True)
-    return nearest_stored_cases(engine, spectra, tuple(geometries), tolerance, count,
-                                shop=shop, target_texture=texture)  # fmt: skip
+    return nearest_stored_cases(engine, spectra, tuple(geometries), tolerance, count, shop=shop,
+                                colour_code=colour_code, target_texture=texture)  # fmt: skip
 
 
 def _print_nearest(report: dict) -> None:
@@ -860,9 +886,10 @@ def _print_nearest(report: dict) -> None:
     rows = report["nearest"]
     shops = sorted({row["shop"] for row in rows})
     whose = f" of {shops[0]!r}" if len(shops) == 1 else ""
+    code = f" of colour code {report['colour_code']!r}" if report["colour_code"] else ""
     title = (
-        f"The {len(rows)} of {report['cases_searched']} cases{whose} whose spray-outs lie "
-        f"closest to {report['target']} ({report['tolerance']})"
+        f"The {len(rows)} of {report['cases_searched']} cases{whose}{code} whose spray-outs "
+        f"lie closest to {report['target']} ({report['tolerance']})"
     )
     console.print(nearest_table(rows, title))
     passing = sum(row["passes"] for row in rows)
@@ -888,8 +915,10 @@ def nearest_table(rows: list[dict], title: str) -> Table:
     from flakelab.cases.database import short_id
 
     shops = sorted({row["shop"] for row in rows})
+    codes = any(row["colour_code"] for row in rows)
     table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True)
-    columns = ["#", "case", "made", "outcome", "spray-out ΔE00", "its car", "recipe (share)"]
+    columns = ["#", "case", "made", *(["colour code"] * codes), "outcome", "spray-out ΔE00",
+               "its car", "recipe (share)"]  # fmt: skip
     for column in columns + (["shop"] if len(shops) > 1 else []):
         right = column in ("#", "spray-out ΔE00", "its car")
         wraps = column in ("recipe (share)", "shop")
@@ -900,6 +929,7 @@ def nearest_table(rows: list[dict], title: str) -> Table:
             str(k),
             short_id(row["case_id"]),
             shown_time(row["created_at"], day=True),
+            *([row["colour_code"]] * codes),
             row["outcome"],
             f"[{colour}]{row['sprayout_de00_max']:.2f}[/] {row['worst_geometry']}",
             f"{row['target_de00_max']:.2f}",
@@ -1006,6 +1036,7 @@ def export_cases(
     database: DatabaseOption = None,
     shop: ShopOption = None,
     since: SinceOption = None,
+    colour_code: ColourCodeOption = None,
     instrument: Annotated[
         str | None,
         typer.Option(
@@ -1025,7 +1056,8 @@ def export_cases(
         ),
     ] = False,
 ) -> None:
-    """Export case histories as CSV or CxF3: a shop's, since a date, at one geometry set."""
+    """Export case histories as CSV or CxF3: a shop's, since a date, of a colour code, at one
+    geometry set."""
     from flakelab.cases.case import select_cases
     from flakelab.cases.database import count_cases, iter_cases, open_database
     from flakelab.cases.exchange import check_case_file_suffix, write_cases
@@ -1035,13 +1067,14 @@ def export_cases(
     check_output_file(target, "TARGET", reads={"--database": database})
     geometries = instrument and INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     engine = open_database(database, must_exist=True)
-    stored = count_cases(engine, shop=shop, since=since)  # 30,000 cases: 6 s to read
-    read = tracked(iter_cases(engine, shop=shop, since=since), "reading the cases", total=stored)
+    chosen = {"shop": shop, "since": since, "colour_code": colour_code}
+    stored = count_cases(engine, **chosen)  # 30,000 cases: 6 s to read
+    read = tracked(iter_cases(engine, **chosen), "reading the cases", total=stored)
     cases = select_cases(read, geometries=geometries)
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(
-            f"{database_label(engine)}: no cases {which_cases(shop, since)}{at}; nothing written"
+            f"{database_label(engine)}: no cases {which_cases(**chosen)}{at}; nothing written"
         )
     with progress_bar() as bar:  # and 4 s to write
         task = bar.add_task(f"writing {target.name}", total=len(cases))

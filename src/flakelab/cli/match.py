@@ -52,13 +52,23 @@ from flakelab.cli.matcher import (
     spectra_for_model,
     with_left_out,
 )
-from flakelab.cli.sources import DatabaseOption, InstrumentOption, LibraryOption, workplace_shop
+from flakelab.cli.sources import (
+    DatabaseOption,
+    InstrumentOption,
+    LibraryOption,
+    colour_code_spelled,
+    workplace_shop,
+)
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
+
+NEAREST_OF_A_CODE = 5
+"""The recorded cases ``match --colour-code`` shows where ``--nearest`` names no number (as
+many as ``cases nearest`` shows)."""
 
 
 def match_command(
@@ -162,6 +172,14 @@ def match_command(
             "predicted ('cases nearest').",
         ),
     ] = 0,
+    colour_code: Annotated[
+        str | None,
+        typer.Option(
+            callback=colour_code_spelled,
+            help="The car's colour code, as on its plate ('Toyota 1G3'): --nearest shows the "
+            "recorded cases of this code alone (5 of them where --nearest is not given).",
+        ),
+    ] = None,
     max_pigments: Annotated[
         int,
         typer.Option(
@@ -252,10 +270,10 @@ def match_command(
         without=tuple(without or ()),
     )
     if target == "evaluate":
-        if render or recipe_out or average or nearest:
+        if render or recipe_out or average or nearest or colour_code:
             raise FlakelabError(
-                "--render, --recipe-out, --average, --nearest: for the candidates of one "
-                "target, not the harness"
+                "--render, --recipe-out, --average, --nearest, --colour-code: for the "
+                "candidates of one target, not the harness"
             )
         _evaluate(
             library=library,
@@ -284,7 +302,8 @@ def match_command(
             "--weighed, --no-target-texture, --resprays: for the harness (flakelab match evaluate)"
         )
     _check_target_options(target, example, all_samples, jobs, recipe_dir,
-                          for_one=(sample, average, render, plot, recipe_out, nearest))  # fmt: skip
+                          for_one=(sample, average, render, plot, recipe_out, nearest,
+                                   colour_code))  # fmt: skip
     can = order_can(quantity, resolution)
     reads = {"TARGET": None if example else target, "--library": library, "--model": model,
              "--database": database, "--habits": habits, "--lots": lots,
@@ -312,11 +331,13 @@ def match_command(
         return
     measurement, readings = read_readings(path, sample, average)
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
+    nearest = nearest or (NEAREST_OF_A_CODE if colour_code else 0)
     if nearest:  # before the search: a database that is not there is refused before the wait
         from flakelab.cli.cases import recorded_nearest
 
         found, searched = recorded_nearest(database or default_url(), shop, forward.geometries,
-                                           spectra, tol, nearest, measurement.texture)  # fmt: skip
+                                           spectra, tol, nearest, measurement.texture,
+                                           colour_code)  # fmt: skip
     result = match(
         measurement,
         forward,
@@ -331,7 +352,8 @@ def match_command(
     report["lots"] = tins and lots_report(tins)
     report["notes"] += lot_notes
     if nearest:
-        _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward)
+        _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward,
+                              colour_code)  # fmt: skip
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
@@ -357,7 +379,7 @@ def _check_target_options(target, example, all_samples, jobs, recipe_dir, for_on
     """The target (a file or ``--example``) and the options of ``--all`` (``jobs``,
     ``recipe_dir``), refused before any file is read where they do not fit together;
     ``for_one`` holds the options of one target's match (--sample, --average, --render,
-    --plot, --recipe-out, --nearest), which ``--all`` refuses."""
+    --plot, --recipe-out, --nearest, --colour-code), which ``--all`` refuses."""
     if target is not None and example:
         # "--quantity 250 g" leaves its "g" here as the target
         raise FlakelabError(
@@ -367,8 +389,8 @@ def _check_target_options(target, example, all_samples, jobs, recipe_dir, for_on
         raise FlakelabError("expected a target file or --example")
     if all_samples and any(for_one):
         raise FlakelabError(
-            "--sample, --average, --render, --plot, --recipe-out, --nearest: for one target, "
-            "not --all (--recipe-dir writes every sample's best recipe)"
+            "--sample, --average, --render, --plot, --recipe-out, --nearest, --colour-code: for "
+            "one target, not --all (--recipe-dir writes every sample's best recipe)"
         )
     if jobs is not None and not all_samples:
         raise FlakelabError("--jobs: for --all (one target is matched in one process)")
@@ -392,15 +414,19 @@ def _check_output_options(render, plot, recipe_out, pick: int, candidates: int,
         raise FlakelabError(f"--pick: {pick} is more than the {shown} shown (--candidates)")
 
 
-def _add_recorded_nearest(report: dict, found, searched: bool, database: str, shop, forward):
+def _add_recorded_nearest(
+    report: dict, found, searched: bool, database: str, shop, forward, colour_code
+):
     """``--nearest``: the recorded cases ``found`` closest to the target, into ``report``, and a
-    note where no case of the ``database`` (of ``shop``) was read at the model's
-    geometries."""
+    note where no case of the ``database`` (of ``shop``, of ``colour_code``) was read at the
+    model's geometries."""
     from flakelab.cases.database import url_for
 
     report["recorded_nearest"] = [near.to_dict() for near in found]
+    report["colour_code"] = colour_code
     if not searched:
         whose = f"of shop {shop!r} " if shop else ""
+        whose += f"of colour code {colour_code!r} " if colour_code else ""
         report["notes"].append(
             f"--nearest: no recorded cases {whose}in {database_label(url_for(database))} read "
             f"at the model's geometries ({', '.join(forward.geometries)})"
@@ -626,7 +652,8 @@ def _print_match(report: dict) -> None:
     if report.get("recorded_nearest"):
         from flakelab.cli.cases import nearest_table
 
-        title = "Recorded spray-outs nearest the target (measured, not predicted)"
+        code = f" of colour code {report['colour_code']!r}" if report["colour_code"] else ""
+        title = f"Recorded spray-outs{code} nearest the target (measured, not predicted)"
         console.print(nearest_table(report["recorded_nearest"], title))
     print_notes(report["notes"])
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):

@@ -35,6 +35,32 @@ def shop_spelled(shop: str | None) -> str | None:
     return shop if shop is None else tidy_name(shop)
 
 
+def colour_code_spelled(code: str | None) -> str | None:
+    """``--colour-code`` as cases store it (:func:`~flakelab.cases.case.colour_code_words`),
+    refused where it holds no letter or digit, or more than a case keeps."""
+    from flakelab.cases.case import TEXT_LENGTHS, colour_code_words
+
+    if code is None:
+        return None
+    stored, longest = " ".join(colour_code_words(code)), TEXT_LENGTHS["colour_code"]
+    if not stored or len(stored) > longest:
+        raise typer.BadParameter(
+            f"expected a car maker's colour code of letters and digits, at most {longest} "
+            f"characters (e.g. 'Toyota 1G3'), got {code!r}"
+        )
+    return stored
+
+
+ColourCodeOption = Annotated[
+    str | None,
+    typer.Option(
+        callback=colour_code_spelled,
+        help="Only the cases of this colour code, as on the car's plate: '1G3' finds "
+        "'Toyota 1G3' and 'Lexus 1G3', 'Toyota 1G3' the first alone; case and '-' aside.",
+    ),
+]
+
+
 DatabaseOption = Annotated[
     str | None,
     typer.Option(
@@ -190,19 +216,26 @@ def recorded_tins_used(data, library, no_tins: bool):
     return at_standard_tins(used, library), used.tins_recorded
 
 
-def load_cases(source: str, shop: str | None = None, since: datetime | None = None) -> list:
-    """The cases of ``shop`` made at or after ``since`` (None: any shop, any time) in a
-    CSV/CxF file, or in a database (URL or .db/.sqlite file), which chooses them itself."""
+def load_cases(
+    source: str,
+    shop: str | None = None,
+    since: datetime | None = None,
+    colour_code: str | None = None,
+) -> list:
+    """The cases of ``shop`` made at or after ``since`` for ``colour_code`` (None: any shop,
+    any time, any colour) in a CSV/CxF file, or in a database (URL or .db/.sqlite file),
+    which chooses them itself."""
     from flakelab.cases.case import select_cases
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import is_case_file, read_cases
 
     path = Path(source)
     if is_case_file(path):
-        return select_cases(read_cases(path), shop=shop, since=since)
+        return select_cases(read_cases(path), shop=shop, since=since, colour_code=colour_code)
     if "://" not in source and not path.exists():
         raise FlakelabError(f"{source}: no such case file or database")
-    return list(iter_cases(open_database(source, must_exist=True), shop=shop, since=since))
+    engine = open_database(source, must_exist=True)
+    return list(iter_cases(engine, shop=shop, since=since, colour_code=colour_code))
 
 
 def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
@@ -239,10 +272,11 @@ def instrument_key(name: str) -> str:
         raise FlakelabError(f"--instrument: {error}") from None
 
 
-def which_cases(shop: str | None, since: datetime | None) -> str:
-    """The cases ``shop`` and ``since`` choose, in words for a message."""
+def which_cases(shop: str | None, since: datetime | None, colour_code: str | None = None) -> str:
+    """The cases ``shop``, ``since`` and ``colour_code`` choose, in words for a message."""
     whose = f"from shop {shop!r}" if shop else "from any shop"
-    return whose + (f" since {shown_time(since)}" if since else "")
+    code = f" of colour code {colour_code!r}" if colour_code else ""
+    return whose + code + (f" since {shown_time(since)}" if since else "")
 
 
 def unseen_cases(model, chosen: list, source: str, which: str) -> tuple[list, int]:
