@@ -48,6 +48,7 @@ import torch
 from typer.testing import CliRunner
 
 from flakelab.cases.database import open_database
+from flakelab.cases.exchange import read_cases, write_cases
 from flakelab.cli.main import app
 from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_RANGE
 from flakelab.data import example_path
@@ -204,7 +205,7 @@ def damage_workbook(data: bytes, rng: random.Random) -> bytes:
 
 CASE_COLUMNS = ("case_id", "shop", "instrument", "conditions", "outcome", "synthetic",
                 "geometries", "recipe", "target", "sprayout", "target_texture",
-                "sprayout_texture", "created_at", "updated_at", "tins")  # fmt: skip
+                "sprayout_texture", "created_at", "updated_at", "tins", "colour_code")  # fmt: skip
 """The columns of a case row that a damaged database changes."""
 TABLE_COLUMNS = {
     "cases": CASE_COLUMNS,
@@ -292,9 +293,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     (work / "tolerance.json").write_text(json.dumps(tolerance))
     write_recipe(json.loads(recipe.read_text()), work / "recipe.json")
     for suffix in ("csv", "cxf"):
-        CliRunner().invoke(
-            app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", f"{work}/cases.{suffix}"]
-        )
+        cases = work / f"cases.{suffix}"
+        CliRunner().invoke(app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", cases])
+        write_cases([replace(c, colour_code="Toyota 1G3") for c in read_cases(cases)], cases)
     CliRunner().invoke(app, ["cases", "import", f"{work}/cases.csv", "-d", f"{work}/shop.db"])
     model = replace(shipped_model("five-angle"))  # a copy recording cases, as a shop's does
     model.add_learned([f"case {i}" for i in range(50)])
@@ -302,9 +303,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     for name, path in (("car.cxf", target), ("spray.cxf", sprayout), ("shot.json", recipe)):
         shutil.copy(path, work / name)
     (work / "manifest.csv").write_text(
-        "target,recipe,sprayed,shop,outcome,at,case_id\n"
-        "car.cxf,shot.json,spray.cxf,shop A,auto,2026-01-02T10:00:00,c1\n"
-        "car.cxf,shot.json,spray.cxf,shop A,corrected,2026-01-03 11:30:00,c2\n"
+        "target,recipe,sprayed,shop,outcome,at,case_id,colour_code\n"
+        "car.cxf,shot.json,spray.cxf,shop A,auto,2026-01-02T10:00:00,c1,NH-731P\n"
+        "car.cxf,shot.json,spray.cxf,shop A,corrected,2026-01-03 11:30:00,c2,\n"
     )
     shutil.copy(demo_library_path(), work / "library.json")
     read_library(work / "library.json")

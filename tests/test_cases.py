@@ -2029,7 +2029,8 @@ def test_a_colour_code_finds_a_shops_cases_as_a_colorist_types_it(cases, databas
     that colour: in the database (its own query), in a case file and among cases in memory
     alike; '1G3' both makers' 1G3, 'Toyota 1G3' Toyota's alone, 'nh731p' Honda's 'NH-731P',
     'toyota' every Toyota colour. The code survives the database and both case files."""
-    from flakelab.cases.case import has_colour_code
+    from flakelab.cases.case import colour_code_hint, has_colour_code
+    from flakelab.cases.database import colour_codes
     from flakelab.cases.nearest import nearest_stored_cases
 
     coded = _coded(cases)
@@ -2061,6 +2062,16 @@ def test_a_colour_code_finds_a_shops_cases_as_a_colorist_types_it(cases, databas
         )  # fmt: skip
         assert searched == len(chosen) and {n.case.colour_code for n in near} <= codes
     assert [c.colour_code for c in iter_cases(engine)] == [c.colour_code for c in coded]
+    # a code that finds none: the shop's code it most likely means, by its words or spelling
+    hints = {asked: colour_code_hint(asked, colour_codes(engine)) for asked in
+             ("N.H. 731-P", "ly 9b", "Lexis 1G3", "toyota 1g 3", "ZZ 999")}  # fmt: skip
+    assert hints == {
+        "N.H. 731-P": " (did you mean 'NH731P'?)",
+        "ly 9b": " (did you mean 'VW AUDI LY9B'?)",
+        "Lexis 1G3": " (did you mean 'LEXUS 1G3'?)",
+        "toyota 1g 3": " (did you mean 'TOYOTA 1G3'?)",
+        "ZZ 999": "",
+    }
     for name in ("cases.csv", "cases.cxf"):
         write_cases(coded, tmp_path / name)
         assert [c.colour_code for c in read_cases(tmp_path / name)] == [

@@ -383,7 +383,11 @@ def test_a_shop_finds_its_recipes_by_the_colour_code_on_the_car(tmp_path, cli):
     text = cli("cases", "list", "-d", db, "--colour-code", "nh731p").stdout
     assert "colour code" in text and "NH731P" in text and "LY9B" not in text
     near = cli("cases", "nearest", car, "-d", db, "--colour-code", "NH 731P", "--json")
-    assert near.returncode == 2 and "no cases from any shop of colour code 'NH 731P'" in near.stderr
+    assert (
+        near.returncode == 2
+        and "no cases from any shop of colour code 'NH 731P' (did you mean 'NH731P'?)"
+        in near.stderr
+    )
     near = json.loads(cli("cases", "nearest", car, "-d", db, "--colour-code", "nh-731p",
                           "--json").stdout)  # fmt: skip
     assert near["cases_searched"] == 1 and near["nearest"][0]["colour_code"] == "NH731P"

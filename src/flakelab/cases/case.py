@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import unicodedata
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -23,7 +24,7 @@ from flakelab.core.measurement import (
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import zoned_here
 from flakelab.core.units import is_number
-from flakelab.core.wording import tidy_name
+from flakelab.core.wording import did_you_mean, tidy_name
 from flakelab.errors import FlakelabError
 from flakelab.library.lots import TonerLot
 
@@ -33,6 +34,7 @@ __all__ = [
     "OUTCOMES",
     "TEXT_LENGTHS",
     "cases_at",
+    "colour_code_hint",
     "colour_code_words",
     "has_colour_code",
     "select_cases",
@@ -68,6 +70,23 @@ def colour_code_words(code: str) -> tuple[str, ...]:
     ('VW/Audi LY9B': VW, AUDI, LY9B)."""
     words = unicodedata.normalize("NFC", code).translate(_CODE_BREAKS).upper().split()
     return tuple(w for w in ("".join(c for c in word if c.isalnum()) for word in words) if w)
+
+
+def colour_code_hint(asked: str, codes: Iterable[str]) -> str:
+    """ " (did you mean 'NH731P'?)": the one of the shop's ``codes`` that a code that found
+    no case most likely means: the code of which a run of words is the one asked, but for
+    spaces ('NH 731P' is two words, no case's code; 'LY 9B' is in 'VW AUDI LY9B'), else the
+    closest spelling; "" where none is near."""
+    codes = sorted(set(codes) - {""})
+    runs = {}
+    for code in codes:
+        words = colour_code_words(code)
+        for start, end in itertools.combinations(range(len(words) + 1), 2):
+            runs.setdefault("".join(words[start:end]), code)
+    wanted = "".join(colour_code_words(asked))
+    if wanted in runs:
+        return f" (did you mean {runs[wanted]!r}?)"
+    return did_you_mean(asked, codes, lambda c: "".join(colour_code_words(c)))
 
 
 def has_colour_code(code: str, asked: str) -> bool:

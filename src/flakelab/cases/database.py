@@ -817,6 +817,13 @@ def _chosen(query, shop: str | None, since: datetime | None, colour_code: str | 
     return query
 
 
+def colour_codes(engine: Engine, *, shop: str | None = None) -> list[str]:
+    """The colour codes the cases (of ``shop``, where given) record, each once."""
+    query = _chosen(select(CaseRow.colour_code).distinct(), shop, None, None)
+    with reading_rows(engine) as session:
+        return sorted(code for code in session.scalars(query) if code)
+
+
 def shop_summary(engine: Engine) -> list[dict]:
     """Every shop in the database: its cases by outcome, and the first and last case's time."""
     query = select(

@@ -48,6 +48,7 @@ from flakelab.cli.sources import (
     ShopOption,
     SinceOption,
     StartOption,
+    colour_code_hint_in,
     colour_code_spelled,
     existing_engine,
     instrument_key,
@@ -686,6 +687,7 @@ def list_cases(
     if not rows:  # which cases were looked at: the newest alone, not the whole history
         of = f"shop {shop!r}" if shop else "any shop"
         of += f" of colour code {colour_code!r}" if colour_code else ""
+        of += colour_code_hint_in(engine, shop, colour_code) if not cases else ""
         newest = "the newest " if len(cases) == last else "the "
         more = " (--last N checks more of them)" if len(cases) == last else ""
         none = (
@@ -831,8 +833,9 @@ def nearest(
                                        reading.texture, colour_code)  # fmt: skip
     if not searched:
         raise FlakelabError(
-            f"{hidden_passwords(source)}: no cases {which_cases(shop, None, colour_code)} read "
-            f"at the geometries {tuple(geometries)}"
+            f"{hidden_passwords(source)}: no cases {which_cases(shop, None, colour_code)}"
+            f"{colour_code_hint_in(source, shop, colour_code)} read at the geometries "
+            f"{tuple(geometries)}"
         )
     report = {
         "target": reading.sample,
@@ -1074,7 +1077,8 @@ def export_cases(
     if not cases:
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(
-            f"{database_label(engine)}: no cases {which_cases(**chosen)}{at}; nothing written"
+            f"{database_label(engine)}: no cases {which_cases(**chosen)}"
+            f"{colour_code_hint_in(engine, shop, colour_code)}{at}; nothing written"
         )
     with progress_bar() as bar:  # and 4 s to write
         task = bar.add_task(f"writing {target.name}", total=len(cases))

@@ -56,6 +56,7 @@ from flakelab.cli.sources import (
     DatabaseOption,
     InstrumentOption,
     LibraryOption,
+    colour_code_hint_in,
     colour_code_spelled,
     workplace_shop,
 )
@@ -426,7 +427,8 @@ def _add_recorded_nearest(
     report["colour_code"] = colour_code
     if not searched:
         whose = f"of shop {shop!r} " if shop else ""
-        whose += f"of colour code {colour_code!r} " if colour_code else ""
+        whose += f"of colour code {colour_code!r}" if colour_code else ""
+        whose += f"{colour_code_hint_in(database, shop, colour_code)} " if colour_code else ""
         report["notes"].append(
             f"--nearest: no recorded cases {whose}in {database_label(url_for(database))} read "
             f"at the model's geometries ({', '.join(forward.geometries)})"

@@ -238,6 +238,23 @@ def load_cases(
     return list(iter_cases(engine, shop=shop, since=since, colour_code=colour_code))
 
 
+def colour_code_hint_in(source, shop: str | None, colour_code: str | None) -> str:
+    """ " (did you mean 'NH731P'?)" where ``colour_code`` found no case in ``source`` (a case
+    file or a database, or its engine; ``shop``'s cases) and one of its codes is near."""
+    from flakelab.cases.case import colour_code_hint
+    from flakelab.cases.database import colour_codes, open_database
+    from flakelab.cases.exchange import is_case_file
+
+    if not colour_code:
+        return ""
+    if isinstance(source, str | Path) and is_case_file(source):
+        codes = [case.colour_code for case in load_cases(str(source), shop)]
+    else:
+        engine = source if hasattr(source, "url") else open_database(source, must_exist=True)
+        codes = colour_codes(engine, shop=shop)
+    return colour_code_hint(colour_code, codes)
+
+
 def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
     """Mass fractions in ``library`` order of a recipe file's ``grams``; a toner the library
     lacks is named with the file."""

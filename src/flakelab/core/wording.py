@@ -3,8 +3,10 @@ message reads "1 cases" or hedges with "case(s)"; it hides the password of a dat
 (a shop's PostgreSQL server) wherever one is shown, and names a SQLite database by its file.
 It imports nothing but the standard library, like :mod:`flakelab.core.defaults`."""
 
+import difflib
 import re
 import unicodedata
+from collections.abc import Callable, Iterable
 
 _URL_PASSWORD = re.compile(r"\b([A-Za-z][A-Za-z0-9+.-]*://[^\s:/@]*:)[^\s/@]+@")
 """A URL's ``scheme://user:`` and the password after it, up to its ``@``."""
@@ -15,6 +17,17 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
     "1 case", ``counted(2, "spray-out")`` "2 spray-outs"; ``plural`` where adding an "s"
     does not make it ("geometry", "geometries")."""
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def did_you_mean(name: str, choices: Iterable[str], key: Callable[[str], str] = str) -> str:
+    """ " (did you mean 'Phthalo blue GS'?)": the one of ``choices`` that ``name`` most likely
+    means, for the message that refuses it; "" where none is near. One whose ``key`` is
+    ``name``'s (the same but for case and spaces, as ``key`` makes them alike) comes first,
+    then the closest spelling of the keys."""
+    keys = {key(c): c for c in choices}
+    wanted = key(name)
+    near = [wanted] if wanted in keys else difflib.get_close_matches(wanted, list(keys), 1, 0.6)
+    return f" (did you mean {keys[near[0]]!r}?)" if near else ""
 
 
 def hidden_passwords(text: str) -> str:

@@ -9,7 +9,6 @@ Files: ``flakelab.io.read_library``.
 
 from __future__ import annotations
 
-import difflib
 import unicodedata
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import MISSING, dataclass, field, fields
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from flakelab.core import wording
 from flakelab.core.geometry import N_BINDER
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
@@ -95,10 +95,7 @@ def did_you_mean(name: str, toners: Iterable[str]) -> str:
     for case and spaces ("phthalo blue gs", a spreadsheet's non-breaking space) comes first,
     then the closest spelling; before, the spelling alone was compared, and a name typed in
     lower case or copied from a spreadsheet was refused without a hint."""
-    keys = {_toner_key(t): t for t in toners}
-    key = _toner_key(name)
-    near = [key] if key in keys else difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
-    return f" (did you mean {keys[near[0]]!r}?)" if near else ""
+    return wording.did_you_mean(name, toners, _toner_key)
 
 
 def _toner_key(name: str) -> str:
