@@ -572,8 +572,9 @@ def test_the_database_chooses_a_shop_s_cases_since_a_date_as_select_cases_does(c
 
 
 def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
-    """A database of the first release (no shop habits, no tins) keeps its cases through
-    every migration; they record no tins, and cases that do are stored beside them."""
+    """A database of the first release (no shop habits, no tins, no colour codes) keeps its
+    cases through every migration; they record no tins and no code, and cases that do are
+    stored beside them."""
     url = database_url
     engine = create_engine(url)
     migrate(engine, "0001")  # the first release's schema: no shop habits, no tins
@@ -584,11 +585,12 @@ def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
     assert "shop_habits" in inspect(engine).get_table_names()
     stored = list(iter_cases(engine))
     assert [c.case_id for c in stored] == [c.case_id for c in cases[:7]]
-    assert all(c.tins == {} for c in stored)
+    assert all(c.tins == {} and c.colour_code == "" for c in stored)
     assert np.allclose(stored[3].sprayout, cases[3].sprayout, rtol=1e-6)
     tinned = _with_tins(cases[7])
-    add_cases(engine, [tinned])
-    assert _tins_of(list(iter_cases(engine))[-1]) == _tins_of(tinned)
+    add_cases(engine, [tinned, *_coded(cases[8:9])])
+    assert _tins_of(list(iter_cases(engine))[-2]) == _tins_of(tinned)
+    assert [c.case_id for c in latest_cases(engine, 9, colour_code="toyota")] == [cases[8].case_id]
 
 
 def _store_as_the_first_release(engine, cases) -> None:
@@ -596,7 +598,8 @@ def _store_as_the_first_release(engine, cases) -> None:
     from flakelab.cases.database import _row
     from flakelab.cases.schema import CaseRow
 
-    first = [c.name for c in CaseRow.__table__.columns if c.name not in ("id", "tins")]
+    later = ("id", "tins", "colour_code")
+    first = [c.name for c in CaseRow.__table__.columns if c.name not in later]
     with engine.begin() as connection:
         connection.execute(
             CaseRow.__table__.insert(), [{k: getattr(_row(c), k) for k in first} for c in cases]
@@ -2083,28 +2086,3 @@ def test_a_colour_code_finds_a_shops_cases_as_a_colorist_types_it(cases, databas
     assert "colour_code" not in header and header[len(CASE_FIELDS)].startswith("target:")
     with pytest.raises(CaseError, match="colour_code: expected a text of at most 40"):
         replace(cases[0], colour_code="X" * 41)
-
-
-def test_cases_stored_before_colour_codes_are_kept_without_one(cases, database_url):
-    """A database made before migration 0007 keeps its cases whole, each without a code, and
-    takes coded cases beside them."""
-    engine = create_engine(database_url)
-    migrate(engine, "0006")
-    table = inspect(engine).get_columns("cases")
-    assert "colour_code" not in {c["name"] for c in table}
-    with engine.begin() as connection:  # as the code before stored them
-        from sqlalchemy import MetaData, Table
-
-        old = Table("cases", MetaData(), autoload_with=connection)
-        rows = [database_module._row_values(c) for c in cases[:3]]
-        connection.execute(old.insert(), [{k: v for k, v in r.items() if k != "colour_code"}
-                                          for r in rows])  # fmt: skip
-    engine.dispose()
-    engine = open_database(database_url)
-    back = list(iter_cases(engine))
-    assert [c.case_id for c in back] == [c.case_id for c in cases[:3]]
-    assert all(c.colour_code == "" for c in back)
-    np.testing.assert_allclose(back[2].sprayout, cases[2].sprayout, rtol=1e-6)
-    add_cases(engine, _coded(cases[3:4]))
-    assert [c.case_id for c in latest_cases(engine, 9, colour_code="NH731P")] == []
-    assert [c.case_id for c in latest_cases(engine, 9, colour_code="toyota")] == [cases[3].case_id]

@@ -127,7 +127,7 @@ class CaseRow(Base):
     tins: Mapped[dict | None] = mapped_column(JSON, nullable=True)
     # the car maker's code for the colour, its words upper case; '' where none (migration 0007)
     colour_code: Mapped[str] = mapped_column(
-        KeptString(TEXT_LENGTHS["colour_code"]), default="", server_default=""
+        KeptString(TEXT_LENGTHS["colour_code"]), server_default=""
     )
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
     updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
