@@ -991,6 +991,9 @@ def test_a_report_on_a_database_shows_no_password(database_url, cases, cli):
         "://flakelab@", "://flakelab:***@"
     )
     assert "s3cret" not in run.stdout + run.stderr
+    run = cli("cases", "nearest", example_path("target"), "-d", with_password, "--shop", "none")
+    assert run.returncode == 2 and "no cases from shop 'none'" in run.stderr
+    assert "s3cret" not in run.stderr and "flakelab:***@" in run.stderr
     run = cli("cases", "habits", with_password)
     assert run.returncode == 0, run.stderr
     assert "s3cret" not in run.stdout + run.stderr and "flakelab:***@" in run.stdout
@@ -2066,14 +2069,15 @@ def test_a_colour_code_finds_a_shops_cases_as_a_colorist_types_it(cases, databas
         assert searched == len(chosen) and {n.case.colour_code for n in near} <= codes
     assert [c.colour_code for c in iter_cases(engine)] == [c.colour_code for c in coded]
     # a code that finds none: the shop's code it most likely means, by its words or spelling
-    hints = {asked: colour_code_hint(asked, colour_codes(engine)) for asked in
-             ("N.H. 731-P", "ly 9b", "Lexis 1G3", "toyota 1g 3", "ZZ 999")}  # fmt: skip
+    asked = ("N.H. 731-P", "ly 9b", "Lexis 1G3", "toyota 1g 3", "ZZ 999", "lexus 1g3")
+    hints = {code: colour_code_hint(code, colour_codes(engine)) for code in asked}
     assert hints == {
         "N.H. 731-P": " (did you mean 'NH731P'?)",
         "ly 9b": " (did you mean 'VW AUDI LY9B'?)",
         "Lexis 1G3": " (did you mean 'LEXUS 1G3'?)",
         "toyota 1g 3": " (did you mean 'TOYOTA 1G3'?)",
         "ZZ 999": "",
+        "lexus 1g3": "",  # a code of the shop's: no other is meant
     }
     for name in ("cases.csv", "cases.cxf"):
         write_cases(coded, tmp_path / name)

@@ -76,8 +76,11 @@ def colour_code_hint(asked: str, codes: Iterable[str]) -> str:
     """ " (did you mean 'NH731P'?)": the one of the shop's ``codes`` that a code that found
     no case most likely means: the code of which a run of words is the one asked, but for
     spaces ('NH 731P' is two words, no case's code; 'LY 9B' is in 'VW AUDI LY9B'), else the
-    closest spelling; "" where none is near."""
+    closest spelling; "" where none is near, or where the code asked is among them (its cases
+    were left out for another reason: their shop, or their geometries)."""
     codes = sorted(set(codes) - {""})
+    if any(has_colour_code(code, asked) for code in codes):
+        return ""
     runs = {}
     for code in codes:
         words = colour_code_words(code)

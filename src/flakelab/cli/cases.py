@@ -833,7 +833,7 @@ def nearest(
                                        reading.texture, colour_code)  # fmt: skip
     if not searched:
         raise FlakelabError(
-            f"{hidden_passwords(source)}: no cases {which_cases(shop, None, colour_code)}"
+            f"{source}: no cases {which_cases(shop, None, colour_code)}"
             f"{colour_code_hint_in(source, shop, colour_code)} read at the geometries "
             f"{tuple(geometries)}"
         )
