@@ -369,9 +369,9 @@ def test_a_shop_finds_its_recipes_by_the_colour_code_on_the_car(tmp_path, cli):
     db, examples = str(tmp_path / "shop.db"), example_path("target").parent
     car, recipe = str(examples / "blue-metallic-target.cxf"), examples / "blue-metallic-recipe.json"
     run = cli("cases", "record", car, "-r", str(recipe), "--sprayed", str(example_path("sprayout")),
-              "-d", db, "--colour-code", "VW/Audi LY9B", "--no-check", "--json")  # fmt: skip
+              "-d", db, "--colour-code", "VW/Audi LY9B", "--no-check")  # fmt: skip
     assert run.returncode == 0, run.stderr
-    assert json.loads(run.stdout)["colour_code"] == "VW AUDI LY9B"
+    assert "for 'unknown' (colour code VW AUDI LY9B): accepted" in run.stdout
     manifest = tmp_path / "history.csv"
     manifest.write_text(
         f"target,recipe,sprayed,shop,colour_code\n{car},{recipe},{example_path('sprayout')},"

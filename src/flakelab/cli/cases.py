@@ -453,8 +453,9 @@ def _print_recorded(report: dict, chosen: bool) -> None:
     )
     verdict = "passes" if not failing else f"fails {report['tolerance']} at {', '.join(failing)}"
     case_id, at = report["case_id"], datetime.fromisoformat(report["created_at"])
+    code = f" (colour code {report['colour_code']})" if report["colour_code"] else ""
     console.print(
-        f"recorded case [bold]{case_id}[/] for {report['shop']!r}: {report['outcome']} "
+        f"recorded case [bold]{case_id}[/] for {report['shop']!r}{code}: {report['outcome']} "
         f"(the spray-out {verdict}), {report['instrument']} at {shown_time(at)}",
         highlight=False,
     )
