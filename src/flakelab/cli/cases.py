@@ -709,7 +709,8 @@ def list_cases(
     )
     codes = any(row["colour_code"] for row in rows)
     for column in ("made", "case", *(["colour code"] * codes), "outcome", "worst ΔE00"):
-        table.add_column(column, no_wrap=True, justify="right" if "ΔE" in column else "left")
+        right = "right" if "ΔE" in column else "left"
+        table.add_column(column, no_wrap=column != "colour code", justify=right)
     if checked:  # in the recipe's place, which --json keeps
         table.add_column("from prediction", no_wrap=True, justify="right")
     else:
@@ -925,7 +926,7 @@ def nearest_table(rows: list[dict], title: str) -> Table:
                "its car", "recipe (share)"]  # fmt: skip
     for column in columns + (["shop"] if len(shops) > 1 else []):
         right = column in ("#", "spray-out ΔE00", "its car")
-        wraps = column in ("recipe (share)", "shop")
+        wraps = column in ("colour code", "recipe (share)", "shop")
         table.add_column(column, justify="right" if right else "left", no_wrap=not wraps)
     for k, row in enumerate(rows, 1):
         colour = "green" if row["passes"] else "red"
