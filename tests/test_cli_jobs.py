@@ -394,6 +394,9 @@ def test_a_shop_finds_its_recipes_by_the_colour_code_on_the_car(tmp_path, cli):
     matched = json.loads(cli("match", car, "-d", db, "--colour-code", "audi", "--candidates",
                              "1", "--json").stdout)  # fmt: skip
     assert [c["colour_code"] for c in matched["recorded_nearest"]] == ["VW AUDI LY9B"]
+    # its recipe judged as it is and refined too (tests/test_match.py -k recorded_recipe)
+    assert any("started from the recipes of the 1 case recorded" in n for n in matched["notes"])
+    assert matched["candidates"][0]["recorded_case"] in (None, listed["cases"][0]["case_id"])
     for command in (["cases", "list", "-d", db], ["match", car, "-d", db]):
         run = cli(*command, "--colour-code", "-/-")
         assert run.returncode == 2 and "'--colour-code'" in run.stderr

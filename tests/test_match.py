@@ -1528,6 +1528,30 @@ def test_an_interrupted_harness_reports_the_targets_it_judged(hybrid, monkeypatc
     )
 
 
+def test_a_recorded_recipe_is_judged_as_it_is_and_refined(hybrid):
+    """The shop's recorded recipe for this colour, given as a start, is judged as it is and
+    refined from: where it is the car's recipe (the target is its prediction) a hasty search
+    returns it first, exactly, where alone it ends above ΔE00 0.3; a toner the shop does
+    not have is left out of it."""
+    from flakelab.match.models import effect_mask
+
+    effect = effect_mask(hybrid.library, hybrid.toners)
+    recipe = {"Al medium": 0.5, "Al fine bright": 0.3, "Phthalo blue GS": 0.1,
+              "Indanthrone blue": 0.06, "Carbon black": 0.04}  # fmt: skip
+    x = np.array([recipe.get(t, 0.0) for t in hybrid.toners])
+    with torch.no_grad():
+        target = hybrid(torch.as_tensor(x[None], dtype=hybrid.dtype))[0][0].numpy().astype(float)
+    hasty = MatchSettings(candidates=3, screen_steps=10, refine_steps=12)
+    alone = match(target, hybrid, effect, settings=hasty)
+    assert alone.candidates[0].de00.max() > 0.3
+    started = match(target, hybrid, effect, settings=hasty, starts=x[None])
+    assert started.candidates[0].fractions == pytest.approx(recipe, abs=1e-9)
+    assert started.candidates[0].de00.max() < 1e-3
+    without = replace(hasty, without=("Carbon black",))
+    shop = match(target, hybrid, effect, settings=without, starts=x[None])
+    assert all("Carbon black" not in c.fractions for c in shop.candidates)
+
+
 def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     """The hidden formula's spray is the same whichever recipes the matcher proposed (and
     whether they needed a correction, or it read the targets without texture), so two

@@ -26,7 +26,7 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import Tolerance
 
-__all__ = ["NearCase", "nearest_cases", "nearest_stored_cases"]
+__all__ = ["NearCase", "nearest_cases", "nearest_stored_cases", "recorded_recipes"]
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,17 @@ def nearest_stored_cases(
     found = cases_by_rows(engine, [row_ids[i] for i in order])
     chosen = [case.at_geometries(geometries) for case in found]
     return _near(target, chosen, judged, tolerance, target_texture), len(row_ids)
+
+
+def recorded_recipes(found: Sequence[NearCase], toners: Sequence[str]) -> dict[str, NDArray]:
+    """The recipes of the cases ``found``, by case id, as mass fractions over ``toners``: those
+    whose every toner is among them (a recipe without one of its toners is not that
+    recipe)."""
+    return {
+        near.case.case_id: np.array([near.case.recipe.get(t, 0.0) for t in toners])
+        for near in found
+        if set(near.case.recipe) <= set(toners)
+    }
 
 
 def _ranked(target, sprayouts: NDArray, geometries, tolerance: Tolerance, count: int):

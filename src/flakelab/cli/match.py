@@ -333,12 +333,15 @@ def match_command(
     measurement, readings = read_readings(path, sample, average)
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
     nearest = nearest or (NEAREST_OF_A_CODE if colour_code else 0)
+    recorded = {}
     if nearest:  # before the search: a database that is not there is refused before the wait
+        from flakelab.cases.nearest import recorded_recipes
         from flakelab.cli.cases import recorded_nearest
 
         found, searched = recorded_nearest(database or default_url(), shop, forward.geometries,
                                            spectra, tol, nearest, measurement.texture,
                                            colour_code)  # fmt: skip
+        recorded = recorded_recipes(found, forward.toners)
     result = match(
         measurement,
         forward,
@@ -347,6 +350,7 @@ def match_command(
         settings=settings,
         habits=shop_habits,
         library=lib,
+        starts=list(recorded.values()) or None,
     )
     report = result.to_dict()
     report["without"] = list(without or ())
@@ -355,6 +359,7 @@ def match_command(
     if nearest:
         _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward,
                               colour_code)  # fmt: skip
+        _mark_recorded(report, recorded, forward.toners)
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
@@ -433,6 +438,39 @@ def _add_recorded_nearest(
             f"--nearest: no recorded cases {whose}in {database_label(url_for(database))} read "
             f"at the model's geometries ({', '.join(forward.geometries)})"
         )
+
+
+def _mark_recorded(report: dict, recorded: dict, toners) -> None:
+    """Each candidate's ``recorded_case``: the case whose recipe (``recorded``, fractions over
+    ``toners`` by case id) it is, as recorded (the search judges the nearest cases' recipes as
+    they are, and refines each), else None; and a note that the search started from them."""
+    recipes = {
+        case_id: dict(zip(toners, x.tolist(), strict=True)) for case_id, x in recorded.items()
+    }
+    for c in report["candidates"]:
+        c["recorded_case"] = next(
+            (case_id for case_id, r in recipes.items() if _same_recipe(c["recipe"], r)), None
+        )
+    if recorded:
+        report["notes"].append(
+            f"the search also started from the recipes of the {counted(len(recorded), 'case')} "
+            "recorded nearest the target, each judged as it is and refined"
+        )
+
+
+def _as_recorded(case_id: str | None) -> str:
+    """A candidate's header's word on the recorded case whose recipe it is, if any."""
+    if case_id is None:
+        return ""
+    from flakelab.cases.database import short_id
+
+    return f"  as recorded in case {short_id(case_id)}"
+
+
+def _same_recipe(shown: dict[str, float], recorded: dict[str, float]) -> bool:
+    """Whether a candidate's ``shown`` recipe (fractions to 6 decimals) is ``recorded``."""
+    toners = set(shown) | {t for t, v in recorded.items() if v > 0}
+    return all(abs(shown.get(t, 0.0) - recorded.get(t, 0.0)) < 2e-6 for t in toners)
 
 
 def _add_predicted_left_out(report: dict, result, measurement, forward, other, tolerance) -> list:
@@ -607,6 +645,7 @@ def _print_match(report: dict) -> None:
             f"#{rank}  max ΔE00 {c['de00_max']:.2f}  mean {c['de00_mean']:.2f}  {verdict}"
             f"  (at worst {c['limit_share_max']:.0%} of the tolerance)"
             + ("  aimed off for the shop's habits" if c.get("aimed_off") else "")
+            + _as_recorded(c.get("recorded_case"))
         )
         table = weights_table(can_text(report | c) if "quantity_ml" in report else None,
                               c["weights_g"])  # fmt: skip

@@ -355,6 +355,27 @@ def _starts(
     return torch.as_tensor(np.log(candidates[choice, np.arange(N)] + 1e-6), dtype=forward.dtype)
 
 
+def _recorded_starts(
+    starts: NDArray, allowed: NDArray, effect: NDArray, settings: MatchSettings
+) -> tuple[NDArray, list[tuple[int, ...]]]:
+    """Recipes ``starts[K, T]`` to refine from, as rows beside the screen's best (so that
+    :func:`_starts` starts each one's own toners from it) and their toners: each recipe's
+    allowed toners, every trace of a tint kept (the screen's own rows keep those ≥ 1 %),
+    the largest ``max_pigments`` pigments, renormalised; a recipe left with none is not
+    used."""
+    rows, subsets = [], []
+    for recipe in np.where(allowed, starts, 0.0):
+        used = [i for i in np.argsort(-recipe, kind="stable") if recipe[i] > 0]
+        kept = sorted([i for i in used if effect[i]] +
+                      [i for i in used if not effect[i]][: settings.max_pigments])  # fmt: skip
+        if kept:
+            row = np.zeros_like(recipe)
+            row[kept] = recipe[kept] / recipe[kept].sum()
+            rows.append(row)
+            subsets.append(tuple(int(i) for i in kept))
+    return np.array(rows).reshape(len(rows), starts.shape[1]), subsets
+
+
 def _support(x: NDArray, effect: NDArray, settings: MatchSettings) -> tuple[int, ...]:
     """The toners a screen solution uses (≥ 1 %): at most ``top_effects`` effect toners and
     ``max_pigments`` pigments, the largest amounts."""
@@ -417,6 +438,7 @@ def _match(
     allowed: NDArray | None = None,
     habits=None,
     library=None,
+    starts: NDArray | None = None,
 ) -> MatchResult:
     """Ranked candidate recipes for ``target`` (a Measurement or reflectance ``[G, 31]``).
 
@@ -426,7 +448,9 @@ def _match(
     whose physics says what they do) every candidate is aimed off for them, and its numbers
     are what the shop should measure. The search aims at ``tolerance`` (default ΔE00 ≤ 1.0
     at every geometry, the harness's criterion) and judges by it
-    (:class:`~flakelab.match.objective.MatchObjective`).
+    (:class:`~flakelab.match.objective.MatchObjective`). ``starts[K, T]`` are recipes to
+    judge as they are and to refine as well, each from itself (the shop's recorded recipes
+    nearest the car, which a colorist would start from; :func:`_recorded_starts`).
     """
     start = time.perf_counter()
     settings = _settled(settings or MatchSettings(), forward)
@@ -456,6 +480,11 @@ def _match(
     )
     x_best, subsets = _subsets_to_refine(forward, objective, x_screen, screen_loss, bases,
                                          effect, target_lab, target_texture, settings)  # fmt: skip
+    recorded = np.zeros((0, T))
+    if starts is not None:
+        recorded, own = _recorded_starts(np.asarray(starts, float), allowed, effect, settings)
+        x_best = np.concatenate([x_best, recorded])
+        subsets = list(dict.fromkeys(subsets + own))
     # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
@@ -473,7 +502,8 @@ def _match(
         target_texture,
         settings,
     )
-    x = _weighable(x_refined.numpy().astype(float), settings)
+    # each recorded recipe as it is, too: a colorist may mix it unchanged
+    x = _weighable(np.concatenate([x_refined.numpy().astype(float), recorded]), settings)
     candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     swapped = 0
     if candidates and (
