@@ -355,25 +355,36 @@ def _starts(
     return torch.as_tensor(np.log(candidates[choice, np.arange(N)] + 1e-6), dtype=forward.dtype)
 
 
-def _recorded_starts(
-    starts: NDArray, allowed: NDArray, effect: NDArray, settings: MatchSettings
-) -> tuple[NDArray, list[tuple[int, ...]]]:
-    """Recipes ``starts[K, T]`` to refine from, as rows beside the screen's best (so that
-    :func:`_starts` starts each one's own toners from it) and their toners: each recipe's
-    allowed toners, every trace of a tint kept (the screen's own rows keep those ≥ 1 %),
-    the largest ``max_pigments`` pigments, renormalised; a recipe left with none is not
-    used."""
-    rows, subsets = [], []
+def _recorded_starts(starts: NDArray, allowed: NDArray, effect: NDArray, settings) -> NDArray:
+    """Recipes ``starts[K, T]`` as a search may use them: each recipe's allowed toners, every
+    trace of a tint kept (the screen's own rows keep those ≥ 1 %), the largest
+    ``max_pigments`` pigments, renormalised; a recipe left with none is not used."""
+    rows = []
     for recipe in np.where(allowed, starts, 0.0):
         used = [i for i in np.argsort(-recipe, kind="stable") if recipe[i] > 0]
-        kept = sorted([i for i in used if effect[i]] +
-                      [i for i in used if not effect[i]][: settings.max_pigments])  # fmt: skip
+        kept = [i for i in used if effect[i]] + [i for i in used if not effect[i]][
+            : settings.max_pigments
+        ]
         if kept:
             row = np.zeros_like(recipe)
             row[kept] = recipe[kept] / recipe[kept].sum()
             rows.append(row)
-            subsets.append(tuple(int(i) for i in kept))
-    return np.array(rows).reshape(len(rows), starts.shape[1]), subsets
+    return np.array(rows).reshape(len(rows), starts.shape[1])
+
+
+def _refined_recorded(
+    forward, objective, starts, allowed, effect, target_lab, target_texture, settings
+) -> tuple[NDArray, torch.Tensor]:
+    """The recorded recipes ``starts`` as the search may use them (:func:`_recorded_starts`),
+    and each refined from itself over its own toners, in a batch of their own: beside the
+    search's subsets they would change which of those successive halving keeps."""
+    recorded = _recorded_starts(np.asarray(starts, float), allowed, effect, settings)
+    if not len(recorded):
+        return recorded, torch.zeros((0, recorded.shape[1]), dtype=forward.dtype)
+    init = torch.as_tensor(np.log(recorded + 1e-6), dtype=forward.dtype)
+    mask = torch.as_tensor(recorded > 0)
+    refined = _refine(forward, objective, init, mask, effect, target_lab, target_texture, settings)
+    return recorded, refined
 
 
 def _support(x: NDArray, effect: NDArray, settings: MatchSettings) -> tuple[int, ...]:
@@ -480,11 +491,6 @@ def _match(
     )
     x_best, subsets = _subsets_to_refine(forward, objective, x_screen, screen_loss, bases,
                                          effect, target_lab, target_texture, settings)  # fmt: skip
-    recorded = np.zeros((0, T))
-    if starts is not None:
-        recorded, own = _recorded_starts(np.asarray(starts, float), allowed, effect, settings)
-        x_best = np.concatenate([x_best, recorded])
-        subsets = list(dict.fromkeys(subsets + own))
     # 2.–3. refine every subset in one batch, then only the most promising
     subset_mask = np.zeros((len(subsets), T), bool)
     for row, subset in enumerate(subsets):
@@ -502,8 +508,7 @@ def _match(
         target_texture,
         settings,
     )
-    # each recorded recipe as it is, too: a colorist may mix it unchanged
-    x = _weighable(np.concatenate([x_refined.numpy().astype(float), recorded]), settings)
+    x = _weighable(x_refined.numpy().astype(float), settings)
     candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     swapped = 0
     if candidates and (
@@ -515,6 +520,15 @@ def _match(
         if swapped:
             x = np.concatenate([x, x_swapped])
             candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
+    recorded = np.zeros((0, T))
+    if starts is not None:  # after the search's own stages, which they leave as they were
+        recorded, x_from_recorded = _refined_recorded(
+            forward, objective, starts, allowed, effect, target_lab, target_texture, settings
+        )
+        # each recorded recipe as it is, too: a colorist may mix it unchanged
+        from_recorded = np.concatenate([x_from_recorded.numpy().astype(float), recorded])
+        x = np.concatenate([x, _weighable(from_recorded, settings)])
+        candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     habits_note = None
     if habits is not None and candidates:
         candidates, habits_note = _aimed_off(
@@ -528,7 +542,7 @@ def _match(
         candidates,
         tolerance.name,
         time.perf_counter() - start,
-        len(subsets) + swapped,
+        len(subsets) + len(recorded) + swapped,
         notes,
         tolerance.texture_limits(),
         forward.model_id,

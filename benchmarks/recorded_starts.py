@@ -1,0 +1,107 @@
+"""What the shop's recorded recipes bring to a match: a car the shop painted before (a
+recorded case's own car, read again) matched by the search alone (the baseline, measured in
+the same run) and by the search started from the recipes of the five recorded cases whose
+spray-outs lie nearest it (``match --nearest 5``, ``match --colour-code``). Each best
+candidate is sprayed in the generator's world, as the harness sprays it (the shop's batches
+and application, the same draws for both searches), and judged at every geometry against
+the car (ΔE00 ≤ 1.0): the share that passes, the model's predicted worst ΔE00, the search's
+seconds, and how often the best is a recorded recipe as it is. The recorded spray-out of
+the car's own case says what the shop got when it mixed that recipe.
+
+    python benchmarks/recorded_starts.py [--history 300] [--targets 30] [--seed 11] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from flakelab.cases.generator import World
+from flakelab.cases.nearest import nearest_cases, recorded_recipes
+from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
+from flakelab.core.tolerance import tolerance_preset
+from flakelab.io import read_library
+from flakelab.match.models import effect_mask, forward_for
+from flakelab.match.search import MatchSettings, match
+from flakelab.models.registry import shipped_model
+from timing import matmul_gflops, print_report
+
+NEAREST = 5
+
+
+def sprayed_passes(world: World, fractions: dict, toners, car, seed: int) -> bool:
+    """Whether ``fractions`` sprayed once in ``world`` (draws of ``seed``) and read lies
+    within ΔE00 1.0 of ``car`` at every geometry."""
+    rng = np.random.default_rng(seed)
+    x = np.array([[fractions.get(t, 0.0) for t in toners]])
+    reading = world.measure(world.appearance(x, world.variation(1, rng))[0], rng)
+    return bool(world.worst_de00(reading, car[None])[0] <= 1.0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--history", type=int, default=300)
+    parser.add_argument("--targets", type=int, default=30)
+    parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+
+    library = read_library(None)
+    world = World(library, "five-angle")
+    forward = forward_for(shipped_model("five-angle"), library)
+    effect = effect_mask(library, forward.toners)
+    tolerance = tolerance_preset("refinish")
+    settings = MatchSettings(candidates=1)
+    history = [c for batch in world.cases(args.history, seed=args.seed) for c in batch]
+    rng = np.random.default_rng(args.seed)
+    picked = rng.choice(len(history), args.targets, replace=False)
+    rows = {"alone": [], "started": []}
+    own_case_nearest, as_recorded, recorded_passed = 0, 0, 0
+    gflops = matmul_gflops()
+    for k, index in enumerate(picked):
+        case = history[index]
+        car = world.measure(case.target[None], rng)[0]  # the car read again
+        recorded_passed += bool(world.worst_de00(case.sprayout[None], car[None])[0] <= 1.0)
+        start = time.perf_counter()
+        near = nearest_cases(car, history, tolerance, NEAREST)
+        recorded = recorded_recipes(near, forward.toners)
+        nearest_s = time.perf_counter() - start
+        own_case_nearest += case.case_id in recorded
+        for label, starts in (("alone", None), ("started", list(recorded.values()) or None)):
+            start = time.perf_counter()
+            best = match(car, forward, effect, settings=settings, starts=starts).candidates[0]
+            seconds = time.perf_counter() - start + (nearest_s if starts else 0.0)
+            passed = sprayed_passes(world, best.fractions, forward.toners, car, 1000 + k)
+            rows[label].append((passed, float(best.de00.max()), seconds))
+            if label == "started":
+                as_recorded += any(
+                    np.allclose([best.fractions.get(t, 0.0) for t in forward.toners], x, atol=1e-9)
+                    for x in recorded.values()
+                )
+    report = {
+        "history": args.history,
+        "targets": args.targets,
+        "seed": args.seed,
+        "gflops": round(gflops),
+        "instrument": "five-angle",
+        "geometries": len(INSTRUMENT_GEOMETRIES["five-angle"]),
+        "own_case_among_nearest": own_case_nearest,
+        "recorded_sprayout_passed": round(recorded_passed / args.targets, 3),
+        "best_is_a_recorded_recipe": as_recorded,
+    }
+    for label, results in rows.items():
+        passed, predicted, seconds = (np.array(v) for v in zip(*results, strict=True))
+        report[f"{label}_sprayed_success"] = round(float(passed.mean()), 3)
+        report[f"{label}_predicted_de00_median"] = round(float(np.median(predicted)), 3)
+        report[f"{label}_seconds_median"] = round(float(np.median(seconds)), 2)
+        report[f"{label}_seconds_max"] = round(float(seconds.max()), 2)
+    report["success_ratio_started_vs_alone"] = round(
+        report["started_sprayed_success"] / max(report["alone_sprayed_success"], 1e-9), 2
+    )
+    print_report(report, args.json)
+
+
+if __name__ == "__main__":
+    main()
