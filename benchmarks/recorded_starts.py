@@ -6,7 +6,10 @@ candidate is sprayed in the generator's world, as the harness sprays it (the sho
 and application, the same draws for both searches), and judged at every geometry against
 the car (ΔE00 ≤ 1.0): the share that passes, the model's predicted worst ΔE00, the search's
 seconds, and how often the best is a recorded recipe as it is. The recorded spray-out of
-the car's own case says what the shop got when it mixed that recipe.
+the car's own case says what the shop got when it mixed that recipe. A third way
+(``corrected``) takes the nearest case as a first spray-out already made: its recipe
+corrected from its recorded spray-out (``flakelab correct --mode reformulate``), which knows
+what the model's prediction does not.
 
     python benchmarks/recorded_starts.py [--history 300] [--targets 30] [--seed 11] [--json]
 """
@@ -20,9 +23,12 @@ import numpy as np
 
 from flakelab.cases.generator import World
 from flakelab.cases.nearest import nearest_cases, recorded_recipes
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
+from flakelab.match.correction import correct
 from flakelab.match.models import effect_mask, forward_for
 from flakelab.match.search import MatchSettings, match
 from flakelab.models.registry import shipped_model
@@ -57,7 +63,7 @@ def main() -> None:
     history = [c for batch in world.cases(args.history, seed=args.seed) for c in batch]
     rng = np.random.default_rng(args.seed)
     picked = rng.choice(len(history), args.targets, replace=False)
-    rows = {"alone": [], "started": []}
+    rows = {"alone": [], "started": [], "corrected": []}
     own_case_nearest, as_recorded, recorded_passed = 0, 0, 0
     gflops = matmul_gflops()
     for k, index in enumerate(picked):
@@ -80,6 +86,14 @@ def main() -> None:
                     np.allclose([best.fractions.get(t, 0.0) for t in forward.toners], x, atol=1e-9)
                     for x in recorded.values()
                 )
+        start = time.perf_counter()
+        first = near[0].case
+        fix = correct(forward, car, dict(first.recipe), first.sprayout, mode="reformulate",
+                      library=library, tolerance=tolerance)  # fmt: skip
+        seconds = time.perf_counter() - start + nearest_s
+        passed = sprayed_passes(world, fix.fractions, forward.toners, car, 1000 + k)
+        expected = delta_E(reflectance_to_Lab(car), fix.expected_lab).max()
+        rows["corrected"].append((passed, float(expected), seconds))
     report = {
         "history": args.history,
         "targets": args.targets,
@@ -97,9 +111,10 @@ def main() -> None:
         report[f"{label}_predicted_de00_median"] = round(float(np.median(predicted)), 3)
         report[f"{label}_seconds_median"] = round(float(np.median(seconds)), 2)
         report[f"{label}_seconds_max"] = round(float(seconds.max()), 2)
-    report["success_ratio_started_vs_alone"] = round(
-        report["started_sprayed_success"] / max(report["alone_sprayed_success"], 1e-9), 2
-    )
+    for label in ("started", "corrected"):
+        report[f"success_ratio_{label}_vs_alone"] = round(
+            report[f"{label}_sprayed_success"] / max(report["alone_sprayed_success"], 1e-9), 2
+        )
     print_report(report, args.json)
 
 
