@@ -38,10 +38,10 @@ def shop_spelled(shop: str | None) -> str | None:
 def colour_code_spelled(code: str | None) -> str | None:
     """``--colour-code`` as cases store it (:func:`~flakelab.cases.case.colour_code_words`),
     refused where it holds no letter or digit, or more than a case keeps."""
+    if code is None:  # Click calls it for every command that has the option
+        return None
     from flakelab.cases.case import TEXT_LENGTHS, colour_code_words
 
-    if code is None:
-        return None
     stored, longest = " ".join(colour_code_words(code)), TEXT_LENGTHS["colour_code"]
     if not stored or len(stored) > longest:
         raise typer.BadParameter(

@@ -373,18 +373,14 @@ def _recorded_starts(starts: NDArray, allowed: NDArray, effect: NDArray, setting
 
 
 def _refined_recorded(
-    forward, objective, starts, allowed, effect, target_lab, target_texture, settings
-) -> tuple[NDArray, torch.Tensor]:
-    """The recorded recipes ``starts`` as the search may use them (:func:`_recorded_starts`),
-    and each refined from itself over its own toners, in a batch of their own: beside the
-    search's subsets they would change which of those successive halving keeps."""
-    recorded = _recorded_starts(np.asarray(starts, float), allowed, effect, settings)
-    if not len(recorded):
-        return recorded, torch.zeros((0, recorded.shape[1]), dtype=forward.dtype)
+    forward, objective, recorded, effect, target_lab, target_texture, settings
+) -> torch.Tensor:
+    """Each of the ``recorded`` recipes (:func:`_recorded_starts`) refined from itself over its
+    own toners, in a batch of their own: beside the search's subsets they would change which
+    of those successive halving keeps."""
     init = torch.as_tensor(np.log(recorded + 1e-6), dtype=forward.dtype)
     mask = torch.as_tensor(recorded > 0)
-    refined = _refine(forward, objective, init, mask, effect, target_lab, target_texture, settings)
-    return recorded, refined
+    return _refine(forward, objective, init, mask, effect, target_lab, target_texture, settings)
 
 
 def _support(x: NDArray, effect: NDArray, settings: MatchSettings) -> tuple[int, ...]:
@@ -521,9 +517,11 @@ def _match(
             x = np.concatenate([x, x_swapped])
             candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     recorded = np.zeros((0, T))
-    if starts is not None:  # after the search's own stages, which they leave as they were
-        recorded, x_from_recorded = _refined_recorded(
-            forward, objective, starts, allowed, effect, target_lab, target_texture, settings
+    if starts is not None:
+        recorded = _recorded_starts(np.asarray(starts, float), allowed, effect, settings)
+    if len(recorded):  # after the search's own stages, which they leave as they were
+        x_from_recorded = _refined_recorded(
+            forward, objective, recorded, effect, target_lab, target_texture, settings
         )
         # each recorded recipe as it is, too: a colorist may mix it unchanged
         from_recorded = np.concatenate([x_from_recorded.numpy().astype(float), recorded])
