@@ -70,6 +70,9 @@ __all__ = [
     "short_id",
     "SHORT_ID_LENGTH",
     "shop_summary",
+    "code_summary",
+    "case_summary",
+    "colour_codes",
     "DatabaseError",
 ]
 
@@ -826,20 +829,35 @@ def colour_codes(engine: Engine, *, shop: str | None = None) -> list[str]:
 
 def shop_summary(engine: Engine) -> list[dict]:
     """Every shop in the database: its cases by outcome, and the first and last case's time."""
+    return case_summary(engine, "shop")
+
+
+def code_summary(engine: Engine, *, shop: str | None = None) -> list[dict]:
+    """Every colour code the cases (of ``shop``, where given) record: its cases by outcome, and
+    the first and last case's time; cases without a code are left out."""
+    return [s for s in case_summary(engine, "colour_code", shop=shop) if s["colour_code"]]
+
+
+def case_summary(engine: Engine, by: str, *, shop: str | None = None) -> list[dict]:
+    """The cases (of ``shop``, where given) grouped by the column ``by`` ('shop',
+    'colour_code'): each group's cases by outcome, and its first and last case's time (in
+    UTC), in the order of ``by``."""
+    column = getattr(CaseRow, by)
     query = select(
-        CaseRow.shop,
+        column,
         CaseRow.outcome,
         func.count(CaseRow.id),
         func.min(CaseRow.created_at),
         func.max(CaseRow.created_at),
-    ).group_by(CaseRow.shop, CaseRow.outcome)
-    shops: dict[str, dict] = {}
+    ).group_by(column, CaseRow.outcome)
+    groups: dict[str, dict] = {}
     with reading_rows(engine) as session:
-        for shop, outcome, n, first, last in session.execute(query):
-            entry = shops.setdefault(
-                shop, {"shop": shop, "cases": 0, "outcomes": {}, "first": first, "last": last}
+        for key, outcome, n, first, last in session.execute(_chosen(query, shop, None, None)):
+            first, last = zoned(first), zoned(last)  # SQLite keeps no zone: stored in UTC
+            entry = groups.setdefault(
+                key, {by: key, "cases": 0, "outcomes": {}, "first": first, "last": last}
             )
             entry["cases"] += n
             entry["outcomes"][outcome] = n
             entry["first"], entry["last"] = min(entry["first"], first), max(entry["last"], last)
-    return [shops[name] for name in sorted(shops)]
+    return [groups[key] for key in sorted(groups)]

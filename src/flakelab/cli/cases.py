@@ -37,6 +37,7 @@ from flakelab.cli.sources import (
     TIME_FORMATS,
     WORKPLACE_SHOP,
     CasesArgument,
+    CaseSourceOption,
     ColourCodeOption,
     DatabaseOption,
     InstrumentOption,
@@ -85,7 +86,7 @@ CheckOption = Annotated[
 
 cases_app = typer.Typer(
     help="Refinish cases: generate, record, record-all, list, nearest, remove, import, "
-    "export; realism, habits, shops."
+    "export; realism, habits, shops; colour codes and their variants."
 )
 
 
@@ -777,15 +778,7 @@ def nearest(
     target: Annotated[Path, typer.Argument(help="Target measurement file (the car).")],
     sample: SampleOption = None,
     average: AverageOption = False,
-    database: Annotated[
-        str | None,
-        typer.Option(
-            "--database",
-            "-d",
-            help="Database URL or SQLite file, or a case file (CSV/CxF) (default: "
-            "FLAKELAB_DATABASE_URL or the user data folder).",
-        ),
-    ] = None,
+    database: CaseSourceOption = None,
     shop: ShopOption = None,
     colour_code: ColourCodeOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,

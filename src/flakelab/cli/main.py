@@ -11,6 +11,7 @@ from rich.table import Table
 
 from flakelab import __version__
 from flakelab.cli.cases import cases_app
+from flakelab.cli.codes import codes_command, variants_command
 from flakelab.cli.common import (
     AverageOption,
     AverageSprayedOption,
@@ -366,6 +367,8 @@ def plot(
 app.command("match")(reports_errors(match_command))
 app.command("correct")(reports_errors(correct_command))
 app.command("weigh")(reports_errors(weigh_command))
+cases_app.command("codes")(reports_errors(codes_command))
+cases_app.command("variants")(reports_errors(variants_command))
 app.add_typer(cases_app, name="cases")
 app.add_typer(model_app, name="model")
 app.add_typer(lots_app, name="lots")

@@ -72,6 +72,17 @@ DatabaseOption = Annotated[
 ]
 
 
+CaseSourceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--database",
+        "-d",
+        help="Database URL or SQLite file, or a case file (CSV/CxF) (default: "
+        "FLAKELAB_DATABASE_URL or the user data folder).",
+    ),
+]
+
+
 def instrument_spelled(name: str | None) -> str | None:
     """``--instrument`` in the spelling cases and models record it (``MA-T12``, ``ma_t12`` →
     ``ma-t12``): some commands took the instrument's own spelling, and ``match -i MA-T12`` was

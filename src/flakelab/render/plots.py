@@ -32,6 +32,7 @@ __all__ = [
     "plot_differences",
     "plot_scaling",
     "plot_habits",
+    "plot_variants",
     "plot_tins_history",
     "plot_model_errors",
     "plot_harness",
@@ -382,6 +383,36 @@ def plot_habits(
     if scan is not None:
         _plot_change_scan(figure.add_subplot(grid[1, :]), scan)
     figure.suptitle(title or f"Shop habits against {fit['cases']} spray-outs")
+    _save(figure, path, dpi)
+
+
+def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
+                  dpi: int = 120) -> None:  # fmt: skip
+    """A colour code's variants (:class:`~flakelab.cases.variants.ColourVariant`, most cars
+    first): L* of every car against aspecular angle, and its a*, b* from geometry to
+    geometry, each variant in its own colour, its centre car bold."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+
+    geometries = variants[0].centre.geometries
+    aspecular = np.array([g.aspecular for g in geometries])
+    order = np.argsort(aspecular)
+    figure, (lightness, hue) = plt.subplots(1, 2, figsize=(12, 4.6))
+    for k, variant in enumerate(variants):
+        colour = plt.cm.tab10(k % 10)
+        cars = reflectance_to_Lab(np.stack([c.target for c in variant.cases]))[:, order]
+        centre = reflectance_to_Lab(variant.centre.target)[order]
+        lightness.plot(aspecular[order], cars[..., 0].T, color=colour, alpha=0.25, lw=0.8)
+        hue.plot(cars[..., 1].T, cars[..., 2].T, color=colour, alpha=0.25, lw=0.8)
+        label = f"#{k + 1} ({counted(len(variant.cases), 'car')})"
+        lightness.plot(aspecular[order], centre[:, 0], "o-", color=colour, lw=2, label=label)
+        hue.plot(centre[:, 1], centre[:, 2], "o-", color=colour, lw=2)
+        hue.annotate(geometries[order[0]].name, centre[0, 1:], fontsize=7, color=colour)
+    lightness.set(xlabel="aspecular angle [°]", ylabel="L*")
+    hue.set(xlabel="a*", ylabel="b*", title="from the first geometry (named) to the last")
+    lightness.legend(fontsize=8)
+    for axis in (lightness, hue):
+        axis.grid(alpha=0.3)
+    figure.suptitle(title or f"{counted(len(variants), 'variant')} of a colour code")
     _save(figure, path, dpi)
 
 

@@ -1,0 +1,195 @@
+"""The colour codes a shop has painted, and a code's variants (flakelab.cases.variants)."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import replace
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+import pytest
+
+from flakelab.cases.case import Case, CaseError
+from flakelab.cases.database import add_cases, code_summary, open_database, shop_summary
+from flakelab.cases.exchange import write_cases
+from flakelab.cases.generator import World
+from flakelab.cases.variants import colour_variants
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.tolerance import tolerance_preset
+from flakelab.io import read_library
+
+TOLERANCE = tolerance_preset("refinish")
+START = datetime(2026, 3, 2, 8, 0, tzinfo=UTC)
+
+
+@pytest.fixture(scope="module")
+def generated() -> list[Case]:
+    world = World(read_library(None), "five-angle")
+    return [c for batch in world.cases(12, seed=7, batch=12) for c in batch]
+
+
+def _cars(generated: list[Case], lightness: list[float], sprayed: list[float], code: str):
+    """Cars of one ``code``: the first generated car's colour with its reflectance scaled by
+    each of ``lightness`` (lighter above 1), each sprayed with another generated case's recipe
+    and a spray-out scaled by ``sprayed`` from its car, a day apart, accepted in shop 'south'."""
+    base = generated[0]
+    return [
+        replace(
+            generated[k + 1],
+            case_id=f"{code}-{k}",
+            target=base.target * scale,
+            sprayout=base.target * scale * off,
+            colour_code=code,
+            shop="south",
+            outcome="accepted",
+            created_at=START + timedelta(days=k),
+        )
+        for k, (scale, off) in enumerate(zip(lightness, sprayed, strict=True))
+    ]
+
+
+def _worst_share(a: Case, b: Case) -> float:
+    """The worst geometry's share of the limit between two cars, either way round: one pair
+    at a time, as the tolerance judges a spray-out."""
+    names = a.geometry_names
+    la, lb = reflectance_to_Lab(a.target), reflectance_to_Lab(b.target)
+    shares = []
+    for ref, smp in ((la, lb), (lb, la)):
+        de00, dLCH, _ = TOLERANCE.judge(names, ref, smp)
+        shares.append(TOLERANCE.share_of_limit(names, de00=de00, dLCH=dLCH).max())
+    return float(max(shares))
+
+
+def test_variants_cover_the_cars_each_within_the_tolerance_of_its_centre(generated):
+    """Five cars of the code's usual colour and three a tenth lighter (another plant's): two
+    variants, the usual one first; its offset is the lighter one's ΔL* > 0 and well outside
+    the tolerance; every car lies within it of its variant's centre, the car whose furthest
+    member lies nearest; each variant's recipe is the case whose spray-out lies nearest its
+    centre car, found one case at a time."""
+    usual = [1.0, 1.004, 0.996, 1.002, 0.998]
+    lighter = [1.10, 1.104, 1.097]
+    sprayed = [1.03, 0.99, 1.05, 1.012, 0.97, 1.04, 1.006, 0.95]
+    cars = _cars(generated, usual + lighter, sprayed, "TOYOTA 1G3")
+    variants = colour_variants(cars, TOLERANCE)
+    assert [sorted(c.case_id for c in v.cases) for v in variants] == [
+        [f"TOYOTA 1G3-{k}" for k in range(5)],
+        [f"TOYOTA 1G3-{k}" for k in range(5, 8)],
+    ]
+    main, other = variants
+    assert [c.case_id for c in other.cases] == ["TOYOTA 1G3-7", "TOYOTA 1G3-6", "TOYOTA 1G3-5"]
+    assert np.all(main.offset_de00 == 0) and other.offset_de00.max() > 2
+    assert np.all(other.offset_dLCH[:, 0] > 0)  # lighter at every geometry
+    for variant in variants:
+        members = variant.cases
+        furthest = {c.case_id: max(_worst_share(c, o) for o in members) for c in members}
+        assert variant.spread == pytest.approx(furthest[variant.centre.case_id])
+        assert variant.spread == pytest.approx(min(furthest.values())) and variant.spread <= 1
+        nearest = min(members, key=lambda c: _sprayout_share(variant.centre, c))
+        assert variant.recipe.case.case_id == nearest.case_id
+        assert dict(variant.recipe.case.recipe) == dict(nearest.recipe)
+    assert main.centre.case_id == "TOYOTA 1G3-0"  # the middle of the usual five
+    assert main.recipe.case.case_id == "TOYOTA 1G3-1"  # 0.99: the nearest spray-out
+    assert other.recipe.case.case_id == "TOYOTA 1G3-6"
+
+
+def _sprayout_share(car: Case, case: Case) -> float:
+    names = car.geometry_names
+    de00, dLCH, _ = TOLERANCE.judge(
+        names, reflectance_to_Lab(car.target), reflectance_to_Lab(case.sprayout)
+    )
+    return float(TOLERANCE.share_of_limit(names, de00=de00, dLCH=dLCH).max())
+
+
+def test_a_chain_of_near_cars_needs_as_few_variants_as_cover_it(generated):
+    """Cars each a little lighter than the one before: every neighbour within the tolerance
+    of the next, the ends far outside it. The variants hold every car once, each within
+    ``within`` of its centre; no fewer centres would cover the chain (every choice of one
+    fewer tried); a wider reach never needs more variants."""
+    steps = [1.0 + 0.02 * k for k in range(7)]
+    cars = _cars(generated, steps, [1.0] * len(steps), "NH731P")
+    assert all(_worst_share(a, b) < 1 for a, b in itertools.pairwise(cars))
+    assert _worst_share(cars[0], cars[-1]) > 2
+    counts = []
+    for within in (0.3, 0.5, 1.0, 3.0):
+        variants = colour_variants(cars, TOLERANCE, within)
+        assert sorted(c.case_id for v in variants for c in v.cases) == sorted(
+            c.case_id for c in cars
+        )
+        for variant in variants:
+            assert all(_worst_share(variant.centre, c) <= within for c in variant.cases)
+        fewer = itertools.combinations(cars, len(variants) - 1)
+        assert not any(
+            all(
+                min((_worst_share(c, o) for o in centres), default=2 * within) <= within
+                for c in cars
+            )
+            for centres in fewer
+        ), within
+        counts.append(len(variants))
+    assert counts == sorted(counts, reverse=True) and counts[-1] == 1 and counts[2] == 2
+    assert len(colour_variants(cars[:1], TOLERANCE)) == 1
+    with pytest.raises(CaseError, match="within: expected a share"):
+        colour_variants(cars, TOLERANCE, 0.0)
+    with pytest.raises(CaseError, match="no cases"):
+        colour_variants([], TOLERANCE)
+
+
+def test_code_summary_counts_each_codes_cases_in_the_database(generated, database_url):
+    """The database counts each code's cases by outcome, one shop's or all; cases without a
+    code are not a code; the shops' summary is what it was."""
+    cars = _cars(generated, [1.0, 1.01, 1.1, 1.0], [1.0] * 4, "TOYOTA 1G3")
+    cars[1] = replace(cars[1], outcome="corrected", shop="north")
+    cars[2] = replace(cars[2], colour_code="NH731P", shop="north")
+    cars[3] = replace(cars[3], colour_code="")
+    engine = open_database(database_url)
+    add_cases(engine, cars)
+    summary = {s["colour_code"]: (s["cases"], s["outcomes"]) for s in code_summary(engine)}
+    assert summary == {
+        "NH731P": (1, {"accepted": 1}),
+        "TOYOTA 1G3": (2, {"accepted": 1, "corrected": 1}),
+    }
+    north = {s["colour_code"]: s["cases"] for s in code_summary(engine, shop="north")}
+    assert north == {"NH731P": 1, "TOYOTA 1G3": 1}
+    assert [s["last"] for s in code_summary(engine) if s["colour_code"] == "TOYOTA 1G3"] == [
+        START + timedelta(days=1)
+    ]
+    assert {s["shop"]: s["cases"] for s in shop_summary(engine)} == {"north": 2, "south": 2}
+
+
+def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
+    """'cases codes' lists the codes; 'cases variants CODE' finds the variants in a database
+    and in a case file alike, the code typed as on the plate; a code the shop lacks is refused
+    with the one it likely means, and nothing is written; --plot draws them, and a figure
+    file of no known format is refused before any work."""
+    usual, lighter = [1.0, 1.004, 0.996], [1.10, 1.104]
+    cars = _cars(generated, usual + lighter, [1.01, 0.99, 1.0, 1.02, 1.0], "Toyota 1G3")
+    db, csv = tmp_path / "shop.db", tmp_path / "cases.csv"
+    add_cases(open_database(str(db)), cars)
+    write_cases(cars, csv)
+    listed = cli("cases", "codes", "-d", db, "--json")
+    assert listed.returncode == 0, listed.stderr
+    assert [(c["colour_code"], c["cases"]) for c in json.loads(listed.stdout)["codes"]] == [
+        ("TOYOTA 1G3", 5)
+    ]
+    for source in (db, csv):
+        found = cli("cases", "variants", "toyota 1g3", "-d", source, "--json")
+        assert found.returncode == 0, found.stderr
+        report = json.loads(found.stdout)
+        assert report["colour_code"] == "TOYOTA 1G3" and report["cars"] == 5
+        assert [v["cases"] for v in report["variants"]] == [3, 2]
+        assert report["variants"][1]["offset_dLCH"]["dL"] > 0
+    figure = tmp_path / "variants.png"
+    shown = cli("cases", "variants", "1G3", "-d", db, "--plot", figure)
+    assert shown.returncode == 0 and "2 variants among 5 cars" in shown.stdout
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    unknown = cli("cases", "variants", "1G3", "-d", db, "--plot", tmp_path / "variants.txt")
+    assert unknown.returncode == 2 and "expected a figure file" in unknown.stderr
+    before = db.read_bytes()
+    wrong = cli("cases", "variants", "Toyota 1G 3", "-d", db)
+    assert wrong.returncode == 2 and "Traceback" not in wrong.stderr
+    assert "no cases from any shop of colour code 'TOYOTA 1G 3'" in wrong.stderr
+    assert "(did you mean 'TOYOTA 1G3'?)" in wrong.stderr
+    bad = cli("cases", "variants", "1G3", "-d", db, "--within", "0")
+    assert bad.returncode == 2 and "--within" in bad.stderr
+    assert db.read_bytes() == before
