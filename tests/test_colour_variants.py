@@ -190,6 +190,7 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
     assert wrong.returncode == 2 and "Traceback" not in wrong.stderr
     assert "no cases from any shop of colour code 'TOYOTA 1G 3'" in wrong.stderr
     assert "(did you mean 'TOYOTA 1G3'?)" in wrong.stderr
-    bad = cli("cases", "variants", "1G3", "-d", db, "--within", "0")
-    assert bad.returncode == 2 and "--within" in bad.stderr
+    for within in ("0", "inf"):
+        bad = cli("cases", "variants", "1G3", "-d", db, "--within", within)
+        assert bad.returncode == 2 and "--within: expected a share" in bad.stderr
     assert db.read_bytes() == before

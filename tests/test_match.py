@@ -1567,6 +1567,7 @@ def test_a_recorded_recipe_is_judged_as_it_is_and_refined(hybrid):
     assert scores[0][1] <= scores[0][0] and scores[1][1] < scores[1][0] / 2, scores
 
 
+@pytest.mark.slow  # a validation run: four harness runs, 20 s
 def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
     """The hidden formula's spray is the same whichever recipes the matcher proposed (and
     whether they needed a correction, or it read the targets without texture), so two

@@ -248,7 +248,10 @@ def test_the_figures_per_paint_family_make_up_the_whole(trained, data):
     assert per_family["pearl"]["de00_p95"] == pytest.approx(alone["de00_p95"], rel=1e-6)
 
 
-@pytest.mark.parametrize("screening", SCREENINGS)
+@pytest.mark.parametrize(
+    "screening",  # the paper's sequential screen in the suite, the other a validation run
+    [pytest.param(s, marks=[pytest.mark.slow] * (s != "sequential")) for s in SCREENINGS],
+)
 def test_gross_errors_are_flagged_and_dropped(data, screening):
     bad_rows = [3, 50, 120, 200, 399]
     config = replace(QUICK, screening=screening)

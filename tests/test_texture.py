@@ -66,6 +66,7 @@ def test_a_texture_reading_counts_the_glints_of_one_spot():
     np.testing.assert_allclose(coating[:, 6], grade)
 
 
+@pytest.mark.slow  # a validation run: rendered flake populations, 15 s
 def test_the_world_s_texture_noise_is_the_spot_to_spot_spread_of_rendered_images():
     from flakelab.cases.generator import World
     from flakelab.io import read_library

@@ -63,6 +63,7 @@ def codes_command(
             f"no cases {which_cases(shop, None)} in {database_label(engine)} record a colour "
             "code ('cases record --colour-code', a case file's colour_code column)",
             highlight=False,
+            soft_wrap=True,
         )
         return
     whose = f" of shop {shop!r}" if shop else ""
@@ -120,7 +121,7 @@ def variants_command(
     from flakelab.cases.variants import colour_variants
     from flakelab.io import read_tolerance
 
-    if not within > 0:
+    if not 0 < within < float("inf"):
         raise FlakelabError(f"--within: expected a share of the limit above 0, got {within:g}")
     check_figure_file(plot, "--plot", reads={"--database": database, "--tolerance": tolerance})
     tol = read_tolerance(tolerance)
