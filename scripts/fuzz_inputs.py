@@ -17,7 +17,8 @@ weights; a shop's SQLite database by replacing one value of one case row (or, fo
 
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
         sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
-        manifest,model,model-register,lots,panel,database,database-shops]
+        manifest,model,model-register,lots,panel,database,database-shops,database-variants,
+        cases-variants,car]
         [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
@@ -383,6 +384,15 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # the same for any row of a database holding a shop's cases, model, habits and tins,
         # every one read by the shops' summary
         "database-shops": (shops, lambda p: ["cases", "shops", "-d", str(p)]),
+        # the same, and a case file, read by a colour code's variants; a damaged car in the
+        # booth held against them
+        "database-variants": (work / "shop.db",
+                              lambda p: ["cases", "variants", "1G3", "-d", str(p)]),
+        "cases-variants": (work / "cases.csv",
+                           lambda p: ["cases", "variants", "1G3", "-d", str(p)]),
+        "car": (work / "good.json",
+                lambda p: ["cases", "variants", "1G3", "-d", str(work / "shop.db"), "--car",
+                           str(p)]),
         # the shop's tins, which the main job weighs for
         "lots": (work / "lots.json",
                  lambda p: ["match", "--example", "--candidates", "1", "--lots", str(p)]),
@@ -417,13 +427,13 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
         damaged = work / f"{kind}-{i}{good.suffix}"
         if kind.startswith("model"):
             damaged.write_bytes(damage_model(data, rng))
-        elif kind == "database":
+        elif kind in ("database", "database-variants"):
             damaged.write_bytes(damage_database(data, rng))
         elif kind == "database-shops":
             damaged.write_bytes(damage_database(data, rng, tuple(TABLE_COLUMNS)))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
-        elif kind in ("target", "sprayout", "record") and rng.random() < 0.5:
+        elif kind in ("target", "sprayout", "record", "car") and rng.random() < 0.5:
             damaged.write_text(json.dumps(odd_target(json.loads(data), rng)))
         elif good.suffix == ".json" and rng.random() < 0.7:
             damaged.write_text(json.dumps(damage_json(json.loads(data), rng)))

@@ -16,6 +16,7 @@ from flakelab.cases.exchange import write_cases
 from flakelab.cases.generator import World
 from flakelab.cases.variants import colour_variants
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
 
@@ -161,7 +162,8 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
     """'cases codes' lists the codes; 'cases variants CODE' finds the variants in a database
     and in a case file alike, the code typed as on the plate; a code the shop lacks is refused
     with the one it likely means, and nothing is written; --plot draws them, and a figure
-    file of no known format is refused before any work."""
+    file of no known format is refused before any work. --car names the variant the car in
+    the booth lies nearest, or says none is its colour."""
     usual, lighter = [1.0, 1.004, 0.996], [1.10, 1.104]
     cars = _cars(generated, usual + lighter, [1.01, 0.99, 1.0, 1.02, 1.0], "Toyota 1G3")
     db, csv = tmp_path / "shop.db", tmp_path / "cases.csv"
@@ -179,6 +181,23 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
         assert report["colour_code"] == "TOYOTA 1G3" and report["cars"] == 5
         assert [v["cases"] for v in report["variants"]] == [3, 2]
         assert report["variants"][1]["offset_dLCH"]["dL"] > 0
+    from flakelab.core.measurement import Measurement
+    from flakelab.io import write_measurements
+
+    booth = {"lighter": 1.101, "darker": 0.8}
+    for sample, scale in booth.items():
+        reading = Measurement(sample, cars[0].geometries, WAVELENGTHS, cars[0].target * scale)
+        write_measurements([reading], tmp_path / f"{sample}.cxf")
+    found = json.loads(cli("cases", "variants", "1G3", "-d", db, "--car", tmp_path / "lighter.cxf",
+                           "--json").stdout)  # fmt: skip
+    assert found["car"]["nearest_variant"] == 2 and found["car"]["within_tolerance"]
+    assert [v["car"]["passes"] for v in found["variants"]] == [False, True]
+    darker = cli("cases", "variants", "1G3", "-d", db, "--car", tmp_path / "darker.cxf")
+    assert "no variant the shop has painted is this car's colour" in " ".join(darker.stdout.split())
+    fewer = Measurement("door", cars[0].geometries[:3], WAVELENGTHS, cars[0].target[:3])
+    write_measurements([fewer], tmp_path / "door.cxf")
+    unread = cli("cases", "variants", "1G3", "-d", db, "--car", tmp_path / "door.cxf")
+    assert unread.returncode == 2 and "door.cxf: not read at 45as75, 45as110" in unread.stderr
     figure = tmp_path / "variants.png"
     shown = cli("cases", "variants", "1G3", "-d", db, "--plot", figure)
     assert shown.returncode == 0 and "2 variants among 5 cars" in shown.stdout

@@ -33,7 +33,13 @@ from flakelab.cases.nearest import NearCase, nearest_cases
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.tolerance import Tolerance
 
-__all__ = ["ColourVariant", "colour_variants", "covering_centres", "pairwise_shares"]
+__all__ = [
+    "ColourVariant",
+    "car_from_centres",
+    "colour_variants",
+    "covering_centres",
+    "pairwise_shares",
+]
 
 ROWS_AT_ONCE = 256
 """Cars compared with every other car at once: bounds the pairwise colour computation's
@@ -127,6 +133,19 @@ def colour_variants(
             )
         )
     return variants
+
+
+def car_from_centres(
+    variants: Sequence[ColourVariant], car: NDArray, tolerance: Tolerance
+) -> tuple[NDArray, NDArray, NDArray]:
+    """How far a car in the booth (reflectance ``[G, 31]`` at the variants' geometries) lies
+    from each variant's centre car, the centre the standard: ΔE00 ``[V, G]``, the worst
+    geometry's share of ``tolerance``'s limit ``[V]``, and whether it passes ``[V]``."""
+    geometries = variants[0].centre.geometry_names
+    centres = reflectance_to_Lab(np.stack([v.centre.target for v in variants]))
+    de00, dLCH, passed = tolerance.judge(geometries, centres, reflectance_to_Lab(car)[None])
+    shares = tolerance.share_of_limit(geometries, de00=de00, dLCH=dLCH).max(axis=1)
+    return de00, shares, passed.all(axis=1)
 
 
 def covering_centres(shares: NDArray, within: float) -> list[int]:

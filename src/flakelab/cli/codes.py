@@ -11,12 +11,15 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    AverageOption,
     JsonOption,
+    SampleOption,
     ToleranceOption,
     check_figure_file,
     console,
     errors,
     print_report,
+    read_readings,
     shares_text,
 )
 from flakelab.cli.sources import (
@@ -101,11 +104,20 @@ def variants_command(
             "centre car, at every geometry.",
         ),
     ] = 1.0,
+    car: Annotated[
+        Path | None,
+        typer.Option(
+            help="The car in the booth (a measurement file): how far it lies from each "
+            "variant's centre, and the variant it is nearest."
+        ),
+    ] = None,
+    sample: SampleOption = None,
+    average: AverageOption = False,
     plot: Annotated[
         Path | None,
         typer.Option(
             help="Save a figure: each variant's cars, L* against aspecular angle and a*, b* "
-            "from geometry to geometry (.png, .pdf, .svg)."
+            "from geometry to geometry, and --car's (.png, .pdf, .svg)."
         ),
     ] = None,
     json_output: JsonOption = False,
@@ -115,7 +127,8 @@ def variants_command(
 
     Each variant is shown by its centre car, how far that lies from the main variant's (the
     most cars), and the recorded recipe whose spray-out lies nearest it. 'cases nearest CAR
-    --colour-code CODE' then finds the recipes nearest the car in the booth."""
+    --colour-code CODE' then finds the recipes nearest the car in the booth; --car says
+    which variant it is."""
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import default_url
     from flakelab.cases.variants import colour_variants
@@ -123,9 +136,11 @@ def variants_command(
 
     if not 0 < within < float("inf"):
         raise FlakelabError(f"--within: expected a share of the limit above 0, got {within:g}")
-    check_figure_file(plot, "--plot", reads={"--database": database, "--tolerance": tolerance})
+    check_figure_file(plot, "--plot", reads={"--database": database, "--tolerance": tolerance,
+                                             "--car": car})  # fmt: skip
     tol = read_tolerance(tolerance)
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
+    reading = car and car_reading(car, sample, average, geometries, instrument)
     source = database or default_url()
     cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
     if not cases:
@@ -145,17 +160,49 @@ def variants_command(
         "cars": len(cases),
         "variants": [variant.to_dict() for variant in found],
     }
+    spectra = reading and reading.storage_spectra(list(geometries))
+    if reading is not None:
+        report["car"] = {"file": str(car), "sample": reading.sample,
+                         **_car_report(found, spectra, tol, report)}  # fmt: skip
     if plot is not None:
         from flakelab.render.plots import plot_variants
 
         title = f"Colour code {colour_code!r}: {counted(len(found), 'variant')} ({tol.name})"
-        plot_variants(found, plot, title=title)
+        plot_variants(found, plot, title=title, car=spectra)
         report["plot"] = str(plot)
         errors.print(f"wrote {plot}", highlight=False)
     if json_output:
         print_report(report)
         return
     _print_variants(report)
+
+
+def car_reading(path: Path, sample, average: bool, geometries, instrument: str):
+    """``--car``'s reading, refused where it was not read at ``geometries``."""
+    reading = read_readings(path, sample, average)[0]
+    if missing := [g for g in geometries if g not in reading.geometry_names]:
+        raise FlakelabError(
+            f"{path}: not read at {', '.join(missing)} ({instrument}'s geometries; "
+            "--instrument chooses)"
+        )
+    return reading
+
+
+def _car_report(found, spectra, tolerance, report: dict) -> dict:
+    """The car's worst ΔE00 and share from each variant's centre (added to each variant's
+    row of ``report``) and the variant it lies nearest."""
+    from flakelab.cases.variants import car_from_centres
+
+    de00, shares, passes = car_from_centres(found, spectra, tolerance)
+    names = report["geometries"]
+    for row, d, share, ok in zip(report["variants"], de00, shares, passes, strict=True):
+        row["car"] = {
+            "de00_max": round(float(d.max()), 3),
+            "geometry": names[int(d.argmax())],
+            "limit_share_max": round(float(share), 3),
+            "passes": bool(ok),
+        }
+    return {"nearest_variant": int(shares.argmin()) + 1, "within_tolerance": bool(passes.any())}
 
 
 def _print_variants(report: dict) -> None:
@@ -171,8 +218,9 @@ def _print_variants(report: dict) -> None:
         f"({report['tolerance']}, every car within {report['within']:g}× the limit of its centre)"
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True)
-    columns = ("#", "cars", "spread", "from #1 ΔE00", "ΔL* ΔC* ΔH*", "centre car",
-               "nearest spray-out", "its recipe (share)")  # fmt: skip
+    car = report.get("car")
+    columns = ("#", "cars", "spread", "from #1 ΔE00", "ΔL* ΔC* ΔH*", *(["the car"] * bool(car)),
+               "centre car", "nearest spray-out", "its recipe (share)")  # fmt: skip
     for column in columns:
         right = column in ("#", "cars", "spread", "from #1 ΔE00")
         table.add_column(column, justify="right" if right else "left",
@@ -187,6 +235,7 @@ def _print_variants(report: dict) -> None:
             f"{row['spread']:.2f}",
             f"{row['offset_de00_max']:.2f} {row['offset_geometry']}" if k > 1 else "",
             f"{shift['dL']:+.2f} {shift['dC']:+.2f} {shift['dH']:+.2f}" if k > 1 else "",
+            *([_car_cell(row["car"], k == car["nearest_variant"])] if car else []),
             short_id(row["centre_case_id"]),
             f"{short_id(near['case_id'])} [{colour}]{near['sprayout_de00_max']:.2f}[/]",
             shares_text(near["recipe"]),
@@ -200,3 +249,34 @@ def _print_variants(report: dict) -> None:
         f"flakelab cases nearest CAR --colour-code {report['colour_code']!r}",
         highlight=False,
     )
+    if car:
+        _print_car(report)
+
+
+def _car_cell(row: dict, nearest: bool) -> str:
+    """The car's worst ΔE00 from a variant's centre, green within the tolerance; ◀ marks
+    the nearest."""
+    colour = "green" if row["passes"] else "red"
+    return f"[{colour}]{row['de00_max']:.2f}[/] {row['geometry']}" + (" ◀" if nearest else "")
+
+
+def _print_car(report: dict) -> None:
+    """Which variant the car in the booth is, and what to do next."""
+    k = report["car"]["nearest_variant"]
+    near = report["variants"][k - 1]["car"]
+    said = (
+        f"{report['car']['sample']} lies nearest variant #{k}: worst ΔE00 {near['de00_max']:.2f} "
+        f"at {near['geometry']} from its centre car"
+    )
+    nearest = (
+        f"flakelab cases nearest {report['car']['file']} --colour-code {report['colour_code']!r}"
+    )
+    if near["passes"]:
+        console.print(f"{said}, within {report['tolerance']}; the shop's recipes nearest it: "
+                      f"{nearest}", highlight=False)  # fmt: skip
+    else:
+        console.print(
+            f"[yellow]note:[/] {said}, outside {report['tolerance']}: no variant the shop has "
+            f"painted is this car's colour; match it (flakelab match {report['car']['file']})",
+            highlight=False,
+        )

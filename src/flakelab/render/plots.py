@@ -387,10 +387,11 @@ def plot_habits(
 
 
 def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
-                  dpi: int = 120) -> None:  # fmt: skip
+                  car: np.ndarray | None = None, dpi: int = 120) -> None:  # fmt: skip
     """A colour code's variants (:class:`~flakelab.cases.variants.ColourVariant`, most cars
     first): L* of every car against aspecular angle, and its a*, b* from geometry to
-    geometry, each variant in its own colour, its centre car bold."""
+    geometry, each variant in its own colour, its centre car bold; the ``car`` in the booth
+    (reflectance ``[G, 31]`` at their geometries) black and dashed."""
     from flakelab.core.colorimetry import reflectance_to_Lab
 
     geometries = variants[0].centre.geometries
@@ -407,6 +408,10 @@ def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
         lightness.plot(aspecular[order], centre[:, 0], "o-", color=colour, lw=2, label=label)
         hue.plot(centre[:, 1], centre[:, 2], "o-", color=colour, lw=2)
         hue.annotate(geometries[order[0]].name, centre[0, 1:], fontsize=7, color=colour)
+    if car is not None:
+        booth = reflectance_to_Lab(car)[order]
+        lightness.plot(aspecular[order], booth[:, 0], "s--", color="k", lw=1.5, label="the car")
+        hue.plot(booth[:, 1], booth[:, 2], "s--", color="k", lw=1.5)
     lightness.set(xlabel="aspecular angle [°]", ylabel="L*")
     hue.set(xlabel="a*", ylabel="b*", title="from the first geometry (named) to the last")
     lightness.legend(fontsize=8)
