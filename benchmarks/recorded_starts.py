@@ -11,7 +11,13 @@ the car's own case says what the shop got when it mixed that recipe. A third way
 corrected from its recorded spray-out (``flakelab correct --mode reformulate``), which knows
 what the model's prediction does not.
 
-    python benchmarks/recorded_starts.py [--history 300] [--targets 30] [--seed 11] [--json]
+With ``--colour-codes K`` the world paints every car in one of K OEM colours (``cases
+generate --colour-codes``), and the cars matched are the next to come in: each a car of a
+code the shop may have painted before, matched from that code's recorded cases alone
+(``match --colour-code``), as a colorist reads the code off the car's plate.
+
+    python benchmarks/recorded_starts.py [--history 300] [--targets 30] [--seed 11]
+        [--colour-codes K] [--json]
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import time
 
 import numpy as np
 
-from flakelab.cases.generator import World
+from flakelab.cases.generator import World, WorldSettings
 from flakelab.cases.nearest import nearest_cases, recorded_recipes
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -46,35 +52,54 @@ def sprayed_passes(world: World, fractions: dict, toners, car, seed: int) -> boo
     return bool(world.worst_de00(reading, car[None])[0] <= 1.0)
 
 
+def history_and_cars(world: World, args) -> tuple[list, list]:
+    """The shop's history and the cars to match, each ``(reflectance, code, its case)``:
+    without colour codes, cars the shop painted before (a history case's own car, read
+    again); with them, the next cars to come in (the cases after the history), each matched
+    from its own code's recorded cases alone (``match --colour-code``), none of its own."""
+    if args.colour_codes:
+        made = [c for b in world.cases(args.history + args.targets, seed=args.seed) for c in b]
+        return made[: args.history], [(c.target, c.colour_code, None) for c in made[args.history :]]
+    history = [c for batch in world.cases(args.history, seed=args.seed) for c in batch]
+    rng = np.random.default_rng(args.seed)
+    picked = rng.choice(len(history), args.targets, replace=False)
+    return history, [(world.measure(history[i].target[None], rng)[0], "", history[i])
+                     for i in picked]  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--history", type=int, default=300)
     parser.add_argument("--targets", type=int, default=30)
     parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--colour-codes", type=int, default=0)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
     library = read_library(None)
-    world = World(library, "five-angle")
+    world = World(library, "five-angle", WorldSettings(colour_codes=args.colour_codes))
     forward = forward_for(shipped_model("five-angle"), library)
     effect = effect_mask(library, forward.toners)
     tolerance = tolerance_preset("refinish")
     settings = MatchSettings(candidates=1)
-    history = [c for batch in world.cases(args.history, seed=args.seed) for c in batch]
-    rng = np.random.default_rng(args.seed)
-    picked = rng.choice(len(history), args.targets, replace=False)
+    history, cars = history_and_cars(world, args)
     rows = {"alone": [], "started": [], "corrected": []}
-    own_case_nearest, as_recorded, recorded_passed = 0, 0, 0
+    own_case_nearest, as_recorded, recorded_passed, code_in_history = 0, 0, 0, 0
     gflops = matmul_gflops()
-    for k, index in enumerate(picked):
-        case = history[index]
-        car = world.measure(case.target[None], rng)[0]  # the car read again
-        recorded_passed += bool(world.worst_de00(case.sprayout[None], car[None])[0] <= 1.0)
+    for k, (car, code, case) in enumerate(cars):
         start = time.perf_counter()
-        near = nearest_cases(car, history, tolerance, NEAREST)
+        pool = [c for c in history if c.colour_code == code] if code else history
+        near = nearest_cases(car, pool, tolerance, NEAREST) if pool else []
         recorded = recorded_recipes(near, forward.toners)
         nearest_s = time.perf_counter() - start
-        own_case_nearest += case.case_id in recorded
+        code_in_history += bool(code and pool)
+        if case is not None:
+            own_case_nearest += case.case_id in recorded
+            recorded_passed += bool(world.worst_de00(case.sprayout[None], car[None])[0] <= 1.0)
+        elif near:  # the nearest recorded spray-out, as it is, against the new car
+            recorded_passed += bool(
+                world.worst_de00(near[0].case.sprayout[None], car[None])[0] <= 1.0
+            )
         for label, starts in (("alone", None), ("started", list(recorded.values()) or None)):
             start = time.perf_counter()
             best = match(car, forward, effect, settings=settings, starts=starts).candidates[0]
@@ -86,6 +111,9 @@ def main() -> None:
                     np.allclose([best.fractions.get(t, 0.0) for t in forward.toners], x, atol=1e-9)
                     for x in recorded.values()
                 )
+        if not near:  # nothing recorded of the code: the colorist takes the search's best
+            rows["corrected"].append(rows["alone"][-1])
+            continue
         start = time.perf_counter()
         first = near[0].case
         fix = correct(forward, car, dict(first.recipe), first.sprayout, mode="reformulate",
@@ -101,7 +129,9 @@ def main() -> None:
         "gflops": round(gflops),
         "instrument": "five-angle",
         "geometries": len(INSTRUMENT_GEOMETRIES["five-angle"]),
+        "colour_codes": args.colour_codes,
         "own_case_among_nearest": own_case_nearest,
+        "code_in_history": code_in_history,
         "recorded_sprayout_passed": round(recorded_passed / args.targets, 3),
         "best_is_a_recorded_recipe": as_recorded,
     }

@@ -213,3 +213,46 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
         bad = cli("cases", "variants", "1G3", "-d", db, "--within", within)
         assert bad.returncode == 2 and "--within: expected a share" in bad.stderr
     assert db.read_bytes() == before
+
+
+def test_a_world_of_colour_codes_paints_each_car_in_one_of_its_colours():
+    """With K colour codes every car is one of K OEM colours, met as a popular colour is
+    (the first code about 1 / H_K of the cars), its case records the code and its recipe
+    that colour's toners; every other draw is the world's without codes (the same case ids),
+    and case i's code is the same whatever the batches."""
+    from flakelab.cases.generator import ColourCatalogue, WorldSettings
+
+    library = read_library(None)
+    plain = [c for b in World(library, "five-angle").cases(1000, seed=7) for c in b]
+    world = World(library, "five-angle", WorldSettings(colour_codes=20))
+    coded = [c for b in world.cases(1000, seed=7) for c in b]
+    assert [c.case_id for c in coded] == [c.case_id for c in plain]
+    assert {c.colour_code for c in plain} == {""}
+    again = [c for b in world.cases(300, seed=7, batch=16) for c in b]
+    assert [c.colour_code for c in again] == [c.colour_code for c in coded[:300]]
+    assert all(np.array_equal(a.target, b.target) for a, b in zip(again, coded, strict=False))
+    catalogue = ColourCatalogue(world, 7)
+    assert catalogue.codes == tuple(f"GEN {k:03d}" for k in range(1, 21))
+    share = np.mean([c.colour_code == "GEN 001" for c in coded])
+    assert abs(share - 1 / np.sum(1 / np.arange(1, 21))) < 0.05  # 0.278; binomial sd 0.014
+    names = library.names
+    for case in coded:
+        colour = catalogue.formulations[catalogue.codes.index(case.colour_code)]
+        assert set(case.recipe) == {names[j] for j in np.flatnonzero(colour > 0)}
+    with pytest.raises(ValueError, match="colour_codes: expected a whole number"):
+        list(World(library, "five-angle", WorldSettings(colour_codes=-1)).cases(1, seed=0))
+
+
+def test_cases_generate_records_the_codes_asked_for(tmp_path, cli):
+    """'cases generate --colour-codes K' writes each case's code; without, the file has no
+    colour code column (as every case file generated before)."""
+    from flakelab.cases.exchange import read_cases
+
+    coded, plain = tmp_path / "coded.csv", tmp_path / "plain.csv"
+    run = cli("cases", "generate", "--n", "30", "--seed", "2", "--colour-codes", "4", "-o", coded)
+    assert run.returncode == 0, run.stderr
+    assert {c.colour_code for c in read_cases(coded)} <= {f"GEN 00{k}" for k in range(1, 5)}
+    assert cli("cases", "generate", "--n", "30", "--seed", "2", "-o", plain).returncode == 0
+    assert "colour_code" in coded.read_text().splitlines()[0]
+    assert "colour_code" not in plain.read_text().splitlines()[0]
+    assert [c.case_id for c in read_cases(coded)] == [c.case_id for c in read_cases(plain)]

@@ -38,7 +38,12 @@ Sources of variation (all in :class:`WorldSettings`):
 * the shop's own habits (``shop_*``, none by default): its sprayer's mean film build and
   flake spread against the factory's, and its instrument's gain against the instrument the
   shipped model learned from. These are what the protocol's adaptation phase is for
-  (``flakelab model adapt``): every case of one shop carries them, no case of another does.
+  (``flakelab model adapt``): every case of one shop carries them, no case of another does;
+* the car makers' colour codes (``colour_codes``, none by default): with K > 0 every car is
+  painted in one of K OEM colours (:class:`ColourCatalogue`), met as often as a popular
+  colour is met, and its case records the colour's code; cars of one code still differ by
+  their factory batches, spray line and weathering. Without, every car is a colour of its
+  own and records no code.
 
 They were set so that ``World.realism`` lands in the ranges a shop sees (issue 4).
 """
@@ -79,6 +84,7 @@ __all__ = [
     "Variation",
     "CHUNK",
     "LastingTins",
+    "ColourCatalogue",
     "SHOP_WITH_HABITS",
     "NEAR_BLACK_L",
     "near_black",
@@ -105,6 +111,14 @@ the seed: apart from every chunk's."""
 
 TIN_BLOCK = 64
 """Tins of one toner drawn from one stream: tin k's draws are the same whatever the chunk."""
+
+CODE_STREAM = 7106
+"""The key of the streams a world's colour codes are drawn from (:class:`ColourCatalogue`),
+beside the seed: apart from every chunk's and the tins'."""
+
+CODE_POPULARITY = 1.0
+"""How often a shop meets a car maker's colour: the r-th most met code's share goes as
+1 / r to this power (Zipf): a few whites, silvers and blacks make many of the cars."""
 
 ORGANIC_FAMILIES = (
     "phthalocyanine",
@@ -148,6 +162,7 @@ class WorldSettings:
     tin_strength_referenced_sd: float = 0.0059
     tin_shade_referenced_sd_nm: float = 0.29
     tin_sprayouts: int = 1
+    colour_codes: int = 0  # the car makers' colours a shop meets (0: every car its own)
     solid_white_share: float = 0.5
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
@@ -376,22 +391,36 @@ class World:
         start = start or datetime(2026, 1, 1, tzinfo=UTC)
         pending: list[Case] = []
         tins = LastingTins(self, seed) if self.settings.tin_sprayouts != 1 else None
+        catalogue = ColourCatalogue(self, seed) if self.settings.colour_codes else None
         for first in range(0, n, CHUNK):
             rng = np.random.default_rng([seed, first // CHUNK])
-            pending += self._batch(rng, shop, start, first, tins)[: n - first]
+            codes = catalogue and catalogue.codes_met(first // CHUNK, CHUNK)
+            pending += self._batch(rng, shop, start, first, tins, codes)[: n - first]
             while len(pending) >= batch:
                 yield pending[:batch]
                 pending = pending[batch:]
         if pending:
             yield pending
 
-    def _batch(self, rng, shop, start, offset, tins: LastingTins | None = None) -> list[Case]:
+    def _batch(
+        self,
+        rng,
+        shop,
+        start,
+        offset,
+        tins: LastingTins | None = None,
+        codes: tuple[NDArray, tuple[str, ...], NDArray] | None = None,
+    ) -> list[Case]:
         """One block of :data:`CHUNK` cases, drawn whole whatever part of it is kept: a block
         cut short would draw each array at another size, and so other cases. ``tins``: the
         shop's lasting tins, which its spray-outs are poured from (None: a batch of each
-        toner for every spray-out)."""
+        toner for every spray-out). ``codes``: each car's colour (formulations ``[CHUNK,
+        T]``) and code (:meth:`ColourCatalogue.codes_met`; None: each car a colour of its
+        own)."""
         s, size = self.settings, CHUNK
-        hidden = self.formulations(size, rng)
+        hidden = self.formulations(size, rng)  # drawn either way: every other draw the same
+        if codes is not None:
+            hidden = codes[0]
         oem = self.variation(size, rng, at_shop=False)
         weathered = rng.random(size) < s.weathered_share
         aged, haze = self.weather(hidden, rng)
@@ -438,6 +467,7 @@ class World:
                     synthetic=True,
                     created_at=start + timedelta(minutes=37 * (offset + i)),
                     tins=recorded[i],
+                    colour_code="" if codes is None else codes[1][codes[2][i]],
                 )
             )
         return cases
@@ -587,6 +617,32 @@ def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int, int]) -> NDAr
     kernel = np.array([1, 2, 3, 2, 1], dtype=float)
     kernel /= np.sqrt(np.sum(kernel**2))
     return sum(kernel[i] * raw[..., i : i + shape[-1]] for i in range(5))
+
+
+class ColourCatalogue:
+    """The car makers' colours a shop meets (``WorldSettings.colour_codes`` = K > 0): K OEM
+    formulations drawn once from the stream ``(seed, CODE_STREAM)``, coded ``GEN 001`` …
+    (synthetic codes, as the cases are), the r-th met in proportion to 1 / r^
+    :data:`CODE_POPULARITY`. Which code each car of a chunk has is drawn from the stream
+    ``(seed, CODE_STREAM, chunk)``: case i's code is the same whatever the batches."""
+
+    def __init__(self, world: World, seed: int) -> None:
+        count = world.settings.colour_codes
+        if not isinstance(count, int) or isinstance(count, bool) or count < 0:
+            raise ValueError(f"colour_codes: expected a whole number from 0, got {count!r}")
+        self.seed = seed
+        self.formulations = world.formulations(count, np.random.default_rng([seed, CODE_STREAM]))
+        digits = max(3, len(str(count)))
+        self.codes = tuple(f"GEN {k:0{digits}d}" for k in range(1, count + 1))
+        popularity = np.arange(1, count + 1) ** -CODE_POPULARITY
+        self.share = popularity / popularity.sum()
+
+    def codes_met(self, chunk: int, size: int) -> tuple[NDArray, tuple[str, ...], NDArray]:
+        """The formulations ``[size, T]`` of the cars of ``chunk``, the codes, and each car's
+        index among them ``[size]``."""
+        rng = np.random.default_rng([self.seed, CODE_STREAM, chunk])
+        met = rng.choice(len(self.codes), size=size, p=self.share)
+        return self.formulations[met], self.codes, met
 
 
 class LastingTins:

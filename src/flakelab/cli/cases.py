@@ -142,6 +142,15 @@ def generate(
             "cases of a stretch share their tins (1: every spray-out from batches of its own).",
         ),
     ] = 1,
+    colour_codes: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="The car makers' colours the shop meets: every car painted in one of this many "
+            "OEM colours, coded GEN 001 … (synthetic), the r-th met as often as 1/r; its case "
+            "records the code (0: every car a colour of its own, no code).",
+        ),
+    ] = 0,
 ) -> None:
     """Generate synthetic refinish cases (labelled synthetic) and store them. A database
     takes them in batches of 500: the same command again, after a Ctrl-C, stores the rest."""
@@ -159,6 +168,7 @@ def generate(
         shop_gain=shop_gain,
         tins=tins,
         tin_sprayouts=tin_sprayouts,
+        colour_codes=colour_codes,
     )
     world = World(read_library(library), instrument_key(instrument), settings)
     to_file = out is not None and is_case_file(out)
@@ -176,7 +186,8 @@ def generate(
                     bar.advance(task, len(batch))
 
             columns = tuple(g.name for g in world.geometries)
-            write_cases(generated(), out, geometries=columns, tins=tins != "none")
+            write_cases(generated(), out, geometries=columns, tins=tins != "none",
+                        codes=colour_codes > 0)  # fmt: skip
         errors.print(
             f"wrote {n} synthetic cases ({instrument}, seed {seed}) to {out}",
             highlight=False,

@@ -389,34 +389,35 @@ def plot_habits(
 def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
                   car: np.ndarray | None = None, dpi: int = 120) -> None:  # fmt: skip
     """A colour code's variants (:class:`~flakelab.cases.variants.ColourVariant`, most cars
-    first): L* of every car against aspecular angle, and its a*, b* from geometry to
-    geometry, each variant in its own colour, its centre car bold; the ``car`` in the booth
-    (reflectance ``[G, 31]`` at their geometries) black and dashed."""
+    first): every car's ΔL*, Δa*, Δb* from the main variant's centre car against aspecular
+    angle (a code's variants differ by a unit or two, which L* itself, 10 to 100 over the
+    angles, would hide), each variant in its own colour, its centre car bold; the ``car`` in
+    the booth (reflectance ``[G, 31]`` at their geometries) black and dashed."""
     from flakelab.core.colorimetry import reflectance_to_Lab
 
     geometries = variants[0].centre.geometries
     aspecular = np.array([g.aspecular for g in geometries])
     order = np.argsort(aspecular)
-    figure, (lightness, hue) = plt.subplots(1, 2, figsize=(12, 4.6))
+    x = aspecular[order]
+    main = reflectance_to_Lab(variants[0].centre.target)[order]
+    figure, axes = plt.subplots(1, 3, figsize=(15, 4.4), sharey=True)
     for k, variant in enumerate(variants):
         colour = plt.cm.tab10(k % 10)
-        cars = reflectance_to_Lab(np.stack([c.target for c in variant.cases]))[:, order]
-        centre = reflectance_to_Lab(variant.centre.target)[order]
-        lightness.plot(aspecular[order], cars[..., 0].T, color=colour, alpha=0.25, lw=0.8)
-        hue.plot(cars[..., 1].T, cars[..., 2].T, color=colour, alpha=0.25, lw=0.8)
+        cars = reflectance_to_Lab(np.stack([c.target for c in variant.cases]))[:, order] - main
+        centre = reflectance_to_Lab(variant.centre.target)[order] - main
         label = f"#{k + 1} ({counted(len(variant.cases), 'car')})"
-        lightness.plot(aspecular[order], centre[:, 0], "o-", color=colour, lw=2, label=label)
-        hue.plot(centre[:, 1], centre[:, 2], "o-", color=colour, lw=2)
-        hue.annotate(geometries[order[0]].name, centre[0, 1:], fontsize=7, color=colour)
+        for j, axis in enumerate(axes):
+            axis.plot(x, cars[..., j].T, color=colour, alpha=0.2, lw=0.8)
+            axis.plot(x, centre[:, j], "o-", color=colour, lw=2, label=label)
     if car is not None:
-        booth = reflectance_to_Lab(car)[order]
-        lightness.plot(aspecular[order], booth[:, 0], "s--", color="k", lw=1.5, label="the car")
-        hue.plot(booth[:, 1], booth[:, 2], "s--", color="k", lw=1.5)
-    lightness.set(xlabel="aspecular angle [°]", ylabel="L*")
-    hue.set(xlabel="a*", ylabel="b*", title="from the first geometry (named) to the last")
-    lightness.legend(fontsize=8)
-    for axis in (lightness, hue):
+        booth = reflectance_to_Lab(car)[order] - main
+        for j, axis in enumerate(axes):
+            axis.plot(x, booth[:, j], "s--", color="k", lw=1.5, label="the car")
+    for axis, name in zip(axes, ("ΔL*", "Δa*", "Δb*"), strict=True):
+        axis.axhline(0, color="0.6", lw=0.8)
+        axis.set(xlabel="aspecular angle [°]", ylabel=f"{name} from #1's centre car")
         axis.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
     figure.suptitle(title or f"{counted(len(variants), 'variant')} of a colour code")
     _save(figure, path, dpi)
 
