@@ -9,7 +9,8 @@ seconds, and how often the best is a recorded recipe as it is. The recorded spra
 the car's own case says what the shop got when it mixed that recipe. A third way
 (``corrected``) takes the nearest case as a first spray-out already made: its recipe
 corrected from its recorded spray-out (``flakelab correct --mode reformulate``), which knows
-what the model's prediction does not.
+what the model's prediction does not. A fourth (``recorded``) mixes the nearest case's recipe
+again as it is, with its recorded spray-out's worst ΔE00 from the car as its prediction.
 
 With ``--colour-codes K`` the world paints every car in one of K OEM colours (``cases
 generate --colour-codes``), and the cars matched are the next to come in: each a car of a
@@ -83,7 +84,7 @@ def main() -> None:
     tolerance = tolerance_preset("refinish")
     settings = MatchSettings(candidates=1)
     history, cars = history_and_cars(world, args)
-    rows = {"alone": [], "started": [], "corrected": []}
+    rows = {"alone": [], "started": [], "corrected": [], "recorded": []}
     own_case_nearest, as_recorded, recorded_passed, code_in_history = 0, 0, 0, 0
     gflops = matmul_gflops()
     for k, (car, code, case) in enumerate(cars):
@@ -113,9 +114,13 @@ def main() -> None:
                 )
         if not near:  # nothing recorded of the code: the colorist takes the search's best
             rows["corrected"].append(rows["alone"][-1])
+            rows["recorded"].append(rows["alone"][-1])
             continue
-        start = time.perf_counter()
+        # the nearest case's recipe mixed again as it is, judged by its recorded spray-out
         first = near[0].case
+        passed = sprayed_passes(world, dict(first.recipe), forward.toners, car, 1000 + k)
+        rows["recorded"].append((passed, float(near[0].sprayout_de00.max()), nearest_s))
+        start = time.perf_counter()
         fix = correct(forward, car, dict(first.recipe), first.sprayout, mode="reformulate",
                       library=library, tolerance=tolerance)  # fmt: skip
         seconds = time.perf_counter() - start + nearest_s
@@ -141,7 +146,7 @@ def main() -> None:
         report[f"{label}_predicted_de00_median"] = round(float(np.median(predicted)), 3)
         report[f"{label}_seconds_median"] = round(float(np.median(seconds)), 2)
         report[f"{label}_seconds_max"] = round(float(seconds.max()), 2)
-    for label in ("started", "corrected"):
+    for label in ("started", "corrected", "recorded"):
         report[f"success_ratio_{label}_vs_alone"] = round(
             report[f"{label}_sprayed_success"] / max(report["alone_sprayed_success"], 1e-9), 2
         )

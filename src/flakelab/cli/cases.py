@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     interrupted,
     print_report,
     progress_bar,
+    read_reading_at,
     read_readings,
     reports_errors,
     shares_text,
@@ -827,12 +828,7 @@ def nearest(
         raise FlakelabError(f"--pick: {pick} is more than the {counted(count, 'case')} shown")
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     can = order_can(quantity, resolution)  # a can the scale cannot weigh: before the search
-    reading = read_readings(target, sample, average)[0]
-    if missing := [g for g in geometries if g not in reading.geometry_names]:
-        raise FlakelabError(
-            f"{target}: not read at {', '.join(missing)} ({instrument}'s geometries; "
-            "--instrument chooses)"
-        )
+    reading = read_reading_at(target, sample, average, geometries, instrument)
     source = database or default_url()
     spectra = reading.storage_spectra(list(geometries))
     found, searched = recorded_nearest(source, shop, geometries, spectra, tol, count,

@@ -19,7 +19,7 @@ from flakelab.cli.common import (
     console,
     errors,
     print_report,
-    read_readings,
+    read_reading_at,
     shares_text,
 )
 from flakelab.cli.sources import (
@@ -116,8 +116,8 @@ def variants_command(
     plot: Annotated[
         Path | None,
         typer.Option(
-            help="Save a figure: each variant's cars, L* against aspecular angle and a*, b* "
-            "from geometry to geometry, and --car's (.png, .pdf, .svg)."
+            help="Save a figure: every car's ΔL*, Δa*, Δb* from the main variant's centre car "
+            "against aspecular angle, and --car's (.png, .pdf, .svg)."
         ),
     ] = None,
     json_output: JsonOption = False,
@@ -140,7 +140,7 @@ def variants_command(
                                              "--car": car})  # fmt: skip
     tol = read_tolerance(tolerance)
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
-    reading = car and car_reading(car, sample, average, geometries, instrument)
+    reading = car and read_reading_at(car, sample, average, geometries, instrument)
     source = database or default_url()
     cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
     if not cases:
@@ -175,17 +175,6 @@ def variants_command(
         print_report(report)
         return
     _print_variants(report)
-
-
-def car_reading(path: Path, sample, average: bool, geometries, instrument: str):
-    """``--car``'s reading, refused where it was not read at ``geometries``."""
-    reading = read_readings(path, sample, average)[0]
-    if missing := [g for g in geometries if g not in reading.geometry_names]:
-        raise FlakelabError(
-            f"{path}: not read at {', '.join(missing)} ({instrument}'s geometries; "
-            "--instrument chooses)"
-        )
-    return reading
 
 
 def _car_report(found, spectra, tolerance, report: dict) -> dict:

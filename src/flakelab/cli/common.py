@@ -471,6 +471,18 @@ def read_sample(path, sample: str | None, option: str = "--sample"):
     return chosen
 
 
+def read_reading_at(path, sample: str | None, average: bool, geometries, instrument: str):
+    """The reading of ``path`` (:func:`read_readings`), refused where it was not read at every
+    one of ``geometries`` (``instrument``'s, which ``--instrument`` chooses)."""
+    reading = read_readings(path, sample, average)[0]
+    if missing := [g for g in geometries if g not in reading.geometry_names]:
+        raise FlakelabError(
+            f"{path}: not read at {', '.join(missing)} ({instrument}'s geometries; "
+            "--instrument chooses)"
+        )
+    return reading
+
+
 def read_readings(
     path,
     sample: str | None,
