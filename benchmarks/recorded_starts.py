@@ -146,10 +146,14 @@ def main() -> None:
         report[f"{label}_predicted_de00_median"] = round(float(np.median(predicted)), 3)
         report[f"{label}_seconds_median"] = round(float(np.median(seconds)), 2)
         report[f"{label}_seconds_max"] = round(float(seconds.max()), 2)
+    alone = np.array([row[0] for row in rows["alone"]], dtype=bool)
     for label in ("started", "corrected", "recorded"):
         report[f"success_ratio_{label}_vs_alone"] = round(
             report[f"{label}_sprayed_success"] / max(report["alone_sprayed_success"], 1e-9), 2
         )
+        way = np.array([row[0] for row in rows[label]], dtype=bool)  # paired: the same cars
+        report[f"{label}_passed_alone_failed"] = int((way & ~alone).sum())
+        report[f"alone_passed_{label}_failed"] = int((alone & ~way).sum())
     print_report(report, args.json)
 
 
