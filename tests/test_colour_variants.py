@@ -256,3 +256,15 @@ def test_cases_generate_records_the_codes_asked_for(tmp_path, cli):
     assert "colour_code" in coded.read_text().splitlines()[0]
     assert "colour_code" not in plain.read_text().splitlines()[0]
     assert [c.case_id for c in read_cases(coded)] == [c.case_id for c in read_cases(plain)]
+
+
+def test_a_code_asked_without_its_numbers_leading_zeros_is_hinted():
+    """'gen 2' finds no case of 'GEN 002' (a word matches whole), and is told that code, not
+    the nearer spelling 'GEN 029'; 'Toyota 40' is told 'TOYOTA 040'."""
+    from flakelab.cases.case import colour_code_hint, has_colour_code
+
+    codes = ["GEN 002", "GEN 029", "TOYOTA 040", "LEXUS 1G3"]
+    assert not any(has_colour_code(code, "gen 2") for code in codes)
+    assert colour_code_hint("gen 2", codes) == " (did you mean 'GEN 002'?)"
+    assert colour_code_hint("Toyota 40", codes) == " (did you mean 'TOYOTA 040'?)"
+    assert colour_code_hint("gen 002", codes) == ""

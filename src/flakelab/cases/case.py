@@ -74,13 +74,18 @@ def colour_code_words(code: str) -> tuple[str, ...]:
 
 def colour_code_hint(asked: str, codes: Iterable[str]) -> str:
     """ " (did you mean 'NH731P'?)": the one of the shop's ``codes`` that a code that found
-    no case most likely means: the code of which a run of words is the one asked, but for
-    spaces ('NH 731P' is two words, no case's code; 'LY 9B' is in 'VW AUDI LY9B'), else the
+    no case most likely means: the code whose words hold the ones asked but for a number's
+    leading zeros ('gen 2' for 'GEN 002'), the code of which a run of words is the one asked,
+    but for spaces ('NH 731P' is two words, no case's code; 'LY 9B' is in 'VW AUDI LY9B'), else the
     closest spelling; "" where none is near, or where the code asked is among them (its cases
     were left out for another reason: their shop, or their geometries)."""
     codes = sorted(set(codes) - {""})
     if any(has_colour_code(code, asked) for code in codes):
         return ""
+    unpadded = set(_unpadded(colour_code_words(asked)))
+    for code in codes:  # 'gen 2' for 'GEN 002', 'Toyota 40' for 'TOYOTA 040'
+        if unpadded <= set(_unpadded(colour_code_words(code))):
+            return f" (did you mean {code!r}?)"
     runs = {}
     for code in codes:
         words = colour_code_words(code)
@@ -90,6 +95,11 @@ def colour_code_hint(asked: str, codes: Iterable[str]) -> str:
     if wanted in runs:
         return f" (did you mean {runs[wanted]!r}?)"
     return did_you_mean(asked, codes, lambda c: "".join(colour_code_words(c)))
+
+
+def _unpadded(words: tuple[str, ...]) -> tuple[str, ...]:
+    """Code words with a number's leading zeros left out ('002' → '2')."""
+    return tuple(w.lstrip("0") or "0" if w.isdigit() else w for w in words)
 
 
 def has_colour_code(code: str, asked: str) -> bool:
