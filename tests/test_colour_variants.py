@@ -81,6 +81,9 @@ def test_variants_cover_the_cars_each_within_the_tolerance_of_its_centre(generat
     assert [c.case_id for c in other.cases] == ["TOYOTA 1G3-7", "TOYOTA 1G3-6", "TOYOTA 1G3-5"]
     assert np.all(main.offset_de00 == 0) and other.offset_de00.max() > 2
     assert np.all(other.offset_dLCH[:, 0] > 0)  # lighter at every geometry
+    assert set(main.offset_texture.values()) == {0.0} and "G" in other.offset_texture
+    for name, value in other.offset_texture.items():
+        assert value == other.centre.target_texture[name] - main.centre.target_texture[name]
     for variant in variants:
         members = variant.cases
         furthest = {c.case_id: max(_worst_share(c, o) for o in members) for c in members}

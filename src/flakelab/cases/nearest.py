@@ -26,7 +26,13 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.tolerance import Tolerance
 
-__all__ = ["NearCase", "nearest_cases", "nearest_stored_cases", "recorded_recipes"]
+__all__ = [
+    "NearCase",
+    "nearest_cases",
+    "nearest_stored_cases",
+    "recorded_recipes",
+    "texture_delta",
+]
 
 
 @dataclass(frozen=True)
@@ -147,12 +153,13 @@ def _near(target, cases: list[Case], judged, tolerance: Tolerance, target_textur
             float(shares[k]),
             bool(passes[k]),
             cars_de00[k],
-            _texture_delta(case.sprayout_texture, target_texture or {}),
+            texture_delta(case.sprayout_texture, target_texture or {}),
         )  # fmt: skip
         for k, case in enumerate(cases)
     ]
 
 
-def _texture_delta(sprayout: dict[str, float], target: dict[str, float]) -> dict[str, float]:
-    """The spray-out's texture readings minus the target's, where both have them."""
+def texture_delta(sprayout: dict[str, float], target: dict[str, float]) -> dict[str, float]:
+    """The spray-out's (or any sample's) texture readings minus the target's, where both
+    have them."""
     return {k: sprayout[k] - target[k] for k in TEXTURE_READINGS if k in sprayout and k in target}

@@ -22,14 +22,14 @@ needs its variant chips.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from flakelab.cases.case import Case, CaseError
-from flakelab.cases.nearest import NearCase, nearest_cases
+from flakelab.cases.nearest import NearCase, nearest_cases, texture_delta
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.tolerance import Tolerance
 
@@ -51,8 +51,9 @@ class ColourVariant:
     """Cars of one colour code around one car, ``centre`` (the one whose furthest member lies
     nearest; ``spread``: that member's share of the tolerance's limit from it);
     ``offset_de00`` and ``offset_dLCH`` its ΔE00 and (ΔL*, ΔC*, ΔH*) per geometry from the
-    main variant's centre (zero for the main one); ``recipe`` the recorded case whose
-    spray-out lies nearest the centre car."""
+    main variant's centre (zero for the main one), ``offset_texture`` its texture readings
+    minus that car's, where both were read; ``recipe`` the recorded case whose spray-out lies
+    nearest the centre car."""
 
     cases: tuple[Case, ...]
     centre: Case
@@ -60,6 +61,7 @@ class ColourVariant:
     offset_de00: NDArray
     offset_dLCH: NDArray
     recipe: NearCase
+    offset_texture: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         names = self.centre.geometry_names
@@ -75,6 +77,7 @@ class ColourVariant:
             "offset_dLCH": dict(
                 zip(("dL", "dC", "dH"), self.offset_dLCH[worst].round(3).tolist(), strict=True)
             ),
+            "offset_texture": {k: round(v, 3) for k, v in self.offset_texture.items()},
             "recipe": self.recipe.to_dict(),
         }
 
@@ -130,6 +133,9 @@ def colour_variants(
                 offset_de00=de00[k],
                 offset_dLCH=dLCH[k],
                 recipe=nearest_cases(cases[centre].target, members, tolerance, count=1)[0],
+                offset_texture=texture_delta(
+                    cases[centre].target_texture, cases[centres[0]].target_texture
+                ),
             )
         )
     return variants

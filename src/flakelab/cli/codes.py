@@ -208,10 +208,12 @@ def _print_variants(report: dict) -> None:
     )
     table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True)
     car = report.get("car")
-    columns = ("#", "cars", "spread", "from #1 ΔE00", "ΔL* ΔC* ΔH*", *(["the car"] * bool(car)),
-               "centre car", "nearest spray-out", "its recipe (share)")  # fmt: skip
+    grainy = any("G" in row["offset_texture"] for row in rows)  # the cars' texture was read
+    columns = ("#", "cars", "spread", "from #1 ΔE00", "ΔL* ΔC* ΔH*", *(["ΔG"] * grainy),
+               *(["the car"] * bool(car)), "centre car", "nearest spray-out",
+               "its recipe (share)")  # fmt: skip
     for column in columns:
-        right = column in ("#", "cars", "spread", "from #1 ΔE00")
+        right = column in ("#", "cars", "spread", "from #1 ΔE00", "ΔG")
         table.add_column(column, justify="right" if right else "left",
                          no_wrap=column != "its recipe (share)")  # fmt: skip
     for k, row in enumerate(rows, 1):
@@ -224,6 +226,7 @@ def _print_variants(report: dict) -> None:
             f"{row['spread']:.2f}",
             f"{row['offset_de00_max']:.2f} {row['offset_geometry']}" if k > 1 else "",
             f"{shift['dL']:+.2f} {shift['dC']:+.2f} {shift['dH']:+.2f}" if k > 1 else "",
+            *([_grain_cell(row["offset_texture"]) if k > 1 else ""] * grainy),
             *([_car_cell(row["car"], k == car["nearest_variant"])] if car else []),
             short_id(row["centre_case_id"]),
             f"{short_id(near['case_id'])} [{colour}]{near['sprayout_de00_max']:.2f}[/]",
@@ -232,7 +235,8 @@ def _print_variants(report: dict) -> None:
     console.print(table)
     console.print(
         "spread: the share of the limit its furthest car lies from its centre car; from #1: its "
-        "centre car against the main variant's, at the geometry where they differ most; "
+        "centre car against the main variant's, at the geometry where they differ most (ΔG: "
+        "its graininess, coarser above 0); "
         "nearest spray-out: the recorded case whose spray-out lies nearest the centre car "
         "(worst ΔE00, green within the tolerance). Measure the car and find its recipes: "
         f"flakelab cases nearest CAR --colour-code {report['colour_code']!r}",
@@ -240,6 +244,12 @@ def _print_variants(report: dict) -> None:
     )
     if car:
         _print_car(report)
+
+
+def _grain_cell(texture: dict) -> str:
+    """A variant's graininess against the main one's (coarser above 0), where both were
+    read."""
+    return f"{texture['G']:+.2f}" if "G" in texture else ""
 
 
 def _car_cell(row: dict, nearest: bool) -> str:
