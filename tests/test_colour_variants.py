@@ -172,11 +172,12 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
     db, csv = tmp_path / "shop.db", tmp_path / "cases.csv"
     add_cases(open_database(str(db)), cars)
     write_cases(cars, csv)
-    listed = cli("cases", "codes", "-d", db, "--json")
-    assert listed.returncode == 0, listed.stderr
-    assert [(c["colour_code"], c["cases"]) for c in json.loads(listed.stdout)["codes"]] == [
-        ("TOYOTA 1G3", 5)
-    ]
+    for source in (db, csv):
+        listed = cli("cases", "codes", "-d", source, "--json")
+        assert listed.returncode == 0, listed.stderr
+        assert [(c["colour_code"], c["cases"]) for c in json.loads(listed.stdout)["codes"]] == [
+            ("TOYOTA 1G3", 5)
+        ]
     for source in (db, csv):
         found = cli("cases", "variants", "toyota 1g3", "-d", source, "--json")
         assert found.returncode == 0, found.stderr

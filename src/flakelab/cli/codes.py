@@ -24,7 +24,6 @@ from flakelab.cli.common import (
 )
 from flakelab.cli.sources import (
     CaseSourceOption,
-    DatabaseOption,
     InstrumentOption,
     ShopOption,
     colour_code_hint_in,
@@ -44,33 +43,33 @@ __all__ = ["codes_command", "variants_command"]
 
 def codes_command(
     shop: ShopOption = None,
-    database: DatabaseOption = None,
+    database: CaseSourceOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """The colour codes the shop's cases record: their cases by outcome, first and last.
 
     'cases variants CODE' then groups the cars of one code into its variants."""
     from flakelab.cases.case import OUTCOMES
-    from flakelab.cases.database import code_summary, open_database
+    from flakelab.cases.database import code_summary
 
-    engine = open_database(database, must_exist=True)
+    engine, label = _summarised(database, shop)
     rows = [
         s | {"first": s["first"].isoformat(), "last": s["last"].isoformat()}
         for s in code_summary(engine, shop=shop)
     ]
     if json_output:
-        print_report({"cases": hidden_passwords(str(engine.url)), "shop": shop, "codes": rows})
+        print_report({"cases": hidden_passwords(label), "shop": shop, "codes": rows})
         return
     if not rows:
         errors.print(
-            f"no cases {which_cases(shop, None)} in {database_label(engine)} record a colour "
-            "code ('cases record --colour-code', a case file's colour_code column)",
+            f"no cases {which_cases(shop, None)} in {label} record a colour code ('cases "
+            "record --colour-code', a case file's colour_code column)",
             highlight=False,
             soft_wrap=True,
         )
         return
     whose = f" of shop {shop!r}" if shop else ""
-    table = Table(title=f"Colour codes{whose} in {database_label(engine)}", box=box.SIMPLE_HEAD)
+    table = Table(title=f"Colour codes{whose} in {label}", box=box.SIMPLE_HEAD)
     for column in ("colour code", "cases", " / ".join(OUTCOMES), "first case", "last case"):
         table.add_column(column, justify="right" if column == "cases" else "left")
     for row in rows:
@@ -83,6 +82,21 @@ def codes_command(
             shown_time(row["last"], day=True),
         )
     console.print(table)
+
+
+def _summarised(database: str | None, shop: str | None):
+    """An engine on the cases of ``database`` (a case file's ``shop``'s cases held in an
+    in-memory database, so that one query summarises either), and how to name them."""
+    from flakelab.cases.database import add_cases, default_url, open_database
+    from flakelab.cases.exchange import is_case_file
+
+    source = database or default_url()
+    if not is_case_file(Path(source)):
+        engine = open_database(database, must_exist=True)
+        return engine, database_label(engine)
+    engine = open_database("sqlite://")
+    add_cases(engine, load_cases(source, shop))
+    return engine, source
 
 
 def variants_command(
