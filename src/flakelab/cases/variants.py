@@ -86,17 +86,17 @@ def pairwise_shares(
     Lab: NDArray, geometries: Sequence[str], tolerance: Tolerance
 ) -> NDArray[np.float64]:
     """Every two cars' worst geometry's share of ``tolerance``'s limit, ``[N, N]``, of CIELAB
-    ``[N, G, 3]``: the larger of the two ways round (CIEDE2000 and component limits are not
-    quite symmetric), so that neither car of a pair is the standard."""
+    ``[N, G, 3]``. CIEDE2000 and the magnitudes of ΔL*, ΔC*, ΔH* that the limits bound are
+    the same whichever car of a pair is the standard, so each pair is judged once."""
     n = len(Lab)
     shares = np.empty((n, n))
     for start in range(0, n, ROWS_AT_ONCE):
-        rows = Lab[start : start + ROWS_AT_ONCE, None]
-        de00, dLCH, _ = tolerance.judge(geometries, rows, Lab[None])
-        shares[start : start + ROWS_AT_ONCE] = tolerance.share_of_limit(
-            geometries, de00=de00, dLCH=dLCH
-        ).max(axis=-1)
-    return np.maximum(shares, shares.T)
+        rows = slice(start, start + ROWS_AT_ONCE)
+        de00, dLCH, _ = tolerance.judge(geometries, Lab[rows, None], Lab[None, start:])
+        block = tolerance.share_of_limit(geometries, de00=de00, dLCH=dLCH).max(axis=-1)
+        shares[rows, start:] = block
+        shares[start:, rows] = block.T
+    return shares
 
 
 def colour_variants(
@@ -118,6 +118,7 @@ def colour_variants(
     chips = covering_centres(shares, within)
     nearest_chip = np.argmin(shares[:, chips], axis=1)
     groups = [np.flatnonzero(nearest_chip == k) for k in range(len(chips))]
+    groups = [g for g in groups if g.size]  # two chips alike would leave one empty
     newest = np.array([c.created_at.timestamp() for c in cases])
     groups.sort(key=lambda g: (-len(g), -newest[g].max()))
     centres = [g[np.argmin(shares[np.ix_(g, g)].max(axis=1))] for g in groups]
