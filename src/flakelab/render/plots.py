@@ -386,6 +386,10 @@ def plot_habits(
     _save(figure, path, dpi)
 
 
+LEGEND_VARIANTS = 10
+"""Variants a figure of a code's variants names in its legend (the ten colours it cycles)."""
+
+
 def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
                   car: np.ndarray | None = None, dpi: int = 120) -> None:  # fmt: skip
     """A colour code's variants (:class:`~flakelab.cases.variants.ColourVariant`, most cars
@@ -405,7 +409,8 @@ def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
         colour = plt.cm.tab10(k % 10)
         cars = reflectance_to_Lab(np.stack([c.target for c in variant.cases]))[:, order] - main
         centre = reflectance_to_Lab(variant.centre.target)[order] - main
-        label = f"#{k + 1} ({counted(len(variant.cases), 'car')})"
+        shown = k < LEGEND_VARIANTS  # more would bury the lines; the rest drawn unnamed
+        label = f"#{k + 1} ({counted(len(variant.cases), 'car')})" if shown else None
         for j, axis in enumerate(axes):
             axis.plot(x, cars[..., j].T, color=colour, alpha=0.2, lw=0.8)
             axis.plot(x, centre[:, j], "o-", color=colour, lw=2, label=label)
