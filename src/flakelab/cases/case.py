@@ -75,10 +75,11 @@ def colour_code_words(code: str) -> tuple[str, ...]:
 def colour_code_hint(asked: str, codes: Iterable[str]) -> str:
     """ " (did you mean 'NH731P'?)": the one of the shop's ``codes`` that a code that found
     no case most likely means: the code whose words hold the ones asked but for a number's
-    leading zeros ('gen 2' for 'GEN 002'), the code of which a run of words is the one asked,
-    but for spaces ('NH 731P' is two words, no case's code; 'LY 9B' is in 'VW AUDI LY9B'), else the
-    closest spelling; "" where none is near, or where the code asked is among them (its cases
-    were left out for another reason: their shop, or their geometries)."""
+    leading zeros ('gen 2' for 'GEN 002'), else the code of which a run of words is the one
+    asked but for spaces ('NH 731P' is two words, no case's code; 'LY 9B' is in 'VW AUDI
+    LY9B'), else the closest spelling; "" where none is near, or where the code asked is
+    among them (its cases were left out for another reason: their shop, or their
+    geometries)."""
     codes = sorted(set(codes) - {""})
     if any(has_colour_code(code, asked) for code in codes):
         return ""
