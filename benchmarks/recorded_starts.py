@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from flakelab.cases.case import select_cases
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.cases.nearest import nearest_cases, recorded_recipes
 from flakelab.core.colorimetry import reflectance_to_Lab
@@ -89,7 +90,7 @@ def main() -> None:
     gflops = matmul_gflops()
     for k, (car, code, case) in enumerate(cars):
         start = time.perf_counter()
-        pool = [c for c in history if c.colour_code == code] if code else history
+        pool = select_cases(history, colour_code=code) if code else history
         near = nearest_cases(car, pool, tolerance, NEAREST) if pool else []
         recorded = recorded_recipes(near, forward.toners)
         nearest_s = time.perf_counter() - start

@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter  # noqa: E402
 
-from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh  # noqa: E402
+from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab  # noqa: E402
 from flakelab.core.geometry import Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.core.tolerance import Tolerance  # noqa: E402
@@ -397,8 +397,6 @@ def plot_variants(variants: Sequence, path: str | PathLike, *, title: str = "",
     angle (a code's variants differ by a unit or two, which L* itself, 10 to 100 over the
     angles, would hide), each variant in its own colour, its centre car bold; the ``car`` in
     the booth (reflectance ``[G, 31]`` at their geometries) black and dashed."""
-    from flakelab.core.colorimetry import reflectance_to_Lab
-
     geometries = variants[0].centre.geometries
     aspecular = np.array([g.aspecular for g in geometries])
     order = np.argsort(aspecular)
