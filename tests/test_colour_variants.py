@@ -140,21 +140,23 @@ def test_a_chain_of_near_cars_needs_as_few_variants_as_cover_it(generated):
 
 
 def test_code_summary_counts_each_codes_cases_in_the_database(generated, database_url):
-    """The database counts each code's cases by outcome, one shop's or all; cases without a
-    code are not a code; the shops' summary is what it was."""
+    """The database counts each code's cases by outcome, and the shops that made them, one
+    shop's or all; cases without a code are not a code; the shops' summary is what it was."""
     cars = _cars(generated, [1.0, 1.01, 1.1, 1.0], [1.0] * 4, "TOYOTA 1G3")
     cars[1] = replace(cars[1], outcome="corrected", shop="north")
     cars[2] = replace(cars[2], colour_code="NH731P", shop="north")
     cars[3] = replace(cars[3], colour_code="")
     engine = open_database(database_url)
     add_cases(engine, cars)
-    summary = {s["colour_code"]: (s["cases"], s["outcomes"]) for s in code_summary(engine)}
-    assert summary == {
-        "NH731P": (1, {"accepted": 1}),
-        "TOYOTA 1G3": (2, {"accepted": 1, "corrected": 1}),
+    summary = {
+        s["colour_code"]: (s["cases"], s["outcomes"], s["shops"]) for s in code_summary(engine)
     }
-    north = {s["colour_code"]: s["cases"] for s in code_summary(engine, shop="north")}
-    assert north == {"NH731P": 1, "TOYOTA 1G3": 1}
+    assert summary == {
+        "NH731P": (1, {"accepted": 1}, 1),
+        "TOYOTA 1G3": (2, {"accepted": 1, "corrected": 1}, 2),
+    }
+    north = {s["colour_code"]: (s["cases"], s["shops"]) for s in code_summary(engine, shop="north")}
+    assert north == {"NH731P": (1, 1), "TOYOTA 1G3": (1, 1)}
     assert [s["last"] for s in code_summary(engine) if s["colour_code"] == "TOYOTA 1G3"] == [
         START + timedelta(days=1)
     ]
@@ -217,6 +219,69 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
         bad = cli("cases", "variants", "1G3", "-d", db, "--within", within)
         assert bad.returncode == 2 and "--within: expected a share" in bad.stderr
     assert db.read_bytes() == before
+
+
+def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp_path, cli):
+    """'cases variants --out' writes each variant's centre car as a sample 'CODE #k': read
+    back from CxF3 and CSV it is that car's reading, CxF3 keeps the cars and recipe it stands
+    for, and 'compare' against a chip finds the car's ΔE00 that --car reports; an output of
+    no known format, or the database itself, is refused before any work."""
+    cars = _cars(generated, [1.0, 1.004, 0.996, 1.10, 1.104], [1.01, 0.99, 1.0, 1.02, 1.0], "1G3")
+    db = tmp_path / "shop.db"
+    add_cases(open_database(str(db)), cars)
+    before = db.read_bytes()
+    from flakelab.core.measurement import Measurement
+    from flakelab.io import read_measurements, write_measurements
+
+    write_measurements([Measurement("car", cars[0].geometries, WAVELENGTHS, cars[0].target * 1.1)],
+                       tmp_path / "car.cxf")  # fmt: skip
+    for chips in (tmp_path / "chips.cxf", tmp_path / "chips.csv"):
+        written = cli("cases", "variants", "1G3", "-d", db, "--car", tmp_path / "car.cxf",
+                      "--out", chips, "--json")  # fmt: skip
+        assert written.returncode == 0, written.stderr
+        report = json.loads(written.stdout)
+        read = read_measurements(chips)
+        assert [m.sample for m in read] == ["1G3 #1", "1G3 #2"]
+        by_id = {c.case_id: c for c in cars}
+        for chip, variant in zip(read, report["variants"], strict=True):
+            np.testing.assert_allclose(chip.reflectance, by_id[variant["centre_case_id"]].target,
+                                       atol=5e-6)  # fmt: skip
+    meta = read_measurements(tmp_path / "chips.cxf")[1].metadata
+    lighter = report["variants"][1]
+    assert meta["cars"] == "2" and meta["centre_case_id"] == lighter["centre_case_id"]
+    assert json.loads(meta["recipe"]) == by_id[lighter["recipe"]["case_id"]].recipe
+    judged = cli("compare", tmp_path / "chips.cxf", tmp_path / "car.cxf", "--reference-sample",
+                 "1G3 #2", "--json")  # fmt: skip
+    worst = max(g["de00"] for g in json.loads(judged.stdout)["geometries"])
+    assert worst == pytest.approx(lighter["car"]["de00_max"], abs=2e-3)
+    unknown = cli("cases", "variants", "1G3", "-d", db, "--out", tmp_path / "chips.txt2")
+    assert unknown.returncode == 2 and "unknown output extension '.txt2'" in unknown.stderr
+    itself = cli("cases", "variants", "1G3", "-d", db, "--out", db)
+    assert itself.returncode == 2 and "Traceback" not in itself.stderr
+    assert db.read_bytes() == before
+
+
+def test_match_with_a_colour_code_names_the_variant_the_car_lies_nearest(generated, tmp_path,
+                                                                         cli):  # fmt: skip
+    """'match --colour-code' says which of the code's variants the car lies nearest, as
+    'cases variants --car' finds it."""
+    cars = _cars(generated, [1.0, 1.004, 0.996, 1.10, 1.104], [1.01, 0.99, 1.0, 1.02, 1.0], "1G3")
+    db = tmp_path / "shop.db"
+    add_cases(open_database(str(db)), cars)
+    from flakelab.core.measurement import Measurement
+    from flakelab.io import write_measurements
+
+    car = tmp_path / "car.cxf"
+    write_measurements([Measurement("car", cars[0].geometries, WAVELENGTHS, cars[0].target * 1.1)],
+                       car)  # fmt: skip
+    matched = cli("match", car, "-d", db, "--colour-code", "1g3", "--candidates", "1", "--json")
+    assert matched.returncode == 0, matched.stderr
+    named = json.loads(matched.stdout)["colour_variant"]
+    variants = json.loads(cli("cases", "variants", "1G3", "-d", db, "--car", car, "--json").stdout)
+    nearest = variants["variants"][variants["car"]["nearest_variant"] - 1]
+    assert named["variant"] == 2 and named["variants"] == 2 and named["cars"] == 2
+    assert named["centre_case_id"] == nearest["centre_case_id"]
+    assert named["de00_max"] == nearest["car"]["de00_max"] and named["passes"]
 
 
 def test_a_world_of_colour_codes_paints_each_car_in_one_of_its_colours():

@@ -26,6 +26,7 @@ from sqlalchemy import (
     Engine,
     create_engine,
     delete,
+    distinct,
     event,
     func,
     insert,
@@ -840,8 +841,9 @@ def code_summary(engine: Engine, *, shop: str | None = None) -> list[dict]:
 
 def case_summary(engine: Engine, by: str, *, shop: str | None = None) -> list[dict]:
     """The cases (of ``shop``, where given) grouped by the column ``by`` ('shop',
-    'colour_code'): each group's cases by outcome, and its first and last case's time (in
-    UTC), in the order of ``by``."""
+    'colour_code'): each group's cases by outcome, its first and last case's time (in UTC),
+    and, grouped by another column than the shop, how many shops made them; in the order of
+    ``by``."""
     column = getattr(CaseRow, by)
     query = select(
         column,
@@ -860,4 +862,8 @@ def case_summary(engine: Engine, by: str, *, shop: str | None = None) -> list[di
             entry["cases"] += n
             entry["outcomes"][outcome] = n
             entry["first"], entry["last"] = min(entry["first"], first), max(entry["last"], last)
+        if by != "shop":
+            shops = select(column, func.count(distinct(CaseRow.shop))).group_by(column)
+            for key, n in session.execute(_chosen(shops, shop, None, None)):
+                groups[key]["shops"] = n
     return [groups[key] for key in sorted(groups)]

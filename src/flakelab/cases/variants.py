@@ -21,6 +21,7 @@ needs its variant chips.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,6 +32,8 @@ from numpy.typing import NDArray
 from flakelab.cases.case import Case, CaseError
 from flakelab.cases.nearest import NearCase, nearest_cases, texture_delta
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.measurement import Measurement
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import Tolerance
 
 __all__ = [
@@ -39,6 +42,7 @@ __all__ = [
     "colour_variants",
     "covering_centres",
     "pairwise_shares",
+    "variant_chips",
 ]
 
 ROWS_AT_ONCE = 256
@@ -171,3 +175,48 @@ def covering_centres(shares: NDArray, within: float) -> list[int]:
         centres.append(centre)
         left &= ~reach[centre]
     return centres
+
+
+def chip_name(colour_code: str, number: int) -> str:
+    """The sample name of a code's variant chip: ``'GEN 001 #2'``."""
+    return f"{colour_code} #{number}"
+
+
+def variant_chips(
+    variants: Sequence[ColourVariant], colour_code: str, tolerance: Tolerance, within: float
+) -> list[Measurement]:
+    """The shop's variant chips of ``colour_code``: each variant's centre car as the
+    instrument read it (reflectance and texture), named by :func:`chip_name` in the order of
+    ``variants``, for a QC program or ``compare``/``match`` to take as standards. Its metadata
+    (kept by CxF3 and JSON) say which cars it stands for and the recorded recipe nearest it
+    (mass fractions, as the case recorded them)."""
+    synthetic = any(case.synthetic for v in variants for case in v.cases)
+    chips = []
+    for k, variant in enumerate(variants, 1):
+        centre, recipe = variant.centre, variant.recipe.case
+        meta = {
+            "colour_code": colour_code,
+            "variant": str(k),
+            "variants": str(len(variants)),
+            "cars": str(len(variant.cases)),
+            "spread": f"{variant.spread:.3f}",
+            "centre_case_id": centre.case_id,
+            "recipe_case_id": recipe.case_id,
+            "recipe": json.dumps(recipe.recipe),
+            "tolerance": tolerance.name,
+            "within": f"{within:g}",
+            "synthetic": "1" if synthetic else "0",
+        }
+        chips.append(
+            Measurement(
+                chip_name(colour_code, k),
+                geometries=centre.geometries,
+                wavelengths=WAVELENGTHS,
+                reflectance=centre.target,
+                texture=centre.target_texture,
+                instrument=centre.instrument,
+                measured_at=centre.created_at,
+                metadata=meta,
+            )
+        )
+    return chips

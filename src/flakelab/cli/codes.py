@@ -16,6 +16,7 @@ from flakelab.cli.common import (
     SampleOption,
     ToleranceOption,
     check_figure_file,
+    check_output_file,
     console,
     errors,
     print_report,
@@ -38,7 +39,7 @@ from flakelab.core.times import shown_time
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
-__all__ = ["codes_command", "variants_command"]
+__all__ = ["car_from_variants", "codes_command", "variants_command"]
 
 
 def codes_command(
@@ -70,13 +71,17 @@ def codes_command(
         return
     whose = f" of shop {shop!r}" if shop else ""
     table = Table(title=f"Colour codes{whose} in {label}", box=box.SIMPLE_HEAD)
-    for column in ("colour code", "cases", " / ".join(OUTCOMES), "first case", "last case"):
-        table.add_column(column, justify="right" if column == "cases" else "left")
+    shops = shop is None  # one shop's codes: each its own
+    columns = ("colour code", "cases", *["shops"] * shops, " / ".join(OUTCOMES), "first case",
+               "last case")  # fmt: skip
+    for column in columns:
+        table.add_column(column, justify="right" if column in ("cases", "shops") else "left")
     for row in rows:
         outcomes = row["outcomes"]
         table.add_row(
             row["colour_code"],
             str(row["cases"]),
+            *[str(row["shops"])] * shops,
             " / ".join(str(outcomes.get(k, 0)) for k in OUTCOMES),
             shown_time(row["first"], day=True),
             shown_time(row["last"], day=True),
@@ -134,6 +139,17 @@ def variants_command(
             "against aspecular angle, and --car's (.png, .pdf, .svg)."
         ),
     ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Write the variant chips: each variant's centre car as a sample named "
+            "'CODE #k', in a measurement file (format from the extension: .cxf, .json, "
+            ".csv, .xlsx; CxF3 and JSON keep which cars and recipe each stands for), for "
+            "'compare' and 'match' to take as standards.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """The variants of a colour code among the shop's cars: as few as cover them, every car
@@ -142,16 +158,17 @@ def variants_command(
     Each variant is shown by its centre car, how far that lies from the main variant's (the
     most cars), and the recorded recipe whose spray-out lies nearest it. 'cases nearest CAR
     --colour-code CODE' then finds the recipes nearest the car in the booth; --car says
-    which variant it is."""
+    which variant it is; --out writes the variants' centre cars as a chip book."""
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import default_url
-    from flakelab.cases.variants import colour_variants
-    from flakelab.io import read_tolerance
+    from flakelab.cases.variants import colour_variants, variant_chips
+    from flakelab.io import format_for_path, read_tolerance, write_measurements
 
     if not 0 < within < float("inf"):
         raise FlakelabError(f"--within: expected a share of the limit above 0, got {within:g}")
-    check_figure_file(plot, "--plot", reads={"--database": database, "--tolerance": tolerance,
-                                             "--car": car})  # fmt: skip
+    reads = {"--database": database, "--tolerance": tolerance, "--car": car}
+    check_figure_file(plot, "--plot", reads=reads, writes={"--out": out})
+    check_output_file(out, "--out", format_for_path, reads=reads, writes={"--plot": plot})
     tol = read_tolerance(tolerance)
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     reading = car and read_reading_at(car, sample, average, geometries, instrument)
@@ -185,6 +202,10 @@ def variants_command(
         plot_variants(found, plot, title=title, car=spectra)
         report["plot"] = str(plot)
         errors.print(f"wrote {plot}", highlight=False)
+    if out is not None:
+        write_measurements(variant_chips(found, colour_code, tol, within), out)
+        report["out"] = str(out)
+        errors.print(f"wrote {counted(len(found), 'variant chip')} to {out}", highlight=False)
     if json_output:
         print_report(report)
         return
@@ -194,18 +215,30 @@ def variants_command(
 def _car_report(found, spectra, tolerance, report: dict) -> dict:
     """The car's worst ΔE00 and share from each variant's centre (added to each variant's
     row of ``report``) and the variant it lies nearest."""
+    rows, nearest = car_from_variants(found, spectra, tolerance)
+    for row, car in zip(report["variants"], rows, strict=True):
+        row["car"] = car
+    return {"nearest_variant": nearest + 1, "within_tolerance": any(r["passes"] for r in rows)}
+
+
+def car_from_variants(found, spectra, tolerance) -> tuple[list[dict], int]:
+    """A car's (reflectance ``[G, 31]`` at the variants' geometries) worst ΔE00, its
+    geometry, worst share of the limit and pass/fail from each variant's centre car in
+    ``found``, and the index of the variant it lies nearest."""
     from flakelab.cases.variants import car_from_centres
 
     de00, shares, passes = car_from_centres(found, spectra, tolerance)
-    names = report["geometries"]
-    for row, d, share, ok in zip(report["variants"], de00, shares, passes, strict=True):
-        row["car"] = {
+    names = found[0].centre.geometry_names
+    rows = [
+        {
             "de00_max": round(float(d.max()), 3),
             "geometry": names[int(d.argmax())],
             "limit_share_max": round(float(share), 3),
             "passes": bool(ok),
         }
-    return {"nearest_variant": int(shares.argmin()) + 1, "within_tolerance": bool(passes.any())}
+        for d, share, ok in zip(de00, shares, passes, strict=True)
+    ]
+    return rows, int(shares.argmin())
 
 
 def _print_variants(report: dict) -> None:

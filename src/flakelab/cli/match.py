@@ -58,6 +58,7 @@ from flakelab.cli.sources import (
     LibraryOption,
     colour_code_hint_in,
     colour_code_spelled,
+    load_cases,
     workplace_shop,
 )
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
@@ -70,6 +71,11 @@ from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSetti
 NEAREST_OF_A_CODE = 5
 """The recorded cases ``match --colour-code`` shows where ``--nearest`` names no number (as
 many as ``cases nearest`` shows)."""
+
+VARIANT_CARS = 500
+"""The newest cars of a code that ``match --colour-code`` groups into variants to name the
+car's: bounds the pairwise comparison (500 cars of one code: 0.74 s,
+``benchmarks/code_variants.py``)."""
 
 
 def match_command(
@@ -360,6 +366,9 @@ def match_command(
         _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward,
                               colour_code)  # fmt: skip
         _mark_recorded(report, recorded, forward.toners)
+    if colour_code and found:
+        _add_car_variant(report, database or default_url(), shop, colour_code,
+                         forward.geometries, spectra, tol)  # fmt: skip
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
@@ -438,6 +447,30 @@ def _add_recorded_nearest(
             f"--nearest: no recorded cases {whose}in {database_label(url_for(database))} read "
             f"at the model's geometries ({', '.join(forward.geometries)})"
         )
+
+
+def _add_car_variant(report: dict, source: str, shop, colour_code: str, geometries, spectra,
+                     tolerance) -> None:  # fmt: skip
+    """``--colour-code``: the variant of the code among the shop's cars (``cases variants``;
+    its newest :data:`VARIANT_CARS`) whose centre car the target lies nearest, into
+    ``report``."""
+    from flakelab.cases.case import cases_at
+    from flakelab.cases.variants import colour_variants
+    from flakelab.cli.codes import car_from_variants
+
+    cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
+    grouped = sorted(cases, key=lambda case: case.created_at)[-VARIANT_CARS:]
+    found = colour_variants(grouped, tolerance)
+    rows, k = car_from_variants(found, spectra, tolerance)
+    report["colour_variant"] = {
+        "variant": k + 1,
+        "variants": len(found),
+        "cars": len(found[k].cases),
+        "cars_grouped": len(grouped),
+        "cars_of_code": len(cases),
+        "centre_case_id": found[k].centre.case_id,
+        **rows[k],
+    }
 
 
 def _mark_recorded(report: dict, recorded: dict, toners) -> None:
@@ -696,11 +729,33 @@ def _print_match(report: dict) -> None:
         code = f" of colour code {report['colour_code']!r}" if report["colour_code"] else ""
         title = f"Recorded spray-outs{code} nearest the target (measured, not predicted)"
         console.print(nearest_table(report["recorded_nearest"], title))
+    if report.get("colour_variant"):
+        _print_car_variant(report)
     print_notes(report["notes"])
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
         console.print(
             "± model: how far the networks of the model's ensemble disagree (ΔE00 about their "
             "mean); where it is large, the prediction deserves less trust.",
+            highlight=False,
+        )
+
+
+def _print_car_variant(report: dict) -> None:
+    """Which of its code's variants the car lies nearest, and what to do next."""
+    v, code = report["colour_variant"], report["colour_code"]
+    newest = f"newest {v['cars_grouped']} of its " if v["cars_grouped"] < v["cars_of_code"] else ""
+    said = (
+        f"The car lies nearest variant #{v['variant']} of the {v['variants']} of {code!r} among "
+        f"the shop's {newest}{counted(v['cars_of_code'], 'car')} ({v['cars']} in it): worst "
+        f"ΔE00 {v['de00_max']:.2f} at {v['geometry']} from its centre car"
+    )
+    if v["passes"]:
+        console.print(f"{said}, within {report['tolerance']} (flakelab cases variants {code!r})",
+                      highlight=False)  # fmt: skip
+    else:
+        console.print(
+            f"[yellow]note:[/] {said}, outside {report['tolerance']}: no variant of the code "
+            "the shop has painted is this car's colour",
             highlight=False,
         )
 
