@@ -384,12 +384,13 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # the same for any row of a database holding a shop's cases, model, habits and tins,
         # every one read by the shops' summary
         "database-shops": (shops, lambda p: ["cases", "shops", "-d", str(p)]),
-        # the same, and a case file, read by a colour code's variants; a damaged car in the
-        # booth held against them
+        # the same, and a case file, read by a colour code's variants (the case file's
+        # written as a chip book); a damaged car in the booth held against them
         "database-variants": (work / "shop.db",
                               lambda p: ["cases", "variants", "1G3", "-d", str(p)]),
         "cases-variants": (work / "cases.csv",
-                           lambda p: ["cases", "variants", "1G3", "-d", str(p)]),
+                           lambda p: ["cases", "variants", "1G3", "-d", str(p), "--out",
+                                      str(work / "chips.cxf")]),
         "car": (work / "good.json",
                 lambda p: ["cases", "variants", "1G3", "-d", str(work / "shop.db"), "--car",
                            str(p)]),

@@ -224,7 +224,8 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
 def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp_path, cli):
     """'cases variants --out' writes each variant's centre car as a sample 'CODE #k': read
     back from CxF3 and CSV it is that car's reading, CxF3 keeps the cars and recipe it stands
-    for, and 'compare' against a chip finds the car's ΔE00 that --car reports; an output of
+    for, and 'compare' against a chip finds the car's ΔE00 that --car reports; a chip held as
+    the car is its own variant, and the command suggested next reads that chip; an output of
     no known format, or the database itself, is refused before any work."""
     cars = _cars(generated, [1.0, 1.004, 0.996, 1.10, 1.104], [1.01, 0.99, 1.0, 1.02, 1.0], "1G3")
     db = tmp_path / "shop.db"
@@ -254,6 +255,11 @@ def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp
                  "1G3 #2", "--json")  # fmt: skip
     worst = max(g["de00"] for g in json.loads(judged.stdout)["geometries"])
     assert worst == pytest.approx(lighter["car"]["de00_max"], abs=2e-3)
+    chip = cli("cases", "variants", "1G3", "-d", db, "--car", tmp_path / "chips.cxf", "--sample",
+               "1G3 #2")  # fmt: skip
+    said = " ".join(chip.stdout.split())
+    assert "1G3 #2 lies nearest variant #2: worst ΔE00 0.00" in said
+    assert f"cases nearest {tmp_path / 'chips.cxf'} --sample '1G3 #2' --colour-code" in said
     unknown = cli("cases", "variants", "1G3", "-d", db, "--out", tmp_path / "chips.txt2")
     assert unknown.returncode == 2 and "unknown output extension '.txt2'" in unknown.stderr
     itself = cli("cases", "variants", "1G3", "-d", db, "--out", db)

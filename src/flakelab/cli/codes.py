@@ -209,7 +209,7 @@ def variants_command(
     if json_output:
         print_report(report)
         return
-    _print_variants(report)
+    _print_variants(report, (f" --sample {sample!r}" if sample else "") + " --average" * average)
 
 
 def _car_report(found, spectra, tolerance, report: dict) -> dict:
@@ -241,9 +241,10 @@ def car_from_variants(found, spectra, tolerance) -> tuple[list[dict], int]:
     return rows, int(shares.argmin())
 
 
-def _print_variants(report: dict) -> None:
+def _print_variants(report: dict, car_options: str = "") -> None:
     """A code's variants as a colorist reads them: each one's cars, spread, offset from the
-    main variant, and the recipe nearest its centre."""
+    main variant, and the recipe nearest its centre; ``car_options``: how --car's reading
+    was chosen from its file, for the commands suggested next."""
     from flakelab.cases.database import short_id
 
     rows = report["variants"]
@@ -290,7 +291,7 @@ def _print_variants(report: dict) -> None:
         highlight=False,
     )
     if car:
-        _print_car(report)
+        _print_car(report, car_options)
 
 
 def _grain_cell(texture: dict) -> str:
@@ -306,23 +307,23 @@ def _car_cell(row: dict, nearest: bool) -> str:
     return f"[{colour}]{row['de00_max']:.2f}[/] {row['geometry']}" + (" ◀" if nearest else "")
 
 
-def _print_car(report: dict) -> None:
-    """Which variant the car in the booth is, and what to do next."""
+def _print_car(report: dict, car_options: str) -> None:
+    """Which variant the car in the booth is, and what to do next (the car's reading chosen
+    from its file by ``car_options``)."""
     k = report["car"]["nearest_variant"]
     near = report["variants"][k - 1]["car"]
     said = (
         f"{report['car']['sample']} lies nearest variant #{k}: worst ΔE00 {near['de00_max']:.2f} "
         f"at {near['geometry']} from its centre car"
     )
-    nearest = (
-        f"flakelab cases nearest {report['car']['file']} --colour-code {report['colour_code']!r}"
-    )
+    car = f"{report['car']['file']}{car_options}"
+    nearest = f"flakelab cases nearest {car} --colour-code {report['colour_code']!r}"
     if near["passes"]:
         console.print(f"{said}, within {report['tolerance']}; the shop's recipes nearest it: "
                       f"{nearest}", highlight=False)  # fmt: skip
     else:
         console.print(
             f"[yellow]note:[/] {said}, outside {report['tolerance']}: no variant the shop has "
-            f"painted is this car's colour; match it (flakelab match {report['car']['file']})",
+            f"painted is this car's colour; match it (flakelab match {car})",
             highlight=False,
         )
