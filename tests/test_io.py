@@ -68,6 +68,22 @@ def test_every_format_round_trips_every_field_it_can_hold(fmt, rich_measurement,
     assert detect_format(path) == fmt
 
 
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+def test_every_format_keeps_the_moment_of_a_zoned_time(fmt, rich_measurement, tmp_path):
+    """A time with a zone (a CxF3 file's, a case's in UTC) is the same moment read back:
+    where the format keeps no zone (an MA-T12 export), as this machine's local time. Excel
+    refused a zoned time, and 'convert' to .xlsx ended in an internal error."""
+    from dataclasses import replace
+    from datetime import timedelta, timezone
+
+    from flakelab.core.times import zoned_here
+
+    tokyo = datetime(2026, 3, 4, 5, 6, 7, tzinfo=timezone(timedelta(hours=9)))
+    path = tmp_path / f"zoned{FORMATS[fmt][2][0]}"
+    write_measurements([replace(rich_measurement, measured_at=tokyo)], path)
+    assert zoned_here(read_measurement(path).measured_at) == tokyo
+
+
 def test_multi_sample_files_keep_order(rich_measurement, tmp_path):
     from dataclasses import replace
 

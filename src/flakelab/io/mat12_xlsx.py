@@ -241,14 +241,21 @@ def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> N
     spectral.append(["Name", "Date/Time", "Geometry", *(f"{w:g}" for w in wavelengths)])
     for m in measurements:
         lab = m.stored_lab if m.stored_lab is not None else m.lab(conditions)
+        when = _cell_time(m.measured_at)
         for i, g in enumerate(m.geometries):
-            color.append([m.sample, m.measured_at, g.name, *map(float, lab[i])])
-            spectral.append([m.sample, m.measured_at, g.name, *map(float, m.reflectance[i])])
+            color.append([m.sample, when, g.name, *map(float, lab[i])])
+            spectral.append([m.sample, when, g.name, *map(float, m.reflectance[i])])
         if m.texture:
-            texture.append(
-                [m.sample, m.measured_at, None, *(m.texture.get(k) for k in TEXTURE_READINGS)]
-            )
+            texture.append([m.sample, when, None, *(m.texture.get(k) for k in TEXTURE_READINGS)])
     write_atomically(path, lambda temporary: _save(workbook, Path(temporary)))
+
+
+def _cell_time(time: datetime | None) -> datetime | None:
+    """A measurement's time as the instrument's export holds it: local time without a zone
+    (Excel keeps none; read back, a time without one is this machine's local time)."""
+    if time is None or time.tzinfo is None:
+        return time
+    return time.astimezone().replace(tzinfo=None)
 
 
 def _save(workbook: openpyxl.Workbook, path: Path) -> None:
