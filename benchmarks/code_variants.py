@@ -1,12 +1,16 @@
 """A colour code's variants (``flakelab cases variants``) in the generator's world: how many
 variants one formulation's cars need, whether cars of a code sprayed at three plants come
-back as those three, and how the grouping scales with the cars of a code.
+back as those three, how many of the code's next cars the shop's variant chips cover, and
+how the grouping scales with the cars of a code.
 
 Each car is a formulation sprayed at the factory (its batches and spray line,
 ``World.variation(at_shop=False)``) and read once with the instrument's noise; no car is
 weathered. A plant's variant is the code's formulation with every toner's share scaled by
 its own factor (lognormal, sd ``--plant-sd``), as another plant's or year's formula is, drawn
-until the three plants' colours lie at least ``--apart`` (worst ΔE00) apart.
+until the three plants' colours lie at least ``--apart`` (worst ΔE00) apart. The chips
+(``cases variants --out``) of the three plants' cars are held against as many cars again,
+drawn the same way: the share within the tolerance of their nearest chip, against one chip
+alone (the car whose furthest car lies nearest).
 
     python benchmarks/code_variants.py [--formulations 10] [--cars 40] [--seed 5] [--json]
 """
@@ -21,7 +25,7 @@ import numpy as np
 
 from flakelab.cases.case import Case
 from flakelab.cases.generator import World
-from flakelab.cases.variants import colour_variants
+from flakelab.cases.variants import car_from_centres, colour_variants
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
 from timing import print_report
@@ -29,6 +33,8 @@ from timing import print_report
 WITHIN = (1.0, 2.0)
 PLANTS = 3
 SIZES = (500, 2000)
+ONE_CHIP = 1e6
+"""A share of the limit every car lies within: the cover is one chip."""
 
 
 def cars_of(world: World, fractions: np.ndarray, rng: np.random.Generator) -> list[Case]:
@@ -77,6 +83,12 @@ def purity(variants, plant_of: dict[str, int]) -> float:
     return kept / len(plant_of)
 
 
+def covered(chips, cars: list[Case], tolerance) -> float:
+    """The share of ``cars`` within ``tolerance`` of their nearest chip (a variant's centre
+    car, the standard) at every geometry."""
+    return float(np.mean([car_from_centres(chips, c.target, tolerance)[2].any() for c in cars]))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--formulations", type=int, default=10)
@@ -90,8 +102,10 @@ def main() -> None:
     world = World(read_library(None), "five-angle")
     tolerance = tolerance_preset("refinish")
     rng = np.random.default_rng(args.seed)
+    next_rng = np.random.default_rng((args.seed, 1))  # the next cars: the rest drawn as before
     one, three, apart = {w: [] for w in WITHIN}, {w: [] for w in WITHIN}, []
     purities = {w: [] for w in WITHIN}
+    coverage = {w: [] for w in (*WITHIN, ONE_CHIP)}
     while len(apart) < args.formulations:
         base = world.formulations(1, rng)[0]
         plants = plant_formulas(world, base, args, rng)
@@ -105,10 +119,13 @@ def main() -> None:
         plant = np.repeat(np.arange(PLANTS), args.cars)
         coded = cars_of(world, formulas[plant], rng)
         plant_of = {c.case_id: int(p) for c, p in zip(coded, plant, strict=True)}
-        for within in WITHIN:
+        following = cars_of(world, formulas[plant], next_rng)
+        for within in (*WITHIN, ONE_CHIP):
             found = colour_variants(coded, tolerance, within)
-            three[within].append(len(found))
-            purities[within].append(purity(found, plant_of))
+            coverage[within].append(covered(found, following, tolerance))
+            if within in WITHIN:
+                three[within].append(len(found))
+                purities[within].append(purity(found, plant_of))
     report: dict = {
         "formulations": args.formulations,
         "cars_per_formulation": args.cars,
@@ -128,6 +145,10 @@ def main() -> None:
         report[f"three_plants_purity_within_{within:g}"] = round(
             float(np.mean(purities[within])), 3
         )
+        report[f"next_cars_covered_by_chips_within_{within:g}"] = round(
+            float(np.mean(coverage[within])), 3
+        )
+    report["next_cars_covered_by_one_chip"] = round(float(np.mean(coverage[ONE_CHIP])), 3)
     for size in SIZES:
         cars = cars_of(world, np.repeat(base[None], size, axis=0), rng)
         tracemalloc.start()
