@@ -309,6 +309,17 @@ def test_a_report_is_written_whole_whatever_the_standard_streams(tmp_path):
                                                             "confirm with --yes")  # fmt: skip
 
 
+def test_a_message_to_a_log_stays_on_one_line(tmp_path, cli):
+    """A command's message on a stderr that is no terminal is one line however long, so that
+    a log can be searched for it: Rich wrapped it at 80 columns, between words."""
+    for length in range(1, 30):  # wherever the 80th column would have fallen
+        folder = tmp_path / ("f" * length)
+        folder.mkdir()
+        out = folder / "target.json"
+        run = cli("convert", example_path("target"), out)
+        assert run.returncode == 0 and run.stderr == f"wrote 1 measurement to {out}\n"
+
+
 def test_convert_refuses_unknown_extension_and_keeps_existing_file(tmp_path, cli):
     existing = tmp_path / "out.bmp"
     existing.write_text("keep me")

@@ -84,10 +84,14 @@ class _Console(Console):
         has its widest wrapping columns narrowed down to their longest word, and no more;
         one that still does not fit is drawn past the terminal's edge. Rich cut cells with
         an ellipsis: in a 70-column terminal the match's L*a*b* read "62.…" and "-1…", and in
-        80 a model's data hash and the correction's "spray-out" row were cut."""
+        80 a model's data hash and the correction's "spray-out" row were cut. A message on a
+        stderr that is no terminal (a log file) is not wrapped: at 80 columns "shop.db:
+        five-angle v1 promoted" was split after "five-angle" where the path was 68 long."""
         if any(isinstance(o, Table) for o in objects):
             objects = tuple(self._drawn_uncut(o) for o in objects)
             kwargs["crop"] = False
+        if self.stderr and not self.is_terminal:  # a log's message on one line, for grep
+            kwargs.setdefault("soft_wrap", True)
         super().print(*objects, **kwargs)
         if reader_gone(self.file):  # what it wrote may be lost without a word: see there
             self.on_broken_pipe()
