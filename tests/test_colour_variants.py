@@ -225,7 +225,8 @@ def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp
     """'cases variants --out' writes each variant's centre car as a sample 'CODE #k': read
     back from CxF3 and CSV it is that car's reading, CxF3 keeps the cars and recipe it stands
     for, and 'compare' against a chip finds the car's ΔE00 that --car reports; a chip held as
-    the car is its own variant, and the command suggested next reads that chip; an output of
+    the car is its own variant, and the command suggested next reads that chip in that
+    database; an output of
     no known format, or the database itself, is refused before any work."""
     cars = _cars(generated, [1.0, 1.004, 0.996, 1.10, 1.104], [1.01, 0.99, 1.0, 1.02, 1.0], "1G3")
     db = tmp_path / "shop.db"
@@ -259,7 +260,7 @@ def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp
                "1G3 #2")  # fmt: skip
     said = " ".join(chip.stdout.split())
     assert "1G3 #2 lies nearest variant #2: worst ΔE00 0.00" in said
-    assert f"cases nearest {tmp_path / 'chips.cxf'} --sample '1G3 #2' --colour-code" in said
+    assert f"cases nearest {tmp_path / 'chips.cxf'} --sample '1G3 #2' -d {db} --colour-code" in said
     unknown = cli("cases", "variants", "1G3", "-d", db, "--out", tmp_path / "chips.txt2")
     assert unknown.returncode == 2 and "unknown output extension '.txt2'" in unknown.stderr
     itself = cli("cases", "variants", "1G3", "-d", db, "--out", db)

@@ -3,6 +3,7 @@ painted, and the variants of one (:mod:`flakelab.cases.variants`)."""
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Annotated
 
@@ -29,6 +30,7 @@ from flakelab.cli.sources import (
     ShopOption,
     colour_code_hint_in,
     colour_code_spelled,
+    database_option,
     instrument_key,
     load_cases,
     which_cases,
@@ -209,7 +211,8 @@ def variants_command(
     if json_output:
         print_report(report)
         return
-    _print_variants(report, (f" --sample {sample!r}" if sample else "") + " --average" * average)
+    chosen = (f" --sample {shlex.quote(sample)}" if sample else "") + " --average" * average
+    _print_variants(report, database_option(database), chosen)
 
 
 def _car_report(found, spectra, tolerance, report: dict) -> dict:
@@ -241,10 +244,11 @@ def car_from_variants(found, spectra, tolerance) -> tuple[list[dict], int]:
     return rows, int(shares.argmin())
 
 
-def _print_variants(report: dict, car_options: str = "") -> None:
+def _print_variants(report: dict, where: str = "", chosen: str = "") -> None:
     """A code's variants as a colorist reads them: each one's cars, spread, offset from the
-    main variant, and the recipe nearest its centre; ``car_options``: how --car's reading
-    was chosen from its file, for the commands suggested next."""
+    main variant, and the recipe nearest its centre. The commands it suggests next read the
+    cases ``where`` (:func:`~flakelab.cli.sources.database_option`) and the car's reading
+    ``chosen`` from its file."""
     from flakelab.cases.database import short_id
 
     rows = report["variants"]
@@ -287,11 +291,11 @@ def _print_variants(report: dict, car_options: str = "") -> None:
         "its graininess, coarser above 0); "
         "nearest spray-out: the recorded case whose spray-out lies nearest the centre car "
         "(worst ΔE00, green within the tolerance). Measure the car and find its recipes: "
-        f"flakelab cases nearest CAR --colour-code {report['colour_code']!r}",
+        f"flakelab cases nearest CAR{where} --colour-code {report['colour_code']!r}",
         highlight=False,
     )
     if car:
-        _print_car(report, car_options)
+        _print_car(report, where, chosen)
 
 
 def _grain_cell(texture: dict) -> str:
@@ -307,17 +311,17 @@ def _car_cell(row: dict, nearest: bool) -> str:
     return f"[{colour}]{row['de00_max']:.2f}[/] {row['geometry']}" + (" ◀" if nearest else "")
 
 
-def _print_car(report: dict, car_options: str) -> None:
-    """Which variant the car in the booth is, and what to do next (the car's reading chosen
-    from its file by ``car_options``)."""
+def _print_car(report: dict, where: str, chosen: str) -> None:
+    """Which variant the car in the booth is, and what to do next (:func:`_print_variants`'s
+    ``where`` and ``chosen``)."""
     k = report["car"]["nearest_variant"]
     near = report["variants"][k - 1]["car"]
     said = (
         f"{report['car']['sample']} lies nearest variant #{k}: worst ΔE00 {near['de00_max']:.2f} "
         f"at {near['geometry']} from its centre car"
     )
-    car = f"{report['car']['file']}{car_options}"
-    nearest = f"flakelab cases nearest {car} --colour-code {report['colour_code']!r}"
+    car = f"{shlex.quote(report['car']['file'])}{chosen}"
+    nearest = f"flakelab cases nearest {car}{where} --colour-code {report['colour_code']!r}"
     if near["passes"]:
         console.print(f"{said}, within {report['tolerance']}; the shop's recipes nearest it: "
                       f"{nearest}", highlight=False)  # fmt: skip

@@ -58,13 +58,14 @@ from flakelab.cli.sources import (
     LibraryOption,
     colour_code_hint_in,
     colour_code_spelled,
+    database_option,
     load_cases,
     workplace_shop,
 )
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.wording import counted, database_label
+from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
 
@@ -387,7 +388,7 @@ def match_command(
     if json_output:
         print_report(report)
         return
-    _print_match(report)
+    _print_match(report, database_option(database))
 
 
 def _check_target_options(target, example, all_samples, jobs, recipe_dir, for_one) -> None:
@@ -463,6 +464,7 @@ def _add_car_variant(report: dict, source: str, shop, colour_code: str, geometri
     found = colour_variants(grouped, tolerance)
     rows, k = car_from_variants(found, spectra, tolerance)
     report["colour_variant"] = {
+        "cases": hidden_passwords(source),
         "variant": k + 1,
         "variants": len(found),
         "cars": len(found[k].cases),
@@ -655,7 +657,9 @@ def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
                      texture=texture)  # fmt: skip
 
 
-def _print_match(report: dict) -> None:
+def _print_match(report: dict, where: str = "") -> None:
+    """The candidates as a colorist reads them; the commands suggested read the cases
+    ``where`` (:func:`~flakelab.cli.sources.database_option`)."""
     from flakelab.core.tolerance import failures
 
     console.print(
@@ -730,7 +734,7 @@ def _print_match(report: dict) -> None:
         title = f"Recorded spray-outs{code} nearest the target (measured, not predicted)"
         console.print(nearest_table(report["recorded_nearest"], title))
     if report.get("colour_variant"):
-        _print_car_variant(report)
+        _print_car_variant(report, where)
     print_notes(report["notes"])
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
         console.print(
@@ -740,7 +744,7 @@ def _print_match(report: dict) -> None:
         )
 
 
-def _print_car_variant(report: dict) -> None:
+def _print_car_variant(report: dict, where: str) -> None:
     """Which of its code's variants the car lies nearest, and what to do next."""
     v, code = report["colour_variant"], report["colour_code"]
     newest = f"newest {v['cars_grouped']} of its " if v["cars_grouped"] < v["cars_of_code"] else ""
@@ -750,8 +754,8 @@ def _print_car_variant(report: dict) -> None:
         f"ΔE00 {v['de00_max']:.2f} at {v['geometry']} from its centre car"
     )
     if v["passes"]:
-        console.print(f"{said}, within {report['tolerance']} (flakelab cases variants {code!r})",
-                      highlight=False)  # fmt: skip
+        shown = f"flakelab cases variants {code!r}{where}"
+        console.print(f"{said}, within {report['tolerance']} ({shown})", highlight=False)
     else:
         console.print(
             f"[yellow]note:[/] {said}, outside {report['tolerance']}: no variant of the code "

@@ -4,6 +4,7 @@ cases and models from (a case file or database, the current or a named model).""
 from __future__ import annotations
 
 import os
+import shlex
 from datetime import datetime
 from pathlib import Path
 from typing import Annotated
@@ -13,7 +14,7 @@ import typer
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.core.times import shown_time, zoned, zoned_here
-from flakelab.core.wording import database_label, tidy_name
+from flakelab.core.wording import database_label, hidden_passwords, tidy_name
 from flakelab.errors import FlakelabError
 
 WORKPLACE_SHOP = "FLAKELAB_SHOP"
@@ -81,6 +82,12 @@ CaseSourceOption = Annotated[
         "FLAKELAB_DATABASE_URL or the user data folder).",
     ),
 ]
+
+
+def database_option(database: str | None) -> str:
+    """`` -d DATABASE`` for a command a report suggests next, where the user named one (its
+    password hidden: a hint is read over a shoulder too), else ""."""
+    return f" -d {shlex.quote(hidden_passwords(database))}" if database else ""
 
 
 def instrument_spelled(name: str | None) -> str | None:
