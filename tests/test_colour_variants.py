@@ -226,8 +226,8 @@ def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp
     back from CxF3 and CSV it is that car's reading, CxF3 keeps the cars and recipe it stands
     for, and 'compare' against a chip finds the car's ΔE00 that --car reports; a chip held as
     the car is its own variant, and the command suggested next reads that chip in that
-    database; an output of
-    no known format, or the database itself, is refused before any work."""
+    database; an output of no known format, or the database itself, is refused before any
+    work."""
     cars = _cars(generated, [1.0, 1.004, 0.996, 1.10, 1.104], [1.01, 0.99, 1.0, 1.02, 1.0], "1G3")
     db = tmp_path / "shop.db"
     add_cases(open_database(str(db)), cars)
