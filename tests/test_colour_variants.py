@@ -224,10 +224,10 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
 def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp_path, cli):
     """'cases variants --out' writes each variant's centre car as a sample 'CODE #k': read
     back from CxF3 and CSV it is that car's reading, CxF3 keeps the cars and recipe it stands
-    for, and 'compare' against a chip finds the car's ΔE00 that --car reports; a chip held as
-    the car is its own variant, and the command suggested next reads that chip in that
-    database; an output of no known format, or the database itself, is refused before any
-    work."""
+    for, and 'compare' against a chip finds the car's ΔE00 that --car reports (against the
+    deck, --nearest, the chip --car names nearest); a chip held as the car is its own
+    variant, and the command suggested next reads that chip in that database; an output of
+    no known format, or the database itself, is refused before any work."""
     cars = _cars(generated, [1.0, 1.004, 0.996, 1.10, 1.104], [1.01, 0.99, 1.0, 1.02, 1.0], "1G3")
     db = tmp_path / "shop.db"
     add_cases(open_database(str(db)), cars)
@@ -256,6 +256,13 @@ def test_variant_chips_are_the_centre_cars_read_back_as_standards(generated, tmp
                  "1G3 #2", "--json")  # fmt: skip
     worst = max(g["de00"] for g in json.loads(judged.stdout)["geometries"])
     assert worst == pytest.approx(lighter["car"]["de00_max"], abs=2e-3)
+    ranked = json.loads(cli("compare", tmp_path / "chips.cxf", tmp_path / "car.cxf", "--nearest",
+                            "5", "--json").stdout)  # fmt: skip
+    assert [r["reference"] for r in ranked["nearest_references"]] == ["1G3 #2", "1G3 #1"]
+    assert ranked["reference"] == "1G3 #2" and ranked["de00_max"] == pytest.approx(worst)
+    both = cli("compare", tmp_path / "chips.cxf", tmp_path / "car.cxf", "--nearest", "1",
+               "--reference-sample", "1G3 #1")  # fmt: skip
+    assert both.returncode == 2 and "not with --reference-sample" in both.stderr
     chip = cli("cases", "variants", "1G3", "-d", db, "--car", tmp_path / "chips.cxf", "--sample",
                "1G3 #2")  # fmt: skip
     said = " ".join(chip.stdout.split())

@@ -155,6 +155,46 @@ def test_compare_judges_texture_where_the_tolerance_bounds_it():
     assert tolerance_preset("refinish").texture is not None
 
 
+def test_standards_rank_by_the_worst_share_of_the_limit_as_each_pair_is_compared():
+    """Standards of a deck ranked for one sample, nearest first: each one's ΔE00, shares,
+    texture and verdict are those of compare() on that pair alone, whether the standards
+    share the sample's geometries or some of them, on its wavelength grid or another; one
+    sharing no geometry is left out; texture ranks too (the grainier twin falls behind)."""
+    from dataclasses import replace
+
+    import colour
+
+    from flakelab.core.comparison import rank_references
+    from flakelab.core.spectra import resample
+
+    rng = np.random.default_rng(3)
+    sample = _grey_metallic({"45as15": 100, "45as45": 50, "45as110": 20})
+    sample = replace(sample, texture={"G": 3.0})
+    standards = []
+    for k in range(12):
+        shifted = sample.reflectance * np.exp(rng.normal(0, 0.02, (3, 1)))
+        standards.append(replace(sample, sample=f"chip {k}", reflectance=shifted))
+    standards[4] = replace(standards[4], texture={"G": 4.6})  # its colour fine, its grain not
+    standards[5] = standards[5].select(["45as45", "45as110"])
+    fine = colour.SpectralShape(380, 730, 5)
+    finer = resample(standards[6].reflectance, WAVELENGTHS, fine)
+    standards[6] = replace(standards[6], wavelengths=fine.wavelengths, reflectance=finer)
+    standards.append(_grey_metallic({"45as-15": 100}))
+    ranked = rank_references(standards, sample, "refinish")
+    assert len(ranked) == 12 and "grey" not in [r.reference.sample for r in ranked]
+    shares = [r.share for r in ranked]
+    assert shares == sorted(shares)
+    for r in ranked:
+        judged = compare(r.reference, sample, "refinish")
+        report = judged.to_dict()
+        assert r.geometries == judged.geometries
+        np.testing.assert_allclose(r.de00, judged.de00, atol=1e-9)
+        assert r.share == pytest.approx(report["limit_share_max"], abs=1e-9)
+        assert r.passes == judged.all_pass
+    grainy = next(r for r in ranked if r.reference.sample == "chip 4")
+    assert grainy.to_dict()["limit_share_at"] == "G" and not grainy.passes
+
+
 def test_readings_of_one_surface_average_and_say_how_far_each_lies():
     """Three readings of a grey: the mean's spectra are the readings' mean (resampled to the
     storage grid where a file used another), texture averaged where all hold it; a reading

@@ -48,7 +48,7 @@ from flakelab.cli.weigh import weigh_command
 from flakelab.core.defaults import DEFAULT_CONDITIONS, DEFAULT_TOLERANCE
 from flakelab.core.wording import counted
 from flakelab.data import example_path
-from flakelab.errors import FlakelabError
+from flakelab.errors import FlakelabError, MeasurementFileError
 
 app = typer.Typer(
     help="flakelab: match, predict and show the appearance of car paints.",
@@ -185,8 +185,20 @@ def compare(
         ),
     ] = None,
     plot: PlotOption = None,
+    nearest: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="Rank every standard in the reference file (a chip deck, 'cases variants "
+            "--out') by the sample's worst share of the tolerance from it, show the N "
+            "nearest, and compare the sample with the nearest.",
+        ),
+    ] = 0,
 ) -> None:
-    """Multi-angle colour difference of a sample against a reference, with pass/fail."""
+    """Multi-angle colour difference of a sample against a reference, with pass/fail.
+
+    With --nearest, the reference file holds many standards, and the sample is compared with
+    the one it lies nearest."""
     from flakelab.core.colorimetry import Conditions
     from flakelab.core.comparison import compare as compare_measurements
     from flakelab.core.comparison import spread_of_readings
@@ -195,22 +207,33 @@ def compare(
 
     if not example and (reference is None or sample is None):
         raise FlakelabError("give a reference and a sample file, or --example")
+    if nearest and (reference_sample or average):
+        raise FlakelabError("--nearest ranks every standard of the reference file: "
+                            "not with --reference-sample or --average")  # fmt: skip
     check_figure_file(render)
     check_figure_file(plot, "--plot")
     tol = read_tolerance(tolerance)
-    ref, ref_readings = read_readings(
-        reference or example_path("target"), reference_sample, average, "--reference-sample"
-    )
     smp, smp_readings = read_readings(
         sample or example_path("sprayout"), sample_name, average_sprayed, "--sample-name",
         "--average-sprayed",
     )  # fmt: skip
     light = Conditions.parse(conditions)
+    ranked = []
+    if nearest:
+        ranked = _ranked_references(reference or example_path("target"), smp, tol, light)
+        ref, ref_readings = ranked[0].reference, [ranked[0].reference]
+    else:
+        ref, ref_readings = read_readings(
+            reference or example_path("target"), reference_sample, average, "--reference-sample"
+        )
     tests = lights_option(lights, light) or tuple(
         t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
     )
     result = compare_measurements(ref, smp, tol, conditions=light, lights=tests)
     report = result.to_dict()
+    if nearest:
+        report["nearest_references"] = [r.to_dict() for r in ranked[:nearest]]
+        report["references_ranked"] = len(ranked)
     for key, wanted, readings, mean in (
         ("reference_readings", average, ref_readings, ref),
         ("sample_readings", average_sprayed, smp_readings, smp),
@@ -228,9 +251,45 @@ def compare(
     if as_json:
         print_report(report, indent=1)
     else:
+        if nearest:
+            _print_ranked(report, reference or example_path("target"))
         _print_comparison(report, tol)
     if fail_on_reject and not result.all_pass:
         raise typer.Exit(1)
+
+
+def _ranked_references(path, sample, tolerance, conditions) -> list:
+    """Every standard of the file at ``path`` that shares a geometry with ``sample``, nearest
+    first (:func:`~flakelab.core.comparison.rank_references`)."""
+    from flakelab.core.comparison import rank_references
+    from flakelab.io import read_measurements
+
+    standards = read_measurements(path)
+    ranked = rank_references(standards, sample, tolerance, conditions=conditions)
+    if not ranked:
+        raise MeasurementFileError(
+            path, f"no standard shares a geometry with {sample.sample!r} "
+            f"({', '.join(sample.geometry_names)})"
+        )  # fmt: skip
+    return ranked
+
+
+def _print_ranked(report: dict[str, Any], path) -> None:
+    """The standards nearest the sample, nearest first, each green where it passes."""
+    rows = report["nearest_references"]
+    table = Table(
+        title=f"The {len(rows)} of {report['references_ranked']} standards in {path} nearest "
+        f"{report['sample']} ({report['tolerance']})",
+        box=box.SIMPLE_HEAD,
+        collapse_padding=True,
+    )
+    for column in ("#", "standard", "worst ΔE00", "worst share of the limit", "verdict"):
+        table.add_column(column, justify="right" if column == "#" else "left")
+    for k, row in enumerate(rows, 1):
+        verdict = "[green]pass[/]" if row["pass"] else "[red]fail[/]"
+        table.add_row(str(k), row["reference"], f"{row['de00_max']:.2f} {row['geometry']}",
+                      f"{row['limit_share_max']:.0%} {row['limit_share_at']}", verdict)  # fmt: skip
+    console.print(table)
 
 
 def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:

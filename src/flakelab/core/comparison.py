@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh
+from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.difference import (
     METAMERISM_ILLUMINANTS,
@@ -21,7 +22,15 @@ from flakelab.core.geometry import flake_angles
 from flakelab.core.measurement import Measurement
 from flakelab.core.tolerance import Tolerance, failing_geometries, over_limit, tolerance_preset
 
-__all__ = ["Comparison", "compare", "describe", "spread_of_readings", "READINGS_SPREAD_SHARE"]
+__all__ = [
+    "Comparison",
+    "RankedReference",
+    "compare",
+    "describe",
+    "rank_references",
+    "spread_of_readings",
+    "READINGS_SPREAD_SHARE",
+]
 
 READINGS_SPREAD_SHARE = 0.5
 """A reading further than this share of the tolerance from the mean of its fellows is worth a
@@ -201,6 +210,78 @@ def compare(
         ),
         texture_share=tolerance.texture_share(reference.texture, sample.texture),
     )
+
+
+@dataclass(frozen=True)
+class RankedReference:
+    """A ``reference`` (a standard, a variant chip) and how far a sample lies from it, as
+    :func:`compare` judges them: ΔE00 and the share of the tolerance's limit per geometry
+    both hold (``geometries``), the share of each texture reading the tolerance bounds, and
+    whether every one passes."""
+
+    reference: Measurement
+    geometries: tuple[str, ...]
+    de00: NDArray[np.float64]
+    limit_share: NDArray[np.float64]
+    texture_share: dict[str, float]
+    passes: bool
+
+    @property
+    def shares(self) -> dict[str, float]:
+        """The share of the limit at each geometry, then each texture reading."""
+        return dict(zip(self.geometries, self.limit_share.tolist(), strict=True)) | dict(
+            self.texture_share
+        )
+
+    @property
+    def share(self) -> float:
+        """The worst share of the limit: what ranks the references."""
+        return max(self.shares.values())
+
+    def to_dict(self) -> dict[str, Any]:
+        worst = int(np.argmax(self.de00))
+        shares = self.shares
+        return {
+            "reference": self.reference.sample,
+            "de00_max": float(self.de00[worst]),
+            "geometry": self.geometries[worst],
+            "limit_share_max": self.share,
+            "limit_share_at": max(shares, key=shares.__getitem__),
+            "pass": self.passes,
+            "geometries": list(self.geometries),
+        }
+
+
+def rank_references(
+    references: Sequence[Measurement],
+    sample: Measurement,
+    tolerance: Tolerance | str = DEFAULT_TOLERANCE,
+    *,
+    conditions: Conditions = D65_10,
+) -> list[RankedReference]:
+    """The ``references`` that share a geometry with ``sample``, nearest first: by the worst
+    share of ``tolerance``'s limit over the geometries each shares with it and the texture
+    readings the tolerance bounds, as :func:`compare` judges one pair (the reference the
+    standard). References read at the same geometries on one wavelength grid (a chip deck's)
+    are judged together."""
+    tolerance = tolerance_preset(tolerance) if isinstance(tolerance, str) else tolerance
+    held = set(sample.geometry_names)
+    groups: dict[tuple, list[int]] = {}
+    for i, ref in enumerate(references):
+        common = tuple(g for g in ref.geometry_names if g in held)
+        if common:
+            groups.setdefault((common, tuple(ref.wavelengths)), []).append(i)
+    ranked = []
+    for (common, wavelengths), members in groups.items():
+        spectra = np.stack([references[i].select(common).reflectance for i in members])
+        lab_ref = reflectance_to_Lab(spectra, np.array(wavelengths), conditions)
+        de00, dLCH, passed = tolerance.judge(common, lab_ref, sample.select(common).lab(conditions))
+        shares = tolerance.share_of_limit(common, de00=de00, dLCH=dLCH)
+        for k, i in enumerate(members):
+            texture = tolerance.texture_share(references[i].texture, sample.texture)
+            ok = bool(passed[k].all()) and not over_limit(texture)
+            ranked.append(RankedReference(references[i], common, de00[k], shares[k], texture, ok))
+    return sorted(ranked, key=lambda r: r.share)
 
 
 def spread_of_readings(
