@@ -18,7 +18,7 @@ weights; a shop's SQLite database by replacing one value of one case row (or, fo
     python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
         sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
         manifest,model,model-register,lots,panel,database,database-shops,database-variants,
-        cases-variants,car]
+        cases-variants,car,deck]
         [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
@@ -298,6 +298,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         CliRunner().invoke(app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", cases])
         write_cases([replace(c, colour_code="Toyota 1G3") for c in read_cases(cases)], cases)
     CliRunner().invoke(app, ["cases", "import", f"{work}/cases.csv", "-d", f"{work}/shop.db"])
+    CliRunner().invoke(app, ["cases", "variants", "1G3", "-d", f"{work}/shop.db", "--within",
+                             "0.1", "--out", f"{work}/deck.json"])  # fmt: skip
     model = replace(shipped_model("five-angle"))  # a copy recording cases, as a shop's does
     model.add_learned([f"case {i}" for i in range(50)])
     (work / "model.pt").write_bytes(model.to_bytes())
@@ -391,6 +393,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "cases-variants": (work / "cases.csv",
                            lambda p: ["cases", "variants", "1G3", "-d", str(p), "--out",
                                       str(work / "chips.cxf")]),
+        # a deck of standards (the shop's variant chips) a car is ranked against
+        "deck": (work / "deck.json",
+                 lambda p: ["compare", str(p), str(work / "good.json"), "--nearest", "3"]),
         "car": (work / "good.json",
                 lambda p: ["cases", "variants", "1G3", "-d", str(work / "shop.db"), "--car",
                            str(p)]),
