@@ -75,7 +75,7 @@ many as ``cases nearest`` shows)."""
 
 VARIANT_CARS = 500
 """The newest cars of a code that ``match --colour-code`` groups into variants to name the
-car's: bounds the pairwise comparison (500 cars of one code: 0.74 s,
+car's: bounds the pairwise comparison (500 cars of one code: 0.6-1.0 s,
 ``benchmarks/code_variants.py``)."""
 
 
