@@ -32,7 +32,7 @@ from timing import print_report
 
 WITHIN = (1.0, 2.0)
 PLANTS = 3
-SIZES = (500, 2000)
+SIZES = (500, 2000, 5000)
 ONE_CHIP = 1e6
 """A share of the limit every car lies within: the cover is one chip."""
 

@@ -139,6 +139,38 @@ def test_a_chain_of_near_cars_needs_as_few_variants_as_cover_it(generated):
         colour_variants([], TOLERANCE)
 
 
+def _cover_at_once(shares: np.ndarray, within: float) -> list[int]:
+    """The greedy cover as first written, every count over the whole matrix at once."""
+    reach, left, centres = shares <= within, np.ones(len(shares), dtype=bool), []
+    while left.any():
+        gain = (reach & left).sum(axis=1)
+        nearness = np.where(reach & left, shares, 0.0).sum(axis=1)
+        best = np.flatnonzero(gain == gain.max())
+        centres.append(int(best[np.argmin(nearness[best])]))
+        left &= ~reach[centres[-1]]
+    return centres
+
+
+def test_the_cover_in_blocks_is_the_cover_at_once(monkeypatch):
+    """Judged in blocks of a few pairs, as a code of thousands of cars is, every pair is
+    judged once and told to the progress, the shares are those of one block, and the cover
+    is the one the whole matrix at once gives, ties broken the same."""
+    from flakelab.cases import variants
+
+    rng = np.random.default_rng(2)
+    Lab = rng.normal([60.0, 0.0, 0.0], [0.4, 0.25, 0.25], (70, 5, 3))
+    names = ("45as15", "45as25", "45as45", "45as75", "45as110")
+    whole = variants.pairwise_shares(Lab, names, TOLERANCE)
+    told: list[int] = []
+    monkeypatch.setattr(variants, "PAIRS_AT_ONCE", 150)  # two rows at once
+    blocked = variants.pairwise_shares(Lab, names, TOLERANCE, told.append)
+    np.testing.assert_allclose(blocked, whole, rtol=1e-12, atol=0)
+    assert len(told) == 35 and sum(told) == 70 * 71 // 2
+    for within in (0.7, 0.8, 1.0, 1.2):  # 26, 14, 4 and 2 centres
+        found = variants.covering_centres(whole, within)
+        assert found == _cover_at_once(whole, within) and 1 < len(found) < 70
+
+
 def test_code_summary_counts_each_codes_cases_in_the_database(generated, database_url):
     """The database counts each code's cases by outcome, and the shops that made them, one
     shop's or all; cases without a code are not a code; the shops' summary is what it was."""
@@ -207,6 +239,7 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
     figure = tmp_path / "variants.png"
     shown = cli("cases", "variants", "1G3", "-d", db, "--plot", figure)
     assert shown.returncode == 0 and "2 variants among 5 cars" in shown.stdout
+    assert "comparing 5 cars pair by pair: 15/15 (100 %)" in shown.stderr
     assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     unknown = cli("cases", "variants", "1G3", "-d", db, "--plot", tmp_path / "variants.txt")
     assert unknown.returncode == 2 and "expected a figure file" in unknown.stderr

@@ -22,7 +22,7 @@ needs its variant chips.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,8 +46,13 @@ __all__ = [
 ]
 
 ROWS_AT_ONCE = 256
-"""Cars compared with every other car at once: bounds the pairwise colour computation's
-memory (rows × cars × geometries ΔE00 and its temporaries)."""
+"""The most cars compared with the cars after them at once: small blocks of rows leave the
+pairs judged twice (below the diagonal) few."""
+
+PAIRS_AT_ONCE = 2**18
+"""Pairs of cars judged at once: bounds the pairwise colour computation's memory (pairs ×
+geometries ΔE00 and its temporaries, about 0.3 GB at five geometries), however many cars a
+code has: a fixed block of rows took 1.75 GB for 5,000 cars."""
 
 
 @dataclass(frozen=True)
@@ -87,29 +92,41 @@ class ColourVariant:
 
 
 def pairwise_shares(
-    Lab: NDArray, geometries: Sequence[str], tolerance: Tolerance
+    Lab: NDArray,
+    geometries: Sequence[str],
+    tolerance: Tolerance,
+    progress: Callable[[int], None] | None = None,
 ) -> NDArray[np.float64]:
     """Every two cars' worst geometry's share of ``tolerance``'s limit, ``[N, N]``, of CIELAB
     ``[N, G, 3]``. CIEDE2000 and the magnitudes of ΔL*, ΔC*, ΔH* that the limits bound are
-    the same whichever car of a pair is the standard, so each pair is judged once."""
+    the same whichever car of a pair is the standard, so each pair is judged once
+    (N (N + 1) / 2 pairs, told to ``progress`` block by block)."""
     n = len(Lab)
     shares = np.empty((n, n))
-    for start in range(0, n, ROWS_AT_ONCE):
-        rows = slice(start, start + ROWS_AT_ONCE)
+    rows_at_once = max(1, min(ROWS_AT_ONCE, PAIRS_AT_ONCE // max(n, 1)))
+    for start in range(0, n, rows_at_once):
+        rows = slice(start, start + rows_at_once)
         de00, dLCH, _ = tolerance.judge(geometries, Lab[rows, None], Lab[None, start:])
         block = tolerance.share_of_limit(geometries, de00=de00, dLCH=dLCH).max(axis=-1)
         shares[rows, start:] = block
         shares[start:, rows] = block.T
+        if progress is not None:
+            height = block.shape[0]  # its rows' pairs with themselves and the cars after
+            progress(height * (n - start) - height * (height - 1) // 2)
     return shares
 
 
 def colour_variants(
-    cases: Sequence[Case], tolerance: Tolerance, within: float = 1.0
+    cases: Sequence[Case],
+    tolerance: Tolerance,
+    within: float = 1.0,
+    progress: Callable[[int], None] | None = None,
 ) -> list[ColourVariant]:
     """The variants of ``cases`` (one colour code's, read at the same geometries): every car
     within ``within`` of ``tolerance``'s limit of its variant's centre car, as few variants as
     the greedy cover finds; most cars first (the main variant), then newest first; each
-    variant's cases newest first."""
+    variant's cases newest first. ``progress`` is told the pairs of cars judged
+    (:func:`pairwise_shares`)."""
     if not cases:
         raise CaseError("no cases to group into variants")
     if not within > 0:
@@ -118,7 +135,7 @@ def colour_variants(
     if any(c.geometry_names != geometries for c in cases):
         raise CaseError("colour_variants: expected every case at the same geometries")
     Lab = reflectance_to_Lab(np.stack([c.target for c in cases]))
-    shares = pairwise_shares(Lab, geometries, tolerance)
+    shares = pairwise_shares(Lab, geometries, tolerance, progress)
     chips = covering_centres(shares, within)
     nearest_chip = np.argmin(shares[:, chips], axis=1)
     groups = [np.flatnonzero(nearest_chip == k) for k in range(len(chips))]
@@ -167,11 +184,19 @@ def covering_centres(shares: NDArray, within: float) -> list[int]:
     reach = shares <= within
     left = np.ones(len(shares), dtype=bool)
     centres: list[int] = []
-    while left.any():
-        gain = (reach & left).sum(axis=1)
-        nearness = np.where(reach & left, shares, 0.0).sum(axis=1)
+    cars = np.arange(len(shares))
+    while left.any():  # in blocks of rows: no [N, N] temporary for each centre
+        gain = np.concatenate(
+            [np.count_nonzero(reach[rows] & left, axis=1) for rows in _blocks(cars, len(cars))]
+        )
         best = np.flatnonzero(gain == gain.max())
-        centre = int(best[np.argmin(nearness[best])])
+        nearness = np.concatenate(
+            [
+                np.where(reach[rows] & left, shares[rows], 0.0).sum(axis=1)
+                for rows in _blocks(best, len(cars))
+            ]
+        )
+        centre = int(best[np.argmin(nearness)])
         centres.append(centre)
         left &= ~reach[centre]
     return centres
@@ -220,3 +245,9 @@ def variant_chips(
             )
         )
     return chips
+
+
+def _blocks(rows: NDArray[np.intp], columns: int) -> list[NDArray[np.intp]]:
+    """``rows`` of a matrix of ``columns`` columns, in blocks of about :data:`PAIRS_AT_ONCE`
+    elements."""
+    return np.array_split(rows, max(1, -(-len(rows) * columns // PAIRS_AT_ONCE)))
