@@ -197,10 +197,11 @@ def test_code_summary_counts_each_codes_cases_in_the_database(generated, databas
 
 def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
     """'cases codes' lists the codes; 'cases variants CODE' finds the variants in a database
-    and in a case file alike, the code typed as on the plate; a code the shop lacks is refused
-    with the one it likely means, and nothing is written; --plot draws them, and a figure
-    file of no known format is refused before any work. --car names the variant the car in
-    the booth lies nearest, or says none is its colour."""
+    and in a case file alike, the code typed as on the plate, of the cars since a date where
+    asked; a code the shop lacks is refused with the one it likely means, and nothing is
+    written; --plot draws them, and a figure file of no known format is refused before any
+    work. --car names the variant the car in the booth lies nearest, or says none is its
+    colour."""
     usual, lighter = [1.0, 1.004, 0.996], [1.10, 1.104]
     cars = _cars(generated, usual + lighter, [1.01, 0.99, 1.0, 1.02, 1.0], "Toyota 1G3")
     db, csv = tmp_path / "shop.db", tmp_path / "cases.csv"
@@ -219,6 +220,10 @@ def test_cases_codes_and_variants_on_the_command_line(generated, tmp_path, cli):
         assert report["colour_code"] == "TOYOTA 1G3" and report["cars"] == 5
         assert [v["cases"] for v in report["variants"]] == [3, 2]
         assert report["variants"][1]["offset_dLCH"]["dL"] > 0
+    # the cars a day apart from 08:00 UTC: --since (local time, to the minute as a report
+    # shows a time; refused before) keeps the last three
+    recent = cli("cases", "variants", "1G3", "-d", db, "--since", "2026-03-03T20:00", "--json")
+    assert json.loads(recent.stdout)["cars"] == 3
     from flakelab.core.measurement import Measurement
     from flakelab.io import write_measurements
 

@@ -29,6 +29,7 @@ from flakelab.cli.sources import (
     CaseSourceOption,
     InstrumentOption,
     ShopOption,
+    SinceOption,
     colour_code_hint_in,
     colour_code_spelled,
     database_option,
@@ -38,7 +39,7 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
-from flakelab.core.times import shown_time
+from flakelab.core.times import shown_time, zoned_here
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
@@ -117,6 +118,7 @@ def variants_command(
     ],
     database: CaseSourceOption = None,
     shop: ShopOption = None,
+    since: SinceOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     within: Annotated[
@@ -176,10 +178,10 @@ def variants_command(
     geometries = INSTRUMENT_GEOMETRIES[instrument_key(instrument)]
     reading = car and read_reading_at(car, sample, average, geometries, instrument)
     source = database or default_url()
-    cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
+    cases = cases_at(load_cases(source, shop, since, colour_code), geometries)
     if not cases:
         raise FlakelabError(
-            f"{hidden_passwords(source)}: no cases {which_cases(shop, None, colour_code)}"
+            f"{hidden_passwords(source)}: no cases {which_cases(shop, since, colour_code)}"
             f"{colour_code_hint_in(source, shop, colour_code)} read at the geometries "
             f"{tuple(geometries)}"
         )
@@ -190,6 +192,7 @@ def variants_command(
     report = {
         "cases": hidden_passwords(source),
         "shop": shop,
+        "since": since and zoned_here(since).isoformat(),
         "colour_code": colour_code,
         "geometries": list(geometries),
         "tolerance": tol.name,
@@ -257,6 +260,7 @@ def _print_variants(report: dict, where: str = "", chosen: str = "") -> None:
 
     rows = report["variants"]
     whose = f" of shop {report['shop']!r}" if report["shop"] else ""
+    whose += f" since {shown_time(report['since'])}" if report["since"] else ""
     title = (
         f"Colour code {report['colour_code']!r}{whose}: "
         f"{counted(len(rows), 'variant')} among {counted(report['cars'], 'car')} "

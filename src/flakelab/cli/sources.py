@@ -149,9 +149,12 @@ ShopModelOption = Annotated[
 ]
 
 
-TIME_FORMATS = ["%Y-%m-%d", "%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M:%S%z"]
-"""How a date and time may be typed at the command line: local time, or with its zone as the
-JSON reports write it (``2026-02-10T08:17:00+00:00``, copied from one)."""
+TIME_FORMATS = ["%Y-%m-%d", "%Y-%m-%dT%H:%M", "%Y-%m-%d %H:%M", "%Y-%m-%dT%H:%M:%S",
+                "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M:%S%z"]  # fmt: skip
+"""How a date and time may be typed at the command line: local time, to the minute as the
+reports show it (``2026-02-10 08:17``, copied from a table, and as a case file's times are
+read) or to the second, or with its zone as the JSON reports write it
+(``2026-02-10T08:17:00+00:00``). To the minute was refused before."""
 
 
 def typed_time(when: datetime | None) -> datetime | None:
