@@ -865,25 +865,47 @@ def nearest(
 
 
 def recorded_nearest(
-    source: str, shop, geometries, spectra, tolerance, count: int, texture, colour_code=None
+    source: str,
+    shop,
+    geometries,
+    spectra,
+    tolerance,
+    count: int,
+    texture,
+    colour_code=None,
+    cases: list | None = None,
 ):
     """The ``count`` recorded cases of ``source`` (a database, or a case file; ``shop``'s, of
     ``colour_code``, where given) whose spray-outs lie closest to ``spectra`` at
     ``geometries``, and how many were searched; a database gives only its spray-outs until
-    the nearest are known."""
-    from flakelab.cases.case import cases_at
+    the nearest are known. ``cases``: those cases, where the caller read them whole already
+    (:func:`recorded_cases`)."""
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file
     from flakelab.cases.nearest import nearest_cases, nearest_stored_cases
-    from flakelab.cli.sources import load_cases
 
-    if is_case_file(Path(source)):
-        cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
+    if cases is None and is_case_file(Path(source)):
+        cases = recorded_cases(source, shop, geometries, colour_code)
+    if cases is not None:
         found = nearest_cases(spectra, cases, tolerance, count, texture) if cases else []
         return found, len(cases)
     engine = open_database(source, must_exist=True)
     return nearest_stored_cases(engine, spectra, tuple(geometries), tolerance, count, shop=shop,
                                 colour_code=colour_code, target_texture=texture)  # fmt: skip
+
+
+def recorded_cases(source: str, shop, geometries, colour_code=None) -> list:
+    """The recorded cases of ``source`` (a case file, or a database that must exist;
+    ``shop``'s, of ``colour_code``, where given) read at ``geometries``, restricted to them."""
+    from flakelab.cases.case import cases_at
+    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.exchange import is_case_file
+    from flakelab.cli.sources import load_cases
+
+    if is_case_file(Path(source)):
+        return cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
+    engine = open_database(source, must_exist=True)
+    return cases_at(iter_cases(engine, shop=shop, colour_code=colour_code), geometries)
 
 
 def _print_nearest(report: dict) -> None:

@@ -59,7 +59,6 @@ from flakelab.cli.sources import (
     colour_code_hint_in,
     colour_code_spelled,
     database_option,
-    load_cases,
     workplace_shop,
 )
 from flakelab.cli.weigh import can_size, can_text, rounding_text, weighed_recipe, weights_table
@@ -341,13 +340,17 @@ def match_command(
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
     nearest = nearest or (NEAREST_OF_A_CODE if colour_code else 0)
     recorded = {}
+    coded = None  # a code's cases, read whole once: its nearest recipes and its variants
     if nearest:  # before the search: a database that is not there is refused before the wait
         from flakelab.cases.nearest import recorded_recipes
-        from flakelab.cli.cases import recorded_nearest
+        from flakelab.cli.cases import recorded_cases, recorded_nearest
 
-        found, searched = recorded_nearest(database or default_url(), shop, forward.geometries,
-                                           spectra, tol, nearest, measurement.texture,
-                                           colour_code)  # fmt: skip
+        source = database or default_url()
+        if colour_code:
+            coded = recorded_cases(source, shop, forward.geometries, colour_code)
+        found, searched = recorded_nearest(source, shop, forward.geometries, spectra, tol,
+                                           nearest, measurement.texture, colour_code,
+                                           cases=coded)  # fmt: skip
         recorded = recorded_recipes(found, forward.toners)
     result = match(
         measurement,
@@ -367,9 +370,8 @@ def match_command(
         _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward,
                               colour_code)  # fmt: skip
         _mark_recorded(report, recorded, forward.toners)
-    if colour_code and found:
-        _add_car_variant(report, database or default_url(), shop, colour_code,
-                         forward.geometries, spectra, tol)  # fmt: skip
+    if coded:
+        _add_car_variant(report, database or default_url(), coded, spectra, tol)
     if average:
         add_readings_spread(report, "target_readings", readings, measurement, tol)
     extra = []
@@ -450,16 +452,14 @@ def _add_recorded_nearest(
         )
 
 
-def _add_car_variant(report: dict, source: str, shop, colour_code: str, geometries, spectra,
-                     tolerance) -> None:  # fmt: skip
-    """``--colour-code``: the variant of the code among the shop's cars (``cases variants``;
-    its newest :data:`VARIANT_CARS`) whose centre car the target lies nearest, into
+def _add_car_variant(report: dict, source: str, cases: list, spectra, tolerance) -> None:
+    """``--colour-code``: the variant of the code among the shop's cars (``cases`` of the
+    code read in ``source``, at the model's geometries; their newest :data:`VARIANT_CARS`,
+    as ``cases variants`` groups them) whose centre car the target lies nearest, into
     ``report``."""
-    from flakelab.cases.case import cases_at
     from flakelab.cases.variants import colour_variants
     from flakelab.cli.codes import car_from_variants
 
-    cases = cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
     grouped = sorted(cases, key=lambda case: case.created_at)[-VARIANT_CARS:]
     found = colour_variants(grouped, tolerance)
     rows, k = car_from_variants(found, spectra, tolerance)
