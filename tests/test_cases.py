@@ -630,7 +630,7 @@ def test_a_shops_own_model_is_registered_under_the_longest_shop_name(cases, data
     engine = create_engine(database_url)
     migrate(engine, "0002")
     model, held = shipped_model("five-angle"), case_arrays(cases, read_library(None).names)
-    register(engine, model, held)
+    _store_before_0008(engine, model)
     engine.dispose()
     engine = open_database(database_url)
     shop = "s" * TEXT_LENGTHS["shop"]
@@ -1080,6 +1080,8 @@ def test_an_error_no_stored_value_explains_is_not_blamed_on_the_database(cases, 
     ("column", "value", "said"),
     [
         ("created_at", "x", "model 'five-angle' (row 1): created_at: cannot be read as DATETIME"),
+        ("cases_read_at", "x", "model 'five-angle' (row 1): cases_read_at: cannot be read as "
+                               "DATETIME"),
         ("toners", "5", "model 'five-angle' v1: toners: expected a list of toner names, got 5"),
         ("name", b"ab", "model b'ab' (row 1): name: cannot be read as VARCHAR(200) (expected "
                         "text, got bytes)"),
@@ -1402,6 +1404,24 @@ def _register_a_model(args):
     return register(engine, model, data)["version"]
 
 
+def _models_before_0008():
+    """The registry's table as the schemas before 0008 hold it: without ``cases_read_at``."""
+    import sqlalchemy as sa
+
+    columns = [sa.column(c.name, c.type) for c in ModelRow.__table__.c if c.name != "cases_read_at"]
+    return sa.table("models", *columns)
+
+
+def _store_before_0008(engine, model) -> None:
+    """``model`` stored as five-angle v1, a candidate, in a registry older than 0008, as
+    'flakelab train' of that release stored it."""
+    stored = {"name": "five-angle", "version": 1, "instrument": "five-angle", "toners": [],
+              "status": "candidate", "data_hash": "", "metrics": {}, "held_out_de00": 0.6,
+              "artefact": model.to_bytes(), "created_at": datetime.now(UTC)}  # fmt: skip
+    with engine.begin() as connection:
+        connection.execute(_models_before_0008().insert().values(stored))
+
+
 def test_versions_stored_twice_are_numbered_afresh_by_the_migration(cases, database_url):
     """A database whose registrations clashed before 0006 (two rows of one version, two
     promoted) keeps every row: the later takes the next number, the last promoted stays."""
@@ -1411,8 +1431,8 @@ def test_versions_stored_twice_are_numbered_afresh_by_the_migration(cases, datab
     engine = create_engine(database_url)
     migrate(engine, "0005")
     model, held = shipped_model("five-angle"), case_arrays(cases, read_library(None).names)
-    register(engine, model, held)  # version 1
-    models = ModelRow.__table__
+    _store_before_0008(engine, model)  # version 1
+    models = _models_before_0008()
     with engine.begin() as connection:  # as a clash stored them
         row = dict(connection.execute(models.select()).mappings().one())
         del row["id"]

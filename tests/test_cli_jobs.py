@@ -101,6 +101,72 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     )
 
 
+def test_a_nightly_training_runs_only_once_enough_new_cases_came_in(tmp_path, cli):
+    """'train --when-new N' (a job run on a schedule) trains where the database has stored N
+    cases at the instrument's geometries since the newest registered version read its cases,
+    whatever their own times (an imported history's); else it says how many and stops."""
+    from datetime import UTC, datetime
+
+    from flakelab.cases.database import count_stored_since
+
+    database = str(tmp_path / "shop.db")
+    nightly = ("train", database, "-d", database, "--epochs", "1", "--hidden", "8", "--json")
+    assert cli("cases", "generate", "--n", "120", "--seed", "5", "-o", database).returncode == 0
+    before = datetime.now(UTC)
+    run = cli(*nightly, "--when-new", "50")  # none registered: every case is new
+    assert run.returncode == 0, run.stderr
+    first = json.loads(run.stdout)
+    assert first["when_new"]["new_cases"] is None and first["registry"]["version"] == 1
+    listed = json.loads(cli("model", "list", "-d", database, "--json").stdout)["registered"]
+    read_at = datetime.fromisoformat(listed[0]["cases_read_at"])
+    registered = datetime.fromisoformat(listed[0]["created_at"])
+    assert before <= read_at < registered  # before it trained
+    run = cli(*nightly, "--when-new", "50")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout) == {
+        "trained": False,
+        "when_new": {"when_new": 50, "model": "five-angle", "since_version": 1,
+                     "since": read_at.isoformat(), "since_what": "cases read",
+                     "new_cases": 0},
+    }  # fmt: skip
+    history = tmp_path / "history.csv"  # cases made before, brought in now
+    assert cli("cases", "generate", "--n", "30", "--seed", "6", "-o", history).returncode == 0
+    assert cli("cases", "import", history, "-d", database).returncode == 0
+    for instrument in ("byk-mac-i", "ma-t12"):  # both read the five-angle geometries too
+        run = cli("cases", "generate", "--n", "15", "--seed", "7", "-i", instrument, "-o", database)
+        assert run.returncode == 0, run.stderr
+    engine = open_database(database)
+    assert count_stored_since(engine, read_at, INSTRUMENT_GEOMETRIES["five-angle"]) == 60
+    assert count_stored_since(engine, read_at, INSTRUMENT_GEOMETRIES["ma-t12"]) == 15
+    run = cli("train", database, "-d", database, "--epochs", "1", "--when-new", "61")
+    assert run.returncode == 0, run.stderr
+    said = " ".join(run.stdout.split())
+    assert "60 cases at the five-angle's geometries stored since five-angle v1 read its" in said
+    assert "fewer than --when-new 61: nothing trained" in said
+    listed = json.loads(cli("model", "list", "-d", database, "--json").stdout)["registered"]
+    assert [m["version"] for m in listed] == [1]
+    run = cli(*nightly, "--when-new", "60")
+    assert run.returncode == 0, run.stderr
+    second = json.loads(run.stdout)
+    assert second["when_new"]["new_cases"] == 60 and second["registry"]["version"] == 2
+    assert second["cases"] + second["held_out"]["cases"] == 120 + 60
+    # a model file trained elsewhere counts from its registration
+    elsewhere = tmp_path / "elsewhere.pt"
+    run = cli("train", history, "--epochs", "1", "--no-register", "-o", elsewhere)
+    assert run.returncode == 0, run.stderr
+    assert cli("model", "register", elsewhere, "-d", database).returncode == 0
+    gate = json.loads(cli(*nightly, "--when-new", "1").stdout)["when_new"]
+    listed = json.loads(cli("model", "list", "-d", database, "--json").stdout)["registered"]
+    assert gate["since_version"] == 3 and gate["new_cases"] == 0
+    assert gate["since_what"] == "registration"
+    assert listed[-1]["cases_read_at"] is None
+    registered = datetime.fromisoformat(listed[-1]["created_at"])  # in UTC, with its zone
+    assert datetime.fromisoformat(gate["since"]) == registered
+    # a case file has no time its cases were stored: refused, naming it
+    run = cli("train", history, "-d", database, "--when-new", "10")
+    assert run.returncode == 2 and "is a case file" in run.stderr and str(history) in run.stderr
+
+
 def test_a_model_promoted_in_the_user_data_folder_is_the_current_one(tmp_path, cli, monkeypatch):
     """'flakelab train' registers in the user data folder's database when none is named, and
     what it promotes there is the model 'match' and the others use without --database (they

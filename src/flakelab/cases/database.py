@@ -58,6 +58,7 @@ __all__ = [
     "add_new_cases",
     "iter_cases",
     "count_cases",
+    "count_stored_since",
     "case_exists",
     "existing_case_ids",
     "user_database_file",
@@ -804,6 +805,23 @@ def count_cases(
     query = _chosen(select(func.count(CaseRow.id)), shop, since, colour_code)
     with Session(engine) as session:
         return int(session.scalar(query) or 0)
+
+
+def count_stored_since(engine: Engine, since: datetime, geometries: Iterable[str]) -> int:
+    """How many cases were stored in the database (recorded, imported or generated into it)
+    at or after ``since`` (without a zone: UTC), read at every one of ``geometries``: those a
+    model whose training read the database at ``since`` has not seen, whatever their own
+    time (an imported history's cases were made long before)."""
+    stored = CaseRow.updated_at >= zoned_here(since).astimezone(UTC)  # a case's storing
+    query = select(CaseRow.case_id, CaseRow.geometries).where(stored)
+    wanted, count = set(geometries), 0
+    with reading_rows(engine) as session:
+        for case_id, names in session.execute(query):
+            try:
+                count += wanted <= set(_geometry_names(names))
+            except CaseError as error:
+                raise _in_case(engine, case_id, error) from None
+    return count
 
 
 def _chosen(query, shop: str | None, since: datetime | None, colour_code: str | None):

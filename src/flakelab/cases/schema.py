@@ -150,6 +150,8 @@ class ModelRow(Base):
     held_out_de00: Mapped[float] = mapped_column(KeptFloat)
     artefact: Mapped[bytes] = mapped_column(LargeBinary)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    # when its training read its cases; None where not known (migration 0008)
+    cases_read_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
 
 
 class HabitsRow(Base):

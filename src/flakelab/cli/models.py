@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -275,6 +276,17 @@ def train(
             "once the command is done.",
         ),
     ] = None,
+    when_new: Annotated[
+        int | None,
+        typer.Option(
+            "--when-new",
+            min=1,
+            help="Train only where CASES, a database, has stored at least this many cases at "
+            "the instrument's geometries since the newest version registered (in --database) "
+            "read its cases; else say how many and stop (exit 0): a nightly job retrains as "
+            "the shop's cases come in.",
+        ),
+    ] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Train the learned forward model with the hybrid paper's protocol.
@@ -306,6 +318,11 @@ def train(
     lib = read_library(library)
     instrument = instrument_key(instrument)
     geometries = INSTRUMENT_GEOMETRIES[instrument]
+    read_at = datetime.now(UTC)  # before reading: a case stored while it trains is new next time
+    gate = when_new and _new_cases(cases, database, register_model, instrument, when_new)
+    if gate and gate["new_cases"] is not None and gate["new_cases"] < when_new:
+        _print_not_trained(cases, instrument, gate, json_output)
+        return
     loaded = load_cases(cases)
     chosen = cases_at(loaded, geometries)
     if not chosen:
@@ -356,9 +373,13 @@ def train(
     summary["cases_with_tins"] = int(tinned.sum())
     if kept:
         summary["stages_resumed"] = resumed  # kept by an earlier, interrupted run
+    if gate:
+        summary["when_new"] = gate
     engine = open_database(database) if register_model else None
     if engine is not None:
-        summary["registry"] = register(engine, model, held_out, metrics=summary["held_out"])
+        summary["registry"] = register(
+            engine, model, held_out, metrics=summary["held_out"], cases_read_at=read_at
+        )
     log = report["log"]
     if adapt is not None:
         shop_held_out = held_out.of_shop(adapt)
@@ -373,6 +394,7 @@ def train(
                 shop_held_out,
                 shop=adapt,
                 metrics=summary["adaptation"]["held_out"],
+                cases_read_at=read_at,
             )
         log = log + adaptation["log"]
         model = shop_model  # --out: the shop's model
@@ -388,6 +410,51 @@ def train(
         print_report(summary, default=str)
         return
     console.print_json(json.dumps(summary, default=str))
+
+
+def _new_cases(cases: str, database: str | None, register: bool, instrument: str,
+               when_new: int) -> dict:  # fmt: skip
+    """``train --when-new``: how many cases the database ``cases`` stored at ``instrument``'s
+    geometries since the newest version registered as its model read its cases (None where
+    none is: every case is new)."""
+    from flakelab.cases.database import count_stored_since, open_database
+    from flakelab.cases.exchange import is_case_file
+    from flakelab.models.registry import newest_training, shop_model_name
+
+    if is_case_file(Path(cases)):
+        raise FlakelabError(
+            f"--when-new: counts the cases a database stored since the last training; {cases} "
+            "is a case file (import it: 'flakelab cases import')"
+        )
+    registry = open_database(database) if register else existing_engine(database)
+    name = shop_model_name(instrument)
+    newest = registry and newest_training(registry, name)
+    gate: dict[str, Any] = {"when_new": when_new, "model": name, "since_version": None}
+    if not newest:
+        return gate | {"new_cases": None}
+    version, read_at, known = newest
+    if "://" not in cases and not Path(cases).exists():
+        raise FlakelabError(f"{cases}: no such case file or database")
+    stored = count_stored_since(
+        open_database(cases, must_exist=True), read_at, INSTRUMENT_GEOMETRIES[instrument]
+    )
+    since = "cases read" if known else "registration"  # a model file trained elsewhere
+    return gate | {"since_version": version, "since": read_at.isoformat(), "since_what": since,
+                   "new_cases": stored}  # fmt: skip
+
+
+def _print_not_trained(cases: str, instrument: str, gate: dict, json_output: bool) -> None:
+    """What ``train --when-new`` says where too few cases came in to train again."""
+    if json_output:
+        print_report({"trained": False, "when_new": gate})
+        return
+    console.print(
+        f"{hidden_passwords(cases)}: {counted(gate['new_cases'], 'case')} at the {instrument}'s "
+        f"geometries stored since {gate['model']} v{gate['since_version']} "
+        + ("read its cases" if gate["since_what"] == "cases read" else "was registered")
+        + f" ({shown_time(gate['since'])}), fewer than --when-new {gate['when_new']}: nothing "
+        "trained"
+    )
 
 
 def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
@@ -629,8 +696,8 @@ def _model_card_table(card: dict) -> Table:
         "network": f"{' × '.join(map(str, card['hidden']))} SiLU"
         + (f", an ensemble of {card['members']}" if card["members"] > 1 else "")
         + (f", log features (offset {card['log_offset']:g})" if card["log_offset"] else ""),
-        "trained on": f"{card['trained_cases']:,} cases ({card['outliers_dropped']} outliers "
-        f"dropped), data {card['data_hash'][:12]}"
+        "trained on": f"{card['trained_cases']:,} cases "
+        f"({counted(card['outliers_dropped'], 'outlier')} dropped), data {card['data_hash'][:12]}"
         if card["trained_cases"] is not None
         else "not recorded",
         "training": ", ".join(f"{k} {v}" for k, v in training.items()) or "not recorded",

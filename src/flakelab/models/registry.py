@@ -31,6 +31,7 @@ from flakelab.cases.database import (
 )
 from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_name
+from flakelab.core.times import zoned
 from flakelab.core.wording import database_label
 from flakelab.models.network import ForwardModel, ModelError
 
@@ -53,6 +54,7 @@ __all__ = [
     "current_model_and_source",
     "registered_model",
     "held_already",
+    "newest_training",
     "model_card",
     "promote",
     "retire",
@@ -146,6 +148,7 @@ def list_models(engine: Engine, name: str | None = None, version: int | None = N
         ModelRow.toners,
         ModelRow.data_hash,
         ModelRow.created_at,
+        ModelRow.cases_read_at,
         func.length(ModelRow.artefact).label("size"),
     )
     query = select(*columns).order_by(ModelRow.name, ModelRow.version)
@@ -170,7 +173,8 @@ def list_models(engine: Engine, name: str | None = None, version: int | None = N
             "held_out_de00": r.held_out_de00,
             "toners": len(r.toners),
             "data_hash": r.data_hash[:12],
-            "created_at": r.created_at.isoformat(),
+            "created_at": zoned(r.created_at).isoformat(),  # SQLite keeps no zone: UTC
+            "cases_read_at": r.cases_read_at and zoned(r.cases_read_at).isoformat(),
             "size_kb": round(r.size / 1024, 1),
         }
         for r in rows
@@ -194,6 +198,21 @@ def _stored_model(engine: Engine, name: str, version: int, artefact: bytes) -> F
     """A registered version's model read from its stored artefact; one another tool or a
     hand damaged is named with the database, the name and the version."""
     return ForwardModel.from_bytes(artefact, f"{database_label(engine)}: {name} v{version}")
+
+
+def newest_training(engine: Engine, name: str) -> tuple[int, datetime, bool] | None:
+    """The newest version registered as ``name``, whatever its status (a candidate that did
+    not beat the current model learned the same cases), when its training read its cases, and
+    whether the registry knows that time (a version registered before migration 0008, or from
+    a file trained elsewhere, gives the time it was registered); None where none is."""
+    columns = (ModelRow.version, ModelRow.cases_read_at, ModelRow.created_at)
+    query = select(*columns).where(ModelRow.name == name).order_by(ModelRow.version.desc())
+    with _reading(engine) as session:
+        row = session.execute(query.limit(1)).first()
+    if row is None:
+        return None
+    read = row.cases_read_at is not None
+    return row.version, zoned(row.cases_read_at if read else row.created_at), read
 
 
 def held_already(engine: Engine, name: str, model: ForwardModel) -> str | None:
@@ -349,13 +368,15 @@ def register(
     name: str | None = None,
     shop: str | None = None,
     metrics: dict | None = None,
+    cases_read_at: datetime | None = None,
 ) -> dict:
     """Store ``model`` as a new version and promote it if it beats the current one (for
     ``shop``, a model adapted to its cases: :func:`shop_model_name`) on ``held_out``, judged
     on the cases whose toners both learned (the network's answer for a toner it never learned
     is no answer: the matcher has physics scale such toners) and neither learned from
-    (:func:`~flakelab.models.training.unseen_by`). Returns the version, both scores, the
-    cases judged and whether it was promoted.
+    (:func:`~flakelab.models.training.unseen_by`); ``cases_read_at``: when its training read
+    its cases (:func:`newest_training`). Returns the version, both scores, the cases judged
+    and whether it was promoted.
 
     Workplaces sharing a database may register at once: models are stored one at a time
     (:func:`_stored`), each version with a number of its own (the database refuses a second
@@ -378,6 +399,7 @@ def register(
             held_out_de00=score,
             artefact=artefact,
             created_at=datetime.now(UTC),
+            cases_read_at=cases_read_at and cases_read_at.astimezone(UTC),
         )
         version = _stored(engine, row, shop, serving)
         if version is not None:
