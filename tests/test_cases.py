@@ -1422,6 +1422,32 @@ def _store_before_0008(engine, model) -> None:
         connection.execute(_models_before_0008().insert().values(stored))
 
 
+def test_the_cases_stored_since_a_training_read_its_cases_are_counted(cases, database_url):
+    """'train --when-new' counts the cases stored after the newest version's training read
+    the database, at the instrument's geometries, whatever their own times; a version that
+    does not say when it read them counts from its registration."""
+    from flakelab.cases.database import count_stored_since
+    from flakelab.models.registry import newest_training, register, shipped_model
+    from flakelab.models.training import case_arrays
+
+    engine = open_database(database_url)
+    add_cases(engine, cases[:10])
+    assert newest_training(engine, "five-angle") is None
+    read_at = datetime.now(UTC)
+    model, held = shipped_model("five-angle"), case_arrays(cases, read_library(None).names)
+    register(engine, model, held, cases_read_at=read_at.astimezone(timezone(timedelta(hours=9))))
+    old = [replace(c, created_at=datetime(2025, 1, 2, tzinfo=UTC)) for c in cases[10:14]]
+    add_cases(engine, old)  # a history brought in: made long ago, stored now
+    five = INSTRUMENT_GEOMETRIES["five-angle"]
+    assert newest_training(engine, "five-angle") == (1, read_at, True)
+    assert count_stored_since(engine, read_at, five) == 4
+    assert count_stored_since(engine, read_at, INSTRUMENT_GEOMETRIES["ma-t12"]) == 0
+    assert count_stored_since(engine, datetime.now(UTC), five) == 0
+    register(engine, model, held)  # registered without the time: from a file
+    version, since, known = newest_training(engine, "five-angle")
+    assert (version, known) == (2, False) and read_at < since <= datetime.now(UTC)
+
+
 def test_versions_stored_twice_are_numbered_afresh_by_the_migration(cases, database_url):
     """A database whose registrations clashed before 0006 (two rows of one version, two
     promoted) keeps every row: the later takes the next number, the last promoted stays."""
