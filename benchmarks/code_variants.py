@@ -13,6 +13,7 @@ drawn the same way: the share within the tolerance of their nearest chip, agains
 alone (the car whose furthest car lies nearest).
 
     python benchmarks/code_variants.py [--formulations 10] [--cars 40] [--seed 5] [--json]
+    python benchmarks/code_variants.py --sizes 20000 [--json]
 """
 
 from __future__ import annotations
@@ -96,6 +97,11 @@ def main() -> None:
     parser.add_argument("--plant-sd", type=float, default=0.15)
     parser.add_argument("--apart", type=float, default=2.0)
     parser.add_argument("--seed", type=int, default=5)
+    parser.add_argument(
+        "--sizes",
+        default=",".join(map(str, SIZES)),
+        help="cars of one code to group, each size in turn (20000: about 5 min, 1 GB)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
@@ -149,7 +155,7 @@ def main() -> None:
             float(np.mean(coverage[within])), 3
         )
     report["next_cars_covered_by_one_chip"] = round(float(np.mean(coverage[ONE_CHIP])), 3)
-    for size in SIZES:
+    for size in (int(n) for n in args.sizes.split(",")):
         cars = cars_of(world, np.repeat(base[None], size, axis=0), rng)
         tracemalloc.start()
         start = time.perf_counter()

@@ -153,22 +153,44 @@ def _cover_at_once(shares: np.ndarray, within: float) -> list[int]:
 
 def test_the_cover_in_blocks_is_the_cover_at_once(monkeypatch):
     """Judged in blocks of a few pairs, as a code of thousands of cars is, every pair is
-    judged once and told to the progress, the shares are those of one block, and the cover
-    is the one the whole matrix at once gives, ties broken the same."""
+    judged once and told to the progress, the reach is the whole matrix's, and the cover, the
+    chip nearest each car and each group's centre are the ones the whole matrix of shares at
+    once gives, ties broken the same, though only the pairs within reach are kept and the
+    shares are judged again where needed."""
     from flakelab.cases import variants
 
     rng = np.random.default_rng(2)
     Lab = rng.normal([60.0, 0.0, 0.0], [0.4, 0.25, 0.25], (70, 5, 3))
     names = ("45as15", "45as25", "45as45", "45as75", "45as110")
-    whole = variants.pairwise_shares(Lab, names, TOLERANCE)
-    told: list[int] = []
+    whole = variants.worst_shares(Lab, Lab, names, TOLERANCE)
     monkeypatch.setattr(variants, "PAIRS_AT_ONCE", 150)  # two rows at once
-    blocked = variants.pairwise_shares(Lab, names, TOLERANCE, told.append)
-    np.testing.assert_allclose(blocked, whole, rtol=1e-12, atol=0)
-    assert len(told) == 35 and sum(told) == 70 * 71 // 2
+
+    def shares_of(rows, columns):
+        assert len(rows) * len(columns) <= 2 * max(150, len(columns))  # in blocks of about 150
+        return variants.worst_shares(Lab[rows], Lab[columns], names, TOLERANCE)
+
     for within in (0.7, 0.8, 1.0, 1.2):  # 26, 14, 4 and 2 centres
-        found = variants.covering_centres(whole, within)
+        told: list[int] = []
+        reach = variants.pairwise_reach(Lab, names, TOLERANCE, within, told.append)
+        assert len(told) == 35 and sum(told) == 70 * 71 // 2
+        np.testing.assert_array_equal(reach, whole <= within)
+        found = variants.covering_centres(reach, shares_of)
         assert found == _cover_at_once(whole, within) and 1 < len(found) < 70
+        nearest = variants._nearest_chip(70, found, shares_of)
+        np.testing.assert_array_equal(nearest, np.argmin(whole[:, found], axis=1))
+        for k in range(len(found)):
+            group = np.flatnonzero(nearest == k)
+            furthest = whole[np.ix_(group, group)].max(axis=1)
+            centre, spread = variants._centre(group, reach, shares_of)
+            assert centre == group[np.argmin(furthest)]
+            assert spread == pytest.approx(furthest.min(), rel=1e-12)
+    # a group that no car of it reaches whole (its chip gone to a chip alike) is judged whole
+    group = np.array([3, 17, 40])
+    reach = variants.pairwise_reach(Lab, names, TOLERANCE, 0.7)
+    assert not reach[np.ix_(group, group)].all(axis=1).any()
+    furthest = whole[np.ix_(group, group)].max(axis=1)
+    centre, spread = variants._centre(group, reach, shares_of)
+    assert (centre, spread) == (group[np.argmin(furthest)], pytest.approx(furthest.min()))
 
 
 def test_code_summary_counts_each_codes_cases_in_the_database(generated, database_url):

@@ -41,7 +41,8 @@ __all__ = [
     "car_from_centres",
     "colour_variants",
     "covering_centres",
-    "pairwise_shares",
+    "pairwise_reach",
+    "worst_shares",
     "variant_chips",
 ]
 
@@ -91,29 +92,41 @@ class ColourVariant:
         }
 
 
-def pairwise_shares(
+def worst_shares(
+    Lab_a: NDArray, Lab_b: NDArray, geometries: Sequence[str], tolerance: Tolerance
+) -> NDArray[np.float64]:
+    """Each car of CIELAB ``Lab_a`` ``[A, G, 3]`` against each of ``Lab_b`` ``[B, G, 3]``: the
+    worst geometry's share of ``tolerance``'s limit, ``[A, B]``, judged ``A × B`` pairs at
+    once (callers keep that to about :data:`PAIRS_AT_ONCE`)."""
+    de00, dLCH, _ = tolerance.judge(geometries, Lab_a[:, None], Lab_b[None, :])
+    return tolerance.share_of_limit(geometries, de00=de00, dLCH=dLCH).max(axis=-1)
+
+
+def pairwise_reach(
     Lab: NDArray,
     geometries: Sequence[str],
     tolerance: Tolerance,
+    within: float,
     progress: Callable[[int], None] | None = None,
-) -> NDArray[np.float64]:
-    """Every two cars' worst geometry's share of ``tolerance``'s limit, ``[N, N]``, of CIELAB
-    ``[N, G, 3]``. CIEDE2000 and the magnitudes of ΔL*, ΔC*, ΔH* that the limits bound are
-    the same whichever car of a pair is the standard, so each pair is judged once
-    (N (N + 1) / 2 pairs, told to ``progress`` block by block)."""
+) -> NDArray[np.bool_]:
+    """Whether each two cars of CIELAB ``[N, G, 3]`` lie within ``within`` of ``tolerance``'s
+    limit of each other, ``[N, N]``: a byte a pair (a code of 20,000 cars, 0.4 GB; their
+    shares, 3.2 GB), the shares judged again where the cover and the centres need them.
+    CIEDE2000 and the magnitudes of ΔL*, ΔC*, ΔH* that the limits bound are the same whichever
+    car of a pair is the standard, so each pair is judged once (N (N + 1) / 2 pairs, told to
+    ``progress`` block by block)."""
     n = len(Lab)
-    shares = np.empty((n, n))
+    reach = np.empty((n, n), dtype=bool)
     rows_at_once = max(1, min(ROWS_AT_ONCE, PAIRS_AT_ONCE // max(n, 1)))
     for start in range(0, n, rows_at_once):
         rows = slice(start, start + rows_at_once)
-        de00, dLCH, _ = tolerance.judge(geometries, Lab[rows, None], Lab[None, start:])
-        block = tolerance.share_of_limit(geometries, de00=de00, dLCH=dLCH).max(axis=-1)
-        shares[rows, start:] = block
-        shares[start:, rows] = block.T
+        block = worst_shares(Lab[rows], Lab[start:], geometries, tolerance) <= within
+        reach[rows, start:] = block
+        reach[start:, rows] = block.T
         if progress is not None:
             height = block.shape[0]  # its rows' pairs with themselves and the cars after
             progress(height * (n - start) - height * (height - 1) // 2)
-    return shares
+    return reach
 
 
 def colour_variants(
@@ -135,23 +148,29 @@ def colour_variants(
     if any(c.geometry_names != geometries for c in cases):
         raise CaseError("colour_variants: expected every case at the same geometries")
     Lab = reflectance_to_Lab(np.stack([c.target for c in cases]))
-    shares = pairwise_shares(Lab, geometries, tolerance, progress)
-    chips = covering_centres(shares, within)
-    nearest_chip = np.argmin(shares[:, chips], axis=1)
+
+    def shares_of(rows: NDArray, columns: NDArray) -> NDArray:
+        return worst_shares(Lab[rows], Lab[columns], geometries, tolerance)
+
+    reach = pairwise_reach(Lab, geometries, tolerance, within, progress)
+    chips = covering_centres(reach, shares_of)
+    nearest_chip = _nearest_chip(len(cases), chips, shares_of)
     groups = [np.flatnonzero(nearest_chip == k) for k in range(len(chips))]
     groups = [g for g in groups if g.size]  # two chips alike would leave one empty
     newest = np.array([c.created_at.timestamp() for c in cases])
     groups.sort(key=lambda g: (-len(g), -newest[g].max()))
-    centres = [g[np.argmin(shares[np.ix_(g, g)].max(axis=1))] for g in groups]
+    centred = [_centre(group, reach, shares_of) for group in groups]
+    del reach  # N² bytes, needed no more
+    centres = [centre for centre, _ in centred]
     de00, dLCH, _ = tolerance.judge(geometries, Lab[centres[0]], Lab[centres])
     variants = []
-    for k, (group, centre) in enumerate(zip(groups, centres, strict=True)):
+    for k, (group, (centre, spread)) in enumerate(zip(groups, centred, strict=True)):
         members = [cases[i] for i in sorted(group, key=lambda i: -newest[i])]
         variants.append(
             ColourVariant(
                 cases=tuple(members),
                 centre=cases[centre],
-                spread=float(shares[centre, group].max()),
+                spread=spread,
                 offset_de00=de00[k],
                 offset_dLCH=dLCH[k],
                 recipe=nearest_cases(cases[centre].target, members, tolerance, count=1)[0],
@@ -176,30 +195,72 @@ def car_from_centres(
     return de00, shares, passed.all(axis=1)
 
 
-def covering_centres(shares: NDArray, within: float) -> list[int]:
-    """Cars (indices of the distance matrix ``shares``) such that every car lies within
-    ``within`` of one: greedy set cover, each time the car within reach of the most cars not
-    yet covered, the one nearest them on a tie (Chvátal 1979: at most 1 + ln N times the
-    fewest there are)."""
-    reach = shares <= within
-    left = np.ones(len(shares), dtype=bool)
+SharesOf = Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray[np.float64]]
+"""The worst share of the limit of each car of ``rows`` against each of ``columns``."""
+
+
+def covering_centres(reach: NDArray[np.bool_], shares_of: SharesOf) -> list[int]:
+    """Cars (indices of ``reach``, :func:`pairwise_reach`) such that every car lies within
+    reach of one: greedy set cover, each time the car within reach of the most cars not yet
+    covered, on a tie the one nearest them: the least sum of their shares, judged again
+    (``shares_of``) for the tied cars alone (Chvátal 1979: at most 1 + ln N times the fewest
+    there are)."""
+    left = np.ones(len(reach), dtype=bool)
     centres: list[int] = []
-    cars = np.arange(len(shares))
+    cars = np.arange(len(reach))
     while left.any():  # in blocks of rows: no [N, N] temporary for each centre
         gain = np.concatenate(
             [np.count_nonzero(reach[rows] & left, axis=1) for rows in _blocks(cars, len(cars))]
         )
         best = np.flatnonzero(gain == gain.max())
-        nearness = np.concatenate(
-            [
-                np.where(reach[rows] & left, shares[rows], 0.0).sum(axis=1)
-                for rows in _blocks(best, len(cars))
-            ]
-        )
-        centre = int(best[np.argmin(nearness)])
-        centres.append(centre)
-        left &= ~reach[centre]
+        if best.size > 1:
+            near = np.flatnonzero(left & _reached_by(reach, best))
+            nearness = np.concatenate(
+                [
+                    np.where(reach[np.ix_(rows, near)], shares_of(rows, near), 0.0).sum(axis=1)
+                    for rows in _blocks(best, len(near))
+                ]
+            )
+            best = best[[np.argmin(nearness)]]
+        centres.append(int(best[0]))
+        left &= ~reach[centres[-1]]
     return centres
+
+
+def _reached_by(reach: NDArray[np.bool_], rows: NDArray[np.intp]) -> NDArray[np.bool_]:
+    """Whether any car of ``rows`` reaches each car, ``[N]``."""
+    reached = np.zeros(len(reach), dtype=bool)
+    for block in _blocks(rows, len(reach)):
+        reached |= reach[block].any(axis=0)
+    return reached
+
+
+def _nearest_chip(n: int, chips: Sequence[int], shares_of: SharesOf) -> NDArray[np.intp]:
+    """For each of the ``n`` cars, the chip (index into ``chips``) nearest it, the first on a
+    tie."""
+    cars, chips = np.arange(n), np.asarray(chips)
+    return np.concatenate(
+        [np.argmin(shares_of(rows, chips), axis=1) for rows in _blocks(cars, len(chips))]
+    )
+
+
+def _centre(
+    group: NDArray[np.intp], reach: NDArray[np.bool_], shares_of: SharesOf
+) -> tuple[int, float]:
+    """The car of ``group`` whose furthest member lies nearest, the first on a tie, and that
+    member's share. Every member lies within reach of the chip the group gathered around, so
+    the cars that reach the whole group (that chip among them) are the only ones judged:
+    every other car's furthest member lies beyond reach. A group that none reaches whole (its
+    chip went to another chip alike) is judged whole."""
+    whole = np.concatenate(
+        [reach[np.ix_(rows, group)].all(axis=1) for rows in _blocks(group, len(group))]
+    )
+    candidates = group[whole] if whole.any() else group
+    furthest = np.concatenate(
+        [shares_of(rows, group).max(axis=1) for rows in _blocks(candidates, len(group))]
+    )
+    k = int(np.argmin(furthest))
+    return int(candidates[k]), float(furthest[k])
 
 
 def chip_name(colour_code: str, number: int) -> str:
