@@ -167,6 +167,54 @@ def test_a_nightly_training_runs_only_once_enough_new_cases_came_in(tmp_path, cl
     assert run.returncode == 2 and "is a case file" in run.stderr and str(history) in run.stderr
 
 
+def test_a_nightly_training_interrupted_starts_again_once_more_cases_came_in(
+    tmp_path, cli, monkeypatch, ctrl_c
+):
+    """A training on a schedule cut short keeps its stages; cases stored before the next
+    night make it a training of other cases, which 'train --when-new' starts again (where a
+    training by hand refuses the file, naming the difference); the same cases go on."""
+    import flakelab.models.training as training
+
+    database, checkpoint = str(tmp_path / "shop.db"), tmp_path / "night.ckpt"
+    nightly = ("train", database, "-d", database, "--epochs", "1", "--hidden", "8", "--json",
+               "--when-new", "20", "--checkpoint", checkpoint)  # fmt: skip
+    assert cli("cases", "generate", "--n", "120", "--seed", "5", "-o", database).returncode == 0
+    fit_as_is = training.fit
+    monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 3))
+    assert cli(*nightly).returncode == 130 and checkpoint.exists()
+    monkeypatch.undo()
+    assert cli("cases", "generate", "--n", "30", "--seed", "6", "-o", database).returncode == 0
+    by_hand = cli("train", database, "--epochs", "1", "--hidden", "8", "--checkpoint", checkpoint)
+    assert by_hand.returncode == 2 and "the checkpoint of another training (other cases)" in (
+        " ".join(by_hand.stderr.split())
+    )
+    monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 1))  # before its first stage
+    run = cli(*nightly)
+    assert run.returncode == 130 and checkpoint.exists()
+    assert "still keeps a training of other cases, which the next run with --when-new" in (
+        " ".join(run.stderr.split())
+    )
+    monkeypatch.setattr(training, "fit", ctrl_c(fit_as_is, 3))
+    assert cli(*nightly).returncode == 130  # two stages of the 150 cases kept
+    monkeypatch.undo()
+    run = cli(*nightly)
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["stages_resumed"] == 2 and not report["checkpoint_of_other_cases_replaced"]
+    assert report["cases"] + report["held_out"]["cases"] == 150
+    assert report["registry"]["version"] == 1 and not checkpoint.exists()
+    fresh = cli("train", database, "--epochs", "1", "--hidden", "8", "--json", "--no-register",
+                "-o", tmp_path / "fresh.pt")  # fmt: skip
+    assert fresh.returncode == 0, fresh.stderr
+    resumed = cli("model", "show", "five-angle:1", "-d", database, "-o", tmp_path / "v1.pt")
+    assert resumed.returncode == 0, resumed.stderr
+    x = np.eye(35)[:5]
+    np.testing.assert_array_equal(
+        load_model_file(tmp_path / "v1.pt").predict(x)[0],
+        load_model_file(tmp_path / "fresh.pt").predict(x)[0],
+    )  # the stages kept for 120 cases played no part
+
+
 def test_a_model_promoted_in_the_user_data_folder_is_the_current_one(tmp_path, cli, monkeypatch):
     """'flakelab train' registers in the user data folder's database when none is named, and
     what it promotes there is the model 'match' and the others use without --database (they

@@ -284,7 +284,8 @@ def train(
             help="Train only where CASES, a database, has stored at least this many cases at "
             "the instrument's geometries since the newest version registered (in --database) "
             "read its cases; else say how many and stop (exit 0): a nightly job retrains as "
-            "the shop's cases come in.",
+            "the shop's cases come in. A --checkpoint kept for other cases (a night "
+            "interrupted before more came in) is started again.",
         ),
     ] = None,
     json_output: JsonOption = False,
@@ -337,12 +338,19 @@ def train(
     if adapt is not None:  # before the long training
         check_shop_split(cases, adapt, data, held_out)
         data, validation = withhold_for_adaptation(data, adapt, config)
-    kept = checkpoint and TrainingCheckpoint(checkpoint, config, data_hash(data))
+    # on a schedule, a checkpoint kept for fewer cases is of a training the cases came in after
+    other_cases = "restart" if gate else "refuse"
+    kept = checkpoint and TrainingCheckpoint(checkpoint, config, data_hash(data), other_cases)
     resumed = kept.stages if kept else 0
 
     def left() -> str:  # what a Ctrl-C leaves
         if not kept:
             return "nothing was written or registered (--checkpoint FILE keeps a training's stages)"
+        if not kept.stages and kept.replaced:
+            return (
+                f"no stage was done: {kept.path} still keeps a training of other cases, which "
+                "the next run with --when-new starts again; nothing was written or registered"
+            )
         if not kept.stages:
             return f"no stage was done: {kept.path} keeps none; nothing was written or registered"
         return (
@@ -373,6 +381,7 @@ def train(
     summary["cases_with_tins"] = int(tinned.sum())
     if kept:
         summary["stages_resumed"] = resumed  # kept by an earlier, interrupted run
+        summary["checkpoint_of_other_cases_replaced"] = kept.replaced
     if gate:
         summary["when_new"] = gate
     engine = open_database(database) if register_model else None

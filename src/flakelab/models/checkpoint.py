@@ -31,19 +31,23 @@ CHECKPOINT_FORMAT = "flakelab-training-checkpoint"
 
 class TrainingCheckpoint:
     """The kept stages of one training (``config`` on cases of ``data_hash``) in ``path``;
-    an empty one where the file is not there yet."""
+    an empty one where the file is not there yet, or where it keeps the same training of
+    other cases and ``other_cases`` is "restart" (a training on a schedule: the cases came
+    in since it was interrupted; ``replaced`` then says so, and the first stage kept
+    replaces the file)."""
 
-    def __init__(self, path: str | PathLike, config, data_hash: str):
+    def __init__(self, path: str | PathLike, config, data_hash: str, other_cases: str = "refuse"):
         self.path = Path(path)
         self.key = {"config": asdict(config), "data_hash": data_hash}
         self.stages = 0
         self.log: list[dict] = []
         self.outliers: NDArray[np.bool_] | None = None
         self._states: list[dict] = []
+        self.replaced = False
         if self.path.exists():
-            self._read()
+            self._read(restart_for_other_cases=other_cases == "restart")
 
-    def _read(self) -> None:
+    def _read(self, restart_for_other_cases: bool) -> None:
         try:
             saved = torch.load(self.path, weights_only=True)
             meta = json.loads(saved["meta"])
@@ -56,6 +60,9 @@ class TrainingCheckpoint:
         if not _holds_a_training(meta, states):
             raise ModelError(f"{self.path}: not a flakelab training checkpoint")
         other = self._other_training(meta)
+        if other == "other cases" and restart_for_other_cases:
+            self.replaced = True
+            return
         if other:
             raise ModelError(
                 f"{self.path}: the checkpoint of another training ({other}); name another "
