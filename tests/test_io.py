@@ -761,6 +761,40 @@ def test_bad_recipe_files_name_file_toner_and_problem(tmp_path, text, problem):
         read_recipe(tmp_path / "missing.json")
 
 
+def test_a_document_given_to_the_wrong_reader_is_named(tmp_path):
+    """A flakelab JSON document given where another is read is refused naming what it is: a
+    recipe to 'inspect', a measurement file or a match report to '--recipe' (before, the
+    latter read "format: expected grams as a number, got 'flakelab-measurements'")."""
+    from flakelab.data import example_path
+    from flakelab.io import read_library, read_measurement, write_library, write_measurements
+    from flakelab.match.habits import HABITS_FORMAT
+
+    measured = tmp_path / "target.json"
+    write_measurements([read_measurement(example_path("target"))], measured)
+    library = tmp_path / "library.json"
+    write_library(read_library(None), library)
+    habits, report, recipe = tmp_path / "habits.json", tmp_path / "m.json", tmp_path / "r.json"
+    habits.write_text(json.dumps({"format": HABITS_FORMAT, "version": 1, "shop": "A"}))
+    report.write_text(json.dumps({"target": "car", "candidates": []}))
+    recipe.write_text(json.dumps({"Al medium": 194.0, "Carbon black": 3.6}))
+    for path, kind in [(recipe, "a recipe file, toner → grams (--recipe)"),
+                       (library, "a toner library (--library)"),
+                       (habits, "a shop's habits (--habits)"),
+                       (report, "a report of 'flakelab match --json'")]:  # fmt: skip
+        with pytest.raises(MeasurementFileError) as raised:
+            read_measurements(path)
+        assert f"format 'flakelab-measurements'; this is {kind}" in str(raised.value)
+    for path, kind in [(measured, "a measurement file"), (report, "a report of 'flakelab")]:
+        with pytest.raises(FlakelabError, match=f"toner → grams; this is {re.escape(kind)}"):
+            read_recipe(path)
+    assert read_recipe(recipe) == {"Al medium": 194.0, "Carbon black": 3.6}
+    unknown = tmp_path / "other.json"
+    unknown.write_text(json.dumps({"format": "someone-elses", "x": 1}))
+    with pytest.raises(MeasurementFileError) as raised:
+        read_measurements(unknown)
+    assert str(raised.value).endswith("expected a JSON object with format 'flakelab-measurements'")
+
+
 def test_the_cielab_limit_holds_every_reflectance_a_file_may_hold():
     """LAB_LIMIT follows from REFLECTANCE_RANGE: a flat factor of 100 reads L* 522.4
     (116 · 100^⅓ − 16), and no spectrum of factors at either end of the range, band by band

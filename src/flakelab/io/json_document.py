@@ -19,6 +19,7 @@ from os import PathLike
 from typing import Any
 
 from flakelab.core.defaults import DEFAULT_CONDITIONS
+from flakelab.core.documents import MEASUREMENTS_FORMAT, document_kind
 from flakelab.core.measurement import Measurement
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
@@ -37,7 +38,7 @@ from flakelab.io.records import (
 
 __all__ = ["read_json", "write_json", "FORMAT_NAME"]
 
-FORMAT_NAME = "flakelab-measurements"
+FORMAT_NAME = MEASUREMENTS_FORMAT
 FORMAT_VERSION = 1
 
 
@@ -67,7 +68,12 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
             path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"
         ) from None
     if not isinstance(document, dict) or document.get("format") != FORMAT_NAME:
-        raise MeasurementFileError(path, f"expected a JSON object with format {FORMAT_NAME!r}")
+        kind = document_kind(document)
+        raise MeasurementFileError(
+            path,
+            f"expected a JSON object with format {FORMAT_NAME!r}"
+            + (f"; this is {kind}" if kind else ""),
+        )
     if document.get("version", FORMAT_VERSION) != FORMAT_VERSION:  # a later flakelab's file
         raise MeasurementFileError(
             path,

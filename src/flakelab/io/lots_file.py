@@ -29,6 +29,7 @@ from dataclasses import asdict, fields
 from os import PathLike
 from pathlib import Path
 
+from flakelab.core.documents import LOTS_FORMAT
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.io.records import read_json_file, write_atomically
@@ -37,7 +38,6 @@ from flakelab.library.lots import TonerLot, TonerLots
 
 __all__ = ["LOTS_FORMAT", "read_lots", "write_lots", "lots_document", "lots_from_document"]
 
-LOTS_FORMAT = "flakelab-toner-lots"
 _VERSION = 3
 _READS = (1, 2, 3)
 _TEXT_FIELDS = ("toner", "lot", "calibrated", "model_id")

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 
+from flakelab.core.documents import document_kind
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.io.records import read_json_file, write_atomically
@@ -29,6 +30,9 @@ def read_recipe(path: str | PathLike) -> dict[str, float]:
     grams = read_json_file(path, "recipe file", "a JSON object toner → grams")
     if not isinstance(grams, dict) or not grams:
         raise FlakelabError(f"{path}: expected a JSON object toner → grams with at least one toner")
+    kind = document_kind(grams)
+    if kind and not kind.startswith("a recipe file"):
+        raise FlakelabError(f"{path}: expected a JSON object toner → grams; this is {kind}")
     for toner, amount in grams.items():
         if not is_number(amount):
             raise FlakelabError(f"{path}: {toner}: expected grams as a number, got {amount!r}")

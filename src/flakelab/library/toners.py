@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core import wording
+from flakelab.core.documents import LIBRARY_FORMAT
 from flakelab.core.geometry import N_BINDER
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
@@ -446,7 +447,7 @@ class Library:
             return data
 
         return {
-            "format": "flakelab-library",
+            "format": LIBRARY_FORMAT,
             "version": 1,
             "name": self.name,
             "synthetic": self.synthetic,
@@ -463,9 +464,9 @@ class Library:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "library") -> Library:
         """Build and check a library from its file structure (see :meth:`to_dict`)."""
-        if data.get("format") != "flakelab-library":
+        if data.get("format") != LIBRARY_FORMAT:
             raise LibraryError(
-                f"{source}: expected format 'flakelab-library', got {data.get('format')!r}"
+                f"{source}: expected format {LIBRARY_FORMAT!r}, got {data.get('format')!r}"
             )
         wavelengths = data.get("wavelengths", WAVELENGTHS.tolist())
         if not _is_storage_grid(wavelengths):

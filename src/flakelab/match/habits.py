@@ -61,6 +61,7 @@ from flakelab.cases.database import DatabaseError, reading_rows, write_transacti
 from flakelab.cases.schema import HabitsRow
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.documents import SHOP_HABITS_FORMAT
 from flakelab.core.units import is_number
 from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError, MeasurementFileError
@@ -95,7 +96,7 @@ __all__ = [
     "list_habits",
 ]
 
-HABITS_FORMAT = "flakelab-shop-habits"
+HABITS_FORMAT = SHOP_HABITS_FORMAT
 """The ``format`` of a habits file: the JSON of :meth:`ShopHabits.report` with ``shop``."""
 
 MIN_HABIT_CASES = 20
