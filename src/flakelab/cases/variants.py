@@ -139,7 +139,7 @@ def colour_variants(
     within ``within`` of ``tolerance``'s limit of its variant's centre car, as few variants as
     the greedy cover finds; most cars first (the main variant), then newest first; each
     variant's cases newest first. ``progress`` is told the pairs of cars judged
-    (:func:`pairwise_shares`)."""
+    (:func:`pairwise_reach`)."""
     if not cases:
         raise CaseError("no cases to group into variants")
     if not within > 0:
@@ -213,6 +213,7 @@ def covering_centres(reach: NDArray[np.bool_], shares_of: SharesOf) -> list[int]
             [np.count_nonzero(reach[rows] & left, axis=1) for rows in _blocks(cars, len(cars))]
         )
         best = np.flatnonzero(gain == gain.max())
+        centre = int(best[0])
         if best.size > 1:
             near = np.flatnonzero(left & _reached_by(reach, best))
             nearness = np.concatenate(
@@ -221,9 +222,9 @@ def covering_centres(reach: NDArray[np.bool_], shares_of: SharesOf) -> list[int]
                     for rows in _blocks(best, len(near))
                 ]
             )
-            best = best[[np.argmin(nearness)]]
-        centres.append(int(best[0]))
-        left &= ~reach[centres[-1]]
+            centre = int(best[np.argmin(nearness)])
+        centres.append(centre)
+        left &= ~reach[centre]
     return centres
 
 

@@ -34,6 +34,7 @@ from flakelab.cli.sources import (
     ShopModelOption,
     SinceOption,
     UnseenOption,
+    case_database,
     chosen_model,
     existing_engine,
     instrument_key,
@@ -339,8 +340,9 @@ def train(
         check_shop_split(cases, adapt, data, held_out)
         data, validation = withhold_for_adaptation(data, adapt, config)
     # on a schedule, a checkpoint kept for fewer cases is of a training the cases came in after
-    other_cases = "restart" if gate else "refuse"
-    kept = checkpoint and TrainingCheckpoint(checkpoint, config, data_hash(data), other_cases)
+    kept = checkpoint and TrainingCheckpoint(
+        checkpoint, config, data_hash(data), restart_other_cases=bool(gate)
+    )
     resumed = kept.stages if kept else 0
 
     def left() -> str:  # what a Ctrl-C leaves
@@ -442,11 +444,7 @@ def _new_cases(cases: str, database: str | None, register: bool, instrument: str
     if not newest:
         return gate | {"new_cases": None}
     version, read_at, known = newest
-    if "://" not in cases and not Path(cases).exists():
-        raise FlakelabError(f"{cases}: no such case file or database")
-    stored = count_stored_since(
-        open_database(cases, must_exist=True), read_at, INSTRUMENT_GEOMETRIES[instrument]
-    )
+    stored = count_stored_since(case_database(cases), read_at, INSTRUMENT_GEOMETRIES[instrument])
     since = "cases read" if known else "registration"  # a model file trained elsewhere
     return gate | {"since_version": version, "since": read_at.isoformat(), "since_what": since,
                    "new_cases": stored}  # fmt: skip

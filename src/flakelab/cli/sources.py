@@ -247,16 +247,24 @@ def load_cases(
     any time, any colour) in a CSV/CxF file, or in a database (URL or .db/.sqlite file),
     which chooses them itself."""
     from flakelab.cases.case import select_cases
-    from flakelab.cases.database import iter_cases, open_database
+    from flakelab.cases.database import iter_cases
     from flakelab.cases.exchange import is_case_file, read_cases
 
     path = Path(source)
     if is_case_file(path):
         return select_cases(read_cases(path), shop=shop, since=since, colour_code=colour_code)
-    if "://" not in source and not path.exists():
-        raise FlakelabError(f"{source}: no such case file or database")
-    engine = open_database(source, must_exist=True)
+    engine = case_database(source)
     return list(iter_cases(engine, shop=shop, since=since, colour_code=colour_code))
+
+
+def case_database(source: str):
+    """The database of cases ``source`` names (a URL, or a .db/.sqlite file that must be
+    there: a name of neither is no case file or database)."""
+    from flakelab.cases.database import open_database
+
+    if "://" not in source and not Path(source).exists():
+        raise FlakelabError(f"{source}: no such case file or database")
+    return open_database(source, must_exist=True)
 
 
 def colour_code_hint_in(source, shop: str | None, colour_code: str | None) -> str:

@@ -11,6 +11,7 @@ __all__ = [
     "LIBRARY_FORMAT",
     "LOTS_FORMAT",
     "MEASUREMENTS_FORMAT",
+    "RECIPE_KIND",
     "SHOP_HABITS_FORMAT",
     "document_kind",
 ]
@@ -19,6 +20,9 @@ MEASUREMENTS_FORMAT = "flakelab-measurements"
 LIBRARY_FORMAT = "flakelab-library"
 LOTS_FORMAT = "flakelab-toner-lots"
 SHOP_HABITS_FORMAT = "flakelab-shop-habits"
+
+RECIPE_KIND = "a recipe file, toner → grams (--recipe)"
+"""What :func:`document_kind` calls a recipe file, which names no format."""
 
 _KINDS = {
     MEASUREMENTS_FORMAT: "a measurement file",
@@ -39,5 +43,5 @@ def document_kind(document: object) -> str:
     if {"target", "candidates"} <= document.keys():
         return "a report of 'flakelab match --json' ('match --recipe-out' writes a recipe file)"
     if all(isinstance(v, Real) and not isinstance(v, bool) for v in document.values()):
-        return "a recipe file, toner → grams (--recipe)"
+        return RECIPE_KIND
     return ""

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 
-from flakelab.core.documents import document_kind
+from flakelab.core.documents import RECIPE_KIND, document_kind
 from flakelab.core.units import is_number
 from flakelab.errors import FlakelabError
 from flakelab.io.records import read_json_file, write_atomically
@@ -31,7 +31,7 @@ def read_recipe(path: str | PathLike) -> dict[str, float]:
     if not isinstance(grams, dict) or not grams:
         raise FlakelabError(f"{path}: expected a JSON object toner → grams with at least one toner")
     kind = document_kind(grams)
-    if kind and not kind.startswith("a recipe file"):
+    if kind not in ("", RECIPE_KIND):
         raise FlakelabError(f"{path}: expected a JSON object toner → grams; this is {kind}")
     for toner, amount in grams.items():
         if not is_number(amount):

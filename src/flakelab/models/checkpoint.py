@@ -32,11 +32,13 @@ CHECKPOINT_FORMAT = "flakelab-training-checkpoint"
 class TrainingCheckpoint:
     """The kept stages of one training (``config`` on cases of ``data_hash``) in ``path``;
     an empty one where the file is not there yet, or where it keeps the same training of
-    other cases and ``other_cases`` is "restart" (a training on a schedule: the cases came
-    in since it was interrupted; ``replaced`` then says so, and the first stage kept
-    replaces the file)."""
+    other cases and ``restart_other_cases`` (a training on a schedule: the cases came in since
+    it was interrupted; ``replaced`` then says so, and the first stage kept replaces the
+    file)."""
 
-    def __init__(self, path: str | PathLike, config, data_hash: str, other_cases: str = "refuse"):
+    def __init__(
+        self, path: str | PathLike, config, data_hash: str, restart_other_cases: bool = False
+    ):
         self.path = Path(path)
         self.key = {"config": asdict(config), "data_hash": data_hash}
         self.stages = 0
@@ -45,9 +47,9 @@ class TrainingCheckpoint:
         self._states: list[dict] = []
         self.replaced = False
         if self.path.exists():
-            self._read(restart_for_other_cases=other_cases == "restart")
+            self._read(restart_other_cases)
 
-    def _read(self, restart_for_other_cases: bool) -> None:
+    def _read(self, restart_other_cases: bool) -> None:
         try:
             saved = torch.load(self.path, weights_only=True)
             meta = json.loads(saved["meta"])
@@ -60,7 +62,7 @@ class TrainingCheckpoint:
         if not _holds_a_training(meta, states):
             raise ModelError(f"{self.path}: not a flakelab training checkpoint")
         other = self._other_training(meta)
-        if other == "other cases" and restart_for_other_cases:
+        if other == "other cases" and restart_other_cases:
             self.replaced = True
             return
         if other:
