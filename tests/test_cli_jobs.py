@@ -812,6 +812,13 @@ def test_adaptation_runs_the_epochs_asked_for_on_the_shops_cases(tmp_path, cli):
     # refused before the training: a loss log in no folder
     run = cli("train", str(cases), "--no-register", "--loss-log", tmp_path / "no" / "l.csv")
     assert run.returncode == 2 and "--loss-log:" in run.stderr and "no folder" in run.stderr
+    # and a registry it could not store in: no stage of the training is kept
+    notes, kept = tmp_path / "notes.db", tmp_path / "training.ckpt"
+    notes.write_text("not a database\n")
+    run = cli("train", str(cases), "--epochs", "2", "--hidden", "8", "-d", notes,
+              "--checkpoint", kept)  # fmt: skip
+    assert run.returncode == 2 and f"{notes}: cannot open the database" in run.stderr
+    assert not kept.exists() and notes.read_text() == "not a database\n"
     run = cli("train", str(cases), "--no-register", "--adapt", "synthetic shop",
               "--adapt-epochs", "0")  # fmt: skip
     assert run.returncode != 0 and "--adapt-epochs" in run.stderr

@@ -339,6 +339,8 @@ def train(
     if adapt is not None:  # before the long training
         check_shop_split(cases, adapt, data, held_out)
         data, validation = withhold_for_adaptation(data, adapt, config)
+    # the registry before the long training: one it cannot store in is refused now, not after
+    engine = open_database(database) if register_model else None
     # on a schedule, a checkpoint kept for fewer cases is of a training the cases came in after
     kept = checkpoint and TrainingCheckpoint(
         checkpoint, config, data_hash(data), restart_other_cases=bool(gate)
@@ -386,7 +388,6 @@ def train(
         summary["checkpoint_of_other_cases_replaced"] = kept.replaced
     if gate:
         summary["when_new"] = gate
-    engine = open_database(database) if register_model else None
     if engine is not None:
         summary["registry"] = register(
             engine, model, held_out, metrics=summary["held_out"], cases_read_at=read_at
