@@ -102,12 +102,18 @@ def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path, 
     run = cli("compare", "--example", "--plot", tmp_path / "chart.bmp")
     assert run.returncode == 2 and "chart.bmp" in run.stderr and ".png" in run.stderr
     target = read_measurement(example_path("target"))
-    lit_at_15 = tmp_path / "lit-at-15.csv"  # nothing lit at 45°: no curve to draw
+    lit_at_15 = tmp_path / "lit-at-15.csv"  # nothing lit at 45°: drawn under the 15° lamp
     write_measurements([target.select([g for g in target.geometry_names if g[:2] == "15"])],
                        lit_at_15)  # fmt: skip
-    run = cli("compare", lit_at_15, lit_at_15, "--render", tmp_path / "none.png")
-    assert run.returncode == 2 and "--render" in run.stderr and "lit at 45°" in run.stderr
-    assert sorted(tmp_path.iterdir()) == [chart, lit_at_15, picture]
+    low = tmp_path / "low.png"
+    run = cli("compare", lit_at_15, lit_at_15, "--render", low)
+    assert run.returncode == 0 and imread(low).shape[2] in (3, 4), run.stderr
+    one_each = tmp_path / "one-each.csv"  # one geometry under each lamp: no curve to draw
+    write_measurements([target.select(["15as15", "45as45"])], one_each)
+    run = cli("compare", one_each, one_each, "--render", tmp_path / "none.png")
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 2 and "--render" in said and "a lamp at 45° needs two or" in said
+    assert sorted(tmp_path.iterdir()) == [chart, lit_at_15, low, one_each, picture]
 
 
 def test_compare_a_measurement_with_itself_passes_with_zero_difference(ma_t12_files, cli):

@@ -9,8 +9,11 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     Geometry,
     directions,
+    directions_at,
     flake_angles,
+    flake_angles_at,
     instrument_geometries,
+    parse_geometries,
     refract_into_coating,
 )
 
@@ -55,6 +58,18 @@ def test_flake_angles_symmetries():
     # θ_flake grows monotonically from specular toward the lamp (BYK-mac set)
     tilt = flake_angles(instrument_geometries("byk-mac-i")[1:])[0]
     assert np.all(np.diff(tilt) > 0)
+
+
+def test_flake_angles_of_angles_are_those_of_the_named_geometries():
+    """A curved panel's columns are geometries given by their angles, not names: the same
+    angles, in and out of plane, broadcast over one lamp and many columns."""
+    names = (*INSTRUMENT_GEOMETRIES["ma-t12"], "45as25az90", "45as25az-60")
+    geometries = parse_geometries(names)
+    angles = [[getattr(g, a) for g in geometries] for a in ("illumination", "aspecular", "azimuth")]
+    np.testing.assert_allclose(flake_angles_at(*angles), flake_angles(names))
+    np.testing.assert_allclose(directions_at(*angles), directions(names))
+    sweep = flake_angles_at(15.0, [-45.0, -30.0, -15.0, 15.0, 45.0, 80.0], n=1.4)
+    np.testing.assert_allclose(sweep, flake_angles(INSTRUMENT_GEOMETRIES["ma-t12"][:6], n=1.4))
 
 
 def test_refraction_follows_snell_and_keeps_unit_length():

@@ -10,19 +10,24 @@ import pytest
 from scipy.ndimage import gaussian_filter
 from scipy.stats import spearmanr
 
-from flakelab.core.colorimetry import linear_sRGB_to_Lab
+from flakelab.core.colorimetry import linear_sRGB_to_Lab, reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000 as delta_E00
+from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, flake_angles_at
 from flakelab.data import example_path
 from flakelab.io import read_measurement
 from flakelab.render.appearance import (
+    SPARKLE_ANGLES,
     _periodic_blur,
     appearance_of,
     cardinal_spline,
     compose,
+    glint_along,
+    lamps_of,
     parse_distance,
     render_curved,
     render_panel,
     render_stack,
+    render_under_lamps,
     texture_images,
 )
 from flakelab.texture.calibration import (
@@ -163,6 +168,57 @@ def test_curved_panel_shows_measured_colour_and_gloss(appearance):
     assert np.argmax(brightness) < 5  # the clearcoat's highlight sits at specular
 
 
+def test_an_ma_t12_reading_is_drawn_under_each_of_its_lamps():
+    """Under its 15° lamp, from the geometries that lamp lit, as under its 45° lamp: a colour
+    at 45° from specular is the 15as45 reading's, not the 45as45's."""
+    target = read_measurement(example_path("target"))  # the MA-T12's twelve geometries
+    five = target.select(INSTRUMENT_GEOMETRIES["five-angle"])
+    assert lamps_of(target) == (45.0, 15.0) and lamps_of(five) == (45.0,)
+    low = appearance_of(target, lamp=15)
+    lit = [g for g in target.geometry_names if g.startswith("15as")]
+    np.testing.assert_allclose(low.aspecular, [-45, -30, -15, 15, 45, 80])
+    np.testing.assert_allclose(low.Lab, reflectance_to_Lab(target.select(lit).reflectance))
+    image = render_curved(low, (8, 161), diffuse_fraction=0.0, texture=False, gloss=0.0)
+    columns = np.linspace(0, 80, 161)  # to the last angle the lamp lit
+    high = appearance_of(target)
+    for angle in (15.0, 45.0, 80.0):
+        got = linear_sRGB_to_Lab(image[0, int(np.argmin(abs(columns - angle)))])
+        assert delta_E00(got, low.Lab[list(low.aspecular).index(angle)]) < 0.5, angle
+    got = linear_sRGB_to_Lab(image[0, 90])  # 45°
+    assert delta_E00(got, high.Lab[list(high.aspecular).index(45.0)]) > 1.0
+    stacks = render_under_lamps([target, target], band_px=8, width_px=32, texture=False)
+    assert [(lamp, span) for _, span, lamp in stacks] == [(45.0, (0.0, 110.0)), (15.0, (0.0, 80.0))]
+    assert all(image.shape == (16, 32, 3) for image, _, _ in stacks)
+    assert [lamp for *_, lamp in render_under_lamps([target, five], band_px=8, width_px=32)] == [
+        45.0
+    ]
+    with pytest.raises(ValueError, match=r"a lamp at 30° needs .* it can be drawn under 45°, 15°"):
+        appearance_of(target, lamp=30)
+    one_each = target.select(["15as15", "45as45"])
+    with pytest.raises(ValueError, match="lamp at 45° needs two or more .* got 15as15, 45as45"):
+        render_under_lamps([one_each])
+
+
+def test_glint_is_placed_by_the_flake_tilt_the_texture_camera_saw(appearance):
+    """The camera reads each lamp's glint along the normal (15as15, 45as45, 75as75): a panel
+    under any lamp glints as the camera saw where its geometry needs the flake tilt the
+    camera's did (DESIGN.md §7), not at the same aspecular angle."""
+    from dataclasses import replace
+
+    from scipy.optimize import brentq
+
+    readings = replace(appearance, glint=np.array([1.0, 2.0, 3.0]))
+    for lamp, glint in zip(SPARKLE_ANGLES, readings.glint, strict=True):
+        under = replace(readings, lamp=lamp)
+        assert glint_along(under, np.array([lamp]))[0] == pytest.approx(glint)
+    # under the 45° lamp the 75° lamp's tilt (20°) is reached 62° from specular
+    tilt = flake_angles_at(75.0, 75.0)[0]
+    tilt_of_75 = brentq(lambda a: flake_angles_at(45.0, a)[0] - tilt, 45.0, 75.0)
+    assert 60 < tilt_of_75 < 64
+    np.testing.assert_allclose(glint_along(readings, np.array([tilt_of_75, 75.0])), [3.0, 3.0])
+    assert 2.0 < glint_along(readings, np.array([55.0]))[0] < 3.0
+
+
 def test_a_stack_is_each_paints_curved_panel_in_one_texture_draw(appearance):
     from dataclasses import replace
 
@@ -220,6 +276,26 @@ def test_render_commands_write_images_of_the_asked_size(tmp_path, cli):
     assert imread(tmp_path / "g.png").shape[:2] == (96, 96)
 
 
+def test_render_draws_the_panel_under_the_lamp_asked_for(tmp_path, cli):
+    """``render --lamp 15`` draws an MA-T12 reading from what its 15° lamp lit: 45° from
+    specular shows the 15as45 colour (sRGB's 8 bits allow ΔE00 0.5), not the 45as45 one."""
+    import colour
+    from matplotlib.image import imread
+
+    target = read_measurement(example_path("target"))
+    measured = dict(zip(target.geometry_names, reflectance_to_Lab(target.reflectance), strict=True))
+    for lamp, reading, other in (("15", "15as45", "45as45"), ("45", "45as45", "15as45")):
+        out = tmp_path / f"lamp-{lamp}.png"
+        run = cli("render", "--lamp", lamp, "--size", "161", "--no-texture", "--light", "0",
+                  "-o", str(out))  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        pixels = imread(out)[..., :3]
+        span = 80.0 if lamp == "15" else 110.0
+        drawn = linear_sRGB_to_Lab(colour.cctf_decoding(pixels[0, round(45.0 / span * 160)]))
+        assert delta_E00(drawn, measured[reading]) < 0.5, lamp
+        assert delta_E00(drawn, measured[other]) > 1.0, lamp
+
+
 def test_a_render_is_written_in_the_format_its_suffix_names(tmp_path, cli):
     """Every suffix ``--output`` takes gives a file of its format and the same pixels (JPEG:
     within its compression). Before, a ``.tif`` was refused "error: TIF": Pillow names
@@ -271,6 +347,9 @@ def test_render_refuses_bad_input_without_writing(tmp_path, cli):
         (("--view", "panel", "--aspecular", "130"), "within the measured -15–110°"),
         (("--aspecular", "30"), "--aspecular: for --view panel"),  # the curved view sweeps
         ((str(tmp_path / "missing.cxf"),), "missing.cxf"),
+        # the example is an MA-T12 reading: lit at 45° and 15°, nothing else
+        (("--lamp", "30"), "blue-metallic-target.cxf: "),
+        (("--lamp", "30"), "can be drawn under 45°, 15°"),
     ]:
         run = cli("render", *args, "--size", "32", "-o", str(out))
         assert run.returncode == 2 and message in run.stderr, run.stderr

@@ -36,13 +36,20 @@ class View(StrEnum):
     curved = "curved"
 
 
-def _appearance(measurement: Path | None, sample: str | None, conditions: str):
+def _appearance(measurement: Path | None, sample: str | None, conditions: str,
+                lamp: float | None = None):  # fmt: skip
     from flakelab.core.colorimetry import Conditions
     from flakelab.data import example_path
-    from flakelab.render.appearance import appearance_of
+    from flakelab.render.appearance import LAMP_DEG, appearance_of
 
     path = measurement if measurement is not None else example_path("target")
-    return appearance_of(read_sample(path, sample), Conditions.parse(conditions))
+    reading = read_sample(path, sample)
+    try:
+        return appearance_of(
+            reading, Conditions.parse(conditions), LAMP_DEG if lamp is None else lamp
+        )
+    except ValueError as error:
+        raise FlakelabError(f"{path}: {error}") from None
 
 
 def render_command(
@@ -59,6 +66,15 @@ def render_command(
         float | None, typer.Option(help="panel: aspecular angle [°] (default 45).")
     ] = None,
     size: Annotated[int, typer.Option(min=16, max=8192, help="Image width in pixels.")] = 1024,
+    lamp: Annotated[
+        float | None,
+        typer.Option(
+            min=0.0,
+            max=89.0,
+            help="The lamp's angle from the normal [°]: 45 (default; every instrument lights "
+            "at 45°), or another the reading was lit at (15 on an MA-T12).",
+        ),
+    ] = None,
     no_texture: Annotated[bool, typer.Option("--no-texture", help="Colour only.")] = False,
     sample: SampleOption = None,
     conditions: ConditionsOption = DEFAULT_CONDITIONS,
@@ -77,7 +93,7 @@ def render_command(
     check_output_file(output, "--output", image_format)  # before the render
     if aspecular is not None and view is not View.panel:
         raise FlakelabError("--aspecular: for --view panel (the curved panel sweeps 0–110°)")
-    appearance = _appearance(measurement, sample, conditions)
+    appearance = _appearance(measurement, sample, conditions, lamp)
     options = dict(
         diffuse_fraction=light, distance_m=parse_distance(distance), texture=not no_texture
     )

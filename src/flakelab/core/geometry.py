@@ -33,8 +33,10 @@ __all__ = [
     "instrument_of",
     "instruments_reading",
     "directions",
+    "directions_at",
     "refract_into_coating",
     "flake_angles",
+    "flake_angles_at",
 ]
 
 N_BINDER = 1.5
@@ -198,7 +200,24 @@ def directions(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray]:
     >>> np.round(view, 6).tolist()
     [[0.0, 0.0, 1.0]]
     """
-    theta_i, aspecular, azimuth = _angles(geometries)
+    return directions_at(*np.degrees(_angles(geometries)))
+
+
+def directions_at(
+    illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0
+) -> tuple[NDArray, NDArray]:
+    """:func:`directions` of geometries given by their angles [degree] (arrays that broadcast
+    together, ``[...]`` → ``[..., 3]``): a curved panel's columns, each its own geometry.
+
+    Examples
+    --------
+    >>> light, view = directions_at([45.0, 15.0], [45.0, 15.0])
+    >>> np.round(view, 6).tolist()
+    [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]
+    """
+    theta_i, aspecular, azimuth = np.broadcast_arrays(
+        *(np.radians(np.asarray(a, dtype=float)) for a in (illumination, aspecular, azimuth))
+    )
     light = np.stack(
         [
             -np.sin(theta_i) * np.cos(azimuth),
@@ -247,7 +266,22 @@ def flake_angles(
     >>> round(float(theta_flake[0]), 1), round(float(theta_inc[0]), 1)
     (4.3, 23.8)
     """
-    light, view = directions(geometries)
+    return flake_angles_at(*np.degrees(_angles(geometries)), n=n)
+
+
+def flake_angles_at(
+    illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0, n: float = N_BINDER
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`flake_angles` of geometries given by their angles [degree], arrays that
+    broadcast together.
+
+    Examples
+    --------
+    >>> theta_flake, _ = flake_angles_at(45.0, [15.0, 45.0, 75.0])
+    >>> np.round(theta_flake, 1).tolist()
+    [4.3, 14.1, 23.8]
+    """
+    light, view = directions_at(illumination, aspecular, azimuth)
     light_in, view_in = refract_into_coating(light, n), refract_into_coating(view, n)
     bisector = light_in + view_in
     bisector /= np.linalg.norm(bisector, axis=-1, keepdims=True)

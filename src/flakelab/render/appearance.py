@@ -41,6 +41,7 @@ from flakelab.core.colorimetry import (
     encode_sRGB,
     reflectance_to_Lab,
 )
+from flakelab.core.geometry import flake_angles_at
 from flakelab.core.measurement import Measurement
 from flakelab.core.units import parse_amount
 from flakelab.io.records import write_atomically
@@ -53,10 +54,13 @@ __all__ = [
     "REFERENCE_DISTANCE_M",
     "Appearance",
     "appearance_of",
+    "lamps_of",
+    "curved_range",
     "cardinal_spline",
     "render_panel",
     "render_curved",
     "render_stack",
+    "render_under_lamps",
     "image_format",
     "IMAGE_FORMATS",
     "render_grid",
@@ -74,7 +78,12 @@ CAMERA_PIXEL_UM = 15.0
 GLOSS_WIDTH_DEG = 3.0
 """Angular half-width of the clearcoat's highlight around the specular direction."""
 SPARKLE_ANGLES = (15.0, 45.0, 75.0)
+"""The texture camera's lamps: it looks along the normal, so each reads at ``NasN``."""
 CURVED_RANGE_DEG = (0.0, 110.0)
+"""The aspecular angles a curved panel sweeps, those of the lamp's measured geometries
+within it (paper 001 Fig. 4: 0–110° under the 45° lamp)."""
+LAMP_DEG = 45.0
+"""The lamp a paint is drawn under unless told: the one every multi-angle instrument has."""
 PANEL_ASPECULAR_DEG = 45.0
 """Where a flat panel (and the grid of texture tiles) is seen unless told: mid-flop."""
 _TENSION = 0.0  # cardinal spline tension: 0 is Catmull–Rom
@@ -82,7 +91,8 @@ _TENSION = 0.0  # cardinal spline tension: 0 is Catmull–Rom
 
 @dataclass(frozen=True)
 class Appearance:
-    """What the renderer needs: colour along aspecular angle, diffuse colour, texture."""
+    """What the renderer needs: colour along aspecular angle under one lamp (``lamp``° from
+    the normal), diffuse colour, texture."""
 
     aspecular: NDArray[np.float64]  # [K] degrees, increasing
     Lab: NDArray[np.float64]  # [K, 3]
@@ -90,16 +100,33 @@ class Appearance:
     glint: NDArray[np.float64]  # [3] at SPARKLE_ANGLES; 0 when unmeasured
     coarseness: float  # 0 when unmeasured
     name: str = ""
+    lamp: float = LAMP_DEG
 
 
-def appearance_of(measurement: Measurement, conditions: Conditions = D65_10) -> Appearance:
-    """Colour and texture of ``measurement`` for rendering; needs in-plane geometries lit at
-    45° (the 45as… family every multi-angle instrument has)."""
-    rows = [i for i, g in enumerate(measurement.geometries) if g.illumination == 45 and g.in_plane]
+def lamps_of(measurement: Measurement) -> tuple[float, ...]:
+    """The lamps ``measurement`` can be drawn under: those that light two or more of its
+    in-plane geometries, 45° first (an MA-T12 reading: 45°, then 15°)."""
+    lit = [g.illumination for g in measurement.geometries if g.in_plane]
+    lamps = {lamp for lamp in lit if lit.count(lamp) >= 2}
+    return tuple(sorted(lamps, key=lambda lamp: (lamp != LAMP_DEG, lamp)))
+
+
+def appearance_of(
+    measurement: Measurement, conditions: Conditions = D65_10, lamp: float = LAMP_DEG
+) -> Appearance:
+    """Colour and texture of ``measurement`` for rendering under a lamp ``lamp``° from the
+    normal; needs two or more in-plane geometries it lit (45as15, 45as45 … at 45°, the
+    family every multi-angle instrument has; 15as-15, 15as15 … on an MA-T12)."""
+    rows = [
+        i for i, g in enumerate(measurement.geometries) if g.illumination == lamp and g.in_plane
+    ]
     if len(rows) < 2:
+        lamps = lamps_of(measurement)
+        has = f"it can be drawn under {', '.join(f'{a:g}°' for a in lamps)}" if lamps else (
+            f"got {', '.join(map(str, measurement.geometries))}")  # fmt: skip
         raise ValueError(
-            f"{measurement.sample}: rendering needs at least two in-plane geometries lit at "
-            f"45° (45as15, 45as45 …), got {', '.join(map(str, measurement.geometries))}"
+            f"{measurement.sample}: rendering under a lamp at {lamp:g}° needs two or more "
+            f"in-plane geometries it lit ({lamp:g}as15, {lamp:g}as45 …); {has}"
         )
     aspecular = np.array([measurement.geometries[i].aspecular for i in rows])
     order = np.argsort(aspecular)
@@ -113,9 +140,27 @@ def appearance_of(measurement: Measurement, conditions: Conditions = D65_10) -> 
             for a in SPARKLE_ANGLES
         ]
     )
-    return Appearance(
-        aspecular[order], Lab, diffuse, glint, float(texture.get("G", 0.0)), measurement.sample
-    )
+    return Appearance(aspecular[order], Lab, diffuse, glint, float(texture.get("G", 0.0)),
+                      measurement.sample, float(lamp))  # fmt: skip
+
+
+def curved_range(appearances: Sequence[Appearance]) -> tuple[float, float]:
+    """The aspecular angles curved panels of ``appearances`` sweep, side by side: 0° to the
+    last angle every one measured within :data:`CURVED_RANGE_DEG` (under a 15° lamp an
+    MA-T12 reads up to 80°, and a detector beyond 105° would lie below the horizon)."""
+    top = min(float(a.aspecular[-1]) for a in appearances)
+    return CURVED_RANGE_DEG[0], min(max(top, CURVED_RANGE_DEG[0] + 1.0), CURVED_RANGE_DEG[1])
+
+
+def glint_along(appearance: Appearance, aspecular: NDArray) -> NDArray:
+    """The glint impression at aspecular angles under the appearance's lamp, from its readings
+    under the texture camera's lamps, interpolated over the flake tilt each geometry sees
+    (θ_flake, DESIGN.md §7): a flake glints where its tilt mirrors the lamp into the eye, so
+    the tilt, not the aspecular angle, says how many flakes glint (under a 45° lamp 75° from
+    specular needs 24° of tilt, the camera's 75° lamp 20°)."""
+    knots = flake_angles_at(SPARKLE_ANGLES, SPARKLE_ANGLES)[0]
+    tilt = flake_angles_at(appearance.lamp, aspecular)[0]
+    return cardinal_spline(knots, appearance.glint, tilt)
 
 
 def cardinal_spline(x: NDArray, y: NDArray, at: NDArray, tension: float = _TENSION) -> NDArray:
@@ -240,7 +285,7 @@ def _render(
     )
     diffuse_colour = Lab_to_linear_sRGB(appearance.diffuse_Lab)
     if texture:
-        glint = cardinal_spline(np.array(SPARKLE_ANGLES), appearance.glint, aspecular)
+        glint = glint_along(appearance, aspecular)
         T_dir, T_diff = texture_images(
             np.maximum(glint, 0.0), appearance.coarseness, shape, distance_m=distance_m, seed=seed
         )
@@ -299,9 +344,11 @@ def render_curved(
     gloss: float = 0.8,
     texture: bool = True,
     seed: int = 0,
+    aspecular_range: tuple[float, float] | None = None,
 ) -> NDArray:
-    """Curved panel: columns sweep aspecular 0–110° (paper 001 Fig. 4), ``[rows, cols, 3]``."""
-    columns = np.linspace(*CURVED_RANGE_DEG, size_px[1])
+    """Curved panel: columns sweep aspecular 0–110° (paper 001 Fig. 4; under another lamp to
+    the last angle it measured: :func:`curved_range`), ``[rows, cols, 3]``."""
+    columns = np.linspace(*(aspecular_range or curved_range([appearance])), size_px[1])
     options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
     return _render(appearance, columns, size_px, texture=texture, seed=seed, **options)
 
@@ -310,11 +357,29 @@ def render_stack(
     appearances: Sequence[Appearance], band_px: int = 160, width_px: int = 1024, **options
 ) -> NDArray:
     """Curved panels of several paints, one band each from top to bottom, touching as panels
-    laid side by side in a light booth: ``[bands × band_px, width, 3]``. Every band takes the
-    same ``options`` of :func:`render_curved`, its texture ``seed`` too, so what differs from
-    band to band is the paint, not the noise."""
-    bands = [render_curved(a, (band_px, width_px), **options) for a in appearances]
+    laid side by side in a light booth: ``[bands × band_px, width, 3]``, each over the same
+    angles (:func:`curved_range`). Every band takes the same ``options`` of
+    :func:`render_curved`, its texture ``seed`` too, so what differs from band to band is the
+    paint, not the noise."""
+    span = curved_range(appearances)
+    bands = [render_curved(a, (band_px, width_px), aspecular_range=span, **options)
+             for a in appearances]  # fmt: skip
     return np.concatenate(bands, axis=0)
+
+
+def render_under_lamps(
+    readings: Sequence[Measurement], conditions: Conditions = D65_10, **options
+) -> list[tuple[NDArray, tuple[float, float], float]]:
+    """Readings as stacks of curved panels (:func:`render_stack`), one stack under each lamp
+    every reading can be drawn under (an MA-T12's 45° and 15°; :func:`lamps_of`), each
+    ``(image, aspecular range, lamp)``. None shared: the 45° lamp's refusal names the
+    reading that lacks its geometries."""
+    lamps = [lamp for lamp in lamps_of(readings[0]) if all(lamp in lamps_of(m) for m in readings)]
+    stacks = []
+    for lamp in lamps or [LAMP_DEG]:
+        appearances = [appearance_of(m, conditions, lamp) for m in readings]
+        stacks.append((render_stack(appearances, **options), curved_range(appearances), lamp))
+    return stacks
 
 
 def render_grid(

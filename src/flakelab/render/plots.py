@@ -697,28 +697,31 @@ def plot_losses(
 
 
 def plot_rendering(
-    image: np.ndarray,
+    stacks: Sequence[tuple[np.ndarray, tuple[float, float], float]],
     labels: list[str],
     path: str | PathLike,
     *,
     title: str = "",
     dpi: int = 120,
 ) -> None:
-    """A stack of curved panels (:func:`~flakelab.render.appearance.render_stack`), one band
-    per label from the top, with the aspecular angle along the bottom."""
+    """Stacks of curved panels (:func:`~flakelab.render.appearance.render_stack`), each
+    ``(image, aspecular range, lamp)``, one above the other with the lamp named: one band per
+    label from the top, the aspecular angle along the bottom."""
     from flakelab.core.colorimetry import encode_sRGB
-    from flakelab.render.appearance import CURVED_RANGE_DEG
 
-    rows = image.shape[0]
-    band = rows / len(labels)
-    figure, axis = plt.subplots(figsize=(11, 0.9 + 1.6 * len(labels)))
-    axis.imshow(encode_sRGB(image), extent=(*CURVED_RANGE_DEG, rows, 0), aspect="auto")
-    axis.set_yticks(band * (np.arange(len(labels)) + 0.5), labels)
-    axis.set_xticks(np.arange(0, CURVED_RANGE_DEG[1] + 1, 15))
-    axis.set_xlabel("aspecular angle [°]")
-    for k in range(1, len(labels)):
-        axis.axhline(k * band, color="white", lw=0.6)
-    axis.set_title(title)
+    figure, axes = plt.subplots(
+        len(stacks), 1, figsize=(11, (0.9 + 1.6 * len(labels)) * len(stacks)), squeeze=False
+    )
+    for axis, (image, span, lamp) in zip(axes[:, 0], stacks, strict=True):
+        rows = image.shape[0]
+        band = rows / len(labels)
+        axis.imshow(encode_sRGB(image), extent=(*span, rows, 0), aspect="auto")
+        axis.set_yticks(band * (np.arange(len(labels)) + 0.5), labels)
+        axis.set_xticks(np.arange(span[0], span[1] + 1, 15))
+        axis.set_xlabel(f"aspecular angle [°], lamp at {lamp:g}°")
+        for k in range(1, len(labels)):
+            axis.axhline(k * band, color="white", lw=0.6)
+    axes[0, 0].set_title(title)
     _save(figure, path, dpi)
 
 
@@ -731,8 +734,9 @@ def plot_side_by_side(
     conditions: Conditions = D65_10,
 ) -> None:
     """Readings (measured or predicted) drawn as curved panels, one band each from the top,
-    in one texture draw (:func:`~flakelab.render.appearance.render_stack`)."""
-    from flakelab.render.appearance import appearance_of, render_stack
+    in one texture draw (:func:`~flakelab.render.appearance.render_stack`), under each lamp
+    every reading can be drawn under (an MA-T12's 45° and 15°, one stack each)."""
+    from flakelab.render.appearance import render_under_lamps
 
-    image = render_stack([appearance_of(m, conditions) for m in readings])
-    plot_rendering(image, labels, path, title=title)
+    stacks = render_under_lamps(readings, conditions)
+    plot_rendering(stacks, labels, path, title=title)
