@@ -780,9 +780,10 @@ def test_match_through_the_library_s_physics_alone_needs_no_model(cli):
     assert run.returncode == 2 and "--physics and --model" in run.stderr
 
 
-def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files, cli):
+def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files, cli, tmp_path):
     """A real MA-T12 export matched with the five-angle model (the default) says which seven
-    of its twelve readings the match did not use; with the MA-T12 model it uses them all."""
+    of its twelve readings the match did not use; with the MA-T12 model it uses them all, and
+    --render draws target and candidate under the 15° lamp as well as the 45°."""
     run = cli("match", str(ma_t12_files[0]), "--json", "--candidates", "1")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
@@ -814,6 +815,17 @@ def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files
     result = match(target, ma_t12, settings=MatchSettings(candidates=1))
     assert result.geometries == INSTRUMENT_GEOMETRIES["ma-t12"]
     assert not any("left out" in note for note in result.notes)
+    # drawn under the 15° lamp too with that model: a second stack of panels below the first
+    from matplotlib.image import imread
+
+    shapes = []
+    for instrument in ("five-angle", "ma-t12"):
+        picture = tmp_path / f"{instrument}.png"
+        run = cli("match", str(ma_t12_files[0]), "-i", instrument, "--candidates", "1",
+                  "--render", str(picture))  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        shapes.append(imread(picture).shape[:2])
+    assert shapes[0][0] < 0.5 * shapes[0][1] and shapes[1][0] > 0.6 * shapes[1][1]
 
 
 def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):
