@@ -25,6 +25,7 @@ os.environ.pop("FLAKELAB_SHOP", None)  # no workplace's shop but the one a test 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MA_T12 = SHARED / "ma-t12"
 PIGMENT_KM = SHARED / "pigment-km"
+REFERENCE_BRDF = SHARED / "reference-brdf"
 
 
 def _run_cli(*args: object, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
@@ -114,6 +115,15 @@ def ma_t12_dir() -> Path:
     if not MA_T12.is_dir():
         pytest.skip(f"reference data not found at {MA_T12} (../shared/data is absent)")
     return MA_T12
+
+
+@pytest.fixture(scope="session")
+def gunther_fits_file() -> Path:
+    """Günther et al.'s Cook-Torrance fits of eight measured car paints (reference-brdf)."""
+    path = REFERENCE_BRDF / "gunther2005_carpaint_ct3.csv"
+    if not path.is_file():
+        pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
+    return path
 
 
 @pytest.fixture(scope="session")

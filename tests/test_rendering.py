@@ -339,7 +339,12 @@ def test_the_shipped_coarseness_grey_level_is_what_its_refit_gives(tmp_path, cli
 
 
 def test_render_refuses_bad_input_without_writing(tmp_path, cli):
+    from flakelab.io import write_measurements
+
     out = tmp_path / "x.png"
+    one_each = tmp_path / "one-each.csv"
+    target = read_measurement(example_path("target"))
+    write_measurements([target.select(["15as15", "45as45"])], one_each)
     for args, message in [
         (("--distance", "near"), "distance"),
         (("--light", "1.5"), "diffuse fraction"),
@@ -347,9 +352,10 @@ def test_render_refuses_bad_input_without_writing(tmp_path, cli):
         (("--view", "panel", "--aspecular", "130"), "within the measured -15–110°"),
         (("--aspecular", "30"), "--aspecular: for --view panel"),  # the curved view sweeps
         ((str(tmp_path / "missing.cxf"),), "missing.cxf"),
-        # the example is an MA-T12 reading: lit at 45° and 15°, nothing else
-        (("--lamp", "30"), "blue-metallic-target.cxf: "),
-        (("--lamp", "30"), "can be drawn under 45°, 15°"),
+        # a reading of one geometry under each lamp: nothing to draw, nor to interpolate from
+        ((str(one_each), "--lamp", "30"), f"{one_each}: "),
+        ((str(one_each), "--lamp", "30"), "two or more of them in plane"),
+        ((str(one_each),), "a lamp at 45° needs two or more"),
     ]:
         run = cli("render", *args, "--size", "32", "-o", str(out))
         assert run.returncode == 2 and message in run.stderr, run.stderr
@@ -360,7 +366,7 @@ def test_render_refuses_bad_input_without_writing(tmp_path, cli):
     for command in ("render", "render-grid"):  # checked before the render, named as an option
         run = cli(command, "-o", str(missing))
         assert run.returncode == 2 and f"--output: {missing}: no folder" in run.stderr
-    assert list(tmp_path.iterdir()) == []
+    assert list(tmp_path.iterdir()) == [one_each]
 
 
 def test_texture_grid_keeps_one_colour_in_every_tile(appearance):

@@ -40,16 +40,25 @@ def _appearance(measurement: Path | None, sample: str | None, conditions: str,
                 lamp: float | None = None):  # fmt: skip
     from flakelab.core.colorimetry import Conditions
     from flakelab.data import example_path
-    from flakelab.render.appearance import LAMP_DEG, appearance_of
+    from flakelab.render.appearance import appearance_of, appearance_under, lamps_of
 
     path = measurement if measurement is not None else example_path("target")
     reading = read_sample(path, sample)
+    conditions = Conditions.parse(conditions)
     try:
-        return appearance_of(
-            reading, Conditions.parse(conditions), LAMP_DEG if lamp is None else lamp
-        )
+        if lamp is None or lamp in lamps_of(reading):
+            return appearance_of(reading, conditions, *([] if lamp is None else [lamp]))
+        drawn = appearance_under(reading, lamp, conditions)
     except ValueError as error:
         raise FlakelabError(f"{path}: {error}") from None
+    errors.print(
+        f"note: {reading.sample} was not read under a lamp at {lamp:g}°: drawn from its "
+        f"{drawn.interpolated_from:g}° readings interpolated over flake tilt (an MA-T12's 15° "
+        "readings so predicted from its 45° ones lie a median ΔE00 1.5 from the measured, on "
+        "230 real samples; README, Texture)",
+        highlight=False,
+    )
+    return drawn
 
 
 def render_command(
@@ -72,7 +81,8 @@ def render_command(
             min=0.0,
             max=89.0,
             help="The lamp's angle from the normal [°]: 45 (default; every instrument lights "
-            "at 45°), or another the reading was lit at (15 on an MA-T12).",
+            "at 45°), another the reading was lit at (15 on an MA-T12), or any other: its 45° "
+            "readings interpolated over flake tilt.",
         ),
     ] = None,
     no_texture: Annotated[bool, typer.Option("--no-texture", help="Colour only.")] = False,

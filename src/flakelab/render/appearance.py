@@ -27,7 +27,7 @@ Pipeline (DESIGN.md §4):
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,6 +54,7 @@ __all__ = [
     "REFERENCE_DISTANCE_M",
     "Appearance",
     "appearance_of",
+    "appearance_under",
     "lamps_of",
     "curved_range",
     "cardinal_spline",
@@ -84,6 +85,11 @@ CURVED_RANGE_DEG = (0.0, 110.0)
 within it (paper 001 Fig. 4: 0–110° under the 45° lamp)."""
 LAMP_DEG = 45.0
 """The lamp a paint is drawn under unless told: the one every multi-angle instrument has."""
+INTERPOLATED_STEP_DEG = 5.0
+"""Aspecular step of the colours interpolated under a lamp the instrument did not use."""
+DETECTOR_LIMIT_DEG = 80.0
+"""The furthest from the normal an interpolated reading's detector lies (instruments read
+within 65°, 45as110; near the horizon the clearcoat reflects most light away)."""
 PANEL_ASPECULAR_DEG = 45.0
 """Where a flat panel (and the grid of texture tiles) is seen unless told: mid-flop."""
 _TENSION = 0.0  # cardinal spline tension: 0 is Catmull–Rom
@@ -101,6 +107,7 @@ class Appearance:
     coarseness: float  # 0 when unmeasured
     name: str = ""
     lamp: float = LAMP_DEG
+    interpolated_from: float | None = None  # the lamp whose readings were interpolated
 
 
 def lamps_of(measurement: Measurement) -> tuple[float, ...]:
@@ -142,6 +149,38 @@ def appearance_of(
     )
     return Appearance(aspecular[order], Lab, diffuse, glint, float(texture.get("G", 0.0)),
                       measurement.sample, float(lamp))  # fmt: skip
+
+
+def appearance_under(
+    measurement: Measurement,
+    lamp: float,
+    conditions: Conditions = D65_10,
+    source: float | None = None,
+) -> Appearance:
+    """:func:`appearance_of` under a lamp ``lamp``° from the normal that the instrument did
+    not use: its readings under ``source`` (default: the first of :func:`lamps_of`, 45° on
+    every multi-angle instrument) interpolated over flake tilt (:mod:`flakelab.render.angular`)
+    every :data:`INTERPOLATED_STEP_DEG` of aspecular angle from -15° to 110°, the detector
+    within :data:`DETECTOR_LIMIT_DEG` of the normal. Texture and diffuse colour are the
+    reading's own: neither depends on the lamp's angle."""
+    from flakelab.render.angular import tilt_interpolation
+
+    lamps = lamps_of(measurement)
+    if source is None and not lamps:
+        raise ValueError(
+            f"{measurement.sample}: drawing under a lamp at {lamp:g}° interpolates the readings "
+            f"under one lamp the instrument used, two or more of them in plane (45as15, 45as45 "
+            f"…); got {', '.join(map(str, measurement.geometries))}"
+        )
+    source = lamps[0] if source is None else source
+    measured = appearance_of(measurement, conditions, source)
+    bottom = max(-15.0, lamp - DETECTOR_LIMIT_DEG)
+    top = min(CURVED_RANGE_DEG[1], lamp + DETECTOR_LIMIT_DEG)
+    aspecular = np.unique(np.append(np.arange(bottom, top, INTERPOLATED_STEP_DEG), top))
+    reflectance = tilt_interpolation(measurement, source).reflectance(lamp, aspecular)
+    Lab = reflectance_to_Lab(reflectance, measurement.wavelengths, conditions)
+    return replace(measured, aspecular=aspecular, Lab=Lab, lamp=float(lamp),
+                   interpolated_from=float(source))  # fmt: skip
 
 
 def curved_range(appearances: Sequence[Appearance]) -> tuple[float, float]:

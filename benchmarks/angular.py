@@ -1,0 +1,158 @@
+"""Readings at geometries the instrument did not read: flake-tilt interpolation against the
+aspecular interpolation of the same readings (the baseline, measured in the same run).
+
+Three sets, each predicted from its six readings under the 45° lamp (45as-15 … 45as110):
+- the 230 real MA-T12 samples of ../shared/data/ma-t12 (matte pigments on marble), their six
+  readings under the 15° lamp (ΔE00, D65/10);
+- generated targets at the MA-T12's geometries (metallic, pearl and solid paints of the demo
+  library, as `flakelab cases generate -i ma-t12` makes them), their 15° readings;
+- Günther et al.'s eight car paints (../shared/data/reference-brdf, Cook-Torrance fits of
+  measured BRDFs, RGB taken as linear sRGB), at lamps of 15–65° other than 45°, in plane and
+  30°/60°/90° out of plane, detectors within 80° of the normal, aspecular angles 15–110°.
+
+    python benchmarks/angular.py [--targets 300] [--seed 11] [--floor 0.5,0.9] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import colour
+import numpy as np
+
+from flakelab.cases.generator import World
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E_CIE2000
+from flakelab.core.geometry import instrument_geometries
+from flakelab.io import read_library, read_measurements
+from flakelab.physics.reference_brdf import read_gunther_fits
+from flakelab.render.angular import FLOOR_SHARE, interpolate_over_tilt
+from flakelab.render.appearance import cardinal_spline
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+SOURCE = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 45)
+PREDICTED = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 15)
+
+
+def by_aspecular(readings: np.ndarray, illumination, aspecular, azimuth=0.0) -> np.ndarray:
+    """The baseline: the reading at the same aspecular angle under the 45° lamp (a cardinal
+    spline through the readings, held beyond them), whatever the lamp."""
+    knots = np.array([g.aspecular for g in SOURCE])
+    at = np.broadcast_to(np.asarray(aspecular, float), np.broadcast(illumination, aspecular,
+                                                                   azimuth).shape)  # fmt: skip
+    return cardinal_spline(knots, readings, at)
+
+
+def by_tilt(readings: np.ndarray, floor: float):
+    source = interpolate_over_tilt([g.illumination for g in SOURCE],
+                                   [g.aspecular for g in SOURCE], readings, floor)  # fmt: skip
+    return source.reflectance
+
+
+def statistics(errors: np.ndarray) -> dict[str, float]:
+    return {"median": round(float(np.median(errors)), 3),
+            "p95": round(float(np.percentile(errors, 95)), 3)}  # fmt: skip
+
+
+def spectral_set(readings: list[tuple[np.ndarray, np.ndarray]], floor: float) -> dict:
+    """ΔE00 of each predicted 15° reading from the measured: ``readings`` (source [6, W],
+    measured [6, W]) per sample."""
+    angles = ([g.illumination for g in PREDICTED], [g.aspecular for g in PREDICTED])
+    tilt, aspec = [], []
+    for source, measured in readings:
+        truth = reflectance_to_Lab(measured)
+        tilt.append(delta_E_CIE2000(reflectance_to_Lab(by_tilt(source, floor)(*angles)), truth))
+        aspec.append(delta_E_CIE2000(reflectance_to_Lab(by_aspecular(source, *angles)), truth))
+    tilt, aspec = np.concatenate(tilt), np.concatenate(aspec)
+    return {"samples": len(readings), "tilt": statistics(tilt), "aspecular": statistics(aspec),
+            "median_ratio": round(float(np.median(aspec) / np.median(tilt)), 2)}  # fmt: skip
+
+
+def real_ma_t12(floor: float) -> dict | None:
+    path = SHARED / "ma-t12" / "all_samples_spectra.csv"
+    if not path.is_file():
+        return None
+    pairs = [(m.select(SOURCE).reflectance, m.select(PREDICTED).reflectance)
+             for m in read_measurements(path)]  # fmt: skip
+    return spectral_set(pairs, floor)
+
+
+def generated(targets: int, seed: int, floor: float) -> dict:
+    world = World(read_library(None), "ma-t12")
+    cases = [case for batch in world.cases(targets, seed) for case in batch]
+    names = [str(g) for g in cases[0].geometries]
+    source = [names.index(str(g)) for g in SOURCE]
+    predicted = [names.index(str(g)) for g in PREDICTED]
+    pairs = [(np.asarray(c.target)[source], np.asarray(c.target)[predicted]) for c in cases]
+    return spectral_set(pairs, floor)
+
+
+def _rgb_to_Lab(rgb: np.ndarray) -> np.ndarray:
+    return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(rgb, apply_cctf_decoding=False))
+
+
+def gunther_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    lamps, aspecular, azimuths = np.meshgrid([15.0, 25.0, 35.0, 55.0, 65.0],
+                                             np.arange(15.0, 111.0, 5.0),
+                                             [0.0, 30.0, 60.0, 90.0], indexing="ij")  # fmt: skip
+    above = np.abs(lamps - aspecular) <= 80.0
+    return lamps[above], aspecular[above], azimuths[above]
+
+
+def gunther(floor: float) -> list[dict] | None:
+    path = SHARED / "reference-brdf" / "gunther2005_carpaint_ct3.csv"
+    if not path.is_file():
+        return None
+    grid = gunther_grid()
+    source_angles = ([g.illumination for g in SOURCE], [g.aspecular for g in SOURCE])
+    report = []
+    for paint in read_gunther_fits(path):
+        readings = paint.reflectance_factor(*source_angles)
+        truth = _rgb_to_Lab(paint.reflectance_factor(*grid))
+        tilt = delta_E_CIE2000(_rgb_to_Lab(by_tilt(readings, floor)(*grid)), truth)
+        aspec = delta_E_CIE2000(_rgb_to_Lab(by_aspecular(readings, *grid)), truth)
+        report.append({"paint": paint.name, "geometries": int(tilt.size),
+                       "tilt": statistics(tilt), "aspecular": statistics(aspec)})  # fmt: skip
+    return report
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--targets", type=int, default=300)
+    parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument(
+        "--floor", default=str(FLOOR_SHARE), help="Floor shares to compare, e.g. 0.5,0.9"
+    )
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    report = {}
+    for floor in (float(f) for f in args.floor.split(",")):
+        report[f"floor {floor:g}"] = {
+            "real_ma_t12": real_ma_t12(floor),
+            "generated": generated(args.targets, args.seed, floor),
+            "gunther": gunther(floor),
+        }
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return
+    for floor, sets in report.items():
+        print(f"{floor} (ΔE00 median / p95; aspecular interpolation, the baseline, after)")
+        for name in ("real_ma_t12", "generated"):
+            r = sets[name]
+            if r is None:
+                print(f"  {name}: ../shared/data absent")
+                continue
+            print(f"  {name} ({r['samples']} samples, 15° from 45°): "
+                  f"{r['tilt']['median']:.2f} / {r['tilt']['p95']:.2f}, aspecular "
+                  f"{r['aspecular']['median']:.2f} / {r['aspecular']['p95']:.2f} "
+                  f"(median ×{r['median_ratio']:.1f})")  # fmt: skip
+        for r in sets["gunther"] or []:
+            tilt, base = r["tilt"], r["aspecular"]
+            print(f"  {r['paint']:16s} {tilt['median']:.2f} / {tilt['p95']:.2f}, "
+                  f"aspecular {base['median']:.2f} / {base['p95']:.2f}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
