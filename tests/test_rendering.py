@@ -278,7 +278,8 @@ def test_render_commands_write_images_of_the_asked_size(tmp_path, cli):
 
 def test_render_draws_the_panel_under_the_lamp_asked_for(tmp_path, cli):
     """``render --lamp 15`` draws an MA-T12 reading from what its 15° lamp lit: 45° from
-    specular shows the 15as45 colour (sRGB's 8 bits allow ΔE00 0.5), not the 45as45 one."""
+    specular shows the 15as45 colour (sRGB's 8 bits allow ΔE00 0.5), not the 45as45 one; the
+    reading's 45° readings alone draw about the same there, interpolated over flake tilt."""
     import colour
     from matplotlib.image import imread
 
@@ -294,6 +295,20 @@ def test_render_draws_the_panel_under_the_lamp_asked_for(tmp_path, cli):
         drawn = linear_sRGB_to_Lab(colour.cctf_decoding(pixels[0, round(45.0 / span * 160)]))
         assert delta_E00(drawn, measured[reading]) < 0.5, lamp
         assert delta_E00(drawn, measured[other]) > 1.0, lamp
+    # its 45° readings alone: the 15° lamp interpolated over flake tilt, and said so
+    from flakelab.io import write_measurements
+
+    lit_at_45 = tmp_path / "lit-at-45.csv"
+    write_measurements([target.select([g for g in target.geometry_names if g[:2] == "45"])],
+                       lit_at_45)  # fmt: skip
+    out = tmp_path / "interpolated.png"
+    run = cli("render", lit_at_45, "--lamp", "15", "--size", "161", "--no-texture", "--light",
+              "0", "-o", str(out))  # fmt: skip
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 0 and "was not read under a lamp at 15°: drawn from its 45°" in said
+    pixels = imread(out)[..., :3]  # interpolated to 95° from specular: the detector within 80°
+    drawn = linear_sRGB_to_Lab(colour.cctf_decoding(pixels[0, round(45.0 / 95.0 * 160)]))
+    assert delta_E00(drawn, measured["15as45"]) < 0.8
 
 
 def test_a_render_is_written_in_the_format_its_suffix_names(tmp_path, cli):
