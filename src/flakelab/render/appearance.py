@@ -2,11 +2,13 @@
 
 Pipeline (DESIGN.md §4):
 
-1. **Appearance of a measurement** — L*a*b* at the in-plane geometries lit at 45°, indexed by
-   aspecular angle; the diffuse-light colour as the mean reflectance over those geometries
-   (a hemispherical average of the directional readings); glint impression g per lamp angle
-   (sparkle grade √(Sa·Si)/2 at 15°, 45°, 75°, placed at those aspecular angles: the texture
-   camera looks along the normal) and diffuse coarseness c (graininess G).
+1. **Appearance of a measurement** — L*a*b* at the in-plane geometries one lamp lit (45°
+   unless told; an MA-T12 also lit at 15°), indexed by aspecular angle; under a lamp the
+   instrument did not use, its 45° readings interpolated over flake tilt
+   (:mod:`flakelab.render.angular`); the diffuse-light colour as the mean reflectance over
+   those geometries (a hemispherical average of the directional readings); glint impression
+   g per lamp angle (sparkle grade √(Sa·Si)/2 at 15°, 45°, 75°: the texture camera looks
+   along the normal, at 15as15, 45as45, 75as75) and diffuse coarseness c (graininess G).
 2. **Texture images** from the fitted appearance-based processes, tone-mapped to display
    grey T = G/(G + 1) (a white diffuser at half scale, glints near full scale), as the
    instrument camera's 8-bit images are.
@@ -15,8 +17,9 @@ Pipeline (DESIGN.md §4):
    colour's (the light clipped away is given back to the unclipped pixels), so adding
    texture does not change colour. Eq. 7 mixes the diffuse and directional images with the
    diffuse fraction d; gloss adds white near the specular direction.
-4. **Curved panel** — columns sweep the aspecular angle 0–110°; colour (in CIELAB) and glint
-   are interpolated between measured geometries with cardinal splines.
+4. **Curved panel** — columns sweep the aspecular angle 0–110° (to 80° under an MA-T12's 15°
+   lamp); colour (in CIELAB) is interpolated between the geometries with cardinal splines,
+   glint over the flake tilt each column's geometry needs, between the camera's three.
 5. **Distance** — the eye resolves about 1′ of arc, so relative to the reference distance
    the coarseness pattern is blurred by the growth of the eye's spot (contrast falls), while
    each glint keeps its size and is dimmed by the share of the spot it fills (its light is
