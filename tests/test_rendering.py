@@ -365,6 +365,10 @@ def test_render_refuses_bad_input_without_writing(tmp_path, cli):
         (("--light", "1.5"), "diffuse fraction"),
         # the panel interpolates between measured angles; beyond them it would show the end
         (("--view", "panel", "--aspecular", "130"), "within the measured -15–110°"),
+        (
+            ("--view", "panel", "--aspecular", "100", "--lamp", "5"),
+            "within the interpolated (from the 45° lamp's readings) -15–85°",
+        ),
         (("--aspecular", "30"), "--aspecular: for --view panel"),  # the curved view sweeps
         ((str(tmp_path / "missing.cxf"),), "missing.cxf"),
         # a reading of one geometry under each lamp: nothing to draw, nor to interpolate from

@@ -369,12 +369,19 @@ def render_panel(
     low, high = appearance.aspecular[0], appearance.aspecular[-1]
     if not low <= aspecular <= high:
         raise ValueError(
-            f"aspecular: expected an angle within the measured {low:g}–{high:g}° of "
-            f"{appearance.name!r}, got {aspecular:g}°"
+            f"aspecular: expected an angle within the {_range_kind(appearance)} "
+            f"{low:g}–{high:g}° of {appearance.name!r} under the {appearance.lamp:g}° lamp, "
+            f"got {aspecular:g}°"
         )
     columns = np.full(size_px, float(aspecular))
     options = dict(diffuse_fraction=diffuse_fraction, distance_m=distance_m, gloss=gloss)
     return _render(appearance, columns, (size_px, size_px), texture=texture, seed=seed, **options)
+
+
+def _range_kind(appearance: Appearance) -> str:
+    if appearance.interpolated_from is None:
+        return "measured"
+    return f"interpolated (from the {appearance.interpolated_from:g}° lamp's readings)"
 
 
 def render_curved(
