@@ -471,3 +471,18 @@ def test_the_difference_chart_draws_each_bounded_texture_reading_s_share(monkeyp
     assert np.allclose(rings, [[len(names) + 2 - 0.075, 130.0]])  # sample a's G: 1.3 of it
     # the colour panels keep the geometries alone
     assert [t.get_text() for t in drawn["figure"].axes[0].get_xticklabels()] == list(names)
+
+
+def test_a_figure_s_long_title_is_broken_into_lines_as_wide_as_the_figure():
+    """A verdict naming every one of an MA-T12's twelve geometries ran off the figure's side."""
+    import matplotlib.pyplot as plt
+
+    from flakelab.render.plots import _fitted
+
+    names = ", ".join(INSTRUMENT_GEOMETRIES["ma-t12"])
+    title = f"PAR_PW_EB_CC_1 vs PAR_PW_GE_MC_2: FAIL at {names}"
+    figure = plt.figure(figsize=(11, 4))
+    lines = _fitted(title, figure).splitlines()
+    plt.close(figure)
+    assert len(lines) == 2 and all(len(line) <= 99 for line in lines)
+    assert " ".join(lines) == title

@@ -231,7 +231,7 @@ def plot_differences(
     used.set_ylim(bottom=0.0, top=max(125.0, used.get_ylim()[1]))
     axes[0, 0].legend(fontsize=7, frameon=False)
     used.legend(fontsize=7, frameon=False)
-    figure.suptitle(title)
+    figure.suptitle(_fitted(title, figure))
     _save(figure, path, dpi)
 
 
@@ -696,6 +696,10 @@ def plot_losses(
     _save(figure, path, dpi)
 
 
+_TITLE_CHARACTERS_PER_INCH = 9
+"""About as many characters of a figure's title as fit an inch, at matplotlib's default."""
+
+
 def plot_rendering(
     stacks: Sequence[tuple[np.ndarray, tuple[float, float], float]],
     labels: list[str],
@@ -721,8 +725,14 @@ def plot_rendering(
         axis.set_xlabel(f"aspecular angle [°], lamp at {lamp:g}°")
         for k in range(1, len(labels)):
             axis.axhline(k * band, color="white", lw=0.6)
-    axes[0, 0].set_title(title)
+    axes[0, 0].set_title(_fitted(title, figure))
     _save(figure, path, dpi)
+
+
+def _fitted(title: str, figure) -> str:
+    """``title`` broken into lines as wide as ``figure`` (a verdict that names every one of
+    an MA-T12's twelve geometries ran off the side)."""
+    return textwrap.fill(title, int(_TITLE_CHARACTERS_PER_INCH * figure.get_figwidth()))
 
 
 def plot_side_by_side(
