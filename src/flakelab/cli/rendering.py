@@ -40,14 +40,14 @@ def _appearance(measurement: Path | None, sample: str | None, conditions: str,
                 lamp: float | None = None):  # fmt: skip
     from flakelab.core.colorimetry import Conditions
     from flakelab.data import example_path
-    from flakelab.render.appearance import appearance_of, appearance_under, lamps_of
+    from flakelab.render.appearance import LAMP_DEG, appearance_of, appearance_under, lamps_of
 
     path = measurement if measurement is not None else example_path("target")
     reading = read_sample(path, sample)
     conditions = Conditions.parse(conditions)
     try:
-        if lamp is None or lamp in lamps_of(reading):
-            return appearance_of(reading, conditions, *([] if lamp is None else [lamp]))
+        if lamp is None or lamp in lamps_of(reading):  # by default 45°, or refused saying why
+            return appearance_of(reading, conditions, LAMP_DEG if lamp is None else lamp)
         drawn = appearance_under(reading, lamp, conditions)
     except ValueError as error:
         raise FlakelabError(f"{path}: {error}") from None
