@@ -143,6 +143,11 @@ def test_plot_writes_a_png(tmp_path, cli):
     result = cli("plot", example_path("target"), "-o", out)
     assert result.returncode == 0, result.stderr
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+    tilted = tmp_path / "flop-tilt.png"
+    result = cli("plot", example_path("target"), "--against", "flake-tilt", "-o", tilted)
+    assert result.returncode == 0 and tilted.read_bytes() != out.read_bytes(), result.stderr
+    result = cli("plot", example_path("target"), "--against", "tilt", "-o", tmp_path / "x.png")
+    assert result.returncode == 2 and "'--against'" in result.stderr
 
 
 def test_a_postscript_plot_says_in_a_note_that_it_drops_transparency(tmp_path):

@@ -486,3 +486,27 @@ def test_a_figure_s_long_title_is_broken_into_lines_as_wide_as_the_figure():
     plt.close(figure)
     assert len(lines) == 2 and all(len(line) <= 99 for line in lines)
     assert " ".join(lines) == title
+
+
+def test_against_flake_tilt_the_readings_under_both_lamps_fall_on_one_curve():
+    """The example's L* under the 15° lamp, read off at the 45° lamp's abscissae where both
+    reach: 4.0 apart on average against the aspecular angle, 0.95 against θ_flake, the
+    flake-based parameter (DESIGN.md §2), as an effect paint's readings should."""
+    from flakelab.core.geometry import flake_angles
+    from flakelab.render.plots import flop_series
+
+    target = read_measurement(example_path("target"))
+    apart = {}
+    for against in ("aspecular", "flake-tilt"):
+        series = flop_series(target, against=against)
+        assert list(series) == [15.0, 45.0]
+        (x15, low), (x45, high) = series[15.0], series[45.0]
+        assert np.all(np.diff(x15) >= 0) and np.all(np.diff(x45) >= 0)
+        shared = (x45 >= x15.min()) & (x45 <= x15.max())
+        apart[against] = np.abs(np.interp(x45[shared], x15, low[:, 0]) - high[shared, 0]).mean()
+    lit = [g for g in target.geometries if g.illumination == 45]
+    np.testing.assert_allclose(flop_series(target, against="flake-tilt")[45.0][0],
+                               np.sort(flake_angles(lit)[0]))  # fmt: skip
+    assert apart["flake-tilt"] < 0.4 * apart["aspecular"]
+    with pytest.raises(ValueError, match="against: expected one of aspecular, flake-tilt"):
+        flop_series(target, against="tilt")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -404,6 +405,13 @@ def convert(
     errors.print(f"wrote {counted(len(measurements), 'measurement')} to {target}", highlight=False)
 
 
+class FlopAxis(StrEnum):
+    """``plot --against``: the keys of :data:`flakelab.render.plots.FLOP_AXES`."""
+
+    aspecular = "aspecular"
+    flake_tilt = "flake-tilt"
+
+
 @app.command()
 @reports_errors
 def plot(
@@ -413,13 +421,24 @@ def plot(
     ],
     sample: SampleOption = None,
     conditions: ConditionsOption = DEFAULT_CONDITIONS,
+    against: Annotated[
+        FlopAxis,
+        typer.Option(
+            help="Draw L* and C* against the aspecular angle, or the flake tilt each geometry "
+            "needs (θ_flake): over it an effect paint's readings under different lamps fall "
+            "on one curve."
+        ),
+    ] = FlopAxis.aspecular,
 ) -> None:
-    """Spectra per geometry and L*, C* versus aspecular angle."""
+    """Spectra per geometry and L*, C* versus aspecular angle (or flake tilt)."""
     from flakelab.core.colorimetry import Conditions
     from flakelab.render.plots import plot_measurements
 
     check_figure_file(output, "--output")
-    plot_measurements([read_sample(path, sample)], output, conditions=Conditions.parse(conditions))
+    reading = read_sample(path, sample)
+    plot_measurements(
+        [reading], output, conditions=Conditions.parse(conditions), against=str(against)
+    )
     errors.print(f"wrote {output}", highlight=False)
 
 

@@ -40,6 +40,8 @@ __all__ = [
     "plot_losses",
     "plot_rendering",
     "plot_side_by_side",
+    "flop_series",
+    "FLOP_AXES",
 ]
 
 
@@ -101,16 +103,45 @@ class _DroppedTransparency(logging.Filter):
         return True
 
 
+FLOP_AXES = {"aspecular": "aspecular angle [°]", "flake-tilt": "flake tilt θ_flake [°]"}
+"""What a flop chart's L* and C* are drawn against: the aspecular angle, or the tilt a flake
+needs to mirror the lamp into the detector (DESIGN.md §2), over which an effect paint's
+readings under different lamps fall on one curve."""
+
+
+def flop_series(
+    measurement: Measurement, conditions: Conditions = D65_10, against: str = "aspecular"
+) -> dict[float, tuple[np.ndarray, np.ndarray]]:
+    """Per lamp (illumination angle): the in-plane geometries it lit, as ``x`` (the aspecular
+    angle, or ``"flake-tilt"``: θ_flake) ascending and their L*, C*ab ``[K, 2]``."""
+    from flakelab.core.geometry import flake_angles
+
+    if against not in FLOP_AXES:
+        raise ValueError(f"against: expected one of {', '.join(FLOP_AXES)}, got {against!r}")
+    lch = Lab_to_LCh(measurement.lab(conditions))
+    series = {}
+    for lamp in sorted({g.illumination for g in measurement.geometries if g.in_plane}):
+        rows = [i for i, g in enumerate(measurement.geometries)
+                if g.illumination == lamp and g.in_plane]  # fmt: skip
+        lit = [measurement.geometries[i] for i in rows]
+        x = (flake_angles(lit)[0] if against == "flake-tilt"
+             else np.array([g.aspecular for g in lit]))  # fmt: skip
+        order = np.argsort(x, kind="stable")
+        series[lamp] = (x[order], lch[np.asarray(rows)[order], :2])
+    return series
+
+
 def plot_measurements(
     measurements: list[Measurement],
     path: str | PathLike,
     *,
     conditions: Conditions = D65_10,
+    against: str = "aspecular",
     dpi: int = 120,
 ) -> None:
     """Save a figure: reflectance spectra per geometry (one row per sample; line colour by
     aspecular angle, dashed for illumination below 30°) and L*, C*ab versus aspecular angle
-    per illumination angle."""
+    (or flake tilt: :func:`flop_series`) per illumination angle."""
     n = len(measurements)
     figure, axes = plt.subplots(n, 2, figsize=(11, 3.6 * n), squeeze=False)
     for row, m in enumerate(measurements):
@@ -130,21 +161,12 @@ def plot_measurements(
         spectra.legend(fontsize=7, ncol=2, frameon=False)
         spectra.grid(alpha=0.3)
 
-        lch = Lab_to_LCh(m.lab(conditions))
         lightness_axis, chroma_axis = trend, trend.twinx()
-        for illumination in sorted({g.illumination for g in m.geometries}):
-            rows = [
-                i
-                for i, g in enumerate(m.geometries)
-                if g.illumination == illumination and g.in_plane
-            ]
-            rows.sort(key=lambda i: m.geometries[i].aspecular)
-            angles = [m.geometries[i].aspecular for i in rows]
-            lightness_axis.plot(angles, lch[rows, 0], "o-", label=f"L*  {illumination:g}° light")
-            chroma_axis.plot(
-                angles, lch[rows, 1], "s--", alpha=0.7, label=f"C*  {illumination:g}° light"
-            )
-        lightness_axis.set(xlabel="aspecular angle [°]", ylabel="L*", title=f"flop ({conditions})")
+        series = flop_series(m, conditions, against)
+        for illumination, (x, lc) in series.items():
+            lightness_axis.plot(x, lc[:, 0], "o-", label=f"L*  {illumination:g}° light")
+            chroma_axis.plot(x, lc[:, 1], "s--", alpha=0.7, label=f"C*  {illumination:g}° light")
+        lightness_axis.set(xlabel=FLOP_AXES[against], ylabel="L*", title=f"flop ({conditions})")
         chroma_axis.set_ylabel("C*ab")
         handles = lightness_axis.get_legend_handles_labels()
         extra = chroma_axis.get_legend_handles_labels()
@@ -152,8 +174,9 @@ def plot_measurements(
             handles[0] + extra[0], handles[1] + extra[1], fontsize=7, frameon=False
         )
         lightness_axis.grid(alpha=0.3)
-        lightness_axis.set_xticks(np.unique(aspecular))
-        lightness_axis.tick_params(axis="x", labelrotation=60, labelsize=8)
+        if against == "aspecular":
+            lightness_axis.set_xticks(np.unique(aspecular))
+            lightness_axis.tick_params(axis="x", labelrotation=60, labelsize=8)
     _save(figure, path, dpi)
 
 
