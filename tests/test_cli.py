@@ -113,6 +113,10 @@ def test_compare_draws_reference_above_sample_only_into_a_figure_file(tmp_path, 
     run = cli("compare", one_each, one_each, "--render", tmp_path / "none.png")
     said = " ".join(run.stderr.split())
     assert run.returncode == 2 and "--render" in said and "a lamp at 45° needs two or" in said
+    for args, said in ((("--render-lamps", "15"), "give --render"),
+                       (("--render", picture, "--render-lamps", "90"), "0 to 89°")):  # fmt: skip
+        run = cli("compare", "--example", *args)
+        assert run.returncode == 2 and "--render-lamps: " in run.stderr and said in run.stderr
     assert sorted(tmp_path.iterdir()) == [chart, lit_at_15, low, one_each, picture]
 
 

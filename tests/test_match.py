@@ -819,13 +819,17 @@ def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files
     from matplotlib.image import imread
 
     shapes = []
-    for instrument in ("five-angle", "ma-t12"):
-        picture = tmp_path / f"{instrument}.png"
+    for instrument, lamps in (("five-angle", ()), ("ma-t12", ()),
+                              ("five-angle", ("--render-lamps", "45,25"))):  # fmt: skip
+        picture = tmp_path / f"{instrument}{len(lamps)}.png"
         run = cli("match", str(ma_t12_files[0]), "-i", instrument, "--candidates", "1",
-                  "--render", str(picture))  # fmt: skip
+                  "--render", str(picture), *lamps)  # fmt: skip
         assert run.returncode == 0, run.stderr
         shapes.append(imread(picture).shape[:2])
     assert shapes[0][0] < 0.5 * shapes[0][1] and shapes[1][0] > 0.6 * shapes[1][1]
+    assert shapes[2] == shapes[1]  # a 25° lamp the five geometries did not read: interpolated
+    run = cli("match", str(ma_t12_files[0]), "--render", str(picture), "--render-lamps", "45,45")
+    assert run.returncode == 2 and "--render-lamps: " in run.stderr
 
 
 def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):

@@ -168,6 +168,9 @@ def test_curved_panel_shows_measured_colour_and_gloss(appearance):
     assert np.argmax(brightness) < 5  # the clearcoat's highlight sits at specular
 
 
+SOURCE_45 = [g for g in INSTRUMENT_GEOMETRIES["ma-t12"] if g.startswith("45as")]
+
+
 def test_an_ma_t12_reading_is_drawn_under_each_of_its_lamps():
     """Under its 15° lamp, from the geometries that lamp lit, as under its 45° lamp: a colour
     at 45° from specular is the 15as45 reading's, not the 45as45's."""
@@ -187,11 +190,24 @@ def test_an_ma_t12_reading_is_drawn_under_each_of_its_lamps():
     got = linear_sRGB_to_Lab(image[0, 90])  # 45°
     assert delta_E00(got, high.Lab[list(high.aspecular).index(45.0)]) > 1.0
     stacks = render_under_lamps([target, target], band_px=8, width_px=32, texture=False)
-    assert [(lamp, span) for _, span, lamp in stacks] == [(45.0, (0.0, 110.0)), (15.0, (0.0, 80.0))]
-    assert all(image.shape == (16, 32, 3) for image, _, _ in stacks)
-    assert [lamp for *_, lamp in render_under_lamps([target, five], band_px=8, width_px=32)] == [
-        45.0
+    assert [(s.lamp, s.span, s.interpolated_from) for s in stacks] == [
+        (45.0, (0.0, 110.0), None),
+        (15.0, (0.0, 80.0), None),
     ]
+    assert all(s.image.shape == (16, 32, 3) for s in stacks)
+    assert [s.lamp for s in render_under_lamps([target, five], band_px=8, width_px=32)] == [45.0]
+    # lamps asked for: those not read by every reading interpolated from each one's 45° lamp
+    asked = render_under_lamps([target, five], lamps=[15.0, 45.0], band_px=8, width_px=32)
+    assert [(s.lamp, s.span, s.interpolated_from) for s in asked] == [
+        (15.0, (0.0, 95.0), 45.0),
+        (45.0, (0.0, 110.0), None),
+    ]
+    alike = render_under_lamps([five, five], lamps=[15.0], band_px=8, width_px=32, seed=1)
+    np.testing.assert_array_equal(alike[0].image[:8], alike[0].image[8:])
+    drawn = render_under_lamps([target.select(SOURCE_45)], lamps=[15.0], band_px=1, width_px=96,
+                               texture=False, diffuse_fraction=0.0, gloss=0.0)[0].image  # fmt: skip
+    at_45 = linear_sRGB_to_Lab(drawn[0, round(45.0 / 95.0 * 95)])
+    assert delta_E00(at_45, low.Lab[list(low.aspecular).index(45.0)]) < 0.5
     with pytest.raises(ValueError, match=r"a lamp at 30° needs .* it can be drawn under 45°, 15°"):
         appearance_of(target, lamp=30)
     one_each = target.select(["15as15", "45as45"])

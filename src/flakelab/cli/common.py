@@ -627,6 +627,33 @@ def draw_differences(geometries, reference_lab, samples: dict, tolerance, path, 
     errors.print(f"wrote {path}", highlight=False)
 
 
+RenderLampsOption = Annotated[
+    str | None,
+    typer.Option(
+        "--render-lamps",
+        help="With --render: the lamps to draw under, comma-separated angles from the normal "
+        "(45,25; default: each the readings were read under, an MA-T12's 45 and 15). A lamp "
+        "not read is drawn from each reading's 45° readings interpolated over flake tilt, "
+        "and labelled so.",
+    ),
+]
+
+
+def render_lamps(text: str | None, render) -> tuple[float, ...] | None:
+    """The lamps ``--render-lamps`` names (None: the default), refused without ``--render``
+    or where they are no angles from 0 to 89°."""
+    from flakelab.render.appearance import parse_lamps
+
+    if text is None:
+        return None
+    if render is None:
+        raise FlakelabError("--render-lamps: the lamps of the --render figure; give --render")
+    try:
+        return parse_lamps(text)
+    except ValueError as error:
+        raise FlakelabError(str(error)) from None
+
+
 def draw_side_by_side(readings, labels: list[str], path, title: str, **options) -> None:
     """``--render``: readings as curved panels one above the other
     (:func:`~flakelab.render.plots.plot_side_by_side`); a reading the renderer cannot draw is

@@ -20,6 +20,7 @@ from flakelab.cli.common import (
     JsonOption,
     LightsOption,
     PlotOption,
+    RenderLampsOption,
     SampleOption,
     ToleranceOption,
     check_figure_file,
@@ -35,6 +36,7 @@ from flakelab.cli.common import (
     read_sample,
     readings_note,
     reflow_help,
+    render_lamps,
     reports_errors,
     stop_on_signals,
     texture_table,
@@ -185,6 +187,7 @@ def compare(
             "they share (PNG, PDF or SVG)."
         ),
     ] = None,
+    lamps: RenderLampsOption = None,
     plot: PlotOption = None,
     nearest: Annotated[
         int,
@@ -213,6 +216,7 @@ def compare(
                             "not with --reference-sample or --average")  # fmt: skip
     check_figure_file(render)
     check_figure_file(plot, "--plot")
+    lamps = render_lamps(lamps, render)
     tol = read_tolerance(tolerance)
     smp, smp_readings = read_readings(
         sample or example_path("sprayout"), sample_name, average_sprayed, "--sample-name",
@@ -242,7 +246,7 @@ def compare(
         if wanted:
             report[key] = spread_of_readings(readings, mean, tol, light)
     if render is not None:
-        _render_comparison(ref, smp, report, render, light)
+        _render_comparison(ref, smp, report, render, light, lamps)
     if plot is not None:
         title = f"{smp.sample} vs {ref.sample} ({light}): {'PASS' if result.all_pass else 'FAIL'}"
         samples = {smp.sample: result.lab_sample}
@@ -293,7 +297,7 @@ def _print_ranked(report: dict[str, Any], path) -> None:
     console.print(table)
 
 
-def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
+def _render_comparison(ref, smp, report: dict, path: Path, conditions, lamps) -> None:
     from flakelab.core.tolerance import failures
 
     shared = [g["name"] for g in report["geometries"]]
@@ -302,7 +306,7 @@ def _render_comparison(ref, smp, report: dict, path: Path, conditions) -> None:
     labels = [f"reference: {ref.sample}", f"sample: {smp.sample}"]
     title = f"{smp.sample} vs {ref.sample}: {verdict}"
     readings = [ref.select(shared), smp.select(shared)]
-    draw_side_by_side(readings, labels, path, title, conditions=conditions)
+    draw_side_by_side(readings, labels, path, title, conditions=conditions, lamps=lamps)
 
 
 _LIMIT_LABELS = {"de00": "ΔE≤", "dL": "L≤", "dC": "C≤", "dH": "H≤"}

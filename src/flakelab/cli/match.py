@@ -15,6 +15,7 @@ from flakelab.cli.common import (
     AverageOption,
     JsonOption,
     LightsOption,
+    RenderLampsOption,
     SampleOption,
     add_readings_spread,
     check_figure_file,
@@ -30,6 +31,7 @@ from flakelab.cli.common import (
     print_report,
     progress_bar,
     read_readings,
+    render_lamps,
     shares_text,
     stop_interrupted,
     texture_table,
@@ -240,6 +242,7 @@ def match_command(
             "predicted (PNG, PDF or SVG).",
         ),
     ] = None,
+    lamps: RenderLampsOption = None,
     plot: Annotated[
         Path | None,
         typer.Option(
@@ -277,10 +280,10 @@ def match_command(
         without=tuple(without or ()),
     )
     if target == "evaluate":
-        if render or recipe_out or average or nearest or colour_code:
+        if render or lamps or recipe_out or average or nearest or colour_code:
             raise FlakelabError(
-                "--render, --recipe-out, --average, --nearest, --colour-code: for the "
-                "candidates of one target, not the harness"
+                "--render, --render-lamps, --recipe-out, --average, --nearest, --colour-code: "
+                "for the candidates of one target, not the harness"
             )
         _evaluate(
             library=library,
@@ -316,6 +319,7 @@ def match_command(
              "--database": database, "--habits": habits, "--lots": lots,
              "--tolerance": tolerance}  # fmt: skip
     _check_output_options(render, plot, recipe_out, pick, candidates, reads)
+    lamps = render_lamps(lamps, render)
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
     tins, forward, lot_notes = shop_lots(lots and Path(lots), lib, forward, shop, database)
@@ -382,7 +386,7 @@ def match_command(
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
     if render is not None:
-        _render_match(measurement.select(forward.geometries), result, render)
+        _render_match(measurement.select(forward.geometries), result, render, lamps)
         report["rendering"] = str(render)
     if plot is not None:
         _plot_match(measurement, result, extra, tol, plot)
@@ -629,15 +633,17 @@ def _write_candidate(report: dict, pick: int, path: Path) -> None:
     errors.print(f"wrote candidate #{pick}'s recipe to {path}", highlight=False)
 
 
-def _render_match(target, result, path: Path) -> None:
+def _render_match(target, result, path: Path, lamps) -> None:
     """The target as measured (at the model's geometries, as the candidates) above each
-    candidate as its model predicts it, curved panels in one texture draw."""
+    candidate as its model predicts it, curved panels in one texture draw, under ``lamps``
+    (None: each the target was read under)."""
     readings = [target] + [c.as_measurement(f"#{k}") for k, c in enumerate(result.candidates, 1)]
     labels = ["target"] + [
         f"#{k}  {'PASS' if c.passes else 'FAIL'}  max ΔE00 {c.de00.max():.2f}"
         for k, c in enumerate(result.candidates, 1)
     ]
-    draw_side_by_side(readings, labels, path, f"{result.target}: target and candidates (predicted)")
+    draw_side_by_side(readings, labels, path, f"{result.target}: target and candidates (predicted)",
+                      lamps=lamps)  # fmt: skip
 
 
 def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:

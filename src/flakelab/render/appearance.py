@@ -65,6 +65,8 @@ __all__ = [
     "render_curved",
     "render_stack",
     "render_under_lamps",
+    "LampStack",
+    "parse_lamps",
     "image_format",
     "IMAGE_FORMATS",
     "render_grid",
@@ -416,19 +418,56 @@ def render_stack(
     return np.concatenate(bands, axis=0)
 
 
+@dataclass(frozen=True)
+class LampStack:
+    """Curved panels of several readings under one lamp (:func:`render_under_lamps`):
+    ``image`` ``[bands × rows, cols, 3]`` over the aspecular angles ``span``; where
+    ``interpolated_from`` is a lamp, the readings were not taken under ``lamp`` and are their
+    readings under that one interpolated over flake tilt."""
+
+    image: NDArray
+    span: tuple[float, float]
+    lamp: float
+    interpolated_from: float | None = None
+
+
 def render_under_lamps(
-    readings: Sequence[Measurement], conditions: Conditions = D65_10, **options
-) -> list[tuple[NDArray, tuple[float, float], float]]:
-    """Readings as stacks of curved panels (:func:`render_stack`), one stack under each lamp
-    every reading can be drawn under (an MA-T12's 45° and 15°; :func:`lamps_of`), each
-    ``(image, aspecular range, lamp)``. None shared: the 45° lamp's refusal names the
-    reading that lacks its geometries."""
-    lamps = [lamp for lamp in lamps_of(readings[0]) if all(lamp in lamps_of(m) for m in readings)]
+    readings: Sequence[Measurement],
+    conditions: Conditions = D65_10,
+    lamps: Sequence[float] | None = None,
+    **options,
+) -> list[LampStack]:
+    """Readings as stacks of curved panels (:func:`render_stack`), one stack under each of
+    ``lamps`` (default: each lamp every reading was read under, an MA-T12's 45° and 15°;
+    :func:`lamps_of`). A lamp not every reading was read under draws each from its own
+    first lamp's readings, interpolated over flake tilt (:func:`appearance_under`). None
+    shared: the 45° lamp's refusal names the reading that lacks its geometries."""
+    read = [lamp for lamp in lamps_of(readings[0]) if all(lamp in lamps_of(m) for m in readings)]
     stacks = []
-    for lamp in lamps or [LAMP_DEG]:
-        appearances = [appearance_of(m, conditions, lamp) for m in readings]
-        stacks.append((render_stack(appearances, **options), curved_range(appearances), lamp))
+    for lamp in lamps or read or [LAMP_DEG]:
+        if lamp in read or not lamps:
+            appearances = [appearance_of(m, conditions, lamp) for m in readings]
+        else:
+            appearances = [appearance_under(m, lamp, conditions) for m in readings]
+        image = render_stack(appearances, **options)
+        sources = {a.interpolated_from for a in appearances}
+        source = sources.pop() if len(sources) == 1 else None
+        stacks.append(LampStack(image, curved_range(appearances), float(lamp), source))
     return stacks
+
+
+def parse_lamps(text: str) -> tuple[float, ...]:
+    """``45,15`` → the lamps' angles from the normal [°], each from 0 to 89, none twice."""
+    try:
+        lamps = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        lamps = ()
+    if not lamps or not all(0.0 <= a <= 89.0 for a in lamps) or len(set(lamps)) < len(lamps):
+        raise ValueError(
+            f"--render-lamps: expected lamp angles from the normal, 0 to 89°, comma-separated "
+            f"and each once (45,15), got {text!r}"
+        )
+    return lamps
 
 
 def render_grid(

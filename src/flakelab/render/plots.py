@@ -724,28 +724,33 @@ _TITLE_CHARACTERS_PER_INCH = 9
 
 
 def plot_rendering(
-    stacks: Sequence[tuple[np.ndarray, tuple[float, float], float]],
+    stacks: Sequence,
     labels: list[str],
     path: str | PathLike,
     *,
     title: str = "",
     dpi: int = 120,
 ) -> None:
-    """Stacks of curved panels (:func:`~flakelab.render.appearance.render_stack`), each
-    ``(image, aspecular range, lamp)``, one above the other with the lamp named: one band per
+    """Stacks of curved panels (:class:`~flakelab.render.appearance.LampStack`), one above the
+    other with the lamp named (and where its colours were interpolated from): one band per
     label from the top, the aspecular angle along the bottom."""
     from flakelab.core.colorimetry import encode_sRGB
 
     figure, axes = plt.subplots(
         len(stacks), 1, figsize=(11, (0.9 + 1.6 * len(labels)) * len(stacks)), squeeze=False
     )
-    for axis, (image, span, lamp) in zip(axes[:, 0], stacks, strict=True):
-        rows = image.shape[0]
+    for axis, stack in zip(axes[:, 0], stacks, strict=True):
+        rows = stack.image.shape[0]
         band = rows / len(labels)
-        axis.imshow(encode_sRGB(image), extent=(*span, rows, 0), aspect="auto")
+        axis.imshow(encode_sRGB(stack.image), extent=(*stack.span, rows, 0), aspect="auto")
         axis.set_yticks(band * (np.arange(len(labels)) + 0.5), labels)
-        axis.set_xticks(np.arange(span[0], span[1] + 1, 15))
-        axis.set_xlabel(f"aspecular angle [°], lamp at {lamp:g}°")
+        axis.set_xticks(np.arange(stack.span[0], stack.span[1] + 1, 15))
+        source = stack.interpolated_from
+        axis.set_xlabel(
+            f"aspecular angle [°], lamp at {stack.lamp:g}°"
+            + ("" if source is None else f" (not read: interpolated over flake tilt from the "
+                                         f"{source:g}° lamp's geometries)")
+        )  # fmt: skip
         for k in range(1, len(labels)):
             axis.axhline(k * band, color="white", lw=0.6)
     axes[0, 0].set_title(_fitted(title, figure))
@@ -765,11 +770,13 @@ def plot_side_by_side(
     *,
     title: str = "",
     conditions: Conditions = D65_10,
+    lamps: Sequence[float] | None = None,
 ) -> None:
     """Readings (measured or predicted) drawn as curved panels, one band each from the top,
-    in one texture draw (:func:`~flakelab.render.appearance.render_stack`), under each lamp
-    every reading can be drawn under (an MA-T12's 45° and 15°, one stack each)."""
+    in one texture draw (:func:`~flakelab.render.appearance.render_stack`), under each of
+    ``lamps`` (default: each every reading was read under, an MA-T12's 45° and 15°), one
+    stack each (:func:`~flakelab.render.appearance.render_under_lamps`)."""
     from flakelab.render.appearance import render_under_lamps
 
-    stacks = render_under_lamps(readings, conditions)
+    stacks = render_under_lamps(readings, conditions, lamps)
     plot_rendering(stacks, labels, path, title=title)
