@@ -422,13 +422,13 @@ def render_stack(
 class LampStack:
     """Curved panels of several readings under one lamp (:func:`render_under_lamps`):
     ``image`` ``[bands × rows, cols, 3]`` over the aspecular angles ``span``; where
-    ``interpolated_from`` is a lamp, the readings were not taken under ``lamp`` and are their
-    readings under that one interpolated over flake tilt."""
+    ``interpolated_from`` names lamps, the readings were not taken under ``lamp`` and are
+    their readings under those interpolated over flake tilt."""
 
     image: NDArray
     span: tuple[float, float]
     lamp: float
-    interpolated_from: float | None = None
+    interpolated_from: tuple[float, ...] = ()
 
 
 def render_under_lamps(
@@ -450,9 +450,8 @@ def render_under_lamps(
         else:
             appearances = [appearance_under(m, lamp, conditions) for m in readings]
         image = render_stack(appearances, **options)
-        sources = {a.interpolated_from for a in appearances}
-        source = sources.pop() if len(sources) == 1 else None
-        stacks.append(LampStack(image, curved_range(appearances), float(lamp), source))
+        sources = sorted({a.interpolated_from for a in appearances} - {None}, reverse=True)
+        stacks.append(LampStack(image, curved_range(appearances), float(lamp), tuple(sources)))
     return stacks
 
 

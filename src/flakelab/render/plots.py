@@ -745,11 +745,11 @@ def plot_rendering(
         axis.imshow(encode_sRGB(stack.image), extent=(*stack.span, rows, 0), aspect="auto")
         axis.set_yticks(band * (np.arange(len(labels)) + 0.5), labels)
         axis.set_xticks(np.arange(stack.span[0], stack.span[1] + 1, 15))
-        source = stack.interpolated_from
+        sources = " and ".join(f"{a:g}°" for a in stack.interpolated_from)
         axis.set_xlabel(
             f"aspecular angle [°], lamp at {stack.lamp:g}°"
-            + ("" if source is None else f" (not read: interpolated over flake tilt from the "
-                                         f"{source:g}° lamp's geometries)")
+            + (f" (not read: interpolated over flake tilt from the {sources} lamp's geometries)"
+               if sources else "")
         )  # fmt: skip
         for k in range(1, len(labels)):
             axis.axhline(k * band, color="white", lw=0.6)
