@@ -191,16 +191,16 @@ def test_an_ma_t12_reading_is_drawn_under_each_of_its_lamps():
     assert delta_E00(got, high.Lab[list(high.aspecular).index(45.0)]) > 1.0
     stacks = render_under_lamps([target, target], band_px=8, width_px=32, texture=False)
     assert [(s.lamp, s.span, s.interpolated_from) for s in stacks] == [
-        (45.0, (0.0, 110.0), None),
-        (15.0, (0.0, 80.0), None),
+        (45.0, (0.0, 110.0), ()),
+        (15.0, (0.0, 80.0), ()),
     ]
     assert all(s.image.shape == (16, 32, 3) for s in stacks)
     assert [s.lamp for s in render_under_lamps([target, five], band_px=8, width_px=32)] == [45.0]
     # lamps asked for: those not read by every reading interpolated from each one's 45° lamp
     asked = render_under_lamps([target, five], lamps=[15.0, 45.0], band_px=8, width_px=32)
     assert [(s.lamp, s.span, s.interpolated_from) for s in asked] == [
-        (15.0, (0.0, 95.0), 45.0),
-        (45.0, (0.0, 110.0), None),
+        (15.0, (0.0, 95.0), (45.0,)),
+        (45.0, (0.0, 110.0), ()),
     ]
     alike = render_under_lamps([five, five], lamps=[15.0], band_px=8, width_px=32, seed=1)
     np.testing.assert_array_equal(alike[0].image[:8], alike[0].image[8:])
