@@ -51,6 +51,8 @@ def test_the_readings_are_given_back_at_their_own_geometries_and_reciprocally():
     assert clearcoat_factor(0.0, 0.0) == pytest.approx(0.96**2)
     with pytest.raises(ValueError, match="two or more in-plane readings under a lamp at 30°"):
         tilt_interpolation(target, 30.0)
+    with pytest.raises(ValueError, match="floor_share: expected a share from 0 to below 1"):
+        interpolate_over_tilt(*_angles(SOURCE), own, floor_share=1.0)
 
 
 def test_real_ma_t12_readings_under_the_15_degree_lamp_follow_from_the_45_degree_ones(

@@ -107,6 +107,8 @@ def interpolate_over_tilt(
     """Readings ``reflectance`` [G, C] at in-plane geometries given by their angles [degree]
     (each [G]) interpolated over flake tilt; readings at one tilt are averaged. Needs two or
     more tilts."""
+    if not 0.0 <= floor_share < 1.0:  # the smallest reading must keep a flake part to log
+        raise ValueError(f"floor_share: expected a share from 0 to below 1, got {floor_share}")
     tilt = flake_angles_at(illumination, aspecular)[0]
     knots, where = np.unique(np.round(tilt, 6), return_inverse=True)
     if knots.size < 2:
