@@ -25,7 +25,7 @@ import numpy as np
 from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
-from flakelab.core.geometry import instrument_geometries
+from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.io import read_library, read_measurements
 from flakelab.physics.reference_brdf import read_gunther_fits
 from flakelab.render.angular import FLOOR_SHARE, interpolate_over_tilt
@@ -39,16 +39,14 @@ PREDICTED = tuple(g for g in instrument_geometries("ma-t12") if g.illumination =
 def by_aspecular(readings: np.ndarray, illumination, aspecular, azimuth=0.0) -> np.ndarray:
     """The baseline: the reading at the same aspecular angle under the 45° lamp (a cardinal
     spline through the readings, held beyond them), whatever the lamp."""
-    knots = np.array([g.aspecular for g in SOURCE])
+    knots = geometry_angles(SOURCE)[1]
     at = np.broadcast_to(np.asarray(aspecular, float), np.broadcast(illumination, aspecular,
                                                                    azimuth).shape)  # fmt: skip
     return cardinal_spline(knots, readings, at)
 
 
 def by_tilt(readings: np.ndarray, floor: float):
-    source = interpolate_over_tilt([g.illumination for g in SOURCE],
-                                   [g.aspecular for g in SOURCE], readings, floor)  # fmt: skip
-    return source.reflectance
+    return interpolate_over_tilt(SOURCE, readings, floor).reflectance
 
 
 def statistics(errors: np.ndarray) -> dict[str, float]:
@@ -59,7 +57,7 @@ def statistics(errors: np.ndarray) -> dict[str, float]:
 def spectral_set(readings: list[tuple[np.ndarray, np.ndarray]], floor: float) -> dict:
     """ΔE00 of each predicted 15° reading from the measured: ``readings`` (source [6, W],
     measured [6, W]) per sample."""
-    angles = ([g.illumination for g in PREDICTED], [g.aspecular for g in PREDICTED])
+    angles = geometry_angles(PREDICTED)
     tilt, aspec = [], []
     for source, measured in readings:
         truth = reflectance_to_Lab(measured)
@@ -106,7 +104,7 @@ def gunther(floor: float) -> list[dict] | None:
     if not path.is_file():
         return None
     grid = gunther_grid()
-    source_angles = ([g.illumination for g in SOURCE], [g.aspecular for g in SOURCE])
+    source_angles = geometry_angles(SOURCE)
     report = []
     for paint in read_gunther_fits(path):
         readings = paint.reflectance_factor(*source_angles)

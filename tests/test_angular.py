@@ -11,7 +11,7 @@ import pytest
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
-from flakelab.core.geometry import instrument_geometries
+from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_measurements
 from flakelab.physics.reference_brdf import CookTorrancePaint, read_gunther_fits
@@ -23,13 +23,9 @@ PREDICTED = tuple(g for g in instrument_geometries("ma-t12") if g.illumination =
 METALLICS = ("polaris silber", "opel titan", "bmw339")
 
 
-def _angles(geometries) -> tuple[list[float], list[float]]:
-    return [g.illumination for g in geometries], [g.aspecular for g in geometries]
-
-
 def _by_aspecular(readings, aspecular) -> np.ndarray:
     """The reading at the same aspecular angle under the 45° lamp, whatever the lamp."""
-    return cardinal_spline(np.array(_angles(SOURCE)[1]), readings, np.asarray(aspecular, float))
+    return cardinal_spline(geometry_angles(SOURCE)[1], readings, np.asarray(aspecular, float))
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +38,7 @@ def test_the_readings_are_given_back_at_their_own_geometries_and_reciprocally():
     model = tilt_interpolation(target)
     own = target.select(SOURCE).reflectance
     np.testing.assert_allclose(
-        model.reflectance(*_angles(SOURCE)), own, rtol=1e-6
+        model.reflectance(*geometry_angles(SOURCE)), own, rtol=1e-6
     )  # tilts to 1e-6°
     # lamp and detector swapped (45as15 ↔ 30as-15): the same flake tilt, the same clearcoat
     np.testing.assert_allclose(model.reflectance(45.0, 15.0), model.reflectance(30.0, -15.0))
@@ -52,7 +48,7 @@ def test_the_readings_are_given_back_at_their_own_geometries_and_reciprocally():
     with pytest.raises(ValueError, match="two or more in-plane readings under a lamp at 30°"):
         tilt_interpolation(target, 30.0)
     with pytest.raises(ValueError, match="floor_share: expected a share from 0 to below 1"):
-        interpolate_over_tilt(*_angles(SOURCE), own, floor_share=1.0)
+        interpolate_over_tilt(SOURCE, own, floor_share=1.0)
 
 
 def test_real_ma_t12_readings_under_the_15_degree_lamp_follow_from_the_45_degree_ones(
@@ -66,9 +62,9 @@ def test_real_ma_t12_readings_under_the_15_degree_lamp_follow_from_the_45_degree
     for sample in read_measurements(ma_t12_dir / "all_samples_spectra.csv"):
         source, truth = sample.select(SOURCE).reflectance, sample.select(PREDICTED).reflectance
         truth_Lab = reflectance_to_Lab(truth)
-        predicted = tilt_interpolation(sample).reflectance(*_angles(PREDICTED))
+        predicted = tilt_interpolation(sample).reflectance(*geometry_angles(PREDICTED))
         tilt.append(delta_E_CIE2000(reflectance_to_Lab(predicted), truth_Lab))
-        same_angle = _by_aspecular(source, _angles(PREDICTED)[1])
+        same_angle = _by_aspecular(source, geometry_angles(PREDICTED)[1])
         aspecular.append(delta_E_CIE2000(reflectance_to_Lab(same_angle), truth_Lab))
     tilt, aspecular = np.concatenate(tilt), np.concatenate(aspecular)
     assert tilt.size == 230 * 6
@@ -90,9 +86,9 @@ def test_car_paints_measured_brdfs_are_rebuilt_from_six_readings_under_other_lam
     above = np.abs(lamps - aspecular) <= 80
     grid = lamps[above], aspecular[above], azimuth[above]
     for name, paint in gunther.items():
-        readings = paint.reflectance_factor(*_angles(SOURCE))
+        readings = paint.reflectance_factor(*geometry_angles(SOURCE))
         truth = _rgb_Lab(paint.reflectance_factor(*grid))
-        rebuilt = interpolate_over_tilt(*_angles(SOURCE), readings).reflectance(*grid)
+        rebuilt = interpolate_over_tilt(SOURCE, readings).reflectance(*grid)
         tilt = np.percentile(delta_E_CIE2000(_rgb_Lab(rebuilt), truth), 95)
         same_angle = _by_aspecular(readings, grid[1])
         base = np.percentile(delta_E_CIE2000(_rgb_Lab(same_angle), truth), 95)
@@ -117,9 +113,9 @@ def test_generated_targets_under_the_15_degree_lamp_follow_from_the_45_degree_on
     for case in cases:
         readings, truth = np.asarray(case.target)[source], np.asarray(case.target)[predicted]
         truth_Lab = reflectance_to_Lab(truth)
-        rebuilt = interpolate_over_tilt(*_angles(SOURCE), readings).reflectance(*_angles(PREDICTED))
+        rebuilt = interpolate_over_tilt(SOURCE, readings).reflectance(*geometry_angles(PREDICTED))
         tilt.append(delta_E_CIE2000(reflectance_to_Lab(rebuilt), truth_Lab))
-        same_angle = _by_aspecular(readings, _angles(PREDICTED)[1])
+        same_angle = _by_aspecular(readings, geometry_angles(PREDICTED)[1])
         aspecular.append(delta_E_CIE2000(reflectance_to_Lab(same_angle), truth_Lab))
     assert np.median(tilt) < 0.6 and np.median(aspecular) > 5 * np.median(tilt)
 

@@ -26,6 +26,8 @@ _WHERE = {
     "directions_at": "flakelab.core.geometry",
     "flake_angles": "flakelab.core.geometry",
     "flake_angles_at": "flakelab.core.geometry",
+    "geometry_angles": "flakelab.core.geometry",
+    "lit_by": "flakelab.core.geometry",
     "instrument_geometries": "flakelab.core.geometry",
     "refract_into_coating": "flakelab.core.geometry",
     "TEXTURE_READINGS": "flakelab.core.measurement",

@@ -37,6 +37,8 @@ __all__ = [
     "refract_into_coating",
     "flake_angles",
     "flake_angles_at",
+    "geometry_angles",
+    "lit_by",
 ]
 
 N_BINDER = 1.5
@@ -183,12 +185,26 @@ def instruments_reading(names: ArrayLike) -> tuple[str, ...]:
     return tuple(k for k, v in INSTRUMENT_GEOMETRIES.items() if set(v) <= have)
 
 
-def _angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:
-    """Illumination, aspecular and azimuth angles [radian] of geometries or their names."""
+def geometry_angles(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray, NDArray]:
+    """Illumination, aspecular and azimuth angles [degree] of geometries or their names, as
+    :func:`directions_at` and :func:`flake_angles_at` take them.
+
+    Examples
+    --------
+    >>> [a.tolist() for a in geometry_angles(["45as15", "15as-45", "45as25az90"])]
+    [[45.0, 15.0, 45.0], [15.0, -45.0, 25.0], [0.0, 0.0, 90.0]]
+    """
     items = [geometries] if isinstance(geometries, Geometry | str) else list(geometries)
     geoms = [g if isinstance(g, Geometry) else Geometry.parse(g) for g in items]
-    table = np.radians([(g.illumination, g.aspecular, g.azimuth) for g in geoms]).reshape(-1, 3)
+    table = np.array([(g.illumination, g.aspecular, g.azimuth) for g in geoms], float)
+    table = table.reshape(-1, 3)
     return table[:, 0], table[:, 1], table[:, 2]
+
+
+def lit_by(geometries, lamp: float) -> list[int]:
+    """Indices of the in-plane geometries of ``geometries`` a lamp ``lamp``° from the normal
+    lit (45as-15, 45as15 … for 45; the out-of-plane ones are lit from aside)."""
+    return [i for i, g in enumerate(geometries) if g.illumination == lamp and g.in_plane]
 
 
 def directions(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray]:
@@ -200,7 +216,7 @@ def directions(geometries: ArrayLike | Geometry) -> tuple[NDArray, NDArray]:
     >>> np.round(view, 6).tolist()
     [[0.0, 0.0, 1.0]]
     """
-    return directions_at(*np.degrees(_angles(geometries)))
+    return directions_at(*geometry_angles(geometries))
 
 
 def directions_at(
@@ -266,7 +282,7 @@ def flake_angles(
     >>> round(float(theta_flake[0]), 1), round(float(theta_inc[0]), 1)
     (4.3, 23.8)
     """
-    return flake_angles_at(*np.degrees(_angles(geometries)), n=n)
+    return flake_angles_at(*geometry_angles(geometries), n=n)
 
 
 def flake_angles_at(

@@ -37,7 +37,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 
-from flakelab.core.geometry import N_BINDER, directions_at, flake_angles_at, refract_into_coating
+from flakelab.core.geometry import (
+    N_BINDER,
+    directions_at,
+    flake_angles_at,
+    geometry_angles,
+    lit_by,
+    refract_into_coating,
+)
 from flakelab.core.measurement import Measurement
 from flakelab.library.optics import fresnel_reflectance
 
@@ -99,24 +106,21 @@ class TiltInterpolation:
 
 
 def interpolate_over_tilt(
-    illumination: ArrayLike,
-    aspecular: ArrayLike,
-    reflectance: ArrayLike,
-    floor_share: float = FLOOR_SHARE,
+    geometries, reflectance: ArrayLike, floor_share: float = FLOOR_SHARE
 ) -> TiltInterpolation:
-    """Readings ``reflectance`` [G, C] at in-plane geometries given by their angles [degree]
-    (each [G]) interpolated over flake tilt; readings at one tilt are averaged. Needs two or
-    more tilts."""
+    """Readings ``reflectance`` [G, C] at in-plane ``geometries`` (or their names)
+    interpolated over flake tilt; readings at one tilt are averaged. Needs two or more
+    tilts."""
     if not 0.0 <= floor_share < 1.0:  # the smallest reading must keep a flake part to log
         raise ValueError(f"floor_share: expected a share from 0 to below 1, got {floor_share}")
-    tilt = flake_angles_at(illumination, aspecular)[0]
+    angles = geometry_angles(geometries)
+    tilt = flake_angles_at(*angles)[0]
     knots, where = np.unique(np.round(tilt, 6), return_inverse=True)
     if knots.size < 2:
         raise ValueError(f"expected readings at two or more flake tilts, got {knots.size}")
     reflectance = np.maximum(np.asarray(reflectance, dtype=float), _SMALLEST)
     floor = floor_share * reflectance.min(axis=0)
-    factor = clearcoat_factor(illumination, aspecular)
-    log_flake = np.log((reflectance - floor) / factor[:, None])
+    log_flake = np.log((reflectance - floor) / clearcoat_factor(*angles)[:, None])
     summed = np.zeros((knots.size, log_flake.shape[1]))
     np.add.at(summed, where, log_flake)
     return TiltInterpolation(knots, summed / np.bincount(where)[:, None], floor)
@@ -126,9 +130,7 @@ def tilt_interpolation(measurement: Measurement, lamp: float = 45.0) -> TiltInte
     """``measurement``'s in-plane readings under a lamp ``lamp``° from the normal, interpolated
     over flake tilt (:func:`interpolate_over_tilt`); a reading without two of them at
     different tilts is refused naming what it has."""
-    rows = [
-        i for i, g in enumerate(measurement.geometries) if g.illumination == lamp and g.in_plane
-    ]
+    rows = lit_by(measurement.geometries, lamp)
     lit = [measurement.geometries[i] for i in rows]
     if len({g.aspecular for g in lit}) < 2:
         raise ValueError(
@@ -136,6 +138,4 @@ def tilt_interpolation(measurement: Measurement, lamp: float = 45.0) -> TiltInte
             f"readings under a lamp at {lamp:g}° ({lamp:g}as15, {lamp:g}as45 …), got "
             f"{', '.join(map(str, measurement.geometries))}"
         )
-    return interpolate_over_tilt(
-        [g.illumination for g in lit], [g.aspecular for g in lit], measurement.reflectance[rows]
-    )
+    return interpolate_over_tilt(lit, measurement.reflectance[rows])

@@ -44,7 +44,7 @@ from flakelab.core.colorimetry import (
     encode_sRGB,
     reflectance_to_Lab,
 )
-from flakelab.core.geometry import flake_angles_at
+from flakelab.core.geometry import flake_angles_at, lit_by
 from flakelab.core.measurement import Measurement
 from flakelab.core.units import parse_amount
 from flakelab.io.records import write_atomically
@@ -129,9 +129,7 @@ def appearance_of(
     """Colour and texture of ``measurement`` for rendering under a lamp ``lamp``° from the
     normal; needs two or more in-plane geometries it lit (45as15, 45as45 … at 45°, the
     family every multi-angle instrument has; 15as-15, 15as15 … on an MA-T12)."""
-    rows = [
-        i for i, g in enumerate(measurement.geometries) if g.illumination == lamp and g.in_plane
-    ]
+    rows = lit_by(measurement.geometries, lamp)
     if len(rows) < 2:
         lamps = lamps_of(measurement)
         has = f"it can be drawn under {', '.join(f'{a:g}°' for a in lamps)}" if lamps else (

@@ -114,15 +114,14 @@ def flop_series(
 ) -> dict[float, tuple[np.ndarray, np.ndarray]]:
     """Per lamp (illumination angle): the in-plane geometries it lit, as ``x`` (the aspecular
     angle, or ``"flake-tilt"``: θ_flake) ascending and their L*, C*ab ``[K, 2]``."""
-    from flakelab.core.geometry import flake_angles
+    from flakelab.core.geometry import flake_angles, lit_by
 
     if against not in FLOP_AXES:
         raise ValueError(f"against: expected one of {', '.join(FLOP_AXES)}, got {against!r}")
     lch = Lab_to_LCh(measurement.lab(conditions))
     series = {}
     for lamp in sorted({g.illumination for g in measurement.geometries if g.in_plane}):
-        rows = [i for i, g in enumerate(measurement.geometries)
-                if g.illumination == lamp and g.in_plane]  # fmt: skip
+        rows = lit_by(measurement.geometries, lamp)
         lit = [measurement.geometries[i] for i in rows]
         x = (flake_angles(lit)[0] if against == "flake-tilt"
              else np.array([g.aspecular for g in lit]))  # fmt: skip
