@@ -321,7 +321,10 @@ def train(
     instrument = instrument_key(instrument)
     geometries = INSTRUMENT_GEOMETRIES[instrument]
     read_at = datetime.now(UTC)  # before reading: a case stored while it trains is new next time
-    gate = when_new and _new_cases(cases, database, register_model, instrument, when_new)
+    gate, registry = (
+        _new_cases(cases, database, register_model, instrument, when_new) if when_new
+        else (None, None)
+    )  # fmt: skip
     if gate and gate["new_cases"] is not None and gate["new_cases"] < when_new:
         _print_not_trained(cases, instrument, gate, json_output)
         return
@@ -340,7 +343,10 @@ def train(
         check_shop_split(cases, adapt, data, held_out)
         data, validation = withhold_for_adaptation(data, adapt, config)
     # the registry before the long training: one it cannot store in is refused now, not after
-    engine = open_database(database) if register_model else None
+    if register_model:
+        engine = registry if registry is not None else open_database(database)
+    else:
+        engine = None
     # on a schedule, a checkpoint kept for fewer cases is of a training the cases came in after
     kept = checkpoint and TrainingCheckpoint(
         checkpoint, config, data_hash(data), restart_other_cases=bool(gate)
@@ -425,10 +431,11 @@ def train(
 
 
 def _new_cases(cases: str, database: str | None, register: bool, instrument: str,
-               when_new: int) -> dict:  # fmt: skip
+               when_new: int) -> tuple[dict, Any]:  # fmt: skip
     """``train --when-new``: how many cases the database ``cases`` stored at ``instrument``'s
     geometries since the newest version registered as its model read its cases (None where
-    none is: every case is new)."""
+    none is: every case is new), and the registry it looked in (opened, or created where
+    ``register``: the training registers there; None where none is)."""
     from flakelab.cases.database import count_stored_since, open_database
     from flakelab.cases.exchange import is_case_file
     from flakelab.models.registry import newest_training, shop_model_name
@@ -443,12 +450,12 @@ def _new_cases(cases: str, database: str | None, register: bool, instrument: str
     newest = registry and newest_training(registry, name)
     gate: dict[str, Any] = {"when_new": when_new, "model": name, "since_version": None}
     if not newest:
-        return gate | {"new_cases": None}
+        return gate | {"new_cases": None}, registry
     version, read_at, known = newest
     stored = count_stored_since(case_database(cases), read_at, INSTRUMENT_GEOMETRIES[instrument])
     since = "cases read" if known else "registration"  # a model file trained elsewhere
     return gate | {"since_version": version, "since": read_at.isoformat(), "since_what": since,
-                   "new_cases": stored}  # fmt: skip
+                   "new_cases": stored}, registry  # fmt: skip
 
 
 def _print_not_trained(cases: str, instrument: str, gate: dict, json_output: bool) -> None:
