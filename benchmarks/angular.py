@@ -1,14 +1,16 @@
 """Readings at geometries the instrument did not read: flake-tilt interpolation against the
 aspecular interpolation of the same readings (the baseline, measured in the same run).
 
-Three sets, each predicted from its six readings under the 45° lamp (45as-15 … 45as110):
+Four sets, each predicted from its six readings under the 45° lamp (45as-15 … 45as110):
 - the 230 real MA-T12 samples of ../shared/data/ma-t12 (matte pigments on marble), their six
   readings under the 15° lamp (ΔE00, D65/10);
 - generated targets at the MA-T12's geometries (metallic, pearl and solid paints of the demo
   library, as `flakelab cases generate -i ma-t12` makes them), their 15° readings;
 - Günther et al.'s eight car paints (../shared/data/reference-brdf, Cook-Torrance fits of
   measured BRDFs, RGB taken as linear sRGB), at lamps of 15–65° other than 45°, in plane and
-  30°/60°/90° out of plane, detectors within 80° of the normal, aspecular angles 15–110°.
+  30°/60°/90° out of plane, detectors within 80° of the normal, aspecular angles 15–110°;
+- the 25 paints of the MERL database (metallic, pearl, colour-changing, two-layer and solid),
+  as Löw et al.'s ABC model fits them, at the same geometries.
 
     python benchmarks/angular.py [--targets 300] [--seed 11] [--floor 0.5,0.9] [--json]
 """
@@ -27,7 +29,12 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.io import read_library, read_measurements
-from flakelab.physics.reference_brdf import read_gunther_fits
+from flakelab.physics.reference_brdf import (
+    is_merl_effect_paint,
+    is_merl_paint,
+    read_gunther_fits,
+    read_low_abc_fits,
+)
 from flakelab.render.angular import FLOOR_SHARE, interpolate_over_tilt
 from flakelab.render.appearance import cardinal_spline
 
@@ -91,7 +98,7 @@ def _rgb_to_Lab(rgb: np.ndarray) -> np.ndarray:
     return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(rgb, apply_cctf_decoding=False))
 
 
-def gunther_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reference_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lamps, aspecular, azimuths = np.meshgrid([15.0, 25.0, 35.0, 55.0, 65.0],
                                              np.arange(15.0, 111.0, 5.0),
                                              [0.0, 30.0, 60.0, 90.0], indexing="ij")  # fmt: skip
@@ -99,14 +106,12 @@ def gunther_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return lamps[above], aspecular[above], azimuths[above]
 
 
-def gunther(floor: float) -> list[dict] | None:
-    path = SHARED / "reference-brdf" / "gunther2005_carpaint_ct3.csv"
-    if not path.is_file():
-        return None
-    grid = gunther_grid()
+def reference_set(paints, floor: float) -> list[dict]:
+    """Each fitted paint read at the 45° lamp's six geometries, rebuilt on the grid."""
+    grid = reference_grid()
     source_angles = geometry_angles(SOURCE)
     report = []
-    for paint in read_gunther_fits(path):
+    for paint in paints:
         readings = paint.reflectance_factor(*source_angles)
         truth = _rgb_to_Lab(paint.reflectance_factor(*grid))
         tilt = delta_E_CIE2000(_rgb_to_Lab(by_tilt(readings, floor)(*grid)), truth)
@@ -114,6 +119,36 @@ def gunther(floor: float) -> list[dict] | None:
         report.append({"paint": paint.name, "geometries": int(tilt.size),
                        "tilt": statistics(tilt), "aspecular": statistics(aspec)})  # fmt: skip
     return report
+
+
+def gunther(floor: float) -> list[dict] | None:
+    path = SHARED / "reference-brdf" / "gunther2005_carpaint_ct3.csv"
+    return reference_set(read_gunther_fits(path), floor) if path.is_file() else None
+
+
+def merl(floor: float) -> list[dict] | None:
+    path = SHARED / "reference-brdf" / "merl_abc_fits_low2012.csv"
+    if not path.is_file():
+        return None
+    return reference_set([p for p in read_low_abc_fits(path) if is_merl_paint(p.name)], floor)
+
+
+def ranges(report: list[dict]) -> dict[str, dict[str, list[float]]]:
+    """The MERL paints' figures from least to most, effect paints (by name) and the others."""
+    groups = {"effect": [r for r in report if is_merl_effect_paint(r["paint"])]}
+    groups["other"] = [r for r in report if r not in groups["effect"]]
+    return {
+        group: {
+            f"{method} {figure}": [
+                min(r[method][figure] for r in rows),
+                max(r[method][figure] for r in rows),
+            ]  # fmt: skip
+            for method in ("tilt", "aspecular")
+            for figure in ("median", "p95")
+        }
+        | {"paints": len(rows)}
+        for group, rows in groups.items()
+    }
 
 
 def main() -> None:
@@ -131,7 +166,10 @@ def main() -> None:
             "real_ma_t12": real_ma_t12(floor),
             "generated": generated(args.targets, args.seed, floor),
             "gunther": gunther(floor),
+            "merl": merl(floor),
         }
+        if report[f"floor {floor:g}"]["merl"] is not None:
+            report[f"floor {floor:g}"]["merl_ranges"] = ranges(report[f"floor {floor:g}"]["merl"])
     if args.json:
         print(json.dumps(report, indent=2))
         return
@@ -146,10 +184,18 @@ def main() -> None:
                   f"{r['tilt']['median']:.2f} / {r['tilt']['p95']:.2f}, aspecular "
                   f"{r['aspecular']['median']:.2f} / {r['aspecular']['p95']:.2f} "
                   f"(median ×{r['median_ratio']:.1f})")  # fmt: skip
-        for r in sets["gunther"] or []:
-            tilt, base = r["tilt"], r["aspecular"]
-            print(f"  {r['paint']:16s} {tilt['median']:.2f} / {tilt['p95']:.2f}, "
-                  f"aspecular {base['median']:.2f} / {base['p95']:.2f}")  # fmt: skip
+        for name in ("gunther", "merl"):
+            print(f"  {name}:" if sets[name] is not None else f"  {name}: ../shared/data absent")
+            for r in sets[name] or []:
+                tilt, base = r["tilt"], r["aspecular"]
+                print(f"    {r['paint']:22s} {tilt['median']:.2f} / {tilt['p95']:.2f}, "
+                      f"aspecular {base['median']:.2f} / {base['p95']:.2f}")  # fmt: skip
+        for group, r in sets.get("merl_ranges", {}).items():
+            print(f"  merl, {r['paints']} {group} paints: median "
+                  f"{r['tilt median'][0]:.2f}–{r['tilt median'][1]:.2f}, p95 "
+                  f"{r['tilt p95'][0]:.2f}–{r['tilt p95'][1]:.2f}; aspecular median "
+                  f"{r['aspecular median'][0]:.2f}–{r['aspecular median'][1]:.2f}, p95 "
+                  f"{r['aspecular p95'][0]:.2f}–{r['aspecular p95'][1]:.2f}")  # fmt: skip
 
 
 if __name__ == "__main__":

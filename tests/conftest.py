@@ -127,6 +127,15 @@ def gunther_fits_file() -> Path:
 
 
 @pytest.fixture(scope="session")
+def merl_abc_fits_file() -> Path:
+    """Löw et al.'s ABC fits of the 100 MERL BRDFs, 25 of them paints (reference-brdf)."""
+    path = REFERENCE_BRDF / "merl_abc_fits_low2012.csv"
+    if not path.is_file():
+        pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
+    return path
+
+
+@pytest.fixture(scope="session")
 def ma_t12_files(ma_t12_dir: Path) -> list[Path]:
     files = sorted(ma_t12_dir.glob("*.xlsx"))
     assert files, f"no MA-T12 exports in {ma_t12_dir}"

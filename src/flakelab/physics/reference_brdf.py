@@ -1,31 +1,76 @@
 """Analytic BRDFs fitted to measured car paints: references for angular interpolation.
 
-Günther, Chen, Goesele, Wald and Seidel (VMV 2005, Table 1) fitted a Lambertian term and three
-Cook-Torrance lobes to eight measured car paints, in RGB. Evaluated at an instrument's
-geometries they give the readings it would take; evaluated anywhere else, what those readings
-must be interpolated to (:mod:`flakelab.render.angular`). The fits are third-party data
-(../shared/data/reference-brdf, SOURCES.md there), read from the file, never shipped.
+Evaluated at an instrument's geometries they give the readings it would take; evaluated
+anywhere else, what those readings must be interpolated to (:mod:`flakelab.render.angular`).
+The fits are third-party data (../shared/data/reference-brdf, SOURCES.md there), read from
+the file, never shipped. Both are in RGB; the reflectance factor is π f (a white diffuser
+reads 1), and both shadow as Cook and Torrance's V-grooves do,
+G = min(1, 2 cos θ_h cos θ_v / v·h, 2 cos θ_h cos θ_l / v·h).
 
-Each lobe: f = k_s D(θ_h) F(v·h) G / (4 cos θ_l cos θ_v), with Beckmann's distribution
-D = exp(−tan²θ_h / m²) / (π m² cos⁴θ_h), Schlick's Fresnel F = r + (1 − r)(1 − v·h)⁵ and
-Cook and Torrance's shadowing G = min(1, 2 cos θ_h cos θ_v / v·h, 2 cos θ_h cos θ_l / v·h).
-The reflectance factor is π f (a white diffuser reads 1).
+- Günther, Chen, Goesele, Wald and Seidel (VMV 2005, Table 1) fitted a Lambertian term and
+  three Cook-Torrance lobes to eight measured car paints. Each lobe:
+  f = k_s D(θ_h) F(v·h) G / (4 cos θ_l cos θ_v), with Beckmann's distribution
+  D = exp(−tan²θ_h / m²) / (π m² cos⁴θ_h) and Schlick's Fresnel F = r + (1 − r)(1 − v·h)⁵.
+- Löw, Kronander, Ynnerman and Unger (ACM TOG 31(1), 2012) fitted their ABC model to the 100
+  BRDFs of the MERL database (Matusik et al. 2003), 23 of them car paints (metallic, pearl,
+  colour-changing, two-layer): f = k_d / π + F(l·h) D(θ_h) G / (π cos θ_l cos θ_v), with
+  D = A / (1 + B (1 − cos θ_h))^C (A per colour channel, B and C shared) and the exact
+  unpolarised Fresnel reflectance of a dielectric of index ``ior``.
 """
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core.geometry import directions_at
+from flakelab.library.optics import fresnel_reflectance
 
-__all__ = ["CookTorrancePaint", "read_gunther_fits"]
+__all__ = [
+    "AbcPaint",
+    "CookTorrancePaint",
+    "is_merl_effect_paint",
+    "is_merl_paint",
+    "read_gunther_fits",
+    "read_low_abc_fits",
+]
 
 _CHANNELS = ("R", "G", "B")
+
+_MERL_EFFECT_WORDS = ("metallic", "pearl", "color-changing", "two-layer")
+
+
+def is_merl_paint(name: str) -> bool:
+    """Whether a MERL material is a paint: 25 of the 100, the 23 whose names say so and the
+    two two-layer car paints (gold and silver)."""
+    return "paint" in name or name.startswith("two-layer")
+
+
+def is_merl_effect_paint(name: str) -> bool:
+    """Whether a MERL material's name calls it an effect paint (metallic, pearl,
+    colour-changing, two-layer): 16 of its 25 paints. Its "gold-paint" and "silver-paint"
+    say neither, though their fits' broad lobes are a metallic's."""
+    return any(word in name for word in _MERL_EFFECT_WORDS)
+
+
+def _microfacet_terms(
+    illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """cos θ_l, cos θ_v, cos θ_h, v·h and Cook and Torrance's shadowing G, each ``[..., 1]``,
+    of geometries given by their angles [degree]."""
+    light, view = directions_at(illumination, aspecular, azimuth)
+    half = light + view
+    half /= np.linalg.norm(half, axis=-1, keepdims=True)
+    cos_l, cos_v, cos_h = light[..., 2:], view[..., 2:], half[..., 2:]
+    v_h = np.sum(view * half, axis=-1, keepdims=True)
+    shadowing = np.minimum(1.0, np.minimum(2 * cos_h * cos_v, 2 * cos_h * cos_l) / v_h)
+    return cos_l, cos_v, cos_h, v_h, shadowing
 
 
 @dataclass(frozen=True)
@@ -43,12 +88,7 @@ class CookTorrancePaint:
         self, illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0
     ) -> NDArray[np.float64]:
         """π f ``[..., 3]`` at geometries given by their angles [degree]."""
-        light, view = directions_at(illumination, aspecular, azimuth)
-        half = light + view
-        half /= np.linalg.norm(half, axis=-1, keepdims=True)
-        cos_l, cos_v, cos_h = light[..., 2:], view[..., 2:], half[..., 2:]
-        v_h = np.sum(view * half, axis=-1, keepdims=True)
-        shadowing = np.minimum(1.0, np.minimum(2 * cos_h * cos_v, 2 * cos_h * cos_l) / v_h)
+        cos_l, cos_v, cos_h, v_h, shadowing = _microfacet_terms(illumination, aspecular, azimuth)
         m2 = self.roughness**2  # [L]
         tan2 = (1 - cos_h**2) / cos_h**2
         beckmann = np.exp(-tan2 / m2) / (np.pi * m2 * cos_h**4)  # [..., L]
@@ -58,38 +98,83 @@ class CookTorrancePaint:
         return np.pi * (self.diffuse / np.pi + glossy)
 
 
+@dataclass(frozen=True)
+class AbcPaint:
+    """Löw et al.'s ABC model: a Lambertian term ``diffuse`` [3], the distribution's ``scale``
+    A [3], ``sharpness`` B and ``falloff`` C, and the Fresnel index ``ior``, in RGB."""
+
+    name: str
+    diffuse: NDArray[np.float64]
+    scale: NDArray[np.float64]
+    sharpness: float
+    falloff: float
+    ior: float
+
+    def reflectance_factor(
+        self, illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0
+    ) -> NDArray[np.float64]:
+        """π f ``[..., 3]`` at geometries given by their angles [degree]."""
+        cos_l, cos_v, cos_h, v_h, shadowing = _microfacet_terms(illumination, aspecular, azimuth)
+        distribution = self.scale / (1 + self.sharpness * (1 - cos_h)) ** self.falloff
+        fresnel = fresnel_reflectance(v_h, 1.0, self.ior)  # v·h = l·h
+        return self.diffuse + fresnel * distribution * shadowing / (cos_l * cos_v)
+
+
 def read_gunther_fits(path: str | Path) -> list[CookTorrancePaint]:
     """The paints of ``gunther2005_carpaint_ct3.csv`` (name, kd_R…B, ks1_R…ks3_B, r1…r3,
     m1…m3); a missing column or a value that is no positive number is named with the row."""
+    return _read_fits(path, _gunther_paint)
+
+
+def read_low_abc_fits(path: str | Path) -> list[AbcPaint]:
+    """The materials of ``merl_abc_fits_low2012.csv`` (name, kD_R…B, A_R…B, B, C, ior); a
+    missing column or a value out of its range is named with the row."""
+    return _read_fits(path, _abc_paint)
+
+
+def _read_fits(path: str | Path, paint: Callable[[dict[str, str]], Any]) -> list:
     paints = []
     with open(path, newline="", encoding="utf-8") as handle:
         for row_number, row in enumerate(csv.DictReader(handle), start=2):
             try:
-                paints.append(_paint(row))
+                paints.append(paint(row))
             except ValueError as error:
                 raise ValueError(f"{path}: row {row_number}: {error}") from None
     return paints
 
 
-def _paint(row: dict[str, str]) -> CookTorrancePaint:
-    def number(column: str, positive: bool = False) -> float:
-        text = row.get(column)
-        if text is None or not text.strip():
-            raise ValueError(f"{column}: missing")
-        try:
-            value = float(text)
-        except ValueError:
-            value = np.nan
-        if not np.isfinite(value) or value < 0 or (positive and value == 0):
-            bound = "> 0" if positive else "≥ 0"
-            raise ValueError(f"{column}: expected a number {bound}, got {row[column]!r}")
-        return value
+def _number(row: dict[str, str], column: str, above: float | None = None) -> float:
+    """``row[column]`` as a finite number ≥ 0, or above ``above`` where given."""
+    text = row.get(column)
+    if text is None or not text.strip():
+        raise ValueError(f"{column}: missing")
+    try:
+        value = float(text)
+    except ValueError:
+        value = np.nan
+    if not np.isfinite(value) or value < 0 or (above is not None and value <= above):
+        bound = "≥ 0" if above is None else f"> {above:g}"
+        raise ValueError(f"{column}: expected a number {bound}, got {row[column]!r}")
+    return value
 
+
+def _gunther_paint(row: dict[str, str]) -> CookTorrancePaint:
     lobes = range(1, 4)
     return CookTorrancePaint(
         row.get("name") or "",
-        np.array([number(f"kd_{c}") for c in _CHANNELS]),
-        np.array([[number(f"ks{k}_{c}") for c in _CHANNELS] for k in lobes]),
-        np.array([number(f"r{k}") for k in lobes]),
-        np.array([number(f"m{k}", positive=True) for k in lobes]),
+        np.array([_number(row, f"kd_{c}") for c in _CHANNELS]),
+        np.array([[_number(row, f"ks{k}_{c}") for c in _CHANNELS] for k in lobes]),
+        np.array([_number(row, f"r{k}") for k in lobes]),
+        np.array([_number(row, f"m{k}", above=0) for k in lobes]),
+    )
+
+
+def _abc_paint(row: dict[str, str]) -> AbcPaint:
+    return AbcPaint(
+        row.get("name") or "",
+        np.array([_number(row, f"kD_{c}") for c in _CHANNELS]),
+        np.array([_number(row, f"A_{c}") for c in _CHANNELS]),
+        _number(row, "B", above=0),
+        _number(row, "C", above=0),
+        _number(row, "ior", above=1),
     )
