@@ -1,7 +1,7 @@
 """Readings at geometries the instrument did not read: flake-tilt interpolation against the
 aspecular interpolation of the same readings (the baseline, measured in the same run).
 
-Four sets, each predicted from its six readings under the 45° lamp (45as-15 … 45as110):
+Five sets, each predicted from its six readings under the 45° lamp (45as-15 … 45as110):
 - the 230 real MA-T12 samples of ../shared/data/ma-t12 (matte pigments on marble), their six
   readings under the 15° lamp (ΔE00, D65/10);
 - generated targets at the MA-T12's geometries (metallic, pearl and solid paints of the demo
@@ -10,7 +10,8 @@ Four sets, each predicted from its six readings under the 45° lamp (45as-15 …
   measured BRDFs, RGB taken as linear sRGB), at lamps of 15–65° other than 45°, in plane and
   30°/60°/90° out of plane, detectors within 80° of the normal, aspecular angles 15–110°;
 - the 25 paints of the MERL database (metallic, pearl, colour-changing, two-layer and solid),
-  as Löw et al.'s ABC model fits them, at the same geometries.
+  as Löw et al.'s ABC model fits them and as Bagher et al.'s SGD model does, at the same
+  geometries (and how far those two fits of one measurement lie apart there).
 
     python benchmarks/angular.py [--targets 300] [--seed 11] [--floor 0.5,0.9] [--json]
 """
@@ -32,6 +33,7 @@ from flakelab.io import read_library, read_measurements
 from flakelab.physics.reference_brdf import (
     is_merl_effect_paint,
     is_merl_paint,
+    read_bagher_sgd_fits,
     read_gunther_fits,
     read_low_abc_fits,
 )
@@ -126,11 +128,36 @@ def gunther(floor: float) -> list[dict] | None:
     return reference_set(read_gunther_fits(path), floor) if path.is_file() else None
 
 
-def merl(floor: float) -> list[dict] | None:
-    path = SHARED / "reference-brdf" / "merl_abc_fits_low2012.csv"
+MERL_FITS = {
+    "merl_abc": ("merl_abc_fits_low2012.csv", read_low_abc_fits),
+    "merl_sgd": ("merl_sgd_fits_bagher2012.csv", read_bagher_sgd_fits),
+}
+"""The two fits of the MERL database's BRDFs: Löw et al.'s ABC and Bagher et al.'s SGD."""
+
+
+def merl(floor: float, fit: str) -> list[dict] | None:
+    file, read = MERL_FITS[fit]
+    path = SHARED / "reference-brdf" / file
     if not path.is_file():
         return None
-    return reference_set([p for p in read_low_abc_fits(path) if is_merl_paint(p.name)], floor)
+    return reference_set([p for p in read(path) if is_merl_paint(p.name)], floor)
+
+
+def fits_apart() -> list[dict] | None:
+    """How far the MERL database's two fits of each paint lie apart on the grid (ΔE00): how
+    well a fit knows the measured BRDF between the angles it was fitted at."""
+    paths = {fit: SHARED / "reference-brdf" / file for fit, (file, _) in MERL_FITS.items()}
+    if not all(path.is_file() for path in paths.values()):
+        return None
+    abc, sgd = ({p.name: p for p in read(paths[fit]) if is_merl_paint(p.name)}
+                for fit, (_, read) in MERL_FITS.items())  # fmt: skip
+    grid = reference_grid()
+    report = []
+    for name, paint in abc.items():
+        apart = delta_E_CIE2000(_rgb_to_Lab(paint.reflectance_factor(*grid)),
+                                _rgb_to_Lab(sgd[name].reflectance_factor(*grid)))  # fmt: skip
+        report.append({"paint": name, **statistics(apart)})
+    return report
 
 
 def ranges(report: list[dict]) -> dict[str, dict[str, list[float]]]:
@@ -166,10 +193,10 @@ def main() -> None:
             "real_ma_t12": real_ma_t12(floor),
             "generated": generated(args.targets, args.seed, floor),
             "gunther": gunther(floor),
-            "merl": merl(floor),
-        }
-        if report[f"floor {floor:g}"]["merl"] is not None:
-            report[f"floor {floor:g}"]["merl_ranges"] = ranges(report[f"floor {floor:g}"]["merl"])
+        } | {fit: merl(floor, fit) for fit in MERL_FITS}
+        sets = report[f"floor {floor:g}"]
+        sets |= {f"{fit}_ranges": ranges(sets[fit]) for fit in MERL_FITS if sets[fit] is not None}
+        sets["merl_fits_apart"] = fits_apart()
     if args.json:
         print(json.dumps(report, indent=2))
         return
@@ -184,18 +211,24 @@ def main() -> None:
                   f"{r['tilt']['median']:.2f} / {r['tilt']['p95']:.2f}, aspecular "
                   f"{r['aspecular']['median']:.2f} / {r['aspecular']['p95']:.2f} "
                   f"(median ×{r['median_ratio']:.1f})")  # fmt: skip
-        for name in ("gunther", "merl"):
+        for name in ("gunther", *MERL_FITS):
             print(f"  {name}:" if sets[name] is not None else f"  {name}: ../shared/data absent")
             for r in sets[name] or []:
                 tilt, base = r["tilt"], r["aspecular"]
                 print(f"    {r['paint']:22s} {tilt['median']:.2f} / {tilt['p95']:.2f}, "
                       f"aspecular {base['median']:.2f} / {base['p95']:.2f}")  # fmt: skip
-        for group, r in sets.get("merl_ranges", {}).items():
-            print(f"  merl, {r['paints']} {group} paints: median "
-                  f"{r['tilt median'][0]:.2f}–{r['tilt median'][1]:.2f}, p95 "
-                  f"{r['tilt p95'][0]:.2f}–{r['tilt p95'][1]:.2f}; aspecular median "
-                  f"{r['aspecular median'][0]:.2f}–{r['aspecular median'][1]:.2f}, p95 "
-                  f"{r['aspecular p95'][0]:.2f}–{r['aspecular p95'][1]:.2f}")  # fmt: skip
+        for fit in MERL_FITS:
+            for group, r in sets.get(f"{fit}_ranges", {}).items():
+                print(f"  {fit}, {r['paints']} {group} paints: median "
+                      f"{r['tilt median'][0]:.2f}–{r['tilt median'][1]:.2f}, p95 "
+                      f"{r['tilt p95'][0]:.2f}–{r['tilt p95'][1]:.2f}; aspecular median "
+                      f"{r['aspecular median'][0]:.2f}–{r['aspecular median'][1]:.2f}, p95 "
+                      f"{r['aspecular p95'][0]:.2f}–{r['aspecular p95'][1]:.2f}")  # fmt: skip
+        if apart := sets["merl_fits_apart"]:
+            medians, p95s = ([r[k] for r in apart] for k in ("median", "p95"))
+            print(f"  merl_abc against merl_sgd, the same {len(apart)} paints: median "
+                  f"{min(medians):.2f}–{max(medians):.2f}, "
+                  f"p95 {min(p95s):.2f}–{max(p95s):.2f}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -136,6 +136,15 @@ def merl_abc_fits_file() -> Path:
 
 
 @pytest.fixture(scope="session")
+def merl_sgd_fits_file() -> Path:
+    """Bagher et al.'s SGD fits of the same 100 MERL BRDFs (reference-brdf)."""
+    path = REFERENCE_BRDF / "merl_sgd_fits_bagher2012.csv"
+    if not path.is_file():
+        pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
+    return path
+
+
+@pytest.fixture(scope="session")
 def ma_t12_files(ma_t12_dir: Path) -> list[Path]:
     files = sorted(ma_t12_dir.glob("*.xlsx"))
     assert files, f"no MA-T12 exports in {ma_t12_dir}"
