@@ -117,31 +117,29 @@ def ma_t12_dir() -> Path:
     return MA_T12
 
 
-@pytest.fixture(scope="session")
-def gunther_fits_file() -> Path:
-    """Günther et al.'s Cook-Torrance fits of eight measured car paints (reference-brdf)."""
-    path = REFERENCE_BRDF / "gunther2005_carpaint_ct3.csv"
+def _reference_brdf(name: str) -> Path:
+    path = REFERENCE_BRDF / name
     if not path.is_file():
         pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
     return path
+
+
+@pytest.fixture(scope="session")
+def gunther_fits_file() -> Path:
+    """Günther et al.'s Cook-Torrance fits of eight measured car paints (reference-brdf)."""
+    return _reference_brdf("gunther2005_carpaint_ct3.csv")
 
 
 @pytest.fixture(scope="session")
 def merl_abc_fits_file() -> Path:
     """Löw et al.'s ABC fits of the 100 MERL BRDFs, 25 of them paints (reference-brdf)."""
-    path = REFERENCE_BRDF / "merl_abc_fits_low2012.csv"
-    if not path.is_file():
-        pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
-    return path
+    return _reference_brdf("merl_abc_fits_low2012.csv")
 
 
 @pytest.fixture(scope="session")
 def merl_sgd_fits_file() -> Path:
     """Bagher et al.'s SGD fits of the same 100 MERL BRDFs (reference-brdf)."""
-    path = REFERENCE_BRDF / "merl_sgd_fits_bagher2012.csv"
-    if not path.is_file():
-        pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
-    return path
+    return _reference_brdf("merl_sgd_fits_bagher2012.csv")
 
 
 @pytest.fixture(scope="session")
