@@ -15,6 +15,7 @@ from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.data import example_path
 from flakelab.io import read_measurement, read_measurements
 from flakelab.physics.reference_brdf import (
+    GUNTHER_METALLICS,
     AbcPaint,
     CookTorrancePaint,
     SgdPaint,
@@ -29,7 +30,6 @@ from flakelab.render.appearance import appearance_of, appearance_under, cardinal
 
 SOURCE = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 45)
 PREDICTED = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 15)
-METALLICS = ("polaris silber", "opel titan", "bmw339")
 
 
 def _by_aspecular(readings, aspecular) -> np.ndarray:
@@ -117,7 +117,7 @@ def test_car_paints_measured_brdfs_are_rebuilt_from_six_readings_under_other_lam
     for name, paint in gunther.items():
         tilt, base = (np.percentile(e, 95) for e in _rebuilt_from_six(paint))
         assert tilt < base, name
-        if name in METALLICS:
+        if name in GUNTHER_METALLICS:
             assert tilt < 2.7 and base > 10 * tilt, name
 
 

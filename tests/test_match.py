@@ -2142,6 +2142,35 @@ def test_search_and_correction_aim_at_the_tolerance(km):
             assert judged(plain, labs["plain"]) < judged(plain, labs[name]), name
 
 
+def test_real_solid_car_paints_read_without_texture_are_told_from_metallics(gunther_fits_file):
+    """Günther et al.'s fits of measured car paints read at each instrument's geometries (RGB
+    as linear sRGB): their solid white, blue and 2K acrylic travel under ``SOLID_TRAVEL``
+    beyond 25° from specular (0.40-0.96), their three metallics far over it (44.8-52.4). Over
+    all geometries the blue's clearcoat haze at 45as15 carries it to 3.68 (the white's at the
+    MA-T12's to 2.82): the rule before stop 94 read them as effect paints."""
+    import colour
+
+    from flakelab.core.difference import colour_travel, travel_off_specular
+    from flakelab.core.geometry import geometry_angles
+    from flakelab.match.settings import SOLID_TRAVEL, SOLID_TRAVEL_FROM
+    from flakelab.physics.reference_brdf import GUNTHER_METALLICS, read_gunther_fits
+
+    paints = {p.name: p for p in read_gunther_fits(gunther_fits_file)}
+    for instrument in ("five-angle", "ma-t12"):
+        names = [str(g) for g in instrument_geometries(instrument)]
+        Lab = {
+            name: colour.XYZ_to_Lab(colour.sRGB_to_XYZ(
+                paint.reflectance_factor(*geometry_angles(names)), apply_cctf_decoding=False))
+            for name, paint in paints.items()
+        }  # fmt: skip
+        for name in ("white", "blue", "2k acrylack"):
+            assert travel_off_specular(Lab[name], names, SOLID_TRAVEL_FROM) < SOLID_TRAVEL
+        for name in GUNTHER_METALLICS:
+            assert travel_off_specular(Lab[name], names, SOLID_TRAVEL_FROM) > 10 * SOLID_TRAVEL
+        assert colour_travel(Lab["blue"]) > SOLID_TRAVEL
+    assert colour_travel(Lab["white"]) > SOLID_TRAVEL  # the MA-T12's twelve
+
+
 def test_a_target_that_reads_no_flakes_is_matched_as_a_solid(hybrid):
     """A pastel of TiO2 with traces of perylene maroon and DPP orange, sprayed and read as
     the harness does. Its texture reads no flakes (G 0, SG 0), so the search keeps to

@@ -68,7 +68,12 @@ from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
-from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, MatchSettings
+from flakelab.match.settings import (
+    CAN_QUANTITY,
+    SCALE_RESOLUTION_G,
+    SOLID_TRAVEL_FROM,
+    MatchSettings,
+)
 
 NEAREST_OF_A_CODE = 5
 """The recorded cases ``match --colour-code`` shows where ``--nearest`` names no number (as
@@ -203,8 +208,10 @@ def match_command(
         typer.Option(
             min=0.0,
             help="A target without texture readings whose colour travels less than this "
-            "(ΔE00, the largest between two of its geometries) is a solid, matched with "
-            "pigments alone (0: never).",
+            f"(ΔE00, the largest between two of its geometries {SOLID_TRAVEL_FROM:g}° or more "
+            "from specular, "
+            "where a clearcoat's haze no longer lifts a solid's lightness) is a solid, "
+            "matched with pigments alone (0: never).",
         ),
     ] = MatchSettings.solid_travel,
     target_texture: Annotated[
@@ -843,6 +850,7 @@ def _evaluate(
     report["metamerism_weight"] = settings.metamerism
     report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
     report["solid_travel"] = settings.solid_travel
+    report["solid_travel_from"] = settings.solid_travel_from
     report["max_pigments"] = settings.max_pigments
     report["world"] = world_name
     report["habits"] = habits and habits.report()

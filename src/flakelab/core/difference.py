@@ -33,6 +33,7 @@ from flakelab.core.colorimetry import (
     reflectance_to_XYZ,
     white_point,
 )
+from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS
 
 __all__ = [
@@ -326,3 +327,22 @@ def colour_travel(lab: ArrayLike) -> NDArray[np.float64]:
     """
     lab = np.asarray(lab, dtype=float)
     return delta_E_CIE2000(lab[..., :, None, :], lab[..., None, :, :]).max(axis=(-2, -1))
+
+
+def travel_off_specular(lab: ArrayLike, geometries, at_least: float) -> NDArray[np.float64]:
+    """:func:`colour_travel` over the geometries (``Geometry`` objects or names) at least
+    ``at_least``° from specular, of CIELAB readings ``lab[..., G, 3]`` at ``geometries``; over
+    them all where fewer than two lie that far. Nearer specular a clearcoat's haze lifts any
+    paint's lightness, a dark solid's by several units; flakes move the far readings too.
+
+    Examples
+    --------
+    >>> lab = [[60, 0, 0], [50, 0, 0], [49, 0, 0], [48.5, 0, 0]]  # a haze at 45as15
+    >>> names = ["45as15", "45as25", "45as75", "45as110"]
+    >>> round(float(travel_off_specular(lab, names, 25.0)), 2)
+    1.5
+    """
+    angles = np.array([abs(Geometry.parse(str(g)).aspecular) for g in geometries])
+    far = np.flatnonzero(angles >= at_least)
+    lab = np.asarray(lab, dtype=float)
+    return colour_travel(lab[..., far, :] if far.size >= 2 else lab)

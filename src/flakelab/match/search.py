@@ -49,8 +49,8 @@ import torch
 from numpy.typing import NDArray
 
 from flakelab.core.difference import (
-    colour_travel,
     is_metamer,
+    travel_off_specular,
     worst_light,
     worst_per_light,
 )
@@ -476,7 +476,7 @@ def _match(
     target_texture = _texture_readings(texture, forward.dtype)
     solid = None
     if (allowed & ~effect).any():  # pigments to match with
-        solid = _solid_reason(texture, target_lab.numpy(), settings.solid_travel)
+        solid = _solid_reason(texture, target_lab.numpy(), forward.geometries, settings)
     if solid:
         allowed = allowed & ~effect
     generator = torch.Generator().manual_seed(settings.seed)
@@ -654,10 +654,13 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
     return notes
 
 
-def _solid_reason(texture: dict | None, lab: NDArray, travel_limit: float) -> str | None:
+def _solid_reason(
+    texture: dict | None, lab: NDArray, geometries, settings: MatchSettings
+) -> str | None:
     """Why a target is a solid, or None: its texture readings show no flakes
-    (:data:`SOLID_TEXTURE`), or, read without them, its colour ``lab[G, 3]`` travels less
-    than ``travel_limit`` over the geometries
+    (:data:`SOLID_TEXTURE`), or, read without them, its colour ``lab[G, 3]`` at
+    ``geometries`` travels less than ``settings.solid_travel`` over those
+    ``settings.solid_travel_from`` or more from specular
     (:data:`~flakelab.match.settings.SOLID_TRAVEL`)."""
     texture = texture or {}
     if all(k in texture for k in SOLID_TEXTURE):
@@ -667,11 +670,12 @@ def _solid_reason(texture: dict | None, lab: NDArray, travel_limit: float) -> st
         return None
     if lab.shape[0] < 2:  # one geometry: no travel to read
         return None
-    travel = float(colour_travel(lab))
-    if travel < travel_limit:
+    travel = float(travel_off_specular(lab, geometries, settings.solid_travel_from))
+    if travel < settings.solid_travel:
         return (
             f"the target has no texture readings and its colour travels {travel:.2f} ΔE00 over "
-            f"its geometries, under the {travel_limit:g} of a paint with flakes"
+            f"its geometries {settings.solid_travel_from:g}° or more from specular, under the "
+            f"{settings.solid_travel:g} of a paint with flakes"
         )
     return None
 

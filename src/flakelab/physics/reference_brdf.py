@@ -40,6 +40,8 @@ from flakelab.core.geometry import directions_at
 from flakelab.library.optics import fresnel_reflectance
 
 __all__ = [
+    "GUNTHER_METALLICS",
+    "GUNTHER_SOLIDS",
     "AbcPaint",
     "CookTorrancePaint",
     "is_merl_effect_paint",
@@ -51,6 +53,12 @@ __all__ = [
 ]
 
 _CHANNELS = ("R", "G", "B")
+
+GUNTHER_METALLICS = ("polaris silber", "opel titan", "bmw339")
+"""Günther et al.'s three silver metallics."""
+
+GUNTHER_SOLIDS = ("2k acrylack", "white", "blue", "blue matte")
+"""Günther et al.'s four solid paints; their eighth, the dark "ford f8", is neither here."""
 
 _MERL_EFFECT_WORDS = ("metallic", "pearl", "color-changing", "two-layer")
 
