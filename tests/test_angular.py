@@ -1,7 +1,8 @@
 """Readings at geometries the instrument did not read: interpolation over flake tilt
-(flakelab.render.angular), against real MA-T12 readings, Günther et al.'s and Löw et al.'s
-fits of measured car-paint BRDFs and the generated world, each time against interpolation
-over the aspecular angle alone; and the reference BRDFs themselves."""
+(flakelab.render.angular), against real MA-T12 readings, fits of measured car-paint BRDFs
+(Günther et al.'s; the MERL database's as Löw et al. and Bagher et al. fit them) and the
+generated world, each time against interpolation over the aspecular angle alone; and the
+reference BRDFs themselves."""
 
 from __future__ import annotations
 
