@@ -19,24 +19,18 @@ Five sets, each predicted from its six readings under the 45° lamp (45as-15 …
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
-import colour
 import numpy as np
 
 from flakelab.cases.generator import World
-from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.colorimetry import linear_sRGB_to_Lab, reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.io import read_library, read_measurements
-from flakelab.physics.reference_brdf import (
-    is_merl_effect_paint,
-    is_merl_paint,
-    read_bagher_sgd_fits,
-    read_gunther_fits,
-    read_low_abc_fits,
-)
+from flakelab.physics.reference_brdf import REFERENCE_FITS, is_merl_effect_paint, is_merl_paint
 from flakelab.render.angular import FLOOR_SHARE, interpolate_over_tilt
 from flakelab.render.appearance import cardinal_spline
 
@@ -96,10 +90,6 @@ def generated(targets: int, seed: int, floor: float) -> dict:
     return spectral_set(pairs, floor)
 
 
-def _rgb_to_Lab(rgb: np.ndarray) -> np.ndarray:
-    return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(rgb, apply_cctf_decoding=False))
-
-
 def reference_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lamps, aspecular, azimuths = np.meshgrid([15.0, 25.0, 35.0, 55.0, 65.0],
                                              np.arange(15.0, 111.0, 5.0),
@@ -115,48 +105,48 @@ def reference_set(paints, floor: float) -> list[dict]:
     report = []
     for paint in paints:
         readings = paint.reflectance_factor(*source_angles)
-        truth = _rgb_to_Lab(paint.reflectance_factor(*grid))
-        tilt = delta_E_CIE2000(_rgb_to_Lab(by_tilt(readings, floor)(*grid)), truth)
-        aspec = delta_E_CIE2000(_rgb_to_Lab(by_aspecular(readings, *grid)), truth)
+        truth = linear_sRGB_to_Lab(paint.reflectance_factor(*grid))
+        tilt = delta_E_CIE2000(linear_sRGB_to_Lab(by_tilt(readings, floor)(*grid)), truth)
+        aspec = delta_E_CIE2000(linear_sRGB_to_Lab(by_aspecular(readings, *grid)), truth)
         report.append({"paint": paint.name, "geometries": int(tilt.size),
                        "tilt": statistics(tilt), "aspecular": statistics(aspec)})  # fmt: skip
     return report
 
 
-def gunther(floor: float) -> list[dict] | None:
-    path = SHARED / "reference-brdf" / "gunther2005_carpaint_ct3.csv"
-    return reference_set(read_gunther_fits(path), floor) if path.is_file() else None
-
-
-MERL_FITS = {
-    "merl_abc": ("merl_abc_fits_low2012.csv", read_low_abc_fits),
-    "merl_sgd": ("merl_sgd_fits_bagher2012.csv", read_bagher_sgd_fits),
-}
+MERL_FITS = ("merl_abc", "merl_sgd")
 """The two fits of the MERL database's BRDFs: Löw et al.'s ABC and Bagher et al.'s SGD."""
 
 
-def merl(floor: float, fit: str) -> list[dict] | None:
-    file, read = MERL_FITS[fit]
+@functools.cache
+def fitted_paints(fit: str) -> tuple | None:
+    """The paints of one of :data:`~flakelab.physics.reference_brdf.REFERENCE_FITS` (the
+    MERL database's paints alone), read once a run; None where ../shared/data is absent."""
+    file, read = REFERENCE_FITS[fit]
     path = SHARED / "reference-brdf" / file
     if not path.is_file():
         return None
-    return reference_set([p for p in read(path) if is_merl_paint(p.name)], floor)
+    return tuple(p for p in read(path) if fit == "gunther" or is_merl_paint(p.name))
 
 
+def reference(floor: float, fit: str) -> list[dict] | None:
+    paints = fitted_paints(fit)
+    return None if paints is None else reference_set(paints, floor)
+
+
+@functools.cache
 def fits_apart() -> list[dict] | None:
     """How far the MERL database's two fits of each paint lie apart on the grid (ΔE00): how
     well a fit knows the measured BRDF between the angles it was fitted at."""
-    paths = {fit: SHARED / "reference-brdf" / file for fit, (file, _) in MERL_FITS.items()}
-    if not all(path.is_file() for path in paths.values()):
+    abc, sgd = (fitted_paints(fit) for fit in MERL_FITS)
+    if abc is None or sgd is None:
         return None
-    abc, sgd = ({p.name: p for p in read(paths[fit]) if is_merl_paint(p.name)}
-                for fit, (_, read) in MERL_FITS.items())  # fmt: skip
     grid = reference_grid()
+    sgd_of = {p.name: p for p in sgd}
     report = []
-    for name, paint in abc.items():
-        apart = delta_E_CIE2000(_rgb_to_Lab(paint.reflectance_factor(*grid)),
-                                _rgb_to_Lab(sgd[name].reflectance_factor(*grid)))  # fmt: skip
-        report.append({"paint": name, **statistics(apart)})
+    for paint in abc:
+        truth = linear_sRGB_to_Lab(sgd_of[paint.name].reflectance_factor(*grid))
+        apart = delta_E_CIE2000(linear_sRGB_to_Lab(paint.reflectance_factor(*grid)), truth)
+        report.append({"paint": paint.name, **statistics(apart)})
     return report
 
 
@@ -192,8 +182,7 @@ def main() -> None:
         report[f"floor {floor:g}"] = {
             "real_ma_t12": real_ma_t12(floor),
             "generated": generated(args.targets, args.seed, floor),
-            "gunther": gunther(floor),
-        } | {fit: merl(floor, fit) for fit in MERL_FITS}
+        } | {fit: reference(floor, fit) for fit in ("gunther", *MERL_FITS)}
         sets = report[f"floor {floor:g}"]
         sets |= {f"{fit}_ranges": ranges(sets[fit]) for fit in MERL_FITS if sets[fit] is not None}
         sets["merl_fits_apart"] = fits_apart()

@@ -24,11 +24,10 @@ import argparse
 import json
 from pathlib import Path
 
-import colour
 import numpy as np
 
 from flakelab.cases.generator import World
-from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.colorimetry import linear_sRGB_to_Lab, reflectance_to_Lab
 from flakelab.core.difference import colour_travel, travel_off_specular
 from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.io import read_library
@@ -37,11 +36,9 @@ from flakelab.match.settings import SOLID_TRAVEL, SOLID_TRAVEL_FROM
 from flakelab.physics.reference_brdf import (
     GUNTHER_METALLICS,
     GUNTHER_SOLIDS,
+    REFERENCE_FITS,
     is_merl_effect_paint,
     is_merl_paint,
-    read_bagher_sgd_fits,
-    read_gunther_fits,
-    read_low_abc_fits,
 )
 
 REFERENCE_BRDF = Path(__file__).resolve().parents[2] / "shared" / "data" / "reference-brdf"
@@ -81,22 +78,17 @@ def family_travel(library, instrument: str, n: int, seed: int) -> dict[str, dict
     return rows
 
 
-def _rgb_to_Lab(rgb: np.ndarray) -> np.ndarray:
-    return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(rgb, apply_cctf_decoding=False))
-
-
 def reference_groups() -> dict[str, list] | None:
     """The real paints by what their sources say they are (module docstring)."""
     if not REFERENCE_BRDF.is_dir():
         return None
-    gunther = read_gunther_fits(REFERENCE_BRDF / "gunther2005_carpaint_ct3.csv")
+    fits = {fit: read(REFERENCE_BRDF / file) for fit, (file, read) in REFERENCE_FITS.items()}
     groups = {
-        "Günther metallic": [p for p in gunther if p.name in GUNTHER_METALLICS],
-        "Günther solid": [p for p in gunther if p.name in GUNTHER_SOLIDS],
+        "Günther metallic": [p for p in fits["gunther"] if p.name in GUNTHER_METALLICS],
+        "Günther solid": [p for p in fits["gunther"] if p.name in GUNTHER_SOLIDS],
     }
-    for fit, read in (("ABC", read_low_abc_fits), ("SGD", read_bagher_sgd_fits)):
-        file = f"merl_{fit.lower()}_fits_{'low' if fit == 'ABC' else 'bagher'}2012.csv"
-        paints = [p for p in read(REFERENCE_BRDF / file) if is_merl_paint(p.name)]
+    for fit in ("ABC", "SGD"):
+        paints = [p for p in fits[f"merl_{fit.lower()}"] if is_merl_paint(p.name)]
         groups[f"MERL {fit} effect"] = [p for p in paints if is_merl_effect_paint(p.name)]
         groups[f"MERL {fit} other"] = [p for p in paints if not is_merl_effect_paint(p.name)]
     return groups
@@ -109,7 +101,7 @@ def reference_travel(instrument: str, groups: dict[str, list]) -> dict[str, dict
     angles = geometry_angles(names)
     rows = {}
     for group, paints in groups.items():
-        Lab = {p.name: _rgb_to_Lab(p.reflectance_factor(*angles)) for p in paints}
+        Lab = {p.name: linear_sRGB_to_Lab(p.reflectance_factor(*angles)) for p in paints}
         rows[group] = {"paints": len(paints)}
         for read in ("rule", "all"):
             travel = {name: float(travel_off_specular(lab, names, SOLID_TRAVEL_FROM)

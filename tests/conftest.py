@@ -117,8 +117,10 @@ def ma_t12_dir() -> Path:
     return MA_T12
 
 
-def _reference_brdf(name: str) -> Path:
-    path = REFERENCE_BRDF / name
+def _reference_brdf(fit: str) -> Path:
+    from flakelab.physics.reference_brdf import REFERENCE_FITS
+
+    path = REFERENCE_BRDF / REFERENCE_FITS[fit][0]
     if not path.is_file():
         pytest.skip(f"reference data not found at {path} (../shared/data is absent)")
     return path
@@ -127,19 +129,19 @@ def _reference_brdf(name: str) -> Path:
 @pytest.fixture(scope="session")
 def gunther_fits_file() -> Path:
     """Günther et al.'s Cook-Torrance fits of eight measured car paints (reference-brdf)."""
-    return _reference_brdf("gunther2005_carpaint_ct3.csv")
+    return _reference_brdf("gunther")
 
 
 @pytest.fixture(scope="session")
 def merl_abc_fits_file() -> Path:
     """Löw et al.'s ABC fits of the 100 MERL BRDFs, 25 of them paints (reference-brdf)."""
-    return _reference_brdf("merl_abc_fits_low2012.csv")
+    return _reference_brdf("merl_abc")
 
 
 @pytest.fixture(scope="session")
 def merl_sgd_fits_file() -> Path:
     """Bagher et al.'s SGD fits of the same 100 MERL BRDFs (reference-brdf)."""
-    return _reference_brdf("merl_sgd_fits_bagher2012.csv")
+    return _reference_brdf("merl_sgd")
 
 
 @pytest.fixture(scope="session")

@@ -42,6 +42,7 @@ from flakelab.library.optics import fresnel_reflectance
 __all__ = [
     "GUNTHER_METALLICS",
     "GUNTHER_SOLIDS",
+    "REFERENCE_FITS",
     "AbcPaint",
     "CookTorrancePaint",
     "is_merl_effect_paint",
@@ -76,18 +77,21 @@ def is_merl_effect_paint(name: str) -> bool:
     return any(word in name for word in _MERL_EFFECT_WORDS)
 
 
-def _microfacet_terms(
+def _half_vector_cosines(
     illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
-    """cos θ_l, cos θ_v, cos θ_h, v·h and Cook and Torrance's shadowing G, each ``[..., 1]``,
-    of geometries given by their angles [degree]."""
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """cos θ_l, cos θ_v, cos θ_h and v·h, each ``[..., 1]``, of geometries given by their
+    angles [degree]."""
     light, view = directions_at(illumination, aspecular, azimuth)
     half = light + view
     half /= np.linalg.norm(half, axis=-1, keepdims=True)
-    cos_l, cos_v, cos_h = light[..., 2:], view[..., 2:], half[..., 2:]
     v_h = np.sum(view * half, axis=-1, keepdims=True)
-    shadowing = np.minimum(1.0, np.minimum(2 * cos_h * cos_v, 2 * cos_h * cos_l) / v_h)
-    return cos_l, cos_v, cos_h, v_h, shadowing
+    return light[..., 2:], view[..., 2:], half[..., 2:], v_h
+
+
+def _v_groove_shadowing(cos_l: NDArray, cos_v: NDArray, cos_h: NDArray, v_h: NDArray) -> NDArray:
+    """Cook and Torrance's G = min(1, 2 cos θ_h cos θ_v / v·h, 2 cos θ_h cos θ_l / v·h)."""
+    return np.minimum(1.0, np.minimum(2 * cos_h * cos_v, 2 * cos_h * cos_l) / v_h)
 
 
 @dataclass(frozen=True)
@@ -105,7 +109,8 @@ class CookTorrancePaint:
         self, illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0
     ) -> NDArray[np.float64]:
         """π f ``[..., 3]`` at geometries given by their angles [degree]."""
-        cos_l, cos_v, cos_h, v_h, shadowing = _microfacet_terms(illumination, aspecular, azimuth)
+        cos_l, cos_v, cos_h, v_h = _half_vector_cosines(illumination, aspecular, azimuth)
+        shadowing = _v_groove_shadowing(cos_l, cos_v, cos_h, v_h)
         m2 = self.roughness**2  # [L]
         tan2 = (1 - cos_h**2) / cos_h**2
         beckmann = np.exp(-tan2 / m2) / (np.pi * m2 * cos_h**4)  # [..., L]
@@ -131,7 +136,8 @@ class AbcPaint:
         self, illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0
     ) -> NDArray[np.float64]:
         """π f ``[..., 3]`` at geometries given by their angles [degree]."""
-        cos_l, cos_v, cos_h, v_h, shadowing = _microfacet_terms(illumination, aspecular, azimuth)
+        cos_l, cos_v, cos_h, v_h = _half_vector_cosines(illumination, aspecular, azimuth)
+        shadowing = _v_groove_shadowing(cos_l, cos_v, cos_h, v_h)
         distribution = self.scale / (1 + self.sharpness * (1 - cos_h)) ** self.falloff
         fresnel = fresnel_reflectance(v_h, 1.0, self.ior)  # v·h = l·h
         return self.diffuse + fresnel * distribution * shadowing / (cos_l * cos_v)
@@ -161,7 +167,7 @@ class SgdPaint:
         self, illumination: ArrayLike, aspecular: ArrayLike, azimuth: ArrayLike = 0.0
     ) -> NDArray[np.float64]:
         """π f ``[..., 3]`` at geometries given by their angles [degree]."""
-        cos_l, cos_v, cos_h, v_h, _ = _microfacet_terms(illumination, aspecular, azimuth)
+        cos_l, cos_v, cos_h, v_h = _half_vector_cosines(illumination, aspecular, azimuth)
         shifted = self.alpha + (1 - cos_h**2) / cos_h**2 / self.alpha  # α + tan²θ_h / α
         distribution = self.kappa * np.exp(-shifted) / (np.pi * shifted**self.p * cos_h**4)
         cos_d = np.clip(v_h, 0.0, 1.0)
@@ -194,6 +200,14 @@ def read_bagher_sgd_fits(path: str | Path) -> list[SgdPaint]:
     alpha, p, f0, f1, kap, lambda, c, k, theta0, error, each per channel); a missing column
     or a value out of its range is named with the row."""
     return _read_fits(path, _sgd_paint)
+
+
+REFERENCE_FITS = {
+    "gunther": ("gunther2005_carpaint_ct3.csv", read_gunther_fits),
+    "merl_abc": ("merl_abc_fits_low2012.csv", read_low_abc_fits),
+    "merl_sgd": ("merl_sgd_fits_bagher2012.csv", read_bagher_sgd_fits),
+}
+"""Each fit in ../shared/data/reference-brdf (SOURCES.md there): its file and its reader."""
 
 
 def _read_fits(path: str | Path, paint: Callable[[dict[str, str]], Any]) -> list:
