@@ -6,7 +6,8 @@ Each kind starts from a good file made here from the shipped example (or the dem
 the example recipe, a habits report, a tolerance file, generated cases in CSV and CxF3, a
 manifest of instrument files for `cases record-all`, the shipped model, a toner-lot file, the
 example calibration panel's reading) and damages it: an
-MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short);
+MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short), one
+with camera pictures also by moving a picture or damaging its bytes;
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
 stray characters, or in another encoding (a byte-order mark alone, Windows-1252, a cut
 inside a character); JSON files by replacing or deleting one value anywhere in them (a target
@@ -15,10 +16,10 @@ values still readable but odd); a model file by editing its description, standar
 weights; a shop's SQLite database by replacing one value of one case row (or, for
 ``database-shops``, of a row of its models, habits or tins).
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,target,readings,readings-inspect,
-        sprayout,record,recipe,poured,library,habits,habits-match,tolerance,cases,cases-cxf,
-        manifest,model,model-register,lots,panel,database,database-shops,database-variants,
-        cases-variants,car,deck]
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,xlsx-images,target,readings,
+        readings-inspect,sprayout,record,recipe,poured,library,habits,habits-match,tolerance,
+        cases,cases-cxf,manifest,model,model-register,lots,panel,database,database-shops,
+        database-variants,cases-variants,car,deck]
         [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
@@ -38,6 +39,7 @@ import shutil
 import sqlite3
 import sys
 import tempfile
+import zipfile
 from collections.abc import Callable
 from dataclasses import replace
 from datetime import datetime
@@ -204,6 +206,53 @@ def damage_workbook(data: bytes, rng: random.Random) -> bytes:
     return buffer.getvalue()
 
 
+CAMERA_ROWS = ("15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80", "15d")
+"""An MA-T12 export's camera picture rows (sheet ``Texture Images``)."""
+
+
+def add_camera_pictures(source: Path, path: Path, sample: str) -> None:
+    """``source`` with a ``Texture Images`` sheet as the MA-T12 writes it: the sample's name
+    heading column B, a small noise picture in each geometry's row."""
+    from openpyxl.drawing.image import Image as Picture
+    from PIL import Image
+
+    workbook = openpyxl.load_workbook(source)
+    sheet = workbook.create_sheet("Texture Images")
+    sheet["B1"] = sample
+    pixels = np.random.default_rng(0).integers(0, 256, (len(CAMERA_ROWS), 36, 48, 3))
+    for row, (label, picture) in enumerate(zip(CAMERA_ROWS, pixels, strict=True), start=2):
+        sheet.cell(row, 1).value = label
+        png = io.BytesIO()
+        Image.fromarray(picture.astype(np.uint8)).save(png, format="png")
+        sheet.add_image(Picture(png), f"B{row}")
+    workbook.save(path)
+
+
+def damage_pictures(data: bytes, rng: random.Random) -> bytes:
+    """An MA-T12 export with camera pictures, damaged as :func:`damage_workbook` does, or one
+    of its pictures moved to another cell, or its bytes cut short or replaced."""
+    if rng.random() < 0.5:
+        return damage_workbook(data, rng)
+    if rng.random() < 0.5:
+        workbook = openpyxl.load_workbook(io.BytesIO(data))
+        picture = rng.choice(workbook["Texture Images"]._images)
+        picture.anchor._from.row = rng.randrange(12)
+        picture.anchor._from.col = rng.randrange(4)
+        buffer = io.BytesIO()
+        workbook.save(buffer)
+        return buffer.getvalue()
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as source, zipfile.ZipFile(buffer, "w") as target:
+        pictures = [n for n in source.namelist() if n.startswith("xl/media/")]
+        broken = rng.choice(pictures)
+        for item in source.infolist():
+            content = source.read(item)
+            if item.filename == broken:
+                content = content[: rng.randrange(len(content))] if rng.random() < 0.5 else b"x"
+            target.writestr(item, content)
+    return buffer.getvalue()
+
+
 CASE_COLUMNS = ("case_id", "shop", "instrument", "conditions", "outcome", "synthetic",
                 "geometries", "recipe", "target", "sprayout", "target_texture",
                 "sprayout_texture", "created_at", "updated_at", "tins", "colour_code")  # fmt: skip
@@ -283,6 +332,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     write_measurements([measurement], work / "good.json")
     write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
+    add_camera_pictures(work / "good.xlsx", work / "pictures.xlsx", measurement.sample)
     spots = [replace(measurement, sample=f"spot {i}", stored_lab=None) for i in (1, 2, 3)]
     write_measurements(spots, work / "spots.json")
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]), 200,
@@ -338,6 +388,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
+        # an export with the camera's pictures, drawn by inspect --images
+        "xlsx-images": (work / "pictures.xlsx",
+                        lambda p: ["inspect", str(p), "--images", str(work / "pictures.png")]),
         # a damaged target read by the main job, whose search and tables meet every value
         "target": (work / "good.json", lambda p: ["match", str(p), "--candidates", "1"]),
         # the car read at three spots, the readings averaged by the main job
@@ -439,6 +492,8 @@ def fuzz(kind: str, good: Path, command, n: int, rng: random.Random, work: Path)
             damaged.write_bytes(damage_database(data, rng, tuple(TABLE_COLUMNS)))
         elif kind == "xlsx":
             damaged.write_bytes(damage_workbook(data, rng))
+        elif kind == "xlsx-images":
+            damaged.write_bytes(damage_pictures(data, rng))
         elif kind in ("target", "sprayout", "record", "car") and rng.random() < 0.5:
             damaged.write_text(json.dumps(odd_target(json.loads(data), rng)))
         elif good.suffix == ".json" and rng.random() < 0.7:

@@ -32,6 +32,36 @@ def test_inspect_json_carries_lab_per_geometry_and_flop_index(ma_t12_files, cli)
     assert report["flop_index"] == pytest.approx(m.flop_index())
 
 
+def test_inspect_images_draws_the_camera_pictures_with_the_spectra_colour(ma_t12_files, tmp_path,
+                                                                         cli):  # fmt: skip
+    """``inspect --images``: the MA-T12's seven camera pictures in one figure, each above a
+    swatch of the colour its geometry's spectrum gives (a flat patch of exactly that sRGB)."""
+    from matplotlib.image import imread
+
+    from flakelab.core.colorimetry import Lab_to_sRGB
+
+    figure = tmp_path / "pictures.png"
+    result = cli("inspect", ma_t12_files[0], "--images", figure, "--json")
+    assert result.returncode == 0, result.stderr
+    drawn = json.loads(result.stdout)["camera_pictures"]
+    assert drawn["geometries"] == ["15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80",
+                                   "15d"]  # fmt: skip
+    assert (drawn["width"], drawn["height"]) == (480, 360)
+    pixels = np.round(imread(figure)[..., :3] * 255).reshape(-1, 3)
+    m = read_measurement(ma_t12_files[0])
+    for geometry in drawn["geometries"][:-1]:
+        swatch = np.round(Lab_to_sRGB(m.lab()[m.index(geometry)]) * 255)
+        assert (np.abs(pixels - swatch).max(axis=1) <= 1).sum() > 5000, geometry
+    for refused, message in [
+        ((example_path("target"),), "read from MA-T12 exports"),
+        ((ma_t12_files[0], "--all"), "one sample at a time"),
+    ]:
+        figure.unlink(missing_ok=True)
+        result = cli("inspect", *refused, "--images", figure)
+        assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert not figure.exists()
+
+
 def test_compare_example_agrees_with_library_and_tolerance(cli):
     result = cli("compare", "--example", "--json", "--tolerance", "de00-1.0")
     assert result.returncode == 0, result.stderr

@@ -147,6 +147,108 @@ def test_truncated_xlsx_is_reported(ma_t12_files, tmp_path):
         read_measurements(path)
 
 
+def test_mat12_camera_pictures_are_read_by_the_geometry_of_their_row(ma_t12_files):
+    """The six exports' camera pictures: seven each, 480 × 360 sRGB, labelled by the rows they
+    are anchored in (six geometries under the 15° lamp, then diffuse light). Read one row off,
+    the first would take the second's label and the last none. Over the six geometries, the
+    pictures' mean lightness ranks as the spectra's L* does (Spearman 0.31-0.94, mean 0.77;
+    0.24 with the pictures' order reversed), 10-28 L* darker: the camera is no colorimeter."""
+    from colour.models import eotf_sRGB
+    from scipy.stats import spearmanr
+
+    from flakelab.core.colorimetry import linear_sRGB_to_Lab
+    from flakelab.io.mat12_xlsx import read_mat12_images
+
+    order = ["15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80", "15d"]
+    agreement = []
+    for file in ma_t12_files:
+        measurement = read_measurement(file)
+        pictures = read_mat12_images(file)
+        assert list(pictures) == [measurement.sample]
+        found = pictures[measurement.sample]
+        assert list(found) == order
+        assert {p.shape for p in found.values()} == {(360, 480, 3)}
+        assert {p.dtype for p in found.values()} == {np.dtype(np.uint8)}
+        directional = order[:-1]
+        camera = [linear_sRGB_to_Lab(eotf_sRGB(found[g] / 255).reshape(-1, 3).mean(0))[0]
+                  for g in directional]  # fmt: skip
+        spectra = measurement.lab()[[measurement.index(g) for g in directional], 0]
+        assert 5 < np.min(spectra - camera) and np.max(spectra - camera) < 35
+        agreement.append(spearmanr(camera, spectra)[0])
+    assert min(agreement) > 0.2 and np.mean(agreement) > 0.6, agreement
+
+
+def _damaged_pictures(source: Path, folder: Path, damage) -> Path:
+    """A real export, loaded with its pictures, changed by ``damage(sheet)`` and saved."""
+    import openpyxl
+
+    workbook = openpyxl.load_workbook(source)
+    damage(workbook["Texture Images"])
+    path = folder / "damaged.xlsx"
+    workbook.save(path)
+    return path
+
+
+def _second_picture_on_first(sheet) -> None:
+    sheet._images[1].anchor._from.row = sheet._images[0].anchor._from.row
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (
+            lambda sheet: setattr(sheet["A3"], "value", None),
+            r"A3: a picture in a row that names no",
+        ),
+        (lambda sheet: setattr(sheet["A4"], "value", "15xx"), r"A4: expected a geometry name"),
+        (lambda sheet: setattr(sheet["B1"], "value", None), r"B2: a picture in a column no sample"),
+        (_second_picture_on_first, r"B2: a second picture of 15as-45"),
+    ],
+    ids=["unlabelled row", "unknown geometry", "no sample", "two in one cell"],
+)
+def test_mat12_camera_pictures_misplaced_are_refused_by_cell(ma_t12_files, tmp_path, damage,
+                                                             message):  # fmt: skip
+    from flakelab.io.mat12_xlsx import read_mat12_images
+
+    path = _damaged_pictures(ma_t12_files[0], tmp_path, damage)
+    with pytest.raises(MeasurementFileError, match=f"damaged.xlsx: Texture Images, {message}"):
+        read_mat12_images(path)
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda data: data[:100], r"Texture Images, B4: picture cannot be decoded \(image file is"),
+        (lambda data: b"no picture", r"Texture Images: picture xl/media/image3.png cannot be"),
+    ],
+    ids=["cut short", "not an image"],
+)
+def test_mat12_camera_picture_that_cannot_be_decoded_is_refused(ma_t12_files, tmp_path, damage,
+                                                                message):  # fmt: skip
+    """A picture cut short fails as it is decoded; one that is no image at all openpyxl drops
+    with a warning. flakelab refuses both, naming the cell or the picture."""
+    import zipfile
+
+    from flakelab.io.mat12_xlsx import read_mat12_images
+
+    path = tmp_path / "broken.xlsx"
+    with zipfile.ZipFile(ma_t12_files[0]) as source, zipfile.ZipFile(path, "w") as target:
+        for item in source.infolist():
+            data = source.read(item)
+            target.writestr(item, damage(data) if item.filename == "xl/media/image3.png" else data)
+    with pytest.raises(MeasurementFileError, match=f"broken.xlsx: {message}"):
+        read_mat12_images(path)
+    assert read_measurement(path).sample  # the spectra are still read
+
+
+def test_mat12_export_without_pictures_has_none(rich_measurement, tmp_path):
+    from flakelab.io.mat12_xlsx import read_mat12_images
+
+    path = tmp_path / "written.xlsx"
+    write_measurements([rich_measurement], path)
+    assert read_mat12_images(path) == {}
+
+
 def test_spectra_in_percent_are_read_as_reflectance_factors(ma_t12_dir, ma_t12_files, tmp_path):
     """Many instruments' exports write spectra in percent. Read as factors they gave L* of 274
     with no word: now they are divided by 100, with a note naming the file and why. Where a

@@ -119,6 +119,15 @@ def inspect(
     example: Annotated[
         bool, typer.Option("--example", help="Inspect the shipped example target.")
     ] = False,
+    pictures: Annotated[
+        Path | None,
+        typer.Option(
+            "--images",
+            help="An MA-T12 export: draw the instrument camera's pictures of the sample, each "
+            "with the colour its spectra give at that geometry, to this figure (.png, .pdf, "
+            ".svg).",
+        ),
+    ] = None,
 ) -> None:
     """Per-geometry L*a*b*, C*, h, flake angles, flop index and texture of a measurement."""
     from flakelab.core.colorimetry import Conditions
@@ -131,6 +140,10 @@ def inspect(
         raise FlakelabError("--all and --average: expected one of them, not both")
     cond = Conditions.parse(conditions)
     source = path if path is not None else example_path("target")
+    if pictures is not None:
+        if average or all_samples:
+            raise FlakelabError("--images: one sample at a time, not with --all or --average")
+        check_figure_file(pictures, "--images", reads={"measurement": source})
     if average:
         tol = read_tolerance(tolerance)
         mean, readings = read_readings(source, sample, average)
@@ -144,12 +157,45 @@ def inspect(
         return
     measurements = read_measurements(source) if all_samples else [read_sample(source, sample)]
     infos = [describe(m, cond) for m in measurements]
+    if pictures is not None:
+        infos[0]["camera_pictures"] = _draw_camera_pictures(source, measurements[0], pictures, cond)
     if as_json:
         out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
         print_report(out, indent=1)
         return
     for info in infos:
         _print_description(info)
+    if pictures is not None:
+        drawn = infos[0]["camera_pictures"]
+        errors.print(
+            f"wrote {pictures}: {counted(len(drawn['geometries']), 'camera picture')} "
+            f"({', '.join(drawn['geometries'])})",
+            highlight=False,
+        )
+
+
+def _draw_camera_pictures(source: Path, measurement, figure: Path, conditions) -> dict[str, Any]:
+    """The camera pictures of ``measurement``'s sample in the MA-T12 export ``source``, drawn
+    to ``figure``; their row labels and size."""
+    from flakelab.io import detect_format
+    from flakelab.io.mat12_xlsx import read_mat12_images
+    from flakelab.render.plots import plot_camera_pictures
+
+    if (kind := detect_format(source)) != "mat12-xlsx":
+        raise FlakelabError(
+            f"--images: {source}: the camera's pictures are read from MA-T12 exports (.xlsx), "
+            f"this is a {kind} file"
+        )
+    pictures = read_mat12_images(source)
+    if not (found := pictures.get(measurement.sample)):
+        others = f", only of {', '.join(map(repr, pictures))}" if pictures else ""
+        raise FlakelabError(
+            f"--images: {source}: no camera pictures of {measurement.sample!r} "
+            f"(sheet 'Texture Images'{others})"
+        )
+    plot_camera_pictures(found, measurement, figure, conditions=conditions)
+    height, width = next(iter(found.values())).shape[:2]
+    return {"file": str(figure), "geometries": list(found), "width": width, "height": height}
 
 
 @app.command()

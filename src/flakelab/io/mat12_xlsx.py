@@ -1,17 +1,24 @@
 """X-Rite MA-T12 QC export (.xlsx), as the instrument software writes it.
 
 Sheets: ``Color Data`` (L*a*b* per geometry), ``Spectral Data`` (reflectance factor per
-geometry, 400–700 nm), ``Texture Data``, ``Texture Images``. Each sheet opens with
+geometry, 400–700 nm), ``Texture Data``, ``Texture Images``. Each data sheet opens with
 ``QC JOB:``, ``STANDARD:`` (and ``ILLUMINANT/OBSERVER:``) rows, then a header row starting
 with ``Name``. The shared exports carry no texture values, so the layout of texture columns
 in a real export is not known here; flakelab reads and writes texture as one row per sample
 with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`. An optional
 ``INSTRUMENT:`` preamble row (written by flakelab for other instruments) names the instrument.
+
+``Texture Images`` holds the instrument camera's pictures of the measured spot as drawings:
+the sample's name heads a column (row 1), each geometry names a row (column A: ``15as-45`` …
+``15as80`` under the 15° lamp, ``15d`` under diffuse light), and each picture is anchored in
+its sample's column and its geometry's row (480 × 360 pixels, 8-bit sRGB, in the shared
+exports). :func:`read_mat12_images` reads them; flakelab does not write them.
 """
 
 from __future__ import annotations
 
 import gc
+import re
 import sys
 import warnings
 import zipfile
@@ -21,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import openpyxl
+from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
@@ -37,10 +45,20 @@ from flakelab.io.records import (
     write_atomically,
 )
 
-__all__ = ["read_mat12_xlsx", "write_mat12_xlsx", "INSTRUMENT"]
+__all__ = ["read_mat12_xlsx", "read_mat12_images", "write_mat12_xlsx", "INSTRUMENT"]
 
 INSTRUMENT = "X-Rite MA-T12"
-_SPECTRAL, _COLOR, _TEXTURE = "Spectral Data", "Color Data", "Texture Data"
+_SPECTRAL, _COLOR, _TEXTURE, _IMAGES = (
+    "Spectral Data",
+    "Color Data",
+    "Texture Data",
+    "Texture Images",
+)
+_DIFFUSE_IMAGE = re.compile(r"\d+d")
+"""A camera picture's row label under diffuse light (``15d``), where the others name a
+geometry."""
+_DROPPED_PICTURE = re.compile(r"image (\S+) will be removed")
+"""openpyxl's warning for a picture it could not open (``openpyxl.reader.drawings``)."""
 
 
 def _split_sheet(rows: list[tuple]) -> tuple[dict[str, str], int]:
@@ -173,6 +191,88 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         texture=texture,
         metadata=metadata,
     )
+
+
+def read_mat12_images(path: str | PathLike) -> dict[str, dict[str, NDArray[np.uint8]]]:
+    """The camera pictures of an MA-T12 export: sample → row label (``15as-45`` …, ``15d``) →
+    ``[rows, cols, 3]`` 8-bit sRGB, in the sheet's row order; empty without the sheet.
+
+    Raises
+    ------
+    MeasurementFileError
+        For a workbook that cannot be read, a picture that cannot be decoded, one anchored in
+        a row without a geometry or a column without a sample, a row label that names no
+        geometry, or two pictures in one cell.
+    """
+    try:
+        with open(path, "rb") as handle, warnings.catch_warnings(record=True) as dropped:
+            warnings.simplefilter("always")
+            # openpyxl drops a picture it cannot decode with a warning (reader.drawings)
+            sheet = _images_sheet(path, handle)
+    except OSError as error:
+        raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
+    for warning in dropped:
+        if found := _DROPPED_PICTURE.search(str(warning.message)):
+            raise MeasurementFileError(path, f"picture {found[1]} cannot be decoded", field=_IMAGES)
+    if sheet is None:
+        return {}
+    pictures: dict[str, dict[str, NDArray[np.uint8]]] = {}
+    for picture, (row, column) in sorted(sheet["pictures"], key=lambda p: p[1]):
+        where = f"{_IMAGES}, {openpyxl.utils.get_column_letter(column)}{row}"
+        sample = sheet["samples"].get(column)
+        if not sample:
+            raise MeasurementFileError(path, "a picture in a column no sample heads", field=where)
+        label = _picture_label(path, sheet["labels"].get(row), f"{_IMAGES}, A{row}")
+        if label in pictures.setdefault(sample, {}):
+            raise MeasurementFileError(path, f"a second picture of {label}", field=where)
+        pictures[sample][label] = _decode_picture(path, picture, where)
+    return pictures
+
+
+def _images_sheet(path: str | PathLike, handle) -> dict | None:
+    """The ``Texture Images`` sheet's pictures with their (row, column), 1-based, its row
+    labels (column A) and its sample names (row 1); None without the sheet. The whole
+    workbook is loaded (not read-only), as openpyxl reads drawings only then."""
+    try:
+        workbook = openpyxl.load_workbook(handle, data_only=True)
+    except (zipfile.BadZipFile, KeyError, OSError, ValueError, TypeError) as error:
+        raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
+    try:
+        if _IMAGES not in workbook.sheetnames:
+            return None
+        sheet = workbook[_IMAGES]
+        cells = {(c.row, c.column): c.value for row in sheet.iter_rows() for c in row}
+        text = {k: str(v).strip() for k, v in cells.items() if v not in (None, "")}
+        return {
+            # Worksheet._images: openpyxl's only handle on the pictures it read (no public one)
+            "pictures": [
+                (p, (p.anchor._from.row + 1, p.anchor._from.col + 1)) for p in sheet._images
+            ],
+            "labels": {row: v for (row, column), v in text.items() if column == 1},
+            "samples": {column: v for (row, column), v in text.items() if row == 1},
+        }
+    finally:
+        workbook.close()
+
+
+def _picture_label(path: str | PathLike, label: str | None, where: str) -> str:
+    if label is None:
+        raise MeasurementFileError(path, "a picture in a row that names no geometry", field=where)
+    if _DIFFUSE_IMAGE.fullmatch(label):
+        return label
+    return parse_geometry_name(path, label, where).name
+
+
+def _decode_picture(path: str | PathLike, picture, where: str) -> NDArray[np.uint8]:
+    from PIL import Image
+
+    try:
+        with Image.open(picture.ref) as image:
+            return np.asarray(image.convert("RGB"))
+    except (OSError, ValueError) as error:
+        raise MeasurementFileError(
+            path, f"picture cannot be decoded ({error})", field=where
+        ) from None
 
 
 def _read_color_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:

@@ -40,6 +40,7 @@ __all__ = [
     "plot_losses",
     "plot_rendering",
     "plot_side_by_side",
+    "plot_camera_pictures",
     "flop_series",
     "FLOP_AXES",
 ]
@@ -760,6 +761,64 @@ def _fitted(title: str, figure) -> str:
     """``title`` broken into lines as wide as ``figure`` (a verdict that names every one of
     an MA-T12's twelve geometries ran off the side)."""
     return textwrap.fill(title, int(_TITLE_CHARACTERS_PER_INCH * figure.get_figwidth()))
+
+
+def plot_camera_pictures(
+    pictures: Mapping[str, np.ndarray],
+    measurement: Measurement | None,
+    path: str | PathLike,
+    *,
+    conditions: Conditions = D65_10,
+    columns: int = 4,
+    dpi: int = 100,
+) -> None:
+    """An instrument camera's pictures of the measured spot (row label → 8-bit sRGB image,
+    :func:`~flakelab.io.mat12_xlsx.read_mat12_images`), each titled by its geometry with a
+    swatch along its foot of the colour the spectra give there: the camera is not a
+    colorimeter (its pictures of the shared exports lie 10-28 L* darker than the spectra), so
+    the picture shows where the spot is uneven, the swatch what was measured."""
+    from flakelab.core.colorimetry import Lab_to_sRGB
+
+    labels = list(pictures)
+    lab = (
+        dict(zip(measurement.geometry_names, measurement.lab(conditions), strict=True))
+        if measurement is not None
+        else {}
+    )
+    rows = -(-len(labels) // columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.75 * rows), squeeze=False)
+    for axis in axes.flat[len(labels) :]:
+        axis.set_axis_off()
+    for axis, label in zip(axes.flat, labels, strict=False):
+        picture = pictures[label]
+        height, width = picture.shape[:2]
+        axis.imshow(picture, extent=(0, width, height, 0))
+        axis.set_ylim(_SWATCH * height, 0)
+        axis.set_xticks([])
+        axis.set_yticks([])
+        if label in lab:
+            swatch = Lab_to_sRGB(lab[label])
+            axis.add_patch(plt.Rectangle((0, height), width, (_SWATCH - 1) * height, color=swatch))
+            values = " ".join(f"{k}* {v:.1f}" for k, v in zip("Lab", lab[label], strict=True))
+            axis.set_title(f"{label}\n{values}", fontsize=9)
+        else:
+            axis.set_title(f"{label}\n{_picture_caption(label)}", fontsize=9)
+    sample = measurement.sample if measurement is not None else ""
+    figure.suptitle(
+        _fitted(f"{sample}: the instrument camera's pictures; along each foot, the colour the "
+                f"spectra give at that geometry ({conditions})", figure), fontsize=10
+    )  # fmt: skip
+    _save(figure, path, dpi)
+
+
+_SWATCH = 1.2
+"""A picture's height and its swatch's below it, in the picture's heights."""
+
+
+def _picture_caption(label: str) -> str:
+    """What a picture without a reading of its own shows: the diffuse-light picture (``15d``)
+    is the one an instrument judges graininess on."""
+    return "diffuse light (graininess)" if label.endswith("d") else "no spectral reading"
 
 
 def plot_side_by_side(
