@@ -62,6 +62,16 @@ def test_inspect_images_draws_the_camera_pictures_with_the_spectra_colour(ma_t12
         assert not figure.exists()
 
 
+def test_convert_says_the_camera_pictures_stay_behind(ma_t12_files, tmp_path, cli):
+    """flakelab writes readings only: converting an export with pictures says so, once."""
+    converted = tmp_path / "spot.json"
+    result = cli("convert", ma_t12_files[0], converted)
+    assert result.returncode == 0, result.stderr
+    assert "7 camera pictures stay behind" in result.stderr
+    again = cli("convert", converted, tmp_path / "spot.xlsx")
+    assert again.returncode == 0 and "camera" not in again.stderr, again.stderr
+
+
 def test_compare_example_agrees_with_library_and_tolerance(cli):
     result = cli("compare", "--example", "--json", "--tolerance", "de00-1.0")
     assert result.returncode == 0, result.stderr

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import shlex
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 from rich import box
+from rich.markup import escape
 from rich.table import Table
 
 from flakelab import __version__
@@ -448,11 +450,19 @@ def convert(
 ) -> None:
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
     from flakelab.io import read_measurements, write_measurements
+    from flakelab.io.mat12_xlsx import camera_pictures_in
 
     check_output_file(target, "TARGET", reads={"SOURCE": source})
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     write_measurements(measurements, target, decimal_comma=decimal_comma)
     errors.print(f"wrote {counted(len(measurements), 'measurement')} to {target}", highlight=False)
+    if pictures := camera_pictures_in(source):
+        left = (
+            f"{source}'s {counted(pictures, 'camera picture')} stay behind: flakelab writes the "
+            f"readings only ('flakelab inspect {shlex.quote(str(source))} --images FIGURE' draws "
+            "them)"
+        )
+        errors.print(f"[yellow]note:[/] {escape(left)}", highlight=False)
 
 
 class FlopAxis(StrEnum):

@@ -47,7 +47,13 @@ from flakelab.io.records import (
     write_atomically,
 )
 
-__all__ = ["read_mat12_xlsx", "read_mat12_images", "write_mat12_xlsx", "INSTRUMENT"]
+__all__ = [
+    "read_mat12_xlsx",
+    "read_mat12_images",
+    "camera_pictures_in",
+    "write_mat12_xlsx",
+    "INSTRUMENT",
+]
 
 INSTRUMENT = "X-Rite MA-T12"
 _SPECTRAL, _COLOR, _TEXTURE, _IMAGES = (
@@ -229,6 +235,20 @@ def read_mat12_images(path: str | PathLike) -> dict[str, dict[str, NDArray[np.ui
             raise MeasurementFileError(path, f"a second picture of {label}", field=where)
         pictures[sample][label] = _decode_picture(path, picture, where)
     return pictures
+
+
+def camera_pictures_in(path: str | PathLike) -> int:
+    """How many pictures a workbook with a ``Texture Images`` sheet holds (0 for any other
+    file), counted from its parts without decoding them: what a conversion leaves behind."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+            sheets = archive.read("xl/workbook.xml") if "xl/workbook.xml" in names else b""
+    except (zipfile.BadZipFile, OSError, ValueError):
+        return 0
+    if f'name="{_IMAGES}"'.encode() not in sheets:
+        return 0
+    return sum(name.startswith("xl/media/") for name in names)
 
 
 def _images_sheet(path: str | PathLike, handle) -> dict | None:
