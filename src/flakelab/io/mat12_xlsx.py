@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
-from flakelab.errors import MeasurementFileError
+from flakelab.errors import MeasurementFileError, Note
 from flakelab.io.records import (
     Reading,
     assemble,
@@ -65,6 +65,8 @@ _SPECTRAL, _COLOR, _TEXTURE, _IMAGES = (
 _DIFFUSE_IMAGE = re.compile(r"\d+d")
 """A camera picture's row label under diffuse light (``15d``), where the others name a
 geometry."""
+_ROW_KEYS = ("Name", "Date/Time", "Geometry")
+"""The columns that open each data sheet's rows."""
 _DROPPED_PICTURE = re.compile(r"image (\S+) will be removed")
 """openpyxl's warning for a picture it could not open (``openpyxl.reader.drawings``)."""
 
@@ -145,7 +147,7 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
     labels = list(spectral[header])
     while labels and labels[-1] in (None, ""):
         labels.pop()
-    if labels[:3] != ["Name", "Date/Time", "Geometry"]:
+    if labels[:3] != list(_ROW_KEYS):
         raise MeasurementFileError(
             path,
             f"expected columns Name, Date/Time, Geometry, got {labels[:3]}",
@@ -322,6 +324,7 @@ def _read_texture_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
         return {}
     labels = [str(v).strip() if v is not None else "" for v in rows[header]]
     columns = {i: k for i, k in enumerate(labels) if k in TEXTURE_READINGS}
+    _note_unread_texture(path, labels, _data_rows(rows, header))
     texture: dict[str, dict[str, float]] = {}
     for number, row in _data_rows(rows, header):
         where = f"{_TEXTURE}, row {number}"
@@ -333,6 +336,25 @@ def _read_texture_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
         if values:
             texture.setdefault(str(row[0]).strip(), {}).update(values)
     return texture
+
+
+def _note_unread_texture(path: str | PathLike, labels: list[str], rows: list[tuple[int, tuple]]):
+    """A :class:`~flakelab.errors.Note` naming the ``Texture Data`` columns that hold values
+    flakelab does not read: the shared exports' texture sheets are empty, so the instrument's
+    own column names are not known here, and its readings would otherwise vanish unsaid."""
+    unread = [
+        label or f"column {openpyxl.utils.get_column_letter(i + 1)}"
+        for i, label in enumerate(labels)
+        if i >= len(_ROW_KEYS) and label not in TEXTURE_READINGS
+        and any(i < len(row) and row[i] not in (None, "") for _, row in rows)
+    ]  # fmt: skip
+    if unread:
+        warnings.warn(
+            f"{path}: {_TEXTURE}: {', '.join(map(repr, unread))} not read (flakelab reads "
+            f"texture as {', '.join(TEXTURE_READINGS)}); the rest of the file is read",
+            Note,
+            stacklevel=4,
+        )
 
 
 def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> None:
@@ -350,17 +372,17 @@ def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> N
     color.append(["QC JOB:", job])
     color.append(["STANDARD:", standard])
     color.append(["ILLUMINANT/OBSERVER:", str(conditions)])
-    color.append(["Name", "Date/Time", "Geometry", *(f"{k}* ({conditions})" for k in "Lab")])
+    color.append([*_ROW_KEYS, *(f"{k}* ({conditions})" for k in "Lab")])
     texture = workbook.create_sheet(_TEXTURE)
     texture.append(["QC JOB:", job])
     texture.append(["STANDARD:", standard])
-    texture.append(["Name", "Date/Time", "Geometry", *TEXTURE_READINGS])
+    texture.append([*_ROW_KEYS, *TEXTURE_READINGS])
     spectral = workbook.create_sheet(_SPECTRAL)
     spectral.append(["QC JOB:", job])
     spectral.append(["STANDARD:", standard])
     if measurements[0].instrument and measurements[0].instrument != INSTRUMENT:
         spectral.append(["INSTRUMENT:", measurements[0].instrument])
-    spectral.append(["Name", "Date/Time", "Geometry", *(f"{w:g}" for w in wavelengths)])
+    spectral.append([*_ROW_KEYS, *(f"{w:g}" for w in wavelengths)])
     for m in measurements:
         lab = m.stored_lab if m.stored_lab is not None else m.lab(conditions)
         when = _cell_time(m.measured_at)
