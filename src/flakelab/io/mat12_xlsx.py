@@ -51,6 +51,7 @@ __all__ = [
     "read_mat12_xlsx",
     "read_mat12_images",
     "camera_pictures_in",
+    "is_diffuse_picture",
     "write_mat12_xlsx",
     "INSTRUMENT",
 ]
@@ -279,10 +280,19 @@ def _images_sheet(path: str | PathLike, handle) -> dict | None:
         workbook.close()
 
 
+def is_diffuse_picture(label: str) -> bool:
+    """Whether a camera picture's row label names diffuse light (``15d``), not a geometry.
+
+    >>> is_diffuse_picture("15d"), is_diffuse_picture("15as15")
+    (True, False)
+    """
+    return _DIFFUSE_IMAGE.fullmatch(label) is not None
+
+
 def _picture_label(path: str | PathLike, label: str | None, where: str) -> str:
     if label is None:
         raise MeasurementFileError(path, "a picture in a row that names no geometry", field=where)
-    if _DIFFUSE_IMAGE.fullmatch(label):
+    if is_diffuse_picture(label):
         return label
     return parse_geometry_name(path, label, where).name
 

@@ -818,7 +818,9 @@ _SWATCH = 1.2
 def _picture_caption(label: str) -> str:
     """What a picture without a reading of its own shows: the diffuse-light picture (``15d``)
     is the one an instrument judges graininess on."""
-    return "diffuse light (graininess)" if label.endswith("d") else "no spectral reading"
+    from flakelab.io.mat12_xlsx import is_diffuse_picture
+
+    return "diffuse light (graininess)" if is_diffuse_picture(label) else "no spectral reading"
 
 
 def plot_side_by_side(
