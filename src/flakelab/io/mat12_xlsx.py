@@ -12,9 +12,11 @@ with columns named as :data:`~flakelab.core.measurement.TEXTURE_READINGS`. An op
 the sample's name heads a column (row 1), each geometry names a row (column A: ``15as-45`` …
 ``15as80`` under the 15° lamp, ``15d`` under diffuse light), and each picture is anchored in
 its sample's column and its geometry's row (480 × 360 pixels, 8-bit sRGB, in the shared
-exports). The labels place the camera at the instrument's 15° detector, six lamps lighting
-it in turn (``MA-T12_geometry_scheme.png`` of the shared data): by reciprocity, the 15° lamp
-of the geometries' names. :func:`read_mat12_images` reads them; flakelab does not write them.
+exports). Those hold one sample each, so a job of several is read as columns side by side,
+each headed by its sample: a guess at a layout not seen here. The labels place the camera at
+the instrument's 15° detector, six lamps lighting it in turn (``MA-T12_geometry_scheme.png``
+of the shared data): by reciprocity, the 15° lamp of the geometries' names.
+:func:`read_mat12_images` reads them; flakelab does not write them.
 """
 
 from __future__ import annotations
