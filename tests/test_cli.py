@@ -62,6 +62,29 @@ def test_inspect_images_draws_the_camera_pictures_with_the_spectra_colour(ma_t12
         assert not figure.exists()
 
 
+def test_compare_images_draws_the_reference_above_the_sample(ma_t12_files, tmp_path, cli):
+    """``compare --images``: two exports' camera pictures in one figure, each above the swatch
+    of its own spectrum; refused with an averaged reading, which no one picture shows."""
+    from matplotlib.image import imread
+
+    from flakelab.core.colorimetry import Lab_to_sRGB
+
+    reference, sample = ma_t12_files[:2]
+    figure = tmp_path / "pictures.png"
+    result = cli("compare", reference, sample, "--images", figure, "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["camera_pictures"]["geometries"][-1] == "15d"
+    pixels = np.round(imread(figure)[..., :3] * 255).reshape(-1, 3)
+    for file in (reference, sample):
+        m = read_measurement(file)
+        swatch = np.round(Lab_to_sRGB(m.lab()[m.index("15as15")]) * 255)
+        assert (np.abs(pixels - swatch).max(axis=1) <= 1).sum() > 2000, file.name
+    figure.unlink()
+    refused = cli("compare", reference, sample, "--images", figure, "--average")
+    assert refused.returncode == 2 and "not with --average" in refused.stderr
+    assert not figure.exists()
+
+
 def test_convert_says_the_camera_pictures_stay_behind(ma_t12_files, tmp_path, cli):
     """flakelab writes readings only: converting an export with pictures says so, once."""
     converted = tmp_path / "spot.json"

@@ -160,7 +160,8 @@ def inspect(
     measurements = read_measurements(source) if all_samples else [read_sample(source, sample)]
     infos = [describe(m, cond) for m in measurements]
     if pictures is not None:
-        infos[0]["camera_pictures"] = _draw_camera_pictures(source, measurements[0], pictures, cond)
+        drawn = _draw_camera_pictures([(source, measurements[0])], pictures, cond)
+        infos[0]["camera_pictures"] = drawn
     if as_json:
         out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
         print_report(out, indent=1)
@@ -176,12 +177,24 @@ def inspect(
         )
 
 
-def _draw_camera_pictures(source: Path, measurement, figure: Path, conditions) -> dict[str, Any]:
-    """The camera pictures of ``measurement``'s sample in the MA-T12 export ``source``, drawn
-    to ``figure``; their row labels and size."""
+def _draw_camera_pictures(readings: list[tuple[Path, Any]], figure: Path, conditions):
+    """``--images``: the camera pictures of each (file, measurement) of ``readings``, read
+    from its MA-T12 export, drawn to ``figure``; what the report says of them."""
+    from flakelab.render.plots import plot_camera_pictures
+
+    found = [
+        (measurement, _camera_pictures(source, measurement)) for source, measurement in readings
+    ]
+    plot_camera_pictures(found, figure, conditions=conditions)
+    labels = list(dict.fromkeys(label for _, pictures in found for label in pictures))
+    height, width = next(iter(found[0][1].values())).shape[:2]
+    return {"file": str(figure), "geometries": labels, "width": width, "height": height}
+
+
+def _camera_pictures(source: Path, measurement) -> dict:
+    """The camera pictures of ``measurement``'s sample in the MA-T12 export ``source``."""
     from flakelab.io import detect_format
     from flakelab.io.mat12_xlsx import read_mat12_images
-    from flakelab.render.plots import plot_camera_pictures
 
     if (kind := detect_format(source)) != "mat12-xlsx":
         raise FlakelabError(
@@ -195,9 +208,7 @@ def _draw_camera_pictures(source: Path, measurement, figure: Path, conditions) -
             f"--images: {source}: no camera pictures of {measurement.sample!r} "
             f"(sheet 'Texture Images'{others})"
         )
-    plot_camera_pictures(found, measurement, figure, conditions=conditions)
-    height, width = next(iter(found.values())).shape[:2]
-    return {"file": str(figure), "geometries": list(found), "width": width, "height": height}
+    return found
 
 
 @app.command()
@@ -246,6 +257,15 @@ def compare(
             "nearest, and compare the sample with the nearest.",
         ),
     ] = 0,
+    pictures: Annotated[
+        Path | None,
+        typer.Option(
+            "--images",
+            help="Both are MA-T12 exports: draw the instrument camera's pictures of the "
+            "reference above the sample's, each with the colour its spectrum gives, to this "
+            "figure (.png, .pdf, .svg).",
+        ),
+    ] = None,
 ) -> None:
     """Multi-angle colour difference of a sample against a reference, with pass/fail.
 
@@ -264,6 +284,11 @@ def compare(
                             "not with --reference-sample or --average")  # fmt: skip
     check_figure_file(render)
     check_figure_file(plot, "--plot")
+    if pictures is not None and (average or average_sprayed):
+        raise FlakelabError("--images: the pictures of one reading each, not with --average or "
+                            "--average-sprayed")  # fmt: skip
+    check_figure_file(pictures, "--images", reads={"REFERENCE": reference, "SAMPLE": sample},
+                      writes={"--render": render, "--plot": plot})  # fmt: skip
     lamps = render_lamps(lamps, render)
     tol = read_tolerance(tolerance)
     smp, smp_readings = read_readings(
@@ -301,6 +326,12 @@ def compare(
         draw_differences(result.geometries, result.lab_reference, samples, tol, plot, title,
                          texture={smp.sample: result.texture_share})  # fmt: skip
         report["plot"] = str(plot)
+    if pictures is not None:
+        spots = [
+            (reference or example_path("target"), ref),
+            (sample or example_path("sprayout"), smp),
+        ]
+        report["camera_pictures"] = _draw_camera_pictures(spots, pictures, light)
     if as_json:
         print_report(report, indent=1)
     else:

@@ -764,51 +764,62 @@ def _fitted(title: str, figure) -> str:
 
 
 def plot_camera_pictures(
-    pictures: Mapping[str, np.ndarray],
-    measurement: Measurement | None,
+    samples: Sequence[tuple[Measurement, Mapping[str, np.ndarray]]],
     path: str | PathLike,
     *,
     conditions: Conditions = D65_10,
     columns: int = 4,
     dpi: int = 100,
 ) -> None:
-    """An instrument camera's pictures of the measured spot (row label → 8-bit sRGB image,
+    """An instrument camera's pictures of each measured spot (row label → 8-bit sRGB image,
     :func:`~flakelab.io.mat12_xlsx.read_mat12_images`), each titled by its geometry with a
-    swatch along its foot of the colour the spectra give there: the camera is not a
+    swatch below it of the colour the sample's spectrum gives there: the camera is not a
     colorimeter (its pictures of the shared exports lie 10-28 L* darker than the spectra), so
-    the picture shows where the spot is uneven, the swatch what was measured."""
-    from flakelab.core.colorimetry import Lab_to_sRGB
-
-    labels = list(pictures)
-    lab = (
-        dict(zip(measurement.geometry_names, measurement.lab(conditions), strict=True))
-        if measurement is not None
-        else {}
-    )
-    rows = -(-len(labels) // columns)
-    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.75 * rows), squeeze=False)
-    for axis in axes.flat[len(labels) :]:
+    the picture shows where the spot is uneven or how it sparkles, the swatch what was
+    measured. One sample fills a grid ``columns`` wide; several, a row each, their pictures
+    of one geometry in one column (a reference above its sample)."""
+    labels = list(dict.fromkeys(label for _, pictures in samples for label in pictures))
+    one = len(samples) == 1
+    rows, width = (-(-len(labels) // columns), columns) if one else (len(samples), len(labels))
+    figure, axes = plt.subplots(rows, width, figsize=(3.2 * width, 2.75 * rows), squeeze=False)
+    for axis in axes.flat:
         axis.set_axis_off()
-    for axis, label in zip(axes.flat, labels, strict=False):
-        picture = pictures[label]
-        height, width = picture.shape[:2]
-        axis.imshow(picture, extent=(0, width, height, 0))
-        axis.set_ylim(_SWATCH * height, 0)
-        axis.set_xticks([])
-        axis.set_yticks([])
-        if label in lab:
-            swatch = Lab_to_sRGB(lab[label])
-            axis.add_patch(plt.Rectangle((0, height), width, (_SWATCH - 1) * height, color=swatch))
-            values = " ".join(f"{k}* {v:.1f}" for k, v in zip("Lab", lab[label], strict=True))
-            axis.set_title(f"{label}\n{values}", fontsize=9)
-        else:
-            axis.set_title(f"{label}\n{_picture_caption(label)}", fontsize=9)
-    sample = measurement.sample if measurement is not None else ""
+    for k, (measurement, pictures) in enumerate(samples):
+        lab = dict(zip(measurement.geometry_names, measurement.lab(conditions), strict=True))
+        for i, label in enumerate(labels):
+            if label in pictures:
+                axis = axes.flat[i] if one else axes[k, i]
+                _picture_tile(axis, pictures[label], label, lab.get(label))
+        if not one:
+            axes[k, 0].text(-0.08, 0.5, measurement.sample, rotation=90, va="center", ha="right",
+                            transform=axes[k, 0].transAxes, fontsize=9)  # fmt: skip
+    names = " above ".join(measurement.sample for measurement, _ in samples)
     figure.suptitle(
-        _fitted(f"{sample}: the instrument camera's pictures; along each foot, the colour the "
-                f"spectra give at that geometry ({conditions})", figure), fontsize=10
+        _fitted(f"{names}: the instrument camera's pictures; below each, the colour the "
+                f"spectrum gives at that geometry ({conditions})", figure), fontsize=10
     )  # fmt: skip
     _save(figure, path, dpi)
+
+
+def _picture_tile(axis, picture: np.ndarray, label: str, lab: np.ndarray | None) -> None:
+    """One camera picture, titled by its geometry, above a swatch of ``lab`` (none where
+    the sample has no reading there: the diffuse-light picture)."""
+    from flakelab.core.colorimetry import Lab_to_sRGB
+
+    height, width = picture.shape[:2]
+    axis.set_axis_on()
+    axis.imshow(picture, extent=(0, width, height, 0))
+    axis.set_ylim(_SWATCH * height, 0)
+    axis.set_xticks([])
+    axis.set_yticks([])
+    if lab is None:
+        axis.set_title(f"{label}\n{_picture_caption(label)}", fontsize=9)
+        return
+    axis.add_patch(
+        plt.Rectangle((0, height), width, (_SWATCH - 1) * height, color=Lab_to_sRGB(lab))
+    )
+    values = " ".join(f"{k}* {v:.1f}" for k, v in zip("Lab", lab, strict=True))
+    axis.set_title(f"{label}\n{values}", fontsize=9)
 
 
 _SWATCH = 1.2
