@@ -52,6 +52,9 @@ def test_inspect_images_draws_the_camera_pictures_with_the_spectra_colour(ma_t12
     for geometry in drawn["geometries"][:-1]:
         swatch = np.round(Lab_to_sRGB(m.lab()[m.index(geometry)]) * 255)
         assert (np.abs(pixels - swatch).max(axis=1) <= 1).sum() > 5000, geometry
+    said = cli("inspect", ma_t12_files[0]).stdout  # without --images, where to find them
+    assert "camera pictures: 7 in the file ('--images FIGURE' draws them)" in said
+    assert "camera pictures" not in cli("inspect", "--example").stdout
     for refused, message in [
         ((example_path("target"),), "read from MA-T12 exports"),
         ((ma_t12_files[0], "--all"), "one sample at a time"),

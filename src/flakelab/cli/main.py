@@ -135,6 +135,7 @@ def inspect(
     from flakelab.core.colorimetry import Conditions
     from flakelab.core.comparison import describe, spread_of_readings
     from flakelab.io import read_measurements, read_tolerance
+    from flakelab.io.mat12_xlsx import camera_pictures_in
 
     if path is None and not example:
         raise FlakelabError("give a measurement file, or --example")
@@ -174,6 +175,10 @@ def inspect(
             f"wrote {pictures}: {counted(len(drawn['geometries']), 'camera picture')} "
             f"({', '.join(drawn['geometries'])})",
             highlight=False,
+        )
+    elif held := camera_pictures_in(source):
+        console.print(
+            f"camera pictures: {held} in the file ('--images FIGURE' draws them)", highlight=False
         )
 
 
