@@ -30,7 +30,12 @@ from flakelab.core.colorimetry import linear_sRGB_to_Lab, reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import geometry_angles, instrument_geometries
 from flakelab.io import read_library, read_measurements
-from flakelab.physics.reference_brdf import REFERENCE_FITS, is_merl_effect_paint, is_merl_paint
+from flakelab.physics.reference_brdf import (
+    REFERENCE_FITS,
+    comparison_geometries,
+    is_merl_effect_paint,
+    is_merl_paint,
+)
 from flakelab.render.angular import FLOOR_SHARE, interpolate_over_tilt
 from flakelab.render.appearance import cardinal_spline
 
@@ -90,17 +95,9 @@ def generated(targets: int, seed: int, floor: float) -> dict:
     return spectral_set(pairs, floor)
 
 
-def reference_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    lamps, aspecular, azimuths = np.meshgrid([15.0, 25.0, 35.0, 55.0, 65.0],
-                                             np.arange(15.0, 111.0, 5.0),
-                                             [0.0, 30.0, 60.0, 90.0], indexing="ij")  # fmt: skip
-    above = np.abs(lamps - aspecular) <= 80.0
-    return lamps[above], aspecular[above], azimuths[above]
-
-
 def reference_set(paints, floor: float) -> list[dict]:
     """Each fitted paint read at the 45° lamp's six geometries, rebuilt on the grid."""
-    grid = reference_grid()
+    grid = comparison_geometries()
     source_angles = geometry_angles(SOURCE)
     report = []
     for paint in paints:
@@ -140,7 +137,7 @@ def fits_apart() -> list[dict] | None:
     abc, sgd = (fitted_paints(fit) for fit in MERL_FITS)
     if abc is None or sgd is None:
         return None
-    grid = reference_grid()
+    grid = comparison_geometries()
     sgd_of = {p.name: p for p in sgd}
     report = []
     for paint in abc:

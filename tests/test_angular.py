@@ -19,6 +19,7 @@ from flakelab.physics.reference_brdf import (
     AbcPaint,
     CookTorrancePaint,
     SgdPaint,
+    comparison_geometries,
     is_merl_effect_paint,
     is_merl_paint,
     read_bagher_sgd_fits,
@@ -81,17 +82,8 @@ def test_real_ma_t12_readings_under_the_15_degree_lamp_follow_from_the_45_degree
     assert np.median(aspecular) > 3 * np.median(tilt)
 
 
-def _reference_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lamps of 15–65° but 45°, aspecular 15–110°, in plane and 30–90° out of it, the detector
-    within 80° of the normal."""
-    lamps, aspecular, azimuth = np.meshgrid([15.0, 25.0, 35.0, 55.0, 65.0],
-                                            np.arange(15.0, 111.0, 5.0),
-                                            [0.0, 30.0, 60.0, 90.0], indexing="ij")  # fmt: skip
-    above = np.abs(lamps - aspecular) <= 80
-    return lamps[above], aspecular[above], azimuth[above]
-
-
-_GRID = _reference_grid()
+_GRID = comparison_geometries()
+"""Where a fit is compared with its rebuilt readings (the benchmark's geometries too)."""
 
 
 def _rebuilt_from_six(paint) -> tuple[np.ndarray, np.ndarray]:

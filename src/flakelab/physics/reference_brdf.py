@@ -44,6 +44,7 @@ __all__ = [
     "GUNTHER_SOLIDS",
     "REFERENCE_FITS",
     "AbcPaint",
+    "comparison_geometries",
     "CookTorrancePaint",
     "is_merl_effect_paint",
     "is_merl_paint",
@@ -208,6 +209,18 @@ REFERENCE_FITS = {
     "merl_sgd": ("merl_sgd_fits_bagher2012.csv", read_bagher_sgd_fits),
 }
 """Each fit in ../shared/data/reference-brdf (SOURCES.md there): its file and its reader."""
+
+
+def comparison_geometries() -> tuple[NDArray, NDArray, NDArray]:
+    """(illumination, aspecular, azimuth) [degree] where a fit is compared with what its six
+    readings under the 45° lamp are interpolated to (``benchmarks/angular.py``,
+    ``tests/test_angular.py``): lamps of 15–65° but 45°, aspecular 15–110° in steps of 5°, in
+    plane and 30°, 60° and 90° out of it, the detector within 80° of the normal."""
+    lamps, aspecular, azimuth = np.meshgrid([15.0, 25.0, 35.0, 55.0, 65.0],
+                                            np.arange(15.0, 111.0, 5.0),
+                                            [0.0, 30.0, 60.0, 90.0], indexing="ij")  # fmt: skip
+    above = np.abs(lamps - aspecular) <= 80.0
+    return lamps[above], aspecular[above], azimuth[above]
 
 
 def _read_fits(path: str | Path, paint: Callable[[dict[str, str]], Any]) -> list:
