@@ -37,7 +37,7 @@ from flakelab.physics.reference_brdf import (
     is_merl_paint,
 )
 from flakelab.render.angular import FLOOR_SHARE, interpolate_over_tilt
-from flakelab.render.appearance import cardinal_spline
+from flakelab.render.appearance import same_aspecular_reading
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 SOURCE = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 45)
@@ -45,12 +45,9 @@ PREDICTED = tuple(g for g in instrument_geometries("ma-t12") if g.illumination =
 
 
 def by_aspecular(readings: np.ndarray, illumination, aspecular, azimuth=0.0) -> np.ndarray:
-    """The baseline: the reading at the same aspecular angle under the 45° lamp (a cardinal
-    spline through the readings, held beyond them), whatever the lamp."""
-    knots = geometry_angles(SOURCE)[1]
-    at = np.broadcast_to(np.asarray(aspecular, float), np.broadcast(illumination, aspecular,
-                                                                   azimuth).shape)  # fmt: skip
-    return cardinal_spline(knots, readings, at)
+    """The baseline: the reading at the same aspecular angle under the 45° lamp."""
+    at = np.broadcast_to(aspecular, np.broadcast(illumination, aspecular, azimuth).shape)
+    return same_aspecular_reading(SOURCE, readings, at)
 
 
 def by_tilt(readings: np.ndarray, floor: float):

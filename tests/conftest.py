@@ -3,6 +3,8 @@ live PostgreSQL for the database tests (skipped when none can be had)."""
 
 from __future__ import annotations
 
+import functools
+import multiprocessing
 import os
 import pwd
 import shutil
@@ -28,6 +30,22 @@ PIGMENT_KM = SHARED / "pigment-km"
 REFERENCE_BRDF = SHARED / "reference-brdf"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _cli_built_once():
+    """The CLI's commands built from flakelab's functions once for the session: typer's test
+    runner builds them again on every call (0.05-0.1 s of reading type hints, over hundreds
+    of calls). Where typer's runner no longer builds them by this name, nothing changes."""
+    import typer.testing
+
+    built = getattr(typer.testing, "_get_command", None)
+    if built is None:
+        yield
+        return
+    typer.testing._get_command = functools.cache(built)
+    yield
+    typer.testing._get_command = built
+
+
 def _run_cli(*args: object, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     """The CLI run in this process, as a finished process (exit status, stdout, stderr), with
     ``env`` added to the environment while it runs: a new interpreter would cost each call 3-4 s
@@ -41,6 +59,21 @@ def _run_cli(*args: object, env: dict[str, str] | None = None) -> subprocess.Com
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         raise result.exception
     return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)
+
+
+@pytest.fixture(scope="session")
+def workplaces() -> multiprocessing.context.BaseContext:
+    """Processes that stand for workplaces acting at once, forked from one server that
+    imported torch, flakelab and the tests' worker functions once for the session. Spawned,
+    each imported them again: 4-5 s a process on two cores, most of these tests' time. The
+    server runs no torch before it forks, so the fork is safe where forking a process whose
+    OpenMP threads ran may hang (why ``match --all`` itself spawns)."""
+    server = multiprocessing.get_context("forkserver")
+    server.set_forkserver_preload(["torch", "flakelab.models.registry", *_WORKER_MODULES])
+    return server
+
+
+_WORKER_MODULES = ("test_cases", "test_lots")  # the modules whose functions the pools run
 
 
 def _interrupting(original, call: int, after: bool = False):

@@ -27,15 +27,15 @@ from flakelab.physics.reference_brdf import (
     read_low_abc_fits,
 )
 from flakelab.render.angular import clearcoat_factor, interpolate_over_tilt, tilt_interpolation
-from flakelab.render.appearance import appearance_of, appearance_under, cardinal_spline
+from flakelab.render.appearance import (
+    appearance_of,
+    appearance_under,
+    cardinal_spline,
+    same_aspecular_reading,
+)
 
 SOURCE = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 45)
 PREDICTED = tuple(g for g in instrument_geometries("ma-t12") if g.illumination == 15)
-
-
-def _by_aspecular(readings, aspecular) -> np.ndarray:
-    """The reading at the same aspecular angle under the 45° lamp, whatever the lamp."""
-    return cardinal_spline(geometry_angles(SOURCE)[1], readings, np.asarray(aspecular, float))
 
 
 @pytest.fixture(scope="module")
@@ -50,6 +50,11 @@ def test_the_readings_are_given_back_at_their_own_geometries_and_reciprocally():
     np.testing.assert_allclose(
         model.reflectance(*geometry_angles(SOURCE)), own, rtol=1e-6
     )  # tilts to 1e-6°
+    # the baseline too gives them back, and holds the end readings beyond them
+    aspecular = geometry_angles(SOURCE)[1]
+    np.testing.assert_allclose(same_aspecular_reading(SOURCE, own, aspecular), own, rtol=1e-12)
+    beyond = same_aspecular_reading(SOURCE, own, [aspecular[0] - 10, aspecular[-1] + 10])
+    np.testing.assert_allclose(beyond, own[[0, -1]], rtol=1e-12)
     # lamp and detector swapped (45as15 ↔ 30as-15): the same flake tilt, the same clearcoat
     np.testing.assert_allclose(model.reflectance(45.0, 15.0), model.reflectance(30.0, -15.0))
     np.testing.assert_allclose(model.reflectance(45, 25, 60), model.reflectance(45, 25, -60))
@@ -74,7 +79,7 @@ def test_real_ma_t12_readings_under_the_15_degree_lamp_follow_from_the_45_degree
         truth_Lab = reflectance_to_Lab(truth)
         predicted = tilt_interpolation(sample).reflectance(*geometry_angles(PREDICTED))
         tilt.append(delta_E_CIE2000(reflectance_to_Lab(predicted), truth_Lab))
-        same_angle = _by_aspecular(source, geometry_angles(PREDICTED)[1])
+        same_angle = same_aspecular_reading(SOURCE, source, geometry_angles(PREDICTED)[1])
         aspecular.append(delta_E_CIE2000(reflectance_to_Lab(same_angle), truth_Lab))
     tilt, aspecular = np.concatenate(tilt), np.concatenate(aspecular)
     assert tilt.size == 230 * 6
@@ -93,7 +98,7 @@ def _rebuilt_from_six(paint) -> tuple[np.ndarray, np.ndarray]:
     readings = paint.reflectance_factor(*geometry_angles(SOURCE))
     truth = linear_sRGB_to_Lab(paint.reflectance_factor(*grid))
     rebuilt = interpolate_over_tilt(SOURCE, readings).reflectance(*grid)
-    same_angle = _by_aspecular(readings, grid[1])
+    same_angle = same_aspecular_reading(SOURCE, readings, grid[1])
     return (delta_E_CIE2000(linear_sRGB_to_Lab(rebuilt), truth),
             delta_E_CIE2000(linear_sRGB_to_Lab(same_angle), truth))  # fmt: skip
 
@@ -197,7 +202,7 @@ def test_generated_targets_under_the_15_degree_lamp_follow_from_the_45_degree_on
         truth_Lab = reflectance_to_Lab(truth)
         rebuilt = interpolate_over_tilt(SOURCE, readings).reflectance(*geometry_angles(PREDICTED))
         tilt.append(delta_E_CIE2000(reflectance_to_Lab(rebuilt), truth_Lab))
-        same_angle = _by_aspecular(readings, geometry_angles(PREDICTED)[1])
+        same_angle = same_aspecular_reading(SOURCE, readings, geometry_angles(PREDICTED)[1])
         aspecular.append(delta_E_CIE2000(reflectance_to_Lab(same_angle), truth_Lab))
     assert np.median(tilt) < 0.6 and np.median(aspecular) > 5 * np.median(tilt)
 

@@ -6,7 +6,6 @@ import contextlib
 import csv
 import io
 import json
-import multiprocessing
 import os
 import re
 import sqlite3
@@ -1247,14 +1246,14 @@ def _write_batches(args) -> tuple[int, int]:
     return sum(added for added, _ in counts), sum(found for _, found in counts)
 
 
-def test_concurrent_writers_lose_no_case(database_url):
+def test_concurrent_writers_lose_no_case(database_url, workplaces):
     """Four processes write from the same instant: two seeds' cases, and one seed's twice
     (a generation started twice) by ``add_new_cases``, which finds what the other stored as
     it would store it and goes on (it was refused "already stored" before it looked again)."""
     url = database_url
     open_database(url)
-    spawn = multiprocessing.get_context("spawn")
-    with spawn.Manager() as manager, spawn.Pool(4) as pool:
+    server = workplaces
+    with server.Manager() as manager, server.Pool(4) as pool:
         ready = manager.Barrier(4)  # every process loaded and waiting, then all at once
         counts = pool.map(_write_batches, [(url, s, s == 3, ready) for s in (1, 2, 3, 3)])
     assert counts[:2] == [(60, 0), (60, 0)]
@@ -1262,7 +1261,7 @@ def test_concurrent_writers_lose_no_case(database_url):
     assert count_cases(open_database(url)) == 180
 
 
-def test_workplaces_opening_a_new_database_at_once_all_find_it_ready(database_url):
+def test_workplaces_opening_a_new_database_at_once_all_find_it_ready(database_url, workplaces):
     """Four processes open a database no one has opened yet at the same instant: one builds
     its tables, the others find them built (three were refused before, "table cases
     already exists"), and each reads it. A new SQLite file, twelve times over: switching it
@@ -1270,8 +1269,8 @@ def test_workplaces_opening_a_new_database_at_once_all_find_it_ready(database_ur
     once, without the busy timeout's wait (3 to 5 of 60 rounds before stop 85)."""
     new_files = [database_url.replace(".db", f"-{i}.db") for i in range(12)]
     urls = new_files if database_url.startswith("sqlite") else [database_url]
-    spawn = multiprocessing.get_context("spawn")
-    with spawn.Manager() as manager, spawn.Pool(4) as pool:
+    server = workplaces
+    with server.Manager() as manager, server.Pool(4) as pool:
         for url in urls:
             ready = manager.Barrier(4)  # every process loaded and waiting, then all at once
             assert pool.map(_open_and_count, [(url, ready)] * 4) == [0, 0, 0, 0], url
@@ -1365,15 +1364,15 @@ with open_database(sys.argv[1]).begin() as connection:
 """
 
 
-def test_registrations_at_once_each_get_their_own_version(database_url):
+def test_registrations_at_once_each_get_their_own_version(database_url, workplaces):
     """Six workplaces register a model at the same instant: six versions, numbered 1 to 6, and
     one of them promoted. Before the registry judged again on a clash, PostgreSQL stored
     three numbers twice and promoted two versions."""
     from flakelab.models.registry import list_models
 
     open_database(database_url)
-    spawn = multiprocessing.get_context("spawn")
-    with spawn.Manager() as manager, spawn.Pool(6) as pool:
+    server = workplaces
+    with server.Manager() as manager, server.Pool(6) as pool:
         ready = manager.Barrier(6)  # every process loaded and waiting, then all at once
         versions = pool.map(_register_a_model, [(database_url, seed, ready) for seed in range(6)])
     assert sorted(versions) == [1, 2, 3, 4, 5, 6]

@@ -4,6 +4,7 @@ the ones that exist: every figure there is reproduced by running them as written
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -35,9 +36,15 @@ def documented_commands() -> list[tuple[str, str]]:
     return found
 
 
+@functools.cache
+def flakelab_command():
+    """The CLI's commands as click builds them (once: typer builds every one on each call)."""
+    return typer.main.get_command(app)
+
+
 def cli_options(words: list[str]) -> tuple[set[str], list[str]]:
     """The options of the flakelab command ``words`` names, and the words after its name."""
-    command = typer.main.get_command(app)
+    command = flakelab_command()
     while hasattr(command, "commands") and words and not words[0].startswith("-"):
         sub = command.get_command(None, words[0])
         if sub is None:

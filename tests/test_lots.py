@@ -924,11 +924,11 @@ def test_a_shops_tins_through_its_versions_are_a_line_a_tin():
     assert tins[white][0]["strength_sd"] == [LOT_STRENGTH_SD, 0.01]
 
 
-def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(database_url):
+def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(
+    database_url, workplaces
+):
     """Two workplaces that read panels against the same version: the second is refused, and
     the first's stays the latest; every version is kept. Four at once: one is stored."""
-    import multiprocessing
-
     from flakelab.cases.database import DatabaseError, open_database
     from flakelab.cases.shop_lots import list_stored_lots, lots_history, store_lots, stored_lots
 
@@ -949,7 +949,7 @@ def test_two_readings_of_one_version_of_a_shops_tins_cannot_both_be_stored(datab
         stored_lots(engine, "")
     store_lots(engine, "C", one, None)
     strengths = (0.96, 0.97, 0.98, 0.99)
-    with multiprocessing.get_context("spawn").Pool(4) as pool:
+    with workplaces.Pool(4) as pool:
         stored = pool.map(_store_read_from_the_first, [(database_url, s) for s in strengths])
     assert sum(stored) == 1
     history = lots_history(engine, "C")

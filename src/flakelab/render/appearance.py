@@ -44,7 +44,7 @@ from flakelab.core.colorimetry import (
     encode_sRGB,
     reflectance_to_Lab,
 )
-from flakelab.core.geometry import flake_angles_at, lit_by
+from flakelab.core.geometry import flake_angles_at, geometry_angles, lit_by
 from flakelab.core.measurement import Measurement
 from flakelab.core.units import parse_amount
 from flakelab.io.records import write_atomically
@@ -61,6 +61,7 @@ __all__ = [
     "lamps_of",
     "curved_range",
     "cardinal_spline",
+    "same_aspecular_reading",
     "render_panel",
     "render_curved",
     "render_stack",
@@ -216,6 +217,15 @@ def cardinal_spline(x: NDArray, y: NDArray, at: NDArray, tension: float = _TENSI
     slope[1:-1] = inner
     spline = CubicHermiteSpline(x, y, (1 - tension) * slope, axis=0)
     return spline(np.clip(at, x[0], x[-1]))
+
+
+def same_aspecular_reading(geometries, readings: NDArray, aspecular: NDArray) -> NDArray:
+    """The naive reading under a lamp not read: the one ``readings`` (``[K, ...]``, at the
+    in-plane ``geometries`` of one lamp) give at the same aspecular angle, whatever the lamp
+    (a cardinal spline through them, held beyond them). The baseline that interpolation over
+    flake tilt (:mod:`flakelab.render.angular`) is measured against."""
+    knots = geometry_angles(geometries)[1]
+    return cardinal_spline(knots, readings, np.asarray(aspecular, float))
 
 
 def _tone(grey: NDArray) -> NDArray:
