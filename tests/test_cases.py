@@ -1472,14 +1472,8 @@ def test_versions_stored_twice_are_numbered_afresh_by_the_migration(cases, datab
     assert register(engine, model, held)["version"] == 5
 
 
-def _cli(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "flakelab.cli.main", *args], capture_output=True, text=True
-    )
-
-
 def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(
-    cases, tmp_path, database_url
+    cases, tmp_path, database_url, cli
 ):
     good, bad = tmp_path / "good.csv", tmp_path / "bad.csv"
     write_cases(cases[:4], good)
@@ -1489,8 +1483,8 @@ def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(
     lines[3] = ",".join(cells)
     bad.write_text("\n".join(lines) + "\n")
     database = database_url
-    assert _cli("cases", "import", str(good), "--database", database).returncode == 0
-    run = _cli("cases", "import", str(bad), "--database", database)
+    assert cli("cases", "import", str(good), "--database", database).returncode == 0
+    run = cli("cases", "import", str(bad), "--database", database)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "row 4" in run.stderr and "expected a number" in run.stderr
     assert count_cases(open_database(database)) == 4

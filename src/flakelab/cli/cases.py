@@ -22,6 +22,7 @@ from flakelab.cli.common import (
     ToleranceOption,
     check_figure_file,
     check_output_file,
+    command_group,
     console,
     errors,
     interrupted,
@@ -35,7 +36,6 @@ from flakelab.cli.common import (
 )
 from flakelab.cli.matcher import ResolutionOption
 from flakelab.cli.sources import (
-    TIME_FORMATS,
     WORKPLACE_SHOP,
     CasesArgument,
     CaseSourceOption,
@@ -62,7 +62,7 @@ from flakelab.cli.sources import (
     shop_spelled,
     since_option,
     source_arrays,
-    typed_time,
+    time_option,
     which_cases,
 )
 from flakelab.core.defaults import DEFAULT_TOLERANCE
@@ -85,9 +85,9 @@ CheckOption = Annotated[
     ),
 ]
 
-cases_app = typer.Typer(
-    help="Refinish cases: generate, record, record-all, list, nearest, remove, import, "
-    "export; realism, habits, shops; colour codes and their variants."
+cases_app = command_group(
+    "Refinish cases: generate, record, record-all, list, nearest, remove, import, export; "
+    "realism, habits, shops; colour codes and their variants."
 )
 
 
@@ -341,10 +341,8 @@ def record_case(
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     at: Annotated[
         datetime | None,
-        typer.Option(
-            formats=TIME_FORMATS,
-            callback=typed_time,
-            help="When the spray-out was made (local time).",
+        time_option(
+            "When the spray-out was made (local time).",
             show_default="the spray-out file's date, else now",
         ),
     ] = None,

@@ -9,15 +9,19 @@ import typer
 from rich import box
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, console, errors, print_report, reports_errors
+from flakelab.cli.common import (
+    JsonOption,
+    command_group,
+    console,
+    errors,
+    print_report,
+    reports_errors,
+)
 from flakelab.cli.matcher import ModelOption
 from flakelab.cli.sources import DatabaseOption, InstrumentOption, shop_spelled
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 
-library_app = typer.Typer(
-    help="The toner library: its toners, and how the current model knows each.",
-    no_args_is_help=True,
-)
+library_app = command_group("The toner library: its toners, and how the current model knows each.")
 
 
 @library_app.command("show")

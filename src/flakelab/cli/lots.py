@@ -19,6 +19,7 @@ from flakelab.cli.common import (
     SampleOption,
     check_figure_file,
     check_output_file,
+    command_group,
     console,
     errors,
     file_name_for,
@@ -51,11 +52,10 @@ from flakelab.core.wording import database_label
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import SCALE_RESOLUTION_G
 
-lots_app = typer.Typer(
-    help="The shop's toner tins: a calibration panel for a toner, its tin's strength read "
-    "from the panel's spray-out, the tins read so far. 'match --lots' and 'correct --lots' "
-    "then weigh for them.",
-    no_args_is_help=True,
+lots_app = command_group(
+    "The shop's toner tins: a calibration panel for a toner, its tin's strength read from "
+    "the panel's spray-out, the tins read so far. 'match --lots' and 'correct --lots' then "
+    "weigh for them."
 )
 
 LotsOption = Annotated[

@@ -27,6 +27,7 @@ from flakelab.cli.common import (
     ToleranceOption,
     check_figure_file,
     check_output_file,
+    command_group,
     console,
     draw_differences,
     draw_side_by_side,
@@ -55,9 +56,8 @@ from flakelab.core.wording import counted
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError, MeasurementFileError
 
-app = typer.Typer(
-    help="flakelab: match, predict and show the appearance of car paints.",
-    no_args_is_help=True,
+app = command_group(
+    "flakelab: match, predict and show the appearance of car paints.",
     pretty_exceptions_enable=False,
     add_completion=False,
 )
@@ -551,7 +551,7 @@ app.command("train")(reports_errors(train))
 app.command("render")(reports_errors(render_command))
 app.command("render-grid")(reports_errors(render_grid_command))
 app.add_typer(texture_app, name="texture")
-validate_app = typer.Typer(help="Validation experiments against the reference Monte Carlo.")
+validate_app = command_group("Validation experiments against the reference Monte Carlo.")
 app.add_typer(validate_app, name="validate")
 
 

@@ -17,6 +17,7 @@ from flakelab.cli.common import (
     JsonOption,
     check_figure_file,
     check_output_file,
+    command_group,
     console,
     errors,
     interrupted,
@@ -134,8 +135,8 @@ def de00_table(title: str, label: str, stats: dict, names=None, total: bool = Tr
     return table
 
 
-model_app = typer.Typer(
-    help="Learned forward models: list, show, evaluate, adapt to a shop; register a model file; "
+model_app = command_group(
+    "Learned forward models: list, show, evaluate, adapt to a shop; register a model file; "
     "promote and retire."
 )
 

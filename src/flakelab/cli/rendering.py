@@ -13,6 +13,7 @@ from flakelab.cli.common import (
     JsonOption,
     SampleOption,
     check_output_file,
+    command_group,
     console,
     errors,
     print_report,
@@ -138,7 +139,7 @@ def render_grid_command(
     errors.print(f"wrote {output} ({steps}×{steps} tiles)", highlight=False)
 
 
-texture_app = typer.Typer(help="Appearance-based texture processes: closed loop and fitting.")
+texture_app = command_group("Appearance-based texture processes: closed loop and fitting.")
 
 
 @texture_app.command("evaluate")
