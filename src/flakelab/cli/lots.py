@@ -317,6 +317,7 @@ def calibrate_command(
         list[str] | None,
         typer.Option(
             "--toner",
+            metavar="TONER",
             help="A toner whose tin the panel reads (repeat for each; default: every toner of "
             "the recipe, each starting from its tin's last reading); a --lot's toner too.",
             show_default="every toner of the recipe",
@@ -326,6 +327,7 @@ def calibrate_command(
         list[str] | None,
         typer.Option(
             "--lot",
+            metavar="TONER=NUMBER",
             help="TONER=NUMBER: the tin's lot number. A number other than the one on file is a "
             "new tin: it starts from the standard, not from the old tin's reading.",
         ),

@@ -36,6 +36,7 @@ WithoutOption = Annotated[
     list[str] | None,
     typer.Option(
         "--without",
+        metavar="TONER",
         help="A toner the recipe may not use: out of stock, or not in the shop's mixing bank "
         "(repeat for each).",
     ),

@@ -179,7 +179,9 @@ def texture_fit(
     output: Annotated[Path, typer.Option("--output", "-o", help="JSON file to write.")],
     process: Annotated[
         list[str] | None,
-        typer.Option(help="Refit only this process (coarseness, glint); others kept from -o."),
+        typer.Option(
+            metavar="NAME", help="Refit only this process (coarseness, glint); others kept from -o."
+        ),
     ] = None,
     grey_only: Annotated[
         bool,

@@ -52,6 +52,7 @@ def weigh_command(
     poured: Annotated[
         list[str] | None,
         typer.Option(
+            metavar="NAME=GRAMS",
             help="A toner already poured, as the scale read it: 'NAME=GRAMS' (repeat for "
             "each). Prints what is still to pour; where one ran over, for the least larger "
             "can that keeps the recipe's proportions.",
