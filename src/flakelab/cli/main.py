@@ -52,6 +52,7 @@ from flakelab.cli.models import model_app, train
 from flakelab.cli.rendering import render_command, render_grid_command, texture_app
 from flakelab.cli.weigh import weigh_command
 from flakelab.core.defaults import DEFAULT_CONDITIONS, DEFAULT_TOLERANCE
+from flakelab.core.geometry import FLOP_AXES
 from flakelab.core.wording import counted
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError, MeasurementFileError
@@ -501,11 +502,8 @@ def convert(
         errors.print(f"[yellow]note:[/] {escape(left)}", highlight=False)
 
 
-class FlopAxis(StrEnum):
-    """``plot --against``: the keys of :data:`flakelab.render.plots.FLOP_AXES`."""
-
-    aspecular = "aspecular"
-    flake_tilt = "flake-tilt"
+FlopAxis = StrEnum("FlopAxis", [(axis.replace("-", "_"), axis) for axis in FLOP_AXES])
+"""``plot --against``: :data:`~flakelab.core.geometry.FLOP_AXES`."""
 
 
 @app.command()

@@ -25,6 +25,7 @@ __all__ = [
     "Geometry",
     "INSTRUMENT_GEOMETRIES",
     "DEFAULT_INSTRUMENT",
+    "FLOP_AXES",
     "N_BINDER",
     "parse_geometry",
     "parse_geometries",
@@ -40,6 +41,11 @@ __all__ = [
     "geometry_angles",
     "lit_by",
 ]
+
+FLOP_AXES = {"aspecular": "aspecular angle [°]", "flake-tilt": "flake tilt θ_flake [°]"}
+"""What a flop chart's L* and C* are drawn against: the aspecular angle, or the tilt a flake
+needs to mirror the lamp into the detector (DESIGN.md §2), over which an effect paint's
+readings under different lamps fall on one curve."""
 
 N_BINDER = 1.5
 """Refractive index of binder and clearcoat [-], DESIGN.md §3."""

@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter  # noqa: E402
 
 from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab  # noqa: E402
-from flakelab.core.geometry import Geometry  # noqa: E402
+from flakelab.core.geometry import FLOP_AXES, Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.core.tolerance import Tolerance  # noqa: E402
 from flakelab.core.wording import counted  # noqa: E402
@@ -102,12 +102,6 @@ class _DroppedTransparency(logging.Filter):
             self.seen = True
             return False
         return True
-
-
-FLOP_AXES = {"aspecular": "aspecular angle [°]", "flake-tilt": "flake tilt θ_flake [°]"}
-"""What a flop chart's L* and C* are drawn against: the aspecular angle, or the tilt a flake
-needs to mirror the lamp into the detector (DESIGN.md §2), over which an effect paint's
-readings under different lamps fall on one curve."""
 
 
 def flop_series(
