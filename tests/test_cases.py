@@ -1252,8 +1252,7 @@ def test_concurrent_writers_lose_no_case(database_url, workplaces):
     it would store it and goes on (it was refused "already stored" before it looked again)."""
     url = database_url
     open_database(url)
-    server = workplaces
-    with server.Manager() as manager, server.Pool(4) as pool:
+    with workplaces.Manager() as manager, workplaces.Pool(4) as pool:
         ready = manager.Barrier(4)  # every process loaded and waiting, then all at once
         counts = pool.map(_write_batches, [(url, s, s == 3, ready) for s in (1, 2, 3, 3)])
     assert counts[:2] == [(60, 0), (60, 0)]
@@ -1269,8 +1268,7 @@ def test_workplaces_opening_a_new_database_at_once_all_find_it_ready(database_ur
     once, without the busy timeout's wait (3 to 5 of 60 rounds before stop 85)."""
     new_files = [database_url.replace(".db", f"-{i}.db") for i in range(12)]
     urls = new_files if database_url.startswith("sqlite") else [database_url]
-    server = workplaces
-    with server.Manager() as manager, server.Pool(4) as pool:
+    with workplaces.Manager() as manager, workplaces.Pool(4) as pool:
         for url in urls:
             ready = manager.Barrier(4)  # every process loaded and waiting, then all at once
             assert pool.map(_open_and_count, [(url, ready)] * 4) == [0, 0, 0, 0], url
@@ -1371,8 +1369,7 @@ def test_registrations_at_once_each_get_their_own_version(database_url, workplac
     from flakelab.models.registry import list_models
 
     open_database(database_url)
-    server = workplaces
-    with server.Manager() as manager, server.Pool(6) as pool:
+    with workplaces.Manager() as manager, workplaces.Pool(6) as pool:
         ready = manager.Barrier(6)  # every process loaded and waiting, then all at once
         versions = pool.map(_register_a_model, [(database_url, seed, ready) for seed in range(6)])
     assert sorted(versions) == [1, 2, 3, 4, 5, 6]
