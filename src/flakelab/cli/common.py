@@ -692,20 +692,17 @@ def texture_table(
     return table
 
 
-def reflow_help(app: typer.Typer) -> None:
-    """Give each command of ``app`` and of its groups its docstring as help, every paragraph
-    on one line, and list it under its group with its whole first paragraph: a terminal
-    narrower or wider than the source showed ragged lines, and click's list of a group's
-    commands cut each at its first full stop or 45-60 characters ("Generate synthetic
-    refinish cases (labelled synthetic) and...", "Paper 001 Fig.")."""
+def list_commands_whole(app: typer.Typer) -> None:
+    """List each command and group of ``app`` under its group with its whole first paragraph:
+    click's list cut each at its first full stop or 45-60 characters ("Generate synthetic
+    refinish cases (labelled synthetic) and...", "Paper 001 Fig."). Click wraps it, as it
+    wraps every paragraph of a help to the terminal."""
     for info in app.registered_commands:
-        if info.help is None and info.callback is not None:
-            paragraphs = inspect.cleandoc(info.callback.__doc__ or "").split("\n\n")
-            info.help = "\n\n".join(" ".join(p.split("\n")) for p in paragraphs)
-        info.short_help = info.short_help or _first_paragraph(info.help)
+        text = info.help if info.help is not None else inspect.getdoc(info.callback)
+        info.short_help = info.short_help or _first_paragraph(text)
     for group in app.registered_groups:
         group.short_help = group.short_help or _first_paragraph(group.typer_instance.info.help)
-        reflow_help(group.typer_instance)
+        list_commands_whole(group.typer_instance)
 
 
 def _first_paragraph(text: str | None) -> str | None:

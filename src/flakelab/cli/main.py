@@ -33,12 +33,12 @@ from flakelab.cli.common import (
     draw_side_by_side,
     errors,
     lights_option,
+    list_commands_whole,
     print_report,
     progress_bar,
     read_readings,
     read_sample,
     readings_note,
-    reflow_help,
     render_lamps,
     reports_errors,
     stop_on_signals,
@@ -645,7 +645,7 @@ def main(
         raise typer.Exit()
 
 
-reflow_help(app)  # after every command and group is registered
+list_commands_whole(app)  # after every command and group is registered
 
 
 def run() -> None:
