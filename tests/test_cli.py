@@ -733,8 +733,8 @@ def test_every_help_reads_whole_in_an_80_column_terminal():
     what an option does beginning by the 34th. Typer's Rich panels squeezed that into 16
     characters at the right of ``match --help`` (394 lines; 167 now), read a unit in brackets
     ("[g]") as a style tag and dropped it, and listed a group's commands cut short ("Paper
-    001 Fig."); a docstring's line breaks showed as ragged lines. A group run alone shows
-    its help too ('cases', 'model', 'texture' and 'validate' said "Missing command")."""
+    001 Fig."). A group run alone shows its help too ('cases', 'model', 'texture' and
+    'validate' said "Missing command")."""
     import typer.main
     from typer.testing import CliRunner
 
