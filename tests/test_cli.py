@@ -734,7 +734,8 @@ def test_every_help_reads_whole_in_an_80_column_terminal():
     characters at the right of ``match --help`` (394 lines; 167 now), read a unit in brackets
     ("[g]") as a style tag and dropped it, and listed a group's commands cut short ("Paper
     001 Fig."). A group run alone shows its help too ('cases', 'model', 'texture' and
-    'validate' said "Missing command")."""
+    'validate' said "Missing command"). What an option takes is named, as argparse names
+    it (``--seed N``, ``--library LIBRARY``), where typer wrote ``<int range>``, ``<path>``."""
     import typer.main
     from typer.testing import CliRunner
 
@@ -755,6 +756,8 @@ def test_every_help_reads_whole_in_an_80_column_terminal():
             texts.append((sub.help or "").split("\n\n")[0])
         for text in texts:
             assert flat(text) in flat(shown), (" ".join(path), text)
+        # what an option takes is named (--seed N), not typed (--seed <int range>)
+        assert not re.search(r"-[\w-]+ <", shown), (path, re.search(r"-[\w-]+ <.*", shown))
         if getattr(command, "commands", None):  # a group run alone shows its help
             assert runner.invoke(app, list(path), env={"COLUMNS": "80"}).output == shown, path
 

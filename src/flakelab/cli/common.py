@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
-import inspect
 import json
 import os
 import select
@@ -20,6 +19,7 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import typer
+import typer.core
 from rich import box
 from rich.console import Console
 from rich.markup import escape
@@ -44,7 +44,46 @@ def command_group(help: str, **settings: Any) -> typer.Typer:
     click's plain text, wrapped to the terminal. Typer's Rich panels gave each option's type
     a column of its own and squeezed what the option does into 16 characters of an
     80-column terminal: ``match --help`` ran to 394 lines, against 167 as plain text."""
-    return typer.Typer(help=help, no_args_is_help=True, rich_markup_mode=None, **settings)
+    return typer.Typer(
+        help=help, no_args_is_help=True, rich_markup_mode=None, cls=_PlainHelpGroup, **settings
+    )
+
+
+class _PlainHelpGroup(typer.core.TyperGroup):
+    """A group whose help lists each command and group under it by its whole first paragraph,
+    and names what each option takes. Click's list cut each at its first full stop or 45-60
+    characters ("Generate synthetic refinish cases (labelled synthetic) and...", "Paper 001
+    Fig."); click wraps it, as it wraps every paragraph of a help to the terminal."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            _name_value(param)
+        for command in self.commands.values():
+            command.short_help = command.short_help or _first_paragraph(command.help)
+            for param in command.params:
+                _name_value(param)
+
+
+_VALUE_NAMES = {int: "N", float: "NUMBER"}
+"""What a number option takes, named in its help: ``--seed N``, ``--resolution NUMBER``."""
+
+
+def _name_value(param: Any) -> None:
+    """Name the value of an option that has no name for it of its own, as argparse does: a
+    number by its kind, a choice by its choices (``[panel|curved]``), any other by the
+    option's name in capitals (``--library LIBRARY``). Typer showed ``<int range>``,
+    ``<float>``, ``<str>`` and ``<path>``. Left as typer names it where its parameter
+    carries no ``type_descriptor`` (typer before 0.2x)."""
+    kind = getattr(param, "type_descriptor", None)
+    if not isinstance(param, typer.core.TyperOption) or kind is None:
+        return
+    if param.metavar or param.is_flag or param.count:
+        return
+    if kind.choices:
+        param.metavar = "[" + "|".join(str(c) for c in kind.choices) + "]"
+    else:
+        param.metavar = _VALUE_NAMES.get(kind.annotation) or param.name.upper()
 
 
 def _open_closed_streams() -> None:
@@ -690,19 +729,6 @@ def texture_table(
     if limits:
         table.add_row("limit ±", *(f"{limits[k]:.2f}" if k in limits else "" for k in delta))
     return table
-
-
-def list_commands_whole(app: typer.Typer) -> None:
-    """List each command and group of ``app`` under its group with its whole first paragraph:
-    click's list cut each at its first full stop or 45-60 characters ("Generate synthetic
-    refinish cases (labelled synthetic) and...", "Paper 001 Fig."). Click wraps it, as it
-    wraps every paragraph of a help to the terminal."""
-    for info in app.registered_commands:
-        text = info.help if info.help is not None else inspect.getdoc(info.callback)
-        info.short_help = info.short_help or _first_paragraph(text)
-    for group in app.registered_groups:
-        group.short_help = group.short_help or _first_paragraph(group.typer_instance.info.help)
-        list_commands_whole(group.typer_instance)
 
 
 def _first_paragraph(text: str | None) -> str | None:

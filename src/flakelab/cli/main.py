@@ -33,7 +33,6 @@ from flakelab.cli.common import (
     draw_side_by_side,
     errors,
     lights_option,
-    list_commands_whole,
     print_report,
     progress_bar,
     read_readings,
@@ -643,9 +642,6 @@ def main(
     if version:
         print(f"flakelab {__version__}")
         raise typer.Exit()
-
-
-list_commands_whole(app)  # after every command and group is registered
 
 
 def run() -> None:
