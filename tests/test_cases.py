@@ -29,12 +29,14 @@ from flakelab.cases.database import (
     add_cases,
     add_new_cases,
     count_cases,
+    default_url,
     iter_cases,
     latest_cases,
     migrate,
     open_database,
     refusal,
     remove_case,
+    user_database_file,
 )
 from flakelab.cases.exchange import CASE_FIELDS, CaseFileError, read_cases, write_cases
 from flakelab.cases.generator import World, near_black
@@ -676,6 +678,27 @@ def test_a_database_that_cannot_be_opened_is_named(tmp_path):
             open_database(url)
         assert str(url).split("/")[-1] in str(error.value)
     assert junk.read_text() == "not a database"  # left as it was
+
+
+def test_the_default_database_lies_in_the_xdg_data_folder(tmp_path, monkeypatch):
+    """``XDG_DATA_HOME`` where it is an absolute path; set empty or relative, ignored for
+    ``~/.local/share``, as the XDG Base Directory Specification says (``XDG_DATA_HOME=``
+    put a database in every folder a command ran in). A home where no folder can be made is
+    refused naming the folder and how to name a database instead."""
+    monkeypatch.delenv("FLAKELAB_DATABASE_URL", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    share = tmp_path / "home" / ".local" / "share" / "flakelab" / "flakelab.db"
+    own = tmp_path / "data" / "flakelab" / "flakelab.db"
+    for data_home, file in [(str(tmp_path / "data"), own), ("", share), ("relative/data", share)]:
+        monkeypatch.setenv("XDG_DATA_HOME", data_home)
+        assert user_database_file() == file
+        assert default_url() == f"sqlite:///{file}" and file.parent.is_dir()
+    (tmp_path / "file").write_text("not a folder")
+    monkeypatch.setenv("HOME", str(tmp_path / "file"))
+    with pytest.raises(
+        DatabaseError, match=r"file/\.local/share/flakelab: cannot make .*--database"
+    ):
+        default_url()
 
 
 def test_a_database_of_a_newer_flakelab_is_refused_and_left_as_it_is(cases, database_url):

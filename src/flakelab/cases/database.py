@@ -183,14 +183,23 @@ def default_url() -> str:
     if url := os.environ.get("FLAKELAB_DATABASE_URL"):
         return url_for(url)
     file = user_database_file()
-    file.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        file.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise DatabaseError(
+            f"{file.parent}: cannot make the user data folder of the default database "
+            f"({error.strerror}); name one with --database or FLAKELAB_DATABASE_URL"
+        ) from None
     return f"sqlite:///{file}"
 
 
 def user_database_file() -> Path:
     """The SQLite file in the user's data folder (XDG), the database of the commands that
-    name none; it need not exist yet."""
-    base = Path(os.environ.get("XDG_DATA_HOME", Path.home() / ".local" / "share"))
+    name none; it need not exist yet. ``XDG_DATA_HOME`` set empty or to a relative path is
+    ignored, as the XDG Base Directory Specification says: flakelab read ``XDG_DATA_HOME=``
+    as the current folder, and each folder a command ran in got a database of its own."""
+    data_home = os.environ.get("XDG_DATA_HOME", "")
+    base = Path(data_home) if os.path.isabs(data_home) else Path.home() / ".local" / "share"
     return base / "flakelab" / "flakelab.db"
 
 
