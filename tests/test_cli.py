@@ -819,3 +819,39 @@ def test_the_match_shows_every_number_whole_in_a_narrow_terminal(cli, monkeypatc
     for name, g in report["geometries"].items():
         row = next(line.split() for line in shown.splitlines() if line.split()[:1] == [name])
         assert row[1:4] == [f"{g[k]:.2f}" for k in ("L", "a", "b")], name
+
+
+class _Stream:
+    def __init__(self, tty: bool):
+        self.tty = tty
+
+    def isatty(self) -> bool:
+        return self.tty
+
+    def fileno(self) -> int:
+        return 1
+
+
+@pytest.mark.parametrize(
+    "columns, tty, width",
+    [("", False, 110), ("0", False, 110), ("00", False, 110), ("abc", False, 110),
+     ("72", False, None), ("", True, None), ("abc", True, None), ("72", True, None),
+     ("0", True, 97)],
+)  # fmt: skip
+def test_a_console_draws_at_columns_or_the_terminals_width_never_at_zero(
+    monkeypatch, columns, tty, width
+):
+    """Rich took ``COLUMNS=0`` for a width of 0 and drew nothing: every table, report and
+    error of a command vanished and it still exited 0 (or 2, silent). The width is Rich's
+    own (None: ``COLUMNS``, else the terminal's) where that is a width, the terminal's where
+    ``COLUMNS`` is 0, and the piped width (110) for a file or a pipe without one."""
+    from rich.console import Console
+
+    from flakelab.cli.common import _drawing_width
+
+    monkeypatch.setenv("COLUMNS", columns)
+    monkeypatch.setattr(os, "get_terminal_size", lambda fd: os.terminal_size((97, 30)))
+    assert _drawing_width(_Stream(tty), 110) == width
+    shown = io.StringIO()
+    Console(file=shown, width=_drawing_width(_Stream(tty), 110)).print("45as15 ΔE00 0.22")
+    assert shown.getvalue() == "45as15 ΔE00 0.22\n"

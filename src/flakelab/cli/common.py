@@ -231,10 +231,29 @@ def _cell_paddings(table: Table) -> tuple[list[int], list[int]]:
 
 _open_closed_streams()
 _encodable_output()
-console = _Console(width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 110)
-"""Tables and reports: the terminal's width, else ``COLUMNS``, else 110 columns (piped
+
+
+def _drawing_width(stream: Any, piped: int) -> int | None:
+    """The width a console draws ``stream`` at: Rich's own (``COLUMNS`` where it is set, else
+    the terminal's), ``piped`` columns for a file or a pipe without ``COLUMNS``, and never
+    0: Rich took ``COLUMNS=0`` for a width and printed nothing, not even an error."""
+    columns = os.environ.get("COLUMNS", "")
+    if columns.isdigit() and int(columns) > 0:
+        return None
+    if not stream.isatty():
+        return piped
+    if not columns.isdigit():
+        return None
+    try:
+        return os.get_terminal_size(stream.fileno()).columns or piped
+    except (OSError, ValueError):
+        return piped
+
+
+console = _Console(width=_drawing_width(sys.stdout, 110))
+"""Tables and reports: ``COLUMNS``, else the terminal's width, else 110 columns (piped
 output that wraps no row of the main job's tables)."""
-errors = _Console(stderr=True)
+errors = _Console(stderr=True, width=_drawing_width(sys.stderr, 80))
 
 
 def _show_note(message, category, filename, lineno, file=None, line=None) -> None:
