@@ -128,6 +128,7 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
         (HEADER + "\n" + ROW[:40], "row 2", "truncated line"),
         (HEADER.replace("geometry", "angle") + "\n" + ROW, "header", "missing column 'geometry'"),
         (HEADER + "\n" + ROW.replace(",0.5", ",-3", 1), "row 2, 400 nm", "reflectance factor"),
+        ("sample,geometry,L,a,b\nS1,45as15,50,1,2", "header", "L*a*b* alone: flakelab reads"),
     ],
 )
 def test_bad_csv_names_file_field_and_problem(tmp_path, text, field, problem):

@@ -93,7 +93,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
     spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
     if not spectral:
-        raise MeasurementFileError(path, "no reflectance columns such as R400", field="header")
+        alone = " (L*a*b* alone: flakelab reads the spectra, R400 … R700; export them too)"
+        found = alone if all(k in columns for k in "Lab") else ""
+        raise MeasurementFileError(
+            path, f"no reflectance columns such as R400{found}", field="header"
+        )
     wavelengths = parse_wavelength_header(path, [header[i] for i in spectral], "header")
     has_lab = all(k in columns for k in "Lab")
     if delimiter != ",":  # the comma is free to be the decimal mark
