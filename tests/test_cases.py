@@ -1893,12 +1893,23 @@ def test_recording_refuses_readings_without_the_instrument_s_geometries():
         case_from_readings(target, sprayout, {"Al medium": 1.0}, "ma-t12", shop="x", outcome="ok")
 
 
-def test_the_newest_cases_come_first_and_one_can_be_removed(cases, database_url):
+def test_the_newest_cases_come_first_and_one_can_be_removed(cases, database_url, cli):
+    """Newest first, of a shop, since a time (``cases list --since``, as a shop asks for the
+    cases since its new gun); one removed by its id."""
     engine = open_database(database_url)
     shops = [replace(c, shop="Dupont" if k % 3 else "Martin") for k, c in enumerate(cases[:12])]
     add_cases(engine, shops)
     newest = latest_cases(engine, 4)
     assert [c.created_at for c in newest] == sorted((c.created_at for c in shops), reverse=True)[:4]
+    third = newest[2].created_at  # whole minutes, as 'cases list --since' takes them
+    assert [c.case_id for c in latest_cases(engine, 9, since=third)] == [
+        c.case_id for c in newest[:3]
+    ]
+    listed = cli("cases", "list", "--since", f"{third.astimezone():%Y-%m-%d %H:%M}", "--json",
+                 "-d", database_url)  # fmt: skip
+    assert [c["case_id"] for c in json.loads(listed.stdout)["cases"]] == [
+        c.case_id for c in newest[:3]
+    ]
     martin = latest_cases(engine, 100, shop="Martin")
     assert [c.case_id for c in martin] == [c.case_id for c in shops[::3]][::-1]
     removed = remove_case(engine, martin[0].case_id)

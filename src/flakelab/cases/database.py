@@ -709,12 +709,17 @@ def cases_by_rows(engine: Engine, row_ids: list[int]) -> list[Case]:
 
 
 def latest_cases(
-    engine: Engine, n: int, *, shop: str | None = None, colour_code: str | None = None
+    engine: Engine,
+    n: int,
+    *,
+    shop: str | None = None,
+    colour_code: str | None = None,
+    since: datetime | None = None,
 ) -> list[Case]:
-    """The ``n`` cases made last, newest first, of ``shop``, for ``colour_code`` (None: every
-    shop, every colour)."""
+    """The ``n`` cases made last, newest first, of ``shop``, for ``colour_code``, made at or
+    after ``since`` (None: every shop, every colour, any time)."""
     query = select(CaseRow).order_by(CaseRow.created_at.desc(), CaseRow.id.desc()).limit(n)
-    query = _chosen(query, shop, None, colour_code)
+    query = _chosen(query, shop, since, colour_code)
     with reading_rows(engine) as session:
         return [_case(row, engine) for row in session.scalars(query)]
 

@@ -629,6 +629,7 @@ def list_cases(
         str | None, typer.Option(callback=shop_spelled, help="Only this shop's cases.")
     ] = None,
     colour_code: ColourCodeOption = None,
+    since: SinceOption = None,
     last: Annotated[int, typer.Option(min=1, help="How many of the newest cases.")] = 20,
     check: Annotated[
         bool,
@@ -658,7 +659,7 @@ def list_cases(
     from flakelab.cases.database import SHORT_ID_LENGTH, latest_cases, open_database, short_id
 
     engine = open_database(database, must_exist=True)
-    cases = latest_cases(engine, last, shop=shop, colour_code=colour_code)
+    cases = latest_cases(engine, last, shop=shop, colour_code=colour_code, since=since)
     worst, where = worst_differences(cases) if cases else ([], [])
     rows = [
         {
@@ -699,6 +700,7 @@ def list_cases(
     if not rows:  # which cases were looked at: the newest alone, not the whole history
         of = f"shop {shop!r}" if shop else "any shop"
         of += f" of colour code {colour_code!r}" if colour_code else ""
+        of += f" since {shown_time(since)}" if since else ""
         of += colour_code_hint_in(engine, shop, colour_code) if not cases else ""
         newest = "the newest " if len(cases) == last else "the "
         more = " (--last N checks more of them)" if len(cases) == last else ""
@@ -714,6 +716,7 @@ def list_cases(
     table = Table(
         title=f"{title} {counted(len(cases), 'case')} of {whose}"
         + (f" of colour code {colour_code!r}" if colour_code else "")
+        + (f" since {shown_time(since)}" if since else "")
         + f" in {database_label(engine)}",
         box=box.SIMPLE_HEAD,
         collapse_padding=True,
