@@ -36,6 +36,7 @@ from flakelab.cases.database import (
     open_database,
     refusal,
     remove_case,
+    url_for,
     user_database_file,
 )
 from flakelab.cases.exchange import CASE_FIELDS, CaseFileError, read_cases, write_cases
@@ -699,6 +700,21 @@ def test_the_default_database_lies_in_the_xdg_data_folder(tmp_path, monkeypatch)
         DatabaseError, match=r"file/\.local/share/flakelab: cannot make .*--database"
     ):
         default_url()
+
+
+@pytest.mark.parametrize("name", ["shop?2.db", "shop%20b.db", "Müller & Söhne.db", "#1.db"])
+def test_a_sqlite_file_is_the_one_named_whatever_its_name_holds(cases, tmp_path, name):
+    """``--database`` names a file, and that file is the database, named so in messages: a
+    name with ``?`` wrote the file before it ("shop"), one with ``%20`` a file with a space,
+    and a message named "Müller" as "M%C3%BCller"."""
+    from flakelab.core.wording import database_label
+
+    file = tmp_path / name
+    engine = open_database(file)
+    add_cases(engine, cases[:2])
+    assert [p.name for p in tmp_path.iterdir() if p.suffix == ".db" or p.name == "shop"] == [name]
+    assert database_label(engine) == database_label(url_for(file)) == str(file)
+    assert count_cases(open_database(url_for(file), must_exist=True)) == 2
 
 
 def test_a_database_of_a_newer_flakelab_is_refused_and_left_as_it_is(cases, database_url):

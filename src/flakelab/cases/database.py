@@ -33,7 +33,7 @@ from sqlalchemy import (
     literal,
     select,
 )
-from sqlalchemy.engine import make_url
+from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session
 from sqlalchemy.pool import NullPool, StaticPool
@@ -190,7 +190,7 @@ def default_url() -> str:
             f"{file.parent}: cannot make the user data folder of the default database "
             f"({error.strerror}); name one with --database or FLAKELAB_DATABASE_URL"
         ) from None
-    return f"sqlite:///{file}"
+    return _sqlite_url(file)
 
 
 def user_database_file() -> Path:
@@ -206,7 +206,13 @@ def user_database_file() -> Path:
 def url_for(target: str | os.PathLike) -> str:
     """A URL as given, or a SQLite URL for a file path."""
     text = str(target)
-    return text if "://" in text else f"sqlite:///{Path(text).resolve()}"
+    return text if "://" in text else _sqlite_url(Path(text).resolve())
+
+
+def _sqlite_url(file: Path) -> str:
+    """The SQLite URL of ``file``, quoted as a URL is: a name with ``?`` opened the file before
+    it (the rest read as the URL's query) and one with ``%20`` a file with a space."""
+    return URL.create("sqlite", database=str(file)).render_as_string(hide_password=False)
 
 
 def _sqlite_pragmas(dbapi_connection, _record, journal: str = "WAL") -> None:

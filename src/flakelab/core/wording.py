@@ -7,6 +7,7 @@ import difflib
 import re
 import unicodedata
 from collections.abc import Callable, Iterable
+from urllib.parse import unquote
 
 _URL_PASSWORD = re.compile(r"\b([A-Za-z][A-Za-z0-9+.-]*://[^\s:/@]*:)[^\s/@]+@")
 """A URL's ``scheme://user:`` and the password after it, up to its ``@``."""
@@ -44,7 +45,7 @@ def database_label(engine) -> str:
     database by its URL, the password hidden as SQLAlchemy hides it."""
     url = getattr(engine, "url", engine)
     if isinstance(url, str):
-        file = url.removeprefix("sqlite:///").partition("?")[0]
+        file = unquote(url.removeprefix("sqlite:///").partition("?")[0])
         return file if url.startswith("sqlite:///") and file else hidden_passwords(url)
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         return url.database
