@@ -1,11 +1,14 @@
 """flakelab: match, predict and show the appearance of car paints.
 
-Layers (``../DESIGN.md`` §8), each a subpackage, arrows pointing down::
+Layers (DESIGN.md §8), each a subpackage, arrows pointing down (the README's Layout says
+what each holds)::
 
-    cli                      thin: parse, call, present
-    render                   images and plots
-    io                       measurement files (MA-T12 xlsx, CxF3, CSV, JSON)
-    core                     spectra, colour, geometry, measurement, tolerances
+    cli                          thin: parse, call, present
+    match, render                the two jobs: recipes and their correction; images, plots
+    models, physics, texture     learned forward model; coating optics; sparkle, graininess
+    cases, library               refinish cases and their database; toners and tins
+    io                           measurement, library, recipe and tolerance files
+    core                         spectra, colour, geometry, measurement, tolerances
 """
 
 from flakelab.errors import FlakelabError, MeasurementFileError
