@@ -1,8 +1,9 @@
 """flakelab: match, predict and show the appearance of car paints.
 
 Layers (DESIGN.md §8), each a subpackage, arrows pointing down but for two: the case
-generator (``cases.generator``) makes its cases with the physics, and ``io`` reads library
-and tin files into the library's types. The README's Layout says what each holds::
+generator (``cases.generator``) makes its cases with the physics and the texture readings'
+model, and ``io`` reads library and tin files into the library's types
+(``tests/test_layers.py``). The README's Layout says what each holds::
 
     cli                          thin: parse, call, present
     match, render                the two jobs: recipes and their correction; images, plots
