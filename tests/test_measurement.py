@@ -34,6 +34,23 @@ def test_flop_index_from_spectra_matches_formula():
     assert _grey_metallic({"45as15": 50, "45as45": 50}).flop_index() is None
 
 
+def test_a_black_read_at_zero_or_below_has_no_flop_index():
+    """The index divides by L*45: a black read as zero (a light trap, a carbon black solid),
+    or just below it by the instrument's noise, has none. It was NaN, with a RuntimeWarning,
+    and 'inspect --json' wrote the NaN no JSON reader takes."""
+    import warnings
+
+    names = tuple(Geometry.parse(n) for n in ("45as15", "45as45", "45as110"))
+    zero = np.zeros((3, 31))
+    below = zero.copy()
+    below[1] = -0.002  # within REFLECTANCE_RANGE: instrument noise on black
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for reflectance in (zero, below):
+            assert Measurement("black", names, WAVELENGTHS, reflectance).flop_index() is None
+        assert np.isnan(flop_index([10.0, 10.0], [0.0, -0.5], [5.0, 5.0])).all()
+
+
 def test_measurement_rejects_inconsistent_data():
     g = (Geometry.parse("45as15"),)
     with pytest.raises(ValueError, match="expected reflectance of shape"):

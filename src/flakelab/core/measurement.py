@@ -77,7 +77,8 @@ def flop_index(L15: NDArray | float, L45: NDArray | float, L110: NDArray | float
     """X-Rite flop index 2.69·(L*15 − L*110)^1.11 / (L*45)^0.86 at 45° illumination.
 
     A negative L*15 − L*110 (an inverse flop, seen on some matte or pearl samples) keeps its
-    sign: the power applies to the magnitude.
+    sign: the power applies to the magnitude. NaN where L*45 ≤ 0 (a black read as zero, or
+    below it by the instrument's noise), which the index divides by.
 
     Examples
     --------
@@ -85,7 +86,10 @@ def flop_index(L15: NDArray | float, L45: NDArray | float, L110: NDArray | float
     13.74
     """
     dL = np.asarray(L15, dtype=float) - np.asarray(L110, dtype=float)
-    return 2.69 * np.sign(dL) * np.abs(dL) ** 1.11 / np.asarray(L45, dtype=float) ** 0.86
+    L45 = np.asarray(L45, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        index = 2.69 * np.sign(dL) * np.abs(dL) ** 1.11 / L45**0.86
+    return np.where(L45 > 0, index, np.nan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,12 +172,14 @@ class Measurement:
         return Lab_to_LCh(self.lab(conditions))
 
     def flop_index(self, conditions: Conditions = D65_10) -> float | None:
-        """Flop index from 45as15, 45as45, 45as110; None when one of them is missing."""
+        """Flop index from 45as15, 45as45, 45as110; None when one of them is missing, or
+        where L*45 ≤ 0 leaves it undefined (a report's JSON has no NaN)."""
         if not set(FLOP_GEOMETRIES) <= set(self.geometry_names):
             return None
         L = self.lab(conditions)[:, 0]
         L15, L45, L110 = (L[self.index(name)] for name in FLOP_GEOMETRIES)
-        return float(flop_index(L15, L45, L110))
+        index = float(flop_index(L15, L45, L110))
+        return index if np.isfinite(index) else None
 
     def storage_spectra(self, geometries: tuple[Geometry, ...] | list[str]) -> NDArray[np.float64]:
         """Reflectance ``[G, 31]`` at ``geometries``, in their order, on the storage grid
