@@ -855,3 +855,17 @@ def test_a_console_draws_at_columns_or_the_terminals_width_never_at_zero(
     shown = io.StringIO()
     Console(file=shown, width=_drawing_width(_Stream(tty), 110)).print("45as15 ΔE00 0.22")
     assert shown.getvalue() == "45as15 ΔE00 0.22\n"
+
+
+def test_a_json_report_writes_a_number_that_is_none_as_null(capsys):
+    """JSON has no NaN or infinity: Python wrote ``NaN``, which jq, JavaScript and a strict
+    reader refuse. A number that is none is ``null``, however deep in the report."""
+    from flakelab.cli.common import print_report
+
+    print_report({"flop": np.nan, "rows": [1.5, (np.inf, -np.inf)], "by": {"45as15": np.nan}})
+
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+
+    shown = json.loads(capsys.readouterr().out, parse_constant=refuse)
+    assert shown == {"flop": None, "rows": [1.5, [None, None]], "by": {"45as15": None}}

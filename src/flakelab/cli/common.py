@@ -6,6 +6,7 @@ import contextlib
 import errno
 import functools
 import json
+import math
 import os
 import select
 import signal
@@ -151,11 +152,24 @@ class _Console(Console):
 
 
 def print_report(report: Any, *, indent: int = 2, default: Callable | None = None) -> None:
-    """A ``--json`` report on stdout; its reader gone half way, the command stops as a
-    table's does (:func:`reader_gone`)."""
-    print(json.dumps(report, indent=indent, default=default))
+    """A ``--json`` report on stdout, a number that is none (NaN, ±∞) written ``null``: JSON
+    has no NaN, and a strict reader refuses Python's ``NaN``. Its reader gone half way, the
+    command stops as a table's does (:func:`reader_gone`)."""
+    print(json.dumps(_finite(report), indent=indent, default=default, allow_nan=False))
     if reader_gone(sys.stdout):
         console.on_broken_pipe()
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with every float in it that is not finite made None, through its dicts,
+    lists and tuples."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def reader_gone(stream: Any) -> bool:
