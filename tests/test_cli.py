@@ -858,8 +858,9 @@ def test_a_console_draws_at_columns_or_the_terminals_width_never_at_zero(
 
 
 def test_a_json_report_writes_a_number_that_is_none_as_null(capsys):
-    """JSON has no NaN or infinity: Python wrote ``NaN``, which jq, JavaScript and a strict
-    reader refuse. A number that is none is ``null``, however deep in the report."""
+    """JSON has no NaN or infinity: Python wrote ``NaN``, which JavaScript's ``JSON.parse``
+    and any strict reader refuse. A number that is none is ``null``, however deep in the
+    report."""
     from flakelab.cli.common import print_report
 
     print_report({"flop": np.nan, "rows": [1.5, (np.inf, -np.inf)], "by": {"45as15": np.nan}})
