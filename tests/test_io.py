@@ -878,6 +878,7 @@ def test_json_and_toml_files_windows_writes_are_read(tmp_path, rich_measurement)
         ('{"Al medium": "ten"}', "Al medium: expected grams as a number, got 'ten'"),
         ('{"Al medium": -3}', "Al medium: expected non-negative grams, got -3"),
         ('{"Al medium": 0}', "the amounts sum to zero grams"),
+        ('{"Al medium": 1e308, "Al fine": 1e308}', "sum to more grams than a number holds"),
         ('{"Al medium": 10,', "expected a JSON object toner → grams (Expecting"),
     ],
 )

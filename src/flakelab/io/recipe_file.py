@@ -38,8 +38,11 @@ def read_recipe(path: str | PathLike) -> dict[str, float]:
             raise FlakelabError(f"{path}: {toner}: expected grams as a number, got {amount!r}")
         if not math.isfinite(amount) or amount < 0:
             raise FlakelabError(f"{path}: {toner}: expected non-negative grams, got {amount!r}")
-    if sum(grams.values()) <= 0:
+    total = sum(grams.values())
+    if total <= 0:
         raise FlakelabError(f"{path}: the amounts sum to zero grams")
+    if not math.isfinite(total):  # each finite, their sum past 1.8e308
+        raise FlakelabError(f"{path}: the amounts sum to more grams than a number holds")
     return {str(toner): float(amount) for toner, amount in grams.items()}
 
 
