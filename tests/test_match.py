@@ -30,6 +30,7 @@ from flakelab.match.judging import evaluate_recipes, recipe_vector
 from flakelab.match.recipe import (
     RecipeError,
     can_on_scale,
+    check_poured,
     order_can,
     parse_quantity,
     weigh,
@@ -438,6 +439,11 @@ def test_impossible_quantities_are_refused():
         weigh({"A": 0.5, "B": 0.5}, parse_quantity("1e30kg"), 0.1)
     with pytest.raises(RecipeError, match="1e[+]308 g is more than 1e[+]09 steps"):  # not "inf"
         weigh({"A": 0.5, "B": 0.5}, 1e308, 0.1)
+    # poured by mistake, by the ton or past what a number holds: it overflowed the additions
+    for grams in (1e12, 1e308):
+        with pytest.raises(RecipeError, match=f"--poured: {grams:g} g in all is more than 1e"):
+            check_poured({"A": 100.0, "C": grams}, 0.1)
+    check_poured({"A": 100.0, "C": 3.0}, 0.1)
     for text in ("0g", "-5g", "lots"):
         with pytest.raises(RecipeError, match="--quantity"):
             parse_quantity(text)

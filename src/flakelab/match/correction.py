@@ -629,7 +629,7 @@ def correct_what_was_poured(
     )
 
     check_scale(quantity_g, resolution_g)
-    check_poured(poured)
+    check_poured(poured, resolution_g)
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     total = sum(fractions.values())
     planned = {n: v / total * quantity_g for n, v in fractions.items()}

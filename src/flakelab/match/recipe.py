@@ -333,7 +333,7 @@ def weigh_after_pouring(
             f"--poured: {', '.join(unknown)} not in the recipe ({', '.join(fractions)}): "
             "scaling cannot take it out (correction.correct_what_was_poured dilutes it)"
         )
-    check_poured(poured)
+    check_poured(poured, resolution_g)
     total = sum(fractions.values())
     share = {n: v / total for n, v in fractions.items()}
     needed = max(g / share[n] / resolution_g for n, g in poured.items())
@@ -366,12 +366,18 @@ def room_for_additions(most_g: float, can_g: float, toners: int, resolution_g: f
     return (most_g - needed) / can_g
 
 
-def check_poured(poured: dict[str, float]) -> None:
-    """A :class:`RecipeError` unless ``poured`` gives grams ≥ 0, more than none in all."""
+def check_poured(poured: dict[str, float], resolution_g: float = SCALE_RESOLUTION_G) -> None:
+    """A :class:`RecipeError` unless ``poured`` gives grams ≥ 0, more than none in all, and no
+    more than a scale of ``resolution_g`` weighs (1e308 g overflowed the additions)."""
     if not poured or any(not (np.isfinite(g) and g >= 0) for g in poured.values()):
         raise RecipeError(f"--poured: expected grams ≥ 0 for at least one toner, got {poured}")
     if sum(poured.values()) <= 0:
         raise RecipeError("--poured: the amounts poured sum to zero grams")
+    if not sum(poured.values()) / resolution_g <= MAX_SCALE_STEPS:  # inf too
+        raise RecipeError(
+            f"--poured: {sum(poured.values()):g} g in all is more than {MAX_SCALE_STEPS:.0e} "
+            f"steps of the scale's {resolution_g:g} g"
+        )
 
 
 def _whole_can_roundings(exact: np.ndarray, nearest: np.ndarray, steps: int) -> np.ndarray:
