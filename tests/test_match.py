@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -441,7 +442,7 @@ def test_impossible_quantities_are_refused():
         weigh({"A": 0.5, "B": 0.5}, 1e308, 0.1)
     # poured by mistake, by the ton or past what a number holds: it overflowed the additions
     for grams in (1e12, 1e308):
-        with pytest.raises(RecipeError, match=f"--poured: {grams:g} g in all is more than 1e"):
+        with pytest.raises(RecipeError, match=re.escape(f"--poured: {grams:g} g in all is more")):
             check_poured({"A": 100.0, "C": grams}, 0.1)
     check_poured({"A": 100.0, "C": 3.0}, 0.1)
     for text in ("0g", "-5g", "lots"):
