@@ -973,6 +973,17 @@ def test_a_shop_typed_with_stray_spaces_is_the_same_shop(cases, tmp_path, cli):
     assert [(s["shop"], s["cases"]) for s in shops] == [("Dupont", 2)]
     listed = json.loads(cli("cases", "list", "-d", file, "--shop", " Dupont ", "--json").stdout)
     assert len(listed["cases"]) == 2
+    # a name of spaces alone, or longer than a case keeps, is refused naming the option and
+    # its variable, and nothing is stored: FLAKELAB_SHOP="  " recorded cases of shop ""
+    for env, shop in (({"FLAKELAB_SHOP": "   "}, ()), ({}, ("--shop", "x" * 121))):
+        run = cli("cases", "record", target, "-r", recipe, "--sprayed", sprayout, "-d", file,
+                  *shop, env=env)  # fmt: skip
+        said = " ".join(run.stderr.split())
+        assert (
+            run.returncode == 2 and "Invalid value for '--shop' (env var: 'FLAKELAB_SHOP')" in said
+        )
+        assert "expected a shop's name of 1 to 120 characters" in said
+    assert count_cases(open_database(file)) == 2
 
 
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):

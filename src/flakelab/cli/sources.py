@@ -28,12 +28,24 @@ def workplace_shop(shop: str | None) -> tuple[str | None, bool]:
     and whether ``--shop`` named it."""
     if shop is not None:
         return tidy_name(shop), True
-    return shop_spelled(os.environ.get(WORKPLACE_SHOP)) or None, False
+    return tidy_name(os.environ.get(WORKPLACE_SHOP) or "") or None, False
 
 
 def shop_spelled(shop: str | None) -> str | None:
-    """``--shop`` as shops are stored (:func:`~flakelab.core.wording.tidy_name`)."""
-    return shop if shop is None else tidy_name(shop)
+    """``--shop`` as shops are stored (:func:`~flakelab.core.wording.tidy_name`), refused
+    where that leaves no name or a longer one than a case keeps: ``FLAKELAB_SHOP="  "``
+    recorded cases of shop "", and the refusal named no option. Click calls it for every
+    command that has the option, given or not."""
+    if shop is None:
+        return None
+    from flakelab.cases.case import TEXT_LENGTHS
+
+    tidy, longest = tidy_name(shop), TEXT_LENGTHS["shop"]
+    if not tidy or len(tidy) > longest:
+        raise typer.BadParameter(
+            f"expected a shop's name of 1 to {longest} characters, got {shop!r}"
+        )
+    return tidy
 
 
 def colour_code_spelled(code: str | None) -> str | None:
