@@ -71,15 +71,19 @@ _VALUE_NAMES = {int: "N", float: "NUMBER"}
 
 
 def _name_value(param: Any) -> None:
-    """Name the value of an option that has no name for it of its own, as argparse does: a
-    number by its kind, a choice by its choices (``[panel|curved]``), any other by the
-    option's name in capitals (``--library LIBRARY``). Typer showed ``<int range>``,
-    ``<float>``, ``<str>`` and ``<path>``. Left as typer names it where its parameter
-    carries no ``type_descriptor`` (typer before 0.2x)."""
+    """Name the value of a parameter that has no name for it of its own, as argparse does:
+    an argument by its name in capitals (``[TARGET]``, as messages name it: "TARGET: …");
+    an option's value by its kind where a number, by its choices (``[panel|curved]``), else
+    by the option's name in capitals (``--library LIBRARY``). Typer showed ``[target]``,
+    ``<int range>``, ``<float>``, ``<str>`` and ``<path>``. Left as typer names it where
+    the parameter carries no ``type_descriptor`` (typer before 0.2x)."""
     kind = getattr(param, "type_descriptor", None)
-    if not isinstance(param, typer.core.TyperOption) or kind is None:
+    if kind is None or param.metavar:
         return
-    if param.metavar or param.is_flag or param.count:
+    if isinstance(param, typer.core.TyperArgument):
+        param.metavar = param.name.upper()
+        return
+    if not isinstance(param, typer.core.TyperOption) or param.is_flag or param.count:
         return
     if kind.choices:
         param.metavar = "[" + "|".join(str(c) for c in kind.choices) + "]"
