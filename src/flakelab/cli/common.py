@@ -52,9 +52,10 @@ def command_group(help: str, **settings: Any) -> typer.Typer:
 
 class _PlainHelpGroup(typer.core.TyperGroup):
     """A group whose help lists each command and group under it by its whole first paragraph,
-    and names what each option takes. Click's list cut each at its first full stop or 45-60
-    characters ("Generate synthetic refinish cases (labelled synthetic) and...", "Paper 001
-    Fig."); click wraps it, as it wraps every paragraph of a help to the terminal."""
+    and names each argument and what each option takes (:func:`_name_value`). Click's list
+    cut each at its first full stop or 45-60 characters ("Generate synthetic refinish cases
+    (labelled synthetic) and...", "Paper 001 Fig."); click wraps it, as it wraps every
+    paragraph of a help to the terminal."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
