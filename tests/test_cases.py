@@ -2076,6 +2076,14 @@ def test_the_nearest_cases_are_those_whose_spray_outs_lie_closest(cases, tmp_pat
     for where in (source, db):
         run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(where), "--shop", "X")
         assert run.returncode == 2 and "no cases from shop 'X'" in run.stderr
+    # --since: the cases made at or after it alone, in a case file and a database alike
+    since = sorted(c.created_at for c in cases)[len(cases) // 2]
+    newer = {c.case_id for c in cases if c.created_at >= since}
+    for where in (source, db):
+        run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(where), "-n", "99",
+                  "--since", f"{since.astimezone():%Y-%m-%d %H:%M}", "--json")  # fmt: skip
+        found = {c["case_id"] for c in json.loads(run.stdout)["nearest"]}
+        assert found == newer and json.loads(run.stdout)["cases_searched"] == len(newer)
     run = cli("cases", "nearest", str(tmp_path / "car.json"), "-d", str(source), "-i", "ma-t12")
     assert run.returncode == 2 and "car.json: not read at 15as-45" in run.stderr
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 import numpy as np
@@ -100,13 +101,15 @@ def nearest_stored_cases(
     *,
     shop: str | None = None,
     colour_code: str | None = None,
+    since: datetime | None = None,
     target_texture: dict[str, float] | None = None,
 ) -> tuple[list[NearCase], int]:
-    """:func:`nearest_cases` among a database's cases (``shop``'s, for ``colour_code``, where
-    given) read at ``geometries``, reading only their spray-outs and then the ``count`` cases
-    found; and how many were searched (none found where none was read there)."""
+    """:func:`nearest_cases` among a database's cases (``shop``'s, for ``colour_code``, made
+    at or after ``since``, where given) read at ``geometries``, reading only their spray-outs
+    and then the ``count`` cases found; and how many were searched (none found where none was
+    read there)."""
     row_ids, sprayouts = stored_sprayouts(
-        engine, tuple(geometries), shop=shop, colour_code=colour_code
+        engine, tuple(geometries), shop=shop, colour_code=colour_code, since=since
     )
     if not row_ids:
         return [], 0

@@ -71,7 +71,7 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     instruments_reading,
 )
-from flakelab.core.times import shown_time
+from flakelab.core.times import shown_time, zoned_here
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
@@ -794,6 +794,7 @@ def nearest(
     database: CaseSourceOption = None,
     shop: ShopOption = None,
     colour_code: ColourCodeOption = None,
+    since: SinceOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     count: Annotated[int, typer.Option("--count", "-n", min=1, help="Cases to show.")] = 5,
@@ -833,10 +834,10 @@ def nearest(
     source = database or default_url()
     spectra = reading.storage_spectra(list(geometries))
     found, searched = recorded_nearest(source, shop, geometries, spectra, tol, count,
-                                       reading.texture, colour_code)  # fmt: skip
+                                       reading.texture, colour_code, since=since)  # fmt: skip
     if not searched:
         raise FlakelabError(
-            f"{source}: no cases {which_cases(shop, None, colour_code)}"
+            f"{source}: no cases {which_cases(shop, since, colour_code)}"
             f"{colour_code_hint_in(source, shop, colour_code)} read at the geometries "
             f"{tuple(geometries)}"
         )
@@ -846,6 +847,7 @@ def nearest(
         "cases_searched": searched,
         "shop": shop,
         "colour_code": colour_code,
+        "since": since and zoned_here(since).isoformat(),
         "geometries": list(geometries),
         "tolerance": tol.name,
         "nearest": [near.to_dict() for near in found],
@@ -875,9 +877,11 @@ def recorded_nearest(
     texture,
     colour_code=None,
     cases: list | None = None,
+    since: datetime | None = None,
 ):
     """The ``count`` recorded cases of ``source`` (a database, or a case file; ``shop``'s, of
-    ``colour_code``, where given) whose spray-outs lie closest to ``spectra`` at
+    ``colour_code``, made at or after ``since``, where given) whose spray-outs lie closest to
+    ``spectra`` at
     ``geometries``, and how many were searched; a database gives only its spray-outs until
     the nearest are known. ``cases``: those cases, where the caller read them whole already
     (:func:`recorded_cases`)."""
@@ -886,27 +890,29 @@ def recorded_nearest(
     from flakelab.cases.nearest import nearest_cases, nearest_stored_cases
 
     if cases is None and is_case_file(Path(source)):
-        cases = recorded_cases(source, shop, geometries, colour_code)
+        cases = recorded_cases(source, shop, geometries, colour_code, since)
     if cases is not None:
         found = nearest_cases(spectra, cases, tolerance, count, texture) if cases else []
         return found, len(cases)
     engine = open_database(source, must_exist=True)
     return nearest_stored_cases(engine, spectra, tuple(geometries), tolerance, count, shop=shop,
-                                colour_code=colour_code, target_texture=texture)  # fmt: skip
+                                colour_code=colour_code, since=since,
+                                target_texture=texture)  # fmt: skip
 
 
-def recorded_cases(source: str, shop, geometries, colour_code=None) -> list:
+def recorded_cases(source: str, shop, geometries, colour_code=None, since=None) -> list:
     """The recorded cases of ``source`` (a case file, or a database that must exist;
-    ``shop``'s, of ``colour_code``, where given) read at ``geometries``, restricted to them."""
+    ``shop``'s, of ``colour_code``, made at or after ``since``, where given) read at
+    ``geometries``, restricted to them."""
     from flakelab.cases.case import cases_at
     from flakelab.cases.database import iter_cases, open_database
     from flakelab.cases.exchange import is_case_file
     from flakelab.cli.sources import load_cases
 
     if is_case_file(Path(source)):
-        return cases_at(load_cases(source, shop, colour_code=colour_code), geometries)
+        return cases_at(load_cases(source, shop, since, colour_code), geometries)
     engine = open_database(source, must_exist=True)
-    return cases_at(iter_cases(engine, shop=shop, colour_code=colour_code), geometries)
+    return cases_at(iter_cases(engine, shop=shop, colour_code=colour_code, since=since), geometries)
 
 
 def _print_nearest(report: dict) -> None:
@@ -915,6 +921,7 @@ def _print_nearest(report: dict) -> None:
     shops = sorted({row["shop"] for row in rows})
     whose = f" of {shops[0]!r}" if len(shops) == 1 else ""
     code = f" of colour code {report['colour_code']!r}" if report["colour_code"] else ""
+    code += f" since {shown_time(report['since'])}" if report.get("since") else ""
     title = (
         f"The {len(rows)} of {report['cases_searched']} cases{whose}{code} whose spray-outs "
         f"lie closest to {report['target']} ({report['tolerance']})"
