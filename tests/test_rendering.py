@@ -278,6 +278,20 @@ def test_distance_parsing():
             parse_distance(bad)
 
 
+def test_a_panel_seen_from_afar_is_drawn_as_from_a_kilometre():
+    """Beyond 1 km the eye's blur already smooths any image drawn, so a farther panel is
+    drawn as from 1 km: ``--distance 1e308m`` overflowed squaring the distance (an internal
+    error). The blur grows with the distance up to there."""
+    from flakelab.render.appearance import FARTHEST_DISTANCE_M, _eye_blur_px, texture_images
+
+    blurs = [_eye_blur_px(d) for d in (0.5, 2.0, 10.0, FARTHEST_DISTANCE_M, 1e6, 1e308)]
+    assert blurs[0] == 0.0 and blurs[1] < blurs[2] < blurs[3] == blurs[4] == blurs[5]
+    assert blurs[3] > 8192  # wider than the widest image drawn
+    far, farthest = (texture_images(1.0, 1.0, (32, 64), distance_m=d) for d in (1e3, 1e308))
+    for a, b in zip(far, farthest, strict=True):
+        assert np.isfinite(b).all() and np.array_equal(a, b)
+
+
 def test_render_commands_write_images_of_the_asked_size(tmp_path, cli):
     from matplotlib.image import imread
 

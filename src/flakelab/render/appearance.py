@@ -80,6 +80,10 @@ DIFFUSE_FRACTION = 0.7
 """Default diffuse share of the light: a body shop (paper 001: 70 % diffuse, 30 % direct)."""
 REFERENCE_DISTANCE_M = 0.5
 """Distance at which texture is drawn as the camera saw it."""
+FARTHEST_DISTANCE_M = 1000.0
+"""Distance beyond which a panel is drawn as from it: the eye's blur there (σ 8,200 camera
+pixels) already smooths the widest image drawn (8,192), and a farther distance's square
+overflowed (``--distance 1e308m``)."""
 EYE_RESOLUTION_ARCMIN = 1.0
 CAMERA_PIXEL_UM = 15.0
 GLOSS_WIDTH_DEG = 3.0
@@ -261,7 +265,7 @@ def _column_mean(image: NDArray) -> NDArray:
 def _eye_blur_px(distance_m: float) -> float:
     """Extra blur σ [camera pixels] of the eye's spot at ``distance_m`` beyond the reference."""
     spot = np.radians(EYE_RESOLUTION_ARCMIN / 60.0) / FWHM_PER_SIGMA
-    extra = max(distance_m**2 - REFERENCE_DISTANCE_M**2, 0.0)
+    extra = max(min(distance_m, FARTHEST_DISTANCE_M) ** 2 - REFERENCE_DISTANCE_M**2, 0.0)
     return float(np.sqrt(extra) * spot * 1e6 / CAMERA_PIXEL_UM)
 
 
