@@ -45,7 +45,8 @@ def test_every_import_points_down_or_across_but_the_two_the_package_names():
         for name in _imports(path):
             target = name.split(".")[1]
             if LAYERS[target] > LAYERS[layer]:
-                allowed = any(module.startswith(a) and target == t for a, t in UPWARD)
-                assert allowed, f"{module} imports {name}: a higher layer"
-                upward.add(next(a for a, t in UPWARD if module.startswith(a) and t == target))
-    assert upward == {a for a, _ in UPWARD}, "an allowed upward arrow no module takes any more"
+                arrow = next((a, t) for a, t in [*UPWARD, (module, target)]
+                             if t == target and f"{module}.".startswith(f"{a}."))  # fmt: skip
+                assert arrow in UPWARD, f"{module} imports {name}: a higher layer"
+                upward.add(arrow)
+    assert upward == UPWARD, f"allowed arrows no module takes any more: {UPWARD - upward}"
