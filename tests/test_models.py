@@ -14,6 +14,7 @@ import torch
 from flakelab.cases.database import open_database
 from flakelab.cases.generator import World
 from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.errors import Note
 from flakelab.io import read_library
 from flakelab.library import Library
 from flakelab.models.network import ForwardModel, ModelError
@@ -40,6 +41,7 @@ from flakelab.models.training import (
     protocol_epochs,
     protocol_stages,
     recorded_config,
+    too_few_readings,
     train_protocol,
     training_device,
 )
@@ -246,6 +248,27 @@ def test_the_figures_per_paint_family_make_up_the_whole(trained, data):
     # each family's figures are those of its cases alone
     alone = evaluate_model(model, data.subset(np.flatnonzero(families == "pearl")))
     assert per_family["pearl"]["de00_p95"] == pytest.approx(alone["de00_p95"], rel=1e-6)
+
+
+def test_too_few_cases_for_the_network_s_weights_are_said_to_be_so():
+    """A network learns a case's readings (reflectance at each geometry and wavelength, and
+    texture) with its weights: fewer readings than weights and it can fit every case and
+    learn little else, which 'train' said nothing of (25 cases, 4,075 readings, 43,763
+    weights). The shipped five-angle model's 119,820 cases give 446 readings a weight of each
+    of its four networks."""
+    model = shipped_model()
+    assert (len(model.x_mean), model.hidden, len(model.y_mean)) == (70, (100, 100, 100), 163)
+    weights = 71 * 100 + 2 * 101 * 100 + 101 * 163  # 43,763, counted by hand
+    # an ensemble of four networks, each learning every case with as many weights
+    assert model.members * weights == sum(p.numel() for p in model.network.parameters())
+    note = too_few_readings(model, 25)
+    assert "25 cases give 4,075 readings to learn, fewer than the network's 43,763" in note
+    assert too_few_readings(model, -(-weights // 163)) is None  # as many readings as weights
+    assert too_few_readings(model, -(-weights // 163) - 1) is not None
+    assert too_few_readings(model, model.info["trained_cases"]) is None
+    few = generated_case_arrays(World(SMALL, "five-angle"), 25, seed=3)
+    with pytest.warns(Note, match="25 cases give 4,075 readings to learn"):
+        train_protocol(few, replace(QUICK, epochs=1, finetune_epochs=1))
 
 
 @pytest.mark.parametrize(
