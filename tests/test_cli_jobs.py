@@ -101,6 +101,7 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     )
 
 
+@pytest.mark.filterwarnings("ignore:.*readings to learn")  # a few cases, trained quickly
 def test_a_nightly_training_runs_only_once_enough_new_cases_came_in(tmp_path, cli):
     """'train --when-new N' (a job run on a schedule) trains where the database has stored N
     cases at the instrument's geometries since the newest registered version read its cases,
