@@ -689,9 +689,8 @@ def stored_sprayouts(
 ) -> tuple[list[int], np.ndarray]:
     """The row ids and spray-outs ``[N, G, 31]`` of the cases (``shop``'s, for
     ``colour_code``, made at or after ``since``, where given) read at every one of
-    ``geometries``, restricted to them in
-    their order: those columns alone, without building each case (a fifth of the time;
-    :func:`cases_by_rows` builds the few that are wanted)."""
+    ``geometries``, restricted to them in their order: those columns alone, without building
+    each case (a fifth of the time; :func:`cases_by_rows` builds the few that are wanted)."""
     columns = (CaseRow.id, CaseRow.case_id, CaseRow.geometries, CaseRow.sprayout)
     query = _chosen(select(*columns).order_by(CaseRow.id), shop, since, colour_code)
     wanted, ids, spectra = set(geometries), [], []

@@ -881,10 +881,9 @@ def recorded_nearest(
 ):
     """The ``count`` recorded cases of ``source`` (a database, or a case file; ``shop``'s, of
     ``colour_code``, made at or after ``since``, where given) whose spray-outs lie closest to
-    ``spectra`` at
-    ``geometries``, and how many were searched; a database gives only its spray-outs until
-    the nearest are known. ``cases``: those cases, where the caller read them whole already
-    (:func:`recorded_cases`)."""
+    ``spectra`` at ``geometries``, and how many were searched; a database gives only its
+    spray-outs until the nearest are known. ``cases``: those cases, where the caller read them
+    whole already (:func:`recorded_cases`)."""
     from flakelab.cases.database import open_database
     from flakelab.cases.exchange import is_case_file
     from flakelab.cases.nearest import nearest_cases, nearest_stored_cases

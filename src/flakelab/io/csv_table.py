@@ -92,14 +92,14 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         duplicate = next(h for h in header if header.count(h) > 1)
         raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
     spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
+    has_lab = all(k in columns for k in "Lab")
     if not spectral:
         alone = " (L*a*b* alone: flakelab reads the spectra, R400 … R700; export them too)"
-        found = alone if all(k in columns for k in "Lab") else ""
+        found = alone if has_lab else ""
         raise MeasurementFileError(
             path, f"no reflectance columns such as R400{found}", field="header"
         )
     wavelengths = parse_wavelength_header(path, [header[i] for i in spectral], "header")
-    has_lab = all(k in columns for k in "Lab")
     if delimiter != ",":  # the comma is free to be the decimal mark
         numeric = [*spectral, *(columns[k] for k in (*"Lab", *TEXTURE_READINGS) if k in columns)]
         rows = ((number, _decimal_points(row, numeric)) for number, row in rows)

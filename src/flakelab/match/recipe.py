@@ -371,12 +371,13 @@ def check_poured(poured: dict[str, float], resolution_g: float = SCALE_RESOLUTIO
     more than a scale of ``resolution_g`` weighs (1e308 g overflowed the additions)."""
     if not poured or any(not (np.isfinite(g) and g >= 0) for g in poured.values()):
         raise RecipeError(f"--poured: expected grams ≥ 0 for at least one toner, got {poured}")
-    if sum(poured.values()) <= 0:
+    in_all = sum(poured.values())
+    if in_all <= 0:
         raise RecipeError("--poured: the amounts poured sum to zero grams")
-    if not sum(poured.values()) / resolution_g <= MAX_SCALE_STEPS:  # inf too
+    if not in_all / resolution_g <= MAX_SCALE_STEPS:  # inf too
         raise RecipeError(
-            f"--poured: {sum(poured.values()):g} g in all is more than {MAX_SCALE_STEPS:.0e} "
-            f"steps of the scale's {resolution_g:g} g"
+            f"--poured: {in_all:g} g in all is more than {MAX_SCALE_STEPS:.0e} steps of the "
+            f"scale's {resolution_g:g} g"
         )
 
 

@@ -52,7 +52,6 @@ import copy
 import functools
 import hashlib
 import importlib.util
-import itertools
 import time
 import warnings
 from collections.abc import Callable, Iterable, Sequence
@@ -828,8 +827,7 @@ def too_few_readings(model: ForwardModel, cases: int) -> str | None:
     weights: it can then fit every one of them and learn little of any other case. The
     shipped models learned about 120,000 cases each: 450 (five-angle) and 690 (MA-T12)
     readings a weight."""
-    sizes = [len(model.x_mean), *model.hidden, len(model.y_mean)]
-    weights = sum((a + 1) * b for a, b in itertools.pairwise(sizes))
+    weights = sum(p.numel() for p in model.network.parameters()) // model.members
     readings = cases * len(model.y_mean)
     if readings >= weights:
         return None
