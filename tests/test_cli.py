@@ -736,7 +736,9 @@ def test_every_help_reads_whole_in_an_80_column_terminal():
     001 Fig."). A group run alone shows its help too ('cases', 'model', 'texture' and
     'validate' said "Missing command"). What an option takes is named, as argparse names
     it (``--seed N``, ``--library LIBRARY``), where typer wrote ``<int range>``, ``<path>``,
-    and an argument is in capitals (``[TARGET]``, not ``[target]``)."""
+    and an argument is in capitals, bracketed only where it may be left out (``SOURCE``,
+    ``[TARGET]``; typer wrote ``{source}``, ``[target]`` and ``SOURCE <path>``)."""
+    import typer.core
     import typer.main
     from typer.testing import CliRunner
 
@@ -759,9 +761,11 @@ def test_every_help_reads_whole_in_an_80_column_terminal():
             assert flat(text) in flat(shown), (" ".join(path), text)
         # what an option takes is named (--seed N), not typed (--seed <int range>); an
         # argument in capitals, as messages name it ("TARGET: …")
-        assert not re.search(r"-[\w-]+ <", shown), (path, re.search(r"-[\w-]+ <.*", shown))
-        for argument in (p for p in command.params if type(p).__name__ == "TyperArgument"):
-            assert re.search(rf"[\[{{]{argument.name.upper()}[\]}}]", lines[0]), (path, lines[0])
+        assert not re.search(r"(-[\w-]+|^\s+[A-Z_]+) <", shown, re.M), (path, shown)
+        for argument in (p for p in command.params if isinstance(p, typer.core.TyperArgument)):
+            name = argument.name.upper()
+            shape = name if argument.required else rf"\[{name}\]"
+            assert re.search(rf"(?<![{{\[]){shape}(?![}}\]])", lines[0]), (path, lines[0])
         if getattr(command, "commands", None):  # a group run alone shows its help
             assert runner.invoke(app, list(path), env={"COLUMNS": "80"}).output == shown, path
 

@@ -83,6 +83,7 @@ def _name_value(param: Any) -> None:
         return
     if isinstance(param, typer.core.TyperArgument):
         param.metavar = param.name.upper()
+        param.__class__ = _PlainArgument
         return
     if not isinstance(param, typer.core.TyperOption) or param.is_flag or param.count:
         return
@@ -90,6 +91,19 @@ def _name_value(param: Any) -> None:
         param.metavar = "[" + "|".join(str(c) for c in kind.choices) + "]"
     else:
         param.metavar = _VALUE_NAMES.get(kind.annotation) or param.name.upper()
+
+
+class _PlainArgument(typer.core.TyperArgument):
+    """An argument shown as argparse and click show one: ``SOURCE`` where it is required and
+    ``[TARGET]`` where not, with no type beside its name. Typer wrote ``{SOURCE}``, which
+    reads as a choice among values, and ``SOURCE <path>``."""
+
+    def _usage_display_name(self) -> str:
+        name = self.display_name_raw if self.required else f"[{self.display_name_raw}]"
+        return name + ("..." if self.nargs != 1 else "")
+
+    def display_type_rich(self, ctx: Any) -> str | None:
+        return None
 
 
 def _open_closed_streams() -> None:
