@@ -46,16 +46,19 @@ def _cli_built_once():
     typer.testing._get_command = built
 
 
-def _run_cli(*args: object, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+def _run_cli(
+    *args: object, env: dict[str, str] | None = None, input: bytes | None = None
+) -> subprocess.CompletedProcess:
     """The CLI run in this process, as a finished process (exit status, stdout, stderr), with
-    ``env`` added to the environment while it runs: a new interpreter would cost each call 3-4 s
+    ``env`` added to the environment while it runs and ``input`` piped into its standard
+    input: a new interpreter would cost each call 3-4 s
     of imports. An exception that escapes the command (a bug, which a user would meet as a
     traceback) is raised here, so that the test fails on it."""
     from typer.testing import CliRunner
 
     from flakelab.cli.main import app
 
-    result = CliRunner().invoke(app, [str(a) for a in args], env=env)
+    result = CliRunner().invoke(app, [str(a) for a in args], env=env, input=input)
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         raise result.exception
     return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)

@@ -10,6 +10,7 @@ import os
 import re
 import shutil
 import stat
+import sys
 import time
 import warnings
 from datetime import datetime
@@ -633,6 +634,34 @@ def test_a_measurement_is_read_from_a_pipe_whatever_its_format(tmp_path, cli):
     _fed_through_a_pipe(tmp_path / "pipe", b"sample,geometry\n")
     with pytest.raises(MeasurementFileError, match=f"^{tmp_path / 'pipe'}: "):  # the pipe named
         read_measurements(tmp_path / "pipe")
+
+
+def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, monkeypatch):
+    """``cat car.cxf | flakelab inspect -``, as most command-line tools read: "-: no such
+    file" before. What is piped in is read in any format (here CxF3 and an MA-T12 workbook);
+    errors name ``stdin``; a terminal is refused rather than waited on, and the camera's
+    pictures, which are read from a file named, are refused by name."""
+    import flakelab.io
+    from flakelab.data import example_path
+
+    target = example_path("target")
+    named = cli("inspect", target, "--json")
+    piped = cli("inspect", "-", "--json", input=target.read_bytes())
+    assert piped.returncode == 0, piped.stderr
+    assert json.loads(piped.stdout)["geometries"] == json.loads(named.stdout)["geometries"]
+    workbook = tmp_path / "m.xlsx"
+    write_measurements(read_measurements(target), workbook)
+    piped = cli("compare", target, "-", "--json", input=workbook.read_bytes())
+    assert piped.returncode == 0 and json.loads(piped.stdout)["de00_max"] < 1e-3, piped.stderr
+    assert cli("inspect", "-", input=b"").stderr.strip() == "error: stdin: empty file"
+    refused = cli("inspect", "-", "--images", tmp_path / "pictures", input=workbook.read_bytes())
+    assert refused.returncode == 2 and "--images: stdin:" in refused.stderr, refused.stderr
+    monkeypatch.setattr(sys, "stdin", open(os.devnull))  # not a terminal: read, empty
+    with pytest.raises(MeasurementFileError, match="^stdin: empty file"):
+        flakelab.io.read_measurements("-")
+    monkeypatch.setattr(sys.stdin, "isatty", lambda: True)
+    with pytest.raises(MeasurementFileError, match="^stdin: a terminal, not a file"):
+        flakelab.io.read_measurements("-")
 
 
 def test_a_case_history_is_imported_from_a_pipe(tmp_path, cli):

@@ -95,7 +95,7 @@ def _print_description(info: dict[str, Any]) -> None:
 @reports_errors
 def inspect(
     path: Annotated[
-        Path | None, typer.Argument(help="Measurement file (xlsx, CxF, CSV, JSON).")
+        Path | None, typer.Argument(help="Measurement file (xlsx, CxF, CSV, JSON; - reads stdin).")
     ] = None,
     sample: SampleOption = None,
     all_samples: Annotated[bool, typer.Option("--all", help="Every sample in the file.")] = False,
@@ -198,9 +198,14 @@ def _draw_camera_pictures(readings: list[tuple[Path, Any]], figure: Path, condit
 
 def _camera_pictures(source: Path, measurement) -> dict:
     """The camera pictures of ``measurement``'s sample in the MA-T12 export ``source``."""
-    from flakelab.io import detect_format
+    from flakelab.io import STDIN, detect_format
     from flakelab.io.mat12_xlsx import read_mat12_images
 
+    if str(source) == STDIN:
+        raise FlakelabError(
+            "--images: stdin: the camera's pictures are read from an MA-T12 export named, not "
+            "piped; name the file"
+        )
     if (kind := detect_format(source)) != "mat12-xlsx":
         raise FlakelabError(
             f"--images: {source}: the camera's pictures are read from MA-T12 exports (.xlsx), "

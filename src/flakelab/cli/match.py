@@ -88,7 +88,10 @@ car's: bounds the pairwise comparison (500 cars of one code: 0.6-1.0 s,
 def match_command(
     target: Annotated[
         str | None,
-        typer.Argument(help="Target measurement file, or 'evaluate' for the evaluation harness."),
+        typer.Argument(
+            help="Target measurement file (- reads stdin), or 'evaluate' for the evaluation "
+            "harness."
+        ),
     ] = None,
     example: Annotated[
         bool, typer.Option("--example", help="Match the shipped example target.")

@@ -8,6 +8,8 @@
 from __future__ import annotations
 
 import codecs
+import os
+import sys
 import tempfile
 import warnings
 import zipfile
@@ -39,6 +41,7 @@ from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
     "FORMATS",
+    "STDIN",
     "detect_format",
     "read_measurements",
     "read_measurement",
@@ -130,9 +133,17 @@ def detect_format(path: str | PathLike) -> str:
     )
 
 
+STDIN = "-"
+"""The file name that reads standard input, as most command-line tools take it: ``cat
+car.cxf | flakelab inspect -``, or a measurement piped from an instrument's own tool. Errors
+name it ``stdin``."""
+
+
 def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format; spectra an instrument's
     export wrote in percent read as reflectance factors (:func:`percent_evidence`)."""
+    if os.fspath(path) == STDIN:
+        return _as_factors("stdin", _read_through_a_copy(STDIN))
     if is_no_regular_file(path) or _is_utf16(path):
         return _as_factors(path, _read_through_a_copy(path))
     return _as_factors(path, _read_as_written(path))
@@ -198,22 +209,35 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
     A pipe's format is judged from its head and the reader reads it from the start, but its
     head, once read, is gone (the reader met the rest alone and called it, say, a CSV file
     missing its 'sample' column); UTF-16 was called "binary content". Errors name the
-    source."""
+    source, standard input (:data:`STDIN`) as ``stdin``."""
+    named = "stdin" if os.fspath(source) == STDIN else source
     with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
-        copy = Path(folder) / (Path(source).name or "input")
+        copy = Path(folder) / (Path(named).name or "input")
         try:
-            data = Path(source).read_bytes()
+            data = _stdin_bytes() if named == "stdin" else Path(source).read_bytes()
             if data.startswith(UTF16_BOMS):
                 data = data.decode("utf-16").encode("utf-8")
             copy.write_bytes(data)
         except OSError as error:
-            raise MeasurementFileError(source, f"cannot be read ({error.strerror})") from None
+            raise MeasurementFileError(named, f"cannot be read ({error.strerror})") from None
         except UnicodeDecodeError as error:
-            raise MeasurementFileError(source, f"not UTF-16 text ({error.reason})") from None
+            raise MeasurementFileError(named, f"not UTF-16 text ({error.reason})") from None
         try:
             return _read_as_written(copy)
         except MeasurementFileError as error:
-            raise MeasurementFileError(source, error.problem, field=error.field) from None
+            raise MeasurementFileError(named, error.problem, field=error.field) from None
+
+
+def _stdin_bytes() -> bytes:
+    """What is piped into standard input; refused where it is a terminal, where reading it
+    would wait, silent, for a measurement typed by hand."""
+    if sys.stdin is None or sys.stdin.isatty():
+        raise MeasurementFileError(
+            "stdin",
+            "a terminal, not a file: pipe a measurement into it ('… | flakelab "
+            "inspect -'), or name the file",
+        )
+    return sys.stdin.buffer.read()
 
 
 def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:
