@@ -664,6 +664,35 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
         flakelab.io.read_measurements("-")
 
 
+def test_measurements_are_converted_to_standard_output(tmp_path, cli, capsysbinary):
+    """``flakelab convert scan.xlsx - --format csv | …``: a TARGET of ``-`` is standard
+    output, in the format ``--format`` names (before: "-: unknown output extension ''"), and
+    read back as written; a workbook too. ``--format`` that contradicts TARGET's extension
+    is refused, and nothing written; the option's choices are :data:`~flakelab.io.FORMATS`."""
+    from flakelab.cli.main import MeasurementFormat
+    from flakelab.data import example_path
+    from flakelab.io import FORMATS
+
+    assert [f.value for f in MeasurementFormat] == list(FORMATS)
+    target = example_path("target")
+    expected = read_measurements(target)[0].reflectance
+    for format, suffix in (("csv", ".csv"), ("json", ".json"), ("cxf", ".cxf")):
+        written = cli("convert", target, "-", "--format", format)
+        assert written.stderr == "wrote 1 measurement to stdout\n", written.stderr
+        (tmp_path / f"out{suffix}").write_text(written.stdout)
+        read = read_measurements(tmp_path / f"out{suffix}")[0].reflectance
+        np.testing.assert_allclose(read, expected, rtol=1e-12)
+    write_measurements(read_measurements(target), "-", "mat12-xlsx")
+    (tmp_path / "out.xlsx").write_bytes(capsysbinary.readouterr().out)
+    np.testing.assert_allclose(read_measurements(tmp_path / "out.xlsx")[0].reflectance,
+                               expected, rtol=1e-12)  # fmt: skip
+    unnamed = cli("convert", target, "-")
+    assert unnamed.returncode == 2 and "--format names it" in unnamed.stderr, unnamed.stderr
+    contrary = cli("convert", target, tmp_path / "x.csv", "--format", "json")
+    assert contrary.stderr.strip().endswith("x.csv: its extension says csv, not json")
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_a_case_history_is_imported_from_a_pipe(tmp_path, cli):
     """``cases import /dev/stdin``: the progress bar counted the pipe's lines first, and the
     import met it empty ("expected a header starting with case_id"). It now counts none."""

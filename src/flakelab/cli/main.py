@@ -198,10 +198,10 @@ def _draw_camera_pictures(readings: list[tuple[Path, Any]], figure: Path, condit
 
 def _camera_pictures(source: Path, measurement) -> dict:
     """The camera pictures of ``measurement``'s sample in the MA-T12 export ``source``."""
-    from flakelab.io import STDIN, detect_format
+    from flakelab.io import STANDARD_STREAM, detect_format
     from flakelab.io.mat12_xlsx import read_mat12_images
 
-    if str(source) == STDIN:
+    if str(source) == STANDARD_STREAM:
         raise FlakelabError(
             "--images: stdin: the camera's pictures are read from an MA-T12 export named, not "
             "piped; name the file"
@@ -472,14 +472,30 @@ def _print_readings_spread(spread: dict, what: str) -> None:
         console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
+MeasurementFormat = StrEnum(
+    "MeasurementFormat", {"mat12_xlsx": "mat12-xlsx", "cxf": "cxf", "csv": "csv", "json": "json"}
+)
+"""``convert --format``: the names of :data:`flakelab.io.FORMATS`, written out so that the
+command line starts without importing the readers (a test keeps the two the same)."""
+
+
 @app.command()
 @reports_errors
 def convert(
     source: Annotated[
         Path, typer.Argument(help="Measurement file to read (any supported format).")
     ],
-    target: Annotated[Path, typer.Argument(help="File to write; format from the extension.")],
+    target: Annotated[
+        Path,
+        typer.Argument(help="File to write; format from the extension (- writes stdout)."),
+    ],
     sample: SampleOption = None,
+    to: Annotated[
+        MeasurementFormat | None,
+        typer.Option(
+            "--format", help="The format to write, where TARGET's extension does not say it."
+        ),
+    ] = None,
     decimal_comma: Annotated[
         bool,
         typer.Option(
@@ -490,13 +506,21 @@ def convert(
     ] = False,
 ) -> None:
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
-    from flakelab.io import read_measurements, write_measurements
+    from flakelab.io import STANDARD_STREAM, read_measurements, write_measurements
     from flakelab.io.mat12_xlsx import camera_pictures_in
 
-    check_output_file(target, "TARGET", reads={"SOURCE": source})
+    to_stdout = str(target) == STANDARD_STREAM
+    if to_stdout and to is None:
+        raise FlakelabError(
+            f"TARGET -: standard output has no extension to name the format: --format names it "
+            f"({'|'.join(MeasurementFormat)})"
+        )
+    if not to_stdout:
+        check_output_file(target, "TARGET", reads={"SOURCE": source})
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
-    write_measurements(measurements, target, decimal_comma=decimal_comma)
-    errors.print(f"wrote {counted(len(measurements), 'measurement')} to {target}", highlight=False)
+    write_measurements(measurements, target, to and to.value, decimal_comma=decimal_comma)
+    written = "stdout" if to_stdout else target
+    errors.print(f"wrote {counted(len(measurements), 'measurement')} to {written}", highlight=False)
     if pictures := camera_pictures_in(source):
         left = (
             f"{source}'s {counted(pictures, 'camera picture')} stay behind: flakelab writes the "

@@ -41,7 +41,7 @@ from flakelab.io.tolerance_file import read_tolerance
 
 __all__ = [
     "FORMATS",
-    "STDIN",
+    "STANDARD_STREAM",
     "detect_format",
     "read_measurements",
     "read_measurement",
@@ -133,17 +133,18 @@ def detect_format(path: str | PathLike) -> str:
     )
 
 
-STDIN = "-"
-"""The file name that reads standard input, as most command-line tools take it: ``cat
-car.cxf | flakelab inspect -``, or a measurement piped from an instrument's own tool. Errors
-name it ``stdin``."""
+STANDARD_STREAM = "-"
+"""The file name that stands for standard input where a measurement is read and standard
+output where one is written, as most command-line tools take it: ``cat car.cxf | flakelab
+inspect -``, ``flakelab convert scan.xlsx - --format csv | …``. Errors name it ``stdin`` or
+``stdout``."""
 
 
 def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format; spectra an instrument's
     export wrote in percent read as reflectance factors (:func:`percent_evidence`)."""
-    if os.fspath(path) == STDIN:
-        return _as_factors("stdin", _read_through_a_copy(STDIN))
+    if os.fspath(path) == STANDARD_STREAM:
+        return _as_factors("stdin", _read_through_a_copy(STANDARD_STREAM))
     if is_no_regular_file(path) or _is_utf16(path):
         return _as_factors(path, _read_through_a_copy(path))
     return _as_factors(path, _read_as_written(path))
@@ -209,8 +210,8 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
     A pipe's format is judged from its head and the reader reads it from the start, but its
     head, once read, is gone (the reader met the rest alone and called it, say, a CSV file
     missing its 'sample' column); UTF-16 was called "binary content". Errors name the
-    source, standard input (:data:`STDIN`) as ``stdin``."""
-    named = "stdin" if os.fspath(source) == STDIN else source
+    source, standard input (:data:`STANDARD_STREAM`) as ``stdin``."""
+    named = "stdin" if os.fspath(source) == STANDARD_STREAM else source
     with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
         copy = Path(folder) / (Path(named).name or "input")
         try:
@@ -259,12 +260,21 @@ def pick_sample(
 
 
 def format_for_path(path: str | PathLike) -> str:
+    if os.fspath(path) == STANDARD_STREAM:
+        raise MeasurementFileError(
+            "stdout", f"no extension to take the format from: name one ({', '.join(FORMATS)})"
+        )
+    if name := _format_said(path):
+        return name
     suffix = Path(path).suffix.lower()
-    for name, (_, _, suffixes) in FORMATS.items():
-        if suffix in suffixes:
-            return name
     known = ", ".join(s for _, _, ss in FORMATS.values() for s in ss)
     raise MeasurementFileError(path, f"unknown output extension {suffix!r} (known: {known})")
+
+
+def _format_said(path: str | PathLike) -> str | None:
+    """The format that ``path``'s extension names, if any."""
+    suffix = Path(path).suffix.lower()
+    return next((name for name, (_, _, ss) in FORMATS.items() if suffix in ss), None)
 
 
 def write_measurements(
@@ -281,9 +291,16 @@ def write_measurements(
     name = format or format_for_path(path)
     if name not in FORMATS:
         raise ValueError(f"expected a format among {', '.join(FORMATS)}, got {name!r}")
+    to_stdout = os.fspath(path) == STANDARD_STREAM
+    if not to_stdout and format and (said := _format_said(path)) not in (None, format):
+        raise MeasurementFileError(path, f"its extension says {said}, not {format}")
     if decimal_comma and name != "csv":
-        raise MeasurementFileError(path, f"a decimal comma is for a CSV file, not {name}")
+        raise MeasurementFileError(
+            "stdout" if to_stdout else path, f"a decimal comma is for a CSV file, not {name}"
+        )
     options = {"decimal_comma": True} if decimal_comma else {}
+    if to_stdout:
+        return _write_to_stdout(measurements, name, options)
     try:
         FORMATS[name][1](measurements, path, **options)
     except ValueError as error:
@@ -292,3 +309,22 @@ def write_measurements(
         raise MeasurementFileError(path, str(error)) from None
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be written ({error.strerror})") from None
+
+
+def _write_to_stdout(measurements: list[Measurement], name: str, options: dict) -> None:
+    """``measurements`` written in format ``name`` to standard output, whole or not at all:
+    through a temporary file, as every writer writes. A workbook, binary, is refused where
+    standard output is a terminal."""
+    if name == "mat12-xlsx" and sys.stdout.isatty():
+        raise MeasurementFileError(
+            "stdout", "a terminal: an xlsx workbook is binary; redirect it into a file"
+        )
+    with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
+        copy = Path(folder) / f"stdout{FORMATS[name][2][0]}"
+        try:
+            FORMATS[name][1](measurements, copy, **options)
+        except ValueError as error:
+            raise MeasurementFileError("stdout", getattr(error, "problem", str(error))) from None
+        sys.stdout.flush()
+        sys.stdout.buffer.write(copy.read_bytes())
+        sys.stdout.buffer.flush()
