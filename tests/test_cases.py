@@ -847,6 +847,33 @@ def in_tokyo(monkeypatch):
     time.tzset()
 
 
+def test_a_time_the_clocks_skipped_is_read_after_the_change(monkeypatch):
+    """Berlin's clocks go from 02:00 to 03:00 on 29 March 2026: ``--since "2026-03-29
+    02:30"``, a time no clock showed, is read as PEP 495 reads it, with the offset before the
+    change (03:30 summer time, 01:30 UTC); it was read as 01:30 winter time, an hour before
+    the time typed. The hour repeated in October is read the first time round (summer time),
+    or the second with ``fold=1``, and a time outside either is as before."""
+    import time
+
+    from flakelab.core.times import zoned_here
+
+    monkeypatch.setenv("TZ", "CET-1CEST,M3.5.0,M10.5.0/3")  # Berlin's rule, no zone database
+    time.tzset()
+    try:
+        for typed, utc in (
+            (datetime(2026, 3, 29, 2, 30), datetime(2026, 3, 29, 1, 30)),
+            (datetime(2026, 3, 29, 1, 59), datetime(2026, 3, 29, 0, 59)),
+            (datetime(2026, 3, 29, 3, 0), datetime(2026, 3, 29, 1, 0)),
+            (datetime(2026, 10, 25, 2, 30), datetime(2026, 10, 25, 0, 30)),
+            (datetime(2026, 10, 25, 2, 30, fold=1), datetime(2026, 10, 25, 1, 30)),
+            (datetime(2026, 12, 4, 12, 0), datetime(2026, 12, 4, 11, 0)),
+        ):
+            assert zoned_here(typed) == utc.replace(tzinfo=UTC), typed
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+
+
 def test_times_are_typed_and_shown_in_local_time_and_stored_in_utc(in_tokyo, cases, tmp_path,
                                                                   cli):  # fmt: skip
     """A case recorded at 09:15 in Tokyo is stored at 00:15 UTC, written so to JSON, and

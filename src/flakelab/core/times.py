@@ -10,7 +10,7 @@ like :mod:`flakelab.core.wording`.
 """
 
 import re
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 
 __all__ = ["TIME_EXPECTED", "read_time", "shown_time", "zoned", "zoned_here"]
 
@@ -28,7 +28,16 @@ def zoned(time: datetime) -> datetime:
 def zoned_here(time: datetime) -> datetime:
     """A ``time`` as an instrument's clock, a shop's case file or a person at the command
     line writes it: taken as this machine's local time where it has no zone."""
-    return time if time.tzinfo is not None else time.astimezone()
+    if time.tzinfo is not None:
+        return time
+    local = time.astimezone()
+    if local.replace(tzinfo=None) == time:
+        return local
+    # A wall time the clocks skipped (02:30 on the night summer time begins): read, as PEP
+    # 495 reads it, with the offset before the change, 03:30 summer time; astimezone gave
+    # 01:30, an hour before the time typed. A day before is before the change.
+    before = (time - timedelta(days=1)).astimezone().utcoffset()
+    return (time.replace(fold=0) - before).replace(tzinfo=UTC).astimezone()
 
 
 def shown_time(when: datetime | str | None, *, day: bool = False) -> str:
