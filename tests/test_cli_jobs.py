@@ -445,9 +445,11 @@ def test_correct_refuses_a_bad_recipe(tmp_path, cli):
     run = cli("correct", target, "--recipe", recipe, "--sprayed", target, "--tolerance", "x")
     assert run.returncode == 2 and "x: neither a tolerance preset" in run.stderr
     assert "Traceback" not in run.stderr
-    # a scale it cannot be weighed on is refused before the correction (was: division by zero)
+    # a scale it cannot be weighed on is refused, by its option, before the correction (was:
+    # division by zero; then "resolution: …")
     run = cli("correct", target, "--recipe", recipe, "--sprayed", target, "--resolution", "0")
-    assert run.returncode == 2 and "resolution: expected a positive number" in run.stderr
+    assert run.returncode == 2, run.stderr
+    assert "Invalid value for '--resolution': expected a positive number" in run.stderr
 
 
 def test_a_shop_brings_its_history_in_one_transaction(tmp_path, cli):

@@ -392,7 +392,8 @@ def test_render_refuses_bad_input_without_writing(tmp_path, cli):
     write_measurements([target.select(["15as15", "45as45"])], one_each)
     for args, message in [
         (("--distance", "near"), "distance"),
-        (("--light", "1.5"), "diffuse fraction"),
+        (("--light", "1.5"), "Invalid value for '--light'"),  # named by its option
+        (("--light", "nan"), "Invalid value for '--light'"),
         # the panel interpolates between measured angles; beyond them it would show the end
         (("--view", "panel", "--aspecular", "130"), "within the measured -15–110°"),
         (

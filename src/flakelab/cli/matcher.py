@@ -62,7 +62,21 @@ QuantityOption = Annotated[
 ]
 
 
-ResolutionOption = Annotated[float, typer.Option(help="Scale resolution in grams.")]
+def _checked_resolution(grams: float) -> float:
+    """``--resolution`` read before any work, so that a scale that weighs nothing is named by
+    its option (it was refused after the search, as "resolution: …")."""
+    from flakelab.match.recipe import check_resolution
+
+    try:
+        check_resolution(grams)
+    except FlakelabError as error:
+        raise typer.BadParameter(str(error).removeprefix("resolution: ")) from None
+    return grams
+
+
+ResolutionOption = Annotated[
+    float, typer.Option(help="Scale resolution in grams.", callback=_checked_resolution)
+]
 
 
 ModelOption = Annotated[

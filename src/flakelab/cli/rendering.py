@@ -27,7 +27,10 @@ OutputOption = Annotated[
     Path, typer.Option("--output", "-o", help="Image to write (.png, .jpg, .tif).")
 ]
 LightOption = Annotated[
-    float, typer.Option("--light", help="Diffuse fraction of the light, 0 (spot) to 1 (dome).")
+    float,
+    typer.Option(
+        "--light", min=0.0, max=1.0, help="Diffuse fraction of the light, 0 (spot) to 1 (dome)."
+    ),
 ]
 SeedOption = Annotated[int, typer.Option(min=0, help="Seed of the texture.")]
 
