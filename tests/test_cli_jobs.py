@@ -1278,7 +1278,8 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
     cases = str(tmp_path / "cases.csv")
     for option, value, message in [
         ("--hidden", "abc", "--hidden: expected layer sizes such as 100,100,100"),
-        ("--hidden", "0,5", "hidden: expected layer sizes from 1 to 4096"),
+        ("--hidden", "0,5", "--hidden: expected layer sizes from 1 to 4096"),
+        ("--members", "65", "--members: expected at most 64"),  # named by its option
         ("--holdout", "-0.5", "'--holdout'"),
     ]:
         run = cli("train", cases, option, value, "--no-register")

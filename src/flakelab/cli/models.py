@@ -479,7 +479,7 @@ def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
                      adapt_epochs: int | None):  # fmt: skip
     """``train``'s options as a :class:`~flakelab.models.training.TrainingConfig`, each
     checked (the config refuses its own); the options left unset keep its defaults."""
-    from flakelab.models.network import LOG_OFFSET_MAX
+    from flakelab.models.network import LOG_OFFSET_MAX, ModelError
     from flakelab.models.training import SCREENINGS, TrainingConfig
 
     if screening not in SCREENINGS:
@@ -494,18 +494,21 @@ def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
         raise FlakelabError(
             f"--hidden: expected layer sizes such as 100,100,100, got {hidden!r}"
         ) from None
-    config = TrainingConfig(
-        hidden=sizes,
-        epochs=epochs,
-        finetune_epochs=epochs,
-        batch_size=batch_size,
-        screening=screening,
-        adapt_validation=adapt_validation,
-        members=members,
-        log_offset=log_offset,
-        seed=seed,
-        device=device,
-    )
+    try:
+        config = TrainingConfig(
+            hidden=sizes,
+            epochs=epochs,
+            finetune_epochs=epochs,
+            batch_size=batch_size,
+            screening=screening,
+            adapt_validation=adapt_validation,
+            members=members,
+            log_offset=log_offset,
+            seed=seed,
+            device=device,
+        )
+    except ModelError as error:  # "hidden: …", "members: …": named as they were typed
+        raise FlakelabError(f"--{error}") from None
     if colour_weight is not None:
         config = replace(config, colour_weight=colour_weight)
     if adapt_epochs is not None:
