@@ -1025,6 +1025,7 @@ def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_p
     engine = open_database(file)
     assert database_label(engine) == str(file.resolve())
     assert database_label(create_engine("sqlite://")) == "sqlite://"
+    assert database_label(create_engine("sqlite:///:memory:")) == "sqlite:///:memory:"
     server = create_engine("postgresql+psycopg://flakelab:s3cret@db.shop:5432/cases")
     assert database_label(server) == "postgresql+psycopg://flakelab:***@db.shop:5432/cases"
     add_cases(engine, cases[:3])

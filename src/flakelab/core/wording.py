@@ -49,6 +49,8 @@ def database_label(engine) -> str:
         return file if url.startswith("sqlite:///") and file else hidden_passwords(url)
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         return url.database
+    if url.get_backend_name() == "sqlite" and url.database == ":memory:":
+        return "sqlite:///:memory:"  # as typed; SQLAlchemy writes sqlite:///%3Amemory%3A
     return str(url)
 
 
