@@ -982,6 +982,23 @@ def test_a_document_given_to_the_wrong_reader_is_named(tmp_path):
     with pytest.raises(MeasurementFileError) as raised:
         read_measurements(unknown)
     assert str(raised.value).endswith("expected a JSON object with format 'flakelab-measurements'")
+    # a file of another format where JSON is read, or a case history where measurements
+    # are, is named for what it is (before: "Expecting value: line 1 column 1 (char 0)",
+    # "missing column 'sample' (columns: case_id, shop, …)")
+    for suffix, kind in ((".cxf", "a CxF3 file"), (".xlsx", "an xlsx workbook"),
+                         (".csv", "a CSV file")):  # fmt: skip
+        write_measurements([read_measurement(example_path("target"))], tmp_path / f"m{suffix}")
+        with pytest.raises(FlakelabError, match=f"toner → grams; this is {kind}, not JSON$"):
+            read_recipe(tmp_path / f"m{suffix}")
+        with pytest.raises(FlakelabError, match=f"toner library; this is {kind}, not JSON$"):
+            read_library(tmp_path / f"m{suffix}")
+    (tmp_path / "broken.json").write_text('{"Al medium": 1')
+    with pytest.raises(FlakelabError, match=r"toner → grams \(Expecting ',' delimiter"):
+        read_recipe(tmp_path / "broken.json")
+    history = tmp_path / "history.csv"
+    history.write_text("case_id,shop,instrument\nc1,A,five-angle\n")
+    with pytest.raises(MeasurementFileError, match="this is a case history, which 'flakelab"):
+        read_measurements(history)
 
 
 def test_the_cielab_limit_holds_every_reflectance_a_file_may_hold():

@@ -83,10 +83,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     columns = {h: i for i, h in enumerate(header)}
     for required in ("sample", "geometry"):
         if required not in columns:
+            found = f"columns: {', '.join(header[:6])}…"
+            if "case_id" in columns and "sample" not in columns:  # cases.exchange's first
+                found = "this is a case history, which 'flakelab cases import' reads"
             raise MeasurementFileError(
-                path,
-                f"missing column {required!r} (columns: {', '.join(header[:6])}…)",
-                field="header",
+                path, f"missing column {required!r} ({found})", field="header"
             )
     if len(columns) != len(header):
         duplicate = next(h for h in header if header.count(h) > 1)

@@ -12,7 +12,13 @@ from importlib.resources import files
 from os import PathLike
 from pathlib import Path
 
-from flakelab.io.records import json_value, text_of, toml_value, write_atomically
+from flakelab.io.records import (
+    json_value,
+    other_format,
+    text_of,
+    toml_value,
+    write_atomically,
+)
 from flakelab.library.toners import Library, LibraryError
 
 __all__ = ["read_library", "write_library", "demo_library_path"]
@@ -30,10 +36,14 @@ def read_library(path: str | PathLike | None = None) -> Library:
     except FileNotFoundError:
         raise LibraryError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as error:
+        if isinstance(error, UnicodeDecodeError) and (kind := other_format(path)):
+            raise LibraryError(f"{path}: expected a toner library; this is {kind}") from None
         raise LibraryError(f"{path}: cannot be read ({error})") from None
     try:
         data = toml_value(text) if path.suffix.lower() == ".toml" else json_value(text)
     except json.JSONDecodeError as error:
+        if kind := other_format(path):
+            raise LibraryError(f"{path}: expected a toner library; this is {kind}") from None
         raise LibraryError(
             f"{path}: line {error.lineno}, column {error.colno}: invalid JSON ({error.msg})"
         ) from None

@@ -441,8 +441,31 @@ def read_json_file(path: Path, what: str, expected: str):
         return json_value(text_of(path))
     except FileNotFoundError:
         raise FlakelabError(f"{path}: no such {what}") from None
-    except (OSError, UnicodeDecodeError, ValueError) as error:
+    except (UnicodeDecodeError, ValueError) as error:
+        why = f"; this is {kind}" if (kind := other_format(path)) else f" ({error})"
+        raise FlakelabError(f"{path}: expected {expected}{why}") from None
+    except OSError as error:
         raise FlakelabError(f"{path}: expected {expected} ({error})") from None
+
+
+_FORMAT_KINDS = {
+    "mat12-xlsx": "an xlsx workbook, not JSON",
+    "cxf": "a CxF3 file, not JSON",
+    "csv": "a CSV file, not JSON",
+}
+"""What :func:`other_format` calls each format of :data:`flakelab.io.FORMATS` but JSON."""
+
+
+def other_format(path: Path) -> str:
+    """What a file given where JSON is read is instead, by its content: "a CxF3 file, not
+    JSON" (a car's measurement given as ``--recipe``, a case history as ``--library``); ""
+    where it is none flakelab reads."""
+    from flakelab.io import detect_format  # the package, which imports this module
+
+    try:
+        return _FORMAT_KINDS.get(detect_format(path), "")
+    except FlakelabError:
+        return ""
 
 
 def _umask() -> int:
