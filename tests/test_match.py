@@ -847,6 +847,32 @@ def test_a_match_names_the_target_s_geometries_its_model_leaves_out(ma_t12_files
     assert run.returncode == 2 and "--render-lamps: " in run.stderr
 
 
+def test_a_byk_mac_i_reading_s_45as_minus_15_is_predicted_apart(cli, tmp_path):
+    """A BYK-mac i reads the five angles and 45as-15, which the five-angle model leaves out:
+    the MA-T12 model, which predicts it, says how each candidate looks there, set apart (it
+    was used only for a target read at all twelve, and the match said nothing of 45as-15
+    but a note); the physics does where the match is the physics'. A target of the five
+    angles alone has nothing left out to predict."""
+    from flakelab.data import example_path
+    from flakelab.io import write_measurements
+
+    target = read_measurement(example_path("target"))
+    byk = tmp_path / "byk.csv"
+    write_measurements([target.select(INSTRUMENT_GEOMETRIES["byk-mac-i"])], byk)
+    for physics, model in (((), "demo-ma-t12"), (("--physics",), "physics")):
+        run = cli("match", byk, "--json", "--candidates", "1", *physics)
+        assert run.returncode == 0, run.stderr
+        left_out = json.loads(run.stdout)["candidates"][0]["left_out"]
+        assert list(left_out["geometries"]) == ["45as-15"] and left_out["model_id"].startswith(
+            model
+        )
+        assert left_out["geometries"]["45as-15"]["dE00"] < 1.0  # the example's own recipe
+    five = tmp_path / "five.csv"
+    write_measurements([target.select(INSTRUMENT_GEOMETRIES["five-angle"])], five)
+    run = cli("match", five, "--json", "--candidates", "1")
+    assert "left_out" not in json.loads(run.stdout)["candidates"][0]
+
+
 def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):
     """The MA-T12 model's numbers for five-angle candidates at the example's seven other
     geometries agree with the world's physics for those recipes: within that model's held-out
