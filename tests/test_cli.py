@@ -390,6 +390,27 @@ def test_a_report_is_written_whole_whatever_the_standard_streams(tmp_path):
                                                             "confirm with --yes")  # fmt: skip
 
 
+def test_a_command_in_a_removed_folder_says_so(tmp_path):
+    """The folder a command runs in, removed under its shell (``rm -r`` from another
+    terminal, a USB stick taken out): 'match' died in torch's import ("Intel oneMKL FATAL
+    ERROR: Cannot load …libtorch_cpu.so") and an output named without a whole path was
+    "[Errno 2] No such file or directory", naming none. It stops at once, saying why."""
+    gone = tmp_path / "gone"
+    gone.mkdir()
+
+    def enter_and_remove():
+        os.chdir(gone)
+        os.rmdir(gone)
+
+    run = subprocess.run(
+        [sys.executable, "-c", "from flakelab.cli.main import run; run()", "match", "--example"],
+        capture_output=True, text=True, preexec_fn=enter_and_remove, timeout=300,
+    )  # fmt: skip
+    assert run.returncode == 2, run.stderr
+    assert run.stderr == "error: the folder this runs in no longer exists (removed, or its disk "\
+                         "taken out): cd to another\n"  # fmt: skip
+
+
 def test_a_message_to_a_log_stays_on_one_line(tmp_path, cli):
     """A command's message on a stderr that is no terminal is one line however long, so that
     a log can be searched for it: Rich wrapped it at 80 columns, between words."""

@@ -403,6 +403,25 @@ def _message(error: Exception) -> str:
     return str(error)
 
 
+def refuse_a_removed_folder() -> None:
+    """Stop, saying why, where the folder the command runs in was removed under its shell
+    (``rm -r`` from another terminal, a USB stick taken out): no file named without a whole
+    path can be there, and torch's import dies in it ("Intel oneMKL FATAL ERROR: Cannot
+    load libtorch_cpu.so") where 'match' began; an output named so was "[Errno 2] No such
+    file or directory", naming none."""
+    try:
+        os.getcwd()
+    except FileNotFoundError:
+        with contextlib.suppress(OSError):
+            errors.print(
+                "[bold red]error:[/] the folder this runs in no longer exists (removed, or its "
+                "disk taken out): cd to another",
+                highlight=False,
+                soft_wrap=True,
+            )
+        sys.exit(2)
+
+
 def _stop(label: str, message: str, status: int) -> None:
     """One line on stderr, then exit with ``status``; the message is escaped, since it may
     quote brackets (a CSV cell, "flakelab[postgres]") that are not terminal markup, and a

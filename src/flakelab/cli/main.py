@@ -38,6 +38,7 @@ from flakelab.cli.common import (
     read_readings,
     read_sample,
     readings_note,
+    refuse_a_removed_folder,
     render_lamps,
     reports_errors,
     stop_on_signals,
@@ -676,6 +677,7 @@ def main(
 def run() -> None:
     """Console entry point."""
     stop_on_signals()
+    refuse_a_removed_folder()
     app(prog_name="flakelab")
 
 
