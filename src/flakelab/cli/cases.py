@@ -71,7 +71,7 @@ from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
     instruments_reading,
 )
-from flakelab.core.times import shown_time, zoned_here
+from flakelab.core.times import shown_time
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
@@ -847,7 +847,7 @@ def nearest(
         "cases_searched": searched,
         "shop": shop,
         "colour_code": colour_code,
-        "since": since and zoned_here(since).isoformat(),
+        "since": since and since.isoformat(),  # zoned as typed (typed_time)
         "geometries": list(geometries),
         "tolerance": tol.name,
         "nearest": [near.to_dict() for near in found],

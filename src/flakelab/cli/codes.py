@@ -39,7 +39,7 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.defaults import DEFAULT_TOLERANCE
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, INSTRUMENT_GEOMETRIES
-from flakelab.core.times import shown_time, zoned_here
+from flakelab.core.times import shown_time
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 
@@ -192,7 +192,7 @@ def variants_command(
     report = {
         "cases": hidden_passwords(source),
         "shop": shop,
-        "since": since and zoned_here(since).isoformat(),
+        "since": since and since.isoformat(),  # zoned as typed (typed_time)
         "colour_code": colour_code,
         "geometries": list(geometries),
         "tolerance": tol.name,
