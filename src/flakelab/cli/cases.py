@@ -697,10 +697,11 @@ def list_cases(
         print_report(report)
         return
     whose = f"{shops[0]!r}" if len(shops) == 1 else "every shop"
+    chosen = (f" of colour code {colour_code!r}" if colour_code else "") + (
+        f" since {shown_time(since)}" if since else ""
+    )
     if not rows:  # which cases were looked at: the newest alone, not the whole history
-        of = f"shop {shop!r}" if shop else "any shop"
-        of += f" of colour code {colour_code!r}" if colour_code else ""
-        of += f" since {shown_time(since)}" if since else ""
+        of = (f"shop {shop!r}" if shop else "any shop") + chosen
         of += colour_code_hint_in(engine, shop, colour_code) if not cases else ""
         newest = "the newest " if len(cases) == last else "the "
         more = " (--last N checks more of them)" if len(cases) == last else ""
@@ -714,10 +715,8 @@ def list_cases(
         return
     title = "Likely mix-ups among the newest" if mix_ups else "Newest"
     table = Table(
-        title=f"{title} {counted(len(cases), 'case')} of {whose}"
-        + (f" of colour code {colour_code!r}" if colour_code else "")
-        + (f" since {shown_time(since)}" if since else "")
-        + f" in {database_label(engine)}",
+        title=f"{title} {counted(len(cases), 'case')} of {whose}{chosen} in "
+        f"{database_label(engine)}",
         box=box.SIMPLE_HEAD,
         collapse_padding=True,
     )
