@@ -100,8 +100,19 @@ def test_instrument_sets():
         ("45as140", "expected a detector above"),
         ("95as15", "expected illumination angle"),
         ("", "expected a geometry name"),
+        ("d/8", "a sphere's diffuse reading has no angle"),
+        ("di:8°", "a sphere's diffuse reading has no angle"),
+        ("45°:15°", "which side of the normal .* as 45as30 or 45as60, name it so"),
     ],
 )
 def test_bad_names_rejected_with_message(name, message):
     with pytest.raises(ValueError, match=message):
         Geometry.parse(name)
+
+
+@pytest.mark.parametrize("name", ["45°:0°", "45:0", "45/0", " 45 ° / 0 ° "])
+def test_the_cie_name_of_the_detector_along_the_normal_is_read(name):
+    """CIE 15's 45°:0°, as an instrument for solid colours exports it, is 45as45: the
+    detector along the normal, 45° from specular (refused before as no geometry name)."""
+    geometry = Geometry.parse(name)
+    assert geometry == Geometry.parse("45as45") and geometry.viewing == 0

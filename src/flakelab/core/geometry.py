@@ -57,6 +57,14 @@ _NAME = re.compile(
 )
 
 
+_CIE_NAME = re.compile(r"^\s*(?P<i>\d+(?:\.\d+)?)\s*°?\s*[:/]\s*(?P<v>\d+(?:\.\d+)?)\s*°?\s*$")
+"""CIE 15's name of a bidirectional geometry, illumination then detection from the normal:
+``45°:0°``, as an instrument for solid colours exports it (also ``45:0``, ``45/0``)."""
+
+_SPHERE_NAME = re.compile(r"^\s*(?:d[ie]?\s*[:/]\s*8|8\s*[:/]\s*d)\s*°?\s*$", re.IGNORECASE)
+"""A sphere's diffuse geometry, CIE 15's ``d:8°`` (``di:8``, ``de:8``, ``8:d``)."""
+
+
 def _number(value: float) -> str:
     return f"{value:g}"
 
@@ -89,14 +97,36 @@ class Geometry:
     @classmethod
     @functools.cache  # immutable, and parsed for every case read from a database
     def parse(cls, name: str) -> Geometry:
-        """Parse an ASTM E2194/E2539 name such as ``45as15`` or ``45as25az90``."""
+        """Parse an ASTM E2194/E2539 name such as ``45as15`` or ``45as25az90``; CIE 15's
+        ``45°:0°``, the detector along the normal, is ``45as45`` (another detection angle
+        leaves unsaid on which side of the normal the detector stands, and is refused
+        naming both)."""
         match = _NAME.match(str(name))
         if match is None:
-            raise ValueError(
-                f"expected a geometry name such as '45as15' or '45as25az90', got {name!r}"
-            )
+            return cls._parse_cie(str(name))
         azimuth = float(match["z"]) if match["z"] is not None else 0.0
         return cls(float(match["i"]), float(match["a"]), azimuth)
+
+    @classmethod
+    def _parse_cie(cls, name: str) -> Geometry:
+        expected = f"expected a geometry name such as '45as15' or '45as25az90', got {name!r}"
+        if _SPHERE_NAME.match(name):
+            raise ValueError(
+                f"{expected}: a sphere's diffuse reading has no angle to tell flop by; "
+                "flakelab reads a multi-angle instrument's"
+            )
+        match = _CIE_NAME.match(name)
+        if match is None:
+            raise ValueError(expected)
+        illumination, detection = float(match["i"]), float(match["v"])
+        if detection != 0:
+            sides = sorted({illumination - detection, illumination + detection})
+            raise ValueError(
+                f"{expected}: which side of the normal its detector stands on is unsaid; as "
+                f"{_number(illumination)}as{_number(sides[0])} or "
+                f"{_number(illumination)}as{_number(sides[1])}, name it so"
+            )
+        return cls(illumination, illumination)
 
     @property
     def name(self) -> str:
