@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -1335,6 +1336,28 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
                       ("the hidden formula sprayed", "oracle_success"),
                       ("new toner, first shot", "novel_toner_first_shot")):  # fmt: skip
         assert f"<!-- {name}: {drawn[key]:.2f} -->" in svg, name
+    # without --json, tables of the same figures (it printed the JSON report itself)
+    shown = cli("match", "evaluate", "--targets", "2", "--novel-targets", "1", env=fresh).stdout
+
+    def fig(value):
+        return "–" if value is None else f"{value:.2f}"
+
+    for name, key, versus, count in (
+        ("first shot", "first_shot_success", "first_shot_vs_oracle", 2),
+        ("after one correction", "after_one_correction", "after_one_correction_vs_oracle", 2),
+        ("new toner, first shot", "novel_toner_first_shot", "novel_toner_first_shot_vs_oracle", 1),
+        ("oracle: the hidden formula sprayed", "oracle_success", None, 2),
+        ("the car's own paint sprayed again", "respray_success", None, 2),
+    ):
+        ratio = rf"\s+{re.escape(fig(drawn[versus]))}" if versus else ""
+        row = rf"^\s*{re.escape(name)}\s+{fig(drawn[key])}{ratio}\s+{count}\s*$"
+        assert re.search(row, shown, re.M), (row, shown)
+    for family, rates in drawn["by_family"].items():
+        cells = [fig(rates[k]) for k in ("first_shot_success", "after_one_correction",
+                                         "oracle_success", "respray_success")]  # fmt: skip
+        row = rf"^\s*{family}\s+{rates['targets']}\s+" + r"\s+".join(map(re.escape, cells))
+        assert re.search(row, shown, re.M), (row, shown)
+    assert f"first shot sprayed {drawn['first_shot_de00_median']:.2f}" in shown
     database = str(tmp_path / "empty.db")
     assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", database).returncode == 0
     run = cli("match", "evaluate", "--targets", "1", "--shop", "shop Z", "--database", database)

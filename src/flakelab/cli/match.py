@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -860,7 +859,7 @@ def _evaluate(
     if json_output:
         print_report(report)
     else:
-        console.print_json(json.dumps(report))
+        _print_harness(report)
     if "targets_asked" in report:  # a Ctrl-C ended the run early
         novel = report["novel_targets"]
         judged = counted(report["targets"], "target") + (
@@ -868,3 +867,67 @@ def _evaluate(
         )
         asked = report["targets_asked"] + report["novel_targets_asked"]
         stop_interrupted(f"{judged} of the {asked} asked for were judged; the figures are theirs")
+
+
+def _share(value: float | None) -> str:
+    return "–" if value is None else f"{value:.2f}"
+
+
+def _print_harness(report: dict) -> None:
+    """The harness's figures as tables (``--json`` gives them all, and each target's): each
+    rate, of how many targets, and against the oracle's, the limit that spray and
+    measurement set; the rates of each paint family; the errors and the latency. It printed
+    the JSON report itself, 60 lines of it."""
+    from flakelab.match.evaluate import FAMILY_FIGURES
+    from flakelab.render.plots import HARNESS_CURVES
+
+    targets, novel = report["targets"], report["novel_targets"]
+    rows = [
+        (HARNESS_CURVES["first"], "first_shot_success", "first_shot_vs_oracle", targets),
+        (HARNESS_CURVES["corrected"], "after_one_correction", "after_one_correction_vs_oracle",
+         targets),
+        ("new toner, first shot", "novel_toner_first_shot", "novel_toner_first_shot_vs_oracle",
+         novel),
+        (f"oracle: {HARNESS_CURVES['oracle']}", "oracle_success", None, targets),
+        ("oracle, new toner", "novel_oracle_success", None, novel),
+        (HARNESS_CURVES["respray"], "respray_success", None, targets),
+        ("after one perfect correction", "after_one_perfect_correction", None, targets),
+    ]  # fmt: skip
+    table = Table(
+        title=f"The harness: {counted(targets, 'hidden target')}"
+        + (f" and {novel} with a new toner" if novel else "")
+        + f" (seed {report['seed']}, tolerance {report['tolerance']}, world {report['world']})",
+        box=box.SIMPLE_HEAD,
+    )
+    for column in ("sprayed and judged", "passed", "÷ oracle", "targets"):
+        table.add_column(column, justify="left" if column.startswith("sprayed") else "right")
+    for name, key, versus, count in rows:
+        if count:
+            ratio = _share(report[versus]) if versus else ""
+            table.add_row(name, _share(report[key]), ratio, str(count))
+    console.print(table)
+    families = Table(title="By paint family", box=box.SIMPLE_HEAD)
+    families.add_column("family")
+    families.add_column("targets", justify="right")
+    short = {"oracle": "oracle", "respray": "sprayed again"}  # as the rows above name them
+    for trial in FAMILY_FIGURES.values():
+        families.add_column(short.get(trial, HARNESS_CURVES[trial]), justify="right")
+    for family, figures in report["by_family"].items():
+        families.add_row(family, str(figures["targets"]),
+                         *(_share(figures[key]) for key in FAMILY_FIGURES))  # fmt: skip
+    console.print(families)
+    lines = [
+        f"worst-geometry ΔE00, median: predicted {report['predicted_de00_median']:.2f}, first "
+        f"shot sprayed {report['first_shot_de00_median']:.2f}, the hidden formula sprayed "
+        f"{report['oracle_de00_median']:.2f}",
+        f"first shots within the texture limits {_share(report['first_shot_texture_within'])} "
+        f"(the hidden formula's {_share(report['oracle_texture_within'])}); metamerism index "
+        f"median {report['first_shot_metamerism_median']:.2f} "
+        f"({report['oracle_metamerism_median']:.2f})",
+        f"latency per target: p50 {report['latency_p50_s']:.2f} s, p95 "
+        f"{report['latency_p95_s']:.2f} s",
+        f"model: {report['model']} ({report['model_id']}); --json gives every figure and "
+        "--plot draws each target's",
+    ]
+    for line in lines:
+        console.print(line, highlight=False)
