@@ -39,6 +39,14 @@ def test_generate_train_register_list_and_evaluate(tmp_path, cli):
     assert report["registry"]["version"] == 1
     # three epochs cannot beat the shipped model on the same held-out cases
     assert report["registry"]["promoted"] is False
+    # without --json, the same training's figures in a table and words (it printed the JSON)
+    run = cli("train", str(cases), "--epochs", "3", "--hidden", "16", "--no-register")
+    held_out = report["held_out"]
+    row = rf"^\s*{held_out['cases']} cases\s+" + r"\s+".join(
+        f"{held_out[k]:.3f}" for k in ("de00_mean", "de00_p95", "de00_max")
+    )
+    assert re.search(row, run.stdout, re.M), run.stdout
+    assert f"final loss {report['final_loss']:.4g} " in run.stderr, run.stderr
     listed = json.loads(cli("model", "list", "--database", database, "--json").stdout)
     assert [(m["version"], m["status"]) for m in listed["registered"]] == [(1, "candidate")]
     # a candidate, never promoted, is taken out of the registry as the model it trained

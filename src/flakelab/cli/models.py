@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -428,7 +427,38 @@ def train(
     if json_output:
         print_report(summary, default=str)
         return
-    console.print_json(json.dumps(summary, default=str))
+    _print_training(summary, title)
+
+
+def _print_training(summary: dict, title: str) -> None:
+    """A training's held-out error, what it left out, its registration and adaptation, in
+    tables and words (``--json`` gives them all, with the losses' tail). It printed the JSON
+    report itself."""
+    held_out = {f"{summary['held_out']['cases']} cases": summary["held_out"]}
+    console.print(de00_table(title, "held out", held_out, total=False))
+    said = [f"{summary['seconds']:.1f} s on {summary['device']}; final loss "
+            f"{summary['final_loss']:.4g} (--loss-log writes every epoch's)"]  # fmt: skip
+    if dropped := summary["outlier_case_ids"]:
+        said.append(f"{counted(len(dropped), 'outlier')} dropped: {', '.join(dropped[:5])}"
+                    + (" …" if len(dropped) > 5 else ""))  # fmt: skip
+    if summary["cases_left_out"]:
+        said.append(f"{counted(summary['cases_left_out'], 'case')} left out, not read at the "
+                    "model's geometries")  # fmt: skip
+    if summary.get("stages_resumed"):
+        said.append(f"went on from {summary['stages_resumed']} stages its checkpoint kept")
+    if "file" in summary:
+        said.append(f"wrote {summary['file']}")
+    if "registry" in summary:
+        said.append(_registry_verdict(summary["registry"]))
+    for line in said:
+        errors.print(line, highlight=False)
+    if adaptation := summary.get("adaptation"):
+        title = f"adapted to shop {adaptation['shop']!r}, {counted(adaptation['cases'], 'case')}"
+        before_after = adaptation["held_out"]
+        console.print(de00_table(title, "held out", before_after, ("before", "after")))
+        errors.print(_kept_epoch_text(adaptation), highlight=False)
+        if "registry" in adaptation:
+            errors.print(_registry_verdict(adaptation["registry"]), highlight=False)
 
 
 def _new_cases(cases: str, database: str | None, register: bool, instrument: str,
