@@ -693,6 +693,22 @@ def test_measurements_are_converted_to_standard_output(tmp_path, cli, capsysbina
     assert not (tmp_path / "x.csv").exists()
 
 
+def test_an_output_or_a_database_named_dash_is_refused(tmp_path, cli, monkeypatch):
+    """Where ``-`` reads standard input, an output file or a database named ``-`` wrote a file
+    of that name (``--recipe-out -``, ``cases generate --out -``, ``-d -``); each is refused,
+    naming the option, and nothing is written."""
+    monkeypatch.chdir(tmp_path)
+    for args, said in (
+        (("match", "--example", "--recipe-out", "-"), "--recipe-out: - is standard output"),
+        (("render", "-o", "-"), "--output: - is standard output"),
+        (("cases", "generate", "--n", "2", "--out", "-"), "-: a database is a file or"),
+        (("cases", "list", "-d", "-"), "-: a database is a file or"),
+    ):
+        run = cli(*args)
+        assert run.returncode == 2 and said in run.stderr, (args, run.stderr)
+    assert not list(tmp_path.iterdir())
+
+
 def test_a_case_history_is_imported_from_a_pipe(tmp_path, cli):
     """``cases import /dev/stdin``: the progress bar counted the pipe's lines first, and the
     import met it empty ("expected a header starting with case_id"). It now counts none."""

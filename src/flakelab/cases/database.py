@@ -44,6 +44,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import zoned, zoned_here
 from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError, Note
+from flakelab.io import STANDARD_STREAM
 
 __all__ = [
     "default_url",
@@ -204,8 +205,14 @@ def user_database_file() -> Path:
 
 
 def url_for(target: str | os.PathLike) -> str:
-    """A URL as given, or a SQLite URL for a file path."""
+    """A URL as given, or a SQLite URL for a file path; ``-``, which a measurement's reader
+    takes for standard input, is refused (it was a database file named "-")."""
     text = str(target)
+    if text == STANDARD_STREAM:
+        raise DatabaseError(
+            "-: a database is a file or a server's URL; standard input and output hold none "
+            "(a file named - by its whole path)"
+        )
     return text if "://" in text else _sqlite_url(Path(text).resolve())
 
 

@@ -672,7 +672,14 @@ def check_output_file(
     would be lost."""
     if path is None:
         return
-    from flakelab.io.records import is_no_regular_file, unwritable_folder  # not at start-up
+    from flakelab.io import STANDARD_STREAM  # not at start-up
+    from flakelab.io.records import is_no_regular_file, unwritable_folder
+
+    if str(path) == STANDARD_STREAM:  # it wrote a file named "-", where a reader reads stdin
+        raise FlakelabError(
+            f"{option}: - is standard output, which carries this command's report: name a "
+            "file (by its whole path where it is named -)"
+        )
 
     if format_of is not None:
         format_of(path)
