@@ -1013,6 +1013,36 @@ def test_a_shop_typed_with_stray_spaces_is_the_same_shop(cases, tmp_path, cli):
     assert count_cases(open_database(file)) == 2
 
 
+def test_a_shop_misspelt_is_refused_with_the_one_it_likely_means(cases, tmp_path, cli):
+    """A shop named with another case, spaces or punctuation than its cases record found
+    none, and the message read as if the shop had no cases ("no cases from shop
+    'dupont-fils'"): it names the shop meant, in a database and in a case file; a shop that
+    is there, or none near, gets no hint."""
+    from flakelab.cli.sources import cases_hint_in
+
+    shops = ["Dupont & Fils", "Garage Nord", "Garage Sud"]
+    named = [replace(c, shop=shops[k % 3]) for k, c in enumerate(cases[:6])]
+    file, database = tmp_path / "shops.csv", tmp_path / "shops.db"
+    write_cases(named, file)
+    add_cases(open_database(database), named)
+    for source in (str(file), open_database(database)):
+        hints = {shop: cases_hint_in(source, shop) for shop in
+                 ("dupont-fils", "DUPONT & FILS", "garage_nord", "Garage Nort", "Garage Sud",
+                  "Carrosserie Est")}  # fmt: skip
+        assert hints == {
+            "dupont-fils": " (did you mean 'Dupont & Fils'?)",
+            "DUPONT & FILS": " (did you mean 'Dupont & Fils'?)",
+            "garage_nord": " (did you mean 'Garage Nord'?)",
+            "Garage Nort": " (did you mean 'Garage Nord'?)",
+            "Garage Sud": "",  # there: its cases were left out for another reason
+            "Carrosserie Est": "",
+        }, source
+    listed = cli("cases", "list", "-d", database, "--shop", "dupont-fils")
+    assert "no cases of shop 'dupont-fils' (did you mean 'Dupont & Fils'?) in" in listed.stderr
+    habits = cli("cases", "habits", file, "--shop", "garage nord")
+    assert habits.returncode == 2 and "(did you mean 'Garage Nord'?)" in habits.stderr
+
+
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):
     """``-d shop.db`` is named in messages and titles as the file the colorist gave, its path
     (as "h.csv: …" names a case file), not as the URL ``sqlite:////…/shop.db`` it became; an

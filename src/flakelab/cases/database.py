@@ -874,6 +874,12 @@ def colour_codes(engine: Engine, *, shop: str | None = None) -> list[str]:
         return sorted(code for code in session.scalars(query) if code)
 
 
+def shop_names(engine: Engine) -> list[str]:
+    """The shops whose cases the database keeps, each once."""
+    with reading_rows(engine) as session:
+        return sorted(session.scalars(select(CaseRow.shop).distinct()))
+
+
 def shop_summary(engine: Engine) -> list[dict]:
     """Every shop in the database: its cases by outcome, and the first and last case's time."""
     return case_summary(engine, "shop")

@@ -50,7 +50,7 @@ from flakelab.cli.sources import (
     ShopOption,
     SinceOption,
     StartOption,
-    colour_code_hint_in,
+    cases_hint_in,
     colour_code_spelled,
     existing_engine,
     instrument_key,
@@ -702,7 +702,7 @@ def list_cases(
     )
     if not rows:  # which cases were looked at: the newest alone, not the whole history
         of = (f"shop {shop!r}" if shop else "any shop") + chosen
-        of += colour_code_hint_in(engine, shop, colour_code) if not cases else ""
+        of += cases_hint_in(engine, shop, colour_code) if not cases else ""
         newest = "the newest " if len(cases) == last else "the "
         more = " (--last N checks more of them)" if len(cases) == last else ""
         none = (
@@ -837,7 +837,7 @@ def nearest(
     if not searched:
         raise FlakelabError(
             f"{source}: no cases {which_cases(shop, since, colour_code)}"
-            f"{colour_code_hint_in(source, shop, colour_code)} read at the geometries "
+            f"{cases_hint_in(source, shop, colour_code)} read at the geometries "
             f"{tuple(geometries)}"
         )
     report = {
@@ -1108,7 +1108,7 @@ def export_cases(
         at = f" read at the {instrument}'s geometries" if instrument else ""
         raise FlakelabError(
             f"{database_label(engine)}: no cases {which_cases(**chosen)}"
-            f"{colour_code_hint_in(engine, shop, colour_code)}{at}; nothing written"
+            f"{cases_hint_in(engine, shop, colour_code)}{at}; nothing written"
         )
     with progress_bar() as bar:  # and 4 s to write
         task = bar.add_task(f"writing {target.name}", total=len(cases))

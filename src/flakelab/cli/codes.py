@@ -30,7 +30,7 @@ from flakelab.cli.sources import (
     InstrumentOption,
     ShopOption,
     SinceOption,
-    colour_code_hint_in,
+    cases_hint_in,
     colour_code_spelled,
     database_option,
     instrument_key,
@@ -182,7 +182,7 @@ def variants_command(
     if not cases:
         raise FlakelabError(
             f"{hidden_passwords(source)}: no cases {which_cases(shop, since, colour_code)}"
-            f"{colour_code_hint_in(source, shop, colour_code)} read at the geometries "
+            f"{cases_hint_in(source, shop, colour_code)} read at the geometries "
             f"{tuple(geometries)}"
         )
     pairs = len(cases) * (len(cases) + 1) // 2  # 5,000 cars: 19 s

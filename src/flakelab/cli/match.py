@@ -57,7 +57,7 @@ from flakelab.cli.sources import (
     DatabaseOption,
     InstrumentOption,
     LibraryOption,
-    colour_code_hint_in,
+    cases_hint_in,
     colour_code_spelled,
     database_option,
     workplace_shop,
@@ -456,11 +456,12 @@ def _add_recorded_nearest(
     report["recorded_nearest"] = [near.to_dict() for near in found]
     report["colour_code"] = colour_code
     if not searched:
-        whose = f"of shop {shop!r} " if shop else ""
-        whose += f"of colour code {colour_code!r}" if colour_code else ""
-        whose += f"{colour_code_hint_in(database, shop, colour_code)} " if colour_code else ""
+        whose = (f" of shop {shop!r}" if shop else "") + (
+            f" of colour code {colour_code!r}" if colour_code else ""
+        )
+        whose += cases_hint_in(database, shop, colour_code)
         report["notes"].append(
-            f"--nearest: no recorded cases {whose}in {database_label(url_for(database))} read "
+            f"--nearest: no recorded cases{whose} in {database_label(url_for(database))} read "
             f"at the model's geometries ({', '.join(forward.geometries)})"
         )
 

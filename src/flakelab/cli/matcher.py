@@ -11,6 +11,7 @@ import typer
 
 from flakelab.cli.common import errors
 from flakelab.cli.sources import (
+    cases_hint_in,
     current_forward,
     existing_engine,
     learned_forward,
@@ -192,8 +193,9 @@ def habits_for(
             if not named or own_model or stored_lots(engine, shop) is not None:
                 return None  # the shop's own model learned them; a workplace may have none yet
             raise FlakelabError(
-                f"{database_label(engine)}: shop {shop!r} has no habits, tins or model of its own "
-                f"stored: read its habits with flakelab cases habits CASES --shop {shop!r} --save, "
+                f"{database_label(engine)}: shop {shop!r}{cases_hint_in(engine, shop)} has no "
+                "habits, tins or model of its own stored: read its habits with flakelab cases "
+                f"habits CASES --shop {shop!r} --save, "
                 f"its tins with flakelab lots calibrate PANEL --recipe R --shop {shop!r}, or "
                 f"adapt a model to its cases with flakelab model adapt CASES --shop {shop!r}"
             ) from None

@@ -35,6 +35,7 @@ from flakelab.cli.sources import (
     SinceOption,
     UnseenOption,
     case_database,
+    cases_hint_in,
     chosen_model,
     existing_engine,
     instrument_key,
@@ -96,7 +97,9 @@ def check_shop_split(source: str, shop: str, data, held_out) -> None:
     held out to judge the adapted model."""
     counts = {name: part.shops.count(shop) for name, part in (("data", data), ("held", held_out))}
     if not any(counts.values()):
-        raise FlakelabError(f"{source}: --adapt: no cases from shop {shop!r}")
+        raise FlakelabError(
+            f"{source}: --adapt: no cases from shop {shop!r}{cases_hint_in(source, shop)}"
+        )
     if not all(counts.values()):
         where = "held out" if counts["held"] else "left to adapt to"
         raise FlakelabError(
@@ -821,8 +824,8 @@ def evaluate(
     chosen = cases_at(loaded, forward.geometries)
     if not chosen:
         raise FlakelabError(
-            f"{cases}: no cases {which_cases(shop, since)} read at the model's geometries "
-            f"{forward.geometries}"
+            f"{cases}: no cases {which_cases(shop, since)}{cases_hint_in(cases, shop)} read at "
+            f"the model's geometries {forward.geometries}"
         )
     at_geometries = len(chosen)
     if unseen:

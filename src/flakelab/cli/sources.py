@@ -4,6 +4,7 @@ cases and models from (a case file or database, the current or a named model).""
 from __future__ import annotations
 
 import os
+import re
 import shlex
 from datetime import datetime
 from pathlib import Path
@@ -14,7 +15,7 @@ import typer
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.core.times import shown_time, zoned, zoned_here
-from flakelab.core.wording import database_label, hidden_passwords, tidy_name
+from flakelab.core.wording import database_label, did_you_mean, hidden_passwords, tidy_name
 from flakelab.errors import FlakelabError
 
 WORKPLACE_SHOP = "FLAKELAB_SHOP"
@@ -284,21 +285,29 @@ def case_database(source: str):
     return open_database(source, must_exist=True)
 
 
-def colour_code_hint_in(source, shop: str | None, colour_code: str | None) -> str:
-    """ " (did you mean 'NH731P'?)" where ``colour_code`` found no case in ``source`` (a case
-    file or a database, or its engine; ``shop``'s cases) and one of its codes is near."""
+def cases_hint_in(source, shop: str | None, colour_code: str | None = None) -> str:
+    """ " (did you mean 'Dupont & Fils'?)" where ``shop`` names no shop of ``source`` (a case
+    file or a database, or its engine) and one of its shops is near: the same but for case,
+    spaces and punctuation ('dupont-fils'), else the closest spelling; else " (did you mean
+    'NH731P'?)" where ``colour_code`` found none of ``shop``'s cases and one of their codes is
+    near. A shop misspelt was "no cases from shop 'dupont-fils'", as if it had none."""
     from flakelab.cases.case import colour_code_hint
-    from flakelab.cases.database import colour_codes, open_database
+    from flakelab.cases.database import colour_codes, open_database, shop_names
     from flakelab.cases.exchange import is_case_file
 
-    if not colour_code:
+    if not shop and not colour_code:
         return ""
     if isinstance(source, str | Path) and is_case_file(source):
-        codes = [case.colour_code for case in load_cases(str(source), shop)]
+        cases = load_cases(str(source))
+        shops = {case.shop for case in cases}
+        codes = [case.colour_code for case in cases if case.shop == shop or not shop]
     else:
         engine = source if hasattr(source, "url") else open_database(source, must_exist=True)
-        codes = colour_codes(engine, shop=shop)
-    return colour_code_hint(colour_code, codes)
+        shops = set(shop_names(engine))
+        codes = colour_codes(engine, shop=shop) if colour_code else []
+    if shop and shop not in shops:
+        return did_you_mean(shop, shops, lambda name: re.sub(r"[\W_]+", "", name.casefold()))
+    return colour_code_hint(colour_code, codes) if colour_code else ""
 
 
 def recipe_fractions(library, grams: dict[str, float], path) -> np.ndarray:
@@ -321,8 +330,8 @@ def shop_cases(source: str, shop: str | None, geometries, since: datetime | None
     chosen = cases_at(load_cases(source, shop, since), geometries)
     if not chosen:
         raise FlakelabError(
-            f"{source}: no cases {which_cases(shop, since)} read at the model's "
-            f"geometries {tuple(geometries)}"
+            f"{source}: no cases {which_cases(shop, since)}{cases_hint_in(source, shop)} read "
+            f"at the model's geometries {tuple(geometries)}"
         )
     return chosen
 
