@@ -37,7 +37,7 @@ def zoned_here(time: datetime) -> datetime:
     # 495 reads it, with the offset before the change, 03:30 summer time; astimezone gave
     # 01:30, an hour before the time typed. A day before is before the change.
     before = (time - timedelta(days=1)).astimezone().utcoffset()
-    return (time.replace(fold=0) - before).replace(tzinfo=UTC).astimezone()
+    return (time - before).replace(tzinfo=UTC).astimezone()
 
 
 def shown_time(when: datetime | str | None, *, day: bool = False) -> str:
