@@ -696,6 +696,23 @@ def test_the_command_line_starts_without_colour_science_or_torch():
     assert "module 'flakelab.core' has no attribute 'nothing'" in done.stdout
 
 
+def test_the_version_names_python_and_every_library_a_bug_report_needs(cli):
+    """``flakelab --version`` said "flakelab 0.1.0" alone; a bug report needs Python's and
+    the machine's, and the version of each library flakelab requires, as installed."""
+    import platform
+    from importlib.metadata import version
+
+    from flakelab import __version__
+
+    run = cli("--version")
+    first, python, libraries = run.stdout.splitlines()
+    assert first == f"flakelab {__version__}"
+    assert python.startswith(f"Python {platform.python_version()} (")
+    for name in ("torch", "numpy", "colour-science", "sqlalchemy", "typer"):
+        assert f"{name} {version(name)}" in libraries.split(", "), name
+    assert np.__version__ == version("numpy")
+
+
 def test_help_shows_the_matchers_defaults_without_importing_torch():
     """The defaults are the numbers the library uses, printed as numbers; the help of the main
     job must not pay torch's import (over a second) to print them."""

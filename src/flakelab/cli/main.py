@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shlex
 from enum import StrEnum
 from pathlib import Path
@@ -667,11 +668,43 @@ def _print_scaling(report: dict[str, Any]) -> None:
 
 @app.callback(invoke_without_command=True)
 def main(
-    version: Annotated[bool, typer.Option("--version", help="Print the version and exit.")] = False,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            help="Print the versions of flakelab, Python and the libraries it runs on, and exit.",
+        ),
+    ] = False,
 ) -> None:
     if version:
-        print(f"flakelab {__version__}")
+        print(version_text())
         raise typer.Exit()
+
+
+def version_text() -> str:
+    """flakelab's version, then Python's and the machine's, then the version of each library
+    it runs on, as its installed metadata requires them: what a bug report needs. Read from
+    the packages' metadata without importing them (torch's import takes seconds)."""
+    import platform
+    from importlib.metadata import PackageNotFoundError, requires, version
+
+    lines = [
+        f"flakelab {__version__}",
+        f"Python {platform.python_version()} ({platform.python_implementation()}), "
+        f"{platform.system()} {platform.machine()}",
+    ]
+    try:
+        required = [r for r in requires("flakelab") or [] if "extra ==" not in r]
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "\n".join(lines)
+    found = []
+    for requirement in required:
+        name = re.match(r"[A-Za-z0-9_.-]+", requirement).group()
+        try:
+            found.append(f"{name} {version(name)}")
+        except PackageNotFoundError:
+            found.append(f"{name} missing")
+    return "\n".join([*lines, ", ".join(found)])
 
 
 def run() -> None:
