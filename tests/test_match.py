@@ -974,7 +974,8 @@ def test_match_refuses_bad_input(tmp_path, cli):
     run = cli("match", "evaluate", "--render", str(tmp_path / "side-by-side.png"))
     assert run.returncode == 2 and "--render" in run.stderr and "not the harness" in run.stderr
     run = cli("match", "evaluate", "--plot", str(tmp_path / "chart.bmp"))  # before the targets
-    assert run.returncode == 2 and "chart.bmp: expected a figure file ending .png" in run.stderr
+    assert run.returncode == 2, run.stderr
+    assert f"--plot: {tmp_path / 'chart.bmp'}: expected a figure file ending .png" in run.stderr
     # an output file that cannot be written is refused before the search, not after it
     run = cli("match", "--example", "--recipe-out", str(tmp_path / "no" / "r.json"))
     assert run.returncode == 2 and f"--recipe-out: {tmp_path / 'no' / 'r.json'}" in run.stderr

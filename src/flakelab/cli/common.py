@@ -682,7 +682,10 @@ def check_output_file(
         )
 
     if format_of is not None:
-        format_of(path)
+        try:
+            format_of(path)
+        except ValueError as error:  # named by its option, as every other refusal here
+            raise FlakelabError(f"{option}: {error}") from None
     target = Path(path).resolve()
     if target.is_dir():
         raise FlakelabError(f"{option}: {path}: is a folder, expected a file name")
