@@ -1008,6 +1008,16 @@ def test_a_document_given_to_the_wrong_reader_is_named(tmp_path):
             read_recipe(tmp_path / f"m{suffix}")
         with pytest.raises(FlakelabError, match=f"toner library; this is {kind}, not JSON$"):
             read_library(tmp_path / f"m{suffix}")
+    from flakelab.io.lots_file import read_lots
+    from flakelab.match.habits import read_habits
+
+    with pytest.raises(FlakelabError, match="this is a CxF3 file, not JSON$"):
+        read_habits(tmp_path / "m.cxf")
+    # a folder: named so, where the messages quoted "[Errno 21] Is a directory: '…'"
+    for reader, what in ((read_recipe, "recipe file"), (read_library, "toner library"),
+                         (read_habits, "habits file"), (read_lots, "toner-lot file")):  # fmt: skip
+        with pytest.raises(FlakelabError, match=f"a folder, not a {what}$"):
+            reader(tmp_path)
     (tmp_path / "broken.json").write_text('{"Al medium": 1')
     with pytest.raises(FlakelabError, match=r"toner → grams \(Expecting ',' delimiter"):
         read_recipe(tmp_path / "broken.json")

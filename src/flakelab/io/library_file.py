@@ -35,6 +35,8 @@ def read_library(path: str | PathLike | None = None) -> Library:
         text = text_of(path)
     except FileNotFoundError:
         raise LibraryError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LibraryError(f"{path}: a folder, not a toner library") from None
     except (OSError, UnicodeDecodeError) as error:
         if isinstance(error, UnicodeDecodeError) and (kind := other_format(path)):
             raise LibraryError(f"{path}: expected a toner library; this is {kind}") from None

@@ -441,6 +441,8 @@ def read_json_file(path: Path, what: str, expected: str):
         return json_value(text_of(path))
     except FileNotFoundError:
         raise FlakelabError(f"{path}: no such {what}") from None
+    except IsADirectoryError:  # "[Errno 21] Is a directory: '/tmp'" before
+        raise FlakelabError(f"{path}: a folder, not a {what}") from None
     except (UnicodeDecodeError, ValueError) as error:
         why = f"; this is {kind}" if (kind := other_format(path)) else f" ({error})"
         raise FlakelabError(f"{path}: expected {expected}{why}") from None
@@ -456,7 +458,7 @@ _FORMAT_KINDS = {
 """What :func:`other_format` calls each format of :data:`flakelab.io.FORMATS` but JSON."""
 
 
-def other_format(path: Path) -> str:
+def other_format(path: str | PathLike) -> str:
     """What a file given where JSON is read is instead, by its content: "a CxF3 file, not
     JSON" (a car's measurement given as ``--recipe``, a case history as ``--library``); ""
     where it is none flakelab reads."""

@@ -65,7 +65,7 @@ from flakelab.core.documents import SHOP_HABITS_FORMAT
 from flakelab.core.units import is_number
 from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError, MeasurementFileError
-from flakelab.io.records import json_value, text_of, write_atomically
+from flakelab.io.records import json_value, other_format, text_of, write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
 from flakelab.match.forward import film_of
@@ -651,10 +651,14 @@ def read_habits(path: str | PathLike) -> ShopHabits:
         document = json_value(text_of(path))
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
+    except IsADirectoryError:
+        raise MeasurementFileError(path, "a folder, not a habits file") from None
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise MeasurementFileError(path, f"not a JSON habits file ({error})") from None
+        kind = other_format(path)  # a car's measurement given for its habits
+        why = f"this is {kind}" if kind else f"not a JSON habits file ({error})"
+        raise MeasurementFileError(path, why) from None
     if not isinstance(document, dict) or document.get("format") != HABITS_FORMAT:
         raise MeasurementFileError(path, f"expected {HABITS_FORMAT!r}", field="format")
     if found := _report_problem(document):
