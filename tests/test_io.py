@@ -1008,6 +1008,7 @@ def test_a_document_given_to_the_wrong_reader_is_named(tmp_path):
             read_recipe(tmp_path / f"m{suffix}")
         with pytest.raises(FlakelabError, match=f"toner library; this is {kind}, not JSON$"):
             read_library(tmp_path / f"m{suffix}")
+    from flakelab.cases.exchange import read_cases
     from flakelab.io.lots_file import read_lots
     from flakelab.match.habits import read_habits
 
@@ -1018,6 +1019,10 @@ def test_a_document_given_to_the_wrong_reader_is_named(tmp_path):
                          (read_habits, "habits file"), (read_lots, "toner-lot file")):  # fmt: skip
         with pytest.raises(FlakelabError, match=f"a folder, not a {what}$"):
             reader(tmp_path)
+    with pytest.raises(FlakelabError, match="a folder, not a measurement file$"):
+        read_measurements(tmp_path)
+    with pytest.raises(FlakelabError, match="a folder, not a case file$"):
+        read_cases(tmp_path)
     (tmp_path / "broken.json").write_text('{"Al medium": 1')
     with pytest.raises(FlakelabError, match=r"toner → grams \(Expecting ',' delimiter"):
         read_recipe(tmp_path / "broken.json")

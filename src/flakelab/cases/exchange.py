@@ -233,6 +233,8 @@ def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None)
     path = Path(path)
     if not path.exists():
         raise CaseFileError(f"{path}: no such file")
+    if path.is_dir():  # "Is a directory" before
+        raise CaseFileError(f"{path}: a folder, not a case file")
     if path.suffix.lower() in CXF_SUFFIXES:
         return _from_measurements(path, read_cxf(path))
     try:  # row by row: 30,000 cases as one list of cells took 1.45 GB

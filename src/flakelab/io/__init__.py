@@ -83,7 +83,7 @@ def detect_format(path: str | PathLike) -> str:
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
     except IsADirectoryError:
-        raise MeasurementFileError(path, "is a directory, not a file") from None
+        raise MeasurementFileError(path, "a folder, not a measurement file") from None
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
     if not head.strip():
