@@ -1021,6 +1021,19 @@ def test_a_document_given_to_the_wrong_reader_is_named(tmp_path):
             reader(tmp_path)
     with pytest.raises(FlakelabError, match="a folder, not a measurement file$"):
         read_measurements(tmp_path)
+    # an empty file: named so, where the messages quoted "Expecting value: line 1 column 1"
+    # or asked a case file for its header at row 1
+    empty = tmp_path / "empty.json"
+    empty.write_text(" \n")
+    for reader, what in ((read_recipe, "a JSON object toner → grams"),
+                         (read_library, "a toner library"), (read_habits, "a JSON habits file"),
+                         (read_lots, "a JSON toner-lot file")):  # fmt: skip
+        with pytest.raises(FlakelabError, match=f"empty.json: empty file; expected {what}$"):
+            reader(empty)
+    blank_history = tmp_path / "empty.csv"
+    blank_history.write_text("\n")
+    with pytest.raises(FlakelabError, match="empty file; expected a case history's header"):
+        read_cases(blank_history)
     with pytest.raises(FlakelabError, match="a folder, not a case file$"):
         read_cases(tmp_path)
     (tmp_path / "broken.json").write_text('{"Al medium": 1')

@@ -273,7 +273,9 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
 
     separator, header, rows = spreadsheet_table(lines, refused)
     separator = separator or ","
-    if not header or header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
+    if not header:  # "row 1: expected a header starting with case_id, …" before
+        raise CaseFileError(f"{path}: empty file; expected a case history's header and rows")
+    if header[: len(CASE_FIELDS)] != list(CASE_FIELDS):
         raise CaseFileError(
             f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)} "
             "(separated by commas, semicolons or tabs)"

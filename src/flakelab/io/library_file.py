@@ -41,6 +41,8 @@ def read_library(path: str | PathLike | None = None) -> Library:
         if isinstance(error, UnicodeDecodeError) and (kind := other_format(path)):
             raise LibraryError(f"{path}: expected a toner library; this is {kind}") from None
         raise LibraryError(f"{path}: cannot be read ({error})") from None
+    if not text.strip():
+        raise LibraryError(f"{path}: empty file; expected a toner library")
     try:
         data = toml_value(text) if path.suffix.lower() == ".toml" else json_value(text)
     except json.JSONDecodeError as error:

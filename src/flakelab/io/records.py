@@ -438,7 +438,12 @@ def read_json_file(path: Path, what: str, expected: str):
     :class:`~flakelab.errors.FlakelabError` naming it: missing, unreadable, or not JSON
     (``expected`` says what it should hold)."""
     try:
-        return json_value(text_of(path))
+        text = text_of(path)
+        if not text.strip():  # "Expecting value: line 1 column 1 (char 0)" before
+            raise FlakelabError(f"{path}: empty file; expected {expected}")
+        return json_value(text)
+    except FlakelabError:
+        raise
     except FileNotFoundError:
         raise FlakelabError(f"{path}: no such {what}") from None
     except IsADirectoryError:  # "[Errno 21] Is a directory: '/tmp'" before

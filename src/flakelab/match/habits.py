@@ -648,7 +648,12 @@ def write_habits(habits: ShopHabits, path: str | PathLike) -> None:
 def read_habits(path: str | PathLike) -> ShopHabits:
     """A habits file written by :func:`write_habits` (``flakelab cases habits --out``)."""
     try:
-        document = json_value(text_of(path))
+        text = text_of(path)
+        if not text.strip():
+            raise MeasurementFileError(path, "empty file; expected a JSON habits file")
+        document = json_value(text)
+    except MeasurementFileError:
+        raise
     except FileNotFoundError:
         raise MeasurementFileError(path, "no such file") from None
     except IsADirectoryError:
