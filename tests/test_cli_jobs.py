@@ -1373,6 +1373,38 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
     assert run.returncode == 2 and "no habits, tins or model of its own" in said
 
 
+def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
+    """The harness's tables say, in words, what --without, --resprays and --lots add to its
+    report, with the report's own figures: the targets that needed a toner out of stock, the
+    chances over the resprays, and the tins' errors."""
+    from flakelab.cli.match import _print_harness
+
+    run = cli("match", "evaluate", "--targets", "2", "--novel-targets", "1", "--resprays", "2",
+              "--without", "Phthalo blue GS", "--lots", "calibrated", "--json")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    capsys.readouterr()
+    _print_harness(report)
+    shown = " ".join(capsys.readouterr().out.split())
+
+    def fig(value):
+        return "–" if value is None else f"{value:.2f}"
+
+    assert (
+        f"{report['needing_missing_targets']} target" in shown
+        and f"needed Phthalo blue GS, out of stock: first shot "
+        f"{fig(report['needing_missing_first_shot'])}"
+        in shown
+    )
+    assert (
+        f"over 2 resprays each: first shot {fig(report['first_shot_chance'])}, after one "
+        f"correction {fig(report['after_one_correction_chance'])}, oracle "
+        f"{fig(report['oracle_chance'])}, new toner "
+        f"{fig(report['novel_toner_first_shot_chance'])}" in shown
+    )
+    assert f"strength RMS {report['lot_strength_error_rms']:.3f}" in shown
+
+
 def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):
     """Cases that record their tins are predicted for them: the batches' strength and shade
     leave the error, which with the world's own tins falls well below the standard's

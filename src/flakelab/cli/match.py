@@ -925,6 +925,7 @@ def _print_harness(report: dict) -> None:
         f"(the hidden formula's {_share(report['oracle_texture_within'])}); metamerism index "
         f"median {report['first_shot_metamerism_median']:.2f} "
         f"({report['oracle_metamerism_median']:.2f})",
+        *_harness_options(report),
         f"latency per target: p50 {report['latency_p50_s']:.2f} s, p95 "
         f"{report['latency_p95_s']:.2f} s",
         f"model: {report['model']} ({report['model_id']}); --json gives every figure and "
@@ -932,3 +933,33 @@ def _print_harness(report: dict) -> None:
     ]
     for line in lines:
         console.print(line, highlight=False)
+
+
+def _harness_options(report: dict) -> list[str]:
+    """What the harness's options add to its report, in words: the targets that needed a
+    toner out of stock (``--without``), the chances over the resprays (``--resprays``), and
+    how far the tins the shop matched with were from the true ones (``--lots``)."""
+    lines = []
+    if report["without"]:
+        lines.append(
+            f"{counted(report['needing_missing_targets'], 'target')} needed "
+            f"{', '.join(report['without'])}, out of stock: first shot "
+            f"{_share(report['needing_missing_first_shot'])}, after one correction "
+            f"{_share(report['needing_missing_after_one_correction'])}"
+        )
+    if report["resprays"]:
+        lines.append(
+            f"the chance a spray passes, over {report['resprays']} resprays each: first shot "
+            f"{_share(report['first_shot_chance'])}, after one correction "
+            f"{_share(report['after_one_correction_chance'])}, oracle "
+            f"{_share(report['oracle_chance'])}, new toner "
+            f"{_share(report['novel_toner_first_shot_chance'])}"
+        )
+    if report["lots"] != "none" and report["lot_strength_error_rms"] is not None:
+        shade = report["lot_shade_error_rms_nm"]
+        lines.append(
+            f"the shop's tins ({report['lots']}) against the true ones: strength RMS "
+            f"{report['lot_strength_error_rms']:.3f}"
+            + (f", shade RMS {shade:.2f} nm" if shade is not None else "")
+        )
+    return lines
