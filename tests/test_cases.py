@@ -1721,6 +1721,24 @@ def test_importing_stored_cases_again_names_one_and_stores_nothing(
     assert "(1 of the 4 cases given); nothing was stored" in run.stderr
     assert run.stderr.count(str(new)) == 1
     assert count_cases(open_database(database_url)) == 3
+    assert "(--new-only passes over those stored already)" in " ".join(run.stderr.split())
+    # a history exported again with more cases: --new-only stores the new ones alone, and a
+    # case stored otherwise than the file has it refuses the file, nothing stored
+    changed = tmp_path / "changed.csv"
+    write_cases([replace(cases[2], outcome="rejected"), *cases[6:8]], changed)
+    run = cli("cases", "import", str(changed), "--database", database_url, "--new-only",
+              "--no-check")  # fmt: skip
+    assert run.returncode == 2 and f"case {cases[2].case_id!r} is already stored as" in (
+        " ".join(run.stderr.split())
+    )
+    assert count_cases(open_database(database_url)) == 3
+    run = cli("cases", "import", str(new), "--database", database_url, "--new-only")
+    assert run.returncode == 0, run.stderr
+    assert f"imported 3 cases from {new} into" in run.stderr and "; 1 stored already" in (
+        run.stderr
+    )
+    stored = {c.case_id for c in iter_cases(open_database(database_url))}
+    assert stored == {c.case_id for c in cases[:6]}
 
 
 def test_generating_again_stores_only_the_cases_not_stored_yet(database_url, cli):

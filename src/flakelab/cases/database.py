@@ -57,6 +57,7 @@ __all__ = [
     "BUSY_TIMEOUT_S",
     "add_cases",
     "add_new_cases",
+    "stored_case_ids",
     "iter_cases",
     "count_cases",
     "count_stored_since",
@@ -621,6 +622,11 @@ each time another writer stored some of them first."""
 _COMPARED = tuple(c.name for c in CaseRow.__table__.columns if c.name not in ("id", "updated_at"))
 """The columns that make two stored cases the same case (not the row or the time it was
 stored)."""
+
+
+def stored_case_ids(engine: Engine, case_ids: list[str]) -> set[str]:
+    """Those of ``case_ids`` the database stores already."""
+    return set(_selected_by_id(engine, CaseRow.case_id, case_ids))
 
 
 def _stored_rows(engine: Engine, case_ids: list[str]) -> dict[str, CaseRow]:
