@@ -1348,7 +1348,7 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
     shown = cli("match", "evaluate", "--targets", "2", "--novel-targets", "1", env=fresh).stdout
 
     def fig(value):
-        return "–" if value is None else f"{value:.2f}"
+        return "–" if value is None else f"{value:.3f}"
 
     for name, key, versus, count in (
         ("first shot", "first_shot_success", "first_shot_vs_oracle", 2),
@@ -1388,7 +1388,7 @@ def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
     shown = " ".join(capsys.readouterr().out.split())
 
     def fig(value):
-        return "–" if value is None else f"{value:.2f}"
+        return "–" if value is None else f"{value:.3f}"
 
     assert (
         f"{report['needing_missing_targets']} target" in shown
