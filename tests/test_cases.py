@@ -1041,6 +1041,12 @@ def test_a_shop_misspelt_is_refused_with_the_one_it_likely_means(cases, tmp_path
     assert "no cases of shop 'dupont-fils' (did you mean 'Dupont & Fils'?) in" in listed.stderr
     habits = cli("cases", "habits", file, "--shop", "garage nord")
     assert habits.returncode == 2 and "(did you mean 'Garage Nord'?)" in habits.stderr
+    codes = cli("cases", "codes", "--shop", "garage sud", "-d", file)
+    assert "no cases from shop 'garage sud' (did you mean 'Garage Sud'?) in" in codes.stderr
+    removed = cli("cases", "remove", "--synthetic", "--shop", "garage-sud", "-d", database,
+                  "--yes")  # fmt: skip
+    assert "of shop 'garage-sud' (did you mean 'Garage Sud'?) in" in removed.stderr
+    assert count_cases(open_database(database)) == 6
 
 
 def test_a_sqlite_database_is_named_by_its_file_as_every_other_file(cases, tmp_path, cli):

@@ -1064,6 +1064,7 @@ def _remove_synthetic(engine, shop: str | None, yes: bool) -> None:
     where = database_label(engine)
     held = synthetic_cases(engine, shop)
     if not held:
+        of += cases_hint_in(engine, shop)
         errors.print(f"no synthetic cases{of} in {where}; nothing was removed", highlight=False)
         return
     _confirm(f"remove {_by_shop(held)} from {where}?", "cases remove --synthetic", yes)

@@ -67,7 +67,8 @@ def codes_command(
         return
     if not rows:
         errors.print(
-            f"no cases {which_cases(shop, None)} in {label} record a colour code ('cases "
+            f"no cases {which_cases(shop, None)}{_shop_hint(database, shop)} in {label} record "
+            "a colour code ('cases "
             "record --colour-code', a case file's colour_code column)",
             highlight=False,
             soft_wrap=True,
@@ -91,6 +92,14 @@ def codes_command(
             shown_time(row["last"], day=True),
         )
     console.print(table)
+
+
+def _shop_hint(database: str | None, shop: str | None) -> str:
+    """The shop that ``shop`` likely means among the cases of ``database`` (a case file's
+    too, whose summary holds ``shop``'s cases alone): :func:`cases_hint_in`."""
+    from flakelab.cases.database import default_url
+
+    return cases_hint_in(database or default_url(), shop)
 
 
 def _summarised(database: str | None, shop: str | None):
