@@ -858,6 +858,10 @@ def test_cli_a_shops_tins_kept_in_the_database_serve_each_of_its_workplaces(
     assert old["version"] == 1 and old["lots"][0]["strength"] == first_read
     missing = cli("lots", "show", "--shop", shop, "-d", db, "--version", "9")
     assert missing.returncode == 2 and "no version 9" in missing.stderr
+    for command in ("show", "history"):  # a shop misspelt: the one with tins it means
+        typo = cli("lots", command, "--shop", shop.upper(), "-d", db)
+        said = " ".join(typo.stderr.split())
+        assert f"no tins stored for shop {shop.upper()!r} (did you mean {shop!r}?)" in said
     text = cli("lots", "history", "--shop", shop, "-d", db)
     assert text.returncode == 0 and "new tin (K-9) 0.970" in text.stdout
     drawn = tmp_path / "tins.png"

@@ -48,7 +48,7 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.times import shown_time
-from flakelab.core.wording import database_label
+from flakelab.core.wording import database_label, shop_meant
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import SCALE_RESOLUTION_G
 
@@ -878,15 +878,20 @@ def _stored_or_told(shop: str, database: str | None, version: int | None = None)
         return kept
     if version is not None and stored_tins(shop, database):
         raise FlakelabError(f"--version: shop {shop!r} has no version {version} of its tins")
-    raise _no_tins_stored(shop)
+    raise _no_tins_stored(shop, database)
 
 
-def _no_tins_stored(shop: str) -> FlakelabError:
-    """The error for a shop with no tins stored, saying how to store them."""
+def _no_tins_stored(shop: str, database: str | None) -> FlakelabError:
+    """The error for a shop with no tins stored, saying how to store them, or which shop
+    with tins it likely means (:func:`~flakelab.core.wording.did_you_mean`)."""
+    from flakelab.cases.shop_lots import list_stored_lots
+
+    engine = existing_engine(database)
+    shops = [row["shop"] for row in list_stored_lots(engine)] if engine is not None else []
     return FlakelabError(
-        f"no tins stored for shop {shop!r}: flakelab lots calibrate SPRAYED --recipe R "
-        f"--shop {shop!r} reads them from panels, flakelab lots save FILE --shop {shop!r} "
-        "stores a lot file's"
+        f"no tins stored for shop {shop!r}{shop_meant(shop, shops)}: flakelab lots calibrate "
+        f"SPRAYED --recipe R --shop {shop!r} reads them from panels, flakelab lots save FILE "
+        f"--shop {shop!r} stores a lot file's"
     )
 
 
@@ -915,7 +920,7 @@ def history_command(
     engine = existing_engine(database)
     versions = lots_history(engine, shop) if engine is not None else []
     if not versions:
-        raise _no_tins_stored(shop)
+        raise _no_tins_stored(shop, database)
     tins = tins_through(versions)
     if plot is not None:
         from flakelab.render.plots import plot_tins_history

@@ -4,7 +4,6 @@ cases and models from (a case file or database, the current or a named model).""
 from __future__ import annotations
 
 import os
-import re
 import shlex
 from datetime import datetime
 from pathlib import Path
@@ -15,7 +14,7 @@ import typer
 
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.core.times import shown_time, zoned, zoned_here
-from flakelab.core.wording import database_label, did_you_mean, hidden_passwords, tidy_name
+from flakelab.core.wording import database_label, hidden_passwords, shop_meant, tidy_name
 from flakelab.errors import FlakelabError
 
 WORKPLACE_SHOP = "FLAKELAB_SHOP"
@@ -306,7 +305,7 @@ def cases_hint_in(source, shop: str | None, colour_code: str | None = None) -> s
         shops = set(shop_names(engine))
         codes = colour_codes(engine, shop=shop) if colour_code else []
     if shop and shop not in shops:
-        return did_you_mean(shop, shops, lambda name: re.sub(r"[\W_]+", "", name.casefold()))
+        return shop_meant(shop, shops)
     return colour_code_hint(colour_code, codes) if colour_code else ""
 
 

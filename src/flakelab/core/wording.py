@@ -31,6 +31,16 @@ def did_you_mean(name: str, choices: Iterable[str], key: Callable[[str], str] = 
     return f" (did you mean {keys[near[0]]!r}?)" if near else ""
 
 
+def shop_meant(name: str, shops: Iterable[str]) -> str:
+    """ " (did you mean 'Dupont & Fils'?)": the one of ``shops`` that a shop's ``name`` which
+    found none likely means, the same but for case, spaces and punctuation ('dupont-fils'),
+    else the closest spelling; "" where ``name`` is among them or none is near."""
+    shops = set(shops)
+    if name in shops:
+        return ""
+    return did_you_mean(name, shops, lambda shop: re.sub(r"[\W_]+", "", shop.casefold()))
+
+
 def hidden_passwords(text: str) -> str:
     """``text`` with the password of every URL in it shown as SQLAlchemy shows it
     (``postgresql://flakelab:***@server/shop``): a message may be read over a colorist's
