@@ -643,6 +643,7 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
     pictures, which are read from a file named, are refused by name."""
     import flakelab.io
     from flakelab.data import example_path
+    from flakelab.io.library_file import demo_library_path
 
     target = example_path("target")
     named = cli("inspect", target, "--json")
@@ -654,6 +655,19 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
     piped = cli("compare", target, "-", "--json", input=workbook.read_bytes())
     assert piped.returncode == 0 and json.loads(piped.stdout)["de00_max"] < 1e-3, piped.stderr
     assert cli("inspect", "-", input=b"").stderr.strip() == "error: stdin: empty file"
+    # standard input holds one file: a second - is refused, where it met it empty
+    twice = cli("compare", "-", "-", input=target.read_bytes())
+    assert twice.returncode == 2 and "stdin: read already for another of this command's" in (
+        " ".join(twice.stderr.split())
+    )
+    # a recipe or a library is read from it too: "… | flakelab weigh - --quantity 1l"
+    recipe = target.with_name("blue-metallic-recipe.json")
+    weighed = cli("weigh", "-", "--quantity", "1l", "--json", input=recipe.read_bytes())
+    assert weighed.returncode == 0, weighed.stderr
+    from_file = json.loads(cli("weigh", recipe, "--quantity", "1l", "--json").stdout)
+    assert json.loads(weighed.stdout) == from_file | {"recipe": "-"}
+    library = cli("library", "show", "-", "--json", input=demo_library_path().read_bytes())
+    assert library.returncode == 0 and json.loads(library.stdout)["library"] == "flakelab demo"
     refused = cli("inspect", "-", "--images", tmp_path / "pictures", input=workbook.read_bytes())
     assert refused.returncode == 2 and "--images: stdin:" in refused.stderr, refused.stderr
     monkeypatch.setattr(sys, "stdin", open(os.devnull))  # not a terminal: read, empty

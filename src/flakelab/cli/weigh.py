@@ -40,7 +40,9 @@ from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
 
 
 def weigh_command(
-    recipe: Annotated[Path, typer.Argument(help="Recipe JSON {toner: grams} (any amount).")],
+    recipe: Annotated[
+        Path, typer.Argument(help="Recipe JSON {toner: grams} (any amount; - reads stdin).")
+    ],
     quantity: QuantityOption = CAN_QUANTITY,
     resolution: ResolutionOption = SCALE_RESOLUTION_G,
     library: LibraryOption = None,

@@ -32,9 +32,11 @@ from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
 from flakelab.io.records import (
     NOT_UTF8,
+    STANDARD_STREAM,
     UTF16_BOMS,
     csv_separator,
     is_no_regular_file,
+    standard_input,
     text_encoding,
 )
 from flakelab.io.tolerance_file import read_tolerance
@@ -133,13 +135,6 @@ def detect_format(path: str | PathLike) -> str:
     )
 
 
-STANDARD_STREAM = "-"
-"""The file name that stands for standard input where a measurement is read and standard
-output where one is written, as most command-line tools take it: ``cat car.cxf | flakelab
-inspect -``, ``flakelab convert scan.xlsx - --format csv | …``. Errors name it ``stdin`` or
-``stdout``."""
-
-
 def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format; spectra an instrument's
     export wrote in percent read as reflectance factors (:func:`percent_evidence`)."""
@@ -215,7 +210,7 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
     with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
         copy = Path(folder) / (Path(named).name or "input")
         try:
-            data = _stdin_bytes() if named == "stdin" else Path(source).read_bytes()
+            data = standard_input() if named == "stdin" else Path(source).read_bytes()
             if data.startswith(UTF16_BOMS):
                 data = data.decode("utf-16").encode("utf-8")
             copy.write_bytes(data)
@@ -227,18 +222,6 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
             return _read_as_written(copy)
         except MeasurementFileError as error:
             raise MeasurementFileError(named, error.problem, field=error.field) from None
-
-
-def _stdin_bytes() -> bytes:
-    """What is piped into standard input; refused where it is a terminal, where reading it
-    would wait, silent, for a measurement typed by hand."""
-    if sys.stdin is None or sys.stdin.isatty():
-        raise MeasurementFileError(
-            "stdin",
-            "a terminal, not a file: pipe a measurement into it ('… | flakelab "
-            "inspect -'), or name the file",
-        )
-    return sys.stdin.buffer.read()
 
 
 def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:

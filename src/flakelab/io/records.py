@@ -14,6 +14,7 @@ import math
 import os
 import re
 import stat
+import sys
 import tempfile
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -160,10 +161,43 @@ def text_encoding(path: str | PathLike) -> str:
         return "utf-16" if handle.read(2) in UTF16_BOMS else "utf-8-sig"
 
 
+STANDARD_STREAM = "-"
+"""The file name that stands for standard input where a file is read and standard output
+where a measurement is written, as most command-line tools take it: ``cat car.cxf |
+flakelab inspect -``, ``… | flakelab weigh - --quantity 1l``, ``flakelab convert scan.xlsx -
+--format csv | …``. Errors name it ``stdin`` or ``stdout``."""
+
+
+_READ_STDIN: list = []
+"""The standard input read already, where one was: it holds one file, and a command given
+``-`` twice (``compare - -``, ``correct - -r -``) met it empty the second time."""
+
+
+def standard_input() -> bytes:
+    """What is piped into standard input; refused where it is a terminal, where reading it
+    would wait, silent, for a file typed by hand, and where it was read already."""
+    if sys.stdin is None or sys.stdin.isatty():
+        raise MeasurementFileError(
+            "stdin",
+            "a terminal, not a file: pipe the file into it ('… | flakelab inspect -'), or name "
+            "the file",
+        )
+    if _READ_STDIN and _READ_STDIN[0] is sys.stdin:
+        raise MeasurementFileError(
+            "stdin", "read already for another of this command's files: - stands for one file"
+        )
+    _READ_STDIN[:] = [sys.stdin]
+    return sys.stdin.buffer.read()
+
+
 def text_of(path: str | PathLike) -> str:
     """A text file's contents in :func:`text_encoding`'s encoding: a JSON or TOML file that
     Windows wrote is read as well as any, UTF-16 from PowerShell's ``>`` or UTF-8 with the
-    byte-order mark of an older Notepad (both were refused, "Unexpected UTF-8 BOM")."""
+    byte-order mark of an older Notepad (both were refused, "Unexpected UTF-8 BOM").
+    :data:`STANDARD_STREAM` reads standard input (:func:`standard_input`)."""
+    if os.fspath(path) == STANDARD_STREAM:
+        data = standard_input()
+        return data.decode("utf-16" if data.startswith(UTF16_BOMS) else "utf-8-sig")
     return Path(path).read_text(encoding=text_encoding(path))
 
 
