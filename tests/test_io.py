@@ -666,6 +666,9 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
     assert weighed.returncode == 0, weighed.stderr
     from_file = json.loads(cli("weigh", recipe, "--quantity", "1l", "--json").stdout)
     assert json.loads(weighed.stdout) == from_file | {"recipe": "-"}
+    tight = b'name = "tight"\n[default]\nde00 = 0.3\n'
+    judged = cli("compare", "--example", "--tolerance", "-", "--json", input=tight)
+    assert json.loads(judged.stdout)["tolerance"] == "tight", judged.stderr
     library = cli("library", "show", "-", "--json", input=demo_library_path().read_bytes())
     assert library.returncode == 0 and json.loads(library.stdout)["library"] == "flakelab demo"
     refused = cli("inspect", "-", "--images", tmp_path / "pictures", input=workbook.read_bytes())

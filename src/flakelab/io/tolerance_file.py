@@ -23,7 +23,7 @@ from pathlib import Path
 
 from flakelab.core.tolerance import TOLERANCE_PRESETS, Tolerance
 from flakelab.errors import FlakelabError
-from flakelab.io.records import json_value, text_of, toml_value
+from flakelab.io.records import STANDARD_STREAM, json_value, text_of, toml_value
 
 __all__ = ["read_tolerance"]
 
@@ -33,7 +33,7 @@ def read_tolerance(name_or_path: str | PathLike) -> Tolerance:
     if str(name_or_path) in TOLERANCE_PRESETS:
         return TOLERANCE_PRESETS[str(name_or_path)]
     path = Path(name_or_path)
-    if not path.is_file():
+    if not path.is_file() and str(path) != STANDARD_STREAM:
         raise FlakelabError(
             f"{name_or_path}: neither a tolerance preset ({', '.join(TOLERANCE_PRESETS)}) "
             f"nor a tolerance file"
