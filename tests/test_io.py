@@ -673,12 +673,14 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
     assert library.returncode == 0 and json.loads(library.stdout)["library"] == "flakelab demo"
     refused = cli("inspect", "-", "--images", tmp_path / "pictures", input=workbook.read_bytes())
     assert refused.returncode == 2 and "--images: stdin:" in refused.stderr, refused.stderr
-    monkeypatch.setattr(sys, "stdin", open(os.devnull))  # not a terminal: read, empty
-    with pytest.raises(MeasurementFileError, match="^stdin: empty file"):
-        flakelab.io.read_measurements("-")
-    monkeypatch.setattr(sys.stdin, "isatty", lambda: True)
-    with pytest.raises(MeasurementFileError, match="^stdin: a terminal, not a file"):
-        flakelab.io.read_measurements("-")
+    with open(os.devnull) as null:  # not a terminal: read, empty
+        monkeypatch.setattr(sys, "stdin", null)
+        with pytest.raises(MeasurementFileError, match="^stdin: empty file"):
+            flakelab.io.read_measurements("-")
+        monkeypatch.setattr(null, "isatty", lambda: True)
+        with pytest.raises(MeasurementFileError, match="^stdin: a terminal, not a file"):
+            flakelab.io.read_measurements("-")
+        monkeypatch.undo()
 
 
 def test_measurements_are_converted_to_standard_output(tmp_path, cli, capsysbinary):
