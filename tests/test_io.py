@@ -683,6 +683,23 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
         monkeypatch.undo()
 
 
+def test_a_file_named_stdin_is_read_as_a_file(tmp_path, monkeypatch):
+    """Only ``-`` stands for standard input: a UTF-16 file (read through a copy, as a pipe
+    is) that happens to be named ``stdin`` is read from its file, where the copy took the
+    name its errors give for standard input and read standard input."""
+    from flakelab.data import example_path
+
+    monkeypatch.chdir(tmp_path)
+    write_measurements(read_measurements(example_path("target")), tmp_path / "t.csv")
+    (tmp_path / "stdin").write_bytes((tmp_path / "t.csv").read_text().encode("utf-16"))
+    with open(os.devnull) as null:
+        monkeypatch.setattr(sys, "stdin", null)
+        read = read_measurements("stdin")
+    np.testing.assert_array_equal(
+        read[0].reflectance, read_measurements(tmp_path / "t.csv")[0].reflectance
+    )
+
+
 def test_measurements_are_converted_to_standard_output(tmp_path, cli, capsysbinary):
     """``flakelab convert scan.xlsx - --format csv | …``: a TARGET of ``-`` is standard
     output, in the format ``--format`` names (before: "-: unknown output extension ''"), and

@@ -206,11 +206,12 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
     head, once read, is gone (the reader met the rest alone and called it, say, a CSV file
     missing its 'sample' column); UTF-16 was called "binary content". Errors name the
     source, standard input (:data:`STANDARD_STREAM`) as ``stdin``."""
-    named = "stdin" if os.fspath(source) == STANDARD_STREAM else source
+    piped = os.fspath(source) == STANDARD_STREAM
+    named = "stdin" if piped else source
     with tempfile.TemporaryDirectory(prefix="flakelab-") as folder:
         copy = Path(folder) / (Path(named).name or "input")
         try:
-            data = standard_input() if named == "stdin" else Path(source).read_bytes()
+            data = standard_input() if piped else Path(source).read_bytes()
             if data.startswith(UTF16_BOMS):
                 data = data.decode("utf-16").encode("utf-8")
             copy.write_bytes(data)
