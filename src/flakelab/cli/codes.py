@@ -68,8 +68,7 @@ def codes_command(
     if not rows:
         errors.print(
             f"no cases {which_cases(shop, None)}{_shop_hint(database, shop)} in {label} record "
-            "a colour code ('cases "
-            "record --colour-code', a case file's colour_code column)",
+            "a colour code ('cases record --colour-code', a case file's colour_code column)",
             highlight=False,
             soft_wrap=True,
         )

@@ -883,7 +883,7 @@ def _stored_or_told(shop: str, database: str | None, version: int | None = None)
 
 def _no_tins_stored(shop: str, database: str | None) -> FlakelabError:
     """The error for a shop with no tins stored, saying how to store them, or which shop
-    with tins it likely means (:func:`~flakelab.core.wording.did_you_mean`)."""
+    with tins it likely means (:func:`~flakelab.core.wording.shop_meant`)."""
     from flakelab.cases.shop_lots import list_stored_lots
 
     engine = existing_engine(database)
