@@ -75,26 +75,24 @@ def screening_rates(data, config: TrainingConfig, epochs: int = 2) -> dict[str, 
     partitions, rows = fold_rows(data.x.shape[0], config)
     models = [_new_model(data, config, r) for r in rows]
     names = [f"fold {k}" for k in range(config.folds)]
-    warm = [r[:4096] for r in rows]  # first calls pay one-off costs
-    fit(models, data, warm, 1, config.learning_rate, config, [], names)
-    fit(models[:1], data, warm[:1], 1, config.learning_rate, config, [], names[:1])
+    rate = config.learning_rate
+    runs = (
+        lambda n: fit(models, data, rows, n, rate, config, [], names),
+        lambda n: [
+            fit([m], data, [r], n, rate, config, [], [k])
+            for m, r, k in zip(models, rows, names, strict=True)
+        ],
+        lambda n: fit(models[:1], data, partitions[:1], n, rate, config, [], ["s"]),
+    )
+    for run in runs:
+        run(1)  # first calls pay one-off costs: on a GPU, the step compiled for each batch shape
 
     def seconds(run) -> float:
         start = time.perf_counter()
-        run()
+        run(epochs)
         return (time.perf_counter() - start) / epochs
 
-    rate = config.learning_rate
-    together = seconds(lambda: fit(models, data, rows, epochs, rate, config, [], names))
-    alone = seconds(
-        lambda: [
-            fit([m], data, [r], epochs, rate, config, [], [k])
-            for m, r, k in zip(models, rows, names, strict=True)
-        ]
-    )
-    session = seconds(
-        lambda: fit(models[:1], data, partitions[:1], epochs, rate, config, [], ["s"])
-    )
+    together, alone, session = (seconds(run) for run in runs)
     sessions = config.folds - 1
     return {
         "fold_epoch_seconds_side_by_side": together,
