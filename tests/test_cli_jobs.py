@@ -1494,3 +1494,52 @@ def test_a_recorded_case_keeps_the_tins_its_recipe_was_poured_from(tmp_path, cli
               "--lots", str(lots), "-d", str(tmp_path / "other.db"))  # fmt: skip
     assert run.returncode == 2 and "tins.json" in run.stderr and "Unobtainium" in run.stderr
     assert "Traceback" not in run.stderr
+
+
+def _colour_alone(measurement, path):
+    """``measurement`` as a file of L*a*b* (D65/10) and texture alone, as an instrument that
+    exports colour and no spectra writes it."""
+    keys = list(measurement.texture)
+    lines = [",".join(["sample", "geometry", "L", "a", "b", *keys])]
+    for name, lab in zip(measurement.geometry_names, measurement.lab(), strict=True):
+        texture = [repr(measurement.texture[k]) for k in keys]
+        lines.append(",".join([measurement.sample, name, *map(repr, lab), *texture]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_index(tmp_path, cli):
+    """The example car and spray-out, each as the L*a*b* of its spectra and nothing else:
+    inspect and compare say their spectra were recovered; the colour differences are those of
+    the measured spectra, and no metamerism index is given. The correction weighs none, and
+    says so; a case is not recorded from them (the model would learn invented spectra)."""
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    lab_target = _colour_alone(read_measurement(target), tmp_path / "car.csv")
+    lab_sprayed = _colour_alone(read_measurement(sprayed), tmp_path / "spray.csv")
+    seen = json.loads(cli("inspect", lab_target, "--json").stdout)
+    assert "gives L*a*b* alone" in seen["spectra_recovered"]
+    assert not any("de00_vs_stored" in g for g in seen["geometries"])
+    measured = json.loads(cli("compare", target, sprayed, "--json").stdout)
+    alone = json.loads(cli("compare", lab_target, lab_sprayed, "--json").stdout)
+    assert [g["de00"] for g in alone["geometries"]] == pytest.approx(
+        [g["de00"] for g in measured["geometries"]], abs=1e-6
+    )
+    assert measured["metamerism_index_max"] and alone["metamerism_index_max"] == {}
+    assert len(alone["spectra_recovered"]) == 2
+    run = cli("correct", lab_target, "--recipe", recipe, "--sprayed", lab_sprayed, "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["sprayout_metamerism_index_max"] == report["expected_metamerism_index_max"] == {}
+    assert sum("no metamerism index is weighed" in n for n in report["notes"]) == 2
+    shown = cli("correct", lab_target, "--recipe", recipe, "--sprayed", lab_sprayed)
+    assert shown.returncode == 0 and "metamerism index against" not in shown.stdout
+    database = tmp_path / "shop.db"
+    refused = cli("cases", "record", lab_target, "-r", recipe, "--sprayed", sprayed, "-d",
+                  database)  # fmt: skip
+    assert refused.returncode != 0
+    assert (
+        "target: 'Blue metallic target (synthetic)' gives L*a*b* alone: a case keeps spectra"
+        in refused.stderr
+    ), refused.stderr
+    assert not database.exists() or "no cases" in cli("cases", "list", "-d", database).stderr

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flakelab.core import delta_E_CIE2000
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io import (
@@ -129,7 +130,9 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
         (HEADER + "\n" + ROW[:40], "row 2", "truncated line"),
         (HEADER.replace("geometry", "angle") + "\n" + ROW, "header", "missing column 'geometry'"),
         (HEADER + "\n" + ROW.replace(",0.5", ",-3", 1), "row 2, 400 nm", "reflectance factor"),
-        ("sample,geometry,L,a,b\nS1,45as15,50,1,2", "header", "L*a*b* alone: flakelab reads"),
+        ("sample,geometry,instrument\nS1,45as15,x", "header", "no reflectance columns"),
+        ("sample,geometry,L,a,b\nS1,45as15,50,1,2\nS1,45as45,,1,2", "row 3, L", "a number"),
+        ("sample,geometry,L,a,b\nS1,45as15,50,130,2", "row 2", "no colour a surface reflects"),
     ],
 )
 def test_bad_csv_names_file_field_and_problem(tmp_path, text, field, problem):
@@ -1171,3 +1174,60 @@ def test_a_date_cell_whose_serial_is_no_date_reads_as_no_date(rich_measurement, 
         back = read_measurement(path)
     assert back.measured_at is None
     np.testing.assert_allclose(back.reflectance, rich_measurement.reflectance, atol=1e-9)
+
+
+def test_a_file_of_lab_alone_is_read_with_spectra_recovered_from_it(ma_t12_dir, tmp_path):
+    """The instrument's own L*a*b* of the 230 real MA-T12 samples (2,760 readings, no spectra):
+    each reading gets a spectrum that gives the file's colour (to ΔE00 1e-6) and so the colour
+    of the measured spectra to the instrument's 5.6e-6. Written as CSV it is written as read,
+    L*a*b* alone; another format, which would give the spectra as measured, is refused, and
+    so is one CSV of both kinds."""
+    labs = ma_t12_dir / "all_samples_instrument_lab_d65_10.csv"
+    recovered = read_measurements(labs)
+    measured = read_measurements(ma_t12_dir / "all_samples_spectra.csv")
+    assert len(recovered) == 230 and all(m.spectra_recovered for m in recovered)
+    assert not any(m.spectra_recovered for m in measured)
+    for r, m in zip(recovered, measured, strict=True):
+        assert r.sample == m.sample and r.geometry_names == m.geometry_names
+        assert delta_E_CIE2000(r.lab(), r.stored_lab).max() < 1e-6
+        assert delta_E_CIE2000(r.lab(), m.lab()).max() < 1e-4
+    written = tmp_path / "again.csv"
+    write_measurements(recovered[:3], written)
+    assert (
+        written.read_text().splitlines()[0]
+        == "sample,geometry,L,a,b,lab_conditions,instrument,measured_at"
+    )
+    again = read_measurements(written)
+    assert all(a.spectra_recovered for a in again)
+    np.testing.assert_allclose(again[2].reflectance, recovered[2].reflectance, atol=1e-12)
+    for suffix in (".cxf", ".json", ".xlsx"):
+        with pytest.raises(
+            MeasurementFileError, match="recovered from L.a.b.: a .* file would give"
+        ):
+            write_measurements(recovered[:1], tmp_path / f"out{suffix}")
+        assert not (tmp_path / f"out{suffix}").exists()
+    with pytest.raises(MeasurementFileError, match="spectra measured, or L.a.b. alone, not both"):
+        write_measurements([measured[0], recovered[1]], tmp_path / "both.csv")
+
+
+def test_a_cxf_of_colorcielab_alone_is_read_with_spectra_recovered(rich_measurement, tmp_path):
+    """A CxF3 file whose Objects hold ColorCIELab and no ReflectanceSpectrum (a paint maker's
+    colour data): its readings get spectra that give its colours, at its geometries, under the
+    conditions its ColorSpecifications name."""
+    cxf = tmp_path / "spectra.cxf"
+    write_measurements([rich_measurement], cxf)
+    text = cxf.read_text()
+    spectrum = r"<(\w+:)ReflectanceSpectrum[^>]*>[^<]*</\1ReflectanceSpectrum>"
+    alone = tmp_path / "colour.cxf"
+    alone.write_text(re.sub(spectrum, "", text))
+    assert "ReflectanceSpectrum" not in alone.read_text()
+    read = read_measurement(alone)
+    assert read.spectra_recovered and read.geometry_names == rich_measurement.geometry_names
+    conditions = rich_measurement.stored_lab_conditions
+    assert read.stored_lab_conditions == conditions
+    assert delta_E_CIE2000(read.lab(conditions), rich_measurement.stored_lab).max() < 1e-6
+    nothing = tmp_path / "nothing.cxf"
+    lab = r"<(\w+:)ColorCIELab[^>]*>.*?</\1ColorCIELab>"
+    nothing.write_text(re.sub(lab, "", alone.read_text()))
+    with pytest.raises(MeasurementFileError, match="no ReflectanceSpectrum or ColorCIELab"):
+        read_measurement(nothing)

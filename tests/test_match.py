@@ -1104,6 +1104,35 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
     assert all(np.allclose(exact[k], best[1.0].metamerism[k]) for k in exact)
 
 
+def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
+    hybrid, example_by_metamerism
+):
+    """The example car given as its L*a*b* alone (spectra recovered from it, a metamer of
+    many): the search cannot weigh a metamerism index against it and so finds what the
+    measured spectra give with --metamerism 0, the same recipe (phthalo green and quinacridone
+    violet, ΔE00 0.51 at worst, where the index steers the measured car to phthalo blue GS at
+    0.20), with no index in the candidates and a note saying why."""
+    from flakelab.core.colorimetry import reflectance_from_Lab
+    from flakelab.match.models import effect_mask
+
+    target, best, _ = example_by_metamerism
+    alone = replace(
+        target,
+        reflectance=reflectance_from_Lab(target.lab()),
+        stored_lab=target.lab(),
+        spectra_recovered=True,
+    )
+    effect = effect_mask(read_library(None), hybrid.toners)
+    result = match(alone, hybrid, effect, settings=MatchSettings(candidates=1))
+    found = result.candidates[0]
+    assert set(found.fractions) == set(best[0.0].fractions) != set(best[1.0].fractions)
+    for toner, share in found.fractions.items():
+        assert share == pytest.approx(best[0.0].fractions[toner], abs=1e-4)
+    assert found.de00.max() == pytest.approx(best[0.0].de00.max(), abs=1e-3)
+    assert found.metamerism == {} and found.to_dict()["metamer"] is False
+    assert any("gives L*a*b* alone" in n and "no metamerism index" in n for n in result.notes)
+
+
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
     """The car's blue is phthalo blue GS (the match that weighs metamerism). The daylight-only
     match of the example without the phthalo blues stands in phthalo green and quinacridone

@@ -136,6 +136,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.measurement import recovered_note
     from flakelab.core.tolerance import failing_geometries, failures
     from flakelab.io import read_recipe, read_tolerance
     from flakelab.match.correction import correct, mismatch_note
@@ -164,6 +165,9 @@ def correct_command(
     )
     target_R, _, _ = spectra_for_model(target, target_reading, forward)
     sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)
+    recovered = [note for r in (target_reading, sprayed_reading) if (note := recovered_note(r))]
+    if recovered:  # a metamer of many: neither weighed nor reported
+        metamerism, test_lights = 0.0, ()
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
     shop_habits = habits_for(
         habits, shop, database, forward, named=named, with_tins=tins is not None
@@ -196,6 +200,7 @@ def correct_command(
         "sprayout_passes": not failing and not texture_failing,
         "sprayout_failing": failures(failing, texture_failing),
         "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction")
+        + [f"{note}: no metamerism index is weighed or taken" for note in recovered]
         + lot_notes,
         "lots": tins and lots_report(tins),
     }
@@ -518,11 +523,12 @@ def _print_correction(report: dict) -> None:
             assumed += " beyond the shop's habits, which persist"
     console.print(f"model: {report['model']}; {rounding_text(report)}", highlight=False)
     console.print(f"expected ΔE00 assumes {assumed}", highlight=False)
-    console.print(
-        metamerism_text(
-            report["sprayout_metamerism_index_max"], report["sprayout_metamer"], "spray-out "
+    if report["sprayout_metamerism_index_max"]:  # none against spectra recovered from L*a*b*
+        console.print(
+            metamerism_text(
+                report["sprayout_metamerism_index_max"], report["sprayout_metamer"], "spray-out "
+            )
+            + f"; expected {metamerism_values(report['expected_metamerism_index_max'])}",
+            highlight=False,
         )
-        + f"; expected {metamerism_values(report['expected_metamerism_index_max'])}",
-        highlight=False,
-    )
     print_notes(report["notes"])

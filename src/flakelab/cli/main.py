@@ -91,6 +91,8 @@ def _print_description(info: dict[str, Any]) -> None:
     console.print(line, highlight=False)
     if info["texture"]:
         console.print("texture: " + "  ".join(f"{k} {v:.2f}" for k, v in info["texture"].items()))
+    if info["spectra_recovered"]:
+        console.print(f"note: {info['spectra_recovered']}", highlight=False)
 
 
 @app.command()
@@ -448,9 +450,12 @@ def _print_comparison(report: dict[str, Any], tol: Any) -> None:
         f"{verdict}",
         highlight=False,
     )
-    worst = "  ".join(f"{k} {v:.2f}" for k, v in report["metamerism_index_max"].items())
-    against = f"ISO 18314-4, ΔE00 from {report['conditions']}, worst geometry"
-    console.print(f"metamerism index ({against}): {worst}", highlight=False)
+    if report["metamerism_index_max"]:
+        worst = "  ".join(f"{k} {v:.2f}" for k, v in report["metamerism_index_max"].items())
+        against = f"ISO 18314-4, ΔE00 from {report['conditions']}, worst geometry"
+        console.print(f"metamerism index ({against}): {worst}", highlight=False)
+    for note in report["spectra_recovered"]:
+        console.print(f"note: {note}; no metamerism index is taken against it", highlight=False)
     if report["texture_difference"]:
         limits = {k: tol.texture_limits()[k] for k in report["texture_limit_share"]}
         texture = report["texture_difference"]

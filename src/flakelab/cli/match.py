@@ -742,7 +742,8 @@ def _print_match(report: dict, where: str = "") -> None:
             )
         # a recipe with new toners is flagged by its model, which names their physics scaling
         console.print(f"model: {c['model']}; {rounding_text(c)}", highlight=False)
-        console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
+        if c["metamerism_index_max"]:  # none against spectra recovered from L*a*b*
+            console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
     if report.get("recorded_nearest"):
         from flakelab.cli.cases import nearest_table
 

@@ -19,7 +19,7 @@ from flakelab.core.difference import (
     worst_per_light,
 )
 from flakelab.core.geometry import flake_angles
-from flakelab.core.measurement import Measurement
+from flakelab.core.measurement import Measurement, recovered_note
 from flakelab.core.tolerance import Tolerance, failing_geometries, over_limit, tolerance_preset
 
 __all__ = [
@@ -43,7 +43,8 @@ def describe(measurement: Measurement, conditions: Conditions = D65_10) -> dict[
     lch = Lab_to_LCh(lab)
     theta_flake, theta_inc = flake_angles(measurement.geometries)
     stored_de = None
-    if measurement.stored_lab is not None and measurement.stored_lab_conditions == conditions:
+    stored = measurement.stored_lab is not None and not measurement.spectra_recovered
+    if stored and measurement.stored_lab_conditions == conditions:  # recovered: 0 by making
         stored_de = delta_E_CIE2000(lab, measurement.stored_lab)
     geometries = []
     for i, g in enumerate(measurement.geometries):
@@ -70,6 +71,7 @@ def describe(measurement: Measurement, conditions: Conditions = D65_10) -> dict[
         "geometries": geometries,
         "flop_index": measurement.flop_index(conditions),
         "texture": dict(measurement.texture),
+        "spectra_recovered": recovered_note(measurement),
     }
 
 
@@ -92,6 +94,8 @@ class Comparison:
     metamerism: dict[str, NDArray[np.float64]]  # per test illuminant and geometry
     # each texture reading the tolerance bounds and both hold: |Δ| as a share of its limit
     texture_share: dict[str, float]
+    # what the reports say of each measurement whose spectra were recovered from L*a*b*
+    recovered: tuple[str, ...] = ()
 
     @property
     def failing_texture(self) -> list[str]:
@@ -162,6 +166,7 @@ class Comparison:
             "texture_difference": texture,
             "texture_limit_share": self.texture_share,
             "failing_texture": self.failing_texture,
+            "spectra_recovered": list(self.recovered),
         }
 
 
@@ -175,7 +180,8 @@ def compare(
     lights: tuple[str, ...] = METAMERISM_ILLUMINANTS,
 ) -> Comparison:
     """Compare ``sample`` with ``reference`` at every geometry both hold; the metamerism index
-    from ``conditions`` to each of the test ``lights``.
+    from ``conditions`` to each of the test ``lights``, where both measured their spectra (one
+    recovered from L*a*b* is a metamer of many: an index against it means nothing).
 
     Raises
     ------
@@ -192,6 +198,10 @@ def compare(
     ref, smp = reference.select(common), sample.select(common)
     lab_ref, lab_smp = ref.lab(conditions), smp.lab(conditions)
     de00, dLCH, passed = tolerance.judge(common, lab_ref, lab_smp)
+    recovered = tuple(note for m in (reference, sample) if (note := recovered_note(m)))
+    metamerism = {} if recovered else metamerism_indices(
+        ref.storage_spectra(common), smp.storage_spectra(common), conditions, lights
+    )  # fmt: skip
     return Comparison(
         reference=reference,
         sample=sample,
@@ -205,10 +215,9 @@ def compare(
         limit_share=tolerance.share_of_limit(common, de00=de00, dLCH=dLCH),
         tolerance=tolerance,
         conditions=conditions,
-        metamerism=metamerism_indices(
-            ref.storage_spectra(common), smp.storage_spectra(common), conditions, lights
-        ),
+        metamerism=metamerism,
         texture_share=tolerance.texture_share(reference.texture, sample.texture),
+        recovered=recovered,
     )
 
 

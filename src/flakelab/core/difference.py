@@ -74,8 +74,8 @@ def worst_light(indices: dict[str, NDArray]) -> tuple[str, float]:
 def is_metamer(indices: dict[str, NDArray]) -> bool:
     """Whether a recipe with these metamerism indices (per test light, as
     :func:`metamerism_indices` gives them) is a metamer of its target: an index over
-    :data:`METAMERISM_NOTICE` under some test light, judged unrounded."""
-    return worst_light(indices)[1] > METAMERISM_NOTICE
+    :data:`METAMERISM_NOTICE` under some test light, judged unrounded; none taken: not one."""
+    return bool(indices) and worst_light(indices)[1] > METAMERISM_NOTICE
 
 
 def worst_per_light(indices: dict[str, NDArray]) -> dict[str, float]:
@@ -288,7 +288,8 @@ def metamerism_indices(
     wavelengths: ArrayLike = WAVELENGTHS,
 ) -> dict[str, NDArray[np.float64]]:
     """:func:`metamerism_index` under each illuminant of ``tests`` (None:
-    :data:`METAMERISM_ILLUMINANTS`), by its name; the pair's XYZ under ``reference`` taken
+    :data:`METAMERISM_ILLUMINANTS`; ``()``: none, for a pair one of which has no measured
+    spectrum), by its name; the pair's XYZ under ``reference`` taken
     once for all of them. A sample that reads black under the reference (a tristimulus value
     of 0) has no multiplicative correction: its value is taken at :data:`BLACK_TRISTIMULUS`, so
     that its index is the pair's plain difference under the test light, not 0/0."""
@@ -297,7 +298,7 @@ def metamerism_indices(
     XYZ_standard_r = reflectance_to_XYZ(standard, wavelengths, reference)
     XYZ_sample_r = np.maximum(reflectance_to_XYZ(sample, wavelengths, reference), BLACK_TRISTIMULUS)
     indices = {}
-    for test in tests or METAMERISM_ILLUMINANTS:
+    for test in METAMERISM_ILLUMINANTS if tests is None else tests:
         conditions = Conditions(test, reference.observer)
         white = colour.XYZ_to_xy(white_point(wavelengths, conditions))
         indices[test] = np.asarray(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 
 import numpy as np
@@ -26,6 +26,7 @@ __all__ = [
     "TEXTURE_RANGE",
     "outside",
     "mean_reading",
+    "recovered_note",
 ]
 
 TEXTURE_READINGS: tuple[str, ...] = (
@@ -111,6 +112,11 @@ class Measurement:
     stored_lab : ndarray [geometry, 3] | None
         L*a*b* as the instrument or file stated it, under ``stored_lab_conditions``.
     metadata : mapping of further text fields kept through conversions.
+    spectra_recovered : bool
+        The file gave L*a*b* alone (``stored_lab``) and ``reflectance`` was recovered from it
+        (:func:`~flakelab.core.colorimetry.reflectance_from_Lab`): its colour under
+        ``stored_lab_conditions`` is the file's, its spectral shape one metamer of many, so
+        no metamerism index is taken against it and no model learns from it.
     """
 
     sample: str
@@ -123,6 +129,7 @@ class Measurement:
     stored_lab: NDArray[np.float64] | None = None
     stored_lab_conditions: Conditions = D65_10
     metadata: Mapping[str, str] = field(default_factory=dict)
+    spectra_recovered: bool = False
 
     def __post_init__(self) -> None:
         wl = np.asarray(self.wavelengths, dtype=float)
@@ -196,18 +203,24 @@ class Measurement:
     def select(self, geometries: tuple[Geometry, ...] | list[str]) -> Measurement:
         """The same measurement restricted to (and ordered as) ``geometries``."""
         rows = [self.index(g) for g in geometries]
-        return Measurement(
-            sample=self.sample,
+        return replace(
+            self,
             geometries=tuple(self.geometries[i] for i in rows),
-            wavelengths=self.wavelengths,
             reflectance=self.reflectance[rows],
-            texture=self.texture,
-            instrument=self.instrument,
-            measured_at=self.measured_at,
             stored_lab=None if self.stored_lab is None else self.stored_lab[rows],
-            stored_lab_conditions=self.stored_lab_conditions,
-            metadata=self.metadata,
         )
+
+
+def recovered_note(measurement: Measurement) -> str | None:
+    """What a report says of a measurement whose spectra were recovered from its L*a*b*
+    (None for measured spectra)."""
+    if not measurement.spectra_recovered:
+        return None
+    return (
+        f"{measurement.sample}: its file gives L*a*b* alone; its spectra were recovered from "
+        f"it (one metamer of many), so its colour under {measurement.stored_lab_conditions} "
+        "is the file's, under any other light an estimate"
+    )
 
 
 def mean_reading(readings: Sequence[Measurement]) -> Measurement:
@@ -243,4 +256,5 @@ def mean_reading(readings: Sequence[Measurement]) -> Measurement:
         instrument=first.instrument,
         measured_at=first.measured_at,
         metadata={"averaged": names},
+        spectra_recovered=any(r.spectra_recovered for r in readings),
     )

@@ -282,6 +282,14 @@ def write_measurements(
         raise MeasurementFileError(
             "stdout" if to_stdout else path, f"a decimal comma is for a CSV file, not {name}"
         )
+    if name != "csv" and (
+        recovered := next((m for m in measurements if m.spectra_recovered), None)
+    ):
+        raise MeasurementFileError(
+            "stdout" if to_stdout else path,
+            f"{recovered.sample}'s spectra were recovered from L*a*b*: a {name} file would give "
+            "them as measured; write CSV, which keeps its L*a*b* alone",
+        )
     options = {"decimal_comma": True} if decimal_comma else {}
     if to_stdout:
         return _write_to_stdout(measurements, name, options)

@@ -9,6 +9,11 @@ Columns, in any order after the first two:
 ``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
 ``lab_conditions``                optional, e.g. ``D65/10``
 
+A file of ``L``, ``a``, ``b`` without spectra (an instrument that exports colour alone, a
+paint maker's data sheet) is read with spectra recovered from its colour (one metamer of
+many, :func:`~flakelab.core.colorimetry.reflectance_from_Lab`), and says so
+(``Measurement.spectra_recovered``).
+
 Lines starting with ``#`` are comments. Comma, semicolon or tab separated (detected); a
 semicolon or tab separated file may write its numbers with a decimal comma (``0,2039``), as
 spreadsheets do in most of Europe.
@@ -25,6 +30,7 @@ import numpy as np
 
 from flakelab.core.colorimetry import D65_10
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
@@ -40,6 +46,7 @@ from flakelab.io.records import (
     parse_spectrum,
     parse_texture,
     parse_wavelength_header,
+    recovered_readings,
     spreadsheet_table,
     write_atomically,
 )
@@ -94,13 +101,16 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
     spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
     has_lab = all(k in columns for k in "Lab")
-    if not spectral:
-        alone = " (L*a*b* alone: flakelab reads the spectra, R400 … R700; export them too)"
-        found = alone if has_lab else ""
+    if not spectral and not has_lab:
         raise MeasurementFileError(
-            path, f"no reflectance columns such as R400{found}", field="header"
+            path, "no reflectance columns such as R400, nor L, a and b", field="header"
         )
-    wavelengths = parse_wavelength_header(path, [header[i] for i in spectral], "header")
+    lab_alone = not spectral  # spectra recovered from the L*a*b* (a metamer of many)
+    wavelengths = (
+        WAVELENGTHS
+        if lab_alone
+        else parse_wavelength_header(path, [header[i] for i in spectral], "header")
+    )
     if delimiter != ",":  # the comma is free to be the decimal mark
         numeric = [*spectral, *(columns[k] for k in (*"Lab", *TEXTURE_READINGS) if k in columns)]
         rows = ((number, _decimal_points(row, numeric)) for number, row in rows)
@@ -120,7 +130,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         geometry = parse_geometry_name(path, row[columns["geometry"]], f"{where}, geometry")
         lab = (
             parse_lab(path, [row[columns[k]] for k in "Lab"], [f"{where}, {k}" for k in "Lab"])
-            if has_lab and row[columns["L"]].strip()
+            if has_lab and (row[columns["L"]].strip() or lab_alone)
             else None
         )
         measured_at = None
@@ -154,7 +164,9 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
                 geometry=geometry,
                 lab=lab,
                 measured_at=measured_at,
-                reflectance=parse_spectrum(path, [row[i] for i in spectral], wavelengths, where),
+                reflectance=None
+                if lab_alone
+                else parse_spectrum(path, [row[i] for i in spectral], wavelengths, where),
             )
         )
     if len(conditions) > 1:
@@ -162,6 +174,8 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     lab_conditions = (
         parse_conditions(path, conditions.pop(), "lab_conditions") if conditions else D65_10
     )
+    if lab_alone and readings:
+        readings = recovered_readings(path, readings, lab_conditions)
     return assemble(
         path,
         readings,
@@ -169,6 +183,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         lab_conditions=lab_conditions,
         texture=texture,
         instrument=instruments.pop() if len(instruments) == 1 else None,
+        spectra_recovered=lab_alone,
     )
 
 
@@ -177,13 +192,21 @@ def write_csv(
 ) -> None:
     """Write measurements in the CSV layout above (full float precision); with
     ``decimal_comma``, as a spreadsheet in most of Europe opens it: cells separated by
-    semicolons, numbers with a decimal comma, a byte-order mark for its encoding."""
+    semicolons, numbers with a decimal comma, a byte-order mark for its encoding.
+    Measurements whose spectra were recovered from L*a*b* are written as they were read, L*a*b*
+    alone: the spectra are not measurements."""
     wavelengths = measurements[0].wavelengths
     if any(not np.array_equal(m.wavelengths, wavelengths) for m in measurements):
         raise ValueError("expected all measurements on one wavelength grid for one CSV file")
+    lab_alone = measurements[0].spectra_recovered
+    if any(m.spectra_recovered != lab_alone for m in measurements):
+        raise ValueError(
+            "expected measurements of one kind for one CSV file: spectra measured, or L*a*b* "
+            "alone, not both"
+        )
     texture_keys = [k for k in TEXTURE_READINGS if any(k in m.texture for m in measurements)]
     with_lab = any(m.stored_lab is not None for m in measurements)
-    header = ["sample", "geometry", *(f"R{w:g}" for w in wavelengths)]
+    header = ["sample", "geometry", *(f"R{w:g}" for w in wavelengths if not lab_alone)]
     header += ["L", "a", "b", "lab_conditions"] if with_lab else []
     header += ["instrument", "measured_at", *texture_keys]
 
@@ -197,7 +220,8 @@ def write_csv(
     writer.writerow(header)
     for m in measurements:
         for i, g in enumerate(m.geometries):
-            row: list[object] = [m.sample, g.name, *(number(v) for v in m.reflectance[i])]
+            spectrum = () if lab_alone else m.reflectance[i]
+            row: list[object] = [m.sample, g.name, *(number(v) for v in spectrum)]
             if with_lab:
                 lab = m.stored_lab[i] if m.stored_lab is not None else ("", "", "")
                 row += [*(number(v) if v != "" else "" for v in lab)]

@@ -28,6 +28,7 @@ from flakelab import __version__
 from flakelab.core.colorimetry import D65_10, Conditions
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import Measurement
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
@@ -38,6 +39,7 @@ from flakelab.io.records import (
     parse_number,
     parse_spectrum,
     parse_texture,
+    recovered_readings,
     write_atomically,
 )
 
@@ -129,7 +131,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
     if not objects:
         raise MeasurementFileError(path, "no Object in ObjectCollection")
 
-    readings, texture, metadata = [], {}, {}
+    readings, lab_alone, texture, metadata = [], [], {}, {}
     wavelengths: np.ndarray | None = None
     instrument = None
     lab_conditions = D65_10
@@ -142,6 +144,11 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
             if isinstance(v, cxf3.ColorCielab)
         }
         measured_at = _creation_date(path, sample, obj.creation_date)
+        lab_alone += [
+            Reading(f"Object {sample!r}, ColorCIELab {spec}", sample, geometries.get(spec), None,
+                    lab, measured_at, {"spec": spec})
+            for spec, lab in labs.items()
+        ]  # fmt: skip
         for v in values:
             if not isinstance(v, cxf3.ReflectanceSpectrum):
                 continue
@@ -197,8 +204,11 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                     instrument = value
                 elif key.startswith("meta:"):
                     metadata.setdefault(sample, {})[key[5:]] = value
-    if wavelengths is None:
-        raise MeasurementFileError(path, "no ReflectanceSpectrum in any Object")
+    if wavelengths is None and not lab_alone:
+        raise MeasurementFileError(path, "no ReflectanceSpectrum or ColorCIELab in any Object")
+    recovered = wavelengths is None  # colour alone: spectra recovered from it
+    if recovered:
+        readings, wavelengths, lab_conditions = _recovered(path, lab_alone, conditions)
     return assemble(
         path,
         readings,
@@ -207,7 +217,29 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         lab_conditions=lab_conditions,
         texture=texture,
         metadata=metadata,
+        spectra_recovered=recovered,
     )
+
+
+def _recovered(
+    path: str | PathLike, readings: list[Reading], conditions: dict[str, Conditions | None]
+) -> tuple[list[Reading], np.ndarray, Conditions]:
+    """Readings of a file that gives ColorCIELab alone, each with a spectrum recovered from
+    its colour (:func:`~flakelab.io.records.recovered_readings`); their geometries and the
+    one set of conditions their ColorSpecifications name (D65/10 where none)."""
+    for reading in readings:
+        if reading.geometry is None:
+            raise MeasurementFileError(
+                path, "its ColorSpecification has no MultiAngle BRDFAngle geometry",
+                field=reading.where,
+            )  # fmt: skip
+    named = {conditions.get(r.extras["spec"]) or D65_10 for r in readings}
+    if len(named) > 1:
+        raise MeasurementFileError(
+            path, f"ColorCIELab under several conditions: {sorted(map(str, named))}"
+        )
+    lab_conditions = named.pop()
+    return recovered_readings(path, readings, lab_conditions), WAVELENGTHS, lab_conditions
 
 
 def _lab_of(path: str | PathLike, sample: str, value: cxf3.ColorCielab) -> np.ndarray:

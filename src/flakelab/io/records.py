@@ -18,14 +18,14 @@ import sys
 import tempfile
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
-from flakelab.core.colorimetry import D65_10, Conditions
+from flakelab.core.colorimetry import D65_10, Conditions, UnreachableColour, reflectance_from_Lab
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import (
     LAB_LIMIT,
@@ -35,7 +35,7 @@ from flakelab.core.measurement import (
     Measurement,
     outside,
 )
-from flakelab.core.spectra import shape_of
+from flakelab.core.spectra import WAVELENGTHS, shape_of
 from flakelab.errors import FlakelabError, MeasurementFileError
 
 __all__ = [
@@ -72,12 +72,13 @@ _WAVELENGTH = re.compile(r"^\s*(?:R|r|nm)?\s*(\d{3}(?:\.\d+)?)\s*(?:nm)?\s*$")
 
 @dataclass
 class Reading:
-    """One spectrum of one sample at one geometry, with where it came from (for messages)."""
+    """One spectrum of one sample at one geometry, with where it came from (for messages);
+    a file of L*a*b* alone gives no spectrum (None) until :func:`recovered_readings`."""
 
     where: str
     sample: str
     geometry: Geometry
-    reflectance: np.ndarray
+    reflectance: np.ndarray | None
     lab: np.ndarray | None = None
     measured_at: datetime | None = None
     extras: dict[str, str] = field(default_factory=dict)
@@ -406,6 +407,20 @@ def parse_conditions(path: str | PathLike, text: str, where: str) -> Conditions:
         raise MeasurementFileError(path, str(error), field=where) from None
 
 
+def recovered_readings(
+    path: str | PathLike, readings: list[Reading], conditions: Conditions
+) -> list[Reading]:
+    """``readings`` of L*a*b* alone, each with a spectrum recovered from its colour under
+    ``conditions`` on the storage grid (:func:`~flakelab.core.colorimetry.reflectance_from_Lab`);
+    a colour no surface reflects is refused naming its reading."""
+    lab = np.array([r.lab for r in readings], dtype=float).reshape(-1, 3)
+    try:
+        spectra = reflectance_from_Lab(lab, WAVELENGTHS, conditions)
+    except UnreachableColour as error:
+        raise MeasurementFileError(path, str(error), field=readings[error.position].where) from None
+    return [replace(r, reflectance=R) for r, R in zip(readings, spectra, strict=True)]
+
+
 def assemble(
     path: str | PathLike,
     readings: Iterable[Reading],
@@ -415,9 +430,11 @@ def assemble(
     lab_conditions: Conditions = D65_10,
     texture: dict[str, dict[str, float]] | None = None,
     metadata: dict[str, dict[str, str]] | None = None,
+    spectra_recovered: bool = False,
 ) -> list[Measurement]:
     """Group readings by sample (file order) into measurements, checking that each sample has
-    each geometry once and that stored L*a*b* is given for all of a sample's geometries or none."""
+    each geometry once and that stored L*a*b* is given for all of a sample's geometries or none;
+    ``spectra_recovered`` where the readings' spectra were recovered from their L*a*b*."""
     groups: dict[str, list[Reading]] = {}
     for reading in readings:
         groups.setdefault(reading.sample, []).append(reading)
@@ -462,6 +479,7 @@ def assemble(
                 stored_lab=None if labs[0] is None else np.stack(labs),  # type: ignore[arg-type]
                 stored_lab_conditions=lab_conditions,
                 metadata=(metadata or {}).get(sample, {}),
+                spectra_recovered=spectra_recovered,
             )
         )
     return measurements

@@ -54,7 +54,7 @@ from flakelab.core.difference import (
     worst_light,
     worst_per_light,
 )
-from flakelab.core.measurement import TEXTURE_READINGS
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement, recovered_note
 from flakelab.core.tolerance import (
     Tolerance,
     tolerance_preset,
@@ -72,7 +72,7 @@ from flakelab.match.judging import (
     recipe_vector,
 )
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
-from flakelab.match.settings import MatchSettings
+from flakelab.match.settings import MatchSettings, without_metamerism
 from flakelab.match.stock import toners_allowed
 from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
 
@@ -461,6 +461,8 @@ def _match(
     """
     start = time.perf_counter()
     settings = _settled(settings or MatchSettings(), forward)
+    if getattr(target, "spectra_recovered", False):
+        settings = without_metamerism(settings)
     tolerance = tolerance or tolerance_preset(OBJECTIVE_DEFAULT)
     T = len(forward.toners)
     effect = np.zeros(T, bool) if effect is None else np.asarray(effect, bool)
@@ -627,6 +629,8 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
     shop's habits, and of the best candidate whether it lies outside the model's support,
     fails, is a metamer or was judged without the target's texture."""
     notes = left_out_note(unused_geometries(target, forward), forward, "match")
+    if note := recovered_note(target) if isinstance(target, Measurement) else None:
+        notes.append(f"{note}: the search weighed no metamerism index against it")
     if solid:
         notes.append(f"{solid}: a solid, matched with pigments alone")
     if habits_note:

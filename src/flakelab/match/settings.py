@@ -6,7 +6,7 @@ importing the libraries that compute with them (torch alone takes over a second)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 __all__ = [
     "CAN_QUANTITY",
@@ -100,7 +100,8 @@ class MatchSettings:
     # :class:`~flakelab.match.forward.HeldJacobian`)
     physics_every: int = 4
     # the index's test illuminants (colour-science names); None: A, F11 and LED-B3
-    # (:data:`~flakelab.core.difference.METAMERISM_ILLUMINANTS`)
+    # (:data:`~flakelab.core.difference.METAMERISM_ILLUMINANTS`); (): no index (a target
+    # whose spectra were recovered from its L*a*b*, :func:`without_metamerism`)
     lights: tuple[str, ...] | None = None
     # a target without texture readings whose colour travels less (ΔE00) is matched as a solid
     solid_travel: float = SOLID_TRAVEL
@@ -125,3 +126,10 @@ where 8 gave 0.010 ± 0.010 less than 4."""
 EXTRA_TONERS_TRIED = 8
 """Toners outside the recipe that :func:`~flakelab.match.correction.correct` tries as an
 addition, the most promising first."""
+
+
+def without_metamerism(settings: MatchSettings) -> MatchSettings:
+    """``settings`` that neither weigh nor report a metamerism index: for a target whose
+    spectra were recovered from its L*a*b* (one metamer of many, against which the index
+    means nothing)."""
+    return replace(settings, metamerism=0.0, lights=())
