@@ -151,7 +151,11 @@ def plot_measurements(
                 lw=1.5,
                 label=g.name,
             )
-        spectra.set(xlabel="wavelength [nm]", ylabel="reflectance factor", title=m.sample)
+        # spectra recovered from L*a*b* are one metamer of many: drawn so, not as measured
+        recovered = " (recovered from L*a*b*: one metamer)" if m.spectra_recovered else ""
+        spectra.set(
+            xlabel="wavelength [nm]", ylabel="reflectance factor", title=m.sample + recovered
+        )
         spectra.legend(fontsize=7, ncol=2, frameon=False)
         spectra.grid(alpha=0.3)
 
