@@ -133,6 +133,7 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
         ("sample,geometry,instrument\nS1,45as15,x", "header", "no reflectance columns"),
         ("sample,geometry,L,a,b\nS1,45as15,50,1,2\nS1,45as45,,1,2", "row 3, L", "a number"),
         ("sample,geometry,L,a,b\nS1,45as15,50,130,2", "row 2", "no colour a surface reflects"),
+        ("sample,geometry,L,a,b\nS1,45as15,2500,0,0", "row 2", "over the 100 any paint reaches"),
     ],
 )
 def test_bad_csv_names_file_field_and_problem(tmp_path, text, field, problem):

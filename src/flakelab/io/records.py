@@ -418,6 +418,15 @@ def recovered_readings(
         spectra = reflectance_from_Lab(lab, WAVELENGTHS, conditions)
     except UnreachableColour as error:
         raise MeasurementFileError(path, str(error), field=readings[error.position].where) from None
+    high = REFLECTANCE_RANGE[1]
+    if (over := np.flatnonzero(spectra.max(axis=1) > high)).size:
+        reading = readings[over[0]]
+        raise MeasurementFileError(
+            path,
+            f"L* {reading.lab[0]:g} asks a reflectance factor of {spectra[over[0]].max():.3g}, "
+            f"over the {high:g} any paint reaches near specular: the file is wrong, not the paint",
+            field=reading.where,
+        )
     return [replace(r, reflectance=R) for r, R in zip(readings, spectra, strict=True)]
 
 
