@@ -14,7 +14,7 @@ noise, with the whole offset: what a perfect split of the offset could buy. The 
 "respray", sprays the car's own paint (the hidden formula from the factory's batches) with
 the same streams: what a correction that removed every batch difference and every error of
 the model would still face, each spray's own application. ``persistent_offset`` is what the
-correction's prior σ_p (:data:`flakelab.match.correction.PERSISTENT_SD`) describes: the
+correction's prior σ_p (:data:`flakelab.match.settings.PERSISTENT_SD`) describes: the
 L*a*b* offset between the failed recipe mixed from the shop's batches, sprayed at the nominal
 application and read without noise, and the model's prediction for it (RMS and median
 absolute value over targets, geometries and components). ``defaults_foresight`` says how

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["FlakelabError", "MeasurementFileError", "MissingGeometryError", "Note", "shown"]
+__all__ = [
+    "FlakelabError",
+    "MeasurementFileError",
+    "MissingGeometryError",
+    "ModelError",
+    "Note",
+    "shown",
+]
 
 
 def shown(value: object, limit: int = 60) -> str:
@@ -31,6 +38,10 @@ class MissingGeometryError(FlakelabError, KeyError):
     read "error: TIF", blaming the user)."""
 
     __str__ = Exception.__str__  # the message as written, not quoted as KeyError quotes it
+
+
+class ModelError(FlakelabError):
+    """A model file or a model input that is wrong."""
 
 
 class Note(UserWarning):

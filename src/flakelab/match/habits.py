@@ -14,8 +14,8 @@ offset_i = f_i(θ) + e_i, with f_i(θ) the L*a*b* change the physics predicts fo
 sprayed at θ, and e_i ~ N(0, S_i Σ_a S_iᵀ + (σ_p² + σ_n²) I): the spray's own application
 (one sigma :data:`~flakelab.physics.application.FILM_BUILD_SD`,
 :data:`~flakelab.physics.application.SPREAD_SD`, sensitivities S_i), the batches' and the
-model's error and the reading (:data:`~flakelab.match.correction.PERSISTENT_SD`,
-:data:`~flakelab.match.correction.NOISE_SD`). f is not linear over a few sigmas of film build:
+model's error and the reading (:data:`~flakelab.match.settings.PERSISTENT_SD`,
+:data:`~flakelab.match.settings.NOISE_SD`). f is not linear over a few sigmas of film build:
 Gauss–Newton relinearises it at θ. Standard errors are the sandwich (robust) estimate,
 since the persistent offsets are heavy-tailed, not Gaussian, each case's score freed of its
 own leverage (Bell and McCaffrey's CR2, :func:`_small_sample_sandwich`). The estimate is then
@@ -67,11 +67,8 @@ from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError, MeasurementFileError
 from flakelab.io.records import json_value, other_format, text_of, write_atomically
 from flakelab.library.toners import Library
-from flakelab.match.correction import NOISE_SD, PERSISTENT_SD
-from flakelab.match.forward import film_of
-from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, sprayout_mismatch
-from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_lab
+from flakelab.match.settings import NOISE_SD, PERSISTENT_SD
 
 __all__ = [
     "ShopHabits",
@@ -252,6 +249,8 @@ def _offsets(thetas: NDArray, library: Library, x: NDArray, R: NDArray, geometri
     """``[P, F, G, 3]`` L*a*b* changes for P habit vectors at once (one physics call). An
     application the vectors share (they differ in the instrument's gain alone, or none at
     all) is sprayed once: a Gauss–Newton step's seven vectors spray five or six."""
+    from flakelab.physics.application import sprayed_lab  # numba: only where habits are fitted
+
     film = np.concatenate([[1.0], 1 + thetas[:, 0]])  # the nominal application first
     spread = np.concatenate([[1.0], np.exp(thetas[:, 1])])
     sprayed, which = np.unique(np.stack([film, spread], 1), axis=0, return_inverse=True)
@@ -340,6 +339,8 @@ def _gauss_newton(
     degrees of freedom (:func:`_small_sample_sandwich`), with the model's prediction
     ``R[N, G, 31]`` and the spray-outs' L*a*b* offsets from it ``[N, G·3]`` that they were
     read from. Fewer than :data:`MIN_HABIT_CASES` spray-outs are refused."""
+    from flakelab.match.judging import evaluate_recipes  # torch: only where a model predicts
+
     N = len(fractions)
     if N < MIN_HABIT_CASES:
         raise FlakelabError(
@@ -375,6 +376,8 @@ def _case_terms(
     ``offset[N, G·3]`` of its spray-out from the model's prediction ``R``. Sums over any
     run of cases give that run's step, so every split of the cases is read from one pass;
     they are computed :data:`_CASES_AT_ONCE` cases at a time."""
+    from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD
+
     # θ itself and θ ± one step along each habit, in one physics call a run
     thetas = np.concatenate([theta[None], theta + np.diag(_STEP), theta - np.diag(_STEP)])
     spray_var = np.array([FILM_BUILD_SD, SPREAD_SD, 0.0]) ** 2
@@ -626,6 +629,9 @@ def habits_fit(
     prediction alone and with the habits' offset, and the mean L*a*b* offset measured and
     the habits' mean offset. On the cases the habits were read from, the ΔE00 with them is
     optimistic by about 3 parameters in N·G·3 values: little."""
+    from flakelab.match.forward import film_of  # torch: only where a model predicts
+    from flakelab.match.judging import evaluate_recipes
+
     R = evaluate_recipes(forward, fractions)[0]
     predicted, measured = reflectance_to_Lab(R), reflectance_to_Lab(sprayouts)
     offset = habits.offset(library, film_of(forward, fractions), R, forward.geometries)

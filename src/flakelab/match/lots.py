@@ -102,9 +102,10 @@ from flakelab.library.lots import (
     TonerLots,
 )
 from flakelab.library.toners import Library
-from flakelab.match.correction import NOISE_SD, PERSISTENT_SD, application_sensitivities
+from flakelab.match.correction import application_sensitivities
 from flakelab.match.forward import model_name_for
 from flakelab.match.judging import evaluate_recipes
+from flakelab.match.settings import NOISE_SD, PERSISTENT_SD
 from flakelab.models.network import LOG_FLOOR
 from flakelab.models.training import CaseArrays
 from flakelab.physics.fast import reflectance_factor

@@ -25,7 +25,7 @@ from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import is_number
-from flakelab.errors import FlakelabError, shown
+from flakelab.errors import ModelError, shown
 
 __all__ = [
     "FoldedNetwork",
@@ -60,10 +60,6 @@ LOG_FLOOR = 1e-3
 LOG_CEILING = float(np.log(6.0))
 """Predicted log reflectance factors are capped here: a bright aluminium reads about 3 near
 specular; an MLP far outside its data must not extrapolate to absurd values."""
-
-
-class ModelError(FlakelabError):
-    """A model file or a model input that is wrong."""
 
 
 def reflectance_from_log(log_R: torch.Tensor) -> torch.Tensor:

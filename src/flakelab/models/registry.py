@@ -33,9 +33,10 @@ from flakelab.cases.schema import ModelRow
 from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_name
 from flakelab.core.times import zoned
 from flakelab.core.wording import database_label
-from flakelab.models.network import ForwardModel, ModelError
+from flakelab.errors import ModelError
 
-if TYPE_CHECKING:  # training imports the generator and the physics: 0.3-0.6 s of 'model list'
+if TYPE_CHECKING:  # torch and training (the generator, the physics): 2 s of 'model list'
+    from flakelab.models.network import ForwardModel
     from flakelab.models.training import CaseArrays
 
 __all__ = [
@@ -128,6 +129,8 @@ def load_model_file(path: str | Path) -> ForwardModel:
         raise ModelError(f"{path}: no such model file")
     if path.is_dir():
         raise ModelError(f"{path}: a folder, not a model file")
+    from flakelab.models.network import ForwardModel
+
     return ForwardModel.from_bytes(path.read_bytes(), str(path))
 
 
@@ -197,6 +200,8 @@ def registered_model(engine: Engine, name: str, version: int) -> ForwardModel:
 def _stored_model(engine: Engine, name: str, version: int, artefact: bytes) -> ForwardModel:
     """A registered version's model read from its stored artefact; one another tool or a
     hand damaged is named with the database, the name and the version."""
+    from flakelab.models.network import ForwardModel
+
     return ForwardModel.from_bytes(artefact, f"{database_label(engine)}: {name} v{version}")
 
 
