@@ -11,7 +11,7 @@ import torch
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.errors import FlakelabError
-from flakelab.io import read_library
+from flakelab.io import read_library, read_measurement
 from flakelab.io.lots_file import read_lots, write_lots
 from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TonerLot, TonerLots
 from flakelab.match.forward import stepping
@@ -542,6 +542,16 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(
 
     # a new tin (another lot number) starts from the standard; --dry-run leaves the file
     before = lots.read_text()
+    # the panel read as L*a*b* alone holds no shade to read: refused, the tins as they were
+    colour = tmp_path / "colour.csv"
+    rows = zip(_geometries(forward), read_measurement(sprayed).lab(), strict=True)
+    colour.write_text("sample,geometry,L,a,b\n" + "".join(
+        f"panel,{g},{L!r},{a!r},{b!r}\n" for g, (L, a, b) in rows
+    ))  # fmt: skip
+    refused = cli("lots", "calibrate", colour, "--recipe", panel, "--lots", lots,
+                  "--toner", "Phthalo blue GS")  # fmt: skip
+    assert refused.returncode == 2 and "gives L*a*b* alone" in refused.stderr, refused.stderr
+    assert lots.read_text() == before
     done = cli("lots", "calibrate", sprayed, "--recipe", panel, "--lots", lots, "--dry-run",
                "--lot", "Phthalo blue GS=B-2", "--toner", "Phthalo blue GS", "--json")  # fmt: skip
     report = json.loads(done.stdout)

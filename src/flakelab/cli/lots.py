@@ -470,11 +470,17 @@ def _tins_on_file(engine, lots: Path | None, shop: str | None, database, lib):
 
 
 def _panel_spectra(paths: list[Path], sample, average: bool, forward, option="--sample"):
-    """Each panel file's reflectance at the model's geometries ``[N, G·31]``."""
-    return np.array([
-        spectra_for_model(path, read_readings(path, sample, average, option)[0], forward)[0]
-        for path in paths
-    ])  # fmt: skip
+    """Each panel file's reflectance at the model's geometries ``[N, G·31]``. A panel read as
+    L*a*b* alone is refused: a tin's shade is read as a shift of its spectrum, which a
+    spectrum recovered from a colour (one metamer of many) does not hold."""
+    readings = [(path, read_readings(path, sample, average, option)[0]) for path in paths]
+    for path, reading in readings:
+        if reading.spectra_recovered:
+            raise FlakelabError(
+                f"{path}: {reading.sample!r} gives L*a*b* alone: a tin's strength and shade are "
+                "read from a panel's spectra; read the panel with a spectrophotometer's export"
+            )
+    return np.array([spectra_for_model(path, reading, forward)[0] for path, reading in readings])
 
 
 def _check_the_panels_read(found, sprayed: list[Path], recipe: list[Path], standard) -> None:
