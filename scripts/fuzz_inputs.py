@@ -16,7 +16,7 @@ values still readable but odd); a model file by editing its description, standar
 weights; a shop's SQLite database by replacing one value of one case row (or, for
 ``database-shops``, of a row of its models, habits or tins).
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,json,xlsx,xlsx-images,target,readings,
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,colour,json,xlsx,xlsx-images,target,readings,
         readings-inspect,sprayout,record,recipe,poured,library,habits,habits-match,tolerance,
         cases,cases-cxf,manifest,model,model-register,lots,panel,database,database-shops,
         database-variants,cases-variants,car,deck]
@@ -329,6 +329,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     recipe = target.parent / "blue-metallic-recipe.json"
     measurement = read_measurement(target)
     write_measurements([measurement], work / "good.csv")
+    colour = replace(measurement, stored_lab=measurement.lab(), spectra_recovered=True)
+    write_measurements([colour], work / "colour.csv")  # L*a*b* alone: spectra recovered
     write_measurements([measurement], work / "good.json")
     write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
@@ -386,6 +388,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     return {
         "cxf": (target, lambda p: ["inspect", str(p)]),
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
+        # a car read as L*a*b* alone, its spectra recovered, matched by the main job
+        "colour": (work / "colour.csv", lambda p: ["match", str(p), "--candidates", "1"]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         # an export with the camera's pictures, drawn by inspect --images
