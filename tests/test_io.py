@@ -1180,9 +1180,9 @@ def test_a_date_cell_whose_serial_is_no_date_reads_as_no_date(rich_measurement, 
 def test_a_file_of_lab_alone_is_read_with_spectra_recovered_from_it(ma_t12_dir, tmp_path):
     """The instrument's own L*a*b* of the 230 real MA-T12 samples (2,760 readings, no spectra):
     each reading gets a spectrum that gives the file's colour (to ΔE00 1e-6) and so the colour
-    of the measured spectra to the instrument's 5.6e-6. Written as CSV it is written as read,
-    L*a*b* alone; another format, which would give the spectra as measured, is refused, and
-    so is one CSV of both kinds."""
+    of the measured spectra to the instrument's 5.6e-6. Written as CSV or CxF it is written as
+    read, L*a*b* alone; JSON or xlsx, which would give the spectra as measured, are refused,
+    and so is one file of both kinds."""
     labs = ma_t12_dir / "all_samples_instrument_lab_d65_10.csv"
     recovered = read_measurements(labs)
     measured = read_measurements(ma_t12_dir / "all_samples_spectra.csv")
@@ -1201,14 +1201,23 @@ def test_a_file_of_lab_alone_is_read_with_spectra_recovered_from_it(ma_t12_dir, 
     again = read_measurements(written)
     assert all(a.spectra_recovered for a in again)
     np.testing.assert_allclose(again[2].reflectance, recovered[2].reflectance, atol=1e-12)
-    for suffix in (".cxf", ".json", ".xlsx"):
+    cxf = tmp_path / "again.cxf"
+    write_measurements(recovered[:3], cxf)
+    assert "ReflectanceSpectrum" not in cxf.read_text()
+    through_cxf = read_measurements(cxf)
+    assert all(a.spectra_recovered for a in through_cxf)
+    np.testing.assert_allclose(through_cxf[1].stored_lab, recovered[1].stored_lab, atol=1e-12)
+    for suffix in (".json", ".xlsx"):
         with pytest.raises(
             MeasurementFileError, match="recovered from L.a.b.: a .* file would give"
         ):
             write_measurements(recovered[:1], tmp_path / f"out{suffix}")
         assert not (tmp_path / f"out{suffix}").exists()
-    with pytest.raises(MeasurementFileError, match="spectra measured, or L.a.b. alone, not both"):
-        write_measurements([measured[0], recovered[1]], tmp_path / "both.csv")
+    for suffix in (".csv", ".cxf"):
+        both = tmp_path / f"both{suffix}"
+        with pytest.raises(MeasurementFileError, match="measured, or L.a.b. alone, not both"):
+            write_measurements([measured[0], recovered[1]], both)
+        assert not both.exists()
 
 
 def test_a_cxf_of_colorcielab_alone_is_read_with_spectra_recovered(rich_measurement, tmp_path):

@@ -67,6 +67,10 @@ FORMATS: dict[str, tuple[Reader, Writer, tuple[str, ...]]] = {
 }
 """Format name → (reader, writer, file extensions written)."""
 
+COLOUR_ALONE_FORMATS = ("csv", "cxf")
+"""The formats that hold L*a*b* without spectra, in which measurements whose spectra were
+recovered from it are written (as they were read)."""
+
 _OTHER_KINDS = {
     b"\x89PNG": "a PNG image",
     b"%PDF": "a PDF document",
@@ -282,13 +286,13 @@ def write_measurements(
         raise MeasurementFileError(
             "stdout" if to_stdout else path, f"a decimal comma is for a CSV file, not {name}"
         )
-    if name != "csv" and (
-        recovered := next((m for m in measurements if m.spectra_recovered), None)
-    ):
+    recovered = next((m for m in measurements if m.spectra_recovered), None)
+    if recovered and name not in COLOUR_ALONE_FORMATS:
         raise MeasurementFileError(
             "stdout" if to_stdout else path,
             f"{recovered.sample}'s spectra were recovered from L*a*b*: a {name} file would give "
-            "them as measured; write CSV, which keeps its L*a*b* alone",
+            f"them as measured; write {' or '.join(COLOUR_ALONE_FORMATS)}, which keep its "
+            "L*a*b* alone",
         )
     options = {"decimal_comma": True} if decimal_comma else {}
     if to_stdout:

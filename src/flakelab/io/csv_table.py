@@ -37,6 +37,7 @@ from flakelab.io.records import (
     NOT_UTF8,
     Reading,
     assemble,
+    colour_alone,
     csv_form,
     decimal_comma_in,
     decimal_point,
@@ -198,12 +199,7 @@ def write_csv(
     wavelengths = measurements[0].wavelengths
     if any(not np.array_equal(m.wavelengths, wavelengths) for m in measurements):
         raise ValueError("expected all measurements on one wavelength grid for one CSV file")
-    lab_alone = measurements[0].spectra_recovered
-    if any(m.spectra_recovered != lab_alone for m in measurements):
-        raise ValueError(
-            "expected measurements of one kind for one CSV file: spectra measured, or L*a*b* "
-            "alone, not both"
-        )
+    lab_alone = colour_alone(measurements)
     texture_keys = [k for k in TEXTURE_READINGS if any(k in m.texture for m in measurements)]
     with_lab = any(m.stored_lab is not None for m in measurements)
     header = ["sample", "geometry", *(f"R{w:g}" for w in wavelengths if not lab_alone)]

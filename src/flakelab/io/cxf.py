@@ -34,6 +34,7 @@ from flakelab.io.records import (
     Reading,
     assemble,
     checked_wavelengths,
+    colour_alone,
     parse_conditions,
     parse_lab,
     parse_number,
@@ -303,7 +304,9 @@ def _specification(geometry: Geometry, wavelengths: np.ndarray, conditions: Cond
 
 
 def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
-    """Write measurements as one CxF3 document (see module docstring for the layout)."""
+    """Write measurements as one CxF3 document (see module docstring for the layout); those
+    whose spectra were recovered from L*a*b* as ColorCIELab alone, as they were read."""
+    lab_alone = colour_alone(measurements)
     wavelengths = measurements[0].wavelengths
     if not 360 <= wavelengths[0] <= 400 or np.any(np.diff(wavelengths) % 1):
         raise ValueError(
@@ -317,13 +320,14 @@ def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
     for number, m in enumerate(measurements, start=1):
         values: list[object] = []
         for i, g in enumerate(m.geometries):
-            values.append(
-                cxf3.ReflectanceSpectrum(
-                    value=[float(v) for v in m.reflectance[i]],
-                    start_wl=int(m.wavelengths[0]),
-                    color_specification=f"CS_{g.name}",
+            if not lab_alone:
+                values.append(
+                    cxf3.ReflectanceSpectrum(
+                        value=[float(v) for v in m.reflectance[i]],
+                        start_wl=int(m.wavelengths[0]),
+                        color_specification=f"CS_{g.name}",
+                    )
                 )
-            )
             if m.stored_lab is not None:
                 L, a, b = map(float, m.stored_lab[i])
                 values.append(cxf3.ColorCielab(l=L, a=a, b=b, color_specification=f"CS_{g.name}"))

@@ -430,6 +430,18 @@ def recovered_readings(
     return [replace(r, reflectance=R) for r, R in zip(readings, spectra, strict=True)]
 
 
+def colour_alone(measurements: Sequence[Measurement]) -> bool:
+    """Whether ``measurements`` are to be written as L*a*b* alone (their spectra recovered
+    from it, which a file must not give as measured); one file holds one kind or the other."""
+    alone = measurements[0].spectra_recovered
+    if any(m.spectra_recovered != alone for m in measurements):
+        raise ValueError(
+            "expected measurements of one kind for one file: spectra measured, or L*a*b* "
+            "alone, not both"
+        )
+    return alone
+
+
 def assemble(
     path: str | PathLike,
     readings: Iterable[Reading],
