@@ -55,14 +55,57 @@ def test_inspect_images_draws_the_camera_pictures_with_the_spectra_colour(ma_t12
     said = cli("inspect", ma_t12_files[0]).stdout  # without --images, where to find them
     assert "camera pictures: 7 in the file ('--images FIGURE' draws them)" in said
     assert "camera pictures" not in cli("inspect", "--example").stdout
-    for refused, message in [
-        ((example_path("target"),), "read from MA-T12 exports"),
-        ((ma_t12_files[0], "--all"), "one sample at a time"),
-    ]:
-        figure.unlink(missing_ok=True)
-        result = cli("inspect", *refused, "--images", figure)
-        assert result.returncode == 2 and message in result.stderr, result.stderr
-        assert not figure.exists()
+    figure.unlink()
+    result = cli("inspect", example_path("target"), "--images", figure)
+    assert result.returncode == 2 and "read from MA-T12 exports" in result.stderr, result.stderr
+    assert not figure.exists()
+
+
+def _export_with_pictures(readings, path: Path) -> Path:
+    """``readings`` as one MA-T12 export with a ``Texture Images`` sheet as the instrument
+    writes it: each sample heading a column from B, a flat picture in each geometry's row."""
+    import openpyxl
+    from openpyxl.drawing.image import Image as Picture
+    from PIL import Image
+
+    write_measurements(readings, path)
+    workbook = openpyxl.load_workbook(path)
+    sheet = workbook.create_sheet("Texture Images")
+    rows = ("15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80", "15d")
+    for row, label in enumerate(rows, start=2):
+        sheet.cell(row, 1).value = label
+    for column, reading in enumerate(readings, start=2):
+        sheet.cell(1, column).value = reading.sample
+        for row in range(2, len(rows) + 2):
+            png = io.BytesIO()
+            Image.new("RGB", (48, 36), (40 * column, 20 * row, 90)).save(png, format="png")
+            sheet.add_image(Picture(png), f"{chr(64 + column)}{row}")
+    workbook.save(path)
+    return path
+
+
+def test_inspect_images_of_several_readings_draws_a_row_of_each(ma_t12_files, tmp_path, cli):
+    """``inspect --images --all`` (and ``--average``) on an export of two samples: the
+    pictures of each, a row each, every one above the swatch of its own sample's spectrum.
+    Both were refused before stop 99 ("one sample at a time")."""
+    from matplotlib.image import imread
+
+    from flakelab.core.colorimetry import Lab_to_sRGB
+
+    readings = [read_measurement(f) for f in ma_t12_files[:2]]
+    export = _export_with_pictures(readings, tmp_path / "two.xlsx")
+    for option in ("--all", "--average"):
+        figure = tmp_path / f"pictures{option}.png"
+        result = cli("inspect", export, option, "--images", figure, "--json")
+        assert result.returncode == 0, result.stderr
+        drawn = json.loads(result.stdout)["camera_pictures"]
+        assert drawn["readings"] == 2 and drawn["geometries"][-1] == "15d"
+        pixels = np.round(imread(figure)[..., :3] * 255).reshape(-1, 3)
+        for m in readings:
+            swatch = np.round(Lab_to_sRGB(m.lab()[m.index("15as15")]) * 255)
+            assert (np.abs(pixels - swatch).max(axis=1) <= 1).sum() > 2000, (option, m.sample)
+    said = cli("inspect", export, "--all", "--images", tmp_path / "again.png").stderr
+    assert "7 camera pictures of each of 2 readings" in " ".join(said.split()), said
 
 
 def test_compare_images_draws_the_reference_above_the_sample(ma_t12_files, tmp_path, cli):

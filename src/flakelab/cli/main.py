@@ -129,9 +129,9 @@ def inspect(
         Path | None,
         typer.Option(
             "--images",
-            help="An MA-T12 export: draw the instrument camera's pictures of the sample, each "
-            "with the colour its spectra give at that geometry, to this figure (.png, .pdf, "
-            ".svg).",
+            help="An MA-T12 export: draw the instrument camera's pictures of the sample (with "
+            "--all or --average, of each, a row each), each with the colour its spectra give at "
+            "that geometry, to this figure (.png, .pdf, .svg).",
         ),
     ] = None,
 ) -> None:
@@ -148,60 +148,77 @@ def inspect(
     cond = Conditions.parse(conditions)
     source = path if path is not None else example_path("target")
     if pictures is not None:
-        if average or all_samples:
-            raise FlakelabError("--images: one sample at a time, not with --all or --average")
         check_figure_file(pictures, "--images", reads={"measurement": source})
     if average:
         tol = read_tolerance(tolerance)
         mean, readings = read_readings(source, sample, average)
         info = describe(mean, cond) | {"readings": spread_of_readings(readings, mean, tol, cond)}
         info["readings"]["tolerance"] = tol.name
+        if pictures is not None:  # each reading's, a row each: the mean has none
+            spots = [(source, r) for r in readings]
+            info["camera_pictures"] = _draw_camera_pictures(spots, pictures, cond)
         if as_json:
             print_report(info, indent=1)
             return
         _print_description(info)
         _print_readings_spread(info["readings"], "file")
+        if pictures is not None:
+            _say_pictures_drawn(info["camera_pictures"])
         return
     measurements = read_measurements(source) if all_samples else [read_sample(source, sample)]
     infos = [describe(m, cond) for m in measurements]
+    out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
     if pictures is not None:
-        drawn = _draw_camera_pictures([(source, measurements[0])], pictures, cond)
-        infos[0]["camera_pictures"] = drawn
+        spots = [(source, m) for m in measurements]
+        out["camera_pictures"] = _draw_camera_pictures(spots, pictures, cond)
     if as_json:
-        out = infos[0] if not all_samples else {"file": str(source), "measurements": infos}
         print_report(out, indent=1)
         return
     for info in infos:
         _print_description(info)
     if pictures is not None:
-        drawn = infos[0]["camera_pictures"]
-        errors.print(
-            f"wrote {pictures}: {counted(len(drawn['geometries']), 'camera picture')} "
-            f"({', '.join(drawn['geometries'])})",
-            highlight=False,
-        )
+        _say_pictures_drawn(out["camera_pictures"])
     elif held := camera_pictures_in(source):
         console.print(
             f"camera pictures: {held} in the file ('--images FIGURE' draws them)", highlight=False
         )
 
 
+def _say_pictures_drawn(drawn: dict) -> None:
+    """The line that tells where ``--images`` drew the camera's pictures, and of what."""
+    each = f" of each of {drawn['readings']} readings" if drawn["readings"] > 1 else ""
+    errors.print(
+        f"wrote {drawn['file']}: {counted(len(drawn['geometries']), 'camera picture')}{each} "
+        f"({', '.join(drawn['geometries'])})",
+        highlight=False,
+    )
+
+
 def _draw_camera_pictures(readings: list[tuple[Path, Any]], figure: Path, conditions):
     """``--images``: the camera pictures of each (file, measurement) of ``readings``, read
-    from its MA-T12 export, drawn to ``figure``; what the report says of them."""
+    from its MA-T12 export (each export once), drawn to ``figure``, a row a reading where
+    there are several; what the report says of them."""
     from flakelab.render.plots import plot_camera_pictures
 
+    exports = {source: _camera_pictures_in(source) for source, _ in readings}
     found = [
-        (measurement, _camera_pictures(source, measurement)) for source, measurement in readings
+        (measurement, _pictures_of(source, exports[source], measurement))
+        for source, measurement in readings
     ]
     plot_camera_pictures(found, figure, conditions=conditions)
     labels = list(dict.fromkeys(label for _, pictures in found for label in pictures))
     height, width = next(iter(found[0][1].values())).shape[:2]
-    return {"file": str(figure), "geometries": labels, "width": width, "height": height}
+    return {
+        "file": str(figure),
+        "geometries": labels,
+        "width": width,
+        "height": height,
+        "readings": len(found),
+    }
 
 
-def _camera_pictures(source: Path, measurement) -> dict:
-    """The camera pictures of ``measurement``'s sample in the MA-T12 export ``source``."""
+def _camera_pictures_in(source: Path) -> dict:
+    """The camera pictures in the MA-T12 export ``source``, by sample."""
     from flakelab.io import STANDARD_STREAM, detect_format
     from flakelab.io.mat12_xlsx import read_mat12_images
 
@@ -215,7 +232,12 @@ def _camera_pictures(source: Path, measurement) -> dict:
             f"--images: {source}: the camera's pictures are read from MA-T12 exports (.xlsx), "
             f"this is a {kind} file"
         )
-    pictures = read_mat12_images(source)
+    return read_mat12_images(source)
+
+
+def _pictures_of(source: Path, pictures: dict, measurement) -> dict:
+    """The camera pictures of ``measurement``'s sample among ``pictures``, those of the
+    export ``source``."""
     if not (found := pictures.get(measurement.sample)):
         others = f", only of {', '.join(map(repr, pictures))}" if pictures else ""
         raise FlakelabError(
