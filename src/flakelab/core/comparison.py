@@ -44,7 +44,7 @@ def describe(measurement: Measurement, conditions: Conditions = D65_10) -> dict[
     theta_flake, theta_inc = flake_angles(measurement.geometries)
     stored_de = None
     stored = measurement.stored_lab is not None and not measurement.spectra_recovered
-    if stored and measurement.stored_lab_conditions == conditions:  # recovered: 0 by making
+    if stored and measurement.stored_lab_conditions == conditions:  # recovered: 0 by design
         stored_de = delta_E_CIE2000(lab, measurement.stored_lab)
     geometries = []
     for i, g in enumerate(measurement.geometries):
