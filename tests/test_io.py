@@ -675,6 +675,9 @@ def test_a_measurement_named_dash_is_read_from_standard_input(tmp_path, cli, mon
     assert json.loads(judged.stdout)["tolerance"] == "tight", judged.stderr
     library = cli("library", "show", "-", "--json", input=demo_library_path().read_bytes())
     assert library.returncode == 0 and json.loads(library.stdout)["library"] == "flakelab demo"
+    # a car piped where a recipe is read is named as such, as a file named is (stop 99)
+    mixed_up = cli("weigh", "-", input=target.read_bytes())
+    assert mixed_up.returncode == 2 and "this is a CxF3 file, not JSON" in mixed_up.stderr
     refused = cli("inspect", "-", "--images", tmp_path / "pictures", input=workbook.read_bytes())
     assert refused.returncode == 2 and "--images: stdin:" in refused.stderr, refused.stderr
     with open(os.devnull) as null:  # not a terminal: read, empty

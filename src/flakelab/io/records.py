@@ -170,8 +170,8 @@ flakelab inspect -``, ``… | flakelab weigh - --quantity 1l``, ``flakelab conve
 
 
 _READ_STDIN: list = []
-"""The standard input read already, where one was: it holds one file, and a command given
-``-`` twice (``compare - -``, ``correct - -r -``) met it empty the second time."""
+"""The standard input read already and what it held, where one was: it holds one file, and a
+command given ``-`` twice (``compare - -``, ``correct - -r -``) met it empty the second time."""
 
 
 def standard_input() -> bytes:
@@ -187,8 +187,9 @@ def standard_input() -> bytes:
         raise MeasurementFileError(
             "stdin", "read already for another of this command's files: - stands for one file"
         )
-    _READ_STDIN[:] = [sys.stdin]
-    return sys.stdin.buffer.read()
+    data = sys.stdin.buffer.read()
+    _READ_STDIN[:] = [sys.stdin, data]
+    return data
 
 
 def text_of(path: str | PathLike) -> str:
@@ -543,7 +544,14 @@ def other_format(path: str | PathLike) -> str:
     from flakelab.io import detect_format  # the package, which imports this module
 
     try:
-        return _FORMAT_KINDS.get(detect_format(path), "")
+        if os.fspath(path) != STANDARD_STREAM:
+            return _FORMAT_KINDS.get(detect_format(path), "")
+        if not _READ_STDIN or _READ_STDIN[0] is not sys.stdin:
+            return ""
+        with tempfile.TemporaryDirectory() as folder:  # what was piped, judged as a file
+            copy = Path(folder) / "stdin"
+            copy.write_bytes(_READ_STDIN[1])
+            return _FORMAT_KINDS.get(detect_format(copy), "")
     except FlakelabError:
         return ""
 
