@@ -630,7 +630,10 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
     fails, is a metamer or was judged without the target's texture."""
     notes = left_out_note(unused_geometries(target, forward), forward, "match")
     if note := recovered_note(target) if isinstance(target, Measurement) else None:
-        notes.append(f"{note}: the search weighed no metamerism index against it")
+        notes.append(
+            f"{note}: the search weighed no metamerism index against it (the instrument's "
+            "spectral export would let it prefer the car's own pigments to a metamer)"
+        )
     if solid:
         notes.append(f"{solid}: a solid, matched with pigments alone")
     if habits_note:
