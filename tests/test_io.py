@@ -1244,3 +1244,19 @@ def test_a_cxf_of_colorcielab_alone_is_read_with_spectra_recovered(rich_measurem
     nothing.write_text(re.sub(lab, "", alone.read_text()))
     with pytest.raises(MeasurementFileError, match="no ReflectanceSpectrum or ColorCIELab"):
         read_measurement(nothing)
+
+
+def test_an_export_of_colour_alone_says_how_to_read_it(ma_t12_files, tmp_path):
+    """An MA-T12 export saved with its Color Data sheet and no Spectral Data: refused, naming
+    the two ways to read it (the spectra exported, or the colour saved as CSV)."""
+    import openpyxl
+
+    workbook = openpyxl.load_workbook(ma_t12_files[0])
+    del workbook["Spectral Data"]
+    path = tmp_path / "colour.xlsx"
+    workbook.save(path)
+    with pytest.raises(MeasurementFileError) as caught:
+        read_measurements(path)
+    message = str(caught.value)
+    assert "no sheet 'Spectral Data'" in message and "export the spectra too" in message
+    assert "CSV of sample, geometry, L, a, b" in message

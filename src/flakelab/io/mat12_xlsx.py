@@ -140,8 +140,14 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
     if _SPECTRAL not in sheets:
+        colour = (
+            f"; export the spectra too, or save its {_COLOR!r} as a CSV of sample, geometry, "
+            "L, a, b, read as colour alone"
+            if _COLOR in sheets
+            else ""
+        )
         raise MeasurementFileError(
-            path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'})"
+            path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'}){colour}"
         )
     spectral = sheets[_SPECTRAL]
     preamble, header = _split_sheet(spectral)
