@@ -1246,17 +1246,23 @@ def test_a_cxf_of_colorcielab_alone_is_read_with_spectra_recovered(rich_measurem
         read_measurement(nothing)
 
 
-def test_an_export_of_colour_alone_says_how_to_read_it(ma_t12_files, tmp_path):
-    """An MA-T12 export saved with its Color Data sheet and no Spectral Data: refused, naming
-    the two ways to read it (the spectra exported, or the colour saved as CSV)."""
+def test_an_export_of_colour_alone_is_read_with_spectra_recovered(ma_t12_files, tmp_path):
+    """An MA-T12 export saved with its Color Data sheet and no Spectral Data: each reading's
+    spectrum recovered from the sheet's L*a*b*, at its geometries and date. Without either
+    sheet it is refused naming the sheets it has."""
     import openpyxl
 
+    measured = read_measurement(ma_t12_files[0])
     workbook = openpyxl.load_workbook(ma_t12_files[0])
     del workbook["Spectral Data"]
     path = tmp_path / "colour.xlsx"
     workbook.save(path)
-    with pytest.raises(MeasurementFileError) as caught:
+    read = read_measurement(path)
+    assert read.spectra_recovered and read.geometry_names == measured.geometry_names
+    assert read.measured_at == measured.measured_at and read.sample == measured.sample
+    assert delta_E_CIE2000(read.lab(), measured.stored_lab).max() < 1e-6
+    workbook = openpyxl.load_workbook(ma_t12_files[0])  # its pictures are read once, as saved
+    del workbook["Spectral Data"], workbook["Color Data"]
+    workbook.save(path)
+    with pytest.raises(MeasurementFileError, match="no sheet 'Spectral Data' .sheets: "):
         read_measurements(path)
-    message = str(caught.value)
-    assert "no sheet 'Spectral Data'" in message and "export the spectra too" in message
-    assert "CSV of sample, geometry, L, a, b" in message

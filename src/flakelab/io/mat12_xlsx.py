@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from flakelab.core.colorimetry import D65_10
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import MeasurementFileError, Note
 from flakelab.io.records import (
     Reading,
@@ -46,6 +47,7 @@ from flakelab.io.records import (
     parse_spectrum,
     parse_texture,
     parse_wavelength_header,
+    recovered_readings,
     write_atomically,
 )
 
@@ -139,15 +141,18 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
             sheets = _sheets(path, handle)
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
+    lab_conditions = D65_10
+    if _COLOR in sheets:
+        color_preamble, _ = _split_sheet(sheets[_COLOR])
+        if color_preamble.get("ILLUMINANT/OBSERVER"):
+            lab_conditions = parse_conditions(
+                path, color_preamble["ILLUMINANT/OBSERVER"], f"{_COLOR}, ILLUMINANT/OBSERVER"
+            )
+    if _SPECTRAL not in sheets and (colour := _color_rows(path, sheets.get(_COLOR))):
+        return _colour_alone(path, sheets, colour, lab_conditions)
     if _SPECTRAL not in sheets:
-        colour = (
-            f"; export the spectra too, or save its {_COLOR!r} as a CSV of sample, geometry, "
-            "L, a, b, read as colour alone"
-            if _COLOR in sheets
-            else ""
-        )
         raise MeasurementFileError(
-            path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'}){colour}"
+            path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'})"
         )
     spectral = sheets[_SPECTRAL]
     preamble, header = _split_sheet(spectral)
@@ -164,15 +169,7 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         )
     wavelengths = parse_wavelength_header(path, labels[3:], f"{_SPECTRAL}, row {header + 1}")
     n = wavelengths.size
-
-    labs = _read_color_sheet(path, sheets.get(_COLOR))
-    lab_conditions = D65_10
-    if _COLOR in sheets:
-        color_preamble, _ = _split_sheet(sheets[_COLOR])
-        if color_preamble.get("ILLUMINANT/OBSERVER"):
-            lab_conditions = parse_conditions(
-                path, color_preamble["ILLUMINANT/OBSERVER"], f"{_COLOR}, ILLUMINANT/OBSERVER"
-            )
+    labs = {(r.sample, r.geometry.name): r.lab for r in _color_rows(path, sheets.get(_COLOR))}
 
     readings = []
     for number, row in _data_rows(spectral, header):
@@ -192,7 +189,12 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
                 measured_at=_date(cells[1]),
             )
         )
-    texture = _read_texture_sheet(path, sheets.get(_TEXTURE))
+    return _assembled(path, sheets, readings, wavelengths, preamble, lab_conditions)
+
+
+def _assembled(path, sheets, readings, wavelengths, preamble, lab_conditions, recovered=False):
+    """The export's measurements of ``readings``, with the texture sheet's readings and what
+    the sheet's ``preamble`` says of the job."""
     metadata = {
         r.sample: {
             k: v
@@ -207,9 +209,18 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
         wavelengths,
         instrument=preamble.get("INSTRUMENT") or INSTRUMENT,
         lab_conditions=lab_conditions,
-        texture=texture,
+        texture=_read_texture_sheet(path, sheets.get(_TEXTURE)),
         metadata=metadata,
+        spectra_recovered=recovered,
     )
+
+
+def _colour_alone(path, sheets, readings: list[Reading], lab_conditions) -> list[Measurement]:
+    """An export saved with its Color Data sheet and no Spectral Data: each reading with a
+    spectrum recovered from its colour (:func:`~flakelab.io.records.recovered_readings`)."""
+    preamble, _ = _split_sheet(sheets[_COLOR])
+    readings = recovered_readings(path, readings, lab_conditions)
+    return _assembled(path, sheets, readings, WAVELENGTHS, preamble, lab_conditions, True)
 
 
 def read_mat12_images(path: str | PathLike) -> dict[str, dict[str, NDArray[np.uint8]]]:
@@ -317,21 +328,25 @@ def _decode_picture(path: str | PathLike, picture, where: str) -> NDArray[np.uin
         ) from None
 
 
-def _read_color_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
+def _color_rows(path: str | PathLike, rows: list[tuple] | None) -> list[Reading]:
+    """The Color Data sheet's readings: sample, geometry, L*a*b* and date, no spectrum."""
     if not rows:
-        return {}
+        return []
     _, header = _split_sheet(rows)
     if header < 0:
-        return {}
-    labs = {}
+        return []
+    readings = []
     for number, row in _data_rows(rows, header):
         where = f"{_COLOR}, row {number}"
         if len(row) < 6:
             raise MeasurementFileError(path, f"expected 6 columns, got {len(row)}", field=where)
+        sample = str(row[0]).strip() if row[0] is not None else ""
+        if not sample:
+            raise MeasurementFileError(path, "empty sample name", field=f"{where}, Name")
         geometry = parse_geometry_name(path, row[2], f"{where}, Geometry")
         lab = parse_lab(path, row[3:6], [f"{where}, {k}" for k in "Lab"])
-        labs[(str(row[0]).strip(), geometry.name)] = lab
-    return labs
+        readings.append(Reading(where, sample, geometry, None, lab, _date(row[1])))
+    return readings
 
 
 def _read_texture_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
