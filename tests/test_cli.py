@@ -141,6 +141,32 @@ def test_convert_says_the_camera_pictures_stay_behind(ma_t12_files, tmp_path, cl
     assert again.returncode == 0 and "stay behind" not in again.stderr, again.stderr
 
 
+def test_convert_lab_only_writes_the_colour_and_no_spectra(tmp_path, cli):
+    """``convert --lab-only``: the example car as L*a*b* under the conditions named, no
+    spectra, in CSV or CxF3 (software that takes a colour per angle). Read back, its spectra
+    are recovered: the same colour under those conditions to 1e-6, another under daylight
+    (a metamer); JSON, which would give them as measured, is refused before anything is read
+    or written."""
+    target = example_path("target")
+    written = tmp_path / "car.csv"
+    done = cli("convert", target, written, "--lab-only", "--conditions", "A/10")
+    assert done.returncode == 0, done.stderr
+    header = written.read_text().splitlines()[0].split(",")
+    assert header[:5] == ["sample", "geometry", "L", "a", "b"] and "R400" not in header
+    for file in (written, tmp_path / "car.cxf"):
+        if file.suffix == ".cxf":
+            cli("convert", written, file)  # colour alone stays colour alone
+            assert "ReflectanceSpectrum" not in file.read_text()
+        under_a = json.loads(cli("compare", target, file, "--conditions", "A/10", "--json").stdout)
+        daylight = json.loads(cli("compare", target, file, "--json").stdout)
+        assert under_a["de00_max"] < 1e-6 and daylight["de00_max"] > 0.1
+        assert under_a["spectra_recovered"] and under_a["metamerism_index_max"] == {}
+    refused = cli("convert", target, tmp_path / "car.json", "--lab-only")
+    assert refused.returncode == 2
+    assert "--lab-only: L*a*b* without spectra is written as csv" in refused.stderr
+    assert not (tmp_path / "car.json").exists()
+
+
 def test_compare_example_agrees_with_library_and_tolerance(cli):
     result = cli("compare", "--example", "--json", "--tolerance", "de00-1.0")
     assert result.returncode == 0, result.stderr

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import shlex
+from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
@@ -533,9 +534,26 @@ def convert(
             "semicolons, numbers with a decimal comma (flakelab reads it back).",
         ),
     ] = False,
+    lab_only: Annotated[
+        bool,
+        typer.Option(
+            "--lab-only",
+            help="Write L*a*b* alone (under --conditions) and no spectra, as CSV or CxF3: for "
+            "software that takes a colour per angle. flakelab reads it back with spectra "
+            "recovered from it.",
+        ),
+    ] = False,
+    conditions: ConditionsOption = DEFAULT_CONDITIONS,
 ) -> None:
     """Convert measurement files between MA-T12 xlsx, CxF3, CSV and JSON."""
-    from flakelab.io import STANDARD_STREAM, read_measurements, write_measurements
+    from flakelab.core.colorimetry import Conditions
+    from flakelab.io import (
+        COLOUR_ALONE_FORMATS,
+        STANDARD_STREAM,
+        format_for_path,
+        read_measurements,
+        write_measurements,
+    )
     from flakelab.io.mat12_xlsx import camera_pictures_in
 
     to_stdout = str(target) == STANDARD_STREAM
@@ -546,7 +564,19 @@ def convert(
         )
     if not to_stdout:
         check_output_file(target, "TARGET", reads={"SOURCE": source})
+    written_as = to.value if to else format_for_path(target)
+    if lab_only and written_as not in COLOUR_ALONE_FORMATS:
+        raise FlakelabError(
+            f"--lab-only: L*a*b* without spectra is written as {' or '.join(COLOUR_ALONE_FORMATS)}"
+            f", not {written_as}"
+        )
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
+    if lab_only:  # written as a file of colour alone is: the writers give such spectra none
+        cond = Conditions.parse(conditions)
+        measurements = [
+            replace(m, stored_lab=m.lab(cond), stored_lab_conditions=cond, spectra_recovered=True)
+            for m in measurements
+        ]
     write_measurements(measurements, target, to and to.value, decimal_comma=decimal_comma)
     written = "stdout" if to_stdout else target
     errors.print(f"wrote {counted(len(measurements), 'measurement')} to {written}", highlight=False)
