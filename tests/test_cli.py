@@ -161,6 +161,9 @@ def test_convert_lab_only_writes_the_colour_and_no_spectra(tmp_path, cli):
         daylight = json.loads(cli("compare", target, file, "--json").stdout)
         assert under_a["de00_max"] < 1e-6 and daylight["de00_max"] > 0.1
         assert under_a["spectra_recovered"] and under_a["metamerism_index_max"] == {}
+    again = cli("convert", written, tmp_path / "daylight.csv", "--lab-only")
+    said = " ".join(again.stderr.split())
+    assert "L*a*b* under D65/10 is an estimate: its file gave it under A/10 alone" in said, said
     refused = cli("convert", target, tmp_path / "car.json", "--lab-only")
     assert refused.returncode == 2
     assert "--lab-only: L*a*b* without spectra is written as csv" in refused.stderr

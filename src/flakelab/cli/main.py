@@ -573,6 +573,13 @@ def convert(
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     if lab_only:  # written as a file of colour alone is: the writers give such spectra none
         cond = Conditions.parse(conditions)
+        for m in measurements:
+            if m.spectra_recovered and m.stored_lab_conditions != cond:
+                estimate = (
+                    f"{m.sample}'s L*a*b* under {cond} is an estimate: its file gave it under "
+                    f"{m.stored_lab_conditions} alone, and its spectra are recovered from that"
+                )
+                errors.print(f"[yellow]note:[/] {escape(estimate)}", highlight=False)
         measurements = [
             replace(m, stored_lab=m.lab(cond), stored_lab_conditions=cond, spectra_recovered=True)
             for m in measurements
