@@ -35,7 +35,9 @@ from flakelab.core.times import zoned
 from flakelab.core.wording import database_label
 from flakelab.errors import ModelError
 
-if TYPE_CHECKING:  # torch and training (the generator, the physics): 2 s of 'model list'
+# torch, the generator and the physics are imported where a model is loaded or trained, so that
+# listing what the database holds ('cases shops') imports none of them
+if TYPE_CHECKING:
     from flakelab.models.network import ForwardModel
     from flakelab.models.training import CaseArrays
 
@@ -124,13 +126,13 @@ def shipped_model_path(instrument: str) -> Path:
 
 
 def load_model_file(path: str | Path) -> ForwardModel:
+    from flakelab.models.network import ForwardModel
+
     path = Path(path)
     if not path.exists():
         raise ModelError(f"{path}: no such model file")
     if path.is_dir():
         raise ModelError(f"{path}: a folder, not a model file")
-    from flakelab.models.network import ForwardModel
-
     return ForwardModel.from_bytes(path.read_bytes(), str(path))
 
 
