@@ -110,7 +110,8 @@ def test_inspect_images_of_several_readings_draws_a_row_of_each(ma_t12_files, tm
 
 def test_compare_images_draws_the_reference_above_the_sample(ma_t12_files, tmp_path, cli):
     """``compare --images``: two exports' camera pictures in one figure, each above the swatch
-    of its own spectrum; refused with an averaged reading, which no one picture shows."""
+    of its own spectrum; with an averaged reading, a row of each reading averaged (refused
+    before stop 99: no one picture shows the mean)."""
     from matplotlib.image import imread
 
     from flakelab.core.colorimetry import Lab_to_sRGB
@@ -125,10 +126,16 @@ def test_compare_images_draws_the_reference_above_the_sample(ma_t12_files, tmp_p
         m = read_measurement(file)
         swatch = np.round(Lab_to_sRGB(m.lab()[m.index("15as15")]) * 255)
         assert (np.abs(pixels - swatch).max(axis=1) <= 1).sum() > 2000, file.name
-    figure.unlink()
-    refused = cli("compare", reference, sample, "--images", figure, "--average")
-    assert refused.returncode == 2 and "not with --average" in refused.stderr
-    assert not figure.exists()
+    # the car read at two spots, averaged: a row of each spot's pictures above the spray-out's
+    readings = [read_measurement(f) for f in ma_t12_files[2:4]]
+    car = _export_with_pictures(readings, tmp_path / "car.xlsx")
+    averaged = cli("compare", car, sample, "--images", figure, "--average", "--json")
+    assert averaged.returncode == 0, averaged.stderr
+    assert json.loads(averaged.stdout)["camera_pictures"]["readings"] == 3
+    pixels = np.round(imread(figure)[..., :3] * 255).reshape(-1, 3)
+    for m in [*readings, read_measurement(sample)]:
+        swatch = np.round(Lab_to_sRGB(m.lab()[m.index("15as15")]) * 255)
+        assert (np.abs(pixels - swatch).max(axis=1) <= 1).sum() > 1000, m.sample
 
 
 def test_convert_says_the_camera_pictures_stay_behind(ma_t12_files, tmp_path, cli):

@@ -299,8 +299,8 @@ def compare(
         typer.Option(
             "--images",
             help="Both are MA-T12 exports: draw the instrument camera's pictures of the "
-            "reference above the sample's, each with the colour its spectrum gives, to this "
-            "figure (.png, .pdf, .svg).",
+            "reference above the sample's (of each reading averaged, a row each), each with the "
+            "colour its spectrum gives, to this figure (.png, .pdf, .svg).",
         ),
     ] = None,
 ) -> None:
@@ -321,9 +321,6 @@ def compare(
                             "not with --reference-sample or --average")  # fmt: skip
     check_figure_file(render)
     check_figure_file(plot, "--plot")
-    if pictures is not None and (average or average_sprayed):
-        raise FlakelabError("--images: the pictures of one reading each, not with --average or "
-                            "--average-sprayed")  # fmt: skip
     check_figure_file(pictures, "--images", reads={"REFERENCE": reference, "SAMPLE": sample},
                       writes={"--render": render, "--plot": plot})  # fmt: skip
     lamps = render_lamps(lamps, render)
@@ -363,11 +360,9 @@ def compare(
         draw_differences(result.geometries, result.lab_reference, samples, tol, plot, title,
                          texture={smp.sample: result.texture_share})  # fmt: skip
         report["plot"] = str(plot)
-    if pictures is not None:
-        spots = [
-            (reference or example_path("target"), ref),
-            (sample or example_path("sprayout"), smp),
-        ]
+    if pictures is not None:  # each reading averaged a row: the mean has no picture
+        spots = [(reference or example_path("target"), r) for r in ref_readings]
+        spots += [(sample or example_path("sprayout"), r) for r in smp_readings]
         report["camera_pictures"] = _draw_camera_pictures(spots, pictures, light)
     if as_json:
         print_report(report, indent=1)
