@@ -57,7 +57,7 @@ __all__ = [
     "BUSY_TIMEOUT_S",
     "add_cases",
     "add_new_cases",
-    "stored_case_ids",
+    "store_new_cases",
     "iter_cases",
     "count_cases",
     "count_stored_since",
@@ -584,16 +584,24 @@ def add_cases(engine: Engine, cases: Iterable[Case]) -> int:
 
 def add_new_cases(engine: Engine, cases: list[Case]) -> tuple[int, int]:
     """Store those of ``cases`` not stored yet (one transaction) and return how many were
-    stored and how many were there already. A case already stored must be stored as given,
-    field by field (a generation cut short, or a shorter one of the same seed, stored it);
-    an id stored with another case is a :class:`CaseError` naming the id and the field,
-    and nothing is stored. Where another writer stores some of them meanwhile (the same
-    generation run twice at once), they are looked at again."""
+    stored and how many were there already (:func:`store_new_cases`)."""
+    stored = store_new_cases(engine, cases)
+    return len(stored), len(cases) - len(stored)
+
+
+def store_new_cases(engine: Engine, cases: list[Case]) -> list[Case]:
+    """Store those of ``cases`` not stored yet (one transaction) and return them. A case
+    already stored must be stored as given, field by field (a generation cut short, or a
+    shorter one of the same seed, stored it); an id stored with another case is a
+    :class:`CaseError` naming the id and the field, and nothing is stored. Where another
+    writer stores some of them meanwhile (the same generation run twice at once), they are
+    looked at again."""
     left = _ADD_NEW_ATTEMPTS
     while True:
         new = _not_stored(engine, cases)
         try:
-            return (add_cases(engine, new) if new else 0), len(cases) - len(new)
+            add_cases(engine, new)
+            return new
         except CaseError:
             left -= 1
             if not left:
@@ -622,11 +630,6 @@ each time another writer stored some of them first."""
 _COMPARED = tuple(c.name for c in CaseRow.__table__.columns if c.name not in ("id", "updated_at"))
 """The columns that make two stored cases the same case (not the row or the time it was
 stored)."""
-
-
-def stored_case_ids(engine: Engine, case_ids: list[str]) -> set[str]:
-    """Those of ``case_ids`` the database stores already."""
-    return set(_selected_by_id(engine, CaseRow.case_id, case_ids))
 
 
 def _stored_rows(engine: Engine, case_ids: list[str]) -> dict[str, CaseRow]:

@@ -295,12 +295,7 @@ def import_cases(
 ) -> None:
     """Import a shop's case history into the database (all cases or none)."""
     from flakelab.cases.case import CaseError
-    from flakelab.cases.database import (
-        add_cases,
-        add_new_cases,
-        open_database,
-        stored_case_ids,
-    )
+    from flakelab.cases.database import add_cases, open_database, store_new_cases
     from flakelab.cases.exchange import count_lines, read_cases
     from flakelab.io import read_library
     from flakelab.match.mixups import is_mismatched, recorded_checks
@@ -311,15 +306,19 @@ def import_cases(
         task = bar.add_task(f"reading the lines of {source.name}", total=count_lines(source))
         cases = read_cases(source, lambda: bar.advance(task))
     engine = open_database(database)
-    before = stored_case_ids(engine, [c.case_id for c in cases]) if new_only else set()
     try:  # one transaction: all of them or none
-        count, there = add_new_cases(engine, cases) if new_only else (add_cases(engine, cases), 0)
+        stored = store_new_cases(engine, cases) if new_only else cases
+        if not new_only:
+            add_cases(engine, cases)
     except CaseError as error:  # it names the case stored already, or stored otherwise
         again = " (--new-only passes over those stored already)" if not new_only else ""
         raise FlakelabError(f"{source}: {error}{again}") from None
-    imported = f"imported {counted(count, 'case')} from {source} into {database_label(engine)}"
-    errors.print(imported + (f"; {there} stored already" if new_only else ""), highlight=False)
-    cases = [c for c in cases if c.case_id not in before]  # the others were checked then
+    imported = (
+        f"imported {counted(len(stored), 'case')} from {source} into {database_label(engine)}"
+    )
+    there = f"; {len(cases) - len(stored)} stored already" if new_only else ""
+    errors.print(imported + there, highlight=False)
+    cases = stored  # those stored already were checked then
     if not check:
         return
     checks, unchecked = recorded_checks(cases, lib, existing_engine(database))

@@ -254,9 +254,12 @@ def reflectance_from_Lab(
     R = resample(np.stack([sd.values for sd in shapes]), shapes[0].wavelengths, shape_of(wl))
     R = np.where(black, 0.0, R)
     towards = np.linalg.solve(W.T @ W, W.T)  # [3, wavelength]: XYZ → the smallest change
+    aimed = XYZ / scale
+    missed = aimed - R @ W
     for _ in range(iterations):  # most converge in a few; the darkest and most vivid in 1,000
-        R = np.maximum(R + (XYZ / scale - R @ W) @ towards, 0.0)
-        if np.abs(XYZ / scale - R @ W).max() < 1e-12:
+        R = np.maximum(R + missed @ towards, 0.0)
+        missed = aimed - R @ W
+        if np.abs(missed).max() < 1e-12:
             break
     R = R * scale
     error = colour.delta_E(XYZ_to_Lab(R @ W, white_point(wl, conditions)), Lab.reshape(-1, 3))

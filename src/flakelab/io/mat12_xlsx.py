@@ -141,15 +141,17 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
             sheets = _sheets(path, handle)
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
+    color_preamble = _split_sheet(sheets[_COLOR])[0] if _COLOR in sheets else {}
     lab_conditions = D65_10
-    if _COLOR in sheets:
-        color_preamble, _ = _split_sheet(sheets[_COLOR])
-        if color_preamble.get("ILLUMINANT/OBSERVER"):
-            lab_conditions = parse_conditions(
-                path, color_preamble["ILLUMINANT/OBSERVER"], f"{_COLOR}, ILLUMINANT/OBSERVER"
-            )
+    if color_preamble.get("ILLUMINANT/OBSERVER"):
+        lab_conditions = parse_conditions(
+            path, color_preamble["ILLUMINANT/OBSERVER"], f"{_COLOR}, ILLUMINANT/OBSERVER"
+        )
     if _SPECTRAL not in sheets and (colour := _color_rows(path, sheets.get(_COLOR))):
-        return _colour_alone(path, sheets, colour, lab_conditions)
+        # saved with its Color Data alone: each reading's spectrum recovered from its colour
+        readings = recovered_readings(path, colour, lab_conditions)
+        return _assembled(path, sheets, readings, WAVELENGTHS, color_preamble, lab_conditions,
+                          recovered=True)  # fmt: skip
     if _SPECTRAL not in sheets:
         raise MeasurementFileError(
             path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'})"
@@ -213,14 +215,6 @@ def _assembled(path, sheets, readings, wavelengths, preamble, lab_conditions, re
         metadata=metadata,
         spectra_recovered=recovered,
     )
-
-
-def _colour_alone(path, sheets, readings: list[Reading], lab_conditions) -> list[Measurement]:
-    """An export saved with its Color Data sheet and no Spectral Data: each reading with a
-    spectrum recovered from its colour (:func:`~flakelab.io.records.recovered_readings`)."""
-    preamble, _ = _split_sheet(sheets[_COLOR])
-    readings = recovered_readings(path, readings, lab_conditions)
-    return _assembled(path, sheets, readings, WAVELENGTHS, preamble, lab_conditions, True)
 
 
 def read_mat12_images(path: str | PathLike) -> dict[str, dict[str, NDArray[np.uint8]]]:

@@ -420,7 +420,7 @@ def recovered_readings(
     except UnreachableColour as error:
         raise MeasurementFileError(path, str(error), field=readings[error.position].where) from None
     high = REFLECTANCE_RANGE[1]
-    if (over := np.flatnonzero(spectra.max(axis=1) > high)).size:
+    if (over := np.flatnonzero(outside(spectra, REFLECTANCE_RANGE).any(axis=1))).size:
         reading = readings[over[0]]
         raise MeasurementFileError(
             path,
