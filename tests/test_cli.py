@@ -357,6 +357,7 @@ def test_bad_options_exit_nonzero_without_traceback(cli):
         (("inspect",), "give a measurement file"),
         (("match", "--example", "--no-target-texture"), "for the harness"),
         (("match", "--example", "--resprays", "5"), "for the harness"),
+        (("match", "--example", "--colour-alone"), "for the harness"),
         (("match", "evaluate", "--resprays", "-1"), "--resprays"),
     ):
         result = cli(*args)

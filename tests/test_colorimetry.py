@@ -147,6 +147,26 @@ def test_a_recovered_spectrum_is_a_metamer_not_the_measurement(ma_t12_files):
         assert apart.max() > 0.6
 
 
+def test_a_dark_reading_s_noise_is_recovered_dipping_below_zero_as_measured_spectra_do():
+    """Near black an instrument's noise gives colours no surface reflects: a dark metallic's
+    45as110 of L* -0.27 in the harness's world (its measured spectrum down to -4e-4), L* 0.04
+    with b* -1.1. Allowed to dip to -0.05, as the readers allow a measured spectrum, each is
+    recovered exactly, dipping a few 1e-4; without, each is refused. A vivid colour no
+    instrument's noise explains (L* 50, a* 130) is refused either way."""
+    noisy = np.array([[-0.27, -0.09, -0.31], [0.04, -0.33, -1.12], [0.0, 5.0, 0.0]])
+    R = reflectance_from_Lab(noisy, floor=-0.05)
+    assert delta_E_CIE2000(reflectance_to_Lab(R), noisy).max() < 1e-6
+    assert -0.003 < R.min() < 0.0
+    for lab in noisy:
+        with pytest.raises(UnreachableColour):
+            reflectance_from_Lab([lab])
+    with pytest.raises(UnreachableColour, match="nor one dipping no lower than -0.05"):
+        reflectance_from_Lab([[50.0, 130.0, 0.0]], floor=-0.05)
+    # a colour a surface reflects is recovered without a dip, floor or none
+    within = reflectance_from_Lab(RECOVERED, floor=-0.05)
+    np.testing.assert_array_equal(within, reflectance_from_Lab(RECOVERED))
+
+
 def test_a_colour_no_surface_reflects_is_refused_by_its_position():
     with pytest.raises(UnreachableColour) as caught:
         reflectance_from_Lab([[50.0, 0.0, 0.0], [50.0, 130.0, 0.0]])

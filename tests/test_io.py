@@ -1223,6 +1223,21 @@ def test_a_file_of_lab_alone_is_read_with_spectra_recovered_from_it(ma_t12_dir, 
         assert not both.exists()
 
 
+def test_a_dark_metallic_s_flop_reading_of_lab_alone_is_read_as_its_spectra_would_be(tmp_path):
+    """A black metallic read at 45as110 gives L* -0.27 (its measured spectrum dips to -4e-4,
+    instrument noise the spectral readers accept): as L*a*b* alone the reading is read too,
+    its spectrum recovered dipping as little. It was refused, "no colour a surface reflects"."""
+    table = tmp_path / "black.csv"
+    table.write_text(
+        "sample,geometry,L,a,b\nB,45as15,13.51,1.2,-3.4\nB,45as45,1.57,0.1,-0.6\n"
+        "B,45as110,-0.27,-0.09,-0.31\n"
+    )
+    black = read_measurement(table)
+    assert black.spectra_recovered
+    assert delta_E_CIE2000(black.lab(), black.stored_lab).max() < 1e-6
+    assert -0.001 < black.reflectance.min() < 0.0
+
+
 def test_a_cxf_of_colorcielab_alone_is_read_with_spectra_recovered(rich_measurement, tmp_path):
     """A CxF3 file whose Objects hold ColorCIELab and no ReflectanceSpectrum (a paint maker's
     colour data): its readings get spectra that give its colours, at its geometries, under the

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.colorimetry import Conditions, reflectance_to_Lab
 from flakelab.core.difference import delta_E, delta_E_CIE2000, metamerism_indices
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_geometries
 from flakelab.core.tolerance import Limit, TextureLimit, Tolerance, tolerance_preset
@@ -1828,6 +1828,58 @@ def test_harness_counts_the_targets_that_need_a_toner_out_of_stock(hybrid):
     with pytest.raises(LibraryError, match="'Al mediun' is not a toner"):
         evaluate_matching(world, hybrid, effect, targets=1, seed=5,
                           settings=replace(hasty, without=("Al mediun",)))  # fmt: skip
+
+
+def test_harness_reads_by_colour_alone_where_the_instrument_gives_no_spectra(hybrid, monkeypatch):
+    """``colour_alone``: the matcher and the correction read each target and spray-out as a
+    file of L*a*b* alone gives it, the colour in daylight exact, the spectrum one metamer
+    (under illuminant A it parts from the car's), and weigh no metamerism index; the sprays
+    are judged against the car's measured spectra, so the hidden formula's own spray is
+    judged as in a run with spectra."""
+    from flakelab.match import evaluate
+    from flakelab.match.models import effect_mask
+
+    world = evaluate.harness_world(hybrid.library, "five-angle", "shop")
+    effect = effect_mask(hybrid.library, hybrid.toners)
+    _, t = next(evaluate.harness_trials(world, 1, 3))
+    read = t.read(colour_alone=True)
+    assert read.spectra_recovered and not t.read().spectra_recovered
+    assert read.texture == t.texture and t.read(False, True).texture == {}
+    assert delta_E(read.lab(), reflectance_to_Lab(t.target)).max() < 1e-3
+    under_A = Conditions("A", "10")
+    assert delta_E(read.lab(under_A), reflectance_to_Lab(t.target, conditions=under_A)).max() > 0.1
+    assert t.as_read(t.target, False) is t.target
+    assert delta_E(reflectance_to_Lab(t.as_read(t.target, True)), read.lab()).max() < 1e-3
+
+    matched, corrected = [], []
+    real_match, real_correct = evaluate.match, evaluate.correct
+    monkeypatch.setattr(
+        evaluate,
+        "match",
+        lambda target, *a, **k: (
+            matched.append(target.spectra_recovered) or real_match(target, *a, **k)
+        ),
+    )
+    monkeypatch.setattr(evaluate, "correct", lambda forward, target, recipe, sprayed, **k: (
+        corrected.append((target, sprayed, k["metamerism"], k["lights"]))
+        or real_correct(forward, target, recipe, sprayed, **k)))  # fmt: skip
+    hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
+    tight = Tolerance("tight", Limit(de00=0.05))  # every first spray fails: each is corrected
+    runs = {
+        alone: evaluate.evaluate_matching(world, hybrid, effect, targets=2, seed=3,
+                                          settings=hasty, tolerance=tight, colour_alone=alone)
+        for alone in (True, False)
+    }  # fmt: skip
+    assert matched == [True, True, False, False]
+    assert [c[2:] for c in corrected] == [(0.0, ())] * 2 + [(hasty.metamerism, None)] * 2
+    first = [trial for _, trial in evaluate.harness_trials(world, 2, 3)]
+    for (target, sprayed, *_), trial in zip(corrected[:2], first, strict=True):
+        assert not np.allclose(target, trial.target, atol=1e-3)  # a metamer of the car's
+        assert delta_E(reflectance_to_Lab(target), reflectance_to_Lab(trial.target)).max() < 1e-3
+        assert sprayed.shape == trial.target.shape
+    assert runs[True]["targets_read_colour_alone"] and not runs[False]["targets_read_colour_alone"]
+    for key in ("oracle_de00_median", "oracle_metamerism_median", "respray_success"):
+        assert runs[True][key] == runs[False][key]
 
 
 def test_harness_judges_by_its_tolerance(hybrid):

@@ -224,6 +224,15 @@ def match_command(
             "texture: as from a file without them; the sprays are judged as ever).",
         ),
     ] = True,
+    colour_alone: Annotated[
+        bool,
+        typer.Option(
+            "--colour-alone",
+            help="evaluate: the shop's instrument exports L*a*b* alone: the matcher and the "
+            "correction read each target and spray-out by its colour (D65/10), their spectra "
+            "recovered from it, as from such a file; the sprays are judged as ever.",
+        ),
+    ] = False,
     resprays: Annotated[
         int,
         typer.Option(
@@ -310,15 +319,17 @@ def match_command(
             tolerance=tolerance,
             scale=order_can(quantity, resolution) if weighed else None,
             target_texture=target_texture,
+            colour_alone=colour_alone,
             resprays=resprays,
             lots=lots or "none",
             plot=plot,
             json_output=json_output,
         )
         return
-    if weighed or not target_texture or resprays:
+    if weighed or not target_texture or colour_alone or resprays:
         raise FlakelabError(
-            "--weighed, --no-target-texture, --resprays: for the harness (flakelab match evaluate)"
+            "--weighed, --no-target-texture, --colour-alone, --resprays: for the harness "
+            "(flakelab match evaluate)"
         )
     _check_target_options(target, example, all_samples, jobs, recipe_dir,
                           for_one=(sample, average, render, plot, recipe_out, nearest,
@@ -798,6 +809,7 @@ def _evaluate(
     tolerance,
     scale,
     target_texture,
+    colour_alone,
     resprays,
     lots,
     plot,
@@ -836,6 +848,7 @@ def _evaluate(
             tolerance=tol,
             scale=scale,
             target_texture=target_texture,
+            colour_alone=colour_alone,
             resprays=resprays,
             lots=lots,
             progress=lambda: bar.advance(task),
@@ -940,8 +953,9 @@ def _print_harness(report: dict) -> None:
 
 def _harness_options(report: dict) -> list[str]:
     """What the harness's options add to its report, in words: the targets that needed a
-    toner out of stock (``--without``), the chances over the resprays (``--resprays``), and
-    how far the tins the shop matched with were from the true ones (``--lots``)."""
+    toner out of stock (``--without``), the chances over the resprays (``--resprays``), how
+    the targets were read (``--colour-alone``, ``--no-target-texture``), and how far the tins
+    the shop matched with were from the true ones (``--lots``)."""
     lines = []
     if report["without"]:
         lines.append(
@@ -958,6 +972,13 @@ def _harness_options(report: dict) -> list[str]:
             f"{_share(report['oracle_chance'])}, new toner "
             f"{_share(report['novel_toner_first_shot_chance'])}"
         )
+    if report["targets_read_colour_alone"]:
+        lines.append(
+            "targets and spray-outs read by their L*a*b* alone, their spectra recovered from "
+            "it: the metamerism index above is the sprays' against the car's measured spectra"
+        )
+    if not report["targets_read_texture"]:
+        lines.append("targets read without their texture readings")
     if report["lots"] != "none" and report["lot_strength_error_rms"] is not None:
         shade = report["lot_shade_error_rms_nm"]
         lines.append(

@@ -212,6 +212,7 @@ def reflectance_from_Lab(
     wavelengths: ArrayLike = WAVELENGTHS,
     conditions: Conditions = D65_10,
     iterations: int = 2000,
+    floor: float = 0.0,
 ) -> NDArray[np.float64]:
     """A smooth, non-negative reflectance factor ``R[..., wavelength]`` whose CIELAB under
     ``conditions`` is ``Lab[..., 3]``: one metamer of the many a colour known only as
@@ -222,11 +223,17 @@ def reflectance_from_Lab(
     makes its colour exact (Cohen's fundamental metamer: ``R + (XYZ - R W)(WᵀW)⁻¹ Wᵀ``),
     alternated with clipping at 0 so that it stays a reflectance.
 
+    With a negative ``floor``, a colour no non-negative spectrum gives is reached by one more
+    such change unclipped, where that dips no lower than ``floor``. Near black an
+    instrument's noise reads so: a dark metallic's reading at 110° from specular of L* -0.3,
+    or L* 0.04 with b* -1.1 (a hue a surface that dark cannot have), comes from a measured
+    spectrum a few 1e-4 below 0.
+
     Raises
     ------
     UnreachableColour
         When a colour lies outside those a surface can reflect (its spectrum cannot be
-        non-negative).
+        non-negative, nor dip no lower than ``floor``).
 
     Examples
     --------
@@ -246,7 +253,7 @@ def reflectance_from_Lab(
     Y = XYZ[:, 1:2]
     black = Y <= 0.0  # L* 0: no light at any wavelength, if a* and b* are 0 too
     scale = np.where(black, 1.0, Y / np.clip(Y, *RECOVERY_LUMINANCE))
-    XYZ = np.where(black, 0.0, XYZ)
+    stated, XYZ = XYZ, np.where(black, 0.0, XYZ)
     cmfs = colour.MSDS_CMFS[OBSERVERS[conditions.observer]]
     illuminant = colour.SDS_ILLUMINANTS[conditions.illuminant]
     with colour.utilities.suppress_warnings(colour_runtime_warnings=True):
@@ -262,13 +269,20 @@ def reflectance_from_Lab(
         if np.abs(missed).max() < 1e-12:
             break
     R = R * scale
-    error = colour.delta_E(XYZ_to_Lab(R @ W, white_point(wl, conditions)), Lab.reshape(-1, 3))
+    white = white_point(wl, conditions)
+    error = colour.delta_E(XYZ_to_Lab(R @ W, white), Lab.reshape(-1, 3))
+    if floor < 0.0 and np.any(error > RECOVERED_EXACT):
+        dipped = R + (stated - R @ W) @ towards
+        take = (error > RECOVERED_EXACT) & (dipped.min(axis=1) >= floor)
+        R = np.where(take[:, None], dipped, R)
+        error = np.where(take, colour.delta_E(XYZ_to_Lab(R @ W, white), Lab.reshape(-1, 3)), error)
     if np.any(error > RECOVERED_EXACT):
         at = int(np.argmax(error > RECOVERED_EXACT))
+        dipping = f", nor one dipping no lower than {floor:g}" if floor < 0.0 else ""
         raise UnreachableColour(
             f"L*a*b* {np.round(Lab.reshape(-1, 3)[at], 2).tolist()} is no colour a surface "
             f"reflects under {conditions}: no spectrum comes nearer than "
-            f"{float(error[at]):.2g} ΔE00",
+            f"{float(error[at]):.2g} ΔE00{dipping}",
             at,
         )
     return R.reshape(*Lab.shape[:-1], wl.size)

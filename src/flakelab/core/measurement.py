@@ -9,7 +9,13 @@ from datetime import datetime
 import numpy as np
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab
+from flakelab.core.colorimetry import (
+    D65_10,
+    Conditions,
+    Lab_to_LCh,
+    reflectance_from_Lab,
+    reflectance_to_Lab,
+)
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS, resample
 from flakelab.core.wording import counted
@@ -27,6 +33,7 @@ __all__ = [
     "outside",
     "mean_reading",
     "recovered_note",
+    "known_by_colour",
 ]
 
 TEXTURE_READINGS: tuple[str, ...] = (
@@ -220,6 +227,24 @@ def recovered_note(measurement: Measurement) -> str | None:
         f"{measurement.sample}: its file gives L*a*b* alone; its spectra were recovered from "
         f"it (one metamer of many), so its colour under {measurement.stored_lab_conditions} "
         "is the file's, under any other light an estimate"
+    )
+
+
+def known_by_colour(measurement: Measurement, conditions: Conditions = D65_10) -> Measurement:
+    """``measurement`` as an instrument that exports L*a*b* alone gives it: its colour under
+    ``conditions`` (``stored_lab``) and spectra recovered from that colour
+    (:func:`~flakelab.core.colorimetry.reflectance_from_Lab`), one metamer of many, as
+    flakelab reads such a file (a dark reading's spectrum dipping below 0 as far as a measured
+    one may, :data:`REFLECTANCE_RANGE`)."""
+    lab = measurement.lab(conditions)
+    return replace(
+        measurement,
+        reflectance=reflectance_from_Lab(
+            lab, measurement.wavelengths, conditions, floor=REFLECTANCE_RANGE[0]
+        ),
+        stored_lab=lab,
+        stored_lab_conditions=conditions,
+        spectra_recovered=True,
     )
 
 

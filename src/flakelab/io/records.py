@@ -416,7 +416,8 @@ def recovered_readings(
     a colour no surface reflects is refused naming its reading."""
     lab = np.array([r.lab for r in readings], dtype=float).reshape(-1, 3)
     try:
-        spectra = reflectance_from_Lab(lab, WAVELENGTHS, conditions)
+        # near black an instrument's noise dips below 0, as its spectra would
+        spectra = reflectance_from_Lab(lab, WAVELENGTHS, conditions, floor=REFLECTANCE_RANGE[0])
     except UnreachableColour as error:
         raise MeasurementFileError(path, str(error), field=readings[error.position].where) from None
     high = REFLECTANCE_RANGE[1]

@@ -11,7 +11,9 @@ formulation itself sprayed and judged the same way — the limit that spray and 
 noise set. The respray is the car's own paint (the factory's batches) sprayed again: what a
 correction that removed every batch difference would still face, each spray's application.
 Novel-toner targets each contain one toner the learned model never saw. Recipes are sprayed
-as computed, or, given a scale, as a shop weighs them (rounded to its resolution).
+as computed, or, given a scale, as a shop weighs them (rounded to its resolution). A shop
+whose instrument exports L*a*b* alone is run too: the matcher and the correction then read
+every target and spray-out by its colour, their spectra recovered from it.
 
 The issue's figures come from a real shop's world. Two calmer worlds (:data:`HARNESS_WORLDS`)
 say where the rest is lost: with the paper's "standardised pigments" no batch differs from
@@ -25,6 +27,7 @@ import copy
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +36,7 @@ from flakelab.cases.generator import SHOP_WITH_HABITS, Variation, World, WorldSe
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E, metamerism_indices, worst_light
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement, known_by_colour
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import REFINISH_TEXTURE, Tolerance, tolerance_preset
 from flakelab.library.lots import TIN_KNOWLEDGE
@@ -44,6 +47,7 @@ from flakelab.match.lots import WithLots, calibrate_lots, calibration_recipes
 from flakelab.match.objective import OBJECTIVE_DEFAULT
 from flakelab.match.recipe import Can, weigh_whole_can
 from flakelab.match.search import MatchError, MatchSettings, match
+from flakelab.match.settings import without_metamerism
 
 __all__ = [
     "evaluate_matching",
@@ -108,6 +112,26 @@ class Trial:
         """The target as the shop's instrument gives it: spectra and texture readings."""
         geometries = self.world.geometries
         return Measurement("target", geometries, WAVELENGTHS, self.target, texture=self.texture)
+
+    @cached_property
+    def target_by_colour(self) -> Measurement:
+        """The target as an instrument that exports L*a*b* alone gives it: its spectra
+        recovered from its colour (:func:`~flakelab.core.measurement.known_by_colour`)."""
+        return known_by_colour(self.measurement())
+
+    def read(self, texture: bool = True, colour_alone: bool = False) -> Measurement:
+        """The target as the matcher reads it: without its texture readings unless
+        ``texture``; with ``colour_alone``, known by its L*a*b* alone."""
+        read = self.target_by_colour if colour_alone else self.measurement()
+        return read if texture else replace(read, texture={})
+
+    def as_read(self, reading: NDArray, colour_alone: bool) -> NDArray:
+        """A spray-out's ``reading`` ``[G, 31]`` as the shop's instrument gives it: with
+        ``colour_alone``, the spectra recovered from its L*a*b*."""
+        if not colour_alone:
+            return reading
+        sprayed = Measurement("sprayed", self.world.geometries, WAVELENGTHS, reading)
+        return known_by_colour(sprayed).reflectance
 
     def spray(
         self, x: NDArray, stream: np.random.Generator, batches: Variation | None = None
@@ -308,13 +332,15 @@ def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None, standards
     return WithLots(forward, strength, shade, library), error
 
 
-def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target_texture=True):
+def harness_match(
+    t: Trial, forward, effect, settings, habits, tolerance, target_texture=True, colour_alone=False
+):
     """The harness's match of trial ``t``'s target, and its latency in seconds: the target
-    read (without its texture readings unless ``target_texture``) and matched."""
+    read (:meth:`Trial.read`: without its texture readings unless ``target_texture``, by its
+    L*a*b* alone with ``colour_alone``) and matched."""
     start = time.perf_counter()
-    read = t.measurement() if target_texture else replace(t.measurement(), texture={})
     result = match(
-        read,
+        t.read(target_texture, colour_alone),
         forward,
         effect,
         tolerance=tolerance,
@@ -327,7 +353,7 @@ def harness_match(t: Trial, forward, effect, settings, habits, tolerance, target
 
 def _one(
     t: Trial, x_hidden, forward, effect, settings, habits, tolerance, scale, target_texture=True,
-    resprays=0, lots="none", panels=None, standards=None,
+    resprays=0, lots="none", panels=None, standards=None, colour_alone=False,
 ) -> dict:  # fmt: skip
     world = t.world
     forward, lot_error = shop_forward(t, forward, lots, panels, standards)
@@ -341,7 +367,11 @@ def _one(
     def texture_share(sprayed: tuple[NDArray, dict]) -> float:  # by refinish's limits
         return max(REFINISH_TEXTURE.share(t.texture, sprayed[1]).values(), default=0.0)
 
-    result, latency = harness_match(t, forward, effect, settings, habits, tolerance, target_texture)
+    result, latency = harness_match(
+        t, forward, effect, settings, habits, tolerance, target_texture, colour_alone
+    )
+    # the correction, too, reads what the instrument gives; no metamerism index against a metamer
+    aim = without_metamerism(settings) if colour_alone else settings
     best = result.candidates[0]
     mixed = as_weighed(forward, best.fractions, scale)
     x = recipe_vector(forward, mixed)
@@ -351,15 +381,15 @@ def _one(
     if first_share > 1.0:
         recipe = correct(
             forward,
-            t.target,
+            t.read(colour_alone=colour_alone).reflectance,
             mixed,
-            first[0],
+            t.as_read(first[0], colour_alone),
             mode="reformulate",
             library=world.library,
             habits=habits,
             tolerance=tolerance,
-            metamerism=settings.metamerism,
-            lights=settings.lights,
+            metamerism=aim.metamerism,
+            lights=aim.lights,
             physics_every=settings.physics_every,
             without=settings.without,
         ).fractions
@@ -422,6 +452,7 @@ def evaluate_matching(
     target_texture: bool = True,
     resprays: int = 0,
     lots: str = "none",
+    colour_alone: bool = False,
     progress: Callable[[], None] | None = None,
     per_target: bool = False,
 ) -> dict:
@@ -432,7 +463,11 @@ def evaluate_matching(
     correction splits the offset about them. Sprays are judged by ``tolerance`` (default
     :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`), which the matcher and the
     correction aim at. Without ``target_texture`` the matcher reads each target without its
-    texture readings, as from a file that lacks them; the sprays are judged as ever.
+    texture readings, as from a file that lacks them; the sprays are judged as ever. With
+    ``colour_alone`` the shop's instrument exports L*a*b* alone: the matcher and the
+    correction read each target and spray-out by its colour (D65/10), their spectra
+    recovered from it (:meth:`Trial.read`), and weigh no metamerism index; the sprays are
+    judged as ever, their metamerism against the car's measured spectra.
 
     With ``resprays`` = K, each target's first recipe and its hidden formula are sprayed K
     more times, in pairs that share their application and reading: ``first_shot_chance`` and
@@ -461,7 +496,7 @@ def evaluate_matching(
         for i, (x, t) in enumerate(harness_trials(world, targets, seed, novel, novel_targets)):
             row = _one(
                 t, x, forward, effect, settings, habits, tolerance, scale, target_texture,
-                resprays, lots, panels, standards,
+                resprays, lots, panels, standards, colour_alone,
             )  # fmt: skip
             (rows if i < targets else novel_rows).append(row)
             if progress:
@@ -502,6 +537,7 @@ def evaluate_matching(
         ),
         "by_family": _by_family(rows, share, mean),
         "targets_read_texture": target_texture,
+        "targets_read_colour_alone": colour_alone,
         "after_one_correction": corrected,
         "novel_toner_first_shot": novel_first,
         "novel_targets": len(novel_rows),
