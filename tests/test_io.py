@@ -13,6 +13,7 @@ import stat
 import sys
 import time
 import warnings
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
@@ -1259,6 +1260,31 @@ def test_a_cxf_of_colorcielab_alone_is_read_with_spectra_recovered(rich_measurem
     nothing.write_text(re.sub(lab, "", alone.read_text()))
     with pytest.raises(MeasurementFileError, match="no ReflectanceSpectrum or ColorCIELab"):
         read_measurement(nothing)
+
+
+def test_a_cxf_of_measured_objects_and_colour_alone_ones_reads_each_as_it_is(
+    rich_measurement, tmp_path
+):
+    """A CxF3 file whose first Object is measured and whose second gives ColorCIELab alone (a
+    standard's colour beside a measured trial): both are read, in the file's order, the second
+    with spectra recovered from its colour; it was passed over, unsaid. A geometry of colour
+    alone in a measured Object is refused by name, where it was dropped."""
+    both = tmp_path / "both.cxf"
+    write_measurements([rich_measurement, replace(rich_measurement, sample="standard")], both)
+    text = both.read_text()
+    spectrum = r"<(\w+:)ReflectanceSpectrum[^>]*>[^<]*</\1ReflectanceSpectrum>"
+    second = text.index("standard")
+    both.write_text(text[:second] + re.sub(spectrum, "", text[second:]))
+    trial, standard = read_measurements(both)
+    assert (trial.sample, standard.sample) == (rich_measurement.sample, "standard")
+    assert not trial.spectra_recovered and standard.spectra_recovered
+    np.testing.assert_array_equal(trial.reflectance, rich_measurement.reflectance)
+    conditions = rich_measurement.stored_lab_conditions
+    assert delta_E_CIE2000(standard.lab(conditions), rich_measurement.stored_lab).max() < 1e-6
+    partly = tmp_path / "partly.cxf"
+    partly.write_text(re.sub(spectrum, "", text, count=1))
+    with pytest.raises(MeasurementFileError, match="ColorCIELab without a ReflectanceSpectrum"):
+        read_measurements(partly)
 
 
 def test_an_export_of_colour_alone_is_read_with_spectra_recovered(ma_t12_files, tmp_path):

@@ -145,10 +145,13 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
             if isinstance(v, cxf3.ColorCielab)
         }
         measured_at = _creation_date(path, sample, obj.creation_date)
+        spectral = {
+            v.color_specification for v in values if isinstance(v, cxf3.ReflectanceSpectrum)
+        }
         lab_alone += [
             Reading(f"Object {sample!r}, ColorCIELab {spec}", sample, geometries.get(spec), None,
                     lab, measured_at, {"spec": spec})
-            for spec, lab in labs.items()
+            for spec, lab in labs.items() if spec not in spectral
         ]  # fmt: skip
         for v in values:
             if not isinstance(v, cxf3.ReflectanceSpectrum):
@@ -207,19 +210,37 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                     metadata.setdefault(sample, {})[key[5:]] = value
     if wavelengths is None and not lab_alone:
         raise MeasurementFileError(path, "no ReflectanceSpectrum or ColorCIELab in any Object")
-    recovered = wavelengths is None  # colour alone: spectra recovered from it
-    if recovered:
-        readings, wavelengths, lab_conditions = _recovered(path, lab_alone, conditions)
-    return assemble(
-        path,
-        readings,
-        wavelengths,
-        instrument=instrument,
-        lab_conditions=lab_conditions,
-        texture=texture,
-        metadata=metadata,
-        spectra_recovered=recovered,
-    )
+    _check_one_kind_per_sample(path, readings, lab_alone)
+    keep = dict(instrument=instrument, texture=texture, metadata=metadata)
+    measured = assemble(path, readings, wavelengths, lab_conditions=lab_conditions, **keep) if (
+        readings
+    ) else []  # fmt: skip
+    if not lab_alone:
+        return measured
+    # Objects of ColorCIELab alone (some software stores a standard so beside measured
+    # trials): their spectra recovered from it (one metamer of many), each flagged so
+    recovered, grid, lab_conditions = _recovered(path, lab_alone, conditions)
+    by_colour = assemble(path, recovered, grid, lab_conditions=lab_conditions,
+                         spectra_recovered=True, **keep)  # fmt: skip
+    order = {name: i for i, name in enumerate(obj.name or obj.id for obj in objects)}
+    return sorted(measured + by_colour, key=lambda m: order[m.sample])
+
+
+def _check_one_kind_per_sample(
+    path: str | PathLike, measured: list[Reading], lab_alone: list[Reading]
+) -> None:
+    """A sample is measured (its spectra) or known by its colour alone at every geometry: a
+    geometry of ColorCIELab alone in a sample whose other geometries give spectra is refused,
+    by name, where it was left out unsaid."""
+    samples = {r.sample for r in measured}
+    if mixed := next((r for r in lab_alone if r.sample in samples), None):
+        raise MeasurementFileError(
+            path,
+            "ColorCIELab without a ReflectanceSpectrum, where the sample's other geometries "
+            "give spectra: a measurement is read from its spectra or from its colour alone, "
+            "not both",
+            field=mixed.where,
+        )
 
 
 def _recovered(
