@@ -483,7 +483,7 @@ def test_habits_files_round_trip_and_bad_ones_name_the_field(tmp_path):
     bad.write_text(json.dumps({k: v for k, v in document.items() if k != "film_build_se"}))
     with pytest.raises(MeasurementFileError, match="film_build_se: missing"):
         read_habits(bad)
-    with pytest.raises(MeasurementFileError, match="not a JSON habits file"):
+    with pytest.raises(MeasurementFileError, match="expected a JSON habits file"):
         (tmp_path / "broken.json").write_text("{")
         read_habits(tmp_path / "broken.json")
 

@@ -508,26 +508,26 @@ def assemble(
     return measurements
 
 
-def read_json_file(path: Path, what: str, expected: str):
+def read_json_file(path: str | PathLike, what: str, expected: str):
     """The parsed contents of the JSON file ``path`` (a ``what``: "recipe file"), or a
-    :class:`~flakelab.errors.FlakelabError` naming it: missing, unreadable, or not JSON
+    :class:`~flakelab.errors.MeasurementFileError` naming it: missing, unreadable, or not JSON
     (``expected`` says what it should hold)."""
     try:
         text = text_of(path)
         if not text.strip():  # "Expecting value: line 1 column 1 (char 0)" before
-            raise FlakelabError(f"{path}: empty file; expected {expected}")
+            raise MeasurementFileError(path, f"empty file; expected {expected}")
         return json_value(text)
     except FlakelabError:
         raise
     except FileNotFoundError:
-        raise FlakelabError(f"{path}: no such {what}") from None
+        raise MeasurementFileError(path, f"no such {what}") from None
     except IsADirectoryError:  # "[Errno 21] Is a directory: '/tmp'" before
-        raise FlakelabError(f"{path}: a folder, not a {what}") from None
+        raise MeasurementFileError(path, f"a folder, not a {what}") from None
     except (UnicodeDecodeError, ValueError) as error:
         why = f"; this is {kind}" if (kind := other_format(path)) else f" ({error})"
-        raise FlakelabError(f"{path}: expected {expected}{why}") from None
+        raise MeasurementFileError(path, f"expected {expected}{why}") from None
     except OSError as error:
-        raise FlakelabError(f"{path}: expected {expected} ({error})") from None
+        raise MeasurementFileError(path, f"expected {expected} ({error})") from None
 
 
 _FORMAT_KINDS = {

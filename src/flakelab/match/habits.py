@@ -65,7 +65,7 @@ from flakelab.core.documents import SHOP_HABITS_FORMAT
 from flakelab.core.units import is_number
 from flakelab.core.wording import counted, database_label
 from flakelab.errors import FlakelabError, MeasurementFileError
-from flakelab.io.records import json_value, other_format, text_of, write_atomically
+from flakelab.io.records import read_json_file, write_atomically
 from flakelab.library.toners import Library
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, sprayout_mismatch
 from flakelab.match.settings import NOISE_SD, PERSISTENT_SD
@@ -653,23 +653,7 @@ def write_habits(habits: ShopHabits, path: str | PathLike) -> None:
 
 def read_habits(path: str | PathLike) -> ShopHabits:
     """A habits file written by :func:`write_habits` (``flakelab cases habits --out``)."""
-    try:
-        text = text_of(path)
-        if not text.strip():
-            raise MeasurementFileError(path, "empty file; expected a JSON habits file")
-        document = json_value(text)
-    except MeasurementFileError:
-        raise
-    except FileNotFoundError:
-        raise MeasurementFileError(path, "no such file") from None
-    except IsADirectoryError:
-        raise MeasurementFileError(path, "a folder, not a habits file") from None
-    except OSError as error:
-        raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        kind = other_format(path)  # a car's measurement given for its habits
-        why = f"this is {kind}" if kind else f"not a JSON habits file ({error})"
-        raise MeasurementFileError(path, why) from None
+    document = read_json_file(path, "habits file", "a JSON habits file")
     if not isinstance(document, dict) or document.get("format") != HABITS_FORMAT:
         raise MeasurementFileError(path, f"expected {HABITS_FORMAT!r}", field="format")
     if found := _report_problem(document):
