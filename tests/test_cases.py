@@ -1632,6 +1632,16 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
             "meta tag created_at: expected a date and time such as 2026-11-22T09:30 or "
             "22.11.2026 09:30, got 'soon'"
         ),
+        # a history of colours alone (read with spectra recovered): a case keeps spectra
+        (
+            "colour.cxf",
+            lambda t: re.sub(
+                r'<(\w+:)ReflectanceSpectrum [^>]*(ColorSpecification="[^"]+")>[^<]*'
+                r"</\1ReflectanceSpectrum>",
+                r"<\1ColorCIELab \2><\1L>40</\1L><\1A>2</\1A><\1B>-3</\1B></\1ColorCIELab>",
+                t,
+            ),
+        ): (f"target: '{first.case_id}/target' gives L\\*a\\*b\\* alone: a case keeps spectra"),
         ("twice.csv", lambda t: t + t.splitlines()[1] + "\n"): (
             f"row 5: case_id: '{first.case_id}' is also row 2's"
         ),

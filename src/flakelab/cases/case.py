@@ -34,6 +34,7 @@ __all__ = [
     "OUTCOMES",
     "TEXT_LENGTHS",
     "cases_at",
+    "check_measured",
     "colour_code_hint",
     "colour_code_words",
     "has_colour_code",
@@ -58,6 +59,18 @@ longer value; SQLite would keep it), checked with every case so that no store fa
 
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
+
+
+def check_measured(role: str, reading) -> None:
+    """Refuse a ``role`` reading (target, spray-out) whose spectra were recovered from its
+    L*a*b* (a :class:`~flakelab.core.measurement.Measurement`): a case keeps spectra, which
+    the learned model learns from, and a recovered one is a metamer of many."""
+    if reading.spectra_recovered:
+        raise CaseError(
+            f"{role}: {reading.sample!r} gives L*a*b* alone: a case keeps spectra, which the "
+            "learned model learns from, and one recovered from a colour is a metamer of "
+            "many; record it from the instrument's spectral export"
+        )
 
 
 _CODE_BREAKS = str.maketrans({c: " " for c in "/,;+&"})

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.cases.case import Case, CaseError, tin_fields
+from flakelab.cases.case import Case, CaseError, check_measured, tin_fields
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -500,6 +500,11 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
         where = f"{path}: sample {name!r}"
         if sprayout is None:
             raise CaseFileError(f"{where}: no matching '{case_id}/sprayout' sample")
+        try:
+            check_measured("target", target)
+            check_measured("spray-out", sprayout)
+        except CaseError as error:  # a shop's history of colours alone
+            raise CaseFileError(f"{path}: {error}") from None
         meta = target.metadata
         missing = [k for k in ("recipe", "outcome", "created_at") if k not in meta]
         if missing:

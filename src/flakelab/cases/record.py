@@ -17,7 +17,7 @@ from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
-from flakelab.cases.case import OUTCOMES, TEXT_LENGTHS, Case, CaseError
+from flakelab.cases.case import OUTCOMES, TEXT_LENGTHS, Case, CaseError, check_measured
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
@@ -130,13 +130,8 @@ def case_from_readings(
     file's date), else now. ``tins`` (the shop's lots, by toner) gives the case the tins of
     its recipe's toners; ``colour_code`` the car maker's code for the car's colour.
     """
-    for role, reading in (("target", target), ("spray-out", sprayout)):
-        if reading.spectra_recovered:
-            raise CaseError(
-                f"{role}: {reading.sample!r} gives L*a*b* alone: a case keeps spectra, which the "
-                "learned model learns from, and one recovered from a colour is a metamer of "
-                "many; record it from the instrument's spectral export"
-            )
+    check_measured("target", target)
+    check_measured("spray-out", sprayout)
     shop = tidy_name(shop)  # as the case stores it, for its id
     if instrument is None:
         names, instrument = shared_geometries(target, sprayout)
