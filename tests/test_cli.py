@@ -10,6 +10,7 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -175,6 +176,28 @@ def test_convert_lab_only_writes_the_colour_and_no_spectra(tmp_path, cli):
     assert refused.returncode == 2
     assert "--lab-only: L*a*b* without spectra is written as csv" in refused.stderr
     assert not (tmp_path / "car.json").exists()
+
+
+def test_convert_of_a_file_of_both_kinds_says_how_to_write_it(tmp_path, cli):
+    """A CxF3 file of a measured trial and a standard's colour alone converts with
+    ``--lab-only`` (both as L*a*b*) or ``--sample`` (one); without either it is refused,
+    saying so, and nothing is written."""
+    both = tmp_path / "both.cxf"
+    car = read_measurement(example_path("target"))
+    car = replace(car, stored_lab=car.lab())
+    write_measurements([replace(car, sample="standard"), replace(car, sample="trial")], both)
+    text = both.read_text()
+    trial = text.index('Name="trial"')
+    spectrum = r"<(\w+:)ReflectanceSpectrum[^>]*>[^<]*</\1ReflectanceSpectrum>"
+    both.write_text(re.sub(spectrum, "", text[:trial]) + text[trial:])
+    refused = cli("convert", both, tmp_path / "out.csv")
+    assert refused.returncode == 2 and not (tmp_path / "out.csv").exists()
+    said = " ".join(refused.stderr.split())
+    assert "holds measured spectra and L*a*b* alone ('standard')" in said, said
+    assert "--lab-only writes every one as L*a*b*, --sample NAME one of them" in said
+    assert cli("convert", both, tmp_path / "out.csv", "--lab-only").returncode == 0
+    assert len(read_measurements(tmp_path / "out.csv")) == 2
+    assert cli("convert", both, tmp_path / "trial.json", "--sample", "trial").returncode == 0
 
 
 def test_compare_example_agrees_with_library_and_tolerance(cli):

@@ -566,6 +566,13 @@ def convert(
             f", not {written_as}"
         )
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
+    kinds = {m.spectra_recovered for m in measurements}
+    if len(kinds) > 1 and not lab_only:  # a CxF3 file of both kinds, as read
+        alone = next(m.sample for m in measurements if m.spectra_recovered)
+        raise FlakelabError(
+            f"{source} holds measured spectra and L*a*b* alone ({alone!r}), and a file holds "
+            "one kind: --lab-only writes every one as L*a*b*, --sample NAME one of them"
+        )
     if lab_only:  # written as a file of colour alone is: the writers give such spectra none
         cond = Conditions.parse(conditions)
         for m in measurements:
