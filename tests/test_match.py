@@ -1131,6 +1131,15 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
     assert found.de00.max() == pytest.approx(best[0.0].de00.max(), abs=1e-3)
     assert found.metamerism == {} and found.to_dict()["metamer"] is False
     assert any("gives L*a*b* alone" in n and "no metamerism index" in n for n in result.notes)
+    assert not any("an estimate from its colour under" in n for n in result.notes)
+    # its colour stated under illuminant A: the search's daylight colour is an estimate
+    under_a = Conditions("A", "10")
+    lamp = replace(alone, reflectance=reflectance_from_Lab(target.lab(under_a), conditions=under_a),
+                   stored_lab=target.lab(under_a), stored_lab_conditions=under_a)  # fmt: skip
+    hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
+    notes = match(lamp, hybrid, effect, settings=hasty).notes
+    assert any("matched its colour in D65/10, where its file gives none: an estimate from its "
+               "colour under A/10" in n for n in notes), notes  # fmt: skip
 
 
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
