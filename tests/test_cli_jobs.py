@@ -1534,6 +1534,13 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
     assert sum("no metamerism index is weighed" in n for n in report["notes"]) == 2
     shown = cli("correct", lab_target, "--recipe", recipe, "--sprayed", lab_sprayed)
     assert shown.returncode == 0 and "metamerism index against" not in shown.stdout
+    assert not any("judged its colour in D65/10" in n for n in report["notes"])
+    # the car's colour stated under illuminant A: its daylight colour is an estimate
+    lamp_target = tmp_path / "car-A.csv"
+    assert cli("convert", target, lamp_target, "--lab-only", "--conditions", "A/10").returncode == 0
+    lamp = json.loads(cli("correct", lamp_target, "--recipe", recipe, "--sprayed", lab_sprayed,
+                          "--json").stdout)  # fmt: skip
+    assert sum("the correction judged its colour in D65/10" in n for n in lamp["notes"]) == 1
     database = tmp_path / "shop.db"
     refused = cli("cases", "record", lab_target, "-r", recipe, "--sprayed", sprayed, "-d",
                   database)  # fmt: skip

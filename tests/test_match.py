@@ -1138,7 +1138,7 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
                    stored_lab=target.lab(under_a), stored_lab_conditions=under_a)  # fmt: skip
     hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
     notes = match(lamp, hybrid, effect, settings=hasty).notes
-    assert any("matched its colour in D65/10, where its file gives none: an estimate from its "
+    assert any("judged its colour in D65/10, where its file gives none: an estimate from its "
                "colour under A/10" in n for n in notes), notes  # fmt: skip
 
 

@@ -136,7 +136,7 @@ def correct_command(
     spray-out's offset from the prediction that persists: the library's physics
     splits off what the spray's own film build and flake alignment did."""
     from flakelab.core.colorimetry import reflectance_to_Lab
-    from flakelab.core.measurement import recovered_note
+    from flakelab.core.measurement import daylight_estimate_note, recovered_note
     from flakelab.core.tolerance import failing_geometries, failures
     from flakelab.io import read_recipe, read_tolerance
     from flakelab.match.correction import correct, mismatch_note
@@ -165,7 +165,9 @@ def correct_command(
     )
     target_R, _, _ = spectra_for_model(target, target_reading, forward)
     sprayed_R, _, _ = spectra_for_model(sprayed, sprayed_reading, forward)
-    recovered = [note for r in (target_reading, sprayed_reading) if (note := recovered_note(r))]
+    readings = (target_reading, sprayed_reading)
+    recovered = [note for r in readings if (note := recovered_note(r))]
+    estimates = [n for r in readings if (n := daylight_estimate_note(r, "the correction"))]
     if recovered:  # a metamer of many: neither weighed nor reported
         metamerism, test_lights = 0.0, ()
     fractions = {n: float(v) for n, v in zip(lib.names, x0, strict=True) if v > 0}
@@ -201,6 +203,7 @@ def correct_command(
         "sprayout_failing": failures(failing, texture_failing),
         "notes": left_out_note(unused_geometries(target_reading, forward), forward, "correction")
         + [f"{note}: no metamerism index is weighed or taken" for note in recovered]
+        + estimates
         + lot_notes,
         "lots": tins and lots_report(tins),
     }

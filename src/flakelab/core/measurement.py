@@ -33,6 +33,7 @@ __all__ = [
     "outside",
     "mean_reading",
     "recovered_note",
+    "daylight_estimate_note",
     "known_by_colour",
 ]
 
@@ -227,6 +228,18 @@ def recovered_note(measurement: Measurement) -> str | None:
         f"{measurement.sample}: its file gives L*a*b* alone; its spectra were recovered from "
         f"it (one metamer of many), so its colour under {measurement.stored_lab_conditions} "
         "is the file's, under any other light an estimate"
+    )
+
+
+def daylight_estimate_note(measurement: Measurement, task: str = "the search") -> str | None:
+    """What a report says where ``task`` judges in D65/10 a measurement known by its colour
+    alone under other conditions (its daylight colour an estimate); None otherwise."""
+    stated = measurement.stored_lab_conditions
+    if not measurement.spectra_recovered or stated == D65_10:
+        return None
+    return (
+        f"{measurement.sample}: {task} judged its colour in {D65_10}, where its file gives "
+        f"none: an estimate from its colour under {stated}"
     )
 
 

@@ -48,14 +48,18 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import D65_10
 from flakelab.core.difference import (
     is_metamer,
     travel_off_specular,
     worst_light,
     worst_per_light,
 )
-from flakelab.core.measurement import TEXTURE_READINGS, Measurement, recovered_note
+from flakelab.core.measurement import (
+    TEXTURE_READINGS,
+    Measurement,
+    daylight_estimate_note,
+    recovered_note,
+)
 from flakelab.core.tolerance import (
     Tolerance,
     tolerance_preset,
@@ -635,11 +639,8 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
             f"{note}: the search weighed no metamerism index against it (the instrument's "
             "spectral export would let it prefer the car's own pigments to a metamer)"
         )
-        if (stated := target.stored_lab_conditions) != D65_10:  # the search's colours are D65/10
-            notes.append(
-                f"{target.sample}: the search matched its colour in {D65_10}, where its file "
-                f"gives none: an estimate from its colour under {stated}"
-            )
+        if estimate := daylight_estimate_note(target):
+            notes.append(estimate)
     if solid:
         notes.append(f"{solid}: a solid, matched with pigments alone")
     if habits_note:
