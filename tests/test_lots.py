@@ -542,15 +542,24 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(
 
     # a new tin (another lot number) starts from the standard; --dry-run leaves the file
     before = lots.read_text()
-    # the panel read as L*a*b* alone holds no shade to read: refused, the tins as they were
-    colour = tmp_path / "colour.csv"
+    # the panel read as L*a*b* alone in D65/10 holds all the reading uses, its colour in
+    # daylight: the same tin as from its spectra (it was refused); under A/10 it is refused,
+    # the tins as they were
+    colour, lamp = tmp_path / "colour.csv", tmp_path / "colour-A.csv"
     rows = zip(_geometries(forward), read_measurement(sprayed).lab(), strict=True)
     colour.write_text("sample,geometry,L,a,b\n" + "".join(
         f"panel,{g},{L!r},{a!r},{b!r}\n" for g, (L, a, b) in rows
     ))  # fmt: skip
-    refused = cli("lots", "calibrate", colour, "--recipe", panel, "--lots", lots,
+    read = [json.loads(cli("lots", "calibrate", panel_file, "--recipe", panel, "--lots", lots,
+                           "--dry-run", "--toner", "Phthalo blue GS", "--json").stdout)["tins"][0]
+            for panel_file in (sprayed, colour)]  # fmt: skip
+    assert read[1]["strength"] == pytest.approx(read[0]["strength"], abs=1e-4)
+    assert read[1]["shade_nm"] == pytest.approx(read[0]["shade_nm"], abs=0.01)
+    assert cli("convert", sprayed, lamp, "--lab-only", "--conditions", "A/10").returncode == 0
+    refused = cli("lots", "calibrate", lamp, "--recipe", panel, "--lots", lots,
                   "--toner", "Phthalo blue GS")  # fmt: skip
-    assert refused.returncode == 2 and "gives L*a*b* alone" in refused.stderr, refused.stderr
+    assert refused.returncode == 2, refused.stderr
+    assert "gives L*a*b* under A/10 alone" in " ".join(refused.stderr.split())
     assert lots.read_text() == before
     done = cli("lots", "calibrate", sprayed, "--recipe", panel, "--lots", lots, "--dry-run",
                "--lot", "Phthalo blue GS=B-2", "--toner", "Phthalo blue GS", "--json")  # fmt: skip

@@ -470,15 +470,20 @@ def _tins_on_file(engine, lots: Path | None, shop: str | None, database, lib):
 
 
 def _panel_spectra(paths: list[Path], sample, average: bool, forward, option="--sample"):
-    """Each panel file's reflectance at the model's geometries ``[N, G·31]``. A panel read as
-    L*a*b* alone is refused: a tin's shade is read as a shift of its spectrum, which a
-    spectrum recovered from a colour (one metamer of many) does not hold."""
+    """Each panel file's reflectance at the model's geometries ``[N, G·31]``. A tin's strength
+    and shade are read from its panels' colour in D65/10 (:func:`~flakelab.match.lots.
+    calibrate_lots`), so a panel known by that colour alone serves as well as its spectra: its
+    recovered spectrum gives that colour exactly. One known by its colour under other light is
+    refused: its daylight colour would be an estimate, and the lot file keeps what is read."""
+    from flakelab.core.colorimetry import D65_10
+
     readings = [(path, read_readings(path, sample, average, option)[0]) for path in paths]
     for path, reading in readings:
-        if reading.spectra_recovered:
+        if reading.spectra_recovered and (stated := reading.stored_lab_conditions) != D65_10:
             raise FlakelabError(
-                f"{path}: {reading.sample!r} gives L*a*b* alone: a tin's strength and shade are "
-                "read from a panel's spectra; read the panel with a spectrophotometer's export"
+                f"{path}: {reading.sample!r} gives L*a*b* under {stated} alone: a tin's strength "
+                f"and shade are read from a panel's colour in {D65_10}, which its file does not "
+                f"give; export the panel's spectra, or its colour in {D65_10}"
             )
     return np.array([spectra_for_model(path, reading, forward)[0] for path, reading in readings])
 
