@@ -212,9 +212,9 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         raise MeasurementFileError(path, "no ReflectanceSpectrum or ColorCIELab in any Object")
     _check_one_kind_per_sample(path, readings, lab_alone)
     keep = dict(instrument=instrument, texture=texture, metadata=metadata)
-    measured = assemble(path, readings, wavelengths, lab_conditions=lab_conditions, **keep) if (
-        readings
-    ) else []  # fmt: skip
+    measured = []
+    if readings:
+        measured = assemble(path, readings, wavelengths, lab_conditions=lab_conditions, **keep)
     if not lab_alone:
         return measured
     # Objects of ColorCIELab alone (some software stores a standard so beside measured
