@@ -1403,6 +1403,12 @@ def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
         f"{fig(report['novel_toner_first_shot_chance'])}" in shown
     )
     assert f"strength RMS {report['lot_strength_error_rms']:.3f}" in shown
+    # how the targets were read is said only where it differs from a spectral export's
+    assert "L*a*b* alone" not in shown and "without their texture" not in shown
+    _print_harness(report | {"targets_read_colour_alone": True, "targets_read_texture": False})
+    shown = " ".join(capsys.readouterr().out.split())
+    assert "targets and spray-outs read by their L*a*b* alone" in shown
+    assert "targets read without their texture readings" in shown
 
 
 def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):

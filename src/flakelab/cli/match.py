@@ -858,7 +858,8 @@ def _evaluate(
         from flakelab.render.plots import plot_harness
 
         trials = report.pop("per_target")
-        title = f"{forward.model_id}, {counted(targets, 'target')} (seed {seed})"
+        read = ", read by L*a*b* alone" if colour_alone else ""
+        title = f"{forward.model_id}, {counted(targets, 'target')} (seed {seed}){read}"
         plot_harness(trials[:targets], trials[targets:], plot, tolerance=tol.name, title=title)
         report["plot"] = str(plot)
     report["model"] = forward.name
