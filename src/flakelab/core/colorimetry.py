@@ -213,6 +213,7 @@ def reflectance_from_Lab(
     conditions: Conditions = D65_10,
     iterations: int = 2000,
     floor: float = 0.0,
+    basis=None,
 ) -> NDArray[np.float64]:
     """A smooth, non-negative reflectance factor ``R[..., wavelength]`` whose CIELAB under
     ``conditions`` is ``Lab[..., 3]``: one metamer of the many a colour known only as
@@ -222,6 +223,10 @@ def reflectance_from_Lab(
     method "Otsu 2018") gives its shape; the smallest change that the weights allow then
     makes its colour exact (Cohen's fundamental metamer: ``R + (XYZ - R W)(WᵀW)⁻¹ Wᵀ``),
     alternated with clipping at 0 so that it stays a reflectance.
+
+    ``basis`` is an Otsu 2018 dataset (colour-science's ``Dataset_Otsu2018``) to take the
+    shape from; None: colour-science's own, learnt on measured reflectances of many surfaces
+    (``benchmarks/colour_alone.py --paint-basis`` weighs one learnt on paints).
 
     With a negative ``floor``, a colour no non-negative spectrum gives is reached by one more
     such change unclipped, where that dips no lower than ``floor``. Near black an
@@ -257,7 +262,8 @@ def reflectance_from_Lab(
     cmfs = colour.MSDS_CMFS[OBSERVERS[conditions.observer]]
     illuminant = colour.SDS_ILLUMINANTS[conditions.illuminant]
     with colour.utilities.suppress_warnings(colour_runtime_warnings=True):
-        shapes = [XYZ_to_sd_Otsu2018(xyz, cmfs, illuminant) for xyz in XYZ / scale]
+        chosen = {} if basis is None else {"dataset": basis}
+        shapes = [XYZ_to_sd_Otsu2018(xyz, cmfs, illuminant, **chosen) for xyz in XYZ / scale]
     R = resample(np.stack([sd.values for sd in shapes]), shapes[0].wavelengths, shape_of(wl))
     R = np.where(black, 0.0, R)
     towards = np.linalg.solve(W.T @ W, W.T)  # [3, wavelength]: XYZ → the smallest change
