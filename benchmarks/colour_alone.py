@@ -28,11 +28,12 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-from flakelab.core.colorimetry import Conditions, reflectance_to_Lab
+from flakelab.core.colorimetry import D65_10, OBSERVERS, Conditions, reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.io import read_measurements
 from timing import best_time, print_report
@@ -55,10 +56,10 @@ def paint_basis(spectra: int, seed: int):
     R = R[R.min(axis=1) > 0][:spectra]
     shapes = R / R.max(axis=1, keepdims=True)
     grid = colour.SpectralShape(WAVELENGTHS[0], WAVELENGTHS[-1], WAVELENGTHS[1] - WAVELENGTHS[0])
-    tree = Tree_Otsu2018(
+    tree = Tree_Otsu2018(  # under the colour-alone files' D65/10, as the recovery's default
         colour.MultiSpectralDistributions(shapes.T, WAVELENGTHS),
-        colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"].copy().align(grid),
-        colour.SDS_ILLUMINANTS["D65"].copy().align(grid),
+        colour.MSDS_CMFS[OBSERVERS[D65_10.observer]].copy().align(grid),
+        colour.SDS_ILLUMINANTS[D65_10.illuminant].copy().align(grid),
     )
     tree.optimise(iterations=3, print_callable=lambda *_: None)
     return tree.to_dataset()
@@ -87,16 +88,10 @@ def basis_report(spectra: int, seed: int, folder: Path = MA_T12) -> dict:
     start = time.perf_counter()
     basis = paint_basis(spectra, seed)
     report = {"paint_basis_spectra": spectra, "paint_basis_seconds": time.perf_counter() - start}
-    measured = np.concatenate(
-        [m.reflectance for m in read_measurements(folder / "all_samples_spectra.csv")]
-    )
+    measured = np.concatenate([m.reflectance for m in _measured(folder)])
     lab = reflectance_to_Lab(measured)
     recovered = reflectance_from_Lab(lab, floor=REFLECTANCE_RANGE[0], basis=basis)
-    for light in OTHER_LIGHTS:
-        found = _apart(recovered, measured, Conditions.parse(light))
-        name = light.replace("/", "_").replace("-", "_").lower()
-        report |= {f"paint_de00_{name}_median": float(np.median(found)),
-                   f"paint_de00_{name}_p95": float(np.percentile(found, 95))}  # fmt: skip
+    report |= _under_other_lights(recovered, measured, "paint_")
     held = generated_readings(200, seed + 1)
     held = held[held.min(axis=1) > 0]  # readings a noiseless colour gives
     A = Conditions("A", "10")
@@ -114,11 +109,32 @@ def _apart(a: np.ndarray, b: np.ndarray, conditions: Conditions) -> np.ndarray:
     return delta_E(*lab).ravel()
 
 
+def _under_other_lights(recovered: np.ndarray, measured: np.ndarray, prefix: str = "") -> dict:
+    """Median, 95th percentile and largest ΔE00 between ``recovered`` and ``measured``
+    readings under each of :data:`OTHER_LIGHTS`, keyed ``{prefix}de00_{light}_{figure}``."""
+    report = {}
+    for light in OTHER_LIGHTS:
+        found = _apart(recovered, measured, Conditions.parse(light))
+        name = f"{prefix}de00_{light.replace('/', '_').replace('-', '_').lower()}"
+        report |= {
+            f"{name}_median": float(np.median(found)),
+            f"{name}_p95": float(np.percentile(found, 95)),
+            f"{name}_max": float(found.max()),
+        }
+    return report
+
+
+@cache
+def _measured(folder: Path) -> list:
+    """The measured spectra of the real samples (``all_samples_spectra.csv``), read once."""
+    return read_measurements(folder / "all_samples_spectra.csv")
+
+
 def colour_alone_report(folder: Path = MA_T12) -> dict:
     colour_file = folder / "all_samples_instrument_lab_d65_10.csv"
     seconds = best_time(read_measurements, colour_file)
     recovered = read_measurements(colour_file)
-    measured = read_measurements(folder / "all_samples_spectra.csv")
+    measured = _measured(folder)
     readings = sum(len(m.geometries) for m in recovered)
 
     assert [m.sample for m in recovered] == [m.sample for m in measured]
@@ -126,25 +142,14 @@ def colour_alone_report(folder: Path = MA_T12) -> dict:
         np.stack([m.reflectance for m in ms]) for ms in (recovered, measured)
     )
 
-    def apart(conditions: Conditions) -> np.ndarray:
-        return _apart(R_recovered, R_measured, conditions)
-
-    report = {
+    return {
         "samples": len(recovered),
         "readings": readings,
         "read_seconds": seconds,
         "readings_per_s": readings / seconds,
-        "de00_d65_10_max": float(apart(Conditions("D65", "10")).max()),
+        "de00_d65_10_max": float(_apart(R_recovered, R_measured, D65_10).max()),
+        **_under_other_lights(R_recovered, R_measured),
     }
-    for light in OTHER_LIGHTS:
-        found = apart(Conditions.parse(light))
-        name = light.replace("/", "_").replace("-", "_").lower()
-        report |= {
-            f"de00_{name}_median": float(np.median(found)),
-            f"de00_{name}_p95": float(np.percentile(found, 95)),
-            f"de00_{name}_max": float(found.max()),
-        }
-    return report
 
 
 def main() -> int:

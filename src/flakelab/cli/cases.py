@@ -307,9 +307,11 @@ def import_cases(
         cases = read_cases(source, lambda: bar.advance(task))
     engine = open_database(database)
     try:  # one transaction: all of them or none
-        stored = store_new_cases(engine, cases) if new_only else cases
-        if not new_only:
+        if new_only:
+            stored = store_new_cases(engine, cases)
+        else:
             add_cases(engine, cases)
+            stored = cases
     except CaseError as error:  # it names the case stored already, or stored otherwise
         again = " (--new-only passes over those stored already)" if not new_only else ""
         raise FlakelabError(f"{source}: {error}{again}") from None
@@ -318,11 +320,11 @@ def import_cases(
     )
     there = f"; {len(cases) - len(stored)} stored already" if new_only else ""
     errors.print(imported + there, highlight=False)
-    cases = stored  # those stored already were checked then
     if not check:
         return
-    checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
-    mismatched = [c.case_id for c, k in zip(cases, checks, strict=True) if is_mismatched(k)]
+    # the cases stored now: those stored already were checked then
+    checks, unchecked = recorded_checks(stored, lib, existing_engine(database))
+    mismatched = [c.case_id for c, k in zip(stored, checks, strict=True) if is_mismatched(k)]
     shown = ", ".join(mismatched[:5]) + (" …" if len(mismatched) > 5 else "")
     _tell_mix_ups(len(mismatched), shown, unchecked)
 
