@@ -255,7 +255,8 @@ def damage_pictures(data: bytes, rng: random.Random) -> bytes:
 
 CASE_COLUMNS = ("case_id", "shop", "instrument", "conditions", "outcome", "synthetic",
                 "geometries", "recipe", "target", "sprayout", "target_texture",
-                "sprayout_texture", "created_at", "updated_at", "tins", "colour_code")  # fmt: skip
+                "sprayout_texture", "created_at", "updated_at", "tins", "colour_code",
+                "target_recovered")  # fmt: skip
 """The columns of a case row that a damaged database changes."""
 TABLE_COLUMNS = {
     "cases": CASE_COLUMNS,
@@ -348,7 +349,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     for suffix in ("csv", "cxf"):
         cases = work / f"cases.{suffix}"
         CliRunner().invoke(app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", cases])
-        write_cases([replace(c, colour_code="Toyota 1G3") for c in read_cases(cases)], cases)
+        generated = read_cases(cases)  # one car known by its L*a*b* alone, as a shop records it
+        write_cases([replace(c, colour_code="Toyota 1G3", target_recovered=i == 1)
+                     for i, c in enumerate(generated)], cases)  # fmt: skip
     CliRunner().invoke(app, ["cases", "import", f"{work}/cases.csv", "-d", f"{work}/shop.db"])
     CliRunner().invoke(app, ["cases", "variants", "1G3", "-d", f"{work}/shop.db", "--within",
                              "0.1", "--out", f"{work}/deck.json"])  # fmt: skip

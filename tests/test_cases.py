@@ -574,9 +574,9 @@ def test_the_database_chooses_a_shop_s_cases_since_a_date_as_select_cases_does(c
 
 
 def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
-    """A database of the first release (no shop habits, no tins, no colour codes) keeps its
-    cases through every migration; they record no tins and no code, and cases that do are
-    stored beside them."""
+    """A database of the first release (no shop habits, no tins, no colour codes, no target
+    known by its colour alone) keeps its cases through every migration; they record no tins
+    and no code, their targets measured, and cases that do are stored beside them."""
     url = database_url
     engine = create_engine(url)
     migrate(engine, "0001")  # the first release's schema: no shop habits, no tins
@@ -587,7 +587,7 @@ def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
     assert "shop_habits" in inspect(engine).get_table_names()
     stored = list(iter_cases(engine))
     assert [c.case_id for c in stored] == [c.case_id for c in cases[:7]]
-    assert all(c.tins == {} and c.colour_code == "" for c in stored)
+    assert all(c.tins == {} and c.colour_code == "" and not c.target_recovered for c in stored)
     assert np.allclose(stored[3].sprayout, cases[3].sprayout, rtol=1e-6)
     tinned = _with_tins(cases[7])
     add_cases(engine, [tinned, *_coded(cases[8:9])])
@@ -600,7 +600,7 @@ def _store_as_the_first_release(engine, cases) -> None:
     from flakelab.cases.database import _row
     from flakelab.cases.schema import CaseRow
 
-    later = ("id", "tins", "colour_code")
+    later = ("id", "tins", "colour_code", "target_recovered")
     first = [c.name for c in CaseRow.__table__.columns if c.name not in later]
     with engine.begin() as connection:
         connection.execute(
@@ -1641,7 +1641,10 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
                 r"<\1ColorCIELab \2><\1L>40</\1L><\1A>2</\1A><\1B>-3</\1B></\1ColorCIELab>",
                 t,
             ),
-        ): (f"target: '{first.case_id}/target' gives L\\*a\\*b\\* alone: a case keeps spectra"),
+        ): (
+            f"spray-out: '{first.case_id}/sprayout' gives L\\*a\\*b\\* alone: a case keeps the "
+            "spray-out's spectra"
+        ),
         ("twice.csv", lambda t: t + t.splitlines()[1] + "\n"): (
             f"row 5: case_id: '{first.case_id}' is also row 2's"
         ),
@@ -1708,6 +1711,38 @@ def test_cases_streamed_into_a_csv_are_the_file_a_list_writes(cases, tmp_path):
     with pytest.raises(CaseFileError, match="expected at least one case to write, got none"):
         write_cases(iter([]), fewer, geometries=columns, tins=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["listed.csv", "streamed.csv"]
+
+
+def test_a_case_history_keeps_which_targets_were_known_by_their_colour_alone(cases, tmp_path):
+    """A case whose target was known by its L*a*b* alone keeps the flag through CSV (a column
+    where any case has one) and CxF3 (its target written as ColorCIELab alone, read back with
+    its colour); a file without such a case is the file it was. A flag that is neither 0 nor 1
+    is named; a generator's stream, whose columns were fixed before, refuses such a case."""
+    alone = replace(cases[1], target_recovered=True)
+    history = [cases[0], alone, cases[2]]
+    for name in ("history.csv", "history.cxf"):
+        write_cases(history, tmp_path / name)
+        back = read_cases(tmp_path / name)
+        assert [c.target_recovered for c in back] == [False, True, False], name
+        assert (
+            delta_E(reflectance_to_Lab(back[1].target), reflectance_to_Lab(alone.target)).max()
+            < 1e-3
+        )
+        np.testing.assert_allclose(back[0].target, cases[0].target, rtol=1e-5)
+        np.testing.assert_allclose(back[1].sprayout, alone.sprayout, rtol=1e-5)
+    text = (tmp_path / "history.csv").read_text()
+    column = next(csv.reader(io.StringIO(text))).index("target_recovered")
+    assert column == len(CASE_FIELDS)  # after the fields every file has
+    write_cases([cases[0], cases[2]], tmp_path / "measured.csv")
+    assert "target_recovered" not in (tmp_path / "measured.csv").read_text()
+    flawed = tmp_path / "flawed.csv"
+    flawed.write_text(text.replace(text.splitlines()[2], _cell(text, 2, column, "yes")))
+    with pytest.raises(CaseFileError, match="row 3: target_recovered: expected 0 or 1, got 'yes'"):
+        read_cases(flawed)
+    streamed = tmp_path / "streamed.csv"
+    with pytest.raises(CaseFileError, match=r"knows its target by its L\*a\*b\* alone"):
+        write_cases(iter(history), streamed, geometries=cases[0].geometry_names, tins=False)
+    assert not streamed.exists()
 
 
 def _grain(text: str) -> int:

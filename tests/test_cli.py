@@ -181,7 +181,7 @@ def test_convert_lab_only_writes_the_colour_and_no_spectra(tmp_path, cli):
 def test_convert_of_a_file_of_both_kinds_says_how_to_write_it(tmp_path, cli):
     """A CxF3 file of a measured trial and a standard's colour alone converts with
     ``--lab-only`` (both as L*a*b*) or ``--sample`` (one); without either it is refused,
-    saying so, and nothing is written."""
+    saying so, and nothing is written, but for a CxF3 file, which holds both."""
     both = tmp_path / "both.cxf"
     car = read_measurement(example_path("target"))
     car = replace(car, stored_lab=car.lab())
@@ -198,6 +198,10 @@ def test_convert_of_a_file_of_both_kinds_says_how_to_write_it(tmp_path, cli):
     assert cli("convert", both, tmp_path / "out.csv", "--lab-only").returncode == 0
     assert len(read_measurements(tmp_path / "out.csv")) == 2
     assert cli("convert", both, tmp_path / "trial.json", "--sample", "trial").returncode == 0
+    assert "a CxF3 file holds both" in said  # and is written whole, as read
+    assert cli("convert", both, tmp_path / "again.cxf").returncode == 0
+    again = read_measurements(tmp_path / "again.cxf")
+    assert [m.spectra_recovered for m in again] == [True, False]
 
 
 def test_compare_example_agrees_with_library_and_tolerance(cli):

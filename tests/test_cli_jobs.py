@@ -1518,7 +1518,8 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
     """The example car and spray-out, each as the L*a*b* of its spectra and nothing else:
     inspect and compare say their spectra were recovered; the colour differences are those of
     the measured spectra, and no metamerism index is given. The correction weighs none, and
-    says so; a case is not recorded from them (the model would learn invented spectra)."""
+    says so; a case is not recorded from the spray-out's (the model would learn invented
+    spectra)."""
     target, sprayed = example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"
     lab_target = _colour_alone(read_measurement(target), tmp_path / "car.csv")
@@ -1548,11 +1549,64 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
                           "--json").stdout)  # fmt: skip
     assert sum("the correction judged its colour in D65/10" in n for n in lamp["notes"]) == 1
     database = tmp_path / "shop.db"
-    refused = cli("cases", "record", lab_target, "-r", recipe, "--sprayed", sprayed, "-d",
+    refused = cli("cases", "record", lab_target, "-r", recipe, "--sprayed", lab_sprayed, "-d",
                   database)  # fmt: skip
     assert refused.returncode != 0
+    said = " ".join(refused.stderr.split())
     assert (
-        "target: 'Blue metallic target (synthetic)' gives L*a*b* alone: a case keeps spectra"
-        in refused.stderr
-    ), refused.stderr
+        "spray-out: 'Blue metallic sprayout (synthetic)' gives L*a*b* alone: a case keeps the "
+        "spray-out's spectra, which the learned model learns from" in said
+    ), said
     assert not database.exists() or "no cases" in cli("cases", "list", "-d", database).stderr
+
+
+def test_a_case_keeps_a_car_known_by_its_lab_alone_and_says_so(tmp_path, cli):
+    """A car read by an instrument that exports L*a*b* alone (or a maker's standard given as
+    its colour), sprayed and read with spectra: the case is recorded, its target flagged, its
+    outcome and colour those of the measured car's. The flag and the colour go through the
+    database, CSV and CxF3 (the target written as ColorCIELab alone, as read). It was refused,
+    "a case keeps spectra". A colour stated under another light is refused, its daylight
+    colour an estimate."""
+    from flakelab.cases.database import iter_cases
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+
+    target, sprayed = example_path("target"), example_path("sprayout")
+    recipe = target.parent / "blue-metallic-recipe.json"
+    car = read_measurement(target)
+    lab_target = _colour_alone(car, tmp_path / "car.csv")
+    measured_db, alone_db = tmp_path / "measured.db", tmp_path / "alone.db"
+    record = ("cases", "record", "-r", recipe, "--sprayed", sprayed, "--json", "-d")
+    by_spectra = json.loads(cli(*record, measured_db, target).stdout)
+    run = cli(*record, alone_db, lab_target)
+    assert run.returncode == 0, run.stderr
+    by_colour = json.loads(run.stdout)
+    assert by_colour["target_recovered"] and not by_spectra["target_recovered"]
+    for key in ("outcome", "sprayout_failing", "geometries"):
+        assert by_colour[key] == by_spectra[key]
+    (case,) = iter_cases(open_database(alone_db))
+    assert case.target_recovered
+    assert delta_E(reflectance_to_Lab(case.target), car.lab()).max() < 1e-3
+    shown = cli("cases", "list", "-d", alone_db)
+    assert "*" in shown.stdout and "known by its L*a*b* in D65/10 alone" in shown.stderr
+    listed = json.loads(cli("cases", "list", "-d", alone_db, "--json").stdout)["cases"]
+    assert [row["target_recovered"] for row in listed] == [True]
+    for name in ("history.csv", "history.cxf"):
+        exported, again = tmp_path / name, tmp_path / f"{name}.db"
+        assert cli("cases", "export", exported, "-d", alone_db).returncode == 0
+        imported = cli("cases", "import", exported, "-d", again, "--no-check")
+        assert "1 of them know their target by its L*a*b* in D65/10 alone" in imported.stderr
+        (back,) = iter_cases(open_database(again))
+        assert back.case_id == case.case_id and back.target_recovered
+        assert delta_E(reflectance_to_Lab(back.target), car.lab()).max() < 1e-3
+        np.testing.assert_allclose(back.sprayout, case.sprayout, atol=1e-6)
+    assert "target_recovered" in (tmp_path / "history.csv").read_text().splitlines()[0]
+    cxf = (tmp_path / "history.cxf").read_text()
+    geometries = len(case.geometries)  # the spray-out's spectra, the target's colour
+    assert cxf.count("ReflectanceSpectrum ") == cxf.count("ColorCIELab ") == geometries
+    lamp_target = tmp_path / "car-A.csv"
+    assert cli("convert", target, lamp_target, "--lab-only", "--conditions", "A/10").returncode == 0
+    refused = cli(*record, tmp_path / "lamp.db", lamp_target)
+    assert refused.returncode == 2
+    said = " ".join(refused.stderr.split())
+    assert "gives L*a*b* under A/10 alone: a case keeps the car's colour in D65/10" in said, said

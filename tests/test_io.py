@@ -1217,11 +1217,16 @@ def test_a_file_of_lab_alone_is_read_with_spectra_recovered_from_it(ma_t12_dir, 
         ):
             write_measurements(recovered[:1], tmp_path / f"out{suffix}")
         assert not (tmp_path / f"out{suffix}").exists()
-    for suffix in (".csv", ".cxf"):
-        both = tmp_path / f"both{suffix}"
-        with pytest.raises(MeasurementFileError, match="measured, or L.a.b. alone, not both"):
-            write_measurements([measured[0], recovered[1]], both)
-        assert not both.exists()
+    both = tmp_path / "both.csv"  # a table holds one kind: its columns are a spectrum's or L*a*b*
+    with pytest.raises(MeasurementFileError, match="measured, or L.a.b. alone, not both"):
+        write_measurements([measured[0], recovered[1]], both)
+    assert not both.exists()
+    both = tmp_path / "both.cxf"  # a CxF3 document holds both, Object by Object, as read
+    write_measurements([measured[0], recovered[1]], both)
+    kept, alone = read_measurements(both)
+    assert not kept.spectra_recovered and alone.spectra_recovered
+    np.testing.assert_allclose(kept.reflectance, measured[0].reflectance, atol=1e-12)
+    np.testing.assert_allclose(alone.stored_lab, recovered[1].stored_lab, atol=1e-12)
 
 
 def test_a_dark_metallic_s_flop_reading_of_lab_alone_is_read_as_its_spectra_would_be(tmp_path):

@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 import numpy as np
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.colorimetry import D65_10, reflectance_to_Lab
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import Geometry, parse_geometries
@@ -32,6 +32,7 @@ __all__ = [
     "Case",
     "CaseError",
     "OUTCOMES",
+    "TARGET_RECOVERED_NOTE",
     "TEXT_LENGTHS",
     "cases_at",
     "check_measured",
@@ -57,19 +58,38 @@ TEXT_LENGTHS = {
 longer value; SQLite would keep it), checked with every case so that no store fails on one."""
 
 
+TARGET_RECOVERED_NOTE = (
+    "the target is known by its L*a*b* in D65/10 alone: its spectra were recovered from it "
+    "(one metamer of many); the models learn from the spray-out's measured spectra"
+)
+"""What a report says of a case whose target was known by its colour alone."""
+
+
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
 
 
-def check_measured(role: str, reading) -> None:
-    """Refuse a ``role`` reading (target, spray-out) whose spectra were recovered from its
-    L*a*b* (a :class:`~flakelab.core.measurement.Measurement`): a case keeps spectra, which
-    the learned model learns from, and a recovered one is a metamer of many."""
-    if reading.spectra_recovered:
+def check_measured(target, sprayout) -> None:
+    """Refuse readings (:class:`~flakelab.core.measurement.Measurement`) a case cannot keep as
+    they are: a spray-out whose spectra were recovered from its L*a*b*, since the learned
+    model learns from the spray-outs' spectra and a recovered one is a metamer of many; a
+    target known by its colour alone under other conditions than D65/10. A target known by
+    its colour in D65/10 is kept (:attr:`Case.target_recovered`): a case's target is read
+    for its colour there alone (its outcome, the nearest cases, the variants of a colour),
+    which its recovered spectrum gives exactly."""
+    if sprayout.spectra_recovered:
         raise CaseError(
-            f"{role}: {reading.sample!r} gives L*a*b* alone: a case keeps spectra, which the "
-            "learned model learns from, and one recovered from a colour is a metamer of "
-            "many; record it from the instrument's spectral export"
+            f"spray-out: {sprayout.sample!r} gives L*a*b* alone: a case keeps the spray-out's "
+            "spectra, which the learned model learns from, and one recovered from a colour is "
+            "a metamer of many; record it from the instrument's spectral export"
+        )
+    stated = target.stored_lab_conditions
+    if target.spectra_recovered and stated != D65_10:
+        raise CaseError(
+            f"target: {target.sample!r} gives L*a*b* under {stated} alone: a case keeps the "
+            f"car's colour in {D65_10}, by which its outcome is judged and its nearest cases "
+            f"found, and its file gives none; export the car's spectra, or its colour in "
+            f"{D65_10}"
         )
 
 
@@ -214,7 +234,9 @@ class Case:
     recipe to the tin it was poured from, as the shop had read it (none recorded: every toner
     at the standard, as far as anyone knows). ``colour_code`` is the car maker's code for the
     car's colour, as on its plate (with the maker where codes clash: 'Toyota 1G3'), kept as
-    its :func:`colour_code_words`; empty where none was recorded."""
+    its :func:`colour_code_words`; empty where none was recorded. ``target_recovered``: the
+    car was known by its L*a*b* in D65/10 alone, and ``target`` was recovered from it: its
+    colour there is the reading's, its spectral shape one metamer of many."""
 
     case_id: str
     geometries: tuple[Geometry, ...]
@@ -231,6 +253,7 @@ class Case:
     created_at: datetime = field(default_factory=lambda: datetime.now(UTC))
     tins: Mapping[str, TonerLot] = field(default_factory=dict)
     colour_code: str = ""
+    target_recovered: bool = False
 
     def __post_init__(self) -> None:
         where = f"case {self.case_id!r}"

@@ -450,6 +450,7 @@ def _row_values(case: Case) -> dict:
         sprayout_texture=dict(case.sprayout_texture),
         tins={toner: tin_fields(tin) for toner, tin in case.tins.items()} or None,
         colour_code=case.colour_code,
+        target_recovered=case.target_recovered,
         # in UTC: SQLite keeps no zone, so an offset would otherwise be dropped, not applied
         created_at=case.created_at.astimezone(UTC),
         updated_at=now,
@@ -491,6 +492,7 @@ def _case_of(row: CaseRow) -> Case:
         created_at=zoned(row.created_at),
         tins=row.tins or {},
         colour_code=row.colour_code,
+        target_recovered=row.target_recovered,
     )
 
 

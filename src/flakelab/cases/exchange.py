@@ -4,7 +4,9 @@ CSV columns: ``case_id, shop, instrument, conditions, outcome, synthetic, create
 recipe`` (JSON object toner → amount), ``geometries`` (the case's, names joined by ``;``),
 where any case records the car maker's colour code ``colour_code`` (empty for a case that
 records none), where any case records the tins it was poured from ``tins`` (JSON object
-toner → ``{lot, strength, shade_nm}``, empty for a case that records none), then
+toner → ``{lot, strength, shade_nm}``, empty for a case that records none), where any
+case's target was known by its L*a*b* alone ``target_recovered`` (1 for such a case, its
+target's spectra those recovered from its colour in D65/10; 0 for a measured one), then
 ``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for every
 geometry of the file and band (400–700 nm, 10 nm), then ``target:<reading>`` and
 ``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
@@ -15,7 +17,8 @@ tabs) with decimal commas in its readings, is read as well.
 
 CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
 the case's fields ride as ``meta:`` tags on the target (``tins`` as the CSV's cell;
-``colour_code`` where the case records one).
+``colour_code`` where the case records one). A target known by its L*a*b* alone is
+written as its ColorCIELab in D65/10 alone, as it was read.
 
 Readers check every row and name the file, row and column of the first problem; nothing is
 returned from a bad file.
@@ -36,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from flakelab.cases.case import Case, CaseError, check_measured, tin_fields
+from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -79,15 +83,23 @@ TINS_FIELD = "tins"
 """The second optional column after :data:`CASE_FIELDS`: the tins each case was poured
 from."""
 
+RECOVERED_FIELD = "target_recovered"
+"""The third optional column after :data:`CASE_FIELDS`: whether each case's target was known
+by its L*a*b* alone (:attr:`~flakelab.cases.case.Case.target_recovered`)."""
+
+_FLAGS = {"0": False, "1": True}
+
 
 class CaseFileError(FlakelabError):
     """A case file that is wrong: names the file, row, column and problem."""
 
 
 @cache
-def _header(geometries: tuple[str, ...], tins: bool = False, codes: bool = False) -> tuple:
-    """Column names for one geometry set, with the colour codes' and the tins' columns or
-    without (cached: every row of a file checks against it)."""
+def _header(
+    geometries: tuple[str, ...], tins: bool = False, codes: bool = False, recovered: bool = False
+) -> tuple:
+    """Column names for one geometry set, with the colour codes', the tins' and the recovered
+    targets' columns or without (cached: every row of a file checks against it)."""
     spectra = [
         f"{role}:{g}:{int(w)}"
         for role in ("target", "sprayout")
@@ -95,7 +107,7 @@ def _header(geometries: tuple[str, ...], tins: bool = False, codes: bool = False
         for w in WAVELENGTHS
     ]
     texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
-    optional = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins
+    optional = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins + (RECOVERED_FIELD,) * recovered
     return (*CASE_FIELDS, *optional, *spectra, *texture)
 
 
@@ -142,24 +154,24 @@ def write_cases(
     if Path(path).suffix.lower() in CXF_SUFFIXES:
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
+    recovered = not streamed and any(c.target_recovered for c in cases)
     if not streamed:
         geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
         tins = any(c.tins for c in cases)
         codes = any(c.colour_code for c in cases)
-
-    readings = len(CASE_FIELDS) + codes + tins  # the first cell of the readings
+    readings = len(CASE_FIELDS) + codes + tins + recovered  # the first cell of the readings
 
     separator, encoding = csv_form(decimal_comma)
 
     def write(temporary: Path) -> None:  # row by row, not the whole text first
         with temporary.open("w", encoding=encoding, newline="") as handle:
             writer = csv.writer(handle, delimiter=separator)
-            writer.writerow(_header(geometries, tins, codes))
+            writer.writerow(_header(geometries, tins, codes, recovered))
             written = 0
             for case in cases:
                 if streamed:
                     _check_columns_hold(path, case, geometries, tins, codes)
-                row = _csv_row(case, geometries, tins, codes)
+                row = _csv_row(case, geometries, tins, codes, recovered)
                 if decimal_comma:
                     row[readings:] = [decimal_comma_in(cell) for cell in row[readings:]]
                 writer.writerow(row)
@@ -174,22 +186,28 @@ def write_cases(
 
 def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], tins: bool, codes: bool):
     """A case streamed into a CSV of ``geometries`` (and ``tins`` and colour ``codes`` columns
-    or not) is one its columns hold whole."""
+    or not) is one its columns hold whole: a generator's, whose targets are measured."""
     beyond = [g for g in case.geometry_names if g not in geometries]
-    if beyond or (case.tins and not tins) or (case.colour_code and not codes):
-        what = (
-            f"read at {', '.join(beyond)}"
-            if beyond
-            else "records its tins"
-            if case.tins and not tins
-            else "records its colour code"
-        )
+    what = (
+        f"read at {', '.join(beyond)}"
+        if beyond
+        else "records its tins"
+        if case.tins and not tins
+        else "records its colour code"
+        if case.colour_code and not codes
+        else "knows its target by its L*a*b* alone"
+        if case.target_recovered
+        else None
+    )
+    if what:
         raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
 
 
-def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool, codes: bool) -> list[str]:
-    """A case's row of a case file of ``geometries`` (and its colour code's and its tins'
-    columns, with ``codes`` and ``tins``)."""
+def _csv_row(
+    case: Case, geometries: tuple[str, ...], tins: bool, codes: bool, recovered: bool = False
+) -> list[str]:
+    """A case's row of a case file of ``geometries`` (and its colour code's, its tins' and its
+    target's kind's columns, with ``codes``, ``tins`` and ``recovered``)."""
     return [
         case.case_id,
         case.shop,
@@ -202,6 +220,7 @@ def _csv_row(case: Case, geometries: tuple[str, ...], tins: bool, codes: bool) -
         ";".join(case.geometry_names),
         *([case.colour_code] if codes else []),
         *([_tins_cell(case)] if tins else []),
+        *(["1" if case.target_recovered else "0"] if recovered else []),
         *_spectra_cells(case, case.target, geometries),
         *_spectra_cells(case, case.sprayout, geometries),
         *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
@@ -321,7 +340,9 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
     """The geometries whose columns the header holds, checked to be every column they need."""
     spectral = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
     geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
-    expected = _header(geometries, TINS_FIELD in header, CODE_FIELD in header)
+    expected = _header(
+        geometries, TINS_FIELD in header, CODE_FIELD in header, RECOVERED_FIELD in header
+    )
     if tuple(header) != expected:
         missing = [c for c in expected if c not in header]
         extra = [c for c in header if c not in expected]
@@ -387,8 +408,9 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
     recipe = _recipe_field(f"{where}: recipe", cells["recipe"])
     tins = _tins_field(f"{where}: tins", cells.get(TINS_FIELD, ""))
     created = _date_field(f"{where}: created_at", cells["created_at"])
-    if cells["synthetic"] not in ("0", "1"):
-        raise CaseFileError(f"{where}: synthetic: expected 0 or 1, got {cells['synthetic']!r}")
+    for flag in ("synthetic", RECOVERED_FIELD):
+        if cells.get(flag, "0") not in _FLAGS:
+            raise CaseFileError(f"{where}: {flag}: expected 0 or 1, got {cells[flag]!r}")
     readings = {
         "target": spectra("target"),
         "sprayout": spectra("sprayout"),
@@ -405,10 +427,11 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
             shop=cells["shop"],
             conditions=cells["conditions"],
             outcome=cells["outcome"],
-            synthetic=cells["synthetic"] == "1",
+            synthetic=_FLAGS[cells["synthetic"]],
             created_at=created,
             tins=tins,
             colour_code=cells.get(CODE_FIELD, ""),
+            target_recovered=_FLAGS[cells.get(RECOVERED_FIELD, "0")],
         )
     except (CaseError, ValueError) as error:
         raise CaseFileError(f"{where}: {error}") from None
@@ -472,6 +495,7 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
             texture=case.target_texture,
             metadata=meta,
             **common,
+            **_as_read(case),
         ),
         Measurement(
             f"{case.case_id}/sprayout",
@@ -481,6 +505,13 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
             **common,
         ),
     )
+
+
+def _as_read(case: Case) -> dict:
+    """How a case's target was read: by its L*a*b* in D65/10 alone, where it was."""
+    if not case.target_recovered:
+        return {}
+    return {"stored_lab": reflectance_to_Lab(case.target), "spectra_recovered": True}
 
 
 def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case]:
@@ -501,8 +532,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
         if sprayout is None:
             raise CaseFileError(f"{where}: no matching '{case_id}/sprayout' sample")
         try:
-            check_measured("target", target)
-            check_measured("spray-out", sprayout)
+            check_measured(target, sprayout)
         except CaseError as error:  # a shop's history of colours alone
             raise CaseFileError(f"{path}: {error}") from None
         meta = target.metadata
@@ -530,6 +560,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
                     created_at=created,
                     tins=tins,
                     colour_code=meta.get(CODE_FIELD, ""),
+                    target_recovered=target.spectra_recovered,
                 )
             )
         except (CaseError, ValueError) as error:

@@ -130,8 +130,7 @@ def case_from_readings(
     file's date), else now. ``tins`` (the shop's lots, by toner) gives the case the tins of
     its recipe's toners; ``colour_code`` the car maker's code for the car's colour.
     """
-    check_measured("target", target)
-    check_measured("spray-out", sprayout)
+    check_measured(target, sprayout)
     shop = tidy_name(shop)  # as the case stores it, for its id
     if instrument is None:
         names, instrument = shared_geometries(target, sprayout)
@@ -179,4 +178,5 @@ def case_from_readings(
         created_at=when,
         tins={name: tin for name, tin in (tins or {}).items() if name in recipe},
         colour_code=colour_code,
+        target_recovered=target.spectra_recovered,
     )

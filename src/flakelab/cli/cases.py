@@ -319,6 +319,8 @@ def import_cases(
         f"imported {counted(len(stored), 'case')} from {source} into {database_label(engine)}"
     )
     there = f"; {len(cases) - len(stored)} stored already" if new_only else ""
+    if alone := sum(c.target_recovered for c in stored):
+        there += f"; {alone} of them know their target by its L*a*b* in D65/10 alone"
     errors.print(imported + there, highlight=False)
     if not check:
         return
@@ -451,6 +453,7 @@ def record_case(
         "geometries": list(case.geometry_names),
         "read_by_models_of": list(models),
         "outcome": case.outcome,
+        "target_recovered": case.target_recovered,
         "tins": {name: tin_fields(tin) for name, tin in sorted(case.tins.items())},
         "tins_from": str(lots) if lots else kept and kept.describe(),
         "created_at": case.created_at.isoformat(),
@@ -475,6 +478,7 @@ def _print_recorded(report: dict, chosen: bool) -> None:
     tins, how far the spray-out lies from its recipe's prediction, what was not kept
     (``chosen``: the geometries were chosen by ``--instrument``), the cases now in its
     database."""
+    from flakelab.cases.case import TARGET_RECOVERED_NOTE
     from flakelab.match.mixups import is_mismatched, mismatch_message
 
     failing, found, left_out = (
@@ -496,6 +500,8 @@ def _print_recorded(report: dict, chosen: bool) -> None:
             f"{', '.join(report['geometries'])} hold no instrument's whole set",
             highlight=False,
         )
+    if report["target_recovered"]:
+        console.print(f"[yellow]note:[/] {TARGET_RECOVERED_NOTE}", highlight=False)
     if report["tins"]:
         tins = ", ".join(f"{n} {t['lot'] or '(no lot number)'}" for n, t in report["tins"].items())
         console.print(f"poured from {report['tins_from']}: {tins}", highlight=False)
@@ -594,6 +600,7 @@ def record_all(
             "colour_code": c.colour_code,
             "instrument": c.instrument,
             "outcome": c.outcome,
+            "target_recovered": c.target_recovered,
             "created_at": c.created_at.isoformat(),
             "worst_de00": round(float(de), 3),
             "worst_geometry": g,
@@ -627,10 +634,11 @@ def record_all(
         table.add_column(column, no_wrap=column != "shop")
     for row in recorded:
         cells = [str(row["row"]), row["case_id"], row["shop"], row["outcome"]]
-        cells.append(f"{row['worst_de00']:.2f} {row['worst_geometry']}")
+        cells.append(_worst_cell(row))
         cells += [_shown_check(row["from_prediction"])] if check else []
         table.add_row(*cells, row["instrument"])
     console.print(table)
+    _tell_targets_recovered(recorded)
     counts = ", ".join(f"{n} {o}" for o, n in report["outcomes"].items() if n)
     models = ", ".join(f"{m} {n}" for m, n in learners.items() if n) or "none"
     console.print(f"outcomes: {counts}; cases each model learns from: {models}", highlight=False)
@@ -688,6 +696,7 @@ def list_cases(
             "instrument": c.instrument,
             "outcome": c.outcome,
             "synthetic": c.synthetic,
+            "target_recovered": c.target_recovered,
             "recipe": {k: round(v, 6) for k, v in sorted(c.recipe.items(), key=lambda t: -t[1])},
             "tins": {name: tin_fields(tin) for name, tin in sorted(c.tins.items())},
             "worst_de00": round(float(de), 3),
@@ -754,7 +763,7 @@ def list_cases(
             short_id(row["case_id"]),
             *([row["colour_code"]] * codes),
             row["outcome"],
-            f"{row['worst_de00']:.2f} {row['worst_geometry']}",
+            _worst_cell(row),
         ]
         if checked:
             cells.append(_shown_check(row.get("from_prediction")))
@@ -764,6 +773,7 @@ def list_cases(
             cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
         table.add_row(*cells)
     console.print(table)
+    _tell_targets_recovered(rows)
     if any(short_id(row["case_id"]) != row["case_id"] for row in rows):
         errors.print(
             f"ids shortened to their first {SHORT_ID_LENGTH} characters: 'cases remove' takes "
@@ -772,6 +782,21 @@ def list_cases(
             highlight=False,
         )
     _tell_mix_ups(0, "", unchecked)
+
+
+def _worst_cell(row: dict) -> str:
+    """A case's worst ΔE00 and its geometry, starred where its target is known by its colour
+    alone (:func:`_tell_targets_recovered`)."""
+    return f"{row['worst_de00']:.2f} {row['worst_geometry']}" + "*" * row["target_recovered"]
+
+
+def _tell_targets_recovered(rows: list[dict]) -> None:
+    """The footnote of a table of cases some of whose targets are known by their colour
+    alone."""
+    from flakelab.cases.case import TARGET_RECOVERED_NOTE
+
+    if any(row["target_recovered"] for row in rows):
+        errors.print(f"* {TARGET_RECOVERED_NOTE}", style="dim", highlight=False)
 
 
 def _tell_mix_ups(count: int, which: str, unchecked: str | None) -> None:

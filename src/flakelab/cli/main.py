@@ -567,11 +567,12 @@ def convert(
         )
     measurements = [read_sample(source, sample)] if sample else read_measurements(source)
     kinds = {m.spectra_recovered for m in measurements}
-    if len(kinds) > 1 and not lab_only:  # a CxF3 file of both kinds, as read
+    if len(kinds) > 1 and not lab_only and written_as != "cxf":  # a CxF3 file of both kinds
         alone = next(m.sample for m in measurements if m.spectra_recovered)
         raise FlakelabError(
-            f"{source} holds measured spectra and L*a*b* alone ({alone!r}), and a file holds "
-            "one kind: --lab-only writes every one as L*a*b*, --sample NAME one of them"
+            f"{source} holds measured spectra and L*a*b* alone ({alone!r}), and a {written_as} "
+            "file holds one kind: --lab-only writes every one as L*a*b*, --sample NAME one of "
+            "them; a CxF3 file holds both"
         )
     if lab_only:  # written as a file of colour alone is: the writers give such spectra none
         cond = Conditions.parse(conditions)

@@ -34,7 +34,6 @@ from flakelab.io.records import (
     Reading,
     assemble,
     checked_wavelengths,
-    colour_alone,
     parse_conditions,
     parse_lab,
     parse_number,
@@ -326,8 +325,8 @@ def _specification(geometry: Geometry, wavelengths: np.ndarray, conditions: Cond
 
 def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
     """Write measurements as one CxF3 document (see module docstring for the layout); those
-    whose spectra were recovered from L*a*b* as ColorCIELab alone, as they were read."""
-    lab_alone = colour_alone(measurements)
+    whose spectra were recovered from L*a*b* as ColorCIELab alone, as they were read, beside
+    measured ones where the document holds both (a standard's colour and a trial)."""
     wavelengths = measurements[0].wavelengths
     if not 360 <= wavelengths[0] <= 400 or np.any(np.diff(wavelengths) % 1):
         raise ValueError(
@@ -341,7 +340,7 @@ def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
     for number, m in enumerate(measurements, start=1):
         values: list[object] = []
         for i, g in enumerate(m.geometries):
-            if not lab_alone:
+            if not m.spectra_recovered:
                 values.append(
                     cxf3.ReflectanceSpectrum(
                         value=[float(v) for v in m.reflectance[i]],

@@ -434,7 +434,8 @@ def recovered_readings(
 
 def colour_alone(measurements: Sequence[Measurement]) -> bool:
     """Whether ``measurements`` are to be written as L*a*b* alone (their spectra recovered
-    from it, which a file must not give as measured); one file holds one kind or the other."""
+    from it, which a file must not give as measured); one table holds one kind or the other
+    (a CxF3 document holds both, Object by Object)."""
     alone = measurements[0].spectra_recovered
     if any(m.spectra_recovered != alone for m in measurements):
         raise ValueError(
