@@ -256,7 +256,7 @@ def damage_pictures(data: bytes, rng: random.Random) -> bytes:
 CASE_COLUMNS = ("case_id", "shop", "instrument", "conditions", "outcome", "synthetic",
                 "geometries", "recipe", "target", "sprayout", "target_texture",
                 "sprayout_texture", "created_at", "updated_at", "tins", "colour_code",
-                "target_recovered")  # fmt: skip
+                "target_recovered", "sprayout_recovered")  # fmt: skip
 """The columns of a case row that a damaged database changes."""
 TABLE_COLUMNS = {
     "cases": CASE_COLUMNS,
@@ -349,12 +349,14 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     for suffix in ("csv", "cxf"):
         cases = work / f"cases.{suffix}"
         CliRunner().invoke(app, ["cases", "generate", "--n", "4", "--seed", "3", "--out", cases])
-        generated = read_cases(cases)  # one car known by its L*a*b* alone, as a shop records it
-        write_cases([replace(c, colour_code="Toyota 1G3", target_recovered=i == 1)
-                     for i, c in enumerate(generated)], cases)  # fmt: skip
+        write_cases([replace(c, colour_code="Toyota 1G3") for c in read_cases(cases)], cases)
     CliRunner().invoke(app, ["cases", "import", f"{work}/cases.csv", "-d", f"{work}/shop.db"])
     CliRunner().invoke(app, ["cases", "variants", "1G3", "-d", f"{work}/shop.db", "--within",
                              "0.1", "--out", f"{work}/deck.json"])  # fmt: skip
+    for suffix in ("csv", "cxf"):  # readings known by their L*a*b* alone, as shops record them
+        cases = work / f"cases.{suffix}"
+        write_cases([replace(c, target_recovered=i == 1, sprayout_recovered=i == 2)
+                     for i, c in enumerate(read_cases(cases))], cases)  # fmt: skip
     model = replace(shipped_model("five-angle"))  # a copy recording cases, as a shop's does
     model.add_learned([f"case {i}" for i in range(50)])
     (work / "model.pt").write_bytes(model.to_bytes())

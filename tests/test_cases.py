@@ -587,7 +587,8 @@ def test_an_older_database_is_migrated_with_its_cases(cases, database_url):
     assert "shop_habits" in inspect(engine).get_table_names()
     stored = list(iter_cases(engine))
     assert [c.case_id for c in stored] == [c.case_id for c in cases[:7]]
-    assert all(c.tins == {} and c.colour_code == "" and not c.target_recovered for c in stored)
+    assert all(c.tins == {} and c.colour_code == "" for c in stored)
+    assert not any(c.target_recovered or c.sprayout_recovered for c in stored)
     assert np.allclose(stored[3].sprayout, cases[3].sprayout, rtol=1e-6)
     tinned = _with_tins(cases[7])
     add_cases(engine, [tinned, *_coded(cases[8:9])])
@@ -600,7 +601,7 @@ def _store_as_the_first_release(engine, cases) -> None:
     from flakelab.cases.database import _row
     from flakelab.cases.schema import CaseRow
 
-    later = ("id", "tins", "colour_code", "target_recovered")
+    later = ("id", "tins", "colour_code", "target_recovered", "sprayout_recovered")
     first = [c.name for c in CaseRow.__table__.columns if c.name not in later]
     with engine.begin() as connection:
         connection.execute(
@@ -1534,8 +1535,9 @@ def _store_before_0008(engine, model) -> None:
 
 def test_the_cases_stored_since_a_training_read_its_cases_are_counted(cases, database_url):
     """'train --when-new' counts the cases stored after the newest version's training read
-    the database, at the instrument's geometries, whatever their own times; a version that
-    does not say when it read them counts from its registration."""
+    the database, at the instrument's geometries, whatever their own times, but for those
+    whose spray-out is known by its L*a*b* alone, which no model learns; a version that does
+    not say when it read them counts from its registration."""
     from flakelab.cases.database import count_stored_since
     from flakelab.models.registry import newest_training, register, shipped_model
     from flakelab.models.training import case_arrays
@@ -1548,6 +1550,7 @@ def test_the_cases_stored_since_a_training_read_its_cases_are_counted(cases, dat
     register(engine, model, held, cases_read_at=read_at.astimezone(timezone(timedelta(hours=9))))
     old = [replace(c, created_at=datetime(2025, 1, 2, tzinfo=UTC)) for c in cases[10:14]]
     add_cases(engine, old)  # a history brought in: made long ago, stored now
+    add_cases(engine, [replace(cases[14], sprayout_recovered=True)])  # read by colour: unlearnt
     five = INSTRUMENT_GEOMETRIES["five-angle"]
     assert newest_training(engine, "five-angle") == (1, read_at, True)
     assert count_stored_since(engine, read_at, five) == 4
@@ -1632,7 +1635,7 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
             "meta tag created_at: expected a date and time such as 2026-11-22T09:30 or "
             "22.11.2026 09:30, got 'soon'"
         ),
-        # a history of colours alone (read with spectra recovered): a case keeps spectra
+        # a history of colours alone under illuminant A: a case keeps colours in D65/10
         (
             "colour.cxf",
             lambda t: re.sub(
@@ -1640,10 +1643,10 @@ def test_a_case_file_s_every_flaw_is_named_where_it_lies(cases, tmp_path):
                 r"</\1ReflectanceSpectrum>",
                 r"<\1ColorCIELab \2><\1L>40</\1L><\1A>2</\1A><\1B>-3</\1B></\1ColorCIELab>",
                 t,
-            ),
+            ).replace("Illuminant>D65<", "Illuminant>A<"),
         ): (
-            f"spray-out: '{first.case_id}/sprayout' gives L\\*a\\*b\\* alone: a case keeps the "
-            "spray-out's spectra"
+            f"target: '{first.case_id}/target' gives L\\*a\\*b\\* under A/10 alone: a case "
+            "keeps its readings' colour in D65/10"
         ),
         ("twice.csv", lambda t: t + t.splitlines()[1] + "\n"): (
             f"row 5: case_id: '{first.case_id}' is also row 2's"
@@ -1713,35 +1716,45 @@ def test_cases_streamed_into_a_csv_are_the_file_a_list_writes(cases, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["listed.csv", "streamed.csv"]
 
 
-def test_a_case_history_keeps_which_targets_were_known_by_their_colour_alone(cases, tmp_path):
-    """A case whose target was known by its L*a*b* alone keeps the flag through CSV (a column
-    where any case has one) and CxF3 (its target written as ColorCIELab alone, read back with
-    its colour); a file without such a case is the file it was. A flag that is neither 0 nor 1
-    is named; a generator's stream, whose columns were fixed before, refuses such a case."""
-    alone = replace(cases[1], target_recovered=True)
-    history = [cases[0], alone, cases[2]]
+def test_a_case_history_keeps_which_readings_were_known_by_their_colour_alone(cases, tmp_path):
+    """A case whose target or spray-out was known by its L*a*b* alone keeps the flag through
+    CSV (a column each, where any case has one) and CxF3 (the reading written as ColorCIELab
+    alone, read back with its colour); a file without such a case is the file it was. A flag
+    that is neither 0 nor 1 is named; a generator's stream, whose columns were fixed before,
+    refuses such a case."""
+    history = [
+        cases[0],
+        replace(cases[1], target_recovered=True),
+        replace(cases[2], sprayout_recovered=True),
+        replace(cases[3], target_recovered=True, sprayout_recovered=True),
+    ]
+    flags = [(c.target_recovered, c.sprayout_recovered) for c in history]
     for name in ("history.csv", "history.cxf"):
         write_cases(history, tmp_path / name)
         back = read_cases(tmp_path / name)
-        assert [c.target_recovered for c in back] == [False, True, False], name
-        assert (
-            delta_E(reflectance_to_Lab(back[1].target), reflectance_to_Lab(alone.target)).max()
-            < 1e-3
-        )
+        assert [(c.target_recovered, c.sprayout_recovered) for c in back] == flags, name
+        for before, after in zip(history, back, strict=True):
+            for role in ("target", "sprayout"):
+                colours = (reflectance_to_Lab(getattr(c, role)) for c in (before, after))
+                assert delta_E(*colours).max() < 1e-3, (name, role)
         np.testing.assert_allclose(back[0].target, cases[0].target, rtol=1e-5)
-        np.testing.assert_allclose(back[1].sprayout, alone.sprayout, rtol=1e-5)
+        np.testing.assert_allclose(back[1].sprayout, cases[1].sprayout, rtol=1e-5)
     text = (tmp_path / "history.csv").read_text()
-    column = next(csv.reader(io.StringIO(text))).index("target_recovered")
-    assert column == len(CASE_FIELDS)  # after the fields every file has
-    write_cases([cases[0], cases[2]], tmp_path / "measured.csv")
-    assert "target_recovered" not in (tmp_path / "measured.csv").read_text()
+    header = next(csv.reader(io.StringIO(text)))
+    column = header.index("target_recovered")
+    assert column == len(CASE_FIELDS) and header[column + 1] == "sprayout_recovered"
+    write_cases(cases[:3], tmp_path / "measured.csv")
+    assert "_recovered" not in (tmp_path / "measured.csv").read_text()
     flawed = tmp_path / "flawed.csv"
-    flawed.write_text(text.replace(text.splitlines()[2], _cell(text, 2, column, "yes")))
-    with pytest.raises(CaseFileError, match="row 3: target_recovered: expected 0 or 1, got 'yes'"):
+    flawed.write_text(text.replace(text.splitlines()[2], _cell(text, 2, column + 1, "yes")))
+    with pytest.raises(
+        CaseFileError, match="row 3: sprayout_recovered: expected 0 or 1, got 'yes'"
+    ):
         read_cases(flawed)
     streamed = tmp_path / "streamed.csv"
-    with pytest.raises(CaseFileError, match=r"knows its target by its L\*a\*b\* alone"):
-        write_cases(iter(history), streamed, geometries=cases[0].geometry_names, tins=False)
+    for case, role in ((history[1], "target"), (history[2], "spray-out")):
+        with pytest.raises(CaseFileError, match=rf"knows its {role} by its L\*a\*b\* alone"):
+            write_cases(iter([case]), streamed, geometries=case.geometry_names, tins=False)
     assert not streamed.exists()
 
 

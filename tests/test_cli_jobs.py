@@ -1518,7 +1518,7 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
     """The example car and spray-out, each as the L*a*b* of its spectra and nothing else:
     inspect and compare say their spectra were recovered; the colour differences are those of
     the measured spectra, and no metamerism index is given. The correction weighs none, and
-    says so; a case is not recorded from the spray-out's (the model would learn invented
+    says so; a case recorded from them is learned by no model (it would learn invented
     spectra)."""
     target, sprayed = example_path("target"), example_path("sprayout")
     recipe = target.parent / "blue-metallic-recipe.json"
@@ -1549,15 +1549,17 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
                           "--json").stdout)  # fmt: skip
     assert sum("the correction judged its colour in D65/10" in n for n in lamp["notes"]) == 1
     database = tmp_path / "shop.db"
-    refused = cli("cases", "record", lab_target, "-r", recipe, "--sprayed", lab_sprayed, "-d",
-                  database)  # fmt: skip
-    assert refused.returncode != 0
-    said = " ".join(refused.stderr.split())
-    assert (
-        "spray-out: 'Blue metallic sprayout (synthetic)' gives L*a*b* alone: a case keeps the "
-        "spray-out's spectra, which the learned model learns from" in said
-    ), said
-    assert not database.exists() or "no cases" in cli("cases", "list", "-d", database).stderr
+    recorded = cli("cases", "record", lab_target, "-r", recipe, "--sprayed", lab_sprayed, "-d",
+                   database, "--json")  # fmt: skip
+    assert recorded.returncode == 0, recorded.stderr
+    case = json.loads(recorded.stdout)
+    assert case["target_recovered"] and case["sprayout_recovered"]
+    assert case["read_by_models_of"] == []  # kept for its colour; no model learns from it
+    said = " ".join(cli("cases", "record", lab_target, "-r", recipe, "--sprayed", lab_sprayed,
+                        "-d", tmp_path / "again.db").stdout.split())  # fmt: skip
+    assert "the target and the spray-out are known by their L*a*b* in D65/10 alone" in said
+    assert "no model learns from the case, since a model learns spectra" in said
+    assert "no instrument's model learns from it" not in said
 
 
 def test_a_case_keeps_a_car_known_by_its_lab_alone_and_says_so(tmp_path, cli):
@@ -1609,4 +1611,35 @@ def test_a_case_keeps_a_car_known_by_its_lab_alone_and_says_so(tmp_path, cli):
     refused = cli(*record, tmp_path / "lamp.db", lamp_target)
     assert refused.returncode == 2
     said = " ".join(refused.stderr.split())
-    assert "gives L*a*b* under A/10 alone: a case keeps the car's colour in D65/10" in said, said
+    assert "gives L*a*b* under A/10 alone: a case keeps its readings' colour in D65/10" in said, (
+        said
+    )
+
+
+def test_no_model_learns_from_a_spray_out_known_by_its_lab_alone(tmp_path, cli):
+    """A shop whose instrument exports L*a*b* alone (a BYK-mac i) keeps its cases, but a model
+    learns spectra: 'train' and 'model adapt' leave out the cases whose spray-out was known so,
+    and count them, and refuse a history of nothing else."""
+    from flakelab.cases.exchange import read_cases, write_cases
+
+    generated = tmp_path / "generated.csv"
+    assert cli("cases", "generate", "--n", "60", "--seed", "5", "--out", generated).returncode == 0
+    cases = read_cases(generated)
+    mixed, alone = tmp_path / "mixed.csv", tmp_path / "alone.csv"
+    write_cases([replace(c, sprayout_recovered=i % 4 == 0) for i, c in enumerate(cases)], mixed)
+    write_cases([replace(c, sprayout_recovered=True) for c in cases], alone)
+    run = cli("train", mixed, "--epochs", "1", "--hidden", "8", "--no-register", "--json")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["cases_left_out_known_by_colour"] == 15 and report["cases_left_out"] == 0
+    assert report["cases"] + report["held_out"]["cases"] == 45
+    shown = cli("train", mixed, "--epochs", "1", "--hidden", "8", "--no-register")
+    assert "15 cases left out, whose spray-out is known by its L*a*b* alone" in shown.stderr
+    run = cli("model", "adapt", mixed, "--epochs", "1", "--no-register", "--json")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["left_out_known_by_colour"] == 15
+    for command in (("train", alone, "--epochs", "1"), ("model", "adapt", alone)):
+        refused = cli(*command, "--no-register")
+        assert refused.returncode == 2 and "Traceback" not in refused.stderr
+        said = " ".join(refused.stderr.split())
+        assert "every one of the 60 cases knows its spray-out by its L*a*b* alone" in said, said

@@ -16,6 +16,7 @@ from flakelab.cases.exchange import write_cases
 from flakelab.cases.generator import World
 from flakelab.cases.variants import colour_variants
 from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.core.difference import delta_E
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
@@ -411,3 +412,29 @@ def test_a_code_asked_without_its_numbers_leading_zeros_is_hinted():
     assert colour_code_hint("gen 2", codes) == " (did you mean 'GEN 002'?)"
     assert colour_code_hint("Toyota 40", codes) == " (did you mean 'TOYOTA 040'?)"
     assert colour_code_hint("gen 002", codes) == ""
+
+
+def test_a_chip_of_a_car_known_by_its_lab_alone_is_written_as_it_was_read(generated, tmp_path, cli):
+    """A variant whose centre car was read as L*a*b* alone (a case's ``target_recovered``) is
+    written as that colour alone: read back, its spectra are recovered and flagged, its
+    colour the car's; a JSON chip book, which would give them as measured, is refused and
+    nothing is written."""
+    from flakelab.io import read_measurements
+
+    cars = _cars(generated, [1.0, 1.004, 1.10], [1.01, 0.99, 1.02], "1G3")
+    cars = [replace(c, target_recovered=True) for c in cars]
+    db = tmp_path / "shop.db"
+    add_cases(open_database(str(db)), cars)
+    written = cli("cases", "variants", "1G3", "-d", db, "--out", tmp_path / "chips.cxf", "--json")
+    assert written.returncode == 0, written.stderr
+    by_id = {c.case_id: c for c in cars}
+    chips = read_measurements(tmp_path / "chips.cxf")
+    variants = json.loads(written.stdout)["variants"]
+    for chip, variant in zip(chips, variants, strict=True):
+        assert chip.spectra_recovered
+        car = reflectance_to_Lab(by_id[variant["centre_case_id"]].target)
+        assert delta_E(chip.lab(), car).max() < 1e-3
+    refused = cli("cases", "variants", "1G3", "-d", db, "--out", tmp_path / "chips.json")
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr
+    assert "recovered from L*a*b*: a json file would give them as measured" in refused.stderr
+    assert not (tmp_path / "chips.json").exists()

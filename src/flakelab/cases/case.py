@@ -32,14 +32,15 @@ __all__ = [
     "Case",
     "CaseError",
     "OUTCOMES",
-    "TARGET_RECOVERED_NOTE",
     "TEXT_LENGTHS",
     "cases_at",
-    "check_measured",
+    "check_readings_kept",
     "colour_code_hint",
     "colour_code_words",
     "has_colour_code",
+    "recovered_note",
     "select_cases",
+    "spectra_to_learn",
     "tin_fields",
     "worst_differences",
 ]
@@ -58,39 +59,55 @@ TEXT_LENGTHS = {
 longer value; SQLite would keep it), checked with every case so that no store fails on one."""
 
 
-TARGET_RECOVERED_NOTE = (
-    "the target is known by its L*a*b* in D65/10 alone: its spectra were recovered from it "
-    "(one metamer of many); the models learn from the spray-out's measured spectra"
-)
-"""What a report says of a case whose target was known by its colour alone."""
+def recovered_note(target: bool, sprayout: bool) -> str | None:
+    """What a report says of a case whose ``target`` or ``sprayout`` (or both) was known by
+    its L*a*b* in D65/10 alone; None where both were measured."""
+    if not (target or sprayout):
+        return None
+    which = (
+        "the target and the spray-out are known by their"
+        if target and sprayout
+        else f"the {'target' if target else 'spray-out'} is known by its"
+    )
+    learnt = (
+        "no model learns from the case, since a model learns spectra"
+        if sprayout
+        else "the models learn from the spray-out's measured spectra"
+    )
+    return (
+        f"{which} L*a*b* in D65/10 alone (spectra recovered from it: one metamer of many); {learnt}"
+    )
 
 
 class CaseError(FlakelabError):
     """A case that is wrong: names the case, the field and the problem."""
 
 
-def check_measured(target, sprayout) -> None:
-    """Refuse readings (:class:`~flakelab.core.measurement.Measurement`) a case cannot keep as
-    they are: a spray-out whose spectra were recovered from its L*a*b*, since the learned
-    model learns from the spray-outs' spectra and a recovered one is a metamer of many; a
-    target known by its colour alone under other conditions than D65/10. A target known by
-    its colour in D65/10 is kept (:attr:`Case.target_recovered`): a case's target is read
-    for its colour there alone (its outcome, the nearest cases, the variants of a colour),
-    which its recovered spectrum gives exactly."""
-    if sprayout.spectra_recovered:
-        raise CaseError(
-            f"spray-out: {sprayout.sample!r} gives L*a*b* alone: a case keeps the spray-out's "
-            "spectra, which the learned model learns from, and one recovered from a colour is "
-            "a metamer of many; record it from the instrument's spectral export"
-        )
-    stated = target.stored_lab_conditions
-    if target.spectra_recovered and stated != D65_10:
-        raise CaseError(
-            f"target: {target.sample!r} gives L*a*b* under {stated} alone: a case keeps the "
-            f"car's colour in {D65_10}, by which its outcome is judged and its nearest cases "
-            f"found, and its file gives none; export the car's spectra, or its colour in "
-            f"{D65_10}"
-        )
+def check_readings_kept(target, sprayout) -> None:
+    """Refuse a reading (:class:`~flakelab.core.measurement.Measurement`) a case cannot keep as
+    it is: one known by its L*a*b* alone under other conditions than D65/10. A case's readings
+    are read for their colour in D65/10 (its outcome, the nearest cases, the variants of a
+    colour, a shop's habits, the mix-up check), which a spectrum recovered from that colour
+    gives exactly; such a reading is kept, flagged (:attr:`Case.target_recovered`,
+    :attr:`Case.sprayout_recovered`), and no model learns from a spray-out known so
+    (:func:`spectra_to_learn`)."""
+    for role, reading in (("target", target), ("spray-out", sprayout)):
+        stated = reading.stored_lab_conditions
+        if reading.spectra_recovered and stated != D65_10:
+            raise CaseError(
+                f"{role}: {reading.sample!r} gives L*a*b* under {stated} alone: a case keeps "
+                f"its readings' colour in {D65_10}, by which its outcome is judged and the "
+                f"shop's habits read, and its file gives none; export its spectra, or its "
+                f"colour in {D65_10}"
+            )
+
+
+def spectra_to_learn(cases: Sequence[Case]) -> tuple[list[Case], int]:
+    """The cases a model learns from, those whose spray-out was measured, and how many were
+    left out: a spray-out known by its L*a*b* alone gives one metamer of many, and a model
+    that learnt it would predict invented spectra."""
+    kept = [c for c in cases if not c.sprayout_recovered]
+    return kept, len(cases) - len(kept)
 
 
 _CODE_BREAKS = str.maketrans({c: " " for c in "/,;+&"})
@@ -234,9 +251,10 @@ class Case:
     recipe to the tin it was poured from, as the shop had read it (none recorded: every toner
     at the standard, as far as anyone knows). ``colour_code`` is the car maker's code for the
     car's colour, as on its plate (with the maker where codes clash: 'Toyota 1G3'), kept as
-    its :func:`colour_code_words`; empty where none was recorded. ``target_recovered``: the
-    car was known by its L*a*b* in D65/10 alone, and ``target`` was recovered from it: its
-    colour there is the reading's, its spectral shape one metamer of many."""
+    its :func:`colour_code_words`; empty where none was recorded. ``target_recovered``
+    (``sprayout_recovered``): the car (the spray-out) was known by its L*a*b* in D65/10 alone,
+    and ``target`` (``sprayout``) was recovered from it: its colour there is the reading's, its
+    spectral shape one metamer of many."""
 
     case_id: str
     geometries: tuple[Geometry, ...]
@@ -254,6 +272,7 @@ class Case:
     tins: Mapping[str, TonerLot] = field(default_factory=dict)
     colour_code: str = ""
     target_recovered: bool = False
+    sprayout_recovered: bool = False
 
     def __post_init__(self) -> None:
         where = f"case {self.case_id!r}"
@@ -305,6 +324,15 @@ class Case:
     @property
     def geometry_names(self) -> tuple[str, ...]:
         return tuple(g.name for g in self.geometries)
+
+    def as_read(self, role: str) -> dict:
+        """How its ``role`` reading (``target``, ``sprayout``) was read, as a
+        :class:`~flakelab.core.measurement.Measurement`'s fields: its L*a*b* in D65/10 alone
+        where its spectra were recovered from it, so that a file gives it so; none where
+        measured."""
+        if not getattr(self, f"{role}_recovered"):
+            return {}
+        return {"stored_lab": reflectance_to_Lab(getattr(self, role)), "spectra_recovered": True}
 
     def reads(self, geometries: Sequence[str]) -> bool:
         """Whether the case was read at every one of ``geometries``."""

@@ -451,6 +451,7 @@ def _row_values(case: Case) -> dict:
         tins={toner: tin_fields(tin) for toner, tin in case.tins.items()} or None,
         colour_code=case.colour_code,
         target_recovered=case.target_recovered,
+        sprayout_recovered=case.sprayout_recovered,
         # in UTC: SQLite keeps no zone, so an offset would otherwise be dropped, not applied
         created_at=case.created_at.astimezone(UTC),
         updated_at=now,
@@ -493,6 +494,7 @@ def _case_of(row: CaseRow) -> Case:
         tins=row.tins or {},
         colour_code=row.colour_code,
         target_recovered=row.target_recovered,
+        sprayout_recovered=row.sprayout_recovered,
     )
 
 
@@ -850,9 +852,11 @@ def count_stored_since(engine: Engine, since: datetime, geometries: Iterable[str
     """How many cases were stored in the database (recorded, imported or generated into it)
     at or after ``since`` (without a zone: UTC), read at every one of ``geometries``: those a
     model whose training read the database at ``since`` has not seen, whatever their own
-    time (an imported history's cases were made long before)."""
+    time (an imported history's cases were made long before), and could learn from: a
+    spray-out known by its L*a*b* alone is not learnt (``cases.case.spectra_to_learn``)."""
     stored = CaseRow.updated_at >= zoned_here(since).astimezone(UTC)  # a case's storing
-    query = select(CaseRow.case_id, CaseRow.geometries).where(stored)
+    learnt = CaseRow.sprayout_recovered.is_(False)
+    query = select(CaseRow.case_id, CaseRow.geometries).where(stored, learnt)
     wanted, count = set(geometries), 0
     with reading_rows(engine) as session:
         for case_id, names in session.execute(query):

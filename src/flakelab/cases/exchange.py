@@ -5,8 +5,9 @@ recipe`` (JSON object toner → amount), ``geometries`` (the case's, names joine
 where any case records the car maker's colour code ``colour_code`` (empty for a case that
 records none), where any case records the tins it was poured from ``tins`` (JSON object
 toner → ``{lot, strength, shade_nm}``, empty for a case that records none), where any
-case's target was known by its L*a*b* alone ``target_recovered`` (1 for such a case, its
-target's spectra those recovered from its colour in D65/10; 0 for a measured one), then
+case's target (spray-out) was known by its L*a*b* alone ``target_recovered``
+(``sprayout_recovered``: 1 for such a reading, its spectra those recovered from its colour in
+D65/10; 0 for a measured one), then
 ``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for every
 geometry of the file and band (400–700 nm, 10 nm), then ``target:<reading>`` and
 ``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
@@ -17,7 +18,7 @@ tabs) with decimal commas in its readings, is read as well.
 
 CxF3: each case is two multi-angle samples, ``<case_id>/target`` and ``<case_id>/sprayout``;
 the case's fields ride as ``meta:`` tags on the target (``tins`` as the CSV's cell;
-``colour_code`` where the case records one). A target known by its L*a*b* alone is
+``colour_code`` where the case records one). A reading known by its L*a*b* alone is
 written as its ColorCIELab in D65/10 alone, as it was read.
 
 Readers check every row and name the file, row and column of the first problem; nothing is
@@ -32,14 +33,13 @@ import math
 from collections.abc import Callable, Iterable, Iterator
 from datetime import datetime
 from functools import cache
-from operator import itemgetter
+from operator import attrgetter, itemgetter
 from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
-from flakelab.cases.case import Case, CaseError, check_measured, tin_fields
-from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.cases.case import Case, CaseError, check_readings_kept, tin_fields
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -83,11 +83,41 @@ TINS_FIELD = "tins"
 """The second optional column after :data:`CASE_FIELDS`: the tins each case was poured
 from."""
 
-RECOVERED_FIELD = "target_recovered"
-"""The third optional column after :data:`CASE_FIELDS`: whether each case's target was known
-by its L*a*b* alone (:attr:`~flakelab.cases.case.Case.target_recovered`)."""
+RECOVERED_FIELDS = ("target_recovered", "sprayout_recovered")
+"""The third and fourth optional columns: whether each case's target (spray-out) was known by
+its L*a*b* alone (:attr:`~flakelab.cases.case.Case.target_recovered`), 1 or 0."""
+
+OPTIONAL_FIELDS = (CODE_FIELD, TINS_FIELD, *RECOVERED_FIELDS)
+"""The columns after :data:`CASE_FIELDS` a file has, in this order, where any of its cases
+records what they hold."""
 
 _FLAGS = {"0": False, "1": True}
+
+
+def _tins_cell(case: Case) -> str:
+    """A case's tins as its file writes them: a JSON object, empty where it records none."""
+    return json.dumps({k: tin_fields(t) for k, t in case.tins.items()}) if case.tins else ""
+
+
+_OPTIONAL_CELLS = {
+    CODE_FIELD: attrgetter("colour_code"),
+    TINS_FIELD: _tins_cell,
+    **{
+        name: lambda case, name=name: "1" if getattr(case, name) else "0"
+        for name in RECOVERED_FIELDS
+    },
+}
+"""Each optional column's cell of a case."""
+
+_HOLDS = {
+    CODE_FIELD: ("records its colour code", attrgetter("colour_code")),
+    TINS_FIELD: ("records its tins", attrgetter("tins")),
+    **{
+        name: (f"knows its {role} by its L*a*b* alone", attrgetter(name))
+        for name, role in zip(RECOVERED_FIELDS, ("target", "spray-out"), strict=True)
+    },
+}
+"""What a case records that each optional column holds, in words and as a test."""
 
 
 class CaseFileError(FlakelabError):
@@ -95,11 +125,9 @@ class CaseFileError(FlakelabError):
 
 
 @cache
-def _header(
-    geometries: tuple[str, ...], tins: bool = False, codes: bool = False, recovered: bool = False
-) -> tuple:
-    """Column names for one geometry set, with the colour codes', the tins' and the recovered
-    targets' columns or without (cached: every row of a file checks against it)."""
+def _header(geometries: tuple[str, ...], optional: tuple[str, ...] = ()) -> tuple:
+    """Column names for one geometry set, with the ``optional`` columns (of
+    :data:`OPTIONAL_FIELDS`, in its order) (cached: every row of a file checks against it)."""
     spectra = [
         f"{role}:{g}:{int(w)}"
         for role in ("target", "sprayout")
@@ -107,8 +135,12 @@ def _header(
         for w in WAVELENGTHS
     ]
     texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
-    optional = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins + (RECOVERED_FIELD,) * recovered
     return (*CASE_FIELDS, *optional, *spectra, *texture)
+
+
+def _optional_columns(cases: list[Case]) -> tuple[str, ...]:
+    """The optional columns a file of ``cases`` has: those that any of them records."""
+    return tuple(f for f in OPTIONAL_FIELDS if any(_HOLDS[f][1](c) for c in cases))
 
 
 def is_case_file(path: str | PathLike) -> bool:
@@ -154,24 +186,24 @@ def write_cases(
     if Path(path).suffix.lower() in CXF_SUFFIXES:
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
-    recovered = not streamed and any(c.target_recovered for c in cases)
-    if not streamed:
+    if streamed:  # a generator's: its cases' readings measured
+        optional = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins
+    else:
         geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
-        tins = any(c.tins for c in cases)
-        codes = any(c.colour_code for c in cases)
-    readings = len(CASE_FIELDS) + codes + tins + recovered  # the first cell of the readings
+        optional = _optional_columns(cases)
+    readings = len(CASE_FIELDS) + len(optional)  # the first cell of the readings
 
     separator, encoding = csv_form(decimal_comma)
 
     def write(temporary: Path) -> None:  # row by row, not the whole text first
         with temporary.open("w", encoding=encoding, newline="") as handle:
             writer = csv.writer(handle, delimiter=separator)
-            writer.writerow(_header(geometries, tins, codes, recovered))
+            writer.writerow(_header(geometries, optional))
             written = 0
             for case in cases:
                 if streamed:
-                    _check_columns_hold(path, case, geometries, tins, codes)
-                row = _csv_row(case, geometries, tins, codes, recovered)
+                    _check_columns_hold(path, case, geometries, optional)
+                row = _csv_row(case, geometries, optional)
                 if decimal_comma:
                     row[readings:] = [decimal_comma_in(cell) for cell in row[readings:]]
                 writer.writerow(row)
@@ -184,30 +216,18 @@ def write_cases(
     write_atomically(path, write)
 
 
-def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], tins: bool, codes: bool):
-    """A case streamed into a CSV of ``geometries`` (and ``tins`` and colour ``codes`` columns
-    or not) is one its columns hold whole: a generator's, whose targets are measured."""
+def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], optional: tuple[str, ...]):
+    """A case streamed into a CSV of ``geometries`` and ``optional`` columns is one its
+    columns hold whole."""
     beyond = [g for g in case.geometry_names if g not in geometries]
-    what = (
-        f"read at {', '.join(beyond)}"
-        if beyond
-        else "records its tins"
-        if case.tins and not tins
-        else "records its colour code"
-        if case.colour_code and not codes
-        else "knows its target by its L*a*b* alone"
-        if case.target_recovered
-        else None
-    )
+    unheld = (words for f, (words, held) in _HOLDS.items() if f not in optional and held(case))
+    what = f"read at {', '.join(beyond)}" if beyond else next(unheld, None)
     if what:
         raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
 
 
-def _csv_row(
-    case: Case, geometries: tuple[str, ...], tins: bool, codes: bool, recovered: bool = False
-) -> list[str]:
-    """A case's row of a case file of ``geometries`` (and its colour code's, its tins' and its
-    target's kind's columns, with ``codes``, ``tins`` and ``recovered``)."""
+def _csv_row(case: Case, geometries: tuple[str, ...], optional: tuple[str, ...]) -> list[str]:
+    """A case's row of a case file of ``geometries`` and ``optional`` columns."""
     return [
         case.case_id,
         case.shop,
@@ -218,9 +238,7 @@ def _csv_row(
         case.created_at.isoformat(),
         json.dumps(case.recipe),
         ";".join(case.geometry_names),
-        *([case.colour_code] if codes else []),
-        *([_tins_cell(case)] if tins else []),
-        *(["1" if case.target_recovered else "0"] if recovered else []),
+        *(_OPTIONAL_CELLS[f](case) for f in optional),
         *_spectra_cells(case, case.target, geometries),
         *_spectra_cells(case, case.sprayout, geometries),
         *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
@@ -235,11 +253,6 @@ def _spectra_cells(case: Case, spectra: np.ndarray, geometries: tuple[str, ...])
     return [
         cell for g in geometries for cell in ([f"{v:.6g}" for v in own[g]] if g in own else empty)
     ]
-
-
-def _tins_cell(case: Case) -> str:
-    """A case's tins as its file writes them: a JSON object, empty where it records none."""
-    return json.dumps({k: tin_fields(t) for k, t in case.tins.items()}) if case.tins else ""
 
 
 def _fmt(value: float | None) -> str:
@@ -340,9 +353,7 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
     """The geometries whose columns the header holds, checked to be every column they need."""
     spectral = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
     geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
-    expected = _header(
-        geometries, TINS_FIELD in header, CODE_FIELD in header, RECOVERED_FIELD in header
-    )
+    expected = _header(geometries, tuple(f for f in OPTIONAL_FIELDS if f in header))
     if tuple(header) != expected:
         missing = [c for c in expected if c not in header]
         extra = [c for c in header if c not in expected]
@@ -408,7 +419,7 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
     recipe = _recipe_field(f"{where}: recipe", cells["recipe"])
     tins = _tins_field(f"{where}: tins", cells.get(TINS_FIELD, ""))
     created = _date_field(f"{where}: created_at", cells["created_at"])
-    for flag in ("synthetic", RECOVERED_FIELD):
+    for flag in ("synthetic", *RECOVERED_FIELDS):
         if cells.get(flag, "0") not in _FLAGS:
             raise CaseFileError(f"{where}: {flag}: expected 0 or 1, got {cells[flag]!r}")
     readings = {
@@ -431,7 +442,7 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
             created_at=created,
             tins=tins,
             colour_code=cells.get(CODE_FIELD, ""),
-            target_recovered=_FLAGS[cells.get(RECOVERED_FIELD, "0")],
+            **{flag: _FLAGS[cells.get(flag, "0")] for flag in RECOVERED_FIELDS},
         )
     except (CaseError, ValueError) as error:
         raise CaseFileError(f"{where}: {error}") from None
@@ -495,7 +506,7 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
             texture=case.target_texture,
             metadata=meta,
             **common,
-            **_as_read(case),
+            **case.as_read("target"),
         ),
         Measurement(
             f"{case.case_id}/sprayout",
@@ -503,15 +514,9 @@ def _as_measurements(case: Case) -> tuple[Measurement, Measurement]:
             texture=case.sprayout_texture,
             metadata={"case_id": case.case_id},
             **common,
+            **case.as_read("sprayout"),
         ),
     )
-
-
-def _as_read(case: Case) -> dict:
-    """How a case's target was read: by its L*a*b* in D65/10 alone, where it was."""
-    if not case.target_recovered:
-        return {}
-    return {"stored_lab": reflectance_to_Lab(case.target), "spectra_recovered": True}
 
 
 def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case]:
@@ -532,7 +537,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
         if sprayout is None:
             raise CaseFileError(f"{where}: no matching '{case_id}/sprayout' sample")
         try:
-            check_measured(target, sprayout)
+            check_readings_kept(target, sprayout)
         except CaseError as error:  # a shop's history of colours alone
             raise CaseFileError(f"{path}: {error}") from None
         meta = target.metadata
@@ -561,6 +566,7 @@ def _from_measurements(path: Path, measurements: list[Measurement]) -> list[Case
                     tins=tins,
                     colour_code=meta.get(CODE_FIELD, ""),
                     target_recovered=target.spectra_recovered,
+                    sprayout_recovered=sprayout.spectra_recovered,
                 )
             )
         except (CaseError, ValueError) as error:

@@ -17,7 +17,7 @@ from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
-from flakelab.cases.case import OUTCOMES, TEXT_LENGTHS, Case, CaseError, check_measured
+from flakelab.cases.case import OUTCOMES, TEXT_LENGTHS, Case, CaseError, check_readings_kept
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.geometry import (
     INSTRUMENT_GEOMETRIES,
@@ -130,7 +130,7 @@ def case_from_readings(
     file's date), else now. ``tins`` (the shop's lots, by toner) gives the case the tins of
     its recipe's toners; ``colour_code`` the car maker's code for the car's colour.
     """
-    check_measured(target, sprayout)
+    check_readings_kept(target, sprayout)
     shop = tidy_name(shop)  # as the case stores it, for its id
     if instrument is None:
         names, instrument = shared_geometries(target, sprayout)
@@ -179,4 +179,5 @@ def case_from_readings(
         tins={name: tin for name, tin in (tins or {}).items() if name in recipe},
         colour_code=colour_code,
         target_recovered=target.spectra_recovered,
+        sprayout_recovered=sprayout.spectra_recovered,
     )

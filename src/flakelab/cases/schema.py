@@ -130,8 +130,9 @@ class CaseRow(Base):
     colour_code: Mapped[str] = mapped_column(
         KeptString(TEXT_LENGTHS["colour_code"]), server_default=""
     )
-    # the target's spectra recovered from its L*a*b* in D65/10 (migration 0009)
+    # the target's (the spray-out's) spectra recovered from its L*a*b* in D65/10 (migration 0009)
     target_recovered: Mapped[bool] = mapped_column(Boolean, server_default=false())
+    sprayout_recovered: Mapped[bool] = mapped_column(Boolean, server_default=false())
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
     updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 

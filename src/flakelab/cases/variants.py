@@ -304,6 +304,7 @@ def variant_chips(
                 instrument=centre.instrument,
                 measured_at=centre.created_at,
                 metadata=meta,
+                **centre.as_read("target"),
             )
         )
     return chips

@@ -319,8 +319,10 @@ def import_cases(
         f"imported {counted(len(stored), 'case')} from {source} into {database_label(engine)}"
     )
     there = f"; {len(cases) - len(stored)} stored already" if new_only else ""
-    if alone := sum(c.target_recovered for c in stored):
-        there += f"; {alone} of them know their target by its L*a*b* in D65/10 alone"
+    for role in ("target", "sprayout"):
+        if alone := sum(getattr(c, f"{role}_recovered") for c in stored):
+            known = "target" if role == "target" else "spray-out"
+            there += f"; {alone} of them know their {known} by its L*a*b* in D65/10 alone"
     errors.print(imported + there, highlight=False)
     if not check:
         return
@@ -441,7 +443,7 @@ def record_case(
         )
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
-    models = instruments_reading(case.geometry_names)
+    models = () if case.sprayout_recovered else instruments_reading(case.geometry_names)
     found, unchecked = None, None
     if check:
         (found,), unchecked = recorded_checks([case], lib, existing_engine(database))
@@ -454,6 +456,7 @@ def record_case(
         "read_by_models_of": list(models),
         "outcome": case.outcome,
         "target_recovered": case.target_recovered,
+        "sprayout_recovered": case.sprayout_recovered,
         "tins": {name: tin_fields(tin) for name, tin in sorted(case.tins.items())},
         "tins_from": str(lots) if lots else kept and kept.describe(),
         "created_at": case.created_at.isoformat(),
@@ -478,7 +481,7 @@ def _print_recorded(report: dict, chosen: bool) -> None:
     tins, how far the spray-out lies from its recipe's prediction, what was not kept
     (``chosen``: the geometries were chosen by ``--instrument``), the cases now in its
     database."""
-    from flakelab.cases.case import TARGET_RECOVERED_NOTE
+    from flakelab.cases.case import recovered_note
     from flakelab.match.mixups import is_mismatched, mismatch_message
 
     failing, found, left_out = (
@@ -494,14 +497,14 @@ def _print_recorded(report: dict, chosen: bool) -> None:
     )
     if models := report["read_by_models_of"]:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
-    else:
+    elif not report["sprayout_recovered"]:  # else the note below says why
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
             f"{', '.join(report['geometries'])} hold no instrument's whole set",
             highlight=False,
         )
-    if report["target_recovered"]:
-        console.print(f"[yellow]note:[/] {TARGET_RECOVERED_NOTE}", highlight=False)
+    if note := recovered_note(report["target_recovered"], report["sprayout_recovered"]):
+        console.print(f"[yellow]note:[/] {note}", highlight=False)
     if report["tins"]:
         tins = ", ".join(f"{n} {t['lot'] or '(no lot number)'}" for n, t in report["tins"].items())
         console.print(f"poured from {report['tins_from']}: {tins}", highlight=False)
@@ -601,6 +604,7 @@ def record_all(
             "instrument": c.instrument,
             "outcome": c.outcome,
             "target_recovered": c.target_recovered,
+            "sprayout_recovered": c.sprayout_recovered,
             "created_at": c.created_at.isoformat(),
             "worst_de00": round(float(de), 3),
             "worst_geometry": g,
@@ -609,7 +613,7 @@ def record_all(
         for number, c, de, g, found in zip(rows, cases, worst, where, checks, strict=True)
     ]
     mismatched = [row for row in recorded if is_mismatched(row["from_prediction"])]
-    readers = [instruments_reading(c.geometry_names) for c in cases]
+    readers = [() if c.sprayout_recovered else instruments_reading(c.geometry_names) for c in cases]
     learners = {model: sum(model in r for r in readers) for model in INSTRUMENT_GEOMETRIES}
     report = {
         "manifest": str(manifest),
@@ -638,7 +642,7 @@ def record_all(
         cells += [_shown_check(row["from_prediction"])] if check else []
         table.add_row(*cells, row["instrument"])
     console.print(table)
-    _tell_targets_recovered(recorded)
+    _tell_recovered(recorded)
     counts = ", ".join(f"{n} {o}" for o, n in report["outcomes"].items() if n)
     models = ", ".join(f"{m} {n}" for m, n in learners.items() if n) or "none"
     console.print(f"outcomes: {counts}; cases each model learns from: {models}", highlight=False)
@@ -697,6 +701,7 @@ def list_cases(
             "outcome": c.outcome,
             "synthetic": c.synthetic,
             "target_recovered": c.target_recovered,
+            "sprayout_recovered": c.sprayout_recovered,
             "recipe": {k: round(v, 6) for k, v in sorted(c.recipe.items(), key=lambda t: -t[1])},
             "tins": {name: tin_fields(tin) for name, tin in sorted(c.tins.items())},
             "worst_de00": round(float(de), 3),
@@ -773,7 +778,7 @@ def list_cases(
             cells.append(row["shop"] + (" [dim](synthetic)[/]" if row["synthetic"] else ""))
         table.add_row(*cells)
     console.print(table)
-    _tell_targets_recovered(rows)
+    _tell_recovered(rows)
     if any(short_id(row["case_id"]) != row["case_id"] for row in rows):
         errors.print(
             f"ids shortened to their first {SHORT_ID_LENGTH} characters: 'cases remove' takes "
@@ -784,19 +789,26 @@ def list_cases(
     _tell_mix_ups(0, "", unchecked)
 
 
+RECOVERED_MARKS = {"target_recovered": "*", "sprayout_recovered": "†"}
+"""How a table of cases marks a target (a spray-out) known by its L*a*b* alone."""
+
+
 def _worst_cell(row: dict) -> str:
-    """A case's worst ΔE00 and its geometry, starred where its target is known by its colour
-    alone (:func:`_tell_targets_recovered`)."""
-    return f"{row['worst_de00']:.2f} {row['worst_geometry']}" + "*" * row["target_recovered"]
+    """A case's worst ΔE00 and its geometry, marked where a reading is known by its colour
+    alone (:func:`_tell_recovered`)."""
+    marks = "".join(mark for flag, mark in RECOVERED_MARKS.items() if row[flag])
+    return f"{row['worst_de00']:.2f} {row['worst_geometry']}{marks}"
 
 
-def _tell_targets_recovered(rows: list[dict]) -> None:
-    """The footnote of a table of cases some of whose targets are known by their colour
+def _tell_recovered(rows: list[dict]) -> None:
+    """The footnotes of a table of cases some of whose readings are known by their colour
     alone."""
-    from flakelab.cases.case import TARGET_RECOVERED_NOTE
+    from flakelab.cases.case import recovered_note
 
-    if any(row["target_recovered"] for row in rows):
-        errors.print(f"* {TARGET_RECOVERED_NOTE}", style="dim", highlight=False)
+    for flag, mark in RECOVERED_MARKS.items():
+        if any(row[flag] for row in rows):
+            note = recovered_note(flag == "target_recovered", flag == "sprayout_recovered")
+            errors.print(f"{mark} {note}", style="dim", highlight=False)
 
 
 def _tell_mix_ups(count: int, which: str, unchecked: str | None) -> None:

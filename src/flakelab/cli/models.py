@@ -335,6 +335,7 @@ def train(
     chosen = cases_at(loaded, geometries)
     if not chosen:
         raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
+    chosen, by_colour = cases_to_learn(cases, chosen)
     arrays = source_arrays(cases, chosen, lib, effect=True)
     arrays, tinned = recorded_tins_used(arrays, lib, no_tins)
     data, held_out = (
@@ -390,7 +391,8 @@ def train(
     metrics = evaluate_model(model, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
-    summary["cases_left_out"] = len(loaded) - len(chosen)  # not read at the model's geometries
+    summary["cases_left_out"] = len(loaded) - len(chosen) - by_colour  # not at its geometries
+    summary["cases_left_out_known_by_colour"] = by_colour
     summary["cases_with_tins"] = int(tinned.sum())
     if kept:
         summary["stages_resumed"] = resumed  # kept by an earlier, interrupted run
@@ -447,6 +449,8 @@ def _print_training(summary: dict, title: str) -> None:
     if summary["cases_left_out"]:
         said.append(f"{counted(summary['cases_left_out'], 'case')} left out, not read at the "
                     "model's geometries")  # fmt: skip
+    if by_colour := summary["cases_left_out_known_by_colour"]:
+        said.append(by_colour_left_out(by_colour))
     if summary.get("stages_resumed"):
         said.append(f"went on from {summary['stages_resumed']} stages its checkpoint kept")
     if "file" in summary:
@@ -1018,7 +1022,7 @@ def adapt(
         base = named_model(model, database, "--model")[0]
     else:  # the database the new version goes to holds the current model, the shop's own
         base = current_model(engine, instrument, shop)
-    chosen = shop_cases(cases, shop, base.geometries, since)
+    chosen, by_colour = cases_to_learn(cases, shop_cases(cases, shop, base.geometries, since))
     novel = set(base.new_toners)
     known = [c for c in chosen if not novel & set(c.recipe)]
     if not known:
@@ -1057,6 +1061,7 @@ def adapt(
         "from": base.identity,
         "shop": shop,
         "left_out_new_toners": len(chosen) - len(known),
+        "left_out_known_by_colour": by_colour,
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
         "learned_before": int(base.learned_from(screened.case_ids).sum()),
@@ -1075,6 +1080,31 @@ def adapt(
         print_report(summary)
         return
     _print_adaptation(summary, stage, config.outlier_threshold)
+
+
+def cases_to_learn(source: str, cases: list) -> tuple[list, int]:
+    """The ``cases`` of ``source`` a model learns from, those whose spray-out was measured
+    (:func:`~flakelab.cases.case.spectra_to_learn`), and how many were left out; none is an
+    error that says why."""
+    from flakelab.cases.case import spectra_to_learn
+
+    kept, by_colour = spectra_to_learn(cases)
+    if not kept:
+        raise FlakelabError(
+            f"{hidden_passwords(source)}: every one of the {counted(by_colour, 'case')} knows its "
+            "spray-out by its L*a*b* alone: a model learns spectra, and one recovered from a "
+            "colour is a metamer of many; record spray-outs from the instrument's spectral export"
+        )
+    return kept, by_colour
+
+
+def by_colour_left_out(count: int) -> str:
+    """What a training or an adaptation says of the cases it left out, their spray-outs known
+    by their L*a*b* alone."""
+    return (
+        f"{counted(count, 'case')} left out, whose spray-out is known by its L*a*b* alone: a "
+        "model learns spectra"
+    )
 
 
 def _adapting_label(data, validation, config) -> str:
@@ -1105,6 +1135,8 @@ def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
             f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
             highlight=False,
         )
+    if by_colour := summary["left_out_known_by_colour"]:
+        errors.print(f"note: {by_colour_left_out(by_colour)}", highlight=False)
     if summary["learned_before"]:
         errors.print(
             f"note: the model learned from {summary['learned_before']} of these cases: adapted "
