@@ -1643,3 +1643,38 @@ def test_no_model_learns_from_a_spray_out_known_by_its_lab_alone(tmp_path, cli):
         assert refused.returncode == 2 and "Traceback" not in refused.stderr
         said = " ".join(refused.stderr.split())
         assert "every one of the 60 cases knows its spray-out by its L*a*b* alone" in said, said
+
+
+def test_a_shops_habits_and_a_models_errors_read_the_same_from_its_spray_outs_colours(
+    tmp_path, cli
+):
+    """A shop whose instrument exports L*a*b* alone (a BYK-mac i) keeps its spray-outs as
+    their colour in D65/10, spectra recovered: its habits and the model's errors, both read
+    in D65/10, are those its measured spectra read, and the mix-up check finds the same."""
+    from flakelab.cases.exchange import read_cases, write_cases
+    from flakelab.core.colorimetry import reflectance_from_Lab, reflectance_to_Lab
+    from flakelab.core.measurement import REFLECTANCE_RANGE
+
+    measured, by_colour = tmp_path / "measured.csv", tmp_path / "by-colour.csv"
+    run = cli("cases", "generate", "--n", "150", "--seed", "23", "--shop", "shop A",
+              "--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005",
+              "--out", measured)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    cases = read_cases(measured)
+    cases[5] = replace(cases[5], recipe=cases[40].recipe)  # a tin mixed up
+    write_cases(cases, measured)
+    colours = reflectance_to_Lab(np.stack([c.sprayout for c in cases]))
+    recovered = reflectance_from_Lab(colours, floor=REFLECTANCE_RANGE[0])
+    assert np.abs(recovered - np.stack([c.sprayout for c in cases])).max() > 0.01  # metamers
+    write_cases([replace(c, sprayout=r, sprayout_recovered=True)
+                 for c, r in zip(cases, recovered, strict=True)], by_colour)  # fmt: skip
+    habits = [json.loads(cli("cases", "habits", f, "--json").stdout) for f in (measured, by_colour)]
+    assert habits[0]["film_build"] > 0.01  # the shop's thicker film, read
+    for key in ("film_build", "flake_spread", "instrument_gain"):
+        assert habits[1][key] == pytest.approx(habits[0][key], abs=0.02 * habits[0][f"{key}_se"])
+    assert habits[1]["left_out_mismatched"] == habits[0]["left_out_mismatched"] != []
+    judged = [
+        json.loads(cli("model", "evaluate", f, "--json").stdout) for f in (measured, by_colour)
+    ]
+    for key in ("de00_mean", "de00_p95", "de00_max"):
+        assert judged[1][key] == pytest.approx(judged[0][key], abs=1e-3)
