@@ -20,7 +20,14 @@ with it (``paint_*``), and, for 200 held-out generated formulations' readings, t
 ΔE00 under A with either basis (``generated_*``): whether a basis of paints would recover a
 car's spectrum closer than one of surfaces in general.
 
-    python benchmarks/colour_alone.py [--paint-basis 800 [--seed 0]] [--json]
+With ``--shop N`` it also keeps a shop's history of N generated cases (``--seed``) with
+habits (film +5 %, flakes 4 % flatter, gain +0.5 %) and one tin mixed up twice: as generated,
+and with every spray-out known by its L*a*b* alone (spectra recovered from its colour in
+D65/10, as a BYK-mac i's export is read), and prints the habits 'cases habits' reads and the
+errors 'model evaluate' finds from each (``shop_*``): what a shop whose instrument exports no
+spectra loses in both, which read colour in D65/10.
+
+    python benchmarks/colour_alone.py [--paint-basis 800] [--shop 150] [--seed 0] [--json]
 """
 
 from __future__ import annotations
@@ -103,6 +110,56 @@ def basis_report(spectra: int, seed: int, folder: Path = MA_T12) -> dict:
     return report
 
 
+SHOP_HABITS = ("--shop-film-build", "1.05", "--shop-spread", "0.96", "--shop-gain", "0.005")
+"""The habits of the shop of ``--shop``."""
+
+
+def shop_report(cases: int, seed: int) -> dict:
+    """What a shop's habits and the model's errors read from its spray-outs as measured and
+    as known by their colour alone, through the commands a shop runs."""
+    import json
+    import tempfile
+    from dataclasses import replace
+
+    from typer.testing import CliRunner
+
+    from flakelab.cases.exchange import read_cases, write_cases
+    from flakelab.cli.main import app
+    from flakelab.core.colorimetry import reflectance_from_Lab
+    from flakelab.core.measurement import REFLECTANCE_RANGE
+
+    def run(*args) -> dict:
+        done = CliRunner().invoke(app, [str(a) for a in args])
+        assert done.exit_code == 0, done.output
+        return json.loads(done.stdout)
+
+    report: dict = {"shop_cases": cases}
+    with tempfile.TemporaryDirectory() as folder:
+        measured, by_colour = Path(folder, "measured.csv"), Path(folder, "by-colour.csv")
+        generate = ("cases", "generate", "--n", cases, "--seed", seed, "--shop", "shop A")
+        CliRunner().invoke(app, [str(a) for a in (*generate, *SHOP_HABITS, "--out", measured)])
+        history = read_cases(measured)
+        history[5] = replace(history[5], recipe=history[cases // 4].recipe)  # a tin mixed up
+        write_cases(history, measured)
+        sprayed = np.stack([c.sprayout for c in history])
+        recovered = reflectance_from_Lab(reflectance_to_Lab(sprayed), floor=REFLECTANCE_RANGE[0])
+        report["shop_recovered_reflectance_apart_max"] = float(np.abs(recovered - sprayed).max())
+        write_cases([replace(c, sprayout=r, sprayout_recovered=True)
+                     for c, r in zip(history, recovered, strict=True)], by_colour)  # fmt: skip
+        for name, path in (("measured", measured), ("by_colour", by_colour)):
+            habits, judged = (
+                run("cases", "habits", path, "--json"),
+                run("model", "evaluate", path, "--json"),
+            )
+            for key in ("film_build", "flake_spread", "instrument_gain"):
+                report[f"shop_{name}_{key}"] = habits[key]
+                report[f"shop_{name}_{key}_se"] = habits[f"{key}_se"]
+            report[f"shop_{name}_mixed_up"] = len(habits["left_out_mismatched"])
+            for key in ("de00_mean", "de00_p95", "de00_max"):
+                report[f"shop_{name}_{key}"] = judged[key]
+    return report
+
+
 def _apart(a: np.ndarray, b: np.ndarray, conditions: Conditions) -> np.ndarray:
     """ΔE00 between readings ``a`` and ``b`` ``[..., 31]`` under ``conditions``, flattened."""
     lab = (reflectance_to_Lab(R, conditions=conditions) for R in (a, b))
@@ -162,6 +219,13 @@ def main() -> int:
         metavar="N",
         help="also learn Otsu's basis from N generated paint readings",
     )
+    parser.add_argument(
+        "--shop",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also read a shop's habits from N generated cases by their spray-outs' colours",
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if not MA_T12.is_dir():
@@ -170,6 +234,8 @@ def main() -> int:
     report = colour_alone_report()
     if args.paint_basis:
         report |= basis_report(args.paint_basis, args.seed)
+    if args.shop:
+        report |= shop_report(args.shop, args.seed)
     print_report(report, args.json, ".4g")
     return 0
 
