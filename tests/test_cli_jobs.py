@@ -1558,7 +1558,7 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
     said = " ".join(cli("cases", "record", lab_target, "-r", recipe, "--sprayed", lab_sprayed,
                         "-d", tmp_path / "again.db").stdout.split())  # fmt: skip
     assert "the target and the spray-out are known by their L*a*b* in D65/10 alone" in said
-    assert "no model learns from the case, since a model learns spectra" in said
+    assert "no model learns from such a case, since a model learns spectra" in said
     assert "no instrument's model learns from it" not in said
 
 
@@ -1597,7 +1597,7 @@ def test_a_case_keeps_a_car_known_by_its_lab_alone_and_says_so(tmp_path, cli):
         exported, again = tmp_path / name, tmp_path / f"{name}.db"
         assert cli("cases", "export", exported, "-d", alone_db).returncode == 0
         imported = cli("cases", "import", exported, "-d", again, "--no-check")
-        assert "1 of them know their target by its L*a*b* in D65/10 alone" in imported.stderr
+        assert "1 of them know their target by their L*a*b* in D65/10 alone" in imported.stderr
         (back,) = iter_cases(open_database(again))
         assert back.case_id == case.case_id and back.target_recovered
         assert delta_E(reflectance_to_Lab(back.target), car.lab()).max() < 1e-3

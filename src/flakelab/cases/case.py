@@ -70,7 +70,7 @@ def recovered_note(target: bool, sprayout: bool) -> str | None:
         else f"the {'target' if target else 'spray-out'} is known by its"
     )
     learnt = (
-        "no model learns from the case, since a model learns spectra"
+        "no model learns from such a case, since a model learns spectra"
         if sprayout
         else "the models learn from the spray-out's measured spectra"
     )

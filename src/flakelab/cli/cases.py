@@ -322,7 +322,7 @@ def import_cases(
     for role in ("target", "sprayout"):
         if alone := sum(getattr(c, f"{role}_recovered") for c in stored):
             known = "target" if role == "target" else "spray-out"
-            there += f"; {alone} of them know their {known} by its L*a*b* in D65/10 alone"
+            there += f"; {alone} of them know their {known} by their L*a*b* in D65/10 alone"
     errors.print(imported + there, highlight=False)
     if not check:
         return
