@@ -1288,7 +1288,9 @@ def test_a_cxf_of_measured_objects_and_colour_alone_ones_reads_each_as_it_is(
     assert delta_E_CIE2000(standard.lab(conditions), rich_measurement.stored_lab).max() < 1e-6
     partly = tmp_path / "partly.cxf"
     partly.write_text(re.sub(spectrum, "", text, count=1))
-    with pytest.raises(MeasurementFileError, match="ColorCIELab without a ReflectanceSpectrum"):
+    with pytest.raises(
+        MeasurementFileError, match="ColorCIELab .*a colour without a ReflectanceSpectrum"
+    ):
         read_measurements(partly)
 
 
@@ -1312,3 +1314,41 @@ def test_an_export_of_colour_alone_is_read_with_spectra_recovered(ma_t12_files, 
     workbook.save(path)
     with pytest.raises(MeasurementFileError, match="no sheet 'Spectral Data' .sheets: "):
         read_measurements(path)
+
+
+def test_a_cxf_object_of_lch_or_xyz_alone_is_read_as_that_colour(tmp_path):
+    """An Object that gives ColorCIELCh, or ColorCIEXYZ [Y 0–100], per geometry and no
+    spectra, as some instruments export a colour, is read as its L*a*b* (converted by
+    colour-science under its ColorSpecification's D65/10), spectra recovered and flagged; the
+    file was refused, "no ReflectanceSpectrum or ColorCIELab in any Object". A cell that is
+    no number is named."""
+    from flakelab.core.colorimetry import Lab_to_LCh, reflectance_to_XYZ
+    from flakelab.core.measurement import known_by_colour
+    from flakelab.data import example_path
+
+    car = read_measurement(example_path("target"))
+    given = tmp_path / "lab.cxf"
+    write_measurements([known_by_colour(car)], given)
+    text = given.read_text()
+    tristimulus = 100 * reflectance_to_XYZ(car.reflectance, car.wavelengths)
+    for kind, names, values in (
+        ("ColorCIELCh", "LCH", Lab_to_LCh(car.lab())),
+        ("ColorCIEXYZ", "XYZ", tristimulus),
+    ):
+        rows = iter(values.tolist())
+
+        def swapped(m, kind=kind, names=names, rows=rows):
+            row = zip(names, next(rows), strict=True)
+            cells = "".join(f"<{m[1]}{n}>{v!r}</{m[1]}{n}>" for n, v in row)
+            return f"<{m[1]}{kind} {m[2]}>{cells}</{m[1]}{kind}>"
+
+        path = tmp_path / f"{kind}.cxf"
+        path.write_text(re.sub(r"<(\w+:)ColorCIELab ([^>]*)>.*?</\1ColorCIELab>", swapped, text))
+        assert "ColorCIELab" not in path.read_text() and kind in path.read_text()
+        read = read_measurement(path)
+        assert read.spectra_recovered and read.geometry_names == car.geometry_names
+        assert delta_E_CIE2000(read.lab(), car.lab()).max() < 1e-4, kind
+    broken = tmp_path / "broken.cxf"
+    broken.write_text(re.sub(r"<(\w+:)X>[^<]*</", r"<\1X>abc</", path.read_text(), count=1))
+    with pytest.raises(MeasurementFileError, match=r"ColorCIEXYZ CS_\S+, X: expected a number"):
+        read_measurement(broken)

@@ -27,6 +27,7 @@ __all__ = [
     "reflectance_to_XYZ",
     "reflectance_to_Lab",
     "XYZ_to_Lab",
+    "LCh_to_Lab",
     "Lab_to_XYZ",
     "Lab_to_LCh",
     "reflectance_from_Lab",
@@ -297,6 +298,11 @@ def reflectance_from_Lab(
 def Lab_to_LCh(Lab: ArrayLike) -> NDArray[np.float64]:
     """CIELCh: lightness, chroma C*ab and hue angle h [degree, 0–360]."""
     return colour.Lab_to_LCHab(np.asarray(Lab, dtype=float))
+
+
+def LCh_to_Lab(LCh: ArrayLike) -> NDArray[np.float64]:
+    """CIELAB of CIE L*C*h* [h in degrees]."""
+    return colour.LCHab_to_Lab(np.asarray(LCh, dtype=float))
 
 
 def Lab_to_sRGB(Lab: ArrayLike, white: ArrayLike | None = None) -> NDArray[np.float64]:

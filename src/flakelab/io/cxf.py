@@ -7,6 +7,10 @@ Layout written (and expected on reading):
   ``Notation`` = the ASTM name) and the ``WavelengthRange``;
 - one ``Object`` per sample, with a ``ReflectanceSpectrum`` (and optionally a
   ``ColorCIELab``) per geometry referring to that specification;
+- read too: an Object that gives a colour per geometry and no spectra (``ColorCIELab``, or
+  ``ColorCIELCh`` or ``ColorCIEXYZ`` [Y 0–100] as some instruments export it, taken to
+  L*a*b* under its ColorSpecification's conditions by colour-science), its spectra
+  recovered from that colour;
 - texture readings, instrument and free metadata as ``Tag`` elements in a ``TagCollection``
   named ``flakelab`` (``texture:Sa15``, ``instrument``, ``meta:<key>``).
 """
@@ -25,7 +29,7 @@ from xsdata.exceptions import ConverterWarning, ParserError
 from xsdata.models.datatype import XmlDateTime
 
 from flakelab import __version__
-from flakelab.core.colorimetry import D65_10, Conditions
+from flakelab.core.colorimetry import D65_10, Conditions, LCh_to_Lab, XYZ_to_Lab, white_point
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -138,19 +142,15 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
     for obj in objects:
         sample = obj.name or obj.id
         values = obj.color_values.choice if obj.color_values else []
-        labs = {
-            v.color_specification: _lab_of(path, sample, v)
-            for v in values
-            if isinstance(v, cxf3.ColorCielab)
-        }
+        labs = _colours_of(path, sample, values, conditions)
         measured_at = _creation_date(path, sample, obj.creation_date)
         spectral = {
             v.color_specification for v in values if isinstance(v, cxf3.ReflectanceSpectrum)
         }
         lab_alone += [
-            Reading(f"Object {sample!r}, ColorCIELab {spec}", sample, geometries.get(spec), None,
-                    lab, measured_at, {"spec": spec})
-            for spec, lab in labs.items() if spec not in spectral
+            Reading(f"Object {sample!r}, {kind} {spec}", sample, geometries.get(spec), None, lab,
+                    measured_at, {"spec": spec})
+            for spec, (kind, lab) in labs.items() if spec not in spectral
         ]  # fmt: skip
         for v in values:
             if not isinstance(v, cxf3.ReflectanceSpectrum):
@@ -181,7 +181,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                 raise MeasurementFileError(
                     path, "spectra on different wavelength grids", field=where
                 )
-            lab = labs.get(v.color_specification)
+            lab = labs.get(v.color_specification, (None, None))[1]
             if lab is not None and conditions.get(v.color_specification):
                 lab_conditions = conditions[v.color_specification]
             readings.append(
@@ -208,7 +208,9 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                 elif key.startswith("meta:"):
                     metadata.setdefault(sample, {})[key[5:]] = value
     if wavelengths is None and not lab_alone:
-        raise MeasurementFileError(path, "no ReflectanceSpectrum or ColorCIELab in any Object")
+        raise MeasurementFileError(
+            path, f"no ReflectanceSpectrum or {', '.join(COLOUR_VALUES)} in any Object"
+        )
     _check_one_kind_per_sample(path, readings, lab_alone)
     keep = dict(instrument=instrument, texture=texture, metadata=metadata)
     measured = []
@@ -216,7 +218,7 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         measured = assemble(path, readings, wavelengths, lab_conditions=lab_conditions, **keep)
     if not lab_alone:
         return measured
-    # Objects of ColorCIELab alone (some software stores a standard so beside measured
+    # Objects of a colour alone (some software stores a standard so beside measured
     # trials): their spectra recovered from it (one metamer of many), each flagged so
     recovered, grid, lab_conditions = _recovered(path, lab_alone, conditions)
     by_colour = assemble(path, recovered, grid, lab_conditions=lab_conditions,
@@ -235,7 +237,7 @@ def _check_one_kind_per_sample(
     if mixed := next((r for r in lab_alone if r.sample in samples), None):
         raise MeasurementFileError(
             path,
-            "ColorCIELab without a ReflectanceSpectrum, where the sample's other geometries "
+            "a colour without a ReflectanceSpectrum, where the sample's other geometries "
             "give spectra: a measurement is read from its spectra or from its colour alone, "
             "not both",
             field=mixed.where,
@@ -257,16 +259,51 @@ def _recovered(
     named = {conditions.get(r.extras["spec"]) or D65_10 for r in readings}
     if len(named) > 1:
         raise MeasurementFileError(
-            path, f"ColorCIELab under several conditions: {sorted(map(str, named))}"
+            path, f"colours alone under several conditions: {sorted(map(str, named))}"
         )
     lab_conditions = named.pop()
     return recovered_readings(path, readings, lab_conditions), WAVELENGTHS, lab_conditions
 
 
-def _lab_of(path: str | PathLike, sample: str, value: cxf3.ColorCielab) -> np.ndarray:
-    """An Object's stored CIELAB at one geometry (:func:`~flakelab.io.records.parse_lab`)."""
-    where = f"Object {sample!r}, ColorCIELab {value.color_specification}"
-    return parse_lab(path, (value.l, value.a, value.b), [f"{where}, {k}" for k in "LAB"])
+COLOUR_VALUES = {
+    "ColorCIELab": cxf3.ColorCielab,
+    "ColorCIELCh": cxf3.ColorCielch,
+    "ColorCIEXYZ": cxf3.ColorCiexyz,
+}
+"""The colours an Object may give per geometry in place of a spectrum, each read as L*a*b*,
+by their CxF3 names, in the order taken where one geometry gives several."""
+
+
+def _colours_of(
+    path: str | PathLike, sample: str, values: list, conditions: dict[str, Conditions | None]
+) -> dict[str, tuple[str, np.ndarray]]:
+    """An Object's stored colour per ColorSpecification, as its kind and L*a*b* under the
+    specification's conditions (D65/10 where it names none): ColorCIELab as given,
+    ColorCIELCh and ColorCIEXYZ [Y 0–100] converted by colour-science; where a geometry
+    gives several, the first of :data:`COLOUR_VALUES`."""
+    colours: dict[str, tuple[str, np.ndarray]] = {}
+    for kind, cls in COLOUR_VALUES.items():
+        for v in values:
+            if isinstance(v, cls) and v.color_specification not in colours:
+                where = f"Object {sample!r}, {kind} {v.color_specification}"
+                lab = _as_lab(path, where, v, conditions.get(v.color_specification) or D65_10)
+                colours[v.color_specification] = kind, lab
+    return colours
+
+
+def _as_lab(path: str | PathLike, where: str, value, conditions: Conditions) -> np.ndarray:
+    """One stored colour as L*a*b* ``[3]`` under ``conditions``, each cell checked and
+    named."""
+    if isinstance(value, cxf3.ColorCielab):
+        return parse_lab(path, (value.l, value.a, value.b), [f"{where}, {k}" for k in "LAB"])
+    if isinstance(value, cxf3.ColorCielch):
+        lch = parse_lab(path, (value.l, value.c, value.h), [f"{where}, {k}" for k in "LCH"])
+        lab = LCh_to_Lab(lch)
+    else:
+        cells = zip((value.x, value.y, value.z), "XYZ", strict=True)
+        XYZ = np.array([parse_number(path, v, f"{where}, {k}") for v, k in cells])
+        lab = XYZ_to_Lab(XYZ / 100, white_point(conditions=conditions))
+    return parse_lab(path, lab, [f"{where}, as L*a*b* {k}" for k in "LAB"])
 
 
 def _creation_date(
