@@ -59,9 +59,10 @@ TEXT_LENGTHS = {
 longer value; SQLite would keep it), checked with every case so that no store fails on one."""
 
 
-def recovered_note(target: bool, sprayout: bool) -> str | None:
+def recovered_note(target: bool, sprayout: bool, *, learning: bool = True) -> str | None:
     """What a report says of a case whose ``target`` or ``sprayout`` (or both) was known by
-    its L*a*b* in D65/10 alone; None where both were measured."""
+    its L*a*b* in D65/10 alone, with whether a model learns from it (``learning``); None where
+    both were measured."""
     if not (target or sprayout):
         return None
     which = (
@@ -70,12 +71,13 @@ def recovered_note(target: bool, sprayout: bool) -> str | None:
         else f"the {'target' if target else 'spray-out'} is known by its"
     )
     learnt = (
-        "no model learns from such a case, since a model learns spectra"
+        "; no model learns from such a case, since a model learns spectra"
         if sprayout
-        else "the models learn from the spray-out's measured spectra"
+        else "; the models learn from the spray-out's measured spectra"
     )
     return (
-        f"{which} L*a*b* in D65/10 alone (spectra recovered from it: one metamer of many); {learnt}"
+        f"{which} L*a*b* in D65/10 alone (spectra recovered from it: one metamer of many)"
+        + learnt * learning
     )
 
 

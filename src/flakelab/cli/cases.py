@@ -807,7 +807,8 @@ def _tell_recovered(rows: list[dict]) -> None:
 
     for flag, mark in RECOVERED_MARKS.items():
         if any(row[flag] for row in rows):
-            note = recovered_note(flag == "target_recovered", flag == "sprayout_recovered")
+            target = flag == "target_recovered"  # what a model learns: the spray-out's say
+            note = recovered_note(target, not target, learning=not target)
             errors.print(f"{mark} {note}", style="dim", highlight=False)
 
 
