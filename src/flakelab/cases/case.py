@@ -19,6 +19,7 @@ from flakelab.core.measurement import (
     REFLECTANCE_RANGE,
     TEXTURE_RANGE,
     TEXTURE_READINGS,
+    colour_stated_elsewhere,
     outside,
 )
 from flakelab.core.spectra import WAVELENGTHS
@@ -94,8 +95,7 @@ def check_readings_kept(target, sprayout) -> None:
     :attr:`Case.sprayout_recovered`), and no model learns from a spray-out known so
     (:func:`spectra_to_learn`)."""
     for role, reading in (("target", target), ("spray-out", sprayout)):
-        stated = reading.stored_lab_conditions
-        if reading.spectra_recovered and stated != D65_10:
+        if stated := colour_stated_elsewhere(reading):
             raise CaseError(
                 f"{role}: {reading.sample!r} gives L*a*b* under {stated} alone: a case keeps "
                 f"its readings' colour in {D65_10}, by which its outcome is judged and the "

@@ -36,6 +36,7 @@ from functools import cache
 from operator import attrgetter, itemgetter
 from os import PathLike
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -99,25 +100,35 @@ def _tins_cell(case: Case) -> str:
     return json.dumps({k: tin_fields(t) for k, t in case.tins.items()}) if case.tins else ""
 
 
-_OPTIONAL_CELLS = {
-    CODE_FIELD: attrgetter("colour_code"),
-    TINS_FIELD: _tins_cell,
-    **{
-        name: lambda case, name=name: "1" if getattr(case, name) else "0"
-        for name in RECOVERED_FIELDS
-    },
-}
-"""Each optional column's cell of a case."""
+class _Optional(NamedTuple):
+    """An optional column: its cell of a case, whether the case records what it holds, and
+    that in words."""
 
-_HOLDS = {
-    CODE_FIELD: ("records its colour code", attrgetter("colour_code")),
-    TINS_FIELD: ("records its tins", attrgetter("tins")),
+    cell: Callable[[Case], str]
+    held: Callable[[Case], object]
+    words: str
+
+
+def _flag_column(name: str, role: str) -> _Optional:
+    """The 0/1 column ``name``: whether a case's ``role`` reading was known by its colour."""
+    return _Optional(
+        lambda case: "1" if getattr(case, name) else "0",
+        attrgetter(name),
+        f"knows its {role} by its L*a*b* alone",
+    )
+
+
+_OPTIONAL = {
+    CODE_FIELD: _Optional(
+        attrgetter("colour_code"), attrgetter("colour_code"), "records its colour code"
+    ),
+    TINS_FIELD: _Optional(_tins_cell, attrgetter("tins"), "records its tins"),
     **{
-        name: (f"knows its {role} by its L*a*b* alone", attrgetter(name))
+        name: _flag_column(name, role)
         for name, role in zip(RECOVERED_FIELDS, ("target", "spray-out"), strict=True)
     },
 }
-"""What a case records that each optional column holds, in words and as a test."""
+"""Each of :data:`OPTIONAL_FIELDS`: what a case writes in it and when it needs it."""
 
 
 class CaseFileError(FlakelabError):
@@ -140,7 +151,7 @@ def _header(geometries: tuple[str, ...], optional: tuple[str, ...] = ()) -> tupl
 
 def _optional_columns(cases: list[Case]) -> tuple[str, ...]:
     """The optional columns a file of ``cases`` has: those that any of them records."""
-    return tuple(f for f in OPTIONAL_FIELDS if any(_HOLDS[f][1](c) for c in cases))
+    return tuple(f for f in OPTIONAL_FIELDS if any(_OPTIONAL[f].held(c) for c in cases))
 
 
 def is_case_file(path: str | PathLike) -> bool:
@@ -220,7 +231,7 @@ def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], optional:
     """A case streamed into a CSV of ``geometries`` and ``optional`` columns is one its
     columns hold whole."""
     beyond = [g for g in case.geometry_names if g not in geometries]
-    unheld = (words for f, (words, held) in _HOLDS.items() if f not in optional and held(case))
+    unheld = (o.words for f, o in _OPTIONAL.items() if f not in optional and o.held(case))
     what = f"read at {', '.join(beyond)}" if beyond else next(unheld, None)
     if what:
         raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
@@ -238,7 +249,7 @@ def _csv_row(case: Case, geometries: tuple[str, ...], optional: tuple[str, ...])
         case.created_at.isoformat(),
         json.dumps(case.recipe),
         ";".join(case.geometry_names),
-        *(_OPTIONAL_CELLS[f](case) for f in optional),
+        *(_OPTIONAL[f].cell(case) for f in optional),
         *_spectra_cells(case, case.target, geometries),
         *_spectra_cells(case, case.sprayout, geometries),
         *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),

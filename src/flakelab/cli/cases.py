@@ -319,10 +319,9 @@ def import_cases(
         f"imported {counted(len(stored), 'case')} from {source} into {database_label(engine)}"
     )
     there = f"; {len(cases) - len(stored)} stored already" if new_only else ""
-    for role in ("target", "sprayout"):
-        if alone := sum(getattr(c, f"{role}_recovered") for c in stored):
-            known = "target" if role == "target" else "spray-out"
-            there += f"; {alone} of them know their {known} by their L*a*b* in D65/10 alone"
+    for flag, role in (("target_recovered", "target"), ("sprayout_recovered", "spray-out")):
+        if alone := sum(getattr(c, flag) for c in stored):
+            there += f"; {alone} of them know their {role} by their L*a*b* in D65/10 alone"
     errors.print(imported + there, highlight=False)
     if not check:
         return

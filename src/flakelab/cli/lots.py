@@ -476,10 +476,11 @@ def _panel_spectra(paths: list[Path], sample, average: bool, forward, option="--
     recovered spectrum gives that colour exactly. One known by its colour under other light is
     refused: its daylight colour would be an estimate, and the lot file keeps what is read."""
     from flakelab.core.colorimetry import D65_10
+    from flakelab.core.measurement import colour_stated_elsewhere
 
     readings = [(path, read_readings(path, sample, average, option)[0]) for path in paths]
     for path, reading in readings:
-        if reading.spectra_recovered and (stated := reading.stored_lab_conditions) != D65_10:
+        if stated := colour_stated_elsewhere(reading):
             raise FlakelabError(
                 f"{path}: {reading.sample!r} gives L*a*b* under {stated} alone: a tin's strength "
                 f"and shade are read from a panel's colour in {D65_10}, which its file does not "

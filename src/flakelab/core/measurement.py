@@ -33,6 +33,7 @@ __all__ = [
     "outside",
     "mean_reading",
     "recovered_note",
+    "colour_stated_elsewhere",
     "daylight_estimate_note",
     "known_by_colour",
 ]
@@ -231,11 +232,20 @@ def recovered_note(measurement: Measurement) -> str | None:
     )
 
 
+def colour_stated_elsewhere(measurement: Measurement) -> Conditions | None:
+    """The conditions under which a measurement known by its colour alone states it, where
+    they are not D65/10: its daylight colour, which matching, cases and tins judge, is then an
+    estimate. None for measured spectra, or a colour stated in D65/10, which its recovered
+    spectrum gives exactly."""
+    stated = measurement.stored_lab_conditions
+    return stated if measurement.spectra_recovered and stated != D65_10 else None
+
+
 def daylight_estimate_note(measurement: Measurement, task: str = "the search") -> str | None:
     """What a report says where ``task`` judges in D65/10 a measurement known by its colour
     alone under other conditions (its daylight colour an estimate); None otherwise."""
-    stated = measurement.stored_lab_conditions
-    if not measurement.spectra_recovered or stated == D65_10:
+    stated = colour_stated_elsewhere(measurement)
+    if stated is None:
         return None
     return (
         f"{measurement.sample}: {task} judged its colour in {D65_10}, where its file gives "
