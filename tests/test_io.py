@@ -125,7 +125,7 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
         (HEADER + "\n" + ROW.replace(",0.5", ",nan", 1), "row 2, 400 nm", "finite number"),
         (HEADER + "\n" + ROW.replace(",0.5", ",abc", 1), "row 2, 400 nm", "expected a number"),
         (HEADER.replace("R410", "R415") + "\n" + ROW, "header", "constant step"),
-        (HEADER.replace("R410", "Rxx") + "\n" + ROW, "header, column 2", "expected a wavelength"),
+        (HEADER.replace("R410", "Rxx") + "\n" + ROW, "header, column 4", "expected a wavelength"),
         (HEADER + "\n" + ROW.replace("45as15", "45as15x"), "row 2, geometry", "geometry name"),
         (HEADER + "\n" + ROW + "\n" + ROW, "row 3", "appears twice"),
         (HEADER + "\n" + ROW[:40], "row 2", "truncated line"),
@@ -135,6 +135,10 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
         ("sample,geometry,L,a,b\nS1,45as15,50,1,2\nS1,45as45,,1,2", "row 3, L", "a number"),
         ("sample,geometry,L,a,b\nS1,45as15,50,130,2", "row 2", "no colour a surface reflects"),
         ("sample,geometry,L,a,b\nS1,45as15,2500,0,0", "row 2", "over the 100 any paint reaches"),
+        ("sample,geometry,L,C\nS1,45as15,50,1", "header", "columns L, C without the rest"),
+        ("sample,geometry,L,L*,a,b\nS1,45as15,50,50,1,2", "header", "'L' and 'L*' both"),
+        ("sample,geometry,L,C,h\nS1,45as15,50,-1,2", "row 2, C", "a chroma of 0 or more"),
+        ("sample,geometry,X,Y,Z\nS1,45as15,20,1e9,20", "row 2, as L*a*b* L", "within ±2500"),
     ],
 )
 def test_bad_csv_names_file_field_and_problem(tmp_path, text, field, problem):
@@ -280,6 +284,22 @@ def test_mat12_texture_columns_flakelab_does_not_know_are_named(rich_measurement
         read = read_measurement(path)
     assert len(notes) == 1 and "Unused" not in str(notes[0].message)
     assert dict(read.texture) == dict(rich_measurement.texture)
+
+
+def test_mat12_wavelength_header_that_is_none_is_named_by_its_column(ma_t12_files, tmp_path):
+    """A Spectral Data header cell that is no wavelength is named by its spreadsheet column
+    (the fifth label is column E); it was named by its place among the wavelengths (column 2)."""
+    import openpyxl
+
+    workbook = openpyxl.load_workbook(ma_t12_files[0])
+    sheet = workbook["Spectral Data"]
+    header = next(r for r in range(1, sheet.max_row + 1) if sheet.cell(r, 1).value == "Name")
+    sheet.cell(header, 5).value = "Comment"
+    path = tmp_path / "export.xlsx"
+    workbook.save(path)
+    with pytest.raises(MeasurementFileError, match=rf"Spectral Data, row {header}, column E: "
+                                                   r"expected a wavelength"):  # fmt: skip
+        read_measurement(path)
 
 
 def test_spectra_in_percent_are_read_as_reflectance_factors(ma_t12_dir, ma_t12_files, tmp_path):
@@ -1352,3 +1372,53 @@ def test_a_cxf_object_of_lch_or_xyz_alone_is_read_as_that_colour(tmp_path):
     broken.write_text(re.sub(r"<(\w+:)X>[^<]*</", r"<\1X>abc</", path.read_text(), count=1))
     with pytest.raises(MeasurementFileError, match=r"ColorCIEXYZ CS_\S+, X: expected a number"):
         read_measurement(broken)
+
+
+def test_a_csv_colour_headed_as_instruments_export_it_is_read(tmp_path):
+    """A CSV of colour alone headed ``L*, a*, b*``, or giving L*C*h° or XYZ [Y 0–100], as
+    instruments and spreadsheets export a colour, is read as that colour (colour-science's
+    conversions, under the file's lab_conditions); a row giving several forms keeps its
+    L*a*b* where they agree to ΔE00 0.2 and is refused naming both where they do not. Before,
+    each header was taken for a wavelength ("expected a wavelength such as 'R400' or '400',
+    got 'L*'"), named by its place among the wavelengths, not the file's."""
+    from flakelab.core.colorimetry import (
+        D65_10,
+        Conditions,
+        Lab_to_LCh,
+        reflectance_to_Lab,
+        reflectance_to_XYZ,
+    )
+    from flakelab.data import example_path
+
+    car = read_measurement(example_path("target"))
+    for conditions in (D65_10, Conditions.parse("A/10")):
+        lab = reflectance_to_Lab(car.reflectance, car.wavelengths, conditions)
+        forms = {
+            "L*;a*;b*": lab,
+            "L*;C*;h°": Lab_to_LCh(lab),
+            "X;Y;Z": 100 * reflectance_to_XYZ(car.reflectance, car.wavelengths, conditions),
+        }
+        for header, values in [
+            *forms.items(),
+            ("L*;a*;b*;C*;h°", np.hstack([lab, Lab_to_LCh(lab)[:, 1:]])),
+        ]:
+            lines = [f"sample;geometry;{header};lab_conditions"]
+            lines += [
+                f"car;{g};"
+                + ";".join(repr(float(v)).replace(".", ",") for v in row)
+                + f";{conditions}"
+                for g, row in zip(car.geometry_names, values, strict=True)
+            ]
+            path = _csv(tmp_path, "\n".join(lines))
+            read = read_measurement(path)
+            assert read.spectra_recovered and read.stored_lab_conditions == conditions, header
+            assert delta_E_CIE2000(read.stored_lab, lab).max() < 1e-3, (header, conditions)
+    wrong = np.hstack([lab, Lab_to_LCh(lab)[:, 1:]])
+    wrong[2, 4] += 20  # a hue 20° off at the third geometry
+    lines = ["sample,geometry,R400,R410,R420,L*,a*,b*,C*,h°"]
+    lines += [
+        f"car,{g},0.1,0.1,0.1," + ",".join(map(str, row))
+        for g, row in zip(car.geometry_names, wrong, strict=True)
+    ]
+    with pytest.raises(MeasurementFileError, match=r"row 4: its L\*, C\*, h° give L\*a\*b\*"):
+        read_measurement(_csv(tmp_path, "\n".join(lines)))

@@ -28,6 +28,8 @@ __all__ = [
     "reflectance_to_Lab",
     "XYZ_to_Lab",
     "LCh_to_Lab",
+    "STATED_AS",
+    "stated_to_Lab",
     "Lab_to_XYZ",
     "Lab_to_LCh",
     "reflectance_from_Lab",
@@ -303,6 +305,33 @@ def Lab_to_LCh(Lab: ArrayLike) -> NDArray[np.float64]:
 def LCh_to_Lab(LCh: ArrayLike) -> NDArray[np.float64]:
     """CIELAB of CIE L*C*h* [h in degrees]."""
     return colour.LCHab_to_Lab(np.asarray(LCh, dtype=float))
+
+
+STATED_AS = ("Lab", "LCh", "XYZ")
+"""The forms in which a file may state a reading's colour in place of its spectrum, in the order
+one is taken where a reading states several: L*a*b*, L*C*h° and XYZ [Y 0–100]."""
+
+
+def stated_to_Lab(
+    form: str, values: ArrayLike, conditions: Conditions = D65_10
+) -> NDArray[np.float64]:
+    """CIELAB ``[..., 3]`` of colours stated in ``form`` (one of :data:`STATED_AS`) under
+    ``conditions``: L*a*b* as given, L*C*h° [h in degrees], or XYZ [Y 0–100] relative to the
+    conditions' white.
+
+    Examples
+    --------
+    >>> np.round(stated_to_Lab("LCh", [50, 10, 90]), 6) + 0.0
+    array([ 50.,   0.,  10.])
+    """
+    values = np.asarray(values, dtype=float)
+    if form == "Lab":
+        return values
+    if form == "LCh":
+        return LCh_to_Lab(values)
+    if form == "XYZ":
+        return XYZ_to_Lab(values / 100, white_point(conditions=conditions))
+    raise ValueError(f"expected a colour stated as one of {', '.join(STATED_AS)}, got {form!r}")
 
 
 def Lab_to_sRGB(Lab: ArrayLike, white: ArrayLike | None = None) -> NDArray[np.float64]:

@@ -226,8 +226,8 @@ def recovered_note(measurement: Measurement) -> str | None:
     if not measurement.spectra_recovered:
         return None
     return (
-        f"{measurement.sample}: its file gives L*a*b* alone; its spectra were recovered from "
-        f"it (one metamer of many), so its colour under {measurement.stored_lab_conditions} "
+        f"{measurement.sample}: its file gives its colour alone; its spectra were recovered "
+        f"from it (one metamer of many), so its colour under {measurement.stored_lab_conditions} "
         "is the file's, under any other light an estimate"
     )
 

@@ -4,12 +4,19 @@ Columns, in any order after the first two:
 
 ``sample``, ``geometry``          required; geometry as an ASTM name (``45as15``)
 ``R400`` … ``R700``               reflectance factor per wavelength [0–1]; any regular grid
-``L``, ``a``, ``b``               optional stored L*a*b* under ``lab_conditions`` (default D65/10)
+``L``, ``a``, ``b``               optional stored L*a*b* under ``lab_conditions`` (default D65/10);
+                                  also headed ``L*``, ``a*``, ``b*``
+``L``, ``C``, ``h``               or L*C*h° [h in degrees] (``L*``, ``C*``, ``h°`` or ``hab``)
+``X``, ``Y``, ``Z``               or XYZ [Y 0–100] under ``lab_conditions``
 ``instrument``, ``measured_at``   optional; ISO 8601 date-time, or ``22.11.2026 09:30``
 ``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
 ``lab_conditions``                optional, e.g. ``D65/10``
 
-A file of ``L``, ``a``, ``b`` without spectra (an instrument that exports colour alone, a
+A row may state its colour in several of these forms, as instruments export them; the first
+(L*a*b*, then L*C*h°, then XYZ) is kept, and the others must agree with it to ΔE00
+:data:`~flakelab.io.records.STATED_ALIKE`.
+
+A file of a colour without spectra (an instrument that exports colour alone, a
 paint maker's data sheet) is read with spectra recovered from its colour (one metamer of
 many, :func:`~flakelab.core.colorimetry.reflectance_from_Lab`), and says so
 (``Measurement.spectra_recovered``).
@@ -28,22 +35,24 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.core.colorimetry import D65_10
+from flakelab.core.colorimetry import D65_10, Conditions
+from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     NOT_UTF8,
+    STATED_ALIKE,
     Reading,
     assemble,
     colour_alone,
     csv_form,
     decimal_comma_in,
     decimal_point,
+    parse_colour,
     parse_conditions,
     parse_geometry_name,
-    parse_lab,
     parse_spectrum,
     parse_texture,
     parse_wavelength_header,
@@ -54,7 +63,92 @@ from flakelab.io.records import (
 
 __all__ = ["read_csv", "write_csv"]
 
-_META = ("sample", "geometry", "L", "a", "b", "instrument", "measured_at", "lab_conditions")
+_COLOUR_COLUMNS = {
+    "Lab": (("L", "L*"), ("a", "a*"), ("b", "b*")),
+    "LCh": (("L", "L*"), ("C", "C*"), ("h", "h°", "hab")),
+    "XYZ": (("X",), ("Y",), ("Z",)),
+}
+"""The headers each form of a stated colour is read under, coordinate by coordinate, in the
+order of :data:`~flakelab.core.colorimetry.STATED_AS`."""
+
+_COLOUR_NAMES = {name for form in _COLOUR_COLUMNS.values() for names in form for name in names}
+
+_META = ("sample", "geometry", "instrument", "measured_at", "lab_conditions", *_COLOUR_NAMES)
+
+
+def _colour_columns(path: str | PathLike, columns: dict[str, int]) -> dict[str, list[int]]:
+    """The columns of each form of colour the header states (L*a*b*, L*C*h°, XYZ), by the
+    names of :data:`_COLOUR_COLUMNS`; a coordinate headed twice (``L`` and ``L*``), or colour
+    columns no whole form uses (``C`` without ``h``), refused naming them."""
+    headed: dict[str, list[str]] = {}
+    for form, coordinates in _COLOUR_COLUMNS.items():
+        headed[form] = []
+        for names in coordinates:
+            twice = [name for name in names if name in columns]
+            if len(twice) > 1:
+                raise MeasurementFileError(
+                    path, f"columns {twice[0]!r} and {twice[1]!r} both give one value",
+                    field="header",
+                )  # fmt: skip
+            headed[form] += twice
+    forms = {
+        form: [columns[name] for name in names]
+        for form, names in headed.items()
+        if len(names) == len(_COLOUR_COLUMNS[form])
+    }
+    used = {i for indices in forms.values() for i in indices}
+    partial = [
+        (form, names)
+        for form, names in headed.items()
+        if form not in forms and any(columns[name] not in used for name in names)
+    ]
+    if partial:
+        form, names = max(partial, key=lambda p: len(p[1]))
+        wanted = ", ".join(names[0] for names in _COLOUR_COLUMNS[form])
+        raise MeasurementFileError(
+            path,
+            f"{'column' if len(names) == 1 else 'columns'} {', '.join(names)} without the rest "
+            f"of a colour: {form} needs {wanted}",
+            field="header",
+        )
+    return forms
+
+
+def _conditions_named(
+    path: str | PathLike, rows: list[tuple[int, list[str]]], column: int | None
+) -> Conditions:
+    """The one ``lab_conditions`` the rows name (D65/10 where none)."""
+    named = (
+        set() if column is None else {row[column].strip() for _, row in rows if column < len(row)}
+    )
+    named.discard("")
+    if len(named) > 1:
+        raise MeasurementFileError(path, f"several lab_conditions: {sorted(named)}")
+    return parse_conditions(path, named.pop(), "lab_conditions") if named else D65_10
+
+
+def _one_colour(
+    path: str | PathLike, stated: dict[str, np.ndarray], names: dict[str, str], where: str
+) -> np.ndarray | None:
+    """The colour a row states: its first form's, every other form agreeing with it to ΔE00
+    :data:`~flakelab.io.records.STATED_ALIKE`, else refused naming both."""
+    if not stated:
+        return None
+    (first, lab), *others = stated.items()
+    for form, other in others:
+        difference = float(delta_E_CIE2000(lab, other))
+        if difference > STATED_ALIKE:
+            raise MeasurementFileError(
+                path,
+                f"its {names[form]} give L*a*b* {_shown(other)}, ΔE00 {difference:.2f} from its "
+                f"{names[first]} {_shown(lab)}: one of them is wrong",
+                field=where,
+            )
+    return lab
+
+
+def _shown(lab: np.ndarray) -> str:
+    return "(" + ", ".join(f"{v:.2f}" for v in lab) + ")"
 
 
 def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
@@ -101,22 +195,30 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         duplicate = next(h for h in header if header.count(h) > 1)
         raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
     spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
-    has_lab = all(k in columns for k in "Lab")
-    if not spectral and not has_lab:
+    forms = _colour_columns(path, columns)
+    if not spectral and not forms:
         raise MeasurementFileError(
-            path, "no reflectance columns such as R400, nor L, a and b", field="header"
+            path,
+            "no reflectance columns such as R400, nor a colour: L, a, b (or L, C, h, or X, Y, Z)",
+            field="header",
         )
-    lab_alone = not spectral  # spectra recovered from the L*a*b* (a metamer of many)
+    names = {form: ", ".join(header[i] for i in indices) for form, indices in forms.items()}
+    lab_alone = not spectral  # spectra recovered from the colour (a metamer of many)
     wavelengths = (
         WAVELENGTHS
         if lab_alone
-        else parse_wavelength_header(path, [header[i] for i in spectral], "header")
+        else parse_wavelength_header(
+            path, [header[i] for i in spectral], "header", [f"column {i + 1}" for i in spectral]
+        )
     )
     if delimiter != ",":  # the comma is free to be the decimal mark
-        numeric = [*spectral, *(columns[k] for k in (*"Lab", *TEXTURE_READINGS) if k in columns)]
+        stated = [i for indices in forms.values() for i in indices]
+        numeric = [*spectral, *stated, *(columns[k] for k in TEXTURE_READINGS if k in columns)]
         rows = ((number, _decimal_points(row, numeric)) for number, row in rows)
+    rows = list(rows)
+    lab_conditions = _conditions_named(path, rows, columns.get("lab_conditions"))
 
-    readings, texture, instruments, conditions = [], {}, set(), set()
+    readings, texture, instruments = [], {}, set()
     for number, row in rows:
         where = f"row {number}"
         if len(row) != len(header):
@@ -129,11 +231,16 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         if not sample:
             raise MeasurementFileError(path, "empty sample name", field=f"{where}, sample")
         geometry = parse_geometry_name(path, row[columns["geometry"]], f"{where}, geometry")
-        lab = (
-            parse_lab(path, [row[columns[k]] for k in "Lab"], [f"{where}, {k}" for k in "Lab"])
-            if has_lab and (row[columns["L"]].strip() or lab_alone)
-            else None
-        )
+        given = {form: c for form, c in forms.items() if any(row[i].strip() for i in c)}
+        if lab_alone and not given:  # the first form's empty cell, named
+            given = dict([next(iter(forms.items()))])
+        stated_colours = {
+            form: parse_colour(
+                path, form, [row[i] for i in c], where, [header[i] for i in c], lab_conditions
+            )
+            for form, c in given.items()
+        }
+        lab = _one_colour(path, stated_colours, names, where)
         measured_at = None
         if "measured_at" in columns and row[columns["measured_at"]].strip():
             try:
@@ -156,8 +263,6 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
                     )
         if "instrument" in columns and row[columns["instrument"]].strip():
             instruments.add(row[columns["instrument"]].strip())
-        if "lab_conditions" in columns and row[columns["lab_conditions"]].strip():
-            conditions.add(row[columns["lab_conditions"]].strip())
         readings.append(
             Reading(
                 where=where,
@@ -170,11 +275,6 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
                 else parse_spectrum(path, [row[i] for i in spectral], wavelengths, where),
             )
         )
-    if len(conditions) > 1:
-        raise MeasurementFileError(path, f"several lab_conditions: {sorted(conditions)}")
-    lab_conditions = (
-        parse_conditions(path, conditions.pop(), "lab_conditions") if conditions else D65_10
-    )
     if lab_alone and readings:
         readings = recovered_readings(path, readings, lab_conditions)
     return assemble(

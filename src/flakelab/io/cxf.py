@@ -29,7 +29,7 @@ from xsdata.exceptions import ConverterWarning, ParserError
 from xsdata.models.datatype import XmlDateTime
 
 from flakelab import __version__
-from flakelab.core.colorimetry import D65_10, Conditions, LCh_to_Lab, XYZ_to_Lab, white_point
+from flakelab.core.colorimetry import D65_10, Conditions
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
@@ -38,8 +38,8 @@ from flakelab.io.records import (
     Reading,
     assemble,
     checked_wavelengths,
+    parse_colour,
     parse_conditions,
-    parse_lab,
     parse_number,
     parse_spectrum,
     parse_texture,
@@ -295,15 +295,12 @@ def _as_lab(path: str | PathLike, where: str, value, conditions: Conditions) -> 
     """One stored colour as L*a*b* ``[3]`` under ``conditions``, each cell checked and
     named."""
     if isinstance(value, cxf3.ColorCielab):
-        return parse_lab(path, (value.l, value.a, value.b), [f"{where}, {k}" for k in "LAB"])
-    if isinstance(value, cxf3.ColorCielch):
-        lch = parse_lab(path, (value.l, value.c, value.h), [f"{where}, {k}" for k in "LCH"])
-        lab = LCh_to_Lab(lch)
+        form, cells, names = "Lab", (value.l, value.a, value.b), "LAB"
+    elif isinstance(value, cxf3.ColorCielch):
+        form, cells, names = "LCh", (value.l, value.c, value.h), "LCH"
     else:
-        cells = zip((value.x, value.y, value.z), "XYZ", strict=True)
-        XYZ = np.array([parse_number(path, v, f"{where}, {k}") for v, k in cells])
-        lab = XYZ_to_Lab(XYZ / 100, white_point(conditions=conditions))
-    return parse_lab(path, lab, [f"{where}, as L*a*b* {k}" for k in "LAB"])
+        form, cells, names = "XYZ", (value.x, value.y, value.z), "XYZ"
+    return parse_colour(path, form, cells, where, names, conditions)
 
 
 def _creation_date(

@@ -169,7 +169,12 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
             f"expected columns Name, Date/Time, Geometry, got {labels[:3]}",
             field=f"{_SPECTRAL}, row {header + 1}",
         )
-    wavelengths = parse_wavelength_header(path, labels[3:], f"{_SPECTRAL}, row {header + 1}")
+    wavelengths = parse_wavelength_header(
+        path,
+        labels[3:],
+        f"{_SPECTRAL}, row {header + 1}",
+        [f"column {openpyxl.utils.get_column_letter(i)}" for i in range(4, len(labels) + 1)],
+    )
     n = wavelengths.size
     labs = {(r.sample, r.geometry.name): r.lab for r in _color_rows(path, sheets.get(_COLOR))}
 

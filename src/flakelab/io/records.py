@@ -25,7 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.core.colorimetry import D65_10, Conditions, UnreachableColour, reflectance_from_Lab
+from flakelab.core.colorimetry import (
+    D65_10,
+    Conditions,
+    UnreachableColour,
+    reflectance_from_Lab,
+    stated_to_Lab,
+)
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import (
     LAB_LIMIT,
@@ -44,6 +50,8 @@ __all__ = [
     "parse_wavelength_header",
     "parse_number",
     "parse_lab",
+    "parse_colour",
+    "STATED_ALIKE",
     "parse_texture",
     "parse_geometry_name",
     "parse_conditions",
@@ -85,10 +93,15 @@ class Reading:
 
 
 def parse_wavelength_header(
-    path: str | PathLike, labels: Sequence[object], where: str
+    path: str | PathLike,
+    labels: Sequence[object],
+    where: str,
+    places: Sequence[str] | None = None,
 ) -> np.ndarray:
     """Wavelengths [nm] from column labels such as ``400``, ``R400`` or ``400nm``; checked to
-    form a regular grid within 360–780 nm."""
+    form a regular grid within 360–780 nm. A label that is none is named by its place in
+    ``places`` (the file's own column, where the labels are some of its columns), else by its
+    column among the labels."""
     values = []
     for i, label in enumerate(labels):
         match = _WAVELENGTH.match(str(label)) if label is not None else None
@@ -96,7 +109,7 @@ def parse_wavelength_header(
             raise MeasurementFileError(
                 path,
                 f"expected a wavelength such as 'R400' or '400', got {label!r}",
-                field=f"{where}, column {i + 1}",
+                field=f"{where}, {places[i] if places else f'column {i + 1}'}",
             )
         values.append(float(match[1]))
     return checked_wavelengths(path, np.array(values), where)
@@ -349,6 +362,38 @@ def parse_lab(path: str | PathLike, values: Sequence[object], fields: Sequence[s
                 path, f"expected a CIELAB value within ±{LAB_LIMIT:g}, got {value:g}", field=where
             )
     return lab
+
+
+def parse_colour(
+    path: str | PathLike,
+    form: str,
+    cells: Sequence[object],
+    where: str,
+    names: Sequence[str],
+    conditions: Conditions = D65_10,
+) -> np.ndarray:
+    """A reading's colour stated in ``form`` (one of
+    :data:`~flakelab.core.colorimetry.STATED_AS`) by three cells named ``names``, as L*a*b*
+    ``[3]`` under ``conditions``; each cell checked and named, and the L*a*b* it gives."""
+    fields = [f"{where}, {name}" for name in names]
+    if form == "XYZ":
+        values = np.array([parse_number(path, v, f) for v, f in zip(cells, fields, strict=True)])
+    else:
+        values = parse_lab(path, cells, fields)
+    if form == "Lab":
+        return values
+    if form == "LCh" and values[1] < 0:
+        raise MeasurementFileError(
+            path, f"expected a chroma of 0 or more, got {values[1]:g}", field=fields[1]
+        )
+    lab = stated_to_Lab(form, values, conditions)
+    return parse_lab(path, lab, [f"{where}, as L*a*b* {k}" for k in "LAB"])
+
+
+STATED_ALIKE = 0.2
+"""ΔE00 within which the forms a reading states its colour in (L*a*b* beside L*C*h° or XYZ, as
+instruments export them) must agree: rounding each to one decimal stays within 0.1; columns
+swapped or mislabelled do not."""
 
 
 def parse_texture(path: str | PathLike, value: object, where: str) -> float:
