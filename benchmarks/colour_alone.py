@@ -27,7 +27,15 @@ D65/10, as a BYK-mac i's export is read), and prints the habits 'cases habits' r
 errors 'model evaluate' finds from each (``shop_*``): what a shop whose instrument exports no
 spectra loses in both, which read colour in D65/10.
 
-    python benchmarks/colour_alone.py [--paint-basis 800] [--shop 150] [--seed 0] [--json]
+With ``--adapt N`` it adapts the shipped five-angle model to N cases of such a shop (its new
+toners left out, ``--seed``), their spray-outs as measured, as known by their colour alone
+(learnt for that colour, as ``flakelab model adapt`` learns them), and as recovered spectra
+learnt as if measured, and prints each one's mean ΔE00 on 500 fresh cases of the shop in
+D65/10 and under A/10 (``adapt_*``): what the colour term gains, and what learning a
+recovered spectrum as measured would cost under another light.
+
+    python benchmarks/colour_alone.py [--paint-basis 800] [--shop 150] [--adapt 150] [--seed 0]
+        [--json]
 """
 
 from __future__ import annotations
@@ -160,6 +168,53 @@ def shop_report(cases: int, seed: int) -> dict:
     return report
 
 
+def adaptation_report(cases: int, seed: int) -> dict:
+    """The shipped model's mean ΔE00 on 500 fresh cases of a shop with habits in D65/10 and
+    under A/10, bare and adapted to ``cases`` of the shop's spray-outs: measured, known by
+    their colour alone, and recovered spectra learnt as measured."""
+    from dataclasses import replace
+
+    from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
+    from flakelab.core.colorimetry import reflectance_from_Lab
+    from flakelab.core.measurement import REFLECTANCE_RANGE
+    from flakelab.io import read_library
+    from flakelab.models.registry import shipped_model
+    from flakelab.models.training import (
+        adapt_model,
+        adaptation_cases,
+        generated_case_arrays,
+        recorded_config,
+    )
+
+    model = shipped_model("five-angle")
+    world = World(read_library(None), "five-angle", WorldSettings(**SHOP_WITH_HABITS),
+                  exclude=model.new_toners)  # fmt: skip
+    history, fresh = (generated_case_arrays(world, n, s, shop="shop A")
+                      for n, s in ((cases, seed), (500, seed + 1)))  # fmt: skip
+    recovered = reflectance_from_Lab(reflectance_to_Lab(history.R), floor=REFLECTANCE_RANGE[0])
+    by_colour = replace(history, R=recovered, colour_alone=np.ones(len(history.case_ids), bool))
+    config = recorded_config(model)
+    report: dict = {"adapt_cases": cases}
+    lights = {"d65_10": D65_10, "a_10": Conditions.parse("A/10")}
+    adapted = {"bare": model}
+    kinds = {
+        "measured": history,
+        "by_colour": by_colour,
+        "recovered_as_measured": replace(by_colour, colour_alone=None),
+    }
+    for name, data in kinds.items():
+        learn, validation, _ = adaptation_cases(model, data, 0.1, config)
+        start = time.perf_counter()
+        adapted[name] = adapt_model(model, learn, config, validation=validation)[0]
+        report[f"adapt_{name}_seconds"] = time.perf_counter() - start
+    for name, chosen in adapted.items():
+        predicted = chosen.predict(fresh.x)[0]
+        for light, conditions in lights.items():
+            found = _apart(predicted, fresh.R, conditions).reshape(len(fresh.case_ids), -1)
+            report[f"adapt_{name}_de00_{light}_mean"] = float(found.mean())
+    return report
+
+
 def _apart(a: np.ndarray, b: np.ndarray, conditions: Conditions) -> np.ndarray:
     """ΔE00 between readings ``a`` and ``b`` ``[..., 31]`` under ``conditions``, flattened."""
     lab = (reflectance_to_Lab(R, conditions=conditions) for R in (a, b))
@@ -226,6 +281,13 @@ def main() -> int:
         metavar="N",
         help="also read a shop's habits from N generated cases by their spray-outs' colours",
     )
+    parser.add_argument(
+        "--adapt",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also adapt the shipped model to N cases of a shop by their spray-outs' colours",
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if not MA_T12.is_dir():
@@ -236,6 +298,8 @@ def main() -> int:
         report |= basis_report(args.paint_basis, args.seed)
     if args.shop:
         report |= shop_report(args.shop, args.seed)
+    if args.adapt:
+        report |= adaptation_report(args.adapt, args.seed)
     print_report(report, args.json, ".4g")
     return 0
 

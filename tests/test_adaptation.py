@@ -261,3 +261,60 @@ def test_the_adaptations_progress_counts_its_cases_as_its_report_does():
     assert _adapting_label(cases, withheld, config).startswith("adapting to 39 cases (10 more")
     every_epoch = replace(config, adapt_validation=0.0)
     assert _adapting_label(cases, None, every_epoch) == "adapting to 39 cases"
+
+
+def _known_by_colour(data, seed: int = 0):
+    """``data`` with every spray-out known by its colour alone: its spectrum a metamer in
+    D65/10 of the one read, another shape each seed (a metameric black of CIE 15's weights
+    added, where ``seed`` > 0), flagged as recovered."""
+    from flakelab.core.colorimetry import (
+        reflectance_from_Lab,
+        reflectance_to_Lab,
+        tristimulus_weights,
+    )
+    from flakelab.core.measurement import REFLECTANCE_RANGE
+
+    R = reflectance_from_Lab(reflectance_to_Lab(data.R), floor=REFLECTANCE_RANGE[0])
+    if seed:
+        weights = tristimulus_weights()  # [31, 3]
+        blacks = np.linalg.svd(weights.T)[2][3:]  # [28, 31]: spectra no observer sees in D65/10
+        black = np.random.default_rng(seed).normal(size=blacks.shape[0]) @ blacks
+        R = R + 0.5 * R.min(axis=-1, keepdims=True) * black / np.abs(black).max()
+    return replace(data, R=R, colour_alone=np.ones(len(data.case_ids), dtype=bool))
+
+
+def test_spray_outs_known_by_their_colour_alone_teach_a_model_that_colour(model):
+    """A shop whose instrument exports L*a*b* alone adapts the model to its habits from its
+    colour: the spectrum learned is not the recovered one (a metamer of many) but its colour in
+    D65/10 (the loss's colour term). So it gains about what measured spectra gain on fresh
+    cases of the shop (0.999 → 0.730 against 0.732 from 150 cases: ``benchmarks/
+    colour_alone.py --shop``), and two metamers teach the same model where, learnt as
+    measured spectra, they teach two."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+
+    train = shop_cases(model, SHOP_HABITS, 150, 31)
+    fresh = shop_cases(model, SHOP_HABITS, 300, 32)
+    config = replace(recorded_config(model), seed=1, adapt_epochs=60)
+    one, other = _known_by_colour(train, 1), _known_by_colour(train, 2)
+    assert delta_E(reflectance_to_Lab(one.R), reflectance_to_Lab(train.R)).max() < 1e-3
+    assert np.abs(one.R - other.R).max() > 0.02  # metamers, not one spectrum
+    before = evaluate_model(model, fresh)["de00_mean"]
+    measured = evaluate_model(adapt_model(model, train, config)[0], fresh)["de00_mean"]
+    adapted = [adapt_model(model, data, config)[0] for data in (one, other)]
+    by_colour = evaluate_model(adapted[0], fresh)["de00_mean"]
+    assert before > 0.9 and by_colour < before - 0.2 and abs(by_colour - measured) < 0.05
+    predicted = [m.predict(fresh.x)[0] for m in adapted]
+    assert np.abs(predicted[0] - predicted[1]).max() < 1e-4
+    as_measured = [
+        adapt_model(model, replace(data, colour_alone=None), config)[0] for data in (one, other)
+    ]
+    apart = np.abs(as_measured[0].predict(fresh.x)[0] - as_measured[1].predict(fresh.x)[0])
+    assert apart.max() > 0.01
+
+
+def test_spray_outs_known_by_their_colour_alone_need_the_colour_term(model):
+    data = _known_by_colour(shop_cases(model, SHOP_HABITS, 40, 33))
+    config = replace(recorded_config(model), colour_weight=0.0, adapt_validation=0.0)
+    with pytest.raises(ModelError, match="colour term alone; expected a colour_weight above 0"):
+        adapt_model(model, data, config)

@@ -1554,11 +1554,12 @@ def test_a_car_read_as_lab_alone_is_compared_and_corrected_with_no_metamerism_in
     assert recorded.returncode == 0, recorded.stderr
     case = json.loads(recorded.stdout)
     assert case["target_recovered"] and case["sprayout_recovered"]
-    assert case["read_by_models_of"] == []  # kept for its colour; no model learns from it
+    assert case["read_by_models_of"] == []  # kept for its colour; no model trains on it
     said = " ".join(cli("cases", "record", lab_target, "-r", recipe, "--sprayed", lab_sprayed,
                         "-d", tmp_path / "again.db").stdout.split())  # fmt: skip
     assert "the target and the spray-out are known by their L*a*b* in D65/10 alone" in said
-    assert "no model learns from such a case, since a model learns spectra" in said
+    assert "'flakelab train' leaves such a case out, since it learns spectra, and 'model adapt' " \
+           "learns its colour alone" in said  # fmt: skip
     assert "no instrument's model learns from it" not in said
 
 
@@ -1616,10 +1617,14 @@ def test_a_case_keeps_a_car_known_by_its_lab_alone_and_says_so(tmp_path, cli):
     )
 
 
-def test_no_model_learns_from_a_spray_out_known_by_its_lab_alone(tmp_path, cli):
-    """A shop whose instrument exports L*a*b* alone (a BYK-mac i) keeps its cases, but a model
-    learns spectra: 'train' and 'model adapt' leave out the cases whose spray-out was known so,
-    and count them, and refuse a history of nothing else."""
+def test_train_leaves_out_and_adapt_learns_the_colour_of_spray_outs_known_by_lab_alone(
+    tmp_path, cli
+):
+    """A shop whose instrument exports L*a*b* alone (a BYK-mac i) keeps its cases. 'train'
+    learns spectra: it leaves out the cases whose spray-out was known so, counts them, and
+    refuses a history of nothing else. 'model adapt' starts from a model that knows spectra
+    and learns such a spray-out's colour (``tests/test_adaptation.py -k colour_alone``): it
+    adapts on them, counts them and says so."""
     from flakelab.cases.exchange import read_cases, write_cases
 
     generated = tmp_path / "generated.csv"
@@ -1637,12 +1642,24 @@ def test_no_model_learns_from_a_spray_out_known_by_its_lab_alone(tmp_path, cli):
     assert "15 cases left out, whose spray-out is known by its L*a*b* alone" in shown.stderr
     run = cli("model", "adapt", mixed, "--epochs", "1", "--no-register", "--json")
     assert run.returncode == 0, run.stderr
-    assert json.loads(run.stdout)["left_out_known_by_colour"] == 15
-    for command in (("train", alone, "--epochs", "1"), ("model", "adapt", alone)):
-        refused = cli(*command, "--no-register")
-        assert refused.returncode == 2 and "Traceback" not in refused.stderr
-        said = " ".join(refused.stderr.split())
-        assert "every one of the 60 cases knows its spray-out by its L*a*b* alone" in said, said
+    report = json.loads(run.stdout)
+    mixed_up, novel = report["outlier_case_ids"], report["left_out_new_toners"]
+    read = [i for i, c in enumerate(cases) if c.case_id not in mixed_up]
+    assert sum(i % 4 == 0 for i in read) - novel <= report["known_by_colour_alone"] <= 15
+    refused = cli("train", alone, "--epochs", "1", "--no-register")
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr
+    said = " ".join(refused.stderr.split())
+    assert "every one of the 60 cases knows its spray-out by its L*a*b* alone" in said, said
+    assert "or adapt the shipped model to them ('flakelab model adapt'" in said
+    adapted = cli("model", "adapt", alone, "--epochs", "1", "--no-register", "--json")
+    assert adapted.returncode == 0, adapted.stderr
+    report = json.loads(adapted.stdout)
+    assert (
+        report["known_by_colour_alone"] == 60 - report["outliers"] - report["left_out_new_toners"]
+    )
+    adapted = cli("model", "adapt", alone, "--epochs", "1", "--no-register")
+    said = " ".join(adapted.stderr.split())
+    assert "known by its L*a*b* alone, learnt and judged by that colour in D65/10 alone" in said
 
 
 def test_a_shops_habits_and_a_models_errors_read_the_same_from_its_spray_outs_colours(

@@ -72,7 +72,8 @@ def recovered_note(target: bool, sprayout: bool, *, learning: bool = True) -> st
         else f"the {'target' if target else 'spray-out'} is known by its"
     )
     learnt = (
-        "; no model learns from such a case, since a model learns spectra"
+        "; 'flakelab train' leaves such a case out, since it learns spectra, and 'model "
+        "adapt' learns its colour alone"
         if sprayout
         else "; the models learn from the spray-out's measured spectra"
     )
@@ -92,8 +93,8 @@ def check_readings_kept(target, sprayout) -> None:
     are read for their colour in D65/10 (its outcome, the nearest cases, the variants of a
     colour, a shop's habits, the mix-up check), which a spectrum recovered from that colour
     gives exactly; such a reading is kept, flagged (:attr:`Case.target_recovered`,
-    :attr:`Case.sprayout_recovered`), and no model learns from a spray-out known so
-    (:func:`spectra_to_learn`)."""
+    :attr:`Case.sprayout_recovered`): no model trains on a spray-out known so
+    (:func:`spectra_to_learn`), and an adaptation learns its colour alone."""
     for role, reading in (("target", target), ("spray-out", sprayout)):
         if stated := colour_stated_elsewhere(reading):
             raise CaseError(
@@ -105,9 +106,11 @@ def check_readings_kept(target, sprayout) -> None:
 
 
 def spectra_to_learn(cases: Sequence[Case]) -> tuple[list[Case], int]:
-    """The cases a model learns from, those whose spray-out was measured, and how many were
+    """The cases a model trains on, those whose spray-out was measured, and how many were
     left out: a spray-out known by its L*a*b* alone gives one metamer of many, and a model
-    that learnt it would predict invented spectra."""
+    trained on it would predict invented spectra. An adaptation, which starts from a model
+    that knows spectra, learns such a spray-out's colour in D65/10 alone
+    (:class:`~flakelab.models.training.CaseArrays`' ``colour_alone``)."""
     kept = [c for c in cases if not c.sprayout_recovered]
     return kept, len(cases) - len(kept)
 

@@ -1022,7 +1022,7 @@ def adapt(
         base = named_model(model, database, "--model")[0]
     else:  # the database the new version goes to holds the current model, the shop's own
         base = current_model(engine, instrument, shop)
-    chosen, by_colour = cases_to_learn(cases, shop_cases(cases, shop, base.geometries, since))
+    chosen = shop_cases(cases, shop, base.geometries, since)
     novel = set(base.new_toners)
     known = [c for c in chosen if not novel & set(c.recipe)]
     if not known:
@@ -1061,7 +1061,7 @@ def adapt(
         "from": base.identity,
         "shop": shop,
         "left_out_new_toners": len(chosen) - len(known),
-        "left_out_known_by_colour": by_colour,
+        "known_by_colour_alone": int(screened.known_by_colour.sum()),
         "outliers": len(dropped),
         "outlier_case_ids": dropped,
         "learned_before": int(base.learned_from(screened.case_ids).sum()),
@@ -1083,27 +1083,29 @@ def adapt(
 
 
 def cases_to_learn(source: str, cases: list) -> tuple[list, int]:
-    """The ``cases`` of ``source`` a model learns from, those whose spray-out was measured
+    """The ``cases`` of ``source`` a model trains on, those whose spray-out was measured
     (:func:`~flakelab.cases.case.spectra_to_learn`), and how many were left out; none is an
-    error that says why."""
+    error that says why. An adaptation learns the others by their colour."""
     from flakelab.cases.case import spectra_to_learn
 
     kept, by_colour = spectra_to_learn(cases)
     if not kept:
         raise FlakelabError(
             f"{hidden_passwords(source)}: every one of the {counted(by_colour, 'case')} knows its "
-            "spray-out by its L*a*b* alone: a model learns spectra, and one recovered from a "
-            "colour is a metamer of many; record spray-outs from the instrument's spectral export"
+            "spray-out by its L*a*b* alone: a model trains on spectra, and one recovered from a "
+            "colour is a metamer of many; record spray-outs from the instrument's spectral "
+            "export, or adapt the shipped model to them ('flakelab model adapt', which learns "
+            "their colour)"
         )
     return kept, by_colour
 
 
 def by_colour_left_out(count: int) -> str:
-    """What a training or an adaptation says of the cases it left out, their spray-outs known
-    by their L*a*b* alone."""
+    """What a training says of the cases it left out, their spray-outs known by their L*a*b*
+    alone."""
     return (
         f"{counted(count, 'case')} left out, whose spray-out is known by its L*a*b* alone: a "
-        "model learns spectra"
+        "model trains on spectra ('model adapt' learns their colour)"
     )
 
 
@@ -1135,8 +1137,13 @@ def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
             f"mix-ups: {', '.join(dropped[:5])}" + (" …" if len(dropped) > 5 else ""),
             highlight=False,
         )
-    if by_colour := summary["left_out_known_by_colour"]:
-        errors.print(f"note: {by_colour_left_out(by_colour)}", highlight=False)
+    if by_colour := summary["known_by_colour_alone"]:
+        errors.print(
+            f"note: {counted(by_colour, 'case')} whose spray-out is known by its L*a*b* alone, "
+            "learnt and judged by that colour in D65/10 alone: the model keeps the spectra it "
+            "knew",
+            highlight=False,
+        )
     if summary["learned_before"]:
         errors.print(
             f"note: the model learned from {summary['learned_before']} of these cases: adapted "

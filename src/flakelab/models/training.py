@@ -213,7 +213,9 @@ class CaseArrays:
     """Recipes ``x[N, T]``, spray-out reflectance ``R[N, G, 31]``, texture ``tex[N, 8]``
     (NaN where a case's instrument gave no such reading); where any case records the tins its
     recipe was poured from, their ``strength[N, T]`` and ``shade[N, T]`` [nm] (1 and 0 for a
-    toner without a recorded tin: the standard, as far as the shop knew)."""
+    toner without a recorded tin: the standard, as far as the shop knew); where any case knows
+    its spray-out by its colour alone, which do ``colour_alone[N]`` (their ``R`` recovered
+    from their L*a*b* in D65/10: one metamer of many, learnt for that colour alone)."""
 
     x: NDArray
     R: NDArray
@@ -226,6 +228,7 @@ class CaseArrays:
     effect: NDArray | None = None
     strength: NDArray | None = None
     shade: NDArray | None = None
+    colour_alone: NDArray | None = None
 
     @property
     def tins_recorded(self) -> NDArray[np.bool_]:
@@ -249,6 +252,7 @@ class CaseArrays:
             self,
             strength=None if self.strength is None else self.strength[rows],
             shade=None if self.shade is None else self.shade[rows],
+            colour_alone=None if self.colour_alone is None else self.colour_alone[rows],
             x=self.x[rows],
             R=self.R[rows],
             texture=self.texture[rows],
@@ -262,16 +266,27 @@ class CaseArrays:
             raise ModelError("cases: expected the same toners and geometries to join them")
         tins = self.strength is not None or other.strength is not None
         (strength, shade), (other_strength, other_shade) = self.tins(), other.tins()
+        by_colour = self.colour_alone is not None or other.colour_alone is not None
         return replace(
             self,
             strength=np.concatenate([strength, other_strength]) if tins else None,
             shade=np.concatenate([shade, other_shade]) if tins else None,
+            colour_alone=np.concatenate([self.known_by_colour, other.known_by_colour])
+            if by_colour
+            else None,
             x=np.concatenate([self.x, other.x]),
             R=np.concatenate([self.R, other.R]),
             texture=np.concatenate([self.texture, other.texture]),
             case_ids=self.case_ids + other.case_ids,
             shops=self.shops + other.shops,
         )
+
+    @property
+    def known_by_colour(self) -> NDArray[np.bool_]:
+        """Which cases know their spray-out by its colour alone ``[N]``."""
+        if self.colour_alone is None:
+            return np.zeros(len(self.case_ids), dtype=bool)
+        return self.colour_alone
 
     def tins(self) -> tuple[NDArray, NDArray]:
         """``strength[N, T]`` and ``shade[N, T]``, the standard's where none is recorded."""
@@ -314,7 +329,7 @@ def case_arrays(
     cases_at` brings cases read by several instruments to one set); the arrays' instrument is
     the one whose set it is, else the first case's."""
     index = {name: i for i, name in enumerate(toners)}
-    xs, Rs, texs, ids, shops, tins = [], [], [], [], [], []
+    xs, Rs, texs, ids, shops, tins, by_colour = [], [], [], [], [], [], []
     geometries = instrument = None
     for case in cases:
         if geometries is None:
@@ -339,6 +354,7 @@ def case_arrays(
         tins.append((strength, shade))
         xs.append(x)
         Rs.append(case.sprayout)
+        by_colour.append(case.sprayout_recovered)
         texs.append([case.sprayout_texture.get(k, np.nan) for k in TEXTURE_READINGS])
         ids.append(case.case_id)
         shops.append(case.shop)
@@ -355,6 +371,7 @@ def case_arrays(
         str(instrument),
         None if effect is None else np.asarray(effect, float),
         *(np.array(column) for column in zip(*tins, strict=True)),
+        np.array(by_colour) if any(by_colour) else None,
     ).recorded_tins_only()
 
 
@@ -398,7 +415,7 @@ def _new_model(data: CaseArrays, config: TrainingConfig, rows: NDArray) -> Forwa
         data.effect,
         config.log_offset,
     )
-    y = probe.encode_targets(data.R[rows], data.texture[rows])
+    y = _targets_read(probe, data, rows)
     x = probe.features(torch.as_tensor(data.x[rows])).numpy()
     network = build_network(x.shape[1], y.shape[1], config.hidden)
     y_mean, y_std = _moments_of_readings(y)
@@ -462,6 +479,11 @@ def fit(
     sizes = [r.size for r in rows]
     if epochs <= 0 or min(sizes) == 0:
         return None
+    if config.colour_weight <= 0 and any(data.known_by_colour[r].any() for r in rows):
+        raise ModelError(
+            "fit: a spray-out known by its colour alone is learnt by the colour term alone; "
+            "expected a colour_weight above 0"
+        )
     device = training_device(config.device)
     generator = torch.Generator().manual_seed(config.seed + len(log))
     x = _stack_rows([_standard_inputs(m, data.x[r]) for m, r in zip(models, rows, strict=True)])
@@ -575,8 +597,17 @@ def _standard_inputs(model: ForwardModel, fractions: NDArray) -> torch.Tensor:
     return torch.as_tensor((features - model.x_mean) / model.x_std, dtype=torch.float32)
 
 
-def _standard_targets(model: ForwardModel, data: CaseArrays, rows: NDArray) -> torch.Tensor:
+def _targets_read(model: ForwardModel, data: CaseArrays, rows: NDArray) -> NDArray:
+    """The outputs a model learns of the cases at ``rows``; NaN (not learnt) where none was
+    read: texture an instrument did not read, and the spectrum of a spray-out known by its
+    colour alone, which the colour term learns instead (module notes)."""
     y = model.encode_targets(data.R[rows], data.texture[rows])
+    y[data.known_by_colour[rows], : model.spectral_outputs] = np.nan
+    return y
+
+
+def _standard_targets(model: ForwardModel, data: CaseArrays, rows: NDArray) -> torch.Tensor:
+    y = _targets_read(model, data, rows)
     return torch.as_tensor((y - model.y_mean) / model.y_std, dtype=torch.float32)
 
 
