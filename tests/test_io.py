@@ -1341,7 +1341,8 @@ def test_a_cxf_object_of_lch_or_xyz_alone_is_read_as_that_colour(tmp_path):
     spectra, as some instruments export a colour, is read as its L*a*b* (converted by
     colour-science under its ColorSpecification's D65/10), spectra recovered and flagged; the
     file was refused, "no ReflectanceSpectrum or ColorCIELab in any Object". A cell that is
-    no number is named."""
+    no number is named. An Object giving ColorCIELab beside ColorCIELCh is read as the Lab
+    where they agree and refused, naming both, where they do not (the LCh was passed over)."""
     from flakelab.core.colorimetry import Lab_to_LCh, reflectance_to_XYZ
     from flakelab.core.measurement import known_by_colour
     from flakelab.data import example_path
@@ -1372,6 +1373,27 @@ def test_a_cxf_object_of_lch_or_xyz_alone_is_read_as_that_colour(tmp_path):
     broken.write_text(re.sub(r"<(\w+:)X>[^<]*</", r"<\1X>abc</", path.read_text(), count=1))
     with pytest.raises(MeasurementFileError, match=r"ColorCIEXYZ CS_\S+, X: expected a number"):
         read_measurement(broken)
+    # ColorCIELab and ColorCIELCh side by side: read as the Lab where they agree, else refused
+    for hue_off, where in ((0.0, None), (20.0, 2)):
+        lch = Lab_to_LCh(car.lab())
+        if where is not None:
+            lch[where, 2] += hue_off
+        rows = iter(lch.tolist())
+
+        def beside(m, rows=rows):
+            row = zip("LCH", next(rows), strict=True)
+            cells = "".join(f"<{m[1]}{n}>{v!r}</{m[1]}{n}>" for n, v in row)
+            return f"{m[0]}<{m[1]}ColorCIELCh {m[2]}>{cells}</{m[1]}ColorCIELCh>"
+
+        both = tmp_path / "both.cxf"
+        both.write_text(re.sub(r"<(\w+:)ColorCIELab ([^>]*)>.*?</\1ColorCIELab>", beside, text))
+        if where is None:
+            assert delta_E_CIE2000(read_measurement(both).lab(), car.lab()).max() < 1e-4
+            continue
+        with pytest.raises(MeasurementFileError, match=r"CS_\S+: its ColorCIELCh read as L\*a\*b\* "
+                                                       r"\(.*\) lies ΔE00 \d+\.\d\d from its "
+                                                       r"ColorCIELab"):  # fmt: skip
+            read_measurement(both)
 
 
 def test_a_csv_colour_headed_as_instruments_export_it_is_read(tmp_path):
@@ -1420,5 +1442,8 @@ def test_a_csv_colour_headed_as_instruments_export_it_is_read(tmp_path):
         f"car,{g},0.1,0.1,0.1," + ",".join(map(str, row))
         for g, row in zip(car.geometry_names, wrong, strict=True)
     ]
-    with pytest.raises(MeasurementFileError, match=r"row 4: its L\*, C\*, h° give L\*a\*b\*"):
+    with pytest.raises(
+        MeasurementFileError,
+        match=r"row 4: its L\*, C\*, h° read as L\*a\*b\* \(\S+, \S+, \S+\) lies ΔE00",
+    ):
         read_measurement(_csv(tmp_path, "\n".join(lines)))

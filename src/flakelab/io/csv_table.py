@@ -14,7 +14,7 @@ Columns, in any order after the first two:
 
 A row may state its colour in several of these forms, as instruments export them; the first
 (L*a*b*, then L*C*h°, then XYZ) is kept, and the others must agree with it to ΔE00
-:data:`~flakelab.io.records.STATED_ALIKE`.
+:data:`~flakelab.io.records.STATED_ALIKE` (:func:`~flakelab.io.records.agreed_colour`).
 
 A file of a colour without spectra (an instrument that exports colour alone, a
 paint maker's data sheet) is read with spectra recovered from its colour (one metamer of
@@ -36,15 +36,14 @@ from pathlib import Path
 import numpy as np
 
 from flakelab.core.colorimetry import D65_10, Conditions
-from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     NOT_UTF8,
-    STATED_ALIKE,
     Reading,
+    agreed_colour,
     assemble,
     colour_alone,
     csv_form,
@@ -125,30 +124,6 @@ def _conditions_named(
     if len(named) > 1:
         raise MeasurementFileError(path, f"several lab_conditions: {sorted(named)}")
     return parse_conditions(path, named.pop(), "lab_conditions") if named else D65_10
-
-
-def _one_colour(
-    path: str | PathLike, stated: dict[str, np.ndarray], names: dict[str, str], where: str
-) -> np.ndarray | None:
-    """The colour a row states: its first form's, every other form agreeing with it to ΔE00
-    :data:`~flakelab.io.records.STATED_ALIKE`, else refused naming both."""
-    if not stated:
-        return None
-    (first, lab), *others = stated.items()
-    for form, other in others:
-        difference = float(delta_E_CIE2000(lab, other))
-        if difference > STATED_ALIKE:
-            raise MeasurementFileError(
-                path,
-                f"its {names[form]} give L*a*b* {_shown(other)}, ΔE00 {difference:.2f} from its "
-                f"{names[first]} {_shown(lab)}: one of them is wrong",
-                field=where,
-            )
-    return lab
-
-
-def _shown(lab: np.ndarray) -> str:
-    return "(" + ", ".join(f"{v:.2f}" for v in lab) + ")"
 
 
 def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
@@ -234,13 +209,13 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         given = {form: c for form, c in forms.items() if any(row[i].strip() for i in c)}
         if lab_alone and not given:  # the first form's empty cell, named
             given = dict([next(iter(forms.items()))])
-        stated_colours = {
-            form: parse_colour(
+        stated = {
+            names[form]: parse_colour(
                 path, form, [row[i] for i in c], where, [header[i] for i in c], lab_conditions
             )
             for form, c in given.items()
         }
-        lab = _one_colour(path, stated_colours, names, where)
+        lab = agreed_colour(path, stated, where)
         measured_at = None
         if "measured_at" in columns and row[columns["measured_at"]].strip():
             try:

@@ -36,6 +36,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
+    agreed_colour,
     assemble,
     checked_wavelengths,
     parse_colour,
@@ -280,15 +281,20 @@ def _colours_of(
     """An Object's stored colour per ColorSpecification, as its kind and L*a*b* under the
     specification's conditions (D65/10 where it names none): ColorCIELab as given,
     ColorCIELCh and ColorCIEXYZ [Y 0–100] converted by colour-science; where a geometry
-    gives several, the first of :data:`COLOUR_VALUES`."""
-    colours: dict[str, tuple[str, np.ndarray]] = {}
+    gives several, the first of :data:`COLOUR_VALUES`, the others agreeing with it
+    (:func:`~flakelab.io.records.agreed_colour`)."""
+    stated: dict[str, dict[str, np.ndarray]] = {}
     for kind, cls in COLOUR_VALUES.items():
         for v in values:
-            if isinstance(v, cls) and v.color_specification not in colours:
-                where = f"Object {sample!r}, {kind} {v.color_specification}"
-                lab = _as_lab(path, where, v, conditions.get(v.color_specification) or D65_10)
-                colours[v.color_specification] = kind, lab
-    return colours
+            spec = v.color_specification
+            if isinstance(v, cls) and kind not in stated.setdefault(spec, {}):
+                where = f"Object {sample!r}, {kind} {spec}"
+                stated[spec][kind] = _as_lab(path, where, v, conditions.get(spec) or D65_10)
+    return {
+        spec: (next(iter(forms)), agreed_colour(path, forms, f"Object {sample!r}, {spec}"))
+        for spec, forms in stated.items()
+        if forms
+    }
 
 
 def _as_lab(path: str | PathLike, where: str, value, conditions: Conditions) -> np.ndarray:

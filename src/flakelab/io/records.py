@@ -32,6 +32,7 @@ from flakelab.core.colorimetry import (
     reflectance_from_Lab,
     stated_to_Lab,
 )
+from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import (
     LAB_LIMIT,
@@ -52,6 +53,7 @@ __all__ = [
     "parse_lab",
     "parse_colour",
     "STATED_ALIKE",
+    "agreed_colour",
     "parse_texture",
     "parse_geometry_name",
     "parse_conditions",
@@ -394,6 +396,32 @@ STATED_ALIKE = 0.2
 """ΔE00 within which the forms a reading states its colour in (L*a*b* beside L*C*h° or XYZ, as
 instruments export them) must agree: rounding each to one decimal stays within 0.1; columns
 swapped or mislabelled do not."""
+
+
+def agreed_colour(
+    path: str | PathLike, stated: dict[str, np.ndarray], where: str
+) -> np.ndarray | None:
+    """The colour a reading states, as L*a*b* ``[3]``, by the forms it gives it in (``stated``,
+    each named as the file names it, in the order of
+    :data:`~flakelab.core.colorimetry.STATED_AS`): the first, every other agreeing with it to
+    ΔE00 :data:`STATED_ALIKE`, else refused naming both; None where it states none."""
+    if not stated:
+        return None
+    (first, lab), *others = stated.items()
+    for name, other in others:
+        difference = float(delta_E_CIE2000(lab, other))
+        if difference > STATED_ALIKE:
+            raise MeasurementFileError(
+                path,
+                f"its {name} read as L*a*b* {_shown(other)} lies ΔE00 {difference:.2f} from its "
+                f"{first} {_shown(lab)}: one of them is wrong",
+                field=where,
+            )
+    return lab
+
+
+def _shown(lab: np.ndarray) -> str:
+    return "(" + ", ".join(f"{v:.2f}" for v in lab) + ")"
 
 
 def parse_texture(path: str | PathLike, value: object, where: str) -> float:
