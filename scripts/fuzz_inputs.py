@@ -16,7 +16,7 @@ values still readable but odd); a model file by editing its description, standar
 weights; a shop's SQLite database by replacing one value of one case row (or, for
 ``database-shops``, of a row of its models, habits or tins).
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,colour,json,xlsx,xlsx-images,target,readings,
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,colour,export,json,xlsx,xlsx-images,target,readings,
         readings-inspect,sprayout,record,recipe,poured,library,habits,habits-match,tolerance,
         cases,cases-cxf,manifest,model,model-register,lots,panel,database,database-shops,
         database-variants,cases-variants,car,deck]
@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import csv
 import io
 import json
 import random
@@ -324,6 +325,35 @@ def damage_model(data: bytes, rng: random.Random) -> bytes:
     return buffer.getvalue()
 
 
+def as_exported(source: Path, path: Path) -> None:
+    """A CSV of L*a*b* alone (``source``) written as an instrument exports it: ``L*, a*, b*``
+    with ``C*, h°`` beside, then ``X, Y, Z``, semicolons and decimal commas."""
+    from flakelab.core.colorimetry import Conditions, Lab_to_LCh, Lab_to_XYZ, white_point
+
+    rows = list(csv.reader(source.read_text().splitlines()))
+    header, body = rows[0], rows[1:]
+    at = header.index("L")
+    lab = np.array([[float(v) for v in row[at : at + 3]] for row in body])
+    conditions = Conditions.parse(body[0][header.index("lab_conditions")])
+    extra = np.hstack(
+        [Lab_to_LCh(lab)[:, 1:], 100 * Lab_to_XYZ(lab, white_point(conditions=conditions))]
+    )
+    header[at : at + 3] = ["L*", "a*", "b*", "C*", "h°", "X", "Y", "Z"]
+    lines = [";".join(header)]
+    for row, more in zip(body, extra, strict=True):
+        cells = row[: at + 3] + [repr(float(v)) for v in more] + row[at + 3 :]
+        lines.append(";".join(c.replace(".", ",") if _is_number(c) else c for c in cells))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
 def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]]:
     """Each kind's good file and the command that reads a file of its kind."""
     target, sprayout = example_path("target"), example_path("sprayout")
@@ -332,6 +362,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     write_measurements([measurement], work / "good.csv")
     colour = replace(measurement, stored_lab=measurement.lab(), spectra_recovered=True)
     write_measurements([colour], work / "colour.csv")  # L*a*b* alone: spectra recovered
+    as_exported(work / "colour.csv", work / "export.csv")
     write_measurements([measurement], work / "good.json")
     write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
@@ -395,6 +426,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         "csv": (work / "good.csv", lambda p: ["inspect", str(p)]),
         # a car read as L*a*b* alone, its spectra recovered, matched by the main job
         "colour": (work / "colour.csv", lambda p: ["match", str(p), "--candidates", "1"]),
+        "export": (work / "export.csv", lambda p: ["inspect", str(p)]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         # an export with the camera's pictures, drawn by inspect --images

@@ -138,6 +138,16 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
         ("sample,geometry,L,C\nS1,45as15,50,1", "header", "columns L, C without the rest"),
         ("sample,geometry,L,L*,a,b\nS1,45as15,50,50,1,2", "header", "'L' and 'L*' both"),
         ("sample,geometry,L,C,h\nS1,45as15,50,-1,2", "row 2, C", "a chroma of 0 or more"),
+        (
+            "sample,geometry,L,a,b,lab_conditions\nS1,45as15,50,1,2,D65/10\nS1,45as45,50,1,2,A/10",
+            "row 3, lab_conditions",
+            "'A/10', where row 2 names 'D65/10'",
+        ),
+        (
+            "sample,geometry,L,a,b,lab_conditions\nS1,45as15,50,1,2,D65/99",
+            "row 2, lab_conditions",
+            "observer",
+        ),
         ("sample,geometry,X,Y,Z\nS1,45as15,20,1e9,20", "row 2, as L*a*b* L", "within ±2500"),
     ],
 )

@@ -116,14 +116,23 @@ def _colour_columns(path: str | PathLike, columns: dict[str, int]) -> dict[str, 
 def _conditions_named(
     path: str | PathLike, rows: list[tuple[int, list[str]]], column: int | None
 ) -> Conditions:
-    """The one ``lab_conditions`` the rows name (D65/10 where none)."""
-    named = (
-        set() if column is None else {row[column].strip() for _, row in rows if column < len(row)}
-    )
-    named.discard("")
-    if len(named) > 1:
-        raise MeasurementFileError(path, f"several lab_conditions: {sorted(named)}")
-    return parse_conditions(path, named.pop(), "lab_conditions") if named else D65_10
+    """The one ``lab_conditions`` the rows name (D65/10 where none); a row naming others than
+    an earlier row is refused, naming both."""
+    first: tuple[int, str] | None = None
+    for number, row in rows if column is not None else ():
+        named = row[column].strip() if column < len(row) else ""
+        if named and first is None:
+            first = number, named
+        elif named and named != first[1]:
+            raise MeasurementFileError(
+                path,
+                f"{named!r}, where row {first[0]} names {first[1]!r}: a file's colours are "
+                "stated under one set of conditions",
+                field=f"row {number}, lab_conditions",
+            )
+    if first is None:
+        return D65_10
+    return parse_conditions(path, first[1], f"row {first[0]}, lab_conditions")
 
 
 def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
