@@ -1717,11 +1717,14 @@ def test_cases_streamed_into_a_csv_are_the_file_a_list_writes(cases, tmp_path):
 
 
 def test_a_case_history_keeps_which_readings_were_known_by_their_colour_alone(cases, tmp_path):
-    """A case whose target or spray-out was known by its L*a*b* alone keeps the flag through
-    CSV (a column each, where any case has one) and CxF3 (the reading written as ColorCIELab
-    alone, read back with its colour); a file without such a case is the file it was. A flag
-    that is neither 0 nor 1 is named; a generator's stream, whose columns were fixed before,
-    refuses such a case."""
+    """A case whose target or spray-out was known by its L*a*b* alone keeps it through CSV
+    (that reading's L*a*b* in ``<role>:<geometry>:L``, ``:a``, ``:b`` columns, where any case
+    has one, its reflectance cells empty) and CxF3 (the reading written as ColorCIELab alone),
+    read back with its colour and flagged; a file without such a case is the file it was. A
+    history of colours alone has no reflectance column, as a shop whose instrument exports
+    colour writes it. A reading given in both forms, a colour no surface reflects and a stop
+    101 flag that is neither 0 nor 1 are named; a generator's stream, whose columns were fixed
+    before, refuses such a case."""
     history = [
         cases[0],
         replace(cases[1], target_recovered=True),
@@ -1741,18 +1744,60 @@ def test_a_case_history_keeps_which_readings_were_known_by_their_colour_alone(ca
         np.testing.assert_allclose(back[1].sprayout, cases[1].sprayout, rtol=1e-5)
     text = (tmp_path / "history.csv").read_text()
     header = next(csv.reader(io.StringIO(text)))
-    column = header.index("target_recovered")
-    assert column == len(CASE_FIELDS) and header[column + 1] == "sprayout_recovered"
+    g = cases[0].geometry_names[0]
+    assert "target_recovered" not in header and f"sprayout:{g}:400" in header
+    rows = list(csv.reader(io.StringIO(text)))
+    assert rows[2][header.index(f"target:{g}:L")] and not rows[2][header.index(f"target:{g}:400")]
+    assert rows[1][header.index(f"target:{g}:400")] and not rows[1][header.index(f"target:{g}:L")]
     write_cases(cases[:3], tmp_path / "measured.csv")
-    assert "_recovered" not in (tmp_path / "measured.csv").read_text()
+    measured = (tmp_path / "measured.csv").read_text()
+    assert "_recovered" not in measured and f":{g}:L" not in measured
+
+    alone = tmp_path / "alone.csv"  # a shop whose instrument exports colour alone
+    write_cases([replace(c, target_recovered=True, sprayout_recovered=True) for c in cases[:3]],
+                alone)  # fmt: skip
+    columns = next(csv.reader(io.StringIO(alone.read_text())))
+    assert not [c for c in columns if c.endswith(":400")]
+    assert sum(c.endswith((":L", ":a", ":b")) for c in columns) == 2 * 3 * len(cases[0].geometries)
+    assert all(c.target_recovered and c.sprayout_recovered for c in read_cases(alone))
+
+    both = tmp_path / "both.csv"
+    both.write_text(
+        text.replace(text.splitlines()[1], _cell(text, 1, header.index(f"target:{g}:L"), "50"))
+    )
+    with pytest.raises(CaseFileError, match="row 2: target: given as reflectance factors and as L"):
+        read_cases(both)
+    unreal = tmp_path / "unreal.csv"
+    row = text.splitlines()[2]
+    for cell, value in (("L", "50"), ("a", "130"), ("b", "2")):
+        row = _cell(row, 0, header.index(f"target:{g}:{cell}"), value)
+    unreal.write_text(text.replace(text.splitlines()[2], row))
+    with pytest.raises(CaseFileError, match=rf"row 3: target:{g}: .*no colour a surface reflects"):
+        read_cases(unreal)
+
+    # a file of stop 101: recovered spectra, flagged in 0/1 columns after the case's fields
+    legacy_rows = list(csv.reader(io.StringIO(measured)))
+    at = len(CASE_FIELDS)
+    assert legacy_rows[0][at].startswith("target:")  # no optional column before
+    for i, cells in enumerate(legacy_rows):
+        cells[at:at] = ["target_recovered", "sprayout_recovered"] if i == 0 else ["0", str(i % 2)]
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerows(legacy_rows)
+    legacy = tmp_path / "legacy.csv"
+    legacy.write_text(out.getvalue())
+    read = read_cases(legacy)
+    assert [c.sprayout_recovered for c in read] == [True, False, True]
+    np.testing.assert_allclose(read[0].sprayout, cases[0].sprayout, rtol=1e-5)
     flawed = tmp_path / "flawed.csv"
-    flawed.write_text(text.replace(text.splitlines()[2], _cell(text, 2, column + 1, "yes")))
+    legacy_text = out.getvalue()
+    flawed.write_text(legacy_text.replace(legacy_text.splitlines()[2],
+                                          _cell(legacy_text, 2, at + 1, "yes")))  # fmt: skip
     with pytest.raises(
         CaseFileError, match="row 3: sprayout_recovered: expected 0 or 1, got 'yes'"
     ):
         read_cases(flawed)
     streamed = tmp_path / "streamed.csv"
-    for case, role in ((history[1], "target"), (history[2], "spray-out")):
+    for case, role in ((history[1], "target"), (history[2], "sprayout")):
         with pytest.raises(CaseFileError, match=rf"knows its {role} by its L\*a\*b\* alone"):
             write_cases(iter([case]), streamed, geometries=case.geometry_names, tins=False)
     assert not streamed.exists()

@@ -1603,7 +1603,10 @@ def test_a_case_keeps_a_car_known_by_its_lab_alone_and_says_so(tmp_path, cli):
         assert back.case_id == case.case_id and back.target_recovered
         assert delta_E(reflectance_to_Lab(back.target), car.lab()).max() < 1e-3
         np.testing.assert_allclose(back.sprayout, case.sprayout, atol=1e-6)
-    assert "target_recovered" in (tmp_path / "history.csv").read_text().splitlines()[0]
+    header = (tmp_path / "history.csv").read_text().splitlines()[0].split(",")
+    g = case.geometry_names[0]  # the target's colour, the spray-out's spectra
+    assert f"target:{g}:L" in header and f"target:{g}:400" not in header
+    assert f"sprayout:{g}:400" in header and f"sprayout:{g}:L" not in header
     cxf = (tmp_path / "history.cxf").read_text()
     geometries = len(case.geometries)  # the spray-out's spectra, the target's colour
     assert cxf.count("ReflectanceSpectrum ") == cxf.count("ColorCIELab ") == geometries

@@ -4,13 +4,17 @@ CSV columns: ``case_id, shop, instrument, conditions, outcome, synthetic, create
 recipe`` (JSON object toner → amount), ``geometries`` (the case's, names joined by ``;``),
 where any case records the car maker's colour code ``colour_code`` (empty for a case that
 records none), where any case records the tins it was poured from ``tins`` (JSON object
-toner → ``{lot, strength, shade_nm}``, empty for a case that records none), where any
-case's target (spray-out) was known by its L*a*b* alone ``target_recovered``
-(``sprayout_recovered``: 1 for such a reading, its spectra those recovered from its colour in
-D65/10; 0 for a measured one), then
-``target:<geometry>:<nm>`` and ``sprayout:<geometry>:<nm>`` reflectance factors for every
-geometry of the file and band (400–700 nm, 10 nm), then ``target:<reading>`` and
-``sprayout:<reading>`` texture readings (empty when not measured). A file may hold cases
+toner → ``{lot, strength, shade_nm}``, empty for a case that records none), then each role's
+readings: ``target:<geometry>:<nm>`` reflectance factors for every geometry of the file and
+band (400–700 nm, 10 nm) where any case measured its target, ``target:<geometry>:L``, ``:a``
+and ``:b`` (its L*a*b* in D65/10) where any case knows its target by its colour alone (a
+case fills one or the other), the same for ``sprayout``, then ``target:<reading>`` and
+``sprayout:<reading>`` texture readings (empty when not measured). So a shop whose
+instrument exports colour alone writes a history of L*a*b* columns alone, and a reading
+known by its colour is read with its spectrum recovered from it, flagged
+(:attr:`~flakelab.cases.case.Case.target_recovered`). A file of stop 101 gave such a reading
+as its recovered spectrum, flagged by a ``target_recovered`` (``sprayout_recovered``) column
+of 0/1 after the tins; it is read as it was. A file may hold cases
 read at different geometry sets (an MA-T12's and a five-angle instrument's): its columns
 are every geometry any case was read at, and a case's cells at geometries it was not read
 at are empty. A file saved by a spreadsheet in most of Europe, separated by semicolons (or
@@ -41,8 +45,9 @@ from typing import NamedTuple
 import numpy as np
 
 from flakelab.cases.case import Case, CaseError, check_readings_kept, tin_fields
+from flakelab.core.colorimetry import UnreachableColour, reflectance_from_Lab, reflectance_to_Lab
 from flakelab.core.defaults import DEFAULT_CONDITIONS
-from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import FlakelabError, shown
@@ -85,12 +90,23 @@ TINS_FIELD = "tins"
 from."""
 
 RECOVERED_FIELDS = ("target_recovered", "sprayout_recovered")
-"""The third and fourth optional columns: whether each case's target (spray-out) was known by
-its L*a*b* alone (:attr:`~flakelab.cases.case.Case.target_recovered`), 1 or 0."""
+"""The third and fourth optional columns of a file of stop 101, read and no longer written:
+whether each case's target (spray-out) was known by its L*a*b* alone
+(:attr:`~flakelab.cases.case.Case.target_recovered`), 1 or 0, its spectra the recovered."""
 
-OPTIONAL_FIELDS = (CODE_FIELD, TINS_FIELD, *RECOVERED_FIELDS)
+OPTIONAL_FIELDS = (CODE_FIELD, TINS_FIELD)
 """The columns after :data:`CASE_FIELDS` a file has, in this order, where any of its cases
 records what they hold."""
+
+ROLES = ("target", "sprayout")
+"""A case's two readings, as its columns name them."""
+
+READING_CELLS = {"spectra": tuple(str(int(w)) for w in WAVELENGTHS), "colour": ("L", "a", "b")}
+"""The cells of one reading at one geometry, by the form a file gives it in: its reflectance
+factors band by band [nm], or its L*a*b* in D65/10 (a reading known by its colour alone)."""
+
+MEASURED = tuple((role, "spectra") for role in ROLES)
+"""The reading blocks of a file of measured readings alone: each role's spectra."""
 
 _FLAGS = {"0": False, "1": True}
 
@@ -109,26 +125,18 @@ class _Optional(NamedTuple):
     words: str
 
 
-def _flag_column(name: str, role: str) -> _Optional:
-    """The 0/1 column ``name``: whether a case's ``role`` reading was known by its colour."""
-    return _Optional(
-        lambda case: "1" if getattr(case, name) else "0",
-        attrgetter(name),
-        f"knows its {role} by its L*a*b* alone",
-    )
-
-
 _OPTIONAL = {
     CODE_FIELD: _Optional(
         attrgetter("colour_code"), attrgetter("colour_code"), "records its colour code"
     ),
     TINS_FIELD: _Optional(_tins_cell, attrgetter("tins"), "records its tins"),
-    **{
-        name: _flag_column(name, role)
-        for name, role in zip(RECOVERED_FIELDS, ("target", "spray-out"), strict=True)
-    },
 }
 """Each of :data:`OPTIONAL_FIELDS`: what a case writes in it and when it needs it."""
+
+
+def _recovered(case: Case, role: str) -> bool:
+    """Whether a case knows its ``role`` reading by its colour alone."""
+    return getattr(case, f"{role}_recovered")
 
 
 class CaseFileError(FlakelabError):
@@ -136,22 +144,40 @@ class CaseFileError(FlakelabError):
 
 
 @cache
-def _header(geometries: tuple[str, ...], optional: tuple[str, ...] = ()) -> tuple:
+def _header(
+    geometries: tuple[str, ...],
+    optional: tuple[str, ...] = (),
+    blocks: tuple[tuple[str, str], ...] = MEASURED,
+) -> tuple:
     """Column names for one geometry set, with the ``optional`` columns (of
-    :data:`OPTIONAL_FIELDS`, in its order) (cached: every row of a file checks against it)."""
-    spectra = [
-        f"{role}:{g}:{int(w)}"
-        for role in ("target", "sprayout")
-        for g in geometries
-        for w in WAVELENGTHS
-    ]
-    texture = [f"{role}:{t}" for role in ("target", "sprayout") for t in TEXTURE_READINGS]
-    return (*CASE_FIELDS, *optional, *spectra, *texture)
+    :data:`OPTIONAL_FIELDS`, or of a file of stop 101 :data:`RECOVERED_FIELDS` too, in that
+    order) and the readings' ``blocks`` (role, form) (cached: every row of a file checks
+    against it)."""
+    readings = _block_columns(blocks, geometries)
+    texture = [f"{role}:{t}" for role in ROLES for t in TEXTURE_READINGS]
+    return (*CASE_FIELDS, *optional, *readings, *texture)
+
+
+def _block_columns(blocks: tuple[tuple[str, str], ...], geometries: tuple[str, ...]) -> list[str]:
+    return [
+        f"{role}:{g}:{cell}" for role, form in blocks for g in geometries
+        for cell in READING_CELLS[form]
+    ]  # fmt: skip
 
 
 def _optional_columns(cases: list[Case]) -> tuple[str, ...]:
     """The optional columns a file of ``cases`` has: those that any of them records."""
     return tuple(f for f in OPTIONAL_FIELDS if any(_OPTIONAL[f].held(c) for c in cases))
+
+
+def _reading_blocks(cases: list[Case]) -> tuple[tuple[str, str], ...]:
+    """The readings' blocks a file of ``cases`` has, role by role: its spectra where any case
+    measured it, its colour where any case knows it by its L*a*b* alone."""
+    blocks = []
+    for role in ROLES:
+        known = [_recovered(c, role) for c in cases]
+        blocks += [(role, "spectra")] * (not all(known)) + [(role, "colour")] * any(known)
+    return tuple(blocks)
 
 
 def is_case_file(path: str | PathLike) -> bool:
@@ -198,10 +224,10 @@ def write_cases(
         write_cxf([m for c in cases for m in _as_measurements(c)], path)
         return
     if streamed:  # a generator's: its cases' readings measured
-        optional = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins
+        optional, blocks = (CODE_FIELD,) * codes + (TINS_FIELD,) * tins, MEASURED
     else:
         geometries = tuple(dict.fromkeys(g for c in cases for g in c.geometry_names))
-        optional = _optional_columns(cases)
+        optional, blocks = _optional_columns(cases), _reading_blocks(cases)
     readings = len(CASE_FIELDS) + len(optional)  # the first cell of the readings
 
     separator, encoding = csv_form(decimal_comma)
@@ -209,12 +235,12 @@ def write_cases(
     def write(temporary: Path) -> None:  # row by row, not the whole text first
         with temporary.open("w", encoding=encoding, newline="") as handle:
             writer = csv.writer(handle, delimiter=separator)
-            writer.writerow(_header(geometries, optional))
+            writer.writerow(_header(geometries, optional, blocks))
             written = 0
             for case in cases:
                 if streamed:
                     _check_columns_hold(path, case, geometries, optional)
-                row = _csv_row(case, geometries, optional)
+                row = _csv_row(case, geometries, optional, blocks)
                 if decimal_comma:
                     row[readings:] = [decimal_comma_in(cell) for cell in row[readings:]]
                 writer.writerow(row)
@@ -231,14 +257,21 @@ def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], optional:
     """A case streamed into a CSV of ``geometries`` and ``optional`` columns is one its
     columns hold whole."""
     beyond = [g for g in case.geometry_names if g not in geometries]
-    unheld = (o.words for f, o in _OPTIONAL.items() if f not in optional and o.held(case))
-    what = f"read at {', '.join(beyond)}" if beyond else next(unheld, None)
+    unheld = [o.words for f, o in _OPTIONAL.items() if f not in optional and o.held(case)]
+    unheld += [f"knows its {role} by its L*a*b* alone" for role in ROLES if _recovered(case, role)]
+    what = f"read at {', '.join(beyond)}" if beyond else next(iter(unheld), None)
     if what:
         raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
 
 
-def _csv_row(case: Case, geometries: tuple[str, ...], optional: tuple[str, ...]) -> list[str]:
-    """A case's row of a case file of ``geometries`` and ``optional`` columns."""
+def _csv_row(
+    case: Case,
+    geometries: tuple[str, ...],
+    optional: tuple[str, ...],
+    blocks: tuple[tuple[str, str], ...] = MEASURED,
+) -> list[str]:
+    """A case's row of a case file of ``geometries``, ``optional`` columns and readings'
+    ``blocks``: each reading in the form it was read, the other's cells empty."""
     return [
         case.case_id,
         case.shop,
@@ -250,17 +283,22 @@ def _csv_row(case: Case, geometries: tuple[str, ...], optional: tuple[str, ...])
         json.dumps(case.recipe),
         ";".join(case.geometry_names),
         *(_OPTIONAL[f].cell(case) for f in optional),
-        *_spectra_cells(case, case.target, geometries),
-        *_spectra_cells(case, case.sprayout, geometries),
+        *(cell for role, form in blocks for cell in _reading_cells(case, role, form, geometries)),
         *(_fmt(case.target_texture.get(t)) for t in TEXTURE_READINGS),
         *(_fmt(case.sprayout_texture.get(t)) for t in TEXTURE_READINGS),
     ]
 
 
-def _spectra_cells(case: Case, spectra: np.ndarray, geometries: tuple[str, ...]) -> list[str]:
-    """A case's reflectance cells at the file's ``geometries``: empty where it was not read."""
-    own = dict(zip(case.geometry_names, spectra.tolist(), strict=True))  # floats: formatted faster
-    empty = [""] * WAVELENGTHS.size
+def _reading_cells(case: Case, role: str, form: str, geometries: tuple[str, ...]) -> list[str]:
+    """A case's cells of its ``role`` reading in ``form`` at the file's ``geometries``: its
+    reflectance factors, or its L*a*b* in D65/10 where it knows the reading by its colour
+    alone; empty where it was not read so, or not at that geometry."""
+    empty = [""] * len(READING_CELLS[form])
+    if (form == "colour") != _recovered(case, role):
+        return empty * len(geometries)
+    values = getattr(case, role)
+    values = reflectance_to_Lab(values) if form == "colour" else values
+    own = dict(zip(case.geometry_names, values.tolist(), strict=True))  # floats: formatted faster
     return [
         cell for g in geometries for cell in ([f"{v:.6g}" for v in own[g]] if g in own else empty)
     ]
@@ -323,10 +361,13 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
             f"{path}: row 1: expected a header starting with {', '.join(CASE_FIELDS)} "
             "(separated by commas, semicolons or tabs)"
         )
-    layout = _Layout(header, _file_geometries(path, header), decimal_comma=separator != ",")
+    geometries, blocks = _file_geometries(path, header)
+    layout = _Layout(header, geometries, blocks, decimal_comma=separator != ",")
+    read = [(number, _case_from_row(path, number, layout, row)) for number, row in rows]
+    _recover_colours(path, read)
     cases, rows_of = [], {}
-    for number, row in rows:
-        case = _case_from_row(path, number, layout, row)
+    for number, fields in read:
+        case = _case_of(f"{path}: row {number}", fields)
         if case.case_id in rows_of:
             raise CaseFileError(
                 f"{path}: row {number}: case_id: {case.case_id!r} is also row "
@@ -340,31 +381,51 @@ def _cases_from_lines(path: Path, lines: Iterable[str]) -> list[Case]:
 
 
 class _Layout:
-    """A case file's columns: its header, its geometries, and each role's spectral cells
-    for a row's geometries, taken from a row at once (found once per set of geometries)."""
+    """A case file's columns: its header, its geometries and readings' blocks, and the
+    cells of each block for a row's geometries, taken from a row at once (found once per set
+    of geometries)."""
 
     def __init__(
-        self, header: list[str], geometries: tuple[str, ...], *, decimal_comma: bool = False
+        self,
+        header: list[str],
+        geometries: tuple[str, ...],
+        blocks: tuple[tuple[str, str], ...] = MEASURED,
+        *,
+        decimal_comma: bool = False,
     ) -> None:
         self.header, self.geometries, self.decimal_comma = header, geometries, decimal_comma
+        self.blocks = blocks
         self._index = {column: i for i, column in enumerate(header)}
-        self._spectral: dict = {}
+        self._cells: dict = {}
 
-    def spectral(self, role: str, geometries: tuple[str, ...]):
-        """The column names of ``role``'s reflectance at ``geometries``, geometry by
+    def cells(self, role: str, form: str, geometries: tuple[str, ...]):
+        """The column names of ``role``'s reading in ``form`` at ``geometries``, geometry by
         geometry, and a function that takes their cells from a row."""
-        key = (role, geometries)
-        if key not in self._spectral:
-            names = [f"{role}:{g}:{int(w)}" for g in geometries for w in WAVELENGTHS]
-            self._spectral[key] = names, itemgetter(*(self._index[n] for n in names))
-        return self._spectral[key]
+        key = (role, form, geometries)
+        if key not in self._cells:
+            names = _block_columns(((role, form),), geometries)
+            self._cells[key] = names, itemgetter(*(self._index[n] for n in names))
+        return self._cells[key]
 
 
-def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
-    """The geometries whose columns the header holds, checked to be every column they need."""
-    spectral = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
-    geometries = tuple(dict.fromkeys(g for role, g, _ in spectral if role == "target"))
-    expected = _header(geometries, tuple(f for f in OPTIONAL_FIELDS if f in header))
+def _file_geometries(path: Path, header: list[str]) -> tuple[tuple[str, ...], tuple]:
+    """The geometries and readings' blocks whose columns the header holds, checked to be
+    every column they need, and each role to be given in some form."""
+    columns = [c.split(":") for c in header[len(CASE_FIELDS) :] if c.count(":") == 2]
+    geometries = tuple(dict.fromkeys(g for role, g, _ in columns if role in ROLES))
+    forms = {(role, "colour" if cell in READING_CELLS["colour"] else "spectra")
+             for role, _, cell in columns}  # fmt: skip
+    blocks = tuple(
+        (role, form) for role in ROLES for form in READING_CELLS if (role, form) in forms
+    )
+    absent = [role for role in ROLES if not any(r == role for r, _ in blocks)]
+    if absent and geometries:
+        raise CaseFileError(
+            f"{path}: row 1: no {absent[0]} readings: expected {absent[0]}:<geometry>:<nm> "
+            f"reflectance columns, or {absent[0]}:<geometry>:L, :a and :b"
+        )
+    optional = tuple(f for f in (*OPTIONAL_FIELDS, *RECOVERED_FIELDS) if f in header)
+    expected = _header(geometries, optional, blocks or MEASURED)
     if tuple(header) != expected:
         missing = [c for c in expected if c not in header]
         extra = [c for c in header if c not in expected]
@@ -375,10 +436,13 @@ def _file_geometries(path: Path, header: list[str]) -> tuple[str, ...]:
             f"{path}: row 1: expected the columns of geometries {';'.join(geometries) or 'none'}"
             f" ({'; '.join(wrong)})"
         )
-    return geometries
+    return geometries, blocks
 
 
-def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> Case:
+def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> dict:
+    """A row's case, as the fields of a :class:`Case`; a reading known by its colour is given
+    as its L*a*b* ``[G, 3]`` under ``colours`` (its spectrum recovered for the whole file at
+    once, :func:`_recover_colours`)."""
     where = f"{path}: row {number}"
     header, columns = layout.header, layout.geometries
     if len(row) != len(header):
@@ -391,14 +455,8 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
             f"{where}: geometries: expected some of the file's {';'.join(columns)}, "
             f"got {cells['geometries']!r}"
         )
-    unread = [
-        column
-        for role in ("target", "sprayout")
-        for g in columns
-        if g not in geometries
-        for column in (f"{role}:{g}:{int(w)}" for w in WAVELENGTHS)
-        if cells[column].strip()
-    ]
+    others = tuple(g for g in columns if g not in geometries)
+    unread = [c for c in _block_columns(layout.blocks, others) if cells[c].strip()]
     if unread:
         raise CaseFileError(
             f"{where}: {unread[0]}: a value at a geometry the row's geometries "
@@ -416,13 +474,18 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
             raise CaseFileError(f"{where}: {column}: expected a finite number")
         return value
 
-    def spectra(role: str) -> np.ndarray:
-        names, cells_of = layout.spectral(role, geometries)
+    def values(role: str, form: str) -> np.ndarray:
+        names, cells_of = layout.cells(role, form, geometries)
         read = cells_of(row)
-        values = numbers_at_once([decimal_point(c) for c in read] if layout.decimal_comma else read)
-        if values is None:  # the cell that stops them, named
-            values = np.array([number_of(name) for name in names])
-        return values.reshape(len(geometries), WAVELENGTHS.size)
+        found = numbers_at_once([decimal_point(c) for c in read] if layout.decimal_comma else read)
+        if found is None:  # the cell that stops them, named
+            found = np.array([number_of(name) for name in names])
+        return found.reshape(len(geometries), len(READING_CELLS[form]))
+
+    def given(role: str, form: str) -> bool:
+        if (role, form) not in layout.blocks:
+            return False
+        return any(c.strip() for c in layout.cells(role, form, geometries)[1](row))
 
     def texture(role: str) -> dict[str, float]:
         return {t: number_of(f"{role}:{t}") for t in TEXTURE_READINGS if cells[f"{role}:{t}"]}
@@ -433,28 +496,72 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
     for flag in ("synthetic", *RECOVERED_FIELDS):
         if cells.get(flag, "0") not in _FLAGS:
             raise CaseFileError(f"{where}: {flag}: expected 0 or 1, got {cells[flag]!r}")
-    readings = {
-        "target": spectra("target"),
-        "sprayout": spectra("sprayout"),
-        "target_texture": texture("target"),
-        "sprayout_texture": texture("sprayout"),
-    }
+    readings: dict = {"colours": {}}
+    for role in ROLES:
+        by_colour = given(role, "colour")
+        if by_colour and given(role, "spectra"):
+            raise CaseFileError(
+                f"{where}: {role}: given as reflectance factors and as L*a*b*; a reading is "
+                "read in one form, measured or known by its colour alone"
+            )
+        flag = f"{role}_recovered"
+        if flag in cells and (role, "colour") in layout.blocks and _FLAGS[cells[flag]] != by_colour:
+            raise CaseFileError(
+                f"{where}: {flag}: {cells[flag]}, where the {role} is given as "
+                f"{'L*a*b*' if by_colour else 'reflectance factors'}"
+            )
+        if by_colour or (role, "spectra") not in layout.blocks:  # an empty colour, named
+            readings["colours"][role] = values(role, "colour")
+        else:
+            readings[role] = values(role, "spectra")
+        readings[flag] = by_colour or _FLAGS[cells.get(flag, "0")]
+    return dict(
+        case_id=cells["case_id"],
+        geometries=geometries,
+        recipe=recipe,
+        **readings,
+        target_texture=texture("target"),
+        sprayout_texture=texture("sprayout"),
+        instrument=cells["instrument"],
+        shop=cells["shop"],
+        conditions=cells["conditions"],
+        outcome=cells["outcome"],
+        synthetic=_FLAGS[cells["synthetic"]],
+        created_at=created,
+        tins=tins,
+        colour_code=cells.get(CODE_FIELD, ""),
+    )
+
+
+def _recover_colours(path: Path, rows: list[tuple[int, dict]]) -> None:
+    """Give each reading the rows know by its colour (``fields["colours"]``) its spectrum,
+    recovered from its L*a*b* in D65/10 (:func:`~flakelab.core.colorimetry.
+    reflectance_from_Lab`), all at once; a colour no surface reflects is refused naming its
+    row, role and geometry."""
+    known = [(number, fields, role, lab) for number, fields in rows
+             for role, lab in fields.pop("colours").items()]  # fmt: skip
+    if not known:
+        return
+    lab = np.concatenate([k[3] for k in known])
+    try:  # near black an instrument's noise dips below 0, as its spectra would
+        spectra = reflectance_from_Lab(lab, floor=REFLECTANCE_RANGE[0])
+    except UnreachableColour as error:
+        at = error.position
+        for number, fields, role, colour in known:
+            if at < len(colour):
+                g = fields["geometries"][at]
+                raise CaseFileError(f"{path}: row {number}: {role}:{g}: {error}") from None
+            at -= len(colour)
+        raise
+    start = 0
+    for _, fields, role, colour in known:
+        fields[role] = spectra[start : start + len(colour)]
+        start += len(colour)
+
+
+def _case_of(where: str, fields: dict) -> Case:
     try:
-        return Case(
-            case_id=cells["case_id"],
-            geometries=geometries,
-            recipe=recipe,
-            **readings,
-            instrument=cells["instrument"],
-            shop=cells["shop"],
-            conditions=cells["conditions"],
-            outcome=cells["outcome"],
-            synthetic=_FLAGS[cells["synthetic"]],
-            created_at=created,
-            tins=tins,
-            colour_code=cells.get(CODE_FIELD, ""),
-            **{flag: _FLAGS[cells.get(flag, "0")] for flag in RECOVERED_FIELDS},
-        )
+        return Case(**fields)
     except (CaseError, ValueError) as error:
         raise CaseFileError(f"{where}: {error}") from None
 
