@@ -1535,9 +1535,10 @@ def _store_before_0008(engine, model) -> None:
 
 def test_the_cases_stored_since_a_training_read_its_cases_are_counted(cases, database_url):
     """'train --when-new' counts the cases stored after the newest version's training read
-    the database, at the instrument's geometries, whatever their own times, but for those
-    whose spray-out is known by its L*a*b* alone, which no model learns; a version that does
-    not say when it read them counts from its registration."""
+    the database, at the instrument's geometries, whatever their own times, those whose
+    spray-out is known by its L*a*b* alone too (a model learns its colour; stop 101 left them
+    uncounted, when no model learnt them); a version that does not say when it read them
+    counts from its registration."""
     from flakelab.cases.database import count_stored_since
     from flakelab.models.registry import newest_training, register, shipped_model
     from flakelab.models.training import case_arrays
@@ -1550,10 +1551,10 @@ def test_the_cases_stored_since_a_training_read_its_cases_are_counted(cases, dat
     register(engine, model, held, cases_read_at=read_at.astimezone(timezone(timedelta(hours=9))))
     old = [replace(c, created_at=datetime(2025, 1, 2, tzinfo=UTC)) for c in cases[10:14]]
     add_cases(engine, old)  # a history brought in: made long ago, stored now
-    add_cases(engine, [replace(cases[14], sprayout_recovered=True)])  # read by colour: unlearnt
+    add_cases(engine, [replace(cases[14], sprayout_recovered=True)])  # its colour is learnt
     five = INSTRUMENT_GEOMETRIES["five-angle"]
     assert newest_training(engine, "five-angle") == (1, read_at, True)
-    assert count_stored_since(engine, read_at, five) == 4
+    assert count_stored_since(engine, read_at, five) == 5
     assert count_stored_since(engine, read_at, INSTRUMENT_GEOMETRIES["ma-t12"]) == 0
     assert count_stored_since(engine, datetime.now(UTC), five) == 0
     register(engine, model, held)  # registered without the time: from a file

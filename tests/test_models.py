@@ -674,3 +674,37 @@ def test_a_models_card_tells_what_it_learned_from(cli, tmp_path):
     ):
         run = cli("model", "show", spec)
         assert run.returncode == 2 and problem in run.stderr, (spec, run.stderr)
+
+
+def _by_colour(data):
+    """``data`` with every spray-out known by its colour alone: the spectrum recovered from
+    its L*a*b* in D65/10, flagged."""
+    from flakelab.core.colorimetry import reflectance_from_Lab, reflectance_to_Lab
+    from flakelab.core.measurement import REFLECTANCE_RANGE
+
+    R = reflectance_from_Lab(reflectance_to_Lab(data.R), floor=REFLECTANCE_RANGE[0])
+    return replace(data, R=R, colour_alone=np.ones(len(data.case_ids), dtype=bool))
+
+
+def test_a_model_trained_afresh_learns_spray_outs_known_by_their_colour_alone():
+    """A shop with few measured spray-outs and many known by their L*a*b* alone trains on
+    both: spectra from the measured, colour from the others. Beside 200 measured, 600 known
+    by colour more than halve the error on fresh cases (9.2 → 4.4 mean ΔE00 at this small
+    size and 100 epochs; 2.89 → 1.77 for 1,000 and 2,000 at 300, as 2,000 more measured give
+    1.80). Fewer than ten measured spray-outs leave no spectra to learn, and are refused."""
+    from flakelab.models.training import evaluate_model, train_protocol
+
+    world = World(read_library(None), "five-angle")
+    measured, more, fresh = (generated_case_arrays(world, n, seed)
+                             for n, seed in ((200, 11), (600, 12), (400, 13)))  # fmt: skip
+    config = TrainingConfig(epochs=100, finetune_epochs=100, hidden=(64, 64), seed=0)
+    errors = [
+        evaluate_model(train_protocol(data, config)[0], fresh)["de00_mean"]
+        for data in (measured, measured.joined(_by_colour(more)))
+    ]
+    assert errors[1] < 0.6 * errors[0], errors
+    few = measured.subset(np.arange(9)).joined(_by_colour(more))
+    with pytest.raises(
+        ModelError, match="at least 10 measured spray-outs to learn spectra from, got 9"
+    ):
+        train_protocol(few, config)

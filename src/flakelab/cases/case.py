@@ -41,7 +41,6 @@ __all__ = [
     "has_colour_code",
     "recovered_note",
     "select_cases",
-    "spectra_to_learn",
     "tin_fields",
     "worst_differences",
 ]
@@ -72,8 +71,7 @@ def recovered_note(target: bool, sprayout: bool, *, learning: bool = True) -> st
         else f"the {'target' if target else 'spray-out'} is known by its"
     )
     learnt = (
-        "; 'flakelab train' leaves such a case out, since it learns spectra, and 'model "
-        "adapt' learns its colour alone"
+        "; the models learn the spray-out's colour alone, not its recovered spectra"
         if sprayout
         else "; the models learn from the spray-out's measured spectra"
     )
@@ -93,8 +91,8 @@ def check_readings_kept(target, sprayout) -> None:
     are read for their colour in D65/10 (its outcome, the nearest cases, the variants of a
     colour, a shop's habits, the mix-up check), which a spectrum recovered from that colour
     gives exactly; such a reading is kept, flagged (:attr:`Case.target_recovered`,
-    :attr:`Case.sprayout_recovered`): no model trains on a spray-out known so
-    (:func:`spectra_to_learn`), and an adaptation learns its colour alone."""
+    :attr:`Case.sprayout_recovered`), and a model learns a spray-out known so by that colour
+    alone (:class:`~flakelab.models.training.CaseArrays`' ``colour_alone``)."""
     for role, reading in (("target", target), ("spray-out", sprayout)):
         if stated := colour_stated_elsewhere(reading):
             raise CaseError(
@@ -103,16 +101,6 @@ def check_readings_kept(target, sprayout) -> None:
                 f"shop's habits read, and its file gives none; export its spectra, or its "
                 f"colour in {D65_10}"
             )
-
-
-def spectra_to_learn(cases: Sequence[Case]) -> tuple[list[Case], int]:
-    """The cases a model trains on, those whose spray-out was measured, and how many were
-    left out: a spray-out known by its L*a*b* alone gives one metamer of many, and a model
-    trained on it would predict invented spectra. An adaptation, which starts from a model
-    that knows spectra, learns such a spray-out's colour in D65/10 alone
-    (:class:`~flakelab.models.training.CaseArrays`' ``colour_alone``)."""
-    kept = [c for c in cases if not c.sprayout_recovered]
-    return kept, len(cases) - len(kept)
 
 
 _CODE_BREAKS = str.maketrans({c: " " for c in "/,;+&"})

@@ -852,11 +852,10 @@ def count_stored_since(engine: Engine, since: datetime, geometries: Iterable[str
     """How many cases were stored in the database (recorded, imported or generated into it)
     at or after ``since`` (without a zone: UTC), read at every one of ``geometries``: those a
     model whose training read the database at ``since`` has not seen, whatever their own
-    time (an imported history's cases were made long before), and could learn from: a
-    spray-out known by its L*a*b* alone is not learnt (``cases.case.spectra_to_learn``)."""
+    time (an imported history's cases were made long before), and could learn from (a
+    spray-out known by its L*a*b* alone too: its colour is learnt)."""
     stored = CaseRow.updated_at >= zoned_here(since).astimezone(UTC)  # a case's storing
-    learnt = CaseRow.sprayout_recovered.is_(False)
-    query = select(CaseRow.case_id, CaseRow.geometries).where(stored, learnt)
+    query = select(CaseRow.case_id, CaseRow.geometries).where(stored)
     wanted, count = set(geometries), 0
     with reading_rows(engine) as session:
         for case_id, names in session.execute(query):

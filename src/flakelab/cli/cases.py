@@ -442,7 +442,7 @@ def record_case(
         )
     add_cases(engine, [case])  # a writer between the check and here is refused by the database
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
-    models = () if case.sprayout_recovered else instruments_reading(case.geometry_names)
+    models = instruments_reading(case.geometry_names)
     found, unchecked = None, None
     if check:
         (found,), unchecked = recorded_checks([case], lib, existing_engine(database))
@@ -496,7 +496,7 @@ def _print_recorded(report: dict, chosen: bool) -> None:
     )
     if models := report["read_by_models_of"]:
         console.print(f"models that learn from it: {', '.join(models)}", highlight=False)
-    elif not report["sprayout_recovered"]:  # else the note below says why
+    else:
         console.print(
             f"[yellow]warning:[/] no instrument's model learns from it: its geometries "
             f"{', '.join(report['geometries'])} hold no instrument's whole set",
@@ -612,7 +612,7 @@ def record_all(
         for number, c, de, g, found in zip(rows, cases, worst, where, checks, strict=True)
     ]
     mismatched = [row for row in recorded if is_mismatched(row["from_prediction"])]
-    readers = [() if c.sprayout_recovered else instruments_reading(c.geometry_names) for c in cases]
+    readers = [instruments_reading(c.geometry_names) for c in cases]
     learners = {model: sum(model in r for r in readers) for model in INSTRUMENT_GEOMETRIES}
     report = {
         "manifest": str(manifest),

@@ -335,7 +335,7 @@ def train(
     chosen = cases_at(loaded, geometries)
     if not chosen:
         raise FlakelabError(f"{cases}: no cases read at the {instrument}'s geometries {geometries}")
-    chosen, by_colour = cases_to_learn(cases, chosen)
+    by_colour = measured_enough(cases, chosen, 2 * config.folds)
     arrays = source_arrays(cases, chosen, lib, effect=True)
     arrays, tinned = recorded_tins_used(arrays, lib, no_tins)
     data, held_out = (
@@ -391,8 +391,8 @@ def train(
     metrics = evaluate_model(model, held_out)
     summary: dict[str, Any] = {k: v for k, v in report.items() if k != "log"}
     summary["held_out"] = {k: metrics[k] for k in ("cases", *DE00_STATISTICS)}
-    summary["cases_left_out"] = len(loaded) - len(chosen) - by_colour  # not at its geometries
-    summary["cases_left_out_known_by_colour"] = by_colour
+    summary["cases_left_out"] = len(loaded) - len(chosen)  # not at its geometries
+    summary["cases_known_by_colour_alone"] = by_colour
     summary["cases_with_tins"] = int(tinned.sum())
     if kept:
         summary["stages_resumed"] = resumed  # kept by an earlier, interrupted run
@@ -449,8 +449,8 @@ def _print_training(summary: dict, title: str) -> None:
     if summary["cases_left_out"]:
         said.append(f"{counted(summary['cases_left_out'], 'case')} left out, not read at the "
                     "model's geometries")  # fmt: skip
-    if by_colour := summary["cases_left_out_known_by_colour"]:
-        said.append(by_colour_left_out(by_colour))
+    if by_colour := summary["cases_known_by_colour_alone"]:
+        said.append(learnt_by_colour(by_colour))
     if summary.get("stages_resumed"):
         said.append(f"went on from {summary['stages_resumed']} stages its checkpoint kept")
     if "file" in summary:
@@ -1082,30 +1082,29 @@ def adapt(
     _print_adaptation(summary, stage, config.outlier_threshold)
 
 
-def cases_to_learn(source: str, cases: list) -> tuple[list, int]:
-    """The ``cases`` of ``source`` a model trains on, those whose spray-out was measured
-    (:func:`~flakelab.cases.case.spectra_to_learn`), and how many were left out; none is an
-    error that says why. An adaptation learns the others by their colour."""
-    from flakelab.cases.case import spectra_to_learn
-
-    kept, by_colour = spectra_to_learn(cases)
-    if not kept:
+def measured_enough(source: str, cases: list, minimum: int) -> int:
+    """How many of the ``cases`` of ``source`` know their spray-out by its L*a*b* alone (a
+    model learns that colour, not the recovered spectra); fewer than ``minimum`` measured
+    spray-outs, from which a model trained afresh learns spectra, is an error that says
+    why."""
+    by_colour = sum(c.sprayout_recovered for c in cases)
+    if len(cases) - by_colour < minimum:
         raise FlakelabError(
-            f"{hidden_passwords(source)}: every one of the {counted(by_colour, 'case')} knows its "
-            "spray-out by its L*a*b* alone: a model trains on spectra, and one recovered from a "
-            "colour is a metamer of many; record spray-outs from the instrument's spectral "
-            "export, or adapt the shipped model to them ('flakelab model adapt', which learns "
-            "their colour)"
+            f"{hidden_passwords(source)}: {by_colour} of the {counted(len(cases), 'case')} know "
+            f"their spray-out by its L*a*b* alone: a model trained afresh learns spectra from "
+            f"measured spray-outs, at least {minimum}, and the colour of the others; record "
+            "spray-outs from the instrument's spectral export, or adapt the shipped model to "
+            "these cases ('flakelab model adapt', which learns their colour)"
         )
-    return kept, by_colour
+    return by_colour
 
 
-def by_colour_left_out(count: int) -> str:
-    """What a training says of the cases it left out, their spray-outs known by their L*a*b*
-    alone."""
+def learnt_by_colour(count: int) -> str:
+    """What a training or an adaptation says of the cases whose spray-outs are known by
+    their L*a*b* alone."""
     return (
-        f"{counted(count, 'case')} left out, whose spray-out is known by its L*a*b* alone: a "
-        "model trains on spectra ('model adapt' learns their colour)"
+        f"{counted(count, 'case')} whose spray-out is known by its L*a*b* alone, learnt and "
+        "judged by that colour in D65/10 alone"
     )
 
 
@@ -1139,9 +1138,7 @@ def _print_adaptation(summary: dict, stage: str, threshold: float) -> None:
         )
     if by_colour := summary["known_by_colour_alone"]:
         errors.print(
-            f"note: {counted(by_colour, 'case')} whose spray-out is known by its L*a*b* alone, "
-            "learnt and judged by that colour in D65/10 alone: the model keeps the spectra it "
-            "knew",
+            f"note: {learnt_by_colour(by_colour)}: the model keeps the spectra it knew",
             highlight=False,
         )
     if summary["learned_before"]:

@@ -818,6 +818,12 @@ def train_protocol(
         raise ModelError(
             f"screening: expected one of {', '.join(SCREENINGS)}, got {config.screening!r}"
         )
+    measured = n - int(data.known_by_colour.sum())
+    if measured < config.folds * 2:  # the spectral outputs' standardisation, and their shape
+        raise ModelError(
+            f"cases: expected at least {config.folds * 2} measured spray-outs to learn spectra "
+            f"from, got {measured} (the others known by their colour alone)"
+        )
     partitions, train_rows = fold_rows(n, config)
     if checkpoint is not None:
         checkpoint.check_fits(n, protocol_stages(config))
