@@ -4,7 +4,11 @@ The loss is the mean squared standardised error of the outputs (log reflectance,
 ``colour_weight`` × the mean squared CIE94 colour difference between predicted and measured
 CIELAB at every geometry. Without the colour term the standardisation weights each output by
 the inverse of its spread over the cases, which under-weights the bright near-specular
-angles, where the eye (and ΔE00) is most sensitive and where the spread is largest.
+angles, where the eye (and ΔE00) is most sensitive and where the spread is largest. A
+spray-out known by its L*a*b* alone (an instrument that exports colour, its spectrum recovered:
+one metamer of many) is learnt by the colour term alone, its spectral outputs left out of the
+first term as a texture its instrument did not read; its colour in D65/10 is the reading's.
+Two metamers of it teach the same model (``tests/test_adaptation.py -k colour_alone``).
 
 1. Split the cases into five partitions (seeded).
 2. Screen (``screening``):
@@ -213,9 +217,10 @@ class CaseArrays:
     """Recipes ``x[N, T]``, spray-out reflectance ``R[N, G, 31]``, texture ``tex[N, 8]``
     (NaN where a case's instrument gave no such reading); where any case records the tins its
     recipe was poured from, their ``strength[N, T]`` and ``shade[N, T]`` [nm] (1 and 0 for a
-    toner without a recorded tin: the standard, as far as the shop knew); where any case knows
-    its spray-out by its colour alone, which do ``colour_alone[N]`` (their ``R`` recovered
-    from their L*a*b* in D65/10: one metamer of many, learnt for that colour alone)."""
+    toner without a recorded tin: the standard, as far as the shop knew); ``colour_alone[N]``,
+    which cases know their spray-out by its colour alone (None where none does): their ``R``
+    was recovered from their L*a*b* in D65/10, one metamer of many, and is learnt for that
+    colour alone (module notes)."""
 
     x: NDArray
     R: NDArray
