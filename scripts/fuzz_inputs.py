@@ -16,8 +16,8 @@ values still readable but odd); a model file by editing its description, standar
 weights; a shop's SQLite database by replacing one value of one case row (or, for
 ``database-shops``, of a row of its models, habits or tins).
 
-    python scripts/fuzz_inputs.py [--kinds cxf,csv,colour,export,json,xlsx,xlsx-images,target,readings,
-        readings-inspect,sprayout,record,recipe,poured,library,habits,habits-match,tolerance,
+    python scripts/fuzz_inputs.py [--kinds cxf,csv,colour,export,json,xlsx,xlsx-images,target,
+        readings,readings-inspect,sprayout,record,recipe,poured,library,habits,habits-match,tolerance,
         cases,cases-cxf,manifest,model,model-register,lots,panel,database,database-shops,
         database-variants,cases-variants,car,deck]
         [--n 200] [--seed 0] [--show]
