@@ -181,8 +181,6 @@ def adaptation_report(cases: int, seed: int) -> dict:
     from dataclasses import replace
 
     from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
-    from flakelab.core.colorimetry import reflectance_from_Lab
-    from flakelab.core.measurement import REFLECTANCE_RANGE
     from flakelab.io import read_library
     from flakelab.models.registry import shipped_model
     from flakelab.models.training import (
@@ -197,11 +195,9 @@ def adaptation_report(cases: int, seed: int) -> dict:
                   exclude=model.new_toners)  # fmt: skip
     history, fresh = (generated_case_arrays(world, n, s, shop="shop A")
                       for n, s in ((cases, seed), (500, seed + 1)))  # fmt: skip
-    recovered = reflectance_from_Lab(reflectance_to_Lab(history.R), floor=REFLECTANCE_RANGE[0])
-    by_colour = replace(history, R=recovered, colour_alone=np.ones(len(history.case_ids), bool))
+    by_colour = _known_by_colour(history)
     config = recorded_config(model)
     report: dict = {"adapt_cases": cases}
-    lights = {"d65_10": D65_10, "a_10": Conditions.parse("A/10")}
     adapted = {"bare": model}
     kinds = {
         "measured": history,
@@ -214,10 +210,7 @@ def adaptation_report(cases: int, seed: int) -> dict:
         adapted[name] = adapt_model(model, learn, config, validation=validation)[0]
         report[f"adapt_{name}_seconds"] = time.perf_counter() - start
     for name, chosen in adapted.items():
-        predicted = chosen.predict(fresh.x)[0]
-        for light, conditions in lights.items():
-            found = _apart(predicted, fresh.R, conditions).reshape(len(fresh.case_ids), -1)
-            report[f"adapt_{name}_de00_{light}_mean"] = float(found.mean())
+        report |= _mean_errors(chosen, fresh, f"adapt_{name}")
     return report
 
 
@@ -225,35 +218,47 @@ def training_report(cases: int, seed: int) -> dict:
     """Mean ΔE00 on 1,000 fresh generated cases, in D65/10 and under A/10, of models trained
     afresh on ``cases`` measured spray-outs, with 2 × ``cases`` more known by their colour
     alone, and with as many more measured."""
-    from dataclasses import replace
 
     from flakelab.cases.generator import World
-    from flakelab.core.colorimetry import reflectance_from_Lab
-    from flakelab.core.measurement import REFLECTANCE_RANGE
     from flakelab.io import read_library
     from flakelab.models.training import TrainingConfig, generated_case_arrays, train_protocol
 
     world = World(read_library(None), "five-angle")
     measured, more, fresh = (generated_case_arrays(world, n, seed + i)
                              for i, n in enumerate((cases, 2 * cases, 1000)))  # fmt: skip
-    recovered = reflectance_from_Lab(reflectance_to_Lab(more.R), floor=REFLECTANCE_RANGE[0])
-    by_colour = replace(more, R=recovered, colour_alone=np.ones(len(more.case_ids), bool))
     kinds = {
         "measured": measured,
-        "with_by_colour": measured.joined(by_colour),
+        "with_by_colour": measured.joined(_known_by_colour(more)),
         "with_measured": measured.joined(more),
     }
     report: dict = {"train_cases": cases, "train_more_cases": 2 * cases}
-    lights = {"d65_10": D65_10, "a_10": Conditions.parse("A/10")}
     for name, data in kinds.items():
         start = time.perf_counter()
         model, _ = train_protocol(data, TrainingConfig(seed=seed))
         report[f"train_{name}_seconds"] = time.perf_counter() - start
-        predicted = model.predict(fresh.x)[0]
-        for light, conditions in lights.items():
-            found = _apart(predicted, fresh.R, conditions).reshape(len(fresh.case_ids), -1)
-            report[f"train_{name}_de00_{light}_mean"] = float(found.mean())
+        report |= _mean_errors(model, fresh, f"train_{name}")
     return report
+
+
+def _known_by_colour(data):
+    """Cases (:class:`~flakelab.models.training.CaseArrays`) with every spray-out known by
+    its colour alone: spectra recovered from their L*a*b* in D65/10, flagged."""
+    from dataclasses import replace
+
+    from flakelab.core.colorimetry import reflectance_from_Lab
+    from flakelab.core.measurement import REFLECTANCE_RANGE
+
+    recovered = reflectance_from_Lab(reflectance_to_Lab(data.R), floor=REFLECTANCE_RANGE[0])
+    return replace(data, R=recovered, colour_alone=np.ones(len(data.case_ids), bool))
+
+
+def _mean_errors(model, fresh, prefix: str) -> dict:
+    """A model's mean ΔE00 on ``fresh`` cases in D65/10 and under A/10, keyed
+    ``{prefix}_de00_{light}_mean``."""
+    predicted = model.predict(fresh.x)[0]
+    lights = {"d65_10": D65_10, "a_10": Conditions.parse("A/10")}
+    return {f"{prefix}_de00_{light}_mean": float(_apart(predicted, fresh.R, conditions).mean())
+            for light, conditions in lights.items()}  # fmt: skip
 
 
 def _apart(a: np.ndarray, b: np.ndarray, conditions: Conditions) -> np.ndarray:

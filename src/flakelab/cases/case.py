@@ -318,12 +318,17 @@ class Case:
     def geometry_names(self) -> tuple[str, ...]:
         return tuple(g.name for g in self.geometries)
 
+    def known_by_colour(self, role: str) -> bool:
+        """Whether its ``role`` reading (``target``, ``sprayout``) was known by its L*a*b* in
+        D65/10 alone (:attr:`target_recovered`, :attr:`sprayout_recovered`)."""
+        return getattr(self, f"{role}_recovered")
+
     def as_read(self, role: str) -> dict:
         """How its ``role`` reading (``target``, ``sprayout``) was read, as a
         :class:`~flakelab.core.measurement.Measurement`'s fields: its L*a*b* in D65/10 alone
         where its spectra were recovered from it, so that a file gives it so; none where
         measured."""
-        if not getattr(self, f"{role}_recovered"):
+        if not self.known_by_colour(role):
             return {}
         return {"stored_lab": reflectance_to_Lab(getattr(self, role)), "spectra_recovered": True}
 

@@ -45,12 +45,11 @@ from typing import NamedTuple
 import numpy as np
 
 from flakelab.cases.case import Case, CaseError, check_readings_kept, tin_fields
-from flakelab.core.colorimetry import UnreachableColour, reflectance_from_Lab, reflectance_to_Lab
 from flakelab.core.defaults import DEFAULT_CONDITIONS
-from flakelab.core.measurement import REFLECTANCE_RANGE, TEXTURE_READINGS, Measurement
+from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
-from flakelab.errors import FlakelabError, shown
+from flakelab.errors import FlakelabError, MeasurementFileError, shown
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     NOT_UTF8,
@@ -60,6 +59,7 @@ from flakelab.io.records import (
     is_no_regular_file,
     json_value,
     numbers_at_once,
+    recovered_spectra,
     spreadsheet_table,
     text_encoding,
     write_atomically,
@@ -134,11 +134,6 @@ _OPTIONAL = {
 """Each of :data:`OPTIONAL_FIELDS`: what a case writes in it and when it needs it."""
 
 
-def _recovered(case: Case, role: str) -> bool:
-    """Whether a case knows its ``role`` reading by its colour alone."""
-    return getattr(case, f"{role}_recovered")
-
-
 class CaseFileError(FlakelabError):
     """A case file that is wrong: names the file, row, column and problem."""
 
@@ -175,7 +170,7 @@ def _reading_blocks(cases: list[Case]) -> tuple[tuple[str, str], ...]:
     measured it, its colour where any case knows it by its L*a*b* alone."""
     blocks = []
     for role in ROLES:
-        known = [_recovered(c, role) for c in cases]
+        known = [c.known_by_colour(role) for c in cases]
         blocks += [(role, "spectra")] * (not all(known)) + [(role, "colour")] * any(known)
     return tuple(blocks)
 
@@ -258,7 +253,8 @@ def _check_columns_hold(path, case: Case, geometries: tuple[str, ...], optional:
     columns hold whole."""
     beyond = [g for g in case.geometry_names if g not in geometries]
     unheld = [o.words for f, o in _OPTIONAL.items() if f not in optional and o.held(case)]
-    unheld += [f"knows its {role} by its L*a*b* alone" for role in ROLES if _recovered(case, role)]
+    unheld += [f"knows its {role} by its L*a*b* alone" for role in ROLES
+               if case.known_by_colour(role)]  # fmt: skip
     what = f"read at {', '.join(beyond)}" if beyond else next(iter(unheld), None)
     if what:
         raise CaseFileError(f"{path}: case {case.case_id!r} {what}, which its columns do not hold")
@@ -294,10 +290,10 @@ def _reading_cells(case: Case, role: str, form: str, geometries: tuple[str, ...]
     reflectance factors, or its L*a*b* in D65/10 where it knows the reading by its colour
     alone; empty where it was not read so, or not at that geometry."""
     empty = [""] * len(READING_CELLS[form])
-    if (form == "colour") != _recovered(case, role):
+    read = case.as_read(role)
+    if (form == "colour") != bool(read):
         return empty * len(geometries)
-    values = getattr(case, role)
-    values = reflectance_to_Lab(values) if form == "colour" else values
+    values = read["stored_lab"] if read else getattr(case, role)
     own = dict(zip(case.geometry_names, values.tolist(), strict=True))  # floats: formatted faster
     return [
         cell for g in geometries for cell in ([f"{v:.6g}" for v in own[g]] if g in own else empty)
@@ -535,24 +531,20 @@ def _case_from_row(path: Path, number: int, layout: _Layout, row: list[str]) -> 
 
 def _recover_colours(path: Path, rows: list[tuple[int, dict]]) -> None:
     """Give each reading the rows know by its colour (``fields["colours"]``) its spectrum,
-    recovered from its L*a*b* in D65/10 (:func:`~flakelab.core.colorimetry.
-    reflectance_from_Lab`), all at once; a colour no surface reflects is refused naming its
-    row, role and geometry."""
+    recovered from its L*a*b* in D65/10, all at once (:func:`~flakelab.io.records.
+    recovered_spectra`); a colour no surface reflects is refused naming its row, role and
+    geometry."""
     known = [(number, fields, role, lab) for number, fields in rows
              for role, lab in fields.pop("colours").items()]  # fmt: skip
     if not known:
         return
     lab = np.concatenate([k[3] for k in known])
-    try:  # near black an instrument's noise dips below 0, as its spectra would
-        spectra = reflectance_from_Lab(lab, floor=REFLECTANCE_RANGE[0])
-    except UnreachableColour as error:
-        at = error.position
-        for number, fields, role, colour in known:
-            if at < len(colour):
-                g = fields["geometries"][at]
-                raise CaseFileError(f"{path}: row {number}: {role}:{g}: {error}") from None
-            at -= len(colour)
-        raise
+    places = [f"row {number}: {role}:{g}" for number, fields, role, _ in known
+              for g in fields["geometries"]]  # fmt: skip
+    try:
+        spectra = recovered_spectra(path, lab, places)
+    except MeasurementFileError as error:  # a case file's error, as its others
+        raise CaseFileError(str(error)) from None
     start = 0
     for _, fields, role, colour in known:
         fields[role] = spectra[start : start + len(colour)]

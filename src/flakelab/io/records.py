@@ -54,6 +54,7 @@ __all__ = [
     "parse_colour",
     "STATED_ALIKE",
     "agreed_colour",
+    "recovered_spectra",
     "parse_texture",
     "parse_geometry_name",
     "parse_conditions",
@@ -481,27 +482,38 @@ def parse_conditions(path: str | PathLike, text: str, where: str) -> Conditions:
         raise MeasurementFileError(path, str(error), field=where) from None
 
 
-def recovered_readings(
-    path: str | PathLike, readings: list[Reading], conditions: Conditions
-) -> list[Reading]:
-    """``readings`` of L*a*b* alone, each with a spectrum recovered from its colour under
-    ``conditions`` on the storage grid (:func:`~flakelab.core.colorimetry.reflectance_from_Lab`);
-    a colour no surface reflects is refused naming its reading."""
-    lab = np.array([r.lab for r in readings], dtype=float).reshape(-1, 3)
+def recovered_spectra(
+    path: str | PathLike, lab: np.ndarray, places: Sequence[str], conditions: Conditions = D65_10
+) -> np.ndarray:
+    """Spectra ``[N, 31]`` on the storage grid recovered from colours ``lab [N, 3]`` under
+    ``conditions`` (:func:`~flakelab.core.colorimetry.reflectance_from_Lab`), all at once; a
+    colour no surface reflects, or one asking a reflectance factor no paint reaches, is
+    refused naming its place in the file (``places``, one per colour)."""
     try:
         # near black an instrument's noise dips below 0, as its spectra would
         spectra = reflectance_from_Lab(lab, WAVELENGTHS, conditions, floor=REFLECTANCE_RANGE[0])
     except UnreachableColour as error:
-        raise MeasurementFileError(path, str(error), field=readings[error.position].where) from None
+        raise MeasurementFileError(path, str(error), field=places[error.position]) from None
     high = REFLECTANCE_RANGE[1]
     if (over := np.flatnonzero(outside(spectra, REFLECTANCE_RANGE).any(axis=1))).size:
-        reading = readings[over[0]]
+        i = over[0]
         raise MeasurementFileError(
             path,
-            f"L* {reading.lab[0]:g} asks a reflectance factor of {spectra[over[0]].max():.3g}, "
-            f"over the {high:g} any paint reaches near specular: the file is wrong, not the paint",
-            field=reading.where,
+            f"L* {lab[i, 0]:g} asks a reflectance factor of {spectra[i].max():.3g}, over the "
+            f"{high:g} any paint reaches near specular: the file is wrong, not the paint",
+            field=places[i],
         )
+    return spectra
+
+
+def recovered_readings(
+    path: str | PathLike, readings: list[Reading], conditions: Conditions
+) -> list[Reading]:
+    """``readings`` of L*a*b* alone, each with a spectrum recovered from its colour under
+    ``conditions`` (:func:`recovered_spectra`); a colour no surface reflects is refused
+    naming its reading."""
+    lab = np.array([r.lab for r in readings], dtype=float).reshape(-1, 3)
+    spectra = recovered_spectra(path, lab, [r.where for r in readings], conditions)
     return [replace(r, reflectance=R) for r, R in zip(readings, spectra, strict=True)]
 
 
