@@ -346,6 +346,24 @@ def as_exported(source: Path, path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def as_panel_sheet(measurement, path: Path) -> None:
+    """``measurement``'s colour at its 45° lamp's geometries as a spreadsheet of panels holds
+    it: a row per sample, ``L* 15°`` columns (aspecular angles alone), semicolons, decimal
+    commas."""
+    at_45 = [i for i, g in enumerate(measurement.geometries) if g.illumination == 45]
+    panel = replace(
+        measurement,
+        geometries=tuple(measurement.geometries[i] for i in at_45),
+        reflectance=measurement.reflectance[at_45],
+        stored_lab=measurement.lab()[at_45],
+        spectra_recovered=True,
+    )
+    write_measurements([panel], path, wide=True, decimal_comma=True)
+    text = path.read_text(encoding="utf-8-sig")
+    header, rest = text.split("\n", 1)
+    path.write_text(re.sub(r" 45as(-?\d+)", r" \1°", header) + "\n" + rest, encoding="utf-8")
+
+
 def _is_number(cell: str) -> bool:
     try:
         float(cell)
@@ -363,6 +381,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     colour = replace(measurement, stored_lab=measurement.lab(), spectra_recovered=True)
     write_measurements([colour], work / "colour.csv")  # L*a*b* alone: spectra recovered
     as_exported(work / "colour.csv", work / "export.csv")
+    both = [measurement, read_measurement(sprayout)]
+    write_measurements(both, work / "wide.csv", wide=True)  # a row per sample
+    as_panel_sheet(measurement, work / "panels.csv")
     write_measurements([measurement], work / "good.json")
     write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
@@ -427,6 +448,9 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # a car read as L*a*b* alone, its spectra recovered, matched by the main job
         "colour": (work / "colour.csv", lambda p: ["match", str(p), "--candidates", "1"]),
         "export": (work / "export.csv", lambda p: ["inspect", str(p)]),
+        # a row per sample: spectra at each geometry; colour headed by aspecular angles alone
+        "wide": (work / "wide.csv", lambda p: ["compare", str(p), str(target)]),
+        "panels": (work / "panels.csv", lambda p: ["match", str(p), "--candidates", "1"]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         # an export with the camera's pictures, drawn by inspect --images

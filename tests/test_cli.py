@@ -19,6 +19,7 @@ import pytest
 from flakelab.cli.common import progress_bar, reports_errors, tracked
 from flakelab.core import compare, tolerance_preset
 from flakelab.data import example_path
+from flakelab.errors import Note
 from flakelab.io import read_measurement, read_measurements, write_measurements
 
 
@@ -176,6 +177,34 @@ def test_convert_lab_only_writes_the_colour_and_no_spectra(tmp_path, cli):
     assert refused.returncode == 2
     assert "--lab-only: L*a*b* without spectra is written as csv" in refused.stderr
     assert not (tmp_path / "car.json").exists()
+
+
+def test_convert_wide_writes_a_row_per_sample_that_reads_back(tmp_path, cli):
+    """``convert --wide``: the example car in one row, its spectra at each of the 12
+    geometries in columns; compared with the car it differs by nothing, and ``--lab-only``
+    gives its colour alone in 36 columns. A format other than CSV is refused, nothing
+    written. A panel headed by aspecular angles alone is read, and the note says at which
+    lamp."""
+    target = example_path("target")
+    written = tmp_path / "car.csv"
+    assert cli("convert", target, written, "--wide").returncode == 0
+    header, row = written.read_text().splitlines()
+    assert header.split(",")[1] == "R400 15as-45" and len(row.split(",")) == 1 + 12 * 31 + 10
+    same = json.loads(cli("compare", target, written, "--json").stdout)
+    assert same["de00_max"] == 0 and not same["spectra_recovered"]
+    assert cli("convert", target, tmp_path / "lab.csv", "--wide", "--lab-only").returncode == 0
+    header = (tmp_path / "lab.csv").read_text().splitlines()[0].split(",")
+    assert header[1:37] == [f"{q} {g}" for g in read_measurement(target).geometry_names
+                            for q in ("L*", "a*", "b*")]  # fmt: skip
+    refused = cli("convert", target, tmp_path / "car.json", "--wide")
+    assert refused.returncode == 2 and not (tmp_path / "car.json").exists()
+    assert "a row per sample is for a CSV file, not json" in refused.stderr
+    panel = tmp_path / "panel.csv"
+    panel.write_text("sample,L* 15°,a* 15°,b* 15°,L* 45°,a* 45°,b* 45°\nblue,40,-2,-30,25,0,-20\n")
+    with pytest.warns(Note, match=r"read at a 45° lamp \(15° as 45as15, 45° as 45as45\)"):
+        shown = cli("inspect", panel)  # the command prints it as a note: pytest catches it here
+    assert shown.returncode == 0, shown.stderr
+    assert "45as15" in shown.stdout and "40.00" in shown.stdout
 
 
 def test_convert_of_a_file_of_both_kinds_says_how_to_write_it(tmp_path, cli):

@@ -117,6 +117,9 @@ def _csv(tmp_path: Path, text: str) -> Path:
 
 HEADER = "sample,geometry," + ",".join(f"R{w}" for w in range(400, 710, 10))
 ROW = "S1,45as15," + ",".join(["0.5"] * 31)
+WIDE = "sample,L* 15°,a* 15°,b* 15°,L* 45°,a* 45°,b* 45°"
+WIDE_ROW = "S1,50,1,2,30,1,2"
+WIDE_BANDS = "sample," + ",".join(f"R{w} {g}" for g in ("15°", "45°") for w in range(400, 710, 10))
 
 
 @pytest.mark.parametrize(
@@ -149,6 +152,32 @@ ROW = "S1,45as15," + ",".join(["0.5"] * 31)
             "observer",
         ),
         ("sample,geometry,X,Y,Z\nS1,45as15,20,1e9,20", "row 2, as L*a*b* L", "within ±2500"),
+        # a row per sample, its geometries in the header
+        ("sample,geometry,L* 15°,a* 15°,b* 15°\nS1,45as15,50,1,2", "header", "a row per sample"),
+        (
+            WIDE.replace("L* 45°", "L 45°") + ",L* 45°\n" + WIDE_ROW + ",1",
+            "header, 45°",
+            "columns 'L 45°' and 'L* 45°' both",
+        ),  # fmt: skip
+        (WIDE + ",L* 45as45\n" + WIDE_ROW + ",1", "header, L* 45as45", "headed both '45°'"),
+        (WIDE + ",L\n" + WIDE_ROW + ",1", "header", "column 'L' gives no geometry"),
+        (WIDE + ",dE 15°\n" + WIDE_ROW + ",1", "header", "column 'dE 15°' is no quantity flakelab reads"),
+        (WIDE + ",L* 75°,a* 75°\n" + WIDE_ROW + ",1,2", "header, 75°", "L* 75°, a* 75° without"),
+        (WIDE + ",L* 140°\n" + WIDE_ROW + ",1", "header, L* 140°", "detector above"),
+        (
+            WIDE + ",R400 15°,R410 15°,R420 15°\n" + WIDE_ROW + ",0.5" * 3,
+            "header, 45°",
+            "45° has no reflectance columns where 15° has",
+        ),  # fmt: skip
+        (
+            WIDE_BANDS.replace("R400 45°,", "") + "\nS1" + ",0.5" * 61,
+            "header, 45°",
+            "another wavelength grid",
+        ),  # fmt: skip
+        (WIDE + "\n" + "S1" + "," * 6, "row 2", "'S1' is read at no geometry"),
+        (WIDE + "\n" + WIDE_ROW.replace("50", "x", 1), "row 2, 15°, L*", "expected a number"),
+        (WIDE_BANDS + "\nS1" + ",0.5" * 31 + ",-3" * 31, "row 2, 45°, 400 nm", "reflectance"),
+        (WIDE + "\n" + WIDE_ROW + "\n" + WIDE_ROW, "row 3, 15°", "appears twice"),
     ],
 )
 def test_bad_csv_names_file_field_and_problem(tmp_path, text, field, problem):
@@ -1404,6 +1433,99 @@ def test_a_cxf_object_of_lch_or_xyz_alone_is_read_as_that_colour(tmp_path):
                                                        r"\(.*\) lies ΔE00 \d+\.\d\d from its "
                                                        r"ColorCIELab"):  # fmt: skip
             read_measurement(both)
+
+
+def _same_readings(read, written) -> None:
+    """Two lists of measurements hold the same readings, exactly."""
+    assert [m.sample for m in read] == [m.sample for m in written]
+    for a, b in zip(read, written, strict=True):
+        assert a.geometries == b.geometries and a.texture == b.texture, a.sample
+        assert np.array_equal(a.reflectance, b.reflectance), a.sample
+        assert (a.stored_lab is None) == (b.stored_lab is None), a.sample
+        if a.stored_lab is not None:
+            assert np.array_equal(a.stored_lab, b.stored_lab), a.sample
+        assert (a.instrument, a.measured_at) == (b.instrument, b.measured_at), a.sample
+        assert a.spectra_recovered == b.spectra_recovered, a.sample
+
+
+def test_a_csv_of_a_row_per_sample_reads_as_its_row_per_reading(rich_measurement, tmp_path):
+    """``write_measurements(..., wide=True)`` writes a row per sample, its L*a*b* and spectra
+    at each geometry in columns (``L* 45as15``, ``R400 45as15``); read back it gives the
+    readings exactly, as the row-per-reading file does: the example target and spray-out (12
+    geometries, texture, date), a third sample read at five of them (its other cells empty), a
+    fourth with stored L*a*b* at an out-of-plane geometry and a name with quotes and
+    separators, with a decimal comma too; and their colour alone."""
+    from flakelab.core.colorimetry import D65_10
+    from flakelab.core.geometry import instrument_geometries
+    from flakelab.data import example_path
+
+    target, sprayout = (read_measurement(example_path(n)) for n in ("target", "sprayout"))
+    five = [target.index(g) for g in instrument_geometries("five-angle")]
+    subset = replace(
+        sprayout,
+        sample="five-angle panel",
+        geometries=tuple(sprayout.geometries[i] for i in five),
+        reflectance=sprayout.reflectance[five][:, ::-1],
+        stored_lab=None,
+        texture={},
+    )
+    rich = replace(rich_measurement, metadata={}, instrument=target.instrument)  # one per file
+    written = [target, sprayout, subset, rich]
+    long = tmp_path / "long.csv"
+    write_measurements(written, long)
+    for decimal_comma in (False, True):
+        wide = tmp_path / f"wide-{decimal_comma}.csv"
+        write_measurements(written, wide, wide=True, decimal_comma=decimal_comma)
+        lines = wide.read_text(encoding="utf-8-sig").splitlines()
+        assert len(lines) == 1 + len(written)
+        header = lines[0].split(";" if decimal_comma else ",")
+        assert header[1:3] == ["L* 15as-45", "a* 15as-45"] and "R400 45as25az90" in header
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # full geometry names: nothing to note
+            _same_readings(read_measurements(wide), read_measurements(long))
+        _same_readings(read_measurements(wide), written)
+    colours = [
+        replace(m, stored_lab=m.lab(D65_10), stored_lab_conditions=D65_10, spectra_recovered=True)
+        for m in written[:2]
+    ]
+    write_measurements(colours, tmp_path / "lab.csv", wide=True)
+    write_measurements(colours, tmp_path / "lab-long.csv")
+    assert (tmp_path / "lab.csv").read_text().startswith("sample,L* 15as-45,a* 15as-45,b* 15as-45,")
+    _same_readings(
+        read_measurements(tmp_path / "lab.csv"), read_measurements(tmp_path / "lab-long.csv")
+    )
+    with pytest.raises(MeasurementFileError, match="a row per sample is for a CSV file, not json"):
+        write_measurements(written, tmp_path / "wide.json", wide=True)
+
+
+def test_a_wide_csv_headed_as_a_spreadsheet_of_panels_is_read(tmp_path):
+    """The headers of a row per panel, as spreadsheets and instrument exports write them: the
+    quantity first or the geometry first, joined by a space, an underscore or nothing, and an
+    aspecular angle alone (``L* -15°``, ``a*15``, ``as25_b*``) read at the 45° lamp with a
+    note; L*C*h° beside them. Each reading lands at its geometry as the same colours written a
+    row per reading do."""
+    from flakelab.core.colorimetry import Lab_to_LCh
+    from flakelab.errors import Note
+
+    lab = np.array([[38.2, -3.1, -31.0], [33.5, -2.0, -28.4], [21.7, 0.4, -17.9]])
+    lch = Lab_to_LCh(lab)
+    header = (
+        "sample;L* -15°;a*-15;-15°_b*;45as15 L*;45as15 a*;45as15 b*;L 45;a 45;b 45;C* 45°;h° 45°"
+    )
+    row = ["blue", *(f"{v:.4f}".replace(".", ",") for v in lab.ravel()), "44,0", "0,0"]
+    row[-2:] = [f"{lch[2, 1]:.4f}".replace(".", ","), f"{lch[2, 2]:.4f}".replace(".", ",")]
+    wide = _csv(tmp_path, header + "\n" + ";".join(row))
+    with pytest.warns(Note, match=r"45° lamp \(-15° as 45as-15, 45 as 45as45\)"):
+        (read,) = read_measurements(wide)
+    assert [g.name for g in read.geometries] == ["45as-15", "45as15", "45as45"]
+    assert read.spectra_recovered
+    np.testing.assert_allclose(read.stored_lab, np.round(lab, 4), atol=1e-9)
+    long = tmp_path / "long.csv"
+    long.write_text("sample,geometry,L,a,b\n" + "\n".join(
+        f"blue,{g},{L:.4f},{a:.4f},{b:.4f}" for g, (L, a, b) in
+        zip(("45as-15", "45as15", "45as45"), lab, strict=True)
+    ))  # fmt: skip
+    _same_readings([read], read_measurements(long))
 
 
 def test_a_csv_colour_headed_as_instruments_export_it_is_read(tmp_path):

@@ -529,6 +529,15 @@ def convert(
             "semicolons, numbers with a decimal comma (flakelab reads it back).",
         ),
     ] = False,
+    wide: Annotated[
+        bool,
+        typer.Option(
+            "--wide",
+            help="A CSV of a row per sample, its L*a*b* and spectra at each geometry in columns "
+            "('L* 45as15', 'R400 45as15'), as a spreadsheet of panels holds them (flakelab "
+            "reads it back).",
+        ),
+    ] = False,
     lab_only: Annotated[
         bool,
         typer.Option(
@@ -587,7 +596,9 @@ def convert(
             replace(m, stored_lab=m.lab(cond), stored_lab_conditions=cond, spectra_recovered=True)
             for m in measurements
         ]
-    write_measurements(measurements, target, to and to.value, decimal_comma=decimal_comma)
+    write_measurements(
+        measurements, target, to and to.value, decimal_comma=decimal_comma, wide=wide
+    )
     written = "stdout" if to_stdout else target
     errors.print(f"wrote {counted(len(measurements), 'measurement')} to {written}", highlight=False)
     if pictures := camera_pictures_in(source):

@@ -25,6 +25,7 @@ __all__ = [
     "Geometry",
     "INSTRUMENT_GEOMETRIES",
     "DEFAULT_INSTRUMENT",
+    "LAMP_OF_AN_ASPECULAR_ANGLE",
     "FLOP_AXES",
     "N_BINDER",
     "parse_geometry",
@@ -175,6 +176,11 @@ INSTRUMENT_GEOMETRIES: dict[str, tuple[str, ...]] = {
     "five-angle": ("45as15", "45as25", "45as45", "45as75", "45as110"),
 }
 """Geometry sets of common multi-angle instruments, in their export order."""
+
+LAMP_OF_AN_ASPECULAR_ANGLE = 45.0
+"""The illumination angle [°] an aspecular angle given alone (``15°``, a spreadsheet's ``L*
+15°``) is taken at: every instrument of :data:`INSTRUMENT_GEOMETRIES` lights at 45°, and the
+MA-T12's second lamp (15°) is named in full in its exports."""
 
 DEFAULT_INSTRUMENT = "five-angle"
 """The geometry set (and so the shipped model) used where no option names one: five-angle

@@ -135,7 +135,7 @@ def detect_format(path: str | PathLike) -> str:
     raise MeasurementFileError(
         path,
         "not a measurement file: expected MA-T12 xlsx, CxF3, flakelab JSON or a CSV with "
-        "a 'geometry' column",
+        "a 'sample' column and a 'geometry' column, or columns at a geometry ('L* 45as15')",
     )
 
 
@@ -271,9 +271,11 @@ def write_measurements(
     format: str | None = None,
     *,
     decimal_comma: bool = False,
+    wide: bool = False,
 ) -> None:
     """Write measurements; the format comes from ``format`` or the extension of ``path``.
-    ``decimal_comma``: a CSV file as a spreadsheet in most of Europe opens it."""
+    ``decimal_comma``: a CSV file as a spreadsheet in most of Europe opens it; ``wide``: a CSV
+    file of a row per sample."""
     if not measurements:
         raise ValueError("expected at least one measurement to write, got none")
     name = format or format_for_path(path)
@@ -282,10 +284,11 @@ def write_measurements(
     to_stdout = os.fspath(path) == STANDARD_STREAM
     if not to_stdout and format and (said := _format_said(path)) not in (None, format):
         raise MeasurementFileError(path, f"its extension says {said}, not {format}")
-    if decimal_comma and name != "csv":
-        raise MeasurementFileError(
-            "stdout" if to_stdout else path, f"a decimal comma is for a CSV file, not {name}"
-        )
+    for option, what in ((decimal_comma, "a decimal comma"), (wide, "a row per sample")):
+        if option and name != "csv":
+            raise MeasurementFileError(
+                "stdout" if to_stdout else path, f"{what} is for a CSV file, not {name}"
+            )
     recovered = next((m for m in measurements if m.spectra_recovered), None)
     if recovered and name not in COLOUR_ALONE_FORMATS:
         raise MeasurementFileError(
@@ -294,7 +297,7 @@ def write_measurements(
             f"them as measured; write {' or '.join(COLOUR_ALONE_FORMATS)}, which keep its "
             "L*a*b* alone",
         )
-    options = {"decimal_comma": True} if decimal_comma else {}
+    options = {k: True for k, v in (("decimal_comma", decimal_comma), ("wide", wide)) if v}
     if to_stdout:
         return _write_to_stdout(measurements, name, options)
     try:

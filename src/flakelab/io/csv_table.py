@@ -1,6 +1,6 @@
-"""CSV: one row per sample × geometry (the layout of spreadsheets and of ../shared/data).
+"""CSV: a row per sample × geometry (the layout of ../shared/data), or a row per sample.
 
-Columns, in any order after the first two:
+A row per reading: columns, in any order after the first two,
 
 ``sample``, ``geometry``          required; geometry as an ASTM name (``45as15``)
 ``R400`` … ``R700``               reflectance factor per wavelength [0–1]; any regular grid
@@ -11,6 +11,15 @@ Columns, in any order after the first two:
 ``instrument``, ``measured_at``   optional; ISO 8601 date-time, or ``22.11.2026 09:30``
 ``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
 ``lab_conditions``                optional, e.g. ``D65/10``
+
+A row per sample (``wide``, as a spreadsheet of panels holds them): no ``geometry`` column;
+each quantity above is headed with the geometry it was read at, either first, joined by a
+space, an underscore, ``@``, ``:`` or nothing: ``L* 45as15``, ``45as15 L*``, ``R400_45as15``,
+``h°45as110``. An aspecular angle alone (``L* 15°``, ``a*-15``, ``as25 b*``), as multi-angle
+instruments head their readings, is taken at the 45° lamp
+(:data:`~flakelab.core.geometry.LAMP_OF_AN_ASPECULAR_ANGLE`), and a note says so. A sample's
+cells at a geometry it was not read at are left empty. Texture, ``instrument``,
+``measured_at`` and ``lab_conditions`` are columns as above.
 
 A row may state its colour in several of these forms, as instruments export them; the first
 (L*a*b*, then L*C*h°, then XYZ) is kept, and the others must agree with it to ΔE00
@@ -30,16 +39,21 @@ from __future__ import annotations
 
 import csv
 import io
+import re
+import warnings
+from dataclasses import dataclass
+from datetime import datetime
 from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
 from flakelab.core.colorimetry import D65_10, Conditions
+from flakelab.core.geometry import LAMP_OF_AN_ASPECULAR_ANGLE, Geometry
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
-from flakelab.errors import MeasurementFileError
+from flakelab.errors import MeasurementFileError, Note
 from flakelab.io.records import (
     NOT_UTF8,
     Reading,
@@ -75,7 +89,9 @@ _COLOUR_NAMES = {name for form in _COLOUR_COLUMNS.values() for names in form for
 _META = ("sample", "geometry", "instrument", "measured_at", "lab_conditions", *_COLOUR_NAMES)
 
 
-def _colour_columns(path: str | PathLike, columns: dict[str, int]) -> dict[str, list[int]]:
+def _colour_columns(
+    path: str | PathLike, columns: dict[str, int], where: str, header: list[str]
+) -> dict[str, list[int]]:
     """The columns of each form of colour the header states (L*a*b*, L*C*h°, XYZ), by the
     names of :data:`_COLOUR_COLUMNS`; a coordinate headed twice (``L`` and ``L*``), or colour
     columns no whole form uses (``C`` without ``h``), refused naming them."""
@@ -86,8 +102,10 @@ def _colour_columns(path: str | PathLike, columns: dict[str, int]) -> dict[str, 
             twice = [name for name in names if name in columns]
             if len(twice) > 1:
                 raise MeasurementFileError(
-                    path, f"columns {twice[0]!r} and {twice[1]!r} both give one value",
-                    field="header",
+                    path,
+                    f"columns {header[columns[twice[0]]]!r} and {header[columns[twice[1]]]!r} "
+                    "both give one value",
+                    field=where,
                 )  # fmt: skip
             headed[form] += twice
     forms = {
@@ -106,9 +124,10 @@ def _colour_columns(path: str | PathLike, columns: dict[str, int]) -> dict[str, 
         wanted = ", ".join(names[0] for names in _COLOUR_COLUMNS[form])
         raise MeasurementFileError(
             path,
-            f"{'column' if len(names) == 1 else 'columns'} {', '.join(names)} without the rest "
+            f"{'column' if len(names) == 1 else 'columns'} "
+            f"{', '.join(header[columns[name]] for name in names)} without the rest "
             f"of a colour: {form} needs {wanted}",
-            field="header",
+            field=where,
         )
     return forms
 
@@ -144,8 +163,175 @@ def _decimal_points(row: list[str], numeric: list[int]) -> list[str]:
     return row
 
 
+_ANGLE = r"[-+]?\d+(?:\.\d+)?"
+_AT = rf"(?:\d+(?:\.\d+)?\s*)?(?i:as)\s*{_ANGLE}(?:\s*(?i:az)\s*{_ANGLE})?|{_ANGLE}\s*°?"
+_QUANTITY = r"hab|h°|[LabCh]\*?|[XYZ]|R?\d{3}(?:\.\d+)?(?:\s*nm)?"
+_AT_GEOMETRY = (
+    re.compile(rf"^(?P<q>{_QUANTITY})[\s_@:]*(?P<g>{_AT})$"),
+    re.compile(rf"^(?P<g>{_AT})[\s_@:]+(?P<q>{_QUANTITY})$"),
+)
+"""A column of the wide layout: a quantity (a colour coordinate of :data:`_COLOUR_COLUMNS` or
+a wavelength) at a geometry, either first: ``L* 45as15``, ``L*15°``, ``a*_-15``, ``R400
+45as15``, ``45as15 L*``."""
+
+_QUANTITY_ALONE = re.compile(rf"^(?:{_QUANTITY})$")
+_ROW_COLUMNS = ("sample", "instrument", "measured_at", "lab_conditions", "texture (Sa15 … G)")
+"""The columns a wide file gives once per row (named in a message)."""
+
+_ASPECULAR_ALONE = re.compile(rf"^(?i:as)?\s*({_ANGLE})\s*°?$")
+
+
+@dataclass(frozen=True)
+class _Block:
+    """Where a row gives one reading: at ``geometry`` (None: the one its ``geometry`` cell
+    names), labelled as the header labels it; its reflectance columns and its colour's columns
+    by form, and each column's name in messages."""
+
+    geometry: Geometry | None
+    label: str
+    spectral: list[int]
+    forms: dict[str, list[int]]
+    names: dict[int, str]
+    lamp_unsaid: bool = False
+
+    @property
+    def cells(self) -> list[int]:
+        return [*self.spectral, *(i for indices in self.forms.values() for i in indices)]
+
+
+def _split_wide(header: list[str]) -> dict[int, tuple[str, str]]:
+    """The columns of the header that give a quantity at a geometry: index → (quantity,
+    geometry as headed)."""
+    found = {}
+    for i, name in enumerate(header):
+        if name in _META or name in TEXTURE_READINGS:
+            continue
+        match = next((m for p in _AT_GEOMETRY if (m := p.match(name))), None)
+        if match is not None:
+            found[i] = match["q"].strip(), match["g"].strip()
+    return found
+
+
+def _headed_geometry(path: str | PathLike, label: str, column: str) -> tuple[Geometry, bool]:
+    """The geometry a wide column's label names, and whether it named an aspecular angle alone
+    (taken at :data:`~flakelab.core.geometry.LAMP_OF_AN_ASPECULAR_ANGLE`)."""
+    alone = _ASPECULAR_ALONE.match(label)
+    try:
+        if alone is not None:
+            return Geometry(LAMP_OF_AN_ASPECULAR_ANGLE, float(alone[1])), True
+        return Geometry.parse(label), False
+    except ValueError as error:
+        raise MeasurementFileError(path, str(error), field=f"header, {column}") from None
+
+
+def _long_blocks(path: str | PathLike, header: list[str]) -> list[_Block]:
+    """The one reading a row of the long layout gives."""
+    columns = {h: i for i, h in enumerate(header)}
+    spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
+    names = dict(enumerate(header))
+    return [_Block(None, "", spectral, _colour_columns(path, columns, "header", header), names)]
+
+
+def _wide_blocks(
+    path: str | PathLike, header: list[str], wide: dict[int, tuple[str, str]]
+) -> list[_Block]:
+    """The readings a row of the wide layout gives, one per geometry in the header's order;
+    a column the layout does not read, or a geometry headed in two ways, refused by name."""
+    loose = [
+        h for i, h in enumerate(header)
+        if i not in wide and (h in _COLOUR_NAMES or h not in _META and h not in TEXTURE_READINGS)
+    ]  # fmt: skip
+    if loose:
+        quantity = _QUANTITY_ALONE.match(loose[0])
+        raise MeasurementFileError(
+            path,
+            f"column {loose[0]!r} "
+            + ("gives no geometry" if quantity else "is no quantity flakelab reads")
+            + ": a file without a geometry column heads each quantity with its geometry, such "
+            f"as 'L* 45as15', 'a* 15°' or 'R400 45as15', beside {', '.join(_ROW_COLUMNS)}",
+            field="header",
+        )
+    quantities: dict[Geometry, dict[str, int]] = {}
+    labels: dict[Geometry, str] = {}
+    unsaid: set[Geometry] = set()
+    for i, (quantity, label) in wide.items():
+        geometry, lamp_unsaid = _headed_geometry(path, label, header[i])
+        if geometry in labels and (geometry in unsaid) != lamp_unsaid:
+            raise MeasurementFileError(
+                path,
+                f"{geometry.name} is headed both {labels[geometry]!r} and {label!r}, its lamp "
+                "unsaid in one: name it alike in both",
+                field=f"header, {header[i]}",
+            )
+        if quantity in quantities.setdefault(geometry, {}):
+            first = header[quantities[geometry][quantity]]
+            raise MeasurementFileError(
+                path, f"columns {first!r} and {header[i]!r} both give one value", field="header"
+            )
+        quantities[geometry][quantity] = i
+        labels.setdefault(geometry, label)
+        if lamp_unsaid:
+            unsaid.add(geometry)
+    blocks = []
+    for geometry, named in quantities.items():
+        where = f"header, {labels[geometry]}"
+        forms = _colour_columns(path, named, where, header)
+        spectral = [i for q, i in named.items() if q not in _COLOUR_NAMES]
+        names = {i: q for q, i in named.items()}
+        blocks.append(
+            _Block(geometry, labels[geometry], spectral, forms, names, geometry in unsaid)
+        )
+    return blocks
+
+
+def _note_lamps_unsaid(path: str | PathLike, blocks: list[_Block]) -> None:
+    """Say which of a wide file's geometries were headed by an aspecular angle alone, and
+    read at :data:`~flakelab.core.geometry.LAMP_OF_AN_ASPECULAR_ANGLE`."""
+    unsaid = [f"{b.label} as {b.geometry.name}" for b in blocks if b.lamp_unsaid]
+    if unsaid:
+        warnings.warn(
+            f"{path}: aspecular angles alone are read at a "
+            f"{LAMP_OF_AN_ASPECULAR_ANGLE:g}° lamp ({', '.join(unsaid)}), as multi-angle "
+            "instruments name their readings",
+            Note,
+            stacklevel=4,
+        )
+
+
+def _grid(path: str | PathLike, header: list[str], blocks: list[_Block]) -> np.ndarray:
+    """The wavelengths [nm] of the file's reflectance columns, one grid for every geometry
+    (:data:`WAVELENGTHS` where it gives colour alone); a geometry without them, or on another
+    grid, refused by name."""
+    spectral = [block for block in blocks if block.spectral]
+    if not spectral:
+        return WAVELENGTHS
+    grids = []
+    for block in spectral:
+        where = f"header, {block.label}" if block.geometry is not None else "header"
+        labels = [block.names[i] for i in block.spectral]
+        grids.append(parse_wavelength_header(
+            path, labels, where, [f"column {i + 1}" for i in block.spectral]
+        ))  # fmt: skip
+        if grids[-1].shape != grids[0].shape or not np.allclose(grids[-1], grids[0]):
+            raise MeasurementFileError(
+                path,
+                f"{block.label}'s reflectance columns lie on another wavelength grid than "
+                f"{spectral[0].label}'s",
+                field=where,
+            )
+    bare = next((block for block in blocks if not block.spectral), None)
+    if bare is not None:
+        raise MeasurementFileError(
+            path,
+            f"{bare.label} has no reflectance columns where {spectral[0].label} has: a file gives "
+            "spectra at every geometry, or colour alone",
+            field=f"header, {bare.label}",
+        )
+    return grids[0]
+
+
 def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]:
-    """Read measurements from a CSV file in the layout above."""
+    """Read measurements from a CSV file in either layout above."""
     if text is None:
         try:
             text = Path(path).read_text(encoding="utf-8-sig")
@@ -167,37 +353,20 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         )
     header = [h.strip() for h in header]
     columns = {h: i for i, h in enumerate(header)}
-    for required in ("sample", "geometry"):
-        if required not in columns:
-            found = f"columns: {', '.join(header[:6])}…"
-            if "case_id" in columns and "sample" not in columns:  # cases.exchange's first
-                found = "this is a case history, which 'flakelab cases import' reads"
-            raise MeasurementFileError(
-                path, f"missing column {required!r} ({found})", field="header"
-            )
-    if len(columns) != len(header):
-        duplicate = next(h for h in header if header.count(h) > 1)
-        raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
-    spectral = [i for i, h in enumerate(header) if h not in _META and h not in TEXTURE_READINGS]
-    forms = _colour_columns(path, columns)
-    if not spectral and not forms:
+    _check_header(path, header, columns)
+    wide = _split_wide(header) if "geometry" not in columns else {}
+    blocks = _wide_blocks(path, header, wide) if wide else _long_blocks(path, header)
+    if not any(block.cells for block in blocks):
         raise MeasurementFileError(
             path,
             "no reflectance columns such as R400, nor a colour: L, a, b (or L, C, h, or X, Y, Z)",
             field="header",
         )
-    names = {form: ", ".join(header[i] for i in indices) for form, indices in forms.items()}
-    lab_alone = not spectral  # spectra recovered from the colour (a metamer of many)
-    wavelengths = (
-        WAVELENGTHS
-        if lab_alone
-        else parse_wavelength_header(
-            path, [header[i] for i in spectral], "header", [f"column {i + 1}" for i in spectral]
-        )
-    )
+    wavelengths = _grid(path, header, blocks)
+    lab_alone = not any(block.spectral for block in blocks)  # spectra recovered from the colour
     if delimiter != ",":  # the comma is free to be the decimal mark
-        stated = [i for indices in forms.values() for i in indices]
-        numeric = [*spectral, *stated, *(columns[k] for k in TEXTURE_READINGS if k in columns)]
+        texture = [columns[k] for k in TEXTURE_READINGS if k in columns]
+        numeric = [*(i for block in blocks for i in block.cells), *texture]
         rows = ((number, _decimal_points(row, numeric)) for number, row in rows)
     rows = list(rows)
     lab_conditions = _conditions_named(path, rows, columns.get("lab_conditions"))
@@ -214,27 +383,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         sample = row[columns["sample"]].strip()
         if not sample:
             raise MeasurementFileError(path, "empty sample name", field=f"{where}, sample")
-        geometry = parse_geometry_name(path, row[columns["geometry"]], f"{where}, geometry")
-        given = {form: c for form, c in forms.items() if any(row[i].strip() for i in c)}
-        if lab_alone and not given:  # the first form's empty cell, named
-            given = dict([next(iter(forms.items()))])
-        stated = {
-            names[form]: parse_colour(
-                path, form, [row[i] for i in c], where, [header[i] for i in c], lab_conditions
-            )
-            for form, c in given.items()
-        }
-        lab = agreed_colour(path, stated, where)
-        measured_at = None
-        if "measured_at" in columns and row[columns["measured_at"]].strip():
-            try:
-                measured_at = read_time(row[columns["measured_at"]])
-            except ValueError:
-                raise MeasurementFileError(
-                    path,
-                    f"expected {TIME_EXPECTED}, got {row[columns['measured_at']]!r}",
-                    field=f"{where}, measured_at",
-                ) from None
+        measured_at = _measured_at(path, row, columns, where)
         for k in TEXTURE_READINGS:
             if k in columns and row[columns[k]].strip():
                 value = parse_texture(path, row[columns[k]], f"{where}, {k}")
@@ -247,21 +396,32 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
                     )
         if "instrument" in columns and row[columns["instrument"]].strip():
             instruments.add(row[columns["instrument"]].strip())
-        readings.append(
-            Reading(
-                where=where,
-                sample=sample,
-                geometry=geometry,
-                lab=lab,
-                measured_at=measured_at,
-                reflectance=None
-                if lab_alone
-                else parse_spectrum(path, [row[i] for i in spectral], wavelengths, where),
+        read = len(readings)
+        for block in blocks:
+            if block.geometry is None:
+                geometry = parse_geometry_name(path, row[columns["geometry"]], f"{where}, geometry")
+                at = where
+            elif any(row[i].strip() for i in block.cells):
+                geometry, at = block.geometry, f"{where}, {block.label}"
+            else:  # the sample was not read at this geometry
+                continue
+            readings.append(
+                Reading(
+                    where=at,
+                    sample=sample,
+                    geometry=geometry,
+                    lab=_stated_colour(path, row, at, block, lab_alone, lab_conditions),
+                    measured_at=measured_at,
+                    reflectance=None
+                    if lab_alone
+                    else parse_spectrum(path, [row[i] for i in block.spectral], wavelengths, at),
+                )
             )
-        )
+        if len(readings) == read:
+            raise MeasurementFileError(path, f"{sample!r} is read at no geometry", field=where)
     if lab_alone and readings:
         readings = recovered_readings(path, readings, lab_conditions)
-    return assemble(
+    measurements = assemble(
         path,
         readings,
         wavelengths,
@@ -270,12 +430,84 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         instrument=instruments.pop() if len(instruments) == 1 else None,
         spectra_recovered=lab_alone,
     )
+    _note_lamps_unsaid(path, blocks)
+    return measurements
+
+
+def _check_header(path: str | PathLike, header: list[str], columns: dict[str, int]) -> None:
+    """A header naming its samples, each column once, and either a geometry column or columns
+    at a geometry (:data:`_AT_GEOMETRY`), but not both."""
+    if "sample" not in columns:
+        found = f"columns: {', '.join(header[:6])}…"
+        if "case_id" in columns:  # cases.exchange's first
+            found = "this is a case history, which 'flakelab cases import' reads"
+        raise MeasurementFileError(path, f"missing column 'sample' ({found})", field="header")
+    if len(columns) != len(header):
+        duplicate = next(h for h in header if header.count(h) > 1)
+        raise MeasurementFileError(path, f"column {duplicate!r} appears twice", field="header")
+    wide = _split_wide(header)
+    if "geometry" in columns and wide:
+        raise MeasurementFileError(
+            path,
+            f"a geometry column and columns at a geometry ({header[next(iter(wide))]!r}): a file "
+            "gives a row per reading, or a row per sample",
+            field="header",
+        )
+    if "geometry" not in columns and not wide:
+        raise MeasurementFileError(
+            path,
+            f"missing column 'geometry', or columns at a geometry such as 'L* 45as15' (columns: "
+            f"{', '.join(header[:6])}…)",
+            field="header",
+        )
+
+
+def _measured_at(
+    path: str | PathLike, row: list[str], columns: dict[str, int], where: str
+) -> datetime | None:
+    cell = row[columns["measured_at"]] if "measured_at" in columns else ""
+    if not cell.strip():
+        return None
+    try:
+        return read_time(cell)
+    except ValueError:
+        raise MeasurementFileError(
+            path, f"expected {TIME_EXPECTED}, got {cell!r}", field=f"{where}, measured_at"
+        ) from None
+
+
+def _stated_colour(
+    path: str | PathLike,
+    row: list[str],
+    where: str,
+    block: _Block,
+    lab_alone: bool,
+    conditions: Conditions,
+) -> np.ndarray | None:
+    """The colour a reading states (L*a*b* ``[3]``, see :func:`agreed_colour`), None where it
+    states none; where the file gives colour alone, its first form's empty cell is refused."""
+    given = {form: c for form, c in block.forms.items() if any(row[i].strip() for i in c)}
+    if lab_alone and not given:  # the first form's empty cell, named
+        given = dict([next(iter(block.forms.items()))])
+    stated = {
+        ", ".join(block.names[i] for i in c): parse_colour(
+            path, form, [row[i] for i in c], where, [block.names[i] for i in c], conditions
+        )
+        for form, c in given.items()
+    }
+    return agreed_colour(path, stated, where)
 
 
 def write_csv(
-    measurements: list[Measurement], path: str | PathLike, *, decimal_comma: bool = False
+    measurements: list[Measurement],
+    path: str | PathLike,
+    *,
+    decimal_comma: bool = False,
+    wide: bool = False,
 ) -> None:
-    """Write measurements in the CSV layout above (full float precision); with
+    """Write measurements in the CSV layout above (full float precision): a row per reading,
+    or ``wide``, a row per sample with its L*a*b* and then its spectra at each geometry
+    (``L* 45as15``, ``R400 45as15``), as a spreadsheet of panels holds them. With
     ``decimal_comma``, as a spreadsheet in most of Europe opens it: cells separated by
     semicolons, numbers with a decimal comma, a byte-order mark for its encoding.
     Measurements whose spectra were recovered from L*a*b* are written as they were read, L*a*b*
@@ -286,29 +518,56 @@ def write_csv(
     lab_alone = colour_alone(measurements)
     texture_keys = [k for k in TEXTURE_READINGS if any(k in m.texture for m in measurements)]
     with_lab = any(m.stored_lab is not None for m in measurements)
-    header = ["sample", "geometry", *(f"R{w:g}" for w in wavelengths if not lab_alone)]
-    header += ["L", "a", "b", "lab_conditions"] if with_lab else []
-    header += ["instrument", "measured_at", *texture_keys]
+    bands = () if lab_alone else tuple(f"R{w:g}" for w in wavelengths)
+    colour = ("L*", "a*", "b*") if with_lab else ()
 
     def number(value: float) -> str:
         text = repr(float(value))
         return decimal_comma_in(text) if decimal_comma else text
 
+    def cells(m: Measurement, i: int | None) -> tuple[list[str], list[str]]:
+        """The colour and the spectrum of ``m`` at its ``i``-th geometry (empty cells where it
+        has none)."""
+        if i is None:
+            return [""] * len(colour), [""] * len(bands)
+        known = with_lab and m.stored_lab is not None
+        lab = [number(v) for v in m.stored_lab[i]] if known else [""] * len(colour)
+        return lab, [number(v) for v in m.reflectance[i]] if bands else []
+
+    def conditions(m: Measurement) -> list[str]:
+        return [str(m.stored_lab_conditions) if m.stored_lab is not None else ""] * with_lab
+
+    def rest(m: Measurement) -> list[str]:
+        return [
+            m.instrument or "",
+            m.measured_at.isoformat() if m.measured_at else "",
+            *(number(m.texture[k]) if k in m.texture else "" for k in texture_keys),
+        ]
+
+    tail = [*(["lab_conditions"] * with_lab), "instrument", "measured_at", *texture_keys]
+    if wide:
+        geometries = list(dict.fromkeys(g for m in measurements for g in m.geometries))
+        header = ["sample"]
+        header += [f"{q} {g.name}" for g in geometries for q in colour]
+        header += [f"{q} {g.name}" for g in geometries for q in bands]
+        table = [header + tail]
+        for m in measurements:
+            at = [
+                cells(m, m.geometries.index(g) if g in m.geometries else None) for g in geometries
+            ]
+            lab = [c for lab, _ in at for c in lab]
+            spectra = [c for _, spectrum in at for c in spectrum]
+            table.append([m.sample, *lab, *spectra, *conditions(m), *rest(m)])
+    else:
+        table = [["sample", "geometry", *bands, *("L", "a", "b")[: len(colour)], *tail]]
+        for m in measurements:
+            for i, g in enumerate(m.geometries):
+                lab, spectrum = cells(m, i)
+                table.append([m.sample, g.name, *spectrum, *lab, *conditions(m), *rest(m)])
+
     separator, encoding = csv_form(decimal_comma)
     buffer = io.StringIO()
-    writer = csv.writer(buffer, delimiter=separator, lineterminator="\n")
-    writer.writerow(header)
-    for m in measurements:
-        for i, g in enumerate(m.geometries):
-            spectrum = () if lab_alone else m.reflectance[i]
-            row: list[object] = [m.sample, g.name, *(number(v) for v in spectrum)]
-            if with_lab:
-                lab = m.stored_lab[i] if m.stored_lab is not None else ("", "", "")
-                row += [*(number(v) if v != "" else "" for v in lab)]
-                row += [str(m.stored_lab_conditions) if m.stored_lab is not None else ""]
-            row += [m.instrument or "", m.measured_at.isoformat() if m.measured_at else ""]
-            row += [number(m.texture[k]) if k in m.texture else "" for k in texture_keys]
-            writer.writerow(row)
+    csv.writer(buffer, delimiter=separator, lineterminator="\n").writerows(table)
     write_atomically(
         path, lambda temporary: temporary.write_text(buffer.getvalue(), encoding=encoding)
     )
