@@ -161,7 +161,11 @@ WIDE_BANDS = "sample," + ",".join(f"R{w} {g}" for g in ("15°", "45°") for w in
         ),  # fmt: skip
         (WIDE + ",L* 45as45\n" + WIDE_ROW + ",1", "header, L* 45as45", "headed both '45°'"),
         (WIDE + ",L\n" + WIDE_ROW + ",1", "header", "column 'L' gives no geometry"),
-        (WIDE + ",dE 15°\n" + WIDE_ROW + ",1", "header", "column 'dE 15°' is no quantity flakelab reads"),
+        (
+            WIDE + ",dE 15°\n" + WIDE_ROW + ",1",
+            "header",
+            "column 'dE 15°' is no quantity flakelab reads",
+        ),
         (WIDE + ",L* 75°,a* 75°\n" + WIDE_ROW + ",1,2", "header, 75°", "L* 75°, a* 75° without"),
         (WIDE + ",L* 140°\n" + WIDE_ROW + ",1", "header, L* 140°", "detector above"),
         (
@@ -1501,9 +1505,9 @@ def test_a_csv_of_a_row_per_sample_reads_as_its_row_per_reading(rich_measurement
 def test_a_wide_csv_headed_as_a_spreadsheet_of_panels_is_read(tmp_path):
     """The headers of a row per panel, as spreadsheets and instrument exports write them: the
     quantity first or the geometry first, joined by a space, an underscore or nothing, and an
-    aspecular angle alone (``L* -15°``, ``a*15``, ``as25_b*``) read at the 45° lamp with a
-    note; L*C*h° beside them. Each reading lands at its geometry as the same colours written a
-    row per reading do."""
+    aspecular angle alone (``L* -15°``, ``a*-15``, ``-15°_b*``) read at the 45° lamp with a
+    note; L*C*h° beside them; sparkle headed with its lamp apart (``Sa 15°``). Each reading
+    lands at its geometry as the same colours written a row per reading do."""
     from flakelab.core.colorimetry import Lab_to_LCh
     from flakelab.errors import Note
 
@@ -1511,18 +1515,20 @@ def test_a_wide_csv_headed_as_a_spreadsheet_of_panels_is_read(tmp_path):
     lch = Lab_to_LCh(lab)
     header = (
         "sample;L* -15°;a*-15;-15°_b*;45as15 L*;45as15 a*;45as15 b*;L 45;a 45;b 45;C* 45°;h° 45°"
+        ";Sa 15°;Si_15;G"
     )
-    row = ["blue", *(f"{v:.4f}".replace(".", ",") for v in lab.ravel()), "44,0", "0,0"]
-    row[-2:] = [f"{lch[2, 1]:.4f}".replace(".", ","), f"{lch[2, 2]:.4f}".replace(".", ",")]
+    row = ["blue", *(f"{v:.4f}".replace(".", ",") for v in lab.ravel())]
+    row += [f"{lch[2, 1]:.4f}".replace(".", ","), f"{lch[2, 2]:.4f}".replace(".", ",")]
+    row += ["2,5", "3,25", "1,5"]
     wide = _csv(tmp_path, header + "\n" + ";".join(row))
     with pytest.warns(Note, match=r"45° lamp \(-15° as 45as-15, 45 as 45as45\)"):
         (read,) = read_measurements(wide)
     assert [g.name for g in read.geometries] == ["45as-15", "45as15", "45as45"]
-    assert read.spectra_recovered
+    assert read.spectra_recovered and read.texture == {"Sa15": 2.5, "Si15": 3.25, "G": 1.5}
     np.testing.assert_allclose(read.stored_lab, np.round(lab, 4), atol=1e-9)
     long = tmp_path / "long.csv"
-    long.write_text("sample,geometry,L,a,b\n" + "\n".join(
-        f"blue,{g},{L:.4f},{a:.4f},{b:.4f}" for g, (L, a, b) in
+    long.write_text("sample,geometry,L,a,b,Sa15,Si15,G\n" + "\n".join(
+        f"blue,{g},{L:.4f},{a:.4f},{b:.4f},2.5,3.25,1.5" for g, (L, a, b) in
         zip(("45as-15", "45as15", "45as45"), lab, strict=True)
     ))  # fmt: skip
     _same_readings([read], read_measurements(long))

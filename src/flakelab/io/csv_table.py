@@ -9,7 +9,8 @@ A row per reading: columns, in any order after the first two,
 ``L``, ``C``, ``h``               or L*C*h° [h in degrees] (``L*``, ``C*``, ``h°`` or ``hab``)
 ``X``, ``Y``, ``Z``               or XYZ [Y 0–100] under ``lab_conditions``
 ``instrument``, ``measured_at``   optional; ISO 8601 date-time, or ``22.11.2026 09:30``
-``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample
+``Sa15`` … ``G``                  optional texture readings; repeated on every row of a sample;
+                                  also headed ``Sa 15°``, ``Si_45``
 ``lab_conditions``                optional, e.g. ``D65/10``
 
 A row per sample (``wide``, as a spreadsheet of panels holds them): no ``geometry`` column;
@@ -177,6 +178,17 @@ a wavelength) at a geometry, either first: ``L* 45as15``, ``L*15°``, ``a*_-15``
 _QUANTITY_ALONE = re.compile(rf"^(?:{_QUANTITY})$")
 _ROW_COLUMNS = ("sample", "instrument", "measured_at", "lab_conditions", "texture (Sa15 … G)")
 """The columns a wide file gives once per row (named in a message)."""
+
+_TEXTURE_SPELT = re.compile(r"^(S[ai])[\s_]*(15|45|75)\s*°?$")
+"""A sparkle reading headed with its lamp's angle apart (``Sa 15°``, ``Si_45``)."""
+
+
+def _texture_named(header: str) -> str:
+    """A header as :data:`~flakelab.core.measurement.TEXTURE_READINGS` names it where it heads a
+    sparkle reading (``Sa 15°`` → ``Sa15``); any other as it stands."""
+    spelt = _TEXTURE_SPELT.match(header)
+    return f"{spelt[1]}{spelt[2]}" if spelt else header
+
 
 _ASPECULAR_ALONE = re.compile(rf"^(?i:as)?\s*({_ANGLE})\s*°?$")
 
@@ -351,7 +363,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         raise MeasurementFileError(
             path, "no comma, semicolon or tab separated header", field="header"
         )
-    header = [h.strip() for h in header]
+    header = [_texture_named(h.strip()) for h in header]
     columns = {h: i for i, h in enumerate(header)}
     _check_header(path, header, columns)
     wide = _split_wide(header) if "geometry" not in columns else {}
