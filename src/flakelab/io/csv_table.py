@@ -310,7 +310,7 @@ def _note_lamps_unsaid(path: str | PathLike, blocks: list[_Block]) -> None:
         )
 
 
-def _grid(path: str | PathLike, header: list[str], blocks: list[_Block]) -> np.ndarray:
+def _grid(path: str | PathLike, blocks: list[_Block]) -> np.ndarray:
     """The wavelengths [nm] of the file's reflectance columns, one grid for every geometry
     (:data:`WAVELENGTHS` where it gives colour alone); a geometry without them, or on another
     grid, refused by name."""
@@ -374,7 +374,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
             "no reflectance columns such as R400, nor a colour: L, a, b (or L, C, h, or X, Y, Z)",
             field="header",
         )
-    wavelengths = _grid(path, header, blocks)
+    wavelengths = _grid(path, blocks)
     lab_alone = not any(block.spectral for block in blocks)  # spectra recovered from the colour
     if delimiter != ",":  # the comma is free to be the decimal mark
         texture = [columns[k] for k in TEXTURE_READINGS if k in columns]
