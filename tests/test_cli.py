@@ -179,6 +179,56 @@ def test_convert_lab_only_writes_the_colour_and_no_spectra(tmp_path, cli):
     assert not (tmp_path / "car.json").exists()
 
 
+def test_compare_all_judges_each_sample_as_compare_judges_it_alone(tmp_path, cli):
+    """``compare REFERENCE SAMPLES --all``: each panel of a batch judged against the target as
+    ``compare`` judges it alone (its worst ΔE00 and verdict), a row each, how many pass, and
+    ``--fail-on-reject`` exits 1 when any fails. A panel read at five geometries is judged at
+    those, the others named; one sharing none is refused by name; options that pick one sample
+    are refused."""
+    from flakelab.core.geometry import Geometry, instrument_geometries
+
+    target, sprayout = (read_measurement(example_path(n)) for n in ("target", "sprayout"))
+    five = [sprayout.index(g) for g in instrument_geometries("five-angle")]
+    batch = [
+        replace(sprayout, sample="first"),
+        replace(sprayout, sample="too light", reflectance=sprayout.reflectance * 1.15),
+        replace(sprayout, sample="five", geometries=tuple(sprayout.geometries[i] for i in five),
+                reflectance=sprayout.reflectance[five]),
+    ]  # fmt: skip
+    panels = tmp_path / "batch.csv"
+    write_measurements(batch, panels, wide=True)
+    done = cli("compare", example_path("target"), panels, "--all", "--json")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert (report["compared"], report["passed"]) == (3, 2)
+    for row in report["samples"]:
+        alone = cli("compare", example_path("target"), panels, "--sample-name", row["sample"],
+                    "--json")  # fmt: skip
+        assert json.loads(alone.stdout)["de00_max"] == row["de00_max"]
+        assert json.loads(alone.stdout)["pass"] == row["pass"], row["sample"]
+    judged = [g.name for g in instrument_geometries("five-angle")]
+    assert [g["name"] for g in report["samples"][2]["geometries"]] == judged
+    left = [g for g in target.geometry_names if g not in judged]
+    assert report["samples"][2]["not_compared"] == {"reference": left, "sample": []}
+    shown = cli("compare", example_path("target"), panels, "--all", "--fail-on-reject")
+    assert shown.returncode == 1
+    said = " ".join(shown.stdout.split())
+    assert "2 of 3 samples pass" in said and "too light" in said and "fail at" in said
+    lacks = "not compared for five: 7 of the reference's geometries, which the sample lacks: "
+    assert lacks + ", ".join(left) in said
+    refused = cli("compare", example_path("target"), panels, "--all", "--sample-name", "five")
+    assert refused.returncode == 2 and "--all compares every sample of SAMPLE" in refused.stderr
+    apart = replace(sprayout, sample="apart", geometries=(Geometry(45, 60),),
+                    reflectance=sprayout.reflectance[:1])  # fmt: skip
+    write_measurements([batch[0], apart], tmp_path / "apart.csv", wide=True)
+    lost = cli("compare", example_path("target"), tmp_path / "apart.csv", "--all")
+    assert (
+        lost.returncode == 2
+        and "sample 'apart'" in lost.stderr
+        and "share no geometry" in (" ".join(lost.stderr.split()))
+    )
+
+
 def test_convert_wide_writes_a_row_per_sample_that_reads_back(tmp_path, cli):
     """``convert --wide``: the example car in one row, its spectra at each of the 12
     geometries in columns; compared with the car it differs by nothing, and ``--lab-only``

@@ -303,11 +303,21 @@ def compare(
             "colour its spectrum gives, to this figure (.png, .pdf, .svg).",
         ),
     ] = None,
+    every: Annotated[
+        bool,
+        typer.Option(
+            "--all",
+            help="Compare every sample of SAMPLE with the reference (a batch of panels, a QC "
+            "job's trials): a row each and how many pass; --plot draws them all, "
+            "--fail-on-reject exits 1 when any fails.",
+        ),
+    ] = False,
 ) -> None:
     """Multi-angle colour difference of a sample against a reference, with pass/fail.
 
     With --nearest, the reference file holds many standards, and the sample is compared with
-    the one it lies nearest."""
+    the one it lies nearest; with --all, every sample of the sample file is compared with the
+    reference."""
     from flakelab.core.colorimetry import Conditions
     from flakelab.core.comparison import compare as compare_measurements
     from flakelab.core.comparison import spread_of_readings
@@ -319,17 +329,32 @@ def compare(
     if nearest and (reference_sample or average):
         raise FlakelabError("--nearest ranks every standard of the reference file: "
                             "not with --reference-sample or --average")  # fmt: skip
+    if every and (sample_name or average_sprayed or nearest or render or pictures):
+        raise FlakelabError("--all compares every sample of SAMPLE: not with --sample-name, "
+                            "--average-sprayed, --nearest, --render or --images")  # fmt: skip
     check_figure_file(render)
     check_figure_file(plot, "--plot")
     check_figure_file(pictures, "--images", reads={"REFERENCE": reference, "SAMPLE": sample},
                       writes={"--render": render, "--plot": plot})  # fmt: skip
     lamps = render_lamps(lamps, render)
     tol = read_tolerance(tolerance)
+    light = Conditions.parse(conditions)
+    tests = lights_option(lights, light) or tuple(
+        t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
+    )
+    if every:
+        ref, _ = read_readings(
+            reference or example_path("target"), reference_sample, average, "--reference-sample"
+        )
+        passed = _compare_every(ref, sample or example_path("sprayout"), tol, light, tests,
+                                as_json, plot)  # fmt: skip
+        if fail_on_reject and not passed:
+            raise typer.Exit(1)
+        return
     smp, smp_readings = read_readings(
         sample or example_path("sprayout"), sample_name, average_sprayed, "--sample-name",
         "--average-sprayed",
     )  # fmt: skip
-    light = Conditions.parse(conditions)
     ranked = []
     if nearest:
         ranked = _ranked_references(reference or example_path("target"), smp, tol, light)
@@ -338,9 +363,6 @@ def compare(
         ref, ref_readings = read_readings(
             reference or example_path("target"), reference_sample, average, "--reference-sample"
         )
-    tests = lights_option(lights, light) or tuple(
-        t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
-    )
     result = compare_measurements(ref, smp, tol, conditions=light, lights=tests)
     report = result.to_dict()
     if nearest:
@@ -372,6 +394,80 @@ def compare(
         _print_comparison(report, tol)
     if fail_on_reject and not result.all_pass:
         raise typer.Exit(1)
+
+
+def _compare_every(ref, path, tol, light, tests, as_json: bool, plot) -> bool:
+    """``compare --all``: every sample of the file at ``path`` compared with ``ref``, reported
+    as a table (or JSON) and drawn with ``--plot``; whether every one passes."""
+    from flakelab.core.comparison import compare as compare_measurements
+    from flakelab.io import read_measurements
+
+    results = []
+    for smp in read_measurements(path):
+        try:
+            results.append(compare_measurements(ref, smp, tol, conditions=light, lights=tests))
+        except ValueError as error:
+            raise MeasurementFileError(path, str(error), field=f"sample {smp.sample!r}") from None
+    passed = sum(r.all_pass for r in results)
+    report = {"reference": ref.sample, "conditions": str(light), "tolerance": tol.name,
+              "compared": len(results), "passed": passed,
+              "samples": [r.to_dict() for r in results]}  # fmt: skip
+    if plot is not None:
+        shared = {r.geometries for r in results}
+        if len(shared) > 1:
+            raise FlakelabError(
+                f"--plot: the samples of {path} share different geometries with {ref.sample!r}; "
+                "one chart draws samples at the same geometries"
+            )
+        first = results[0]
+        draw_differences(first.geometries, first.lab_reference,
+                         {r.sample.sample: r.lab_sample for r in results}, tol, plot,
+                         f"{path.name if isinstance(path, Path) else path} vs {ref.sample} "
+                         f"({light}): {passed} of {len(results)} pass",
+                         texture={r.sample.sample: r.texture_share for r in results})  # fmt: skip
+        report["plot"] = str(plot)
+    if as_json:
+        print_report(report, indent=1)
+    else:
+        _print_every(report, path)
+    return passed == len(results)
+
+
+def _print_every(report: dict[str, Any], path) -> None:
+    """``compare --all``'s table: each sample's worst ΔE00 and share of the limit, and what
+    fails it."""
+    from flakelab.core.tolerance import failures
+
+    table = Table(
+        title=f"Each sample of {path} against {report['reference']} ({report['tolerance']}, "
+        f"{report['conditions']})",
+        box=box.SIMPLE_HEAD,
+        collapse_padding=True,
+    )
+    for column in ("#", "sample", "worst ΔE00", "worst share of the limit", "verdict"):
+        table.add_column(column, justify="right" if column == "#" else "left")
+    for k, row in enumerate(report["samples"], 1):
+        worst = max(row["geometries"], key=lambda g: g["de00"])
+        shares = {g["name"]: g["limit_share"] for g in row["geometries"]}
+        shares |= row["texture_limit_share"]
+        at = max(shares, key=shares.__getitem__)
+        failing = failures(row["failing_geometries"], row["failing_texture"])
+        verdict = "[green]pass[/]" if row["pass"] else f"[red]fail[/] at {', '.join(failing)}"
+        table.add_row(str(k), escape(row["sample"]), f"{worst['de00']:.2f} {worst['name']}",
+                      f"{shares[at]:.0%} {at}", verdict)  # fmt: skip
+    console.print(table)
+    compared, passed = report["compared"], report["passed"]
+    colour = "green" if passed == compared else "red"
+    console.print(f"[{colour}]{passed} of {counted(compared, 'sample')} pass[/]", highlight=False)
+    for row in report["samples"]:
+        for which, names in row["not_compared"].items():
+            other = "sample" if which == "reference" else "reference"
+            if names:
+                console.print(
+                    f"[yellow]not compared for {escape(row['sample'])}:[/] {len(names)} of the "
+                    f"{which}'s geometries, which the {other} lacks: {', '.join(names)}",
+                    highlight=False,
+                )
 
 
 def _ranked_references(path, sample, tolerance, conditions) -> list:
