@@ -364,6 +364,20 @@ def as_panel_sheet(measurement, path: Path) -> None:
     path.write_text(re.sub(r" 45as(-?\d+)", r" \1°", header) + "\n" + rest, encoding="utf-8")
 
 
+def sheet_saved_as_csv(export: Path, sheet: str, path: Path) -> None:
+    """One sheet of an MA-T12 export saved as CSV, as a spreadsheet saves the sheet it shows."""
+    import openpyxl
+
+    workbook = openpyxl.load_workbook(export, read_only=True)
+    with path.open("w", newline="", encoding="utf-8") as out:
+        csv.writer(out).writerows(
+            ["" if c is None else c.strftime("%d.%m.%Y %H:%M") if hasattr(c, "strftime") else c
+             for c in row]
+            for row in workbook[sheet].iter_rows(values_only=True)
+        )  # fmt: skip
+    workbook.close()
+
+
 def _is_number(cell: str) -> bool:
     try:
         float(cell)
@@ -388,6 +402,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     write_measurements([read_measurement(sprayout)], work / "sprayout.json")
     write_measurements([measurement], work / "good.xlsx")
     add_camera_pictures(work / "good.xlsx", work / "pictures.xlsx", measurement.sample)
+    sheet_saved_as_csv(work / "good.xlsx", "Spectral Data", work / "sheet.csv")
     spots = [replace(measurement, sample=f"spot {i}", stored_lab=None) for i in (1, 2, 3)]
     write_measurements(spots, work / "spots.json")
     habits = ShopHabits(np.array([0.04, np.log(0.96), 0.005]), np.array([0.02, 0.001, 0.001]), 200,
@@ -451,6 +466,8 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # a row per sample: spectra at each geometry; colour headed by aspecular angles alone
         "wide": (work / "wide.csv", lambda p: ["compare", str(p), str(target)]),
         "panels": (work / "panels.csv", lambda p: ["match", str(p), "--candidates", "1"]),
+        # an MA-T12 export's Spectral Data sheet saved as CSV
+        "sheet": (work / "sheet.csv", lambda p: ["inspect", str(p)]),
         "json": (work / "good.json", lambda p: ["inspect", str(p)]),
         "xlsx": (work / "good.xlsx", lambda p: ["inspect", str(p)]),
         # an export with the camera's pictures, drawn by inspect --images

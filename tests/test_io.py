@@ -1534,6 +1534,88 @@ def test_a_wide_csv_headed_as_a_spreadsheet_of_panels_is_read(tmp_path):
     _same_readings([read], read_measurements(long))
 
 
+def _sheet_as_csv(export: Path, sheet: str, path: Path, european: bool = False) -> Path:
+    """One sheet of an MA-T12 export saved as CSV, as a spreadsheet saves the sheet it shows:
+    its preamble rows, dates as it shows them (``29.05.2024 19:02:51``), numbers in full; with
+    ``european``, semicolons and decimal commas."""
+    import openpyxl
+
+    workbook = openpyxl.load_workbook(export, read_only=True)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, delimiter=";" if european else ",", lineterminator="\n")
+    for row in workbook[sheet].iter_rows(values_only=True):
+        cells = []
+        for cell in row:
+            if isinstance(cell, datetime):
+                cell = cell.strftime("%d.%m.%Y %H:%M:%S")
+            elif isinstance(cell, float):
+                cell = repr(cell).replace(".", ",") if european else repr(cell)
+            cells.append("" if cell is None else cell)
+        writer.writerow(cells)
+    workbook.close()
+    path.write_text(buffer.getvalue(), encoding="utf-8")
+    return path
+
+
+def test_a_sheet_of_an_ma_t12_export_saved_as_csv_reads_as_the_export(ma_t12_files, tmp_path):
+    """A sheet of each of the six real MA-T12 exports saved as CSV, as a spreadsheet saves the
+    sheet it shows: ``QC JOB:``, ``STANDARD:`` (and ``ILLUMINANT/OBSERVER:``) rows, then
+    ``Name, Date/Time, Geometry`` and ``L* (D65/10)`` or wavelengths. Its Spectral Data reads
+    as the workbook does (spectra exactly, the instrument, the job, the date); its Color Data
+    as the workbook saved with that sheet alone (the instrument's L*a*b*, spectra recovered),
+    with semicolons and decimal commas too. Before, each was refused "missing column
+    'sample'"."""
+    for export in ma_t12_files:
+        (workbook,) = read_measurements(export)
+        spectral = _sheet_as_csv(export, "Spectral Data", tmp_path / "spectral.csv")
+        (read,) = read_measurements(spectral)
+        assert (read.sample, read.geometries) == (workbook.sample, workbook.geometries)
+        np.testing.assert_array_equal(read.reflectance, workbook.reflectance)
+        assert read.instrument == workbook.instrument == "X-Rite MA-T12"
+        assert read.metadata == workbook.metadata and "qc_job" in read.metadata
+        assert read.measured_at == workbook.measured_at.replace(microsecond=0)
+        for european in (False, True):
+            colour = _sheet_as_csv(export, "Color Data", tmp_path / "colour.csv", european)
+            (read,) = read_measurements(colour)
+            assert read.spectra_recovered and read.geometries == workbook.geometries
+            np.testing.assert_array_equal(read.stored_lab, workbook.stored_lab)
+            assert read.metadata == workbook.metadata, export.name
+
+
+@pytest.mark.parametrize(
+    ("damage", "field", "problem"),
+    [
+        (lambda t: t.replace("Name,", "Sample,", 1), "row 4", "without its header row"),
+        (lambda t: t.replace("Date/Time", "When", 1), "header", "expected columns Name, Date"),
+        (
+            lambda t: t.replace("a* (D65/10)", "a* (A/10)"),
+            "header, a* (A/10)",
+            "A/10, where preamble, ILLUMINANT/OBSERVER states D65/10",
+        ),  # fmt: skip
+        (
+            lambda t: t.replace("D65/10,", "D65/99,", 1),
+            "preamble, ILLUMINANT/OBSERVER",
+            "expected observer",
+        ),  # fmt: skip
+        (lambda t: t.replace("15as-30", "15as-300", 1), "row 6, geometry", "detector above"),
+        (lambda t: t.replace(",15as-30,", ",15as-30,x", 1), "row 6, L*", "expected a number"),
+        # after Excel's separator line, which it hides: the row it shows
+        (lambda t: "sep=,\n" + t.replace(",15as-30,", ",15as-30,x", 1), "row 6, L*", "a number"),
+    ],
+)
+def test_a_damaged_ma_t12_sheet_saved_as_csv_is_refused_by_its_row(
+    ma_t12_files, tmp_path, damage, field, problem
+):
+    """Refusals of a sheet saved as CSV name the spreadsheet's own row (the header is row 4,
+    under three preamble rows) or the header's column."""
+    colour = _sheet_as_csv(ma_t12_files[0], "Color Data", tmp_path / "colour.csv")
+    colour.write_text(damage(colour.read_text()))
+    with pytest.raises(MeasurementFileError) as caught:
+        read_measurements(colour)
+    said = str(caught.value)
+    assert f"colour.csv: {field}" in said and problem in said, said
+
+
 def test_a_csv_colour_headed_as_instruments_export_it_is_read(tmp_path):
     """A CSV of colour alone headed ``L*, a*, b*``, or giving L*C*h° or XYZ [Y 0–100], as
     instruments and spreadsheets export a colour, is read as that colour (colour-science's

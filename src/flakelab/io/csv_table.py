@@ -22,6 +22,11 @@ instruments head their readings, is taken at the 45° lamp
 cells at a geometry it was not read at are left empty. Texture, ``instrument``,
 ``measured_at`` and ``lab_conditions`` are columns as above.
 
+A sheet of an MA-T12 export saved as CSV (a spreadsheet saves the sheet it shows) is read as
+the workbook's sheet is: its ``QC JOB:``, ``STANDARD:``, ``ILLUMINANT/OBSERVER:`` rows, then
+``Name, Date/Time, Geometry`` for ``sample, measured_at, geometry``, and ``L* (D65/10)`` …
+or wavelengths; rows are named as the spreadsheet numbers them.
+
 A row may state its colour in several of these forms, as instruments export them; the first
 (L*a*b*, then L*C*h°, then XYZ) is kept, and the others must agree with it to ΔE00
 :data:`~flakelab.io.records.STATED_ALIKE` (:func:`~flakelab.io.records.agreed_colour`).
@@ -55,6 +60,13 @@ from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import MeasurementFileError, Note
+from flakelab.io.mat12_xlsx import (
+    PREAMBLE_KEYS,
+    ROW_KEYS,
+    instrument_of_sheet,
+    job_of,
+    split_sheet,
+)
 from flakelab.io.records import (
     NOT_UTF8,
     Reading,
@@ -62,8 +74,11 @@ from flakelab.io.records import (
     assemble,
     colour_alone,
     csv_form,
+    csv_rows,
+    csv_separator,
     decimal_comma_in,
     decimal_point,
+    named_separator,
     parse_colour,
     parse_conditions,
     parse_geometry_name,
@@ -134,10 +149,13 @@ def _colour_columns(
 
 
 def _conditions_named(
-    path: str | PathLike, rows: list[tuple[int, list[str]]], column: int | None
+    path: str | PathLike,
+    rows: list[tuple[int, list[str]]],
+    column: int | None,
+    stated: Conditions | None = None,
 ) -> Conditions:
-    """The one ``lab_conditions`` the rows name (D65/10 where none); a row naming others than
-    an earlier row is refused, naming both."""
+    """The one ``lab_conditions`` the rows name (else those the header ``stated``, else
+    D65/10); a row naming others than an earlier row is refused, naming both."""
     first: tuple[int, str] | None = None
     for number, row in rows if column is not None else ():
         named = row[column].strip() if column < len(row) else ""
@@ -151,7 +169,7 @@ def _conditions_named(
                 field=f"row {number}, lab_conditions",
             )
     if first is None:
-        return D65_10
+        return stated or D65_10
     return parse_conditions(path, first[1], f"row {first[0]}, lab_conditions")
 
 
@@ -352,9 +370,10 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]
+    sheet, lines, before = _export_sheet(path, lines)
 
     def refused(number: int, problem: str) -> MeasurementFileError:
-        return MeasurementFileError(path, problem, field=f"row {number}")
+        return MeasurementFileError(path, problem, field=f"row {number + before}")
 
     delimiter, header, rows = spreadsheet_table(io.StringIO("\n".join(lines)), refused)
     if header is None:
@@ -364,6 +383,10 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
             path, "no comma, semicolon or tab separated header", field="header"
         )
     header = [_texture_named(h.strip()) for h in header]
+    stated = None
+    if sheet is not None:
+        header, stated = _sheet_header(path, header, sheet)
+        rows = ((number + before, row) for number, row in rows)
     columns = {h: i for i, h in enumerate(header)}
     _check_header(path, header, columns)
     wide = _split_wide(header) if "geometry" not in columns else {}
@@ -381,7 +404,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         numeric = [*(i for block in blocks for i in block.cells), *texture]
         rows = ((number, _decimal_points(row, numeric)) for number, row in rows)
     rows = list(rows)
-    lab_conditions = _conditions_named(path, rows, columns.get("lab_conditions"))
+    lab_conditions = _conditions_named(path, rows, columns.get("lab_conditions"), stated)
 
     readings, texture, instruments = [], {}, set()
     for number, row in rows:
@@ -433,6 +456,8 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
             raise MeasurementFileError(path, f"{sample!r} is read at no geometry", field=where)
     if lab_alone and readings:
         readings = recovered_readings(path, readings, lab_conditions)
+    if sheet is not None:
+        instruments = {instrument_of_sheet(sheet)}
     measurements = assemble(
         path,
         readings,
@@ -440,10 +465,78 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         lab_conditions=lab_conditions,
         texture=texture,
         instrument=instruments.pop() if len(instruments) == 1 else None,
+        metadata={r.sample: job_of(sheet) for r in readings} if sheet else None,
         spectra_recovered=lab_alone,
     )
     _note_lamps_unsaid(path, blocks)
     return measurements
+
+
+def _export_sheet(
+    path: str | PathLike, lines: list[str]
+) -> tuple[dict[str, str] | None, list[str], int]:
+    """A sheet of an MA-T12 export saved as CSV (a spreadsheet saves the sheet it shows): its
+    preamble (``QC JOB:``, ``STANDARD:``, ``ILLUMINANT/OBSERVER:`` …), its lines from the
+    header row on (``Name, Date/Time, Geometry, …``; after Excel's ``sep=`` line, where it has
+    one), and how many lines it left out before that row; any other file: None, its lines, 0."""
+    hint = named_separator(lines[0]) if lines else None  # Excel's "sep=;" line
+    table = lines[1:] if hint else lines
+    separator = hint or (csv_separator(table[0]) if table else None)
+    opening = table[: len(PREAMBLE_KEYS) + 1]  # every preamble row once, then the header
+
+    def refused(number: int, problem: str) -> MeasurementFileError:
+        return MeasurementFileError(path, problem, field=f"row {number}")
+
+    cells = list(csv_rows(opening, separator or ",", refused))
+    first = cells[0][0].strip() if cells and cells[0] else ""
+    if not first.endswith(":") or first[:-1] not in PREAMBLE_KEYS:
+        return None, lines, 0
+    preamble, header = split_sheet([tuple(row) for row in cells])
+    if header < 0:
+        raise MeasurementFileError(
+            path,
+            f"an MA-T12 sheet's preamble ({first} …) without its header row "
+            f"'{', '.join(ROW_KEYS)}, …'",
+            field=f"row {len(preamble) + 1 + bool(hint)}",
+        )
+    return preamble, lines[: bool(hint)] + table[header:], header
+
+
+_STATED_UNDER = re.compile(r"^(?P<name>.+?)\s*\((?P<conditions>[^()]+)\)$")
+"""A sheet's colour column, headed with the conditions it is stated under: ``L* (D65/10)``."""
+
+
+def _sheet_header(
+    path: str | PathLike, header: list[str], sheet: dict[str, str]
+) -> tuple[list[str], Conditions | None]:
+    """An MA-T12 sheet's header as the layout above names its columns (``Name, Date/Time,
+    Geometry`` → ``sample, measured_at, geometry``; ``L* (D65/10)`` → ``L*``), and the
+    conditions its colour is stated under (its ``ILLUMINANT/OBSERVER:`` row, and those its
+    colour columns name, which must agree); None where it states none."""
+    if header[:3] != list(ROW_KEYS):
+        raise MeasurementFileError(
+            path, f"expected columns {', '.join(ROW_KEYS)}, got {header[:3]}", field="header"
+        )
+    key = "ILLUMINANT/OBSERVER"
+    named = {f"preamble, {key}": sheet[key]} if sheet.get(key) else {}
+    renamed = ["sample", "measured_at", "geometry"]
+    for h in header[3:]:
+        under = _STATED_UNDER.match(h)
+        if under is not None and under["name"] in _COLOUR_NAMES:
+            named[f"header, {h}"] = under["conditions"]
+            h = under["name"]
+        renamed.append(h)
+    stated = {where: parse_conditions(path, text, where) for where, text in named.items()}
+    first, conditions = next(iter(stated.items()), (None, None))
+    other = next(((where, c) for where, c in stated.items() if c != conditions), None)
+    if other is not None:
+        raise MeasurementFileError(
+            path,
+            f"{other[1]}, where {first} states {conditions}: a file's colours are stated "
+            "under one set of conditions",
+            field=other[0],
+        )
+    return renamed, conditions
 
 
 def _check_header(path: str | PathLike, header: list[str], columns: dict[str, int]) -> None:

@@ -58,6 +58,11 @@ __all__ = [
     "is_diffuse_picture",
     "write_mat12_xlsx",
     "INSTRUMENT",
+    "PREAMBLE_KEYS",
+    "ROW_KEYS",
+    "instrument_of_sheet",
+    "job_of",
+    "split_sheet",
 ]
 
 INSTRUMENT = "X-Rite MA-T12"
@@ -70,13 +75,15 @@ _SPECTRAL, _COLOR, _TEXTURE, _IMAGES = (
 _DIFFUSE_IMAGE = re.compile(r"\d+d")
 """A camera picture's row label under diffuse light (``15d``), where the others name a
 geometry."""
-_ROW_KEYS = ("Name", "Date/Time", "Geometry")
+ROW_KEYS = ("Name", "Date/Time", "Geometry")
 """The columns that open each data sheet's rows."""
+PREAMBLE_KEYS = ("QC JOB", "STANDARD", "ILLUMINANT/OBSERVER", "INSTRUMENT")
+"""The rows (``QC JOB:`` …) a data sheet may open with, before its header."""
 _DROPPED_PICTURE = re.compile(r"image (\S+) will be removed")
 """openpyxl's warning for a picture it could not open (``openpyxl.reader.drawings``)."""
 
 
-def _split_sheet(rows: list[tuple]) -> tuple[dict[str, str], int]:
+def split_sheet(rows: list[tuple]) -> tuple[dict[str, str], int]:
     """Preamble key/values (``QC JOB`` …) and the index of the header row (first cell 'Name')."""
     preamble: dict[str, str] = {}
     for i, row in enumerate(rows):
@@ -141,7 +148,7 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
             sheets = _sheets(path, handle)
     except OSError as error:
         raise MeasurementFileError(path, f"cannot be read ({error.strerror})") from None
-    color_preamble = _split_sheet(sheets[_COLOR])[0] if _COLOR in sheets else {}
+    color_preamble = split_sheet(sheets[_COLOR])[0] if _COLOR in sheets else {}
     lab_conditions = D65_10
     if color_preamble.get("ILLUMINANT/OBSERVER"):
         lab_conditions = parse_conditions(
@@ -157,13 +164,13 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
             path, f"no sheet {_SPECTRAL!r} (sheets: {', '.join(sheets) or 'none'})"
         )
     spectral = sheets[_SPECTRAL]
-    preamble, header = _split_sheet(spectral)
+    preamble, header = split_sheet(spectral)
     if header < 0:
         raise MeasurementFileError(path, "no header row starting with 'Name'", field=_SPECTRAL)
     labels = list(spectral[header])
     while labels and labels[-1] in (None, ""):
         labels.pop()
-    if labels[:3] != list(_ROW_KEYS):
+    if labels[:3] != list(ROW_KEYS):
         raise MeasurementFileError(
             path,
             f"expected columns Name, Date/Time, Geometry, got {labels[:3]}",
@@ -199,25 +206,29 @@ def read_mat12_xlsx(path: str | PathLike) -> list[Measurement]:
     return _assembled(path, sheets, readings, wavelengths, preamble, lab_conditions)
 
 
+def job_of(preamble: dict[str, str]) -> dict[str, str]:
+    """What a sheet's ``preamble`` says of the job, as each measurement's metadata keeps it."""
+    job = (("qc_job", preamble.get("QC JOB")), ("standard", preamble.get("STANDARD")))
+    return {k: v for k, v in job if v}
+
+
+def instrument_of_sheet(preamble: dict[str, str]) -> str:
+    """The instrument a sheet's ``preamble`` names (written by flakelab for others), else the
+    MA-T12 whose software wrote it."""
+    return preamble.get("INSTRUMENT") or INSTRUMENT
+
+
 def _assembled(path, sheets, readings, wavelengths, preamble, lab_conditions, recovered=False):
     """The export's measurements of ``readings``, with the texture sheet's readings and what
     the sheet's ``preamble`` says of the job."""
-    metadata = {
-        r.sample: {
-            k: v
-            for k, v in (("qc_job", preamble.get("QC JOB")), ("standard", preamble.get("STANDARD")))
-            if v
-        }
-        for r in readings
-    }
     return assemble(
         path,
         readings,
         wavelengths,
-        instrument=preamble.get("INSTRUMENT") or INSTRUMENT,
+        instrument=instrument_of_sheet(preamble),
         lab_conditions=lab_conditions,
         texture=_read_texture_sheet(path, sheets.get(_TEXTURE)),
-        metadata=metadata,
+        metadata={r.sample: job_of(preamble) for r in readings},
         spectra_recovered=recovered,
     )
 
@@ -331,7 +342,7 @@ def _color_rows(path: str | PathLike, rows: list[tuple] | None) -> list[Reading]
     """The Color Data sheet's readings: sample, geometry, L*a*b* and date, no spectrum."""
     if not rows:
         return []
-    _, header = _split_sheet(rows)
+    _, header = split_sheet(rows)
     if header < 0:
         return []
     readings = []
@@ -351,7 +362,7 @@ def _color_rows(path: str | PathLike, rows: list[tuple] | None) -> list[Reading]
 def _read_texture_sheet(path: str | PathLike, rows: list[tuple] | None) -> dict:
     if not rows:
         return {}
-    _, header = _split_sheet(rows)
+    _, header = split_sheet(rows)
     if header < 0:
         return {}
     labels = [str(v).strip() if v is not None else "" for v in rows[header]]
@@ -377,7 +388,7 @@ def _note_unread_texture(path: str | PathLike, labels: list[str], rows: list[tup
     unread = [
         label or f"column {openpyxl.utils.get_column_letter(i + 1)}"
         for i, label in enumerate(labels)
-        if i >= len(_ROW_KEYS) and label not in TEXTURE_READINGS
+        if i >= len(ROW_KEYS) and label not in TEXTURE_READINGS
         and any(i < len(row) and row[i] not in (None, "") for _, row in rows)
     ]  # fmt: skip
     if unread:
@@ -404,17 +415,17 @@ def write_mat12_xlsx(measurements: list[Measurement], path: str | PathLike) -> N
     color.append(["QC JOB:", job])
     color.append(["STANDARD:", standard])
     color.append(["ILLUMINANT/OBSERVER:", str(conditions)])
-    color.append([*_ROW_KEYS, *(f"{k}* ({conditions})" for k in "Lab")])
+    color.append([*ROW_KEYS, *(f"{k}* ({conditions})" for k in "Lab")])
     texture = workbook.create_sheet(_TEXTURE)
     texture.append(["QC JOB:", job])
     texture.append(["STANDARD:", standard])
-    texture.append([*_ROW_KEYS, *TEXTURE_READINGS])
+    texture.append([*ROW_KEYS, *TEXTURE_READINGS])
     spectral = workbook.create_sheet(_SPECTRAL)
     spectral.append(["QC JOB:", job])
     spectral.append(["STANDARD:", standard])
     if measurements[0].instrument and measurements[0].instrument != INSTRUMENT:
         spectral.append(["INSTRUMENT:", measurements[0].instrument])
-    spectral.append([*_ROW_KEYS, *(f"{w:g}" for w in wavelengths)])
+    spectral.append([*ROW_KEYS, *(f"{w:g}" for w in wavelengths)])
     for m in measurements:
         lab = m.stored_lab if m.stored_lab is not None else m.lab(conditions)
         when = _cell_time(m.measured_at)
