@@ -1607,7 +1607,11 @@ def test_a_damaged_ma_t12_sheet_saved_as_csv_is_refused_by_its_row(
     ma_t12_files, tmp_path, damage, field, problem
 ):
     """Refusals of a sheet saved as CSV name the spreadsheet's own row (the header is row 4,
-    under three preamble rows) or the header's column."""
+    under three preamble rows) or the header's column; the Texture Data sheet, which holds no
+    colour, is told which to save."""
+    texture = _sheet_as_csv(ma_t12_files[0], "Texture Data", tmp_path / "texture.csv")
+    with pytest.raises(MeasurementFileError, match="save its Spectral Data or Color Data sheet"):
+        read_measurements(texture)
     colour = _sheet_as_csv(ma_t12_files[0], "Color Data", tmp_path / "colour.csv")
     colour.write_text(damage(colour.read_text()))
     with pytest.raises(MeasurementFileError) as caught:

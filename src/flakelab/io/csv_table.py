@@ -392,9 +392,11 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     wide = _split_wide(header) if "geometry" not in columns else {}
     blocks = _wide_blocks(path, header, wide) if wide else _long_blocks(path, header)
     if not any(block.cells for block in blocks):
+        saved = "; a sheet saved alone: save its Spectral Data or Color Data sheet" if sheet else ""
         raise MeasurementFileError(
             path,
-            "no reflectance columns such as R400, nor a colour: L, a, b (or L, C, h, or X, Y, Z)",
+            "no reflectance columns such as R400, nor a colour: L, a, b (or L, C, h, or X, Y, Z)"
+            + saved,
             field="header",
         )
     wavelengths = _grid(path, blocks)
