@@ -88,6 +88,22 @@ def test_resample_keeps_smooth_spectra_and_colour():
     assert delta_E_CIE2000(reflectance_to_Lab(back), reflectance_to_Lab(R)) < 0.2
 
 
+def test_resample_onto_wavelengths_given_is_colour_science_s_alignment():
+    """Spectra resampled onto a grid whose every wavelength they give (Otsu's 380–730 nm
+    basis onto storage's 400–700 nm, 5 nm onto 10 nm) take those values at once: what
+    colour-science's alignment returns, to 1e-12, for rough spectra as for smooth ones."""
+    import colour
+
+    from flakelab.core.spectra import SHAPE_STORE
+
+    rng = np.random.default_rng(3)
+    for start, end, step in ((380, 730, 10), (400, 700, 5), (360, 780, 10)):
+        wl = np.arange(start, end + step / 2, step, dtype=float)
+        spectra = rng.uniform(0.0, 1.0, (7, wl.size))
+        aligned = colour.MultiSpectralDistributions(spectra.T, wl).copy().align(SHAPE_STORE)
+        np.testing.assert_allclose(resample(spectra, wl), aligned.values.T, atol=1e-12)
+
+
 def test_unknown_illuminant_and_observer_rejected_with_message():
     with pytest.raises(ValueError, match="expected an illuminant"):
         Conditions.parse("D66/10")

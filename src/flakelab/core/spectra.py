@@ -74,8 +74,11 @@ def resample(
     wl = np.asarray(wavelengths, dtype=float)
     if values.shape[-1] != wl.size:
         raise ValueError(f"expected {wl.size} values per spectrum, got {values.shape[-1]}")
-    if np.array_equal(wl, np.asarray(shape.wavelengths)):
-        return values.copy()
+    wanted = np.asarray(shape.wavelengths, dtype=float)
+    at = np.minimum(np.searchsorted(wl, wanted), wl.size - 1)
+    if np.all(np.abs(wl[at] - wanted) < 1e-9):
+        # every wavelength wanted was given: interpolation would return its value (to 1e-15)
+        return values[..., at].copy()
     flat = values.reshape(-1, wl.size)
     msds = colour.MultiSpectralDistributions(flat.T, wl)
     msds = msds.copy().align(shape)
