@@ -206,6 +206,12 @@ def test_compare_all_judges_each_sample_as_compare_judges_it_alone(tmp_path, cli
                     "--json")  # fmt: skip
         assert json.loads(alone.stdout)["de00_max"] == row["de00_max"]
         assert json.loads(alone.stdout)["pass"] == row["pass"], row["sample"]
+        worst = max(row["geometries"], key=lambda g: g["limit_share"])
+        assert row["de00_max_at"] == max(row["geometries"], key=lambda g: g["de00"])["name"]
+        assert (row["limit_share_at"], row["limit_share_max"]) == (
+            worst["name"],
+            worst["limit_share"],
+        )
     judged = [g.name for g in instrument_geometries("five-angle")]
     assert [g["name"] for g in report["samples"][2]["geometries"]] == judged
     left = [g for g in target.geometry_names if g not in judged]

@@ -447,14 +447,10 @@ def _print_every(report: dict[str, Any], path) -> None:
     for column in ("#", "sample", "worst ΔE00", "worst share of the limit", "verdict"):
         table.add_column(column, justify="right" if column == "#" else "left")
     for k, row in enumerate(report["samples"], 1):
-        worst = max(row["geometries"], key=lambda g: g["de00"])
-        shares = {g["name"]: g["limit_share"] for g in row["geometries"]}
-        shares |= row["texture_limit_share"]
-        at = max(shares, key=shares.__getitem__)
         failing = failures(row["failing_geometries"], row["failing_texture"])
         verdict = "[green]pass[/]" if row["pass"] else f"[red]fail[/] at {', '.join(failing)}"
-        table.add_row(str(k), escape(row["sample"]), f"{worst['de00']:.2f} {worst['name']}",
-                      f"{shares[at]:.0%} {at}", verdict)  # fmt: skip
+        table.add_row(str(k), escape(row["sample"]), f"{row['de00_max']:.2f} {row['de00_max_at']}",
+                      f"{row['limit_share_max']:.0%} {row['limit_share_at']}", verdict)  # fmt: skip
     console.print(table)
     compared, passed = report["compared"], report["passed"]
     colour = "green" if passed == compared else "red"

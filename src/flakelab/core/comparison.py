@@ -148,6 +148,9 @@ class Comparison:
             for k in self.reference.texture
             if k in self.sample.texture
         }
+        shares = dict(zip(self.geometries, self.limit_share.tolist(), strict=True))
+        shares |= self.texture_share
+        limit_share_at = max(shares, key=shares.__getitem__)  # a geometry, or a texture reading
         return {
             "reference": self.reference.sample,
             "sample": self.sample.sample,
@@ -156,8 +159,10 @@ class Comparison:
             "geometries": rows,
             "not_compared": self.not_compared,
             "de00_max": self.de00_max,
+            "de00_max_at": self.geometries[int(np.argmax(self.de00))],
             "de00_mean": self.de00_mean,
-            "limit_share_max": float(max([self.limit_share.max(), *self.texture_share.values()])),
+            "limit_share_max": shares[limit_share_at],
+            "limit_share_at": limit_share_at,
             "metamerism_index_max": worst_per_light(self.metamerism),
             "pass": self.all_pass,
             "failing_geometries": failing_geometries(self.geometries, self.passed),

@@ -388,8 +388,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         header, stated = _sheet_header(path, header, sheet)
         rows = ((number + before, row) for number, row in rows)
     columns = {h: i for i, h in enumerate(header)}
-    _check_header(path, header, columns)
-    wide = _split_wide(header) if "geometry" not in columns else {}
+    wide = _checked_header(path, header, columns)
     blocks = _wide_blocks(path, header, wide) if wide else _long_blocks(path, header)
     if not any(block.cells for block in blocks):
         saved = "; a sheet saved alone: save its Spectral Data or Color Data sheet" if sheet else ""
@@ -402,8 +401,8 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     wavelengths = _grid(path, blocks)
     lab_alone = not any(block.spectral for block in blocks)  # spectra recovered from the colour
     if delimiter != ",":  # the comma is free to be the decimal mark
-        texture = [columns[k] for k in TEXTURE_READINGS if k in columns]
-        numeric = [*(i for block in blocks for i in block.cells), *texture]
+        texture_columns = [columns[k] for k in TEXTURE_READINGS if k in columns]
+        numeric = [*(i for block in blocks for i in block.cells), *texture_columns]
         rows = ((number, _decimal_points(row, numeric)) for number, row in rows)
     rows = list(rows)
     lab_conditions = _conditions_named(path, rows, columns.get("lab_conditions"), stated)
@@ -541,9 +540,12 @@ def _sheet_header(
     return renamed, conditions
 
 
-def _check_header(path: str | PathLike, header: list[str], columns: dict[str, int]) -> None:
-    """A header naming its samples, each column once, and either a geometry column or columns
-    at a geometry (:data:`_AT_GEOMETRY`), but not both."""
+def _checked_header(
+    path: str | PathLike, header: list[str], columns: dict[str, int]
+) -> dict[int, tuple[str, str]]:
+    """The columns at a geometry (:func:`_split_wide`) of a header that names its samples and
+    each column once, and gives either a geometry column or columns at a geometry, not both
+    (none where it gives the geometry column)."""
     if "sample" not in columns:
         found = f"columns: {', '.join(header[:6])}…"
         if "case_id" in columns:  # cases.exchange's first
@@ -567,6 +569,7 @@ def _check_header(path: str | PathLike, header: list[str], columns: dict[str, in
             f"{', '.join(header[:6])}…)",
             field="header",
         )
+    return wide
 
 
 def _measured_at(
