@@ -235,6 +235,34 @@ def test_compare_all_judges_each_sample_as_compare_judges_it_alone(tmp_path, cli
     )
 
 
+def test_compare_all_of_a_qc_job_judges_its_trials_against_its_standard(tmp_path, cli):
+    """``compare JOB --all``: an MA-T12 QC job holding its standard (named by its
+    ``STANDARD:`` row, here not its first sample) and two trials; each trial is judged against
+    the standard, which is left out of the samples, and commands that read one sample of the
+    job read its standard, and say so."""
+    sprayout = read_measurement(example_path("sprayout"))
+    target = replace(read_measurement(example_path("target")), sample="std")
+    job = tmp_path / "job.xlsx"
+    trials = [replace(sprayout, sample=f"trial {i}", reflectance=sprayout.reflectance * i)
+              for i in (1.0, 1.1)]  # fmt: skip
+    write_measurements([replace(trials[0], metadata={"standard": "std"}), target, trials[1]], job)
+    done = cli("compare", job, "--all", "--json")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["reference"] == "std" and report["reference_left_out"]
+    assert [s["sample"] for s in report["samples"]] == ["trial 1.0", "trial 1.1"]
+    alone = json.loads(cli("compare", example_path("target"), job, "--sample-name", "trial 1.1",
+                           "--json").stdout)  # fmt: skip
+    assert report["samples"][1]["de00_max"] == pytest.approx(alone["de00_max"], abs=1e-9)
+    said = " ".join(done.stderr.split())
+    assert "holds 3 samples; read its QC job's standard, 'std'" in said, said
+    shown = cli("compare", job, "--all")
+    assert "the reference, 'std', is left out of its own file's samples" in " ".join(
+        shown.stdout.split()
+    )
+    assert "std" in cli("inspect", job).stdout.splitlines()[0]
+
+
 def test_convert_wide_writes_a_row_per_sample_that_reads_back(tmp_path, cli):
     """``convert --wide``: the example car in one row, its spectra at each of the 12
     geometries in columns; compared with the car it differs by nothing, and ``--lab-only``

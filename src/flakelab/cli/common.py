@@ -580,14 +580,15 @@ def shares_text(recipe: dict[str, float], shown: int = 3) -> str:
 def read_sample(path, sample: str | None, option: str = "--sample"):
     """One measurement of a file, as :func:`flakelab.io.read_measurement` reads it; when the
     file holds several and none was named, says which one was taken (its first)."""
-    from flakelab.io import pick_sample, read_measurements
+    from flakelab.io import pick_sample, read_measurements, standard_of
 
     measurements = read_measurements(path)
     chosen = pick_sample(measurements, sample, path)
     if sample is None and len(measurements) > 1:
+        which = "QC job's standard" if chosen is standard_of(measurements) else "first"
         errors.print(
             f"[yellow]note:[/] {escape(str(path))} holds {len(measurements)} samples; read its "
-            f"first, {escape(repr(chosen.sample))} ({option} names another)",
+            f"{which}, {escape(repr(chosen.sample))} ({option} names another)",
             highlight=False,
         )
     return chosen

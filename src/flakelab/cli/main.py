@@ -252,7 +252,13 @@ def _pictures_of(source: Path, pictures: dict, measurement) -> dict:
 @reports_errors
 def compare(
     reference: Annotated[Path | None, typer.Argument(help="Target / standard measurement.")] = None,
-    sample: Annotated[Path | None, typer.Argument(help="Sample (spray-out) measurement.")] = None,
+    sample: Annotated[
+        Path | None,
+        typer.Argument(
+            help="Sample (spray-out) measurement; with --all, the samples (default: the "
+            "reference's file, its standard left out)."
+        ),
+    ] = None,
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     reference_sample: Annotated[
         str | None,
@@ -324,6 +330,8 @@ def compare(
     from flakelab.core.difference import METAMERISM_ILLUMINANTS
     from flakelab.io import read_tolerance
 
+    if every and not example and sample is None:  # a QC job: its trials against its standard
+        sample = reference
     if not example and (reference is None or sample is None):
         raise FlakelabError("give a reference and a sample file, or --example")
     if nearest and (reference_sample or average):
@@ -346,8 +354,9 @@ def compare(
         ref, _ = read_readings(
             reference or example_path("target"), reference_sample, average, "--reference-sample"
         )
-        passed = _compare_every(ref, sample or example_path("sprayout"), tol, light, tests,
-                                as_json, plot)  # fmt: skip
+        samples = sample or example_path("sprayout")
+        itself = not average and Path(samples).resolve() == Path(reference or "").resolve()
+        passed = _compare_every(ref, samples, tol, light, tests, as_json, plot, itself)
         if fail_on_reject and not passed:
             raise typer.Exit(1)
         return
@@ -396,21 +405,27 @@ def compare(
         raise typer.Exit(1)
 
 
-def _compare_every(ref, path, tol, light, tests, as_json: bool, plot) -> bool:
+def _compare_every(ref, path, tol, light, tests, as_json: bool, plot, itself: bool) -> bool:
     """``compare --all``: every sample of the file at ``path`` compared with ``ref``, reported
-    as a table (or JSON) and drawn with ``--plot``; whether every one passes."""
+    as a table (or JSON) and drawn with ``--plot``, but ``ref`` itself where the file holds it
+    (``itself``: the reference's file); whether every one passes."""
     from flakelab.core.comparison import compare as compare_measurements
     from flakelab.io import read_measurements
 
+    samples = read_measurements(path)
+    if itself:
+        samples = [m for m in samples if m.sample != ref.sample]
+        if not samples:
+            raise MeasurementFileError(path, f"holds {ref.sample!r} alone: nothing to compare")
     results = []
-    for smp in read_measurements(path):
+    for smp in samples:
         try:
             results.append(compare_measurements(ref, smp, tol, conditions=light, lights=tests))
         except ValueError as error:
             raise MeasurementFileError(path, str(error), field=f"sample {smp.sample!r}") from None
     passed = sum(r.all_pass for r in results)
     report = {"reference": ref.sample, "conditions": str(light), "tolerance": tol.name,
-              "compared": len(results), "passed": passed,
+              "compared": len(results), "passed": passed, "reference_left_out": itself,
               "samples": [r.to_dict() for r in results]}  # fmt: skip
     if plot is not None:
         shared = {r.geometries for r in results}
@@ -455,6 +470,9 @@ def _print_every(report: dict[str, Any], path) -> None:
     compared, passed = report["compared"], report["passed"]
     colour = "green" if passed == compared else "red"
     console.print(f"[{colour}]{passed} of {counted(compared, 'sample')} pass[/]", highlight=False)
+    if report["reference_left_out"]:
+        console.print(f"the reference, {escape(repr(report['reference']))}, is left out of its "
+                      "own file's samples", highlight=False)  # fmt: skip
     for row in report["samples"]:
         for which, names in row["not_compared"].items():
             other = "sample" if which == "reference" else "reference"

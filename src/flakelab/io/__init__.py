@@ -48,6 +48,7 @@ __all__ = [
     "read_measurements",
     "read_measurement",
     "pick_sample",
+    "standard_of",
     "write_measurements",
     "read_tolerance",
     "read_recipe",
@@ -230,16 +231,26 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
 
 
 def read_measurement(path: str | PathLike, sample: str | None = None) -> Measurement:
-    """One measurement: the sample named, or the file's first (standard) one."""
+    """One measurement: the sample named, else the standard the file names, else its first
+    (:func:`pick_sample`)."""
     return pick_sample(read_measurements(path), sample, path)
+
+
+def standard_of(measurements: list[Measurement]) -> Measurement | None:
+    """The measurement a file names its QC job's standard (an MA-T12 export's ``STANDARD:``
+    row), where it holds it; else None."""
+    named = {m.metadata.get("standard") for m in measurements}
+    standard = named.pop() if len(named) == 1 else None
+    return next((m for m in measurements if standard and m.sample == standard), None)
 
 
 def pick_sample(
     measurements: list[Measurement], sample: str | None, path: str | PathLike
 ) -> Measurement:
-    """The sample named among a file's ``measurements``, or the first (standard) one."""
+    """The sample named among a file's ``measurements``; else the standard it names
+    (:func:`standard_of`), else its first."""
     if sample is None:
-        return measurements[0]
+        return standard_of(measurements) or measurements[0]
     for m in measurements:
         if m.sample == sample:
             return m
