@@ -579,7 +579,8 @@ def shares_text(recipe: dict[str, float], shown: int = 3) -> str:
 
 def read_sample(path, sample: str | None, option: str = "--sample"):
     """One measurement of a file, as :func:`flakelab.io.read_measurement` reads it; when the
-    file holds several and none was named, says which one was taken (its first)."""
+    file holds several and none was named, says which one was taken (the standard it names,
+    else its first)."""
     from flakelab.io import pick_sample, read_measurements, standard_of
 
     measurements = read_measurements(path)
