@@ -453,20 +453,15 @@ def _print_every(report: dict[str, Any], path) -> None:
     fails it."""
     from flakelab.core.tolerance import failures
 
-    table = Table(
-        title=f"Each sample of {path} against {report['reference']} ({report['tolerance']}, "
-        f"{report['conditions']})",
-        box=box.SIMPLE_HEAD,
-        collapse_padding=True,
-    )
-    for column in ("#", "sample", "worst ΔE00", "worst share of the limit", "verdict"):
-        table.add_column(column, justify="right" if column == "#" else "left")
-    for k, row in enumerate(report["samples"], 1):
-        failing = failures(row["failing_geometries"], row["failing_texture"])
-        verdict = "[green]pass[/]" if row["pass"] else f"[red]fail[/] at {', '.join(failing)}"
-        table.add_row(str(k), escape(row["sample"]), f"{row['de00_max']:.2f} {row['de00_max_at']}",
-                      f"{row['limit_share_max']:.0%} {row['limit_share_at']}", verdict)  # fmt: skip
-    console.print(table)
+    title = (f"Each sample of {path} against {report['reference']} ({report['tolerance']}, "
+             f"{report['conditions']})")  # fmt: skip
+    rows = [
+        (row["sample"], row["de00_max"], row["de00_max_at"], row["limit_share_max"],
+         row["limit_share_at"], "[green]pass[/]" if row["pass"] else "[red]fail[/] at "
+         + ", ".join(failures(row["failing_geometries"], row["failing_texture"])))
+        for row in report["samples"]
+    ]  # fmt: skip
+    console.print(_worst_table(title, "sample", rows))
     compared, passed = report["compared"], report["passed"]
     colour = "green" if passed == compared else "red"
     console.print(f"[{colour}]{passed} of {counted(compared, 'sample')} pass[/]", highlight=False)
@@ -502,20 +497,27 @@ def _ranked_references(path, sample, tolerance, conditions) -> list:
 
 def _print_ranked(report: dict[str, Any], path) -> None:
     """The standards nearest the sample, nearest first, each green where it passes."""
-    rows = report["nearest_references"]
-    table = Table(
-        title=f"The {len(rows)} of {report['references_ranked']} standards in {path} nearest "
-        f"{report['sample']} ({report['tolerance']})",
-        box=box.SIMPLE_HEAD,
-        collapse_padding=True,
-    )
-    for column in ("#", "standard", "worst ΔE00", "worst share of the limit", "verdict"):
+    ranked = report["nearest_references"]
+    title = (f"The {len(ranked)} of {report['references_ranked']} standards in {path} nearest "
+             f"{report['sample']} ({report['tolerance']})")  # fmt: skip
+    rows = [
+        (row["reference"], row["de00_max"], row["geometry"], row["limit_share_max"],
+         row["limit_share_at"], "[green]pass[/]" if row["pass"] else "[red]fail[/]")
+        for row in ranked
+    ]  # fmt: skip
+    console.print(_worst_table(title, "standard", rows))
+
+
+def _worst_table(title: str, named: str, rows: list[tuple]) -> Table:
+    """Comparisons a row each, numbered: what is compared (its column headed ``named``), its
+    worst ΔE00 and where, its worst share of the limit and where, and its verdict."""
+    table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True)
+    for column in ("#", named, "worst ΔE00", "worst share of the limit", "verdict"):
         table.add_column(column, justify="right" if column == "#" else "left")
-    for k, row in enumerate(rows, 1):
-        verdict = "[green]pass[/]" if row["pass"] else "[red]fail[/]"
-        table.add_row(str(k), row["reference"], f"{row['de00_max']:.2f} {row['geometry']}",
-                      f"{row['limit_share_max']:.0%} {row['limit_share_at']}", verdict)  # fmt: skip
-    console.print(table)
+    for k, (name, de00, de00_at, share, share_at, verdict) in enumerate(rows, 1):
+        table.add_row(str(k), escape(name), f"{de00:.2f} {de00_at}", f"{share:.0%} {share_at}",
+                      verdict)  # fmt: skip
+    return table
 
 
 def _render_comparison(ref, smp, report: dict, path: Path, conditions, lamps) -> None:
