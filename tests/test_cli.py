@@ -183,8 +183,8 @@ def test_compare_all_judges_each_sample_as_compare_judges_it_alone(tmp_path, cli
     """``compare REFERENCE SAMPLES --all``: each panel of a batch judged against the target as
     ``compare`` judges it alone (its worst ΔE00 and verdict), a row each, how many pass, and
     ``--fail-on-reject`` exits 1 when any fails. A panel read at five geometries is judged at
-    those, the others named; one sharing none is refused by name; options that pick one sample
-    are refused."""
+    those, the others named, and ``--plot`` draws every panel at those five, saying so; one
+    sharing none is refused by name; options that pick one sample are refused."""
     from flakelab.core.geometry import Geometry, instrument_geometries
 
     target, sprayout = (read_measurement(example_path(n)) for n in ("target", "sprayout"))
@@ -216,6 +216,12 @@ def test_compare_all_judges_each_sample_as_compare_judges_it_alone(tmp_path, cli
     assert [g["name"] for g in report["samples"][2]["geometries"]] == judged
     left = [g for g in target.geometry_names if g not in judged]
     assert report["samples"][2]["not_compared"] == {"reference": left, "sample": []}
+    chart = tmp_path / "batch.png"
+    drawn = cli("compare", example_path("target"), panels, "--all", "--plot", chart)
+    assert drawn.returncode == 0 and chart.read_bytes().startswith(b"\x89PNG"), drawn.stderr
+    said = " ".join(drawn.stderr.split())
+    drawn_at = "--plot draws the 5 geometries every sample shares with the reference, not "
+    assert drawn_at + ", ".join(left) in said, said
     shown = cli("compare", example_path("target"), panels, "--all", "--fail-on-reject")
     assert shown.returncode == 1
     said = " ".join(shown.stdout.split())

@@ -428,24 +428,40 @@ def _compare_every(ref, path, tol, light, tests, as_json: bool, plot, itself: bo
               "compared": len(results), "passed": passed, "reference_left_out": itself,
               "samples": [r.to_dict() for r in results]}  # fmt: skip
     if plot is not None:
-        shared = {r.geometries for r in results}
-        if len(shared) > 1:
-            raise FlakelabError(
-                f"--plot: the samples of {path} share different geometries with {ref.sample!r}; "
-                "one chart draws samples at the same geometries"
-            )
-        first = results[0]
-        draw_differences(first.geometries, first.lab_reference,
-                         {r.sample.sample: r.lab_sample for r in results}, tol, plot,
-                         f"{path.name if isinstance(path, Path) else path} vs {ref.sample} "
-                         f"({light}): {passed} of {len(results)} pass",
-                         texture={r.sample.sample: r.texture_share for r in results})  # fmt: skip
-        report["plot"] = str(plot)
+        report["plot"] = _draw_every(results, path, ref, tol, light, plot)
     if as_json:
         print_report(report, indent=1)
     else:
         _print_every(report, path)
     return passed == len(results)
+
+
+def _draw_every(results, path, ref, tol, light, plot) -> str:
+    """``compare --all --plot``: every sample's difference from the reference on one chart, at
+    the geometries every sample shares with it (a note names the others)."""
+    shared = [g for g in results[0].geometries if all(g in r.geometries for r in results)]
+    if not shared:
+        raise FlakelabError(f"--plot: the samples of {path} share no geometry with each other "
+                            f"and {ref.sample!r}, for one chart to draw them at")  # fmt: skip
+    left = list(dict.fromkeys(g for r in results for g in r.geometries if g not in shared))
+    if left:
+        errors.print(
+            f"[yellow]note:[/] --plot draws the {len(shared)} geometries every sample shares "
+            f"with the reference, not {', '.join(left)}",
+            highlight=False,
+        )
+
+    def at_shared(lab, r):
+        return lab[[r.geometries.index(g) for g in shared]]
+
+    passed = sum(r.all_pass for r in results)
+    title = (f"{path.name if isinstance(path, Path) else path} vs {ref.sample} ({light}): "
+             f"{passed} of {len(results)} pass")  # fmt: skip
+    samples = {r.sample.sample: at_shared(r.lab_sample, r) for r in results}
+    texture = {r.sample.sample: r.texture_share for r in results}
+    reference_lab = at_shared(results[0].lab_reference, results[0])
+    draw_differences(tuple(shared), reference_lab, samples, tol, plot, title, texture=texture)
+    return str(plot)
 
 
 def _print_every(report: dict[str, Any], path) -> None:
