@@ -241,21 +241,27 @@ def test_compare_all_judges_each_sample_as_compare_judges_it_alone(tmp_path, cli
     )
 
 
-def test_compare_all_of_a_qc_job_judges_its_trials_against_its_standard(tmp_path, cli):
+def test_compare_all_of_a_qc_job_judges_its_trials_against_its_standard(tmp_path, cli, monkeypatch):
     """``compare JOB --all``: an MA-T12 QC job holding its standard (named by its
     ``STANDARD:`` row, here not its first sample) and two trials; each trial is judged against
     the standard, which is left out of the samples, and commands that read one sample of the
-    job read its standard, and say so."""
+    job read its standard, and say so. The job is read once, standard and trials."""
+    import flakelab.io
+
+    reads, read_measurements = [], flakelab.io.read_measurements
+    monkeypatch.setattr(flakelab.io, "read_measurements",
+                        lambda path: reads.append(path) or read_measurements(path))  # fmt: skip
     sprayout = read_measurement(example_path("sprayout"))
     target = replace(read_measurement(example_path("target")), sample="std")
     job = tmp_path / "job.xlsx"
     trials = [replace(sprayout, sample=f"trial {i}", reflectance=sprayout.reflectance * i)
               for i in (1.0, 1.1)]  # fmt: skip
     write_measurements([replace(trials[0], metadata={"standard": "std"}), target, trials[1]], job)
+    reads.clear()
     done = cli("compare", job, "--all", "--json")
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
-    assert report["reference"] == "std" and report["reference_left_out"]
+    assert report["reference"] == "std" and report["reference_left_out"] and reads == [job]
     assert [s["sample"] for s in report["samples"]] == ["trial 1.0", "trial 1.1"]
     alone = json.loads(cli("compare", example_path("target"), job, "--sample-name", "trial 1.1",
                            "--json").stdout)  # fmt: skip

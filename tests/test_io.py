@@ -1574,6 +1574,10 @@ def test_a_sheet_of_an_ma_t12_export_saved_as_csv_reads_as_the_export(ma_t12_fil
         assert read.instrument == workbook.instrument == "X-Rite MA-T12"
         assert read.metadata == workbook.metadata and "qc_job" in read.metadata
         assert read.measured_at == workbook.measured_at.replace(microsecond=0)
+        # a sheet once used further right: ",,," closes every line, the preamble's too
+        spectral.write_text("".join(f"{line},,,\n" for line in spectral.read_text().splitlines()))
+        (padded,) = read_measurements(spectral)
+        np.testing.assert_array_equal(padded.reflectance, workbook.reflectance)
         for european in (False, True):
             colour = _sheet_as_csv(export, "Color Data", tmp_path / "colour.csv", european)
             (read,) = read_measurements(colour)

@@ -581,9 +581,16 @@ def read_sample(path, sample: str | None, option: str = "--sample"):
     """One measurement of a file, as :func:`flakelab.io.read_measurement` reads it; when the
     file holds several and none was named, says which one was taken (the standard it names,
     else its first)."""
-    from flakelab.io import pick_sample, read_measurements, standard_of
+    from flakelab.io import read_measurements
 
-    measurements = read_measurements(path)
+    return sample_of(read_measurements(path), path, sample, option)
+
+
+def sample_of(measurements: list, path, sample: str | None, option: str = "--sample"):
+    """:func:`read_sample`'s choice among the ``measurements`` read from ``path``, with its
+    note."""
+    from flakelab.io import pick_sample, standard_of
+
     chosen = pick_sample(measurements, sample, path)
     if sample is None and len(measurements) > 1:
         which = "QC job's standard" if chosen is standard_of(measurements) else "first"

@@ -43,6 +43,7 @@ from flakelab.cli.common import (
     refuse_a_removed_folder,
     render_lamps,
     reports_errors,
+    sample_of,
     stop_on_signals,
     texture_table,
 )
@@ -351,12 +352,17 @@ def compare(
         t for t in METAMERISM_ILLUMINANTS if t != light.illuminant
     )
     if every:
-        ref, _ = read_readings(
-            reference or example_path("target"), reference_sample, average, "--reference-sample"
-        )
-        samples = sample or example_path("sprayout")
-        itself = not average and Path(samples).resolve() == Path(reference or "").resolve()
-        passed = _compare_every(ref, samples, tol, light, tests, as_json, plot, itself)
+        from flakelab.io import read_measurements
+
+        path = sample or example_path("sprayout")
+        itself = not average and Path(path).resolve() == Path(reference or "").resolve()
+        samples = read_measurements(path)
+        if itself:  # a QC job: its standard is read from the same file, once
+            ref = sample_of(samples, path, reference_sample, "--reference-sample")
+        else:
+            ref, _ = read_readings(reference or example_path("target"), reference_sample,
+                                   average, "--reference-sample")  # fmt: skip
+        passed = _compare_every(ref, samples, path, tol, light, tests, as_json, plot, itself)
         if fail_on_reject and not passed:
             raise typer.Exit(1)
         return
@@ -405,14 +411,14 @@ def compare(
         raise typer.Exit(1)
 
 
-def _compare_every(ref, path, tol, light, tests, as_json: bool, plot, itself: bool) -> bool:
-    """``compare --all``: every sample of the file at ``path`` compared with ``ref``, reported
-    as a table (or JSON) and drawn with ``--plot``, but ``ref`` itself where the file holds it
-    (``itself``: the reference's file); whether every one passes."""
+def _compare_every(
+    ref, samples: list, path, tol, light, tests, as_json: bool, plot, itself: bool
+) -> bool:
+    """``compare --all``: every one of ``samples`` (read from ``path``) compared with ``ref``,
+    reported as a table (or JSON) and drawn with ``--plot``, but ``ref`` itself where the file
+    holds it (``itself``: the reference's file); whether every one passes."""
     from flakelab.core.comparison import compare as compare_measurements
-    from flakelab.io import read_measurements
 
-    samples = read_measurements(path)
     if itself:
         samples = [m for m in samples if m.sample != ref.sample]
         if not samples:

@@ -47,6 +47,7 @@ import csv
 import io
 import re
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
 from os import PathLike
@@ -74,11 +75,9 @@ from flakelab.io.records import (
     assemble,
     colour_alone,
     csv_form,
-    csv_rows,
-    csv_separator,
     decimal_comma_in,
     decimal_point,
-    named_separator,
+    filled_width,
     parse_colour,
     parse_conditions,
     parse_geometry_name,
@@ -87,6 +86,7 @@ from flakelab.io.records import (
     parse_wavelength_header,
     recovered_readings,
     spreadsheet_table,
+    within,
     write_atomically,
 )
 
@@ -370,23 +370,23 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]
-    sheet, lines, before = _export_sheet(path, lines)
 
     def refused(number: int, problem: str) -> MeasurementFileError:
-        return MeasurementFileError(path, problem, field=f"row {number + before}")
+        return MeasurementFileError(path, problem, field=f"row {number}")
 
     delimiter, header, rows = spreadsheet_table(io.StringIO("\n".join(lines)), refused)
     if header is None:
         raise MeasurementFileError(path, "empty CSV file")
+    sheet, stated = None, None
+    if _opens_a_sheet(header):
+        sheet, header, rows = _export_sheet(path, header, rows)
     if delimiter is None:
         raise MeasurementFileError(
             path, "no comma, semicolon or tab separated header", field="header"
         )
     header = [_texture_named(h.strip()) for h in header]
-    stated = None
     if sheet is not None:
         header, stated = _sheet_header(path, header, sheet)
-        rows = ((number + before, row) for number, row in rows)
     columns = {h: i for i, h in enumerate(header)}
     wide = _checked_header(path, header, columns)
     blocks = _wide_blocks(path, header, wide) if wide else _long_blocks(path, header)
@@ -474,33 +474,36 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
 
 
 def _export_sheet(
-    path: str | PathLike, lines: list[str]
-) -> tuple[dict[str, str] | None, list[str], int]:
-    """A sheet of an MA-T12 export saved as CSV (a spreadsheet saves the sheet it shows): its
-    preamble (``QC JOB:``, ``STANDARD:``, ``ILLUMINANT/OBSERVER:`` …), its lines from the
-    header row on (``Name, Date/Time, Geometry, …``; after Excel's ``sep=`` line, where it has
-    one), and how many lines it left out before that row; any other file: None, its lines, 0."""
-    hint = named_separator(lines[0]) if lines else None  # Excel's "sep=;" line
-    table = lines[1:] if hint else lines
-    separator = hint or (csv_separator(table[0]) if table else None)
-    opening = table[: len(PREAMBLE_KEYS) + 1]  # every preamble row once, then the header
-
-    def refused(number: int, problem: str) -> MeasurementFileError:
-        return MeasurementFileError(path, problem, field=f"row {number}")
-
-    cells = list(csv_rows(opening, separator or ",", refused))
-    first = cells[0][0].strip() if cells and cells[0] else ""
-    if not first.endswith(":") or first[:-1] not in PREAMBLE_KEYS:
-        return None, lines, 0
-    preamble, header = split_sheet([tuple(row) for row in cells])
-    if header < 0:
+    path: str | PathLike, first: list[str], rows: Iterator[tuple[int, list[str]]]
+) -> tuple[dict[str, str], list[str], Iterator[tuple[int, list[str]]]]:
+    """A sheet of an MA-T12 export saved as CSV (a spreadsheet saves the sheet it shows), read
+    by :func:`~flakelab.io.records.spreadsheet_table` from its ``first`` row (``QC JOB:`` …):
+    its preamble (``QC JOB:``, ``STANDARD:``, ``ILLUMINANT/OBSERVER:`` …), its header row
+    (``Name, Date/Time, Geometry, …``) up to its last named column, and the rows after it,
+    numbered as the spreadsheet shows them (the header is row 4)."""
+    opening = [(1, first)]
+    for number, row in rows:  # every preamble row once, then the header
+        opening.append((number, row))
+        if row[0].strip() == ROW_KEYS[0] or len(opening) > len(PREAMBLE_KEYS):
+            break
+    preamble, at = split_sheet([tuple(row) for _, row in opening])
+    if at < 0:
+        after = next((n for n, row in opening if not row[0].strip().endswith(":")), None)
         raise MeasurementFileError(
             path,
-            f"an MA-T12 sheet's preamble ({first} …) without its header row "
+            f"an MA-T12 sheet's preamble ({first[0].strip()} …) without its header row "
             f"'{', '.join(ROW_KEYS)}, …'",
-            field=f"row {len(preamble) + 1 + bool(hint)}",
+            field=f"row {after or opening[-1][0] + 1}",
         )
-    return preamble, lines[: bool(hint)] + table[header:], header
+    header = opening[at][1]
+    width = filled_width(header)
+    return preamble, header[:width], ((number, within(row, width)) for number, row in rows)
+
+
+def _opens_a_sheet(header: list[str]) -> bool:
+    """Whether a CSV file's first row is an MA-T12 sheet's preamble (``QC JOB:`` …)."""
+    first = header[0].strip() if header else ""
+    return first.endswith(":") and first[:-1] in PREAMBLE_KEYS
 
 
 _STATED_UNDER = re.compile(r"^(?P<name>.+?)\s*\((?P<conditions>[^()]+)\)$")
