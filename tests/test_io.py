@@ -1357,6 +1357,35 @@ def test_a_cxf_of_measured_objects_and_colour_alone_ones_reads_each_as_it_is(
         read_measurements(partly)
 
 
+def test_a_cxf_qc_job_marks_its_standard_by_object_type(rich_measurement, ma_t12_files, tmp_path):
+    """A CxF3 QC job whose one Object of ObjectType "Standard" is not its first (trials
+    before it): commands that take one sample read that standard, not the first trial. A
+    document of several Standards (a library of them) names none, and its first is read. An
+    MA-T12 job written as CxF3 marks the standard its ``STANDARD:`` row names, which reads
+    back as that job's standard. Before, every CxF3 file gave its first Object."""
+    job = tmp_path / "job.cxf"
+    samples = [replace(rich_measurement, sample=name) for name in ("trial 1", "std", "trial 2")]
+    write_measurements(samples, job)
+    text = job.read_text()
+    assert text.count('ObjectType="Sample"') == 3  # none named: none marked
+    job.write_text(
+        text.replace('ObjectType="Sample" Name="std"', 'ObjectType="Standard" Name="std"')
+    )
+    assert read_measurement(job).sample == "std"
+    assert {m.metadata["standard"] for m in read_measurements(job)} == {"std"}
+    job.write_text(text.replace('ObjectType="Sample"', 'ObjectType="Standard"'))
+    assert read_measurement(job).sample == "trial 1"
+    assert all("standard" not in m.metadata for m in read_measurements(job))
+    export = read_measurements(ma_t12_files[0])
+    trials = [replace(export[0], sample=f"trial {i}") for i in (1, 2)]
+    standard = export[0].metadata["standard"]
+    written = tmp_path / "export.cxf"
+    write_measurements([trials[0], replace(export[0], sample=standard), trials[1]], written)
+    marked = re.findall(r'ObjectType="(\w+)" Name="([^"]+)"', written.read_text())
+    assert marked == [("Trial", "trial 1"), ("Standard", standard), ("Trial", "trial 2")]
+    assert read_measurement(written).sample == standard
+
+
 def test_an_export_of_colour_alone_is_read_with_spectra_recovered(ma_t12_files, tmp_path):
     """An MA-T12 export saved with its Color Data sheet and no Spectral Data: each reading's
     spectrum recovered from the sheet's L*a*b*, at its geometries and date. Without either

@@ -37,6 +37,7 @@ from flakelab.io.records import (
     csv_separator,
     is_no_regular_file,
     standard_input,
+    standard_of,
     text_encoding,
 )
 from flakelab.io.tolerance_file import read_tolerance
@@ -234,14 +235,6 @@ def read_measurement(path: str | PathLike, sample: str | None = None) -> Measure
     """One measurement: the sample named, else the standard the file names, else its first
     (:func:`pick_sample`)."""
     return pick_sample(read_measurements(path), sample, path)
-
-
-def standard_of(measurements: list[Measurement]) -> Measurement | None:
-    """The measurement a file names its QC job's standard (an MA-T12 export's ``STANDARD:``
-    row), where it holds it; else None."""
-    named = {m.metadata.get("standard") for m in measurements}
-    standard = named.pop() if len(named) == 1 else None
-    return next((m for m in measurements if standard and m.sample == standard), None)
 
 
 def pick_sample(

@@ -12,7 +12,9 @@ Layout written (and expected on reading):
   L*a*b* under its ColorSpecification's conditions by colour-science), its spectra
   recovered from that colour;
 - texture readings, instrument and free metadata as ``Tag`` elements in a ``TagCollection``
-  named ``flakelab`` (``texture:Sa15``, ``instrument``, ``meta:<key>``).
+  named ``flakelab`` (``texture:Sa15``, ``instrument``, ``meta:<key>``);
+- a QC job's standard as the one Object of ``ObjectType="Standard"`` among its trials
+  (:data:`STANDARD_TYPE`), read as the standard the file names.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from flakelab.io.records import (
     parse_spectrum,
     parse_texture,
     recovered_readings,
+    standard_of,
     write_atomically,
 )
 
@@ -213,6 +216,9 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
             path, f"no ReflectanceSpectrum or {', '.join(COLOUR_VALUES)} in any Object"
         )
     _check_one_kind_per_sample(path, readings, lab_alone)
+    if (standard := _standard_marked(objects)) is not None:
+        for obj in objects:
+            metadata.setdefault(obj.name or obj.id, {}).setdefault("standard", standard)
     keep = dict(instrument=instrument, texture=texture, metadata=metadata)
     measured = []
     if readings:
@@ -226,6 +232,29 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
                          spectra_recovered=True, **keep)  # fmt: skip
     order = {name: i for i, name in enumerate(obj.name or obj.id for obj in objects)}
     return sorted(measured + by_colour, key=lambda m: order[m.sample])
+
+
+STANDARD_TYPE = "Standard"
+"""The ObjectType of a QC job's standard: the one Object a document of several marks so is
+the standard its others (``Trial``, ``Sample`` …) are judged against; written for the standard
+a file names (:func:`~flakelab.io.records.standard_of`), or a document's one Object."""
+
+
+def _standard_marked(objects: list[cxf3.Object]) -> str | None:
+    """The name of the one Object of several whose ObjectType is :data:`STANDARD_TYPE`;
+    None where a document marks none or several (a library of standards)."""
+    marked = [o for o in objects if (o.object_type or "").strip().lower() == "standard"]
+    if len(objects) < 2 or len(marked) != 1:
+        return None
+    return marked[0].name or marked[0].id
+
+
+def _object_type(m: Measurement, standard: Measurement | None, alone: bool) -> str:
+    """The ObjectType written for ``m``: the file's ``standard`` (or its one Object) a
+    :data:`STANDARD_TYPE`, the others then ``Trial``, else ``Sample``."""
+    if alone or m is standard:
+        return STANDARD_TYPE
+    return "Trial" if standard is not None else "Sample"
 
 
 def _check_one_kind_per_sample(
@@ -376,7 +405,7 @@ def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
     geometries = sorted({g for m in measurements for g in m.geometries})
     conditions = measurements[0].stored_lab_conditions
     specs = [_specification(g, wavelengths, conditions) for g in geometries]
-    objects = []
+    objects, standard = [], standard_of(measurements)
     for number, m in enumerate(measurements, start=1):
         values: list[object] = []
         for i, g in enumerate(m.geometries):
@@ -397,7 +426,7 @@ def write_cxf(measurements: list[Measurement], path: str | PathLike) -> None:
             tags.append(cxf3.Tag(name="instrument", value=m.instrument))
         objects.append(
             cxf3.Object(
-                object_type="Standard" if number == 1 else "Sample",
+                object_type=_object_type(m, standard, len(measurements) == 1),
                 name=m.sample,
                 id=str(number),
                 creation_date=_xml_datetime(m.measured_at),

@@ -244,6 +244,15 @@ def csv_separator(header: str) -> str | None:
     return found if found in header else None
 
 
+def standard_of(measurements: Sequence[Measurement]) -> Measurement | None:
+    """The measurement a file names its QC job's standard (an MA-T12 export's ``STANDARD:``
+    row, a CxF3 document's one Object of ObjectType "Standard"), where it holds it; else
+    None."""
+    named = {m.metadata.get("standard") for m in measurements}
+    standard = named.pop() if len(named) == 1 else None
+    return next((m for m in measurements if standard and m.sample == standard), None)
+
+
 def json_value(text: str):
     """``json.loads``. JSON nested deeper than Python's recursion reaches (a damaged or
     hostile file: ``[[[[…`` a hundred thousand deep) is refused as any JSON that does not
