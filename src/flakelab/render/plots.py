@@ -34,6 +34,7 @@ __all__ = [
     "plot_habits",
     "plot_variants",
     "plot_tins_history",
+    "plot_characterisation",
     "plot_model_errors",
     "plot_harness",
     "plot_realism",
@@ -477,6 +478,52 @@ def plot_tins_history(
     strength.legend(fontsize=8, ncol=2)
     title = title or "A shop's tins, version by version"
     figure.suptitle(f"{title} (open marker: a new tin)")
+    _save(figure, path, dpi)
+
+
+def plot_characterisation(
+    wavelengths: np.ndarray,
+    fitted: Mapping[str, np.ndarray],
+    start: Mapping[str, np.ndarray],
+    sd: Mapping[str, np.ndarray],
+    geometries: Sequence[str],
+    panels: Mapping[str, np.ndarray],
+    path: str | PathLike,
+    *,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """A pigment read from calibration panels (``flakelab library characterise --plot``):
+    its absorption and scattering [1/µm] fitted, with a band of ± one standard deviation
+    (``sd``: of their logs), beside the Kubelka–Munk start (dashed), on a log axis; and each
+    panel's ΔE00 between its reading and the fit at each of ``geometries`` (``panels``:
+    name → ``[G]``, NaN where not read)."""
+    figure, (spectra, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
+    for k, (key, label) in enumerate((("absorption", "absorption κ"),
+                                      ("scattering", "scattering σ"))):  # fmt: skip
+        colour = f"C{k}"
+        values = np.asarray(fitted[key], float)
+        if not np.any(values > 0):
+            spectra.plot([], [], color=colour, label=f"{label}: none (transparent)")
+            continue
+        spectra.plot(wavelengths, values, color=colour, lw=2, label=f"{label}, fitted")
+        band = np.nan_to_num(np.asarray(sd[key], float))
+        spectra.fill_between(wavelengths, values * np.exp(-band), values * np.exp(band),
+                             color=colour, alpha=0.2, lw=0)  # fmt: skip
+        spectra.plot(wavelengths, start[key], color=colour, ls="--", lw=1,
+                     label=f"{label}, Kubelka–Munk at 45as45")  # fmt: skip
+    spectra.set_yscale("log")
+    spectra.set(xlabel="wavelength [nm]", ylabel="per unit mass fraction [1/µm] (± 1 s.d.)")
+    spectra.legend(fontsize=8)
+    at = np.arange(len(geometries))
+    width = 0.8 / max(len(panels), 1)
+    for n, (name, de00) in enumerate(panels.items()):
+        misfit.bar(at + (n - (len(panels) - 1) / 2) * width, np.nan_to_num(de00), width,
+                   label=name)  # fmt: skip
+    misfit.set_xticks(at, list(geometries), rotation=60, fontsize=8)
+    misfit.set(ylabel="ΔE00, reading vs fit (D65/10)")
+    misfit.legend(fontsize=8)
+    figure.suptitle(_fitted(title or "A pigment read from calibration panels", figure))
     _save(figure, path, dpi)
 
 
