@@ -275,6 +275,9 @@ def characterise(
 POORLY_READ_LOG_SD = float(np.log(2))
 """Standard deviation of a fitted coefficient's log past which it is reported as poorly read:
 the panels leave it unsure by more than a factor of two either way."""
+MATTERS = 0.01
+"""Share of a pigment's most absorption (or scattering) below which how well it is read is
+not reported: a yellow's absorption in the red, a factor of two of nothing."""
 PANEL_MISFIT_NOTED = 1.0
 """Worst ΔE00 between a panel and the fit past which the panel is named: a recipe weighed
 otherwise, a mislabelled file, or a paint the physics does not reproduce."""
@@ -321,8 +324,8 @@ def _characterisation_report(found, pigment, sprayed, x, k: int, geometries) -> 
     for key, what in (("absorption", "a tint in the white"),
                       ("scattering", "the pigment in an aluminium base, or a masstone "
                        "thin enough to show the primer")):  # fmt: skip
-        sd = getattr(found, f"{key}_sd")
-        unsure = WAVELENGTHS[sd > POORLY_READ_LOG_SD]
+        sd, values = getattr(found, f"{key}_sd"), getattr(pigment, key)
+        unsure = WAVELENGTHS[(sd > POORLY_READ_LOG_SD) & (values >= MATTERS * values.max())]
         if unsure.size:
             notes.append(
                 f"its {key} is read to no better than a factor of two at "
