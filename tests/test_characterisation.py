@@ -148,7 +148,7 @@ def test_panels_that_cannot_split_absorption_from_scattering_are_refused():
     without[1, k], without[1, lib.names.index(WHITE)] = 0.0, 1.0
     with pytest.raises(FlakelabError, match="b.cxf: its recipe holds no 'Phthalo blue GS'"):
         characterise_pigment(lib, name, without, GEOMETRIES, R, ["a.cxf", "b.cxf"])
-    with pytest.raises(FlakelabError, match="'Al medium' is aluminium toner"):
+    with pytest.raises(FlakelabError, match="'Al medium' is an aluminium toner"):
         characterise_pigment(lib, "Al medium", masstones, GEOMETRIES, R, ["a.cxf", "b.cxf"])
 
 

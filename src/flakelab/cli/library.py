@@ -205,7 +205,7 @@ def characterise(
 
     from flakelab.cli.common import check_figure_file, check_output_file, read_readings
     from flakelab.cli.sources import recipe_fractions
-    from flakelab.core.geometry import parse_geometries
+    from flakelab.core.spectra import WAVELENGTHS
     from flakelab.errors import FlakelabError
     from flakelab.io import read_library, read_recipe
     from flakelab.io.library_file import write_library
@@ -233,13 +233,14 @@ def characterise(
     grams = [read_recipe(path) for path in recipe]
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
     readings = [read_readings(path, sample, average)[0] for path in sprayed]
-    names = list(dict.fromkeys(g for r in readings for g in r.geometry_names))
-    measured = np.full((len(readings), len(names), 31), np.nan)
+    geometries = tuple(sorted({g for r in readings for g in r.geometries}))  # every panel's
+    names = [g.name for g in geometries]
+    measured = np.full((len(readings), len(names), WAVELENGTHS.size), np.nan)
     for row, reading in zip(measured, readings, strict=True):
         row[[names.index(g) for g in reading.geometry_names]] = reading.storage_spectra(
             reading.geometry_names
         )
-    found = characterise_pigment(lib, toner, x, parse_geometries(names), measured,
+    found = characterise_pigment(lib, toner, x, geometries, measured,
                                  [str(path) for path in sprayed])  # fmt: skip
     made = f"read by flakelab from {len(sprayed)} calibration panels on {date.today()}"
     pigment = found.pigment
@@ -251,7 +252,6 @@ def characterise(
                "spectra_recovered": [str(p) for p, r in zip(sprayed, readings, strict=True)
                                      if r.spectra_recovered]}  # fmt: skip
     if plot is not None:
-        from flakelab.core.spectra import WAVELENGTHS
         from flakelab.render.plots import plot_characterisation
 
         plot_characterisation(
@@ -286,16 +286,15 @@ otherwise, a mislabelled file, or a paint the physics does not reproduce."""
 def _blank_pigment(held, name: str, family, asymmetry, density):
     """The pigment whose constants the panels will give: the library's ``held`` toner of that
     name, or a new one, with the options given."""
-    from flakelab.errors import FlakelabError
+    from flakelab.core.spectra import WAVELENGTHS
     from flakelab.library.toners import Pigment
+    from flakelab.physics.characterisation import check_pigment
 
-    flat = np.ones(31)
+    flat = np.ones(WAVELENGTHS.size)
     if held is None:
         return Pigment(name, family or "unknown", flat, flat, g=asymmetry or 0.0,
                        density_g_ml=density)  # fmt: skip
-    if held.kind != "pigment":
-        raise FlakelabError(f"{name!r} is {held.kind} toner: only a pigment's absorption and "
-                            "scattering are read from panels")  # fmt: skip
+    check_pigment(held)
     return replace(held, family=family or held.family,
                    g=held.g if asymmetry is None else asymmetry,
                    density_g_ml=density or held.density_g_ml, description="")  # fmt: skip

@@ -55,6 +55,8 @@ __all__ = [
     "PANEL_OFFSET_SD",
     "COEFFICIENT_FLOOR",
     "Characterisation",
+    "CharacterisationError",
+    "check_pigment",
     "with_pigment",
     "characterise_pigment",
 ]
@@ -193,15 +195,22 @@ def _unpacked(p: NDArray, panels: int) -> tuple[NDArray, NDArray, NDArray, NDArr
     return kappa, sigma, film, spread
 
 
+def check_pigment(toner) -> None:
+    """Refuse a toner that is no pigment: a flake's or a pearl's optics are not two
+    coefficients."""
+    if toner.kind != "pigment":
+        article = "an" if toner.kind[0] in "aeiou" else "a"
+        raise CharacterisationError(
+            f"{toner.name!r} is {article} {toner.kind} toner: only a pigment's absorption and "
+            "scattering are read from panels"
+        )
+
+
 def _check_panels(library: Library, k: int, x: NDArray, panels: Sequence[str]) -> None:
     """Refuse panels that cannot split the pigment's absorption from its scattering: one
     without the pigment, or masstones alone."""
     name = library.names[k]
-    if library.toners[k].kind != "pigment":
-        raise CharacterisationError(
-            f"{name!r} is {library.toners[k].kind} toner: only a pigment's absorption and "
-            "scattering are read from panels"
-        )
+    check_pigment(library.toners[k])
     for panel, recipe in zip(panels, x, strict=True):
         if recipe[k] <= 0:
             raise CharacterisationError(f"{panel}: its recipe holds no {name!r}")
