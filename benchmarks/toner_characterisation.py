@@ -1,5 +1,5 @@
-"""A new pigment read from three calibration panels: how well the fitted constants predict
-paints the panels never showed.
+"""A new pigment or aluminium flake read from three calibration panels: how well what was
+read predicts paints the panels never showed.
 
 For each of the demo library's pigments in turn, the generated world sprays three panels
 from one set of tins (a masstone and tints of 1:4 and 1:19 in the white; the white itself
@@ -17,6 +17,12 @@ compared, worst geometry, with what those tins give (ΔE00, D65/10):
 
 It prints the median, p95 and max over pigments × held-out paints of each, the ratio of
 the fitted's median to the baseline's, and the seconds a characterisation takes.
+
+Each of the library's ten aluminium flakes likewise (``flakes_*``): a masstone, a tenth of
+phthalo blue in it and a fifth of iron oxide red, its orientation spread, surface quality
+and volume fraction fitted from the next flake's values (the baseline: a similar paste taken
+for it), the held-out paints three tenths of perylene maroon in it and a twentieth of carbon
+black; and how far each fitted value lies from the flake's (``flakes_parameter_error_*``).
 
     python benchmarks/toner_characterisation.py [--seed 7] [--json]
 """
@@ -36,7 +42,12 @@ from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.spectra import shift_spectra
 from flakelab.io import read_library
 from flakelab.physics.application import sprayed_reflectance
-from flakelab.physics.characterisation import characterise_pigment, with_pigment
+from flakelab.physics.characterisation import (
+    FLAKE_FITTED,
+    characterise_flake,
+    characterise_pigment,
+    with_toner,
+)
 from timing import print_report
 
 WHITE, BLACK = "Titanium dioxide white", "Carbon black"
@@ -82,7 +93,7 @@ def one_pigment(world: World, name: str, rng: np.random.Generator, panel_set: st
     measured = world.measure(world.appearance(x, sprayed)[0], rng)
     blank = replace(library[name], absorption=np.ones(31), scattering=np.ones(31))
     started = time.perf_counter()
-    found = characterise_pigment(with_pigment(library, blank), name, x, world.geometries,
+    found = characterise_pigment(with_toner(library, blank), name, x, world.geometries,
                                  measured, labels)  # fmt: skip
     seconds = time.perf_counter() - started
     other = next(p.name for p in library.of_kind("pigment") if p.name not in (name, partner))
@@ -98,11 +109,73 @@ def one_pigment(world: World, name: str, rng: np.random.Generator, panel_set: st
     k = names.index(name)
     tin = tins_pigment(library[name], tins.strength[0, k], tins.hue_shift[0])
     judged = {}
-    for label, pigment in (("fitted", found.pigment), ("km", found.start), ("oracle", tin)):
-        predicted = sprayed_reflectance(with_pigment(library, pigment), held, world.geometries,
+    for label, pigment in (("fitted", found.toner), ("km", found.start), ("oracle", tin)):
+        predicted = sprayed_reflectance(with_toner(library, pigment), held, world.geometries,
                                         np.ones(n), np.ones(n))  # fmt: skip
         judged[label] = worst_de00(predicted, truth)
     return {"seconds": seconds, "panels_de00_max": float(np.nanmax(found.de00)), **judged}
+
+
+def blended(names: tuple[str, ...], toner: str, others: dict[str, float]) -> np.ndarray:
+    """A recipe of ``toner`` with ``others`` at their shares, the toner the rest."""
+    x = np.zeros(len(names))
+    x[names.index(toner)] = 1 - sum(others.values())
+    for name, share in others.items():
+        x[names.index(name)] = share
+    return x
+
+
+def one_flake(world: World, k: int, rng: np.random.Generator) -> dict:
+    """Spray and read the library's ``k``-th aluminium flake's panels, read it starting from
+    the next flake's values, and judge the held-out paints."""
+    library, names = world.library, world.library.names
+    flakes = library.of_kind("aluminium")
+    flake, similar = flakes[k], flakes[(k + 1) % len(flakes)]
+    start = replace(flake, **{f: getattr(similar, f) for f in FLAKE_FITTED})
+    x = np.array([blended(names, flake.name, parts) for parts in
+                  ({}, {"Phthalo blue GS": 0.1}, {"Iron oxide red": 0.2})])  # fmt: skip
+    tins = world.variation(1, rng, at_shop=False)
+    film, spread = world.application(len(x), rng, at_shop=False)
+    sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
+                        film, spread)  # fmt: skip
+    measured = world.measure(world.appearance(x, sprayed)[0], rng)
+    started = time.perf_counter()
+    found = characterise_flake(with_toner(library, start), flake.name, x, world.geometries,
+                               measured, ["masstone", "blue", "red"])  # fmt: skip
+    seconds = time.perf_counter() - started
+    held = np.array([blended(names, flake.name, parts) for parts in
+                     ({"Perylene maroon": 0.3}, {"Carbon black": 0.05})])  # fmt: skip
+    n = len(held)
+    truth = world.appearance(held, Variation(np.repeat(tins.strength, n, 0),
+                                             np.repeat(tins.hue_shift, n), np.ones(n),
+                                             np.ones(n)))[0]  # fmt: skip
+    judged = {}
+    for label, toner in (("fitted", found.toner), ("similar", start), ("oracle", flake)):
+        predicted = sprayed_reflectance(with_toner(library, toner), held, world.geometries,
+                                        np.ones(n), np.ones(n))  # fmt: skip
+        judged[label] = worst_de00(predicted, truth)
+    errors = {f: abs(getattr(found.toner, f) / getattr(flake, f) - 1) for f in FLAKE_FITTED}
+    return {"seconds": seconds, "panels_de00_max": float(np.nanmax(found.de00)), **judged,
+            "errors": errors}  # fmt: skip
+
+
+def flakes_report(world: World, seed: int) -> dict:
+    """Every aluminium flake of the library read from its panels (:func:`one_flake`)."""
+    rng = np.random.default_rng(seed)
+    results = [one_flake(world, k, rng) for k in range(len(world.library.of_kind("aluminium")))]
+    report: dict = {"flakes": len(results)}
+    for label in ("fitted", "similar", "oracle"):
+        values = np.concatenate([r[label] for r in results])
+        report |= {f"flakes_{label}_de00_median": float(np.median(values)),
+                   f"flakes_{label}_de00_max": float(values.max())}  # fmt: skip
+    report["flakes_fitted_over_similar_median"] = (
+        report["flakes_fitted_de00_median"] / report["flakes_similar_de00_median"]
+    )
+    for f in FLAKE_FITTED:
+        report[f"flakes_parameter_error_{f}_max"] = max(r["errors"][f] for r in results)
+    report["flakes_panels_de00_max"] = max(r["panels_de00_max"] for r in results)
+    report["flakes_seconds_max"] = max(r["seconds"] for r in results)
+    return report
 
 
 def characterisation_report(seed: int) -> dict:
@@ -132,7 +205,7 @@ def characterisation_report(seed: int) -> dict:
         seconds = [r["seconds"] for r in results]
         report[f"{panel_set}_seconds_median"] = float(np.median(seconds))
         report[f"{panel_set}_seconds_max"] = max(seconds)
-    return report
+    return report | flakes_report(world, seed)
 
 
 def main() -> int:

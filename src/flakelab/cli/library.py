@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -119,16 +120,24 @@ def _standing_text(row: dict) -> str:
     return f"[yellow]{row['standing']}[/]{stand_in}"
 
 
+class CharacterisedKind(StrEnum):
+    """The kinds of toner ``library characterise`` reads
+    (:data:`~flakelab.physics.characterisation.CHARACTERISED`)."""
+
+    pigment = "pigment"
+    aluminium = "aluminium"
+
+
 @library_app.command("characterise")
 @reports_errors
 def characterise(
-    toner: Annotated[str, typer.Argument(help="The pigment's name, as recipes name it.")],
+    toner: Annotated[str, typer.Argument(help="The toner's name, as recipes name it.")],
     sprayed: Annotated[
         list[Path],
         typer.Argument(
-            help="Measurement of each calibration panel (a masstone, tints of the pigment in "
-            "the library's white, the pigment in an aluminium base …), each with its --recipe "
-            "in the same order."
+            help="Measurement of each calibration panel (a masstone, tints in the library's "
+            "white, the toner with an aluminium or a pigment of the library …), each with "
+            "its --recipe in the same order."
         ),
     ],
     recipe: Annotated[
@@ -144,15 +153,25 @@ def characterise(
         typer.Option(
             "--out",
             "-o",
-            help="The library written: --library's toners and the pigment read (JSON). It may "
-            "be --library itself, which then gains the pigment.",
+            help="The library written: --library's toners and the toner read (JSON). It may "
+            "be --library itself, which then gains the toner.",
         ),
     ],
     library: LibraryOption = None,
+    kind: Annotated[
+        CharacterisedKind | None,
+        typer.Option(
+            "--kind",
+            help="What a new toner is: a pigment (its absorption and scattering are read) or "
+            "an aluminium flake (its orientation spread, surface quality and volume fraction; "
+            "--radius and --thickness from its datasheet). A toner read anew keeps its kind.",
+            show_default="pigment",
+        ),
+    ] = None,
     family: Annotated[
         str | None,
         typer.Option(
-            help="The pigment's chemical family (phthalocyanine, iron oxide …); a pigment read "
+            help="A new pigment's chemical family (phthalocyanine, iron oxide …); one read "
             "anew keeps its own.",
             show_default="unknown",
         ),
@@ -163,11 +182,18 @@ def characterise(
             "--g",
             min=-0.99,
             max=0.99,
-            help="Henyey–Greenstein asymmetry of its scattering: 0.3 for a scattering "
-            "inorganic (the demo's white and oxides), 0 for an organic; a pigment read anew "
-            "keeps its own.",
+            help="A pigment's Henyey–Greenstein asymmetry: 0.3 for a scattering inorganic (the "
+            "demo's white and oxides), 0 for an organic; one read anew keeps its own.",
             show_default="0",
         ),
+    ] = None,
+    radius: Annotated[
+        float | None,
+        typer.Option("--radius", help="A new aluminium flake's radius [µm]: half its D50."),
+    ] = None,
+    thickness: Annotated[
+        float | None,
+        typer.Option("--thickness", help="A new aluminium flake's thickness [µm]."),
     ] = None,
     density: Annotated[
         float | None, typer.Option("--density", help="Its density as sold [g/mL].")
@@ -176,7 +202,7 @@ def characterise(
         bool,
         typer.Option(
             "--replace",
-            help="Read a pigment the library already holds anew, in its place (a new "
+            help="Read a toner the library already holds anew, in its place (a new "
             "supplier's grade under the old name).",
         ),
     ] = False,
@@ -186,21 +212,23 @@ def characterise(
         Path | None,
         typer.Option(
             "--plot",
-            help="Also draw the pigment's absorption and scattering with their uncertainty "
-            "and each panel's misfit per geometry (PNG, PDF or SVG).",
+            help="Also draw what was read (a pigment's absorption and scattering with their "
+            "uncertainty; each panel's L* flop, read and fitted, for a flake) and each panel's "
+            "misfit per geometry (PNG, PDF or SVG).",
         ),
     ] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Read a new pigment's absorption and scattering from calibration panels of known
-    recipes, and write the library with it.
+    """Read a new toner's optics from calibration panels of known recipes, and write the
+    library with it.
 
-    The library's physics, with the pigment in it, is fitted to the panels at every geometry
-    they were read at (each panel's film build and flake alignment allowed for), from a
-    Kubelka–Munk start at 45as45. A masstone alone tells the pigment's K/S, not K and S: give
-    a tint in the white too, and a panel in an aluminium base for its scattering among
-    flakes. The pigment is then 'added' to the library: the matcher predicts it by the
-    hybrid path until cases teach the model."""
+    The library's physics, with the toner in it, is fitted to the panels at every geometry
+    they were read at, each panel's film build and flake alignment allowed for: a pigment's
+    absorption and scattering (from a Kubelka–Munk start at 45as45), or an aluminium flake's
+    orientation spread, surface quality and volume fraction. A pigment's masstone alone tells
+    its K/S, not K and S: give a tint in the white too, and a panel in an aluminium base for
+    its scattering among flakes. The toner is then 'added' to the library: the matcher
+    predicts it by the hybrid path until cases teach the model."""
     from datetime import date
 
     from flakelab.cli.common import check_figure_file, check_output_file, read_readings
@@ -209,8 +237,7 @@ def characterise(
     from flakelab.errors import FlakelabError
     from flakelab.io import read_library, read_recipe
     from flakelab.io.library_file import write_library
-    from flakelab.library.toners import Pigment
-    from flakelab.physics.characterisation import characterise_pigment, with_pigment
+    from flakelab.physics.characterisation import CHARACTERISED, with_toner
 
     if len(recipe) != len(sprayed):
         raise FlakelabError(
@@ -228,8 +255,9 @@ def characterise(
                             "anew, in its place")  # fmt: skip
     if anew and not held:
         raise FlakelabError(f"--replace: {lib.name!r} holds no toner {toner!r}")
-    blank = _blank_pigment(lib[toner] if held else None, toner, family, asymmetry, density)
-    lib = with_pigment(lib, blank) if isinstance(blank, Pigment) else lib
+    options = {"--family": family, "--g": asymmetry, "--radius": radius, "--thickness": thickness}
+    start = _starting_toner(lib, toner, kind, options, density)
+    lib = with_toner(lib, start)
     grams = [read_recipe(path) for path in recipe]
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
     readings = [read_readings(path, sample, average)[0] for path in sprayed]
@@ -240,31 +268,17 @@ def characterise(
         row[[names.index(g) for g in reading.geometry_names]] = reading.storage_spectra(
             reading.geometry_names
         )
-    found = characterise_pigment(lib, toner, x, geometries, measured,
-                                 [str(path) for path in sprayed])  # fmt: skip
+    found = CHARACTERISED[start.kind](lib, toner, x, geometries, measured,
+                                      [str(path) for path in sprayed])  # fmt: skip
     made = f"read by flakelab from {len(sprayed)} calibration panels on {date.today()}"
-    pigment = found.pigment
-    if not pigment.description:
-        pigment = replace(pigment, description=made)
-    write_library(with_pigment(lib, pigment), out)
-    report = _characterisation_report(found, pigment, sprayed, x, lib.names.index(toner), names)
+    read = found.toner if found.toner.description else replace(found.toner, description=made)
+    write_library(with_toner(lib, read), out)
+    report = _characterisation_report(found, read, sprayed, x, lib.names.index(toner), names)
     report |= {"library": lib.name, "out": str(out), "replaced": held,
                "spectra_recovered": [str(p) for p, r in zip(sprayed, readings, strict=True)
                                      if r.spectra_recovered]}  # fmt: skip
     if plot is not None:
-        from flakelab.render.plots import plot_characterisation
-
-        plot_characterisation(
-            WAVELENGTHS,
-            {"absorption": pigment.absorption, "scattering": pigment.scattering},
-            {"absorption": found.start.absorption, "scattering": found.start.scattering},
-            {"absorption": found.absorption_sd, "scattering": found.scattering_sd},
-            names,
-            {str(p.name): d for p, d in zip(sprayed, found.de00, strict=True)},
-            plot,
-            title=f"{toner}, read from {len(sprayed)} panels: worst ΔE00 "
-            f"{np.nanmax(found.de00):.2f} (Kubelka–Munk start: {np.nanmax(found.start_de00):.2f})",
-        )
+        _draw_characterisation(found, lib, x, geometries, measured, sprayed, plot)
         report["plot"] = str(plot)
     if json_output:
         print_report(report)
@@ -273,7 +287,7 @@ def characterise(
 
 
 POORLY_READ_LOG_SD = float(np.log(2))
-"""Standard deviation of a fitted coefficient's log past which it is reported as poorly read:
+"""Standard deviation of a fitted quantity's log past which it is reported as poorly read:
 the panels leave it unsure by more than a factor of two either way."""
 MATTERS = 0.01
 """Share of a pigment's most absorption (or scattering) below which how well it is read is
@@ -281,29 +295,46 @@ not reported: a yellow's absorption in the red, a factor of two of nothing."""
 PANEL_MISFIT_NOTED = 1.0
 """Worst ΔE00 between a panel and the fit past which the panel is named: a recipe weighed
 otherwise, a mislabelled file, or a paint the physics does not reproduce."""
+_KIND_OPTIONS = {"pigment": ("--family", "--g"), "aluminium": ("--radius", "--thickness")}
+"""The options that describe a new toner of each kind."""
 
 
-def _blank_pigment(held, name: str, family, asymmetry, density):
-    """The pigment whose constants the panels will give: the library's ``held`` toner of that
-    name, or a new one, with the options given."""
+def _starting_toner(lib, name: str, kind, options: dict, density):
+    """The toner the panels are read for: the library's toner of that name (its kind kept),
+    or a new one of ``kind`` described by ``options`` (a new flake starts from the library's
+    first aluminium's spread, surface and volume fraction)."""
     from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.errors import FlakelabError
     from flakelab.library.toners import Pigment
-    from flakelab.physics.characterisation import check_pigment
+    from flakelab.physics.characterisation import check_kind
 
-    flat = np.ones(WAVELENGTHS.size)
-    if held is None:
-        return Pigment(name, family or "unknown", flat, flat, g=asymmetry or 0.0,
-                       density_g_ml=density)  # fmt: skip
-    check_pigment(held)
-    return replace(held, family=family or held.family,
-                   g=held.g if asymmetry is None else asymmetry,
-                   density_g_ml=density or held.density_g_ml, description="")  # fmt: skip
+    held = lib[name] if name in lib.names else None
+    kind = held.kind if held is not None else (kind or CharacterisedKind.pigment).value
+    if held is not None:
+        check_kind(held)
+    if kind == "aluminium" and held is None and None in (options["--radius"],
+                                                         options["--thickness"]):  # fmt: skip
+        raise FlakelabError("a new aluminium flake: --radius (half its D50) and --thickness "
+                            "[µm] from its datasheet: the panels do not show them")  # fmt: skip
+    for option, value in options.items():
+        if value is not None and option not in _KIND_OPTIONS[kind]:
+            takes = " and ".join(_KIND_OPTIONS[kind])
+            raise FlakelabError(f"{option}: not for {kind} toner {name!r} (it takes {takes})")
+    density = density or (held.density_g_ml if held is not None else None)
+    if kind == "pigment":
+        flat = np.ones(WAVELENGTHS.size)
+        base = held or Pigment(name, "unknown", flat, flat)
+        return replace(base, family=options["--family"] or base.family,
+                       g=base.g if options["--g"] is None else options["--g"],
+                       density_g_ml=density, description="")  # fmt: skip
+    base = held or replace(lib.of_kind("aluminium")[0], name=name)
+    return replace(base, radius_um=options["--radius"] or base.radius_um,
+                   thickness_um=options["--thickness"] or base.thickness_um,
+                   density_g_ml=density, description="")  # fmt: skip
 
 
-def _characterisation_report(found, pigment, sprayed, x, k: int, geometries) -> dict:
-    """``library characterise``'s report: the pigment, each panel's misfit and the notes."""
-    from flakelab.core.spectra import WAVELENGTHS
-
+def _characterisation_report(found, toner, sprayed, x, k: int, geometries) -> dict:
+    """``library characterise``'s report: the toner, each panel's misfit and the notes."""
     panels = []
     for path, share, film, spread, de00, start in zip(
         sprayed, x[:, k], found.film, found.spread, found.de00, found.start_de00, strict=True
@@ -320,35 +351,94 @@ def _characterisation_report(found, pigment, sprayed, x, k: int, geometries) -> 
         for p in panels
         if p["de00_max"] > PANEL_MISFIT_NOTED
     ]
+    report = {"toner": toner.name, "kind": toner.kind}
+    if toner.kind == "pigment":
+        report |= _pigment_read(found, toner, notes)
+    else:
+        report |= _flake_read(found, toner, notes)
+    return report | {"panels": panels, "chi2_per_dof": found.chi2_per_dof,
+                     "evaluations": found.evaluations, "notes": notes}  # fmt: skip
+
+
+def _pigment_read(found, pigment, notes: list[str]) -> dict:
+    """A pigment's part of the report; a note where the panels leave it unsure."""
+    from flakelab.core.spectra import WAVELENGTHS
+
     for key, what in (("absorption", "a tint in the white"),
                       ("scattering", "the pigment in an aluminium base, or a masstone "
                        "thin enough to show the primer")):  # fmt: skip
-        sd, values = getattr(found, f"{key}_sd"), getattr(pigment, key)
+        sd, values = found.uncertainty[key], getattr(pigment, key)
         unsure = WAVELENGTHS[(sd > POORLY_READ_LOG_SD) & (values >= MATTERS * values.max())]
         if unsure.size:
             notes.append(
                 f"its {key} is read to no better than a factor of two at "
                 f"{_wavelength_ranges(unsure)}: add a panel that shows it ({what})"
             )
-    transparent = not np.any(pigment.scattering > 0)
     return {
-        "toner": pigment.name,
         "family": pigment.family,
         "g": pigment.g,
-        "transparent": transparent,
+        "transparent": pigment.transparent,
         "hides": pigment.hides,
         "wavelengths_nm": WAVELENGTHS.tolist(),
         "absorption": pigment.absorption.tolist(),
         "scattering": pigment.scattering.tolist(),
-        "absorption_log_sd": found.absorption_sd.tolist(),
-        "scattering_log_sd": found.scattering_sd.tolist(),
+        "absorption_log_sd": found.uncertainty["absorption"].tolist(),
+        "scattering_log_sd": found.uncertainty["scattering"].tolist(),
         "start_absorption": found.start.absorption.tolist(),
         "start_scattering": found.start.scattering.tolist(),
-        "panels": panels,
-        "chi2_per_dof": found.chi2_per_dof,
-        "evaluations": found.evaluations,
-        "notes": notes,
     }
+
+
+def _flake_read(found, flake, notes: list[str]) -> dict:
+    """An aluminium flake's part of the report; a note where the panels leave it unsure."""
+    from flakelab.physics.characterisation import FLAKE_FITTED
+
+    unsure = [f for f in FLAKE_FITTED if found.uncertainty[f] > POORLY_READ_LOG_SD]
+    if unsure:
+        notes.append(f"its {', '.join(unsure)}: read to no better than a factor of two: add a "
+                     "panel that shows it (the flake tinted with a pigment)")  # fmt: skip
+    read = {f: getattr(flake, f) for f in FLAKE_FITTED}
+    return read | {
+        "radius_um": flake.radius_um,
+        "thickness_um": flake.thickness_um,
+        "relative_sd": dict(found.uncertainty),
+        "start": {f: getattr(found.start, f) for f in FLAKE_FITTED},
+    }
+
+
+def _draw_characterisation(found, lib, x, geometries, measured, sprayed, plot) -> None:
+    """``library characterise --plot``: what was read beside each panel's misfit."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.physics.application import sprayed_reflectance
+    from flakelab.physics.characterisation import with_toner
+    from flakelab.render.plots import plot_flake_read, plot_pigment_read
+
+    names = [g.name for g in geometries]
+    misfit = {str(p.name): d for p, d in zip(sprayed, found.de00, strict=True)}
+    title = (
+        f"{found.toner.name}, read from {len(sprayed)} panels: worst ΔE00 "
+        f"{np.nanmax(found.de00):.2f} (from the start: {np.nanmax(found.start_de00):.2f})"
+    )
+    if found.toner.kind == "pigment":
+        spectra = {k: getattr(found.toner, k) for k in ("absorption", "scattering")}
+        start = {k: getattr(found.start, k) for k in ("absorption", "scattering")}
+        plot_pigment_read(WAVELENGTHS, spectra, start, found.uncertainty, names, misfit, plot,
+                          title=title)  # fmt: skip
+        return
+    fitted = sprayed_reflectance(with_toner(lib, found.toner), x, geometries, found.film,
+                                 found.spread)  # fmt: skip
+    lightness = {"read": reflectance_to_Lab(np.nan_to_num(measured))[..., 0],
+                 "fitted": reflectance_to_Lab(fitted)[..., 0]}  # fmt: skip
+    lightness["read"][~np.isfinite(measured).all(axis=-1)] = np.nan
+    plot_flake_read(names, list(misfit), lightness, misfit, plot, title=title)
+
+
+def _relative(sd: float | None) -> str:
+    """A relative standard deviation as the report words it."""
+    if sd is None or not np.isfinite(sd):
+        return "at the end of its range"
+    return f"± {sd:.1%}" if sd < 0.1 else f"± {sd:.0%}"
 
 
 def _wavelength_ranges(wavelengths) -> str:
@@ -365,26 +455,15 @@ def _wavelength_ranges(wavelengths) -> str:
 def _print_characterisation(report: dict) -> None:
     table = Table(title=f"{report['toner']} read from {len(report['panels'])} panels",
                   box=box.SIMPLE_HEAD, collapse_padding=True)  # fmt: skip
-    for column in ("panel", "its share", "film build", "worst ΔE00, fit", "Kubelka–Munk"):
+    start = "Kubelka–Munk" if report["kind"] == "pigment" else "from the start"
+    for column in ("panel", "its share", "film build", "worst ΔE00, fit", start):
         table.add_column(column, justify="left" if column == "panel" else "right")
     for p in report["panels"]:
         table.add_row(escape(p["panel"]), f"{p['share']:.1%}", f"{p['film_build']:.2f}",
                       f"{p['de00_max']:.2f} {p['de00_max_at']}",
                       f"{p['start_de00_max']:.2f}")  # fmt: skip
     console.print(table)
-    absorption = np.asarray(report["absorption"])
-    peak = int(np.argmax(absorption))
-    scatters = (
-        "scatters nothing the panels tell from none (transparent)"
-        if report["transparent"]
-        else f"scatters σ {np.mean(report['scattering']):.3g} /µm on average"
-    )
-    console.print(
-        f"{escape(report['toner'])} ({escape(report['family'])}): absorbs most at "
-        f"{report['wavelengths_nm'][peak]:g} nm (κ {absorption[peak]:.3g} /µm), {scatters}"
-        f"{'; it hides the primer' if report['hides'] else ''}.",
-        highlight=False,
-    )
+    console.print(f"{escape(report['toner'])} {_what_was_read(report)}.", highlight=False)
     verb = "read anew in" if report["replaced"] else "added to"
     console.print(
         f"{escape(report['toner'])} {verb} {escape(report['library'])}, written to "
@@ -397,3 +476,31 @@ def _print_characterisation(report: dict) -> None:
                      "recovered from it, one metamer of many", highlight=False)  # fmt: skip
     for note in report["notes"]:
         errors.print(f"[yellow]note:[/] {escape(note)}", highlight=False)
+
+
+def _what_was_read(report: dict) -> str:
+    """What the panels told of the toner, in a few words."""
+    if report["kind"] == "aluminium":
+        sd = report["relative_sd"]
+        read = ", ".join(
+            f"{label} {report[key]:.3g}{unit} ({_relative(sd[key])})"
+            for key, label, unit in (
+                ("orientation_sd_deg", "orientation spread", "°"),
+                ("surface_quality", "surface quality", ""),
+                ("volume_fraction", "volume fraction", ""),
+            )  # fmt: skip
+        )
+        size = f"{report['radius_um']:g} × {report['thickness_um']:g} µm as given"
+        return f"(aluminium, {size}): {read}"
+    absorption = np.asarray(report["absorption"])
+    peak = int(np.argmax(absorption))
+    scatters = (
+        "scatters nothing the panels tell from none (transparent)"
+        if report["transparent"]
+        else f"scatters σ {np.mean(report['scattering']):.3g} /µm on average"
+    )
+    hides = "; it hides the primer" if report["hides"] else ""
+    return (
+        f"({escape(report['family'])}): absorbs most at {report['wavelengths_nm'][peak]:g} nm "
+        f"(κ {absorption[peak]:.3g} /µm), {scatters}{hides}"
+    )

@@ -1,40 +1,48 @@
-"""A new pigment's absorption and scattering read from calibration panels: the library's
-physics inverted.
+"""A new toner's optics read from calibration panels: the library's physics inverted.
 
 A toner the cases never saw is predicted by the physics (the hybrid path, DESIGN.md §3),
-which needs its specific absorption κ(λ) and scattering σ(λ) [1/µm per unit mass fraction].
-A paint maker seldom states them; a lab sprays them. The two-constant method of colorant
-formulation (Allen, *Colorant formulation and shading*, 1980) reads them from a masstone and
-tints in a white: a masstone at hiding tells K/S alone, and a tint in a known scatterer splits
-K from S. Here the panels are any recipes of the new pigment with the library's toners (a
-masstone, tints in the white, a pigment in an aluminium base), measured at every geometry.
+which needs its optics: a pigment's specific absorption κ(λ) and scattering σ(λ) [1/µm per
+unit mass fraction], an aluminium flake's orientation spread, surface quality and volume
+fraction. A paint maker seldom states them; a lab sprays them.
 
-**Start: Kubelka–Munk at 45as45**, the instrument's 45°/0°. Each panel's internal R∞, by the
-inverse Saunderson correction, gives K/S, and (K_b + x·K)/(S_b + x·S) = K/S is linear in the
-pigment's K and S (K_b, S_b: the panel's other toners, from the library): least squares over
-the panels at each wavelength, all wavelengths at once.
+**A pigment.** The two-constant method of colorant formulation (Allen, *Colorant formulation
+and shading*, 1980) reads κ and σ from a masstone and tints in a white: a masstone at hiding
+tells K/S alone, and a tint in a known scatterer splits K from S. Here the panels are any
+recipes of the new pigment with the library's toners (a masstone, tints in the white, the
+pigment in an aluminium base), measured at every geometry. The fit starts from
+Kubelka–Munk at 45as45, the instrument's 45°/0°: each panel's internal R∞, by the inverse
+Saunderson correction, gives K/S, and (K_b + x·K)/(S_b + x·S) = K/S is linear in the
+pigment's K and S (K_b, S_b: the panel's other toners, from the library), least squares over
+the panels at each wavelength, all wavelengths at once. Where dropping the scattering
+altogether raises χ² by no more than the wavelengths it frees (the likelihood-ratio test, χ²
+scaled by its misfit), the pigment is transparent: a phthalo's or a dye's scattering, which
+the panels cannot tell from none, is written as none.
 
-**Fit: the library's own physics.** The pigment's log κ and log σ at every wavelength and
-each panel's film build are fitted so that
-:func:`~flakelab.physics.application.sprayed_reflectance`, with the pigment in the library,
+**An aluminium flake** (:data:`FLAKE_FITTED`): its normals' spread sets the flop, its surface
+quality the near-specular sparkle of light, its volume fraction how bright and how hiding
+the film is, all seen in a masstone and its tints at every geometry; the fit starts from the
+flake's values in the library (a similar paste's, for a new one). Its radius shows in the
+texture alone and its thickness only with the volume fraction (the flakes' number), so both
+are the supplier's (D50/2 and the stated thickness).
+
+**The fit: the library's own physics.** The toner's parameters (logs) and each panel's film
+build and flake spread are fitted so that
+:func:`~flakelab.physics.application.sprayed_reflectance`, with the toner in the library,
 reproduces the panels' reflectance at every geometry they were read at (scipy's bounded
 trust-region least squares), each residual in units of its reading's error (relative,
-:data:`PANEL_RELATIVE_SD`, and absolute, :data:`PANEL_OFFSET_SD`) and each panel's film build
-and flake spread (where it holds flakes) drawn towards the nominal by
-:data:`~flakelab.physics.application.FILM_BUILD_SD` and ``SPREAD_SD``. Where dropping
-the scattering altogether raises χ² by no more than the wavelengths it frees (the
-likelihood-ratio test, χ² scaled by its misfit), the pigment is transparent: a phthalo's
-or a dye's scattering, which the panels cannot tell from none, is written as none.
-The fitted constants are those with which flakelab's predictions reproduce the panels, which
-is what the hybrid path needs of them; they are not a measurement of the pigment's optics
-apart from the model. Their uncertainty is the fit's: the inverse of JᵀJ at the solution,
-scaled by χ²/dof where that exceeds one.
-"""
+:data:`PANEL_RELATIVE_SD`, and absolute, :data:`PANEL_OFFSET_SD`), each panel's film build
+and flake spread drawn towards the nominal by
+:data:`~flakelab.physics.application.FILM_BUILD_SD` and ``SPREAD_SD``. The fitted optics
+are those with which flakelab's predictions reproduce the panels, which is what the hybrid
+path needs of them; they are not a measurement of the toner apart from the model. Their
+uncertainty is the fit's: the inverse of JᵀJ at the solution, scaled by χ²/dof where that
+exceeds one."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,7 +53,14 @@ from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
-from flakelab.library.toners import MAX_COEFFICIENT, Library, Pigment
+from flakelab.library.toners import (
+    MAX_COEFFICIENT,
+    ORIENTATION_SD_MIN_DEG,
+    AluminiumFlake,
+    Library,
+    Pigment,
+    Toner,
+)
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_reflectance
 from flakelab.physics.kubelka_munk import inverse_saunderson, km_coefficients, ks_ratio
 from flakelab.physics.layer import layer_from_fractions
@@ -56,9 +71,12 @@ __all__ = [
     "COEFFICIENT_FLOOR",
     "Characterisation",
     "CharacterisationError",
-    "check_pigment",
-    "with_pigment",
+    "CHARACTERISED",
+    "FLAKE_FITTED",
+    "check_kind",
+    "with_toner",
     "characterise_pigment",
+    "characterise_flake",
 ]
 
 PANEL_RELATIVE_SD = 0.01
@@ -71,8 +89,7 @@ PANEL_OFFSET_SD = 2e-4
 pigment's flop."""
 COEFFICIENT_FLOOR = 1e-6
 """Least absorption or scattering the fit may give [1/µm per unit mass fraction]: a million
-times below the demo's weakest scatterer. A pigment fitted at this floor at every wavelength
-scatters nothing the panels can see, and is written as transparent (zero)."""
+times below the demo's weakest scatterer."""
 KM_GEOMETRY = "45as45"
 """Where the Kubelka–Munk start reads the panels: 45° lamp, detector along the normal."""
 _APPLICATION_RANGE = (0.5, 1.5)
@@ -85,35 +102,50 @@ class CharacterisationError(FlakelabError):
 
 @dataclass(frozen=True)
 class Characterisation:
-    """A pigment's constants fitted to calibration panels.
+    """A toner's optics fitted to calibration panels.
 
-    ``pigment`` is the fit; ``start`` the Kubelka–Munk start at 45as45. ``film[N]`` and
-    ``spread[N]`` are each panel's fitted relative film build and flake-spread scale;
-    ``de00[N, G]`` each panel's ΔE00 (D65/10) between its reading and the physics with the
-    fitted pigment, ``start_de00`` with the start's (NaN where a panel was not read).
-    ``absorption_sd[W]`` and ``scattering_sd[W]`` are the standard deviations of the natural
-    logs of κ and σ (about a relative error; NaN at the floor, or where the pigment is
-    transparent); ``chi2_per_dof`` the fit's misfit in units of the readings' errors."""
+    ``toner`` is the fit; ``start`` where it began (a pigment's Kubelka–Munk start at
+    45as45; a flake's values before). ``film[N]`` and ``spread[N]`` are each panel's fitted
+    relative film build and flake-spread scale; ``de00[N, G]`` each panel's ΔE00 (D65/10)
+    between its reading and the physics with the fitted toner, ``start_de00`` with the start
+    (NaN where a panel was not read). ``uncertainty`` holds each fitted quantity's relative
+    standard deviation (that of its log): a pigment's ``absorption`` and ``scattering``
+    ``[W]`` (NaN at the floor, or where the pigment is transparent), a flake's
+    ``orientation_sd_deg``, ``surface_quality`` and ``volume_fraction`` (NaN at a bound).
+    ``chi2_per_dof`` is the fit's misfit in units of the readings' errors."""
 
-    pigment: Pigment
-    start: Pigment
+    toner: Toner
+    start: Toner
     film: NDArray[np.float64]
     spread: NDArray[np.float64]
     de00: NDArray[np.float64]
     start_de00: NDArray[np.float64]
-    absorption_sd: NDArray[np.float64]
-    scattering_sd: NDArray[np.float64]
+    uncertainty: dict[str, Any]
     chi2_per_dof: float
     evaluations: int
 
 
-def with_pigment(library: Library, pigment: Pigment) -> Library:
-    """``library`` with ``pigment`` in place of its toner of that name, else added last."""
+FLAKE_FITTED = ("orientation_sd_deg", "surface_quality", "volume_fraction")
+"""What an aluminium flake's panels read: how its normals spread, how mirror-like it is and how
+much of the film it fills. Its radius (texture alone) and thickness (the panels see the
+volume fraction over the thickness, the flakes' number) are the supplier's: D50/2 and the
+stated thickness."""
+_FLAKE_RANGE = {
+    "orientation_sd_deg": (ORIENTATION_SD_MIN_DEG, 45.0),
+    "surface_quality": (0.05, 1.0),
+    "volume_fraction": (0.005, 0.6),
+}
+"""The values a flake's fit may give: a library's own limits, a surface no rougher than a
+twentieth of a mirror's, a volume fraction from half a per cent."""
+
+
+def with_toner(library: Library, toner: Toner) -> Library:
+    """``library`` with ``toner`` in place of its toner of that name, else added last."""
     names = library.names
-    if pigment.name in names:
-        k = names.index(pigment.name)
-        return replace(library, toners=(*library.toners[:k], pigment, *library.toners[k + 1 :]))
-    return replace(library, toners=(*library.toners, pigment))
+    if toner.name in names:
+        k = names.index(toner.name)
+        return replace(library, toners=(*library.toners[:k], toner, *library.toners[k + 1 :]))
+    return replace(library, toners=(*library.toners, toner))
 
 
 def characterise_pigment(
@@ -129,97 +161,167 @@ def characterise_pigment(
     messages) of recipes ``fractions[N, T]`` (library order), read as ``measured[N, G, W]``
     reflectance factors at ``geometries`` (NaN where a panel was not read)."""
     k = library.names.index(name)
-    x = np.asarray(fractions, dtype=float)
-    measured = np.asarray(measured, dtype=float)
-    _check_panels(library, k, x, panels)
-    read = np.isfinite(measured)
-    start = _km_start(library, k, x, geometries, measured)
-    model = _PanelModel(library, k, x, geometries)
-    target = measured[read]
-    weight = 1 / (PANEL_RELATIVE_SD * np.abs(target) + PANEL_OFFSET_SD)
-    N, W = len(x), WAVELENGTHS.size
-
-    def residuals_of(kappa: NDArray, sigma: NDArray, film: NDArray, spread: NDArray):
-        R = model.reflectance(kappa, sigma, film, spread)
-        return np.concatenate([(R[read] - target) * weight, np.log(film) / FILM_BUILD_SD,
-                               np.log(spread) / SPREAD_SD])  # fmt: skip
-
-    p0 = np.concatenate([np.log(start.absorption), np.log(start.scattering), np.zeros(2 * N)])
-    low = np.log([COEFFICIENT_FLOOR] * (2 * W) + [_APPLICATION_RANGE[0]] * (2 * N))
-    high = np.log([MAX_COEFFICIENT] * (2 * W) + [_APPLICATION_RANGE[1]] * (2 * N))
-    solution = least_squares(lambda p: residuals_of(*_unpacked(p, N)), np.clip(p0, low, high),
-                             bounds=(low, high), method="trf", x_scale=1.0)  # fmt: skip
-    kappa, sigma, film, spread = _unpacked(solution.x, N)
-    chi2 = float(np.sum(solution.fun**2))
-    dof = max(solution.fun.size - solution.x.size, 1)
-    scale = max(chi2 / dof, 1.0)
-    sd = _log_sd(solution.jac, scale)
-    sd[solution.x <= low + 1e-6] = np.nan
-    if np.sum(residuals_of(kappa, np.zeros(W), film, spread) ** 2) - chi2 <= W * scale:
-        sigma = np.zeros(W)  # scattering nothing the panels can tell from none: transparent
-        sd[W : 2 * W] = np.nan
-    pigment = replace(library.toners[k], absorption=kappa, scattering=sigma)
-    return Characterisation(
-        pigment=pigment,
-        start=start,
-        film=film,
-        spread=spread,
-        de00=_panel_de00(measured, model.reflectance(kappa, sigma, film, spread)),
-        start_de00=_panel_de00(
-            measured, model.reflectance(start.absorption, start.scattering, *np.ones((2, N)))
-        ),
-        absorption_sd=sd[:W],
-        scattering_sd=sd[W : 2 * W],
-        chi2_per_dof=chi2 / dof,
-        evaluations=int(solution.nfev),
-    )
-
-
-class _PanelModel:
-    """The panels' reflectance ``[N, G, W]`` by the library's physics, with the pigment at
-    index ``k`` given constants and each panel its film build."""
-
-    def __init__(self, library: Library, k: int, x: NDArray, geometries) -> None:
-        self.library, self.k, self.x, self.geometries = library, k, x, geometries
-
-    def reflectance(self, kappa: NDArray, sigma: NDArray, film: NDArray, spread: NDArray):
-        pigment = replace(self.library.toners[self.k], absorption=kappa, scattering=sigma)
-        library = with_pigment(self.library, pigment)
-        return sprayed_reflectance(library, self.x, self.geometries, film, spread)
-
-
-def _unpacked(p: NDArray, panels: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """κ, σ, film builds and flake spreads from the fit's parameters (their logs)."""
+    check_kind(library.toners[k], "pigment")
+    fit = _PanelFit(library, k, fractions, geometries, measured, panels)
+    _check_tinted(library, k, fit.x)
+    start = _km_start(library, k, fit.x, geometries, fit.measured)
     W = WAVELENGTHS.size
-    kappa, sigma, film, spread = np.split(np.exp(p), [W, 2 * W, 2 * W + panels])
-    return kappa, sigma, film, spread
+
+    def pigment_of(p: NDArray) -> Pigment:
+        return replace(start, absorption=np.exp(p[:W]), scattering=np.exp(p[W:]))
+
+    p0 = np.log(np.concatenate([start.absorption, start.scattering]))
+    bounds = np.log([[COEFFICIENT_FLOOR] * 2 * W, [MAX_COEFFICIENT] * 2 * W])
+    found = fit.run(pigment_of, p0, bounds, start)
+    sd = found.sd
+    transparent = replace(found.toner, scattering=np.zeros(W))
+    if fit.chi2(transparent, found.film, found.spread) - found.chi2 <= W * found.scale:
+        found = replace(found, toner=transparent)  # scatters nothing told from none
+        sd[W:] = np.nan
+    return found.characterisation({"absorption": sd[:W], "scattering": sd[W:]})
 
 
-def check_pigment(toner) -> None:
-    """Refuse a toner that is no pigment: a flake's or a pearl's optics are not two
-    coefficients."""
-    if toner.kind != "pigment":
-        article = "an" if toner.kind[0] in "aeiou" else "a"
+def characterise_flake(
+    library: Library,
+    name: str,
+    fractions: NDArray,
+    geometries: tuple[Geometry, ...],
+    measured: NDArray,
+    panels: Sequence[str],
+) -> Characterisation:
+    """Fit :data:`FLAKE_FITTED` of ``library``'s aluminium flake ``name``, from its values
+    there (its radius and thickness kept), to ``panels``, as :func:`characterise_pigment`."""
+    k = library.names.index(name)
+    flake = library.toners[k]
+    check_kind(flake, "aluminium")
+    fit = _PanelFit(library, k, fractions, geometries, measured, panels)
+
+    def flake_of(p: NDArray) -> AluminiumFlake:
+        return replace(flake, **dict(zip(FLAKE_FITTED, np.exp(p).tolist(), strict=True)))
+
+    p0 = np.log([getattr(flake, f) for f in FLAKE_FITTED])
+    bounds = np.log([[_FLAKE_RANGE[f][i] for f in FLAKE_FITTED] for i in (0, 1)])
+    found = fit.run(flake_of, p0, bounds, flake)
+    return found.characterisation(dict(zip(FLAKE_FITTED, found.sd.tolist(), strict=True)))
+
+
+CHARACTERISED = {"pigment": characterise_pigment, "aluminium": characterise_flake}
+"""The kinds of toner read from panels, and how."""
+
+
+def check_kind(toner: Toner, kind: str | None = None) -> None:
+    """Refuse a toner that is not of ``kind`` (None: any kind panels are read for)."""
+    if toner.kind != kind if kind else toner.kind not in CHARACTERISED:
+        wanted = _a(kind) if kind else " or ".join(map(_a, CHARACTERISED))
         raise CharacterisationError(
-            f"{toner.name!r} is {article} {toner.kind} toner: only a pigment's absorption and "
-            "scattering are read from panels"
+            f"{toner.name!r} is {_a(toner.kind)} toner: expected {wanted} (a pigment's "
+            "absorption and scattering, or an aluminium flake's spread, surface and volume "
+            "fraction, are read from panels)"
         )
 
 
-def _check_panels(library: Library, k: int, x: NDArray, panels: Sequence[str]) -> None:
-    """Refuse panels that cannot split the pigment's absorption from its scattering: one
-    without the pigment, or masstones alone."""
-    name = library.names[k]
-    check_pigment(library.toners[k])
-    for panel, recipe in zip(panels, x, strict=True):
-        if recipe[k] <= 0:
-            raise CharacterisationError(f"{panel}: its recipe holds no {name!r}")
-    others = np.delete(x, k, axis=1)
-    if not np.any(others > 0):
+def _a(kind: str) -> str:
+    return f"an {kind}" if kind[0] in "aeiou" else f"a {kind}"
+
+
+@dataclass(frozen=True)
+class _Found:
+    """A panel fit's outcome: the toner, each panel's application, the misfit and the
+    fitted parameters' standard deviations (of their logs; NaN at a bound)."""
+
+    fit: _PanelFit
+    toner: Toner
+    start: Toner
+    film: NDArray
+    spread: NDArray
+    chi2: float
+    dof: int
+    sd: NDArray
+    evaluations: int
+
+    @property
+    def scale(self) -> float:
+        """χ²/dof where the panels lie further from the physics than their errors allow,
+        else 1: what the parameters' uncertainty is scaled by."""
+        return max(self.chi2 / self.dof, 1.0)
+
+    def characterisation(self, uncertainty: dict[str, Any]) -> Characterisation:
+        nominal = np.ones(len(self.film))
+        return Characterisation(
+            toner=self.toner,
+            start=self.start,
+            film=self.film,
+            spread=self.spread,
+            de00=self.fit.de00(self.toner, self.film, self.spread),
+            start_de00=self.fit.de00(self.start, nominal, nominal),
+            uncertainty=uncertainty,
+            chi2_per_dof=self.chi2 / self.dof,
+            evaluations=self.evaluations,
+        )
+
+
+class _PanelFit:
+    """Panels of recipes ``x[N, T]`` read as ``measured[N, G, W]``, and the library's physics
+    that predicts them with its toner at ``k`` replaced (module notes)."""
+
+    def __init__(self, library: Library, k: int, x, geometries, measured, panels) -> None:
+        self.library, self.k, self.geometries = library, k, geometries
+        self.x = np.asarray(x, dtype=float)
+        self.measured = np.asarray(measured, dtype=float)
+        name = library.names[k]
+        for panel, recipe in zip(panels, self.x, strict=True):
+            if recipe[k] <= 0:
+                raise CharacterisationError(f"{panel}: its recipe holds no {name!r}")
+        self.read = np.isfinite(self.measured)
+        self.target = self.measured[self.read]
+        self.weight = 1 / (PANEL_RELATIVE_SD * np.abs(self.target) + PANEL_OFFSET_SD)
+
+    def reflectance(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
+        library = with_toner(self.library, toner)
+        return sprayed_reflectance(library, self.x, self.geometries, film, spread)
+
+    def residuals(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
+        """Each reading's misfit in units of its error, then each panel's film build and
+        spread in units of their spray-to-spray spread."""
+        misfit = (self.reflectance(toner, film, spread)[self.read] - self.target) * self.weight
+        return np.concatenate([misfit, np.log(film) / FILM_BUILD_SD, np.log(spread) / SPREAD_SD])
+
+    def chi2(self, toner: Toner, film: NDArray, spread: NDArray) -> float:
+        return float(np.sum(self.residuals(toner, film, spread) ** 2))
+
+    def de00(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
+        return _panel_de00(self.measured, self.reflectance(toner, film, spread))
+
+    def run(self, toner_of: Callable[[NDArray], Toner], p0, bounds, start: Toner) -> _Found:
+        """Least squares over the toner's parameters (``toner_of`` makes it from them, ``p0``
+        within ``bounds[2, P]``) and each panel's log film build and spread."""
+        N, P = len(self.x), len(p0)
+        application = np.log([[_APPLICATION_RANGE[0]] * 2 * N, [_APPLICATION_RANGE[1]] * 2 * N])
+        low, high = np.concatenate([bounds, application], axis=1)
+
+        def residuals(p: NDArray) -> NDArray:
+            film, spread = np.exp(p[P:]).reshape(2, N)
+            return self.residuals(toner_of(p[:P]), film, spread)
+
+        p = np.clip(np.concatenate([p0, np.zeros(2 * N)]), low, high)
+        solution = least_squares(residuals, p, bounds=(low, high), method="trf", x_scale=1.0)
+        film, spread = np.exp(solution.x[P:]).reshape(2, N)
+        chi2 = float(np.sum(solution.fun**2))
+        dof = max(solution.fun.size - solution.x.size, 1)
+        sd = _log_sd(solution.jac, max(chi2 / dof, 1.0))[:P]
+        at_bound = (solution.x[:P] <= low[:P] + 1e-6) | (solution.x[:P] >= high[:P] - 1e-6)
+        sd[at_bound] = np.nan
+        return _Found(self, toner_of(solution.x[:P]), start, film, spread, chi2, dof, sd,
+                      int(solution.nfev))  # fmt: skip
+
+
+def _check_tinted(library: Library, k: int, x: NDArray) -> None:
+    """Refuse masstones alone: they tell a pigment's K/S, not K and S apart."""
+    if not np.any(np.delete(x, k, axis=1) > 0):
         raise CharacterisationError(
-            f"the panels are masstones of {name!r} alone, which tell its K/S and not K and S "
-            "apart: add a tint of it in the library's white (or in another toner of the "
-            "library)"
+            f"the panels are masstones of {library.names[k]!r} alone, which tell its K/S and "
+            "not K and S apart: add a tint of it in the library's white (or in another toner "
+            "of the library)"
         )
 
 

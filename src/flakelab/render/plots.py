@@ -34,7 +34,8 @@ __all__ = [
     "plot_habits",
     "plot_variants",
     "plot_tins_history",
-    "plot_characterisation",
+    "plot_pigment_read",
+    "plot_flake_read",
     "plot_model_errors",
     "plot_harness",
     "plot_realism",
@@ -481,7 +482,7 @@ def plot_tins_history(
     _save(figure, path, dpi)
 
 
-def plot_characterisation(
+def plot_pigment_read(
     wavelengths: np.ndarray,
     fitted: Mapping[str, np.ndarray],
     start: Mapping[str, np.ndarray],
@@ -515,16 +516,51 @@ def plot_characterisation(
     spectra.set_yscale("log")
     spectra.set(xlabel="wavelength [nm]", ylabel="per unit mass fraction [1/µm] (± 1 s.d.)")
     spectra.legend(fontsize=8)
+    _misfit_bars(misfit, geometries, panels)
+    figure.suptitle(_fitted(title or "A pigment read from calibration panels", figure))
+    _save(figure, path, dpi)
+
+
+def plot_flake_read(
+    geometries: Sequence[str],
+    names: Sequence[str],
+    lightness: Mapping[str, np.ndarray],
+    panels: Mapping[str, np.ndarray],
+    path: str | PathLike,
+    *,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """An aluminium flake read from calibration panels (``flakelab library characterise
+    --plot``): each panel's L* (D65/10) at each of ``geometries``, ``lightness["read"]``
+    (markers, NaN where not read) and ``lightness["fitted"]`` (lines) ``[N, G]``, panels
+    ``names``; and each panel's ΔE00 between its reading and the fit (``panels``)."""
+    figure, (flop, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
+    at = np.arange(len(geometries))
+    lamps = _geometry_groups(list(geometries), len(geometries))  # a line for each lamp
+    for n, name in enumerate(names):
+        for i, (rows, _) in enumerate(lamps):
+            flop.plot(at[rows], lightness["fitted"][n][rows], color=f"C{n}", lw=1.5,
+                      label=None if i else f"{name}, fitted")  # fmt: skip
+        flop.plot(at, lightness["read"][n], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
+    flop.set_xticks(at, list(geometries), rotation=60, fontsize=8)
+    flop.set(ylabel="L* (D65/10)")
+    flop.legend(fontsize=8)
+    _misfit_bars(misfit, geometries, panels)
+    figure.suptitle(_fitted(title or "An aluminium flake read from calibration panels", figure))
+    _save(figure, path, dpi)
+
+
+def _misfit_bars(axis, geometries: Sequence[str], panels: Mapping[str, np.ndarray]) -> None:
+    """Each panel's ΔE00 between its reading and the fit, a bar per panel at each geometry."""
     at = np.arange(len(geometries))
     width = 0.8 / max(len(panels), 1)
     for n, (name, de00) in enumerate(panels.items()):
-        misfit.bar(at + (n - (len(panels) - 1) / 2) * width, np.nan_to_num(de00), width,
-                   label=name)  # fmt: skip
-    misfit.set_xticks(at, list(geometries), rotation=60, fontsize=8)
-    misfit.set(ylabel="ΔE00, reading vs fit (D65/10)")
-    misfit.legend(fontsize=8)
-    figure.suptitle(_fitted(title or "A pigment read from calibration panels", figure))
-    _save(figure, path, dpi)
+        axis.bar(at + (n - (len(panels) - 1) / 2) * width, np.nan_to_num(de00), width,
+                 label=name)  # fmt: skip
+    axis.set_xticks(at, list(geometries), rotation=60, fontsize=8)
+    axis.set(ylabel="ΔE00, reading vs fit (D65/10)")
+    axis.legend(fontsize=8)
 
 
 def plot_model_errors(
