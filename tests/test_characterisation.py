@@ -306,10 +306,11 @@ def test_library_characterise_writes_the_library_with_the_pigment(tmp_path, cli)
 def test_library_characterise_reads_a_new_aluminium_flake(tmp_path, cli):
     """``library characterise --kind aluminium``: a paste new to the demo library (Al medium
     under another name) read from a masstone and two tints, its radius and thickness from
-    its datasheet: the library written holds it with Al medium's spread, surface and volume
-    fraction (the fit starting from the library's first flake's), and --plot draws each
-    panel's flop. A new flake without its radius and thickness, a pigment's option for a
-    flake, and a pearl are refused, nothing written."""
+    its datasheet (a radius of 16 µm, as Al coarse bright's): the library written holds it
+    with Al medium's spread, surface and volume fraction, the fit starting from Al coarse
+    bright's, the library's flake nearest in radius; --plot draws each panel's flop. A new
+    flake without its radius and thickness, a pigment's option for a flake, and a pearl are
+    refused, nothing written."""
     demo = read_library()
     name = "Al medium 2027"
     real = replace(demo["Al medium"], name=name)
@@ -321,16 +322,21 @@ def test_library_characterise_reads_a_new_aluminium_flake(tmp_path, cli):
     args = ["library", "characterise", name, *panels]
     for path in recipe_files:
         args += ["--recipe", path]
-    datasheet = ["--kind", "aluminium", "--radius", "10", "--thickness", "0.3"]
+    datasheet = ["--kind", "aluminium", "--radius", "16", "--thickness", "0.3"]
     done = cli(*args, *datasheet, "--out", out, "--plot", plot, "--json")
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     flake = read_library_file(out)[name]
-    assert flake.kind == "aluminium" and (flake.radius_um, flake.thickness_um) == (10, 0.3)
+    assert flake.kind == "aluminium" and (flake.radius_um, flake.thickness_um) == (16, 0.3)
     for f in FLAKE_FITTED:
         assert getattr(flake, f) == pytest.approx(getattr(real, f), rel=1e-3), f
         assert report[f] == getattr(flake, f)
-    assert report["start"]["orientation_sd_deg"] == demo.of_kind("aluminium")[0].orientation_sd_deg
+    nearest = demo["Al coarse bright"]
+    assert (
+        report["start"]
+        == {f: getattr(nearest, f) for f in FLAKE_FITTED}
+        != {f: getattr(real, f) for f in FLAKE_FITTED}
+    )
     assert "<svg" in plot.read_text()
     refused = {
         "--radius (half its D50) and --thickness": ["--kind", "aluminium"],

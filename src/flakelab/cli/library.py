@@ -278,7 +278,7 @@ def characterise(
                "spectra_recovered": [str(p) for p, r in zip(sprayed, readings, strict=True)
                                      if r.spectra_recovered]}  # fmt: skip
     if plot is not None:
-        _draw_characterisation(found, lib, x, geometries, measured, sprayed, plot)
+        _draw_characterisation(found, geometries, measured, sprayed, plot)
         report["plot"] = str(plot)
     if json_output:
         print_report(report)
@@ -301,12 +301,12 @@ _KIND_OPTIONS = {"pigment": ("--family", "--g"), "aluminium": ("--radius", "--th
 
 def _starting_toner(lib, name: str, kind, options: dict, density):
     """The toner the panels are read for: the library's toner of that name (its kind kept),
-    or a new one of ``kind`` described by ``options`` (a new flake starts from the library's
-    first aluminium's spread, surface and volume fraction)."""
+    or a new one of ``kind`` described by ``options`` (a new flake starts from the spread,
+    surface and volume fraction of the library's flake nearest in radius)."""
     from flakelab.core.spectra import WAVELENGTHS
     from flakelab.errors import FlakelabError
     from flakelab.library.toners import Pigment
-    from flakelab.physics.characterisation import check_kind
+    from flakelab.physics.characterisation import check_kind, similar_flake
 
     held = lib[name] if name in lib.names else None
     kind = held.kind if held is not None else (kind or CharacterisedKind.pigment).value
@@ -327,10 +327,8 @@ def _starting_toner(lib, name: str, kind, options: dict, density):
         return replace(base, family=options["--family"] or base.family,
                        g=base.g if options["--g"] is None else options["--g"],
                        density_g_ml=density, description="")  # fmt: skip
-    base = held or replace(lib.of_kind("aluminium")[0], name=name)
-    return replace(base, radius_um=options["--radius"] or base.radius_um,
-                   thickness_um=options["--thickness"] or base.thickness_um,
-                   density_g_ml=density, description="")  # fmt: skip
+    base = held or similar_flake(lib, name, options["--radius"], options["--thickness"])
+    return replace(base, density_g_ml=density, description="")
 
 
 def _characterisation_report(found, toner, sprayed, x, k: int, geometries) -> dict:
@@ -406,16 +404,17 @@ def _flake_read(found, flake, notes: list[str]) -> dict:
     }
 
 
-def _draw_characterisation(found, lib, x, geometries, measured, sprayed, plot) -> None:
+def _draw_characterisation(found, geometries, measured, sprayed, plot) -> None:
     """``library characterise --plot``: what was read beside each panel's misfit."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.spectra import WAVELENGTHS
-    from flakelab.physics.application import sprayed_reflectance
-    from flakelab.physics.characterisation import with_toner
     from flakelab.render.plots import plot_flake_read, plot_pigment_read
 
     names = [g.name for g in geometries]
-    misfit = {str(p.name): d for p, d in zip(sprayed, found.de00, strict=True)}
+    labels = [p.name for p in sprayed]
+    if len(set(labels)) < len(labels):  # panels of one name in several folders
+        labels = [str(p) for p in sprayed]
+    misfit = dict(zip(labels, found.de00, strict=True))
     title = (
         f"{found.toner.name}, read from {len(sprayed)} panels: worst ΔE00 "
         f"{np.nanmax(found.de00):.2f} (from the start: {np.nanmax(found.start_de00):.2f})"
@@ -426,10 +425,8 @@ def _draw_characterisation(found, lib, x, geometries, measured, sprayed, plot) -
         plot_pigment_read(WAVELENGTHS, spectra, start, found.uncertainty, names, misfit, plot,
                           title=title)  # fmt: skip
         return
-    fitted = sprayed_reflectance(with_toner(lib, found.toner), x, geometries, found.film,
-                                 found.spread)  # fmt: skip
     lightness = {"read": reflectance_to_Lab(np.nan_to_num(measured))[..., 0],
-                 "fitted": reflectance_to_Lab(fitted)[..., 0]}  # fmt: skip
+                 "fitted": reflectance_to_Lab(found.fitted)[..., 0]}  # fmt: skip
     lightness["read"][~np.isfinite(measured).all(axis=-1)] = np.nan
     plot_flake_read(names, list(misfit), lightness, misfit, plot, title=title)
 

@@ -73,6 +73,8 @@ __all__ = [
     "CharacterisationError",
     "CHARACTERISED",
     "FLAKE_FITTED",
+    "FLAKE_START",
+    "similar_flake",
     "check_kind",
     "with_toner",
     "characterise_pigment",
@@ -106,18 +108,20 @@ class Characterisation:
 
     ``toner`` is the fit; ``start`` where it began (a pigment's Kubelka–Munk start at
     45as45; a flake's values before). ``film[N]`` and ``spread[N]`` are each panel's fitted
-    relative film build and flake-spread scale; ``de00[N, G]`` each panel's ΔE00 (D65/10)
-    between its reading and the physics with the fitted toner, ``start_de00`` with the start
-    (NaN where a panel was not read). ``uncertainty`` holds each fitted quantity's relative
-    standard deviation (that of its log): a pigment's ``absorption`` and ``scattering``
-    ``[W]`` (NaN at the floor, or where the pigment is transparent), a flake's
-    ``orientation_sd_deg``, ``surface_quality`` and ``volume_fraction`` (NaN at a bound).
-    ``chi2_per_dof`` is the fit's misfit in units of the readings' errors."""
+    relative film build and flake-spread scale; ``fitted[N, G, W]`` each panel's reflectance
+    by the physics with the fitted toner; ``de00[N, G]`` its ΔE00 (D65/10) from the reading,
+    ``start_de00`` the start's (NaN where a panel was not read). ``uncertainty`` holds each
+    fitted quantity's relative standard deviation (that of its log): a pigment's
+    ``absorption`` and ``scattering`` ``[W]`` (NaN at the floor, or where the pigment is
+    transparent), a flake's ``orientation_sd_deg``, ``surface_quality`` and
+    ``volume_fraction`` (NaN at a bound). ``chi2_per_dof`` is the fit's misfit in units of
+    the readings' errors."""
 
     toner: Toner
     start: Toner
     film: NDArray[np.float64]
     spread: NDArray[np.float64]
+    fitted: NDArray[np.float64]
     de00: NDArray[np.float64]
     start_de00: NDArray[np.float64]
     uncertainty: dict[str, Any]
@@ -130,6 +134,9 @@ FLAKE_FITTED = ("orientation_sd_deg", "surface_quality", "volume_fraction")
 much of the film it fills. Its radius (texture alone) and thickness (the panels see the
 volume fraction over the thickness, the flakes' number) are the supplier's: D50/2 and the
 stated thickness."""
+FLAKE_START = {"orientation_sd_deg": 10.0, "surface_quality": 0.9, "volume_fraction": 0.13}
+"""Where a new flake's fit starts in a library of no aluminium to start from: a middling
+paste's spread, surface and volume fraction."""
 _FLAKE_RANGE = {
     "orientation_sd_deg": (ORIENTATION_SD_MIN_DEG, 45.0),
     "surface_quality": (0.05, 1.0),
@@ -209,12 +216,25 @@ CHARACTERISED = {"pigment": characterise_pigment, "aluminium": characterise_flak
 """The kinds of toner read from panels, and how."""
 
 
+def similar_flake(library: Library, name: str, radius_um: float, thickness_um: float):
+    """A new flake ``name`` of the datasheet's radius and thickness, its spread, surface and
+    volume fraction those of the library's flake nearest in radius (:data:`FLAKE_START` where
+    it has none): where its fit starts."""
+    flakes = library.of_kind("aluminium")
+    if not flakes:
+        return AluminiumFlake(name, radius_um, thickness_um, **FLAKE_START)
+    nearest = min(flakes, key=lambda f: abs(np.log(f.radius_um / radius_um)))
+    return replace(nearest, name=name, radius_um=radius_um, thickness_um=thickness_um,
+                   description="", density_g_ml=None)  # fmt: skip
+
+
 def check_kind(toner: Toner, kind: str | None = None) -> None:
     """Refuse a toner that is not of ``kind`` (None: any kind panels are read for)."""
-    if toner.kind != kind if kind else toner.kind not in CHARACTERISED:
-        wanted = _a(kind) if kind else " or ".join(map(_a, CHARACTERISED))
+    allowed = (kind,) if kind else tuple(CHARACTERISED)
+    if toner.kind not in allowed:
         raise CharacterisationError(
-            f"{toner.name!r} is {_a(toner.kind)} toner: expected {wanted} (a pigment's "
+            f"{toner.name!r} is {_a(toner.kind)} toner: expected "
+            f"{' or '.join(map(_a, allowed))} (a pigment's "
             "absorption and scattering, or an aluminium flake's spread, surface and volume "
             "fraction, are read from panels)"
         )
@@ -247,13 +267,16 @@ class _Found:
 
     def characterisation(self, uncertainty: dict[str, Any]) -> Characterisation:
         nominal = np.ones(len(self.film))
+        fitted = self.fit.reflectance(self.toner, self.film, self.spread)
+        started = self.fit.reflectance(self.start, nominal, nominal)
         return Characterisation(
             toner=self.toner,
             start=self.start,
             film=self.film,
             spread=self.spread,
-            de00=self.fit.de00(self.toner, self.film, self.spread),
-            start_de00=self.fit.de00(self.start, nominal, nominal),
+            fitted=fitted,
+            de00=_panel_de00(self.fit.measured, fitted),
+            start_de00=_panel_de00(self.fit.measured, started),
             uncertainty=uncertainty,
             chi2_per_dof=self.chi2 / self.dof,
             evaluations=self.evaluations,
@@ -288,9 +311,6 @@ class _PanelFit:
 
     def chi2(self, toner: Toner, film: NDArray, spread: NDArray) -> float:
         return float(np.sum(self.residuals(toner, film, spread) ** 2))
-
-    def de00(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
-        return _panel_de00(self.measured, self.reflectance(toner, film, spread))
 
     def run(self, toner_of: Callable[[NDArray], Toner], p0, bounds, start: Toner) -> _Found:
         """Least squares over the toner's parameters (``toner_of`` makes it from them, ``p0``
