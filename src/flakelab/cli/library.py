@@ -233,11 +233,16 @@ def characterise(
 
     from flakelab.cli.common import check_figure_file, check_output_file, read_readings
     from flakelab.cli.sources import recipe_fractions
+    from flakelab.core.measurement import TEXTURE_READINGS
     from flakelab.core.spectra import WAVELENGTHS
     from flakelab.errors import FlakelabError
     from flakelab.io import read_library, read_recipe
     from flakelab.io.library_file import write_library
-    from flakelab.physics.characterisation import CHARACTERISED, with_toner
+    from flakelab.physics.characterisation import (
+        characterise_flake,
+        characterise_pigment,
+        with_toner,
+    )
 
     if len(recipe) != len(sprayed):
         raise FlakelabError(
@@ -255,12 +260,13 @@ def characterise(
                             "anew, in its place")  # fmt: skip
     if anew and not held:
         raise FlakelabError(f"--replace: {lib.name!r} holds no toner {toner!r}")
+    readings = [read_readings(path, sample, average)[0] for path in sprayed]
+    texture = np.array([[r.texture.get(k, np.nan) for k in TEXTURE_READINGS] for r in readings])
     options = {"--family": family, "--g": asymmetry, "--radius": radius, "--thickness": thickness}
-    start = _starting_toner(lib, toner, kind, options, density)
+    start = _starting_toner(lib, toner, kind, options, density, np.isfinite(texture).any())
     lib = with_toner(lib, start)
     grams = [read_recipe(path) for path in recipe]
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
-    readings = [read_readings(path, sample, average)[0] for path in sprayed]
     geometries = tuple(sorted({g for r in readings for g in r.geometries}))  # every panel's
     names = [g.name for g in geometries]
     measured = np.full((len(readings), len(names), WAVELENGTHS.size), np.nan)
@@ -268,8 +274,12 @@ def characterise(
         row[[names.index(g) for g in reading.geometry_names]] = reading.storage_spectra(
             reading.geometry_names
         )
-    found = CHARACTERISED[start.kind](lib, toner, x, geometries, measured,
-                                      [str(path) for path in sprayed])  # fmt: skip
+    panels = [str(path) for path in sprayed]
+    if start.kind == "pigment":
+        found = characterise_pigment(lib, toner, x, geometries, measured, panels)
+    else:  # the radius read from the texture, where the panels were read with it
+        found = characterise_flake(lib, toner, x, geometries, measured, panels,
+                                   None if radius is not None else texture)  # fmt: skip
     made = f"read by flakelab from {len(sprayed)} calibration panels on {date.today()}"
     read = found.toner if found.toner.description else replace(found.toner, description=made)
     write_library(with_toner(lib, read), out)
@@ -296,26 +306,36 @@ PANEL_MISFIT_NOTED = 1.0
 """Worst ΔE00 between a panel and the fit past which the panel is named: a recipe weighed
 otherwise, a mislabelled file, or a paint the physics does not reproduce."""
 _KIND_OPTIONS = {"pigment": ("--family", "--g"), "aluminium": ("--radius", "--thickness")}
-"""The options that describe a new toner of each kind."""
+"""The options that describe a new toner of each kind (a flake read anew takes --radius, its
+datasheet's, in place of reading it from the texture)."""
 
 
-def _starting_toner(lib, name: str, kind, options: dict, density):
+def _starting_toner(lib, name: str, kind, options: dict, density, textured: bool):
     """The toner the panels are read for: the library's toner of that name (its kind kept),
     or a new one of ``kind`` described by ``options`` (a new flake starts from the spread,
-    surface and volume fraction of the library's flake nearest in radius)."""
+    surface and volume fraction of the library's flake nearest in radius; where the panels
+    were read with texture, ``textured``, its radius may be left to them, from the library's
+    median flake's)."""
     from flakelab.core.spectra import WAVELENGTHS
     from flakelab.errors import FlakelabError
     from flakelab.library.toners import Pigment
-    from flakelab.physics.characterisation import check_kind, similar_flake
+    from flakelab.physics.characterisation import (
+        FLAKE_START_RADIUS_UM,
+        check_kind,
+        similar_flake,
+    )
 
     held = lib[name] if name in lib.names else None
     kind = held.kind if held is not None else (kind or CharacterisedKind.pigment).value
     if held is not None:
         check_kind(held)
-    if kind == "aluminium" and held is None and None in (options["--radius"],
-                                                         options["--thickness"]):  # fmt: skip
-        raise FlakelabError("a new aluminium flake: --radius (half its D50) and --thickness "
-                            "[µm] from its datasheet: the panels do not show them")  # fmt: skip
+    if kind == "aluminium" and held is None and options["--thickness"] is None:
+        raise FlakelabError("a new aluminium flake: --thickness [µm] from its datasheet: the "
+                            "panels show it only with its volume fraction")  # fmt: skip
+    if kind == "aluminium" and held is None and options["--radius"] is None and not textured:
+        raise FlakelabError("a new aluminium flake: --radius (half its D50, from its "
+                            "datasheet), or panels read with texture (sparkle and "
+                            "graininess), from which it is read")  # fmt: skip
     for option, value in options.items():
         if value is not None and option not in _KIND_OPTIONS[kind]:
             takes = " and ".join(_KIND_OPTIONS[kind])
@@ -327,8 +347,14 @@ def _starting_toner(lib, name: str, kind, options: dict, density):
         return replace(base, family=options["--family"] or base.family,
                        g=base.g if options["--g"] is None else options["--g"],
                        density_g_ml=density, description="")  # fmt: skip
-    base = held or similar_flake(lib, name, options["--radius"], options["--thickness"])
-    return replace(base, density_g_ml=density, description="")
+    if held is not None:
+        return replace(held, radius_um=options["--radius"] or held.radius_um,
+                       thickness_um=options["--thickness"] or held.thickness_um,
+                       density_g_ml=density, description="")  # fmt: skip
+    radii = [f.radius_um for f in lib.of_kind("aluminium")] or [FLAKE_START_RADIUS_UM]
+    base = similar_flake(lib, name, options["--radius"] or float(np.median(radii)),
+                         options["--thickness"])  # fmt: skip
+    return replace(base, density_g_ml=density)
 
 
 def _characterisation_report(found, toner, sprayed, x, k: int, geometries) -> dict:
@@ -391,16 +417,17 @@ def _flake_read(found, flake, notes: list[str]) -> dict:
     """An aluminium flake's part of the report; a note where the panels leave it unsure."""
     from flakelab.physics.characterisation import FLAKE_FITTED
 
-    unsure = [f for f in FLAKE_FITTED if found.uncertainty[f] > POORLY_READ_LOG_SD]
+    unsure = [f for f, sd in found.uncertainty.items() if sd > POORLY_READ_LOG_SD]
     if unsure:
         notes.append(f"its {', '.join(unsure)}: read to no better than a factor of two: add a "
                      "panel that shows it (the flake tinted with a pigment)")  # fmt: skip
     read = {f: getattr(flake, f) for f in FLAKE_FITTED}
     return read | {
         "radius_um": flake.radius_um,
+        "radius_read": "radius_um" in found.uncertainty,  # from the texture, else as given
         "thickness_um": flake.thickness_um,
         "relative_sd": dict(found.uncertainty),
-        "start": {f: getattr(found.start, f) for f in FLAKE_FITTED},
+        "start": {f: getattr(found.start, f) for f in (*FLAKE_FITTED, "radius_um")},
     }
 
 
@@ -487,8 +514,13 @@ def _what_was_read(report: dict) -> str:
                 ("volume_fraction", "volume fraction", ""),
             )  # fmt: skip
         )
-        size = f"{report['radius_um']:g} × {report['thickness_um']:g} µm as given"
-        return f"(aluminium, {size}): {read}"
+        if report["radius_read"]:
+            radius = (f"radius {report['radius_um']:.3g} µm read from the texture "
+                      f"({_relative(sd['radius_um'])}), ")  # fmt: skip
+            size = f"{report['thickness_um']:g} µm thick as given"
+        else:
+            radius, size = "", f"{report['radius_um']:g} × {report['thickness_um']:g} µm as given"
+        return f"(aluminium, {size}): {radius}{read}"
     absorption = np.asarray(report["absorption"])
     peak = int(np.argmax(absorption))
     scatters = (

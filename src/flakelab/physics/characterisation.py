@@ -51,9 +51,11 @@ from scipy.optimize import least_squares
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import Geometry
+from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import (
+    FLAKE_RADIUS_MIN_UM,
     MAX_COEFFICIENT,
     ORIENTATION_SD_MIN_DEG,
     AluminiumFlake,
@@ -61,19 +63,24 @@ from flakelab.library.toners import (
     Pigment,
     Toner,
 )
-from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_reflectance
+from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
+from flakelab.physics.fast import reflectance_factor
 from flakelab.physics.kubelka_munk import inverse_saunderson, km_coefficients, ks_ratio
 from flakelab.physics.layer import layer_from_fractions
+from flakelab.texture.readings import GLINT_SHARE, texture_readings
 
 __all__ = [
     "PANEL_RELATIVE_SD",
     "PANEL_OFFSET_SD",
+    "TEXTURE_RELATIVE_SD",
+    "TEXTURE_OFFSET_SD",
     "COEFFICIENT_FLOOR",
     "Characterisation",
     "CharacterisationError",
     "CHARACTERISED",
     "FLAKE_FITTED",
     "FLAKE_START",
+    "FLAKE_START_RADIUS_UM",
     "similar_flake",
     "check_kind",
     "with_toner",
@@ -92,6 +99,23 @@ pigment's flop."""
 COEFFICIENT_FLOOR = 1e-6
 """Least absorption or scattering the fit may give [1/µm per unit mass fraction]: a million
 times below the demo's weakest scatterer."""
+TEXTURE_RELATIVE_SD = 0.1
+"""Relative error of a texture reading that the fit weighs its misfit by [-]: a camera's
+count of glints from one spot to the next, and the texture model's own misfit (the generated
+world reads Sa, Si and G to a few per cent from spot to spot; a real instrument's formulas
+are its maker's)."""
+TEXTURE_OFFSET_SD = 0.05
+"""Absolute error of a texture reading beside :data:`TEXTURE_RELATIVE_SD`: a reading near
+zero (a dark paint's sparkle) is still one of a few glints."""
+FEW_GLINTS = 10
+"""Glints under one light below which a panel's sparkle intensity Si is not fitted: the mean
+brightness of fewer is a sample too small (one glint's spread is ``GLINT_SD``, 57 %), and
+with none the instrument reads 0, which no flake population predicts."""
+RADIUS_GRID_TOP_UM = 60.0
+"""Largest flake radius the texture's first look tries [µm]: beyond the coarsest effect
+pastes (D50 about 100 µm)."""
+_NOT_SG = np.array([k != "SG" for k in TEXTURE_READINGS])
+"""The texture readings fitted: the sparkle grade follows from Sa and Si."""
 KM_GEOMETRY = "45as45"
 """Where the Kubelka–Munk start reads the panels: 45° lamp, detector along the normal."""
 _APPLICATION_RANGE = (0.5, 1.5)
@@ -109,7 +133,8 @@ class Characterisation:
     ``toner`` is the fit; ``start`` where it began (a pigment's Kubelka–Munk start at
     45as45; a flake's values before). ``film[N]`` and ``spread[N]`` are each panel's fitted
     relative film build and flake-spread scale; ``fitted[N, G, W]`` each panel's reflectance
-    by the physics with the fitted toner; ``de00[N, G]`` its ΔE00 (D65/10) from the reading,
+    by the physics with the fitted toner and ``fitted_texture[N, 8]`` its texture readings;
+    ``de00[N, G]`` its ΔE00 (D65/10) from the reading,
     ``start_de00`` the start's (NaN where a panel was not read). ``uncertainty`` holds each
     fitted quantity's relative standard deviation (that of its log): a pigment's
     ``absorption`` and ``scattering`` ``[W]`` (NaN at the floor, or where the pigment is
@@ -122,6 +147,7 @@ class Characterisation:
     film: NDArray[np.float64]
     spread: NDArray[np.float64]
     fitted: NDArray[np.float64]
+    fitted_texture: NDArray[np.float64]
     de00: NDArray[np.float64]
     start_de00: NDArray[np.float64]
     uncertainty: dict[str, Any]
@@ -137,10 +163,14 @@ stated thickness."""
 FLAKE_START = {"orientation_sd_deg": 10.0, "surface_quality": 0.9, "volume_fraction": 0.13}
 """Where a new flake's fit starts in a library of no aluminium to start from: a middling
 paste's spread, surface and volume fraction."""
+FLAKE_START_RADIUS_UM = 10.0
+"""A middling paste's radius [µm]: where a new flake's radius, to be read from its panels'
+texture, starts in a library of no aluminium."""
 _FLAKE_RANGE = {
     "orientation_sd_deg": (ORIENTATION_SD_MIN_DEG, 45.0),
     "surface_quality": (0.05, 1.0),
     "volume_fraction": (0.005, 0.6),
+    "radius_um": (FLAKE_RADIUS_MIN_UM, 100.0),
 }
 """The values a flake's fit may give: a library's own limits, a surface no rougher than a
 twentieth of a mirror's, a volume fraction from half a per cent."""
@@ -195,21 +225,41 @@ def characterise_flake(
     geometries: tuple[Geometry, ...],
     measured: NDArray,
     panels: Sequence[str],
+    texture: NDArray | None = None,
 ) -> Characterisation:
     """Fit :data:`FLAKE_FITTED` of ``library``'s aluminium flake ``name``, from its values
-    there (its radius and thickness kept), to ``panels``, as :func:`characterise_pigment`."""
+    there (its thickness kept), to ``panels``, as :func:`characterise_pigment`; its radius
+    too where the panels' ``texture[N, 8]`` readings are given (NaN where not read; in
+    :data:`~flakelab.core.measurement.TEXTURE_READINGS` order), else kept."""
     k = library.names.index(name)
     flake = library.toners[k]
     check_kind(flake, "aluminium")
     fit = _PanelFit(library, k, fractions, geometries, measured, panels)
+    found = _flake_fit(fit, flake, FLAKE_FITTED, flake)
+    if texture is not None and np.isfinite(np.asarray(texture, float)).any():
+        # the radius from the texture, from the reflectance's fit and the radius of those
+        # on a grid that fits the texture best: jointly from a start far off, the fit can
+        # run to a bound (a VMP's count of glints rises steeply as its spread narrows)
+        fit = _PanelFit(library, k, fractions, geometries, measured, panels, texture)
+        grid = np.geomspace(_FLAKE_RANGE["radius_um"][0], RADIUS_GRID_TOP_UM, 24)
+        chi2 = [fit.chi2(replace(found.toner, radius_um=r), found.film, found.spread)
+                for r in grid]  # fmt: skip
+        near = replace(found.toner, radius_um=float(grid[int(np.argmin(chi2))]))
+        found = _flake_fit(fit, near, (*FLAKE_FITTED, "radius_um"), flake)
+    return found
+
+
+def _flake_fit(fit: _PanelFit, flake: AluminiumFlake, fitted: tuple[str, ...], start):
+    """``fitted`` of ``flake`` fitted to the panels, from its values (``start``: the flake
+    reported as where the fit began)."""
 
     def flake_of(p: NDArray) -> AluminiumFlake:
-        return replace(flake, **dict(zip(FLAKE_FITTED, np.exp(p).tolist(), strict=True)))
+        return replace(flake, **dict(zip(fitted, np.exp(p).tolist(), strict=True)))
 
-    p0 = np.log([getattr(flake, f) for f in FLAKE_FITTED])
-    bounds = np.log([[_FLAKE_RANGE[f][i] for f in FLAKE_FITTED] for i in (0, 1)])
-    found = fit.run(flake_of, p0, bounds, flake)
-    return found.characterisation(dict(zip(FLAKE_FITTED, found.sd.tolist(), strict=True)))
+    p0 = np.log([getattr(flake, f) for f in fitted])
+    bounds = np.log([[_FLAKE_RANGE[f][i] for f in fitted] for i in (0, 1)])
+    found = fit.run(flake_of, p0, bounds, start)
+    return found.characterisation(dict(zip(fitted, found.sd.tolist(), strict=True)))
 
 
 CHARACTERISED = {"pigment": characterise_pigment, "aluminium": characterise_flake}
@@ -267,7 +317,7 @@ class _Found:
 
     def characterisation(self, uncertainty: dict[str, Any]) -> Characterisation:
         nominal = np.ones(len(self.film))
-        fitted = self.fit.reflectance(self.toner, self.film, self.spread)
+        fitted, texture = self.fit.appearance(self.toner, self.film, self.spread)
         started = self.fit.reflectance(self.start, nominal, nominal)
         return Characterisation(
             toner=self.toner,
@@ -275,6 +325,7 @@ class _Found:
             film=self.film,
             spread=self.spread,
             fitted=fitted,
+            fitted_texture=texture,
             de00=_panel_de00(self.fit.measured, fitted),
             start_de00=_panel_de00(self.fit.measured, started),
             uncertainty=uncertainty,
@@ -287,7 +338,9 @@ class _PanelFit:
     """Panels of recipes ``x[N, T]`` read as ``measured[N, G, W]``, and the library's physics
     that predicts them with its toner at ``k`` replaced (module notes)."""
 
-    def __init__(self, library: Library, k: int, x, geometries, measured, panels) -> None:
+    def __init__(
+        self, library: Library, k: int, x, geometries, measured, panels, texture=None
+    ) -> None:
         self.library, self.k, self.geometries = library, k, geometries
         self.x = np.asarray(x, dtype=float)
         self.measured = np.asarray(measured, dtype=float)
@@ -298,16 +351,36 @@ class _PanelFit:
         self.read = np.isfinite(self.measured)
         self.target = self.measured[self.read]
         self.weight = 1 / (PANEL_RELATIVE_SD * np.abs(self.target) + PANEL_OFFSET_SD)
+        self.texture = None if texture is None else np.asarray(texture, dtype=float)
+        if self.texture is not None:  # SG follows from Sa and Si: not counted twice
+            self.texture_read = np.isfinite(self.texture) & _NOT_SG
+            Sa = self.texture[:, list(TEXTURE_FAMILIES["Sa"])]
+            few = ~(Sa >= FEW_GLINTS * GLINT_SHARE)  # Si of a few glints, or none: no reading
+            self.texture_read[:, list(TEXTURE_FAMILIES["Si"])] &= ~few
+            self.texture_target = self.texture[self.texture_read]
+            self.texture_weight = 1 / (
+                TEXTURE_RELATIVE_SD * np.abs(self.texture_target) + TEXTURE_OFFSET_SD
+            )
+
+    def appearance(self, toner: Toner, film: NDArray, spread: NDArray):
+        """The panels' reflectance ``[N, G, W]`` and texture readings ``[N, 8]``."""
+        library = with_toner(self.library, toner)
+        layer = sprayed_layer(layer_from_fractions(library, self.x), library, film, spread)
+        R = reflectance_factor(layer, self.geometries)
+        return R, texture_readings(layer, library.flake_radii_um)
 
     def reflectance(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
-        library = with_toner(self.library, toner)
-        return sprayed_reflectance(library, self.x, self.geometries, film, spread)
+        return self.appearance(toner, film, spread)[0]
 
     def residuals(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
-        """Each reading's misfit in units of its error, then each panel's film build and
-        spread in units of their spray-to-spray spread."""
-        misfit = (self.reflectance(toner, film, spread)[self.read] - self.target) * self.weight
-        return np.concatenate([misfit, np.log(film) / FILM_BUILD_SD, np.log(spread) / SPREAD_SD])
+        """Each reading's misfit in units of its error (the texture readings' too, where
+        they are fitted), then each panel's film build and spread in units of their
+        spray-to-spray spread."""
+        R, texture = self.appearance(toner, film, spread)
+        misfit = [(R[self.read] - self.target) * self.weight]
+        if self.texture is not None:
+            misfit.append((texture[self.texture_read] - self.texture_target) * self.texture_weight)
+        return np.concatenate([*misfit, np.log(film) / FILM_BUILD_SD, np.log(spread) / SPREAD_SD])
 
     def chi2(self, toner: Toner, film: NDArray, spread: NDArray) -> float:
         return float(np.sum(self.residuals(toner, film, spread) ** 2))
