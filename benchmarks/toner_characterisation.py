@@ -1,16 +1,17 @@
-"""A new pigment or aluminium flake read from three calibration panels: how well what was
-read predicts paints the panels never showed.
+"""A new pigment or aluminium flake read from calibration panels: how well what was read
+predicts paints the panels never showed.
 
-For each of the demo library's pigments in turn, the generated world sprays three panels
-from one set of tins (a masstone and tints of 1:4 and 1:19 in the white; the white itself
-in carbon black), each with its own film build and flake spread, and reads them with the
-MA-T12's noise (``World.measure``). ``flakelab.physics.characterisation`` fits the pigment's
-absorption and scattering to the readings, its library constants unseen. Three held-out
-paints of the same tins are then predicted by the physics at the nominal application, and
-compared, worst geometry, with what those tins give (ΔE00, D65/10):
+For each of the demo library's pigments in turn, the generated world sprays panels from one
+set of tins, each with its own film build and flake spread, and reads them with the MA-T12's
+noise (``World.measure``): a masstone and tints of 1:4 and 1:19 in the white (the white
+itself in carbon black), ``tints``; and those and a tenth of the pigment in Al medium,
+``tints_and_metallic``. ``flakelab.physics.characterisation`` fits the pigment's absorption
+and scattering to the readings, its library constants unseen. Three held-out paints of the
+same tins are then predicted by the physics at the nominal application, and compared, worst
+geometry, with what those tins give (ΔE00, D65/10):
 
-* a 1:9 tint in the white, the pigment in a metallic (a tenth of it, the rest Al medium) and
-  with another pigment of the library (its fifth, the rest that pigment);
+* a 1:9 tint in the white, a fifth of the pigment in Al coarse bright, and a fifth of it with
+  another pigment of the library;
 * by the constants fitted (``fitted``), by the Kubelka–Munk start at 45as45 alone (Allen's
   two-constant method, ``km``: the baseline, measured in the same run) and by the tin's own
   constants (``oracle``: what the other tins' batch strengths leave, the floor).
@@ -22,7 +23,9 @@ Each of the library's ten aluminium flakes likewise (``flakes_*``): a masstone, 
 phthalo blue in it and a fifth of iron oxide red, its orientation spread, surface quality
 and volume fraction fitted from the next flake's values (the baseline: a similar paste taken
 for it), the held-out paints three tenths of perylene maroon in it and a twentieth of carbon
-black; and how far each fitted value lies from the flake's (``flakes_parameter_error_*``).
+black; and how far each fitted value lies from the flake's (``flakes_parameter_error_*``),
+its radius read from the panels' texture readings (the camera's glint counts), started
+from the library's median radius.
 
     python benchmarks/toner_characterisation.py [--seed 7] [--json]
 """
@@ -138,11 +141,22 @@ def one_flake(world: World, k: int, rng: np.random.Generator) -> dict:
     film, spread = world.application(len(x), rng, at_shop=False)
     sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
                         film, spread)  # fmt: skip
-    measured = world.measure(world.appearance(x, sprayed)[0], rng)
+    R, texture = world.appearance(x, sprayed)
+    measured = world.measure(R, rng)
     started = time.perf_counter()
     found = characterise_flake(with_toner(library, start), flake.name, x, world.geometries,
                                measured, ["masstone", "blue", "red"])  # fmt: skip
     seconds = time.perf_counter() - started
+    median_radius = float(np.median([f.radius_um for f in flakes]))
+    textured = characterise_flake(
+        with_toner(library, replace(start, radius_um=median_radius)),
+        flake.name,
+        x,
+        world.geometries,
+        measured,
+        ["masstone", "blue", "red"],
+        texture=world.measure_texture(texture, rng),
+    )
     held = np.array([blended(names, flake.name, parts) for parts in
                      ({"Perylene maroon": 0.3}, {"Carbon black": 0.05})])  # fmt: skip
     n = len(held)
@@ -155,6 +169,7 @@ def one_flake(world: World, k: int, rng: np.random.Generator) -> dict:
                                         np.ones(n), np.ones(n))  # fmt: skip
         judged[label] = worst_de00(predicted, truth)
     errors = {f: abs(getattr(found.toner, f) / getattr(flake, f) - 1) for f in FLAKE_FITTED}
+    errors["radius_um"] = abs(textured.toner.radius_um / flake.radius_um - 1)
     return {"seconds": seconds, "panels_de00_max": float(np.nanmax(found.de00)), **judged,
             "errors": errors}  # fmt: skip
 
@@ -171,8 +186,11 @@ def flakes_report(world: World, seed: int) -> dict:
     report["flakes_fitted_over_similar_median"] = (
         report["flakes_fitted_de00_median"] / report["flakes_similar_de00_median"]
     )
-    for f in FLAKE_FITTED:
+    for f in (*FLAKE_FITTED, "radius_um"):
         report[f"flakes_parameter_error_{f}_max"] = max(r["errors"][f] for r in results)
+    report["flakes_parameter_error_radius_um_median"] = float(
+        np.median([r["errors"]["radius_um"] for r in results])
+    )
     report["flakes_panels_de00_max"] = max(r["panels_de00_max"] for r in results)
     report["flakes_seconds_max"] = max(r["seconds"] for r in results)
     return report

@@ -362,23 +362,24 @@ class _PanelFit:
                 TEXTURE_RELATIVE_SD * np.abs(self.texture_target) + TEXTURE_OFFSET_SD
             )
 
-    def appearance(self, toner: Toner, film: NDArray, spread: NDArray):
-        """The panels' reflectance ``[N, G, W]`` and texture readings ``[N, 8]``."""
+    def appearance(self, toner: Toner, film: NDArray, spread: NDArray, texture: bool = True):
+        """The panels' reflectance ``[N, G, W]`` and, with ``texture``, their texture
+        readings ``[N, 8]`` (else None)."""
         library = with_toner(self.library, toner)
         layer = sprayed_layer(layer_from_fractions(library, self.x), library, film, spread)
         R = reflectance_factor(layer, self.geometries)
-        return R, texture_readings(layer, library.flake_radii_um)
+        return R, texture_readings(layer, library.flake_radii_um) if texture else None
 
     def reflectance(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
-        return self.appearance(toner, film, spread)[0]
+        return self.appearance(toner, film, spread, texture=False)[0]
 
     def residuals(self, toner: Toner, film: NDArray, spread: NDArray) -> NDArray:
         """Each reading's misfit in units of its error (the texture readings' too, where
         they are fitted), then each panel's film build and spread in units of their
         spray-to-spray spread."""
-        R, texture = self.appearance(toner, film, spread)
+        R, texture = self.appearance(toner, film, spread, self.texture is not None)
         misfit = [(R[self.read] - self.target) * self.weight]
-        if self.texture is not None:
+        if texture is not None:
             misfit.append((texture[self.texture_read] - self.texture_target) * self.texture_weight)
         return np.concatenate([*misfit, np.log(film) / FILM_BUILD_SD, np.log(spread) / SPREAD_SD])
 
