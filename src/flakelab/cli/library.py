@@ -462,6 +462,8 @@ def _relative(sd: float | None) -> str:
     """A relative standard deviation as the report words it."""
     if sd is None or not np.isfinite(sd):
         return "at the end of its range"
+    if sd < 0.001:
+        return "± less than 0.1%"
     return f"± {sd:.1%}" if sd < 0.1 else f"± {sd:.0%}"
 
 

@@ -306,6 +306,7 @@ class _Found:
     spread: NDArray
     chi2: float
     dof: int
+    misfit: float
     sd: NDArray
     evaluations: int
 
@@ -329,7 +330,7 @@ class _Found:
             de00=_panel_de00(self.fit.measured, fitted),
             start_de00=_panel_de00(self.fit.measured, started),
             uncertainty=uncertainty,
-            chi2_per_dof=self.chi2 / self.dof,
+            chi2_per_dof=self.misfit,
             evaluations=self.evaluations,
         )
 
@@ -348,6 +349,7 @@ class _PanelFit:
         for panel, recipe in zip(panels, self.x, strict=True):
             if recipe[k] <= 0:
                 raise CharacterisationError(f"{panel}: its recipe holds no {name!r}")
+        self.misfit = 1.0  # the readings' errors' scale: more where the panels lie further
         self.read = np.isfinite(self.measured)
         self.target = self.measured[self.read]
         self.weight = 1 / (PANEL_RELATIVE_SD * np.abs(self.target) + PANEL_OFFSET_SD)
@@ -381,7 +383,8 @@ class _PanelFit:
         misfit = [(R[self.read] - self.target) * self.weight]
         if texture is not None:
             misfit.append((texture[self.texture_read] - self.texture_target) * self.texture_weight)
-        return np.concatenate([*misfit, np.log(film) / FILM_BUILD_SD, np.log(spread) / SPREAD_SD])
+        data = np.concatenate(misfit) / self.misfit
+        return np.concatenate([data, np.log(film) / FILM_BUILD_SD, np.log(spread) / SPREAD_SD])
 
     def chi2(self, toner: Toner, film: NDArray, spread: NDArray) -> float:
         return float(np.sum(self.residuals(toner, film, spread) ** 2))
@@ -399,14 +402,19 @@ class _PanelFit:
 
         p = np.clip(np.concatenate([p0, np.zeros(2 * N)]), low, high)
         solution = least_squares(residuals, p, bounds=(low, high), method="trf", x_scale=1.0)
+        dof = max(solution.fun.size - solution.x.size, 1)
+        misfit = float(np.sum(solution.fun**2)) / dof
+        if misfit > 1:  # the panels lie further from the physics than their readings' errors
+            self.misfit = np.sqrt(misfit)  # the errors made as large, the fit run again
+            solution = least_squares(residuals, solution.x, bounds=(low, high), method="trf",
+                                     x_scale=1.0)  # fmt: skip
         film, spread = np.exp(solution.x[P:]).reshape(2, N)
         chi2 = float(np.sum(solution.fun**2))
-        dof = max(solution.fun.size - solution.x.size, 1)
         sd = _log_sd(solution.jac, max(chi2 / dof, 1.0))[:P]
         at_bound = (solution.x[:P] <= low[:P] + 1e-6) | (solution.x[:P] >= high[:P] - 1e-6)
         sd[at_bound] = np.nan
-        return _Found(self, toner_of(solution.x[:P]), start, film, spread, chi2, dof, sd,
-                      int(solution.nfev))  # fmt: skip
+        return _Found(self, toner_of(solution.x[:P]), start, film, spread, chi2, dof, misfit,
+                      sd, int(solution.nfev))  # fmt: skip
 
 
 def _check_tinted(library: Library, k: int, x: NDArray) -> None:
