@@ -14,7 +14,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from flakelab.cli.common import (
-    AverageOption,
     JsonOption,
     SampleOption,
     command_group,
@@ -163,8 +162,9 @@ def characterise(
         typer.Option(
             "--kind",
             help="What a new toner is: a pigment (its absorption and scattering are read) or "
-            "an aluminium flake (its orientation spread, surface quality and volume fraction; "
-            "--radius and --thickness from its datasheet). A toner read anew keeps its kind.",
+            "an aluminium flake (its orientation spread, surface quality and volume fraction, "
+            "and its radius where the panels were read with texture; --thickness from its "
+            "datasheet). A toner read anew keeps its kind.",
             show_default="pigment",
         ),
     ] = None,
@@ -189,11 +189,20 @@ def characterise(
     ] = None,
     radius: Annotated[
         float | None,
-        typer.Option("--radius", help="A new aluminium flake's radius [µm]: half its D50."),
+        typer.Option(
+            "--radius",
+            help="An aluminium flake's radius [µm], half its D50 (from its datasheet), kept as "
+            "given; without it, read from the panels' texture (sparkle and graininess) where "
+            "they were read with it.",
+        ),
     ] = None,
     thickness: Annotated[
         float | None,
-        typer.Option("--thickness", help="A new aluminium flake's thickness [µm]."),
+        typer.Option(
+            "--thickness",
+            help="An aluminium flake's thickness [µm], from its datasheet: the panels show it "
+            "only with its volume fraction.",
+        ),
     ] = None,
     density: Annotated[
         float | None, typer.Option("--density", help="Its density as sold [g/mL].")
@@ -207,7 +216,14 @@ def characterise(
         ),
     ] = False,
     sample: SampleOption = None,
-    average: AverageOption = False,
+    average: Annotated[
+        bool,
+        typer.Option(
+            "--average",
+            help="Average every reading in each panel's file (the panel read at a few spots) "
+            "and use their mean.",
+        ),
+    ] = False,
     plot: Annotated[
         Path | None,
         typer.Option(
