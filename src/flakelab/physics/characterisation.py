@@ -123,7 +123,8 @@ _APPLICATION_RANGE = (0.5, 1.5)
 
 
 class CharacterisationError(FlakelabError):
-    """Panels that cannot tell a pigment's absorption from its scattering, naming why."""
+    """A toner that panels do not read (a pearl), or panels that cannot read it (masstones
+    alone of a pigment, a panel without it), naming why."""
 
 
 @dataclass(frozen=True)
@@ -134,13 +135,14 @@ class Characterisation:
     45as45; a flake's values before). ``film[N]`` and ``spread[N]`` are each panel's fitted
     relative film build and flake-spread scale; ``fitted[N, G, W]`` each panel's reflectance
     by the physics with the fitted toner and ``fitted_texture[N, 8]`` its texture readings;
-    ``de00[N, G]`` its ΔE00 (D65/10) from the reading,
-    ``start_de00`` the start's (NaN where a panel was not read). ``uncertainty`` holds each
+    ``de00[N, G]`` its ΔE00 (D65/10) from the reading, ``start_de00`` the start's (NaN where
+    a panel was not read). ``uncertainty`` holds each
     fitted quantity's relative standard deviation (that of its log): a pigment's
     ``absorption`` and ``scattering`` ``[W]`` (NaN at the floor, or where the pigment is
-    transparent), a flake's ``orientation_sd_deg``, ``surface_quality`` and
-    ``volume_fraction`` (NaN at a bound). ``chi2_per_dof`` is the fit's misfit in units of
-    the readings' errors."""
+    transparent), a flake's ``orientation_sd_deg``, ``surface_quality``,
+    ``volume_fraction`` and, where read from the texture, ``radius_um`` (NaN at a bound).
+    ``chi2_per_dof`` is the first fit's misfit in units of the readings' errors (above 1,
+    the errors were scaled by it and the fit run again)."""
 
     toner: Toner
     start: Toner
