@@ -270,3 +270,30 @@ def test_readings_of_one_surface_average_and_say_how_far_each_lies():
         mean_reading([readings[0], fewer])
     with pytest.raises(FlakelabError, match="instrument 'ma-t12' differs from 'a'"):
         mean_reading([readings[0], replace(base, instrument="ma-t12")])
+
+
+def test_readings_at_different_geometries_stack_at_every_geometry_any_was_read_at():
+    """Panels read by two instruments stack at the union of their geometries, in instrument
+    order (the 15° lamp's first, each lamp's by aspecular angle), each panel's spectra where
+    it was read and NaN elsewhere; its texture readings likewise."""
+    from dataclasses import replace
+
+    from flakelab.core.geometry import instrument_geometries
+    from flakelab.core.measurement import TEXTURE_READINGS, stacked_readings
+    from flakelab.data import example_path
+    from flakelab.io import read_measurement
+
+    car = read_measurement(example_path("target"))
+    five = car.select(instrument_geometries("five-angle"))
+    bare = replace(read_measurement(example_path("sprayout")), texture={})
+    geometries, spectra, texture = stacked_readings([five, bare])
+    assert [g.name for g in geometries] == [
+        "15as-45", "15as-30", "15as-15", "15as15", "15as45", "15as80",
+        "45as-15", "45as15", "45as25", "45as45", "45as75", "45as110",
+    ]  # fmt: skip
+    read = [geometries.index(g) for g in five.geometries]
+    np.testing.assert_array_equal(spectra[0, read], five.storage_spectra(five.geometries))
+    assert np.isnan(np.delete(spectra[0], read, axis=0)).all()
+    np.testing.assert_array_equal(spectra[1], bare.storage_spectra(geometries))
+    np.testing.assert_array_equal(texture[0], [car.texture[k] for k in TEXTURE_READINGS])
+    assert texture.shape == (2, 8) and np.isnan(texture[1]).all()

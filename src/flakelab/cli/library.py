@@ -249,8 +249,7 @@ def characterise(
 
     from flakelab.cli.common import check_figure_file, check_output_file, read_readings
     from flakelab.cli.sources import recipe_fractions
-    from flakelab.core.measurement import TEXTURE_READINGS
-    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.core.measurement import stacked_readings
     from flakelab.errors import FlakelabError
     from flakelab.io import read_library, read_recipe
     from flakelab.io.library_file import write_library
@@ -277,19 +276,13 @@ def characterise(
     if anew and not held:
         raise FlakelabError(f"--replace: {lib.name!r} holds no toner {toner!r}")
     readings = [read_readings(path, sample, average)[0] for path in sprayed]
-    texture = np.array([[r.texture.get(k, np.nan) for k in TEXTURE_READINGS] for r in readings])
+    geometries, measured, texture = stacked_readings(readings)
     options = {"--family": family, "--g": asymmetry, "--radius": radius, "--thickness": thickness}
     start = _starting_toner(lib, toner, kind, options, density, np.isfinite(texture).any())
     lib = with_toner(lib, start)
     grams = [read_recipe(path) for path in recipe]
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipe, strict=True)])
-    geometries = tuple(sorted({g for r in readings for g in r.geometries}))  # every panel's
     names = [g.name for g in geometries]
-    measured = np.full((len(readings), len(names), WAVELENGTHS.size), np.nan)
-    for row, reading in zip(measured, readings, strict=True):
-        row[[names.index(g) for g in reading.geometry_names]] = reading.storage_spectra(
-            reading.geometry_names
-        )
     panels = [str(path) for path in sprayed]
     if start.kind == "pigment":
         found = characterise_pigment(lib, toner, x, geometries, measured, panels)

@@ -32,6 +32,7 @@ __all__ = [
     "TEXTURE_RANGE",
     "outside",
     "mean_reading",
+    "stacked_readings",
     "recovered_note",
     "colour_stated_elsewhere",
     "daylight_estimate_note",
@@ -269,6 +270,23 @@ def known_by_colour(measurement: Measurement, conditions: Conditions = D65_10) -
         stored_lab_conditions=conditions,
         spectra_recovered=True,
     )
+
+
+def stacked_readings(
+    readings: Sequence[Measurement],
+) -> tuple[tuple[Geometry, ...], NDArray[np.float64], NDArray[np.float64]]:
+    """Several samples read at geometries that may differ (calibration panels read by two
+    instruments): every geometry any was read at, in instrument order (lamp, then aspecular
+    angle), their reflectance ``[N, G, 31]`` on the storage grid and their texture readings
+    ``[N, 8]`` in :data:`TEXTURE_READINGS` order, NaN where a sample was not read."""
+    geometries = tuple(sorted({g for r in readings for g in r.geometries}))
+    spectra = np.full((len(readings), len(geometries), WAVELENGTHS.size), np.nan)
+    for row, reading in zip(spectra, readings, strict=True):
+        row[[geometries.index(g) for g in reading.geometries]] = reading.storage_spectra(
+            reading.geometries
+        )
+    texture = np.array([[r.texture.get(k, np.nan) for k in TEXTURE_READINGS] for r in readings])
+    return geometries, spectra, texture.reshape(len(readings), len(TEXTURE_READINGS))
 
 
 def mean_reading(readings: Sequence[Measurement]) -> Measurement:
