@@ -63,11 +63,7 @@ pigment in Al medium."""
 
 def recipes(names: tuple[str, ...], pigment: str, partner: str, shares) -> np.ndarray:
     """Recipes ``[len(shares), T]``: the pigment at each share, the partner the rest."""
-    x = np.zeros((len(shares), len(names)))
-    for row, share in zip(x, shares, strict=True):
-        row[names.index(pigment)] = share
-        row[names.index(partner)] += 1 - share
-    return x
+    return np.array([blended(names, pigment, {partner: 1 - share}) for share in shares])
 
 
 def tins_pigment(pigment, strength: float, shade_nm: float):

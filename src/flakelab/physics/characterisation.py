@@ -237,7 +237,8 @@ def characterise_flake(
     flake = library.toners[k]
     check_kind(flake, "aluminium")
     fit = _PanelFit(library, k, fractions, geometries, measured, panels)
-    found = _flake_fit(fit, flake, FLAKE_FITTED, flake)
+    fitted = FLAKE_FITTED
+    found = _flake_fit(fit, flake, fitted, flake)
     if texture is not None and np.isfinite(np.asarray(texture, float)).any():
         # the radius from the texture, from the reflectance's fit and the radius of those
         # on a grid that fits the texture best: jointly from a start far off, the fit can
@@ -247,11 +248,12 @@ def characterise_flake(
         chi2 = [fit.chi2(replace(found.toner, radius_um=r), found.film, found.spread)
                 for r in grid]  # fmt: skip
         near = replace(found.toner, radius_um=float(grid[int(np.argmin(chi2))]))
-        found = _flake_fit(fit, near, (*FLAKE_FITTED, "radius_um"), flake)
-    return found
+        fitted = (*FLAKE_FITTED, "radius_um")
+        found = _flake_fit(fit, near, fitted, flake)
+    return found.characterisation(dict(zip(fitted, found.sd.tolist(), strict=True)))
 
 
-def _flake_fit(fit: _PanelFit, flake: AluminiumFlake, fitted: tuple[str, ...], start):
+def _flake_fit(fit: _PanelFit, flake: AluminiumFlake, fitted: tuple[str, ...], start) -> _Found:
     """``fitted`` of ``flake`` fitted to the panels, from its values (``start``: the flake
     reported as where the fit began)."""
 
@@ -260,12 +262,12 @@ def _flake_fit(fit: _PanelFit, flake: AluminiumFlake, fitted: tuple[str, ...], s
 
     p0 = np.log([getattr(flake, f) for f in fitted])
     bounds = np.log([[_FLAKE_RANGE[f][i] for f in fitted] for i in (0, 1)])
-    found = fit.run(flake_of, p0, bounds, start)
-    return found.characterisation(dict(zip(fitted, found.sd.tolist(), strict=True)))
+    return fit.run(flake_of, p0, bounds, start)
 
 
-CHARACTERISED = {"pigment": characterise_pigment, "aluminium": characterise_flake}
-"""The kinds of toner read from panels, and how."""
+CHARACTERISED = ("pigment", "aluminium")
+"""The kinds of toner read from panels (:func:`characterise_pigment`,
+:func:`characterise_flake`)."""
 
 
 def similar_flake(library: Library, name: str, radius_um: float, thickness_um: float):
@@ -282,7 +284,7 @@ def similar_flake(library: Library, name: str, radius_um: float, thickness_um: f
 
 def check_kind(toner: Toner, kind: str | None = None) -> None:
     """Refuse a toner that is not of ``kind`` (None: any kind panels are read for)."""
-    allowed = (kind,) if kind else tuple(CHARACTERISED)
+    allowed = (kind,) if kind else CHARACTERISED
     if toner.kind not in allowed:
         raise CharacterisationError(
             f"{toner.name!r} is {_a(toner.kind)} toner: expected "
