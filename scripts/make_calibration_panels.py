@@ -1,4 +1,4 @@
-"""Write calibration panels of two toners new to the demo library, for trying
+"""Write calibration panels of three toners new to the demo library, for trying
 ``flakelab library characterise`` (synthetic, labelled so in their metadata).
 
 * ``DPP red 2027``, a new grade of the demo's DPP red (its absorption band 10 nm to the red,
@@ -6,7 +6,10 @@
   medium (``dpp-*.cxf``, ``dpp-*.json``);
 * ``Al sparkle 2027``, a coarse paste (15 µm radius, 0.4 µm thick, normals spread 8.5°,
   surface quality 0.92, volume fraction 0.12): its masstone, a tenth of phthalo blue GS in it
-  and a fifth of iron oxide red (``al-*.cxf``, ``al-*.json``).
+  and a fifth of iron oxide red (``al-*.cxf``, ``al-*.json``);
+* ``Pearl gold 2027``, an interference gold (TiO2 80 nm thick on mica 400 nm, 12 µm radius,
+  normals spread 9°, volume fraction 0.09): alone, over a twentieth of carbon black and half
+  and half with Al medium (``pearl-*.cxf``, ``pearl-*.json``).
 
 Each set is sprayed in the generated world from one set of tins at the factory, each panel
 with its own film build and flake spread, and read at the MA-T12's geometries with its noise
@@ -33,11 +36,11 @@ from flakelab.cases.generator import Variation, World
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS, shift_spectra
 from flakelab.io import read_library, write_measurements
-from flakelab.library.toners import AluminiumFlake
+from flakelab.library.toners import AluminiumFlake, Pearl
 from flakelab.physics.characterisation import with_toner
 
 CAN_G = 50.0
-PIGMENT, FLAKE = "DPP red 2027", "Al sparkle 2027"
+PIGMENT, FLAKE, PEARL = "DPP red 2027", "Al sparkle 2027", "Pearl gold 2027"
 PANELS = {
     "dpp": {
         "masstone": {PIGMENT: 1.0},
@@ -50,18 +53,25 @@ PANELS = {
         "phthalo-blue": {FLAKE: 0.9, "Phthalo blue GS": 0.1},
         "iron-oxide-red": {FLAKE: 0.8, "Iron oxide red": 0.2},
     },
+    "pearl": {
+        "alone": {PEARL: 1.0},
+        "over-black": {PEARL: 0.95, "Carbon black": 0.05},
+        "with-al-medium": {PEARL: 0.5, "Al medium": 0.5},
+    },
 }
 """Each set's panels: their names and recipes (mass fractions)."""
 
 
 def new_toners(library):
-    """The two toners, as the world sprays them (the library never holds them)."""
+    """The three toners, as the world sprays them (the library never holds them)."""
     dpp = library["DPP red"]
     pigment = replace(dpp, name=PIGMENT, absorption=1.15 * shift_spectra(
         dpp.absorption[None], np.array([10.0]))[0])  # fmt: skip
     flake = AluminiumFlake(FLAKE, radius_um=15.0, thickness_um=0.4, orientation_sd_deg=8.5,
                            surface_quality=0.92, volume_fraction=0.12)  # fmt: skip
-    return pigment, flake
+    pearl = Pearl(PEARL, coating_nm=80.0, substrate="mica", substrate_nm=400.0, radius_um=12.0,
+                  orientation_sd_deg=9.0, volume_fraction=0.09)  # fmt: skip
+    return pigment, flake, pearl
 
 
 def main() -> None:

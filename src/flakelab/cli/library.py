@@ -125,6 +125,15 @@ class CharacterisedKind(StrEnum):
 
     pigment = "pigment"
     aluminium = "aluminium"
+    pearl = "pearl"
+
+
+class Substrate(StrEnum):
+    """A pearl's platelet (:data:`~flakelab.library.optics.SUBSTRATE_INDEX`)."""
+
+    mica = "mica"
+    alumina = "alumina"
+    silica = "silica"
 
 
 @library_app.command("characterise")
@@ -161,10 +170,12 @@ def characterise(
         CharacterisedKind | None,
         typer.Option(
             "--kind",
-            help="What a new toner is: a pigment (its absorption and scattering are read) or "
-            "an aluminium flake (its orientation spread, surface quality and volume fraction, "
-            "and its radius where the panels were read with texture; --thickness from its "
-            "datasheet). A toner read anew keeps its kind.",
+            help="What a new toner is: a pigment (its absorption and scattering are read), "
+            "an aluminium flake (its orientation spread, surface quality and volume fraction; "
+            "--thickness from its datasheet) or a pearl (its coating's thickness, orientation "
+            "spread and volume fraction; --substrate from its datasheet); a flake's or a "
+            "pearl's radius too, where the panels were read with texture. A toner read anew "
+            "keeps its kind.",
             show_default="pigment",
         ),
     ] = None,
@@ -191,9 +202,9 @@ def characterise(
         float | None,
         typer.Option(
             "--radius",
-            help="An aluminium flake's radius [µm], half its D50 (from its datasheet), kept as "
-            "given; without it, read from the panels' texture (sparkle and graininess) where "
-            "they were read with it.",
+            help="An aluminium flake's or a pearl's radius [µm], half its D50 (from its "
+            "datasheet), kept as given; without it, read from the panels' texture (sparkle "
+            "and graininess) where they were read with it.",
         ),
     ] = None,
     thickness: Annotated[
@@ -215,6 +226,26 @@ def characterise(
             "supplier's grade under the old name).",
         ),
     ] = False,
+    substrate: Annotated[
+        Substrate | None,
+        typer.Option(
+            "--substrate",
+            help="A new pearl's platelet, from its datasheet: natural or synthetic mica, "
+            "alumina (Xirallic-like) or silica.",
+        ),
+    ] = None,
+    substrate_nm: Annotated[
+        float | None,
+        typer.Option(
+            "--substrate-thickness",
+            min=10,
+            max=5000,
+            help="A pearl's platelet thickness [nm], where its datasheet gives it; else "
+            "that of the library's pearl on the same substrate nearest in radius (it sets "
+            "only fine fringes, which the platelets' spread of thicknesses washes out).",
+            show_default="a similar pearl's, or 400",
+        ),
+    ] = None,
     sample: SampleOption = None,
     average: Annotated[
         bool,
@@ -240,8 +271,11 @@ def characterise(
 
     The library's physics, with the toner in it, is fitted to the panels at every geometry
     they were read at, each panel's film build and flake alignment allowed for: a pigment's
-    absorption and scattering (from a Kubelka–Munk start at 45as45), or an aluminium flake's
-    orientation spread, surface quality and volume fraction. A pigment's masstone alone tells
+    absorption and scattering (from a Kubelka–Munk start at 45as45), an aluminium flake's
+    orientation spread, surface quality and volume fraction, or a pearl's coating (its
+    interference colour), orientation spread and volume fraction. A pearl shows its
+    interference colour best over black: spray it alone and with a little carbon black. A
+    pigment's masstone alone tells
     its K/S, not K and S: give a tint in the white too, and a panel in an aluminium base for
     its scattering among flakes. The toner is then 'added' to the library: the matcher
     predicts it by the hybrid path until cases teach the model."""
@@ -277,7 +311,8 @@ def characterise(
         raise FlakelabError(f"--replace: {lib.name!r} holds no toner {toner!r}")
     readings = [read_readings(path, sample, average)[0] for path in sprayed]
     geometries, measured, texture = stacked_readings(readings)
-    options = {"--family": family, "--g": asymmetry, "--radius": radius, "--thickness": thickness}
+    options = {"--family": family, "--g": asymmetry, "--radius": radius, "--thickness": thickness,
+               "--substrate": substrate, "--substrate-thickness": substrate_nm}  # fmt: skip
     start = _starting_toner(lib, toner, kind, options, density, np.isfinite(texture).any())
     lib = with_toner(lib, start)
     grams = [read_recipe(path) for path in recipe]
@@ -286,7 +321,7 @@ def characterise(
     panels = [str(path) for path in sprayed]
     if start.kind == "pigment":
         found = characterise_pigment(lib, toner, x, geometries, measured, panels)
-    else:  # the radius read from the texture, where the panels were read with it
+    else:  # an aluminium or a pearl: its radius read from the texture, where there is one
         found = characterise_flake(lib, toner, x, geometries, measured, panels,
                                    None if radius is not None else texture)  # fmt: skip
     made = f"read by flakelab from {len(sprayed)} calibration panels on {date.today()}"
@@ -314,56 +349,90 @@ not reported: a yellow's absorption in the red, a factor of two of nothing."""
 PANEL_MISFIT_NOTED = 1.0
 """Worst ΔE00 between a panel and the fit past which the panel is named: a recipe weighed
 otherwise, a mislabelled file, or a paint the physics does not reproduce."""
-_KIND_OPTIONS = {"pigment": ("--family", "--g"), "aluminium": ("--radius", "--thickness")}
-"""The options that describe a new toner of each kind (a flake read anew takes --radius, its
-datasheet's, in place of reading it from the texture)."""
+_KIND_OPTIONS = {
+    "pigment": ("--family", "--g"),
+    "aluminium": ("--radius", "--thickness"),
+    "pearl": ("--radius", "--substrate", "--substrate-thickness"),
+}
+"""The options that describe a new toner of each kind (a flake or a pearl read anew takes
+--radius, its datasheet's, in place of reading it from the texture)."""
+_DATASHEET = {"aluminium": ("--thickness", "[µm] from its datasheet: the panels show it only "
+                            "with its volume fraction"),
+              "pearl": ("--substrate", "(mica, alumina or silica) from its datasheet: its "
+                        "platelet, beneath the coating")}  # fmt: skip
+"""What a new effect toner must be given, and why."""
 
 
 def _starting_toner(lib, name: str, kind, options: dict, density, textured: bool):
     """The toner the panels are read for: the library's toner of that name (its kind kept),
-    or a new one of ``kind`` described by ``options`` (a new flake starts from the spread,
-    surface and volume fraction of the library's flake nearest in radius; where the panels
-    were read with texture, ``textured``, its radius may be left to them, from the library's
-    median flake's)."""
-    from flakelab.core.spectra import WAVELENGTHS
+    or a new one of ``kind`` described by ``options`` (a new flake or pearl starts from the
+    library's of its kind nearest in radius; where the panels were read with texture,
+    ``textured``, its radius may be left to them, from the median of the library's)."""
+    from flakelab.core.wording import with_article
     from flakelab.errors import FlakelabError
-    from flakelab.library.toners import Pigment
-    from flakelab.physics.characterisation import (
-        FLAKE_START_RADIUS_UM,
-        check_kind,
-        similar_flake,
-    )
+    from flakelab.physics.characterisation import check_kind
 
     held = lib[name] if name in lib.names else None
-    kind = held.kind if held is not None else (kind or CharacterisedKind.pigment).value
     if held is not None:
         check_kind(held)
-    if kind == "aluminium" and held is None and options["--thickness"] is None:
-        raise FlakelabError("a new aluminium flake: --thickness [µm] from its datasheet: the "
-                            "panels show it only with its volume fraction")  # fmt: skip
-    if kind == "aluminium" and held is None and options["--radius"] is None and not textured:
-        raise FlakelabError("a new aluminium flake: --radius (half its D50, from its "
-                            "datasheet), or panels read with texture (sparkle and "
-                            "graininess), from which it is read")  # fmt: skip
+        if kind is not None and kind.value != held.kind:
+            raise FlakelabError(f"--kind {kind.value}: {lib.name!r} holds {name!r} as "
+                                f"{with_article(held.kind)}, and a toner read anew keeps its "
+                                "kind")  # fmt: skip
+    kind = held.kind if held is not None else (kind or CharacterisedKind.pigment).value
+    if held is None and kind in _DATASHEET and options[_DATASHEET[kind][0]] is None:
+        option, why = _DATASHEET[kind]
+        raise FlakelabError(f"a new {kind}: {option} {why}")
+    if held is None and kind != "pigment" and options["--radius"] is None and not textured:
+        raise FlakelabError(f"a new {kind}: --radius (half its D50, from its datasheet), or "
+                            "panels read with texture (sparkle and graininess), from which "
+                            "it is read")  # fmt: skip
     for option, value in options.items():
         if value is not None and option not in _KIND_OPTIONS[kind]:
             takes = " and ".join(_KIND_OPTIONS[kind])
             raise FlakelabError(f"{option}: not for {kind} toner {name!r} (it takes {takes})")
     density = density or (held.density_g_ml if held is not None else None)
     if kind == "pigment":
-        flat = np.ones(WAVELENGTHS.size)
-        base = held or Pigment(name, "unknown", flat, flat)
-        return replace(base, family=options["--family"] or base.family,
-                       g=base.g if options["--g"] is None else options["--g"],
-                       density_g_ml=density, description="")  # fmt: skip
+        return _starting_pigment(held, name, options, density)
     if held is not None:
-        return replace(held, radius_um=options["--radius"] or held.radius_um,
-                       thickness_um=options["--thickness"] or held.thickness_um,
-                       density_g_ml=density, description="")  # fmt: skip
-    radii = [f.radius_um for f in lib.of_kind("aluminium")] or [FLAKE_START_RADIUS_UM]
-    base = similar_flake(lib, name, options["--radius"] or float(np.median(radii)),
-                         options["--thickness"])  # fmt: skip
-    return replace(base, density_g_ml=density)
+        given = {"radius_um": options["--radius"]}
+        if kind == "aluminium":
+            given["thickness_um"] = options["--thickness"]
+        else:
+            given |= {"substrate": options["--substrate"] and str(options["--substrate"]),
+                      "substrate_nm": options["--substrate-thickness"]}  # fmt: skip
+        given = {k: v for k, v in given.items() if v is not None}
+        return replace(held, **given, density_g_ml=density, description="")
+    return replace(_new_effect_toner(lib, name, kind, options), density_g_ml=density)
+
+
+def _starting_pigment(held, name: str, options: dict, density):
+    """A pigment read anew, or a new one (flat constants: the Kubelka–Munk start replaces
+    them), of ``options``' family and asymmetry."""
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.library.toners import Pigment
+
+    flat = np.ones(WAVELENGTHS.size)
+    base = held or Pigment(name, "unknown", flat, flat)
+    return replace(base, family=options["--family"] or base.family,
+                   g=base.g if options["--g"] is None else options["--g"],
+                   density_g_ml=density, description="")  # fmt: skip
+
+
+def _new_effect_toner(lib, name: str, kind: str, options: dict):
+    """A new aluminium or pearl from its datasheet's ``options``, where its fit starts."""
+    from flakelab.physics.characterisation import (
+        FLAKE_START_RADIUS_UM,
+        similar_flake,
+        similar_pearl,
+    )
+
+    radii = [t.radius_um for t in lib.of_kind(kind)] or [FLAKE_START_RADIUS_UM]
+    radius = options["--radius"] or float(np.median(radii))
+    if kind == "aluminium":
+        return similar_flake(lib, name, radius, options["--thickness"])
+    return similar_pearl(lib, name, str(options["--substrate"]), radius,
+                         options["--substrate-thickness"])  # fmt: skip
 
 
 def _characterisation_report(found, toner, sprayed, x, k: int, geometries) -> dict:
@@ -423,20 +492,21 @@ def _pigment_read(found, pigment, notes: list[str]) -> dict:
 
 
 def _flake_read(found, flake, notes: list[str]) -> dict:
-    """An aluminium flake's part of the report; a note where the panels leave it unsure."""
-    from flakelab.physics.characterisation import FLAKE_FITTED
+    """An aluminium flake's or a pearl's part of the report; a note where the panels leave it
+    unsure."""
+    from flakelab.physics.characterisation import EFFECT_FITTED
 
+    fitted = EFFECT_FITTED[flake.kind]
     unsure = [f for f, sd in found.uncertainty.items() if sd > POORLY_READ_LOG_SD]
     if unsure:
+        over = "over black (a little carbon black)" if flake.kind == "pearl" else "tinted"
         notes.append(f"its {', '.join(unsure)}: read to no better than a factor of two: add a "
-                     "panel that shows it (the flake tinted with a pigment)")  # fmt: skip
-    read = {f: getattr(flake, f) for f in FLAKE_FITTED}
-    return read | {
-        "radius_um": flake.radius_um,
+                     f"panel that shows it (the {flake.kind} {over})")  # fmt: skip
+    made = ("thickness_um",) if flake.kind == "aluminium" else ("substrate", "substrate_nm")
+    return {f: getattr(flake, f) for f in (*fitted, "radius_um", *made)} | {
         "radius_read": "radius_um" in found.uncertainty,  # from the texture, else as given
-        "thickness_um": flake.thickness_um,
         "relative_sd": dict(found.uncertainty),
-        "start": {f: getattr(found.start, f) for f in (*FLAKE_FITTED, "radius_um")},
+        "start": {f: getattr(found.start, f) for f in (*fitted, "radius_um")},
     }
 
 
@@ -444,7 +514,7 @@ def _draw_characterisation(found, geometries, measured, sprayed, plot) -> None:
     """``library characterise --plot``: what was read beside each panel's misfit."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.spectra import WAVELENGTHS
-    from flakelab.render.plots import plot_flake_read, plot_pigment_read
+    from flakelab.render.plots import plot_flake_read, plot_pearl_read, plot_pigment_read
 
     names = [g.name for g in geometries]
     labels = [p.name for p in sprayed]
@@ -461,9 +531,13 @@ def _draw_characterisation(found, geometries, measured, sprayed, plot) -> None:
         plot_pigment_read(WAVELENGTHS, spectra, start, found.uncertainty, names, misfit, plot,
                           title=title)  # fmt: skip
         return
-    lightness = {"read": reflectance_to_Lab(np.nan_to_num(measured))[..., 0],
-                 "fitted": reflectance_to_Lab(found.fitted)[..., 0]}  # fmt: skip
-    lightness["read"][~np.isfinite(measured).all(axis=-1)] = np.nan
+    Lab = {"read": reflectance_to_Lab(np.nan_to_num(measured)),
+           "fitted": reflectance_to_Lab(found.fitted)}  # fmt: skip
+    Lab["read"][~np.isfinite(measured).all(axis=-1)] = np.nan
+    if found.toner.kind == "pearl":  # its interference colour travels with the angle
+        plot_pearl_read(names, list(misfit), Lab, misfit, plot, title=title)
+        return
+    lightness = {which: values[..., 0] for which, values in Lab.items()}
     plot_flake_read(names, list(misfit), lightness, misfit, plot, title=title)
 
 
@@ -515,23 +589,8 @@ def _print_characterisation(report: dict) -> None:
 
 def _what_was_read(report: dict) -> str:
     """What the panels told of the toner, in a few words."""
-    if report["kind"] == "aluminium":
-        sd = report["relative_sd"]
-        read = ", ".join(
-            f"{label} {report[key]:.3g}{unit} ({_relative(sd[key])})"
-            for key, label, unit in (
-                ("orientation_sd_deg", "orientation spread", "°"),
-                ("surface_quality", "surface quality", ""),
-                ("volume_fraction", "volume fraction", ""),
-            )  # fmt: skip
-        )
-        if report["radius_read"]:
-            radius = (f"radius {report['radius_um']:.3g} µm read from the texture "
-                      f"({_relative(sd['radius_um'])}), ")  # fmt: skip
-            size = f"{report['thickness_um']:g} µm thick as given"
-        else:
-            radius, size = "", f"{report['radius_um']:g} × {report['thickness_um']:g} µm as given"
-        return f"(aluminium, {size}): {radius}{read}"
+    if report["kind"] in ("aluminium", "pearl"):
+        return _effect_read(report)
     absorption = np.asarray(report["absorption"])
     peak = int(np.argmax(absorption))
     scatters = (
@@ -544,3 +603,32 @@ def _what_was_read(report: dict) -> str:
         f"({escape(report['family'])}): absorbs most at {report['wavelengths_nm'][peak]:g} nm "
         f"(κ {absorption[peak]:.3g} /µm), {scatters}{hides}"
     )
+
+
+_READ_WORDS = {
+    "coating_nm": ("TiO2 coating", " nm"),
+    "orientation_sd_deg": ("orientation spread", "°"),
+    "surface_quality": ("surface quality", ""),
+    "volume_fraction": ("volume fraction", ""),
+}
+"""How the report names each value read of a flake or a pearl, and its unit."""
+
+
+def _effect_read(report: dict) -> str:
+    """What the panels told of an aluminium flake or a pearl, in a few words."""
+    sd = report["relative_sd"]
+    read = ", ".join(f"{_READ_WORDS[key][0]} {report[key]:.3g}{_READ_WORDS[key][1]} "
+                     f"({_relative(sd[key])})" for key in sd if key in _READ_WORDS)  # fmt: skip
+    if report["kind"] == "pearl":
+        made = f"on {report['substrate']} {report['substrate_nm']:g} nm thick, as given"
+        size = f"{report['radius_um']:g} µm"
+    else:
+        made = f"{report['thickness_um']:g} µm thick as given"
+        size = f"{report['radius_um']:g} × {report['thickness_um']:g} µm"
+    if report["radius_read"]:
+        radius = (f"radius {report['radius_um']:.3g} µm read from the texture "
+                  f"({_relative(sd['radius_um'])}), ")  # fmt: skip
+        return f"({report['kind']}, {made}): {radius}{read}"
+    if report["kind"] == "pearl":
+        return f"(pearl, {size} {made}): {read}"
+    return f"(aluminium, {size} as given): {read}"

@@ -20,6 +20,12 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
+def with_article(noun: str) -> str:
+    """``noun`` after its indefinite article, by its first letter: "an aluminium", "a
+    pearl"."""
+    return f"{'an' if noun[:1].lower() in 'aeiou' else 'a'} {noun}"
+
+
 def did_you_mean(name: str, choices: Iterable[str], key: Callable[[str], str] = str) -> str:
     """ " (did you mean 'Phthalo blue GS'?)": the one of ``choices`` that ``name`` most likely
     means, for the message that refuses it; "" where none is near. One whose ``key`` is

@@ -25,6 +25,16 @@ flake's values in the library (a similar paste's, for a new one). Its radius sho
 texture alone and its thickness only with the volume fraction (the flakes' number), so both
 are the supplier's (D50/2 and the stated thickness).
 
+**A pearl** (:data:`PEARL_FITTED`): its TiO2 coating's thickness sets its interference colour
+(the hue at the specular and how it turns away from it), its normals' spread the flop, its
+volume fraction how strong it is. Interference colours repeat with the coating's thickness,
+order after order, so a fit from a silver-white's coating finds the nearest order's
+minimum, not the pearl's: the coating is first placed on a grid (:data:`COATING_GRID_NM`)
+that spans the orders a pearl is made in, the panels' misfit at each, and fitted from the
+best. Its substrate (mica, alumina …) and the substrate's thickness, whose fine fringes
+the platelets' spread of thicknesses washes out, are the supplier's; its radius, as an
+aluminium's, shows in the texture alone.
+
 **The fit: the library's own physics.** The toner's parameters (logs) and each panel's film
 build and flake spread are fitted so that
 :func:`~flakelab.physics.application.sprayed_reflectance`, with the toner in the library,
@@ -53,6 +63,7 @@ from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
+from flakelab.core.wording import with_article
 from flakelab.errors import FlakelabError
 from flakelab.library.toners import (
     FLAKE_RADIUS_MIN_UM,
@@ -60,6 +71,7 @@ from flakelab.library.toners import (
     ORIENTATION_SD_MIN_DEG,
     AluminiumFlake,
     Library,
+    Pearl,
     Pigment,
     Toner,
 )
@@ -79,9 +91,14 @@ __all__ = [
     "CharacterisationError",
     "CHARACTERISED",
     "FLAKE_FITTED",
+    "PEARL_FITTED",
+    "EFFECT_FITTED",
     "FLAKE_START",
     "FLAKE_START_RADIUS_UM",
+    "PEARL_START",
+    "COATING_GRID_NM",
     "similar_flake",
+    "similar_pearl",
     "check_kind",
     "with_toner",
     "characterise_pigment",
@@ -123,8 +140,8 @@ _APPLICATION_RANGE = (0.5, 1.5)
 
 
 class CharacterisationError(FlakelabError):
-    """A toner that panels do not read (a pearl), or panels that cannot read it (masstones
-    alone of a pigment, a panel without it), naming why."""
+    """A toner not of the kind asked for, or panels that cannot read it (masstones alone of
+    a pigment, a panel without it), naming why."""
 
 
 @dataclass(frozen=True)
@@ -139,8 +156,8 @@ class Characterisation:
     a panel was not read). ``uncertainty`` holds each
     fitted quantity's relative standard deviation (that of its log): a pigment's
     ``absorption`` and ``scattering`` ``[W]`` (NaN at the floor, or where the pigment is
-    transparent), a flake's ``orientation_sd_deg``, ``surface_quality``,
-    ``volume_fraction`` and, where read from the texture, ``radius_um`` (NaN at a bound).
+    transparent), an aluminium's or a pearl's :data:`EFFECT_FITTED` and, where read from the
+    texture, ``radius_um`` (NaN at a bound).
     ``chi2_per_dof`` is the first fit's misfit in units of the readings' errors (above 1,
     the errors were scaled by it and the fit run again)."""
 
@@ -162,20 +179,36 @@ FLAKE_FITTED = ("orientation_sd_deg", "surface_quality", "volume_fraction")
 much of the film it fills. Its radius (texture alone) and thickness (the panels see the
 volume fraction over the thickness, the flakes' number) are the supplier's: D50/2 and the
 stated thickness."""
+PEARL_FITTED = ("coating_nm", "orientation_sd_deg", "volume_fraction")
+"""What a pearl's panels read: its coating (its interference colour), how its normals spread
+and how much of the film it fills. Its substrate and the substrate's thickness, and its radius
+where the panels carry no texture, are the supplier's."""
+EFFECT_FITTED = {"aluminium": FLAKE_FITTED, "pearl": PEARL_FITTED}
+"""What panels read of each kind of effect flake."""
 FLAKE_START = {"orientation_sd_deg": 10.0, "surface_quality": 0.9, "volume_fraction": 0.13}
 """Where a new flake's fit starts in a library of no aluminium to start from: a middling
 paste's spread, surface and volume fraction."""
 FLAKE_START_RADIUS_UM = 10.0
 """A middling paste's radius [µm]: where a new flake's radius, to be read from its panels'
-texture, starts in a library of no aluminium."""
-_FLAKE_RANGE = {
+texture, starts in a library of no flake of its kind."""
+PEARL_START = {"coating_nm": 100.0, "substrate_nm": 400.0, "orientation_sd_deg": 10.0,
+               "volume_fraction": 0.10}  # fmt: skip
+"""Where a new pearl starts in a library of no pearl to start from: a mica pearl's platelet
+(400 nm), a middling spread and volume fraction (its coating is then placed on
+:data:`COATING_GRID_NM`)."""
+COATING_GRID_NM = np.arange(20.0, 405.0, 5.0)
+"""The TiO2 coatings [nm] a pearl's fit first looks at: from a thin silver-white's through
+the first three orders of interference colours (silver, gold, red, violet, blue, green at
+about 40–140 nm, then again, paler), at 5 nm, about an eighth of a hue's span."""
+_EFFECT_RANGE = {
     "orientation_sd_deg": (ORIENTATION_SD_MIN_DEG, 45.0),
     "surface_quality": (0.05, 1.0),
     "volume_fraction": (0.005, 0.6),
     "radius_um": (FLAKE_RADIUS_MIN_UM, 100.0),
+    "coating_nm": (10.0, 1000.0),
 }
-"""The values a flake's fit may give: a library's own limits, a surface no rougher than a
-twentieth of a mirror's, a volume fraction from half a per cent."""
+"""The values a flake's or a pearl's fit may give: a library's own limits, a surface no
+rougher than a twentieth of a mirror's, a volume fraction from half a per cent."""
 
 
 def with_toner(library: Library, toner: Toner) -> Library:
@@ -200,7 +233,7 @@ def characterise_pigment(
     messages) of recipes ``fractions[N, T]`` (library order), read as ``measured[N, G, W]``
     reflectance factors at ``geometries`` (NaN where a panel was not read)."""
     k = library.names.index(name)
-    check_kind(library.toners[k], "pigment")
+    check_kind(library.toners[k], ("pigment",))
     fit = _PanelFit(library, k, fractions, geometries, measured, panels)
     _check_tinted(library, k, fit.x)
     start = _km_start(library, k, fit.x, geometries, fit.measured)
@@ -229,43 +262,68 @@ def characterise_flake(
     panels: Sequence[str],
     texture: NDArray | None = None,
 ) -> Characterisation:
-    """Fit :data:`FLAKE_FITTED` of ``library``'s aluminium flake ``name``, from its values
-    there (its thickness kept), to ``panels``, as :func:`characterise_pigment`; its radius
-    too where the panels' ``texture[N, 8]`` readings are given (NaN where not read; in
-    :data:`~flakelab.core.measurement.TEXTURE_READINGS` order), else kept."""
+    """Fit :data:`EFFECT_FITTED` of ``library``'s aluminium flake or pearl ``name``, from its
+    values there (an aluminium's thickness, a pearl's substrate kept; a pearl's coating from
+    the best of :data:`COATING_GRID_NM`), to ``panels``, as :func:`characterise_pigment`; its
+    radius too where the panels' ``texture[N, 8]`` readings are given (NaN where not read;
+    in :data:`~flakelab.core.measurement.TEXTURE_READINGS` order), else kept."""
     k = library.names.index(name)
     flake = library.toners[k]
-    check_kind(flake, "aluminium")
+    check_kind(flake, tuple(EFFECT_FITTED))
     fit = _PanelFit(library, k, fractions, geometries, measured, panels)
-    fitted = FLAKE_FITTED
-    found = _flake_fit(fit, flake, fitted, flake)
+    fitted = EFFECT_FITTED[flake.kind]
+    near = _coating_from_grid(fit, flake) if flake.kind == "pearl" else flake
+    found = _flake_fit(fit, near, fitted, flake)
     if texture is not None and np.isfinite(np.asarray(texture, float)).any():
         # the radius from the texture, from the reflectance's fit and the radius of those
         # on a grid that fits the texture best: jointly from a start far off, the fit can
         # run to a bound (a VMP's count of glints rises steeply as its spread narrows)
         fit = _PanelFit(library, k, fractions, geometries, measured, panels, texture)
-        grid = np.geomspace(_FLAKE_RANGE["radius_um"][0], RADIUS_GRID_TOP_UM, 24)
+        grid = np.geomspace(_EFFECT_RANGE["radius_um"][0], RADIUS_GRID_TOP_UM, 24)
         chi2 = [fit.chi2(replace(found.toner, radius_um=r), found.film, found.spread)
                 for r in grid]  # fmt: skip
         near = replace(found.toner, radius_um=float(grid[int(np.argmin(chi2))]))
-        fitted = (*FLAKE_FITTED, "radius_um")
+        fitted = (*fitted, "radius_um")
         found = _flake_fit(fit, near, fitted, flake)
     return found.characterisation(dict(zip(fitted, found.sd.tolist(), strict=True)))
 
 
-def _flake_fit(fit: _PanelFit, flake: AluminiumFlake, fitted: tuple[str, ...], start) -> _Found:
-    """``fitted`` of ``flake`` fitted to the panels, from its values (``start``: the flake
-    reported as where the fit began)."""
+def _coating_from_grid(fit: _PanelFit, pearl: Pearl) -> Pearl:
+    """``pearl`` with the coating of :data:`COATING_GRID_NM` (or its own) that fits the
+    panels best at the nominal application, its spread and volume fraction fitted at each
+    (module notes: the orders of interference; a silver's coating looks higher orders' pale
+    where the spread is not its own)."""
+    nominal = np.ones(len(fit.x))
+    profiled = ("orientation_sd_deg", "volume_fraction")  # in at()'s order
+    bounds = np.log([[_EFFECT_RANGE[f][i] for f in profiled] for i in (0, 1)])
 
-    def flake_of(p: NDArray) -> AluminiumFlake:
+    def at(coating: float, p: NDArray) -> Pearl:
+        spread, share = np.exp(p)
+        return replace(pearl, coating_nm=coating, orientation_sd_deg=spread, volume_fraction=share)
+
+    def best_at(coating: float) -> tuple[float, Pearl]:
+        p0 = np.log([getattr(pearl, f) for f in profiled])
+        found = least_squares(lambda p: fit.residuals(at(coating, p), nominal, nominal), p0,
+                              bounds=bounds, method="trf", xtol=1e-3, max_nfev=20)  # fmt: skip
+        return float(np.sum(found.fun**2)), at(coating, found.x)
+
+    tried = [best_at(float(c)) for c in np.append(COATING_GRID_NM, pearl.coating_nm)]
+    return min(tried, key=lambda t: t[0])[1]
+
+
+def _flake_fit(fit: _PanelFit, flake: Toner, fitted: tuple[str, ...], start: Toner) -> _Found:
+    """``fitted`` of ``flake`` (an aluminium or a pearl) fitted to the panels, from its values
+    (``start``: the toner reported as where the fit began)."""
+
+    def flake_of(p: NDArray) -> Toner:
         return replace(flake, **dict(zip(fitted, np.exp(p).tolist(), strict=True)))
 
     p0 = np.log([getattr(flake, f) for f in fitted])
-    bounds = np.log([[_FLAKE_RANGE[f][i] for f in fitted] for i in (0, 1)])
+    bounds = np.log([[_EFFECT_RANGE[f][i] for f in fitted] for i in (0, 1)])
     return fit.run(flake_of, p0, bounds, start)
 
 
-CHARACTERISED = ("pigment", "aluminium")
+CHARACTERISED = ("pigment", "aluminium", "pearl")
 """The kinds of toner read from panels (:func:`characterise_pigment`,
 :func:`characterise_flake`)."""
 
@@ -282,20 +340,37 @@ def similar_flake(library: Library, name: str, radius_um: float, thickness_um: f
                    description="", density_g_ml=None)  # fmt: skip
 
 
-def check_kind(toner: Toner, kind: str | None = None) -> None:
-    """Refuse a toner that is not of ``kind`` (None: any kind panels are read for)."""
-    allowed = (kind,) if kind else CHARACTERISED
-    if toner.kind not in allowed:
+def similar_pearl(
+    library: Library, name: str, substrate: str, radius_um: float, substrate_nm: float | None
+) -> Pearl:
+    """A new pearl ``name`` on the datasheet's ``substrate`` (of ``substrate_nm``, else that
+    of the library's pearl on it nearest in radius, else :data:`PEARL_START`'s) and of its
+    radius: its coating, spread and volume fraction those of the library's pearl nearest in
+    radius, on that substrate where one is (:data:`PEARL_START` where it has none); where
+    its fit starts (its coating then from :data:`COATING_GRID_NM`)."""
+    pearls = library.of_kind("pearl")
+    alike = [p for p in pearls if p.substrate == substrate] or pearls
+    if not alike:
+        start = {k: v for k, v in PEARL_START.items() if k != "substrate_nm"}
+        return Pearl(name, substrate=substrate, radius_um=radius_um,
+                     substrate_nm=substrate_nm or PEARL_START["substrate_nm"], **start)  # fmt: skip
+    nearest = min(alike, key=lambda p: abs(np.log(p.radius_um / radius_um)))
+    if substrate_nm is None:
+        on_it = nearest.substrate == substrate
+        substrate_nm = nearest.substrate_nm if on_it else PEARL_START["substrate_nm"]
+    return replace(nearest, name=name, substrate=substrate, substrate_nm=substrate_nm,
+                   radius_um=radius_um, description="", density_g_ml=None)  # fmt: skip
+
+
+def check_kind(toner: Toner, kinds: tuple[str, ...] = CHARACTERISED) -> None:
+    """Refuse a toner that is not of one of ``kinds``."""
+    if toner.kind not in kinds:
         raise CharacterisationError(
-            f"{toner.name!r} is {_a(toner.kind)} toner: expected "
-            f"{' or '.join(map(_a, allowed))} (a pigment's "
-            "absorption and scattering, or an aluminium flake's spread, surface and volume "
-            "fraction, are read from panels)"
+            f"{toner.name!r} is {with_article(toner.kind)} toner: expected "
+            f"{' or '.join(map(with_article, kinds))} (a pigment's "
+            "absorption and scattering, an aluminium flake's spread, surface and volume "
+            "fraction, or a pearl's coating, spread and volume fraction, are read from panels)"
         )
-
-
-def _a(kind: str) -> str:
-    return f"an {kind}" if kind[0] in "aeiou" else f"a {kind}"
 
 
 @dataclass(frozen=True)

@@ -158,26 +158,39 @@ def mean_projected_cosine(direction: ArrayLike, sd: float, samples: int = 4096) 
     return np.mean(np.abs(np.asarray(direction, dtype=float) @ normals.T), axis=-1)
 
 
-@cache
 def species_reflectance(toner: AluminiumFlake | Pearl, n_binder: float = N_BINDER) -> NDArray:
     """Reflectance table ``[91, 31]`` of one flake species in the binder versus incidence
-    (computed once per toner and binder; read-only)."""
-    table = _species_reflectance(toner, n_binder)
+    (read-only; computed once for each optics and binder, however the toner's spread or
+    volume fraction change, as a fit of them changes them)."""
+    if isinstance(toner, AluminiumFlake):
+        return _aluminium_table(toner.surface_quality, n_binder)
+    return _pearl_table(toner.coating_nm, toner.substrate, toner.substrate_nm, n_binder)
+
+
+@cache
+def _aluminium_table(surface_quality: float, n_binder: float) -> NDArray:
+    return _read_only(
+        surface_quality * flake_reflectance(REFLECTANCE_ANGLES, WAVELENGTHS, n_binder)
+    )
+
+
+@cache
+def _pearl_table(coating_nm: float, substrate: str, substrate_nm: float, n_binder: float):
+    return _read_only(
+        pearl_reflectance(
+            coating_nm,
+            WAVELENGTHS,
+            np.minimum(REFLECTANCE_ANGLES, 89.5),
+            substrate=substrate,
+            substrate_nm=substrate_nm,
+            n_binder=n_binder,
+        )
+    )
+
+
+def _read_only(table: NDArray) -> NDArray:
     table.setflags(write=False)
     return table
-
-
-def _species_reflectance(toner: AluminiumFlake | Pearl, n_binder: float) -> NDArray:
-    if isinstance(toner, AluminiumFlake):
-        return toner.surface_quality * flake_reflectance(REFLECTANCE_ANGLES, WAVELENGTHS, n_binder)
-    return pearl_reflectance(
-        toner.coating_nm,
-        WAVELENGTHS,
-        np.minimum(REFLECTANCE_ANGLES, 89.5),
-        substrate=toner.substrate,
-        substrate_nm=toner.substrate_nm,
-        n_binder=n_binder,
-    )
 
 
 def layer_from_fractions(

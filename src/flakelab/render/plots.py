@@ -36,6 +36,7 @@ __all__ = [
     "plot_tins_history",
     "plot_pigment_read",
     "plot_flake_read",
+    "plot_pearl_read",
     "plot_model_errors",
     "plot_harness",
     "plot_realism",
@@ -548,6 +549,41 @@ def plot_flake_read(
     flop.legend(fontsize=8)
     _misfit_bars(misfit, geometries, panels)
     figure.suptitle(_fitted(title or "An aluminium flake read from calibration panels", figure))
+    _save(figure, path, dpi)
+
+
+def plot_pearl_read(
+    geometries: Sequence[str],
+    names: Sequence[str],
+    Lab: Mapping[str, np.ndarray],
+    panels: Mapping[str, np.ndarray],
+    path: str | PathLike,
+    *,
+    title: str = "",
+    dpi: int = 120,
+) -> None:
+    """A pearl read from calibration panels (``flakelab library characterise --plot``): each
+    panel's colour travel in the a*b* plane (D65/10) across ``geometries``, its first
+    geometry under each lamp marked by a square, ``Lab["read"]`` (markers, NaN where not
+    read) and ``Lab["fitted"]`` (lines) ``[N, G, 3]``, panels ``names``; and each panel's
+    ΔE00 between its reading and the fit (``panels``)."""
+    figure, (travel, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
+    lamps = _geometry_groups(list(geometries), len(geometries))
+    for n, name in enumerate(names):
+        read, fitted = Lab["read"][n], Lab["fitted"][n]
+        for i, (rows, _) in enumerate(lamps):
+            travel.plot(fitted[rows, 1], fitted[rows, 2], color=f"C{n}", lw=1.5,
+                        label=None if i else f"{name}, fitted")  # fmt: skip
+            travel.plot(read[rows[0], 1], read[rows[0], 2], "s", color=f"C{n}", mfc="none")
+        travel.plot(read[:, 1], read[:, 2], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
+    travel.axhline(0, color="0.7", lw=0.8)
+    travel.axvline(0, color="0.7", lw=0.8)
+    travel.set(xlabel="a* (D65/10)", ylabel="b* (D65/10)")
+    travel.set_aspect("equal", adjustable="datalim")  # a hue's turn drawn as it is
+    travel.set_title("colour travel: a square at each lamp's nearest the specular", fontsize=9)
+    travel.legend(fontsize=8)
+    _misfit_bars(misfit, geometries, panels)
+    figure.suptitle(_fitted(title or "A pearl read from calibration panels", figure))
     _save(figure, path, dpi)
 
 
