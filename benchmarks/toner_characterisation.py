@@ -23,9 +23,16 @@ Each of the library's ten aluminium flakes likewise (``flakes_*``): a masstone, 
 phthalo blue in it and a fifth of iron oxide red, its orientation spread, surface quality
 and volume fraction fitted from the next flake's values (the baseline: a similar paste taken
 for it), the held-out paints three tenths of perylene maroon in it and a twentieth of carbon
-black; and how far each fitted value lies from the flake's (``flakes_parameter_error_*``),
-its radius read from the panels' texture readings (the camera's glint counts), started
-from the library's median radius.
+black; and how far each fitted value lies from the tin's (``flakes_parameter_error_*``: the
+volume fraction times the tin's batch strength), its radius read from the panels' texture
+readings (the camera's glint counts), started from the library's median radius. The floor
+(``oracle``) is the tin's own flake.
+
+Each of its five pearls likewise (``pearls_*``): alone, over a twentieth of carbon black and
+half and half with Al medium, its coating, orientation spread and volume fraction fitted
+from the next pearl's values, the held-out paints three tenths of phthalo blue in it and
+four tenths of Al fine with a fifth of quinacridone magenta; its radius from the texture
+started from half the library's median (its pearls are all of about the median's).
 
     python benchmarks/toner_characterisation.py [--seed 7] [--json]
 """
@@ -46,7 +53,7 @@ from flakelab.core.spectra import shift_spectra
 from flakelab.io import read_library
 from flakelab.physics.application import sprayed_reflectance
 from flakelab.physics.characterisation import (
-    FLAKE_FITTED,
+    EFFECT_FITTED,
     characterise_flake,
     characterise_pigment,
     with_toner,
@@ -124,15 +131,31 @@ def blended(names: tuple[str, ...], toner: str, others: dict[str, float]) -> np.
     return x
 
 
-def one_flake(world: World, k: int, rng: np.random.Generator) -> dict:
-    """Spray and read the library's ``k``-th aluminium flake's panels, read it starting from
-    the next flake's values, and judge the held-out paints."""
+EFFECT_PANELS = {
+    "aluminium": ({}, {"Phthalo blue GS": 0.1}, {"Iron oxide red": 0.2}),
+    "pearl": ({}, {BLACK: 0.05}, {PANEL_BASE: 0.5}),
+}
+"""Each effect kind's panels: what else each holds (the toner the rest)."""
+EFFECT_HELD_OUT = {
+    "aluminium": ({"Perylene maroon": 0.3}, {BLACK: 0.05}),
+    "pearl": ({"Phthalo blue GS": 0.3}, {"Al fine": 0.4, "Quinacridone magenta": 0.2}),
+}
+"""Each effect kind's held-out paints."""
+EFFECT_REPORTED = {"aluminium": "flakes", "pearl": "pearls"}
+"""The report's prefix for each effect kind."""
+
+
+def one_effect(world: World, kind: str, k: int, rng: np.random.Generator) -> dict:
+    """Spray and read the library's ``k``-th toner of ``kind`` (aluminium or pearl), read it
+    starting from the next one's values, and judge the held-out paints; read it again with
+    the panels' texture, its radius from the library's median (a pearl's from half of it:
+    the demo's pearls are all of about the median's)."""
     library, names = world.library, world.library.names
-    flakes = library.of_kind("aluminium")
-    flake, similar = flakes[k], flakes[(k + 1) % len(flakes)]
-    start = replace(flake, **{f: getattr(similar, f) for f in FLAKE_FITTED})
-    x = np.array([blended(names, flake.name, parts) for parts in
-                  ({}, {"Phthalo blue GS": 0.1}, {"Iron oxide red": 0.2})])  # fmt: skip
+    toners, fitted = library.of_kind(kind), EFFECT_FITTED[kind]
+    toner, similar = toners[k], toners[(k + 1) % len(toners)]
+    start = replace(toner, **{f: getattr(similar, f) for f in fitted})
+    x = np.array([blended(names, toner.name, parts) for parts in EFFECT_PANELS[kind]])
+    labels = [", ".join(parts) or "alone" for parts in EFFECT_PANELS[kind]]
     tins = world.variation(1, rng, at_shop=False)
     film, spread = world.application(len(x), rng, at_shop=False)
     sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
@@ -140,55 +163,52 @@ def one_flake(world: World, k: int, rng: np.random.Generator) -> dict:
     R, texture = world.appearance(x, sprayed)
     measured = world.measure(R, rng)
     started = time.perf_counter()
-    found = characterise_flake(with_toner(library, start), flake.name, x, world.geometries,
-                               measured, ["masstone", "blue", "red"])  # fmt: skip
+    found = characterise_flake(with_toner(library, start), toner.name, x, world.geometries,
+                               measured, labels)  # fmt: skip
     seconds = time.perf_counter() - started
-    median_radius = float(np.median([f.radius_um for f in flakes]))
-    textured = characterise_flake(
-        with_toner(library, replace(start, radius_um=median_radius)),
-        flake.name,
-        x,
-        world.geometries,
-        measured,
-        ["masstone", "blue", "red"],
-        texture=world.measure_texture(texture, rng),
-    )
-    held = np.array([blended(names, flake.name, parts) for parts in
-                     ({"Perylene maroon": 0.3}, {"Carbon black": 0.05})])  # fmt: skip
+    radius = float(np.median([t.radius_um for t in toners])) * (0.5 if kind == "pearl" else 1)
+    textured = characterise_flake(with_toner(library, replace(start, radius_um=radius)),
+                                  toner.name, x, world.geometries, measured, labels,
+                                  texture=world.measure_texture(texture, rng))  # fmt: skip
+    held = np.array([blended(names, toner.name, parts) for parts in EFFECT_HELD_OUT[kind]])
     n = len(held)
     truth = world.appearance(held, Variation(np.repeat(tins.strength, n, 0),
                                              np.repeat(tins.hue_shift, n), np.ones(n),
                                              np.ones(n)))[0]  # fmt: skip
+    tin = replace(toner, volume_fraction=toner.volume_fraction * tins.strength[0, names.index(
+        toner.name)])  # fmt: skip
     judged = {}
-    for label, toner in (("fitted", found.toner), ("similar", start), ("oracle", flake)):
-        predicted = sprayed_reflectance(with_toner(library, toner), held, world.geometries,
+    for label, read in (("fitted", found.toner), ("similar", start), ("oracle", tin)):
+        predicted = sprayed_reflectance(with_toner(library, read), held, world.geometries,
                                         np.ones(n), np.ones(n))  # fmt: skip
         judged[label] = worst_de00(predicted, truth)
-    errors = {f: abs(getattr(found.toner, f) / getattr(flake, f) - 1) for f in FLAKE_FITTED}
-    errors["radius_um"] = abs(textured.toner.radius_um / flake.radius_um - 1)
+    errors = {f: abs(getattr(found.toner, f) / getattr(tin, f) - 1) for f in fitted}
+    errors["radius_um"] = abs(textured.toner.radius_um / toner.radius_um - 1)
     return {"seconds": seconds, "panels_de00_max": float(np.nanmax(found.de00)), **judged,
             "errors": errors}  # fmt: skip
 
 
-def flakes_report(world: World, seed: int) -> dict:
-    """Every aluminium flake of the library read from its panels (:func:`one_flake`)."""
+def effect_report(world: World, kind: str, seed: int) -> dict:
+    """Every aluminium flake or pearl of the library read from its panels
+    (:func:`one_effect`)."""
     rng = np.random.default_rng(seed)
-    results = [one_flake(world, k, rng) for k in range(len(world.library.of_kind("aluminium")))]
-    report: dict = {"flakes": len(results)}
+    results = [one_effect(world, kind, k, rng) for k in range(len(world.library.of_kind(kind)))]
+    prefix = EFFECT_REPORTED[kind]
+    report: dict = {prefix: len(results)}
     for label in ("fitted", "similar", "oracle"):
         values = np.concatenate([r[label] for r in results])
-        report |= {f"flakes_{label}_de00_median": float(np.median(values)),
-                   f"flakes_{label}_de00_max": float(values.max())}  # fmt: skip
-    report["flakes_fitted_over_similar_median"] = (
-        report["flakes_fitted_de00_median"] / report["flakes_similar_de00_median"]
+        report |= {f"{prefix}_{label}_de00_median": float(np.median(values)),
+                   f"{prefix}_{label}_de00_max": float(values.max())}  # fmt: skip
+    report[f"{prefix}_fitted_over_similar_median"] = (
+        report[f"{prefix}_fitted_de00_median"] / report[f"{prefix}_similar_de00_median"]
     )
-    for f in (*FLAKE_FITTED, "radius_um"):
-        report[f"flakes_parameter_error_{f}_max"] = max(r["errors"][f] for r in results)
-    report["flakes_parameter_error_radius_um_median"] = float(
+    for f in (*EFFECT_FITTED[kind], "radius_um"):
+        report[f"{prefix}_parameter_error_{f}_max"] = max(r["errors"][f] for r in results)
+    report[f"{prefix}_parameter_error_radius_um_median"] = float(
         np.median([r["errors"]["radius_um"] for r in results])
     )
-    report["flakes_panels_de00_max"] = max(r["panels_de00_max"] for r in results)
-    report["flakes_seconds_max"] = max(r["seconds"] for r in results)
+    report[f"{prefix}_panels_de00_max"] = max(r["panels_de00_max"] for r in results)
+    report[f"{prefix}_seconds_max"] = max(r["seconds"] for r in results)
     return report
 
 
@@ -219,7 +239,7 @@ def characterisation_report(seed: int) -> dict:
         seconds = [r["seconds"] for r in results]
         report[f"{panel_set}_seconds_median"] = float(np.median(seconds))
         report[f"{panel_set}_seconds_max"] = max(seconds)
-    return report | flakes_report(world, seed)
+    return report | effect_report(world, "aluminium", seed) | effect_report(world, "pearl", seed)
 
 
 def main() -> int:

@@ -60,6 +60,10 @@ PANELS = {
     },
 }
 """Each set's panels: their names and recipes (mass fractions)."""
+DELIVERIES = (("dpp", "al"), ("pearl",))
+"""The sets in the order their toners arrived: each delivery is sprayed in a world that holds
+the toners delivered so far, so that a later delivery leaves an earlier one's panels as they
+were (the world draws a batch for every toner it holds)."""
 
 
 def new_toners(library):
@@ -81,29 +85,38 @@ def main() -> None:
     args = parser.parse_args()
     args.folder.mkdir(parents=True, exist_ok=True)
     library = read_library()
-    for toner in new_toners(library):
-        library = with_toner(library, toner)
-    world = World(library, "ma-t12")
+    new = iter(new_toners(library))
     rng = np.random.default_rng(args.seed)
-    for prefix, panels in PANELS.items():
-        x = np.array([library.fractions(recipe) for recipe in panels.values()])
-        tins = world.variation(1, rng, at_shop=False)
-        film, spread = world.application(len(x), rng, at_shop=False)
-        sprayed = Variation(np.repeat(tins.strength, len(x), 0),
-                            np.repeat(tins.hue_shift, len(x)), film, spread)  # fmt: skip
-        R, texture = world.appearance(x, sprayed)
-        measured, read = world.measure(R, rng), world.measure_texture(texture, rng)
-        for (name, recipe), spectra, spot in zip(panels.items(), measured, read, strict=True):
-            panel = Measurement(
-                f"{prefix} {name}", world.geometries, WAVELENGTHS, spectra,
-                texture=dict(zip(TEXTURE_READINGS, spot.round(2).tolist(), strict=True)),
-                instrument="X-Rite MA-T12 (synthetic example)",
-                metadata={"synthetic": "yes: scripts/make_calibration_panels.py"},
-            )  # fmt: skip
-            write_measurements([panel], args.folder / f"{prefix}-{name}.cxf")
-            grams = {toner: round(CAN_G * share, 1) for toner, share in recipe.items()}
-            (args.folder / f"{prefix}-{name}.json").write_text(json.dumps(grams) + "\n")
+    for delivery in DELIVERIES:
+        for _ in delivery:
+            library = with_toner(library, next(new))
+        world = World(library, "ma-t12")
+        for prefix in delivery:
+            spray_and_read(world, prefix, rng, args.folder)
     print(f"wrote {sum(map(len, PANELS.values()))} panels and their recipes to {args.folder}")
+
+
+def spray_and_read(world: World, prefix: str, rng: np.random.Generator, folder: Path) -> None:
+    """Spray one set's panels from one set of tins, read them, and write each with its
+    recipe."""
+    panels = PANELS[prefix]
+    x = np.array([world.library.fractions(recipe) for recipe in panels.values()])
+    tins = world.variation(1, rng, at_shop=False)
+    film, spread = world.application(len(x), rng, at_shop=False)
+    sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
+                        film, spread)  # fmt: skip
+    R, texture = world.appearance(x, sprayed)
+    measured, read = world.measure(R, rng), world.measure_texture(texture, rng)
+    for (name, recipe), spectra, spot in zip(panels.items(), measured, read, strict=True):
+        panel = Measurement(
+            f"{prefix} {name}", world.geometries, WAVELENGTHS, spectra,
+            texture=dict(zip(TEXTURE_READINGS, spot.round(2).tolist(), strict=True)),
+            instrument="X-Rite MA-T12 (synthetic example)",
+            metadata={"synthetic": "yes: scripts/make_calibration_panels.py"},
+        )  # fmt: skip
+        write_measurements([panel], folder / f"{prefix}-{name}.cxf")
+        grams = {toner: round(CAN_G * share, 1) for toner, share in recipe.items()}
+        (folder / f"{prefix}-{name}.json").write_text(json.dumps(grams) + "\n")
 
 
 if __name__ == "__main__":

@@ -563,24 +563,26 @@ def plot_pearl_read(
     dpi: int = 120,
 ) -> None:
     """A pearl read from calibration panels (``flakelab library characterise --plot``): each
-    panel's colour travel in the a*b* plane (D65/10) across ``geometries``, its first
-    geometry under each lamp marked by a square, ``Lab["read"]`` (markers, NaN where not
+    panel's colour travel in the a*b* plane (D65/10) across ``geometries``, its reading
+    nearest the specular under each lamp marked by a square, ``Lab["read"]`` (markers, NaN where not
     read) and ``Lab["fitted"]`` (lines) ``[N, G, 3]``, panels ``names``; and each panel's
     ΔE00 between its reading and the fit (``panels``)."""
     figure, (travel, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
     lamps = _geometry_groups(list(geometries), len(geometries))
+    aspecular = np.array([Geometry.parse(g).aspecular for g in geometries])
     for n, name in enumerate(names):
         read, fitted = Lab["read"][n], Lab["fitted"][n]
         for i, (rows, _) in enumerate(lamps):
             travel.plot(fitted[rows, 1], fitted[rows, 2], color=f"C{n}", lw=1.5,
                         label=None if i else f"{name}, fitted")  # fmt: skip
-            travel.plot(read[rows[0], 1], read[rows[0], 2], "s", color=f"C{n}", mfc="none")
+            near = rows[np.argmin(np.abs(aspecular[rows] - 1e-3))]  # 15° before −15°
+            travel.plot(read[near, 1], read[near, 2], "s", color=f"C{n}", mfc="none")
         travel.plot(read[:, 1], read[:, 2], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
     travel.axhline(0, color="0.7", lw=0.8)
     travel.axvline(0, color="0.7", lw=0.8)
     travel.set(xlabel="a* (D65/10)", ylabel="b* (D65/10)")
     travel.set_aspect("equal", adjustable="datalim")  # a hue's turn drawn as it is
-    travel.set_title("colour travel: a square at each lamp's nearest the specular", fontsize=9)
+    travel.set_title("colour travel; a square: nearest the specular, under each lamp", fontsize=9)
     travel.legend(fontsize=8)
     _misfit_bars(misfit, geometries, panels)
     figure.suptitle(_fitted(title or "A pearl read from calibration panels", figure))
