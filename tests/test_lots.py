@@ -769,6 +769,14 @@ def test_cli_refuses_lots_it_cannot_use(cli, tmp_path):
     done = cli("lots", "calibrate", "x.json", "--recipe", panel, "--lots", tmp_path / "n.json",
                "--lot", "B-1")  # fmt: skip
     assert done.returncode == 2 and "TONER=NUMBER" in done.stderr
+    counts = {  # a --recipe for each spray-out; a --standard for each, or none
+        "--recipe: expected one for each spray-out (2), got 1": ["x.json", "y.json"],
+        "--standard: expected one for each spray-out (1) or none, got 2": [
+            "x.json", "--standard", "a.json", "--standard", "b.json"],
+    }  # fmt: skip
+    for said, given in counts.items():
+        done = cli("lots", "calibrate", *given, "--recipe", panel, "--lots", tmp_path / "n.json")
+        assert done.returncode == 2 and said in " ".join(done.stderr.split()), done.stderr
     done = cli("lots", "panel", "Phthalo blu")
     assert done.returncode == 2 and "did you mean" in done.stderr
     done = cli("match", "evaluate", "--targets", 1, "--lots", "guessed")

@@ -664,6 +664,19 @@ def add_readings_spread(
         report["notes"].append(note)
 
 
+def check_one_for_each(
+    option: str, given: list, panels: list, noun: str, optional: bool = False
+) -> None:
+    """Refuse ``option`` given other than once for each of ``panels`` (each a ``noun``: "panel",
+    "spray-out"), or, where ``optional``, not at all."""
+    if len(given) == len(panels) or (optional and not given):
+        return
+    none = " or none" if optional else ""
+    raise FlakelabError(
+        f"{option}: expected one for each {noun} ({len(panels)}){none}, got {len(given)}"
+    )
+
+
 def check_output_file(
     path,
     option: str,

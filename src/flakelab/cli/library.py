@@ -281,7 +281,12 @@ def characterise(
     predicts it by the hybrid path until cases teach the model."""
     from datetime import date
 
-    from flakelab.cli.common import check_figure_file, check_output_file, read_readings
+    from flakelab.cli.common import (
+        check_figure_file,
+        check_one_for_each,
+        check_output_file,
+        read_readings,
+    )
     from flakelab.cli.sources import recipe_fractions
     from flakelab.core.measurement import stacked_readings
     from flakelab.errors import FlakelabError
@@ -293,10 +298,7 @@ def characterise(
         with_toner,
     )
 
-    if len(recipe) != len(sprayed):
-        raise FlakelabError(
-            f"--recipe: expected one for each panel ({len(sprayed)}), got {len(recipe)}"
-        )
+    check_one_for_each("--recipe", recipe, sprayed, "panel")
     if out.suffix.lower() != ".json":
         raise FlakelabError(f"--out: {out}: a library is written as JSON: name a .json file")
     check_output_file(out, "--out", reads={"SPRAYED": sprayed, "--recipe": recipe})

@@ -18,6 +18,7 @@ from flakelab.cli.common import (
     JsonOption,
     SampleOption,
     check_figure_file,
+    check_one_for_each,
     check_output_file,
     command_group,
     console,
@@ -385,7 +386,8 @@ def calibrate_command(
             "SPRAYED": sprayed, "--recipe": recipe, "--standard": standard, "--library": library,
             "--model": model, "--database": database})  # fmt: skip
     numbers = _lot_numbers(lot or [])
-    _check_one_for_each_panel(sprayed, recipe, standard)
+    check_one_for_each("--recipe", recipe, sprayed, "spray-out")
+    check_one_for_each("--standard", standard or [], sprayed, "spray-out", optional=True)
     grams = [read_recipe(path) for path in recipe]
     # a command that stores creates its database, as the others do: before the model is
     # looked for in it
@@ -428,18 +430,6 @@ def calibrate_command(
         print_report(report)
         return
     _print_calibration(report)
-
-
-def _check_one_for_each_panel(sprayed: list[Path], recipe: list[Path], standard) -> None:
-    if len(recipe) != len(sprayed):
-        raise FlakelabError(
-            f"--recipe: expected one for each spray-out ({len(sprayed)}), got {len(recipe)}"
-        )
-    if standard and len(standard) != len(sprayed):
-        raise FlakelabError(
-            f"--standard: expected one for each spray-out ({len(sprayed)}) or none, "
-            f"got {len(standard)}"
-        )
 
 
 def _check_in_the_panels(names: list[str], grams: list[dict], recipe: list[Path]) -> None:
