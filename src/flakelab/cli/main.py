@@ -48,6 +48,7 @@ from flakelab.cli.common import (
     texture_table,
 )
 from flakelab.cli.correct import correct_command
+from flakelab.cli.hiding import hiding_command
 from flakelab.cli.library import library_app
 from flakelab.cli.lots import lots_app
 from flakelab.cli.match import match_command
@@ -781,6 +782,7 @@ def plot(
 app.command("match")(reports_errors(match_command))
 app.command("correct")(reports_errors(correct_command))
 app.command("weigh")(reports_errors(weigh_command))
+app.command("hiding")(reports_errors(hiding_command))
 cases_app.command("codes")(reports_errors(codes_command))
 cases_app.command("variants")(reports_errors(variants_command))
 app.add_typer(cases_app, name="cases")

@@ -37,6 +37,7 @@ __all__ = [
     "plot_pigment_read",
     "plot_flake_read",
     "plot_pearl_read",
+    "plot_hiding",
     "plot_model_errors",
     "plot_harness",
     "plot_realism",
@@ -586,6 +587,37 @@ def plot_pearl_read(
     travel.legend(fontsize=8)
     _misfit_bars(misfit, geometries, panels)
     figure.suptitle(_fitted(title or "A pearl read from calibration panels", figure))
+    _save(figure, path, dpi)
+
+
+def plot_hiding(found, names: Sequence[str], path: str | PathLike, *, dpi: int = 120) -> None:
+    """``flakelab hiding --plot``: for each recipe (``names``, of a
+    :class:`~flakelab.physics.hiding.Hiding`), the worst-geometry ΔE00 between the film over
+    a contrast chart's black and white against its build (black line), and over each grey
+    from its colour built up (lines of the grey's own lightness), with the threshold and the
+    nominal build marked."""
+    columns = min(len(names), 3)
+    rows = -(-len(names) // columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(5.2 * columns, 3.9 * rows), squeeze=False)
+    floor = 1e-3  # a log axis: a film past hiding reads 0
+    for axis, name, f in zip(axes.flat, names, range(len(names)), strict=False):
+        for i, (grey, L) in enumerate(zip(found.primers, found.primer_lightness, strict=True)):
+            axis.plot(found.film_um, np.maximum(found.primer_curve[f, i], floor),
+                      color=str(min(L / 100, 0.85)), lw=1, label=f"over {grey}")  # fmt: skip
+        axis.plot(found.film_um, np.maximum(found.contrast_de00[f], floor), color="k", lw=2.2,
+                  label="black vs white")  # fmt: skip
+        axis.axhline(found.threshold, color="C3", ls="--", lw=1)
+        axis.axvline(found.nominal_um, color="C0", ls=":", lw=1)
+        axis.set(xscale="log", yscale="log", xlabel="film build [µm]",
+                 ylabel="worst-geometry ΔE00")  # fmt: skip
+        hides = found.hiding_um[f]
+        said = f"hides at {hides:.1f} µm" if np.isfinite(hides) else "does not hide"
+        axis.set_title(f"{name}: {said}", fontsize=9)
+    axes.flat[0].legend(fontsize=7, ncol=2)
+    for axis in list(axes.flat)[len(names) :]:
+        axis.set_visible(False)
+    figure.suptitle(_fitted("Hiding: the primer's trace against film build (dashed: the "
+                            "threshold; dotted: the nominal build)", figure))  # fmt: skip
     _save(figure, path, dpi)
 
 

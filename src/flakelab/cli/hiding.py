@@ -1,0 +1,166 @@
+"""CLI: how thick a recipe must be sprayed to hide the primer, and over which grey."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich import box
+from rich.markup import escape
+from rich.table import Table
+
+from flakelab.cli.common import JsonOption, check_figure_file, console, print_report
+from flakelab.cli.sources import InstrumentOption, LibraryOption, recipe_fractions
+from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.physics.hiding import HIDING_DE00
+
+
+def hiding_command(
+    recipes: Annotated[
+        list[Path],
+        typer.Argument(help="Recipe JSON files {toner: grams} (any amount), one or more."),
+    ],
+    library: LibraryOption = None,
+    instrument: InstrumentOption = DEFAULT_INSTRUMENT,
+    threshold: Annotated[
+        float,
+        typer.Option(
+            "--threshold",
+            min=0.1,
+            max=10.0,
+            help="ΔE00, at every geometry, between the film over black and over white (or over "
+            "a grey and built up) at which it hides.",
+        ),
+    ] = HIDING_DE00,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Also draw each recipe's ΔE00 over black against white, and over each grey "
+            "against built up, versus film build (PNG, PDF or SVG).",
+        ),
+    ] = None,
+    json_output: JsonOption = False,
+) -> None:
+    """How thick a recipe must be sprayed to hide the primer, and the grey-shade primer to
+    spray it over.
+
+    By the physics, each recipe is sprayed at film builds from a hundredth of the library's
+    basecoat to eight times it over a contrast chart's black and white and over seven
+    neutral greys (G1 white to G7 black): it hides where the film over black and over white
+    differ by --threshold ΔE00 at every geometry at most (DIN 55987's criterion), and over a
+    grey where it comes that near the colour it tends to. The grey to spray it over is, of
+    those it hides over in the fewest coats, the one nearest its own lightness."""
+    from flakelab.core.geometry import instrument_geometries
+    from flakelab.io import read_library, read_recipe
+    from flakelab.physics.hiding import hiding
+
+    check_figure_file(plot, "--plot", reads={"RECIPES": recipes, "--library": library})
+    lib = read_library(library)
+    grams = [read_recipe(path) for path in recipes]
+    x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipes, strict=True)])
+    geometries = instrument_geometries(instrument)
+    found = hiding(lib, x, geometries, threshold)
+    report = hiding_report(found, [str(p) for p in recipes], instrument)
+    if plot is not None:
+        from flakelab.render.plots import plot_hiding
+
+        labels = [p.name for p in recipes]
+        plot_hiding(found, labels if len(set(labels)) == len(labels) else report["recipes"],
+                    plot)  # fmt: skip
+        report["plot"] = str(plot)
+    if json_output:
+        print_report(report)
+        return
+    _print_hiding(report)
+
+
+def hiding_report(found, names: list[str], instrument: str) -> dict:
+    """``flakelab hiding``'s report (JSON: inf as null)."""
+
+    def um(value: float) -> float | None:
+        return float(value) if np.isfinite(value) else None
+
+    def coats(film_um: float) -> int | None:
+        return int(found.coats(film_um)) if np.isfinite(film_um) else None
+
+    paints = []
+    for f, (name, best) in enumerate(zip(names, found.best_primer, strict=True)):
+        greys = []
+        for i, (primer, L) in enumerate(zip(found.primers, found.primer_lightness, strict=True)):
+            hides = found.primer_hiding_um[f, i]
+            greys.append({"primer": primer, "lightness": float(L),
+                          "de00_at_nominal": um(found.primer_de00[f, i]), "hiding_um": um(hides),
+                          "coats": coats(hides)})  # fmt: skip
+        paints.append({
+            "recipe": name,
+            "hiding_um": um(found.hiding_um[f]),
+            "coats": coats(found.hiding_um[f]),
+            "contrast_ratio": um(found.contrast_ratio[f]),
+            "lightness": um(found.lightness[f]),
+            "best_primer": best,
+            "primers": greys,
+        })  # fmt: skip
+    return {
+        "instrument": instrument,
+        "threshold_de00": found.threshold,
+        "nominal_um": found.nominal_um,
+        "coat_um": found.coat_um,
+        "film_um_range": [float(found.film_um[0]), float(found.film_um[-1])],
+        "recipes": names,
+        "paints": paints,
+    }
+
+
+def _print_hiding(report: dict) -> None:
+    top = report["film_um_range"][1]
+    table = Table(title=f"Hiding (ΔE00 ≤ {report['threshold_de00']:g} at every geometry; a coat "
+                  f"{report['coat_um']:g} µm, {report['nominal_um']:g} µm nominal)",
+                  box=box.SIMPLE_HEAD, collapse_padding=True)  # fmt: skip
+    for column in ("recipe", "hides black/white", "contrast ratio", "spray over",
+                   "hides over it", "ΔE00 at nominal"):  # fmt: skip
+        table.add_column(column, justify="left" if column == "recipe" else "right")
+    for paint in report["paints"]:
+        best = next((g for g in paint["primers"] if g["primer"] == paint["best_primer"]), None)
+        table.add_row(
+            escape(Path(paint["recipe"]).name),
+            _build_text(paint["hiding_um"], paint["coats"], top),
+            "–" if paint["contrast_ratio"] is None else f"{paint['contrast_ratio']:.3f}",
+            "none" if best is None else f"{best['primer']} (L* {best['lightness']:.0f})",
+            "–" if best is None else _build_text(best["hiding_um"], best["coats"], top),
+            "–" if best is None else f"{best['de00_at_nominal']:.2f}",
+        )
+    console.print(table)
+    for paint in report["paints"]:
+        if paint["hiding_um"] is None:
+            console.print(
+                f"{escape(Path(paint['recipe']).name)} does not hide within {top:.0f} µm: a "
+                "transparent colour, sprayed over a ground of its own colour or with a pigment "
+                "that hides",
+                highlight=False,
+            )
+    if len(report["paints"]) == 1:
+        console.print(_greys_table(report["paints"][0], top))
+
+
+def _greys_table(paint: dict, top: float) -> Table:
+    """One recipe over each grey: how far from its full colour at the nominal build, and the
+    build at which it reaches it."""
+    table = Table(title="over each grey", box=box.SIMPLE_HEAD, collapse_padding=True)
+    for column in ("grey", "L*", "ΔE00 at nominal", "hides over it"):
+        table.add_column(column, justify="right")
+    for grey in paint["primers"]:
+        mark = " ←" if grey["primer"] == paint["best_primer"] else ""
+        de = grey["de00_at_nominal"]
+        table.add_row(f"{grey['primer']}{mark}", f"{grey['lightness']:.0f}",
+                      "–" if de is None else f"{de:.2f}",
+                      _build_text(grey["hiding_um"], grey["coats"], top))  # fmt: skip
+    return table
+
+
+def _build_text(film_um: float | None, coats: float | None, top: float) -> str:
+    if film_um is None:
+        return f"not within {top:.0f} µm"
+    return f"{film_um:.1f} µm, {int(coats)} coat{'s' if coats != 1 else ''}"

@@ -1,0 +1,225 @@
+"""How thick a basecoat must be to hide what it is sprayed over, and over which primer grey.
+
+A refinish basecoat is built up coat by coat until the primer no longer shows through. A
+strong solid or a metallic hides in one coat; a clean red, a yellow or a transparent-pigment
+pearl can take four, and a panel sprayed short of hiding reads the primer's colour with its
+own, which the colorist takes for a wrong recipe. Paint makers therefore give each colour a
+grey-shade primer, the one of their greys (white to black) over which it hides soonest.
+
+**Hiding.** The film build at which the paint over black and over white differ by
+:data:`HIDING_DE00` (the colorimetric hiding criterion of DIN 55987, a colour difference of 1
+between the film over the black and the white of a contrast chart; here ΔE00, at every
+geometry the instrument reads, since a metallic's flop hides otherwise than its face). The
+chart's black and white are those of ISO 6504-3's (:data:`CONTRAST_CHART`); the contrast
+ratio, the film's Y over black over its Y over white, is reported at the library's nominal
+build at :data:`CONTRAST_GEOMETRY`, the instrument's 45°/0°.
+
+**The primer grey.** For each of :data:`GREY_SHADES` (neutral greys evenly spaced in L*,
+white to black, as the refinish grey-shade systems are), the film build at which the paint
+over it comes within :data:`HIDING_DE00` of the colour it tends to as it is built up (over
+that grey at :data:`BUILD_GRID`'s thickest, where every grey reads alike for a paint that
+hides the chart there). The best grey is, of those over which it comes in the fewest coats,
+the one nearest its own lightness at :data:`CONTRAST_GEOMETRY` (the grey-shade systems'
+rule: over a grey as light as the paint, what a thin spot shows of it shows least). That can take
+longer than hiding the chart: a yellow brighter than the chart's white nears its full colour
+from below over the black and the white alike, which then agree before either is reached. A
+paint that does not hide the chart within the grid (a transparent pigment's masstone, a pearl
+alone) tends to no colour of its own, and over no grey is it said to.
+
+Everything is the physics' (:func:`~flakelab.physics.application.sprayed_reflectance` with the
+library's basecoat, its primer replaced): the learned model knows only the primer the shops'
+cases were sprayed over. A primer's reflectance is taken as flat at its luminance factor Y,
+which a neutral grey's is to a per cent or so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import colour
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from flakelab.core.colorimetry import reflectance_to_Lab, reflectance_to_XYZ
+from flakelab.core.difference import delta_E_CIE2000
+from flakelab.core.geometry import Geometry
+from flakelab.core.spectra import WAVELENGTHS
+from flakelab.library.toners import Library
+from flakelab.physics.application import sprayed_layer
+from flakelab.physics.fast import reflectance_factor
+from flakelab.physics.layer import layer_from_fractions
+
+__all__ = [
+    "HIDING_DE00",
+    "CONTRAST_CHART",
+    "CONTRAST_GEOMETRY",
+    "GREY_SHADES",
+    "BUILD_GRID",
+    "COATS_AT_NOMINAL",
+    "Hiding",
+    "hiding",
+    "grey_primer",
+]
+
+HIDING_DE00 = 1.0
+"""ΔE00 between the film over black and over white (or over a grey and built up) at which it
+hides, at every geometry (module notes: DIN 55987's criterion)."""
+CONTRAST_CHART = {"black": 0.01, "white": 0.80}
+"""Luminance factors Y of a contrast chart's black and white (ISO 6504-3: black Y ≤ 1 %,
+white Y 80 ± 2 %)."""
+CONTRAST_GEOMETRY = "45as45"
+"""Where the contrast ratio is read: 45° light, detector along the normal (45°/0°)."""
+GREY_SHADES = {f"G{i + 1}": float(L) for i, L in enumerate(np.linspace(93.0, 27.0, 7))}
+"""Grey-shade primers, white to black, by their L* (D65/10): seven steps evenly in lightness
+from a white primer's 93 to a black one's 27 (the demo library's primer, Y 5 %)."""
+BUILD_GRID = 10.0 ** (np.arange(-80, 37) / 40)
+"""Film builds the physics is evaluated at, relative to the library's basecoat [-]: from a
+hundredth of the nominal to 8.4 times it, 40 a decade (6 % apart, the nominal among them),
+between which the build that hides is interpolated."""
+NOMINAL = int(np.flatnonzero(BUILD_GRID == 1.0)[0])
+"""Where the nominal build lies on :data:`BUILD_GRID`."""
+COATS_AT_NOMINAL = 2
+"""Coats a refinish basecoat is sprayed in to its nominal build: a coat is half of it."""
+
+
+@dataclass(frozen=True)
+class Hiding:
+    """What hides ``fractions[F, T]``'s paints (:func:`hiding`).
+
+    ``film_um[B]`` the builds evaluated [µm]; ``contrast_de00[F, B]`` the worst-geometry ΔE00
+    between each paint over the chart's black and white at each; ``hiding_um[F]`` the build
+    at which that falls to ``threshold`` (inf: not within the grid); ``contrast_ratio[F]``
+    Y over black / Y over white at ``nominal_um`` (NaN where not read at
+    :data:`CONTRAST_GEOMETRY`); ``primers`` the greys' names, ``primer_curve[F, P, B]`` the
+    worst-geometry ΔE00 of each paint at each build over each grey from the colour it
+    tends to, ``primer_hiding_um[F, P]`` the build at which that falls to ``threshold``
+    (inf throughout for a paint that does not hide the chart within the grid: module notes),
+    ``primer_lightness[P]`` their L*; ``lightness[F]`` each paint's L* built up, at
+    :data:`CONTRAST_GEOMETRY` (the mean over ``geometries`` where it is not among them; NaN
+    where it does not hide); ``coat_um`` one coat's build."""
+
+    film_um: NDArray[np.float64]
+    contrast_de00: NDArray[np.float64]
+    hiding_um: NDArray[np.float64]
+    contrast_ratio: NDArray[np.float64]
+    primers: tuple[str, ...]
+    primer_curve: NDArray[np.float64]
+    primer_hiding_um: NDArray[np.float64]
+    primer_lightness: NDArray[np.float64]
+    lightness: NDArray[np.float64]
+    nominal_um: float
+    coat_um: float
+    threshold: float
+
+    @property
+    def primer_de00(self) -> NDArray[np.float64]:
+        """Each paint's worst-geometry ΔE00 at the nominal build over each grey from its colour
+        built up ``[F, P]``."""
+        return self.primer_curve[..., NOMINAL]
+
+    def coats(self, film_um: ArrayLike) -> NDArray[np.float64]:
+        """Coats that build ``film_um`` [µm] (inf for inf)."""
+        return np.ceil(np.asarray(film_um, dtype=float) / self.coat_um - 1e-9)
+
+    @property
+    def best_primer(self) -> list[str | None]:
+        """The grey each paint is best sprayed over (module notes; None where it hides over
+        none)."""
+        best: list[str | None] = []
+        for hides, L in zip(self.primer_hiding_um, self.lightness, strict=True):
+            coats = self.coats(hides)
+            fewest = np.isfinite(coats) & (coats == coats.min())
+            apart = np.where(fewest, np.abs(self.primer_lightness - L), np.inf)
+            best.append(self.primers[int(np.argmin(apart))] if fewest.any() else None)
+        return best
+
+
+def grey_primer(lightness: float) -> NDArray[np.float64]:
+    """A neutral primer's reflectance ``[W]``, flat at the luminance factor of ``lightness``
+    (CIE 1976 L*)."""
+    Y = float(colour.colorimetry.luminance_CIE1976(lightness)) / 100
+    return np.full(WAVELENGTHS.size, Y)
+
+
+def hiding(
+    library: Library,
+    fractions: ArrayLike,
+    geometries: tuple[Geometry, ...],
+    threshold: float = HIDING_DE00,
+    primers: dict[str, float] | None = None,
+) -> Hiding:
+    """How thick each paint of ``fractions[F, T]`` (library order) must be to hide the
+    contrast chart and each grey of ``primers`` (name → L*; :data:`GREY_SHADES`), judged at
+    ``geometries`` (module notes)."""
+    x = np.atleast_2d(np.asarray(fractions, dtype=float))
+    primers = GREY_SHADES if primers is None else primers
+    nominal = library.binder.thickness_um
+    over = {name: _Lab_over(library, x, geometries, np.full(WAVELENGTHS.size, Y))
+            for name, Y in CONTRAST_CHART.items()}  # fmt: skip
+    contrast = _worst_de00(over["black"], over["white"])  # [F, B]
+    hides = _where_it_falls_to(contrast, threshold)
+    greys = [_Lab_over(library, x, geometries, grey_primer(L)) for L in primers.values()]
+    built_up = np.stack([_worst_de00(Lab, Lab[:, -1:]) for Lab in greys], axis=1)  # [F, P, B]
+    built_up[~np.isfinite(hides)] = np.inf  # tends to no colour of its own
+    names = [g.name for g in geometries]
+    face = names.index(CONTRAST_GEOMETRY) if CONTRAST_GEOMETRY in names else slice(None)
+    full = greys[0][:, -1, face, 0].reshape(len(x), -1).mean(axis=1)  # L* built up
+    return Hiding(
+        film_um=BUILD_GRID * nominal,
+        contrast_de00=contrast,
+        hiding_um=hides * nominal,
+        contrast_ratio=_contrast_ratio(library, x, geometries),
+        primers=tuple(primers),
+        primer_curve=built_up,
+        primer_hiding_um=_where_it_falls_to(built_up, threshold) * nominal,
+        primer_lightness=np.array(list(primers.values())),
+        lightness=np.where(np.isfinite(hides), full, np.nan),
+        nominal_um=nominal,
+        coat_um=nominal / COATS_AT_NOMINAL,
+        threshold=threshold,
+    )
+
+
+def _Lab_over(library: Library, x: NDArray, geometries, primer: NDArray) -> NDArray:
+    """CIELAB ``[F, B, G, 3]`` of each paint over ``primer`` at every build of the grid."""
+    F, B = len(x), BUILD_GRID.size
+    layer = replace(layer_from_fractions(library, np.repeat(x, B, axis=0)), primer=primer)
+    sprayed = sprayed_layer(layer, library, np.tile(BUILD_GRID, F), np.ones(F * B))
+    Lab = reflectance_to_Lab(reflectance_factor(sprayed, geometries))
+    return Lab.reshape(F, B, len(geometries), 3)
+
+
+def _worst_de00(a: NDArray, b: NDArray) -> NDArray:
+    """ΔE00 between ``a`` and ``b`` ``[..., G, 3]``, the worst geometry's ``[...]``."""
+    a, b = np.broadcast_arrays(a, b)
+    return delta_E_CIE2000(a, b).max(axis=-1)
+
+
+def _where_it_falls_to(de: NDArray, threshold: float) -> NDArray:
+    """The relative build ``[...]`` past which ``de[..., B]`` stays at or under ``threshold``,
+    interpolated in log build between the grid's neighbours (inf where it never does, the
+    grid's least where it always does)."""
+    stays = np.flip(np.logical_and.accumulate(np.flip(de <= threshold, -1), -1), -1)
+    first = np.argmax(stays, axis=-1)[..., None]  # the first build of the run to the end
+    before = np.maximum(first - 1, 0)
+    d0 = np.take_along_axis(de, before, -1)[..., 0]
+    d1 = np.take_along_axis(de, first, -1)[..., 0]
+    log_build = np.log(BUILD_GRID)
+    lo, hi = log_build[before[..., 0]], log_build[first[..., 0]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(first[..., 0] > 0, (d0 - threshold) / (d0 - d1), 0.0)
+    return np.where(stays[..., -1], np.exp(lo + np.nan_to_num(share) * (hi - lo)), np.inf)
+
+
+def _contrast_ratio(library: Library, x: NDArray, geometries) -> NDArray:
+    """Y over the chart's black over Y over its white ``[F]`` at the nominal build, at
+    :data:`CONTRAST_GEOMETRY` (NaN where not among ``geometries``)."""
+    if CONTRAST_GEOMETRY not in [g.name for g in geometries]:
+        return np.full(len(x), np.nan)
+    at, ones = (Geometry.parse(CONTRAST_GEOMETRY),), np.ones(len(x))
+    Y = {}
+    for name, chart in CONTRAST_CHART.items():
+        layer = replace(layer_from_fractions(library, x), primer=np.full(WAVELENGTHS.size, chart))
+        R = reflectance_factor(sprayed_layer(layer, library, ones, ones), at)[:, 0]
+        Y[name] = reflectance_to_XYZ(R)[..., 1]
+    return Y["black"] / Y["white"]
