@@ -114,3 +114,19 @@ def test_cli_hiding_reports_each_recipe_and_refuses_what_it_cannot_read(tmp_path
         done = cli("hiding", *args)
         assert done.returncode == 2 and message in " ".join(done.stderr.split()), done.stderr
     assert not (tmp_path / "hiding.xyz").exists()
+
+
+def test_match_names_the_primer_for_each_candidate_as_hiding_does(tmp_path, cli):
+    """``match --example``: each candidate carries the grey to spray it over and its coats,
+    and its weighed recipe, read by ``flakelab hiding``, gets the same grey and coats."""
+    best = tmp_path / "best.json"
+    done = cli("match", "--example", "--recipe-out", best, "--json")
+    assert done.returncode == 0, done.stderr
+    candidate = json.loads(done.stdout)["candidates"][0]["hiding"]
+    assert candidate["best_primer"] in GREY_SHADES and candidate["coats"] >= 1
+    read = cli("hiding", best, "--json")
+    assert read.returncode == 0, read.stderr
+    paint = json.loads(read.stdout)["paints"][0]
+    assert (paint["best_primer"], paint["coats"]) == (candidate["best_primer"], candidate["coats"])
+    shown = cli("match", "--example")
+    assert f"spray over grey {candidate['best_primer']}" in shown.stdout

@@ -13,8 +13,8 @@ from rich.table import Table
 
 from flakelab.cli.common import JsonOption, check_figure_file, console, print_report
 from flakelab.cli.sources import InstrumentOption, LibraryOption, recipe_fractions
+from flakelab.core.defaults import HIDING_DE00
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
-from flakelab.physics.hiding import HIDING_DE00
 
 
 def hiding_command(

@@ -403,6 +403,7 @@ def match_command(
         other = left_out_model(measurement, forward, lib, database, physics, shop)
         extra = _add_predicted_left_out(report, result, measurement, forward, other, tol)
     _weigh_candidates(report, result.candidates, forward, can)
+    _add_hiding(report, result.candidates, lib, forward.geometries)
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
     if render is not None:
@@ -555,6 +556,44 @@ def _weigh_candidates(report: dict, candidates, forward, can) -> None:
         entry.update(weighed_recipe(forward, candidate.fractions, grams, can.resolution_g))
         entry["quantity_g"] = grams
     report |= can_size(can, can.grams)
+
+
+def _add_hiding(report: dict, candidates, library, geometries) -> None:
+    """Each candidate's hiding and the grey-shade primer to spray it over (``flakelab
+    hiding``'s, by the physics) into its entry of ``report``."""
+    import numpy as np
+
+    from flakelab.cli.hiding import hiding_report
+    from flakelab.core.geometry import Geometry
+    from flakelab.physics.hiding import hiding
+
+    x = np.array([library.fractions(c.fractions) for c in candidates])
+    at = tuple(Geometry.parse(g) for g in geometries)  # the names the model reads
+    found = hiding_report(hiding(library, x, at), [""] * len(x), "")
+    for entry, paint in zip(report["candidates"], found["paints"], strict=True):
+        over = next((g for g in paint["primers"] if g["primer"] == paint["best_primer"]), None)
+        entry["hiding"] = {
+            "hiding_um": paint["hiding_um"],
+            "coats": paint["coats"],
+            "contrast_ratio": paint["contrast_ratio"],
+            "best_primer": paint["best_primer"],
+            "best_primer_lightness": over and over["lightness"],
+            "best_primer_coats": over and over["coats"],
+            "film_um_range": found["film_um_range"],
+        }
+
+
+def _hiding_text(hiding: dict) -> str:
+    """A candidate's primer line: the grey to spray it over, and the coats."""
+    if hiding["best_primer"] is None:
+        return (f"primer: it hides none within {hiding['film_um_range'][1]:.0f} µm (a "
+                "transparent colour): spray it over a ground of its own colour")  # fmt: skip
+    grey, L = hiding["best_primer"], hiding["best_primer_lightness"]
+    return (
+        f"primer: spray over grey {grey} (L* {L:.0f}), its full colour in "
+        f"{counted(hiding['best_primer_coats'], 'coat')} (black and white hidden in "
+        f"{counted(hiding['coats'], 'coat')}; flakelab hiding)"
+    )
 
 
 def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,
@@ -753,6 +792,8 @@ def _print_match(report: dict, where: str = "") -> None:
             )
         # a recipe with new toners is flagged by its model, which names their physics scaling
         console.print(f"model: {c['model']}; {rounding_text(c)}", highlight=False)
+        if c.get("hiding"):
+            console.print(_hiding_text(c["hiding"]), highlight=False)
         if c["metamerism_index_max"]:  # none against spectra recovered from L*a*b*
             console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
     if report.get("recorded_nearest"):

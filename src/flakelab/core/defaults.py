@@ -1,5 +1,6 @@
 """What a command, a comparison or a case uses where nothing names it: the illuminant and
-observer of CIELAB, and the tolerance a colour is judged against.
+observer of CIELAB, the tolerance a colour is judged against, and the colour difference at
+which a film hides its primer.
 
 They live here, apart from :mod:`flakelab.core.colorimetry` and :mod:`flakelab.core.tolerance`
 where their meaning is defined, because this module imports nothing: the command line gives
@@ -13,3 +14,8 @@ DEFAULT_CONDITIONS = "D65/10"
 
 DEFAULT_TOLERANCE = "refinish"
 """flakelab's body-shop tolerance, one of :data:`flakelab.core.tolerance.TOLERANCE_PRESETS`."""
+
+HIDING_DE00 = 1.0
+"""ΔE00 between a film over black and over white (or over a grey and built up) at which it
+hides, at every geometry: DIN 55987's colorimetric criterion, a difference of 1
+(:mod:`flakelab.physics.hiding`)."""

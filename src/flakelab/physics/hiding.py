@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flakelab.core.colorimetry import reflectance_to_Lab, reflectance_to_XYZ
+from flakelab.core.defaults import HIDING_DE00
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import Geometry
 from flakelab.core.spectra import WAVELENGTHS
@@ -61,9 +62,6 @@ __all__ = [
     "grey_primer",
 ]
 
-HIDING_DE00 = 1.0
-"""ΔE00 between the film over black and over white (or over a grey and built up) at which it
-hides, at every geometry (module notes: DIN 55987's criterion)."""
 CONTRAST_CHART = {"black": 0.01, "white": 0.80}
 """Luminance factors Y of a contrast chart's black and white (ISO 6504-3: black Y ≤ 1 %,
 white Y 80 ± 2 %)."""
