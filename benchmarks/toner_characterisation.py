@@ -4,8 +4,9 @@ predicts paints the panels never showed.
 For each of the demo library's pigments in turn, the generated world sprays panels from one
 set of tins, each with its own film build and flake spread, and reads them with the MA-T12's
 noise (``World.measure``): a masstone and tints of 1:4 and 1:19 in the white (the white
-itself in carbon black), ``tints``; and those and a tenth of the pigment in Al medium,
-``tints_and_metallic``. ``flakelab.physics.characterisation`` fits the pigment's absorption
+itself in carbon black), ``tints``; those and a tenth of the pigment in Al medium,
+``tints_and_metallic``; and those and the masstone sprayed over a hiding chart's black,
+``tints_and_black``. ``flakelab.physics.characterisation`` fits the pigment's absorption
 and scattering to the readings, its library constants unseen. Three held-out paints of the
 same tins are then predicted by the physics at the nominal application, and compared, worst
 geometry, with what those tins give (ΔE00, D65/10):
@@ -58,14 +59,15 @@ from flakelab.physics.characterisation import (
     characterise_pigment,
     with_toner,
 )
+from flakelab.physics.hiding import reflectance_over
 from timing import print_report
 
 WHITE, BLACK = "Titanium dioxide white", "Carbon black"
 PANEL_BASE, HELD_OUT_BASE = "Al medium", "Al coarse bright"
 PANEL_SHARES = (1.0, 0.2, 0.05)
-PANEL_SETS = ("tints", "tints_and_metallic")
-"""The panels sprayed: a masstone and two tints in the white; and those and a tenth of the
-pigment in Al medium."""
+PANEL_SETS = ("tints", "tints_and_metallic", "tints_and_black")
+"""The panels sprayed: a masstone and two tints in the white; those and a tenth of the
+pigment in Al medium; and those and the masstone over a hiding chart's black."""
 
 
 def recipes(names: tuple[str, ...], pigment: str, partner: str, shares) -> np.ndarray:
@@ -90,17 +92,23 @@ def one_pigment(world: World, name: str, rng: np.random.Generator, panel_set: st
     partner = BLACK if name == WHITE else WHITE
     x = recipes(names, name, partner, PANEL_SHARES)
     labels = ["masstone", "1:4", "1:19"]
+    grounds = ["primer"] * len(x)
     if panel_set == "tints_and_metallic":
         x, labels = np.concatenate([x, recipes(names, name, PANEL_BASE, (0.1,))]), [*labels, "Al"]
+        grounds.append("primer")
+    if panel_set == "tints_and_black":
+        x, labels = np.concatenate([x, x[:1]]), [*labels, "masstone over black"]
+        grounds.append("black")
     tins = world.variation(1, rng, at_shop=False)
     film, spread = world.application(len(x), rng, at_shop=False)
     sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
                         film, spread)  # fmt: skip
-    measured = world.measure(world.appearance(x, sprayed)[0], rng)
+    R = reflectance_over(world.layer(x, sprayed), library, grounds, world.geometries)
+    measured = world.measure(R, rng)
     blank = replace(library[name], absorption=np.ones(31), scattering=np.ones(31))
     started = time.perf_counter()
     found = characterise_pigment(with_toner(library, blank), name, x, world.geometries,
-                                 measured, labels)  # fmt: skip
+                                 measured, labels, grounds)  # fmt: skip
     seconds = time.perf_counter() - started
     other = next(p.name for p in library.of_kind("pigment") if p.name not in (name, partner))
     held = np.concatenate([

@@ -28,7 +28,7 @@ from flakelab.physics.characterisation import (
     characterise_pigment,
     with_toner,
 )
-from flakelab.physics.fast import reflectance_factor
+from flakelab.physics.hiding import reflectance_over
 from flakelab.physics.layer import layer_from_fractions
 from flakelab.texture.readings import texture_readings
 
@@ -166,6 +166,37 @@ def test_panels_that_cannot_split_absorption_from_scattering_are_refused():
         FlakelabError, match="'Phthalo blue GS' is a pigment toner: expected an aluminium or a pe"
     ):
         characterise_flake(lib, name, masstones, GEOMETRIES, R, ["a.cxf", "b.cxf"])
+
+
+def test_a_masstone_over_a_hiding_charts_black_reads_what_tints_leave_unsure():
+    """Bismuth vanadate from one set of tins, read with the instrument's noise: from a
+    masstone and tints of 1:4 and 1:19 in the white, its scattering at 580–700 nm, where it
+    hardly absorbs, is off by more than twice (30 times here) and the fit says so (it names
+    wavelengths read no better than a factor of two); with its masstone sprayed over a hiding
+    chart's black too, the film's trace of the black reads it within 5 % (1.5 % here)."""
+    library = read_library()
+    world = World(library, "ma-t12")
+    name, names = "Bismuth vanadate yellow", library.names
+    tints = [{name: 1.0}, {name: 0.2, WHITE: 0.8}, {name: 0.05, WHITE: 0.95}]
+    band = WAVELENGTHS >= 580
+    errors, unsure = [], []
+    for grounds in (["primer"] * 3, ["primer"] * 3 + ["black"]):
+        rng = np.random.default_rng(3)
+        x = np.array([library.fractions(r) for r in (tints + [{name: 1.0}])[: len(grounds)]])
+        n = len(x)
+        tins = world.variation(1, rng, at_shop=False)
+        film, spread = world.application(n, rng, at_shop=False)
+        sprayed = Variation(np.repeat(tins.strength, n, 0), np.repeat(tins.hue_shift, n), film,
+                            spread)  # fmt: skip
+        R = reflectance_over(world.layer(x, sprayed), library, grounds, world.geometries)
+        found = characterise_pigment(with_toner(library, _blank(library[name])), name, x,
+                                     world.geometries, world.measure(R, rng),
+                                     [f"panel {i}" for i in range(n)], grounds)  # fmt: skip
+        tin = library[name].scattering[band] * tins.strength[0, names.index(name)]
+        errors.append(np.abs(found.toner.scattering[band] / tin - 1).max())
+        unsure.append(np.sum(found.uncertainty["scattering"][band] > np.log(2)))
+    assert errors[0] > 2 and unsure[0] > 0
+    assert errors[1] < 0.05 and unsure[1] == 0
 
 
 def _flake_panels(library, name: str) -> np.ndarray:
@@ -330,13 +361,15 @@ def test_a_pearl_read_from_noisy_panels_predicts_paints_they_never_showed():
     assert np.all(off(found.toner) < off(pearl) + 0.2) and off(start).max() > 3.0
 
 
-def _panel_files(folder, name: str, library, recipes: list[dict], texture: bool = False):
-    """Each recipe's panel by the library's physics, as a CxF file (with its texture
-    readings, where ``texture``), and its recipe file."""
+def _panel_files(folder, name: str, library, recipes: list[dict], texture: bool = False,
+                 grounds: list[str] | None = None):  # fmt: skip
+    """Each recipe's panel by the library's physics (over its one of ``grounds``: default,
+    the library's primer), as a CxF file (with its texture readings, where ``texture``), and
+    its recipe file."""
     x = np.array([library.fractions(r) for r in recipes])
     ones = np.ones(len(x))
     layer = sprayed_layer(layer_from_fractions(library, x), library, ones, ones)
-    R = reflectance_factor(layer, GEOMETRIES)
+    R = reflectance_over(layer, library, grounds or ["primer"] * len(x), GEOMETRIES)
     readings = texture_readings(layer, library.flake_radii_um)
     panels, recipe_files = [], []
     for i, (grams, spectra) in enumerate(zip(recipes, R, strict=True)):
@@ -352,20 +385,22 @@ def _panel_files(folder, name: str, library, recipes: list[dict], texture: bool 
 def test_library_characterise_writes_the_library_with_the_pigment(tmp_path, cli):
     """``flakelab library characterise``: a pigment new to the demo library (the demo's
     perylene red under another name, its constants unseen) read from three panels' CxF files
-    and recipes; the library written holds it as fitted, and ``library show`` says the model
-    predicts it as an added toner. Refused, with nothing written: a name the library holds
-    (without --replace), a --recipe short of the panels, a library written as TOML, and
-    --replace of a toner the library lacks."""
+    and recipes, and its masstone sprayed over a hiding chart's black (--over); the library
+    written holds it as fitted, and ``library show`` says the model predicts it as an added
+    toner. Refused, with nothing written: a name the library holds (without --replace), a
+    --recipe or an --over short of the panels, a ground flakelab does not know, a library
+    written as TOML, and --replace of a toner the library lacks."""
     demo = read_library()
     name = "Perylene red 2027"
     real = replace(demo["Perylene red"], name=name)
     library = with_toner(demo, real)
-    recipes = [{name: 50.0}, {name: 10.0, WHITE: 40.0}, {name: 2.5, WHITE: 47.5}]
-    panels, recipe_files = _panel_files(tmp_path, name, library, recipes)
+    recipes = [{name: 50.0}, {name: 10.0, WHITE: 40.0}, {name: 2.5, WHITE: 47.5}, {name: 50.0}]
+    grounds = ["primer", "primer", "primer", "black"]
+    panels, recipe_files = _panel_files(tmp_path, name, library, recipes, grounds=grounds)
     out = tmp_path / "shop.json"
     args = ["library", "characterise", name, *panels]
-    for path in recipe_files:
-        args += ["--recipe", path]
+    for path, ground in zip(recipe_files, grounds, strict=True):
+        args += ["--recipe", path, "--over", ground]
     plot = tmp_path / "read.png"
     done = cli(*args, "--out", out, "--family", "perylene", "--plot", plot, "--json")
     assert done.returncode == 0, done.stderr
@@ -379,15 +414,24 @@ def test_library_characterise_writes_the_library_with_the_pigment(tmp_path, cli)
     assert pigment.transparent and report["transparent"]
     assert np.allclose(report["absorption"], pigment.absorption)
     assert max(p["de00_max"] for p in report["panels"]) < 0.01
-    assert "read by flakelab from 3 calibration panels" in pigment.description
+    assert "read by flakelab from 4 calibration panels" in pigment.description
+    assert [p["over"] for p in report["panels"]] == grounds
     shown = cli("library", "show", out)
     assert shown.returncode == 0 and name in shown.stdout and "added" in shown.stdout
     before = out.read_bytes()
     short = ["library", "characterise", name, *panels, "--recipe", recipe_files[0]]
+    recipes_only = [a for r in recipe_files for a in ("--recipe", r)]
     refused = {
         "already a toner of 'flakelab demo': --replace reads it anew": [
             *args, "--out", tmp_path / "new.json", "--library", out],
-        "expected one for each panel (3), got 1": [*short, "--out", tmp_path / "new.json"],
+        "--recipe: expected one for each panel (4), got 1": [
+            *short, "--out", tmp_path / "new.json"],
+        "--over: expected one for each panel (4) or none, got 1": [
+            "library", "characterise", name, *panels, *recipes_only, "--over", "black",
+            "--out", tmp_path / "new.json"],
+        "--over: 'blak': expected one of primer, black, white, G1": [
+            "library", "characterise", name, *panels, *recipes_only,
+            *[a for _ in panels for a in ("--over", "blak")], "--out", tmp_path / "new.json"],
         "a library is written as JSON": [*args, "--out", tmp_path / "shop.toml"],
         "'flakelab demo' holds no toner 'Perylene red 2027'": [
             *args, "--out", tmp_path / "new.json", "--replace"],

@@ -246,6 +246,18 @@ def characterise(
             show_default="a similar pearl's, or 400",
         ),
     ] = None,
+    over: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--over",
+            metavar="GROUND",
+            help="What each panel was sprayed over, in order, one for each or none: primer "
+            "(the library's), black or white (a hiding chart's), or a grey-shade primer "
+            "G1–G7. A pigment's masstone over a chart's black reads its scattering where it "
+            "hardly absorbs, which tints in the white leave unsure.",
+            show_default="every panel over the library's primer",
+        ),
+    ] = None,
     sample: SampleOption = None,
     average: Annotated[
         bool,
@@ -299,6 +311,8 @@ def characterise(
     )
 
     check_one_for_each("--recipe", recipe, sprayed, "panel")
+    check_one_for_each("--over", over or [], sprayed, "panel", optional=True)
+    grounds = _grounds(over, len(sprayed))
     if out.suffix.lower() != ".json":
         raise FlakelabError(f"--out: {out}: a library is written as JSON: name a .json file")
     check_output_file(out, "--out", reads={"SPRAYED": sprayed, "--recipe": recipe})
@@ -322,14 +336,15 @@ def characterise(
     names = [g.name for g in geometries]
     panels = [str(path) for path in sprayed]
     if start.kind == "pigment":
-        found = characterise_pigment(lib, toner, x, geometries, measured, panels)
+        found = characterise_pigment(lib, toner, x, geometries, measured, panels, grounds)
     else:  # an aluminium or a pearl: its radius read from the texture, where there is one
         found = characterise_flake(lib, toner, x, geometries, measured, panels,
-                                   None if radius is not None else texture)  # fmt: skip
+                                   None if radius is not None else texture, grounds)  # fmt: skip
     made = f"read by flakelab from {len(sprayed)} calibration panels on {date.today()}"
     read = found.toner if found.toner.description else replace(found.toner, description=made)
     write_library(with_toner(lib, read), out)
-    report = _characterisation_report(found, read, sprayed, x, lib.names.index(toner), names)
+    report = _characterisation_report(found, read, sprayed, x, lib.names.index(toner), names,
+                                      grounds)  # fmt: skip
     report |= {"library": lib.name, "out": str(out), "replaced": held,
                "spectra_recovered": [str(p) for p, r in zip(sprayed, readings, strict=True)
                                      if r.spectra_recovered]}  # fmt: skip
@@ -437,14 +452,30 @@ def _new_effect_toner(lib, name: str, kind: str, options: dict):
                          options["--substrate-thickness"])  # fmt: skip
 
 
-def _characterisation_report(found, toner, sprayed, x, k: int, geometries) -> dict:
+def _grounds(over: list[str] | None, panels: int) -> list[str]:
+    """``--over``'s grounds, one for each panel (the library's primer where none is given);
+    one flakelab does not know is refused."""
+    from flakelab.errors import FlakelabError
+    from flakelab.physics.hiding import GROUNDS
+
+    for ground in over or []:
+        if ground not in GROUNDS:
+            raise FlakelabError(f"--over: {ground!r}: expected one of {', '.join(GROUNDS)}")
+    return list(over) if over else ["primer"] * panels
+
+
+def _characterisation_report(found, toner, sprayed, x, k: int, geometries, grounds) -> dict:
     """``library characterise``'s report: the toner, each panel's misfit and the notes."""
+    from flakelab.physics.characterisation import FIT_ITERATIONS
+
     panels = []
-    for path, share, film, spread, de00, start in zip(
-        sprayed, x[:, k], found.film, found.spread, found.de00, found.start_de00, strict=True
-    ):
+    for path, ground, share, film, spread, de00, start in zip(
+        sprayed, grounds, x[:, k], found.film, found.spread, found.de00, found.start_de00,
+        strict=True,
+    ):  # fmt: skip
         worst = int(np.nanargmax(de00))
-        panels.append({"panel": str(path), "share": float(share), "film_build": float(film),
+        panels.append({"panel": str(path), "over": ground, "share": float(share),
+                       "film_build": float(film),
                        "flake_spread": float(spread), "de00_max": float(de00[worst]),
                        "de00_max_at": geometries[worst],
                        "start_de00_max": float(np.nanmax(start))})  # fmt: skip
@@ -455,13 +486,18 @@ def _characterisation_report(found, toner, sprayed, x, k: int, geometries) -> di
         for p in panels
         if p["de00_max"] > PANEL_MISFIT_NOTED
     ]
+    if not found.converged:
+        notes.append(f"the fit stopped after {FIT_ITERATIONS} iterations, still creeping along "
+                     "what the panels hardly tell (each step a little closer to their noise): "
+                     "what it predicts no longer moves by then")  # fmt: skip
     report = {"toner": toner.name, "kind": toner.kind}
     if toner.kind == "pigment":
         report |= _pigment_read(found, toner, notes)
     else:
         report |= _flake_read(found, toner, notes)
     return report | {"panels": panels, "chi2_per_dof": found.chi2_per_dof,
-                     "evaluations": found.evaluations, "notes": notes}  # fmt: skip
+                     "evaluations": found.evaluations, "converged": found.converged,
+                     "notes": notes}  # fmt: skip
 
 
 def _pigment_read(found, pigment, notes: list[str]) -> dict:
@@ -469,8 +505,8 @@ def _pigment_read(found, pigment, notes: list[str]) -> dict:
     from flakelab.core.spectra import WAVELENGTHS
 
     for key, what in (("absorption", "a tint in the white"),
-                      ("scattering", "the pigment in an aluminium base, or a masstone "
-                       "thin enough to show the primer")):  # fmt: skip
+                      ("scattering", "a masstone over a hiding chart's black, --over black, "
+                       "or the pigment in an aluminium base")):  # fmt: skip
         sd, values = found.uncertainty[key], getattr(pigment, key)
         unsure = WAVELENGTHS[(sd > POORLY_READ_LOG_SD) & (values >= MATTERS * values.max())]
         if unsure.size:
@@ -567,11 +603,13 @@ def _print_characterisation(report: dict) -> None:
     table = Table(title=f"{report['toner']} read from {len(report['panels'])} panels",
                   box=box.SIMPLE_HEAD, collapse_padding=True)  # fmt: skip
     start = "Kubelka–Munk" if report["kind"] == "pigment" else "from the start"
-    for column in ("panel", "its share", "film build", "worst ΔE00, fit", start):
-        table.add_column(column, justify="left" if column == "panel" else "right")
+    grounds = any(p["over"] != "primer" for p in report["panels"])
+    for column in ("panel", *(["over"] if grounds else []), "its share", "film build",
+                   "worst ΔE00, fit", start):  # fmt: skip
+        table.add_column(column, justify="left" if column in ("panel", "over") else "right")
     for p in report["panels"]:
-        table.add_row(escape(p["panel"]), f"{p['share']:.1%}", f"{p['film_build']:.2f}",
-                      f"{p['de00_max']:.2f} {p['de00_max_at']}",
+        table.add_row(escape(p["panel"]), *([p["over"]] if grounds else []), f"{p['share']:.1%}",
+                      f"{p['film_build']:.2f}", f"{p['de00_max']:.2f} {p['de00_max_at']}",
                       f"{p['start_de00_max']:.2f}")  # fmt: skip
     console.print(table)
     console.print(f"{escape(report['toner'])} {_what_was_read(report)}.", highlight=False)

@@ -34,6 +34,7 @@ which a neutral grey's is to a per cent or so.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import colour
@@ -48,7 +49,7 @@ from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
 from flakelab.physics.application import sprayed_layer
 from flakelab.physics.fast import reflectance_factor
-from flakelab.physics.layer import layer_from_fractions
+from flakelab.physics.layer import Layer, layer_from_fractions
 
 __all__ = [
     "HIDING_DE00",
@@ -57,9 +58,12 @@ __all__ = [
     "GREY_SHADES",
     "BUILD_GRID",
     "COATS_AT_NOMINAL",
+    "GROUNDS",
     "Hiding",
     "hiding",
     "grey_primer",
+    "ground_reflectance",
+    "reflectance_over",
 ]
 
 CONTRAST_CHART = {"black": 0.01, "white": 0.80}
@@ -78,6 +82,9 @@ NOMINAL = int(np.flatnonzero(BUILD_GRID == 1.0)[0])
 """Where the nominal build lies on :data:`BUILD_GRID`."""
 COATS_AT_NOMINAL = 2
 """Coats a refinish basecoat is sprayed in to its nominal build: a coat is half of it."""
+GROUNDS = ("primer", *CONTRAST_CHART, *GREY_SHADES)
+"""What a panel may be sprayed over (:func:`ground_reflectance`): the library's primer, a
+contrast chart's black or white, or a grey-shade primer."""
 
 
 @dataclass(frozen=True)
@@ -137,6 +144,31 @@ def grey_primer(lightness: float) -> NDArray[np.float64]:
     (CIE 1976 L*)."""
     Y = float(colour.colorimetry.luminance_CIE1976(lightness)) / 100
     return np.full(WAVELENGTHS.size, Y)
+
+
+def ground_reflectance(library: Library, ground: str) -> NDArray[np.float64]:
+    """The reflectance ``[W]`` of what a panel is sprayed over, one of :data:`GROUNDS`."""
+    if ground == "primer":
+        return library.binder.primer_reflectance
+    if ground in CONTRAST_CHART:
+        return np.full(WAVELENGTHS.size, CONTRAST_CHART[ground])
+    if ground in GREY_SHADES:
+        return grey_primer(GREY_SHADES[ground])
+    raise ValueError(f"expected a ground among {', '.join(GROUNDS)}, got {ground!r}")
+
+
+def reflectance_over(
+    layer: Layer, library: Library, grounds: Sequence[str], geometries: tuple[Geometry, ...]
+) -> NDArray[np.float64]:
+    """Reflectance factors ``[F, G, W]`` of each formulation of ``layer`` sprayed over its one
+    of ``grounds[F]`` (:data:`GROUNDS`), at ``geometries``."""
+    grounds = np.asarray(grounds)
+    R = np.empty((layer.size, len(geometries), WAVELENGTHS.size))
+    for ground in np.unique(grounds):  # the formulations over each, at once
+        rows = np.flatnonzero(grounds == ground)
+        over = replace(layer[rows], primer=ground_reflectance(library, str(ground)))
+        R[rows] = reflectance_factor(over, geometries)
+    return R
 
 
 def hiding(
