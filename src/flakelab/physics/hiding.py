@@ -176,47 +176,44 @@ def hiding(
     fractions: ArrayLike,
     geometries: tuple[Geometry, ...],
     threshold: float = HIDING_DE00,
-    primers: dict[str, float] | None = None,
 ) -> Hiding:
     """How thick each paint of ``fractions[F, T]`` (library order) must be to hide the
-    contrast chart and each grey of ``primers`` (name → L*; :data:`GREY_SHADES`), judged at
-    ``geometries`` (module notes)."""
+    contrast chart and each of :data:`GREY_SHADES`, judged at ``geometries`` (module
+    notes)."""
     x = np.atleast_2d(np.asarray(fractions, dtype=float))
-    primers = GREY_SHADES if primers is None else primers
-    nominal = library.binder.thickness_um
-    over = {name: _Lab_over(library, x, geometries, np.full(WAVELENGTHS.size, Y))
-            for name, Y in CONTRAST_CHART.items()}  # fmt: skip
-    contrast = _worst_de00(over["black"], over["white"])  # [F, B]
+    F, B, nominal = len(x), BUILD_GRID.size, library.binder.thickness_um
+    layer = sprayed_layer(layer_from_fractions(library, np.repeat(x, B, axis=0)), library,
+                          np.tile(BUILD_GRID, F), np.ones(F * B))  # fmt: skip
+    R = {
+        ground: reflectance_over(layer, library, [ground] * (F * B), geometries).reshape(
+            F, B, len(geometries), WAVELENGTHS.size
+        )
+        for ground in (*CONTRAST_CHART, *GREY_SHADES)
+    }
+    Lab = {ground: reflectance_to_Lab(spectra) for ground, spectra in R.items()}  # [F, B, G, 3]
+    contrast = _worst_de00(Lab["black"], Lab["white"])  # [F, B]
     hides = _where_it_falls_to(contrast, threshold)
-    greys = [_Lab_over(library, x, geometries, grey_primer(L)) for L in primers.values()]
-    built_up = np.stack([_worst_de00(Lab, Lab[:, -1:]) for Lab in greys], axis=1)  # [F, P, B]
-    built_up[~np.isfinite(hides)] = np.inf  # tends to no colour of its own
+    built_up = np.stack([_worst_de00(Lab[g], Lab[g][:, -1:]) for g in GREY_SHADES], axis=1)
+    built_up[~np.isfinite(hides)] = np.inf  # tends to no colour of its own: [F, P, B]
     names = [g.name for g in geometries]
     face = names.index(CONTRAST_GEOMETRY) if CONTRAST_GEOMETRY in names else slice(None)
-    full = greys[0][:, -1, face, 0].reshape(len(x), -1).mean(axis=1)  # L* built up
+    full = Lab["G1"][:, -1, face, 0].reshape(F, -1).mean(axis=1)  # L* built up
+    Y = {chart: reflectance_to_XYZ(R[chart][:, NOMINAL, face])[..., 1] for chart in CONTRAST_CHART}
+    ratio = Y["black"] / Y["white"] if CONTRAST_GEOMETRY in names else np.full(F, np.nan)
     return Hiding(
         film_um=BUILD_GRID * nominal,
         contrast_de00=contrast,
         hiding_um=hides * nominal,
-        contrast_ratio=_contrast_ratio(library, x, geometries),
-        primers=tuple(primers),
+        contrast_ratio=ratio,
+        primers=tuple(GREY_SHADES),
         primer_curve=built_up,
         primer_hiding_um=_where_it_falls_to(built_up, threshold) * nominal,
-        primer_lightness=np.array(list(primers.values())),
+        primer_lightness=np.array(list(GREY_SHADES.values())),
         lightness=np.where(np.isfinite(hides), full, np.nan),
         nominal_um=nominal,
         coat_um=nominal / COATS_AT_NOMINAL,
         threshold=threshold,
     )
-
-
-def _Lab_over(library: Library, x: NDArray, geometries, primer: NDArray) -> NDArray:
-    """CIELAB ``[F, B, G, 3]`` of each paint over ``primer`` at every build of the grid."""
-    F, B = len(x), BUILD_GRID.size
-    layer = replace(layer_from_fractions(library, np.repeat(x, B, axis=0)), primer=primer)
-    sprayed = sprayed_layer(layer, library, np.tile(BUILD_GRID, F), np.ones(F * B))
-    Lab = reflectance_to_Lab(reflectance_factor(sprayed, geometries))
-    return Lab.reshape(F, B, len(geometries), 3)
 
 
 def _worst_de00(a: NDArray, b: NDArray) -> NDArray:
@@ -239,17 +236,3 @@ def _where_it_falls_to(de: NDArray, threshold: float) -> NDArray:
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(first[..., 0] > 0, (d0 - threshold) / (d0 - d1), 0.0)
     return np.where(stays[..., -1], np.exp(lo + np.nan_to_num(share) * (hi - lo)), np.inf)
-
-
-def _contrast_ratio(library: Library, x: NDArray, geometries) -> NDArray:
-    """Y over the chart's black over Y over its white ``[F]`` at the nominal build, at
-    :data:`CONTRAST_GEOMETRY` (NaN where not among ``geometries``)."""
-    if CONTRAST_GEOMETRY not in [g.name for g in geometries]:
-        return np.full(len(x), np.nan)
-    at, ones = (Geometry.parse(CONTRAST_GEOMETRY),), np.ones(len(x))
-    Y = {}
-    for name, chart in CONTRAST_CHART.items():
-        layer = replace(layer_from_fractions(library, x), primer=np.full(WAVELENGTHS.size, chart))
-        R = reflectance_factor(sprayed_layer(layer, library, ones, ones), at)[:, 0]
-        Y[name] = reflectance_to_XYZ(R)[..., 1]
-    return Y["black"] / Y["white"]
