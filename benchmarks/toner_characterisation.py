@@ -47,7 +47,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from flakelab.cases.generator import Variation, World
+from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.spectra import shift_spectra
@@ -99,10 +99,7 @@ def one_pigment(world: World, name: str, rng: np.random.Generator, panel_set: st
     if panel_set == "tints_and_black":
         x, labels = np.concatenate([x, x[:1]]), [*labels, "masstone over black"]
         grounds.append("black")
-    tins = world.variation(1, rng, at_shop=False)
-    film, spread = world.application(len(x), rng, at_shop=False)
-    sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
-                        film, spread)  # fmt: skip
+    sprayed = world.one_set_of_tins(len(x), rng)
     R = reflectance_over(world.layer(x, sprayed), library, grounds, world.geometries)
     measured = world.measure(R, rng)
     blank = replace(library[name], absorption=np.ones(31), scattering=np.ones(31))
@@ -117,11 +114,9 @@ def one_pigment(world: World, name: str, rng: np.random.Generator, panel_set: st
         recipes(names, name, other, (0.2,)),
     ])  # fmt: skip
     n = len(held)
-    truth = world.appearance(held, Variation(np.repeat(tins.strength, n, 0),
-                                             np.repeat(tins.hue_shift, n), np.ones(n),
-                                             np.ones(n)))[0]  # fmt: skip
+    truth = world.appearance(held, sprayed.tins_at_nominal(n))[0]
     k = names.index(name)
-    tin = tins_pigment(library[name], tins.strength[0, k], tins.hue_shift[0])
+    tin = tins_pigment(library[name], sprayed.strength[0, k], sprayed.hue_shift[0])
     judged = {}
     for label, pigment in (("fitted", found.toner), ("km", found.start), ("oracle", tin)):
         predicted = sprayed_reflectance(with_toner(library, pigment), held, world.geometries,
@@ -164,10 +159,7 @@ def one_effect(world: World, kind: str, k: int, rng: np.random.Generator) -> dic
     start = replace(toner, **{f: getattr(similar, f) for f in fitted})
     x = np.array([blended(names, toner.name, parts) for parts in EFFECT_PANELS[kind]])
     labels = [", ".join(parts) or "alone" for parts in EFFECT_PANELS[kind]]
-    tins = world.variation(1, rng, at_shop=False)
-    film, spread = world.application(len(x), rng, at_shop=False)
-    sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
-                        film, spread)  # fmt: skip
+    sprayed = world.one_set_of_tins(len(x), rng)
     R, texture = world.appearance(x, sprayed)
     measured = world.measure(R, rng)
     started = time.perf_counter()
@@ -180,10 +172,8 @@ def one_effect(world: World, kind: str, k: int, rng: np.random.Generator) -> dic
                                   texture=world.measure_texture(texture, rng))  # fmt: skip
     held = np.array([blended(names, toner.name, parts) for parts in EFFECT_HELD_OUT[kind]])
     n = len(held)
-    truth = world.appearance(held, Variation(np.repeat(tins.strength, n, 0),
-                                             np.repeat(tins.hue_shift, n), np.ones(n),
-                                             np.ones(n)))[0]  # fmt: skip
-    tin = replace(toner, volume_fraction=toner.volume_fraction * tins.strength[0, names.index(
+    truth = world.appearance(held, sprayed.tins_at_nominal(n))[0]
+    tin = replace(toner, volume_fraction=toner.volume_fraction * sprayed.strength[0, names.index(
         toner.name)])  # fmt: skip
     judged = {}
     for label, read in (("fitted", found.toner), ("similar", start), ("oracle", tin)):

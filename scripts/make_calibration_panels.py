@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.cases.generator import Variation, World
+from flakelab.cases.generator import World
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS, shift_spectra
 from flakelab.io import read_library, write_measurements
@@ -101,10 +101,7 @@ def spray_and_read(world: World, prefix: str, rng: np.random.Generator, folder: 
     recipe."""
     panels = PANELS[prefix]
     x = np.array([world.library.fractions(recipe) for recipe in panels.values()])
-    tins = world.variation(1, rng, at_shop=False)
-    film, spread = world.application(len(x), rng, at_shop=False)
-    sprayed = Variation(np.repeat(tins.strength, len(x), 0), np.repeat(tins.hue_shift, len(x)),
-                        film, spread)  # fmt: skip
+    sprayed = world.one_set_of_tins(len(x), rng)
     R, texture = world.appearance(x, sprayed)
     measured, read = world.measure(R, rng), world.measure_texture(texture, rng)
     for (name, recipe), spectra, spot in zip(panels.items(), measured, read, strict=True):

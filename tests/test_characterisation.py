@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from flakelab.cases.generator import Variation, World
+from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
 from flakelab.core.geometry import instrument_geometries
@@ -22,6 +22,7 @@ from flakelab.io.library_file import read_library as read_library_file
 from flakelab.library.toners import Pigment
 from flakelab.physics.application import sprayed_layer, sprayed_reflectance
 from flakelab.physics.characterisation import (
+    EFFECT_FITTED,
     FLAKE_FITTED,
     PEARL_FITTED,
     characterise_flake,
@@ -115,11 +116,7 @@ def test_panels_sprayed_and_read_in_the_world_predict_paints_they_never_showed()
     x = _recipes(names, name, {WHITE: 0.2})
     x = np.concatenate([x, _recipes(names, name, {WHITE: 0.05})[1:],
                         _recipes(names, name, {"Al medium": 0.1})[1:]])  # fmt: skip
-    tins = world.variation(1, rng, at_shop=False)
-    film, spread = world.application(len(x), rng, at_shop=False)
-    n = len(x)
-    sprayed = Variation(np.repeat(tins.strength, n, 0), np.repeat(tins.hue_shift, n), film,
-                        spread)  # fmt: skip
+    sprayed = world.one_set_of_tins(len(x), rng)
     measured = world.measure(world.appearance(x, sprayed)[0], rng)
     found = characterise_pigment(with_toner(library, _blank(library[name])), name, x,
                                  world.geometries, measured, list("abcd"))  # fmt: skip
@@ -127,9 +124,7 @@ def test_panels_sprayed_and_read_in_the_world_predict_paints_they_never_showed()
                            _recipes(names, name, {"Al coarse bright": 0.2})[1:],
                            _recipes(names, name, {"Phthalo green": 0.2})[1:]])  # fmt: skip
     m = len(held)
-    truth = world.appearance(held, Variation(np.repeat(tins.strength, m, 0),
-                                             np.repeat(tins.hue_shift, m), np.ones(m),
-                                             np.ones(m)))[0]  # fmt: skip
+    truth = world.appearance(held, sprayed.tins_at_nominal(m))[0]
 
     def predicted(pigment):
         return sprayed_reflectance(with_toner(library, pigment), held, world.geometries,
@@ -139,7 +134,7 @@ def test_panels_sprayed_and_read_in_the_world_predict_paints_they_never_showed()
     assert fitted.max() < 0.6, fitted
     assert _worst_de00(predicted(found.start), truth).max() > 3.0
     assert np.nanmax(found.de00) < 0.3
-    np.testing.assert_allclose(found.film, film, rtol=0.05)
+    np.testing.assert_allclose(found.film, sprayed.film, rtol=0.05)
 
 
 def test_panels_that_cannot_split_absorption_from_scattering_are_refused():
@@ -184,15 +179,12 @@ def test_a_masstone_over_a_hiding_charts_black_reads_what_tints_leave_unsure():
         rng = np.random.default_rng(3)
         x = np.array([library.fractions(r) for r in (tints + [{name: 1.0}])[: len(grounds)]])
         n = len(x)
-        tins = world.variation(1, rng, at_shop=False)
-        film, spread = world.application(n, rng, at_shop=False)
-        sprayed = Variation(np.repeat(tins.strength, n, 0), np.repeat(tins.hue_shift, n), film,
-                            spread)  # fmt: skip
+        sprayed = world.one_set_of_tins(n, rng)
         R = reflectance_over(world.layer(x, sprayed), library, grounds, world.geometries)
         found = characterise_pigment(with_toner(library, _blank(library[name])), name, x,
                                      world.geometries, world.measure(R, rng),
                                      [f"panel {i}" for i in range(n)], grounds)  # fmt: skip
-        tin = library[name].scattering[band] * tins.strength[0, names.index(name)]
+        tin = library[name].scattering[band] * sprayed.strength[0, names.index(name)]
         errors.append(np.abs(found.toner.scattering[band] / tin - 1).max())
         unsure.append(np.sum(found.uncertainty["scattering"][band] > np.log(2)))
     assert errors[0] > 2 and unsure[0] > 0
@@ -208,27 +200,6 @@ def _flake_panels(library, name: str) -> np.ndarray:
     x[1, [k, names.index("Phthalo blue GS")]] = (0.9, 0.1)
     x[2, [k, names.index("Iron oxide red")]] = (0.8, 0.2)
     return x
-
-
-@pytest.mark.parametrize(
-    ("name", "similar"),
-    [("Al medium", "Al coarse"), ("Al VMP", "Al fine"), ("Al extra coarse", "Al medium bright")],
-)
-def test_an_aluminium_flake_is_read_back_from_panels_its_physics_made(name, similar):
-    """An aluminium flake's orientation spread, surface quality and volume fraction, started
-    from another paste's (3–34 ΔE00 off on some panel), come back to 0.1 % from a masstone
-    and two tints its physics made; its radius and thickness are kept as given."""
-    library = read_library()
-    flake = library[name]
-    start = replace(flake, **{f: getattr(library[similar], f) for f in FLAKE_FITTED})
-    x = _flake_panels(library, name)
-    R = sprayed_reflectance(library, x, GEOMETRIES, np.ones(3), np.ones(3))
-    found = characterise_flake(with_toner(library, start), name, x, GEOMETRIES, R, list("abc"))
-    for f in FLAKE_FITTED:
-        assert getattr(found.toner, f) == pytest.approx(getattr(flake, f), rel=1e-3), f
-    assert (found.toner.radius_um, found.toner.thickness_um) == (flake.radius_um,
-                                                                 flake.thickness_um)  # fmt: skip
-    assert np.nanmax(found.de00) < 0.01 and np.nanmax(found.start_de00) > 2.0
 
 
 def test_a_flake_read_from_noisy_panels_predicts_paints_they_never_showed():
@@ -247,10 +218,7 @@ def test_a_flake_read_from_noisy_panels_predicts_paints_they_never_showed():
     flake = library[name]
     start = replace(flake, **{f: getattr(library["Al coarse bright"], f) for f in FLAKE_FITTED})
     x = _flake_panels(library, name)
-    tins = world.variation(1, rng, at_shop=False)
-    film, spread = world.application(3, rng, at_shop=False)
-    sprayed = Variation(np.repeat(tins.strength, 3, 0), np.repeat(tins.hue_shift, 3), film,
-                        spread)  # fmt: skip
+    sprayed = world.one_set_of_tins(3, rng)
     R, texture = world.appearance(x, sprayed)
     measured = world.measure(R, rng)
     found = characterise_flake(with_toner(library, start), name, x, world.geometries, measured,
@@ -262,16 +230,14 @@ def test_a_flake_read_from_noisy_panels_predicts_paints_they_never_showed():
     assert textured.toner.radius_um == pytest.approx(flake.radius_um, rel=0.1)
     names = library.names
     tin = replace(
-        flake, volume_fraction=flake.volume_fraction * tins.strength[0, names.index(name)]
+        flake, volume_fraction=flake.volume_fraction * sprayed.strength[0, names.index(name)]
     )
     for f in FLAKE_FITTED:  # the tin's volume fraction: its batch's strength
         assert getattr(found.toner, f) == pytest.approx(getattr(tin, f), rel=0.03), f
     held = np.zeros((2, len(names)))
     held[0, [names.index(name), names.index("Perylene maroon")]] = (0.7, 0.3)
     held[1, [names.index(name), names.index("Carbon black")]] = (0.95, 0.05)
-    truth = world.appearance(held, Variation(np.repeat(tins.strength, 2, 0),
-                                             np.repeat(tins.hue_shift, 2), np.ones(2),
-                                             np.ones(2)))[0]  # fmt: skip
+    truth = world.appearance(held, sprayed.tins_at_nominal(2))[0]
 
     def off(toner) -> np.ndarray:
         predicted = sprayed_reflectance(with_toner(library, toner), held, world.geometries,
@@ -291,29 +257,37 @@ def _pearl_panels(library, name: str) -> np.ndarray:
 @pytest.mark.parametrize(
     ("name", "similar"),
     [
+        ("Al medium", "Al coarse"),
+        ("Al VMP", "Al fine"),
+        ("Al extra coarse", "Al medium bright"),
         ("Pearl interference red", "Pearl silver white"),
         ("Pearl interference green", "Pearl silver white"),
         ("Xirallic crystal silver", "Pearl interference blue"),
     ],
 )
-def test_a_pearl_is_read_back_from_panels_its_physics_made(name, similar):
-    """A pearl's coating, orientation spread and volume fraction, started from another
-    pearl's (more than 20 ΔE00 off on some panel), come back to 0.1 % from three panels its
-    physics made; its substrate and radius are kept as given. The green from the silver
-    white's 60 nm needs the coating's first look over the orders of interference: a local
-    fit from there stops at 53 nm; the Xirallic silver from the blue's 10° spread needs its
-    spread fitted at each coating looked at, or a third order's pale 329 nm fits better."""
+def test_an_effect_toner_is_read_back_from_panels_its_physics_made(name, similar):
+    """An aluminium flake's orientation spread, surface quality and volume fraction, and a
+    pearl's coating, orientation spread and volume fraction, started from another's (3–51
+    ΔE00 off on some panel), come back to 0.1 % from three panels its physics made (a flake's
+    masstone and two tints; a pearl alone, over carbon black and with Al medium); a flake's
+    radius and thickness, a pearl's substrate and radius, are kept as given. The green from
+    the silver white's 60 nm needs the coating's first look over the orders of interference:
+    a local fit from there stops at 53 nm; the Xirallic silver from the blue's 10° spread
+    needs its spread fitted at each coating looked at, or a third order's pale 329 nm fits
+    better."""
     library = read_library()
-    pearl = library[name]
-    start = replace(pearl, **{f: getattr(library[similar], f) for f in PEARL_FITTED})
-    x = _pearl_panels(library, name)
+    toner = library[name]
+    fitted = EFFECT_FITTED[toner.kind]
+    start = replace(toner, **{f: getattr(library[similar], f) for f in fitted})
+    x = (_flake_panels if toner.kind == "aluminium" else _pearl_panels)(library, name)
     R = sprayed_reflectance(library, x, GEOMETRIES, np.ones(3), np.ones(3))
     found = characterise_flake(with_toner(library, start), name, x, GEOMETRIES, R, list("abc"))
-    for f in PEARL_FITTED:
-        assert getattr(found.toner, f) == pytest.approx(getattr(pearl, f), rel=1e-3), f
-    kept = ("substrate", "substrate_nm", "radius_um")
-    assert [getattr(found.toner, f) for f in kept] == [getattr(pearl, f) for f in kept]
-    assert np.nanmax(found.de00) < 0.01 and np.nanmax(found.start_de00) > 20
+    for f in fitted:
+        assert getattr(found.toner, f) == pytest.approx(getattr(toner, f), rel=1e-3), f
+    kept = {"aluminium": ("radius_um", "thickness_um"),
+            "pearl": ("substrate", "substrate_nm", "radius_um")}[toner.kind]  # fmt: skip
+    assert [getattr(found.toner, f) for f in kept] == [getattr(toner, f) for f in kept]
+    assert np.nanmax(found.de00) < 0.01 and np.nanmax(found.start_de00) > 2.0
 
 
 def test_a_pearl_read_from_noisy_panels_predicts_paints_they_never_showed():
@@ -333,15 +307,12 @@ def test_a_pearl_read_from_noisy_panels_predicts_paints_they_never_showed():
     start = replace(pearl, **{f: getattr(library["Pearl silver white"], f) for f in PEARL_FITTED},
                     radius_um=5.0)  # fmt: skip
     x = _pearl_panels(library, name)
-    tins = world.variation(1, rng, at_shop=False)
-    film, spread = world.application(3, rng, at_shop=False)
-    sprayed = Variation(np.repeat(tins.strength, 3, 0), np.repeat(tins.hue_shift, 3), film,
-                        spread)  # fmt: skip
+    sprayed = world.one_set_of_tins(3, rng)
     R, texture = world.appearance(x, sprayed)
     measured, read = world.measure(R, rng), world.measure_texture(texture, rng)
     found = characterise_flake(with_toner(library, start), name, x, world.geometries, measured,
                                list("abc"), texture=read)  # fmt: skip
-    tin = pearl.volume_fraction * tins.strength[0, names.index(name)]
+    tin = pearl.volume_fraction * sprayed.strength[0, names.index(name)]
     assert found.toner.coating_nm == pytest.approx(pearl.coating_nm, rel=1e-3)
     assert found.toner.orientation_sd_deg == pytest.approx(pearl.orientation_sd_deg, rel=0.03)
     assert found.toner.volume_fraction == pytest.approx(tin, rel=0.05)
@@ -349,9 +320,7 @@ def test_a_pearl_read_from_noisy_panels_predicts_paints_they_never_showed():
     held = np.zeros((2, len(names)))
     held[0, [names.index(name), names.index("Phthalo blue GS")]] = (0.7, 0.3)
     held[1, [names.index(n) for n in (name, "Al fine", "Indanthrone blue")]] = (0.4, 0.4, 0.2)
-    truth = world.appearance(held, Variation(np.repeat(tins.strength, 2, 0),
-                                             np.repeat(tins.hue_shift, 2), np.ones(2),
-                                             np.ones(2)))[0]  # fmt: skip
+    truth = world.appearance(held, sprayed.tins_at_nominal(2))[0]
 
     def off(toner) -> np.ndarray:
         predicted = sprayed_reflectance(with_toner(library, toner), held, world.geometries,

@@ -238,6 +238,12 @@ class Variation:
     film: NDArray
     spread: NDArray
 
+    def tins_at_nominal(self, n: int) -> Variation:
+        """``n`` sprays from the first spray's tins at the nominal application (film build and
+        flake spread 1): what those tins make of a paint, the spray aside."""
+        return Variation(np.repeat(self.strength[:1], n, 0), np.repeat(self.hue_shift[:1], n, 0),
+                         np.ones(n), np.ones(n))  # fmt: skip
+
 
 class World:
     """Formulations, their appearance and its measurement for one library and instrument."""
@@ -326,6 +332,14 @@ class World:
         strength = rng.normal(1.0, s.batch_strength_sd, (n, T))
         hue_shift = rng.normal(0.0, s.batch_hue_shift_nm, n)
         return Variation(strength, hue_shift, *self.application(n, rng, at_shop))
+
+    def one_set_of_tins(self, n: int, rng: np.random.Generator, at_shop: bool = False):
+        """``n`` sprays from one set of tins (one batch of each toner), each with its own
+        application: calibration panels sprayed in one session."""
+        tins = self.variation(1, rng, at_shop)
+        film, spread = self.application(n, rng, at_shop)
+        return Variation(np.repeat(tins.strength, n, 0), np.repeat(tins.hue_shift, n), film,
+                         spread)  # fmt: skip
 
     def nominal(self, n: int, at_shop: bool = False) -> Variation:
         """No batch or application variation: the formulation as the library describes it,

@@ -552,7 +552,7 @@ def _draw_characterisation(found, geometries, measured, sprayed, plot) -> None:
     """``library characterise --plot``: what was read beside each panel's misfit."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.spectra import WAVELENGTHS
-    from flakelab.render.plots import plot_flake_read, plot_pearl_read, plot_pigment_read
+    from flakelab.render.plots import plot_flake_read, plot_pigment_read
 
     names = [g.name for g in geometries]
     labels = [p.name for p in sprayed]
@@ -572,11 +572,9 @@ def _draw_characterisation(found, geometries, measured, sprayed, plot) -> None:
     Lab = {"read": reflectance_to_Lab(np.nan_to_num(measured)),
            "fitted": reflectance_to_Lab(found.fitted)}  # fmt: skip
     Lab["read"][~np.isfinite(measured).all(axis=-1)] = np.nan
-    if found.toner.kind == "pearl":  # its interference colour travels with the angle
-        plot_pearl_read(names, list(misfit), Lab, misfit, plot, title=title)
-        return
-    lightness = {which: values[..., 0] for which, values in Lab.items()}
-    plot_flake_read(names, list(misfit), lightness, misfit, plot, title=title)
+    plot_flake_read(
+        names, list(misfit), Lab, misfit, plot, title=title, travel=found.toner.kind == "pearl"
+    )  # its interference colour travels
 
 
 def _relative(sd: float | None) -> str:

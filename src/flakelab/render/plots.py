@@ -36,7 +36,6 @@ __all__ = [
     "plot_tins_history",
     "plot_pigment_read",
     "plot_flake_read",
-    "plot_pearl_read",
     "plot_hiding",
     "plot_model_errors",
     "plot_harness",
@@ -526,68 +525,59 @@ def plot_pigment_read(
 def plot_flake_read(
     geometries: Sequence[str],
     names: Sequence[str],
-    lightness: Mapping[str, np.ndarray],
-    panels: Mapping[str, np.ndarray],
-    path: str | PathLike,
-    *,
-    title: str = "",
-    dpi: int = 120,
-) -> None:
-    """An aluminium flake read from calibration panels (``flakelab library characterise
-    --plot``): each panel's L* (D65/10) at each of ``geometries``, ``lightness["read"]``
-    (markers, NaN where not read) and ``lightness["fitted"]`` (lines) ``[N, G]``, panels
-    ``names``; and each panel's ΔE00 between its reading and the fit (``panels``)."""
-    figure, (flop, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
-    at = np.arange(len(geometries))
-    lamps = _geometry_groups(list(geometries), len(geometries))  # a line for each lamp
-    for n, name in enumerate(names):
-        for i, (rows, _) in enumerate(lamps):
-            flop.plot(at[rows], lightness["fitted"][n][rows], color=f"C{n}", lw=1.5,
-                      label=None if i else f"{name}, fitted")  # fmt: skip
-        flop.plot(at, lightness["read"][n], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
-    flop.set_xticks(at, list(geometries), rotation=60, fontsize=8)
-    flop.set(ylabel="L* (D65/10)")
-    flop.legend(fontsize=8)
-    _misfit_bars(misfit, geometries, panels)
-    figure.suptitle(_fitted(title or "An aluminium flake read from calibration panels", figure))
-    _save(figure, path, dpi)
-
-
-def plot_pearl_read(
-    geometries: Sequence[str],
-    names: Sequence[str],
     Lab: Mapping[str, np.ndarray],
     panels: Mapping[str, np.ndarray],
     path: str | PathLike,
     *,
+    travel: bool = False,
     title: str = "",
     dpi: int = 120,
 ) -> None:
-    """A pearl read from calibration panels (``flakelab library characterise --plot``): each
-    panel's colour travel in the a*b* plane (D65/10) across ``geometries``, its reading
-    nearest the specular under each lamp marked by a square, ``Lab["read"]`` (markers, NaN where not
-    read) and ``Lab["fitted"]`` (lines) ``[N, G, 3]``, panels ``names``; and each panel's
-    ΔE00 between its reading and the fit (``panels``)."""
-    figure, (travel, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
-    lamps = _geometry_groups(list(geometries), len(geometries))
+    """An aluminium flake or a pearl read from calibration panels (``flakelab library
+    characterise --plot``): each panel's CIELAB (D65/10) at each of ``geometries``,
+    ``Lab["read"]`` (markers, NaN where not read) and ``Lab["fitted"]`` (lines) ``[N, G, 3]``,
+    panels ``names``, as its L* flop (a flake) or, with ``travel``, its colour travel in the
+    a*b* plane (a pearl); and each panel's ΔE00 between its reading and the fit
+    (``panels``)."""
+    figure, (left, misfit) = plt.subplots(1, 2, figsize=(13, 4.6))
+    lamps = _geometry_groups(list(geometries), len(geometries))  # a line for each lamp
+    (_colour_travel if travel else _lightness_flop)(left, geometries, names, Lab, lamps)
+    left.legend(fontsize=8)
+    _misfit_bars(misfit, geometries, panels)
+    made = "A pearl" if travel else "An aluminium flake"
+    figure.suptitle(_fitted(title or f"{made} read from calibration panels", figure))
+    _save(figure, path, dpi)
+
+
+def _lightness_flop(axis, geometries: Sequence[str], names, Lab, lamps) -> None:
+    """Each panel's L* at each geometry, read (markers) and fitted (a line for each lamp)."""
+    at = np.arange(len(geometries))
+    for n, name in enumerate(names):
+        for i, (rows, _) in enumerate(lamps):
+            axis.plot(at[rows], Lab["fitted"][n][rows, 0], color=f"C{n}", lw=1.5,
+                      label=None if i else f"{name}, fitted")  # fmt: skip
+        axis.plot(at, Lab["read"][n][:, 0], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
+    axis.set_xticks(at, list(geometries), rotation=60, fontsize=8)
+    axis.set(ylabel="L* (D65/10)")
+
+
+def _colour_travel(axis, geometries: Sequence[str], names, Lab, lamps) -> None:
+    """Each panel's a*, b* across the geometries, read (markers; a square at each lamp's
+    nearest the specular) and fitted (a line for each lamp)."""
     aspecular = np.array([Geometry.parse(g).aspecular for g in geometries])
     for n, name in enumerate(names):
         read, fitted = Lab["read"][n], Lab["fitted"][n]
         for i, (rows, _) in enumerate(lamps):
-            travel.plot(fitted[rows, 1], fitted[rows, 2], color=f"C{n}", lw=1.5,
-                        label=None if i else f"{name}, fitted")  # fmt: skip
+            axis.plot(fitted[rows, 1], fitted[rows, 2], color=f"C{n}", lw=1.5,
+                      label=None if i else f"{name}, fitted")  # fmt: skip
             near = rows[np.argmin(np.abs(aspecular[rows] - 1e-3))]  # 15° before −15°
-            travel.plot(read[near, 1], read[near, 2], "s", color=f"C{n}", mfc="none")
-        travel.plot(read[:, 1], read[:, 2], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
-    travel.axhline(0, color="0.7", lw=0.8)
-    travel.axvline(0, color="0.7", lw=0.8)
-    travel.set(xlabel="a* (D65/10)", ylabel="b* (D65/10)")
-    travel.set_aspect("equal", adjustable="datalim")  # a hue's turn drawn as it is
-    travel.set_title("colour travel; a square: nearest the specular, under each lamp", fontsize=9)
-    travel.legend(fontsize=8)
-    _misfit_bars(misfit, geometries, panels)
-    figure.suptitle(_fitted(title or "A pearl read from calibration panels", figure))
-    _save(figure, path, dpi)
+            axis.plot(read[near, 1], read[near, 2], "s", color=f"C{n}", mfc="none")
+        axis.plot(read[:, 1], read[:, 2], "o", color=f"C{n}", mfc="none", label=f"{name}, read")
+    axis.axhline(0, color="0.7", lw=0.8)
+    axis.axvline(0, color="0.7", lw=0.8)
+    axis.set(xlabel="a* (D65/10)", ylabel="b* (D65/10)")
+    axis.set_aspect("equal", adjustable="datalim")  # a hue's turn drawn as it is
+    axis.set_title("colour travel; a square: nearest the specular, under each lamp", fontsize=9)
 
 
 def plot_hiding(found, names: Sequence[str], path: str | PathLike, *, dpi: int = 120) -> None:
