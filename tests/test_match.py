@@ -616,10 +616,11 @@ def test_a_match_shows_the_shop_s_nearest_recorded_spray_outs(tmp_path, cli):
 
 
 def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli, monkeypatch):
-    """``match --all``: each reading matched as ``match --sample`` matches it, its best
-    recipe weighed into ``--recipe-dir`` (two samples named alike in two files, and none over
-    the file read); a reading the model cannot read is named in its row and the rest go on;
-    the options for one target are refused with --all."""
+    """``match --all``: each reading matched as ``match --sample`` matches it (the grey to
+    spray it over too), its best recipe weighed into ``--recipe-dir`` (two samples named
+    alike in two files, and none over the file read); a reading the model cannot read is
+    named in its row and the rest go on; the options for one target are refused with
+    --all."""
     from dataclasses import replace as replaced
 
     from flakelab.data import example_path
@@ -639,6 +640,7 @@ def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli, 
     alone = json.loads(cli("match", str(example_path("target")), "--candidates", "1",
                            "--json").stdout)["candidates"][0]  # fmt: skip
     assert reports[0]["candidates"][0]["weights_g"] == alone["weights_g"]
+    assert reports[0]["candidates"][0]["hiding"] == alone["hiding"]  # the grey to spray over
     assert reports[1]["candidates"][0]["recipe"] != alone["recipe"]  # the darker one
     assert sorted(p.name for p in folder.iterdir()) == ["door-2.json", "door.json"]
     for report in reports[:2]:
@@ -647,6 +649,7 @@ def test_every_sample_of_a_file_is_matched_as_one_alone_would_be(tmp_path, cli, 
         assert sum(written.values()) == pytest.approx(250.0)
     text = cli(*args, "--all").stdout
     assert "not read" in text and "of 3 samples matched within the tolerance" in text
+    assert "spray over" in text and alone["hiding"]["best_primer"] in text
     # shared out over two processes (this one from the back, a worker from the front): every
     # report the same but for its time
     shared = json.loads(cli(*args, "--all", "--jobs", "2", "--json").stdout)["targets"]
@@ -1441,7 +1444,8 @@ def test_every_samples_table_flags_a_best_recipe_with_new_toners():
 
     def report(sample, recipe, novel):
         best = {"recipe": recipe, "novel_toners": novel, "failing_geometries": [],
-                "failing_texture": [], "passes": True, "de00_max": 0.3}  # fmt: skip
+                "failing_texture": [], "passes": True, "de00_max": 0.3,
+                "hiding": {"best_primer": "G5"}}  # fmt: skip
         return {"target": sample, "candidates": [best]}
 
     reports = [report("door", {"Al medium": 0.9, "Perylene red": 0.1}, ["Perylene red"]),

@@ -636,6 +636,7 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
             continue
         report = result.to_dict()
         _weigh_candidates(report, result.candidates, forward, can)
+        _add_hiding(report, result.candidates, search["library"], forward.geometries)
         if recipe_dir is not None:
             best = recipe_dir / f"{file_name_for(reading.sample, names)}.json"
             write_recipe({w["toner"]: w["grams"] for w in report["candidates"][0]["weights_g"]},
@@ -659,12 +660,12 @@ def _print_every_sample(path, reports: list[dict]) -> None:
 
     table = Table(title=f"The best recipe for each sample of {path}", box=box.SIMPLE_HEAD,
                   collapse_padding=True)  # fmt: skip
-    for column in ("sample", "max ΔE00", "verdict", "best recipe (share)"):
+    for column in ("sample", "max ΔE00", "verdict", "spray over", "best recipe (share)"):
         table.add_column(column, justify="right" if "ΔE" in column else "left",
                          no_wrap=column != "best recipe (share)")  # fmt: skip
     for report in reports:
         if "error" in report:
-            table.add_row(report["target"], "", "[red]not read[/]", report["error"])
+            table.add_row(report["target"], "", "[red]not read[/]", "", report["error"])
             continue
         best = report["candidates"][0]
         failing = failures(best["failing_geometries"], best["failing_texture"])
@@ -672,7 +673,8 @@ def _print_every_sample(path, reports: list[dict]) -> None:
         recipe = shares_text(best["recipe"])
         if best["novel_toners"]:  # predicted by the physics scaling for them
             recipe += f" [yellow](new: {', '.join(best['novel_toners'])})[/]"
-        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict, recipe)
+        grey = best["hiding"]["best_primer"] or "none"  # the grey-shade primer: flakelab hiding
+        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict, grey, recipe)
     console.print(table)
     passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
     samples = counted(len(reports), "sample")
