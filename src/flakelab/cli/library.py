@@ -285,11 +285,11 @@ def characterise(
     they were read at, each panel's film build and flake alignment allowed for: a pigment's
     absorption and scattering (from a Kubelka–Munk start at 45as45), an aluminium flake's
     orientation spread, surface quality and volume fraction, or a pearl's coating (its
-    interference colour), orientation spread and volume fraction. A pearl shows its
-    interference colour best over black: spray it alone and with a little carbon black. A
-    pigment's masstone alone tells
-    its K/S, not K and S: give a tint in the white too, and a panel in an aluminium base for
-    its scattering among flakes. The toner is then 'added' to the library: the matcher
+    interference colour), orientation spread and volume fraction. A pigment's masstone alone
+    tells its K/S, not K and S: give a tint in the white too, and for its scattering where it
+    hardly absorbs its masstone over a hiding chart's black (--over) or a panel in an
+    aluminium base. A pearl shows its interference colour best over black: spray it alone
+    and with a little carbon black. The toner is then 'added' to the library: the matcher
     predicts it by the hybrid path until cases teach the model."""
     from datetime import date
 
