@@ -50,9 +50,10 @@ def hiding_command(
     By the physics, each recipe is sprayed at film builds from a hundredth of the library's
     basecoat to eight times it over a contrast chart's black and white and over seven
     neutral greys (G1 white to G7 black): it hides where the film over black and over white
-    differ by --threshold ΔE00 at every geometry at most (DIN 55987's criterion), and over a
-    grey where it comes that near the colour it tends to. The grey to spray it over is, of
-    those it hides over in the fewest coats, the one nearest its own lightness."""
+    differ by --threshold ΔE00 at every geometry at most (a colorimetric criterion, as DIN
+    55987 reads hiding), and over a grey where it comes that near the colour it tends to.
+    The grey to spray it over is, of those it hides over in the fewest coats, the one
+    nearest its own lightness."""
     from flakelab.core.geometry import instrument_geometries
     from flakelab.io import read_library, read_recipe
     from flakelab.physics.hiding import hiding

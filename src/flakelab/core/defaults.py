@@ -17,5 +17,5 @@ DEFAULT_TOLERANCE = "refinish"
 
 HIDING_DE00 = 1.0
 """ΔE00 between a film over black and over white (or over a grey and built up) at which it
-hides, at every geometry: DIN 55987's colorimetric criterion, a difference of 1
-(:mod:`flakelab.physics.hiding`)."""
+hides, at every geometry: a colorimetric hiding criterion, as DIN 55987 reads hiding from the
+colour difference of a film over black and over white (:mod:`flakelab.physics.hiding`)."""

@@ -7,10 +7,10 @@ own, which the colorist takes for a wrong recipe. Paint makers therefore give ea
 grey-shade primer, the one of their greys (white to black) over which it hides soonest.
 
 **Hiding.** The film build at which the paint over black and over white differ by
-:data:`HIDING_DE00` (the colorimetric hiding criterion of DIN 55987, a colour difference of 1
-between the film over the black and the white of a contrast chart; here ΔE00, at every
-geometry the instrument reads, since a metallic's flop hides otherwise than its face). The
-chart's black and white are those of ISO 6504-3's (:data:`CONTRAST_CHART`); the contrast
+:data:`HIDING_DE00`: a colorimetric hiding criterion, read as DIN 55987 reads hiding from the
+colour difference between a film over a contrast chart's black and over its white; here in
+ΔE00, at every geometry the instrument reads, since a metallic's flop hides otherwise than
+its face. The chart's black and white are :data:`CONTRAST_CHART`'s; the contrast
 ratio, the film's Y over black over its Y over white, is reported at the library's nominal
 build at :data:`CONTRAST_GEOMETRY`, the instrument's 45°/0°.
 
@@ -67,8 +67,8 @@ __all__ = [
 ]
 
 CONTRAST_CHART = {"black": 0.01, "white": 0.80}
-"""Luminance factors Y of a contrast chart's black and white (ISO 6504-3: black Y ≤ 1 %,
-white Y 80 ± 2 %)."""
+"""Luminance factors Y of a contrast chart's black and white [-]: a deep black and a white of
+80 %, about those of the charts a contrast ratio is read on (ISO 6504-3)."""
 CONTRAST_GEOMETRY = "45as45"
 """Where the contrast ratio is read: 45° light, detector along the normal (45°/0°)."""
 GREY_SHADES = {f"G{i + 1}": float(L) for i, L in enumerate(np.linspace(93.0, 27.0, 7))}
