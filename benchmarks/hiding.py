@@ -29,7 +29,7 @@ import numpy as np
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
-from flakelab.core.geometry import Geometry, instrument_geometries
+from flakelab.core.geometry import FACE_GEOMETRY, Geometry, instrument_geometries
 from flakelab.io import read_library
 from flakelab.physics.application import sprayed_layer
 from flakelab.physics.hiding import HIDING_DE00, ground_reflectance, hiding
@@ -44,7 +44,7 @@ PAINTS = {
     "iron oxide 1:9 in white": {"Iron oxide red": 0.1, "Titanium dioxide white": 0.9},
 }
 """The paints whose hiding is read both ways."""
-FACE = (Geometry.parse("45as45"),)
+FACE = (Geometry.parse(FACE_GEOMETRY),)
 BUILDS = np.geomspace(1 / 3, 3, 9)
 """Where the Monte Carlo reads each paint, relative to the fast model's hiding build."""
 

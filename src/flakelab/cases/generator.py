@@ -62,7 +62,12 @@ from flakelab.cases.case import Case
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.core.difference import delta_E
-from flakelab.core.geometry import DEFAULT_INSTRUMENT, Geometry, instrument_geometries
+from flakelab.core.geometry import (
+    DEFAULT_INSTRUMENT,
+    FACE_GEOMETRY,
+    Geometry,
+    instrument_geometries,
+)
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import shift_spectra
 from flakelab.library.lots import MAX_SHADE_NM, TIN_KNOWLEDGE, TonerLot
@@ -555,7 +560,7 @@ class World:
         rng = np.random.default_rng(seed)
         x = self.formulations(n, rng)
         R, texture = self.appearance(x, self.variation(n, rng))
-        index = [g.name for g in self.geometries].index("45as45")
+        index = [g.name for g in self.geometries].index(FACE_GEOMETRY)
         first_reading, second_reading = self.measure(R, rng), self.measure(R, rng)
         remeasure = delta_E(reflectance_to_Lab(first_reading), reflectance_to_Lab(second_reading))[
             :, index

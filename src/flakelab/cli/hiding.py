@@ -11,7 +11,13 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from flakelab.cli.common import JsonOption, check_figure_file, console, print_report
+from flakelab.cli.common import (
+    JsonOption,
+    check_figure_file,
+    console,
+    print_notes,
+    print_report,
+)
 from flakelab.cli.sources import InstrumentOption, LibraryOption, recipe_fractions
 from flakelab.core.defaults import HIDING_DE00
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
@@ -34,11 +40,12 @@ def hiding_command(
             "a grey and built up) at which it hides.",
         ),
     ] = HIDING_DE00,
+    primers: PrimersOption = None,
     plot: Annotated[
         Path | None,
         typer.Option(
             "--plot",
-            help="Also draw each recipe's ΔE00 over black against white, and over each grey "
+            help="Also draw each recipe's ΔE00 over black against white, and over each primer "
             "against built up, versus film build (PNG, PDF or SVG).",
         ),
     ] = None,
@@ -49,22 +56,25 @@ def hiding_command(
 
     By the physics, each recipe is sprayed at film builds from a hundredth of the library's
     basecoat to eight times it over a contrast chart's black and white and over seven
-    neutral greys (G1 white to G7 black): it hides where the film over black and over white
-    differ by --threshold ΔE00 at every geometry at most (a colorimetric criterion, as DIN
-    55987 reads hiding), and over a grey where it comes that near the colour it tends to.
-    The grey to spray it over is, of those it hides over in the fewest coats, the one
-    nearest its own lightness."""
+    neutral greys (G1 white to G7 black) or the shop's own primers (--primers): it hides where
+    the film over black and over white differ by --threshold ΔE00 at every geometry at most
+    (a colorimetric criterion, as DIN 55987 reads hiding), and over a primer where it comes
+    that near the colour it tends to. The primer to spray it over is, of those it hides over
+    in the fewest coats, the one nearest its own colour (for greys, its lightness)."""
     from flakelab.core.geometry import instrument_geometries
     from flakelab.io import read_library, read_recipe
     from flakelab.physics.hiding import hiding
 
-    check_figure_file(plot, "--plot", reads={"RECIPES": recipes, "--library": library})
+    reads = {"RECIPES": recipes, "--library": library, "--primers": primers}
+    check_figure_file(plot, "--plot", reads=reads)
     lib = read_library(library)
     grams = [read_recipe(path) for path in recipes]
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipes, strict=True)])
+    shop_primers, notes = read_primers(primers) if primers else (None, [])
     geometries = instrument_geometries(instrument)
-    found = hiding(lib, x, geometries, threshold)
-    report = hiding_report(found, [str(p) for p in recipes], instrument)
+    found = hiding(lib, x, geometries, threshold, shop_primers)
+    report = hiding_report(found, [str(p) for p in recipes], instrument, primers)
+    report["notes"] = notes
     if plot is not None:
         from flakelab.render.plots import plot_hiding
 
@@ -76,10 +86,61 @@ def hiding_command(
         print_report(report)
         return
     _print_hiding(report)
+    print_notes(notes)
 
 
-def hiding_report(found, names: list[str], instrument: str) -> dict:
-    """``flakelab hiding``'s report (JSON: inf as null)."""
+PrimersOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--primers",
+        help="The shop's own primers, measured: a measurement file (CxF, CSV, MA-T12 export) "
+        "of one sample a primer, its reading at 45as45 taken as its colour.",
+        show_default="seven neutral greys, G1 (L* 93) to G7 (L* 27)",
+    ),
+]
+
+
+MATTE_SPREAD_DE00 = 2.0
+"""ΔE00 between a primer's 45°:0° reading and its others away from the gloss (45° lamp, 25°
+or more from the specular) beyond which it is said to read like no matte primer: a dull
+surface reads nearly alike there, an effect or glossy panel does not."""
+
+
+def read_primers(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The primers of a measurement file ``{sample: reflectance [W] at 45°:0°}`` and notes on
+    those that read like no matte primer, or are known by their colour alone. A sample
+    without a 45°:0° reading is refused with the file's name (one named twice, by the
+    file's reader)."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E_CIE2000
+    from flakelab.core.geometry import FACE_GEOMETRY
+    from flakelab.core.measurement import recovered_note
+    from flakelab.errors import MeasurementFileError
+    from flakelab.io import read_measurements
+
+    primers, notes = {}, []
+    for reading in read_measurements(path):
+        where = f"sample {reading.sample!r}"
+        if FACE_GEOMETRY not in reading.geometry_names:
+            raise MeasurementFileError(path, f"no reading at {FACE_GEOMETRY} (45°:0°), where a "
+                                       "primer's colour is taken", field=where)  # fmt: skip
+        face = reading.storage_spectra([FACE_GEOMETRY])
+        dull = [g for g in reading.geometries if g.illumination == 45 and g.aspecular >= 25]
+        spread = delta_E_CIE2000(reflectance_to_Lab(face), reflectance_to_Lab(
+            reading.storage_spectra(dull))).max()  # fmt: skip
+        if spread > MATTE_SPREAD_DE00:
+            notes.append(
+                f"{path}: {where} reads like no matte primer ({spread:.1f} ΔE00 between "
+                f"its readings away from the gloss): its {FACE_GEOMETRY} reading taken"
+            )
+        notes += [f"{path}: {note}" for note in [recovered_note(reading)] if note]
+        primers[reading.sample] = face[0]
+    return primers, notes
+
+
+def hiding_report(found, names: list[str], instrument: str, primers: Path | None = None) -> dict:
+    """``flakelab hiding``'s report (JSON: inf as null); ``primers``: the file the primers were
+    read from (None: the grey shades)."""
 
     def um(value: float) -> float | None:
         return float(value) if np.isfinite(value) else None
@@ -90,9 +151,10 @@ def hiding_report(found, names: list[str], instrument: str) -> dict:
     paints = []
     for f, (name, best) in enumerate(zip(names, found.best_primer, strict=True)):
         greys = []
-        for i, (primer, L) in enumerate(zip(found.primers, found.primer_lightness, strict=True)):
+        for i, (primer, lab) in enumerate(zip(found.primers, found.primer_lab, strict=True)):
             hides = found.primer_hiding_um[f, i]
-            greys.append({"primer": primer, "lightness": float(L),
+            greys.append({"primer": primer, "lightness": float(lab[0]),
+                          "lab": [round(float(v), 2) for v in lab],
                           "de00_at_nominal": um(found.primer_de00[f, i]), "hiding_um": um(hides),
                           "coats": coats(hides)})  # fmt: skip
         paints.append({
@@ -110,6 +172,7 @@ def hiding_report(found, names: list[str], instrument: str) -> dict:
         "nominal_um": found.nominal_um,
         "coat_um": found.coat_um,
         "film_um_range": [float(found.film_um[0]), float(found.film_um[-1])],
+        "primers_file": primers and str(primers),
         "recipes": names,
         "paints": paints,
     }
@@ -129,7 +192,7 @@ def _print_hiding(report: dict) -> None:
             escape(Path(paint["recipe"]).name),
             _build_text(paint["hiding_um"], paint["coats"], top),
             "–" if paint["contrast_ratio"] is None else f"{paint['contrast_ratio']:.3f}",
-            "none" if best is None else f"{best['primer']} (L* {best['lightness']:.0f})",
+            "none" if best is None else f"{escape(best['primer'])} (L* {best['lightness']:.0f})",
             "–" if best is None else _build_text(best["hiding_um"], best["coats"], top),
             "–" if best is None else f"{best['de00_at_nominal']:.2f}",
         )
@@ -143,21 +206,24 @@ def _print_hiding(report: dict) -> None:
                 highlight=False,
             )
     if len(report["paints"]) == 1:
-        console.print(_greys_table(report["paints"][0], top))
+        console.print(_primers_table(report["paints"][0], top, report["primers_file"]))
 
 
-def _greys_table(paint: dict, top: float) -> Table:
-    """One recipe over each grey: how far from its full colour at the nominal build, and the
-    build at which it reaches it."""
-    table = Table(title="over each grey", box=box.SIMPLE_HEAD, collapse_padding=True)
-    for column in ("grey", "L*", "ΔE00 at nominal", "hides over it"):
+def _primers_table(paint: dict, top: float, primers_file: str | None) -> Table:
+    """One recipe over each primer: how far from its full colour at the nominal build, and
+    the build at which it reaches it."""
+    title = f"over each primer of {escape(primers_file)}" if primers_file else "over each grey"
+    table = Table(title=title, box=box.SIMPLE_HEAD, collapse_padding=True)
+    for column in ("primer" if primers_file else "grey", "L*", "a*", "b*", "ΔE00 at nominal",
+                   "hides over it"):  # fmt: skip
         table.add_column(column, justify="right")
-    for grey in paint["primers"]:
-        mark = " ←" if grey["primer"] == paint["best_primer"] else ""
-        de = grey["de00_at_nominal"]
-        table.add_row(f"{grey['primer']}{mark}", f"{grey['lightness']:.0f}",
+    for primer in paint["primers"]:
+        mark = " ←" if primer["primer"] == paint["best_primer"] else ""
+        de = primer["de00_at_nominal"]
+        table.add_row(escape(primer["primer"]) + mark,
+                      *(str(round(v)) for v in primer["lab"]),
                       "–" if de is None else f"{de:.2f}",
-                      _build_text(grey["hiding_um"], grey["coats"], top))  # fmt: skip
+                      _build_text(primer["hiding_um"], primer["coats"], top))  # fmt: skip
     return table
 
 

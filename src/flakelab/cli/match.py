@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 from rich import box
+from rich.markup import escape
 from rich.table import Table
 
 from flakelab.cli.common import (
@@ -35,6 +36,7 @@ from flakelab.cli.common import (
     stop_interrupted,
     texture_table,
 )
+from flakelab.cli.hiding import PrimersOption, read_primers
 from flakelab.cli.lots import lots_report, shop_lots
 from flakelab.cli.matcher import (
     HabitsOption,
@@ -275,6 +277,7 @@ def match_command(
     pick: Annotated[
         int, typer.Option(min=1, max=20, help="The candidate --recipe-out writes.")
     ] = 1,
+    primers: PrimersOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Match a target: ranked recipes, grams for the can, pass/fail at every angle.
@@ -298,10 +301,10 @@ def match_command(
         without=tuple(without or ()),
     )
     if target == "evaluate":
-        if render or lamps or recipe_out or average or nearest or colour_code:
+        if render or lamps or recipe_out or average or nearest or colour_code or primers:
             raise FlakelabError(
-                "--render, --render-lamps, --recipe-out, --average, --nearest, --colour-code: "
-                "for the candidates of one target, not the harness"
+                "--render, --render-lamps, --recipe-out, --average, --nearest, --colour-code, "
+                "--primers: for the candidates of one target, not the harness"
             )
         _evaluate(
             library=library,
@@ -337,8 +340,10 @@ def match_command(
     can = order_can(quantity, resolution)
     reads = {"TARGET": None if example else target, "--library": library, "--model": model,
              "--database": database, "--habits": habits, "--lots": lots,
-             "--tolerance": tolerance}  # fmt: skip
+             "--tolerance": tolerance, "--primers": primers}  # fmt: skip
     _check_output_options(render, plot, recipe_out, pick, candidates, reads)
+    shop_primers, primer_notes = read_primers(primers) if primers else (None, [])  # before the wait
+    over = {"primers": shop_primers, "primers_file": primers}
     lamps = render_lamps(lamps, render)
     shop, named = workplace_shop(shop)
     lib, forward, effect = matcher_setup(library, instrument, model, database, physics, shop)
@@ -355,10 +360,10 @@ def match_command(
         from flakelab.io import read_measurements
 
         keywords = dict(tolerance=tol, settings=settings, habits=shop_habits, library=lib)
-        shop_tins = {"lots": tins and lots_report(tins), "notes": lot_notes}
+        shop_tins = {"lots": tins and lots_report(tins), "notes": lot_notes + primer_notes}
         _match_every_sample(read_measurements(path), path, forward, effect, keywords, can,
                             recipe_dir, json_output, jobs, shop_tins,
-                            taken=names_read_in(recipe_dir, reads))  # fmt: skip
+                            taken=names_read_in(recipe_dir, reads), over=over)  # fmt: skip
         return
     measurement, readings = read_readings(path, sample, average)
     spectra = spectra_for_model(path, measurement, forward)[0]  # one it cannot read: named
@@ -389,7 +394,7 @@ def match_command(
     report = result.to_dict()
     report["without"] = list(without or ())
     report["lots"] = tins and lots_report(tins)
-    report["notes"] += lot_notes
+    report["notes"] += lot_notes + primer_notes
     if nearest:
         _add_recorded_nearest(report, found, searched, database or default_url(), shop, forward,
                               colour_code)  # fmt: skip
@@ -403,7 +408,7 @@ def match_command(
         other = left_out_model(measurement, forward, lib, database, physics, shop)
         extra = _add_predicted_left_out(report, result, measurement, forward, other, tol)
     _weigh_candidates(report, result.candidates, forward, can)
-    _add_hiding(report, result.candidates, lib, forward.geometries)
+    _add_hiding(report, result.candidates, lib, forward.geometries, **over)
     if recipe_out is not None:
         _write_candidate(report, pick, recipe_out)
     if render is not None:
@@ -558,9 +563,11 @@ def _weigh_candidates(report: dict, candidates, forward, can) -> None:
     report |= can_size(can, can.grams)
 
 
-def _add_hiding(report: dict, candidates, library, geometries) -> None:
-    """Each candidate's hiding and the grey-shade primer to spray it over (``flakelab
-    hiding``'s, by the physics) into its entry of ``report``."""
+def _add_hiding(report: dict, candidates, library, geometries, primers=None,
+                primers_file=None) -> None:  # fmt: skip
+    """Each candidate's hiding and the primer to spray it over (``flakelab hiding``'s, by the
+    physics) into its entry of ``report``: of the grey shades, or of ``primers`` (read from
+    ``primers_file``)."""
     import numpy as np
 
     from flakelab.cli.hiding import hiding_report
@@ -569,7 +576,8 @@ def _add_hiding(report: dict, candidates, library, geometries) -> None:
 
     x = np.array([library.fractions(c.fractions) for c in candidates])
     at = tuple(Geometry.parse(g) for g in geometries)  # the names the model reads
-    found = hiding_report(hiding(library, x, at), [""] * len(x), "")
+    found = hiding_report(hiding(library, x, at, primers=primers), [""] * len(x), "",
+                          primers_file)  # fmt: skip
     for entry, paint in zip(report["candidates"], found["paints"], strict=True):
         over = next((g for g in paint["primers"] if g["primer"] == paint["best_primer"]), None)
         entry["hiding"] = {
@@ -580,17 +588,21 @@ def _add_hiding(report: dict, candidates, library, geometries) -> None:
             "best_primer_lightness": over and over["lightness"],
             "best_primer_coats": over and over["coats"],
             "film_um_range": found["film_um_range"],
+            "primers_file": found["primers_file"],
         }
 
 
 def _hiding_text(hiding: dict) -> str:
-    """A candidate's primer line: the grey to spray it over, and the coats."""
+    """A candidate's primer line: the grey (or the shop's primer) to spray it over, and the
+    coats."""
     if hiding["best_primer"] is None:
         return (f"primer: it hides none within {hiding['film_um_range'][1]:.0f} µm (a "
                 "transparent colour): spray it over a ground of its own colour")  # fmt: skip
-    grey, L = hiding["best_primer"], hiding["best_primer_lightness"]
+    primer, L = hiding["best_primer"], hiding["best_primer_lightness"]
+    shop = hiding["primers_file"]
+    named = f"{primer!r} of {shop}" if shop else f"grey {primer}"
     return (
-        f"primer: spray over grey {grey} (L* {L:.0f}), its full colour in "
+        f"primer: spray over {named} (L* {L:.0f}), its full colour in "
         f"{counted(hiding['best_primer_coats'], 'coat')} (black and white hidden in "
         f"{counted(hiding['coats'], 'coat')}; flakelab hiding)"
     )
@@ -598,14 +610,15 @@ def _hiding_text(hiding: dict) -> str:
 
 def _match_every_sample(readings, path, forward, effect, search: dict, can, recipe_dir,
                         json_output: bool, jobs: int | None = None,
-                        shop_tins: dict | None = None, taken: set[str] = frozenset()
-                        ) -> None:  # fmt: skip
+                        shop_tins: dict | None = None, taken: set[str] = frozenset(),
+                        over: dict | None = None) -> None:  # fmt: skip
     """``match --all``: each reading of the file matched as ``match`` matches one (the
     ``search``'s keywords), by ``jobs`` processes (default: one per core,
     :func:`~flakelab.match.batch.workers_for`), its best candidate weighed for the ``can``
     (and written into ``recipe_dir``, under no name ``taken``); a reading the model cannot
     read is named in its row, and the rest go on. ``shop_tins`` (the tins weighed for, and
-    their notes) head the report."""
+    their notes) head the report; each best recipe's primer is of ``over``'s primers
+    (:func:`_add_hiding`; default the grey shades)."""
     shop_tins = shop_tins or {"lots": None, "notes": []}
     from flakelab.io import write_recipe
     from flakelab.match.batch import match_readings, usable_cores, workers_for
@@ -636,7 +649,8 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
             continue
         report = result.to_dict()
         _weigh_candidates(report, result.candidates, forward, can)
-        _add_hiding(report, result.candidates, search["library"], forward.geometries)
+        _add_hiding(report, result.candidates, search["library"], forward.geometries,
+                    **(over or {}))  # fmt: skip
         if recipe_dir is not None:
             best = recipe_dir / f"{file_name_for(reading.sample, names)}.json"
             write_recipe({w["toner"]: w["grams"] for w in report["candidates"][0]["weights_g"]},
@@ -673,8 +687,8 @@ def _print_every_sample(path, reports: list[dict]) -> None:
         recipe = shares_text(best["recipe"])
         if best["novel_toners"]:  # predicted by the physics scaling for them
             recipe += f" [yellow](new: {', '.join(best['novel_toners'])})[/]"
-        grey = best["hiding"]["best_primer"] or "none"  # the grey-shade primer: flakelab hiding
-        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict, grey, recipe)
+        grey = best["hiding"]["best_primer"] or "none"  # the primer: flakelab hiding
+        table.add_row(report["target"], f"{best['de00_max']:.2f}", verdict, escape(grey), recipe)
     console.print(table)
     passing = sum(1 for r in reports if "error" not in r and r["candidates"][0]["passes"])
     samples = counted(len(reports), "sample")
@@ -795,7 +809,7 @@ def _print_match(report: dict, where: str = "") -> None:
         # a recipe with new toners is flagged by its model, which names their physics scaling
         console.print(f"model: {c['model']}; {rounding_text(c)}", highlight=False)
         if c.get("hiding"):
-            console.print(_hiding_text(c["hiding"]), highlight=False)
+            console.print(_hiding_text(c["hiding"]), highlight=False, markup=False)
         if c["metamerism_index_max"]:  # none against spectra recovered from L*a*b*
             console.print(metamerism_text(c["metamerism_index_max"], c["metamer"]), highlight=False)
     if report.get("recorded_nearest"):

@@ -25,6 +25,7 @@ __all__ = [
     "Geometry",
     "INSTRUMENT_GEOMETRIES",
     "DEFAULT_INSTRUMENT",
+    "FACE_GEOMETRY",
     "LAMP_OF_AN_ASPECULAR_ANGLE",
     "FLOP_AXES",
     "N_BINDER",
@@ -176,6 +177,11 @@ INSTRUMENT_GEOMETRIES: dict[str, tuple[str, ...]] = {
     "five-angle": ("45as15", "45as25", "45as45", "45as75", "45as110"),
 }
 """Geometry sets of common multi-angle instruments, in their export order."""
+
+FACE_GEOMETRY = "45as45"
+"""45°:0°, the lamp at 45° and the detector along the normal, which every instrument of
+:data:`INSTRUMENT_GEOMETRIES` reads: where a solid's colour is read by Kubelka–Munk, a
+contrast ratio is read, and a matte ground (a primer, a contrast chart) is taken as read."""
 
 LAMP_OF_AN_ASPECULAR_ANGLE = 45.0
 """The illumination angle [°] an aspecular angle given alone (``15°``, a spreadsheet's ``L*

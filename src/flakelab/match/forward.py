@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from flakelab.core.geometry import Geometry
+from flakelab.core.geometry import FACE_GEOMETRY, Geometry
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.library.toners import Library
 from flakelab.models.network import LOG_FLOOR, ForwardModel, reflectance_from_log
@@ -471,7 +471,7 @@ class KubelkaMunkForward:
     dtype = torch.float64
 
     def __init__(
-        self, names: Sequence[str], K: NDArray, S: NDArray, geometry: str = "45as45"
+        self, names: Sequence[str], K: NDArray, S: NDArray, geometry: str = FACE_GEOMETRY
     ) -> None:
         self.toners = tuple(names)
         self.geometries = (geometry,)

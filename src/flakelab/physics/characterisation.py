@@ -60,7 +60,7 @@ from scipy.optimize import least_squares
 
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E_CIE2000
-from flakelab.core.geometry import Geometry
+from flakelab.core.geometry import FACE_GEOMETRY, Geometry
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.wording import with_article
@@ -134,8 +134,6 @@ RADIUS_GRID_TOP_UM = 60.0
 pastes (D50 about 100 µm)."""
 _NOT_SG = np.array([k != "SG" for k in TEXTURE_READINGS])
 """The texture readings fitted: the sparkle grade follows from Sa and Si."""
-KM_GEOMETRY = "45as45"
-"""Where the Kubelka–Munk start reads the panels: 45° lamp, detector along the normal."""
 FIT_ITERATIONS = 100
 """Iterations a panel fit may take (each run): a fit converges in 10 to 60; one that creeps
 along directions the panels hardly tell on is stopped there. Isoindoline yellow with its
@@ -528,16 +526,16 @@ def _check_tinted(library: Library, k: int, x: NDArray) -> None:
 def _km_start(
     library: Library, k: int, x: NDArray, geometries: tuple[Geometry, ...], measured: NDArray
 ) -> Pigment:
-    """The pigment by Kubelka–Munk at :data:`KM_GEOMETRY` (module notes); flat where the
+    """The pigment by Kubelka–Munk at :data:`FACE_GEOMETRY` (module notes); flat where the
     panels were not read there. Every panel is taken to hide: one over a chart's black that
     does not reads darker than its R∞, which the fit then corrects (started from the panels
     over the primer alone, bismuth vanadate's fit stopped in another minimum)."""
     pigment = library.toners[k]
     names = [g.name for g in geometries]
     flat = np.ones(WAVELENGTHS.size)
-    if KM_GEOMETRY not in names:
+    if FACE_GEOMETRY not in names:
         return replace(pigment, absorption=flat, scattering=0.1 * flat)
-    R = measured[:, names.index(KM_GEOMETRY)]
+    R = measured[:, names.index(FACE_GEOMETRY)]
     use = np.isfinite(R).all(axis=1)
     q = ks_ratio(np.clip(inverse_saunderson(R[use]), 1e-4, 0.9999))  # [n, W]
     others = x[use].copy()

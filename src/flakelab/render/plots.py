@@ -18,7 +18,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter  # noqa: E402
 
-from flakelab.core.colorimetry import D65_10, Conditions, Lab_to_LCh, reflectance_to_Lab  # noqa: E402
+from flakelab.core.colorimetry import (  # noqa: E402
+    D65_10,
+    Conditions,
+    Lab_to_LCh,
+    Lab_to_sRGB,
+    reflectance_to_Lab,
+)
 from flakelab.core.geometry import FLOP_AXES, Geometry  # noqa: E402
 from flakelab.core.measurement import Measurement  # noqa: E402
 from flakelab.core.tolerance import Tolerance  # noqa: E402
@@ -583,17 +589,19 @@ def _colour_travel(axis, geometries: Sequence[str], names, Lab, lamps) -> None:
 def plot_hiding(found, names: Sequence[str], path: str | PathLike, *, dpi: int = 120) -> None:
     """``flakelab hiding --plot``: for each recipe (``names``, of a
     :class:`~flakelab.physics.hiding.Hiding`), the worst-geometry ΔE00 between the film over
-    a contrast chart's black and white against its build (black line), and over each grey
-    from its colour built up (lines of the grey's own lightness), with the threshold and the
-    nominal build marked."""
+    a contrast chart's black and white against its build (black line), and over each primer
+    from its colour built up (lines of the primer's own colour, darkened to show on white),
+    with the threshold and the nominal build marked."""
     columns = min(len(names), 3)
     rows = -(-len(names) // columns)
     figure, axes = plt.subplots(rows, columns, figsize=(5.2 * columns, 3.9 * rows), squeeze=False)
     floor = 1e-3  # a log axis: a film past hiding reads 0
+    rgb = Lab_to_sRGB(found.primer_lab)
+    rgb *= np.minimum(1.0, 0.85 / np.maximum(rgb.max(axis=-1, keepdims=True), 1e-6))
     for axis, name, f in zip(axes.flat, names, range(len(names)), strict=False):
-        for i, (grey, L) in enumerate(zip(found.primers, found.primer_lightness, strict=True)):
-            axis.plot(found.film_um, np.maximum(found.primer_curve[f, i], floor),
-                      color=str(min(L / 100, 0.85)), lw=1, label=f"over {grey}")  # fmt: skip
+        for i, primer in enumerate(found.primers):
+            axis.plot(found.film_um, np.maximum(found.primer_curve[f, i], floor), color=rgb[i],
+                      lw=1, label=f"over {primer}")  # fmt: skip
         axis.plot(found.film_um, np.maximum(found.contrast_de00[f], floor), color="k", lw=2.2,
                   label="black vs white")  # fmt: skip
         axis.axhline(found.threshold, color="C3", ls="--", lw=1)
