@@ -343,8 +343,7 @@ class World:
         application: calibration panels sprayed in one session."""
         tins = self.variation(1, rng, at_shop)
         film, spread = self.application(n, rng, at_shop)
-        return Variation(np.repeat(tins.strength, n, 0), np.repeat(tins.hue_shift, n), film,
-                         spread)  # fmt: skip
+        return replace(tins.tins_at_nominal(n), film=film, spread=spread)
 
     def nominal(self, n: int, at_shop: bool = False) -> Variation:
         """No batch or application variation: the formulation as the library describes it,
