@@ -1436,24 +1436,35 @@ def test_a_recipes_numbers_name_the_model_that_made_them(hybrid, example_by_meta
     assert not best.novel and best.model == learned
 
 
-def test_every_samples_table_flags_a_best_recipe_with_new_toners():
+def test_every_samples_table_flags_new_toners_and_counts_many_failures(monkeypatch):
     """``match --all``'s table marks the best recipe of a sample that holds a toner new to
-    the learned model (its numbers are the physics scaling's), and only that one."""
+    the learned model (its numbers are the physics scaling's), and only that one. A best
+    recipe failing at three geometries has them named; at more, they are counted and the
+    worst named (the cell stayed as wide as an MA-T12's twelve names)."""
     from flakelab.cli.common import console
     from flakelab.cli.match import _print_every_sample
 
-    def report(sample, recipe, novel):
-        best = {"recipe": recipe, "novel_toners": novel, "failing_geometries": [],
-                "failing_texture": [], "passes": True, "de00_max": 0.3,
+    def report(sample, recipe, novel, de00=()):
+        failing = [g for g, de in de00 if de > 1]
+        best = {"recipe": recipe, "novel_toners": novel, "failing_geometries": failing,
+                "failing_texture": ["G"] if failing else [], "passes": not failing,
+                "de00_max": 0.3, "geometries": {g: {"dE00": de} for g, de in de00},
                 "hiding": {"best_primer": "G5"}}  # fmt: skip
         return {"target": sample, "candidates": [best]}
 
+    three = [("45as15", 1.2), ("45as25", 1.1), ("45as45", 1.3), ("45as75", 0.4)]
+    four = [("15as-45", 1.5), ("15as15", 2.4), ("45as15", 1.2), ("45as25", 1.1)]
     reports = [report("door", {"Al medium": 0.9, "Perylene red": 0.1}, ["Perylene red"]),
-               report("hood", {"Al medium": 0.9, "Carbon black": 0.1}, [])]  # fmt: skip
+               report("hood", {"Al medium": 0.9, "Carbon black": 0.1}, []),
+               report("wing", {"Al medium": 1}, [], three),
+               report("roof", {"Al medium": 1}, [], four)]  # fmt: skip
+    monkeypatch.setattr(console, "width", 160)  # each row on one line
     with console.capture() as captured:
         _print_every_sample("cars.json", reports)
     rows = {line.split()[0]: line for line in captured.get().splitlines() if line.strip()}
     assert "(new: Perylene red)" in rows["door"] and "new:" not in rows["hood"]
+    assert "FAIL at 45as15, 45as25, 45as45, texture G" in rows["wing"]
+    assert "FAIL at 4 geometries (worst 15as15), texture G" in rows["roof"]
 
 
 def test_hybrid_keeps_a_dark_masstone_dark(hybrid):

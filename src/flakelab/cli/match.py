@@ -670,8 +670,6 @@ def _match_every_sample(readings, path, forward, effect, search: dict, can, reci
 def _print_every_sample(path, reports: list[dict]) -> None:
     """``match --all``'s table: each sample's best recipe, its worst predicted ΔE00 and
     verdict."""
-    from flakelab.core.tolerance import failures
-
     table = Table(title=f"The best recipe for each sample of {path}", box=box.SIMPLE_HEAD,
                   collapse_padding=True)  # fmt: skip
     for column in ("sample", "max ΔE00", "verdict", "spray over", "best recipe (share)"):
@@ -682,8 +680,9 @@ def _print_every_sample(path, reports: list[dict]) -> None:
             table.add_row(report["target"], "", "[red]not read[/]", "", report["error"])
             continue
         best = report["candidates"][0]
-        failing = failures(best["failing_geometries"], best["failing_texture"])
-        verdict = "[green]PASS[/]" if best["passes"] else "[red]FAIL[/] at " + ", ".join(failing)
+        verdict = (
+            "[green]PASS[/]" if best["passes"] else "[red]FAIL[/] at " + _failing_in_short(best)
+        )
         recipe = shares_text(best["recipe"])
         if best["novel_toners"]:  # predicted by the physics scaling for them
             recipe += f" [yellow](new: {', '.join(best['novel_toners'])})[/]"
@@ -694,6 +693,23 @@ def _print_every_sample(path, reports: list[dict]) -> None:
     samples = counted(len(reports), "sample")
     console.print(f"{passing} of {samples} matched within the tolerance, as predicted",
                   highlight=False)  # fmt: skip
+
+
+SHORT_FAILURES = 3
+"""Failures ``match --all``'s table names one by one; beyond, it counts them and names the
+worst geometry (the sample's own report names every one)."""
+
+
+def _failing_in_short(candidate: dict) -> str:
+    """What fails ``candidate`` (its report), for one cell of a table: ``45as15, texture G``,
+    or ``10 geometries (worst 45as15), texture G``."""
+    from flakelab.core.tolerance import failures
+
+    geometries = candidate["failing_geometries"]
+    if len(geometries) > SHORT_FAILURES:
+        worst = max(geometries, key=lambda g: candidate["geometries"][g]["dE00"])
+        geometries = [f"{len(geometries)} geometries (worst {worst})"]
+    return ", ".join(failures(geometries, candidate["failing_texture"]))
 
 
 def _write_candidate(report: dict, pick: int, path: Path) -> None:
