@@ -226,12 +226,14 @@ def write_primers(path, names, geometries=GEOMETRIES, shine=None):
     return path
 
 
-def test_cli_hiding_and_match_take_the_shops_own_primers(tmp_path, cli):
+def test_cli_hiding_and_match_take_the_shops_own_primers(tmp_path, cli, monkeypatch):
     """``--primers FILE``: ``flakelab hiding`` reads each sample's 45°:0° reading as a primer
     and names the one to spray over, with its L*a*b*; ``match`` names it for each candidate.
     A panel that reads like no matte primer (bright near the gloss) is taken with a note. A
     sample without a 45°:0° reading, a name given twice and ``match evaluate --primers`` are
-    refused, naming the file and the sample."""
+    refused, naming the file and the sample. A workplace sets its file once in
+    FLAKELAB_PRIMERS; ``--primers`` overrides it, and one it cannot read is refused naming
+    the variable."""
     red = tmp_path / "red.json"
     red.write_text(json.dumps({"Quinacridone red": 90, WHITE: 10}))
     names = [*NEUTRALS[1:5], "red", "yellow"]
@@ -262,6 +264,16 @@ def test_cli_hiding_and_match_take_the_shops_own_primers(tmp_path, cli):
         assert str(path) in done.stderr
     harness = cli("match", "evaluate", "--targets", "1", "--primers", primers)
     assert harness.returncode == 2 and "--primers" in harness.stderr
+    monkeypatch.setenv("FLAKELAB_PRIMERS", str(primers))
+    workplace = json.loads(cli("hiding", red, "--json").stdout)
+    assert workplace["primers_file"] == str(primers)
+    assert workplace["paints"][0]["best_primer"] == "red"
+    greys = write_primers(tmp_path / "greys.cxf", NEUTRALS[1:5])
+    given = json.loads(cli("hiding", red, "--primers", greys, "--json").stdout)
+    assert given["primers_file"] == str(greys) and given["paints"][0]["best_primer"] in NEUTRALS
+    monkeypatch.setenv("FLAKELAB_PRIMERS", str(tmp_path / "gone.cxf"))
+    gone = cli("hiding", red)
+    assert gone.returncode == 2 and "FLAKELAB_PRIMERS:" in gone.stderr and "gone.cxf" in gone.stderr
 
 
 def test_match_names_the_primer_for_each_candidate_as_hiding_does(tmp_path, cli):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -18,9 +19,15 @@ from flakelab.cli.common import (
     print_notes,
     print_report,
 )
-from flakelab.cli.sources import InstrumentOption, LibraryOption, recipe_fractions
+from flakelab.cli.sources import (
+    WORKPLACE_PRIMERS,
+    InstrumentOption,
+    LibraryOption,
+    recipe_fractions,
+)
 from flakelab.core.defaults import HIDING_DE00
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
+from flakelab.errors import FlakelabError
 
 
 def hiding_command(
@@ -70,7 +77,7 @@ def hiding_command(
     lib = read_library(library)
     grams = [read_recipe(path) for path in recipes]
     x = np.array([recipe_fractions(lib, g, path) for g, path in zip(grams, recipes, strict=True)])
-    shop_primers, notes = read_primers(primers) if primers else (None, [])
+    shop_primers, notes, primers = workplace_primers(primers)
     geometries = instrument_geometries(instrument)
     found = hiding(lib, x, geometries, threshold, shop_primers)
     report = hiding_report(found, [str(p) for p in recipes], instrument, primers)
@@ -94,8 +101,10 @@ PrimersOption = Annotated[
     typer.Option(
         "--primers",
         help="The shop's own primers, measured: a measurement file (CxF, CSV, MA-T12 export) "
-        "of one sample a primer, its reading at 45as45 taken as its colour.",
-        show_default="seven neutral greys, G1 (L* 93) to G7 (L* 27)",
+        "of one sample a primer, its reading at 45as45 taken as its colour; a workplace sets "
+        f"its own with {WORKPLACE_PRIMERS}.",
+        show_default=f"{WORKPLACE_PRIMERS}'s file, else seven neutral greys, G1 (L* 93) to G7 "
+        "(L* 27)",
     ),
 ]
 
@@ -104,6 +113,21 @@ MATTE_SPREAD_DE00 = 2.0
 """ΔE00 between a primer's 45°:0° reading and its others away from the gloss (45° lamp, 25°
 or more from the specular) beyond which it is said to read like no matte primer: a dull
 surface reads nearly alike there, an effect or glossy panel does not."""
+
+
+def workplace_primers(primers: Path | None) -> tuple[dict | None, list[str], Path | None]:
+    """The primers ``--primers`` names, else the workplace's (:data:`WORKPLACE_PRIMERS`), read
+    (:func:`read_primers`), their notes and their file; (None, [], None): the grey shades. A
+    workplace's file that cannot be read is refused naming the variable."""
+    if primers is not None:
+        return *read_primers(primers), primers
+    workplace = os.environ.get(WORKPLACE_PRIMERS, "").strip()
+    if not workplace:
+        return None, [], None
+    try:
+        return *read_primers(Path(workplace)), Path(workplace)
+    except FlakelabError as error:
+        raise FlakelabError(f"{WORKPLACE_PRIMERS}: {error}") from None
 
 
 def read_primers(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:

@@ -36,7 +36,7 @@ from flakelab.cli.common import (
     stop_interrupted,
     texture_table,
 )
-from flakelab.cli.hiding import PrimersOption, read_primers
+from flakelab.cli.hiding import PrimersOption, workplace_primers
 from flakelab.cli.lots import lots_report, shop_lots
 from flakelab.cli.matcher import (
     HabitsOption,
@@ -342,7 +342,7 @@ def match_command(
              "--database": database, "--habits": habits, "--lots": lots,
              "--tolerance": tolerance, "--primers": primers}  # fmt: skip
     _check_output_options(render, plot, recipe_out, pick, candidates, reads)
-    shop_primers, primer_notes = read_primers(primers) if primers else (None, [])  # before the wait
+    shop_primers, primer_notes, primers = workplace_primers(primers)  # before the wait
     over = {"primers": shop_primers, "primers_file": primers}
     lamps = render_lamps(lamps, render)
     shop, named = workplace_shop(shop)

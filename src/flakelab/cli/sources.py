@@ -21,6 +21,9 @@ WORKPLACE_SHOP = "FLAKELAB_SHOP"
 """The environment variable naming a workplace's shop: the shop ``cases record`` records, and
 the one ``match`` and ``correct`` match for (its own model and habits) where ``--shop`` names
 none."""
+WORKPLACE_PRIMERS = "FLAKELAB_PRIMERS"
+"""The environment variable naming a measurement file of the workplace's primers, which
+``match`` and ``hiding`` choose among where ``--primers`` names none."""
 
 
 def workplace_shop(shop: str | None) -> tuple[str | None, bool]:
