@@ -290,3 +290,28 @@ def test_match_names_the_primer_for_each_candidate_as_hiding_does(tmp_path, cli)
     assert (paint["best_primer"], paint["coats"]) == (candidate["best_primer"], candidate["coats"])
     shown = cli("match", "--example")
     assert f"spray over grey {candidate['best_primer']}" in shown.stdout
+
+
+def test_match_keeps_a_transparent_candidate_on_the_primer_it_was_predicted_over(library):
+    """A candidate that hides nothing (a quinacridone red masstone) looks as predicted only
+    over what the cases were sprayed over: its primer line names the library's primer (L* 16
+    read bare) and the nominal build, not a ground of the colorist's choosing; one that hides
+    gets its grey."""
+    from types import SimpleNamespace
+
+    from flakelab.cli.match import _add_hiding, _hiding_text
+
+    recipes = [{"Quinacridone red": 1.0}, {"Iron oxide red": 1.0}]
+    candidates = [SimpleNamespace(fractions=r) for r in recipes]
+    report = {"candidates": [{}, {}]}
+    _add_hiding(report, candidates, library, ("45as15", "45as45", "45as110"))
+    clear, hiding_one = (entry["hiding"] for entry in report["candidates"])
+    assert clear["best_primer"] is None and clear["library_primer_lightness"] == pytest.approx(
+        15.94, abs=0.01
+    )
+    said = _hiding_text(clear)
+    assert "predicted over the library's primer (L* 16) at 15 µm" in said
+    assert hiding_one["best_primer"] in GREY_SHADES
+    assert _hiding_text(hiding_one).startswith(
+        f"primer: spray over grey {hiding_one['best_primer']}"
+    )

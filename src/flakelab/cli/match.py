@@ -571,9 +571,12 @@ def _add_hiding(report: dict, candidates, library, geometries, primers=None,
     import numpy as np
 
     from flakelab.cli.hiding import hiding_report
+    from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.geometry import Geometry
-    from flakelab.physics.hiding import hiding
+    from flakelab.physics.hiding import hiding, read_bare
 
+    binder = library.binder  # what the cases, and so the predictions, were sprayed over
+    own = reflectance_to_Lab(read_bare(binder.primer_reflectance, binder.refractive_index))
     x = np.array([library.fractions(c.fractions) for c in candidates])
     at = tuple(Geometry.parse(g) for g in geometries)  # the names the model reads
     found = hiding_report(hiding(library, x, at, primers=primers), [""] * len(x), "",
@@ -589,15 +592,19 @@ def _add_hiding(report: dict, candidates, library, geometries, primers=None,
             "best_primer_coats": over and over["coats"],
             "film_um_range": found["film_um_range"],
             "primers_file": found["primers_file"],
+            "nominal_um": found["nominal_um"],
+            "library_primer_lightness": round(float(own[0]), 2),
         }
 
 
 def _hiding_text(hiding: dict) -> str:
     """A candidate's primer line: the grey (or the shop's primer) to spray it over, and the
-    coats."""
-    if hiding["best_primer"] is None:
+    coats; for a paint that hides none, the primer and build its colour was predicted at."""
+    if hiding["best_primer"] is None:  # predicted as the cases were sprayed: keep to that
         return (f"primer: it hides none within {hiding['film_um_range'][1]:.0f} µm (a "
-                "transparent colour): spray it over a ground of its own colour")  # fmt: skip
+                "transparent colour): its colour is predicted over the library's primer (L* "
+                f"{hiding['library_primer_lightness']:.0f}) at {hiding['nominal_um']:g} µm; spray "
+                "it over that primer, to that build")  # fmt: skip
     primer, L = hiding["best_primer"], hiding["best_primer_lightness"]
     shop = hiding["primers_file"]
     named = f"{primer!r} of {shop}" if shop else f"grey {primer}"
