@@ -1526,6 +1526,35 @@ def physics():
     return PhysicsForward(library, instrument_geometries("five-angle"))
 
 
+def test_a_white_pearl_the_model_never_saw_is_named_in_a_note(hybrid, physics):
+    """Six tenths of the silver white pearl in the white: the generated cases hold no pearl in
+    a white ground, and the learned search offers a white solid that fails the refinish
+    tolerance's graininess. Its
+    note says the target's texture reads flakes that no toner of the best candidate gives;
+    the physics finds the pearl, passes, and says nothing of it."""
+    from flakelab.cases.generator import World
+    from flakelab.core.measurement import TEXTURE_READINGS, Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.match.models import effect_mask
+
+    library = read_library(None)
+    world = World(library, "five-angle")
+    x = library.fractions({"Pearl silver white": 0.6, "Titanium dioxide white": 0.4})[None]
+    R, texture = world.appearance(x, world.nominal(1))
+    target = Measurement(sample="white pearl", geometries=world.geometries,
+                         wavelengths=WAVELENGTHS, reflectance=R[0],
+                         texture=dict(zip(TEXTURE_READINGS, texture[0], strict=True)))  # fmt: skip
+    said = "the target's texture reads flakes"
+    for forward, pearl_found in ((hybrid, False), (physics, True)):
+        result = match(target, forward, effect_mask(library, forward.toners), library=library,
+                       tolerance=tolerance_preset("refinish"),
+                       settings=MatchSettings(candidates=1))  # fmt: skip
+        best = result.candidates[0]
+        assert ("Pearl silver white" in best.fractions) is pearl_found
+        assert best.passes is pearl_found
+        assert any(said in note for note in result.notes) is not pearl_found
+
+
 def test_the_physics_model_is_the_generated_world_s_nominal_paint(physics):
     """The exact model of the harness (benchmarks/exact_model.py): the library's physics,
     colour and texture readings, equals the generator's paint with no batch or application

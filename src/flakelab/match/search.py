@@ -541,6 +541,8 @@ def _match(
         )
     notes = _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
                          target_texture is not None, settings)  # fmt: skip
+    if candidates and (note := _flakes_unmatched_note(texture, candidates[0], effect, forward)):
+        notes.append(note)
     return MatchResult(
         name,
         tuple(forward.geometries),
@@ -666,6 +668,26 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
             "not judged (read it with an instrument that measures sparkle and graininess)"
         )
     return notes
+
+
+def _flakes_unmatched_note(texture: dict | None, best: Candidate, effect, forward) -> str | None:
+    """A note where the target's texture reads flakes (:data:`SOLID_TEXTURE`) and the best
+    candidate holds no effect toner: a paint the model knows nothing like. A white pearl (a
+    pearl in a white ground) is one: the generated cases hold none, and the learned search
+    offers a white solid that fails the graininess, where the physics matches the pearl."""
+    texture = texture or {}
+    if not all(k in texture for k in SOLID_TEXTURE):
+        return None
+    if all(texture[k] < limit for k, limit in SOLID_TEXTURE.items()):
+        return None
+    if recipe_vector(forward, best.fractions)[np.asarray(effect, bool)].any():
+        return None
+    G, SG = texture["G"], texture["SG"]
+    return (
+        f"the target's texture reads flakes (G {G:.2f}, SG {SG:.2f}), yet the best candidate "
+        "holds no effect toner: the model may know no paint like it (a white pearl, say); a "
+        "search by the physics alone (match --physics) may find its effect pigment"
+    )
 
 
 def _solid_reason(
