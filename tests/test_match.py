@@ -1529,9 +1529,8 @@ def physics():
 def test_a_white_pearl_the_model_never_saw_is_named_in_a_note(hybrid, physics):
     """Six tenths of the silver white pearl in the white: the generated cases hold no pearl in
     a white ground, and the learned search offers a white solid that fails the refinish
-    tolerance's graininess. Its
-    note says the target's texture reads flakes that no toner of the best candidate gives;
-    the physics finds the pearl, passes, and says nothing of it."""
+    tolerance's graininess. Its note says the target's texture reads flakes that no toner of
+    the best candidate gives; the physics finds the pearl, passes, and says nothing of it."""
     from flakelab.cases.generator import World
     from flakelab.core.measurement import TEXTURE_READINGS, Measurement
     from flakelab.core.spectra import WAVELENGTHS
