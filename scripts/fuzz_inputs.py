@@ -5,7 +5,7 @@ traceback, a warning or a NaN in the output (the guide's "Bad input" standard).
 Each kind starts from a good file made here from the shipped example (or the demo library,
 the example recipe, a habits report, a tolerance file, generated cases in CSV and CxF3, a
 manifest of instrument files for `cases record-all`, the shipped model, a toner-lot file, the
-example calibration panel's reading) and damages it: an
+example calibration panel's reading, a shop's primers) and damages it: an
 MA-T12 export by editing its cells, rows, columns and sheets (or cutting its bytes short), one
 with camera pictures also by moving a picture or damaging its bytes;
 text files by deleting, doubling or cutting lines, replacing numbers and names, inserting
@@ -19,7 +19,7 @@ weights; a shop's SQLite database by replacing one value of one case row (or, fo
     python scripts/fuzz_inputs.py [--kinds cxf,csv,colour,export,json,xlsx,xlsx-images,target,
         readings,readings-inspect,sprayout,record,recipe,poured,library,habits,habits-match,tolerance,
         cases,cases-cxf,manifest,model,model-register,lots,panel,database,database-shops,
-        database-variants,cases-variants,car,deck]
+        database-variants,cases-variants,car,deck,primers]
         [--n 200] [--seed 0] [--show]
 
 It prints, per kind, how many damaged files were refused, read, and failed (with the file
@@ -446,6 +446,7 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
     panel_recipe, standard = (
         target.parent / f"phthalo-blue-panel{s}" for s in ("-recipe.json", "-standard.cxf")
     )
+    write_primers(work / "primers.csv")
     shops = work / "shops.db"  # a row of each table: cases, a shop's model, habits and tins
     shutil.copy(work / "shop.db", shops)
     with torch.no_grad():  # the shop's own: weights of its own, as an adaptation gives
@@ -537,12 +538,34 @@ def good_files(work: Path) -> dict[str, tuple[Path, Callable[[Path], list[str]]]
         # the shop's tins, which the main job weighs for
         "lots": (work / "lots.json",
                  lambda p: ["match", "--example", "--candidates", "1", "--lots", str(p)]),
+        # a shop's primers, which hiding chooses among
+        "primers": (work / "primers.csv",
+                    lambda p: ["hiding", str(recipe), "--primers", str(p)]),
         # a calibration panel's spray-out, its tins read against the standard's panel
         "panel": (work / "panel.json",
                   lambda p: ["lots", "calibrate", str(p), "--recipe", str(panel_recipe),
                              "--standard", str(standard), "--lots", str(work / "lots.json"),
                              "--dry-run"]),
     }  # fmt: skip
+
+
+def write_primers(path: Path) -> None:
+    """Four of the ColorChecker's patches (Ohta's measured spectra) as a shop's primers, read
+    alike at the five-angle geometries, as a matte panel is."""
+    import colour
+
+    from flakelab.core.geometry import instrument_geometries
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+
+    patches = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+    geometries = instrument_geometries("five-angle")
+    write_measurements([
+        Measurement(sample=name, geometries=geometries, wavelengths=WAVELENGTHS,
+                    reflectance=np.tile(patches[name].copy().align(colour.SpectralShape(
+                        400, 700, 10)).values, (len(geometries), 1)))
+        for name in ("neutral 8 (.23 D)", "neutral 5 (.70 D)", "red", "yellow")
+    ], path)  # fmt: skip
 
 
 def failure(result) -> str | None:
