@@ -5,10 +5,10 @@ as a Poisson process (delta tracking with majorant N·πa² per unit path; a ten
 flake of sampled normal n is real with probability |d·n|), mirror reflection on aluminium
 with its complex-index Fresnel reflectance, pearls reflecting or transmitting, pigment
 absorption along every path, Henyey–Greenstein scattering (spectral tracking with a
-majorant over wavelengths), a Lambertian primer, Fresnel reflection and total internal
-reflection at the top. Every tentative collision and primer hit also scores the detectors
-by next-event estimation; exit paths are attenuated by the expected flake, pigment and
-scattering extinction along the detector direction.
+majorant over wavelengths, history-aware: Kutz et al. 2017), a Lambertian primer, Fresnel
+reflection and total internal reflection at the top. Every tentative collision and primer
+hit also scores the detectors by next-event estimation; exit paths are attenuated by the
+expected flake, pigment and scattering extinction along the detector direction.
 
 All 31 bands ride on one path (paths do not depend on wavelength; only weights do), each
 photon draws from its own counter-based random stream (seed, photon index), so results do
@@ -201,7 +201,6 @@ def _trace(first, count, seed, optics, tallies):
     rate_total = rates.sum()
     sigma_bar = sigma.max()
     ratio = sigma / sigma_bar if sigma_bar > 0 else np.zeros(W)
-    p_scatter = ratio.mean()
     primer_mean = primer.mean()
     state = np.zeros(1, dtype=np.uint64)
     w = np.empty(W)
@@ -333,7 +332,16 @@ def _trace(first, count, seed, optics, tallies):
                         base = _hg_pdf(cos_t, g) * det_factor[gi]
                         for j in range(W):
                             score[gi, j] += w[j] * ratio[j] * base * np.exp(-det_att[gi, j] * depth)
-                    if _next(state) < p_scatter:
+                    # history-aware (Kutz et al. 2017): real with the weighted bands' share,
+                    # which keeps the weights' mean over the bands. The bands' plain mean
+                    # share made a band far from it carry a product of factors that spread
+                    # over decades along a long path: TiO2 at 700 nm showed no primer
+                    weighted, real = 0.0, 0.0
+                    for j in range(W):
+                        weighted += w[j]
+                        real += w[j] * ratio[j]
+                    p_scatter = real / weighted if weighted > 0 else 0.0
+                    if _next(state) < p_scatter or p_scatter >= 1.0:
                         for j in range(W):
                             w[j] *= ratio[j] / p_scatter
                         if abs(g) > 1e-3:
