@@ -989,7 +989,15 @@ def test_a_command_stopped_by_sigterm_stops_as_a_ctrl_c_stops_it(tmp_path, stop,
     cases.write_text("kept\n")
     command = [sys.executable, "-m", "flakelab.cli.main", "cases", "generate", "--n", "100000",
                "--seed", "1", "--out", str(cases)]  # fmt: skip
-    run = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    # as from a terminal: a suite run under nohup would pass its hangups ignored on, and a
+    # command started so rightly keeps ignoring them
+    run = subprocess.Popen(
+        command,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_DFL),
+    )
     first = run.stderr.readline()  # the bar's first line: the file is being written
     run.send_signal(stop)
     said = first + run.communicate(timeout=120)[1]
