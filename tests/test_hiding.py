@@ -56,7 +56,7 @@ def test_more_paint_hides_more_and_a_white_makes_a_clear_red_hide_sooner(library
     built up (the trace never rises); iron oxide red, the white and carbon black hide within
     one coat at a contrast ratio of 1, a phthalo blue masstone (a transparent pigment) hides
     at no build and over no grey, its contrast ratio under 0.05; and quinacridone red hides
-    sooner the more white it holds (38 µm at 2 %, 2.7 µm at 40 %)."""
+    sooner the more white it holds (47 µm at 2 %, 3.4 µm at 40 %)."""
     solids = [{"Iron oxide red": 1}, {WHITE: 1}, {BLACK: 1}, {"Phthalo blue GS": 1}]
     found = hiding(library, np.array([library.fractions(r) for r in solids]), GEOMETRIES)
     assert np.all(np.diff(found.contrast_de00, axis=1) <= 1e-9)
@@ -72,7 +72,7 @@ def test_more_paint_hides_more_and_a_white_makes_a_clear_red_hide_sooner(library
 def test_a_paint_is_sprayed_over_the_grey_of_its_lightness_unless_another_saves_a_coat(library):
     """Neutral greys of white and carbon black, each hiding every primer in one coat, go over
     the grey nearest their own lightness (L* 91.6 over G1 … 31.5 over G7); bismuth vanadate
-    (L* 77, nearest G3) goes over G1, white, over which it comes to its full colour in three
+    (L* 77, nearest G2) goes over G1, white, over which it comes to its full colour in two
     coats where every other grey takes four. Over the grey chosen, a one-coat paint at the
     nominal build lies within the threshold of its full colour."""
     blacks = (0.0005, 0.005, 0.01, 0.03, 0.1, 0.3)
