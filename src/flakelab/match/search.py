@@ -540,9 +540,7 @@ def _match(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
         )
     notes = _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
-                         target_texture is not None, settings)  # fmt: skip
-    if candidates and (note := _flakes_unmatched_note(texture, candidates[0], effect, forward)):
-        notes.append(note)
+                         texture, target_texture is not None, settings)  # fmt: skip
     return MatchResult(
         name,
         tuple(forward.geometries),
@@ -631,10 +629,11 @@ def _swapped(forward, objective, candidates, allowed, effect, target_lab, target
 
 
 def _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
-                 texture_read: bool, settings) -> list[str]:  # fmt: skip
+                 texture: dict | None, texture_read: bool, settings) -> list[str]:  # fmt: skip
     """What a match says beside its candidates: the geometries it left out, a solid, the
     shop's habits, and of the best candidate whether it lies outside the model's support,
-    fails, is a metamer or was judged without the target's texture."""
+    fails, is a metamer, was judged without the target's ``texture`` or holds no effect toner
+    where that texture reads flakes."""
     notes = left_out_note(unused_geometries(target, forward), forward, "match")
     if note := recovered_note(target) if isinstance(target, Measurement) else None:
         notes.append(
@@ -667,6 +666,8 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
             f"the target carries no texture readings: {tolerance.name}'s texture limits are "
             "not judged (read it with an instrument that measures sparkle and graininess)"
         )
+    if note := _flakes_unmatched_note(texture, best, effect, forward):
+        notes.append(note)
     return notes
 
 
