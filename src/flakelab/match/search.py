@@ -671,15 +671,21 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
     return notes
 
 
+def _reads_flakes(texture: dict | None) -> bool | None:
+    """Whether a target's texture reads flakes: one of :data:`SOLID_TEXTURE`'s readings at
+    or over its limit; None where it lacks one of them."""
+    texture = texture or {}
+    if not all(k in texture for k in SOLID_TEXTURE):
+        return None
+    return not all(texture[k] < limit for k, limit in SOLID_TEXTURE.items())
+
+
 def _flakes_unmatched_note(texture: dict | None, best: Candidate, effect, forward) -> str | None:
     """A note where the target's texture reads flakes (:data:`SOLID_TEXTURE`) and the best
     candidate holds no effect toner: a paint the model knows nothing like. A white pearl (a
     pearl in a white ground) is one: the generated cases hold none, and the learned search
     offers a white solid that fails the graininess, where the physics matches the pearl."""
-    texture = texture or {}
-    if not all(k in texture for k in SOLID_TEXTURE):
-        return None
-    if all(texture[k] < limit for k, limit in SOLID_TEXTURE.items()):
+    if not _reads_flakes(texture):
         return None
     if recipe_vector(forward, best.fractions)[np.asarray(effect, bool)].any():
         return None
@@ -699,11 +705,11 @@ def _solid_reason(
     ``geometries`` travels less than ``settings.solid_travel`` over those
     ``settings.solid_travel_from`` or more from specular
     (:data:`~flakelab.match.settings.SOLID_TRAVEL`)."""
-    texture = texture or {}
-    if all(k in texture for k in SOLID_TEXTURE):
-        if all(texture[k] < limit for k, limit in SOLID_TEXTURE.items()):
-            G, SG = texture["G"], texture["SG"]
-            return f"the target's texture reads no flakes (G {G:.2f}, SG {SG:.2f})"
+    flakes = _reads_flakes(texture)
+    if flakes is False:
+        G, SG = texture["G"], texture["SG"]
+        return f"the target's texture reads no flakes (G {G:.2f}, SG {SG:.2f})"
+    if flakes:
         return None
     if lab.shape[0] < 2:  # one geometry: no travel to read
         return None

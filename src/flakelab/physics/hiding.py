@@ -127,11 +127,6 @@ class Hiding:
     threshold: float
 
     @property
-    def primer_lightness(self) -> NDArray[np.float64]:
-        """The primers' L* as read bare ``[P]``."""
-        return self.primer_lab[:, 0]
-
-    @property
     def lightness(self) -> NDArray[np.float64]:
         """Each paint's L* built up ``[F]`` (NaN where it does not hide)."""
         return self.lab[:, 0]
@@ -252,16 +247,16 @@ def hiding(
                           np.tile(BUILD_GRID, F), np.ones(F * B))  # fmt: skip
     n = library.binder.refractive_index
 
-    def over(bare: ArrayLike) -> NDArray:  # [F, B, G, W]
-        R = reflectance_factor(replace(layer, primer=under_basecoat(bare, n)), geometries)
+    def over(R_g: NDArray) -> NDArray:  # [F, B, G, W] over a ground of R_g under the basecoat
+        R = reflectance_factor(replace(layer, primer=R_g), geometries)
         return R.reshape(F, B, len(geometries), WAVELENGTHS.size)
 
-    chart = {name: over(np.full(WAVELENGTHS.size, Y)) for name, Y in CONTRAST_CHART.items()}
+    chart = {name: over(ground_reflectance(library, name)) for name in CONTRAST_CHART}
     Lab = {name: reflectance_to_Lab(R) for name, R in chart.items()}  # [F, B, G, 3]
     contrast = _worst_de00(Lab["black"], Lab["white"])  # [F, B]
     hides = _where_it_falls_to(contrast, threshold)
-    built_up = np.stack([_worst_de00(lab, lab[:, -1:]) for lab in map(reflectance_to_Lab, (
-        over(bare) for bare in primers.values()))], axis=1)  # fmt: skip
+    over_primers = [reflectance_to_Lab(over(under_basecoat(bare, n))) for bare in primers.values()]
+    built_up = np.stack([_worst_de00(lab, lab[:, -1:]) for lab in over_primers], axis=1)
     built_up[~np.isfinite(hides)] = np.inf  # tends to no colour of its own: [F, P, B]
     names = [g.name for g in geometries]
     face = names.index(FACE_GEOMETRY) if FACE_GEOMETRY in names else slice(None)
