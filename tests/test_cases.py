@@ -46,7 +46,7 @@ from flakelab.cases.schema import Base, ModelRow
 from flakelab.core import compare
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
-from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
+from flakelab.core.geometry import FACE_GEOMETRY, INSTRUMENT_GEOMETRIES
 from flakelab.core.tolerance import Limit, Tolerance, tolerance_preset
 from flakelab.data import example_path
 from flakelab.errors import FlakelabError
@@ -116,7 +116,7 @@ def test_a_world_without_some_toners_keeps_its_instrument_and_family_mix(world):
 
 
 def test_generated_world_is_as_hard_as_a_shop(world):
-    report = world.realism(n=200, seed=3)
+    report = world.realism(n=1000, seed=3)  # 200 left the families' floors within noise
     assert 0.02 <= report["remeasure_de00_median"] <= 0.10
     assert 0.3 <= report["respray_de00_median"] <= 0.8
     assert 0.02 <= report["batch_strength_sd"] <= 0.04
@@ -159,6 +159,30 @@ def test_solids_hide_the_primer_and_only_blacks_read_black(world):
     black = near_black(reflectance_to_Lab(R))
     assert black.any()
     assert (solids[black, library.names.index("Carbon black")] > 0.3).all()
+
+
+def test_white_pearls_are_pearls_beside_the_white(world):
+    """A share ``white_pearl_share`` of the pearls are white pearls: their pearls beside the
+    library's white and no aluminium; they read lighter at 45as45 than pearls without it
+    (L* median 68 against 38). With the share 0 the white is in a pearl only as a tint."""
+    library = world.library
+    white, aluminium = library.names.index("Titanium dioxide white"), world._aluminium
+    drawn = {}
+    for share in (0.0, 1.0):
+        settings = replace(world.settings, kinds={"pearl": 1.0}, white_pearl_share=share)
+        pearls = World(library, world.instrument, settings)
+        drawn[share] = pearls.formulations(400, np.random.default_rng(5))
+    x = drawn[1.0]
+    assert set(library.paint_families(x)) == {"pearl"}
+    assert (x[:, white] > 0).all() and not x[:, aluminium].any()
+    face = [str(g) for g in world.geometries].index(FACE_GEOMETRY)
+    lightness = {}
+    for share, x in drawn.items():
+        R, _ = world.appearance(x, world.nominal(len(x)))
+        lightness[share] = np.median(reflectance_to_Lab(R[:, face])[:, 0])
+    assert lightness[1.0] > lightness[0.0] + 15
+    tinted = (drawn[0.0][:, white] > 0).mean()  # the white among ≤ 4 of 14 tints
+    assert 0.05 < tinted < 0.3
 
 
 def test_exact_model_floor_vanishes_without_variation(world):

@@ -1554,6 +1554,35 @@ def test_a_white_pearl_the_model_never_saw_is_named_in_a_note(hybrid, physics):
         assert any(said in note for note in result.notes) is not pearl_found
 
 
+def test_a_white_pearl_read_without_texture_travels_like_a_solid(physics):
+    """Without texture readings the solid rule reads colour travel alone, and a white pearl
+    (six tenths of the silver white pearl in the white) travels 2.32 ΔE00 beyond 25° from
+    specular, under SOLID_TRAVEL: it is matched with pigments alone, and the note says that a
+    white pearl travels as little and how to match one. Left free, the search finds the
+    pearl and a closer match."""
+    from flakelab.cases.generator import World
+    from flakelab.core.measurement import Measurement
+    from flakelab.core.spectra import WAVELENGTHS
+    from flakelab.match.models import effect_mask
+
+    library = read_library(None)
+    world = World(library, "five-angle")
+    x = library.fractions({"Pearl silver white": 0.6, "Titanium dioxide white": 0.4})[None]
+    R, _ = world.appearance(x, world.nominal(1))
+    target = Measurement(sample="white pearl", geometries=world.geometries,
+                         wavelengths=WAVELENGTHS, reflectance=R[0])  # fmt: skip
+    found = {}
+    for travel in (MatchSettings.solid_travel, 0.0):
+        result = match(target, physics, effect_mask(library, physics.toners), library=library,
+                       settings=MatchSettings(candidates=1, solid_travel=travel))  # fmt: skip
+        best = result.candidates[0]
+        found[travel] = best
+        said = any("a white pearl can travel as little" in n for n in result.notes)
+        assert said is (travel > 0)
+        assert ("Pearl silver white" in best.fractions) is (travel == 0)
+    assert found[0.0].de00.max() < found[MatchSettings.solid_travel].de00.max()
+
+
 def test_the_physics_model_is_the_generated_world_s_nominal_paint(physics):
     """The exact model of the harness (benchmarks/exact_model.py): the library's physics,
     colour and texture readings, equals the generator's paint with no batch or application

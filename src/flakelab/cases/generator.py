@@ -8,8 +8,9 @@ application and measured (the *spray-out*). Every random draw comes from one see
 generator, so ``(n, seed)`` gives the same cases on every machine.
 
 Formulations (:meth:`World.formulations`, the family mix ``kinds``): a metallic is one or two
-aluminiums, a pearl one or two pearls (half of them over a little aluminium), each with up
-to four pigments at log-uniform amounts; a solid is a pigment that hides the primer — the
+aluminiums, a pearl one or two pearls (``white_pearl_share`` of them with the library's white
+beside them, white pearls; half the rest over a little aluminium), each with up to four
+pigments at log-uniform amounts; a solid is a pigment that hides the primer — the
 library's white for ``solid_white_share`` of them, else an opaque iron oxide, BiVO4 or a
 black — with up to three tints.
 
@@ -169,6 +170,7 @@ class WorldSettings:
     tin_sprayouts: int = 1
     colour_codes: int = 0  # the car makers' colours a shop meets (0: every car its own)
     solid_white_share: float = 0.5
+    white_pearl_share: float = 0.3
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
     )
@@ -302,7 +304,9 @@ class World:
         elif kind == "pearl":
             for i in _pick(rng, self._pearls, rng.integers(1, 3)):
                 x[i] = rng.uniform(0.3, 1.0)
-            if rng.random() < 0.5 and self._aluminium:
+            if self._white is not None and rng.random() < self.settings.white_pearl_share:
+                x[self._white] = rng.uniform(0.3, 1.0)  # a white pearl: pearl over white
+            elif rng.random() < 0.5 and self._aluminium:
                 x[rng.choice(self._aluminium)] = rng.uniform(0.05, 0.3)
         elif kind == "solid" and self._white is not None:
             x[self._solid_base(rng)] = rng.uniform(0.3, 1.0)
@@ -318,7 +322,7 @@ class World:
             # tinting strengths span two decades: log-uniform amounts
             x[i] = np.exp(rng.uniform(np.log(0.003), np.log(most)))
         if kind != "solid" and x.sum() - effect > 0.5 * x.sum():
-            x[x > 0] *= np.where(np.isin(np.flatnonzero(x > 0), self._pigments), 0.5, 1.0)
+            x[tints] *= 0.5
         return x / x.sum()
 
     def _solid_base(self, rng: np.random.Generator) -> int:

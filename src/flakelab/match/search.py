@@ -718,7 +718,8 @@ def _solid_reason(
         return (
             f"the target has no texture readings and its colour travels {travel:.2f} ΔE00 over "
             f"its geometries {settings.solid_travel_from:g}° or more from specular, under the "
-            f"{settings.solid_travel:g} of a paint with flakes"
+            f"{settings.solid_travel:g} of a paint with flakes (a white pearl can travel as "
+            "little: if the paint sparkles, match it with --solid-travel 0)"
         )
     return None
 
