@@ -37,6 +37,12 @@ def add_harness_arguments(
         type=parse_kinds,
         help="the hidden targets' paint families, e.g. pearl=1 (default: the generator's mix)",
     )
+    parser.add_argument(
+        "--white-pearls",
+        type=share_of_one,
+        help="share of the hidden pearls that are white pearls, e.g. 1 with --kinds pearl=1 "
+        "(default: the world's, WorldSettings.white_pearl_share)",
+    )
     parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument(
         "--tolerance", help="preset or TOML/JSON file the sprays are judged by (default de00-1.0)"
@@ -133,17 +139,21 @@ def shipped_matcher(
     model: str | None = None,
     kinds: dict[str, float] | None = None,
     shop_habits: dict[str, float] | None = None,
+    white_pearls: float | None = None,
 ):
     """The demo library's harness world (``flakelab match evaluate --world``) for the
     instrument of the shipped five-angle model (or of the model file ``model``), its hidden
-    targets drawn from the paint families ``kinds`` (default: the generator's mix) and its
-    shop given the habits ``shop_habits`` (:func:`parse_world_habits`), the model's forward
-    and its effect-toner mask."""
+    targets drawn from the paint families ``kinds`` (default: the generator's mix), a share
+    ``white_pearls`` of its pearls white pearls (default: the world's) and its shop given the
+    habits ``shop_habits`` (:func:`parse_world_habits`), the model's forward and its
+    effect-toner mask."""
     library = read_library(None)
     learned = load_model_file(model) if model else shipped_model("five-angle")
     forward = forward_for(learned, library)
     harness = harness_world(library, learned.instrument, world)
     changes = {**({"kinds": kinds} if kinds else {}), **(shop_habits or {})}
+    if white_pearls is not None:
+        changes["white_pearl_share"] = white_pearls
     if changes:
         settings = dataclasses.replace(harness.settings, **changes)
         harness = World(library, learned.instrument, settings)
@@ -199,6 +209,17 @@ def parse_kinds(text: str) -> dict[str, float]:
     ):
         raise SystemExit(f"--kinds: expected shares of {', '.join(PAINT_FAMILIES)}, got {text!r}")
     return kinds
+
+
+def share_of_one(text: str) -> float:
+    """``"0.5"`` → 0.5, a share in [0, 1]."""
+    try:
+        share = float(text)
+    except ValueError:
+        share = math.nan
+    if not 0 <= share <= 1:
+        raise argparse.ArgumentTypeError(f"expected a share from 0 to 1, got {text!r}")
+    return share
 
 
 def seeds_from(text: str) -> list[int]:

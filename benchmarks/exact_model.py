@@ -53,7 +53,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=50)
     args = parser.parse_args()
-    world, learned, effect = shipped_matcher(args.world, args.model, args.kinds)
+    world, learned, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
     exact = PhysicsForward(world.library, world.geometries)
     # the new-toner targets are drawn as for the learned model; the exact model knows them all
     rows = {

@@ -72,7 +72,11 @@ def main() -> None:
     args = parser.parse_args()
     habits = read_habits(args.habits)
     world, forward, effect = shipped_matcher(
-        args.world, args.model, args.kinds, shop_habits=args.world_habits
+        args.world,
+        args.model,
+        args.kinds,
+        shop_habits=args.world_habits,
+        white_pearls=args.white_pearls,
     )
     rows, trials = [], []
     for label, shop_habits in (("without habits", None), ("with its habits", habits)):

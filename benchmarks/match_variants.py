@@ -66,7 +66,9 @@ def main() -> None:
     parser.add_argument("settings", nargs="*", help="e.g. top_effects=2,top_pigments=5")
     add_harness_arguments(parser, targets=100, novel_targets=0)
     args = parser.parse_args()
-    world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
     rows = []
     for spec in ["", *args.settings]:
         report = run_harness(world, forward, effect, args, forward.novel, parse_settings(spec))

@@ -41,7 +41,9 @@ def main() -> None:
     add_harness_arguments(parser, targets=200, novel_targets=0)
     args = parser.parse_args()
 
-    world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
     novel = forward.novel  # as the harness: the hidden targets hold only toners it knows
     every, seconds_all = timed_harness(world, forward, effect, args, novel, "every toner",
                                        per_target=True)  # fmt: skip

@@ -35,7 +35,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=0)
     args = parser.parse_args()
-    world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
     settings = MatchSettings()
     rows = {
         f"solid_travel_{SOLID_TRAVEL:g}": run(

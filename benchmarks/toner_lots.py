@@ -50,7 +50,9 @@ def main() -> None:
             f"--modes: expected some of {', '.join(TIN_KNOWLEDGE[1:])}, got {args.modes!r}"
         )
 
-    world, forward, effect = shipped_matcher(args.world, args.model, args.kinds)
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
     runs = {}
     for mode in ["none", *modes]:
         runs[mode] = timed_harness(world, forward, effect, args, forward.novel, mode,
