@@ -541,6 +541,31 @@ def test_colour_loss_is_the_mean_squared_cie94_difference(trained, data):
     assert exact < 1e-3 * value
 
 
+def test_colour_loss_stays_finite_for_an_output_far_out(trained, data):
+    """An output far beyond any reflectance (a step gone wide) is clipped as a prediction is
+    (:func:`~flakelab.models.network.reflectance_from_log`): its loss and gradient stay finite.
+    Unclipped, exp overflowed float32 and the NaN took the weights (stop 107)."""
+    from flakelab.models.training import _colour_loss
+
+    model, _ = trained
+    loss = _colour_loss([model], [data.R[:4]])
+    output = torch.zeros(1, 4, model.y_mean.size)
+    output[0, 0, 3] = 200.0  # 200 standard deviations: e^(hundreds) before the clip
+    output.requires_grad_(True)
+    value = loss(output, torch.arange(4)[None])
+    value.sum().backward()
+    assert torch.isfinite(value).all() and torch.isfinite(output.grad).all()
+    assert float(value[0]) > 0
+
+
+def test_a_training_that_diverges_is_refused_naming_its_stage(data):
+    """A loss that is no longer finite loses the weights: the protocol stops there, naming the
+    stage and epoch, where it once went on and wrote a model of NaN (stop 107)."""
+    wild = replace(QUICK, learning_rate=1e9, epochs=3, finetune_epochs=1)
+    with pytest.raises(ModelError, match=r"training diverged: partition 1, epoch \d: the loss"):
+        train_protocol(data, wild)
+
+
 @pytest.mark.parametrize(
     "settings, problem",
     [

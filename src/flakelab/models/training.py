@@ -83,6 +83,7 @@ from flakelab.models.network import (
     ModelError,
     StackedNetwork,
     build_network,
+    reflectance_from_log,
 )
 
 __all__ = [
@@ -523,6 +524,7 @@ def fit(
             optimiser.step()
             totals += losses.detach() * batch.shape[1]
         schedule.step()
+        _check_finite(totals, stages, epoch)
         scores = best.update(epoch + 1) if best else [None] * len(models)
         for stage, total, score in zip(stages, totals.tolist(), scores, strict=True):
             entry = {"stage": stage, "epoch": epoch, "loss": total / per_epoch}
@@ -621,6 +623,18 @@ def _stack_rows(arrays: Sequence[torch.Tensor]) -> torch.Tensor:
     return torch.nn.utils.rnn.pad_sequence(list(arrays), batch_first=True)
 
 
+def _check_finite(losses: torch.Tensor, stages: Sequence[str], epoch: int) -> None:
+    """A :class:`ModelError` naming the stage and epoch where a model's loss is not finite:
+    its weights are lost, and a model file of them would predict nothing."""
+    finite = torch.isfinite(losses).tolist()
+    if not all(finite):
+        stage = stages[finite.index(False)]
+        raise ModelError(
+            f"training diverged: {stage}, epoch {epoch + 1}: the loss is not a finite number; "
+            "train again with another seed or a lower learning rate"
+        )
+
+
 def _colour_loss(
     models: Sequence[ForwardModel],
     reflectance: Sequence[NDArray],
@@ -647,7 +661,9 @@ def _colour_loss(
     geometry_bands = reflectance[0].shape[1:]
 
     def loss(output: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-        R = torch.exp(output[..., :spectral] * scale + offset)
+        # clipped as a prediction is: an output far out in one step overflowed exp, and the
+        # NaN it made of the loss the weights (stop 107, a member of the five-angle model)
+        R = reflectance_from_log(output[..., :spectral] * scale + offset)
         lab = colour.lab(R.reshape(*output.shape[:2], *geometry_bands))
         return torch.mean(TorchColour.delta_e94_squared(measured[stack, rows], lab), dim=(1, 2))
 
