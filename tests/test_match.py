@@ -1526,32 +1526,56 @@ def physics():
     return PhysicsForward(library, instrument_geometries("five-angle"))
 
 
-def test_a_white_pearl_the_model_never_saw_is_named_in_a_note(hybrid, physics):
-    """Six tenths of the silver white pearl in the white: the generated cases hold no pearl in
-    a white ground, and the learned search offers a white solid that fails the refinish
-    tolerance's graininess. Its note says the target's texture reads flakes that no toner of
-    the best candidate gives; the physics finds the pearl, passes, and says nothing of it."""
+def _white_pearl_target(texture: bool = True):
+    """Six tenths of the silver white pearl in the white, as the world sprays it nominally."""
     from flakelab.cases.generator import World
     from flakelab.core.measurement import TEXTURE_READINGS, Measurement
     from flakelab.core.spectra import WAVELENGTHS
-    from flakelab.match.models import effect_mask
 
     library = read_library(None)
     world = World(library, "five-angle")
     x = library.fractions({"Pearl silver white": 0.6, "Titanium dioxide white": 0.4})[None]
-    R, texture = world.appearance(x, world.nominal(1))
-    target = Measurement(sample="white pearl", geometries=world.geometries,
-                         wavelengths=WAVELENGTHS, reflectance=R[0],
-                         texture=dict(zip(TEXTURE_READINGS, texture[0], strict=True)))  # fmt: skip
-    said = "the target's texture reads flakes"
-    for forward, pearl_found in ((hybrid, False), (physics, True)):
+    R, readings = world.appearance(x, world.nominal(1))
+    return Measurement(
+        sample="white pearl",
+        geometries=world.geometries,
+        wavelengths=WAVELENGTHS,
+        reflectance=R[0],
+        texture=dict(zip(TEXTURE_READINGS, readings[0], strict=True)) if texture else {},
+    )
+
+
+def test_a_white_pearl_is_matched_by_the_learned_model_as_by_the_physics(hybrid, physics):
+    """A white pearl (a pearl beside the white): the generated cases held none before stop 107,
+    the shipped model predicted this one 9.6 ΔE00 off its spray and the learned search offered
+    a white solid that failed the graininess. Learned and physics alike now find the pearl in
+    the white, and it passes."""
+    from flakelab.match.models import effect_mask
+
+    library = read_library(None)
+    target = _white_pearl_target()
+    for forward in (hybrid, physics):
         result = match(target, forward, effect_mask(library, forward.toners), library=library,
                        tolerance=tolerance_preset("refinish"),
                        settings=MatchSettings(candidates=1))  # fmt: skip
         best = result.candidates[0]
-        assert ("Pearl silver white" in best.fractions) is pearl_found
-        assert best.passes is pearl_found
-        assert any(said in note for note in result.notes) is not pearl_found
+        assert {"Pearl silver white", "Titanium dioxide white"} <= set(best.fractions)
+        assert best.passes
+        assert not any("texture reads flakes" in note for note in result.notes)
+
+
+def test_a_target_with_flakes_matched_without_effect_toners_is_named_in_a_note(hybrid):
+    """Where the target's texture reads flakes and the best candidate holds no effect toner
+    (here every effect toner left out), the note says so and points to the physics."""
+    from flakelab.match.models import effect_mask
+
+    library = read_library(None)
+    effect = effect_mask(library, hybrid.toners)
+    result = match(_white_pearl_target(), hybrid, effect, library=library, allowed=~effect,
+                   tolerance=tolerance_preset("refinish"),
+                   settings=MatchSettings(candidates=1))  # fmt: skip
+    assert not result.candidates[0].passes
+    assert any("the target's texture reads flakes" in note for note in result.notes)
 
 
 def test_a_white_pearl_read_without_texture_travels_like_a_solid(physics):
@@ -1560,17 +1584,10 @@ def test_a_white_pearl_read_without_texture_travels_like_a_solid(physics):
     specular, under SOLID_TRAVEL: it is matched with pigments alone, and the note says that a
     white pearl travels as little and how to match one. Left free, the search finds the
     pearl and a closer match."""
-    from flakelab.cases.generator import World
-    from flakelab.core.measurement import Measurement
-    from flakelab.core.spectra import WAVELENGTHS
     from flakelab.match.models import effect_mask
 
     library = read_library(None)
-    world = World(library, "five-angle")
-    x = library.fractions({"Pearl silver white": 0.6, "Titanium dioxide white": 0.4})[None]
-    R, _ = world.appearance(x, world.nominal(1))
-    target = Measurement(sample="white pearl", geometries=world.geometries,
-                         wavelengths=WAVELENGTHS, reflectance=R[0])  # fmt: skip
+    target = _white_pearl_target(texture=False)
     found = {}
     for travel in (MatchSettings.solid_travel, 0.0):
         result = match(target, physics, effect_mask(library, physics.toners), library=library,

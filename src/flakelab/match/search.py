@@ -682,9 +682,10 @@ def _reads_flakes(texture: dict | None) -> bool | None:
 
 def _flakes_unmatched_note(texture: dict | None, best: Candidate, effect, forward) -> str | None:
     """A note where the target's texture reads flakes (:data:`SOLID_TEXTURE`) and the best
-    candidate holds no effect toner: a paint the model knows nothing like. A white pearl (a
-    pearl in a white ground) is one: the generated cases hold none, and the learned search
-    offers a white solid that fails the graininess, where the physics matches the pearl."""
+    candidate holds no effect toner: a paint the model knows nothing like, or none of the
+    library's effect toners searched. A white pearl (a pearl in a white ground) was one until
+    the generated cases held white pearls (stop 107): the learned search offered a white
+    solid that failed the graininess, where the physics matched the pearl."""
     if not _reads_flakes(texture):
         return None
     if recipe_vector(forward, best.fractions)[np.asarray(effect, bool)].any():
@@ -692,8 +693,9 @@ def _flakes_unmatched_note(texture: dict | None, best: Candidate, effect, forwar
     G, SG = texture["G"], texture["SG"]
     return (
         f"the target's texture reads flakes (G {G:.2f}, SG {SG:.2f}), yet the best candidate "
-        "holds no effect toner: the model may know no paint like it (a white pearl, say); a "
-        "search by the physics alone (match --physics) may find its effect pigment"
+        "holds no effect toner: the model may know no paint like it, or the effect toners "
+        "were left out; a search by the physics alone (match --physics) may find its effect "
+        "pigment"
     )
 
 
