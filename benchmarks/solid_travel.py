@@ -15,7 +15,7 @@ measured BRDFs (RGB taken as linear sRGB) read at each instrument's geometries. 
 al.'s three metallics and four solid car paints; the MERL database's 16 effect paints (by
 their names) and its nine others, which their names do not call car paints' solids.
 
-    python benchmarks/solid_travel.py [--n 20000] [--seed 11] [--json]
+    python benchmarks/solid_travel.py [--n 20000] [--seed 11] [--white-pearls 0.3] [--json]
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from flakelab.cases.generator import World
+from _matcher import share_of_one
+from flakelab.cases.generator import World, WorldSettings
 from flakelab.core.colorimetry import linear_sRGB_to_Lab, reflectance_to_Lab
 from flakelab.core.difference import colour_travel, travel_off_specular
 from flakelab.core.geometry import geometry_angles, instrument_geometries
@@ -61,8 +62,10 @@ def measured_travel(world: World, fractions: np.ndarray, rng: np.random.Generato
     return {k: np.concatenate(v) for k, v in travel.items()}
 
 
-def family_travel(library, instrument: str, n: int, seed: int) -> dict[str, dict]:
-    world = World(library, instrument)
+def family_travel(
+    library, instrument: str, n: int, seed: int, white_pearls: float = 0.0
+) -> dict[str, dict]:
+    world = World(library, instrument, WorldSettings(white_pearl_share=white_pearls))
     rng = np.random.default_rng(seed)
     x = world.formulations(n, rng)
     families = library.paint_families(x)
@@ -117,6 +120,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=20_000)
     parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument(
+        "--white-pearls",
+        type=share_of_one,
+        default=0.0,
+        help="share of the pearls that are white pearls, beside the library's white "
+        "(WorldSettings.white_pearl_share; default 0, the shipped models' world)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     library = read_library(None)
@@ -124,7 +134,8 @@ def main() -> None:
         "solid_travel": SOLID_TRAVEL,
         "n": args.n,
         "seed": args.seed,
-        **{i: family_travel(library, i, args.n, args.seed) for i in INSTRUMENTS},
+        "white_pearls": args.white_pearls,
+        **{i: family_travel(library, i, args.n, args.seed, args.white_pearls) for i in INSTRUMENTS},
     }
     if (groups := reference_groups()) is not None:
         result["reference"] = {i: reference_travel(i, groups) for i in INSTRUMENTS}
@@ -132,7 +143,8 @@ def main() -> None:
         print(json.dumps(result, indent=2))
         return
     print(f"SOLID_TRAVEL {SOLID_TRAVEL} ΔE00 at geometries {SOLID_TRAVEL_FROM:g}° or more from "
-          f"specular [over all geometries]; {args.n} formulations, seed {args.seed}")  # fmt: skip
+          f"specular [over all geometries]; {args.n} formulations, seed {args.seed}, "
+          f"white pearls {args.white_pearls:g} of the pearls")  # fmt: skip
     for instrument in INSTRUMENTS:
         for family, row in result[instrument].items():
             rule, every = row["rule"], row["all"]

@@ -299,6 +299,24 @@ def tinned(world) -> list[Case]:
     return [c for batch in reading.cases(40, seed=7, batch=16) for c in batch]
 
 
+def test_a_recipe_that_sums_to_one_is_kept_to_the_last_digit(cases):
+    """Amounts already summing to one (within float rounding) are kept as given: divided by
+    their sum again, some changed in their last digits, and a case file read and written
+    back differed from its original. Amounts that do not sum to one are still scaled."""
+    rng = np.random.default_rng(0)
+    names = ["Al medium", "Quinacridone magenta", "Phthalo blue GS", "Carbon black"]
+    moved = 0
+    for _ in range(200):
+        x = rng.uniform(0.001, 1.0, len(names))
+        x = x / x.sum()
+        given = dict(zip(names, x.tolist(), strict=True))
+        moved += {k: v / sum(given.values()) for k, v in given.items()} != given
+        assert replace(cases[0], recipe=given).recipe == given
+    assert moved > 0  # the old division would have changed some
+    halves = replace(cases[0], recipe={"Al medium": 2.0, "Carbon black": 2.0}).recipe
+    assert halves == {"Al medium": 0.5, "Carbon black": 0.5}
+
+
 def test_recording_the_tins_leaves_every_case_as_it_was(world, cases, tinned):
     """The tins' readings come from a stream of their own: the cases are the same whether
     they record them or not, and each records a tin of every toner of its recipe, near the
