@@ -295,8 +295,8 @@ class Case:
             object.__setattr__(self, name, values)
         amounts = _recipe_amounts(where, self.recipe)
         total = sum(amounts.values())
-        if abs(total - 1.0) > RECIPE_SUM_TOLERANCE:  # else as given: a file read back and
-            amounts = {k: v / total for k, v in amounts.items()}  # written is the same
+        if abs(total - 1.0) > RECIPE_SUM_TOLERANCE:
+            amounts = {k: v / total for k, v in amounts.items()}
         object.__setattr__(self, "recipe", amounts)
         object.__setattr__(self, "tins", _tins(where, self.tins, self.recipe))
         object.__setattr__(self, "created_at", zoned_here(self.created_at).astimezone(UTC))
