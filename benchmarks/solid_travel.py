@@ -15,7 +15,7 @@ measured BRDFs (RGB taken as linear sRGB) read at each instrument's geometries. 
 al.'s three metallics and four solid car paints; the MERL database's 16 effect paints (by
 their names) and its nine others, which their names do not call car paints' solids.
 
-    python benchmarks/solid_travel.py [--n 20000] [--seed 11] [--white-pearls 0.3] [--json]
+    python benchmarks/solid_travel.py [--n 20000] [--seed 11] [--white-pearls 0] [--json]
 """
 
 from __future__ import annotations
@@ -63,7 +63,11 @@ def measured_travel(world: World, fractions: np.ndarray, rng: np.random.Generato
 
 
 def family_travel(
-    library, instrument: str, n: int, seed: int, white_pearls: float = 0.0
+    library,
+    instrument: str,
+    n: int,
+    seed: int,
+    white_pearls: float = WorldSettings.white_pearl_share,
 ) -> dict[str, dict]:
     world = World(library, instrument, WorldSettings(white_pearl_share=white_pearls))
     rng = np.random.default_rng(seed)
@@ -123,9 +127,10 @@ def main() -> None:
     parser.add_argument(
         "--white-pearls",
         type=share_of_one,
-        default=0.0,
+        default=WorldSettings.white_pearl_share,
         help="share of the pearls that are white pearls, beside the library's white "
-        "(WorldSettings.white_pearl_share; default 0, the shipped models' world)",
+        "(default WorldSettings.white_pearl_share, the shipped models' world; 0: the world "
+        "SOLID_TRAVEL was calibrated on)",
     )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()

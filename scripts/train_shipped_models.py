@@ -14,9 +14,9 @@ screen: how much a model owes to its network's draw (README, "Cases and the lear
 features (``flakelab train --log-offset``); ``--tins calibrated|known`` makes the training cases
 record their tins and learns them at the standard tins, as ``flakelab train`` learns such
 cases (:func:`~flakelab.match.lots.at_standard_tins`; default ``none``, the shipped files').
-``--white-pearls 0.3`` makes three in ten of the training pearls white pearls (beside the
-library's white; the shipped files learned none: README, white pearls; stop 107's models,
-trained so, 21.1 and 30.2 min, 52:11 with the cases, 5.7 GB peak).
+``--white-pearls SHARE`` sets the share of the training pearls that are white pearls (beside
+the library's white; default the world's, three in ten, as the shipped files learned: trained
+at stop 107, 21.1 and 30.2 min, 52:11 with the cases, 5.7 GB peak; shipped at stop 108).
 ``--checkpoints DIR`` keeps each training after every stage: run again after an
 interruption, it goes on from there to the same file (``flakelab train --checkpoint``).
 
@@ -94,9 +94,9 @@ def main() -> None:
     parser.add_argument(
         "--white-pearls",
         type=float,
-        default=0.0,
+        default=WorldSettings.white_pearl_share,
         help="share of the training pearls that are white pearls, beside the library's white "
-        "(WorldSettings.white_pearl_share; the shipped files': 0)",
+        "(default WorldSettings.white_pearl_share, the shipped files')",
     )
     parser.add_argument(
         "--checkpoints",

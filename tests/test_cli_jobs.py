@@ -354,7 +354,8 @@ def test_additions_are_for_what_is_left_in_the_can(tmp_path, cli):
     half = json.loads(run.stdout)
     assert half["left_g"] == 125.0 and "left_g" not in whole
     big = [t for t, g in whole["add_g"].items() if g >= 1.0]
-    assert big and all(half["add_g"][t] == pytest.approx(whole["add_g"][t] / 2, abs=0.1)
+    # each rounded for colour to the 0.1 g step, up or down (phthalo blue GS: 2.6 g, then 1.2)
+    assert big and all(half["add_g"][t] == pytest.approx(whole["add_g"][t] / 2, abs=0.15)
                        for t in big)  # fmt: skip
     mixed = json.loads(recipe.read_text())
     assert read_recipe(out) == pytest.approx(
@@ -567,7 +568,7 @@ def test_a_shop_records_its_spray_outs_once_each(tmp_path, cli):
     said = " ".join(run.stdout.split())
     assert "models that learn from it: five-angle" in said
     assert "no instrument's model learns from it" not in said
-    assert "the spray-out from its recipe's prediction: ΔE00 0.35 at 45as110" in said
+    assert "the spray-out from its recipe's prediction: ΔE00 0.34 at 45as110" in said
     assert "the target's 15as-45, 15as-30" in said and "not kept (--instrument chooses)" in said
     # a spray-out read at three geometries: no model learns from it, nor checks it
     three = tmp_path / "three.cxf"
@@ -843,10 +844,12 @@ def test_training_with_adaptation_keeps_the_general_model_and_judges_the_shops_o
     copy under the shop's, adapted from the general one and judged on the shop's own held-out
     cases only (the shop's current model would otherwise be judged on other shops' cases)."""
     cases, database = str(tmp_path / "cases.db"), str(tmp_path / "models.db")
-    run = cli("cases", "generate", "--n", "120", "--seed", "31", "--shop", "shop A",
+    # seeds whose held-out cases of shop A include some of well-known toners alone (5 of 28;
+    # with seeds 31 and 32 none, in the world with white pearls)
+    run = cli("cases", "generate", "--n", "120", "--seed", "33", "--shop", "shop A",
               "--shop-film-build", "1.05", "--out", cases)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = cli("cases", "generate", "--n", "120", "--seed", "32", "--out", cases)
+    run = cli("cases", "generate", "--n", "120", "--seed", "34", "--out", cases)
     assert run.returncode == 0, run.stderr
     quick = ("--epochs", "2", "--hidden", "8", "--adapt-epochs", "2", "--holdout", "0.25")
     run = cli("train", cases, *quick, "--adapt", "nobody", "-d", database)
@@ -1253,7 +1256,7 @@ def test_a_shops_habits_are_read_from_its_cases_and_aim_its_recipes(tmp_path, cl
     run = cli("match", "--example", "--candidates", "1", "--shop", "shop A",
               "--database", cases, "--json")  # fmt: skip
     assert run.returncode == 0, run.stderr
-    assert any("flakes 4.0%" in n for n in json.loads(run.stdout)["notes"])
+    assert any("flakes 3.9%" in n for n in json.loads(run.stdout)["notes"])
     assert "warning" not in run.stderr  # read against the model in use
     run = cli("match", "--example", "--shop", "synthetic shop", "--database", cases)
     said = " ".join(run.stderr.split())

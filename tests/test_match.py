@@ -1020,15 +1020,16 @@ def example_by_metamerism(hybrid):
 
 
 def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(hybrid):
-    """A silver of fine bright and medium bright aluminium, made as the harness makes its
-    targets (seed 11, the 32nd of 40). Matched on colour alone, its candidates include one
-    visibly grainier (ΔG +1.17). The refinish tolerance bounds |ΔG| by 1: that recipe then
-    ranks out of the five, what fails the limit ranks after every candidate that meets it,
-    and the colour-best recipe is still first. A limit no recipe can meet fails them all on
-    texture alone, and the search's note names the reading. (Stop 52's model: of the 40
-    targets, 3 had a grainy colour candidate, and this one alone kept the colour-best recipe
-    first under refinish; stop 51's served the 40th, whose grainy candidate is now among the
-    other two; with the models before, 7 had one.)"""
+    """A green-gold silver of fine aluminium and isoindoline yellow with traces of phthalos,
+    made as the harness makes its targets (seed 11, the 5th of 40). Matched on colour alone,
+    two of its candidates are visibly grainier, on medium coarse aluminium (ΔG +1.81 and
+    +1.76). The refinish tolerance bounds |ΔG| by 1: those recipes then rank out of the five,
+    what fails the limit ranks after every candidate that meets it, and the colour-best
+    recipe is still first. A limit no recipe can meet fails them all on texture alone, and
+    the search's note names the reading. (The shipped model, stop 108: of the 40 targets of
+    the world with white pearls, 5 had a grainy colour candidate, and this one kept every
+    candidate passing on colour and the colour-best first under refinish; stop 52's model
+    served the 32nd target of the world before, stop 51's the 40th.)"""
     from flakelab.match.evaluate import harness_world, trial
     from flakelab.match.models import effect_mask
 
@@ -1037,7 +1038,7 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     rng = np.random.default_rng(11)
     hidden = world.formulations(40, rng)
     # the trials before it are made only to draw the generator as the scan of 40 did
-    target = [trial(world, x, rng) for x in hidden[:32]][-1].measurement()
+    target = [trial(world, x, rng) for x in hidden[:5]][-1].measurement()
     effect = effect_mask(library, hybrid.toners)
     refinish = tolerance_preset("refinish")
     results = {
@@ -1045,10 +1046,9 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
         for name, tolerance in [
             ("colour", replace(refinish, texture=None)),
             ("refinish", refinish),
-            # no recipe comes this near: the best came within 0.0015 of the target's G
-            # (2.36) with stop 52's model, and within 0.0007 with the shipped one on an AMD
-            # EPYC (stop 61), whose arithmetic ends the search a little elsewhere: a limit
-            # of 0.001 passed there
+            # no recipe comes this near: stop 52's best came within 0.0015 of the 32nd
+            # target's G (2.36), stop 61's within 0.0007 on an AMD EPYC, whose arithmetic
+            # ends the search a little elsewhere: a limit of 0.001 passed there
             ("tight", replace(refinish, texture=TextureLimit(G=1e-5))),
         ]
     }
@@ -1082,17 +1082,18 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
     hybrid, example_by_metamerism
 ):
     """The example blue metallic is tinted with phthalo blue GS and indanthrone blue.
-    Matched on its colour in daylight alone, the best recipe takes phthalo blue RS with a
-    trace of phthalo green (metamerism index 0.96 under F11, stop 52's model); with the
-    index in the objective it takes the GS, and its index falls below a third of that. A
-    shop without the phthalo blues gets in daylight a metamer of phthalo green and
-    quinacridone violet (2.47 under F11), named as such in the search's notes. (Stop 51's
-    model gave that metamer with every toner allowed.)"""
+    Matched on its colour in daylight alone, the best recipe is a metamer of phthalo green
+    and quinacridone violet (metamerism index 2.46 under F11, the shipped model of stop 108;
+    stop 52's took phthalo blue RS, 0.96); with the index in the objective it takes both
+    phthalo blues, and its index falls below a tenth of that. A shop without the phthalo
+    blues gets in daylight a metamer of indanthrone blue and phthalo green (2.26 under F11),
+    named as such in the search's notes. (Stop 52's model gave there the green and violet.)"""
     target, best, notes = example_by_metamerism
     worst = {w: max(v.max() for v in c.metamerism.values()) for w, c in best.items()}
     assert worst[1.0] < worst[0.0] / 3 and worst["no blues"] > 2.0
     assert {"Phthalo blue GS", "Indanthrone blue"} & set(best[1.0].fractions)
-    assert {"Phthalo green", "Quinacridone violet"} <= set(best["no blues"].fractions)
+    assert {"Phthalo green", "Quinacridone violet"} <= set(best[0.0].fractions)
+    assert {"Phthalo green", "Indanthrone blue"} <= set(best["no blues"].fractions)
     assert best[1.0].passes  # in daylight it still matches
     assert any("the best recipe is a metamer of the target" in n and "FL11" in n
                for n in notes["no blues"])  # fmt: skip
@@ -1113,8 +1114,8 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
     """The example car given as its L*a*b* alone (spectra recovered from it, a metamer of
     many): the search cannot weigh a metamerism index against it and so finds what the
     measured spectra give with --metamerism 0, the same recipe (phthalo green and quinacridone
-    violet, ΔE00 0.51 at worst, where the index steers the measured car to phthalo blue GS at
-    0.20), with no index in the candidates and a note saying why."""
+    violet, ΔE00 0.44 at worst, where the index steers the measured car to the phthalo blues
+    at 0.23), with no index in the candidates and a note saying why."""
     from flakelab.core.colorimetry import reflectance_from_Lab
     from flakelab.match.models import effect_mask
 
@@ -1129,9 +1130,9 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
     result = match(alone, hybrid, effect, settings=MatchSettings(candidates=1))
     found = result.candidates[0]
     assert set(found.fractions) == set(best[0.0].fractions) != set(best[1.0].fractions)
-    for toner, share in found.fractions.items():
-        assert share == pytest.approx(best[0.0].fractions[toner], abs=1e-4)
-    assert found.de00.max() == pytest.approx(best[0.0].de00.max(), abs=1e-3)
+    for toner, share in found.fractions.items():  # within 0.1 g of a 250 g can
+        assert share == pytest.approx(best[0.0].fractions[toner], abs=4e-4)
+    assert found.de00.max() == pytest.approx(best[0.0].de00.max(), abs=5e-3)
     assert found.metamerism == {} and found.to_dict()["metamer"] is False
     assert any("gives its colour alone" in n and "no metamerism index" in n for n in result.notes)
     assert not any("an estimate from its colour under" in n for n in result.notes)
@@ -1147,19 +1148,19 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
 
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
     """The car's blue is phthalo blue GS (the match that weighs metamerism). The daylight-only
-    match of the example without the phthalo blues stands in phthalo green and quinacridone
-    violet for it. Sprayed a little light, a correction that keeps its pigments moves
-    amounts, its expected index stays over the notice level under every light, and the
-    colorist is told to match again; the car's own recipe sprayed the same way draws no such
-    note. Allowed to add a toner too, the correction finds none that helps (worst index
-    under FL11 2.47 → 2.53) and still says to match again. With a trace of the GS (0.3 %),
-    the correction raises it into a tint (adding carbon black) and the metamer is cured
-    (under A 1.94 → 0.26). A correction changes amounts and adds one toner: it cures a
-    metamer only where the recipe already carries the car's pigment that makes it one.
-    (Stop 54's model; stop 52's cured A 1.98 → 0.17. Stop 51's gave the same metamer with
-    every toner allowed, and its cure added DPP red, A 1.96 → 0.10; the models before stood
-    in phthalo green and quinacridone magenta for the car's two blues, and kept the
-    indanthrone.)"""
+    match of the example without the phthalo blues stands in indanthrone blue, phthalo green
+    and a little carbon black for it. Sprayed a little light, a correction that keeps its
+    pigments moves amounts, its expected index stays over the notice level under every light,
+    and the colorist is told to match again; the car's own recipe sprayed the same way draws
+    no such note. Allowed to add a toner too, the correction adds DPP orange, which lowers
+    the worst index (under FL11 2.26 → 1.36) but not below the notice level, and still says to
+    match again. With a trace of the GS (0.3 %), the correction raises it into a tint (8 %)
+    and the metamer is cured (under A 1.37 → 0.13, FL11 2.26 → 0.23). A correction changes
+    amounts and adds one toner: it cures a metamer only where the recipe already carries the
+    car's pigment that makes it one. (The shipped model of stop 108. The models of stops 52–
+    107 stood in phthalo green and quinacridone violet, and their cure added a toner: carbon
+    black, A 1.94 → 0.26 at stop 54; stop 51's added DPP red; the models before stood in
+    phthalo green and quinacridone magenta for the car's two blues.)"""
     from flakelab.core.difference import METAMERISM_NOTICE, is_metamer, worst_light
     from flakelab.match.correction import metamerism_note
 
@@ -1189,8 +1190,8 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
         notes[name] = metamerism_note(before, fixed[name].metamerism)
         if name == "metamer":
             assert is_metamer(before)
-            # amounts alone leave it one under every light (A 2.03 → 2.02, FL11 2.47 → 2.53,
-            # LED-B3 1.42 → 1.45)
+            # amounts alone leave it one under every light (A 1.40 → 1.40, FL11 2.26 → 2.20,
+            # LED-B3 1.07 → 1.05)
             for light, index in fixed[name].metamerism.items():
                 assert index.max() > METAMERISM_NOTICE, light
             assert worst_light(fixed[name].metamerism)[1] == pytest.approx(
@@ -1205,16 +1206,13 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     assert "FL11" in notes["found"] and "match the target again" in notes["found"]
     cured = fixed["traced"]
     assert cured.fractions[car[0]] > 10 * traced[car[0]]
-    # one toner joins the tint, which one the machine's arithmetic decides: carbon black on
-    # the machines of stops 54-71, DPP orange (1.4 %) on an Intel Xeon with AVX-512 (stop 72)
-    # and DPP red on the same with torch's AVX2 kernels; the cure below is the same on all
-    assert cured.new_toner is not None and cured.new_toner not in metamer
+    # the GS needs no toner beside it here (the models before stop 108 added one, which one
+    # the machine's arithmetic decided: carbon black, DPP orange or DPP red)
+    assert cured.new_toner not in metamer
     assert worst_light(cured.metamerism)[1] < METAMERISM_NOTICE / 2
-    # the spray-out's index is read, the cure's is where the search ends: 0.26 on the
-    # machines of stops 54-60, 0.246 on an AMD EPYC (stop 61), whose arithmetic differs;
-    # 0.263 and 0.275 under scripts/other_cpus_check.sh's avx2 and baseline kernels; 0.259
-    # on an Intel Xeon with AVX-512 and 0.166 there with torch's AVX2 kernels (stop 72)
-    assert befores["traced"]["A"].max() == pytest.approx(1.94, abs=0.01)
+    # the spray-out's index is read, the cure's is where the search ends: 0.13 on an AMD
+    # EPYC (stop 108); the models before gave 0.17–0.28 as each machine's arithmetic went
+    assert befores["traced"]["A"].max() == pytest.approx(1.37, abs=0.01)
     assert cured.metamerism["A"].max() < 0.3
     assert notes["traced"] is None
 
@@ -1545,25 +1543,23 @@ def _white_pearl_target(texture: bool = True):
     )
 
 
-def test_a_white_pearl_the_model_never_saw_is_named_in_a_note(hybrid, physics):
-    """A white pearl (a pearl beside the white): the shipped model's cases hold none
-    (``WorldSettings.white_pearl_share`` 0), and the learned search offers a white solid that
-    fails the refinish tolerance's graininess. Its note says the target's texture reads
-    flakes that no toner of the best candidate gives; the physics finds the pearl, passes,
-    and says nothing of it."""
+def test_a_white_pearl_is_matched_by_the_learned_model_as_by_the_physics(hybrid, physics):
+    """A white pearl (a pearl beside the white): the generated cases held none before stop 107,
+    the shipped model predicted this one 9.6 ΔE00 off its spray and the learned search offered
+    a white solid that failed the graininess. Learned and physics alike now find the pearl in
+    the white, and it passes."""
     from flakelab.match.models import effect_mask
 
     library = read_library(None)
     target = _white_pearl_target()
-    said = "the target's texture reads flakes"
-    for forward, pearl_found in ((hybrid, False), (physics, True)):
+    for forward in (hybrid, physics):
         result = match(target, forward, effect_mask(library, forward.toners), library=library,
                        tolerance=tolerance_preset("refinish"),
                        settings=MatchSettings(candidates=1))  # fmt: skip
         best = result.candidates[0]
-        assert ("Pearl silver white" in best.fractions) is pearl_found
-        assert best.passes is pearl_found
-        assert any(said in note for note in result.notes) is not pearl_found
+        assert {"Pearl silver white", "Titanium dioxide white"} <= set(best.fractions)
+        assert best.passes
+        assert not any("texture reads flakes" in note for note in result.notes)
 
 
 def test_a_target_with_flakes_matched_without_effect_toners_is_named_in_a_note(hybrid):
@@ -1739,14 +1735,15 @@ def test_a_recorded_recipe_is_judged_as_it_is_and_refined(hybrid):
     assert all("Carbon black" not in c.fractions for c in shop.candidates)
     # a shop's history: each car matched from its five nearest cases' recipes scores no worse
     # than the search alone (before, refined beside its subsets, they changed which of those
-    # successive halving kept: car 8 scored 0.597 against 0.494), and car 15 far better
+    # successive halving kept: car 8 scored 0.597 against 0.494), and car 29 far better
+    # (1.69 → 0.82; none of the first 30 scored worse, stop 108)
     from flakelab.cases.generator import World
     from flakelab.cases.nearest import nearest_cases, recorded_recipes
 
     history = [c for batch in World(hybrid.library, "five-angle").cases(60, seed=11) for c in batch]
     shorter = MatchSettings(candidates=1, screen_steps=30, refine_steps=40)
     scores = {}
-    for car in (history[8].target, history[15].target):
+    for car in (history[8].target, history[29].target):
         near = nearest_cases(car, history, tolerance_preset("refinish"), 5)
         starts = list(recorded_recipes(near, hybrid.toners).values())
         scores[len(scores)] = [match(car, hybrid, effect, settings=shorter, starts=s).candidates[0]
@@ -1915,7 +1912,7 @@ def test_harness_counts_the_targets_that_need_a_toner_out_of_stock(hybrid):
 
     world = harness_world(hybrid.library, "five-angle", "shop")
     effect = effect_mask(hybrid.library, hybrid.toners)
-    missing = "Al medium"
+    missing = "Al coarse bright"  # two of the six hold it (stop 108's world)
     column = list(world.library.names).index(missing)
     hidden = [x for x, _ in harness_trials(world, 6, 5, (), 0)]
     needing = sum(x[column] > 0 for x in hidden)
@@ -2195,12 +2192,12 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
 
 def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
     """No formula holds less than 2.5 % of aluminium, or of pearl (EFFECT_TRACE). Left free,
-    the search tops a pure green pearl with 0.8 % of bright coarse aluminium, 1.26 ΔE00 off the
-    car by the world's physics; kept to the support, with the green pearl alone, 1.67 off. The
-    rule costs here: the model's guess at the trace is good. Stop 53 had found the traced
-    recipe 8.5 off, but that was the world's physics, whose pure pearls lacked their diffuse
-    light (tests/test_physics.py -k pure_pearl). A trace of a toner of the recipe's own kind
-    (a third aluminium in a metallic, Xirallic in a pearl) is none."""
+    the search tops a pure green pearl (1.67 ΔE00 off the car by the world's physics) with
+    0.27 % of VMP aluminium, 2.64 off; kept to the support, with 2.1 % of Xirallic silver
+    beside it, 2.06 off. A trace of a toner of the recipe's own kind (a third aluminium in a
+    metallic, Xirallic in a pearl) is none. The model trained before the cases held white
+    pearls guessed the trace well (0.8 % of coarse aluminium, 1.26 off, against 1.67 kept to
+    the support: stop 107); each model's draw guesses a trace as it will."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import trial, worst_de00
     from flakelab.match.judging import recipe_vector
@@ -2237,10 +2234,10 @@ def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
 
     aluminium = [names.index(t.name) for t in hybrid.library.of_kind("aluminium")]
     _, free, free_physics = best(0.0)
-    assert 0 < free[aluminium].sum() < MatchSettings.effect_trace and free_physics < 1.5
+    assert 0 < free[aluminium].sum() < MatchSettings.effect_trace and free_physics > 2.5
     kept, recipe, physics = best(MatchSettings.effect_trace)
     assert not trace_toners(recipe, effect, kinds).any() and kept.candidates[0].in_support
-    assert recipe[aluminium].sum() == 0.0 and free_physics < physics < 2.0
+    assert recipe[aluminium].sum() == 0.0 and physics < 2.1
 
 
 def test_objective_is_cie94_and_the_plain_multi_angle_one_for_de00_1():

@@ -481,8 +481,9 @@ def test_effect_share_floor_is_where_the_effect_paints_of_the_cases_run_out(trai
     model, _ = trained
     share = (data.x * data.effect).sum(1) / data.x.sum(1)
     floor = model.info["effect_share_floor"]
-    # the generator's effect paints keep at least about half their weight in effect toners
-    assert 0.4 < floor <= np.min(share[share > 0]) + 0.05
+    # the generator's effect paints keep at least a fifth of their weight in effect toners
+    # (a white pearl: its pearl beside up to three times as much white)
+    assert 0.2 < floor <= np.min(share[share > 0]) + 0.05
     assert np.sum((share > 0) & (share < floor)) <= max(1, 0.001 * share.size)
     x = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.5, 0.5], [0.02, 0.0, 0.0, 0.98]])
     assert effect_share_floor(x, np.array([1.0, 1.0, 0.0, 0.0])) == pytest.approx(0.02)
@@ -492,8 +493,9 @@ def test_effect_share_floor_is_where_the_effect_paints_of_the_cases_run_out(trai
 
 @pytest.mark.parametrize("instrument", sorted(SHIPPED))
 def test_shipped_models_record_their_effect_share_floor(instrument):
-    # the demo cases' effect paints: effect toners are at least ~48 % of a recipe
-    assert 0.48 <= shipped_model(instrument).info["effect_share_floor"] <= 0.6
+    # the demo cases' effect paints: effect toners are at least ~26 % of a recipe, a white
+    # pearl's (~48 % before the cases held white pearls, stop 108)
+    assert 0.24 <= shipped_model(instrument).info["effect_share_floor"] <= 0.3
 
 
 def test_unknown_toner_in_a_recipe_is_an_error(trained):

@@ -8,9 +8,9 @@ application and measured (the *spray-out*). Every random draw comes from one see
 generator, so ``(n, seed)`` gives the same cases on every machine.
 
 Formulations (:meth:`World.formulations`, the family mix ``kinds``): a metallic is one or two
-aluminiums, a pearl one or two pearls (``white_pearl_share`` of them, none by default, with
-the library's white beside them, white pearls; half the rest over a little aluminium), each
-with up to four pigments at log-uniform amounts; a solid is a pigment that hides the primer — the
+aluminiums, a pearl one or two pearls (``white_pearl_share`` of them with the library's white
+beside them, white pearls; half the rest over a little aluminium), each with up to four
+pigments at log-uniform amounts; a solid is a pigment that hides the primer — the
 library's white for ``solid_white_share`` of them, else an opaque iron oxide, BiVO4 or a
 black — with up to three tints.
 
@@ -170,7 +170,7 @@ class WorldSettings:
     tin_sprayouts: int = 1
     colour_codes: int = 0  # the car makers' colours a shop meets (0: every car its own)
     solid_white_share: float = 0.5
-    white_pearl_share: float = 0.0  # the shipped models learned none (README, white pearls)
+    white_pearl_share: float = 0.3
     kinds: dict[str, float] = field(
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
     )

@@ -683,9 +683,9 @@ def _reads_flakes(texture: dict | None) -> bool | None:
 def _flakes_unmatched_note(texture: dict | None, best: Candidate, effect, forward) -> str | None:
     """A note where the target's texture reads flakes (:data:`SOLID_TEXTURE`) and the best
     candidate holds no effect toner: a paint the model knows nothing like, or none of the
-    library's effect toners searched. A white pearl (a pearl in a white ground) is one: the
-    shipped model's cases hold none, and the learned search offers a white solid that fails
-    the graininess, where the physics matches the pearl."""
+    library's effect toners searched. A white pearl (a pearl in a white ground) was one until
+    the generated cases held white pearls (stop 107): the learned search offered a white
+    solid that failed the graininess, where the physics matched the pearl."""
     if not _reads_flakes(texture):
         return None
     if recipe_vector(forward, best.fractions)[np.asarray(effect, bool)].any():
