@@ -684,7 +684,7 @@ def _flakes_unmatched_note(texture: dict | None, best: Candidate, effect, forwar
     """A note where the target's texture reads flakes (:data:`SOLID_TEXTURE`) and the best
     candidate holds no effect toner: a paint the model knows nothing like, or none of the
     library's effect toners searched. A white pearl (a pearl in a white ground) was one until
-    the generated cases held white pearls (stop 107): the learned search offered a white
+    the shipped models learned white pearls (stop 108): the learned search offered a white
     solid that failed the graininess, where the physics matched the pearl."""
     if not _reads_flakes(texture):
         return None

@@ -46,10 +46,11 @@ pigments alone (``MatchSettings.solid_travel``; 0 leaves it free). In the genera
 (20,000 formulations, seed 11, each sprayed with the shop's variation and read with the
 instrument's noise: ``benchmarks/solid_travel.py``) solids travel at most 2.15 (five-angle)
 and 2.35 (MA-T12). Calibrated on that world before it held white pearls (a pearl beside the
-library's white, stop 107), when 1 and 2 of its 17,047 effect paints fell below it, and
-checked on the real car paints there are (fits of measured BRDFs, RGB): below it Günther et
-al.'s solid white, blue and 2K acrylic, above it their three metallics and the MERL database's
-16 effect paints as Löw et al. fit them. White pearls travel from 1.62, among the solids
+library's white, stop 107; ``--white-pearls 0``), when 1 and 2 of its 17,047 effect paints
+fell below it, and checked on the real car paints there are (fits of measured BRDFs, RGB):
+below it Günther et al.'s solid white, blue and 2K acrylic, above it their three metallics
+and the MERL database's 16 effect paints as Löw et al. fit them. White pearls travel from
+1.62, among the solids
 (more than half of those travel 1.5 or more): 497 and 496 pearls, each with 9 % or more of
 the white, now fall below it (and at the five-angle one metallic, 2.12), and no threshold
 parts the families. Without texture readings, colour travel
