@@ -100,9 +100,10 @@ def test_mixed_up_sprayouts_are_left_out_and_the_habits_read_as_without_them(shi
     """Three white panels given as spray-outs among the habits shop's 500 are taken for
     mix-ups, and the habits of the rest are those of the 500 screened alone. One of the shop's
     own spray-outs is taken for one too: case 361, interference red pearl with 0.7 % of TiO2,
-    which the shipped model predicts 8.7 ΔE00 off with the habits (8.5 off the world's
-    physics: a trace of white in a pure pearl lies between the cases' pure pearls and their
-    white pearls; stop 107's model 1.8). The next of the 500 reads 2.9 off."""
+    whose spray-out reads 8.7 ΔE00 from the shipped model's prediction with the habits. The
+    model errs there: it predicts that recipe 8.5 off the world's physics (stop 106's model
+    1.8), a trace of white in a pure pearl lying between the cases' pure pearls and their white
+    pearls. The next of the 500 reads 2.9 off."""
     from flakelab.match.habits import screened_habits
 
     library, forward, _ = shipped
@@ -202,7 +203,7 @@ def test_the_prior_draws_a_small_shops_habits_towards_none(shipped, plain_shop, 
     assert np.all(drawn.standard_error < free.standard_error)
     # the least well read habit, drawn in nearly as one number alone would be: by
     # prior² / (prior² + se²) (0.75 here; its correlation with the others moves it by 5 %:
-    # 0.93 and 1 % with the cases of the world before white pearls, stop 107)
+    # 0.93 and 1 % with the cases of the world before white pearls, stop 106)
     shrink = PRIOR_SD[0] ** 2 / (PRIOR_SD[0] ** 2 + free.standard_error[0] ** 2)
     assert drawn.film_build / free.film_build == pytest.approx(shrink, rel=0.06)
     assert abs(drawn.film_build) < abs(free.film_build)

@@ -1544,8 +1544,8 @@ def _white_pearl_target(texture: bool = True):
 
 
 def test_a_white_pearl_is_matched_by_the_learned_model_as_by_the_physics(hybrid, physics):
-    """A white pearl (a pearl beside the white): the generated cases held none before stop 107,
-    the shipped model predicted this one 9.6 ΔE00 off its spray and the learned search offered
+    """A white pearl (a pearl beside the white): the generated cases held none before stop 108,
+    stop 106's model predicted this one 9.6 ΔE00 off its spray and the learned search offered
     a white solid that failed the graininess. Learned and physics alike now find the pearl in
     the white, and it passes."""
     from flakelab.match.models import effect_mask
@@ -2195,9 +2195,9 @@ def test_a_trace_of_aluminium_in_a_pearl_is_outside_the_model_s_support(hybrid):
     the search tops a pure green pearl (1.67 ΔE00 off the car by the world's physics) with
     0.27 % of VMP aluminium, 2.64 off; kept to the support, with 2.1 % of Xirallic silver
     beside it, 2.06 off. A trace of a toner of the recipe's own kind (a third aluminium in a
-    metallic, Xirallic in a pearl) is none. The model trained before the cases held white
-    pearls guessed the trace well (0.8 % of coarse aluminium, 1.26 off, against 1.67 kept to
-    the support: stop 107); each model's draw guesses a trace as it will."""
+    metallic, Xirallic in a pearl) is none. Stop 106's model, trained before the cases held
+    white pearls, guessed the trace well (0.8 % of coarse aluminium, 1.26 off, against 1.67
+    kept to the support); each model's draw guesses a trace as it will."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import trial, worst_de00
     from flakelab.match.judging import recipe_vector
