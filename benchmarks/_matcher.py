@@ -37,12 +37,7 @@ def add_harness_arguments(
         type=parse_kinds,
         help="the hidden targets' paint families, e.g. pearl=1 (default: the generator's mix)",
     )
-    parser.add_argument(
-        "--white-pearls",
-        type=share_of_one,
-        help="share of the hidden pearls that are white pearls, e.g. 1 with --kinds pearl=1 "
-        "(default: the world's, WorldSettings.white_pearl_share)",
-    )
+    add_white_pearls_argument(parser, "the hidden pearls (e.g. 1 with --kinds pearl=1)")
     parser.add_argument("--model", help=MODEL_HELP)
     parser.add_argument(
         "--tolerance", help="preset or TOML/JSON file the sprays are judged by (default de00-1.0)"
@@ -209,6 +204,18 @@ def parse_kinds(text: str) -> dict[str, float]:
     ):
         raise SystemExit(f"--kinds: expected shares of {', '.join(PAINT_FAMILIES)}, got {text!r}")
     return kinds
+
+
+def add_white_pearls_argument(parser: argparse.ArgumentParser, pearls: str, default=None) -> None:
+    """``--white-pearls SHARE``: the share of ``pearls`` that are white pearls, beside the
+    library's white (``WorldSettings.white_pearl_share``; ``default`` None: the world's)."""
+    parser.add_argument(
+        "--white-pearls",
+        type=share_of_one,
+        default=default,
+        help=f"share of {pearls} that are white pearls, beside the library's white "
+        "(default: the world's, WorldSettings.white_pearl_share)",
+    )
 
 
 def share_of_one(text: str) -> float:

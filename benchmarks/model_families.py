@@ -24,7 +24,7 @@ import json
 
 import numpy as np
 
-from _matcher import share_of_one
+from _matcher import add_white_pearls_argument
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -104,12 +104,7 @@ def main() -> None:
     parser.add_argument("--against", help="a second model file, judged on the same paints")
     parser.add_argument("--formulations", type=int, default=1500, help="per family")
     parser.add_argument("--seed", type=int, default=6)
-    parser.add_argument(
-        "--white-pearls",
-        type=share_of_one,
-        default=WorldSettings.white_pearl_share,
-        help="share of the pearls that are white pearls (default the world's)",
-    )
+    add_white_pearls_argument(parser, "the pearls", WorldSettings.white_pearl_share)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.formulations < 1:

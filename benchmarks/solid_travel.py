@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _matcher import share_of_one
+from _matcher import add_white_pearls_argument
 from flakelab.cases.generator import World, WorldSettings
 from flakelab.core.colorimetry import linear_sRGB_to_Lab, reflectance_to_Lab
 from flakelab.core.difference import colour_travel, travel_off_specular
@@ -124,14 +124,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=20_000)
     parser.add_argument("--seed", type=int, default=11)
-    parser.add_argument(
-        "--white-pearls",
-        type=share_of_one,
-        default=WorldSettings.white_pearl_share,
-        help="share of the pearls that are white pearls, beside the library's white "
-        "(default WorldSettings.white_pearl_share, the shipped models' world; 0: the world "
-        "SOLID_TRAVEL was calibrated on)",
-    )
+    add_white_pearls_argument(parser, "the pearls", WorldSettings.white_pearl_share)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     library = read_library(None)
