@@ -109,8 +109,6 @@ def main() -> None:
         parser.error(f"--log-offset: {args.log_offset} is not in [0, {LOG_OFFSET_MAX}]")
     if args.members is not None and args.members < 1:
         parser.error(f"--members: {args.members} is not a positive number of networks")
-    if not 0 <= args.white_pearls <= 1:
-        parser.error(f"--white-pearls: {args.white_pearls} is not a share from 0 to 1")
     if args.cases is not None and args.cases < 1:
         parser.error(f"--cases: {args.cases} is not a positive number of cases")
     library = read_library(None)
@@ -119,11 +117,14 @@ def main() -> None:
         n, epochs, batch_size, members, screening = SETTINGS[instrument]
         n = args.cases if args.cases is not None else n
         kinds = TRAINING_KINDS.get(instrument)
-        settings = WorldSettings(
-            tins=args.tins,
-            white_pearl_share=args.white_pearls,
-            **({"kinds": kinds} if kinds else {}),
-        )
+        try:
+            settings = WorldSettings(
+                tins=args.tins,
+                white_pearl_share=args.white_pearls,
+                **({"kinds": kinds} if kinds else {}),
+            )
+        except ValueError as error:  # before any training
+            parser.error(f"--white-pearls: {error}")
         world = World(library, instrument, settings, exclude=NOVEL_TONERS)
         rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
         config = TrainingConfig.per_stage(

@@ -40,7 +40,7 @@ from flakelab.cases.database import (
     user_database_file,
 )
 from flakelab.cases.exchange import CASE_FIELDS, CaseFileError, read_cases, write_cases
-from flakelab.cases.generator import World, near_black
+from flakelab.cases.generator import World, WorldSettings, near_black
 from flakelab.cases.record import case_from_readings, judged_outcome
 from flakelab.cases.schema import Base, ModelRow
 from flakelab.core import compare
@@ -183,6 +183,14 @@ def test_white_pearls_are_pearls_beside_the_white(world):
     assert lightness[1.0] > lightness[0.0] + 15
     tinted = (drawn[0.0][:, white] > 0).mean()  # the white among ≤ 4 of 14 tints
     assert 0.05 < tinted < 0.3
+
+
+@pytest.mark.parametrize("name", ["white_pearl_share", "solid_white_share", "weathered_share"])
+@pytest.mark.parametrize("share", [-0.1, 1.5, float("nan")])
+def test_a_world_share_outside_zero_to_one_is_refused(name, share):
+    with pytest.raises(ValueError, match=f"WorldSettings.{name}: .* is not a share from 0 to 1"):
+        WorldSettings(**{name: share})
+    assert getattr(WorldSettings(**{name: 1.0}), name) == 1.0  # the ends are shares
 
 
 def test_exact_model_floor_vanishes_without_variation(world):

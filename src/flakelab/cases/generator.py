@@ -175,6 +175,12 @@ class WorldSettings:
         default_factory=lambda: {"metallic": 0.7, "pearl": 0.15, "solid": 0.15}
     )
 
+    def __post_init__(self) -> None:
+        for name in ("weathered_share", "solid_white_share", "white_pearl_share"):
+            share = getattr(self, name)
+            if not 0 <= share <= 1:
+                raise ValueError(f"WorldSettings.{name}: {share!r} is not a share from 0 to 1")
+
 
 SHOP_WITH_HABITS = {"shop_film_build": 1.05, "shop_spread": 0.96, "shop_gain": 0.005}
 """An example shop's habits (:class:`WorldSettings` changes): its sprayer lays 5 % more film
