@@ -26,13 +26,11 @@ import numpy as np
 
 from _matcher import add_white_pearls_argument
 from flakelab.cases.generator import World, WorldSettings
-from flakelab.core.colorimetry import reflectance_to_Lab
-from flakelab.core.difference import delta_E
 from flakelab.errors import ModelError
 from flakelab.io import read_library
-from flakelab.match.judging import evaluate_recipes
 from flakelab.match.models import forward_for
 from flakelab.models.registry import load_model_file, shipped_model
+from matched_error import own_error
 
 FAMILIES = ("metallic", "solid", "pearl")
 WHITE_BANDS = (
@@ -42,14 +40,6 @@ WHITE_BANDS = (
     ("white pearls", 0.2, 1.0),
 )
 """The pearls' bands of white share (name, above, up to); ``no white`` is exactly none."""
-
-
-def worst_geometry_de00(forward, x: np.ndarray, truth: np.ndarray, names: list[str]) -> np.ndarray:
-    """ΔE00 at the worst geometry ``[N]`` of the model's prediction of recipes ``x[N, T]`` (over
-    the library's ``names``) against their nominal reflectance ``truth[N, G, 31]``."""
-    columns = [names.index(t) for t in forward.toners]
-    predicted = evaluate_recipes(forward, x[:, columns])[0]
-    return delta_E(reflectance_to_Lab(truth), reflectance_to_Lab(predicted)).max(axis=1)
 
 
 def pearl_bands(library, x: np.ndarray) -> dict[str, np.ndarray]:
@@ -78,17 +68,16 @@ def summary(errors: np.ndarray) -> dict:
 
 
 def family_errors(library, models: dict, instrument: str, n: int, seed: int, share: float):
-    """Each model's worst-geometry ΔE00 summaries per family and pearl band."""
+    """Each model's worst-geometry ΔE00 summaries per family and pearl band
+    (:func:`matched_error.own_error`: against the world's nominal physics)."""
     novel = set().union(*(m.new_toners for m in models.values()))
     forwards = {k: forward_for(m, library) for k, m in models.items()}
-    names = list(library.names)
     rows = {}
     for family in FAMILIES:
         settings = WorldSettings(kinds={family: 1.0}, white_pearl_share=share)
         world = World(library, instrument, settings, exclude=novel)
         x = world.formulations(n, np.random.default_rng(seed))
-        truth = world.appearance(x, world.nominal(n))[0]
-        errors = {k: worst_geometry_de00(f, x, truth, names) for k, f in forwards.items()}
+        errors = {k: own_error(world, f, x).max(axis=1) for k, f in forwards.items()}
         groups = {family: np.ones(n, bool)}
         if family == "pearl":
             groups |= {f"pearl, {band}": m for band, m in pearl_bands(library, x).items()}
