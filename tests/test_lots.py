@@ -599,11 +599,19 @@ def test_cli_reads_a_tin_from_its_panel_and_weighs_for_it(
     uniform = tmp_path / "uniform.json"
     write_lots(TonerLots.of([TonerLot(n, 1.05) for n in forward.toners]), uniform)
     alike = json.loads(cli("match", "--example", "--lots", uniform, "--json").stdout)
-    for a, b in zip(alike["candidates"], plain["candidates"], strict=True):
-        # the same recipes, to single precision's rounding of the renormalised recipe
-        assert [w["toner"] for w in a["weights_g"]] == [w["toner"] for w in b["weights_g"]]
-        assert np.allclose([w["grams"] for w in a["weights_g"]],
-                           [w["grams"] for w in b["weights_g"]], atol=0.3)  # fmt: skip
+
+    def same(a, b, grams):  # one recipe, to single precision's rounding of the renormalised one
+        toners, weights = (
+            [[w[k] for w in c["weights_g"]] for c in (a, b)] for k in ("toner", "grams")
+        )
+        return toners[0] == toners[1] and np.allclose(*weights, atol=grams)
+
+    assert same(alike["candidates"][0], plain["candidates"][0], 0.3)
+    # the rest are near ties that rounding may rank or end otherwise (stop 109's model: the
+    # uniform tins' 3rd candidate is the standard's 2nd within 0.6 g, and their 2nd and the
+    # standard's 3rd are others); before, every candidate was the same
+    rest = alike["candidates"][1:]
+    assert any(same(a, b, 1.0) for a in rest for b in plain["candidates"][1:])
     # weigh predicts the rounding's cost for the tins, and alike tins cost as the standard's
     recipe = example_path("target").parent / "blue-metallic-recipe.json"
     weigh = ("weigh", recipe, "--quantity", "100g", "--json")

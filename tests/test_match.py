@@ -1020,16 +1020,16 @@ def example_by_metamerism(hybrid):
 
 
 def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(hybrid):
-    """A green-gold silver of fine aluminium and isoindoline yellow with traces of phthalos,
-    made as the harness makes its targets (seed 11, the 5th of 40). Matched on colour alone,
-    two of its candidates are visibly grainier, on medium coarse aluminium (ΔG +1.81 and
-    +1.76). The refinish tolerance bounds |ΔG| by 1: those recipes then rank out of the five,
-    what fails the limit ranks after every candidate that meets it, and the colour-best
-    recipe is still first. A limit no recipe can meet fails them all on texture alone, and
-    the search's note names the reading. (The shipped model, stop 108: of the 40 targets of
-    the world with white pearls, 5 had a grainy colour candidate, and this one kept every
-    candidate passing on colour and the colour-best first under refinish; stop 52's model
-    served the 32nd target of the world before, stop 51's the 40th.)"""
+    """A silver of two fine aluminiums, made as the harness makes its targets (seed 11, the
+    8th of 40). Matched on colour alone, one of its candidates is visibly grainier, on medium
+    coarse aluminium (ΔG +1.07), though it passes on colour. The refinish tolerance bounds
+    |ΔG| by 1: that recipe then fails on texture alone and ranks after every candidate that
+    passes, and the colour-best recipe is still first. A limit no recipe can meet fails them
+    all on texture alone, and the search's note names the reading. (Stop 109's model: of the
+    40 targets, two had a grainy colour candidate, and this is the one whose grainy
+    candidate passed on colour; stop 108's served the 5th, with two grainy candidates that
+    refinish ranked out of the five; stop 52's the 32nd target of the world before, stop
+    51's the 40th.)"""
     from flakelab.match.evaluate import harness_world, trial
     from flakelab.match.models import effect_mask
 
@@ -1038,7 +1038,7 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     rng = np.random.default_rng(11)
     hidden = world.formulations(40, rng)
     # the trials before it are made only to draw the generator as the scan of 40 did
-    target = [trial(world, x, rng) for x in hidden[:5]][-1].measurement()
+    target = [trial(world, x, rng) for x in hidden[:8]][-1].measurement()
     effect = effect_mask(library, hybrid.toners)
     refinish = tolerance_preset("refinish")
     results = {
@@ -1054,16 +1054,19 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     }
     colour = results["colour"].candidates
     grainy = [c for c in colour if c.texture_delta["G"] > refinish.texture.G]
-    assert grainy and all(c.passes and c.texture_share == {} for c in colour)
+    assert grainy and all(c.passes for c in grainy)
+    assert all(c.texture_share == {} for c in colour)
     sets = {name: [set(c.fractions) for c in r.candidates] for name, r in results.items()}
-    assert all(set(c.fractions) not in sets["refinish"] for c in grainy)
-    meets = []
-    for c in results["refinish"].candidates:
+    ranked = results["refinish"].candidates
+    for c in ranked:
         assert set(c.texture_share) == {"SG", "G"}
-        meets.append(max(c.texture_share.values()) <= 1)
-        assert meets[-1] == (c.failing_texture == [])
+        meets = max(c.texture_share.values()) <= 1
+        assert meets == (c.failing_texture == [])
         assert c.texture_share["G"] == pytest.approx(abs(c.texture_delta["G"]))
-    assert sum(meets) >= 4 and meets == sorted(meets, reverse=True)
+        if set(c.fractions) in [set(g.fractions) for g in grainy]:
+            assert not c.passes and c.failing == [] and c.failing_texture == ["G"]
+    passes = [c.passes for c in ranked]
+    assert sum(passes) >= 3 and passes == sorted(passes, reverse=True)
     assert sets["refinish"][0] == sets["colour"][0]
     best = results["tight"].candidates[0]
     assert best.failing == [] and best.failing_texture == ["G"] and not best.passes
@@ -1083,17 +1086,18 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
 ):
     """The example blue metallic is tinted with phthalo blue GS and indanthrone blue.
     Matched on its colour in daylight alone, the best recipe is a metamer of phthalo green
-    and quinacridone violet (metamerism index 2.46 under F11, the shipped model of stop 108;
-    stop 52's took phthalo blue RS, 0.96); with the index in the objective it takes both
-    phthalo blues, and its index falls below a tenth of that. A shop without the phthalo
-    blues gets in daylight a metamer of indanthrone blue and phthalo green (2.26 under F11),
-    named as such in the search's notes. (Stop 52's model gave there the green and violet.)"""
+    and quinacridone violet (metamerism index 2.29 under F11, the shipped model of stop 109;
+    stop 108's 2.46; stop 52's took phthalo blue RS, 0.96); with the index in the objective
+    it takes the phthalo blue GS and indanthrone blue, and its index falls below a tenth of
+    that. A shop without the phthalo blues gets in daylight the same metamer, named as such
+    in the search's notes. (Stop 108's model gave there indanthrone blue and phthalo green,
+    2.26 under F11; stop 52's the green and violet.)"""
     target, best, notes = example_by_metamerism
     worst = {w: max(v.max() for v in c.metamerism.values()) for w, c in best.items()}
     assert worst[1.0] < worst[0.0] / 3 and worst["no blues"] > 2.0
     assert {"Phthalo blue GS", "Indanthrone blue"} & set(best[1.0].fractions)
     assert {"Phthalo green", "Quinacridone violet"} <= set(best[0.0].fractions)
-    assert {"Phthalo green", "Indanthrone blue"} <= set(best["no blues"].fractions)
+    assert {"Phthalo green", "Quinacridone violet"} <= set(best["no blues"].fractions)
     assert best[1.0].passes  # in daylight it still matches
     assert any("the best recipe is a metamer of the target" in n and "FL11" in n
                for n in notes["no blues"])  # fmt: skip
@@ -1148,19 +1152,20 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
 
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
     """The car's blue is phthalo blue GS (the match that weighs metamerism). The daylight-only
-    match of the example without the phthalo blues stands in indanthrone blue, phthalo green
-    and a little carbon black for it. Sprayed a little light, a correction that keeps its
-    pigments moves amounts, its expected index stays over the notice level under every light,
-    and the colorist is told to match again; the car's own recipe sprayed the same way draws
-    no such note. Allowed to add a toner too, the correction adds DPP orange, which lowers
-    the worst index (under FL11 2.26 → 1.36) but not below the notice level, and still says to
-    match again. With a trace of the GS (0.3 %), the correction raises it into a tint (8 %)
-    and the metamer is cured (under A 1.37 → 0.13, FL11 2.26 → 0.23). A correction changes
+    match of the example without the phthalo blues stands in phthalo green and quinacridone
+    violet for it. Sprayed a little light, a correction that keeps its pigments moves
+    amounts, its expected index stays over the notice level under every light, and the
+    colorist is told to match again; the car's own recipe sprayed the same way draws no such
+    note. Allowed to add a toner too, the correction adds a trace of DPP orange, which barely
+    lowers the worst index (under FL11 2.29 → 2.21), and still says to match again. With a
+    trace of the GS (0.3 %), the correction raises it into a tint (11 %), adds DPP red, and
+    the metamer is cured (under A 1.94 → 0.11, FL11 2.29 → 0.36). A correction changes
     amounts and adds one toner: it cures a metamer only where the recipe already carries the
-    car's pigment that makes it one. (The shipped model of stop 108. The models of stops 52–
-    107 stood in phthalo green and quinacridone violet, and their cure added a toner: carbon
-    black, A 1.94 → 0.26 at stop 54; stop 51's added DPP red; the models before stood in
-    phthalo green and quinacridone magenta for the car's two blues.)"""
+    car's pigment that makes it one. (The shipped five-angle model of stop 109, as those of
+    stops 52–107, which added carbon black, A 1.94 → 0.26 at stop 54; stop 108's stood in
+    indanthrone blue, phthalo green and a little carbon black, A 1.37 → 0.13 with no toner
+    added; stop 51's added DPP red; the models before stood in phthalo green and
+    quinacridone magenta for the car's two blues.)"""
     from flakelab.core.difference import METAMERISM_NOTICE, is_metamer, worst_light
     from flakelab.match.correction import metamerism_note
 
@@ -1190,8 +1195,8 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
         notes[name] = metamerism_note(before, fixed[name].metamerism)
         if name == "metamer":
             assert is_metamer(before)
-            # amounts alone leave it one under every light (A 1.40 → 1.40, FL11 2.26 → 2.20,
-            # LED-B3 1.07 → 1.05)
+            # amounts alone leave it one under every light (A 1.97 → 1.98, FL11 2.29 → 2.36,
+            # LED-B3 1.41 → 1.45)
             for light, index in fixed[name].metamerism.items():
                 assert index.max() > METAMERISM_NOTICE, light
             assert worst_light(fixed[name].metamerism)[1] == pytest.approx(
@@ -1206,13 +1211,14 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     assert "FL11" in notes["found"] and "match the target again" in notes["found"]
     cured = fixed["traced"]
     assert cured.fractions[car[0]] > 10 * traced[car[0]]
-    # the GS needs no toner beside it here (the models before stop 108 added one, which one
-    # the machine's arithmetic decided: carbon black, DPP orange or DPP red)
+    # a toner the metamer lacks, where one is added (stop 109's model: DPP red; stop 108's
+    # added none; those before, as the machine's arithmetic decided, carbon black, DPP orange
+    # or DPP red)
     assert cured.new_toner not in metamer
     assert worst_light(cured.metamerism)[1] < METAMERISM_NOTICE / 2
-    # the spray-out's index is read, the cure's is where the search ends: 0.13 on an AMD
-    # EPYC (stop 108); the models before gave 0.17–0.28 as each machine's arithmetic went
-    assert befores["traced"]["A"].max() == pytest.approx(1.37, abs=0.01)
+    # the spray-out's index is read, the cure's is where the search ends: 0.11 on an AMD
+    # EPYC (stop 109); the models before gave 0.13–0.28 as each machine's arithmetic went
+    assert befores["traced"]["A"].max() == pytest.approx(1.94, abs=0.01)
     assert cured.metamerism["A"].max() < 0.3
     assert notes["traced"] is None
 
@@ -2091,20 +2097,23 @@ def test_matcher_finds_a_trace_tint_in_a_silver(hybrid, tint, amount):
 
 
 def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
-    """A bronze metallic tinted with 0.6 % phthalo blue GS, as the physics makes it: the
-    screen's solutions carry phthalo green instead, the blue is never tried and the best
-    recipe stays above the swap stage's trigger (ΔE00 1.23 with stop 54's ensemble, 1.22 as
-    the physics makes that recipe; 0.68 and 0.70 with stop 52's). One move away from the
-    best recipes, a trace of phthalo blue RS beside the green does the GS's job, and the
-    physics agrees (0.12; 0.17). The same bronze tinted with 0.54 % quinacridone magenta,
-    this test's target until the models learnt Si per light, had the swap find the magenta
-    itself (0.66 → 0.12). All on daylight colour alone.
+    """A bronze metallic tinted with 0.54 % phthalo blue RS, as the physics makes it: the
+    screen's solutions carry phthalo green yellowish instead, the blue is never tried and the
+    best recipe stays above the swap stage's trigger (ΔE00 1.93 with stop 109's model). One
+    move away from the best recipes, the RS itself does the job, and the physics agrees
+    (0.14; 0.21 as the physics makes it). Until stop 108 the target was this bronze tinted
+    with 0.6 % phthalo blue GS, which stop 109's model's screen finds without the swap (0.52):
+    the swap then found a trace of RS beside the green (1.23 → 0.12 with stop 54's
+    ensemble). The same bronze tinted with 0.54 % quinacridone magenta, the test's target
+    until the models learnt Si per light, had the swap find the magenta itself (0.66 → 0.12).
+    All on daylight colour alone.
 
     The trigger is a share of the tolerance's limit; the search's own loss is not, so a wider
     tolerance does not weaken it. Under ΔE00 ≤ 2.5 the search before its swap stage gives
     the same recipe as under ΔE00 ≤ 1.0 (before stop 55 it stopped at 1.53, and that fired
-    the trigger); 1.23 is under 0.6 of 2.5, and the swap stage does not run. Where the screen
-    stops further off (1.72 on an Intel Xeon with AVX-512), the trigger fires under 2.5 too."""
+    the trigger). Where the screen stops under 0.6 of 2.5 (stop 54's ensemble at 1.23 on the
+    GS bronze) the swap stage does not run; where it stops further off (1.93 here; 1.72 on an
+    Intel Xeon with AVX-512 then), the trigger fires under 2.5 too."""
     from flakelab.cases.generator import World
     from flakelab.match.models import effect_mask
 
@@ -2112,7 +2121,7 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     recipe = {
         "Al fine dark": 0.4511,
         "Al extra coarse": 0.5156,
-        "Phthalo blue GS": 0.006,
+        "Phthalo blue RS": 0.0054,
         "Iron oxide yellow": 0.0279,
     }
     world = World(hybrid.library, "five-angle")
@@ -2122,7 +2131,7 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
     never_swap = replace(daylight, swap_above=np.inf)
     unswapped = match(target, hybrid, effect, settings=never_swap).candidates[0]
     assert unswapped.de00.max() > MatchSettings().swap_above
-    assert "Phthalo blue GS" not in unswapped.fractions
+    assert "Phthalo blue RS" not in unswapped.fractions
     swapped = match(target, hybrid, effect, settings=daylight).candidates[0]
     assert set(swapped.fractions) - set(unswapped.fractions)
     assert swapped.de00.max() < 0.3
@@ -2148,16 +2157,18 @@ def test_swap_stage_finds_the_pigment_the_screen_passed_over(hybrid):
 )
 def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     """A solid, as the physics makes it. The learned model never saw a paint between a solid
-    and about half effect toners; left free, the search finds its guess there, a trace of
-    effect toner (this tinted black, stop 54's model: 0.32 off by the physics; stop 52's
-    models: 14 % of effect toner, predicted within 0.29 ΔE00, 0.56 off; stop 51's: 6.5 %,
-    0.40, 0.43). Kept to the model's support, the best recipe is a solid and nearer (0.29 off
-    by the physics; stop 52's 0.18, stop 51's 0.085). On daylight colour alone, and not kept
-    to pigments by how little the target's colour travels (which finds a solid 0.14 off).
-    The models before stop 51 (trained on solids of organics alone) did this to a maroon of
-    iron oxide red, carbon black and perylene maroon and to a solid of quinacridones without
-    a white; the maroon is now matched as a solid when free too (0.42 off by the physics),
-    and organics alone no longer make a solid of the world."""
+    and about a quarter effect toners; left free, the search finds its guess there, a trace
+    of effect toner (stop 109's model: 11 % of interference blue pearl, 0.94 off by the
+    physics; stop 54's: 0.32 off; stop 52's models: 14 % of effect toner, predicted within
+    0.29 ΔE00, 0.56 off; stop 51's: 6.5 %, 0.40, 0.43). Kept to the model's support, the best
+    recipe lies inside it and nearer: a solid (stop 108's model; 0.29 off with stop 54's,
+    0.18 with stop 52's, 0.085 with stop 51's), or, with stop 109's, a black over 43 % of
+    coarse aluminium whose carbon black hides the flakes' colour (0.22 off). On daylight
+    colour alone, and not kept to pigments by how little the target's colour travels (which
+    finds a solid 0.14 off). The models before stop 51 (trained on solids of organics alone)
+    did this to a maroon of iron oxide red, carbon black and perylene maroon and to a solid
+    of quinacridones without a white; the maroon is now matched as a solid when free too
+    (0.42 off by the physics), and organics alone no longer make a solid of the world."""
     from flakelab.cases.generator import World
     from flakelab.match.evaluate import worst_de00
     from flakelab.match.judging import recipe_vector
@@ -2185,7 +2196,8 @@ def test_matcher_keeps_to_the_model_s_support(hybrid, recipe):
     floor = MatchSettings(effect_floor=hybrid.effect_share_floor)
     assert outside_support(free_recipe[None], effect, floor)[0]
     kept, recipe, physics = best(None)  # the model's own floor
-    assert kept.candidates[0].in_support and recipe[effect].sum() == 0.0
+    assert kept.candidates[0].in_support
+    assert not outside_support(recipe[None], effect, floor)[0]
     assert physics < free_physics and physics < 0.6
     assert not any("extrapolated" in note for note in kept.notes)
 
@@ -2385,10 +2397,13 @@ def test_a_target_that_reads_no_flakes_is_matched_as_a_solid(hybrid):
     """A pastel of TiO2 with traces of perylene maroon and DPP orange, sprayed and read as
     the harness does. Its texture reads no flakes (G 0, SG 0), so the search keeps to
     pigments and says so. Read without texture, its colour travels under ``solid_travel``
-    over the geometries, and it is a solid again; with that rule off, the search spends
-    more than half the can on aluminium (stop 51's model: 4 of 30 such solid targets with
-    texture did, 1.7–2.7 ΔE00 off the car's paint by the physics). A metallic read without
-    texture travels far over that."""
+    over the geometries, and it is a solid again; with that rule off, the search offers
+    effect toners among its candidates and its best recipe lies further from the car (stop
+    109's model: its best a solid 0.20 ΔE00 off the car's paint by the physics, against the
+    rule's 0.03, and its third 40 % Xirallic and 11 % aluminium, 1.72 off; stop 108's spent
+    more than half the can on aluminium in its best; stop 51's model: 4 of 30 such solid
+    targets with texture did, 1.7–2.7 off). A metallic read without texture travels far over
+    that."""
     from flakelab.match.evaluate import harness_world, trial, worst_de00
     from flakelab.match.models import effect_mask
 
@@ -2408,7 +2423,8 @@ def test_a_target_that_reads_no_flakes_is_matched_as_a_solid(hybrid):
     free = replace(settings, solid_travel=0.0)
     blind = match(replace(target, texture={}), hybrid, effect, settings=free)
     best = recipe_vector(hybrid, blind.candidates[0].fractions)
-    assert best[effect].sum() > 0.5 and not any("a solid" in n for n in blind.notes)
+    offered = [recipe_vector(hybrid, c.fractions)[effect].sum() for c in blind.candidates]
+    assert max(offered) > 0.25 and not any("a solid" in n for n in blind.notes)
     made = as_made(world, recipe_vector(hybrid, solid.candidates[0].fractions))
     painted = as_made(world, best)
     car = as_made(world, x)
