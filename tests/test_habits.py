@@ -99,11 +99,11 @@ def test_a_shops_habits_are_read_from_its_sprayouts(habits_shop):
 def test_mixed_up_sprayouts_are_left_out_and_the_habits_read_as_without_them(shipped, habits_shop):
     """Three white panels given as spray-outs among the habits shop's 500 are taken for
     mix-ups, and the habits of the rest are those of the 500 screened alone. One of the shop's
-    own spray-outs is taken for one too: case 361, interference red pearl with 0.7 % of TiO2,
-    whose spray-out reads 8.7 ΔE00 from the shipped model's prediction with the habits. The
-    model errs there: it predicts that recipe 8.5 off the world's physics (stop 106's model
-    1.8), a trace of white in a pure pearl lying between the cases' pure pearls and their white
-    pearls. The next of the 500 reads 2.9 off."""
+    own spray-outs is taken for one too: case 361, interference red pearl with 0.7 % of TiO2.
+    The model errs there: the five-angle model of stop 109 predicts that recipe 5.3 ΔE00 off
+    the world's physics (stop 108's 8.5, whose prediction with the habits that spray-out read
+    8.7 from, the next of the 500 2.9; stop 106's 1.8), a trace of white in a pure pearl
+    lying between the cases' pure pearls and their white pearls."""
     from flakelab.match.habits import screened_habits
 
     library, forward, _ = shipped
