@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from flakelab.cases.generator import SHOP_WITH_HABITS, World
+from flakelab.cases.generator import SHOP_WITH_HABITS, World, WorldSettings
 from flakelab.cli.common import progress_bar
 from flakelab.io import read_library, read_tolerance
 from flakelab.library import PAINT_FAMILIES
@@ -211,22 +211,20 @@ def add_white_pearls_argument(parser: argparse.ArgumentParser, pearls: str, defa
     library's white (``WorldSettings.white_pearl_share``; ``default`` None: the world's)."""
     parser.add_argument(
         "--white-pearls",
-        type=share_of_one,
+        type=white_pearl_share,
         default=default,
         help=f"share of {pearls} that are white pearls, beside the library's white "
         "(default: the world's, WorldSettings.white_pearl_share)",
     )
 
 
-def share_of_one(text: str) -> float:
-    """``"0.5"`` → 0.5, a share in [0, 1]."""
+def white_pearl_share(text: str) -> float:
+    """``"0.5"`` → 0.5, a share of the pearls as :class:`WorldSettings` takes it (which
+    refuses one outside 0 to 1)."""
     try:
-        share = float(text)
-    except ValueError:
-        share = math.nan
-    if not 0 <= share <= 1:
-        raise argparse.ArgumentTypeError(f"expected a share from 0 to 1, got {text!r}")
-    return share
+        return WorldSettings(white_pearl_share=float(text)).white_pearl_share
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def seeds_from(text: str) -> list[int]:
