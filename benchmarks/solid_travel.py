@@ -80,7 +80,9 @@ def family_travel(
         for read, values in travel.items():
             t = values[families == family]
             wrong = t >= SOLID_TRAVEL if family == "solid" else t < SOLID_TRAVEL
-            rows[family][read] = {"travel_min": float(t.min()), "travel_max": float(t.max()),
+            # a family the draw left out (a small --n) has no travel: null, not a crash
+            rows[family][read] = {"travel_min": float(t.min()) if t.size else None,
+                                  "travel_max": float(t.max()) if t.size else None,
                                   "wrong_side": int(wrong.sum())}  # fmt: skip
     return rows
 
@@ -127,6 +129,8 @@ def main() -> None:
     add_white_pearls_argument(parser, "the pearls", WorldSettings.white_pearl_share)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if args.n < 1:
+        parser.error(f"--n: {args.n} is not a positive number of formulations")
     library = read_library(None)
     result = {
         "solid_travel": SOLID_TRAVEL,
@@ -146,6 +150,9 @@ def main() -> None:
     for instrument in INSTRUMENTS:
         for family, row in result[instrument].items():
             rule, every = row["rule"], row["all"]
+            if not row["paints"]:
+                print(f"{instrument:>10} {family:>8}: no paints in this draw")
+                continue
             print(f"{instrument:>10} {family:>8}: {row['paints']:>6} paints, travel "
                   f"{rule['travel_min']:.3f}–{rule['travel_max']:.3f} "
                   f"[{every['travel_min']:.3f}–{every['travel_max']:.3f}], "
