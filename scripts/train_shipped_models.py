@@ -21,11 +21,11 @@ interruption, it goes on from there to the same file (``flakelab train --checkpo
 
 Both models are ensembles of four networks, trained on more cases than the hybrid paper's
 database (61,000): held-out accuracy grows with the cases far more than with the network's
-width or the epochs, and pearls most (README, "Cases and the learned model"). The
-five-angle model learned from 150,000 cases, a third of them pearls (stop 109: 25:25 here
-with its cases, 3.6 GB peak); the MA-T12 model, whose 12 geometries make each case
-costlier, from 120,000, a quarter of them pearls (trained at stop 107: 30.2 min, 5.7 GB
-peak for the two).
+width or the epochs, and pearls most (README, "Cases and the learned model"). Both learned
+from 150,000 cases, a third of them pearls: the five-angle model at stop 109 (25:25 here
+with its cases, 3.6 GB peak), the MA-T12 model, whose 12 geometries make each case
+costlier, at stop 110 (35:17 for the eight stages after the two its checkpoint kept, about
+38 min whole; 6.8 GB peak).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 """Demo toners absent from the shipped models' training cases."""
 SETTINGS = {
     "five-angle": (150_000, 150, 256, 4, "sequential"),
-    "ma-t12": (120_000, 150, 256, 4, "sequential"),
+    "ma-t12": (150_000, 150, 256, 4, "sequential"),
 }
 """For each shipped instrument: cases, epochs per stage, batch size (CPU time on a 2-core
 machine; the learning rate scales with the batch, 2e-3 at 128), networks averaged as an
@@ -64,13 +64,14 @@ the shipped files). The five-angle ensemble of four errs a fifth less than its m
 alone (README, "Cases and the learned model")."""
 TRAINING_KINDS = {
     "five-angle": {"metallic": 0.52, "pearl": 0.33, "solid": 0.15},
-    "ma-t12": {"metallic": 0.6, "pearl": 0.25, "solid": 0.15},
+    "ma-t12": {"metallic": 0.52, "pearl": 0.33, "solid": 0.15},
 }
 """Share of each paint family in an instrument's training cases (else the generator's
 default mix, which the evaluation cases keep): pearls, whose interference colour changes
-with angle, are the model's hardest family and get more cases: a third of the five-angle
-model's, with 30,000 more cases (stop 109; its pearls' own error 0.45 → 0.39 ΔE00 median,
-and every family's lower: ``benchmarks/model_families.py``)."""
+with angle, are the model's hardest family and get more cases: a third of each model's,
+with 30,000 more cases (stops 109 and 110; the pearls' own error 0.45 → 0.39 ΔE00 median
+at the five-angle, 0.53 → 0.46 at the MA-T12, and every family's lower:
+``benchmarks/model_families.py``)."""
 
 
 def main() -> None:
