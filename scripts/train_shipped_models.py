@@ -63,8 +63,7 @@ ensemble and the outlier screen it was trained with (kept, so that this script r
 the shipped files). The five-angle ensemble of four errs a fifth less than its members
 alone (README, "Cases and the learned model")."""
 TRAINING_KINDS = {
-    "five-angle": {"metallic": 0.52, "pearl": 0.33, "solid": 0.15},
-    "ma-t12": {"metallic": 0.52, "pearl": 0.33, "solid": 0.15},
+    instrument: {"metallic": 0.52, "pearl": 0.33, "solid": 0.15} for instrument in SETTINGS
 }
 """Share of each paint family in an instrument's training cases (else the generator's
 default mix, which the evaluation cases keep): pearls, whose interference colour changes

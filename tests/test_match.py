@@ -1058,12 +1058,13 @@ def test_a_texture_limit_ranks_and_judges_candidates_as_a_geometry_s_limit_does(
     assert all(c.texture_share == {} for c in colour)
     sets = {name: [set(c.fractions) for c in r.candidates] for name, r in results.items()}
     ranked = results["refinish"].candidates
+    grainy_sets = [set(c.fractions) for c in grainy]
     for c in ranked:
         assert set(c.texture_share) == {"SG", "G"}
         meets = max(c.texture_share.values()) <= 1
         assert meets == (c.failing_texture == [])
         assert c.texture_share["G"] == pytest.approx(abs(c.texture_delta["G"]))
-        if set(c.fractions) in [set(g.fractions) for g in grainy]:
+        if set(c.fractions) in grainy_sets:
             assert not c.passes and c.failing == [] and c.failing_texture == ["G"]
     passes = [c.passes for c in ranked]
     assert sum(passes) >= 3 and passes == sorted(passes, reverse=True)
