@@ -12,7 +12,7 @@ saw), for what the cases record of their tins:
 
 * ``none``: nothing (the issue's figure);
 * ``calibrated``: each tin read from one panel against the model, to the error that reading has
-  in the harness (1.11 % in strength, 0.75 nm in shade: README, *The shop's tins*);
+  in the harness (1.11 % in strength, 0.75 nm in shade: docs/matching.md, *The shop's tins*);
 * ``referenced``: against the paint maker's panel (0.59 %, 0.29 nm);
 * ``known``: the world's own batches (the limit a reading approaches);
 
@@ -57,7 +57,7 @@ RECORDED = {
     "referenced": WorldSettings(tins="referenced"),
     "known": WorldSettings(tins="known"),
 }
-"""What the cases record of their tins, row by row (the harness's readings: README)."""
+"""What the cases record of their tins, row by row (the harness's readings: docs/matching.md)."""
 
 
 def tins_report(instrument: str, cases: int, seed: int) -> dict:

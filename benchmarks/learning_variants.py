@@ -39,7 +39,7 @@ from flakelab.models.training import (
 
 NOVEL_TONERS = ("Perylene red", "Isoindoline yellow")
 EVALUATION = (500, 987)
-"""Cases and seed of the README's unseen evaluation set."""
+"""Cases and seed of issue 4's unseen evaluation set (docs/figures.md)."""
 
 
 def train_once(library, cases: int, config: TrainingConfig, kinds: dict[str, float] | None = None):

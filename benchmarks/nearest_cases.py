@@ -45,7 +45,8 @@ from flakelab.core.tolerance import tolerance_preset
 from flakelab.io import read_library
 from timing import peak_rss_mb, print_report
 
-NOISE = 0.003  # relative reflectance noise of a second reading (README: repeatability)
+# relative reflectance noise of a second reading (docs/cases-and-model.md: repeatability)
+NOISE = 0.003
 MAKERS = ("Toyota", "VW", "Ford", "BMW", "Honda", "Nissan", "Renault", "Opel", "Fiat", "Kia")
 
 

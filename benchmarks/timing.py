@@ -20,7 +20,7 @@ def best_time(function, *args, repeat: int = 3) -> float:
 
 def matmul_gflops(size: int = 2048, repeat: int = 10) -> float:
     """The machine's pace now: GFLOP/s of a ``size``² float32 matrix product in torch, best
-    of ``repeat`` (the figure the README's timings quote). This machine's varies by the hour
+    of ``repeat`` (the figure docs/figures.md's timings quote). This machine's varies by the hour
     and, by a fifth, from one second to the next (144–185 in four calls): a rough gauge, which
     a benchmark comparing runs made one after another records before each."""
     import torch  # only the benchmarks that match or learn need it

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Training on a GPU: the GPU tests and the learning benchmark, on a machine whose Python
-# already holds torch with CUDA (the figures in README's "Training on a GPU").
+# already holds torch with CUDA (the figures in docs/figures.md's "training on a GPU").
 #
 #   bash scripts/gpu_check.sh prepare   # here, with network: wheels of what such a machine lacks
 #   bash scripts/gpu_check.sh           # there, from the repository root, wheels carried along

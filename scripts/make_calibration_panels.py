@@ -18,7 +18,7 @@ panel's recipe is written beside it in grams for a 50 g can. Run:
 
     python scripts/make_calibration_panels.py FOLDER [--seed 2027]
 
-and read them (the README's "A new toner read from panels"):
+and read them (docs/toner-library.md, "A new toner read from panels"):
 
     flakelab library characterise "DPP red 2027" FOLDER/dpp-*.cxf -r FOLDER/dpp-masstone.json …
 """

@@ -9,7 +9,7 @@ matcher handles with the physics scaling (hybrid path).
 
 ``--seed`` draws the cases and the network alike; ``--network-seed`` draws the network (its
 weights, splits and batches) alone, on the same cases, and ``--screening`` changes the outlier
-screen: how much a model owes to its network's draw (README, "Cases and the learned model");
+screen: how much a model owes to its network's draw (docs/cases-and-model.md);
 ``--members 1`` trains one network instead of the ensemble; ``--log-offset`` adds log
 features (``flakelab train --log-offset``); ``--tins calibrated|known`` makes the training cases
 record their tins and learns them at the standard tins, as ``flakelab train`` learns such
@@ -21,7 +21,7 @@ interruption, it goes on from there to the same file (``flakelab train --checkpo
 
 Both models are ensembles of four networks, trained on more cases than the hybrid paper's
 database (61,000): held-out accuracy grows with the cases far more than with the network's
-width or the epochs, and pearls most (README, "Cases and the learned model"). Both learned
+width or the epochs, and pearls most (docs/cases-and-model.md). Both learned
 from 150,000 cases, a third of them pearls: the five-angle model at stop 109 (25:25 here
 with its cases, 3.6 GB peak), the MA-T12 model, whose 12 geometries make each case
 costlier, at stop 110 (35:17 for the eight stages after the two its checkpoint kept, about
@@ -61,7 +61,7 @@ SETTINGS = {
 machine; the learning rate scales with the batch, 2e-3 at 128), networks averaged as an
 ensemble and the outlier screen it was trained with (kept, so that this script regenerates
 the shipped files). The five-angle ensemble of four errs a fifth less than its members
-alone (README, "Cases and the learned model")."""
+alone (docs/cases-and-model.md)."""
 TRAINING_KINDS = {
     instrument: {"metallic": 0.52, "pearl": 0.33, "solid": 0.15} for instrument in SETTINGS
 }

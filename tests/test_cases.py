@@ -131,7 +131,7 @@ def test_generated_world_is_as_hard_as_a_shop(world):
     assert respray["solid"] < 0.5 * min(respray["metallic"], respray["pearl"])
     # paints that read black at every geometry are the blacks a shop sees, not a fifth of
     # its solids (a world that drew solids without a hiding pigment made 7.75 % of seed 0's
-    # 400 cases black; README and benchmarks/near_black.py)
+    # 400 cases black; docs/figures.md and benchmarks/near_black.py)
     assert report["near_black_share"] < 0.05
 
 

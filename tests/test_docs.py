@@ -16,6 +16,7 @@ from flakelab.cli.main import app
 ROOT = Path(__file__).resolve().parent.parent
 COMMAND = re.compile(r"(flakelab|python (benchmarks|scripts)/\S+\.py)( |$)")
 PLACEHOLDER = "…"  # 'flakelab … --json': any command
+DOCUMENTS = [ROOT / "README.md", *sorted(ROOT.glob("docs/*.md"))]
 
 
 def documented_commands() -> list[tuple[str, str]]:
@@ -23,7 +24,7 @@ def documented_commands() -> list[tuple[str, str]]:
     docs/ (each of a line's commands joined by &&), and every usage line of a benchmark's or
     a script's docstring."""
     found = []
-    for path in [ROOT / "README.md", *sorted(ROOT.glob("docs/*.md"))]:
+    for path in DOCUMENTS:
         text = path.read_text()
         spans = re.findall(r"`([^`\n]+)`", text)
         lines = [ln.strip() for block in re.findall(r"```\w*\n(.*?)```", text, re.S)
@@ -109,3 +110,58 @@ def test_a_misspelt_option_or_command_is_caught():
     assert unknown_options("python benchmarks/aim_off.py --world-habits 1,1,0") == []
     with pytest.raises(LookupError, match="'evaluat'"):
         unknown_options("flakelab model evaluat F")
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+def heading_anchor(heading: str) -> str:
+    """The anchor GitHub gives a Markdown heading: lower case, punctuation dropped, each space
+    a hyphen (so "A, b" gives "a-b" and "x + y" gives "x--y")."""
+    kept = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return kept.replace(" ", "-")
+
+
+def document_anchors(path: Path) -> set[str]:
+    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+    return {heading_anchor(h) for h in re.findall(r"^#{1,6} (.+)$", text, re.M)}
+
+
+def broken_links(path: Path) -> list[str]:
+    """The links of ``path`` to a file or a heading of these documents that is not there."""
+    broken = []
+    for target in LINK.findall(re.sub(r"```.*?```", "", path.read_text(), flags=re.S)):
+        if re.match(r"[a-z]+:", target):  # https: and the like: not ours to check
+            continue
+        file, _, anchor = target.partition("#")
+        linked = (path.parent / file).resolve() if file else path
+        if not linked.exists():
+            broken.append(f"{path.name}: {target}: no such file")
+        elif anchor and linked.suffix == ".md" and anchor not in document_anchors(linked):
+            broken.append(f"{path.name}: {target}: no such heading")
+    return broken
+
+
+def test_heading_anchors_are_githubs():
+    assert heading_anchor("The main job: `flakelab match`") == "the-main-job-flakelab-match"
+    assert heading_anchor("Match harness, 200 targets + 50 with a new toner") == (
+        "match-harness-200-targets--50-with-a-new-toner"
+    )
+
+
+def test_every_link_between_the_documents_leads_somewhere():
+    """The README and the pages under docs/ link to each other's files, headings and images:
+    each link's file and heading exist (the README was split into docs/ at stop 111)."""
+    links = [t for path in DOCUMENTS for t in LINK.findall(path.read_text())]
+    assert sum(not re.match(r"[a-z]+:", t) for t in links) > 30
+    broken = [b for path in DOCUMENTS for b in broken_links(path)]
+    assert not broken, "\n".join(broken)
+
+
+def test_a_broken_link_is_caught(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# Page\n\n[there](page.md#page) [gone](gone.md) [lost](page.md#lost)\n")
+    assert broken_links(page) == [
+        "page.md: gone.md: no such file",
+        "page.md: page.md#lost: no such heading",
+    ]

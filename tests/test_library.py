@@ -338,9 +338,10 @@ def test_the_demo_white_is_a_rutile_white(pigment_km):
 
 def test_library_show_says_how_the_model_knows_each_toner(tmp_path, cli):
     """'flakelab library show': the demo's two new toners stand in as the transparent iron
-    oxides (as the README says), every other toner learned from the cases its model's record
-    gives; a toner added to a library since is "added", standing in as its nearest known
-    toner (an exact copy: as the original), and a toner the library lacks is named."""
+    oxides (as docs/toner-library.md says), every other toner learned from the cases its
+    model's record gives; a toner added to a library since is "added", standing in as its
+    nearest known toner (an exact copy: as the original), and a toner the library lacks is
+    named."""
     from flakelab.models.registry import shipped_model
 
     report = json.loads(cli("library", "show", "--json").stdout)

@@ -879,10 +879,10 @@ def test_a_byk_mac_i_reading_s_45as_minus_15_is_predicted_apart(cli, tmp_path):
 def test_the_geometries_a_match_left_out_are_predicted_where_the_physics_puts_them(hybrid):
     """The MA-T12 model's numbers for five-angle candidates at the example's seven other
     geometries agree with the world's physics for those recipes: within that model's held-out
-    p95 (1.70 ΔE00 on 500 unseen cases, README), and about as well as the same model agrees at
-    the five geometries the match saw (measured with stop 55's model: at worst 0.60 and 0.12
-    left out, 0.66 and 0.13 seen; stop 52's: 1.06 and 0.27, 0.97 and 0.36). The geometries
-    mixed up, they would be some 20 off."""
+    p95 (1.70 ΔE00 on 500 unseen cases, docs/figures.md), and about as well as the same model
+    agrees at the five geometries the match saw (measured with stop 55's model: at worst 0.60
+    and 0.12 left out, 0.66 and 0.13 seen; stop 52's: 1.06 and 0.27, 0.97 and 0.36). The
+    geometries mixed up, they would be some 20 off."""
     from flakelab.data import example_path
     from flakelab.match.crosscheck import predict_left_out
     from flakelab.match.forward import PhysicsForward

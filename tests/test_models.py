@@ -557,7 +557,7 @@ def test_colour_loss_stays_finite_for_an_output_far_out(trained, data):
     value = loss(output, torch.arange(4)[None])
     value.sum().backward()
     assert torch.isfinite(value).all() and torch.isfinite(output.grad).all()
-    assert float(value[0]) > 0
+    assert float(value[0].detach()) > 0
 
 
 def test_a_training_that_diverges_is_refused_naming_its_stage(data):

@@ -162,7 +162,7 @@ class WorldSettings:
     shop_gain: float = 0.0
     tins: str = "none"  # TIN_KNOWLEDGE
     # a tin read from one panel against the model: RMS error over the harness's shops
-    # (README, *The shop's tins*, stop 74); against the paint maker's panel, the same
+    # (docs/matching.md, *The shop's tins*, stop 74); against the paint maker's panel, the same
     tin_strength_read_sd: float = 0.0111
     tin_shade_read_sd_nm: float = 0.75
     tin_strength_referenced_sd: float = 0.0059

@@ -59,7 +59,7 @@ def _appearance(measurement: Path | None, sample: str | None, conditions: str,
         f"note: {reading.sample} was not read under a lamp at {lamp:g}°: drawn from its "
         f"{drawn.interpolated_from:g}° readings interpolated over flake tilt (an MA-T12's 15° "
         "readings so predicted from its 45° ones lie a median ΔE00 1.5 from the measured, on "
-        "230 real samples; README, Texture)",
+        "230 real samples; docs/texture.md)",
         highlight=False,
     )
     return drawn

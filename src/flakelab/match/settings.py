@@ -89,7 +89,7 @@ class MatchSettings:
     screen_steps: int = 90
     # a third on every subset, the rest on the ``refine_keep`` best; 120 (150 before
     # 2026-11-26): the same pass rates on four harness runs, a match a tenth to a fifth
-    # faster (README, Figures: match latency)
+    # faster (docs/figures.md: match latency)
     refine_steps: int = 120
     refine_keep: int = 24
     novel_threshold: float = 1.5

@@ -10,8 +10,8 @@ registered under the shop's own name (:func:`shop_model_name`) and is current fo
 alone: it has learned the shop's film build, flake alignment and instrument, which another
 shop sharing the database does not have. On 500 fresh cases of the habits shop the shipped
 model errs by ΔE00 1.04 and the model adapted to 2,000 others of it by 0.65; on 500 cases of
-a shop without those habits, by 0.62 and 1.03 (README, "A model per shop"). A shop without a
-model of its own uses the instrument's.
+a shop without those habits, by 0.62 and 1.03 (docs/cases-and-model.md, "A model per
+shop"). A shop without a model of its own uses the instrument's.
 """
 
 from __future__ import annotations
