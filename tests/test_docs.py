@@ -165,3 +165,13 @@ def test_a_broken_link_is_caught(tmp_path):
         "page.md: gone.md: no such file",
         "page.md: page.md#lost: no such heading",
     ]
+
+
+def test_the_readme_leads_to_every_page_under_docs():
+    """A newcomer starts at the README: each page under docs/ is linked from it."""
+    linked = {
+        (ROOT / t.partition("#")[0]).resolve() for t in LINK.findall(DOCUMENTS[0].read_text())
+    }
+    pages = {p.resolve() for p in DOCUMENTS[1:]}
+    assert len(pages) >= 9
+    assert not pages - linked, sorted(p.name for p in pages - linked)
