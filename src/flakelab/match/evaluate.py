@@ -428,6 +428,8 @@ def _one(
         "latency_s": latency,
         "lot_error": lot_error,
         "predicted_de00": float(best.de00.max()),
+        # an ensemble's disagreement on the first recipe, at its worst geometry (None: one network)
+        "predicted_spread": None if best.spread is None else float(best.spread.max()),
         "family": str(world.library.paint_families(x_hidden[None])[0]),
         # the car's paint holds a toner the shop is out of (settings.without)
         "needs_missing": bool(

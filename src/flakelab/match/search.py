@@ -77,7 +77,7 @@ from flakelab.match.judging import (
     recipe_vector,
 )
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
-from flakelab.match.settings import MatchSettings, without_metamerism
+from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings, without_metamerism
 from flakelab.match.stock import toners_allowed
 from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
 
@@ -660,6 +660,8 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
         )
     if note := _metamer_note(best, settings):
         notes.append(note)
+    if note := _unsure_note(best):
+        notes.append(note)
     flakes = any(v > 0 for v in best.texture.values())
     if tolerance.texture is not None and not texture_read and flakes:
         notes.append(
@@ -742,6 +744,22 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     return (
         f"the best recipe is a metamer of the target: its metamerism index under {light} is "
         f"{worst:.2f} at worst, so it matches in daylight and not under that light ({advice})"
+    )
+
+
+def _unsure_note(best: Candidate) -> str | None:
+    """A note when the model's ensemble disagrees on the best candidate by more than
+    :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` at some geometry: the cases taught
+    it little about such a paint, and its recipe passes its first spray about half as often."""
+    if best.spread is None or not best.spread.max() > MODEL_SPREAD_NOTICE:
+        return None
+    worst = int(np.argmax(best.spread))
+    return (
+        f"the model's networks disagree on the best recipe by {best.spread[worst]:.2f} ΔE00 at "
+        f"{best.geometries[worst]} (± model), over the {MODEL_SPREAD_NOTICE:g} beyond which "
+        "recipes pass their first spray about half as often: the cases taught the model "
+        "little about paints like this one; spray a test card before mixing the can, or "
+        "compare match --physics"
     )
 
 

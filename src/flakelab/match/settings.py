@@ -13,6 +13,7 @@ __all__ = [
     "EFFECT_TRACE",
     "EXTRA_TONERS_TRIED",
     "MODEL_SD",
+    "MODEL_SPREAD_NOTICE",
     "NOISE_SD",
     "PERSISTENT_SD",
     "SCALE_RESOLUTION_G",
@@ -37,6 +38,14 @@ CAN_QUANTITY = "250g"
 
 SCALE_RESOLUTION_G = 0.1
 """A paint-mixing scale's step [g] unless told (``--resolution``; issue 5's default)."""
+
+MODEL_SPREAD_NOTICE = 0.5
+"""An ensemble's disagreement (ΔE00 about the members' mean, at the best candidate's worst
+geometry) over which ``match`` says its numbers deserve a test card: where the members disagree
+the cases taught the model little. On the harness's 200 targets + 50 with a new toner (seed
+4242, each first recipe sprayed ten more times, stop 111) the 26 best candidates over it passed
+first time with a chance of 0.35 against 0.64 for the other 224 (over 0.7: 14, 0.29; over 1.0:
+3, 0.03), most of them pearls and solids; ``benchmarks/model_spread.py``."""
 
 SOLID_TRAVEL = 2.4
 """A target read without texture whose colour travels less than this over its geometries at
