@@ -750,14 +750,14 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
 def _unsure_note(best: Candidate) -> str | None:
     """A note when the model's ensemble disagrees on the best candidate by more than
     :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` at some geometry: the cases taught
-    it little about such a paint, and its recipe passes its first spray about half as often."""
+    it little about such a paint, and its recipe passes its first spray a third less often."""
     if best.spread is None or not best.spread.max() > MODEL_SPREAD_NOTICE:
         return None
     worst = int(np.argmax(best.spread))
     return (
         f"the model's networks disagree on the best recipe by {best.spread[worst]:.2f} ΔE00 at "
         f"{best.geometries[worst]} (± model), over the {MODEL_SPREAD_NOTICE:g} beyond which "
-        "recipes pass their first spray about half as often: the cases taught the model "
+        "recipes pass their first spray a third less often: the cases taught the model "
         "little about paints like this one; spray a test card before mixing the can, or "
         "compare match --physics"
     )
