@@ -122,16 +122,25 @@ def heading_anchor(heading: str) -> str:
     return kept.replace(" ", "-")
 
 
+def prose(path: Path) -> str:
+    """The text of the Markdown file ``path`` without its code blocks."""
+    return re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+
+
+def is_external(target: str) -> bool:
+    """Whether a link leads off these documents (https: and the like: not ours to check)."""
+    return re.match(r"[a-z]+:", target) is not None
+
+
 def document_anchors(path: Path) -> set[str]:
-    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
-    return {heading_anchor(h) for h in re.findall(r"^#{1,6} (.+)$", text, re.M)}
+    return {heading_anchor(h) for h in re.findall(r"^#{1,6} (.+)$", prose(path), re.M)}
 
 
 def broken_links(path: Path) -> list[str]:
     """The links of ``path`` to a file or a heading of these documents that is not there."""
     broken = []
-    for target in LINK.findall(re.sub(r"```.*?```", "", path.read_text(), flags=re.S)):
-        if re.match(r"[a-z]+:", target):  # https: and the like: not ours to check
+    for target in LINK.findall(prose(path)):
+        if is_external(target):
             continue
         file, _, anchor = target.partition("#")
         linked = (path.parent / file).resolve() if file else path
@@ -152,8 +161,8 @@ def test_heading_anchors_are_githubs():
 def test_every_link_between_the_documents_leads_somewhere():
     """The README and the pages under docs/ link to each other's files, headings and images:
     each link's file and heading exist (the README was split into docs/ at stop 111)."""
-    links = [t for path in DOCUMENTS for t in LINK.findall(path.read_text())]
-    assert sum(not re.match(r"[a-z]+:", t) for t in links) > 30
+    links = [t for path in DOCUMENTS for t in LINK.findall(prose(path))]
+    assert sum(not is_external(t) for t in links) > 30
     broken = [b for path in DOCUMENTS for b in broken_links(path)]
     assert not broken, "\n".join(broken)
 
