@@ -5,8 +5,9 @@ model's ensemble disagree (``± model``), and says so in a note where that disag
 :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` at some geometry. This runs the
 evaluation harness (``flakelab match evaluate``) with each first recipe sprayed ``--resprays``
 times more, and gives the first shot's chance to pass by the best candidate's disagreement
-at its worst geometry: in bands, and over the notice against the rest of the same run (the
-baseline), for every target and by paint family.
+at its worst geometry, in bands, and over the notice against the rest of the same run (the
+baseline), for every target and by paint family. The recipes are the model's own, as
+``--no-physics-check`` leaves them (``benchmarks/physics_check.py`` measures the check).
 
     python benchmarks/model_spread.py [--targets 200] [--novel-targets 50] [--seed 4242]
         [--resprays 10] [--notice 0.5] [--model FILE] [--json]
@@ -20,7 +21,7 @@ import json
 import numpy as np
 
 from _matcher import add_harness_arguments, shipped_matcher, timed_harness
-from flakelab.match.settings import MODEL_SPREAD_NOTICE
+from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings
 
 BANDS = (0.0, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, np.inf)
 """Edges of the disagreement bands [ΔE00]."""
@@ -85,9 +86,11 @@ def main() -> None:
     )
     if getattr(forward, "members", 1) < 2:
         parser.error("--model: a single network has no ensemble to disagree")
+    # the model's own recipes: the physics checks none (benchmarks/physics_check.py does)
     report, seconds = timed_harness(
-        world, forward, effect, args, forward.novel, "harness", per_target=True
-    )
+        world, forward, effect, args, forward.novel, "harness",
+        settings=MatchSettings(physics_check=0), per_target=True,
+    )  # fmt: skip
     figures = chance_by_spread(report["per_target"], args.notice)
     summary = {
         "targets": args.targets,

@@ -1556,37 +1556,72 @@ def _white_pearl_target(texture: bool = True):
     return _nominal_target(recipe, "white pearl", texture)
 
 
-def test_a_paint_the_model_knows_little_is_named_by_its_ensembles_disagreement(
-    hybrid, example_by_metamerism
-):
+def test_a_paint_the_model_knows_little_is_refined_by_the_physics(hybrid, example_by_metamerism):
     """A dark Xirallic red (four tenths of the crystal silver, three of perylene maroon and
     three of quinacridone red) lies where the cases are sparse. The networks of the shipped
     ensemble disagree on the learned search's best recipe by over 1 ΔE00 at 45as15 (1.70
     with stop 109's model), and there the world's physics puts that recipe 1.85 off the
-    target where the model predicts 0.41. The search's note names the disagreement and its
-    geometry (``MODEL_SPREAD_NOTICE``). On the example blue metallic, where the members agree
-    within 0.2, no note says so."""
+    target where the model predicts 0.41 (``--no-physics-check``). By default the library's
+    physics refines the best recipes and judges every candidate (``PHYSICS_CHECK``): the
+    recipe it finds, sprayed nominally, lies within 0.3 of the target everywhere. Both ways
+    the note names the disagreement and its geometry (``MODEL_SPREAD_NOTICE``). On the
+    example blue metallic, where the members agree within 0.2, the physics checks nothing."""
     from flakelab.match.models import effect_mask
     from flakelab.match.settings import MODEL_SPREAD_NOTICE
 
     library = read_library(None)
     recipe = {"Xirallic crystal silver": 0.4, "Perylene maroon": 0.3, "Quinacridone red": 0.3}
     target = _nominal_target(recipe, "dark Xirallic red")
-    result = match(target, hybrid, effect_mask(library, hybrid.toners), library=library,
-                   tolerance=tolerance_preset("refinish"),
-                   settings=MatchSettings(candidates=1))  # fmt: skip
-    best = result.candidates[0]
-    worst = int(np.argmax(best.spread))
-    assert best.geometries[worst] == "45as15" and best.spread[worst] > 2 * MODEL_SPREAD_NOTICE
-    sprayed = _nominal_target(best.fractions, "its best recipe")
-    de00 = delta_E_CIE2000(reflectance_to_Lab(sprayed.reflectance),
-                           reflectance_to_Lab(target.reflectance))  # fmt: skip
-    assert de00[worst] > best.de00[worst] + 0.5  # the model's numbers fail where they disagree
-    said = [n for n in result.notes if "disagree on the best recipe" in n]
-    assert len(said) == 1 and f"by {best.spread[worst]:.2f} ΔE00 at 45as15" in said[0]
+    target_lab = reflectance_to_Lab(target.reflectance)
+
+    def matched(check: int):
+        result = match(target, hybrid, effect_mask(library, hybrid.toners), library=library,
+                       tolerance=tolerance_preset("refinish"),
+                       settings=MatchSettings(candidates=1, physics_check=check))  # fmt: skip
+        best = result.candidates[0]
+        sprayed = _nominal_target(best.fractions, "its best recipe")
+        de00 = delta_E_CIE2000(reflectance_to_Lab(sprayed.reflectance), target_lab)
+        said = [n for n in result.notes if "disagree on its best recipe by" in n]
+        return best, de00, said
+
+    learned, de00, said = matched(check=0)
+    worst = int(np.argmax(learned.spread))
+    assert learned.geometries[worst] == "45as15"
+    assert learned.spread[worst] > 2 * MODEL_SPREAD_NOTICE
+    assert de00[worst] > learned.de00[worst] + 0.5  # the model's numbers fail where they disagree
+    assert len(said) == 1 and f"by {learned.spread[worst]:.2f} ΔE00 at 45as15" in said[0]
+    assert "compare match --physics" in said[0]
+    checked, de00, said = matched(check=3)
+    assert checked.model.startswith("physics") and checked.spread is None
+    assert de00.max() < 0.3 and np.allclose(checked.de00, de00, atol=0.05)
+    assert len(said) == 1 and f"by {learned.spread[worst]:.2f} ΔE00 at 45as15" in said[0]
+    assert "the library's physics refined its best recipes" in said[0]
     _, example_best, example_notes = example_by_metamerism
     assert example_best[1.0].spread.max() < MODEL_SPREAD_NOTICE
-    assert not any("disagree on the best recipe" in n for n in example_notes[1.0])
+    assert not any("disagree on its best recipe" in n for n in example_notes[1.0])
+
+
+def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path):
+    """``flakelab match`` on the dark Xirallic red: by default the physics checked the model's
+    recipes, and the report names it as the model of every candidate; ``--no-physics-check``
+    keeps the learned model's recipes and numbers, the note pointing to ``--physics``."""
+    from flakelab.io import write_measurements
+
+    recipe = {"Xirallic crystal silver": 0.4, "Perylene maroon": 0.3, "Quinacridone red": 0.3}
+    path = tmp_path / "xirallic-red.json"
+    write_measurements([_nominal_target(recipe, "dark Xirallic red")], path)
+    reports = {}
+    for flag in ("--physics-check", "--no-physics-check"):
+        result = cli("match", path, flag, "--tolerance", "refinish", "--json")
+        assert result.returncode == 0, result.stderr
+        reports[flag] = json.loads(result.stdout)
+    checked, learned = reports["--physics-check"], reports["--no-physics-check"]
+    assert checked["model_id"] == "physics" and learned["model_id"].startswith("demo-five-angle")
+    assert all(c["model"].startswith("physics") for c in checked["candidates"])
+    assert all(c["model"].startswith("learned") for c in learned["candidates"])
+    assert checked["candidates"][0]["de00_max"] < 0.3 < learned["candidates"][0]["de00_max"]
+    assert any("physics refined its best recipes" in n for n in checked["notes"])
+    assert any("compare match --physics" in n for n in learned["notes"])
 
 
 def test_a_white_pearl_is_matched_by_the_learned_model_as_by_the_physics(hybrid, physics):
@@ -1919,7 +1954,12 @@ def test_harness_sprays_recipes_as_a_shop_weighs_them_when_given_a_scale(hybrid)
 
     world = harness_world(hybrid.library, "five-angle", "shop")
     effect = effect_mask(hybrid.library, hybrid.toners)
-    hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
+    # the model's recipes as they are: the hasty search leaves some that its networks
+    # disagree on, and the recipes the physics refines from them happened to lose less to
+    # this can's rounding (median 2.86 against 3.17 as computed): four targets are few
+    hasty = MatchSettings(
+        candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf, physics_check=0
+    )
     small = order_can("20g", 1.0)
     runs = {
         scale: evaluate_matching(

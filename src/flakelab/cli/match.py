@@ -71,6 +71,8 @@ from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import (
     CAN_QUANTITY,
+    MODEL_SPREAD_NOTICE,
+    PHYSICS_CHECK,
     SCALE_RESOLUTION_G,
     SOLID_TRAVEL_FROM,
     MatchSettings,
@@ -165,6 +167,16 @@ def match_command(
             "predicted match, wherever the model is unsure).",
         ),
     ] = MatchSettings.model_risk,
+    physics_check: Annotated[
+        bool,
+        typer.Option(
+            "--physics-check/--no-physics-check",
+            help="Where the model's networks disagree on the best recipe by over "
+            f"{MODEL_SPREAD_NOTICE:g} ΔE00 (its cases too few), the library's physics refines "
+            "the best recipes and predicts every candidate (--no-physics-check: the learned "
+            "model's recipes and numbers throughout).",
+        ),
+    ] = True,
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
     without: WithoutOption = None,
@@ -294,6 +306,7 @@ def match_command(
 
     search = MatchSettings(
         model_risk=model_risk,
+        physics_check=PHYSICS_CHECK if physics_check else 0,
         metamerism=metamerism,
         lights=lights_option(lights),
         solid_travel=solid_travel,
@@ -945,6 +958,7 @@ def _evaluate(
     report["model"] = forward.name
     report["model_id"] = forward.model_id
     report["model_risk"] = settings.model_risk
+    report["physics_check"] = settings.physics_check
     report["metamerism_weight"] = settings.metamerism
     report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
     report["solid_travel"] = settings.solid_travel
@@ -1023,6 +1037,7 @@ def _print_harness(report: dict) -> None:
         f"median {report['first_shot_metamerism_median']:.2f} "
         f"({report['oracle_metamerism_median']:.2f})",
         *_harness_options(report),
+        _physics_checked_line(report),
         f"latency per target: p50 {report['latency_p50_s']:.2f} s, p95 "
         f"{report['latency_p95_s']:.2f} s",
         f"model: {report['model']} ({report['model_id']}); --json gives every figure and "
@@ -1030,6 +1045,18 @@ def _print_harness(report: dict) -> None:
     ]
     for line in lines:
         console.print(line, highlight=False)
+
+
+def _physics_checked_line(report: dict) -> str:
+    """How many targets' best recipes the physics refined, the model's networks disagreeing
+    on them (``--physics-check``)."""
+    if not report["physics_check"]:
+        return "the physics checked no recipe (--no-physics-check)"
+    checked = report["physics_checked_targets"] + report["novel_physics_checked_targets"]
+    return (
+        f"the physics refined the recipes of {counted(checked, 'target')}, where the model's "
+        f"networks disagreed by over {MODEL_SPREAD_NOTICE:g} ΔE00 (--physics-check)"
+    )
 
 
 def _harness_options(report: dict) -> list[str]:

@@ -428,8 +428,10 @@ def _one(
         "latency_s": latency,
         "lot_error": lot_error,
         "predicted_de00": float(best.de00.max()),
-        # an ensemble's disagreement on the first recipe, at its worst geometry (None: one network)
+        # an ensemble's disagreement on the first recipe, at its worst geometry (None: one network,
+        # or the library's physics, which predicts where the ensemble disagreed)
         "predicted_spread": None if best.spread is None else float(best.spread.max()),
+        "physics_checked": result.model_id != forward.model_id,
         "family": str(world.library.paint_families(x_hidden[None])[0]),
         # the car's paint holds a toner the shop is out of (settings.without)
         "needs_missing": bool(
@@ -568,6 +570,9 @@ def evaluate_matching(
         ),
         "oracle_de00_median": float(np.median([r["oracle_de00"] for r in rows])),
         "predicted_de00_median": float(np.median([r["predicted_de00"] for r in rows])),
+        # targets whose best recipes the physics refined, the ensemble unsure (physics_check)
+        "physics_checked_targets": sum(r["physics_checked"] for r in rows),
+        "novel_physics_checked_targets": sum(r["physics_checked"] for r in novel_rows),
         "latency_p50_s": float(np.percentile(latency, 50)),
         "latency_p95_s": float(np.percentile(latency, 95)),
         "resprays": resprays,

@@ -24,6 +24,11 @@
 5. **Judge** with the numbers the colorist sees — CIEDE2000 per geometry, texture
    differences, the tolerance — plus a small penalty per toner, and return the best distinct
    candidates (:mod:`flakelab.match.judging`).
+6. **Physics check**, only where the learned model's ensemble disagrees on the best candidate
+   by more than :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`: there its cases were
+   too few, so the best few candidates are refined over their own toners through the
+   library's physics, which then judges every candidate (DESIGN.md §3's hybrid;
+   :data:`~flakelab.match.settings.PHYSICS_CHECK`).
 
 Every stage aims at the colorist's tolerance: the optimiser's loss and the judging's score
 count each geometry's error as a share of its limit, with the tolerance's kL, kC, kH
@@ -534,13 +539,21 @@ def _match(
         from_recorded = np.concatenate([x_from_recorded.numpy().astype(float), recorded])
         x = np.concatenate([x, _weighable(from_recorded, settings)])
         candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
+    learned_best = candidates[0] if candidates else None
+    if (physics := _physics_check(forward, library, learned_best, settings)) is not None:
+        # 5. the model unsure of its best: the physics refines the best few and judges all
+        candidates = _physics_checked(
+            physics, candidates, effect, spectra, texture, tolerance, settings
+        )
+        forward = physics
     habits_note = None
     if habits is not None and candidates:
         candidates, habits_note = _aimed_off(
             forward, candidates, effect, spectra, texture, tolerance, settings, habits, library
         )
     notes = _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
-                         texture, target_texture is not None, settings)  # fmt: skip
+                         texture, target_texture is not None, settings, learned_best,
+                         checked=physics is not None)  # fmt: skip
     return MatchResult(
         name,
         tuple(forward.geometries),
@@ -629,11 +642,13 @@ def _swapped(forward, objective, candidates, allowed, effect, target_lab, target
 
 
 def _match_notes(target, forward, candidates, effect, solid, habits_note, tolerance,
-                 texture: dict | None, texture_read: bool, settings) -> list[str]:  # fmt: skip
+                 texture: dict | None, texture_read: bool, settings,
+                 learned_best: Candidate | None, checked: bool) -> list[str]:  # fmt: skip
     """What a match says beside its candidates: the geometries it left out, a solid, the
     shop's habits, and of the best candidate whether it lies outside the model's support,
     fails, is a metamer, was judged without the target's ``texture`` or holds no effect toner
-    where that texture reads flakes."""
+    where that texture reads flakes; and whether the model was unsure of the best it found,
+    ``learned_best``, and whether the physics then ``checked`` it (:func:`_unsure_note`)."""
     notes = left_out_note(unused_geometries(target, forward), forward, "match")
     if note := recovered_note(target) if isinstance(target, Measurement) else None:
         notes.append(
@@ -660,7 +675,7 @@ def _match_notes(target, forward, candidates, effect, solid, habits_note, tolera
         )
     if note := _metamer_note(best, settings):
         notes.append(note)
-    if note := _unsure_note(best):
+    if note := _unsure_note(learned_best, checked):
         notes.append(note)
     flakes = any(v > 0 for v in best.texture.values())
     if tolerance.texture is not None and not texture_read and flakes:
@@ -747,20 +762,72 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
     )
 
 
-def _unsure_note(best: Candidate) -> str | None:
-    """A note when the model's ensemble disagrees on the best candidate by more than
-    :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` at some geometry: the cases taught
-    it little about such a paint, and its recipe passes its first spray a third less often."""
-    if best.spread is None or not best.spread.max() > MODEL_SPREAD_NOTICE:
+def _unsure(best: Candidate | None) -> bool:
+    """Whether the model's ensemble disagrees on the ``best`` candidate by more than
+    :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` at some geometry."""
+    return best is not None and best.spread is not None and best.spread.max() > MODEL_SPREAD_NOTICE
+
+
+def _unsure_note(best: Candidate, checked: bool) -> str | None:
+    """A note when the model's ensemble is :func:`_unsure` of the ``best`` candidate: the cases
+    taught it little about such a paint, and its recipe passes its first spray a third less
+    often; and whether the physics then ``checked`` the candidates (:func:`_physics_checked`)."""
+    if not _unsure(best):
         return None
     worst = int(np.argmax(best.spread))
-    return (
-        f"the model's networks disagree on the best recipe by {best.spread[worst]:.2f} ΔE00 at "
-        f"{best.geometries[worst]} (± model), over the {MODEL_SPREAD_NOTICE:g} beyond which "
-        "recipes pass their first spray a third less often: the cases taught the model "
-        "little about paints like this one; spray a test card before mixing the can, or "
-        "compare match --physics"
+    disagree = (
+        f"the model's networks disagree on its best recipe by {best.spread[worst]:.2f} ΔE00 at "
+        f"{best.geometries[worst]}, over the {MODEL_SPREAD_NOTICE:g} beyond which its recipes "
+        "pass their first spray a third less often: the cases taught it little about paints "
+        "like this one"
     )
+    if checked:
+        return (
+            f"{disagree}, so the library's physics refined its best recipes and predicts every "
+            "candidate shown (--no-physics-check keeps the model's); spray a test card before "
+            "mixing the can"
+        )
+    return f"{disagree}; spray a test card before mixing the can, or compare match --physics"
+
+
+def _physics_check(forward, library, best: Candidate | None, settings: MatchSettings):
+    """The library's physics as the matcher predicts with it where the learned model is
+    :func:`_unsure` of its ``best`` candidate (for the shop's tins where ``forward`` is), or
+    None: the model sure, ``settings.physics_check`` 0, no ``library``, or a forward whose
+    toners are not the library's (the physics alone, a Kubelka–Munk solid)."""
+    if not (settings.physics_check and library is not None and _unsure(best)):
+        return None
+    if tuple(forward.toners) != tuple(library.names):
+        return None
+    from flakelab.match.forward import PhysicsForward
+    from flakelab.match.lots import WithLots  # which builds on the correction, and it on this
+
+    physics = PhysicsForward(library, forward.geometries)
+    if isinstance(forward, WithLots):
+        return WithLots(physics, forward.strength, forward.shade, library)
+    return physics
+
+
+def _physics_checked(
+    physics, candidates, effect, spectra, texture, tolerance, settings
+) -> list[Candidate]:
+    """The learned search's ``candidates`` judged by the library's ``physics``, beside its
+    best ``settings.physics_check`` refined over their own toners through it: where the
+    networks disagree, the cases were too few, and the physics answers (DESIGN.md §3).
+    Refining the learned recipes passed as often as a whole search through the physics at a
+    tenth of its time (:data:`~flakelab.match.settings.PHYSICS_CHECK`)."""
+    objective = MatchObjective(
+        physics.geometries, tolerance, physics.dtype, spectra, settings.metamerism, settings.lights
+    )
+    target_lab = objective.lab(torch.as_tensor(spectra))
+    target_texture = _texture_readings(texture, physics.dtype)
+    x = np.array([recipe_vector(physics, c.fractions) for c in candidates])
+    best = _recorded_starts(x[: settings.physics_check], np.ones(len(x[0]), bool), effect, settings)
+    refined = _refined_recorded(
+        physics, objective, best, effect, target_lab, target_texture, settings
+    )
+    x = np.concatenate([_weighable(refined.numpy().astype(float), settings), x])
+    return judge(physics, x, effect, spectra, texture, tolerance, settings)
 
 
 def _ranked(rows: NDArray, loss: NDArray, outside: NDArray) -> NDArray:

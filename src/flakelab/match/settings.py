@@ -16,6 +16,7 @@ __all__ = [
     "MODEL_SPREAD_NOTICE",
     "NOISE_SD",
     "PERSISTENT_SD",
+    "PHYSICS_CHECK",
     "SCALE_RESOLUTION_G",
     "SOLID_TRAVEL",
     "MatchSettings",
@@ -47,6 +48,19 @@ first recipe sprayed ten more times, stop 111) the best candidates over it passe
 with a chance of 0.35 (26 of seed 4242) and 0.48 (22 of seed 4343) against 0.64 and 0.59 for
 the rest, 0.41 against 0.61 over both: a third less often; most of them pearls and solids.
 Chosen on seed 4242, where it parted the two most (``benchmarks/model_spread.py``)."""
+
+PHYSICS_CHECK = 3
+"""Where the learned model is unsure of the best candidate (its networks disagree by over
+:data:`MODEL_SPREAD_NOTICE`), the matcher refines this many of its best candidates over their
+own toners through the library's physics, and the physics judges every candidate
+(``MatchSettings.physics_check``; DESIGN.md §3's hybrid: the physics where the cases are too
+few). On the harness's seed 4242 (200 targets + 50 with a new toner, each first recipe
+sprayed 20 times more; stop 112) the 26 checked targets passed first time with a chance of
+0.34 as the model matched them and 0.56 checked (their hidden formulas 0.70); on seed 4343,
+22 at 0.46 and 0.48 (0.38): 0.39 against 0.52 over both. The refinement costs 0.05–0.2 s.
+In the harness the library's physics is the generated world's own, so this is what a
+perfectly calibrated library gives (``benchmarks/physics_check.py``; docs/matching.md)."""
+
 
 SOLID_TRAVEL = 2.4
 """A target read without texture whose colour travels less than this over its geometries at
@@ -120,6 +134,10 @@ class MatchSettings:
     # library's kinds), and none for the physics alone (no trace rule)
     effect_kinds: tuple[str, ...] | None = None
     model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
+    # where the ensemble disagrees on the best candidate by over MODEL_SPREAD_NOTICE, this
+    # many of the best are refined by the library's physics, which then judges every
+    # candidate (0: the learned model's numbers throughout; :data:`PHYSICS_CHECK`)
+    physics_check: int = PHYSICS_CHECK
     metamerism: float = 1.0  # weight of the mean metamerism index (ΔE) in the objective
     # the optimiser takes that term afresh every so many steps and follows its tangent
     # between (1: exact at every step; :mod:`flakelab.match.objective` has the figures)

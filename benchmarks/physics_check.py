@@ -1,0 +1,126 @@
+"""Matcher: where the model's ensemble is unsure, does the library's physics do better?
+
+``flakelab match`` refines its best candidates through the library's physics where the
+networks of the model's ensemble disagree on the best one by more than
+:data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` (``MatchSettings.physics_check``,
+``--physics-check``). This runs the evaluation harness (``flakelab match evaluate``) twice on
+the same targets, without the check (the baseline) and with it, each first recipe sprayed
+``--resprays`` times more, and compares the first shot's chance on the targets the physics
+checked (paired: the same targets and spray streams) and over all, with the hidden formulas'
+chance there, and the latency.
+
+    python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
+        [--resprays 20] [--model FILE] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from _matcher import add_harness_arguments, shipped_matcher, timed_harness
+from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
+
+
+def paired(learned: list[dict], checked: list[dict]) -> dict:
+    """The first shot's chance of the harness's rows ``learned`` (no check) and ``checked``
+    (the same targets, with it), on the targets the physics checked and over all; the hidden
+    formulas' chance on those targets; and their latency, p50 and p95 over all targets."""
+    mask = np.array([r["physics_checked"] for r in checked])
+
+    def chances(rows: list[dict], key: str) -> np.ndarray:
+        return np.array([r[key] for r in rows], dtype=float)
+
+    before, after = chances(learned, "first_chance"), chances(checked, "first_chance")
+    gain = after[mask] - before[mask]
+    family = np.array([r["family"] for r in checked])
+    latency = {
+        name: [float(np.percentile(chances(rows, "latency_s"), q)) for q in (50, 95)]
+        for name, rows in (("learned", learned), ("checked", checked))
+    }
+    return {
+        "checked_targets": int(mask.sum()),
+        "checked_by_family": {str(f): int((mask & (family == f)).sum()) for f in np.unique(family)},
+        "checked_first_chance_learned": float(before[mask].mean()) if mask.any() else None,
+        "checked_first_chance_physics": float(after[mask].mean()) if mask.any() else None,
+        "checked_gain_se": float(gain.std(ddof=1) / np.sqrt(gain.size)) if gain.size > 1 else None,
+        "checked_oracle_chance": float(chances(checked, "oracle_chance")[mask].mean())
+        if mask.any()
+        else None,
+        "first_chance_learned": float(before.mean()),
+        "first_chance_checked": float(after.mean()),
+        "latency_p50_p95_s": latency,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_harness_arguments(parser, targets=200, novel_targets=50)
+    parser.set_defaults(resprays=20)
+    args = parser.parse_args()
+    if args.resprays < 1:
+        parser.error(
+            f"--resprays: expected at least 1 (the chances need them), got {args.resprays}"
+        )
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
+    runs, seconds = {}, {}
+    for name, check in (("learned", 0), ("checked", PHYSICS_CHECK)):
+        report, seconds[name] = timed_harness(
+            world, forward, effect, args, forward.novel, f"harness ({name})",
+            settings=MatchSettings(physics_check=check), per_target=True,
+        )  # fmt: skip
+        runs[name] = report
+    rows = {name: report["per_target"] for name, report in runs.items()}
+    known = args.targets
+    figures = {
+        "known": paired(rows["learned"][:known], rows["checked"][:known]),
+        "novel": paired(rows["learned"][known:], rows["checked"][known:])
+        if len(rows["checked"]) > known
+        else None,
+    }
+    summary = {
+        "targets": args.targets,
+        "novel_targets": args.novel_targets,
+        "seed": args.seed,
+        "resprays": args.resprays,
+        "physics_check": PHYSICS_CHECK,
+        **{
+            f"{name}_{key}": runs[name][key]
+            for name in runs
+            for key in ("first_shot_success", "after_one_correction", "novel_toner_first_shot")
+        },
+        **figures,
+        "wall_s": seconds,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return
+    for part, f in figures.items():
+        if f is None:
+            continue
+        print(f"{part} toners: the physics checked {f['checked_targets']} targets "
+              f"{f['checked_by_family']}; their first-shot chance {_chance(f, 'learned')} as the "
+              f"model matched them, {_chance(f, 'physics')} checked (± "
+              f"{f['checked_gain_se'] or 0:.3f} paired), hidden formula "
+              f"{f['checked_oracle_chance'] or 0:.3f}; over all {f['first_chance_learned']:.3f} "
+              f"→ {f['first_chance_checked']:.3f}")  # fmt: skip
+        for name, (p50, p95) in f["latency_p50_p95_s"].items():
+            print(f"  latency {name}: p50 {p50:.2f} s, p95 {p95:.2f} s")
+    for name in runs:
+        r = runs[name]
+        print(f"{name}: first shot {r['first_shot_success']:.3f}, after one correction "
+              f"{r['after_one_correction']:.3f}, new toner {r['novel_toner_first_shot'] or 0:.3f}"
+              f" ({seconds[name]:.0f} s)")  # fmt: skip
+
+
+def _chance(figures: dict, name: str) -> str:
+    value = figures[f"checked_first_chance_{name}"]
+    return "-" if value is None else f"{value:.3f}"
+
+
+if __name__ == "__main__":
+    main()
