@@ -40,6 +40,7 @@ def paired(learned: list[dict], checked: list[dict]) -> dict:
         name: [float(np.percentile(chances(rows, "latency_s"), q)) for q in (50, 95)]
         for name, rows in (("learned", learned), ("checked", checked))
     }
+    added = (chances(checked, "latency_s") - chances(learned, "latency_s"))[mask]
     return {
         "checked_targets": int(mask.sum()),
         "checked_by_family": {str(f): int((mask & (family == f)).sum()) for f in np.unique(family)},
@@ -52,6 +53,8 @@ def paired(learned: list[dict], checked: list[dict]) -> dict:
         "first_chance_learned": float(before.mean()),
         "first_chance_checked": float(after.mean()),
         "latency_p50_p95_s": latency,
+        # what the check added to the checked targets' match, median and worst (paired)
+        "checked_added_s": [float(np.median(added)), float(added.max())] if mask.any() else None,
     }
 
 
@@ -110,6 +113,9 @@ def main() -> None:
               f"→ {f['first_chance_checked']:.3f}")  # fmt: skip
         for name, (p50, p95) in f["latency_p50_p95_s"].items():
             print(f"  latency {name}: p50 {p50:.2f} s, p95 {p95:.2f} s")
+        if f["checked_added_s"]:
+            median, worst = f["checked_added_s"]
+            print(f"  the check added {median:.2f} s to a checked match (worst {worst:.2f})")
     for name in runs:
         r = runs[name]
         print(f"{name}: first shot {r['first_shot_success']:.3f}, after one correction "

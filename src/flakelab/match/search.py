@@ -541,7 +541,7 @@ def _match(
         candidates = judge(forward, x, effect, spectra, texture, tolerance, settings)
     learned_best = candidates[0] if candidates else None
     if (physics := _physics_check(forward, library, learned_best, settings)) is not None:
-        # 5. the model unsure of its best: the physics refines the best few and judges all
+        # 6. the model unsure of its best: the physics refines the best few and judges all
         candidates = _physics_checked(
             physics, candidates, effect, spectra, texture, tolerance, settings
         )
@@ -813,9 +813,10 @@ def _physics_checked(
 ) -> list[Candidate]:
     """The learned search's ``candidates`` judged by the library's ``physics``, beside its
     best ``settings.physics_check`` refined over their own toners through it: where the
-    networks disagree, the cases were too few, and the physics answers (DESIGN.md §3).
-    Refining the learned recipes passed as often as a whole search through the physics at a
-    tenth of its time (:data:`~flakelab.match.settings.PHYSICS_CHECK`)."""
+    networks disagree, the cases were too few, and the physics answers (DESIGN.md §3;
+    :data:`~flakelab.match.settings.PHYSICS_CHECK`). Refining from the learned recipes adds a
+    tenth of a second or two, where a whole search through the physics (``match --physics``)
+    took 2.7–2.8 s at the harness's median (docs/matching.md)."""
     objective = MatchObjective(
         physics.geometries, tolerance, physics.dtype, spectra, settings.metamerism, settings.lights
     )
