@@ -814,8 +814,8 @@ def _physics_checked(
     """The learned search's ``candidates`` judged by the library's ``physics``, beside its
     best ``settings.physics_check`` refined over their own toners through it: where the
     networks disagree, the cases were too few, and the physics answers (DESIGN.md §3;
-    :data:`~flakelab.match.settings.PHYSICS_CHECK`). Refining from the learned recipes adds a
-    tenth of a second or two, where a whole search through the physics (``match --physics``)
+    :data:`~flakelab.match.settings.PHYSICS_CHECK`). Refining from the learned recipes adds
+    0.1–0.3 s at the median, where a whole search through the physics (``match --physics``)
     took 2.7–2.8 s at the harness's median (docs/matching.md)."""
     objective = MatchObjective(
         physics.geometries, tolerance, physics.dtype, spectra, settings.metamerism, settings.lights

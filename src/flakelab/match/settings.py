@@ -57,7 +57,8 @@ own toners through the library's physics, and the physics judges every candidate
 few). On the harness's seed 4242 (200 targets + 50 with a new toner, each first recipe
 sprayed 20 times more; stop 112) the 26 checked targets passed first time with a chance of
 0.34 as the model matched them and 0.56 checked (their hidden formulas 0.70); on seed 4343,
-22 at 0.46 and 0.48 (0.38): 0.39 against 0.52 over both. The refinement costs 0.05–0.2 s.
+22 at 0.46 and 0.48 (0.38): 0.39 against 0.52 over both; at the MA-T12's geometries (seed
+4242) 36 at 0.37 and 0.57 (0.46). The refinement adds 0.1–0.3 s to a match at the median.
 In the harness the library's physics is the generated world's own, so this is what a
 perfectly calibrated library gives (``benchmarks/physics_check.py``; docs/matching.md)."""
 
