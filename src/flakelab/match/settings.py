@@ -47,7 +47,8 @@ the cases taught the model little. On the harness's 200 targets + 50 with a new 
 first recipe sprayed ten more times, stop 111) the best candidates over it passed first time
 with a chance of 0.35 (26 of seed 4242) and 0.48 (22 of seed 4343) against 0.64 and 0.59 for
 the rest, 0.41 against 0.61 over both: a third less often; most of them pearls and solids.
-Chosen on seed 4242, where it parted the two most (``benchmarks/model_spread.py``)."""
+Chosen on seed 4242, where it parted the two most (``benchmarks/model_spread.py``). Over it
+the matcher also asks the library's physics (:data:`PHYSICS_CHECK`)."""
 
 PHYSICS_CHECK = 3
 """Where the learned model is unsure of the best candidate (its networks disagree by over
