@@ -51,6 +51,16 @@ def add_harness_arguments(
     parser.add_argument("--json", action="store_true")
 
 
+def parse_with_chances(parser: argparse.ArgumentParser) -> argparse.Namespace:
+    """``parser``'s options, ``--resprays`` refused under 1: the chances need them."""
+    args = parser.parse_args()
+    if args.resprays < 1:
+        parser.error(
+            f"--resprays: expected at least 1 (the chances need them), got {args.resprays}"
+        )
+    return args
+
+
 def run_harness(
     world,
     forward,
@@ -153,6 +163,17 @@ def shipped_matcher(
         settings = dataclasses.replace(harness.settings, **changes)
         harness = World(library, learned.instrument, settings)
     return harness, forward, effect_mask(library, forward.toners)
+
+
+def shipped_ensemble(parser: argparse.ArgumentParser, args: argparse.Namespace):
+    """:func:`shipped_matcher` for the harness's options ``args``, a model of one network
+    refused: it has no ensemble to disagree."""
+    world, forward, effect = shipped_matcher(
+        args.world, args.model, args.kinds, white_pearls=args.white_pearls
+    )
+    if getattr(forward, "members", 1) < 2:
+        parser.error("--model: a single network has no ensemble to disagree")
+    return world, forward, effect
 
 
 def generated_recipes(world, forward, n: int, rng) -> list[dict[str, float]]:

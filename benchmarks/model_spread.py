@@ -20,7 +20,7 @@ import json
 
 import numpy as np
 
-from _matcher import add_harness_arguments, shipped_matcher, timed_harness
+from _matcher import add_harness_arguments, parse_with_chances, shipped_ensemble, timed_harness
 from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings
 
 BANDS = (0.0, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, np.inf)
@@ -76,16 +76,8 @@ def main() -> None:
     parser.add_argument("--notice", type=float, default=MODEL_SPREAD_NOTICE,
                         help="the disagreement [ΔE00] the match's note names")  # fmt: skip
     parser.set_defaults(resprays=10)
-    args = parser.parse_args()
-    if args.resprays < 1:
-        parser.error(
-            f"--resprays: expected at least 1 (the chances need them), got {args.resprays}"
-        )
-    world, forward, effect = shipped_matcher(
-        args.world, args.model, args.kinds, white_pearls=args.white_pearls
-    )
-    if getattr(forward, "members", 1) < 2:
-        parser.error("--model: a single network has no ensemble to disagree")
+    args = parse_with_chances(parser)
+    world, forward, effect = shipped_ensemble(parser, args)
     # the model's own recipes: the physics checks none (benchmarks/physics_check.py does)
     report, seconds = timed_harness(
         world, forward, effect, args, forward.novel, "harness",

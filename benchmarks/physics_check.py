@@ -20,7 +20,8 @@ import json
 
 import numpy as np
 
-from _matcher import add_harness_arguments, shipped_matcher, timed_harness
+from _matcher import add_harness_arguments, parse_with_chances, shipped_ensemble, timed_harness
+from flakelab.core.wording import counted
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
 
 
@@ -62,14 +63,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=50)
     parser.set_defaults(resprays=20)
-    args = parser.parse_args()
-    if args.resprays < 1:
-        parser.error(
-            f"--resprays: expected at least 1 (the chances need them), got {args.resprays}"
-        )
-    world, forward, effect = shipped_matcher(
-        args.world, args.model, args.kinds, white_pearls=args.white_pearls
-    )
+    args = parse_with_chances(parser)
+    world, forward, effect = shipped_ensemble(parser, args)
     runs, seconds = {}, {}
     for name, check in (("learned", 0), ("checked", PHYSICS_CHECK)):
         report, seconds[name] = timed_harness(
@@ -105,12 +100,14 @@ def main() -> None:
     for part, f in figures.items():
         if f is None:
             continue
-        print(f"{part} toners: the physics checked {f['checked_targets']} targets "
-              f"{f['checked_by_family']}; their first-shot chance {_chance(f, 'learned')} as the "
-              f"model matched them, {_chance(f, 'physics')} checked (± "
-              f"{f['checked_gain_se'] or 0:.3f} paired), hidden formula "
-              f"{f['checked_oracle_chance'] or 0:.3f}; over all {f['first_chance_learned']:.3f} "
-              f"→ {f['first_chance_checked']:.3f}")  # fmt: skip
+        print(f"{part} toners: over all, first-shot chance {f['first_chance_learned']:.3f} → "
+              f"{f['first_chance_checked']:.3f}; the physics checked "
+              f"{counted(f['checked_targets'], 'target')} {f['checked_by_family']}")  # fmt: skip
+        if f["checked_targets"]:
+            se = f"± {f['checked_gain_se']:.3f} paired" if f["checked_gain_se"] else "one target"
+            print(f"  their first-shot chance {f['checked_first_chance_learned']:.3f} as the "
+                  f"model matched them, {f['checked_first_chance_physics']:.3f} checked ({se}); "
+                  f"their hidden formulas {f['checked_oracle_chance']:.3f}")  # fmt: skip
         for name, (p50, p95) in f["latency_p50_p95_s"].items():
             print(f"  latency {name}: p50 {p50:.2f} s, p95 {p95:.2f} s")
         if f["checked_added_s"]:
@@ -119,12 +116,11 @@ def main() -> None:
     for name in runs:
         r = runs[name]
         print(f"{name}: first shot {r['first_shot_success']:.3f}, after one correction "
-              f"{r['after_one_correction']:.3f}, new toner {r['novel_toner_first_shot'] or 0:.3f}"
+              f"{r['after_one_correction']:.3f}, new toner {_rate(r['novel_toner_first_shot'])}"
               f" ({seconds[name]:.0f} s)")  # fmt: skip
 
 
-def _chance(figures: dict, name: str) -> str:
-    value = figures[f"checked_first_chance_{name}"]
+def _rate(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
 
 
