@@ -481,11 +481,9 @@ def _match(
     if not allowed.any():
         raise MatchError("library: no toners to match with (--without leaves none)")
     spectra, texture, name = target_spectra(target, forward)
-    objective = MatchObjective(
-        forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism, settings.lights
+    objective, target_lab, target_texture = _aimed_at(
+        forward, spectra, texture, tolerance, settings
     )
-    target_lab = objective.lab(torch.as_tensor(spectra))
-    target_texture = _texture_readings(texture, forward.dtype)
     solid = None
     if (allowed & ~effect).any():  # pigments to match with
         solid = _solid_reason(texture, target_lab.numpy(), forward.geometries, settings)
@@ -575,6 +573,17 @@ def _settled(settings: MatchSettings, forward) -> MatchSettings:
     if settings.effect_kinds is None and getattr(forward, "effect_kinds", None):
         settings = replace(settings, effect_kinds=tuple(forward.effect_kinds))
     return settings
+
+
+def _aimed_at(forward, spectra, texture, tolerance, settings):
+    """What a search through ``forward`` aims at: its objective for the target's ``spectra``
+    (:class:`~flakelab.match.objective.MatchObjective`), the target's L*a*b* by it, and the
+    target's ``texture`` readings as the model's outputs (:func:`_texture_readings`)."""
+    objective = MatchObjective(
+        forward.geometries, tolerance, forward.dtype, spectra, settings.metamerism, settings.lights
+    )
+    target_lab = objective.lab(torch.as_tensor(spectra))
+    return objective, target_lab, _texture_readings(texture, forward.dtype)
 
 
 def _texture_readings(texture: dict | None, dtype) -> torch.Tensor | None:
@@ -768,7 +777,7 @@ def _unsure(best: Candidate | None) -> bool:
     return best is not None and best.spread is not None and best.spread.max() > MODEL_SPREAD_NOTICE
 
 
-def _unsure_note(best: Candidate, checked: bool) -> str | None:
+def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
     """A note when the model's ensemble is :func:`_unsure` of the ``best`` candidate: the cases
     taught it little about such a paint, and its recipe passes its first spray a third less
     often; and whether the physics then ``checked`` the candidates (:func:`_physics_checked`)."""
@@ -817,11 +826,9 @@ def _physics_checked(
     :data:`~flakelab.match.settings.PHYSICS_CHECK`). Refining from the learned recipes adds
     0.1–0.3 s at the median, where a whole search through the physics (``match --physics``)
     took 2.7–2.8 s at the harness's median (docs/matching.md)."""
-    objective = MatchObjective(
-        physics.geometries, tolerance, physics.dtype, spectra, settings.metamerism, settings.lights
+    objective, target_lab, target_texture = _aimed_at(
+        physics, spectra, texture, tolerance, settings
     )
-    target_lab = objective.lab(torch.as_tensor(spectra))
-    target_texture = _texture_readings(texture, physics.dtype)
     x = np.array([recipe_vector(physics, c.fractions) for c in candidates])
     best = _recorded_starts(x[: settings.physics_check], np.ones(len(x[0]), bool), effect, settings)
     refined = _refined_recorded(
