@@ -29,6 +29,12 @@ with the paired standard error (same targets, same sprays), and the median time 
 took; ``per_seed`` in ``--json``. ``--physics`` matches and corrects through the library's
 physics alone (``flakelab correct --physics``), e.g. to time ``"physics_every=1"``.
 
+The targets are matched as the harness matches them, the library given, so the physics
+checks the recipes the model is unsure of (:mod:`flakelab.match.physics_check`); the
+defaults' correction does too. Where it did (the ensemble unsure of the sprayed recipe),
+``checked_*`` gives each row's pass rate over those shots alone and its paired difference
+from the defaults there: ``"physics_check=0"`` corrects them with the learned model.
+
     python benchmarks/correction.py [--targets 60] [--sprays 6] [--seed 77] [--ceiling]
         [--kinds pearl=1] [--model FILE | --physics] [--json]
         "library=none" "offset_weight=1.0" "persistent_sd=0.3" "noise_sd=0.05" ...
@@ -46,6 +52,7 @@ from _matcher import MODEL_HELP, parse_kinds, seeds_from, shipped_matcher
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
+from flakelab.core.wording import counted
 from flakelab.match.correction import correct
 from flakelab.match.evaluate import (
     SUCCESS_DE00,
@@ -85,7 +92,8 @@ def failed_first_shots(seed: int, targets: int, world, forward, effect):
     trials = harness_trials(world, targets, seed, forward.novel)
     # progress on stderr even with --json: these runs are long, their output usually a file
     for x_hidden, t in tracked(trials, f"targets (seed {seed})", total=targets):
-        best = match(t.target, forward, effect).candidates[0]
+        # with the library, as the harness matches: its physics checks where the model is unsure
+        best = match(t.target, forward, effect, library=world.library).candidates[0]
         x_best = recipe_vector(forward, best.fractions)
         first = t.spray(x_best, t.streams[0])
         if worst_de00(t.target, first) > SUCCESS_DE00:
@@ -93,19 +101,21 @@ def failed_first_shots(seed: int, targets: int, world, forward, effect):
 
 
 def corrected_recipe(spec: str, world, forward, t, best, x_best, first, x_hidden):
-    """The recipe a setting sprays next, the batches it is mixed from (None: the shop's) and
-    what the correction expects it to measure (L*a*b* ``[G, 3]``; None: no correction)."""
+    """The recipe a setting sprays next, the batches it is mixed from (None: the shop's),
+    what the correction expects it to measure (L*a*b* ``[G, 3]``; None: no correction) and
+    whether the library's physics corrected in the model's place (the physics check)."""
     if spec == "respray":
-        return x_hidden, t.car, None
+        return x_hidden, t.car, None, False
     if spec == "none":
-        return x_best, None, None
+        return x_best, None, None, False
     if spec == "ceiling":
         fixed = correct(forward, t.target, best.fractions, t.unsprayed(x_best),
                         mode="reformulate", offset_weight=1.0)  # fmt: skip
-        return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab
+        return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab, False
     keywords = {"library": world.library, **({} if spec == "defaults" else parse(spec))}
     fixed = correct(forward, t.target, best.fractions, first, mode="reformulate", **keywords)
-    return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab
+    checked = fixed.model_spread is not None
+    return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab, checked
 
 
 def foresight(expected_fail: list[bool], passed: list[float]) -> dict:
@@ -120,24 +130,42 @@ def foresight(expected_fail: list[bool], passed: list[float]) -> dict:
     }
 
 
-def summary(passed: dict, worst: dict, metameric: dict, seconds: dict, spec: str) -> dict:
+def _mean_se(values: np.ndarray) -> tuple[float | None, float | None]:
+    """Mean and standard error (None where there are too few values)."""
+    if not values.size:
+        return None, None
+    se = float(values.std(ddof=1) / np.sqrt(values.size)) if values.size > 1 else None
+    return float(values.mean()), se
+
+
+def summary(
+    passed: dict, worst: dict, metameric: dict, seconds: dict, checked: list[bool], spec: str
+) -> dict:  # fmt: skip
     """Pass rate over every failed first shot, its standard error, and its difference from the
-    defaults' with the paired standard error (the same targets and sprays); the median over
-    targets of each one's median worst ΔE00 and worst metamerism index over its sprays, and
-    the median seconds its correction took (None: a setting that does not correct)."""
+    defaults' with the paired standard error (the same targets and sprays), over all and over
+    the shots whose defaults' correction the library's physics made (``checked``: the model
+    unsure of the recipe); the median over targets of each one's median worst ΔE00 and worst
+    metamerism index over its sprays, and the median seconds its correction took (None: a
+    setting that does not correct)."""
     p, base = np.array(passed[spec]), np.array(passed["defaults"])
-    n = p.size
-    if n == 0:
+    if p.size == 0:
         return {"setting": spec, "failed_first_shots": 0, "pass_rate": None}
-    se = float(p.std(ddof=1) / np.sqrt(n)) if n > 1 else None
-    diff = p - base
+    mask = np.array(checked, bool)
+    rate, se = _mean_se(p)
+    diff, diff_se = _mean_se(p - base)
+    checked_rate, _ = _mean_se(p[mask])
+    checked_diff, checked_diff_se = _mean_se((p - base)[mask])
     return {
         "setting": spec,
-        "failed_first_shots": n,
-        "pass_rate": float(p.mean()),
+        "failed_first_shots": int(p.size),
+        "pass_rate": rate,
         "pass_rate_se": se,
-        "vs_defaults": float(diff.mean()),
-        "vs_defaults_se": float(diff.std(ddof=1) / np.sqrt(n)) if n > 1 else None,
+        "vs_defaults": diff,
+        "vs_defaults_se": diff_se,
+        "checked_shots": int(mask.sum()),
+        "checked_pass_rate": checked_rate,
+        "checked_vs_defaults": checked_diff,
+        "checked_vs_defaults_se": checked_diff_se,
         "median_worst_de00": float(np.median(worst[spec])),
         "median_worst_metamerism": float(np.median(metameric[spec])),
         "median_seconds": float(np.median(seconds[spec])) if seconds[spec] else None,
@@ -167,7 +195,7 @@ def main() -> None:
     worst: dict[str, list[float]] = {s: [] for s in specs}
     metameric: dict[str, list[float]] = {s: [] for s in specs}
     seconds: dict[str, list[float]] = {s: [] for s in specs}  # the settings that correct
-    offsets, per_seed, expected_fail = [], {}, []
+    offsets, per_seed, expected_fail, checked = [], {}, [], []
     for seed in seeds:
         before = {s: len(passed[s]) for s in specs}
         for t, best, x_best, first, x_hidden in failed_first_shots(
@@ -177,12 +205,13 @@ def main() -> None:
             sprays = t.streams[1].bit_generator.seed_seq.spawn(args.sprays)
             for spec in specs:
                 start = time.perf_counter()
-                x, batches, expected = corrected_recipe(
+                x, batches, expected, by_physics = corrected_recipe(
                     spec, world, forward, t, best, x_best, first, x_hidden
                 )
                 if spec == "defaults":
                     lab = reflectance_to_Lab(t.target)
                     expected_fail.append(bool(delta_E(lab, expected).max() > SUCCESS_DE00))
+                    checked.append(by_physics)
                 if spec not in ("none", "respray"):
                     seconds[spec].append(time.perf_counter() - start)
                 # the same seeds for every setting: each sees the same sprays
@@ -197,7 +226,7 @@ def main() -> None:
             s: float(np.mean(passed[s][before[s] :])) if len(passed[s]) > before[s] else None
             for s in specs
         }
-    rows = [summary(passed, worst, metameric, seconds, spec) for spec in specs]
+    rows = [summary(passed, worst, metameric, seconds, checked, spec) for spec in specs]
     offsets = np.array(offsets)
     failed = len(offsets)
     persistent = {
@@ -234,6 +263,15 @@ def main() -> None:
             f"metamerism {row['median_worst_metamerism']:.2f}"
             + (f"  {row['median_seconds']:.2f} s" if row["median_seconds"] is not None else "")
         )
+    if any(checked):
+        shots = counted(sum(checked), "shot")
+        print(f"{shots} the library's physics corrected (the model unsure of the recipe):")
+        for row in rows:
+            se = row["checked_vs_defaults_se"]
+            print(
+                f"{row['setting']:>32}  pass {row['checked_pass_rate']:.3f}  vs defaults "
+                f"{row['checked_vs_defaults']:+.3f}" + (f" ± {se:.3f}" if se is not None else "")
+            )
 
 
 if __name__ == "__main__":

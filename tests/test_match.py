@@ -1556,7 +1556,32 @@ def _white_pearl_target(texture: bool = True):
     return _nominal_target(recipe, "white pearl", texture)
 
 
-def test_a_paint_the_model_knows_little_is_refined_by_the_physics(hybrid, example_by_metamerism):
+XIRALLIC_RED = {"Xirallic crystal silver": 0.4, "Perylene maroon": 0.3, "Quinacridone red": 0.3}
+"""A dark Xirallic red, where the cases are sparse and the shipped ensemble unsure."""
+
+
+def _xirallic_red_matched(hybrid, check: int):
+    """The dark Xirallic red as the world sprays it nominally, and its best candidate matched
+    with ``check`` recipes refined by the physics where the model is unsure (0: none)."""
+    from flakelab.match.models import effect_mask
+
+    library = read_library(None)
+    target = _nominal_target(XIRALLIC_RED, "dark Xirallic red")
+    result = match(target, hybrid, effect_mask(library, hybrid.toners), library=library,
+                   tolerance=tolerance_preset("refinish"),
+                   settings=MatchSettings(candidates=1, physics_check=check))  # fmt: skip
+    return target, result
+
+
+@pytest.fixture(scope="module")
+def xirallic_red_learned(hybrid):
+    """The dark Xirallic red and the learned search's result, the physics checking nothing."""
+    return _xirallic_red_matched(hybrid, check=0)
+
+
+def test_a_paint_the_model_knows_little_is_refined_by_the_physics(
+    hybrid, example_by_metamerism, xirallic_red_learned
+):  # fmt: skip
     """A dark Xirallic red (four tenths of the crystal silver, three of perylene maroon and
     three of quinacridone red) lies where the cases are sparse. The networks of the shipped
     ensemble disagree on the learned search's best recipe by over 1 ΔE00 at 45as15 (1.70
@@ -1566,32 +1591,25 @@ def test_a_paint_the_model_knows_little_is_refined_by_the_physics(hybrid, exampl
     recipe it finds, sprayed nominally, lies within 0.3 of the target everywhere. Both ways
     the note names the disagreement and its geometry (``MODEL_SPREAD_NOTICE``). On the
     example blue metallic, where the members agree within 0.2, the physics checks nothing."""
-    from flakelab.match.models import effect_mask
     from flakelab.match.settings import MODEL_SPREAD_NOTICE
 
-    library = read_library(None)
-    recipe = {"Xirallic crystal silver": 0.4, "Perylene maroon": 0.3, "Quinacridone red": 0.3}
-    target = _nominal_target(recipe, "dark Xirallic red")
-    target_lab = reflectance_to_Lab(target.reflectance)
+    target_lab = reflectance_to_Lab(xirallic_red_learned[0].reflectance)
 
-    def matched(check: int):
-        result = match(target, hybrid, effect_mask(library, hybrid.toners), library=library,
-                       tolerance=tolerance_preset("refinish"),
-                       settings=MatchSettings(candidates=1, physics_check=check))  # fmt: skip
+    def judged(result):
         best = result.candidates[0]
         sprayed = _nominal_target(best.fractions, "its best recipe")
         de00 = delta_E_CIE2000(reflectance_to_Lab(sprayed.reflectance), target_lab)
         said = [n for n in result.notes if "disagree on its best recipe by" in n]
         return best, de00, said
 
-    learned, de00, said = matched(check=0)
+    learned, de00, said = judged(xirallic_red_learned[1])
     worst = int(np.argmax(learned.spread))
     assert learned.geometries[worst] == "45as15"
     assert learned.spread[worst] > 2 * MODEL_SPREAD_NOTICE
     assert de00[worst] > learned.de00[worst] + 0.5  # the model's numbers fail where they disagree
     assert len(said) == 1 and f"by {learned.spread[worst]:.2f} ΔE00 at 45as15" in said[0]
     assert "compare match --physics" in said[0]
-    checked, de00, said = matched(check=3)
+    checked, de00, said = judged(_xirallic_red_matched(hybrid, check=3)[1])
     assert checked.model.startswith("physics") and checked.spread is None
     assert de00.max() < 0.3 and np.allclose(checked.de00, de00, atol=0.05)
     assert len(said) == 1 and f"by {learned.spread[worst]:.2f} ΔE00 at 45as15" in said[0]
@@ -1601,15 +1619,60 @@ def test_a_paint_the_model_knows_little_is_refined_by_the_physics(hybrid, exampl
     assert not any("disagree on its best recipe" in n for n in example_notes[1.0])
 
 
+def test_a_recipe_the_model_knows_little_is_corrected_by_the_physics(hybrid, xirallic_red_learned):
+    """The learned recipe for the dark Xirallic red, sprayed nominally, misses by 1.85 ΔE00 at
+    45as15, where the ensemble's networks disagree on it by 1.7. Reformulated from that
+    spray-out through the learned model (``physics_check=False``), its Jacobian is as unsure
+    as its numbers: the new recipe sprays 0.96 off there, where it expects 0.15. By default
+    the library's physics corrects in its place: the new recipe sprays within 0.1 everywhere,
+    as it expects, and the note names the disagreement. Where the model is sure (the example
+    blue metallic's spray-out, its own recipe) the learned model corrects."""
+    from flakelab.data import example_path
+    from flakelab.match.correction import physics_checked_note
+    from flakelab.match.search import target_spectra
+
+    library = read_library(None)
+    target, result = xirallic_red_learned
+    recipe = result.candidates[0].fractions
+    sprayed = _nominal_target(recipe, "its spray-out").reflectance
+    target_lab = reflectance_to_Lab(target.reflectance)
+
+    def corrected(check: bool):
+        fixed = correct(hybrid, target.reflectance, recipe, sprayed, mode="reformulate",
+                        library=library, tolerance=tolerance_preset("refinish"),
+                        physics_check=check)  # fmt: skip
+        again = _nominal_target(fixed.fractions, "the corrected recipe").reflectance
+        return fixed, delta_E_CIE2000(reflectance_to_Lab(again), target_lab)
+
+    learned, learned_de00 = corrected(check=False)
+    assert learned.predicted_by is hybrid and learned.model_spread is None
+    assert learned_de00.max() > 0.5  # the model's correction misses where it is unsure
+    assert physics_checked_note(learned) is None
+    checked, checked_de00 = corrected(check=True)
+    assert checked.predicted_by.model_id == "physics"
+    assert checked.model_spread.max() > 2 * 0.5 and checked.model_spread.argmax() == 0
+    assert checked_de00.max() < 0.1
+    expected = delta_E_CIE2000(checked.expected_lab, target_lab)
+    assert np.allclose(expected, checked_de00, atol=0.05)  # its figures are the spray's
+    assert f"by {checked.model_spread[0]:.2f} ΔE00 at 45as15" in physics_checked_note(checked)
+    example, example_sprayed = (
+        target_spectra(read_measurement(example_path(n)), hybrid)[0] for n in ("target", "sprayout")
+    )
+    example_recipe = read_recipe(example_path("target").parent / "blue-metallic-recipe.json")
+    sure = correct(hybrid, example, example_recipe, example_sprayed, library=library)
+    assert sure.predicted_by is hybrid and sure.model_spread is None
+
+
 def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path):
     """``flakelab match`` on the dark Xirallic red: by default the physics checked the model's
     recipes, and the report names it as the model of every candidate; ``--no-physics-check``
-    keeps the learned model's recipes and numbers, the note pointing to ``--physics``."""
-    from flakelab.io import write_measurements
+    keeps the learned model's recipes and numbers, the note pointing to ``--physics``.
+    ``flakelab correct`` of the learned recipe's nominal spray-out names the physics, which
+    corrected it; ``--no-physics-check`` the learned model."""
+    from flakelab.io import write_measurements, write_recipe
 
-    recipe = {"Xirallic crystal silver": 0.4, "Perylene maroon": 0.3, "Quinacridone red": 0.3}
     path = tmp_path / "xirallic-red.json"
-    write_measurements([_nominal_target(recipe, "dark Xirallic red")], path)
+    write_measurements([_nominal_target(XIRALLIC_RED, "dark Xirallic red")], path)
     reports = {}
     for flag in ("--physics-check", "--no-physics-check"):
         result = cli("match", path, flag, "--tolerance", "refinish", "--json")
@@ -1622,6 +1685,18 @@ def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path
     assert checked["candidates"][0]["de00_max"] < 0.3 < learned["candidates"][0]["de00_max"]
     assert any("physics refined its best recipes" in n for n in checked["notes"])
     assert any("compare match --physics" in n for n in learned["notes"])
+    grams = {w["toner"]: w["grams"] for w in learned["candidates"][0]["weights_g"]}
+    write_recipe(grams, tmp_path / "learned.json")
+    write_measurements([_nominal_target(grams, "its spray-out")], tmp_path / "sprayed.json")
+    args = ["correct", path, "--recipe", tmp_path / "learned.json", "--sprayed",
+            tmp_path / "sprayed.json", "--mode", "reformulate", "--json"]  # fmt: skip
+    for flag, model in (("--physics-check", "physics"), ("--no-physics-check", "demo-five-")):
+        result = cli(*args, flag)
+        assert result.returncode == 0, result.stderr
+        report = json.loads(result.stdout)
+        assert report["model_id"].startswith(model)
+        said = any("the library's physics made the correction" in n for n in report["notes"])
+        assert said == (model == "physics")
 
 
 def test_a_white_pearl_is_matched_by_the_learned_model_as_by_the_physics(hybrid, physics):

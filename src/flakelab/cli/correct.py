@@ -61,6 +61,7 @@ from flakelab.errors import FlakelabError
 from flakelab.match.settings import (
     EXTRA_TONERS_TRIED,
     MODEL_SD,
+    MODEL_SPREAD_NOTICE,
     SCALE_RESOLUTION_G,
     MatchSettings,
 )
@@ -121,6 +122,15 @@ def correct_command(
             "ensemble's disagreement at each geometry (0: one prior everywhere).",
         ),
     ] = MODEL_SD,
+    physics_check: Annotated[
+        bool,
+        typer.Option(
+            "--physics-check/--no-physics-check",
+            help="Where the model's networks disagree on the sprayed recipe by over "
+            f"{MODEL_SPREAD_NOTICE:g} ΔE00 (its cases too few), the library's physics "
+            "corrects in the model's place (--no-physics-check: the learned model's).",
+        ),
+    ] = True,
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
     metamerism: MetamerismOption = MatchSettings.metamerism,
     lights: LightsOption = None,
@@ -139,7 +149,7 @@ def correct_command(
     from flakelab.core.measurement import daylight_estimate_note, recovered_note
     from flakelab.core.tolerance import failing_geometries, failures
     from flakelab.io import read_recipe, read_tolerance
-    from flakelab.match.correction import correct, mismatch_note
+    from flakelab.match.correction import correct, mismatch_note, physics_checked_note
     from flakelab.match.search import left_out_note, unused_geometries
 
     _check_correction_options(mode, left, most, extra_toners)
@@ -190,7 +200,9 @@ def correct_command(
         lights=test_lights,
         max_total=room,
         without=without or (),
+        physics_check=physics_check,
     )
+    forward = correction.predicted_by  # the library's physics, where the model was unsure
     target_lab = reflectance_to_Lab(target_R)
     before, _, passed = tol.judge(forward.geometries, target_lab, reflectance_to_Lab(sprayed_R))
     texture_failing = tol.failing_texture(target_reading.texture, sprayed_reading.texture)
@@ -214,6 +226,7 @@ def correct_command(
                             "spray-out")  # fmt: skip
     mismatch = mismatch_note(forward, fractions, sprayed_R, shop_habits, lib)
     report["notes"] += _sprayout_notes(tol, failing, texture_failing, mismatch)
+    report["notes"] += [note] if (note := physics_checked_note(correction)) else []
     weighing = _weigh_correction(forward, correction, mode, can, resolution)
     report |= _weighing_report(weighing, forward, mode, fractions)
     expected_lab = correction.expected_lab + weighing.lab_shift  # as weighed, not as computed

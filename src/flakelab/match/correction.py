@@ -60,9 +60,11 @@ from flakelab.match.forward import film_of, stepping
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
+from flakelab.match.physics_check import checked_forward
 from flakelab.match.settings import (
     EXTRA_TONERS_TRIED,
     MODEL_SD,
+    MODEL_SPREAD_NOTICE,
     NOISE_SD,
     PERSISTENT_SD,
     SCALE_RESOLUTION_G,
@@ -94,6 +96,7 @@ __all__ = [
     "NOISE_SD",
     "metamerism_note",
     "mismatch_note",
+    "physics_checked_note",
     "unreached_note",
     "model_persistent_sd",
     "split_offset",
@@ -177,6 +180,22 @@ def unreached_note(
     )
 
 
+def physics_checked_note(correction: Correction) -> str | None:
+    """A note where the library's physics made the ``correction`` in the learned model's
+    place, its networks unsure of the sprayed recipe
+    (:func:`~flakelab.match.physics_check.checked_forward`); None where it did not."""
+    spread = correction.model_spread
+    if spread is None:
+        return None
+    worst = int(np.argmax(spread))
+    return (
+        f"the model's networks disagree on the sprayed recipe by {spread[worst]:.2f} ΔE00 at "
+        f"{correction.predicted_by.geometries[worst]}, over {MODEL_SPREAD_NOTICE:g}: the cases "
+        "taught it little about paints like this one, so the library's physics made the "
+        "correction and predicts its figures (--no-physics-check keeps the model's)"
+    )
+
+
 def _vector(forward, recipe: dict[str, float]) -> NDArray:
     index = {n: i for i, n in enumerate(forward.toners)}
     x = np.zeros(len(forward.toners))
@@ -207,6 +226,11 @@ class Correction:
     # the corrected spray-out's expected metamerism index against the target, per test
     # illuminant and geometry (reported whether or not the correction weighed it)
     metamerism: dict[str, NDArray] | None = None
+    # the forward model whose predictions these are: the one given, or the library's physics
+    # where the ensemble disagreed on the sprayed recipe by ``model_spread`` (ΔE00 per
+    # geometry; None where it did not stand in) (:mod:`flakelab.match.physics_check`)
+    predicted_by: object = None
+    model_spread: NDArray | None = None
 
 
 def split_offset(
@@ -337,6 +361,7 @@ def correct(
     lights: tuple[str, ...] | None = None,
     physics_every: int = MatchSettings.physics_every,
     without: Collection[str] = (),
+    physics_check: bool = True,
 ) -> Correction:
     """Correct ``recipe`` (fractions) after its spray-out measured ``sprayed`` [G, 31]; in
     ``additions`` mode every addition is ≥ 0 and at most ``max_addition`` of the can, and
@@ -352,17 +377,22 @@ def correct(
     LED-B3), as the search does. Its optimiser holds what it differentiates by finite
     differences ``physics_every`` steps, as the search's does
     (:func:`~flakelab.match.forward.stepping`). Toners ``without`` (out of stock) are
-    neither added nor brought in; a reformulation leaves them out."""
+    neither added nor brought in; a reformulation leaves them out. With ``physics_check`` and
+    the ``library``, where the model's ensemble is unsure of the sprayed recipe the library's
+    physics corrects in its place (:func:`~flakelab.match.physics_check.checked_forward`)."""
     if mode not in CORRECTION_MODES:
         raise FlakelabError(f"--mode: expected one of {', '.join(CORRECTION_MODES)}, got {mode!r}")
     if max_total is not None and not max_total >= 0:
         raise FlakelabError(f"max_total: expected a share ≥ 0 of the can, got {max_total}")
     if offset_weight is not None and not 0.0 <= offset_weight <= 1.0:
         raise FlakelabError(f"--offset-weight: expected 0 to 1, got {offset_weight}")
+    x_recipe = _vector(forward, recipe)
+    disagreement = None  # the ensemble's, where the physics stands in for it
+    if physics_check:
+        forward, disagreement = checked_forward(forward, library, x_recipe)
     objective = MatchObjective(
         forward.geometries, tolerance, forward.dtype, target, metamerism, lights
     )
-    x_recipe = _vector(forward, recipe)
     allowed = toners_allowed(forward.toners, without)
     if mode == "reformulate" and not (allowed & (x_recipe > 0)).any():
         raise FlakelabError("--without: leaves none of the recipe's toners to reformulate with")
@@ -391,7 +421,7 @@ def correct(
         application = dict(
             zip(APPLICATION_PARAMETERS, (float(film), float(np.expm1(spread))), strict=True)
         )
-    return _recipe_for_offset(
+    corrected = _recipe_for_offset(
         forward,
         objective,
         target,
@@ -407,6 +437,7 @@ def correct(
         physics_every,
         allowed,
     )
+    return replace(corrected, predicted_by=forward, model_spread=disagreement)
 
 
 def aim_off(

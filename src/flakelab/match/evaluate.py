@@ -377,9 +377,9 @@ def _one(
     x = recipe_vector(forward, mixed)
     first = t.sprayed(x, first_rng)
     first_share = corrected_share = share(first)
-    corrected_metamerism, corrected_again = None, [True]
+    corrected_metamerism, corrected_again, correction_checked = None, [True], False
     if first_share > 1.0:
-        recipe = correct(
+        correction = correct(
             forward,
             t.read(colour_alone=colour_alone).reflectance,
             mixed,
@@ -392,8 +392,10 @@ def _one(
             lights=aim.lights,
             physics_every=settings.physics_every,
             without=settings.without,
-        ).fractions
-        x_corrected = recipe_vector(forward, as_weighed(forward, recipe, scale))
+            physics_check=bool(settings.physics_check),
+        )
+        correction_checked = correction.model_spread is not None
+        x_corrected = recipe_vector(forward, as_weighed(forward, correction.fractions, scale))
         corrected = t.sprayed(x_corrected, correction_rng)
         corrected_share = share(corrected)
         corrected_metamerism = worst_metamerism(t.target, corrected[0], settings.lights)
@@ -432,6 +434,8 @@ def _one(
         # or the library's physics, which predicts where the ensemble disagreed)
         "predicted_spread": None if best.spread is None else float(best.spread.max()),
         "physics_checked": result.model_id != forward.model_id,
+        # the physics corrected the failed first shot, the ensemble unsure of its recipe
+        "correction_physics_checked": correction_checked,
         "family": str(world.library.paint_families(x_hidden[None])[0]),
         # the car's paint holds a toner the shop is out of (settings.without)
         "needs_missing": bool(
@@ -573,6 +577,7 @@ def evaluate_matching(
         # targets whose best recipes the physics refined, the ensemble unsure (physics_check)
         "physics_checked_targets": sum(r["physics_checked"] for r in rows),
         "novel_physics_checked_targets": sum(r["physics_checked"] for r in novel_rows),
+        "correction_physics_checked_targets": sum(r["correction_physics_checked"] for r in rows),
         "latency_p50_s": float(np.percentile(latency, 50)),
         "latency_p95_s": float(np.percentile(latency, 95)),
         "resprays": resprays,

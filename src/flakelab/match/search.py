@@ -28,7 +28,7 @@
    by more than :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`: there its cases were
    too few, so the best few candidates are refined over their own toners through the
    library's physics, which then judges every candidate (DESIGN.md §3's hybrid;
-   :data:`~flakelab.match.settings.PHYSICS_CHECK`).
+   :data:`~flakelab.match.settings.PHYSICS_CHECK`; :mod:`flakelab.match.physics_check`).
 
 Every stage aims at the colorist's tolerance: the optimiser's loss and the judging's score
 count each geometry's error as a share of its limit, with the tolerance's kL, kC, kH
@@ -82,6 +82,7 @@ from flakelab.match.judging import (
     recipe_vector,
 )
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
+from flakelab.match.physics_check import is_unsure, physics_for
 from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings, without_metamerism
 from flakelab.match.stock import toners_allowed
 from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
@@ -772,9 +773,9 @@ def _metamer_note(best: Candidate, settings: MatchSettings) -> str | None:
 
 
 def _unsure(best: Candidate | None) -> bool:
-    """Whether the model's ensemble disagrees on the ``best`` candidate by more than
-    :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` at some geometry."""
-    return best is not None and best.spread is not None and best.spread.max() > MODEL_SPREAD_NOTICE
+    """Whether the model's ensemble :func:`~flakelab.match.physics_check.is_unsure` of the
+    ``best`` candidate."""
+    return best is not None and is_unsure(best.spread)
 
 
 def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
@@ -801,20 +802,11 @@ def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
 
 def _physics_check(forward, library, best: Candidate | None, settings: MatchSettings):
     """The library's physics as the matcher predicts with it where the learned model is
-    :func:`_unsure` of its ``best`` candidate (for the shop's tins where ``forward`` is), or
-    None: the model sure, ``settings.physics_check`` 0, no ``library``, or a forward whose
-    toners are not the library's (the physics alone, a Kubelka–Munk solid)."""
-    if not (settings.physics_check and library is not None and _unsure(best)):
+    :func:`_unsure` of its ``best`` candidate (:func:`~flakelab.match.physics_check.physics_for`),
+    or None: the model sure, ``settings.physics_check`` 0, or no physics to stand in."""
+    if not (settings.physics_check and _unsure(best)):
         return None
-    if tuple(forward.toners) != tuple(library.names):
-        return None
-    from flakelab.match.forward import PhysicsForward
-    from flakelab.match.lots import WithLots  # which builds on the correction, and it on this
-
-    physics = PhysicsForward(library, forward.geometries)
-    if isinstance(forward, WithLots):
-        return WithLots(physics, forward.strength, forward.shade, library)
-    return physics
+    return physics_for(forward, library)
 
 
 def _physics_checked(

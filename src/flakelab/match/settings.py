@@ -138,7 +138,8 @@ class MatchSettings:
     model_risk: float = 0.0  # weight of an ensemble's disagreement in the objective
     # where the ensemble disagrees on the best candidate by over MODEL_SPREAD_NOTICE, this
     # many of the best are refined by the library's physics, which then judges every
-    # candidate (0: the learned model's numbers throughout; :data:`PHYSICS_CHECK`)
+    # candidate (0: the learned model's numbers throughout; :data:`PHYSICS_CHECK`); the
+    # harness's correction is checked likewise unless 0 (``correct(physics_check=...)``)
     physics_check: int = PHYSICS_CHECK
     metamerism: float = 1.0  # weight of the mean metamerism index (ΔE) in the objective
     # the optimiser takes that term afresh every so many steps and follows its tangent

@@ -1,0 +1,56 @@
+"""The physics check: the library's physics where the learned model is unsure (DESIGN.md §3).
+
+Where the networks of the shipped ensemble disagree on a recipe by more than
+:data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` ΔE00 at some geometry, the cases taught
+the model little about such a paint, and its recipes pass their first spray a third less
+often. There the library's physics answers in its place, as DESIGN.md §3's hybrid does for a
+toner with too few cases: the search refines its best recipes through it
+(:func:`flakelab.match.search.match`, ``MatchSettings.physics_check``), and the correction
+corrects through it (:func:`flakelab.match.correction.correct`, ``physics_check``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flakelab.core.colorimetry import reflectance_to_Lab
+from flakelab.library.toners import Library
+from flakelab.match.judging import evaluate_recipes, model_spread
+from flakelab.match.settings import MODEL_SPREAD_NOTICE
+
+__all__ = ["is_unsure", "physics_for", "checked_forward"]
+
+
+def is_unsure(spread: NDArray | None) -> bool:
+    """Whether an ensemble's disagreement ``spread`` (ΔE00 per geometry; None: one network,
+    or the physics) exceeds :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` somewhere."""
+    return spread is not None and float(np.max(spread)) > MODEL_SPREAD_NOTICE
+
+
+def physics_for(forward, library: Library | None):
+    """The library's physics at ``forward``'s geometries, for the shop's tins where
+    ``forward`` is (:class:`~flakelab.match.lots.WithLots`), or None: no ``library``, or a
+    forward whose toners are not the library's (a Kubelka–Munk solid)."""
+    if library is None or tuple(forward.toners) != tuple(library.names):
+        return None
+    from flakelab.match.forward import PhysicsForward
+    from flakelab.match.lots import WithLots  # which builds on the correction, and it on this
+
+    physics = PhysicsForward(library, forward.geometries)
+    if isinstance(forward, WithLots):
+        return WithLots(physics, forward.strength, forward.shade, library)
+    return physics
+
+
+def checked_forward(forward, library: Library | None, x: NDArray) -> tuple[object, NDArray | None]:
+    """The forward model to predict recipe ``x[T]`` and its neighbours with, and the ensemble's
+    disagreement on ``x`` (ΔE00 per geometry) where that sent it to the library's physics:
+    ``forward`` itself and None where the model is sure of ``x``, is one network, or the
+    physics cannot stand in (:func:`physics_for`)."""
+    if getattr(forward, "members", 1) < 2:
+        return forward, None
+    R = evaluate_recipes(forward, x[None])[0]
+    spread = model_spread(forward, x[None], reflectance_to_Lab(R))[0]
+    physics = physics_for(forward, library) if is_unsure(spread) else None
+    return (forward, None) if physics is None else (physics, spread)
