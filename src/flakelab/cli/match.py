@@ -1048,14 +1048,16 @@ def _print_harness(report: dict) -> None:
 
 
 def _physics_checked_line(report: dict) -> str:
-    """How many targets' best recipes the physics refined, the model's networks disagreeing
-    on them (``--physics-check``)."""
+    """How many targets' best recipes the physics refined, and how many failed first shots it
+    corrected, the model's networks disagreeing on them (``--physics-check``)."""
     if not report["physics_check"]:
         return "the physics checked no recipe (--no-physics-check)"
     checked = report["physics_checked_targets"] + report["novel_physics_checked_targets"]
+    corrected = report["correction_physics_checked_targets"]
     return (
-        f"the physics refined the recipes of {counted(checked, 'target')}, where the model's "
-        f"networks disagreed by over {MODEL_SPREAD_NOTICE:g} ΔE00 (--physics-check)"
+        f"the physics refined the recipes of {counted(checked, 'target')} and corrected "
+        f"{counted(corrected, 'failed first shot')}, where the model's networks disagreed by "
+        f"over {MODEL_SPREAD_NOTICE:g} ΔE00 (--physics-check)"
     )
 
 
