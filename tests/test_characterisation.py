@@ -260,9 +260,10 @@ def _pearl_panels(library, name: str) -> np.ndarray:
         ("Al medium", "Al coarse"),
         ("Al VMP", "Al fine"),
         ("Al extra coarse", "Al medium bright"),
-        ("Pearl interference red", "Pearl silver white"),
+        # validation runs, 12–14 s each: fits over the orders of interference
+        pytest.param("Pearl interference red", "Pearl silver white", marks=pytest.mark.slow),
         ("Pearl interference green", "Pearl silver white"),
-        ("Xirallic crystal silver", "Pearl interference blue"),
+        pytest.param("Xirallic crystal silver", "Pearl interference blue", marks=pytest.mark.slow),
     ],
 )
 def test_an_effect_toner_is_read_back_from_panels_its_physics_made(name, similar):

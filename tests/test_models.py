@@ -713,6 +713,7 @@ def _by_colour(data):
     return replace(data, R=R, colour_alone=np.ones(len(data.case_ids), dtype=bool))
 
 
+@pytest.mark.slow  # a validation run: three networks trained, 16 s
 def test_a_model_trained_afresh_learns_spray_outs_known_by_their_colour_alone():
     """A shop with few measured spray-outs and many known by their L*a*b* alone trains on
     both: spectra from the measured, colour from the others. Beside 200 measured, 600 known

@@ -100,6 +100,7 @@ def test_thick_scattering_layer_reaches_kubelka_munk(kappa, g):
     assert abs(result.albedo[0] - reflectance_infinite(K, S)) < 0.01
 
 
+@pytest.mark.slow  # a validation run: Monte Carlo films, 40,000 paths a band, 15 s
 def test_each_band_of_a_scatterer_is_traced_as_its_own_medium():
     """Bands ride one path, but physics keeps them apart: a film whose scattering halves
     from 400 to 700 nm (a white's σ, 1.5 µm over a white primer) reads at each band what a
