@@ -60,7 +60,7 @@ from flakelab.match.forward import film_of, stepping
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
-from flakelab.match.physics_check import checked_forward
+from flakelab.match.physics_check import checked_forward, disagreement_words
 from flakelab.match.settings import (
     EXTRA_TONERS_TRIED,
     MODEL_SD,
@@ -187,12 +187,12 @@ def physics_checked_note(correction: Correction) -> str | None:
     spread = correction.model_spread
     if spread is None:
         return None
-    worst = int(np.argmax(spread))
+    geometries = correction.predicted_by.geometries
     return (
-        f"the model's networks disagree on the sprayed recipe by {spread[worst]:.2f} ΔE00 at "
-        f"{correction.predicted_by.geometries[worst]}, over {MODEL_SPREAD_NOTICE:g}: the cases "
-        "taught it little about paints like this one, so the library's physics made the "
-        "correction and predicts its figures (--no-physics-check keeps the model's)"
+        f"{disagreement_words(spread, geometries, 'the sprayed recipe')}, over "
+        f"{MODEL_SPREAD_NOTICE:g}: the cases taught it little about paints like this one, so "
+        "the library's physics made the correction and predicts its figures "
+        "(--no-physics-check keeps the model's)"
     )
 
 

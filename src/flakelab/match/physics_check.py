@@ -19,13 +19,24 @@ from flakelab.library.toners import Library
 from flakelab.match.judging import evaluate_recipes, model_spread
 from flakelab.match.settings import MODEL_SPREAD_NOTICE
 
-__all__ = ["is_unsure", "physics_for", "checked_forward"]
+__all__ = ["is_unsure", "physics_for", "checked_forward", "disagreement_words"]
 
 
 def is_unsure(spread: NDArray | None) -> bool:
     """Whether an ensemble's disagreement ``spread`` (ΔE00 per geometry; None: one network,
     or the physics) exceeds :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` somewhere."""
     return spread is not None and float(np.max(spread)) > MODEL_SPREAD_NOTICE
+
+
+def disagreement_words(spread: NDArray, geometries, recipe: str) -> str:
+    """How far the ensemble's networks disagree on ``recipe`` (its words), at the worst of
+    the ``geometries`` by ``spread`` (ΔE00 per geometry), as the notes of the search and the
+    correction begin."""
+    worst = int(np.argmax(spread))
+    return (
+        f"the model's networks disagree on {recipe} by {spread[worst]:.2f} ΔE00 at "
+        f"{geometries[worst]}"
+    )
 
 
 def physics_for(forward, library: Library | None):

@@ -82,7 +82,7 @@ from flakelab.match.judging import (
     recipe_vector,
 )
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
-from flakelab.match.physics_check import is_unsure, physics_for
+from flakelab.match.physics_check import disagreement_words, is_unsure, physics_for
 from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings, without_metamerism
 from flakelab.match.stock import toners_allowed
 from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
@@ -784,12 +784,10 @@ def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
     often; and whether the physics then ``checked`` the candidates (:func:`_physics_checked`)."""
     if not _unsure(best):
         return None
-    worst = int(np.argmax(best.spread))
     disagree = (
-        f"the model's networks disagree on its best recipe by {best.spread[worst]:.2f} ΔE00 at "
-        f"{best.geometries[worst]}, over the {MODEL_SPREAD_NOTICE:g} beyond which its recipes "
-        "pass their first spray a third less often: the cases taught it little about paints "
-        "like this one"
+        f"{disagreement_words(best.spread, best.geometries, 'its best recipe')}, over the "
+        f"{MODEL_SPREAD_NOTICE:g} beyond which its recipes pass their first spray a third less "
+        "often: the cases taught it little about paints like this one"
     )
     if checked:
         return (
