@@ -51,6 +51,15 @@ def add_harness_arguments(
     parser.add_argument("--json", action="store_true")
 
 
+def mean_and_se(values: np.ndarray) -> tuple[float | None, float | None]:
+    """The mean of ``values`` and its standard error; None for each where there are too few
+    (no values; one, for the error)."""
+    if not values.size:
+        return None, None
+    se = float(values.std(ddof=1) / np.sqrt(values.size)) if values.size > 1 else None
+    return float(values.mean()), se
+
+
 def parse_with_chances(parser: argparse.ArgumentParser) -> argparse.Namespace:
     """``parser``'s options, ``--resprays`` refused under 1: the chances need them."""
     args = parser.parse_args()

@@ -48,7 +48,7 @@ import time
 
 import numpy as np
 
-from _matcher import MODEL_HELP, parse_kinds, seeds_from, shipped_matcher
+from _matcher import MODEL_HELP, mean_and_se, parse_kinds, seeds_from, shipped_matcher
 from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
@@ -130,14 +130,6 @@ def foresight(expected_fail: list[bool], passed: list[float]) -> dict:
     }
 
 
-def _mean_se(values: np.ndarray) -> tuple[float | None, float | None]:
-    """Mean and standard error (None where there are too few values)."""
-    if not values.size:
-        return None, None
-    se = float(values.std(ddof=1) / np.sqrt(values.size)) if values.size > 1 else None
-    return float(values.mean()), se
-
-
 def summary(
     passed: dict, worst: dict, metameric: dict, seconds: dict, checked: list[bool], spec: str
 ) -> dict:  # fmt: skip
@@ -151,10 +143,10 @@ def summary(
     if p.size == 0:
         return {"setting": spec, "failed_first_shots": 0, "pass_rate": None}
     mask = np.array(checked, bool)
-    rate, se = _mean_se(p)
-    diff, diff_se = _mean_se(p - base)
-    checked_rate, _ = _mean_se(p[mask])
-    checked_diff, checked_diff_se = _mean_se((p - base)[mask])
+    rate, se = mean_and_se(p)
+    diff, diff_se = mean_and_se(p - base)
+    checked_rate, _ = mean_and_se(p[mask])
+    checked_diff, checked_diff_se = mean_and_se((p - base)[mask])
     return {
         "setting": spec,
         "failed_first_shots": int(p.size),

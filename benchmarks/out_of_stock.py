@@ -15,7 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from _matcher import add_harness_arguments, shipped_matcher, timed_harness
+from _matcher import add_harness_arguments, mean_and_se, shipped_matcher, timed_harness
 from flakelab.match.settings import MatchSettings
 from timing import print_report
 
@@ -26,7 +26,7 @@ def paired(rows_all: list[dict], rows_without: list[dict], key: str, chosen) -> 
     a = np.array([r[key] <= 1.0 for r, c in zip(rows_all, chosen, strict=True) if c], float)
     b = np.array([r[key] <= 1.0 for r, c in zip(rows_without, chosen, strict=True) if c], float)
     diff = b - a
-    se = float(diff.std(ddof=1) / np.sqrt(diff.size)) if diff.size > 1 else None
+    se = mean_and_se(diff)[1]
     return {
         "with_every_toner": round(float(a.mean()), 3) if a.size else None,
         "without": round(float(b.mean()), 3) if b.size else None,

@@ -20,7 +20,13 @@ import json
 
 import numpy as np
 
-from _matcher import add_harness_arguments, parse_with_chances, shipped_ensemble, timed_harness
+from _matcher import (
+    add_harness_arguments,
+    mean_and_se,
+    parse_with_chances,
+    shipped_ensemble,
+    timed_harness,
+)
 from flakelab.core.wording import counted
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
 
@@ -47,7 +53,7 @@ def paired(learned: list[dict], checked: list[dict]) -> dict:
         "checked_by_family": {str(f): int((mask & (family == f)).sum()) for f in np.unique(family)},
         "checked_first_chance_learned": float(before[mask].mean()) if mask.any() else None,
         "checked_first_chance_physics": float(after[mask].mean()) if mask.any() else None,
-        "checked_gain_se": float(gain.std(ddof=1) / np.sqrt(gain.size)) if gain.size > 1 else None,
+        "checked_gain_se": mean_and_se(gain)[1],
         "checked_oracle_chance": float(chances(checked, "oracle_chance")[mask].mean())
         if mask.any()
         else None,
