@@ -1663,23 +1663,30 @@ def test_a_recipe_the_model_knows_little_is_corrected_by_the_physics(hybrid, xir
     assert sure.predicted_by is hybrid and sure.model_spread is None
 
 
-def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path):
+def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path, monkeypatch):
     """``flakelab match`` on the dark Xirallic red: by default the physics checked the model's
     recipes, and the report names it as the model of every candidate; ``--no-physics-check``
     keeps the learned model's recipes and numbers, the note pointing to ``--physics``.
     ``flakelab correct`` of the learned recipe's nominal spray-out names the physics, which
-    corrected it; ``--no-physics-check`` the learned model."""
+    corrected it; ``--no-physics-check`` the learned model. Each ``--plot`` chart's title
+    names the model its figures came from."""
+    import flakelab.render.plots
     from flakelab.io import write_measurements, write_recipe
 
-    path = tmp_path / "xirallic-red.json"
+    titles = []
+    monkeypatch.setattr(flakelab.render.plots, "plot_differences",
+                        lambda *args, title, **options: titles.append(title))  # fmt: skip
+    path, chart = tmp_path / "xirallic-red.json", tmp_path / "chart.png"
     write_measurements([_nominal_target(XIRALLIC_RED, "dark Xirallic red")], path)
     reports = {}
     for flag in ("--physics-check", "--no-physics-check"):
-        result = cli("match", path, flag, "--tolerance", "refinish", "--json")
+        result = cli("match", path, flag, "--tolerance", "refinish", "--plot", chart, "--json")
         assert result.returncode == 0, result.stderr
         reports[flag] = json.loads(result.stdout)
     checked, learned = reports["--physics-check"], reports["--no-physics-check"]
     assert checked["model_id"] == "physics" and learned["model_id"].startswith("demo-five-angle")
+    assert titles == [f"dark Xirallic red: candidates as predicted by {r['model_id']}"
+                      for r in (checked, learned)]  # fmt: skip
     assert all(c["model"].startswith("physics") for c in checked["candidates"])
     assert all(c["model"].startswith("learned") for c in learned["candidates"])
     assert checked["candidates"][0]["de00_max"] < 0.3 < learned["candidates"][0]["de00_max"]
@@ -1691,12 +1698,14 @@ def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path
     args = ["correct", path, "--recipe", tmp_path / "learned.json", "--sprayed",
             tmp_path / "sprayed.json", "--mode", "reformulate", "--json"]  # fmt: skip
     for flag, model in (("--physics-check", "physics"), ("--no-physics-check", "demo-five-")):
-        result = cli(*args, flag)
+        result = cli(*args, flag, "--plot", chart)
         assert result.returncode == 0, result.stderr
         report = json.loads(result.stdout)
         assert report["model_id"].startswith(model)
         said = any("the library's physics made the correction" in n for n in report["notes"])
         assert said == (model == "physics")
+        by = report["model_id"]
+        assert titles[-1] == f"its spray-out against dark Xirallic red: the correction by {by}"
 
 
 def test_a_white_pearl_is_matched_by_the_learned_model_as_by_the_physics(hybrid, physics):

@@ -458,7 +458,8 @@ def _plot_correction(target, sprayed, target_lab, samples: dict, left_out, forwa
     )
     chart = with_left_out(target, list(forward.geometries), target_lab, samples, others, there)
     apart = f"not in the correction; expected by {left_out.model_id}" if left_out else ""
-    title = f"{sprayed.sample} against {target.sample}: the correction"
+    # the model that made the correction: the library's physics, where the ensemble was unsure
+    title = f"{sprayed.sample} against {target.sample}: the correction by {forward.model_id}"
     measured = {next(iter(samples)): tolerance.texture_share(target.texture, sprayed.texture)}
     draw_differences(*chart, tolerance, path, title, apart=len(forward.geometries),
                      apart_label=apart, texture=measured)  # fmt: skip

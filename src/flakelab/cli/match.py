@@ -770,7 +770,8 @@ def _plot_match(target, result, left_out: list, tolerance, path: Path) -> None:
     )  # fmt: skip
     apart = f"not searched; predicted by {left_out[0].model_id}" if left_out else ""
     texture = {f"#{k}": c.texture_share for k, c in enumerate(result.candidates, 1)}
-    draw_differences(*chart, tolerance, path, f"{result.target}: candidates as predicted",
+    title = f"{result.target}: candidates as predicted by {result.model_id}"
+    draw_differences(*chart, tolerance, path, title,
                      apart=len(result.candidates[0].geometries), apart_label=apart,
                      texture=texture)  # fmt: skip
 
