@@ -1623,7 +1623,8 @@ def test_a_recipe_the_model_knows_little_is_corrected_by_the_physics(hybrid, xir
     """The learned recipe for the dark Xirallic red, sprayed nominally, misses by 1.85 ΔE00 at
     45as15, where the ensemble's networks disagree on it by 1.7. Reformulated from that
     spray-out through the learned model (``physics_check=False``), its Jacobian is as unsure
-    as its numbers: the new recipe sprays 0.96 off there, where it expects 0.15. By default
+    as its numbers: the new recipe sprays 0.96 off there, where it expects 0.15, and its
+    networks disagree on the new recipe by 1.95 there, more than that miss. By default
     the library's physics corrects in its place: the new recipe sprays within 0.1 everywhere,
     as it expects, and the note names the disagreement. Where the model is sure (the example
     blue metallic's spray-out, its own recipe) the learned model corrects."""
@@ -1648,8 +1649,12 @@ def test_a_recipe_the_model_knows_little_is_corrected_by_the_physics(hybrid, xir
     assert learned.predicted_by is hybrid and learned.model_spread is None
     assert learned_de00.max() > 0.5  # the model's correction misses where it is unsure
     assert physics_checked_note(learned) is None
+    # and says so: its networks disagree on the new recipe by more than it then misses by
+    learned_expected = delta_E_CIE2000(learned.expected_lab, target_lab)
+    assert np.all(learned.expected_spread > np.abs(learned_de00 - learned_expected))
+    assert learned.expected_spread[0] > 2 * 0.5
     checked, checked_de00 = corrected(check=True)
-    assert checked.predicted_by.model_id == "physics"
+    assert checked.predicted_by.model_id == "physics" and checked.expected_spread is None
     assert checked.model_spread.max() > 2 * 0.5 and checked.model_spread.argmax() == 0
     assert checked_de00.max() < 0.1
     expected = delta_E_CIE2000(checked.expected_lab, target_lab)
@@ -1661,6 +1666,7 @@ def test_a_recipe_the_model_knows_little_is_corrected_by_the_physics(hybrid, xir
     example_recipe = read_recipe(example_path("target").parent / "blue-metallic-recipe.json")
     sure = correct(hybrid, example, example_recipe, example_sprayed, library=library)
     assert sure.predicted_by is hybrid and sure.model_spread is None
+    assert sure.expected_spread.shape == (5,) and sure.expected_spread.max() < 0.5
 
 
 def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path, monkeypatch):
@@ -1704,6 +1710,10 @@ def test_match_says_which_model_answered_where_the_physics_checked(cli, tmp_path
         assert report["model_id"].startswith(model)
         said = any("the library's physics made the correction" in n for n in report["notes"])
         assert said == (model == "physics")
+        # the learned model's expected figures carry its networks' disagreement (± model)
+        spread = report["expected_model_spread"]
+        assert (spread is None) == (model == "physics")
+        assert model == "physics" or len(spread) == 5 and max(spread) > 0.5
         by = report["model_id"]
         assert titles[-1] == f"its spray-out against dark Xirallic red: the correction by {by}"
 

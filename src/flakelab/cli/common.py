@@ -306,6 +306,13 @@ F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
 
 
+MODEL_SPREAD_LEGEND = (
+    "± model: how far the networks of the model's ensemble disagree (ΔE00 about their mean); "
+    "where it is large, the prediction deserves less trust."
+)
+"""The line under a table with a ``± model`` column or row (``match``, ``correct``)."""
+
+
 def print_notes(notes: list[str]) -> None:
     """A report's notes, one line each, as every command prints them."""
     for note in notes:

@@ -10,6 +10,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    MODEL_SPREAD_LEGEND,
     AverageOption,
     AverageSprayedOption,
     JsonOption,
@@ -241,6 +242,10 @@ def correct_command(
         "spray_application": correction.application
         and {name: round(value, 4) for name, value in correction.application.items()},
         "habits": shop_habits and shop_habits.report(),
+        # how far the ensemble that corrected disagrees on the corrected recipe, per geometry
+        "expected_model_spread": None
+        if correction.expected_spread is None
+        else correction.expected_spread.round(3).tolist(),
     }
     _add_expected(report, tol, forward.geometries, target_lab, expected_lab, failing, mode)
     _add_metamerism(report, target_R, sprayed_R, correction, metamerism, test_lights)
@@ -517,6 +522,8 @@ def _print_correction(report: dict) -> None:
             for g, v in zip(report["geometries"], report["expected_de00"], strict=True)
         ),
     )
+    if spread := report["expected_model_spread"]:
+        geo.add_row("± model", *(f"{v:.2f}" for v in spread))
     console.print(table)
     console.print(geo)
     if left_out := report.get("left_out"):
@@ -549,3 +556,5 @@ def _print_correction(report: dict) -> None:
             highlight=False,
         )
     print_notes(report["notes"])
+    if report["expected_model_spread"]:
+        console.print(MODEL_SPREAD_LEGEND, highlight=False)

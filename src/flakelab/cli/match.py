@@ -12,6 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from flakelab.cli.common import (
+    MODEL_SPREAD_LEGEND,
     AverageOption,
     JsonOption,
     LightsOption,
@@ -859,11 +860,7 @@ def _print_match(report: dict, where: str = "") -> None:
         _print_car_variant(report, where)
     print_notes(report["notes"])
     if any("model_spread" in v for c in report["candidates"] for v in c["geometries"].values()):
-        console.print(
-            "± model: how far the networks of the model's ensemble disagree (ΔE00 about their "
-            "mean); where it is large, the prediction deserves less trust.",
-            highlight=False,
-        )
+        console.print(MODEL_SPREAD_LEGEND, highlight=False)
 
 
 def _print_car_variant(report: dict, where: str) -> None:

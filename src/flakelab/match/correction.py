@@ -57,7 +57,7 @@ from flakelab.errors import FlakelabError
 from flakelab.library.toners import Library
 from flakelab.match.adam import TensorAdam
 from flakelab.match.forward import film_of, stepping
-from flakelab.match.judging import evaluate_recipes
+from flakelab.match.judging import evaluate_recipes, recipe_spread
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
 from flakelab.match.physics_check import checked_forward, disagreement_words
@@ -231,6 +231,9 @@ class Correction:
     # geometry; None where it did not stand in) (:mod:`flakelab.match.physics_check`)
     predicted_by: object = None
     model_spread: NDArray | None = None
+    # how far the ensemble of ``predicted_by`` disagrees on the corrected recipe (ΔE00 per
+    # geometry; None for one network or the physics): how far to trust ``expected_lab``
+    expected_spread: NDArray | None = None
 
 
 def split_offset(
@@ -437,7 +440,12 @@ def correct(
         physics_every,
         allowed,
     )
-    return replace(corrected, predicted_by=forward, model_spread=disagreement)
+    return replace(
+        corrected,
+        predicted_by=forward,
+        model_spread=disagreement,
+        expected_spread=recipe_spread(forward, _vector(forward, corrected.fractions)),
+    )
 
 
 def aim_off(

@@ -186,6 +186,15 @@ def model_spread(forward, x: NDArray, lab: NDArray) -> NDArray | None:
     return np.sqrt(np.mean(delta_E(lab[None], members) ** 2, axis=0))
 
 
+def recipe_spread(forward, x: NDArray) -> NDArray | None:
+    """:func:`model_spread` of one recipe ``x[T]`` about ``forward``'s own prediction: ΔE00
+    per geometry ``[G]``; None for a single network."""
+    if getattr(forward, "members", 1) < 2:
+        return None
+    R = evaluate_recipes(forward, x[None])[0]
+    return model_spread(forward, x[None], reflectance_to_Lab(R))[0]
+
+
 @dataclass(frozen=True)
 class Assessment:
     """Recipes ``x[N, T]`` as the judge sees them: predictions, differences from the target

@@ -14,9 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.library.toners import Library
-from flakelab.match.judging import evaluate_recipes, model_spread
+from flakelab.match.judging import recipe_spread
 from flakelab.match.settings import MODEL_SPREAD_NOTICE
 
 __all__ = ["is_unsure", "physics_for", "checked_forward", "disagreement_words"]
@@ -61,7 +60,6 @@ def checked_forward(forward, library: Library | None, x: NDArray) -> tuple[objec
     physics cannot stand in (:func:`physics_for`)."""
     if getattr(forward, "members", 1) < 2:
         return forward, None
-    R = evaluate_recipes(forward, x[None])[0]
-    spread = model_spread(forward, x[None], reflectance_to_Lab(R))[0]
+    spread = recipe_spread(forward, x)
     physics = physics_for(forward, library) if is_unsure(spread) else None
     return (forward, None) if physics is None else (physics, spread)
