@@ -20,6 +20,9 @@ application and read without noise, and the model's prediction for it (RMS and m
 absolute value over targets, geometries and components). ``defaults_foresight`` says how
 the defaults' expected ΔE00 foretells their sprays: the share of corrections expected to fail
 somewhere (what ``flakelab correct`` notes as ``expected_failing``) and the pass rate of
+those and of the others; and how their ``± model`` does (the ensemble's disagreement on the
+corrected recipe, ``flakelab correct``'s row): the share of the learned model's corrections
+over :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` somewhere, and the pass rate of
 those and of the others.
 
 ``--seed 77,78,81-86`` pools the failed first shots of several seeds (one seed's 20-odd are
@@ -64,6 +67,7 @@ from flakelab.match.evaluate import (
 from flakelab.match.forward import PhysicsForward
 from flakelab.match.judging import evaluate_recipes
 from flakelab.match.search import match
+from flakelab.match.settings import MODEL_SPREAD_NOTICE
 
 
 def parse(spec: str) -> dict:
@@ -101,32 +105,46 @@ def failed_first_shots(seed: int, targets: int, world, forward, effect):
 
 
 def corrected_recipe(spec: str, world, forward, t, best, x_best, first, x_hidden):
-    """The recipe a setting sprays next, the batches it is mixed from (None: the shop's),
-    what the correction expects it to measure (L*a*b* ``[G, 3]``; None: no correction) and
-    whether the library's physics corrected in the model's place (the physics check)."""
+    """The recipe a setting sprays next, the batches it is mixed from (None: the shop's), and
+    the correction that made it (None: a setting that does not correct)."""
     if spec == "respray":
-        return x_hidden, t.car, None, False
+        return x_hidden, t.car, None
     if spec == "none":
-        return x_best, None, None, False
+        return x_best, None, None
     if spec == "ceiling":
         fixed = correct(forward, t.target, best.fractions, t.unsprayed(x_best),
                         mode="reformulate", offset_weight=1.0)  # fmt: skip
-        return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab, False
+        return recipe_vector(forward, fixed.fractions), None, fixed
     keywords = {"library": world.library, **({} if spec == "defaults" else parse(spec))}
     fixed = correct(forward, t.target, best.fractions, first, mode="reformulate", **keywords)
-    checked = fixed.model_spread is not None
-    return recipe_vector(forward, fixed.fractions), None, fixed.expected_lab, checked
+    return recipe_vector(forward, fixed.fractions), None, fixed
 
 
-def foresight(expected_fail: list[bool], passed: list[float]) -> dict:
-    """How the defaults' expected ΔE00 foretells their sprays: the share of corrections
-    expected to fail (ΔE00 > 1 somewhere, what ``flakelab correct`` notes as
-    ``expected_failing``) and the pass rate of those and of the others."""
+def foresight(expected_fail: list[bool], spread: list[float], passed: list[float]) -> dict:
+    """How the defaults' expected ΔE00 and its ``± model`` foretell their sprays: the share of
+    corrections expected to fail (ΔE00 > 1 somewhere, what ``flakelab correct`` notes as
+    ``expected_failing``) and the pass rate of those and of the others; the share of the
+    learned model's corrections whose ensemble disagrees on the corrected recipe by over
+    :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` somewhere (``spread``: that worst
+    disagreement, NaN where the physics corrected), and the pass rate of those and of the
+    others."""
     fail, rate = np.array(expected_fail, bool), np.array(passed)
+    spread = np.array(spread, float)
+    learned = ~np.isnan(spread)
+    unsure = learned & (spread > MODEL_SPREAD_NOTICE)
+    sure = learned & ~unsure
+
+    def rate_of(mask):
+        return float(rate[mask].mean()) if mask.any() else None
+
     return {
         "expected_fail_share": float(fail.mean()) if fail.size else None,
-        "pass_when_expected_fail": float(rate[fail].mean()) if fail.any() else None,
-        "pass_when_expected_pass": float(rate[~fail].mean()) if (~fail).any() else None,
+        "pass_when_expected_fail": rate_of(fail),
+        "pass_when_expected_pass": rate_of(~fail),
+        "spread_median": float(np.median(spread[learned])) if learned.any() else None,
+        "spread_over_notice_share": float(unsure.sum() / learned.sum()) if learned.any() else None,
+        "pass_when_spread_over_notice": rate_of(unsure),
+        "pass_when_spread_under_notice": rate_of(sure),
     }
 
 
@@ -187,7 +205,7 @@ def main() -> None:
     worst: dict[str, list[float]] = {s: [] for s in specs}
     metameric: dict[str, list[float]] = {s: [] for s in specs}
     seconds: dict[str, list[float]] = {s: [] for s in specs}  # the settings that correct
-    offsets, per_seed, expected_fail, checked = [], {}, [], []
+    offsets, per_seed, expected_fail, spread, checked = [], {}, [], [], []
     for seed in seeds:
         before = {s: len(passed[s]) for s in specs}
         for t, best, x_best, first, x_hidden in failed_first_shots(
@@ -197,13 +215,15 @@ def main() -> None:
             sprays = t.streams[1].bit_generator.seed_seq.spawn(args.sprays)
             for spec in specs:
                 start = time.perf_counter()
-                x, batches, expected, by_physics = corrected_recipe(
+                x, batches, fixed = corrected_recipe(
                     spec, world, forward, t, best, x_best, first, x_hidden
                 )
                 if spec == "defaults":
-                    lab = reflectance_to_Lab(t.target)
-                    expected_fail.append(bool(delta_E(lab, expected).max() > SUCCESS_DE00))
-                    checked.append(by_physics)
+                    expected = delta_E(reflectance_to_Lab(t.target), fixed.expected_lab)
+                    expected_fail.append(bool(expected.max() > SUCCESS_DE00))
+                    unsure = fixed.expected_spread
+                    spread.append(np.nan if unsure is None else float(unsure.max()))
+                    checked.append(fixed.model_spread is not None)
                 if spec not in ("none", "respray"):
                     seconds[spec].append(time.perf_counter() - start)
                 # the same seeds for every setting: each sees the same sprays
@@ -231,7 +251,7 @@ def main() -> None:
             "rows": rows,
             "per_seed": per_seed,
             "persistent_offset": persistent,
-            "defaults_foresight": foresight(expected_fail, passed["defaults"]),
+            "defaults_foresight": foresight(expected_fail, spread, passed["defaults"]),
         }
         print(json.dumps(report, indent=2))
         return
@@ -242,10 +262,17 @@ def main() -> None:
         f"seeds {args.seed}: {failed} failed first shots; persistent offset per L*a*b* "
         f"component: RMS {persistent['rms']:.2f}, median |offset| {persistent['median_abs']:.2f}"
     )
-    seen = foresight(expected_fail, passed["defaults"])
+    seen = foresight(expected_fail, spread, passed["defaults"])
     print(
         f"defaults expected to fail {seen['expected_fail_share']:.2f} of them; sprayed, those "
         f"pass {seen['pass_when_expected_fail']}, the others {seen['pass_when_expected_pass']}"
+    )
+    shown = {k: "none" if v is None else f"{v:.3f}" for k, v in seen.items()}
+    print(
+        f"the learned model's corrections: ± model over {MODEL_SPREAD_NOTICE} somewhere for "
+        f"{shown['spread_over_notice_share']} of them (median worst {shown['spread_median']}); "
+        f"sprayed, those pass {shown['pass_when_spread_over_notice']}, the others "
+        f"{shown['pass_when_spread_under_notice']}"
     )
     for row in rows:
         print(
