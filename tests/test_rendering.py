@@ -505,7 +505,9 @@ def test_the_difference_chart_draws_each_bounded_texture_reading_s_share(monkeyp
 
 
 def test_a_figure_s_long_title_is_broken_into_lines_as_wide_as_the_figure():
-    """A verdict naming every one of an MA-T12's twelve geometries ran off the figure's side."""
+    """A verdict naming every one of an MA-T12's twelve geometries ran off the figure's side.
+    Broken at spaces only: the correction chart's title, naming its model, was broken inside
+    "demo-five-angle"."""
     import matplotlib.pyplot as plt
 
     from flakelab.render.plots import _fitted
@@ -514,9 +516,15 @@ def test_a_figure_s_long_title_is_broken_into_lines_as_wide_as_the_figure():
     title = f"PAR_PW_EB_CC_1 vs PAR_PW_GE_MC_2: FAIL at {names}"
     figure = plt.figure(figsize=(11, 4))
     lines = _fitted(title, figure).splitlines()
-    plt.close(figure)
     assert len(lines) == 2 and all(len(line) <= 99 for line in lines)
     assert " ".join(lines) == title
+    figure.set_figwidth(12)  # the difference chart's
+    title = ("Blue metallic sprayout (synthetic) against Blue metallic target (synthetic): the "
+             "correction by demo-five-angle 717120462ac3")  # fmt: skip
+    lines = _fitted(title, figure).splitlines()
+    plt.close(figure)
+    assert len(lines) == 2 and " ".join(lines) == title
+    assert any("demo-five-angle" in line for line in lines)
 
 
 def test_against_flake_tilt_the_readings_under_both_lamps_fall_on_one_curve():

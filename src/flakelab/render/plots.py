@@ -908,8 +908,10 @@ def plot_rendering(
 
 def _fitted(title: str, figure) -> str:
     """``title`` broken into lines as wide as ``figure`` (a verdict that names every one of
-    an MA-T12's twelve geometries ran off the side)."""
-    return textwrap.fill(title, int(_TITLE_CHARACTERS_PER_INCH * figure.get_figwidth()))
+    an MA-T12's twelve geometries ran off the side), at spaces only: a geometry (45as-15) or
+    a model (demo-five-angle) split at its hyphen reads as two."""
+    width = int(_TITLE_CHARACTERS_PER_INCH * figure.get_figwidth())
+    return textwrap.fill(title, width, break_on_hyphens=False)
 
 
 def plot_camera_pictures(
