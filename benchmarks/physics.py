@@ -6,22 +6,46 @@ second on a flake + dye layer; peak memory of each (tracemalloc). Accuracy: ΔE0
 model against the Monte Carlo for a ladder of recipes, from dye-only metallics (where the
 path-table route is exact) to scattering pigments and pearls (where it approximates).
 
+With ``--world N``, instead: how faithful the generated world is to the Monte Carlo. N
+formulations drawn as the case generator draws them (its mix of metallics, pearls and solids,
+seed ``--seed``), each sprayed at the world's mean application, computed by the fast model
+(the world's physics) and by the Monte Carlo; ΔE00 per family, split by whether the recipe
+holds a pigment that hides (whites, iron oxides, bismuth vanadate, carbon black: the ones that
+scatter or absorb strongly). ``monte_carlo_noise`` is the ΔE00 a one-standard-error shift of
+the Monte Carlo's own reflectance makes: the reference's noise.
+
+The same Monte Carlo also judges two candidate changes of the fast model, which the world
+does not use yet (changing its physics means training the shipped models again,
+docs/coating-optics.md): ``lobes``, the aluminium channel as the mixture of each aluminium's
+own lobe, weighted by its share of the flakes, in place of one lobe at their mean spread;
+``collimated``, the light that pigments scatter out of the flake paths counted at those paths'
+own length (1/μ in and out) where the diffuse channel's flakes-only reference leaves it out;
+and both.
+
     python benchmarks/physics.py [--n 10000] [--photons 200000] [--json]
+    python benchmarks/physics.py --world 40 --photons 100000 [--instrument five-angle] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+from contextlib import contextmanager
+from dataclasses import replace
+from unittest import mock
 
 import numpy as np
 
+from flakelab.cases.generator import World
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.io import read_library
-from flakelab.physics.fast import predict
-from flakelab.physics.layer import layer_from_fractions
+from flakelab.physics import fast
+from flakelab.physics.fast import predict, reflectance_factor
+from flakelab.physics.kubelka_munk import km_coefficients, layer_reflectance
+from flakelab.physics.layer import internal_diffuse_reflectance, layer_from_fractions
 from flakelab.physics.montecarlo import simulate
 from timing import measure_peak
 
@@ -56,15 +80,143 @@ def random_fractions(library, n: int, seed: int) -> np.ndarray:
     return x / x.sum(axis=1, keepdims=True)
 
 
+CANDIDATES = {"as shipped": (), "lobes": ("lobes",), "collimated": ("collimated",)}
+CANDIDATES["both"] = CANDIDATES["lobes"] + CANDIDATES["collimated"]
+"""The fast model as the world computes it, and the candidate changes it is judged with."""
+
+
+def lobe_mixture(layer, atlas_index, extinction, atlas):
+    """Candidate aluminium channel ``[F, G, W]``: each aluminium's lobe at its own spread,
+    under the attenuation of all flakes and pigments, weighted by its share of the flake
+    rate (single bounces are exactly such a sum; one lobe at the mean spread is not)."""
+    opaque = ~layer.flake_transmits
+    sigma = layer.flake_rate[:, opaque].sum(axis=1, keepdims=True)
+    share = np.divide(layer.flake_rate, sigma, out=np.zeros_like(layer.flake_rate), where=sigma > 0)
+    out = 0.0
+    for s in np.flatnonzero(opaque & (layer.flake_rate > 0).any(axis=0)):
+        alone = replace(layer, flake_sd=np.full_like(layer.flake_sd, layer.flake_sd[s]))
+        lobe = ALUMINIUM_CHANNEL(alone, atlas_index, extinction, atlas)
+        out = out + share[:, s, None, None] * lobe
+    return out
+
+
+def collimated_diffuse(layer, geo):
+    """Candidate diffuse channel ``[F, G, W]``: the flakes-only reference loses the light the
+    pigments scatter (reduced coefficient) along the flake paths' own length, (1/μi' + 1/μo')/2
+    per flux, as the aluminium channel loses it."""
+    K, S = km_coefficients(layer.absorption, layer.scattering, layer.asymmetry[:, None])
+    K_fl, S_fl = fast._flake_two_flux(layer)
+    H = layer.film[:, None, None]
+    path = (1 / geo["mu_in"] + 1 / geo["mu_out"]) / 2  # [G]
+    lost = (S / 0.75)[:, None, :] * path[None, :, None]  # reduced scattering, S = ¾σ_s(1 − g)
+    everything = layer_reflectance(K + K_fl, S + S_fl, H[:, 0], layer.primer[None])[:, None]
+    flakes_only = layer_reflectance((K + K_fl)[:, None] + lost, S_fl[:, None], H, 0.0)
+    r_i = internal_diffuse_reflectance(layer.n)
+    body = everything / (1 - r_i * everything) - flakes_only / (1 - r_i * flakes_only)
+    return geo["interface"][None, :, None] * np.maximum(body, 0.0) / np.pi
+
+
+ALUMINIUM_CHANNEL = fast._aluminium_channel
+
+
+@contextmanager
+def candidate(changes: tuple[str, ...]):
+    """The fast model with the named candidate changes, inside the ``with`` block."""
+    with (
+        mock.patch.object(fast, "_aluminium_channel", lobe_mixture)
+        if "lobes" in changes
+        else mock.patch.object(fast, "_aluminium_channel", ALUMINIUM_CHANNEL),
+        mock.patch.object(fast, "_diffuse_channel", collimated_diffuse)
+        if "collimated" in changes
+        else mock.patch.object(fast, "_diffuse_channel", fast._diffuse_channel),
+    ):
+        yield
+
+
+def world_fidelity(library, instrument: str, n: int, photons: int, seed: int) -> dict:
+    """ΔE00 of the fast model against the Monte Carlo over ``n`` of the world's own
+    formulations: each row's mean and worst over the geometries, and the Monte Carlo's noise."""
+    world = World(library, instrument)
+    x = world.formulations(n, np.random.default_rng(seed))
+    layer = world.layer(x, world.nominal(n))
+    models = {}
+    for name, changes in CANDIDATES.items():
+        with candidate(changes):
+            models[name] = reflectance_to_Lab(reflectance_factor(layer, world.geometries))
+    hiding = np.array([t.kind == "pigment" and t.hides for t in library.toners])
+    rows = []
+    for i in range(n):
+        mc = simulate(layer[i : i + 1], world.geometries, photons, seed=seed + i)
+        truth = reflectance_to_Lab(np.pi * mc.brdf)
+        noise = delta_E(reflectance_to_Lab(np.pi * (mc.brdf + mc.stderr)), truth)
+        de = np.array([delta_E(lab[i], truth) for lab in models.values()])  # [model, G]
+        rows.append((de.mean(axis=1), de.max(axis=1), noise.mean(), mc.seconds))
+        print(f"  {i + 1}/{n} ΔE00 mean {de[0].mean():.2f} max {de[0].max():.2f}", file=sys.stderr)
+    mean, worst = (np.array([r[k] for r in rows]) for k in (0, 1))  # [n, model]
+    noise, seconds = (np.array([r[k] for r in rows]) for k in (2, 3))
+    family = library.paint_families(x)
+    holds = (x[:, hiding] > 0).any(axis=1)
+    groups = {"all": np.ones(n, bool)}
+    for name in ("metallic", "pearl", "solid"):
+        groups[f"{name}, with a hiding pigment"] = (family == name) & holds
+        groups[f"{name}, without"] = (family == name) & ~holds
+    summary = {
+        group: {"n": int(m.sum()), "monte_carlo_noise": float(np.median(noise[m]))}
+        | {
+            name: {
+                "de00_mean": float(mean[m, k].mean()),
+                "de00_median": float(np.median(mean[m, k])),
+                "worst_geometry_median": float(np.median(worst[m, k])),
+                "worst_geometry_max": float(worst[m, k].max()),
+            }
+            for k, name in enumerate(models)
+        }
+        for group, m in groups.items()
+        if m.any()
+    }
+    return {
+        "instrument": instrument,
+        "formulations": n,
+        "photons_per_spectrum": photons,
+        "seed": seed,
+        "monte_carlo_seconds": float(seconds.sum()),
+        "fast_vs_monte_carlo": summary,
+    }
+
+
+def print_world(report: dict) -> None:
+    print(f"fast model (the generated world) vs Monte Carlo, {report['formulations']} of the "
+          f"world's formulations at the {report['instrument']}, seed {report['seed']}, "
+          f"{report['photons_per_spectrum']:,} photons each:")  # fmt: skip
+    print("ΔE00 over the geometries (mean / median) and at the worst geometry (median / max);")
+    print("the world's fast model as shipped, then the candidate changes:")
+    for group, e in report["fast_vs_monte_carlo"].items():
+        print(f"  {group} ({e['n']}; the Monte Carlo's own noise {e['monte_carlo_noise']:.2f})")
+        for name in CANDIDATES:
+            figures = (e[name][k] for k in ("de00_mean", "de00_median", "worst_geometry_median"))
+            mean, median, worst = figures
+            print(f"    {name:12s} {mean:5.2f} / {median:5.2f}   "
+                  f"{worst:5.2f} / {e[name]['worst_geometry_max']:5.2f}")  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=10_000, help="formulations per batch")
     parser.add_argument("--photons", type=int, default=200_000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--world", type=int, default=0, help="the world's formulations instead")
+    parser.add_argument("--instrument", default="five-angle", help="with --world")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
     library = read_library(None)
+    if args.world:
+        world = world_fidelity(library, args.instrument, args.world, args.photons, args.seed)
+        if args.json:
+            print(json.dumps(world, indent=1))
+        else:
+            print_world(world)
+        return
     x = random_fractions(library, args.n, args.seed)
     predict(layer_from_fractions(library, x[:10]), GEOMETRIES)  # load the atlas once
     _, fast_seconds, fast_peak = measure_peak(
