@@ -23,7 +23,7 @@ own length (1/μ in and out) where the diffuse channel's flakes-only reference l
 and both.
 
     python benchmarks/physics.py [--n 10000] [--photons 200000] [--json]
-    python benchmarks/physics.py --world 40 --photons 100000 [--instrument five-angle] [--json]
+    python benchmarks/physics.py --world 60 --photons 100000 [--instrument five-angle] [--json]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 from unittest import mock
 
@@ -108,7 +108,8 @@ def collimated_diffuse(layer, geo):
     K_fl, S_fl = fast._flake_two_flux(layer)
     H = layer.film[:, None, None]
     path = (1 / geo["mu_in"] + 1 / geo["mu_out"]) / 2  # [G]
-    lost = (S / 0.75)[:, None, :] * path[None, :, None]  # reduced scattering, S = ¾σ_s(1 − g)
+    reduced = layer.scattering * (1 - layer.asymmetry[:, None])  # σ_s(1 − g)
+    lost = reduced[:, None, :] * path[None, :, None]
     everything = layer_reflectance(K + K_fl, S + S_fl, H[:, 0], layer.primer[None])[:, None]
     flakes_only = layer_reflectance((K + K_fl)[:, None] + lost, S_fl[:, None], H, 0.0)
     r_i = internal_diffuse_reflectance(layer.n)
@@ -122,14 +123,11 @@ ALUMINIUM_CHANNEL = fast._aluminium_channel
 @contextmanager
 def candidate(changes: tuple[str, ...]):
     """The fast model with the named candidate changes, inside the ``with`` block."""
-    with (
-        mock.patch.object(fast, "_aluminium_channel", lobe_mixture)
-        if "lobes" in changes
-        else mock.patch.object(fast, "_aluminium_channel", ALUMINIUM_CHANNEL),
-        mock.patch.object(fast, "_diffuse_channel", collimated_diffuse)
-        if "collimated" in changes
-        else mock.patch.object(fast, "_diffuse_channel", fast._diffuse_channel),
-    ):
+    with ExitStack() as stack:
+        if "lobes" in changes:
+            stack.enter_context(mock.patch.object(fast, "_aluminium_channel", lobe_mixture))
+        if "collimated" in changes:
+            stack.enter_context(mock.patch.object(fast, "_diffuse_channel", collimated_diffuse))
         yield
 
 
