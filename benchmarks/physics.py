@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 from unittest import mock
@@ -38,6 +37,7 @@ from unittest import mock
 import numpy as np
 
 from flakelab.cases.generator import World
+from flakelab.cli.common import tracked
 from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
@@ -143,15 +143,13 @@ def world_fidelity(library, instrument: str, n: int, photons: int, seed: int) ->
             models[name] = reflectance_to_Lab(reflectance_factor(layer, world.geometries))
     hiding = np.array([t.kind == "pigment" and t.hides for t in library.toners])
     rows = []
-    for i in range(n):
+    for i in tracked(range(n), "Monte Carlo of the world's formulations"):
         mc = simulate(layer[i : i + 1], world.geometries, photons, seed=seed + i)
         truth = reflectance_to_Lab(np.pi * mc.brdf)
         noise = delta_E(reflectance_to_Lab(np.pi * (mc.brdf + mc.stderr)), truth)
         de = np.array([delta_E(lab[i], truth) for lab in models.values()])  # [model, G]
         rows.append((de.mean(axis=1), de.max(axis=1), noise.mean(), mc.seconds))
-        print(f"  {i + 1}/{n} ΔE00 mean {de[0].mean():.2f} max {de[0].max():.2f}", file=sys.stderr)
-    mean, worst = (np.array([r[k] for r in rows]) for k in (0, 1))  # [n, model]
-    noise, seconds = (np.array([r[k] for r in rows]) for k in (2, 3))
+    mean, worst, noise, seconds = map(np.array, zip(*rows, strict=True))  # mean, worst: [n, model]
     family = library.paint_families(x)
     holds = (x[:, hiding] > 0).any(axis=1)
     groups = {"all": np.ones(n, bool)}
