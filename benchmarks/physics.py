@@ -14,25 +14,14 @@ holds a pigment that hides (whites, iron oxides, bismuth vanadate, carbon black:
 scatter or absorb strongly). ``monte_carlo_noise`` is the ΔE00 a one-standard-error shift of
 the Monte Carlo's own reflectance makes: the reference's noise.
 
-The same Monte Carlo also judges two candidate changes of the fast model, which the world
-does not use yet (changing its physics means training the shipped models again,
-docs/coating-optics.md): ``lobes``, the aluminium channel as the mixture of each aluminium's
-own lobe, weighted by its share of the flakes, in place of one lobe at their mean spread;
-``collimated``, the light that pigments scatter out of the flake paths counted at those paths'
-own length (1/μ in and out) where the diffuse channel's flakes-only reference leaves it out;
-and both.
-
     python benchmarks/physics.py [--n 10000] [--photons 200000] [--json]
-    python benchmarks/physics.py --world 60 --photons 100000 [--instrument five-angle] [--json]
+    python benchmarks/physics.py --world 40 --photons 100000 [--instrument five-angle] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from contextlib import ExitStack, contextmanager
-from dataclasses import replace
-from unittest import mock
 
 import numpy as np
 
@@ -42,10 +31,8 @@ from flakelab.core.colorimetry import reflectance_to_Lab
 from flakelab.core.difference import delta_E
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES
 from flakelab.io import read_library
-from flakelab.physics import fast
 from flakelab.physics.fast import predict, reflectance_factor
-from flakelab.physics.kubelka_munk import km_coefficients, layer_reflectance
-from flakelab.physics.layer import internal_diffuse_reflectance, layer_from_fractions
+from flakelab.physics.layer import layer_from_fractions
 from flakelab.physics.montecarlo import simulate
 from timing import measure_peak
 
@@ -80,76 +67,22 @@ def random_fractions(library, n: int, seed: int) -> np.ndarray:
     return x / x.sum(axis=1, keepdims=True)
 
 
-CANDIDATES = {"as shipped": (), "lobes": ("lobes",), "collimated": ("collimated",)}
-CANDIDATES["both"] = CANDIDATES["lobes"] + CANDIDATES["collimated"]
-"""The fast model as the world computes it, and the candidate changes it is judged with."""
-
-
-def lobe_mixture(layer, atlas_index, extinction, atlas):
-    """Candidate aluminium channel ``[F, G, W]``: each aluminium's lobe at its own spread,
-    under the attenuation of all flakes and pigments, weighted by its share of the flake
-    rate (single bounces are exactly such a sum; one lobe at the mean spread is not)."""
-    opaque = ~layer.flake_transmits
-    sigma = layer.flake_rate[:, opaque].sum(axis=1, keepdims=True)
-    share = np.divide(layer.flake_rate, sigma, out=np.zeros_like(layer.flake_rate), where=sigma > 0)
-    out = 0.0
-    for s in np.flatnonzero(opaque & (layer.flake_rate > 0).any(axis=0)):
-        alone = replace(layer, flake_sd=np.full_like(layer.flake_sd, layer.flake_sd[s]))
-        lobe = ALUMINIUM_CHANNEL(alone, atlas_index, extinction, atlas)
-        out = out + share[:, s, None, None] * lobe
-    return out
-
-
-def collimated_diffuse(layer, geo):
-    """Candidate diffuse channel ``[F, G, W]``: the flakes-only reference loses the light the
-    pigments scatter (reduced coefficient) along the flake paths' own length, (1/μi' + 1/μo')/2
-    per flux, as the aluminium channel loses it."""
-    K, S = km_coefficients(layer.absorption, layer.scattering, layer.asymmetry[:, None])
-    K_fl, S_fl = fast._flake_two_flux(layer)
-    H = layer.film[:, None, None]
-    path = (1 / geo["mu_in"] + 1 / geo["mu_out"]) / 2  # [G]
-    reduced = layer.scattering * (1 - layer.asymmetry[:, None])  # σ_s(1 − g)
-    lost = reduced[:, None, :] * path[None, :, None]
-    everything = layer_reflectance(K + K_fl, S + S_fl, H[:, 0], layer.primer[None])[:, None]
-    flakes_only = layer_reflectance((K + K_fl)[:, None] + lost, S_fl[:, None], H, 0.0)
-    r_i = internal_diffuse_reflectance(layer.n)
-    body = everything / (1 - r_i * everything) - flakes_only / (1 - r_i * flakes_only)
-    return geo["interface"][None, :, None] * np.maximum(body, 0.0) / np.pi
-
-
-ALUMINIUM_CHANNEL = fast._aluminium_channel
-
-
-@contextmanager
-def candidate(changes: tuple[str, ...]):
-    """The fast model with the named candidate changes, inside the ``with`` block."""
-    with ExitStack() as stack:
-        if "lobes" in changes:
-            stack.enter_context(mock.patch.object(fast, "_aluminium_channel", lobe_mixture))
-        if "collimated" in changes:
-            stack.enter_context(mock.patch.object(fast, "_diffuse_channel", collimated_diffuse))
-        yield
-
-
 def world_fidelity(library, instrument: str, n: int, photons: int, seed: int) -> dict:
     """ΔE00 of the fast model against the Monte Carlo over ``n`` of the world's own
     formulations: each row's mean and worst over the geometries, and the Monte Carlo's noise."""
     world = World(library, instrument)
     x = world.formulations(n, np.random.default_rng(seed))
     layer = world.layer(x, world.nominal(n))
-    models = {}
-    for name, changes in CANDIDATES.items():
-        with candidate(changes):
-            models[name] = reflectance_to_Lab(reflectance_factor(layer, world.geometries))
+    lab = reflectance_to_Lab(reflectance_factor(layer, world.geometries))
     hiding = np.array([t.kind == "pigment" and t.hides for t in library.toners])
     rows = []
     for i in tracked(range(n), "Monte Carlo of the world's formulations"):
         mc = simulate(layer[i : i + 1], world.geometries, photons, seed=seed + i)
         truth = reflectance_to_Lab(np.pi * mc.brdf)
         noise = delta_E(reflectance_to_Lab(np.pi * (mc.brdf + mc.stderr)), truth)
-        de = np.array([delta_E(lab[i], truth) for lab in models.values()])  # [model, G]
-        rows.append((de.mean(axis=1), de.max(axis=1), noise.mean(), mc.seconds))
-    mean, worst, noise, seconds = map(np.array, zip(*rows, strict=True))  # mean, worst: [n, model]
+        de = delta_E(lab[i], truth)
+        rows.append((de.mean(), de.max(), noise.mean(), mc.seconds))
+    mean, worst, noise, seconds = np.array(rows).T
     family = library.paint_families(x)
     holds = (x[:, hiding] > 0).any(axis=1)
     groups = {"all": np.ones(n, bool)}
@@ -157,15 +90,13 @@ def world_fidelity(library, instrument: str, n: int, photons: int, seed: int) ->
         groups[f"{name}, with a hiding pigment"] = (family == name) & holds
         groups[f"{name}, without"] = (family == name) & ~holds
     summary = {
-        group: {"n": int(m.sum()), "monte_carlo_noise": float(np.median(noise[m]))}
-        | {
-            name: {
-                "de00_mean": float(mean[m, k].mean()),
-                "de00_median": float(np.median(mean[m, k])),
-                "worst_geometry_median": float(np.median(worst[m, k])),
-                "worst_geometry_max": float(worst[m, k].max()),
-            }
-            for k, name in enumerate(models)
+        group: {
+            "n": int(m.sum()),
+            "de00_mean": float(mean[m].mean()),
+            "de00_median": float(np.median(mean[m])),
+            "worst_geometry_median": float(np.median(worst[m])),
+            "worst_geometry_max": float(worst[m].max()),
+            "monte_carlo_noise": float(np.median(noise[m])),
         }
         for group, m in groups.items()
         if m.any()
@@ -184,15 +115,12 @@ def print_world(report: dict) -> None:
     print(f"fast model (the generated world) vs Monte Carlo, {report['formulations']} of the "
           f"world's formulations at the {report['instrument']}, seed {report['seed']}, "
           f"{report['photons_per_spectrum']:,} photons each:")  # fmt: skip
-    print("ΔE00 over the geometries (mean / median) and at the worst geometry (median / max);")
-    print("the world's fast model as shipped, then the candidate changes:")
+    print(f"  {'':32s} {'n':>3s} {'mean':>5s} {'median':>6s}  worst geometry: "
+          f"{'median':>6s} {'max':>6s}  {'MC noise':>8s}")  # fmt: skip
     for group, e in report["fast_vs_monte_carlo"].items():
-        print(f"  {group} ({e['n']}; the Monte Carlo's own noise {e['monte_carlo_noise']:.2f})")
-        for name in CANDIDATES:
-            figures = (e[name][k] for k in ("de00_mean", "de00_median", "worst_geometry_median"))
-            mean, median, worst = figures
-            print(f"    {name:12s} {mean:5.2f} / {median:5.2f}   "
-                  f"{worst:5.2f} / {e[name]['worst_geometry_max']:5.2f}")  # fmt: skip
+        print(f"  {group:32s} {e['n']:3d} {e['de00_mean']:5.2f} {e['de00_median']:6.2f}"
+              f"  {'':15s} {e['worst_geometry_median']:6.2f} {e['worst_geometry_max']:6.2f}"
+              f"  {e['monte_carlo_noise']:8.2f}")  # fmt: skip
 
 
 def main() -> None:
