@@ -569,15 +569,16 @@ def test_a_match_keeps_to_the_toners_the_shop_has_and_to_few_pigments(cli):
     pigments = {t.name for t in read_library().toners if t.kind == "pigment"}
     args = ["match", "--example", "--candidates", "2", "--json"]
     free = json.loads(cli(*args).stdout)["candidates"]
-    assert all("Phthalo green" in c["recipe"] for c in free)
+    out_of_stock = "Phthalo blue GS"  # the car's blue (phthalo green until stop 116's example)
+    assert all(out_of_stock in c["recipe"] for c in free)
     assert all(len(pigments & set(c["recipe"])) > 2 for c in free)
-    run = cli(*args, "--without", "Phthalo green", "--max-pigments", "2")
+    run = cli(*args, "--without", out_of_stock, "--max-pigments", "2")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
-    assert report["without"] == ["Phthalo green"]
+    assert report["without"] == [out_of_stock]
     for candidate in report["candidates"]:
-        assert "Phthalo green" not in candidate["recipe"]
-        assert "Phthalo green" not in {w["toner"] for w in candidate["weights_g"]}
+        assert out_of_stock not in candidate["recipe"]
+        assert out_of_stock not in {w["toner"] for w in candidate["weights_g"]}
         assert 1 <= len(pigments & set(candidate["recipe"])) <= 2
     run = cli(*args, "--without", "Phthalo gren")
     assert run.returncode == 2 and "Traceback" not in run.stderr
@@ -1088,15 +1089,16 @@ def test_weighing_metamerism_steers_the_search_to_the_car_s_own_pigments(
 ):
     """The example blue metallic is tinted with phthalo blue GS and indanthrone blue.
     Matched on its colour in daylight alone, the best recipe is a metamer of phthalo green
-    without the phthalo blue GS (the shipped model of stop 115: indanthrone blue, phthalo
-    green and carbon black over interference green pearl and two aluminiums, metamerism
-    index 1.75 under F11; stop 109's phthalo green and quinacridone violet, 2.29; stop 108's
-    2.46; stop 52's took phthalo blue RS, 0.96); with the index in the objective it takes
-    the phthalo blue GS, and its index falls below a third of that (0.29). A shop without
-    the phthalo blues gets in daylight a worse metamer of phthalo green and quinacridone
-    violet (2.59 under F11 over silver white pearl), named as such in the search's notes.
-    (Stop 108's model gave there indanthrone blue and phthalo green, 2.26 under F11; stop
-    52's the green and violet.)"""
+    without the phthalo blue GS (the shipped model of stop 115, the example sprayed in its
+    world at stop 116: phthalo green, indanthrone blue and quinacridone magenta over the
+    car's own two aluminiums, metamerism index 2.77 under F11; stop 109's phthalo green and
+    quinacridone violet, 2.29; stop 108's 2.46; stop 52's took phthalo blue RS, 0.96); with
+    the index in the objective it takes the phthalo blue GS and indanthrone blue, and its
+    index falls below a tenth of that (0.17). A shop without the phthalo blues gets in
+    daylight a worse metamer of phthalo green and quinacridone violet (3.08 under F11, over
+    interference green pearl), named as such in the search's notes. (Stop 108's model gave
+    there indanthrone blue and phthalo green, 2.26 under F11; stop 52's the green and
+    violet.)"""
     target, best, notes = example_by_metamerism
     worst = {w: max(v.max() for v in c.metamerism.values()) for w, c in best.items()}
     assert worst[1.0] < worst[0.0] / 3 and worst["no blues"] > 2.0
@@ -1122,10 +1124,12 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
 ):
     """The example car given as its L*a*b* alone (spectra recovered from it, a metamer of
     many): the search cannot weigh a metamerism index against it and so finds what the
-    measured spectra give with --metamerism 0, the same recipe (indanthrone blue, phthalo
-    green and carbon black over interference green pearl, ΔE00 0.16 at worst, where the index
-    steers the measured car to the phthalo blue GS at 0.20; stop 115's model), with no index
-    in the candidates and a note saying why."""
+    measured spectra give with --metamerism 0, the same recipe (phthalo green, indanthrone
+    blue and quinacridone magenta over the car's two aluminiums, ΔE00 0.46 at worst, where
+    the index steers the measured car to the phthalo blue GS at 0.55; stop 115's model and
+    stop 116's example), with no index in the candidates and a note saying why. Its amounts
+    are within 0.6 g of a 250 g can of the measured spectra's (stop 115's model ends the
+    medium aluminium 0.5 g apart; stop 109's within 0.1 g)."""
     from flakelab.core.colorimetry import reflectance_from_Lab
     from flakelab.match.models import effect_mask
 
@@ -1140,8 +1144,8 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
     result = match(alone, hybrid, effect, settings=MatchSettings(candidates=1))
     found = result.candidates[0]
     assert set(found.fractions) == set(best[0.0].fractions) != set(best[1.0].fractions)
-    for toner, share in found.fractions.items():  # within 0.1 g of a 250 g can
-        assert share == pytest.approx(best[0.0].fractions[toner], abs=4e-4)
+    for toner, share in found.fractions.items():  # within 0.6 g of a 250 g can
+        assert share == pytest.approx(best[0.0].fractions[toner], abs=2.4e-3)
     assert found.de00.max() == pytest.approx(best[0.0].de00.max(), abs=5e-3)
     assert found.metamerism == {} and found.to_dict()["metamer"] is False
     assert any("gives its colour alone" in n and "no metamerism index" in n for n in result.notes)
@@ -1159,18 +1163,19 @@ def test_a_target_of_lab_alone_is_matched_as_its_spectra_are_on_colour_alone(
 def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_metamerism):
     """The car's blue is phthalo blue GS (the match that weighs metamerism). The daylight-only
     match of the example without the phthalo blues stands in phthalo green and quinacridone
-    violet for it (over silver white pearl and medium aluminium, stop 115's model). Sprayed a
-    little light, a correction that keeps its pigments moves amounts, its expected index
-    stays over the notice level under every light (FL11 2.59 → 2.51), and the colorist is
-    told to match again; the car's own recipe sprayed the same way draws no such note.
-    Allowed to add a toner too, the correction adds a trace of perylene maroon, which barely
-    lowers the worst index (under FL11 2.59 → 2.29), and still says to match again. With a
-    trace of the GS (0.3 %), the correction raises it into a tint (3.3 %), adds carbon
-    black, and the metamer is cured (under A 2.18 → 0.35, FL11 2.58 → 0.45). A correction
-    changes amounts and adds one toner: it cures a metamer only where the recipe already
-    carries the car's pigment that makes it one. (The shipped five-angle model of stop 109
-    added DPP orange to the metamer and DPP red to the traced one, A 1.94 → 0.11; those of
-    stops 52–107 added carbon black, A 1.94 → 0.26 at stop 54; stop 108's stood in
+    violet for it (over interference green pearl and two fine aluminiums, stop 115's model
+    and stop 116's example). Sprayed a little light, a correction that keeps its pigments
+    moves amounts, its expected index stays over the notice level under every light (FL11
+    3.08 → 3.03), and the colorist is told to match again; the car's own recipe sprayed the
+    same way draws no such note. Allowed to add a toner too, the correction adds a trace of
+    DPP orange and raises the indanthrone blue, which lowers the worst index (under FL11 3.08
+    → 1.36) but not under the notice level, and still says to match again. With a trace of
+    the GS (0.3 %), the correction raises it into a tint (5.0 %), adds perylene maroon, and
+    the metamer is cured (under A 2.38 → 0.14, FL11 3.10 → 0.34). A correction changes
+    amounts and adds one toner: it cures a metamer only where the recipe already carries
+    the car's pigment that makes it one. (The shipped five-angle model of stop 109 added DPP
+    orange to the metamer and DPP red to the traced one, A 1.94 → 0.11; those of stops
+    52–107 added carbon black, A 1.94 → 0.26 at stop 54; stop 108's stood in
     indanthrone blue, phthalo green and a little carbon black, A 1.37 → 0.13 with no toner
     added; stop 51's added DPP red; the models before stood in phthalo green and
     quinacridone magenta for the car's two blues.)"""
@@ -1203,8 +1208,8 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
         notes[name] = metamerism_note(before, fixed[name].metamerism)
         if name == "metamer":
             assert is_metamer(before)
-            # amounts alone leave it one under every light (A 2.30 → 2.18, FL11 2.59 → 2.51,
-            # LED-B3 1.78 → 1.70; stop 109's model: A 1.97 → 1.98, FL11 2.29 → 2.36)
+            # amounts alone leave it one under every light (A 2.47 → 2.46, FL11 3.08 → 3.03,
+            # LED-B3 1.96 → 1.94; stop 109's model: A 1.97 → 1.98, FL11 2.29 → 2.36)
             for light, index in fixed[name].metamerism.items():
                 assert index.max() > METAMERISM_NOTICE, light
             assert worst_light(fixed[name].metamerism)[1] == pytest.approx(
@@ -1219,15 +1224,15 @@ def test_a_correction_cannot_repair_a_metamer_and_says_so(hybrid, example_by_met
     assert "FL11" in notes["found"] and "match the target again" in notes["found"]
     cured = fixed["traced"]
     assert cured.fractions[car[0]] > 10 * traced[car[0]]
-    # a toner the metamer lacks, where one is added (stop 115's model: carbon black; stop
-    # 109's: DPP red; stop 108's added none; those before, as the machine's arithmetic
+    # a toner the metamer lacks, where one is added (stop 115's model: perylene maroon;
+    # stop 109's: DPP red; stop 108's added none; those before, as the machine's arithmetic
     # decided, carbon black, DPP orange or DPP red)
     assert cured.new_toner not in metamer
     assert worst_light(cured.metamerism)[1] < METAMERISM_NOTICE / 2
-    # the spray-out's index is read, the cure's is where the search ends: 0.35 on an Intel
+    # the spray-out's index is read, the cure's is where the search ends: 0.14 on an Intel
     # Xeon (stop 115's model), 0.11 on an AMD EPYC (stop 109's); the models before gave
     # 0.13–0.28 as each machine's arithmetic went
-    assert befores["traced"]["A"].max() == pytest.approx(2.18, abs=0.01)
+    assert befores["traced"]["A"].max() == pytest.approx(2.38, abs=0.01)
     assert cured.metamerism["A"].max() < METAMERISM_NOTICE / 2
     assert notes["traced"] is None
 

@@ -247,8 +247,11 @@ def compose(colour: NDArray, texture: NDArray, iterations: int = 4) -> NDArray:
     target = np.clip(colour, 0.0, 1.0)
     deviation = texture - _column_mean(texture)[None]
     image = np.clip(target[None] + deviation[..., None], 0.0, 1.0)
+    # the colour's mean smoothed as the image's is: against the raw colour, a steep change
+    # along the columns (a dark face) reads as a deficit even where nothing was clipped
+    kept = _column_mean(np.broadcast_to(target[None], image.shape))
     for _ in range(iterations):
-        deficit = target - _column_mean(image)  # [cols, 3]
+        deficit = kept - _column_mean(image)  # [cols, 3]
         free = np.where(deficit[None] > 0, image < 1, image > 0)
         share = np.maximum(free.sum(axis=0), 1)
         image = np.clip(image + free * (deficit * rows / share)[None], 0.0, 1.0)
