@@ -71,6 +71,11 @@ def random_fractions(library, n: int, seed: int) -> np.ndarray:
     return x / x.sum(axis=1, keepdims=True)
 
 
+def fast_model(library, x: np.ndarray) -> np.ndarray:
+    """The fast model of formulations ``x`` at the benchmark's geometries, layers built."""
+    return predict(layer_from_fractions(library, x), GEOMETRIES)
+
+
 def world_fidelity(library, instrument: str, n: int, photons: int, seed: int) -> dict:
     """ΔE00 of the fast model against the Monte Carlo over ``n`` of the world's own
     formulations: each row's mean and worst over the geometries, and the Monte Carlo's noise."""
@@ -147,15 +152,14 @@ def main() -> None:
             print_world(world)
         return
     x = random_fractions(library, args.n, args.seed)
-    predict(layer_from_fractions(library, x[:10]), GEOMETRIES)  # load the atlas once
+    fast_model(library, x[:10])  # load the atlas once
     # speed untraced, best of three (tracemalloc slows numpy's allocations), then the peak
-    fast_seconds = best_time(lambda: predict(layer_from_fractions(library, x), GEOMETRIES))
-    _, _, fast_peak = measure_peak(lambda: predict(layer_from_fractions(library, x), GEOMETRIES))
+    fast_seconds = best_time(fast_model, library, x)
+    _, _, fast_peak = measure_peak(fast_model, library, x)
     drawn = World(library, "five-angle").formulations(args.n, np.random.default_rng(args.seed))
-    world_seconds = best_time(lambda: predict(layer_from_fractions(library, drawn), GEOMETRIES))
+    world_seconds = best_time(fast_model, library, drawn)
     ladder = {}
     mc_seconds = mc_photons = 0.0
-    mc_peak = 0.0
     for name, recipe in {} if args.fast_only else LADDER.items():
         coating = layer_from_fractions(library, library.fractions(recipe))
         mc, _, mc_peak = measure_peak(simulate, coating, GEOMETRIES, args.photons)

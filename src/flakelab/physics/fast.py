@@ -344,8 +344,7 @@ def _diffuse_channel(layer: Layer, geo: dict) -> NDArray:
     H = layer.film[:, None]
     everything = layer_reflectance(K + K_fl, S + S_fl, H, layer.primer[None])[:, None, :]
     path = (1 / geo["mu_in"] + 1 / geo["mu_out"]) / 2  # [G]
-    reduced = layer.scattering * (1 - layer.asymmetry[:, None])  # σ_s(1 − g)
-    scattered = reduced[:, None, :] * path[None, :, None]
+    scattered = layer.reduced_scattering[:, None, :] * path[None, :, None]
     flakes_only = layer_reflectance(
         (K + K_fl)[:, None, :] + scattered, S_fl[:, None, :], H[:, :, None], 0.0
     )
@@ -371,7 +370,7 @@ def predict(layer: Layer, geometries: ArrayLike, atlas: FlakeAtlas | None = None
         )
     geo = flake_geometry(geometries, layer.n)
     # forward-scattered light stays near the specular flake paths; the rest leaves them
-    extinction = layer.absorption + layer.scattering * (1 - layer.asymmetry[:, None])
+    extinction = layer.absorption + layer.reduced_scattering
     aluminium = _aluminium_channel(layer, atlas.index(geometries), extinction, atlas)
     K_fl, S_fl = _flake_two_flux(layer)  # per depth: what flakes absorb plus reflect
     flakes = (K_fl + S_fl)[:, None, :]

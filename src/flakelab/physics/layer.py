@@ -95,6 +95,12 @@ class Layer:
         return self.flake_reflectance[:, 0].mean(axis=1)
 
     @property
+    def reduced_scattering(self) -> NDArray[np.float64]:
+        """σ_s·(1 − g) of each formulation ``[F, W]`` [1/µm]: the scattering that turns
+        light off its path (what scatters forward stays on it)."""
+        return self.scattering * (1 - self.asymmetry[:, None])
+
+    @property
     def film(self) -> NDArray[np.float64]:
         """Basecoat thickness of each formulation ``[F]`` [µm]."""
         return np.broadcast_to(np.asarray(self.thickness, dtype=float), (self.size,))

@@ -249,7 +249,7 @@ def compose(colour: NDArray, texture: NDArray, iterations: int = 4) -> NDArray:
     image = np.clip(target[None] + deviation[..., None], 0.0, 1.0)
     # the colour's mean smoothed as the image's is: against the raw colour, a steep change
     # along the columns (a dark face) reads as a deficit even where nothing was clipped
-    kept = _column_mean(np.broadcast_to(target[None], image.shape))
+    kept = _smoothed_along_columns(target)
     for _ in range(iterations):
         deficit = kept - _column_mean(image)  # [cols, 3]
         free = np.where(deficit[None] > 0, image < 1, image > 0)
@@ -260,9 +260,13 @@ def compose(colour: NDArray, texture: NDArray, iterations: int = 4) -> NDArray:
 
 def _column_mean(image: NDArray) -> NDArray:
     """Mean over rows, smoothed over about 1/64 of the columns."""
-    mean = image.mean(axis=0)
-    width = image.shape[1] / 64
-    return gaussian_filter1d(mean, width, axis=0, mode="nearest") if width >= 1 else mean
+    return _smoothed_along_columns(image.mean(axis=0))
+
+
+def _smoothed_along_columns(values: NDArray) -> NDArray:
+    """``values`` ``[cols, ...]`` smoothed over about 1/64 of the columns."""
+    width = values.shape[0] / 64
+    return gaussian_filter1d(values, width, axis=0, mode="nearest") if width >= 1 else values
 
 
 def _eye_blur_px(distance_m: float) -> float:
