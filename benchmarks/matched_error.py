@@ -6,7 +6,10 @@ does not see that. For hidden targets made as in ``flakelab match evaluate`` thi
 the model's ΔE00 against the nominal physics of the world (no batch, application or
 instrument noise) twice: at the recipe the matcher proposes for each target, and at the
 target's hidden formula. Their ratio says how much of the model's error the optimiser
-finds.
+finds. Beside them, the search's own fit: the best recipe's predicted worst-geometry ΔE00
+to the target (per paint family too), which is what the search could reach through the
+model; run with an older checkout's ``src`` first on ``PYTHONPATH`` (and its model) to tell
+a world where targets are harder to reach from one where the model is further off.
 
     python benchmarks/matched_error.py [--targets 60] [--seed 81,82] [--model FILE] [--json]
         [--settings "model_risk=1"]
@@ -54,10 +57,12 @@ def matched_and_hidden(
     targets: int,
     candidates: int = 1,
     settings: MatchSettings | None = None,
+    fits: list[float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """For ``targets`` hidden formulations per seed, made and measured as in the harness: the
     recipes ``[N·candidates, T]`` the matcher proposes (its best ``candidates``) and the hidden
-    formulations ``[N, T]``."""
+    formulations ``[N, T]``; with a list ``fits``, each target's best recipe's predicted
+    worst-geometry ΔE00 to it is appended there."""
     matched, hidden = [], []
     for seed in seeds:
         trials = harness_trials(world, targets, seed, forward.novel)
@@ -65,21 +70,30 @@ def matched_and_hidden(
             proposed = match(t.target, forward, effect, settings=settings).candidates[:candidates]
             matched += [recipe_vector(forward, c.fractions) for c in proposed]
             hidden.append(x_hidden)
+            if fits is not None:
+                fits.append(float(proposed[0].de00.max()))
     return np.array(matched), np.array(hidden)
 
 
 def measure(world: World, forward, effect, args, settings: MatchSettings | None = None) -> dict:
-    """The model's own error at matched recipes and at hidden formulas, and their ratio."""
+    """The model's own error at matched recipes and at hidden formulas, their ratio, and the
+    search's predicted fit (median worst-geometry ΔE00, over all and per paint family)."""
+    fits: list[float] = []
     matched, hidden = matched_and_hidden(
-        world, forward, effect, seeds_from(args.seed), args.targets, settings=settings
+        world, forward, effect, seeds_from(args.seed), args.targets, settings=settings, fits=fits
     )
     at_matches = statistics(own_error(world, forward, matched))
     at_hidden = statistics(own_error(world, forward, hidden))
+    families = world.library.paint_families(hidden)
     return {
         "targets": len(hidden),
         "at_matched_recipes": at_matches,
         "at_hidden_formulas": at_hidden,
         "mean_ratio": at_matches["de00_mean"] / at_hidden["de00_mean"],
+        "predicted_fit_median": float(np.median(fits)),
+        "predicted_fit_median_by_family": {
+            str(f): float(np.median(np.array(fits)[families == f])) for f in np.unique(families)
+        },
     }
 
 
@@ -109,6 +123,11 @@ def main() -> None:
             f"worst geometry median {s['worst_geometry_median']:.3f}"
         )
     print(f"  matched / hidden mean ×{report['mean_ratio']:.2f}")
+    families = ", ".join(
+        f"{f} {v:.3f}" for f, v in report["predicted_fit_median_by_family"].items()
+    )
+    fit = report["predicted_fit_median"]
+    print(f"  the search's predicted worst-geometry ΔE00, median {fit:.3f} ({families})")
 
 
 if __name__ == "__main__":

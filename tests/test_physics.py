@@ -282,28 +282,33 @@ class TestFastModel:
         alone = [texture_readings(layer_from_fractions(self.library, row), radius)[0] for row in x]
         np.testing.assert_allclose(texture, np.array(alone), rtol=1e-12)
 
-    def test_atlas_interpolation_is_multilinear(self):
-        """The compiled 16-corner interpolation agrees with scipy's multilinear interpolation
-        of the same table at random points (spread, depth per formulation; ρ, κ' per band)."""
+    def test_atlas_lobes_are_multilinear_and_summed(self):
+        """The compiled lobes: the 16-corner interpolation agrees with scipy's multilinear
+        interpolation of the same table at random points (spread, depth per lobe; ρ, κ' per
+        band), and each formulation gets the weighted sum of its own lobes' exponentials."""
         from scipy.interpolate import RegularGridInterpolator
 
-        from flakelab.physics.fast import _interpolate
+        from flakelab.physics.fast import _summed_lobes
 
         rng = np.random.default_rng(5)
         table = rng.normal(size=(4, 5, 6, 7, 3))  # [spread, depth, ρ, κ', G]
-        F, W = 9, 11
-        s, d = rng.uniform(0, 3, F), rng.uniform(0, 4, F)
-        r, k = rng.uniform(0, 5, (F, W)), rng.uniform(0, 6, (F, W))
+        P, W = 9, 11
+        first = np.array([0, 4, 5])  # three formulations: lobes 0–3, 4, 5–8
+        weight = rng.uniform(0.1, 1.0, P)
+        s, d = rng.uniform(0, 3, P), rng.uniform(0, 4, P)
+        r, k = rng.uniform(0, 5, (P, W)), rng.uniform(0, 6, (P, W))
         cells = [
             np.minimum(np.floor(v).astype(int), n - 2) for v, n in ((s, 4), (d, 5), (r, 6), (k, 7))
         ]
-        got = _interpolate(table, cells[0], s - cells[0], cells[1], d - cells[1],
-                           cells[2], r - cells[2], cells[3], k - cells[3])  # fmt: skip
+        got = _summed_lobes(table, first, weight, cells[0], s - cells[0], cells[1], d - cells[1],
+                            cells[2], r - cells[2], cells[3], k - cells[3])  # fmt: skip
         axes = [np.arange(n, dtype=float) for n in table.shape[:4]]
         points = np.stack(np.broadcast_arrays(s[:, None], d[:, None], r, k), axis=-1)
-        want = np.stack(
-            [RegularGridInterpolator(axes, table[..., g])(points) for g in range(3)], axis=-1
-        )
+        log_lobes = np.stack(
+            [RegularGridInterpolator(axes, table[..., g])(points) for g in range(3)], axis=1
+        )  # [P, G, W]
+        lobes = weight[:, None, None] * np.exp(log_lobes)
+        want = np.stack([lobes[0:4].sum(0), lobes[4], lobes[5:9].sum(0)])
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
 
     def test_fractions_must_match_the_library(self):
