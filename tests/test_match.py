@@ -2050,24 +2050,34 @@ def test_harness_worlds_take_the_shop_s_variation_away(hybrid):
     """In the controlled world only the instrument's reading varies, so the hidden formula's
     own spray and the car's paint sprayed again pass every time, the first within about the
     instrument's repeatability; in a shop's world the batches and the application move it
-    several times as far."""
+    several times as far. The first recipe's colour without its spray's noise
+    (``first_unsprayed``) is its spray's there but for the instrument's reading; in the
+    shop's world the application moves the spray further from it."""
     from flakelab.match.evaluate import evaluate_matching, harness_world
     from flakelab.match.models import effect_mask
     from flakelab.match.search import MatchError
 
     effect = effect_mask(hybrid.library, hybrid.toners)
     hasty = MatchSettings(candidates=1, screen_steps=3, refine_steps=3, swap_above=np.inf)
-    oracle = {}
+    oracle, luck = {}, {}
     for name in ("controlled", "shop"):
         world = harness_world(hybrid.library, "five-angle", name)
-        run = evaluate_matching(world, hybrid, effect, targets=5, seed=3, settings=hasty)
+        run = evaluate_matching(
+            world, hybrid, effect, targets=5, seed=3, settings=hasty, per_target=True
+        )
         oracle[name] = (run["oracle_success"], run["oracle_de00_median"])
+        luck[name] = [abs(r["first"] - r["first_unsprayed"]) for r in run["per_target"]]
+        assert run["first_shot_unsprayed"] == np.mean(
+            [r["first_unsprayed"] <= 1.0 for r in run["per_target"]]
+        )
         assert run["after_one_perfect_correction"] >= run["first_shot_success"]
         if name == "controlled":  # the car's own paint, sprayed again as it was
             assert run["respray_success"] == 1.0
     assert oracle["controlled"][0] == 1.0
     assert oracle["controlled"][1] < 0.3
     assert oracle["shop"][1] > 2 * oracle["controlled"][1]
+    assert max(luck["controlled"]) < 0.1  # the instrument's reading alone (0.05 here)
+    assert np.mean(luck["shop"]) > 2 * np.mean(luck["controlled"])  # 0.18 against 0.03
     with pytest.raises(MatchError, match="--world"):
         harness_world(hybrid.library, "five-angle", "paint shop")
 

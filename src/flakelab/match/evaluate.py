@@ -420,6 +420,9 @@ def _one(
         "first_texture": texture_share(first),
         "oracle_texture": texture_share(oracle),
         "first": first_share,
+        # the first recipe from the shop's tins at its mean application, read without noise:
+        # what the search and its model left, apart from the spray's own luck
+        "first_unsprayed": worst_share(tolerance, forward.geometries, t.target, t.unsprayed(x)),
         "corrected": min(first_share, corrected_share),
         "oracle": share(oracle),
         "respray": respray_share,
@@ -536,6 +539,9 @@ def evaluate_matching(
         "tolerance": tolerance.name,
         "weighed": scale and scale.to_dict(),
         "first_shot_success": first,
+        # the first recipes' colour without their spray's noise (``Trial.unsprayed``)
+        "first_shot_unsprayed": share(rows, "first_unsprayed"),
+        "novel_toner_first_shot_unsprayed": share(novel_rows, "first_unsprayed"),
         "without": list(settings.without),
         # the targets whose paint holds a toner out of stock, and how they fared
         "needing_missing_targets": sum(r["needs_missing"] for r in rows),
