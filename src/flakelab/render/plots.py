@@ -698,6 +698,7 @@ def plot_model_errors(
 
 HARNESS_CURVES = {
     "first": "first shot",
+    "first_unsprayed": "first recipe, its colour without the spray's noise",
     "corrected": "after one correction",
     "oracle": "the hidden formula sprayed",
     "respray": "the car's own paint sprayed again",
