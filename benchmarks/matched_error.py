@@ -84,15 +84,15 @@ def measure(world: World, forward, effect, args, settings: MatchSettings | None 
     )
     at_matches = statistics(own_error(world, forward, matched))
     at_hidden = statistics(own_error(world, forward, hidden))
-    families = world.library.paint_families(hidden)
+    families, fit = world.library.paint_families(hidden), np.array(fits)
     return {
         "targets": len(hidden),
         "at_matched_recipes": at_matches,
         "at_hidden_formulas": at_hidden,
         "mean_ratio": at_matches["de00_mean"] / at_hidden["de00_mean"],
-        "predicted_fit_median": float(np.median(fits)),
+        "predicted_fit_median": float(np.median(fit)),
         "predicted_fit_median_by_family": {
-            str(f): float(np.median(np.array(fits)[families == f])) for f in np.unique(families)
+            str(f): float(np.median(fit[families == f])) for f in np.unique(families)
         },
     }
 

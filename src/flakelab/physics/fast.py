@@ -341,15 +341,15 @@ def _flake_two_flux(layer: Layer) -> tuple[NDArray, NDArray]:
     return layer.flake_rate @ absorbed, layer.flake_rate @ R
 
 
-def _diffuse_channel(layer: Layer, geo: dict) -> NDArray:
+def _diffuse_channel(layer: Layer, geo: dict, K_fl: NDArray, S_fl: NDArray) -> NDArray:
     """Lambertian light from scattering pigments and the primer ``[F, G, W]``: the two-flux
     light of everything, less that of the flakes alone as the flake channels hold it, which
     loses what the pigments scatter (reduced coefficient) along the flake paths' own length,
     (1/μi' + 1/μo')/2 per flux. Leaving that loss out gave back little of the light 3 % TiO2
     scatters out of a VMP's paths (45as110 at 550 nm: 0.026 against the Monte Carlo's 0.142,
-    now 0.178); counting it at the diffuse flux's length (2 per flux) twice over (0.217)."""
+    now 0.178); counting it at the diffuse flux's length (2 per flux) twice over (0.217).
+    ``K_fl``, ``S_fl``: the flakes as two-flux reflectors (:func:`_flake_two_flux`)."""
     K, S = km_coefficients(layer.absorption, layer.scattering, layer.asymmetry[:, None])
-    K_fl, S_fl = _flake_two_flux(layer)
     H = layer.film[:, None]
     everything = layer_reflectance(K + K_fl, S + S_fl, H, layer.primer[None])[:, None, :]
     flakes_only = _flakes_only(layer, K + K_fl, S_fl, geo)
@@ -366,11 +366,12 @@ def _flakes_only(layer: Layer, K: NDArray, S_fl: NDArray, geo: dict) -> NDArray:
     per-geometry layers had been half the cost of the diffuse channel)."""
     out = np.empty((layer.size, geo["mu_in"].size, K.shape[1]))
     H = layer.film[:, None]
-    scatters = np.any(layer.reduced_scattering > 0, axis=1)
+    reduced = layer.reduced_scattering
+    scatters = np.any(reduced > 0, axis=1)
     calm = ~scatters
     out[calm] = layer_reflectance(K[calm], S_fl[calm], H[calm], 0.0)[:, None, :]
     path = (1 / geo["mu_in"] + 1 / geo["mu_out"]) / 2  # [G]
-    scattered = layer.reduced_scattering[scatters, None, :] * path[None, :, None]
+    scattered = reduced[scatters, None, :] * path[None, :, None]
     out[scatters] = layer_reflectance(
         K[scatters, None, :] + scattered, S_fl[scatters, None, :], H[scatters, :, None], 0.0
     )
@@ -401,7 +402,7 @@ def predict(layer: Layer, geometries: ArrayLike, atlas: FlakeAtlas | None = None
     ext_in = flakes + extinction[:, None, :] / geo["mu_in"][None, :, None]
     ext_out = flakes + extinction[:, None, :] / geo["mu_out"][None, :, None]
     pearls = _pearl_channel(layer, geo, ext_in, ext_out)
-    return aluminium + pearls + _diffuse_channel(layer, geo)
+    return aluminium + pearls + _diffuse_channel(layer, geo, K_fl, S_fl)
 
 
 def reflectance_factor(layer: Layer, geometries: ArrayLike) -> NDArray:
