@@ -476,6 +476,18 @@ def test_truncated_cxf_and_json_are_reported(rich_measurement, tmp_path):
             read_measurements(path)
 
 
+def test_a_cxf_declaring_an_unknown_encoding_is_reported(rich_measurement, tmp_path):
+    """An XML declaration naming an encoding Python lacks was an internal error
+    (LookupError) until stop 118; the file's stored content is not touched."""
+    path = tmp_path / "m.cxf"
+    write_measurements([rich_measurement], path)
+    text = re.sub(r"^<\?xml[^>]*\?>", '<?xml version="1.0" encoding="abc"?>', path.read_text())
+    path.write_text(text)
+    with pytest.raises(MeasurementFileError, match=r"m\.cxf.*not valid CxF3 XML.*unknown encoding"):
+        read_measurements(path)
+    assert path.read_text() == text
+
+
 def test_a_json_document_s_every_flaw_is_named_by_its_field(rich_measurement, tmp_path):
     path = tmp_path / "m.json"
     write_measurements([rich_measurement], path)

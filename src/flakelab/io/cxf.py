@@ -121,7 +121,8 @@ def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measure
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConverterWarning)
             document = colour_cxf.read_cxf(data)
-    except (ParserError, ValueError, TypeError) as error:
+    # LookupError: an XML declaration naming an encoding Python does not know
+    except (ParserError, ValueError, TypeError, LookupError) as error:
         raise MeasurementFileError(path, f"not valid CxF3 XML ({error})") from None
     resources = document.resources
     specs = (
