@@ -7,6 +7,7 @@ import csv
 import io
 import json
 import os
+import random
 import re
 import shutil
 import stat
@@ -1725,3 +1726,79 @@ def test_a_csv_colour_headed_as_instruments_export_it_is_read(tmp_path):
         match=r"row 4: its L\*, C\*, h° read as L\*a\*b\* \(\S+, \S+, \S+\) lies ΔE00",
     ):
         read_measurement(_csv(tmp_path, "\n".join(lines)))
+
+
+_BAD_TOKENS = ("", "abc", "nan", "inf", "-1", "1e400", "0", "\x00", "😀", '"', "<", "&", "[]", "{}")
+
+
+def _mutated(text: str, rng: random.Random) -> str:
+    """``text`` with one to three random edits: a number or a quoted string replaced by a bad
+    token (a string's quotes kept or not), a line dropped, doubled or swapped with another,
+    or the text cut short."""
+    for _ in range(rng.randint(1, 3)):
+        lines = text.splitlines(keepends=True)
+        edit = rng.randrange(5)
+        tokens = list(re.finditer(r'-?\d+(\.\d+)?(e-?\d+)?|"[^"\n]*"', text))
+        if edit == 0 and tokens:  # a quoted string keeps its quotes half the time
+            m, bad = rng.choice(tokens), rng.choice(_BAD_TOKENS)
+            quoted = m.group().startswith('"') and rng.random() < 0.5
+            text = text[: m.start()] + (f'"{bad}"' if quoted else bad) + text[m.end() :]
+        elif edit == 1 and lines:
+            del lines[rng.randrange(len(lines))]
+            text = "".join(lines)
+        elif edit == 2 and lines:
+            i = rng.randrange(len(lines))
+            text = "".join(lines[: i + 1] + lines[i:])
+        elif edit == 3 and len(lines) > 1:
+            i, j = rng.sample(range(len(lines)), 2)
+            lines[i], lines[j] = lines[j], lines[i]
+            text = "".join(lines)
+        else:
+            text = text[: rng.randrange(len(text) + 1)]
+    return text
+
+
+def _valid_file(kind: str, measurement, folder: Path) -> tuple[Path, object]:
+    """A valid file of ``kind`` in ``folder`` and the reader that reads it."""
+    from flakelab.core.tolerance import TOLERANCE_PRESETS
+    from flakelab.io import read_library, read_tolerance
+    from flakelab.io.library_file import demo_library_path
+    from flakelab.io.lots_file import read_lots, write_lots
+    from flakelab.library.lots import TonerLot, TonerLots
+
+    path = folder / f"valid.{kind if kind in ('cxf', 'csv') else 'json'}"
+    if kind in ("cxf", "csv", "json"):
+        write_measurements([measurement], path)
+        return path, read_measurements
+    if kind == "recipe":
+        write_recipe({"Al medium": 194.0, "Phthalo blue GS": 16.6, "Carbon black": 3.6}, path)
+        return path, read_recipe
+    if kind == "library":
+        shutil.copyfile(demo_library_path(), path)
+        return path, read_library
+    if kind == "tolerance":
+        path.write_text(json.dumps(TOLERANCE_PRESETS["refinish"].to_dict()))
+        return path, read_tolerance
+    write_lots(TonerLots.of([TonerLot("Carbon black", 0.97, 0.01, "K-9")]), path)
+    return path, read_lots
+
+
+@pytest.mark.parametrize("kind", ["cxf", "json", "csv", "recipe", "library", "tolerance", "lots"])
+def test_a_mutated_file_is_read_or_refused_by_name(kind, rich_measurement, tmp_path):
+    """Fuzzing, seeded: 60 random mutations of a valid file of each kind each either read
+    or raise a FlakelabError that names the file, never another exception (the CLI would
+    show one as an internal error). Fuzzing of this kind, longer, found the CxF declaration
+    of an unknown encoding above."""
+    valid, read = _valid_file(kind, rich_measurement, tmp_path)
+    text, rng = valid.read_text(encoding="utf-8"), random.Random(f"{kind} 118")
+    read(valid)  # the unmutated file reads
+    refused = 0
+    for k in range(60):
+        path = tmp_path / f"mutated-{k}{valid.suffix}"
+        path.write_text(_mutated(text, rng), encoding="utf-8")
+        try:
+            read(path)
+        except FlakelabError as error:
+            assert path.name in str(error), (path.read_text(), str(error))
+            refused += 1
+    assert refused >= 40, refused  # most mutations break the file: the readers are put to work
