@@ -703,8 +703,10 @@ def test_a_match_aimed_off_scores_no_worse_than_its_recipes_left_unaimed(shipped
     offset = habits.offset(library, x, R, forward.geometries)
     tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
     unaimed = assess(forward, x, target, None, tolerance, MatchSettings(), offset).score
-    # every candidate aimed off, as before stop 63, the best scored 0.926 against 0.891
-    assert aimed.candidates[0].score <= unaimed.min() + 1e-9
+    # every candidate aimed off, as before stop 63, the best scored 0.926 against 0.891; a
+    # plain candidate kept is scored in another batch, in float32, whose last digits move with
+    # the batch's size (torch's portable kernels: 0.952564 against 0.952546)
+    assert aimed.candidates[0].score <= unaimed.min() + 1e-4
     # each candidate says whether it was aimed: those that were differ from every plain one
     plain_recipes = [c.fractions for c in plain.candidates]
     for c in aimed.candidates:
