@@ -196,7 +196,8 @@ def rich_measurement() -> Measurement:
         sample='rich; sample, with "quotes"',
         geometries=geometries,
         wavelengths=WAVELENGTHS,
-        reflectance=rng.uniform(0.01, 1.8, (4, 31)),
+        # up to 1.8 near specular; 45as110, far from it, no brighter than a white
+        reflectance=rng.uniform(0.01, 1.8, (4, 31)) * np.array([[1.0], [1.0], [0.5], [1.0]]),
         texture={"Sa15": 12.5, "Si15": 9.25, "SG": 7.0, "G": 4.125},
         instrument="BYK-mac i",
         measured_at=datetime(2026, 3, 4, 5, 6, 7),

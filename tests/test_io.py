@@ -386,6 +386,40 @@ def test_spectra_in_percent_are_read_as_reflectance_factors(ma_t12_dir, ma_t12_f
     np.testing.assert_allclose(back.reflectance, target.reflectance, rtol=1e-12)
 
 
+def test_a_reading_brighter_than_a_white_far_from_specular_is_noted_and_read_as_given(
+    ma_t12_dir, tmp_path
+):
+    """A reflectance factor above 1.05 at 75° or more from specular is brighter than the
+    perfect white diffuser: a fluorescent paint, or an instrument calibrated against the wrong
+    white. The file is read as given, with a note naming it, the sample and the geometry. A
+    perfect white, and every real MA-T12 reading (0.89 at most there), get none."""
+    from dataclasses import replace
+
+    from flakelab.data import example_path
+    from flakelab.errors import Note
+    from flakelab.io import brighter_than_white
+
+    real = read_measurements(ma_t12_dir / "all_samples_spectra.csv")
+    assert len(real) == 230 and not any(brighter_than_white(m) for m in real)
+    target = read_measurement(example_path("target"))
+    written = tmp_path / "bright.json"
+    white = replace(target, sample="white", reflectance=np.ones_like(target.reflectance))
+    write_measurements([white], written)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Note)
+        read_measurements(written)
+    fluorescent = white.reflectance.copy()
+    fluorescent[target.index("45as110"), 15] = 1.3  # 550 nm
+    bright = replace(white, sample="bright", reflectance=fluorescent)
+    write_measurements([white, bright], written)
+    with pytest.warns(Note, match=r"bright.json: sample 'bright': 45as110 reads up to 1.3, "
+                                  r"brighter than a perfect white") as notes:  # fmt: skip
+        back = read_measurements(written)
+    assert len(notes) == 1
+    for read, original in zip(back, (white, bright), strict=True):
+        np.testing.assert_allclose(read.reflectance, original.reflectance, rtol=1e-12)
+
+
 def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_measurement, tmp_path):
     """Semicolons between cells and decimal commas, as Excel writes CSV in most of Europe."""
     plain = tmp_path / "plain.csv"

@@ -143,12 +143,17 @@ def detect_format(path: str | PathLike) -> str:
 
 def read_measurements(path: str | PathLike) -> list[Measurement]:
     """All measurements in a file, whatever its supported format; spectra an instrument's
-    export wrote in percent read as reflectance factors (:func:`percent_evidence`)."""
+    export wrote in percent read as reflectance factors (:func:`percent_evidence`); a note
+    where one reads brighter than a white (:func:`brighter_than_white`)."""
     if os.fspath(path) == STANDARD_STREAM:
-        return _as_factors("stdin", _read_through_a_copy(STANDARD_STREAM))
-    if is_no_regular_file(path) or _is_utf16(path):
-        return _as_factors(path, _read_through_a_copy(path))
-    return _as_factors(path, _read_as_written(path))
+        path, read = "stdin", _read_through_a_copy(STANDARD_STREAM)
+    elif is_no_regular_file(path) or _is_utf16(path):
+        read = _read_through_a_copy(path)
+    else:
+        read = _read_as_written(path)
+    measurements = _as_factors(path, read)
+    _note_brighter_than_white(path, measurements)
+    return measurements
 
 
 def _read_as_written(path: str | PathLike) -> list[Measurement]:
@@ -158,6 +163,22 @@ def _read_as_written(path: str | PathLike) -> list[Measurement]:
 PERCENT_SIGN = 2.0
 """A reflectance factor no paint reaches 75° or more from the specular direction (a white
 reads 0.9 there, a fluorescent at most about 1.5): a reading above it there is in percent."""
+
+WHITE_LIMIT = 1.05
+"""A reflectance factor 75° or more from the specular direction above which a reading is
+brighter than the perfect white diffuser (1 by definition) by more than a calibration errs:
+a fluorescent paint, or an instrument calibrated against the wrong white. The brightest of
+the real readings in ``shared/data`` reads 0.89 there, the generated world's 0.87."""
+
+
+def _brightest_far_from_specular(measurement: Measurement) -> tuple[int, float] | None:
+    """The geometry 75° or more from specular that reads brightest, and its largest
+    reflectance factor; None where no geometry lies so far."""
+    far = np.flatnonzero([abs(g.aspecular) >= 75 for g in measurement.geometries])
+    if not far.size:
+        return None
+    peaks = measurement.reflectance[far].max(axis=1)
+    return int(far[np.argmax(peaks)]), float(peaks.max())
 
 
 def percent_evidence(measurement: Measurement) -> str | None:
@@ -177,14 +198,37 @@ def percent_evidence(measurement: Measurement) -> str | None:
         if np.median(as_percent) < 1.0 < np.median(as_read) / 10:
             return "its L*a*b* is that of its spectra divided by 100"
         return None
-    far = np.array([abs(g.aspecular) >= 75 for g in measurement.geometries])
-    if far.any() and R[far].max() > PERCENT_SIGN:
-        i = int(np.flatnonzero(far)[np.argmax(R[far].max(axis=1))])
+    brightest = _brightest_far_from_specular(measurement)
+    if brightest is not None and brightest[1] > PERCENT_SIGN:
+        i, peak = brightest
         return (
-            f"{measurement.geometries[i].name} reads up to {R[i].max():.3g}, a reflectance "
+            f"{measurement.geometries[i].name} reads up to {peak:.3g}, a reflectance "
             "factor no paint reaches so far from specular"
         )
     return None
+
+
+def brighter_than_white(measurement: Measurement) -> str | None:
+    """Where ``measurement`` reads brighter than a white far from specular (above
+    :data:`WHITE_LIMIT`), what a note says of it; None otherwise. Read as given: a
+    fluorescent paint does so."""
+    brightest = _brightest_far_from_specular(measurement)
+    if brightest is None or brightest[1] <= WHITE_LIMIT:
+        return None
+    i, peak = brightest
+    return (
+        f"{measurement.geometries[i].name} reads up to {peak:.3g}, brighter than a perfect "
+        "white so far from specular: a fluorescent paint, or an instrument calibrated against "
+        "the wrong white; read as given"
+    )
+
+
+def _note_brighter_than_white(path: str | PathLike, measurements: list[Measurement]) -> None:
+    """A note naming the file and the first of its ``measurements`` brighter than a white."""
+    found = ((m.sample, brighter_than_white(m)) for m in measurements)
+    shown = next(((sample, why) for sample, why in found if why), None)
+    if shown is not None:
+        warnings.warn(f"{path}: sample {shown[0]!r}: {shown[1]}", Note, stacklevel=3)
 
 
 def _as_factors(path: str | PathLike, measurements: list[Measurement]) -> list[Measurement]:
