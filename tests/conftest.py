@@ -201,7 +201,8 @@ def rich_measurement() -> Measurement:
         texture={"Sa15": 12.5, "Si15": 9.25, "SG": 7.0, "G": 4.125},
         instrument="BYK-mac i",
         measured_at=datetime(2026, 3, 4, 5, 6, 7),
-        stored_lab=rng.uniform([10, -40, -40], [100, 40, 40], (4, 3)),
+        # its 45as110 darker: a colour its recovered spectra give no brighter than a white
+        stored_lab=rng.uniform([10, -40, -40], [100, 40, 40], (4, 3)) * [[1], [1], [0.5], [1]],
         metadata={"shop": "north"},
     )
 
