@@ -55,6 +55,7 @@ def test_a_shops_habits_are_drawn_about_its_own_means():
     assert world.measure(R, rng).mean() / 0.4 == pytest.approx(1.005, abs=2e-4)
 
 
+@pytest.mark.slow  # a validation run: a model adapted to 600 cases, 9 s
 def test_adaptation_learns_a_shops_habits(model):
     train = shop_cases(model, SHOP_HABITS, 600, 21)
     fresh = shop_cases(model, SHOP_HABITS, 400, 22)
@@ -283,6 +284,7 @@ def _known_by_colour(data, seed: int = 0):
     return replace(data, R=R, colour_alone=np.ones(len(data.case_ids), dtype=bool))
 
 
+@pytest.mark.slow  # a validation run: five adaptations, 7 s
 def test_spray_outs_known_by_their_colour_alone_teach_a_model_that_colour(model):
     """A shop whose instrument exports L*a*b* alone adapts the model to its habits from its
     colour: the spectrum learned is not the recovered one (a metamer of many) but its colour in

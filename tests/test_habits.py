@@ -636,6 +636,7 @@ def test_aimed_off_recipes_land_nearer_the_target_in_a_shop_with_habits(shipped)
     assert sum(a < p for a, p in zip(aimed, plain, strict=True)) >= 3
 
 
+@pytest.mark.slow  # a validation run: eight targets matched and aimed off, 10 s
 def test_aiming_off_weighs_metamerism_as_the_search_does(shipped):
     """The aim-off reformulates for the habits with the search's metamerism weight: its
     recipes are less metameric to the target than those aimed at colour alone, and their

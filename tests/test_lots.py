@@ -285,6 +285,7 @@ def test_a_pigments_panel_is_chosen_for_its_strength_and_shade_together(forward,
     assert d_chosen < d_other and s_chosen * d_chosen < s_other * d_other
 
 
+@pytest.mark.slow  # a validation run: three shops' tins read, 5 s
 def test_calibrated_tins_lie_nearer_the_worlds_than_the_standard(forward, library):
     from flakelab.match.evaluate import (
         harness_trials,

@@ -2049,6 +2049,7 @@ def test_harness_trials_hold_a_new_toner_only_where_the_harness_adds_one(hybrid)
         assert a.texture == b.texture
 
 
+@pytest.mark.slow  # a validation run: two harness runs, 9 s
 def test_harness_worlds_take_the_shop_s_variation_away(hybrid):
     """In the controlled world only the instrument's reading varies, so the hidden formula's
     own spray and the car's paint sprayed again pass every time, the first within about the
