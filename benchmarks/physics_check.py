@@ -9,14 +9,23 @@ the same targets, without the check (the baseline) and with it, each first recip
 checked (paired: the same targets and spray streams) and over all, with the hidden formulas'
 chance there, and the latency.
 
+In the harness the library's physics is the world's own nominal physics: a library as well
+calibrated as a library can be. With ``--miscalibrated`` a third run checks through a library
+whose pigments are off by one lot each, as a library characterised from one tin of each
+toner is (strength × N(1, :data:`~flakelab.library.lots.LOT_STRENGTH_SD`), shade
+N(0, :data:`~flakelab.library.lots.LOT_SHADE_SD_NM`) nm; drawn once from ``--seed``: one
+shop's library), while the learned model stays the one that learned the world's cases.
+
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
-        [--resprays 20] [--model FILE] [--json]
+        [--resprays 20] [--model FILE] [--miscalibrated] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -28,6 +37,9 @@ from _matcher import (
     timed_harness,
 )
 from flakelab.core.wording import counted
+from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD
+from flakelab.match import physics_check, search
+from flakelab.match.lots import WithLots
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
 
 
@@ -65,19 +77,57 @@ def paired(learned: list[dict], checked: list[dict]) -> dict:
     }
 
 
+def lot_errors(library, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A library's calibration error, one lot's deviation per pigment (effect toners exact):
+    relative strength and shade [nm] in the library's toner order, drawn from ``seed``."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(7,)))
+    pigments = ~np.asarray(library.effect)
+    strength = np.where(pigments, rng.normal(1.0, LOT_STRENGTH_SD, pigments.size), 1.0)
+    shade = np.where(pigments, rng.normal(0.0, LOT_SHADE_SD_NM, pigments.size), 0.0)
+    return strength, shade
+
+
+@contextlib.contextmanager
+def physics_off_by(strength: np.ndarray, shade: np.ndarray) -> Iterator[None]:
+    """The physics check's physics (:func:`~flakelab.match.physics_check.physics_for`, in the
+    search and the correction) for a library off by ``strength`` and ``shade`` per toner."""
+    exact = physics_check.physics_for
+
+    def off(forward, library):
+        physics = exact(forward, library)
+        return None if physics is None else WithLots(physics, strength, shade, library)
+
+    physics_check.physics_for = search.physics_for = off
+    try:
+        yield
+    finally:
+        physics_check.physics_for = search.physics_for = exact
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=50)
+    parser.add_argument(
+        "--miscalibrated",
+        action="store_true",
+        help="a third run: the check through a library off by one lot per pigment",
+    )
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
     world, forward, effect = shipped_ensemble(parser, args)
+    strength, shade = lot_errors(world.library, args.seed)
+    pigments = ~np.asarray(world.library.effect)
+    plans = [("learned", 0, contextlib.nullcontext())]
+    plans.append(("checked", PHYSICS_CHECK, contextlib.nullcontext()))
+    if args.miscalibrated:
+        plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(strength, shade)))
     runs, seconds = {}, {}
-    for name, check in (("learned", 0), ("checked", PHYSICS_CHECK)):
-        report, seconds[name] = timed_harness(
-            world, forward, effect, args, forward.novel, f"harness ({name})",
-            settings=MatchSettings(physics_check=check), per_target=True,
-        )  # fmt: skip
-        runs[name] = report
+    for name, check, context in plans:
+        with context:
+            runs[name], seconds[name] = timed_harness(
+                world, forward, effect, args, forward.novel, f"harness ({name})",
+                settings=MatchSettings(physics_check=check), per_target=True,
+            )  # fmt: skip
     rows = {name: report["per_target"] for name, report in runs.items()}
     known = args.targets
     figures = {
@@ -86,12 +136,28 @@ def main() -> None:
         if len(rows["checked"]) > known
         else None,
     }
+    if args.miscalibrated:
+        figures["known_miscalibrated"] = paired(
+            rows["learned"][:known], rows["miscalibrated"][:known]
+        )
+        figures["novel_miscalibrated"] = (
+            paired(rows["learned"][known:], rows["miscalibrated"][known:])
+            if len(rows["checked"]) > known
+            else None
+        )
     summary = {
         "targets": args.targets,
         "novel_targets": args.novel_targets,
         "seed": args.seed,
         "resprays": args.resprays,
         "physics_check": PHYSICS_CHECK,
+        # the miscalibrated library's pigments: RMS strength error and shade error [nm]
+        "library_error": {
+            "strength_rms": float(np.sqrt(np.mean((strength[pigments] - 1) ** 2))),
+            "shade_rms_nm": float(np.sqrt(np.mean(shade[pigments] ** 2))),
+        }
+        if args.miscalibrated
+        else None,
         **{
             f"{name}_{key}": runs[name][key]
             for name in runs
@@ -106,7 +172,9 @@ def main() -> None:
     for part, f in figures.items():
         if f is None:
             continue
-        print(f"{part} toners: over all, first-shot chance {f['first_chance_learned']:.3f} → "
+        toners, _, off = part.partition("_")
+        label = f"{toners} toners" + (", the library off by a lot" if off else "")
+        print(f"{label}: over all, first-shot chance {f['first_chance_learned']:.3f} → "
               f"{f['first_chance_checked']:.3f}; the physics checked "
               f"{counted(f['checked_targets'], 'target')} {f['checked_by_family']}")  # fmt: skip
         if f["checked_targets"]:
