@@ -117,8 +117,10 @@ def main() -> None:
     world, forward, effect = shipped_ensemble(parser, args)
     strength, shade = lot_errors(world.library, args.seed)
     pigments = ~np.asarray(world.library.effect)
-    plans = [("learned", 0, contextlib.nullcontext())]
-    plans.append(("checked", PHYSICS_CHECK, contextlib.nullcontext()))
+    plans = [
+        ("learned", 0, contextlib.nullcontext()),
+        ("checked", PHYSICS_CHECK, contextlib.nullcontext()),
+    ]
     if args.miscalibrated:
         plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(strength, shade)))
     runs, seconds = {}, {}
