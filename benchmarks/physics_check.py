@@ -10,11 +10,13 @@ checked (paired: the same targets and spray streams) and over all, with the hidd
 chance there, and the latency.
 
 In the harness the library's physics is the world's own nominal physics: a library as well
-calibrated as a library can be. With ``--miscalibrated`` a third run checks through a library
-whose pigments are off by one lot each, as a library characterised from one tin of each
-toner is (strength × N(1, :data:`~flakelab.library.lots.LOT_STRENGTH_SD`), shade
-N(0, :data:`~flakelab.library.lots.LOT_SHADE_SD_NM`) nm; drawn once from ``--seed``: one
-shop's library), while the learned model stays the one that learned the world's cases.
+calibrated as a library can be. With ``--miscalibrated`` two more runs, unchecked and
+checked, go through a library whose pigments are off by one lot each, as a library
+characterised from one tin of each toner is (strength × N(1,
+:data:`~flakelab.library.lots.LOT_STRENGTH_SD`), shade N(0,
+:data:`~flakelab.library.lots.LOT_SHADE_SD_NM`) nm; drawn once from ``--seed``: one shop's
+library), while the learned model stays the one that learned the world's cases. The hybrid's
+scaling for a new toner goes through that library in both.
 
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
         [--resprays 20] [--model FILE] [--miscalibrated] [--json]
@@ -88,20 +90,29 @@ def lot_errors(library, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @contextlib.contextmanager
-def physics_off_by(strength: np.ndarray, shade: np.ndarray) -> Iterator[None]:
-    """The physics check's physics (:func:`~flakelab.match.physics_check.physics_for`, in the
-    search and the correction) for a library off by ``strength`` and ``shade`` per toner."""
-    exact = physics_check.physics_for
+def physics_off_by(
+    forward, library, strength: np.ndarray, shade: np.ndarray, check: bool = True
+) -> Iterator[None]:
+    """The library's physics off by ``strength`` and ``shade`` per toner wherever the matcher
+    uses it: the hybrid's scaling for a new toner (``forward.physics``) and, with ``check``,
+    the physics check's (:func:`~flakelab.match.physics_check.physics_for`, in the search
+    and the correction)."""
+    exact, hybrid = physics_check.physics_for, getattr(forward, "physics", None)
 
     def off(forward, library):
         physics = exact(forward, library)
         return None if physics is None else WithLots(physics, strength, shade, library)
 
-    physics_check.physics_for = search.physics_for = off
+    if check:
+        physics_check.physics_for = search.physics_for = off
+    if hybrid is not None:
+        forward.physics = WithLots(hybrid, strength, shade, library)
     try:
         yield
     finally:
         physics_check.physics_for = search.physics_for = exact
+        if hybrid is not None:
+            forward.physics = hybrid
 
 
 def main() -> None:
@@ -110,7 +121,7 @@ def main() -> None:
     parser.add_argument(
         "--miscalibrated",
         action="store_true",
-        help="a third run: the check through a library off by one lot per pigment",
+        help="two more runs through a library off by one lot per pigment, unchecked and checked",
     )
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
@@ -121,8 +132,10 @@ def main() -> None:
         ("learned", 0, contextlib.nullcontext()),
         ("checked", PHYSICS_CHECK, contextlib.nullcontext()),
     ]
-    if args.miscalibrated:
-        plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(strength, shade)))
+    if args.miscalibrated:  # the library off by a lot, unchecked and checked
+        off = (forward, world.library, strength, shade)
+        plans.append(("learned_off", 0, physics_off_by(*off, check=False)))
+        plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(*off)))
     runs, seconds = {}, {}
     for name, check, context in plans:
         with context:
@@ -140,10 +153,10 @@ def main() -> None:
     }
     if args.miscalibrated:
         figures["known_miscalibrated"] = paired(
-            rows["learned"][:known], rows["miscalibrated"][:known]
+            rows["learned_off"][:known], rows["miscalibrated"][:known]
         )
         figures["novel_miscalibrated"] = (
-            paired(rows["learned"][known:], rows["miscalibrated"][known:])
+            paired(rows["learned_off"][known:], rows["miscalibrated"][known:])
             if len(rows["checked"]) > known
             else None
         )

@@ -143,6 +143,10 @@ def test_a_tins_shade_is_the_worlds_hue_drift(library):
     assert above.mean() > 0.9
     assert np.allclose(R[above], drifted[above], rtol=1e-9)
     assert delta_E(reflectance_to_Lab(R), reflectance_to_Lab(standard)).max() > 0.3
+    # the physics' own numpy call, as the hybrid's scaling makes it, has the tins too
+    stronger = WithLots(physics, np.where(library.effect, 1.0, 1.04), shade, library)
+    assert np.allclose(stronger.reflectance(x), evaluate_recipes(stronger, x)[0], rtol=1e-12)
+    assert np.allclose(tins.reflectance(x), R, rtol=1e-12)
 
 
 def test_a_shaded_tins_gradient_and_its_own_held_ratio(library):

@@ -221,6 +221,13 @@ class WithLots:
         members = self.forward.member_reflectance(mixed_with(self.strength, x))
         return members * self.film_ratio(x)[None] if self.shaded else members
 
+    def reflectance(self, x: NDArray) -> NDArray:
+        """``forward``'s reflectance factors ``[N, G, 31]`` of recipes ``x[N, T]`` poured
+        from these tins (the library's physics has them; the hybrid's scaling calls it): not
+        passed through to ``forward``, which would leave the tins out."""
+        R = self.forward.reflectance(mixed_with(self.strength, x))
+        return R * self.film_ratio(x) if self.shaded else R
+
     def film(self, x: NDArray) -> NDArray:
         """What recipes ``x[N, T]`` poured from these tins put in the film (:func:`mixed_with`),
         in the standard tins' terms: where a shop's habits act."""
