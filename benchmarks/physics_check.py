@@ -89,6 +89,15 @@ def lot_errors(library, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return strength, shade
 
 
+def rms_error(library, strength: np.ndarray, shade: np.ndarray) -> dict[str, float]:
+    """The RMS of :func:`lot_errors` over the library's pigments: strength and shade [nm]."""
+    pigments = ~np.asarray(library.effect)
+    return {
+        "strength_rms": float(np.sqrt(np.mean((strength[pigments] - 1) ** 2))),
+        "shade_rms_nm": float(np.sqrt(np.mean(shade[pigments] ** 2))),
+    }
+
+
 @contextlib.contextmanager
 def physics_off_by(
     forward, library, strength: np.ndarray, shade: np.ndarray, check: bool = True
@@ -115,6 +124,18 @@ def physics_off_by(
             forward.physics = hybrid
 
 
+def by_part(
+    rows: dict[str, list[dict]], baseline: str, run: str, known: int, suffix: str = ""
+) -> dict[str, dict | None]:
+    """:func:`paired` of the runs named ``baseline`` and ``run``: on the first ``known``
+    targets (known toners) and on the rest (a new toner; None where there are none)."""
+    novel = len(rows[run]) > known
+    return {
+        f"known{suffix}": paired(rows[baseline][:known], rows[run][:known]),
+        f"novel{suffix}": paired(rows[baseline][known:], rows[run][known:]) if novel else None,
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=50)
@@ -126,13 +147,14 @@ def main() -> None:
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
     world, forward, effect = shipped_ensemble(parser, args)
-    strength, shade = lot_errors(world.library, args.seed)
-    pigments = ~np.asarray(world.library.effect)
     plans = [
         ("learned", 0, contextlib.nullcontext()),
         ("checked", PHYSICS_CHECK, contextlib.nullcontext()),
     ]
+    library_error = None
     if args.miscalibrated:  # the library off by a lot, unchecked and checked
+        strength, shade = lot_errors(world.library, args.seed)
+        library_error = rms_error(world.library, strength, shade)
         off = (forward, world.library, strength, shade)
         plans.append(("learned_off", 0, physics_off_by(*off, check=False)))
         plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(*off)))
@@ -144,35 +166,16 @@ def main() -> None:
                 settings=MatchSettings(physics_check=check), per_target=True,
             )  # fmt: skip
     rows = {name: report["per_target"] for name, report in runs.items()}
-    known = args.targets
-    figures = {
-        "known": paired(rows["learned"][:known], rows["checked"][:known]),
-        "novel": paired(rows["learned"][known:], rows["checked"][known:])
-        if len(rows["checked"]) > known
-        else None,
-    }
+    figures = by_part(rows, "learned", "checked", args.targets)
     if args.miscalibrated:
-        figures["known_miscalibrated"] = paired(
-            rows["learned_off"][:known], rows["miscalibrated"][:known]
-        )
-        figures["novel_miscalibrated"] = (
-            paired(rows["learned_off"][known:], rows["miscalibrated"][known:])
-            if len(rows["checked"]) > known
-            else None
-        )
+        figures |= by_part(rows, "learned_off", "miscalibrated", args.targets, "_miscalibrated")
     summary = {
         "targets": args.targets,
         "novel_targets": args.novel_targets,
         "seed": args.seed,
         "resprays": args.resprays,
         "physics_check": PHYSICS_CHECK,
-        # the miscalibrated library's pigments: RMS strength error and shade error [nm]
-        "library_error": {
-            "strength_rms": float(np.sqrt(np.mean((strength[pigments] - 1) ** 2))),
-            "shade_rms_nm": float(np.sqrt(np.mean(shade[pigments] ** 2))),
-        }
-        if args.miscalibrated
-        else None,
+        "library_error": library_error,
         **{
             f"{name}_{key}": runs[name][key]
             for name in runs
