@@ -1315,6 +1315,8 @@ def test_errors_name_what_is_wrong_and_keep_their_brackets(tmp_path, cli):
     assert not (tmp_path / "no").exists()
     run = cli("match", "evaluate", "--targets", "1", "--novel-targets", "-1")
     assert run.returncode == 2 and "'--novel-targets'" in run.stderr
+    run = cli("match", "evaluate", "--targets", "0", "--novel-targets", "0")
+    assert run.returncode == 2 and "--targets 0 --novel-targets 0: no target to judge" in run.stderr
     # a reading without every geometry the model predicts is named with its file
     short = tmp_path / "short.json"
     target = read_measurement(example_path("target"))

@@ -1920,6 +1920,44 @@ def test_an_interrupted_harness_reports_the_targets_it_judged(hybrid, monkeypatc
     )
 
 
+def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, capsys):
+    """``targets`` 0: the harness judges the targets that hold a new toner alone (a toner
+    being brought in). Each of its hidden formulas holds one; the new toner's rate is that of
+    its trials; the known targets' figures are None, not a failure to take a median of none,
+    and the tables leave them out. A Ctrl-C during the second ends the run with the first's
+    figures, as it does for known targets."""
+    import flakelab.match.evaluate as evaluate
+    from flakelab.cases.generator import World
+    from flakelab.cli.match import _print_harness
+    from flakelab.match.models import effect_mask
+
+    world, effect = World(hybrid.library, "five-angle"), effect_mask(hybrid.library, hybrid.toners)
+    hasty = MatchSettings(
+        candidates=1, screen_steps=3, refine_steps=3, top_pigments=2, swap_above=np.inf
+    )
+    run = dict(targets=0, seed=3, novel=hybrid.novel, novel_targets=2, settings=hasty)
+    alone = evaluate.evaluate_matching(world, hybrid, effect, **run, per_target=True)
+    drawn = [x for x, _ in evaluate.harness_trials(world, 0, 3, hybrid.novel, 2)]
+    columns = [list(world.library.names).index(n) for n in hybrid.novel]
+    assert len(drawn) == 2 and all(x[columns].sum() > 0 for x in drawn)
+    assert (alone["targets"], alone["novel_targets"], alone["by_family"]) == (0, 2, {})
+    trials = alone.pop("per_target")
+    assert alone["novel_toner_first_shot"] == np.mean([t["first"] <= 1.0 for t in trials])
+    for key in ("first_shot_success", "after_one_correction", "oracle_success",
+                "first_shot_de00_median", "first_shot_texture_share_p95"):  # fmt: skip
+        assert alone[key] is None, key
+    report = alone | {"model": hybrid.name, "model_id": hybrid.model_id, "physics_check": 0,
+                      "world": "shop"}  # fmt: skip
+    _print_harness(report)
+    shown = " ".join(capsys.readouterr().out.split())
+    assert "The harness: 2 hidden targets with a new toner (seed 3" in shown
+    assert "new toner, first shot" in shown and "worst-geometry" not in shown
+    assert "By paint family" not in shown and "after one correction" not in shown
+    monkeypatch.setattr(evaluate, "_one", ctrl_c(evaluate._one, 2))
+    cut = evaluate.evaluate_matching(world, hybrid, effect, **run)
+    assert (cut["targets"], cut["novel_targets"], cut["novel_targets_asked"]) == (0, 1, 2)
+
+
 def test_a_recorded_recipe_is_judged_as_it_is_and_refined(hybrid):
     """The shop's recorded recipe for this colour, given as a start, is judged as it is and
     refined from: where it is the car's recipe (the target is its prediction) a hasty search

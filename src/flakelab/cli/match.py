@@ -145,7 +145,9 @@ def match_command(
     model: ModelOption = None,
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
-    targets: Annotated[int, typer.Option(min=1, help="evaluate: hidden targets.")] = 200,
+    targets: Annotated[
+        int, typer.Option(min=0, help="evaluate: hidden targets (0: those with a new toner alone).")
+    ] = 200,
     novel_targets: Annotated[
         int, typer.Option(min=0, help="evaluate: targets with a new toner.")
     ] = 50,
@@ -914,6 +916,8 @@ def _evaluate(
     from flakelab.match.stock import toners_allowed
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
+    if not targets + novel_targets:
+        raise FlakelabError("--targets 0 --novel-targets 0: no target to judge")
     check_figure_file(plot, "--plot")
     if lots not in TIN_KNOWLEDGE:  # before the model: a file is for one target's match
         raise FlakelabError(
@@ -924,6 +928,12 @@ def _evaluate(
     toners_allowed(forward.toners, settings.without)  # a toner misspelt: before the targets
     scale = scale and scale.for_toners(lib, forward.toners)
     habits = habits_for(habits_file, shop, database, forward, with_tins=lots != "none")
+    novel_targets = novel_targets if forward.novel else 0  # no new toner, none of its targets
+    if not targets + novel_targets:
+        raise FlakelabError(
+            f"--targets 0: judges the targets with a new toner alone, and {forward.name} has "
+            "no new toner"
+        )
     with progress_bar(json_output) as bar:
         task = bar.add_task("matching hidden targets", total=targets + novel_targets)
         report = evaluate_matching(
@@ -933,7 +943,7 @@ def _evaluate(
             targets=targets,
             seed=seed,
             novel=forward.novel,
-            novel_targets=novel_targets if forward.novel else 0,
+            novel_targets=novel_targets,
             habits=habits,
             settings=settings,
             tolerance=tol,
@@ -949,9 +959,11 @@ def _evaluate(
         from flakelab.render.plots import plot_harness
 
         trials = report.pop("per_target")
+        judged = report["targets"]  # fewer than asked where a Ctrl-C ended the run
         read = ", read by L*a*b* alone" if colour_alone else ""
-        title = f"{forward.model_id}, {counted(targets, 'target')} (seed {seed}){read}"
-        plot_harness(trials[:targets], trials[targets:], plot, tolerance=tol.name, title=title)
+        words = _targets_words(judged, report["novel_targets"])
+        title = f"{forward.model_id}, {words} (seed {seed}){read}"
+        plot_harness(trials[:judged], trials[judged:], plot, tolerance=tol.name, title=title)
         report["plot"] = str(plot)
     report["model"] = forward.name
     report["model_id"] = forward.model_id
@@ -969,12 +981,17 @@ def _evaluate(
     else:
         _print_harness(report)
     if "targets_asked" in report:  # a Ctrl-C ended the run early
-        novel = report["novel_targets"]
-        judged = counted(report["targets"], "target") + (
-            f" and {novel} with a new toner" if novel else ""
-        )
+        judged = _targets_words(report["targets"], report["novel_targets"])
         asked = report["targets_asked"] + report["novel_targets_asked"]
         stop_interrupted(f"{judged} of the {asked} asked for were judged; the figures are theirs")
+
+
+def _targets_words(targets: int, novel: int, noun: str = "target") -> str:
+    """The harness's targets in words: ``2 targets and 1 with a new toner``, or
+    ``3 targets with a new toner`` where it judged those alone (``--targets 0``)."""
+    if not targets:
+        return f"{counted(novel, noun)} with a new toner"
+    return counted(targets, noun) + (f" and {novel} with a new toner" if novel else "")
 
 
 def _share(value: float | None) -> str:
@@ -988,7 +1005,6 @@ def _print_harness(report: dict) -> None:
     rate, of how many targets, and against the oracle's, the limit that spray and
     measurement set; the rates of each paint family; the errors and the latency. It printed
     the JSON report itself, 60 lines of it."""
-    from flakelab.match.evaluate import FAMILY_FIGURES
     from flakelab.render.plots import HARNESS_CURVES
 
     targets, novel = report["targets"], report["novel_targets"]
@@ -1006,8 +1022,7 @@ def _print_harness(report: dict) -> None:
         ("after one perfect correction", "after_one_perfect_correction", None, targets),
     ]  # fmt: skip
     table = Table(
-        title=f"The harness: {counted(targets, 'hidden target')}"
-        + (f" and {novel} with a new toner" if novel else "")
+        title=f"The harness: {_targets_words(targets, novel, 'hidden target')}"
         + f" (seed {report['seed']}, tolerance {report['tolerance']}, world {report['world']})",
         box=box.SIMPLE_HEAD,
     )
@@ -1018,24 +1033,10 @@ def _print_harness(report: dict) -> None:
             ratio = _share(report[versus]) if versus else ""
             table.add_row(name, _share(report[key]), ratio, str(count))
     console.print(table)
-    families = Table(title="By paint family", box=box.SIMPLE_HEAD)
-    families.add_column("family")
-    families.add_column("targets", justify="right")
-    short = {"oracle": "oracle", "respray": "sprayed again"}  # as the rows above name them
-    for trial in FAMILY_FIGURES.values():
-        families.add_column(short.get(trial, HARNESS_CURVES[trial]), justify="right")
-    for family, figures in report["by_family"].items():
-        families.add_row(family, str(figures["targets"]),
-                         *(_share(figures[key]) for key in FAMILY_FIGURES))  # fmt: skip
-    console.print(families)
+    if targets:  # a harness of new-toner targets alone (--targets 0) has no families' table
+        console.print(_families_table(report))
     lines = [
-        f"worst-geometry ΔE00, median: predicted {report['predicted_de00_median']:.2f}, first "
-        f"shot sprayed {report['first_shot_de00_median']:.2f}, the hidden formula sprayed "
-        f"{report['oracle_de00_median']:.2f}",
-        f"first shots within the texture limits {_share(report['first_shot_texture_within'])} "
-        f"(the hidden formula's {_share(report['oracle_texture_within'])}); metamerism index "
-        f"median {report['first_shot_metamerism_median']:.2f} "
-        f"({report['oracle_metamerism_median']:.2f})",
+        *(_errors_lines(report) if targets else []),
         *_harness_options(report),
         _physics_checked_line(report),
         f"latency per target: p50 {report['latency_p50_s']:.2f} s, p95 "
@@ -1045,6 +1046,36 @@ def _print_harness(report: dict) -> None:
     ]
     for line in lines:
         console.print(line, highlight=False)
+
+
+def _families_table(report: dict) -> Table:
+    """The harness's rates by paint family, as its first table names them."""
+    from flakelab.match.evaluate import FAMILY_FIGURES
+    from flakelab.render.plots import HARNESS_CURVES
+
+    families = Table(title="By paint family", box=box.SIMPLE_HEAD)
+    families.add_column("family")
+    families.add_column("targets", justify="right")
+    short = {"oracle": "oracle", "respray": "sprayed again"}  # as the rows above name them
+    for trial in FAMILY_FIGURES.values():
+        families.add_column(short.get(trial, HARNESS_CURVES[trial]), justify="right")
+    for family, figures in report["by_family"].items():
+        families.add_row(family, str(figures["targets"]),
+                         *(_share(figures[key]) for key in FAMILY_FIGURES))  # fmt: skip
+    return families
+
+
+def _errors_lines(report: dict) -> list[str]:
+    """The known targets' median errors, texture and metamerism, in words."""
+    return [
+        f"worst-geometry ΔE00, median: predicted {report['predicted_de00_median']:.2f}, first "
+        f"shot sprayed {report['first_shot_de00_median']:.2f}, the hidden formula sprayed "
+        f"{report['oracle_de00_median']:.2f}",
+        f"first shots within the texture limits {_share(report['first_shot_texture_within'])} "
+        f"(the hidden formula's {_share(report['oracle_texture_within'])}); metamerism index "
+        f"median {report['first_shot_metamerism_median']:.2f} "
+        f"({report['oracle_metamerism_median']:.2f})",
+    ]
 
 
 def _physics_checked_line(report: dict) -> str:

@@ -264,6 +264,13 @@ def _median(values) -> float | None:
     return float(np.median(values)) if values else None
 
 
+def _percentile(values, q: float) -> float | None:
+    """The ``q``-th percentile of ``values``; None where there are none (a harness of new-toner
+    targets alone has no known target's figures)."""
+    values = list(values)
+    return float(np.percentile(values, q)) if values else None
+
+
 def worst_share(tolerance: Tolerance, geometries, a: NDArray, b: NDArray) -> float:
     """How far reading ``b`` ``[G, 31]`` is from passing ``tolerance`` against ``a``: the
     largest share of a limit over geometries (≤ 1 passes)."""
@@ -487,8 +494,9 @@ def evaluate_matching(
     averages that out, so two matchers (or paint families) compare with a fraction of the
     noise of one spray each. With ``per_target`` the report keeps every target's trial
     (``per_target``: the targets, then those with a new toner), for paired comparisons of
-    two runs on the same seed. ``lots`` says what the shop knows of its tins
-    (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`).
+    two runs on the same seed. With ``targets`` 0 the new-toner targets are judged alone
+    (a toner being brought in): the figures of the known targets are then None. ``lots``
+    says what the shop knows of its tins (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`).
 
     A Ctrl-C (KeyboardInterrupt) once a target is judged ends the run there: the report is
     that of the targets judged (``targets``), with the counts asked for (``targets_asked``,
@@ -513,7 +521,7 @@ def evaluate_matching(
             if progress:
                 progress()
     except KeyboardInterrupt:  # a Ctrl-C ends the run early: the figures of the targets judged
-        if not rows:
+        if not (rows or novel_rows):
             raise
         interrupted = {"targets_asked": targets, "novel_targets_asked": novel_targets}
     else:
@@ -562,15 +570,13 @@ def evaluate_matching(
         "first_shot_vs_oracle": ratio(first, oracle),
         "after_one_correction_vs_oracle": ratio(corrected, oracle),
         "novel_toner_first_shot_vs_oracle": ratio(novel_first, novel_oracle),
-        "first_shot_de00_median": float(np.median([r["first_de00"] for r in rows])),
+        "first_shot_de00_median": _median(r["first_de00"] for r in rows),
         # first spray-outs within the refinish tolerance's texture limits, whatever judged
         "first_shot_texture_within": share(rows, "first_texture"),
         "oracle_texture_within": share(rows, "oracle_texture"),
-        "first_shot_texture_share_p95": float(
-            np.percentile([r["first_texture"] for r in rows], 95)
-        ),
-        "first_shot_metamerism_median": float(np.median([r["first_metamerism"] for r in rows])),
-        "oracle_metamerism_median": float(np.median([r["oracle_metamerism"] for r in rows])),
+        "first_shot_texture_share_p95": _percentile((r["first_texture"] for r in rows), 95),
+        "first_shot_metamerism_median": _median(r["first_metamerism"] for r in rows),
+        "oracle_metamerism_median": _median(r["oracle_metamerism"] for r in rows),
         # the failed first shots, their spray-outs before and after the correction
         "correction_metamerism_before_median": _median(
             r["first_metamerism"] for r in rows if r["corrected_metamerism"] is not None
@@ -578,8 +584,8 @@ def evaluate_matching(
         "correction_metamerism_median": _median(
             r["corrected_metamerism"] for r in rows if r["corrected_metamerism"] is not None
         ),
-        "oracle_de00_median": float(np.median([r["oracle_de00"] for r in rows])),
-        "predicted_de00_median": float(np.median([r["predicted_de00"] for r in rows])),
+        "oracle_de00_median": _median(r["oracle_de00"] for r in rows),
+        "predicted_de00_median": _median(r["predicted_de00"] for r in rows),
         # targets whose best recipes the physics refined, the ensemble unsure (physics_check)
         "physics_checked_targets": sum(r["physics_checked"] for r in rows),
         "novel_physics_checked_targets": sum(r["physics_checked"] for r in novel_rows),

@@ -721,9 +721,11 @@ def plot_harness(
     worst share of the ``tolerance`` lies at or below each value, for each spray of
     :data:`HARNESS_CURVES` (at 1 it reads the success rate; how far the failures miss reads
     off to the right), and each first shot's worst ΔE00 sprayed against its model's
-    prediction, by paint family."""
+    prediction, by paint family (the new toner's targets' where they were judged alone)."""
     figure, (shares, predicted) = plt.subplots(1, 2, figsize=(14, 5.2))
     curves = [(rows, key, name) for key, name in HARNESS_CURVES.items()]
+    if not rows:  # the new toner's targets judged alone: against their own hidden formulas
+        curves = [(novel_rows, "oracle", f"{HARNESS_CURVES['oracle']}, new toner")]
     curves += [(novel_rows, "first", "new toner, first shot")] if novel_rows else []
     for trials, key, name in curves:
         values = np.sort([t[key] for t in trials])
@@ -739,12 +741,12 @@ def plot_harness(
     shares.set(xlabel=f"worst share of the tolerance {tolerance} (≤ 1 passes)",
                ylabel="share of targets at or below", ylim=(0, 1.02))  # fmt: skip
     shares.legend(fontsize=8, loc="upper left", title="passing", title_fontsize=8)
-    families = sorted({t["family"] for t in rows})
-    for family in families:
-        own = [t for t in rows if t["family"] == family]
+    scattered = rows or novel_rows
+    for family in sorted({t["family"] for t in scattered}):
+        own = [t for t in scattered if t["family"] == family]
         predicted.plot([t["predicted_de00"] for t in own], [t["first_de00"] for t in own], ".",
                        alpha=0.7, label=f"{family} ({len(own)})")  # fmt: skip
-    top = max(max(t["first_de00"] for t in rows), max(t["predicted_de00"] for t in rows))
+    top = max(max(t["first_de00"] for t in scattered), max(t["predicted_de00"] for t in scattered))
     predicted.plot([0, top], [0, top], color="0.6", lw=0.8)
     predicted.set(xlabel="predicted worst ΔE00 of the recipe (the model's)",
                   ylabel="sprayed worst ΔE00 (the world's)")  # fmt: skip
