@@ -149,6 +149,32 @@ def test_a_tins_shade_is_the_worlds_hue_drift(library):
     assert np.allclose(tins.reflectance(x), R, rtol=1e-12)
 
 
+def test_a_forward_s_methods_never_pass_through_the_tins_unmixed(library):
+    """Every method a forward model binds (a static one knows no recipe's tins) either
+    predicts for the tins in WithLots or is refused through it, naming it: none passes
+    through to predict from the standard tins, as ``reflectance`` once did. Its data (toners,
+    geometries) still pass through."""
+    import inspect
+
+    from flakelab.match.forward import HybridForward, KubelkaMunkForward, PhysicsForward
+    from flakelab.match.models import forward_for
+    from flakelab.models.registry import shipped_model
+
+    hybrid = forward_for(shipped_model("five-angle"), library)
+    physics = PhysicsForward(library, hybrid.geometries)
+    assert isinstance(hybrid, HybridForward)
+    for forward in (hybrid, physics):
+        tins = WithLots(forward, np.full(len(library.names), 1.02))
+        assert tins.toners == forward.toners and tins.geometries == forward.geometries
+        for cls in (*type(forward).__mro__, KubelkaMunkForward):
+            for name, _ in inspect.getmembers(cls, inspect.isfunction):
+                bound = inspect.ismethod(getattr(forward, name, None))
+                if name.startswith("__") or not bound or name in vars(WithLots):
+                    continue
+                with pytest.raises(AttributeError, match=f"WithLots.{name}: .* the tins out"):
+                    getattr(tins, name)
+
+
 def test_a_shaded_tins_gradient_and_its_own_held_ratio(library):
     from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_geometries
     from flakelab.match.forward import PhysicsForward

@@ -83,6 +83,7 @@ read black's tin 15 % off and the white's 6 % (stop 72).
 from __future__ import annotations
 
 import copy
+import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
@@ -204,7 +205,12 @@ class WithLots:
         # only what this class does not define; guarded for copy, which asks before __init__
         if name.startswith("__") or "forward" not in self.__dict__:
             raise AttributeError(name)
-        return getattr(self.forward, name)
+        found = getattr(self.forward, name)
+        if inspect.ismethod(found):  # it would predict from standard tins: wrapped, or refused
+            raise AttributeError(
+                f"WithLots.{name}: {type(self.forward).__name__}.{name} would leave the tins out"
+            )
+        return found
 
     def __call__(self, fractions: torch.Tensor):
         R, texture = self.forward(mixed_with(self.strength, fractions))
