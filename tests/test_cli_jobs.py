@@ -688,6 +688,30 @@ def test_weigh_says_what_is_still_to_pour_after_a_toner_ran_over(tmp_path, cli):
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
 
 
+def test_weigh_dilutes_a_can_the_model_is_unsure_of_by_the_physics(tmp_path, cli):
+    """``weigh --poured`` with a stray toner in a can whose recipe the shipped ensemble is
+    unsure of: the library's physics dilutes it, and the report names it as the model and
+    says why, in a note and in its words; ``--no-physics-check`` keeps the model's, and is
+    refused without --poured."""
+    from test_match import UNSURE_RECIPE
+
+    recipe = tmp_path / "unsure.json"
+    recipe.write_text(json.dumps(UNSURE_RECIPE))
+    args = ["weigh", str(recipe), "--poured", "Indanthrone blue=0.7"]
+    checked, text = cli(*args, "--json"), cli(*args)
+    assert checked.returncode == 0, checked.stderr
+    report = json.loads(checked.stdout)
+    assert report["physics_checked"] and report["model"].startswith("physics")
+    said = " ".join(text.stdout.split())
+    assert "the can as poured or its recipe by 0.65 ΔE00 at 45as110" in " ".join(report["notes"])
+    assert "at worst (by the library's physics;" in said and "by the model" not in said
+    learned = json.loads(cli(*args, "--no-physics-check", "--json").stdout)
+    assert not learned["physics_checked"] and learned["model"].startswith("learned")
+    assert not any("networks disagree" in note for note in learned["notes"])
+    run = cli("weigh", str(recipe), "--no-physics-check")
+    assert run.returncode == 2 and "--no-physics-check: for --poured" in run.stderr
+
+
 def test_a_can_that_may_hold_at_most_so_much_is_weighed_within_it(tmp_path, cli):
     """``weigh --poured --most``: 5 g of black needs a 347.3 g can at the recipe's
     proportions; at most 300 g, the rest is poured and diluted as far as 300 g allows, and

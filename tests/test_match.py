@@ -415,6 +415,50 @@ def test_a_can_that_may_not_grow_is_diluted_only_as_far_as_it_holds(hybrid):
         correct_what_was_poured(hybrid, recipe, 250.0, poured, 0.1, most_g=251.0)
 
 
+UNSURE_RECIPE = {"Phthalo blue GS": 85.0, "Quinacridone violet": 15.4, "DPP orange": 29.3,
+                 "Titanium dioxide white": 120.3}  # fmt: skip
+"""A generated solid blue whose recipe the shipped ensemble's networks disagree on by 0.65
+ΔE00 at 45as110 (over :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`)."""
+
+
+def test_a_can_the_model_is_unsure_of_is_diluted_by_the_library_s_physics(hybrid):
+    """Indanthrone blue poured by mistake into :data:`UNSURE_RECIPE`'s can: with the library
+    the physics stands in for the unsure model, and the miss it reports is the physics' own
+    for the can as weighed; without the library, or the check, the model dilutes. Neither
+    pours more of the stray toner. The example's can, of which the model is sure, is diluted
+    by the model with the library too."""
+    from flakelab.match.correction import correct_what_was_poured, physics_checked_note
+    from flakelab.match.forward import PhysicsForward
+
+    library, poured = hybrid.library, {"Titanium dioxide white": 120.3, "Indanthrone blue": 0.7}
+    checked = correct_what_was_poured(hybrid, UNSURE_RECIPE, 250.0, poured, 0.1, library=library)
+    physics = checked.predicted_by
+    assert isinstance(physics, PhysicsForward) and checked.model_spread.max() > 0.5
+    names = list(checked.holds)
+    assert checked.expected_de00.max() == pytest.approx(
+        _largest_dE00(physics, names, [UNSURE_RECIPE.get(n, 0.0) for n in names],
+                      list(checked.holds.values())),
+        abs=1e-3,
+    )  # fmt: skip
+    assert "the can as poured or its recipe by 0.65 ΔE00 at 45as110" in physics_checked_note(
+        checked, "the can as poured or its recipe"
+    )
+    for learned in (
+        correct_what_was_poured(hybrid, UNSURE_RECIPE, 250.0, poured, 0.1),
+        correct_what_was_poured(
+            hybrid, UNSURE_RECIPE, 250.0, poured, 0.1, library=library, physics_check=False
+        ),
+    ):
+        assert learned.predicted_by is hybrid and learned.model_spread is None
+    assert "Indanthrone blue" not in checked.weighing.grams | learned.weighing.grams
+    assert physics_checked_note(learned) is None
+    example = {"Al fine bright": 26.5, "Al medium": 194.0, "Phthalo blue GS": 16.6,
+               "Indanthrone blue": 9.3, "Carbon black": 3.6}  # fmt: skip
+    sure = correct_what_was_poured(hybrid, example, 250.0, {"Phthalo green": 1.0}, 0.1,
+                                   library=library)  # fmt: skip
+    assert sure.predicted_by is hybrid and sure.model_spread is None
+
+
 def test_addition_bounds_cut_a_row_short_along_its_own_direction():
     """Each addition at most ``each`` of the can; a row over ``total`` scaled down whole,
     so that its proportions (where the colour moves) stay; a row within it untouched."""

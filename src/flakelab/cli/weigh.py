@@ -36,7 +36,7 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
-from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G
+from flakelab.match.settings import CAN_QUANTITY, MODEL_SPREAD_NOTICE, SCALE_RESOLUTION_G
 
 
 def weigh_command(
@@ -79,6 +79,15 @@ def weigh_command(
         ),
     ] = None,
     shop: ShopTinsOption = None,
+    physics_check: Annotated[
+        bool,
+        typer.Option(
+            "--physics-check/--no-physics-check",
+            help="With --poured: where the model's networks disagree on the can or its recipe "
+            f"by over {MODEL_SPREAD_NOTICE:g} ΔE00 (its cases too few), the library's physics "
+            "dilutes in the model's place (--no-physics-check: the learned model's).",
+        ),
+    ] = True,
     json_output: JsonOption = False,
 ) -> None:
     """Weigh a recipe for another can, and what rounding to the scale costs in colour.
@@ -104,10 +113,13 @@ def weigh_command(
     can_g = can.grams_for(shares)
     if most is not None and not poured:
         raise FlakelabError("--most: for --poured (how far a can may grow once poured)")
+    if not physics_check and not poured:
+        raise FlakelabError("--no-physics-check: for --poured (what dilutes a stray toner)")
     if poured:
         most_g = None if most is None else _most_the_can_holds(most, can, can_g, lib, shares)
+        checked_by = lib if physics_check else None
         _weigh_the_rest(forward, recipe, shares, can, can_g, poured_grams(poured), most_g,
-                        recipe_out, json_output, for_tins)  # fmt: skip
+                        recipe_out, json_output, for_tins, checked_by)  # fmt: skip
         return
     report = {
         "recipe": str(recipe),
@@ -162,13 +174,15 @@ def _most_the_can_holds(most: str, can, can_g: float, library, shares) -> float:
 
 def _weigh_the_rest(
     forward, recipe: Path, shares, can, can_g: float, poured: dict, most_g, recipe_out,
-    json_output, for_tins: dict,
+    json_output, for_tins: dict, checked_by=None,
 ) -> None:  # fmt: skip
     """``weigh --poured``: what is still to pour, and the can's size, once some is poured;
     where a toner outside the recipe was poured, what brings the can back to its colour
-    (``for_tins``: the report's entries for the shop's tins)."""
+    (``for_tins``: the report's entries for the shop's tins), by the library ``checked_by``'s
+    physics where the model is unsure of the can (None: by the model)."""
     from flakelab.io import write_recipe
     from flakelab.library import did_you_mean
+    from flakelab.match.correction import physics_checked_note
     from flakelab.match.forward import model_name_for
 
     if unknown := [n for n in poured if n not in forward.toners]:
@@ -180,7 +194,10 @@ def _weigh_the_rest(
     total = sum(shares.values())
     planned = {n: shares.get(n, 0.0) / total * can_g for n in poured}
     strays = [n for n in poured if n not in shares]
-    weighing, found = _what_to_pour(forward, shares, can, can_g, poured, strays, most_g)
+    weighing, found, diluted = _what_to_pour(
+        forward, shares, can, can_g, poured, strays, most_g, checked_by
+    )
+    predicted_by = forward if diluted is None else diluted.predicted_by
     grown = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
     report = {
         "recipe": str(recipe),
@@ -195,9 +212,11 @@ def _weigh_the_rest(
         **found,
         "to_pour_g": [asdict(ln) for ln in weighing.lines],
         **rounding_costs(weighing),
-        "model": model_name_for(forward, {*shares, *poured}),  # strays poured in too
+        "model": model_name_for(predicted_by, {*shares, *poured}),  # strays poured in too
         **for_tins,
     }
+    if note := diluted and physics_checked_note(diluted, "the can as poured or its recipe"):
+        report["notes"] = [*report["notes"], note]
     if recipe_out is not None:  # what the can holds once the rest is poured
         held = {n: poured.get(n, 0.0) + weighing.grams.get(n, 0.0) for n in {*poured, *shares}}
         write_recipe({n: g for n, g in held.items() if g > 0}, recipe_out)
@@ -209,11 +228,13 @@ def _weigh_the_rest(
     _print_the_rest(report, recipe, planned)
 
 
-def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most_g):
-    """The weighing of what is still to pour, and what the report adds for it: nothing on
-    plan or where a recipe's toner ran over and the can may grow to keep the proportions;
-    where ``strays`` outside the recipe were poured, or the can may not grow to more than
-    ``most_g``, the ΔE00 by which it is then expected to miss the recipe."""
+def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most_g, library):
+    """The weighing of what is still to pour, what the report adds for it, and the dilution
+    (None: none was needed): nothing on plan or where a recipe's toner ran over and the can
+    may grow to keep the proportions; where ``strays`` outside the recipe were poured, or the
+    can may not grow to more than ``most_g``, the ΔE00 by which it is then expected to miss
+    the recipe, by ``library``'s physics where the model is unsure of the can (None: by the
+    model alone)."""
     from flakelab.core.tolerance import failing_geometries, tolerance_preset
     from flakelab.match.correction import correct_what_was_poured
     from flakelab.match.objective import OBJECTIVE_DEFAULT
@@ -224,36 +245,45 @@ def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most
         weighing = weigh_after_pouring(forward, shares, can_g, poured, can.resolution_g)[1]
         proportional = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
         if most_g is None or proportional <= most_g:
-            return weighing, found
+            return weighing, found, None
         found["proportional_g"] = proportional  # more than --most: diluted as far as it allows
     tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
     poured_right = correct_what_was_poured(
-        forward, shares, can_g, poured, can.resolution_g, tolerance, most_g
+        forward, shares, can_g, poured, can.resolution_g, tolerance, most_g, library,
+        physics_check=library is not None,
+    )  # fmt: skip
+    return (
+        poured_right.weighing,
+        found
+        | {
+            "tolerance": tolerance.name,
+            "geometries": list(forward.geometries),
+            "as_planned_de00": poured_right.as_planned_de00.round(3).tolist(),
+            "expected_de00": poured_right.expected_de00.round(3).tolist(),
+            "expected_failing": failing_geometries(forward.geometries, poured_right.passes),
+            # predicted by the library's physics, the model unsure of the can (or its recipe)
+            "physics_checked": poured_right.model_spread is not None,
+        },
+        poured_right,
     )
-    return poured_right.weighing, found | {
-        "tolerance": tolerance.name,
-        "geometries": list(forward.geometries),
-        "as_planned_de00": poured_right.as_planned_de00.round(3).tolist(),
-        "expected_de00": poured_right.expected_de00.round(3).tolist(),
-        "expected_failing": failing_geometries(forward.geometries, poured_right.passes),
-    }
 
 
 def _print_the_rest(report: dict, recipe: Path, planned: dict) -> None:
     poured, grown = report["poured_g"], report["grown_g"]
     over = report["ran_over"]
+    by = "by the library's physics" if report.get("physics_checked") else "by the model"
     ran = ", ".join(f"{n} ({poured[n]:g} g of {planned[n]:.1f} g)" for n in over)
     if report["not_in_recipe"]:
         state = (
             f"{', '.join(report['not_in_recipe'])} is not in the recipe: the rest of the recipe "
-            "and what brings the can back to its colour by the model; the can grows to "
+            f"and what brings the can back to its colour {by}; the can grows to "
             f"{grown:g} g" + (f" (--most {report['most_g']:g} g)" if report["most_g"] else "")
         )
     elif over and "proportional_g" in report:
         state = (
             f"{ran} ran over; at the recipe's proportions the can would grow to "
             f"{report['proportional_g']:g} g, more than --most {report['most_g']:g} g: the "
-            f"rest and what brings the can nearest its colour by the model, in {grown:g} g"
+            f"rest and what brings the can nearest its colour {by}, in {grown:g} g"
         )
     elif over:
         state = f"{ran} ran over; the can grows to {grown:g} g"
@@ -272,7 +302,7 @@ def _print_the_rest(report: dict, recipe: Path, planned: dict) -> None:
     if "expected_de00" in report:
         worst, planned_worst = max(report["expected_de00"]), max(report["as_planned_de00"])
         text = (
-            f"expected to miss the recipe by ΔE00 {worst:.2f} at worst (by the model; "
+            f"expected to miss the recipe by ΔE00 {worst:.2f} at worst ({by}; "
             f"{planned_worst:.2f} with the rest poured as planned)"
         )
         if report["expected_failing"]:

@@ -180,16 +180,18 @@ def unreached_note(
     )
 
 
-def physics_checked_note(correction: Correction) -> str | None:
+def physics_checked_note(
+    correction: Correction | PouredCorrection, unsure_of: str = "the sprayed recipe"
+) -> str | None:
     """A note where the library's physics made the ``correction`` in the learned model's
-    place, its networks unsure of the sprayed recipe
+    place, its networks unsure of what ``unsure_of`` names
     (:func:`~flakelab.match.physics_check.checked_forward`); None where it did not."""
     spread = correction.model_spread
     if spread is None:
         return None
     geometries = correction.predicted_by.geometries
     return (
-        f"{disagreement_words(spread, geometries, 'the sprayed recipe')}, over "
+        f"{disagreement_words(spread, geometries, unsure_of)}, over "
         f"{MODEL_SPREAD_NOTICE:g}: the cases taught it little about paints like this one, so "
         "the library's physics made the correction and predicts its figures "
         "(--no-physics-check keeps the model's)"
@@ -628,6 +630,11 @@ class PouredCorrection:
     passes: NDArray
     as_planned: dict[str, float]
     as_planned_de00: NDArray
+    # the forward model whose predictions these are: the one given, or the library's physics
+    # where the ensemble disagreed on the can or the recipe by ``model_spread`` (ΔE00 per
+    # geometry; None where it did not stand in) (:mod:`flakelab.match.physics_check`)
+    predicted_by: object = None
+    model_spread: NDArray | None = None
 
 
 def correct_what_was_poured(
@@ -638,6 +645,8 @@ def correct_what_was_poured(
     resolution_g: float = SCALE_RESOLUTION_G,
     tolerance: Tolerance | None = None,
     most_g: float | None = None,
+    library: Library | None = None,
+    physics_check: bool = True,
 ) -> PouredCorrection:
     """What to pour into a can that holds a toner outside the recipe (``poured``, grams per
     toner; poured by mistake) or too much of one of its own: the rest of the recipe's
@@ -647,8 +656,10 @@ def correct_what_was_poured(
     ``tolerance`` (default :data:`~flakelab.match.objective.OBJECTIVE_DEFAULT`). With
     ``most_g`` the can holds at most that many grams once weighed, and the additions are
     scaled down together to fit (:func:`~flakelab.match.recipe.room_for_additions`). A toner
-    the recipe lacks can only be diluted: where even then the can misses, it is better mixed
-    afresh."""
+    the recipe lacks is never added to, only diluted: where even then the can misses, it is
+    better mixed afresh. With ``physics_check`` and the ``library``, where the model's
+    ensemble is unsure of the can or of the recipe, the library's physics predicts both and
+    dilutes in its place (:func:`~flakelab.match.physics_check.checked_forward`)."""
     from flakelab.match.recipe import (
         check_poured,
         check_scale,
@@ -665,11 +676,14 @@ def correct_what_was_poured(
     can = {n: max(planned.get(n, 0.0), poured.get(n, 0.0)) for n in {*planned, *poured}}
     in_can, mixed = sum(poured.values()), sum(can.values())
     room = None if most_g is None else room_for_additions(most_g, mixed, len(can), resolution_g)
-    R, _ = evaluate_recipes(forward, np.stack([_vector(forward, fractions), _vector(forward, can)]))
+    x = np.stack([_vector(forward, fractions), _vector(forward, can)])
+    forward, spread = checked_forward(forward, library, x) if physics_check else (forward, None)
+    R, _ = evaluate_recipes(forward, x)
     recipe_lab, can_lab = reflectance_to_Lab(R)
+    strays = [n for n in poured if n not in fractions]  # never poured again
     correction = correct(
         forward, R[0], can, R[1], offset_weight=1.0, extra_toners=0, tolerance=tolerance,
-        max_total=room,
+        max_total=room, without=strays, physics_check=False,
     )  # fmt: skip
     to_pour = {
         n: (can[n] - poured.get(n, 0.0) + correction.added.get(n, 0.0) * mixed) / in_can
@@ -681,5 +695,6 @@ def correct_what_was_poured(
     miss, _, passes = tolerance.judge(forward.geometries, recipe_lab, reflectance_to_Lab(R_held[0]))
     lines = pouring_order(weighing.grams, start=in_can)
     return PouredCorrection(
-        replace(weighing, lines=lines), held, miss, passes, can, delta_E(recipe_lab, can_lab)
-    )
+        replace(weighing, lines=lines), held, miss, passes, can, delta_E(recipe_lab, can_lab),
+        forward, spread,
+    )  # fmt: skip

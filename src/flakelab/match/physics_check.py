@@ -54,12 +54,13 @@ def physics_for(forward, library: Library | None):
 
 
 def checked_forward(forward, library: Library | None, x: NDArray) -> tuple[object, NDArray | None]:
-    """The forward model to predict recipe ``x[T]`` and its neighbours with, and the ensemble's
-    disagreement on ``x`` (ΔE00 per geometry) where that sent it to the library's physics:
+    """The forward model to predict recipe ``x[T]`` (or recipes ``x[N, T]``, which one model
+    must compare) and their neighbours with, and the ensemble's disagreement on ``x`` (ΔE00
+    per geometry, the worst recipe's at each) where that sent it to the library's physics:
     ``forward`` itself and None where the model is sure of ``x``, is one network, or the
     physics cannot stand in (:func:`physics_for`)."""
     if getattr(forward, "members", 1) < 2:
         return forward, None
-    spread = recipe_spread(forward, x)
+    spread = np.max([recipe_spread(forward, row) for row in np.atleast_2d(x)], axis=0)
     physics = physics_for(forward, library) if is_unsure(spread) else None
     return (forward, None) if physics is None else (physics, spread)
