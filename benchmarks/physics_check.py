@@ -128,10 +128,11 @@ def by_part(
     rows: dict[str, list[dict]], baseline: str, run: str, known: int, suffix: str = ""
 ) -> dict[str, dict | None]:
     """:func:`paired` of the runs named ``baseline`` and ``run``: on the first ``known``
-    targets (known toners) and on the rest (a new toner; None where there are none)."""
+    targets (known toners) and on the rest (a new toner); None for a part with no targets
+    (``--targets 0`` judges a new toner's alone)."""
     novel = len(rows[run]) > known
     return {
-        f"known{suffix}": paired(rows[baseline][:known], rows[run][:known]),
+        f"known{suffix}": paired(rows[baseline][:known], rows[run][:known]) if known else None,
         f"novel{suffix}": paired(rows[baseline][known:], rows[run][known:]) if novel else None,
     }
 
@@ -207,8 +208,8 @@ def main() -> None:
             print(f"  the check added {median:.2f} s to a checked match (worst {worst:.2f})")
     for name in runs:
         r = runs[name]
-        print(f"{name}: first shot {r['first_shot_success']:.3f}, after one correction "
-              f"{r['after_one_correction']:.3f}, new toner {_rate(r['novel_toner_first_shot'])}"
+        print(f"{name}: first shot {_rate(r['first_shot_success'])}, after one correction "
+              f"{_rate(r['after_one_correction'])}, new toner {_rate(r['novel_toner_first_shot'])}"
               f" ({seconds[name]:.0f} s)")  # fmt: skip
 
 
