@@ -1389,6 +1389,12 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
         ("first shot", "first_shot_success", "first_shot_vs_oracle", 2),
         ("after one correction", "after_one_correction", "after_one_correction_vs_oracle", 2),
         ("new toner, first shot", "novel_toner_first_shot", "novel_toner_first_shot_vs_oracle", 1),
+        (
+            "new toner, after one correction",
+            "novel_toner_after_one_correction",
+            "novel_toner_after_one_correction_vs_oracle",
+            1,
+        ),
         ("first recipe, its colour without the spray's noise", "first_shot_unsprayed", None, 2),
         ("… with a new toner", "novel_toner_first_shot_unsprayed", None, 1),
         ("oracle: the hidden formula sprayed", "oracle_success", None, 2),

@@ -1987,6 +1987,9 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     assert (alone["targets"], alone["novel_targets"], alone["by_family"]) == (0, 2, {})
     trials = alone.pop("per_target")
     assert alone["novel_toner_first_shot"] == np.mean([t["first"] <= 1.0 for t in trials])
+    corrected = alone["novel_toner_after_one_correction"]  # a pass stays one
+    assert corrected == np.mean([t["corrected"] <= 1.0 for t in trials])
+    assert corrected >= alone["novel_toner_first_shot"]
     for key in ("first_shot_success", "after_one_correction", "oracle_success",
                 "first_shot_de00_median", "first_shot_texture_share_p95"):  # fmt: skip
         assert alone[key] is None, key
@@ -1996,7 +1999,8 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     shown = " ".join(capsys.readouterr().out.split())
     assert "The harness: 2 hidden targets with a new toner (seed 3" in shown
     assert "new toner, first shot" in shown and "worst-geometry" not in shown
-    assert "By paint family" not in shown and "after one correction" not in shown
+    assert "By paint family" not in shown and "oracle: the hidden formula" not in shown
+    assert "new toner, after one correction" in shown
     monkeypatch.setattr(evaluate, "_one", ctrl_c(evaluate._one, 2))
     cut = evaluate.evaluate_matching(world, hybrid, effect, **run)
     assert (cut["targets"], cut["novel_targets"], cut["novel_targets_asked"]) == (0, 1, 2)

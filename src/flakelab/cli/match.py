@@ -1014,6 +1014,8 @@ def _print_harness(report: dict) -> None:
          targets),
         ("new toner, first shot", "novel_toner_first_shot", "novel_toner_first_shot_vs_oracle",
          novel),
+        ("new toner, after one correction", "novel_toner_after_one_correction",
+         "novel_toner_after_one_correction_vs_oracle", novel),
         (HARNESS_CURVES["first_unsprayed"], "first_shot_unsprayed", None, targets),
         ("… with a new toner", "novel_toner_first_shot_unsprayed", None, novel),
         (f"oracle: {HARNESS_CURVES['oracle']}", "oracle_success", None, targets),

@@ -725,7 +725,8 @@ def plot_harness(
     figure, (shares, predicted) = plt.subplots(1, 2, figsize=(14, 5.2))
     curves = [(rows, key, name) for key, name in HARNESS_CURVES.items()]
     if not rows:  # the new toner's targets judged alone: against their own hidden formulas
-        curves = [(novel_rows, "oracle", f"{HARNESS_CURVES['oracle']}, new toner")]
+        curves = [(novel_rows, key, f"{HARNESS_CURVES[key]}, new toner")
+                  for key in ("corrected", "oracle")]  # fmt: skip
     curves += [(novel_rows, "first", "new toner, first shot")] if novel_rows else []
     for trials, key, name in curves:
         values = np.sort([t[key] for t in trials])
