@@ -1993,10 +1993,13 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     for key in ("first_shot_success", "after_one_correction", "oracle_success",
                 "first_shot_de00_median", "first_shot_texture_share_p95"):  # fmt: skip
         assert alone[key] is None, key
-    report = alone | {"model": hybrid.name, "model_id": hybrid.model_id, "physics_check": 0,
+    fixed = sum(t["correction_physics_checked"] for t in trials)  # the new toner's corrected too
+    assert alone["novel_correction_physics_checked_targets"] == fixed
+    report = alone | {"model": hybrid.name, "model_id": hybrid.model_id, "physics_check": 3,
                       "world": "shop"}  # fmt: skip
     _print_harness(report)
     shown = " ".join(capsys.readouterr().out.split())
+    assert f"and corrected {fixed} failed first shot" in shown
     assert "The harness: 2 hidden targets with a new toner (seed 3" in shown
     assert "new toner, first shot" in shown and "worst-geometry" not in shown
     assert "By paint family" not in shown and "oracle: the hidden formula" not in shown

@@ -1086,7 +1086,10 @@ def _physics_checked_line(report: dict) -> str:
     if not report["physics_check"]:
         return "the physics checked no recipe (--no-physics-check)"
     checked = report["physics_checked_targets"] + report["novel_physics_checked_targets"]
-    corrected = report["correction_physics_checked_targets"]
+    corrected = (
+        report["correction_physics_checked_targets"]
+        + report["novel_correction_physics_checked_targets"]
+    )
     return (
         f"the physics refined the recipes of {counted(checked, 'target')} and corrected "
         f"{counted(corrected, 'failed first shot')}, where the model's networks disagreed by "

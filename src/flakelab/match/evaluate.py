@@ -593,6 +593,9 @@ def evaluate_matching(
         "physics_checked_targets": sum(r["physics_checked"] for r in rows),
         "novel_physics_checked_targets": sum(r["physics_checked"] for r in novel_rows),
         "correction_physics_checked_targets": sum(r["correction_physics_checked"] for r in rows),
+        "novel_correction_physics_checked_targets": sum(
+            r["correction_physics_checked"] for r in novel_rows
+        ),
         "latency_p50_s": float(np.percentile(latency, 50)),
         "latency_p95_s": float(np.percentile(latency, 95)),
         "resprays": resprays,
