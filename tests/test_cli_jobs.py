@@ -1443,8 +1443,11 @@ def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
         f"over 2 resprays each: first shot {fig(report['first_shot_chance'])}, after one "
         f"correction {fig(report['after_one_correction_chance'])}, oracle "
         f"{fig(report['oracle_chance'])}, new toner "
-        f"{fig(report['novel_toner_first_shot_chance'])}" in shown
+        f"{fig(report['novel_toner_first_shot_chance'])} (after one correction "
+        f"{fig(report['novel_toner_after_one_correction_chance'])}, its oracle "
+        f"{fig(report['novel_oracle_chance'])})" in shown
     )
+    assert report["novel_oracle_chance"] is not None  # one new-toner target, two resprays
     assert f"strength RMS {report['lot_strength_error_rms']:.3f}" in shown
     # how the targets were read is said only where it differs from a spectral export's
     assert "L*a*b* alone" not in shown and "without their texture" not in shown

@@ -1979,7 +1979,7 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     hasty = MatchSettings(
         candidates=1, screen_steps=3, refine_steps=3, top_pigments=2, swap_above=np.inf
     )
-    run = dict(targets=0, seed=3, novel=hybrid.novel, novel_targets=2, settings=hasty)
+    run = dict(targets=0, seed=3, novel=hybrid.novel, novel_targets=2, settings=hasty, resprays=2)
     alone = evaluate.evaluate_matching(world, hybrid, effect, **run, per_target=True)
     drawn = [x for x, _ in evaluate.harness_trials(world, 0, 3, hybrid.novel, 2)]
     columns = [list(world.library.names).index(n) for n in hybrid.novel]
@@ -1990,6 +1990,10 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     corrected = alone["novel_toner_after_one_correction"]  # a pass stays one
     assert corrected == np.mean([t["corrected"] <= 1.0 for t in trials])
     assert corrected >= alone["novel_toner_first_shot"]
+    chances = {"novel_oracle_chance": "oracle_chance",
+               "novel_toner_after_one_correction_chance": "corrected_chance"}  # fmt: skip
+    for chance, key in chances.items():
+        assert alone[chance] == np.mean([t[key] for t in trials]), chance
     for key in ("first_shot_success", "after_one_correction", "oracle_success",
                 "first_shot_de00_median", "first_shot_texture_share_p95"):  # fmt: skip
         assert alone[key] is None, key

@@ -1111,12 +1111,18 @@ def _harness_options(report: dict) -> list[str]:
             f"{_share(report['needing_missing_after_one_correction'])}"
         )
     if report["resprays"]:
+        novel = report["novel_toner_after_one_correction_chance"], report["novel_oracle_chance"]
         lines.append(
             f"the chance a spray passes, over {report['resprays']} resprays each: first shot "
             f"{_share(report['first_shot_chance'])}, after one correction "
             f"{_share(report['after_one_correction_chance'])}, oracle "
             f"{_share(report['oracle_chance'])}, new toner "
             f"{_share(report['novel_toner_first_shot_chance'])}"
+            + (
+                f" (after one correction {_share(novel[0])}, its oracle {_share(novel[1])})"
+                if report["novel_targets"]
+                else ""
+            )
         )
     if report["targets_read_colour_alone"]:
         lines.append(

@@ -609,5 +609,7 @@ def evaluate_matching(
         ),
         **{name: mean(rows, key) for name, key in CHANCES.items()},
         "novel_toner_first_shot_chance": mean(novel_rows, "first_chance"),
+        "novel_toner_after_one_correction_chance": mean(novel_rows, "corrected_chance"),
+        "novel_oracle_chance": mean(novel_rows, "oracle_chance"),
         **({"per_target": rows + novel_rows} if per_target else {}),
     }
