@@ -117,9 +117,8 @@ def weigh_command(
         raise FlakelabError("--no-physics-check: for --poured (what dilutes a stray toner)")
     if poured:
         most_g = None if most is None else _most_the_can_holds(most, can, can_g, lib, shares)
-        checked_by = lib if physics_check else None
         _weigh_the_rest(forward, recipe, shares, can, can_g, poured_grams(poured), most_g,
-                        recipe_out, json_output, for_tins, checked_by)  # fmt: skip
+                        recipe_out, json_output, for_tins, lib, physics_check)  # fmt: skip
         return
     report = {
         "recipe": str(recipe),
@@ -174,12 +173,12 @@ def _most_the_can_holds(most: str, can, can_g: float, library, shares) -> float:
 
 def _weigh_the_rest(
     forward, recipe: Path, shares, can, can_g: float, poured: dict, most_g, recipe_out,
-    json_output, for_tins: dict, checked_by=None,
+    json_output, for_tins: dict, library, physics_check: bool,
 ) -> None:  # fmt: skip
     """``weigh --poured``: what is still to pour, and the can's size, once some is poured;
     where a toner outside the recipe was poured, what brings the can back to its colour
-    (``for_tins``: the report's entries for the shop's tins), by the library ``checked_by``'s
-    physics where the model is unsure of the can (None: by the model)."""
+    (``for_tins``: the report's entries for the shop's tins), with ``physics_check`` by the
+    ``library``'s physics where the model is unsure of the can."""
     from flakelab.io import write_recipe
     from flakelab.library import did_you_mean
     from flakelab.match.correction import physics_checked_note
@@ -195,7 +194,7 @@ def _weigh_the_rest(
     planned = {n: shares.get(n, 0.0) / total * can_g for n in poured}
     strays = [n for n in poured if n not in shares]
     weighing, found, diluted = _what_to_pour(
-        forward, shares, can, can_g, poured, strays, most_g, checked_by
+        forward, shares, can, can_g, poured, strays, most_g, library, physics_check
     )
     predicted_by = forward if diluted is None else diluted.predicted_by
     grown = round(sum(poured.values()) + sum(weighing.grams.values()), 6)
@@ -228,13 +227,15 @@ def _weigh_the_rest(
     _print_the_rest(report, recipe, planned)
 
 
-def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most_g, library):
+def _what_to_pour(
+    forward, shares, can, can_g: float, poured: dict, strays, most_g, library, physics_check
+):
     """The weighing of what is still to pour, what the report adds for it, and the dilution
     (None: none was needed): nothing on plan or where a recipe's toner ran over and the can
     may grow to keep the proportions; where ``strays`` outside the recipe were poured, or the
     can may not grow to more than ``most_g``, the ΔE00 by which it is then expected to miss
-    the recipe, by ``library``'s physics where the model is unsure of the can (None: by the
-    model alone)."""
+    the recipe, with ``physics_check`` by ``library``'s physics where the model is unsure of
+    the can."""
     from flakelab.core.tolerance import failing_geometries, tolerance_preset
     from flakelab.match.correction import correct_what_was_poured
     from flakelab.match.objective import OBJECTIVE_DEFAULT
@@ -250,7 +251,7 @@ def _what_to_pour(forward, shares, can, can_g: float, poured: dict, strays, most
     tolerance = tolerance_preset(OBJECTIVE_DEFAULT)
     poured_right = correct_what_was_poured(
         forward, shares, can_g, poured, can.resolution_g, tolerance, most_g, library,
-        physics_check=library is not None,
+        physics_check,
     )  # fmt: skip
     return (
         poured_right.weighing,

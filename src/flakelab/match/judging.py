@@ -188,11 +188,14 @@ def model_spread(forward, x: NDArray, lab: NDArray) -> NDArray | None:
 
 def recipe_spread(forward, x: NDArray) -> NDArray | None:
     """:func:`model_spread` of one recipe ``x[T]`` about ``forward``'s own prediction: ΔE00
-    per geometry ``[G]``; None for a single network."""
+    per geometry ``[G]`` (of recipes ``x[N, T]``, in one pass: ``[N, G]``); None for a
+    single network."""
     if getattr(forward, "members", 1) < 2:
         return None
-    R = evaluate_recipes(forward, x[None])[0]
-    return model_spread(forward, x[None], reflectance_to_Lab(R))[0]
+    rows = np.atleast_2d(x)
+    R = evaluate_recipes(forward, rows)[0]
+    spread = model_spread(forward, rows, reflectance_to_Lab(R))
+    return spread if np.ndim(x) == 2 else spread[0]
 
 
 @dataclass(frozen=True)

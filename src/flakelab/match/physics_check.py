@@ -61,6 +61,6 @@ def checked_forward(forward, library: Library | None, x: NDArray) -> tuple[objec
     physics cannot stand in (:func:`physics_for`)."""
     if getattr(forward, "members", 1) < 2:
         return forward, None
-    spread = np.max([recipe_spread(forward, row) for row in np.atleast_2d(x)], axis=0)
+    spread = np.atleast_2d(recipe_spread(forward, x)).max(axis=0)
     physics = physics_for(forward, library) if is_unsure(spread) else None
     return (forward, None) if physics is None else (physics, spread)
