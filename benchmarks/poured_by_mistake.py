@@ -72,14 +72,16 @@ def one_can(world, forward, recipe: dict, rng, most_g: float | None, off=None) -
     grams = float(np.exp(rng.uniform(*np.log(STRAY_G))))
     largest = max(recipe, key=recipe.get)
     poured = {largest: round(recipe[largest] * CAN_G, 1), stray: round(grams, 1)}
-    start = time.perf_counter()
-    found = correct_what_was_poured(
-        forward, recipe, CAN_G, poured, RESOLUTION_G, physics_check=False
-    )
-    seconds = time.perf_counter() - start
+    start = time.perf_counter()  # weigh --poured's default
     checked = correct_what_was_poured(
         forward, recipe, CAN_G, poured, RESOLUTION_G, library=world.library
     )
+    seconds = time.perf_counter() - start
+    found = checked  # the model's own, but where the physics stood in for it
+    if checked.model_spread is not None:
+        found = correct_what_was_poured(
+            forward, recipe, CAN_G, poured, RESOLUTION_G, physics_check=False
+        )
     row = {
         "physics_checked": checked.model_spread is not None,
         "checked_after": physics_worst(world, forward, recipe, checked.holds),
