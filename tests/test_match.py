@@ -1591,6 +1591,45 @@ def physics():
     return PhysicsForward(library, instrument_geometries("five-angle"))
 
 
+def test_grams_are_refused_not_predicted_far_outside_the_cases(physics, hybrid):
+    """A recipe in grams (a 250 g can) or percent reached the forwards as mass fractions. The
+    hybrid renormalises, and the physics of a film that hides hardly changes, but a learned
+    model's forward (a model with every toner learned) predicted the blue metallic's 250 g
+    26–117 ΔE00 from its fractions, and its 1.5-times recipe 7–28, without a word. Each numpy
+    entry refuses them, naming the row; the optimiser's own torch path keeps to fractions."""
+    from flakelab.core.colorimetry import reflectance_to_Lab
+    from flakelab.core.difference import delta_E
+    from flakelab.core.units import FRACTION_SUM_TOLERANCE
+    from flakelab.match.forward import LearnedForward
+    from flakelab.match.judging import evaluate_recipes, recipe_spread
+    from flakelab.models.network import ModelError
+
+    recipe = {"Al fine": 0.6, "Phthalo blue GS": 0.3, "Carbon black": 0.1}
+    learned = LearnedForward(hybrid.model)
+    x = recipe_row(list(learned.toners), recipe)
+    lab_one, lab_more = reflectance_to_Lab(reflect(learned, np.stack([x, 1.5 * x])))
+    assert delta_E(lab_one, lab_more).min() > 5  # what the refusal keeps out
+    for forward in (physics, hybrid, learned):
+        x = recipe_row(list(forward.toners), recipe)
+        for rows, total, row in (
+            (np.stack([x, 250 * x]), "250", 1),
+            (np.stack([x, x, 100 * x]), "100", 2),
+        ):
+            with pytest.raises(ValueError, match=f"row {row} sums to {total}, not 1"):
+                evaluate_recipes(forward, rows)
+    with pytest.raises(ValueError, match="row 0 sums to 250"):
+        recipe_spread(hybrid, 250 * x)
+    y = recipe_row(list(hybrid.model.toners), {**recipe, "Carbon black": -0.1, "Al fine": 0.8})
+    with pytest.raises(ModelError, match="row 0 has a negative amount"):
+        hybrid.model.predict(y)
+    # a float32 recipe, or one nudged within the tolerance, is the same recipe
+    x = recipe_row(list(physics.toners), recipe)[None]
+    near = evaluate_recipes(physics, x * (1 + FRACTION_SUM_TOLERANCE / 2))[0]
+    assert np.allclose(near, evaluate_recipes(physics, x)[0], rtol=1e-3)
+    x = recipe_row(list(hybrid.toners), recipe)
+    assert np.isfinite(recipe_spread(hybrid, x.astype(np.float32))).all()
+
+
 def _nominal_target(recipe: dict[str, float], sample: str, texture: bool = True):
     """The demo library's ``recipe`` {toner: share} as the world sprays it nominally, read at
     the five-angle geometries (with its texture readings, or without)."""

@@ -30,6 +30,7 @@ from flakelab.core.tolerance import (
     failures,
     over_limit,
 )
+from flakelab.core.units import check_mass_fractions
 from flakelab.match.forward import model_name_for
 from flakelab.match.support import outside_support
 
@@ -171,6 +172,9 @@ def recipe_vector(forward, fractions: dict[str, float]) -> NDArray:
 
 
 def evaluate_recipes(forward, x: NDArray) -> tuple[NDArray, NDArray | None]:
+    """``forward``'s reflectance ``[N, G, 31]`` and texture readings of recipes ``x[N, T]``,
+    mass fractions (refused otherwise), in float64."""
+    check_mass_fractions(x)
     with torch.no_grad():
         R, texture = forward(torch.as_tensor(x, dtype=forward.dtype))
     return R.double().numpy(), None if texture is None else texture.double().numpy()

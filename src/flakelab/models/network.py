@@ -24,7 +24,7 @@ from torch import nn
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.core.units import is_number
+from flakelab.core.units import check_mass_fractions, is_number
 from flakelab.errors import ModelError, shown
 
 __all__ = [
@@ -485,6 +485,7 @@ class ForwardModel:
         x = np.atleast_2d(np.asarray(fractions, dtype=np.float32))
         if x.shape[1] != len(self.toners):
             raise ModelError(f"fractions: expected {len(self.toners)} columns, got {x.shape[1]}")
+        check_mass_fractions(x, error=ModelError)
         self.network.eval()
         return x
 
