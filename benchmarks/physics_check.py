@@ -18,8 +18,16 @@ characterised from one tin of each toner is (strength × N(1,
 library), while the learned model stays the one that learned the world's cases. The hybrid's
 scaling for a new toner goes through that library in both.
 
+With ``--thresholds 0.3,0.5,0.8`` it weighs the spread over which the matcher checks
+(:data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`, 0.5 ΔE00): the checked runs check
+over the lowest, and each threshold's first shots take a target's checked row where the
+model's spread on its best recipe exceeds that threshold, else its unchecked one. That is
+what a run at the threshold gives, to the spray: each target is matched and sprayed on its
+own streams, and the spread is the learned search's, before any check (the corrections are
+not composed so: a correction is checked on its own spread).
+
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
-        [--resprays 20] [--model FILE] [--miscalibrated] [--json]
+        [--resprays 20] [--model FILE] [--miscalibrated] [--thresholds T,T,...] [--json]
 """
 
 from __future__ import annotations
@@ -77,6 +85,62 @@ def paired(learned: list[dict], checked: list[dict]) -> dict:
         # what the check added to the checked targets' match, median and worst (paired)
         "checked_added_s": [float(np.median(added)), float(added.max())] if mask.any() else None,
     }
+
+
+def by_threshold(learned: list[dict], checked: list[dict], thresholds: list[float]) -> list[dict]:
+    """The first shot's chance over all targets had the matcher checked over each of
+    ``thresholds`` (ΔE00): each target's row of ``checked`` (a run checking over the lowest)
+    where its unchecked best recipe's spread exceeds the threshold, else its row of
+    ``learned``; the checked targets' paired gain, and what the check added to their match."""
+
+    def column(rows: list[dict], key: str) -> np.ndarray:
+        return np.array([r[key] for r in rows], dtype=float)
+
+    spread = np.array([r["predicted_spread"] or 0.0 for r in learned])  # one network: never
+    before, after = column(learned, "first_chance"), column(checked, "first_chance")
+    added = column(checked, "latency_s") - column(learned, "latency_s")
+    figures = []
+    for threshold in thresholds:
+        mask = spread > threshold
+        gain, gain_se = mean_and_se(after[mask] - before[mask])
+        figures.append({
+            "threshold": threshold,
+            "checked_targets": int(mask.sum()),
+            "first_chance": float(np.where(mask, after, before).mean()),
+            "checked_gain": gain,
+            "checked_gain_se": gain_se,
+            "checked_added_s_median": float(np.median(added[mask])) if mask.any() else None,
+        })  # fmt: skip
+    return figures
+
+
+def composed_mismatches(learned: list[dict], checked: list[dict], lowest: float) -> int:
+    """Targets the run checking over ``lowest`` checked where the learned run's spread says it
+    would not, or the other way round: 0 where :func:`by_threshold`'s composition holds."""
+    would = np.array([(r["predicted_spread"] or 0.0) > lowest for r in learned])
+    return int((would != np.array([r["physics_checked"] for r in checked])).sum())
+
+
+@contextlib.contextmanager
+def checking_over(threshold: float | None) -> Iterator[None]:
+    """The physics check acting over the spread ``threshold`` (None: the matcher's own)."""
+    default = physics_check.MODEL_SPREAD_NOTICE
+    physics_check.MODEL_SPREAD_NOTICE = default if threshold is None else threshold
+    try:
+        yield
+    finally:
+        physics_check.MODEL_SPREAD_NOTICE = default
+
+
+def thresholds_from(text: str) -> list[float]:
+    """``"0.3,0.5,0.8"`` → sorted positive spreads [ΔE00]."""
+    try:
+        values = sorted({float(part) for part in text.split(",") if part.strip()})
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected numbers, e.g. 0.3,0.5,0.8") from None
+    if not values or values[0] <= 0 or not np.isfinite(values[-1]):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected positive spreads, e.g. 0.3,0.5,0.8")
+    return values
 
 
 def lot_errors(library, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -137,6 +201,27 @@ def by_part(
     }
 
 
+def thresholds_by_part(
+    rows: dict[str, list[dict]], known: int, thresholds: list[float], miscalibrated: bool
+) -> dict[str, dict]:
+    """:func:`by_threshold` on the known toners' targets and on a new toner's, through the
+    exact library and (``miscalibrated``) the one off by a lot, with each pair's
+    :func:`composed_mismatches`."""
+    pairs = [("", "learned", "checked")]
+    if miscalibrated:
+        pairs.append(("_miscalibrated", "learned_off", "miscalibrated"))
+    figures = {}
+    for suffix, baseline, run in pairs:
+        for part, where in (("known", slice(None, known)), ("novel", slice(known, None))):
+            learned, checked = rows[baseline][where], rows[run][where]
+            if learned:
+                figures[f"thresholds_{part}{suffix}"] = {
+                    "mismatches": composed_mismatches(learned, checked, thresholds[0]),
+                    "by_threshold": by_threshold(learned, checked, thresholds),
+                }
+    return figures
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_harness_arguments(parser, targets=200, novel_targets=50)
@@ -144,6 +229,13 @@ def main() -> None:
         "--miscalibrated",
         action="store_true",
         help="two more runs through a library off by one lot per pigment, unchecked and checked",
+    )
+    parser.add_argument(
+        "--thresholds",
+        type=thresholds_from,
+        help="spreads (ΔE00) to compare as the check's threshold, e.g. 0.3,0.5,0.8: the "
+        "checked runs check over the lowest, and each threshold's first shots are composed "
+        "from the two runs (default: the matcher's own, 0.5, alone)",
     )
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
@@ -160,8 +252,9 @@ def main() -> None:
         plans.append(("learned_off", 0, physics_off_by(*off, check=False)))
         plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(*off)))
     runs, seconds = {}, {}
+    lowest = args.thresholds[0] if args.thresholds else None
     for name, check, context in plans:
-        with context:
+        with context, checking_over(lowest):
             runs[name], seconds[name] = timed_harness(
                 world, forward, effect, args, forward.novel, f"harness ({name})",
                 settings=MatchSettings(physics_check=check), per_target=True,
@@ -170,6 +263,8 @@ def main() -> None:
     figures = by_part(rows, "learned", "checked", args.targets)
     if args.miscalibrated:
         figures |= by_part(rows, "learned_off", "miscalibrated", args.targets, "_miscalibrated")
+    if args.thresholds:
+        figures |= thresholds_by_part(rows, args.targets, args.thresholds, args.miscalibrated)
     summary = {
         "targets": args.targets,
         "novel_targets": args.novel_targets,
@@ -189,6 +284,9 @@ def main() -> None:
         print(json.dumps(summary, indent=2))
         return
     for part, f in figures.items():
+        if part.startswith("thresholds_"):
+            _print_thresholds(part, f)
+            continue
         if f is None:
             continue
         toners, _, off = part.partition("_")
@@ -211,6 +309,18 @@ def main() -> None:
         print(f"{name}: first shot {_rate(r['first_shot_success'])}, after one correction "
               f"{_rate(r['after_one_correction'])}, new toner {_rate(r['novel_toner_first_shot'])}"
               f" ({seconds[name]:.0f} s)")  # fmt: skip
+
+
+def _print_thresholds(part: str, figures: dict) -> None:
+    toners, _, off = part.removeprefix("thresholds_").partition("_")
+    print(f"{toners} toners" + (", the library off by a lot" if off else "") + ", checked over:")
+    for f in figures["by_threshold"]:
+        gain = "" if f["checked_gain"] is None else f", their chance {f['checked_gain']:+.3f}"
+        se = "" if f["checked_gain_se"] is None else f" ± {f['checked_gain_se']:.3f}"
+        print(f"  {f['threshold']:g} ΔE00: {counted(f['checked_targets'], 'target')} checked"
+              f"{gain}{se}, first-shot chance over all {f['first_chance']:.3f}")  # fmt: skip
+    if figures["mismatches"]:
+        print(f"  the composition does not hold on {counted(figures['mismatches'], 'target')}")
 
 
 def _rate(value: float | None) -> str:
