@@ -1403,11 +1403,22 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
         ratio = rf"\s+{re.escape(fig(drawn[versus]))}" if versus else ""
         row = rf"^\s*{re.escape(name)}\s+{fig(drawn[key])}{ratio}\s+{count}\s*$"
         assert re.search(row, shown, re.M), (row, shown)
-    for family, rates in drawn["by_family"].items():
-        cells = [fig(rates[k]) for k in ("first_shot_success", "after_one_correction",
-                                         "oracle_success", "respray_success")]  # fmt: skip
+    assert sum(rates["targets"] for rates in drawn["novel_by_family"].values()) == 1
+    for family, rates in [
+        *drawn["by_family"].items(),
+        *((f"{f}, new toner", r) for f, r in drawn["novel_by_family"].items()),
+    ]:
+        cells = [
+            fig(rates[k])
+            for k in (
+                "first_shot_success",
+                "after_one_correction",
+                "oracle_success",
+                "respray_success",
+            )
+        ]
         row = rf"^\s*{family}\s+{rates['targets']}\s+" + r"\s+".join(map(re.escape, cells))
-        assert re.search(row, shown, re.M), (row, shown)
+        assert re.search(row, shown, re.M), (row, shown)  # fmt: skip
     assert f"first shot sprayed {drawn['first_shot_de00_median']:.2f}" in shown
     database = str(tmp_path / "empty.db")
     assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", database).returncode == 0

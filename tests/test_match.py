@@ -2045,7 +2045,13 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     assert f"and corrected {fixed} failed first shot" in shown
     assert "The harness: 2 hidden targets with a new toner (seed 3" in shown
     assert "new toner, first shot" in shown and "worst-geometry" not in shown
-    assert "By paint family" not in shown and "oracle: the hidden formula" not in shown
+    assert "oracle: the hidden formula" not in shown
+    families = alone["novel_by_family"]  # the new toner's targets by family, in its table
+    assert sum(f["targets"] for f in families.values()) == 2
+    for family, f in families.items():
+        mine = [t for t in trials if t["family"] == family]
+        assert f["first_shot_success"] == np.mean([t["first"] <= 1.0 for t in mine])
+        assert f"{family}, new toner {len(mine)} {f['first_shot_success']:.3f}" in shown
     assert "new toner, after one correction" in shown
     monkeypatch.setattr(evaluate, "_one", ctrl_c(evaluate._one, 2))
     cut = evaluate.evaluate_matching(world, hybrid, effect, **run)

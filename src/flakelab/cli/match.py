@@ -1035,8 +1035,7 @@ def _print_harness(report: dict) -> None:
             ratio = _share(report[versus]) if versus else ""
             table.add_row(name, _share(report[key]), ratio, str(count))
     console.print(table)
-    if targets:  # a harness of new-toner targets alone (--targets 0) has no families' table
-        console.print(_families_table(report))
+    console.print(_families_table(report))
     lines = [
         *(_errors_lines(report) if targets else []),
         *_harness_options(report),
@@ -1051,7 +1050,8 @@ def _print_harness(report: dict) -> None:
 
 
 def _families_table(report: dict) -> Table:
-    """The harness's rates by paint family, as its first table names them."""
+    """The harness's rates by paint family, as its first table names them: the known toners'
+    targets, then a new toner's (each family against its own oracle)."""
     from flakelab.match.evaluate import FAMILY_FIGURES
     from flakelab.render.plots import HARNESS_CURVES
 
@@ -1061,9 +1061,10 @@ def _families_table(report: dict) -> Table:
     short = {"oracle": "oracle", "respray": "sprayed again"}  # as the rows above name them
     for trial in FAMILY_FIGURES.values():
         families.add_column(short.get(trial, HARNESS_CURVES[trial]), justify="right")
-    for family, figures in report["by_family"].items():
-        families.add_row(family, str(figures["targets"]),
-                         *(_share(figures[key]) for key in FAMILY_FIGURES))  # fmt: skip
+    for part, which in (("by_family", ""), ("novel_by_family", ", new toner")):
+        for family, figures in report[part].items():
+            families.add_row(family + which, str(figures["targets"]),
+                             *(_share(figures[key]) for key in FAMILY_FIGURES))  # fmt: skip
     return families
 
 

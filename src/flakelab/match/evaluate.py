@@ -558,6 +558,7 @@ def evaluate_matching(
             [r for r in rows if r["needs_missing"]], "corrected"
         ),
         "by_family": _by_family(rows, share, mean),
+        "novel_by_family": _by_family(novel_rows, share, mean),
         "targets_read_texture": target_texture,
         "targets_read_colour_alone": colour_alone,
         "after_one_correction": corrected,
