@@ -23,8 +23,9 @@ With ``--thresholds 0.3,0.5,0.8`` it weighs the spread over which the matcher ch
 over the lowest, and each threshold's first shots take a target's checked row where the
 model's spread on its best recipe exceeds that threshold, else its unchecked one. That is
 what a run at the threshold gives, to the spray: each target is matched and sprayed on its
-own streams, and the spread is the learned search's, before any check (the corrections are
-not composed so: a correction is checked on its own spread).
+own streams, and the spread is the learned search's, before any check. The corrections are
+not composed so (a correction is checked on its own spread), and the runs' own figures, the
+paired ones above among them, are then those at the lowest threshold.
 
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
         [--resprays 20] [--model FILE] [--miscalibrated] [--thresholds T,T,...] [--json]
