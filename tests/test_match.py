@@ -1595,8 +1595,9 @@ def test_grams_are_refused_not_predicted_far_outside_the_cases(physics, hybrid):
     """A recipe in grams (a 250 g can) or percent reached the forwards as mass fractions. The
     hybrid renormalises, and the physics of a film that hides hardly changes, but a learned
     model's forward (a model with every toner learned) predicted the blue metallic's 250 g
-    26–117 ΔE00 from its fractions, and its 1.5-times recipe 7–28, without a word. Each numpy
-    entry refuses them, naming the row; the optimiser's own torch path keeps to fractions."""
+    26–117 ΔE00 from its fractions, and its 1.5-times recipe 7–28, without a word. The judge
+    (evaluate_recipes, which the spread and every report go through) and the model's predict
+    refuse them, naming the row; the optimiser's own torch path keeps to fractions."""
     from flakelab.core.colorimetry import reflectance_to_Lab
     from flakelab.core.difference import delta_E
     from flakelab.core.units import FRACTION_SUM_TOLERANCE
