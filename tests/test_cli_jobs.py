@@ -1459,6 +1459,12 @@ def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
         f"{fig(report['novel_oracle_chance'])})" in shown
     )
     assert report["novel_oracle_chance"] is not None  # one new-toner target, two resprays
+    # a new toner's targets that needed the missing toner are counted apart from the others
+    needing = f"1 target with a new toner, first shot {fig(0.0)}"
+    assert needing not in shown and report["novel_needing_missing_targets"] == 0
+    _print_harness(report | {"novel_needing_missing_targets": 1,
+                             "novel_needing_missing_first_shot": 0.0})  # fmt: skip
+    assert needing in " ".join(capsys.readouterr().out.split())
     assert f"strength RMS {report['lot_strength_error_rms']:.3f}" in shown
     # how the targets were read is said only where it differs from a spectral export's
     assert "L*a*b* alone" not in shown and "without their texture" not in shown

@@ -557,6 +557,10 @@ def evaluate_matching(
         "needing_missing_after_one_correction": share(
             [r for r in rows if r["needs_missing"]], "corrected"
         ),
+        "novel_needing_missing_targets": sum(r["needs_missing"] for r in novel_rows),
+        "novel_needing_missing_first_shot": share(
+            [r for r in novel_rows if r["needs_missing"]], "first"
+        ),
         "by_family": _by_family(rows, share, mean),
         "novel_by_family": _by_family(novel_rows, share, mean),
         "targets_read_texture": target_texture,
