@@ -54,30 +54,37 @@ from flakelab.match.lots import WithLots
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
 
 
+def column(rows: list[dict], key: str) -> np.ndarray:
+    """The harness's per-target figure ``key`` of ``rows``, as floats."""
+    return np.array([r[key] for r in rows], dtype=float)
+
+
+def spreads(rows: list[dict]) -> np.ndarray:
+    """The ensemble's spread on each target's best recipe before any check (ΔE00; 0 for one
+    network, which is never checked)."""
+    return np.array([r["predicted_spread"] or 0.0 for r in rows])
+
+
 def paired(learned: list[dict], checked: list[dict]) -> dict:
     """The first shot's chance of the harness's rows ``learned`` (no check) and ``checked``
     (the same targets, with it), on the targets the physics checked and over all; the hidden
     formulas' chance on those targets; and their latency, p50 and p95 over all targets."""
     mask = np.array([r["physics_checked"] for r in checked])
-
-    def chances(rows: list[dict], key: str) -> np.ndarray:
-        return np.array([r[key] for r in rows], dtype=float)
-
-    before, after = chances(learned, "first_chance"), chances(checked, "first_chance")
+    before, after = column(learned, "first_chance"), column(checked, "first_chance")
     gain = after[mask] - before[mask]
     family = np.array([r["family"] for r in checked])
     latency = {
-        name: [float(np.percentile(chances(rows, "latency_s"), q)) for q in (50, 95)]
+        name: [float(np.percentile(column(rows, "latency_s"), q)) for q in (50, 95)]
         for name, rows in (("learned", learned), ("checked", checked))
     }
-    added = (chances(checked, "latency_s") - chances(learned, "latency_s"))[mask]
+    added = (column(checked, "latency_s") - column(learned, "latency_s"))[mask]
     return {
         "checked_targets": int(mask.sum()),
         "checked_by_family": {str(f): int((mask & (family == f)).sum()) for f in np.unique(family)},
         "checked_first_chance_learned": float(before[mask].mean()) if mask.any() else None,
         "checked_first_chance_physics": float(after[mask].mean()) if mask.any() else None,
         "checked_gain_se": mean_and_se(gain)[1],
-        "checked_oracle_chance": float(chances(checked, "oracle_chance")[mask].mean())
+        "checked_oracle_chance": float(column(checked, "oracle_chance")[mask].mean())
         if mask.any()
         else None,
         "first_chance_learned": float(before.mean()),
@@ -93,11 +100,7 @@ def by_threshold(learned: list[dict], checked: list[dict], thresholds: list[floa
     ``thresholds`` (ΔE00): each target's row of ``checked`` (a run checking over the lowest)
     where its unchecked best recipe's spread exceeds the threshold, else its row of
     ``learned``; the checked targets' paired gain, and what the check added to their match."""
-
-    def column(rows: list[dict], key: str) -> np.ndarray:
-        return np.array([r[key] for r in rows], dtype=float)
-
-    spread = np.array([r["predicted_spread"] or 0.0 for r in learned])  # one network: never
+    spread = spreads(learned)
     before, after = column(learned, "first_chance"), column(checked, "first_chance")
     added = column(checked, "latency_s") - column(learned, "latency_s")
     figures = []
@@ -118,7 +121,7 @@ def by_threshold(learned: list[dict], checked: list[dict], thresholds: list[floa
 def composed_mismatches(learned: list[dict], checked: list[dict], lowest: float) -> int:
     """Targets the run checking over ``lowest`` checked where the learned run's spread says it
     would not, or the other way round: 0 where :func:`by_threshold`'s composition holds."""
-    would = np.array([(r["predicted_spread"] or 0.0) > lowest for r in learned])
+    would = spreads(learned) > lowest
     return int((would != np.array([r["physics_checked"] for r in checked])).sum())
 
 
@@ -290,9 +293,7 @@ def main() -> None:
             continue
         if f is None:
             continue
-        toners, _, off = part.partition("_")
-        label = f"{toners} toners" + (", the library off by a lot" if off else "")
-        print(f"{label}: over all, first-shot chance {f['first_chance_learned']:.3f} → "
+        print(f"{_part_label(part)}: over all, first-shot chance {f['first_chance_learned']:.3f} → "
               f"{f['first_chance_checked']:.3f}; the physics checked "
               f"{counted(f['checked_targets'], 'target')} {f['checked_by_family']}")  # fmt: skip
         if f["checked_targets"]:
@@ -312,9 +313,15 @@ def main() -> None:
               f" ({seconds[name]:.0f} s)")  # fmt: skip
 
 
-def _print_thresholds(part: str, figures: dict) -> None:
+def _part_label(part: str) -> str:
+    """A part of the figures (``known``, ``novel_miscalibrated``, ``thresholds_known``…) in
+    words."""
     toners, _, off = part.removeprefix("thresholds_").partition("_")
-    print(f"{toners} toners" + (", the library off by a lot" if off else "") + ", checked over:")
+    return f"{toners} toners" + (", the library off by a lot" if off else "")
+
+
+def _print_thresholds(part: str, figures: dict) -> None:
+    print(f"{_part_label(part)}, checked over:")
     for f in figures["by_threshold"]:
         gain = "" if f["checked_gain"] is None else f", their chance {f['checked_gain']:+.3f}"
         se = "" if f["checked_gain_se"] is None else f" ± {f['checked_gain_se']:.3f}"

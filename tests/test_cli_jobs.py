@@ -1418,7 +1418,7 @@ def test_the_harness_names_its_model_and_takes_no_workplace_shop(tmp_path, cli):
             )
         ]
         row = rf"^\s*{family}\s+{rates['targets']}\s+" + r"\s+".join(map(re.escape, cells))
-        assert re.search(row, shown, re.M), (row, shown)  # fmt: skip
+        assert re.search(row, shown, re.M), (row, shown)
     assert f"first shot sprayed {drawn['first_shot_de00_median']:.2f}" in shown
     database = str(tmp_path / "empty.db")
     assert cli("cases", "generate", "--n", "1", "--seed", "1", "--out", database).returncode == 0

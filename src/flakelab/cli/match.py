@@ -1105,16 +1105,16 @@ def _harness_options(report: dict) -> list[str]:
     the shop matched with were from the true ones (``--lots``)."""
     lines = []
     if report["without"]:
-        novel = report["novel_needing_missing_targets"]
+        novel_needing = report["novel_needing_missing_targets"]
         lines.append(
             f"{counted(report['needing_missing_targets'], 'target')} needed "
             f"{', '.join(report['without'])}, out of stock: first shot "
             f"{_share(report['needing_missing_first_shot'])}, after one correction "
             f"{_share(report['needing_missing_after_one_correction'])}"
             + (
-                f"; {counted(novel, 'target')} with a new toner, first shot "
+                f"; {counted(novel_needing, 'target')} with a new toner, first shot "
                 f"{_share(report['novel_needing_missing_first_shot'])}"
-                if novel
+                if novel_needing
                 else ""
             )
         )

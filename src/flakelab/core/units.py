@@ -25,9 +25,7 @@ def is_number(value: object) -> bool:
     return isinstance(value, Real) and not isinstance(value, bool)
 
 
-def check_mass_fractions(
-    fractions: np.ndarray, what: str = "fractions", error: type[Exception] = ValueError
-) -> None:
+def check_mass_fractions(fractions: np.ndarray, error: type[Exception] = ValueError) -> None:
     """Refuse recipes ``fractions[N, T]`` that are not mass fractions: each row finite, none
     below zero and summing to one (within :data:`FRACTION_SUM_TOLERANCE`), naming the first
     row that is not."""
@@ -48,7 +46,7 @@ def check_mass_fractions(
     else:
         problem = f"sums to {sums[row]:g}, not 1"
     raise error(
-        f"{what}: row {row} {problem}: a recipe's amounts are mass fractions of the can "
+        f"fractions: row {row} {problem}: a recipe's amounts are mass fractions of the can "
         "(divide grams by the can's total)"
     )
 
