@@ -27,8 +27,14 @@ own streams, and the spread is the learned search's, before any check. The corre
 not composed so (a correction is checked on its own spread), and the runs' own figures, the
 paired ones above among them, are then those at the lowest threshold.
 
+With ``--lots calibrated`` (or ``referenced``, ``known``: ``flakelab match evaluate
+--lots``) every run's shop predicts for its own tins, read from its calibration panels, and
+the physics check's physics then does too (:func:`~flakelab.match.physics_check.physics_for`);
+through the library off by a lot, the tins are still read with the exact library.
+
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
-        [--resprays 20] [--model FILE] [--miscalibrated] [--thresholds T,T,...] [--json]
+        [--resprays 20] [--model FILE] [--miscalibrated] [--thresholds T,T,...]
+        [--lots none|calibrated|referenced|known] [--json]
 """
 
 from __future__ import annotations
@@ -48,7 +54,7 @@ from _matcher import (
     timed_harness,
 )
 from flakelab.core.wording import counted
-from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD
+from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TIN_KNOWLEDGE
 from flakelab.match import physics_check, search
 from flakelab.match.lots import WithLots
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
@@ -241,6 +247,13 @@ def main() -> None:
         "checked runs check over the lowest, and each threshold's first shots are composed "
         "from the two runs (default: the matcher's own, 0.5, alone)",
     )
+    parser.add_argument(
+        "--lots",
+        choices=TIN_KNOWLEDGE,
+        default="none",
+        help="what every run's shop knows of its tins, as 'flakelab match evaluate --lots' "
+        "(default: none, every tin taken at the standard)",
+    )
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
     world, forward, effect = shipped_ensemble(parser, args)
@@ -261,7 +274,7 @@ def main() -> None:
         with context, checking_over(lowest):
             runs[name], seconds[name] = timed_harness(
                 world, forward, effect, args, forward.novel, f"harness ({name})",
-                settings=MatchSettings(physics_check=check), per_target=True,
+                settings=MatchSettings(physics_check=check), per_target=True, lots=args.lots,
             )  # fmt: skip
     rows = {name: report["per_target"] for name, report in runs.items()}
     figures = by_part(rows, "learned", "checked", args.targets)
@@ -274,6 +287,7 @@ def main() -> None:
         "novel_targets": args.novel_targets,
         "seed": args.seed,
         "resprays": args.resprays,
+        "lots": args.lots,
         "physics_check": PHYSICS_CHECK,
         "library_error": library_error,
         **{
