@@ -29,8 +29,10 @@ paired ones above among them, are then those at the lowest threshold.
 
 With ``--lots calibrated`` (or ``referenced``, ``known``: ``flakelab match evaluate
 --lots``) every run's shop predicts for its own tins, read from its calibration panels, and
-the physics check's physics then does too (:func:`~flakelab.match.physics_check.physics_for`);
-through the library off by a lot, the tins are still read with the exact library.
+the physics check's physics then does too (:func:`~flakelab.match.physics_check.physics_for`).
+Through the library off by a lot only the check's physics and the hybrid's scaling are off:
+the tins are read, and the learned model's shade moved, by the exact library's physics
+(ratios of its predictions, in which a lot's error mostly cancels).
 
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
         [--resprays 20] [--model FILE] [--miscalibrated] [--thresholds T,T,...]
