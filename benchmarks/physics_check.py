@@ -2,12 +2,12 @@
 
 ``flakelab match`` refines its best candidates through the library's physics where the
 networks of the model's ensemble disagree on the best one by more than
-:data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` (``MatchSettings.physics_check``,
-``--physics-check``). This runs the evaluation harness (``flakelab match evaluate``) twice on
-the same targets, without the check (the baseline) and with it, each first recipe sprayed
-``--resprays`` times more, and compares the first shot's chance on the targets the physics
-checked (paired: the same targets and spray streams) and over all, with the hidden formulas'
-chance there, and the latency.
+:func:`~flakelab.match.physics_check.check_over` (0.5 ΔE00, 1.0 for an MA-T12 model;
+``MatchSettings.physics_check``, ``--physics-check``). This runs the evaluation harness
+(``flakelab match evaluate``) twice on the same targets, without the check (the baseline)
+and with it, each first recipe sprayed ``--resprays`` times more, and compares the first
+shot's chance on the targets the physics checked (paired: the same targets and spray
+streams) and over all, with the hidden formulas' chance there, and the latency.
 
 In the harness the library's physics is the world's own nominal physics: a library as well
 calibrated as a library can be. With ``--miscalibrated`` two more runs, unchecked and
@@ -20,7 +20,7 @@ scaling for a new toner goes through that library in both. ``--only-miscalibrate
 those two alone, in half the time, for more seeds of the realistic library.
 
 With ``--thresholds 0.3,0.5,0.8`` it weighs the spread over which the matcher checks
-(:data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`, 0.5 ΔE00): the checked runs check
+(:func:`~flakelab.match.physics_check.check_over`): the checked runs check
 over the lowest, and each threshold's first shots take a target's checked row where the
 model's spread on its best recipe exceeds that threshold, else its unchecked one. That is
 what a run at the threshold gives, to the spray: each target is matched and sprayed on its
@@ -136,13 +136,15 @@ def composed_mismatches(learned: list[dict], checked: list[dict], lowest: float)
 
 @contextlib.contextmanager
 def checking_over(threshold: float | None) -> Iterator[None]:
-    """The physics check acting over the spread ``threshold`` (None: the matcher's own)."""
-    default = physics_check.MODEL_SPREAD_NOTICE
-    physics_check.MODEL_SPREAD_NOTICE = default if threshold is None else threshold
+    """The physics check acting over the spread ``threshold`` (None: the matcher's own,
+    :func:`~flakelab.match.physics_check.check_over`)."""
+    default = physics_check.check_over
+    if threshold is not None:
+        physics_check.check_over = lambda geometries: threshold
     try:
         yield
     finally:
-        physics_check.MODEL_SPREAD_NOTICE = default
+        physics_check.check_over = default
 
 
 def thresholds_from(text: str) -> list[float]:
@@ -255,7 +257,7 @@ def main() -> None:
         type=thresholds_from,
         help="spreads (ΔE00) to compare as the check's threshold, e.g. 0.3,0.5,0.8: the "
         "checked runs check over the lowest, and each threshold's first shots are composed "
-        "from the two runs (default: the matcher's own, 0.5, alone)",
+        "from the two runs (default: the matcher's own alone, 0.5 or the MA-T12's 1.0)",
     )
     parser.add_argument(
         "--lots",

@@ -1725,6 +1725,28 @@ def test_a_paint_the_model_knows_little_is_refined_by_the_physics(
     assert not any("disagree on its best recipe" in n for n in example_notes[1.0])
 
 
+def test_the_physics_checks_an_ma_t12_model_over_a_wider_spread():
+    """The MA-T12's spread is the worst of twelve geometries, and checking it over 0.5 lost
+    first shots on the targets between 0.5 and 1.0 through a library off by a lot (stop 124):
+    its shipped model is checked over 1.0, the five-angle's over ``MODEL_SPREAD_NOTICE``. A
+    disagreement of 0.7 at one geometry sends the five-angle model to the physics and not the
+    MA-T12's; 1.1 sends both; one network (no spread) neither. The help says both."""
+    from flakelab.match.physics_check import check_over, needs_physics
+    from flakelab.match.settings import MODEL_SPREAD_NOTICE, physics_check_words
+    from flakelab.models.registry import shipped_model
+
+    for instrument, over in (("five-angle", MODEL_SPREAD_NOTICE), ("ma-t12", 1.0)):
+        geometries = shipped_model(instrument).geometries
+        assert check_over(geometries) == over
+        spread = np.full(len(geometries), 0.2)
+        spread[-1] = 0.7
+        assert needs_physics(spread, geometries) == (instrument == "five-angle")
+        spread[0] = 1.1
+        assert needs_physics(spread, geometries)
+        assert not needs_physics(None, geometries)
+    assert physics_check_words() == "0.5 ΔE00 (1.0 for an ma-t12 model)"
+
+
 def test_a_recipe_the_model_knows_little_is_corrected_by_the_physics(hybrid, xirallic_red_learned):
     """The learned recipe for the dark Xirallic red, sprayed nominally, misses by 4.91 ΔE00 at
     45as15, where the ensemble's networks disagree on it by 2.03 (stop 115's model; stop

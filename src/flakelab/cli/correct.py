@@ -62,9 +62,9 @@ from flakelab.errors import FlakelabError
 from flakelab.match.settings import (
     EXTRA_TONERS_TRIED,
     MODEL_SD,
-    MODEL_SPREAD_NOTICE,
     SCALE_RESOLUTION_G,
     MatchSettings,
+    physics_check_words,
 )
 
 
@@ -128,7 +128,7 @@ def correct_command(
         typer.Option(
             "--physics-check/--no-physics-check",
             help="Where the model's networks disagree on the sprayed recipe by over "
-            f"{MODEL_SPREAD_NOTICE:g} ΔE00 (its cases too few), the library's physics "
+            f"{physics_check_words()} (its cases too few), the library's physics "
             "corrects in the model's place (--no-physics-check: the learned model's).",
         ),
     ] = True,

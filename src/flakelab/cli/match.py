@@ -72,11 +72,11 @@ from flakelab.core.wording import counted, database_label, hidden_passwords
 from flakelab.errors import FlakelabError
 from flakelab.match.settings import (
     CAN_QUANTITY,
-    MODEL_SPREAD_NOTICE,
     PHYSICS_CHECK,
     SCALE_RESOLUTION_G,
     SOLID_TRAVEL_FROM,
     MatchSettings,
+    physics_check_words,
 )
 
 NEAREST_OF_A_CODE = 5
@@ -175,7 +175,7 @@ def match_command(
         typer.Option(
             "--physics-check/--no-physics-check",
             help="Where the model's networks disagree on the best recipe by over "
-            f"{MODEL_SPREAD_NOTICE:g} ΔE00 (its cases too few), the library's physics refines "
+            f"{physics_check_words()} (its cases too few), the library's physics refines "
             "the best recipes and predicts every candidate (--no-physics-check: the learned "
             "model's recipes and numbers throughout).",
         ),
@@ -1094,7 +1094,7 @@ def _physics_checked_line(report: dict) -> str:
     return (
         f"the physics refined the recipes of {counted(checked, 'target')} and corrected "
         f"{counted(corrected, 'failed first shot')}, where the model's networks disagreed by "
-        f"over {MODEL_SPREAD_NOTICE:g} ΔE00 (--physics-check)"
+        f"over {physics_check_words()} (--physics-check)"
     )
 
 

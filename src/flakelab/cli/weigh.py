@@ -36,7 +36,7 @@ from flakelab.cli.sources import (
 )
 from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.errors import FlakelabError
-from flakelab.match.settings import CAN_QUANTITY, MODEL_SPREAD_NOTICE, SCALE_RESOLUTION_G
+from flakelab.match.settings import CAN_QUANTITY, SCALE_RESOLUTION_G, physics_check_words
 
 
 def weigh_command(
@@ -84,7 +84,7 @@ def weigh_command(
         typer.Option(
             "--physics-check/--no-physics-check",
             help="With --poured: where the model's networks disagree on the can or its recipe "
-            f"by over {MODEL_SPREAD_NOTICE:g} ΔE00 (its cases too few), the library's physics "
+            f"by over {physics_check_words()} (its cases too few), the library's physics "
             "dilutes in the model's place (--no-physics-check: the learned model's).",
         ),
     ] = True,

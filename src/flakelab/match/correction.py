@@ -60,11 +60,10 @@ from flakelab.match.forward import film_of, stepping
 from flakelab.match.judging import evaluate_recipes, recipe_spread
 from flakelab.match.mixups import SPRAYOUT_MISMATCH, mismatch_message, sprayout_mismatch
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective
-from flakelab.match.physics_check import checked_forward, disagreement_words
+from flakelab.match.physics_check import check_over, checked_forward, disagreement_words
 from flakelab.match.settings import (
     EXTRA_TONERS_TRIED,
     MODEL_SD,
-    MODEL_SPREAD_NOTICE,
     NOISE_SD,
     PERSISTENT_SD,
     SCALE_RESOLUTION_G,
@@ -192,7 +191,7 @@ def physics_checked_note(
     geometries = correction.predicted_by.geometries
     return (
         f"{disagreement_words(spread, geometries, unsure_of)}, over "
-        f"{MODEL_SPREAD_NOTICE:g}: the cases taught it little about paints like this one, so "
+        f"{check_over(geometries):.1f}: the cases taught it little about paints like this one, so "
         "the library's physics made the correction and predicts its figures "
         "(--no-physics-check keeps the model's)"
     )

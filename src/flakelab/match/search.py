@@ -25,7 +25,8 @@
    differences, the tolerance — plus a small penalty per toner, and return the best distinct
    candidates (:mod:`flakelab.match.judging`).
 6. **Physics check**, only where the learned model's ensemble disagrees on the best candidate
-   by more than :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`: there its cases were
+   by more than :func:`~flakelab.match.physics_check.check_over` (0.5 ΔE00, 1.0 at the
+   MA-T12's twelve geometries): there its cases were
    too few, so the best few candidates are refined over their own toners through the
    library's physics, which then judges every candidate (DESIGN.md §3's hybrid;
    :data:`~flakelab.match.settings.PHYSICS_CHECK`; :mod:`flakelab.match.physics_check`).
@@ -82,7 +83,12 @@ from flakelab.match.judging import (
     recipe_vector,
 )
 from flakelab.match.objective import OBJECTIVE_DEFAULT, MatchObjective, MetamerismTangent
-from flakelab.match.physics_check import disagreement_words, is_unsure, physics_for
+from flakelab.match.physics_check import (
+    disagreement_words,
+    is_unsure,
+    needs_physics,
+    physics_for,
+)
 from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings, without_metamerism
 from flakelab.match.stock import toners_allowed
 from flakelab.match.support import below_effect_floor, outside_note, outside_support, trace_toners
@@ -799,10 +805,13 @@ def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
 
 
 def _physics_check(forward, library, best: Candidate | None, settings: MatchSettings):
-    """The library's physics as the matcher predicts with it where the learned model is
-    :func:`_unsure` of its ``best`` candidate (:func:`~flakelab.match.physics_check.physics_for`),
-    or None: the model sure, ``settings.physics_check`` 0, or no physics to stand in."""
-    if not (settings.physics_check and _unsure(best)):
+    """The library's physics as the matcher predicts with it where the learned model's
+    ensemble disagrees on its ``best`` candidate by over its
+    :func:`~flakelab.match.physics_check.check_over`
+    (:func:`~flakelab.match.physics_check.physics_for`), or None: the model sure enough,
+    ``settings.physics_check`` 0, or no physics to stand in."""
+    checking = settings.physics_check and best is not None
+    if not (checking and needs_physics(best.spread, forward.geometries)):
         return None
     return physics_for(forward, library)
 
