@@ -1459,6 +1459,7 @@ def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
         f"{fig(report['novel_oracle_chance'])})" in shown
     )
     assert report["novel_oracle_chance"] is not None  # one new-toner target, two resprays
+    assert report["physics_check_over"] == 0.5  # the five-angle model's (an MA-T12's 1.0)
     # a new toner's targets that needed the missing toner are counted apart from the others
     needing = f"1 target with a new toner, first shot {fig(0.0)}"
     assert needing not in shown and report["novel_needing_missing_targets"] == 0

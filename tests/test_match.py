@@ -2062,10 +2062,11 @@ def test_a_new_toner_s_targets_are_judged_alone(hybrid, monkeypatch, ctrl_c, cap
     fixed = sum(t["correction_physics_checked"] for t in trials)  # the new toner's corrected too
     assert alone["novel_correction_physics_checked_targets"] == fixed
     report = alone | {"model": hybrid.name, "model_id": hybrid.model_id, "physics_check": 3,
-                      "world": "shop"}  # fmt: skip
+                      "physics_check_over": 0.5, "world": "shop"}  # fmt: skip
     _print_harness(report)
     shown = " ".join(capsys.readouterr().out.split())
     assert f"and corrected {fixed} failed first shot" in shown
+    assert "where the model's networks disagreed by over 0.5 ΔE00" in shown
     assert "The harness: 2 hidden targets with a new toner (seed 3" in shown
     assert "new toner, first shot" in shown and "worst-geometry" not in shown
     assert "oracle: the hidden formula" not in shown

@@ -913,6 +913,7 @@ def _evaluate(
     from flakelab.library.lots import TIN_KNOWLEDGE
     from flakelab.match.evaluate import evaluate_matching, harness_world
     from flakelab.match.objective import OBJECTIVE_DEFAULT
+    from flakelab.match.physics_check import check_over
     from flakelab.match.stock import toners_allowed
 
     tol = read_tolerance(tolerance or OBJECTIVE_DEFAULT)
@@ -969,6 +970,7 @@ def _evaluate(
     report["model_id"] = forward.model_id
     report["model_risk"] = settings.model_risk
     report["physics_check"] = settings.physics_check
+    report["physics_check_over"] = check_over(forward.geometries)
     report["metamerism_weight"] = settings.metamerism
     report["metamerism_lights"] = list(settings.lights or METAMERISM_ILLUMINANTS)
     report["solid_travel"] = settings.solid_travel
@@ -1094,7 +1096,7 @@ def _physics_checked_line(report: dict) -> str:
     return (
         f"the physics refined the recipes of {counted(checked, 'target')} and corrected "
         f"{counted(corrected, 'failed first shot')}, where the model's networks disagreed by "
-        f"over {physics_check_words()} (--physics-check)"
+        f"over {report['physics_check_over']:.1f} ΔE00 (--physics-check)"
     )
 
 

@@ -91,7 +91,7 @@ gained (FIGURES). At the five-angle 0.5 led 1.0 on both of stop 122's seeds."""
 
 def physics_check_words() -> str:
     """The spreads over which the library's physics checks the model, as the command line's
-    help and the harness's summary say them: ``0.5 ΔE00 (1.0 for an ma-t12 model)``."""
+    help says them: ``0.5 ΔE00 (1.0 for an ma-t12 model)``."""
     others = ", ".join(f"{v:.1f} for an {k} model" for k, v in PHYSICS_CHECK_OVER.items())
     return f"{MODEL_SPREAD_NOTICE:.1f} ΔE00" + (f" ({others})" if others else "")
 
