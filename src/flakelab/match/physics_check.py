@@ -4,8 +4,8 @@ Where the networks of the shipped ensemble disagree on a recipe by more than
 :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` ΔE00 at some geometry, the cases taught
 the model little about such a paint, and its recipes pass their first spray a third less
 often. There (over :func:`check_over`: 1.0 at the MA-T12's twelve geometries) the library's
-physics answers in its place, as DESIGN.md §3's hybrid does for a
-toner with too few cases: the search refines its best recipes through it
+physics answers in its place, as DESIGN.md §3's hybrid does for a toner with too few cases:
+the search refines its best recipes through it
 (:func:`flakelab.match.search.match`, ``MatchSettings.physics_check``), and the correction
 corrects through it (:func:`flakelab.match.correction.correct`, ``physics_check``).
 """
@@ -33,7 +33,7 @@ __all__ = [
 def is_unsure(spread: NDArray | None) -> bool:
     """Whether an ensemble's disagreement ``spread`` (ΔE00 per geometry; None: one network,
     or the physics) exceeds :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` somewhere."""
-    return spread is not None and float(np.max(spread)) > MODEL_SPREAD_NOTICE
+    return _exceeds(spread, MODEL_SPREAD_NOTICE)
 
 
 def check_over(geometries) -> float:
@@ -46,7 +46,11 @@ def check_over(geometries) -> float:
 def needs_physics(spread: NDArray | None, geometries) -> bool:
     """Whether an ensemble's disagreement ``spread`` (ΔE00 per geometry of ``geometries``;
     None: one network, or the physics) exceeds :func:`check_over` somewhere."""
-    return spread is not None and float(np.max(spread)) > check_over(geometries)
+    return _exceeds(spread, check_over(geometries))
+
+
+def _exceeds(spread: NDArray | None, threshold: float) -> bool:
+    return spread is not None and float(np.max(spread)) > threshold
 
 
 def disagreement_words(spread: NDArray, geometries, recipe: str) -> str:

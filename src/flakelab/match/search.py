@@ -26,10 +26,10 @@
    candidates (:mod:`flakelab.match.judging`).
 6. **Physics check**, only where the learned model's ensemble disagrees on the best candidate
    by more than :func:`~flakelab.match.physics_check.check_over` (0.5 ΔE00, 1.0 at the
-   MA-T12's twelve geometries): there its cases were
-   too few, so the best few candidates are refined over their own toners through the
-   library's physics, which then judges every candidate (DESIGN.md §3's hybrid;
-   :data:`~flakelab.match.settings.PHYSICS_CHECK`; :mod:`flakelab.match.physics_check`).
+   MA-T12's twelve geometries): there its cases were too few, so the best few candidates are
+   refined over their own toners through the library's physics, which then judges every
+   candidate (DESIGN.md §3's hybrid; :data:`~flakelab.match.settings.PHYSICS_CHECK`;
+   :mod:`flakelab.match.physics_check`).
 
 Every stage aims at the colorist's tolerance: the optimiser's loss and the judging's score
 count each geometry's error as a share of its limit, with the tolerance's kL, kC, kH
@@ -805,11 +805,10 @@ def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
 
 
 def _physics_check(forward, library, best: Candidate | None, settings: MatchSettings):
-    """The library's physics as the matcher predicts with it where the learned model's
-    ensemble disagrees on its ``best`` candidate by over its
-    :func:`~flakelab.match.physics_check.check_over`
-    (:func:`~flakelab.match.physics_check.physics_for`), or None: the model sure enough,
-    ``settings.physics_check`` 0, or no physics to stand in."""
+    """The library's physics (:func:`~flakelab.match.physics_check.physics_for`) as the
+    matcher predicts with it where the learned model's ensemble disagrees on its ``best``
+    candidate by over :func:`~flakelab.match.physics_check.check_over`, or None: the model
+    sure enough, ``settings.physics_check`` 0, or no physics to stand in."""
     checking = settings.physics_check and best is not None
     if not (checking and needs_physics(best.spread, forward.geometries)):
         return None
