@@ -221,6 +221,11 @@ PAIRS = (("", "learned", "checked"), ("_miscalibrated", "learned_off", "miscalib
 off by a lot (the figures' keys' suffix, the baseline's name, the checked run's)."""
 
 
+def pairs_run(rows: dict[str, list[dict]]) -> list[tuple[str, str, str]]:
+    """The :data:`PAIRS` whose checked run ``rows`` holds (``--only-miscalibrated`` runs one)."""
+    return [p for p in PAIRS if p[2] in rows]
+
+
 def thresholds_by_part(
     rows: dict[str, list[dict]], known: int, thresholds: list[float]
 ) -> dict[str, dict]:
@@ -228,7 +233,7 @@ def thresholds_by_part(
     library ``rows`` has runs through (:data:`PAIRS`), with each pair's
     :func:`composed_mismatches`."""
     figures = {}
-    for suffix, baseline, run in (p for p in PAIRS if p[2] in rows):
+    for suffix, baseline, run in pairs_run(rows):
         for part, where in (("known", slice(None, known)), ("novel", slice(known, None))):
             learned, checked = rows[baseline][where], rows[run][where]
             if learned:
@@ -290,7 +295,7 @@ def main() -> None:
             )  # fmt: skip
     rows = {name: report["per_target"] for name, report in runs.items()}
     figures = {}
-    for suffix, baseline, run in (p for p in PAIRS if p[2] in rows):
+    for suffix, baseline, run in pairs_run(rows):
         figures |= by_part(rows, baseline, run, args.targets, suffix)
     if args.thresholds:
         figures |= thresholds_by_part(rows, args.targets, args.thresholds)
