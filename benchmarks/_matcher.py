@@ -60,6 +60,17 @@ def mean_and_se(values: np.ndarray) -> tuple[float | None, float | None]:
     return float(values.mean()), se
 
 
+def thresholds_from(text: str) -> list[float]:
+    """``"0.3,0.5,0.8"`` → sorted positive spreads [ΔE00]."""
+    try:
+        values = sorted({float(part) for part in text.split(",") if part.strip()})
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected numbers, e.g. 0.3,0.5,0.8") from None
+    if not values or values[0] <= 0 or not np.isfinite(values[-1]):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected positive spreads, e.g. 0.3,0.5,0.8")
+    return values
+
+
 def parse_with_chances(parser: argparse.ArgumentParser) -> argparse.Namespace:
     """``parser``'s options, ``--resprays`` refused under 1: the chances need them."""
     args = parser.parse_args()

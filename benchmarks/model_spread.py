@@ -10,7 +10,11 @@ baseline), for every target and by paint family. The recipes are the model's own
 ``--no-physics-check`` leaves them (``benchmarks/physics_check.py`` measures the check).
 
     python benchmarks/model_spread.py [--targets 200] [--novel-targets 50] [--seed 4242]
-        [--resprays 10] [--notice 0.5] [--model FILE] [--json]
+        [--resprays 10] [--notice 0.5] [--notices 0.3,0.4,0.5,0.7,1.0] [--model FILE] [--json]
+
+``--notices`` weighs where the note might stand: for each, the targets over it, their chance
+and the rest's, and how much lower theirs is, with its standard error (over targets; each
+target's chance is the share of its sprays that passed).
 """
 
 from __future__ import annotations
@@ -20,11 +24,45 @@ import json
 
 import numpy as np
 
-from _matcher import add_harness_arguments, parse_with_chances, shipped_ensemble, timed_harness
+from _matcher import (
+    add_harness_arguments,
+    mean_and_se,
+    parse_with_chances,
+    shipped_ensemble,
+    thresholds_from,
+    timed_harness,
+)
 from flakelab.match.settings import MODEL_SPREAD_NOTICE, MatchSettings
 
 BANDS = (0.0, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, np.inf)
 """Edges of the disagreement bands [ΔE00]."""
+
+NOTICES = "0.3,0.4,0.5,0.7,1.0"
+"""Where the note might stand (``--notices``) [ΔE00]."""
+
+
+def chance_by_notice(rows: list[dict], notices: list[float]) -> list[dict]:
+    """For each of ``notices``: the harness's ``rows`` whose best candidate's disagreement
+    exceeds it, their first shot's chance and the rest's, and the rest's lead over them with
+    its standard error (the two groups' errors in quadrature)."""
+    spread = np.array([r["predicted_spread"] for r in rows], dtype=float)
+    chance = np.array([r["first_chance"] for r in rows], dtype=float)
+    figures = []
+    for notice in notices:
+        over = spread > notice
+        mean_over, se_over = mean_and_se(chance[over])
+        mean_under, se_under = mean_and_se(chance[~over])
+        known = None not in (mean_over, mean_under)
+        errors = None if None in (se_over, se_under) else float(np.hypot(se_over, se_under))
+        figures.append({
+            "notice": notice,
+            "targets_over": int(over.sum()),
+            "first_shot_chance_over": mean_over,
+            "first_shot_chance_under": mean_under,
+            "lead_of_the_rest": mean_under - mean_over if known else None,
+            "lead_of_the_rest_se": errors,
+        })  # fmt: skip
+    return figures
 
 
 def chance_by_spread(rows: list[dict], notice: float) -> dict:
@@ -75,6 +113,8 @@ def main() -> None:
     add_harness_arguments(parser, targets=200, novel_targets=50)
     parser.add_argument("--notice", type=float, default=MODEL_SPREAD_NOTICE,
                         help="the disagreement [ΔE00] the match's note names")  # fmt: skip
+    parser.add_argument("--notices", type=thresholds_from, default=thresholds_from(NOTICES),
+                        help=f"where the note might stand, e.g. {NOTICES} [ΔE00]")  # fmt: skip
     parser.set_defaults(resprays=10)
     args = parse_with_chances(parser)
     world, forward, effect = shipped_ensemble(parser, args)
@@ -84,6 +124,7 @@ def main() -> None:
         settings=MatchSettings(physics_check=0), per_target=True,
     )  # fmt: skip
     figures = chance_by_spread(report["per_target"], args.notice)
+    figures["by_notice"] = chance_by_notice(report["per_target"], args.notices)
     summary = {
         "targets": args.targets,
         "novel_targets": args.novel_targets,
@@ -111,6 +152,13 @@ def main() -> None:
         shown = [f"{r['targets']} at {r['first_shot_chance']:.3f}" if r["targets"] else "none"
                  for r in (over, under)]  # fmt: skip
         print(f"{name:>9}: over {args.notice:g}: {shown[0]}; the rest: {shown[1]}")
+    for row in figures["by_notice"]:
+        if row["lead_of_the_rest"] is not None:
+            se = row["lead_of_the_rest_se"]
+            print(f"  note over {row['notice']:g}: {row['targets_over']:3d} targets at "
+                  f"{row['first_shot_chance_over']:.3f}, the rest at "
+                  f"{row['first_shot_chance_under']:.3f}: {row['lead_of_the_rest']:+.3f}"
+                  + (f" ± {se:.3f}" if se is not None else ""))  # fmt: skip
     print(f"{seconds:.0f} s")
 
 

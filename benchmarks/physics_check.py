@@ -54,6 +54,7 @@ from _matcher import (
     mean_and_se,
     parse_with_chances,
     shipped_ensemble,
+    thresholds_from,
     timed_harness,
 )
 from flakelab.core.wording import counted
@@ -145,17 +146,6 @@ def checking_over(threshold: float | None) -> Iterator[None]:
         yield
     finally:
         physics_check.check_over = default
-
-
-def thresholds_from(text: str) -> list[float]:
-    """``"0.3,0.5,0.8"`` → sorted positive spreads [ΔE00]."""
-    try:
-        values = sorted({float(part) for part in text.split(",") if part.strip()})
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected numbers, e.g. 0.3,0.5,0.8") from None
-    if not values or values[0] <= 0 or not np.isfinite(values[-1]):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected positive spreads, e.g. 0.3,0.5,0.8")
-    return values
 
 
 def lot_errors(library, seed: int) -> tuple[np.ndarray, np.ndarray]:
