@@ -2,10 +2,10 @@
 
 Where the networks of the shipped ensemble disagree on a recipe by more than
 :data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE` ΔE00 at some geometry, the cases taught
-the model little about such a paint, and its recipes pass their first spray a third less
-often. There (over :func:`check_over`: 1.0 at the MA-T12's twelve geometries) the library's
-physics answers in its place, as DESIGN.md §3's hybrid does for a toner with too few cases:
-the search refines its best recipes through it
+the model little about such a paint, and its recipes pass their first spray a quarter (at the
+MA-T12) to a third (at the five-angle) less often. There (over :func:`check_over`: 1.0 at the
+MA-T12's twelve geometries) the library's physics answers in its place, as DESIGN.md §3's
+hybrid does for a toner with too few cases: the search refines its best recipes through it
 (:func:`flakelab.match.search.match`, ``MatchSettings.physics_check``), and the correction
 corrects through it (:func:`flakelab.match.correction.correct`, ``physics_check``).
 """

@@ -786,14 +786,15 @@ def _unsure(best: Candidate | None) -> bool:
 
 def _unsure_note(best: Candidate | None, checked: bool) -> str | None:
     """A note when the model's ensemble is :func:`_unsure` of the ``best`` candidate: the cases
-    taught it little about such a paint, and its recipe passes its first spray a third less
-    often; and whether the physics then ``checked`` the candidates (:func:`_physics_checked`)."""
+    taught it little about such a paint, and its recipe passes its first spray a quarter to a
+    third less often (:data:`~flakelab.match.settings.MODEL_SPREAD_NOTICE`); and whether the
+    physics then ``checked`` the candidates (:func:`_physics_checked`)."""
     if not _unsure(best):
         return None
     disagree = (
         f"{disagreement_words(best.spread, best.geometries, 'its best recipe')}, over the "
-        f"{MODEL_SPREAD_NOTICE:g} beyond which its recipes pass their first spray a third less "
-        "often: the cases taught it little about paints like this one"
+        f"{MODEL_SPREAD_NOTICE:g} beyond which its recipes pass their first spray a quarter to "
+        "a third less often: the cases taught it little about paints like this one"
     )
     if checked:
         return (
