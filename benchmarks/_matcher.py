@@ -51,6 +51,11 @@ def add_harness_arguments(
     parser.add_argument("--json", action="store_true")
 
 
+def column(rows: list[dict], key: str) -> np.ndarray:
+    """The harness's per-target figure ``key`` of ``rows``, as floats."""
+    return np.array([r[key] for r in rows], dtype=float)
+
+
 def mean_and_se(values: np.ndarray) -> tuple[float | None, float | None]:
     """The mean of ``values`` and its standard error; None for each where there are too few
     (no values; one, for the error)."""

@@ -26,6 +26,7 @@ import numpy as np
 
 from _matcher import (
     add_harness_arguments,
+    column,
     mean_and_se,
     parse_with_chances,
     shipped_ensemble,
@@ -45,8 +46,7 @@ def chance_by_notice(rows: list[dict], notices: list[float]) -> list[dict]:
     """For each of ``notices``: the harness's ``rows`` whose best candidate's disagreement
     exceeds it, their first shot's chance and the rest's, and the rest's lead over them with
     its standard error (the two groups' errors in quadrature)."""
-    spread = np.array([r["predicted_spread"] for r in rows], dtype=float)
-    chance = np.array([r["first_chance"] for r in rows], dtype=float)
+    spread, chance = column(rows, "predicted_spread"), column(rows, "first_chance")
     figures = []
     for notice in notices:
         over = spread > notice
@@ -68,10 +68,8 @@ def chance_by_notice(rows: list[dict], notices: list[float]) -> list[dict]:
 def chance_by_spread(rows: list[dict], notice: float) -> dict:
     """The first shot's chance of the harness's ``rows`` in bands of the best candidate's
     disagreement, and over ``notice`` against under it, for all and by family."""
-    spread = np.array([r["predicted_spread"] for r in rows], dtype=float)
-    chance = np.array([r["first_chance"] for r in rows], dtype=float)
-    sprayed = np.array([r["first_de00"] for r in rows], dtype=float)
-    predicted = np.array([r["predicted_de00"] for r in rows], dtype=float)
+    spread, chance = column(rows, "predicted_spread"), column(rows, "first_chance")
+    sprayed, predicted = column(rows, "first_de00"), column(rows, "predicted_de00")
     family = np.array([r["family"] for r in rows])
 
     def summary(mask: np.ndarray) -> dict:

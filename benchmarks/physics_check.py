@@ -51,6 +51,7 @@ import numpy as np
 
 from _matcher import (
     add_harness_arguments,
+    column,
     mean_and_se,
     parse_with_chances,
     shipped_ensemble,
@@ -62,11 +63,6 @@ from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TIN_KNOWLEDG
 from flakelab.match import physics_check, search
 from flakelab.match.lots import WithLots
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
-
-
-def column(rows: list[dict], key: str) -> np.ndarray:
-    """The harness's per-target figure ``key`` of ``rows``, as floats."""
-    return np.array([r[key] for r in rows], dtype=float)
 
 
 def spreads(rows: list[dict]) -> np.ndarray:
