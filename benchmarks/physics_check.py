@@ -109,6 +109,7 @@ def by_threshold(learned: list[dict], checked: list[dict], thresholds: list[floa
     spread = spreads(learned)
     before, after = column(learned, "first_chance"), column(checked, "first_chance")
     added = column(checked, "latency_s") - column(learned, "latency_s")
+    family = np.array([r["family"] for r in checked])
     figures = []
     for threshold in thresholds:
         mask = spread > threshold
@@ -120,8 +121,23 @@ def by_threshold(learned: list[dict], checked: list[dict], thresholds: list[floa
             "checked_gain": gain,
             "checked_gain_se": gain_se,
             "checked_added_s_median": float(np.median(added[mask])) if mask.any() else None,
+            "by_family": {
+                str(f): _gain_where(mask & (family == f), before, after) for f in np.unique(family)
+            },
         })  # fmt: skip
     return figures
+
+
+def _gain_where(mask: np.ndarray, before: np.ndarray, after: np.ndarray) -> dict:
+    """The targets ``mask`` picks, and the check's paired gain in first-shot chance on them
+    (target-chances: the sum, so that families add up to the threshold's whole)."""
+    gain = after[mask] - before[mask]
+    se = mean_and_se(gain)[1]
+    return {
+        "checked_targets": int(mask.sum()),
+        "gained": float(gain.sum()),
+        "gained_se": None if se is None else float(se * mask.sum()),
+    }
 
 
 def composed_mismatches(learned: list[dict], checked: list[dict], lowest: float) -> int:
@@ -344,6 +360,13 @@ def _print_thresholds(part: str, figures: dict) -> None:
         se = "" if f["checked_gain_se"] is None else f" ± {f['checked_gain_se']:.3f}"
         print(f"  {f['threshold']:g} ΔE00: {counted(f['checked_targets'], 'target')} checked"
               f"{gain}{se}, first-shot chance over all {f['first_chance']:.3f}")  # fmt: skip
+        families = (
+            f"{name} {g['checked_targets']} ({g['gained']:+.1f}"
+            + ("" if g["gained_se"] is None else f" ± {g['gained_se']:.1f}")
+            + ")"
+            for name, g in f["by_family"].items()
+        )
+        print(f"    by family, checked (target-chances gained): {', '.join(families)}")
     if figures["mismatches"]:
         print(f"  the composition does not hold on {counted(figures['mismatches'], 'target')}")
 
