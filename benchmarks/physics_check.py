@@ -33,19 +33,23 @@ With ``--lots calibrated`` (or ``referenced``, ``known``: ``flakelab match evalu
 the physics check's physics then does too (:func:`~flakelab.match.physics_check.physics_for`).
 Through the library off by a lot only the check's physics and the hybrid's scaling are off:
 the tins are read, and the learned model's shade moved, by the exact library's physics
-(ratios of its predictions, in which a lot's error mostly cancels).
+(ratios of its predictions, in which a lot's error mostly cancels); with ``--tins-read-off``
+by the library off by a lot too (:func:`library_off_by`), as a shop's own library reads them.
 
     python benchmarks/physics_check.py [--targets 200] [--novel-targets 50] [--seed 4242]
         [--resprays 20] [--model FILE] [--miscalibrated] [--thresholds T,T,...]
-        [--lots none|calibrated|referenced|known] [--only-miscalibrated] [--json]
+        [--lots none|calibrated|referenced|known] [--only-miscalibrated] [--tins-read-off]
+        [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 
@@ -58,9 +62,10 @@ from _matcher import (
     thresholds_from,
     timed_harness,
 )
+from flakelab.core.spectra import shift_spectra
 from flakelab.core.wording import counted
 from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TIN_KNOWLEDGE
-from flakelab.match import physics_check, search
+from flakelab.match import evaluate, physics_check, search
 from flakelab.match.lots import WithLots
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
 
@@ -179,15 +184,38 @@ def rms_error(library, strength: np.ndarray, shade: np.ndarray) -> dict[str, flo
     }
 
 
+def library_off_by(library, strength: np.ndarray, shade: np.ndarray):
+    """``library`` as characterised from one lot of each pigment: its absorption and
+    scattering times ``strength``, its absorption moved by ``shade`` [nm] (as the world's
+    batches move theirs)."""
+    toners = tuple(
+        replace(t, absorption=s * shift_spectra(t.absorption, d), scattering=s * t.scattering)
+        if t.kind == "pigment"
+        else t
+        for t, s, d in zip(library.toners, strength, shade, strict=True)
+    )
+    return replace(library, toners=toners)
+
+
 @contextlib.contextmanager
 def physics_off_by(
-    forward, library, strength: np.ndarray, shade: np.ndarray, check: bool = True
+    forward,
+    library,
+    strength: np.ndarray,
+    shade: np.ndarray,
+    check: bool = True,
+    tins: bool = False,
 ) -> Iterator[None]:
     """The library's physics off by ``strength`` and ``shade`` per toner wherever the matcher
     uses it: the hybrid's scaling for a new toner (``forward.physics``) and, with ``check``,
     the physics check's (:func:`~flakelab.match.physics_check.physics_for`, in the search
-    and the correction)."""
+    and the correction); with ``tins``, where the shop reads its tins and moves their shades
+    (:func:`~flakelab.match.evaluate.shop_forward`, by :func:`library_off_by`)."""
     exact, hybrid = physics_check.physics_for, getattr(forward, "physics", None)
+    shop_forward = evaluate.shop_forward
+    if tins:
+        off_library = library_off_by(library, strength, shade)
+        evaluate.shop_forward = functools.partial(shop_forward, library=off_library)
 
     def off(forward, library):
         physics = exact(forward, library)
@@ -201,6 +229,7 @@ def physics_off_by(
         yield
     finally:
         physics_check.physics_for = search.physics_for = exact
+        evaluate.shop_forward = shop_forward
         if hybrid is not None:
             forward.physics = hybrid
 
@@ -273,8 +302,23 @@ def main() -> None:
         help="what every run's shop knows of its tins, as 'flakelab match evaluate --lots' "
         "(default: none, every tin taken at the standard)",
     )
+    parser.add_argument(
+        "--tins-read-off",
+        action="store_true",
+        help="with --lots calibrated or referenced, the shop reads its tins and moves their "
+        "shades through the library off by a lot too (the runs through it; default: through "
+        "the exact library's physics)",
+    )
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
+    if args.tins_read_off and not (
+        args.lots in ("calibrated", "referenced")
+        and (args.miscalibrated or args.only_miscalibrated)
+    ):
+        parser.error(
+            "--tins-read-off: needs --lots calibrated or referenced and a run through the "
+            "library off by a lot (--miscalibrated or --only-miscalibrated)"
+        )
     world, forward, effect = shipped_ensemble(parser, args)
     plans = []
     if not args.only_miscalibrated:
@@ -285,8 +329,9 @@ def main() -> None:
         strength, shade = lot_errors(world.library, args.seed)
         library_error = rms_error(world.library, strength, shade)
         off = (forward, world.library, strength, shade)
-        plans.append(("learned_off", 0, physics_off_by(*off, check=False)))
-        plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(*off)))
+        tins = args.tins_read_off
+        plans.append(("learned_off", 0, physics_off_by(*off, check=False, tins=tins)))
+        plans.append(("miscalibrated", PHYSICS_CHECK, physics_off_by(*off, tins=tins)))
     runs, seconds = {}, {}
     lowest = args.thresholds[0] if args.thresholds else None
     for name, check, context in plans:
@@ -307,6 +352,7 @@ def main() -> None:
         "seed": args.seed,
         "resprays": args.resprays,
         "lots": args.lots,
+        "tins_read_off": args.tins_read_off,
         "physics_check": PHYSICS_CHECK,
         "library_error": library_error,
         **{

@@ -312,16 +312,21 @@ def harness_trials(
         yield x, trial(world, x, rng)
 
 
-def shop_forward(t: Trial, forward, lots: str, panels: NDArray | None, standards=None):
+def shop_forward(
+    t: Trial, forward, lots: str, panels: NDArray | None, standards=None, library=None
+):
     """``forward`` as trial ``t``'s shop predicts with it, knowing ``lots`` of its tins
     (:data:`~flakelab.library.lots.TIN_KNOWLEDGE`; ``none``: the issue's figures), and the
     RMS of its tins' strengths' and its pigments' shades' errors (None at the standard).
     ``panels`` are the calibration recipes (:func:`~flakelab.match.lots.calibration_recipes`),
     one of each toner sprayed from the trial's tins; ``standards`` their readings from the
-    standard tins (one spray each, at the factory, the same for every trial)."""
+    standard tins (one spray each, at the factory, the same for every trial). ``library``
+    is the shop's, through whose physics it reads its tins and moves their shades (the
+    world's unless given: ``benchmarks/physics_check.py --tins-read-off`` gives one off by
+    a lot)."""
     if lots == "none":
         return forward, None
-    library = t.world.library
+    library = t.world.library if library is None else library
     order = [list(library.names).index(n) for n in forward.toners]
     true = t.shop.strength[0][order]
     # the world's batches drift every pigment's absorption alike (World.layer)
