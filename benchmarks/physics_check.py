@@ -26,7 +26,9 @@ model's spread on its best recipe exceeds that threshold, else its unchecked one
 what a run at the threshold gives, to the spray: each target is matched and sprayed on its
 own streams, and the spread is the learned search's, before any check. The corrections are
 not composed so (a correction is checked on its own spread), and the runs' own figures, the
-paired ones above among them, are then those at the lowest threshold.
+paired ones above among them, are then those at the lowest threshold. Each threshold's
+figures break down by paint family too (the hidden formula's): the targets checked and the
+target-chances gained, which add up to the threshold's.
 
 With ``--lots calibrated`` (or ``referenced``, ``known``: ``flakelab match evaluate
 --lots``) every run's shop predicts for its own tins, read from its calibration panels, and
