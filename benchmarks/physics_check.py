@@ -66,7 +66,7 @@ from _matcher import (
 )
 from flakelab.core.spectra import shift_spectra
 from flakelab.core.wording import counted
-from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TIN_KNOWLEDGE
+from flakelab.library.lots import LOT_SHADE_SD_NM, LOT_STRENGTH_SD, TIN_KNOWLEDGE, TINS_READ
 from flakelab.match import evaluate, physics_check, search
 from flakelab.match.lots import WithLots
 from flakelab.match.settings import PHYSICS_CHECK, MatchSettings
@@ -314,8 +314,7 @@ def main() -> None:
     parser.set_defaults(resprays=20)
     args = parse_with_chances(parser)
     if args.tins_read_off and not (
-        args.lots in ("calibrated", "referenced")
-        and (args.miscalibrated or args.only_miscalibrated)
+        args.lots in TINS_READ and (args.miscalibrated or args.only_miscalibrated)
     ):
         parser.error(
             "--tins-read-off: needs --lots calibrated or referenced and a run through the "

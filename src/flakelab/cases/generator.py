@@ -71,7 +71,7 @@ from flakelab.core.geometry import (
 )
 from flakelab.core.measurement import TEXTURE_FAMILIES, TEXTURE_READINGS
 from flakelab.core.spectra import shift_spectra
-from flakelab.library.lots import MAX_SHADE_NM, TIN_KNOWLEDGE, TonerLot
+from flakelab.library.lots import MAX_SHADE_NM, TIN_KNOWLEDGE, TINS_READ, TonerLot
 from flakelab.library.toners import Library
 from flakelab.physics.application import FILM_BUILD_SD, SPREAD_SD, sprayed_layer
 from flakelab.physics.fast import reflectance_factor
@@ -523,7 +523,7 @@ class World:
         strength = batches.strength
         drift = batches.hue_shift if batches.hue_shift.ndim == 2 else batches.hue_shift[:, None]
         shade = np.where(self.library.effect[None, :], 0.0, drift)
-        if s.tins in ("calibrated", "referenced"):
+        if s.tins in TINS_READ:
             if reading is None:
                 reading = (rng.normal(0, 1, (F, T)), rng.normal(0, 1, (F, T)))
             strength_sd, shade_sd = (

@@ -112,6 +112,9 @@ strength and shade read from a calibration panel against the model's prediction 
 the same panel from its standard tins (``referenced``); or the tins' own strengths and shades
 (``known``, the limit that calibration approaches)."""
 
+TINS_READ = ("calibrated", "referenced")
+"""The :data:`TIN_KNOWLEDGE` in which a shop reads its tins from calibration panels."""
+
 READ_AGAINST = ("model", "standard")
 """What a panel is read against: the model's prediction of it, or the paint maker's reading
 of it from the standard tins (whose covariance holds no model error)."""

@@ -39,7 +39,7 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement, known_by_colour
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.tolerance import REFINISH_TEXTURE, Tolerance, tolerance_preset
-from flakelab.library.lots import TIN_KNOWLEDGE
+from flakelab.library.lots import TIN_KNOWLEDGE, TINS_READ
 from flakelab.match.correction import correct
 from flakelab.match.habits import ShopHabits
 from flakelab.match.judging import recipe_vector
@@ -332,7 +332,7 @@ def shop_forward(
     # the world's batches drift every pigment's absorption alike (World.layer)
     true_shade = np.where(library.effect[order], 0.0, t.shop.hue_shift[0])
     strength, shade = true, true_shade
-    if lots in ("calibrated", "referenced"):
+    if lots in TINS_READ:
         found = calibrate_lots(forward, library, panels, t.panels(panels), standards=standards)
         read = dict(zip(found.toners, zip(found.strength, found.shade, strict=True), strict=True))
         strength, shade = np.array([read.get(n, (1.0, 0.0)) for n in forward.toners]).T
@@ -511,7 +511,7 @@ def evaluate_matching(
     if lots not in TIN_KNOWLEDGE:
         raise MatchError(f"--lots: expected one of {', '.join(TIN_KNOWLEDGE)}, got {lots!r}")
     panels = standards = None
-    if lots in ("calibrated", "referenced"):
+    if lots in TINS_READ:
         panels = calibration_recipes(forward, world.library)
     if lots == "referenced":
         standards = standard_panels(world, panels, seed)
