@@ -56,6 +56,11 @@ def column(rows: list[dict], key: str) -> np.ndarray:
     return np.array([r[key] for r in rows], dtype=float)
 
 
+def families(rows: list[dict]) -> np.ndarray:
+    """The paint family of each of the harness's ``rows`` (its hidden formula's)."""
+    return np.array([r["family"] for r in rows])
+
+
 def mean_and_se(values: np.ndarray) -> tuple[float | None, float | None]:
     """The mean of ``values`` and its standard error; None for each where there are too few
     (no values; one, for the error)."""

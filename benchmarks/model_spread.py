@@ -27,6 +27,7 @@ import numpy as np
 from _matcher import (
     add_harness_arguments,
     column,
+    families,
     mean_and_se,
     parse_with_chances,
     shipped_ensemble,
@@ -70,7 +71,7 @@ def chance_by_spread(rows: list[dict], notice: float) -> dict:
     disagreement, and over ``notice`` against under it, for all and by family."""
     spread, chance = column(rows, "predicted_spread"), column(rows, "first_chance")
     sprayed, predicted = column(rows, "first_de00"), column(rows, "predicted_de00")
-    family = np.array([r["family"] for r in rows])
+    family = families(rows)
 
     def summary(mask: np.ndarray) -> dict:
         if not mask.any():

@@ -58,6 +58,7 @@ import numpy as np
 from _matcher import (
     add_harness_arguments,
     column,
+    families,
     mean_and_se,
     parse_with_chances,
     shipped_ensemble,
@@ -85,7 +86,7 @@ def paired(learned: list[dict], checked: list[dict]) -> dict:
     mask = np.array([r["physics_checked"] for r in checked])
     before, after = column(learned, "first_chance"), column(checked, "first_chance")
     gain = after[mask] - before[mask]
-    family = np.array([r["family"] for r in checked])
+    family = families(checked)
     latency = {
         name: [float(np.percentile(column(rows, "latency_s"), q)) for q in (50, 95)]
         for name, rows in (("learned", learned), ("checked", checked))
@@ -116,7 +117,7 @@ def by_threshold(learned: list[dict], checked: list[dict], thresholds: list[floa
     spread = spreads(learned)
     before, after = column(learned, "first_chance"), column(checked, "first_chance")
     added = column(checked, "latency_s") - column(learned, "latency_s")
-    family = np.array([r["family"] for r in checked])
+    family = families(checked)
     figures = []
     for threshold in thresholds:
         mask = spread > threshold
@@ -407,13 +408,13 @@ def _print_thresholds(part: str, figures: dict) -> None:
         se = "" if f["checked_gain_se"] is None else f" ± {f['checked_gain_se']:.3f}"
         print(f"  {f['threshold']:g} ΔE00: {counted(f['checked_targets'], 'target')} checked"
               f"{gain}{se}, first-shot chance over all {f['first_chance']:.3f}")  # fmt: skip
-        families = (
+        gained = (
             f"{name} {g['checked_targets']} ({g['gained']:+.1f}"
             + ("" if g["gained_se"] is None else f" ± {g['gained_se']:.1f}")
             + ")"
             for name, g in f["by_family"].items()
         )
-        print(f"    by family, checked (target-chances gained): {', '.join(families)}")
+        print(f"    by family, checked (target-chances gained): {', '.join(gained)}")
     if figures["mismatches"]:
         print(f"  the composition does not hold on {counted(figures['mismatches'], 'target')}")
 
