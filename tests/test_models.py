@@ -21,11 +21,13 @@ from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.registry import (
     SHIPPED,
     list_models,
+    model_file_description,
     promote,
     promoted_model,
     register,
     retire,
     shipped_model,
+    shipped_model_path,
 )
 from flakelab.models.training import (
     SCREENINGS,
@@ -165,9 +167,7 @@ def _with_stored(model: ForwardModel, edit) -> bytes:
     """``model``'s file after ``edit`` of its stored dictionary (meta, state, norm)."""
     stored = torch.load(io.BytesIO(model.to_bytes()), weights_only=True)
     edit(stored)
-    buffer = io.BytesIO()
-    torch.save(stored, buffer)
-    return buffer.getvalue()
+    return _saved(stored)
 
 
 def _set_info(**changes):
@@ -221,6 +221,41 @@ def test_a_model_file_s_description_is_checked_before_its_network_is_built(chang
     shipped = shipped_model("five-angle")
     with pytest.raises(ModelError, match=f"^m.pt: {re.escape(problem)}"):
         ForwardModel.from_bytes(with_meta(shipped, **changes), source="m.pt")
+
+
+@pytest.mark.parametrize("instrument", list(SHIPPED))
+def test_a_model_file_s_description_reads_as_loading_it_does(instrument):
+    """`model list` reads the shipped models' toners and data without torch: the description
+    must be the one the whole file gives, weights and all."""
+    path = shipped_model_path(instrument)
+    described, model = model_file_description(path), shipped_model(instrument)
+    assert tuple(described["toners"]) == model.toners
+    assert tuple(described["geometries"]) == model.geometries
+    assert (described["instrument"], described["info"]) == (model.instrument, model.info)
+
+
+def test_a_file_that_is_no_model_has_no_description(tmp_path):
+    shipped = shipped_model("five-angle")
+    files = {
+        "text.pt": b"not a model",
+        "cut.pt": shipped.to_bytes()[:5000],
+        "other.pt": with_meta(shipped, format="something-else"),
+        "tensor.pt": _saved(torch.zeros(3)),
+    }
+    problems = ("(BadZipFile)", "(BadZipFile)", "format: expected 'flakelab-model'", "(TypeError)")
+    for (name, content), problem in zip(files.items(), problems, strict=True):
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(ModelError, match=f"{name}: .*{re.escape(problem)}"):
+            model_file_description(tmp_path / name)
+    for path, problem in ((tmp_path / "none.pt", "no such model file"), (tmp_path, "a folder")):
+        with pytest.raises(ModelError, match=problem):
+            model_file_description(path)
+
+
+def _saved(stored) -> bytes:
+    buffer = io.BytesIO()
+    torch.save(stored, buffer)
+    return buffer.getvalue()
 
 
 def test_training_learns_far_better_than_the_mean(trained, data):

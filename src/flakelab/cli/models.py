@@ -558,7 +558,12 @@ def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
 def list_models(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
     """Registered model versions."""
     from flakelab.cases.database import open_database
-    from flakelab.models.registry import SHIPPED, list_models, shipped_model
+    from flakelab.models.registry import (
+        SHIPPED,
+        list_models,
+        model_file_description,
+        shipped_model_path,
+    )
 
     rows = list_models(open_database(database, must_exist=True))
     promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}
@@ -581,8 +586,8 @@ def list_models(database: DatabaseOption = None, json_output: JsonOption = False
         )
     for name in SHIPPED:  # the current model while none of its name is promoted
         status = "current" if current[name] == "shipped" else "fallback"
-        shipped = shipped_model(name)  # 20 ms each: its toners and data, as a version's
-        toners, data = str(len(shipped.toners)), shipped.info.get("data_hash", "")[:12]
+        shipped = model_file_description(shipped_model_path(name))  # its toners and data
+        toners, data = str(len(shipped["toners"])), shipped["info"].get("data_hash", "")[:12]
         table.add_row(name, "shipped", status, "", toners, data, "")
     console.print(table)
 
