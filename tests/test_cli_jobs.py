@@ -1475,6 +1475,31 @@ def test_the_harness_says_what_its_options_add(tmp_path, cli, capsys):
     assert "targets read without their texture readings" in shown
 
 
+def test_the_harness_says_which_targets_were_matched_as_another_paint_family():
+    """A pearl target whose first recipe holds no pearl, a solid matched with aluminium: the
+    harness counts them, with a new toner's targets too, and names each move."""
+    from flakelab.cli.match import _matched_as_line
+
+    report = {
+        "targets": 6,
+        "novel_targets": 2,
+        "by_family": {
+            "metallic": {"matched_as": {"metallic": 3}},
+            "pearl": {"matched_as": {"pearl": 1, "metallic": 1}},
+            "solid": {"matched_as": {"metallic": 1}},
+        },
+        "novel_by_family": {"pearl": {"matched_as": {"metallic": 1, "pearl": 1}}},
+    }
+    assert _matched_as_line(report) == (
+        "first recipes of another paint family than their target's: 3 of 8 targets "
+        "(pearl as metallic 2, solid as metallic 1)"
+    )
+    for part in ("by_family", "novel_by_family"):
+        for family, figures in report[part].items():
+            figures["matched_as"] = {family: 1}
+    assert _matched_as_line(report) == "every first recipe is of its target's paint family"
+
+
 def test_a_model_is_judged_for_the_tins_each_case_records(tmp_path, cli):
     """Cases that record their tins are predicted for them: the batches' strength and shade
     leave the error, which with the world's own tins falls well below the standard's

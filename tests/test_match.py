@@ -7,6 +7,7 @@ import json
 import re
 import subprocess
 import sys
+from collections import Counter
 from dataclasses import replace
 
 import numpy as np
@@ -2175,9 +2176,14 @@ def test_harness_oracle_does_not_depend_on_the_matcher(hybrid):
         k: runs[1][k] for k in single if k != "by_family"
     }
     assert not runs[2]["targets_read_texture"]
+    # each family's first recipes by their own family, as each target's trial has them
+    for family, figures in runs[0]["by_family"].items():
+        mine = [t["matched_family"] for t in trials if t["family"] == family]
+        assert figures["matched_as"] == dict(Counter(mine))
     for run in runs:
         families = run["by_family"].values()
         assert sum(f["targets"] for f in families) == 6
+        assert all(sum(f["matched_as"].values()) == f["targets"] for f in families)
         rates = [*FAMILY_FIGURES, *(CHANCES if run["resprays"] else ())]
         for rate in rates:
             passed = sum(f["targets"] * f[rate] for f in families)

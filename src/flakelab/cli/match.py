@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -1041,6 +1042,7 @@ def _print_harness(report: dict) -> None:
     lines = [
         *(_errors_lines(report) if targets else []),
         *_harness_options(report),
+        _matched_as_line(report),
         _physics_checked_line(report),
         f"latency per target: p50 {report['latency_p50_s']:.2f} s, p95 "
         f"{report['latency_p95_s']:.2f} s",
@@ -1068,6 +1070,25 @@ def _families_table(report: dict) -> Table:
             families.add_row(family + which, str(figures["targets"]),
                              *(_share(figures[key]) for key in FAMILY_FIGURES))  # fmt: skip
     return families
+
+
+def _matched_as_line(report: dict) -> str:
+    """How many targets' first recipes are of another paint family than the target's paint
+    (a pearl matched with aluminium alone, a solid with an effect toner, …), and which."""
+    moves: Counter[str] = Counter()
+    for part in ("by_family", "novel_by_family"):
+        for family, figures in report[part].items():
+            for matched, count in figures["matched_as"].items():
+                if matched != family:
+                    moves[f"{family} as {matched}"] += count
+    if not moves:
+        return "every first recipe is of its target's paint family"
+    targets = report["targets"] + report["novel_targets"]
+    which = ", ".join(f"{move} {count}" for move, count in moves.most_common())
+    return (
+        f"first recipes of another paint family than their target's: {moves.total()} of "
+        f"{counted(targets, 'target')} ({which})"
+    )
 
 
 def _errors_lines(report: dict) -> list[str]:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import time
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -241,16 +242,17 @@ corrected recipe's spray passes (the correction made from that first spray-out).
 
 
 def _by_family(rows: list[dict], share, mean) -> dict[str, dict]:
-    """The targets of each paint family among ``rows`` and their rates
-    (:data:`FAMILY_FIGURES`, :data:`CHANCES`): a family's first shot is judged against its
-    own oracle."""
+    """The targets of each paint family among ``rows``, their rates (:data:`FAMILY_FIGURES`,
+    :data:`CHANCES`; a family's first shot judged against its own oracle) and the families of
+    their first recipes (``matched_as``: a pearl matched by aluminium alone, …)."""
     families = sorted({r["family"] for r in rows})
     report = {}
     for f in families:
         mine = [r for r in rows if r["family"] == f]
         rates = {name: share(mine, key) for name, key in FAMILY_FIGURES.items()}
         chances = {name: mean(mine, key) for name, key in CHANCES.items()}
-        report[f] = {"targets": len(mine), **rates, **chances}
+        matched = Counter(r["matched_family"] for r in mine)
+        report[f] = {"targets": len(mine), **rates, **chances, "matched_as": dict(matched)}
     return report
 
 
@@ -452,6 +454,8 @@ def _one(
         # the physics corrected the failed first shot, the ensemble unsure of its recipe
         "correction_physics_checked": correction_checked,
         "family": str(world.library.paint_families(x_hidden[None])[0]),
+        # the first recipe's family: what the matcher made of the target
+        "matched_family": str(world.library.paint_families(x[None])[0]),
         # the car's paint holds a toner the shop is out of (settings.without)
         "needs_missing": bool(
             any(x_hidden[list(world.library.names).index(n)] > 0 for n in settings.without)
