@@ -183,6 +183,9 @@ class _StateDict(dict):
 
 
 class _WithoutTensors(pickle.Unpickler):
+    """A model file's ``data.pkl`` with its tensors and every class but the state dict's read
+    as nothing (:func:`model_file_description`)."""
+
     def find_class(self, module: str, name: str):
         return _StateDict if (module, name) == ("collections", "OrderedDict") else _Nothing
 
