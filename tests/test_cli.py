@@ -1002,7 +1002,8 @@ def test_listing_a_databases_shops_cases_and_models_does_not_import_torch(tmp_pa
     """`cases shops` lists each shop's habits, tins and models: stored rows, no model run. It
     imported torch (through the habits' and the registry's modules) and took 5.9 s on a
     200-case database; 2.6 s without it (stop 99). `model list` loaded the shipped models
-    for their toner counts (stop 127: 8.6 s and 381 MB, 4.7 s and 183 MB without)."""
+    for their toner counts (stop 127, medians of five alone: 7.5 s and 380 MB; 4.9 s and
+    182 MB without)."""
     database = tmp_path / "shop.db"
     assert cli("cases", "generate", "--n", "30", "--seed", "3", "-d", database).returncode == 0
     script = (
