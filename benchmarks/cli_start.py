@@ -6,9 +6,13 @@ Each run is a new process. The figures: the command's wall time; the match itsel
 that imports only the third-party packages the command needs (torch, colour-science,
 numba, SciPy, SQLAlchemy, Typer, Rich, colour-cxf), the floor no change of flakelab's can
 go below. One more run under ``python -X importtime`` names the packages whose import takes
-longest, each with all it imports.
+longest, each with all it imports, and says whether torch was among them.
 
-    python benchmarks/cli_start.py [--runs 5] [--json]
+``--command model-list`` times ``flakelab model list`` (its table) on that fresh machine (the
+shipped models alone) the same way, against SQLAlchemy, Typer, Rich and colour-science, which
+flakelab's case and measurement types import; it loaded torch until stop 127.
+
+    python benchmarks/cli_start.py [--command match|model-list] [--runs 5] [--json]
 """
 
 from __future__ import annotations
@@ -27,8 +31,15 @@ import numpy as np
 
 from timing import print_report
 
-DEPENDENCIES = "torch, colour, numba, scipy.optimize, sqlalchemy.orm, typer, rich.table, colour_cxf"
-"""What ``flakelab match`` imports of others' code (the baseline's imports)."""
+COMMANDS = {
+    "match": (
+        ["match", "--example", "--json"],
+        "torch, colour, numba, scipy.optimize, sqlalchemy.orm, typer, rich.table, colour_cxf",
+    ),
+    "model-list": (["model", "list"], "colour, sqlalchemy.orm, typer, rich.table"),
+}
+"""Each command timed: its arguments, and what it imports of others' code (the baseline's
+imports)."""
 
 
 def fresh_environment(folder: str) -> dict:
@@ -68,33 +79,39 @@ def slowest_imports(stderr: str, most: int = 8) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--command", choices=list(COMMANDS), default="match")
     parser.add_argument("--runs", type=int, default=5, help="fresh processes of each kind")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
     entry = shutil.which("flakelab") or str(Path(sys.executable).parent / "flakelab")
-    command = [sys.executable, entry, "match", "--example", "--json"]
-    baseline = [sys.executable, "-c", f"import {DEPENDENCIES}"]
+    arguments, dependencies = COMMANDS[args.command]
+    command = [sys.executable, entry, *arguments]
+    baseline = [sys.executable, "-c", f"import {dependencies}"]
     with tempfile.TemporaryDirectory() as folder:
         env = fresh_environment(folder)
         walls, matches, floors = [], [], []
         for _ in range(args.runs):  # interleaved, so a change of the machine's pace hits both
             seconds, stdout, _ = timed(command, env)
             walls.append(seconds)
-            matches.append(json.loads(stdout)["seconds"])
+            if args.command == "match":
+                matches.append(json.loads(stdout)["seconds"])
             floors.append(timed(baseline, env)[0])
         _, _, log = timed([sys.executable, "-X", "importtime", *command[1:]], env)
         made_database = any(Path(folder).rglob("*.sqlite*")) or any(Path(folder).rglob("*.db"))
-    wall, match, floor = (float(np.median(v)) for v in (walls, matches, floors))
+    wall, floor = float(np.median(walls)), float(np.median(floors))
+    match = float(np.median(matches)) if matches else 0.0
     report = {
+        "command": " ".join(["flakelab", *arguments]),
         "runs": args.runs,
         "command_wall_s_median": wall,
-        "match_s_median": match,
+        "match_s_median": match if args.command == "match" else None,
         "dependencies_import_s_median": floor,
         "command_over_dependencies": wall / floor,
         "rest_s": wall - floor - match,
         "made_a_database": made_database,
         "slowest_imports_s": slowest_imports(log),
+        "imported_torch": any(line.split("|")[-1].strip() == "torch" for line in log.splitlines()),
     }
     print_report(report, args.json, ",.4g")
 

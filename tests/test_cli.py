@@ -1002,8 +1002,8 @@ def test_listing_a_databases_shops_cases_and_models_does_not_import_torch(tmp_pa
     """`cases shops` lists each shop's habits, tins and models: stored rows, no model run. It
     imported torch (through the habits' and the registry's modules) and took 5.9 s on a
     200-case database; 2.6 s without it (stop 99). `model list` loaded the shipped models
-    for their toner counts (stop 127, medians of five alone: 7.5 s and 380 MB; 4.9 s and
-    182 MB without)."""
+    for their toner counts: 7.2 s against 4.8 s without on a fresh machine (stop 127,
+    `python benchmarks/cli_start.py --command model-list`), 380 MB against 182."""
     database = tmp_path / "shop.db"
     assert cli("cases", "generate", "--n", "30", "--seed", "3", "-d", database).returncode == 0
     script = (
