@@ -240,9 +240,16 @@ def test_a_file_that_is_no_model_has_no_description(tmp_path):
         "text.pt": b"not a model",
         "cut.pt": shipped.to_bytes()[:5000],
         "other.pt": with_meta(shipped, format="something-else"),
+        "toners.pt": with_meta(shipped, toners="A, B"),
         "tensor.pt": _saved(torch.zeros(3)),
     }
-    problems = ("(BadZipFile)", "(BadZipFile)", "format: expected 'flakelab-model'", "(TypeError)")
+    problems = (
+        "(BadZipFile)",
+        "(BadZipFile)",
+        "format: expected 'flakelab-model'",
+        "toners: expected a list",
+        "(TypeError)",
+    )
     for (name, content), problem in zip(files.items(), problems, strict=True):
         (tmp_path / name).write_bytes(content)
         with pytest.raises(ModelError, match=f"{name}: .*{re.escape(problem)}"):

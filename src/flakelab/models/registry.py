@@ -168,6 +168,10 @@ def model_file_description(path: str | Path) -> dict:
         raise ModelError(f"{path}: not a flakelab model file ({type(error).__name__})") from None
     if not isinstance(meta, dict) or meta.get("format") != "flakelab-model":
         raise ModelError(f"{path}: format: expected 'flakelab-model'")
+    # what a listing reads; loading the model checks every field (ForwardModel.from_bytes)
+    for field, kind, expected in (("toners", list, "a list"), ("info", dict, "a table")):
+        if not isinstance(meta.get(field), kind):
+            raise ModelError(f"{path}: {field}: expected {expected}")
     return meta
 
 
