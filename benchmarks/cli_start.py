@@ -100,15 +100,15 @@ def main() -> None:
         _, _, log = timed([sys.executable, "-X", "importtime", *command[1:]], env)
         made_database = any(Path(folder).rglob("*.sqlite*")) or any(Path(folder).rglob("*.db"))
     wall, floor = float(np.median(walls)), float(np.median(floors))
-    match = float(np.median(matches)) if matches else 0.0
+    match = float(np.median(matches)) if matches else None  # model list matches nothing
     report = {
         "command": " ".join(["flakelab", *arguments]),
         "runs": args.runs,
         "command_wall_s_median": wall,
-        "match_s_median": match if args.command == "match" else None,
+        "match_s_median": match,
         "dependencies_import_s_median": floor,
         "command_over_dependencies": wall / floor,
-        "rest_s": wall - floor - match,
+        "rest_s": wall - floor - (match or 0.0),
         "made_a_database": made_database,
         "slowest_imports_s": slowest_imports(log),
         "imported_torch": any(line.split("|")[-1].strip() == "torch" for line in log.splitlines()),
