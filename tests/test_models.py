@@ -17,11 +17,12 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.errors import Note
 from flakelab.io import read_library
 from flakelab.library import Library
+from flakelab.models.files import MODEL_FORMAT, model_file_description
 from flakelab.models.network import ForwardModel, ModelError
 from flakelab.models.registry import (
     SHIPPED,
     list_models,
-    model_file_description,
+    load_model_file,
     promote,
     promoted_model,
     register,
@@ -246,7 +247,7 @@ def test_a_file_that_is_no_model_has_no_description(tmp_path):
     problems = (
         "(BadZipFile)",
         "(BadZipFile)",
-        "format: expected 'flakelab-model'",
+        f"format: expected {MODEL_FORMAT!r}",
         "toners: expected a list",
         "(TypeError)",
     )
@@ -257,6 +258,25 @@ def test_a_file_that_is_no_model_has_no_description(tmp_path):
     for path, problem in ((tmp_path / "none.pt", "no such model file"), (tmp_path, "a folder")):
         with pytest.raises(ModelError, match=problem):
             model_file_description(path)
+
+
+def test_both_readers_of_a_model_file_refuse_one_that_is_not_alike(tmp_path):
+    """The whole model (torch) and its description (without) check the format in one place
+    (flakelab.models.files): a file of another format or with no description is refused by
+    both in the same words."""
+    files = {
+        "other.pt": with_meta(shipped_model("five-angle"), format="something-else"),
+        "meta.pt": _saved({"meta": "{not JSON", "state": {}}),
+    }
+    problems = ("format: expected 'flakelab-model'", "not a flakelab model file (JSONDecodeError)")
+    for (name, content), problem in zip(files.items(), problems, strict=True):
+        path = tmp_path / name
+        path.write_bytes(content)
+        with pytest.raises(ModelError) as described:
+            model_file_description(path)
+        with pytest.raises(ModelError) as loaded:
+            load_model_file(path)
+        assert str(described.value) == str(loaded.value) == f"{path}: {problem}"
 
 
 def _saved(stored) -> bytes:

@@ -558,12 +558,8 @@ def _training_config(hidden: str, epochs: int, batch_size: int, screening: str,
 def list_models(database: DatabaseOption = None, json_output: JsonOption = False) -> None:
     """Registered model versions."""
     from flakelab.cases.database import open_database
-    from flakelab.models.registry import (
-        SHIPPED,
-        list_models,
-        model_file_description,
-        shipped_model_path,
-    )
+    from flakelab.models.files import model_file_description
+    from flakelab.models.registry import SHIPPED, list_models, shipped_model_path
 
     rows = list_models(open_database(database, must_exist=True))
     promoted = {r["name"]: f"v{r['version']}" for r in rows if r["status"] == "promoted"}

@@ -26,6 +26,7 @@ from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import check_mass_fractions, is_number
 from flakelab.errors import ModelError, shown
+from flakelab.models.files import MODEL_FORMAT, not_a_model_file, stored_meta
 
 __all__ = [
     "FoldedNetwork",
@@ -518,7 +519,7 @@ class ForwardModel:
     def to_bytes(self) -> bytes:
         buffer = io.BytesIO()
         meta = {
-            "format": "flakelab-model",
+            "format": MODEL_FORMAT,
             "version": 1,
             "toners": list(self.toners),
             "geometries": list(self.geometries),
@@ -548,13 +549,9 @@ class ForwardModel:
     def from_bytes(cls, data: bytes, source: str = "model") -> ForwardModel:
         try:
             stored = torch.load(io.BytesIO(data), weights_only=True)
-            meta = json.loads(stored["meta"])
         except Exception as error:  # torch raises many types for a bad file
-            raise ModelError(
-                f"{source}: not a flakelab model file ({error.__class__.__name__})"
-            ) from None
-        if not isinstance(meta, dict) or meta.get("format") != "flakelab-model":
-            raise ModelError(f"{source}: format: expected 'flakelab-model'")
+            raise not_a_model_file(source, error) from None
+        meta = stored_meta(stored, source)
         _check_meta(meta, source)
         outputs = len(meta["geometries"]) * WAVELENGTHS.size + len(meta["texture"])
         members = meta.get("members", 1)

@@ -16,9 +16,6 @@ shop"). A shop without a model of its own uses the instrument's.
 
 from __future__ import annotations
 
-import json
-import pickle
-import zipfile
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,6 +34,7 @@ from flakelab.core.geometry import DEFAULT_INSTRUMENT, instrument_name
 from flakelab.core.times import zoned
 from flakelab.core.wording import database_label
 from flakelab.errors import ModelError
+from flakelab.models.files import model_file
 
 # torch, the generator and the physics are imported where a model is loaded or trained, so that
 # listing what the database holds ('cases shops') imports none of them
@@ -56,7 +54,6 @@ __all__ = [
     "promoted_model",
     "list_models",
     "load_model_file",
-    "model_file_description",
     "current_model",
     "current_model_and_source",
     "registered_model",
@@ -132,69 +129,12 @@ def shipped_model_path(instrument: str) -> Path:
 def load_model_file(path: str | Path) -> ForwardModel:
     from flakelab.models.network import ForwardModel
 
-    path = _model_file(path)
+    path = model_file(path)
     return ForwardModel.from_bytes(path.read_bytes(), str(path))
-
-
-def _model_file(path: str | Path) -> Path:
-    """``path``, refused where no model file can be: nothing there, or a folder."""
-    path = Path(path)
-    if not path.exists():
-        raise ModelError(f"{path}: no such model file")
-    if path.is_dir():
-        raise ModelError(f"{path}: a folder, not a model file")
-    return path
 
 
 def shipped_model(instrument: str = DEFAULT_INSTRUMENT) -> ForwardModel:
     return load_model_file(shipped_model_path(instrument))
-
-
-def model_file_description(path: str | Path) -> dict:
-    """A model file's description (its toners, geometries, instrument and ``info``, as
-    :meth:`~flakelab.models.network.ForwardModel.to_bytes` writes them) read without its
-    weights and without torch, whose import for the shipped models' toner counts was a third of
-    ``flakelab model list``'s time and half its memory (stop 127). A model file is torch's zip
-    archive, whose ``data.pkl`` names each tensor's storage by a persistent id; those and
-    torch's classes are read as nothing, so no code of the file's runs."""
-    path = _model_file(path)
-    try:
-        with zipfile.ZipFile(path) as archive:
-            pickled = next(n for n in archive.namelist() if n.endswith("/data.pkl"))
-            stored = _WithoutTensors(archive.open(pickled)).load()
-        meta = json.loads(stored["meta"])
-    except (OSError, zipfile.BadZipFile, StopIteration, pickle.UnpicklingError, EOFError,
-            KeyError, IndexError, AttributeError, TypeError, ValueError) as error:  # fmt: skip
-        raise ModelError(f"{path}: not a flakelab model file ({type(error).__name__})") from None
-    if not isinstance(meta, dict) or meta.get("format") != "flakelab-model":
-        raise ModelError(f"{path}: format: expected 'flakelab-model'")
-    # what a listing reads; loading the model checks every field (ForwardModel.from_bytes)
-    for field, kind, expected in (("toners", list, "a list"), ("info", dict, "a table")):
-        if not isinstance(meta.get(field), kind):
-            raise ModelError(f"{path}: {field}: expected {expected}")
-    return meta
-
-
-class _Nothing:
-    """What a tensor, a storage or any class of torch's reads as in :class:`_WithoutTensors`."""
-
-    def __init__(self, *args, **kwargs) -> None:
-        pass
-
-
-class _StateDict(dict):
-    """A state dict's ``OrderedDict``, which pickle gives attributes (its ``_metadata``)."""
-
-
-class _WithoutTensors(pickle.Unpickler):
-    """A model file's ``data.pkl`` with its tensors and every class but the state dict's read
-    as nothing (:func:`model_file_description`)."""
-
-    def find_class(self, module: str, name: str):
-        return _StateDict if (module, name) == ("collections", "OrderedDict") else _Nothing
-
-    def persistent_load(self, pid) -> None:
-        return None
 
 
 def list_models(engine: Engine, name: str | None = None, version: int | None = None) -> list[dict]:
