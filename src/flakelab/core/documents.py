@@ -11,6 +11,7 @@ __all__ = [
     "LIBRARY_FORMAT",
     "LOTS_FORMAT",
     "MEASUREMENTS_FORMAT",
+    "MODEL_FORMAT",
     "RECIPE_KIND",
     "SHOP_HABITS_FORMAT",
     "document_kind",
@@ -20,6 +21,8 @@ MEASUREMENTS_FORMAT = "flakelab-measurements"
 LIBRARY_FORMAT = "flakelab-library"
 LOTS_FORMAT = "flakelab-toner-lots"
 SHOP_HABITS_FORMAT = "flakelab-shop-habits"
+MODEL_FORMAT = "flakelab-model"
+"""The ``format`` of the description inside a model file (:mod:`flakelab.models.files`)."""
 
 RECIPE_KIND = "a recipe file, toner → grams (--recipe)"
 """What :func:`document_kind` calls a recipe file, which names no format."""

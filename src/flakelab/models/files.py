@@ -2,10 +2,11 @@
 its description read without torch.
 
 A model file is torch's zip archive of one dictionary: ``meta`` (a JSON text: the format
-name, toners, geometries, instrument, layer widths, ``info``), the network's ``state``, the
-normalisation and the learned spreads. This module holds the format's name and the check that
-a file is one, for both readers: the whole model (torch, :mod:`flakelab.models.network`) and
-its description alone (here, without torch, for ``flakelab model list``).
+name, :data:`~flakelab.core.documents.MODEL_FORMAT`, then toners, geometries, instrument,
+layer widths, ``info``), the network's ``state``, the normalisation and the learned spreads.
+This module holds the check that a file is one, for both readers: the whole model (torch,
+:mod:`flakelab.models.network`) and its description alone (here, without torch, for
+``flakelab model list``).
 """
 
 from __future__ import annotations
@@ -15,18 +16,15 @@ import pickle
 import zipfile
 from pathlib import Path
 
+from flakelab.core.documents import MODEL_FORMAT
 from flakelab.errors import ModelError
 
 __all__ = [
-    "MODEL_FORMAT",
     "model_file",
     "model_file_description",
     "not_a_model_file",
     "stored_meta",
 ]
-
-MODEL_FORMAT = "flakelab-model"
-"""The ``format`` field of every model file's ``meta``."""
 
 
 def not_a_model_file(source: str, error: BaseException) -> ModelError:

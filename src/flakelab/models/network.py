@@ -21,12 +21,13 @@ import torch
 from numpy.typing import ArrayLike, NDArray
 from torch import nn
 
+from flakelab.core.documents import MODEL_FORMAT
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import TEXTURE_READINGS
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.units import check_mass_fractions, is_number
 from flakelab.errors import ModelError, shown
-from flakelab.models.files import MODEL_FORMAT, not_a_model_file, stored_meta
+from flakelab.models.files import not_a_model_file, stored_meta
 
 __all__ = [
     "FoldedNetwork",
