@@ -523,6 +523,29 @@ def test_a_cxf_declaring_an_unknown_encoding_is_reported(rich_measurement, tmp_p
     assert path.read_text() == text
 
 
+def test_xml_that_cxf_has_no_place_for_is_a_note_naming_the_file(
+    rich_measurement, tmp_path, caplog
+):
+    """Text where CxF3's schema has no place for it (an element's tags damaged) was printed on
+    stderr by xsdata's logger as a bare "Unassigned parsed object None", naming no file. It
+    is a note naming the file, and the spectra read are the file's."""
+    from flakelab.errors import Note
+
+    path = tmp_path / "m.cxf"
+    write_measurements([rich_measurement], path)
+    (before,) = read_measurements(path)
+    text = path.read_text()
+    damaged = re.sub(r"<(\w+:)?Observer>[^<]*</(\w+:)?Observer>", "bserver>", text, count=1)
+    assert damaged != text
+    path.write_text(damaged)
+    with pytest.warns(Note, match=r"m\.cxf: part of the XML has no place in CxF3's schema and "
+                                  r"was skipped \(Unassigned parsed object None\)"):  # fmt: skip
+        (after,) = read_measurements(path)
+    assert not [r for r in caplog.records if r.name.startswith("xsdata")]
+    assert np.array_equal(after.reflectance, before.reflectance)
+    assert after.geometries == before.geometries
+
+
 def test_a_json_document_s_every_flaw_is_named_by_its_field(rich_measurement, tmp_path):
     path = tmp_path / "m.json"
     write_measurements([rich_measurement], path)

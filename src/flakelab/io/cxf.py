@@ -19,7 +19,10 @@ Layout written (and expected on reading):
 
 from __future__ import annotations
 
+import logging
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import datetime
 from os import PathLike
 from pathlib import Path
@@ -28,6 +31,7 @@ import colour_cxf
 import numpy as np
 from colour_cxf import cxf3
 from xsdata.exceptions import ConverterWarning, ParserError
+from xsdata.logger import logger as xsdata_logger
 from xsdata.models.datatype import XmlDateTime
 
 from flakelab import __version__
@@ -35,7 +39,7 @@ from flakelab.core.colorimetry import D65_10, Conditions
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
-from flakelab.errors import MeasurementFileError
+from flakelab.errors import MeasurementFileError, Note
 from flakelab.io.records import (
     Reading,
     agreed_colour,
@@ -113,17 +117,40 @@ def _conditions_of(path: str | PathLike, spec: cxf3.ColorSpecification) -> Condi
     )
 
 
+@contextmanager
+def _parser_log() -> Iterator[list[str]]:
+    """What xsdata logs while it parses (an element or text it read where the schema has no
+    place for it), kept to be said as notes naming the file: its logger would print it on
+    stderr as a bare line that names no file ("Unassigned parsed object None")."""
+    said: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: said.append(record.getMessage())  # type: ignore[method-assign]
+    xsdata_logger.addHandler(handler)
+    propagates, xsdata_logger.propagate = xsdata_logger.propagate, False
+    try:
+        yield said
+    finally:
+        xsdata_logger.removeHandler(handler)
+        xsdata_logger.propagate = propagates
+
+
 def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measurement]:
     """Read multi-angle reflectance measurements from a CxF3 file."""
     data = Path(path).read_bytes() if content is None else content
     try:
         # a value xsdata cannot convert stays text and is named below, by field and wavelength
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _parser_log() as skipped:
             warnings.simplefilter("ignore", ConverterWarning)
             document = colour_cxf.read_cxf(data)
     # LookupError: an XML declaration naming an encoding Python does not know
     except (ParserError, ValueError, TypeError, LookupError) as error:
         raise MeasurementFileError(path, f"not valid CxF3 XML ({error})") from None
+    for said in dict.fromkeys(skipped):
+        warnings.warn(
+            f"{path}: part of the XML has no place in CxF3's schema and was skipped ({said})",
+            Note,
+            stacklevel=2,
+        )
     resources = document.resources
     specs = (
         resources.color_specification_collection.color_specification
