@@ -202,6 +202,38 @@ def test_truncated_xlsx_is_reported(ma_t12_files, tmp_path):
         read_measurements(path)
 
 
+@pytest.mark.parametrize(
+    ("part", "damage"),
+    [
+        ("xl/worksheets/sheet3.xml", lambda xml: xml[: len(xml) // 2]),  # cut: ParseError
+        ("xl/workbook.xml", lambda xml: xml.replace(b'"UTF-8"', b'"UTF-99"')),  # LookupError
+        ("xl/workbook.xml", lambda xml: xml.replace(b'activeTab="3"', b'activeTab="x"')),
+        ("xl/sharedStrings.xml", lambda xml: xml[: xml.index(b"<si>")] + b"</sst>"),  # IndexError
+    ],
+    ids=["sheet-cut", "encoding", "attribute", "shared-strings"],
+)
+def test_an_export_with_a_damaged_part_is_reported_naming_the_file(
+    ma_t12_files, tmp_path, part, damage
+):
+    """A workbook whose zip is whole but one of its parts is damaged was an internal error
+    (xml's ParseError, LookupError, TypeError, IndexError from openpyxl) until stop 128; both
+    readers name the file."""
+    import zipfile
+
+    from flakelab.io.mat12_xlsx import read_mat12_images
+
+    path = tmp_path / "damaged.xlsx"
+    with zipfile.ZipFile(ma_t12_files[0]) as source, zipfile.ZipFile(path, "w") as damaged:
+        for name in source.namelist():
+            content = source.read(name)
+            damaged.writestr(name, damage(content) if name == part else content)
+    for reader in (read_measurements, read_mat12_images):
+        with pytest.raises(MeasurementFileError) as caught:
+            reader(path)
+        said = str(caught.value)
+        assert said.startswith(f"{path}: ") and " workbook (" in said, said
+
+
 def test_mat12_camera_pictures_are_read_by_the_geometry_of_their_row(ma_t12_files):
     """The six exports' camera pictures: seven each, 480 × 360 sRGB, labelled by the rows they
     are anchored in (six geometries under the 15° lamp, then diffuse light). Read one row off,

@@ -79,6 +79,11 @@ ROW_KEYS = ("Name", "Date/Time", "Geometry")
 """The columns that open each data sheet's rows."""
 PREAMBLE_KEYS = ("QC JOB", "STANDARD", "ILLUMINANT/OBSERVER", "INSTRUMENT")
 """The rows (``QC JOB:`` …) a data sheet may open with, before its header."""
+_DAMAGED_WORKBOOK = (zipfile.BadZipFile, OSError, ValueError, SyntaxError, TypeError, LookupError)
+"""What openpyxl raises for a workbook whose parts are damaged: a zip it cannot open, a
+part's XML that does not parse (xml's ``ParseError`` is a ``SyntaxError``) or names an
+unknown encoding (``LookupError``), a value of the wrong type for its field (``TypeError``),
+a shared string's index past the table's end (``IndexError``, a ``LookupError``)."""
 _DROPPED_PICTURE = re.compile(r"image (\S+) will be removed")
 """openpyxl's warning for a picture it could not open (``openpyxl.reader.drawings``)."""
 
@@ -120,7 +125,7 @@ def _sheets(path: str | PathLike, handle) -> dict[str, list[tuple]]:
     otherwise, or read from a pipe), and the file was judged a workbook by its content."""
     try:
         workbook = openpyxl.load_workbook(handle, read_only=True, data_only=True)
-    except (zipfile.BadZipFile, KeyError, OSError, ValueError) as error:
+    except _DAMAGED_WORKBOOK as error:
         raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
     try:
         with warnings.catch_warnings():
@@ -128,7 +133,7 @@ def _sheets(path: str | PathLike, handle) -> dict[str, list[tuple]]:
             # value, which reads as no date, as any other Date/Time that is not one does
             warnings.filterwarnings("ignore", "Cell .* is marked as a date", UserWarning)
             return {ws.title: [tuple(r) for r in ws.iter_rows(values_only=True)] for ws in workbook}
-    except (zipfile.BadZipFile, OSError, ValueError, KeyError) as error:
+    except _DAMAGED_WORKBOOK as error:
         raise MeasurementFileError(path, f"truncated or corrupt workbook ({error})") from None
     finally:
         workbook.close()
@@ -289,7 +294,7 @@ def _images_sheet(path: str | PathLike, handle) -> dict | None:
     workbook is loaded (not read-only), as openpyxl reads drawings only then."""
     try:
         workbook = openpyxl.load_workbook(handle, data_only=True)
-    except (zipfile.BadZipFile, KeyError, OSError, ValueError, TypeError) as error:
+    except _DAMAGED_WORKBOOK as error:
         raise MeasurementFileError(path, f"not a readable Excel workbook ({error})") from None
     try:
         if _IMAGES not in workbook.sheetnames:
