@@ -543,6 +543,21 @@ def test_truncated_cxf_and_json_are_reported(rich_measurement, tmp_path):
             read_measurements(path)
 
 
+def test_a_json_measurement_file_that_is_not_utf8_is_refused_naming_the_byte(
+    rich_measurement, tmp_path
+):
+    """A byte that is not UTF-8 in a JSON measurement file was said without the file's name
+    ("error: 'utf-8' codec can't decode byte 0xff in position 3565")."""
+    path = tmp_path / "m.json"
+    write_measurements([rich_measurement], path)
+    data = path.read_bytes()
+    at = data.index(b'"sample"')
+    path.write_bytes(data[:at] + b"\xff" + data[at:])
+    said = rf"^{re.escape(str(path))}: not UTF-8 text \(invalid start byte at byte {at + 1}\)$"
+    with pytest.raises(MeasurementFileError, match=said):
+        read_measurements(path)
+
+
 def test_a_cxf_declaring_an_unknown_encoding_is_reported(rich_measurement, tmp_path):
     """An XML declaration naming an encoding Python lacks was an internal error
     (LookupError) until stop 118; the file's stored content is not touched."""
@@ -986,6 +1001,64 @@ def test_json_nested_too_deeply_is_refused_by_name_in_every_reader(tmp_path, cli
     with pytest.raises(FlakelabError, match=f"^{history}: row 2: recipe: expected a JSON") as e:
         read_cases(history)
     assert len(str(e.value)) < len(str(history)) + 150  # the cell quoted cut, not 120,000 long
+
+
+HUGE = {"1e21": "1" + "0" * 21, "1e400": "1" + "0" * 400}
+"""Integers past 64 bits, written out in digits: a double, and past a double's range."""
+
+
+@pytest.mark.parametrize("huge", list(HUGE))
+def test_an_integer_past_64_bits_is_judged_as_the_number_it_names(tmp_path, rich_measurement, huge):
+    """An integer past 64 bits was an internal error wherever numpy or a float met it (a
+    habits file's film build: "ufunc 'isfinite' not supported"; a spectrum's value, a tin's
+    strength: OverflowError). JSON and TOML integers past 64 bits are read as the doubles they
+    name, as most tools read JSON: a field with a range refuses it by name, and past a
+    double's range it is infinity, which every field refuses."""
+    from flakelab.io import read_library, write_measurements
+    from flakelab.io.library_file import demo_library_path
+    from flakelab.io.lots_file import read_lots
+    from flakelab.io.records import json_value, toml_value
+    from flakelab.io.tolerance_file import read_tolerance
+    from flakelab.match.habits import ShopHabits, read_habits, write_habits
+
+    digits, infinite = HUGE[huge], huge == "1e400"
+    assert json_value(f"[{digits}, -{digits}, 12]") == [float(huge), -float(huge), 12]
+    assert toml_value(f"a = [{digits}, 12]") == {"a": [float(huge), 12]}
+    assert type(json_value("999999999999999999")) is int  # 18 digits: an int, exactly
+
+    habits = tmp_path / "habits.json"
+    write_habits(ShopHabits(np.array([0.04, -0.04, 0.005]), np.full(3, 0.01), 9, "m"), habits)
+    measurement = tmp_path / "m.json"
+    write_measurements([rich_measurement], measurement)
+    library = tmp_path / "library.json"
+    library.write_text(demo_library_path().read_text())
+    lots = tmp_path / "lots.json"
+    lots.write_text(json.dumps({"format": "flakelab-toner-lots", "version": 3, "lots": [
+        {"toner": "Phthalo blue GS", "strength": 1.031, "strength_sd": 0.006}]}))  # fmt: skip
+    recipe = tmp_path / "recipe.json"
+    recipe.write_text('{"Al medium": 1.0, "Carbon black": 2.0}')
+    tolerance = tmp_path / "tolerance.toml"
+    tolerance.write_text('name = "mine"\n[default]\nde00 = 1.0\n')
+    cases = [  # the file, its reader, the number made huge, what is said; read where in range
+        (habits, read_habits, r'"film_build": (\S+),', "film_build: expected", False),
+        (measurement, read_measurements, r'"reflectance": \[\s*([^,\s]+)', "reflectance", False),
+        (library, read_library, r'"refractive_index": ([^,\s]+)', "refractive_index", False),
+        (lots, read_lots, r'"strength": ([^,\s]+)', "lots[0] (Phthalo blue GS): strength", False),
+        (recipe, read_recipe, r'"Al medium": ([^,\s]+)', "Al medium: expected", True),
+        (tolerance, read_tolerance, r"de00 = (\S+)", "default: expected a positive limit", True),
+    ]
+    for path, reader, number, said, in_range in cases:
+        text = path.read_text()
+        found = re.search(number, text)
+        assert found, (path, number)
+        path.write_text(text[: found.start(1)] + digits + text[found.end(1) :])
+        if in_range and not infinite:
+            reader(path)  # a recipe of 10²¹ grams, a limit of 10²¹: numbers, and in range
+            continue
+        with pytest.raises(FlakelabError) as caught:
+            reader(path)
+        message = str(caught.value)
+        assert message.startswith(f"{path}: ") and said in message, message
 
 
 def test_a_named_pipe_is_written_into_not_replaced(tmp_path, cli):

@@ -67,6 +67,10 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
         raise MeasurementFileError(
             path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"
         ) from None
+    except UnicodeDecodeError as error:  # the CLI said it naming no file
+        encoding = "UTF-16" if error.encoding.startswith("utf-16") else "UTF-8"
+        where = f"{error.reason} at byte {error.start + 1}"
+        raise MeasurementFileError(path, f"not {encoding} text ({where})") from None
     if not isinstance(document, dict) or document.get("format") != FORMAT_NAME:
         kind = document_kind(document)
         raise MeasurementFileError(
