@@ -1293,6 +1293,8 @@ def test_a_damaged_model_artefact_is_named_with_its_database(tmp_path, cli):
                                             "habits report (a JSON object), got [1, 2]"),
         ("shop_habits", "report", '{"a": 1}', "habits of shop 'shop A' (row 1): film_build: "
                                               "missing"),
+        ("shop_habits", "report", '{"film_build": 1' + "0" * 21 + '}',  # past 64 bits
+         "habits of shop 'shop A' (row 1): film_build: expected -0.5 to 0.5, got 1e+21"),
         ("shop_habits", "shop", b"ab", "habits of shop b'ab' (row 1): shop: cannot be read as "
                                        "VARCHAR(120) (expected text, got bytes)"),
         ("shop_lots", "document", "5", "the tins of shop 'shop A', version 1: format: expected "

@@ -1014,10 +1014,10 @@ def test_an_integer_past_64_bits_is_judged_as_the_number_it_names(tmp_path, rich
     strength: OverflowError). JSON and TOML integers past 64 bits are read as the doubles they
     name, as most tools read JSON: a field with a range refuses it by name, and past a
     double's range it is infinity, which every field refuses."""
+    from flakelab.core.documents import json_value, toml_value
     from flakelab.io import read_library, write_measurements
     from flakelab.io.library_file import demo_library_path
     from flakelab.io.lots_file import read_lots
-    from flakelab.io.records import json_value, toml_value
     from flakelab.io.tolerance_file import read_tolerance
     from flakelab.match.habits import ShopHabits, read_habits, write_habits
 

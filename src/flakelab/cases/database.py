@@ -40,6 +40,7 @@ from sqlalchemy.pool import NullPool, StaticPool
 
 from flakelab.cases.case import Case, CaseError, colour_code_words, tin_fields
 from flakelab.cases.schema import CaseRow
+from flakelab.core.documents import json_value
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import zoned, zoned_here
 from flakelab.core.wording import counted, database_label, hidden_passwords
@@ -307,7 +308,10 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
         # its transaction ends, none is left open for the collector (psycopg warns of those);
         # an in-memory SQLite database lives in its one connection, which is kept
         pool = StaticPool if file == "" else NullPool
-        engine = create_engine(url, poolclass=pool, **_read_only_connections(file))
+        # the JSON columns parsed as files are (a report's integer past 64 bits, a float)
+        engine = create_engine(
+            url, poolclass=pool, json_deserializer=json_value, **_read_only_connections(file)
+        )
         if engine.dialect.name == "sqlite":
             journal = _journal_for(file) if file else "WAL"
             event.listen(engine, "connect", functools.partial(_sqlite_pragmas, journal=journal))

@@ -46,6 +46,7 @@ import numpy as np
 
 from flakelab.cases.case import Case, CaseError, check_readings_kept, tin_fields
 from flakelab.core.defaults import DEFAULT_CONDITIONS
+from flakelab.core.documents import json_value
 from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
@@ -57,7 +58,6 @@ from flakelab.io.records import (
     decimal_comma_in,
     decimal_point,
     is_no_regular_file,
-    json_value,
     numbers_at_once,
     recovered_spectra,
     spreadsheet_table,

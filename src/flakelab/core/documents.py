@@ -1,10 +1,14 @@
 """The JSON documents flakelab reads and writes, by the name in their ``format`` field: the
 names in one place, and what a document is, for a message that names the file a command was
-given by mistake (a recipe to ``inspect``, a measurement file to ``correct --recipe``). It
-imports nothing but the standard library, like :mod:`flakelab.core.wording`."""
+given by mistake (a recipe to ``inspect``, a measurement file to ``correct --recipe``), and
+how their text is parsed (:func:`json_value`, :func:`toml_value`), for files and the case
+database's JSON columns alike. It imports nothing but the standard library, like
+:mod:`flakelab.core.wording`."""
 
 from __future__ import annotations
 
+import json
+import tomllib
 from numbers import Real
 
 __all__ = [
@@ -15,6 +19,8 @@ __all__ = [
     "RECIPE_KIND",
     "SHOP_HABITS_FORMAT",
     "document_kind",
+    "json_value",
+    "toml_value",
 ]
 
 MEASUREMENTS_FORMAT = "flakelab-measurements"
@@ -48,3 +54,53 @@ def document_kind(document: object) -> str:
     if all(isinstance(v, Real) and not isinstance(v, bool) for v in document.values()):
         return RECIPE_KIND
     return ""
+
+
+def json_value(text: str):
+    """``json.loads``. JSON nested deeper than Python's recursion reaches (a damaged or
+    hostile file: ``[[[[…`` a hundred thousand deep) is refused as any JSON that does not
+    parse, a :class:`json.JSONDecodeError`; it was an internal error, RecursionError.
+    Integers past 64 bits are read as doubles (:func:`_number_of_integer`)."""
+    try:
+        return json.loads(text, parse_int=_number_of_integer)
+    except RecursionError:
+        raise json.JSONDecodeError("nested too deeply to be read", text, 0) from None
+
+
+def toml_value(text: str) -> dict:
+    """``tomllib.loads``, where arrays nested deeper than Python's recursion reaches are a
+    :class:`tomllib.TOMLDecodeError` as any TOML that does not parse (as :func:`json_value`),
+    and integers past 64 bits are doubles (:func:`_number_of_integer`)."""
+    try:
+        return _without_huge_integers(tomllib.loads(text))
+    except RecursionError:
+        raise tomllib.TOMLDecodeError("nested too deeply to be read") from None
+    except tomllib.TOMLDecodeError:
+        raise
+    except ValueError as error:  # an integer of over 4,300 digits, past what Python converts
+        raise tomllib.TOMLDecodeError(str(error).partition(";")[0]) from None
+
+
+_INT64_DIGITS = 18
+"""Digits that every signed 64-bit integer of that length holds."""
+
+
+def _number_of_integer(text: str) -> int | float:
+    """An integer as a JSON or TOML file writes it: a Python int where it fits 64 bits, else
+    the double it names (infinity past a double's range), as JavaScript and most tools that
+    write JSON read it; each field's check of a finite number then judges it. A Python int
+    past 64 bits was an internal error wherever numpy met it (``np.isfinite``: "not
+    supported for the input types") or a float was made of it (OverflowError)."""
+    return int(text) if len(text.lstrip("+-")) <= _INT64_DIGITS else float(text)
+
+
+def _without_huge_integers(value):
+    """``value`` (parsed TOML, whose integers Python reads at any size) with each integer
+    past 64 bits a double (:func:`_number_of_integer`)."""
+    if isinstance(value, dict):
+        return {k: _without_huge_integers(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_without_huge_integers(v) for v in value]
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**_INT64_DIGITS:
+        return _number_of_integer(str(value))
+    return value

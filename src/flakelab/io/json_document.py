@@ -19,13 +19,12 @@ from os import PathLike
 from typing import Any
 
 from flakelab.core.defaults import DEFAULT_CONDITIONS
-from flakelab.core.documents import MEASUREMENTS_FORMAT, document_kind
+from flakelab.core.documents import MEASUREMENTS_FORMAT, document_kind, json_value
 from flakelab.core.measurement import Measurement
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
     Reading,
     assemble,
-    json_value,
     parse_conditions,
     parse_geometry_name,
     parse_lab,

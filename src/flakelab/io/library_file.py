@@ -12,11 +12,10 @@ from importlib.resources import files
 from os import PathLike
 from pathlib import Path
 
+from flakelab.core.documents import json_value, toml_value
 from flakelab.io.records import (
-    json_value,
     other_format,
     text_of,
-    toml_value,
     write_atomically,
 )
 from flakelab.library.toners import Library, LibraryError

@@ -9,14 +9,12 @@ from __future__ import annotations
 import csv
 import errno
 import itertools
-import json
 import math
 import os
 import re
 import stat
 import sys
 import tempfile
-import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
@@ -33,6 +31,7 @@ from flakelab.core.colorimetry import (
     stated_to_Lab,
 )
 from flakelab.core.difference import delta_E_CIE2000
+from flakelab.core.documents import json_value
 from flakelab.core.geometry import Geometry
 from flakelab.core.measurement import (
     LAB_LIMIT,
@@ -72,8 +71,6 @@ __all__ = [
     "within",
     "spreadsheet_table",
     "csv_rows",
-    "json_value",
-    "toml_value",
     "NOT_UTF8",
     "text_of",
 ]
@@ -251,56 +248,6 @@ def standard_of(measurements: Sequence[Measurement]) -> Measurement | None:
     named = {m.metadata.get("standard") for m in measurements}
     standard = named.pop() if len(named) == 1 else None
     return next((m for m in measurements if standard and m.sample == standard), None)
-
-
-def json_value(text: str):
-    """``json.loads``. JSON nested deeper than Python's recursion reaches (a damaged or
-    hostile file: ``[[[[…`` a hundred thousand deep) is refused as any JSON that does not
-    parse, a :class:`json.JSONDecodeError`; it was an internal error, RecursionError.
-    Integers past 64 bits are read as doubles (:func:`_number_of_integer`)."""
-    try:
-        return json.loads(text, parse_int=_number_of_integer)
-    except RecursionError:
-        raise json.JSONDecodeError("nested too deeply to be read", text, 0) from None
-
-
-def toml_value(text: str) -> dict:
-    """``tomllib.loads``, where arrays nested deeper than Python's recursion reaches are a
-    :class:`tomllib.TOMLDecodeError` as any TOML that does not parse (as :func:`json_value`),
-    and integers past 64 bits are doubles (:func:`_number_of_integer`)."""
-    try:
-        return _without_huge_integers(tomllib.loads(text))
-    except RecursionError:
-        raise tomllib.TOMLDecodeError("nested too deeply to be read") from None
-    except tomllib.TOMLDecodeError:
-        raise
-    except ValueError as error:  # an integer of over 4,300 digits, past what Python converts
-        raise tomllib.TOMLDecodeError(str(error).partition(";")[0]) from None
-
-
-_INT64_DIGITS = 18
-"""Digits that every signed 64-bit integer of that length holds."""
-
-
-def _number_of_integer(text: str) -> int | float:
-    """An integer as a JSON or TOML file writes it: a Python int where it fits 64 bits, else
-    the double it names (infinity past a double's range), as JavaScript and most tools that
-    write JSON read it; each field's check of a finite number then judges it. A Python int
-    past 64 bits was an internal error wherever numpy met it (``np.isfinite``: "not
-    supported for the input types") or a float was made of it (OverflowError)."""
-    return int(text) if len(text.lstrip("+-")) <= _INT64_DIGITS else float(text)
-
-
-def _without_huge_integers(value):
-    """``value`` (parsed TOML, whose integers Python reads at any size) with each integer
-    past 64 bits a double (:func:`_number_of_integer`)."""
-    if isinstance(value, dict):
-        return {k: _without_huge_integers(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_without_huge_integers(v) for v in value]
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**_INT64_DIGITS:
-        return _number_of_integer(str(value))
-    return value
 
 
 def csv_rows(

@@ -21,9 +21,10 @@ import tomllib
 from os import PathLike
 from pathlib import Path
 
+from flakelab.core.documents import json_value, toml_value
 from flakelab.core.tolerance import TOLERANCE_PRESETS, Tolerance
 from flakelab.errors import FlakelabError
-from flakelab.io.records import STANDARD_STREAM, json_value, text_of, toml_value
+from flakelab.io.records import STANDARD_STREAM, text_of
 
 __all__ = ["read_tolerance"]
 
