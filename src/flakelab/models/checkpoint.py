@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
+from flakelab.core.documents import json_value
 from flakelab.io.records import write_atomically
 from flakelab.models.network import ForwardModel, ModelError
 
@@ -52,7 +53,7 @@ class TrainingCheckpoint:
     def _read(self, restart_other_cases: bool) -> None:
         try:
             saved = torch.load(self.path, weights_only=True)
-            meta = json.loads(saved["meta"])
+            meta = json_value(saved["meta"])
             states = saved["states"]
             stages, log, outliers = meta["stages"], meta["log"], meta["outliers"]
         except Exception as error:  # a damaged file fails in any of torch's readers

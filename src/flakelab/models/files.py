@@ -11,12 +11,11 @@ This module holds the check that a file is one, for both readers: the whole mode
 
 from __future__ import annotations
 
-import json
 import pickle
 import zipfile
 from pathlib import Path
 
-from flakelab.core.documents import MODEL_FORMAT
+from flakelab.core.documents import MODEL_FORMAT, json_value
 from flakelab.errors import ModelError
 
 __all__ = [
@@ -35,7 +34,7 @@ def stored_meta(stored: object, source: str) -> dict:
     """The description (``meta``) of a model file's unpickled dictionary, refused where it is
     not a flakelab model's (its fields are checked where they are used)."""
     try:
-        meta = json.loads(stored["meta"])  # type: ignore[index]
+        meta = json_value(stored["meta"])  # type: ignore[index]
     except Exception as error:  # whatever ``stored`` is: a tensor, a list, a text, None
         raise not_a_model_file(source, error) from None
     if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
