@@ -1064,6 +1064,31 @@ def test_every_help_reads_whole_in_an_80_column_terminal():
             assert runner.invoke(app, list(path), env={"COLUMNS": "80"}).output == shown, path
 
 
+def test_every_seed_option_takes_what_torch_s_generators_take(cli):
+    """A seed past 64 bits was refused by torch ("Overflow when unpacking long long") after
+    the command had begun, naming no option. Every ``--seed`` is bounded at
+    :data:`~flakelab.cli.common.SEED_MAX`, which torch's generators take and one more they
+    refuse."""
+    import torch
+    import typer.main
+
+    from flakelab.cli.common import SEED_MAX
+    from flakelab.cli.main import app
+
+    torch.Generator().manual_seed(SEED_MAX)
+    with pytest.raises((ValueError, RuntimeError), match="Overflow"):
+        torch.Generator().manual_seed(SEED_MAX + 1)
+    seeded = {
+        " ".join(path): next(p for p in command.params if p.name == "seed")
+        for path, command in _commands(typer.main.get_command(app))
+        if any(p.name == "seed" for p in command.params)
+    }
+    assert {"cases generate", "match", "train", "model adapt"} <= seeded.keys(), seeded
+    assert {(t.min, t.max) for t in seeded.values()} == {(0, SEED_MAX)}, seeded
+    run = cli("cases", "generate", "--n", "1", "--seed", SEED_MAX + 1)
+    assert run.returncode == 2 and "--seed" in run.stderr and str(SEED_MAX) in run.stderr
+
+
 def _table_like_the_case_list():
     """A table as 'cases list' draws one: padding collapsed, unwrapped columns of times and
     ids, and a recipe column that wraps."""

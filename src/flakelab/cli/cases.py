@@ -31,6 +31,7 @@ from flakelab.cli.common import (
     read_reading_at,
     read_readings,
     reports_errors,
+    seed_option,
     shares_text,
     tracked,
 )
@@ -95,7 +96,7 @@ cases_app = command_group(
 @reports_errors
 def generate(
     n: Annotated[int, typer.Option("--n", min=1, help="Number of cases.")] = 1000,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the generated world.")] = 0,
+    seed: Annotated[int, seed_option("Seed of the generated world.")] = 0,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="CSV/CxF file or SQLite .db to write.")
     ] = None,
@@ -1175,7 +1176,7 @@ def export_cases(
 @cases_app.command("realism")
 @reports_errors
 def realism(
-    seed: Annotated[int, typer.Option(min=0, help="Seed.")] = 0,
+    seed: Annotated[int, seed_option("Seed.")] = 0,
     n: Annotated[int, typer.Option("--n", min=20, help="Formulations per statistic.")] = 400,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,

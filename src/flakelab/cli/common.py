@@ -460,6 +460,17 @@ ConditionsOption = Annotated[
     ),
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")]
+
+SEED_MAX = 2**64 - 1
+"""The largest seed a command takes: torch's generators read 64 bits, and a seed past them was
+refused "Overflow when unpacking long long", naming no option."""
+
+
+def seed_option(help: str) -> Any:
+    """A ``--seed`` option's settings: a whole number from 0 to :data:`SEED_MAX`."""
+    return typer.Option(min=0, max=SEED_MAX, help=help)
+
+
 LightsOption = Annotated[
     str | None,
     typer.Option(

@@ -44,6 +44,7 @@ from flakelab.cli.common import (
     render_lamps,
     reports_errors,
     sample_of,
+    seed_option,
     stop_on_signals,
     texture_table,
 )
@@ -804,7 +805,7 @@ def validate_scaling(
     photons: Annotated[
         int, typer.Option(help="Photons per Monte Carlo spectrum.", min=1000)
     ] = 200_000,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the Monte Carlo runs.")] = 51,
+    seed: Annotated[int, seed_option("Seed of the Monte Carlo runs.")] = 51,
     spreads: Annotated[
         str, typer.Option(help="Orientation spreads [°]: reference first, then the series.")
     ] = "10,5,15",

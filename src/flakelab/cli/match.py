@@ -34,6 +34,7 @@ from flakelab.cli.common import (
     progress_bar,
     read_readings,
     render_lamps,
+    seed_option,
     shares_text,
     stop_interrupted,
     texture_table,
@@ -159,9 +160,7 @@ def match_command(
             "differs) or controlled (only the instrument's reading varies)."
         ),
     ] = "shop",
-    seed: Annotated[
-        int, typer.Option(min=0, help="Seed (search restarts; evaluate: the world).")
-    ] = 0,
+    seed: Annotated[int, seed_option("Seed (search restarts; evaluate: the world).")] = 0,
     model_risk: Annotated[
         float,
         typer.Option(

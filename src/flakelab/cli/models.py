@@ -23,6 +23,7 @@ from flakelab.cli.common import (
     print_report,
     progress_bar,
     reports_errors,
+    seed_option,
 )
 from flakelab.cli.sources import (
     CasesArgument,
@@ -265,7 +266,7 @@ def train(
             "amounts spread out (0: fractions and amounts per unit effect pigment only).",
         ),
     ] = 0.0,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of splits and weights.")] = 0,
+    seed: Annotated[int, seed_option("Seed of splits and weights.")] = 0,
     device: DeviceOption = "cpu",
     no_tins: NoTinsOption = False,
     loss_log: LossLogOption = None,
@@ -982,7 +983,7 @@ def adapt(
     holdout: Annotated[
         float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
     ] = 0.1,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the splits and the adaptation.")] = 0,
+    seed: Annotated[int, seed_option("Seed of the splits and the adaptation.")] = 0,
     device: DeviceOption = "cpu",
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Also write the model here.")

@@ -19,6 +19,7 @@ from flakelab.cli.common import (
     print_report,
     read_sample,
     reports_errors,
+    seed_option,
 )
 from flakelab.core.defaults import DEFAULT_CONDITIONS
 from flakelab.errors import FlakelabError
@@ -32,7 +33,7 @@ LightOption = Annotated[
         "--light", min=0.0, max=1.0, help="Diffuse fraction of the light, 0 (spot) to 1 (dome)."
     ),
 ]
-SeedOption = Annotated[int, typer.Option(min=0, help="Seed of the texture.")]
+SeedOption = Annotated[int, seed_option("Seed of the texture.")]
 
 
 class View(StrEnum):
