@@ -1089,6 +1089,41 @@ def test_every_seed_option_takes_what_torch_s_generators_take(cli):
     assert run.returncode == 2 and "--seed" in run.stderr and str(SEED_MAX) in run.stderr
 
 
+def test_every_whole_number_option_is_bounded_within_the_database_s_integers(cli):
+    """A count past 64 bits was an internal error where numpy or SQLite met it ('match
+    evaluate --targets', 'cases realism --n', 'cases list --last', 'lots show --version':
+    "Python int too large to convert to C long", "… to SQLite INTEGER"). Every whole-number
+    option has a largest value, which typer names; counts stop at
+    :data:`~flakelab.cli.common.COUNT_MAX`, within PostgreSQL's 32-bit integers, so that a
+    version asked for is looked for, not overflowed."""
+    import typer.main
+
+    from flakelab.cli.common import COUNT_MAX, SEED_MAX
+    from flakelab.cli.main import app
+
+    assert COUNT_MAX < 2**31 - 1 and SEED_MAX == 2**64 - 1
+    unbounded, counted_options = [], 0
+    for path, command in _commands(typer.main.get_command(app)):
+        for p in command.params:
+            annotation = getattr(getattr(p, "type_descriptor", None), "annotation", None)
+            if annotation not in (int, int | None):
+                continue
+            counted_options += 1
+            bound = SEED_MAX if p.name == "seed" else COUNT_MAX
+            if p.max is None or p.max > bound:
+                unbounded.append((" ".join(path), p.name, p.max))
+    assert counted_options > 30 and not unbounded, unbounded
+    huge = str(10**23)
+    for args, said in (
+        (("match", "evaluate", "--targets", huge), "Invalid value for '--targets'"),
+        (("cases", "list", "--last", huge), "Invalid value for '--last'"),
+        (("model", "show", f"five-angle:{huge}"), f"VERSION: expected at most {COUNT_MAX:,}"),
+        (("model", "show", "five-angle:²"), "expected a model file, NAME:VERSION"),
+    ):
+        run = cli(*args)
+        assert run.returncode == 2 and said in " ".join(run.stderr.split()), (args, run.stderr)
+
+
 def _table_like_the_case_list():
     """A table as 'cases list' draws one: padding collapsed, unwrapped columns of times and
     ids, and a recipe column that wraps."""

@@ -14,6 +14,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    COUNT_MAX,
     AverageOption,
     AverageSprayedOption,
     JsonOption,
@@ -95,7 +96,7 @@ cases_app = command_group(
 @cases_app.command("generate")
 @reports_errors
 def generate(
-    n: Annotated[int, typer.Option("--n", min=1, help="Number of cases.")] = 1000,
+    n: Annotated[int, typer.Option("--n", min=1, max=COUNT_MAX, help="Number of cases.")] = 1000,
     seed: Annotated[int, seed_option("Seed of the generated world.")] = 0,
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="CSV/CxF file or SQLite .db to write.")
@@ -140,6 +141,7 @@ def generate(
         int,
         typer.Option(
             min=1,
+            max=COUNT_MAX,
             help="Spray-outs each of the shop's tins serves before the next is opened: the "
             "cases of a stretch share their tins (1: every spray-out from batches of its own).",
         ),
@@ -148,6 +150,7 @@ def generate(
         int,
         typer.Option(
             min=0,
+            max=COUNT_MAX,
             help="The car makers' colours the shop meets: every car painted in one of this many "
             "OEM colours, coded GEN 001 … (synthetic), the r-th met as often as 1/r; its case "
             "records the code (0: every car a colour of its own, no code).",
@@ -660,7 +663,9 @@ def list_cases(
     ] = None,
     colour_code: ColourCodeOption = None,
     since: SinceOption = None,
-    last: Annotated[int, typer.Option(min=1, help="How many of the newest cases.")] = 20,
+    last: Annotated[
+        int, typer.Option(min=1, max=COUNT_MAX, help="How many of the newest cases.")
+    ] = 20,
     check: Annotated[
         bool,
         typer.Option(
@@ -852,7 +857,9 @@ def nearest(
     since: SinceOption = None,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     tolerance: ToleranceOption = DEFAULT_TOLERANCE,
-    count: Annotated[int, typer.Option("--count", "-n", min=1, help="Cases to show.")] = 5,
+    count: Annotated[
+        int, typer.Option("--count", "-n", min=1, max=COUNT_MAX, help="Cases to show.")
+    ] = 5,
     recipe_out: Annotated[
         Path | None,
         typer.Option(
@@ -860,7 +867,9 @@ def nearest(
             "{toner: grams} that 'weigh', 'correct' and 'cases record' read."
         ),
     ] = None,  # fmt: skip
-    pick: Annotated[int, typer.Option(min=1, help="The case --recipe-out writes.")] = 1,
+    pick: Annotated[
+        int, typer.Option(min=1, max=COUNT_MAX, help="The case --recipe-out writes.")
+    ] = 1,
     quantity: Annotated[
         str, typer.Option(help="Can --recipe-out weighs, e.g. 250g (or by volume, 0.5l).")
     ] = CAN_QUANTITY,
@@ -1177,7 +1186,9 @@ def export_cases(
 @reports_errors
 def realism(
     seed: Annotated[int, seed_option("Seed.")] = 0,
-    n: Annotated[int, typer.Option("--n", min=20, help="Formulations per statistic.")] = 400,
+    n: Annotated[
+        int, typer.Option("--n", min=20, max=COUNT_MAX, help="Formulations per statistic.")
+    ] = 400,
     instrument: InstrumentOption = DEFAULT_INSTRUMENT,
     library: LibraryOption = None,
     plot: Annotated[

@@ -10,6 +10,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    COUNT_MAX,
     MODEL_SPREAD_LEGEND,
     AverageOption,
     AverageSprayedOption,
@@ -111,7 +112,10 @@ def correct_command(
         ),
     ] = None,
     extra_toners: Annotated[
-        int, typer.Option(help="Toners outside the recipe tried as one addition (0: none).")
+        int,
+        typer.Option(
+            min=0, max=COUNT_MAX, help="Toners outside the recipe tried as one addition (0: none)."
+        ),
     ] = EXTRA_TONERS_TRIED,
     without: WithoutOption = None,
     lots: LotsOption = None,
@@ -153,7 +157,7 @@ def correct_command(
     from flakelab.match.correction import correct, mismatch_note, physics_checked_note
     from flakelab.match.search import left_out_note, unused_geometries
 
-    _check_correction_options(mode, left, most, extra_toners)
+    _check_correction_options(mode, left, most)
     tol = read_tolerance(tolerance)
     test_lights = lights_option(lights)
     reads = {"TARGET": target, "--recipe": recipe, "--sprayed": sprayed, "--library": library,
@@ -305,13 +309,11 @@ def _add_expected_left_out(
     return found
 
 
-def _check_correction_options(mode: str, left, most, extra_toners: int) -> None:
+def _check_correction_options(mode: str, left, most) -> None:
     """Options that do not fit the correction's ``mode``, refused before any file is read."""
     for option, given in (("--left", left), ("--most", most)):
         if given is not None and mode != "additions":
             raise FlakelabError(f"{option}: for --mode additions (a reformulation is mixed afresh)")
-    if extra_toners < 0:
-        raise FlakelabError(f"--extra-toners: expected 0 or more, got {extra_toners}")
 
 
 def _add_expected(report: dict, tol, geometries, target_lab, expected_lab, failing, mode) -> None:

@@ -14,6 +14,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    COUNT_MAX,
     AverageOption,
     JsonOption,
     SampleOption,
@@ -747,6 +748,7 @@ def show_command(
         int | None,
         typer.Option(
             min=1,
+            max=COUNT_MAX,
             help="The version of the shop's tins ('lots history' lists them).",
             show_default="the latest",
         ),

@@ -18,6 +18,7 @@ from flakelab import __version__
 from flakelab.cli.cases import cases_app
 from flakelab.cli.codes import codes_command, variants_command
 from flakelab.cli.common import (
+    COUNT_MAX,
     AverageOption,
     AverageSprayedOption,
     ConditionsOption,
@@ -298,6 +299,7 @@ def compare(
         int,
         typer.Option(
             min=0,
+            max=COUNT_MAX,
             help="Rank every standard in the reference file (a chip deck, 'cases variants "
             "--out') by the sample's worst share of the tolerance from it, show the N "
             "nearest, and compare the sample with the nearest.",
@@ -803,7 +805,7 @@ app.add_typer(validate_app, name="validate")
 def validate_scaling(
     json_output: JsonOption = False,
     photons: Annotated[
-        int, typer.Option(help="Photons per Monte Carlo spectrum.", min=1000)
+        int, typer.Option(help="Photons per Monte Carlo spectrum.", min=1000, max=COUNT_MAX)
     ] = 200_000,
     seed: Annotated[int, seed_option("Seed of the Monte Carlo runs.")] = 51,
     spreads: Annotated[

@@ -13,6 +13,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from flakelab.cli.common import (
+    COUNT_MAX,
     MODEL_SPREAD_LEGEND,
     AverageOption,
     JsonOption,
@@ -118,6 +119,7 @@ def match_command(
         typer.Option(
             "--jobs",
             "-j",
+            max=COUNT_MAX,
             help="With --all: how many processes match the samples (each the same recipes as "
             "one process gives).",
             show_default="one per 4 samples, up to the cores",
@@ -148,10 +150,13 @@ def match_command(
     physics: PhysicsOption = False,
     database: DatabaseOption = None,
     targets: Annotated[
-        int, typer.Option(min=0, help="evaluate: hidden targets (0: those with a new toner alone).")
+        int,
+        typer.Option(
+            min=0, max=COUNT_MAX, help="evaluate: hidden targets (0: those with a new toner alone)."
+        ),
     ] = 200,
     novel_targets: Annotated[
-        int, typer.Option(min=0, help="evaluate: targets with a new toner.")
+        int, typer.Option(min=0, max=COUNT_MAX, help="evaluate: targets with a new toner.")
     ] = 50,
     world: Annotated[
         str,

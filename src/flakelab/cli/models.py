@@ -13,6 +13,7 @@ from rich import box
 from rich.table import Table
 
 from flakelab.cli.common import (
+    COUNT_MAX,
     JsonOption,
     check_figure_file,
     check_output_file,
@@ -207,10 +208,12 @@ def train(
         bool, typer.Option("--register/--no-register", help="Store and maybe promote it.")
     ] = True,
     epochs: Annotated[
-        int, typer.Option(min=1, help="Epochs per stage (then as many fine-tuning).")
+        int, typer.Option(min=1, max=COUNT_MAX, help="Epochs per stage (then as many fine-tuning).")
     ] = 300,
     hidden: Annotated[str, typer.Option(help="Hidden layer sizes.")] = "100,100,100",
-    batch_size: Annotated[int, typer.Option(min=1, help="Cases per optimiser step.")] = 128,
+    batch_size: Annotated[
+        int, typer.Option(min=1, max=COUNT_MAX, help="Cases per optimiser step.")
+    ] = 128,
     colour_weight: Annotated[
         float | None,
         typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term (default: 0.02)."),
@@ -230,6 +233,7 @@ def train(
         int | None,
         typer.Option(
             min=1,
+            max=COUNT_MAX,
             help="Epochs of the adaptation (default: the paper's 150).",
         ),
     ] = None,
@@ -253,6 +257,7 @@ def train(
         int,
         typer.Option(
             min=1,
+            max=COUNT_MAX,
             help="Networks trained side by side on the cleaned cases and averaged (an "
             "ensemble: less error where the cases are few, and their disagreement reported "
             "with every prediction; costs that many times the inference).",
@@ -286,6 +291,7 @@ def train(
         typer.Option(
             "--when-new",
             min=1,
+            max=COUNT_MAX,
             help="Train only where CASES, a database, has stored at least this many cases at "
             "the instrument's geometries since the newest version registered (in --database) "
             "read its cases; else say how many and stop (exit 0): a nightly job retrains as "
@@ -969,7 +975,8 @@ def adapt(
     library: LibraryOption = None,
     database: DatabaseOption = None,
     epochs: Annotated[
-        int | None, typer.Option(min=1, help="Adaptation epochs (default: the paper's 150).")
+        int | None,
+        typer.Option(min=1, max=COUNT_MAX, help="Adaptation epochs (default: the paper's 150)."),
     ] = None,
     validation: Annotated[
         float,

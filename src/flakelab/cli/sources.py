@@ -12,6 +12,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from flakelab.cli.common import COUNT_MAX
 from flakelab.core.geometry import INSTRUMENT_GEOMETRIES, instrument_name
 from flakelab.core.times import shown_time, zoned, zoned_here
 from flakelab.core.wording import database_label, hidden_passwords, shop_meant, tidy_name
@@ -416,9 +417,15 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
 
 
 def name_and_version(spec: str) -> tuple[str, int] | None:
-    """``NAME:VERSION`` of a registered model (``flakelab model list``), else None."""
+    """``NAME:VERSION`` of a registered model (``flakelab model list``), else None. VERSION
+    is in ASCII digits ('five-angle:²' was an internal error) and at most
+    :data:`~flakelab.cli.common.COUNT_MAX` (past SQLite's integers, another)."""
     name, colon, version = spec.rpartition(":")
-    return (name, int(version)) if colon and name and version.isdigit() else None
+    if not (colon and name and version.isascii() and version.isdigit()):
+        return None
+    if int(version) > COUNT_MAX:
+        raise FlakelabError(f"{spec}: VERSION: expected at most {COUNT_MAX:,}")
+    return name, int(version)
 
 
 def learned_forward(
