@@ -1124,6 +1124,34 @@ def test_every_whole_number_option_is_bounded_within_the_database_s_integers(cli
         assert run.returncode == 2 and said in " ".join(run.stderr.split()), (args, run.stderr)
 
 
+def test_an_objective_s_weights_are_finite(cli):
+    """An infinite weight made every recipe's loss infinite: 'match --model-risk inf' said
+    "fractions: row 0 holds an amount that is not a number", 'correct --metamerism inf'
+    "recipe: amounts sum to zero". Each weight stops at
+    :data:`~flakelab.cli.common.WEIGHT_MAX`, named by its option."""
+    import typer.main
+
+    from flakelab.cli.common import WEIGHT_MAX
+    from flakelab.cli.main import app
+
+    weights = {"model_risk", "metamerism", "model_sd", "colour_weight"}
+    found = {
+        (" ".join(path), p.name): p.max
+        for path, command in _commands(typer.main.get_command(app))
+        for p in command.params
+        if p.name in weights
+    }
+    assert {name for _, name in found} == weights, found
+    assert set(found.values()) == {WEIGHT_MAX}, found
+    for args, option in (
+        (("match", "--example", "--model-risk", "inf"), "--model-risk"),
+        (("correct", "t.cxf", "-r", "r.json", "-s", "s.cxf", "--metamerism", "inf"),
+         "--metamerism"),  # fmt: skip
+    ):
+        run = cli(*args)
+        assert run.returncode == 2 and f"Invalid value for '{option}'" in run.stderr, run.stderr
+
+
 def _table_like_the_case_list():
     """A table as 'cases list' draws one: padding collapsed, unwrapped columns of times and
     ids, and a recipe column that wraps."""

@@ -471,6 +471,12 @@ def seed_option(help: str) -> Any:
     return typer.Option(min=0, max=SEED_MAX, help=help)
 
 
+WEIGHT_MAX = 100.0
+"""The largest weight a term of the search's or the correction's objective takes from the
+command line (``--model-risk``, ``--metamerism``, ``--model-sd``, ``--colour-weight``): at a
+hundred times the colour's own it has long swamped it; an infinite one made every recipe's
+loss infinite, refused as "amounts that are not a number" or "amounts sum to zero"."""
+
 COUNT_MAX = 10**9
 """The most of anything a command counts (cases, targets, formulations, spray-outs, photons,
 colour codes): far past a day's work, and within numpy's 64-bit integers, where a count past

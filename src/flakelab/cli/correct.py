@@ -12,6 +12,7 @@ from rich.table import Table
 from flakelab.cli.common import (
     COUNT_MAX,
     MODEL_SPREAD_LEGEND,
+    WEIGHT_MAX,
     AverageOption,
     AverageSprayedOption,
     JsonOption,
@@ -123,6 +124,7 @@ def correct_command(
         float,
         typer.Option(
             min=0.0,
+            max=WEIGHT_MAX,
             help="Widen the prior of the offset that persists by this many times the model "
             "ensemble's disagreement at each geometry (0: one prior everywhere).",
         ),

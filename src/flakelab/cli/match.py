@@ -15,6 +15,7 @@ from rich.table import Table
 from flakelab.cli.common import (
     COUNT_MAX,
     MODEL_SPREAD_LEGEND,
+    WEIGHT_MAX,
     AverageOption,
     JsonOption,
     LightsOption,
@@ -170,6 +171,7 @@ def match_command(
         float,
         typer.Option(
             min=0.0,
+            max=WEIGHT_MAX,
             help="Weight of the model ensemble's disagreement (ΔE94) in the search's objective: "
             "steers recipes to where the learned model's networks agree (0: the closest "
             "predicted match, wherever the model is unsure).",

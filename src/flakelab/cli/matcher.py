@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from flakelab.cli.common import errors
+from flakelab.cli.common import WEIGHT_MAX, errors
 from flakelab.cli.sources import (
     cases_hint_in,
     current_forward,
@@ -26,6 +26,7 @@ MetamerismOption = Annotated[
     float,
     typer.Option(
         min=0.0,
+        max=WEIGHT_MAX,
         help="Weight of the metamerism index against the target (ΔE00 after ISO 18314-4's "
         "correction, under the test lights) in the objective: steers recipes to the car's own "
         "pigments (0: colour under D65/10 alone).",

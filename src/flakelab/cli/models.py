@@ -14,6 +14,7 @@ from rich.table import Table
 
 from flakelab.cli.common import (
     COUNT_MAX,
+    WEIGHT_MAX,
     JsonOption,
     check_figure_file,
     check_output_file,
@@ -216,7 +217,11 @@ def train(
     ] = 128,
     colour_weight: Annotated[
         float | None,
-        typer.Option(min=0.0, help="Weight of the mean squared ΔE94 loss term (default: 0.02)."),
+        typer.Option(
+            min=0.0,
+            max=WEIGHT_MAX,
+            help="Weight of the mean squared ΔE94 loss term (default: 0.02).",
+        ),
     ] = None,
     holdout: Annotated[
         float, typer.Option(min=0.01, max=0.9, help="Share of cases held out to judge it.")
