@@ -1145,8 +1145,10 @@ def test_an_objective_s_weights_are_finite(cli):
     assert set(found.values()) == {WEIGHT_MAX}, found
     for args, option in (
         (("match", "--example", "--model-risk", "inf"), "--model-risk"),
-        (("correct", "t.cxf", "-r", "r.json", "-s", "s.cxf", "--metamerism", "inf"),
-         "--metamerism"),  # fmt: skip
+        (
+            ("correct", "t.cxf", "-r", "r.json", "-s", "s.cxf", "--metamerism", "inf"),
+            "--metamerism",
+        ),  # fmt: skip
     ):
         run = cli(*args)
         assert run.returncode == 2 and f"Invalid value for '{option}'" in run.stderr, run.stderr
