@@ -63,10 +63,14 @@ from flakelab.library.lots import TonerLot, TonerLots
 from flakelab.match.habits import ShopHabits, save_habits, write_habits
 from flakelab.models.registry import shipped_model
 
+HUGE_INTEGERS = ("1" + "0" * 21, "9" * 400)
+"""Integers past 64 bits, and past a double's range, written out in digits (stop 128: each
+was an internal error in the readers of habits, tins, spectra and libraries)."""
 TOKENS = ("nan", "-1", "1e400", "1e300", "", "abc", "0", "Infinity", "1e-320", "[]", "{}", "null",
-          "true")  # fmt: skip
+          "true", *HUGE_INTEGERS)  # fmt: skip
 """What a damaged number becomes."""
-VALUES = (None, "x", -1, 0, 1e308, float("nan"), float("inf"), [], {}, True, [1, 2], {"a": 1})
+VALUES = (None, "x", -1, 0, 1e308, float("nan"), float("inf"), [], {}, True, [1, 2], {"a": 1},
+          *map(int, HUGE_INTEGERS))  # fmt: skip
 """What a damaged JSON value becomes."""
 CELLS = (None, "", "x", " 45as15 ", "45as15", "Name", "1,5", "=1/0", -1.0, 0, 1e308,
          float("nan"), float("inf"), True, datetime(2020, 1, 1))  # fmt: skip
@@ -177,9 +181,12 @@ def odd_target(document, rng: random.Random):
 
 def damage_workbook(data: bytes, rng: random.Random) -> bytes:
     """An MA-T12 export with one to three of: a cell replaced, a row or column deleted, a
-    junk row inserted, a sheet removed, renamed or copied; or the file's bytes cut short."""
+    junk row inserted, a sheet removed, renamed or copied; or the file's bytes cut short; or
+    one of its parts' XML damaged as text is (:func:`damage_part`)."""
     if rng.random() < 0.1:
         return data[: rng.randrange(len(data))]
+    if rng.random() < 0.15:
+        return damage_part(data, rng)
     workbook = openpyxl.load_workbook(io.BytesIO(data))
     for _ in range(rng.randint(1, 3)):
         sheet = rng.choice(workbook.worksheets)
@@ -204,6 +211,22 @@ def damage_workbook(data: bytes, rng: random.Random) -> bytes:
                 workbook.copy_worksheet(sheet)
     buffer = io.BytesIO()
     workbook.save(buffer)
+    return buffer.getvalue()
+
+
+def damage_part(data: bytes, rng: random.Random) -> bytes:
+    """A workbook whose zip is whole but one XML part (a sheet, the shared strings, the
+    workbook's own) damaged as :func:`damage_text` damages a text (stop 128: openpyxl's
+    ParseError, LookupError, TypeError and IndexError were internal errors)."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as source, zipfile.ZipFile(buffer, "w") as target:
+        parts = [n for n in source.namelist() if n.endswith((".xml", ".rels"))]
+        broken = rng.choice(parts)
+        for item in source.infolist():
+            content = source.read(item)
+            if item.filename == broken:
+                content = damage_text(content.decode("utf-8"), rng).encode("utf-8")
+            target.writestr(item, content)
     return buffer.getvalue()
 
 
@@ -269,7 +292,8 @@ TABLE_COLUMNS = {
 """The columns of each table's rows that a damaged database changes (``database-shops``)."""
 CELL_VALUES = (None, "", "x", "nonsense", 5, -1.0, 1e308, b"ab", b"", "[1, 2]", '{"a": 1}',
                '["45as15"]', '["zz"]', '{"Sa15": "x"}', "2026-13-45 25:00:00", "{",
-               "null")  # fmt: skip
+               "null", '{"film_build": 1000000000000000000000}',
+               "[1000000000000000000000]")  # fmt: skip
 """What a damaged database cell becomes."""
 
 

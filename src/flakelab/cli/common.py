@@ -480,8 +480,8 @@ loss infinite, refused as "amounts that are not a number" or "amounts sum to zer
 COUNT_MAX = 10**9
 """The most of anything a command counts (cases, targets, formulations, spray-outs, photons,
 colour codes): far past a day's work, and within numpy's 64-bit integers, where a count past
-them was an internal error ("Python int too large to convert to C long"); a count this large
-is refused for the memory it would take, as any job too large is."""
+them was an internal error ("Python int too large to convert to C long"). A job that large
+may still be refused for the memory it would take, as any job too large is."""
 
 
 LightsOption = Annotated[

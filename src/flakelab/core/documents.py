@@ -82,7 +82,7 @@ def toml_value(text: str) -> dict:
 
 
 _INT64_DIGITS = 18
-"""Digits that every signed 64-bit integer of that length holds."""
+"""Every integer of this many digits fits a signed 64-bit integer (2⁶³ − 1 has 19)."""
 
 
 def _number_of_integer(text: str) -> int | float:
