@@ -418,8 +418,8 @@ def named_model(spec: str, database: str | None, label: str = "MODEL"):
 
 def name_and_version(spec: str) -> tuple[str, int] | None:
     """``NAME:VERSION`` of a registered model (``flakelab model list``), else None. VERSION
-    is in ASCII digits ('five-angle:²' was an internal error) and at most
-    :data:`~flakelab.cli.common.COUNT_MAX` (past SQLite's integers, another)."""
+    is in ASCII digits ('five-angle:²' was refused "invalid literal for int()") and at most
+    :data:`~flakelab.cli.common.COUNT_MAX` (past SQLite's integers, an internal error)."""
     name, colon, version = spec.rpartition(":")
     if not (colon and name and version.isascii() and version.isdigit()):
         return None
