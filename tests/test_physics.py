@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import colour
 import numpy as np
 import pytest
@@ -26,7 +28,7 @@ from flakelab.physics.layer import (
     layer_from_fractions,
     mean_projected_cosine,
 )
-from flakelab.physics.montecarlo import simulate
+from flakelab.physics.montecarlo import ROUND_PHOTONS, simulate
 from flakelab.physics.scaling import _de00, _lab
 from flakelab.texture.readings import texture_readings
 
@@ -146,6 +148,42 @@ def test_seed_makes_the_monte_carlo_reproducible():
     c = simulate(layer(rate=0.2), ["45as45"], 2_000, seed=12)
     np.testing.assert_allclose(a.brdf, b.brdf, rtol=1e-12)
     assert not np.allclose(a.brdf, c.brdf)
+
+
+def test_progress_counts_every_photon_once_round_by_round():
+    photons = 2 * 3 * ROUND_PHOTONS + 5  # three chunks: the last chunk's third round is short
+    traced = []
+    simulate(layer(rate=0.2), ["45as45"], photons, seed=11, chunks=3, progress=traced.append)
+    assert traced == [3 * ROUND_PHOTONS, 3 * ROUND_PHOTONS, 5]
+
+
+@pytest.mark.skipif(not hasattr(signal, "setitimer"), reason="no interval timer (Windows)")
+def test_a_long_run_stops_within_a_round_or_two_of_a_signal():
+    """Compiled code holds the interpreter, and a signal's handler runs only when it returns:
+    one compiled call for the whole run kept a Ctrl-C or SIGTERM waiting until the run had
+    ended (hours at 10⁹ photons; ``timeout`` could not stop ``validate scaling``). The tracer
+    returns every round, so here an alarm half a second in stops a run of 60 rounds (about
+    15 s on two cores) after a few."""
+
+    class Stopped(Exception):
+        pass
+
+    def stop(_signum, _frame):
+        raise Stopped
+
+    coating, rounds = layer(rate=0.2, sigma=0.1), 60
+    simulate(coating, GEOMETRIES, 2, seed=1)  # compiled (or loaded) before the alarm is set
+    traced = []
+    previous = signal.signal(signal.SIGALRM, stop)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.5)
+        with pytest.raises(Stopped):
+            photons = rounds * 8 * ROUND_PHOTONS
+            simulate(coating, GEOMETRIES, photons, seed=1, chunks=8, progress=traced.append)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert len(traced) < rounds / 10, f"stopped after {len(traced)} of {rounds} rounds"
 
 
 def test_one_run_refuses_two_illumination_angles():

@@ -819,7 +819,7 @@ def validate_scaling(
 
     Its Table 1 dye series, each reflectance by the reference Monte Carlo against the fast
     model and the single-collision scaling."""
-    from flakelab.physics.scaling import run_series, scaling_report
+    from flakelab.physics.scaling import SERIES_RUNS, run_series, scaling_report
     from flakelab.render.plots import plot_scaling
 
     try:
@@ -836,9 +836,11 @@ def validate_scaling(
         raise FlakelabError(f"--spreads: expected degrees in (0, 45], got {spreads!r}")
     series = []
     with progress_bar(json_output) as progress:
-        task = progress.add_task("Monte Carlo", total=8 * len(values))
+        task = progress.add_task("Monte Carlo photons", total=SERIES_RUNS * len(values) * photons)
         for value in values:
-            series.append(run_series(value, photons, seed, progress=lambda: progress.advance(task)))
+            series.append(
+                run_series(value, photons, seed, progress=lambda n: progress.advance(task, n))
+            )
     report = scaling_report(series[0], series[1:])
     if plots is not None:
         plots.mkdir(parents=True, exist_ok=True)

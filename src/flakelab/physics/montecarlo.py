@@ -22,6 +22,7 @@ for any transparent dye (:mod:`flakelab.physics.fast`).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -36,7 +37,7 @@ from flakelab.physics.layer import (
     mean_projected_cosine,
 )
 
-__all__ = ["MonteCarloResult", "PathTable", "simulate", "MAX_BOUNCES"]
+__all__ = ["MonteCarloResult", "PathTable", "simulate", "MAX_BOUNCES", "ROUND_PHOTONS"]
 
 MAX_BOUNCES = 63
 """Flake-bounce counts recorded separately in path tables; the last slot holds ≥ 63 (light
@@ -46,6 +47,11 @@ PATH_BINS = 400
 everything longer)."""
 MAX_EVENTS = 200_000
 """Events after which a photon is dropped (counted in ``MonteCarloResult.capped``)."""
+ROUND_PHOTONS = 1024
+"""Photons each chunk traces before the compiled tracer hands back to Python. Compiled code
+holds the interpreter, so a Ctrl-C or SIGTERM waited for the whole run (hours at 10⁹
+photons); it now stops the run within a round (about 0.25 s for eight chunks of the scaling
+experiment's coatings on two cores), and each round reports progress."""
 
 
 @dataclass(frozen=True)
@@ -369,11 +375,13 @@ def _trace(first, count, seed, optics, tallies):
 
 
 @numba.njit(cache=True, parallel=True)
-def _trace_chunks(chunks, per_chunk, photons, seed, optics, tallies):
+def _trace_round(chunks, per_chunk, done, photons, seed, optics, tallies):
+    """Each chunk's photons ``done … done + ROUND_PHOTONS`` of its own (chunk c holds photons
+    ``c·per_chunk …``, in order, whatever the rounds: the sums are those of one call)."""
     score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped = tallies
     for c in numba.prange(chunks):
-        first = c * per_chunk
-        count = min(per_chunk, photons - first)
+        first = c * per_chunk + done
+        count = min(ROUND_PHOTONS, per_chunk - done, photons - first)
         if count > 0:
             chunk = (score_sum[c], score_sq[c], albedo_sum[c], albedo_sq[c], table_w[c],
                      table_wl[c], capped[c])  # fmt: skip
@@ -407,12 +415,14 @@ def simulate(
     diffuse_illumination: bool = False,
     path_step: float = 0.5,
     chunks: int = 8,
+    progress: Callable[[int], None] | None = None,
 ) -> MonteCarloResult:
     """Trace ``photons`` through the first formulation of ``layer`` for every geometry's
     detector (all geometries must share the illumination direction unless diffuse).
 
     ``diffuse_illumination`` replaces the collimated beam by a cosine-weighted one inside the
-    coating (what Kubelka–Munk assumes). Deterministic for a given ``seed``.
+    coating (what Kubelka–Munk assumes). Deterministic for a given ``seed``. ``progress`` is
+    called with the photons of each round as it ends (:data:`ROUND_PHOTONS`).
     """
     if photons < 2:
         raise ValueError(f"photons: expected at least 2, got {photons}")
@@ -459,7 +469,11 @@ def simulate(
         float(path_step),
     )
     tallies = (score_sum, score_sq, albedo_sum, albedo_sq, table_w, table_wl, capped)
-    _trace_chunks(chunks, per_chunk, photons, np.uint64(seed), optics, tallies)
+    left = np.clip(photons - np.arange(chunks) * per_chunk, 0, per_chunk)  # each chunk's
+    for done in range(0, per_chunk, ROUND_PHOTONS):
+        _trace_round(chunks, per_chunk, done, photons, np.uint64(seed), optics, tallies)
+        if progress:
+            progress(int(np.clip(left - done, 0, ROUND_PHOTONS).sum()))
     seconds = time.perf_counter() - start
     mean = score_sum.sum(0) / photons
     stderr = np.sqrt(np.maximum(score_sq.sum(0) / photons - mean**2, 0) / (photons - 1))

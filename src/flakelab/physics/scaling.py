@@ -31,6 +31,7 @@ from flakelab.physics.montecarlo import simulate
 __all__ = [
     "TABLE1_DYE",
     "TABLE1_FLAKES",
+    "SERIES_RUNS",
     "ScalingSeries",
     "run_series",
     "scaling_report",
@@ -41,6 +42,8 @@ TABLE1_DYE = np.array([1.12, 2.91, 4.23, 5.23, 5.98, 6.58]) / 100
 """Dye pigment volume concentrations of the hybrid paper's Table 1 (dry film)."""
 TABLE1_FLAKES = np.array([12.85, 12.62, 12.47, 12.36, 12.24, 12.14]) / 100
 """Flake volume concentrations of the same samples (diluted by the dye paste)."""
+SERIES_RUNS = 2 + TABLE1_DYE.size
+"""Monte Carlo runs of one series: the base twice (truth and fast-model table), each sample."""
 FLAKE_THICKNESS = 0.5
 """Coarse aluminium flake thickness [µm]."""
 LAYER_THICKNESS = 15.0
@@ -105,22 +108,17 @@ def run_series(
     spread_deg: float = 10.0,
     photons: int = 200_000,
     seed: int = 51,
-    progress: Callable[[], None] | None = None,
+    progress: Callable[[int], None] | None = None,
 ) -> ScalingSeries:
-    """Monte Carlo of the base (twice: truth and fast-model table) and of the six samples."""
+    """Monte Carlo of the base (twice: truth and fast-model table) and of the six samples
+    (:data:`SERIES_RUNS` runs); ``progress`` is called with the photons traced as they are."""
     geometries = INSTRUMENT_GEOMETRIES["byk-mac-i"]
     samples = _layer(TABLE1_FLAKES, TABLE1_DYE, spread_deg)
     base_layer = _layer(TABLE1_FLAKES[:1], np.zeros(1), spread_deg)
-
-    def step(result):
-        if progress:
-            progress()
-        return result
-
-    base = step(simulate(base_layer, geometries, photons, seed=seed))
-    table_run = step(simulate(base_layer, geometries, photons, seed=seed + 1000))
+    base = simulate(base_layer, geometries, photons, seed=seed, progress=progress)
+    table_run = simulate(base_layer, geometries, photons, seed=seed + 1000, progress=progress)
     runs = [
-        step(simulate(samples[i], geometries, photons, seed=seed + 1 + i))
+        simulate(samples[i], geometries, photons, seed=seed + 1 + i, progress=progress)
         for i in range(samples.size)
     ]
     start = time.perf_counter()
