@@ -1973,6 +1973,74 @@ def test_an_interrupted_generation_says_what_it_stored_and_goes_on_when_run_agai
     assert count_cases(open_database(database)) == 1600
 
 
+@pytest.mark.parametrize(
+    ("stopped", "stored"),
+    [("reading", 0), ("storing", 0), ("committing", 30), ("checking", 30)],
+)
+def test_an_interrupted_import_says_whether_its_transaction_landed(
+    tmp_path, cli, monkeypatch, ctrl_c, stopped, stored
+):
+    """A Ctrl-C while the history is read, before its one transaction, once it is committed
+    (the signal met the commit: raised after it) or while the cases are checked against a
+    model: the line says what the database holds, as the database says. Before, each was
+    "stopped before it finished", though the cases were stored in the last two, and the
+    same import again refused them as stored already."""
+    from flakelab.cases import exchange
+    from flakelab.match import mixups
+
+    history, database = tmp_path / "history.csv", tmp_path / "shop.db"
+    write_cases(
+        [c for batch in World(read_library(None)).cases(30, seed=31) for c in batch], history
+    )
+    interrupted = {
+        "reading": (exchange, "read_cases", 1, False),
+        "storing": (database_module, "add_cases", 1, False),
+        "committing": (database_module, "add_cases", 1, True),
+        "checking": (mixups, "recorded_checks", 1, False),
+    }
+    module, name, call, after = interrupted[stopped]
+    monkeypatch.setattr(module, name, ctrl_c(getattr(module, name), call, after))
+    run = cli("cases", "import", history, "-d", database)
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 130 and "Traceback" not in said, said
+    if stopped == "reading":
+        assert said.endswith("interrupted: nothing was imported") and not database.exists()
+        return
+    assert count_cases(open_database(str(database))) == stored
+    if stored:
+        assert said.endswith(
+            f"interrupted: {database.resolve()} holds 30 cases imported; they were not checked "
+            "against a model ('cases list --mix-ups' checks them)"
+        ), said
+    else:
+        assert said.endswith(
+            f"interrupted: nothing was imported; {database.resolve()} is as it was"
+        )
+
+
+@pytest.mark.parametrize("command", ["record", "record-all"])
+def test_an_interrupted_record_says_whether_its_case_was_stored(
+    tmp_path, cli, monkeypatch, ctrl_c, command
+):
+    from flakelab.match import mixups
+
+    target, sprayout = example_path("target"), example_path("sprayout")
+    recipe, database = target.with_name("blue-metallic-recipe.json"), tmp_path / "shop.db"
+    record = ("cases", "record", target, "-r", recipe, "--sprayed", sprayout, "-d", database)
+    if command == "record-all":
+        manifest = tmp_path / "history.csv"
+        manifest.write_text(f"target,recipe,sprayed\n{target},{recipe},{sprayout}\n")
+        record = ("cases", "record-all", manifest, "-d", database)
+    monkeypatch.setattr(mixups, "recorded_checks", ctrl_c(mixups.recorded_checks, 1))
+    run = cli(*record)
+    said = " ".join(run.stderr.split())
+    assert run.returncode == 130 and count_cases(open_database(str(database))) == 1
+    assert said.endswith(
+        f"interrupted: {database.resolve()} holds the case recorded; it was not checked against "
+        "a model ('cases list --mix-ups' checks them)"
+    ), said
+
+
 def test_case_checks_its_fields():
     with pytest.raises(CaseError, match="outcome"):
         Case("x", ("45as45",), {"A": 1.0}, np.ones((1, 31)), np.ones((1, 31)), outcome="maybe")

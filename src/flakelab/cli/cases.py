@@ -306,16 +306,19 @@ def import_cases(
 
     # a library given is read, and refused if malformed, even where --no-check leaves it unused
     lib = read_library(library) if check or library is not None else None
-    with progress_bar() as bar:  # a shop's history of 30,000 cases: 7 s to read
+    # a shop's history of 30,000 cases: 7 s to read
+    with interrupted("nothing was imported"), progress_bar() as bar:
         task = bar.add_task(f"reading the lines of {source.name}", total=count_lines(source))
         cases = read_cases(source, lambda: bar.advance(task))
     engine = open_database(database)
+    left = _left_by_storing(engine, cases, "imported", new_only)
     try:  # one transaction: all of them or none
-        if new_only:
-            stored = store_new_cases(engine, cases)
-        else:
-            add_cases(engine, cases)
-            stored = cases
+        with interrupted(left):
+            if new_only:
+                stored = store_new_cases(engine, cases)
+            else:
+                add_cases(engine, cases)
+                stored = cases
     except CaseError as error:  # it names the case stored already, or stored otherwise
         again = " (--new-only passes over those stored already)" if not new_only else ""
         raise FlakelabError(f"{source}: {error}{again}") from None
@@ -330,7 +333,8 @@ def import_cases(
     if not check:
         return
     # the cases stored now: those stored already were checked then
-    checks, unchecked = recorded_checks(stored, lib, existing_engine(database))
+    with interrupted(left):
+        checks, unchecked = recorded_checks(stored, lib, existing_engine(database))
     mismatched = [c.case_id for c, k in zip(stored, checks, strict=True) if is_mismatched(k)]
     shown = ", ".join(mismatched[:5]) + (" …" if len(mismatched) > 5 else "")
     _tell_mix_ups(len(mismatched), shown, unchecked)
@@ -444,12 +448,15 @@ def record_case(
             f"{database_label(engine)}: case {case.case_id} is already recorded (the same "
             "readings, recipe and shop); nothing was stored"
         )
-    add_cases(engine, [case])  # a writer between the check and here is refused by the database
+    left = _left_by_storing(engine, [case], "recorded")
+    with interrupted(left):  # a writer between the check and here is refused by the database
+        add_cases(engine, [case])
     left_out = [g for g in target_reading.geometry_names if g not in case.geometry_names]
     models = instruments_reading(case.geometry_names)
     found, unchecked = None, None
     if check:
-        (found,), unchecked = recorded_checks([case], lib, existing_engine(database))
+        with interrupted(left):
+            (found,), unchecked = recorded_checks([case], lib, existing_engine(database))
     report = {
         "case_id": case.case_id,
         "shop": case.shop,
@@ -575,14 +582,15 @@ def record_all(
     instrument = instrument and instrument_key(instrument)
     tol = read_tolerance(tolerance)
     lib = read_library(library)
-    numbered = cases_from_manifest(
-        manifest,
-        lib,
-        tolerance=tol,
-        shop=shop,
-        instrument=instrument,
-        rows=tracked(read_manifest(manifest), "reading the spray-outs", disable=json_output),
-    )
+    with interrupted("nothing was recorded"):
+        numbered = cases_from_manifest(
+            manifest,
+            lib,
+            tolerance=tol,
+            shop=shop,
+            instrument=instrument,
+            rows=tracked(read_manifest(manifest), "reading the spray-outs", disable=json_output),
+        )
     rows, cases = [n for n, _ in numbered], [c for _, c in numbered]
     engine = open_database(database)
     stored = existing_case_ids(engine, (c.case_id for c in cases))
@@ -593,11 +601,14 @@ def record_all(
             f"{database_label(engine)} "
             f"({len(stored)} of the {len(cases)} rows are); nothing was stored"
         )
-    add_cases(engine, cases)  # one transaction: a writer in between is refused whole
+    left = _left_by_storing(engine, cases, "recorded")
+    with interrupted(left):  # one transaction: a writer in between is refused whole
+        add_cases(engine, cases)
     worst, where = worst_differences(cases)
     checks, unchecked = [None] * len(cases), None
     if check:
-        checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
+        with interrupted(left):
+            checks, unchecked = recorded_checks(cases, lib, existing_engine(database))
     recorded = [
         {
             "row": number,
@@ -815,6 +826,31 @@ def _tell_recovered(rows: list[dict]) -> None:
             target = flag == "target_recovered"  # what a model learns: the spray-out's say
             note = recovered_note(target, not target, learning=not target)
             errors.print(f"{mark} {note}", style="dim", highlight=False)
+
+
+def _left_by_storing(engine, cases: list, verb: str, some_stored: bool = False):
+    """What a Ctrl-C left where ``cases`` go into the database in one transaction, all or
+    none, and are checked against a model after it: asked of the database, since a signal
+    that meets the commit is raised once it is done. With ``some_stored``, those stored
+    before are told apart (read now, before the transaction)."""
+    from flakelab.cases.database import existing_case_ids
+
+    ids = [case.case_id for case in cases]
+    before = existing_case_ids(engine, ids) if some_stored else set()
+
+    def left() -> str:
+        stored = len(existing_case_ids(engine, ids) - before)
+        if not stored:
+            return f"nothing was {verb}; {database_label(engine)} is as it was"
+        which, were = (
+            ("the case", "it was") if stored == 1 else (counted(stored, "case"), "they were")
+        )
+        return (
+            f"{database_label(engine)} holds {which} {verb}; {were} not checked against a model "
+            "('cases list --mix-ups' checks them)"
+        )
+
+    return left
 
 
 def _tell_mix_ups(count: int, which: str, unchecked: str | None) -> None:
