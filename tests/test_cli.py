@@ -8,6 +8,7 @@ import io
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 from dataclasses import replace
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flakelab.cli.common import progress_bar, reports_errors, tracked
+from flakelab.cli.common import Terminated, progress_bar, reports_errors, run_command_line, tracked
 from flakelab.core import compare, tolerance_preset
 from flakelab.data import example_path
 from flakelab.errors import Note
@@ -860,6 +861,38 @@ def test_a_ctrl_c_stops_a_command_with_one_line_and_the_shells_status(capsys):
         long_job()
     assert exited.value.exit_code == 130  # 128 + SIGINT, as the shell's tools exit
     assert capsys.readouterr().err.strip() == "interrupted: stopped before it finished"
+
+
+@pytest.mark.parametrize(("stop", "status", "said"), [
+    (KeyboardInterrupt(), 130, "interrupted"),
+    (Terminated(signal.SIGTERM), 143, "terminated"),
+])  # fmt: skip
+def test_a_signal_met_while_the_options_are_read_stops_as_in_the_command(
+    monkeypatch, capsys, stop, status, said
+):
+    """Typer turns a Ctrl-C met outside the command, in an option's check (``--shop``'s
+    imports colour-science: seconds), into exit 130 and no word, a SIGTERM too."""
+    import typer
+
+    def checked(value: str) -> str:
+        raise stop
+
+    app = typer.Typer()
+
+    @app.command()
+    def job(shop: str = typer.Option("x", callback=checked)) -> None:
+        pass
+
+    monkeypatch.setattr(sys, "argv", ["flakelab", "--shop", "y"])
+    with pytest.raises(SystemExit) as exited:
+        run_command_line(app, "flakelab")
+    assert exited.value.code == status
+    assert capsys.readouterr().err.strip() == f"{said}: stopped before it began; nothing was done"
+    # any other exit is Typer's own
+    monkeypatch.setattr(sys, "argv", ["flakelab", "--shop"])
+    with pytest.raises(SystemExit) as exited:
+        run_command_line(app, "flakelab")
+    assert exited.value.code == 2 and "requires an argument" in capsys.readouterr().err
 
 
 def test_a_file_the_system_refuses_is_named_first(tmp_path, capsys):

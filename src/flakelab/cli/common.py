@@ -389,15 +389,32 @@ def interrupted(left: str | Callable[[], str]) -> Iterator[None]:
         stop_interrupted(left() if callable(left) else left)
 
 
-def stop_interrupted(message: str) -> None:
-    """Stop a command that a Ctrl-C cut short: one line, exit status 130 (128 + SIGINT), as
-    the shell's tools stop; 143 (128 + SIGTERM) and "terminated" for a SIGTERM, 129 and "hung
-    up" for a SIGHUP."""
-    stopped = sys.exc_info()[1]
+def stop_interrupted(message: str, stopped: BaseException | None = None) -> None:
+    """Stop a command that a Ctrl-C cut short (``stopped``, by default the exception being
+    handled): one line, exit status 130 (128 + SIGINT), as the shell's tools stop; 143
+    (128 + SIGTERM) and "terminated" for a SIGTERM, 129 and "hung up" for a SIGHUP."""
+    stopped = stopped or sys.exc_info()[1]
     if isinstance(stopped, Terminated):
         label = "hung up" if stopped.signum == SIGHUP else "terminated"
         _stop(label, message, 128 + stopped.signum)
     _stop("interrupted", message, 128 + signal.SIGINT)
+
+
+def run_command_line(app: typer.Typer, prog_name: str) -> None:
+    """Run ``app`` as the console's command. Typer turns a Ctrl-C (or SIGTERM, SIGHUP) met
+    outside the command, while it reads the options, into exit status 130 and no word: an
+    option's check can take seconds (``--shop``'s imports colour-science), and such a SIGTERM
+    left a silent 130. It stops as a command stops (:func:`stop_interrupted`)."""
+    try:
+        app(prog_name=prog_name)
+    except SystemExit as exit:  # Typer: raise Exit(130) from the interrupt, then sys.exit
+        stopped = getattr(exit.__context__, "__cause__", None)
+        if not isinstance(stopped, KeyboardInterrupt):
+            raise
+        try:
+            stop_interrupted("stopped before it began; nothing was done", stopped)
+        except typer.Exit as said:
+            raise SystemExit(said.exit_code) from None
 
 
 def _message(error: Exception) -> str:

@@ -44,6 +44,7 @@ from flakelab.cli.common import (
     refuse_a_removed_folder,
     render_lamps,
     reports_errors,
+    run_command_line,
     sample_of,
     seed_option,
     stop_on_signals,
@@ -930,7 +931,7 @@ def run() -> None:
     """Console entry point."""
     stop_on_signals()
     refuse_a_removed_folder()
-    app(prog_name="flakelab")
+    run_command_line(app, "flakelab")
 
 
 if __name__ == "__main__":
