@@ -503,6 +503,11 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
         (back,) = read_measurements(european)
         np.testing.assert_array_equal(back.reflectance, expected.reflectance)
         assert back.sample == expected.sample and back.texture == expected.texture
+        # without its mark: refused as such, where its header was "s a m p l e …", a CSV
+        # missing its 'sample' column
+        european.write_bytes(tabbed.getvalue().encode(encoding))
+        with pytest.raises(MeasurementFileError, match="UTF-16 text without its byte-order"):
+            read_measurements(european)
 
 
 def test_a_csv_written_for_a_european_spreadsheet_is_the_one_it_saves(rich_measurement, tmp_path):

@@ -83,6 +83,14 @@ _OTHER_KINDS = {
 }
 
 
+NUL_TEXT = (
+    "not a measurement file: it holds NUL bytes, which no text file does (UTF-16 text without "
+    "its byte-order mark? save it as UTF-8, or as UTF-16 with its mark)"
+)
+"""What a head with NUL bytes is told: UTF-16 written without its mark read as UTF-8 was a
+CSV whose header was "s a m p l e", refused as missing its 'sample' column."""
+
+
 def detect_format(path: str | PathLike) -> str:
     """Name of the measurement format of a file, judged by its content."""
     try:
@@ -111,6 +119,8 @@ def detect_format(path: str | PathLike) -> str:
     text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
     if not text:  # a byte-order mark alone
         raise MeasurementFileError(path, "empty file")
+    if b"\x00" in text:  # valid UTF-8, but no text file holds NULs; was read as a CSV
+        raise MeasurementFileError(path, NUL_TEXT)
     if text.startswith(b"<"):
         if b"colorexchangeformat.com/CxF3" in head or b"<CxF" in head or b":CxF" in head:
             return "cxf"
