@@ -702,6 +702,12 @@ def test_other_kinds_of_file_are_named(tmp_path):
     mark.write_bytes(b"\xc3")  # a character's first byte alone
     with pytest.raises(MeasurementFileError, match="binary content"):
         read_measurements(mark)
+    # bytes that are not UTF-8 and hold NULs (a comma among them): binary, not the hint
+    # for UTF-16 text that valid UTF-8 with NULs is given
+    blob = tmp_path / "blob.csv"
+    blob.write_bytes(b"a,b\x00\xff\xfe\x00\x93\n" * 40)
+    with pytest.raises(MeasurementFileError, match="blob.csv: not a measurement file: binary"):
+        read_measurements(blob)
 
 
 def test_a_csv_whose_head_ends_inside_a_character_is_read(rich_measurement, tmp_path):

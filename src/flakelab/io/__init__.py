@@ -91,6 +91,14 @@ NUL_TEXT = (
 CSV whose header was "s a m p l e", refused as missing its 'sample' column."""
 
 
+def _utf8_lines(head: bytes) -> list[str] | None:
+    """Lines of a file's head read as UTF-8, or None where it is not UTF-8."""
+    try:  # the head may end inside a character: not an error of the file
+        return codecs.getincrementaldecoder("utf-8")().decode(head).splitlines()
+    except UnicodeDecodeError:
+        return None
+
+
 def detect_format(path: str | PathLike) -> str:
     """Name of the measurement format of a file, judged by its content."""
     try:
@@ -119,7 +127,8 @@ def detect_format(path: str | PathLike) -> str:
     text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
     if not text:  # a byte-order mark alone
         raise MeasurementFileError(path, "empty file")
-    if b"\x00" in text:  # valid UTF-8, but no text file holds NULs; was read as a CSV
+    lines = _utf8_lines(text)
+    if lines is not None and b"\x00" in text:  # valid UTF-8, but no text file holds NULs
         raise MeasurementFileError(path, NUL_TEXT)
     if text.startswith(b"<"):
         if b"colorexchangeformat.com/CxF3" in head or b"<CxF" in head or b":CxF" in head:
@@ -127,14 +136,12 @@ def detect_format(path: str | PathLike) -> str:
         raise MeasurementFileError(path, "an XML file, but not CxF3 (no CxF3 namespace)")
     if text.startswith((b"{", b"[")):
         return "json"
-    try:  # the head may end inside a character: not an error of the file
-        lines = codecs.getincrementaldecoder("utf-8")().decode(text).splitlines()
-    except UnicodeDecodeError:
+    if lines is None:
         header = head.split(b"\n")[0].decode("latin-1")  # any byte, to look for separators
         binary = b"\x00" in head or csv_separator(header) is None
         raise MeasurementFileError(
             path, "not a measurement file: binary content" if binary else NOT_UTF8
-        ) from None
+        )
     if not lines:  # a character's first bytes alone
         raise MeasurementFileError(path, "not a measurement file: binary content")
     first_line = lines[0].lower()
