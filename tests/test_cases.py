@@ -270,7 +270,7 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
     rows[1][1] = "Müller"
     with saved.open("w", encoding="cp1252", newline="") as handle:
         csv.writer(handle, delimiter=separator, quoting=quoting).writerows(rows)
-    with pytest.raises(CaseFileError, match="not UTF-8 text; .* when asked for 'CSV UTF-8'$"):
+    with pytest.raises(CaseFileError, match=r"not UTF-8 text; .*'CSV UTF-8' \(invalid start"):
         read_cases(saved)
     # saved as its "Unicode Text" (UTF-16, a byte-order mark): read, Müller and all
     with saved.open("w", encoding="utf-16", newline="") as handle:
@@ -278,6 +278,14 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
     assert saved.read_bytes().startswith(b"\xff\xfe")
     (read,) = read_cases(saved)
     assert read.shop == "Müller" and read.recipe == tinned[0].recipe
+    # and without its mark: refused as such, where it was "not UTF-8 text" (the ü), and its
+    # header read "c a s e _ i d" without the ü, refused as missing that column
+    for shop, where in (("Müller", ""), ("Muller", "row 1: ")):
+        rows[1][1] = shop
+        with saved.open("w", encoding="utf-16-le", newline="") as handle:
+            csv.writer(handle, delimiter=separator, quoting=quoting).writerows(rows[:2])
+        with pytest.raises(CaseFileError, match=f"eu.csv: {where}it holds NUL bytes.*UTF-16"):
+            read_cases(saved)
 
 
 def test_cases_exported_for_a_european_spreadsheet_read_back_as_they_were(tinned, tmp_path):
@@ -2187,6 +2195,9 @@ def test_a_manifest_records_each_row_as_record_would(tmp_path):
         csv.writer(handle, delimiter="\t").writerows(csv.reader(manifest.read_text().splitlines()))
     again = cases_from_manifest(european, library, tolerance=tol, shop="Dupont")
     assert [(n, c.case_id) for n, c in again] == [(n, c.case_id) for n, c in numbered]
+    european.write_bytes(european.read_bytes()[2:])  # without its mark
+    with pytest.raises(ManifestError, match="manifest-eu.csv: row 1: it holds NUL bytes"):
+        cases_from_manifest(european, library, tolerance=tol)
     european.write_text("target;recipe;sprayed;shop\ncar.cxf;shot.json;sprays.cxf;Müller\n",
                         encoding="cp1252")  # fmt: skip
     with pytest.raises(ManifestError, match="manifest-eu.csv: not UTF-8 text; .*'CSV UTF-8'"):

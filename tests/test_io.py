@@ -505,9 +505,10 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
         assert back.sample == expected.sample and back.texture == expected.texture
         # without its mark: refused as such, where its header was "s a m p l e …", a CSV
         # missing its 'sample' column
-        european.write_bytes(tabbed.getvalue().encode(encoding))
-        with pytest.raises(MeasurementFileError, match="UTF-16 text without its byte-order"):
-            read_measurements(european)
+        for text in (tabbed.getvalue(), tabbed.getvalue().replace("rich;", "Müller;")):
+            european.write_bytes(text.encode(encoding))  # the ü: not UTF-8 either
+            with pytest.raises(MeasurementFileError, match="UTF-16 text without its byte-order"):
+                read_measurements(european)
 
 
 def test_a_csv_written_for_a_european_spreadsheet_is_the_one_it_saves(rich_measurement, tmp_path):
@@ -1244,6 +1245,14 @@ def test_json_and_toml_files_windows_writes_are_read(tmp_path, rich_measurement)
                 read_measurements(measured)[0].reflectance)  # fmt: skip
         assert read[:3] == expected[:3], encoding
         np.testing.assert_array_equal(read[3], expected[3])
+    # UTF-16 without its mark: each refused as such, where JSON said "Expecting property
+    # name enclosed in double quotes" at line 1, column 2
+    readers = {recipe: read_recipe, library: read_library, tolerance: read_tolerance,
+               measured: read_measurements}  # fmt: skip
+    for path, text in texts.items():
+        path.write_bytes(text.encode("utf-16-le"))
+        with pytest.raises(FlakelabError, match=f"{path.name}: .*it holds NUL bytes.*UTF-16"):
+            readers[path](path)
 
 
 @pytest.mark.parametrize(

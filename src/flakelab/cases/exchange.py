@@ -53,11 +53,11 @@ from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import FlakelabError, MeasurementFileError, shown
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
-    NOT_UTF8,
     csv_form,
     decimal_comma_in,
     decimal_point,
     is_no_regular_file,
+    not_utf8,
     numbers_at_once,
     recovered_spectra,
     spreadsheet_table,
@@ -318,8 +318,8 @@ def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None)
         with path.open(encoding=text_encoding(path), newline="") as handle:
             lines = handle if progress is None else _told(handle, progress)
             return _cases_from_lines(path, lines)
-    except UnicodeDecodeError:
-        raise CaseFileError(f"{path}: {NOT_UTF8}") from None
+    except UnicodeDecodeError as error:
+        raise CaseFileError(f"{path}: {not_utf8(error)}") from None
 
 
 def _told(lines: Iterable[str], progress: Callable[[], None]) -> Iterator[str]:

@@ -32,6 +32,7 @@ from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
 from flakelab.io.records import (
     NOT_UTF8,
+    NUL_BYTES,
     STANDARD_STREAM,
     UTF16_BOMS,
     csv_separator,
@@ -39,6 +40,7 @@ from flakelab.io.records import (
     standard_input,
     standard_of,
     text_encoding,
+    utf16_without_mark,
 )
 from flakelab.io.tolerance_file import read_tolerance
 
@@ -83,10 +85,7 @@ _OTHER_KINDS = {
 }
 
 
-NUL_TEXT = (
-    "not a measurement file: it holds NUL bytes, which no text file does (UTF-16 text without "
-    "its byte-order mark? save it as UTF-8, or as UTF-16 with its mark)"
-)
+NUL_TEXT = f"not a measurement file: {NUL_BYTES}"
 """What a head with NUL bytes is told: UTF-16 written without its mark read as UTF-8 was a
 CSV whose header was "s a m p l e", refused as missing its 'sample' column."""
 
@@ -128,8 +127,8 @@ def detect_format(path: str | PathLike) -> str:
     if not text:  # a byte-order mark alone
         raise MeasurementFileError(path, "empty file")
     lines = _utf8_lines(text)
-    if lines is not None and b"\x00" in text:  # valid UTF-8, but no text file holds NULs
-        raise MeasurementFileError(path, NUL_TEXT)
+    if utf16_without_mark(text) or (lines is not None and b"\x00" in text):
+        raise MeasurementFileError(path, NUL_TEXT)  # UTF-8 or not: no text file holds NULs
     if text.startswith(b"<"):
         if b"colorexchangeformat.com/CxF3" in head or b"<CxF" in head or b":CxF" in head:
             return "cxf"

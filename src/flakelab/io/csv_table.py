@@ -69,7 +69,6 @@ from flakelab.io.mat12_xlsx import (
     split_sheet,
 )
 from flakelab.io.records import (
-    NOT_UTF8,
     Reading,
     agreed_colour,
     assemble,
@@ -78,6 +77,7 @@ from flakelab.io.records import (
     decimal_comma_in,
     decimal_point,
     filled_width,
+    not_utf8,
     parse_colour,
     parse_conditions,
     parse_geometry_name,
@@ -366,7 +366,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         try:
             text = Path(path).read_text(encoding="utf-8-sig")
         except UnicodeDecodeError as error:
-            raise MeasurementFileError(path, f"{NOT_UTF8} ({error.reason})") from None
+            raise MeasurementFileError(path, not_utf8(error)) from None
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]

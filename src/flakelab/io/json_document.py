@@ -23,6 +23,7 @@ from flakelab.core.documents import MEASUREMENTS_FORMAT, document_kind, json_val
 from flakelab.core.measurement import Measurement
 from flakelab.errors import MeasurementFileError
 from flakelab.io.records import (
+    NulBytesError,
     Reading,
     assemble,
     parse_conditions,
@@ -66,6 +67,8 @@ def read_json(path: str | PathLike, text: str | None = None) -> list[Measurement
         raise MeasurementFileError(
             path, f"invalid JSON ({error.msg})", field=f"line {error.lineno}, column {error.colno}"
         ) from None
+    except NulBytesError as error:
+        raise MeasurementFileError(path, f"not a measurement file: {error}") from None
     except UnicodeDecodeError as error:  # the CLI said it naming no file
         encoding = "UTF-16" if error.encoding.startswith("utf-16") else "UTF-8"
         where = f"{error.reason} at byte {error.start + 1}"

@@ -72,6 +72,10 @@ __all__ = [
     "spreadsheet_table",
     "csv_rows",
     "NOT_UTF8",
+    "NUL_BYTES",
+    "NulBytesError",
+    "not_utf8",
+    "utf16_without_mark",
     "text_of",
 ]
 
@@ -161,6 +165,43 @@ NOT_UTF8 = "not UTF-8 text; a spreadsheet saves a CSV as UTF-8 when asked for 'C
 """What a CSV file in another encoding is told (a spreadsheet's default, Windows-1252, for
 a shop named Müller)."""
 
+NUL_BYTES = (
+    "it holds NUL bytes, which no text file does: UTF-16 text without its byte-order mark? "
+    "Save it as UTF-8, or as UTF-16 with its mark"
+)
+"""What a text file holding NUL bytes is told: UTF-16 written without its mark and read as
+UTF-8 is one, a CSV whose header read "s a m p l e" or JSON refused "Expecting property
+name" at column 2."""
+
+
+def utf16_without_mark(data: bytes) -> bool:
+    """Whether ``data`` reads as UTF-16 text written without its byte-order mark: one byte of
+    nearly every pair NUL, as in Latin text (a CSV of measurements, a shop named Müller)."""
+    pairs = len(data) // 2
+    return pairs >= 2 and any(data[k : 2 * pairs : 2].count(0) >= 0.9 * pairs for k in (0, 1))
+
+
+def not_utf8(error: UnicodeDecodeError) -> str:
+    """What text that is not UTF-8 is told: :data:`NUL_BYTES` where NULs lie among its bytes
+    (UTF-16 without its mark, with a character UTF-8 cannot read), else :data:`NOT_UTF8` with
+    the decoder's reason."""
+    if isinstance(error.object, bytes) and b"\x00" in error.object:
+        return NUL_BYTES
+    return f"{NOT_UTF8} ({error.reason})"
+
+
+class NulBytesError(UnicodeDecodeError):
+    """Text that decoded but holds NUL bytes (:data:`NUL_BYTES`); a :class:`UnicodeDecodeError`,
+    for every reader of :func:`text_of` names the file where it meets one."""
+
+    def __init__(self, encoding: str, text: str) -> None:
+        start = text.index("\x00")
+        super().__init__(encoding, text.encode(encoding, "replace"), start, start + 1, NUL_BYTES)
+
+    def __str__(self) -> str:
+        return NUL_BYTES
+
+
 UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
 """The byte-order marks of UTF-16 text: a spreadsheet's "Unicode Text", tab-separated."""
 
@@ -209,11 +250,18 @@ def text_of(path: str | PathLike) -> str:
     """A text file's contents in :func:`text_encoding`'s encoding: a JSON or TOML file that
     Windows wrote is read as well as any, UTF-16 from PowerShell's ``>`` or UTF-8 with the
     byte-order mark of an older Notepad (both were refused, "Unexpected UTF-8 BOM").
-    :data:`STANDARD_STREAM` reads standard input (:func:`standard_input`)."""
+    :data:`STANDARD_STREAM` reads standard input (:func:`standard_input`). Text holding NUL
+    bytes raises :class:`NulBytesError`."""
     if os.fspath(path) == STANDARD_STREAM:
         data = standard_input()
-        return data.decode("utf-16" if data.startswith(UTF16_BOMS) else "utf-8-sig")
-    return Path(path).read_text(encoding=text_encoding(path))
+        encoding = "utf-16" if data.startswith(UTF16_BOMS) else "utf-8-sig"
+        text = data.decode(encoding)
+    else:
+        encoding = text_encoding(path)
+        text = Path(path).read_text(encoding=encoding)
+    if "\x00" in text:
+        raise NulBytesError(encoding, text)
+    return text
 
 
 CSV_SEPARATORS = ",;\t"
@@ -271,6 +319,8 @@ def csv_rows(
                     "open takes every line after it)"
                 )
             raise refused(number, problem) from None
+        if number == 1 and "\x00" in "".join(row):  # Python 3.11's csv reads NULs
+            raise refused(number, NUL_BYTES)  # a NUL further down is named by its cell
         yield row
 
 

@@ -41,8 +41,10 @@ def read_tolerance(name_or_path: str | PathLike) -> Tolerance:
         )
     try:
         text = text_of(path)
-    except UnicodeDecodeError:
-        raise FlakelabError(f"{path}: not a UTF-8 text (TOML or JSON) tolerance file") from None
+    except UnicodeDecodeError as error:
+        raise FlakelabError(
+            f"{path}: not a UTF-8 text (TOML or JSON) tolerance file ({error.reason})"
+        ) from None
     try:
         data = json_value(text) if path.suffix.lower() == ".json" else toml_value(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as error:
