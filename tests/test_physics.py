@@ -320,6 +320,32 @@ class TestFastModel:
         alone = [texture_readings(layer_from_fractions(self.library, row), radius)[0] for row in x]
         np.testing.assert_allclose(texture, np.array(alone), rtol=1e-12)
 
+    def test_an_atlas_saved_reads_back_and_a_save_cut_short_keeps_the_file(
+        self, tmp_path, monkeypatch
+    ):
+        """``scripts/make_flake_atlas.py`` saves through a temporary file: the atlas read back
+        is the one saved, and a Ctrl-C in the save leaves the file there as it was (numpy
+        wrote into the shipped file itself)."""
+        from flakelab.physics.fast import load_atlas
+
+        shipped = load_atlas()
+        path = tmp_path / "flake-atlas.npz"
+        shipped.save(path)
+        back = load_atlas(path)
+        np.testing.assert_array_equal(back.laplace, shipped.laplace.astype(np.float32))
+        assert (back.geometries, back.photons, back.seed) == (
+            shipped.geometries, shipped.photons, shipped.seed)  # fmt: skip
+        before = path.read_bytes()
+
+        def cut_short(handle, **arrays):
+            handle.write(b"PK\x03\x04 half an archive")
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(np, "savez_compressed", cut_short)
+        with pytest.raises(KeyboardInterrupt):
+            shipped.save(path)
+        assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == [path.name]
+
     def test_atlas_lobes_are_multilinear_and_summed(self):
         """The compiled lobes: the 16-corner interpolation agrees with scipy's multilinear
         interpolation of the same table at random points (spread, depth per lobe; ρ, κ' per

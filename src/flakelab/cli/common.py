@@ -411,10 +411,16 @@ def run_command_line(app: typer.Typer, prog_name: str) -> None:
         stopped = getattr(exit.__context__, "__cause__", None)
         if not isinstance(stopped, KeyboardInterrupt):
             raise
-        try:
-            stop_interrupted("stopped before it began; nothing was done", stopped)
-        except typer.Exit as said:
-            raise SystemExit(said.exit_code) from None
+        exit_interrupted("stopped before it began; nothing was done", stopped)
+
+
+def exit_interrupted(message: str, stopped: KeyboardInterrupt) -> None:
+    """Leave the process as :func:`stop_interrupted` stops a command, outside Typer's app
+    (the console's entry point, a script of ``scripts/``)."""
+    try:
+        stop_interrupted(message, stopped)
+    except typer.Exit as said:
+        raise SystemExit(said.exit_code) from None
 
 
 def _message(error: Exception) -> str:

@@ -97,13 +97,21 @@ class FlakeAtlas:
         return np.array([self.geometries.index(n) for n in names])
 
     def save(self, path: Path) -> None:
-        np.savez_compressed(
-            path,
-            geometries=np.array(self.geometries),
-            laplace=self.laplace.astype(np.float32),
-            photons=self.photons,
-            seed=self.seed,
-        )
+        """Write the atlas to ``path`` whole or not at all (a Ctrl-C there half-wrote the
+        shipped file)."""
+        from flakelab.io.records import write_atomically  # the file formats: not at start-up
+
+        def write(temporary: Path) -> None:
+            with temporary.open("wb") as handle:  # a handle: numpy adds ".npz" to a name
+                np.savez_compressed(
+                    handle,
+                    geometries=np.array(self.geometries),
+                    laplace=self.laplace.astype(np.float32),
+                    photons=self.photons,
+                    seed=self.seed,
+                )
+
+        write_atomically(path, write)
 
 
 @cache
