@@ -35,8 +35,9 @@ import json
 from pathlib import Path
 
 from flakelab.cases.generator import World, WorldSettings
-from flakelab.cli.common import progress_bar
+from flakelab.cli.common import exit_interrupted, progress_bar, stop_on_signals
 from flakelab.io import read_library
+from flakelab.io.records import write_atomically
 from flakelab.library.lots import TIN_KNOWLEDGE
 from flakelab.match.lots import at_standard_tins
 from flakelab.models.checkpoint import TrainingCheckpoint
@@ -113,69 +114,89 @@ def main() -> None:
     if args.cases is not None and args.cases < 1:
         parser.error(f"--cases: {args.cases} is not a positive number of cases")
     library = read_library(None)
+    stop_on_signals()
+    written: list[Path] = []
+    try:
+        for instrument in args.instrument or sorted(SETTINGS):
+            written.append(_train_shipped(instrument, args, library, parser))
+    except KeyboardInterrupt as stopped:  # a traceback before
+        exit_interrupted(_left(written, args.checkpoints), stopped)
+
+
+def _left(written: list[Path], checkpoints: Path | None) -> str:
+    """What an interrupted run leaves: the files it wrote whole, a training's kept stages."""
+    kept = f"; wrote {', '.join(map(str, written))}" if written else "; no model file written"
+    goes_on = (f"; run again with --checkpoints {checkpoints} to go on from the last kept stage"
+               if checkpoints else "; --checkpoints DIR keeps a training's stages")  # fmt: skip
+    return f"stopped before it finished{kept}{goes_on}"
+
+
+def _train_shipped(instrument: str, args: argparse.Namespace, library, parser) -> Path:
+    """Generate one instrument's cases, train its model with the full protocol and write
+    it (whole or not at all); the file's path."""
     effect = [t.kind != "pigment" for t in library.toners]
-    for instrument in args.instrument or sorted(SETTINGS):
-        n, epochs, batch_size, members, screening = SETTINGS[instrument]
-        n = args.cases if args.cases is not None else n
-        kinds = TRAINING_KINDS.get(instrument)
-        try:
-            settings = WorldSettings(
-                tins=args.tins,
-                white_pearl_share=args.white_pearls,
-                **({"kinds": kinds} if kinds else {}),
-            )
-        except ValueError as error:  # before any training
-            parser.error(f"--white-pearls: {error}")
-        world = World(library, instrument, settings, exclude=NOVEL_TONERS)
-        rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
-        config = TrainingConfig.per_stage(
-            epochs,
-            rate,
-            batch_size=batch_size,
-            seed=args.seed if args.network_seed is None else args.network_seed,
-            screening=args.screening or screening,
-            members=args.members or members,
-            log_offset=args.log_offset,
+    n, epochs, batch_size, members, screening = SETTINGS[instrument]
+    n = args.cases if args.cases is not None else n
+    kinds = TRAINING_KINDS.get(instrument)
+    try:
+        settings = WorldSettings(
+            tins=args.tins,
+            white_pearl_share=args.white_pearls,
+            **({"kinds": kinds} if kinds else {}),
         )
-        with progress_bar() as progress:
-            task = progress.add_task(f"{instrument}: generating cases", total=n)
-            cases = []
-            for batch in world.cases(n, args.seed):
-                cases.extend(batch)
-                progress.advance(task, len(batch))
-            data = at_standard_tins(case_arrays(cases, library.names, effect), library)
-            epochs_total = protocol_epochs(config)
-            task = progress.add_task(f"{instrument}: training epochs", total=epochs_total)
-            checkpoint = args.checkpoints and TrainingCheckpoint(
-                args.checkpoints / f"{instrument}.ckpt", config, data_hash(data)
-            )
-            model, report = train_protocol(
-                data,
-                config,
-                progress=lambda k, task=task: progress.advance(task, k),
-                checkpoint=checkpoint,
-            )
-        model.learned = None  # generated cases, which no shop holds: kept out of the file
-        model.info.update(
-            {
-                "name": f"demo-{instrument}",
-                "novel_toners": list(NOVEL_TONERS),
-                "generator_seed": args.seed,
-                "network_seed": config.seed,
-                "cases": n,
-                "training_kinds": settings.kinds,
-                **({"training_tins": args.tins} if args.tins != "none" else {}),
-                **({"white_pearl_share": args.white_pearls} if args.white_pearls else {}),
-            }
+    except ValueError as error:  # before any training
+        parser.error(f"--white-pearls: {error}")
+    world = World(library, instrument, settings, exclude=NOVEL_TONERS)
+    rate = TrainingConfig.learning_rate * batch_size / TrainingConfig.batch_size
+    config = TrainingConfig.per_stage(
+        epochs,
+        rate,
+        batch_size=batch_size,
+        seed=args.seed if args.network_seed is None else args.network_seed,
+        screening=args.screening or screening,
+        members=args.members or members,
+        log_offset=args.log_offset,
+    )
+    with progress_bar() as progress:
+        task = progress.add_task(f"{instrument}: generating cases", total=n)
+        cases = []
+        for batch in world.cases(n, args.seed):
+            cases.extend(batch)
+            progress.advance(task, len(batch))
+        data = at_standard_tins(case_arrays(cases, library.names, effect), library)
+        epochs_total = protocol_epochs(config)
+        task = progress.add_task(f"{instrument}: training epochs", total=epochs_total)
+        checkpoint = args.checkpoints and TrainingCheckpoint(
+            args.checkpoints / f"{instrument}.ckpt", config, data_hash(data)
         )
-        path = shipped_model_path(instrument)
-        path = args.out / path.name if args.out else path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(model.to_bytes())
-        if checkpoint:
-            checkpoint.remove()
-        summary = {k: v for k, v in report.items() if k not in ("log", "outlier_case_ids")}
-        print(json.dumps({"instrument": instrument, "file": str(path), **summary}))
+        model, report = train_protocol(
+            data,
+            config,
+            progress=lambda k, task=task: progress.advance(task, k),
+            checkpoint=checkpoint,
+        )
+    model.learned = None  # generated cases, which no shop holds: kept out of the file
+    model.info.update(
+        {
+            "name": f"demo-{instrument}",
+            "novel_toners": list(NOVEL_TONERS),
+            "generator_seed": args.seed,
+            "network_seed": config.seed,
+            "cases": n,
+            "training_kinds": settings.kinds,
+            **({"training_tins": args.tins} if args.tins != "none" else {}),
+            **({"white_pearl_share": args.white_pearls} if args.white_pearls else {}),
+        }
+    )
+    path = shipped_model_path(instrument)
+    path = args.out / path.name if args.out else path
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomically(path, lambda temporary: temporary.write_bytes(model.to_bytes()))
+    if checkpoint:
+        checkpoint.remove()
+    summary = {k: v for k, v in report.items() if k not in ("log", "outlier_case_ids")}
+    print(json.dumps({"instrument": instrument, "file": str(path), **summary}))
+    return path
 
 
 if __name__ == "__main__":
