@@ -511,6 +511,27 @@ def test_a_european_spreadsheet_s_csv_reads_as_the_comma_separated_one(rich_meas
                 read_measurements(european)
 
 
+def test_utf16_files_are_judged_and_read_as_their_text(rich_measurement, tmp_path):
+    """A file in UTF-16 with its byte-order mark is judged by its text ("binary content"
+    before, so ``--images`` called a UTF-16 CSV binary), and a CxF3 file is read whether its
+    declaration names UTF-16, as it should, or UTF-8; declaring UTF-16, it was refused
+    ("encoding specified in XML declaration is incorrect")."""
+    cxf, csv_file = tmp_path / "m.cxf", tmp_path / "m.csv"
+    write_measurements([rich_measurement], cxf)
+    write_measurements([rich_measurement], csv_file)
+    texts = {cxf: cxf.read_text(encoding="utf-8"), csv_file: csv_file.read_text(encoding="utf-8")}
+    assert 'encoding="UTF-8"' in texts[cxf].splitlines()[0]
+    texts[tmp_path / "declared.cxf"] = texts[cxf].replace('encoding="UTF-8"', "encoding='utf-16'")
+    for encoding in ("utf-16", "utf-16-be"):  # the mark of the machine's order, or big-endian
+        for path, text in texts.items():
+            path.write_bytes(
+                (b"\xfe\xff" if encoding == "utf-16-be" else b"") + text.encode(encoding)
+            )
+            assert detect_format(path) == path.suffix[1:], (path.name, encoding)
+            (back,) = read_measurements(path)
+            _assert_same(rich_measurement, back, metadata=False)
+
+
 def test_a_csv_written_for_a_european_spreadsheet_is_the_one_it_saves(rich_measurement, tmp_path):
     """``convert … --decimal-comma`` writes the file the test above builds by hand (with the
     byte-order mark a spreadsheet needs to read UTF-8), and reads back to full precision,

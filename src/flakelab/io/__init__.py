@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import codecs
 import os
+import re
 import sys
 import tempfile
 import warnings
@@ -123,6 +124,11 @@ def detect_format(path: str | PathLike) -> str:
     for magic, kind in _OTHER_KINDS.items():
         if head.startswith(magic):
             raise MeasurementFileError(path, f"not a measurement file: this is {kind}")
+    if head.startswith(UTF16_BOMS):  # a spreadsheet's "Unicode Text": judged as its UTF-8
+        try:
+            head = codecs.getincrementaldecoder("utf-16")().decode(head).encode("utf-8")
+        except UnicodeDecodeError as error:
+            raise MeasurementFileError(path, f"not UTF-16 text ({error.reason})") from None
     text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
     if not text:  # a byte-order mark alone
         raise MeasurementFileError(path, "empty file")
@@ -265,6 +271,16 @@ def _is_utf16(path: str | PathLike) -> bool:
         return False
 
 
+_XML_ENCODING = re.compile(rb"""^(\s*<\?xml[^>]*?encoding\s*=\s*["'])[^"']*""")
+
+
+def _utf8_of_utf16(data: bytes) -> bytes:
+    """UTF-16 text (with its mark) as UTF-8, an XML declaration's encoding made to say so: a
+    CxF3 file that declared its UTF-16 was refused, "encoding specified in XML declaration is
+    incorrect"."""
+    return _XML_ENCODING.sub(rb"\1UTF-8", data.decode("utf-16").encode("utf-8"), count=1)
+
+
 def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
     """The measurements of a pipe (``/dev/stdin``, ``<(…)``) or of UTF-16 text (a
     spreadsheet's "Unicode Text"), read once into a temporary UTF-8 file and read from there.
@@ -279,7 +295,7 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
         try:
             data = standard_input() if piped else Path(source).read_bytes()
             if data.startswith(UTF16_BOMS):
-                data = data.decode("utf-16").encode("utf-8")
+                data = _utf8_of_utf16(data)
             copy.write_bytes(data)
         except OSError as error:
             raise MeasurementFileError(named, f"cannot be read ({error.strerror})") from None
