@@ -111,8 +111,11 @@ def damage_text(text: str, rng: random.Random) -> str:
 def damage_encoding(text: str, rng: random.Random) -> bytes:
     """``text`` as a spreadsheet or a cut copy may leave its bytes: a byte-order mark alone
     or before the text, the text in Windows-1252 with an 'é' in it, or cut inside one, or in
-    UTF-16 (a spreadsheet's "Unicode Text"), perhaps cut inside a character."""
-    kind = rng.randrange(5)
+    UTF-16 (a spreadsheet's "Unicode Text"), perhaps cut inside a character, or UTF-16
+    without its byte-order mark, as a script may write it."""
+    kind = rng.randrange(6)
+    if kind == 5:
+        return text.encode(rng.choice(("utf-16-le", "utf-16-be")))
     if kind == 0:
         return b"\xef\xbb\xbf" + rng.choice((b"", b"\n"))
     if kind == 1:
