@@ -195,8 +195,8 @@ class NulBytesError(UnicodeDecodeError):
     for every reader of :func:`text_of` names the file where it meets one."""
 
     def __init__(self, encoding: str, text: str) -> None:
-        start = text.index("\x00")
-        super().__init__(encoding, text.encode(encoding, "replace"), start, start + 1, NUL_BYTES)
+        start = len(text[: text.index("\x00")].encode("utf-8", "replace"))  # the NUL's byte
+        super().__init__(encoding, text.encode("utf-8", "replace"), start, start + 1, NUL_BYTES)
 
     def __str__(self) -> str:
         return NUL_BYTES
