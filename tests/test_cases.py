@@ -226,6 +226,19 @@ def test_case_files_round_trip(cases, tmp_path, suffix):
         assert b.sprayout_texture == pytest.approx(a.sprayout_texture, rel=1e-5)
 
 
+def test_a_cxf_case_history_in_utf16_reads_whatever_its_declaration_says(cases, tmp_path):
+    """Saved again in UTF-16 with its mark: declaring UTF-16, as it should, or still UTF-8,
+    as an editor may leave it (refused before, "encoding specified in XML declaration is
+    incorrect"); the same cases as the UTF-8 file."""
+    path = tmp_path / "cases.cxf"
+    write_cases(cases[:3], path)
+    text = path.read_text(encoding="utf-8")
+    expected = [(c.case_id, c.recipe) for c in read_cases(path)]
+    for declared in (text, text.replace('encoding="UTF-8"', 'encoding="UTF-16"', 1)):
+        path.write_bytes(declared.encode("utf-16"))
+        assert [(c.case_id, c.recipe) for c in read_cases(path)] == expected
+
+
 @pytest.mark.parametrize(
     "separator, quoting",
     [(";", csv.QUOTE_MINIMAL), ("\t", csv.QUOTE_MINIMAL), (";", csv.QUOTE_ALL)],

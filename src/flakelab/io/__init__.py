@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import codecs
 import os
-import re
 import sys
 import tempfile
 import warnings
@@ -41,6 +40,7 @@ from flakelab.io.records import (
     standard_input,
     standard_of,
     text_encoding,
+    utf8_of_utf16,
     utf16_without_mark,
 )
 from flakelab.io.tolerance_file import read_tolerance
@@ -271,16 +271,6 @@ def _is_utf16(path: str | PathLike) -> bool:
         return False
 
 
-_XML_ENCODING = re.compile(rb"""^(\s*<\?xml[^>]*?encoding\s*=\s*["'])[^"']*""")
-
-
-def _utf8_of_utf16(data: bytes) -> bytes:
-    """UTF-16 text (with its mark) as UTF-8, an XML declaration's encoding made to say so: a
-    CxF3 file that declared its UTF-16 was refused, "encoding specified in XML declaration is
-    incorrect"."""
-    return _XML_ENCODING.sub(rb"\1UTF-8", data.decode("utf-16").encode("utf-8"), count=1)
-
-
 def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
     """The measurements of a pipe (``/dev/stdin``, ``<(…)``) or of UTF-16 text (a
     spreadsheet's "Unicode Text"), read once into a temporary UTF-8 file and read from there.
@@ -295,7 +285,7 @@ def _read_through_a_copy(source: str | PathLike) -> list[Measurement]:
         try:
             data = standard_input() if piped else Path(source).read_bytes()
             if data.startswith(UTF16_BOMS):
-                data = _utf8_of_utf16(data)
+                data = utf8_of_utf16(data)
             copy.write_bytes(data)
         except OSError as error:
             raise MeasurementFileError(named, f"cannot be read ({error.strerror})") from None

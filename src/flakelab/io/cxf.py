@@ -41,6 +41,7 @@ from flakelab.core.measurement import Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.errors import MeasurementFileError, Note
 from flakelab.io.records import (
+    UTF16_BOMS,
     Reading,
     agreed_colour,
     assemble,
@@ -52,6 +53,7 @@ from flakelab.io.records import (
     parse_texture,
     recovered_readings,
     standard_of,
+    utf8_of_utf16,
     write_atomically,
 )
 
@@ -137,6 +139,11 @@ def _parser_log() -> Iterator[list[str]]:
 def read_cxf(path: str | PathLike, content: bytes | None = None) -> list[Measurement]:
     """Read multi-angle reflectance measurements from a CxF3 file."""
     data = Path(path).read_bytes() if content is None else content
+    if data.startswith(UTF16_BOMS):
+        try:
+            data = utf8_of_utf16(data)
+        except UnicodeDecodeError as error:
+            raise MeasurementFileError(path, f"not UTF-16 text ({error.reason})") from None
     try:
         # a value xsdata cannot convert stays text and is named below, by field and wavelength
         with warnings.catch_warnings(), _parser_log() as skipped:

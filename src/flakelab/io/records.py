@@ -76,6 +76,7 @@ __all__ = [
     "NulBytesError",
     "not_utf8",
     "utf16_without_mark",
+    "utf8_of_utf16",
     "text_of",
 ]
 
@@ -204,6 +205,16 @@ class NulBytesError(UnicodeDecodeError):
 
 UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
 """The byte-order marks of UTF-16 text: a spreadsheet's "Unicode Text", tab-separated."""
+
+_XML_ENCODING = re.compile(rb"""^(\s*<\?xml[^>]*?encoding\s*=\s*["'])[^"']*""")
+
+
+def utf8_of_utf16(data: bytes) -> bytes:
+    """UTF-16 text (with its mark) as UTF-8, an XML declaration's encoding made to say so:
+    whatever a CxF3 file in UTF-16 declares, its parser reads the UTF-8 (declaring UTF-16 it
+    had been refused in a copy, "encoding specified in XML declaration is incorrect", and a
+    case history declaring UTF-8 was)."""
+    return _XML_ENCODING.sub(rb"\1UTF-8", data.decode("utf-16").encode("utf-8"), count=1)
 
 
 def text_encoding(path: str | PathLike) -> str:
