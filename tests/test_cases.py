@@ -291,6 +291,9 @@ def test_a_case_file_saved_by_a_european_spreadsheet_reads_as_its_original(
     assert saved.read_bytes().startswith(b"\xff\xfe")
     (read,) = read_cases(saved)
     assert read.shop == "Müller" and read.recipe == tinned[0].recipe
+    saved.write_bytes(saved.read_bytes()[:-1])  # cut inside its last character
+    with pytest.raises(CaseFileError, match=r"eu.csv: not UTF-16 text \(truncated data\)$"):
+        read_cases(saved)  # "not UTF-8 text" before
     # and without its mark: refused as such, where it was "not UTF-8 text" (the ü), and its
     # header read "c a s e _ i d" without the ü, refused as missing that column
     for shop, where in (("Müller", ""), ("Muller", "row 1: ")):

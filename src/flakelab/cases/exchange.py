@@ -56,8 +56,8 @@ from flakelab.io.records import (
     csv_form,
     decimal_comma_in,
     decimal_point,
+    decoding_problem,
     is_no_regular_file,
-    not_utf8,
     numbers_at_once,
     recovered_spectra,
     spreadsheet_table,
@@ -319,7 +319,7 @@ def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None)
             lines = handle if progress is None else _told(handle, progress)
             return _cases_from_lines(path, lines)
     except UnicodeDecodeError as error:
-        raise CaseFileError(f"{path}: {not_utf8(error)}") from None
+        raise CaseFileError(f"{path}: {decoding_problem(error)}") from None
 
 
 def _told(lines: Iterable[str], progress: Callable[[], None]) -> Iterator[str]:

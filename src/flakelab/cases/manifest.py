@@ -43,7 +43,7 @@ from flakelab.errors import FlakelabError
 from flakelab.io import pick_sample, read_measurements, read_recipe
 from flakelab.io.lots_file import read_lots
 from flakelab.io.records import (
-    not_utf8,
+    decoding_problem,
     spreadsheet_table,
     text_encoding,
 )
@@ -81,7 +81,7 @@ def read_manifest(path: str | PathLike) -> list[tuple[int, dict[str, str]]]:
     except FileNotFoundError:
         raise ManifestError(f"{path}: no such manifest file") from None
     except UnicodeDecodeError as error:
-        raise ManifestError(f"{path}: {not_utf8(error)}") from None
+        raise ManifestError(f"{path}: {decoding_problem(error)}") from None
     except OSError as error:
         raise ManifestError(f"{path}: cannot be read as a CSV manifest ({error})") from None
 

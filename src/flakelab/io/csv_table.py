@@ -76,8 +76,8 @@ from flakelab.io.records import (
     csv_form,
     decimal_comma_in,
     decimal_point,
+    decoding_problem,
     filled_width,
-    not_utf8,
     parse_colour,
     parse_conditions,
     parse_geometry_name,
@@ -366,7 +366,7 @@ def read_csv(path: str | PathLike, text: str | None = None) -> list[Measurement]
         try:
             text = Path(path).read_text(encoding="utf-8-sig")
         except UnicodeDecodeError as error:
-            raise MeasurementFileError(path, not_utf8(error)) from None
+            raise MeasurementFileError(path, decoding_problem(error)) from None
     lines = [
         line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
     ]

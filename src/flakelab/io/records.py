@@ -74,7 +74,7 @@ __all__ = [
     "NOT_UTF8",
     "NUL_BYTES",
     "NulBytesError",
-    "not_utf8",
+    "decoding_problem",
     "utf16_without_mark",
     "utf8_of_utf16",
     "text_of",
@@ -182,10 +182,13 @@ def utf16_without_mark(data: bytes) -> bool:
     return pairs >= 2 and any(data[k : 2 * pairs : 2].count(0) >= 0.9 * pairs for k in (0, 1))
 
 
-def not_utf8(error: UnicodeDecodeError) -> str:
-    """What text that is not UTF-8 is told: :data:`NUL_BYTES` where NULs lie among its bytes
-    (UTF-16 without its mark, with a character UTF-8 cannot read), else :data:`NOT_UTF8` with
-    the decoder's reason."""
+def decoding_problem(error: UnicodeDecodeError) -> str:
+    """What text its encoding cannot read is told: UTF-16 (with its mark) cut inside a
+    character, "not UTF-16 text (truncated data)"; :data:`NUL_BYTES` where NULs lie among
+    bytes that are not UTF-8 (UTF-16 without its mark, with a character UTF-8 cannot read);
+    else :data:`NOT_UTF8`, with the decoder's reason."""
+    if error.encoding.startswith("utf-16"):  # "not UTF-8 text" before
+        return f"not UTF-16 text ({error.reason})"
     if isinstance(error.object, bytes) and b"\x00" in error.object:
         return NUL_BYTES
     return f"{NOT_UTF8} ({error.reason})"
