@@ -511,6 +511,9 @@ def test_a_can_in_pounds_or_ounces_is_weighed_to_the_scale():
         can_on_scale("250.05g", 0.1)
     with pytest.raises(RecipeError, match="less than the scale's 0.1 g"):
         can_on_scale("0.001oz", 0.1)
+    with pytest.raises(RecipeError, match="0.05g is less than the scale's 0.1 g; mix a larger"):
+        can_on_scale("0.05g", 0.1)  # "not a multiple of the scale's 0.1 g" before
+    assert can_on_scale("0.1g", 0.1) == 0.1  # one step: weighed
 
 
 def test_a_can_by_volume_weighs_what_its_toners_fill():

@@ -187,7 +187,7 @@ def can_on_scale(text: str, resolution_g: float, option: str = "--quantity") -> 
     grams = parse_quantity(text, option)
     if unit_of(text, IMPERIAL_MASS):
         grams = to_scale(grams, resolution_g)
-    if grams <= 0:
+    if grams < resolution_g * (1 - 1e-9):  # "0.05 g is not a multiple of …" before
         _under_a_step(option, text, resolution_g)
     check_scale(grams, resolution_g, option)
     return grams
