@@ -1679,6 +1679,13 @@ def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "row 4" in run.stderr and "expected a number" in run.stderr
     assert count_cases(open_database(database)) == 4
+    # piped: told to name a file, where it was "-: no such file" (or "… case file or
+    # database"); nothing stored
+    for command in (("cases", "import", "-", "--database", database), ("model", "evaluate", "-")):
+        run = cli(*command, input=good.read_bytes())
+        assert run.returncode == 2 and "-: cases are read from a case file" in run.stderr
+        assert "not from standard input" in run.stderr
+    assert count_cases(open_database(database)) == 4
 
 
 def _case_file_with(cases, tmp_path, name, edit):

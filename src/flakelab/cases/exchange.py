@@ -51,6 +51,7 @@ from flakelab.core.measurement import TEXTURE_READINGS, Measurement
 from flakelab.core.spectra import WAVELENGTHS
 from flakelab.core.times import TIME_EXPECTED, read_time
 from flakelab.errors import FlakelabError, MeasurementFileError, shown
+from flakelab.io import STANDARD_STREAM
 from flakelab.io.cxf import read_cxf, write_cxf
 from flakelab.io.records import (
     csv_form,
@@ -69,6 +70,13 @@ __all__ = ["read_cases", "write_cases", "is_case_file", "check_case_file_suffix"
 
 CXF_SUFFIXES = (".cxf", ".xml")
 CASE_FILE_SUFFIXES = (".csv", *CXF_SUFFIXES)
+
+PIPED_CASES = (
+    "-: cases are read from a case file (CSV or CxF3) or a database named, not from standard "
+    "input; save what is piped to a file (a file named - by its path, ./-)"
+)
+"""What ``-`` is told where cases are read: it was "no such file", or "no such case file or
+database"."""
 
 CASE_FIELDS = (
     "case_id",
@@ -307,6 +315,8 @@ def _fmt(value: float | None) -> str:
 def read_cases(path: str | PathLike, progress: Callable[[], None] | None = None) -> list[Case]:
     """All cases of a CSV or CxF3 case file; ``progress`` is called for each line of a CSV
     file read."""
+    if str(path) == STANDARD_STREAM:
+        raise CaseFileError(PIPED_CASES)
     path = Path(path)
     if not path.exists():
         raise CaseFileError(f"{path}: no such file")

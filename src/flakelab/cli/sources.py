@@ -282,7 +282,11 @@ def case_database(source: str):
     """The database of cases ``source`` names (a URL, or a .db/.sqlite file that must be
     there: a name of neither is no case file or database)."""
     from flakelab.cases.database import open_database
+    from flakelab.cases.exchange import PIPED_CASES
+    from flakelab.io import STANDARD_STREAM
 
+    if source == STANDARD_STREAM:
+        raise FlakelabError(PIPED_CASES)
     if "://" not in source and not Path(source).exists():
         raise FlakelabError(f"{source}: no such case file or database")
     return open_database(source, must_exist=True)
