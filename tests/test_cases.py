@@ -1679,6 +1679,11 @@ def test_malformed_case_file_names_the_row_and_leaves_the_database_alone(
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "row 4" in run.stderr and "expected a number" in run.stderr
     assert count_cases(open_database(database)) == 4
+    # a database given as a case file: named as one (it had been "not UTF-8 text")
+    misnamed = tmp_path / "history.csv"
+    sqlite3.connect(misnamed).execute("CREATE TABLE t (x)").connection.commit()
+    run = cli("cases", "import", misnamed, "--database", database)
+    assert run.returncode == 2 and "history.csv: this is a SQLite database, not text" in run.stderr
     # piped: told to name a file, where it was "-: no such file" (or "… case file or
     # database"); nothing stored
     for command in (("cases", "import", "-", "--database", database), ("model", "evaluate", "-")):

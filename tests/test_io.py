@@ -10,6 +10,7 @@ import os
 import random
 import re
 import shutil
+import sqlite3
 import stat
 import sys
 import time
@@ -730,6 +731,14 @@ def test_other_kinds_of_file_are_named(tmp_path):
     blob.write_bytes(b"a,b\x00\xff\xfe\x00\x93\n" * 40)
     with pytest.raises(MeasurementFileError, match="blob.csv: not a measurement file: binary"):
         read_measurements(blob)
+    blob.write_bytes(b"a,b\x00\x00\x00\x00\n" * 40)  # valid UTF-8, NULs in both bytes of pairs
+    with pytest.raises(MeasurementFileError, match="blob.csv: not a measurement file: binary"):
+        read_measurements(blob)
+    # a case database given for a measurement (it had the hint for UTF-16 text)
+    database = tmp_path / "shop.csv"
+    sqlite3.connect(database).execute("CREATE TABLE t (x)").connection.commit()
+    with pytest.raises(MeasurementFileError, match="shop.csv: .*this is a SQLite database$"):
+        read_measurements(database)
 
 
 def test_a_csv_whose_head_ends_inside_a_character_is_read(rich_measurement, tmp_path):

@@ -32,11 +32,12 @@ from flakelab.io.mat12_xlsx import read_mat12_xlsx, write_mat12_xlsx
 from flakelab.io.recipe_file import read_recipe, write_recipe
 from flakelab.io.records import (
     NOT_UTF8,
-    NUL_BYTES,
     STANDARD_STREAM,
     UTF16_BOMS,
     csv_separator,
     is_no_regular_file,
+    kind_of_binary,
+    nul_problem,
     standard_input,
     standard_of,
     text_encoding,
@@ -76,20 +77,6 @@ COLOUR_ALONE_FORMATS = ("csv", "cxf")
 """The formats that hold L*a*b* without spectra, in which measurements whose spectra were
 recovered from it are written (as they were read)."""
 
-_OTHER_KINDS = {
-    b"\x89PNG": "a PNG image",
-    b"%PDF": "a PDF document",
-    b"\xff\xd8\xff": "a JPEG image",
-    b"GIF8": "a GIF image",
-    b"\x1f\x8b": "a gzip archive",
-    b"\xd0\xcf\x11\xe0": "an old binary Office file (.xls); export as .xlsx",
-}
-
-
-NUL_TEXT = f"not a measurement file: {NUL_BYTES}"
-"""What a head with NUL bytes is told: UTF-16 written without its mark read as UTF-8 was a
-CSV whose header was "s a m p l e", refused as missing its 'sample' column."""
-
 
 def _utf8_lines(head: bytes) -> list[str] | None:
     """Lines of a file's head read as UTF-8, or None where it is not UTF-8."""
@@ -121,9 +108,8 @@ def detect_format(path: str | PathLike) -> str:
         if "xl/workbook.xml" not in names:
             raise MeasurementFileError(path, "a ZIP archive, but not an Excel workbook")
         return "mat12-xlsx"
-    for magic, kind in _OTHER_KINDS.items():
-        if head.startswith(magic):
-            raise MeasurementFileError(path, f"not a measurement file: this is {kind}")
+    if kind := kind_of_binary(head):
+        raise MeasurementFileError(path, f"not a measurement file: this is {kind}")
     if head.startswith(UTF16_BOMS):  # a spreadsheet's "Unicode Text": judged as its UTF-8
         try:
             head = codecs.getincrementaldecoder("utf-16")().decode(head).encode("utf-8")
@@ -134,7 +120,7 @@ def detect_format(path: str | PathLike) -> str:
         raise MeasurementFileError(path, "empty file")
     lines = _utf8_lines(text)
     if utf16_without_mark(text) or (lines is not None and b"\x00" in text):
-        raise MeasurementFileError(path, NUL_TEXT)  # UTF-8 or not: no text file holds NULs
+        raise MeasurementFileError(path, f"not a measurement file: {nul_problem(text)}")
     if text.startswith(b"<"):
         if b"colorexchangeformat.com/CxF3" in head or b"<CxF" in head or b":CxF" in head:
             return "cxf"

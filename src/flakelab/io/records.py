@@ -73,6 +73,10 @@ __all__ = [
     "csv_rows",
     "NOT_UTF8",
     "NUL_BYTES",
+    "BINARY",
+    "OTHER_KINDS",
+    "kind_of_binary",
+    "nul_problem",
     "NulBytesError",
     "decoding_problem",
     "utf16_without_mark",
@@ -170,40 +174,73 @@ NUL_BYTES = (
     "it holds NUL bytes, which no text file does: UTF-16 text without its byte-order mark? "
     "Save it as UTF-8, or as UTF-16 with its mark"
 )
-"""What a text file holding NUL bytes is told: UTF-16 written without its mark and read as
-UTF-8 is one, a CSV whose header read "s a m p l e" or JSON refused "Expecting property
-name" at column 2."""
+"""What a text file holding NUL bytes is told where it reads as UTF-16 without its mark
+(:func:`utf16_without_mark`): read as UTF-8, a CSV whose header read "s a m p l e", or JSON
+refused "Expecting property name" at column 2."""
+
+BINARY = "binary content, not text"
+"""What content holding NUL bytes is told where it does not read as UTF-16 text."""
+
+OTHER_KINDS = {
+    b"\x89PNG": "a PNG image",
+    b"%PDF": "a PDF document",
+    b"\xff\xd8\xff": "a JPEG image",
+    b"GIF8": "a GIF image",
+    b"\x1f\x8b": "a gzip archive",
+    b"\xd0\xcf\x11\xe0": "an old binary Office file (.xls); export as .xlsx",
+    b"SQLite format 3\x00": "a SQLite database",
+}
+"""Files that no reader takes, by their first bytes, and what each is called."""
+
+
+def kind_of_binary(data: bytes) -> str | None:
+    """What :data:`OTHER_KINDS` calls a file whose first bytes are ``data``, or None."""
+    return next((kind for magic, kind in OTHER_KINDS.items() if data.startswith(magic)), None)
 
 
 def utf16_without_mark(data: bytes) -> bool:
     """Whether ``data`` reads as UTF-16 text written without its byte-order mark: one byte of
-    nearly every pair NUL, as in Latin text (a CSV of measurements, a shop named Müller)."""
+    nearly every pair NUL and the other not, as in Latin text (a CSV of measurements, a shop
+    named Müller); a database's empty pages are NUL in both."""
     pairs = len(data) // 2
-    return pairs >= 2 and any(data[k : 2 * pairs : 2].count(0) >= 0.9 * pairs for k in (0, 1))
+    nuls = sorted(data[k : 2 * pairs : 2].count(0) for k in (0, 1))
+    return pairs >= 2 and nuls[1] >= 0.9 * pairs and nuls[0] <= 0.1 * pairs
+
+
+def nul_problem(data: bytes) -> str:
+    """What content holding NUL bytes is told: :data:`NUL_BYTES` where it reads as UTF-16
+    without its mark, else what :data:`OTHER_KINDS` calls it or :data:`BINARY`."""
+    if utf16_without_mark(data):
+        return NUL_BYTES
+    kind = kind_of_binary(data)
+    return f"this is {kind}, not text" if kind else BINARY
 
 
 def decoding_problem(error: UnicodeDecodeError) -> str:
     """What text its encoding cannot read is told: UTF-16 (with its mark) cut inside a
-    character, "not UTF-16 text (truncated data)"; :data:`NUL_BYTES` where NULs lie among
-    bytes that are not UTF-8 (UTF-16 without its mark, with a character UTF-8 cannot read);
-    else :data:`NOT_UTF8`, with the decoder's reason."""
+    character, "not UTF-16 text (truncated data)"; where NULs lie among bytes that are not
+    UTF-8, :func:`nul_problem` (UTF-16 without its mark with a character UTF-8 cannot read, a
+    database); else :data:`NOT_UTF8`, with the decoder's reason."""
     if error.encoding.startswith("utf-16"):  # "not UTF-8 text" before
         return f"not UTF-16 text ({error.reason})"
     if isinstance(error.object, bytes) and b"\x00" in error.object:
-        return NUL_BYTES
+        return nul_problem(error.object)
     return f"{NOT_UTF8} ({error.reason})"
 
 
 class NulBytesError(UnicodeDecodeError):
-    """Text that decoded but holds NUL bytes (:data:`NUL_BYTES`); a :class:`UnicodeDecodeError`,
-    for every reader of :func:`text_of` names the file where it meets one."""
+    """Text that decoded but holds NUL bytes (:func:`nul_problem` says what it is); a
+    :class:`UnicodeDecodeError`, for every reader of :func:`text_of` names the file where it
+    meets one."""
 
     def __init__(self, encoding: str, text: str) -> None:
+        data = text.encode("utf-8", "replace")
         start = len(text[: text.index("\x00")].encode("utf-8", "replace"))  # the NUL's byte
-        super().__init__(encoding, text.encode("utf-8", "replace"), start, start + 1, NUL_BYTES)
+        problem = nul_problem(text.encode("latin-1", "replace"))  # UTF-16 read as UTF-8
+        super().__init__(encoding, data, start, start + 1, problem)
 
     def __str__(self) -> str:
-        return NUL_BYTES
+        return self.reason
 
 
 UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
@@ -333,8 +370,8 @@ def csv_rows(
                     "open takes every line after it)"
                 )
             raise refused(number, problem) from None
-        if number == 1 and "\x00" in "".join(row):  # Python 3.11's csv reads NULs
-            raise refused(number, NUL_BYTES)  # a NUL further down is named by its cell
+        if number == 1 and "\x00" in (header := "\t".join(row)):  # csv reads NULs as any
+            raise refused(number, nul_problem(header.encode("latin-1", "replace")))
         yield row
 
 
