@@ -1975,6 +1975,18 @@ def test_generating_into_a_database_holding_other_cases_of_its_ids_says_what_sta
     assert count_cases(open_database(database)) == 520
 
 
+def test_a_generation_named_as_another_format_is_refused_before_it_writes(tmp_path, cli):
+    """Any ``--out`` but a case file's name is a SQLite database: ``--out cases.txt`` wrote
+    one under that name. Another format's name is refused, nothing written; a database's is
+    one."""
+    for name in ("cases.txt", "cases.JSON", "cases.xlsx"):
+        run = cli("cases", "generate", "--n", "2", "--out", tmp_path / name)
+        assert run.returncode == 2 and "any other name is a SQLite database" in run.stderr
+    assert list(tmp_path.iterdir()) == []
+    assert cli("cases", "generate", "--n", "2", "--out", tmp_path / "shop.db").returncode == 0
+    assert count_cases(open_database(tmp_path / "shop.db")) == 2
+
+
 def test_an_interrupted_generation_to_a_file_writes_nothing(tmp_path, cli, monkeypatch, ctrl_c):
     out = tmp_path / "cases.csv"
     monkeypatch.setattr(World, "_batch", ctrl_c(World._batch, 2))

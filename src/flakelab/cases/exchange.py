@@ -188,6 +188,23 @@ def is_case_file(path: str | PathLike) -> bool:
     return Path(path).suffix.lower() in CASE_FILE_SUFFIXES
 
 
+OTHER_FORMAT_SUFFIXES = (".txt", ".tsv", ".json", ".toml", ".xlsx", ".xls", ".pt", ".npz",
+                         ".png", ".pdf", ".svg")  # fmt: skip
+"""Suffixes of other formats, which a file of cases or a database is not named: ``cases
+generate --out cases.txt`` wrote a SQLite database under that name."""
+
+
+def check_cases_or_database_name(path: str | PathLike, option: str) -> None:
+    """Refuse a name ``path`` of another format where a case file or a database is written:
+    any name but a case file's (:data:`CASE_FILE_SUFFIXES`) is a database."""
+    suffix = Path(path).suffix.lower()
+    if suffix in OTHER_FORMAT_SUFFIXES:
+        raise CaseFileError(
+            f"{option}: {path}: a case file is named {', '.join(CASE_FILE_SUFFIXES)} (CSV or "
+            f"CxF3) and any other name is a SQLite database; {suffix} would hold a database"
+        )
+
+
 def check_case_file_suffix(path: str | PathLike, *, decimal_comma: bool = False) -> None:
     """A case file to write is named .csv, .cxf or .xml (its format is read from the name);
     one with a ``decimal_comma`` is a CSV."""

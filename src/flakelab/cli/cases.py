@@ -160,11 +160,13 @@ def generate(
     """Generate synthetic refinish cases (labelled synthetic) and store them. A database
     takes them in batches of 500: the same command again, after a Ctrl-C, stores the rest."""
     from flakelab.cases.database import open_database
-    from flakelab.cases.exchange import is_case_file, write_cases
+    from flakelab.cases.exchange import check_cases_or_database_name, is_case_file, write_cases
     from flakelab.cases.generator import World, WorldSettings
     from flakelab.io import read_library
     from flakelab.library.lots import TIN_KNOWLEDGE
 
+    if out is not None:
+        check_cases_or_database_name(out, "--out")
     if tins not in TIN_KNOWLEDGE:
         raise FlakelabError(f"--tins: expected one of {', '.join(TIN_KNOWLEDGE)}, got {tins!r}")
     settings = WorldSettings(
