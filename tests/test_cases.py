@@ -744,7 +744,7 @@ def _is_open(connection) -> bool:
     return True
 
 
-def test_a_database_that_cannot_be_opened_is_named(tmp_path):
+def test_a_database_that_cannot_be_opened_is_named(tmp_path, cases):
     junk = tmp_path / "junk.db"
     junk.write_text("not a database")
     # a file that is no database, and a server that is not there (or whose driver is not
@@ -754,6 +754,16 @@ def test_a_database_that_cannot_be_opened_is_named(tmp_path):
             open_database(url)
         assert str(url).split("/")[-1] in str(error.value)
     assert junk.read_text() == "not a database"  # left as it was
+    # said what it is, where SQLite said "file is not a database": a case file is told how
+    # to import it; an empty file is a database with no tables yet
+    with pytest.raises(DatabaseError, match="not a SQLite one; its first bytes are not"):
+        open_database(junk)
+    history = tmp_path / "history.csv"
+    write_cases(cases[:2], history)
+    with pytest.raises(DatabaseError, match="a case file.*'flakelab cases import history.csv'"):
+        open_database(history)
+    (tmp_path / "new.db").touch()
+    assert count_cases(open_database(tmp_path / "new.db")) == 0
 
 
 def test_the_default_database_lies_in_the_xdg_data_folder(tmp_path, monkeypatch):

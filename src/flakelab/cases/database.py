@@ -277,6 +277,26 @@ def _postgres_settings(dbapi_connection, _record) -> None:
     dbapi_connection.commit()  # a SET in a transaction rolled back is undone
 
 
+SQLITE_HEADER = b"SQLite format 3\x00"
+"""The first bytes of every SQLite database file (an empty file is one with no tables yet)."""
+
+
+def _not_sqlite(file: Path) -> str | None:
+    """What a file given as a database is where it is no SQLite database: a case file, told
+    how to import it, or another file; None where it is one, empty, or not there. SQLite said
+    "file is not a database" of any."""
+    try:
+        with file.open("rb") as handle:
+            head = handle.read(len(SQLITE_HEADER))
+    except OSError:  # not there, or unreadable: said where it is opened
+        return None
+    if not head or head == SQLITE_HEADER:
+        return None
+    if file.suffix.lower() in (".csv", ".cxf", ".xml"):  # exchange.CASE_FILE_SUFFIXES
+        return f"a case file? 'flakelab cases import {file.name}' stores its cases in one"
+    return "its first bytes are not those of one"
+
+
 def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = False) -> Engine:
     """An engine on an up-to-date database (migrations applied). A SQLite file that does not
     exist is created, unless ``must_exist`` and the file was named (here or by
@@ -297,6 +317,8 @@ def open_database(url: str | os.PathLike | None = None, *, must_exist: bool = Fa
             f"{shown}: no such database file; nothing was created (the commands that store "
             "cases or models create one)"
         )
+    if file and (what := _not_sqlite(Path(file))):
+        raise DatabaseError(f"{shown}: cannot open the database: not a SQLite one; {what}")
     if file and not Path(file).exists():
         from flakelab.io.records import unwritable_folder  # the file formats: not at start-up
 
