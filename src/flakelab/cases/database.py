@@ -292,7 +292,9 @@ def _not_sqlite(file: Path) -> str | None:
         return None
     if not head or head == SQLITE_HEADER:
         return None
-    if file.suffix.lower() in (".csv", ".cxf", ".xml"):  # exchange.CASE_FILE_SUFFIXES
+    from flakelab.cases.exchange import is_case_file  # the file formats: not at start-up
+
+    if is_case_file(file):
         return f"a case file? 'flakelab cases import {file.name}' stores its cases in one"
     return "its first bytes are not those of one"
 
